@@ -1,0 +1,39 @@
+"""What a scene source (generated city or GeoJSON footprints) hands to the bake."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from shared.records import BuildingParams, StreetParams
+
+__all__ = ["FeatureIssue", "SourceScene"]
+
+
+@dataclass(frozen=True, slots=True)
+class FeatureIssue:
+    """A problem found in one input feature and what was done about it.
+
+    ``action`` is ``"repaired"`` (the feature was kept after a documented fix) or
+    ``"skipped"`` (the feature was left out).
+    """
+
+    feature_id: str
+    problem: str
+    action: str
+
+
+@dataclass(frozen=True, slots=True)
+class SourceScene:
+    """Buildings and street pieces in scene-local metres, plus where that frame sits.
+
+    ``origin`` is the position of local (0, 0) in ``crs`` (projected metres, float64);
+    local coordinates = projected coordinates - origin.  Object ids are unique over
+    buildings and streets together (buildings first).
+    """
+
+    name: str
+    crs: str
+    origin: tuple[float, float]
+    buildings: tuple[BuildingParams, ...]
+    streets: tuple[StreetParams, ...]
+    issues: tuple[FeatureIssue, ...] = ()

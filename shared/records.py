@@ -1,0 +1,173 @@
+"""Scene records shared by server and client.
+
+Records are frozen, slotted dataclasses.  Geometry is numpy arrays in scene-local
+metres (float64 for footprints; the server keeps the CRS origin separately) and the
+arrays are made read-only so caches can hand them out safely.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["BuildingParams", "StreetParams", "Mesh", "readonly"]
+
+F64 = NDArray[np.float64]
+
+
+def readonly(a: NDArray) -> NDArray:  # type: ignore[type-arg]
+    """Return ``a`` (contiguous) with its write flag cleared."""
+    a = np.ascontiguousarray(a)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True, slots=True)
+class BuildingParams:
+    """The compact procedural description of one building.
+
+    Attributes
+    ----------
+    id:
+        Object id, unique in a scene (non-negative int).
+    rings:
+        Footprint rings, each ``(n, 2) float64`` in scene-local metres, without a
+        repeated closing vertex.  ``rings[0]`` is the exterior, counter-clockwise;
+        the others are holes (courtyards), clockwise.  Edge ``i`` of a ring runs from
+        vertex ``i`` to vertex ``(i + 1) % n``; its outward normal is to its right.
+    neighbour_heights:
+        One ``(n,) float64`` array per ring: the height in metres of the neighbour
+        building behind each edge (0 where the edge is a free frontage).
+    floors:
+        Number of floors, at least 1.
+    floor_height:
+        Height of one floor in metres (> 0).
+    style:
+        Style seed; the grammar may vary the facade with it.
+    source_id:
+        The id of the feature the building came from (for error reports).
+    """
+
+    id: int
+    rings: tuple[F64, ...]
+    neighbour_heights: tuple[F64, ...]
+    floors: int
+    floor_height: float
+    style: int = 0
+    source_id: str = ""
+
+    def __post_init__(self) -> None:
+        if len(self.rings) == 0:
+            raise ValueError("BuildingParams.rings: expected at least one ring, got none")
+        if len(self.neighbour_heights) != len(self.rings):
+            raise ValueError(
+                f"BuildingParams.neighbour_heights: expected {len(self.rings)} arrays "
+                f"(one per ring), got {len(self.neighbour_heights)}"
+            )
+        rings = tuple(readonly(np.asarray(r, dtype=np.float64).reshape(-1, 2)) for r in self.rings)
+        nbs = tuple(readonly(np.asarray(h, dtype=np.float64).reshape(-1)) for h in self.neighbour_heights)
+        for k, (r, h) in enumerate(zip(rings, nbs, strict=True)):
+            if len(r) < 3:
+                raise ValueError(f"BuildingParams.rings[{k}]: expected >= 3 vertices, got {len(r)}")
+            if len(h) != len(r):
+                raise ValueError(
+                    f"BuildingParams.neighbour_heights[{k}]: expected {len(r)} values, got {len(h)}"
+                )
+        if int(self.floors) < 1:
+            raise ValueError(f"BuildingParams.floors: expected >= 1, got {self.floors}")
+        if not float(self.floor_height) > 0:
+            raise ValueError(f"BuildingParams.floor_height: expected > 0, got {self.floor_height}")
+        object.__setattr__(self, "rings", rings)
+        object.__setattr__(self, "neighbour_heights", nbs)
+        object.__setattr__(self, "floors", int(self.floors))
+        object.__setattr__(self, "floor_height", float(self.floor_height))
+        object.__setattr__(self, "style", int(self.style))
+
+    @property
+    def height(self) -> float:
+        """Total height in metres (floors times floor height)."""
+        return self.floors * self.floor_height
+
+
+@dataclass(frozen=True, slots=True)
+class StreetParams:
+    """A street piece, crossroad or square: a flat procedural ground object.
+
+    ``kind`` is ``"street"``, ``"crossroad"`` or ``"square"``; ``ring`` is its outline,
+    ``(n, 2) float64``, counter-clockwise, scene-local metres; ``width`` is the street
+    width in metres (for a crossroad, the widest street meeting there).
+    """
+
+    id: int
+    kind: str
+    ring: F64
+    width: float
+    source_id: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("street", "crossroad", "square"):
+            raise ValueError(f"StreetParams.kind: expected street|crossroad|square, got {self.kind!r}")
+        object.__setattr__(self, "ring", readonly(np.asarray(self.ring, dtype=np.float64).reshape(-1, 2)))
+        object.__setattr__(self, "width", float(self.width))
+
+
+@dataclass(frozen=True, slots=True)
+class Mesh:
+    """A GPU-ready triangle mesh with flat-shaded faces.
+
+    Attributes
+    ----------
+    positions: ``(n, 3) float32`` vertex positions (x east, y north, z up), scene-local metres.
+    normals: ``(n, 3) float32`` unit vertex normals.
+    indices: ``(m, 3) uint32`` triangles, counter-clockwise seen from outside.
+    materials: ``(n,) uint8`` material id per vertex (wall, window, door, roof, ...),
+        used for colouring; not counted as GPU bytes.
+    """
+
+    positions: NDArray[np.float32]
+    normals: NDArray[np.float32]
+    indices: NDArray[np.uint32]
+    materials: NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, np.uint8))
+
+    def __post_init__(self) -> None:
+        p = readonly(np.asarray(self.positions, dtype=np.float32).reshape(-1, 3))
+        n = readonly(np.asarray(self.normals, dtype=np.float32).reshape(-1, 3))
+        i = readonly(np.asarray(self.indices, dtype=np.uint32).reshape(-1, 3))
+        m = np.asarray(self.materials, dtype=np.uint8).reshape(-1)
+        if len(m) == 0:
+            m = np.zeros(len(p), np.uint8)
+        m = readonly(m)
+        if len(n) != len(p) or len(m) != len(p):
+            raise ValueError(
+                f"Mesh: positions, normals and materials must have the same length, got "
+                f"{len(p)}, {len(n)}, {len(m)}"
+            )
+        object.__setattr__(self, "positions", p)
+        object.__setattr__(self, "normals", n)
+        object.__setattr__(self, "indices", i)
+        object.__setattr__(self, "materials", m)
+
+    @property
+    def triangles(self) -> int:
+        """Number of triangles."""
+        return int(len(self.indices))
+
+    @property
+    def gpu_bytes(self) -> int:
+        """Bytes of float32 positions and normals plus uint32 indices."""
+        return int(self.positions.nbytes + self.normals.nbytes + self.indices.nbytes)
+
+    @staticmethod
+    def concat(meshes: list[Mesh]) -> Mesh:
+        """Join meshes into one (indices re-based)."""
+        if not meshes:
+            return Mesh(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
+        offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
+        return Mesh(
+            np.concatenate([m.positions for m in meshes]),
+            np.concatenate([m.normals for m in meshes]),
+            np.concatenate([m.indices + np.uint32(o) for m, o in zip(meshes, offsets, strict=True)]),
+            np.concatenate([m.materials for m in meshes]),
+        )
