@@ -24,6 +24,23 @@ def readonly(a: NDArray) -> NDArray:  # type: ignore[type-arg]
     return a
 
 
+def _oriented(
+    rings: tuple[F64, ...], heights: tuple[F64, ...]
+) -> tuple[tuple[F64, ...], tuple[F64, ...]]:
+    """Exterior counter-clockwise, holes clockwise; per-edge values follow their edges."""
+    out_r, out_h = [], []
+    for k, (r, h) in enumerate(zip(rings, heights, strict=True)):
+        x, y = r[:, 0] - r[0, 0], r[:, 1] - r[0, 1]
+        area2 = float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+        if area2 != 0 and (area2 > 0) != (k == 0):
+            # reversing a ring turns edge i (v_i -> v_i+1) into edge n-2-i
+            r = readonly(r[::-1])
+            h = readonly(np.roll(h[::-1], -1))
+        out_r.append(r)
+        out_h.append(h)
+    return tuple(out_r), tuple(out_h)
+
+
 @dataclass(frozen=True, slots=True)
 class BuildingParams:
     """The compact procedural description of one building.
@@ -75,6 +92,7 @@ class BuildingParams:
                 raise ValueError(
                     f"BuildingParams.neighbour_heights[{k}]: expected {len(r)} values, got {len(h)}"
                 )
+        rings, nbs = _oriented(rings, nbs)
         if int(self.floors) < 1:
             raise ValueError(f"BuildingParams.floors: expected >= 1, got {self.floors}")
         if not float(self.floor_height) > 0:

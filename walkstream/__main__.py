@@ -1,0 +1,3 @@
+from walkstream.cli import main
+import sys
+sys.exit(main())

@@ -1,0 +1,295 @@
+"""The ``walkstream`` command: where server, client and shared pieces are wired together.
+
+Every subcommand imports what it needs lazily so ``walkstream --help`` stays fast.
+Errors a user can cause (``WalkstreamError``, unreadable files) end as one line on
+stderr and exit status 2; nothing else is caught, so a bug still shows its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from shared.errors import WalkstreamError
+
+__all__ = ["main", "build_parser"]
+
+DEFAULT_CITY_SIZE = 700.0
+DEFAULT_CITY_SEED = 1
+
+
+def _progress(total: int, desc: str) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="bldg", file=sys.stderr, leave=False, dynamic_ncols=True)
+
+
+# ---------------------------------------------------------------- generate
+
+
+def cmd_generate_city(args: argparse.Namespace) -> int:
+    from server.sources.citygen import city_summary, write_city
+
+    t0 = time.perf_counter()
+    write_city(args.output, args.size, args.seed)
+    fc = json.loads(Path(args.output).read_text())
+    summary = city_summary(fc)
+    summary["seconds"] = round(time.perf_counter() - t0, 2)
+    summary["output"] = str(args.output)
+    _print_summary("city", summary, args.json)
+    return 0
+
+
+def _print_summary(title: str, summary: dict[str, Any], as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(summary))
+        return
+    print(f"{title}:")
+    width = max(len(k) for k in summary)
+    for k, v in summary.items():
+        print(f"  {k:<{width}}  {v}")
+
+
+# ---------------------------------------------------------------- buildings
+
+
+def _load(path: str) -> Any:
+    from server.sources.geojson import load_geojson
+
+    return load_geojson(path)
+
+
+def cmd_buildings_stats(args: argparse.Namespace) -> int:
+    from shared.buildstats import building_stats
+    from shared.codec import encode_building
+
+    scene = _load(args.file)
+    skipped = sum(1 for i in scene.issues if i.action == "skipped")
+    with _progress(len(scene.buildings), "rebuilding") as bar:
+        stats = building_stats(scene.buildings, encode_building, skipped=skipped, progress=bar.update)
+    if args.json:
+        print(json.dumps(stats))
+        return 0
+    print(f"{args.file}: {stats['buildings']} buildings kept, {stats['skipped']} skipped")
+    print(f"  {'':<22}{'LOD0':>12}{'LOD1':>12}{'LOD2':>12}")
+    print(f"  {'triangles':<22}" + "".join(f"{t:>12,}" for t in stats["triangles"]))  # type: ignore[attr-defined]
+    print(f"  {'rebuild buildings/s':<22}" + "".join(f"{t:>12,.0f}" for t in stats["rebuild_per_s"]))  # type: ignore[attr-defined]
+    print(f"  parameters (msgpack)  {stats['param_bytes']:,} bytes")
+    print(f"  LOD2 geometry (GPU)   {stats['lod2_bytes']:,} bytes")
+    print(f"  ratio                 {100 * float(stats['ratio']):.4f} %")  # type: ignore[arg-type]
+    return 0
+
+
+def _pick_building(scene: Any, ident: str) -> Any:
+    for b in scene.buildings:
+        if str(b.id) == ident or b.source_id == ident:
+            return b
+    ids = ", ".join(b.source_id or str(b.id) for b in scene.buildings[:5])
+    raise WalkstreamError(f"no building with id {ident!r} (ids look like: {ids}, ...)")
+
+
+def cmd_buildings_render(args: argparse.Namespace) -> int:
+    from shared.buildings import build_lods
+
+    scene = _load(args.file)
+    b = _pick_building(scene, args.id)
+    meshes = list(build_lods(b))
+    if args.output:
+        from client.render import render_lods_figure
+
+        render_lods_figure(meshes, args.output)
+        print(f"wrote {args.output} (building {b.source_id or b.id}: triangles {[m.triangles for m in meshes]})")
+    if args.gltf:
+        from shared.buildings import build_lod
+        from shared.export import export_glb
+
+        chosen = scene.buildings if args.all else [b]
+        with _progress(len(chosen), f"LOD{args.lod}") as bar:
+            out = []
+            for c in chosen:
+                out.append(build_lod(c, args.lod))
+                bar.update(1)
+        n = export_glb(out, args.gltf)
+        print(f"wrote {args.gltf} ({len(out)} buildings at LOD{args.lod}, {n:,} bytes)")
+    if not args.output and not args.gltf:
+        raise WalkstreamError("nothing to do: give -o PNG and/or --gltf GLB")
+    return 0
+
+
+# ---------------------------------------------------------------- grammar
+
+
+def cmd_grammar(args: argparse.Namespace) -> int:
+    from shared.buildings import default_grammar_text
+    from shared.lsystem.grammar import load_grammar, parse_grammar
+
+    if args.file:
+        g = load_grammar(args.file)
+        print(f"{args.file}: grammar {g.name} version {g.version}, {sum(len(p) for p in g.productions.values())} productions, id {g.id}")
+    else:
+        text = default_grammar_text()
+        if args.check:
+            g = parse_grammar(text)
+            print(f"built-in grammar {g.id} ok")
+        else:
+            sys.stdout.write(text)
+    return 0
+
+
+# ---------------------------------------------------------------- bench
+
+
+def cmd_bench_rebuild(args: argparse.Namespace) -> int:
+    import statistics
+    import tempfile
+
+    from shared.buildstats import building_stats
+    from shared.codec import encode_building
+
+    source = args.file
+    if source is None:
+        from server.sources.citygen import write_city
+
+        source = str(Path(tempfile.mkdtemp()) / "city.geojson")
+        write_city(source, args.size, DEFAULT_CITY_SEED)
+    scene = _load(source)
+    runs = []
+    for r in range(args.repeat):
+        with _progress(len(scene.buildings), f"run {r + 1}/{args.repeat}") as bar:
+            runs.append(building_stats(scene.buildings, encode_building, progress=bar.update))
+    first = runs[0]
+    print(f"rebuild benchmark: {source} ({first['buildings']} buildings, {args.repeat} runs, one core)")
+    print(f"{'LOD':<6}{'median b/s':>12}{'min':>10}{'max':>10}{'triangles':>14}{'goal b/s':>10}")
+    goals = (2000, None, 200)
+    for lod in range(3):
+        rates = [float(r["rebuild_per_s"][lod]) for r in runs]  # type: ignore[index]
+        goal = goals[lod]
+        print(
+            f"LOD{lod:<3}{statistics.median(rates):>12,.0f}{min(rates):>10,.0f}{max(rates):>10,.0f}"
+            f"{first['triangles'][lod]:>14,}{goal if goal else '-':>10}"  # type: ignore[index]
+        )
+    ratio = float(first["ratio"])  # type: ignore[arg-type]
+    print(f"parameters {first['param_bytes']:,} B, LOD2 geometry {first['lod2_bytes']:,} B, ratio {100 * ratio:.4f} % (goal <= 0.1 %)")
+    return 0
+
+
+# ---------------------------------------------------------------- demo
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from server.sources.citygen import city_summary, write_city
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    city = out / "city.geojson"
+    if not city.exists():
+        print(f"generating the default city ({DEFAULT_CITY_SIZE:.0f} m, seed {DEFAULT_CITY_SEED}) -> {city}")
+        write_city(city, DEFAULT_CITY_SIZE, DEFAULT_CITY_SEED)
+    summary = city_summary(json.loads(city.read_text()))
+    _print_summary("default city", summary, False)
+    from shared.buildstats import building_stats
+    from shared.codec import encode_building
+
+    scene = _load(str(city))
+    with _progress(len(scene.buildings), "rebuilding") as bar:
+        stats = building_stats(scene.buildings, encode_building, progress=bar.update)
+    print(
+        f"rebuilt {stats['buildings']} buildings: triangles per LOD {stats['triangles']}, "
+        f"buildings/s per LOD {stats['rebuild_per_s']}"
+    )
+    print(
+        f"parameters {stats['param_bytes']:,} B vs LOD2 geometry {stats['lod2_bytes']:,} B "
+        f"({100 * float(stats['ratio']):.4f} %)"  # type: ignore[arg-type]
+    )
+    try:
+        from client.render import render_lods_figure
+        from shared.buildings import build_lods
+
+        biggest = max(scene.buildings, key=lambda b: len(b.rings[0]) + b.floors)
+        png = out / "lods.png"
+        render_lods_figure(list(build_lods(biggest)), png)
+        print(f"LOD figure of building {biggest.source_id}: {png}")
+    except WalkstreamError as exc:
+        print(f"(no LOD figure: {exc})")
+    return 0
+
+
+# ---------------------------------------------------------------- parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every subcommand."""
+    p = argparse.ArgumentParser(
+        prog="walkstream",
+        description=(
+            "Interactive walkthroughs of large 3D scenes over slow links: procedural "
+            "cities and real footprints, L-system buildings at three levels of detail."
+        ),
+    )
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    d = sub.add_parser("demo", help="the main job on the built-in default scene (make demo)")
+    d.add_argument("--out", default="out/demo", help="folder for everything the demo writes (default out/demo)")
+    d.set_defaults(func=cmd_demo)
+
+    g = sub.add_parser("generate", help="generate a procedural scene source")
+    gsub = g.add_subparsers(dest="what", metavar="WHAT", required=True)
+    gc = gsub.add_parser("city", help="a procedural city as GeoJSON (streets, crossroads, squares, buildings)")
+    gc.add_argument("--size", type=float, default=DEFAULT_CITY_SIZE, help="side of the square city in metres (100-5000, default 700)")
+    gc.add_argument("--seed", type=int, default=DEFAULT_CITY_SEED, help="random seed (default 1); same seed, same city")
+    gc.add_argument("-o", "--output", required=True, help="GeoJSON file to write")
+    gc.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    gc.set_defaults(func=cmd_generate_city)
+
+    b = sub.add_parser("buildings", help="rebuild buildings of a GeoJSON file: statistics and pictures")
+    bsub = b.add_subparsers(dest="what", metavar="WHAT", required=True)
+    bs = bsub.add_parser("stats", help="buildings kept/skipped, triangles and rebuild speed per LOD, bytes")
+    bs.add_argument("file", help="GeoJSON FeatureCollection (generated city or real footprints)")
+    bs.add_argument("--json", action="store_true", help="print one JSON object")
+    bs.set_defaults(func=cmd_buildings_stats)
+    br = bsub.add_parser("render", help="draw one building's three LODs side by side; export glTF")
+    br.add_argument("file", help="GeoJSON FeatureCollection")
+    br.add_argument("--id", required=True, help="building id (the feature id, or the object number)")
+    br.add_argument("-o", "--output", help="PNG to write (the three LODs side by side)")
+    br.add_argument("--gltf", help="binary glTF (.glb) to write")
+    br.add_argument("--lod", type=int, choices=(0, 1, 2), default=2, help="LOD for --gltf (default 2)")
+    br.add_argument("--all", action="store_true", help="with --gltf: export every building, not only --id")
+    br.set_defaults(func=cmd_buildings_render)
+
+    gr = sub.add_parser("grammar", help="print the built-in building grammar, or check a grammar file")
+    gr.add_argument("file", nargs="?", help="grammar file to check (default: print the built-in one)")
+    gr.add_argument("--check", action="store_true", help="parse the built-in grammar and report its id")
+    gr.set_defaults(func=cmd_grammar)
+
+    be = sub.add_parser("bench", help="benchmarks that print a table")
+    besub = be.add_subparsers(dest="what", metavar="WHAT", required=True)
+    bb = besub.add_parser("rebuild", help="rebuild throughput per LOD and parameter/geometry bytes")
+    bb.add_argument("file", nargs="?", help="GeoJSON source (default: the default 700 m city)")
+    bb.add_argument("--size", type=float, default=DEFAULT_CITY_SIZE, help="city size when no file is given")
+    bb.add_argument("--repeat", type=int, default=5, help="runs; the table shows medians (default 5)")
+    bb.set_defaults(func=cmd_bench_rebuild)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``walkstream`` console command."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except WalkstreamError as exc:
+        print(f"walkstream: error: {exc}", file=sys.stderr)
+        return 2
+    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
+        print(f"walkstream: error: {exc.filename}: {exc.strerror}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("walkstream: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
