@@ -8,6 +8,7 @@ arrays are made read-only so caches can hand them out safely.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,7 +18,7 @@ __all__ = ["BuildingParams", "StreetParams", "Mesh", "readonly"]
 F64 = NDArray[np.float64]
 
 
-def readonly(a: NDArray) -> NDArray:  # type: ignore[type-arg]
+def readonly(a: NDArray[Any]) -> NDArray[Any]:
     """Return ``a`` (contiguous) with its write flag cleared."""
     a = np.ascontiguousarray(a)
     a.flags.writeable = False
@@ -144,10 +145,11 @@ class Mesh:
         used for colouring; not counted as GPU bytes.
     """
 
-    positions: NDArray[np.float32]
-    normals: NDArray[np.float32]
-    indices: NDArray[np.uint32]
-    materials: NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, np.uint8))
+    # typed loosely: any numeric array is accepted and converted in __post_init__
+    positions: NDArray[Any]
+    normals: NDArray[Any]
+    indices: NDArray[Any]
+    materials: NDArray[Any] = field(default_factory=lambda: np.zeros(0, np.uint8))
 
     def __post_init__(self) -> None:
         p = readonly(np.asarray(self.positions, dtype=np.float32).reshape(-1, 3))

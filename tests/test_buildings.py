@@ -135,11 +135,11 @@ def test_two_windows_per_bay_and_no_door_by_editing_the_grammar_text() -> None:
     w, d, floors = 24.0, 10.0, 3
     b = building([rect(w, d)], floors=floors)
     # per frontage and floor: wall quad (2) + ledge box (10); per frontage: parapet box (10);
-    # per window: pane quad (2) + sill box (10); roof: 2 triangles
+    # per window: pane quad (2) + sill and lintel boxes (2 x 10); roof: 2 triangles
     bays = lambda length: max(1, int(length // 4.0))  # noqa: E731
     windows = floors * 2 * sum(2 * bays(length) for length in (w, d))
     lod1 = 2 + 4 * (floors * 12 + 10)
-    lod2 = lod1 + windows * 12
+    lod2 = lod1 + windows * 22
     assert predict_triangles(b, g) == (12, lod1, lod2)
     m2 = build_lod(b, 2, g)
     assert m2.triangles == lod2

@@ -1,3 +1,5 @@
-from walkstream.cli import main
 import sys
+
+from walkstream.cli import main
+
 sys.exit(main())

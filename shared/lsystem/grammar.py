@@ -104,7 +104,9 @@ class Grammar:
 
 def _split_top(text: str, sep: str, line: int) -> list[str]:
     """Split on ``sep`` outside parentheses."""
-    out, depth, cur = [], 0, []
+    out: list[str] = []
+    cur: list[str] = []
+    depth = 0
     for ch in text:
         if ch == "(":
             depth += 1
@@ -281,13 +283,13 @@ def parse_grammar(text: str) -> Grammar:
             if not body:
                 raise GrammarError(f"{sym}: empty right-hand side (write '*' to delete)", line)
             for s_sym, rep_text, arg_texts in _scan_successors(body, line):
-                rep = compile_expr(rep_text, known, line) if rep_text is not None else None
-                arg_known = known | {"i"} if rep is not None else known
-                args = tuple(compile_expr(a, arg_known, line) for a in arg_texts)
-                want = arity.setdefault(s_sym, len(args))
-                if want != len(args):
-                    raise GrammarError(f"{s_sym} takes {want} parameters, got {len(args)}", line)
-                succs.append(Successor(s_sym, args, rep, line))
+                rep_expr = compile_expr(rep_text, known, line) if rep_text is not None else None
+                arg_known = known | {"i"} if rep_expr is not None else known
+                arg_exprs = tuple(compile_expr(a, arg_known, line) for a in arg_texts)
+                want = arity.setdefault(s_sym, len(arg_exprs))
+                if want != len(arg_exprs):
+                    raise GrammarError(f"{s_sym} takes {want} parameters, got {len(arg_exprs)}", line)
+                succs.append(Successor(s_sym, arg_exprs, rep_expr, line))
         prods.setdefault(sym, []).append(Production(sym, params, cond, tuple(succs), line))
 
     return Grammar(

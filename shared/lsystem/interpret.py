@@ -39,7 +39,9 @@ class EdgeFrames:
 def _template(faces: list[tuple[list[tuple[int, int, int]], tuple[int, int, int]]]) -> tuple[
     NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]
 ]:
-    corners, normals, tris = [], [], []
+    corners: list[tuple[int, int, int]] = []
+    normals: list[tuple[int, int, int]] = []
+    tris: list[tuple[int, int, int]] = []
     for quad, nrm in faces:
         base = len(corners)
         corners.extend(quad)
@@ -73,7 +75,7 @@ def _valid(sym: str, p: NDArray[np.float64], n_edges: int) -> NDArray[np.bool_]:
         ok &= (e >= 0) & (e < n_edges) & (p[:, 3] > p[:, 1]) & (p[:, 4] > p[:, 2])
         if sym == "Box":
             ok &= p[:, 6] > 0
-    return ok
+    return np.asarray(ok, dtype=bool)
 
 
 def count_triangles(modules: dict[str, NDArray[np.float64]], frames: EdgeFrames) -> int:
