@@ -1,0 +1,417 @@
+"""Offscreen mesh renderer for the client and for report figures.
+
+:class:`MeshRenderer` keeps one vertex and index buffer per uploaded mesh and draws
+them with a directional + ambient light, coloured by material through
+:data:`shared.palette.PALETTE`.  Depth test and back-face culling are on, so a
+triangle with the wrong winding shows up as a hole rather than being hidden.
+
+:func:`render_lods_figure` draws several meshes (the LODs of one building) side by
+side into a PNG for reports.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Sequence
+from types import TracebackType
+
+import moderngl
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from shared.camera import fit_view, mat4_bytes
+from shared.errors import RenderError
+from shared.gl import Framebuffer, check_gl_error, create_context
+from shared.palette import material_rgb
+from shared.records import Mesh
+
+__all__ = [
+    "BACKGROUND_RGB",
+    "FIGURE_DIRECTION",
+    "LIGHT_DIRECTION",
+    "MeshRenderer",
+    "render_lods_figure",
+]
+
+#: Clear colour, sRGB 0-255: a pale sky that no shaded material in the palette matches.
+BACKGROUND_RGB: tuple[int, int, int] = (232, 238, 246)
+
+#: Direction towards the light (world, z-up): high sun from the south-south-west, so
+#: the south, west and top faces a 3/4 view shows all get different shades.
+LIGHT_DIRECTION: tuple[float, float, float] = (-0.3, -0.8, 0.6)
+
+#: From the object towards the eye in :func:`render_lods_figure`: south-west, 25 degrees up.
+FIGURE_DIRECTION: tuple[float, float, float] = (
+    -math.cos(math.radians(25.0)) * math.sqrt(0.5),
+    -math.cos(math.radians(25.0)) * math.sqrt(0.5),
+    math.sin(math.radians(25.0)),
+)
+
+_VERTEX_SHADER = """
+#version 330
+uniform mat4 u_view_proj;
+in vec3 in_position;
+in vec3 in_normal;
+in vec4 in_color;
+out vec3 v_normal;
+out vec3 v_color;
+void main() {
+    gl_Position = u_view_proj * vec4(in_position, 1.0);
+    v_normal = in_normal;
+    v_color = in_color.rgb;
+}
+"""
+
+_FRAGMENT_SHADER = """
+#version 330
+uniform vec3 u_light_dir;
+uniform float u_ambient;
+in vec3 v_normal;
+in vec3 v_color;
+out vec4 f_color;
+void main() {
+    // Meshes are in scene-local world space (no model matrix), so the normal needs no
+    // transform; renormalise because interpolation shortens it.
+    float diffuse = max(dot(normalize(v_normal), u_light_dir), 0.0);
+    f_color = vec4(v_color * (u_ambient + (1.0 - u_ambient) * diffuse), 1.0);
+}
+"""
+
+# Interleaved vertex: position, normal (float32) and an RGBA8 colour. 28 bytes keeps
+# every attribute 4-byte aligned; alpha is padding.
+_VERTEX_DTYPE = np.dtype([("p", "<f4", 3), ("n", "<f4", 3), ("c", "u1", 4)])
+_VERTEX_FORMAT = "3f 3f 4f1"
+
+
+class _GpuMesh:
+    """The GL objects of one uploaded mesh (holds the mesh so its id() stays unique)."""
+
+    __slots__ = ("mesh", "vbo", "ibo", "vao")
+
+    def __init__(
+        self,
+        mesh: Mesh,
+        vbo: moderngl.Buffer,
+        ibo: moderngl.Buffer,
+        vao: moderngl.VertexArray,
+    ) -> None:
+        self.mesh = mesh
+        self.vbo = vbo
+        self.ibo = ibo
+        self.vao = vao
+
+    def release(self) -> None:
+        self.vao.release()
+        self.ibo.release()
+        self.vbo.release()
+
+
+class MeshRenderer:
+    """Uploads :class:`~shared.records.Mesh` objects and draws them offscreen.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context, optional
+        Context to draw with.  When omitted the renderer creates one with
+        :func:`shared.gl.create_context` and releases it in :meth:`close`; a context
+        that is passed in stays the caller's.
+    light_dir : (3,) float
+        Direction towards the light, world space (normalised here).
+    ambient : float
+        Share of the base colour lit regardless of the light (0..1).
+    background : (3,) int
+        Clear colour, sRGB 0-255.
+
+    Notes
+    -----
+    Uploaded meshes are keyed by identity (``Mesh`` holds arrays, so it is not
+    hashable); the renderer keeps a reference to each so that an id is never reused
+    while its buffers live.  Call :meth:`forget` to drop one, :meth:`close` for all.
+    """
+
+    def __init__(
+        self,
+        ctx: moderngl.Context | None = None,
+        light_dir: ArrayLike = LIGHT_DIRECTION,
+        ambient: float = 0.35,
+        background: tuple[int, int, int] = BACKGROUND_RGB,
+    ) -> None:
+        light = np.asarray(light_dir, dtype=np.float64).reshape(3)
+        if not np.linalg.norm(light) > 0:
+            raise ValueError(
+                f"MeshRenderer.light_dir: expected a non-zero vector, got {light_dir!r}"
+            )
+        if not 0.0 <= ambient <= 1.0:
+            raise ValueError(f"MeshRenderer.ambient: expected 0..1, got {ambient}")
+        r, g, b = (int(c) for c in background)
+        self.background: tuple[int, int, int] = (r, g, b)
+        # Validate before creating a context, so a bad argument leaks nothing.
+        self._own_ctx = ctx is None
+        self.ctx: moderngl.Context = create_context() if ctx is None else ctx
+        self._meshes: dict[int, _GpuMesh] = {}
+        self._fb: Framebuffer | None = None
+        self._prog: moderngl.Program | None = None
+        try:
+            self._prog = self.ctx.program(
+                vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER
+            )
+        except Exception as exc:
+            self.close()
+            raise RenderError(f"MeshRenderer: shader program failed: {exc}") from exc
+        self._uniform("u_light_dir").value = tuple(light / np.linalg.norm(light))
+        self._uniform("u_ambient").value = float(ambient)
+
+    def _uniform(self, name: str) -> moderngl.Uniform:
+        if self._prog is None:
+            raise RenderError("MeshRenderer: used after close()")
+        u = self._prog[name]
+        assert isinstance(u, moderngl.Uniform), f"{name} is not a uniform"
+        return u
+
+    # -- buffers -------------------------------------------------------------------
+
+    @property
+    def uploaded(self) -> int:
+        """Number of meshes with live GPU buffers."""
+        return len(self._meshes)
+
+    def upload(self, mesh: Mesh) -> None:
+        """Create the vertex and index buffers of ``mesh`` (no-op if already uploaded).
+
+        A mesh without triangles gets no buffers (GL cannot make empty ones) and is
+        skipped when drawing.
+        """
+        if id(mesh) in self._meshes or mesh.triangles == 0:
+            return
+        if self._prog is None:
+            raise RenderError("MeshRenderer: used after close()")
+        verts = np.empty(len(mesh.positions), _VERTEX_DTYPE)
+        verts["p"] = mesh.positions
+        verts["n"] = mesh.normals
+        verts["c"][:, :3] = material_rgb(mesh.materials)
+        verts["c"][:, 3] = 255
+        vbo = self.ctx.buffer(verts.tobytes())
+        ibo = self.ctx.buffer(np.ascontiguousarray(mesh.indices, dtype="<u4").tobytes())
+        try:
+            vao = self.ctx.vertex_array(
+                self._prog,
+                [(vbo, _VERTEX_FORMAT, "in_position", "in_normal", "in_color")],
+                index_buffer=ibo,
+                index_element_size=4,
+            )
+        except Exception:
+            ibo.release()
+            vbo.release()
+            raise
+        self._meshes[id(mesh)] = _GpuMesh(mesh, vbo, ibo, vao)
+
+    def forget(self, mesh: Mesh) -> None:
+        """Release the buffers of ``mesh`` (no-op if it was not uploaded)."""
+        gm = self._meshes.pop(id(mesh), None)
+        if gm is not None:
+            gm.release()
+
+    # -- drawing -------------------------------------------------------------------
+
+    def _framebuffer(self, size: tuple[int, int]) -> Framebuffer:
+        # Reuse the framebuffer while the size stays the same (the usual case per frame).
+        w, h = (int(v) for v in size)
+        if self._fb is None or self._fb.size != (w, h):
+            if self._fb is not None:
+                self._fb.release()
+                self._fb = None
+            self._fb = Framebuffer(self.ctx, (w, h))
+        return self._fb
+
+    def draw(
+        self,
+        meshes: Iterable[Mesh],
+        view: ArrayLike,
+        proj: ArrayLike,
+        size: tuple[int, int],
+        viewport: tuple[int, int, int, int] | None = None,
+        clear: bool = True,
+    ) -> None:
+        """Draw into the internal framebuffer without reading it back.
+
+        Parameters
+        ----------
+        meshes : iterable of Mesh
+            Uploaded on first use.
+        view, proj : (4, 4) float
+            Camera matrices (see :mod:`shared.camera`).
+        size : (int, int)
+            Framebuffer width and height in pixels.
+        viewport : (x, y, w, h), optional
+            Sub-rectangle to draw into (GL convention: y from the bottom); default is
+            the whole framebuffer.
+        clear : bool
+            Clear colour and depth of the whole framebuffer first.
+        """
+        if self._prog is None:
+            raise RenderError("MeshRenderer: used after close()")
+        fb = self._framebuffer(size)
+        fb.use()
+        if clear:
+            r, g, b = (c / 255.0 for c in self.background)
+            fb.clear((r, g, b, 1.0))
+        if viewport is not None:
+            x, y, vw, vh = (int(v) for v in viewport)
+            self.ctx.viewport = (x, y, vw, vh)
+        vp = np.asarray(proj, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
+        self._uniform("u_view_proj").write(mat4_bytes(vp))
+        # Set on every draw: the context may be shared with code that changes state.
+        self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
+        self.ctx.front_face = "ccw"
+        self.ctx.cull_face = "back"
+        for mesh in meshes:
+            self.upload(mesh)
+            gm = self._meshes.get(id(mesh))
+            if gm is not None:
+                gm.vao.render()
+        check_gl_error(self.ctx, "after MeshRenderer.draw")
+
+    def read(self) -> NDArray[np.uint8]:
+        """The last drawn image, ``(h, w, 3) uint8``, row 0 at the top."""
+        if self._fb is None:
+            raise RenderError("MeshRenderer.read: nothing drawn yet")
+        return self._fb.read(components=3)
+
+    def render(
+        self,
+        meshes: Iterable[Mesh],
+        view: ArrayLike,
+        proj: ArrayLike,
+        size: tuple[int, int],
+    ) -> NDArray[np.uint8]:
+        """Draw ``meshes`` and read the image back.
+
+        Parameters
+        ----------
+        meshes : iterable of Mesh
+        view, proj : (4, 4) float
+            Camera matrices (see :mod:`shared.camera`).
+        size : (int, int)
+            Width and height in pixels.
+
+        Returns
+        -------
+        (h, w, 3) uint8
+            sRGB image, row 0 at the top.
+        """
+        self.draw(meshes, view, proj, size)
+        return self.read()
+
+    # -- lifetime ------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Release every GL object made here (and the context, if it was made here)."""
+        for gm in self._meshes.values():
+            gm.release()
+        self._meshes.clear()
+        if self._fb is not None:
+            self._fb.release()
+            self._fb = None
+        if self._prog is not None:
+            self._prog.release()
+            self._prog = None
+        if self._own_ctx:
+            self.ctx.release()
+            self._own_ctx = False
+
+    def __enter__(self) -> MeshRenderer:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def _bounds(mesh: Mesh) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """Bounding box of the vertices that triangles use, or None for an empty mesh."""
+    if mesh.triangles == 0:
+        return None
+    used = mesh.positions[np.unique(mesh.indices)].astype(np.float64)
+    return used.min(axis=0), used.max(axis=0)
+
+
+def render_lods_figure(
+    meshes: Sequence[Mesh],
+    path: str | os.PathLike[str],
+    size: tuple[int, int] = (1200, 500),
+    titles: Sequence[str] = ("LOD0", "LOD1", "LOD2"),
+    ctx: moderngl.Context | None = None,
+    supersample: int = 2,
+) -> None:
+    """Draw meshes side by side into a PNG, each framed by its own bounding box.
+
+    All panels use the same 3/4 view direction (:data:`FIGURE_DIRECTION`, from the
+    south-west and 25 degrees above), so the LODs of one building compare directly.
+    Each panel is titled with its name and triangle count.
+
+    Parameters
+    ----------
+    meshes : sequence of Mesh
+        One panel each, left to right.
+    path : path-like
+        Output PNG.
+    size : (int, int)
+        Width and height of the PNG in pixels.
+    titles : sequence of str
+        Panel names; panels beyond ``len(titles)`` are called ``LOD<i>``.
+    ctx : moderngl.Context, optional
+        Context to draw with (default: a new one, released afterwards).
+    supersample : int
+        Render each panel this many times larger and average down (anti-aliasing
+        without relying on driver MSAA support).
+    """
+    # Agg through the object API: no pyplot global state, no GUI backend selection.
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    if not meshes:
+        raise ValueError("render_lods_figure: expected at least one mesh, got none")
+    w, h = (int(v) for v in size)
+    n = len(meshes)
+    title_px = min(40, h // 4)
+    pad = 4
+    panel_w = max(1, w // n - 2 * pad)
+    panel_h = max(1, h - title_px - 2 * pad)
+    ss = max(1, int(supersample))
+    fovy = 30.0
+
+    images: list[NDArray[np.uint8]] = []
+    with MeshRenderer(ctx) as r:
+        for mesh in meshes:
+            box = _bounds(mesh)
+            if box is None:
+                images.append(np.empty((panel_h, panel_w, 3), np.uint8))
+                images[-1][:] = r.background
+                continue
+            view, proj = fit_view(box[0], box[1], FIGURE_DIRECTION, fovy, panel_w / panel_h)
+            img = r.render([mesh], view, proj, (panel_w * ss, panel_h * ss))
+            img = img.reshape(panel_h, ss, panel_w, ss, 3).mean(axis=(1, 3))
+            images.append(np.round(img).astype(np.uint8))
+
+    dpi = 100
+    fig = Figure(figsize=(w / dpi, h / dpi), dpi=dpi, facecolor="white")
+    FigureCanvasAgg(fig)
+    for i, (mesh, img) in enumerate(zip(meshes, images, strict=True)):
+        name = titles[i] if i < len(titles) else f"LOD{i}"
+        ax = fig.add_axes(
+            (
+                (i * (w / n) + pad) / w,
+                pad / h,
+                panel_w / w,
+                panel_h / h,
+            )
+        )
+        ax.imshow(img, interpolation="nearest", aspect="auto")
+        ax.set_axis_off()
+        ax.set_title(f"{name}: {mesh.triangles:,} triangles", fontsize=12, pad=6)
+    fig.savefig(os.fspath(path), dpi=dpi, format="png")

@@ -1,0 +1,240 @@
+"""Camera matrices (pure numpy) for the client renderer and the visibility bake.
+
+Conventions, the same as OpenGL's fixed pipeline had:
+
+* Matrices are ``(4, 4)`` and act on column vectors: ``p_clip = proj @ view @ p``.
+  GLSL expects column-major storage, so upload ``m.T`` (:func:`mat4_bytes` does it).
+* The world is z-up (x east, y north).  View space is right-handed with the camera
+  looking down ``-z`` and ``+y`` up on screen.
+* :func:`perspective` maps view depth ``-near`` to NDC ``z = -1`` and ``-far`` to
+  ``z = +1``.
+
+The maths runs in float64 (eye positions may be hundreds of metres from the
+scene-local origin) and only the results are float32, as they go to the GPU as such.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "CUBE_FACE_DIRECTIONS",
+    "CUBE_FACE_NAMES",
+    "CUBE_FACE_UPS",
+    "cube_face_views",
+    "fit_view",
+    "look_at",
+    "mat4_bytes",
+    "perspective",
+]
+
+F32 = NDArray[np.float32]
+
+#: The six 90-degree cube-face view directions, ``(6, 3) float64``, in the order of
+#: :data:`CUBE_FACE_NAMES`.
+CUBE_FACE_DIRECTIONS: NDArray[np.float64] = np.array(
+    [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float64
+)
+CUBE_FACE_DIRECTIONS.flags.writeable = False
+
+#: Screen-up vector of each cube face, ``(6, 3) float64``: world up (+z) for the four
+#: horizontal faces; the up and down faces cannot use +z (it is their view axis), so
+#: they take +y (north at the top of the image).
+CUBE_FACE_UPS: NDArray[np.float64] = np.array(
+    [[0, 0, 1], [0, 0, 1], [0, 0, 1], [0, 0, 1], [0, 1, 0], [0, 1, 0]], dtype=np.float64
+)
+CUBE_FACE_UPS.flags.writeable = False
+
+#: Names of the cube faces, in order.
+CUBE_FACE_NAMES: tuple[str, ...] = ("+x", "-x", "+y", "-y", "+z", "-z")
+
+
+def _vec3(v: ArrayLike, name: str) -> NDArray[np.float64]:
+    a = np.asarray(v, dtype=np.float64).reshape(-1)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: expected 3 finite numbers, got {v!r}")
+    return a
+
+
+def perspective(fovy_deg: float, aspect: float, near: float, far: float) -> F32:
+    """OpenGL perspective projection (like ``gluPerspective``).
+
+    Parameters
+    ----------
+    fovy_deg : float
+        Vertical field of view in degrees, in (0, 180).
+    aspect : float
+        Width over height of the viewport (> 0).
+    near, far : float
+        Distances of the clip planes, ``0 < near < far``.
+
+    Returns
+    -------
+    (4, 4) float32
+        Maps view-space depth ``-near`` to NDC ``z = -1`` and ``-far`` to ``+1``.
+    """
+    if not 0.0 < fovy_deg < 180.0:
+        raise ValueError(f"perspective: fovy_deg must be in (0, 180), got {fovy_deg}")
+    if not aspect > 0.0:
+        raise ValueError(f"perspective: aspect must be > 0, got {aspect}")
+    if not 0.0 < near < far or not math.isfinite(far):
+        raise ValueError(f"perspective: expected 0 < near < far < inf, got near={near}, far={far}")
+    f = 1.0 / math.tan(math.radians(fovy_deg) / 2.0)
+    n, fa = float(near), float(far)
+    m = np.zeros((4, 4), np.float64)
+    m[0, 0] = f / aspect
+    m[1, 1] = f
+    m[2, 2] = (fa + n) / (n - fa)
+    m[2, 3] = 2.0 * fa * n / (n - fa)
+    m[3, 2] = -1.0
+    return m.astype(np.float32)
+
+
+def _look_at64(
+    eye: NDArray[np.float64], target: NDArray[np.float64], up: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    fwd = target - eye
+    dist = np.linalg.norm(fwd)
+    if not dist > 0.0:
+        raise ValueError(f"look_at: eye and target coincide at {eye.tolist()}")
+    fwd = fwd / dist
+    side = np.cross(fwd, up)
+    sn = np.linalg.norm(side)
+    # A relative threshold: up nearly parallel to the view axis gives an unstable roll.
+    if not sn > 1e-9 * max(float(np.linalg.norm(up)), 1e-300):
+        raise ValueError(
+            f"look_at: up {up.tolist()} is parallel to the view direction {fwd.tolist()}"
+        )
+    side = side / sn
+    true_up = np.cross(side, fwd)
+    m = np.eye(4, dtype=np.float64)
+    m[0, :3] = side
+    m[1, :3] = true_up
+    m[2, :3] = -fwd
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m
+
+
+def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> F32:
+    """View matrix of a camera at ``eye`` looking at ``target`` (like ``gluLookAt``).
+
+    Parameters
+    ----------
+    eye, target : (3,) float
+        Camera position and the point it looks at, scene-local metres.
+    up : (3,) float
+        Approximate screen-up direction; must not be parallel to ``target - eye``.
+
+    Returns
+    -------
+    (4, 4) float32
+        Rigid transform to view space: ``eye`` goes to the origin and ``target`` onto
+        the negative z axis.
+
+    Raises
+    ------
+    ValueError
+        When ``eye == target`` or ``up`` is parallel to the view direction.
+    """
+    return _look_at64(_vec3(eye, "eye"), _vec3(target, "target"), _vec3(up, "up")).astype(
+        np.float32
+    )
+
+
+def cube_face_views(eye: ArrayLike) -> F32:
+    """The six 90-degree cube-face view matrices at a point.
+
+    Used with ``perspective(90.0, 1.0, near, far)`` the six frusta tile the whole
+    sphere of directions around ``eye`` without gaps (they share their edges).
+
+    Parameters
+    ----------
+    eye : (3,) float
+        The sample point, scene-local metres.
+
+    Returns
+    -------
+    (6, 4, 4) float32
+        One view matrix per face, looking along :data:`CUBE_FACE_DIRECTIONS` with the
+        screen-up of :data:`CUBE_FACE_UPS` (order of :data:`CUBE_FACE_NAMES`).
+    """
+    e = _vec3(eye, "eye")
+    out = np.empty((6, 4, 4), np.float32)
+    for k in range(6):
+        out[k] = _look_at64(e, e + CUBE_FACE_DIRECTIONS[k], CUBE_FACE_UPS[k])
+    return out
+
+
+def fit_view(
+    bounds_min: ArrayLike,
+    bounds_max: ArrayLike,
+    direction: ArrayLike,
+    fovy_deg: float,
+    aspect: float,
+    margin: float = 1.08,
+    up: ArrayLike = (0.0, 0.0, 1.0),
+) -> tuple[F32, F32]:
+    """Frame an axis-aligned box from a given direction.
+
+    The camera looks at the box centre from ``direction`` (pointing from the box to
+    the eye) and backs off just far enough for all eight corners to fit in the view
+    with ``margin`` to spare; near and far hug the box.
+
+    Parameters
+    ----------
+    bounds_min, bounds_max : (3,) float
+        Opposite corners of the box (a flat or empty-size box is fine).
+    direction : (3,) float
+        From the box centre towards the eye (need not be unit length).
+    fovy_deg, aspect : float
+        As for :func:`perspective`.
+    margin : float
+        Scale (>= 1) of the box's extent on screen; 1 touches the image border.
+    up : (3,) float
+        Screen-up direction.
+
+    Returns
+    -------
+    view, proj : (4, 4) float32, (4, 4) float32
+    """
+    lo, hi = _vec3(bounds_min, "bounds_min"), _vec3(bounds_max, "bounds_max")
+    d = _vec3(direction, "direction")
+    if not np.linalg.norm(d) > 0.0:
+        raise ValueError("fit_view: direction must not be zero")
+    d = d / np.linalg.norm(d)
+    centre = (lo + hi) / 2.0
+    # Floor the size so a single point or a degenerate box still gets a usable camera.
+    size = max(float(np.linalg.norm(hi - lo)), 1e-3)
+    rot = _look_at64(centre + d, centre, _vec3(up, "up"))[:3, :3]
+    corners = np.array(
+        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    )
+    local = (corners - centre) @ rot.T  # corner offsets in camera axes (x right, y up, -z fwd)
+    tan_y = math.tan(math.radians(fovy_deg) / 2.0) / margin
+    tan_x = tan_y * aspect
+    # A corner at view offset (x, y, z) relative to the centre has depth dist - z when
+    # the eye is at distance dist; it fits when |x| <= tan_x * (dist - z) and likewise y.
+    dist = float(
+        np.max(
+            np.maximum(
+                local[:, 2] + np.abs(local[:, 0]) / tan_x, local[:, 2] + np.abs(local[:, 1]) / tan_y
+            )
+        )
+    )
+    dist = max(dist, size * 0.5, 1e-3)
+    depths = dist - local[:, 2]
+    near = max(float(depths.min()) * 0.9, dist * 1e-3)
+    far = max(float(depths.max()) * 1.1, near * 2.0)
+    view = _look_at64(centre + d * dist, centre, _vec3(up, "up")).astype(np.float32)
+    return view, perspective(fovy_deg, aspect, near, far)
+
+
+def mat4_bytes(m: ArrayLike) -> bytes:
+    """Column-major float32 bytes of a ``(4, 4)`` matrix, as a GLSL ``mat4`` uniform wants."""
+    a = np.asarray(m, dtype=np.float32)
+    if a.shape != (4, 4):
+        raise ValueError(f"mat4_bytes: expected a (4, 4) matrix, got shape {a.shape}")
+    return np.ascontiguousarray(a.T).tobytes()

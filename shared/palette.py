@@ -1,0 +1,72 @@
+"""Material colours shared by the client renderer and the glTF export.
+
+Material ids are the ``Mesh.materials`` values written by the building grammar and
+the street builder.  The table is plain data so that the renderer, the exporter and
+any report draw a given material in the same colour.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["MATERIALS", "PALETTE", "UNKNOWN_RGB", "material_name", "material_rgb"]
+
+#: ``(id, name, (r, g, b))`` per material id, sRGB 0-255; the id is the row index.
+MATERIALS: tuple[tuple[int, str, tuple[int, int, int]], ...] = (
+    (0, "wall", (222, 204, 170)),  # warm beige
+    (1, "window", (72, 86, 102)),  # dark blue-grey
+    (2, "door", (112, 74, 46)),  # brown
+    (3, "roof", (116, 84, 82)),  # dark red-grey
+    (4, "ledge", (204, 204, 200)),  # ledge / cornice: light grey
+    (5, "street", (92, 94, 98)),  # asphalt grey
+    (6, "crossroad", (110, 110, 116)),  # a slightly different grey, so junctions read
+    (7, "square", (200, 186, 158)),  # paving beige
+    (8, "party_wall", (192, 174, 142)),  # slightly darker than a wall
+)
+
+#: Colour of a material id outside the table: loud magenta, so that a grammar bug
+#: shows up in a picture instead of passing as a plausible grey.
+UNKNOWN_RGB: tuple[int, int, int] = (255, 0, 255)
+
+
+def _table() -> NDArray[np.uint8]:
+    # 256 rows so any uint8 id indexes without a bounds check; unknown ids get magenta.
+    t = np.empty((256, 3), np.uint8)
+    t[:] = UNKNOWN_RGB
+    for i, (mid, _, rgb) in enumerate(MATERIALS):
+        assert mid == i, "MATERIALS must be listed in id order"
+        t[mid] = rgb
+    t.flags.writeable = False
+    return t
+
+
+#: ``(256, 3) uint8`` read-only lookup table: ``PALETTE[material_id]`` is its sRGB colour.
+PALETTE: NDArray[np.uint8] = _table()
+
+
+def material_rgb(materials: ArrayLike) -> NDArray[np.uint8]:
+    """Colours of material ids.
+
+    Parameters
+    ----------
+    materials : (n,) integer array
+        Material ids (``Mesh.materials``).  Ids outside 0..255 or not in
+        :data:`MATERIALS` get :data:`UNKNOWN_RGB`.
+
+    Returns
+    -------
+    (n, 3) uint8
+        sRGB colour per id (a new, writable array).
+    """
+    m = np.asarray(materials).reshape(-1).astype(np.int64)
+    out = PALETTE[np.clip(m, 0, 255)]  # fancy indexing copies, so the result is writable
+    out[(m < 0) | (m > 255)] = UNKNOWN_RGB
+    return out
+
+
+def material_name(material_id: int) -> str:
+    """Name of a material id (``"unknown"`` when it is not in :data:`MATERIALS`)."""
+    if 0 <= material_id < len(MATERIALS):
+        return MATERIALS[material_id][1]
+    return "unknown"
