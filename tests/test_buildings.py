@@ -178,3 +178,30 @@ def test_style_seed_varies_the_facade() -> None:
     a = build_lod(building([rect(40, 10)], floors=2, style=1), 2).triangles
     b = [build_lod(building([rect(40, 10)], floors=2, style=s), 2).triangles for s in range(2, 12)]
     assert any(x != a for x in b)
+
+
+def test_far_from_origin_footprint_rebuilds_like_one_at_the_origin() -> None:
+    """Projected coordinates of millions of metres reach the builder as local float64."""
+    from server.sources.geojson import load_geojson_dict
+
+    def fc(x0: float, y0: float) -> dict:
+        ring = (rect(23.37, 11.91) + [x0, y0]).tolist()
+        ring.append(ring[0])
+        return {
+            "type": "FeatureCollection",
+            "crs": {"type": "name", "properties": {"name": "EPSG:32633"}},
+            "features": [
+                {"type": "Feature", "id": "a", "properties": {"floors": 4},
+                 "geometry": {"type": "Polygon", "coordinates": [ring]}},
+            ],
+        }
+
+    far = load_geojson_dict(fc(612_345.678, 5_000_000.123)).buildings[0]
+    near = load_geojson_dict(fc(0.0, 0.0)).buildings[0]
+    for lod in (0, 1, 2):
+        a, b = build_lod(far, lod), build_lod(near, lod)
+        assert a.triangles == b.triangles
+        # same local geometry once each scene's own origin is taken away
+        da = a.positions - a.positions.min(axis=0)
+        db = b.positions - b.positions.min(axis=0)
+        assert np.abs(da - db).max() < 1e-3
