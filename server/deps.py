@@ -1,0 +1,600 @@
+"""Per-scene state of the service and the FastAPI dependencies that hand it out.
+
+Everything a request needs is prepared when the app starts or on the first request
+that needs it, so that answering costs about as much as serving a static file:
+
+* each database is opened read-only with :class:`server.store.SceneReader` (which
+  validates it) and every cell is read once, which builds the
+  :class:`server.cells.CellLocator`, keeps every cell boundary (neighbour records
+  need them) and decodes every PVS, so a damaged file stops the start;
+* the manifest is encoded at start-up in both representations (msgpack and JSON);
+* cell records and recorded paths are encoded on first use and kept in a
+  byte-bounded LRU;
+* object frames (see :mod:`server.routes`) are encoded on first use and kept in a
+  second byte-bounded LRU; which ids exist and their kinds are known from start-up,
+  so an unknown id is answered without touching the database.
+
+A scene is immutable (a recorded path makes a *new* scene version in a new file), so
+nothing cached here ever needs invalidating; a restart serves the new version.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import json
+import math
+import os
+import re
+import threading
+from collections import OrderedDict
+from collections.abc import Hashable, Iterable, Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any, Literal, cast
+
+import msgpack
+from fastapi import Request
+
+from server.cells import CELL_KINDS as LOCATOR_KINDS
+from server.cells import CellLocator, ViewCell
+from server.store import CellInfo, SceneReader, StoreError
+from shared.codec import unpack_bounded
+from shared.errors import CodecError, WalkstreamError
+
+__all__ = [
+    "MSGPACK",
+    "JSON",
+    "MAX_IDS",
+    "IMMUTABLE",
+    "Rep",
+    "ApiError",
+    "Encoded",
+    "LRU",
+    "Scene",
+    "SceneRegistry",
+    "encode",
+    "etag_for",
+    "etag_matches",
+    "negotiate",
+    "get_registry",
+    "get_scene",
+    "get_rep",
+]
+
+MSGPACK = "application/msgpack"
+"""Media type of every msgpack response (the default representation)."""
+JSON = "application/json"
+"""Media type of the JSON representation and of every error."""
+MSGPACK_TYPES = frozenset({MSGPACK, "application/x-msgpack", "application/vnd.msgpack"})
+"""Media types accepted as msgpack in ``Accept`` and ``Content-Type``."""
+
+MAX_IDS = 1000
+"""Most object ids one ``POST .../objects`` may ask for (more: 413)."""
+
+IMMUTABLE = "public, max-age=31536000, immutable"
+"""Cache-Control of everything keyed by a scene version."""
+
+Rep = Literal["msgpack", "json"]
+"""A representation: msgpack (default) or JSON."""
+
+_MEDIA: dict[str, str] = {"msgpack": MSGPACK, "json": JSON}
+
+# an ETag's resource part is written as is when it is made of these, else hashed
+# (ETags may not hold spaces or quotes, and recorded path names may)
+_SAFE_TAG = re.compile(r"[A-Za-z0-9._:+-]{1,120}")
+
+# LRU budgets per scene: enough for every cell and object of a large city, small
+# enough that several scenes fit in one worker
+_BODY_CACHE_BYTES = 64 << 20
+_FRAME_CACHE_BYTES = 128 << 20
+# a recorded path larger than this is not decoded for the JSON representation
+_MAX_PATH_JSON_BYTES = 8 << 20
+
+
+class ApiError(WalkstreamError):
+    """A request the service refuses, with its HTTP status and a JSON ``detail``.
+
+    Turned into ``{"error": message, "detail": detail}`` by the app's handler.
+    """
+
+    def __init__(self, status: int, message: str, detail: Any = None) -> None:
+        super().__init__(message)
+        self.status = status
+        self.message = message
+        self.detail = detail
+
+
+# ---------------------------------------------------------------------------
+# representations, ETags
+# ---------------------------------------------------------------------------
+
+
+def negotiate(accept: str | None) -> Rep:
+    """The representation an ``Accept`` header asks for.
+
+    msgpack unless ``application/json`` has a higher quality than every msgpack
+    type; a missing header, ``*/*`` or types the service does not serve also give
+    msgpack (the default), never a 406.
+    """
+    if not accept:
+        return "msgpack"
+    # clients send few distinct headers, so parsing is cached; odd long ones are not,
+    # so that they cannot fill the cache with large strings
+    return _negotiate_cached(accept) if len(accept) <= 256 else _negotiate(accept)
+
+
+@lru_cache(maxsize=256)
+def _negotiate_cached(accept: str) -> Rep:
+    return _negotiate(accept)
+
+
+def _negotiate(accept: str) -> Rep:
+    q_json = q_msgpack = -1.0
+    for part in accept.split(","):
+        media, *params = part.split(";")
+        media = media.strip().lower()
+        q = 1.0
+        for p in params:
+            key, _, value = p.partition("=")
+            if key.strip().lower() == "q":
+                try:
+                    q = float(value.strip())
+                except ValueError:
+                    q = 0.0
+                if not math.isfinite(q):
+                    q = 0.0
+        if media == JSON:
+            q_json = max(q_json, q)
+        elif media in MSGPACK_TYPES:
+            q_msgpack = max(q_msgpack, q)
+    return "json" if q_json > 0 and q_json > q_msgpack else "msgpack"
+
+
+def etag_for(version: str, resource: str, rep: str) -> str:
+    """A strong ETag naming the scene version, the resource and the representation."""
+    tag = resource if _SAFE_TAG.fullmatch(resource) else "h" + _digest(resource.encode())
+    return f'"{version}-{tag}-{rep}"'
+
+
+def etag_matches(if_none_match: str | None, etag: str) -> bool:
+    """Whether an ``If-None-Match`` header matches ``etag`` (weak comparison, RFC 9110)."""
+    if not if_none_match:
+        return False
+    if if_none_match.strip() == "*":
+        return True
+    for t in if_none_match.split(","):
+        t = t.strip()
+        if t.startswith("W/"):
+            t = t[2:]
+        if t == etag:
+            return True
+    return False
+
+
+def _digest(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()[:20]
+
+
+def dump_json(obj: Any) -> bytes:
+    """Compact UTF-8 JSON; refuses NaN and infinities (they are not JSON)."""
+    return json.dumps(obj, separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode()
+
+
+def dump_msgpack(obj: Any) -> bytes:
+    """msgpack with ``bin`` for bytes and float64 for floats."""
+    data: bytes = msgpack.packb(obj, use_bin_type=True)
+    return data
+
+
+@dataclass(frozen=True, slots=True)
+class Encoded:
+    """A response body ready to send: bytes, media type and ETag."""
+
+    content: bytes
+    media_type: str
+    etag: str
+
+
+def encode(obj: Any, rep: Rep, version: str, resource: str) -> Encoded:
+    """Encode ``obj`` in representation ``rep`` with its ETag."""
+    content = dump_json(obj) if rep == "json" else dump_msgpack(obj)
+    return Encoded(content, _MEDIA[rep], etag_for(version, resource, rep))
+
+
+# ---------------------------------------------------------------------------
+# LRU
+# ---------------------------------------------------------------------------
+
+
+class LRU:
+    """A thread-safe least-recently-used map of byte strings bounded by total size.
+
+    Lookups happen on the event loop and fills from worker threads (after a
+    database read), hence the lock; it is held for dictionary operations only.
+    """
+
+    def __init__(self, max_bytes: int) -> None:
+        self._data: OrderedDict[Hashable, Any] = OrderedDict()
+        self._sizes: dict[Hashable, int] = {}
+        self._bytes = 0
+        self._max = max_bytes
+        self._lock = threading.Lock()
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    def get(self, key: Hashable) -> Any:
+        """The value under ``key`` (marked as recently used), or None."""
+        with self._lock:
+            value = self._data.get(key)
+            if value is not None:
+                self._data.move_to_end(key)
+            return value
+
+    def get_many(self, keys: Iterable[Hashable]) -> tuple[dict[Hashable, Any], list[Hashable]]:
+        """``(found, missing)`` for many keys under one lock; ``missing`` without repeats."""
+        found: dict[Hashable, Any] = {}
+        missing: dict[Hashable, None] = {}
+        with self._lock:
+            for k in keys:
+                if k in found or k in missing:
+                    continue
+                value = self._data.get(k)
+                if value is None:
+                    missing[k] = None
+                else:
+                    self._data.move_to_end(k)
+                    found[k] = value
+        return found, list(missing)
+
+    def put(self, key: Hashable, value: Any, size: int) -> None:
+        """Store ``value`` of ``size`` bytes, dropping the least recently used beyond the budget."""
+        if size > self._max:
+            return  # would evict everything else and still not fit
+        with self._lock:
+            if key in self._data:
+                self._bytes -= self._sizes[key]
+            self._data[key] = value
+            self._data.move_to_end(key)
+            self._sizes[key] = size
+            self._bytes += size
+            while self._bytes > self._max:
+                old, _ = self._data.popitem(last=False)
+                self._bytes -= self._sizes.pop(old)
+
+
+# ---------------------------------------------------------------------------
+# one scene
+# ---------------------------------------------------------------------------
+
+
+def _jsonable(obj: Any) -> Any:
+    """A decoded msgpack value made JSON-able: bytes as base64, non-finite floats as None."""
+    if isinstance(obj, bytes):
+        return {"base64": base64.b64encode(obj).decode("ascii")}
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    return obj
+
+
+class Scene:
+    """One scene database as the service serves it; see the module docstring.
+
+    Build with :meth:`load`.  Thread-safe: the database reader has a connection
+    pool and the caches are locked.
+    """
+
+    def __init__(
+        self,
+        reader: SceneReader,
+        cells: Sequence[CellInfo],
+        kinds: dict[int, str],
+        path_names: Sequence[str],
+    ) -> None:
+        """Private: use :meth:`load`."""
+        meta = reader.meta
+        self.reader = reader
+        self.name: str = meta.name
+        self.version: str = meta.version
+        self.kinds = kinds
+        """Object id -> kind, for every object of the scene."""
+        self.path_names = frozenset(path_names)
+        self.cell_kinds: dict[int, str] = {c.id: c.kind for c in cells}
+        # boundaries as nested lists, encoded into every neighbour entry of a cell record
+        self.boundaries: dict[int, list[list[float]]] = {c.id: c.boundary.tolist() for c in cells}
+        self.locator = CellLocator(
+            [
+                # the locator only uses id and polygon; a kind it does not know
+                # (e.g. "room") is given as "grid" just to pass ViewCell's check
+                ViewCell(
+                    c.id,
+                    c.kind if c.kind in LOCATOR_KINDS else "grid",
+                    c.boundary,
+                    c.zmin,
+                    c.zmax,
+                    (),
+                )
+                for c in cells
+            ]
+        )
+        b = reader.bounds()
+        vps = reader.viewpoints()
+        manifest = {
+            "name": meta.name,
+            "version": meta.version,
+            "schema_version": meta.schema_version,
+            "crs": meta.crs,
+            "origin": list(meta.origin),
+            "bounds": list(b),
+            "features": list(meta.features),
+            "grammar": {"id": meta.grammar_version, "text": meta.grammar_text},
+            "viewpoints": [
+                {"name": v.name, "x": v.x, "y": v.y, "z": v.z, "yaw": v.yaw, "cell": v.cell}
+                for v in vps
+            ],
+            "paths": sorted(path_names),
+            "objects": len(kinds),
+            "cells": len(cells),
+            "limits": {"objects_per_request": MAX_IDS},
+        }
+        self.manifest: dict[Rep, Encoded] = {
+            rep: encode(manifest, rep, self.version, "manifest") for rep in ("msgpack", "json")
+        }
+        self._bodies = LRU(_BODY_CACHE_BYTES)
+        self._frames = LRU(_FRAME_CACHE_BYTES)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Scene:
+        """Open, validate and index a scene database.
+
+        Raises
+        ------
+        StoreError
+            Missing, not a scene database, another schema version, unfinished,
+            damaged (every page is checked, every cell decoded), or a scene name
+            that cannot be part of a URL.  The message names the file.
+        """
+        reader = SceneReader.open(path, check=True)
+        label = os.fspath(path)
+        try:
+            name = reader.meta.name
+            if not name or "/" in name or not name.isprintable():
+                raise StoreError(f"{label}: scene name {name!r:.60} cannot be part of a URL")
+            cells = list(reader.cells())
+            info = reader.object_info(reader.object_ids().tolist())
+            kinds = {oid: i.kind for oid, i in info.items()}
+            return cls(reader, cells, kinds, reader.path_names())
+        except CodecError as exc:
+            reader.close()
+            raise StoreError(f"{label}: damaged database ({exc})") from exc
+        except BaseException:
+            reader.close()
+            raise
+
+    def close(self) -> None:
+        """Close the database (idempotent)."""
+        self.reader.close()
+
+    # -- cells ---------------------------------------------------------------
+
+    def has_cell(self, cid: int) -> bool:
+        """Whether the scene has cell ``cid``."""
+        return cid in self.boundaries
+
+    def cached_cell(self, cid: int, rep: Rep) -> Encoded | None:
+        """The encoded record of cell ``cid`` if it is cached (no database access)."""
+        value: Encoded | None = self._bodies.get(("cell", cid, rep))
+        return value
+
+    def cell(self, cid: int, rep: Rep) -> Encoded:
+        """The encoded record of cell ``cid`` (reads the database on a cache miss).
+
+        The record is ``{id, kind, boundary, zmin, zmax, neighbours: [{id,
+        boundary}], pvs, ach}``; a neighbour id the database has no cell for is left
+        out (nobody can walk into it).
+        """
+        enc = self.cached_cell(cid, rep)
+        if enc is None:
+            c = self.reader.cell(cid)
+            record = {
+                "id": c.id,
+                "kind": c.kind,
+                "boundary": self.boundaries[c.id],
+                "zmin": c.zmin,
+                "zmax": c.zmax,
+                "neighbours": [
+                    {"id": n, "boundary": self.boundaries[n]}
+                    for n in c.neighbours.tolist()
+                    if n in self.boundaries
+                ],
+                "pvs": c.pvs.tolist(),
+                "ach": c.ach.tolist(),
+            }
+            enc = encode(record, rep, self.version, f"cell:{cid}")
+            self._bodies.put(("cell", cid, rep), enc, len(enc.content))
+        return enc
+
+    # -- locate --------------------------------------------------------------
+
+    def locate(self, x: float, y: float, rep: Rep) -> Encoded:
+        """``{cell: id}`` for the cell containing ``(x, y)``, or ``{cell: null, reason}``."""
+        cid = self.locator.locate(x, y)
+        body: dict[str, Any] = (
+            {"cell": None, "reason": "outside every cell"} if cid is None else {"cell": cid}
+        )
+        return encode(body, rep, self.version, f"locate:{x!r}:{y!r}")
+
+    # -- paths ---------------------------------------------------------------
+
+    def cached_path(self, name: str, rep: Rep) -> Encoded | None:
+        """The encoded path ``name`` if it is cached."""
+        value: Encoded | None = self._bodies.get(("path", name, rep))
+        return value
+
+    def path(self, name: str, rep: Rep) -> Encoded:
+        """Recorded path ``name``: the stored msgpack bytes as they are, or as JSON.
+
+        The JSON representation is ``{"name", "data"}`` with ``data`` the decoded
+        msgpack (bytes as ``{"base64": ...}``); a blob that is not msgpack (or too
+        large to decode) is given as ``{"name", "base64"}`` instead.
+        """
+        enc = self.cached_path(name, rep)
+        if enc is not None:
+            return enc
+        blob = self.reader.path_blob(name)
+        tag = f"path:{name}"
+        if rep == "msgpack":
+            enc = Encoded(blob, MSGPACK, etag_for(self.version, tag, rep))
+        else:
+            try:
+                data = unpack_bounded(
+                    blob,
+                    f"path {name!r}",
+                    max_bytes=_MAX_PATH_JSON_BYTES,
+                    max_array_len=len(blob),
+                    max_map_len=len(blob),
+                    max_str_len=len(blob),
+                    max_bin_len=len(blob),
+                )
+                body: dict[str, Any] = {"name": name, "data": _jsonable(data)}
+            except (CodecError, RecursionError):
+                body = {"name": name, "base64": base64.b64encode(blob).decode("ascii")}
+            enc = encode(body, rep, self.version, tag)
+        self._bodies.put(("path", name, rep), enc, len(enc.content))
+        return enc
+
+    # -- objects -------------------------------------------------------------
+
+    def unknown_ids(self, ids: Iterable[int]) -> list[int]:
+        """The ids (first occurrence, in order) the scene has no object for."""
+        seen: dict[int, None] = {}
+        for i in ids:
+            if i not in self.kinds:
+                seen[i] = None
+        return list(seen)
+
+    def cached_frames(self, ids: Sequence[int]) -> tuple[dict[int, bytes], list[int]]:
+        """``(frames found in the cache by id, ids not cached, without repeats)``."""
+        found, missing = self._frames.get_many(ids)
+        return cast(dict[int, bytes], found), cast(list[int], missing)
+
+    def load_frames(self, ids: Sequence[int]) -> dict[int, bytes]:
+        """Read and encode the frames of ``ids`` (known ids) and cache them.
+
+        A frame is the msgpack map ``{"id": int, "kind": str, "params": bin}``.
+        Runs a database query: call it from a worker thread.
+        """
+        params = self.reader.object_params(ids)
+        out: dict[int, bytes] = {}
+        for oid, blob in params.items():
+            frame = dump_msgpack({"id": oid, "kind": self.kinds[oid], "params": blob})
+            self._frames.put(oid, frame, len(frame))
+            out[oid] = frame
+        missing = [i for i in ids if i not in out]
+        if missing:
+            raise ApiError(404, f"scene {self.name!r}: no object {missing[0]}", {"ids": missing})
+        return out
+
+
+# ---------------------------------------------------------------------------
+# all scenes
+# ---------------------------------------------------------------------------
+
+
+class SceneRegistry:
+    """The scenes a service serves, by name."""
+
+    def __init__(self, scenes: Sequence[Scene]) -> None:
+        """Private: use :meth:`open`."""
+        self.scenes: dict[str, Scene] = {s.name: s for s in sorted(scenes, key=lambda s: s.name)}
+        listing = [{"name": s.name, "version": s.version} for s in self.scenes.values()]
+        # the list changes only when the service restarts with other files: validated
+        # with the ETag on every use rather than cached for a year
+        tag = _digest(dump_json(listing))
+        self.listing: dict[Rep, Encoded] = {
+            rep: encode(listing, rep, tag, "scenes") for rep in ("msgpack", "json")
+        }
+
+    @classmethod
+    def open(cls, paths: Sequence[str | os.PathLike[str]]) -> SceneRegistry:
+        """Open and validate every database; all or nothing.
+
+        Raises
+        ------
+        StoreError
+            No path, a database that cannot be served (see :meth:`Scene.load`), or
+            two databases with the same scene name.
+        """
+        if not paths:
+            raise StoreError("no scene database given")
+        scenes: list[Scene] = []
+        where: dict[str, str] = {}
+        try:
+            for p in paths:
+                s = Scene.load(p)
+                scenes.append(s)
+                if s.name in where:
+                    raise StoreError(
+                        f"{os.fspath(p)}: scene name {s.name!r} is already served from "
+                        f"{where[s.name]}; each scene needs its own name"
+                    )
+                where[s.name] = os.fspath(p)
+        except BaseException:
+            for s in scenes:
+                s.close()
+            raise
+        return cls(scenes)
+
+    def get(self, name: str) -> Scene:
+        """The scene called ``name``.
+
+        Raises
+        ------
+        ApiError
+            404 naming the scene and listing the known ones.
+        """
+        scene = self.scenes.get(name)
+        if scene is None:
+            raise ApiError(
+                404, f"unknown scene {name!r:.80}", {"scene": name, "known": list(self.scenes)}
+            )
+        return scene
+
+    def close(self) -> None:
+        """Close every database."""
+        for s in self.scenes.values():
+            s.close()
+
+
+# ---------------------------------------------------------------------------
+# FastAPI dependencies
+# ---------------------------------------------------------------------------
+
+
+# The dependencies are ``async def`` although they never wait: FastAPI runs a plain
+# ``def`` dependency in a worker thread, which would cost more than the request.
+
+
+def _registry(request: Request) -> SceneRegistry:
+    registry: SceneRegistry = request.app.state.scenes
+    return registry
+
+
+async def get_registry(request: Request) -> SceneRegistry:
+    """The app's scenes (set by :func:`server.app.create_app`)."""
+    return _registry(request)
+
+
+async def get_scene(scene: str, request: Request) -> Scene:
+    """The scene named by the ``{scene}`` path parameter; 404 if unknown."""
+    return _registry(request).get(scene)
+
+
+async def get_rep(request: Request) -> Rep:
+    """The representation the request's ``Accept`` header asks for."""
+    return negotiate(request.headers.get("accept"))

@@ -1,0 +1,830 @@
+"""Visibility and average coverage hints (ACH) of a view cell, by rendering ID buffers.
+
+This is the bake step of Marvie et al. (2003), section 2.1: for each view cell, six
+90-degree cameras (the faces of a cube) at a few sample points near the corners of the
+cell render every object with a unique id; the PVS is the set of ids that cover at
+least one pixel of the 48 images and ``ACH_j = N_j / sum(N)`` where ``N_j`` is the
+number of pixels object ``j`` covers over all images.  The sampling is not
+conservative (an object seen only from the inside of the cell is missed);
+:func:`dense_points` gives a denser set of viewpoints to measure what it misses.
+
+How it is made fast enough on a software rasteriser (Mesa llvmpipe):
+
+* all objects live in ONE vertex buffer and ONE index buffer, in Hilbert-curve order of their
+  bounding-box centres, so objects close to each other are contiguous and a
+  frustum-culled set of objects becomes a few contiguous index ranges;
+* each vertex carries the object's local index + 1 and the fragment shader writes it
+  to an ``R32UI`` colour attachment (0 = nothing);
+* all images of a cell are tiles of one framebuffer (a row of 6 faces per sample
+  point), cleared once, read back once and counted with one ``np.bincount``;
+* culling is vectorised numpy: per cell the distance to every bounding box, per cube
+  face a 6-plane frustum test of every bounding box; the ranges of each face are drawn
+  with one ``glMultiDrawElementsIndirect`` call (OpenGL 4.3; older contexts fall back
+  to one draw per range).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
+import shapely
+from numpy.typing import ArrayLike, NDArray
+
+from shared.buildings import build_lod
+from shared.camera import cube_face_views, perspective
+from shared.errors import InputError, RenderError
+from shared.gl import Framebuffer, check_gl_error, create_context
+from shared.records import Mesh
+from shared.streets import build_street
+
+if TYPE_CHECKING:
+    import moderngl
+    from shapely import STRtree
+
+    from server.sources.scene import SourceScene
+
+__all__ = [
+    "VisibilityRenderer",
+    "dense_points",
+    "meshes_for_scene",
+    "pvs_from_counts",
+    "sample_points",
+]
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+
+_VERTEX_SHADER = """
+#version 330
+uniform mat4 mvp;
+in vec3 in_pos;
+in uint in_id;
+flat out uint v_id;
+void main() {
+    gl_Position = mvp * vec4(in_pos, 1.0);
+    v_id = in_id;
+}
+"""
+
+_FRAGMENT_SHADER = """
+#version 330
+flat in uint v_id;
+out uint f_id;
+void main() {
+    f_id = v_id;
+}
+"""
+
+#: Bytes of one DrawElementsIndirectCommand (count, instanceCount, firstIndex,
+#: baseVertex, baseInstance), the stride moderngl uses for render_indirect.
+_INDIRECT_STRIDE = 20
+
+
+# --------------------------------------------------------------------------- scene
+
+
+def meshes_for_scene(scene: SourceScene, lod: int) -> tuple[list[Mesh], I64]:
+    """The meshes and object ids of every object of a scene, as the bake renders them.
+
+    Parameters
+    ----------
+    scene : SourceScene
+        Buildings and street pieces in scene-local metres.
+    lod : int
+        Level of detail of the buildings (0, 1 or 2); street pieces are the same at
+        every level.
+
+    Returns
+    -------
+    meshes : list of Mesh
+        Buildings first (``build_lod``), then street pieces (``build_street``).
+    ids : (n,) int64
+        The object id of each mesh.
+    """
+    meshes = [build_lod(b, lod) for b in scene.buildings]
+    meshes += [build_street(s, lod) for s in scene.streets]
+    ids = np.array([b.id for b in scene.buildings] + [s.id for s in scene.streets], dtype=np.int64)
+    return meshes, ids
+
+
+def _hilbert_key(x: I64, y: I64, bits: int = 16) -> I64:
+    """Distance along a Hilbert curve of integer points ``x, y`` in ``[0, 2**bits)``."""
+    x, y = x.copy(), y.copy()
+    d = np.zeros(len(x), np.int64)
+    s = 1 << (bits - 1)
+    while s > 0:
+        rx = (x & s) > 0
+        ry = (y & s) > 0
+        d += s * s * ((3 * rx.astype(np.int64)) ^ ry.astype(np.int64))
+        # Rotate the quadrant so the sub-curve is traversed in the right orientation
+        # (only the bits below ``s`` matter from here on, so ``s - 1 - x`` is enough).
+        flip = ~ry & rx
+        x[flip], y[flip] = s - 1 - x[flip], s - 1 - y[flip]
+        swap = ~ry
+        x[swap], y[swap] = y[swap], x[swap]
+        s >>= 1
+    return d
+
+
+def _curve_order(centres: F64) -> I64:
+    """Indices that sort points ``(n, 2)`` along a Hilbert curve (ties by index).
+
+    Objects next to each other on the curve are next to each other in space, so a
+    frustum keeps few contiguous runs of them (a Hilbert curve gives about a quarter
+    fewer runs than a Morton curve on a generated city).
+    """
+    if len(centres) == 0:
+        return np.zeros(0, np.int64)
+    lo = centres.min(axis=0)
+    span = float(max((centres.max(axis=0) - lo).max(), 1e-9))
+    q = np.clip((centres - lo) / span * 65535.0, 0, 65535).astype(np.int64)
+    return np.argsort(_hilbert_key(q[:, 0], q[:, 1]), kind="stable").astype(np.int64)
+
+
+# ------------------------------------------------------------------------- culling
+
+
+def _frustum_planes(near: float, far: float) -> tuple[F64, F64, F64]:
+    """Half-space tests of the six cube-face frusta, in world axes relative to the eye.
+
+    A box (relative to the eye) meets face ``f`` only if, for each of its six planes
+    ``k``, ``max over the box of w[f, k] . x >= t[f, k]``.  For face axis ``a`` with
+    sign ``s`` the planes are the four 90-degree sides ``s*x_a >= |x_b|``,
+    ``s*x_a >= |x_c|``, the near plane ``s*x_a >= near`` and the far plane
+    ``s*x_a <= far``.
+
+    Returns
+    -------
+    w_pos, w_neg : (36, 3) float64
+        Positive and negative parts of the plane normals (face-major), so that the box
+        maximum is ``hi @ w_pos.T + lo @ w_neg.T``.
+    t : (36,) float64
+        The thresholds.
+    """
+    w = np.zeros((6, 6, 3))
+    t = np.zeros((6, 6))
+    for f in range(6):
+        a, s = f // 2, (1.0 if f % 2 == 0 else -1.0)  # order +x -x +y -y +z -z
+        b, c = [k for k in range(3) if k != a]
+        for k, (axis, sign) in enumerate(((b, 1.0), (b, -1.0), (c, 1.0), (c, -1.0))):
+            w[f, k, a] = s
+            w[f, k, axis] = sign
+        w[f, 4, a] = s
+        t[f, 4] = near
+        w[f, 5, a] = -s
+        t[f, 5] = -far
+    flat = w.reshape(36, 3)
+    return np.maximum(flat, 0.0), np.minimum(flat, 0.0), t.reshape(36)
+
+
+def _runs(mask: NDArray[np.bool_]) -> tuple[I64, I64, I64]:
+    """Runs of True in each row of ``mask`` ``(r, n)``: ``(row, start, stop)`` each ``(m,)``.
+
+    Runs come row by row, left to right; ``stop`` is exclusive.
+    """
+    r, n = mask.shape
+    padded = np.zeros((r, n + 2), np.int8)
+    padded[:, 1:-1] = mask
+    step = np.diff(padded, axis=1)
+    rows, starts = np.nonzero(step == 1)
+    _, stops = np.nonzero(step == -1)
+    return rows.astype(np.int64), starts.astype(np.int64), stops.astype(np.int64)
+
+
+# ------------------------------------------------------------------------ renderer
+
+
+class VisibilityRenderer:
+    """Counts the pixels each object covers in cube-face ID images at sample points.
+
+    Parameters
+    ----------
+    meshes : sequence of Mesh
+        The objects, in scene-local metres (float32 positions near the origin).
+    object_ids : sequence of int
+        One non-negative id per mesh.  Several meshes may share an id (their pixels
+        add up).
+    resolution : int
+        Width and height in pixels of each cube-face image.
+    view_distance : float
+        Far plane of every camera, metres; an object whose bounding box is farther
+        than this from a sample point is not drawn for that point.
+    near : float
+        Near plane, metres (sample points must keep at least this far from walls).
+    ctx : moderngl.Context, optional
+        Context to render with; by default one is created (and released by
+        :meth:`release`).  A context passed in is not released.
+    max_points_per_pass : int
+        Sample points rendered into one framebuffer (one clear and one read-back); the
+        framebuffer is ``6 * resolution`` by ``max_points_per_pass * resolution``.
+    cull_back_faces : bool
+        Skip back-facing triangles (front faces are counter-clockwise, as
+        :class:`~shared.records.Mesh` winds them seen from outside).  For closed meshes
+        seen from outside this changes nothing but halves the triangles the
+        rasteriser sets up (2-3 times faster on llvmpipe); turn it off for meshes that
+        are open or wound the other way.  Counts may differ by a few pixels where
+        adjacent meshes leave sub-pixel cracks (a back face behind the crack is seen
+        without culling).
+    merge_gap : int
+        Two visible index ranges of one face separated by at most this many indices of
+        culled objects are drawn as one range.  On llvmpipe a draw costs about as much
+        as 170 triangles, so bridging short gaps is cheaper; on a GPU it hardly matters.
+
+    Raises
+    ------
+    InputError
+        On inconsistent arguments.
+    RenderError
+        When no OpenGL context can be made or a GL object cannot be created.
+
+    Notes
+    -----
+    The renderer is deterministic: the same meshes and points give the same counts
+    (the rasteriser's coverage rules do not depend on draw order and the depth test
+    is ``<``, so ties keep the object drawn first, and objects are always drawn in
+    the same order).
+    """
+
+    def __init__(
+        self,
+        meshes: Sequence[Mesh],
+        object_ids: Sequence[int] | NDArray[np.integer[Any]],
+        *,
+        resolution: int = 128,
+        view_distance: float = 800.0,
+        near: float = 0.1,
+        ctx: moderngl.Context | None = None,
+        max_points_per_pass: int = 16,
+        cull_back_faces: bool = True,
+        merge_gap: int = 512,
+    ) -> None:
+        ids = np.asarray(object_ids, dtype=np.int64).reshape(-1)
+        if len(ids) != len(meshes):
+            raise InputError(
+                f"VisibilityRenderer.object_ids: expected {len(meshes)} ids (one per mesh), "
+                f"got {len(ids)}"
+            )
+        if len(ids) and ids.min() < 0:
+            raise InputError(f"VisibilityRenderer.object_ids: expected ids >= 0, got {ids.min()}")
+        if int(resolution) < 1:
+            raise InputError(f"VisibilityRenderer.resolution: expected >= 1, got {resolution}")
+        if not 0.0 < float(near) < float(view_distance) < math.inf:
+            raise InputError(
+                "VisibilityRenderer: expected 0 < near < view_distance < inf, got "
+                f"near={near}, view_distance={view_distance}"
+            )
+        if int(max_points_per_pass) < 1:
+            raise InputError(
+                f"VisibilityRenderer.max_points_per_pass: expected >= 1, got {max_points_per_pass}"
+            )
+        if int(merge_gap) < 0:
+            raise InputError(f"VisibilityRenderer.merge_gap: expected >= 0, got {merge_gap}")
+        self.resolution = int(resolution)
+        self.view_distance = float(view_distance)
+        self.near = float(near)
+        self.cull_back_faces = bool(cull_back_faces)
+        self.merge_gap = int(merge_gap)
+        self._prepare_geometry(meshes, ids)
+
+        self._own_ctx = ctx is None
+        self.ctx: moderngl.Context | None = None
+        self._prog: moderngl.Program | None = None
+        self._vbo: moderngl.Buffer | None = None
+        self._ibo: moderngl.Buffer | None = None
+        self._vao: moderngl.VertexArray | None = None
+        self._indirect: moderngl.Buffer | None = None
+        self._fb: Framebuffer | None = None
+        try:
+            self.ctx = create_context() if ctx is None else ctx
+            limit = int(self.ctx.info["GL_MAX_RENDERBUFFER_SIZE"])
+            if 6 * self.resolution > limit:
+                raise InputError(
+                    f"VisibilityRenderer.resolution: 6 * {self.resolution} exceeds the "
+                    f"driver's maximum framebuffer size {limit}"
+                )
+            self.points_per_pass = max(1, min(int(max_points_per_pass), limit // self.resolution))
+            # glMultiDrawElementsIndirect is core in OpenGL 4.3; older contexts (e.g. macOS
+            # 4.1) draw range by range instead.
+            self._multi_draw = self.ctx.version_code >= 430
+            self._create_gl_objects()
+            check_gl_error(self.ctx, "after creating the visibility renderer")
+        except BaseException:
+            self.release()
+            raise
+        self._w_pos, self._w_neg, self._t = _frustum_planes(self.near, self.view_distance)
+        self._proj = perspective(90.0, 1.0, self.near, self.view_distance).astype(np.float64)
+        # The six face rotations are the same at every point; only the translation
+        # (-R @ eye) changes, so the per-point matrices are one vectorised product.
+        self._face_rot = cube_face_views((0.0, 0.0, 0.0)).astype(np.float64)[:, :3, :3]
+
+    # -- setup ---------------------------------------------------------------------
+
+    def _prepare_geometry(self, meshes: Sequence[Mesh], ids: I64) -> None:
+        """Concatenate the meshes in Hilbert-curve order and keep per-object ranges and boxes."""
+        n = len(meshes)
+        lo = np.zeros((n, 3))
+        hi = np.zeros((n, 3))
+        nonempty = np.zeros(n, bool)
+        for i, m in enumerate(meshes):
+            if len(m.positions) and len(m.indices):
+                p = m.positions.astype(np.float64)
+                lo[i], hi[i] = p.min(axis=0), p.max(axis=0)
+                nonempty[i] = True
+        keep = np.flatnonzero(nonempty)
+        order = keep[_curve_order((lo[keep, :2] + hi[keep, :2]) / 2.0)]
+        #: object id of each drawn object, in draw (Hilbert-curve) order
+        self._ids = ids[order]
+        self._lo, self._hi = lo[order], hi[order]
+        self.object_ids = ids.copy()
+        self.object_ids.flags.writeable = False
+
+        nv = np.array([len(meshes[i].positions) for i in order], np.int64)
+        ni = np.array([meshes[i].indices.size for i in order], np.int64)
+        v_first = np.concatenate([[0], np.cumsum(nv)[:-1]]).astype(np.int64)
+        i_first = np.concatenate([[0], np.cumsum(ni)]).astype(np.int64)
+        self._index_first = i_first[:-1]
+        self._index_stop = i_first[1:]
+        total_v = int(nv.sum())
+        if total_v >= 2**32 - 1:
+            raise InputError(
+                f"VisibilityRenderer: too many vertices for uint32 indices ({total_v})"
+            )
+        # Interleaved (x, y, z, id) of 4-byte words: float32 positions as uint32 bits.
+        verts = np.empty((total_v, 4), np.uint32)
+        index = np.empty(int(i_first[-1]), np.uint32)
+        for k, i in enumerate(order):
+            m = meshes[i]
+            s, e = int(v_first[k]), int(v_first[k] + nv[k])
+            verts[s:e, :3] = np.ascontiguousarray(m.positions, np.float32).view(np.uint32)
+            verts[s:e, 3] = k + 1  # 0 is the clear value: "nothing here"
+            index[i_first[k] : i_first[k + 1]] = m.indices.reshape(-1) + np.uint32(s)
+        self._verts = verts
+        self._index = index
+
+    def _create_gl_objects(self) -> None:
+        ctx = self.ctx
+        assert ctx is not None
+        self._prog = ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
+        self._mvp = cast("moderngl.Uniform", self._prog["mvp"])
+        # Empty buffers are not allowed; a 16-byte placeholder keeps an empty scene valid.
+        self._vbo = ctx.buffer(self._verts.tobytes() if len(self._verts) else bytes(16))
+        self._ibo = ctx.buffer(self._index.tobytes() if len(self._index) else bytes(12))
+        self._vao = ctx.vertex_array(
+            self._prog,
+            [(self._vbo, "3f4 u4", "in_pos", "in_id")],
+            index_buffer=self._ibo,
+            index_element_size=4,
+        )
+        self._indirect = ctx.buffer(reserve=_INDIRECT_STRIDE * 1024, dynamic=True)
+        res = self.resolution
+        self._fb = Framebuffer(ctx, (6 * res, self.points_per_pass * res), 1, "u4")
+        self._pixels = np.empty((self.points_per_pass * res, 6 * res), np.uint32)
+        # The CPU copies are not needed once uploaded.
+        del self._verts, self._index
+
+    # -- culling -------------------------------------------------------------------
+
+    def _face_masks(self, points: F64) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+        """Which objects to draw in each cube face of each point.
+
+        Returns
+        -------
+        draw : (p * 6, n) bool
+            The object's box meets the face's frustum and is within the view distance
+            of the point.
+        unsafe : (p * 6, n) bool
+            Not drawn but could show pixels if it were: its box meets the frustum (the
+            far plane is a depth, so a box farther than the view distance can still be
+            in front of it).  Merged draw ranges must not include these.
+        """
+        p = len(points)
+        draw = np.zeros((p, 6, len(self._ids)), bool)
+        unsafe = np.zeros_like(draw)
+        # Per cell, one O(n) box-to-box test first: in a 90-degree face the distance to
+        # a visible point is at most sqrt(3) times its depth, so boxes farther than
+        # sqrt(3) * view_distance from the points' bounding box are clipped by the far
+        # plane in every face; they skip the per-point tests (cheap in big scenes).
+        gap = np.maximum(
+            np.maximum(self._lo - points.max(axis=0), points.min(axis=0) - self._hi), 0.0
+        )
+        reach2 = self.view_distance**2
+        cand = np.flatnonzero(np.einsum("nk,nk->n", gap, gap) <= 3.0 * reach2)
+        if len(cand) == 0:
+            return draw.reshape(p * 6, -1), unsafe.reshape(p * 6, -1)
+        lo_c, hi_c = self._lo[cand], self._hi[cand]
+        for i, eye in enumerate(points):  # a loop over points bounds memory to (c, 36)
+            lo, hi = lo_c - eye, hi_c - eye  # boxes relative to the eye
+            d = np.maximum(np.maximum(lo, -hi), 0.0)
+            near_enough = np.einsum("ck,ck->c", d, d) <= reach2
+            best = hi @ self._w_pos.T + lo @ self._w_neg.T  # (c, 36): box maxima per plane
+            inside = (best >= self._t).reshape(len(cand), 6, 6).all(axis=2)  # (c, 6)
+            draw[i][:, cand] = (inside & near_enough[:, None]).T
+            unsafe[i][:, cand] = (inside & ~near_enough[:, None]).T
+        return draw.reshape(p * 6, -1), unsafe.reshape(p * 6, -1)
+
+    def _draw_commands(
+        self, draw: NDArray[np.bool_], unsafe: NDArray[np.bool_]
+    ) -> tuple[NDArray[np.uint32], I64]:
+        """Indirect draw commands for every face and each face's first command.
+
+        Parameters
+        ----------
+        draw, unsafe : (faces, n) bool
+            As returned by :meth:`_face_masks`.
+
+        Returns
+        -------
+        commands : (m, 5) uint32
+            DrawElementsIndirectCommand rows, face by face.
+        offsets : (faces + 1,) int64
+            Face ``f`` uses commands ``offsets[f]:offsets[f + 1]``.
+        """
+        rows, starts, stops = _runs(draw)
+        first = self._index_first[starts]
+        stop = self._index_stop[stops - 1]
+        if self.merge_gap and len(rows) > 1:
+            # Bridge short gaps of culled objects (one range costs less than two draws),
+            # but only gaps whose objects all lie outside the frustum, so that the
+            # extra triangles are clipped away and the counts do not change.
+            n_unsafe = np.zeros((len(draw), draw.shape[1] + 1), np.int64)
+            np.cumsum(unsafe, axis=1, out=n_unsafe[:, 1:])
+            same = rows[1:] == rows[:-1]
+            row = rows[1:]
+            blocked = n_unsafe[row, starts[1:]] - n_unsafe[row, stops[:-1]] > 0
+            join = same & ~blocked & (first[1:] - stop[:-1] <= self.merge_gap)
+            head = np.concatenate([[True], ~join])
+            rows, first = rows[head], first[head]
+            stop = np.maximum.reduceat(stop, np.flatnonzero(head))
+        commands = np.zeros((len(rows), 5), np.uint32)
+        commands[:, 0] = stop - first
+        commands[:, 1] = 1
+        commands[:, 2] = first
+        offsets = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=len(draw)))])
+        return commands, offsets.astype(np.int64)
+
+    # -- rendering -----------------------------------------------------------------
+
+    def _render_pass(self, points: F64, counts: I64) -> None:
+        """Render up to ``points_per_pass`` points and add each object's pixels to ``counts``."""
+        ctx, fb, vao, indirect = self.ctx, self._fb, self._vao, self._indirect
+        assert ctx is not None and fb is not None and vao is not None and indirect is not None
+        import moderngl
+
+        res = self.resolution
+        p = len(points)
+        commands, offsets = self._draw_commands(*self._face_masks(points))
+        if self._multi_draw and len(commands):
+            need = commands.nbytes
+            if need > indirect.size:
+                indirect.orphan(max(need, 2 * indirect.size))
+            indirect.write(commands.tobytes())
+
+        views = np.zeros((p, 6, 4, 4))
+        views[:, :, :3, :3] = self._face_rot
+        views[:, :, :3, 3] = -np.einsum("fij,pj->pfi", self._face_rot, points)
+        views[:, :, 3, 3] = 1.0
+        # float64 product, transposed to column-major for GLSL, float32 on upload
+        mvps = np.ascontiguousarray(
+            np.transpose(self._proj @ views, (0, 1, 3, 2)).reshape(p * 6, 4, 4), np.float32
+        )
+
+        used = (0, 0, 6 * res, p * res)
+        fb.fbo.use()
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.BLEND)
+        ctx.depth_func = "<"
+        if self.cull_back_faces:
+            ctx.front_face = "ccw"
+            ctx.cull_face = "back"
+            ctx.enable(moderngl.CULL_FACE)
+        else:
+            ctx.disable(moderngl.CULL_FACE)
+        ctx.scissor = None
+        fb.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=used)
+        try:
+            for face in range(p * 6):
+                c0, c1 = int(offsets[face]), int(offsets[face + 1])
+                if c1 == c0:
+                    continue
+                i, f = divmod(face, 6)
+                tile = (f * res, i * res, res, res)
+                ctx.viewport = tile
+                # Guard-band clipping may rasterise outside the viewport; the scissor keeps
+                # every face inside its own tile on every driver.
+                ctx.scissor = tile
+                self._mvp.write(mvps[face].tobytes())
+                if self._multi_draw:
+                    vao.render_indirect(indirect, moderngl.TRIANGLES, count=c1 - c0, first=c0)
+                else:
+                    for cmd in commands[c0:c1]:
+                        vao.render(moderngl.TRIANGLES, vertices=int(cmd[0]), first=int(cmd[2]))
+        finally:
+            ctx.scissor = None
+            if self.cull_back_faces:
+                ctx.disable(moderngl.CULL_FACE)
+        rows = self._pixels[: p * res]
+        fb.fbo.read_into(rows, viewport=used, components=1, dtype="u4", alignment=1)
+        counts += np.bincount(rows.reshape(-1), minlength=len(counts))[: len(counts)]
+
+    def cell_counts(self, points: ArrayLike) -> tuple[I64, I64]:
+        """Pixels each object covers in the six cube faces of every sample point.
+
+        Parameters
+        ----------
+        points : (p, 3) float
+            Sample points (camera centres), scene-local metres.
+
+        Returns
+        -------
+        ids : (k,) int64
+            Ids of the objects seen (covering at least one pixel), ascending.
+        pixels : (k,) int64
+            Pixels each covers, summed over the ``6 * p`` images.
+
+        Raises
+        ------
+        InputError
+            When ``points`` is not ``(p, 3)`` finite numbers.
+        RenderError
+            When the renderer was released or OpenGL reports an error.
+        """
+        pts = np.asarray(points, dtype=np.float64)
+        if pts.size == 0:
+            pts = pts.reshape(0, 3)
+        if pts.ndim != 2 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
+            raise InputError(
+                f"cell_counts.points: expected (p, 3) finite numbers, got shape {pts.shape}"
+            )
+        if self._fb is None or self.ctx is None:
+            raise RenderError("VisibilityRenderer: used after release()")
+        counts = np.zeros(len(self._ids) + 1, np.int64)
+        if len(pts) and len(self._ids):
+            for s in range(0, len(pts), self.points_per_pass):
+                self._render_pass(pts[s : s + self.points_per_pass], counts)
+            check_gl_error(self.ctx, f"after rendering {len(pts)} visibility sample points")
+        seen = np.flatnonzero(counts[1:])
+        ids, inverse = np.unique(self._ids[seen], return_inverse=True)
+        # Several meshes may carry one id; their pixels add up.
+        pixels = np.bincount(inverse.reshape(-1), weights=counts[1:][seen], minlength=len(ids))
+        return ids.astype(np.int64), pixels.astype(np.int64)
+
+    # -- lifetime ------------------------------------------------------------------
+
+    def release(self) -> None:
+        """Release every GL object (and the context if this renderer made it); idempotent."""
+        if self._fb is not None:
+            self._fb.release()
+            self._fb = None
+        for name in ("_vao", "_indirect", "_ibo", "_vbo", "_prog"):
+            obj = getattr(self, name, None)
+            if obj is not None:
+                obj.release()
+                setattr(self, name, None)
+        if self._own_ctx and self.ctx is not None:
+            self.ctx.release()
+        self.ctx = None
+
+    def __enter__(self) -> VisibilityRenderer:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.release()
+
+
+# ------------------------------------------------------------------ PVS and ACH
+
+
+def pvs_from_counts(ids: ArrayLike, pixels: ArrayLike, *, threshold: int = 0) -> tuple[I64, F64]:
+    """The PVS and ACH of a cell from per-object pixel counts.
+
+    Parameters
+    ----------
+    ids : (k,) int
+        Object ids (as returned by :meth:`VisibilityRenderer.cell_counts`).
+    pixels : (k,) int
+        Pixels each object covers over all the cell's images.
+    threshold : int
+        An object is potentially visible when it covers more than this many pixels
+        (0: any pixel at all; larger values drop hardly visible objects).
+
+    Returns
+    -------
+    pvs : (m,) int64
+        The ids kept, in input order.
+    ach : (m,) float64
+        ``ACH_j = N_j / sum(N)`` over the kept objects; sums to 1 unless the cell
+        sees nothing (then both arrays are empty).
+    """
+    i = np.asarray(ids, dtype=np.int64).reshape(-1)
+    n = np.asarray(pixels, dtype=np.int64).reshape(-1)
+    if len(i) != len(n):
+        raise InputError(
+            f"pvs_from_counts: expected as many pixels as ids ({len(i)}), got {len(n)}"
+        )
+    keep = n > int(threshold)
+    i, n = i[keep], n[keep]
+    total = int(n.sum())
+    if total == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.float64)
+    return i, n.astype(np.float64) / float(total)
+
+
+# ------------------------------------------------------------------ sample points
+
+
+def _cell_polygon(polygon: ArrayLike) -> shapely.Polygon:
+    ring = np.asarray(polygon, dtype=np.float64)
+    if ring.ndim != 2 or ring.shape[1] != 2 or len(ring) < 3 or not np.all(np.isfinite(ring)):
+        raise InputError(
+            f"polygon: expected (n >= 3, 2) finite coordinates, got shape {ring.shape}"
+        )
+    poly = shapely.Polygon(ring)
+    if not poly.is_valid:
+        poly = shapely.make_valid(poly)
+    if poly.is_empty or poly.area <= 0:
+        raise InputError("polygon: the cell polygon has no area")
+    return poly
+
+
+def _free_space(
+    poly: shapely.Geometry, margin: float, footprints: STRtree | None
+) -> shapely.Geometry | None:
+    """Where a viewer may stand: inside the cell (inset by ``margin``) and out of buildings.
+
+    Tries the full margin first (from the cell border and from footprints), then
+    smaller ones, so that a cell narrower than two margins still gets points; returns
+    ``None`` when the cell has no free space at all.
+    """
+    blocked = None
+    if footprints is not None:
+        hits = footprints.query(poly, predicate="intersects")
+        if len(hits):
+            blocked = shapely.union_all(footprints.geometries.take(hits))
+    for m in (margin, margin / 4.0, 0.0):
+        free = poly.buffer(-m) if m > 0 else poly
+        if blocked is not None and not free.is_empty:
+            free = free.difference(blocked.buffer(m) if m > 0 else blocked)
+        if not free.is_empty and free.area > 0:
+            return free
+    return None
+
+
+def _move_into(free: shapely.Geometry, xy: F64) -> F64:
+    """Nearest points of ``free`` to each point ``(p, 2)`` (points inside stay put)."""
+    pts = shapely.points(xy)
+    inside = shapely.contains(free, pts)
+    out = xy.copy()
+    if not inside.all():
+        lines = shapely.shortest_line(pts[~inside], free)
+        out[~inside] = shapely.get_coordinates(lines).reshape(-1, 2, 2)[:, 1]
+    return out
+
+
+def _check_z(zmin: float, zmax: float) -> tuple[float, float]:
+    lo, hi = float(zmin), float(zmax)
+    if not (math.isfinite(lo) and math.isfinite(hi)) or hi < lo:
+        raise InputError(f"expected finite zmin <= zmax, got zmin={zmin}, zmax={zmax}")
+    return lo, hi
+
+
+def sample_points(
+    polygon: ArrayLike,
+    zmin: float,
+    zmax: float,
+    *,
+    margin: float = 0.3,
+    centre: bool = False,
+    footprints: STRtree | None = None,
+) -> F64:
+    """The cell's sample points: box corners moved just inside the cell and out of buildings.
+
+    The four corners of the polygon's bounding box go to the nearest point of the
+    polygon shrunk by ``margin`` (so that facades on the cell border act as occluders
+    instead of being straddled), then out of any building footprint (within ``margin``
+    of one) to the nearest free point of the cell.  If the cell has no free space at
+    all, no points are returned.
+
+    Parameters
+    ----------
+    polygon : (n, 2) float
+        The cell outline, scene-local metres.
+    zmin, zmax : float
+        Bottom and top of the cell's eye-height range, metres.
+    margin : float
+        How far inside the cell and away from footprints the points go, metres.
+        A cell narrower than ``2 * margin`` uses a smaller margin.
+    centre : bool
+        Also sample the centre of the cell (its centroid, moved into free space).
+    footprints : shapely.STRtree, optional
+        Building footprint polygons; points are kept out of them.
+
+    Returns
+    -------
+    (p, 3) float64
+        ``p = 8`` (10 with ``centre``), or 0 when the cell has no free space: the
+        corners at ``zmin`` (order ``(xmin, ymin)``, ``(xmax, ymin)``, ``(xmax, ymax)``,
+        ``(xmin, ymax)``), the same at ``zmax``, then the centre at ``zmin`` and ``zmax``.
+    """
+    lo_z, hi_z = _check_z(zmin, zmax)
+    if not float(margin) >= 0:
+        raise InputError(f"sample_points.margin: expected >= 0, got {margin}")
+    poly = _cell_polygon(polygon)
+    free = _free_space(poly, float(margin), footprints)
+    if free is None:
+        return np.zeros((0, 3), np.float64)
+    x0, y0, x1, y1 = poly.bounds
+    xy = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], np.float64)
+    if centre:
+        xy = np.vstack([xy, shapely.get_coordinates(poly.centroid)])
+    xy = _move_into(free, xy)
+    corners, mid = xy[:4], xy[4:]
+    out = [np.column_stack([corners, np.full(4, z)]) for z in (lo_z, hi_z)]
+    out += [np.column_stack([mid, np.full(len(mid), z)]) for z in (lo_z, hi_z)]
+    return np.vstack(out)
+
+
+def dense_points(
+    polygon: ArrayLike,
+    zmin: float,
+    zmax: float,
+    n: int,
+    *,
+    levels: int = 3,
+    margin: float = 0.3,
+    footprints: STRtree | None = None,
+    seed: int = 0,
+) -> F64:
+    """Many viewpoints spread through a cell, for a reference PVS.
+
+    A jittered grid over the cell's free space (the polygon shrunk by ``margin``, minus
+    building footprints grown by ``margin``, as for :func:`sample_points`): the grid
+    spacing is chosen so that about ``n`` cells of it fall in the free space, each
+    grid cell gets one uniformly random point (random generator seeded with ``seed``,
+    so the result is deterministic), points outside the free space are dropped and
+    ``n`` of the rest are kept, evenly spread over the grid order.
+
+    Parameters
+    ----------
+    polygon : (m, 2) float
+        The cell outline, scene-local metres.
+    zmin, zmax : float
+        Height range, metres.
+    n : int
+        Number of positions in the plane (>= 1).
+    levels : int
+        Heights per position, evenly from ``zmin`` to ``zmax`` (1: ``zmin`` only).
+    margin : float
+        Distance kept from the cell border and from footprints, metres.
+    footprints : shapely.STRtree, optional
+        Building footprints to keep out of.
+    seed : int
+        Seed of the jitter.
+
+    Returns
+    -------
+    (q, 3) float64
+        ``q = n * levels`` points (height-major: all positions at the first height,
+        then the next), or fewer when the free space is too small, or none when the
+        cell has no free space.
+    """
+    lo_z, hi_z = _check_z(zmin, zmax)
+    if int(n) < 1 or int(levels) < 1:
+        raise InputError(
+            f"dense_points: expected n >= 1 and levels >= 1, got n={n}, levels={levels}"
+        )
+    poly = _cell_polygon(polygon)
+    free = _free_space(poly, float(margin), footprints)
+    if free is None:
+        return np.zeros((0, 3), np.float64)
+    x0, y0, x1, y1 = free.bounds
+    rng = np.random.default_rng(seed)
+    spacing = math.sqrt(free.area / int(n))
+    xy = np.zeros((0, 2))
+    for _ in range(12):
+        nx = max(1, math.ceil((x1 - x0) / spacing))
+        ny = max(1, math.ceil((y1 - y0) / spacing))
+        gx, gy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")
+        cells = np.column_stack([gx.reshape(-1), gy.reshape(-1)]).astype(np.float64)
+        jitter = rng.random(cells.shape)
+        cand = np.array([x0, y0]) + (cells + jitter) * spacing
+        cand = cand[shapely.contains_xy(free, cand[:, 0], cand[:, 1])]
+        if len(cand) >= int(n):
+            xy = cand
+            break
+        xy = cand if len(cand) > len(xy) else xy
+        spacing *= 0.8
+    if len(xy) == 0:  # a sliver: fall back to a point that is surely in the free space
+        xy = shapely.get_coordinates(free.representative_point())
+    if len(xy) > int(n):
+        xy = xy[np.round(np.linspace(0, len(xy) - 1, int(n))).astype(np.int64)]
+    zs = np.linspace(lo_z, hi_z, int(levels)) if int(levels) > 1 else np.array([lo_z])
+    return np.vstack([np.column_stack([xy, np.full(len(xy), z)]) for z in zs])

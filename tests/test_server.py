@@ -1,0 +1,655 @@
+"""The HTTP service (server.app, server.routes, server.deps, server.serve).
+
+Most tests talk to the ASGI app in-process through httpx; one test runs a real
+uvicorn server on a free loopback port for what only a socket shows (a streamed
+body arriving in pieces, a client that vanishes mid-stream).  A schemathesis run
+over the OpenAPI schema checks that no generated request gets a 5xx.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import io
+import json
+import os
+import shutil
+import socket
+import threading
+import time
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import msgpack
+import numpy as np
+import pytest
+import uvicorn
+from fastapi import FastAPI
+from scenes import PATH_DATA, PATH_NAME, CityDb, build_city_db
+
+import server.serve as serve_mod
+from server.app import create_app
+from server.deps import LRU, MAX_IDS, etag_matches, negotiate
+from server.store import StoreError
+from shared.codec import decode_object
+from shared.records import StreetParams
+
+JSON_ACCEPT = {"accept": "application/json"}
+
+
+# ---------------------------------------------------------------------------
+# fixtures
+# ---------------------------------------------------------------------------
+
+
+class Client:
+    """A synchronous face on ``httpx.AsyncClient`` over the ASGI app (one event loop)."""
+
+    def __init__(self, app: FastAPI) -> None:
+        self.loop = asyncio.new_event_loop()
+        self.http = httpx.AsyncClient(
+            transport=httpx.ASGITransport(app=app), base_url="http://testserver"
+        )
+
+    def request(self, method: str, url: str, **kwargs: Any) -> httpx.Response:
+        return self.loop.run_until_complete(self.http.request(method, url, **kwargs))
+
+    def get(self, url: str, **kwargs: Any) -> httpx.Response:
+        return self.request("GET", url, **kwargs)
+
+    def post(self, url: str, **kwargs: Any) -> httpx.Response:
+        return self.request("POST", url, **kwargs)
+
+    def close(self) -> None:
+        self.loop.run_until_complete(self.http.aclose())
+        self.loop.close()
+
+
+@pytest.fixture(scope="module")
+def city(tmp_path_factory: pytest.TempPathFactory) -> CityDb:
+    return build_city_db(tmp_path_factory.mktemp("server") / "tiny.db")
+
+
+@pytest.fixture(scope="module")
+def app(city: CityDb) -> Iterator[FastAPI]:
+    app = create_app([city.path])
+    yield app
+    app.state.scenes.close()
+
+
+@pytest.fixture(scope="module")
+def client(app: FastAPI) -> Iterator[Client]:
+    c = Client(app)
+    yield c
+    c.close()
+
+
+def scene_url(city: CityDb, rest: str = "") -> str:
+    return f"/v1/scenes/{city.name}{rest}"
+
+
+def unpack(r: httpx.Response) -> Any:
+    assert r.headers["content-type"] == "application/msgpack", r.text
+    return msgpack.unpackb(r.content)
+
+
+def both(client: Client, url: str) -> tuple[Any, Any, httpx.Response, httpx.Response]:
+    """The msgpack (default) and JSON answers for ``url``, both 200."""
+    rm = client.get(url)
+    rj = client.get(url, headers=JSON_ACCEPT)
+    assert rm.status_code == 200, rm.text
+    assert rj.status_code == 200, rj.text
+    assert rj.headers["content-type"] == "application/json"
+    return unpack(rm), rj.json(), rm, rj
+
+
+def assert_error(r: httpx.Response, status: int, *needles: str) -> dict[str, Any]:
+    """``r`` is a JSON error with this status whose message contains every needle."""
+    assert r.status_code == status, (r.status_code, r.text)
+    assert r.headers["content-type"] == "application/json"
+    body = r.json()
+    assert set(body) == {"error", "detail"}
+    for n in needles:
+        assert n in body["error"], (n, body)
+    return body
+
+
+def post_ids(client: Client, city: CityDb, ids: Any, **kwargs: Any) -> httpx.Response:
+    return client.post(scene_url(city, "/objects"), json={"ids": ids}, **kwargs)
+
+
+# ---------------------------------------------------------------------------
+# small units
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("accept", "rep"),
+    [
+        (None, "msgpack"),
+        ("", "msgpack"),
+        ("*/*", "msgpack"),
+        ("application/json", "json"),
+        ("text/html,application/json;q=0.9,*/*;q=0.8", "json"),
+        ("application/msgpack, application/json", "msgpack"),
+        ("application/msgpack;q=0.5, application/json", "json"),
+        ("application/json;q=0", "msgpack"),
+        ("application/json;q=nan", "msgpack"),
+        ("application/json;q=abc", "msgpack"),
+        ("application/json, " + ", ".join(f"x/y{i};q=0.1" for i in range(100)), "json"),
+    ],
+)
+def test_negotiate(accept: str | None, rep: str) -> None:
+    assert negotiate(accept) == rep
+
+
+def test_etag_matching() -> None:
+    tag = '"abc-cell:1-json"'
+    assert etag_matches(tag, tag)
+    assert etag_matches(f'"x", W/{tag}', tag)
+    assert etag_matches("*", tag)
+    assert not etag_matches('"abc-cell:1-msgpack"', tag)
+    assert not etag_matches(None, tag)
+
+
+def test_lru_is_bounded_by_bytes() -> None:
+    lru = LRU(100)
+    for i in range(10):
+        lru.put(i, b"x" * 30, 30)
+    assert len(lru) == 3 and lru.get(9) is not None and lru.get(0) is None
+    lru.get(7)  # 7 becomes the most recent; 8 is evicted next
+    lru.put(10, b"y" * 30, 30)
+    assert lru.get(8) is None and lru.get(7) is not None
+    lru.put(11, b"z" * 1000, 1000)  # larger than the budget: not cached, nothing evicted
+    assert lru.get(11) is None and len(lru) == 3
+    found, missing = lru.get_many([7, 7, 99, 10, 99])
+    assert set(found) == {7, 10} and missing == [99]
+
+
+# ---------------------------------------------------------------------------
+# endpoints, both representations
+# ---------------------------------------------------------------------------
+
+
+def test_health_and_scene_list(client: Client, city: CityDb) -> None:
+    m, j, _, _ = both(client, "/v1/health")
+    assert m == j == {"status": "ok", "scenes": 1}
+    m, j, rm, rj = both(client, "/v1/scenes")
+    assert m == j == [{"name": city.name, "version": city.version}]
+    assert rm.headers["etag"] != rj.headers["etag"]
+    assert rm.headers["cache-control"] == "no-cache"
+
+
+def test_manifest(client: Client, city: CityDb) -> None:
+    m, j, rm, rj = both(client, scene_url(city))
+    assert m == j
+    assert m["name"] == city.name and m["version"] == city.version
+    assert m["crs"] == "EPSG:32633" and len(m["origin"]) == 2
+    assert len(m["bounds"]) == 6 and m["bounds"][0] < m["bounds"][3]
+    assert m["features"] == ["street_cells"]
+    assert m["grammar"]["id"] and "->" in m["grammar"]["text"]
+    assert [v["name"] for v in m["viewpoints"]] == ["start"]
+    assert m["viewpoints"][0]["cell"] in city.pvs
+    assert m["paths"] == [PATH_NAME]
+    assert m["objects"] == len(city.object_ids) and m["cells"] == len(city.pvs)
+    assert m["limits"] == {"objects_per_request": MAX_IDS}
+    for r, rep in ((rm, "msgpack"), (rj, "json")):
+        assert r.headers["cache-control"] == "public, max-age=31536000, immutable"
+        assert r.headers["vary"] == "Accept"
+        etag = r.headers["etag"]
+        assert city.version in etag and "manifest" in etag and rep in etag
+
+
+def test_cell_record(client: Client, city: CityDb) -> None:
+    for cid, pvs in city.pvs.items():
+        m, j, _, _ = both(client, scene_url(city, f"/cells/{cid}"))
+        assert m == j
+        assert m["id"] == cid and m["kind"] in ("street", "crossroad")
+        assert len(m["boundary"]) >= 3 and m["zmin"] <= m["zmax"]
+        assert tuple(m["pvs"]) == pvs
+        assert len(m["ach"]) == len(pvs) and abs(sum(m["ach"]) - 1) < 1e-9
+        for nb in m["neighbours"]:
+            assert nb["id"] in city.pvs and nb["id"] != cid
+            other = client.get(scene_url(city, f"/cells/{nb['id']}"), headers=JSON_ACCEPT).json()
+            assert other["boundary"] == nb["boundary"]
+            assert cid in [n["id"] for n in other["neighbours"]]  # adjacency is symmetric
+
+
+def test_locate(client: Client, city: CityDb) -> None:
+    for cid, (x, y) in list(city.centroids.items())[:10]:
+        m, j, _, _ = both(client, scene_url(city, f"/locate?x={x!r}&y={y!r}"))
+        assert m == j == {"cell": cid}
+    m, j, _, _ = both(client, scene_url(city, "/locate?x=1e6&y=-1e6"))
+    assert m == j == {"cell": None, "reason": "outside every cell"}
+
+
+@pytest.mark.parametrize(
+    "query",
+    ["x=nan&y=0", "x=0&y=inf", "x=-Infinity&y=0", "x=1e999&y=0", "x=abc&y=0", "y=0", "x=0", ""],
+)
+def test_locate_refuses_bad_coordinates(client: Client, city: CityDb, query: str) -> None:
+    r = client.get(scene_url(city, f"/locate?{query}"))
+    body = assert_error(r, 422)
+    named = {e["loc"][-1] for e in body["detail"]}
+    assert named and named <= {"x", "y"}
+    assert any(f"query.{n}" in body["error"] for n in named)
+
+
+def test_recorded_path(client: Client, city: CityDb) -> None:
+    url = scene_url(city, f"/paths/{PATH_NAME}")
+    rm = client.get(url)
+    assert rm.status_code == 200 and rm.headers["content-type"] == "application/msgpack"
+    assert msgpack.unpackb(rm.content) == PATH_DATA
+    rj = client.get(url, headers=JSON_ACCEPT)
+    assert rj.json() == {"name": PATH_NAME, "data": PATH_DATA}
+    assert rm.headers["etag"] != rj.headers["etag"]
+    assert_error(client.get(scene_url(city, "/paths/nope")), 404, "'nope'")
+
+
+def test_etag_and_304(client: Client, city: CityDb) -> None:
+    urls = [
+        "/v1/scenes",
+        scene_url(city),
+        scene_url(city, "/cells/0"),
+        scene_url(city, "/locate?x=0&y=0"),
+        scene_url(city, f"/paths/{PATH_NAME}"),
+    ]
+    for url in urls:
+        for headers in ({}, JSON_ACCEPT):
+            r = client.get(url, headers=headers)
+            etag = r.headers["etag"]
+            assert etag.startswith('"') and etag.endswith('"')
+            again = client.get(url, headers={**headers, "if-none-match": etag})
+            assert again.status_code == 304 and again.content == b""
+            assert again.headers["etag"] == etag and again.headers["vary"] == "Accept"
+            assert again.headers["cache-control"] == r.headers["cache-control"]
+            weak = client.get(url, headers={**headers, "if-none-match": f'"other", W/{etag}'})
+            assert weak.status_code == 304
+            stale = client.get(url, headers={**headers, "if-none-match": '"old"'})
+            assert stale.status_code == 200 and stale.content == r.content
+    # the representations never share an ETag: msgpack's does not validate JSON
+    url = scene_url(city, "/cells/0")
+    tag = client.get(url).headers["etag"]
+    assert client.get(url, headers={"if-none-match": tag, **JSON_ACCEPT}).status_code == 200
+
+
+def test_vary_on_every_response(client: Client, city: CityDb) -> None:
+    for r in (
+        client.get("/v1/health"),
+        client.get("/metrics"),
+        client.get("/v1/scenes/nope"),
+        client.get("/nope"),
+        post_ids(client, city, [0]),
+        post_ids(client, city, ["x"]),
+    ):
+        assert r.headers["vary"] == "Accept", r.url
+
+
+# ---------------------------------------------------------------------------
+# objects
+# ---------------------------------------------------------------------------
+
+
+def frames(content: bytes) -> list[dict[str, Any]]:
+    return list(msgpack.Unpacker(io.BytesIO(content), raw=False))
+
+
+def test_objects_stream_in_the_order_asked(client: Client, city: CityDb) -> None:
+    rng = np.random.default_rng(3)
+    ids = [int(i) for i in rng.permutation(city.object_ids)] + [city.object_ids[0]] * 2
+    r = post_ids(client, city, ids)
+    assert r.status_code == 200 and r.headers["content-type"] == "application/msgpack"
+    assert r.headers["x-scene-version"] == city.version
+    assert r.headers["x-object-count"] == str(len(ids))
+    got = frames(r.content)
+    assert [f["id"] for f in got] == ids
+    for f in got:
+        p = decode_object(f["params"])
+        assert p.id == f["id"]
+        assert f["kind"] == (p.kind if isinstance(p, StreetParams) else "building")
+    # a msgpack body gives the same bytes; so does a second (cached) request
+    rb = client.post(
+        scene_url(city, "/objects"),
+        content=msgpack.packb({"ids": ids}),
+        headers={"content-type": "application/msgpack"},
+    )
+    assert rb.status_code == 200 and rb.content == r.content
+    assert post_ids(client, city, ids).content == r.content
+
+
+def test_objects_json(client: Client, city: CityDb) -> None:
+    ids = list(city.object_ids[:5])[::-1]
+    rm = post_ids(client, city, ids)
+    rj = post_ids(client, city, ids, headers=JSON_ACCEPT)
+    assert rj.status_code == 200 and rj.headers["content-type"] == "application/json"
+    items = rj.json()
+    assert [o["id"] for o in items] == ids
+    assert [base64.b64decode(o["params"]) for o in items] == [
+        f["params"] for f in frames(rm.content)
+    ]
+
+
+def test_objects_empty_request(client: Client, city: CityDb) -> None:
+    r = post_ids(client, city, [])
+    assert r.status_code == 200 and r.content == b""
+    assert post_ids(client, city, [], headers=JSON_ACCEPT).json() == []
+
+
+def test_objects_unknown_ids_are_named(client: Client, city: CityDb) -> None:
+    top = max(city.object_ids)
+    r = post_ids(client, city, [city.object_ids[0], top + 7, top + 1, top + 7])
+    body = assert_error(r, 404, str(top + 7), str(top + 1))
+    assert body["detail"] == {"ids": [top + 7, top + 1]}
+
+
+def test_objects_limit(client: Client, city: CityDb) -> None:
+    ok = [city.object_ids[i % len(city.object_ids)] for i in range(MAX_IDS)]
+    r = post_ids(client, city, ok)
+    assert r.status_code == 200 and len(frames(r.content)) == MAX_IDS
+    assert_error(post_ids(client, city, ok + ok[:1]), 413, str(MAX_IDS + 1), str(MAX_IDS))
+    big = b'{"ids": [' + b" " * 70_000 + b"]}"
+    r = client.post(
+        scene_url(city, "/objects"), content=big, headers={"content-type": "application/json"}
+    )
+    assert_error(r, 413, "limit")
+
+
+@pytest.mark.parametrize(
+    "ids",
+    [
+        ["1"],
+        [1.5],
+        [1.0],
+        [True],
+        [-1],
+        [2**63],
+        [None],
+        [[1]],
+        [{"id": 1}],
+    ],
+)
+def test_objects_wrong_types(client: Client, city: CityDb, ids: list[Any]) -> None:
+    body = assert_error(post_ids(client, city, ids), 422, "ids[0]")
+    assert body["detail"][0]["index"] == 0
+
+
+@pytest.mark.parametrize(
+    ("content", "ctype", "status", "needle"),
+    [
+        (b"", "application/json", 400, "empty"),
+        (b"{not json", "application/json", 400, "not valid JSON"),
+        (b"[" * 50_000 + b"]" * 50_000, "application/json", 413, "limit"),
+        (b"[" * 30_000 + b"]" * 30_000, "application/json", 400, "JSON"),
+        (b"\xc1", "application/msgpack", 400, "msgpack"),
+        (b"\x92\x01", "application/msgpack", 400, "msgpack"),
+        (b"[1, 2]", "application/json", 422, "ids"),
+        (b'{"id": [1]}', "application/json", 422, "ids"),
+        (b'{"ids": 5}', "application/json", 422, "array"),
+        (b'{"ids": "1,2"}', "application/json", 422, "array"),
+        (b'{"ids": [1]}', "text/plain", 415, "text/plain"),
+        (b'{"ids": [NaN]}', "application/json", 422, "ids[0]"),
+        (b'{"ids": [' + b"9" * 5000 + b"]}", "application/json", 400, "JSON"),
+    ],
+)
+def test_objects_malformed_bodies(
+    client: Client, city: CityDb, content: bytes, ctype: str, status: int, needle: str
+) -> None:
+    r = client.post(scene_url(city, "/objects"), content=content, headers={"content-type": ctype})
+    assert_error(r, status, needle)
+
+
+# ---------------------------------------------------------------------------
+# errors
+# ---------------------------------------------------------------------------
+
+
+def test_unknown_things_are_404_and_named(client: Client, city: CityDb) -> None:
+    body = assert_error(client.get("/v1/scenes/atlantis"), 404, "atlantis")
+    assert body["detail"]["known"] == [city.name]
+    assert_error(client.get("/v1/scenes/atlantis/cells/0"), 404, "atlantis")
+    assert_error(client.post("/v1/scenes/atlantis/objects", json={"ids": [1]}), 404, "atlantis")
+    assert_error(client.get(scene_url(city, "/cells/99999")), 404, "99999")
+    assert_error(client.get(scene_url(city, "/cells/-1")), 404, "-1")
+    assert_error(client.get(scene_url(city, f"/cells/{2**70}")), 404, str(2**70))
+    assert_error(client.get(scene_url(city, "/paths/a%20b")), 404, "'a b'")
+    assert_error(client.get("/v2/nothing"), 404, "/v2/nothing")
+    assert_error(client.get(scene_url(city, "/cells/zero")), 422, "cell")
+    assert_error(client.request("DELETE", scene_url(city)), 405)
+
+
+def test_metrics(client: Client, city: CityDb) -> None:
+    client.get(scene_url(city))
+    client.get("/v1/scenes/atlantis")
+    post_ids(client, city, [city.object_ids[0]])
+    r = client.get("/metrics")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
+    text = r.text
+    assert 'walkstream_requests_total{method="GET",route="/v1/scenes/{scene}",status="200"}' in text
+    assert 'walkstream_requests_total{method="GET",route="/v1/scenes/{scene}",status="404"}' in text
+    assert 'route="/v1/scenes/{scene}/objects",status="200"' in text
+    assert 'walkstream_response_bytes_total{route="/v1/scenes/{scene}"}' in text
+    assert (
+        'walkstream_request_duration_seconds_bucket{route="/v1/scenes/{scene}",le="+Inf"}' in text
+    )
+    assert f'walkstream_scene_info{{scene="{city.name}",version="{city.version}"}} 1' in text
+    for line in text.splitlines():  # every sample line is "name{labels} number"
+        if not line.startswith("#"):
+            float(line.rsplit(" ", 1)[1])
+
+
+# ---------------------------------------------------------------------------
+# start-up
+# ---------------------------------------------------------------------------
+
+
+def test_create_app_refuses_bad_databases(city: CityDb, tmp_path: Path) -> None:
+    missing = tmp_path / "missing.db"
+    with pytest.raises(StoreError, match="missing.db: no such file"):
+        create_app([missing])
+    junk = tmp_path / "junk.db"
+    junk.write_bytes(b"not a database at all" * 100)
+    with pytest.raises(StoreError, match="junk.db: not an SQLite database"):
+        create_app([junk])
+    newer = tmp_path / "newer.db"
+    data = bytearray(city.path.read_bytes())
+    data[60:64] = (99).to_bytes(4, "big")  # PRAGMA user_version lives in the header
+    newer.write_bytes(bytes(data))
+    with pytest.raises(StoreError, match="newer.db: schema version 99"):
+        create_app([newer])
+    damaged = tmp_path / "damaged.db"
+    data = bytearray(city.path.read_bytes())
+    page = 4096
+    data[2 * page : len(data) - page] = os.urandom(len(data) - 3 * page)
+    damaged.write_bytes(bytes(data))
+    with pytest.raises(StoreError, match="damaged.db"):
+        create_app([damaged])
+    with pytest.raises(StoreError, match="no scene database"):
+        create_app([])
+    twin = tmp_path / "twin.db"
+    shutil.copyfile(city.path, twin)
+    with pytest.raises(StoreError, match="already served"):
+        create_app([city.path, twin])
+    # all or nothing: a good file next to a bad one does not start either
+    with pytest.raises(StoreError, match="missing.db"):
+        create_app([city.path, missing])
+
+
+def test_two_scenes(city: CityDb, tmp_path: Path) -> None:
+    other = build_city_db(tmp_path / "other.db", name="other", k=5)
+    app = create_app([city.path, other.path])
+    c = Client(app)
+    try:
+        names = [s["name"] for s in c.get("/v1/scenes", headers=JSON_ACCEPT).json()]
+        assert names == sorted([city.name, "other"])
+        cell = c.get("/v1/scenes/other/cells/0", headers=JSON_ACCEPT).json()
+        assert len(cell["pvs"]) == 5
+    finally:
+        c.close()
+        app.state.scenes.close()
+
+
+def test_serve_validates_before_starting(
+    city: CityDb, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[tuple[Any, dict[str, Any]]] = []
+    monkeypatch.setattr(serve_mod.uvicorn, "run", lambda app, **kw: calls.append((app, kw)))
+    monkeypatch.delenv(serve_mod.ENV_PATHS, raising=False)
+    with pytest.raises(StoreError, match="nope.db: no such file"):
+        serve_mod.serve([tmp_path / "nope.db"])
+    assert calls == []  # nothing started
+    with pytest.raises(ValueError, match="workers"):
+        serve_mod.serve([city.path], workers=0)
+    with pytest.raises(ValueError, match="port"):
+        serve_mod.serve([city.path], port=70000)
+
+    serve_mod.serve([city.path], host="0.0.0.0", port=8123)
+    app, kw = calls.pop()
+    assert isinstance(app, FastAPI) and (kw["host"], kw["port"]) == ("0.0.0.0", 8123)
+
+    serve_mod.serve([city.path], workers=2)
+    target, kw = calls.pop()
+    assert target == "server.serve:app_from_env" and kw["factory"] and kw["workers"] == 2
+    assert json.loads(os.environ[serve_mod.ENV_PATHS]) == [str(city.path.resolve())]
+    worker_app = serve_mod.app_from_env()  # what each worker process builds
+    worker_app.state.scenes.close()
+
+    monkeypatch.setenv(serve_mod.ENV_PATHS, "not json")
+    with pytest.raises(StoreError, match="not JSON"):
+        serve_mod.app_from_env()
+
+
+# ---------------------------------------------------------------------------
+# schemathesis: no generated request gets a 5xx
+# ---------------------------------------------------------------------------
+
+
+def test_schemathesis_finds_no_server_error(app: FastAPI, city: CityDb) -> None:
+    import schemathesis
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis.errors import Unsatisfiable
+    from schemathesis.checks import not_a_server_error
+    from schemathesis.generation import GenerationMode
+    from schemathesis.specs.openapi.checks import status_code_conformance
+
+    schema = schemathesis.openapi.from_asgi("/openapi.json", app)
+    operations = [result.ok() for result in schema.get_all_operations()]
+    assert len(operations) == 8
+    runs: list[str] = []
+    for op in operations:
+        for mode in GenerationMode:
+            # random scene names only reach the 404, so most examples go to the real one
+            variants = [(op.as_strategy(generation_mode=mode), 10)]
+            if "{scene}" in op.path:
+                fixed = {"scene": city.name}
+                variants.append((op.as_strategy(generation_mode=mode, path_parameters=fixed), 50))
+            for strategy, examples in variants:
+
+                @given(case=strategy)
+                @settings(
+                    max_examples=examples,
+                    deadline=None,
+                    database=None,
+                    derandomize=True,  # the same examples on every run: no flaky CI
+                    suppress_health_check=list(HealthCheck),
+                )
+                def run(case: Any) -> None:
+                    # status_code_conformance: every status answered is documented
+                    case.call_and_validate(checks=[not_a_server_error, status_code_conformance])
+
+                try:
+                    run()
+                except Unsatisfiable:
+                    # no invalid request exists when nothing is left to generate
+                    # (/v1/health, or a manifest with its scene fixed)
+                    assert mode == GenerationMode.NEGATIVE
+                    continue
+                runs.append(f"{mode.value} {op.method.upper()} {op.path} {examples}")
+    # positive: every operation, the scene ones twice; negative: those with something to break
+    assert len(runs) >= 14 + 5, runs
+
+
+# ---------------------------------------------------------------------------
+# a real server
+# ---------------------------------------------------------------------------
+
+
+@pytest.fixture
+def live_server(app: FastAPI) -> Iterator[str]:
+    """uvicorn serving the app on a free loopback port, in a thread; yields the base URL."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]
+    config = uvicorn.Config(
+        app, log_level="warning", lifespan="off", ws="none", access_log=False, timeout_keep_alive=5
+    )
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 10
+    while not server.started:
+        assert thread.is_alive() and time.monotonic() < deadline, "uvicorn did not start"
+        time.sleep(0.01)
+    try:
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        server.should_exit = True
+        thread.join(10)
+        sock.close()
+        assert not thread.is_alive()
+
+
+def _raw_post(port: int, path: str, body: bytes) -> socket.socket:
+    s = socket.create_connection(("127.0.0.1", port), timeout=5)
+    head = (
+        f"POST {path} HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+        f"Content-Length: {len(body)}\r\n\r\n"
+    ).encode()
+    s.sendall(head + body)
+    return s
+
+
+def test_real_server_streams_and_survives_vanishing_clients(live_server: str, city: CityDb) -> None:
+    url = live_server + scene_url(city, "/objects")
+    ids = [city.object_ids[(7 * i) % len(city.object_ids)] for i in range(MAX_IDS)]
+
+    # the frames decode one by one as the bytes arrive, in the order asked
+    got: list[int] = []
+    unpacker = msgpack.Unpacker(raw=False)
+    with httpx.Client(timeout=10) as http:
+        with http.stream("POST", url, json={"ids": ids}) as r:
+            assert r.status_code == 200
+            assert r.headers.get("transfer-encoding") == "chunked"
+            pieces = 0
+            for chunk in r.iter_raw():
+                pieces += 1
+                unpacker.feed(chunk)
+                got += [f["id"] for f in unpacker]
+        assert got == ids and pieces > 1
+
+        # clients that vanish mid-stream, or never read, do not break the server
+        port = int(live_server.rsplit(":", 1)[1])
+        body = json.dumps({"ids": ids}).encode()
+        for _ in range(5):
+            s = _raw_post(port, scene_url(city, "/objects"), body)
+            assert s.recv(64).startswith(b"HTTP/1.1 200")
+            s.close()
+        stalled = [_raw_post(port, scene_url(city, "/objects"), body) for _ in range(3)]
+        half = socket.create_connection(("127.0.0.1", port), timeout=5)
+        half.sendall(
+            b"POST /v1/scenes/x/objects HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\n{"
+        )
+        t = time.perf_counter()
+        r = http.post(url, json={"ids": ids[:3]})
+        assert r.status_code == 200 and [f["id"] for f in frames(r.content)] == ids[:3]
+        assert http.get(live_server + scene_url(city, "/cells/0")).status_code == 200
+        assert time.perf_counter() - t < 2
+        for s in (*stalled, half):
+            s.close()
+
+    # the compose healthcheck's probe works against a real server
+    with urllib.request.urlopen(live_server + "/v1/health", timeout=3) as resp:
+        assert resp.status == 200

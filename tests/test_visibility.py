@@ -1,0 +1,321 @@
+"""Tests of server.visibility: ID-buffer PVS and ACH of a view cell, and its sample points."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import moderngl
+import numpy as np
+import pytest
+import shapely
+
+from server.sources.scene import SourceScene
+from server.visibility import (
+    VisibilityRenderer,
+    dense_points,
+    meshes_for_scene,
+    pvs_from_counts,
+    sample_points,
+)
+from shared.buildings import build_lod
+from shared.errors import InputError, RenderError
+from shared.records import BuildingParams, Mesh, StreetParams
+from shared.streets import build_street
+
+# The scene: a viewer cell (10 x 10 m around the origin) south of a long, high wall
+# (y = 10..11) with a 6 m gap at x = -3..3.  Ids name what each object is for.
+WALL_WEST, WALL_EAST = 1, 2
+HIDDEN = 3  # behind the wall, off to the east: no line of sight from the cell
+THROUGH_GAP = 4  # behind the gap: seen through it
+BEHIND_VIEWER = 5  # south of the cell, large and close
+FAR_SOUTH = 6  # south-east, small and far, not hidden by anything
+STREET = 7  # the ground under the cell (seen by the downward cube face only)
+BEYOND = 8  # farther than the view distance
+VIEW_DISTANCE = 300.0
+
+CELL = np.array([[-5.0, -5.0], [5.0, -5.0], [5.0, 5.0], [-5.0, 5.0]])
+
+
+def rect(x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
+    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], dtype=np.float64)
+
+
+def block(oid: int, x0: float, y0: float, x1: float, y1: float, height: float) -> BuildingParams:
+    """A box-shaped building: one floor of ``height`` metres."""
+    return BuildingParams(
+        oid, (rect(x0, y0, x1, y1),), (np.zeros(4),), floors=1, floor_height=height
+    )
+
+
+BUILDINGS = (
+    block(WALL_WEST, -100.0, 10.0, -3.0, 11.0, 20.0),
+    block(WALL_EAST, 3.0, 10.0, 100.0, 11.0, 20.0),
+    block(HIDDEN, 40.0, 20.0, 44.0, 22.0, 5.0),
+    block(THROUGH_GAP, -6.0, 30.0, 6.0, 32.0, 5.0),
+    block(BEHIND_VIEWER, -3.0, -22.0, 3.0, -20.0, 4.0),
+    block(FAR_SOUTH, 40.0, -80.0, 42.0, -78.0, 2.0),
+    block(BEYOND, -20.0, -420.0, 20.0, -400.0, 60.0),
+)
+STREETS = (StreetParams(STREET, "street", rect(-6.0, -6.0, 6.0, 6.0), 12.0),)
+SCENE = SourceScene("wall", "local", (0.0, 0.0), BUILDINGS, STREETS)
+
+
+def footprint_tree(buildings: tuple[BuildingParams, ...]) -> shapely.STRtree:
+    return shapely.STRtree([shapely.Polygon(b.rings[0], b.rings[1:]) for b in buildings])
+
+
+@pytest.fixture(params=[True, False], ids=["cull", "nocull"])
+def renderer(request: pytest.FixtureRequest, gl: moderngl.Context) -> Iterator[VisibilityRenderer]:
+    """The wall scene at 64 x 64 per face, with and without back-face culling."""
+    meshes, ids = meshes_for_scene(SCENE, 0)
+    with VisibilityRenderer(
+        meshes,
+        ids,
+        resolution=64,
+        view_distance=VIEW_DISTANCE,
+        ctx=gl,
+        cull_back_faces=request.param,
+    ) as r:
+        yield r
+
+
+def cell_pvs(r: VisibilityRenderer, points: np.ndarray) -> dict[int, float]:
+    ids, pixels = r.cell_counts(points)
+    pvs, ach = pvs_from_counts(ids, pixels)
+    return dict(zip(pvs.tolist(), ach.tolist(), strict=True))
+
+
+def test_wall_scene_pvs(renderer: VisibilityRenderer) -> None:
+    pts = sample_points(CELL, 1.6, 3.0, footprints=footprint_tree(BUILDINGS))
+    assert pts.shape == (8, 3)
+    pvs = cell_pvs(renderer, pts)
+    assert HIDDEN not in pvs  # behind the wall
+    assert THROUGH_GAP in pvs  # through the gap
+    assert BEHIND_VIEWER in pvs  # the cube faces look backwards too
+    assert STREET in pvs  # ... and down
+    assert {WALL_WEST, WALL_EAST, FAR_SOUTH} <= set(pvs)
+    assert BEYOND not in pvs  # farther than the view distance
+    assert sum(pvs.values()) == pytest.approx(1.0)
+    assert all(0.0 < a <= 1.0 for a in pvs.values())
+    # bigger and closer covers more of the screen on average
+    assert pvs[BEHIND_VIEWER] > pvs[FAR_SOUTH]
+    assert pvs[WALL_EAST] > pvs[THROUGH_GAP]
+
+
+def test_occlusion_is_what_hides_them(gl: moderngl.Context) -> None:
+    pts = sample_points(CELL, 1.6, 3.0)
+    no_wall = SourceScene("open", "local", (0.0, 0.0), BUILDINGS[2:], STREETS)
+    closed = block(WALL_WEST, -100.0, 10.0, 100.0, 11.0, 20.0)  # the wall without its gap
+    no_gap = SourceScene("closed", "local", (0.0, 0.0), (closed, *BUILDINGS[2:]), STREETS)
+    for scene, seen in ((no_wall, True), (no_gap, False)):
+        meshes, ids = meshes_for_scene(scene, 0)
+        with VisibilityRenderer(
+            meshes, ids, resolution=64, view_distance=VIEW_DISTANCE, ctx=gl
+        ) as r:
+            pvs = cell_pvs(r, pts)
+        assert (HIDDEN in pvs) is seen and (THROUGH_GAP in pvs) is seen
+        assert BEHIND_VIEWER in pvs
+
+
+def test_view_distance_limits_the_pvs(gl: moderngl.Context) -> None:
+    meshes, ids = meshes_for_scene(SCENE, 0)
+    pts = sample_points(CELL, 1.6, 3.0)
+    with VisibilityRenderer(meshes, ids, resolution=32, view_distance=1000.0, ctx=gl) as r:
+        assert BEYOND in cell_pvs(r, pts)  # big enough to be seen once in range
+    with VisibilityRenderer(meshes, ids, resolution=32, view_distance=50.0, ctx=gl) as r:
+        pvs = cell_pvs(r, pts)
+    assert BEYOND not in pvs and FAR_SOUTH not in pvs
+    assert BEHIND_VIEWER in pvs
+
+
+def test_counts_are_exact_and_tiles_do_not_bleed(gl: moderngl.Context) -> None:
+    # A slab 10 m east of the eye spanning exactly the 90-degree +x face: it fills that
+    # face's res x res pixels and nothing in the neighbouring faces or tiles.
+    res = 32
+    slab = block(9, 10.0, -10.0, 10.5, 10.0, 20.0)
+    with VisibilityRenderer([build_lod(slab, 0)], [9], resolution=res, ctx=gl) as r:
+        ids, pixels = r.cell_counts(np.array([[0.0, 0.0, 10.0], [0.0, 0.0, 10.0]]))
+    assert ids.tolist() == [9]
+    assert pixels.tolist() == [2 * res * res]
+
+
+def test_cell_inside_buildings_has_empty_pvs(gl: moderngl.Context) -> None:
+    big = block(11, -50.0, -50.0, 50.0, 50.0, 10.0)
+    meshes, ids = meshes_for_scene(SCENE, 0)
+    pts = sample_points(CELL, 1.6, 3.0, footprints=footprint_tree((big,)))
+    assert pts.shape == (0, 3)
+    with VisibilityRenderer(meshes, ids, resolution=16, ctx=gl) as r:
+        got_ids, pixels = r.cell_counts(pts)
+    assert got_ids.shape == (0,) and pixels.shape == (0,)
+    pvs, ach = pvs_from_counts(got_ids, pixels)
+    assert pvs.dtype == np.int64 and ach.dtype == np.float64
+    assert len(pvs) == 0 and len(ach) == 0
+    assert len(dense_points(CELL, 1.6, 3.0, 20, footprints=footprint_tree((big,)))) == 0
+
+
+def test_sample_points_inside_cell_and_outside_footprints() -> None:
+    # An L-shaped cell with one building over its south-west corner and one inside it.
+    cell = np.array([[0, 0], [30, 0], [30, 10], [10, 10], [10, 30], [0, 30]], dtype=np.float64)
+    blds = (block(1, -5.0, -5.0, 4.0, 4.0, 10.0), block(2, 20.0, 2.0, 25.0, 6.0, 10.0))
+    tree = footprint_tree(blds)
+    margin = 0.3
+    pts = sample_points(cell, 1.5, 4.0, margin=margin, footprints=tree, centre=True)
+    assert pts.shape == (10, 3)
+    assert pts[:4, 2].tolist() == [1.5] * 4 and pts[4:8, 2].tolist() == [4.0] * 4
+    assert pts[8:, 2].tolist() == [1.5, 4.0]
+    poly = shapely.Polygon(cell)
+    p = shapely.points(pts[:, :2])
+    # inside the cell by the margin (allow for the buffer's polygonal arcs)
+    assert np.all(shapely.contains(poly, p))
+    assert np.all(shapely.distance(poly.exterior, p) >= margin * 0.98)
+    for b in blds:
+        fp = shapely.Polygon(b.rings[0])
+        assert not np.any(shapely.intersects(fp, p))
+        assert np.all(shapely.distance(fp, p) >= margin * 0.98)
+    # the south-west corner moved out of the building, as close as it can
+    assert shapely.distance(shapely.Point(pts[0, :2]), shapely.box(-5, -5, 4, 4)) == pytest.approx(
+        margin, abs=0.02
+    )
+
+
+def test_sample_points_without_footprints_hug_the_corners() -> None:
+    pts = sample_points(CELL, 1.0, 2.0, margin=0.5)
+    assert pts.shape == (8, 3)
+    np.testing.assert_allclose(np.abs(pts[:, :2]), 4.5, atol=1e-9)
+    # a cell thinner than two margins still gets points inside it
+    thin = rect(0.0, 0.0, 20.0, 0.4)
+    t = sample_points(thin, 1.0, 1.0, margin=0.3)
+    assert t.shape == (8, 3)
+    assert np.all(shapely.contains(shapely.Polygon(thin), shapely.points(t[:, :2])))
+
+
+def test_dense_points_spread_and_deterministic() -> None:
+    tree = footprint_tree((block(1, -2.0, -2.0, 2.0, 2.0, 5.0),))
+    a = dense_points(CELL, 1.5, 3.5, 50, levels=3, footprints=tree)
+    b = dense_points(CELL, 1.5, 3.5, 50, levels=3, footprints=tree)
+    np.testing.assert_array_equal(a, b)
+    assert a.shape == (150, 3)
+    assert sorted(set(a[:, 2].tolist())) == [1.5, 2.5, 3.5]
+    p = shapely.points(a[:, :2])
+    assert np.all(shapely.contains(shapely.Polygon(CELL), p))
+    assert not np.any(shapely.intersects(shapely.box(-2, -2, 2, 2), p))
+    # spread: every quadrant of the cell gets some
+    quadrants = {(bool(x > 0), bool(y > 0)) for x, y in a[:, :2]}
+    assert len(quadrants) == 4
+
+
+def test_results_are_deterministic(renderer: VisibilityRenderer, gl: moderngl.Context) -> None:
+    pts = sample_points(CELL, 1.6, 3.0, centre=True)
+    first = renderer.cell_counts(pts)
+    again = renderer.cell_counts(pts)
+    meshes, ids = meshes_for_scene(SCENE, 0)
+    with VisibilityRenderer(
+        meshes,
+        ids,
+        resolution=64,
+        view_distance=VIEW_DISTANCE,
+        ctx=gl,
+        cull_back_faces=renderer.cull_back_faces,
+        max_points_per_pass=3,  # several passes must add up to the same counts
+    ) as other:
+        third = other.cell_counts(pts)
+    for got in (again, third):
+        np.testing.assert_array_equal(first[0], got[0])
+        np.testing.assert_array_equal(first[1], got[1])
+
+
+def test_shared_ids_add_up_and_empty_meshes_are_ignored(gl: moderngl.Context) -> None:
+    a = build_lod(block(0, 5.0, -1.0, 6.0, 1.0, 3.0), 0)
+    b = build_lod(block(0, -6.0, -1.0, -5.0, 1.0, 3.0), 0)
+    empty = Mesh(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
+    eye = np.array([[0.0, 0.0, 1.5]])
+    with VisibilityRenderer([a, b, empty], [3, 3, 4], resolution=32, ctx=gl) as r:
+        ids, pixels = r.cell_counts(eye)
+    with VisibilityRenderer([a], [3], resolution=32, ctx=gl) as r:
+        _, single = r.cell_counts(eye)
+    assert ids.tolist() == [3]
+    assert pixels[0] == 2 * single[0]  # symmetric: both halves cover the same
+
+
+def test_pvs_from_counts() -> None:
+    pvs, ach = pvs_from_counts([4, 2, 9], [30, 10, 2], threshold=2)
+    assert pvs.tolist() == [4, 2]
+    np.testing.assert_allclose(ach, [0.75, 0.25])
+    e_ids, e_ach = pvs_from_counts([], [])
+    assert e_ids.shape == (0,) and e_ach.shape == (0,)
+    with pytest.raises(InputError):
+        pvs_from_counts([1, 2], [3])
+
+
+def test_meshes_for_scene_lists_every_object() -> None:
+    meshes, ids = meshes_for_scene(SCENE, 2)
+    assert ids.tolist() == [b.id for b in BUILDINGS] + [STREET]
+    assert ids.dtype == np.int64
+    assert meshes[-1].triangles == build_street(STREETS[0]).triangles
+    assert meshes[0].triangles == build_lod(BUILDINGS[0], 2).triangles
+
+
+def test_bad_input_and_release(gl: moderngl.Context) -> None:
+    meshes, ids = meshes_for_scene(SCENE, 0)
+    with pytest.raises(InputError):
+        VisibilityRenderer(meshes, ids[:-1], ctx=gl)
+    with pytest.raises(InputError):
+        VisibilityRenderer(meshes, ids, near=10.0, view_distance=5.0, ctx=gl)
+    r = VisibilityRenderer(meshes, ids, resolution=8, ctx=gl)
+    with pytest.raises(InputError):
+        r.cell_counts(np.zeros((2, 2)))
+    with pytest.raises(InputError):
+        r.cell_counts(np.array([[0.0, 0.0, np.nan]]))
+    r.release()
+    r.release()  # idempotent
+    with pytest.raises(RenderError):
+        r.cell_counts(np.zeros((1, 3)))
+    with pytest.raises(InputError):
+        sample_points(CELL, 3.0, 1.0)
+    with pytest.raises(InputError):
+        sample_points(np.zeros((2, 2)), 1.0, 2.0)
+
+
+def test_empty_scene(gl: moderngl.Context) -> None:
+    with VisibilityRenderer([], [], resolution=8, ctx=gl) as r:
+        ids, pixels = r.cell_counts(np.zeros((1, 3)))
+    assert ids.shape == (0,) and pixels.shape == (0,)
+
+
+def test_merging_draw_ranges_never_draws_out_of_range_objects(gl: moderngl.Context) -> None:
+    # Boxes within reach (radius 40 m) and boxes just beyond the view distance (100 m)
+    # but at a depth < 100 m in their cube face, interleaved around the eye: however the
+    # draw ranges are merged, the far ones must stay out and the counts must not change.
+    angles = np.radians(np.arange(0.0, 360.0, 15.0))
+    meshes: list[Mesh] = []
+    ids: list[int] = []
+    for k, a in enumerate(angles):
+        radius = 40.0 if k % 2 == 0 else 104.0
+        x, y = radius * np.cos(a), radius * np.sin(a)
+        meshes.append(build_lod(block(k, x - 1, y - 1, x + 1, y + 1, 12.0), 0))
+        ids.append(k)
+    eye = np.array([[0.0, 0.0, 1.7]])
+    results = []
+    for gap in (0, 10**9):
+        with VisibilityRenderer(
+            meshes, ids, resolution=64, view_distance=100.0, ctx=gl, merge_gap=gap
+        ) as r:
+            results.append(r.cell_counts(eye))
+    assert results[0][0].tolist() == list(range(0, len(angles), 2))
+    np.testing.assert_array_equal(results[0][0], results[1][0])
+    np.testing.assert_array_equal(results[0][1], results[1][1])
+
+
+def test_fallback_without_multi_draw_gives_the_same_counts(gl: moderngl.Context) -> None:
+    # OpenGL < 4.3 (e.g. macOS) has no glMultiDrawElementsIndirect: one draw per range.
+    meshes, ids = meshes_for_scene(SCENE, 0)
+    pts = sample_points(CELL, 1.6, 3.0, centre=True)
+    got = []
+    for multi in (True, False):
+        with VisibilityRenderer(
+            meshes, ids, resolution=32, view_distance=VIEW_DISTANCE, ctx=gl
+        ) as r:
+            r._multi_draw = multi
+            got.append(r.cell_counts(pts))
+    np.testing.assert_array_equal(got[0][0], got[1][0])
+    np.testing.assert_array_equal(got[0][1], got[1][1])
