@@ -177,18 +177,111 @@ def cmd_bench_rebuild(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------- bake / inspect / serve
+
+
+def _parse_bbox(text: str | None) -> tuple[float, float, float, float] | None:
+    if text is None:
+        return None
+    try:
+        parts = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        parts = ()
+    if len(parts) != 4:
+        raise WalkstreamError(f"--bbox: expected MINX,MINY,MAXX,MAXY in scene-local metres, got {text!r}")
+    return parts
+
+
+def _default_city_source(folder: Path) -> Path:
+    from server.sources.citygen import write_city
+
+    folder.mkdir(parents=True, exist_ok=True)
+    city = folder / "city.geojson"
+    if not city.exists():
+        print(f"generating the default city ({DEFAULT_CITY_SIZE:.0f} m, seed {DEFAULT_CITY_SEED}) -> {city}")
+        write_city(city, DEFAULT_CITY_SIZE, DEFAULT_CITY_SEED)
+    return city
+
+
+def run_bake(source: str | Path, output: str | Path, **kw: Any) -> dict[str, Any]:
+    """Bake with a progress bar on stderr; returns the summary."""
+    from tqdm import tqdm
+
+    from server.bake import bake
+
+    bar = tqdm(total=0, desc="baking cells", unit="cell", file=sys.stderr, dynamic_ncols=True)
+
+    def progress(done: int, total: int) -> None:
+        bar.total = total
+        bar.n = done
+        bar.refresh()
+
+    try:
+        return bake(source, output, progress=progress, log=lambda m: bar.write(m, file=sys.stderr), **kw)
+    finally:
+        bar.close()
+
+
+def cmd_bake(args: argparse.Namespace) -> int:
+    from server.bake import BakeSettings
+
+    if args.default_city:
+        source: Path = _default_city_source(Path(args.output).resolve().parent)
+    elif args.source:
+        source = Path(args.source)
+    else:
+        raise WalkstreamError("give a SOURCE.geojson or --default-city")
+    st = BakeSettings(
+        cells=args.cells,
+        cell_size=args.cell_size,
+        max_length=args.cell_size,
+        view_distance=args.view_distance,
+        bbox=_parse_bbox(args.bbox),
+        centre=args.centre,
+        threshold=args.threshold,
+        **{k: v for k, v in (("resolution", args.resolution), ("occluder_lod", args.occluder_lod)) if v is not None},
+    )
+    summary = run_bake(source, args.output, settings=st, name=args.name, workers=args.workers, scheduler=args.scheduler)
+    _print_summary(f"baked {args.output}", summary, args.json)
+    return 0
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    from server.store import SceneReader
+
+    reader = SceneReader.open(args.db)
+    try:
+        summary = reader.summary()
+        if args.map:
+            from server.mapplot import draw_map
+
+            draw_map(reader, args.map)
+    finally:
+        reader.close()
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        _print_summary(str(args.db), summary, False)
+        if args.map:
+            print(f"map: {args.map}")
+    return 0
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    from server.serve import serve
+
+    serve(args.db, host=args.host, port=args.port, workers=args.workers)
+    return 0
+
+
 # ---------------------------------------------------------------- demo
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from server.sources.citygen import city_summary, write_city
+    from server.sources.citygen import city_summary
 
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    city = out / "city.geojson"
-    if not city.exists():
-        print(f"generating the default city ({DEFAULT_CITY_SIZE:.0f} m, seed {DEFAULT_CITY_SEED}) -> {city}")
-        write_city(city, DEFAULT_CITY_SIZE, DEFAULT_CITY_SEED)
+    city = _default_city_source(out)
     summary = city_summary(json.loads(city.read_text()))
     _print_summary("default city", summary, False)
     from shared.buildstats import building_stats
@@ -215,6 +308,27 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print(f"LOD figure of building {biggest.source_id}: {png}")
     except WalkstreamError as exc:
         print(f"(no LOD figure: {exc})")
+    db = out / "city.db"
+    if db.exists():
+        print(f"scene database {db} exists (delete it to bake again)")
+    else:
+        t0 = time.perf_counter()
+        run_bake(city, db, workers=args.workers)
+        print(f"baked {db} in {time.perf_counter() - t0:.1f} s")
+    from server.mapplot import draw_map
+    from server.store import SceneReader
+
+    reader = SceneReader.open(db)
+    try:
+        s = reader.summary()
+        draw_map(reader, out / "map.png")
+    finally:
+        reader.close()
+    print(
+        f"scene {s['name']} {s['version']}: {s['cells']} cells, {s['objects']} objects, "
+        f"PVS mean {s['pvs_mean']:.1f} max {s['pvs_max']}, culled {100 * s['culled_ratio']:.1f} %"
+    )
+    print(f"map of the cells: {out / 'map.png'}")
     return 0
 
 
@@ -235,6 +349,39 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("demo", help="the main job on the built-in default scene (make demo)")
     d.add_argument("--out", default="out/demo", help="folder for everything the demo writes (default out/demo)")
     d.set_defaults(func=cmd_demo)
+
+    d.add_argument("--workers", type=int, default=1, help="local processes for the bake (default 1)")
+
+    bk = sub.add_parser("bake", help="bake a GeoJSON source into a scene database (cells, PVS, ACH)")
+    bk.add_argument("source", nargs="?", help="GeoJSON FeatureCollection (generated city or real footprints)")
+    bk.add_argument("-o", "--output", required=True, help="scene database to write (SQLite, replaced atomically)")
+    bk.add_argument("--default-city", action="store_true", help="bake the default 700 m city (generated beside the output)")
+    bk.add_argument("--name", help="scene name (default: the database file's stem)")
+    bk.add_argument("--cells", choices=("auto", "street", "grid"), default="auto", help="street cells (needs streets) or a grid (default auto)")
+    bk.add_argument("--cell-size", type=float, default=40.0, help="grid cell side / longest street cell, metres (default 40)")
+    bk.add_argument("--view-distance", type=float, default=800.0, help="far plane, metres (default 800)")
+    bk.add_argument("--bbox", help="MINX,MINY,MAXX,MAXY in scene-local metres: bake only this part")
+    bk.add_argument("--resolution", type=int, default=None, help="pixels per cube face (default: see bench visibility)")
+    bk.add_argument("--occluder-lod", type=int, choices=(0, 1, 2), default=None, help="LOD rendered as occluder")
+    bk.add_argument("--centre", action="store_true", help="also sample the cell centre (10 points instead of 8)")
+    bk.add_argument("--threshold", type=int, default=0, help="hardly-visible threshold: pixels an object needs to enter the PVS (default 0)")
+    bk.add_argument("--workers", type=int, default=1, help="local processes rendering cells (default 1)")
+    bk.add_argument("--scheduler", help="tcp://HOST:PORT of a Dask scheduler to run the cell tasks on")
+    bk.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    bk.set_defaults(func=cmd_bake)
+
+    ins = sub.add_parser("inspect", help="summary of a scene database; --map draws its cells")
+    ins.add_argument("db", help="scene database")
+    ins.add_argument("--map", help="PNG: top view of the cells coloured by PVS size over the footprints")
+    ins.add_argument("--json", action="store_true", help="print one JSON object")
+    ins.set_defaults(func=cmd_inspect)
+
+    sv = sub.add_parser("serve", help="serve scene databases over HTTP (FastAPI + uvicorn)")
+    sv.add_argument("db", nargs="+", help="scene database(s), each served under its scene name")
+    sv.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    sv.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    sv.add_argument("--workers", type=int, default=1, help="uvicorn worker processes (default 1)")
+    sv.set_defaults(func=cmd_serve)
 
     g = sub.add_parser("generate", help="generate a procedural scene source")
     gsub = g.add_subparsers(dest="what", metavar="WHAT", required=True)

@@ -1,0 +1,122 @@
+"""The bake end to end: database contents, atomic replace, resume, workers, Dask."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from server.bake import BakeSettings, bake
+from server.sources.citygen import write_city
+from server.store import SceneReader, StoreError
+from shared.errors import InputError
+from walkstream.cli import main
+
+pytestmark = pytest.mark.gl
+
+FAST = BakeSettings(resolution=32)
+
+
+@pytest.fixture(scope="module")
+def city(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("bake") / "city.geojson"
+    write_city(path, 150, 2)
+    return path
+
+
+@pytest.fixture(scope="module")
+def baked(city: Path, gl_ctx: object) -> tuple[Path, dict]:
+    out = city.parent / "city.db"
+    return out, bake(city, out, settings=FAST)
+
+
+def test_bake_writes_a_complete_database(baked: tuple[Path, dict]) -> None:
+    db, summary = baked
+    assert summary["name"] == "city"
+    assert summary["cells"] > 5 and summary["objects"] > 10
+    assert 0 < summary["pvs_mean"] <= summary["pvs_max"] <= summary["objects"]
+    reader = SceneReader.open(db)
+    try:
+        meta = reader.meta
+        assert "building" in meta.grammar_text and meta.crs == "EPSG:32633"
+        assert {"buildings", "streets", "street_cells"} == set(meta.features)
+        assert reader.viewpoints()
+        for cell in reader.cells():
+            if len(cell.pvs):
+                assert cell.ach.sum() == pytest.approx(1.0)
+                assert (cell.ach > 0).all()
+            assert set(cell.neighbours) and cell.id not in set(cell.neighbours)
+        info = reader.object_info([0])[0]
+        assert info.tris[0] < info.tris[1] < info.tris[2]
+    finally:
+        reader.close()
+
+
+def test_interrupted_bake_keeps_old_database_and_resumes(city: Path, baked: tuple[Path, dict], tmp_path: Path) -> None:
+    db, summary = baked
+    target = tmp_path / "scene.db"
+    target.write_bytes(db.read_bytes())
+    before = target.read_bytes()
+    # a different setting makes a different scene; stop it after a few cells
+    other = BakeSettings(resolution=32, threshold=1)
+    assert bake(city, target, settings=other, max_cells=3) == {}
+    assert target.read_bytes() == before  # the good database is untouched
+    resumed = bake(city, target, settings=other)
+    assert resumed["resumed_cells"] == 3
+    assert resumed["cells"] == summary["cells"]
+    assert target.read_bytes() != before
+
+
+def test_local_workers_give_the_same_pvs(city: Path, baked: tuple[Path, dict], tmp_path: Path) -> None:
+    db, _ = baked
+    out = tmp_path / "w2.db"
+    bake(city, out, settings=FAST, workers=2)
+    a, b = SceneReader.open(db), SceneReader.open(out)
+    try:
+        for ca, cb in zip(a.cells(), b.cells(), strict=True):
+            assert np.array_equal(ca.pvs, cb.pvs)
+    finally:
+        a.close()
+        b.close()
+
+
+def test_dask_local_cluster(city: Path, baked: tuple[Path, dict], tmp_path: Path) -> None:
+    from distributed import LocalCluster
+
+    db, _ = baked
+    out = tmp_path / "dask.db"
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        summary = bake(city, out, settings=FAST, scheduler=cluster.scheduler_address)
+    ref = SceneReader.open(db)
+    try:
+        assert summary["pvs_mean"] == ref.summary()["pvs_mean"]
+    finally:
+        ref.close()
+
+
+def test_bad_settings_and_sources(city: Path, tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="resolution"):
+        bake(city, tmp_path / "x.db", settings=BakeSettings(resolution=2))
+    with pytest.raises(InputError, match="bbox"):
+        bake(city, tmp_path / "x.db", settings=BakeSettings(bbox=(1e6, 1e6, 1e6 + 10, 1e6 + 10)))
+    assert not (tmp_path / "x.db").exists()
+
+
+def test_inspect_cli_json_map_and_bad_files(baked: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    db, _ = baked
+    png = tmp_path / "map.png"
+    assert main(["inspect", str(db), "--json", "--map", str(png)]) == 0
+    got = json.loads(capsys.readouterr().out)
+    for key in ("name", "version", "cells", "objects", "pvs_mean", "pvs_max", "culled_ratio",
+                "bake_seconds", "db_bytes", "schema_version", "features"):
+        assert key in got
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    junk = tmp_path / "junk.db"
+    junk.write_bytes(b"not a database" * 100)
+    assert main(["inspect", str(junk)]) == 2
+    err = capsys.readouterr().err
+    assert "junk.db" in err and "Traceback" not in err
+    with pytest.raises(StoreError):
+        SceneReader.open(junk)
