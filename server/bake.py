@@ -34,7 +34,7 @@ __all__ = ["BakeSettings", "bake", "clip_scene", "DEFAULT_RESOLUTION", "DEFAULT_
 
 #: chosen with ``walkstream bench visibility`` (cheapest setting whose
 #: pixel-weighted miss rate against the dense reference is at most 1 %)
-DEFAULT_RESOLUTION = 128
+DEFAULT_RESOLUTION = 64
 DEFAULT_OCCLUDER_LOD = 0
 
 #: cells per task: big enough to amortise a task's overhead, small enough for a smooth bar

@@ -274,6 +274,37 @@ def cmd_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_visibility(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from server.visbench import (
+        format_table,
+        load_bench_input,
+        plot_visibility_benchmark,
+        visibility_benchmark,
+    )
+
+    inp = load_bench_input(args.scene, source=args.source)
+    bar = tqdm(total=0, desc="rendering", unit="cell", file=sys.stderr, dynamic_ncols=True)
+
+    def progress(done: int, total: int) -> None:
+        bar.total = total
+        bar.n = done
+        bar.refresh()
+
+    try:
+        res = visibility_benchmark(
+            inp.scene, inp.cells, sample=args.sample, view_distance=inp.view_distance, progress=progress
+        )
+    finally:
+        bar.close()
+    print(format_table(res))
+    if args.plot:
+        plot_visibility_benchmark(res, args.plot)
+        print(f"plot: {args.plot}")
+    return 0
+
+
 # ---------------------------------------------------------------- demo
 
 
@@ -302,7 +333,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
         from client.render import render_lods_figure
         from shared.buildings import build_lods
 
-        biggest = max(scene.buildings, key=lambda b: len(b.rings[0]) + b.floors)
+        # a free-standing building shows every facade; fall back to the most complex one
+        free = [b for b in scene.buildings if all((h == 0).all() for h in b.neighbour_heights)]
+        biggest = max(free or scene.buildings, key=lambda b: len(b.rings[0]) + b.floors)
         png = out / "lods.png"
         render_lods_figure(list(build_lods(biggest)), png)
         print(f"LOD figure of building {biggest.source_id}: {png}")
@@ -419,6 +452,12 @@ def build_parser() -> argparse.ArgumentParser:
     bb.add_argument("--size", type=float, default=DEFAULT_CITY_SIZE, help="city size when no file is given")
     bb.add_argument("--repeat", type=int, default=5, help="runs; the table shows medians (default 5)")
     bb.set_defaults(func=cmd_bench_rebuild)
+    bv = besub.add_parser("visibility", help="PVS miss rate against a dense reference vs bake seconds per cell, per setting")
+    bv.add_argument("scene", help="scene database (its source GeoJSON is read again) or a GeoJSON source")
+    bv.add_argument("--source", help="the GeoJSON the database was baked from, if it moved")
+    bv.add_argument("--sample", type=int, default=12, help="cells compared (default 12)")
+    bv.add_argument("--plot", help="PNG: miss rate against seconds per cell")
+    bv.set_defaults(func=cmd_bench_visibility)
     return p
 
 
