@@ -120,3 +120,46 @@ def test_inspect_cli_json_map_and_bad_files(baked: tuple[Path, dict], tmp_path: 
     assert "junk.db" in err and "Traceback" not in err
     with pytest.raises(StoreError):
         SceneReader.open(junk)
+
+
+def test_a_killed_bake_process_leaves_the_database_and_resumes(tmp_path: Path, gl_ctx: object) -> None:
+    """SIGKILL a real `walkstream bake` mid-way; the old file survives and the rerun resumes."""
+    import os
+    import signal
+    import sqlite3
+    import subprocess
+    import sys
+    import time
+
+    src = tmp_path / "city.geojson"
+    write_city(src, 350, 4)
+    db = tmp_path / "scene.db"
+    db.write_bytes(b"previous good database stands in here")
+    before = db.read_bytes()
+    argv = [sys.executable, "-m", "walkstream", "bake", str(src), "-o", str(db), "--resolution", "64"]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    partial = Path(str(db) + ".partial")
+    done = 0
+    deadline = time.monotonic() + 120
+    try:
+        while time.monotonic() < deadline and proc.poll() is None:
+            if partial.exists():
+                try:
+                    with sqlite3.connect(f"file:{partial}?mode=ro", uri=True, timeout=1) as c:
+                        done = c.execute("SELECT count(*) FROM cells WHERE done = 1").fetchone()[0]
+                except sqlite3.Error:
+                    done = 0
+                if done >= 5:
+                    break
+            time.sleep(0.05)
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    if proc.returncode == 0:
+        pytest.skip("the bake finished before it could be killed")
+    assert done >= 5
+    assert db.read_bytes() == before
+    summary = bake(src, db, settings=BakeSettings(resolution=64))
+    assert summary["resumed_cells"] >= 5
+    assert summary["cells"] > summary["resumed_cells"]
