@@ -203,19 +203,25 @@ def _default_city_source(folder: Path) -> Path:
     return city
 
 
-def run_bake(source: str | Path, output: str | Path, **kw: Any) -> dict[str, Any]:
-    """Bake with a progress bar on stderr; returns the summary."""
+def _count_bar(desc: str, unit: str) -> tuple[Any, Any]:
+    """A stderr progress bar and the ``(done, total)`` callback that drives it."""
     from tqdm import tqdm
 
-    from server.bake import bake
-
-    bar = tqdm(total=0, desc="baking cells", unit="cell", file=sys.stderr, dynamic_ncols=True)
+    bar = tqdm(total=0, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True)
 
     def progress(done: int, total: int) -> None:
         bar.total = total
         bar.n = done
         bar.refresh()
 
+    return bar, progress
+
+
+def run_bake(source: str | Path, output: str | Path, **kw: Any) -> dict[str, Any]:
+    """Bake with a progress bar on stderr; returns the summary."""
+    from server.bake import bake
+
+    bar, progress = _count_bar("baking cells", "cell")
     try:
         return bake(source, output, progress=progress, log=lambda m: bar.write(m, file=sys.stderr), **kw)
     finally:
@@ -275,8 +281,6 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_visibility(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from server.visbench import (
         format_table,
         load_bench_input,
@@ -285,13 +289,7 @@ def cmd_bench_visibility(args: argparse.Namespace) -> int:
     )
 
     inp = load_bench_input(args.scene, source=args.source)
-    bar = tqdm(total=0, desc="rendering", unit="cell", file=sys.stderr, dynamic_ncols=True)
-
-    def progress(done: int, total: int) -> None:
-        bar.total = total
-        bar.n = done
-        bar.refresh()
-
+    bar, progress = _count_bar("rendering", "cell")
     try:
         res = visibility_benchmark(
             inp.scene, inp.cells, sample=args.sample, view_distance=inp.view_distance, progress=progress
