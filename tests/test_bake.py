@@ -163,3 +163,12 @@ def test_a_killed_bake_process_leaves_the_database_and_resumes(tmp_path: Path, g
     summary = bake(src, db, settings=BakeSettings(resolution=64))
     assert summary["resumed_cells"] >= 5
     assert summary["cells"] > summary["resumed_cells"]
+
+
+def test_bench_visibility_cli(baked: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    db, _ = baked
+    png = tmp_path / "vis.png"
+    assert main(["bench", "visibility", str(db), "--sample", "1", "--plot", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert "64 L0" in out and "256 L2 +c" in out and "default:" in out
+    assert png.read_bytes()[:4] == b"\x89PNG"
