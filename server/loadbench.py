@@ -31,7 +31,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -321,7 +321,9 @@ def _free_port(host: str) -> int:
 def _health(host: str, port: int) -> bool:
     try:
         with socket.create_connection((host, port), timeout=1.0) as s:
-            s.sendall(f"GET /v1/health HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n".encode())
+            s.sendall(
+                f"GET /v1/health HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n".encode()
+            )
             data = b""
             while b"\r\n" not in data:
                 chunk = s.recv(4096)
@@ -345,14 +347,22 @@ serve([sys.argv[1]], host="127.0.0.1", port=int(sys.argv[2]), workers=int(sys.ar
 
 
 @contextlib.contextmanager
-def _server(db: str, port: int, workers: int, pin: bool):  # type: ignore[no-untyped-def]
+def _server(db: str, port: int, workers: int, pin: bool) -> Iterator[tuple[str, int]]:
     host = "127.0.0.1"
     port = port or _free_port(host)
     env = dict(os.environ)
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     proc = subprocess.Popen(
-        [sys.executable, "-c", _SERVER_CODE, db, str(port), str(workers), str(SERVER_CORE if pin else -1)],
+        [
+            sys.executable,
+            "-c",
+            _SERVER_CODE,
+            db,
+            str(port),
+            str(workers),
+            str(SERVER_CORE if pin else -1),
+        ],
         env=env,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,

@@ -33,7 +33,9 @@ def evaluate_lets(grammar: Grammar, globals_: Mapping[str, float]) -> dict[str, 
     scope: dict[str, Any] = {k: float(v) for k, v in globals_.items()}
     with np.errstate(all="ignore"):
         for name, expr in grammar.lets:
-            scope[name] = float(np.asarray(expr.eval(scope), dtype=np.float64))
+            v = expr.eval(scope)
+            # most lets are plain Python numbers; skip numpy for them (hot path per building)
+            scope[name] = float(v) if isinstance(v, int | float) else float(np.asarray(v, dtype=np.float64))
     return scope
 
 

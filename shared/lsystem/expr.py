@@ -28,6 +28,8 @@ def hash01(seed: Any, k: Any) -> Any:
     Integer arithmetic only, so the value is the same on every machine.  Works on
     scalars and arrays alike.
     """
+    if isinstance(seed, int | float) and isinstance(k, int | float):
+        return _hash01_scalar(int(seed), int(k))
     s = np.asarray(seed, dtype=np.float64).astype(np.int64).astype(np.uint64)
     kk = np.asarray(k, dtype=np.float64).astype(np.int64).astype(np.uint64)
     with np.errstate(over="ignore"):
@@ -41,6 +43,18 @@ def hash01(seed: Any, k: Any) -> Any:
         x ^= x >> np.uint64(15)
     out = x.astype(np.float64) / 4294967296.0
     return float(out) if out.ndim == 0 else out
+
+
+def _hash01_scalar(seed: int, k: int) -> float:
+    """The same hash as :func:`hash01` in plain Python integers (no numpy call overhead)."""
+    m = 0xFFFFFFFF
+    x = ((seed % (1 << 64)) * 2654435761 + (k % (1 << 64)) * 40503 + 0x9E3779B9) & m
+    x ^= x >> 15
+    x = (x * 0x2C1B3C6D) & m
+    x ^= x >> 12
+    x = (x * 0x297A2D39) & m
+    x ^= x >> 15
+    return x / 4294967296.0
 
 
 def _clamp(x: Any, lo: Any, hi: Any) -> Any:
