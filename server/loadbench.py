@@ -234,6 +234,7 @@ async def _walker(
         await conn.request(stats, "GET", base)
         cell = scene.cells[scene.starts[index % len(scene.starts)]]
         prev = -1
+        first = True
         while time.perf_counter() < stop_at:
             entered = time.perf_counter()
             # a point in the cell, jittered so locate answers are not all the same
@@ -251,6 +252,9 @@ async def _walker(
                     have.update(batch)
             # time to cross the cell at walking pace, kept to one visit every 1-3 s
             dwell = min(3.0, max(1.0, cell.length / speed_ms))
+            if first:  # the walk starts anywhere along the first cell
+                dwell *= rng.random()
+                first = False
             choices = [n for n in cell.neighbours if n in scene.cells and n != prev]
             if not choices:
                 choices = [n for n in cell.neighbours if n in scene.cells]

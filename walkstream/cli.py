@@ -303,6 +303,28 @@ def cmd_bench_visibility(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_server(args: argparse.Namespace) -> int:
+    from server.loadbench import format_table, run_server_bench
+
+    def ints(text: str, flag: str) -> tuple[int, ...]:
+        try:
+            return tuple(int(v) for v in text.split(","))
+        except ValueError:
+            raise WalkstreamError(f"{flag}: expected comma-separated integers, got {text!r}") from None
+
+    rows = run_server_bench(
+        args.db,
+        walkers=ints(args.walkers, "--walkers"),
+        workers=ints(args.workers, "--workers"),
+        ramp_s=args.ramp,
+        duration_s=args.duration,
+        pin=not args.no_pin,
+        progress=lambda row: print(f"done: {row['walkers']} walkers, {row['workers']} worker(s)", file=sys.stderr),
+    )
+    print(format_table(rows))
+    return 0
+
+
 # ---------------------------------------------------------------- demo
 
 
@@ -456,6 +478,14 @@ def build_parser() -> argparse.ArgumentParser:
     bv.add_argument("--sample", type=int, default=12, help="cells compared (default 12)")
     bv.add_argument("--plot", help="PNG: miss rate against seconds per cell")
     bv.set_defaults(func=cmd_bench_visibility)
+    bsv = besub.add_parser("server", help="simulated walkers against a real server on loopback: req/s, p50/p99, errors")
+    bsv.add_argument("db", help="scene database to serve")
+    bsv.add_argument("--walkers", default="10,100,1000", help="walker counts (default 10,100,1000)")
+    bsv.add_argument("--workers", default="1,2", help="server worker counts (default 1,2)")
+    bsv.add_argument("--ramp", type=float, default=60.0, help="seconds over which walkers start (default 60)")
+    bsv.add_argument("--duration", type=float, default=30.0, help="measured seconds after the ramp (default 30)")
+    bsv.add_argument("--no-pin", action="store_true", help="do not pin server and load generator to separate cores")
+    bsv.set_defaults(func=cmd_bench_server)
     return p
 
 
