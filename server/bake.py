@@ -23,6 +23,7 @@ import shapely
 from numpy.typing import NDArray
 
 from server.cells import ViewCell, make_cells, viewpoints
+from server.pathgen import default_paths
 from server.sources.geojson import load_geojson
 from server.sources.scene import SourceScene
 from server.store import CellRow, ObjectRow, SceneReader, SceneWriter
@@ -271,6 +272,11 @@ def bake(
         if max_cells is not None and finished < len(cells):
             writer.close()
             return {}
+        # the default recorded paths: made from the cells alone, so a resumed bake
+        # records the same ones (INSERT OR REPLACE) just before sealing the file
+        for path in default_paths(cells, footprints=[b.rings[0] for b in scene.buildings]):
+            writer.add_path(path.name, path.to_msgpack())
+            say(f"recorded path {path.name}: {path.duration:.0f} s, {path.length_m():.0f} m at {path.speed_kmh:g} km/h")
         seconds = time.perf_counter() - t0
         writer.finish(seconds)
     finally:

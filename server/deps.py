@@ -12,7 +12,10 @@ that needs it, so that answering costs about as much as serving a static file:
   byte-bounded LRU;
 * object frames (see :mod:`server.routes`) are encoded on first use and kept in a
   second byte-bounded LRU; which ids exist and their kinds are known from start-up,
-  so an unknown id is answered without touching the database.
+  so an unknown id is answered without touching the database;
+* LOD2 mesh frames (``form=lod2``, for the client's ``--stream meshes`` comparison)
+  are built from the parameters with the scene's grammar (parsed once per scene) on
+  first use, in a worker thread, and kept in the same frame LRU under separate keys.
 
 A scene is immutable (a recorded path makes a *new* scene version in a new file), so
 nothing cached here ever needs invalidating; a restart serves the new version.
@@ -39,15 +42,21 @@ from fastapi import Request
 from server.cells import CELL_KINDS as LOCATOR_KINDS
 from server.cells import CellLocator, ViewCell
 from server.store import CellInfo, SceneReader, StoreError
-from shared.codec import unpack_bounded
+from shared.buildings import build_lod
+from shared.codec import decode_object, encode_mesh, unpack_bounded
 from shared.errors import CodecError, WalkstreamError
+from shared.lsystem.grammar import Grammar, parse_grammar
+from shared.records import BuildingParams
+from shared.streets import build_street
 
 __all__ = [
     "MSGPACK",
     "JSON",
     "MAX_IDS",
     "IMMUTABLE",
+    "OBJECT_FORMS",
     "Rep",
+    "Form",
     "ApiError",
     "Encoded",
     "LRU",
@@ -77,6 +86,12 @@ IMMUTABLE = "public, max-age=31536000, immutable"
 
 Rep = Literal["msgpack", "json"]
 """A representation: msgpack (default) or JSON."""
+
+Form = Literal["params", "lod2"]
+"""What an object frame carries: the stored parameters, or the rebuilt LOD2 mesh."""
+
+OBJECT_FORMS: tuple[Form, ...] = ("params", "lod2")
+"""The forms ``POST .../objects?form=`` accepts; ``params`` is the default."""
 
 _MEDIA: dict[str, str] = {"msgpack": MSGPACK, "json": JSON}
 
@@ -347,6 +362,9 @@ class Scene:
         }
         self._bodies = LRU(_BODY_CACHE_BYTES)
         self._frames = LRU(_FRAME_CACHE_BYTES)
+        self._grammar_text = meta.grammar_text
+        self._grammar: Grammar | None = None
+        self._grammar_lock = threading.Lock()
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Scene:
@@ -478,27 +496,63 @@ class Scene:
                 seen[i] = None
         return list(seen)
 
-    def cached_frames(self, ids: Sequence[int]) -> tuple[dict[int, bytes], list[int]]:
+    def cached_frames(
+        self, ids: Sequence[int], form: Form = "params"
+    ) -> tuple[dict[int, bytes], list[int]]:
         """``(frames found in the cache by id, ids not cached, without repeats)``."""
-        found, missing = self._frames.get_many(ids)
-        return cast(dict[int, bytes], found), cast(list[int], missing)
+        if form == "params":
+            found, missing = self._frames.get_many(ids)
+            return cast(dict[int, bytes], found), cast(list[int], missing)
+        # mesh frames live in the same LRU under (form, id) keys
+        got, absent = self._frames.get_many((form, i) for i in ids)
+        return (
+            {cast(tuple[str, int], k)[1]: v for k, v in got.items()},
+            [cast(tuple[str, int], k)[1] for k in absent],
+        )
 
-    def load_frames(self, ids: Sequence[int]) -> dict[int, bytes]:
+    def load_frames(self, ids: Sequence[int], form: Form = "params") -> dict[int, bytes]:
         """Read and encode the frames of ``ids`` (known ids) and cache them.
 
-        A frame is the msgpack map ``{"id": int, "kind": str, "params": bin}``.
-        Runs a database query: call it from a worker thread.
+        A ``params`` frame is the msgpack map ``{"id": int, "kind": str, "params":
+        bin}``; a ``lod2`` frame is ``{"id", "kind", "mesh": bin}`` with the object's
+        LOD2 mesh encoded by :func:`shared.codec.encode_mesh` (buildings rebuilt with
+        the scene's grammar, street pieces with :func:`shared.streets.build_street`).
+        Runs a database query, and for ``lod2`` real geometry work: call it from a
+        worker thread.
         """
         params = self.reader.object_params(ids)
         out: dict[int, bytes] = {}
         for oid, blob in params.items():
-            frame = dump_msgpack({"id": oid, "kind": self.kinds[oid], "params": blob})
-            self._frames.put(oid, frame, len(frame))
+            if form == "params":
+                frame = dump_msgpack({"id": oid, "kind": self.kinds[oid], "params": blob})
+                self._frames.put(oid, frame, len(frame))
+            else:
+                mesh = self._lod2_mesh(oid, blob)
+                frame = dump_msgpack({"id": oid, "kind": self.kinds[oid], "mesh": mesh})
+                self._frames.put((form, oid), frame, len(frame))
             out[oid] = frame
         missing = [i for i in ids if i not in out]
         if missing:
             raise ApiError(404, f"scene {self.name!r}: no object {missing[0]}", {"ids": missing})
         return out
+
+    def grammar(self) -> Grammar:
+        """The scene's building grammar, parsed on first use (once per scene)."""
+        with self._grammar_lock:
+            if self._grammar is None:
+                self._grammar = parse_grammar(self._grammar_text)
+            return self._grammar
+
+    def _lod2_mesh(self, oid: int, blob: bytes) -> bytes:
+        """The encoded LOD2 mesh of object ``oid`` from its stored parameters."""
+        try:
+            p = decode_object(blob, f"scene {self.name!r}: object {oid}")
+        except CodecError as exc:
+            # stored bytes, not the request, are at fault: a server-side error
+            raise StoreError(f"{self.reader.path}: damaged database ({exc})") from exc
+        if isinstance(p, BuildingParams):
+            return encode_mesh(build_lod(p, 2, self.grammar()))
+        return encode_mesh(build_street(p, 2))
 
 
 # ---------------------------------------------------------------------------

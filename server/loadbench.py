@@ -27,8 +27,6 @@ import math
 import os
 import random
 import resource
-import socket
-import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -38,6 +36,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from server.process import server_process
 from server.store import SceneReader
 
 __all__ = ["run_server_bench", "format_table", "main"]
@@ -316,85 +315,10 @@ async def _drive(
 # ---------------------------------------------------------------------------
 
 
-def _free_port(host: str) -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind((host, 0))
-        return int(s.getsockname()[1])
-
-
-def _health(host: str, port: int) -> bool:
-    try:
-        with socket.create_connection((host, port), timeout=1.0) as s:
-            s.sendall(
-                f"GET /v1/health HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n".encode()
-            )
-            data = b""
-            while b"\r\n" not in data:
-                chunk = s.recv(4096)
-                if not chunk:
-                    break
-                data += chunk
-        return data.startswith(b"HTTP/1.1 200")
-    except OSError:
-        return False
-
-
-_SERVER_CODE = """
-import os, sys
-core = int(sys.argv[4])
-if core >= 0:
-    os.sched_setaffinity(0, {core})
-from server.serve import serve
-serve([sys.argv[1]], host="127.0.0.1", port=int(sys.argv[2]), workers=int(sys.argv[3]),
-      log_level="warning")
-"""
-
-
 @contextlib.contextmanager
 def _server(db: str, port: int, workers: int, pin: bool) -> Iterator[tuple[str, int]]:
-    host = "127.0.0.1"
-    port = port or _free_port(host)
-    env = dict(os.environ)
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            _SERVER_CODE,
-            db,
-            str(port),
-            str(workers),
-            str(SERVER_CORE if pin else -1),
-        ],
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        start_new_session=True,
-    )
-    try:
-        deadline = time.monotonic() + 60
-        while not _health(host, port):
-            if proc.poll() is not None:
-                err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
-                raise RuntimeError(f"server exited with {proc.returncode}: {err[-2000:]}")
-            if time.monotonic() > deadline:
-                raise RuntimeError("server did not answer /v1/health within 60 s")
-            time.sleep(0.1)
-        if workers > 1:  # let every worker come up before the load starts
-            time.sleep(1.0)
-        yield host, port
-    finally:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, 15)
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(proc.pid, 9)
-            proc.wait()
-        if proc.stderr:
-            proc.stderr.close()
+    with server_process([db], port, workers, SERVER_CORE if pin else -1) as where:
+        yield where
 
 
 def _raise_nofile() -> int:

@@ -27,6 +27,19 @@ per line, of ``{"id", "kind", "params": base64}``.
 
 All ids are checked before the first byte is sent: an unknown id gives a 404 that
 lists the unknown ids, never a truncated stream.
+
+Mesh form (for comparison only)
+-------------------------------
+``POST /v1/scenes/{scene}/objects?form=lod2`` answers with the same framing, but
+each map is ``{"id": int, "kind": str, "mesh": bin}`` where ``mesh`` is the object's
+LOD2 mesh, rebuilt on the server (buildings with the scene's grammar, street pieces
+as their flat surface) and encoded by :func:`shared.codec.encode_mesh` (decode with
+:func:`shared.codec.decode_mesh`); with ``Accept: application/json`` the elements
+are ``{"id", "kind", "mesh": base64}``.  It exists so that a client's
+``--stream meshes`` mode can measure what sending geometry instead of parameters
+costs in bytes and quality, which is the paper's central claim; meshes are about a
+thousand times larger than parameters.  ``form=params`` is the default and the
+format described above; any other form is a 422 naming it.
 """
 
 from __future__ import annotations
@@ -34,7 +47,7 @@ from __future__ import annotations
 import base64
 import json
 from collections.abc import AsyncIterator, Iterable
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, cast
 
 import msgpack
 from fastapi import APIRouter, Depends, Path, Query, Request, Response
@@ -48,8 +61,10 @@ from server.deps import (
     MAX_IDS,
     MSGPACK,
     MSGPACK_TYPES,
+    OBJECT_FORMS,
     ApiError,
     Encoded,
+    Form,
     Rep,
     Scene,
     SceneRegistry,
@@ -350,8 +365,9 @@ _OBJECTS_BODY = {
     "/scenes/{scene}/objects",
     responses={
         200: {
-            "description": "concatenated msgpack maps {id, kind, params}, one per id in the "
-            "order asked (see the module docs); a JSON array with Accept: application/json",
+            "description": "concatenated msgpack maps {id, kind, params} (or {id, kind, mesh} "
+            "with form=lod2), one per id in the order asked (see the module docs); a JSON "
+            "array with Accept: application/json",
             "content": {MSGPACK: {}, JSON: {}},
         },
         400: _err("the body is not JSON / msgpack"),
@@ -361,8 +377,33 @@ _OBJECTS_BODY = {
     openapi_extra={"requestBody": _OBJECTS_BODY},
     summary="Stream object parameters",
 )
-async def objects(request: Request, scene: SceneDep, rep: RepDep) -> StreamingResponse:
-    """Stream the parameters of the objects asked for, in the order asked."""
+async def objects(
+    request: Request,
+    scene: SceneDep,
+    rep: RepDep,
+    form: Annotated[
+        str,
+        Query(
+            description="what each frame carries: `params` (the default), the compact "
+            "procedural parameters, or `lod2`, the LOD2 mesh rebuilt on the server "
+            "(shared.codec.encode_mesh), offered only to compare streaming geometry "
+            "against streaming parameters",
+            examples=list(OBJECT_FORMS),
+            max_length=64,
+        ),
+    ] = "params",
+) -> StreamingResponse:
+    """Stream the parameters (or, with ``form=lod2``, the LOD2 meshes) of the objects asked for.
+
+    The frames come in the order asked; see the module docs for the framing.
+    """
+    if form not in OBJECT_FORMS:
+        raise ApiError(
+            422,
+            f"unknown form {form!r:.80}: expected one of {', '.join(OBJECT_FORMS)}",
+            {"form": form[:80], "known": list(OBJECT_FORMS)},
+        )
+    frm = cast(Form, form)
     ids = _parse_ids(await _read_body(request), request.headers.get("content-type"))
     unknown = scene.unknown_ids(ids)
     if unknown:
@@ -372,9 +413,10 @@ async def objects(request: Request, scene: SceneDep, rep: RepDep) -> StreamingRe
             f"scene {scene.name!r} has no object{'s' if len(unknown) > 1 else ''} {shown}",
             {"ids": unknown},
         )
-    found, missing = scene.cached_frames(ids)
+    found, missing = scene.cached_frames(ids, frm)
     if missing:
-        found.update(await run_in_threadpool(scene.load_frames, missing))
+        # reads the database and, for meshes, rebuilds geometry: off the event loop
+        found.update(await run_in_threadpool(scene.load_frames, missing, frm))
     frames = [found[i] for i in ids]
     headers = {"X-Scene-Version": scene.version, "X-Object-Count": str(len(ids))}
     if rep == "json":
@@ -467,7 +509,8 @@ def _json_items(frames: Iterable[bytes]) -> Iterable[bytes]:
     yield b"["
     for k, f in enumerate(frames):
         o = msgpack.unpackb(f)
-        item = {"id": o["id"], "kind": o["kind"], "params": base64.b64encode(o["params"]).decode()}
+        key = "params" if "params" in o else "mesh"
+        item = {"id": o["id"], "kind": o["kind"], key: base64.b64encode(o[key]).decode()}
         yield (b",\n" if k else b"\n") + dump_json(item)
     yield b"\n]\n"
 

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
-import msgpack
 import numpy as np
 
 from server.cells import make_cells
@@ -22,14 +21,26 @@ from server.sources.scene import SourceScene
 from server.store import CellRow, ObjectRow, SceneWriter
 from shared.buildings import default_grammar_text
 from shared.lsystem.grammar import parse_grammar
+from shared.paths import RecordedPath
 
-__all__ = ["CityDb", "build_city_db", "PATH_NAME", "PATH_DATA"]
+__all__ = ["CityDb", "build_city_db", "PATH_NAME", "PATH", "PATH_DATA"]
 
 PATH_NAME = "tour/1"
 """The name of the recorded path every test database holds (with a slash on purpose)."""
 
-PATH_DATA = {"t": [0.0, 0.5, 1.0], "xyz": [[0.0, 0.0, 1.7], [1.0, 0.0, 1.7], [2.0, 0.5, 1.7]]}
-"""What that path holds (stored as msgpack)."""
+PATH = RecordedPath(
+    PATH_NAME,
+    t=np.array([0.0, 0.5, 1.0]),
+    xyz=np.array([[0.0, 0.0, 1.75], [1.0, 0.0, 1.75], [2.0, 0.5, 1.75]]),
+    yaw=np.array([0.0, 0.0, 0.25]),
+    pitch=np.zeros(3),
+    speed_kmh=7.5,
+)
+"""That path (a ``walkstream-path`` of :mod:`shared.paths`; every number is exact in
+float32, so the stored blob unpacks to exactly :data:`PATH_DATA`)."""
+
+PATH_DATA = PATH.to_dict()
+"""What that path's stored msgpack unpacks to."""
 
 
 @dataclass(frozen=True)
@@ -96,7 +107,7 @@ def build_city_db(
             pvs[c.id] = tuple(sorted(int(i) for i in near))
         first = cells[0]
         w.add_viewpoint("start", *first.centroid, 1.7, 0.0, cell=first.id)
-        w.add_path(PATH_NAME, msgpack.packb(PATH_DATA))
+        w.add_path(PATH_NAME, PATH.to_msgpack())
         version = w.finish(0.5)
     return CityDb(
         path=path,

@@ -142,3 +142,24 @@ def test_every_command_exists_in_the_cli(
                 dict.fromkeys(shlex.join(["walkstream", *c]) for c in cmds if c[0] in missing)
             )
         )
+
+
+def test_client_service_replays_against_the_server(
+    compose: dict[str, Any], capsys: pytest.CaptureFixture[str]
+) -> None:
+    client = compose["services"]["client"]
+    assert client["image"] == compose["services"]["server"]["image"]
+    assert client["depends_on"]["server"]["condition"] == "service_healthy"
+    args = [str(a) for a in client["command"]]
+    assert args[:2] == ["replay", "http://server:8000"]
+    try:
+        ns = build_parser().parse_args(args)
+    except SystemExit:
+        pytest.fail(f"`walkstream {shlex.join(args)}` does not parse: {capsys.readouterr().err}")
+    # the same replay as the demo: SE, 56 kbit/s, 200 ms, simulated clock, desktop2003
+    assert (ns.path, ns.bandwidth, ns.rtt, ns.clock, ns.device, ns.fps) == (
+        "SE", "56kbit", "200ms", "sim", "desktop2003", 25.0
+    )
+    assert ns.report.startswith("/reports/")
+    assert any(v.split(":")[1] == "/reports" for v in client["volumes"])
+    assert "reports" in compose["volumes"]

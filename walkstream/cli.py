@@ -362,6 +362,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     except WalkstreamError as exc:
         print(f"(no LOD figure: {exc})")
     db = out / "city.db"
+    if db.exists() and not _has_paths(db, ("SE",)):
+        print(f"scene database {db} has no recorded path SE (an older bake): baking again")
+        db.unlink()
     if db.exists():
         print(f"scene database {db} exists (delete it to bake again)")
     else:
@@ -382,6 +385,49 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f"PVS mean {s['pvs_mean']:.1f} max {s['pvs_max']}, culled {100 * s['culled_ratio']:.1f} %"
     )
     print(f"map of the cells: {out / 'map.png'}")
+    if args.no_replay:
+        return 0
+    return _demo_replay(db, out / "report", args)
+
+
+def _has_paths(db: Path, names: tuple[str, ...]) -> bool:
+    """Whether ``db`` is a readable scene database holding every path in ``names``."""
+    from server.store import SceneReader, StoreError
+
+    try:
+        reader = SceneReader.open(db)
+    except StoreError:
+        return False
+    try:
+        return set(names) <= set(reader.path_names())
+    finally:
+        reader.close()
+
+
+def _demo_replay(db: Path, report: Path, args: argparse.Namespace) -> int:
+    """Replay SE against the real server on a free local port (simulated 56 kbit/s link)."""
+    from client.link import LinkProfile
+    from client.replay import ReplayConfig
+    from server.process import server_process
+    from walkstream.cmd_replay import headline, replay_to_report
+
+    config = ReplayConfig(
+        link=LinkProfile(56_000.0, 56_000.0, 0.2),
+        path="SE",
+        fps=25.0,
+        clock="sim",
+        device="desktop2003",
+        snapshot_every=250,
+        report_dir=report,
+    )
+    t0 = time.perf_counter()
+    with server_process([db]) as (host, port):
+        url = f"http://{host}:{port}"
+        print(f"server on {url}; replaying SE over a simulated 56 kbit/s, 200 ms link ...")
+        result = replay_to_report(url, config, title="walkstream demo: SE at 56 kbit/s")
+    print(headline(result.summary))
+    print(f"replayed {result.summary['walk_s']:.0f} s of walk in {time.perf_counter() - t0:.1f} s")
+    print(f"report: {report / 'index.html'}")
     return 0
 
 
@@ -401,6 +447,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("demo", help="the main job on the built-in default scene (make demo)")
     d.add_argument("--out", default="out/demo", help="folder for everything the demo writes (default out/demo)")
+    d.add_argument("--no-replay", action="store_true", help="stop after the bake (no server, no replay)")
     d.set_defaults(func=cmd_demo)
 
     d.add_argument("--workers", type=int, default=1, help="local processes for the bake (default 1)")
@@ -435,6 +482,12 @@ def build_parser() -> argparse.ArgumentParser:
     sv.add_argument("--port", type=int, default=8000, help="port (default 8000)")
     sv.add_argument("--workers", type=int, default=1, help="uvicorn worker processes (default 1)")
     sv.set_defaults(func=cmd_serve)
+
+    from walkstream.cmd_path import add_path_parser
+    from walkstream.cmd_replay import add_replay_parser
+
+    add_replay_parser(sub)
+    add_path_parser(sub)
 
     g = sub.add_parser("generate", help="generate a procedural scene source")
     gsub = g.add_subparsers(dest="what", metavar="WHAT", required=True)
@@ -486,6 +539,12 @@ def build_parser() -> argparse.ArgumentParser:
     bsv.add_argument("--duration", type=float, default=30.0, help="measured seconds after the ramp (default 30)")
     bsv.add_argument("--no-pin", action="store_true", help="do not pin server and load generator to separate cores")
     bsv.set_defaults(func=cmd_bench_server)
+    from walkstream.cmd_replay import add_bench_budget_parser, add_bench_stream_parser
+    from walkstream.lodbench import add_bench_lod_parser
+
+    add_bench_stream_parser(besub)
+    add_bench_budget_parser(besub)
+    add_bench_lod_parser(besub)
     return p
 
 

@@ -1,0 +1,254 @@
+"""Per-frame headless drawing for the replay and the LOD benchmark, with honest timing.
+
+:class:`FrameRenderer` keeps GPU buffers per key (usually ``(object id, lod)``) and
+draws a list of keys per frame with :class:`client.render.MeshRenderer`'s shaders
+and lighting, so frames look like the LOD figures: a pale sky background, lit
+buildings, streets as flat ground, back faces culled.
+
+Timing is honest: the clock starts before the clear and stops after
+``ctx.finish()``, so the time includes all the GPU work of the frame, not only the
+time to queue it (on llvmpipe the CPU rasterises; on a real GPU ``finish`` waits for
+it).  The same code runs on both.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Hashable, Iterable
+from types import TracebackType
+
+import moderngl
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from client.render import MeshRenderer
+from shared.camera import look_at, perspective
+from shared.errors import InputError, RenderError
+from shared.records import Mesh
+
+__all__ = ["FrameRenderer", "camera", "MAX_PITCH_DEG", "VERTEX_BYTES", "INDEX_BYTES"]
+
+#: Bytes per vertex in the GPU buffers MeshRenderer makes (float32 position and
+#: normal, RGBA8 colour).
+VERTEX_BYTES = 28
+#: Bytes per triangle of the index buffer (three uint32).
+INDEX_BYTES = 12
+#: :func:`camera` clamps the pitch to this many degrees up or down: straight up or
+#: down the z-up look-at has no defined screen-up.
+MAX_PITCH_DEG = 89.0
+
+
+def camera(eye: ArrayLike, yaw: float, pitch: float = 0.0) -> NDArray[np.float32]:
+    """View matrix of a walker's camera.
+
+    Parameters
+    ----------
+    eye : (3,) float
+        Eye position, scene-local metres (z up).
+    yaw : float
+        Heading in radians, 0 looking east (+x), counter-clockwise (pi/2 looks north).
+    pitch : float
+        Radians above the horizon (negative looks down); clamped to
+        :data:`MAX_PITCH_DEG`.
+
+    Returns
+    -------
+    (4, 4) float32
+        As :func:`shared.camera.look_at` with world up +z.
+    """
+    e = np.asarray(eye, dtype=np.float64).reshape(-1)
+    y, p = float(yaw), float(pitch)
+    if e.shape != (3,) or not np.all(np.isfinite(e)) or not math.isfinite(y + p):
+        raise InputError(
+            f"camera: expected a finite eye (3,) and angles, got {eye!r}, {yaw}, {pitch}"
+        )
+    lim = math.radians(MAX_PITCH_DEG)
+    p = min(max(p, -lim), lim)
+    fwd = np.array([math.cos(p) * math.cos(y), math.cos(p) * math.sin(y), math.sin(p)])
+    return look_at(e, e + fwd, (0.0, 0.0, 1.0))
+
+
+class FrameRenderer:
+    """Draws frames of keyed meshes offscreen and times them.
+
+    Parameters
+    ----------
+    size : (int, int)
+        Width and height of the frame in pixels.
+    fov_deg : float
+        Vertical field of view of the default projection.
+    near, far : float
+        Clip distances of the default projection, metres.
+    ctx : moderngl.Context, optional
+        Context to draw with; default: a new headless one (released in :meth:`close`).
+
+    Notes
+    -----
+    Several keys may hold the same :class:`~shared.records.Mesh` object (a street
+    piece is one mesh at every LOD); its buffers are made once and released when the
+    last key holding it is forgotten.
+    """
+
+    def __init__(
+        self,
+        size: tuple[int, int] = (640, 480),
+        fov_deg: float = 60.0,
+        near: float = 0.5,
+        far: float = 2000.0,
+        ctx: moderngl.Context | None = None,
+    ) -> None:
+        w, h = (int(v) for v in size)
+        if w <= 0 or h <= 0:
+            raise InputError(f"FrameRenderer.size: expected positive width and height, got {size}")
+        self.size: tuple[int, int] = (w, h)
+        # validates fov, near and far before any GL object exists
+        self.proj: NDArray[np.float32] = perspective(fov_deg, w / h, near, far)
+        self.fov_deg = float(fov_deg)
+        self.near, self.far = float(near), float(far)
+        self._r = MeshRenderer(ctx)
+        self.ctx: moderngl.Context = self._r.ctx
+        self._keys: dict[Hashable, Mesh] = {}
+        self._refs: dict[int, int] = {}  # id(mesh) -> number of keys holding it
+        self._triangles = 0
+        self._bytes = 0
+        self._drawn = False
+        #: Triangles drawn by the last :meth:`draw`.
+        self.last_triangles = 0
+        #: Keys drawn by the last :meth:`draw` (the ones that were uploaded).
+        self.last_drawn = 0
+
+    # -- buffers ---------------------------------------------------------------
+
+    def upload(self, key: Hashable, mesh: Mesh) -> None:
+        """Make the GPU buffers of ``mesh`` and file them under ``key``.
+
+        A key that already holds another mesh is replaced; uploading the same mesh
+        again is a no-op.
+        """
+        old = self._keys.get(key)
+        if old is mesh:
+            return
+        if old is not None:
+            self.forget(key)
+        mid = id(mesh)
+        if self._refs.get(mid, 0) == 0:
+            self._r.upload(mesh)
+            self._triangles += mesh.triangles
+            self._bytes += len(mesh.positions) * VERTEX_BYTES + mesh.triangles * INDEX_BYTES
+        self._refs[mid] = self._refs.get(mid, 0) + 1
+        self._keys[key] = mesh
+
+    def has(self, key: Hashable) -> bool:
+        """Whether ``key`` has been uploaded (and not forgotten)."""
+        return key in self._keys
+
+    def forget(self, key: Hashable) -> None:
+        """Release the buffers of ``key`` (no-op for an unknown key).
+
+        Buffers shared with another key stay until that key goes too.
+        """
+        mesh = self._keys.pop(key, None)
+        if mesh is None:
+            return
+        mid = id(mesh)
+        n = self._refs.get(mid, 0) - 1
+        if n > 0:
+            self._refs[mid] = n
+            return
+        self._refs.pop(mid, None)
+        self._r.forget(mesh)
+        self._triangles -= mesh.triangles
+        self._bytes -= len(mesh.positions) * VERTEX_BYTES + mesh.triangles * INDEX_BYTES
+
+    def forget_object(self, object_id: int) -> None:
+        """Forget every key ``(object_id, lod)`` (any tuple key whose first item matches)."""
+        for key in [k for k in self._keys if isinstance(k, tuple) and k and k[0] == object_id]:
+            self.forget(key)
+
+    def keys(self) -> list[Hashable]:
+        """The uploaded keys, in upload order."""
+        return list(self._keys)
+
+    @property
+    def triangles_uploaded(self) -> int:
+        """Triangles in GPU buffers (a mesh shared by several keys counts once)."""
+        return self._triangles
+
+    @property
+    def gpu_bytes(self) -> int:
+        """Bytes of the vertex and index buffers held."""
+        return self._bytes
+
+    # -- frames ----------------------------------------------------------------
+
+    def draw(
+        self,
+        keys: Iterable[Hashable],
+        view: ArrayLike,
+        proj: ArrayLike | None = None,
+    ) -> float:
+        """Draw one frame of the given keys and return its time in seconds.
+
+        Keys that are not uploaded are skipped (the frame never waits for geometry).
+        The clock starts before the clear and stops after ``ctx.finish()``: the frame
+        is complete on the device when the time is taken.
+
+        Parameters
+        ----------
+        keys : iterable of keys
+        view : (4, 4) float
+            View matrix (e.g. from :func:`camera`).
+        proj : (4, 4) float, optional
+            Projection; default: the one made from ``size``, ``fov_deg``, ``near``
+            and ``far``.
+
+        Returns
+        -------
+        float
+            Seconds from the clear to the finished frame.
+        """
+        meshes = [m for m in (self._keys.get(k) for k in keys) if m is not None]
+        p = self.proj if proj is None else proj
+        t0 = time.perf_counter()
+        self._r.draw(meshes, view, p, self.size)
+        self.ctx.finish()
+        dt = time.perf_counter() - t0
+        self._drawn = True
+        self.last_drawn = len(meshes)
+        self.last_triangles = sum(m.triangles for m in meshes)
+        return dt
+
+    def snapshot(self) -> NDArray[np.uint8]:
+        """The last frame, ``(h, w, 3) uint8``, row 0 at the top."""
+        if not self._drawn:
+            raise RenderError("FrameRenderer.snapshot: nothing drawn yet")
+        return self._r.read()
+
+    def save_png(self, path: str | os.PathLike[str]) -> None:
+        """Write the last frame to a PNG file."""
+        from PIL import Image
+
+        Image.fromarray(self.snapshot(), "RGB").save(os.fspath(path), format="PNG")
+
+    # -- lifetime --------------------------------------------------------------
+
+    def close(self) -> None:
+        """Release every buffer (and the context, if it was made here); idempotent."""
+        self._keys.clear()
+        self._refs.clear()
+        self._triangles = 0
+        self._bytes = 0
+        self._r.close()
+
+    def __enter__(self) -> FrameRenderer:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()

@@ -1,0 +1,637 @@
+"""Per-frame log of a replay and the figures computed from it.
+
+The replay appends one row per frame to a :class:`FrameLogBuilder` and turns it into
+a :class:`FrameLog` (columns of equal-length, read-only numpy arrays) when the walk
+ends.  :func:`summarise` reduces the log to the headline figures of ``report.json``;
+:func:`recovery_frames` measures how the frame rate recovers after a step in the cost
+of drawing.  Everything here is a pure function of its arguments.
+
+Definitions (all documented once here, used by the report and the benchmarks)
+-----------------------------------------------------------------------------
+perfect frame
+    A frame whose cell is known (``cell >= 0``) and whose download quality and
+    rewrite quality are both 100 % (>= ``1 - 1e-9``, so that a share computed as
+    ``k / n`` with ``k == n`` always counts).
+``perfect_frame_ratio``
+    Share of the frames from the first perfect frame (included) to the end that are
+    perfect; 0 when no frame is perfect.  The frames before the first perfect one are
+    the start-up, which ``time_to_first_perfect_frame_s`` measures instead.
+``time_to_first_perfect_frame_s``
+    ``t`` of the first perfect frame minus the replay start (``t_start``, by default
+    the ``t`` of the first frame); ``None`` when no frame is perfect.
+``download_quality_mean`` / ``rewrite_quality_mean``
+    Mean over all frames of the per-frame quality, as a **percentage 0-100**.
+displayed frame rate
+    ``1 / max(frame_time, 1 / fps_cap)``: a frame cannot be shown faster than the
+    replay's tick (``--fps``), however little work it took (:func:`displayed_fps`).
+``fps_within_10pct_ratio``
+    Among the *counted* frames -- those starting at least ``warmup_s`` (1 s) after the
+    replay start and not floor-limited -- the share whose displayed frame rate is
+    within ``tolerance`` (10 %) of the target, or above the target only because there
+    is nothing left to spend the budget on (everything visible is already at LOD2, or
+    nothing is visible).  ``None`` when no frame is counted.
+``floor_limited_ratio``
+    Share of all frames whose LOD0s alone exceeded the budget.
+slowdown
+    ``max(0, (target - fps) / target)``: the relative frame-rate deficit of a frame
+    (0.2 = 20 % slower than the target).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from shared.errors import InputError
+
+__all__ = [
+    "COLUMNS",
+    "FrameLog",
+    "FrameLogBuilder",
+    "PERFECT_EPS",
+    "Recovery",
+    "displayed_fps",
+    "first_perfect_index",
+    "perfect_mask",
+    "recovery_frames",
+    "summarise",
+    "within_target_mask",
+]
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+B = NDArray[np.bool_]
+
+#: A quality counts as 100 % when it is at least ``1 - PERFECT_EPS``.
+PERFECT_EPS = 1e-9
+
+#: ``(name, dtype)`` of every :class:`FrameLog` column, in CSV order.
+COLUMNS: tuple[tuple[str, type[np.generic]], ...] = (
+    ("t", np.float64),
+    ("frame_time", np.float64),
+    ("fps", np.float64),
+    ("cell", np.int64),
+    ("pvs", np.int64),
+    ("download_quality", np.float64),
+    ("rewrite_quality", np.float64),
+    ("bytes_down", np.int64),
+    ("budget", np.int64),
+    ("triangles", np.int64),
+    ("visible", np.int64),
+    ("floor_limited", np.bool_),
+    ("all_lod2", np.bool_),
+)
+
+
+def displayed_fps(frame_time: ArrayLike, fps_cap: float) -> F64:
+    """Displayed frame rate of frames that took ``frame_time`` seconds of work.
+
+    Parameters
+    ----------
+    frame_time : (n,) float
+        Work time of each frame, seconds.  Negative values count as 0.
+    fps_cap : float
+        The replay's tick rate (``--fps``), frames per second, > 0 and finite.
+
+    Returns
+    -------
+    (n,) float64
+        ``1 / max(frame_time, 1 / fps_cap)``.
+
+    Raises
+    ------
+    InputError
+        ``fps_cap`` is not a positive finite number.
+    """
+    cap = float(fps_cap)
+    if not (math.isfinite(cap) and cap > 0.0):
+        raise InputError(f"fps_cap must be a positive finite frame rate, got {fps_cap!r}")
+    ft = np.asarray(frame_time, dtype=np.float64)
+    out: F64 = 1.0 / np.maximum(ft, 1.0 / cap)
+    return out
+
+
+def _column(name: str, values: ArrayLike, dtype: type[np.generic]) -> NDArray[Any]:
+    a = np.array(values, dtype=dtype)  # always a copy, so the log owns its data
+    if a.ndim != 1:
+        raise InputError(f"FrameLog column {name!r} must be 1-D, got shape {a.shape}")
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class FrameLog:
+    """One row per drawn frame, as columns of equal length (read-only arrays).
+
+    Attributes
+    ----------
+    t : (n,) float64
+        Frame start, seconds (virtual or real clock).
+    frame_time : (n,) float64
+        Work time of the frame, seconds.
+    fps : (n,) float64
+        Displayed frame rate (:func:`displayed_fps`).
+    cell : (n,) int64
+        Current view cell id; -1 while none is known yet.
+    pvs : (n,) int64
+        Size of the current cell's PVS.
+    download_quality, rewrite_quality : (n,) float64
+        0..1: share of the current cell's PVS whose parameters have arrived / whose
+        geometry is built.
+    bytes_down : (n,) int64
+        Cumulative bytes received by the start of the frame.
+    budget, triangles, visible : (n,) int64
+        Triangle budget, triangles drawn, objects left after culling.
+    floor_limited : (n,) bool
+        The LOD0s of the visible objects alone exceeded the budget.
+    all_lod2 : (n,) bool
+        Everything visible was drawn at LOD2 (vacuously true with nothing visible).
+    """
+
+    t: F64
+    frame_time: F64
+    fps: F64
+    cell: I64
+    pvs: I64
+    download_quality: F64
+    rewrite_quality: F64
+    bytes_down: I64
+    budget: I64
+    triangles: I64
+    visible: I64
+    floor_limited: B
+    all_lod2: B
+
+    def __post_init__(self) -> None:
+        n = None
+        for name, dtype in COLUMNS:
+            a = _column(name, getattr(self, name), dtype)
+            object.__setattr__(self, name, a)
+            if n is None:
+                n = len(a)
+            elif len(a) != n:
+                raise InputError(
+                    f"FrameLog column {name!r} has {len(a)} rows, expected {n} like 't'"
+                )
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @classmethod
+    def empty(cls) -> FrameLog:
+        """A log with no frames."""
+        return cls(**{name: np.empty(0, dtype) for name, dtype in COLUMNS})
+
+    @classmethod
+    def from_columns(
+        cls,
+        *,
+        fps_cap: float,
+        t: ArrayLike,
+        frame_time: ArrayLike,
+        download_quality: ArrayLike,
+        rewrite_quality: ArrayLike,
+        bytes_down: ArrayLike | None = None,
+        cell: ArrayLike | None = None,
+        pvs: ArrayLike | None = None,
+        budget: ArrayLike | None = None,
+        triangles: ArrayLike | None = None,
+        visible: ArrayLike | None = None,
+        floor_limited: ArrayLike | None = None,
+        all_lod2: ArrayLike | None = None,
+    ) -> FrameLog:
+        """Build a log from columns, computing ``fps`` from ``frame_time`` and the tick.
+
+        Columns left out get the defaults of :meth:`FrameLogBuilder.append` (``cell``
+        -1, counts 0, flags False); scalars are broadcast to the length of ``t``.
+        """
+        tt = np.asarray(t, dtype=np.float64)
+        n = tt.shape[0] if tt.ndim == 1 else -1
+
+        def col(v: ArrayLike | None, default: Any) -> Any:
+            if v is None:
+                return np.full(max(n, 0), default)
+            a = np.asarray(v)
+            return np.broadcast_to(a, (max(n, 0),)) if a.ndim == 0 else a
+
+        return cls(
+            t=tt,
+            frame_time=np.asarray(frame_time, dtype=np.float64),
+            fps=displayed_fps(frame_time, fps_cap),
+            cell=col(cell, -1),
+            pvs=col(pvs, 0),
+            download_quality=np.asarray(download_quality, dtype=np.float64),
+            rewrite_quality=np.asarray(rewrite_quality, dtype=np.float64),
+            bytes_down=col(bytes_down, 0),
+            budget=col(budget, 0),
+            triangles=col(triangles, 0),
+            visible=col(visible, 0),
+            floor_limited=col(floor_limited, False),
+            all_lod2=col(all_lod2, False),
+        )
+
+    def columns(self) -> dict[str, NDArray[Any]]:
+        """The columns by name, in :data:`COLUMNS` order (the arrays themselves, read-only)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+class FrameLogBuilder:
+    """Growable per-frame log: one cheap :meth:`append` per frame, one :meth:`build` at the end.
+
+    Rows are kept in Python lists (an append is a handful of list appends, a few
+    microseconds) and turned into arrays once.
+
+    Parameters
+    ----------
+    fps_cap : float, optional
+        The replay's tick rate (``--fps``), used to compute the displayed frame rate;
+        may instead be given to :meth:`build`.
+    """
+
+    __slots__ = (
+        "fps_cap",
+        "_t",
+        "_frame_time",
+        "_cell",
+        "_pvs",
+        "_dq",
+        "_rq",
+        "_bytes",
+        "_budget",
+        "_tri",
+        "_vis",
+        "_floor",
+        "_lod2",
+    )
+
+    def __init__(self, fps_cap: float | None = None) -> None:
+        if fps_cap is not None:
+            displayed_fps(np.empty(0), fps_cap)  # validates the cap now, not at build time
+        self.fps_cap = None if fps_cap is None else float(fps_cap)
+        self._t: list[float] = []
+        self._frame_time: list[float] = []
+        self._cell: list[int] = []
+        self._pvs: list[int] = []
+        self._dq: list[float] = []
+        self._rq: list[float] = []
+        self._bytes: list[int] = []
+        self._budget: list[int] = []
+        self._tri: list[int] = []
+        self._vis: list[int] = []
+        self._floor: list[bool] = []
+        self._lod2: list[bool] = []
+
+    def __len__(self) -> int:
+        return len(self._t)
+
+    def append(
+        self,
+        *,
+        t: float,
+        frame_time: float,
+        download_quality: float,
+        rewrite_quality: float,
+        bytes_down: int = 0,
+        cell: int = -1,
+        pvs: int = 0,
+        budget: int = 0,
+        triangles: int = 0,
+        visible: int = 0,
+        floor_limited: bool = False,
+        all_lod2: bool = False,
+    ) -> None:
+        """Add one frame (keyword arguments named like the :class:`FrameLog` columns, but no ``fps``)."""
+        self._t.append(t)
+        self._frame_time.append(frame_time)
+        self._dq.append(download_quality)
+        self._rq.append(rewrite_quality)
+        self._bytes.append(bytes_down)
+        self._cell.append(cell)
+        self._pvs.append(pvs)
+        self._budget.append(budget)
+        self._tri.append(triangles)
+        self._vis.append(visible)
+        self._floor.append(floor_limited)
+        self._lod2.append(all_lod2)
+
+    def build(self, fps_cap: float | None = None) -> FrameLog:
+        """The frames appended so far as a :class:`FrameLog` (the builder stays usable).
+
+        ``fps_cap`` overrides the tick rate given to the constructor; one of the two is
+        required (:class:`~shared.errors.InputError` otherwise).
+        """
+        cap = self.fps_cap if fps_cap is None else fps_cap
+        if cap is None:
+            raise InputError("FrameLogBuilder.build needs fps_cap (the replay's tick rate)")
+        return FrameLog.from_columns(
+            fps_cap=cap,
+            t=np.array(self._t, dtype=np.float64),
+            frame_time=np.array(self._frame_time, dtype=np.float64),
+            download_quality=np.array(self._dq, dtype=np.float64),
+            rewrite_quality=np.array(self._rq, dtype=np.float64),
+            bytes_down=np.array(self._bytes, dtype=np.int64),
+            cell=np.array(self._cell, dtype=np.int64),
+            pvs=np.array(self._pvs, dtype=np.int64),
+            budget=np.array(self._budget, dtype=np.int64),
+            triangles=np.array(self._tri, dtype=np.int64),
+            visible=np.array(self._vis, dtype=np.int64),
+            floor_limited=np.array(self._floor, dtype=np.bool_),
+            all_lod2=np.array(self._lod2, dtype=np.bool_),
+        )
+
+
+# --------------------------------------------------------------------------- definitions
+
+
+def perfect_mask(log: FrameLog) -> B:
+    """(n,) bool: the frames that are perfect (cell known, both qualities 100 %)."""
+    lim = 1.0 - PERFECT_EPS
+    out: B = (log.cell >= 0) & (log.download_quality >= lim) & (log.rewrite_quality >= lim)
+    return out
+
+
+def first_perfect_index(log: FrameLog) -> int | None:
+    """Index of the first perfect frame, ``None`` when there is none."""
+    hits = np.flatnonzero(perfect_mask(log))
+    return int(hits[0]) if hits.size else None
+
+
+def within_target_mask(
+    fps: ArrayLike,
+    target: float,
+    *,
+    tolerance: float = 0.1,
+    nothing_to_gain: ArrayLike | None = None,
+) -> B:
+    """(n,) bool: frames whose rate is within ``tolerance`` of ``target``.
+
+    A frame above ``target + tolerance * target`` also counts where
+    ``nothing_to_gain`` is true (everything visible already at LOD2, or nothing
+    visible): a budget cannot be spent there, so running fast is no fault.
+    """
+    _check_target(target, tolerance)
+    f = np.asarray(fps, dtype=np.float64)
+    ok: B = np.abs(f - target) <= tolerance * target
+    if nothing_to_gain is not None:
+        ok = ok | ((f > target) & np.asarray(nothing_to_gain, dtype=np.bool_))
+    return ok
+
+
+def _check_target(target: float, tolerance: float) -> None:
+    if not (math.isfinite(target) and target > 0.0):
+        raise InputError(f"target frame rate must be a positive finite number, got {target!r}")
+    if not (math.isfinite(tolerance) and tolerance >= 0.0):
+        raise InputError(f"tolerance must be a finite number >= 0, got {tolerance!r}")
+
+
+def _nothing_to_gain(log: FrameLog) -> B:
+    out: B = log.all_lod2 | (log.visible == 0)
+    return out
+
+
+def _f(x: Any) -> float | None:
+    """A finite Python float, or None (so that JSON never sees NaN or infinity)."""
+    if x is None:
+        return None
+    v = float(x)
+    return v if math.isfinite(v) else None
+
+
+def _mean(a: NDArray[Any]) -> float | None:
+    return _f(np.mean(a)) if a.size else None
+
+
+# --------------------------------------------------------------------------- recovery
+
+
+@dataclass(frozen=True, slots=True)
+class Recovery:
+    """How the frame rate came back after a cost step (see :func:`recovery_frames`).
+
+    Attributes
+    ----------
+    frames : int or None
+        Frames from the step (the first frame at the new cost is frame 0) to the first
+        frame of ``hold`` consecutive frames within tolerance; 0 when the step frame
+        itself starts such a run; ``None`` when the frame rate never recovers.
+    worst_slowdown_during : float or None
+        Largest slowdown (fraction, 0.2 = 20 % slower than target) from the step up
+        to the recovery (excluded); ``None`` when ``frames`` is 0.
+    worst_slowdown_after : float or None
+        Largest slowdown from the recovery to the end of the window; ``None`` when
+        the frame rate never recovers.
+    """
+
+    frames: int | None
+    worst_slowdown_during: float | None
+    worst_slowdown_after: float | None
+
+
+def recovery_frames(
+    log: FrameLog | ArrayLike,
+    step: int,
+    *,
+    target: float,
+    tolerance: float = 0.1,
+    hold: int = 5,
+    end: int | None = None,
+    ignore: ArrayLike | None = None,
+) -> Recovery:
+    """Frames until the frame rate is back within ``tolerance`` of ``target`` after a cost step.
+
+    Parameters
+    ----------
+    log : FrameLog or (n,) float array
+        The frames; an array is taken as the displayed frame rates (then no frame
+        counts as "nothing to gain").
+    step : int
+        Index of the first frame drawn at the new cost.
+    target : float
+        Target frame rate.
+    tolerance : float
+        Relative band around the target (0.1 = 10 %).
+    hold : int
+        "Back and staying": recovery is the first frame that starts ``hold``
+        consecutive frames within tolerance (fewer when the window ends first, but
+        at least one).
+    end : int, optional
+        One past the last frame of the window (default: the end of the log).
+    ignore : (n,) bool, optional
+        Frames to leave out of both the band test and the slowdowns (e.g. frames
+        with a deliberate spike); they neither break nor make a run.  With a
+        :class:`FrameLog`, floor-limited frames are always left out.
+
+    Returns
+    -------
+    Recovery
+
+    Raises
+    ------
+    InputError
+        ``step`` or ``end`` is outside the log, ``hold`` < 1, or the target or
+        tolerance is not usable.
+    """
+    _check_target(target, tolerance)
+    if isinstance(log, FrameLog):
+        fps = log.fps
+        gain = _nothing_to_gain(log)
+        skip = log.floor_limited.copy()
+    else:
+        fps = np.asarray(log, dtype=np.float64).reshape(-1)
+        gain = np.zeros(fps.shape, np.bool_)
+        skip = np.zeros(fps.shape, np.bool_)
+    n = fps.shape[0]
+    if ignore is not None:
+        ig = np.asarray(ignore, dtype=np.bool_).reshape(-1)
+        if ig.shape[0] != n:
+            raise InputError(f"ignore has {ig.shape[0]} entries, expected {n} (one per frame)")
+        skip = skip | ig
+    stop = n if end is None else int(end)
+    if not 0 <= stop <= n:
+        raise InputError(f"end {end} is outside the log of {n} frames")
+    if not 0 <= step < stop:
+        raise InputError(f"step {step} is not a frame of the window [0, {stop})")
+    if hold < 1:
+        raise InputError(f"hold must be at least 1 frame, got {hold}")
+
+    # Work on the window's kept frames only; positions map back to frame indices.
+    idx = np.flatnonzero(~skip[step:stop]) + step
+    if idx.size == 0:
+        return Recovery(None, None, None)
+    f = fps[idx]
+    ok = within_target_mask(f, target, tolerance=tolerance, nothing_to_gain=gain[idx])
+    slow = np.maximum(0.0, (target - f) / target)
+    m = idx.size
+    h = min(hold, m)
+    # run[i]: ok[i : i + h] all true (windows running past the end are shortened).
+    bad = np.concatenate([[0], np.cumsum(~ok)])  # bad[i]: frames not ok among the first i
+    pos = np.arange(m)
+    run = (bad[np.minimum(pos + h, m)] - bad[pos]) == 0
+    starts = np.flatnonzero(run)
+    if starts.size == 0:
+        return Recovery(None, _f(slow.max()), None)
+    k = int(starts[0])
+    frames = int(idx[k] - step)
+    during = _f(slow[:k].max()) if k > 0 else None
+    return Recovery(frames, during, _f(slow[k:].max()))
+
+
+# --------------------------------------------------------------------------- summary
+
+
+def summarise(
+    log: FrameLog,
+    *,
+    fps_target: float,
+    fps_cap: float,
+    bytes_received: int | None = None,
+    t_start: float | None = None,
+    warmup_s: float = 1.0,
+    tolerance: float = 0.1,
+    cost_step: int | None = None,
+    recovery_hold: int = 5,
+    extra: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The headline figures of a replay (the body of ``report.json``).
+
+    Parameters
+    ----------
+    log : FrameLog
+        The frames of the replay.
+    fps_target : float
+        Target (minimum) frame rate of the budget controller.
+    fps_cap : float
+        The replay's tick rate (``--fps``); recorded as ``fps_cap``.
+    bytes_received : int, optional
+        Bytes received over the link (from the link, not the log); recorded as is.
+    t_start : float, optional
+        Replay start on the log's clock; default the ``t`` of the first frame.
+    warmup_s : float
+        Frames starting earlier than this after ``t_start`` are not counted by
+        ``fps_within_10pct_ratio`` (the controller has no history yet).
+    tolerance : float
+        Relative band of ``fps_within_10pct_ratio`` (the name keeps the default's 10 %).
+    cost_step : int, optional
+        Index of a frame where the cost of drawing stepped; adds ``cost_step_frame``,
+        ``recovery_frames``, ``recovery_worst_slowdown_during`` and
+        ``recovery_worst_slowdown_after`` (:func:`recovery_frames` with ``recovery_hold``).
+    extra : mapping, optional
+        More keys for the summary (``prefetch``, ``stream``, ...); a key that this
+        function computes itself is an error.
+
+    Returns
+    -------
+    dict
+        JSON-ready (Python ints, floats, bools, None; never NaN): ``frames``,
+        ``duration_s``, ``t_start_s``, ``perfect_frames``, ``perfect_frame_ratio``,
+        ``time_to_first_perfect_frame_s``, ``download_quality_mean``,
+        ``rewrite_quality_mean`` (percent, 0-100), ``fps_mean``, ``fps_median``,
+        ``fps_target``, ``fps_cap``, ``fps_counted_frames``, ``fps_within_10pct_ratio``,
+        ``floor_limited_ratio``, ``budget_median``, ``budget_min``, ``budget_max``,
+        ``triangles_mean``, ``visible_mean``, ``bytes_received``, plus the recovery keys
+        and ``extra``.  Statistics of an empty log are ``None`` (``frames`` is 0 and
+        ``perfect_frame_ratio`` 0).
+
+    Raises
+    ------
+    InputError
+        A target, cap or tolerance that is not usable, or an ``extra`` key that
+        collides with a computed one.
+    """
+    _check_target(fps_target, tolerance)
+    displayed_fps(np.empty(0), fps_cap)  # validates the cap
+    n = len(log)
+    t0 = float(log.t[0]) if (t_start is None and n) else float(t_start or 0.0)
+
+    perfect = perfect_mask(log)
+    first = first_perfect_index(log)
+    counted = ((log.t - t0) >= warmup_s) & ~log.floor_limited
+    ok = within_target_mask(
+        log.fps, fps_target, tolerance=tolerance, nothing_to_gain=_nothing_to_gain(log)
+    )
+    duration = _f(log.t[-1] - t0 + max(float(log.frame_time[-1]), 1.0 / fps_cap)) if n else None
+
+    out: dict[str, Any] = {
+        "frames": n,
+        "duration_s": duration,
+        "t_start_s": t0 if n or t_start is not None else None,
+        "perfect_frames": int(perfect.sum()),
+        "perfect_frame_ratio": _f(perfect[first:].mean()) if first is not None else 0.0,
+        "time_to_first_perfect_frame_s": (_f(log.t[first] - t0) if first is not None else None),
+        "download_quality_mean": _f(100.0 * log.download_quality.mean()) if n else None,
+        "rewrite_quality_mean": _f(100.0 * log.rewrite_quality.mean()) if n else None,
+        "fps_mean": _mean(log.fps),
+        "fps_median": _f(np.median(log.fps)) if n else None,
+        "fps_target": float(fps_target),
+        "fps_cap": float(fps_cap),
+        "fps_counted_frames": int(counted.sum()),
+        "fps_within_10pct_ratio": _mean(ok[counted]),
+        "floor_limited_ratio": _mean(log.floor_limited),
+        "budget_median": _f(np.median(log.budget)) if n else None,
+        "budget_min": int(log.budget.min()) if n else None,
+        "budget_max": int(log.budget.max()) if n else None,
+        "triangles_mean": _mean(log.triangles),
+        "visible_mean": _mean(log.visible),
+        "bytes_received": None if bytes_received is None else int(bytes_received),
+    }
+    if cost_step is not None:
+        rec = recovery_frames(
+            log, cost_step, target=fps_target, tolerance=tolerance, hold=recovery_hold
+        )
+        out["cost_step_frame"] = int(cost_step)
+        out["recovery_frames"] = rec.frames
+        out["recovery_worst_slowdown_during"] = rec.worst_slowdown_during
+        out["recovery_worst_slowdown_after"] = rec.worst_slowdown_after
+    if extra:
+        clash = sorted(set(extra) & (set(out) - {"bytes_received"}))
+        if "bytes_received" in extra and bytes_received is not None:
+            clash.append("bytes_received")
+        if clash:
+            raise InputError(f"extra keys collide with computed summary keys: {clash}")
+        out.update(extra)
+    return out

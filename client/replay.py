@@ -1,0 +1,549 @@
+"""Replay a recorded path through a scene over a shaped link: the client's main loop.
+
+Setup (the scene, its manifest and the path, fetched concurrently) is followed by
+the walk: a frame loop that ticks at ``fps`` and never waits for the network.  Each
+frame it moves the viewer along the path, lets the :class:`~client.streamer.Streamer`
+follow it (locate, predict, prefetch), measures download and rewrite quality of the
+current cell, culls and allocates the polygon budget by ACH, draws (really, with
+moderngl, on the ``gl`` device; from a cost model on the simulated ones), feeds the
+frame time to the budget controller and logs the frame.  When the frame finished
+before the next tick the loop waits for the tick; a frame that took longer is shown
+late (the frame rate drops) and the next one starts at once.
+
+Under the simulated clock (:class:`client.clock.SimClock`) the same code runs on
+virtual time: link transfers, round trips and backoff sleeps are virtual, frames
+advance it by their (modelled or really measured) duration and rewrites by the CPU
+time they really took, so a ten-minute walk replays in seconds, deterministically
+for the simulated devices.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+from numpy.typing import NDArray
+
+from client.allocate import allocate_ach, allocate_distance, frustum_cull
+from client.api import Manifest, SceneClient, decode_manifest
+from client.budget import BudgetController
+from client.cache import Cache, DiskCache
+from client.clock import Clock, RealClock, SimClock
+from client.devices import make_device
+from client.link import LinkProfile, ShapedTransport
+from client.metrics import FrameLog, FrameLogBuilder, summarise
+from client.predict import MotionPredictor
+from client.rewrite import ObjectGeometry, RewritePool
+from client.streamer import Streamer, StreamerConfig
+from shared.camera import look_at, perspective
+from shared.errors import InputError
+from shared.lsystem.grammar import parse_grammar
+from shared.paths import RecordedPath
+
+__all__ = ["ReplayConfig", "ReplayResult", "run_replay", "replay"]
+
+STREAM_FORMS = {"params": "params", "meshes": "lod2"}
+"""--stream choice -> the server's objects ``form``."""
+
+
+@dataclass(frozen=True)
+class ReplayConfig:
+    """Everything a replay needs besides the server."""
+
+    link: LinkProfile
+    path: str = "SE"
+    scene: str | None = None
+    fps: float = 25.0
+    target_fps: float | None = None
+    """Minimum frame rate the budget holds (default: ``fps``)."""
+    prefetch: bool = True
+    stream: str = "params"
+    cache_bytes: int = 64 << 20
+    cache_dir: Path | None = None
+    clock: str = "sim"
+    device: str = "gl"
+    size: tuple[int, int] = (640, 480)
+    fov_deg: float = 60.0
+    snapshot_every: int = 0
+    duration_s: float | None = None
+    workers: int = 2
+    lod_select: str = "ach"
+    lod_distances: tuple[float, float] = (40.0, 120.0)
+    budget_frames: int = 4
+    seed: int = 0
+    cost_step_at_s: float | None = None
+    """Walk time at which the device's per-triangle cost is multiplied (benchmarks)."""
+    cost_step_factor: float = 10.0
+    report_dir: Path | None = None
+    setup_timeout_s: float = 60.0
+    """Give up (an empty report saying why) when the path has not arrived by then."""
+
+    def __post_init__(self) -> None:
+        if self.stream not in STREAM_FORMS:
+            raise InputError(f"--stream {self.stream!r}: choose one of {', '.join(STREAM_FORMS)}")
+        if self.clock not in ("sim", "real"):
+            raise InputError(f"--clock {self.clock!r}: choose sim or real")
+        if self.lod_select not in ("ach", "distance"):
+            raise InputError(f"--lod {self.lod_select!r}: choose ach or distance")
+        if not (math.isfinite(self.fps) and 0 < self.fps <= 1000):
+            raise InputError(f"--fps {self.fps!r}: expected a number in (0, 1000]")
+        tf = self.target_fps
+        if tf is not None and not (math.isfinite(tf) and 0 < tf <= 1000):
+            raise InputError(f"--target-fps {tf!r}: expected a number in (0, 1000]")
+        if self.cache_bytes < 0:
+            raise InputError(f"--cache {self.cache_bytes}: must not be negative")
+        if self.duration_s is not None and not self.duration_s > 0:
+            raise InputError(f"--duration {self.duration_s!r}: must be > 0")
+        if self.workers < 1:
+            raise InputError(f"--workers {self.workers}: at least 1")
+        if self.snapshot_every < 0:
+            raise InputError(f"--snapshot-every {self.snapshot_every}: must not be negative")
+        w, h = self.size
+        if not (16 <= w <= 8192 and 16 <= h <= 8192):
+            raise InputError(f"--size {w}x{h}: each side from 16 to 8192 pixels")
+
+    @property
+    def fps_target(self) -> float:
+        """The budget's target frame rate."""
+        return self.target_fps if self.target_fps is not None else self.fps
+
+
+@dataclass
+class ReplayResult:
+    """What a replay produced."""
+
+    summary: dict[str, Any]
+    log: FrameLog
+    bytes_log: tuple[NDArray[np.float64], NDArray[np.float64]]
+    snapshots: list[Path] = field(default_factory=list)
+
+
+def run_replay(
+    transport: httpx.AsyncBaseTransport,
+    base_url: str,
+    config: ReplayConfig,
+    progress: Callable[[float, float], None] | None = None,
+) -> ReplayResult:
+    """Run a replay to the end on the configured clock (blocking).
+
+    Parameters
+    ----------
+    transport:
+        How to reach the server: ``httpx.AsyncHTTPTransport()`` for real sockets,
+        or any other httpx transport.
+    base_url:
+        The server's URL (any URL for an in-process transport).
+    config:
+        The replay settings.
+    progress:
+        Called with ``(walk seconds done, walk seconds in total)`` now and then.
+    """
+    if config.clock == "sim":
+        sim = SimClock()
+        return sim.run(replay(transport, base_url, config, sim, progress))
+    return asyncio.run(_real(transport, base_url, config, progress))
+
+
+async def _real(
+    transport: httpx.AsyncBaseTransport,
+    base_url: str,
+    config: ReplayConfig,
+    progress: Callable[[float, float], None] | None,
+) -> ReplayResult:
+    return await replay(transport, base_url, config, RealClock(), progress)
+
+
+async def _manifest(api: SceneClient, disk: DiskCache | None) -> Manifest:
+    """The manifest, revalidated against the disk cache's copy when there is one."""
+    assert api.scene is not None
+    stored = disk.get_manifest(api.scene) if disk is not None else None
+    etag = stored[0] if stored is not None else None
+    m = await api.manifest(etag)
+    if m is None:  # 304: the stored manifest is current
+        assert stored is not None
+        return decode_manifest(stored[1], f"scene {api.scene!r} manifest (disk cache)", etag)
+    if disk is not None and m.etag:
+        disk.put_manifest(api.scene, m.etag, m.body)
+    return m
+
+
+def _view(xyz: NDArray[np.float64], yaw: float, pitch: float) -> NDArray[np.float32]:
+    d = np.array(
+        [math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch), math.sin(pitch)]
+    )
+    return look_at(xyz, xyz + d)
+
+
+class _FrameInputs:
+    """Per-cell arrays for culling and allocation, rebuilt only when something changed."""
+
+    def __init__(self) -> None:
+        self.key: tuple[int, int, int] | None = None
+        self.ids: NDArray[np.int64] = np.zeros(0, np.int64)
+        self.ach = np.zeros(0)
+        self.tri = np.zeros((0, 3), np.int64)
+        self.avail = np.zeros((0, 3), bool)
+        self.lo = np.zeros((0, 3))
+        self.hi = np.zeros((0, 3))
+        self.geoms: list[ObjectGeometry] = []
+        self.dq = 0.0
+        self.rq = 0.0
+
+    def update(self, cid: int | None, streamer: Streamer, cache: Cache) -> None:
+        rec = streamer.cells.get(cid) if cid is not None else None
+        key = (
+            -1 if cid is None or rec is None else cid,
+            streamer.geometry_version,
+            sum(cache.evictions.values()),
+        )
+        if key == self.key:
+            return
+        self.key = key
+        if rec is None or len(rec.pvs) == 0:
+            self.ids = np.zeros(0, np.int64)
+            self.geoms = []
+            self.dq = self.rq = 0.0 if rec is None else 1.0
+            self.ach = np.zeros(0)
+            self.tri = np.zeros((0, 3), np.int64)
+            self.avail = np.zeros((0, 3), bool)
+            self.lo = self.hi = np.zeros((0, 3))
+            return
+        pvs = rec.pvs.tolist()
+        have = sum(1 for i in pvs if streamer.has_object(i))
+        geoms: list[ObjectGeometry] = []
+        ach: list[float] = []
+        for oid, a in zip(pvs, rec.ach.tolist(), strict=True):
+            g = cache.peek("geom", oid)
+            if g is not None:
+                geoms.append(g)
+                ach.append(a)
+        self.dq = have / len(pvs)
+        self.rq = len(geoms) / len(pvs)
+        self.geoms = geoms
+        self.ids = np.array([g.id for g in geoms], dtype=np.int64)
+        self.ach = np.array(ach)
+        if geoms:
+            self.tri = np.stack([g.triangles for g in geoms])
+            self.avail = np.stack([g.available for g in geoms])
+            self.lo = np.stack([g.bbox_min for g in geoms])
+            self.hi = np.stack([g.bbox_max for g in geoms])
+        else:
+            self.tri = np.zeros((0, 3), np.int64)
+            self.avail = np.zeros((0, 3), bool)
+            self.lo = self.hi = np.zeros((0, 3))
+
+
+async def replay(
+    transport: httpx.AsyncBaseTransport,
+    base_url: str,
+    config: ReplayConfig,
+    clock: Clock,
+    progress: Callable[[float, float], None] | None = None,
+) -> ReplayResult:
+    """The replay coroutine (see :func:`run_replay` to run it on a clock)."""
+    link = ShapedTransport(transport, config.link, clock)
+    renderer: Any = None
+    rewrite: RewritePool | None = None
+    streamer: Streamer | None = None
+    disk: DiskCache | None = None
+    async with httpx.AsyncClient(
+        transport=link, base_url=base_url, timeout=httpx.Timeout(30.0)
+    ) as http:
+        api = SceneClient(http, clock, config.scene, seed=config.seed)
+        t_start = clock.now()
+        manifest_task: asyncio.Task[Manifest] | None = None
+        try:
+            if await _within(clock, config.setup_timeout_s, api.resolve_scene()) is None:
+                api.scene = config.scene or "?"
+            disk = DiskCache(config.cache_dir) if config.cache_dir is not None else None
+            # the walk starts as soon as the path is in; the manifest (grammar) may
+            # still be arriving: cells and objects do not need it, rewriting does
+            manifest_task = asyncio.create_task(_manifest(api, disk))
+            got = await _within(clock, config.setup_timeout_s, api.path(config.path))
+            setup_s = clock.now() - t_start
+            if got is None:  # no path, no walk: an empty report that says why
+                stats = link.stats
+                log = FrameLogBuilder().build(fps_cap=config.fps)
+                summary = summarise(
+                    log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0
+                )
+                summary.update(_link_summary(config, stats, api))
+                summary["error"] = (
+                    f"the scene, manifest or path {config.path!r} did not arrive within "
+                    f"{config.setup_timeout_s:g} s"
+                )
+                return ReplayResult(summary, log, _bytes_log(stats, t_start))
+            path, _path_bytes = got
+            cache = Cache(config.cache_bytes)
+            scfg = StreamerConfig(prefetch=config.prefetch, form=STREAM_FORMS[config.stream])
+            streamer = Streamer(api, clock, cache, None, scfg)
+            if config.stream == "params":
+                rewrite = RewritePool(clock, None, streamer.on_built, config.workers)
+                streamer.rewrite = rewrite
+                rewrite.start()
+            device = make_device(config.device, config.seed)
+            if not device.simulated or config.snapshot_every:
+                from client.frames import FrameRenderer
+
+                renderer = FrameRenderer(size=config.size, fov_deg=config.fov_deg)
+
+            def on_evict(kind: str, oid: int) -> None:
+                if kind == "geom" and renderer is not None:
+                    renderer.forget_object(oid)
+
+            cache.on_evict = on_evict
+
+            def manifest_arrived(task: asyncio.Task[Manifest]) -> None:
+                if task.cancelled() or task.exception() is not None:
+                    return
+                m = task.result()
+                assert streamer is not None
+                streamer.api_max_ids = m.max_ids
+                if rewrite is not None:
+                    rewrite.set_grammar(parse_grammar(m.grammar_text))
+                if disk is not None and disk.use(m.name, m.version):
+                    streamer.disk = disk
+
+            manifest_task.add_done_callback(manifest_arrived)
+            log, snapshots = await _walk(
+                config, clock, path, streamer, cache, device, renderer, progress, t_start, link
+            )
+            manifest = manifest_task.result() if manifest_task.done() else None
+        finally:
+            if manifest_task is not None and not manifest_task.done():
+                manifest_task.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await manifest_task
+            if streamer is not None:
+                await streamer.close()
+            if rewrite is not None:
+                await rewrite.close()
+            if renderer is not None:
+                renderer.close()
+            if disk is not None:
+                disk.close()
+    stats = link.stats
+    bytes_log = _bytes_log(stats, t_start)
+    entered = {int(c) for c in np.unique(log.cell) if c >= 0}
+    in_pvs: set[int] = set()
+    for c in entered:
+        rec = streamer.cells.get(c)
+        if rec is not None:
+            in_pvs.update(rec.pvs.tolist())
+    over = sum(n for oid, n in streamer.stats.object_bytes.items() if oid not in in_pvs)
+    bytes_received = int(stats.bytes_down)
+    step = None
+    if config.cost_step_at_s is not None and len(log.t):
+        step = int(np.searchsorted(log.t - log.t[0], config.cost_step_at_s))
+    summary = summarise(
+        log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0, cost_step=step
+    )
+    summary.update(
+        {
+            "scene": api.scene,
+            "scene_version": None if manifest is None else manifest.version,
+            "path": config.path,
+            "path_duration_s": path.duration,
+            "walk_s": float(log.t[-1] - log.t[0]) if len(log.t) else 0.0,
+            "setup_s": setup_s,
+            "clock": config.clock,
+            "device": config.device,
+            "prefetch": config.prefetch,
+            "stream": config.stream,
+            "lod_select": config.lod_select,
+            "bandwidth_bps": config.link.down_bps,
+            "rtt_s": config.link.rtt_s,
+            "loss": config.link.loss,
+            "bytes_received": bytes_received,
+            "bytes_sent": int(stats.bytes_up),
+            "object_bytes": int(sum(streamer.stats.object_bytes.values())),
+            "overfetch_ratio": over / bytes_received if bytes_received else 0.0,
+            "redownloads": int(cache.redownloads),
+            "duplicates": int(
+                sum(n - 1 for n in streamer.stats.object_counts.values()) - cache.redownloads
+            ),
+            "rebuilds": int(cache.rebuilds),
+            "objects_received": streamer.stats.objects_received,
+            "object_requests": streamer.stats.object_requests,
+            "cell_requests": streamer.stats.cell_requests,
+            "cancelled_batches": streamer.stats.cancelled_batches,
+            "retries": api.stats.retries,
+            "cut_streams": api.stats.cut_streams,
+            "responses_cut_by_link": stats.responses_cut,
+            "disk_hits": streamer.stats.disk_hits,
+            "cells_revalidated": streamer.stats.cells_revalidated,
+            "measured_bandwidth_bps": _finite(api.stats.bandwidth_bps),
+            "measured_rtt_s": _finite(api.stats.rtt_s),
+            "cache_bytes": config.cache_bytes,
+            "cache_peak_bytes": int(cache.peak_bytes),
+            "rewrite_cpu_s": rewrite.cpu_s if rewrite is not None else 0.0,
+            "cells_entered": len(entered),
+        }
+    )
+    return ReplayResult(summary, log, bytes_log, snapshots)
+
+
+async def _within(clock: Clock, seconds: float, coro: Any) -> Any:
+    """``await coro``, or ``None`` when it takes longer than ``seconds`` on ``clock``."""
+    task = asyncio.ensure_future(coro)
+    timer = asyncio.ensure_future(clock.sleep(seconds))
+    try:
+        await asyncio.wait({task, timer}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        timer.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await timer
+    if task.done():
+        return task.result()
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task
+    return None
+
+
+def _bytes_log(stats: Any, t_start: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    return (
+        np.array([t for t, _ in stats.down_log], dtype=np.float64) - t_start,
+        np.array([b for _, b in stats.down_log], dtype=np.float64),
+    )
+
+
+def _link_summary(config: ReplayConfig, stats: Any, api: SceneClient) -> dict[str, Any]:
+    return {
+        "scene": api.scene,
+        "path": config.path,
+        "clock": config.clock,
+        "device": config.device,
+        "prefetch": config.prefetch,
+        "stream": config.stream,
+        "bandwidth_bps": config.link.down_bps,
+        "rtt_s": config.link.rtt_s,
+        "loss": config.link.loss,
+        "bytes_received": int(stats.bytes_down),
+        "bytes_sent": int(stats.bytes_up),
+        "overfetch_ratio": 0.0,
+        "redownloads": 0,
+        "rebuilds": 0,
+        "duplicates": 0,
+        "retries": api.stats.retries,
+        "cut_streams": api.stats.cut_streams,
+        "responses_cut_by_link": stats.responses_cut,
+    }
+
+
+def _finite(x: float) -> float | None:
+    return x if math.isfinite(x) else None
+
+
+async def _walk(
+    config: ReplayConfig,
+    clock: Clock,
+    path: RecordedPath,
+    streamer: Streamer,
+    cache: Cache,
+    device: Any,
+    renderer: Any,
+    progress: Callable[[float, float], None] | None,
+    t_start: float,
+    link: ShapedTransport,
+) -> tuple[FrameLog, list[Path]]:
+    tick = 1.0 / config.fps
+    total = path.duration if config.duration_s is None else min(config.duration_s, path.duration)
+    w, h = config.size
+    far = 2000.0
+    proj = perspective(config.fov_deg, w / h, 0.5, far)
+    controller = BudgetController(config.fps_target, k=config.budget_frames)
+    predictor = MotionPredictor()
+    inputs = _FrameInputs()
+    builder = FrameLogBuilder()
+    snapshots: list[Path] = []
+    t_walk0 = clock.now()
+    streamer.walk_end = t_walk0 + total
+    frame = 0
+    stepped = False
+    last_progress = -math.inf
+    while True:
+        t = clock.now()
+        wt = t - t_walk0
+        if wt > total:
+            break
+        if progress is not None and wt - last_progress >= 1.0:
+            last_progress = wt
+            progress(wt, total)
+        xyz, yaw, pitch = path.at(wt)
+        xyz = np.asarray(xyz, dtype=np.float64)
+        predictor.observe(wt, xyz[:2])
+        cur = streamer.tick(t, xyz[:2], predictor)
+        inputs.update(cur, streamer, cache)
+        if streamer.rewrite is not None and inputs.rq < inputs.dq:
+            rec = streamer.cells.get(cur) if cur is not None else None
+            if rec is not None:
+                streamer.ensure_geometry(rec.pvs.tolist())
+        view = _view(xyz, float(yaw), float(pitch))
+        vp = proj.astype(np.float64) @ view.astype(np.float64)
+        visible = frustum_cull(inputs.lo, inputs.hi, vp) if len(inputs.ids) else np.zeros(0, bool)
+        budget = int(controller.budget)
+        if config.lod_select == "ach":
+            alloc = allocate_ach(inputs.ach, inputs.tri, inputs.avail, visible, budget)
+        else:
+            centre = (inputs.lo + inputs.hi) / 2.0
+            dist = np.hypot(centre[:, 0] - xyz[0], centre[:, 1] - xyz[1])
+            alloc = allocate_distance(dist, inputs.tri, inputs.avail, visible, config.lod_distances)
+        if config.cost_step_at_s is not None and not stepped and wt >= config.cost_step_at_s:
+            device.cost_scale = device.cost_scale * config.cost_step_factor
+            stepped = True
+        draw_keys: list[tuple[int, int]] = []
+        if renderer is not None:
+            for g, lod in zip(inputs.geoms, alloc.lod.tolist(), strict=True):
+                if lod >= 0:
+                    key = (g.id, int(lod))
+                    if not renderer.has(key):
+                        mesh = g.meshes[lod]
+                        if mesh is None:
+                            continue
+                        renderer.upload(key, mesh)
+                    draw_keys.append(key)
+        snap = config.snapshot_every and frame % config.snapshot_every == 0
+        if device.simulated:
+            frame_time = float(device.frame_time(int(alloc.triangles), len(draw_keys)))
+            if snap and renderer is not None:
+                renderer.draw(draw_keys, view, proj)
+        else:
+            frame_time = float(renderer.draw(draw_keys, view, proj))
+        if snap and renderer is not None and config.report_dir is not None:
+            out = Path(config.report_dir) / "frames" / f"frame_{frame:06d}.png"
+            out.parent.mkdir(parents=True, exist_ok=True)
+            renderer.save_png(out)
+            snapshots.append(out)
+        controller.observe(frame_time, int(alloc.triangles))
+        builder.append(
+            t=t - t_start,
+            frame_time=frame_time,
+            cell=-1 if cur is None else int(cur),
+            pvs=len(streamer.cells[cur].pvs) if cur is not None and cur in streamer.cells else 0,
+            download_quality=inputs.dq,
+            rewrite_quality=inputs.rq,
+            bytes_down=int(link.stats.bytes_down),
+            budget=budget,
+            triangles=int(alloc.triangles),
+            visible=int(np.count_nonzero(visible)),
+            floor_limited=bool(alloc.floor_limited),
+            all_lod2=bool(alloc.all_max),
+        )
+        frame += 1
+        await clock.sleep_until(t + max(frame_time, tick))
+    if progress is not None:
+        progress(total, total)
+    return builder.build(fps_cap=config.fps), snapshots
+
+
+def with_report_dir(config: ReplayConfig, report_dir: Path | None) -> ReplayConfig:
+    """A copy of ``config`` writing snapshots under ``report_dir``."""
+    return replace(config, report_dir=report_dir)

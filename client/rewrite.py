@@ -1,0 +1,201 @@
+"""Rewriting: rebuild object geometry from parameters, highest priority first.
+
+A pool of workers takes rebuild jobs from a priority queue (the objects of the
+current cell first, then by the time a cell is needed, then by ACH, highest
+first) and turns each object's parameters into its three LODs with the grammar the
+manifest named (:func:`shared.buildings.build_lods`; a street is one flat surface
+used at every LOD).
+
+Under the real clock the jobs run in a thread pool, concurrently with the frame
+loop.  Under the simulated clock a job runs at once on the event loop (virtual
+time is frozen while it runs) and then its worker sleeps the CPU time the job
+really took, so each worker is a lane of virtual time and the results appear when
+they would have on a machine with that many cores.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import heapq
+import itertools
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from client.clock import Clock
+from shared.buildings import build_lods
+from shared.lsystem.grammar import Grammar
+from shared.records import BuildingParams, Mesh, StreetParams
+from shared.streets import build_street
+
+__all__ = ["ObjectGeometry", "geometry_of", "RewritePool"]
+
+Priority = tuple[float, float]
+"""(seconds until needed, -ACH): smaller is sooner."""
+
+
+@dataclass(frozen=True)
+class ObjectGeometry:
+    """An object's rebuilt (or downloaded) geometry per LOD, with what the renderer needs."""
+
+    id: int
+    meshes: tuple[Mesh | None, Mesh | None, Mesh | None]
+    triangles: NDArray[np.int64]
+    """(3,) triangles per LOD; 0 where the LOD is missing."""
+    available: NDArray[np.bool_]
+    """(3,) whether each LOD is there."""
+    bbox_min: NDArray[np.float64]
+    bbox_max: NDArray[np.float64]
+    nbytes: int
+    """Memory the meshes take (what the cache counts)."""
+    cpu_s: float = 0.0
+
+
+def geometry_of(
+    oid: int, meshes: tuple[Mesh | None, Mesh | None, Mesh | None], cpu_s: float = 0.0
+) -> ObjectGeometry:
+    """Wrap meshes (``None`` for a missing LOD) with triangle counts, bounds and size."""
+    tri = np.array([0 if m is None else m.triangles for m in meshes], dtype=np.int64)
+    avail = np.array([m is not None for m in meshes], dtype=bool)
+    present = [m for m in meshes if m is not None and len(m.positions)]
+    if present:
+        pos = np.concatenate([m.positions for m in present])
+        lo, hi = pos.min(axis=0).astype(np.float64), pos.max(axis=0).astype(np.float64)
+    else:
+        lo = hi = np.zeros(3)
+    # a street shares one mesh across LODs: count it once
+    nbytes = sum(m.gpu_bytes for m in {id(m): m for m in meshes if m is not None}.values())
+    return ObjectGeometry(oid, meshes, tri, avail, lo, hi, int(nbytes), cpu_s)
+
+
+def rebuild(oid: int, params: BuildingParams | StreetParams, grammar: Grammar) -> ObjectGeometry:
+    """The three LODs of one object, timed in CPU seconds of this thread."""
+    t0 = time.thread_time()
+    if isinstance(params, StreetParams):
+        m = build_street(params)
+        meshes: tuple[Mesh | None, Mesh | None, Mesh | None] = (m, m, m)
+    else:
+        meshes = build_lods(params, grammar)
+    return geometry_of(oid, meshes, time.thread_time() - t0)
+
+
+class RewritePool:
+    """Rebuild jobs in priority order on ``workers`` workers.
+
+    Parameters
+    ----------
+    clock:
+        Real: jobs run in threads; simulated: inline, charged as virtual time.
+    grammar:
+        The parsed building grammar from the manifest; ``None`` until the manifest
+        arrives (jobs wait; see :meth:`set_grammar`).
+    on_built:
+        Called on the event loop with each finished :class:`ObjectGeometry`.
+    workers:
+        Number of concurrent workers.
+    """
+
+    def __init__(
+        self,
+        clock: Clock,
+        grammar: Grammar | None,
+        on_built: Callable[[ObjectGeometry], None],
+        workers: int = 2,
+    ) -> None:
+        if workers < 1:
+            raise ValueError(f"workers must be >= 1, got {workers}")
+        self.clock = clock
+        self.grammar = grammar
+        self.on_built = on_built
+        self.workers = workers
+        self._heap: list[tuple[Priority, int, int]] = []
+        self._jobs: dict[int, tuple[BuildingParams | StreetParams, Priority]] = {}
+        self._seq = itertools.count()
+        self._wake = asyncio.Event()
+        self._tasks: list[asyncio.Task[None]] = []
+        self._executor: ThreadPoolExecutor | None = None
+        self.built = 0
+        self.cpu_s = 0.0
+
+    def set_grammar(self, grammar: Grammar) -> None:
+        """Give the pool its grammar (the manifest arrived); waiting jobs start."""
+        self.grammar = grammar
+        self._wake.set()
+
+    def submit(self, oid: int, params: BuildingParams | StreetParams, priority: Priority) -> None:
+        """Queue (or re-prioritise) the rebuild of ``oid``."""
+        old = self._jobs.get(oid)
+        if old is not None and old[1] <= priority:
+            return
+        self._jobs[oid] = (params, priority)
+        heapq.heappush(self._heap, (priority, next(self._seq), oid))
+        self._wake.set()
+
+    def bump(self, oid: int, priority: Priority) -> None:
+        """Raise the priority of a queued job (no-op when it is not queued)."""
+        job = self._jobs.get(oid)
+        if job is not None:
+            self.submit(oid, job[0], priority)
+
+    def queued(self, oid: int) -> bool:
+        """Whether ``oid`` waits for a worker."""
+        return oid in self._jobs
+
+    @property
+    def pending(self) -> int:
+        """Jobs waiting for a worker."""
+        return len(self._jobs)
+
+    def _pop(self) -> tuple[int, BuildingParams | StreetParams] | None:
+        while self._heap:
+            prio, _, oid = heapq.heappop(self._heap)
+            job = self._jobs.get(oid)
+            if job is not None and job[1] == prio:
+                del self._jobs[oid]
+                return oid, job[0]
+        return None
+
+    def start(self) -> None:
+        """Start the workers on the running event loop."""
+        if not self.clock.simulated:
+            self._executor = ThreadPoolExecutor(self.workers, thread_name_prefix="rewrite")
+        self._tasks = [asyncio.create_task(self._worker()) for _ in range(self.workers)]
+
+    async def _worker(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            job = self._pop() if self.grammar is not None else None
+            if job is None:
+                self._wake.clear()
+                await self._wake.wait()
+                continue
+            oid, params = job
+            assert self.grammar is not None
+            if self._executor is None:
+                geom = rebuild(oid, params, self.grammar)
+                await self.clock.sleep(geom.cpu_s)
+            else:
+                geom = await loop.run_in_executor(
+                    self._executor, rebuild, oid, params, self.grammar
+                )
+            self.built += 1
+            self.cpu_s += geom.cpu_s
+            self.on_built(geom)
+
+    async def close(self) -> None:
+        """Stop the workers (jobs in progress in threads finish on their own)."""
+        for t in self._tasks:
+            t.cancel()
+        for t in self._tasks:
+            try:
+                await t
+            except asyncio.CancelledError:
+                pass
+        self._tasks = []
+        if self._executor is not None:
+            self._executor.shutdown(wait=True, cancel_futures=True)
+            self._executor = None
