@@ -278,6 +278,20 @@ class Cache:
             evicted = self._shrink()
         self._notify(evicted)
 
+    def set_pins(self, keys: Iterable[tuple[str, int]]) -> None:
+        """Pin exactly ``keys`` (``(kind, id)``), unpinning every other key, then shrink.
+
+        One step, so nothing that stays pinned is evicted in between.
+        """
+        want: set[Key] = {(self._kind(k), int(i)) for k, i in keys}
+        with self._lock:
+            for kind, oid in self._pins - want:
+                self._unpin_one(kind, oid)
+            for kind, oid in want - self._pins:
+                self._pin_one(kind, oid)
+            evicted = self._shrink()
+        self._notify(evicted)
+
     def _pin_one(self, kind: str, oid: int) -> None:
         self._pins.add((kind, oid))
         e = self._lru[kind].pop(oid, None)

@@ -117,6 +117,7 @@ class RewritePool:
         self._seq = itertools.count()
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
+        self._running: set[int] = set()
         self._executor: ThreadPoolExecutor | None = None
         self.built = 0
         self.cpu_s = 0.0
@@ -142,8 +143,8 @@ class RewritePool:
             self.submit(oid, job[0], priority)
 
     def queued(self, oid: int) -> bool:
-        """Whether ``oid`` waits for a worker."""
-        return oid in self._jobs
+        """Whether ``oid`` waits for a worker or is being rebuilt."""
+        return oid in self._jobs or oid in self._running
 
     @property
     def pending(self) -> int:
@@ -175,13 +176,17 @@ class RewritePool:
                 continue
             oid, params = job
             assert self.grammar is not None
-            if self._executor is None:
-                geom = rebuild(oid, params, self.grammar)
-                await self.clock.sleep(geom.cpu_s)
-            else:
-                geom = await loop.run_in_executor(
-                    self._executor, rebuild, oid, params, self.grammar
-                )
+            self._running.add(oid)
+            try:
+                if self._executor is None:
+                    geom = rebuild(oid, params, self.grammar)
+                    await self.clock.sleep(geom.cpu_s)
+                else:
+                    geom = await loop.run_in_executor(
+                        self._executor, rebuild, oid, params, self.grammar
+                    )
+            finally:
+                self._running.discard(oid)
             self.built += 1
             self.cpu_s += geom.cpu_s
             self.on_built(geom)

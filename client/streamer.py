@@ -64,6 +64,8 @@ class StreamerConfig:
     assumed_bps: float = 40_000.0
     """Bandwidth assumed before anything was measured (conservative: GPRS class)."""
     assumed_rtt_s: float = 0.5
+    pin_hold_s: float = 5.0
+    """A cell's objects stay pinned this long after it was last needed."""
 
 
 @dataclass
@@ -143,6 +145,7 @@ class Streamer:
         self.walk_end = math.inf
         """Clock time at which the walk ends (the replay sets it; prefetch stops short of it)."""
         self._now = 0.0
+        self._needed_at: dict[int, float] = {}
         self._closed = False
 
     # -- the frame loop's side -------------------------------------------------
@@ -165,10 +168,32 @@ class Streamer:
             self._dispatch()
         return cur
 
+    def _pin(self, need: dict[int, float]) -> None:
+        """Pin the current cell with its PVS (params and geometry), and the records and
+        params of the cells about to be entered: evicting what the next seconds need
+        would only download it again (geometry can be rebuilt, so it is not pinned)."""
+        cur = self.cellmap.current
+        rec = self.cells.get(cur) if cur is not None else None
+        # hysteresis: a cell that drops out of the prediction for a moment (the
+        # prediction wobbles at 10 Hz) keeps its pins for pin_hold_s
+        for c in need:
+            self._needed_at[c] = self._now
+        hold = self.config.pin_hold_s
+        for c in [c for c, t in self._needed_at.items() if self._now - t > hold]:
+            del self._needed_at[c]
+        keys: list[tuple[str, int]] = [("cell", c) for c in self._needed_at if c in self.cells]
+        if rec is not None:
+            keys += [("params", i) for i in rec.pvs.tolist()]
+            keys += [("geom", i) for i in rec.pvs.tolist()]
+        for c in self._needed_at:
+            r = self.cells.get(c)
+            if r is not None and c != cur:
+                keys += [("params", i) for i in r.pvs.tolist()]
+        self.cache.set_pins(keys)
+
     def _entered(self, cid: int) -> None:
         rec = self.cells.get(cid)
-        params = [] if rec is None else rec.pvs.tolist()
-        self.cache.set_pinned(params, [cid])
+        self._pin({**self.need, cid: 0.0})
         if rec is not None and self.rewrite is not None:
             for oid, a in zip(rec.pvs.tolist(), rec.ach.tolist(), strict=True):
                 self.rewrite.bump(oid, (0.0, -a))
@@ -212,6 +237,7 @@ class Streamer:
                     if t <= h:
                         need[n] = max(t, need[c])
         self.need = need
+        self._pin(need)
         wanted: dict[int, tuple[float, float]] = {}
         for c, t in need.items():
             rec = self.cells.get(c)

@@ -105,8 +105,7 @@ def _bar(desc: str) -> tuple[Any, Callable[[float, float], None]]:
 
     def progress(done: float, total: float) -> None:
         bar.total = max(total, 1e-9)
-        bar.n = min(done, total)
-        bar.refresh()
+        bar.update(min(done, total) - bar.n)  # update() honours tqdm's refresh interval
 
     return bar, progress
 
@@ -230,7 +229,7 @@ def stream_scenarios(vienna: str | None) -> list[dict[str, Any]]:
         {"name": "SE GPRS no-prefetch", "over": {"bandwidth": "5kB/s", "rtt": "500ms", "no_prefetch": True}, "goal": "(reported)"},
         {"name": "drive GPRS prefetch", "over": {"path": "drive", "bandwidth": "5kB/s", "rtt": "500ms"}, "goal": "(reported)"},
         {"name": "SM 56k prefetch", "over": {"path": "SM"}, "goal": "(reported)"},
-        {"name": "SE 56k cache 2MB", "over": {"cache": "2MB"}, "goal": "re-downloads counted"},
+        {"name": "SE 56k cache 8MB", "over": {"cache": "8MB"}, "goal": "re-downloads counted"},
     ]
     if vienna:
         rows.append(
