@@ -229,6 +229,8 @@ def allocate_ach(
     available: ArrayLike,
     visible: ArrayLike,
     budget: float,
+    *,
+    reserve_floor: bool = False,
 ) -> Allocation:
     """Share a triangle budget among the visible objects by their ACH.
 
@@ -246,6 +248,13 @@ def allocate_ach(
         Result of :func:`frustum_cull` (False: not drawn).
     budget : float
         Triangles for the frame (>= 0).
+    reserve_floor : bool
+        The paper's rule as written (False) can overshoot the budget: objects served
+        first take LOD1/LOD2 shares and the later ones still get their LOD0.  With
+        True, the lowest LOD of every visible object is set aside first and the same
+        rule shares what is left (the *upgrades*: a LOD costs its triangles minus
+        the object's lowest LOD), so the frame stays within the budget whenever the
+        lowest LODs fit.  The replay uses True.
 
     Returns
     -------
@@ -281,6 +290,10 @@ def allocate_ach(
     # cost of each LOD, infinite where not available, and the fallback (lowest) LOD
     cost = np.where(av[ids], t[ids], np.inf)
     low = _lowest_available(av[ids])
+    if reserve_floor:
+        floor = cost[np.arange(len(ids)), low]
+        cost = cost - floor[:, None]  # what moving up from the lowest LOD costs
+        b = max(0.0, b - float(floor.sum()))
     c0, c1, c2 = (cost[:, level].tolist() for level in range(3))
     low_l = low.tolist()
     chosen_l = [0] * len(ids)
@@ -313,7 +326,7 @@ def allocate_ach(
         best_free = 2 - np.argmax(free[:, ::-1], axis=1)
         chosen[served:] = np.where(free.any(axis=1), best_free, low[served:])
     lod[ids] = chosen
-    return _finish(lod, t, av, drawable, b)
+    return _finish(lod, t, av, drawable, _budget(budget, what))
 
 
 # --------------------------------------------------------------------------- distance

@@ -123,6 +123,8 @@ class ReplayResult:
     log: FrameLog
     bytes_log: tuple[NDArray[np.float64], NDArray[np.float64]]
     snapshots: list[Path] = field(default_factory=list)
+    spikes: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    """Per frame: the simulated device stalled (its occasional 2x spike)."""
 
 
 def run_replay(
@@ -312,7 +314,7 @@ async def replay(
                     streamer.disk = disk
 
             manifest_task.add_done_callback(manifest_arrived)
-            log, snapshots = await _walk(
+            log, snapshots, spikes = await _walk(
                 config, clock, path, streamer, cache, device, renderer, progress, t_start, link
             )
             manifest = manifest_task.result() if manifest_task.done() else None
@@ -387,7 +389,8 @@ async def replay(
             "cells_entered": len(entered),
         }
     )
-    return ReplayResult(summary, log, bytes_log, snapshots)
+    summary["spike_frames"] = int(spikes.sum())
+    return ReplayResult(summary, log, bytes_log, snapshots, spikes)
 
 
 async def _within(clock: Clock, seconds: float, coro: Any) -> Any:
@@ -453,7 +456,7 @@ async def _walk(
     progress: Callable[[float, float], None] | None,
     t_start: float,
     link: ShapedTransport,
-) -> tuple[FrameLog, list[Path]]:
+) -> tuple[FrameLog, list[Path], NDArray[np.bool_]]:
     tick = 1.0 / config.fps
     total = path.duration if config.duration_s is None else min(config.duration_s, path.duration)
     w, h = config.size
@@ -464,6 +467,7 @@ async def _walk(
     inputs = _FrameInputs()
     builder = FrameLogBuilder()
     snapshots: list[Path] = []
+    spikes: list[bool] = []
     t_walk0 = clock.now()
     streamer.walk_end = t_walk0 + total
     frame = 0
@@ -491,7 +495,9 @@ async def _walk(
         visible = frustum_cull(inputs.lo, inputs.hi, vp) if len(inputs.ids) else np.zeros(0, bool)
         budget = int(controller.budget)
         if config.lod_select == "ach":
-            alloc = allocate_ach(inputs.ach, inputs.tri, inputs.avail, visible, budget)
+            alloc = allocate_ach(
+                inputs.ach, inputs.tri, inputs.avail, visible, budget, reserve_floor=True
+            )
         else:
             centre = (inputs.lo + inputs.hi) / 2.0
             dist = np.hypot(centre[:, 0] - xyz[0], centre[:, 1] - xyz[1])
@@ -512,11 +518,13 @@ async def _walk(
                     draw_keys.append(key)
         snap = config.snapshot_every and frame % config.snapshot_every == 0
         if device.simulated:
-            frame_time = float(device.frame_time(int(alloc.triangles), len(draw_keys)))
+            frame_time = float(device.frame_time(int(alloc.triangles), int((alloc.lod >= 0).sum())))
+            spikes.append(bool(getattr(device, "last_spike", False)))
             if snap and renderer is not None:
                 renderer.draw(draw_keys, view, proj)
         else:
             frame_time = float(renderer.draw(draw_keys, view, proj))
+            spikes.append(False)
         if snap and renderer is not None and config.report_dir is not None:
             out = Path(config.report_dir) / "frames" / f"frame_{frame:06d}.png"
             out.parent.mkdir(parents=True, exist_ok=True)
@@ -541,7 +549,7 @@ async def _walk(
         await clock.sleep_until(t + max(frame_time, tick))
     if progress is not None:
         progress(total, total)
-    return builder.build(fps_cap=config.fps), snapshots
+    return builder.build(fps_cap=config.fps), snapshots, np.array(spikes, dtype=bool)
 
 
 def with_report_dir(config: ReplayConfig, report_dir: Path | None) -> ReplayConfig:

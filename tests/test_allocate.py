@@ -409,3 +409,39 @@ def test_matches_a_plain_reference() -> None:
         budget = int(rng.integers(0, 3000))
         a = allocate_ach(ach, tri, av, v, budget)
         assert a.lod.tolist() == _reference_ach(ach, tri, av, v, budget)
+
+
+def test_reserve_floor_keeps_the_frame_within_budget_when_the_floors_fit() -> None:
+    rng = np.random.default_rng(11)
+    over_plain = 0
+    for _ in range(300):
+        k = int(rng.integers(1, 40))
+        lod0 = rng.integers(6, 40, k)
+        tri = np.stack([lod0, lod0 * 8, lod0 * 60], axis=1)
+        ach = rng.random(k)
+        avail = np.ones((k, 3), bool)
+        vis = rng.random(k) > 0.2
+        budget = float(rng.integers(0, int(tri[:, 2].sum()) + 1))
+        floor = int(tri[vis, 0].sum())
+        a = allocate_ach(ach, tri, avail, vis, budget, reserve_floor=True)
+        plain = allocate_ach(ach, tri, avail, vis, budget)
+        assert a.floor_limited == (floor > budget) == plain.floor_limited
+        if floor <= budget:
+            assert floor <= a.triangles <= budget
+            over_plain += plain.triangles > budget
+        else:
+            assert a.triangles == floor  # everything visible at its lowest LOD
+        assert np.all((a.lod >= 0) == vis)
+    assert over_plain > 0  # the rule as written does overshoot sometimes
+
+
+def test_reserve_floor_passes_leftover_on() -> None:
+    # LOD0 10 each; budget 10*3 + 90: the first object's share of the 90 upgrade
+    # triangles is 45 (ACH 0.5) and LOD1 costs +70: it stays at LOD0 and the next
+    # object, with the whole 90 for ACH 0.3 of 0.5 left = 54 ... also too little; the
+    # last takes all 90 and fits its LOD1 (+70)
+    tri = np.array([[10, 80, 600]] * 3)
+    a = allocate_ach(
+        [0.5, 0.3, 0.2], tri, np.ones((3, 3), bool), np.ones(3, bool), 120, reserve_floor=True
+    )
+    assert a.lod.tolist() == [0, 0, 1] and a.triangles == 100

@@ -348,7 +348,11 @@ def cmd_bench_budget(args: argparse.Namespace) -> int:
             log = result.log
             t_walk = log.t - log.t[0]
             idx = int(np.searchsorted(t_walk, step_at))
-            rec, worst = recovery_frames(log.frame_time, target, idx)
+            # the device's own 2x spikes and floor-limited frames are not the
+            # controller's doing: left out of both figures (client.budget docs)
+            rec, worst = recovery_frames(
+                log.frame_time, target, idx, exclude=result.spikes | log.floor_limited
+            )
         rows.append({"device": device, "target": target, "goal": goal, "recover": rec, "worst": worst, **s})
     print(format_budget_table(rows))
     (out / "bench_budget.json").write_text(json.dumps(rows, indent=2, default=str))
