@@ -12,7 +12,7 @@ import argparse
 import contextlib
 import json
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -97,17 +97,32 @@ def config_from_args(args: argparse.Namespace) -> Any:
     )
 
 
-def _bar(desc: str) -> tuple[Any, Callable[[float, float], None]]:
-    from tqdm import tqdm
+class _Bar:
+    """A tqdm bar of walk seconds, made on the first progress call (so that a replay
+    that fails during setup prints only its error)."""
 
-    bar = tqdm(total=1, desc=desc, unit="s", file=sys.stderr, leave=False, dynamic_ncols=True,
-               bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} s walked [{elapsed}]")
+    def __init__(self, desc: str) -> None:
+        self.desc = desc
+        self.bar: Any = None
 
-    def progress(done: float, total: float) -> None:
-        bar.total = max(total, 1e-9)
-        bar.update(min(done, total) - bar.n)  # update() honours tqdm's refresh interval
+    def __call__(self, done: float, total: float) -> None:
+        if self.bar is None:
+            from tqdm import tqdm
 
-    return bar, progress
+            self.bar = tqdm(
+                total=max(total, 1e-9),
+                desc=self.desc,
+                unit="s",
+                file=sys.stderr,
+                leave=False,
+                dynamic_ncols=True,
+                bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} s walked [{elapsed}]",
+            )
+        self.bar.update(min(done, total) - self.bar.n)  # honours tqdm's refresh interval
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = False) -> Any:
@@ -119,9 +134,11 @@ def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = Fals
         if quiet:
             result = run_replay(transport, url, config)
         else:
-            bar, progress = _bar(f"replay {config.path}")
-            with bar:
-                result = run_replay(transport, url, config, progress)
+            bar = _Bar(f"replay {config.path}")
+            try:
+                result = run_replay(transport, url, config, bar)
+            finally:
+                bar.close()
     if config.report_dir is not None:
         write_report(
             config.report_dir,

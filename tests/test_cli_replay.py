@@ -1,0 +1,153 @@
+"""`walkstream replay`, `bench stream`, `bench budget`, `path` and `demo` from the command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from scenes import build_city_db
+from server.pathgen import default_paths
+from server.store import SceneReader, write_path
+from walkstream.cli import main
+
+ISSUE5_KEYS = {
+    "frames", "perfect_frame_ratio", "download_quality_mean", "rewrite_quality_mean",
+    "bytes_received", "overfetch_ratio", "redownloads", "rebuilds",
+    "time_to_first_perfect_frame_s", "prefetch", "stream", "bandwidth_bps", "rtt_s",
+}  # fmt: skip
+ISSUE6_KEYS = {
+    "fps_mean", "fps_target", "fps_within_10pct_ratio", "floor_limited_ratio",
+    "budget_median", "budget_min", "budget_max",
+}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("cli-replay") / "city.db"
+    build_city_db(path, name="city", size=300.0, k=30)
+    r = SceneReader.open(path)
+    try:
+        cells = list(r.cells())
+    finally:
+        r.close()
+    for p in default_paths(cells):
+        write_path(path, p.name, p.to_msgpack())
+    return path
+
+
+def test_replay_writes_the_report(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    report = tmp_path / "report"
+    argv = [
+        "replay", str(db), "--path", "SE", "--bandwidth", "7kB/s", "--rtt", "200ms",
+        "--duration", "20s", "--device", "desktop2003", "--snapshot-every", "100",
+        "--size", "160x120", "--report", str(report),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "perfect" in out and "index.html" in out
+    summary = json.loads((report / "report.json").read_text())
+    assert ISSUE5_KEYS | ISSUE6_KEYS <= set(summary)
+    assert summary["bandwidth_bps"] == 56_000 and summary["rtt_s"] == 0.2
+    html = (report / "index.html").read_text()
+    for png in ("quality.png", "bytes.png", "fps.png", "budget.png"):
+        assert (report / png).stat().st_size > 1000 and png in html
+    frames = sorted(report.rglob("frame_*.png"))
+    assert len(frames) >= 4  # 20 s at 25 fps, every 100th frame
+    assert all(f.name in html for f in frames)
+
+
+@pytest.mark.gl
+def test_replay_on_the_gl_device_really_draws(db: Path, tmp_path: Path, gl_ctx: object) -> None:
+    report = tmp_path / "gl"
+    argv = [
+        "replay", str(db), "--duration", "3s", "--device", "gl", "--size", "96x64",
+        "--bandwidth", "1Mbit", "--rtt", "50ms", "--report", str(report),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    summary = json.loads((report / "report.json").read_text())
+    assert summary["device"] == "gl" and summary["frames"] > 0 and summary["fps_mean"] > 0
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--bandwidth", "56 parsecs"], "56 parsecs"),
+        (["--rtt", "soon"], "soon"),
+        (["--cache=-5MB"], "-5MB"),
+        (["--loss", "2"], "--loss"),
+        (["--size", "640by480"], "--size"),
+        (["--path", "nowhere"], "nowhere"),
+    ],
+)
+def test_bad_replay_arguments_are_one_line(
+    db: Path, tmp_path: Path, extra: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["replay", str(db), "--device", "desktop2003", "--report", str(tmp_path / "r"), *extra]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("walkstream: error:") and message in err
+    assert "Traceback" not in err and len(err.splitlines()) == 1
+
+
+def test_replay_of_a_missing_database(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["replay", str(tmp_path / "nope.db"), "--report", str(tmp_path / "r")]) == 2
+    assert "nope.db" in capsys.readouterr().err
+
+
+def test_bench_stream_prints_one_table(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "bench"
+    argv = ["bench", "stream", str(db), "--only", "SE 56k", "--duration", "15s", "--out", str(out)]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    for name in ("SE 56k prefetch", "SE 56k no-prefetch", "SE 56k meshes", "SE 56k cache 8MB"):
+        assert name in text
+    rows = json.loads((out / "bench_stream.json").read_text())
+    assert len(rows) == 4 and (out / "index.html").exists()
+
+
+def test_bench_budget_table(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    argv = [
+        "bench", "budget", str(db), "--no-gl", "--duration", "20s", "--step-at", "10",
+        "--out", str(tmp_path / "b"),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "desktop2003" in text and "pda" in text
+    rows = json.loads((tmp_path / "b" / "bench_budget.json").read_text())
+    assert [r["device"] for r in rows] == ["desktop2003", "desktop2003", "pda"]
+    assert all(r["recover"] is not None for r in rows)
+
+
+def test_path_record_then_replay_it(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    copy = tmp_path / "city.db"
+    copy.write_bytes(db.read_bytes())
+    with SceneReader.open(copy) as r:
+        cells = [c for c in r.cells() if c.kind == "street"]
+    a = cells[0].boundary.mean(axis=0)
+    b = cells[-1].boundary.mean(axis=0)
+    argv = [
+        "path", "record", str(copy), "mine", f"--from={a[0]},{a[1]}", f"--to={b[0]},{b[1]}",
+        "--speed", "20",
+    ]  # fmt: skip
+    assert main(argv) == 0
+    assert main(["path", "list", str(copy)]) == 0
+    assert "mine" in capsys.readouterr().out
+    argv = [
+        "replay", str(copy), "--path", "mine", "--duration", "5s", "--device", "pda",
+        "--report", str(tmp_path / "r"),
+    ]  # fmt: skip
+    assert main(argv) == 0
+
+
+@pytest.mark.slow
+@pytest.mark.gl
+def test_demo_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str], gl_ctx: object) -> None:
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "server on http://127.0.0.1:" in out and "perfect" in out
+    summary = json.loads((tmp_path / "report" / "report.json").read_text())
+    assert summary["path"] == "SE" and summary["device"] == "desktop2003"
+    assert summary["clock"] == "sim" and summary["bandwidth_bps"] == 56_000
+    assert summary["frames"] > 4000  # the whole 200 s walk at 25 fps
