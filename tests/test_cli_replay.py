@@ -6,8 +6,8 @@ import json
 from pathlib import Path
 
 import pytest
-
 from scenes import build_city_db
+
 from server.pathgen import default_paths
 from server.store import SceneReader, write_path
 from walkstream.cli import main
