@@ -429,7 +429,11 @@ def _legend(ax: Axes, **kw: Any) -> None:
 
 
 def _save(fig: Figure, path: Path) -> Path:
-    fig.tight_layout()
+    if fig.get_suptitle():  # keep the figure title clear of the top row's titles
+        top = 1.0 - 0.35 / fig.get_figheight()
+        fig.tight_layout(rect=(0.0, 0.0, 1.0, top))
+    else:
+        fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     with _atomic(path, "wb") as f:

@@ -649,6 +649,7 @@ def plot_lod_bench(rows: Sequence[dict[str, Any]], path: str | os.PathLike[str])
             fontsize=11,
         )
     fig.tight_layout()
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     fig.savefig(os.fspath(path), format="png")
 
 
@@ -708,6 +709,7 @@ def write_side_by_side(
         va="center",
     )
     fig.tight_layout()
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     fig.savefig(os.fspath(path), format="png")
 
 
