@@ -318,6 +318,7 @@ async def replay(
                 config, clock, path, streamer, cache, device, renderer, progress, t_start, link
             )
             manifest = manifest_task.result() if manifest_task.done() else None
+            disk_state = (disk.available, disk.last_error) if disk is not None else (False, None)
         finally:
             if manifest_task is not None and not manifest_task.done():
                 manifest_task.cancel()
@@ -390,6 +391,13 @@ async def replay(
         }
     )
     summary["spike_frames"] = int(spikes.sum())
+    if config.cache_dir is not None:
+        # the disk cache never raises: say here whether it was usable
+        summary["disk_cache"] = {
+            "dir": str(config.cache_dir),
+            "available": disk_state[0],
+            "error": disk_state[1],
+        }
     return ReplayResult(summary, log, bytes_log, snapshots, spikes)
 
 

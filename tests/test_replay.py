@@ -116,10 +116,18 @@ def test_disk_cache_persists_between_runs(city: Path, tmp_path: Path) -> None:
     cfg = config(duration_s=20.0, cache_dir=tmp_path / "cache")
     first = replay_in_process(city, cfg).summary
     second = replay_in_process(city, cfg).summary
-    assert first["disk_hits"] == 0
+    assert first["disk_hits"] == 0 and first["disk_cache"]["available"]
     assert second["disk_hits"] > 0 and second["cells_revalidated"] > 0
     assert second["object_bytes"] < first["object_bytes"] / 2
     assert second["time_to_first_perfect_frame_s"] <= first["time_to_first_perfect_frame_s"]
+
+
+def test_an_unusable_cache_dir_is_reported_not_fatal(city: Path, tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    s = replay_in_process(city, config(duration_s=5.0, cache_dir=blocker / "cache")).summary
+    assert s["frames"] > 0
+    assert not s["disk_cache"]["available"] and "cache" in s["disk_cache"]["error"]
 
 
 def test_zero_bandwidth_gives_a_report_not_a_hang(city: Path) -> None:

@@ -182,6 +182,11 @@ def headline(summary: dict[str, Any]) -> str:
 def cmd_replay(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     result = replay_to_report(args.server, config, title=f"replay {config.path}")
+    disk = result.summary.get("disk_cache")
+    if disk and not disk["available"]:
+        print(f"walkstream: warning: --cache-dir not used: {disk['error']}", file=sys.stderr)
+    if result.summary.get("error"):
+        print(f"walkstream: warning: {result.summary['error']}", file=sys.stderr)
     if args.json:
         print(json.dumps(result.summary, indent=2, default=str))
     else:
