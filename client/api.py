@@ -49,7 +49,6 @@ MSGPACK = "application/msgpack"
 
 _MAX_MANIFEST = 4 << 20
 _MAX_CELL = 8 << 20
-_MAX_PATH = 64 << 20
 _MAX_FRAME = 32 << 20  # one object frame (an LOD2 mesh of a large block fits)
 
 

@@ -23,7 +23,7 @@ import asyncio
 import contextlib
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -558,8 +558,3 @@ async def _walk(
     if progress is not None:
         progress(total, total)
     return builder.build(fps_cap=config.fps), snapshots, np.array(spikes, dtype=bool)
-
-
-def with_report_dir(config: ReplayConfig, report_dir: Path | None) -> ReplayConfig:
-    """A copy of ``config`` writing snapshots under ``report_dir``."""
-    return replace(config, report_dir=report_dir)
