@@ -595,6 +595,18 @@ def _plot_fps(path: Path, runs: Sequence[_Run], title: str) -> Path:
         )
         if fin.any():
             ymax = max(ymax, 1.08 * float(f.fps[fin].max()))
+        step = r.summary.get("cost_step_frame")
+        if isinstance(step, int) and 0 <= step < len(f):
+            ax.axvline(float(x[step]), color="#D55E00", linestyle=":", linewidth=1.2)
+            ax.annotate(
+                "cost step",
+                (float(x[step]), 0.02),
+                xycoords=("data", "axes fraction"),
+                xytext=(3, 0),
+                textcoords="offset points",
+                fontsize=8,
+                color="#D55E00",
+            )
         fl = _thin(np.flatnonzero(f.floor_limited & fin))
         if fl.size:
             ax.plot(
