@@ -108,6 +108,8 @@ class CellRecord:
     ach: NDArray[np.float64]
     nbytes: int = 0
     etag: str | None = None
+    body: bytes = field(default=b"", repr=False)
+    """The record as received (kept for the disk cache)."""
 
 
 @dataclass(frozen=True)
@@ -206,6 +208,7 @@ def decode_cell(body: bytes, what: str, etag: str | None = None) -> CellRecord:
             ach=ach,
             nbytes=len(body),
             etag=etag,
+            body=bytes(body),
         )
     except KeyError as exc:
         raise CodecError(f"{what}: missing field {exc}") from exc

@@ -535,6 +535,7 @@ def summarise(
     tolerance: float = 0.1,
     cost_step: int | None = None,
     recovery_hold: int = 5,
+    recovery_ignore: ArrayLike | None = None,
     extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The headline figures of a replay (the body of ``report.json``).
@@ -560,6 +561,9 @@ def summarise(
         Index of a frame where the cost of drawing stepped; adds ``cost_step_frame``,
         ``recovery_frames``, ``recovery_worst_slowdown_during`` and
         ``recovery_worst_slowdown_after`` (:func:`recovery_frames` with ``recovery_hold``).
+    recovery_ignore : (n,) bool, optional
+        Frames left out of the recovery figures besides the floor-limited ones (the
+        simulated device's own spikes).
     extra : mapping, optional
         More keys for the summary (``prefetch``, ``stream``, ...); a key that this
         function computes itself is an error.
@@ -621,7 +625,12 @@ def summarise(
     }
     if cost_step is not None:
         rec = recovery_frames(
-            log, cost_step, target=fps_target, tolerance=tolerance, hold=recovery_hold
+            log,
+            cost_step,
+            target=fps_target,
+            tolerance=tolerance,
+            hold=recovery_hold,
+            ignore=recovery_ignore,
         )
         out["cost_step_frame"] = int(cost_step)
         out["recovery_frames"] = rec.frames

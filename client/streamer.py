@@ -379,7 +379,7 @@ class Streamer:
         self.cache.put("cell", rec.id, rec, max(rec.nbytes, 64))
         self.cellmap.add_record(rec.id, rec.boundary, rec.neighbours)
         if self.disk is not None and rec.etag:
-            self.disk.put_cell(rec.id, rec.etag, _cell_body(rec))
+            self.disk.put_cell(rec.id, rec.etag, rec.body)
         if self.cellmap.current == rec.id:
             self._entered(rec.id)
             new = sum(1 for i in rec.pvs.tolist() if not self.cache.has("params", i))
@@ -494,19 +494,3 @@ class Streamer:
         for t in tasks:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await t
-
-
-def _cell_body(rec: CellRecord) -> bytes:
-    """Re-encode a cell record in the server's msgpack form (for the disk cache)."""
-    return msgpack.packb(
-        {
-            "id": rec.id,
-            "kind": rec.kind,
-            "boundary": rec.boundary.tolist(),
-            "zmin": rec.zmin,
-            "zmax": rec.zmax,
-            "neighbours": [{"id": n, "boundary": b.tolist()} for n, b in rec.neighbours.items()],
-            "pvs": rec.pvs.tolist(),
-            "ach": rec.ach.tolist(),
-        }
-    )

@@ -52,7 +52,6 @@ with :func:`server.store.write_path`, which makes a new scene version.
 from __future__ import annotations
 
 import heapq
-import json
 import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -66,7 +65,7 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 
 from server.cells import CellLocator, ViewCell, cell_polygons
-from server.sources.geojson import _as_points, _parse_crs
+from server.sources.geojson import _as_points, _parse_crs, read_json_file
 from server.store import CellInfo, SceneReader, StoreError, write_path
 from shared.errors import InputError, SourceError
 from shared.paths import DRIVE_EYE_HEIGHT, WALK_EYE_HEIGHT, RecordedPath
@@ -939,23 +938,8 @@ def read_linestring(
     elif not isinstance(source, str | os.PathLike):
         raise SourceError(f"expected a GeoJSON object or file, got {type(source).__name__}")
     else:
-        p = Path(source)
-        label = str(p)
-        try:
-            if p.stat().st_size > _MAX_GEOJSON_BYTES:
-                raise SourceError(f"{label}: larger than {_MAX_GEOJSON_BYTES >> 20} MiB")
-            with p.open("r", encoding="utf-8-sig") as fh:
-                obj = json.load(fh)
-        except OSError as exc:
-            raise SourceError(f"{label}: cannot read file: {exc.strerror or exc}") from exc
-        except UnicodeDecodeError as exc:
-            raise SourceError(f"{label}: not JSON: not UTF-8 text ({exc.reason})") from exc
-        except json.JSONDecodeError as exc:
-            raise SourceError(
-                f"{label}: not JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
-            ) from exc
-        except RecursionError as exc:
-            raise SourceError(f"{label}: not JSON: nested too deeply") from exc
+        label = str(Path(source))
+        obj = read_json_file(source, _MAX_GEOJSON_BYTES)
     if not isinstance(obj, Mapping):
         raise SourceError(f"{label}: expected a GeoJSON object, got {type(obj).__name__}")
     src_crs = _parse_crs(obj.get("crs"), label)

@@ -15,7 +15,6 @@ import json
 import os
 import shutil
 import socket
-import threading
 import time
 import urllib.request
 from collections.abc import Iterator
@@ -26,8 +25,8 @@ import httpx
 import msgpack
 import numpy as np
 import pytest
-import uvicorn
 from fastapi import FastAPI
+from liveserver import serve_in_thread
 from scenes import PATH_DATA, PATH_NAME, CityDb, build_city_db
 
 import server.serve as serve_mod
@@ -579,27 +578,8 @@ def test_schemathesis_finds_no_server_error(app: FastAPI, city: CityDb) -> None:
 @pytest.fixture
 def live_server(app: FastAPI) -> Iterator[str]:
     """uvicorn serving the app on a free loopback port, in a thread; yields the base URL."""
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    sock.bind(("127.0.0.1", 0))
-    port = sock.getsockname()[1]
-    config = uvicorn.Config(
-        app, log_level="warning", lifespan="off", ws="none", access_log=False, timeout_keep_alive=5
-    )
-    server = uvicorn.Server(config)
-    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 10
-    while not server.started:
-        assert thread.is_alive() and time.monotonic() < deadline, "uvicorn did not start"
-        time.sleep(0.01)
-    try:
-        yield f"http://127.0.0.1:{port}"
-    finally:
-        server.should_exit = True
-        thread.join(10)
-        sock.close()
-        assert not thread.is_alive()
+    with serve_in_thread(app, timeout_keep_alive=5) as url:
+        yield url
 
 
 def _raw_post(port: int, path: str, body: bytes) -> socket.socket:

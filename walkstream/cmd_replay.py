@@ -336,8 +336,6 @@ def add_bench_stream_parser(besub: Any) -> None:
 
 
 def cmd_bench_budget(args: argparse.Namespace) -> int:
-    from client.budget import recovery_frames
-
     out = Path(args.out)
     cases = [
         ("desktop2003", 25.0, "within >= 95 %, recover <= 8 frames, never > 20 % slow"),
@@ -352,6 +350,7 @@ def cmd_bench_budget(args: argparse.Namespace) -> int:
         ns.fps = target
         ns.bandwidth = "1Mbit"  # the budget, not the link, is measured here
         ns.rtt = "50ms"
+        ns.seed = args.seed
         ns.duration = args.gl_duration if device == "gl" else args.duration
         folder = out / f"{k:02d}-{device}-{target:g}fps"
         ns.report = str(folder)
@@ -363,18 +362,7 @@ def cmd_bench_budget(args: argparse.Namespace) -> int:
         print(f"[{k}/{len(cases) + len(gl)}] {device} at {target:g} fps ...", file=sys.stderr, flush=True)
         result = replay_to_report(args.db, config, title=f"budget {device} {target:g} fps")
         s = result.summary
-        rec, worst = (None, None)
-        if step_at is not None:
-            import numpy as np
-
-            log = result.log
-            t_walk = log.t - log.t[0]
-            idx = int(np.searchsorted(t_walk, step_at))
-            # the device's own 2x spikes and floor-limited frames are not the
-            # controller's doing: left out of both figures (client.budget docs)
-            rec, worst = recovery_frames(
-                log.frame_time, target, idx, exclude=result.spikes | log.floor_limited
-            )
+        rec, worst = s.get("recovery_frames"), s.get("recovery_worst_slowdown_after")
         rows.append({"device": device, "target": target, "goal": goal, "recover": rec, "worst": worst, **s})
     print(format_budget_table(rows))
     (out / "bench_budget.json").write_text(json.dumps(rows, indent=2, default=str))
@@ -412,5 +400,6 @@ def add_bench_budget_parser(besub: Any) -> None:
     b.add_argument("--gl-duration", default="20s", help="walk length for the gl device (default 20s)")
     b.add_argument("--step-at", type=float, default=60.0, help="walk second of the tenfold cost step (default 60)")
     b.add_argument("--no-gl", action="store_true", help="skip the gl rows")
+    b.add_argument("--seed", type=int, default=0, help="seed of the device noise and spikes (default 0)")
     b.add_argument("--out", default="out/bench-budget", help="folder for the reports")
     b.set_defaults(func=cmd_bench_budget)

@@ -95,6 +95,7 @@ from shared.errors import InputError, SourceError
 from shared.records import BuildingParams, StreetParams
 
 __all__ = [
+    "read_json_file",
     "load_geojson",
     "load_geojson_dict",
     "parse_length",
@@ -124,6 +125,29 @@ _LENGTH_RE = re.compile(
 
 
 # --------------------------------------------------------------------------- public
+
+
+def read_json_file(path: str | os.PathLike[str], max_bytes: int | None = None) -> Any:
+    """Parse a JSON file (UTF-8, BOM allowed); every failure is a :class:`SourceError` naming it.
+
+    ``max_bytes`` refuses larger files before reading them.
+    """
+    p = Path(path)
+    try:
+        if max_bytes is not None and p.stat().st_size > max_bytes:
+            raise SourceError(f"{p}: larger than {max_bytes >> 20} MiB")
+        with p.open("r", encoding="utf-8-sig") as fh:
+            return json.load(fh)
+    except OSError as exc:
+        raise SourceError(f"{p}: cannot read file: {exc.strerror or exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise SourceError(f"{p}: not JSON: not UTF-8 text ({exc.reason})") from exc
+    except json.JSONDecodeError as exc:
+        raise SourceError(
+            f"{p}: not JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
+        ) from exc
+    except RecursionError as exc:
+        raise SourceError(f"{p}: not JSON: nested too deeply") from exc
 
 
 def load_geojson(
@@ -163,19 +187,7 @@ def load_geojson(
         unusable CRS, or has no usable feature.
     """
     p = Path(path)
-    try:
-        with p.open("r", encoding="utf-8-sig") as fh:
-            obj = json.load(fh)
-    except OSError as exc:
-        raise SourceError(f"{p}: cannot read file: {exc.strerror or exc}") from exc
-    except UnicodeDecodeError as exc:
-        raise SourceError(f"{p}: not JSON: not UTF-8 text ({exc.reason})") from exc
-    except json.JSONDecodeError as exc:
-        raise SourceError(
-            f"{p}: not JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
-        ) from exc
-    except RecursionError as exc:
-        raise SourceError(f"{p}: not JSON: nested too deeply") from exc
+    obj = read_json_file(p)
     return load_geojson_dict(
         obj,
         name=p.stem if name is None else name,
