@@ -40,7 +40,7 @@ from client.cellmap import CellMap
 from client.clock import Clock
 from client.predict import MotionPredictor
 from client.rewrite import ObjectGeometry, RewritePool, geometry_of
-from shared.codec import decode_mesh, decode_object
+from shared.codec import decode_mesh, decode_object, unpack_bounded
 from shared.errors import CodecError
 
 __all__ = ["StreamerConfig", "Streamer"]
@@ -393,9 +393,11 @@ class Streamer:
                 found = self.disk.get_objects(remaining, self.config.form)
                 for oid, blob in found.items():
                     try:
-                        kind, payload = msgpack.unpackb(blob)
-                    except (ValueError, TypeError, msgpack.UnpackException):
-                        continue
+                        kind, payload = unpack_bounded(
+                            blob, f"object {oid} (disk cache)", max_array_len=2, max_str_len=64
+                        )
+                    except (CodecError, ValueError, TypeError):
+                        continue  # damaged on disk: fetched from the server instead
                     self.stats.disk_hits += 1
                     self._add_object(ObjectFrame(oid, kind, payload, self.config.form, 0))
                 found = {i: b for i, b in found.items() if self.has_object(i)}
