@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from client.budgetbench import format_table, run_budget_bench
+from walkstream.client.budgetbench import format_table, run_budget_bench
 
 
 def main() -> None:

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 __all__ = [
     "NOT_DRAWN",

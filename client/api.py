@@ -30,10 +30,10 @@ import msgpack
 import numpy as np
 from numpy.typing import NDArray
 
-from client.clock import Clock
-from shared.codec import unpack_bounded
-from shared.errors import CodecError, WalkstreamError
-from shared.paths import RecordedPath
+from walkstream.client.clock import Clock
+from walkstream.shared.codec import unpack_bounded
+from walkstream.shared.errors import CodecError, WalkstreamError
+from walkstream.shared.paths import RecordedPath
 
 __all__ = [
     "ApiError",

@@ -95,8 +95,8 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from client.devices import Device
-from shared.errors import InputError
+from walkstream.client.devices import Device
+from walkstream.shared.errors import InputError
 
 __all__ = [
     "BudgetController",

@@ -37,9 +37,9 @@ from typing import Any
 
 import numpy as np
 
-from client.budget import BudgetController, recovery_frames, simulate, within_ratio
-from client.devices import make_device
-from shared.errors import InputError
+from walkstream.client.budget import BudgetController, recovery_frames, simulate, within_ratio
+from walkstream.client.devices import make_device
+from walkstream.shared.errors import InputError
 
 __all__ = ["PvsSupply", "DEFAULT_CASES", "LIGHT_SCENE", "GOALS", "run_budget_bench", "format_table"]
 

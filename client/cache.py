@@ -35,8 +35,8 @@ from typing import Any, Literal
 
 import msgpack
 
-from shared.codec import unpack_bounded
-from shared.errors import CodecError, InputError
+from walkstream.shared.codec import unpack_bounded
+from walkstream.shared.errors import CodecError, InputError
 
 try:  # POSIX; elsewhere the directory lock is skipped (SQLite still locks its file)
     import fcntl

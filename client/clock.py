@@ -39,7 +39,7 @@ from collections.abc import Callable, Coroutine
 from types import TracebackType
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
-from shared.errors import WalkstreamError
+from walkstream.shared.errors import WalkstreamError
 
 __all__ = ["Clock", "RealClock", "SimClock", "SimulationStalled"]
 

@@ -59,7 +59,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 __all__ = [
     "DEVICES",

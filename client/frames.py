@@ -23,10 +23,10 @@ import moderngl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from client.render import MeshRenderer
-from shared.camera import look_at, perspective
-from shared.errors import InputError, RenderError
-from shared.records import Mesh
+from walkstream.client.render import MeshRenderer
+from walkstream.shared.camera import look_at, perspective
+from walkstream.shared.errors import InputError, RenderError
+from walkstream.shared.records import Mesh
 
 __all__ = ["FrameRenderer", "camera", "MAX_PITCH_DEG", "VERTEX_BYTES", "INDEX_BYTES"]
 

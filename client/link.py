@@ -35,9 +35,9 @@ from typing import Any
 
 import httpx
 
-from client.clock import Clock
-from client.units import parse_bandwidth, parse_duration
-from shared.errors import InputError
+from walkstream.client.clock import Clock
+from walkstream.client.units import parse_bandwidth, parse_duration
+from walkstream.shared.errors import InputError
 
 __all__ = ["LinkProfile", "LinkStats", "ShapedTransport"]
 

@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 __all__ = [
     "COLUMNS",

@@ -20,11 +20,11 @@ import moderngl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from shared.camera import fit_view, mat4_bytes
-from shared.errors import RenderError
-from shared.gl import Framebuffer, check_gl_error, create_context
-from shared.palette import material_rgb
-from shared.records import Mesh
+from walkstream.shared.camera import fit_view, mat4_bytes
+from walkstream.shared.errors import RenderError
+from walkstream.shared.gl import Framebuffer, check_gl_error, create_context
+from walkstream.shared.palette import material_rgb
+from walkstream.shared.records import Mesh
 
 __all__ = [
     "BACKGROUND_RGB",

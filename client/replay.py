@@ -31,21 +31,21 @@ import httpx
 import numpy as np
 from numpy.typing import NDArray
 
-from client.allocate import allocate_ach, allocate_distance, frustum_cull
-from client.api import Manifest, SceneClient, decode_manifest
-from client.budget import BudgetController
-from client.cache import Cache, DiskCache
-from client.clock import Clock, RealClock, SimClock
-from client.devices import make_device
-from client.link import LinkProfile, ShapedTransport
-from client.metrics import FrameLog, FrameLogBuilder, summarise
-from client.predict import MotionPredictor
-from client.rewrite import ObjectGeometry, RewritePool
-from client.streamer import Streamer, StreamerConfig
-from shared.camera import look_at, perspective
-from shared.errors import InputError
-from shared.lsystem.grammar import parse_grammar
-from shared.paths import RecordedPath
+from walkstream.client.allocate import allocate_ach, allocate_distance, frustum_cull
+from walkstream.client.api import Manifest, SceneClient, decode_manifest
+from walkstream.client.budget import BudgetController
+from walkstream.client.cache import Cache, DiskCache
+from walkstream.client.clock import Clock, RealClock, SimClock
+from walkstream.client.devices import make_device
+from walkstream.client.link import LinkProfile, ShapedTransport
+from walkstream.client.metrics import FrameLog, FrameLogBuilder, summarise
+from walkstream.client.predict import MotionPredictor
+from walkstream.client.rewrite import ObjectGeometry, RewritePool
+from walkstream.client.streamer import Streamer, StreamerConfig
+from walkstream.shared.camera import look_at, perspective
+from walkstream.shared.errors import InputError
+from walkstream.shared.lsystem.grammar import parse_grammar
+from walkstream.shared.paths import RecordedPath
 
 __all__ = ["ReplayConfig", "ReplayResult", "run_replay", "replay"]
 
@@ -292,7 +292,7 @@ async def replay(
                 rewrite.start()
             device = make_device(config.device, config.seed)
             if not device.simulated or config.snapshot_every:
-                from client.frames import FrameRenderer
+                from walkstream.client.frames import FrameRenderer
 
                 renderer = FrameRenderer(size=config.size, fov_deg=config.fov_deg)
 

@@ -43,8 +43,8 @@ from urllib.parse import quote
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from client.metrics import COLUMNS, FrameLog, first_perfect_index
-from shared.errors import InputError
+from walkstream.client.metrics import COLUMNS, FrameLog, first_perfect_index
+from walkstream.shared.errors import InputError
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

@@ -26,11 +26,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from client.clock import Clock
-from shared.buildings import build_lods
-from shared.lsystem.grammar import Grammar
-from shared.records import BuildingParams, Mesh, StreetParams
-from shared.streets import build_street
+from walkstream.client.clock import Clock
+from walkstream.shared.buildings import build_lods
+from walkstream.shared.lsystem.grammar import Grammar
+from walkstream.shared.records import BuildingParams, Mesh, StreetParams
+from walkstream.shared.streets import build_street
 
 __all__ = ["ObjectGeometry", "geometry_of", "RewritePool"]
 

@@ -34,14 +34,21 @@ import msgpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from client.api import ApiError, CellRecord, ObjectFrame, SceneClient, StreamCut, decode_cell
-from client.cache import Cache, DiskCache
-from client.cellmap import CellMap
-from client.clock import Clock
-from client.predict import MotionPredictor
-from client.rewrite import ObjectGeometry, RewritePool, geometry_of
-from shared.codec import decode_mesh, decode_object, unpack_bounded
-from shared.errors import CodecError
+from walkstream.client.api import (
+    ApiError,
+    CellRecord,
+    ObjectFrame,
+    SceneClient,
+    StreamCut,
+    decode_cell,
+)
+from walkstream.client.cache import Cache, DiskCache
+from walkstream.client.cellmap import CellMap
+from walkstream.client.clock import Clock
+from walkstream.client.predict import MotionPredictor
+from walkstream.client.rewrite import ObjectGeometry, RewritePool, geometry_of
+from walkstream.shared.codec import decode_mesh, decode_object, unpack_bounded
+from walkstream.shared.errors import CodecError
 
 __all__ = ["StreamerConfig", "Streamer"]
 

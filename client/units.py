@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import re
 
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 __all__ = [
     "format_bandwidth",

@@ -28,10 +28,10 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from server import routes
-from server.deps import ApiError, SceneRegistry
-from server.store import NotFoundError, StoreError
-from shared.errors import CodecError, WalkstreamError
+from walkstream.server import routes
+from walkstream.server.deps import ApiError, SceneRegistry
+from walkstream.server.store import NotFoundError, StoreError
+from walkstream.shared.errors import CodecError, WalkstreamError
 
 __all__ = ["create_app", "Metrics", "MetricsMiddleware", "LATENCY_BUCKETS"]
 

@@ -22,14 +22,19 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from server.cells import ViewCell, make_cells, viewpoints
-from server.pathgen import default_paths
-from server.sources.geojson import load_geojson
-from server.sources.scene import SourceScene
-from server.store import CellRow, ObjectRow, SceneReader, SceneWriter
-from server.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts, sample_points
-from shared.buildings import default_grammar, default_grammar_text, predict_triangles
-from shared.errors import InputError
+from walkstream.server.cells import ViewCell, make_cells, viewpoints
+from walkstream.server.pathgen import default_paths
+from walkstream.server.sources.geojson import load_geojson
+from walkstream.server.sources.scene import SourceScene
+from walkstream.server.store import CellRow, ObjectRow, SceneReader, SceneWriter
+from walkstream.server.visibility import (
+    VisibilityRenderer,
+    meshes_for_scene,
+    pvs_from_counts,
+    sample_points,
+)
+from walkstream.shared.buildings import default_grammar, default_grammar_text, predict_triangles
+from walkstream.shared.errors import InputError
 
 __all__ = ["BakeSettings", "bake", "clip_scene", "DEFAULT_RESOLUTION", "DEFAULT_OCCLUDER_LOD"]
 

@@ -37,9 +37,9 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike, NDArray
 
-from server.sources.scene import SourceScene
-from shared.errors import InputError
-from shared.records import readonly
+from walkstream.server.sources.scene import SourceScene
+from walkstream.shared.errors import InputError
+from walkstream.shared.records import readonly
 
 __all__ = [
     "CELL_KINDS",

@@ -39,15 +39,15 @@ from typing import Any, Literal, cast
 import msgpack
 from fastapi import Request
 
-from server.cells import CELL_KINDS as LOCATOR_KINDS
-from server.cells import CellLocator, ViewCell
-from server.store import CellInfo, SceneReader, StoreError
-from shared.buildings import build_lod
-from shared.codec import decode_object, encode_mesh, unpack_bounded
-from shared.errors import CodecError, WalkstreamError
-from shared.lsystem.grammar import Grammar, parse_grammar
-from shared.records import BuildingParams
-from shared.streets import build_street
+from walkstream.server.cells import CELL_KINDS as LOCATOR_KINDS
+from walkstream.server.cells import CellLocator, ViewCell
+from walkstream.server.store import CellInfo, SceneReader, StoreError
+from walkstream.shared.buildings import build_lod
+from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
+from walkstream.shared.errors import CodecError, WalkstreamError
+from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
+from walkstream.shared.records import BuildingParams
+from walkstream.shared.streets import build_street
 
 __all__ = [
     "MSGPACK",

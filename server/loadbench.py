@@ -36,8 +36,8 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from server.process import server_process
-from server.store import SceneReader
+from walkstream.server.process import server_process
+from walkstream.server.store import SceneReader
 
 __all__ = ["run_server_bench", "format_table", "main"]
 

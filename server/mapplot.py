@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 
-from server.store import SceneReader
+from walkstream.server.store import SceneReader
 
 __all__ = ["draw_map"]
 

@@ -64,11 +64,11 @@ import pyproj
 import shapely
 from numpy.typing import ArrayLike, NDArray
 
-from server.cells import CellLocator, ViewCell, cell_polygons
-from server.sources.geojson import _as_points, _parse_crs, read_json_file
-from server.store import CellInfo, SceneReader, StoreError, write_path
-from shared.errors import InputError, SourceError
-from shared.paths import DRIVE_EYE_HEIGHT, WALK_EYE_HEIGHT, RecordedPath
+from walkstream.server.cells import CellLocator, ViewCell, cell_polygons
+from walkstream.server.sources.geojson import _as_points, _parse_crs, read_json_file
+from walkstream.server.store import CellInfo, SceneReader, StoreError, write_path
+from walkstream.shared.errors import InputError, SourceError
+from walkstream.shared.paths import DRIVE_EYE_HEIGHT, WALK_EYE_HEIGHT, RecordedPath
 
 __all__ = [
     "CellGraph",

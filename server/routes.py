@@ -55,7 +55,7 @@ from fastapi.responses import StreamingResponse
 from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
-from server.deps import (
+from walkstream.server.deps import (
     IMMUTABLE,
     JSON,
     MAX_IDS,
@@ -74,11 +74,11 @@ from server.deps import (
     get_rep,
     get_scene,
 )
-from shared.codec import unpack_bounded
-from shared.errors import CodecError
+from walkstream.shared.codec import unpack_bounded
+from walkstream.shared.errors import CodecError
 
 if TYPE_CHECKING:
-    from server.app import Metrics
+    from walkstream.server.app import Metrics
 
 __all__ = ["router", "ops_router", "CHUNK_BYTES", "MAX_BODY_BYTES"]
 

@@ -18,9 +18,9 @@ from collections.abc import Sequence
 import uvicorn
 from fastapi import FastAPI
 
-from server.app import create_app
-from server.store import StoreError
-from shared.errors import InputError
+from walkstream.server.app import create_app
+from walkstream.server.store import StoreError
+from walkstream.shared.errors import InputError
 
 __all__ = ["ENV_PATHS", "serve", "app_from_env"]
 
@@ -95,7 +95,7 @@ def serve(
     # worker processes build their own app; this one only validated the files
     app.state.scenes.close()
     os.environ[ENV_PATHS] = json.dumps(files)
-    uvicorn.run("server.serve:app_from_env", factory=True, workers=workers, **options)  # type: ignore[arg-type]
+    uvicorn.run("walkstream.server.serve:app_from_env", factory=True, workers=workers, **options)  # type: ignore[arg-type]
 
 
 def app_from_env() -> FastAPI:

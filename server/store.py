@@ -55,7 +55,7 @@ import msgpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from shared.codec import (
+from walkstream.shared.codec import (
     decode_building,
     decode_ids,
     decode_polygon,
@@ -68,8 +68,8 @@ from shared.codec import (
     encode_street,
     pvs_size,
 )
-from shared.errors import CodecError, InputError
-from shared.records import BuildingParams, StreetParams
+from walkstream.shared.errors import CodecError, InputError
+from walkstream.shared.records import BuildingParams, StreetParams
 
 try:  # advisory locks between processes; POSIX only
     import fcntl

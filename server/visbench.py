@@ -36,10 +36,15 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from server.cells import ViewCell, make_cells
-from server.sources.scene import SourceScene
-from server.visibility import VisibilityRenderer, dense_points, meshes_for_scene, sample_points
-from shared.errors import InputError
+from walkstream.server.cells import ViewCell, make_cells
+from walkstream.server.sources.scene import SourceScene
+from walkstream.server.visibility import (
+    VisibilityRenderer,
+    dense_points,
+    meshes_for_scene,
+    sample_points,
+)
+from walkstream.shared.errors import InputError
 
 if TYPE_CHECKING:
     import moderngl
@@ -97,14 +102,14 @@ def load_bench_input(
     InputError
         When the source is unknown, cannot be read, or no longer matches the database.
     """
-    from server.sources.geojson import load_geojson
+    from walkstream.server.sources.geojson import load_geojson
 
     p = Path(path)
     if p.suffix.lower() in (".geojson", ".json"):
         scene = load_geojson(p)
         return BenchInput(scene, make_cells(scene, "auto"), 800.0, str(p))
 
-    from server.store import SceneReader
+    from walkstream.server.store import SceneReader
 
     with SceneReader.open(p) as reader:
         settings = reader.meta.settings
@@ -123,7 +128,7 @@ def load_bench_input(
     scene = load_geojson(src_path)
     bbox = settings.get("bbox")
     if bbox is not None:
-        from server.bake import clip_scene
+        from walkstream.server.bake import clip_scene
 
         scene = clip_scene(scene, tuple(float(v) for v in bbox))  # type: ignore[arg-type]
     scene_ids = np.sort(
@@ -264,7 +269,7 @@ def visibility_benchmark(
     RenderError
         When OpenGL fails.
     """
-    from shared.gl import create_context
+    from walkstream.shared.gl import create_context
 
     t_start = time.perf_counter()
     resolutions = [int(r) for r in resolutions]

@@ -34,18 +34,18 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike, NDArray
 
-from shared.buildings import build_lod
-from shared.camera import cube_face_views, perspective
-from shared.errors import InputError, RenderError
-from shared.gl import Framebuffer, check_gl_error, create_context
-from shared.records import Mesh
-from shared.streets import build_street
+from walkstream.shared.buildings import build_lod
+from walkstream.shared.camera import cube_face_views, perspective
+from walkstream.shared.errors import InputError, RenderError
+from walkstream.shared.gl import Framebuffer, check_gl_error, create_context
+from walkstream.shared.records import Mesh
+from walkstream.shared.streets import build_street
 
 if TYPE_CHECKING:
     import moderngl
     from shapely import STRtree
 
-    from server.sources.scene import SourceScene
+    from walkstream.server.sources.scene import SourceScene
 
 __all__ = [
     "VisibilityRenderer",

@@ -13,11 +13,11 @@ from importlib import resources
 
 import numpy as np
 
-from shared.geometry import ring_edges, triangulate_rings
-from shared.lsystem.derive import Modules, derive
-from shared.lsystem.grammar import Grammar, parse_grammar
-from shared.lsystem.interpret import EdgeFrames, count_triangles, interpret
-from shared.records import BuildingParams, Mesh
+from walkstream.shared.geometry import ring_edges, triangulate_rings
+from walkstream.shared.lsystem.derive import Modules, derive
+from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
+from walkstream.shared.lsystem.interpret import EdgeFrames, count_triangles, interpret
+from walkstream.shared.records import BuildingParams, Mesh
 
 __all__ = [
     "LODS",
@@ -36,7 +36,7 @@ LODS = (0, 1, 2)
 
 def default_grammar_text() -> str:
     """The text of the built-in building grammar."""
-    return resources.files("shared").joinpath("grammars/building.lsys").read_text(encoding="utf-8")
+    return resources.files("walkstream.shared").joinpath("grammars/building.lsys").read_text(encoding="utf-8")
 
 
 @lru_cache(maxsize=1)

@@ -5,9 +5,9 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 
-from shared.buildings import LODS, build_lod
-from shared.lsystem.grammar import Grammar
-from shared.records import BuildingParams
+from walkstream.shared.buildings import LODS, build_lod
+from walkstream.shared.lsystem.grammar import Grammar
+from walkstream.shared.records import BuildingParams
 
 __all__ = ["building_stats"]
 

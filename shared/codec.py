@@ -47,8 +47,8 @@ import msgpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from shared.errors import CodecError
-from shared.records import BuildingParams, StreetParams
+from walkstream.shared.errors import CodecError
+from walkstream.shared.records import BuildingParams, StreetParams
 
 __all__ = [
     "ACH_UNITS",
@@ -1009,7 +1009,7 @@ def decode_polygon(data: bytes | bytearray | memoryview, what: str = "polygon") 
 #     triangle's vertices have different materials, and ``"normals"`` ((n, 3)
 #     float32) when the recomputed normals would differ from the mesh's.
 
-from shared.records import Mesh  # noqa: E402  (this section was appended to the module)
+from walkstream.shared.records import Mesh  # noqa: E402  (this section was appended to the module)
 
 __all__ += ["MESH_FORMAT", "encode_mesh", "decode_mesh"]
 

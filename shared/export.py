@@ -7,9 +7,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from shared.errors import InputError, RenderError
-from shared.palette import material_rgb
-from shared.records import Mesh
+from walkstream.shared.errors import InputError, RenderError
+from walkstream.shared.palette import material_rgb
+from walkstream.shared.records import Mesh
 
 __all__ = ["Z_UP_TO_Y_UP", "export_glb"]
 

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from shared.errors import RenderError
+from walkstream.shared.errors import RenderError
 
 if TYPE_CHECKING:  # moderngl is imported lazily so that importing this module never fails
     import moderngl

@@ -57,9 +57,9 @@ import msgpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from shared.codec import unpack_bounded
-from shared.errors import CodecError, InputError
-from shared.records import readonly
+from walkstream.shared.codec import unpack_bounded
+from walkstream.shared.errors import CodecError, InputError
+from walkstream.shared.records import readonly
 
 __all__ = [
     "FORMAT",

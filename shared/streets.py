@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from shared.geometry import triangulate_rings
-from shared.records import Mesh, StreetParams
+from walkstream.shared.geometry import triangulate_rings
+from walkstream.shared.records import Mesh, StreetParams
 
 __all__ = ["STREET_Z", "MATERIALS", "build_street"]
 

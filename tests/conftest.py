@@ -14,8 +14,8 @@ if TYPE_CHECKING:
 @pytest.fixture(scope="session")
 def gl_ctx() -> Iterator[moderngl.Context]:
     """One headless OpenGL context for the session; skips the test when none can be made."""
-    from shared.errors import RenderError
-    from shared.gl import create_context
+    from walkstream.shared.errors import RenderError
+    from walkstream.shared.gl import create_context
 
     try:
         ctx = create_context()
@@ -28,7 +28,7 @@ def gl_ctx() -> Iterator[moderngl.Context]:
 @pytest.fixture
 def gl(gl_ctx: moderngl.Context) -> Iterator[moderngl.Context]:
     """The session context, with the GL error state checked before and after the test."""
-    from shared.gl import check_gl_error
+    from walkstream.shared.gl import check_gl_error
 
     check_gl_error(gl_ctx, "before the test (left by an earlier one)")
     yield gl_ctx

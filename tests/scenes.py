@@ -14,14 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-from server.cells import make_cells
-from server.sources.citygen import generate_city
-from server.sources.geojson import load_geojson_dict
-from server.sources.scene import SourceScene
-from server.store import CellRow, ObjectRow, SceneWriter
-from shared.buildings import default_grammar_text
-from shared.lsystem.grammar import parse_grammar
-from shared.paths import RecordedPath
+from walkstream.server.cells import make_cells
+from walkstream.server.sources.citygen import generate_city
+from walkstream.server.sources.geojson import load_geojson_dict
+from walkstream.server.sources.scene import SourceScene
+from walkstream.server.store import CellRow, ObjectRow, SceneWriter
+from walkstream.shared.buildings import default_grammar_text
+from walkstream.shared.lsystem.grammar import parse_grammar
+from walkstream.shared.paths import RecordedPath
 
 __all__ = ["CityDb", "build_city_db", "PATH_NAME", "PATH", "PATH_DATA"]
 

@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from client.allocate import (
+from walkstream.client.allocate import (
     NOT_DRAWN,
     allocate_ach,
     allocate_distance,
@@ -15,9 +15,9 @@ from client.allocate import (
     frustum_cull,
     frustum_planes,
 )
-from client.frames import camera
-from shared.camera import look_at, perspective
-from shared.errors import InputError
+from walkstream.client.frames import camera
+from walkstream.shared.camera import look_at, perspective
+from walkstream.shared.errors import InputError
 
 
 def ones(k: int) -> np.ndarray:

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.bake import BakeSettings, bake
-from server.sources.citygen import write_city
-from server.store import SceneReader, StoreError
-from shared.errors import InputError
 from walkstream.cli import main
+from walkstream.server.bake import BakeSettings, bake
+from walkstream.server.sources.citygen import write_city
+from walkstream.server.store import SceneReader, StoreError
+from walkstream.shared.errors import InputError
 
 pytestmark = pytest.mark.gl
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from shared.buildings import (
+from walkstream.shared.buildings import (
     build_lod,
     build_lods,
     default_grammar,
@@ -16,9 +16,9 @@ from shared.buildings import (
     derive_building,
     predict_triangles,
 )
-from shared.lsystem.derive import evaluate_lets
-from shared.lsystem.grammar import parse_grammar
-from shared.records import BuildingParams, Mesh
+from walkstream.shared.lsystem.derive import evaluate_lets
+from walkstream.shared.lsystem.grammar import parse_grammar
+from walkstream.shared.records import BuildingParams, Mesh
 
 
 def rect(w: float, d: float, x: float = 0.0, y: float = 0.0) -> np.ndarray:
@@ -31,7 +31,7 @@ def building(rings: list[np.ndarray], floors: int = 3, nb: list[np.ndarray] | No
 
 
 def footprint_area(b: BuildingParams) -> float:
-    from shared.geometry import signed_area
+    from walkstream.shared.geometry import signed_area
 
     return sum(signed_area(r) for r in b.rings)
 
@@ -182,7 +182,7 @@ def test_style_seed_varies_the_facade() -> None:
 
 def test_far_from_origin_footprint_rebuilds_like_one_at_the_origin() -> None:
     """Projected coordinates of millions of metres reach the builder as local float64."""
-    from server.sources.geojson import load_geojson_dict
+    from walkstream.server.sources.geojson import load_geojson_dict
 
     def fc(x0: float, y0: float) -> dict:
         ring = (rect(23.37, 11.91) + [x0, y0]).tolist()

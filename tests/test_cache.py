@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from client.cache import KEEP_VERSIONS, Cache, DiskCache, safe_name
-from shared.errors import InputError
+from walkstream.client.cache import KEEP_VERSIONS, Cache, DiskCache, safe_name
+from walkstream.shared.errors import InputError
 
 # ---------------------------------------------------------------------------
 # Cache (memory)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import shapely
 
-from server.cells import (
+from walkstream.server.cells import (
     CellLocator,
     ViewCell,
     cell_polygons,
@@ -20,11 +20,11 @@ from server.cells import (
     street_cells,
     viewpoints,
 )
-from server.sources.citygen import generate_city
-from server.sources.geojson import load_geojson, load_geojson_dict
-from server.sources.scene import SourceScene
-from shared.errors import InputError
-from shared.records import BuildingParams, StreetParams
+from walkstream.server.sources.citygen import generate_city
+from walkstream.server.sources.geojson import load_geojson, load_geojson_dict
+from walkstream.server.sources.scene import SourceScene
+from walkstream.shared.errors import InputError
+from walkstream.shared.records import BuildingParams, StreetParams
 
 VIENNA = Path(__file__).resolve().parents[2] / "shared" / "data" / "vienna" / "blocks.geojson"
 

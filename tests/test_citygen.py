@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 import shapely
 
-from server.sources.citygen import (
+from walkstream.server.sources.citygen import (
     CRS_NAME,
     ORIGIN,
     city_summary,
     generate_city,
     write_city,
 )
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 OVERLAP_M2 = 0.01
 
@@ -275,7 +275,7 @@ def test_write_city_is_compact_and_returns_its_summary(tmp_path: Path) -> None:
 
 
 def test_load_geojson_reads_every_building(tmp_path: Path) -> None:
-    geojson = pytest.importorskip("server.sources.geojson")
+    geojson = pytest.importorskip("walkstream.server.sources.geojson")
     path = tmp_path / "city.geojson"
     summary = write_city(path, 350, 1)
     scene = geojson.load_geojson(path)

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 from scenes import build_city_db
 
-from server.pathgen import default_paths
-from server.store import SceneReader, write_path
 from walkstream.cli import main
+from walkstream.server.pathgen import default_paths
+from walkstream.server.store import SceneReader, write_path
 
 ISSUE5_KEYS = {
     "frames", "perfect_frame_ratio", "download_quality_mean", "rewrite_quality_mean",

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from shared.codec import (
+from walkstream.shared.codec import (
     ACH_UNITS,
     decode_building,
     decode_ids,
@@ -29,8 +29,8 @@ from shared.codec import (
     quantise_ach,
     unpack_bounded,
 )
-from shared.errors import CodecError
-from shared.records import BuildingParams, StreetParams
+from walkstream.shared.errors import CodecError
+from walkstream.shared.records import BuildingParams, StreetParams
 
 # 5 mm quantisation plus float64 rounding at ten million metres
 TOL = 0.005 + 1e-6

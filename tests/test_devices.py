@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from client.devices import (
+from walkstream.client.devices import (
     DESKTOP2003_POINTS,
     DEVICES,
     MIN_FRAME_TIME_S,
@@ -20,7 +20,7 @@ from client.devices import (
     GlDevice,
     make_device,
 )
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 
 def test_pda_table_is_mulloni_table_1_without_fog() -> None:

@@ -9,13 +9,13 @@ import moderngl
 import numpy as np
 import pytest
 
-from client.frames import VERTEX_BYTES, FrameRenderer, camera
-from client.render import BACKGROUND_RGB
-from shared.buildings import build_lods
-from shared.camera import look_at
-from shared.errors import InputError, RenderError
-from shared.records import BuildingParams, Mesh, StreetParams
-from shared.streets import build_street
+from walkstream.client.frames import VERTEX_BYTES, FrameRenderer, camera
+from walkstream.client.render import BACKGROUND_RGB
+from walkstream.shared.buildings import build_lods
+from walkstream.shared.camera import look_at
+from walkstream.shared.errors import InputError, RenderError
+from walkstream.shared.records import BuildingParams, Mesh, StreetParams
+from walkstream.shared.streets import build_street
 
 SIZE = (96, 72)
 

@@ -11,15 +11,15 @@ from typing import Any
 import numpy as np
 import pytest
 
-from server.sources.geojson import (
+from walkstream.server.sources.geojson import (
     DEFAULT_STREET_WIDTH,
     default_floors,
     load_geojson,
     load_geojson_dict,
     parse_length,
 )
-from server.sources.scene import FeatureIssue, SourceScene
-from shared.errors import InputError, SourceError
+from walkstream.server.sources.scene import FeatureIssue, SourceScene
+from walkstream.shared.errors import InputError, SourceError
 
 VIENNA = (
     Path(__file__).resolve().parents[1].parent / "shared" / "data" / "vienna" / "blocks.geojson"

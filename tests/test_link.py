@@ -16,9 +16,9 @@ from starlette.requests import Request
 from starlette.responses import Response, StreamingResponse
 from starlette.routing import Route
 
-from client.clock import Clock, RealClock, SimClock
-from client.link import LinkProfile, LinkStats, ShapedTransport
-from shared.errors import InputError
+from walkstream.client.clock import Clock, RealClock, SimClock
+from walkstream.client.link import LinkProfile, LinkStats, ShapedTransport
+from walkstream.shared.errors import InputError
 
 T = TypeVar("T")
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from server.bake import BakeSettings, bake
-from server.loadbench import format_table, run_server_bench
-from server.sources.citygen import write_city
+from walkstream.server.bake import BakeSettings, bake
+from walkstream.server.loadbench import format_table, run_server_bench
+from walkstream.server.sources.citygen import write_city
 
 
 @pytest.fixture(scope="module")

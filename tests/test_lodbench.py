@@ -11,8 +11,6 @@ import numpy as np
 import pytest
 from scenes import PATH_NAME, build_city_db
 
-from server.store import SceneReader, write_path
-from shared.errors import InputError, WalkstreamError
 from walkstream.lodbench import (
     PIXEL_TOLERANCE,
     add_bench_lod_parser,
@@ -23,6 +21,8 @@ from walkstream.lodbench import (
     run_lod_bench,
     summary_line,
 )
+from walkstream.server.store import SceneReader, write_path
+from walkstream.shared.errors import InputError, WalkstreamError
 
 SIZE = (64, 48)
 SHARES = (0.1, 0.5)
@@ -69,7 +69,7 @@ def test_views_fall_back_to_street_cells(city_db: Path) -> None:
 
 
 def test_views_along_a_recorded_path(tmp_path: Path, city_db: Path) -> None:
-    from shared.paths import RecordedPath
+    from walkstream.shared.paths import RecordedPath
 
     db = tmp_path / "city.db"
     db.write_bytes(city_db.read_bytes())

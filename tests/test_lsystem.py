@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from shared.errors import DerivationLimitError, GrammarError
-from shared.lsystem.derive import derive
-from shared.lsystem.expr import compile_expr, hash01
-from shared.lsystem.grammar import parse_grammar
+from walkstream.shared.errors import DerivationLimitError, GrammarError
+from walkstream.shared.lsystem.derive import derive
+from walkstream.shared.lsystem.expr import compile_expr, hash01
+from walkstream.shared.lsystem.grammar import parse_grammar
 
 
 def _g(body: str) -> str:

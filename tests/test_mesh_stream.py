@@ -18,16 +18,22 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scenes import CityDb, build_city_db
 
-from server.app import create_app
-from server.sources.citygen import generate_city
-from server.sources.geojson import load_geojson_dict
-from server.sources.scene import SourceScene
-from shared.buildings import build_lod, build_lods
-from shared.codec import MESH_FORMAT, decode_mesh, decode_object, encode_building, encode_mesh
-from shared.errors import CodecError
-from shared.lsystem.grammar import parse_grammar
-from shared.records import BuildingParams, Mesh, StreetParams
-from shared.streets import build_street
+from walkstream.server.app import create_app
+from walkstream.server.sources.citygen import generate_city
+from walkstream.server.sources.geojson import load_geojson_dict
+from walkstream.server.sources.scene import SourceScene
+from walkstream.shared.buildings import build_lod, build_lods
+from walkstream.shared.codec import (
+    MESH_FORMAT,
+    decode_mesh,
+    decode_object,
+    encode_building,
+    encode_mesh,
+)
+from walkstream.shared.errors import CodecError
+from walkstream.shared.lsystem.grammar import parse_grammar
+from walkstream.shared.records import BuildingParams, Mesh, StreetParams
+from walkstream.shared.streets import build_street
 
 # ---------------------------------------------------------------------------
 # codec

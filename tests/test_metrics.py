@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from client.metrics import (
+from walkstream.client.metrics import (
     FrameLog,
     FrameLogBuilder,
     Recovery,
@@ -20,7 +20,7 @@ from client.metrics import (
     summarise,
     within_target_mask,
 )
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 
 def make_log(n: int | None = None, *, fps_cap: float = 25.0, **cols: Any) -> FrameLog:

@@ -10,8 +10,8 @@ import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from server.sources.partywalls import find_party_walls
-from shared.errors import InputError
+from walkstream.server.sources.partywalls import find_party_walls
+from walkstream.shared.errors import InputError
 
 
 def box(x0: float, y0: float, x1: float, y1: float) -> np.ndarray:

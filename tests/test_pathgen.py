@@ -15,9 +15,10 @@ import pytest
 import shapely
 from scenes import PATH_NAME, build_city_db
 
-import server.store
-from server.cells import CellLocator, ViewCell, make_cells
-from server.pathgen import (
+import walkstream.server.store
+from walkstream.cmd_path import add_path_parser
+from walkstream.server.cells import CellLocator, ViewCell, make_cells
+from walkstream.server.pathgen import (
     CLIP_GAP,
     CellGraph,
     RouteError,
@@ -27,13 +28,12 @@ from server.pathgen import (
     read_linestring,
     record_path,
 )
-from server.sources.citygen import generate_city
-from server.sources.geojson import load_geojson_dict
-from server.sources.scene import SourceScene
-from server.store import CellRow, SceneReader, SceneWriter, StoreError, write_path
-from shared.errors import InputError, SourceError, WalkstreamError
-from shared.paths import RecordedPath
-from walkstream.cmd_path import add_path_parser
+from walkstream.server.sources.citygen import generate_city
+from walkstream.server.sources.geojson import load_geojson_dict
+from walkstream.server.sources.scene import SourceScene
+from walkstream.server.store import CellRow, SceneReader, SceneWriter, StoreError, write_path
+from walkstream.shared.errors import InputError, SourceError, WalkstreamError
+from walkstream.shared.paths import RecordedPath
 
 VIENNA = Path(__file__).resolve().parents[2] / "shared" / "data" / "vienna"
 
@@ -431,7 +431,7 @@ def test_a_failed_write_leaves_the_file_intact(db: Path, monkeypatch: pytest.Mon
     def broken(conn: sqlite3.Connection) -> str:
         raise sqlite3.DatabaseError("disk I/O error")
 
-    monkeypatch.setattr(server.store, "_content_version", broken)
+    monkeypatch.setattr(walkstream.server.store, "_content_version", broken)
     with SceneReader.open(db) as r:
         start = next(iter(r.cells())).boundary.mean(axis=0)
     with pytest.raises(StoreError, match="cannot write path"):
@@ -473,8 +473,8 @@ def test_import_path_into_a_scene(db: Path, tmp_path: Path) -> None:
 def vienna_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[ViewCell]]:
     if not (VIENNA / "blocks.geojson").exists():
         pytest.skip(f"no Vienna data at {VIENNA}")
-    from server.bake import clip_scene
-    from server.sources.geojson import load_geojson
+    from walkstream.server.bake import clip_scene
+    from walkstream.server.sources.geojson import load_geojson
 
     bbox = (-800.0, -900.0, 600.0, 1100.0)  # the part of the city the walk goes through
     scene = clip_scene(load_geojson(VIENNA / "blocks.geojson"), bbox)
@@ -586,8 +586,8 @@ def test_path_commands(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[s
 
 @pytest.mark.gl
 def test_a_resumed_bake_ends_with_the_default_paths(tmp_path: Path, gl: object) -> None:
-    from server.bake import BakeSettings, bake
-    from server.sources.citygen import write_city
+    from walkstream.server.bake import BakeSettings, bake
+    from walkstream.server.sources.citygen import write_city
 
     src = tmp_path / "city.geojson"
     write_city(src, 150, 2)

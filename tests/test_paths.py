@@ -9,8 +9,8 @@ import msgpack
 import numpy as np
 import pytest
 
-from shared.errors import CodecError, InputError
-from shared.paths import (
+from walkstream.shared.errors import CodecError, InputError
+from walkstream.shared.paths import (
     COLUMNS,
     FORMAT,
     MAX_SAMPLES,

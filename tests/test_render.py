@@ -9,19 +9,19 @@ import moderngl
 import numpy as np
 import pytest
 
-from client.render import BACKGROUND_RGB, MeshRenderer, render_lods_figure
-from shared.camera import (
+from walkstream.client.render import BACKGROUND_RGB, MeshRenderer, render_lods_figure
+from walkstream.shared.camera import (
     CUBE_FACE_DIRECTIONS,
     cube_face_views,
     fit_view,
     look_at,
     perspective,
 )
-from shared.errors import InputError, RenderError
-from shared.export import export_glb
-from shared.gl import BACKEND_ENV, Framebuffer, check_gl_error, create_context
-from shared.palette import MATERIALS, PALETTE, UNKNOWN_RGB, material_rgb
-from shared.records import Mesh
+from walkstream.shared.errors import InputError, RenderError
+from walkstream.shared.export import export_glb
+from walkstream.shared.gl import BACKEND_ENV, Framebuffer, check_gl_error, create_context
+from walkstream.shared.palette import MATERIALS, PALETTE, UNKNOWN_RGB, material_rgb
+from walkstream.shared.records import Mesh
 
 WALL = 0
 WINDOW = 1

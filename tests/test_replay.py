@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 from scenes import build_city_db
 
-from client.link import LinkProfile
-from client.replay import ReplayConfig, ReplayResult, run_replay
-from server.app import create_app
-from server.pathgen import default_paths
-from server.process import free_port, server_process
-from server.store import SceneReader, write_path
-from shared.errors import InputError
+from walkstream.client.link import LinkProfile
+from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
+from walkstream.server.app import create_app
+from walkstream.server.pathgen import default_paths
+from walkstream.server.process import free_port, server_process
+from walkstream.server.store import SceneReader, write_path
+from walkstream.shared.errors import InputError
 
 URL = "http://walkstream.test"
 

@@ -12,9 +12,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from client import report as report_mod
-from client.metrics import FrameLog, FrameLogBuilder, summarise
-from client.report import (
+from walkstream.client import report as report_mod
+from walkstream.client.metrics import FrameLog, FrameLogBuilder, summarise
+from walkstream.client.report import (
     PLOT_NAMES,
     SERIES_COLOURS,
     format_comparison_table,
@@ -26,7 +26,7 @@ from client.report import (
     write_json,
     write_report,
 )
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from server.store import (
+from walkstream.server.store import (
     SCHEMA_VERSION,
     CellRow,
     NotFoundError,
@@ -27,9 +27,9 @@ from server.store import (
     StoreError,
     write_path,
 )
-from shared.codec import encode_building, encode_street
-from shared.errors import InputError
-from shared.records import BuildingParams, StreetParams
+from walkstream.shared.codec import encode_building, encode_street
+from walkstream.shared.errors import InputError
+from walkstream.shared.records import BuildingParams, StreetParams
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -312,7 +312,7 @@ def test_killed_process_loses_at_most_the_current_cell(tmp_path: Path) -> None:
         f"""
         import os, signal
         import numpy as np
-        from server.store import CellRow, SceneWriter
+        from walkstream.server.store import CellRow, SceneWriter
         w = SceneWriter.create({str(path)!r}, name="k", crs="", origin=(0.0, 0.0),
             grammar_text="", grammar_version="1", features=[], settings={{}})
         sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from client.units import (
+from walkstream.client.units import (
     format_bandwidth,
     format_bytes,
     format_duration,
@@ -14,7 +14,7 @@ from client.units import (
     parse_duration,
     parse_size,
 )
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 
 @pytest.mark.parametrize(

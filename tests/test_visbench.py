@@ -9,10 +9,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pytest
 
-from server.cells import make_cells
-from server.sources.citygen import generate_city
-from server.sources.geojson import load_geojson_dict
-from server.visbench import (
+from walkstream.server.cells import make_cells
+from walkstream.server.sources.citygen import generate_city
+from walkstream.server.sources.geojson import load_geojson_dict
+from walkstream.server.visbench import (
     MAX_MISS_RATE_PX,
     format_table,
     load_bench_input,
@@ -21,7 +21,7 @@ from server.visbench import (
     setting_label,
     visibility_benchmark,
 )
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 if TYPE_CHECKING:
     import moderngl
@@ -111,7 +111,7 @@ def test_pick_cells_is_deterministic_and_prefers_streets(city: Any) -> None:
 
 
 def test_load_bench_input(city: Any, tmp_path: Path, gl_ctx: moderngl.Context) -> None:
-    from server.bake import BakeSettings, bake
+    from walkstream.server.bake import BakeSettings, bake
 
     src = tmp_path / "city.geojson"
     src.write_text(json.dumps(generate_city(150, 2)))

@@ -9,18 +9,18 @@ import numpy as np
 import pytest
 import shapely
 
-from server.sources.scene import SourceScene
-from server.visibility import (
+from walkstream.server.sources.scene import SourceScene
+from walkstream.server.visibility import (
     VisibilityRenderer,
     dense_points,
     meshes_for_scene,
     pvs_from_counts,
     sample_points,
 )
-from shared.buildings import build_lod
-from shared.errors import InputError, RenderError
-from shared.records import BuildingParams, Mesh, StreetParams
-from shared.streets import build_street
+from walkstream.shared.buildings import build_lod
+from walkstream.shared.errors import InputError, RenderError
+from walkstream.shared.records import BuildingParams, Mesh, StreetParams
+from walkstream.shared.streets import build_street
 
 # The scene: a viewer cell (10 x 10 m around the origin) south of a long, high wall
 # (y = 10..11) with a 6 m gap at x = -3..3.  Ids name what each object is for.

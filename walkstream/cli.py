@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from shared.errors import WalkstreamError
+from walkstream.shared.errors import WalkstreamError
 
 __all__ = ["main", "build_parser"]
 
@@ -32,7 +32,7 @@ def _progress(total: int, desc: str) -> Any:
 
 
 def cmd_generate_city(args: argparse.Namespace) -> int:
-    from server.sources.citygen import city_summary, write_city
+    from walkstream.server.sources.citygen import city_summary, write_city
 
     t0 = time.perf_counter()
     write_city(args.output, args.size, args.seed)
@@ -58,14 +58,14 @@ def _print_summary(title: str, summary: dict[str, Any], as_json: bool) -> None:
 
 
 def _load(path: str) -> Any:
-    from server.sources.geojson import load_geojson
+    from walkstream.server.sources.geojson import load_geojson
 
     return load_geojson(path)
 
 
 def cmd_buildings_stats(args: argparse.Namespace) -> int:
-    from shared.buildstats import building_stats
-    from shared.codec import encode_building
+    from walkstream.shared.buildstats import building_stats
+    from walkstream.shared.codec import encode_building
 
     scene = _load(args.file)
     skipped = sum(1 for i in scene.issues if i.action == "skipped")
@@ -93,19 +93,19 @@ def _pick_building(scene: Any, ident: str) -> Any:
 
 
 def cmd_buildings_render(args: argparse.Namespace) -> int:
-    from shared.buildings import build_lods
+    from walkstream.shared.buildings import build_lods
 
     scene = _load(args.file)
     b = _pick_building(scene, args.id)
     meshes = list(build_lods(b))
     if args.output:
-        from client.render import render_lods_figure
+        from walkstream.client.render import render_lods_figure
 
         render_lods_figure(meshes, args.output)
         print(f"wrote {args.output} (building {b.source_id or b.id}: triangles {[m.triangles for m in meshes]})")
     if args.gltf:
-        from shared.buildings import build_lod
-        from shared.export import export_glb
+        from walkstream.shared.buildings import build_lod
+        from walkstream.shared.export import export_glb
 
         chosen = scene.buildings if args.all else [b]
         with _progress(len(chosen), f"LOD{args.lod}") as bar:
@@ -124,8 +124,8 @@ def cmd_buildings_render(args: argparse.Namespace) -> int:
 
 
 def cmd_grammar(args: argparse.Namespace) -> int:
-    from shared.buildings import default_grammar_text
-    from shared.lsystem.grammar import load_grammar, parse_grammar
+    from walkstream.shared.buildings import default_grammar_text
+    from walkstream.shared.lsystem.grammar import load_grammar, parse_grammar
 
     if args.file:
         g = load_grammar(args.file)
@@ -147,12 +147,12 @@ def cmd_bench_rebuild(args: argparse.Namespace) -> int:
     import statistics
     import tempfile
 
-    from shared.buildstats import building_stats
-    from shared.codec import encode_building
+    from walkstream.shared.buildstats import building_stats
+    from walkstream.shared.codec import encode_building
 
     source = args.file
     if source is None:
-        from server.sources.citygen import write_city
+        from walkstream.server.sources.citygen import write_city
 
         source = str(Path(tempfile.mkdtemp()) / "city.geojson")
         write_city(source, args.size, DEFAULT_CITY_SEED)
@@ -193,7 +193,7 @@ def _parse_bbox(text: str | None) -> tuple[float, float, float, float] | None:
 
 
 def _default_city_source(folder: Path) -> Path:
-    from server.sources.citygen import write_city
+    from walkstream.server.sources.citygen import write_city
 
     folder.mkdir(parents=True, exist_ok=True)
     city = folder / "city.geojson"
@@ -219,7 +219,7 @@ def _count_bar(desc: str, unit: str) -> tuple[Any, Any]:
 
 def run_bake(source: str | Path, output: str | Path, **kw: Any) -> dict[str, Any]:
     """Bake with a progress bar on stderr; returns the summary."""
-    from server.bake import bake
+    from walkstream.server.bake import bake
 
     bar, progress = _count_bar("baking cells", "cell")
     try:
@@ -229,7 +229,7 @@ def run_bake(source: str | Path, output: str | Path, **kw: Any) -> dict[str, Any
 
 
 def cmd_bake(args: argparse.Namespace) -> int:
-    from server.bake import BakeSettings
+    from walkstream.server.bake import BakeSettings
 
     if args.default_city:
         source: Path = _default_city_source(Path(args.output).resolve().parent)
@@ -253,13 +253,13 @@ def cmd_bake(args: argparse.Namespace) -> int:
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
-    from server.store import SceneReader
+    from walkstream.server.store import SceneReader
 
     reader = SceneReader.open(args.db)
     try:
         summary = reader.summary()
         if args.map:
-            from server.mapplot import draw_map
+            from walkstream.server.mapplot import draw_map
 
             draw_map(reader, args.map)
     finally:
@@ -274,14 +274,14 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    from server.serve import serve
+    from walkstream.server.serve import serve
 
     serve(args.db, host=args.host, port=args.port, workers=args.workers)
     return 0
 
 
 def cmd_bench_visibility(args: argparse.Namespace) -> int:
-    from server.visbench import (
+    from walkstream.server.visbench import (
         format_table,
         load_bench_input,
         plot_visibility_benchmark,
@@ -304,7 +304,7 @@ def cmd_bench_visibility(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_server(args: argparse.Namespace) -> int:
-    from server.loadbench import format_table, run_server_bench
+    from walkstream.server.loadbench import format_table, run_server_bench
 
     def ints(text: str, flag: str) -> tuple[int, ...]:
         try:
@@ -329,14 +329,14 @@ def cmd_bench_server(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from server.sources.citygen import city_summary
+    from walkstream.server.sources.citygen import city_summary
 
     out = Path(args.out)
     city = _default_city_source(out)
     summary = city_summary(json.loads(city.read_text()))
     _print_summary("default city", summary, False)
-    from shared.buildstats import building_stats
-    from shared.codec import encode_building
+    from walkstream.shared.buildstats import building_stats
+    from walkstream.shared.codec import encode_building
 
     scene = _load(str(city))
     with _progress(len(scene.buildings), "rebuilding") as bar:
@@ -350,8 +350,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f"({100 * float(stats['ratio']):.4f} %)"  # type: ignore[arg-type]
     )
     try:
-        from client.render import render_lods_figure
-        from shared.buildings import build_lods
+        from walkstream.client.render import render_lods_figure
+        from walkstream.shared.buildings import build_lods
 
         # a free-standing building shows every facade; fall back to the most complex one
         free = [b for b in scene.buildings if all((h == 0).all() for h in b.neighbour_heights)]
@@ -371,8 +371,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         run_bake(city, db, workers=args.workers)
         print(f"baked {db} in {time.perf_counter() - t0:.1f} s")
-    from server.mapplot import draw_map
-    from server.store import SceneReader
+    from walkstream.server.mapplot import draw_map
+    from walkstream.server.store import SceneReader
 
     reader = SceneReader.open(db)
     try:
@@ -392,7 +392,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def _has_paths(db: Path, names: tuple[str, ...]) -> bool:
     """Whether ``db`` is a readable scene database holding every path in ``names``."""
-    from server.store import SceneReader, StoreError
+    from walkstream.server.store import SceneReader, StoreError
 
     try:
         reader = SceneReader.open(db)
@@ -406,10 +406,10 @@ def _has_paths(db: Path, names: tuple[str, ...]) -> bool:
 
 def _demo_replay(db: Path, report: Path, args: argparse.Namespace) -> int:
     """Replay SE against the real server on a free local port (simulated 56 kbit/s link)."""
-    from client.link import LinkProfile
-    from client.replay import ReplayConfig
-    from server.process import server_process
+    from walkstream.client.link import LinkProfile
+    from walkstream.client.replay import ReplayConfig
     from walkstream.cmd_replay import headline, replay_to_report
+    from walkstream.server.process import server_process
 
     config = ReplayConfig(
         link=LinkProfile(56_000.0, 56_000.0, 0.2),

@@ -23,7 +23,7 @@ from contextlib import suppress
 from pathlib import Path
 from typing import Any
 
-from shared.errors import WalkstreamError
+from walkstream.shared.errors import WalkstreamError
 
 __all__ = [
     "add_path_parser",
@@ -56,7 +56,7 @@ def _summary(path: Any) -> str:
 
 def cmd_path_record(args: argparse.Namespace) -> int:
     """Handler of ``walkstream path record``."""
-    from server.pathgen import record_path
+    from walkstream.server.pathgen import record_path
 
     start = _point(args.from_xy, "--from")
     end = _point(args.to_xy, "--to")
@@ -70,7 +70,7 @@ def cmd_path_record(args: argparse.Namespace) -> int:
 
 def cmd_path_import(args: argparse.Namespace) -> int:
     """Handler of ``walkstream path import``."""
-    from server.pathgen import import_path
+    from walkstream.server.pathgen import import_path
 
     path, version, inside = import_path(
         args.db, args.name, args.file, _speed(args.speed), args.clip, replace=args.replace
@@ -83,8 +83,8 @@ def cmd_path_import(args: argparse.Namespace) -> int:
 
 
 def _read_all(db: str | os.PathLike[str]) -> tuple[str, list[Any]]:
-    from server.store import SceneReader
-    from shared.paths import RecordedPath
+    from walkstream.server.store import SceneReader
+    from walkstream.shared.paths import RecordedPath
 
     reader = SceneReader.open(db)
     try:
@@ -130,8 +130,8 @@ def cmd_path_list(args: argparse.Namespace) -> int:
 
 def cmd_path_export(args: argparse.Namespace) -> int:
     """Handler of ``walkstream path export``."""
-    from server.store import SceneReader
-    from shared.paths import RecordedPath
+    from walkstream.server.store import SceneReader
+    from walkstream.shared.paths import RecordedPath
 
     reader = SceneReader.open(args.db)
     try:

@@ -17,7 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from shared.errors import InputError, WalkstreamError
+from walkstream.shared.errors import InputError, WalkstreamError
 
 __all__ = [
     "add_replay_parser",
@@ -45,7 +45,7 @@ def transport_for(server: str) -> Iterator[tuple[Any, str]]:
         raise InputError(
             f"SERVER {server!r}: not an http(s):// URL and no such scene database file"
         )
-    from server.app import create_app
+    from walkstream.server.app import create_app
 
     app = create_app([db])
     try:
@@ -64,9 +64,9 @@ def _size(text: str) -> tuple[int, int]:
 
 def config_from_args(args: argparse.Namespace) -> Any:
     """A :class:`client.replay.ReplayConfig` from parsed replay arguments."""
-    from client.link import LinkProfile
-    from client.replay import ReplayConfig
-    from client.units import parse_bandwidth, parse_duration, parse_size
+    from walkstream.client.link import LinkProfile
+    from walkstream.client.replay import ReplayConfig
+    from walkstream.client.units import parse_bandwidth, parse_duration, parse_size
 
     down = parse_bandwidth(args.bandwidth)
     up = parse_bandwidth(args.uplink) if args.uplink else down
@@ -127,8 +127,8 @@ class _Bar:
 
 def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = False) -> Any:
     """Run one replay against ``server`` and write its report folder; returns the result."""
-    from client.replay import run_replay
-    from client.report import write_report
+    from walkstream.client.replay import run_replay
+    from walkstream.client.report import write_report
 
     with transport_for(server) as (transport, url):
         if quiet:
@@ -265,7 +265,7 @@ def stream_scenarios(vienna: str | None) -> list[dict[str, Any]]:
 
 
 def cmd_bench_stream(args: argparse.Namespace) -> int:
-    from client.report import write_comparison
+    from walkstream.client.report import write_comparison
 
     out = Path(args.out)
     rows = []

@@ -45,14 +45,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from shared.errors import CodecError, InputError, WalkstreamError
+from walkstream.shared.errors import CodecError, InputError, WalkstreamError
 
 if TYPE_CHECKING:
     import moderngl
 
-    from server.store import CellInfo, SceneReader
-    from shared.lsystem.grammar import Grammar
-    from shared.records import Mesh
+    from walkstream.server.store import CellInfo, SceneReader
+    from walkstream.shared.lsystem.grammar import Grammar
+    from walkstream.shared.records import Mesh
 
 __all__ = [
     "DEFAULT_DB",
@@ -107,7 +107,7 @@ class BenchView:
 
 
 def _locator(reader: SceneReader) -> Any:
-    from server.cells import CELL_KINDS, CellLocator, ViewCell
+    from walkstream.server.cells import CELL_KINDS, CellLocator, ViewCell
 
     cells = [
         ViewCell(
@@ -128,7 +128,7 @@ def _path_views(reader: SceneReader, name: str, count: int) -> tuple[list[BenchV
     if name not in reader.path_names():
         return [], f"no recorded path {name!r}"
     try:
-        from shared.paths import RecordedPath
+        from walkstream.shared.paths import RecordedPath
 
         path = RecordedPath.from_msgpack(reader.path_blob(name), f"path {name!r}")
     except (ImportError, CodecError, InputError) as exc:
@@ -238,8 +238,8 @@ class _Geometry:
         self.objects: dict[int, _Object] = {}
 
     def get(self, ids: Sequence[int]) -> list[_Object]:
-        from shared.buildings import build_lods
-        from shared.streets import build_street
+        from walkstream.shared.buildings import build_lods
+        from walkstream.shared.streets import build_street
 
         missing = [i for i in ids if i not in self.objects]
         info = self.reader.object_info(missing)
@@ -315,7 +315,7 @@ def _configs(
     shares: Sequence[float],
     distance_ratio: float | None,
 ) -> list[_Config]:
-    from client.allocate import (
+    from walkstream.client.allocate import (
         allocate_ach,
         allocate_distance,
         distance_thresholds_for_budget,
@@ -353,7 +353,7 @@ def _configs(
 
 
 def _open(db_path: str | os.PathLike[str]) -> SceneReader:
-    from server.store import SceneReader
+    from walkstream.server.store import SceneReader
 
     if not os.path.exists(db_path):
         raise WalkstreamError(
@@ -415,8 +415,8 @@ def run_lod_bench(
     """
     from tqdm import tqdm
 
-    from client.frames import FrameRenderer, camera
-    from shared.lsystem.grammar import parse_grammar
+    from walkstream.client.frames import FrameRenderer, camera
+    from walkstream.shared.lsystem.grammar import parse_grammar
 
     sh = [float(s) for s in shares]
     if not sh or any(not (0.0 < s <= 1.0) for s in sh):

@@ -21,7 +21,7 @@ Layout
 3. **Squares.**  About one block in twelve is left open as a square.
 4. **Lots and footprints.**  Other blocks get a perimeter band of lots (depth 12-20 m
    per block edge, frontages of about 8-25 m, corner lots at the corners), built
-   from shared points so that neighbouring lots share edges exactly.  Most lots are
+   from walkstream.shared points so that neighbouring lots share edges exactly.  Most lots are
    fully built; some are L-shaped (a rear corner cut away, so the neighbour's wall
    is only partly shared); a few are vacant; some blocks are one courtyard building
    (the whole band as one polygon with a hole); a few backyards hold a small
@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 __all__ = [
     "CRS_NAME",
@@ -452,7 +452,7 @@ def _find_party_walls(
     footprints: Sequence[Sequence[F64]], heights: Sequence[float]
 ) -> tuple[list[list[F64]], list[list[F64]]]:
     """Call the shared party-wall finder (imported late: it is a sibling source module)."""
-    from server.sources.partywalls import find_party_walls
+    from walkstream.server.sources.partywalls import find_party_walls
 
     rings, nbh = find_party_walls(footprints, heights)
     return [list(r) for r in rings], [list(h) for h in nbh]

@@ -89,10 +89,10 @@ import pyproj
 import shapely
 from numpy.typing import NDArray
 
-from server.sources.partywalls import find_party_walls
-from server.sources.scene import FeatureIssue, SourceScene
-from shared.errors import InputError, SourceError
-from shared.records import BuildingParams, StreetParams
+from walkstream.server.sources.partywalls import find_party_walls
+from walkstream.server.sources.scene import FeatureIssue, SourceScene
+from walkstream.shared.errors import InputError, SourceError
+from walkstream.shared.records import BuildingParams, StreetParams
 
 __all__ = [
     "read_json_file",

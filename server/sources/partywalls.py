@@ -23,7 +23,7 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from shared.errors import InputError
+from walkstream.shared.errors import InputError
 
 __all__ = ["find_party_walls", "MAX_ANGLE_DEG"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from shared.records import BuildingParams, StreetParams
+from walkstream.shared.records import BuildingParams, StreetParams
 
 __all__ = ["FeatureIssue", "SourceScene"]
 

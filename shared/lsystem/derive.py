@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from shared.errors import DerivationLimitError, GrammarError
-from shared.lsystem.grammar import Grammar
+from walkstream.shared.errors import DerivationLimitError, GrammarError
+from walkstream.shared.lsystem.grammar import Grammar
 
 __all__ = ["derive", "evaluate_lets", "Modules"]
 

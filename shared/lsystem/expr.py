@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from shared.errors import GrammarError
+from walkstream.shared.errors import GrammarError
 
 __all__ = ["Expr", "compile_expr", "FUNCTIONS", "hash01"]
 

@@ -29,8 +29,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from shared.errors import GrammarError
-from shared.lsystem.expr import Expr, compile_expr
+from walkstream.shared.errors import GrammarError
+from walkstream.shared.lsystem.expr import Expr, compile_expr
 
 __all__ = [
     "Grammar",

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from shared.records import Mesh
+from walkstream.shared.records import Mesh
 
 __all__ = ["EdgeFrames", "interpret", "count_triangles", "TEMPLATE_TRIANGLES"]
 
