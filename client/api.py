@@ -32,12 +32,10 @@ from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
 from walkstream.shared.codec import unpack_bounded
-from walkstream.shared.errors import CodecError, WalkstreamError
+from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.paths import RecordedPath
 
 __all__ = [
-    "ApiError",
-    "StreamCut",
     "Manifest",
     "CellRecord",
     "ObjectFrame",
@@ -52,23 +50,8 @@ _MAX_CELL = 8 << 20
 _MAX_FRAME = 32 << 20  # one object frame (an LOD2 mesh of a large block fits)
 
 
-class ApiError(WalkstreamError):
-    """The server refused a request (4xx) or its answer could not be used."""
-
-    def __init__(self, message: str, status: int | None = None) -> None:
-        super().__init__(message)
-        self.status = status
 
 
-class StreamCut(WalkstreamError):
-    """An object stream ended before every asked object arrived intact.
-
-    ``received`` objects were yielded before the cut; the rest must be asked again.
-    """
-
-    def __init__(self, message: str, received: int) -> None:
-        super().__init__(message)
-        self.received = received
 
 
 @dataclass(frozen=True)

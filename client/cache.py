@@ -36,7 +36,7 @@ from typing import Any, Literal
 import msgpack
 
 from walkstream.shared.codec import unpack_bounded
-from walkstream.shared.errors import CodecError, InputError
+from walkstream.shared.errors import CacheDamagedError, CodecError, InputError
 
 try:  # POSIX; elsewhere the directory lock is skipped (SQLite still locks its file)
     import fcntl
@@ -409,8 +409,6 @@ def safe_name(name: str) -> str:
     return safe
 
 
-class _Damaged(Exception):
-    """The cache file is not a (readable) walkstream cache of this scene version."""
 
 
 @contextlib.contextmanager
@@ -530,13 +528,13 @@ class DiskCache:
                 with _dir_lock(d):
                     try:
                         conn = self._connect(path, scene, version)
-                    except _Damaged:
+                    except CacheDamagedError:
                         self._move_aside(path)
                         conn = self._connect(path, scene, version)
                     with contextlib.suppress(OSError):
                         os.utime(path)  # the version in use is the newest
                     self._prune(d, keep=path)
-            except (OSError, sqlite3.Error, _Damaged) as exc:
+            except (OSError, sqlite3.Error, CacheDamagedError) as exc:
                 self.errors += 1
                 self.last_error = f"disk cache {path}: cannot open ({exc})"
                 return False
@@ -544,13 +542,13 @@ class DiskCache:
             return True
 
     def _connect(self, path: Path, scene: str, version: str) -> sqlite3.Connection:
-        """Open and check (or initialise) one version file; :class:`_Damaged` if unusable."""
+        """Open and check (or initialise) one version file; :class:`CacheDamagedError` if unusable."""
         try:
             conn = sqlite3.connect(
                 path, timeout=_BUSY_TIMEOUT_S, isolation_level=None, check_same_thread=False
             )
         except sqlite3.Error as exc:
-            raise _Damaged(str(exc)) from exc
+            raise CacheDamagedError(str(exc)) from exc
         try:
             conn.execute("PRAGMA journal_mode=WAL")
             conn.execute("PRAGMA synchronous=NORMAL")
@@ -571,13 +569,13 @@ class DiskCache:
                         ],
                     )
                 elif not {"meta", "cells", "objects"} <= tables:
-                    raise _Damaged(f"not a walkstream cache (tables {sorted(tables)[:5]})")
+                    raise CacheDamagedError(f"not a walkstream cache (tables {sorted(tables)[:5]})")
                 else:
                     meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
                     want = {"app": _APP, "format": _FORMAT, "scene": scene, "version": version}
                     bad = [k for k, v in want.items() if meta.get(k) != v]
                     if bad or not str(meta.get("bytes", "")).isdigit():
-                        raise _Damaged(f"meta {bad[0] if bad else 'bytes'} does not match")
+                        raise CacheDamagedError(f"meta {bad[0] if bad else 'bytes'} does not match")
                 conn.execute("COMMIT")
             except BaseException:
                 with contextlib.suppress(sqlite3.Error):
@@ -585,15 +583,15 @@ class DiskCache:
                 raise
             row = conn.execute("PRAGMA quick_check").fetchone()
             if not row or row[0] != "ok":
-                raise _Damaged(f"quick_check: {row[0] if row else 'no answer'}")
+                raise CacheDamagedError(f"quick_check: {row[0] if row else 'no answer'}")
         except sqlite3.OperationalError as exc:
             conn.close()
             if not _is_damage(exc):
                 raise  # locked by another process, unopenable directory: not damage
-            raise _Damaged(str(exc)) from exc
-        except (sqlite3.DatabaseError, _Damaged) as exc:
+            raise CacheDamagedError(str(exc)) from exc
+        except (sqlite3.DatabaseError, CacheDamagedError) as exc:
             conn.close()
-            raise _Damaged(str(exc)) from exc
+            raise CacheDamagedError(str(exc)) from exc
         return conn
 
     def _move_aside(self, path: Path) -> Path:
@@ -661,10 +659,10 @@ class DiskCache:
             with _dir_lock(path.parent):
                 try:
                     self._conn = self._connect(path, scene, version)  # another process fixed it
-                except _Damaged:
+                except CacheDamagedError:
                     self._move_aside(path)
                     self._conn = self._connect(path, scene, version)
-        except (OSError, sqlite3.Error, _Damaged):
+        except (OSError, sqlite3.Error, CacheDamagedError):
             self._conn = None  # no disk cache for the rest of the run
 
     def get_cell(self, cid: int) -> tuple[str, bytes] | None:

@@ -39,9 +39,9 @@ from collections.abc import Callable, Coroutine
 from types import TracebackType
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
-from walkstream.shared.errors import WalkstreamError
+from walkstream.shared.errors import SimulationStalled, WalkstreamError
 
-__all__ = ["Clock", "RealClock", "SimClock", "SimulationStalled"]
+__all__ = ["Clock", "RealClock", "SimClock"]
 
 T = TypeVar("T")
 
@@ -50,14 +50,6 @@ T = TypeVar("T")
 _FALLBACK_YIELDS = 32
 
 
-class SimulationStalled(WalkstreamError, RuntimeError):
-    """The simulated program waits, but nothing it waits for can ever happen.
-
-    No task sleeps on the clock with a finite deadline, no busy section is open and
-    the main coroutine has not finished: typically a task waits on ``asyncio.sleep``
-    (real time) or on an event nobody sets, or everything sleeps forever (a link of
-    zero bandwidth with no timeout).
-    """
 
 
 @runtime_checkable

@@ -15,6 +15,8 @@ from collections import deque
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.errors import InputError
+
 __all__ = ["MotionPredictor"]
 
 
@@ -29,7 +31,7 @@ class MotionPredictor:
 
     def __init__(self, window_s: float = 1.0) -> None:
         if not window_s > 0:
-            raise ValueError(f"window_s must be > 0, got {window_s!r}")
+            raise InputError(f"window_s must be > 0, got {window_s!r}")
         self.window_s = float(window_s)
         self._t: deque[float] = deque()
         self._xy: deque[tuple[float, float]] = deque()
@@ -38,7 +40,7 @@ class MotionPredictor:
         """Add the position at time ``t`` (times must not go backwards)."""
         p = np.asarray(xy, dtype=np.float64).reshape(-1)
         if self._t and t < self._t[-1]:
-            raise ValueError(f"time went backwards: {t} after {self._t[-1]}")
+            raise InputError(f"time went backwards: {t} after {self._t[-1]}")
         self._t.append(float(t))
         self._xy.append((float(p[0]), float(p[1])))
         while self._t and self._t[0] < t - self.window_s:

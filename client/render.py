@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.camera import fit_view, mat4_bytes
-from walkstream.shared.errors import RenderError
+from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import Framebuffer, check_gl_error, create_context
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
@@ -139,11 +139,11 @@ class MeshRenderer:
     ) -> None:
         light = np.asarray(light_dir, dtype=np.float64).reshape(3)
         if not np.linalg.norm(light) > 0:
-            raise ValueError(
+            raise InputError(
                 f"MeshRenderer.light_dir: expected a non-zero vector, got {light_dir!r}"
             )
         if not 0.0 <= ambient <= 1.0:
-            raise ValueError(f"MeshRenderer.ambient: expected 0..1, got {ambient}")
+            raise InputError(f"MeshRenderer.ambient: expected 0..1, got {ambient}")
         r, g, b = (int(c) for c in background)
         self.background: tuple[int, int, int] = (r, g, b)
         # Validate before creating a context, so a bad argument leaks nothing.
@@ -375,7 +375,7 @@ def render_lods_figure(
     from matplotlib.figure import Figure
 
     if not meshes:
-        raise ValueError("render_lods_figure: expected at least one mesh, got none")
+        raise InputError("render_lods_figure: expected at least one mesh, got none")
     w, h = (int(v) for v in size)
     n = len(meshes)
     title_px = min(40, h // 4)

@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
 from walkstream.shared.buildings import build_lods
+from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import Grammar
 from walkstream.shared.records import BuildingParams, Mesh, StreetParams
 from walkstream.shared.streets import build_street
@@ -107,7 +108,7 @@ class RewritePool:
         workers: int = 2,
     ) -> None:
         if workers < 1:
-            raise ValueError(f"workers must be >= 1, got {workers}")
+            raise InputError(f"workers must be >= 1, got {workers}")
         self.clock = clock
         self.grammar = grammar
         self.on_built = on_built

@@ -34,21 +34,14 @@ import msgpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.client.api import (
-    ApiError,
-    CellRecord,
-    ObjectFrame,
-    SceneClient,
-    StreamCut,
-    decode_cell,
-)
+from walkstream.client.api import CellRecord, ObjectFrame, SceneClient, decode_cell
 from walkstream.client.cache import Cache, DiskCache
 from walkstream.client.cellmap import CellMap
 from walkstream.client.clock import Clock
 from walkstream.client.predict import MotionPredictor
 from walkstream.client.rewrite import ObjectGeometry, RewritePool, geometry_of
 from walkstream.shared.codec import decode_mesh, decode_object, unpack_bounded
-from walkstream.shared.errors import CodecError
+from walkstream.shared.errors import ApiError, CodecError, StreamCut
 
 __all__ = ["StreamerConfig", "Streamer"]
 

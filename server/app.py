@@ -29,9 +29,14 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from walkstream.server import routes
-from walkstream.server.deps import ApiError, SceneRegistry
-from walkstream.server.store import NotFoundError, StoreError
-from walkstream.shared.errors import CodecError, WalkstreamError
+from walkstream.server.deps import SceneRegistry
+from walkstream.shared.errors import (
+    ApiError,
+    CodecError,
+    NotFoundError,
+    StoreError,
+    WalkstreamError,
+)
 
 __all__ = ["create_app", "Metrics", "MetricsMiddleware", "LATENCY_BUCKETS"]
 
@@ -201,7 +206,7 @@ def _error(status: int, message: str, detail: Any = None) -> JSONResponse:
 
 async def _api_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, ApiError)
-    return _error(exc.status, exc.message, exc.detail)
+    return _error(exc.status or 400, exc.message, exc.detail)
 
 
 async def _validation_error(request: Request, exc: Exception) -> JSONResponse:

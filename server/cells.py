@@ -107,12 +107,12 @@ class ViewCell:
 
     def __post_init__(self) -> None:
         if self.kind not in CELL_KINDS:
-            raise ValueError(f"ViewCell.kind: expected one of {CELL_KINDS}, got {self.kind!r}")
+            raise InputError(f"ViewCell.kind: expected one of {CELL_KINDS}, got {self.kind!r}")
         poly = np.asarray(self.polygon, dtype=np.float64).reshape(-1, 2)
         if len(poly) < 3:
-            raise ValueError(f"ViewCell.polygon: expected >= 3 vertices, got {len(poly)}")
+            raise InputError(f"ViewCell.polygon: expected >= 3 vertices, got {len(poly)}")
         if not float(self.zmin) <= float(self.zmax):
-            raise ValueError(f"ViewCell: zmin {self.zmin} > zmax {self.zmax}")
+            raise InputError(f"ViewCell: zmin {self.zmin} > zmax {self.zmax}")
         object.__setattr__(self, "id", int(self.id))
         object.__setattr__(self, "polygon", readonly(poly))
         object.__setattr__(self, "zmin", float(self.zmin))

@@ -41,10 +41,10 @@ from fastapi import Request
 
 from walkstream.server.cells import CELL_KINDS as LOCATOR_KINDS
 from walkstream.server.cells import CellLocator, ViewCell
-from walkstream.server.store import CellInfo, SceneReader, StoreError
+from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
-from walkstream.shared.errors import CodecError, WalkstreamError
+from walkstream.shared.errors import ApiError, CodecError, StoreError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
 from walkstream.shared.records import BuildingParams
 from walkstream.shared.streets import build_street
@@ -57,7 +57,6 @@ __all__ = [
     "OBJECT_FORMS",
     "Rep",
     "Form",
-    "ApiError",
     "Encoded",
     "LRU",
     "Scene",
@@ -107,17 +106,6 @@ _FRAME_CACHE_BYTES = 128 << 20
 _MAX_PATH_JSON_BYTES = 8 << 20
 
 
-class ApiError(WalkstreamError):
-    """A request the service refuses, with its HTTP status and a JSON ``detail``.
-
-    Turned into ``{"error": message, "detail": detail}`` by the app's handler.
-    """
-
-    def __init__(self, status: int, message: str, detail: Any = None) -> None:
-        super().__init__(message)
-        self.status = status
-        self.message = message
-        self.detail = detail
 
 
 # ---------------------------------------------------------------------------
@@ -533,7 +521,7 @@ class Scene:
             out[oid] = frame
         missing = [i for i in ids if i not in out]
         if missing:
-            raise ApiError(404, f"scene {self.name!r}: no object {missing[0]}", {"ids": missing})
+            raise ApiError(f"scene {self.name!r}: no object {missing[0]}", status=404, detail={"ids": missing})
         return out
 
     def grammar(self) -> Grammar:
@@ -615,7 +603,9 @@ class SceneRegistry:
         scene = self.scenes.get(name)
         if scene is None:
             raise ApiError(
-                404, f"unknown scene {name!r:.80}", {"scene": name, "known": list(self.scenes)}
+                f"unknown scene {name!r:.80}",
+                status=404,
+                detail={"scene": name, "known": list(self.scenes)},
             )
         return scene
 

@@ -66,14 +66,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.server.cells import CellLocator, ViewCell, cell_polygons
 from walkstream.server.sources.geojson import _as_points, _parse_crs, read_json_file
-from walkstream.server.store import CellInfo, SceneReader, StoreError, write_path
-from walkstream.shared.errors import InputError, SourceError
+from walkstream.server.store import CellInfo, SceneReader, write_path
+from walkstream.shared.errors import InputError, RouteError, SourceError, StoreError
 from walkstream.shared.paths import DRIVE_EYE_HEIGHT, WALK_EYE_HEIGHT, RecordedPath
 
 __all__ = [
     "CellGraph",
     "Route",
-    "RouteError",
     "TURN_COST",
     "CLIP_GAP",
     "STRAIGHTEN_TOL",
@@ -131,8 +130,6 @@ _MIN_PORTAL = 0.5
 _MAX_GEOJSON_BYTES = 256 << 20
 
 
-class RouteError(InputError):
-    """No route can be made: a point outside every cell, or cells not connected."""
 
 
 @dataclass(frozen=True)

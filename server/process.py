@@ -15,6 +15,8 @@ import sys
 import time
 from collections.abc import Iterator, Sequence
 
+from walkstream.shared.errors import ServiceError
+
 __all__ = ["free_port", "healthy", "server_process"]
 
 
@@ -100,9 +102,9 @@ def server_process(
         while not healthy(host, port):
             if proc.poll() is not None:
                 err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
-                raise RuntimeError(f"server exited with {proc.returncode}: {err[-2000:]}")
+                raise ServiceError(f"server exited with {proc.returncode}: {err[-2000:]}")
             if time.monotonic() > deadline:
-                raise RuntimeError(f"server did not answer /v1/health within {timeout_s:.0f} s")
+                raise ServiceError(f"server did not answer /v1/health within {timeout_s:.0f} s")
             time.sleep(0.1)
         if workers > 1:  # let every worker come up before the load starts
             time.sleep(1.0)

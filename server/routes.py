@@ -62,7 +62,6 @@ from walkstream.server.deps import (
     MSGPACK,
     MSGPACK_TYPES,
     OBJECT_FORMS,
-    ApiError,
     Encoded,
     Form,
     Rep,
@@ -75,7 +74,7 @@ from walkstream.server.deps import (
     get_scene,
 )
 from walkstream.shared.codec import unpack_bounded
-from walkstream.shared.errors import CodecError
+from walkstream.shared.errors import ApiError, CodecError
 
 if TYPE_CHECKING:
     from walkstream.server.app import Metrics
@@ -300,9 +299,9 @@ async def recorded_path(
     """A recorded walk by name (names as listed in the manifest's ``paths``)."""
     if name not in scene.path_names:
         raise ApiError(
-            404,
             f"scene {scene.name!r} has no recorded path {name!r:.80}",
-            {"path": name, "known": sorted(scene.path_names)},
+            status=404,
+            detail={"path": name, "known": sorted(scene.path_names)},
         )
     enc = scene.cached_path(name, rep)
     if enc is None:  # read and decode in a worker thread, off the event loop
@@ -345,7 +344,7 @@ async def cell_record(
 ) -> Response:
     """Boundary, height range, neighbours with their boundaries, PVS ids and ACH."""
     if not scene.has_cell(cell):
-        raise ApiError(404, f"scene {scene.name!r} has no cell {cell}", {"cell": cell})
+        raise ApiError(f"scene {scene.name!r} has no cell {cell}", status=404, detail={"cell": cell})
     enc = scene.cached_cell(cell, rep)
     if enc is None:  # a database read: in a worker thread, off the event loop
         enc = await run_in_threadpool(scene.cell, cell, rep)
@@ -399,9 +398,9 @@ async def objects(
     """
     if form not in OBJECT_FORMS:
         raise ApiError(
-            422,
             f"unknown form {form!r:.80}: expected one of {', '.join(OBJECT_FORMS)}",
-            {"form": form[:80], "known": list(OBJECT_FORMS)},
+            status=422,
+            detail={"form": form[:80], "known": list(OBJECT_FORMS)},
         )
     frm = cast(Form, form)
     ids = _parse_ids(await _read_body(request), request.headers.get("content-type"))
@@ -409,9 +408,9 @@ async def objects(
     if unknown:
         shown = ", ".join(str(i) for i in unknown[:10]) + (", ..." if len(unknown) > 10 else "")
         raise ApiError(
-            404,
             f"scene {scene.name!r} has no object{'s' if len(unknown) > 1 else ''} {shown}",
-            {"ids": unknown},
+            status=404,
+            detail={"ids": unknown},
         )
     found, missing = scene.cached_frames(ids, frm)
     if missing:
@@ -429,9 +428,9 @@ async def _read_body(request: Request) -> bytes:
     declared = request.headers.get("content-length")
     if declared is not None and declared.isdigit() and int(declared) > MAX_BODY_BYTES:
         raise ApiError(
-            413,
             f"request body of {int(declared)} bytes, more than the limit of {MAX_BODY_BYTES}",
-            {"limit_bytes": MAX_BODY_BYTES},
+            status=413,
+            detail={"limit_bytes": MAX_BODY_BYTES},
         )
     chunks: list[bytes] = []
     n = 0
@@ -439,9 +438,9 @@ async def _read_body(request: Request) -> bytes:
         n += len(chunk)
         if n > MAX_BODY_BYTES:
             raise ApiError(
-                413,
                 f"request body over the limit of {MAX_BODY_BYTES} bytes",
-                {"limit_bytes": MAX_BODY_BYTES},
+                status=413,
+                detail={"limit_bytes": MAX_BODY_BYTES},
             )
         chunks.append(chunk)
     return b"".join(chunks)
@@ -462,44 +461,48 @@ def _parse_ids(body: bytes, content_type: str | None) -> list[int]:
                 max_bin_len=0,
             )
         except CodecError as exc:
-            raise ApiError(400, str(exc)) from exc
+            raise ApiError(str(exc), status=400) from exc
     elif media in ("", JSON) or media.endswith("+json"):
         if not body.strip():
-            raise ApiError(400, 'request body is empty; send {"ids": [int, ...]}')
+            raise ApiError('request body is empty; send {"ids": [int, ...]}', status=400)
         try:
             obj = json.loads(body)
         except (ValueError, RecursionError) as exc:
-            raise ApiError(400, f"request body is not valid JSON ({exc})") from exc
+            raise ApiError(f"request body is not valid JSON ({exc})", status=400) from exc
     else:
         raise ApiError(
-            415,
             f"request body of type {media!r:.80}: send {JSON} or {MSGPACK}",
-            {"content_type": media},
+            status=415,
+            detail={"content_type": media},
         )
     if not isinstance(obj, dict) or "ids" not in obj:
         raise ApiError(
-            422, 'request body: expected an object {"ids": [int, ...]}', {"got": type(obj).__name__}
+            'request body: expected an object {"ids": [int, ...]}',
+            status=422,
+            detail={"got": type(obj).__name__},
         )
     ids = obj["ids"]
     if not isinstance(ids, list):
         raise ApiError(
-            422, f"ids: expected an array of integers, got {type(ids).__name__}", {"field": "ids"}
+            f"ids: expected an array of integers, got {type(ids).__name__}",
+            status=422,
+            detail={"field": "ids"},
         )
     if len(ids) > MAX_IDS:
         raise ApiError(
-            413,
             f"{len(ids)} ids asked, at most {MAX_IDS} per request: split the batch",
-            {"count": len(ids), "limit": MAX_IDS},
+            status=413,
+            detail={"count": len(ids), "limit": MAX_IDS},
         )
     # bool is an int subclass: true/false are not ids
     bad = [(k, v) for k, v in enumerate(ids) if type(v) is not int or not 0 <= v <= _MAX_INT64]
     if bad:
         shown = ", ".join(f"ids[{k}] = {v!r:.30}" for k, v in bad[:5])
         raise ApiError(
-            422,
             f"ids: expected integers from 0 to 2**63 - 1; got {shown}"
             + (f" and {len(bad) - 5} more" if len(bad) > 5 else ""),
-            [{"index": k, "got": f"{v!r:.40}"} for k, v in bad[:100]],
+            status=422,
+            detail=[{"index": k, "got": f"{v!r:.40}"} for k, v in bad[:100]],
         )
     return ids
 

@@ -19,8 +19,7 @@ import uvicorn
 from fastapi import FastAPI
 
 from walkstream.server.app import create_app
-from walkstream.server.store import StoreError
-from walkstream.shared.errors import InputError
+from walkstream.shared.errors import InputError, StoreError
 
 __all__ = ["ENV_PATHS", "serve", "app_from_env"]
 

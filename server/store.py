@@ -68,7 +68,7 @@ from walkstream.shared.codec import (
     encode_street,
     pvs_size,
 )
-from walkstream.shared.errors import CodecError, InputError
+from walkstream.shared.errors import CodecError, NotFoundError, StoreError
 from walkstream.shared.records import BuildingParams, StreetParams
 
 try:  # advisory locks between processes; POSIX only
@@ -82,8 +82,6 @@ __all__ = [
     "CELL_KINDS",
     "OBJECT_KINDS",
     "OPTIONAL_TABLES",
-    "StoreError",
-    "NotFoundError",
     "SceneMeta",
     "ObjectRow",
     "ObjectInfo",
@@ -146,12 +144,8 @@ OPTIONAL_TABLES: dict[str, dict[str, str]] = {
 _VOLATILE_META = ("version", "bake_seconds", "created")
 
 
-class StoreError(InputError):
-    """A scene database cannot be opened, read or written as asked."""
 
 
-class NotFoundError(StoreError):
-    """An object, cell or path asked for is not in the scene."""
 
 
 # ---------------------------------------------------------------------------

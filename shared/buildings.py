@@ -13,6 +13,7 @@ from importlib import resources
 
 import numpy as np
 
+from walkstream.shared.errors import InputError
 from walkstream.shared.geometry import ring_edges, triangulate_rings
 from walkstream.shared.lsystem.derive import Modules, derive
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
@@ -81,7 +82,7 @@ def derive_building(
 ) -> Modules:
     """Derive a building at ``lod``; returns the terminal modules by symbol."""
     if lod not in LODS:
-        raise ValueError(f"lod: expected one of {LODS}, got {lod!r}")
+        raise InputError(f"lod: expected one of {LODS}, got {lod!r}")
     g = grammar or default_grammar()
     fr = frames or edge_frames(b)
     seeds, globals_ = _seeds_and_globals(b, lod, fr)

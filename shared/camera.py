@@ -20,6 +20,8 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.errors import InputError
+
 __all__ = [
     "CUBE_FACE_DIRECTIONS",
     "CUBE_FACE_NAMES",
@@ -55,7 +57,7 @@ CUBE_FACE_NAMES: tuple[str, ...] = ("+x", "-x", "+y", "-y", "+z", "-z")
 def _vec3(v: ArrayLike, name: str) -> NDArray[np.float64]:
     a = np.asarray(v, dtype=np.float64).reshape(-1)
     if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"{name}: expected 3 finite numbers, got {v!r}")
+        raise InputError(f"{name}: expected 3 finite numbers, got {v!r}")
     return a
 
 
@@ -77,11 +79,11 @@ def perspective(fovy_deg: float, aspect: float, near: float, far: float) -> F32:
         Maps view-space depth ``-near`` to NDC ``z = -1`` and ``-far`` to ``+1``.
     """
     if not 0.0 < fovy_deg < 180.0:
-        raise ValueError(f"perspective: fovy_deg must be in (0, 180), got {fovy_deg}")
+        raise InputError(f"perspective: fovy_deg must be in (0, 180), got {fovy_deg}")
     if not aspect > 0.0:
-        raise ValueError(f"perspective: aspect must be > 0, got {aspect}")
+        raise InputError(f"perspective: aspect must be > 0, got {aspect}")
     if not 0.0 < near < far or not math.isfinite(far):
-        raise ValueError(f"perspective: expected 0 < near < far < inf, got near={near}, far={far}")
+        raise InputError(f"perspective: expected 0 < near < far < inf, got near={near}, far={far}")
     f = 1.0 / math.tan(math.radians(fovy_deg) / 2.0)
     n, fa = float(near), float(far)
     m = np.zeros((4, 4), np.float64)
@@ -99,13 +101,13 @@ def _look_at64(
     fwd = target - eye
     dist = np.linalg.norm(fwd)
     if not dist > 0.0:
-        raise ValueError(f"look_at: eye and target coincide at {eye.tolist()}")
+        raise InputError(f"look_at: eye and target coincide at {eye.tolist()}")
     fwd = fwd / dist
     side = np.cross(fwd, up)
     sn = np.linalg.norm(side)
     # A relative threshold: up nearly parallel to the view axis gives an unstable roll.
     if not sn > 1e-9 * max(float(np.linalg.norm(up)), 1e-300):
-        raise ValueError(
+        raise InputError(
             f"look_at: up {up.tolist()} is parallel to the view direction {fwd.tolist()}"
         )
     side = side / sn
@@ -203,7 +205,7 @@ def fit_view(
     lo, hi = _vec3(bounds_min, "bounds_min"), _vec3(bounds_max, "bounds_max")
     d = _vec3(direction, "direction")
     if not np.linalg.norm(d) > 0.0:
-        raise ValueError("fit_view: direction must not be zero")
+        raise InputError("fit_view: direction must not be zero")
     d = d / np.linalg.norm(d)
     centre = (lo + hi) / 2.0
     # Floor the size so a single point or a degenerate box still gets a usable camera.
@@ -236,5 +238,5 @@ def mat4_bytes(m: ArrayLike) -> bytes:
     """Column-major float32 bytes of a ``(4, 4)`` matrix, as a GLSL ``mat4`` uniform wants."""
     a = np.asarray(m, dtype=np.float32)
     if a.shape != (4, 4):
-        raise ValueError(f"mat4_bytes: expected a (4, 4) matrix, got shape {a.shape}")
+        raise InputError(f"mat4_bytes: expected a (4, 4) matrix, got shape {a.shape}")
     return np.ascontiguousarray(a.T).tobytes()

@@ -4,9 +4,16 @@ Every error a user can cause derives from :class:`WalkstreamError`; the subclass
 derive from the built-in they refine (mostly ``ValueError``) so callers that only know
 built-ins still catch them.  The server maps them to 4xx responses and the CLI to one
 clear line and a non-zero exit.
+
+Inputs: :class:`InputError` and its kinds (grammar, source, codec, store, route).
+Runtime: :class:`RenderError`, :class:`DerivationLimitError`, :class:`ServiceError`,
+:class:`SimulationStalled`.  The HTTP API: :class:`ApiError` (a refused request, on
+either side of the wire) and :class:`StreamCut` (an object stream cut short).
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 __all__ = [
     "WalkstreamError",
@@ -16,6 +23,14 @@ __all__ = [
     "SourceError",
     "CodecError",
     "RenderError",
+    "StoreError",
+    "NotFoundError",
+    "CacheDamagedError",
+    "RouteError",
+    "ApiError",
+    "StreamCut",
+    "ServiceError",
+    "SimulationStalled",
 ]
 
 
@@ -53,3 +68,63 @@ class CodecError(InputError):
 
 class RenderError(WalkstreamError, RuntimeError):
     """No OpenGL context could be created, or a draw failed."""
+
+
+class StoreError(InputError):
+    """A scene database cannot be opened, read or written as asked."""
+
+
+class NotFoundError(StoreError):
+    """An object, cell or path asked for is not in the scene."""
+
+
+class CacheDamagedError(StoreError):
+    """A client cache file is not a (readable) walkstream cache of this scene version.
+
+    Raised and handled inside the disk cache, which moves such a file aside.
+    """
+
+
+class RouteError(InputError):
+    """No route can be made: a point outside every cell, or cells not connected."""
+
+
+class ApiError(WalkstreamError):
+    """A request of the HTTP API that is refused, or whose answer cannot be used.
+
+    The service raises it with the HTTP ``status`` to answer and a JSON-able
+    ``detail``; its handler turns it into ``{"error": message, "detail": detail}``.
+    The client raises it for a 4xx answer (``status`` set) or an answer it cannot
+    use (``status`` None).
+    """
+
+    def __init__(self, message: str, status: int | None = None, detail: Any = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.status = status
+        self.detail = detail
+
+
+class StreamCut(WalkstreamError):
+    """An object stream ended before every asked object arrived intact.
+
+    ``received`` objects were yielded before the cut; the rest must be asked again.
+    """
+
+    def __init__(self, message: str, received: int) -> None:
+        super().__init__(message)
+        self.received = received
+
+
+class ServiceError(WalkstreamError, RuntimeError):
+    """The service could not be started, or did not answer its health check."""
+
+
+class SimulationStalled(WalkstreamError, RuntimeError):
+    """The simulated program waits, but nothing it waits for can ever happen.
+
+    No task sleeps on the clock with a finite deadline, no busy section is open and
+    the main coroutine has not finished: typically a task waits on ``asyncio.sleep``
+    (real time) or on an event nobody sets, or everything sleeps forever (a link of
+    zero bandwidth with no timeout).
+    """

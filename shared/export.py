@@ -58,7 +58,7 @@ def export_glb(
     import trimesh  # optional dependency: only needed when exporting
 
     if names is not None and len(names) != len(meshes):
-        raise ValueError(f"export_glb.names: expected {len(meshes)} names, got {len(names)}")
+        raise InputError(f"export_glb.names: expected {len(meshes)} names, got {len(names)}")
     scene = trimesh.Scene()
     transform = Z_UP_TO_Y_UP if y_up else np.eye(4)
     for i, mesh in enumerate(meshes):

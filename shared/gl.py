@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.shared.errors import RenderError
+from walkstream.shared.errors import InputError, RenderError
 
 if TYPE_CHECKING:  # moderngl is imported lazily so that importing this module never fails
     import moderngl
@@ -166,7 +166,7 @@ class Framebuffer:
     ) -> None:
         w, h = (int(v) for v in size)
         if w <= 0 or h <= 0:
-            raise ValueError(f"Framebuffer.size: expected positive width and height, got {size}")
+            raise InputError(f"Framebuffer.size: expected positive width and height, got {size}")
         self.ctx = ctx
         self.size = (w, h)
         self.components = components

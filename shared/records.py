@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.shared.errors import InputError
+
 __all__ = ["BuildingParams", "StreetParams", "Mesh", "readonly"]
 
 F64 = NDArray[np.float64]
@@ -78,9 +80,9 @@ class BuildingParams:
 
     def __post_init__(self) -> None:
         if len(self.rings) == 0:
-            raise ValueError("BuildingParams.rings: expected at least one ring, got none")
+            raise InputError("BuildingParams.rings: expected at least one ring, got none")
         if len(self.neighbour_heights) != len(self.rings):
-            raise ValueError(
+            raise InputError(
                 f"BuildingParams.neighbour_heights: expected {len(self.rings)} arrays "
                 f"(one per ring), got {len(self.neighbour_heights)}"
             )
@@ -88,16 +90,16 @@ class BuildingParams:
         nbs = tuple(readonly(np.asarray(h, dtype=np.float64).reshape(-1)) for h in self.neighbour_heights)
         for k, (r, h) in enumerate(zip(rings, nbs, strict=True)):
             if len(r) < 3:
-                raise ValueError(f"BuildingParams.rings[{k}]: expected >= 3 vertices, got {len(r)}")
+                raise InputError(f"BuildingParams.rings[{k}]: expected >= 3 vertices, got {len(r)}")
             if len(h) != len(r):
-                raise ValueError(
+                raise InputError(
                     f"BuildingParams.neighbour_heights[{k}]: expected {len(r)} values, got {len(h)}"
                 )
         rings, nbs = _oriented(rings, nbs)
         if int(self.floors) < 1:
-            raise ValueError(f"BuildingParams.floors: expected >= 1, got {self.floors}")
+            raise InputError(f"BuildingParams.floors: expected >= 1, got {self.floors}")
         if not float(self.floor_height) > 0:
-            raise ValueError(f"BuildingParams.floor_height: expected > 0, got {self.floor_height}")
+            raise InputError(f"BuildingParams.floor_height: expected > 0, got {self.floor_height}")
         object.__setattr__(self, "rings", rings)
         object.__setattr__(self, "neighbour_heights", nbs)
         object.__setattr__(self, "floors", int(self.floors))
@@ -127,7 +129,7 @@ class StreetParams:
 
     def __post_init__(self) -> None:
         if self.kind not in ("street", "crossroad", "square"):
-            raise ValueError(f"StreetParams.kind: expected street|crossroad|square, got {self.kind!r}")
+            raise InputError(f"StreetParams.kind: expected street|crossroad|square, got {self.kind!r}")
         object.__setattr__(self, "ring", readonly(np.asarray(self.ring, dtype=np.float64).reshape(-1, 2)))
         object.__setattr__(self, "width", float(self.width))
 
@@ -160,7 +162,7 @@ class Mesh:
             m = np.zeros(len(p), np.uint8)
         m = readonly(m)
         if len(n) != len(p) or len(m) != len(p):
-            raise ValueError(
+            raise InputError(
                 f"Mesh: positions, normals and materials must have the same length, got "
                 f"{len(p)}, {len(n)}, {len(m)}"
             )

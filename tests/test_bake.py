@@ -11,8 +11,8 @@ import pytest
 from walkstream.cli import main
 from walkstream.server.bake import BakeSettings, bake
 from walkstream.server.sources.citygen import write_city
-from walkstream.server.store import SceneReader, StoreError
-from walkstream.shared.errors import InputError
+from walkstream.server.store import SceneReader
+from walkstream.shared.errors import InputError, StoreError
 
 pytestmark = pytest.mark.gl
 

@@ -9,8 +9,8 @@ import time
 
 import pytest
 
-from walkstream.client.clock import Clock, RealClock, SimClock, SimulationStalled
-from walkstream.shared.errors import WalkstreamError
+from walkstream.client.clock import Clock, RealClock, SimClock
+from walkstream.shared.errors import SimulationStalled, WalkstreamError
 
 
 def test_both_clocks_are_clocks() -> None:

@@ -21,7 +21,6 @@ from walkstream.server.cells import CellLocator, ViewCell, make_cells
 from walkstream.server.pathgen import (
     CLIP_GAP,
     CellGraph,
-    RouteError,
     default_paths,
     import_linestring,
     import_path,
@@ -31,8 +30,14 @@ from walkstream.server.pathgen import (
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict
 from walkstream.server.sources.scene import SourceScene
-from walkstream.server.store import CellRow, SceneReader, SceneWriter, StoreError, write_path
-from walkstream.shared.errors import InputError, SourceError, WalkstreamError
+from walkstream.server.store import CellRow, SceneReader, SceneWriter, write_path
+from walkstream.shared.errors import (
+    InputError,
+    RouteError,
+    SourceError,
+    StoreError,
+    WalkstreamError,
+)
 from walkstream.shared.paths import RecordedPath
 
 VIENNA = Path(__file__).resolve().parents[2] / "shared" / "data" / "vienna"

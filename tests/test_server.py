@@ -32,8 +32,8 @@ from scenes import PATH_DATA, PATH_NAME, CityDb, build_city_db
 import walkstream.server.serve as serve_mod
 from walkstream.server.app import create_app
 from walkstream.server.deps import LRU, MAX_IDS, etag_matches, negotiate
-from walkstream.server.store import StoreError
 from walkstream.shared.codec import decode_object
+from walkstream.shared.errors import StoreError
 from walkstream.shared.records import StreetParams
 
 JSON_ACCEPT = {"accept": "application/json"}

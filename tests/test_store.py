@@ -20,15 +20,13 @@ import pytest
 from walkstream.server.store import (
     SCHEMA_VERSION,
     CellRow,
-    NotFoundError,
     ObjectRow,
     SceneReader,
     SceneWriter,
-    StoreError,
     write_path,
 )
 from walkstream.shared.codec import encode_building, encode_street
-from walkstream.shared.errors import InputError
+from walkstream.shared.errors import InputError, NotFoundError, StoreError
 from walkstream.shared.records import BuildingParams, StreetParams
 
 ROOT = Path(__file__).resolve().parents[1]

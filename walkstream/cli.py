@@ -392,7 +392,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def _has_paths(db: Path, names: tuple[str, ...]) -> bool:
     """Whether ``db`` is a readable scene database holding every path in ``names``."""
-    from walkstream.server.store import SceneReader, StoreError
+    from walkstream.server.store import SceneReader
+    from walkstream.shared.errors import StoreError
 
     try:
         reader = SceneReader.open(db)

@@ -1,0 +1,115 @@
+"""Bounded msgpack unpacking of untrusted bytes, and the checks every decoder shares.
+
+The client decodes bytes it received over the network, so every decoder is
+*bounded*: the input size is checked first, msgpack is unpacked with explicit
+``max_*_len`` limits, every field is type- and range-checked, and any failure is
+raised as :class:`~walkstream.shared.errors.CodecError` naming what was being decoded.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import msgpack
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.shared.errors import CodecError
+
+__all__ = ["unpack_bounded"]
+
+# Bounds for untrusted input.  A building with a million vertices is already absurd;
+# the limits only have to stop a forged length from allocating gigabytes.
+_MAX_RECORD_BYTES = 1 << 22
+_MAX_STR = 1 << 12
+_INT64_MAX = 2**63 - 1
+
+U64 = NDArray[np.uint64]
+I64 = NDArray[np.int64]
+F64 = NDArray[np.float64]
+
+_DECODE_ERRORS = (ValueError, TypeError, KeyError, IndexError, OverflowError, ZeroDivisionError)
+
+
+# ---------------------------------------------------------------------------
+# bounded msgpack
+# ---------------------------------------------------------------------------
+
+
+def _nbytes(data: object, what: str) -> int:
+    if isinstance(data, bytes | bytearray):
+        return len(data)
+    if isinstance(data, memoryview):
+        return data.nbytes
+    raise CodecError(f"{what}: expected bytes, got {type(data).__name__}")
+
+
+def unpack_bounded(
+    data: bytes | bytearray | memoryview,
+    what: str,
+    *,
+    max_bytes: int = _MAX_RECORD_BYTES,
+    max_array_len: int = 1 << 16,
+    max_map_len: int = 0,
+    max_str_len: int = _MAX_STR,
+    max_bin_len: int = _MAX_RECORD_BYTES,
+) -> Any:
+    """Unpack one msgpack object from untrusted bytes with hard limits.
+
+    ``msgpack.unpackb`` has no ``max_buffer_size`` (only the streaming ``Unpacker``
+    has), so the buffer bound is checked here before unpacking; the per-container
+    limits go to msgpack.  Ext types (and timestamps) are always refused.
+
+    Parameters
+    ----------
+    data:
+        The bytes.
+    what:
+        What is being decoded, for error messages (``"building params"``).
+    max_bytes, max_array_len, max_map_len, max_str_len, max_bin_len:
+        Limits; exceeding any raises :class:`CodecError`.
+
+    Raises
+    ------
+    CodecError
+        The bytes are too long, truncated, not msgpack, exceed a limit, or have
+        trailing bytes.
+    """
+    n = _nbytes(data, what)
+    if n == 0:
+        raise CodecError(f"{what}: no bytes")
+    if n > max_bytes:
+        raise CodecError(f"{what}: {n} bytes, more than the limit of {max_bytes}")
+    try:
+        return msgpack.unpackb(
+            data,
+            raw=False,
+            use_list=True,
+            strict_map_key=True,
+            max_array_len=max_array_len,
+            max_map_len=max_map_len,
+            max_str_len=max_str_len,
+            max_bin_len=max_bin_len,
+            max_ext_len=0,
+        )
+    except msgpack.ExtraData as exc:
+        raise CodecError(f"{what}: trailing bytes after the msgpack object") from exc
+    except (ValueError, TypeError, OverflowError, RecursionError, msgpack.UnpackException) as exc:
+        detail = str(exc) or type(exc).__name__
+        raise CodecError(f"{what}: not valid msgpack ({detail})") from exc
+
+
+def _is_int(x: object) -> bool:
+    # bool is an int subclass; msgpack true/false must not pass as 1/0
+    return type(x) is int
+
+
+def _int(x: object, what: str, field: str, lo: int | None = None, hi: int | None = None) -> int:
+    if not _is_int(x):
+        raise CodecError(f"{what}: {field}: expected an integer, got {type(x).__name__}")
+    assert isinstance(x, int)
+    if lo is not None and x < lo:
+        raise CodecError(f"{what}: {field}: expected >= {lo}, got {x}")
+    if hi is not None and x > hi:
+        raise CodecError(f"{what}: {field}: expected <= {hi}, got {x}")
+    return x
