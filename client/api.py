@@ -27,13 +27,21 @@ from typing import Any
 
 import httpx
 import msgpack
-import numpy as np
-from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
-from walkstream.shared.codec import unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.wire import (
+    MSGPACK,
+    CellRecord,
+    Manifest,
+    ObjectFrame,
+    decode_cell,
+    decode_frame,
+    decode_locate,
+    decode_manifest,
+    decode_scene_list,
+)
 
 __all__ = [
     "Manifest",
@@ -43,10 +51,7 @@ __all__ = [
     "MSGPACK",
 ]
 
-MSGPACK = "application/msgpack"
 
-_MAX_MANIFEST = 4 << 20
-_MAX_CELL = 8 << 20
 _MAX_FRAME = 32 << 20  # one object frame (an LOD2 mesh of a large block fits)
 
 
@@ -54,57 +59,10 @@ _MAX_FRAME = 32 << 20  # one object frame (an LOD2 mesh of a large block fits)
 
 
 
-@dataclass(frozen=True)
-class Manifest:
-    """What the client needs to start walking a scene (see the server's manifest)."""
-
-    name: str
-    version: str
-    crs: str
-    origin: tuple[float, float]
-    bounds: tuple[float, ...]
-    features: tuple[str, ...]
-    grammar_id: str
-    grammar_text: str
-    paths: tuple[str, ...]
-    objects: int
-    cells: int
-    max_ids: int
-    etag: str | None = None
-    body: bytes = field(default=b"", repr=False)
-    """The manifest as received (kept for the disk cache)."""
 
 
-@dataclass(frozen=True)
-class CellRecord:
-    """A view cell as the client uses it."""
-
-    id: int
-    kind: str
-    boundary: NDArray[np.float64]
-    """(n, 2) convex outline, scene-local metres."""
-    zmin: float
-    zmax: float
-    neighbours: dict[int, NDArray[np.float64]]
-    """Neighbour id -> its (m, 2) outline."""
-    pvs: NDArray[np.int64]
-    ach: NDArray[np.float64]
-    nbytes: int = 0
-    etag: str | None = None
-    body: bytes = field(default=b"", repr=False)
-    """The record as received (kept for the disk cache)."""
 
 
-@dataclass(frozen=True)
-class ObjectFrame:
-    """One object of a stream: its id, kind and payload (params, or an encoded mesh)."""
-
-    id: int
-    kind: str
-    payload: bytes
-    form: str
-    nbytes: int
-    """Bytes of the frame on the wire (body only)."""
 
 
 @dataclass
@@ -141,91 +99,10 @@ def _req_error(what: str, r: httpx.Response) -> ApiError:
     return ApiError(f"{what}: HTTP {r.status_code} {detail}".rstrip(), r.status_code)
 
 
-def _floats(x: Any, what: str, shape_cols: int | None = None) -> NDArray[np.float64]:
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise CodecError(f"{what}: expected numbers") from exc
-    if not np.all(np.isfinite(a)):
-        raise CodecError(f"{what}: non-finite values")
-    if shape_cols is not None and (a.ndim != 2 or a.shape[1] != shape_cols or len(a) < 3):
-        raise CodecError(f"{what}: expected an (n >= 3, {shape_cols}) array, got shape {a.shape}")
-    return a
 
 
-def decode_cell(body: bytes, what: str, etag: str | None = None) -> CellRecord:
-    """Decode and check a cell record body (msgpack)."""
-    obj = unpack_bounded(
-        body, what, max_bytes=_MAX_CELL, max_array_len=1 << 20, max_map_len=16, max_bin_len=0
-    )
-    if not isinstance(obj, dict):
-        raise CodecError(f"{what}: expected a map")
-    try:
-        cid = obj["id"]
-        if type(cid) is not int:
-            raise CodecError(f"{what}: id is not an integer")
-        boundary = _floats(obj["boundary"], f"{what}: boundary", 2)
-        neighbours: dict[int, NDArray[np.float64]] = {}
-        for k, n in enumerate(obj["neighbours"]):
-            if not isinstance(n, dict) or type(n.get("id")) is not int:
-                raise CodecError(f"{what}: neighbours[{k}] is not {{id, boundary}}")
-            neighbours[n["id"]] = _floats(n["boundary"], f"{what}: neighbours[{k}]", 2)
-        pvs_list = obj["pvs"]
-        if not isinstance(pvs_list, list) or any(type(i) is not int for i in pvs_list):
-            raise CodecError(f"{what}: pvs is not a list of integers")
-        pvs = np.asarray(pvs_list, dtype=np.int64).reshape(-1)
-        ach = _floats(obj["ach"], f"{what}: ach").reshape(-1)
-        if len(ach) != len(pvs):
-            raise CodecError(f"{what}: {len(pvs)} pvs ids but {len(ach)} ach values")
-        if np.any(ach < 0):
-            raise CodecError(f"{what}: negative ach")
-        kind = obj.get("kind", "")
-        return CellRecord(
-            id=cid,
-            kind=str(kind),
-            boundary=boundary,
-            zmin=float(obj["zmin"]),
-            zmax=float(obj["zmax"]),
-            neighbours=neighbours,
-            pvs=pvs,
-            ach=ach,
-            nbytes=len(body),
-            etag=etag,
-            body=bytes(body),
-        )
-    except KeyError as exc:
-        raise CodecError(f"{what}: missing field {exc}") from exc
-    except (TypeError, ValueError) as exc:
-        raise CodecError(f"{what}: {exc}") from exc
 
 
-def decode_manifest(body: bytes, what: str, etag: str | None = None) -> Manifest:
-    """Decode and check a manifest body (msgpack)."""
-    m = unpack_bounded(
-        body, what, max_bytes=_MAX_MANIFEST, max_array_len=1 << 16, max_map_len=64, max_bin_len=0
-    )
-    if not isinstance(m, dict):
-        raise CodecError(f"{what}: expected a map")
-    try:
-        grammar = m["grammar"]
-        return Manifest(
-            name=str(m["name"]),
-            version=str(m["version"]),
-            crs=str(m["crs"]),
-            origin=(float(m["origin"][0]), float(m["origin"][1])),
-            bounds=tuple(float(v) for v in m["bounds"]),
-            features=tuple(str(f) for f in m["features"]),
-            grammar_id=str(grammar["id"]),
-            grammar_text=str(grammar["text"]),
-            paths=tuple(str(p) for p in m["paths"]),
-            objects=int(m["objects"]),
-            cells=int(m["cells"]),
-            max_ids=max(1, int(m["limits"]["objects_per_request"])),
-            etag=etag,
-            body=bytes(body),
-        )
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
-        raise CodecError(f"{what}: bad or missing field ({exc})") from exc
 
 
 class SceneClient:
@@ -324,13 +201,9 @@ class SceneClient:
         if self.scene is not None:
             return self.scene
 
-        def dec(r: httpx.Response) -> list[str]:
-            obj = unpack_bounded(r.content, "scene list", max_array_len=1 << 12, max_map_len=8)
-            if not isinstance(obj, list) or not all(isinstance(s, dict) for s in obj):
-                raise CodecError("scene list: expected a list of {name, version}")
-            return sorted(str(s["name"]) for s in obj)
-
-        _, names = await self._get_decoded("/v1/scenes", "scene list", dec)
+        _, names = await self._get_decoded(
+            "/v1/scenes", "scene list", lambda r: decode_scene_list(r.content)
+        )
         if not names:
             raise ApiError("the server serves no scene")
         self.scene = names[0]
@@ -363,17 +236,8 @@ class SceneClient:
         """The id of the cell containing ``(x, y)``, or ``None`` outside every cell."""
         what = f"locate ({x:.2f}, {y:.2f})"
 
-        def dec(r: httpx.Response) -> int | None:
-            obj = unpack_bounded(r.content, what, max_map_len=4, max_bin_len=0)
-            if not isinstance(obj, dict) or "cell" not in obj:
-                raise CodecError(f"{what}: expected {{cell}}")
-            c = obj["cell"]
-            if c is not None and type(c) is not int:
-                raise CodecError(f"{what}: cell is not an integer")
-            return c
-
         url = self._url("/locate") + f"?x={x!r}&y={y!r}"
-        _, cid = await self._get_decoded(url, what, dec)
+        _, cid = await self._get_decoded(url, what, lambda r: decode_locate(r.content, what))
         return cid
 
     async def cell(self, cid: int, etag: str | None = None) -> CellRecord | None:
@@ -472,12 +336,7 @@ class SceneClient:
     ) -> ObjectFrame:
         if k >= len(ids):
             raise StreamCut(f"{what}: more objects than asked", k)
-        key = "params" if form == "params" else "mesh"
-        if (
-            not isinstance(obj, dict)
-            or obj.get("id") != ids[k]
-            or not isinstance(obj.get("kind"), str)
-            or not isinstance(obj.get(key), bytes)
-        ):
-            raise StreamCut(f"{what}: object {k} is not {{id: {ids[k]}, kind, {key}}}", k)
-        return ObjectFrame(ids[k], obj["kind"], obj[key], form, nbytes)
+        try:
+            return decode_frame(obj, ids[k], form, nbytes, f"{what}: object {k}")
+        except CodecError as exc:
+            raise StreamCut(str(exc), k) from exc

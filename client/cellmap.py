@@ -13,26 +13,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["inside_convex", "CellMap"]
+from walkstream.shared.cells import INSIDE_TOL, inside_convex
 
-_EPS = 1e-7
+__all__ = ["CellMap"]
 
 
-def inside_convex(poly: NDArray[np.float64], pts: ArrayLike) -> NDArray[np.bool_]:
-    """Whether each point lies in the convex polygon ``poly`` (boundary included).
 
-    Works for either orientation.  ``pts`` is (m, 2); returns (m,) bool.
-    """
-    p = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
-    a = poly
-    b = np.roll(poly, -1, axis=0)
-    e = b - a  # (n, 2)
-    # cross of every edge with every (point - edge start): (m, n)
-    cr = e[None, :, 0] * (p[:, None, 1] - a[None, :, 1]) - e[None, :, 1] * (
-        p[:, None, 0] - a[None, :, 0]
-    )
-    scale = _EPS * max(1.0, float(np.abs(poly).max()))
-    return np.all(cr >= -scale, axis=1) | np.all(cr <= scale, axis=1)
 
 
 class CellMap:
@@ -77,7 +63,7 @@ class CellMap:
                 e[k, :n] = np.roll(poly, -1, axis=0) - poly
                 # padding edges repeat the first vertex with a zero edge: always "on" it
                 a[k, n:] = poly[0]
-                scale[k] = _EPS * max(1.0, float(np.abs(poly).max()))
+                scale[k] = INSIDE_TOL * max(1.0, float(np.abs(poly).max()))
             self._stack = (ids, a, e, scale)
         return self._stack
 

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.allocate import allocate_ach, allocate_distance, frustum_cull
-from walkstream.client.api import Manifest, SceneClient, decode_manifest
+from walkstream.client.api import SceneClient
 from walkstream.client.budget import BudgetController
 from walkstream.client.cache import Cache, DiskCache
 from walkstream.client.clock import Clock, RealClock, SimClock
@@ -46,6 +46,7 @@ from walkstream.shared.camera import look_at, perspective
 from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.wire import Manifest, decode_manifest
 
 __all__ = ["ReplayConfig", "ReplayResult", "run_replay", "replay"]
 

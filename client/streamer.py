@@ -34,7 +34,7 @@ import msgpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.client.api import CellRecord, ObjectFrame, SceneClient, decode_cell
+from walkstream.client.api import SceneClient
 from walkstream.client.cache import Cache, DiskCache
 from walkstream.client.cellmap import CellMap
 from walkstream.client.clock import Clock
@@ -42,6 +42,7 @@ from walkstream.client.predict import MotionPredictor
 from walkstream.client.rewrite import ObjectGeometry, RewritePool, geometry_of
 from walkstream.shared.codec import decode_mesh, decode_object, unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
+from walkstream.shared.wire import CellRecord, ObjectFrame, decode_cell
 
 __all__ = ["StreamerConfig", "Streamer"]
 

@@ -23,7 +23,7 @@ range (eye heights above the flat ground).  Cell ids are the cells' positions in
 returned list; they are deterministic: cells are ordered by kind (crossroad, street,
 square, grid) and then by centroid (y, then x, rounded to a millimetre).
 
-:class:`CellLocator` maps viewer positions to cell ids; :func:`viewpoints` picks a
+:func:`cell_locator` maps viewer positions to cell ids; :func:`viewpoints` picks a
 few start positions spread over the scene.
 """
 
@@ -35,19 +35,18 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from walkstream.server.sources.scene import SourceScene
+from walkstream.shared.cells import CELL_KINDS, CellLocator, outline_polygons
 from walkstream.shared.errors import InputError
-from walkstream.shared.records import readonly
+from walkstream.shared.records import Viewpoint, readonly
 
 __all__ = [
-    "CELL_KINDS",
-    "CellLocator",
-    "LOCATE_TOL",
     "MIN_SHARED_EDGE",
     "ViewCell",
     "Viewpoint",
+    "cell_locator",
     "cell_polygons",
     "grid_cells",
     "make_cells",
@@ -58,11 +57,9 @@ __all__ = [
 F64 = NDArray[np.float64]
 
 #: Cell kinds in id order.
-CELL_KINDS = ("crossroad", "street", "square", "grid")
 #: Two cells are neighbours when their boundaries share more than this many metres.
 MIN_SHARED_EDGE = 0.5
 #: Points this close (metres) to a cell count as inside it.
-LOCATE_TOL = 1e-6
 
 # Source polygons overlapping by less than this (m^2) are rounding noise, not overlap.
 _OVERLAP_EPS = 1e-6
@@ -130,21 +127,6 @@ class ViewCell:
         return _signed_area(self.polygon)
 
 
-@dataclass(frozen=True, slots=True)
-class Viewpoint:
-    """A start position for a walkthrough.
-
-    ``x, y, z`` in scene-local metres (``z`` = eye height above the ground); ``yaw`` in
-    radians, 0 looking east (+x), counter-clockwise; ``cell`` is the id of the cell the
-    position lies in.
-    """
-
-    name: str
-    x: float
-    y: float
-    z: float
-    yaw: float
-    cell: int
 
 
 # --------------------------------------------------------------------------- public
@@ -340,60 +322,14 @@ def make_cells(
 
 def cell_polygons(cells: Sequence[ViewCell]) -> NDArray[np.object_]:
     """The cells' outlines as a ``(n,)`` array of shapely Polygons (index = position)."""
-    return shapely.polygons([c.polygon for c in cells]) if cells else np.empty(0, object)
+    return outline_polygons([c.polygon for c in cells])
 
 
-class CellLocator:
-    """Find the cell containing a point.
+def cell_locator(cells: Sequence[ViewCell]) -> CellLocator:
+    """A :class:`~walkstream.shared.cells.CellLocator` over the cells (ids as given)."""
+    return CellLocator([c.id for c in cells], [c.polygon for c in cells])
 
-    Built once from the cells (a shapely STRtree); queries are vectorised.  A point
-    within :data:`LOCATE_TOL` of several cells (e.g. exactly on a shared edge) gets the
-    lowest of their ids, so the answer is deterministic.
 
-    Parameters
-    ----------
-    cells:
-        The cells; ids need not be their positions.
-    """
-
-    def __init__(self, cells: Sequence[ViewCell]) -> None:
-        self._ids = np.array([c.id for c in cells], dtype=np.int64)
-        self._polys = cell_polygons(cells)
-        self._tree = shapely.STRtree(self._polys)
-
-    def __len__(self) -> int:
-        return len(self._ids)
-
-    def locate(self, x: float, y: float) -> int | None:
-        """Id of the cell containing ``(x, y)``, or ``None`` outside every cell."""
-        cid = int(self.locate_many(np.array([[x, y]], dtype=np.float64))[0])
-        return None if cid < 0 else cid
-
-    def locate_many(self, xy: ArrayLike) -> NDArray[np.int64]:
-        """Cell ids of many points.
-
-        Parameters
-        ----------
-        xy:
-            ``(k, 2)`` points, scene-local metres.
-
-        Returns
-        -------
-        numpy.ndarray
-            ``(k,) int64`` cell ids, ``-1`` for points outside every cell.
-        """
-        pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        out = np.full(len(pts), -1, np.int64)
-        if len(pts) == 0 or len(self._ids) == 0:
-            return out
-        p, t = self._tree.query(shapely.points(pts), predicate="dwithin", distance=LOCATE_TOL)
-        if len(p):
-            big = np.iinfo(np.int64).max
-            best = np.full(len(pts), big, np.int64)
-            np.minimum.at(best, p, self._ids[t])
-            hit = best != big
-            out[hit] = best[hit]
-        return out
 
 
 def viewpoints(

@@ -5,7 +5,7 @@ that needs it, so that answering costs about as much as serving a static file:
 
 * each database is opened read-only with :class:`server.store.SceneReader` (which
   validates it) and every cell is read once, which builds the
-  :class:`server.cells.CellLocator`, keeps every cell boundary (neighbour records
+  :class:`~walkstream.shared.cells.CellLocator`, keeps every cell boundary (neighbour records
   need them) and decodes every PVS, so a damaged file stops the start;
 * the manifest is encoded at start-up in both representations (msgpack and JSON);
 * cell records and recorded paths are encoded on first use and kept in a
@@ -37,21 +37,29 @@ from functools import lru_cache
 from typing import Any, Literal, cast
 
 import msgpack
+import numpy as np
 from fastapi import Request
+from numpy.typing import NDArray
 
-from walkstream.server.cells import CELL_KINDS as LOCATOR_KINDS
-from walkstream.server.cells import CellLocator, ViewCell
 from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.buildings import build_lod
+from walkstream.shared.cells import CellLocator
 from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StoreError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
 from walkstream.shared.records import BuildingParams
 from walkstream.shared.streets import build_street
+from walkstream.shared.wire import (
+    JSON,
+    MSGPACK,
+    MSGPACK_TYPES,
+    CellRecord,
+    Manifest,
+    ObjectFrame,
+    locate_answer,
+)
 
 __all__ = [
-    "MSGPACK",
-    "JSON",
     "MAX_IDS",
     "IMMUTABLE",
     "OBJECT_FORMS",
@@ -70,12 +78,6 @@ __all__ = [
     "get_rep",
 ]
 
-MSGPACK = "application/msgpack"
-"""Media type of every msgpack response (the default representation)."""
-JSON = "application/json"
-"""Media type of the JSON representation and of every error."""
-MSGPACK_TYPES = frozenset({MSGPACK, "application/x-msgpack", "application/vnd.msgpack"})
-"""Media types accepted as msgpack in ``Accept`` and ``Content-Type``."""
 
 MAX_IDS = 1000
 """Most object ids one ``POST .../objects`` may ask for (more: 413)."""
@@ -308,43 +310,27 @@ class Scene:
         """Object id -> kind, for every object of the scene."""
         self.path_names = frozenset(path_names)
         self.cell_kinds: dict[int, str] = {c.id: c.kind for c in cells}
-        # boundaries as nested lists, encoded into every neighbour entry of a cell record
-        self.boundaries: dict[int, list[list[float]]] = {c.id: c.boundary.tolist() for c in cells}
-        self.locator = CellLocator(
-            [
-                # the locator only uses id and polygon; a kind it does not know
-                # (e.g. "room") is given as "grid" just to pass ViewCell's check
-                ViewCell(
-                    c.id,
-                    c.kind if c.kind in LOCATOR_KINDS else "grid",
-                    c.boundary,
-                    c.zmin,
-                    c.zmax,
-                    (),
-                )
-                for c in cells
-            ]
-        )
+        # every outline, for the neighbour entries of cell records
+        self.boundaries: dict[int, NDArray[np.float64]] = {c.id: c.boundary for c in cells}
+        self.locator = CellLocator([c.id for c in cells], [c.boundary for c in cells])
         b = reader.bounds()
         vps = reader.viewpoints()
-        manifest = {
-            "name": meta.name,
-            "version": meta.version,
-            "schema_version": meta.schema_version,
-            "crs": meta.crs,
-            "origin": list(meta.origin),
-            "bounds": list(b),
-            "features": list(meta.features),
-            "grammar": {"id": meta.grammar_version, "text": meta.grammar_text},
-            "viewpoints": [
-                {"name": v.name, "x": v.x, "y": v.y, "z": v.z, "yaw": v.yaw, "cell": v.cell}
-                for v in vps
-            ],
-            "paths": sorted(path_names),
-            "objects": len(kinds),
-            "cells": len(cells),
-            "limits": {"objects_per_request": MAX_IDS},
-        }
+        manifest = Manifest(
+            name=meta.name,
+            version=meta.version,
+            schema_version=meta.schema_version,
+            crs=meta.crs,
+            origin=meta.origin,
+            bounds=tuple(b),
+            features=tuple(meta.features),
+            grammar_id=meta.grammar_version,
+            grammar_text=meta.grammar_text,
+            viewpoints=tuple(vps),
+            paths=tuple(sorted(path_names)),
+            objects=len(kinds),
+            cells=len(cells),
+            max_ids=MAX_IDS,
+        ).to_wire()
         self.manifest: dict[Rep, Encoded] = {
             rep: encode(manifest, rep, self.version, "manifest") for rep in ("msgpack", "json")
         }
@@ -407,20 +393,19 @@ class Scene:
         enc = self.cached_cell(cid, rep)
         if enc is None:
             c = self.reader.cell(cid)
-            record = {
-                "id": c.id,
-                "kind": c.kind,
-                "boundary": self.boundaries[c.id],
-                "zmin": c.zmin,
-                "zmax": c.zmax,
-                "neighbours": [
-                    {"id": n, "boundary": self.boundaries[n]}
-                    for n in c.neighbours.tolist()
-                    if n in self.boundaries
-                ],
-                "pvs": c.pvs.tolist(),
-                "ach": c.ach.tolist(),
-            }
+            record = CellRecord(
+                id=c.id,
+                kind=c.kind,
+                boundary=c.boundary,
+                zmin=c.zmin,
+                zmax=c.zmax,
+                # a neighbour the database has no cell for is left out: nobody walks into it
+                neighbours={
+                    n: self.boundaries[n] for n in c.neighbours.tolist() if n in self.boundaries
+                },
+                pvs=c.pvs,
+                ach=c.ach,
+            ).to_wire()
             enc = encode(record, rep, self.version, f"cell:{cid}")
             self._bodies.put(("cell", cid, rep), enc, len(enc.content))
         return enc
@@ -429,11 +414,8 @@ class Scene:
 
     def locate(self, x: float, y: float, rep: Rep) -> Encoded:
         """``{cell: id}`` for the cell containing ``(x, y)``, or ``{cell: null, reason}``."""
-        cid = self.locator.locate(x, y)
-        body: dict[str, Any] = (
-            {"cell": None, "reason": "outside every cell"} if cid is None else {"cell": cid}
-        )
-        return encode(body, rep, self.version, f"locate:{x!r}:{y!r}")
+        answer = locate_answer(self.locator.locate(x, y))
+        return encode(answer, rep, self.version, f"locate:{x!r}:{y!r}")
 
     # -- paths ---------------------------------------------------------------
 
@@ -511,13 +493,9 @@ class Scene:
         params = self.reader.object_params(ids)
         out: dict[int, bytes] = {}
         for oid, blob in params.items():
-            if form == "params":
-                frame = dump_msgpack({"id": oid, "kind": self.kinds[oid], "params": blob})
-                self._frames.put(oid, frame, len(frame))
-            else:
-                mesh = self._lod2_mesh(oid, blob)
-                frame = dump_msgpack({"id": oid, "kind": self.kinds[oid], "mesh": mesh})
-                self._frames.put((form, oid), frame, len(frame))
+            payload = blob if form == "params" else self._lod2_mesh(oid, blob)
+            frame = dump_msgpack(ObjectFrame(oid, self.kinds[oid], payload, form).to_wire())
+            self._frames.put(oid if form == "params" else (form, oid), frame, len(frame))
             out[oid] = frame
         missing = [i for i in ids if i not in out]
         if missing:

@@ -64,7 +64,7 @@ import pyproj
 import shapely
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.server.cells import CellLocator, ViewCell, cell_polygons
+from walkstream.server.cells import ViewCell, cell_locator, cell_polygons
 from walkstream.server.sources.geojson import _as_points, _parse_crs, read_json_file
 from walkstream.server.store import CellInfo, SceneReader, write_path
 from walkstream.shared.errors import InputError, RouteError, SourceError, StoreError
@@ -230,7 +230,7 @@ class CellGraph:
         self.polys = cell_polygons(self.cells)
         self.centroids = np.array([c.centroid for c in self.cells], dtype=np.float64)
         self.areas = np.array([c.area for c in self.cells], dtype=np.float64)
-        self.locator = CellLocator(self.cells)
+        self.locator = cell_locator(self.cells)
         self._tree = shapely.STRtree(self.polys)
         self._portals()
 

@@ -57,10 +57,7 @@ from starlette.concurrency import run_in_threadpool
 
 from walkstream.server.deps import (
     IMMUTABLE,
-    JSON,
     MAX_IDS,
-    MSGPACK,
-    MSGPACK_TYPES,
     OBJECT_FORMS,
     Encoded,
     Form,
@@ -75,6 +72,7 @@ from walkstream.server.deps import (
 )
 from walkstream.shared.codec import unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError
+from walkstream.shared.wire import JSON, MSGPACK, MSGPACK_TYPES
 
 if TYPE_CHECKING:
     from walkstream.server.app import Metrics

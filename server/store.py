@@ -55,6 +55,7 @@ import msgpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.cells import CELL_KINDS
 from walkstream.shared.codec import (
     decode_building,
     decode_ids,
@@ -69,7 +70,7 @@ from walkstream.shared.codec import (
     pvs_size,
 )
 from walkstream.shared.errors import CodecError, NotFoundError, StoreError
-from walkstream.shared.records import BuildingParams, StreetParams
+from walkstream.shared.records import BuildingParams, StreetParams, Viewpoint
 
 try:  # advisory locks between processes; POSIX only
     import fcntl
@@ -79,7 +80,6 @@ except ImportError:  # pragma: no cover - Windows
 __all__ = [
     "SCHEMA_VERSION",
     "APPLICATION_ID",
-    "CELL_KINDS",
     "OBJECT_KINDS",
     "OPTIONAL_TABLES",
     "SceneMeta",
@@ -99,7 +99,6 @@ SCHEMA_VERSION = 1
 APPLICATION_ID = 0x57534442  # "WSDB"
 """``PRAGMA application_id`` of every walkstream scene database."""
 
-CELL_KINDS = ("street", "crossroad", "square", "grid", "room")
 OBJECT_KINDS = ("building", "street", "crossroad", "square")
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -278,16 +277,6 @@ class CellInfo:
     ach: NDArray[np.float64]
 
 
-@dataclass(frozen=True, slots=True)
-class Viewpoint:
-    """A named start position: local metres, ``yaw`` in radians, ``cell`` (None: outside every cell)."""
-
-    name: str
-    x: float
-    y: float
-    z: float
-    yaw: float
-    cell: int | None
 
 
 # ---------------------------------------------------------------------------

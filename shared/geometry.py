@@ -12,8 +12,18 @@ __all__ = ["signed_area", "orient_rings", "triangulate_rings", "ring_edges"]
 
 
 def signed_area(ring: NDArray[np.float64]) -> float:
-    """Shoelace area of a ring ``(n, 2)``; positive when counter-clockwise."""
-    x, y = ring[:, 0], ring[:, 1]
+    """Shoelace area of a ring ``(n, 2)``; positive when counter-clockwise.
+
+    The ring may repeat its first vertex at the end or not.  Coordinates are taken
+    relative to the first vertex, so that rings millions of metres from the CRS
+    origin do not lose their area to cancellation.
+
+    >>> signed_area(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]]))
+    2.0
+    >>> signed_area(np.array([[6e6, 0.0], [6e6, 1.0], [6e6 + 2.0, 1.0], [6e6 + 2.0, 0.0]]))
+    -2.0
+    """
+    x, y = (np.asarray(ring, dtype=np.float64) - ring[0]).T
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from walkstream.shared.errors import InputError
 
-__all__ = ["BuildingParams", "StreetParams", "Mesh", "readonly"]
+__all__ = ["BuildingParams", "StreetParams", "Mesh", "Viewpoint", "readonly"]
 
 F64 = NDArray[np.float64]
 
@@ -193,3 +193,20 @@ class Mesh:
             np.concatenate([m.indices + np.uint32(o) for m, o in zip(meshes, offsets, strict=True)]),
             np.concatenate([m.materials for m in meshes]),
         )
+
+
+@dataclass(frozen=True, slots=True)
+class Viewpoint:
+    """A named start position for a walkthrough.
+
+    ``x, y, z`` in scene-local metres (``z`` = eye height above the ground); ``yaw`` in
+    radians, 0 looking east (+x), counter-clockwise; ``cell`` is the id of the cell the
+    position lies in (``None``: outside every cell).
+    """
+
+    name: str
+    x: float
+    y: float
+    z: float
+    yaw: float
+    cell: int | None

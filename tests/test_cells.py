@@ -12,8 +12,8 @@ import pytest
 import shapely
 
 from walkstream.server.cells import (
-    CellLocator,
     ViewCell,
+    cell_locator,
     cell_polygons,
     grid_cells,
     make_cells,
@@ -300,7 +300,7 @@ def test_vienna_grid_in_a_2km_bbox() -> None:
     assert 1000 <= len(cells) <= 2500  # 50 x 50 squares, the fully built blocks dropped
     assert_symmetric(cells)
     vps = viewpoints(cells, scene)
-    loc = CellLocator(cells)
+    loc = cell_locator(cells)
     for v in vps:
         assert loc.locate(v.x, v.y) == v.cell
 
@@ -309,7 +309,7 @@ def test_vienna_grid_in_a_2km_bbox() -> None:
 
 
 def test_locate_inside_boundary_outside(grid4: list[ViewCell]) -> None:
-    loc = CellLocator(grid4)
+    loc = cell_locator(grid4)
     assert loc.locate(60.0, 20.0) == 0
     assert loc.locate(100.0, 60.0) == 3
     # on the edge between cells 0 and 2, and on the corner of cells 0, 1, 2: lowest id
@@ -326,7 +326,7 @@ def test_locate_inside_boundary_outside(grid4: list[ViewCell]) -> None:
 def test_locate_many_agrees_with_locate(grid4: list[ViewCell], cells350: list[ViewCell]) -> None:
     rng = np.random.default_rng(7)
     for cells, lo, hi in ((grid4, -10, 130), (cells350, -180, 180)):
-        loc = CellLocator(cells)
+        loc = cell_locator(cells)
         pts = rng.uniform(lo, hi, size=(400, 2))
         # add the cells' vertices: points shared by several cells
         pts = np.concatenate([pts, np.concatenate([c.polygon for c in cells])[:200]])
@@ -341,11 +341,11 @@ def test_locate_many_agrees_with_locate(grid4: list[ViewCell], cells350: list[Vi
         expect = np.where(within.any(axis=1), np.argmax(within, axis=1), -1)
         np.testing.assert_array_equal(many, expect)
         assert (many >= 0).any() and (many == -1).any()
-    assert CellLocator(grid4).locate_many(np.zeros((0, 2))).shape == (0,)
+    assert cell_locator(grid4).locate_many(np.zeros((0, 2))).shape == (0,)
 
 
 def test_locate_street_cell_boundary(cells350: list[ViewCell]) -> None:
-    loc = CellLocator(cells350)
+    loc = cell_locator(cells350)
     c = next(c for c in cells350 if c.kind == "crossroad" and len(c.neighbours) >= 4)
     n = c.neighbours[0]
     shared = shapely.intersection(
@@ -364,7 +364,7 @@ def test_viewpoints_of_street_cells(city350: SourceScene, cells350: list[ViewCel
     vps = viewpoints(cells350, city350, count=4)
     assert len(vps) == 4
     assert len({v.name for v in vps}) == 4
-    loc = CellLocator(cells350)
+    loc = cell_locator(cells350)
     footprints = [shapely.Polygon(b.rings[0], b.rings[1:]) for b in city350.buildings]
     pts = np.array([(v.x, v.y) for v in vps])
     for v in vps:
@@ -384,7 +384,7 @@ def test_viewpoints_of_street_cells(city350: SourceScene, cells350: list[ViewCel
 def test_viewpoints_of_grid_cells(two_buildings: SourceScene, grid4: list[ViewCell]) -> None:
     vps = viewpoints(grid4, two_buildings, count=10)
     assert 1 <= len(vps) <= len(grid4)
-    loc = CellLocator(grid4)
+    loc = cell_locator(grid4)
     for v in vps:
         assert loc.locate(v.x, v.y) == v.cell
         assert not any(

@@ -17,7 +17,7 @@ from scenes import PATH_NAME, build_city_db
 
 import walkstream.server.store
 from walkstream.cmd_path import add_path_parser
-from walkstream.server.cells import CellLocator, ViewCell, make_cells
+from walkstream.server.cells import ViewCell, cell_locator, make_cells
 from walkstream.server.pathgen import (
     CLIP_GAP,
     CellGraph,
@@ -69,12 +69,12 @@ def cells_along(cells: list[ViewCell], xy: np.ndarray, step: float = 0.5) -> np.
     for a, b in zip(xy[:-1], xy[1:], strict=True):
         n = max(1, math.ceil(float(np.hypot(*(b - a))) / step))
         pts.extend(a + (b - a) * np.arange(1, n + 1)[:, None] / n)
-    return CellLocator(cells).locate_many(np.array(pts))
+    return cell_locator(cells).locate_many(np.array(pts))
 
 
 def cells_of(cells: list[ViewCell], p: RecordedPath, n: int = 4000) -> np.ndarray:
     xyz, _, _ = p.sample(np.linspace(0.0, p.duration, n))
-    return CellLocator(cells).locate_many(xyz[:, :2])
+    return cell_locator(cells).locate_many(xyz[:, :2])
 
 
 def to_lonlat(scene: SourceScene, xy: np.ndarray) -> list[list[float]]:
@@ -222,7 +222,7 @@ def test_sm_turns_back_then_crosses_a_square_from_side_to_side() -> None:
     assert np.linalg.norm(before) > 20.0  # tens of metres out, then back
     # then into a square and out on the other side
     xyz, _, _ = sm.sample(np.linspace(0, sm.duration, 4000))
-    ids = CellLocator(cells).locate_many(xyz[:, :2])
+    ids = cell_locator(cells).locate_many(xyz[:, :2])
     sq = np.flatnonzero([cells[i].kind == "square" for i in ids])
     assert len(sq) and sq[0] > np.flatnonzero(ids == ids[0]).max() - 1
     assert (np.diff(sq) == 1).all()  # one crossing
@@ -520,7 +520,7 @@ def test_vienna_walk_imports_into_the_baked_part_of_vienna(
     clipped, _, _ = import_path(db, "vienna", walk, 5.0, clip=True, replace=True)
     assert 3000.0 < clipped.length_m() < path.length_m()
     xyz, _, _ = clipped.sample([0.0, clipped.duration])
-    assert (CellLocator(cells).locate_many(xyz[:, :2]) >= 0).all()
+    assert (cell_locator(cells).locate_many(xyz[:, :2]) >= 0).all()
 
 
 # --------------------------------------------------------------------------- the CLI

@@ -7,10 +7,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from walkstream.client.api import decode_cell, decode_manifest
-from walkstream.client.cellmap import CellMap, inside_convex
+from walkstream.client.cellmap import CellMap
 from walkstream.client.predict import MotionPredictor
+from walkstream.shared.cells import inside_convex
 from walkstream.shared.errors import CodecError
+from walkstream.shared.wire import decode_cell, decode_manifest
 
 SQUARE_A = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
 SQUARE_B = np.array([[10.0, 0.0], [20.0, 0.0], [20.0, 10.0], [10.0, 10.0]])

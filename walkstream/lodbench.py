@@ -107,20 +107,10 @@ class BenchView:
 
 
 def _locator(reader: SceneReader) -> Any:
-    from walkstream.server.cells import CELL_KINDS, CellLocator, ViewCell
+    from walkstream.shared.cells import CellLocator
 
-    cells = [
-        ViewCell(
-            c.id,
-            c.kind if c.kind in CELL_KINDS else "grid",
-            c.boundary,
-            c.zmin,
-            c.zmax,
-            tuple(int(n) for n in c.neighbours),
-        )
-        for c in reader.cells()
-    ]
-    return CellLocator(cells)
+    cells = list(reader.cells())
+    return CellLocator([c.id for c in cells], [c.boundary for c in cells])
 
 
 def _path_views(reader: SceneReader, name: str, count: int) -> tuple[list[BenchView], str]:
