@@ -36,7 +36,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from walkstream.server.process import server_process
+from walkstream.server.service.process import server_process
 from walkstream.server.store import SceneReader
 
 __all__ = ["run_server_bench", "format_table", "main"]

@@ -18,7 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scenes import CityDb, build_city_db
 
-from walkstream.server.app import create_app
+from walkstream.server.service.main import create_app
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict
 from walkstream.server.sources.scene import SourceScene

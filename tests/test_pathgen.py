@@ -15,7 +15,7 @@ import pytest
 import shapely
 from scenes import PATH_NAME, build_city_db
 
-import walkstream.server.store
+import walkstream.server.store.edit
 from walkstream.cmd_path import add_path_parser
 from walkstream.server.cells import ViewCell, cell_locator, make_cells
 from walkstream.server.pathgen import (
@@ -436,7 +436,7 @@ def test_a_failed_write_leaves_the_file_intact(db: Path, monkeypatch: pytest.Mon
     def broken(conn: sqlite3.Connection) -> str:
         raise sqlite3.DatabaseError("disk I/O error")
 
-    monkeypatch.setattr(walkstream.server.store, "_content_version", broken)
+    monkeypatch.setattr(walkstream.server.store.edit, "_content_version", broken)
     with SceneReader.open(db) as r:
         start = next(iter(r.cells())).boundary.mean(axis=0)
     with pytest.raises(StoreError, match="cannot write path"):

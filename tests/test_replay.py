@@ -17,9 +17,9 @@ from scenes import build_city_db
 
 from walkstream.client.link import LinkProfile
 from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
-from walkstream.server.app import create_app
 from walkstream.server.pathgen import default_paths
-from walkstream.server.process import free_port, server_process
+from walkstream.server.service.main import create_app
+from walkstream.server.service.process import free_port, server_process
 from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.errors import InputError
 

@@ -29,9 +29,11 @@ from fastapi import FastAPI
 from liveserver import serve_in_thread
 from scenes import PATH_DATA, PATH_NAME, CityDb, build_city_db
 
-import walkstream.server.serve as serve_mod
-from walkstream.server.app import create_app
-from walkstream.server.deps import LRU, MAX_IDS, etag_matches, negotiate
+import walkstream.server.service.run as serve_mod
+from walkstream.server.service.http import etag_matches, negotiate
+from walkstream.server.service.lru import LRU
+from walkstream.server.service.main import create_app
+from walkstream.server.service.scenes import MAX_IDS
 from walkstream.shared.codec import decode_object
 from walkstream.shared.errors import StoreError
 from walkstream.shared.records import StreetParams
@@ -510,7 +512,7 @@ def test_serve_validates_before_starting(
 
     serve_mod.serve([city.path], workers=2)
     target, kw = calls.pop()
-    assert target == "walkstream.server.serve:app_from_env" and kw["factory"] and kw["workers"] == 2
+    assert target == "walkstream.server.service.run:app_from_env" and kw["factory"] and kw["workers"] == 2
     assert json.loads(os.environ[serve_mod.ENV_PATHS]) == [str(city.path.resolve())]
     worker_app = serve_mod.app_from_env()  # what each worker process builds
     worker_app.state.scenes.close()

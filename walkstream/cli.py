@@ -274,7 +274,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    from walkstream.server.serve import serve
+    from walkstream.server.service.run import serve
 
     serve(args.db, host=args.host, port=args.port, workers=args.workers)
     return 0
@@ -410,7 +410,7 @@ def _demo_replay(db: Path, report: Path, args: argparse.Namespace) -> int:
     from walkstream.client.link import LinkProfile
     from walkstream.client.replay import ReplayConfig
     from walkstream.cmd_replay import headline, replay_to_report
-    from walkstream.server.process import server_process
+    from walkstream.server.service.process import server_process
 
     config = ReplayConfig(
         link=LinkProfile(56_000.0, 56_000.0, 0.2),

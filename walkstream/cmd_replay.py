@@ -45,7 +45,7 @@ def transport_for(server: str) -> Iterator[tuple[Any, str]]:
         raise InputError(
             f"SERVER {server!r}: not an http(s):// URL and no such scene database file"
         )
-    from walkstream.server.app import create_app
+    from walkstream.server.service.main import create_app
 
     app = create_app([db])
     try:

@@ -18,29 +18,30 @@ that needs it, so that answering costs about as much as serving a static file:
   first use, in a worker thread, and kept in the same frame LRU under separate keys.
 
 A scene is immutable (a recorded path makes a *new* scene version in a new file), so
-nothing cached here ever needs invalidating; a restart serves the new version.
-"""
+nothing cached here ever needs invalidating; a restart serves the new version."""
 
 from __future__ import annotations
 
 import base64
-import hashlib
-import json
 import math
 import os
-import re
 import threading
-from collections import OrderedDict
-from collections.abc import Hashable, Iterable, Sequence
-from dataclasses import dataclass
-from functools import lru_cache
+from collections.abc import Iterable, Sequence
 from typing import Any, Literal, cast
 
-import msgpack
 import numpy as np
-from fastapi import Request
 from numpy.typing import NDArray
 
+from walkstream.server.service.http import (
+    Encoded,
+    Rep,
+    _digest,
+    dump_json,
+    dump_msgpack,
+    encode,
+    etag_for,
+)
+from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.cells import CellLocator
@@ -50,43 +51,18 @@ from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
 from walkstream.shared.records import BuildingParams
 from walkstream.shared.streets import build_street
 from walkstream.shared.wire import (
-    JSON,
     MSGPACK,
-    MSGPACK_TYPES,
     CellRecord,
     Manifest,
     ObjectFrame,
     locate_answer,
 )
 
-__all__ = [
-    "MAX_IDS",
-    "IMMUTABLE",
-    "OBJECT_FORMS",
-    "Rep",
-    "Form",
-    "Encoded",
-    "LRU",
-    "Scene",
-    "SceneRegistry",
-    "encode",
-    "etag_for",
-    "etag_matches",
-    "negotiate",
-    "get_registry",
-    "get_scene",
-    "get_rep",
-]
+__all__ = ["MAX_IDS", "Form", "OBJECT_FORMS", "Scene", "SceneRegistry"]
 
 
 MAX_IDS = 1000
 """Most object ids one ``POST .../objects`` may ask for (more: 413)."""
-
-IMMUTABLE = "public, max-age=31536000, immutable"
-"""Cache-Control of everything keyed by a scene version."""
-
-Rep = Literal["msgpack", "json"]
-"""A representation: msgpack (default) or JSON."""
 
 Form = Literal["params", "lod2"]
 """What an object frame carries: the stored parameters, or the rebuilt LOD2 mesh."""
@@ -94,179 +70,12 @@ Form = Literal["params", "lod2"]
 OBJECT_FORMS: tuple[Form, ...] = ("params", "lod2")
 """The forms ``POST .../objects?form=`` accepts; ``params`` is the default."""
 
-_MEDIA: dict[str, str] = {"msgpack": MSGPACK, "json": JSON}
-
-# an ETag's resource part is written as is when it is made of these, else hashed
-# (ETags may not hold spaces or quotes, and recorded path names may)
-_SAFE_TAG = re.compile(r"[A-Za-z0-9._:+-]{1,120}")
-
 # LRU budgets per scene: enough for every cell and object of a large city, small
 # enough that several scenes fit in one worker
 _BODY_CACHE_BYTES = 64 << 20
 _FRAME_CACHE_BYTES = 128 << 20
 # a recorded path larger than this is not decoded for the JSON representation
 _MAX_PATH_JSON_BYTES = 8 << 20
-
-
-
-
-# ---------------------------------------------------------------------------
-# representations, ETags
-# ---------------------------------------------------------------------------
-
-
-def negotiate(accept: str | None) -> Rep:
-    """The representation an ``Accept`` header asks for.
-
-    msgpack unless ``application/json`` has a higher quality than every msgpack
-    type; a missing header, ``*/*`` or types the service does not serve also give
-    msgpack (the default), never a 406.
-    """
-    if not accept:
-        return "msgpack"
-    # clients send few distinct headers, so parsing is cached; odd long ones are not,
-    # so that they cannot fill the cache with large strings
-    return _negotiate_cached(accept) if len(accept) <= 256 else _negotiate(accept)
-
-
-@lru_cache(maxsize=256)
-def _negotiate_cached(accept: str) -> Rep:
-    return _negotiate(accept)
-
-
-def _negotiate(accept: str) -> Rep:
-    q_json = q_msgpack = -1.0
-    for part in accept.split(","):
-        media, *params = part.split(";")
-        media = media.strip().lower()
-        q = 1.0
-        for p in params:
-            key, _, value = p.partition("=")
-            if key.strip().lower() == "q":
-                try:
-                    q = float(value.strip())
-                except ValueError:
-                    q = 0.0
-                if not math.isfinite(q):
-                    q = 0.0
-        if media == JSON:
-            q_json = max(q_json, q)
-        elif media in MSGPACK_TYPES:
-            q_msgpack = max(q_msgpack, q)
-    return "json" if q_json > 0 and q_json > q_msgpack else "msgpack"
-
-
-def etag_for(version: str, resource: str, rep: str) -> str:
-    """A strong ETag naming the scene version, the resource and the representation."""
-    tag = resource if _SAFE_TAG.fullmatch(resource) else "h" + _digest(resource.encode())
-    return f'"{version}-{tag}-{rep}"'
-
-
-def etag_matches(if_none_match: str | None, etag: str) -> bool:
-    """Whether an ``If-None-Match`` header matches ``etag`` (weak comparison, RFC 9110)."""
-    if not if_none_match:
-        return False
-    if if_none_match.strip() == "*":
-        return True
-    for t in if_none_match.split(","):
-        t = t.strip()
-        if t.startswith("W/"):
-            t = t[2:]
-        if t == etag:
-            return True
-    return False
-
-
-def _digest(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()[:20]
-
-
-def dump_json(obj: Any) -> bytes:
-    """Compact UTF-8 JSON; refuses NaN and infinities (they are not JSON)."""
-    return json.dumps(obj, separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode()
-
-
-def dump_msgpack(obj: Any) -> bytes:
-    """msgpack with ``bin`` for bytes and float64 for floats."""
-    data: bytes = msgpack.packb(obj, use_bin_type=True)
-    return data
-
-
-@dataclass(frozen=True, slots=True)
-class Encoded:
-    """A response body ready to send: bytes, media type and ETag."""
-
-    content: bytes
-    media_type: str
-    etag: str
-
-
-def encode(obj: Any, rep: Rep, version: str, resource: str) -> Encoded:
-    """Encode ``obj`` in representation ``rep`` with its ETag."""
-    content = dump_json(obj) if rep == "json" else dump_msgpack(obj)
-    return Encoded(content, _MEDIA[rep], etag_for(version, resource, rep))
-
-
-# ---------------------------------------------------------------------------
-# LRU
-# ---------------------------------------------------------------------------
-
-
-class LRU:
-    """A thread-safe least-recently-used map of byte strings bounded by total size.
-
-    Lookups happen on the event loop and fills from worker threads (after a
-    database read), hence the lock; it is held for dictionary operations only.
-    """
-
-    def __init__(self, max_bytes: int) -> None:
-        self._data: OrderedDict[Hashable, Any] = OrderedDict()
-        self._sizes: dict[Hashable, int] = {}
-        self._bytes = 0
-        self._max = max_bytes
-        self._lock = threading.Lock()
-
-    def __len__(self) -> int:
-        return len(self._data)
-
-    def get(self, key: Hashable) -> Any:
-        """The value under ``key`` (marked as recently used), or None."""
-        with self._lock:
-            value = self._data.get(key)
-            if value is not None:
-                self._data.move_to_end(key)
-            return value
-
-    def get_many(self, keys: Iterable[Hashable]) -> tuple[dict[Hashable, Any], list[Hashable]]:
-        """``(found, missing)`` for many keys under one lock; ``missing`` without repeats."""
-        found: dict[Hashable, Any] = {}
-        missing: dict[Hashable, None] = {}
-        with self._lock:
-            for k in keys:
-                if k in found or k in missing:
-                    continue
-                value = self._data.get(k)
-                if value is None:
-                    missing[k] = None
-                else:
-                    self._data.move_to_end(k)
-                    found[k] = value
-        return found, list(missing)
-
-    def put(self, key: Hashable, value: Any, size: int) -> None:
-        """Store ``value`` of ``size`` bytes, dropping the least recently used beyond the budget."""
-        if size > self._max:
-            return  # would evict everything else and still not fit
-        with self._lock:
-            if key in self._data:
-                self._bytes -= self._sizes[key]
-            self._data[key] = value
-            self._data.move_to_end(key)
-            self._sizes[key] = size
-            self._bytes += size
-            while self._bytes > self._max:
-                old, _ = self._data.popitem(last=False)
-                self._bytes -= self._sizes.pop(old)
 
 
 # ---------------------------------------------------------------------------
@@ -591,32 +400,3 @@ class SceneRegistry:
         """Close every database."""
         for s in self.scenes.values():
             s.close()
-
-
-# ---------------------------------------------------------------------------
-# FastAPI dependencies
-# ---------------------------------------------------------------------------
-
-
-# The dependencies are ``async def`` although they never wait: FastAPI runs a plain
-# ``def`` dependency in a worker thread, which would cost more than the request.
-
-
-def _registry(request: Request) -> SceneRegistry:
-    registry: SceneRegistry = request.app.state.scenes
-    return registry
-
-
-async def get_registry(request: Request) -> SceneRegistry:
-    """The app's scenes (set by :func:`server.app.create_app`)."""
-    return _registry(request)
-
-
-async def get_scene(scene: str, request: Request) -> Scene:
-    """The scene named by the ``{scene}`` path parameter; 404 if unknown."""
-    return _registry(request).get(scene)
-
-
-async def get_rep(request: Request) -> Rep:
-    """The representation the request's ``Accept`` header asks for."""
-    return negotiate(request.headers.get("accept"))

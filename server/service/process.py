@@ -50,7 +50,7 @@ import os, sys
 core = int(sys.argv[3])
 if core >= 0:
     os.sched_setaffinity(0, {core})
-from walkstream.server.serve import serve
+from walkstream.server.service.run import serve
 serve(sys.argv[4:], host="127.0.0.1", port=int(sys.argv[1]), workers=int(sys.argv[2]),
       log_level="warning")
 """

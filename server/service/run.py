@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import uvicorn
 from fastapi import FastAPI
 
-from walkstream.server.app import create_app
+from walkstream.server.service.main import create_app
 from walkstream.shared.errors import InputError, StoreError
 
 __all__ = ["ENV_PATHS", "serve", "app_from_env"]
@@ -94,7 +94,7 @@ def serve(
     # worker processes build their own app; this one only validated the files
     app.state.scenes.close()
     os.environ[ENV_PATHS] = json.dumps(files)
-    uvicorn.run("walkstream.server.serve:app_from_env", factory=True, workers=workers, **options)  # type: ignore[arg-type]
+    uvicorn.run("walkstream.server.service.run:app_from_env", factory=True, workers=workers, **options)  # type: ignore[arg-type]
 
 
 def app_from_env() -> FastAPI:

@@ -1,0 +1,145 @@
+"""The FastAPI application: :func:`create_app` over one or more scene databases.
+
+The routes are in :mod:`server.routes`, the per-scene state and dependencies in
+:mod:`server.deps`.  This module adds what wraps every request:
+
+* :class:`MetricsMiddleware`, a plain ASGI middleware (no per-request task or
+  thread, unlike Starlette's ``BaseHTTPMiddleware``) that counts requests by route
+  and status, response bytes and latency into :class:`Metrics`, and adds
+  ``Vary: Accept`` to every response;
+* exception handlers that turn every error into JSON ``{"error": message,
+  "detail": ...}`` with a 4xx status: unknown things 404, malformed input
+  400/413/415/422.  Bad input never reaches the 500 handler, which exists so that
+  even a bug answers in the same format."""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Sequence
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from walkstream.server.service import routers
+from walkstream.server.service.metrics import Metrics, MetricsMiddleware
+from walkstream.server.service.scenes import SceneRegistry
+from walkstream.shared.errors import (
+    ApiError,
+    CodecError,
+    NotFoundError,
+    StoreError,
+    WalkstreamError,
+)
+
+__all__ = ["log", "create_app"]
+
+log = logging.getLogger(__name__)
+
+
+# ---------------------------------------------------------------------------
+# errors
+# ---------------------------------------------------------------------------
+
+
+def _error(status: int, message: str, detail: Any = None) -> JSONResponse:
+    return JSONResponse({"error": message, "detail": detail}, status_code=status)
+
+
+async def _api_error(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, ApiError)
+    return _error(exc.status or 400, exc.message, exc.detail)
+
+
+async def _validation_error(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, RequestValidationError)
+    # keep only JSON-safe parts: pydantic's "ctx"/"input" may hold exceptions or NaN
+    errors = [
+        {
+            "loc": [str(p) for p in e.get("loc", ())],
+            "msg": str(e.get("msg", "")),
+            "type": e.get("type"),
+        }
+        for e in exc.errors()
+    ]
+    message = "; ".join(f"{'.'.join(e['loc'])}: {e['msg']}" for e in errors[:5])
+    return _error(422, message or "invalid request", errors)
+
+
+async def _http_error(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, StarletteHTTPException)
+    message = exc.detail if isinstance(exc.detail, str) else "HTTP error"
+    if exc.status_code == 404:
+        message = f"no such endpoint: {request.url.path[:200]}"
+    response = _error(exc.status_code, message, {"path": request.url.path[:200]})
+    for k, v in (exc.headers or {}).items():
+        response.headers[k] = v
+    return response
+
+
+async def _walkstream_error(request: Request, exc: Exception) -> JSONResponse:
+    # NotFoundError: the store was asked for something absent; anything else the
+    # project raises on purpose is about the input
+    status = 404 if isinstance(exc, NotFoundError) else 400
+    return _error(status, str(exc))
+
+
+async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
+    log.exception("unexpected error answering %s %s", request.method, request.url.path)
+    return _error(500, "internal server error")
+
+
+# ---------------------------------------------------------------------------
+# the app
+# ---------------------------------------------------------------------------
+
+
+def create_app(paths: Sequence[str | os.PathLike[str]]) -> FastAPI:
+    """The service over the given scene databases, each served under its scene name.
+
+    Every database is opened read-only and validated now (see
+    :meth:`server.deps.Scene.load`), so a bad one stops the start.  The databases
+    stay open for the life of the app; :func:`server.serve.serve` closes them
+    (``app.state.scenes.close()``) when the server stops.
+
+    Parameters
+    ----------
+    paths:
+        Scene database files, at least one; scene names must differ.
+
+    Returns
+    -------
+    FastAPI
+        The app: API under ``/v1``, OpenAPI at ``/openapi.json`` and ``/docs``,
+        Prometheus text at ``/metrics``.
+
+    Raises
+    ------
+    StoreError
+        No path, a missing, corrupt, unfinished or wrong-version database, or two
+        databases with the same scene name.  The message names the file.
+    """
+    registry = SceneRegistry.open(list(paths))
+    app = FastAPI(
+        title="walkstream",
+        version="1",
+        summary="Streams baked city scenes: view cells, PVS/ACH, compact building parameters.",
+        description=(routers.__doc__ or "").split("\n\n", 1)[-1],
+        docs_url="/docs",
+        redoc_url=None,
+    )
+    app.state.scenes = registry
+    app.state.metrics = Metrics()
+    for router in routers.ROUTERS:
+        app.include_router(router)
+    app.add_middleware(MetricsMiddleware, metrics=app.state.metrics)
+    app.add_exception_handler(ApiError, _api_error)
+    app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(StarletteHTTPException, _http_error)
+    for exc_type in (StoreError, CodecError, WalkstreamError):
+        app.add_exception_handler(exc_type, _walkstream_error)
+    app.add_exception_handler(Exception, _unexpected)
+    return app

@@ -1,0 +1,256 @@
+"""The objects route: a scene's object parameters (or LOD2 meshes) streamed in the order asked.
+
+Object stream framing
+---------------------
+``POST /v1/scenes/{scene}/objects`` with body ``{"ids": [int, ...]}`` (msgpack when
+the ``Content-Type`` is ``application/msgpack``, JSON otherwise; at most
+:data:`~walkstream.server.service.scenes.MAX_IDS` = 1000 ids, else 413) answers with a *streamed* body
+made of **plain concatenated msgpack objects, one per id in the order asked**
+(repeats included), with no length prefix or separator: msgpack is
+self-delimiting, so a client feeds the bytes to ``msgpack.Unpacker`` as they
+arrive and gets each object as soon as its last byte is in.  Each object is the map
+``{"id": int, "kind": str, "params": bin}`` where ``params`` is the stored record
+(:func:`shared.codec.decode_building` / :func:`shared.codec.decode_street`, or
+:func:`shared.codec.decode_object` for either).  The server hands the frames to the
+transport in chunks of about :data:`CHUNK_BYTES`, never splitting the order.  The
+headers ``X-Scene-Version`` and ``X-Object-Count`` come first.  With
+``Accept: application/json`` the body is instead a JSON array, streamed one element
+per line, of ``{"id", "kind", "params": base64}``.
+
+All ids are checked before the first byte is sent: an unknown id gives a 404 that
+lists the unknown ids, never a truncated stream.
+
+Mesh form (for comparison only)
+-------------------------------
+``POST /v1/scenes/{scene}/objects?form=lod2`` answers with the same framing, but
+each map is ``{"id": int, "kind": str, "mesh": bin}`` where ``mesh`` is the object's
+LOD2 mesh, rebuilt on the server (buildings with the scene's grammar, street pieces
+as their flat surface) and encoded by :func:`shared.codec.encode_mesh` (decode with
+:func:`shared.codec.decode_mesh`); with ``Accept: application/json`` the elements
+are ``{"id", "kind", "mesh": base64}``.  It exists so that a client's
+``--stream meshes`` mode can measure what sending geometry instead of parameters
+costs in bytes and quality, which is the paper's central claim; meshes are about a
+thousand times larger than parameters.  ``form=params`` is the default and the
+format described above; any other form is a 422 naming it."""
+
+
+from __future__ import annotations
+
+import base64
+import json
+from collections.abc import AsyncIterator, Iterable
+from typing import Annotated, cast
+
+import msgpack
+from fastapi import APIRouter, Query, Request
+from fastapi.responses import StreamingResponse
+from starlette.concurrency import run_in_threadpool
+
+from walkstream.server.service.dependencies import RepDep, SceneDep
+from walkstream.server.service.http import dump_json
+from walkstream.server.service.models import (
+    ERRORS,
+    MAX_INT64,
+    ObjectsIn,
+    error_doc,
+)
+from walkstream.server.service.scenes import MAX_IDS, OBJECT_FORMS, Form
+from walkstream.shared.codec import unpack_bounded
+from walkstream.shared.errors import ApiError, CodecError
+from walkstream.shared.wire import JSON, MSGPACK, MSGPACK_TYPES
+
+__all__ = ["router", "CHUNK_BYTES", "MAX_BODY_BYTES"]
+
+router = APIRouter(prefix="/v1", responses=ERRORS)
+
+
+CHUNK_BYTES = 16 << 10
+"""Object frames are handed to the transport in chunks of about this many bytes."""
+
+MAX_BODY_BYTES = 64 << 10
+"""Largest accepted request body (1000 ids as JSON need about 20 KiB); more: 413."""
+
+
+_OBJECTS_BODY = {
+    "required": True,
+    "content": {
+        JSON: {"schema": ObjectsIn.model_json_schema()},
+        MSGPACK: {"schema": ObjectsIn.model_json_schema()},
+    },
+}
+
+
+@router.post(
+    "/scenes/{scene}/objects",
+    responses={
+        200: {
+            "description": "concatenated msgpack maps {id, kind, params} (or {id, kind, mesh} "
+            "with form=lod2), one per id in the order asked (see the module docs); a JSON "
+            "array with Accept: application/json",
+            "content": {MSGPACK: {}, JSON: {}},
+        },
+        400: error_doc("the body is not JSON / msgpack"),
+        413: error_doc(f"more than {MAX_IDS} ids, or a body over {MAX_BODY_BYTES} bytes"),
+        415: error_doc("a Content-Type other than JSON or msgpack"),
+    },
+    openapi_extra={"requestBody": _OBJECTS_BODY},
+    summary="Stream object parameters",
+)
+async def objects(
+    request: Request,
+    scene: SceneDep,
+    rep: RepDep,
+    form: Annotated[
+        str,
+        Query(
+            description="what each frame carries: `params` (the default), the compact "
+            "procedural parameters, or `lod2`, the LOD2 mesh rebuilt on the server "
+            "(shared.codec.encode_mesh), offered only to compare streaming geometry "
+            "against streaming parameters",
+            examples=list(OBJECT_FORMS),
+            max_length=64,
+        ),
+    ] = "params",
+) -> StreamingResponse:
+    """Stream the parameters (or, with ``form=lod2``, the LOD2 meshes) of the objects asked for.
+
+    The frames come in the order asked; see the module docs for the framing.
+    """
+    if form not in OBJECT_FORMS:
+        raise ApiError(
+            f"unknown form {form!r:.80}: expected one of {', '.join(OBJECT_FORMS)}",
+            status=422,
+            detail={"form": form[:80], "known": list(OBJECT_FORMS)},
+        )
+    frm = cast(Form, form)
+    ids = _parse_ids(await _read_body(request), request.headers.get("content-type"))
+    unknown = scene.unknown_ids(ids)
+    if unknown:
+        shown = ", ".join(str(i) for i in unknown[:10]) + (", ..." if len(unknown) > 10 else "")
+        raise ApiError(
+            f"scene {scene.name!r} has no object{'s' if len(unknown) > 1 else ''} {shown}",
+            status=404,
+            detail={"ids": unknown},
+        )
+    found, missing = scene.cached_frames(ids, frm)
+    if missing:
+        # reads the database and, for meshes, rebuilds geometry: off the event loop
+        found.update(await run_in_threadpool(scene.load_frames, missing, frm))
+    frames = [found[i] for i in ids]
+    headers = {"X-Scene-Version": scene.version, "X-Object-Count": str(len(ids))}
+    if rep == "json":
+        return StreamingResponse(_coalesce(_json_items(frames)), media_type=JSON, headers=headers)
+    return StreamingResponse(_coalesce(frames), media_type=MSGPACK, headers=headers)
+
+
+async def _read_body(request: Request) -> bytes:
+    """The request body, refusing (413) more than :data:`MAX_BODY_BYTES` before reading it all."""
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.isdigit() and int(declared) > MAX_BODY_BYTES:
+        raise ApiError(
+            f"request body of {int(declared)} bytes, more than the limit of {MAX_BODY_BYTES}",
+            status=413,
+            detail={"limit_bytes": MAX_BODY_BYTES},
+        )
+    chunks: list[bytes] = []
+    n = 0
+    async for chunk in request.stream():
+        n += len(chunk)
+        if n > MAX_BODY_BYTES:
+            raise ApiError(
+                f"request body over the limit of {MAX_BODY_BYTES} bytes",
+                status=413,
+                detail={"limit_bytes": MAX_BODY_BYTES},
+            )
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def _parse_ids(body: bytes, content_type: str | None) -> list[int]:
+    """Validate an objects request body; see :func:`objects` for the answers."""
+    media = (content_type or "").split(";")[0].strip().lower()
+    if media in MSGPACK_TYPES:
+        try:
+            obj = unpack_bounded(
+                body,
+                "request body",
+                max_bytes=MAX_BODY_BYTES,
+                max_array_len=MAX_BODY_BYTES,
+                max_map_len=64,
+                max_str_len=1024,
+                max_bin_len=0,
+            )
+        except CodecError as exc:
+            raise ApiError(str(exc), status=400) from exc
+    elif media in ("", JSON) or media.endswith("+json"):
+        if not body.strip():
+            raise ApiError('request body is empty; send {"ids": [int, ...]}', status=400)
+        try:
+            obj = json.loads(body)
+        except (ValueError, RecursionError) as exc:
+            raise ApiError(f"request body is not valid JSON ({exc})", status=400) from exc
+    else:
+        raise ApiError(
+            f"request body of type {media!r:.80}: send {JSON} or {MSGPACK}",
+            status=415,
+            detail={"content_type": media},
+        )
+    if not isinstance(obj, dict) or "ids" not in obj:
+        raise ApiError(
+            'request body: expected an object {"ids": [int, ...]}',
+            status=422,
+            detail={"got": type(obj).__name__},
+        )
+    ids = obj["ids"]
+    if not isinstance(ids, list):
+        raise ApiError(
+            f"ids: expected an array of integers, got {type(ids).__name__}",
+            status=422,
+            detail={"field": "ids"},
+        )
+    if len(ids) > MAX_IDS:
+        raise ApiError(
+            f"{len(ids)} ids asked, at most {MAX_IDS} per request: split the batch",
+            status=413,
+            detail={"count": len(ids), "limit": MAX_IDS},
+        )
+    # bool is an int subclass: true/false are not ids
+    bad = [(k, v) for k, v in enumerate(ids) if type(v) is not int or not 0 <= v <= MAX_INT64]
+    if bad:
+        shown = ", ".join(f"ids[{k}] = {v!r:.30}" for k, v in bad[:5])
+        raise ApiError(
+            f"ids: expected integers from 0 to 2**63 - 1; got {shown}"
+            + (f" and {len(bad) - 5} more" if len(bad) > 5 else ""),
+            status=422,
+            detail=[{"index": k, "got": f"{v!r:.40}"} for k, v in bad[:100]],
+        )
+    return ids
+
+
+def _json_items(frames: Iterable[bytes]) -> Iterable[bytes]:
+    """The JSON array of the frames, one element per line, as pieces."""
+    yield b"["
+    for k, f in enumerate(frames):
+        o = msgpack.unpackb(f)
+        key = "params" if "params" in o else "mesh"
+        item = {"id": o["id"], "kind": o["kind"], key: base64.b64encode(o[key]).decode()}
+        yield (b",\n" if k else b"\n") + dump_json(item)
+    yield b"\n]\n"
+
+
+async def _coalesce(pieces: Iterable[bytes]) -> AsyncIterator[bytes]:
+    """Join small pieces into chunks of about :data:`CHUNK_BYTES`, keeping their order.
+
+    An async generator, so Starlette iterates it on the event loop instead of
+    hopping to a worker thread for every chunk; the frames are already in memory.
+    """
+    buf: list[bytes] = []
+    n = 0
+    for p in pieces:
+        buf.append(p)
+        n += len(p)
+        if n >= CHUNK_BYTES:
+            yield b"".join(buf)
+            buf, n = [], 0
+    if buf:
+        yield b"".join(buf)

@@ -1,0 +1,64 @@
+"""The scene database: one SQLite file per baked scene.
+
+The modules: :mod:`.schema` (tables, header, content hash), :mod:`.records` (rows
+and scene metadata), :mod:`.files` (atomic files, locks), :mod:`.writer`
+(:class:`SceneWriter`), :mod:`.reader` (:class:`SceneReader`), :mod:`.edit`
+(recorded paths written into a finished scene).
+
+The bake writes it with :class:`SceneWriter`, the server reads it with
+:class:`SceneReader`, and recorded paths are added with :func:`write_path`.
+
+Layout (schema version :data:`SCHEMA_VERSION`)
+---------------------------------------------
+``meta(key, value)``
+    ``app`` (``"walkstream"``), ``schema_version``, ``name``, ``version`` (content
+    hash), ``crs``, ``origin_x``, ``origin_y``, ``grammar``, ``grammar_version``,
+    ``features`` (JSON list), ``settings`` (JSON), ``settings_hash``,
+    ``bake_seconds``, ``created``.
+``objects(id, kind, params, minx, miny, minz, maxx, maxy, maxz, tris0, tris1, tris2)``
+    ``params`` is :func:`shared.codec.encode_building` / ``encode_street`` output,
+    streamed to clients as is; ``tris*`` are the triangle counts of LOD 0-2.
+``cells(id, kind, boundary, zmin, zmax, neighbours, pvs, done)``
+    ``boundary`` is :func:`shared.codec.encode_polygon` of the convex ``(n, 2)``
+    outline, ``neighbours`` :func:`shared.codec.encode_ids`, ``pvs``
+    :func:`shared.codec.encode_pvs`.
+``viewpoints(name, x, y, z, yaw, cell)`` and ``paths(name, data)``.
+
+Optional tables are declared once in :data:`OPTIONAL_TABLES`, keyed by the feature
+name that needs them, and only created for scenes that list that feature.  The file
+carries SQLite ``application_id`` :data:`APPLICATION_ID` and ``user_version``
+:data:`SCHEMA_VERSION` so a foreign or newer file is refused from its 100-byte
+header alone.
+
+Atomicity: the bake writes ``<path>.partial`` (WAL, one small transaction per
+cell, so a killed bake loses at most the cell it was on and can resume), and
+:meth:`SceneWriter.finish` vacuums it into a fresh, self-contained file that
+replaces ``path`` with ``os.replace``.  :func:`write_path` copies, edits and
+replaces likewise.  Nothing ever modifies a finished file in place, which is
+what lets readers open it ``immutable``."""
+
+from walkstream.server.store.edit import write_path
+from walkstream.server.store.reader import SceneReader
+from walkstream.server.store.records import CellInfo, CellRow, ObjectInfo, ObjectRow, SceneMeta
+from walkstream.server.store.schema import (
+    APPLICATION_ID,
+    OBJECT_KINDS,
+    OPTIONAL_TABLES,
+    SCHEMA_VERSION,
+)
+from walkstream.server.store.writer import SceneWriter
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "APPLICATION_ID",
+    "OBJECT_KINDS",
+    "OPTIONAL_TABLES",
+    "SceneMeta",
+    "ObjectRow",
+    "ObjectInfo",
+    "CellRow",
+    "CellInfo",
+    "SceneWriter",
+    "SceneReader",
+    "write_path",
+]

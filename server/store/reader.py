@@ -1,0 +1,414 @@
+"""Read-only access to a finished scene database (:class:`SceneReader`)."""
+
+from __future__ import annotations
+
+import os
+import queue
+import sqlite3
+import threading
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.shared.codec import (
+    decode_building,
+    decode_ids,
+    decode_polygon,
+    decode_pvs,
+    decode_street,
+    pvs_size,
+)
+from walkstream.shared.errors import NotFoundError, StoreError
+from walkstream.shared.records import BuildingParams, StreetParams, Viewpoint
+
+try:  # advisory locks between processes; POSIX only
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None  # type: ignore[assignment]
+from walkstream.server.store.files import _label
+from walkstream.server.store.records import CellInfo, ObjectInfo, SceneMeta, _index, _parse_meta
+from walkstream.server.store.schema import _CORE_TABLES, _check_header
+
+__all__ = ["SceneReader"]
+
+
+# ---------------------------------------------------------------------------
+# reader
+# ---------------------------------------------------------------------------
+
+
+class SceneReader:
+    """Read-only access to a finished scene database; see :meth:`open`.
+
+    Thread-safe: queries borrow a connection from a small pool, all opened on the
+    same file at :meth:`open`, so every thread sees the same scene version even if
+    :func:`write_path` replaces the file meanwhile (open a new reader to see it).
+    """
+
+    def __init__(
+        self, label: str, pool: list[sqlite3.Connection], meta: SceneMeta, db_bytes: int
+    ) -> None:
+        """Private: use :meth:`open`."""
+        self._label = label
+        self._all = pool
+        self._pool: queue.SimpleQueue[sqlite3.Connection] = queue.SimpleQueue()
+        for c in pool:
+            self._pool.put(c)
+        self._meta = meta
+        self._db_bytes = db_bytes
+        self._closed = False
+        self._summary: dict[str, Any] | None = None
+        self._summary_lock = threading.Lock()
+
+    @classmethod
+    def open(
+        cls, path: str | os.PathLike[str], *, pool_size: int = 4, check: bool = False
+    ) -> SceneReader:
+        """Open and validate a scene database read-only.
+
+        Opening reads the header, the schema and the meta table; damage elsewhere
+        shows when the damaged part is read (as :class:`StoreError`, or
+        :class:`shared.errors.CodecError` for a damaged blob).  ``check=True`` also
+        runs SQLite's ``quick_check`` over the whole file (linear in its size).
+
+        Parameters
+        ----------
+        path:
+            The database file.
+        pool_size:
+            Connections shared by the threads that use this reader.
+        check:
+            Verify every page now.
+
+        Raises
+        ------
+        StoreError
+            Not a file, not SQLite, not a walkstream database, a schema version this
+            code does not read, an unfinished bake, or a damaged file.  The message
+            starts with the file name.
+        """
+        label = _label(path)
+        wal = _check_header(path)
+        uri = Path(os.path.abspath(path)).as_uri() + "?mode=ro"
+        if not wal:
+            # finished files are never modified in place (only replaced), so SQLite
+            # may skip locking and change detection
+            uri += "&immutable=1"
+        for _attempt in range(3):
+            size = os.path.getsize(path)
+            pool: list[sqlite3.Connection] = []
+            try:
+                for _ in range(max(1, pool_size)):
+                    pool.append(sqlite3.connect(uri, uri=True, check_same_thread=False))
+                metas = [cls._load_meta(c, label) for c in pool]
+                if check:
+                    cls._quick_check(pool[0], label)
+            except BaseException:
+                for c in pool:
+                    c.close()
+                raise
+            if all(m.version == metas[0].version for m in metas):
+                return cls(label, pool, metas[0], size)
+            for c in pool:  # replaced while opening: try again
+                c.close()
+        raise StoreError(f"{label}: the file keeps changing while being opened")
+
+    @staticmethod
+    def _load_meta(conn: sqlite3.Connection, label: str) -> SceneMeta:
+        try:
+            tables = {
+                r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")
+            }
+            missing = [t for t in _CORE_TABLES if t not in tables and t != "paths"]
+            if missing:
+                raise StoreError(
+                    f"{label}: not a walkstream scene database (no table {missing[0]!r})"
+                )
+            raw = dict(conn.execute("SELECT key, value FROM meta").fetchall())
+            meta = _parse_meta(raw, label)
+            conn.execute("SELECT count(*) FROM objects").fetchone()
+            conn.execute("SELECT count(*) FROM cells").fetchone()
+            return meta
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"{label}: damaged database ({exc})") from exc
+
+    @staticmethod
+    def _quick_check(conn: sqlite3.Connection, label: str) -> None:
+        try:
+            rows = conn.execute("PRAGMA quick_check(5)").fetchall()
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"{label}: damaged database ({exc})") from exc
+        if rows != [("ok",)]:
+            detail = "; ".join(str(r[0]) for r in rows)
+            raise StoreError(f"{label}: damaged database ({detail})")
+
+    # -- plumbing -----------------------------------------------------------
+
+    @contextmanager
+    def _conn(self) -> Iterator[sqlite3.Connection]:
+        if self._closed:
+            raise StoreError(f"{self._label}: the reader is closed")
+        conn = self._pool.get()
+        try:
+            yield conn
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"{self._label}: damaged database ({exc})") from exc
+        finally:
+            self._pool.put(conn)
+
+    def _query(self, sql: str, args: Sequence[Any] = ()) -> list[Any]:
+        with self._conn() as c:
+            return c.execute(sql, args).fetchall()
+
+    def _by_ids(self, columns: str, ids: Iterable[int]) -> list[Any]:
+        want = sorted({_index(i, "object id") for i in ids})
+        out: list[Any] = []
+        with self._conn() as c:
+            for k in range(0, len(want), 500):  # stay below SQLite's bound-variable limit
+                chunk = want[k : k + 500]
+                marks = ",".join("?" * len(chunk))
+                out += c.execute(
+                    f"SELECT {columns} FROM objects WHERE id IN ({marks})", chunk
+                ).fetchall()
+        return out
+
+    def close(self) -> None:
+        """Close every connection (waits for the ones in use); idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        for _ in self._all:
+            self._pool.get().close()
+
+    def __enter__(self) -> SceneReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- scene ---------------------------------------------------------------
+
+    @property
+    def path(self) -> str:
+        """The file this reader was opened on."""
+        return self._label
+
+    @property
+    def meta(self) -> SceneMeta:
+        """The scene's meta data."""
+        return self._meta
+
+    @property
+    def version(self) -> str:
+        """The scene version (content hash); use it as the ETag."""
+        return self._meta.version
+
+    def object_ids(self) -> NDArray[np.int64]:
+        """All object ids, ``(n,) int64`` ascending."""
+        rows = self._query("SELECT id FROM objects ORDER BY id")
+        return np.array([r[0] for r in rows], dtype=np.int64)
+
+    def object_params(self, ids: Iterable[int]) -> dict[int, bytes]:
+        """Raw encoded parameters of the given objects, for streaming as they are.
+
+        Unknown ids are left out of the result (the caller decides whether that is
+        an error).  The dict is ordered by id.
+        """
+        return {int(r[0]): bytes(r[1]) for r in self._by_ids("id, params", ids)}
+
+    def object_info(self, ids: Iterable[int]) -> dict[int, ObjectInfo]:
+        """Kind, box and LOD triangle counts of the given objects (unknown ids left out)."""
+        rows = self._by_ids(
+            "id, kind, minx, miny, minz, maxx, maxy, maxz, tris0, tris1, tris2", ids
+        )
+        out: dict[int, ObjectInfo] = {}
+        for oid, kind, x0, y0, z0, x1, y1, z1, t0, t1, t2 in rows:
+            box = (float(x0), float(y0), float(z0), float(x1), float(y1), float(z1))
+            out[int(oid)] = ObjectInfo(int(oid), str(kind), box, (int(t0), int(t1), int(t2)))
+        return out
+
+    def _object(self, oid: int, kinds: tuple[str, ...], what: str) -> bytes:
+        i = _index(oid, "object id")
+        rows = self._query("SELECT kind, params FROM objects WHERE id = ?", (i,))
+        if not rows:
+            raise NotFoundError(f"{self._label}: no object {i}")
+        kind, params = rows[0]
+        if kind not in kinds:
+            raise StoreError(f"{self._label}: object {i} is a {kind}, not a {what}")
+        return bytes(params)
+
+    def building(self, oid: int) -> BuildingParams:
+        """The decoded parameters of building ``oid``.
+
+        Raises
+        ------
+        NotFoundError
+            No such object.
+        StoreError
+            The object is not a building.
+        CodecError
+            Its stored parameters are damaged.
+        """
+        blob = self._object(oid, ("building",), "building")
+        return decode_building(blob, f"{self._label}: building {oid}")
+
+    def street(self, oid: int) -> StreetParams:
+        """The decoded parameters of street piece (street, crossroad or square) ``oid``."""
+        blob = self._object(oid, ("street", "crossroad", "square"), "street piece")
+        return decode_street(blob, f"{self._label}: street {oid}")
+
+    def bounds(self) -> tuple[float, float, float, float, float, float]:
+        """Box over all objects ``(minx, miny, minz, maxx, maxy, maxz)``; zeros for an empty scene."""
+        row = self._query(
+            "SELECT min(minx), min(miny), min(minz), max(maxx), max(maxy), max(maxz) FROM objects"
+        )[0]
+        if row[0] is None:
+            return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return tuple(float(v) for v in row)  # type: ignore[return-value]
+
+    # -- cells ---------------------------------------------------------------
+
+    def _cell_info(self, row: Sequence[Any]) -> CellInfo:
+        cid, kind, boundary, zmin, zmax, neighbours, pvs = row
+        what = f"{self._label}: cell {cid}"
+        if pvs is None:
+            ids, ach = np.zeros(0, np.int64), np.zeros(0, np.float64)
+        else:
+            ids, ach = decode_pvs(pvs, f"{what}: pvs")
+        nb = decode_ids(neighbours, f"{what}: neighbours")
+        for a in (ids, ach, nb):
+            a.flags.writeable = False
+        return CellInfo(
+            id=int(cid),
+            kind=str(kind),
+            boundary=decode_polygon(boundary, f"{what}: boundary"),
+            zmin=float(zmin),
+            zmax=float(zmax),
+            neighbours=nb,
+            pvs=ids,
+            ach=ach,
+        )
+
+    _CELL_COLUMNS = "id, kind, boundary, zmin, zmax, neighbours, pvs"
+
+    def cell(self, cid: int) -> CellInfo:
+        """Cell ``cid`` with its boundary, neighbours, PVS and ACH.
+
+        Raises
+        ------
+        NotFoundError
+            No such cell.
+        """
+        i = _index(cid, "cell id")
+        rows = self._query(f"SELECT {self._CELL_COLUMNS} FROM cells WHERE id = ?", (i,))
+        if not rows:
+            raise NotFoundError(f"{self._label}: no cell {i}")
+        return self._cell_info(rows[0])
+
+    def cell_pvs_blob(self, cid: int) -> bytes:
+        """Cell ``cid``'s PVS as stored (:func:`shared.codec.encode_pvs` bytes), for streaming."""
+        i = _index(cid, "cell id")
+        rows = self._query("SELECT pvs FROM cells WHERE id = ?", (i,))
+        if not rows:
+            raise NotFoundError(f"{self._label}: no cell {i}")
+        return bytes(rows[0][0]) if rows[0][0] is not None else b"\x01\x00"
+
+    def cells(self) -> Iterator[CellInfo]:
+        """All cells in id order (fetched in pages, so no connection is held between them)."""
+        last = -1
+        while True:
+            rows = self._query(
+                f"SELECT {self._CELL_COLUMNS} FROM cells WHERE id > ? ORDER BY id LIMIT 256",
+                (last,),
+            )
+            if not rows:
+                return
+            for r in rows:
+                yield self._cell_info(r)
+            last = rows[-1][0]
+
+    # -- viewpoints and paths ------------------------------------------------
+
+    def viewpoints(self) -> tuple[Viewpoint, ...]:
+        """Named viewpoints, by name."""
+        rows = self._query("SELECT name, x, y, z, yaw, cell FROM viewpoints ORDER BY name")
+        return tuple(
+            Viewpoint(str(n), float(x), float(y), float(z), float(w), c)
+            for n, x, y, z, w, c in rows
+        )
+
+    def _has_paths(self) -> bool:
+        rows = self._query("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'paths'")
+        return bool(rows)
+
+    def path_names(self) -> list[str]:
+        """Names of the recorded paths, sorted."""
+        if not self._has_paths():
+            return []
+        return [r[0] for r in self._query("SELECT name FROM paths ORDER BY name")]
+
+    def path_blob(self, name: str) -> bytes:
+        """The stored bytes of recorded path ``name``.
+
+        Raises
+        ------
+        NotFoundError
+            No such path.
+        """
+        rows = (
+            self._query("SELECT data FROM paths WHERE name = ?", (name,))
+            if self._has_paths()
+            else []
+        )
+        if not rows:
+            raise NotFoundError(f"{self._label}: no recorded path {name!r:.60}")
+        return bytes(rows[0][0])
+
+    # -- summary -------------------------------------------------------------
+
+    def summary(self) -> dict[str, Any]:
+        """Figures about the scene (computed once, the file is immutable).
+
+        Returns
+        -------
+        dict
+            ``name``, ``version``, ``cells``, ``objects``, ``pvs_mean`` and
+            ``pvs_max`` (objects per PVS), ``culled_ratio`` (mean over cells of
+            ``1 - |PVS| / objects``), ``bake_seconds``, ``db_bytes``,
+            ``schema_version``, ``features``, ``paths``.
+        """
+        with self._summary_lock:
+            if self._summary is None:
+                self._summary = self._compute_summary()
+            return dict(self._summary)
+
+    def _compute_summary(self) -> dict[str, Any]:
+        n_objects = int(self._query("SELECT count(*) FROM objects")[0][0])
+        sizes = np.array(
+            [
+                0 if b is None else pvs_size(b, f"{self._label}: cell {i}: pvs")
+                for i, b in self._query("SELECT id, pvs FROM cells")
+            ],
+            dtype=np.float64,
+        )
+        n_cells = len(sizes)
+        culled = float(np.mean(1.0 - sizes / n_objects)) if n_cells and n_objects else 0.0
+        m = self._meta
+        return {
+            "name": m.name,
+            "version": m.version,
+            "cells": n_cells,
+            "objects": n_objects,
+            "pvs_mean": float(sizes.mean()) if n_cells else 0.0,
+            "pvs_max": int(sizes.max()) if n_cells else 0,
+            "culled_ratio": culled,
+            "bake_seconds": m.bake_seconds,
+            "db_bytes": self._db_bytes,
+            "schema_version": m.schema_version,
+            "features": list(m.features),
+            "paths": len(self.path_names()),
+        }

@@ -1,0 +1,225 @@
+"""The rows a bake writes and a reader returns, the scene metadata, and their field checks."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.shared.codec import (
+    encode_building,
+    encode_street,
+)
+from walkstream.shared.errors import StoreError
+from walkstream.shared.records import BuildingParams, StreetParams
+
+try:  # advisory locks between processes; POSIX only
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None  # type: ignore[assignment]
+from walkstream.server.store.schema import SCHEMA_VERSION
+
+__all__ = ["SceneMeta", "ObjectRow", "ObjectInfo", "CellRow", "CellInfo"]
+_MAX_PATH_NAME = 200
+_MAX_PATH_BYTES = 64 << 20
+
+
+
+
+
+
+# ---------------------------------------------------------------------------
+# records
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class SceneMeta:
+    """What the ``meta`` table says about a finished scene.
+
+    ``origin`` is the CRS position of local (0, 0); ``version`` the first 16 hex
+    digits of the content hash; ``settings_json`` the bake settings as canonical
+    JSON (see :attr:`settings`).
+    """
+
+    schema_version: int
+    name: str
+    version: str
+    crs: str
+    origin: tuple[float, float]
+    grammar_text: str
+    grammar_version: str
+    features: tuple[str, ...]
+    settings_json: str
+    bake_seconds: float
+    created: str
+
+    @property
+    def settings(self) -> dict[str, Any]:
+        """The bake settings (a fresh dict on each call)."""
+        value: dict[str, Any] = json.loads(self.settings_json)
+        return value
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectRow:
+    """One object as the bake hands it to :meth:`SceneWriter.add_objects`.
+
+    ``bbox`` is ``(minx, miny, minz, maxx, maxy, maxz)`` in scene-local metres and
+    ``tris`` the triangle counts of LOD 0, 1 and 2.
+    """
+
+    id: int
+    kind: str
+    params: bytes
+    bbox: tuple[float, float, float, float, float, float]
+    tris: tuple[int, int, int] = (0, 0, 0)
+
+    @classmethod
+    def of(
+        cls,
+        p: BuildingParams | StreetParams,
+        *,
+        tris: tuple[int, int, int] = (0, 0, 0),
+        bbox: Sequence[float] | None = None,
+        with_source_id: bool = True,
+    ) -> ObjectRow:
+        """Encode ``p`` and, unless given, derive its box from the footprint.
+
+        The derived box spans z from 0 to ``p.height`` for a building and 0 to 0 for
+        a street piece; pass ``bbox`` when the grammar builds above the eaves.
+        """
+        if isinstance(p, BuildingParams):
+            blob, kind, xy, top = (
+                encode_building(p, with_source_id=with_source_id),
+                "building",
+                p.rings[0],
+                p.height,
+            )
+        else:
+            blob, kind, xy, top = (
+                encode_street(p, with_source_id=with_source_id),
+                p.kind,
+                p.ring,
+                0.0,
+            )
+        if bbox is None:
+            if len(xy) == 0:
+                raise StoreError(f"object {p.id}: no vertices, pass bbox explicitly")
+            lo, hi = xy.min(axis=0), xy.max(axis=0)
+            bbox = (float(lo[0]), float(lo[1]), 0.0, float(hi[0]), float(hi[1]), float(top))
+        b = tuple(float(v) for v in bbox)
+        if len(b) != 6:
+            raise StoreError(f"object {p.id}: bbox: expected 6 numbers, got {len(b)}")
+        return cls(p.id, kind, blob, (b[0], b[1], b[2], b[3], b[4], b[5]), tris)
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectInfo:
+    """An object's kind, box ``(minx, miny, minz, maxx, maxy, maxz)`` and LOD triangle counts."""
+
+    id: int
+    kind: str
+    bbox: tuple[float, float, float, float, float, float]
+    tris: tuple[int, int, int]
+
+
+@dataclass(frozen=True, slots=True)
+class CellRow:
+    """One view cell as the bake hands it to :meth:`SceneWriter.add_cells` (no PVS yet).
+
+    ``boundary`` is the convex outline, ``(n, 2) float64`` local metres; ``zmin`` and
+    ``zmax`` the height range of viewers in it; ``neighbours`` ``(m,)`` cell ids.
+    """
+
+    id: int
+    kind: str
+    boundary: NDArray[np.float64]
+    zmin: float
+    zmax: float
+    neighbours: NDArray[np.int64]
+
+
+@dataclass(frozen=True, slots=True)
+class CellInfo:
+    """A cell read back: :class:`CellRow` fields plus its PVS.
+
+    ``pvs`` is ``(k,) int64`` ascending object ids and ``ach`` ``(k,) float64``
+    their average coverage (sums to 1; both empty for a cell that sees nothing).
+    """
+
+    id: int
+    kind: str
+    boundary: NDArray[np.float64]
+    zmin: float
+    zmax: float
+    neighbours: NDArray[np.int64]
+    pvs: NDArray[np.int64]
+    ach: NDArray[np.float64]
+
+
+def _finite(x: object, what: str) -> float:
+    try:
+        v = float(x)  # type: ignore[arg-type]
+    except (TypeError, ValueError) as exc:
+        raise StoreError(f"{what}: expected a number, got {x!r:.40}") from exc
+    if not math.isfinite(v):
+        raise StoreError(f"{what}: expected a finite number, got {v}")
+    return v
+
+
+def _index(x: object, what: str) -> int:
+    if isinstance(x, bool) or not isinstance(x, int | np.integer):
+        raise StoreError(f"{what}: expected an integer, got {type(x).__name__}")
+    v = int(x)
+    if not 0 <= v < 2**63:
+        raise StoreError(f"{what}: expected a non-negative int64, got {v}")
+    return v
+
+
+def _check_path_name(name: object) -> str:
+    if not isinstance(name, str) or not 0 < len(name) <= _MAX_PATH_NAME:
+        raise StoreError(f"path name: expected 1 to {_MAX_PATH_NAME} characters, got {name!r:.60}")
+    if not name.isprintable():
+        raise StoreError(f"path name {name!r:.60}: control characters are not allowed")
+    return name
+
+
+def _parse_meta(raw: dict[str, Any], label: str) -> SceneMeta:
+    try:
+        if raw.get("app") != "walkstream":
+            raise StoreError(f"{label}: meta table does not name walkstream")
+        if raw["schema_version"] != SCHEMA_VERSION:
+            raise StoreError(
+                f"{label}: schema version {raw['schema_version']}, this walkstream reads "
+                f"version {SCHEMA_VERSION}"
+            )
+        if raw.get("version") is None:
+            raise StoreError(
+                f"{label}: an unfinished bake (no content version); bake the scene again"
+            )
+        features = json.loads(raw["features"])
+        if not isinstance(features, list) or not all(isinstance(f, str) for f in features):
+            raise StoreError(f"{label}: meta 'features' is not a list of names")
+        return SceneMeta(
+            schema_version=int(raw["schema_version"]),
+            name=str(raw["name"]),
+            version=str(raw["version"]),
+            crs=str(raw["crs"]),
+            origin=(float(raw["origin_x"]), float(raw["origin_y"])),
+            grammar_text=str(raw["grammar"]),
+            grammar_version=str(raw["grammar_version"]),
+            features=tuple(features),
+            settings_json=str(raw["settings"]),
+            bake_seconds=float(raw["bake_seconds"]),
+            created=str(raw["created"]),
+        )
+    except KeyError as exc:
+        raise StoreError(f"{label}: meta table lacks {exc.args[0]!r}") from exc
+    except (TypeError, ValueError) as exc:
+        raise StoreError(f"{label}: meta table damaged ({exc})") from exc

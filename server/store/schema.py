@@ -1,0 +1,155 @@
+"""The tables of a scene database, its 100-byte header, and its content hash (the scene version)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sqlite3
+from pathlib import Path
+from typing import Any
+
+import msgpack
+
+from walkstream.shared.cells import CELL_KINDS
+from walkstream.shared.errors import StoreError
+
+try:  # advisory locks between processes; POSIX only
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None  # type: ignore[assignment]
+from walkstream.server.store.files import _label
+
+__all__ = ["SCHEMA_VERSION", "APPLICATION_ID", "OBJECT_KINDS", "OPTIONAL_TABLES"]
+
+SCHEMA_VERSION = 1
+"""The one schema version this code reads and writes (``PRAGMA user_version``)."""
+
+APPLICATION_ID = 0x57534442  # "WSDB"
+"""``PRAGMA application_id`` of every walkstream scene database."""
+
+OBJECT_KINDS = ("building", "street", "crossroad", "square")
+
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+
+# Core tables.  Convention relied on by the content hash: column 1 is the key.
+_CORE_TABLES: dict[str, str] = {
+    "meta": "CREATE TABLE meta(key TEXT PRIMARY KEY NOT NULL, value)",
+    "objects": (
+        "CREATE TABLE objects(id INTEGER PRIMARY KEY, kind TEXT NOT NULL, params BLOB NOT NULL, "
+        "minx REAL NOT NULL, miny REAL NOT NULL, minz REAL NOT NULL, "
+        "maxx REAL NOT NULL, maxy REAL NOT NULL, maxz REAL NOT NULL, "
+        "tris0 INTEGER NOT NULL, tris1 INTEGER NOT NULL, tris2 INTEGER NOT NULL)"
+    ),
+    "cells": (
+        "CREATE TABLE cells(id INTEGER PRIMARY KEY, kind TEXT NOT NULL CHECK (kind IN "
+        f"({', '.join(repr(k) for k in CELL_KINDS)})), boundary BLOB NOT NULL, "
+        "zmin REAL NOT NULL, zmax REAL NOT NULL, neighbours BLOB NOT NULL, pvs BLOB, "
+        "done INTEGER NOT NULL DEFAULT 0)"
+    ),
+    "viewpoints": (
+        "CREATE TABLE viewpoints(name TEXT PRIMARY KEY NOT NULL, x REAL NOT NULL, "
+        "y REAL NOT NULL, z REAL NOT NULL, yaw REAL NOT NULL, cell INTEGER)"
+    ),
+    "paths": "CREATE TABLE paths(name TEXT PRIMARY KEY NOT NULL, data BLOB NOT NULL)",
+}
+
+OPTIONAL_TABLES: dict[str, dict[str, str]] = {
+    # feature name -> {table name: DDL}; created only when the scene lists the feature
+    "portals": {
+        "portals": (
+            "CREATE TABLE portals(id INTEGER PRIMARY KEY, cell_a INTEGER NOT NULL, "
+            "cell_b INTEGER NOT NULL, polygon BLOB NOT NULL)"
+        ),
+    },
+}
+"""Tables that exist only in scenes using a feature, declared in this one place."""
+
+# meta keys that describe the run rather than the content: left out of the hash so
+# that baking the same input twice gives the same version
+_VOLATILE_META = ("version", "bake_seconds", "created")
+
+
+def _canonical_json(value: Any, what: str) -> str:
+    try:
+        return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise StoreError(f"{what}: not JSON-serialisable ({exc})") from exc
+
+
+def _tables(conn: sqlite3.Connection) -> list[str]:
+    """Tables of a scene in hashing order: core first, then optional by feature order."""
+    present = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    order = list(_CORE_TABLES) + [t for tables in OPTIONAL_TABLES.values() for t in tables]
+    return [t for t in order if t in present]
+
+
+def _content_version(conn: sqlite3.Connection) -> str:
+    """First 16 hex digits of sha256 over a canonical dump of the scene.
+
+    Every table is dumped in key order as a stream of msgpack arrays (msgpack is
+    self-delimiting, so the concatenation is unambiguous); ``meta`` leaves out the
+    run-dependent keys in ``_VOLATILE_META``.
+    """
+    h = hashlib.sha256()
+    for table in _tables(conn):
+        h.update(msgpack.packb(["table", table]))
+        if table == "meta":
+            marks = ", ".join("?" * len(_VOLATILE_META))
+            rows = conn.execute(
+                f"SELECT key, value FROM meta WHERE key NOT IN ({marks}) ORDER BY key",
+                _VOLATILE_META,
+            )
+        else:
+            rows = conn.execute(
+                f"SELECT * FROM {table} ORDER BY 1"
+            )  # table names come from _tables()
+        for row in rows:
+            h.update(msgpack.packb(list(row), use_bin_type=True))
+    return h.hexdigest()[:16]
+
+
+def _settings_hash(fields: dict[str, Any]) -> str:
+    return hashlib.sha256(_canonical_json(fields, "settings").encode()).hexdigest()
+
+
+def _read_header(path: str | os.PathLike[str]) -> tuple[int, int, bool]:
+    """Check a file's SQLite header: ``(application_id, user_version, wal)``.
+
+    Raises
+    ------
+    StoreError
+        Missing, not a regular file, unreadable or not SQLite.
+    """
+    label = _label(path)
+    p = Path(path)
+    if not p.exists():
+        raise StoreError(f"{label}: no such file")
+    if not p.is_file():
+        raise StoreError(f"{label}: not a file")
+    try:
+        with open(p, "rb") as f:
+            head = f.read(100)
+    except OSError as exc:
+        raise StoreError(f"{label}: cannot read ({exc.strerror})") from exc
+    if len(head) < 100 or not head.startswith(_SQLITE_MAGIC):
+        raise StoreError(f"{label}: not an SQLite database (so not a walkstream scene database)")
+    app_id = int.from_bytes(head[68:72], "big")
+    user_version = int.from_bytes(head[60:64], "big")
+    return app_id, user_version, head[18] == 2 or head[19] == 2
+
+
+def _check_header(path: str | os.PathLike[str]) -> bool:
+    """Validate the header of a walkstream database; returns whether it is in WAL mode."""
+    label = _label(path)
+    app_id, user_version, wal = _read_header(path)
+    if app_id != APPLICATION_ID:
+        raise StoreError(
+            f"{label}: an SQLite database but not a walkstream scene database "
+            f"(application id {app_id:#x}, expected {APPLICATION_ID:#x})"
+        )
+    if user_version != SCHEMA_VERSION:
+        raise StoreError(
+            f"{label}: schema version {user_version}, this walkstream reads version {SCHEMA_VERSION}"
+        )
+    return wal

@@ -1,0 +1,467 @@
+"""Build a scene database for the bake: atomic, resumable (:class:`SceneWriter`)."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import secrets
+import sqlite3
+from collections.abc import Iterable, Sequence
+from contextlib import suppress
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from walkstream.shared.cells import CELL_KINDS
+from walkstream.shared.codec import (
+    encode_ids,
+    encode_polygon,
+    encode_pvs,
+)
+from walkstream.shared.errors import CodecError, NotFoundError, StoreError
+
+try:  # advisory locks between processes; POSIX only
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None  # type: ignore[assignment]
+from walkstream.server.store.files import _flock, _fsync_dir, _fsync_file, _label, _remove_db_files
+from walkstream.server.store.records import (
+    _MAX_PATH_BYTES,
+    CellRow,
+    ObjectRow,
+    _check_path_name,
+    _finite,
+    _index,
+)
+from walkstream.server.store.schema import (
+    _CORE_TABLES,
+    APPLICATION_ID,
+    OBJECT_KINDS,
+    OPTIONAL_TABLES,
+    SCHEMA_VERSION,
+    _canonical_json,
+    _content_version,
+    _read_header,
+    _settings_hash,
+)
+
+__all__ = ["SceneWriter"]
+
+
+# ---------------------------------------------------------------------------
+# writer
+# ---------------------------------------------------------------------------
+
+
+class SceneWriter:
+    """Builds a scene database for the bake; see :meth:`create`.
+
+    Not thread-safe: one bake, one thread.  Use as a context manager or call
+    :meth:`close`; leaving without :meth:`finish` keeps ``<path>.partial`` for a
+    later resume and leaves ``path`` untouched.
+    """
+
+    def __init__(
+        self, conn: sqlite3.Connection, path: str, work: str, resumed: bool, lock_fd: int | None
+    ) -> None:
+        """Private: use :meth:`create`."""
+        self._conn: sqlite3.Connection | None = conn
+        self._lock_fd = lock_fd
+        self.path = path
+        """The final database path."""
+        self.work_path = work
+        """The work file (``<path>.partial``)."""
+        self.resumed = resumed
+        """True when an interrupted bake with the same settings was reopened."""
+
+    # -- opening -----------------------------------------------------------
+
+    @classmethod
+    def create(
+        cls,
+        path: str | os.PathLike[str],
+        *,
+        name: str,
+        crs: str,
+        origin: tuple[float, float],
+        grammar_text: str,
+        grammar_version: str,
+        features: Sequence[str],
+        settings: dict[str, Any],
+        resume: bool = True,
+    ) -> SceneWriter:
+        """Open the work file ``<path>.partial`` for a bake.
+
+        If a work file from an interrupted bake exists, ``resume`` is true and it was
+        made with the same arguments (compared by a hash of all of them), it is
+        reopened: :attr:`resumed` is true and :meth:`done_cells` lists the cells
+        whose PVS survived.  Otherwise any old work file is discarded.
+
+        Parameters
+        ----------
+        path:
+            Where :meth:`finish` puts the database.
+        name, crs:
+            Scene name and the CRS of ``origin``.
+        origin:
+            CRS position of local (0, 0), projected metres.
+        grammar_text, grammar_version:
+            The building grammar sent to clients.
+        features:
+            Feature names used by the scene (cell kinds, ``"portals"``, ...); a
+            feature listed in :data:`OPTIONAL_TABLES` gets its tables.
+        settings:
+            Bake settings (JSON-serialisable).  Include whatever identifies the input
+            (e.g. a source file hash): resuming trusts that equal settings mean an
+            equal scene.
+        resume:
+            Reuse a matching work file (default) or always start over.
+
+        Raises
+        ------
+        StoreError
+            Bad arguments, another process is baking the same path, or the work file
+            cannot be created.
+        """
+        label = _label(path)
+        for what, v in (("name", name), ("crs", crs), ("grammar_text", grammar_text)):
+            if not isinstance(v, str):
+                raise StoreError(f"{label}: {what}: expected a string, got {type(v).__name__}")
+        if (
+            not isinstance(features, Sequence)
+            or isinstance(features, str)
+            or not all(isinstance(f, str) and f for f in features)
+        ):
+            raise StoreError(f"{label}: features: expected a list of names, got {features!r:.80}")
+        if len(set(features)) != len(features):
+            raise StoreError(f"{label}: features: names repeat in {list(features)}")
+        if not isinstance(settings, dict):
+            raise StoreError(f"{label}: settings: expected a dict, got {type(settings).__name__}")
+        if len(origin) != 2:
+            raise StoreError(f"{label}: origin: expected (x, y), got {origin!r:.80}")
+        ox, oy = (_finite(v, f"{label}: origin") for v in origin)
+        settings_json = _canonical_json(settings, f"{label}: settings")
+        fields = {
+            "schema_version": SCHEMA_VERSION,
+            "name": name,
+            "crs": crs,
+            "origin": [ox, oy],
+            "grammar": grammar_text,
+            "grammar_version": str(grammar_version),
+            "features": list(features),
+            "settings": settings,
+        }
+        shash = _settings_hash(fields)
+        work = label + ".partial"
+        if not os.path.isdir(os.path.dirname(os.path.abspath(work))):
+            raise StoreError(f"{label}: the folder does not exist")
+
+        lock_fd = os.open(work + ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            if fcntl is not None:
+                try:
+                    fcntl.flock(lock_fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                except BlockingIOError as exc:
+                    raise StoreError(f"{label}: another bake is writing {work}") from exc
+            conn = cls._reopen(work, shash) if resume else None
+            resumed = conn is not None
+            if conn is None:
+                _remove_db_files(work)
+                conn = cls._new(work, fields, settings_json, shash)
+        except BaseException:
+            os.close(lock_fd)
+            raise
+        return cls(conn, label, work, resumed, lock_fd)
+
+    @staticmethod
+    def _connect(work: str, *, new: bool = False) -> sqlite3.Connection:
+        conn = sqlite3.connect(work, isolation_level=None)
+        try:
+            if new:
+                # before WAL, so that they land in the file header itself, not in the WAL
+                conn.execute(f"PRAGMA application_id={APPLICATION_ID}")
+                conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+            # WAL + NORMAL: each commit is an append without fsync; a killed process
+            # loses nothing committed, a power cut at most the last few cells
+            conn.execute("PRAGMA journal_mode=WAL")
+            conn.execute("PRAGMA synchronous=NORMAL")
+        except BaseException:
+            conn.close()
+            raise
+        return conn
+
+    @classmethod
+    def _reopen(cls, work: str, shash: str) -> sqlite3.Connection | None:
+        if not os.path.isfile(work):
+            return None
+        try:
+            _read_header(work)  # is it SQLite at all? (sqlite3 would happily overwrite junk)
+            conn = cls._connect(work)
+        except (StoreError, sqlite3.DatabaseError):
+            return None
+        try:
+            # ask SQLite, not the file header: after a kill, header updates may still
+            # sit in the WAL
+            app_id = conn.execute("PRAGMA application_id").fetchone()[0]
+            user_version = conn.execute("PRAGMA user_version").fetchone()[0]
+            row = conn.execute("SELECT value FROM meta WHERE key = 'settings_hash'").fetchone()
+            if (app_id, user_version) == (APPLICATION_ID, SCHEMA_VERSION) and row == (shash,):
+                return conn
+        except sqlite3.DatabaseError:
+            pass
+        conn.close()
+        return None
+
+    @classmethod
+    def _new(
+        cls, work: str, fields: dict[str, Any], settings_json: str, shash: str
+    ) -> sqlite3.Connection:
+        try:
+            conn = cls._connect(work, new=True)
+        except sqlite3.Error as exc:
+            raise StoreError(f"{work}: cannot create ({exc})") from exc
+        try:
+            conn.execute("BEGIN")
+            for ddl in _CORE_TABLES.values():
+                conn.execute(ddl)
+            for feature in fields["features"]:
+                for ddl in OPTIONAL_TABLES.get(feature, {}).values():
+                    conn.execute(ddl)
+            meta = {
+                "app": "walkstream",
+                "schema_version": SCHEMA_VERSION,
+                "name": fields["name"],
+                "version": None,
+                "crs": fields["crs"],
+                "origin_x": fields["origin"][0],
+                "origin_y": fields["origin"][1],
+                "grammar": fields["grammar"],
+                "grammar_version": fields["grammar_version"],
+                "features": json.dumps(fields["features"]),
+                "settings": settings_json,
+                "settings_hash": shash,
+                "bake_seconds": None,
+                "created": None,
+            }
+            conn.executemany("INSERT INTO meta(key, value) VALUES (?, ?)", meta.items())
+            conn.execute("COMMIT")
+            return conn
+        except sqlite3.Error as exc:
+            conn.close()
+            raise StoreError(f"{work}: cannot create ({exc})") from exc
+
+    # -- writing -----------------------------------------------------------
+
+    @property
+    def _db(self) -> sqlite3.Connection:
+        if self._conn is None:
+            raise StoreError(f"{self.work_path}: the writer is closed")
+        return self._conn
+
+    def _run(self, what: str, sql: str, rows: Iterable[Sequence[Any]]) -> None:
+        db = self._db
+        try:
+            db.execute("BEGIN")
+            db.executemany(sql, rows)
+            db.execute("COMMIT")
+        except sqlite3.Error as exc:
+            if db.in_transaction:
+                db.execute("ROLLBACK")
+            raise StoreError(f"{self.work_path}: {what}: {exc}") from exc
+        except BaseException:
+            if db.in_transaction:
+                db.execute("ROLLBACK")
+            raise
+
+    def add_objects(self, rows: Iterable[ObjectRow]) -> int:
+        """Insert (or, on resume, replace) objects in one transaction; returns how many."""
+        out = []
+        for r in rows:
+            what = f"object {r.id}"
+            oid = _index(r.id, what)
+            if r.kind not in OBJECT_KINDS:
+                raise StoreError(
+                    f"{what}: kind: expected one of {'|'.join(OBJECT_KINDS)}, got {r.kind!r}"
+                )
+            if not isinstance(r.params, bytes) or not r.params:
+                raise StoreError(f"{what}: params: expected non-empty bytes")
+            b = [_finite(v, f"{what}: bbox") for v in r.bbox]
+            if len(b) != 6 or b[0] > b[3] or b[1] > b[4] or b[2] > b[5]:
+                raise StoreError(
+                    f"{what}: bbox: expected (minx, miny, minz, maxx, maxy, maxz), got {r.bbox}"
+                )
+            t = [_index(v, f"{what}: tris") for v in r.tris]
+            if len(t) != 3:
+                raise StoreError(f"{what}: tris: expected 3 counts, got {len(t)}")
+            out.append((oid, r.kind, r.params, *b, *t))
+        self._run("objects", "INSERT OR REPLACE INTO objects VALUES (?,?,?,?,?,?,?,?,?,?,?,?)", out)
+        return len(out)
+
+    def add_cells(self, cells: Iterable[CellRow]) -> int:
+        """Insert cells without PVS in one transaction; returns how many.
+
+        Re-adding a cell (on resume) keeps its PVS when its kind, boundary and
+        height range are unchanged and clears it otherwise.
+        """
+        out = []
+        for c in cells:
+            what = f"cell {c.id}"
+            cid = _index(c.id, what)
+            if c.kind not in CELL_KINDS:
+                raise StoreError(
+                    f"{what}: kind: expected one of {'|'.join(CELL_KINDS)}, got {c.kind!r}"
+                )
+            zmin, zmax = _finite(c.zmin, f"{what}: zmin"), _finite(c.zmax, f"{what}: zmax")
+            if zmin > zmax:
+                raise StoreError(f"{what}: zmin {zmin} > zmax {zmax}")
+            try:
+                boundary = encode_polygon(c.boundary)
+                neighbours = encode_ids(np.asarray(c.neighbours, dtype=np.int64).reshape(-1))
+            except (CodecError, ValueError, TypeError) as exc:
+                raise StoreError(f"{what}: {exc}") from exc
+            out.append((cid, c.kind, boundary, zmin, zmax, neighbours))
+        same = (
+            "cells.kind IS excluded.kind AND cells.boundary IS excluded.boundary "
+            "AND cells.zmin IS excluded.zmin AND cells.zmax IS excluded.zmax"
+        )
+        sql = (
+            "INSERT INTO cells(id, kind, boundary, zmin, zmax, neighbours, pvs, done) "
+            "VALUES (?,?,?,?,?,?,NULL,0) ON CONFLICT(id) DO UPDATE SET "
+            f"pvs = CASE WHEN {same} THEN cells.pvs ELSE NULL END, "
+            f"done = CASE WHEN {same} THEN cells.done ELSE 0 END, "
+            "kind = excluded.kind, boundary = excluded.boundary, zmin = excluded.zmin, "
+            "zmax = excluded.zmax, neighbours = excluded.neighbours"
+        )
+        self._run("cells", sql, out)
+        return len(out)
+
+    def set_pvs(self, cell_id: int, ids: ArrayLike, ach: ArrayLike) -> None:
+        """Store a cell's PVS and mark it done, committed at once.
+
+        Parameters
+        ----------
+        cell_id:
+            A cell added with :meth:`add_cells`.
+        ids:
+            ``(k,)`` object ids it can see (``k`` may be 0).
+        ach:
+            ``(k,)`` their coverage, e.g. pixel counts (see
+            :func:`shared.codec.encode_pvs`).
+        """
+        cid = _index(cell_id, "cell id")
+        try:
+            blob = encode_pvs(
+                np.asarray(ids).reshape(-1), np.asarray(ach, dtype=np.float64).reshape(-1)
+            )
+        except CodecError as exc:
+            raise StoreError(f"cell {cid}: {exc}") from exc
+        try:
+            # autocommit: one statement, one transaction, so a kill loses only this cell
+            cur = self._db.execute("UPDATE cells SET pvs = ?, done = 1 WHERE id = ?", (blob, cid))
+        except sqlite3.Error as exc:
+            raise StoreError(f"{self.work_path}: cell {cid}: {exc}") from exc
+        if cur.rowcount == 0:
+            raise NotFoundError(f"{self.work_path}: no cell {cid}; add it with add_cells first")
+
+    def done_cells(self) -> set[int]:
+        """Ids of the cells whose PVS is stored."""
+        return {r[0] for r in self._db.execute("SELECT id FROM cells WHERE done = 1")}
+
+    def add_viewpoint(
+        self, name: str, x: float, y: float, z: float, yaw: float = 0.0, cell: int | None = None
+    ) -> None:
+        """Add (or replace) a named viewpoint; ``yaw`` in radians, ``cell`` None if outside every cell."""
+        if not isinstance(name, str) or not name:
+            raise StoreError(f"viewpoint: name: expected a non-empty string, got {name!r:.40}")
+        what = f"viewpoint {name!r}"
+        row = (
+            name,
+            *(_finite(v, what) for v in (x, y, z, yaw)),
+            None if cell is None else _index(cell, f"{what}: cell"),
+        )
+        self._run("viewpoints", "INSERT OR REPLACE INTO viewpoints VALUES (?,?,?,?,?,?)", [row])
+
+    def add_path(self, name: str, blob: bytes) -> None:
+        """Add (or replace) a recorded path during the bake (see also :func:`write_path`)."""
+        name = _check_path_name(name)
+        if not isinstance(blob, bytes) or len(blob) > _MAX_PATH_BYTES:
+            raise StoreError(f"path {name!r}: expected bytes of at most {_MAX_PATH_BYTES}")
+        self._run("paths", "INSERT OR REPLACE INTO paths VALUES (?, ?)", [(name, blob)])
+
+    # -- finishing -----------------------------------------------------------
+
+    def finish(self, bake_seconds: float) -> str:
+        """Seal the bake: hash, compact into one file and atomically replace ``path``.
+
+        Every cell must have its PVS.  The database is vacuumed into a fresh file
+        beside ``path`` (no WAL, no free pages), fsynced and moved onto ``path`` with
+        ``os.replace``; then the work file is removed.  If anything fails, ``path``
+        is untouched and the work file stays for a resume.
+
+        Returns
+        -------
+        str
+            The scene version: the first 16 hex digits of the content hash.
+        """
+        db = self._db
+        seconds = _finite(bake_seconds, "bake_seconds")
+        missing = [
+            r[0] for r in db.execute("SELECT id FROM cells WHERE done = 0 ORDER BY id LIMIT 6")
+        ]
+        if missing:
+            n = db.execute("SELECT count(*) FROM cells WHERE done = 0").fetchone()[0]
+            raise StoreError(
+                f"{self.work_path}: {n} cells have no PVS yet (ids {missing[:5]}"
+                f"{', ...' if n > 5 else ''}); set_pvs every cell before finish()"
+            )
+        created = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+        tmp = f"{self.path}.tmp-{os.getpid()}-{secrets.token_hex(4)}"
+        try:
+            db.execute("BEGIN")
+            db.execute("UPDATE meta SET value = ? WHERE key = 'bake_seconds'", (seconds,))
+            db.execute("UPDATE meta SET value = ? WHERE key = 'created'", (created,))
+            version = _content_version(db)
+            db.execute("UPDATE meta SET value = ? WHERE key = 'version'", (version,))
+            db.execute("COMMIT")
+            # VACUUM INTO writes a compact rollback-journal file: no -wal to carry along
+            db.execute("VACUUM INTO ?", (tmp,))
+            _fsync_file(tmp)
+            with _flock(self.path + ".lock", blocking=True, what=self.path):
+                os.replace(tmp, self.path)
+            _fsync_dir(self.path)
+        except sqlite3.Error as exc:
+            if db.in_transaction:
+                db.execute("ROLLBACK")
+            with suppress(FileNotFoundError):
+                os.remove(tmp)
+            raise StoreError(f"{self.path}: cannot finish ({exc})") from exc
+        except BaseException:
+            with suppress(FileNotFoundError):
+                os.remove(tmp)
+            raise
+        db.close()
+        self._conn = None
+        _remove_db_files(self.work_path)
+        # safe to unlink while held: a rival create() never waits on this lock, it
+        # fails at once, and one arriving later may start afresh
+        with suppress(FileNotFoundError):
+            os.remove(self.work_path + ".lock")
+        self.close()
+        return version
+
+    def close(self) -> None:
+        """Close without finishing (the work file stays for a resume); idempotent."""
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)
+            self._lock_fd = None
+
+    def __enter__(self) -> SceneWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
