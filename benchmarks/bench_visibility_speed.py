@@ -24,10 +24,11 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from walkstream.server.bake.samples import sample_points
+from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict
 from walkstream.server.sources.scene import SourceScene
-from walkstream.server.visibility import VisibilityRenderer, meshes_for_scene, sample_points
 from walkstream.shared.gl import create_context
 
 
@@ -51,7 +52,7 @@ def bench_cells(
 ) -> tuple[str, list[tuple[NDArray[np.float64], float, float]]]:
     """About ``n`` cells spread evenly over the scene's cell list."""
     try:
-        from walkstream.server.cells import make_cells
+        from walkstream.server.bake.cells import make_cells
     except ImportError:
         return "street boxes (server.cells missing)", street_boxes(scene, n)
     cells = make_cells(scene)

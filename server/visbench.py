@@ -36,14 +36,11 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from walkstream.server.cells import ViewCell, make_cells
+from walkstream.server.bake.cells import make_cells
+from walkstream.server.bake.samples import dense_points, sample_points
+from walkstream.server.bake.viewcell import ViewCell
+from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene
 from walkstream.server.sources.scene import SourceScene
-from walkstream.server.visibility import (
-    VisibilityRenderer,
-    dense_points,
-    meshes_for_scene,
-    sample_points,
-)
 from walkstream.shared.errors import InputError
 
 if TYPE_CHECKING:
@@ -128,7 +125,7 @@ def load_bench_input(
     scene = load_geojson(src_path)
     bbox = settings.get("bbox")
     if bbox is not None:
-        from walkstream.server.bake import clip_scene
+        from walkstream.server.sources.clip import clip_scene
 
         scene = clip_scene(scene, tuple(float(v) for v in bbox))  # type: ignore[arg-type]
     scene_ids = np.sort(

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from walkstream.server.cells import make_cells
+from walkstream.server.bake.cells import make_cells
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict
 from walkstream.server.sources.scene import SourceScene

@@ -11,15 +11,11 @@ import numpy as np
 import pytest
 import shapely
 
-from walkstream.server.cells import (
-    ViewCell,
-    cell_locator,
-    cell_polygons,
-    grid_cells,
-    make_cells,
-    street_cells,
-    viewpoints,
-)
+from walkstream.server.bake.cells import make_cells
+from walkstream.server.bake.gridcells import grid_cells
+from walkstream.server.bake.streetcells import street_cells
+from walkstream.server.bake.viewcell import ViewCell, cell_locator, cell_polygons
+from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson, load_geojson_dict
 from walkstream.server.sources.scene import SourceScene

@@ -9,7 +9,7 @@ import pytest
 from scenes import build_city_db
 
 from walkstream.cli import main
-from walkstream.server.pathgen import default_paths
+from walkstream.server.bake.walks import default_paths
 from walkstream.server.store import SceneReader, write_path
 
 ISSUE5_KEYS = {

@@ -11,13 +11,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from walkstream.server.sources.geojson import (
-    DEFAULT_STREET_WIDTH,
-    default_floors,
-    load_geojson,
-    load_geojson_dict,
-    parse_length,
-)
+from walkstream.server.sources.geojson import DEFAULT_STREET_WIDTH, load_geojson, load_geojson_dict
+from walkstream.server.sources.heights import default_floors, parse_length
 from walkstream.server.sources.scene import FeatureIssue, SourceScene
 from walkstream.shared.errors import InputError, SourceError
 

@@ -17,18 +17,15 @@ from scenes import PATH_NAME, build_city_db
 
 import walkstream.server.store.edit
 from walkstream.cmd_path import add_path_parser
-from walkstream.server.cells import ViewCell, cell_locator, make_cells
-from walkstream.server.pathgen import (
-    CLIP_GAP,
-    CellGraph,
-    default_paths,
-    import_linestring,
-    import_path,
-    read_linestring,
-    record_path,
-)
+from walkstream.server.bake.cells import make_cells
+from walkstream.server.bake.navgraph import CellGraph
+from walkstream.server.bake.viewcell import ViewCell, cell_locator
+from walkstream.server.bake.walks import default_paths
+from walkstream.server.paths.importline import CLIP_GAP, import_linestring, import_path
+from walkstream.server.paths.record import record_path
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict
+from walkstream.server.sources.geojsonlines import read_linestring
 from walkstream.server.sources.scene import SourceScene
 from walkstream.server.store import CellRow, SceneReader, SceneWriter, write_path
 from walkstream.shared.errors import (
@@ -478,7 +475,7 @@ def test_import_path_into_a_scene(db: Path, tmp_path: Path) -> None:
 def vienna_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[ViewCell]]:
     if not (VIENNA / "blocks.geojson").exists():
         pytest.skip(f"no Vienna data at {VIENNA}")
-    from walkstream.server.bake import clip_scene
+    from walkstream.server.sources.clip import clip_scene
     from walkstream.server.sources.geojson import load_geojson
 
     bbox = (-800.0, -900.0, 600.0, 1100.0)  # the part of the city the walk goes through

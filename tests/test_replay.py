@@ -17,7 +17,7 @@ from scenes import build_city_db
 
 from walkstream.client.link import LinkProfile
 from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
-from walkstream.server.pathgen import default_paths
+from walkstream.server.bake.walks import default_paths
 from walkstream.server.service.main import create_app
 from walkstream.server.service.process import free_port, server_process
 from walkstream.server.store import SceneReader, write_path

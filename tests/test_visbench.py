@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pytest
 
-from walkstream.server.cells import make_cells
+from walkstream.server.bake.cells import make_cells
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict
 from walkstream.server.visbench import (

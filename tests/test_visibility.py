@@ -9,14 +9,9 @@ import numpy as np
 import pytest
 import shapely
 
+from walkstream.server.bake.samples import dense_points, sample_points
+from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
 from walkstream.server.sources.scene import SourceScene
-from walkstream.server.visibility import (
-    VisibilityRenderer,
-    dense_points,
-    meshes_for_scene,
-    pvs_from_counts,
-    sample_points,
-)
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.records import BuildingParams, Mesh, StreetParams

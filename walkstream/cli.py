@@ -259,7 +259,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     try:
         summary = reader.summary()
         if args.map:
-            from walkstream.server.mapplot import draw_map
+            from walkstream.server.bake.mapplot import draw_map
 
             draw_map(reader, args.map)
     finally:
@@ -371,7 +371,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         run_bake(city, db, workers=args.workers)
         print(f"baked {db} in {time.perf_counter() - t0:.1f} s")
-    from walkstream.server.mapplot import draw_map
+    from walkstream.server.bake.mapplot import draw_map
     from walkstream.server.store import SceneReader
 
     reader = SceneReader.open(db)

@@ -56,7 +56,7 @@ def _summary(path: Any) -> str:
 
 def cmd_path_record(args: argparse.Namespace) -> int:
     """Handler of ``walkstream path record``."""
-    from walkstream.server.pathgen import record_path
+    from walkstream.server.paths.record import record_path
 
     start = _point(args.from_xy, "--from")
     end = _point(args.to_xy, "--to")
@@ -70,7 +70,7 @@ def cmd_path_record(args: argparse.Namespace) -> int:
 
 def cmd_path_import(args: argparse.Namespace) -> int:
     """Handler of ``walkstream path import``."""
-    from walkstream.server.pathgen import import_path
+    from walkstream.server.paths.importline import import_path
 
     path, version, inside = import_path(
         args.db, args.name, args.file, _speed(args.speed), args.clip, replace=args.replace

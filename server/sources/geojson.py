@@ -70,84 +70,35 @@ Bad features
 
     :class:`~shared.errors.SourceError` is raised only when the file cannot be read,
     is not JSON, is not a FeatureCollection, declares a CRS that is unknown or not in
-    metres / degrees, or has no usable feature at all.
-"""
+    metres / degrees, or has no usable feature at all."""
 
 from __future__ import annotations
 
-import json
 import math
 import os
-import re
 import zlib
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyproj
 import shapely
-from numpy.typing import NDArray
 
+from walkstream.server.sources.crs import crs_label, outside_lonlat, parse_crs_member, utm_epsg
+from walkstream.server.sources.features import F64, _IssueLog, _Line, _Part, _Poly
+from walkstream.server.sources.heights import _levels, _positive, parse_length
+from walkstream.server.sources.jsonfile import read_json_file
 from walkstream.server.sources.partywalls import find_party_walls
-from walkstream.server.sources.scene import FeatureIssue, SourceScene
+from walkstream.server.sources.rings import _clean_and_repair, _clean_rings, _dedupe
+from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError, SourceError
 from walkstream.shared.records import BuildingParams, StreetParams
 
-__all__ = [
-    "read_json_file",
-    "load_geojson",
-    "load_geojson_dict",
-    "parse_length",
-    "default_floors",
-    "DEFAULT_STREET_WIDTH",
-    "MIN_AREA",
-]
-
-F64 = NDArray[np.float64]
+__all__ = ["DEFAULT_STREET_WIDTH", "load_geojson", "load_geojson_dict", "as_points"]
 
 #: Street width in metres when a street has no usable ``width`` property.
 DEFAULT_STREET_WIDTH = 10.0
-#: Polygons (and holes and repaired parts) smaller than this many m² are degenerate.
-MIN_AREA = 0.01
-#: Vertices closer than this (metres) are duplicates; a vertex this close to the
-#: line through its neighbours is collinear.
-_VERTEX_TOL = 1e-3
-_FOOT = 0.3048
-_HEIGHT_KEYS = ("height", "building:height", "est_height")
-_FLOOR_KEYS = ("building:levels", "levels", "floors")
 _STREET_KINDS = ("street", "crossroad", "square")
-_LENGTH_RE = re.compile(
-    r"^\s*([+-]?(?:\d+(?:[.,]\d*)?|[.,]\d+)(?:[eE][+-]?\d+)?)\s*"
-    r"(m|metres?|meters?|ft|feet|foot|'|)\s*$",
-    re.IGNORECASE,
-)
-
-
-# --------------------------------------------------------------------------- public
-
-
-def read_json_file(path: str | os.PathLike[str], max_bytes: int | None = None) -> Any:
-    """Parse a JSON file (UTF-8, BOM allowed); every failure is a :class:`SourceError` naming it.
-
-    ``max_bytes`` refuses larger files before reading them.
-    """
-    p = Path(path)
-    try:
-        if max_bytes is not None and p.stat().st_size > max_bytes:
-            raise SourceError(f"{p}: larger than {max_bytes >> 20} MiB")
-        with p.open("r", encoding="utf-8-sig") as fh:
-            return json.load(fh)
-    except OSError as exc:
-        raise SourceError(f"{p}: cannot read file: {exc.strerror or exc}") from exc
-    except UnicodeDecodeError as exc:
-        raise SourceError(f"{p}: not JSON: not UTF-8 text ({exc.reason})") from exc
-    except json.JSONDecodeError as exc:
-        raise SourceError(
-            f"{p}: not JSON: {exc.msg} at line {exc.lineno} column {exc.colno}"
-        ) from exc
-    except RecursionError as exc:
-        raise SourceError(f"{p}: not JSON: nested too deeply") from exc
 
 
 def load_geojson(
@@ -246,7 +197,7 @@ def load_geojson_dict(
     if name is None:
         name = obj["name"] if isinstance(obj.get("name"), str) else "geojson"
 
-    src_crs = _parse_crs(obj.get("crs"), source)
+    src_crs = parse_crs_member(obj.get("crs"), source)
     log = _IssueLog()
     polys, lines = _read_features(features, log)
     crs_name, origin = _to_local(polys, lines, src_crs, log)
@@ -280,117 +231,6 @@ def load_geojson_dict(
     )
 
 
-def parse_length(value: object) -> float | None:
-    """Parse a length property in metres.
-
-    Accepts numbers and strings such as ``"12"``, ``"12 m"``, ``"12.5m"``, ``"12,5"``
-    (decimal comma), ``"40 ft"``, ``"40 feet"``, ``"40'"`` (feet, converted).  Returns
-    ``None`` for anything else (booleans, unparsable strings).  The sign and
-    finiteness are not checked here.
-    """
-    if isinstance(value, bool):
-        return None
-    if isinstance(value, int | float):
-        return float(value)
-    if isinstance(value, str):
-        m = _LENGTH_RE.match(value)
-        if m is None:
-            return None
-        num = float(m.group(1).replace(",", "."))
-        return num * _FOOT if m.group(2).lower() in ("ft", "feet", "foot", "'") else num
-    return None
-
-
-def default_floors(feature_id: str) -> int:
-    """The default rule's floor count for a feature: 4 + crc32(id) % 3 (4 to 6)."""
-    return 4 + zlib.crc32(feature_id.encode("utf-8")) % 3
-
-
-# ------------------------------------------------------------------ internal records
-
-
-@dataclass
-class _Poly:
-    """One polygon (a Polygon feature or one MultiPolygon part) being loaded."""
-
-    index: int  # feature index in the file, for ordering issues
-    fid: str  # feature id
-    uid: str  # fid, or "fid#k" for MultiPolygon part k
-    is_part: bool  # True for a MultiPolygon part
-    kind: str | None  # None for a building, else street|crossroad|square
-    props: dict[str, Any]
-    raw: list[F64]  # rings, source CRS, (n, 2)
-    local: list[F64] | None = None  # rings, scene-local metres, once projected
-
-
-@dataclass
-class _Line:
-    """One street line (a LineString or one MultiLineString part)."""
-
-    index: int
-    fid: str
-    uid: str
-    props: dict[str, Any]
-    raw: F64
-    local: F64 | None = None
-
-
-@dataclass
-class _Part:
-    """A cleaned, valid polygon ready to become a building or street piece."""
-
-    poly: _Poly
-    source_id: str
-    rings: list[F64]  # exterior CCW, holes CW, scene-local metres
-
-
-@dataclass
-class _IssueLog:
-    """Issues in feature order (then in the order they were found)."""
-
-    items: list[tuple[int, int, FeatureIssue]] = field(default_factory=list)
-
-    def add(self, index: int, feature_id: str, problem: str, action: str) -> None:
-        self.items.append((index, len(self.items), FeatureIssue(feature_id, problem, action)))
-
-    def sorted(self) -> list[FeatureIssue]:
-        return [i for _, _, i in sorted(self.items, key=lambda t: (t[0], t[1]))]
-
-
-# ------------------------------------------------------------------------- reading
-
-
-def _parse_crs(crs: object, source: str) -> pyproj.CRS | None:
-    """The declared CRS, or None for the GeoJSON default (lon/lat, CRS84)."""
-    if crs is None:
-        return None
-    crs_name = None
-    if isinstance(crs, dict) and crs.get("type") == "name":
-        props = crs.get("properties")
-        if isinstance(props, dict):
-            crs_name = props.get("name")
-    if not isinstance(crs_name, str):
-        raise SourceError(
-            f"{source}: unsupported 'crs' member {crs!r}; expected "
-            '{"type": "name", "properties": {"name": "EPSG:NNNN"}}'
-        )
-    try:
-        parsed = pyproj.CRS.from_user_input(crs_name)
-    except pyproj.exceptions.CRSError as exc:
-        raise SourceError(f"{source}: unknown CRS {crs_name!r} in the 'crs' member") from exc
-    if parsed.is_geographic:
-        return parsed
-    if not parsed.is_projected:
-        raise SourceError(f"{source}: CRS {crs_name!r} is neither geographic nor projected")
-    unit = parsed.axis_info[0].unit_conversion_factor if parsed.axis_info else 0.0
-    if unit != 1.0:
-        raise SourceError(
-            f"{source}: projected CRS {crs_name!r} is not in metres "
-            f"({parsed.axis_info[0].unit_name if parsed.axis_info else 'unknown unit'})"
-        )
-    return parsed
-
-
 def _feature_id(feat: dict[str, Any], props: dict[str, Any], index: int) -> str:
     for v in (feat.get("id"), props.get("id"), props.get("@id")):
         if v is not None and v != "":
@@ -398,7 +238,7 @@ def _feature_id(feat: dict[str, Any], props: dict[str, Any], index: int) -> str:
     return str(index)
 
 
-def _as_points(coords: object) -> F64 | str:
+def as_points(coords: object) -> F64 | str:
     """An ``(n, 2) float64`` array from GeoJSON positions, or the problem as text."""
     try:
         arr = np.asarray(coords, dtype=np.float64)
@@ -443,7 +283,7 @@ def _read_features(features: list[Any], log: _IssueLog) -> tuple[list[_Poly], li
                 if not isinstance(part, list) or not part:
                     log.add(index, uid, "polygon without rings", "skipped")
                     continue
-                rings = [_as_points(r) for r in part]
+                rings = [as_points(r) for r in part]
                 bad = next((r for r in rings if isinstance(r, str)), None)
                 if bad is not None:
                     log.add(index, uid, str(bad), "skipped")
@@ -465,7 +305,7 @@ def _read_features(features: list[Any], log: _IssueLog) -> tuple[list[_Poly], li
                 continue
             for k, part in enumerate(coords if is_multi else [coords]):
                 uid = f"{fid}#{k}" if is_multi else fid
-                pts = _as_points(part)
+                pts = as_points(part)
                 if isinstance(pts, str):
                     log.add(index, uid, pts, "skipped")
                     continue
@@ -473,15 +313,6 @@ def _read_features(features: list[Any], log: _IssueLog) -> tuple[list[_Poly], li
         else:
             log.add(index, fid, f"unsupported geometry type {gtype!r}", "skipped")
     return polys, lines
-
-
-# ---------------------------------------------------------------------- projection
-
-
-def _utm_epsg(lon: float, lat: float) -> int:
-    """EPSG code of the WGS 84 UTM zone containing (lon, lat)."""
-    zone = int(math.floor((lon + 180.0) / 6.0)) % 60 + 1
-    return (32600 if lat >= 0 else 32700) + zone
 
 
 def _to_local(
@@ -499,10 +330,7 @@ def _to_local(
         kept = []
         for it in items:
             rings = it.raw if isinstance(it, _Poly) else [it.raw]
-            if all(
-                (np.abs(r[:, 1]) <= 90).all() and (r[:, 0] >= -180).all() and (r[:, 0] <= 360).all()
-                for r in rings
-            ):
+            if not any(outside_lonlat(r).any() for r in rings):
                 kept.append(it)
             else:
                 log.add(
@@ -513,13 +341,13 @@ def _to_local(
                 )
         items = kept
     if not items:
-        return ("EPSG:4326" if geographic else _crs_name(src)), (0.0, 0.0)
+        return ("EPSG:4326" if geographic else crs_label(src)), (0.0, 0.0)
 
     arrays = [r for it in items for r in (it.raw if isinstance(it, _Poly) else [it.raw])]
     allpts = np.concatenate(arrays)
     if geographic:
         lo, hi = allpts.min(axis=0), allpts.max(axis=0)
-        epsg = _utm_epsg(0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]))
+        epsg = utm_epsg(0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]))
         transformer = pyproj.Transformer.from_crs(
             src if src is not None else "OGC:CRS84", f"EPSG:{epsg}", always_xy=True
         )
@@ -528,7 +356,7 @@ def _to_local(
         crs_name = f"EPSG:{epsg}"
     else:
         proj = allpts
-        crs_name = _crs_name(src)
+        crs_name = crs_label(src)
 
     # Split back per item; drop items the projection could not handle.
     counts = [len(a) for a in arrays]
@@ -558,207 +386,6 @@ def _to_local(
         else:
             it.local = local[0]
     return crs_name, (float(origin[0]), float(origin[1]))
-
-
-def _crs_name(crs: pyproj.CRS | None) -> str:
-    if crs is None:
-        return "EPSG:4326"
-    epsg = crs.to_epsg()
-    return f"EPSG:{epsg}" if epsg is not None else crs.to_string()
-
-
-# ------------------------------------------------------------------------ cleaning
-
-
-def _signed_area(r: F64) -> float:
-    """Shoelace area of an ``(n, 2)`` ring; positive when counter-clockwise."""
-    # Relative to the first vertex so large coordinates do not cancel catastrophically.
-    x, y = r[:, 0] - r[0, 0], r[:, 1] - r[0, 1]
-    return 0.5 * float(np.dot(x[:-1], y[1:]) - np.dot(x[1:], y[:-1]))
-
-
-def _dedupe(r: F64, closed: bool = True) -> F64:
-    """Drop repeated vertices (within 1 mm), and for a ring the closing vertex."""
-    if len(r) < 2:
-        return r
-    step = np.hypot(*np.diff(r, axis=0).T)
-    keep = np.ones(len(r), dtype=bool)
-    keep[1:] = step >= _VERTEX_TOL
-    r = r[keep]
-    if closed:
-        while len(r) > 1 and math.hypot(*(r[-1] - r[0])) < _VERTEX_TOL:
-            r = r[:-1]
-    return r
-
-
-def _drop_collinear(r: F64) -> F64:
-    """Drop ring vertices within 1 mm of the line through their two neighbours."""
-    while len(r) >= 3:
-        idx = np.arange(len(r))
-        prev = r[idx - 1]  # index -1 wraps to the last vertex
-        d = r[(idx + 1) % len(r)] - prev
-        v = r - prev
-        chord = np.hypot(d[:, 0], d[:, 1])
-        cross = np.abs(d[:, 0] * v[:, 1] - d[:, 1] * v[:, 0])
-        # A vertex whose neighbours coincide is a spike tip: keep it (make_valid
-        # deals with spikes) instead of dividing by zero.
-        dist = np.where(chord > 0, cross / np.where(chord > 0, chord, 1.0), np.inf)
-        flag = dist < _VERTEX_TOL
-        if not flag.any():
-            break
-        r = r[~flag]
-    return r
-
-
-def _clean_rings(rings: list[F64]) -> tuple[list[F64] | None, str | None, list[str]]:
-    """Clean and orient a polygon's rings.
-
-    Returns ``(rings, skip_reason, hole_notes)``: ``rings`` is None when the exterior
-    is unusable (``skip_reason`` says why); ``hole_notes`` describe dropped holes.
-    """
-    ext = _dedupe(rings[0])
-    if len(ext) < 3:
-        return None, f"fewer than 3 distinct points ({len(ext)})", []
-    area = _signed_area(ext)
-    ext = _drop_collinear(ext)
-    if abs(area) < MIN_AREA or len(ext) < 3:
-        return None, f"zero or near-zero area ({abs(area):.3g} m²)", []
-    if area < 0:
-        ext = ext[::-1].copy()
-    out = [ext]
-    notes = []
-    for j, hole in enumerate(rings[1:], start=1):
-        h = _dedupe(hole)
-        if len(h) < 3:
-            notes.append(f"degenerate hole {j} ({len(h)} distinct points); hole dropped")
-            continue
-        harea = _signed_area(h)
-        h = _drop_collinear(h)
-        if abs(harea) < MIN_AREA or len(h) < 3:
-            notes.append(f"degenerate hole {j} (area {abs(harea):.3g} m²); hole dropped")
-            continue
-        out.append(h[::-1].copy() if harea > 0 else h)
-    return out, None, notes
-
-
-def _clean_and_repair(poly: _Poly, log: _IssueLog) -> list[_Part]:
-    """Clean one polygon; repair a self-intersecting one with make_valid."""
-    assert poly.local is not None
-    ext = _dedupe(poly.local[0])
-    if len(ext) >= 3 and not shapely.is_simple(shapely.LinearRing(ext)):
-        # A self-crossing exterior (bow-tie) has a meaningless shoelace area, so it
-        # must be repaired before the area and collinearity tests, not after.
-        holes = [h for h in map(_dedupe, poly.local[1:]) if len(h) >= 3]
-        return _repair(poly, shapely.Polygon(ext, holes), log)
-    rings, skip, notes = _clean_rings(poly.local)
-    for note in notes:
-        log.add(poly.index, poly.uid, note, "repaired")
-    if rings is None:
-        log.add(poly.index, poly.uid, str(skip), "skipped")
-        return []
-    shape = shapely.Polygon(rings[0], rings[1:])
-    if shape.is_valid:
-        return [_Part(poly, poly.uid, rings)]
-    return _repair(poly, shape, log)
-
-
-def _repair(poly: _Poly, shape: shapely.Polygon, log: _IssueLog) -> list[_Part]:
-    """make_valid an invalid polygon; every polygonal part of >= MIN_AREA is kept."""
-    reason = shapely.is_valid_reason(shape)
-    fixed = shapely.make_valid(shape)
-    parts = [
-        g for g in shapely.get_parts(fixed) if isinstance(g, shapely.Polygon | shapely.MultiPolygon)
-    ]
-    polygons = [p for g in parts for p in shapely.get_parts(g)]
-    cleaned: list[list[F64]] = []
-    dropped = 0
-    for p in polygons:
-        prings = [np.asarray(p.exterior.coords, np.float64)[:, :2]]
-        prings += [np.asarray(i.coords, np.float64)[:, :2] for i in p.interiors]
-        c, _, _ = _clean_rings(prings)
-        if c is None:
-            dropped += 1
-        else:
-            cleaned.append(c)
-    if not cleaned:
-        log.add(
-            poly.index,
-            poly.uid,
-            f"zero or near-zero area: invalid polygon ({reason}) has no part of "
-            f"{MIN_AREA} m² or more after make_valid",
-            "skipped",
-        )
-        return []
-    sep = "." if poly.is_part else "#"
-    ids = [poly.uid] if len(cleaned) == 1 else [f"{poly.uid}{sep}{j}" for j in range(len(cleaned))]
-    log.add(
-        poly.index,
-        poly.uid,
-        f"invalid polygon ({reason}); repaired with make_valid into {len(cleaned)} part(s)"
-        + (f", {dropped} part(s) under {MIN_AREA} m² dropped" if dropped else ""),
-        "repaired",
-    )
-    return [_Part(poly, sid, c) for sid, c in zip(ids, cleaned, strict=True)]
-
-
-# ----------------------------------------------------------------------- assembly
-
-
-def _positive(value: float | None) -> bool:
-    return value is not None and math.isfinite(value) and value > 0
-
-
-def _levels(
-    props: dict[str, Any], fid: str, default_floor_height: float
-) -> tuple[int, float, list[str], str]:
-    """Floors and floor height of a feature by the module's rules.
-
-    Returns ``(floors, floor_height, bad_values, how)``; ``bad_values`` lists the
-    properties that were ignored, ``how`` says which rule decided.
-    """
-    bad: list[str] = []
-
-    def first_valid(keys: tuple[str, ...], parse: Any) -> tuple[str, float] | None:
-        for key in keys:
-            raw = props.get(key)
-            if raw is None or raw == "":
-                continue
-            value = parse(raw)
-            if _positive(value):
-                return key, float(value)
-            bad.append(f"{key}={raw!r}")
-        return None
-
-    height = first_valid(_HEIGHT_KEYS, parse_length)
-    floors_v = first_valid(_FLOOR_KEYS, _parse_count)
-    fh_v = first_valid(("floor_height",), parse_length)
-    floor_height = fh_v[1] if fh_v else default_floor_height
-    floors = int(math.floor(floors_v[1] + 0.5)) if floors_v else 0
-    if floors_v and floors < 1:
-        bad.append(f"{floors_v[0]}={props[floors_v[0]]!r}")
-        floors_v = None
-    if height and floors_v:
-        return floors, height[1] / floors, bad, f"{height[0]} and {floors_v[0]} used"
-    if height:
-        floors = max(1, int(math.floor(height[1] / floor_height + 0.5)))
-        return floors, height[1] / floors, bad, f"{height[0]} used"
-    if floors_v:
-        return floors, floor_height, bad, f"{floors_v[0]} used"
-    return default_floors(fid), floor_height, bad, "default rule used"
-
-
-def _parse_count(value: object) -> float | None:
-    """A floor count from a number or numeric string (None when unparsable)."""
-    if isinstance(value, bool):
-        return None
-    if isinstance(value, int | float):
-        return float(value)
-    if isinstance(value, str):
-        try:
-            return float(value.strip().replace(",", "."))
-        except ValueError:
-            return None
-    return None
 
 
 def _make_buildings(

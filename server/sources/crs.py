@@ -1,0 +1,82 @@
+"""Coordinate reference systems of sources: the declared CRS, the lon/lat check, UTM zones.
+
+Geographic data (x = lon, y = lat) is projected to the WGS 84 UTM zone of its centre
+(EPSG:326zz north, EPSG:327zz south; the Norway/Svalbard exceptions are ignored);
+projected data must be in metres.  Every reader of lon/lat coordinates checks them
+with :func:`outside_lonlat` first: out-of-range values usually mean projected data
+without a ``crs`` member.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyproj
+from numpy.typing import NDArray
+
+from walkstream.shared.errors import SourceError
+
+__all__ = ["parse_crs_member", "utm_epsg", "crs_label", "outside_lonlat"]
+
+# ------------------------------------------------------------------------- reading
+
+
+def parse_crs_member(crs: object, source: str) -> pyproj.CRS | None:
+    """The declared CRS, or None for the GeoJSON default (lon/lat, CRS84)."""
+    if crs is None:
+        return None
+    crs_name = None
+    if isinstance(crs, dict) and crs.get("type") == "name":
+        props = crs.get("properties")
+        if isinstance(props, dict):
+            crs_name = props.get("name")
+    if not isinstance(crs_name, str):
+        raise SourceError(
+            f"{source}: unsupported 'crs' member {crs!r}; expected "
+            '{"type": "name", "properties": {"name": "EPSG:NNNN"}}'
+        )
+    try:
+        parsed = pyproj.CRS.from_user_input(crs_name)
+    except pyproj.exceptions.CRSError as exc:
+        raise SourceError(f"{source}: unknown CRS {crs_name!r} in the 'crs' member") from exc
+    if parsed.is_geographic:
+        return parsed
+    if not parsed.is_projected:
+        raise SourceError(f"{source}: CRS {crs_name!r} is neither geographic nor projected")
+    unit = parsed.axis_info[0].unit_conversion_factor if parsed.axis_info else 0.0
+    if unit != 1.0:
+        raise SourceError(
+            f"{source}: projected CRS {crs_name!r} is not in metres "
+            f"({parsed.axis_info[0].unit_name if parsed.axis_info else 'unknown unit'})"
+        )
+    return parsed
+
+
+# ---------------------------------------------------------------------- projection
+
+
+def utm_epsg(lon: float, lat: float) -> int:
+    """EPSG code of the WGS 84 UTM zone containing (lon, lat)."""
+    zone = int(math.floor((lon + 180.0) / 6.0)) % 60 + 1
+    return (32600 if lat >= 0 else 32700) + zone
+
+
+def crs_label(crs: pyproj.CRS | None) -> str:
+    if crs is None:
+        return "EPSG:4326"
+    epsg = crs.to_epsg()
+    return f"EPSG:{epsg}" if epsg is not None else crs.to_string()
+
+
+def outside_lonlat(points: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """``(n,)`` bool: the ``(n, 2)`` lon/lat points that are outside the lon/lat range.
+
+    Longitudes from -180 to 360 (some data uses 0 to 360) and latitudes from -90 to
+    90 are in range.
+
+    >>> outside_lonlat(np.array([[16.37, 48.21], [600000.0, 5340000.0]])).tolist()
+    [False, True]
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    return (np.abs(p[:, 1]) > 90) | (p[:, 0] < -180) | (p[:, 0] > 360)

@@ -1,0 +1,66 @@
+"""The working records of a source loader: polygons and lines being loaded, and the issue log."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.server.sources.scene import FeatureIssue
+
+__all__ = ["F64"]
+
+F64 = NDArray[np.float64]
+
+
+# ------------------------------------------------------------------ internal records
+
+
+@dataclass
+class _Poly:
+    """One polygon (a Polygon feature or one MultiPolygon part) being loaded."""
+
+    index: int  # feature index in the file, for ordering issues
+    fid: str  # feature id
+    uid: str  # fid, or "fid#k" for MultiPolygon part k
+    is_part: bool  # True for a MultiPolygon part
+    kind: str | None  # None for a building, else street|crossroad|square
+    props: dict[str, Any]
+    raw: list[F64]  # rings, source CRS, (n, 2)
+    local: list[F64] | None = None  # rings, scene-local metres, once projected
+
+
+@dataclass
+class _Line:
+    """One street line (a LineString or one MultiLineString part)."""
+
+    index: int
+    fid: str
+    uid: str
+    props: dict[str, Any]
+    raw: F64
+    local: F64 | None = None
+
+
+@dataclass
+class _Part:
+    """A cleaned, valid polygon ready to become a building or street piece."""
+
+    poly: _Poly
+    source_id: str
+    rings: list[F64]  # exterior CCW, holes CW, scene-local metres
+
+
+@dataclass
+class _IssueLog:
+    """Issues in feature order (then in the order they were found)."""
+
+    items: list[tuple[int, int, FeatureIssue]] = field(default_factory=list)
+
+    def add(self, index: int, feature_id: str, problem: str, action: str) -> None:
+        self.items.append((index, len(self.items), FeatureIssue(feature_id, problem, action)))
+
+    def sorted(self) -> list[FeatureIssue]:
+        return [i for _, _, i in sorted(self.items, key=lambda t: (t[0], t[1]))]

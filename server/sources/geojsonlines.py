@@ -1,0 +1,148 @@
+"""A GeoJSON line (a walk someone recorded) read into scene-local metres.
+
+:func:`read_linestring` takes a GeoJSON ``LineString`` (or ``MultiLineString``, a
+``Feature`` holding one, or a ``FeatureCollection`` with exactly one line feature):
+coordinates in the file's declared ``crs`` (default lon/lat) are projected to the
+scene's CRS with pyproj and moved by the scene origin.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyproj
+
+from walkstream.server.bake.navgraph import F64
+from walkstream.server.sources.crs import outside_lonlat, parse_crs_member
+from walkstream.server.sources.geojson import as_points
+from walkstream.server.sources.jsonfile import read_json_file
+from walkstream.shared.errors import InputError, SourceError
+
+__all__ = ["read_linestring"]
+_MAX_GEOJSON_BYTES = 256 << 20
+
+
+# --------------------------------------------------------------------------- GeoJSON lines
+
+
+def read_linestring(
+    source: str | os.PathLike[str] | Mapping[str, Any], crs: str, origin: Sequence[float]
+) -> F64:
+    """The one line of a GeoJSON object in scene-local metres.
+
+    Parameters
+    ----------
+    source:
+        A ``.geojson`` file or the parsed object: a ``LineString`` or
+        ``MultiLineString`` geometry, a ``Feature`` with one, or a
+        ``FeatureCollection`` with exactly one line feature (other features are
+        ignored).  The parts of a ``MultiLineString`` are joined in order.
+    crs:
+        The scene's CRS (``SceneMeta.crs``), projected metres.
+    origin:
+        The scene origin in that CRS.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(n, 2) float64`` vertices, repeated ones dropped.
+
+    Raises
+    ------
+    SourceError
+        Unreadable file, not JSON, no line or several, malformed or out-of-range
+        coordinates, or an unusable CRS.
+    """
+    if isinstance(source, Mapping):
+        obj: Any = source
+        label = "<geojson>"
+    elif not isinstance(source, str | os.PathLike):
+        raise SourceError(f"expected a GeoJSON object or file, got {type(source).__name__}")
+    else:
+        label = str(Path(source))
+        obj = read_json_file(source, _MAX_GEOJSON_BYTES)
+    if not isinstance(obj, Mapping):
+        raise SourceError(f"{label}: expected a GeoJSON object, got {type(obj).__name__}")
+    src_crs = parse_crs_member(obj.get("crs"), label)
+    geom = _the_line(obj, label)
+    gtype, coords = geom.get("type"), geom.get("coordinates")
+    parts = coords if gtype == "MultiLineString" else [coords]
+    if not isinstance(parts, list) or not parts:
+        raise SourceError(f"{label}: malformed {gtype} coordinates")
+    arrays = []
+    for k, part in enumerate(parts):
+        pts = as_points(part)
+        if isinstance(pts, str):
+            where = f" (part {k})" if gtype == "MultiLineString" else ""
+            raise SourceError(f"{label}: {gtype}{where}: {pts}")
+        arrays.append(pts)
+    raw = np.concatenate(arrays)
+    geographic = src_crs is None or src_crs.is_geographic
+    if geographic:
+        bad = np.flatnonzero(outside_lonlat(raw))
+        if len(bad):
+            i = int(bad[0])
+            raise SourceError(
+                f"{label}: position {i} ({raw[i, 0]}, {raw[i, 1]}) is outside the lon/lat "
+                "range (projected data needs a 'crs' member)"
+            )
+    try:
+        dst = pyproj.CRS.from_user_input(crs)
+    except pyproj.exceptions.CRSError as exc:
+        raise InputError(f"scene CRS {crs!r} is not a known CRS") from exc
+    if not dst.is_projected:
+        raise InputError(f"scene CRS {crs!r} is not projected: cannot place a line in metres")
+    transformer = pyproj.Transformer.from_crs(
+        src_crs if src_crs is not None else "OGC:CRS84", dst, always_xy=True
+    )
+    x, y = transformer.transform(raw[:, 0], raw[:, 1])
+    ox, oy = (float(v) for v in origin)
+    xy = np.column_stack([np.asarray(x, np.float64) - ox, np.asarray(y, np.float64) - oy])
+    if not np.isfinite(xy).all():
+        i = int(np.flatnonzero(~np.isfinite(xy).all(axis=1))[0])
+        raise SourceError(f"{label}: position {i} cannot be projected to {crs}")
+    keep = np.concatenate([[True], np.hypot(*np.diff(xy, axis=0).T) > 1e-3])
+    xy = xy[keep]
+    if len(xy) < 2:
+        raise SourceError(f"{label}: the line has fewer than 2 distinct positions")
+    return xy
+
+
+def _the_line(obj: Mapping[str, Any], label: str) -> Mapping[str, Any]:
+    gtype = obj.get("type")
+    if gtype in ("LineString", "MultiLineString"):
+        return obj
+    if gtype == "Feature":
+        geom = obj.get("geometry")
+        if not isinstance(geom, Mapping) or geom.get("type") not in (
+            "LineString",
+            "MultiLineString",
+        ):
+            got = geom.get("type") if isinstance(geom, Mapping) else geom
+            raise SourceError(f"{label}: the Feature's geometry is {got!r}, not a LineString")
+        return geom
+    if gtype == "FeatureCollection":
+        feats = obj.get("features")
+        if not isinstance(feats, list):
+            raise SourceError(f"{label}: FeatureCollection has no 'features' list")
+        lines = [
+            f["geometry"]
+            for f in feats
+            if isinstance(f, Mapping)
+            and isinstance(f.get("geometry"), Mapping)
+            and f["geometry"].get("type") in ("LineString", "MultiLineString")
+        ]
+        if len(lines) != 1:
+            raise SourceError(
+                f"{label}: expected exactly one LineString feature, found {len(lines)} "
+                f"(among {len(feats)} features)"
+            )
+        return lines[0]
+    raise SourceError(
+        f"{label}: expected a GeoJSON LineString, MultiLineString, Feature or "
+        f"FeatureCollection, got type {gtype!r:.60}"
+    )

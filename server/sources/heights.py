@@ -1,0 +1,104 @@
+"""Building heights and floor counts from feature properties, and the default rule without them."""
+
+from __future__ import annotations
+
+import math
+import re
+import zlib
+from typing import Any
+
+__all__ = ["parse_length", "default_floors"]
+_FOOT = 0.3048
+_HEIGHT_KEYS = ("height", "building:height", "est_height")
+_FLOOR_KEYS = ("building:levels", "levels", "floors")
+_LENGTH_RE = re.compile(
+    r"^\s*([+-]?(?:\d+(?:[.,]\d*)?|[.,]\d+)(?:[eE][+-]?\d+)?)\s*"
+    r"(m|metres?|meters?|ft|feet|foot|'|)\s*$",
+    re.IGNORECASE,
+)
+
+
+def parse_length(value: object) -> float | None:
+    """Parse a length property in metres.
+
+    Accepts numbers and strings such as ``"12"``, ``"12 m"``, ``"12.5m"``, ``"12,5"``
+    (decimal comma), ``"40 ft"``, ``"40 feet"``, ``"40'"`` (feet, converted).  Returns
+    ``None`` for anything else (booleans, unparsable strings).  The sign and
+    finiteness are not checked here.
+    """
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int | float):
+        return float(value)
+    if isinstance(value, str):
+        m = _LENGTH_RE.match(value)
+        if m is None:
+            return None
+        num = float(m.group(1).replace(",", "."))
+        return num * _FOOT if m.group(2).lower() in ("ft", "feet", "foot", "'") else num
+    return None
+
+
+def default_floors(feature_id: str) -> int:
+    """The default rule's floor count for a feature: 4 + crc32(id) % 3 (4 to 6)."""
+    return 4 + zlib.crc32(feature_id.encode("utf-8")) % 3
+
+
+# ----------------------------------------------------------------------- assembly
+
+
+def _positive(value: float | None) -> bool:
+    return value is not None and math.isfinite(value) and value > 0
+
+
+def _levels(
+    props: dict[str, Any], fid: str, default_floor_height: float
+) -> tuple[int, float, list[str], str]:
+    """Floors and floor height of a feature by the module's rules.
+
+    Returns ``(floors, floor_height, bad_values, how)``; ``bad_values`` lists the
+    properties that were ignored, ``how`` says which rule decided.
+    """
+    bad: list[str] = []
+
+    def first_valid(keys: tuple[str, ...], parse: Any) -> tuple[str, float] | None:
+        for key in keys:
+            raw = props.get(key)
+            if raw is None or raw == "":
+                continue
+            value = parse(raw)
+            if _positive(value):
+                return key, float(value)
+            bad.append(f"{key}={raw!r}")
+        return None
+
+    height = first_valid(_HEIGHT_KEYS, parse_length)
+    floors_v = first_valid(_FLOOR_KEYS, _parse_count)
+    fh_v = first_valid(("floor_height",), parse_length)
+    floor_height = fh_v[1] if fh_v else default_floor_height
+    floors = int(math.floor(floors_v[1] + 0.5)) if floors_v else 0
+    if floors_v and floors < 1:
+        bad.append(f"{floors_v[0]}={props[floors_v[0]]!r}")
+        floors_v = None
+    if height and floors_v:
+        return floors, height[1] / floors, bad, f"{height[0]} and {floors_v[0]} used"
+    if height:
+        floors = max(1, int(math.floor(height[1] / floor_height + 0.5)))
+        return floors, height[1] / floors, bad, f"{height[0]} used"
+    if floors_v:
+        return floors, floor_height, bad, f"{floors_v[0]} used"
+    return default_floors(fid), floor_height, bad, "default rule used"
+
+
+def _parse_count(value: object) -> float | None:
+    """A floor count from a number or numeric string (None when unparsable)."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int | float):
+        return float(value)
+    if isinstance(value, str):
+        try:
+            return float(value.strip().replace(",", "."))
+        except ValueError:
+            return None
+    return None

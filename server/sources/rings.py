@@ -1,0 +1,147 @@
+"""Clean, orient and repair footprint rings: repeated and collinear vertices, degenerate holes, self-intersections."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+
+from walkstream.server.sources.features import F64, _IssueLog, _Part, _Poly
+from walkstream.shared.geometry import signed_area
+
+__all__ = ["MIN_AREA"]
+#: Polygons (and holes and repaired parts) smaller than this many m² are degenerate.
+MIN_AREA = 0.01
+#: Vertices closer than this (metres) are duplicates; a vertex this close to the
+#: line through its neighbours is collinear.
+_VERTEX_TOL = 1e-3
+
+
+# ------------------------------------------------------------------------ cleaning
+
+
+
+
+def _dedupe(r: F64, closed: bool = True) -> F64:
+    """Drop repeated vertices (within 1 mm), and for a ring the closing vertex."""
+    if len(r) < 2:
+        return r
+    step = np.hypot(*np.diff(r, axis=0).T)
+    keep = np.ones(len(r), dtype=bool)
+    keep[1:] = step >= _VERTEX_TOL
+    r = r[keep]
+    if closed:
+        while len(r) > 1 and math.hypot(*(r[-1] - r[0])) < _VERTEX_TOL:
+            r = r[:-1]
+    return r
+
+
+def _drop_collinear(r: F64) -> F64:
+    """Drop ring vertices within 1 mm of the line through their two neighbours."""
+    while len(r) >= 3:
+        idx = np.arange(len(r))
+        prev = r[idx - 1]  # index -1 wraps to the last vertex
+        d = r[(idx + 1) % len(r)] - prev
+        v = r - prev
+        chord = np.hypot(d[:, 0], d[:, 1])
+        cross = np.abs(d[:, 0] * v[:, 1] - d[:, 1] * v[:, 0])
+        # A vertex whose neighbours coincide is a spike tip: keep it (make_valid
+        # deals with spikes) instead of dividing by zero.
+        dist = np.where(chord > 0, cross / np.where(chord > 0, chord, 1.0), np.inf)
+        flag = dist < _VERTEX_TOL
+        if not flag.any():
+            break
+        r = r[~flag]
+    return r
+
+
+def _clean_rings(rings: list[F64]) -> tuple[list[F64] | None, str | None, list[str]]:
+    """Clean and orient a polygon's rings.
+
+    Returns ``(rings, skip_reason, hole_notes)``: ``rings`` is None when the exterior
+    is unusable (``skip_reason`` says why); ``hole_notes`` describe dropped holes.
+    """
+    ext = _dedupe(rings[0])
+    if len(ext) < 3:
+        return None, f"fewer than 3 distinct points ({len(ext)})", []
+    area = signed_area(ext)
+    ext = _drop_collinear(ext)
+    if abs(area) < MIN_AREA or len(ext) < 3:
+        return None, f"zero or near-zero area ({abs(area):.3g} m²)", []
+    if area < 0:
+        ext = ext[::-1].copy()
+    out = [ext]
+    notes = []
+    for j, hole in enumerate(rings[1:], start=1):
+        h = _dedupe(hole)
+        if len(h) < 3:
+            notes.append(f"degenerate hole {j} ({len(h)} distinct points); hole dropped")
+            continue
+        harea = signed_area(h)
+        h = _drop_collinear(h)
+        if abs(harea) < MIN_AREA or len(h) < 3:
+            notes.append(f"degenerate hole {j} (area {abs(harea):.3g} m²); hole dropped")
+            continue
+        out.append(h[::-1].copy() if harea > 0 else h)
+    return out, None, notes
+
+
+def _clean_and_repair(poly: _Poly, log: _IssueLog) -> list[_Part]:
+    """Clean one polygon; repair a self-intersecting one with make_valid."""
+    assert poly.local is not None
+    ext = _dedupe(poly.local[0])
+    if len(ext) >= 3 and not shapely.is_simple(shapely.LinearRing(ext)):
+        # A self-crossing exterior (bow-tie) has a meaningless shoelace area, so it
+        # must be repaired before the area and collinearity tests, not after.
+        holes = [h for h in map(_dedupe, poly.local[1:]) if len(h) >= 3]
+        return _repair(poly, shapely.Polygon(ext, holes), log)
+    rings, skip, notes = _clean_rings(poly.local)
+    for note in notes:
+        log.add(poly.index, poly.uid, note, "repaired")
+    if rings is None:
+        log.add(poly.index, poly.uid, str(skip), "skipped")
+        return []
+    shape = shapely.Polygon(rings[0], rings[1:])
+    if shape.is_valid:
+        return [_Part(poly, poly.uid, rings)]
+    return _repair(poly, shape, log)
+
+
+def _repair(poly: _Poly, shape: shapely.Polygon, log: _IssueLog) -> list[_Part]:
+    """make_valid an invalid polygon; every polygonal part of >= MIN_AREA is kept."""
+    reason = shapely.is_valid_reason(shape)
+    fixed = shapely.make_valid(shape)
+    parts = [
+        g for g in shapely.get_parts(fixed) if isinstance(g, shapely.Polygon | shapely.MultiPolygon)
+    ]
+    polygons = [p for g in parts for p in shapely.get_parts(g)]
+    cleaned: list[list[F64]] = []
+    dropped = 0
+    for p in polygons:
+        prings = [np.asarray(p.exterior.coords, np.float64)[:, :2]]
+        prings += [np.asarray(i.coords, np.float64)[:, :2] for i in p.interiors]
+        c, _, _ = _clean_rings(prings)
+        if c is None:
+            dropped += 1
+        else:
+            cleaned.append(c)
+    if not cleaned:
+        log.add(
+            poly.index,
+            poly.uid,
+            f"zero or near-zero area: invalid polygon ({reason}) has no part of "
+            f"{MIN_AREA} m² or more after make_valid",
+            "skipped",
+        )
+        return []
+    sep = "." if poly.is_part else "#"
+    ids = [poly.uid] if len(cleaned) == 1 else [f"{poly.uid}{sep}{j}" for j in range(len(cleaned))]
+    log.add(
+        poly.index,
+        poly.uid,
+        f"invalid polygon ({reason}); repaired with make_valid into {len(cleaned)} part(s)"
+        + (f", {dropped} part(s) under {MIN_AREA} m² dropped" if dropped else ""),
+        "repaired",
+    )
+    return [_Part(poly, sid, c) for sid, c in zip(ids, cleaned, strict=True)]
