@@ -37,8 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from walkstream.client.budget import BudgetController, recovery_frames, simulate, within_ratio
-from walkstream.client.devices import make_device
+from walkstream.client.draw.budget import BudgetController, recovery_frames, simulate, within_ratio
+from walkstream.client.draw.devices import make_device
 from walkstream.shared.errors import InputError
 
 __all__ = ["PvsSupply", "DEFAULT_CASES", "LIGHT_SCENE", "GOALS", "run_budget_bench", "format_table"]

@@ -31,17 +31,19 @@ import httpx
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.allocate import allocate_ach, allocate_distance, frustum_cull
-from walkstream.client.api import SceneClient
-from walkstream.client.budget import BudgetController
-from walkstream.client.cache import Cache, DiskCache
 from walkstream.client.clock import Clock, RealClock, SimClock
-from walkstream.client.devices import make_device
-from walkstream.client.link import LinkProfile, ShapedTransport
-from walkstream.client.metrics import FrameLog, FrameLogBuilder, summarise
-from walkstream.client.predict import MotionPredictor
-from walkstream.client.rewrite import ObjectGeometry, RewritePool
-from walkstream.client.streamer import Streamer, StreamerConfig
+from walkstream.client.draw.allocate import allocate_ach, allocate_distance
+from walkstream.client.draw.budget import BudgetController
+from walkstream.client.draw.culling import frustum_cull
+from walkstream.client.draw.devices import make_device
+from walkstream.client.net.api import SceneClient
+from walkstream.client.net.link import LinkProfile, ShapedTransport
+from walkstream.client.report.metrics import FrameLog, FrameLogBuilder, summarise
+from walkstream.client.rewrite.pool import ObjectGeometry, RewritePool
+from walkstream.client.stream.cache import Cache
+from walkstream.client.stream.diskcache import DiskCache
+from walkstream.client.stream.predict import MotionPredictor
+from walkstream.client.stream.streamer import Streamer, StreamerConfig
 from walkstream.shared.camera import look_at, perspective
 from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import parse_grammar
@@ -293,7 +295,7 @@ async def replay(
                 rewrite.start()
             device = make_device(config.device, config.seed)
             if not device.simulated or config.snapshot_every:
-                from walkstream.client.frames import FrameRenderer
+                from walkstream.client.draw.frames import FrameRenderer
 
                 renderer = FrameRenderer(size=config.size, fov_deg=config.fov_deg)
 

@@ -7,15 +7,14 @@ import itertools
 import numpy as np
 import pytest
 
-from walkstream.client.allocate import (
+from walkstream.client.draw.allocate import (
     NOT_DRAWN,
     allocate_ach,
     allocate_distance,
     distance_thresholds_for_budget,
-    frustum_cull,
-    frustum_planes,
 )
-from walkstream.client.frames import camera
+from walkstream.client.draw.culling import frustum_cull, frustum_planes
+from walkstream.client.draw.frames import camera
 from walkstream.shared.camera import look_at, perspective
 from walkstream.shared.errors import InputError
 

@@ -10,15 +10,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.typing import NDArray
 
-from walkstream.client.budget import (
+from walkstream.client.budgetbench import LIGHT_SCENE, PvsSupply, format_table, run_budget_bench
+from walkstream.client.draw.budget import (
     BudgetController,
     frame_rates,
     recovery_frames,
     simulate,
     within_ratio,
 )
-from walkstream.client.budgetbench import LIGHT_SCENE, PvsSupply, format_table, run_budget_bench
-from walkstream.client.devices import CostModelDevice, make_device
+from walkstream.client.draw.devices import CostModelDevice, make_device
 from walkstream.shared.errors import InputError
 
 CASES = [("desktop2003", 25.0), ("desktop2003", 40.0), ("pda", 10.0)]

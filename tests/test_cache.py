@@ -12,7 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from walkstream.client.cache import KEEP_VERSIONS, Cache, DiskCache, safe_name
+from walkstream.client.stream.cache import Cache
+from walkstream.client.stream.diskcache import KEEP_VERSIONS, DiskCache, safe_name
 from walkstream.shared.errors import InputError
 
 # ---------------------------------------------------------------------------

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from walkstream.client.devices import (
+from walkstream.client.draw.devices import (
     DESKTOP2003_POINTS,
     DEVICES,
     MIN_FRAME_TIME_S,

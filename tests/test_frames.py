@@ -9,8 +9,8 @@ import moderngl
 import numpy as np
 import pytest
 
-from walkstream.client.frames import VERTEX_BYTES, FrameRenderer, camera
-from walkstream.client.render import BACKGROUND_RGB
+from walkstream.client.draw.frames import VERTEX_BYTES, FrameRenderer, camera
+from walkstream.client.draw.meshes import BACKGROUND_RGB
 from walkstream.shared.buildings import build_lods
 from walkstream.shared.camera import look_at
 from walkstream.shared.errors import InputError, RenderError

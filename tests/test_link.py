@@ -17,7 +17,7 @@ from starlette.responses import Response, StreamingResponse
 from starlette.routing import Route
 
 from walkstream.client.clock import Clock, RealClock, SimClock
-from walkstream.client.link import LinkProfile, LinkStats, ShapedTransport
+from walkstream.client.net.link import LinkProfile, LinkStats, ShapedTransport
 from walkstream.shared.errors import InputError
 
 T = TypeVar("T")

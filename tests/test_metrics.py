@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from walkstream.client.metrics import (
+from walkstream.client.report.metrics import (
     FrameLog,
     FrameLogBuilder,
     Recovery,

@@ -9,7 +9,7 @@ import moderngl
 import numpy as np
 import pytest
 
-from walkstream.client.render import BACKGROUND_RGB, MeshRenderer, render_lods_figure
+from walkstream.client.draw.meshes import BACKGROUND_RGB, MeshRenderer, render_lods_figure
 from walkstream.shared.camera import (
     CUBE_FACE_DIRECTIONS,
     cube_face_views,

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scenes import build_city_db
 
-from walkstream.client.link import LinkProfile
+from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
 from walkstream.server.bake.walks import default_paths
 from walkstream.server.service.main import create_app

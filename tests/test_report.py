@@ -12,8 +12,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from walkstream.client import report as report_mod
-from walkstream.client.metrics import FrameLog, FrameLogBuilder, summarise
 from walkstream.client.report import (
     PLOT_NAMES,
     SERIES_COLOURS,
@@ -26,6 +24,9 @@ from walkstream.client.report import (
     write_json,
     write_report,
 )
+from walkstream.client.report import files as report_files
+from walkstream.client.report import plots as report_plots
+from walkstream.client.report.metrics import FrameLog, FrameLogBuilder, summarise
 from walkstream.shared.errors import InputError
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -166,7 +167,7 @@ def test_write_json_leaves_no_trace_when_the_value_is_bad(tmp_path: Path) -> Non
 
 def test_atomic_write_keeps_the_old_file_when_writing_fails(tmp_path: Path) -> None:
     p = write_json(tmp_path / "r.json", {"x": 1})
-    with pytest.raises(RuntimeError), report_mod._atomic(p) as f:
+    with pytest.raises(RuntimeError), report_files._atomic(p) as f:
         f.write('{"x": 2')
         raise RuntimeError("disk full")
     assert json.loads(p.read_text()) == {"x": 1}
@@ -307,7 +308,7 @@ def test_envelope_keeps_extremes_and_bounds_points() -> None:
     y = np.zeros(20_000)
     y[12_345] = 9.0
     y[777] = -4.0
-    xs, ys = report_mod._envelope(x, y, max_points=1000)
+    xs, ys = report_plots._envelope(x, y, max_points=1000)
     assert len(xs) <= 1100
     assert ys.max() == 9.0 and ys.min() == -4.0
     assert 12_345.0 in xs and xs[0] == 0.0 and xs[-1] == 19_999.0

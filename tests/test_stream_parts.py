@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from walkstream.client.cellmap import CellMap
-from walkstream.client.predict import MotionPredictor
+from walkstream.client.stream.cellmap import CellMap
+from walkstream.client.stream.predict import MotionPredictor
 from walkstream.shared.cells import inside_convex
 from walkstream.shared.errors import CodecError
 from walkstream.shared.wire import decode_cell, decode_manifest

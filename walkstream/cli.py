@@ -99,7 +99,7 @@ def cmd_buildings_render(args: argparse.Namespace) -> int:
     b = _pick_building(scene, args.id)
     meshes = list(build_lods(b))
     if args.output:
-        from walkstream.client.render import render_lods_figure
+        from walkstream.client.draw.meshes import render_lods_figure
 
         render_lods_figure(meshes, args.output)
         print(f"wrote {args.output} (building {b.source_id or b.id}: triangles {[m.triangles for m in meshes]})")
@@ -350,7 +350,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f"({100 * float(stats['ratio']):.4f} %)"  # type: ignore[arg-type]
     )
     try:
-        from walkstream.client.render import render_lods_figure
+        from walkstream.client.draw.meshes import render_lods_figure
         from walkstream.shared.buildings import build_lods
 
         # a free-standing building shows every facade; fall back to the most complex one
@@ -407,7 +407,7 @@ def _has_paths(db: Path, names: tuple[str, ...]) -> bool:
 
 def _demo_replay(db: Path, report: Path, args: argparse.Namespace) -> int:
     """Replay SE against the real server on a free local port (simulated 56 kbit/s link)."""
-    from walkstream.client.link import LinkProfile
+    from walkstream.client.net.link import LinkProfile
     from walkstream.client.replay import ReplayConfig
     from walkstream.cmd_replay import headline, replay_to_report
     from walkstream.server.service.process import server_process

@@ -305,12 +305,12 @@ def _configs(
     shares: Sequence[float],
     distance_ratio: float | None,
 ) -> list[_Config]:
-    from walkstream.client.allocate import (
+    from walkstream.client.draw.allocate import (
         allocate_ach,
         allocate_distance,
         distance_thresholds_for_budget,
-        frustum_cull,
     )
+    from walkstream.client.draw.culling import frustum_cull
 
     k = len(objs)
     tri = np.array([o.tri for o in objs], dtype=np.int64).reshape(k, 3)
@@ -405,7 +405,7 @@ def run_lod_bench(
     """
     from tqdm import tqdm
 
-    from walkstream.client.frames import FrameRenderer, camera
+    from walkstream.client.draw.frames import FrameRenderer, camera
     from walkstream.shared.lsystem.grammar import parse_grammar
 
     sh = [float(s) for s in shares]

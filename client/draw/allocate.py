@@ -1,4 +1,4 @@
-"""Per-frame level-of-detail selection: frustum culling, ACH budget sharing, distance LODs.
+"""Per-frame level-of-detail selection: ACH budget sharing and distance LODs (after culling).
 
 Everything here is pure numpy and runs every frame over the current cell's PVS (tens
 to a few hundred objects), so the hot loops stay on plain Python floats.
@@ -26,8 +26,7 @@ Distance selection
     thresholds that spend a given triangle budget, so both rules can be compared at
     equal frame time.
 
-An :class:`Allocation` records the chosen LOD per object (``-1``: not drawn).
-"""
+An :class:`Allocation` records the chosen LOD per object (``-1``: not drawn)."""
 
 from __future__ import annotations
 
@@ -45,8 +44,6 @@ __all__ = [
     "allocate_ach",
     "allocate_distance",
     "distance_thresholds_for_budget",
-    "frustum_cull",
-    "frustum_planes",
 ]
 
 #: LOD value of an object that is not drawn (culled, or no geometry available).
@@ -154,70 +151,6 @@ def _finish(
     all_max = bool(np.all(chosen == _highest_available(av[idx])))
     floor_limited = budget is not None and floor > budget
     return Allocation(lod, triangles, bool(floor_limited), all_max)
-
-
-# --------------------------------------------------------------------------- culling
-
-
-def frustum_planes(view_proj: ArrayLike) -> NDArray[np.float64]:
-    """The six clip planes of a view-projection matrix (Gribb and Hartmann).
-
-    Parameters
-    ----------
-    view_proj : (4, 4) float
-        ``proj @ view`` acting on column vectors, OpenGL clip conventions
-        (:mod:`shared.camera`: a point is inside when ``-w <= x, y, z <= w``).
-
-    Returns
-    -------
-    (6, 4) float64
-        ``(a, b, c, d)`` per plane (left, right, bottom, top, near, far), not
-        normalised; a point ``p`` is on the inner side when ``a*x + b*y + c*z + d >= 0``.
-    """
-    m = np.asarray(view_proj, dtype=np.float64)
-    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise InputError(f"frustum_planes: expected a finite (4, 4) matrix, got shape {m.shape}")
-    r0, r1, r2, r3 = m
-    return np.stack([r3 + r0, r3 - r0, r3 + r1, r3 - r1, r3 + r2, r3 - r2])
-
-
-def frustum_cull(
-    bbox_min: ArrayLike, bbox_max: ArrayLike, view_proj: ArrayLike
-) -> NDArray[np.bool_]:
-    """Conservative box-against-frustum test.
-
-    A box is dropped only when it lies entirely outside one of the six planes; a box
-    that straddles a plane is kept, and so (rarely) is a box near a frustum corner
-    that is outside although no single plane shows it.  That errs on the side of
-    drawing, which is what culling before LOD selection needs.
-
-    Parameters
-    ----------
-    bbox_min, bbox_max : (k, 3) float
-        Opposite corners of each axis-aligned box, scene-local metres.
-    view_proj : (4, 4) float
-        ``proj @ view`` (see :func:`frustum_planes`).
-
-    Returns
-    -------
-    (k,) bool
-        True for the boxes to keep.
-    """
-    lo = np.asarray(bbox_min, dtype=np.float64).reshape(-1, 3)
-    hi = np.asarray(bbox_max, dtype=np.float64).reshape(-1, 3)
-    if lo.shape != hi.shape:
-        raise InputError(
-            f"frustum_cull: bbox_min and bbox_max differ in shape: {lo.shape} vs {hi.shape}"
-        )
-    planes = frustum_planes(view_proj)
-    if len(lo) == 0:
-        return np.zeros(0, bool)
-    normal = planes[:, :3]  # (6, 3)
-    # The box corner farthest along each plane's normal ("positive vertex"): if even it
-    # is outside, the whole box is.
-    pos = np.where(normal[None, :, :] >= 0, hi[:, None, :], lo[:, None, :])  # (k, 6, 3)
-    dist = np.einsum("kpj,pj->kp", pos, normal) + planes[:, 3]
-    return np.asarray(np.all(dist >= 0, axis=1))
 
 
 # --------------------------------------------------------------------------- ACH

@@ -34,12 +34,13 @@ import msgpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.client.api import SceneClient
-from walkstream.client.cache import Cache, DiskCache
-from walkstream.client.cellmap import CellMap
 from walkstream.client.clock import Clock
-from walkstream.client.predict import MotionPredictor
-from walkstream.client.rewrite import ObjectGeometry, RewritePool, geometry_of
+from walkstream.client.net.api import SceneClient
+from walkstream.client.rewrite.pool import ObjectGeometry, RewritePool, geometry_of
+from walkstream.client.stream.cache import Cache
+from walkstream.client.stream.cellmap import CellMap
+from walkstream.client.stream.diskcache import DiskCache
+from walkstream.client.stream.predict import MotionPredictor
 from walkstream.shared.codec import decode_mesh, decode_object, unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.wire import CellRecord, ObjectFrame, decode_cell

@@ -23,7 +23,7 @@ import moderngl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.client.render import MeshRenderer
+from walkstream.client.draw.meshes import MeshRenderer
 from walkstream.shared.camera import look_at, perspective
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.records import Mesh

@@ -95,7 +95,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.devices import Device
+from walkstream.client.draw.devices import Device
 from walkstream.shared.errors import InputError
 
 __all__ = [

@@ -1,0 +1,374 @@
+"""The report folder of a replay (and the overlay of several) with its self-contained index page."""
+
+from __future__ import annotations
+
+import html
+import json
+import logging
+import os
+import shutil
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+from urllib.parse import quote
+
+from walkstream.client.report.metrics import FrameLog
+from walkstream.shared.errors import InputError
+
+if TYPE_CHECKING:
+    pass
+from walkstream.client.report.files import (
+    BytesLog,
+    _atomic,
+    json_safe,
+    write_bytes_csv,
+    write_frames_csv,
+    write_json,
+)
+from walkstream.client.report.plots import (
+    PLOT_NAMES,
+    _make_run,
+    _plot_budget,
+    _plot_bytes,
+    _plot_fps,
+    _plot_quality,
+)
+from walkstream.client.report.tables import _HEADLINE, headline_rows
+
+__all__ = ["log", "write_report", "write_comparison"]
+
+log = logging.getLogger(__name__)
+
+
+# --------------------------------------------------------------------------- HTML
+
+_CSS = """
+body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1150px; color: #222; }
+h1 { font-size: 1.4em; } h2 { font-size: 1.15em; margin-top: 1.6em; }
+table { border-collapse: collapse; } td, th { padding: 3px 10px; border-bottom: 1px solid #ddd; }
+th { text-align: left; } td.v { text-align: right; font-variant-numeric: tabular-nums; }
+figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ccc; }
+figcaption { font-size: 0.9em; color: #555; }
+.snaps { display: flex; flex-wrap: wrap; gap: 8px; }
+.snaps figure { margin: 0; width: 280px; } .snaps img { width: 100%; }
+pre { background: #f6f6f6; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
+.missing { color: #b00; }
+"""
+
+_CAPTIONS = {
+    "bytes.png": "Bytes downloaded over time: cumulative (top) and rate per time bin (bottom).",
+    "quality.png": "Download quality and rewrite quality per frame: the share of the current "
+    "cell's PVS whose parameters have arrived / whose geometry is built.",
+    "fps.png": "Displayed frame rate per frame, with the target and its +-10 % band; red "
+    "crosses are floor-limited frames (the LOD0s alone exceed the budget).",
+    "budget.png": "Polygon budget set by the controller and triangles drawn per frame.",
+}
+
+_DEFINITIONS = (
+    ("perfect frame", "cell known, download and rewrite quality both 100 %"),
+    (
+        "perfect frames",
+        "share of the frames from the first perfect one (included) that are perfect",
+    ),
+    ("quality means", "mean over all frames, in percent"),
+    (
+        "frames within 10 %",
+        "frames after the first second, floor-limited ones left out, whose displayed "
+        "frame rate is within 10 % of target, or above it with everything visible at LOD2",
+    ),
+    ("displayed frame rate", "1 / max(frame time, 1 / tick rate)"),
+)
+
+
+def _url(rel: str) -> str:
+    return quote(rel.replace(os.sep, "/"))
+
+
+def _headline_table(summary: Mapping[str, Any]) -> str:
+    rows = "".join(
+        f"<tr><th>{html.escape(label)}</th><td class='v'>{html.escape(value)}</td></tr>"
+        for _, label, value in headline_rows(summary)
+    )
+    return f"<table>{rows}</table>"
+
+
+def _page(title: str, body: str) -> str:
+    return (
+        "<!doctype html>\n<html lang='en'><head><meta charset='utf-8'>"
+        f"<title>{html.escape(title)}</title><style>{_CSS}</style></head>\n"
+        f"<body><h1>{html.escape(title)}</h1>\n{body}\n</body></html>\n"
+    )
+
+
+def _figures(names: Sequence[str], captions: Mapping[str, str]) -> str:
+    return "\n".join(
+        f"<figure><img src='{_url(n)}' alt='{html.escape(n)}'>"
+        f"<figcaption>{html.escape(captions.get(n, n))}</figcaption></figure>"
+        for n in names
+    )
+
+
+def _place_snapshots(
+    out: Path, snapshots: Sequence[str | os.PathLike[str]]
+) -> list[tuple[str, bool]]:
+    """Relative paths of the snapshots under ``out`` (copied in when they lie outside).
+
+    Returns ``(relative path, exists)``; a missing snapshot is logged and listed, not fatal,
+    so that a long replay still gets its report.
+    """
+    placed: list[tuple[str, bool]] = []
+    used: set[str] = set()
+    root = out.resolve()
+    for s in snapshots:
+        p = Path(s)
+        if not p.is_file():
+            log.warning("snapshot %s does not exist; listed as missing in the report", p)
+            placed.append((os.fspath(p), False))
+            continue
+        rp = p.resolve()
+        if rp.is_relative_to(root):
+            rel = rp.relative_to(root).as_posix()
+        else:
+            name = p.name
+            stem, k = p.stem, 1
+            while f"snapshots/{name}" in used:
+                name, k = f"{stem}_{k}{p.suffix}", k + 1
+            rel = f"snapshots/{name}"
+            with _atomic(out / rel, "wb") as f, rp.open("rb") as src:
+                shutil.copyfileobj(src, f)
+        used.add(rel)
+        placed.append((rel, True))
+    return placed
+
+
+def _snapshot_section(placed: Sequence[tuple[str, bool]]) -> str:
+    if not placed:
+        return ""
+    items = []
+    for rel, ok in placed:
+        if ok:
+            items.append(
+                f"<figure><a href='{_url(rel)}'><img src='{_url(rel)}' loading='lazy' "
+                f"alt='{html.escape(rel)}'></a><figcaption>{html.escape(Path(rel).name)}"
+                "</figcaption></figure>"
+            )
+        else:
+            items.append(f"<p class='missing'>missing snapshot: {html.escape(rel)}</p>")
+    return f"<h2>Snapshots ({len(placed)})</h2><div class='snaps'>{''.join(items)}</div>"
+
+
+# --------------------------------------------------------------------------- entry points
+
+
+def write_report(
+    out_dir: str | os.PathLike[str],
+    summary: Mapping[str, Any],
+    log: FrameLog,
+    bytes_log: BytesLog | None,
+    *,
+    snapshots: Sequence[str | os.PathLike[str]] = (),
+    title: str = "walkstream replay",
+) -> Path:
+    """Write the report folder of one replay and return the path of its ``index.html``.
+
+    Parameters
+    ----------
+    out_dir : path
+        The report folder; created when missing.  Files of an earlier report there are
+        replaced one by one, each atomically.
+    summary : mapping
+        The figures (:func:`client.metrics.summarise` plus the replay's own keys);
+        written as ``report.json``.  ``t_start_s`` sets the origin of the time axes.
+    log : FrameLog
+        The frames.
+    bytes_log : (t, cumulative bytes) arrays, or None
+        The link's samples; when missing or empty, the log's ``bytes_down`` is plotted.
+    snapshots : sequence of paths
+        PNG frames to show.  Those inside ``out_dir`` are linked where they are; others
+        are copied into ``out_dir/snapshots/``; missing ones are listed as missing.
+    title : str
+        Heading of the page and the plots.
+
+    Returns
+    -------
+    Path
+        ``out_dir/index.html``.
+
+    Raises
+    ------
+    InputError
+        The summary holds something that cannot be written as JSON, or the bytes
+        log's arrays differ in length.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    safe = json_safe(summary)  # fail before writing anything when it is not serialisable
+    run = _make_run(title, safe, log, bytes_log, 0)
+    write_frames_csv(out / "frames.csv", log)
+    write_bytes_csv(out / "bytes.csv", bytes_log)
+    _plot_bytes(out / "bytes.png", [run], f"{title}: bytes downloaded")
+    _plot_quality(out / "quality.png", [run], f"{title}: download and rewrite quality per frame")
+    _plot_fps(out / "fps.png", [run], f"{title}: frame rate")
+    _plot_budget(out / "budget.png", [run], f"{title}: polygon budget")
+    placed = _place_snapshots(out, snapshots)
+    write_json(out / "report.json", safe)
+    summary_json = json.dumps(safe, indent=2, allow_nan=False)
+    body = "\n".join(
+        [
+            _headline_table(safe),
+            "<p>Files: <a href='report.json'>report.json</a> · <a href='frames.csv'>frames.csv</a>"
+            " (one row per frame) · <a href='bytes.csv'>bytes.csv</a> (link samples)</p>",
+            "<h2>Plots</h2>",
+            _figures(PLOT_NAMES, _CAPTIONS),
+            _snapshot_section(placed),
+            "<h2>Definitions</h2><ul>"
+            + "".join(
+                f"<li><b>{html.escape(k)}</b>: {html.escape(v)}</li>" for k, v in _DEFINITIONS
+            )
+            + "</ul>",
+            f"<h2>Summary (report.json)</h2><pre>{html.escape(summary_json)}</pre>",
+        ]
+    )
+    index = out / "index.html"
+    with _atomic(index) as f:
+        f.write(_page(title, body))
+    return index
+
+
+def write_comparison(
+    out_dir: str | os.PathLike[str],
+    runs: Sequence[
+        tuple[str, Mapping[str, Any], FrameLog, BytesLog | None]
+        | tuple[str, Mapping[str, Any], FrameLog, BytesLog | None, str | os.PathLike[str] | None]
+    ],
+    title: str = "walkstream stream benchmark",
+    *,
+    reports: Mapping[str, str | os.PathLike[str]] | None = None,
+) -> list[Path]:
+    """Overlay several replays (the stream benchmark's Figure 1) in one folder.
+
+    Writes ``compare_bytes.png`` (bytes over time, all runs overlaid),
+    ``compare_quality.png`` (download and rewrite quality per frame, one panel per
+    run), ``compare_fps.png``, ``compare_budget.png``, ``comparison.json``
+    (``{"title", "runs": [{"label", "report", "summary"}]}``) and ``index.html`` (a
+    table of the runs' headline figures, the plots, links to each run's own report).
+
+    Parameters
+    ----------
+    out_dir : path
+        Folder to write into (created when missing).
+    runs : sequence of (label, summary, FrameLog, bytes log[, report folder])
+        The runs, in legend order; labels must be distinct.  An optional fifth item
+        is the run's own report folder (``None`` for none), as with ``reports``.
+    title : str
+        Heading of the page and the plots.
+    reports : mapping label -> folder, optional
+        Each run's own report folder (from :func:`write_report`), linked from the page;
+        overrides a folder given in ``runs``.
+
+    Returns
+    -------
+    list of Path
+        The files written, ``index.html`` last.
+
+    Raises
+    ------
+    InputError
+        No runs, repeated labels, or a report folder for an unknown label.
+    """
+    if not runs:
+        raise InputError("write_comparison needs at least one run")
+    for r in runs:
+        if len(r) not in (4, 5):
+            raise InputError(
+                f"a run is (label, summary, log, bytes_log[, report folder]), got {len(r)} items"
+            )
+    labels = [r[0] for r in runs]
+    if len(set(labels)) != len(labels):
+        raise InputError(f"run labels must be distinct, got {labels}")
+    unknown = sorted(set(reports or {}) - set(labels))
+    if unknown:
+        raise InputError(f"reports given for unknown run labels {unknown}; runs are {labels}")
+    folders: dict[str, str | os.PathLike[str]] = {
+        r[0]: r[4] for r in runs if len(r) == 5 and r[4] is not None
+    }
+    folders.update(reports or {})
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    safe = [json_safe(r[1]) for r in runs]
+    prepared = [
+        _make_run(r[0], s, r[2], r[3], i) for i, (r, s) in enumerate(zip(runs, safe, strict=True))
+    ]
+    written = [
+        _plot_bytes(out / "compare_bytes.png", prepared, f"{title}: bytes downloaded"),
+        _plot_quality(out / "compare_quality.png", prepared, f"{title}: quality per frame"),
+        _plot_fps(out / "compare_fps.png", prepared, f"{title}: frame rate"),
+        _plot_budget(out / "compare_budget.png", prepared, f"{title}: polygon budget"),
+    ]
+    links: dict[str, str] = {}
+    for label, d in folders.items():
+        rel = os.path.relpath(Path(d) / "index.html", out)
+        links[label] = rel.replace(os.sep, "/")
+    written.append(
+        write_json(
+            out / "comparison.json",
+            {
+                "title": title,
+                "runs": [
+                    {"label": label, "report": links.get(label), "summary": s}
+                    for label, s in zip(labels, safe, strict=True)
+                ],
+            },
+        )
+    )
+    # Table: one row per headline figure, one column per run.
+    keys = [k for k, _, _ in _HEADLINE if any(k in s for s in safe)]
+    names = {k: label for k, label, _ in _HEADLINE}
+    vals = [{k: v for k, _, v in headline_rows(s)} for s in safe]
+    head = "".join(
+        "<th>"
+        + (
+            f"<a href='{_url(links[label])}'>{html.escape(label)}</a>"
+            if label in links
+            else html.escape(label)
+        )
+        + "</th>"
+        for label in labels
+    )
+    rows = "".join(
+        f"<tr><th>{html.escape(names[k])}</th>"
+        + "".join(f"<td class='v'>{html.escape(v.get(k, ''))}</td>" for v in vals)
+        + "</tr>"
+        for k in keys
+    )
+    captions = {
+        "compare_bytes.png": "Bytes downloaded over time, all runs.",
+        "compare_quality.png": "Download and rewrite quality per frame, one panel per run.",
+        "compare_fps.png": "Displayed frame rate over time, all runs.",
+        "compare_budget.png": "Polygon budget (solid) and triangles drawn (dashed), all runs.",
+    }
+    run_links = (
+        "<h2>Run reports</h2><ul>"
+        + "".join(
+            f"<li><a href='{_url(links[label])}'>{html.escape(label)}</a></li>"
+            for label in labels
+            if label in links
+        )
+        + "</ul>"
+        if links
+        else ""
+    )
+    body = "\n".join(
+        [
+            f"<table><tr><th></th>{head}</tr>{rows}</table>",
+            "<p>Data: <a href='comparison.json'>comparison.json</a></p>",
+            run_links,
+            "<h2>Plots</h2>",
+            _figures([p.name for p in written[:4]], captions),
+        ]
+    )
+    index = out / "index.html"
+    with _atomic(index) as f:
+        f.write(_page(title, body))
+    written.append(index)
+    return written

@@ -1,0 +1,367 @@
+"""The report's figures, one function per PNG: bytes, quality, frame rate, budget over time.
+
+Long logs are drawn through a min/max envelope of at most a few thousand points per
+line, so 15,000 frames plot as fast as 1,500 and spikes still show.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from walkstream.client.report.metrics import FrameLog, first_perfect_index
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+from walkstream.client.report.files import F64, BytesLog, _atomic, _bytes_arrays
+
+__all__ = ["PLOT_NAMES", "SERIES_COLOURS"]
+
+#: The plots of one report, in page order.
+PLOT_NAMES: tuple[str, ...] = ("bytes.png", "quality.png", "fps.png", "budget.png")
+
+#: Line colours for runs and series (Okabe-Ito, readable for colour-blind readers).
+#: ``shared.palette`` holds material colours only, which are meant for buildings.
+SERIES_COLOURS: tuple[str, ...] = (
+    "#0072B2",  # blue
+    "#D55E00",  # vermillion
+    "#009E73",  # bluish green
+    "#CC79A7",  # reddish purple
+    "#E69F00",  # orange
+    "#56B4E9",  # sky blue
+    "#000000",  # black
+    "#F0E442",  # yellow
+)
+
+_DPI = 110
+_MAX_POINTS = 4000  # per drawn line, after the min/max envelope
+_MAX_MARKERS = 2500
+
+
+# --------------------------------------------------------------------------- plotting
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class _Run:
+    label: str
+    summary: Mapping[str, Any]
+    frames: FrameLog
+    bytes_t: F64
+    bytes_b: F64
+    t0: float
+    colour: str
+
+
+def _make_run(
+    label: str, summary: Mapping[str, Any], frames: FrameLog, bytes_log: BytesLog | None, i: int
+) -> _Run:
+    bt, bb = _bytes_arrays(bytes_log)
+    if bt.size == 0 and len(frames):
+        # No link samples: the per-frame cumulative count is the next best thing.
+        bt, bb = frames.t.astype(np.float64), frames.bytes_down.astype(np.float64)
+    t0 = summary.get("t_start_s")
+    if t0 is None or not math.isfinite(float(t0)):
+        starts = [a[0] for a in (frames.t, bt) if a.size]
+        t0 = float(min(starts)) if starts else 0.0
+    return _Run(label, summary, frames, bt, bb, float(t0), SERIES_COLOURS[i % len(SERIES_COLOURS)])
+
+
+def _envelope(x: ArrayLike, y: ArrayLike, max_points: int = _MAX_POINTS) -> tuple[F64, F64]:
+    """Thin a line to at most about ``max_points`` points, keeping each bucket's min and max.
+
+    Consecutive samples are grouped into buckets; each bucket contributes its lowest
+    and its highest sample in time order, so spikes and dips survive the thinning.
+    """
+    xa = np.asarray(x, dtype=np.float64)
+    ya = np.asarray(y, dtype=np.float64)
+    n = xa.size
+    if n <= max_points:
+        return xa, ya
+    size = math.ceil(n / max(1, max_points // 2))
+    m = math.ceil(n / size)
+    pad = m * size - n
+    # Pad with the last sample so every bucket has the same length.
+    yp = np.concatenate([ya, np.full(pad, ya[-1])]).reshape(m, size)
+    base = np.arange(m) * size
+    lo = np.minimum(base + np.argmin(yp, axis=1), n - 1)
+    hi = np.minimum(base + np.argmax(yp, axis=1), n - 1)
+    idx = np.unique(np.concatenate([lo, hi, [0, n - 1]]))
+    return xa[idx], ya[idx]
+
+
+def _thin(idx: NDArray[np.intp], limit: int = _MAX_MARKERS) -> NDArray[np.intp]:
+    if idx.size <= limit:
+        return idx
+    return idx[np.linspace(0, idx.size - 1, limit).astype(np.intp)]
+
+
+def _figure(
+    rows: int = 1, height: float = 3.2, *, cols: int = 1, sharex: bool = True
+) -> tuple[Figure, list[Axes]]:
+    """A figure of ``rows x cols`` axes (row-major list), gridded, on the Agg backend."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # never a display; plots are files
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10.0 if cols == 1 else 12.0, 0.8 + height * rows), dpi=_DPI)
+    axes = list(fig.subplots(rows, cols, sharex=sharex, squeeze=False).reshape(-1))
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    return fig, axes
+
+
+def _legend(ax: Axes, **kw: Any) -> None:
+    """A legend when something on the axes has a label (an empty log draws nothing)."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8, **kw)
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    if fig.get_suptitle():  # keep the figure title clear of the top row's titles
+        top = 1.0 - 0.35 / fig.get_figheight()
+        fig.tight_layout(rect=(0.0, 0.0, 1.0, top))
+    else:
+        fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    with _atomic(path, "wb") as f:
+        f.write(buf.getvalue())
+    return path
+
+
+def _thousands(ax: Axes) -> None:
+    from matplotlib.ticker import FuncFormatter
+
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:,.0f}"))
+
+
+def _rate_bins(run: _Run) -> tuple[F64, F64, float]:
+    """Download rate per time bin: (bin starts s, kbit/s, bin width s)."""
+    if run.bytes_t.size == 0:
+        return np.empty(0), np.empty(0), 1.0
+    t = run.bytes_t - run.t0
+    inc = np.diff(run.bytes_b, prepend=0.0)
+    span = max(float(t.max()), 1e-9)
+    width = max(1.0, math.ceil(span / 600.0))  # at most ~600 bins
+    k = np.maximum(np.floor(t / width), 0).astype(np.int64)
+    sums = np.bincount(k, weights=inc, minlength=int(k.max()) + 1)
+    starts: F64 = np.arange(sums.size, dtype=np.float64) * width
+    rate: F64 = np.asarray(sums * (8.0 / 1000.0 / width), dtype=np.float64)
+    return starts, rate, width
+
+
+def _plot_bytes(path: Path, runs: Sequence[_Run], title: str) -> Path:
+    fig, (ax_cum, ax_rate) = _figure(2)
+    top, widths = 1.0, set()
+    for r in runs:
+        if r.bytes_t.size == 0:
+            continue
+        x, y = _envelope(r.bytes_t - r.t0, r.bytes_b / 1000.0)
+        ax_cum.step(x, y, where="post", color=r.colour, label=r.label, linewidth=1.4)
+        bx, rate, width = _rate_bins(r)
+        widths.add(width)
+        top = max(top, float(rate.max()) if rate.size else 0.0)
+        ax_rate.step(
+            np.append(bx, bx[-1] + width) if bx.size else bx,
+            np.append(rate, rate[-1]) if rate.size else rate,
+            where="post",
+            color=r.colour,
+            label=r.label,
+            linewidth=1.1,
+        )
+    bws = sorted(
+        {float(r.summary["bandwidth_bps"]) for r in runs if r.summary.get("bandwidth_bps")}
+    )
+    for bw in bws:
+        top = max(top, bw / 1000.0)
+        ax_rate.axhline(bw / 1000.0, color="#555555", linestyle="--", linewidth=1.0)
+        ax_rate.annotate(
+            f"link {bw / 1000.0:g} kbit/s",
+            (0.0, bw / 1000.0),
+            xycoords=("axes fraction", "data"),
+            xytext=(4, 3),
+            textcoords="offset points",
+            fontsize=8,
+            color="#555555",
+        )
+    ax_cum.set_ylabel("downloaded (kB, cumulative)")
+    _thousands(ax_cum)
+    per = f", per {widths.pop():g} s" if len(widths) == 1 else ""
+    ax_rate.set_ylabel(f"download rate (kbit/s{per})")
+    ax_rate.set_xlabel("time since replay start (s)")
+    ax_cum.set_ylim(bottom=0)
+    ax_rate.set_ylim(0.0, 1.15 * top)
+    if len(runs) > 1:
+        _legend(ax_cum, loc="upper left")
+    ax_cum.set_title(title, fontsize=10)
+    return _save(fig, path)
+
+
+def _quality_axes(ax: Axes, r: _Run, column: str, first: int | None, *, note: bool) -> None:
+    f = r.frames
+    x = f.t - r.t0
+    xs, ys = _envelope(x, 100.0 * getattr(f, column))
+    ax.step(xs, ys, where="post", color=r.colour, linewidth=1.4)
+    if first is not None:
+        ax.axvline(x[first], color="#009E73", linestyle=":", linewidth=1.2)
+        if note:
+            ax.annotate(
+                f"first perfect frame {x[first]:.2f} s",
+                (x[first], 50.0),
+                xytext=(4, 0),
+                textcoords="offset points",
+                fontsize=8,
+                color="#009E73",
+            )
+    ax.set_ylim(-3.0, 103.0)
+
+
+def _plot_quality(path: Path, runs: Sequence[_Run], title: str) -> Path:
+    # One row per run, download and rewrite quality side by side (the layout of the
+    # paper's Figure 1): overlaid lines that all sit at 100 % would hide each other.
+    fig, axes = _figure(len(runs), height=2.4 if len(runs) > 1 else 3.4, cols=2)
+    columns = (
+        ("download_quality", "download quality", "download_quality_mean", "% of PVS received"),
+        ("rewrite_quality", "rewrite quality", "rewrite_quality_mean", "% of PVS built"),
+    )
+    for i, r in enumerate(runs):
+        first = first_perfect_index(r.frames) if len(r.frames) else None
+        for j, (column, name, mean_key, unit) in enumerate(columns):
+            ax = axes[2 * i + j]
+            _quality_axes(ax, r, column, first, note=j == 0)
+            mean = r.summary.get(mean_key)
+            head = f"{r.label}: " if len(runs) > 1 else ""
+            tail = f", mean {mean:.1f} %" if mean is not None else ""
+            if j == 0 and r.summary.get("perfect_frame_ratio") is not None:
+                tail += f"; perfect frames {100.0 * r.summary['perfect_frame_ratio']:.2f} %"
+            ax.set_title(head + name + tail, fontsize=9, loc="left")
+            ax.set_ylabel(unit)
+    for ax in axes[-2:]:
+        ax.set_xlabel("time since replay start (s)")
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
+
+
+def _plot_fps(path: Path, runs: Sequence[_Run], title: str) -> Path:
+    fig, (ax,) = _figure(1, height=4.2)
+    ymax = 1.0
+    for tgt in sorted(
+        {float(r.summary["fps_target"]) for r in runs if r.summary.get("fps_target")}
+    ):
+        ax.axhspan(0.9 * tgt, 1.1 * tgt, color="#009E73", alpha=0.15, linewidth=0)
+        ax.axhline(tgt, color="#009E73", linestyle="--", linewidth=1.2)
+        ax.annotate(
+            f"target {tgt:g} fps +-10 %",
+            (1.0, tgt),
+            xycoords=("axes fraction", "data"),
+            xytext=(-4, 4),
+            textcoords="offset points",
+            ha="right",
+            fontsize=8,
+            color="#006040",
+        )
+        ymax = max(ymax, 1.3 * tgt)
+    warm = [r for r in runs if len(r.frames)]
+    if warm:
+        ax.axvspan(
+            0.0, 1.0, color="#888888", alpha=0.12, linewidth=0, label="first second (not counted)"
+        )
+    floor_labelled = False
+    for r in runs:
+        f = r.frames
+        if not len(f):
+            continue
+        x = f.t - r.t0
+        fin = np.isfinite(f.fps)
+        xs, ys = _envelope(x[fin], f.fps[fin])
+        ax.plot(
+            xs,
+            ys,
+            color=r.colour,
+            linewidth=0.9,
+            label=r.label if len(runs) > 1 else "displayed fps",
+        )
+        if fin.any():
+            ymax = max(ymax, 1.08 * float(f.fps[fin].max()))
+        step = r.summary.get("cost_step_frame")
+        if isinstance(step, int) and 0 <= step < len(f):
+            ax.axvline(float(x[step]), color="#D55E00", linestyle=":", linewidth=1.2)
+            ax.annotate(
+                "cost step",
+                (float(x[step]), 0.02),
+                xycoords=("data", "axes fraction"),
+                xytext=(3, 0),
+                textcoords="offset points",
+                fontsize=8,
+                color="#D55E00",
+            )
+        fl = _thin(np.flatnonzero(f.floor_limited & fin))
+        if fl.size:
+            ax.plot(
+                x[fl],
+                f.fps[fl],
+                linestyle="none",
+                marker="x",
+                markersize=4,
+                color="#D00000",
+                label=None if floor_labelled else "floor-limited frame",
+            )
+            floor_labelled = True
+    ax.set_ylim(0.0, ymax)
+    ax.set_ylabel("frame rate (frames/s)")
+    ax.set_xlabel("time since replay start (s)")
+    notes = []
+    for r in runs:
+        s = r.summary
+        if s.get("fps_within_10pct_ratio") is not None:
+            notes.append(
+                (f"{r.label}: " if len(runs) > 1 else "")
+                + f"{100.0 * s['fps_within_10pct_ratio']:.1f} % of counted frames within 10 %"
+                + (f", mean {s['fps_mean']:.1f} fps" if s.get("fps_mean") is not None else "")
+            )
+    ax.set_title(title + ("\n" + "; ".join(notes) if notes else ""), fontsize=10)
+    _legend(ax, loc="lower right")
+    return _save(fig, path)
+
+
+def _plot_budget(path: Path, runs: Sequence[_Run], title: str) -> Path:
+    fig, (ax,) = _figure(1, height=4.2)
+    top = 1.0
+    for r in runs:
+        f = r.frames
+        if not len(f):
+            continue
+        x = f.t - r.t0
+        prefix = f"{r.label}: " if len(runs) > 1 else ""
+        xs, ys = _envelope(x, f.budget)
+        ax.step(
+            xs, ys, where="post", color=r.colour, linewidth=1.3, label=prefix + "polygon budget"
+        )
+        xs, ys = _envelope(x, f.triangles)
+        ax.plot(
+            xs,
+            ys,
+            color=r.colour,
+            linewidth=0.8,
+            alpha=0.6,
+            linestyle="--",
+            label=prefix + "triangles drawn",
+        )
+        top = max(top, float(f.budget.max()), float(f.triangles.max()))
+    # Headroom above the lines for the legend (two entries per run).
+    ax.set_ylim(0.0, top * (1.15 + 0.1 * len(runs)))
+    _thousands(ax)
+    ax.set_ylabel("triangles per frame")
+    ax.set_xlabel("time since replay start (s)")
+    ax.set_title(title, fontsize=10)
+    _legend(ax, loc="upper right")
+    return _save(fig, path)

@@ -1,0 +1,100 @@
+"""Headline figures of a replay as text: labelled rows, aligned lines, a comparison table."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    pass
+
+__all__ = ["headline_rows", "format_headline", "format_comparison_table"]
+
+
+# --------------------------------------------------------------------------- headline
+
+
+def _ratio(v: Any) -> str:
+    return f"{100.0 * v:.2f} %"
+
+
+def _fmt_bytes(v: Any) -> str:
+    return f"{int(v):,} B ({v / 1000.0:,.1f} kB)"
+
+
+# (key, label, formatter): what the page and the CLI show first, when present.
+_HEADLINE: tuple[tuple[str, str, Callable[[Any], str]], ...] = (
+    ("frames", "frames", lambda v: f"{int(v):,}"),
+    ("duration_s", "duration", lambda v: f"{v:.1f} s"),
+    ("path", "path", str),
+    ("stream", "stream", str),
+    ("prefetch", "prefetch", lambda v: "yes" if v else "no"),
+    ("device", "device", str),
+    ("bandwidth_bps", "bandwidth", lambda v: f"{v / 1000.0:g} kbit/s"),
+    ("rtt_s", "round trip", lambda v: f"{1000.0 * v:.0f} ms"),
+    ("bytes_received", "bytes received", _fmt_bytes),
+    ("overfetch_ratio", "overfetch ratio", lambda v: f"{v:.3f}"),
+    ("redownloads", "re-downloads", lambda v: f"{int(v):,}"),
+    ("rebuilds", "rebuilds", lambda v: f"{int(v):,}"),
+    ("time_to_first_perfect_frame_s", "first perfect frame after", lambda v: f"{v:.2f} s"),
+    ("perfect_frame_ratio", "perfect frames (from the first)", _ratio),
+    ("download_quality_mean", "download quality, mean", lambda v: f"{v:.2f} %"),
+    ("rewrite_quality_mean", "rewrite quality, mean", lambda v: f"{v:.2f} %"),
+    ("fps_target", "target frame rate", lambda v: f"{v:g} fps"),
+    ("fps_mean", "frame rate, mean", lambda v: f"{v:.1f} fps"),
+    ("fps_within_10pct_ratio", "frames within 10 % of target", _ratio),
+    ("floor_limited_ratio", "floor-limited frames", _ratio),
+    ("budget_median", "polygon budget, median", lambda v: f"{v:,.0f} triangles"),
+    ("triangles_mean", "triangles drawn, mean", lambda v: f"{v:,.0f}"),
+    ("recovery_frames", "recovery after cost step", lambda v: f"{int(v)} frames"),
+)
+
+
+def headline_rows(summary: Mapping[str, Any]) -> list[tuple[str, str, str]]:
+    """``(key, label, formatted value)`` of the headline figures present in ``summary``.
+
+    A key that is present with value ``None`` shows as ``"n/a"``.
+    """
+    rows = []
+    for key, label, fmt in _HEADLINE:
+        if key not in summary:
+            continue
+        v = summary[key]
+        if isinstance(v, float) and not math.isfinite(v):
+            v = None
+        rows.append((key, label, "n/a" if v is None else fmt(v)))
+    return rows
+
+
+def format_headline(summary: Mapping[str, Any]) -> str:
+    """The headline figures as aligned ``label  value`` lines (for the CLI)."""
+    rows = headline_rows(summary)
+    if not rows:
+        return ""
+    w = max(len(label) for _, label, _ in rows)
+    return "\n".join(f"{label:<{w}}  {value}" for _, label, value in rows)
+
+
+def format_comparison_table(runs: Sequence[tuple[str, Mapping[str, Any]]]) -> str:
+    """A plain-text table: one row per headline figure, one column per run."""
+    keys = [k for k, _, _ in _HEADLINE if any(k in s for _, s in runs)]
+    labels = {k: label for k, label, _ in _HEADLINE}
+    cells = []
+    for _, s in runs:
+        values = {k: v for k, _, v in headline_rows(s)}
+        cells.append([values.get(k, "") for k in keys])
+    header = ["", *[label for label, _ in runs]]
+    table = [header] + [[labels[k], *[c[i] for c in cells]] for i, k in enumerate(keys)]
+    widths = [max(len(row[j]) for row in table) for j in range(len(header))]
+    lines = []
+    for r, row in enumerate(table):
+        lines.append(
+            "  ".join(
+                (cell.ljust(widths[j]) if j == 0 else cell.rjust(widths[j]))
+                for j, cell in enumerate(row)
+            ).rstrip()
+        )
+        if r == 0:
+            lines.append("  ".join("-" * w for w in widths))
+    return "\n".join(lines)

@@ -1,0 +1,341 @@
+"""The client's memory cache: a byte-budget LRU of cells, parameters and geometry, with pins.
+
+:class:`Cache` holds what the walk needs in memory under one byte budget: cell
+records (``"cell"``), object parameters (``"params"``) and the geometry rebuilt from
+them (``"geom"``).  What the current view needs (the current cell's record, its PVS
+parameters and their geometry) is *pinned* and never evicted.  Over the budget, the
+unpinned entries go in this order: geometry first, because it can be rebuilt
+without the network; then parameters; then cells; least recently used first within
+each kind.  Every operation is O(1) (one ``OrderedDict`` of evictable entries per
+kind, pinned entries kept apart so eviction never has to skip them), apart from
+re-pinning, which costs the size of the change.
+
+The cache on disk is :mod:`.diskcache`.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Iterable
+from typing import Any, Literal
+
+from walkstream.shared.errors import InputError
+
+__all__ = ["Kind", "KINDS", "EVICTION_ORDER", "Key", "Cache"]
+
+Kind = Literal["cell", "params", "geom"]
+"""What a :class:`Cache` entry is: a cell record, object parameters or rebuilt geometry."""
+
+KINDS: tuple[Kind, ...] = ("cell", "params", "geom")
+"""Every entry kind."""
+
+EVICTION_ORDER: tuple[Kind, ...] = ("geom", "params", "cell")
+"""Over the budget, unpinned entries of these kinds go first to last."""
+
+Key = tuple[str, int]
+
+
+# ---------------------------------------------------------------------------
+# in memory
+# ---------------------------------------------------------------------------
+
+
+class Cache:
+    """A byte-budget LRU of cell records, parameters and geometry with pinning.
+
+    Parameters
+    ----------
+    budget_bytes:
+        The byte budget (>= 0).  Pinned entries may push the cache over it (counted
+        in :attr:`over_budget_events`); unpinned entries never stay over it.
+    on_evict:
+        Called as ``on_evict(kind, id)`` whenever an entry leaves the cache (evicted
+        for the budget, or removed with :meth:`remove`), after the cache is updated,
+        e.g. so a renderer frees the entry's GPU buffers.
+
+    Attributes
+    ----------
+    hits, misses, evictions:
+        Per kind: :meth:`get` calls that found / did not find the entry, and entries
+        evicted for the budget.
+    bytes_used, peak_bytes:
+        Bytes held now, and the most held at the end of any operation.
+    over_budget_events:
+        Operations that left the cache over its budget because the pinned entries
+        alone exceed it.
+    redownloads, rebuilds:
+        Calls of :meth:`note_download` / :meth:`note_build` for an id noted before.
+
+    Notes
+    -----
+    Thread-safe (one lock); ``on_evict`` is called outside it.
+    """
+
+    def __init__(
+        self, budget_bytes: int, on_evict: Callable[[str, int], None] | None = None
+    ) -> None:
+        if type(budget_bytes) is not int or budget_bytes < 0:
+            raise InputError(f"cache budget: expected a non-negative integer, got {budget_bytes!r}")
+        self.budget_bytes = budget_bytes
+        self.on_evict = on_evict
+        # evictable entries by kind in LRU order (oldest first); pinned ones apart
+        self._lru: dict[str, OrderedDict[int, tuple[Any, int]]] = {k: OrderedDict() for k in KINDS}
+        self._held: dict[str, dict[int, tuple[Any, int]]] = {k: {} for k in KINDS}
+        self._pins: set[Key] = set()
+        self._ever: set[Key] = set()
+        self._downloaded: set[int] = set()
+        self._built: set[int] = set()
+        self._lock = threading.RLock()
+        self.hits: dict[str, int] = dict.fromkeys(KINDS, 0)
+        self.misses: dict[str, int] = dict.fromkeys(KINDS, 0)
+        self.evictions: dict[str, int] = dict.fromkeys(KINDS, 0)
+        self.bytes_used = 0
+        self.peak_bytes = 0
+        self.over_budget_events = 0
+        self.redownloads = 0
+        self.rebuilds = 0
+
+    # -- entries -------------------------------------------------------------
+
+    @staticmethod
+    def _kind(kind: str) -> str:
+        if kind not in KINDS:
+            raise InputError(f"cache kind: expected one of {', '.join(KINDS)}, got {kind!r:.40}")
+        return kind
+
+    def _find(self, kind: str, oid: int) -> tuple[Any, int] | None:
+        e = self._lru[kind].get(oid)
+        return e if e is not None else self._held[kind].get(oid)
+
+    def put(self, kind: str, oid: int, value: Any, nbytes: int) -> None:
+        """Store ``value`` of ``nbytes`` bytes under ``(kind, oid)`` as most recently used.
+
+        A value already there is replaced (without ``on_evict``).  Then unpinned
+        entries are evicted while the cache is over its budget, which may be this
+        one if it is unpinned and nothing else can go.
+
+        Raises
+        ------
+        InputError
+            An unknown kind or a negative size.
+        """
+        self._kind(kind)
+        if type(nbytes) is not int or nbytes < 0:
+            raise InputError(f"cache entry size: expected a non-negative integer, got {nbytes!r}")
+        with self._lock:
+            old = self._lru[kind].pop(oid, None) or self._held[kind].pop(oid, None)
+            if old is not None:
+                self.bytes_used -= old[1]
+            where = self._held if (kind, oid) in self._pins else self._lru
+            where[kind][oid] = (value, nbytes)
+            self.bytes_used += nbytes
+            self._ever.add((kind, oid))
+            evicted = self._shrink()
+        self._notify(evicted)
+
+    def get(self, kind: str, oid: int) -> Any:
+        """The value under ``(kind, oid)`` (marked most recently used), or None; counted."""
+        self._kind(kind)
+        with self._lock:
+            lru = self._lru[kind]
+            e = lru.get(oid)
+            if e is not None:
+                lru.move_to_end(oid)
+            else:
+                e = self._held[kind].get(oid)
+            if e is None:
+                self.misses[kind] += 1
+                return None
+            self.hits[kind] += 1
+            return e[0]
+
+    def peek(self, kind: str, oid: int) -> Any:
+        """The value under ``(kind, oid)`` or None, without touching the LRU or counters."""
+        self._kind(kind)
+        with self._lock:
+            e = self._find(kind, oid)
+            return None if e is None else e[0]
+
+    def has(self, kind: str, oid: int) -> bool:
+        """Whether ``(kind, oid)`` is cached (no LRU touch, not counted)."""
+        self._kind(kind)
+        with self._lock:
+            return oid in self._lru[kind] or oid in self._held[kind]
+
+    def size_of(self, kind: str, oid: int) -> int | None:
+        """Bytes of the entry ``(kind, oid)``, or None when it is not cached."""
+        self._kind(kind)
+        with self._lock:
+            e = self._find(kind, oid)
+            return None if e is None else e[1]
+
+    def remove(self, kind: str, oid: int) -> bool:
+        """Drop ``(kind, oid)`` even if pinned (calls ``on_evict``); whether it was there."""
+        self._kind(kind)
+        with self._lock:
+            e = self._lru[kind].pop(oid, None) or self._held[kind].pop(oid, None)
+            if e is None:
+                return False
+            self.bytes_used -= e[1]
+        self._notify([(kind, oid)])
+        return True
+
+    def ids(self, kind: str) -> list[int]:
+        """The ids of the cached entries of ``kind`` (pinned ones last)."""
+        self._kind(kind)
+        with self._lock:
+            return [*self._lru[kind], *self._held[kind]]
+
+    def __len__(self) -> int:
+        with self._lock:
+            return sum(len(self._lru[k]) + len(self._held[k]) for k in KINDS)
+
+    def __contains__(self, key: object) -> bool:
+        if not (isinstance(key, tuple) and len(key) == 2 and key[0] in KINDS):
+            return False
+        return self.has(key[0], key[1])
+
+    def ever_had(self, kind: str, oid: int) -> bool:
+        """Whether ``(kind, oid)`` was ever put into the cache (evicted since or not)."""
+        self._kind(kind)
+        with self._lock:
+            return (kind, oid) in self._ever
+
+    # -- pins ----------------------------------------------------------------
+
+    @property
+    def pinned(self) -> frozenset[Key]:
+        """The pinned ``(kind, id)`` keys (cached or not yet)."""
+        with self._lock:
+            return frozenset(self._pins)
+
+    def pin(self, kinds_ids: Iterable[tuple[str, int]]) -> None:
+        """Pin more ``(kind, id)`` keys; a key not cached yet is pinned when it arrives."""
+        with self._lock:
+            for kind, oid in kinds_ids:
+                self._pin_one(self._kind(kind), oid)
+
+    def unpin(self, kinds_ids: Iterable[tuple[str, int]]) -> None:
+        """Unpin ``(kind, id)`` keys; the cache then shrinks to its budget if it can."""
+        with self._lock:
+            for kind, oid in kinds_ids:
+                self._unpin_one(self._kind(kind), oid)
+            evicted = self._shrink()
+        self._notify(evicted)
+
+    def set_pinned(self, params_ids: Iterable[int], cell_ids: Iterable[int]) -> None:
+        """Pin exactly the given cells and the parameters and geometry of the given objects.
+
+        Typically the current cell (and the one being entered) and its PVS.  Every
+        other key is unpinned, and the cache then shrinks to its budget if it can.
+        """
+        want: set[Key] = {("cell", int(c)) for c in cell_ids}
+        for i in params_ids:
+            want.add(("params", int(i)))
+            want.add(("geom", int(i)))
+        with self._lock:
+            for kind, oid in self._pins - want:
+                self._unpin_one(kind, oid)
+            for kind, oid in want - self._pins:
+                self._pin_one(kind, oid)
+            evicted = self._shrink()
+        self._notify(evicted)
+
+    def set_pins(self, keys: Iterable[tuple[str, int]]) -> None:
+        """Pin exactly ``keys`` (``(kind, id)``), unpinning every other key, then shrink.
+
+        One step, so nothing that stays pinned is evicted in between.
+        """
+        want: set[Key] = {(self._kind(k), int(i)) for k, i in keys}
+        with self._lock:
+            for kind, oid in self._pins - want:
+                self._unpin_one(kind, oid)
+            for kind, oid in want - self._pins:
+                self._pin_one(kind, oid)
+            evicted = self._shrink()
+        self._notify(evicted)
+
+    def _pin_one(self, kind: str, oid: int) -> None:
+        self._pins.add((kind, oid))
+        e = self._lru[kind].pop(oid, None)
+        if e is not None:
+            self._held[kind][oid] = e
+
+    def _unpin_one(self, kind: str, oid: int) -> None:
+        self._pins.discard((kind, oid))
+        e = self._held[kind].pop(oid, None)
+        if e is not None:
+            # it was needed until now: the most recently used of the evictable ones
+            self._lru[kind][oid] = e
+
+    # -- budget --------------------------------------------------------------
+
+    def _shrink(self) -> list[Key]:
+        """Evict unpinned entries while over budget; the evicted keys.  Holds the lock."""
+        evicted: list[Key] = []
+        for kind in EVICTION_ORDER:
+            lru = self._lru[kind]
+            while self.bytes_used > self.budget_bytes and lru:
+                oid, (_, n) = lru.popitem(last=False)
+                self.bytes_used -= n
+                self.evictions[kind] += 1
+                evicted.append((kind, oid))
+        if self.bytes_used > self.budget_bytes:
+            self.over_budget_events += 1
+        self.peak_bytes = max(self.peak_bytes, self.bytes_used)
+        return evicted
+
+    def _notify(self, keys: list[Key]) -> None:
+        if self.on_evict is not None:
+            for kind, oid in keys:
+                self.on_evict(kind, oid)
+
+    @property
+    def over_budget(self) -> bool:
+        """Whether the cache holds more than its budget now (only pinned entries can)."""
+        return self.bytes_used > self.budget_bytes
+
+    def pinned_bytes(self) -> int:
+        """Bytes held by pinned entries."""
+        with self._lock:
+            return sum(n for k in KINDS for _, n in self._held[k].values())
+
+    # -- counting ------------------------------------------------------------
+
+    def note_download(self, oid: int) -> bool:
+        """Record that the parameters of ``oid`` were downloaded; True if not the first time.
+
+        Call once per download that arrived (not for what came from the disk cache).
+        A second download of the same id, whether it was evicted in between or asked
+        for twice, counts in :attr:`redownloads`.
+        """
+        with self._lock:
+            again = oid in self._downloaded
+            self._downloaded.add(oid)
+            self.redownloads += int(again)
+            return again
+
+    def note_build(self, oid: int) -> bool:
+        """Record that the geometry of ``oid`` was built; True (and counted) if built before."""
+        with self._lock:
+            again = oid in self._built
+            self._built.add(oid)
+            self.rebuilds += int(again)
+            return again
+
+    def stats(self) -> dict[str, Any]:
+        """Counters and sizes as plain data (for reports)."""
+        with self._lock:
+            return {
+                "budget_bytes": self.budget_bytes,
+                "bytes_used": self.bytes_used,
+                "peak_bytes": self.peak_bytes,
+                "entries": {k: len(self._lru[k]) + len(self._held[k]) for k in KINDS},
+                "hits": dict(self.hits),
+                "misses": dict(self.misses),
+                "evictions": dict(self.evictions),
+                "over_budget_events": self.over_budget_events,
+                "redownloads": self.redownloads,
+                "rebuilds": self.rebuilds,
+            }
