@@ -356,7 +356,6 @@ async def replay(
         fps_cap=config.fps,
         t_start=0.0,
         cost_step=step,
-        recovery_hold=3,
         recovery_ignore=spikes,
     )
     summary.update(

@@ -10,15 +10,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.typing import NDArray
 
-from walkstream.client.budgetbench import LIGHT_SCENE, PvsSupply, format_table, run_budget_bench
-from walkstream.client.draw.budget import (
-    BudgetController,
-    frame_rates,
-    recovery_frames,
+from walkstream.benchmarks.controller import (
+    LIGHT_SCENE,
+    PvsSupply,
+    format_table,
+    run_controller_bench,
     simulate,
-    within_ratio,
 )
+from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.devices import CostModelDevice, make_device
+from walkstream.client.report.metrics import displayed_fps, recovery_frames, within_ratio
 from walkstream.shared.errors import InputError
 
 CASES = [("desktop2003", 25.0), ("desktop2003", 40.0), ("pda", 10.0)]
@@ -72,9 +73,11 @@ def test_longest_alternation_detects_a_see_saw() -> None:
     assert longest_alternation(np.full(20, 1000)) == 0
 
 
-def test_frame_rates_wait_for_the_tick() -> None:
-    rates = frame_rates([0.01, 0.04, 0.05, math.nan, 0.0, -1.0, math.inf], 25.0)
-    assert rates.tolist() == pytest.approx([25.0, 25.0, 20.0, 0.0, 0.0, 0.0, 0.0])
+def test_displayed_rates_wait_for_the_tick() -> None:
+    rates = displayed_fps([0.01, 0.04, 0.05, 0.0, -1.0, math.inf], 25.0)
+    # a frame that never finished (inf) is never shown; one that took no time waits
+    assert rates.tolist() == pytest.approx([25.0, 25.0, 20.0, 25.0, 25.0, 0.0])
+    assert math.isnan(displayed_fps([math.nan], 25.0)[0])
 
 
 def test_within_ratio_counts_skips_and_excludes() -> None:
@@ -94,17 +97,18 @@ def test_within_ratio_counts_skips_and_excludes() -> None:
 def test_recovery_frames_needs_a_run_and_reports_the_worst_after() -> None:
     before = [0.038] * 10
     after = [0.2, 0.1, 0.038, 0.05, 0.038, 0.038, 0.038, 0.042, 0.045, 0.038]
-    times = np.array(before + after)
-    r, worst = recovery_frames(times, 25.0, 10)
-    assert r == 4
-    assert worst == pytest.approx(1 - (1 / 0.045) / 25)
-    excl = np.zeros(times.size, dtype=bool)
+    fps = displayed_fps(np.array(before + after), 25.0)
+    rec = recovery_frames(fps, 10, target=25.0)
+    assert rec.frames == 4
+    assert rec.worst_slowdown_after == pytest.approx(1 - (1 / 0.045) / 25)
+    excl = np.zeros(fps.size, dtype=bool)
     excl[13] = True
-    assert recovery_frames(times, 25.0, 10, exclude=excl)[0] == 2
-    assert recovery_frames(times, 25.0, 10, hold=1)[0] == 2
-    never, nan = recovery_frames(np.array(before + [0.2] * 10), 25.0, 10)
-    assert never == -1 and math.isnan(nan)
-    assert recovery_frames(np.array(before), 25.0, 5) == (0, 0.0)
+    assert recovery_frames(fps, 10, target=25.0, ignore=excl).frames == 2
+    assert recovery_frames(fps, 10, target=25.0, hold=1).frames == 2
+    never = recovery_frames(displayed_fps(before + [0.2] * 10, 25.0), 10, target=25.0)
+    assert never.frames is None and never.worst_slowdown_after is None
+    steady = recovery_frames(displayed_fps(before, 25.0), 5, target=25.0)
+    assert (steady.frames, steady.worst_slowdown_after) == (0, 0.0)
 
 
 # -- construction and input validation ---------------------------------------------------
@@ -251,9 +255,9 @@ def test_device_overhead_change_keeps_the_loop_stable() -> None:
 def test_recovers_from_a_tenfold_cost_step(device: str, fps: float, seed: int) -> None:
     step = 500
     ctrl, sim = run(device, fps, 900, seed, step_at=step)
-    r, worst = recovery_frames(sim["frame_time"], fps, step, exclude=sim["spike"])
-    assert 0 <= r <= 8
-    assert worst <= 0.20
+    rec = recovery_frames(sim["fps"], step, target=fps, ignore=sim["spike"])
+    assert rec.frames is not None and 0 <= rec.frames <= 8
+    assert rec.worst_slowdown_after is not None and rec.worst_slowdown_after <= 0.20
     # And the budget really moved to the new cost, not just somewhere fast.
     after = float(np.median(sim["budget"][step + 100 :]))
     assert after == pytest.approx(ideal_budget(device, fps, scale=10.0), rel=0.3)
@@ -272,9 +276,9 @@ def test_step_recovery_with_ach_allocation(
         walk = PvsSupply(seed=seed + 1000, **scene)  # type: ignore[arg-type]
         ctrl, sim = run(device, fps, 1000, seed, step_at=step, draw_fn=walk)
         excl = sim["spike"] | sim["floor_limited"]
-        r, worst = recovery_frames(sim["frame_time"], fps, step, exclude=excl)
-        assert 0 <= r <= 8
-        assert worst <= 0.20
+        rec = recovery_frames(sim["fps"], step, target=fps, ignore=excl)
+        assert rec.frames is not None and 0 <= rec.frames <= 8
+        assert rec.worst_slowdown_after is not None and rec.worst_slowdown_after <= 0.20
         assert within_ratio(sim["frame_time"][:step], fps, exclude=excl[:step]) >= 0.95
 
 
@@ -447,7 +451,7 @@ def test_pvs_supply_allocation_passes_leftover_on() -> None:
 
 
 def test_budget_bench_rows_and_table() -> None:
-    rows = run_budget_bench(
+    rows = run_controller_bench(
         cases=[("desktop2003", 25.0), ("pda", 10.0, LIGHT_SCENE)], frames=600, seeds=(1,)
     )
     assert [r["device"] for r in rows] == ["desktop2003", "pda"]
@@ -460,4 +464,4 @@ def test_budget_bench_rows_and_table() -> None:
     text = format_table(rows)
     assert "desktop2003" in text and "light" in text and "goals:" in text
     with pytest.raises(InputError):
-        run_budget_bench(cases=[("gl", 25.0)], frames=100, seeds=(1,))
+        run_controller_bench(cases=[("gl", 25.0)], frames=100, seeds=(1,))

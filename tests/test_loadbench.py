@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from walkstream.benchmarks.load import format_table, run_server_bench
 from walkstream.server.bake import BakeSettings, bake
-from walkstream.server.loadbench import format_table, run_server_bench
 from walkstream.server.sources.citygen import write_city
 
 

@@ -1,8 +1,7 @@
-"""Tests of walkstream.lodbench (``walkstream bench lod``) on a tiny scene database."""
+"""Tests of walkstream.benchmarks.lod (``walkstream bench lod``) on a tiny scene database."""
 
 from __future__ import annotations
 
-import argparse
 import math
 from pathlib import Path
 
@@ -11,9 +10,8 @@ import numpy as np
 import pytest
 from scenes import PATH_NAME, build_city_db
 
-from walkstream.lodbench import (
+from walkstream.benchmarks.lod import (
     PIXEL_TOLERANCE,
-    add_bench_lod_parser,
     format_table,
     image_error,
     load_views,
@@ -21,6 +19,7 @@ from walkstream.lodbench import (
     run_lod_bench,
     summary_line,
 )
+from walkstream.cli import build_parser
 from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.errors import InputError, WalkstreamError
 
@@ -175,18 +174,16 @@ def test_bad_shares_rejected(city_db: Path) -> None:
 
 
 def test_parser() -> None:
-    p = argparse.ArgumentParser()
-    sub = p.add_subparsers(dest="what")
-    add_bench_lod_parser(sub)
-    a = p.parse_args(["lod", "x.db", "--budgets", "5,10%", "--size", "320x240", "--views", "3"])
+    p = build_parser()
+    a = p.parse_args(["bench", "lod", "x.db", "--budgets", "5,10%", "--size", "320x240", "--views", "3"])
     assert a.db == "x.db" and a.budgets == (0.05, 0.10) and a.size == (320, 240)
     assert a.views == 3 and a.distance_ratio is None and callable(a.func)
-    a = p.parse_args(["lod", "--distance-ratio", "2"])
+    a = p.parse_args(["bench", "lod", "--distance-ratio", "2"])
     assert a.distance_ratio == 2.0 and a.db.endswith("city.db")
     for bad in (
-        ["lod", "--size", "10"],
-        ["lod", "--budgets", "0"],
-        ["lod", "--distance-ratio", "0.5"],
+        ["bench", "lod", "--size", "10"],
+        ["bench", "lod", "--budgets", "0"],
+        ["bench", "lod", "--distance-ratio", "0.5"],
     ):
         with pytest.raises(SystemExit):
             p.parse_args(bad)

@@ -321,10 +321,12 @@ def test_envelope_keeps_extremes_and_bounds_points() -> None:
 def test_headline_text() -> None:
     s, _, _ = run_parts(100)
     text = format_headline(s)
-    assert re.search(r"bandwidth\s+56 kbit/s", text)
-    assert re.search(r"round trip\s+200 ms", text)
-    assert re.search(r"perfect frames \(from the first\)\s+\d+\.\d\d %", text)
-    assert format_headline({"time_to_first_perfect_frame_s": None}).endswith("n/a")
+    assert re.search(r"^frames \d+, perfect \d+\.\d %, first perfect frame at ", text)
+    assert re.search(r"download quality \d+\.\d %, rewrite quality \d+\.\d %", text)
+    assert re.search(r"bytes received [\d,]+, overfetch", text)
+    assert len(text.splitlines()) == 4
+    empty = format_headline({"time_to_first_perfect_frame_s": None})
+    assert "first perfect frame at never" in empty and "within 10 % n/a" in empty
 
 
 def test_comparison_overlays_and_links(tmp_path: Path) -> None:

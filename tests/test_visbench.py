@@ -9,10 +9,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pytest
 
-from walkstream.server.bake.cells import make_cells
-from walkstream.server.sources.citygen import generate_city
-from walkstream.server.sources.geojson import load_geojson_dict
-from walkstream.server.visbench import (
+from walkstream.benchmarks.visibility import (
     MAX_MISS_RATE_PX,
     format_table,
     load_bench_input,
@@ -21,6 +18,9 @@ from walkstream.server.visbench import (
     setting_label,
     visibility_benchmark,
 )
+from walkstream.server.bake.cells import make_cells
+from walkstream.server.sources.citygen import generate_city
+from walkstream.server.sources.geojson import load_geojson_dict
 from walkstream.shared.errors import InputError
 
 if TYPE_CHECKING:

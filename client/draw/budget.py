@@ -12,7 +12,7 @@ Definitions
 -----------
 ``T = 1 / target_fps`` is the tick.  The frame loop ticks at the target rate and idles
 when a frame finishes early, so a frame is *shown* for ``max(t, T)`` and its rate is
-``1 / max(t, T)`` (:func:`frame_rates`): never above the target, below it only when the
+``1 / max(t, T)`` (:func:`~walkstream.client.report.metrics.displayed_fps`): never above the target, below it only when the
 frame took longer than the tick.  The controller aims at ``T_aim = (1 - headroom) * T``
 (headroom 5 %, like the paper's 26.2 fps for 25), a little under the tick, so that the
 5 % frame-time jitter of a device rarely pushes a frame past ``T / 0.9`` (10 % too
@@ -80,9 +80,9 @@ What remains: where the overhead is nearly the whole frame (``desktop2003`` at
 40 fps: 1.35 ms of triangles under 1.2 ms of jitter), four frames cannot measure the
 triangle cost well, and the budget wanders by some 15-25 % while the frame rate holds.
 
-The module also holds :func:`simulate`, a pure frame loop over a device cost model
-used by the tests and the benchmark (:mod:`client.budgetbench`), and the figures of
-issue 6: :func:`within_ratio` and :func:`recovery_frames`.
+How well a run held its target is measured by :mod:`walkstream.client.report.metrics`
+(the one definition of frame rate, "within 10 %" and recovery); the controller on its
+own, on the device cost models, is benchmarked by :mod:`walkstream.benchmarks.controller`.
 """
 
 from __future__ import annotations
@@ -90,20 +90,14 @@ from __future__ import annotations
 import math
 import statistics
 from collections import deque
-from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.draw.devices import Device
 from walkstream.shared.errors import InputError
 
 __all__ = [
     "BudgetController",
-    "simulate",
-    "frame_rates",
-    "within_ratio",
-    "recovery_frames",
     "FIT_WINDOW",
     "REGIME_FRAMES",
     "MAX_GROWTH",
@@ -407,212 +401,12 @@ class BudgetController:
         self._recent_budgets.append(self._budget)
 
 
-# -- simulation and figures ----------------------------------------------------------
-
-VisibleFn = Callable[[int], "int | tuple[int, int]"]
-DrawFn = Callable[[int, int], tuple[int, int, bool]]
 
 
-def simulate(
-    controller: BudgetController,
-    device: Device,
-    frames: int,
-    visible_triangles_fn: VisibleFn | None = None,
-    step_at: int | None = None,
-    step_factor: float = 10.0,
-    draw_fn: DrawFn | None = None,
-) -> dict[str, NDArray[np.generic]]:
-    """Run the frame loop on a simulated device: budget -> draw -> frame time -> observe.
-
-    Parameters
-    ----------
-    controller : BudgetController
-        Updated in place.
-    device : Device
-        A simulated device (``device.simulated``).  Its ``cost_scale`` is multiplied by
-        ``step_factor`` from frame ``step_at`` on and restored when the run ends.
-    frames : int
-        Frames to run (>= 0).
-    visible_triangles_fn : callable, optional
-        ``f(frame) -> visible`` or ``-> (lod0_floor, visible)``: what can be drawn in
-        that frame.  Triangles drawn = ``max(lod0_floor, min(budget, visible))``: never
-        more than is visible, never less than every visible object's LOD0; a frame
-        whose floor exceeds the budget is *floor-limited*.  None: unlimited supply, no
-        floor (drawn = budget).
-    step_at : int, optional
-        First frame with the stepped cost.
-    step_factor : float
-        Multiplier of the per-triangle cost at the step (10: the issue's tenfold step).
-    draw_fn : callable, optional
-        ``f(frame, budget) -> (triangles, objects, floor_limited)``, e.g. an ACH
-        allocation over a PVS; takes precedence over ``visible_triangles_fn``.
-
-    Returns
-    -------
-    dict of numpy arrays, one entry per frame
-        ``frame_time`` (s), ``triangles``, ``objects``, ``budget`` (the budget the frame
-        was given), ``floor_limited`` (bool), ``spike`` (bool: the device's 2x
-        spike), ``fps`` (shown rate ``1 / max(t, 1/target)``) and ``time`` (end of the
-        frame on the shown-time axis, s).
-
-    Raises
-    ------
-    InputError
-        For a device that is not simulated or a negative frame count.
-    """
-    if not device.simulated:
-        raise InputError(f"device {device.name!r} is not simulated; simulate needs a cost model")
-    if frames < 0:
-        raise InputError(f"frames must be >= 0, got {frames}")
-    ft = np.zeros(frames)
-    tri = np.zeros(frames, dtype=np.int64)
-    objs = np.zeros(frames, dtype=np.int64)
-    bud = np.zeros(frames, dtype=np.int64)
-    floor_lim = np.zeros(frames, dtype=bool)
-    spike = np.zeros(frames, dtype=bool)
-    scale0 = device.cost_scale
-    try:
-        for i in range(frames):
-            if step_at is not None and i == step_at:
-                device.cost_scale = scale0 * step_factor
-            b = controller.budget
-            if draw_fn is not None:
-                n, o, fl = draw_fn(i, b)
-            elif visible_triangles_fn is not None:
-                v = visible_triangles_fn(i)
-                floor, visible = (0, v) if isinstance(v, int | np.integer) else v
-                n = max(int(floor), min(b, int(visible)))
-                o, fl = 0, int(floor) > b
-            else:
-                n, o, fl = b, 0, False
-            t = device.frame_time(n, o)
-            controller.observe(t, n)
-            ft[i], tri[i], objs[i], bud[i], floor_lim[i] = t, n, o, b, fl
-            spike[i] = bool(getattr(device, "last_spike", False))
-    finally:
-        device.cost_scale = scale0
-    fps = frame_rates(ft, controller.target_fps)
-    return {
-        "frame_time": ft,
-        "triangles": tri,
-        "objects": objs,
-        "budget": bud,
-        "floor_limited": floor_lim,
-        "spike": spike,
-        "fps": fps,
-        "time": np.cumsum(1.0 / fps) if frames else np.zeros(0),
-    }
 
 
-def frame_rates(frame_times: NDArray[np.floating] | list[float], target_fps: float) -> _F64:
-    """Shown frame rate of each frame: ``1 / max(frame_time, 1 / target_fps)``.
-
-    The loop waits for the next tick of the target rate, so a frame faster than the
-    tick is shown at the target rate and a slower one at ``1 / frame_time``.
-    Non-finite or non-positive times give rate 0 (a frame that never finished).
-    """
-    t = np.asarray(frame_times, dtype=np.float64)
-    tick = 1.0 / float(target_fps)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rate = 1.0 / np.maximum(t, tick)
-    return np.where(np.isfinite(t) & (t > 0), rate, 0.0)
 
 
-def within_ratio(
-    frame_times: NDArray[np.floating] | list[float],
-    target_fps: float,
-    tol: float = 0.10,
-    skip_s: float = 1.0,
-    exclude: NDArray[np.bool_] | None = None,
-) -> float:
-    """Share of frames whose shown rate is within ``tol`` of the target.
-
-    A frame's rate is ``1 / max(frame_time, 1 / target_fps)`` (see :func:`frame_rates`):
-    never above the target, so "within 10 %" means at least 90 % of the target.  A
-    frame faster than the tick counts as on target -- it was held back only because
-    the loop waits for the tick (or everything visible was already drawn at LOD2).
-
-    Parameters
-    ----------
-    frame_times : array of float
-        Seconds per frame.
-    target_fps : float
-        The target (minimum) frame rate.
-    tol : float
-        Relative tolerance.
-    skip_s : float
-        Frames that *start* before this much shown time are not counted (start-up).
-    exclude : array of bool, optional
-        Frames not to count, e.g. floor-limited ones.
-
-    Returns
-    -------
-    float
-        The share in ``[0, 1]``; NaN when no frame is counted.
-    """
-    rate = frame_rates(frame_times, target_fps)
-    with np.errstate(divide="ignore"):
-        shown = np.where(rate > 0, 1.0 / np.maximum(rate, 1e-300), np.inf)
-    start = np.concatenate([[0.0], np.cumsum(shown)[:-1]]) if rate.size else rate
-    counted = start >= skip_s
-    if exclude is not None:
-        counted &= ~np.asarray(exclude, dtype=bool)
-    if not counted.any():
-        return float("nan")
-    ok = rate[counted] >= (1.0 - tol) * float(target_fps)
-    return float(np.mean(ok))
 
 
-def recovery_frames(
-    frame_times: NDArray[np.floating] | list[float],
-    target_fps: float,
-    step_at: int,
-    tol: float = 0.10,
-    exclude: NDArray[np.bool_] | None = None,
-    hold: int = 3,
-) -> tuple[int, float]:
-    """How quickly the frame rate comes back after a cost step, and how bad it gets later.
 
-    Parameters
-    ----------
-    frame_times : array of float
-        Seconds per frame.
-    target_fps : float
-        The target frame rate.
-    step_at : int
-        First frame with the new cost.
-    tol : float
-        "Back" means a shown rate of at least ``(1 - tol) * target_fps``.
-    exclude : array of bool, optional
-        Frames that are skipped by both figures: the device's own spikes (a single 2x
-        stall no controller can foresee) and floor-limited frames (the budget was not
-        what limited them).
-    hold : int
-        Recovered means back within ``tol`` for ``hold`` counted frames in a row (fewer
-        only where the series ends), so one lucky fast frame is not a recovery.
-
-    Returns
-    -------
-    frames_to_recover : int
-        ``r`` such that frame ``step_at + r`` starts the first such run (0: the step
-        never showed); -1 if there is none.
-    worst_after : float
-        Largest slowdown ``1 - rate / target_fps`` over the counted frames from that
-        run on (0.0: none slower than the target; 0.2: 20 % slower); NaN when it never
-        recovered.
-    """
-    rate = frame_rates(frame_times, target_fps)
-    counted = np.ones(rate.size, dtype=bool)
-    if exclude is not None:
-        counted &= ~np.asarray(exclude, dtype=bool)
-    idx = np.flatnonzero(counted)
-    idx = idx[idx >= step_at]
-    ok = rate[idx] >= (1.0 - tol) * float(target_fps)
-    hold = max(int(hold), 1)
-    for pos in range(idx.size):
-        run = ok[pos : pos + hold]
-        if run.all():
-            later = rate[idx[pos:]]
-            worst = float(np.max(1.0 - later / float(target_fps)))
-            return int(idx[pos] - step_at), max(worst, 0.0)
-    return -1, float("nan")

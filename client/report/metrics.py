@@ -35,6 +35,12 @@ displayed frame rate
 slowdown
     ``max(0, (target - fps) / target)``: the relative frame-rate deficit of a frame
     (0.2 = 20 % slower than the target).
+recovery (after a cost step)
+    Frames from the step until the first of ``hold`` (3) frames in a row whose
+    displayed rate is within ``tolerance`` of the target (fewer where the series
+    ends); floor-limited frames and frames named in ``ignore`` (a simulated device's
+    own spikes) are left out of both the run and the slowdowns
+    (:func:`recovery_frames`).  Every report and benchmark uses this one definition.
 """
 
 from __future__ import annotations
@@ -61,6 +67,7 @@ __all__ = [
     "recovery_frames",
     "summarise",
     "within_target_mask",
+    "within_ratio",
 ]
 
 F64 = NDArray[np.float64]
@@ -94,7 +101,9 @@ def displayed_fps(frame_time: ArrayLike, fps_cap: float) -> F64:
     Parameters
     ----------
     frame_time : (n,) float
-        Work time of each frame, seconds.  Negative values count as 0.
+        Work time of each frame, seconds.  Negative values count as 0; an infinite
+        time (a frame that never finished) gives rate 0, a NaN time (no measurement)
+        rate NaN, which the summary's statistics turn into ``None``.
     fps_cap : float
         The replay's tick rate (``--fps``), frames per second, > 0 and finite.
 
@@ -382,6 +391,33 @@ def within_target_mask(
     return ok
 
 
+def within_ratio(
+    frame_times: ArrayLike,
+    target: float,
+    *,
+    tolerance: float = 0.1,
+    skip_s: float = 1.0,
+    exclude: ArrayLike | None = None,
+) -> float:
+    """Share of a bare series of frames whose displayed rate is within ``tolerance`` of ``target``.
+
+    For a frame loop that ticks at ``target`` (no :class:`FrameLog`): the rates are
+    :func:`displayed_fps` with the target as the cap, the test is
+    :func:`within_target_mask`, and frames that *start* before ``skip_s`` seconds of
+    shown time (the start-up) or that ``exclude`` marks (e.g. floor-limited ones) are
+    not counted.  NaN when no frame is counted.
+    """
+    fps = displayed_fps(frame_times, target)
+    shown = np.where(fps > 0, 1.0 / np.maximum(fps, 1e-300), np.inf)
+    start = np.concatenate([[0.0], np.cumsum(shown)[:-1]]) if fps.size else fps
+    counted = start >= skip_s
+    if exclude is not None:
+        counted &= ~np.asarray(exclude, dtype=np.bool_)
+    if not counted.any():
+        return math.nan
+    return float(np.mean(within_target_mask(fps[counted], target, tolerance=tolerance)))
+
+
 def _check_target(target: float, tolerance: float) -> None:
     if not (math.isfinite(target) and target > 0.0):
         raise InputError(f"target frame rate must be a positive finite number, got {target!r}")
@@ -438,7 +474,7 @@ def recovery_frames(
     *,
     target: float,
     tolerance: float = 0.1,
-    hold: int = 5,
+    hold: int = 3,
     end: int | None = None,
     ignore: ArrayLike | None = None,
 ) -> Recovery:
@@ -534,7 +570,7 @@ def summarise(
     warmup_s: float = 1.0,
     tolerance: float = 0.1,
     cost_step: int | None = None,
-    recovery_hold: int = 5,
+    recovery_hold: int = 3,
     recovery_ignore: ArrayLike | None = None,
     extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:

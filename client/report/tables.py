@@ -68,12 +68,31 @@ def headline_rows(summary: Mapping[str, Any]) -> list[tuple[str, str, str]]:
 
 
 def format_headline(summary: Mapping[str, Any]) -> str:
-    """The headline figures as aligned ``label  value`` lines (for the CLI)."""
-    rows = headline_rows(summary)
-    if not rows:
-        return ""
-    w = max(len(label) for _, label, _ in rows)
-    return "\n".join(f"{label:<{w}}  {value}" for _, label, value in rows)
+    """The figures a person looks at first, on four lines (what the CLI prints after a replay)."""
+
+    def pct(key: str) -> str:
+        v = summary.get(key)
+        return "n/a" if v is None else f"{v:.1f} %"
+
+    def ratio(key: str) -> str:
+        v = summary.get(key)
+        return "n/a" if v is None else f"{100 * v:.1f} %"
+
+    first = summary.get("time_to_first_perfect_frame_s")
+    return "\n".join(
+        [
+            f"frames {summary.get('frames', 0)}, perfect {ratio('perfect_frame_ratio')}, "
+            f"first perfect frame at {'never' if first is None else f'{first:.2f} s'}",
+            f"download quality {pct('download_quality_mean')}, rewrite quality "
+            f"{pct('rewrite_quality_mean')}",
+            f"bytes received {summary.get('bytes_received') or 0:,}, overfetch "
+            f"{ratio('overfetch_ratio')}, re-downloads {summary.get('redownloads', 0)}, rebuilds "
+            f"{summary.get('rebuilds', 0)}",
+            f"fps mean {summary.get('fps_mean') or 0:.1f} (target {summary.get('fps_target', 0):g}), "
+            f"within 10 % {ratio('fps_within_10pct_ratio')}, floor-limited "
+            f"{ratio('floor_limited_ratio')}",
+        ]
+    )
 
 
 def format_comparison_table(runs: Sequence[tuple[str, Mapping[str, Any]]]) -> str:

@@ -53,6 +53,8 @@ from numpy.typing import NDArray
 from walkstream.shared.errors import InputError
 
 __all__ = [
+    "DEFAULT_SIZE",
+    "DEFAULT_SEED",
     "CRS_NAME",
     "FRONTAGE_GAP",
     "MAX_SIZE",
@@ -66,6 +68,10 @@ __all__ = [
 F64 = NDArray[np.float64]
 
 #: Accepted city sizes (side of the square, metres).
+DEFAULT_SIZE = 700.0
+"""Side of the built-in default city, metres (the paper's 490,000 m² model)."""
+DEFAULT_SEED = 1
+"""Seed of the built-in default city."""
 MIN_SIZE = 100.0
 MAX_SIZE = 5000.0
 #: Where the south-west corner of the city lies, in EPSG:32633 metres.

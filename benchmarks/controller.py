@@ -1,16 +1,20 @@
-"""The budget-controller benchmark: simulated walks on the device cost models.
+"""The budget controller alone, on the device cost models: ``walkstream bench controller``.
 
-``walkstream bench budget`` and ``benchmarks/bench_budget.py`` print :func:`format_table`
-of :func:`run_budget_bench`.  Each row is one device and target frame rate, over several
+Unlike ``walkstream bench budget`` (:mod:`.budget`), which replays a recorded walk
+through the whole client, this runs :class:`~walkstream.client.draw.budget.BudgetController`
+in a bare frame loop (:func:`simulate`) over a synthetic walk, fast enough for many
+seeds and frames.  ``walkstream bench controller [--frames 3000] [--seeds 1 2 3]
+[--step 10]`` prints :func:`format_table` of :func:`run_controller_bench`.  Each row is one device and target frame rate, over several
 seeds; per seed two runs of the same walk are made:
 
 - a *steady* run: share of frames within 10 % of the target (after the first second,
-  floor-limited frames left out, see :func:`client.budget.within_ratio`), budget
+  floor-limited frames left out, see
+  :func:`~walkstream.client.report.metrics.within_ratio`), budget
   statistics, floor-limited share;
 - a *step* run: from the middle frame on every triangle costs ``step_factor`` (10) times
   as much; frames to recover and the worst slowdown after recovery
-  (:func:`client.budget.recovery_frames`, the device's own 2x spikes and floor-limited
-  frames left out).
+  (:func:`~walkstream.client.report.metrics.recovery_frames`, the device's own 2x
+  spikes and floor-limited frames left out).
 
 The figures to reach (issue 6): at least 95 % within 10 %; back within 10 % in at most
 8 frames after the step; never more than 20 % slower after that.  The worst seed is
@@ -32,16 +36,26 @@ be measured; the default table therefore also has a PDA row on a light scene
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
-from walkstream.client.draw.budget import BudgetController, recovery_frames, simulate, within_ratio
-from walkstream.client.draw.devices import make_device
+from walkstream.client.draw.budget import BudgetController
+from walkstream.client.draw.devices import Device, make_device
+from walkstream.client.report.metrics import displayed_fps, recovery_frames, within_ratio
 from walkstream.shared.errors import InputError
 
-__all__ = ["PvsSupply", "DEFAULT_CASES", "LIGHT_SCENE", "GOALS", "run_budget_bench", "format_table"]
+__all__ = [
+    "PvsSupply",
+    "DEFAULT_CASES",
+    "LIGHT_SCENE",
+    "GOALS",
+    "simulate",
+    "run_controller_bench",
+    "format_table",
+]
 
 #: Scene of the PDA row whose step can be measured: LODs a tenth of the default ones
 #: (Mulloni et al.'s cells hold 102 to 452 triangles), so that LOD0s fit the budget
@@ -59,6 +73,101 @@ DEFAULT_CASES: tuple[tuple[Any, ...], ...] = (
 
 #: The figures to reach, for the table's last line.
 GOALS = "goals: within10 >= 95 %; recover <= 8 frames; worst after <= 20 % slower"
+
+
+VisibleFn = Callable[[int], "int | tuple[int, int]"]
+DrawFn = Callable[[int, int], tuple[int, int, bool]]
+
+
+def simulate(
+    controller: BudgetController,
+    device: Device,
+    frames: int,
+    visible_triangles_fn: VisibleFn | None = None,
+    step_at: int | None = None,
+    step_factor: float = 10.0,
+    draw_fn: DrawFn | None = None,
+) -> dict[str, NDArray[np.generic]]:
+    """Run the frame loop on a simulated device: budget -> draw -> frame time -> observe.
+
+    Parameters
+    ----------
+    controller : BudgetController
+        Updated in place.
+    device : Device
+        A simulated device (``device.simulated``).  Its ``cost_scale`` is multiplied by
+        ``step_factor`` from frame ``step_at`` on and restored when the run ends.
+    frames : int
+        Frames to run (>= 0).
+    visible_triangles_fn : callable, optional
+        ``f(frame) -> visible`` or ``-> (lod0_floor, visible)``: what can be drawn in
+        that frame.  Triangles drawn = ``max(lod0_floor, min(budget, visible))``: never
+        more than is visible, never less than every visible object's LOD0; a frame
+        whose floor exceeds the budget is *floor-limited*.  None: unlimited supply, no
+        floor (drawn = budget).
+    step_at : int, optional
+        First frame with the stepped cost.
+    step_factor : float
+        Multiplier of the per-triangle cost at the step (10: the issue's tenfold step).
+    draw_fn : callable, optional
+        ``f(frame, budget) -> (triangles, objects, floor_limited)``, e.g. an ACH
+        allocation over a PVS; takes precedence over ``visible_triangles_fn``.
+
+    Returns
+    -------
+    dict of numpy arrays, one entry per frame
+        ``frame_time`` (s), ``triangles``, ``objects``, ``budget`` (the budget the frame
+        was given), ``floor_limited`` (bool), ``spike`` (bool: the device's 2x
+        spike), ``fps`` (shown rate ``1 / max(t, 1/target)``) and ``time`` (end of the
+        frame on the shown-time axis, s).
+
+    Raises
+    ------
+    InputError
+        For a device that is not simulated or a negative frame count.
+    """
+    if not device.simulated:
+        raise InputError(f"device {device.name!r} is not simulated; simulate needs a cost model")
+    if frames < 0:
+        raise InputError(f"frames must be >= 0, got {frames}")
+    ft = np.zeros(frames)
+    tri = np.zeros(frames, dtype=np.int64)
+    objs = np.zeros(frames, dtype=np.int64)
+    bud = np.zeros(frames, dtype=np.int64)
+    floor_lim = np.zeros(frames, dtype=bool)
+    spike = np.zeros(frames, dtype=bool)
+    scale0 = device.cost_scale
+    try:
+        for i in range(frames):
+            if step_at is not None and i == step_at:
+                device.cost_scale = scale0 * step_factor
+            b = controller.budget
+            if draw_fn is not None:
+                n, o, fl = draw_fn(i, b)
+            elif visible_triangles_fn is not None:
+                v = visible_triangles_fn(i)
+                floor, visible = (0, v) if isinstance(v, int | np.integer) else v
+                n = max(int(floor), min(b, int(visible)))
+                o, fl = 0, int(floor) > b
+            else:
+                n, o, fl = b, 0, False
+            t = device.frame_time(n, o)
+            controller.observe(t, n)
+            ft[i], tri[i], objs[i], bud[i], floor_lim[i] = t, n, o, b, fl
+            spike[i] = bool(getattr(device, "last_spike", False))
+    finally:
+        device.cost_scale = scale0
+    fps = displayed_fps(ft, controller.target_fps)
+    return {
+        "frame_time": ft,
+        "triangles": tri,
+        "objects": objs,
+        "budget": bud,
+        "floor_limited": floor_lim,
+        "spike": spike,
+        "fps": fps,
+        "time": np.cumsum(1.0 / fps) if frames else np.zeros(0),
+    }
 
 
 class PvsSupply:
@@ -162,7 +271,7 @@ def _one(
     return simulate(ctrl, dev, frames, step_at=step_at, step_factor=step_factor, draw_fn=walk)
 
 
-def run_budget_bench(
+def run_controller_bench(
     cases: Sequence[tuple[Any, ...]] = DEFAULT_CASES,
     frames: int = 3_000,
     seeds: Sequence[int] = (1, 2, 3),
@@ -222,14 +331,15 @@ def run_budget_bench(
             fps_mean.append(float(len(steady["fps"]) / steady["time"][-1]))
             budgets.append(steady["budget"][after_first_s])
             stepped = _one(device, target, seed, frames, step_at, step_factor, row_supply)
-            r, w = recovery_frames(
-                stepped["frame_time"],
-                target,
+            recovery = recovery_frames(
+                stepped["fps"],
                 step_at,
-                exclude=stepped["spike"] | stepped["floor_limited"],
+                target=target,
+                ignore=stepped["spike"] | stepped["floor_limited"],
             )
-            rec.append(r)
-            worst.append(w)
+            rec.append(-1 if recovery.frames is None else recovery.frames)
+            after = recovery.worst_slowdown_after
+            worst.append(math.nan if after is None else after)
             floor_after.append(float(np.mean(stepped["floor_limited"][step_at:])))
         b = np.concatenate(budgets) if budgets else np.zeros(1)
         rows.append(
@@ -258,7 +368,7 @@ def _pct(x: float) -> str:
 
 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
-    """The rows of :func:`run_budget_bench` as a plain-text table, with the goals line."""
+    """The rows of :func:`run_controller_bench` as a plain-text table, with the goals line."""
     head = (
         f"{'device':<12} {'scene':<6} {'target':>6} {'fps':>6} {'within10':>8} {'floor':>6} "
         f"{'recover':>7} {'worst':>6} {'floor@step':>10} {'budget med':>10} "

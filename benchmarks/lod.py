@@ -32,7 +32,6 @@ Every viewpoint uses the PVS and ACH of the cell it stands in.
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import statistics
@@ -60,8 +59,6 @@ __all__ = [
     "EYE_HEIGHT",
     "PIXEL_TOLERANCE",
     "BenchView",
-    "add_bench_lod_parser",
-    "cmd_bench_lod",
     "format_table",
     "image_error",
     "load_views",
@@ -704,99 +701,3 @@ def write_side_by_side(
 
 
 # --------------------------------------------------------------------------- CLI
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
-    if w <= 0 or h <= 0:
-        raise argparse.ArgumentTypeError(f"expected positive sizes, got {text!r}")
-    return w, h
-
-
-def _shares(text: str) -> tuple[float, ...]:
-    try:
-        vals = tuple(float(v.strip().rstrip("%")) / 100.0 for v in text.split(",") if v.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected percentages like 5,10,25,50, got {text!r}"
-        ) from None
-    if not vals or any(not (0.0 < v <= 1.0) for v in vals):
-        raise argparse.ArgumentTypeError(f"percentages must be in (0, 100], got {text!r}")
-    return vals
-
-
-def _ratio(text: str) -> float | None:
-    if text.strip().lower() in ("free", "none"):
-        return None
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a number >= 1 or 'free', got {text!r}"
-        ) from None
-    if not (math.isfinite(v) and v >= 1.0):
-        raise argparse.ArgumentTypeError(f"expected a number >= 1 or 'free', got {text!r}")
-    return v
-
-
-def add_bench_lod_parser(besub: Any) -> argparse.ArgumentParser:
-    """Register ``lod`` under ``walkstream bench`` (``besub``: its subparsers action)."""
-    p: argparse.ArgumentParser = besub.add_parser(
-        "lod",
-        help="image error against frame time: ACH allocation vs distance LODs vs all LOD2",
-    )
-    p.add_argument(
-        "db", nargs="?", default=str(DEFAULT_DB), help=f"scene database (default {DEFAULT_DB})"
-    )
-    p.add_argument("--views", type=int, default=8, help="viewpoints (default 8)")
-    p.add_argument(
-        "--budgets",
-        type=_shares,
-        default=DEFAULT_SHARES,
-        help="budgets as percent of the LOD2 triangles (default 5,10,25,50)",
-    )
-    p.add_argument("--size", type=_size, default=(640, 480), help="frame size (default 640x480)")
-    p.add_argument("--repeat", type=int, default=5, help="timed draws per frame (default 5)")
-    p.add_argument(
-        "--path", default=PATH_NAME, help=f"recorded path for viewpoints (default {PATH_NAME})"
-    )
-    p.add_argument(
-        "--distance-ratio",
-        type=_ratio,
-        default=DISTANCE_RATIO,
-        help="d2/d1 of the distance selection, or 'free' to fit both (default free)",
-    )
-    p.add_argument("--plot", help="PNG: image error against frame time")
-    p.add_argument("--images", help="PNG: LOD2 / ACH / distance / differences at one viewpoint")
-    p.add_argument("--json", action="store_true", help="print the rows as JSON")
-    p.set_defaults(func=cmd_bench_lod)
-    return p
-
-
-def cmd_bench_lod(args: argparse.Namespace) -> int:
-    """Run ``walkstream bench lod`` from parsed arguments."""
-    import json
-
-    rows = run_lod_bench(
-        args.db,
-        views=args.views,
-        shares=args.budgets,
-        size=args.size,
-        repeats=args.repeat,
-        path_name=args.path,
-        images=args.images,
-        distance_ratio=args.distance_ratio,
-    )
-    if args.json:
-        print(json.dumps(rows))
-    else:
-        print(format_table(rows), end="")
-    if args.plot:
-        plot_lod_bench(rows, args.plot)
-        print(f"plot: {args.plot}")
-    if args.images:
-        print(f"images: {args.images}")
-    return 0

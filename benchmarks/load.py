@@ -1,6 +1,6 @@
 """Load benchmark of the HTTP service: simulated walkers against a real server process.
 
-:func:`run_server_bench` starts ``walkstream serve`` (through :func:`server.serve.serve`)
+:func:`run_server_bench` starts ``walkstream serve`` (through :func:`walkstream.server.service.serve`)
 in a subprocess on a free loopback port, pinned to core 0, and drives it from this
 process, pinned to core 1, with an asyncio load generator on raw sockets (hand-written
 HTTP/1.1 keep-alive requests, one connection per walker).  Each walker asks for what a
@@ -14,20 +14,18 @@ the last byte of the response), errors (non-2xx, connection errors, timeouts) an
 generator's own CPU use (process time over wall time of the window): near 100 % of its
 core means the generator, not the server, may be the bottleneck (``gen_saturated``).
 
-``python -m server.loadbench DB [--walkers 10,100,1000] [--workers 1,2] [--ramp 60]
+``walkstream bench server DB [--walkers 10,100,1000] [--workers 1,2] [--ramp 60]
 [--duration 30]`` prints the table.
 """
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import math
 import os
 import random
 import resource
-import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -38,8 +36,9 @@ import numpy as np
 
 from walkstream.server.service.process import server_process
 from walkstream.server.store import SceneReader
+from walkstream.shared.errors import InputError, ServiceError
 
-__all__ = ["run_server_bench", "format_table", "main"]
+__all__ = ["run_server_bench", "format_table"]
 
 MAX_IDS = 1000
 REQUEST_TIMEOUT_S = 10.0
@@ -91,7 +90,7 @@ def _load_scene(db: str) -> _Scene:
             int(v.cell) for v in reader.viewpoints() if v.cell is not None and v.cell in cells
         )
     if not cells:
-        raise ValueError(f"{db}: the scene has no cells to walk")
+        raise InputError(f"{db}: the scene has no cells to walk")
     return _Scene(name, cells, starts or tuple(sorted(cells)))
 
 
@@ -357,7 +356,7 @@ def run_server_bench(
     if duration_s is None:
         duration_s = 30.0
     if ramp_s < 0 or duration_s <= 0 or speed_kmh <= 0:
-        raise ValueError("ramp_s must be >= 0, duration_s and speed_kmh > 0")
+        raise InputError("ramp_s must be >= 0, duration_s and speed_kmh > 0")
     scene = _load_scene(db)
     nofile = _raise_nofile()
     pinned = False
@@ -372,7 +371,7 @@ def run_server_bench(
         for w in workers:
             for n in walkers:
                 if n + 64 > nofile:
-                    raise RuntimeError(f"open-file limit {nofile} is too low for {n} walkers")
+                    raise ServiceError(f"open-file limit {nofile} is too low for {n} walkers")
                 with _server(db, port, w, pinned) as (host, p):
                     stats, cpu, wall = asyncio.run(
                         _drive(scene, host, p, n, ramp_s, duration_s, speed_kmh / 3.6)
@@ -428,43 +427,3 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
             else "not pinned (pin=False or fewer than 2 cores available)"
         )
     return "\n".join(lines) + "\n"
-
-
-def _ints(text: str) -> tuple[int, ...]:
-    return tuple(int(v) for v in text.split(",") if v.strip())
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m server.loadbench DB [--walkers ..] [--workers ..] [--ramp S] [--duration S]``."""
-    ap = argparse.ArgumentParser(prog="python -m server.loadbench", description=__doc__)
-    ap.add_argument("db")
-    ap.add_argument("--walkers", type=_ints, default=(10, 100, 1000))
-    ap.add_argument("--workers", type=_ints, default=(1, 2))
-    ap.add_argument("--ramp", type=float, default=60.0)
-    ap.add_argument("--duration", type=float, default=30.0)
-    ap.add_argument("--speed", type=float, default=15.0, help="walking speed, km/h")
-    ap.add_argument("--no-pin", action="store_true")
-    args = ap.parse_args(argv)
-
-    def show(row: dict[str, Any]) -> None:
-        sys.stderr.write(
-            f"walkers={row['walkers']} workers={row['workers']}: {row['rps']:.1f} req/s, "
-            f"p99 {row['p99_ms']:.2f} ms, {row['errors']} errors\n"
-        )
-
-    rows = run_server_bench(
-        args.db,
-        walkers=args.walkers,
-        workers=args.workers,
-        ramp_s=args.ramp,
-        duration_s=args.duration,
-        speed_kmh=args.speed,
-        pin=not args.no_pin,
-        progress=show,
-    )
-    sys.stdout.write(format_table(rows))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

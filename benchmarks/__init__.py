@@ -1,0 +1,19 @@
+"""The benchmarks: every speed, size and quality figure the project reports.
+
+Each module is one benchmark that ``walkstream bench ...`` runs and prints as a table
+(the command line only parses options and prints); none is part of the product:
+
+- :mod:`.rebuild`: rebuild throughput per LOD, parameter against geometry bytes;
+- :mod:`.visibility`: PVS misses against a dense reference, against bake time;
+- :mod:`.renderspeed`: cells per second of the visibility renderer;
+- :mod:`.load`: simulated walkers against a real server;
+- :mod:`.stream`: replays per link and mode (quality, bytes, overfetch);
+- :mod:`.budget`: frame rate and polygon budget per device, with a cost step;
+- :mod:`.controller`: the budget controller alone on the device cost models;
+- :mod:`.lod`: image error against frame time, ACH against distance LODs.
+
+A new benchmark is a module here with a ``run_...`` function and a ``format_...``
+table, and a subcommand in :mod:`walkstream.cmd_bench`.
+"""
+
+__all__ = ["budget", "controller", "load", "lod", "rebuild", "renderspeed", "stream", "visibility"]

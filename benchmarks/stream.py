@@ -1,0 +1,109 @@
+"""Streaming under the simulated clock, per link and mode: ``walkstream bench stream``.
+
+Each scenario replays a recorded path of the scene (``SE``, ``SM``, ``drive``) through
+the whole client over a shaped link on the simulated clock: perfect frames, download
+and rewrite quality, the first perfect frame, bytes received, overfetch, re-downloads
+and rebuilds, one row each, with one report per row and comparison plots of every row
+in ``out/index.html``.  A replay is run by the ``replay`` callable the command line
+hands in (it alone may wire a server to the client).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from walkstream.client.report import write_comparison
+from walkstream.shared.errors import WalkstreamError
+
+__all__ = ["Replayer", "stream_scenarios", "run_stream_bench", "format_stream_table"]
+
+Replayer = Callable[[str, Mapping[str, Any], str], Any]
+"""``replay(server, options, title) -> ReplayResult``: one replay with ``walkstream replay``
+options (``bandwidth="5kB/s"``, ``report=folder``, ...) over the defaults."""
+
+
+def stream_scenarios(vienna: str | None) -> list[dict[str, Any]]:
+    """The rows of ``bench stream``: name, server, option overrides, goal."""
+    rows: list[dict[str, Any]] = [
+        {"name": "SE 56k prefetch", "over": {}, "goal": "perfect >= 99.5 %, overfetch <= 0.5, first <= 3 s"},
+        {"name": "SE 56k no-prefetch", "over": {"no_prefetch": True}, "goal": "(reported)"},
+        {"name": "SE 56k meshes", "over": {"stream": "meshes"}, "goal": "(reported)"},
+        {"name": "SE GPRS prefetch", "over": {"bandwidth": "5kB/s", "rtt": "500ms"}, "goal": "perfect >= 98 %"},
+        {"name": "SE GPRS no-prefetch", "over": {"bandwidth": "5kB/s", "rtt": "500ms", "no_prefetch": True}, "goal": "(reported)"},
+        {"name": "drive GPRS prefetch", "over": {"path": "drive", "bandwidth": "5kB/s", "rtt": "500ms"}, "goal": "(reported)"},
+        {"name": "SM 56k prefetch", "over": {"path": "SM"}, "goal": "(reported)"},
+        {"name": "SE 56k cache 8MB", "over": {"cache": "8MB"}, "goal": "re-downloads counted"},
+    ]
+    if vienna:
+        rows.append(
+            {"name": "Vienna walk GPRS", "server": vienna,
+             "over": {"path": "walk", "bandwidth": "5kB/s", "rtt": "500ms"}, "goal": "(reported)"}
+        )
+        rows.append(
+            {"name": "Vienna walk 56k", "server": vienna, "over": {"path": "walk"}, "goal": "(reported)"}
+        )
+    return rows
+
+
+def run_stream_bench(
+    db: str,
+    replay: Replayer,
+    *,
+    out: Path,
+    vienna: str | None = None,
+    device: str = "desktop2003",
+    duration: str | None = None,
+    only: Sequence[str] = (),
+) -> list[dict[str, Any]]:
+    """Replay every scenario (those whose name contains one of ``only``, if given).
+
+    Returns one row per scenario that ran (its summary, name and goal); a scenario
+    that fails is reported on stderr and left out.  Writes the comparison page and
+    ``bench_stream.json`` into ``out``.
+    """
+    scenarios = stream_scenarios(vienna)
+    if only:
+        scenarios = [s for s in scenarios if any(k.lower() in s["name"].lower() for k in only)]
+    rows = []
+    runs = []
+    for k, sc in enumerate(scenarios, 1):
+        folder = out / f"{k:02d}-{sc['name'].replace(' ', '-').lower()}"
+        options: dict[str, Any] = {"device": device, "clock": "sim", **sc["over"]}
+        if duration:
+            options["duration"] = duration
+        options["report"] = str(folder)
+        print(f"[{k}/{len(scenarios)}] {sc['name']} ...", file=sys.stderr, flush=True)
+        try:
+            result = replay(sc.get("server", db), options, sc["name"])
+        except WalkstreamError as exc:
+            print(f"  {sc['name']}: {exc}", file=sys.stderr)
+            continue
+        s = result.summary
+        rows.append({"scenario": sc["name"], "goal": sc["goal"], **s})
+        runs.append((sc["name"], s, result.log, result.bytes_log, folder))
+    if runs:
+        write_comparison(out, runs, title="walkstream bench stream")
+        (out / "bench_stream.json").write_text(json.dumps(rows, indent=2, default=str))
+    return rows
+
+
+def format_stream_table(rows: list[dict[str, Any]]) -> str:
+    """One line per scenario."""
+    head = (
+        f"{'scenario':<22} {'frames':>6} {'perfect%':>8} {'dl q%':>6} {'rw q%':>6} "
+        f"{'first s':>7} {'bytes':>9} {'overfetch':>9} {'redl':>5} {'rebuild':>7}  goal"
+    )
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        first = r.get("time_to_first_perfect_frame_s")
+        lines.append(
+            f"{r['scenario']:<22} {r['frames']:>6} {100 * r['perfect_frame_ratio']:>8.2f} "
+            f"{r['download_quality_mean']:>6.1f} {r['rewrite_quality_mean']:>6.1f} "
+            f"{'never' if first is None else f'{first:.2f}':>7} {r['bytes_received']:>9,} "
+            f"{r['overfetch_ratio']:>9.3f} {r['redownloads']:>5} {r['rebuilds']:>7}  {r['goal']}"
+        )
+    return "\n".join(lines)

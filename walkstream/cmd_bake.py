@@ -1,0 +1,146 @@
+"""``walkstream bake``, ``inspect`` and ``serve``: scene databases, made, looked at and served.
+
+::
+
+    walkstream bake SOURCE.geojson -o scene.db [--cells street|grid] [--cell-size M] ...
+    walkstream bake --default-city -o scene.db
+    walkstream inspect scene.db [--json] [--map map.png]
+    walkstream serve scene.db [more.db ...] [--host H] [--port P] [--workers N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from walkstream.shared.errors import WalkstreamError
+from walkstream.terminal import count_bar, print_summary
+
+__all__ = ["add_bake_parsers", "default_city_source", "run_bake"]
+
+
+def _parse_bbox(text: str | None) -> tuple[float, float, float, float] | None:
+    if text is None:
+        return None
+    try:
+        parts = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        parts = ()
+    if len(parts) != 4:
+        raise WalkstreamError(f"--bbox: expected MINX,MINY,MAXX,MAXY in scene-local metres, got {text!r}")
+    return parts[0], parts[1], parts[2], parts[3]
+
+
+def default_city_source(folder: Path) -> Path:
+    """The default city's GeoJSON in ``folder``, generated when it is not there yet."""
+    from walkstream.server.sources.citygen import DEFAULT_SEED, DEFAULT_SIZE, write_city
+
+    folder.mkdir(parents=True, exist_ok=True)
+    city = folder / "city.geojson"
+    if not city.exists():
+        print(f"generating the default city ({DEFAULT_SIZE:.0f} m, seed {DEFAULT_SEED}) -> {city}")
+        write_city(city, DEFAULT_SIZE, DEFAULT_SEED)
+    return city
+
+
+def run_bake(source: str | Path, output: str | Path, **kw: Any) -> dict[str, Any]:
+    """Bake with a progress bar on stderr; returns the summary."""
+    from walkstream.server.bake import bake
+
+    bar, progress = count_bar("baking cells", "cell")
+    try:
+        return bake(source, output, progress=progress, log=lambda m: bar.write(m, file=sys.stderr), **kw)
+    finally:
+        bar.close()
+
+
+def cmd_bake(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bake``."""
+    from walkstream.server.bake import BakeSettings
+
+    if args.default_city:
+        source: Path = default_city_source(Path(args.output).resolve().parent)
+    elif args.source:
+        source = Path(args.source)
+    else:
+        raise WalkstreamError("give a SOURCE.geojson or --default-city")
+    st = BakeSettings(
+        cells=args.cells,
+        cell_size=args.cell_size,
+        max_length=args.cell_size,
+        view_distance=args.view_distance,
+        bbox=_parse_bbox(args.bbox),
+        centre=args.centre,
+        threshold=args.threshold,
+        **{k: v for k, v in (("resolution", args.resolution), ("occluder_lod", args.occluder_lod)) if v is not None},
+    )
+    summary = run_bake(source, args.output, settings=st, name=args.name, workers=args.workers, scheduler=args.scheduler)
+    print_summary(f"baked {args.output}", summary, args.json)
+    return 0
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream inspect``."""
+    from walkstream.server.store import SceneReader
+
+    reader = SceneReader.open(args.db)
+    try:
+        summary = reader.summary()
+        if args.map:
+            from walkstream.server.bake.mapplot import draw_map
+
+            draw_map(reader, args.map)
+    finally:
+        reader.close()
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print_summary(str(args.db), summary, False)
+        if args.map:
+            print(f"map: {args.map}")
+    return 0
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream serve``."""
+    from walkstream.server.service import serve
+
+    serve(args.db, host=args.host, port=args.port, workers=args.workers)
+    return 0
+
+
+def add_bake_parsers(sub: Any) -> None:
+    """Register ``bake``, ``inspect`` and ``serve``."""
+    bk = sub.add_parser("bake", help="bake a GeoJSON source into a scene database (cells, PVS, ACH)")
+    bk.add_argument("source", nargs="?", help="GeoJSON FeatureCollection (generated city or real footprints)")
+    bk.add_argument("-o", "--output", required=True, help="scene database to write (SQLite, replaced atomically)")
+    bk.add_argument("--default-city", action="store_true", help="bake the default 700 m city (generated beside the output)")
+    bk.add_argument("--name", help="scene name (default: the database file's stem)")
+    bk.add_argument("--cells", choices=("auto", "street", "grid"), default="auto", help="street cells (needs streets) or a grid (default auto)")
+    bk.add_argument("--cell-size", type=float, default=40.0, help="grid cell side / longest street cell, metres (default 40)")
+    bk.add_argument("--view-distance", type=float, default=800.0, help="far plane, metres (default 800)")
+    bk.add_argument("--bbox", help="MINX,MINY,MAXX,MAXY in scene-local metres: bake only this part")
+    bk.add_argument("--resolution", type=int, default=None, help="pixels per cube face (default: see bench visibility)")
+    bk.add_argument("--occluder-lod", type=int, choices=(0, 1, 2), default=None, help="LOD rendered as occluder")
+    bk.add_argument("--centre", action="store_true", help="also sample the cell centre (10 points instead of 8)")
+    bk.add_argument("--threshold", type=int, default=0, help="hardly-visible threshold: pixels an object needs to enter the PVS (default 0)")
+    bk.add_argument("--workers", type=int, default=1, help="local processes rendering cells (default 1)")
+    bk.add_argument("--scheduler", help="tcp://HOST:PORT of a Dask scheduler to run the cell tasks on")
+    bk.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    bk.set_defaults(func=cmd_bake)
+
+    ins = sub.add_parser("inspect", help="summary of a scene database; --map draws its cells")
+    ins.add_argument("db", help="scene database")
+    ins.add_argument("--map", help="PNG: top view of the cells coloured by PVS size over the footprints")
+    ins.add_argument("--json", action="store_true", help="print one JSON object")
+    ins.set_defaults(func=cmd_inspect)
+
+    sv = sub.add_parser("serve", help="serve scene databases over HTTP (FastAPI + uvicorn)")
+    sv.add_argument("db", nargs="+", help="scene database(s), each served under its scene name")
+    sv.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    sv.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    sv.add_argument("--workers", type=int, default=1, help="uvicorn worker processes (default 1)")
+    sv.set_defaults(func=cmd_serve)

@@ -1,0 +1,336 @@
+"""``walkstream bench ...``: every benchmark, each printing one table (and plots where asked).
+
+::
+
+    walkstream bench rebuild [FILE] [--repeat 5]
+    walkstream bench visibility scene.db|SOURCE.geojson [--sample N] [--plot out.png]
+    walkstream bench render [--size 700] [--cells 40] [--runs 3] ...
+    walkstream bench server scene.db [--walkers 10,100,1000] [--workers 1,2] ...
+    walkstream bench stream [scene.db] [--vienna vienna.db] [--only NAMES] [--duration S]
+    walkstream bench budget [scene.db] [--no-gl] [--seed N]
+    walkstream bench controller [--frames 3000] [--seeds 1 2 3] [--step 10]
+    walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
+
+The benchmarks themselves are :mod:`walkstream.benchmarks`; this module parses their
+options, hands the replaying ones a way to run a replay
+(:func:`~walkstream.cmd_replay.replay_with_options`) and prints what they return.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from walkstream.shared.errors import WalkstreamError
+from walkstream.terminal import building_bar, count_bar
+
+__all__ = ["add_bench_parser"]
+
+
+def _ints(text: str, flag: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise WalkstreamError(f"{flag}: expected comma-separated integers, got {text!r}") from None
+
+
+def cmd_bench_rebuild(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench rebuild``."""
+    from walkstream.benchmarks.rebuild import building_stats, rebuild_table
+    from walkstream.cmd_build import load_source
+    from walkstream.server.sources.citygen import DEFAULT_SEED, write_city
+
+    source = args.file
+    if source is None:
+        source = str(Path(tempfile.mkdtemp()) / "city.geojson")
+        write_city(source, args.size, DEFAULT_SEED)
+    scene = load_source(source)
+    runs = []
+    for r in range(args.repeat):
+        with building_bar(len(scene.buildings), f"run {r + 1}/{args.repeat}") as bar:
+            runs.append(building_stats(scene.buildings, progress=bar.update))
+    print(rebuild_table(runs, source))
+    return 0
+
+
+def cmd_bench_visibility(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench visibility``."""
+    from walkstream.benchmarks.visibility import (
+        format_table,
+        load_bench_input,
+        plot_visibility_benchmark,
+        visibility_benchmark,
+    )
+
+    inp = load_bench_input(args.scene, source=args.source)
+    bar, progress = count_bar("rendering", "cell")
+    try:
+        res = visibility_benchmark(
+            inp.scene, inp.cells, sample=args.sample, view_distance=inp.view_distance, progress=progress
+        )
+    finally:
+        bar.close()
+    print(format_table(res))
+    if args.plot:
+        plot_visibility_benchmark(res, args.plot)
+        print(f"plot: {args.plot}")
+    return 0
+
+
+def cmd_bench_render(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench render``."""
+    from walkstream.benchmarks.renderspeed import run_render_speed
+
+    for line in run_render_speed(
+        size=args.size,
+        seed=args.seed,
+        cells_wanted=args.cells,
+        runs=args.runs,
+        resolutions=args.resolutions,
+        lods=args.lods,
+        view_distance=args.view_distance,
+        no_cull=args.no_cull,
+    ):
+        print(line, flush=True)
+    return 0
+
+
+def cmd_bench_server(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench server``."""
+    from walkstream.benchmarks.load import format_table, run_server_bench
+
+    rows = run_server_bench(
+        args.db,
+        walkers=_ints(args.walkers, "--walkers"),
+        workers=_ints(args.workers, "--workers"),
+        ramp_s=args.ramp,
+        duration_s=args.duration,
+        pin=not args.no_pin,
+        progress=lambda row: print(f"done: {row['walkers']} walkers, {row['workers']} worker(s)", file=sys.stderr),
+    )
+    print(format_table(rows))
+    return 0
+
+
+def cmd_bench_stream(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench stream``."""
+    from walkstream.benchmarks.stream import format_stream_table, run_stream_bench
+    from walkstream.cmd_replay import replay_with_options
+
+    out = Path(args.out)
+    only = [s.strip() for s in args.only.split(",")] if args.only else []
+    rows = run_stream_bench(
+        args.db,
+        replay_with_options,
+        out=out,
+        vienna=args.vienna,
+        device=args.device,
+        duration=args.duration,
+        only=only,
+    )
+    print(format_stream_table(rows))
+    if rows:
+        print(f"plots and per-run reports: {out / 'index.html'}")
+    return 0
+
+
+def cmd_bench_budget(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench budget``."""
+    from walkstream.benchmarks.budget import format_budget_table, run_budget_bench
+    from walkstream.cmd_replay import replay_with_options
+
+    out = Path(args.out)
+    rows = run_budget_bench(
+        args.db,
+        replay_with_options,
+        out=out,
+        duration=args.duration,
+        gl_duration=args.gl_duration,
+        step_at=args.step_at,
+        gl=not args.no_gl,
+        seed=args.seed,
+    )
+    print(format_budget_table(rows))
+    print(f"reports: {out}")
+    return 0
+
+
+def cmd_bench_controller(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench controller``."""
+    from walkstream.benchmarks.controller import format_table, run_controller_bench
+
+    t0 = time.perf_counter()
+    rows = run_controller_bench(frames=args.frames, seeds=args.seeds, step_factor=args.step)
+    print(format_table(rows))
+    print(
+        f"{args.frames} frames x {len(args.seeds)} seeds x 2 runs per row, "
+        f"step x{args.step:g} at frame {args.frames // 2}; {time.perf_counter() - t0:.1f} s"
+    )
+    return 0
+
+
+def _lod_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+    if w <= 0 or h <= 0:
+        raise argparse.ArgumentTypeError(f"expected positive sizes, got {text!r}")
+    return w, h
+
+
+def _shares(text: str) -> tuple[float, ...]:
+    try:
+        vals = tuple(float(v.strip().rstrip("%")) / 100.0 for v in text.split(",") if v.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected percentages like 5,10,25,50, got {text!r}"
+        ) from None
+    if not vals or any(not (0.0 < v <= 1.0) for v in vals):
+        raise argparse.ArgumentTypeError(f"percentages must be in (0, 100], got {text!r}")
+    return vals
+
+
+def _ratio(text: str) -> float | None:
+    if text.strip().lower() in ("free", "none"):
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a number >= 1 or 'free', got {text!r}"
+        ) from None
+    if not (math.isfinite(v) and v >= 1.0):
+        raise argparse.ArgumentTypeError(f"expected a number >= 1 or 'free', got {text!r}")
+    return v
+
+
+def _add_lod(besub: Any) -> argparse.ArgumentParser:
+    from walkstream.benchmarks.lod import DEFAULT_DB, DEFAULT_SHARES, DISTANCE_RATIO, PATH_NAME
+
+    p: argparse.ArgumentParser = besub.add_parser(
+        "lod",
+        help="image error against frame time: ACH allocation vs distance LODs vs all LOD2",
+    )
+    p.add_argument(
+        "db", nargs="?", default=str(DEFAULT_DB), help=f"scene database (default {DEFAULT_DB})"
+    )
+    p.add_argument("--views", type=int, default=8, help="viewpoints (default 8)")
+    p.add_argument(
+        "--budgets",
+        type=_shares,
+        default=DEFAULT_SHARES,
+        help="budgets as percent of the LOD2 triangles (default 5,10,25,50)",
+    )
+    p.add_argument("--size", type=_lod_size, default=(640, 480), help="frame size (default 640x480)")
+    p.add_argument("--repeat", type=int, default=5, help="timed draws per frame (default 5)")
+    p.add_argument(
+        "--path", default=PATH_NAME, help=f"recorded path for viewpoints (default {PATH_NAME})"
+    )
+    p.add_argument(
+        "--distance-ratio",
+        type=_ratio,
+        default=DISTANCE_RATIO,
+        help="d2/d1 of the distance selection, or 'free' to fit both (default free)",
+    )
+    p.add_argument("--plot", help="PNG: image error against frame time")
+    p.add_argument("--images", help="PNG: LOD2 / ACH / distance / differences at one viewpoint")
+    p.add_argument("--json", action="store_true", help="print the rows as JSON")
+    p.set_defaults(func=cmd_bench_lod)
+    return p
+
+
+def cmd_bench_lod(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench lod``."""
+    from walkstream.benchmarks.lod import format_table, plot_lod_bench, run_lod_bench
+
+    rows = run_lod_bench(
+        args.db,
+        views=args.views,
+        shares=args.budgets,
+        size=args.size,
+        repeats=args.repeat,
+        path_name=args.path,
+        images=args.images,
+        distance_ratio=args.distance_ratio,
+    )
+    if args.json:
+        print(json.dumps(rows))
+    else:
+        print(format_table(rows), end="")
+    if args.plot:
+        plot_lod_bench(rows, args.plot)
+        print(f"plot: {args.plot}")
+    if args.images:
+        print(f"images: {args.images}")
+    return 0
+
+
+def add_bench_parser(sub: Any) -> None:
+    """Register ``bench`` and every benchmark under it."""
+    from walkstream.server.sources.citygen import DEFAULT_SIZE
+
+    be = sub.add_parser("bench", help="benchmarks that print a table")
+    besub = be.add_subparsers(dest="what", metavar="WHAT", required=True)
+    bb = besub.add_parser("rebuild", help="rebuild throughput per LOD and parameter/geometry bytes")
+    bb.add_argument("file", nargs="?", help="GeoJSON source (default: the default 700 m city)")
+    bb.add_argument("--size", type=float, default=DEFAULT_SIZE, help="city size when no file is given")
+    bb.add_argument("--repeat", type=int, default=5, help="runs; the table shows medians (default 5)")
+    bb.set_defaults(func=cmd_bench_rebuild)
+    bv = besub.add_parser("visibility", help="PVS miss rate against a dense reference vs bake seconds per cell, per setting")
+    bv.add_argument("scene", help="scene database (its source GeoJSON is read again) or a GeoJSON source")
+    bv.add_argument("--source", help="the GeoJSON the database was baked from, if it moved")
+    bv.add_argument("--sample", type=int, default=12, help="cells compared (default 12)")
+    bv.add_argument("--plot", help="PNG: miss rate against seconds per cell")
+    bv.set_defaults(func=cmd_bench_visibility)
+    brs = besub.add_parser("render", help="cells per second the visibility renderer bakes, per resolution and LOD")
+    brs.add_argument("--size", type=float, default=DEFAULT_SIZE, help="generated city size, metres (default 700)")
+    brs.add_argument("--seed", type=int, default=1, help="city seed (default 1)")
+    brs.add_argument("--cells", type=int, default=40, help="cells timed (default 40)")
+    brs.add_argument("--runs", type=int, default=3, help="runs; the median is shown (default 3)")
+    brs.add_argument("--resolutions", type=int, nargs="+", default=[64, 128, 256], help="pixels per cube face")
+    brs.add_argument("--lods", type=int, nargs="+", default=[0, 1, 2], help="occluder LODs")
+    brs.add_argument("--view-distance", type=float, default=800.0, help="far plane, metres (default 800)")
+    brs.add_argument("--no-cull", action="store_true", help="draw back faces too")
+    brs.set_defaults(func=cmd_bench_render)
+    bsv = besub.add_parser("server", help="simulated walkers against a real server on loopback: req/s, p50/p99, errors")
+    bsv.add_argument("db", help="scene database to serve")
+    bsv.add_argument("--walkers", default="10,100,1000", help="walker counts (default 10,100,1000)")
+    bsv.add_argument("--workers", default="1,2", help="server worker counts (default 1,2)")
+    bsv.add_argument("--ramp", type=float, default=60.0, help="seconds over which walkers start (default 60)")
+    bsv.add_argument("--duration", type=float, default=30.0, help="measured seconds after the ramp (default 30)")
+    bsv.add_argument("--no-pin", action="store_true", help="do not pin server and load generator to separate cores")
+    bsv.set_defaults(func=cmd_bench_server)
+
+    b = besub.add_parser("stream", help="replays under the simulated clock: quality, bytes, overfetch per link and mode")
+    b.add_argument("db", nargs="?", default="out/demo/city.db", help="scene database (default out/demo/city.db from make demo)")
+    b.add_argument("--vienna", help="a baked Vienna database with the imported walk (path 'walk')")
+    b.add_argument("--device", default="desktop2003", choices=("gl", "desktop2003", "pda"), help="device (default desktop2003)")
+    b.add_argument("--duration", help="limit every walk, e.g. 60s")
+    b.add_argument("--only", help="comma-separated scenario name parts to run")
+    b.add_argument("--out", default="out/bench-stream", help="folder for reports and plots")
+    b.set_defaults(func=cmd_bench_stream)
+
+    b = besub.add_parser("budget", help="frame rate and polygon budget per device and target, with a tenfold cost step")
+    b.add_argument("db", nargs="?", default="out/demo/city.db", help="scene database (default out/demo/city.db)")
+    b.add_argument("--duration", default="180s", help="walk length for the simulated devices (default 180s)")
+    b.add_argument("--gl-duration", default="20s", help="walk length for the gl device (default 20s)")
+    b.add_argument("--step-at", type=float, default=60.0, help="walk second of the tenfold cost step (default 60)")
+    b.add_argument("--no-gl", action="store_true", help="skip the gl rows")
+    b.add_argument("--seed", type=int, default=0, help="seed of the device noise and spikes (default 0)")
+    b.add_argument("--out", default="out/bench-budget", help="folder for the reports")
+    b.set_defaults(func=cmd_bench_budget)
+
+    bc = besub.add_parser("controller", help="the budget controller alone on the device cost models, many seeds")
+    bc.add_argument("--frames", type=int, default=3_000, help="frames per run (default 3000)")
+    bc.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="noise/walk seeds (default 1 2 3)")
+    bc.add_argument("--step", type=float, default=10.0, help="per-triangle cost step factor (default 10)")
+    bc.set_defaults(func=cmd_bench_controller)
+
+    _add_lod(besub)

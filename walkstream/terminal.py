@@ -1,0 +1,73 @@
+"""What the command line shows on the terminal: progress bars and summaries.
+
+Progress goes to stderr (so that stdout stays a clean table or JSON), through tqdm.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["building_bar", "count_bar", "WalkBar", "print_summary"]
+
+
+def building_bar(total: int, desc: str) -> Any:
+    """A stderr progress bar over ``total`` buildings (a context manager with ``update``)."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="bldg", file=sys.stderr, leave=False, dynamic_ncols=True)
+
+
+def count_bar(desc: str, unit: str) -> tuple[Any, Callable[[int, int], None]]:
+    """A stderr progress bar and the ``(done, total)`` callback that drives it."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=0, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True)
+
+    def progress(done: int, total: int) -> None:
+        bar.total = total
+        bar.n = done
+        bar.refresh()
+
+    return bar, progress
+
+
+class WalkBar:
+    """A tqdm bar of walk seconds, made on the first progress call (so that a replay
+    that fails during setup prints only its error)."""
+
+    def __init__(self, desc: str) -> None:
+        self.desc = desc
+        self.bar: Any = None
+
+    def __call__(self, done: float, total: float) -> None:
+        if self.bar is None:
+            from tqdm import tqdm
+
+            self.bar = tqdm(
+                total=max(total, 1e-9),
+                desc=self.desc,
+                unit="s",
+                file=sys.stderr,
+                leave=False,
+                dynamic_ncols=True,
+                bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} s walked [{elapsed}]",
+            )
+        self.bar.update(min(done, total) - self.bar.n)  # honours tqdm's refresh interval
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def print_summary(title: str, summary: dict[str, Any], as_json: bool) -> None:
+    """A summary as aligned ``key  value`` lines under ``title``, or as one JSON object."""
+    if as_json:
+        print(json.dumps(summary))
+        return
+    print(f"{title}:")
+    width = max(len(k) for k in summary)
+    for k, v in summary.items():
+        print(f"  {k:<{width}}  {v}")
