@@ -13,7 +13,22 @@ Each module is one benchmark that ``walkstream bench ...`` runs and prints as a 
 - :mod:`.lod`: image error against frame time, ACH against distance LODs.
 
 A new benchmark is a module here with a ``run_...`` function and a ``format_...``
-table, and a subcommand in :mod:`walkstream.cmd_bench`.
+table, and a subcommand in :mod:`walkstream.cmd_bench`.  The ``run_...`` functions are
+imported lazily.
 """
 
-__all__ = ["budget", "controller", "load", "lod", "rebuild", "renderspeed", "stream", "visibility"]
+from walkstream.shared.exports import lazy_exports
+
+_EXPORTS = {
+    "building_stats": "walkstream.benchmarks.rebuild",
+    "visibility_benchmark": "walkstream.benchmarks.visibility",
+    "run_render_speed": "walkstream.benchmarks.renderspeed",
+    "run_server_bench": "walkstream.benchmarks.load",
+    "run_stream_bench": "walkstream.benchmarks.stream",
+    "run_budget_bench": "walkstream.benchmarks.budget",
+    "run_controller_bench": "walkstream.benchmarks.controller",
+    "run_lod_bench": "walkstream.benchmarks.lod",
+}
+
+__all__ = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

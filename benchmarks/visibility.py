@@ -34,7 +34,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import shapely
-from numpy.typing import NDArray
 
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.samples import dense_points, sample_points
@@ -45,6 +44,8 @@ from walkstream.shared.errors import InputError
 
 if TYPE_CHECKING:
     import moderngl
+
+from walkstream.shared.arrays import I64
 
 __all__ = [
     "BenchInput",
@@ -60,8 +61,6 @@ __all__ = [
 #: The default setting is the cheapest one whose pixel-weighted miss rate is at most this.
 MAX_MISS_RATE_PX = 0.01
 
-F64 = NDArray[np.float64]
-I64 = NDArray[np.int64]
 Progress = Callable[[int, int], None]
 
 

@@ -39,7 +39,7 @@ from walkstream.client.draw.devices import make_device
 from walkstream.client.net.api import SceneClient
 from walkstream.client.net.link import LinkProfile, ShapedTransport
 from walkstream.client.report.metrics import FrameLog, FrameLogBuilder, summarise
-from walkstream.client.rewrite.pool import ObjectGeometry, RewritePool
+from walkstream.client.rewrite.pool import ObjectGeometry
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.predict import MotionPredictor
@@ -255,7 +255,6 @@ async def replay(
     """The replay coroutine (see :func:`run_replay` to run it on a clock)."""
     link = ShapedTransport(transport, config.link, clock)
     renderer: Any = None
-    rewrite: RewritePool | None = None
     streamer: Streamer | None = None
     disk: DiskCache | None = None
     async with httpx.AsyncClient(
@@ -287,12 +286,11 @@ async def replay(
                 return ReplayResult(summary, log, _bytes_log(stats, t_start))
             path, _path_bytes = got
             cache = Cache(config.cache_bytes)
-            scfg = StreamerConfig(prefetch=config.prefetch, form=STREAM_FORMS[config.stream])
-            streamer = Streamer(api, clock, cache, None, scfg)
-            if config.stream == "params":
-                rewrite = RewritePool(clock, None, streamer.on_built, config.workers)
-                streamer.rewrite = rewrite
-                rewrite.start()
+            scfg = StreamerConfig(
+                prefetch=config.prefetch, form=STREAM_FORMS[config.stream], workers=config.workers
+            )
+            streamer = Streamer(api, clock, cache, scfg)
+            streamer.start()
             device = make_device(config.device, config.seed)
             if not device.simulated or config.snapshot_every:
                 from walkstream.client.draw.frames import FrameRenderer
@@ -310,11 +308,9 @@ async def replay(
                     return
                 m = task.result()
                 assert streamer is not None
-                streamer.api_max_ids = m.max_ids
-                if rewrite is not None:
-                    rewrite.set_grammar(parse_grammar(m.grammar_text))
-                if disk is not None and disk.use(m.name, m.version):
-                    streamer.disk = disk
+                grammar = parse_grammar(m.grammar_text) if streamer.rewrite is not None else None
+                usable = disk is not None and disk.use(m.name, m.version)
+                streamer.on_manifest(m.max_ids, grammar, disk if usable else None)
 
             manifest_task.add_done_callback(manifest_arrived)
             log, snapshots, spikes = await _walk(
@@ -329,10 +325,8 @@ async def replay(
                     await manifest_task
             if streamer is not None:
                 await streamer.close()
-            if rewrite is not None:
-                await rewrite.close()
             if renderer is not None:
-                renderer.close()
+                renderer.release()
             if disk is not None:
                 disk.close()
     stats = link.stats
@@ -396,7 +390,7 @@ async def replay(
             "measured_rtt_s": _finite(api.stats.rtt_s),
             "cache_bytes": config.cache_bytes,
             "cache_peak_bytes": int(cache.peak_bytes),
-            "rewrite_cpu_s": rewrite.cpu_s if rewrite is not None else 0.0,
+            "rewrite_cpu_s": streamer.rewrite.cpu_s if streamer.rewrite is not None else 0.0,
             "cells_entered": len(entered),
         }
     )

@@ -20,6 +20,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.arrays import F32
 from walkstream.shared.errors import InputError
 
 __all__ = [
@@ -33,7 +34,6 @@ __all__ = [
     "perspective",
 ]
 
-F32 = NDArray[np.float32]
 
 #: The six 90-degree cube-face view directions, ``(6, 3) float64``, in the order of
 #: :data:`CUBE_FACE_NAMES`.

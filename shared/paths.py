@@ -55,8 +55,9 @@ from typing import Any
 
 import msgpack
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
+from walkstream.shared.arrays import F64
 from walkstream.shared.codec import unpack_bounded
 from walkstream.shared.errors import CodecError, InputError
 from walkstream.shared.records import readonly
@@ -86,7 +87,6 @@ WALK_EYE_HEIGHT = 1.7
 DRIVE_EYE_HEIGHT = 1.2
 """Eye height of a car driver, metres."""
 
-F64 = NDArray[np.float64]
 
 _MAX_NAME = 200  # as the scene store allows
 # a sample is at most 1 + 6 * 9 bytes of msgpack; plus the header

@@ -13,11 +13,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
 
 __all__ = ["BuildingParams", "StreetParams", "Mesh", "Viewpoint", "readonly"]
 
-F64 = NDArray[np.float64]
 
 
 def readonly(a: NDArray[Any]) -> NDArray[Any]:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -31,7 +32,7 @@ from numpy.typing import NDArray
 
 from walkstream.shared.codec import unpack_bounded
 from walkstream.shared.errors import CodecError
-from walkstream.shared.records import Viewpoint
+from walkstream.shared.records import Viewpoint, readonly
 
 __all__ = [
     "MSGPACK",
@@ -128,13 +129,21 @@ class CellRecord:
     """(n, 2) convex outline, scene-local metres."""
     zmin: float
     zmax: float
-    neighbours: dict[int, NDArray[np.float64]]
+    neighbours: Mapping[int, NDArray[np.float64]]
     """Neighbour id -> its (m, 2) outline."""
     pvs: NDArray[np.int64]
     ach: NDArray[np.float64]
     nbytes: int = 0
     etag: str | None = None
     body: bytes = field(default=b"", repr=False)
+
+    def __post_init__(self) -> None:
+        # records are shared between caches and callers: nothing in them may change
+        object.__setattr__(self, "boundary", readonly(np.asarray(self.boundary, np.float64)))
+        object.__setattr__(self, "pvs", readonly(np.asarray(self.pvs, np.int64)))
+        object.__setattr__(self, "ach", readonly(np.asarray(self.ach, np.float64)))
+        frozen = {int(n): readonly(np.asarray(b, np.float64)) for n, b in self.neighbours.items()}
+        object.__setattr__(self, "neighbours", MappingProxyType(frozen))
 
     def to_wire(self) -> dict[str, Any]:
         """The record as sent: outlines as nested lists of floats."""

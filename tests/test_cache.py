@@ -34,12 +34,12 @@ def test_get_put_and_counters() -> None:
     assert c.has("params", 1) and ("params", 1) in c and ("geom", 1) not in c
     assert c.hits["params"] == 1 and c.misses["params"] == 1
     # peek and has are not counted
-    assert c.hits == {"cell": 0, "params": 1, "geom": 0}
+    assert c.hits == {"cell": 0, "params": 1, "mesh": 0, "geom": 0}
     c.put("params", 1, "p1b", 30)  # replaced: bytes follow the new size
     assert c.bytes_used == 30 and c.peek("params", 1) == "p1b" and len(c) == 1
     assert c.size_of("params", 1) == 30 and c.size_of("geom", 1) is None
     s = c.stats()
-    assert s["bytes_used"] == 30 and s["entries"] == {"cell": 0, "params": 1, "geom": 0}
+    assert s["bytes_used"] == 30 and s["entries"] == {"cell": 0, "params": 1, "mesh": 0, "geom": 0}
 
 
 def test_lru_order_within_a_kind() -> None:
@@ -71,7 +71,7 @@ def test_geometry_goes_before_parameters_before_cells() -> None:
     assert log[3:] == [("params", 2), ("params", 3)]
     c.put("cell", 4, "c", 21)
     assert log[5:] == [("cell", 1)]
-    assert c.evictions == {"geom": 2, "params": 3, "cell": 1}
+    assert c.evictions == {"geom": 2, "params": 3, "mesh": 0, "cell": 1}
     assert c.bytes_used <= 60
 
 
@@ -103,7 +103,7 @@ def test_pin_unpin_and_pin_before_arrival() -> None:
     c.put("geom", 5, "g5", 8)
     assert log[1:] == [("geom", 5)]  # geometry before params, even the newest
     with pytest.raises(InputError, match="kind"):
-        c.pin([("mesh", 1)])
+        c.pin([("texture", 1)])
 
 
 def test_on_evict_sees_the_updated_cache_and_remove() -> None:
@@ -135,7 +135,7 @@ def test_bad_arguments() -> None:
         Cache(-1)
     c = Cache(10)
     with pytest.raises(InputError, match="kind"):
-        c.put("mesh", 1, "x", 1)
+        c.put("texture", 1, "x", 1)
     with pytest.raises(InputError, match="size"):
         c.put("geom", 1, "x", -1)
 

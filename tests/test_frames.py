@@ -188,8 +188,8 @@ def test_snapshot_before_draw_and_after_close(gl: moderngl.Context) -> None:
     fr = FrameRenderer(SIZE, ctx=gl)
     with pytest.raises(RenderError):
         fr.snapshot()
-    fr.close()
-    fr.close()  # idempotent
+    fr.release()
+    fr.release()  # idempotent
     with pytest.raises(RenderError):
         fr.draw([], camera(EYE, 0.0, 0.0))
 

@@ -92,7 +92,6 @@ import statistics
 from collections import deque
 
 import numpy as np
-from numpy.typing import NDArray
 
 from walkstream.shared.errors import InputError
 
@@ -144,7 +143,6 @@ MAX_GROWTH = 2.0
 #: Where an upward probe from (near) zero starts, triangles.
 PROBE_START = 64
 
-_F64 = NDArray[np.float64]
 
 
 class BudgetController:

@@ -234,13 +234,13 @@ class FrameRenderer:
 
     # -- lifetime --------------------------------------------------------------
 
-    def close(self) -> None:
+    def release(self) -> None:
         """Release every buffer (and the context, if it was made here); idempotent."""
         self._keys.clear()
         self._refs.clear()
         self._triangles = 0
         self._bytes = 0
-        self._r.close()
+        self._r.release()
 
     def __enter__(self) -> FrameRenderer:
         return self
@@ -251,4 +251,4 @@ class FrameRenderer:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self.close()
+        self.release()

@@ -157,7 +157,7 @@ class MeshRenderer:
                 vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER
             )
         except Exception as exc:
-            self.close()
+            self.release()
             raise RenderError(f"MeshRenderer: shader program failed: {exc}") from exc
         self._uniform("u_light_dir").value = tuple(light / np.linalg.norm(light))
         self._uniform("u_ambient").value = float(ambient)
@@ -305,7 +305,7 @@ class MeshRenderer:
 
     # -- lifetime ------------------------------------------------------------------
 
-    def close(self) -> None:
+    def release(self) -> None:
         """Release every GL object made here (and the context, if it was made here)."""
         for gm in self._meshes.values():
             gm.release()
@@ -329,7 +329,7 @@ class MeshRenderer:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self.close()
+        self.release()
 
 
 def _bounds(mesh: Mesh) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:

@@ -30,7 +30,6 @@ index page).  A new plot is a function in :mod:`.plots` and a name in
 """
 
 from walkstream.client.report.files import (
-    F64,
     BytesLog,
     json_safe,
     load_run,
@@ -40,15 +39,31 @@ from walkstream.client.report.files import (
     write_frames_csv,
     write_json,
 )
-from walkstream.client.report.html import log, write_comparison, write_report
+from walkstream.client.report.html import write_comparison, write_report
+from walkstream.client.report.metrics import (
+    FrameLog,
+    FrameLogBuilder,
+    Recovery,
+    displayed_fps,
+    recovery_frames,
+    summarise,
+    within_ratio,
+    within_target_mask,
+)
 from walkstream.client.report.plots import PLOT_NAMES, SERIES_COLOURS
 from walkstream.client.report.tables import format_comparison_table, format_headline, headline_rows
 
 __all__ = [
-    "log",
+    "FrameLog",
+    "FrameLogBuilder",
+    "Recovery",
+    "displayed_fps",
+    "within_target_mask",
+    "within_ratio",
+    "recovery_frames",
+    "summarise",
     "write_report",
     "write_comparison",
-    "F64",
     "BytesLog",
     "json_safe",
     "write_json",

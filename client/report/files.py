@@ -22,6 +22,8 @@ from walkstream.shared.errors import InputError
 if TYPE_CHECKING:
     pass
 
+from walkstream.shared.arrays import F64
+
 __all__ = [
     "F64",
     "BytesLog",
@@ -34,7 +36,6 @@ __all__ = [
     "load_run",
 ]
 
-F64 = NDArray[np.float64]
 
 #: ``(t, cumulative bytes)`` samples of the link: two equal-length 1-D arrays.
 BytesLog = tuple[ArrayLike, ArrayLike]

@@ -53,6 +53,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.arrays import F64, I64, Bool
 from walkstream.shared.errors import InputError
 
 __all__ = [
@@ -70,9 +71,6 @@ __all__ = [
     "within_ratio",
 ]
 
-F64 = NDArray[np.float64]
-I64 = NDArray[np.int64]
-B = NDArray[np.bool_]
 
 #: A quality counts as 100 % when it is at least ``1 - PERFECT_EPS``.
 PERFECT_EPS = 1e-9
@@ -173,8 +171,8 @@ class FrameLog:
     budget: I64
     triangles: I64
     visible: I64
-    floor_limited: B
-    all_lod2: B
+    floor_limited: Bool
+    all_lod2: Bool
 
     def __post_init__(self) -> None:
         n = None
@@ -357,10 +355,10 @@ class FrameLogBuilder:
 # --------------------------------------------------------------------------- definitions
 
 
-def perfect_mask(log: FrameLog) -> B:
+def perfect_mask(log: FrameLog) -> Bool:
     """(n,) bool: the frames that are perfect (cell known, both qualities 100 %)."""
     lim = 1.0 - PERFECT_EPS
-    out: B = (log.cell >= 0) & (log.download_quality >= lim) & (log.rewrite_quality >= lim)
+    out: Bool = (log.cell >= 0) & (log.download_quality >= lim) & (log.rewrite_quality >= lim)
     return out
 
 
@@ -376,7 +374,7 @@ def within_target_mask(
     *,
     tolerance: float = 0.1,
     nothing_to_gain: ArrayLike | None = None,
-) -> B:
+) -> Bool:
     """(n,) bool: frames whose rate is within ``tolerance`` of ``target``.
 
     A frame above ``target + tolerance * target`` also counts where
@@ -385,7 +383,7 @@ def within_target_mask(
     """
     _check_target(target, tolerance)
     f = np.asarray(fps, dtype=np.float64)
-    ok: B = np.abs(f - target) <= tolerance * target
+    ok: Bool = np.abs(f - target) <= tolerance * target
     if nothing_to_gain is not None:
         ok = ok | ((f > target) & np.asarray(nothing_to_gain, dtype=np.bool_))
     return ok
@@ -425,8 +423,8 @@ def _check_target(target: float, tolerance: float) -> None:
         raise InputError(f"tolerance must be a finite number >= 0, got {tolerance!r}")
 
 
-def _nothing_to_gain(log: FrameLog) -> B:
-    out: B = log.all_lod2 | (log.visible == 0)
+def _nothing_to_gain(log: FrameLog) -> Bool:
+    out: Bool = log.all_lod2 | (log.visible == 0)
     return out
 
 

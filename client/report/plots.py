@@ -21,7 +21,8 @@ from walkstream.client.report.metrics import FrameLog, first_perfect_index
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
-from walkstream.client.report.files import F64, BytesLog, _atomic, _bytes_arrays
+from walkstream.client.report.files import BytesLog, _atomic, _bytes_arrays
+from walkstream.shared.arrays import F64
 
 __all__ = ["PLOT_NAMES", "SERIES_COLOURS"]
 

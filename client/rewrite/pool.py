@@ -30,10 +30,10 @@ from walkstream.client.clock import Clock
 from walkstream.shared.buildings import build_lods
 from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import Grammar
-from walkstream.shared.records import BuildingParams, Mesh, StreetParams
+from walkstream.shared.records import BuildingParams, Mesh, StreetParams, readonly
 from walkstream.shared.streets import build_street
 
-__all__ = ["ObjectGeometry", "geometry_of", "RewritePool"]
+__all__ = ["ObjectGeometry", "geometry_of", "rebuild", "RewritePool"]
 
 Priority = tuple[float, float]
 """(seconds until needed, -ACH): smaller is sooner."""
@@ -54,6 +54,11 @@ class ObjectGeometry:
     nbytes: int
     """Memory the meshes take (what the cache counts)."""
     cpu_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        # the cache hands this record to every frame: nothing in it may change
+        for name in ("triangles", "available", "bbox_min", "bbox_max"):
+            object.__setattr__(self, name, readonly(np.asarray(getattr(self, name))))
 
 
 def geometry_of(

@@ -10,6 +10,8 @@ point on the shared boundary of two cells stays in the cell it was already in
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -38,7 +40,7 @@ class CellMap:
         ) = None
 
     def add_record(
-        self, cid: int, boundary: NDArray[np.float64], neighbours: dict[int, NDArray[np.float64]]
+        self, cid: int, boundary: NDArray[np.float64], neighbours: Mapping[int, NDArray[np.float64]]
     ) -> None:
         """Learn a fetched cell's outline and its neighbours' outlines."""
         self.outlines[cid] = boundary

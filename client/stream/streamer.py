@@ -37,12 +37,13 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.client.clock import Clock
 from walkstream.client.net.api import SceneClient
 from walkstream.client.rewrite.pool import ObjectGeometry, RewritePool, geometry_of
-from walkstream.client.stream.cache import Cache
+from walkstream.client.stream.cache import Cache, Kind
 from walkstream.client.stream.cellmap import CellMap
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.shared.codec import decode_mesh, decode_object, unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
+from walkstream.shared.lsystem.grammar import Grammar
 from walkstream.shared.wire import CellRecord, ObjectFrame, decode_cell
 
 __all__ = ["StreamerConfig", "Streamer"]
@@ -55,6 +56,8 @@ class StreamerConfig:
     prefetch: bool = True
     form: str = "params"
     """``params`` (rebuild locally) or ``lod2`` (download LOD2 meshes)."""
+    workers: int = 2
+    """Rewrite workers (with ``params``)."""
     max_in_flight: int = 3
     max_object_requests: int = 2
     plan_interval_s: float = 0.1
@@ -88,7 +91,14 @@ class StreamStats:
 
 
 class Streamer:
-    """Keeps the cache filled ahead of the viewer.
+    """Keeps the cache filled ahead of the viewer, and the geometry built.
+
+    With ``config.form == "params"`` the streamer owns a
+    :class:`~walkstream.client.rewrite.pool.RewritePool` that rebuilds each object as
+    its parameters arrive (highest priority first); the pool's jobs wait for the
+    grammar, which comes with the manifest (:meth:`on_manifest`).  With ``lod2`` the
+    downloaded meshes are the geometry and nothing is rebuilt.  Call :meth:`start`
+    once on the event loop and :meth:`close` at the end.
 
     Parameters
     ----------
@@ -97,15 +107,9 @@ class Streamer:
     clock:
         The replay's clock.
     cache:
-        The byte-budget cache (cells, params, geometry).
-    rewrite:
-        The rewrite pool (``None`` when meshes are downloaded instead).
+        The byte-budget cache (cells, downloads, geometry).
     config:
         Scheduling knobs.
-    disk:
-        Optional persistent cache of cells and object frames.
-    on_geometry:
-        Called with every object's geometry once it is usable.
     """
 
     def __init__(
@@ -113,17 +117,21 @@ class Streamer:
         api: SceneClient,
         clock: Clock,
         cache: Cache,
-        rewrite: RewritePool | None,
         config: StreamerConfig,
-        *,
-        disk: DiskCache | None = None,
     ) -> None:
         self.api = api
         self.clock = clock
         self.cache = cache
-        self.rewrite = rewrite
         self.config = config
-        self.disk = disk
+        self.kind: Kind = "params" if config.form == "params" else "mesh"
+        """The cache kind of what is downloaded per object."""
+        self.rewrite: RewritePool | None = (
+            RewritePool(clock, None, self.on_built, config.workers) if self.kind == "params" else None
+        )
+        self.disk: DiskCache | None = None
+        """The persistent cache, once the manifest says which scene version it is for."""
+        self.api_max_ids = 1000
+        """Most ids one objects request may ask for (the manifest's limit, once known)."""
         self.cellmap = CellMap()
         self.stats = StreamStats()
         self.cells: dict[int, CellRecord] = {}
@@ -185,12 +193,12 @@ class Streamer:
             del self._needed_at[c]
         keys: list[tuple[str, int]] = [("cell", c) for c in self._needed_at if c in self.cells]
         if rec is not None:
-            keys += [("params", i) for i in rec.pvs.tolist()]
+            keys += [(self.kind, i) for i in rec.pvs.tolist()]
             keys += [("geom", i) for i in rec.pvs.tolist()]
         for c in self._needed_at:
             r = self.cells.get(c)
             if r is not None and c != cur:
-                keys += [("params", i) for i in r.pvs.tolist()]
+                keys += [(self.kind, i) for i in r.pvs.tolist()]
         self.cache.set_pins(keys)
 
     def _entered(self, cid: int) -> None:
@@ -328,7 +336,6 @@ class Streamer:
         n = min(n, self.api_max_ids)
         return [oid for _, oid in todo[:n]]
 
-    api_max_ids = 1000
 
     # -- requests --------------------------------------------------------------
 
@@ -384,7 +391,7 @@ class Streamer:
             self.disk.put_cell(rec.id, rec.etag, rec.body)
         if self.cellmap.current == rec.id:
             self._entered(rec.id)
-            new = sum(1 for i in rec.pvs.tolist() if not self.cache.has("params", i))
+            new = sum(1 for i in rec.pvs.tolist() if not self.cache.has(self.kind, i))
             self._cell_bytes = 0.8 * self._cell_bytes + 0.2 * new * self._frame_bytes
 
     async def _fetch_objects(self, ids: list[int]) -> None:
@@ -444,7 +451,7 @@ class Streamer:
                 self._submit_rewrite(oid, params)
             else:
                 mesh = decode_mesh(frame.payload, what)
-                self.cache.put("params", oid, frame.payload, max(len(frame.payload), 16))
+                self.cache.put("mesh", oid, frame.payload, max(len(frame.payload), 16))
                 self._geometry_ready(geometry_of(oid, (None, None, mesh)))
         except CodecError:
             return  # a bad record: not cached, so it is wanted (and fetched) again
@@ -464,8 +471,8 @@ class Streamer:
         self.rewrite.submit(oid, params, key)  # type: ignore[arg-type]
 
     def has_object(self, oid: int) -> bool:
-        """Whether ``oid`` arrived and is still usable (its params or its geometry are cached)."""
-        return self.cache.has("params", oid) or self.cache.has("geom", oid)
+        """Whether ``oid`` arrived and is still usable (its download or its geometry is cached)."""
+        return self.cache.has(self.kind, oid) or self.cache.has("geom", oid)
 
     def on_built(self, geom: ObjectGeometry) -> None:
         """Rewrite pool callback: geometry of one object is ready."""
@@ -487,8 +494,24 @@ class Streamer:
             if params is not None:
                 self._submit_rewrite(oid, params)
 
+    def start(self) -> None:
+        """Start the rewrite workers (on the running event loop)."""
+        if self.rewrite is not None:
+            self.rewrite.start()
+
+    def on_manifest(self, max_ids: int, grammar: Grammar | None, disk: DiskCache | None) -> None:
+        """The manifest arrived: the request limit, the grammar, the disk cache to use.
+
+        ``disk`` is a disk cache already bound to the manifest's scene version (or
+        None); ``grammar`` lets the rewrite jobs start (ignored when nothing is rebuilt).
+        """
+        self.api_max_ids = max_ids
+        if self.rewrite is not None and grammar is not None:
+            self.rewrite.set_grammar(grammar)
+        self.disk = disk
+
     async def close(self) -> None:
-        """Cancel everything in flight."""
+        """Cancel everything in flight and stop the rewrite workers."""
         self._closed = True
         tasks = list(self._cell_tasks.values()) + list(self._batches)
         if self._locate_task is not None:
@@ -498,3 +521,5 @@ class Streamer:
         for t in tasks:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await t
+        if self.rewrite is not None:
+            await self.rewrite.close()

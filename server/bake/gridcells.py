@@ -13,8 +13,9 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from walkstream.server.bake.viewcell import F64, ViewCell, _footprints, _height_range, _positive
+from walkstream.server.bake.viewcell import ViewCell, _footprints, _height_range, _positive
 from walkstream.server.sources.scene import SourceScene
+from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
 
 __all__ = ["grid_cells"]

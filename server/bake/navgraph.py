@@ -31,12 +31,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.server.bake.viewcell import ViewCell, cell_locator, cell_polygons
 from walkstream.server.store import CellInfo
+from walkstream.shared.arrays import F64, I64
 from walkstream.shared.errors import InputError, RouteError
 
 __all__ = ["F64", "I64", "TURN_COST", "STRAIGHTEN_TOL", "Route", "CellGraph"]
 
-F64 = NDArray[np.float64]
-I64 = NDArray[np.int64]
 
 #: Metres of extra cost per radian of turning inside a cell (about 16 m per corner).
 TURN_COST = 10.0

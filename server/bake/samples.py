@@ -21,7 +21,8 @@ from walkstream.shared.errors import InputError
 if TYPE_CHECKING:
     from shapely import STRtree
 
-from walkstream.server.bake.visibility import F64
+
+from walkstream.shared.arrays import F64
 
 __all__ = ["sample_points", "dense_points"]
 

@@ -19,6 +19,7 @@ import shapely
 from numpy.typing import NDArray
 
 from walkstream.server.sources.scene import SourceScene
+from walkstream.shared.arrays import F64
 from walkstream.shared.cells import CELL_KINDS, CellLocator, outline_polygons
 from walkstream.shared.errors import InputError
 from walkstream.shared.geometry import signed_area
@@ -26,7 +27,6 @@ from walkstream.shared.records import readonly
 
 __all__ = ["F64", "MIN_SHARED_EDGE", "ViewCell", "cell_polygons", "cell_locator"]
 
-F64 = NDArray[np.float64]
 
 #: Cell kinds in id order.
 #: Two cells are neighbours when their boundaries share more than this many metres.

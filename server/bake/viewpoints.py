@@ -11,8 +11,9 @@ from numpy.typing import NDArray
 
 from walkstream.server.bake.gridcells import _free_share
 from walkstream.server.bake.streetcells import _polygon_parts
-from walkstream.server.bake.viewcell import F64, ViewCell, _footprints, cell_polygons
+from walkstream.server.bake.viewcell import ViewCell, _footprints, cell_polygons
 from walkstream.server.sources.scene import SourceScene
+from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
 from walkstream.shared.records import Viewpoint
 

@@ -45,10 +45,10 @@ if TYPE_CHECKING:
 
     from walkstream.server.sources.scene import SourceScene
 
+from walkstream.shared.arrays import F64, I64
+
 __all__ = ["F64", "I64", "meshes_for_scene", "VisibilityRenderer", "pvs_from_counts"]
 
-F64 = NDArray[np.float64]
-I64 = NDArray[np.int64]
 
 _VERTEX_SHADER = """
 #version 330

@@ -27,9 +27,10 @@ import numpy as np
 import shapely
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.server.bake.navgraph import F64, CellGraph
+from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.store import CellInfo
+from walkstream.shared.arrays import F64
 from walkstream.shared.paths import DRIVE_EYE_HEIGHT, RecordedPath
 
 __all__ = [

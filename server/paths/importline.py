@@ -13,11 +13,12 @@ from typing import Any
 import numpy as np
 import shapely
 
-from walkstream.server.bake.navgraph import F64, CellGraph
+from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.paths.record import _existing
 from walkstream.server.sources.geojsonlines import read_linestring
 from walkstream.server.store import CellInfo, write_path
+from walkstream.shared.arrays import F64
 from walkstream.shared.errors import RouteError
 from walkstream.shared.paths import WALK_EYE_HEIGHT, RecordedPath
 

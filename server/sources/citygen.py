@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
 
 __all__ = [
@@ -65,7 +66,6 @@ __all__ = [
     "write_city",
 ]
 
-F64 = NDArray[np.float64]
 
 #: Accepted city sizes (side of the square, metres).
 DEFAULT_SIZE = 700.0

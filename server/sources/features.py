@@ -5,14 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 from walkstream.server.sources.scene import FeatureIssue
+from walkstream.shared.arrays import F64
 
-__all__ = ["F64"]
+__all__: list[str] = []
 
-F64 = NDArray[np.float64]
 
 
 # ------------------------------------------------------------------ internal records

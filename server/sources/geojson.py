@@ -85,12 +85,13 @@ import pyproj
 import shapely
 
 from walkstream.server.sources.crs import crs_label, outside_lonlat, parse_crs_member, utm_epsg
-from walkstream.server.sources.features import F64, _IssueLog, _Line, _Part, _Poly
+from walkstream.server.sources.features import _IssueLog, _Line, _Part, _Poly
 from walkstream.server.sources.heights import _levels, _positive, parse_length
 from walkstream.server.sources.jsonfile import read_json_file
 from walkstream.server.sources.partywalls import find_party_walls
 from walkstream.server.sources.rings import _clean_and_repair, _clean_rings, _dedupe
 from walkstream.server.sources.scene import SourceScene
+from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError, SourceError
 from walkstream.shared.records import BuildingParams, StreetParams
 

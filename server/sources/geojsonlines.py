@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 import pyproj
 
-from walkstream.server.bake.navgraph import F64
 from walkstream.server.sources.crs import outside_lonlat, parse_crs_member
 from walkstream.server.sources.geojson import as_points
 from walkstream.server.sources.jsonfile import read_json_file
+from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError, SourceError
 
 __all__ = ["read_linestring"]

@@ -21,13 +21,12 @@ from collections.abc import Sequence
 
 import numpy as np
 import shapely
-from numpy.typing import NDArray
 
+from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
 
 __all__ = ["find_party_walls", "MAX_ANGLE_DEG"]
 
-F64 = NDArray[np.float64]
 
 #: Two edges can only be a party wall when their directions differ by at most this
 #: many degrees (parallel or anti-parallel).  Without it, two short edges crossing

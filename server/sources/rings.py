@@ -7,7 +7,8 @@ import math
 import numpy as np
 import shapely
 
-from walkstream.server.sources.features import F64, _IssueLog, _Part, _Poly
+from walkstream.server.sources.features import _IssueLog, _Part, _Poly
+from walkstream.shared.arrays import F64
 from walkstream.shared.geometry import signed_area
 
 __all__ = ["MIN_AREA"]

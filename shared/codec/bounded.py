@@ -11,8 +11,6 @@ from __future__ import annotations
 from typing import Any
 
 import msgpack
-import numpy as np
-from numpy.typing import NDArray
 
 from walkstream.shared.errors import CodecError
 
@@ -24,9 +22,6 @@ _MAX_RECORD_BYTES = 1 << 22
 _MAX_STR = 1 << 12
 _INT64_MAX = 2**63 - 1
 
-U64 = NDArray[np.uint64]
-I64 = NDArray[np.int64]
-F64 = NDArray[np.float64]
 
 _DECODE_ERRORS = (ValueError, TypeError, KeyError, IndexError, OverflowError, ZeroDivisionError)
 

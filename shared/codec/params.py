@@ -25,11 +25,10 @@ import msgpack
 import numpy as np
 from numpy.typing import ArrayLike
 
+from walkstream.shared.arrays import F64, I64
 from walkstream.shared.codec.bounded import (
     _DECODE_ERRORS,
     _INT64_MAX,
-    F64,
-    I64,
     _int,
     _is_int,
     unpack_bounded,

@@ -16,7 +16,8 @@ import msgpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.shared.codec.bounded import _INT64_MAX, F64, I64, U64, _nbytes, unpack_bounded
+from walkstream.shared.arrays import F64, I64, U64
+from walkstream.shared.codec.bounded import _INT64_MAX, _nbytes, unpack_bounded
 from walkstream.shared.codec.varint import decode_varints, encode_varints
 from walkstream.shared.errors import CodecError
 

@@ -8,7 +8,8 @@ from collections.abc import Iterable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.shared.codec.bounded import U64, _nbytes
+from walkstream.shared.arrays import U64
+from walkstream.shared.codec.bounded import _nbytes
 from walkstream.shared.errors import CodecError
 
 __all__ = ["encode_varints", "decode_varints"]
