@@ -12,11 +12,13 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1
 
 WORKDIR /app
-# only what the package needs, so local virtualenvs and outputs stay out of the image
+# only what the package needs (every folder pyproject.toml's package-dir names), so local
+# virtualenvs and outputs stay out of the image
 COPY pyproject.toml README.md ./
 COPY shared ./shared
 COPY server ./server
 COPY client ./client
+COPY benchmarks ./benchmarks
 COPY walkstream ./walkstream
 RUN pip install . && rm -rf build *.egg-info
 

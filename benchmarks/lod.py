@@ -3,14 +3,14 @@
 Marvie et al. (2003) claim that sharing a polygon budget by ACH (section 4) gives a
 better picture than the usual distance-threshold LOD selection at the same frame
 rate.  This benchmark measures it on a baked scene.  For each of a few viewpoints
-it renders, headless (:class:`client.frames.FrameRenderer`):
+it renders, headless (:class:`~walkstream.client.draw.frames.FrameRenderer`):
 
 * ``lod2``: every visible object of the cell's PVS at LOD2, the reference;
-* ``ach``: :func:`client.allocate.allocate_ach` with budgets that are fractions of
+* ``ach``: :func:`~walkstream.client.draw.allocate.allocate_ach` with budgets that are fractions of
   that reference's triangle count (default 5, 10, 25 and 50 %);
-* ``distance``: :func:`client.allocate.allocate_distance` with thresholds ``d1 <= d2``
+* ``distance``: :func:`~walkstream.client.draw.allocate.allocate_distance` with thresholds ``d1 <= d2``
   (both fitted, or ``d2 = ratio * d1``; see :data:`DISTANCE_RATIO`) from
-  :func:`client.allocate.distance_thresholds_for_budget` for the triangles the ACH
+  :func:`~walkstream.client.draw.allocate.distance_thresholds_for_budget` for the triangles the ACH
   allocation actually used at that budget.  Equal triangle
   counts stand in for equal frame time (what the paper compares); the measured frame
   time of both is reported so the stand-in can be checked.  The ACH count rather

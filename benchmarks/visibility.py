@@ -6,11 +6,11 @@ LOD as occluder geometry.  This module measures what each such setting misses ag
 a dense reference on a sample of cells, and how long it takes:
 
 * the reference renders many viewpoints spread through each sampled cell
-  (:func:`server.visibility.dense_points`: ``ref_points`` ground positions times
+  (:func:`~walkstream.server.bake.samples.dense_points`: ``ref_points`` ground positions times
   ``ref_levels`` heights, by default 66 points, more than 8 times the 8 corners) at
   twice the highest resolution (capped at 512) with the finest LOD (2) as occluder;
 * every setting (resolution x centre point x occluder LOD) renders the same cells the
-  way the bake does (:func:`server.visibility.sample_points` then
+  way the bake does (:func:`~walkstream.server.bake.samples.sample_points` then
   :meth:`VisibilityRenderer.cell_counts`) and is timed per cell;
 * a setting's miss rate is the share of reference-visible objects absent from its PVS
   (mean over cells), its pixel-weighted miss rate the reference pixels of the missed

@@ -2,7 +2,7 @@
 
 Setup (the scene, its manifest and the path, fetched concurrently) is followed by
 the walk: a frame loop that ticks at ``fps`` and never waits for the network.  Each
-frame it moves the viewer along the path, lets the :class:`~client.streamer.Streamer`
+frame it moves the viewer along the path, lets the :class:`~walkstream.client.stream.streamer.Streamer`
 follow it (locate, predict, prefetch), measures download and rewrite quality of the
 current cell, culls and allocates the polygon budget by ACH, draws (really, with
 moderngl, on the ``gl`` device; from a cost model on the simulated ones), feeds the
@@ -10,7 +10,7 @@ frame time to the budget controller and logs the frame.  When the frame finished
 before the next tick the loop waits for the tick; a frame that took longer is shown
 late (the frame rate drops) and the next one starts at once.
 
-Under the simulated clock (:class:`client.clock.SimClock`) the same code runs on
+Under the simulated clock (:class:`~walkstream.client.clock.SimClock`) the same code runs on
 virtual time: link transfers, round trips and backoff sleeps are virtual, frames
 advance it by their (modelled or really measured) duration and rewrites by the CPU
 time they really took, so a ten-minute walk replays in seconds, deterministically

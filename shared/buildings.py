@@ -1,7 +1,7 @@
 """Rebuild building geometry from compact parameters with the building grammar.
 
 The grammar text (``shared/grammars/building.lsys``) is data: the server sends it to
-each client once and only :class:`~shared.records.BuildingParams` travel per
+each client once and only :class:`~walkstream.shared.records.BuildingParams` travel per
 building.  This module seeds the derivation from a building's parameters and hands
 the terminal modules to the interpreter.
 """

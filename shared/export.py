@@ -26,7 +26,7 @@ def export_glb(
 ) -> int:
     """Write meshes to a binary glTF file, one node per mesh.
 
-    Vertex colours come from :data:`shared.palette.PALETTE` by material id, so the
+    Vertex colours come from :data:`~walkstream.shared.palette.PALETTE` by material id, so the
     file looks like the client's render.  Meshes without triangles are left out
     (glTF has no empty primitives).
 

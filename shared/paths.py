@@ -41,8 +41,8 @@ along the shorter arc, so a writer splits turns of more than half a circle into
 steps (as :meth:`RecordedPath.from_polyline` does).  Before the first and after the
 last sample the path stays at its ends.
 
-Decoding is bounded (:func:`shared.codec.unpack_bounded` with tight limits) and
-every malformed thing raises :class:`shared.errors.CodecError` naming the field and,
+Decoding is bounded (:func:`~walkstream.shared.codec.bounded.unpack_bounded` with tight limits) and
+every malformed thing raises :class:`~walkstream.shared.errors.CodecError` naming the field and,
 for samples, the sample index.
 """
 
@@ -188,7 +188,7 @@ class RecordedPath:
         Nominal speed the path was timed with, or None.
 
     All arrays are read-only.  Construction validates everything and raises
-    :class:`shared.errors.InputError` naming the first problem.
+    :class:`~walkstream.shared.errors.InputError` naming the first problem.
     """
 
     name: str

@@ -7,6 +7,8 @@ from typing import TYPE_CHECKING
 
 import pytest
 
+pytest_plugins = ["ci_skips"]
+
 if TYPE_CHECKING:
     import moderngl
 

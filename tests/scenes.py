@@ -1,6 +1,6 @@
 """Small scene databases for server tests, built without the real bake.
 
-A generated city (:func:`server.sources.citygen.generate_city`) is loaded, cut into
+A generated city (:func:`~walkstream.server.sources.citygen.generate_city`) is loaded, cut into
 view cells, and given made-up PVS lists (the ``k`` objects nearest to each cell's
 centroid, with equal ACH), so tests get a real-shaped database in well under a
 second.  Import from test modules: ``from scenes import build_city_db``.
@@ -36,7 +36,7 @@ PATH = RecordedPath(
     pitch=np.zeros(3),
     speed_kmh=7.5,
 )
-"""That path (a ``walkstream-path`` of :mod:`shared.paths`; every number is exact in
+"""That path (a ``walkstream-path`` of :mod:`walkstream.shared.paths`; every number is exact in
 float32, so the stored blob unpacks to exactly :data:`PATH_DATA`)."""
 
 PATH_DATA = PATH.to_dict()
@@ -72,7 +72,7 @@ def build_city_db(
     name:
         Scene name.
     size, seed:
-        Passed to :func:`server.sources.citygen.generate_city`.
+        Passed to :func:`~walkstream.server.sources.citygen.generate_city`.
     k:
         PVS size: each cell sees the ``k`` objects nearest to its centroid.
     """

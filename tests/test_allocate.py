@@ -1,4 +1,4 @@
-"""Tests of client.allocate: frustum culling, ACH budget sharing, distance LODs."""
+"""Tests of walkstream.client.draw.culling and .allocate: frustum culling, ACH budget sharing, distance LODs."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The client caches (client.cache): the byte-budget LRU and the on-disk cache."""
+"""The client caches (walkstream.client.stream.cache, .diskcache): the byte-budget LRU and the on-disk cache."""
 
 from __future__ import annotations
 

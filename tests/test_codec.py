@@ -1,4 +1,4 @@
-"""Round trips and hostile input for the wire/storage codecs (shared.codec)."""
+"""Round trips and hostile input for the wire/storage codecs (walkstream.shared.codec)."""
 
 from __future__ import annotations
 

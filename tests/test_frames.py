@@ -1,4 +1,4 @@
-"""Tests of client.frames: the per-frame renderer and the walker camera."""
+"""Tests of walkstream.client.draw.frames: the per-frame renderer and the walker camera."""
 
 from __future__ import annotations
 

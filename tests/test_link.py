@@ -1,4 +1,4 @@
-"""The shaped link (client.link) over an in-process app and over real sockets."""
+"""The shaped link (walkstream.client.net.link) over an in-process app and over real sockets."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests of client.metrics: the frame log and every figure computed from it."""
+"""Tests of walkstream.client.report.metrics: the frame log and every figure computed from it."""
 
 from __future__ import annotations
 

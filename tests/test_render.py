@@ -1,4 +1,4 @@
-"""Tests of shared.camera, shared.gl, shared.export and client.render."""
+"""Tests of shared.camera, shared.gl, shared.export and walkstream.client.draw.meshes."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests of client.report: report.json, the CSV logs, the plots and the HTML pages."""
+"""Tests of walkstream.client.report: report.json, the CSV logs, the plots and the HTML pages."""
 
 from __future__ import annotations
 

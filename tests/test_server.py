@@ -1,4 +1,4 @@
-"""The HTTP service (server.app, server.routes, server.deps, server.serve).
+"""The HTTP service (walkstream.server.service).
 
 Most tests talk to the ASGI app in-process through httpx; one test runs a real
 uvicorn server on a free loopback port for what only a socket shows (a streamed

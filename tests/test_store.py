@@ -1,4 +1,4 @@
-"""The scene database (server.store): round trip, atomicity, resume, validation."""
+"""The scene database (walkstream.server.store): round trip, atomicity, resume, validation."""
 
 from __future__ import annotations
 

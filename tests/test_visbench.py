@@ -1,4 +1,4 @@
-"""The visibility error-vs-time benchmark (server.visbench) on a tiny generated city."""
+"""The visibility error-vs-time benchmark (walkstream.benchmarks.visibility) on a tiny generated city."""
 
 from __future__ import annotations
 

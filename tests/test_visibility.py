@@ -1,4 +1,4 @@
-"""Tests of server.visibility: ID-buffer PVS and ACH of a view cell, and its sample points."""
+"""Tests of walkstream.server.bake.visibility and .samples: ID-buffer PVS and ACH of a view cell, and its sample points."""
 
 from __future__ import annotations
 

@@ -9,7 +9,7 @@
 
 ``record`` and ``import`` write the path into the database atomically; that makes a
 new scene version, which they print.  The file format is documented in
-:mod:`shared.paths`.
+:mod:`walkstream.shared.paths`.
 """
 
 from __future__ import annotations

@@ -65,7 +65,7 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def config_from_args(args: argparse.Namespace) -> Any:
-    """A :class:`client.replay.ReplayConfig` from parsed replay arguments."""
+    """A :class:`~walkstream.client.replay.ReplayConfig` from parsed replay arguments."""
     from walkstream.client.net.link import LinkProfile
     from walkstream.client.replay import ReplayConfig
     from walkstream.client.units import parse_bandwidth, parse_duration, parse_size

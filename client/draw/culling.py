@@ -25,7 +25,7 @@ def frustum_planes(view_proj: ArrayLike) -> NDArray[np.float64]:
     ----------
     view_proj : (4, 4) float
         ``proj @ view`` acting on column vectors, OpenGL clip conventions
-        (:mod:`shared.camera`: a point is inside when ``-w <= x, y, z <= w``).
+        (:mod:`walkstream.shared.camera`: a point is inside when ``-w <= x, y, z <= w``).
 
     Returns
     -------

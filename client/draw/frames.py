@@ -1,7 +1,7 @@
 """Per-frame headless drawing for the replay and the LOD benchmark, with honest timing.
 
 :class:`FrameRenderer` keeps GPU buffers per key (usually ``(object id, lod)``) and
-draws a list of keys per frame with :class:`client.render.MeshRenderer`'s shaders
+draws a list of keys per frame with :class:`~walkstream.client.draw.meshes.MeshRenderer`'s shaders
 and lighting, so frames look like the LOD figures: a pale sky background, lit
 buildings, streets as flat ground, back faces culled.
 
@@ -56,7 +56,7 @@ def camera(eye: ArrayLike, yaw: float, pitch: float = 0.0) -> NDArray[np.float32
     Returns
     -------
     (4, 4) float32
-        As :func:`shared.camera.look_at` with world up +z.
+        As :func:`~walkstream.shared.camera.look_at` with world up +z.
     """
     e = np.asarray(eye, dtype=np.float64).reshape(-1)
     y, p = float(yaw), float(pitch)
@@ -86,7 +86,7 @@ class FrameRenderer:
 
     Notes
     -----
-    Several keys may hold the same :class:`~shared.records.Mesh` object (a street
+    Several keys may hold the same :class:`~walkstream.shared.records.Mesh` object (a street
     piece is one mesh at every LOD); its buffers are made once and released when the
     last key holding it is forgotten.
     """

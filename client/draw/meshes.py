@@ -2,7 +2,7 @@
 
 :class:`MeshRenderer` keeps one vertex and index buffer per uploaded mesh and draws
 them with a directional + ambient light, coloured by material through
-:data:`shared.palette.PALETTE`.  Depth test and back-face culling are on, so a
+:data:`~walkstream.shared.palette.PALETTE`.  Depth test and back-face culling are on, so a
 triangle with the wrong winding shows up as a hole rather than being hidden.
 
 :func:`render_lods_figure` draws several meshes (the LODs of one building) side by
@@ -108,13 +108,13 @@ class _GpuMesh:
 
 
 class MeshRenderer:
-    """Uploads :class:`~shared.records.Mesh` objects and draws them offscreen.
+    """Uploads :class:`~walkstream.shared.records.Mesh` objects and draws them offscreen.
 
     Parameters
     ----------
     ctx : moderngl.Context, optional
         Context to draw with.  When omitted the renderer creates one with
-        :func:`shared.gl.create_context` and releases it in :meth:`close`; a context
+        :func:`~walkstream.shared.gl.create_context` and releases it in :meth:`close`; a context
         that is passed in stays the caller's.
     light_dir : (3,) float
         Direction towards the light, world space (normalised here).
@@ -240,7 +240,7 @@ class MeshRenderer:
         meshes : iterable of Mesh
             Uploaded on first use.
         view, proj : (4, 4) float
-            Camera matrices (see :mod:`shared.camera`).
+            Camera matrices (see :mod:`walkstream.shared.camera`).
         size : (int, int)
             Framebuffer width and height in pixels.
         viewport : (x, y, w, h), optional
@@ -291,7 +291,7 @@ class MeshRenderer:
         ----------
         meshes : iterable of Mesh
         view, proj : (4, 4) float
-            Camera matrices (see :mod:`shared.camera`).
+            Camera matrices (see :mod:`walkstream.shared.camera`).
         size : (int, int)
             Width and height in pixels.
 

@@ -193,7 +193,7 @@ class ShapedTransport(httpx.AsyncBaseTransport):
     profile
         Bandwidths, round-trip time and loss of the link.
     clock
-        The clock to sleep on; under :class:`client.clock.SimClock` the link runs in
+        The clock to sleep on; under :class:`~walkstream.client.clock.SimClock` the link runs in
         virtual time and the inner transport's I/O takes none.
 
     Attributes

@@ -1,7 +1,7 @@
 """Replay reports: ``report.json``, the per-frame CSV, plots and an HTML index.
 
-:func:`write_report` (:mod:`.html`) turns one replay (its summary from :func:`client.metrics.summarise`,
-its :class:`~client.metrics.FrameLog` and the link's bytes log) into a folder::
+:func:`write_report` (:mod:`.html`) turns one replay (its summary from :func:`~walkstream.client.report.metrics.summarise`,
+its :class:`~walkstream.client.report.metrics.FrameLog` and the link's bytes log) into a folder::
 
     report.json   the summary (JSON-safe: numpy types converted, NaN/inf -> null)
     frames.csv    one row per frame, the FrameLog columns

@@ -25,7 +25,6 @@ if TYPE_CHECKING:
 from walkstream.shared.arrays import F64
 
 __all__ = [
-    "F64",
     "BytesLog",
     "json_safe",
     "write_json",

@@ -177,7 +177,7 @@ def write_report(
         The report folder; created when missing.  Files of an earlier report there are
         replaced one by one, each atomically.
     summary : mapping
-        The figures (:func:`client.metrics.summarise` plus the replay's own keys);
+        The figures (:func:`~walkstream.client.report.metrics.summarise` plus the replay's own keys);
         written as ``report.json``.  ``t_start_s`` sets the origin of the time axes.
     log : FrameLog
         The frames.

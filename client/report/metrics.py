@@ -330,7 +330,7 @@ class FrameLogBuilder:
         """The frames appended so far as a :class:`FrameLog` (the builder stays usable).
 
         ``fps_cap`` overrides the tick rate given to the constructor; one of the two is
-        required (:class:`~shared.errors.InputError` otherwise).
+        required (:class:`~walkstream.shared.errors.InputError` otherwise).
         """
         cap = self.fps_cap if fps_cap is None else fps_cap
         if cap is None:

@@ -3,7 +3,7 @@
 A pool of workers takes rebuild jobs from a priority queue (the objects of the
 current cell first, then by the time a cell is needed, then by ACH, highest
 first) and turns each object's parameters into its three LODs with the grammar the
-manifest named (:func:`shared.buildings.build_lods`; a street is one flat surface
+manifest named (:func:`~walkstream.shared.buildings.build_lods`; a street is one flat surface
 used at every LOD).
 
 Under the real clock the jobs run in a thread pool, concurrently with the frame

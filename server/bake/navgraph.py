@@ -34,7 +34,7 @@ from walkstream.server.store import CellInfo
 from walkstream.shared.arrays import F64, I64
 from walkstream.shared.errors import InputError, RouteError
 
-__all__ = ["F64", "I64", "TURN_COST", "STRAIGHTEN_TOL", "Route", "CellGraph"]
+__all__ = ["TURN_COST", "STRAIGHTEN_TOL", "Route", "CellGraph"]
 
 
 #: Metres of extra cost per radian of turning inside a cell (about 16 m per corner).
@@ -111,13 +111,13 @@ class CellGraph:
     Parameters
     ----------
     cells:
-        The cells: :class:`server.cells.ViewCell` (during the bake) or
-        :class:`server.store.CellInfo` (``SceneReader.cells()``).
+        The cells: :class:`~walkstream.server.bake.viewcell.ViewCell` (during the bake) or
+        :class:`~walkstream.server.store.records.CellInfo` (``SceneReader.cells()``).
 
     Attributes
     ----------
     cells:
-        The cells as :class:`server.cells.ViewCell`, sorted by id.  Internally
+        The cells as :class:`~walkstream.server.bake.viewcell.ViewCell`, sorted by id.  Internally
         cells are referred to by their *position* in this list; ``index`` maps a
         cell id to its position and ``ids`` a position to its id.
     portal_cells:

@@ -25,7 +25,7 @@ from walkstream.shared.errors import InputError
 from walkstream.shared.geometry import signed_area
 from walkstream.shared.records import readonly
 
-__all__ = ["F64", "MIN_SHARED_EDGE", "ViewCell", "cell_polygons", "cell_locator"]
+__all__ = ["MIN_SHARED_EDGE", "ViewCell", "cell_polygons", "cell_locator"]
 
 
 #: Cell kinds in id order.

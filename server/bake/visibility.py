@@ -47,7 +47,7 @@ if TYPE_CHECKING:
 
 from walkstream.shared.arrays import F64, I64
 
-__all__ = ["F64", "I64", "meshes_for_scene", "VisibilityRenderer", "pvs_from_counts"]
+__all__ = ["meshes_for_scene", "VisibilityRenderer", "pvs_from_counts"]
 
 
 _VERTEX_SHADER = """
@@ -215,7 +215,7 @@ class VisibilityRenderer:
         framebuffer is ``6 * resolution`` by ``max_points_per_pass * resolution``.
     cull_back_faces : bool
         Skip back-facing triangles (front faces are counter-clockwise, as
-        :class:`~shared.records.Mesh` winds them seen from outside).  For closed meshes
+        :class:`~walkstream.shared.records.Mesh` winds them seen from outside).  For closed meshes
         seen from outside this changes nothing but halves the triangles the
         rasteriser sets up (2-3 times faster on llvmpipe); turn it off for meshes that
         are open or wound the other way.  Counts may differ by a few pixels where

@@ -95,7 +95,7 @@ def import_linestring(
     source, crs, origin:
         The line and the scene's CRS and origin (``SceneReader.meta``).
     speed_kmh, name, eye_height:
-        As for :meth:`shared.paths.RecordedPath.from_polyline`.
+        As for :meth:`~walkstream.shared.paths.RecordedPath.from_polyline`.
     clip_to:
         The scene's cells: keep only the longest stretch of the line inside them.
         Gaps of up to ``max_gap`` metres (a street corner where a grid cell was

@@ -33,7 +33,7 @@ def _registry(request: Request) -> SceneRegistry:
 
 
 async def get_registry(request: Request) -> SceneRegistry:
-    """The app's scenes (set by :func:`server.app.create_app`)."""
+    """The app's scenes (set by :func:`~walkstream.server.service.main.create_app`)."""
     return _registry(request)
 
 

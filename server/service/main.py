@@ -1,7 +1,7 @@
 """The FastAPI application: :func:`create_app` over one or more scene databases.
 
-The routes are in :mod:`server.routes`, the per-scene state and dependencies in
-:mod:`server.deps`.  This module adds what wraps every request:
+The routes are in :mod:`walkstream.server.service.routers`, the per-scene state and dependencies in
+:mod:`walkstream.server.service.scenes`.  This module adds what wraps every request:
 
 * :class:`MetricsMiddleware`, a plain ASGI middleware (no per-request task or
   thread, unlike Starlette's ``BaseHTTPMiddleware``) that counts requests by route
@@ -101,8 +101,8 @@ def create_app(paths: Sequence[str | os.PathLike[str]]) -> FastAPI:
     """The service over the given scene databases, each served under its scene name.
 
     Every database is opened read-only and validated now (see
-    :meth:`server.deps.Scene.load`), so a bad one stops the start.  The databases
-    stay open for the life of the app; :func:`server.serve.serve` closes them
+    :meth:`~walkstream.server.service.scenes.Scene.load`), so a bad one stops the start.  The databases
+    stay open for the life of the app; :func:`~walkstream.server.service.run.serve` closes them
     (``app.state.scenes.close()``) when the server stops.
 
     Parameters

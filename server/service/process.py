@@ -1,6 +1,6 @@
 """Run the service in a child process on a free local port (demo, benchmarks, tests).
 
-The child is ``server.serve.serve`` in its own process group, so stopping it also
+The child is ``walkstream.server.service.serve`` in its own process group, so stopping it also
 stops uvicorn's worker processes; :func:`server_process` waits until
 ``/v1/health`` answers before it yields and kills the group when it leaves.
 """

@@ -1,7 +1,7 @@
 """Run the service with uvicorn: ``walkstream serve scene.db [more.db ...]``.
 
 Every database is validated *before* uvicorn starts, so a missing, corrupt or
-wrong-version file stops the start at once with :class:`server.store.StoreError`
+wrong-version file stops the start at once with :class:`~walkstream.shared.errors.StoreError`
 (the CLI prints its one-line message).  With ``workers > 1`` uvicorn starts worker
 processes that import :func:`app_from_env` (factory mode); the database paths reach
 them in the environment variable :data:`ENV_PATHS` as a JSON list, and each worker

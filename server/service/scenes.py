@@ -3,14 +3,14 @@
 Everything a request needs is prepared when the app starts or on the first request
 that needs it, so that answering costs about as much as serving a static file:
 
-* each database is opened read-only with :class:`server.store.SceneReader` (which
+* each database is opened read-only with :class:`~walkstream.server.store.reader.SceneReader` (which
   validates it) and every cell is read once, which builds the
   :class:`~walkstream.shared.cells.CellLocator`, keeps every cell boundary (neighbour records
   need them) and decodes every PVS, so a damaged file stops the start;
 * the manifest is encoded at start-up in both representations (msgpack and JSON);
 * cell records and recorded paths are encoded on first use and kept in a
   byte-bounded LRU;
-* object frames (see :mod:`server.routes`) are encoded on first use and kept in a
+* object frames (see :mod:`walkstream.server.service.routers`) are encoded on first use and kept in a
   second byte-bounded LRU; which ids exist and their kinds are known from start-up,
   so an unknown id is answered without touching the database;
 * LOD2 mesh frames (``form=lod2``, for the client's ``--stream meshes`` comparison)
@@ -294,8 +294,8 @@ class Scene:
 
         A ``params`` frame is the msgpack map ``{"id": int, "kind": str, "params":
         bin}``; a ``lod2`` frame is ``{"id", "kind", "mesh": bin}`` with the object's
-        LOD2 mesh encoded by :func:`shared.codec.encode_mesh` (buildings rebuilt with
-        the scene's grammar, street pieces with :func:`shared.streets.build_street`).
+        LOD2 mesh encoded by :func:`~walkstream.shared.codec.mesh.encode_mesh` (buildings rebuilt with
+        the scene's grammar, street pieces with :func:`~walkstream.shared.streets.build_street`).
         Runs a database query, and for ``lod2`` real geometry work: call it from a
         worker thread.
         """

@@ -26,7 +26,7 @@ Layout
    is only partly shared); a few are vacant; some blocks are one courtyard building
    (the whole band as one polygon with a hole); a few backyards hold a small
    detached building.
-5. **Party walls.**  :func:`server.sources.partywalls.find_party_walls` splits the
+5. **Party walls.**  :func:`~walkstream.server.sources.partywalls.find_party_walls` splits the
    rings where neighbours touch and gives the neighbour height behind each edge.
 
 Buildings are set back :data:`FRONTAGE_GAP` (2 cm) from the street surfaces: the
@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
+from walkstream.shared.geometry import signed_area
 
 __all__ = [
     "DEFAULT_SIZE",
@@ -181,10 +182,6 @@ def _inset(quads: F64, dist: F64 | float) -> tuple[F64, F64]:
     return inner, nrm
 
 
-def _signed_area(ring: F64) -> float:
-    """Shoelace area of a ring ``(n, 2)`` (positive when CCW), relative to its first vertex."""
-    r = ring - ring[0]
-    return 0.5 * float(np.sum(_cross(r, np.roll(r, -1, axis=0))))
 
 
 # ------------------------------------------------------------------------ street graph
@@ -700,7 +697,7 @@ def city_summary(fc: dict[str, Any]) -> dict[str, Any]:
             continue
         rings = [np.asarray(r, dtype=np.float64)[:-1] for r in f["geometry"]["coordinates"]]
         shapes[_shape_kind(rings)] += 1
-        built += sum(_signed_area(r) for r in rings)  # holes are CW: they subtract
+        built += sum(signed_area(r) for r in rings)  # holes are CW: they subtract
         floors.append(int(props["floors"]))
         for h in props.get("neighbour_heights", []):
             h = np.asarray(h, dtype=np.float64)

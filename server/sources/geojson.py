@@ -1,7 +1,7 @@
 """Load real building footprints (and optional streets) from a GeoJSON file.
 
 :func:`load_geojson` turns a GeoJSON ``FeatureCollection`` into a
-:class:`~server.sources.scene.SourceScene`.  The rules, in the order they apply:
+:class:`~walkstream.server.sources.scene.SourceScene`.  The rules, in the order they apply:
 
 Features
     ``Polygon`` / ``MultiPolygon`` features are buildings unless their ``kind``
@@ -29,7 +29,7 @@ Rings
     Exteriors become counter-clockwise, holes clockwise; the closing vertex, repeated
     vertices (within 1 mm) and collinear vertices (within 1 mm of the line through
     their neighbours) are removed.  Only then are party walls found
-    (:func:`~server.sources.partywalls.find_party_walls` with ``tol``), and the split
+    (:func:`~walkstream.server.sources.partywalls.find_party_walls` with ``tol``), and the split
     vertices that adds are kept.
 
 Heights
@@ -68,7 +68,7 @@ Bad features
       value is ignored and the rules above go on without it (for heights and floors
       usually the default rule): repaired.
 
-    :class:`~shared.errors.SourceError` is raised only when the file cannot be read,
+    :class:`~walkstream.shared.errors.SourceError` is raised only when the file cannot be read,
     is not JSON, is not a FeatureCollection, declares a CRS that is unknown or not in
     metres / degrees, or has no usable feature at all."""
 
@@ -123,7 +123,7 @@ def load_geojson(
         Floor height in metres (> 0) where a feature has no ``floor_height``.
     tol:
         Party-wall tolerance in metres, see
-        :func:`~server.sources.partywalls.find_party_walls`.
+        :func:`~walkstream.server.sources.partywalls.find_party_walls`.
 
     Returns
     -------

@@ -72,7 +72,7 @@ class SceneReader:
 
         Opening reads the header, the schema and the meta table; damage elsewhere
         shows when the damaged part is read (as :class:`StoreError`, or
-        :class:`shared.errors.CodecError` for a damaged blob).  ``check=True`` also
+        :class:`~walkstream.shared.errors.CodecError` for a damaged blob).  ``check=True`` also
         runs SQLite's ``quick_check`` over the whole file (linear in its size).
 
         Parameters
@@ -310,7 +310,7 @@ class SceneReader:
         return self._cell_info(rows[0])
 
     def cell_pvs_blob(self, cid: int) -> bytes:
-        """Cell ``cid``'s PVS as stored (:func:`shared.codec.encode_pvs` bytes), for streaming."""
+        """Cell ``cid``'s PVS as stored (:func:`~walkstream.shared.codec.pvs.encode_pvs` bytes), for streaming."""
         i = _index(cid, "cell id")
         rows = self._query("SELECT pvs FROM cells WHERE id = ?", (i,))
         if not rows:

@@ -8,7 +8,7 @@ id sets (cell neighbours) and cell boundaries.
 The client decodes bytes it received over the network, so every decoder is
 *bounded*: the input size is checked first, msgpack is unpacked with explicit
 ``max_*_len`` limits, every field is type- and range-checked, and any failure is
-raised as :class:`shared.errors.CodecError` naming what was being decoded.  No
+raised as :class:`~walkstream.shared.errors.CodecError` naming what was being decoded.  No
 decoder lets a raw ``msgpack``/``KeyError``/``TypeError`` escape, and none allocates
 more than a small multiple of its input size.
 

@@ -13,8 +13,8 @@ mesh (format "walkstream-mesh/1")
     triangles as little-endian unsigned integers of ``w`` bytes, the smallest of 1,
     2, 4 that holds ``n - 1``; ``materials`` one uint8 per triangle.  Normals are
     not sent: :func:`decode_mesh` recomputes flat per-vertex normals from the
-    triangles (the meshes of :func:`shared.lsystem.interpret.interpret` and
-    :func:`shared.streets.build_street` never share a vertex between faces that
+    triangles (the meshes of :func:`~walkstream.shared.lsystem.interpret.interpret` and
+    :func:`~walkstream.shared.streets.build_street` never share a vertex between faces that
     are not coplanar).  For a mesh that breaks those assumptions the encoder adds
     what cannot be recomputed instead of silently changing the picture:
     ``"vertex_materials"`` (uint8 per vertex, replacing ``materials``) when a
@@ -164,7 +164,7 @@ def decode_mesh(data: bytes | bytearray | memoryview, what: str = "mesh") -> Mes
     """Decode bytes made by :func:`encode_mesh`.
 
     Normals are recomputed from the triangles (flat, per vertex) unless the bytes
-    carry them; materials are given per vertex, as :class:`~shared.records.Mesh`
+    carry them; materials are given per vertex, as :class:`~walkstream.shared.records.Mesh`
     holds them (a vertex no triangle uses gets material 0).
 
     Parameters
