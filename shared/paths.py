@@ -41,7 +41,7 @@ along the shorter arc, so a writer splits turns of more than half a circle into
 steps (as :meth:`RecordedPath.from_polyline` does).  Before the first and after the
 last sample the path stays at its ends.
 
-Decoding is bounded (:func:`~walkstream.shared.codec.bounded.unpack_bounded` with tight limits) and
+Decoding is bounded (:func:`~walkstream.shared.codec.unpack_bounded` with tight limits) and
 every malformed thing raises :class:`~walkstream.shared.errors.CodecError` naming the field and,
 for samples, the sample index.
 """

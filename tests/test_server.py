@@ -635,3 +635,25 @@ def test_real_server_streams_and_survives_vanishing_clients(live_server: str, ci
     # the compose healthcheck's probe works against a real server
     with urllib.request.urlopen(live_server + "/v1/health", timeout=3) as resp:
         assert resp.status == 200
+
+
+def test_documented_shapes_match_the_wire_records() -> None:
+    """The pydantic models of /docs describe exactly what shared/wire.py sends."""
+    from walkstream.server.service import models
+    from walkstream.shared.records import Viewpoint
+    from walkstream.shared.wire import CellRecord, Manifest, locate_answer
+
+    manifest = Manifest(
+        "s", "v", 1, "EPSG:32633", (0.0, 0.0), (0.0,) * 6, (), "g", "text",
+        (Viewpoint("a", 0.0, 0.0, 1.7, 0.0, None),), (), 0, 0, 1000,
+    ).to_wire()
+    assert list(manifest) == list(models.Manifest.model_fields)
+    assert list(manifest["grammar"]) == list(models.GrammarOut.model_fields)
+    assert list(manifest["viewpoints"][0]) == list(models.ViewpointOut.model_fields)
+    assert list(manifest["limits"]) == list(models.LimitsOut.model_fields)
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    cell = CellRecord(3, "street", square, 1.5, 2.0, {4: square}, np.array([1]), np.array([1.0]))
+    wire = cell.to_wire()
+    assert list(wire) == list(models.CellOut.model_fields)
+    assert list(wire["neighbours"][0]) == list(models.NeighbourOut.model_fields)
+    assert set(locate_answer(None)) == set(models.LocateOut.model_fields)

@@ -1,7 +1,7 @@
 """The client's view of the walkstream HTTP API: typed records, bounded decoding, retries.
 
 Everything the server sends is untrusted bytes: every body is unpacked with hard
-limits (:func:`~walkstream.shared.codec.bounded.unpack_bounded`, or a bounded ``msgpack.Unpacker`` for
+limits (:func:`~walkstream.shared.codec.unpack_bounded`, or a bounded ``msgpack.Unpacker`` for
 the object stream) and checked field by field, so a corrupt or hostile response is
 an :class:`ApiError` (and fetched again), never a crash.
 

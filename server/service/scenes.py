@@ -294,7 +294,7 @@ class Scene:
 
         A ``params`` frame is the msgpack map ``{"id": int, "kind": str, "params":
         bin}``; a ``lod2`` frame is ``{"id", "kind", "mesh": bin}`` with the object's
-        LOD2 mesh encoded by :func:`~walkstream.shared.codec.mesh.encode_mesh` (buildings rebuilt with
+        LOD2 mesh encoded by :func:`~walkstream.shared.codec.encode_mesh` (buildings rebuilt with
         the scene's grammar, street pieces with :func:`~walkstream.shared.streets.build_street`).
         Runs a database query, and for ``lod2`` real geometry work: call it from a
         worker thread.

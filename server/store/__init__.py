@@ -16,12 +16,12 @@ Layout (schema version :data:`SCHEMA_VERSION`)
     ``features`` (JSON list), ``settings`` (JSON), ``settings_hash``,
     ``bake_seconds``, ``created``.
 ``objects(id, kind, params, minx, miny, minz, maxx, maxy, maxz, tris0, tris1, tris2)``
-    ``params`` is :func:`~walkstream.shared.codec.params.encode_building` / ``encode_street`` output,
+    ``params`` is :func:`~walkstream.shared.codec.encode_building` / ``encode_street`` output,
     streamed to clients as is; ``tris*`` are the triangle counts of LOD 0-2.
 ``cells(id, kind, boundary, zmin, zmax, neighbours, pvs, done)``
-    ``boundary`` is :func:`~walkstream.shared.codec.pvs.encode_polygon` of the convex ``(n, 2)``
-    outline, ``neighbours`` :func:`~walkstream.shared.codec.pvs.encode_ids`, ``pvs``
-    :func:`~walkstream.shared.codec.pvs.encode_pvs`.
+    ``boundary`` is :func:`~walkstream.shared.codec.encode_polygon` of the convex ``(n, 2)``
+    outline, ``neighbours`` :func:`~walkstream.shared.codec.encode_ids`, ``pvs``
+    :func:`~walkstream.shared.codec.encode_pvs`.
 ``viewpoints(name, x, y, z, yaw, cell)`` and ``paths(name, data)``.
 
 Optional tables are declared once in :data:`OPTIONAL_TABLES`, keyed by the feature

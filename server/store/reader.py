@@ -310,7 +310,7 @@ class SceneReader:
         return self._cell_info(rows[0])
 
     def cell_pvs_blob(self, cid: int) -> bytes:
-        """Cell ``cid``'s PVS as stored (:func:`~walkstream.shared.codec.pvs.encode_pvs` bytes), for streaming."""
+        """Cell ``cid``'s PVS as stored (:func:`~walkstream.shared.codec.encode_pvs` bytes), for streaming."""
         i = _index(cid, "cell id")
         rows = self._query("SELECT pvs FROM cells WHERE id = ?", (i,))
         if not rows:

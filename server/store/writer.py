@@ -348,7 +348,7 @@ class SceneWriter:
             ``(k,)`` object ids it can see (``k`` may be 0).
         ach:
             ``(k,)`` their coverage, e.g. pixel counts (see
-            :func:`~walkstream.shared.codec.pvs.encode_pvs`).
+            :func:`~walkstream.shared.codec.encode_pvs`).
         """
         cid = _index(cell_id, "cell id")
         try:

@@ -10,8 +10,9 @@ made of **plain concatenated msgpack objects, one per id in the order asked**
 self-delimiting, so a client feeds the bytes to ``msgpack.Unpacker`` as they
 arrive and gets each object as soon as its last byte is in.  Each object is the map
 ``{"id": int, "kind": str, "params": bin}`` where ``params`` is the stored record
-(:func:`~walkstream.shared.codec.params.decode_building` / :func:`~walkstream.shared.codec.params.decode_street`, or
-:func:`~walkstream.shared.codec.params.decode_object` for either).  The server hands the frames to the
+(:func:`~walkstream.shared.codec.decode_building` /
+:func:`~walkstream.shared.codec.decode_street`, or
+:func:`~walkstream.shared.codec.decode_object` for either).  The server hands the frames to the
 transport in chunks of about :data:`CHUNK_BYTES`, never splitting the order.  The
 headers ``X-Scene-Version`` and ``X-Object-Count`` come first.  With
 ``Accept: application/json`` the body is instead a JSON array, streamed one element
@@ -25,8 +26,8 @@ Mesh form (for comparison only)
 ``POST /v1/scenes/{scene}/objects?form=lod2`` answers with the same framing, but
 each map is ``{"id": int, "kind": str, "mesh": bin}`` where ``mesh`` is the object's
 LOD2 mesh, rebuilt on the server (buildings with the scene's grammar, street pieces
-as their flat surface) and encoded by :func:`~walkstream.shared.codec.mesh.encode_mesh` (decode with
-:func:`~walkstream.shared.codec.mesh.decode_mesh`); with ``Accept: application/json`` the elements
+as their flat surface) and encoded by :func:`~walkstream.shared.codec.encode_mesh` (decode with
+:func:`~walkstream.shared.codec.decode_mesh`); with ``Accept: application/json`` the elements
 are ``{"id", "kind", "mesh": base64}``.  It exists so that a client's
 ``--stream meshes`` mode can measure what sending geometry instead of parameters
 costs in bytes and quality, which is the paper's central claim; meshes are about a
