@@ -216,44 +216,50 @@ def test_navigation_space_is_tiled(city700: dict[str, Any]) -> None:
 # --------------------------------------------------------------------------- party walls
 
 
-def test_neighbour_heights_align_with_rings(city700: dict[str, Any]) -> None:
-    buildings = of_kind(city700, "building")
-    heights = {f["id"]: f["properties"]["height"] for f in buildings}
-    all_heights = set(heights.values())
+def test_the_generator_writes_plain_footprints(city700: dict[str, Any]) -> None:
+    """Party walls are found in one place, when the footprints are loaded: none in the file."""
+    assert not any("neighbour_heights" in f["properties"] for f in of_kind(city700, "building"))
+
+
+@pytest.fixture(scope="module")
+def loaded700(city700: dict[str, Any]) -> Any:
+    from walkstream.server.sources.geojson import load_geojson_dict
+
+    return load_geojson_dict(city700)
+
+
+def test_neighbour_heights_align_with_rings(city700: dict[str, Any], loaded700: Any) -> None:
+    heights = [b.height for b in loaded700.buildings]
     party = taller = 0
-    for f in buildings:
-        p = f["properties"]
-        rings = f["geometry"]["coordinates"]
-        assert len(p["neighbour_heights"]) == len(rings)
-        for ring, nh in zip(rings, p["neighbour_heights"], strict=True):
-            assert len(nh) == len(ring) - 1  # one per edge (ring is closed)
-            for h in nh:
-                assert h == 0 or h in all_heights  # the height of an actual building
-            party += sum(h > 0 for h in nh)
-            taller += sum(h > p["height"] for h in nh)
-        if len(rings) > 1:  # a courtyard building stands alone in its block
-            assert not any(h > 0 for ring in p["neighbour_heights"] for h in ring)
-    assert party > len(buildings)  # most lots are built wall to wall
+    for b in loaded700.buildings:
+        assert len(b.neighbour_heights) == len(b.rings)
+        for ring, nh in zip(b.rings, b.neighbour_heights, strict=True):
+            assert len(nh) == len(ring)  # one per edge (rings are open)
+            for h in nh:  # the height of an actual building
+                assert h == 0 or min(abs(h - x) for x in heights) < 1e-6
+            party += int(np.count_nonzero(nh > 0))
+            taller += int(np.count_nonzero(nh > b.height + 1e-9))
+        if len(b.rings) > 1:  # a courtyard building stands alone in its block
+            assert not any((h > 0).any() for h in b.neighbour_heights)
+    assert party > len(loaded700.buildings)  # most lots are built wall to wall
     assert taller > 0
     assert city_summary(city700)["party_wall_edges"] == party
 
 
-def test_party_walls_are_shared_and_partly_shared_edges_are_split(city700: dict[str, Any]) -> None:
-    buildings = of_kind(city700, "building")
-    polys = [polygon(f) for f in buildings]
-    outlines = np.array([p.exterior for p in polys], dtype=object)
+def test_party_walls_are_shared_and_partly_shared_edges_are_split(loaded700: Any) -> None:
+    buildings = loaded700.buildings
+    outlines = np.array([shapely.LinearRing(b.rings[0]) for b in buildings], dtype=object)
     tree = shapely.STRtree(outlines)
     l_shapes_with_neighbours = 0
-    for k, f in enumerate(buildings):
-        ring = local_rings(f)[0]
-        nh = np.asarray(f["properties"]["neighbour_heights"][0])
+    for k, b in enumerate(buildings):
+        ring, nh = b.rings[0], np.asarray(b.neighbour_heights[0])
         mids = shapely.points((ring + np.roll(ring, -1, axis=0)) / 2)
         # An edge is a party wall exactly when another building's outline runs along it.
-        near = [set(tree.query(m, predicate="dwithin", distance=0.05)) - {k} for m in mids]
+        near = [set(tree.query(m, predicate="dwithin", distance=0.05).tolist()) - {k} for m in mids]
         for i, hits in enumerate(near):
-            assert (nh[i] > 0) == bool(hits), (f["id"], i)
+            assert (nh[i] > 0) == bool(hits), (b.source_id, i)
             if hits:
-                assert nh[i] == max(buildings[j]["properties"]["height"] for j in hits)
+                assert nh[i] == pytest.approx(max(buildings[j].height for j in hits))
         if len(ring) >= 6 and nh.any():
             l_shapes_with_neighbours += 1
     assert l_shapes_with_neighbours > 0

@@ -26,8 +26,12 @@ Layout
    is only partly shared); a few are vacant; some blocks are one courtyard building
    (the whole band as one polygon with a hole); a few backyards hold a small
    detached building.
-5. **Party walls.**  :func:`~walkstream.server.sources.partywalls.find_party_walls` splits the
-   rings where neighbours touch and gives the neighbour height behind each edge.
+5. **Shared vertices.**  Where a lot's corner lies on a neighbour's wall the wall gets
+   that vertex too (:func:`~walkstream.server.sources.partywalls.split_shared_edges`),
+   so that rounding to 1 cm keeps neighbours wall to wall.  The party walls themselves
+   (the neighbour height behind each edge) are not written: like any footprint file,
+   the city gets them when it is loaded (:mod:`~walkstream.server.sources.geojson`),
+   the one place they are found.
 
 Buildings are set back :data:`FRONTAGE_GAP` (2 cm) from the street surfaces: the
 output is rounded to 1 cm, which can move a vertex by up to 7 mm, and without the
@@ -42,7 +46,6 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -50,6 +53,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.server.sources.partywalls import split_shared_edges
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
 from walkstream.shared.geometry import signed_area
@@ -307,7 +311,7 @@ class _Network:
 
 
 class _Building:
-    """A footprint before party-wall splitting (local metres)."""
+    """A generated footprint before its shared vertices are added (local metres)."""
 
     __slots__ = ("rings", "floors", "floor_height", "style")
 
@@ -451,14 +455,6 @@ def _coords(ring: F64) -> list[list[float]]:
     return np.concatenate([g, g[:1]]).tolist()
 
 
-def _find_party_walls(
-    footprints: Sequence[Sequence[F64]], heights: Sequence[float]
-) -> tuple[list[list[F64]], list[list[F64]]]:
-    """Call the shared party-wall finder (imported late: it is a sibling source module)."""
-    from walkstream.server.sources.partywalls import find_party_walls
-
-    rings, nbh = find_party_walls(footprints, heights)
-    return [list(r) for r in rings], [list(h) for h in nbh]
 
 
 def generate_city(size: float, seed: int = 1) -> dict[str, Any]:
@@ -527,16 +523,15 @@ def generate_city(size: float, seed: int = 1) -> dict[str, Any]:
             buildings.extend(new)
             lots += n
 
-    rings, nbh = _find_party_walls([bd.rings for bd in buildings], [bd.height for bd in buildings])
-
+    split = split_shared_edges([bd.rings for bd in buildings])
     features: list[dict[str, Any]] = []
-    for k, (bd, rr, hh) in enumerate(zip(buildings, rings, nbh, strict=True)):
+    for k, (bd, rings) in enumerate(zip(buildings, split, strict=True)):
         fid = f"b{k}"
         features.append(
             {
                 "type": "Feature",
                 "id": fid,
-                "geometry": {"type": "Polygon", "coordinates": [_coords(r) for r in rr]},
+                "geometry": {"type": "Polygon", "coordinates": [_coords(r) for r in rings]},
                 "properties": {
                     "kind": "building",
                     "id": fid,
@@ -544,7 +539,6 @@ def generate_city(size: float, seed: int = 1) -> dict[str, Any]:
                     "floor_height": bd.floor_height,
                     "height": bd.height,
                     "style": bd.style,
-                    "neighbour_heights": [np.round(np.asarray(h, float), 2).tolist() for h in hh],
                 },
             }
         )
@@ -634,7 +628,7 @@ def write_city(path: str | PathLike[str], size: float, seed: int = 1) -> dict[st
 
 
 def _simplify(ring: F64, sin_tol: float = 0.01) -> F64:
-    """Drop (nearly) collinear vertices, such as the ones party-wall splitting inserts."""
+    """Drop (nearly) collinear vertices, such as the shared vertices added on walls."""
     r = ring
     while len(r) > 3:
         a = np.roll(r, 1, axis=0) - r
@@ -679,7 +673,8 @@ def city_summary(fc: dict[str, Any]) -> dict[str, Any]:
         ``buildings``, ``streets``, ``crossroads``, ``squares``, ``lots`` (from the
         ``walkstream`` member, None when absent), ``shapes`` (counts of ``rect``, ``l``,
         ``courtyard``, ``irregular`` footprints), ``floors`` (``min``, ``mean``,
-        ``max``), ``party_wall_edges`` (edges with a neighbour behind),
+        ``max``), ``party_wall_edges`` (edges with a neighbour behind, once the
+        footprints are loaded: the loader splits partly shared edges),
         ``free_edges``, ``built_area_m2`` (footprint area) and ``area_m2`` (the
         city square, None when the size is unknown).
     """
@@ -699,10 +694,14 @@ def city_summary(fc: dict[str, Any]) -> dict[str, Any]:
         shapes[_shape_kind(rings)] += 1
         built += sum(signed_area(r) for r in rings)  # holes are CW: they subtract
         floors.append(int(props["floors"]))
-        for h in props.get("neighbour_heights", []):
-            h = np.asarray(h, dtype=np.float64)
-            party += int(np.count_nonzero(h > 0))
-            free += int(np.count_nonzero(h <= 0))
+    if counts["building"]:
+        # party walls as the loader finds them (the one place that does)
+        from walkstream.server.sources.geojson import load_geojson_dict
+
+        for b in load_geojson_dict(fc).buildings:
+            for h in b.neighbour_heights:
+                party += int(np.count_nonzero(h > 0))
+                free += int(np.count_nonzero(h <= 0))
     meta = fc.get("walkstream") or {}
     size = meta.get("size")
     return {

@@ -25,7 +25,7 @@ import shapely
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
 
-__all__ = ["find_party_walls", "MAX_ANGLE_DEG"]
+__all__ = ["find_party_walls", "split_shared_edges", "MAX_ANGLE_DEG"]
 
 
 #: Two edges can only be a party wall when their directions differ by at most this
@@ -213,6 +213,18 @@ def find_party_walls(
         _regroup(out_rings, ring_bld, len(footprints)),
         _regroup(out_heights, ring_bld, len(footprints)),
     )
+
+
+def split_shared_edges(footprints: Sequence[Sequence[F64]], tol: float = 0.1) -> list[list[F64]]:
+    """The footprints with a vertex wherever a neighbour's corner lies on an edge.
+
+    The splitting of :func:`find_party_walls` without the heights: a generator that
+    rounds its output (to 1 cm) calls this first, so that buildings standing wall to
+    wall keep identical vertices along the wall and rounding cannot make them overlap.
+    The neighbour heights are left to whoever loads the footprints.
+    """
+    rings, _ = find_party_walls(footprints, [0.0] * len(footprints), tol)
+    return rings
 
 
 def _regroup(items: Sequence[F64], ring_bld: Sequence[int], n_buildings: int) -> list[list[F64]]:
