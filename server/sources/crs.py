@@ -15,9 +15,10 @@ import numpy as np
 import pyproj
 from numpy.typing import NDArray
 
+from walkstream.shared.arrays import F64
 from walkstream.shared.errors import SourceError
 
-__all__ = ["parse_crs_member", "utm_epsg", "crs_label", "outside_lonlat"]
+__all__ = ["parse_crs_member", "utm_epsg", "crs_label", "outside_lonlat", "project"]
 
 # ------------------------------------------------------------------------- reading
 
@@ -80,3 +81,16 @@ def outside_lonlat(points: NDArray[np.float64]) -> NDArray[np.bool_]:
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     return (np.abs(p[:, 1]) > 90) | (p[:, 0] < -180) | (p[:, 0] > 360)
+
+
+def project(points: F64, src: pyproj.CRS | None, dst: str | pyproj.CRS) -> F64:
+    """``(n, 2)`` points from ``src`` (None: lon/lat, CRS84) to ``dst``, x/y order both sides.
+
+    Points that cannot be projected come out non-finite; the caller says which.
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    transformer = pyproj.Transformer.from_crs(
+        src if src is not None else "OGC:CRS84", dst, always_xy=True
+    )
+    x, y = transformer.transform(p[:, 0], p[:, 1])
+    return np.column_stack([np.asarray(x, np.float64), np.asarray(y, np.float64)])

@@ -84,7 +84,13 @@ import numpy as np
 import pyproj
 import shapely
 
-from walkstream.server.sources.crs import crs_label, outside_lonlat, parse_crs_member, utm_epsg
+from walkstream.server.sources.crs import (
+    crs_label,
+    outside_lonlat,
+    parse_crs_member,
+    project,
+    utm_epsg,
+)
 from walkstream.server.sources.features import _IssueLog, _Line, _Part, _Poly
 from walkstream.server.sources.heights import _levels, _positive, parse_length
 from walkstream.server.sources.jsonfile import read_json_file
@@ -349,11 +355,7 @@ def _to_local(
     if geographic:
         lo, hi = allpts.min(axis=0), allpts.max(axis=0)
         epsg = utm_epsg(0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]))
-        transformer = pyproj.Transformer.from_crs(
-            src if src is not None else "OGC:CRS84", f"EPSG:{epsg}", always_xy=True
-        )
-        x, y = transformer.transform(allpts[:, 0], allpts[:, 1])
-        proj = np.column_stack([np.asarray(x, np.float64), np.asarray(y, np.float64)])
+        proj = project(allpts, src, f"EPSG:{epsg}")
         crs_name = f"EPSG:{epsg}"
     else:
         proj = allpts

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pyproj
 
-from walkstream.server.sources.crs import outside_lonlat, parse_crs_member
+from walkstream.server.sources.crs import outside_lonlat, parse_crs_member, project
 from walkstream.server.sources.geojson import as_points
 from walkstream.server.sources.jsonfile import read_json_file
 from walkstream.shared.arrays import F64
@@ -96,12 +96,7 @@ def read_linestring(
         raise InputError(f"scene CRS {crs!r} is not a known CRS") from exc
     if not dst.is_projected:
         raise InputError(f"scene CRS {crs!r} is not projected: cannot place a line in metres")
-    transformer = pyproj.Transformer.from_crs(
-        src_crs if src_crs is not None else "OGC:CRS84", dst, always_xy=True
-    )
-    x, y = transformer.transform(raw[:, 0], raw[:, 1])
-    ox, oy = (float(v) for v in origin)
-    xy = np.column_stack([np.asarray(x, np.float64) - ox, np.asarray(y, np.float64) - oy])
+    xy = project(raw, src_crs, dst) - np.asarray(origin, dtype=np.float64)[:2]
     if not np.isfinite(xy).all():
         i = int(np.flatnonzero(~np.isfinite(xy).all(axis=1))[0])
         raise SourceError(f"{label}: position {i} cannot be projected to {crs}")

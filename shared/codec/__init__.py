@@ -12,29 +12,8 @@ raised as :class:`~walkstream.shared.errors.CodecError` naming what was being de
 decoder lets a raw ``msgpack``/``KeyError``/``TypeError`` escape, and none allocates
 more than a small multiple of its input size.
 
-Formats (version 1)
--------------------
-building
-    msgpack array ``[header, id, ax, ay, counts, coords, heights, floors, fh_cm,
-    style, source_id]``.  ``header = 1 << 5 | nb_format << 2 | coord_format``.
-    ``ax, ay`` is the first exterior vertex in integer centimetres (the anchor);
-    ``counts`` the vertex count (an int for one ring, a list for several);
-    ``coords`` the ``2 (N - 1)`` per-vertex x/y deltas in centimetres chained over
-    all rings (see :func:`encode_building` for the four coordinate formats);
-    ``heights`` the neighbour heights in centimetres over all ``N`` vertices, sparse
-    ``[i, h, i, h, ...]`` (format 0) or run-length ``[h, run, h, run, ...]``
-    (format 1).
-street
-    msgpack array ``[header, id, n, ax, ay, coords, width_cm, source_id]`` with
-    ``header = 2 << 5 | kind << 2 | coord_format``.
-pvs
-    ``b"\x01"`` then unsigned LEB128 varints ``k, id_0, id_1 - id_0, ...,
-    units_0, ..., units_{k-1}`` with ids ascending and the units summing to
-    exactly 65535 (``k > 0``).
-ids
-    unsigned LEB128 varints of the ascending ids, delta coded (empty set: ``b""``).
-polygon
-    msgpack array of ``[x, y]`` float64 pairs.
+Formats (version 1) are described in each module: building and street parameters in
+:mod:`.params`; PVS, id sets and polygons in :mod:`.pvs`; meshes in :mod:`.mesh`.
 
 The modules: :mod:`.bounded` (bounded unpacking), :mod:`.varint`, :mod:`.params`
 (buildings and streets), :mod:`.pvs` (PVS, ids, polygons), :mod:`.mesh` (meshes).

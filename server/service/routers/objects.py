@@ -1,39 +1,9 @@
 """The objects route: a scene's object parameters (or LOD2 meshes) streamed in the order asked.
 
-Object stream framing
----------------------
-``POST /v1/scenes/{scene}/objects`` with body ``{"ids": [int, ...]}`` (msgpack when
-the ``Content-Type`` is ``application/msgpack``, JSON otherwise; at most
-:data:`~walkstream.server.service.scenes.MAX_IDS` = 1000 ids, else 413) answers with a *streamed* body
-made of **plain concatenated msgpack objects, one per id in the order asked**
-(repeats included), with no length prefix or separator: msgpack is
-self-delimiting, so a client feeds the bytes to ``msgpack.Unpacker`` as they
-arrive and gets each object as soon as its last byte is in.  Each object is the map
-``{"id": int, "kind": str, "params": bin}`` where ``params`` is the stored record
-(:func:`~walkstream.shared.codec.decode_building` /
-:func:`~walkstream.shared.codec.decode_street`, or
-:func:`~walkstream.shared.codec.decode_object` for either).  The server hands the frames to the
-transport in chunks of about :data:`CHUNK_BYTES`, never splitting the order.  The
-headers ``X-Scene-Version`` and ``X-Object-Count`` come first.  With
-``Accept: application/json`` the body is instead a JSON array, streamed one element
-per line, of ``{"id", "kind", "params": base64}``.
-
-All ids are checked before the first byte is sent: an unknown id gives a 404 that
-lists the unknown ids, never a truncated stream.
-
-Mesh form (for comparison only)
--------------------------------
-``POST /v1/scenes/{scene}/objects?form=lod2`` answers with the same framing, but
-each map is ``{"id": int, "kind": str, "mesh": bin}`` where ``mesh`` is the object's
-LOD2 mesh, rebuilt on the server (buildings with the scene's grammar, street pieces
-as their flat surface) and encoded by :func:`~walkstream.shared.codec.encode_mesh` (decode with
-:func:`~walkstream.shared.codec.decode_mesh`); with ``Accept: application/json`` the elements
-are ``{"id", "kind", "mesh": base64}``.  It exists so that a client's
-``--stream meshes`` mode can measure what sending geometry instead of parameters
-costs in bytes and quality, which is the paper's central claim; meshes are about a
-thousand times larger than parameters.  ``form=params`` is the default and the
-format described above; any other form is a 422 naming it."""
-
+The framing (plain concatenated msgpack maps, one per id in the order asked; the
+``form=lod2`` mesh form) is the API's own documentation, the docstring of
+:mod:`walkstream.server.service.routers`, which is also the OpenAPI description.
+"""
 
 from __future__ import annotations
 
