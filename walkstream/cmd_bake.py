@@ -2,7 +2,8 @@
 
 ::
 
-    walkstream bake SOURCE.geojson -o scene.db [--cells street|grid] [--cell-size M] ...
+    walkstream bake SOURCE.geojson|.osm|.osm.pbf -o scene.db [--cells street|grid] [--cell-size M]
+                   [--network walk|drive] [--bbox X0,Y0,X1,Y1 [--bbox-crs local|lonlat]] ...
     walkstream bake --default-city -o scene.db
     walkstream inspect scene.db [--json] [--map map.png]
     walkstream serve scene.db [more.db ...] [--host H] [--port P] [--workers N]
@@ -30,7 +31,7 @@ def _parse_bbox(text: str | None) -> tuple[float, float, float, float] | None:
     except ValueError:
         parts = ()
     if len(parts) != 4:
-        raise WalkstreamError(f"--bbox: expected MINX,MINY,MAXX,MAXY in scene-local metres, got {text!r}")
+        raise WalkstreamError(f"--bbox: expected MINX,MINY,MAXX,MAXY (scene-local metres or lon/lat), got {text!r}")
     return parts[0], parts[1], parts[2], parts[3]
 
 
@@ -66,13 +67,15 @@ def cmd_bake(args: argparse.Namespace) -> int:
     elif args.source:
         source = Path(args.source)
     else:
-        raise WalkstreamError("give a SOURCE.geojson or --default-city")
+        raise WalkstreamError("give a SOURCE (.geojson, .osm, .osm.pbf) or --default-city")
     st = BakeSettings(
         cells=args.cells,
         cell_size=args.cell_size,
         max_length=args.cell_size,
         view_distance=args.view_distance,
         bbox=_parse_bbox(args.bbox),
+        bbox_crs=args.bbox_crs,
+        network=args.network,
         centre=args.centre,
         threshold=args.threshold,
         **{k: v for k, v in (("resolution", args.resolution), ("occluder_lod", args.occluder_lod)) if v is not None},
@@ -114,15 +117,17 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
 def add_bake_parsers(sub: Any) -> None:
     """Register ``bake``, ``inspect`` and ``serve``."""
-    bk = sub.add_parser("bake", help="bake a GeoJSON source into a scene database (cells, PVS, ACH)")
-    bk.add_argument("source", nargs="?", help="GeoJSON FeatureCollection (generated city or real footprints)")
+    bk = sub.add_parser("bake", help="bake a GeoJSON or OpenStreetMap source into a scene database (cells, PVS, ACH)")
+    bk.add_argument("source", nargs="?", help="GeoJSON FeatureCollection (generated city or real footprints), or an OpenStreetMap extract (.osm, .osm.pbf)")
     bk.add_argument("-o", "--output", required=True, help="scene database to write (SQLite, replaced atomically)")
     bk.add_argument("--default-city", action="store_true", help="bake the default 700 m city (generated beside the output)")
     bk.add_argument("--name", help="scene name (default: the database file's stem)")
     bk.add_argument("--cells", choices=("auto", "street", "grid"), default="auto", help="street cells (needs streets) or a grid (default auto)")
     bk.add_argument("--cell-size", type=float, default=40.0, help="grid cell side / longest street cell, metres (default 40)")
     bk.add_argument("--view-distance", type=float, default=800.0, help="far plane, metres (default 800)")
-    bk.add_argument("--bbox", help="MINX,MINY,MAXX,MAXY in scene-local metres: bake only this part")
+    bk.add_argument("--bbox", help="MINX,MINY,MAXX,MAXY: bake only this part; objects crossing it are clipped to it")
+    bk.add_argument("--bbox-crs", choices=("local", "lonlat"), default="local", help="--bbox in scene-local metres (default) or lon/lat degrees")
+    bk.add_argument("--network", choices=("walk", "drive"), default="walk", help="street network of OSM highways: what a pedestrian (default) or a car may use")
     bk.add_argument("--resolution", type=int, default=None, help="pixels per cube face (default: see bench visibility)")
     bk.add_argument("--occluder-lod", type=int, choices=(0, 1, 2), default=None, help="LOD rendered as occluder")
     bk.add_argument("--centre", action="store_true", help="also sample the cell centre (10 points instead of 8)")

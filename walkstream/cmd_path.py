@@ -3,7 +3,7 @@
 ::
 
     walkstream path record DB NAME --from X,Y --to X,Y [--via X,Y ...] --speed KMH [--replace]
-    walkstream path import DB NAME FILE.geojson --speed KMH [--clip] [--replace]
+    walkstream path import DB NAME FILE.geojson|FILE.gpx --speed KMH [--clip] [--replace]
     walkstream path list DB [--json]
     walkstream path export DB NAME -o FILE.json
 
@@ -183,12 +183,13 @@ def add_path_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--replace", action="store_true", help="overwrite a path of the same name")
     r.set_defaults(func=cmd_path_record)
 
-    i = psub.add_parser("import", help="turn a GeoJSON LineString into a path (new scene version)")
+    i = psub.add_parser("import", help="turn a GeoJSON LineString or a GPX track into a path (new scene version)")
     i.add_argument("db", help="scene database")
     i.add_argument("name", help="path name")
     i.add_argument(
         "file",
-        help="GeoJSON LineString / Feature / FeatureCollection with one line (lon/lat or its 'crs')",
+        help="GeoJSON LineString / Feature / FeatureCollection with one line (lon/lat or its 'crs'), "
+        "or a GPX file (its tracks, else routes, else waypoints)",
     )
     i.add_argument("--speed", type=float, required=True, metavar="KMH", help="speed in km/h")
     i.add_argument(

@@ -17,8 +17,8 @@ from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
 from walkstream.server.bake.workers import _run_tasks
-from walkstream.server.sources.clip import clip_scene
-from walkstream.server.sources.geojson import load_geojson
+from walkstream.server.sources.clip import clip_scene, local_bbox
+from walkstream.server.sources.read import read_source
 from walkstream.server.store import CellRow, ObjectRow, SceneReader, SceneWriter
 from walkstream.shared.buildings import default_grammar, default_grammar_text, predict_triangles
 from walkstream.shared.errors import InputError
@@ -49,7 +49,7 @@ def bake(
     log: Callable[[str], None] | None = None,
     max_cells: int | None = None,
 ) -> dict[str, Any]:
-    """Bake ``source`` (GeoJSON) into the scene database ``output``.
+    """Bake ``source`` (GeoJSON, OpenStreetMap: :func:`read_source`) into ``output``.
 
     Parameters
     ----------
@@ -85,11 +85,17 @@ def bake(
     say = log or (lambda _msg: None)
     t0 = time.perf_counter()
 
-    scene = load_geojson(src)
-    if st.bbox is not None:
-        scene = clip_scene(scene, st.bbox)
+    scene = read_source(src, network=st.network)
+    for note in scene.notes:
+        say(f"{src.name}: {note}")
+    bbox = st.bbox
+    if bbox is not None:
+        bbox = local_bbox(scene, bbox, st.bbox_crs)
+        scene = clip_scene(scene, bbox)
+    if st.cells == "auto" and not scene.streets:
+        say(f"{src.name}: no street network (after filtering): grid cells")
     cells = make_cells(
-        scene, st.cells, max_length=st.max_length, cell_size=st.cell_size, bbox=st.bbox
+        scene, st.cells, max_length=st.max_length, cell_size=st.cell_size, bbox=bbox
     )
     if not cells:
         raise InputError(f"{src}: no view cell could be made (no free space?)")
@@ -144,7 +150,7 @@ def bake(
             return {}
         # the default recorded paths: made from the cells alone, so a resumed bake
         # records the same ones (INSERT OR REPLACE) just before sealing the file
-        for path in default_paths(cells, footprints=[b.rings[0] for b in scene.buildings]):
+        for path in default_paths(cells, footprints=[b.rings[0] for b in scene.buildings], say=say):
             writer.add_path(path.name, path.to_msgpack())
             say(f"recorded path {path.name}: {path.duration:.0f} s, {path.length_m():.0f} m at {path.speed_kmh:g} km/h")
         seconds = time.perf_counter() - t0
@@ -158,6 +164,9 @@ def bake(
         reader.close()
     summary["resumed_cells"] = len(done)
     summary["source"] = str(src)
+    summary["source_issues"] = len(scene.issues)
+    if scene.notes:
+        summary["source_notes"] = " | ".join(scene.notes)
     return summary
 
 

@@ -25,6 +25,8 @@ class BakeSettings:
     max_length: float = 40.0
     view_distance: float = 800.0
     bbox: tuple[float, float, float, float] | None = None
+    bbox_crs: str = "local"
+    network: str = "walk"
     resolution: int = DEFAULT_RESOLUTION
     occluder_lod: int = DEFAULT_OCCLUDER_LOD
     centre: bool = False
@@ -45,6 +47,10 @@ class BakeSettings:
             raise InputError(f"occluder LOD: expected 0, 1 or 2, got {self.occluder_lod}")
         if self.threshold < 0:
             raise InputError(f"threshold: expected >= 0 pixels, got {self.threshold}")
+        if self.bbox_crs not in ("local", "lonlat"):
+            raise InputError(f"--bbox-crs: expected local or lonlat, got {self.bbox_crs!r}")
+        if self.network not in ("walk", "drive"):
+            raise InputError(f"--network: expected walk or drive, got {self.network!r}")
         if self.bbox is not None:
             x0, y0, x1, y1 = self.bbox
             if not (all(np.isfinite(self.bbox)) and x1 > x0 and y1 > y0):

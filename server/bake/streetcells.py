@@ -6,9 +6,15 @@ cell; every street piece is cut across its length into pieces no longer than
 ``max_length`` (measured along the piece's long axis) so that the potentially
 visible set of a cell stays small; every square is decomposed into convex parts,
 and each part is cut along both of its axes into pieces of about ``max_length``.
-Overlapping source polygons (e.g. street lines buffered by the GeoJSON loader
-that cross each other) are made disjoint first: crossroads win over squares,
-squares over street pieces, lower ids over higher ones.
+Overlapping source polygons (e.g. a street area over a street) are made disjoint
+first: crossroads win over squares, squares over street pieces, lower ids over
+higher ones.  Real streets overlap buildings (a footprint drawn over the edge of a
+road, a way along a wall): building footprints are subtracted from every piece
+except the building passages of the scene (``SourceScene.passages``,
+``tunnel=building_passage``), and parts smaller than :data:`MIN_CELL_AREA` m² left
+by that clipping are dropped.  So every cell is convex, outside every footprint
+(but a passage's), and disjoint from the others; adjacency comes from shared
+boundaries.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from walkstream.server.bake.viewcell import (
     F64,
     ViewCell,
     _finish,
+    _footprints,
     _height_range,
     _positive,
 )
@@ -29,11 +36,14 @@ from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError
 from walkstream.shared.geometry import signed_area
 
-__all__ = ["street_cells"]
-#: Points this close (metres) to a cell count as inside it.
+__all__ = ["MIN_CELL_AREA", "street_cells"]
+#: Parts of street pieces smaller than this (m²) after clipping by footprints are dropped.
+MIN_CELL_AREA = 0.5
 
 # Source polygons overlapping by less than this (m^2) are rounding noise, not overlap.
 _OVERLAP_EPS = 1e-6
+# Parts narrower than this on average (metres, twice area over perimeter) are dropped.
+_MIN_WIDTH = 0.2
 # Parts smaller than this (m^2) left over by cutting or overlap removal are dropped.
 _SLIVER_AREA = 1e-3
 # Vertices closer than this (metres) are merged; a vertex this close to the line
@@ -87,8 +97,8 @@ def street_cells(
         raise InputError(f"eye_height {eye_height} m is outside height_range ({zmin}, {zmax})")
     if not scene.streets:
         raise InputError(
-            f"scene {scene.name!r} has no street pieces, crossroads or squares: street cells "
-            "need street data (use grid cells instead)"
+            f"scene {scene.name!r} has no street pieces, crossroads or squares (an empty "
+            "street network after filtering?): street cells need street data; use --cells grid"
         )
 
     parts: list[tuple[str, F64]] = []
@@ -134,9 +144,11 @@ def _clean_ring(ring: F64) -> F64:
 
 
 def _polygon_parts(geom: shapely.Geometry) -> list[shapely.Polygon]:
+    # a repair may nest a MultiPolygon in a GeometryCollection: flatten both levels
     return [
         p
-        for p in shapely.get_parts(geom)
+        for g in shapely.get_parts(geom)
+        for p in shapely.get_parts(g)
         if isinstance(p, shapely.Polygon) and not p.is_empty and p.area >= _SLIVER_AREA
     ]
 
@@ -146,6 +158,7 @@ def _disjoint_sources(scene: SourceScene) -> list[tuple[str, shapely.Polygon]]:
     order = sorted(scene.streets, key=lambda s: (_PRIORITY[s.kind], s.id))
     kinds: list[str] = []
     geoms: list[shapely.Polygon] = []
+    passage: list[bool] = []
     for s in order:
         poly = shapely.Polygon(s.ring)
         if not poly.is_valid:
@@ -153,6 +166,7 @@ def _disjoint_sources(scene: SourceScene) -> list[tuple[str, shapely.Polygon]]:
         for p in _polygon_parts(poly):
             kinds.append(s.kind)
             geoms.append(p)
+            passage.append(s.id in scene.passages)
     if not geoms:
         return []
     arr = np.array(geoms, dtype=object)
@@ -165,9 +179,34 @@ def _disjoint_sources(scene: SourceScene) -> list[tuple[str, shapely.Polygon]]:
     for jj in np.unique(j[real]):
         winners = arr[i[real & (j == jj)]]
         out_geoms[jj] = shapely.difference(out_geoms[jj], shapely.union_all(winners))
+    out_geoms = _clip_footprints(scene, out_geoms, passage)
     out: list[tuple[str, shapely.Polygon]] = []
     for kind, g in zip(kinds, out_geoms, strict=True):
-        out.extend((kind, p) for p in _polygon_parts(g))
+        # clipping leaves slivers along walls: too small, or too thin to stand in
+        out.extend(
+            (kind, p)
+            for p in _polygon_parts(g)
+            if p.area >= MIN_CELL_AREA and p.area >= _MIN_WIDTH * 0.5 * p.length
+        )
+    return out
+
+
+def _clip_footprints(
+    scene: SourceScene, geoms: list[shapely.Geometry], passage: list[bool]
+) -> list[shapely.Geometry]:
+    """Street geometries minus the building footprints (passages are left whole)."""
+    fps = _footprints(scene)
+    if not len(fps) or not geoms:
+        return geoms
+    fps = np.array([f if f.is_valid else shapely.make_valid(f) for f in fps], dtype=object)
+    arr = np.array(geoms, dtype=object)
+    gi, fi = shapely.STRtree(fps).query(arr, predicate="intersects")
+    out = list(geoms)
+    for g in np.unique(gi).tolist():
+        if passage[g]:
+            continue
+        cut = shapely.union_all(fps[fi[gi == g]])
+        out[g] = shapely.make_valid(shapely.difference(out[g], cut))
     return out
 
 

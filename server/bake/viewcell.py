@@ -144,7 +144,8 @@ def _finish(parts: list[tuple[str, F64]], zmin: float, zmax: float) -> list[View
         ),
     )
     parts = [parts[k] for k in order]
-    polys = shapely.polygons([p for _, p in parts]) if parts else np.empty(0, object)
+    # outlines of any vertex counts (shapely.polygons wants one (n, m, 2) array)
+    polys = outline_polygons([p for _, p in parts])
     nbrs = _neighbours(polys)
     return [
         ViewCell(id=k, kind=kind, polygon=ring, zmin=zmin, zmax=zmax, neighbours=tuple(nbrs[k]))

@@ -4,9 +4,13 @@
 
 ``SE``
     A street walk at 15 km/h of at least :data:`SE_SECONDS` seconds, over street and
-    crossroad cells: from the middle of the city to the cell farthest away, then on
-    to the next farthest, each time making cells already walked through four times
-    as expensive so that the walk keeps finding new streets; cut to length.
+    crossroad cells: from the middle of the city (from the densest part when the
+    buildings are much denser elsewhere, as in real towns: :func:`_start`) to the
+    cell farthest away, then on to the next farthest, each time making cells already
+    walked through four times as expensive so that the walk keeps finding new
+    streets; cut to length.  A network too small for that (its longest route, see
+    :func:`longest_walk`, is shorter than the walk) gets its longest route instead,
+    which does not repeat itself, and :func:`default_paths` says so.
 ``SM``
     A mixed walk at 5 km/h: along a street away from a square, a U-turn, back the
     same way, then across the square from one side to the other.  The square is the
@@ -21,7 +25,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 import shapely
@@ -40,6 +44,7 @@ __all__ = [
     "SE_SECONDS",
     "DRIVE_M",
     "default_paths",
+    "longest_walk",
 ]
 #: Speeds of the default paths, km/h.
 SE_SPEED_KMH = 15.0
@@ -290,11 +295,81 @@ def _mixed(
     return _join([out.xy, out.xy[::-1], cross.xy])
 
 
+# SE starts at the densest part when the middle has less than this share of its density
+_DENSE_SHARE = 0.6
+# radius (metres) over which building density is counted
+_DENSE_RADIUS = 150.0
+
+
+def _start(g: CellGraph, inner: list[int], footprints: Sequence[ArrayLike] | None) -> int:
+    """The cell SE starts from: the middle of the city, or its densest part.
+
+    Density is the footprint area within :data:`_DENSE_RADIUS` of a cell; the middle
+    is kept unless its density is below :data:`_DENSE_SHARE` of the densest cell's.
+    """
+    cen = g.centroids[inner]
+    lo, hi = cen.min(axis=0), cen.max(axis=0)
+    middle = int(np.argmin(np.hypot(*(cen - 0.5 * (lo + hi)).T)))
+    if not footprints:
+        return int(inner[middle])
+    polys = [shapely.Polygon(np.asarray(f, dtype=np.float64)) for f in footprints]
+    arr = np.array([p if p.is_valid else shapely.make_valid(p) for p in polys], dtype=object)
+    pts = shapely.points(cen)
+    ci, fi = shapely.STRtree(arr).query(pts, predicate="dwithin", distance=_DENSE_RADIUS)
+    density = np.zeros(len(inner))
+    np.add.at(density, ci, shapely.area(arr[fi]))
+    if density[middle] >= _DENSE_SHARE * density.max():
+        return int(inner[middle])
+    return int(inner[int(np.argmax(density))])
+
+
+def longest_walk(
+    cells: Iterable[ViewCell | CellInfo] | CellGraph,
+    speed_kmh: float = SE_SPEED_KMH,
+    name: str = "long",
+    *,
+    mask: NDArray[np.bool_] | None = None,
+) -> RecordedPath | None:
+    """The longest walk that does not repeat itself: the longest of the shortest routes.
+
+    Found by a double sweep over the largest connected group of cells (of ``mask``,
+    default street and crossroad cells, all cells in a grid scene): from the middle to
+    the cell farthest away by route, then from there to the cell farthest from it.
+    None when the group has fewer than two cells.
+    """
+    g = cells if isinstance(cells, CellGraph) else CellGraph(cells)
+    if mask is None:
+        kinds = np.array(g.kinds)
+        mask = np.isin(kinds, ("street", "crossroad"))
+        if not mask.any():
+            mask = np.ones(len(g), bool)
+    groups = g.components(mask)
+    if not groups or len(groups[0]) < 2:
+        return None
+    group = groups[0]
+    allowed = np.zeros(len(g), bool)
+    allowed[group] = True
+    cen = g.centroids[group]
+    start = g.centroids[group[int(np.argmin(np.hypot(*(cen - cen.mean(axis=0)).T)))]]
+    a = g.centroids[int(np.argmax(np.where(allowed, _finite(g.cell_costs(start, allowed=allowed)), -1)))]
+    cost = _finite(g.cell_costs(a, allowed=allowed))
+    b = g.centroids[int(np.argmax(np.where(allowed, cost, -1)))]
+    route = g.plan(a, b, allowed=allowed)
+    if route.length <= 0:
+        return None
+    return RecordedPath.from_polyline(name, route.xy, speed_kmh)
+
+
+def _finite(cost: F64) -> F64:
+    return np.where(np.isfinite(cost), cost, -1.0)
+
+
 def default_paths(
     cells: Iterable[ViewCell | CellInfo],
     *,
     footprints: Sequence[ArrayLike] | None = None,
     graph: CellGraph | None = None,
+    say: Callable[[str], None] | None = None,
 ) -> list[RecordedPath]:
     """The default recorded paths of a scene: ``SE``, ``SM`` and ``drive``.
 
@@ -311,6 +386,8 @@ def default_paths(
         find the largest open area for ``SM``.
     graph:
         A :class:`CellGraph` of the same cells, if one was already built.
+    say:
+        Called with a line when a path had to be cut short (a small network).
 
     Returns
     -------
@@ -344,9 +421,20 @@ def default_paths(
         return int(inner[int(np.argmin(np.hypot(*(cen - p).T)))])
 
     se_m = SE_SPEED_KMH / 3.6 * SE_SECONDS
-    se = _chain(g, group, nearest(0.5 * (lo + hi)), se_m, border)
-    if se is not None:
-        out.append(RecordedPath.from_polyline("SE", se[0], SE_SPEED_KMH))
+    longest = longest_walk(g, SE_SPEED_KMH, "SE", mask=in_group) if not grid else None
+    if longest is not None and longest.length_m() < se_m:
+        out.append(longest)
+        if say is not None:
+            say(
+                f"SE: the street network is too small for a {SE_SECONDS:.0f} s walk that "
+                f"does not repeat itself; SE is its longest route ({longest.length_m():.0f} m, "
+                f"{longest.duration:.0f} s)"
+            )
+    else:
+        start = _start(g, inner, footprints) if not grid else nearest(0.5 * (lo + hi))
+        se = _chain(g, group, start, se_m, border)
+        if se is not None:
+            out.append(RecordedPath.from_polyline("SE", se[0], SE_SPEED_KMH))
     sm = _mixed(g, in_group, free, border)
     if sm is not None and len(sm) >= 2:
         out.append(RecordedPath.from_polyline("SM", sm, SM_SPEED_KMH))

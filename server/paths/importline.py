@@ -1,4 +1,4 @@
-"""A recorded path imported from a GeoJSON line and stored in a finished scene.
+"""A recorded path imported from a GeoJSON line or a GPX track and stored in a finished scene.
 
 The line is clipped to the scene's cells: its longest stretch inside them, bridging
 gaps of up to :data:`CLIP_GAP` metres, becomes the path.
@@ -17,6 +17,7 @@ from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.paths.record import _existing
 from walkstream.server.sources.geojsonlines import read_linestring
+from walkstream.server.sources.gpx import read_gpx
 from walkstream.server.store import CellInfo, write_path
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import RouteError
@@ -117,7 +118,10 @@ def import_linestring(
     RouteError
         With ``clip_to``: no part of the line lies inside the cells.
     """
-    xy = read_linestring(source, crs, origin)
+    if isinstance(source, str | os.PathLike) and os.fspath(source).lower().endswith(".gpx"):
+        xy = read_gpx(source, crs, origin)
+    else:
+        xy = read_linestring(source, crs, origin)
     area = clip_to if clip_to is not None else cells
     if area is None:
         return RecordedPath.from_polyline(name, xy, speed_kmh, eye_height), None

@@ -2,7 +2,10 @@
 
 Geographic data (x = lon, y = lat) is projected to the WGS 84 UTM zone of its centre
 (EPSG:326zz north, EPSG:327zz south; the Norway/Svalbard exceptions are ignored);
-projected data must be in metres.  Every reader of lon/lat coordinates checks them
+projected data must be in metres, and true to scale where the data lies: a projected
+CRS whose scale there is off by more than :data:`MAX_SCALE_ERROR` (Web Mercator,
+EPSG:3857, stretches distances by 1/cos(latitude)) is reprojected to the UTM zone of
+the data as well (:func:`metric_crs`).  Every reader of lon/lat coordinates checks them
 with :func:`outside_lonlat` first: out-of-range values usually mean projected data
 without a ``crs`` member.
 """
@@ -18,7 +21,20 @@ from numpy.typing import NDArray
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import SourceError
 
-__all__ = ["parse_crs_member", "utm_epsg", "crs_label", "outside_lonlat", "project"]
+__all__ = [
+    "MAX_SCALE_ERROR",
+    "parse_crs_member",
+    "utm_epsg",
+    "crs_label",
+    "outside_lonlat",
+    "project",
+    "scale_error",
+    "metric_crs",
+]
+
+#: A projected CRS whose point scale at the data differs from 1 by more than this
+#: is reprojected to UTM (0.1 %: UTM itself stays within 0.04 % near its meridian).
+MAX_SCALE_ERROR = 1e-3
 
 # ------------------------------------------------------------------------- reading
 
@@ -94,3 +110,42 @@ def project(points: F64, src: pyproj.CRS | None, dst: str | pyproj.CRS) -> F64:
     )
     x, y = transformer.transform(p[:, 0], p[:, 1])
     return np.column_stack([np.asarray(x, np.float64), np.asarray(y, np.float64)])
+
+
+def scale_error(crs: pyproj.CRS, lon: float, lat: float) -> float:
+    """How far the point scale of a projected CRS at (lon, lat) is from 1 (both axes).
+
+    >>> round(scale_error(pyproj.CRS("EPSG:3857"), 25.0, 60.0), 3)
+    1.0
+    >>> scale_error(pyproj.CRS("EPSG:32633"), 15.0, 48.0) < 1e-3
+    True
+    """
+    f = pyproj.Proj(crs).get_factors(lon, lat)
+    return float(max(abs(f.meridional_scale - 1.0), abs(f.parallel_scale - 1.0)))
+
+
+def metric_crs(src: pyproj.CRS | None, points: F64) -> str:
+    """The CRS (``"EPSG:NNNN"``) a source's ``(n, 2)`` points are stored in.
+
+    Lon/lat (``src`` None or geographic) goes to the UTM zone of the points' centre;
+    a WGS 84 UTM zone (the target itself) stays as it is; another projected CRS stays
+    unless its scale there is off by more than :data:`MAX_SCALE_ERROR`, then it goes
+    to the UTM zone of the points too.
+
+    >>> metric_crs(pyproj.CRS("EPSG:3857"), np.array([[2.87e6, 8.49e6], [2.87e6 + 10, 8.49e6]]))
+    'EPSG:32635'
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    if src is None or src.is_geographic:
+        return f"EPSG:{utm_epsg(float(centre[0]), float(centre[1]))}"
+    epsg = src.to_epsg()
+    if epsg is not None and (32601 <= epsg <= 32660 or 32701 <= epsg <= 32760):
+        return crs_label(src)
+    lon, lat = project(centre[None, :], src, "OGC:CRS84")[0]
+    if not (math.isfinite(lon) and math.isfinite(lat)):
+        return crs_label(src)
+    if scale_error(src, float(lon), float(lat)) <= MAX_SCALE_ERROR:
+        return crs_label(src)
+    return f"EPSG:{utm_epsg(float(lon), float(lat))}"

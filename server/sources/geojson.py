@@ -4,13 +4,24 @@
 :class:`~walkstream.server.sources.scene.SourceScene`.  The rules, in the order they apply:
 
 Features
-    ``Polygon`` / ``MultiPolygon`` features are buildings unless their ``kind``
-    property is ``street``, ``crossroad`` or ``square`` (then they are flat street
-    pieces; only their exterior ring is used).  Every ``MultiPolygon`` part is its own
-    building with source id ``"<fid>#<k>"`` (k = 0-based part index).  ``LineString`` /
-    ``MultiLineString`` features with ``kind=street`` or a ``highway`` property are
-    streets: the line buffered by ``width / 2`` with flat caps and mitred joins
-    (``width`` property in metres, default 10 m), one street piece per line.  The
+    ``Polygon`` / ``MultiPolygon`` features are buildings, except:
+
+    - a ``kind`` property ``street``, ``crossroad`` or ``square``: a flat street
+      piece as it is (holes kept, see :mod:`.network` for how);
+    - a street area (:func:`~walkstream.server.sources.osmtags.is_square`:
+      ``area:highway``, ``place=square``, ``highway=*`` with ``area=yes``): a square of
+      the street network;
+    - a polygon without a ``building`` property (or with ``building=no``) that has
+      one of :data:`NOT_BUILDING_KEYS` (``landuse``, ``leisure``, ``natural``, ...):
+      not a building; left out and counted in the scene's notes.
+
+    Every ``MultiPolygon`` part is its own building with source id ``"<fid>#<k>"``
+    (k = 0-based part index).  ``LineString`` / ``MultiLineString`` features with
+    ``kind=street`` or a ``highway`` property are street centre lines: the ways of the
+    chosen network (``network``, :mod:`.osmtags`) on the ground become the street
+    network (:mod:`.network`: noded, junction regions, street pieces); the width is
+    the ``width`` property, else ``lanes`` or the ``highway`` class
+    (:func:`~walkstream.server.sources.osmtags.street_width`), else 10 m.  The
     feature id is ``feature["id"]``, else property ``id`` or ``@id``, else the
     feature's index in the file.
 
@@ -20,7 +31,10 @@ Coordinates
     (CRS84).  Geographic data (always read as x = lon, y = lat) is projected with
     pyproj to the WGS 84 UTM zone of the centre of its bounding box (EPSG:326zz
     north, EPSG:327zz south; the Norway/Svalbard zone exceptions are ignored).
-    Projected data must be in metres and stays in its CRS.  The scene origin is the
+    Projected data must be in metres; it stays in its CRS unless that CRS is not
+    true to scale where the data lies (scale off by more than 0.1 %, e.g. Web
+    Mercator EPSG:3857, whose distances grow by 1/cos(latitude)): then it is
+    reprojected to the UTM zone of the data.  The scene origin is the
     centre of the projected bounding box rounded to whole metres; rings are stored as
     float64 local coordinates (projected minus origin), so precision is kept even
     millions of metres from the CRS origin.
@@ -43,9 +57,12 @@ Heights
     height)) and floor height = height / floors.  With floors only, the floor height
     above is used.
 
-    **Default rule** (no usable height or floors): floors = 4 + crc32(feature id) % 3,
-    i.e. 4 to 6 floors, deterministic per feature, with the floor height above
-    (normally ``default_floor_height``).
+    ``roof:levels`` adds to the floors given.  **Default rule** (no usable height or
+    floors): the floors of the ``building`` value's type in
+    :data:`~walkstream.server.sources.heights.FLOORS_BY_TYPE` (house 2, garage 1,
+    apartments 5, ...), else 4 + crc32(feature id) % 3, i.e. 4 to 6 floors,
+    deterministic per feature, with the floor height above (normally
+    ``default_floor_height``).
 
     The style seed is the ``style`` property if it is an integer, else
     crc32(feature id) & 0x7fffffff.
@@ -76,36 +93,30 @@ from __future__ import annotations
 
 import math
 import os
-import zlib
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyproj
-import shapely
 
-from walkstream.server.sources.crs import (
-    crs_label,
-    outside_lonlat,
-    parse_crs_member,
-    project,
-    utm_epsg,
-)
-from walkstream.server.sources.features import _IssueLog, _Line, _Part, _Poly
-from walkstream.server.sources.heights import _levels, _positive, parse_length
+from walkstream.server.sources.assemble import assemble_scene
+from walkstream.server.sources.crs import parse_crs_member
+from walkstream.server.sources.features import _IssueLog, _Line, _Poly
 from walkstream.server.sources.jsonfile import read_json_file
-from walkstream.server.sources.partywalls import find_party_walls
-from walkstream.server.sources.rings import _clean_and_repair, _clean_rings, _dedupe
+from walkstream.server.sources.osmtags import is_square
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError, SourceError
-from walkstream.shared.records import BuildingParams, StreetParams
 
-__all__ = ["DEFAULT_STREET_WIDTH", "load_geojson", "load_geojson_dict", "as_points"]
+__all__ = ["NOT_BUILDING_KEYS", "load_geojson", "load_geojson_dict", "as_points"]
 
-#: Street width in metres when a street has no usable ``width`` property.
-DEFAULT_STREET_WIDTH = 10.0
 _STREET_KINDS = ("street", "crossroad", "square")
+#: A polygon with one of these properties and no ``building`` is not a building.
+NOT_BUILDING_KEYS = (
+    "landuse", "leisure", "natural", "amenity", "waterway", "water", "place",
+    "boundary", "highway", "area:highway", "man_made", "parking", "surface",
+    "landcover", "tourism", "historic", "barrier", "railway", "aeroway", "power",
+)  # fmt: skip
 
 
 def load_geojson(
@@ -114,6 +125,7 @@ def load_geojson(
     name: str | None = None,
     default_floor_height: float = 3.2,
     tol: float = 0.1,
+    network: str = "walk",
 ) -> SourceScene:
     """Load a GeoJSON FeatureCollection of footprints (and streets) into a scene.
 
@@ -130,6 +142,9 @@ def load_geojson(
     tol:
         Party-wall tolerance in metres, see
         :func:`~walkstream.server.sources.partywalls.find_party_walls`.
+    network:
+        ``"walk"`` or ``"drive"``: which ``highway`` ways become the street network
+        (:func:`~walkstream.server.sources.osmtags.in_network`).
 
     Returns
     -------
@@ -152,6 +167,7 @@ def load_geojson(
         default_floor_height=default_floor_height,
         tol=tol,
         source=str(p),
+        network=network,
     )
 
 
@@ -162,6 +178,7 @@ def load_geojson_dict(
     default_floor_height: float = 3.2,
     tol: float = 0.1,
     source: str = "<geojson>",
+    network: str = "walk",
 ) -> SourceScene:
     """Build a scene from an already parsed GeoJSON object (see :func:`load_geojson`).
 
@@ -171,7 +188,7 @@ def load_geojson_dict(
         The parsed JSON: a dict with ``"type": "FeatureCollection"``.
     name:
         Scene name; default: ``obj["name"]`` if it is a string, else ``"geojson"``.
-    default_floor_height, tol:
+    default_floor_height, tol, network:
         As for :func:`load_geojson`.
     source:
         How error messages name the input (the file path for :func:`load_geojson`).
@@ -206,35 +223,26 @@ def load_geojson_dict(
 
     src_crs = parse_crs_member(obj.get("crs"), source)
     log = _IssueLog()
-    polys, lines = _read_features(features, log)
-    crs_name, origin = _to_local(polys, lines, src_crs, log)
-
-    buildings_raw: list[_Part] = []
-    street_polys: list[_Part] = []
-    for poly in polys:
-        if poly.local is None:
-            continue
-        parts = _clean_and_repair(poly, log)
-        (buildings_raw if poly.kind is None else street_polys).extend(parts)
-
-    buildings = _make_buildings(buildings_raw, default_floor_height, tol, log)
-    streets = _make_streets(street_polys, lines, len(buildings), log)
-
-    if not buildings and not streets:
-        skipped = [i for i in log.sorted() if i.action == "skipped"]
-        examples = "; ".join(f"{i.feature_id}: {i.problem}" for i in skipped[:3])
-        raise SourceError(
-            f"{source}: no usable feature ({len(features)} features, {len(skipped)} skipped"
-            + (f"; e.g. {examples}" if examples else "")
-            + ")"
+    not_buildings: Counter[str] = Counter()
+    polys, lines = _read_features(features, log, not_buildings)
+    notes = []
+    if not_buildings:
+        notes.append(
+            "not buildings (left out): "
+            + ", ".join(f"{n} {k}" for k, n in sorted(not_buildings.items(), key=lambda t: (-t[1], t[0])))
         )
-    return SourceScene(
+    return assemble_scene(
+        polys,
+        lines,
+        src_crs,
+        log,
         name=name,
-        crs=crs_name,
-        origin=origin,
-        buildings=tuple(buildings),
-        streets=tuple(streets),
-        issues=tuple(log.sorted()),
+        source=source,
+        default_floor_height=default_floor_height,
+        tol=tol,
+        network=network,
+        notes=notes,
+        total_features=len(features),
     )
 
 
@@ -259,7 +267,25 @@ def as_points(coords: object) -> F64 | str:
     return arr
 
 
-def _read_features(features: list[Any], log: _IssueLog) -> tuple[list[_Poly], list[_Line]]:
+def _polygon_kind(props: dict[str, Any], kind: str | None) -> str | None:
+    """``kind`` of a polygon feature: a street kind, ``"square"``, None (a building) or
+    ``"-key=value"`` for a polygon that is not a building."""
+    if kind is not None:
+        return kind
+    building = props.get("building")
+    if building not in (None, "", "no", False):
+        return None
+    if is_square(props):
+        return "square"
+    for key in NOT_BUILDING_KEYS:
+        if props.get(key) not in (None, ""):
+            return f"-{key}={props[key]}"
+    return None
+
+
+def _read_features(
+    features: list[Any], log: _IssueLog, not_buildings: Counter[str]
+) -> tuple[list[_Poly], list[_Line]]:
     """Sort features into polygons and street lines; skip what cannot be used."""
     polys: list[_Poly] = []
     lines: list[_Line] = []
@@ -281,6 +307,10 @@ def _read_features(features: list[Any], log: _IssueLog) -> tuple[list[_Poly], li
         kind = kind if kind in _STREET_KINDS else None
 
         if gtype in ("Polygon", "MultiPolygon"):
+            kind = _polygon_kind(props, kind)
+            if kind is not None and kind.startswith("-"):
+                not_buildings[kind[1:].split("=")[0]] += 1
+                continue
             is_multi = gtype == "MultiPolygon"
             if not isinstance(coords, list) or (is_multi and not coords):
                 log.add(index, fid, f"malformed {gtype} coordinates", "skipped")
@@ -320,174 +350,3 @@ def _read_features(features: list[Any], log: _IssueLog) -> tuple[list[_Poly], li
         else:
             log.add(index, fid, f"unsupported geometry type {gtype!r}", "skipped")
     return polys, lines
-
-
-def _to_local(
-    polys: list[_Poly], lines: list[_Line], src: pyproj.CRS | None, log: _IssueLog
-) -> tuple[str, tuple[float, float]]:
-    """Project every coordinate (one vectorised transform) and move it to the origin.
-
-    Fills ``.local`` of each usable polygon and line (left ``None`` for skipped ones)
-    and returns the projected CRS name and the origin.
-    """
-    items: list[_Poly | _Line] = [*polys, *lines]
-    geographic = src is None or src.is_geographic
-    if geographic:
-        # Out-of-range lon/lat usually means projected data without a 'crs' member.
-        kept = []
-        for it in items:
-            rings = it.raw if isinstance(it, _Poly) else [it.raw]
-            if not any(outside_lonlat(r).any() for r in rings):
-                kept.append(it)
-            else:
-                log.add(
-                    it.index,
-                    it.uid,
-                    "coordinates outside the lon/lat range (projected data needs a 'crs' member)",
-                    "skipped",
-                )
-        items = kept
-    if not items:
-        return ("EPSG:4326" if geographic else crs_label(src)), (0.0, 0.0)
-
-    arrays = [r for it in items for r in (it.raw if isinstance(it, _Poly) else [it.raw])]
-    allpts = np.concatenate(arrays)
-    if geographic:
-        lo, hi = allpts.min(axis=0), allpts.max(axis=0)
-        epsg = utm_epsg(0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]))
-        proj = project(allpts, src, f"EPSG:{epsg}")
-        crs_name = f"EPSG:{epsg}"
-    else:
-        proj = allpts
-        crs_name = crs_label(src)
-
-    # Split back per item; drop items the projection could not handle.
-    counts = [len(a) for a in arrays]
-    chunks = np.split(proj, np.cumsum(counts)[:-1])
-    per_item: list[list[F64]] = []
-    pos = 0
-    for it in items:
-        n = len(it.raw) if isinstance(it, _Poly) else 1
-        per_item.append(chunks[pos : pos + n])
-        pos += n
-    finite = [all(np.isfinite(c).all() for c in chs) for chs in per_item]
-    for it, ok in zip(items, finite, strict=True):
-        if not ok:
-            log.add(it.index, it.uid, "coordinates cannot be projected", "skipped")
-    good = [chs for chs, ok in zip(per_item, finite, strict=True) if ok]
-    if not good:
-        return crs_name, (0.0, 0.0)
-    allgood = np.concatenate([c for chs in good for c in chs])
-    lo, hi = allgood.min(axis=0), allgood.max(axis=0)
-    origin = np.round(0.5 * (lo + hi))
-    for it, chs, ok in zip(items, per_item, finite, strict=True):
-        if not ok:
-            continue
-        local = [c - origin for c in chs]
-        if isinstance(it, _Poly):
-            it.local = local
-        else:
-            it.local = local[0]
-    return crs_name, (float(origin[0]), float(origin[1]))
-
-
-def _make_buildings(
-    parts: list[_Part], default_floor_height: float, tol: float, log: _IssueLog
-) -> list[BuildingParams]:
-    """Heights per feature, party walls over all buildings, then the records."""
-    levels: dict[int, tuple[int, float]] = {}
-    for part in parts:
-        poly = part.poly
-        if poly.index in levels:
-            continue
-        floors, fh, bad, how = _levels(poly.props, poly.fid, default_floor_height)
-        levels[poly.index] = (floors, fh)
-        if bad:
-            log.add(
-                poly.index,
-                poly.fid,
-                f"bad {', '.join(bad)} ignored; {how} ({floors} floors of {fh:.3g} m)",
-                "repaired",
-            )
-    heights = [levels[p.poly.index][0] * levels[p.poly.index][1] for p in parts]
-    split, nbh = find_party_walls([p.rings for p in parts], heights, tol=tol)
-    out = []
-    for i, (part, rings, nh) in enumerate(zip(parts, split, nbh, strict=True)):
-        floors, fh = levels[part.poly.index]
-        style_prop = part.poly.props.get("style")
-        if isinstance(style_prop, int) and not isinstance(style_prop, bool):
-            style = style_prop
-        else:
-            style = zlib.crc32(part.poly.fid.encode("utf-8")) & 0x7FFFFFFF
-        out.append(
-            BuildingParams(
-                id=i,
-                rings=tuple(rings),
-                neighbour_heights=tuple(nh),
-                floors=floors,
-                floor_height=fh,
-                style=style,
-                source_id=part.source_id,
-            )
-        )
-    return out
-
-
-def _street_width(props: dict[str, Any], index: int, uid: str, log: _IssueLog) -> float:
-    raw = props.get("width")
-    if raw is None or raw == "":
-        return DEFAULT_STREET_WIDTH
-    value = parse_length(raw)
-    if value is not None and _positive(value):
-        return value
-    log.add(index, uid, f"bad width={raw!r} ignored; {DEFAULT_STREET_WIDTH:g} m used", "repaired")
-    return DEFAULT_STREET_WIDTH
-
-
-def _make_streets(
-    polys: list[_Part], lines: list[_Line], first_id: int, log: _IssueLog
-) -> list[StreetParams]:
-    """Street pieces from street polygons and buffered street lines."""
-    pieces: list[tuple[str, F64, float, str]] = []  # kind, ring, width, source id
-    widths: dict[int, float] = {}  # per feature, so a bad width is reported once
-    for part in polys:
-        if part.poly.index not in widths:
-            widths[part.poly.index] = _street_width(
-                part.poly.props, part.poly.index, part.poly.uid, log
-            )
-        width = widths[part.poly.index]
-        assert part.poly.kind is not None
-        pieces.append((part.poly.kind, part.rings[0], width, part.source_id))
-
-    usable: list[tuple[_Line, F64, float]] = []
-    for line in lines:
-        if line.local is None:
-            continue
-        pts = _dedupe(line.local, closed=False)
-        if len(pts) < 2:
-            log.add(line.index, line.uid, f"fewer than 2 distinct points ({len(pts)})", "skipped")
-            continue
-        usable.append((line, pts, _street_width(line.props, line.index, line.uid, log)))
-    if usable:
-        coords = np.concatenate([pts for _, pts, _ in usable])
-        which = np.repeat(np.arange(len(usable)), [len(pts) for _, pts, _ in usable])
-        geoms = shapely.linestrings(coords, indices=which)
-        half = np.array([w / 2 for _, _, w in usable])
-        buffered = shapely.buffer(geoms, half, cap_style="flat", join_style="mitre")
-        for (line, _, width), shape in zip(usable, buffered, strict=True):
-            polygons = [p for p in shapely.get_parts(shape) if isinstance(p, shapely.Polygon)]
-            rings = []
-            for p in polygons:
-                c, _, _ = _clean_rings([np.asarray(p.exterior.coords, np.float64)])
-                if c is not None:
-                    rings.append(c[0])
-            if not rings:
-                log.add(line.index, line.uid, "street outline is empty", "skipped")
-                continue
-            for j, ring in enumerate(rings):
-                sid = line.uid if len(rings) == 1 else f"{line.uid}.{j}"
-                pieces.append(("street", ring, width, sid))
-    return [
-        StreetParams(id=first_id + k, kind=kind, ring=ring, width=width, source_id=sid)
-        for k, (kind, ring, width, sid) in enumerate(pieces)
-    ]

@@ -7,7 +7,7 @@ import re
 import zlib
 from typing import Any
 
-__all__ = ["parse_length", "default_floors"]
+__all__ = ["parse_length", "default_floors", "FLOORS_BY_TYPE"]
 _FOOT = 0.3048
 _HEIGHT_KEYS = ("height", "building:height", "est_height")
 _FLOOR_KEYS = ("building:levels", "levels", "floors")
@@ -39,8 +39,31 @@ def parse_length(value: object) -> float | None:
     return None
 
 
-def default_floors(feature_id: str) -> int:
-    """The default rule's floor count for a feature: 4 + crc32(id) % 3 (4 to 6)."""
+#: Floors of a building without height or level tags, by its ``building=*`` value
+#: (OpenStreetMap).  Values not listed (``yes`` among them) get the general rule,
+#: 4 + crc32(id) % 3 floors.
+FLOORS_BY_TYPE: dict[str, int] = {
+    "house": 2, "detached": 2, "semidetached_house": 2, "terrace": 2, "bungalow": 1,
+    "cabin": 1, "farm": 2, "residential": 2, "apartments": 5, "dormitory": 4,
+    "hotel": 6, "commercial": 3, "office": 5, "retail": 1, "supermarket": 1,
+    "kiosk": 1, "industrial": 2, "warehouse": 2, "manufacture": 2, "service": 1,
+    "garage": 1, "garages": 1, "carport": 1, "shed": 1, "hut": 1, "roof": 1,
+    "barn": 2, "farm_auxiliary": 1, "greenhouse": 1, "stable": 1, "transformer_tower": 1,
+    "school": 3, "kindergarten": 1, "university": 4, "college": 3, "hospital": 5,
+    "public": 3, "civic": 3, "government": 4, "church": 3, "chapel": 1,
+    "train_station": 2, "parking": 3, "sports_hall": 2, "toilets": 1,
+}  # fmt: skip
+
+
+def default_floors(feature_id: str, building: object = None) -> int:
+    """The default rule's floor count: :data:`FLOORS_BY_TYPE` for a known ``building``
+    value, else 4 + crc32(id) % 3 (4 to 6).
+
+    >>> default_floors("w1", "garage"), default_floors("w1", "yes") in (4, 5, 6)
+    (1, True)
+    """
+    if isinstance(building, str) and building.lower() in FLOORS_BY_TYPE:
+        return FLOORS_BY_TYPE[building.lower()]
     return 4 + zlib.crc32(feature_id.encode("utf-8")) % 3
 
 
@@ -74,11 +97,16 @@ def _levels(
 
     height = first_valid(_HEIGHT_KEYS, parse_length)
     floors_v = first_valid(_FLOOR_KEYS, _parse_count)
+    roof_v = _parse_count(props.get("roof:levels"))
+    roof = ("roof:levels", roof_v) if roof_v is not None and math.isfinite(roof_v) and roof_v > 0 else None
+    if floors_v and roof:
+        # OSM counts the floors under the roof apart; the grammar has only floors
+        floors_v = (f"{floors_v[0]} + roof:levels", floors_v[1] + roof[1])
     fh_v = first_valid(("floor_height",), parse_length)
     floor_height = fh_v[1] if fh_v else default_floor_height
     floors = int(math.floor(floors_v[1] + 0.5)) if floors_v else 0
     if floors_v and floors < 1:
-        bad.append(f"{floors_v[0]}={props[floors_v[0]]!r}")
+        bad.append(f"{floors_v[0]}={props.get(floors_v[0])!r}")
         floors_v = None
     if height and floors_v:
         return floors, height[1] / floors, bad, f"{height[0]} and {floors_v[0]} used"
@@ -87,6 +115,9 @@ def _levels(
         return floors, height[1] / floors, bad, f"{height[0]} used"
     if floors_v:
         return floors, floor_height, bad, f"{floors_v[0]} used"
+    building = props.get("building")
+    if isinstance(building, str) and building.lower() in FLOORS_BY_TYPE:
+        return default_floors(fid, building), floor_height, bad, f"default for building={building}"
     return default_floors(fid), floor_height, bad, "default rule used"
 
 

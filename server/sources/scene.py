@@ -28,7 +28,10 @@ class SourceScene:
 
     ``origin`` is the position of local (0, 0) in ``crs`` (projected metres, float64);
     local coordinates = projected coordinates - origin.  Object ids are unique over
-    buildings and streets together (buildings first).
+    buildings and streets together (buildings first).  ``passages`` are the ids of
+    street pieces that pass under buildings (``tunnel=building_passage``): their
+    cells are not clipped by footprints.  ``notes`` are one-line remarks for the
+    summary (what a reader left out on purpose, and how much).
     """
 
     name: str
@@ -37,3 +40,5 @@ class SourceScene:
     buildings: tuple[BuildingParams, ...]
     streets: tuple[StreetParams, ...]
     issues: tuple[FeatureIssue, ...] = ()
+    passages: frozenset[int] = frozenset()
+    notes: tuple[str, ...] = ()

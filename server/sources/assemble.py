@@ -1,0 +1,319 @@
+"""The second half of every reader of real data: polygons and street lines into a scene.
+
+A reader (:mod:`.geojson`, :mod:`.osm`) turns its file into working records
+(:mod:`.features`: polygons with a kind, street lines, both with their properties
+or tags); :func:`assemble_scene` does the rest the same way for every format:
+projection to local metres (:func:`_to_local`, the CRS rules of :mod:`.crs`),
+cleaning and repair (:mod:`.rings`), heights (:mod:`.heights`) and party walls
+(:mod:`.partywalls`) of buildings, and the street network (:mod:`.osmtags` picks
+the ways, :mod:`.network` cuts them into crossroads and street pieces).
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections import Counter
+
+import numpy as np
+import pyproj
+import shapely
+
+from walkstream.server.sources.crs import crs_label, metric_crs, outside_lonlat, project
+from walkstream.server.sources.features import _IssueLog, _Line, _Part, _Poly
+from walkstream.server.sources.heights import _levels, _positive, parse_length
+from walkstream.server.sources.network import NetArea, NetLine, split_holes, street_network
+from walkstream.server.sources.osmtags import (
+    NETWORKS,
+    ground_layer,
+    in_network,
+    is_passage,
+    street_width,
+)
+from walkstream.server.sources.partywalls import find_party_walls
+from walkstream.server.sources.rings import _clean_and_repair, _dedupe
+from walkstream.server.sources.scene import SourceScene
+from walkstream.shared.arrays import F64
+from walkstream.shared.errors import InputError, SourceError
+from walkstream.shared.records import BuildingParams, StreetParams
+
+__all__ = ["DEFAULT_STREET_WIDTH", "assemble_scene"]
+
+#: Width in metres of a ``kind=street`` line or polygon without ``highway`` or ``width``.
+DEFAULT_STREET_WIDTH = 10.0
+
+
+def assemble_scene(
+    polys: list[_Poly],
+    lines: list[_Line],
+    src_crs: pyproj.CRS | None,
+    log: _IssueLog,
+    *,
+    name: str,
+    source: str,
+    default_floor_height: float,
+    tol: float,
+    network: str = "walk",
+    notes: list[str] | None = None,
+    total_features: int | None = None,
+) -> SourceScene:
+    """Project, clean and build the buildings and the street network of a source.
+
+    ``polys`` have ``kind`` None (a building), ``"square"`` (a street area, holes
+    kept) or ``"street"`` / ``"crossroad"`` (a ready street piece); ``lines`` are
+    street centre lines whose ``props`` decide network, layer and width
+    (:mod:`.osmtags`).  ``notes`` (the reader's own remarks) come first in the
+    scene's notes.
+
+    Raises
+    ------
+    SourceError
+        No usable building or street at all.
+    InputError
+        An unknown ``network``.
+    """
+    if network not in NETWORKS:
+        raise InputError(f"--network: expected one of {', '.join(NETWORKS)}, got {network!r}")
+    crs_name, origin = _to_local(polys, lines, src_crs, log)
+    buildings_raw: list[_Part] = []
+    pieces: list[_Part] = []
+    areas: list[_Part] = []
+    for poly in polys:
+        if poly.local is None:
+            continue
+        if poly.kind == "square":
+            areas.extend(_clean_and_repair(poly, log))
+        elif poly.kind is None:
+            buildings_raw.extend(_clean_and_repair(poly, log))
+        else:
+            pieces.extend(_clean_and_repair(poly, log))
+    buildings = _make_buildings(buildings_raw, default_floor_height, tol, log)
+    out_notes = list(notes or [])
+    streets, passages = _make_streets(pieces, areas, lines, len(buildings), network, log, out_notes)
+    if not buildings and not streets:
+        skipped = [i for i in log.sorted() if i.action == "skipped"]
+        examples = "; ".join(f"{i.feature_id}: {i.problem}" for i in skipped[:3])
+        count = total_features if total_features is not None else len(polys) + len(lines)
+        raise SourceError(
+            f"{source}: no usable feature ({count} features, {len(skipped)} skipped"
+            + (f"; e.g. {examples}" if examples else "")
+            + ")"
+            + ("".join(f"; {n}" for n in out_notes))
+        )
+    return SourceScene(
+        name=name,
+        crs=crs_name,
+        origin=origin,
+        buildings=tuple(buildings),
+        streets=tuple(streets),
+        issues=tuple(log.sorted()),
+        passages=frozenset(passages),
+        notes=tuple(out_notes),
+    )
+
+
+# --------------------------------------------------------------------------- projection
+
+
+def _to_local(
+    polys: list[_Poly], lines: list[_Line], src: pyproj.CRS | None, log: _IssueLog
+) -> tuple[str, tuple[float, float]]:
+    """Project every coordinate (one vectorised transform) and move it to the origin.
+
+    Fills ``.local`` of each usable polygon and line (left ``None`` for skipped ones)
+    and returns the projected CRS name and the origin.
+    """
+    items: list[_Poly | _Line] = [*polys, *lines]
+    geographic = src is None or src.is_geographic
+    if geographic:
+        # Out-of-range lon/lat usually means projected data without a 'crs' member.
+        kept = []
+        for it in items:
+            rings = it.raw if isinstance(it, _Poly) else [it.raw]
+            if not any(outside_lonlat(r).any() for r in rings):
+                kept.append(it)
+            else:
+                log.add(
+                    it.index,
+                    it.uid,
+                    "coordinates outside the lon/lat range (projected data needs a 'crs' member)",
+                    "skipped",
+                )
+        items = kept
+    if not items:
+        return ("EPSG:4326" if geographic else crs_label(src)), (0.0, 0.0)
+
+    arrays = [r for it in items for r in (it.raw if isinstance(it, _Poly) else [it.raw])]
+    allpts = np.concatenate(arrays)
+    # lon/lat, and projections not true to scale here (Web Mercator), go to UTM
+    crs_name = metric_crs(src, allpts)
+    proj = allpts if crs_name == crs_label(src) and not geographic else project(allpts, src, crs_name)
+
+    # Split back per item; drop items the projection could not handle.
+    counts = [len(a) for a in arrays]
+    chunks = np.split(proj, np.cumsum(counts)[:-1])
+    per_item: list[list[F64]] = []
+    pos = 0
+    for it in items:
+        n = len(it.raw) if isinstance(it, _Poly) else 1
+        per_item.append(chunks[pos : pos + n])
+        pos += n
+    finite = [all(np.isfinite(c).all() for c in chs) for chs in per_item]
+    for it, ok in zip(items, finite, strict=True):
+        if not ok:
+            log.add(it.index, it.uid, "coordinates cannot be projected", "skipped")
+    good = [chs for chs, ok in zip(per_item, finite, strict=True) if ok]
+    if not good:
+        return crs_name, (0.0, 0.0)
+    allgood = np.concatenate([c for chs in good for c in chs])
+    lo, hi = allgood.min(axis=0), allgood.max(axis=0)
+    origin = np.round(0.5 * (lo + hi))
+    for it, chs, ok in zip(items, per_item, finite, strict=True):
+        if not ok:
+            continue
+        local = [c - origin for c in chs]
+        if isinstance(it, _Poly):
+            it.local = local
+        else:
+            it.local = local[0]
+    return crs_name, (float(origin[0]), float(origin[1]))
+
+
+
+
+def _make_buildings(
+    parts: list[_Part], default_floor_height: float, tol: float, log: _IssueLog
+) -> list[BuildingParams]:
+    """Heights per feature, party walls over all buildings, then the records."""
+    levels: dict[int, tuple[int, float]] = {}
+    for part in parts:
+        poly = part.poly
+        if poly.index in levels:
+            continue
+        floors, fh, bad, how = _levels(poly.props, poly.fid, default_floor_height)
+        levels[poly.index] = (floors, fh)
+        if bad:
+            log.add(
+                poly.index,
+                poly.fid,
+                f"bad {', '.join(bad)} ignored; {how} ({floors} floors of {fh:.3g} m)",
+                "repaired",
+            )
+    heights = [levels[p.poly.index][0] * levels[p.poly.index][1] for p in parts]
+    split, nbh = find_party_walls([p.rings for p in parts], heights, tol=tol)
+    out = []
+    for i, (part, rings, nh) in enumerate(zip(parts, split, nbh, strict=True)):
+        floors, fh = levels[part.poly.index]
+        style_prop = part.poly.props.get("style")
+        if isinstance(style_prop, int) and not isinstance(style_prop, bool):
+            style = style_prop
+        else:
+            style = zlib.crc32(part.poly.fid.encode("utf-8")) & 0x7FFFFFFF
+        out.append(
+            BuildingParams(
+                id=i,
+                rings=tuple(rings),
+                neighbour_heights=tuple(nh),
+                floors=floors,
+                floor_height=fh,
+                style=style,
+                source_id=part.source_id,
+            )
+        )
+    return out
+
+
+
+
+# --------------------------------------------------------------------------- streets
+
+
+def _line_width(line: _Line, log: _IssueLog) -> float:
+    props = line.props
+    if "highway" in props:
+        width, note = street_width(props)
+        if note:
+            log.add(line.index, line.uid, f"{note}; {width:g} m used", "repaired")
+        return width
+    raw = props.get("width")
+    if raw is None or raw == "":
+        return DEFAULT_STREET_WIDTH
+    value = parse_length(raw)
+    if value is not None and _positive(value):
+        return value
+    log.add(line.index, line.uid, f"bad width={raw!r} ignored; {DEFAULT_STREET_WIDTH:g} m used", "repaired")
+    return DEFAULT_STREET_WIDTH
+
+
+def _left_out(counts: Counter[str], network: str) -> str | None:
+    """One line for the summary: what the network left out on purpose."""
+    if not counts:
+        return None
+    parts = []
+    for what, n in sorted(counts.items(), key=lambda t: (-t[1], t[0])):
+        parts.append(f"{n} {what}")
+    return f"left out of the {network} network: " + ", ".join(parts)
+
+
+def _make_streets(
+    pieces: list[_Part],
+    areas: list[_Part],
+    lines: list[_Line],
+    first_id: int,
+    network: str,
+    log: _IssueLog,
+    notes: list[str],
+) -> tuple[list[StreetParams], list[int]]:
+    """Street pieces: given pieces as they are, lines and areas through the network."""
+    out: list[tuple[str, F64, float, str, bool]] = []  # kind, ring, width, source id, passage
+    for part in pieces:
+        assert part.poly.kind is not None
+        width = _line_width(_Line(part.poly.index, part.poly.fid, part.poly.uid, part.poly.props, part.rings[0]), log)
+        shape = shapely.Polygon(part.rings[0], part.rings[1:])
+        for k, piece in enumerate(split_holes(shape)):
+            ring = np.asarray(piece.exterior.coords, np.float64)[:-1]
+            sid = part.source_id if k == 0 else f"{part.source_id}.{k}"
+            out.append((part.poly.kind, ring, width, sid, False))
+
+    left: Counter[str] = Counter()
+    net_lines: list[NetLine] = []
+    for line in lines:
+        if line.local is None:
+            continue
+        props = line.props
+        if "highway" in props and not in_network(props, network):
+            left[f"{props.get('highway')} ways"] += 1
+            continue
+        ground, why = ground_layer(props)
+        if not ground:
+            left["tunnels" if why == "tunnel" else f"ways on {why}"] += 1
+            continue
+        pts = _dedupe(line.local, closed=False)
+        if len(pts) < 2:
+            log.add(line.index, line.uid, f"fewer than 2 distinct points ({len(pts)})", "skipped")
+            continue
+        net_lines.append(NetLine(line.uid, pts, _line_width(line, log), is_passage(props)))
+    net_areas: list[NetArea] = []
+    for part in areas:
+        if network != "walk" and not part.poly.props.get("kind"):
+            left["squares (pedestrian areas)"] += 1
+            continue
+        net_areas.append(NetArea(part.source_id, tuple(part.rings)))
+    net = street_network(net_lines, net_areas)
+    for uid, problem in net.skipped:
+        log.add(-1, uid, problem, "skipped")
+    for p in net.pieces:
+        out.append((p.kind, p.ring, p.width, p.source_id, p.passage))
+    note = _left_out(left, network)
+    if note:
+        notes.append(note)
+    if net_lines:
+        notes.append(
+            f"street network ({network}): {len(net_lines)} ways, {net.junctions} junction nodes "
+            f"in {net.clusters} crossroads, {net.components} connected part(s)"
+        )
+    streets = [
+        StreetParams(id=first_id + k, kind=kind, ring=ring, width=width, source_id=sid)
+        for k, (kind, ring, width, sid, _) in enumerate(out)
+    ]
+    passages = [first_id + k for k, t in enumerate(out) if t[4]]
+    return streets, passages
