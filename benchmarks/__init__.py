@@ -10,7 +10,8 @@ Each module is one benchmark that ``walkstream bench ...`` runs and prints as a 
 - :mod:`.stream`: replays per link and mode (quality, bytes, overfetch);
 - :mod:`.budget`: frame rate and polygon budget per device, with a cost step;
 - :mod:`.controller`: the budget controller alone on the device cost models;
-- :mod:`.lod`: image error against frame time, ACH against distance LODs.
+- :mod:`.lod`: image error against frame time, ACH against distance LODs;
+- :mod:`.city`: OpenStreetMap extracts, street cells against grid cells.
 
 A new benchmark is a module here with a ``run_...`` function and a ``format_...``
 table, and a subcommand in :mod:`walkstream.cmd_bench`.  The ``run_...`` functions are
@@ -28,6 +29,7 @@ _EXPORTS = {
     "run_budget_bench": "walkstream.benchmarks.budget",
     "run_controller_bench": "walkstream.benchmarks.controller",
     "run_lod_bench": "walkstream.benchmarks.lod",
+    "run_city_bench": "walkstream.benchmarks.city",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -10,6 +10,7 @@
     walkstream bench budget [scene.db] [--no-gl] [--seed N]
     walkstream bench controller [--frames 3000] [--seeds 1 2 3] [--step 10]
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
+    walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--reuse] [--out DIR]
 
 The benchmarks themselves are :mod:`walkstream.benchmarks`; this module parses their
 options, hands the replaying ones a way to run a replay
@@ -272,6 +273,25 @@ def cmd_bench_lod(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_city(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench city``."""
+    from walkstream.benchmarks.city import format_city_table, run_city_bench
+    from walkstream.cmd_replay import replay_with_options
+
+    only = [s.strip() for s in args.only.split(",")] if args.only else []
+    rows = run_city_bench(
+        replay_with_options,
+        data=Path(args.data),
+        out=Path(args.out),
+        only=only,
+        reuse=args.reuse,
+        workers=args.workers,
+    )
+    print(format_city_table(rows))
+    print("(56 kbit/s, 200 ms, simulated clock, desktop2003; culled% = objects outside the PVS)")
+    return 0
+
+
 def add_bench_parser(sub: Any) -> None:
     """Register ``bench`` and every benchmark under it."""
     from walkstream.server.sources.citygen import DEFAULT_SIZE
@@ -334,3 +354,11 @@ def add_bench_parser(sub: Any) -> None:
     bc.set_defaults(func=cmd_bench_controller)
 
     _add_lod(besub)
+
+    b = besub.add_parser("city", help="OpenStreetMap extracts: street cells against grid cells (bake, PVS, replay)")
+    b.add_argument("--data", default="../shared/data/osm", help="folder of the extracts (default ../shared/data/osm)")
+    b.add_argument("--only", help="comma-separated extract names (kouvola, west-oakland, village)")
+    b.add_argument("--reuse", action="store_true", help="keep databases already baked in --out")
+    b.add_argument("--workers", type=int, default=1, help="local processes rendering cells (default 1)")
+    b.add_argument("--out", default="out/bench-city", help="folder for the databases and reports")
+    b.set_defaults(func=cmd_bench_city)

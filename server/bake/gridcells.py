@@ -49,7 +49,7 @@ def grid_cells(
         Smallest free share of a kept square, in ``[0, 1]``.
     bbox:
         ``(xmin, ymin, xmax, ymax)`` in scene-local metres; default the bounding box
-        of the building footprints (of the streets when there are no buildings).
+        of the building footprints and the street pieces.
 
     Returns
     -------
@@ -114,7 +114,8 @@ def _grid_bbox(
         if not all(map(math.isfinite, (x0, y0, x1, y1))) or not (x0 < x1 and y0 < y1):
             raise InputError(f"bbox must be finite with xmin < xmax and ymin < ymax, got {bbox!r}")
         return x0, y0, x1, y1
-    rings = [b.rings[0] for b in scene.buildings] or [s.ring for s in scene.streets]
+    # streets too: a walk along a street beyond the last building stays in the grid
+    rings = [b.rings[0] for b in scene.buildings] + [s.ring for s in scene.streets]
     if not rings:
         raise InputError(f"scene {scene.name!r} has no buildings or streets: give a bbox")
     pts = np.concatenate(rings)

@@ -1,4 +1,9 @@
-"""A top view of a baked scene: cells coloured by PVS size over the footprints."""
+"""A top view of a baked scene: the streets, the cells coloured by PVS size, the buildings, the walks.
+
+What a user looks at to see what a street network became: the street pieces
+(grey, crossroads darker), over them the view cells coloured by PVS size with thin
+outlines, the building footprints on top, and the recorded path ``SE``.
+"""
 
 from __future__ import annotations
 
@@ -23,19 +28,40 @@ def draw_map(reader: SceneReader, path: str | os.PathLike[str], *, dpi: int = 13
     cells = list(reader.cells())
     fig = Figure(figsize=(9, 8), dpi=dpi)
     ax = fig.add_subplot(1, 1, 1)
-    sizes = np.array([len(c.pvs) for c in cells], dtype=float)
-    coll = PatchCollection(
-        [MplPolygon(c.boundary, closed=True) for c in cells], cmap="viridis", edgecolor="white", linewidth=0.2
-    )
-    coll.set_array(sizes)
-    ax.add_collection(coll)
-    fig.colorbar(coll, ax=ax, label="PVS size (objects)", shrink=0.8)
     buildings = []
+    streets, street_colours = [], []
     infos = reader.object_info(int(i) for i in reader.object_ids())
     for oid, info in infos.items():
         if info.kind == "building":
             buildings.append(MplPolygon(reader.building(oid).rings[0], closed=True))
+        else:
+            piece = reader.street(oid)
+            streets.append(MplPolygon(piece.ring, closed=True))
+            street_colours.append({"crossroad": "#a9a9a9", "square": "#cfd8c4"}.get(piece.kind, "#d4d4d4"))
+    # the streets first, a little wider than their cells where footprints clipped them
+    ax.add_collection(
+        PatchCollection(streets, facecolor=street_colours, edgecolor="#8c8c8c", linewidth=0.3)
+    )
+    sizes = np.array([len(c.pvs) for c in cells], dtype=float)
+    thin = 0.15 if len(cells) > 1500 else 0.3
+    coll = PatchCollection(
+        [MplPolygon(c.boundary, closed=True) for c in cells],
+        cmap="viridis",
+        edgecolor="#202020",
+        linewidth=thin,
+        alpha=0.9,
+    )
+    coll.set_array(sizes)
+    ax.add_collection(coll)
+    fig.colorbar(coll, ax=ax, label="PVS size (objects)", shrink=0.8)
     ax.add_collection(PatchCollection(buildings, facecolor="#9a8f85", edgecolor="#5b524a", linewidth=0.2))
+    if "SE" in reader.path_names():
+        from walkstream.shared.paths import RecordedPath
+
+        se = RecordedPath.from_msgpack(reader.path_blob("SE"), "SE")
+        xy = np.asarray(se.xyz)
+        ax.plot(xy[:, 0], xy[:, 1], color="#d62728", linewidth=0.8, label="path SE")
+        ax.legend(loc="upper right", fontsize=7)
     for vp in reader.viewpoints():
         ax.annotate("", xy=(vp.x + 25 * np.cos(vp.yaw), vp.y + 25 * np.sin(vp.yaw)), xytext=(vp.x, vp.y),
                     arrowprops={"arrowstyle": "->", "color": "red", "lw": 1.5})

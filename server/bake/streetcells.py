@@ -345,4 +345,28 @@ def _cut(ring: F64, u: F64, max_length: float) -> list[F64]:
         ring_k = _clean_ring(refined[inside])
         if len(ring_k) >= 3:
             out.append(ring_k)
+    whole = shapely.Polygon(ring)
+    total = sum(signed_area(r) for r in out)
+    if abs(total - whole.area) > 1e-6 * max(whole.area, 1.0) or any(
+        shapely.difference(shapely.Polygon(r), whole).area > 1e-6 for r in out
+    ):
+        # a nearly degenerate (needle-thin) ring: clip it by each slab instead
+        return _cut_by_strips(whole, u, cuts, tmin, tmax)
+    return out
+
+
+def _cut_by_strips(whole: shapely.Polygon, u: F64, cuts: F64, tmin: float, tmax: float) -> list[F64]:
+    """The slabs of :func:`_cut` by polygon clipping (for rings too thin to walk)."""
+    v = np.array([-u[1], u[0]])
+    c = np.asarray(whole.exterior.coords)[:-1]
+    s = c @ v
+    lo_v, hi_v = float(s.min()) - 1.0, float(s.max()) + 1.0
+    edges = np.concatenate([[tmin - 1.0], cuts, [tmax + 1.0]])
+    out = []
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        strip = shapely.Polygon([a * u + lo_v * v, b * u + lo_v * v, b * u + hi_v * v, a * u + hi_v * v])
+        for part in _polygon_parts(shapely.intersection(whole, strip)):
+            ring = _clean_ring(np.asarray(part.exterior.coords))
+            if len(ring) >= 3:
+                out.append(ring)
     return out

@@ -143,6 +143,13 @@ def street_network(
         a square and a street area overlap in the input), the number of junction
         nodes and clusters, of connected parts, and the lines skipped with why.
     """
+    # GEOS sets floating-point flags on degenerate input (numpy would warn): the
+    # results are checked, not the flags
+    with np.errstate(all="ignore"):
+        return _street_network(lines, areas, close_gap)
+
+
+def _street_network(lines: Sequence[NetLine], areas: Sequence[NetArea], close_gap: float) -> Network:
     net = Network()
     edges, widths, owners = _noded_edges(lines, net)
     square_geoms = _area_polygons(areas, net)

@@ -1,0 +1,448 @@
+"""Real cities: OpenStreetMap and GeoJSON street networks, street cells on them, no traceback.
+
+Small networks are made here (junctions, a roundabout, a bridge, a courtyard); the
+three real extracts of ../shared/data/osm are read as they are.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyproj
+import pytest
+import shapely
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from walkstream.cli import main
+from walkstream.server.bake.navgraph import CellGraph
+from walkstream.server.bake.streetcells import street_cells
+from walkstream.server.bake.viewcell import ViewCell, cell_polygons
+from walkstream.server.paths.importline import import_linestring
+from walkstream.server.sources.clip import clip_scene
+from walkstream.server.sources.geojson import load_geojson_dict
+from walkstream.server.sources.network import NetLine, street_network
+from walkstream.server.sources.osm import load_osm
+from walkstream.server.sources.read import read_source
+from walkstream.server.sources.scene import SourceScene
+from walkstream.shared.errors import InputError, RouteError, SourceError, WalkstreamError
+from walkstream.shared.records import BuildingParams, StreetParams
+
+OSM = Path(__file__).resolve().parents[2] / "shared" / "data" / "osm"
+UTM = "EPSG:32633"
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def line(coords: list[list[float]], fid: str, **props: Any) -> dict[str, Any]:
+    return {"type": "Feature", "id": fid, "properties": props,
+            "geometry": {"type": "LineString", "coordinates": coords}}  # fmt: skip
+
+
+def poly(rings: list[list[list[float]]], fid: str, **props: Any) -> dict[str, Any]:
+    return {"type": "Feature", "id": fid, "properties": props,
+            "geometry": {"type": "Polygon", "coordinates": rings}}  # fmt: skip
+
+
+def box(x0: float, y0: float, x1: float, y1: float) -> list[list[float]]:
+    return [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
+
+
+def fc(*features: dict[str, Any], crs: str | None = UTM) -> dict[str, Any]:
+    obj: dict[str, Any] = {"type": "FeatureCollection", "features": list(features)}
+    if crs:
+        obj["crs"] = {"type": "name", "properties": {"name": crs}}
+    return obj
+
+
+def assert_cells_ok(cells: list[ViewCell], scene: SourceScene) -> None:
+    """Convex, disjoint, outside every footprint (passages aside), symmetric neighbours."""
+    polys = cell_polygons(cells)
+    for c, p in zip(cells, polys, strict=True):
+        assert p.is_valid and abs(p.convex_hull.area - p.area) <= 1e-6 * max(p.area, 1.0), c.id
+        for n in c.neighbours:
+            assert c.id in cells[n].neighbours
+    i, j = shapely.STRtree(polys).query(polys, predicate="intersects")
+    keep = i < j
+    assert shapely.area(shapely.intersection(polys[i[keep]], polys[j[keep]])).max(initial=0) < 1e-6
+    fps = [shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings]
+    passages = shapely.union_all(
+        [shapely.Polygon(s.ring) for s in scene.streets if s.id in scene.passages]
+    )
+    if fps:
+        inside = shapely.area(shapely.intersection(shapely.union_all(polys), shapely.union_all(fps)))
+        allowed = shapely.area(shapely.intersection(passages, shapely.union_all(fps)))
+        assert inside <= allowed + 1e-3
+
+
+def crossroads(scene: SourceScene) -> list[StreetParams]:
+    return [s for s in scene.streets if s.kind == "crossroad"]
+
+
+def at(scene: SourceScene, x: float, y: float) -> tuple[float, float]:
+    """Local coordinates of a point given in the source's CRS."""
+    return x - scene.origin[0], y - scene.origin[1]
+
+
+def contains(scene: SourceScene, s: StreetParams, x: float, y: float) -> bool:
+    return bool(shapely.Polygon(s.ring).covers(shapely.Point(*at(scene, x, y))))
+
+
+# --------------------------------------------------------------------------- networks
+
+
+def test_t_junction_five_way_junction_and_dead_end() -> None:
+    scene = load_geojson_dict(
+        fc(
+            line([[0, 0], [200, 0]], "main", highway="residential"),
+            line([[100, 0], [100, 80]], "side", highway="residential"),  # T at (100, 0)
+            line([[-100, 0], [0, 0]], "w", highway="residential"),  # 5-way at (0, 0)
+            line([[0, 0], [0, 80]], "n", highway="residential"),
+            line([[0, 0], [0, -80]], "s", highway="residential"),
+            line([[0, 0], [-60, -60]], "sw", highway="footway"),
+            line([[150, 0], [150, -50]], "dead", highway="service"),  # a T and a dead end
+        )
+    )
+    cross = crossroads(scene)
+    assert len(cross) == 3
+    five = [c for c in cross if contains(scene, c, 0, 0)]
+    assert len(five) == 1
+    assert any(contains(scene, c, 100, 0) for c in cross) and any(contains(scene, c, 150, 0) for c in cross)
+    # the dead end is a street piece, not a junction
+    assert not any(contains(scene, c, 150, -50) for c in cross)
+    cells = street_cells(scene, max_length=30.0)
+    assert_cells_ok(cells, scene)
+    g = CellGraph(cells)
+    assert len(g.components(np.ones(len(g), bool))) == 1
+    # five streets leave the 5-way junction: its cells touch five different street pieces
+    o = at(scene, 0, 0)
+    five_cells = [c for c in cells if c.kind == "crossroad" and shapely.Polygon(c.polygon).distance(shapely.Point(o)) < 5]
+    around = {n for c in five_cells for n in c.neighbours if cells[n].kind == "street"}
+    directions = {
+        round(math.atan2(cells[n].centroid[1] - o[1], cells[n].centroid[0] - o[0]) / (math.pi / 8))
+        for n in around
+    }
+    assert len(directions) >= 5
+
+
+def test_roundabout_keeps_its_island() -> None:
+    t = np.linspace(0, 2 * math.pi, 25)
+    ring = np.column_stack([20 * np.cos(t), 20 * np.sin(t)]).tolist()
+    ring[-1] = ring[0]
+    arms = [line([[20 * math.cos(a), 20 * math.sin(a)], [80 * math.cos(a), 80 * math.sin(a)]], f"arm{k}", highway="tertiary")
+            for k, a in enumerate(np.linspace(0, 2 * math.pi, 4, endpoint=False))]  # fmt: skip
+    # the arms meet the ring at ring vertices (0, 90, 180, 270 degrees are vertices of 24)
+    scene = load_geojson_dict(fc(line(ring, "rb", highway="tertiary", junction="roundabout"), *arms))
+    assert len(crossroads(scene)) == 4
+    cells = street_cells(scene)
+    assert_cells_ok(cells, scene)
+    locate = CellGraph(cells).locator
+    assert locate.locate(*at(scene, 0.0, 0.0)) is None  # the island is not street
+    assert locate.locate(*at(scene, 20.0 * math.cos(0.4), 20.0 * math.sin(0.4))) is not None
+
+
+def test_bridge_on_another_layer_is_left_out_and_not_noded() -> None:
+    scene = load_geojson_dict(
+        fc(
+            line([[-100, 0], [100, 0]], "road", highway="residential"),
+            line([[0, -100], [0, 100]], "bridge", highway="residential", bridge="yes", layer="1"),
+            line([[-100, 50], [100, 50]], "tunnel", highway="residential", tunnel="yes"),
+        )
+    )
+    assert crossroads(scene) == []
+    assert {s.source_id for s in scene.streets} == {"road"}
+    assert any("1 ways on layer 1" in n and "1 tunnels" in n for n in scene.notes)
+
+
+def test_pedestrian_area_with_a_hole_and_landuse() -> None:
+    outer, hole = box(0, 0, 60, 40), box(20, 10, 40, 30)[::-1]
+    scene = load_geojson_dict(
+        fc(
+            poly([outer, hole], "plaza", highway="pedestrian", area="yes"),
+            poly([box(100, 0, 200, 100)], "park", leisure="park"),
+            poly([box(300, 0, 400, 100)], "field", landuse="meadow"),
+            poly([box(70, 0, 80, 10)], "b", building="yes"),
+        )
+    )
+    assert len(scene.buildings) == 1  # the park and the field are not buildings
+    assert any("not buildings" in n for n in scene.notes)
+    squares = [s for s in scene.streets if s.kind == "square"]
+    assert len(squares) >= 2
+    area = sum(shapely.Polygon(s.ring).area for s in squares)
+    assert area == pytest.approx(60 * 40 - 20 * 20)
+    cells = street_cells(scene)
+    assert_cells_ok(cells, scene)
+    assert CellGraph(cells).locator.locate(*at(scene, 30.0, 20.0)) is None  # the hole stays a hole
+
+
+def test_footway_in_a_courtyard_and_streets_crossing_footprints() -> None:
+    block = [box(0, 0, 100, 100), box(30, 30, 70, 70)[::-1]]
+    scene = load_geojson_dict(
+        fc(
+            poly(block, "block", building="apartments"),
+            line([[35, 50], [65, 50]], "yard", highway="footway"),
+            line([[-50, -3], [150, -3]], "street", highway="residential"),  # overlaps the block
+            line([[-20, -3], [-20, 120]], "other", highway="residential"),
+        )
+    )
+    assert scene.buildings[0].floors == 5  # apartments without levels: the type default
+    cells = street_cells(scene)
+    assert_cells_ok(cells, scene)
+    g = CellGraph(cells)
+    assert len(g.components(np.ones(len(g), bool))) == 2
+    with pytest.raises(RouteError, match="not connected"):
+        g.plan(at(scene, 50.0, 50.0), at(scene, -20.0, 60.0))
+
+
+def test_parallel_sidewalk_merges_into_the_road() -> None:
+    scene = load_geojson_dict(
+        fc(
+            line([[0, 0], [200, 0]], "road", highway="secondary"),  # 8 m wide
+            line([[0, 6], [200, 6]], "walk", highway="footway"),  # 2 m, a 1 m gap
+        )
+    )
+    (piece,) = [s for s in scene.streets]
+    assert piece.source_id == "road"
+    assert shapely.Polygon(piece.ring).covers(shapely.Point(at(scene, 100, 6.5)))
+
+
+def test_web_mercator_is_reprojected_and_lengths_come_out_right() -> None:
+    merc = pyproj.Transformer.from_crs("EPSG:4326", "EPSG:3857", always_xy=True)
+    lon0, lat0, lon1, lat1 = 24.93, 60.17, 24.95, 60.17
+    a, b = merc.transform(lon0, lat0), merc.transform(lon1, lat1)
+    true_m = pyproj.Geod(ellps="WGS84").inv(lon0, lat0, lon1, lat1)[2]
+    assert b[0] - a[0] == pytest.approx(true_m / math.cos(math.radians(lat0)), rel=0.01)
+    bx = [[a[0] + 200, a[1] + 20], [a[0] + 300, a[1] + 20], [a[0] + 300, a[1] + 80], [a[0] + 200, a[1] + 80]]
+    scene = load_geojson_dict(
+        fc(
+            {"type": "Feature", "id": "mp", "properties": {"building": "yes"},
+             "geometry": {"type": "MultiPolygon", "coordinates": [[bx + bx[:1]]]}},  # fmt: skip
+            line([list(a), list(b)], "street", highway="residential", width="6"),
+            crs="EPSG:3857",
+        )
+    )
+    assert scene.crs == "EPSG:32635"
+    (piece,) = scene.streets
+    length = float(np.ptp(np.asarray(piece.ring) @ np.array([1.0, 0.0]))) - 6.0  # less the round ends
+    assert length == pytest.approx(true_m, rel=0.002)
+    cells = street_cells(scene)  # used to end in a traceback from shapely.polygons
+    assert_cells_ok(cells, scene)
+
+
+def test_empty_network_and_bbox_outside(tmp_path: Path) -> None:
+    scene = load_geojson_dict(fc(poly([box(0, 0, 10, 10)], "b"), line([[0, 0], [1, 0]], "m", highway="motorway")))
+    assert scene.streets == ()
+    with pytest.raises(InputError, match="--cells grid"):
+        street_cells(scene)
+    with pytest.raises(InputError, match="no object of the scene lies inside"):
+        clip_scene(scene, (500.0, 500.0, 600.0, 600.0))
+
+
+def test_bbox_clips_objects_that_cross_it() -> None:
+    scene = load_geojson_dict(
+        fc(poly([box(0, 0, 40, 20)], "b"), line([[-100, -10], [100, -10]], "s", highway="residential"))
+    )
+    x0 = float(scene.buildings[0].rings[0][:, 0].min())
+    clipped = clip_scene(scene, (x0 + 10, -100.0, 1000.0, 100.0))
+    (b,) = clipped.buildings
+    assert shapely.Polygon(b.rings[0]).area == pytest.approx(30 * 20)
+    assert all(np.asarray(s.ring)[:, 0].min() >= x0 + 10 - 1e-9 for s in clipped.streets)
+
+
+# --------------------------------------------------------------------------- property test
+
+_coord = st.floats(-60, 60, allow_nan=False, width=32)
+_way = st.lists(st.tuples(_coord, _coord), min_size=1, max_size=5)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
+@given(
+    ways=st.lists(_way, min_size=1, max_size=6),
+    widths=st.lists(st.sampled_from([2.0, 4.0, 7.0]), min_size=6, max_size=6),
+    offset=st.sampled_from([0.0, 612_345.678, 5_000_000.0]),
+    duplicate=st.booleans(),
+    wall=st.booleans(),
+)
+def test_cells_of_random_networks(
+    ways: list[list[tuple[float, float]]], widths: list[float], offset: float, duplicate: bool, wall: bool
+) -> None:
+    """Random, perturbed networks: valid cells covering the street space, or our own error."""
+    lines = [NetLine(f"w{k}", np.asarray(w, np.float64) + offset, widths[k]) for k, w in enumerate(ways)]
+    if duplicate:  # a duplicated way and a repeated node
+        w = np.asarray(ways[0], np.float64) + offset
+        lines.append(NetLine("dup", np.vstack([w, w[-1:]]), widths[0]))
+    ring = np.array([[0, 0], [20, 0], [20, 15], [0, 15]], np.float64) + offset
+    buildings = (BuildingParams(id=0, rings=(ring,), neighbour_heights=(np.zeros(4),), floors=2, floor_height=3.0),)
+    if wall:  # a way along the building's edge
+        lines.append(NetLine("wall", ring[:2].copy(), 3.0))
+    try:
+        net = street_network(lines)
+        streets = tuple(
+            StreetParams(id=1 + k, kind=p.kind, ring=p.ring, width=p.width, source_id=p.source_id)
+            for k, p in enumerate(net.pieces)
+        )
+        scene = SourceScene("h", UTM, (0.0, 0.0), buildings, streets)
+        cells = street_cells(scene, max_length=25.0)
+    except WalkstreamError:
+        return
+    assert_cells_ok(cells, scene)
+    space = shapely.difference(
+        shapely.union_all([shapely.Polygon(s.ring) for s in streets]), shapely.Polygon(ring)
+    )
+    covered = shapely.union_all(cell_polygons(cells))
+    assert shapely.symmetric_difference(covered, space).area <= 0.01 * space.area + 2.0
+
+
+# --------------------------------------------------------------------------- OpenStreetMap
+
+
+def _osm(tmp_path: Path) -> Path:
+    """A tiny OSM XML town near Kouvola: buildings, streets, a passage, broken ways."""
+    lat0, lon0 = 60.53, 26.95
+    nodes: dict[int, tuple[float, float]] = {}
+
+    def node(nid: int, x: float, y: float) -> int:
+        nodes[nid] = (lat0 + y / 111_320.0, lon0 + x / (111_320.0 * math.cos(math.radians(lat0))))
+        return nid
+
+    ways = []
+
+    def way(wid: int, refs: list[int], **tags: str) -> None:
+        ways.append((wid, refs, tags))
+
+    for k, (x, y) in enumerate([(0, 0), (20, 0), (20, 15), (0, 15)]):
+        node(1 + k, x, y)
+    way(1, [1, 2, 3, 4, 1], building="house")
+    for k, (x, y) in enumerate([(40, 0), (60, 0), (60, 15), (40, 15)]):
+        node(11 + k, x, y)
+    way(2, [11, 12, 13, 14, 11], building="apartments", **{"building:levels": "3", "roof:levels": "1"})
+    for k, (x, y) in enumerate([(80, 0), (95, 0), (95, 15), (80, 15)]):
+        node(21 + k, x, y)
+    way(3, [21, 22, 23, 24, 21], building="yes", height="12")
+    way(4, [21, 22, 999, 21], building="garage")  # a node missing from the extract
+    node(31, -50, -10), node(32, 30, -10), node(33, 120, -10), node(34, 30, -60)
+    way(10, [31, 32, 33], highway="residential", name="Main")
+    way(11, [32, 34], highway="footway")
+    node(35, 10, -10), node(36, 10, 25), node(37, 10, 40)
+    way(12, [35, 36, 37], highway="footway", tunnel="building_passage")
+    way(13, [33, 998, 997], highway="service")  # cut at the border: one located node left
+    node(41, 120, 60), node(42, 150, 60)
+    way(14, [33, 41, 996, 42], highway="residential")  # two located stretches
+    node(51, -40, -80), node(52, 130, -80)
+    way(15, [51, 52], highway="motorway")
+    for k, (x, y) in enumerate([(-40, 20), (-20, 20), (-20, 40), (-40, 40)]):
+        node(61 + k, x, y)
+    way(16, [61, 62, 63, 64, 61], landuse="grass")
+    text = ['<?xml version="1.0" encoding="UTF-8"?>', '<osm version="0.6" generator="test">']
+    text += [f'  <node id="{i}" version="1" lat="{la:.8f}" lon="{lo:.8f}"/>' for i, (la, lo) in sorted(nodes.items())]
+    for wid, refs, tags in ways:
+        text.append(f'  <way id="{wid}" version="1">')
+        text += [f'    <nd ref="{r}"/>' for r in refs]
+        text += [f'    <tag k="{k}" v="{v}"/>' for k, v in tags.items()]
+        text.append("  </way>")
+    text.append("</osm>")
+    p = tmp_path / "town.osm"
+    p.write_text("\n".join(text), encoding="utf-8")
+    return p
+
+
+def test_osm_xml_buildings_streets_passages_and_cut_ways(tmp_path: Path) -> None:
+    scene = read_source(_osm(tmp_path), network="walk")
+    assert scene.crs == "EPSG:32635" and scene.name == "town"
+    floors = {b.source_id: b.floors for b in scene.buildings}
+    assert floors == {"way/1": 2, "way/2": 4, "way/3": 4}  # house default, 3 + 1 roof, 12 m
+    issues = {i.feature_id: i for i in scene.issues}
+    assert issues["way/4"].action == "skipped" and "missing" in issues["way/4"].problem
+    assert issues["way/13"].action == "skipped"
+    assert issues["way/14"].action == "repaired"
+    assert any(s.source_id.startswith("way/14") for s in scene.streets)
+    assert not any(s.source_id.startswith("way/15") for s in scene.streets)  # motorway: not walk
+    assert any("1 highway ways cut" in n or "highway ways cut" in n for n in scene.notes)
+    assert len(scene.passages) == 1
+    cells = street_cells(scene)
+    assert_cells_ok(cells, scene)
+    house = shapely.Polygon(scene.buildings[0].rings[0])
+    assert shapely.area(shapely.intersection(shapely.union_all(cell_polygons(cells)), house)) > 10
+    drive = read_source(_osm(tmp_path), network="drive")
+    assert any(s.source_id.startswith("way/15") for s in drive.streets)
+    assert not drive.passages
+
+
+def test_gpx_track_is_imported(tmp_path: Path) -> None:
+    scene = read_source(_osm(tmp_path))
+    cells = street_cells(scene)
+    lat0, lon0 = 60.53, 26.95
+    pts = [(lat0 - 10 / 111_320.0, lon0 + x / (111_320.0 * math.cos(math.radians(lat0)))) for x in (-40, 0, 60, 110)]
+    gpx = tmp_path / "walk.gpx"
+    gpx.write_text(
+        '<?xml version="1.0"?><gpx version="1.1" creator="test" xmlns="http://www.topografix.com/GPX/1/1">'
+        "<trk><trkseg>" + "".join(f'<trkpt lat="{la}" lon="{lo}"/>' for la, lo in pts) + "</trkseg></trk></gpx>",
+        encoding="utf-8",
+    )
+    path, inside = import_linestring(gpx, scene.crs, scene.origin, 5.0, "gpx", cells=cells)
+    assert path.length_m() == pytest.approx(150.0, rel=0.01)
+    assert inside is not None and inside > 140.0
+    bad = tmp_path / "bad.gpx"
+    bad.write_text("<gpx><trk>", encoding="utf-8")
+    with pytest.raises(SourceError, match="bad.gpx: not GPX"):
+        import_linestring(bad, scene.crs, scene.origin, 5.0, "gpx")
+
+
+def test_bad_sources_are_one_line_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    junk = tmp_path / "junk.osm"
+    junk.write_text("<osm><node id='1' lat='x'", encoding="utf-8")
+    with pytest.raises(SourceError, match="junk.osm"):
+        load_osm(junk)
+    with pytest.raises(SourceError, match="unknown source format"):
+        read_source(tmp_path / "x.shp")
+    for bad in (junk, tmp_path / "none.osm.pbf"):
+        assert main(["bake", str(bad), "-o", str(tmp_path / "x.db")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "Traceback" not in err and bad.name in err
+
+
+def test_the_three_extracts() -> None:
+    kv = load_osm(OSM / "kouvola.osm.pbf")
+    assert 2100 < len(kv.buildings) <= 2219
+    assert any("highway ways cut" in n for n in kv.notes)
+    assert sum(i.feature_id.startswith("way/") and i.action == "skipped" for i in kv.issues) >= 40
+    village = load_osm(OSM / "village-10.068_48.135.osm")
+    assert any(i.feature_id == "relation/318560" for i in village.issues)
+    oak = load_osm(OSM / "west-oakland.osm")
+    assert len(oak.buildings) == 23 and oak.crs == "EPSG:32610"
+    cells = street_cells(oak)
+    assert_cells_ok(cells, oak)
+    box_ll = (-122.3026, 37.8061, -122.2982, 37.8092)  # its <bounds>
+    clipped = clip_scene(oak, box_ll, "lonlat")
+    assert 0 < len(clipped.streets) < len(oak.streets)
+
+
+def test_bake_serve_record_and_replay_a_real_city(tmp_path: Path, gl: object) -> None:
+    """The traceback case end to end: EPSG:3857 MultiPolygons and highways, baked with street cells."""
+    merc = pyproj.Transformer.from_crs("EPSG:4326", "EPSG:3857", always_xy=True)
+    x0, y0 = merc.transform(26.95, 60.53)
+    feats = []
+    for k in range(4):
+        bx = box(x0 + 60 * k + 5, y0 + 8, x0 + 60 * k + 45, y0 + 50)
+        feats.append({"type": "Feature", "id": f"b{k}", "properties": {"building": "house"},
+                      "geometry": {"type": "MultiPolygon", "coordinates": [[bx]]}})  # fmt: skip
+    feats.append(line([[x0 - 20, y0], [x0 + 260, y0]], "main", highway="residential"))
+    feats.append(line([[x0 + 50, y0], [x0 + 50, y0 + 120]], "side", highway="residential"))
+    feats.append(line([[x0 + 170, y0 - 60], [x0 + 170, y0 + 120]], "cross", highway="tertiary"))
+    src = tmp_path / "city.geojson"
+    import json
+
+    src.write_text(json.dumps(fc(*feats, crs="EPSG:3857")), encoding="utf-8")
+    db = tmp_path / "city.db"
+    assert main(["bake", str(src), "-o", str(db), "--resolution", "16", "--cell-size", "30"]) == 0
+    assert main(["path", "record", str(db), "mine", "--from=-5,0", "--to=100,0", "--speed", "5"]) == 0
+    png = tmp_path / "map.png"
+    assert main(["inspect", str(db), "--map", str(png)]) == 0
+    assert png.stat().st_size > 10_000
+    rep = tmp_path / "rep"
+    assert main(["replay", str(db), "--path", "mine", "--duration", "10s", "--device", "pda", "--report", str(rep)]) == 0
+    assert (rep / "report.json").exists()
