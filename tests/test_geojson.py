@@ -11,7 +11,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from walkstream.server.sources.assemble import DEFAULT_STREET_WIDTH
 from walkstream.server.sources.geojson import load_geojson, load_geojson_dict
 from walkstream.server.sources.heights import default_floors, parse_length
 from walkstream.server.sources.scene import FeatureIssue, SourceScene
