@@ -362,7 +362,7 @@ class _Graph:
 
         Returns the polyline (oriented away from ``node``), its length and its last node.
         """
-        parts = []
+        parts: list[F64] = []
         length = 0.0
         seen = {edge}
         e, s = edge, side

@@ -154,6 +154,7 @@ class _Reader:
         import osmium
 
         fp = osmium.FileProcessor(str(path)).with_locations().with_areas()
+        obj: Any
         for obj in fp:
             if obj.is_way():
                 self._way(obj)
