@@ -243,7 +243,8 @@ def test_default_paths_are_deterministic_and_work_on_small_and_grid_scenes() -> 
     again = default_paths(cells, footprints=[b.rings[0] for b in scene.buildings])
     assert [p.to_msgpack() for p in again] == [p.to_msgpack() for p in defaults().values()]
     small = defaults(200.0)
-    assert set(small) == {"SE", "SM", "drive"} and small["SE"].duration >= 180
+    # a 200 m city is too small for 200 s without repeating: SE is its longest route
+    assert set(small) == {"SE", "SM", "drive"} and 40 <= small["SE"].duration < 180
     grid = defaults(400.0, "grid")
     assert set(grid) == {"SE", "SM", "drive"}
     _, gcells = city(400.0, 1, "grid")
@@ -605,4 +606,4 @@ def test_a_resumed_bake_ends_with_the_default_paths(tmp_path: Path, gl: object) 
         again = default_paths(r.cells())
     assert stored == [p.to_msgpack() for p in again]
     se = RecordedPath.from_msgpack(stored[0])
-    assert se.duration >= 180.0 and len(stored[0]) < 2048
+    assert se.duration > 30.0 and len(stored[0]) < 2048  # a 150 m city: its longest route
