@@ -52,8 +52,6 @@ _VERTEX_EPS = 1e-9
 _PRIORITY = {"crossroad": 0, "square": 1, "street": 2}
 
 
-
-
 # --------------------------------------------------------------------------- public
 
 
@@ -116,35 +114,7 @@ def street_cells(
                     v = np.array([-u[1], u[0]])
                     parts.extend((kind, p) for p in _cut(piece, v, max_length))
     parts = [(k, p) for k, p in parts if signed_area(p) >= _SLIVER_AREA]
-    return _finish(_without_overlaps(parts), zmin, zmax)
-
-
-def _without_overlaps(parts: list[tuple[str, F64]]) -> list[tuple[str, F64]]:
-    """A safety net: a part overlapping an earlier one loses the overlap (re-decomposed).
-
-    The steps above make disjoint parts; rounding on needle-thin input can still leave
-    an overlap, and cells must be disjoint for the locator and the router.
-    """
-    if len(parts) < 2:
-        return parts
-    polys = np.array([shapely.Polygon(p) for _, p in parts], dtype=object)
-    i, j = shapely.STRtree(polys).query(polys, predicate="intersects")
-    keep = i < j
-    i, j = i[keep], j[keep]
-    if not len(i):
-        return parts
-    over = shapely.area(shapely.intersection(polys[i], polys[j])) > _OVERLAP_EPS
-    losers = sorted(set(j[over].tolist()))
-    if not losers:
-        return parts
-    out = [parts[k] for k in range(len(parts)) if k not in set(losers)]
-    for jj in losers:
-        rest = shapely.difference(polys[jj], shapely.union_all(polys[i[over & (j == jj)]]))
-        for g in _polygon_parts(rest):
-            out.extend(
-                (parts[jj][0], r) for r in _convex_parts(g) if signed_area(r) >= _SLIVER_AREA
-            )
-    return out
+    return _finish(parts, zmin, zmax)
 
 
 def _clean_ring(ring: F64) -> F64:
