@@ -22,7 +22,7 @@ from walkstream.server.sources.jsonfile import read_json_file
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError, SourceError
 
-__all__ = ["read_linestring"]
+__all__ = ["line_to_scene", "read_linestring"]
 _MAX_GEOJSON_BYTES = 256 << 20
 
 
@@ -90,20 +90,58 @@ def read_linestring(
                 f"{label}: position {i} ({raw[i, 0]}, {raw[i, 1]}) is outside the lon/lat "
                 "range (projected data needs a 'crs' member)"
             )
+    return line_to_scene(raw, src_crs, crs, origin, label)
+
+
+def line_to_scene(
+    raw: F64,
+    src_crs: pyproj.CRS | None,
+    crs: str,
+    origin: Sequence[float],
+    label: str,
+    *,
+    point: str = "position",
+    line: str = "line",
+) -> F64:
+    """Project a read line into scene-local metres, repeated positions dropped.
+
+    Parameters
+    ----------
+    raw:
+        ``(n, 2) float64`` positions in ``src_crs`` (``None``: lon/lat).
+    crs, origin:
+        The scene's CRS (projected metres) and origin in it.
+    label:
+        The source named in errors (a file name).
+    point, line:
+        What the source calls a position and the line (GPX: point, track).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(m, 2) float64`` vertices, ``m >= 2``.
+
+    Raises
+    ------
+    InputError
+        If ``crs`` is unknown or not projected.
+    SourceError
+        If a position cannot be projected, or fewer than 2 distinct ones are left.
+    """
     try:
         dst = pyproj.CRS.from_user_input(crs)
     except pyproj.exceptions.CRSError as exc:
         raise InputError(f"scene CRS {crs!r} is not a known CRS") from exc
     if not dst.is_projected:
-        raise InputError(f"scene CRS {crs!r} is not projected: cannot place a line in metres")
+        raise InputError(f"scene CRS {crs!r} is not projected: cannot place a {line} in metres")
     xy = project(raw, src_crs, dst) - np.asarray(origin, dtype=np.float64)[:2]
     if not np.isfinite(xy).all():
         i = int(np.flatnonzero(~np.isfinite(xy).all(axis=1))[0])
-        raise SourceError(f"{label}: position {i} cannot be projected to {crs}")
+        raise SourceError(f"{label}: {point} {i} cannot be projected to {crs}")
     keep = np.concatenate([[True], np.hypot(*np.diff(xy, axis=0).T) > 1e-3])
     xy = xy[keep]
     if len(xy) < 2:
-        raise SourceError(f"{label}: the line has fewer than 2 distinct positions")
+        raise SourceError(f"{label}: the {line} has fewer than 2 distinct {point}s")
     return xy
 
 

@@ -12,11 +12,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-import pyproj
 
-from walkstream.server.sources.crs import outside_lonlat, project
+from walkstream.server.sources.crs import outside_lonlat
+from walkstream.server.sources.geojsonlines import line_to_scene
 from walkstream.shared.arrays import F64
-from walkstream.shared.errors import InputError, SourceError
+from walkstream.shared.errors import SourceError
 
 __all__ = ["read_gpx"]
 _MAX_GPX_BYTES = 256 << 20
@@ -76,16 +76,4 @@ def read_gpx(path: str | os.PathLike[str], crs: str, origin: Sequence[float]) ->
     if len(bad):
         i = int(bad[0])
         raise SourceError(f"{p}: point {i} ({raw[i, 0]}, {raw[i, 1]}) is not a lon/lat position")
-    try:
-        dst = pyproj.CRS.from_user_input(crs)
-    except pyproj.exceptions.CRSError as exc:
-        raise InputError(f"scene CRS {crs!r} is not a known CRS") from exc
-    xy = project(raw, None, dst) - np.asarray(origin, dtype=np.float64)[:2]
-    if not np.isfinite(xy).all():
-        i = int(np.flatnonzero(~np.isfinite(xy).all(axis=1))[0])
-        raise SourceError(f"{p}: point {i} cannot be projected to {crs}")
-    keep = np.concatenate([[True], np.hypot(*np.diff(xy, axis=0).T) > 1e-3])
-    xy = xy[keep]
-    if len(xy) < 2:
-        raise SourceError(f"{p}: the track has fewer than 2 distinct positions")
-    return xy
+    return line_to_scene(raw, None, crs, origin, str(p), point="point", line="track")
