@@ -411,6 +411,12 @@ def test_osm_xml_buildings_streets_passages_and_cut_ways(tmp_path: Path) -> None
     assert issues["way/4"].action == "skipped" and "missing" in issues["way/4"].problem
     assert issues["way/13"].action == "skipped"
     assert issues["way/14"].action == "repaired"
+    # its located stretch (nodes 33-41) is street space, merged into way/10's piece
+    # through node 33 (degree 2: no junction)
+    to = pyproj.Transformer.from_crs("EPSG:4326", scene.crs, always_xy=True)
+    lon, lat = 26.95 + 120.0 / (111_320.0 * math.cos(math.radians(60.53))), 60.53 + 25.0 / 111_320.0
+    mid = shapely.Point(np.subtract(to.transform(lon, lat), scene.origin))
+    assert any(shapely.Polygon(s.ring).contains(mid) for s in scene.streets)
     assert not any(s.source_id.startswith("way/15") for s in scene.streets)  # motorway: not walk
     assert any("1 highway ways cut" in n or "highway ways cut" in n for n in scene.notes)
     assert len(scene.passages) == 1
