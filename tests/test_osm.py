@@ -499,8 +499,9 @@ def test_bake_serve_record_and_replay_a_real_city(tmp_path: Path, gl: object) ->
 
     with SceneReader.open(db) as r:
         g = CellGraph(r.cells())
-    (a, b) = g.components(np.ones(len(g), bool))[0][:1] * 2
-    far = int(np.argmax(np.hypot(*(g.centroids - g.centroids[a]).T)))
+    part = np.asarray(g.components(np.ones(len(g), bool))[0])  # the largest connected part
+    a = int(part[0])
+    far = int(part[np.argmax(np.hypot(*(g.centroids[part] - g.centroids[a]).T))])
     start, end = g.centroids[a], g.centroids[far]
     assert main(["path", "record", str(db), "mine", f"--from={start[0]},{start[1]}",
                  f"--to={end[0]},{end[1]}", "--speed", "5"]) == 0  # fmt: skip
