@@ -18,7 +18,8 @@ from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
 from walkstream.server.bake.workers import _run_tasks
 from walkstream.server.sources.clip import clip_scene
-from walkstream.server.sources.geojson import load_geojson
+from walkstream.server.sources.interior import InteriorScene
+from walkstream.server.sources.read import read_source
 from walkstream.server.store import CellRow, ObjectRow, SceneReader, SceneWriter
 from walkstream.shared.buildings import default_grammar, default_grammar_text, predict_triangles
 from walkstream.shared.errors import InputError
@@ -49,7 +50,10 @@ def bake(
     log: Callable[[str], None] | None = None,
     max_cells: int | None = None,
 ) -> dict[str, Any]:
-    """Bake ``source`` (GeoJSON) into the scene database ``output``.
+    """Bake ``source`` (GeoJSON, an IFC model or an interior file) into the scene database ``output``.
+
+    The reader is chosen by the file's ending (:func:`~walkstream.server.sources.read.read_source`);
+    an interior goes to :func:`~walkstream.server.bake.interior.bake_interior`.
 
     Parameters
     ----------
@@ -85,7 +89,14 @@ def bake(
     say = log or (lambda _msg: None)
     t0 = time.perf_counter()
 
-    scene = load_geojson(src)
+    scene = read_source(src)
+    if isinstance(scene, InteriorScene):
+        from walkstream.server.bake.interior import bake_interior
+
+        return bake_interior(
+            scene, src, out, name=name, workers=workers, scheduler=scheduler, progress=progress,
+            log=log, import_seconds=time.perf_counter() - t0,
+        )
     if st.bbox is not None:
         scene = clip_scene(scene, st.bbox)
     cells = make_cells(
