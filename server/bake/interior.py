@@ -40,7 +40,7 @@ from walkstream.server.store import (
     StoreyInfo,
 )
 from walkstream.shared.arrays import F64
-from walkstream.shared.codec.cellmesh import encode_cell_mesh, position_error_bound, raw_bytes
+from walkstream.shared.codec.cellmesh import decode_cell_mesh, encode_cell_mesh, position_error_bound, raw_bytes
 from walkstream.shared.errors import InputError, RouteError
 
 __all__ = ["INTERIOR_FEATURES", "bake_interior"]
@@ -225,11 +225,14 @@ def bake_interior(
             blob = encode_cell_mesh(ps)
             nv = sum(len(p[2]) for p in ps)
             nt = sum(len(p[3]) for p in ps)
+            # the error as measured (decoded against what was encoded), not the bound
+            err = 0.0
             if ps:
-                allv = np.concatenate([p[2] for p in ps])
-                err = float(position_error_bound(np.ptp(allv, axis=0)).max())
-            else:
-                err = 0.0
+                back = decode_cell_mesh(blob, f"cell {c.id}")
+                err = max(float(np.abs(q.positions.astype(np.float64) - p[2]).max()) for q, p in zip(back.parts, ps, strict=True))
+                bound = float(position_error_bound(np.ptp(np.concatenate([p[2] for p in ps]), axis=0)).max())
+                if err > bound + 2.0**-23 * float(np.abs(np.concatenate([p[2] for p in ps])).max()):
+                    raise InputError(f"cell {c.id}: position error {err} above the stated bound {bound}")
             writer.add_contents(ContentsInfo(c.id, nt, nv, len(ps), len(blob), raw_bytes(nv, nt), err), blob)
         x, y, z = walk.xyz[0]
         writer.add_viewpoint("entrance", float(x), float(y), float(z), float(walk.yaw[0]), start)

@@ -1,4 +1,5 @@
-"""A plan of each storey of an interior: cells coloured by triangles, portals as thick lines."""
+"""Pictures of an interior: a plan of each storey (cells coloured by triangles, portals as
+thick lines, the tour), and the meshes of a storey cut away above eye height."""
 
 from __future__ import annotations
 
@@ -8,9 +9,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from walkstream.server.store import SceneReader
 from walkstream.shared.arrays import F64
+from walkstream.shared.errors import InputError
+from walkstream.shared.records import Mesh
 
-__all__ = ["PlanCell", "PlanPortal", "draw_storeys"]
+__all__ = ["PlanCell", "PlanPortal", "draw_storeys", "draw_interior_map", "storey_meshes"]
 
 _PORTAL_COLOURS = {
     "door": "#d62728",
@@ -76,13 +80,16 @@ def draw_storeys(
 
     storeys = sorted({c.storey for c in cells if c.storey >= 0})
     n = max(1, len(storeys))
-    cols = min(n, 3)
+    span = np.ptp(np.concatenate([c.outline for c in cells if c.storey >= 0]), axis=0) if cells else np.ones(2)
+    # long, narrow buildings: one storey per row, so each plan is readable
+    cols = 1 if span[1] < 0.6 * span[0] else min(n, 3)
     rows = (n + cols - 1) // cols
     inside = [c for c in cells if c.storey >= 0]
     pts = np.concatenate([c.outline for c in inside]) if inside else np.zeros((1, 2))
     lo, hi = pts.min(axis=0) - 1.0, pts.max(axis=0) + 1.0
     aspect = (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-6)
-    fig = Figure(figsize=(5.2 * cols, 5.2 * rows * min(max(aspect, 0.35), 2.0) + 0.8), dpi=dpi)
+    panel_w = 10.0 if cols == 1 else 5.2
+    fig = Figure(figsize=(panel_w * cols, panel_w * rows * min(max(aspect, 0.35), 2.0) + 0.8), dpi=dpi)
     tri = np.array([c.triangles for c in inside], dtype=float)
     norm = Normalize(vmin=0.0, vmax=max(1.0, float(tri.max()) if len(tri) else 1.0))
     cmap = colormaps["viridis"]
@@ -147,3 +154,62 @@ def draw_storeys(
     fig.savefig(os.fspath(path))
     return len(storeys)
 
+
+
+def draw_interior_map(reader: SceneReader, path: str | os.PathLike[str], *, walk: str | None = "tour") -> int:
+    """:func:`draw_storeys` of an interior scene database (with its ``walk`` drawn, if it has one)."""
+    from walkstream.shared.paths import RecordedPath
+
+    rooms = reader.rooms()
+    info = reader.contents_info()
+    cells = [
+        PlanCell(c.id, c.kind, rooms[c.id].name, rooms[c.id].storey, np.asarray(c.boundary),
+                 info[c.id].triangles if c.id in info else 0)
+        for c in reader.cells()
+    ]
+    portals = [PlanPortal(p.kind, np.asarray(p.polygon), p.a, p.b) for p in reader.portals()]
+    storeys = reader.storeys()
+    ranges = np.array([[s.zmin, s.zmax] for s in storeys]) if storeys else None
+    line = None
+    if walk is not None and walk in reader.path_names():
+        p = RecordedPath.from_msgpack(reader.path_blob(walk), f"{reader.path}: path {walk!r}")
+        line = np.asarray(p.sample(np.linspace(0.0, p.duration, max(2, int(p.duration * 4))))[0])
+    s = reader.summary()
+    title = (
+        f"{s['name']}: {s['cells_inside']} cells ({s['doorways']} doorways), {s['portals']} portals, "
+        f"{s['triangles']:,} triangles in cells; tour in pink"
+    )
+    return draw_storeys(cells, portals, [st.name for st in storeys], path, title=title, walk=line, ranges=ranges)
+
+
+def storey_meshes(reader: SceneReader, storey: int, cut: float = 1.4) -> list[Mesh]:
+    """The contents of one storey's cells cut off ``cut`` metres above its floor (a cut-away)."""
+    from walkstream.server.bake.roomgeom import clip_polygons, fan_triangles
+    from walkstream.shared.codec.cellmesh import decode_cell_mesh
+
+    rooms = reader.rooms()
+    storeys = reader.storeys()
+    if not 0 <= storey < len(storeys):
+        raise InputError(f"storey {storey}: the scene has storeys 0 to {len(storeys) - 1}")
+    z = storeys[storey].zmin + cut
+    plane = np.array([0.0, 0.0, 1.0, -z])
+    out: list[Mesh] = []
+    for cid, r in rooms.items():
+        if r.storey != storey:
+            continue
+        cm = decode_cell_mesh(reader.contents(cid), f"{reader.path}: cell {cid}")
+        for part in cm.parts:
+            tri = part.positions.astype(np.float64)[part.indices.astype(np.int64)]
+            if len(tri) == 0:
+                continue
+            poly, count = clip_polygons(tri, np.full(len(tri), 3, np.int64), plane)
+            keep = count >= 3
+            ft, _ = fan_triangles(poly[keep], count[keep])
+            if len(ft) == 0:
+                continue
+            pos = ft.reshape(-1, 3)
+            idx = np.arange(len(pos)).reshape(-1, 3)
+            n = np.repeat(np.cross(ft[:, 1] - ft[:, 0], ft[:, 2] - ft[:, 0]), 3, axis=0)
+            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+            out.append(Mesh(pos, n, idx, np.full(len(pos), part.material, np.uint8)))
+    return out

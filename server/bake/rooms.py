@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import shapely
@@ -93,10 +94,17 @@ class RoomCell:
     zmax: float
     planes: F64
 
-    @property
+    @cached_property
     def polygon(self) -> shapely.Polygon:
-        """The outline as a shapely polygon."""
+        """The outline as a shapely polygon (made once)."""
         return shapely.Polygon(self.outline)
+
+    def holds(self, xy: F64, z: float, tol: float = 1e-6) -> bool:
+        """Whether ``(x, y, z)`` is in the cell (its side planes and height range)."""
+        if not self.zmin - tol <= z < self.zmax or len(self.planes) < 3:
+            return False
+        side = self.planes[:-2]
+        return bool(np.all(side[:, 0] * xy[0] + side[:, 1] * xy[1] + side[:, 3] <= tol))
 
 
 @dataclass(frozen=True)
@@ -207,6 +215,7 @@ class _Builder:
         self.notes: list[str] = []
         self.sources: Counter[str] = Counter()
         self.linked: set[tuple[int, int]] = set()
+        self._unions: dict[int, shapely.Geometry] = {}
 
     # -- cells ---------------------------------------------------------------
 
@@ -225,15 +234,19 @@ class _Builder:
         self.linked.add((min(a, b), max(a, b)))
         return p
 
+    def _rooms_union(self, k: int) -> shapely.Geometry:
+        if k not in self._unions:
+            self._unions[k] = shapely.union_all([x.polygon for x in self.storey_cells(k, ("room",))])
+        return self._unions[k]
+
     def storey_cells(self, k: int, kinds: tuple[str, ...] = ("room", "doorway")) -> list[RoomCell]:
         return [c for c in self.cells if c.storey == k and c.kind in kinds]
 
     def locate(self, xy: F64, z: float, storey: int | None = None, among: list[RoomCell] | None = None) -> RoomCell | None:
-        pt = shapely.Point(xy)
         for c in among if among is not None else self.cells:
             if c.kind == "outside" or (storey is not None and c.storey != storey):
                 continue
-            if c.zmin - 1e-6 <= z < c.zmax and c.polygon.buffer(1e-6).covers(pt):
+            if c.holds(xy, z):
                 return c
         return None
 
@@ -372,8 +385,7 @@ class _Builder:
         c, u, n = op.centre[:2], op.along, op.normal
         w = 0.5 * op.width
         rect = shapely.Polygon([c - u * w - n * ta, c + u * w - n * ta, c + u * w + n * tb, c - u * w + n * tb])
-        rooms = shapely.union_all([x.polygon for x in self.storey_cells(op.storey, ("room",))])
-        hole = rect.difference(rooms)
+        hole = rect.difference(self._rooms_union(op.storey))
         rings = polygon_rings(hole, 0.005)
         lo, hi = self.ranges[op.storey]
         z0, z1 = max(op.zmin, lo), min(op.zmax, hi)

@@ -292,8 +292,10 @@ def load_interior_dict(doc: Any, name: str = "interior", label: str = "interior"
         half = 0.5 * rise
         d = math.copysign(1.0, y1 - y0)
         land = 1.0  # depth of the half landing
-        boxes_a, path_a = stair_boxes((x1, y0), (x1, y1), width, floor(k), half)
-        boxes_b, path_b = stair_boxes((x2, y1), (x2, y0), width, floor(k) + half, half)
+        # a balustrade on the outer side of each half-flight (they face each other inside)
+        outer = -1.0 if (x2 - x1) * (y1 - y0) < 0 else 1.0
+        boxes_a, path_a = stair_boxes((x1, y0), (x1, y1), width, floor(k), half, rails=(outer,))
+        boxes_b, path_b = stair_boxes((x2, y1), (x2, y0), width, floor(k) + half, half, rails=(outer,))
         ym = y1 + d * 0.5 * land
         landing = np.array([[0.5 * (x1 + x2), ym, abs(x2 - x1) + width, land, 0.0,
                              floor(k) + half - 0.2, floor(k) + half]])

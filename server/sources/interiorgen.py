@@ -76,6 +76,8 @@ class InteriorPlan:
     doors_per_segment: int = 2
     furniture: float = 1.0
     """Scales how much furniture a room gets (1: the default amount)."""
+    two_windows: float = 4.8
+    """Rooms wider than this (metres) get two windows, the others one."""
 
     def check(self) -> InteriorPlan:
         if not 1 <= self.storeys <= 60:
@@ -98,11 +100,11 @@ class InteriorPlan:
 
 PRESETS: dict[str, InteriorPlan] = {
     # the paper's model: 93 cells, 114 portals, 28,608 triangles (tuned with bench interiors)
-    "paper": InteriorPlan(storeys=3, length=34.0, width=15.0, seed=1, room_width=(4.2, 5.6),
-                          doors_per_segment=2, furniture=0.7),
+    "paper": InteriorPlan(storeys=3, length=26.5, width=15.0, seed=1, room_width=(4.2, 5.6),
+                          doors_per_segment=1, furniture=0.5, two_windows=99.0),
     # ten times the paper's cells
-    "paper10": InteriorPlan(storeys=10, length=100.0, width=15.0, seed=1, room_width=(4.2, 5.6),
-                            doors_per_segment=2, furniture=0.7),
+    "paper10": InteriorPlan(storeys=10, length=86.0, width=15.0, seed=1, room_width=(4.2, 5.6),
+                            doors_per_segment=1, furniture=0.5, two_windows=99.0),
 }
 """Named plans; ``walkstream generate interior --preset NAME``."""
 
@@ -190,7 +192,7 @@ def generate_interior(plan: InteriorPlan) -> dict[str, Any]:
                         "sill": 0.0, "head": _DOOR_H, "swing": -1 if side == "s" else 1}
                 (wall_s if side == "s" else wall_n).append(door)
                 door_xs.append((dx, side))
-                nwin = 2 if xb - xa > 4.8 else 1
+                nwin = 2 if xb - xa > p.two_windows else 1
                 for q in range(nwin):
                     wx = xa + (xb - xa) * (q + 1) / (nwin + 1)
                     win = {"id": f"w{k}.{n_room:02d}.{q}", "kind": "window", "offset": _r(wx + _TE),
@@ -293,7 +295,7 @@ def _furnish(
         free = xb - 0.7 if door_left else xa + 0.7
         if amount >= 0.5:
             put("shelf", free, y_cor - inward * 0.22, cor_yaw)
-        if rng.random() < amount:
+        if rng.random() < amount - 0.3:
             put("cabinet", free + (-1.0 if door_left else 1.0) * 1.0 if width > 4.5 else free,
                 y_cor - inward * 0.25 - inward * (0.5 if width <= 4.5 else 0.0), cor_yaw)
         if rng.random() < 0.3 * amount:
@@ -301,7 +303,7 @@ def _furnish(
     elif use == "meeting":
         cx, cy = 0.5 * (xa + xb), 0.5 * (ya + yb)
         put("table", cx, cy, 0.0)
-        seats = 4 if amount < 1 else 6
+        seats = 2 if amount < 0.6 else 4 if amount < 1 else 6
         for q in range(seats):
             a = 2 * math.pi * q / seats
             put("chair", cx + 0.95 * math.sin(a), cy - 0.95 * math.cos(a), a)

@@ -156,9 +156,9 @@ def wall_boxes(
 
 def _frame(
     centre: F64, along: F64, normal: F64, width: float, depth: float, z0: float, z1: float,
-    bar: float, sides: Sequence[float],
+    bar: float, sides: Sequence[float], head: bool = True,
 ) -> list[list[float]]:
-    """Boxes of a rectangular frame (two jambs and a head) in an opening's plane."""
+    """Boxes of a rectangular frame (two jambs and, with ``head``, a head) in an opening's plane."""
     yaw = math.atan2(along[1], along[0])
     rows = []
     for off_n in sides:
@@ -166,14 +166,15 @@ def _frame(
         for s in (-1.0, 1.0):
             jc = c + along * (s * (0.5 * width - 0.5 * bar))
             rows.append([jc[0], jc[1], bar, depth, yaw, z0, z1])
-        rows.append([c[0], c[1], width, depth, yaw, z1 - bar, z1])
+        if head:
+            rows.append([c[0], c[1], width, depth, yaw, z1 - bar, z1])
     return rows
 
 
 def door_boxes(
     centre: ArrayLike, normal: ArrayLike, width: float, thickness: float, z0: float, head: float
 ) -> tuple[F64, F64]:
-    """A door drawn open: frame lining, architraves on both faces, threshold, and the leaf.
+    """A door drawn open: frame lining, architrave jambs on both faces, and the leaf.
 
     The leaf is swung 90 degrees into the room on the ``normal`` side, standing
     beside the doorway, so it never hides it (the client and any ground truth draw
@@ -181,7 +182,7 @@ def door_boxes(
 
     Returns
     -------
-    frame : (k, 7) box rows (lining, architraves, threshold)
+    frame : (k, 7) box rows (lining, architraves)
     leaf : (1, 7) box row
     """
     c = np.asarray(centre, np.float64)[:2]
@@ -193,10 +194,9 @@ def door_boxes(
     for side in (-1.0, 1.0):
         rows += _frame(
             c, along, n, width + 2 * arch, 0.02, z0, head + arch, arch,
-            [side * (0.5 * thickness + 0.01)],
+            [side * (0.5 * thickness + 0.01)], head=False,
         )
     yaw = math.atan2(along[1], along[0])
-    rows.append([c[0], c[1], width - 0.08, thickness, yaw, z0, z0 + 0.015])  # threshold
     # the leaf: hinged at one jamb on the room side, opened at right angles to the wall
     hinge = c + along * (0.5 * width - 0.04) + n * (0.5 * thickness + 0.02)
     leaf_c = hinge + n * (0.5 * (width - 0.1)) + along * 0.03
@@ -233,23 +233,21 @@ def window_boxes(
 _FURNITURE: dict[str, tuple[tuple[float, float, float], list[tuple[float, ...]]]] = {
     "desk": ((1.6, 0.8, 0.75), [
         (0.0, 0.0, 1.6, 0.8, 0.72, 0.75),
-        (0.02, 0.02, 0.07, 0.07, 0.0, 0.72), (1.53, 0.02, 1.58, 0.07, 0.0, 0.72),
-        (0.02, 0.73, 0.07, 0.78, 0.0, 0.72), (1.53, 0.73, 1.58, 0.78, 0.0, 0.72),
-        (1.1, 0.05, 1.55, 0.75, 0.1, 0.68),  # drawer unit
-        (0.1, 0.74, 1.5, 0.76, 0.35, 0.7),  # modesty panel
+        (0.02, 0.05, 0.05, 0.75, 0.0, 0.72), (1.55, 0.05, 1.58, 0.75, 0.0, 0.72),  # side panels
+        (1.1, 0.05, 1.52, 0.75, 0.1, 0.68),  # drawer unit
+        (0.05, 0.74, 1.55, 0.76, 0.35, 0.7),  # modesty panel
     ]),
     "chair": ((0.5, 0.5, 0.9), [
         (0.0, 0.0, 0.5, 0.5, 0.42, 0.47),
         (0.0, 0.44, 0.5, 0.5, 0.47, 0.9),
-        (0.03, 0.03, 0.07, 0.07, 0.0, 0.42), (0.43, 0.03, 0.47, 0.07, 0.0, 0.42),
-        (0.03, 0.43, 0.07, 0.47, 0.0, 0.42), (0.43, 0.43, 0.47, 0.47, 0.0, 0.42),
+        (0.22, 0.22, 0.28, 0.28, 0.06, 0.42),  # post
+        (0.05, 0.05, 0.45, 0.45, 0.0, 0.06),  # base
     ]),
     "shelf": ((1.0, 0.4, 2.0), [
         (0.0, 0.0, 0.02, 0.4, 0.0, 2.0), (0.98, 0.0, 1.0, 0.4, 0.0, 2.0),
         (0.0, 0.38, 1.0, 0.4, 0.0, 2.0),
-        (0.02, 0.0, 0.98, 0.38, 0.0, 0.02), (0.02, 0.0, 0.98, 0.38, 0.5, 0.52),
-        (0.02, 0.0, 0.98, 0.38, 1.0, 1.02), (0.02, 0.0, 0.98, 0.38, 1.5, 1.52),
-        (0.0, 0.0, 1.0, 0.4, 1.98, 2.0),
+        (0.02, 0.0, 0.98, 0.38, 0.0, 0.02), (0.02, 0.0, 0.98, 0.38, 0.66, 0.68),
+        (0.02, 0.0, 0.98, 0.38, 1.32, 1.34), (0.0, 0.0, 1.0, 0.4, 1.98, 2.0),
     ]),
     "cabinet": ((0.8, 0.45, 1.1), [
         (0.0, 0.0, 0.8, 0.45, 0.05, 1.1), (0.02, 0.02, 0.78, 0.43, 0.0, 0.05),
@@ -296,14 +294,16 @@ def furniture_boxes(kind: str, at: ArrayLike, yaw: float, z0: float) -> F64:
 
 
 def stair_boxes(
-    start: ArrayLike, end: ArrayLike, width: float, z0: float, rise: float, steps: int = 0
+    start: ArrayLike, end: ArrayLike, width: float, z0: float, rise: float, steps: int = 0,
+    rails: Sequence[float] = (-1.0, 1.0),
 ) -> tuple[F64, F64]:
     """A straight flight from ``start`` (bottom) to ``end`` (top) climbing ``rise``.
 
     Returns
     -------
     boxes : (k, 7) box rows: one solid block per step (from the floor up to the
-        tread, so the flight is closed underneath) and a stringer on each side
+        tread, so the flight is closed underneath) and a balustrade on each side in
+        ``rails`` (-1: right of the climb, 1: left)
     path : (steps + 1, 3) the walking line: floor points from the bottom of the
         first step to the top of the last
     """
@@ -324,7 +324,7 @@ def stair_boxes(
     side = np.array([-u[1], u[0]])
     mid = 0.5 * (a + b)
     stringers = []
-    for s in (-1.0, 1.0):
+    for s in rails:
         c = mid + side * s * (0.5 * width + 0.03)
         stringers.append([c[0], c[1], run, 0.06, yaw, z0, z0 + rise + 0.9])  # wall-side rail
     # walking line: on each tread, at the middle of the flight's width
