@@ -65,7 +65,7 @@ async def walk_interior(
     builder = FrameLogBuilder()
     snapshots: list[Path] = []
     spikes: list[bool] = []
-    meshes: dict[Hashable, Mesh] = {}
+    meshes: dict[tuple[int, int], Mesh] = {}
     t_walk0 = clock.now()
     frame = 0
     last_progress = -math.inf
@@ -101,7 +101,7 @@ async def walk_interior(
                 triangles += part.triangles
                 parts += 1
                 if renderer is not None:
-                    key = (cid, k)
+                    key: tuple[int, int] = (cid, k)
                     if not renderer.has(key):
                         m = meshes.get(key)
                         if m is None:
@@ -138,7 +138,7 @@ async def walk_interior(
         frame += 1
         if renderer is not None and frame % 25 == 0:
             # a flushed cell's GPU buffers go with it
-            for key in [k for k in meshes if streamer.mesh(k[0]) is None]:  # type: ignore[index]
+            for key in [k for k in meshes if streamer.mesh(k[0]) is None]:
                 if renderer.has(key):
                     renderer.forget(key)
                 del meshes[key]

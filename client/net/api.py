@@ -29,22 +29,22 @@ import httpx
 import msgpack
 
 from walkstream.client.clock import Clock
-from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
+from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.wire import (
     MSGPACK,
     CellRecord,
     Manifest,
     ObjectFrame,
+    RoomRecord,
+    Topology,
     decode_cell,
     decode_frame,
     decode_locate,
     decode_manifest,
-    decode_scene_list,
-    Topology,
-    RoomRecord,
     decode_room,
+    decode_scene_list,
     decode_topology,
 )
 

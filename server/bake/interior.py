@@ -40,7 +40,12 @@ from walkstream.server.store import (
     StoreyInfo,
 )
 from walkstream.shared.arrays import F64
-from walkstream.shared.codec.cellmesh import decode_cell_mesh, encode_cell_mesh, position_error_bound, raw_bytes
+from walkstream.shared.codec.cellmesh import (
+    decode_cell_mesh,
+    encode_cell_mesh,
+    position_error_bound,
+    raw_bytes,
+)
 from walkstream.shared.errors import InputError, RouteError
 
 __all__ = ["INTERIOR_FEATURES", "bake_interior"]

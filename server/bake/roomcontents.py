@@ -125,7 +125,7 @@ def contents_task(
     lo = soup.min(axis=1)
     hi = soup.max(axis=1)
     tree = shapely.STRtree(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
-    out = []
+    out: list[tuple[int, list[Part], NDArray[np.int64]]] = []
     for cid, planes in cells:
         g = grown_planes(planes, reach)
         box = _planes_box(planes, reach)

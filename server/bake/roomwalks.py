@@ -101,10 +101,10 @@ def tour(graph: RoomGraph, start: int, speed_kmh: float = INDOOR_SPEED_KMH) -> t
         (names of up to 10 rooms the walk cannot reach) and ``seconds``.
     """
     room_cells: dict[str, list[int]] = {}
-    for c in graph.cells.values():
-        if c.room is not None and c.kind == "room":
-            room_cells.setdefault(c.room, []).append(c.id)
-    names = {c.room: c.name for c in graph.cells.values() if c.room is not None}
+    for cell in graph.cells.values():
+        if cell.room is not None and cell.kind == "room":
+            room_cells.setdefault(cell.room, []).append(cell.id)
+    names = {cell.room: cell.name for cell in graph.cells.values() if cell.room is not None}
     cur = graph.centre[start]
     dist0, _ = graph.distances(cur)
     reachable = {r for r, cs in room_cells.items() if any(graph.centre.get(c) in dist0 for c in cs)}
@@ -119,8 +119,8 @@ def tour(graph: RoomGraph, start: int, speed_kmh: float = INDOOR_SPEED_KMH) -> t
         dist, prev = graph.distances(cur)
         best: tuple[float, int] | None = None
         for r in reachable - visited:
-            for c in room_cells[r]:
-                n = graph.centre.get(c)
+            for cid in room_cells[r]:
+                n = graph.centre.get(cid)
                 if n is not None and n in dist and (best is None or dist[n] < best[0]):
                     best = (dist[n], n)
         if best is None:
@@ -138,10 +138,11 @@ def tour(graph: RoomGraph, start: int, speed_kmh: float = INDOOR_SPEED_KMH) -> t
     floor = np.concatenate(parts)
     if len(floor) < 2:
         # one room and nowhere to go: walk across it and back
-        c = graph.cells[start]
-        a, b = c.outline.min(axis=0), c.outline.max(axis=0)
+        only = graph.cells[start]
+        a, b = only.outline.min(axis=0), only.outline.max(axis=0)
         mid = 0.5 * (a + b)
-        floor = np.array([[a[0] + 0.4, mid[1], c.zmin], [b[0] - 0.4, mid[1], c.zmin], [a[0] + 0.4, mid[1], c.zmin]])
+        z = only.zmin
+        floor = np.array([[a[0] + 0.4, mid[1], z], [b[0] - 0.4, mid[1], z], [a[0] + 0.4, mid[1], z]])
     path = walk_path(TOUR_NAME, floor, speed_kmh, EYE_HEIGHT)
     visited.discard("")
     unreachable = sorted(names[r] for r in set(room_cells) - reachable)

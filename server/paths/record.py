@@ -5,9 +5,8 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 
-from numpy.typing import ArrayLike
-
 import numpy as np
+from numpy.typing import ArrayLike
 
 from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.roomnav import (

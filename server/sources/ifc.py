@@ -298,7 +298,7 @@ def _boundary_polygon(ios: Any, b: Any, scale: float) -> F64 | None:
         try:
             settings = geom.settings()
             tri = geom.create_shape(settings, surf)
-            v = np.asarray(tri.verts, dtype=np.float64).reshape(-1, 3)
+            v = np.asarray(getattr(tri, "verts"), dtype=np.float64).reshape(-1, 3)  # noqa: B009
         except Exception:
             return None
         if len(v) < 3:
@@ -548,16 +548,16 @@ def load_ifc(path: str | os.PathLike[str], *, threads: int | None = None) -> Int
                           "boundary" if len(rooms_of) == 2 else "geometry")
         if op is not None:
             openings.append(op)
-    for a, b2, poly in _pair_virtual(virtual):
+    for ra, rb, poly in _pair_virtual(virtual):
         c = poly.mean(axis=0)
         basis = _plane_basis(poly)
         assert basis is not None
         n3 = basis[3]
         nh = n3[:2] if float(np.hypot(*n3[:2])) > 1e-6 else np.array([1.0, 0.0])
-        st = rooms[[r.key for r in rooms].index(a)].storey
+        st = rooms[[r.key for r in rooms].index(ra)].storey
         width = float(np.ptp(poly[:, :2] @ np.array([-nh[1], nh[0]]) / max(float(np.hypot(*nh)), 1e-12)))
-        openings.append(Opening(f"virtual {a}/{b2}", "virtual", "virtual boundary", st, c, nh, width, 0.0,
-                                float(poly[:, 2].min()), float(poly[:, 2].max()), (a, b2), poly, "boundary"))
+        openings.append(Opening(f"virtual {ra}/{rb}", "virtual", "virtual boundary", st, c, nh, width, 0.0,
+                                float(poly[:, 2].min()), float(poly[:, 2].max()), (ra, rb), poly, "boundary"))
     # ---- stairs
     stairs: list[Stair] = []
     for s in [e for c in _STAIR_CLASSES for e in model.by_type(c)]:

@@ -16,6 +16,7 @@ Readers: :func:`~walkstream.server.sources.ifc.load_ifc` (IFC2X3 / IFC4) and
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import shapely
@@ -162,9 +163,10 @@ class Element:
     key: str
     kind: str
     name: str
-    vertices: F64
-    triangles: NDArray[np.int32]
-    materials: NDArray[np.uint8]
+    # typed loosely: any numeric array is accepted and converted in __post_init__
+    vertices: NDArray[Any]
+    triangles: NDArray[Any]
+    materials: NDArray[Any]
 
     def __post_init__(self) -> None:
         v = np.asarray(self.vertices, np.float64).reshape(-1, 3)

@@ -307,12 +307,12 @@ def load_interior_dict(doc: Any, name: str = "interior", label: str = "interior"
     for f in _items(doc, "furniture", label):
         what = f"{label}: furniture {f.get('id')!r}"
         k = storey_of(f, what)
-        kind = f.get("kind")
-        if kind not in FURNITURE_KINDS:
-            raise SourceError(f"{what}: kind must be one of {', '.join(FURNITURE_KINDS)}, got {kind!r}")
-        rows = furniture_boxes(str(kind), _pt(f.get("at"), what) - origin, _num(f.get("yaw", 0.0), what), floor(k))
-        mat = _MAT["fabric"] if kind in _FABRIC else _MAT["fixture"] if kind == "plant" else _MAT["furniture"]
-        b.boxes(str(f.get("id")), "furniture", f"{kind} {f.get('id')}", rows, mat)
+        fkind = str(f.get("kind"))
+        if fkind not in FURNITURE_KINDS:
+            raise SourceError(f"{what}: kind must be one of {', '.join(FURNITURE_KINDS)}, got {f.get('kind')!r}")
+        rows = furniture_boxes(fkind, _pt(f.get("at"), what) - origin, _num(f.get("yaw", 0.0), what), floor(k))
+        mat = _MAT["fabric"] if fkind in _FABRIC else _MAT["fixture"] if fkind == "plant" else _MAT["furniture"]
+        b.boxes(str(f.get("id")), "furniture", f"{fkind} {f.get('id')}", rows, mat)
     return InteriorScene(
         name=str(doc.get("name") or name),
         crs=crs or "local",

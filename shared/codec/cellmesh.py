@@ -166,8 +166,9 @@ class CellPart:
 
     element: int
     material: int
-    positions: NDArray[np.float32]
-    indices: NDArray[np.uint32]
+    # typed loosely: any numeric array is accepted and converted in __post_init__
+    positions: NDArray[Any]
+    indices: NDArray[Any]
 
     def __post_init__(self) -> None:
         object.__setattr__(
