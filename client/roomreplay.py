@@ -28,18 +28,14 @@ from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
 from walkstream.client.draw.culling import frustum_cull
+from walkstream.client.draw.frames import camera
 from walkstream.client.report.metrics import FrameLog, FrameLogBuilder
 from walkstream.client.stream.rooms import RoomStreamer
-from walkstream.shared.camera import look_at, perspective
+from walkstream.shared.camera import perspective
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.records import Mesh
 
 __all__ = ["walk_interior"]
-
-
-def _view(xyz: NDArray[np.float64], yaw: float, pitch: float) -> NDArray[np.float32]:
-    d = np.array([math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch), math.sin(pitch)])
-    return look_at(xyz, xyz + d)
 
 
 async def walk_interior(
@@ -79,7 +75,7 @@ async def walk_interior(
             progress(wt, total)
         xyz, yaw, pitch = path.at(wt)
         eye = np.asarray(xyz, dtype=np.float64)
-        view = _view(eye, float(yaw), float(pitch))
+        view = camera(eye, float(yaw), float(pitch))
         vp = proj.astype(np.float64) @ view.astype(np.float64)
         vis = streamer.tick(t, eye, vp)
         draw_keys: list[Hashable] = []

@@ -14,7 +14,6 @@ or on a Dask cluster, and this process alone writes the database.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import time
 from collections.abc import Callable, Iterator
@@ -24,10 +23,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.server.bake.pipeline import file_digest
 from walkstream.server.bake.roomcontents import REACH, Part, contents_task, outside_mask, weld
-from walkstream.server.bake.roomnav import NavCell, NavPortal, NavStair, RoomGraph
-from walkstream.server.bake.rooms import RoomLayout, room_layout
+from walkstream.server.bake.roomnav import RoomGraph
+from walkstream.server.bake.rooms import room_layout
 from walkstream.server.bake.roomwalks import TOUR_NAME, entrance_cell, tour
+from walkstream.server.bake.workers import dask_client
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.store import (
     CellRow,
@@ -71,14 +72,9 @@ def _run_contents(
     workers: int, scheduler: str | None,
 ) -> Iterator[list[tuple[int, list[Part], NDArray[np.int64]]]]:
     if scheduler:
-        try:
-            from distributed import Client, as_completed
-        except ImportError as exc:  # optional dependency: fail only when used
-            raise InputError("--scheduler needs Dask: pip install 'dask[distributed]'") from exc
-        try:
-            client = Client(scheduler, timeout=20)
-        except OSError as exc:
-            raise InputError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc})") from exc
+        from distributed import as_completed
+
+        client = dask_client(scheduler)
         try:
             remote = client.scatter([soup, elem, mat], broadcast=True)
             futures = [client.submit(contents_task, c, *remote, pure=False) for c in chunks]
@@ -95,21 +91,6 @@ def _run_contents(
     else:
         for c in chunks:
             yield contents_task(c, soup, elem, mat)
-
-
-def _nav(layout: RoomLayout) -> tuple[list[NavCell], list[NavPortal], list[NavStair]]:
-    cells = [NavCell(c.id, c.kind, c.name, c.room, c.storey, c.outline, c.zmin, c.zmax) for c in layout.cells]
-    portals = [NavPortal(p.id, p.kind, p.a, p.b, p.polygon) for p in layout.portals]
-    stairs = [NavStair(s.lower, s.upper, s.path, s.name) for s in layout.stairs]
-    return cells, portals, stairs
-
-
-def _digest(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()[:16]
 
 
 def bake_interior(
@@ -179,9 +160,8 @@ def bake_interior(
     if progress:
         progress(len(layout.cells), len(layout.cells))
     # ---- the tour
-    ncells, nportals, nstairs = _nav(layout)
-    graph = RoomGraph(ncells, nportals, nstairs)
-    start = entrance_cell(ncells, nportals)
+    graph = RoomGraph(layout.cells, layout.portals, layout.stairs)
+    start = entrance_cell(layout.cells, layout.portals)
     try:
         walk, coverage = tour(graph, start)
     except RouteError as exc:  # pragma: no cover - a tour always exists from a room cell
@@ -189,7 +169,7 @@ def bake_interior(
     # ---- the database
     settings = {
         "source": str(src),
-        "source_digest": _digest(src),
+        "source_digest": file_digest(src),
         "source_format": scene.source_format,
         "reach": REACH,
         "origin_z": scene.origin[2],

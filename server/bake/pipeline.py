@@ -24,13 +24,14 @@ from walkstream.server.store import CellRow, ObjectRow, SceneReader, SceneWriter
 from walkstream.shared.buildings import default_grammar, default_grammar_text, predict_triangles
 from walkstream.shared.errors import InputError
 
-__all__ = ["bake"]
+__all__ = ["bake", "file_digest"]
 
 
 # ------------------------------------------------------------------ the bake
 
 
-def _file_digest(path: Path) -> str:
+def file_digest(path: Path) -> str:
+    """First 16 hex digits of the sha256 of a file (what identifies a bake's input)."""
     h = hashlib.sha256()
     with path.open("rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -109,7 +110,7 @@ def bake(
     say(f"{src.name}: {len(scene.buildings)} buildings, {len(scene.streets)} street pieces, {len(cells)} {kind} cells")
 
     grammar = default_grammar()
-    settings_dict = asdict(st) | {"source": str(src), "source_digest": _file_digest(src)}
+    settings_dict = asdict(st) | {"source": str(src), "source_digest": file_digest(src)}
     writer = SceneWriter.create(
         out,
         name=name or out.stem,

@@ -19,11 +19,11 @@ from __future__ import annotations
 import heapq
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import shapely
 
+from walkstream.server.bake.rooms import Portal, RoomCell, StairLink
 from walkstream.shared.arrays import F64
 from walkstream.shared.cells import CellLocator
 from walkstream.shared.errors import RouteError
@@ -32,9 +32,6 @@ from walkstream.shared.paths import RecordedPath
 __all__ = [
     "EYE_HEIGHT",
     "INDOOR_SPEED_KMH",
-    "NavCell",
-    "NavPortal",
-    "NavStair",
     "RoomGraph",
     "walk_path",
 ]
@@ -47,51 +44,17 @@ INDOOR_SPEED_KMH = 4.0
 _WALKABLE = frozenset({"door", "opening", "virtual", "split"})
 
 
-@dataclass(frozen=True)
-class NavCell:
-    """A cell as the graph sees it."""
-
-    id: int
-    kind: str
-    name: str
-    room: str | None
-    storey: int
-    outline: F64
-    zmin: float
-    zmax: float
-
-
-@dataclass(frozen=True)
-class NavPortal:
-    """A portal as the graph sees it."""
-
-    id: int
-    kind: str
-    a: int
-    b: int
-    polygon: F64
-
-
-@dataclass(frozen=True)
-class NavStair:
-    """A stair: lower and upper cell, walking line ``(k, 3)`` bottom to top."""
-
-    lower: int
-    upper: int
-    path: F64
-    name: str = ""
-
-
 class RoomGraph:
     """Routes through an interior (see the module docstring).
 
     Parameters
     ----------
     cells, portals, stairs:
-        The interior; the ``outside`` cell is ignored.
+        The interior (:func:`~.rooms.room_layout`'s, or read back from a scene
+        database); the ``outside`` cell is ignored.
     """
 
-    def __init__(self, cells: Sequence[NavCell], portals: Sequence[NavPortal], stairs: Sequence[NavStair]) -> None:
+    def __init__(self, cells: Sequence[RoomCell], portals: Sequence[Portal], stairs: Sequence[StairLink]) -> None:
         self.cells = {c.id: c for c in cells if c.kind != "outside"}
         ids = sorted(self.cells)
         self.locator = CellLocator(

@@ -21,11 +21,10 @@ import numpy as np
 from walkstream.server.bake.roomnav import (
     EYE_HEIGHT,
     INDOOR_SPEED_KMH,
-    NavCell,
-    NavPortal,
     RoomGraph,
     walk_path,
 )
+from walkstream.server.bake.rooms import Portal, RoomCell
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import RouteError
 from walkstream.shared.paths import RecordedPath
@@ -38,7 +37,7 @@ TOUR_MIN_SECONDS = 180.0
 """A tour of a building large enough lasts at least this long (the paper's walks: 3 minutes)."""
 
 
-def entrance_cell(cells: Sequence[NavCell], portals: Sequence[NavPortal]) -> int:
+def entrance_cell(cells: Sequence[RoomCell], portals: Sequence[Portal]) -> int:
     """The room cell a tour starts in: next to a doorway leading outside (the largest
     such on the lowest storey), else the largest room cell of the lowest storey."""
     by_id = {c.id: c for c in cells}
@@ -58,9 +57,8 @@ def entrance_cell(cells: Sequence[NavCell], portals: Sequence[NavPortal]) -> int
         raise RouteError("the interior has no room cell to start a tour in")
     low = min(c.storey for c in rooms)
 
-    def area(c: NavCell) -> float:
-        x, y = (c.outline - c.outline[0]).T
-        return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y)))
+    def area(c: RoomCell) -> float:
+        return float(c.polygon.area)
 
     cand = [by_id[i] for i in near if i in by_id and by_id[i].kind == "room"]
     cand = [c for c in cand if c.storey == min((d.storey for d in cand), default=low)] or [

@@ -9,15 +9,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from walkstream.server.bake.navgraph import CellGraph
-from walkstream.server.bake.roomnav import (
-    EYE_HEIGHT,
-    INDOOR_SPEED_KMH,
-    NavCell,
-    NavPortal,
-    NavStair,
-    RoomGraph,
-    walk_path,
-)
+from walkstream.server.bake.roomnav import EYE_HEIGHT, INDOOR_SPEED_KMH, RoomGraph, walk_path
+from walkstream.server.bake.rooms import Portal, RoomCell, StairLink
 from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.errors import RouteError, StoreError
 from walkstream.shared.paths import WALK_EYE_HEIGHT, RecordedPath
@@ -98,12 +91,12 @@ def interior_graph(reader: SceneReader) -> RoomGraph:
     """The walking graph of an interior scene database."""
     rooms = reader.rooms()
     cells = [
-        NavCell(c.id, c.kind, rooms[c.id].name, rooms[c.id].room, rooms[c.id].storey, np.asarray(c.boundary),
-                c.zmin, c.zmax)
+        RoomCell(c.id, c.kind, rooms[c.id].name, rooms[c.id].room, rooms[c.id].storey, np.asarray(c.boundary),
+                 c.zmin, c.zmax, np.asarray(rooms[c.id].planes))
         for c in reader.cells()
     ]
-    portals = [NavPortal(p.id, p.kind, p.a, p.b, np.asarray(p.polygon)) for p in reader.portals()]
-    stairs = [NavStair(s.lower, s.upper, np.asarray(s.path), s.name) for s in reader.stairs()]
+    portals = [Portal(p.id, p.kind, p.a, p.b, np.asarray(p.polygon), p.source, p.name) for p in reader.portals()]
+    stairs = [StairLink(s.portal, s.lower, s.upper, np.asarray(s.path), s.name) for s in reader.stairs()]
     return RoomGraph(cells, portals, stairs)
 
 
