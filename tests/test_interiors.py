@@ -404,3 +404,12 @@ def test_fzk_haus(fzk_db: tuple[Path, dict]) -> None:
         assert np.ptp(heading) > np.pi
         info = r.contents_info()
         assert max(i.max_error for i in info.values()) < 5e-4
+
+
+def test_worker_processes_get_plain_arrays_and_bake_the_same_scene(tmp_path: Path) -> None:
+    """The contents of cells are clipped in worker processes from plain arrays (no IFC
+    objects cross a process boundary): the same database, byte for byte in content."""
+    src = two_rooms_model(tmp_path / "two.ifc")
+    one = bake(src, tmp_path / "one.db", workers=1, name="same")
+    two = bake(src, tmp_path / "two.db", workers=2, name="same")
+    assert one["version"] == two["version"]
