@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["IfcBuilder", "two_rooms_model", "l_room_model", "stair_model"]
+__all__ = ["IfcBuilder", "two_rooms_model", "l_room_model", "stair_model", "stairwell_model"]
 
 
 class IfcBuilder:
@@ -209,4 +209,28 @@ def stair_model(path: Path) -> Path:
     b.slab(u, ring, 3.0, holes=[hole])
     b.slab(u, ring, 6.0)
     b.stair(g, (1.2, 1.6), (6.0, 1.6), 1.0, 0.0, 3.0)
+    return b.write(path)
+
+
+def stairwell_model(path: Path) -> Path:
+    """Two storeys (3 m apart): a hall below and a landing above, side by side with one
+    stair space that the file puts on the ground storey only although it rises through
+    both (as exporters do), a door from each of them into it, and a straight stair in
+    it from the ground floor to the upper one (no slab over the stair space)."""
+    b = IfcBuilder()
+    g = b.storey("ground", 0.0)
+    u = b.storey("upper", 3.0)
+    t = 0.2
+    rooms = [(0, 0), (6, 0), (6, 5), (0, 5)]
+    well = [(6.2, 0), (9, 0), (9, 5), (6.2, 5)]
+    b.space("Hall", g, rooms, 0.0, 2.8)
+    b.space("Landing", u, rooms, 3.0, 2.8)
+    b.space("Stair", g, well, 0.0, 5.8)
+    middle = b.wall(g, (6.1, 0), (6.1, 5), t, 0.0, 5.8)
+    b.opening(g, middle, (6.1, 4.0), (0, 1), 0.9, t + 0.02, 0.0, 2.1, "door")
+    b.opening(u, middle, (6.1, 4.0), (0, 1), 0.9, t + 0.02, 3.0, 5.1, "door")
+    b.slab(g, [(0, 0), (9, 0), (9, 5), (0, 5)], 0.0)
+    b.slab(u, rooms, 3.0)
+    b.slab(u, [(0, 0), (9, 0), (9, 5), (0, 5)], 6.0)
+    b.stair(g, (7.6, 0.4), (7.6, 4.6), 1.0, 0.0, 3.0)
     return b.write(path)

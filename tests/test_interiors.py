@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import shapely
-from ifcmodels import IfcBuilder, l_room_model, stair_model, two_rooms_model
+from ifcmodels import IfcBuilder, l_room_model, stair_model, stairwell_model, two_rooms_model
 
 from walkstream.cli import main
 from walkstream.server.bake import bake
@@ -271,6 +271,72 @@ def test_a_stair_joins_two_storeys_and_the_tour_climbs_it(tmp_path: Path) -> Non
         record_interior_path(tmp_path / "stair.db", "x", "Cellar", "Hall")
     with pytest.raises(RouteError, match="outside every cell"):
         record_interior_path(tmp_path / "stair.db", "x", (50.0, 50.0, 1.6), "Hall")
+
+
+def _triangles_in_holes(reader: SceneReader, openings: object, kinds: tuple[str, ...]) -> int:
+    """How many drawn triangles (of every cell's contents) have their centre inside the
+    hole of a door (or other opening of ``kinds``), 5 cm in from its sides (a frame's
+    lining is 4 cm)."""
+    cents = []
+    for cid in [c.id for c in reader.cells()]:
+        for part in decode_cell_mesh(reader.contents(cid)).parts:
+            tri = np.asarray(part.positions, float)[np.asarray(part.indices).reshape(-1, 3)]
+            cents.append(tri.mean(axis=1))
+    c = np.concatenate(cents)
+    inside = 0
+    for op in openings:  # type: ignore[attr-defined]
+        if op.kind not in kinds:
+            continue
+        along = np.array([op.normal[1], -op.normal[0]])
+        d = c[:, :2] - op.centre[:2]
+        hit = (
+            (np.abs(d @ op.normal) < 0.5 * op.depth)
+            & (np.abs(d @ along) < 0.5 * op.width - 0.05)
+            & (c[:, 2] > op.zmin + 0.02)
+            & (c[:, 2] < op.zmax - 0.05)
+        )
+        inside += int(hit.sum())
+    return inside
+
+
+def test_doors_are_drawn_open_or_left_out(tmp_path: Path, office_db: Path) -> None:
+    """A door leaf exported closed would hide everything behind it: nothing drawn fills
+    a door's hole, neither in an IFC model (the leaf left out) nor in a generated
+    interior (the leaf drawn open, beside the doorway)."""
+    src = two_rooms_model(tmp_path / "two.ifc")
+    bake(src, tmp_path / "two.db")
+    scene = load_ifc(src)
+    assert sum(op.kind == "door" for op in scene.openings) == 2
+    with SceneReader.open(tmp_path / "two.db") as r:
+        assert _triangles_in_holes(r, scene.openings, ("door",)) == 0
+    with SceneReader.open(office_db) as r:
+        openings = load_interior(Path(r.meta.settings["source"])).openings
+        assert sum(op.kind == "door" for op in openings) > 5
+        assert _triangles_in_holes(r, openings, ("door",)) == 0
+
+
+def test_a_stair_space_on_one_storey_is_a_room_of_both(tmp_path: Path) -> None:
+    """Exporters put a stair space on the storey it starts on although its solid rises
+    through the next: it becomes a cell of each storey it rises through, and the
+    stair joins the two."""
+    summary = bake(stairwell_model(tmp_path / "well.ifc"), tmp_path / "well.db")
+    assert summary["rooms"] == 3
+    assert summary["cells_per_storey"]["ground"] >= 2 and summary["cells_per_storey"]["upper"] >= 2
+    with SceneReader.open(tmp_path / "well.db") as r:
+        rooms = r.rooms()
+        wells = sorted((ri.storey, cid) for cid, ri in rooms.items() if ri.name == "Stair")
+        assert [s for s, _ in wells] == [0, 1]
+        [stair] = [p for p in r.portals() if p.kind == "stair"]
+        assert {stair.a, stair.b} == {wells[0][1], wells[1][1]}
+        # the storey's height decides the cell: the same spot in the stair space
+        loc = _locator(r)
+        [well] = [c for c in r.cells() if c.id == wells[0][1]]
+        x, y = np.asarray(well.boundary, float).mean(axis=0)[:2]
+        ids = {loc.locate(float(x), float(y), z) for z in (EYE_HEIGHT, 3.0 + EYE_HEIGHT)}
+        assert ids == {wells[0][1], wells[1][1]}
+    assert summary["tour"]["visited"] == 3 and summary["tour"]["storeys_visited"] == 2
+    path, _ = record_interior_path(tmp_path / "well.db", "up", "Hall", "Landing")
+    assert path.xyz[0, 2] == pytest.approx(EYE_HEIGHT) and path.xyz[-1, 2] == pytest.approx(3.0 + EYE_HEIGHT)
 
 
 def test_coordinates_of_millions_of_metres(tmp_path: Path) -> None:
