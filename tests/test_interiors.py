@@ -451,6 +451,7 @@ def test_duplex(duplex_db: tuple[Path, dict]) -> None:
     assert tour["unreachable_count"] == 11  # the other home (10 rooms) and the roof space
     with SceneReader.open(db) as r:
         _doorways_hold_the_eye(r, load_ifc(DUPLEX).openings)
+        _tour_stays_in_cells(r)
         with closing(sqlite3.connect(db)) as c:
             assert c.execute("PRAGMA user_version").fetchone()[0] == 2
 
@@ -470,6 +471,15 @@ def test_fzk_haus(fzk_db: tuple[Path, dict]) -> None:
         assert np.ptp(heading) > np.pi
         info = r.contents_info()
         assert max(i.max_error for i in info.values()) < 5e-4
+        _tour_stays_in_cells(r)
+
+
+def _tour_stays_in_cells(reader: SceneReader) -> None:
+    """Every 5 cm of the tour the eye is in a cell (it never walks through a wall)."""
+    tour = _tour(reader)
+    xyz = tour.sample(np.arange(0.0, tour.duration, 0.05 / (4.0 / 3.6)))[0]
+    ids = _locator(reader).locate_many(xyz)
+    assert (ids >= 0).all(), f"the tour leaves every cell at {xyz[ids < 0][:3]}"
 
 
 def test_worker_processes_get_plain_arrays_and_bake_the_same_scene(tmp_path: Path) -> None:

@@ -36,7 +36,10 @@ def render_cutaway(
     """Draw the (already cut) meshes of a storey into a PNG; returns the triangles drawn.
 
     The whole storey is framed from :data:`CUTAWAY_DIRECTION`; walls, furniture and
-    frames show up to the cut, floors and stairs below it.
+    frames show up to the cut, floors and stairs below it.  Every triangle is drawn
+    from both sides: a room holds only the inner face of its walls, and the walls on
+    the near side of each room turn that face away from the eye (back-face culled,
+    they would vanish).
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -50,7 +53,7 @@ def render_cutaway(
     ss = max(1, int(supersample))
     view, proj = fit_view(lo, hi, CUTAWAY_DIRECTION, 30.0, w / h, margin=1.02)
     with MeshRenderer(ctx) as r:
-        img = r.render(used, view, proj, (w * ss, h * ss))
+        img = r.render([_two_sided(m) for m in used], view, proj, (w * ss, h * ss))
     img = np.round(img.reshape(h, ss, w, ss, 3).mean(axis=(1, 3))).astype(np.uint8)
     dpi = 100
     fig = Figure(figsize=(w / dpi, (h + 40) / dpi), dpi=dpi, facecolor="white")
@@ -62,3 +65,15 @@ def render_cutaway(
     fig.suptitle(f"{title}{': ' if title else ''}{tris:,} triangles below the cut", fontsize=12, y=0.99)
     fig.savefig(os.fspath(path), dpi=dpi, format="png")
     return tris
+
+
+def _two_sided(mesh: Mesh) -> Mesh:
+    """The mesh with a reversed copy of every triangle (normals flipped)."""
+    n = len(mesh.positions)
+    idx = np.asarray(mesh.indices, np.uint32)
+    return Mesh(
+        np.concatenate([mesh.positions, mesh.positions]),
+        np.concatenate([mesh.normals, -np.asarray(mesh.normals)]),
+        np.concatenate([idx, idx[:, ::-1] + np.uint32(n)]),
+        np.concatenate([mesh.materials, mesh.materials]) if len(mesh.materials) else mesh.materials,
+    )

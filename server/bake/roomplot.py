@@ -144,7 +144,7 @@ def draw_storeys(
         ax.set_ylim(lo[1], hi[1])
         ax.set_aspect("equal")
         name = storey_names[k] if 0 <= k < len(storey_names) else str(k)
-        ax.set_title(f"storey {name}: {len(mine)} cells", fontsize=9)
+        ax.set_title(f"storey {name}: {len(mine)} cell{'' if len(mine) == 1 else 's'}", fontsize=9)
         ax.tick_params(labelsize=6)
     fig.colorbar(
         matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap), ax=axes, label="triangles per cell", shrink=0.8
