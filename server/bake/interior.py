@@ -218,7 +218,7 @@ def bake_interior(
                 bound = float(position_error_bound(np.ptp(np.concatenate([p[2] for p in ps]), axis=0)).max())
                 if err > bound + 2.0**-23 * float(np.abs(np.concatenate([p[2] for p in ps])).max()):
                     raise InputError(f"cell {c.id}: position error {err} above the stated bound {bound}")
-            writer.add_contents(ContentsInfo(c.id, nt, nv, len(ps), len(blob), raw_bytes(nv, nt), err), blob)
+            writer.add_contents(ContentsInfo(nt, nv, len(ps), len(blob), raw_bytes(nv, nt), err, cell=c.id), blob)
         x, y, z = walk.xyz[0]
         writer.add_viewpoint("entrance", float(x), float(y), float(z), float(walk.yaw[0]), start)
         writer.add_path(TOUR_NAME, walk.to_msgpack())

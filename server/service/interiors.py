@@ -52,11 +52,7 @@ class InteriorState:
         for c in cells:
             r = rooms[c.id]
             ci = info.get(c.id)
-            contents = (
-                ContentsRef(ci.triangles, ci.vertices, ci.parts, ci.nbytes, ci.raw_bytes, ci.max_error)
-                if ci is not None
-                else ContentsRef(0, 0, 0, 0, 0, 0.0)
-            )
+            contents = ci if ci is not None else ContentsRef(0, 0, 0, 0, 0, 0.0)
             self.records[c.id] = RoomRecord(
                 id=c.id, kind=c.kind, name=r.name, room=r.room, storey=r.storey, outline=c.boundary,
                 zmin=c.zmin, zmax=c.zmax, planes=r.planes, portals=tuple(refs[c.id]),

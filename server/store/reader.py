@@ -440,7 +440,7 @@ class SceneReader:
         rows = self._query(
             "SELECT cell, triangles, vertices, parts, length(data), raw_bytes, max_error FROM contents ORDER BY cell"
         )
-        return {int(r[0]): ContentsInfo(int(r[0]), int(r[1]), int(r[2]), int(r[3]), int(r[4]), int(r[5]), float(r[6]))
+        return {int(r[0]): ContentsInfo(int(r[1]), int(r[2]), int(r[3]), int(r[4]), int(r[5]), float(r[6]), cell=int(r[0]))
                 for r in rows}
 
     def contents(self, cid: int) -> bytes:

@@ -17,6 +17,7 @@ from walkstream.shared.codec import (
 )
 from walkstream.shared.errors import StoreError
 from walkstream.shared.records import BuildingParams, StreetParams
+from walkstream.shared.wire import ContentsRef
 
 try:  # advisory locks between processes; POSIX only
     import fcntl
@@ -314,15 +315,9 @@ class StairInfo:
     name: str
 
 
-@dataclass(frozen=True, slots=True)
-class ContentsInfo:
-    """Sizes of a cell's contents: triangles, vertices, parts, encoded bytes, the same
-    mesh's raw float32 bytes and the largest position error of the encoding (metres)."""
+@dataclass(frozen=True)
+class ContentsInfo(ContentsRef):
+    """The sizes of one cell's contents as the database holds them: the wire's
+    :class:`~walkstream.shared.wire.ContentsRef` and the cell they belong to."""
 
-    cell: int
-    triangles: int
-    vertices: int
-    parts: int
-    nbytes: int
-    raw_bytes: int
-    max_error: float
+    cell: int = -1
