@@ -10,7 +10,7 @@ $(STAMP): pyproject.toml scripts/system-deps.sh
 	bash scripts/system-deps.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev,osm]'
+	$(BIN)/pip install --quiet -e '.[dev,osm,ifc]'
 	touch $(STAMP)
 
 setup: $(STAMP)

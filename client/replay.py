@@ -87,6 +87,11 @@ class ReplayConfig:
     report_dir: Path | None = None
     setup_timeout_s: float = 60.0
     """Give up (an empty report saying why) when the path has not arrived by then."""
+    kind: str | None = None
+    """``city`` or ``interior`` when the caller knows the scene's kind (the CLI does);
+    ``None``: wait for the manifest to tell (a city walk then starts a little later)."""
+    fog_m: float = 40.0
+    """Interiors: portals farther than this are not looked through."""
 
     def __post_init__(self) -> None:
         if self.stream not in STREAM_FORMS:
@@ -285,6 +290,14 @@ async def replay(
                 )
                 return ReplayResult(summary, log, _bytes_log(stats, t_start))
             path, _path_bytes = got
+            kind = config.kind
+            if kind is None:
+                m0 = await _within(clock, config.setup_timeout_s, asyncio.shield(manifest_task))
+                kind = "city" if m0 is None else m0.kind
+            if kind == "interior":
+                return await _replay_interior(
+                    api, link, clock, config, path, manifest_task, t_start, setup_s, progress
+                )
             cache = Cache(config.cache_bytes)
             scfg = StreamerConfig(
                 prefetch=config.prefetch, form=STREAM_FORMS[config.stream], workers=config.workers
@@ -403,6 +416,72 @@ async def replay(
             "error": disk_state[1],
         }
     return ReplayResult(summary, log, bytes_log, snapshots, spikes)
+
+
+async def _replay_interior(
+    api: SceneClient,
+    link: ShapedTransport,
+    clock: Clock,
+    config: ReplayConfig,
+    path: RecordedPath,
+    manifest_task: asyncio.Task[Manifest],
+    t_start: float,
+    setup_s: float,
+    progress: Callable[[float, float], None] | None,
+) -> ReplayResult:
+    """The walk through an interior (:mod:`walkstream.client.roomreplay`)."""
+    from walkstream.client.roomreplay import walk_interior
+    from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
+
+    topology = await api.topology()
+    cache = Cache(config.cache_bytes)
+    streamer = RoomStreamer(
+        api, clock, cache, topology, RoomStreamConfig(prefetch=config.prefetch, fog_m=config.fog_m)
+    )
+    device = make_device(config.device, config.seed)
+    renderer: Any = None
+    try:
+        if not device.simulated or config.snapshot_every:
+            from walkstream.client.draw.frames import FrameRenderer
+
+            renderer = FrameRenderer(size=config.size, fov_deg=config.fov_deg, near=0.1)
+        log, snapshots, spikes = await walk_interior(
+            config, clock, path, streamer, device, renderer, progress, t_start,
+            lambda: int(link.stats.bytes_down),
+        )
+    finally:
+        await streamer.close()
+        if renderer is not None:
+            renderer.release()
+    manifest = manifest_task.result() if manifest_task.done() and not manifest_task.cancelled() else None
+    stats = link.stats
+    summary = summarise(log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0, recovery_ignore=spikes)
+    summary.update(_link_summary(config, stats, api))
+    entered = {int(c) for c in np.unique(log.cell) if c >= 0}
+    summary.update(
+        {
+            "kind": "interior",
+            "scene_version": None if manifest is None else manifest.version,
+            "path_duration_s": path.duration,
+            "walk_s": float(log.t[-1] - log.t[0]) if len(log.t) else 0.0,
+            "setup_s": setup_s,
+            "cells_entered": len(entered),
+            "cells_in_scene": len(topology.cells),
+            "topology_bytes": topology.nbytes,
+            "visible_cells_mean": float(np.mean(log.pvs)) if len(log.pvs) else 0.0,
+            "visible_cells_max": int(np.max(log.pvs)) if len(log.pvs) else 0,
+            "contents_requests": streamer.stats.requests,
+            "contents_bytes": streamer.stats.bytes_received,
+            "cells_fetched": len(streamer.stats.fetched),
+            "cells_flushed": streamer.stats.flushed,
+            "redownloads": streamer.stats.refetched,
+            "fog_m": config.fog_m,
+            "culling": "frustum culling of the visible cells' contents (cells seen through portals in the frustum)",
+            "cache_bytes": config.cache_bytes,
+            "cache_peak_bytes": int(cache.peak_bytes),
+        }
+    )
+    return ReplayResult(summary, log, _bytes_log(stats, t_start), snapshots, spikes)
 
 
 async def _within(clock: Clock, seconds: float, coro: Any) -> Any:

@@ -15,10 +15,19 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.errors import InputError
 
-__all__ = ["CELL_KINDS", "INSIDE_TOL", "LOCATE_TOL", "CellLocator", "inside_convex", "outline_polygons"]
+__all__ = ["CELL_KINDS", "LOCATABLE_KINDS", "INSIDE_TOL", "LOCATE_TOL", "CellLocator", "inside_convex", "outline_polygons"]
 
-CELL_KINDS: tuple[str, ...] = ("crossroad", "street", "square", "grid", "room")
-"""Every kind of view cell, in the order the bake numbers cells by kind."""
+CELL_KINDS: tuple[str, ...] = ("crossroad", "street", "square", "grid", "room", "doorway", "outside")
+"""Every kind of view cell, in the order the bake numbers cells by kind.
+
+Interiors use the last three: ``room`` (a convex part of a room), ``doorway`` (the
+opening of a door or inner window through a thick wall, so that an eye standing in it
+is in a cell) and ``outside`` (one per interior: everything seen through windows and
+outer doors; no viewer is ever located in it).
+"""
+
+LOCATABLE_KINDS: frozenset[str] = frozenset(k for k in CELL_KINDS if k != "outside")
+"""The kinds a viewer can be located in (every kind but ``outside``)."""
 
 LOCATE_TOL = 1e-6
 """A point this close to a cell (metres) is in it: points on shared edges find a cell."""
@@ -56,27 +65,48 @@ class CellLocator:
     are vectorised.  A point within :data:`LOCATE_TOL` of several cells (e.g. exactly
     on a shared edge) gets the lowest of their ids, so the answer is deterministic.
 
+    With ``zranges`` (interiors, where storeys stack cells over each other) a point
+    may carry a height: a cell holds it when its outline holds ``(x, y)`` and
+    ``zmin <= z < zmax`` (the storey's height decides); a point given without a
+    height is located in 2D as in a city.
+
     Parameters
     ----------
     ids : (n,) int
         Cell ids; they need not be positions.
     outlines : sequence of (m_i, 2) float
         The cells' outlines, scene-local metres, any vertex counts.
+    zranges : (n, 2) float, optional
+        ``zmin, zmax`` of each cell's volume, metres.
+
+    >>> sq = [[0, 0], [1, 0], [1, 1], [0, 1]]
+    >>> loc = CellLocator([7, 8], [sq, sq], zranges=[[0.0, 3.0], [3.0, 6.0]])
+    >>> loc.locate(0.5, 0.5, 1.6), loc.locate(0.5, 0.5, 4.6), loc.locate(0.5, 0.5, 9.0)
+    (7, 8, None)
     """
 
-    def __init__(self, ids: ArrayLike, outlines: Sequence[ArrayLike]) -> None:
+    def __init__(
+        self, ids: ArrayLike, outlines: Sequence[ArrayLike], zranges: ArrayLike | None = None
+    ) -> None:
         self._ids = np.asarray(ids, dtype=np.int64).reshape(-1)
         if len(self._ids) != len(outlines):
             raise InputError(f"CellLocator: {len(self._ids)} ids but {len(outlines)} outlines")
         self._polys = outline_polygons(outlines)
         self._tree = shapely.STRtree(self._polys)
+        self._z: NDArray[np.float64] | None = None
+        if zranges is not None:
+            z = np.asarray(zranges, dtype=np.float64).reshape(-1, 2)
+            if len(z) != len(self._ids):
+                raise InputError(f"CellLocator: {len(self._ids)} ids but {len(z)} height ranges")
+            self._z = z
 
     def __len__(self) -> int:
         return len(self._ids)
 
-    def locate(self, x: float, y: float) -> int | None:
-        """Id of the cell containing ``(x, y)``, or ``None`` outside every cell."""
-        cid = int(self.locate_many(np.array([[x, y]], dtype=np.float64))[0])
+    def locate(self, x: float, y: float, z: float | None = None) -> int | None:
+        """Id of the cell containing ``(x, y[, z])``, or ``None`` outside every cell."""
+        pt = [[x, y]] if z is None else [[x, y, z]]
+        cid = int(self.locate_many(np.array(pt, dtype=np.float64))[0])
         return None if cid < 0 else cid
 
     def locate_many(self, xy: ArrayLike) -> NDArray[np.int64]:
@@ -84,19 +114,27 @@ class CellLocator:
 
         Parameters
         ----------
-        xy : (k, 2) float
-            Points, scene-local metres.
+        xy : (k, 2) or (k, 3) float
+            Points, scene-local metres; a third column is the height, used when the
+            locator has height ranges.
 
         Returns
         -------
         (k,) int64
             Cell ids, ``-1`` for points outside every cell.
         """
-        pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        arr = np.asarray(xy, dtype=np.float64)
+        cols = arr.shape[-1] if arr.ndim == 2 and arr.shape[-1] in (2, 3) else 2
+        arr = arr.reshape(-1, cols)
+        pts = arr[:, :2]
         out = np.full(len(pts), -1, np.int64)
         if len(pts) == 0 or len(self._ids) == 0:
             return out
         p, t = self._tree.query(shapely.points(pts), predicate="dwithin", distance=LOCATE_TOL)
+        if self._z is not None and cols == 3 and len(p):
+            z = arr[p, 2]
+            keep = (z >= self._z[t, 0] - LOCATE_TOL) & (z < self._z[t, 1])
+            p, t = p[keep], t[keep]
         if len(p):
             big = np.iinfo(np.int64).max
             best = np.full(len(pts), big, np.int64)

@@ -23,6 +23,18 @@ MATERIALS: tuple[tuple[int, str, tuple[int, int, int]], ...] = (
     (6, "crossroad", (110, 110, 116)),  # a slightly different grey, so junctions read
     (7, "square", (200, 186, 158)),  # paving beige
     (8, "party_wall", (192, 174, 142)),  # slightly darker than a wall
+    # interiors (IFC elements and generated interiors): light surfaces, darker fittings
+    (9, "floor", (181, 150, 112)),  # wooden floor, seen from above
+    (10, "ceiling", (240, 238, 232)),  # the underside of a slab
+    (11, "inner_wall", (236, 229, 214)),  # partition and inner wall faces
+    (12, "slab", (188, 186, 180)),  # slab edges, foundations
+    (13, "furniture", (146, 104, 66)),  # desks, shelves, cabinets
+    (14, "fabric", (76, 96, 138)),  # chairs, sofas, beds
+    (15, "stair", (160, 160, 168)),  # treads and stringers
+    (16, "glass", (156, 196, 214)),  # window panes (drawn opaque)
+    (17, "frame", (246, 246, 240)),  # door and window frames
+    (18, "metal", (104, 106, 112)),  # railings, beams, members
+    (19, "fixture", (214, 218, 222)),  # sanitary and kitchen fittings, coverings
 )
 
 #: Colour of a material id outside the table: loud magenta, so that a grammar bug

@@ -374,7 +374,7 @@ def test_foreign_sqlite_db(tmp_path: Path) -> None:
 def test_wrong_schema_version(db: Path) -> None:
     with closing(sqlite3.connect(db)) as c:
         c.execute("PRAGMA user_version=7")
-    _reject(db, r"scene\.db: schema version 7, this walkstream reads version 1")
+    _reject(db, r"scene\.db: schema version 7, this walkstream reads versions 1, 2")
 
 
 def test_unfinished_bake_is_refused(tmp_path: Path, scene: Scene) -> None:

@@ -6,6 +6,7 @@
                    [--network walk|drive] [--bbox X0,Y0,X1,Y1 [--bbox-crs local|lonlat]] ...
     walkstream bake --default-city -o scene.db
     walkstream inspect scene.db [--json] [--map map.png]
+    walkstream cutaway interior.db [--storey N] [--cut 1.4] -o cut.png
     walkstream serve scene.db [more.db ...] [--host H] [--port P] [--workers N]
 """
 
@@ -92,7 +93,11 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     reader = SceneReader.open(args.db)
     try:
         summary = reader.summary()
-        if args.map:
+        if args.map and reader.meta.kind == "interior":
+            from walkstream.server.bake.roomplot import draw_interior_map
+
+            draw_interior_map(reader, args.map)
+        elif args.map:
             from walkstream.server.bake.mapplot import draw_map
 
             draw_map(reader, args.map)
@@ -107,6 +112,34 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_cutaway(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream cutaway``."""
+    from walkstream.client.draw.cutaway import render_cutaway
+    from walkstream.server.bake.roomplot import storey_meshes
+    from walkstream.server.store import SceneReader
+
+    with SceneReader.open(args.db) as reader:
+        if reader.meta.kind != "interior":
+            raise WalkstreamError(f"{args.db}: a city scene: cut-aways are of interiors (see walkstream buildings render)")
+        storeys = reader.storeys()
+        if args.storey is None:
+            rooms = reader.rooms()
+            k = min(r.storey for r in rooms.values() if r.storey >= 0)
+        else:
+            names = [s.name for s in storeys]
+            k = names.index(args.storey) if args.storey in names else -1
+            if k < 0:
+                try:
+                    k = int(args.storey)
+                except ValueError:
+                    raise WalkstreamError(f"--storey {args.storey!r}: not a storey (storeys: {', '.join(names)})") from None
+        meshes = storey_meshes(reader, k, args.cut)
+        title = f"{reader.meta.name}, storey {storeys[k].name if 0 <= k < len(storeys) else k}, cut at {args.cut:g} m"
+    tris = render_cutaway(meshes, args.output, title=title)
+    print(f"wrote {args.output} ({title}: {tris:,} triangles)")
+    return 0
+
+
 def cmd_serve(args: argparse.Namespace) -> int:
     """Handler of ``walkstream serve``."""
     from walkstream.server.service import serve
@@ -117,8 +150,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
 def add_bake_parsers(sub: Any) -> None:
     """Register ``bake``, ``inspect`` and ``serve``."""
-    bk = sub.add_parser("bake", help="bake a GeoJSON or OpenStreetMap source into a scene database (cells, PVS, ACH)")
-    bk.add_argument("source", nargs="?", help="GeoJSON FeatureCollection (generated city or real footprints), or an OpenStreetMap extract (.osm, .osm.pbf)")
+    bk = sub.add_parser("bake", help="bake a source into a scene database (a city: cells, PVS, ACH; an interior: rooms, portals, contents)")
+    bk.add_argument("source", nargs="?", help="GeoJSON FeatureCollection (generated city or real footprints), an OpenStreetMap "
+                    "extract (.osm, .osm.pbf), an IFC model (.ifc) or a walkstream-interior file (.json, walkstream generate interior)")
     bk.add_argument("-o", "--output", required=True, help="scene database to write (SQLite, replaced atomically)")
     bk.add_argument("--default-city", action="store_true", help="bake the default 700 m city (generated beside the output)")
     bk.add_argument("--name", help="scene name (default: the database file's stem)")
@@ -139,9 +173,17 @@ def add_bake_parsers(sub: Any) -> None:
 
     ins = sub.add_parser("inspect", help="summary of a scene database; --map draws its cells")
     ins.add_argument("db", help="scene database")
-    ins.add_argument("--map", help="PNG: top view of the cells coloured by PVS size over the footprints")
+    ins.add_argument("--map", help="PNG: top view of the cells coloured by PVS size over the footprints; "
+                     "an interior: a plan per storey, cells coloured by triangles, portals as thick lines")
     ins.add_argument("--json", action="store_true", help="print one JSON object")
     ins.set_defaults(func=cmd_inspect)
+
+    cu = sub.add_parser("cutaway", help="a cut-away picture of an interior storey (cut above eye height)")
+    cu.add_argument("db", help="interior scene database")
+    cu.add_argument("--storey", help="storey name or index (default: the lowest with rooms)")
+    cu.add_argument("--cut", type=float, default=1.4, help="cut this many metres above the storey's floor (default 1.4)")
+    cu.add_argument("-o", "--output", required=True, help="PNG to write")
+    cu.set_defaults(func=cmd_cutaway)
 
     sv = sub.add_parser("serve", help="serve scene databases over HTTP (FastAPI + uvicorn)")
     sv.add_argument("db", nargs="+", help="scene database(s), each served under its scene name")

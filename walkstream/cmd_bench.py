@@ -11,6 +11,7 @@
     walkstream bench controller [--frames 3000] [--seeds 1 2 3] [--step 10]
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--reuse] [--out DIR]
+    walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
 
 The benchmarks themselves are :mod:`walkstream.benchmarks`; this module parses their
 options, hands the replaying ones a way to run a replay
@@ -292,6 +293,32 @@ def cmd_bench_city(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_interiors(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench interiors``."""
+    from walkstream.benchmarks.interiors import (
+        default_ifc_files,
+        generated_sources,
+        interior_figures,
+        interiors_table,
+    )
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    ifc = [Path(f) for f in args.ifc] if args.ifc else default_ifc_files()
+    if not ifc:
+        print("walkstream: note: no IFC models given or found in ../shared/data/indoor", file=sys.stderr)
+    sources = ifc + generated_sources(out, args.presets)
+    rows = []
+    for src in sources:
+        print(f"bench interiors: {src.name}", file=sys.stderr)
+        rows.append(interior_figures(src, out / f"{src.stem}.db"))
+    if args.json:
+        print(json.dumps(rows, indent=2))
+    else:
+        print(interiors_table(rows))
+    return 0
+
+
 def add_bench_parser(sub: Any) -> None:
     """Register ``bench`` and every benchmark under it."""
     from walkstream.server.sources.citygen import DEFAULT_SIZE
@@ -352,6 +379,13 @@ def add_bench_parser(sub: Any) -> None:
     bc.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="noise/walk seeds (default 1 2 3)")
     bc.add_argument("--step", type=float, default=10.0, help="per-triangle cost step factor (default 10)")
     bc.set_defaults(func=cmd_bench_controller)
+
+    bi = besub.add_parser("interiors", help="interiors per IFC model and generated size: cells, portals, triangles, bytes per cell, error")
+    bi.add_argument("--ifc", nargs="*", help="IFC models (default: ../shared/data/indoor/*.ifc)")
+    bi.add_argument("--presets", nargs="*", default=["paper", "paper10"], help="generated interiors (default: paper paper10)")
+    bi.add_argument("--out", default="out/bench-interiors", help="folder for the generated files and databases")
+    bi.add_argument("--json", action="store_true", help="print the figures as JSON")
+    bi.set_defaults(func=cmd_bench_interiors)
 
     _add_lod(besub)
 

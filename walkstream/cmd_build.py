@@ -3,6 +3,7 @@
 ::
 
     walkstream generate city --size 700 --seed 1 -o city.geojson
+    walkstream generate interior --storeys 3 --seed 1 [--size 60x20] [--preset paper] -o office.json
     walkstream buildings stats FILE.geojson [--json]
     walkstream buildings render FILE.geojson --id ID -o lods.png [--gltf out.glb --lod 2 --all]
     walkstream grammar [FILE] [--check]
@@ -41,6 +42,37 @@ def cmd_generate_city(args: argparse.Namespace) -> int:
     summary["seconds"] = round(time.perf_counter() - t0, 2)
     summary["output"] = str(args.output)
     print_summary("city", summary, args.json)
+    return 0
+
+
+def cmd_generate_interior(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream generate interior``."""
+    from dataclasses import replace
+
+    from walkstream.server.sources.interiorgen import PRESETS, InteriorPlan, write_interior
+
+    if args.preset is not None:
+        if args.preset not in PRESETS:
+            raise WalkstreamError(f"--preset {args.preset!r}: choose one of {', '.join(PRESETS)}")
+        plan = PRESETS[args.preset]
+    else:
+        plan = InteriorPlan()
+    changes: dict[str, Any] = {}
+    if args.storeys is not None:
+        changes["storeys"] = args.storeys
+    if args.seed is not None:
+        changes["seed"] = args.seed
+    if args.size is not None:
+        try:
+            length, width = (float(v) for v in args.size.lower().split("x"))
+        except ValueError:
+            raise WalkstreamError(f"--size {args.size!r}: expected LENGTHxWIDTH in metres, e.g. 60x20") from None
+        changes |= {"length": length, "width": width}
+    t0 = time.perf_counter()
+    summary = write_interior(args.output, replace(plan, **changes))
+    summary["seconds"] = round(time.perf_counter() - t0, 2)
+    summary["output"] = str(args.output)
+    print_summary("interior", summary, args.json)
     return 0
 
 
@@ -139,6 +171,14 @@ def add_build_parsers(sub: Any) -> None:
     gc.add_argument("-o", "--output", required=True, help="GeoJSON file to write")
     gc.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     gc.set_defaults(func=cmd_generate_city)
+    gi = gsub.add_parser("interior", help="a procedural office interior (walkstream-interior format): corridors, rooms, doors, windows, stairs, furniture")
+    gi.add_argument("--storeys", type=int, help="storeys (default 3)")
+    gi.add_argument("--seed", type=int, help="random seed (default 1); same arguments, same file")
+    gi.add_argument("--size", help="LENGTHxWIDTH of the building in metres (default 60x20)")
+    gi.add_argument("--preset", help="a named plan: paper (the scale of Mulloni et al.'s model), paper10 (ten times its cells)")
+    gi.add_argument("-o", "--output", required=True, help="interior file to write (.json)")
+    gi.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    gi.set_defaults(func=cmd_generate_interior)
 
     b = sub.add_parser("buildings", help="rebuild buildings of a GeoJSON file: statistics and pictures")
     bsub = b.add_subparsers(dest="what", metavar="WHAT", required=True)

@@ -3,6 +3,8 @@
 ::
 
     walkstream path record DB NAME --from X,Y --to X,Y [--via X,Y ...] --speed KMH [--replace]
+    walkstream path record INTERIOR.db NAME --from-room NAME --to-room NAME [--via-room NAME] [--speed KMH]
+    walkstream path record INTERIOR.db NAME --from X,Y,Z --to X,Y,Z [--speed KMH]
     walkstream path import DB NAME FILE.geojson|FILE.gpx --speed KMH [--clip] [--replace]
     walkstream path list DB [--json]
     walkstream path export DB NAME -o FILE.json
@@ -44,6 +46,16 @@ def _point(text: str, option: str) -> tuple[float, float]:
     return parts[0], parts[1]
 
 
+def _place(text: str, option: str) -> tuple[float, ...]:
+    try:
+        parts = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        parts = ()
+    if len(parts) not in (2, 3) or not all(math.isfinite(v) for v in parts):
+        raise WalkstreamError(f"{option}: expected X,Y or X,Y,Z in scene-local metres, got {text!r}")
+    return parts
+
+
 def _speed(value: float) -> float:
     if not (math.isfinite(value) and value > 0):
         raise WalkstreamError(f"--speed: expected a positive number of km/h, got {value}")
@@ -56,14 +68,37 @@ def _summary(path: Any) -> str:
 
 def cmd_path_record(args: argparse.Namespace) -> int:
     """Handler of ``walkstream path record``."""
-    from walkstream.server.paths.record import record_path
+    from walkstream.server.paths.record import record_interior_path, record_path
+    from walkstream.server.store import SceneReader
 
-    start = _point(args.from_xy, "--from")
-    end = _point(args.to_xy, "--to")
-    via = [_point(v, "--via") for v in args.via or []]
-    path, version = record_path(
-        args.db, args.name, start, end, _speed(args.speed), via, replace=args.replace
-    )
+    with SceneReader.open(args.db) as reader:
+        kind = reader.meta.kind
+    if kind == "interior":
+        from walkstream.server.bake.roomnav import INDOOR_SPEED_KMH
+
+        ends: list[Any] = []
+        for room, xy, flag in ((args.from_room, args.from_xy, "--from"), (args.to_room, args.to_xy, "--to")):
+            if (room is None) == (xy is None):
+                raise WalkstreamError(f"give {flag}-room NAME or {flag} X,Y[,Z] (one of them)")
+            ends.append(room if room is not None else _place(xy, flag))
+        via_places: list[Any] = [*(args.via_room or []), *(_place(v, "--via") for v in args.via or [])]
+        speed = INDOOR_SPEED_KMH if args.speed is None else _speed(args.speed)
+        path, version = record_interior_path(
+            args.db, args.name, ends[0], ends[1], speed, via_places, replace=args.replace
+        )
+    else:
+        if args.from_room or args.to_room or args.via_room:
+            raise WalkstreamError(f"{args.db}: a city scene has no rooms: use --from X,Y --to X,Y")
+        if args.from_xy is None or args.to_xy is None:
+            raise WalkstreamError("give --from X,Y and --to X,Y")
+        if args.speed is None:
+            raise WalkstreamError("--speed KMH: a city path needs a speed")
+        start = _point(args.from_xy, "--from")
+        end = _point(args.to_xy, "--to")
+        via = [_point(v, "--via") for v in args.via or []]
+        path, version = record_path(
+            args.db, args.name, start, end, _speed(args.speed), via, replace=args.replace
+        )
     print(f"recorded path {args.name!r} in {args.db}: {_summary(path)}; scene version {version}")
     return 0
 
@@ -160,9 +195,10 @@ def add_path_parser(sub: argparse._SubParsersAction) -> None:
 
     r = psub.add_parser(
         "record",
-        help="record a path along the street graph (new scene version)",
-        description="Record a path along the street graph. X,Y are scene-local metres; "
-        "a negative X may be written --from -120.5,30 or --from=-120.5,30.",
+        help="record a path along the street graph or through an interior's rooms (new scene version)",
+        description="Record a path along the street graph, or in an interior from room to room "
+        "through doors and up stairs. X,Y are scene-local metres (in an interior X,Y,Z, Z the eye "
+        "height, which picks the storey); a negative X may be written --from -120.5,30 or --from=-120.5,30.",
     )
     if hasattr(r, "_negative_number_matcher"):
         # argparse takes "-120.5,30" for an option (its negative-number test knows no
@@ -171,15 +207,21 @@ def add_path_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("db", help="scene database")
     r.add_argument("name", help="path name")
     r.add_argument(
-        "--from", dest="from_xy", required=True, metavar="X,Y", help="start, scene-local metres"
+        "--from", dest="from_xy", metavar="X,Y[,Z]", help="start, scene-local metres"
     )
     r.add_argument(
-        "--to", dest="to_xy", required=True, metavar="X,Y", help="end, scene-local metres"
+        "--to", dest="to_xy", metavar="X,Y[,Z]", help="end, scene-local metres"
     )
     r.add_argument(
-        "--via", action="append", metavar="X,Y", help="a point to pass on the way (repeatable)"
+        "--via", action="append", metavar="X,Y[,Z]", help="a point to pass on the way (repeatable)"
     )
-    r.add_argument("--speed", type=float, required=True, metavar="KMH", help="speed in km/h")
+    r.add_argument("--from-room", metavar="NAME", help="interiors: start in this room (its name, or part of it)")
+    r.add_argument("--to-room", metavar="NAME", help="interiors: end in this room")
+    r.add_argument("--via-room", action="append", metavar="NAME", help="interiors: a room to pass (repeatable)")
+    r.add_argument(
+        "--speed", type=float, metavar="KMH",
+        help="speed in km/h (needed for a city; interiors default to 4 km/h)",
+    )
     r.add_argument("--replace", action="store_true", help="overwrite a path of the same name")
     r.set_defaults(func=cmd_path_record)
 

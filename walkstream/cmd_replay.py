@@ -18,7 +18,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from walkstream.shared.errors import InputError
+from walkstream.shared.errors import InputError, WalkstreamError
 from walkstream.terminal import WalkBar
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "config_from_args",
     "replay_to_report",
     "replay_with_options",
+    "scene_kind",
 ]
 
 IN_PROCESS_URL = "http://walkstream.in-process"
@@ -95,16 +96,45 @@ def config_from_args(args: argparse.Namespace) -> Any:
         lod_select=args.lod,
         lod_distances=(lo, hi),
         seed=args.seed,
+        fog_m=args.fog,
         report_dir=Path(args.report),
     )
 
 
 
 
+def scene_kind(server: str, scene: str | None) -> str | None:
+    """``city`` or ``interior``: from the database's meta, or the server's manifest (a
+    plain request outside the replay's shaped link); None when it cannot be told."""
+    if not server.startswith(("http://", "https://")):
+        from walkstream.server.store import SceneReader
+
+        try:
+            with SceneReader.open(server) as reader:
+                return reader.meta.kind
+        except WalkstreamError:
+            return None
+    import httpx
+
+    try:
+        base = server.rstrip("/")
+        name = scene
+        if name is None:
+            listing = httpx.get(f"{base}/v1/scenes", headers={"Accept": "application/json"}, timeout=10).json()
+            name = sorted(s["name"] for s in listing)[0]
+        m = httpx.get(f"{base}/v1/scenes/{name}", headers={"Accept": "application/json"}, timeout=10).json()
+        return str(m.get("kind", "city"))
+    except (httpx.HTTPError, ValueError, KeyError, IndexError, TypeError):
+        return None
+
+
 def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = False) -> Any:
     """Run one replay against ``server`` and write its report folder; returns the result."""
     from walkstream.client.replay import run_replay
     from walkstream.client.report import write_report
+
+    if config.kind is None:
+        config = replace(config, kind=scene_kind(server, config.scene))
 
     with transport_for(server) as (transport, url):
         if quiet:
@@ -171,6 +201,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--lod", choices=("ach", "distance"), default="ach", help="LOD selection: ACH-shared budget or distance")
     r.add_argument("--lod-distances", default="40,120", help="distance selection: LOD2 nearer than D1, LOD1 nearer than D2 (default 40,120)")
     r.add_argument("--seed", type=int, default=0, help="seed of link loss, device noise, backoff jitter")
+    r.add_argument("--fog", type=float, default=40.0, help="interiors: portals farther than this many metres are not looked through (default 40)")
 
 
 def add_replay_parser(sub: Any) -> None:

@@ -29,6 +29,7 @@ import httpx
 import msgpack
 
 from walkstream.client.clock import Clock
+from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.wire import (
@@ -36,11 +37,15 @@ from walkstream.shared.wire import (
     CellRecord,
     Manifest,
     ObjectFrame,
+    RoomRecord,
+    Topology,
     decode_cell,
     decode_frame,
     decode_locate,
     decode_manifest,
+    decode_room,
     decode_scene_list,
+    decode_topology,
 )
 
 __all__ = [
@@ -253,6 +258,35 @@ class SceneClient:
             self._url(f"/cells/{cid}"), what, dec, headers=headers, ok=(200, 304)
         )
         return rec
+
+    # -- interiors ------------------------------------------------------------
+
+    async def topology(self) -> Topology:
+        """The interior's topology: storeys, cells (plane sets), portals, stairs."""
+        what = f"scene {self.scene!r} topology"
+        _, t = await self._get_decoded(self._url("/topology"), what, lambda r: decode_topology(r.content, what))
+        return t
+
+    async def room(self, cid: int) -> RoomRecord:
+        """Interior cell ``cid``'s record."""
+        what = f"room cell {cid}"
+
+        def dec(r: httpx.Response) -> RoomRecord:
+            rec = decode_room(r.content, what, r.headers.get("etag"))
+            if rec.id != cid:
+                raise CodecError(f"{what}: the answer is cell {rec.id}")
+            return rec
+
+        _, rec = await self._get_decoded(self._url(f"/rooms/{cid}"), what, dec)
+        return rec
+
+    async def contents(self, cid: int) -> CellMesh:
+        """Interior cell ``cid``'s contents (one immutable response), decoded."""
+        what = f"contents of cell {cid}"
+        _, mesh = await self._get_decoded(
+            self._url(f"/rooms/{cid}/contents"), what, lambda r: decode_cell_mesh(r.content, what)
+        )
+        return mesh
 
     async def objects(self, ids: Sequence[int], form: str = "params") -> AsyncIterator[ObjectFrame]:
         """Stream objects ``ids`` in order, each yielded as soon as its last byte is in.

@@ -18,18 +18,20 @@ from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
 from walkstream.server.bake.workers import _run_tasks
 from walkstream.server.sources.clip import clip_scene, local_bbox
+from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
 from walkstream.server.store import CellRow, ObjectRow, SceneReader, SceneWriter
 from walkstream.shared.buildings import default_grammar, default_grammar_text, predict_triangles
 from walkstream.shared.errors import InputError
 
-__all__ = ["bake"]
+__all__ = ["bake", "file_digest"]
 
 
 # ------------------------------------------------------------------ the bake
 
 
-def _file_digest(path: Path) -> str:
+def file_digest(path: Path) -> str:
+    """First 16 hex digits of the sha256 of a file (what identifies a bake's input)."""
     h = hashlib.sha256()
     with path.open("rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -49,7 +51,10 @@ def bake(
     log: Callable[[str], None] | None = None,
     max_cells: int | None = None,
 ) -> dict[str, Any]:
-    """Bake ``source`` (GeoJSON, OpenStreetMap: :func:`read_source`) into ``output``.
+    """Bake ``source`` (GeoJSON, OpenStreetMap, an IFC model or an interior file) into ``output``.
+
+    The reader is chosen by the file's ending (:func:`~walkstream.server.sources.read.read_source`);
+    an interior goes to :func:`~walkstream.server.bake.interior.bake_interior`.
 
     Parameters
     ----------
@@ -86,6 +91,13 @@ def bake(
     t0 = time.perf_counter()
 
     scene = read_source(src, network=st.network)
+    if isinstance(scene, InteriorScene):
+        from walkstream.server.bake.interior import bake_interior
+
+        return bake_interior(
+            scene, src, out, name=name, workers=workers, scheduler=scheduler, progress=progress,
+            log=log, import_seconds=time.perf_counter() - t0,
+        )
     for note in scene.notes:
         say(f"{src.name}: {note}")
     bbox = st.bbox
@@ -104,7 +116,7 @@ def bake(
     say(f"{src.name}: {len(scene.buildings)} buildings, {len(scene.streets)} street pieces, {len(cells)} {kind} cells")
 
     grammar = default_grammar()
-    settings_dict = asdict(st) | {"source": str(src), "source_digest": _file_digest(src)}
+    settings_dict = asdict(st) | {"source": str(src), "source_digest": file_digest(src)}
     writer = SceneWriter.create(
         out,
         name=name or out.stem,

@@ -21,7 +21,7 @@ from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_sce
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError
 
-__all__ = ["cell_task"]
+__all__ = ["cell_task", "dask_client"]
 
 #: cells per task: big enough to amortise a task's overhead, small enough for a smooth bar
 _CHUNK = 8
@@ -116,6 +116,24 @@ def _run_tasks(
                 r.release()
 
 
+def dask_client(scheduler: str) -> Any:
+    """A ``distributed.Client`` of the scheduler at ``tcp://HOST:PORT`` (close it when done).
+
+    Raises
+    ------
+    InputError
+        Dask is not installed, or the scheduler cannot be reached.
+    """
+    try:
+        from distributed import Client
+    except ImportError as exc:  # optional dependency: fail only when used
+        raise InputError("--scheduler needs Dask: pip install 'dask[distributed]'") from exc
+    try:
+        return Client(scheduler, timeout=20)
+    except OSError as exc:
+        raise InputError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc})") from exc
+
+
 def _run_dask(
     scene: SourceScene,
     st: BakeSettings,
@@ -123,14 +141,9 @@ def _run_dask(
     chunks: list[list[tuple[int, NDArray[np.float64], float, float]]],
     scheduler: str,
 ) -> Iterator[list[tuple[int, NDArray[np.int64], NDArray[np.float64]]]]:
-    try:
-        from distributed import Client, as_completed
-    except ImportError as exc:  # optional dependency: fail only when used
-        raise InputError("--scheduler needs Dask: pip install 'dask[distributed]'") from exc
-    try:
-        client = Client(scheduler, timeout=20)
-    except OSError as exc:
-        raise InputError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc})") from exc
+    from distributed import as_completed
+
+    client = dask_client(scheduler)
     try:
         # ship the scene once; every task refers to the same scattered copy
         [remote] = client.scatter([scene], broadcast=True)

@@ -31,6 +31,14 @@ __all__ = [
     "NeighbourOut",
     "CellOut",
     "ObjectsIn",
+    "PortalRefOut",
+    "ContentsOut",
+    "RoomOut",
+    "StoreyOut",
+    "TopoCellOut",
+    "TopoPortalOut",
+    "StairOut",
+    "TopologyOut",
     "MAX_INT64",
     "ERRORS",
     "both",
@@ -100,6 +108,7 @@ class Manifest(BaseModel):
     objects: int
     cells: int
     limits: LimitsOut
+    kind: str = Field(description="city or interior")
 
 
 class LocateOut(BaseModel):
@@ -129,6 +138,94 @@ class CellOut(BaseModel):
     ach: list[float] = Field(description="average coverage of each PVS object; sums to 1")
 
 
+class PortalRefOut(BaseModel):
+    """A portal of an interior cell: its polygon and the cell on its other side."""
+
+    id: int
+    kind: str = Field(description="door, window, opening, virtual, split, void or stair")
+    polygon: list[list[float]] = Field(description="(k, 3) scene-local metres")
+    cell: int
+
+
+class ContentsOut(BaseModel):
+    """What a cell's contents weigh."""
+
+    triangles: int
+    vertices: int
+    parts: int
+    bytes: int = Field(description="encoded bytes of .../contents")
+    raw_bytes: int = Field(description="the same mesh as float32 positions and uint32 indices")
+    max_error: float = Field(description="largest position error of the encoding, metres")
+
+
+class RoomOut(BaseModel):
+    """An interior cell: plane set, convex outline, height range, portals, neighbours."""
+
+    id: int
+    kind: str = Field(description="room, doorway or outside")
+    name: str
+    room: str | None = Field(description="the source's room key (None for doorways and the outside)")
+    storey: int
+    outline: list[list[float]] = Field(description="(n, 2) convex outline, local metres")
+    zmin: float
+    zmax: float
+    planes: list[list[float]] = Field(description="(k, 4) nx, ny, nz, d: inside where n . p + d <= 0")
+    portals: list[PortalRefOut]
+    neighbours: list[int]
+    contents: ContentsOut
+
+
+class StoreyOut(BaseModel):
+    """A storey and the height range of its cells."""
+
+    id: int
+    name: str
+    zmin: float
+    zmax: float
+
+
+class TopoCellOut(BaseModel):
+    """A cell in the topology (its portals are listed once, in ``portals``)."""
+
+    id: int
+    kind: str
+    name: str
+    storey: int
+    outline: list[list[float]]
+    zmin: float
+    zmax: float
+    planes: list[list[float]]
+    triangles: int
+    bytes: int
+
+
+class TopoPortalOut(BaseModel):
+    """A portal with the two cells it joins."""
+
+    id: int
+    kind: str
+    cells: list[int]
+    polygon: list[list[float]]
+
+
+class StairOut(BaseModel):
+    """A stair: the portal it climbs through, its cells and walking line (floor points)."""
+
+    portal: int
+    lower: int
+    upper: int
+    path: list[list[float]]
+
+
+class TopologyOut(BaseModel):
+    """An interior's topological file: storeys, cells, portals, stairs."""
+
+    storeys: list[StoreyOut]
+    cells: list[TopoCellOut]
+    portals: list[TopoPortalOut]
+    stairs: list[StairOut]
+
+
 class ObjectsIn(BaseModel):
     """The objects to send, in the order to send them."""
 
@@ -141,7 +238,7 @@ def error_doc(description: str) -> dict[str, Any]:
 
 
 ERRORS: dict[int | str, dict[str, Any]] = {
-    404: error_doc("unknown scene, cell, path or object (named in the error)"),
+    404: error_doc("unknown scene, cell, path or object, or rooms of a city (named in the error)"),
     422: error_doc("a malformed parameter"),
 }
 

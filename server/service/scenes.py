@@ -13,6 +13,8 @@ that needs it, so that answering costs about as much as serving a static file:
 * object frames (see :mod:`walkstream.server.service.routers`) are encoded on first use and kept in a
   second byte-bounded LRU; which ids exist and their kinds are known from start-up,
   so an unknown id is answered without touching the database;
+* an interior scene also gets an :class:`~walkstream.server.service.interiors.InteriorState`
+  (its topology, room records and cell contents), and its cells are located in 3D;
 * LOD2 mesh frames (``form=lod2``, for the client's ``--stream meshes`` comparison)
   are built from the parameters with the scene's grammar (parsed once per scene) on
   first use, in a worker thread, and kept in the same frame LRU under separate keys.
@@ -41,10 +43,11 @@ from walkstream.server.service.http import (
     encode,
     etag_for,
 )
+from walkstream.server.service.interiors import InteriorState
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.buildings import build_lod
-from walkstream.shared.cells import CellLocator
+from walkstream.shared.cells import LOCATABLE_KINDS, CellLocator
 from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StoreError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
@@ -121,7 +124,12 @@ class Scene:
         self.cell_kinds: dict[int, str] = {c.id: c.kind for c in cells}
         # every outline, for the neighbour entries of cell records
         self.boundaries: dict[int, NDArray[np.float64]] = {c.id: c.boundary for c in cells}
-        self.locator = CellLocator([c.id for c in cells], [c.boundary for c in cells])
+        # interiors stack storeys: their cells are located in 3D, the outside never
+        locatable = [c for c in cells if c.kind in LOCATABLE_KINDS]
+        zranges = [[c.zmin, c.zmax] for c in locatable] if meta.kind == "interior" else None
+        self.locator = CellLocator([c.id for c in locatable], [c.boundary for c in locatable], zranges)
+        self.kind: str = meta.kind
+        self.interior: InteriorState | None = InteriorState(reader, cells) if meta.kind == "interior" else None
         b = reader.bounds()
         vps = reader.viewpoints()
         manifest = Manifest(
@@ -139,6 +147,7 @@ class Scene:
             objects=len(kinds),
             cells=len(cells),
             max_ids=MAX_IDS,
+            kind=meta.kind,
         ).to_wire()
         self.manifest: dict[Rep, Encoded] = {
             rep: encode(manifest, rep, self.version, "manifest") for rep in ("msgpack", "json")
@@ -221,10 +230,12 @@ class Scene:
 
     # -- locate --------------------------------------------------------------
 
-    def locate(self, x: float, y: float, rep: Rep) -> Encoded:
-        """``{cell: id}`` for the cell containing ``(x, y)``, or ``{cell: null, reason}``."""
-        answer = locate_answer(self.locator.locate(x, y))
-        return encode(answer, rep, self.version, f"locate:{x!r}:{y!r}")
+    def locate(self, x: float, y: float, rep: Rep, z: float | None = None) -> Encoded:
+        """``{cell: id}`` for the cell containing ``(x, y)`` (and height ``z`` in an
+        interior, where the storey's height range decides), or ``{cell: null, reason}``."""
+        answer = locate_answer(self.locator.locate(x, y, z))
+        tag = f"locate:{x!r}:{y!r}" + ("" if z is None else f":{z!r}")
+        return encode(answer, rep, self.version, tag)
 
     # -- paths ---------------------------------------------------------------
 

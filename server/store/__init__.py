@@ -8,8 +8,8 @@ and scene metadata), :mod:`.files` (atomic files, locks), :mod:`.writer`
 The bake writes it with :class:`SceneWriter`, the server reads it with
 :class:`SceneReader`, and recorded paths are added with :func:`write_path`.
 
-Layout (schema version :data:`SCHEMA_VERSION`)
----------------------------------------------
+Layout (schema version :data:`SCHEMA_VERSION`; versions :data:`READABLE_VERSIONS` are read)
+----------------------------------------------------------------------------------
 ``meta(key, value)``
     ``app`` (``"walkstream"``), ``schema_version``, ``name``, ``version`` (content
     hash), ``crs``, ``origin_x``, ``origin_y``, ``grammar``, ``grammar_version``,
@@ -23,6 +23,14 @@ Layout (schema version :data:`SCHEMA_VERSION`)
     outline, ``neighbours`` :func:`~walkstream.shared.codec.encode_ids`, ``pvs``
     :func:`~walkstream.shared.codec.encode_pvs`.
 ``viewpoints(name, x, y, z, yaw, cell)`` and ``paths(name, data)``.
+
+Interiors (version 2): the features ``rooms`` (tables ``rooms(cell, name, room, storey,
+planes)`` and ``storeys(id, name, zmin, zmax)``), ``portals`` (``portals(id, cell_a,
+cell_b, polygon, kind, source, name)`` and ``stairs(id, portal, lower, upper, path,
+name)``) and ``meshes`` (``contents(cell, data, triangles, vertices, parts, raw_bytes,
+max_error)``, the ``walkstream-cellmesh/1`` blob of each cell); an interior has no
+objects and an empty PVS per cell.  Version 1 files (cities baked before interiors
+existed) are read as they are.
 
 Optional tables are declared once in :data:`OPTIONAL_TABLES`, keyed by the feature
 name that needs them, and only created for scenes that list that feature.  The file
@@ -39,17 +47,30 @@ what lets readers open it ``immutable``."""
 
 from walkstream.server.store.edit import write_path
 from walkstream.server.store.reader import SceneReader
-from walkstream.server.store.records import CellInfo, CellRow, ObjectInfo, ObjectRow, SceneMeta
+from walkstream.server.store.records import (
+    CellInfo,
+    CellRow,
+    ContentsInfo,
+    ObjectInfo,
+    ObjectRow,
+    PortalInfo,
+    RoomInfo,
+    SceneMeta,
+    StairInfo,
+    StoreyInfo,
+)
 from walkstream.server.store.schema import (
     APPLICATION_ID,
     OBJECT_KINDS,
     OPTIONAL_TABLES,
+    READABLE_VERSIONS,
     SCHEMA_VERSION,
 )
 from walkstream.server.store.writer import SceneWriter
 
 __all__ = [
     "SCHEMA_VERSION",
+    "READABLE_VERSIONS",
     "APPLICATION_ID",
     "OBJECT_KINDS",
     "OPTIONAL_TABLES",
@@ -58,6 +79,11 @@ __all__ = [
     "ObjectInfo",
     "CellRow",
     "CellInfo",
+    "StoreyInfo",
+    "RoomInfo",
+    "PortalInfo",
+    "StairInfo",
+    "ContentsInfo",
     "SceneWriter",
     "SceneReader",
     "write_path",

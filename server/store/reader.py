@@ -30,7 +30,19 @@ try:  # advisory locks between processes; POSIX only
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
 from walkstream.server.store.files import _label
-from walkstream.server.store.records import CellInfo, ObjectInfo, SceneMeta, _index, _parse_meta
+from walkstream.server.store.records import (
+    CellInfo,
+    ContentsInfo,
+    ObjectInfo,
+    PortalInfo,
+    RoomInfo,
+    SceneMeta,
+    StairInfo,
+    StoreyInfo,
+    _f64,
+    _index,
+    _parse_meta,
+)
 from walkstream.server.store.schema import _CORE_TABLES, _check_header
 
 __all__ = ["SceneReader"]
@@ -262,12 +274,20 @@ class SceneReader:
         return decode_street(blob, f"{self._label}: street {oid}")
 
     def bounds(self) -> tuple[float, float, float, float, float, float]:
-        """Box over all objects ``(minx, miny, minz, maxx, maxy, maxz)``; zeros for an empty scene."""
+        """Box over all objects ``(minx, miny, minz, maxx, maxy, maxz)``; for an interior
+        (no objects) the box of its cells other than the outside; zeros for an empty scene."""
         row = self._query(
             "SELECT min(minx), min(miny), min(minz), max(maxx), max(maxy), max(maxz) FROM objects"
         )[0]
         if row[0] is None:
-            return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            cells = [c for c in self.cells() if c.kind != "outside"]
+            if not cells:
+                return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            pts = np.concatenate([c.boundary for c in cells])
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            z0 = min(c.zmin for c in cells)
+            z1 = max(c.zmax for c in cells)
+            return (float(lo[0]), float(lo[1]), float(z0), float(hi[0]), float(hi[1]), float(z1))
         return tuple(float(v) for v in row)  # type: ignore[return-value]
 
     # -- cells ---------------------------------------------------------------
@@ -368,6 +388,75 @@ class SceneReader:
             raise NotFoundError(f"{self._label}: no recorded path {name!r:.60}")
         return bytes(rows[0][0])
 
+    # -- interiors -------------------------------------------------------------
+
+    def _has_table(self, name: str) -> bool:
+        rows = self._query("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (name,))
+        return bool(rows)
+
+    def storeys(self) -> list[StoreyInfo]:
+        """The storeys of an interior, bottom to top (empty for a city)."""
+        if not self._has_table("storeys"):
+            return []
+        rows = self._query("SELECT id, name, zmin, zmax FROM storeys ORDER BY id")
+        return [StoreyInfo(int(i), str(n), float(a), float(b)) for i, n, a, b in rows]
+
+    def rooms(self) -> dict[int, RoomInfo]:
+        """Cell id -> its room data, for every cell of an interior (empty for a city)."""
+        if not self._has_table("rooms"):
+            return {}
+        rows = self._query("SELECT cell, name, room, storey, planes FROM rooms ORDER BY cell")
+        return {
+            int(c): RoomInfo(int(c), str(n), None if r is None else str(r), int(k),
+                             _f64(pl, 4, f"{self._label}: cell {c}: planes"))
+            for c, n, r, k, pl in rows
+        }
+
+    def portals(self) -> list[PortalInfo]:
+        """Every portal, by id (empty for a city)."""
+        if not self._has_table("portals"):
+            return []
+        rows = self._query("SELECT id, cell_a, cell_b, polygon, kind, source, name FROM portals ORDER BY id")
+        return [
+            PortalInfo(int(i), int(a), int(b), _f64(pg, 3, f"{self._label}: portal {i}: polygon"), str(k),
+                       str(s), str(n))
+            for i, a, b, pg, k, s, n in rows
+        ]
+
+    def stairs(self) -> list[StairInfo]:
+        """Every stair, by id (empty for a city)."""
+        if not self._has_table("stairs"):
+            return []
+        rows = self._query("SELECT id, portal, lower, upper, path, name FROM stairs ORDER BY id")
+        return [
+            StairInfo(int(i), int(p), int(lo), int(up), _f64(pa, 3, f"{self._label}: stair {i}: path"), str(n))
+            for i, p, lo, up, pa, n in rows
+        ]
+
+    def contents_info(self) -> dict[int, ContentsInfo]:
+        """Cell id -> the sizes of its contents (empty for a city)."""
+        if not self._has_table("contents"):
+            return {}
+        rows = self._query(
+            "SELECT cell, triangles, vertices, parts, length(data), raw_bytes, max_error FROM contents ORDER BY cell"
+        )
+        return {int(r[0]): ContentsInfo(int(r[1]), int(r[2]), int(r[3]), int(r[4]), int(r[5]), float(r[6]), cell=int(r[0]))
+                for r in rows}
+
+    def contents(self, cid: int) -> bytes:
+        """Cell ``cid``'s contents as stored (``walkstream-cellmesh/1`` bytes), for streaming.
+
+        Raises
+        ------
+        NotFoundError
+            No such cell, or the scene has no cell contents.
+        """
+        i = _index(cid, "cell id")
+        rows = self._query("SELECT data FROM contents WHERE cell = ?", (i,)) if self._has_table("contents") else []
+        if not rows:
+            raise NotFoundError(f"{self._label}: no contents for cell {i}")
+        return bytes(rows[0][0])
+
     # -- summary -------------------------------------------------------------
 
     def summary(self) -> dict[str, Any]:
@@ -411,4 +500,40 @@ class SceneReader:
             "schema_version": m.schema_version,
             "features": list(m.features),
             "paths": len(self.path_names()),
+            "kind": m.kind,
+            "portals": len(self.portals()),
+        } | (self._interior_summary() if m.kind == "interior" else {})
+
+    def _interior_summary(self) -> dict[str, Any]:
+        rooms = self.rooms()
+        info = self.contents_info()
+        storeys = self.storeys()
+        kinds = {c.id: c.kind for c in self.cells()}
+        inside = [c for c, k in kinds.items() if k != "outside"]
+        per_storey = {s.name: sum(1 for c in inside if rooms[c].storey == s.id) for s in storeys}
+        nbytes = np.array([info[c].nbytes for c in info], dtype=np.float64)
+        raw = np.array([info[c].raw_bytes for c in info], dtype=np.float64)
+        tris = np.array([info[c].triangles for c in inside if c in info], dtype=np.int64)
+        portals = self.portals()
+        ends = np.zeros(len(kinds), np.int64)
+        for p in portals:
+            ends[p.a] += 1
+            ends[p.b] += 1
+        pin = ends[inside] if inside else np.zeros(1, np.int64)
+        return {
+            "storeys": len(storeys),
+            "rooms": len({r.room for r in rooms.values() if r.room is not None}),
+            "cells_inside": len(inside),
+            "doorways": sum(1 for k in kinds.values() if k == "doorway"),
+            "cells_per_storey": per_storey,
+            "portal_kinds": {k: sum(1 for p in portals if p.kind == k) for k in sorted({p.kind for p in portals})},
+            "portals_per_cell": [int(pin.min()), int(pin.max())],
+            "stairs": len(self.stairs()),
+            "triangles": int(sum(i.triangles for i in info.values())),
+            "triangles_per_cell": [int(tris.min()), int(tris.max())] if len(tris) else [0, 0],
+            "contents_bytes": int(nbytes.sum()),
+            "contents_raw_bytes": int(raw.sum()),
+            "bytes_per_cell_mean": float(nbytes.mean()) if len(nbytes) else 0.0,
+            "bytes_per_cell_max": int(nbytes.max()) if len(nbytes) else 0,
+            "max_position_error": float(max((i.max_error for i in info.values()), default=0.0)),
         }

@@ -17,14 +17,26 @@ from walkstream.shared.codec import (
 )
 from walkstream.shared.errors import StoreError
 from walkstream.shared.records import BuildingParams, StreetParams
+from walkstream.shared.wire import ContentsRef
 
 try:  # advisory locks between processes; POSIX only
     import fcntl
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
-from walkstream.server.store.schema import SCHEMA_VERSION
+from walkstream.server.store.schema import READABLE_VERSIONS
 
-__all__ = ["SceneMeta", "ObjectRow", "ObjectInfo", "CellRow", "CellInfo"]
+__all__ = [
+    "SceneMeta",
+    "ObjectRow",
+    "ObjectInfo",
+    "CellRow",
+    "CellInfo",
+    "RoomInfo",
+    "PortalInfo",
+    "StairInfo",
+    "ContentsInfo",
+    "StoreyInfo",
+]
 _MAX_PATH_NAME = 200
 _MAX_PATH_BYTES = 64 << 20
 
@@ -64,6 +76,11 @@ class SceneMeta:
         """The bake settings (a fresh dict on each call)."""
         value: dict[str, Any] = json.loads(self.settings_json)
         return value
+
+    @property
+    def kind(self) -> str:
+        """``interior`` for a scene of rooms and portals, else ``city``."""
+        return "interior" if "rooms" in self.features else "city"
 
 
 @dataclass(frozen=True, slots=True)
@@ -194,10 +211,10 @@ def _parse_meta(raw: dict[str, Any], label: str) -> SceneMeta:
     try:
         if raw.get("app") != "walkstream":
             raise StoreError(f"{label}: meta table does not name walkstream")
-        if raw["schema_version"] != SCHEMA_VERSION:
+        if raw["schema_version"] not in READABLE_VERSIONS:
             raise StoreError(
                 f"{label}: schema version {raw['schema_version']}, this walkstream reads "
-                f"version {SCHEMA_VERSION}"
+                f"versions {', '.join(map(str, READABLE_VERSIONS))}"
             )
         if raw.get("version") is None:
             raise StoreError(
@@ -223,3 +240,84 @@ def _parse_meta(raw: dict[str, Any], label: str) -> SceneMeta:
         raise StoreError(f"{label}: meta table lacks {exc.args[0]!r}") from exc
     except (TypeError, ValueError) as exc:
         raise StoreError(f"{label}: meta table damaged ({exc})") from exc
+
+
+# ---------------------------------------------------------------------------
+# interiors (schema version 2, features rooms / portals / meshes)
+# ---------------------------------------------------------------------------
+
+
+def _f64(blob: bytes, cols: int, what: str) -> NDArray[np.float64]:
+    """A float64 little-endian ``(n, cols)`` array stored as bytes, read-only."""
+    if not isinstance(blob, bytes | bytearray | memoryview) or len(blob) % (8 * cols):
+        raise StoreError(f"{what}: expected float64 rows of {cols}")
+    a = np.frombuffer(bytes(blob), dtype="<f8").reshape(-1, cols).astype(np.float64)
+    if not np.all(np.isfinite(a)):
+        raise StoreError(f"{what}: non-finite values")
+    a.flags.writeable = False
+    return a
+
+
+def _blob(a: object, cols: int, what: str) -> bytes:
+    arr = np.asarray(a, dtype=np.float64).reshape(-1, cols)
+    if not np.all(np.isfinite(arr)):
+        raise StoreError(f"{what}: non-finite values")
+    return arr.astype("<f8").tobytes()
+
+
+@dataclass(frozen=True, slots=True)
+class StoreyInfo:
+    """A storey of an interior: its name and the height range of its cells."""
+
+    id: int
+    name: str
+    zmin: float
+    zmax: float
+
+
+@dataclass(frozen=True, slots=True)
+class RoomInfo:
+    """An interior cell's room data: the room it is part of (``room`` is the source's
+    key, ``None`` for a doorway or the outside), its storey (-1: outside) and its
+    ``planes`` ``(k, 4)`` (inside where ``n . p + d <= 0``)."""
+
+    cell: int
+    name: str
+    room: str | None
+    storey: int
+    planes: NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class PortalInfo:
+    """A portal: ``polygon`` ``(k, 3)`` between cells ``a`` and ``b``; its kind, and
+    where its two sides came from (``source``)."""
+
+    id: int
+    a: int
+    b: int
+    polygon: NDArray[np.float64]
+    kind: str
+    source: str
+    name: str
+
+
+@dataclass(frozen=True, slots=True)
+class StairInfo:
+    """A stair: the portal it climbs through, its lower and upper cell and its walking
+    line ``path`` ``(k, 3)`` (floor points, bottom to top)."""
+
+    id: int
+    portal: int
+    lower: int
+    upper: int
+    path: NDArray[np.float64]
+    name: str
+
+
+@dataclass(frozen=True)
+class ContentsInfo(ContentsRef):
+    """The sizes of one cell's contents as the database holds them: the wire's
+    :class:`~walkstream.shared.wire.ContentsRef` and the cell they belong to."""
+
+    cell: int = -1

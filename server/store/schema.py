@@ -20,10 +20,17 @@ except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
 from walkstream.server.store.files import _label
 
-__all__ = ["SCHEMA_VERSION", "APPLICATION_ID", "OBJECT_KINDS", "OPTIONAL_TABLES"]
+__all__ = ["SCHEMA_VERSION", "READABLE_VERSIONS", "APPLICATION_ID", "OBJECT_KINDS", "OPTIONAL_TABLES"]
 
-SCHEMA_VERSION = 1
-"""The one schema version this code reads and writes (``PRAGMA user_version``)."""
+SCHEMA_VERSION = 2
+"""The schema version this code writes (``PRAGMA user_version``).
+
+Version 2 added interiors: the cell kinds ``doorway`` and ``outside`` and the
+optional tables of the ``rooms``, ``portals`` and ``meshes`` features.  A version 1
+file (every city baked before) has none of them and is read as it is."""
+
+READABLE_VERSIONS = (1, 2)
+"""Schema versions this code reads."""
 
 APPLICATION_ID = 0x57534442  # "WSDB"
 """``PRAGMA application_id`` of every walkstream scene database."""
@@ -56,10 +63,36 @@ _CORE_TABLES: dict[str, str] = {
 
 OPTIONAL_TABLES: dict[str, dict[str, str]] = {
     # feature name -> {table name: DDL}; created only when the scene lists the feature
+    "rooms": {
+        # interior cells: the room a cell is part of, its storey and plane set
+        # (float64 little-endian rows nx, ny, nz, d; inside where n . p + d <= 0)
+        "rooms": (
+            "CREATE TABLE rooms(cell INTEGER PRIMARY KEY, name TEXT NOT NULL, room TEXT, "
+            "storey INTEGER NOT NULL, planes BLOB NOT NULL)"
+        ),
+        "storeys": (
+            "CREATE TABLE storeys(id INTEGER PRIMARY KEY, name TEXT NOT NULL, zmin REAL NOT NULL, "
+            "zmax REAL NOT NULL)"
+        ),
+    },
     "portals": {
+        # polygon: float64 little-endian (k, 3) rows; a stair's path likewise
         "portals": (
             "CREATE TABLE portals(id INTEGER PRIMARY KEY, cell_a INTEGER NOT NULL, "
-            "cell_b INTEGER NOT NULL, polygon BLOB NOT NULL)"
+            "cell_b INTEGER NOT NULL, polygon BLOB NOT NULL, kind TEXT NOT NULL, "
+            "source TEXT NOT NULL, name TEXT NOT NULL)"
+        ),
+        "stairs": (
+            "CREATE TABLE stairs(id INTEGER PRIMARY KEY, portal INTEGER NOT NULL, "
+            "lower INTEGER NOT NULL, upper INTEGER NOT NULL, path BLOB NOT NULL, name TEXT NOT NULL)"
+        ),
+    },
+    "meshes": {
+        # a cell's contents: walkstream-cellmesh/1 (shared/codec/cellmesh.py)
+        "contents": (
+            "CREATE TABLE contents(cell INTEGER PRIMARY KEY, data BLOB NOT NULL, "
+            "triangles INTEGER NOT NULL, vertices INTEGER NOT NULL, parts INTEGER NOT NULL, "
+            "raw_bytes INTEGER NOT NULL, max_error REAL NOT NULL)"
         ),
     },
 }
@@ -148,8 +181,9 @@ def _check_header(path: str | os.PathLike[str]) -> bool:
             f"{label}: an SQLite database but not a walkstream scene database "
             f"(application id {app_id:#x}, expected {APPLICATION_ID:#x})"
         )
-    if user_version != SCHEMA_VERSION:
+    if user_version not in READABLE_VERSIONS:
         raise StoreError(
-            f"{label}: schema version {user_version}, this walkstream reads version {SCHEMA_VERSION}"
+            f"{label}: schema version {user_version}, this walkstream reads versions "
+            f"{', '.join(map(str, READABLE_VERSIONS))}"
         )
     return wal

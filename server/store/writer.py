@@ -30,7 +30,13 @@ from walkstream.server.store.files import _flock, _fsync_dir, _fsync_file, _labe
 from walkstream.server.store.records import (
     _MAX_PATH_BYTES,
     CellRow,
+    ContentsInfo,
     ObjectRow,
+    PortalInfo,
+    RoomInfo,
+    StairInfo,
+    StoreyInfo,
+    _blob,
     _check_path_name,
     _finite,
     _index,
@@ -389,6 +395,71 @@ class SceneWriter:
         if not isinstance(blob, bytes) or len(blob) > _MAX_PATH_BYTES:
             raise StoreError(f"path {name!r}: expected bytes of at most {_MAX_PATH_BYTES}")
         self._run("paths", "INSERT OR REPLACE INTO paths VALUES (?, ?)", [(name, blob)])
+
+    # -- interiors (features rooms, portals, meshes) ---------------------------
+
+    def _require(self, table: str, feature: str) -> None:
+        row = self._db.execute(
+            "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (table,)
+        ).fetchone()
+        if row is None:
+            raise StoreError(f"{self.work_path}: no {table} table: list the feature {feature!r}")
+
+    def add_storeys(self, rows: Iterable[StoreyInfo]) -> int:
+        """Insert (or replace) the storeys of an interior; returns how many."""
+        self._require("storeys", "rooms")
+        out = []
+        for r in rows:
+            what = f"storey {r.id}"
+            out.append((_index(r.id, what), str(r.name), _finite(r.zmin, what), _finite(r.zmax, what)))
+        self._run("storeys", "INSERT OR REPLACE INTO storeys VALUES (?,?,?,?)", out)
+        return len(out)
+
+    def add_rooms(self, rows: Iterable[RoomInfo]) -> int:
+        """Insert (or replace) the room data of interior cells; returns how many."""
+        self._require("rooms", "rooms")
+        out = []
+        for r in rows:
+            what = f"cell {r.cell}"
+            storey = int(r.storey)
+            out.append((_index(r.cell, what), str(r.name), r.room, storey, _blob(r.planes, 4, f"{what}: planes")))
+        self._run("rooms", "INSERT OR REPLACE INTO rooms VALUES (?,?,?,?,?)", out)
+        return len(out)
+
+    def add_portals(self, rows: Iterable[PortalInfo]) -> int:
+        """Insert (or replace) portals; returns how many."""
+        self._require("portals", "portals")
+        out = []
+        for r in rows:
+            what = f"portal {r.id}"
+            poly = _blob(r.polygon, 3, f"{what}: polygon")
+            if len(poly) < 3 * 24:
+                raise StoreError(f"{what}: a polygon needs at least 3 points")
+            out.append((_index(r.id, what), _index(r.a, what), _index(r.b, what), poly, str(r.kind),
+                        str(r.source), str(r.name)))
+        self._run("portals", "INSERT OR REPLACE INTO portals VALUES (?,?,?,?,?,?,?)", out)
+        return len(out)
+
+    def add_stairs(self, rows: Iterable[StairInfo]) -> int:
+        """Insert (or replace) stairs; returns how many."""
+        self._require("stairs", "portals")
+        out = []
+        for r in rows:
+            what = f"stair {r.id}"
+            out.append((_index(r.id, what), _index(r.portal, what), _index(r.lower, what), _index(r.upper, what),
+                        _blob(r.path, 3, f"{what}: path"), str(r.name)))
+        self._run("stairs", "INSERT OR REPLACE INTO stairs VALUES (?,?,?,?,?,?)", out)
+        return len(out)
+
+    def add_contents(self, info: ContentsInfo, blob: bytes) -> None:
+        """Store (or replace) a cell's encoded contents (``walkstream-cellmesh/1``)."""
+        self._require("contents", "meshes")
+        what = f"cell {info.cell}: contents"
+        if not isinstance(blob, bytes) or not blob:
+            raise StoreError(f"{what}: expected non-empty bytes")
+        row = (_index(info.cell, what), blob, _index(info.triangles, what), _index(info.vertices, what),
+               _index(info.parts, what), _index(info.raw_bytes, what), _finite(info.max_error, what))
+        self._run("contents", "INSERT OR REPLACE INTO contents VALUES (?,?,?,?,?,?,?)", [row])
 
     # -- finishing -----------------------------------------------------------
 

@@ -16,10 +16,19 @@ Formats (version 1) are described in each module: building and street parameters
 :mod:`.params`; PVS, id sets and polygons in :mod:`.pvs`; meshes in :mod:`.mesh`.
 
 The modules: :mod:`.bounded` (bounded unpacking), :mod:`.varint`, :mod:`.params`
-(buildings and streets), :mod:`.pvs` (PVS, ids, polygons), :mod:`.mesh` (meshes).
+(buildings and streets), :mod:`.pvs` (PVS, ids, polygons), :mod:`.mesh` (meshes),
+:mod:`.cellmesh` (the quantised contents of an interior cell, with its error bound).
 """
 
 from walkstream.shared.codec.bounded import unpack_bounded
+from walkstream.shared.codec.cellmesh import (
+    CELLMESH_FORMAT,
+    CellMesh,
+    CellPart,
+    decode_cell_mesh,
+    encode_cell_mesh,
+    position_error_bound,
+)
 from walkstream.shared.codec.mesh import MESH_FORMAT, decode_mesh, encode_mesh
 from walkstream.shared.codec.params import (
     decode_building,
@@ -62,4 +71,10 @@ __all__ = [
     "MESH_FORMAT",
     "encode_mesh",
     "decode_mesh",
+    "CELLMESH_FORMAT",
+    "CellPart",
+    "CellMesh",
+    "encode_cell_mesh",
+    "decode_cell_mesh",
+    "position_error_bound",
 ]

@@ -1,4 +1,4 @@
-"""The HTTP API: scene list, manifest, recorded paths, locate, cells, objects, health, metrics.
+"""The HTTP API: scene list, manifest, recorded paths, locate, cells, interiors, objects, health, metrics.
 
 Every route under ``/v1`` answers in msgpack (``application/msgpack``) unless the
 request's ``Accept`` prefers ``application/json``; every response carries
@@ -25,6 +25,11 @@ headers ``X-Scene-Version`` and ``X-Object-Count`` come first.  With
 ``Accept: application/json`` the body is instead a JSON array, streamed one element
 per line, of ``{"id", "kind", "params": base64}``.
 
+Interiors (manifest ``kind: interior``) add ``GET /v1/scenes/{scene}/topology``, ``GET
+/v1/scenes/{scene}/rooms/{cell}`` and ``GET /v1/scenes/{scene}/rooms/{cell}/contents``
+(see :mod:`walkstream.server.service.routers.rooms`); ``locate`` takes a height ``z``
+there.
+
 All ids are checked before the first byte is sent: an unknown id gives a 404 that
 lists the unknown ids, never a truncated stream.
 
@@ -42,9 +47,9 @@ thousand times larger than parameters.  ``form=params`` is the default and the
 format described above; any other form is a 422 naming it.
 """
 
-from walkstream.server.service.routers import cells, objects, ops, paths, scenes
+from walkstream.server.service.routers import cells, objects, ops, paths, rooms, scenes
 
-__all__ = ["ROUTERS", "cells", "objects", "ops", "paths", "scenes"]
+__all__ = ["ROUTERS", "cells", "objects", "ops", "paths", "rooms", "scenes"]
 
-ROUTERS = (scenes.router, paths.router, cells.router, objects.router, ops.router)
+ROUTERS = (scenes.router, paths.router, cells.router, rooms.router, objects.router, ops.router)
 """Every router, in the order their routes are documented."""

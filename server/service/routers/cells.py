@@ -35,13 +35,17 @@ async def locate(
     rep: RepDep,
     x: Annotated[float, Query(allow_inf_nan=False, description="scene-local metres")],
     y: Annotated[float, Query(allow_inf_nan=False, description="scene-local metres")],
+    z: Annotated[
+        float | None,
+        Query(allow_inf_nan=False, description="height (eye), metres: in an interior it picks the storey"),
+    ] = None,
 ) -> Response:
-    """The id of the cell that contains ``(x, y)``.
+    """The id of the cell that contains ``(x, y)`` (in an interior, at height ``z``).
 
     A position outside every cell is a normal answer (200, ``cell: null``), not an
     error: a walker may step off the navigation space.
     """
-    return cached(request, scene.locate(x, y, rep))
+    return cached(request, scene.locate(x, y, rep, z))
 
 
 @router.get(

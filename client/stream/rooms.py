@@ -1,0 +1,217 @@
+"""Interior streaming: which cell the viewer is in, which cells it may see, their contents fetched.
+
+Until the client culls through portals properly (Interiors II), an interior is
+walked like this (Mulloni et al.'s cell manager, without visible screen areas):
+
+* the **viewer's cell** is the cell whose plane set holds the eye (a linear check of
+  the current cell, its neighbours, then all cells; the eye on a shared plane stays
+  in the cell it was in; outside every cell it keeps the last one);
+* the **visible cells** are the current cell and the cells reached from it through
+  portals whose bounding box meets the view frustum and lies within the fog
+  distance, breadth first, to a depth of :attr:`RoomStreamConfig.max_depth` (the
+  ``outside`` cell is entered but not gone through);
+* **contents** (one immutable response per cell) are fetched for the visible cells
+  in that order, then, with prefetch, for the cells one portal beyond them (where
+  the walker may turn next); a cell not visible for :attr:`RoomStreamConfig.flush_s`
+  seconds is flushed (the paper's policy), and the cache's byte budget stays in
+  charge as well.  A cell fetched again after a flush counts as a re-download.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.clock import Clock
+from walkstream.client.draw.culling import frustum_cull
+from walkstream.client.net.api import SceneClient
+from walkstream.client.stream.cache import Cache
+from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.errors import ApiError
+from walkstream.shared.wire import RoomRecord, Topology
+
+__all__ = ["RoomStreamConfig", "RoomStreamer", "cell_of"]
+
+
+@dataclass(frozen=True)
+class RoomStreamConfig:
+    """Knobs of the interior streamer."""
+
+    prefetch: bool = True
+    fog_m: float = 40.0
+    """Portals farther than this from the eye are not looked through."""
+    max_depth: int = 8
+    """Portals passed on the way to a visible cell, at most."""
+    flush_s: float = 30.0
+    """A cell not visible for this long is flushed from memory."""
+    max_in_flight: int = 2
+
+
+@dataclass
+class RoomStreamStats:
+    """What the interior streamer fetched and flushed."""
+
+    requests: int = 0
+    cells_received: int = 0
+    bytes_received: int = 0
+    flushed: int = 0
+    refetched: int = 0
+    errors: int = 0
+    fetched: set[int] = field(default_factory=set)
+
+
+def _stack_planes(cells: list[RoomRecord]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Ids and ``(n, k, 4)`` planes padded with rows that every point satisfies."""
+    k = max((len(c.planes) for c in cells), default=1)
+    out = np.zeros((len(cells), k, 4))
+    out[:, :, 3] = -1.0
+    for i, c in enumerate(cells):
+        out[i, : len(c.planes)] = c.planes
+    return np.array([c.id for c in cells], dtype=np.int64), out
+
+
+def cell_of(planes: NDArray[np.float64], eye: NDArray[np.float64], tol: float = 1e-6) -> NDArray[np.bool_]:
+    """``(n,)`` whether the eye ``(3,)`` is behind every plane of each of ``(n, k, 4)`` cells."""
+    return np.all(planes[:, :, :3] @ eye + planes[:, :, 3] <= tol, axis=1)
+
+
+class RoomStreamer:
+    """Follows the viewer through an interior and keeps the visible cells' contents loaded.
+
+    Parameters
+    ----------
+    api:
+        Access to the scene.
+    clock:
+        The replay's clock.
+    cache:
+        The byte-budget cache; contents are kept as kind ``"mesh"`` under the cell id.
+    topology:
+        The interior's topology (fetched once, before the walk).
+    config:
+        Knobs.
+    """
+
+    def __init__(self, api: SceneClient, clock: Clock, cache: Cache, topology: Topology, config: RoomStreamConfig) -> None:
+        self.api = api
+        self.clock = clock
+        self.cache = cache
+        self.config = config
+        self.topology = topology
+        self.cells: dict[int, RoomRecord] = {c.id: c for c in topology.cells}
+        inside = [c for c in topology.cells if c.kind != "outside" and len(c.planes)]
+        self._ids, self._planes = _stack_planes(inside)
+        self._row = {int(c): i for i, c in enumerate(self._ids)}
+        self.current: int | None = None
+        self.stats = RoomStreamStats()
+        self.last_visible: dict[int, float] = {}
+        self._tasks: dict[int, asyncio.Task[None]] = {}
+        self.visible: list[int] = []
+
+    # -- where the viewer is ---------------------------------------------------
+
+    def locate(self, eye: NDArray[np.float64]) -> int | None:
+        """The viewer's cell by the planes: the current one while it holds the eye, then
+        a neighbour, then any; outside every cell the current one is kept."""
+        e = np.asarray(eye, dtype=np.float64).reshape(3)
+        cur = self.current
+        if cur is not None and cur in self._row:
+            if cell_of(self._planes[self._row[cur] : self._row[cur] + 1], e)[0]:
+                return cur
+            for n in self.cells[cur].neighbours:
+                if n in self._row and cell_of(self._planes[self._row[n] : self._row[n] + 1], e)[0]:
+                    self.current = n
+                    return n
+        hit = np.flatnonzero(cell_of(self._planes, e))
+        if len(hit):
+            self.current = int(self._ids[hit[0]])
+        return self.current
+
+    def visible_cells(self, eye: NDArray[np.float64], view_proj: NDArray[np.float64]) -> list[int]:
+        """The current cell and those seen through portals in the frustum (breadth first)."""
+        if self.current is None:
+            return []
+        e = np.asarray(eye, dtype=np.float64)
+        order = [self.current]
+        depth = {self.current: 0}
+        i = 0
+        while i < len(order):
+            c = order[i]
+            i += 1
+            rec = self.cells[c]
+            if rec.kind == "outside" and c != self.current or depth[c] >= self.config.max_depth:
+                continue
+            refs = [r for r in rec.portals if r.cell not in depth]
+            if not refs:
+                continue
+            lo = np.array([r.polygon.min(axis=0) for r in refs])
+            hi = np.array([r.polygon.max(axis=0) for r in refs])
+            near = np.linalg.norm(np.clip(e, lo, hi) - e, axis=1)
+            seen = frustum_cull(lo, hi, view_proj) | (near < 0.5)
+            for r, ok, d in zip(refs, seen.tolist(), near.tolist(), strict=True):
+                if ok and d <= self.config.fog_m and r.cell not in depth:
+                    depth[r.cell] = depth[c] + 1
+                    order.append(r.cell)
+        return order
+
+    # -- what is loaded ---------------------------------------------------------
+
+    def mesh(self, cid: int) -> CellMesh | None:
+        """Cell ``cid``'s contents if they are in memory."""
+        value: CellMesh | None = self.cache.peek("mesh", cid)
+        return value
+
+    def tick(self, t: float, eye: NDArray[np.float64], view_proj: NDArray[np.float64]) -> list[int]:
+        """Move the viewer: locate, find the visible cells, fetch and flush; returns the visible cells."""
+        self.locate(eye)
+        vis = self.visible_cells(eye, view_proj)
+        self.visible = vis
+        for c in vis:
+            self.last_visible[c] = t
+        want = list(vis)
+        if self.config.prefetch:
+            for c in vis:
+                for n in self.cells[c].neighbours:
+                    if n not in want and self.cells[n].kind != "outside":
+                        want.append(n)
+        self.cache.set_pins([("mesh", c) for c in vis])
+        for c in list(self.last_visible):
+            if c not in vis and t - self.last_visible[c] > self.config.flush_s and self.cache.has("mesh", c):
+                self.cache.remove("mesh", c)
+                self.stats.flushed += 1
+                del self.last_visible[c]
+        for c in want:
+            if len(self._tasks) >= self.config.max_in_flight:
+                break
+            if c in self._tasks or self.cache.has("mesh", c):
+                continue
+            self._tasks[c] = asyncio.ensure_future(self._fetch(c))
+        return vis
+
+    async def _fetch(self, cid: int) -> None:
+        try:
+            self.stats.requests += 1
+            mesh = await self.api.contents(cid)
+            if cid in self.stats.fetched:
+                self.stats.refetched += 1
+            self.stats.fetched.add(cid)
+            self.stats.cells_received += 1
+            self.stats.bytes_received += mesh.nbytes
+            size = sum(p.positions.nbytes + p.indices.nbytes for p in mesh.parts)
+            self.cache.put("mesh", cid, mesh, max(size, 1))
+        except ApiError:
+            self.stats.errors += 1
+        finally:
+            self._tasks.pop(cid, None)
+
+    async def close(self) -> None:
+        """Cancel what is in flight."""
+        for task in list(self._tasks.values()):
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        self._tasks.clear()

@@ -1,0 +1,249 @@
+"""The bake of an interior: cells and portals, each cell's contents, the tour, the database.
+
+Called by :func:`~walkstream.server.bake.pipeline.bake` when the source is an
+interior (an IFC model or a ``walkstream-interior`` file).  No visibility is baked:
+the client culls through portals (Mulloni et al.), so what the database holds is the
+paper's topological file (cells as plane sets with outline and height range, portals
+as polygons with the two cells they join, triangles per cell) plus the contents of
+every cell as one compact blob.
+
+The contents of cells are independent tasks on plain arrays
+(:func:`~.roomcontents.contents_task`): they run here, in ``workers`` local processes
+or on a Dask cluster, and this process alone writes the database.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.server.bake.pipeline import file_digest
+from walkstream.server.bake.roomcontents import REACH, Part, contents_task, outside_mask, weld
+from walkstream.server.bake.roomnav import RoomGraph
+from walkstream.server.bake.rooms import room_layout
+from walkstream.server.bake.roomwalks import TOUR_NAME, entrance_cell, tour
+from walkstream.server.bake.workers import dask_client
+from walkstream.server.sources.interior import InteriorScene
+from walkstream.server.store import (
+    CellRow,
+    ContentsInfo,
+    PortalInfo,
+    RoomInfo,
+    SceneReader,
+    SceneWriter,
+    StairInfo,
+    StoreyInfo,
+)
+from walkstream.shared.arrays import F64
+from walkstream.shared.codec.cellmesh import (
+    decode_cell_mesh,
+    encode_cell_mesh,
+    position_error_bound,
+    raw_bytes,
+)
+from walkstream.shared.errors import InputError, RouteError
+
+__all__ = ["INTERIOR_FEATURES", "bake_interior"]
+
+INTERIOR_FEATURES = ("rooms", "portals", "meshes")
+"""The features an interior lists (and the optional tables it gets)."""
+
+_CHUNK = 16
+_WORKER: dict[str, Any] = {}
+
+
+def _init_worker(soup: F64, elem: NDArray[np.int64], mat: NDArray[np.int64]) -> None:
+    _WORKER["arrays"] = (soup, elem, mat)
+
+
+def _pool_task(cells: list[tuple[int, F64]]) -> list[tuple[int, list[Part], NDArray[np.int64]]]:
+    soup, elem, mat = _WORKER["arrays"]
+    return contents_task(cells, soup, elem, mat)
+
+
+def _run_contents(
+    chunks: list[list[tuple[int, F64]]], soup: F64, elem: NDArray[np.int64], mat: NDArray[np.int64],
+    workers: int, scheduler: str | None,
+) -> Iterator[list[tuple[int, list[Part], NDArray[np.int64]]]]:
+    if scheduler:
+        from distributed import as_completed
+
+        client = dask_client(scheduler)
+        try:
+            remote = client.scatter([soup, elem, mat], broadcast=True)
+            futures = [client.submit(contents_task, c, *remote, pure=False) for c in chunks]
+            for fut in as_completed(futures):
+                yield fut.result()
+        finally:
+            client.close()
+    elif workers > 1:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")
+        with ctx.Pool(workers, initializer=_init_worker, initargs=(soup, elem, mat)) as pool:
+            yield from pool.imap_unordered(_pool_task, chunks)
+    else:
+        for c in chunks:
+            yield contents_task(c, soup, elem, mat)
+
+
+def bake_interior(
+    scene: InteriorScene,
+    source: str | os.PathLike[str],
+    output: str | os.PathLike[str],
+    *,
+    name: str | None = None,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    log: Callable[[str], None] | None = None,
+    import_seconds: float = 0.0,
+) -> dict[str, Any]:
+    """Bake an interior into the scene database ``output`` (replaced atomically).
+
+    Returns
+    -------
+    dict
+        The database summary (``SceneReader.summary``) plus ``bake_seconds``,
+        ``import_seconds``, ``source``, ``notes`` (what the bake wants the user to
+        know, e.g. portals found from the geometry), ``portal_sources`` and ``tour``
+        (what the default walk covers).
+    """
+    if workers < 1:
+        raise InputError(f"--workers: expected >= 1, got {workers}")
+    say = log or (lambda _msg: None)
+    src, out = Path(source), Path(output)
+    t0 = time.perf_counter()
+    layout = room_layout(scene)
+    inside = [c for c in layout.cells if c.kind != "outside"]
+    say(
+        f"{src.name}: {len(scene.rooms)} rooms on {len(scene.storeys)} storeys -> {len(inside)} cells "
+        f"({sum(1 for c in inside if c.kind == 'doorway')} doorways), {len(layout.portals)} portals, "
+        f"{len(layout.stairs)} stairs, {scene.triangles:,} triangles"
+    )
+    notes = list(scene.notes) + layout.notes
+    for n in notes:
+        say(f"note: {n}")
+    # ---- contents: every element triangle clipped to the cells it occupies
+    soup = np.concatenate([e.soup for e in scene.elements]) if scene.elements else np.zeros((0, 3, 3))
+    elem = np.concatenate([np.full(len(e.triangles), e.id, np.int64) for e in scene.elements]) if scene.elements else np.zeros(0, np.int64)
+    mat = np.concatenate([e.materials.astype(np.int64) for e in scene.elements]) if scene.elements else np.zeros(0, np.int64)
+    tasks = [(c.id, c.planes) for c in inside]
+    chunks = [tasks[i : i + _CHUNK] for i in range(0, len(tasks), _CHUNK)]
+    parts: dict[int, list[Part]] = {}
+    held = np.zeros(len(soup), bool)
+    done = 0
+    if progress:
+        progress(0, len(layout.cells))
+    for res in _run_contents(chunks, soup, elem, mat, workers, scheduler):
+        for cid, ps, whole in res:
+            parts[cid] = ps
+            held[whole] = True
+            done += 1
+        if progress:
+            progress(done, len(layout.cells))
+    om = outside_mask(soup, [(c.outline, c.zmin, c.zmax) for c in inside], held)
+    outside_parts: list[Part] = []
+    if om.any():
+        key = elem[om] * 256 + mat[om]
+        for k in np.unique(key).tolist():
+            sel = np.flatnonzero(om)[key == k]
+            v, t = weld(soup[sel])
+            outside_parts.append((int(k) // 256, int(k) % 256, v, t))
+    parts[layout.outside] = outside_parts
+    if progress:
+        progress(len(layout.cells), len(layout.cells))
+    # ---- the tour
+    graph = RoomGraph(layout.cells, layout.portals, layout.stairs)
+    start = entrance_cell(layout.cells, layout.portals)
+    try:
+        walk, coverage = tour(graph, start)
+    except RouteError as exc:  # pragma: no cover - a tour always exists from a room cell
+        raise InputError(f"{src}: no tour could be recorded ({exc})") from exc
+    # ---- the database
+    settings = {
+        "source": str(src),
+        "source_digest": file_digest(src),
+        "source_format": scene.source_format,
+        "reach": REACH,
+        "origin_z": scene.origin[2],
+    }
+    neighbours: dict[int, set[int]] = {c.id: set() for c in layout.cells}
+    for p in layout.portals:
+        neighbours[p.a].add(p.b)
+        neighbours[p.b].add(p.a)
+    writer = SceneWriter.create(
+        out,
+        name=name or out.stem,
+        crs=scene.crs,
+        origin=(scene.origin[0], scene.origin[1]),
+        grammar_text="",
+        grammar_version="",
+        features=list(INTERIOR_FEATURES),
+        settings=settings,
+        resume=False,
+    )
+    try:
+        writer.add_cells(
+            CellRow(c.id, c.kind, c.outline, c.zmin, c.zmax, np.array(sorted(neighbours[c.id]), np.int64))
+            for c in layout.cells
+        )
+        for c in layout.cells:
+            writer.set_pvs(c.id, np.zeros(0, np.int64), np.zeros(0))
+        writer.add_storeys(
+            StoreyInfo(k, s.name, float(layout.ranges[k][0]), float(layout.ranges[k][1]))
+            for k, s in enumerate(scene.storeys)
+        )
+        writer.add_rooms(RoomInfo(c.id, c.name, c.room, c.storey, c.planes) for c in layout.cells)
+        writer.add_portals(PortalInfo(p.id, p.a, p.b, p.polygon, p.kind, p.source, p.name) for p in layout.portals)
+        writer.add_stairs(
+            StairInfo(k, s.portal, s.lower, s.upper, s.path, s.name) for k, s in enumerate(layout.stairs)
+        )
+        for c in layout.cells:
+            ps = [p for p in parts.get(c.id, []) if len(p[3])]
+            blob = encode_cell_mesh(ps)
+            nv = sum(len(p[2]) for p in ps)
+            nt = sum(len(p[3]) for p in ps)
+            # the error as measured (decoded against what was encoded), not the bound
+            err = 0.0
+            if ps:
+                back = decode_cell_mesh(blob, f"cell {c.id}")
+                err = max(float(np.abs(q.positions.astype(np.float64) - p[2]).max()) for q, p in zip(back.parts, ps, strict=True))
+                bound = float(position_error_bound(np.ptp(np.concatenate([p[2] for p in ps]), axis=0)).max())
+                if err > bound + 2.0**-23 * float(np.abs(np.concatenate([p[2] for p in ps])).max()):
+                    raise InputError(f"cell {c.id}: position error {err} above the stated bound {bound}")
+            writer.add_contents(ContentsInfo(nt, nv, len(ps), len(blob), raw_bytes(nv, nt), err, cell=c.id), blob)
+        x, y, z = walk.xyz[0]
+        writer.add_viewpoint("entrance", float(x), float(y), float(z), float(walk.yaw[0]), start)
+        writer.add_path(TOUR_NAME, walk.to_msgpack())
+        writer.finish(time.perf_counter() - t0 + import_seconds)
+    finally:
+        writer.close()
+    say(
+        f"recorded path {TOUR_NAME}: {walk.duration:.0f} s, {walk.length_m():.0f} m; passes "
+        f"{coverage['visited']} of {coverage['reachable']} reachable rooms ({coverage['rooms']} in all) on "
+        f"{coverage['storeys_visited']} of {coverage['storeys_reachable']} storeys"
+    )
+    reader = SceneReader.open(out)
+    try:
+        summary = reader.summary()
+    finally:
+        reader.close()
+    summary.update(
+        {
+            "source": str(src),
+            "import_seconds": import_seconds,
+            "notes": notes,
+            "portal_sources": dict(layout.sources),
+            "issues": [f"{i.feature_id}: {i.problem} ({i.action})" for i in scene.issues],
+            "tour": coverage,
+            "resumed_cells": 0,
+        }
+    )
+    return summary

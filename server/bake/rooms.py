@@ -1,0 +1,601 @@
+"""Room cells and portals of an interior (Mulloni et al.'s cells and portals).
+
+:func:`room_layout` turns an :class:`~walkstream.server.sources.interior.InteriorScene`
+into convex cells, each with its plane set, and the portals between them:
+
+1. **Storeys decide heights.**  A cell's volume runs from its storey's elevation to
+   the next storey's (the top storey: its tallest room), whatever the room's own
+   solid says, so a stair space that reaches into the storey above still belongs to
+   its own storey only, and a viewer at any height is in at most one storey.
+2. **Rooms.**  The rooms of a storey are made disjoint (smaller rooms keep what they
+   share with larger ones; slivers under 2 cm go) and cut into convex parts
+   (:func:`~.roomgeom.convex_parts`); the parts of one room are joined by open
+   ``split`` portals over their shared edge.
+3. **Doorways.**  Walls are thick, so the rooms on the two sides of a door are 10 to
+   40 cm apart: each door, inner window or empty opening gets a ``doorway`` cell that
+   fills the hole from one room's outline to the other's (so an eye in the doorway is
+   in a cell), with a portal on each face (polygon: the shared edge, sill to head).
+   Which rooms lie on the two sides is taken from the source when it names exactly
+   two, else found from the geometry: probe points just beyond both faces of the
+   opening, at half its height; a side with no room is the outside.  An outer window
+   is one portal from its room to the outside cell, on the room's face.
+4. **Open boundaries.**  A virtual boundary of the source joins the cells of its two
+   rooms that touch it; two rooms that touch with no virtual boundary between them
+   are joined over the parts of their shared edge no wall stands on (found from the
+   walls' footprints).
+5. **Floors with holes.**  Where a cell overlaps a cell of the storey above and the
+   slabs between them leave a hole (stairwell, gallery), a horizontal portal joins
+   them; a stair flight whose bottom and top lie in two such cells makes that portal
+   walkable and records its walking line.
+6. **Outside.**  One ``outside`` cell (no planes; nobody is located in it) is the
+   other side of every outer window and door: the client draws what it holds (outer
+   wall faces, roofs, anything no room holds) when one of those portals is visible.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import shapely
+from numpy.typing import NDArray
+
+from walkstream.server.bake.roomgeom import (
+    cell_planes,
+    convex_parts,
+    orient_ccw,
+    polygon_rings,
+    ray_distance,
+    shared_segments,
+)
+from walkstream.server.sources.interior import InteriorScene, Opening, mesh_footprint
+from walkstream.shared.arrays import F64
+from walkstream.shared.errors import SourceError
+
+__all__ = [
+    "PORTAL_KINDS",
+    "WALKABLE",
+    "RoomCell",
+    "Portal",
+    "StairLink",
+    "RoomLayout",
+    "room_layout",
+    "storey_ranges",
+    "portal_counts",
+]
+
+PORTAL_KINDS = ("door", "window", "opening", "virtual", "split", "void", "stair")
+"""Kinds of portals: door, window, opening (an empty hole or an open stretch of a
+room's edge), virtual (an open boundary of the source), split (between convex parts
+of one room), void (a hole in a floor) and stair (a hole a stair climbs through)."""
+
+WALKABLE = frozenset({"door", "opening", "virtual", "split", "stair"})
+"""Portals a walker may pass (a stair portal only along its stair)."""
+
+_TOUCH = 0.03  # outlines this close touch
+_MIN_PORTAL = 0.3  # shorter open stretches are no passage
+_PROBES = (0.05, 0.15, 0.3, 0.5)  # beyond an opening's faces, metres
+
+
+@dataclass(frozen=True)
+class RoomCell:
+    """A convex cell: ``outline`` ``(n, 2)`` CCW, volume ``zmin``..``zmax``, ``planes``
+    ``(k, 4)`` (:func:`~.roomgeom.cell_planes`; empty for the outside cell)."""
+
+    id: int
+    kind: str
+    name: str
+    room: str | None
+    storey: int
+    outline: F64
+    zmin: float
+    zmax: float
+    planes: F64
+
+    @cached_property
+    def polygon(self) -> shapely.Polygon:
+        """The outline as a shapely polygon (made once)."""
+        return shapely.Polygon(self.outline)
+
+    def holds(self, xy: F64, z: float, tol: float = 1e-6) -> bool:
+        """Whether ``(x, y, z)`` is in the cell (its side planes and height range)."""
+        if not self.zmin - tol <= z < self.zmax or len(self.planes) < 3:
+            return False
+        side = self.planes[:-2]
+        return bool(np.all(side[:, 0] * xy[0] + side[:, 1] * xy[1] + side[:, 3] <= tol))
+
+
+@dataclass(frozen=True)
+class Portal:
+    """A portal: ``polygon`` ``(k, 3)`` between cells ``a`` and ``b``."""
+
+    id: int
+    kind: str
+    a: int
+    b: int
+    polygon: F64
+    source: str
+    name: str = ""
+
+    @property
+    def walkable(self) -> bool:
+        """Whether a walker may pass it."""
+        return self.kind in WALKABLE
+
+
+@dataclass(frozen=True)
+class StairLink:
+    """A stair: the portal it climbs through, its lower and upper cell, and its
+    walking line ``(k, 3)`` (floor points, bottom to top)."""
+
+    portal: int
+    lower: int
+    upper: int
+    path: F64
+    name: str = ""
+
+
+@dataclass
+class RoomLayout:
+    """Cells, portals and stairs of an interior, plus what the bake should report."""
+
+    cells: list[RoomCell]
+    portals: list[Portal]
+    stairs: list[StairLink]
+    ranges: F64
+    """``(storeys, 2)`` the height range of each storey's cells."""
+    notes: list[str] = field(default_factory=list)
+    sources: Counter[str] = field(default_factory=Counter)
+    """Portals by where their two sides came from (boundary, geometry, file, split, ...)."""
+
+    @property
+    def outside(self) -> int:
+        """Id of the outside cell."""
+        return self.cells[-1].id
+
+
+def storey_ranges(scene: InteriorScene) -> F64:
+    """``(storeys, 2)`` height ranges: from each storey's elevation to the next one's;
+    the top storey up to the highest room solid on it (at least 2.5 m)."""
+    elev = np.array([s.elevation for s in scene.storeys], dtype=np.float64)
+    out = np.zeros((len(elev), 2))
+    out[:, 0] = elev
+    out[:-1, 1] = elev[1:]
+    top = [r.zmax for r in scene.rooms if r.storey == len(elev) - 1]
+    out[-1, 1] = max([elev[-1] + 2.5] + top)
+    return out
+
+
+def _blocking_footprints(scene: InteriorScene, ranges: F64) -> list[shapely.Geometry]:
+    """Per storey: where walls and columns stand at eye height (their footprints)."""
+    polys: list[list[shapely.Geometry]] = [[] for _ in range(len(ranges))]
+    for e in scene.elements:
+        if e.kind not in ("wall", "column") or len(e.triangles) == 0:
+            continue
+        z0, z1 = float(e.vertices[:, 2].min()), float(e.vertices[:, 2].max())
+        for k, (lo, _hi) in enumerate(ranges):
+            if z0 < lo + 1.0 and z1 > lo + 1.8:
+                fp = mesh_footprint(e.vertices, e.triangles)
+                if not fp.is_empty:
+                    polys[k].append(fp)
+    return [shapely.union_all(p) if p else shapely.Polygon() for p in polys]
+
+
+def _slab_cover(scene: InteriorScene, z: float) -> shapely.Geometry:
+    """Footprint of the floor at height ``z``: the level faces of slabs, roofs and
+    coverings from 0.65 m below to 0.5 m above it (a floor with its ceiling)."""
+    parts = []
+    for e in scene.elements:
+        if e.kind not in ("slab", "roof", "covering") or len(e.triangles) == 0:
+            continue
+        zs = e.vertices[:, 2]
+        if zs.max() < z - 0.65 or zs.min() > z + 0.5:
+            continue
+        tri = e.soup
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        level = np.abs(n[:, 2]) > 0.7 * np.linalg.norm(n, axis=1)
+        cz = tri[:, :, 2].mean(axis=1)
+        keep = level & (cz >= z - 0.65) & (cz <= z + 0.5)
+        if keep.any():
+            fp = mesh_footprint(tri[keep].reshape(-1, 3), np.arange(3 * int(keep.sum())).reshape(-1, 3))
+            if not fp.is_empty:
+                parts.append(fp)
+    return shapely.union_all(parts) if parts else shapely.Polygon()
+
+
+class _Builder:
+    def __init__(self, scene: InteriorScene) -> None:
+        self.scene = scene
+        self.ranges = storey_ranges(scene)
+        self.cells: list[RoomCell] = []
+        self.portals: list[Portal] = []
+        self.stairs: list[StairLink] = []
+        self.notes: list[str] = []
+        self.sources: Counter[str] = Counter()
+        self.linked: set[tuple[int, int]] = set()
+        self._unions: dict[int, shapely.Geometry] = {}
+
+    # -- cells ---------------------------------------------------------------
+
+    def add_cell(self, kind: str, name: str, room: str | None, storey: int, ring: F64) -> RoomCell:
+        lo, hi = self.ranges[storey]
+        r = orient_ccw(ring)
+        cell = RoomCell(len(self.cells), kind, name, room, storey, r, float(lo), float(hi),
+                        cell_planes(r, float(lo), float(hi)))
+        self.cells.append(cell)
+        return cell
+
+    def add_portal(self, kind: str, a: int, b: int, polygon: F64, source: str, name: str = "") -> Portal:
+        p = Portal(len(self.portals), kind, a, b, np.asarray(polygon, np.float64), source, name)
+        self.portals.append(p)
+        self.sources[source] += 1
+        self.linked.add((min(a, b), max(a, b)))
+        return p
+
+    def _rooms_union(self, k: int) -> shapely.Geometry:
+        if k not in self._unions:
+            self._unions[k] = shapely.union_all([x.polygon for x in self.storey_cells(k, ("room",))])
+        return self._unions[k]
+
+    def storey_cells(self, k: int, kinds: tuple[str, ...] = ("room", "doorway")) -> list[RoomCell]:
+        return [c for c in self.cells if c.storey == k and c.kind in kinds]
+
+    def locate(self, xy: F64, z: float, storey: int | None = None, among: list[RoomCell] | None = None) -> RoomCell | None:
+        for c in among if among is not None else self.cells:
+            if c.kind == "outside" or (storey is not None and c.storey != storey):
+                continue
+            if c.holds(xy, z):
+                return c
+        return None
+
+    # -- 2: rooms -------------------------------------------------------------
+
+    def rooms(self) -> None:
+        # a room rising a metre or more into the storeys above (a stair space that the
+        # file puts on one storey) is also a room of those storeys, where no other
+        # room of theirs is
+        by_storey: dict[int, list[tuple[int, float, int]]] = {}
+        for i, r in enumerate(self.scene.rooms):
+            area = shapely.Polygon(r.outline).area if len(r.outline) >= 3 else 0.0
+            for k in range(r.storey, len(self.ranges)):
+                if k == r.storey or r.zmax >= self.ranges[k][0] + 1.0:
+                    by_storey.setdefault(k, []).append((0 if k == r.storey else 1, area, i))
+        for k in sorted(by_storey):
+            taken = shapely.Polygon()
+            for _, _area, i in sorted(by_storey[k]):
+                room = self.scene.rooms[i]
+                poly = shapely.make_valid(shapely.Polygon(room.outline))
+                poly = poly.difference(taken)
+                # drop slivers left by a few centimetres of overlap with a neighbour
+                poly = poly.buffer(-0.01, join_style="mitre").buffer(0.01, join_style="mitre")
+                rings = polygon_rings(poly, 0.25)
+                if not rings:
+                    if k == room.storey:
+                        self.notes.append(f"room {room.name}: nothing left after overlaps, left out")
+                    continue
+                taken = taken.union(shapely.union_all([shapely.Polygon(r) for r in rings]))
+                parts: list[RoomCell] = []
+                for ring in rings:
+                    simple = shapely.Polygon(ring).simplify(0.005)
+                    for part in convex_parts(np.asarray(simple.exterior.coords)[:-1]):
+                        if shapely.Polygon(part).area > 0.05:
+                            parts.append(self.add_cell("room", room.name, room.key, k, part))
+                for x in range(len(parts)):
+                    for y in range(x + 1, len(parts)):
+                        self.edge_portals(parts[x], parts[y], "split", "split", room.zmax, room.name)
+
+    def edge_portals(self, x: RoomCell, y: RoomCell, kind: str, source: str, top: float, name: str = "",
+                     z0: float | None = None) -> int:
+        """Portals over every shared edge of two touching cells; returns how many."""
+        lo = x.zmin if z0 is None else z0
+        hi = min(top, x.zmax)
+        n = 0
+        for seg in shared_segments(x.outline, y.outline, _TOUCH):
+            if float(np.hypot(*(seg[1] - seg[0]))) < 0.05:
+                continue
+            self.add_portal(kind, x.id, y.id, _vertical(seg, lo, hi), source, name)
+            n += 1
+        return n
+
+    # -- 3: doorways and windows -------------------------------------------
+
+    def openings(self) -> None:
+        blocked = 0
+        for op in self.scene.openings:
+            if op.kind == "virtual" or op.depth < 0.01:
+                continue
+            if not 0 <= op.storey < len(self.ranges):
+                continue
+            sides = self.sides(op)
+            if sides is None:
+                blocked += 1
+                continue
+            a, b, source = sides
+            if a is None and b is None:
+                blocked += 1
+                continue
+            if a is not None and b is not None and a.room == b.room:
+                self.notes.append(f"{op.kind} {op.name}: both sides lie in room {a.name}; no portal")
+                continue
+            if op.kind == "window" and (a is None or b is None):
+                room = a if a is not None else b
+                sign = -1.0 if a is not None else 1.0
+                assert room is not None
+                self.outer_window(op, room, sign, source)
+            else:
+                self.doorway(op, a, b, source)
+        if blocked:
+            self.notes.append(f"{blocked} openings with no room on either side: no portal")
+
+    def sides(self, op: Opening) -> tuple[RoomCell | None, RoomCell | None, str] | None:
+        """The cells beyond the opening's two faces (-normal side, +normal side)."""
+        cells = self.storey_cells(op.storey, ("room",))
+        named = set(op.rooms) if len(op.rooms) == 2 else set()
+        z = min(max(op.zmin + 0.5 * min(op.zmax - op.zmin, 2.0), self.ranges[op.storey][0] + 0.2),
+                self.ranges[op.storey][1] - 0.1)
+        found: list[RoomCell | None] = []
+        for s in (-1.0, 1.0):
+            hit = None
+            for delta in _PROBES:
+                for u in (0.0, -0.3, 0.3):
+                    q = op.centre[:2] + op.normal * s * (0.5 * op.depth + delta) + op.along * u * 0.5 * op.width
+                    cand = [c for c in cells if (not named or c.room in named)]
+                    hit = self.locate(q, z, op.storey, cand) or (self.locate(q, z, op.storey, cells) if named else None)
+                    if hit is not None:
+                        break
+                if hit is not None:
+                    break
+            found.append(hit)
+        a, b = found
+        if a is None and b is None:
+            return None
+        source = "boundary" if named and {c.room for c in (a, b) if c is not None} == named else "geometry"
+        return a, b, source
+
+    def outer_window(self, op: Opening, room: RoomCell, sign: float, source: str) -> None:
+        """A window between a room (on the ``sign`` side) and the outside: one portal on the room's face."""
+        t = self.face_distance(op, room, sign)
+        if t is None:
+            t = 0.5 * op.depth
+        c = op.centre[:2] + op.normal * sign * t
+        seg = np.array([c - op.along * 0.5 * op.width, c + op.along * 0.5 * op.width])
+        lo, hi = self.ranges[op.storey]
+        self.add_portal("window", room.id, -1, _vertical(seg, max(op.zmin, lo), min(op.zmax, hi)), source, op.name)
+
+    def face_distance(self, op: Opening, cell: RoomCell, sign: float) -> float | None:
+        """How far from the opening's middle plane the cell's outline begins (max over
+        three lines across the opening), or None when no line reaches it."""
+        ds = []
+        for u in (-0.45, 0.0, 0.45):
+            start = op.centre[:2] + op.along * u * op.width
+            d = ray_distance(start, op.normal * sign, cell.outline, reach=max(1.0, op.depth + 0.6))
+            if d is not None:
+                ds.append(d)
+        return max(ds) if ds else None
+
+    def doorway(self, op: Opening, a: RoomCell | None, b: RoomCell | None, source: str) -> None:
+        """Doorway cells filling the hole from ``a``'s outline to ``b``'s, and their portals."""
+        ext = []
+        for cell, sign in ((a, -1.0), (b, 1.0)):
+            d = self.face_distance(op, cell, sign) if cell is not None else None
+            ext.append(0.5 * op.depth if d is None else min(d, op.depth + 0.6))
+        ta, tb = ext
+        c, u, n = op.centre[:2], op.along, op.normal
+        w = 0.5 * op.width
+        rect = shapely.Polygon([c - u * w - n * ta, c + u * w - n * ta, c + u * w + n * tb, c - u * w + n * tb])
+        hole = rect.difference(self._rooms_union(op.storey))
+        rings = polygon_rings(hole, 0.005)
+        lo, hi = self.ranges[op.storey]
+        z0, z1 = max(op.zmin, lo), min(op.zmax, hi)
+        if not rings:
+            # the rooms reach into the hole (spaces drawn to the wall's middle): a
+            # portal across the opening's middle plane joins them directly
+            if a is not None and b is not None:
+                seg = np.array([c - u * w, c + u * w])
+                self.add_portal(op.kind, a.id, b.id, _vertical(seg, z0, z1), source, op.name)
+            return
+        name = f"{op.kind} {op.name}"
+        pieces: list[RoomCell] = []
+        for ring in rings:
+            for part in convex_parts(ring):
+                if shapely.Polygon(part).area > 0.002:
+                    pieces.append(self.add_cell("doorway", name, None, op.storey, part))
+        for i in range(len(pieces)):
+            for j in range(i + 1, len(pieces)):
+                self.edge_portals(pieces[i], pieces[j], "split", "split", hi, name, z0)
+        # a portal on each face: to the rooms it touches, and to the outside where it
+        # ends at an outer face
+        neighbours = [x for x in self.storey_cells(op.storey, ("room",))]
+        for p in pieces:
+            for x in neighbours:
+                if p.polygon.distance(x.polygon) < _TOUCH:
+                    for seg in shared_segments(p.outline, x.outline, _TOUCH):
+                        self.add_portal(op.kind, p.id, x.id, _vertical(seg, z0, z1), source, op.name)
+            for cell, sign, t in ((a, -1.0, ta), (b, 1.0, tb)):
+                if cell is not None:
+                    continue
+                face = c + n * sign * t
+                seg_line = shapely.LineString([face - u * w, face + u * w])
+                on = seg_line.intersection(p.polygon.buffer(1e-6))
+                if isinstance(on, shapely.LineString) and on.length > 0.05:
+                    pts = np.asarray(on.coords)
+                    self.add_portal(op.kind, p.id, -1, _vertical(pts[[0, -1]], z0, z1), source, op.name)
+
+    # -- 4: open boundaries -------------------------------------------------
+
+    def virtual(self) -> None:
+        for op in self.scene.openings:
+            if op.kind != "virtual" or op.polygon is None or len(op.rooms) != 2:
+                continue
+            poly = op.polygon
+            if float(np.ptp(poly[:, 2])) < 0.3:  # horizontal: floors are handled by holes
+                continue
+            line = shapely.LineString(poly[:, :2]).envelope if len(poly) else None
+            if line is None:
+                continue
+            ra, rb = op.rooms
+            k = op.storey
+            xs = [c for c in self.storey_cells(k, ("room",)) if c.room == ra]
+            ys = [c for c in self.storey_cells(k, ("room",)) if c.room == rb]
+            zone = shapely.MultiPoint(poly[:, :2]).convex_hull.buffer(_TOUCH)
+            z0 = max(float(poly[:, 2].min()), self.ranges[k][0])
+            z1 = min(float(poly[:, 2].max()), self.ranges[k][1])
+            for x in xs:
+                for y in ys:
+                    for seg in shared_segments(x.outline, y.outline, _TOUCH):
+                        part = shapely.LineString(seg).intersection(zone)
+                        if isinstance(part, shapely.LineString) and part.length >= _MIN_PORTAL:
+                            pts = np.asarray(part.coords)
+                            self.add_portal("virtual", x.id, y.id, _vertical(pts[[0, -1]], z0, z1), "boundary", op.name)
+
+    def touching(self) -> None:
+        walls = _blocking_footprints(self.scene, self.ranges)
+        for k in range(len(self.ranges)):
+            cells = self.storey_cells(k, ("room",))
+            cover = walls[k].buffer(0.05) if not walls[k].is_empty else walls[k]
+            for i in range(len(cells)):
+                for j in range(i + 1, len(cells)):
+                    x, y = cells[i], cells[j]
+                    if x.room == y.room or (min(x.id, y.id), max(x.id, y.id)) in self.linked:
+                        continue
+                    if x.polygon.distance(y.polygon) > _TOUCH:
+                        continue
+                    top = min(self._room_top(x), self._room_top(y))
+                    for seg in shared_segments(x.outline, y.outline, _TOUCH):
+                        line = shapely.LineString(seg)
+                        free = line.difference(cover) if not cover.is_empty else line
+                        for g in getattr(free, "geoms", [free]):
+                            if isinstance(g, shapely.LineString) and g.length >= _MIN_PORTAL:
+                                pts = np.asarray(g.coords)
+                                self.add_portal("opening", x.id, y.id, _vertical(pts[[0, -1]], x.zmin, top),
+                                                "geometry", "open")
+
+    def _room_top(self, c: RoomCell) -> float:
+        tops = [r.zmax for r in self.scene.rooms if r.key == c.room]
+        return min(max(tops) if tops else c.zmax, c.zmax)
+
+    # -- 5: holes in floors and stairs ---------------------------------------
+
+    def floors(self) -> None:
+        vertical: dict[tuple[int, int], int] = {}
+        for k in range(len(self.ranges) - 1):
+            lower = self.storey_cells(k)
+            upper = self.storey_cells(k + 1)
+            if not lower or not upper:
+                continue
+            z = float(self.ranges[k + 1][0])
+            cover = _slab_cover(self.scene, z)
+            for x in lower:
+                for y in upper:
+                    ov = x.polygon.intersection(y.polygon)
+                    if ov.area < 0.3:
+                        continue
+                    hole = ov.difference(cover.buffer(0.02)) if not cover.is_empty else ov
+                    for ring in polygon_rings(hole, 0.3):
+                        p = self.add_portal("void", x.id, y.id, np.column_stack([ring, np.full(len(ring), z)]),
+                                            "geometry", "hole in the floor")
+                        vertical[(x.id, y.id)] = p.id
+        for st in self.scene.stairs:
+            self.stair(st.path, st.name, vertical)
+
+    def stair(self, path: F64, name: str, vertical: dict[tuple[int, int], int]) -> None:
+        k = int(np.searchsorted(self.ranges[:, 0], path[0, 2] + 0.05, side="right")) - 1
+        if not 0 <= k < len(self.ranges) - 1:
+            self.notes.append(f"stair {name}: not between two storeys")
+            return
+        low = self.locate(path[0, :2], path[0, 2] + 0.5, k) or self._near(path[0, :2], path[0, 2] + 0.5, k)
+        zt = float(self.ranges[k + 1][0])
+        d = path[-1, :2] - path[-2, :2]
+        d = d / max(float(np.hypot(*d)), 1e-9)
+        top_xy = path[-1, :2] + d * 0.3
+        line = np.concatenate([path, [[top_xy[0], top_xy[1], zt]]])
+        # the walker's eye (1.6 m up) passes the floor above where the treads are 1.6 m
+        # below it: the cell there is the stair's upper cell
+        zs = line[:, 2] + 1.6
+        j = int(np.searchsorted(zs, zt))
+        if 0 < j < len(line):
+            f = (zt - zs[j - 1]) / max(zs[j] - zs[j - 1], 1e-9)
+            cross = line[j - 1, :2] + f * (line[j, :2] - line[j - 1, :2])
+        else:
+            cross = line[-1, :2]
+        up = self.locate(cross, zt + 0.5, k + 1) or self._near(cross, zt + 0.5, k + 1)
+        if low is None or up is None:
+            self.notes.append(f"stair {name}: no cell at its {'bottom' if low is None else 'top'}")
+            return
+        pid = vertical.get((low.id, up.id))
+        if pid is None:
+            # no hole found in the floor above: the stair's own footprint is the passage
+            ov = low.polygon.intersection(up.polygon).intersection(shapely.LineString(line[:, :2]).buffer(0.6))
+            rings = polygon_rings(ov, 0.1)
+            if not rings:
+                self.notes.append(f"stair {name}: its bottom and top cells do not overlap")
+                return
+            p = self.add_portal("stair", low.id, up.id, np.column_stack([rings[0], np.full(len(rings[0]), zt)]),
+                                "geometry", name)
+            self.notes.append(f"stair {name}: no hole found in the floor above; its footprint is the portal")
+        else:
+            old = self.portals[pid]
+            p = Portal(old.id, "stair", old.a, old.b, old.polygon, old.source, name)
+            self.portals[pid] = p
+        self.stairs.append(StairLink(p.id, low.id, up.id, line, name))
+
+    def _near(self, xy: F64, z: float, k: int) -> RoomCell | None:
+        best, dist = None, 0.5
+        pt = shapely.Point(xy)
+        for c in self.storey_cells(k):
+            d = c.polygon.distance(pt)
+            if d < dist:
+                best, dist = c, d
+        return best
+
+    # -- 6: the outside -----------------------------------------------------
+
+    def outside(self) -> None:
+        pts = np.concatenate([c.outline for c in self.cells])
+        lo, hi = pts.min(axis=0) - 1.0, pts.max(axis=0) + 1.0
+        ring = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+        zlo = float(self.ranges[0][0]) - 1.0
+        zhi = float(max(self.ranges[-1][1], max((e.vertices[:, 2].max() for e in self.scene.elements if len(e.vertices)), default=0.0))) + 1.0
+        cid = len(self.cells)
+        self.cells.append(RoomCell(cid, "outside", "outside", None, -1, ring, zlo, zhi, np.zeros((0, 4))))
+        self.portals = [
+            Portal(p.id, p.kind, p.a, cid if p.b < 0 else p.b, p.polygon, p.source, p.name) for p in self.portals
+        ]
+
+
+def _vertical(seg: F64, z0: float, z1: float) -> F64:
+    """The vertical rectangle over a segment from ``z0`` to ``z1``, ``(4, 3)``."""
+    a, b = seg[0], seg[-1]
+    return np.array([[a[0], a[1], z0], [b[0], b[1], z0], [b[0], b[1], z1], [a[0], a[1], z1]], dtype=np.float64)
+
+
+def room_layout(scene: InteriorScene) -> RoomLayout:
+    """Cells, portals and stairs of an interior (see the module docstring).
+
+    Raises
+    ------
+    SourceError
+        No room gives a cell.
+    """
+    b = _Builder(scene)
+    b.rooms()
+    if not b.cells:
+        raise SourceError(f"{scene.name}: no room gives a cell (all empty or overlapping)")
+    b.openings()
+    b.virtual()
+    b.touching()
+    b.floors()
+    b.outside()
+    return RoomLayout(b.cells, b.portals, b.stairs, b.ranges, b.notes, b.sources)
+
+
+def portal_counts(layout: RoomLayout) -> NDArray[np.int64]:
+    """Portals per cell, ``(cells,)``."""
+    n = np.zeros(len(layout.cells), np.int64)
+    for p in layout.portals:
+        n[p.a] += 1
+        n[p.b] += 1
+    return n
+

@@ -1,0 +1,108 @@
+"""What the service keeps of an interior scene: its topology, its cell records, its cell contents.
+
+Built once when the scene is loaded (a damaged interior stops the start): every
+cell's :class:`~walkstream.shared.wire.RoomRecord` is assembled from the database's
+rooms, portals and contents sizes, and the topology (Mulloni et al.'s topological
+file) is encoded in both representations.  Room records and contents blobs are
+encoded or read on first use and kept in a byte-bounded LRU.  Everything is keyed by
+the scene version, so it never needs invalidating.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from walkstream.server.service.http import Encoded, Rep, encode, etag_for
+from walkstream.server.service.lru import LRU
+from walkstream.server.store import CellInfo, SceneReader
+from walkstream.shared.errors import ApiError
+from walkstream.shared.wire import ContentsRef, PortalRef, RoomRecord, Topology
+
+__all__ = ["CONTENTS_MEDIA", "InteriorState"]
+
+CONTENTS_MEDIA = "application/vnd.walkstream.cellmesh"
+"""Media type of a cell's contents (``walkstream-cellmesh/1``, see :mod:`walkstream.shared.codec.cellmesh`)."""
+
+_CACHE_BYTES = 64 << 20
+
+
+class InteriorState:
+    """The interior parts of one scene (see the module docstring).
+
+    Parameters
+    ----------
+    reader:
+        The scene's database.
+    cells:
+        Its cells, as the service already read them.
+    """
+
+    def __init__(self, reader: SceneReader, cells: Sequence[CellInfo]) -> None:
+        self.reader = reader
+        self.version = reader.version
+        self.name = reader.meta.name
+        rooms = reader.rooms()
+        info = reader.contents_info()
+        portals = reader.portals()
+        refs: dict[int, list[PortalRef]] = {c.id: [] for c in cells}
+        for p in portals:
+            refs[p.a].append(PortalRef(p.id, p.kind, p.polygon, p.b))
+            refs[p.b].append(PortalRef(p.id, p.kind, p.polygon, p.a))
+        self.records: dict[int, RoomRecord] = {}
+        for c in cells:
+            r = rooms[c.id]
+            ci = info.get(c.id)
+            contents = ci if ci is not None else ContentsRef(0, 0, 0, 0, 0, 0.0)
+            self.records[c.id] = RoomRecord(
+                id=c.id, kind=c.kind, name=r.name, room=r.room, storey=r.storey, outline=c.boundary,
+                zmin=c.zmin, zmax=c.zmax, planes=r.planes, portals=tuple(refs[c.id]),
+                neighbours=tuple(int(n) for n in c.neighbours), contents=contents,
+            )
+        topology = Topology(
+            storeys=tuple((s.id, s.name, s.zmin, s.zmax) for s in reader.storeys()),
+            cells=tuple(self.records[c.id] for c in cells),
+            portals=tuple((p.id, p.kind, p.a, p.b, p.polygon) for p in portals),
+            stairs=tuple((s.portal, s.lower, s.upper, s.path) for s in reader.stairs()),
+        ).to_wire()
+        self.topology: dict[Rep, Encoded] = {
+            rep: encode(topology, rep, self.version, "topology") for rep in ("msgpack", "json")
+        }
+        self._cache = LRU(_CACHE_BYTES)
+
+    def has(self, cid: int) -> bool:
+        """Whether the interior has cell ``cid``."""
+        return cid in self.records
+
+    def _check(self, cid: int) -> None:
+        if cid not in self.records:
+            raise ApiError(f"scene {self.name!r} has no cell {cid}", status=404, detail={"cell": cid})
+
+    def cached_room(self, cid: int, rep: Rep) -> Encoded | None:
+        """The encoded record of cell ``cid`` if it is cached."""
+        value: Encoded | None = self._cache.get(("room", cid, rep))
+        return value
+
+    def room(self, cid: int, rep: Rep) -> Encoded:
+        """The encoded :class:`~walkstream.shared.wire.RoomRecord` of cell ``cid``."""
+        self._check(cid)
+        enc = self.cached_room(cid, rep)
+        if enc is None:
+            enc = encode(self.records[cid].to_wire(), rep, self.version, f"room:{cid}")
+            self._cache.put(("room", cid, rep), enc, len(enc.content))
+        return enc
+
+    def cached_contents(self, cid: int) -> Encoded | None:
+        """Cell ``cid``'s contents if they are cached."""
+        value: Encoded | None = self._cache.get(("contents", cid))
+        return value
+
+    def contents(self, cid: int) -> Encoded:
+        """Cell ``cid``'s contents blob as stored (reads the database on a cache miss)."""
+        self._check(cid)
+        enc = self.cached_contents(cid)
+        if enc is None:
+            blob = self.reader.contents(cid)
+            enc = Encoded(blob, CONTENTS_MEDIA, etag_for(self.version, f"contents:{cid}", "cellmesh"))
+            self._cache.put(("contents", cid), enc, len(blob))
+        return enc
+

@@ -1,0 +1,90 @@
+"""Routes of an interior: its topology, a cell's record, and a cell's contents.
+
+``GET /v1/scenes/{scene}/topology``
+    The topological file of Mulloni et al.: storeys, every cell (plane set, outline,
+    height range, triangles and contents bytes), every portal (polygon and its two
+    cells), every stair.  One request gives a client the whole visibility graph.
+``GET /v1/scenes/{scene}/rooms/{cell}``
+    One cell: planes, outline, portals (polygon and the other cell), neighbours and
+    what its contents weigh.
+``GET /v1/scenes/{scene}/rooms/{cell}/contents``
+    The cell's geometry as one immutable blob (``walkstream-cellmesh/1``, media type
+    ``application/vnd.walkstream.cellmesh``; decode with
+    :func:`walkstream.shared.codec.decode_cell_mesh`): a cell is one request.
+
+Each has a strong ETag and a year-long immutable Cache-Control (304 on a matching
+``If-None-Match``).  A city scene answers them with a 404 that says so.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Path, Request, Response
+from starlette.concurrency import run_in_threadpool
+
+from walkstream.server.service.dependencies import RepDep, SceneDep
+from walkstream.server.service.http import cached
+from walkstream.server.service.interiors import CONTENTS_MEDIA, InteriorState
+from walkstream.server.service.models import ERRORS, RoomOut, TopologyOut, both
+from walkstream.server.service.scenes import Scene
+from walkstream.shared.errors import ApiError
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/v1", responses=ERRORS)
+
+
+def _interior(scene: Scene) -> InteriorState:
+    if scene.interior is None:
+        raise ApiError(
+            f"scene {scene.name!r} is a {scene.kind}: it has no rooms (see its manifest's kind)",
+            status=404,
+            detail={"scene": scene.name, "kind": scene.kind},
+        )
+    return scene.interior
+
+
+@router.get(
+    "/scenes/{scene}/topology",
+    response_model=TopologyOut,
+    responses=both("the interior's storeys, cells, portals and stairs"),
+    summary="Interior topology",
+)
+async def topology(request: Request, scene: SceneDep, rep: RepDep) -> Response:
+    """Every cell as a plane set with its outline, every portal with its two cells."""
+    return cached(request, _interior(scene).topology[rep])
+
+
+@router.get(
+    "/scenes/{scene}/rooms/{cell}",
+    response_model=RoomOut,
+    responses=both("the interior cell record"),
+    summary="Interior cell record",
+)
+async def room(
+    request: Request, scene: SceneDep, rep: RepDep, cell: Annotated[int, Path(description="cell id")]
+) -> Response:
+    """Planes, outline, portals (polygon and the other cell), neighbours, contents sizes."""
+    state = _interior(scene)
+    enc = state.cached_room(cell, rep)
+    if enc is None:
+        enc = state.room(cell, rep)
+    return cached(request, enc)
+
+
+@router.get(
+    "/scenes/{scene}/rooms/{cell}/contents",
+    responses={
+        200: {"description": "the cell's geometry (walkstream-cellmesh/1)", "content": {CONTENTS_MEDIA: {}}},
+        304: {"description": "not modified (If-None-Match matched the ETag)"},
+    },
+    summary="Interior cell contents",
+)
+async def contents(request: Request, scene: SceneDep, cell: Annotated[int, Path(description="cell id")]) -> Response:
+    """The cell's geometry as one immutable blob (the same bytes whatever ``Accept`` says)."""
+    state = _interior(scene)
+    enc = state.cached_contents(cell)
+    if enc is None:  # a database read: in a worker thread, off the event loop
+        enc = await run_in_threadpool(state.contents, cell)
+    return cached(request, enc)
