@@ -110,7 +110,12 @@ def derive(
                 )
             step += 1
             nxt: dict[str, list[NDArray[np.float64]]] = defaultdict(list)
-            for sym, parts in active.items():
+            # symbols in the grammar's order, not in the order they first appeared: the
+            # modules a building gets then come out in the same order alone or in a batch
+            for sym in prods:
+                parts = active.get(sym)
+                if not parts:
+                    continue
                 arr = parts[0] if len(parts) == 1 else np.concatenate(parts)
                 n = len(arr)
                 remaining = np.ones(n, dtype=bool)
