@@ -15,6 +15,8 @@ from walkstream.shared.buildings import (
     build_lod_batch,
     build_lods,
     build_lods_batch,
+    default_grammar_text,
+    derive_building,
     edge_frames,
     frame_batch,
 )
@@ -118,11 +120,7 @@ def test_module_order_does_not_depend_on_the_other_members_of_the_batch() -> Non
 
 
 def test_a_building_over_the_limits_is_named_as_one_by_one(city: list[BuildingParams]) -> None:
-    from walkstream.shared.buildings import default_grammar_text
-
     # limits that only the biggest building of the city goes over
-    from walkstream.shared.buildings import derive_building
-
     sizes = [sum(len(v) for v in derive_building(b, 2).values()) for b in city]
     tall = city[int(np.argmax(sizes))]
     assert max(sizes) > 600 and max(sizes[:2]) < 500

@@ -209,8 +209,8 @@ def derive_batch(
                     for succ in prod.successors:
                         if succ.repeat is None:
                             out = np.empty((m, len(succ.args)), np.float64)
-                            for k, a in enumerate(succ.args):
-                                out[:, k] = a.eval(sub_env)
+                            for k, ex in enumerate(succ.args):
+                                out[:, k] = ex.eval(sub_env)
                             out_own = sub_own
                         else:
                             raw = np.broadcast_to(np.asarray(succ.repeat.eval(sub_env), np.float64), (m,))
@@ -228,8 +228,8 @@ def derive_batch(
                                 rep_env[p] = sub[rows, k]
                             rep_env["i"] = (np.arange(reps) - np.repeat(starts, counts)).astype(np.float64)
                             out = np.empty((reps, len(succ.args)), np.float64)
-                            for k, a in enumerate(succ.args):
-                                out[:, k] = a.eval(rep_env)
+                            for k, ex in enumerate(succ.args):
+                                out[:, k] = ex.eval(rep_env)
                             out_own = sub_own[rows]
                         per_owner += np.bincount(out_own, minlength=count)
                         (nxt if succ.symbol in prods else done)[succ.symbol].append((out, out_own))
