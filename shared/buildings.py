@@ -17,7 +17,7 @@ import numpy as np
 
 from walkstream.shared.errors import InputError, WalkstreamError
 from walkstream.shared.geometry import ring_edges, triangulate_rings
-from walkstream.shared.lsystem.batch import FrameBatch, derive_batch, interpret_batch
+from walkstream.shared.lsystem.batch import FrameBatch, block_offsets, derive_batch, interpret_batch
 from walkstream.shared.lsystem.derive import Modules, derive
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
 from walkstream.shared.lsystem.interpret import EdgeFrames, count_triangles, interpret
@@ -115,13 +115,6 @@ def predict_triangles(b: BuildingParams, grammar: Grammar | None = None) -> tupl
     return t0, t1, t2
 
 
-def _offsets(counts: np.ndarray) -> np.ndarray:
-    """``(B + 1,)`` int64 offsets of blocks of ``counts`` rows."""
-    out = np.zeros(len(counts) + 1, np.int64)
-    np.cumsum(counts, out=out[1:])
-    return out
-
-
 def frame_batch(buildings: Sequence[BuildingParams]) -> FrameBatch:
     """:func:`edge_frames` of many footprints at once, concatenated.
 
@@ -133,8 +126,8 @@ def frame_batch(buildings: Sequence[BuildingParams]) -> FrameBatch:
     count = len(buildings)
     ring_len = np.fromiter((len(r) for r in rings), np.int64, len(rings))
     ring_owner = np.repeat(np.arange(count), [len(b.rings) for b in buildings])
-    edge_start = _offsets(np.bincount(ring_owner, ring_len, count).astype(np.int64))
-    ring_start = _offsets(ring_len)[:-1]
+    edge_start = block_offsets(np.bincount(ring_owner, ring_len, count).astype(np.int64))
+    ring_start = block_offsets(ring_len)[:-1]
     p0 = np.concatenate(rings) if rings else np.zeros((0, 2))
     nxt = np.arange(1, len(p0) + 1)
     nxt[ring_start + ring_len - 1] = ring_start
@@ -149,13 +142,13 @@ def frame_batch(buildings: Sequence[BuildingParams]) -> FrameBatch:
     edge_owner = np.repeat(np.arange(count), np.diff(edge_start))
     local = p0 - p0[edge_start[:-1]][edge_owner] if count else p0
     ends = (ring_start + ring_len - edge_start[ring_owner]).astype(np.uint32)
-    ring_first = _offsets(np.bincount(ring_owner, minlength=count))
+    ring_first = block_offsets(np.bincount(ring_owner, minlength=count))
     tris = []
     for b in range(count):
         e0, e1 = edge_start[b], edge_start[b + 1]
         tris.append(mapbox_earcut.triangulate_float64(local[e0:e1], ends[ring_first[b] : ring_first[b + 1]]))
     idx = np.asarray(np.concatenate(tris) if tris else np.zeros(0), np.int64).reshape(-1, 3)
-    tri_start = _offsets(np.array([len(t) // 3 for t in tris], np.int64))
+    tri_start = block_offsets(np.array([len(t) // 3 for t in tris], np.int64))
     g = idx + edge_start[:-1][np.repeat(np.arange(count), np.diff(tri_start))][:, None]
     a, b_, c = local[g[:, 0]], local[g[:, 1]], local[g[:, 2]]
     cross = (b_[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b_[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])

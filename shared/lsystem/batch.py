@@ -26,12 +26,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.shared.errors import DerivationLimitError, GrammarError
-from walkstream.shared.lsystem.derive import Modules
+from walkstream.shared.lsystem.derive import Modules, depth_error
 from walkstream.shared.lsystem.grammar import Grammar, Production
 from walkstream.shared.lsystem.interpret import _BOX, _QUAD, EdgeFrames, _instance, _valid
 from walkstream.shared.records import Mesh
 
-__all__ = ["Owners", "FrameBatch", "derive_batch", "interpret_batch"]
+__all__ = ["Owners", "FrameBatch", "derive_batch", "interpret_batch", "block_offsets"]
 
 #: symbol -> ``(count,) int64`` owner (index in the batch) of each module
 Owners = dict[str, NDArray[np.int64]]
@@ -170,11 +170,7 @@ def derive_batch(
     with np.errstate(all="ignore"):
         while active:
             if step >= depth_limit:
-                growing = ", ".join(f"{s} ({sum(len(x) for x, _ in v)})" for s, v in sorted(active.items()))
-                raise DerivationLimitError(
-                    f"grammar {grammar.name}: derivation did not finish within depth {depth_limit}; "
-                    f"still being rewritten: {growing}"
-                )
+                raise depth_error(grammar, depth_limit, {s: sum(len(x) for x, _ in v) for s, v in active.items()})
             step += 1
             nxt: dict[str, list[Part]] = defaultdict(list)
             for sym in prods:  # grammar order, as derive() does
@@ -254,11 +250,20 @@ def derive_batch(
     return modules, out_owners
 
 
-def _starts(counts: NDArray[np.int64]) -> NDArray[np.int64]:
-    """Exclusive prefix sums: where each owner's block starts."""
-    out = np.zeros(len(counts), np.int64)
-    np.cumsum(counts[:-1], out=out[1:])
+def block_offsets(counts: NDArray[Any]) -> NDArray[np.int64]:
+    """``(B + 1,)`` offsets of ``B`` consecutive blocks of ``counts`` rows (0 first, the total last).
+
+    >>> block_offsets(np.array([2, 0, 3])).tolist()
+    [0, 2, 2, 5]
+    """
+    out = np.zeros(len(counts) + 1, np.int64)
+    np.cumsum(counts, out=out[1:])
     return out
+
+
+def _starts(counts: NDArray[Any]) -> NDArray[np.int64]:
+    """Where each of the blocks of ``counts`` rows starts."""
+    return block_offsets(counts)[:-1]
 
 
 class _Assembly:
@@ -294,8 +299,8 @@ class _Assembly:
                 nor.astype(np.float32),
                 (tris + self.verts[t_own][:, None]).astype(np.uint32),
                 np.clip(mats, 0, 255).astype(np.uint8),
-                _starts(v_count).tolist() + [len(pos)],
-                _starts(t_count).tolist() + [len(tris)],
+                block_offsets(v_count).tolist(),
+                block_offsets(t_count).tolist(),
             )
         )
         self.verts = self.verts + v_count
