@@ -1,9 +1,13 @@
 """What rebuilding buildings from parameters costs and saves: ``walkstream bench rebuild``.
 
 :func:`building_stats` rebuilds every building of a scene at every LOD on one core,
-timing each LOD, and counts the parameter bytes against the LOD2 geometry bytes;
-``walkstream buildings stats`` and the demo print it for one run, :func:`rebuild_table`
-summarises several runs (medians) for the benchmark.
+one building per call, timing each LOD, and counts the parameter bytes against the
+LOD2 geometry bytes; ``walkstream buildings stats`` and the demo print it for one run.
+:func:`rebuild_run` adds, in the same run, the batched path
+(:func:`~walkstream.shared.buildings.build_lod_batch`, many buildings per call) at
+some batch sizes and :func:`trimesh.creation.extrude_polygon` per footprint (what a
+plain LOD0 prism costs elsewhere); :func:`rebuild_table` summarises several runs
+(medians, and ratios of the medians) for ``walkstream bench rebuild``.
 """
 
 from __future__ import annotations
@@ -13,15 +17,30 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from walkstream.shared.buildings import LODS, build_lod
+from walkstream.shared.buildings import LODS, build_lod, build_lod_batch
 from walkstream.shared.codec import encode_building
 from walkstream.shared.lsystem.grammar import Grammar
 from walkstream.shared.records import BuildingParams
 
-__all__ = ["REBUILD_GOALS", "building_stats", "rebuild_table"]
+__all__ = [
+    "REBUILD_GOALS",
+    "BATCH_GOALS",
+    "EXTRUDE_GOAL",
+    "building_stats",
+    "batched_rates",
+    "extrude_rate",
+    "rebuild_run",
+    "rebuild_table",
+]
 
 REBUILD_GOALS: tuple[int | None, int | None, int | None] = (2000, None, 200)
 """Buildings per second per LOD to reach (issue 2), on one core, derivation included."""
+
+BATCH_GOALS: tuple[float | None, float | None, float | None] = (5.0, None, 3.0)
+"""Batched over one-by-one throughput per LOD to reach (issue 15), in the same run."""
+
+EXTRUDE_GOAL = 5.0
+"""Batched LOD0 over ``trimesh.creation.extrude_polygon`` per footprint (issue 15)."""
 
 
 def building_stats(
@@ -75,20 +94,105 @@ def building_stats(
 
 
 
-def rebuild_table(runs: Sequence[dict[str, Any]], source: str) -> str:
-    """Several runs of :func:`building_stats` on one scene: median, min and max per LOD."""
-    first = runs[0]
-    lines = [
-        f"rebuild benchmark: {source} ({first['buildings']} buildings, {len(runs)} runs, one core)",
-        f"{'LOD':<6}{'median b/s':>12}{'min':>10}{'max':>10}{'triangles':>14}{'goal b/s':>10}",
-    ]
+def batched_rates(
+    buildings: Sequence[BuildingParams],
+    batch: int,
+    grammar: Grammar | None = None,
+    *,
+    progress: Callable[[int], None] | None = None,
+) -> list[float]:
+    """Buildings per second per LOD through :func:`build_lod_batch`, ``batch`` buildings per call."""
+    if batch < 1:
+        raise ValueError(f"batch: expected >= 1, got {batch}")
+    rates = []
+    n = len(buildings)
     for lod in LODS:
-        rates = [float(r["rebuild_per_s"][lod]) for r in runs]
-        goal = REBUILD_GOALS[lod]
-        lines.append(
-            f"LOD{lod:<3}{statistics.median(rates):>12,.0f}{min(rates):>10,.0f}{max(rates):>10,.0f}"
-            f"{first['triangles'][lod]:>14,}{goal if goal else '-':>10}"
+        t0 = time.perf_counter()
+        for i in range(0, n, batch):
+            build_lod_batch(buildings[i : i + batch], lod, grammar)
+            if progress is not None and lod == LODS[-1]:
+                progress(min(batch, n - i))
+        dt = time.perf_counter() - t0
+        rates.append(round(n / dt, 1) if dt > 0 else 0.0)
+    return rates
+
+
+def extrude_rate(buildings: Sequence[BuildingParams]) -> float:
+    """Footprints per second through ``trimesh.creation.extrude_polygon`` (a closed prism of the
+    building's height, like LOD0; the shapely polygons are made before the clock starts)."""
+    import trimesh
+    from shapely.geometry import Polygon
+
+    polys = [(Polygon(b.rings[0], b.rings[1:]), b.height) for b in buildings]
+    t0 = time.perf_counter()
+    for poly, h in polys:
+        trimesh.creation.extrude_polygon(poly, h)
+    dt = time.perf_counter() - t0
+    return round(len(polys) / dt, 1) if dt > 0 else 0.0
+
+
+def rebuild_run(
+    buildings: Sequence[BuildingParams],
+    batches: Sequence[int],
+    grammar: Grammar | None = None,
+    *,
+    progress: Callable[[int], None] | None = None,
+) -> dict[str, Any]:
+    """One run of everything ``walkstream bench rebuild`` compares, one after the other.
+
+    Returns
+    -------
+    :func:`building_stats`'s dict, plus ``batched`` (batch size -> buildings per second
+    per LOD) and ``extrude_per_s`` (footprints per second through trimesh).
+    """
+    stats = building_stats(buildings, grammar, progress=progress)
+    stats["batched"] = {int(b): batched_rates(buildings, b, grammar) for b in batches}
+    stats["extrude_per_s"] = extrude_rate(buildings)
+    return stats
+
+
+def rebuild_table(runs: Sequence[dict[str, Any]], source: str) -> str:
+    """Several runs of :func:`building_stats` (or :func:`rebuild_run`) on one scene.
+
+    Median, min and max per LOD and path; ``x one-by-one`` is the batched median over
+    the one-by-one median of the same runs.
+    """
+    med = statistics.median
+    first = runs[0]
+    n = first["buildings"]
+    lines = [
+        f"rebuild benchmark: {source} ({n} buildings, {len(runs)} runs, one core; all rows in the same runs)",
+        f"{'path':<26}{'LOD':<6}{'median b/s':>12}{'min':>10}{'max':>10}{'x one-by-one':>14}"
+        f"{'triangles':>14}{'goal':>10}",
+    ]
+    single = [med(float(r["rebuild_per_s"][lod]) for r in runs) for lod in LODS]
+
+    def row(path: str, lod: int, rates: list[float], ratio: str, goal: str) -> str:
+        return (
+            f"{path:<26}LOD{lod:<3}{med(rates):>12,.0f}{min(rates):>10,.0f}{max(rates):>10,.0f}{ratio:>14}"
+            f"{first['triangles'][lod]:>14,}{goal:>10}"
         )
+
+    for lod in LODS:
+        goal = REBUILD_GOALS[lod]
+        lines.append(row("one by one", lod, [float(r["rebuild_per_s"][lod]) for r in runs], "1.0x", f"{goal} b/s" if goal else "-"))
+    batches = sorted(first.get("batched", {}))
+    for b in batches:
+        label = f"batch {b}" if b < n else f"batch {b} (all)"
+        for lod in LODS:
+            rates = [float(r["batched"][b][lod]) for r in runs]
+            ratio = med(rates) / single[lod] if single[lod] else 0.0
+            times = BATCH_GOALS[lod]
+            lines.append(row(label, lod, rates, f"{ratio:.1f}x", f">= {times:g}x" if times else "-"))
+    if "extrude_per_s" in first:
+        ext = [float(r["extrude_per_s"]) for r in runs]
+        lines.append(
+            f"{'trimesh extrude_polygon':<26}{'LOD0':<6}{med(ext):>12,.0f}{min(ext):>10,.0f}{max(ext):>10,.0f}"
+            f"{med(ext) / single[0] if single[0] else 0.0:>13.1f}x{'':>14}{'-':>10}"
+        )
+        for b in batches:
+            ratio = med(float(r["batched"][b][0]) for r in runs) / med(ext) if med(ext) else 0.0
+            lines.append(f"LOD0 batch {b} vs trimesh extrude_polygon: {ratio:.1f}x (goal >= {EXTRUDE_GOAL:g}x)")
     ratio = float(first["ratio"])
     lines.append(
         f"parameters {first['param_bytes']:,} B, LOD2 geometry {first['lod2_bytes']:,} B, "

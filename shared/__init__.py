@@ -46,6 +46,8 @@ _EXPORTS = {
     "load_grammar": "walkstream.shared.lsystem.grammar",
     "build_lod": "walkstream.shared.buildings",
     "build_lods": "walkstream.shared.buildings",
+    "build_lod_batch": "walkstream.shared.buildings",
+    "build_lods_batch": "walkstream.shared.buildings",
     "default_grammar": "walkstream.shared.buildings",
     "default_grammar_text": "walkstream.shared.buildings",
     "build_street": "walkstream.shared.streets",

@@ -91,3 +91,12 @@ def test_grammar_file_error_names_line(tmp_path: Path, capsys: pytest.CaptureFix
     g.write_text("grammar x 1\nA(x) -> B(\n")
     assert main(["grammar", str(g)]) == 2
     assert "grammar line 2" in capsys.readouterr().err
+
+
+def test_bench_rebuild_compares_paths_in_one_run(city: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "rebuild", str(city), "--repeat", "1", "--batch", "4,1000"]) == 0
+    out = capsys.readouterr().out
+    for row in ("one by one", "batch 4 ", "batch 1000 (all)", "trimesh extrude_polygon", "LOD0 batch 4 vs trimesh"):
+        assert row in out, row
+    assert main(["bench", "rebuild", str(city), "--repeat", "1", "--batch", "0"]) == 2
+    assert "--batch" in capsys.readouterr().err

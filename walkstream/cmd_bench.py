@@ -2,7 +2,7 @@
 
 ::
 
-    walkstream bench rebuild [FILE] [--repeat 5]
+    walkstream bench rebuild [FILE] [--repeat 5] [--batch 32,256]
     walkstream bench visibility scene.db|SOURCE.geojson [--sample N] [--plot out.png]
     walkstream bench render [--size 700] [--cells 40] [--runs 3] ...
     walkstream bench server scene.db [--walkers 10,100,1000] [--workers 1,2] ...
@@ -44,7 +44,7 @@ def _ints(text: str, flag: str) -> tuple[int, ...]:
 
 def cmd_bench_rebuild(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench rebuild``."""
-    from walkstream.benchmarks.rebuild import building_stats, rebuild_table
+    from walkstream.benchmarks.rebuild import rebuild_run, rebuild_table
     from walkstream.cmd_build import load_source
     from walkstream.server.sources.citygen import DEFAULT_SEED, write_city
 
@@ -53,10 +53,13 @@ def cmd_bench_rebuild(args: argparse.Namespace) -> int:
         source = str(Path(tempfile.mkdtemp()) / "city.geojson")
         write_city(source, args.size, DEFAULT_SEED)
     scene = load_source(source)
+    batches = _ints(args.batch, "--batch")
+    if min(batches) < 1:
+        raise WalkstreamError(f"--batch: expected sizes >= 1, got {args.batch!r}")
     runs = []
     for r in range(args.repeat):
         with building_bar(len(scene.buildings), f"run {r + 1}/{args.repeat}") as bar:
-            runs.append(building_stats(scene.buildings, progress=bar.update))
+            runs.append(rebuild_run(scene.buildings, batches, progress=bar.update))
     print(rebuild_table(runs, source))
     return 0
 
@@ -329,6 +332,9 @@ def add_bench_parser(sub: Any) -> None:
     bb.add_argument("file", nargs="?", help="GeoJSON source (default: the default 700 m city)")
     bb.add_argument("--size", type=float, default=DEFAULT_SIZE, help="city size when no file is given")
     bb.add_argument("--repeat", type=int, default=5, help="runs; the table shows medians (default 5)")
+    bb.add_argument(
+        "--batch", default="32,256", help="batch sizes of the batched rows, comma-separated (default 32,256)"
+    )
     bb.set_defaults(func=cmd_bench_rebuild)
     bv = besub.add_parser("visibility", help="PVS miss rate against a dense reference vs bake seconds per cell, per setting")
     bv.add_argument("scene", help="scene database (its source GeoJSON is read again) or a GeoJSON source")

@@ -3,8 +3,12 @@
 A pool of workers takes rebuild jobs from a priority queue (the objects of the
 current cell first, then by the time a cell is needed, then by ACH, highest
 first) and turns each object's parameters into its three LODs with the grammar the
-manifest named (:func:`~walkstream.shared.buildings.build_lods`; a street is one flat surface
-used at every LOD).
+manifest named (a street is one flat surface used at every LOD).  A worker takes
+the jobs at the head of the queue together, up to :data:`BATCH` (and no more than
+its share when several workers are idle), and rebuilds their buildings in one call
+(:func:`~walkstream.shared.buildings.build_lods_batch`), so the per-building
+interpreter overhead is paid once per batch; when few jobs wait, a batch is small
+and a job waits no longer than before.
 
 Under the real clock the jobs run in a thread pool, concurrently with the frame
 loop.  Under the simulated clock a job runs at once on the event loop (virtual
@@ -19,21 +23,24 @@ import asyncio
 import heapq
 import itertools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
-from walkstream.shared.buildings import build_lods
+from walkstream.shared.buildings import build_lods, build_lods_batch
 from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import Grammar
 from walkstream.shared.records import BuildingParams, Mesh, StreetParams, readonly
 from walkstream.shared.streets import build_street
 
-__all__ = ["ObjectGeometry", "geometry_of", "rebuild", "RewritePool"]
+__all__ = ["BATCH", "ObjectGeometry", "geometry_of", "rebuild", "rebuild_batch", "RewritePool"]
+
+BATCH = 32
+"""Most jobs one worker rebuilds in one call."""
 
 Priority = tuple[float, float]
 """(seconds until needed, -ACH): smaller is sooner."""
@@ -89,6 +96,28 @@ def rebuild(oid: int, params: BuildingParams | StreetParams, grammar: Grammar) -
     return geometry_of(oid, meshes, time.thread_time() - t0)
 
 
+def rebuild_batch(
+    jobs: Sequence[tuple[int, BuildingParams | StreetParams]], grammar: Grammar
+) -> list[ObjectGeometry]:
+    """The three LODs of several objects, buildings in one batched call; same order as ``jobs``.
+
+    Each object is charged an equal share of the CPU seconds (of this thread) the whole
+    call took.
+    """
+    t0 = time.thread_time()
+    buildings = [(k, p) for k, (_, p) in enumerate(jobs) if isinstance(p, BuildingParams)]
+    meshes: list[tuple[Mesh | None, Mesh | None, Mesh | None]] = [(None, None, None)] * len(jobs)
+    for (k, _), lods in zip(buildings, build_lods_batch([p for _, p in buildings], grammar), strict=True):
+        meshes[k] = lods
+    for k, (_, p) in enumerate(jobs):
+        if isinstance(p, StreetParams):
+            m = build_street(p)
+            meshes[k] = (m, m, m)
+    geoms = [geometry_of(oid, ms) for (oid, _), ms in zip(jobs, meshes, strict=True)]
+    share = (time.thread_time() - t0) / max(1, len(jobs))
+    return [replace(g, cpu_s=share) for g in geoms]
+
+
 class RewritePool:
     """Rebuild jobs in priority order on ``workers`` workers.
 
@@ -103,6 +132,8 @@ class RewritePool:
         Called on the event loop with each finished :class:`ObjectGeometry`.
     workers:
         Number of concurrent workers.
+    batch:
+        Most jobs a worker rebuilds in one call (1: one object per call, as before batching).
     """
 
     def __init__(
@@ -111,13 +142,19 @@ class RewritePool:
         grammar: Grammar | None,
         on_built: Callable[[ObjectGeometry], None],
         workers: int = 2,
+        batch: int = BATCH,
     ) -> None:
         if workers < 1:
             raise InputError(f"workers must be >= 1, got {workers}")
+        if batch < 1:
+            raise InputError(f"batch must be >= 1, got {batch}")
         self.clock = clock
         self.grammar = grammar
         self.on_built = on_built
         self.workers = workers
+        self.batch = batch
+        self._busy = 0
+        self.batches = 0
         self._heap: list[tuple[Priority, int, int]] = []
         self._jobs: dict[int, tuple[BuildingParams | StreetParams, Priority]] = {}
         self._seq = itertools.count()
@@ -166,6 +203,19 @@ class RewritePool:
                 return oid, job[0]
         return None
 
+    def _take(self) -> list[tuple[int, BuildingParams | StreetParams]]:
+        """The jobs at the head of the queue, in priority order: at most :data:`BATCH`, and
+        no more than an equal share of what waits among the workers not busy."""
+        idle = max(1, self.workers - self._busy)
+        want = min(self.batch, max(1, -(-len(self._jobs) // idle)))
+        out: list[tuple[int, BuildingParams | StreetParams]] = []
+        while len(out) < want:
+            job = self._pop()
+            if job is None:
+                break
+            out.append(job)
+        return out
+
     def start(self) -> None:
         """Start the workers on the running event loop."""
         if not self.clock.simulated:
@@ -175,27 +225,28 @@ class RewritePool:
     async def _worker(self) -> None:
         loop = asyncio.get_running_loop()
         while True:
-            job = self._pop() if self.grammar is not None else None
-            if job is None:
+            jobs = self._take() if self.grammar is not None else []
+            if not jobs:
                 self._wake.clear()
                 await self._wake.wait()
                 continue
-            oid, params = job
             assert self.grammar is not None
-            self._running.add(oid)
+            self._running.update(oid for oid, _ in jobs)
+            self._busy += 1
             try:
                 if self._executor is None:
-                    geom = rebuild(oid, params, self.grammar)
-                    await self.clock.sleep(geom.cpu_s)
+                    geoms = rebuild_batch(jobs, self.grammar)
+                    await self.clock.sleep(sum(g.cpu_s for g in geoms))
                 else:
-                    geom = await loop.run_in_executor(
-                        self._executor, rebuild, oid, params, self.grammar
-                    )
+                    geoms = await loop.run_in_executor(self._executor, rebuild_batch, jobs, self.grammar)
             finally:
-                self._running.discard(oid)
-            self.built += 1
-            self.cpu_s += geom.cpu_s
-            self.on_built(geom)
+                self._busy -= 1
+                self._running.difference_update(oid for oid, _ in jobs)
+            self.batches += 1
+            for geom in geoms:
+                self.built += 1
+                self.cpu_s += geom.cpu_s
+                self.on_built(geom)
 
     async def close(self) -> None:
         """Stop the workers (jobs in progress in threads finish on their own)."""

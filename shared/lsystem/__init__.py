@@ -1,5 +1,7 @@
-"""The parametric L-system: expressions -> grammar -> derivation -> interpretation into meshes."""
+"""The parametric L-system: expressions -> grammar -> derivation -> interpretation into meshes
+(one derivation at a time, or a batch of them at once: :mod:`.batch`)."""
 
+from walkstream.shared.lsystem.batch import FrameBatch, derive_batch, interpret_batch
 from walkstream.shared.lsystem.derive import derive, evaluate_lets
 from walkstream.shared.lsystem.expr import Expr, compile_expr, hash01
 from walkstream.shared.lsystem.grammar import (
@@ -25,4 +27,7 @@ __all__ = [
     "EdgeFrames",
     "interpret",
     "count_triangles",
+    "FrameBatch",
+    "derive_batch",
+    "interpret_batch",
 ]

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from walkstream.shared.errors import DerivationLimitError, GrammarError
 from walkstream.shared.lsystem.grammar import Grammar
 
-__all__ = ["derive", "evaluate_lets", "Modules"]
+__all__ = ["derive", "evaluate_lets", "depth_error", "Modules"]
 
 #: symbol -> (count, arity) float64 parameters of the modules with that symbol
 Modules = dict[str, NDArray[np.float64]]
@@ -37,6 +37,14 @@ def evaluate_lets(grammar: Grammar, globals_: Mapping[str, float]) -> dict[str, 
             # most lets are plain Python numbers; skip numpy for them (hot path per building)
             scope[name] = float(v) if isinstance(v, int | float) else float(np.asarray(v, dtype=np.float64))
     return scope
+
+
+def depth_error(grammar: Grammar, limit: int, growing: Mapping[str, int]) -> DerivationLimitError:
+    """The error of a derivation still rewriting ``growing`` (symbol -> modules) at depth ``limit``."""
+    names = ", ".join(f"{s} ({n})" for s, n in sorted(growing.items()))
+    return DerivationLimitError(
+        f"grammar {grammar.name}: derivation did not finish within depth {limit}; still being rewritten: {names}"
+    )
 
 
 def _column_stack(values: list[Any], n: int) -> NDArray[np.float64]:
@@ -103,14 +111,15 @@ def derive(
     with np.errstate(all="ignore"):
         while active:
             if step >= depth_limit:
-                growing = ", ".join(f"{s} ({sum(len(x) for x in v)})" for s, v in sorted(active.items()))
-                raise DerivationLimitError(
-                    f"grammar {grammar.name}: derivation did not finish within depth {depth_limit}; "
-                    f"still being rewritten: {growing}"
-                )
+                raise depth_error(grammar, depth_limit, {s: sum(len(x) for x in v) for s, v in active.items()})
             step += 1
             nxt: dict[str, list[NDArray[np.float64]]] = defaultdict(list)
-            for sym, parts in active.items():
+            # symbols in the grammar's order, not in the order they first appeared: the
+            # modules a building gets then come out in the same order alone or in a batch
+            for sym in prods:
+                parts = active.get(sym)
+                if not parts:
+                    continue
                 arr = parts[0] if len(parts) == 1 else np.concatenate(parts)
                 n = len(arr)
                 remaining = np.ones(n, dtype=bool)
