@@ -1,13 +1,14 @@
 """The client's memory cache: a byte-budget LRU of cells, parameters and geometry, with pins.
 
-:class:`Cache` holds what the walk needs in memory under one byte budget: cell
-records (``"cell"``), what is downloaded per object -- its parameters (``"params"``),
+:class:`Cache` holds what the walk needs in memory under one byte budget: tiles of
+the cell index (``"index"``), cell records (``"cell"``), what is downloaded per object -- its parameters (``"params"``),
 or its LOD2 mesh when meshes are streamed instead (``"mesh"``) -- and the geometry
 ready to draw (``"geom"``).  What the current view needs (the current cell's record, its PVS
 parameters and their geometry) is *pinned* and never evicted.  Over the budget, the
 unpinned entries go in this order: geometry first, because it can be rebuilt
-without the network; then parameters (or meshes); then cells; least recently used first within
-each kind.  Every operation is O(1) (one ``OrderedDict`` of evictable entries per
+without the network; then parameters (or meshes); then cells; then index tiles
+(small, and what tracking the viewer needs); least recently used first within each
+kind.  Every operation is O(1) (one ``OrderedDict`` of evictable entries per
 kind, pinned entries kept apart so eviction never has to skip them), apart from
 re-pinning, which costs the size of the change.
 
@@ -25,13 +26,14 @@ from walkstream.shared.errors import InputError
 
 __all__ = ["Kind", "KINDS", "EVICTION_ORDER", "Key", "Cache"]
 
-Kind = Literal["cell", "params", "mesh", "geom"]
-"""What a :class:`Cache` entry is: a cell record, object parameters, a downloaded mesh, geometry."""
+Kind = Literal["index", "cell", "params", "mesh", "geom"]
+"""What a :class:`Cache` entry is: an index tile, a cell record, object parameters, a
+downloaded mesh, geometry."""
 
-KINDS: tuple[Kind, ...] = ("cell", "params", "mesh", "geom")
+KINDS: tuple[Kind, ...] = ("index", "cell", "params", "mesh", "geom")
 """Every entry kind."""
 
-EVICTION_ORDER: tuple[Kind, ...] = ("geom", "params", "mesh", "cell")
+EVICTION_ORDER: tuple[Kind, ...] = ("geom", "params", "mesh", "cell", "index")
 """Over the budget, unpinned entries of these kinds go first to last."""
 
 Key = tuple[str, int]
@@ -43,7 +45,7 @@ Key = tuple[str, int]
 
 
 class Cache:
-    """A byte-budget LRU of cell records, parameters and geometry with pinning.
+    """A byte-budget LRU of index tiles, cell records, parameters and geometry with pinning.
 
     Parameters
     ----------

@@ -15,11 +15,13 @@ more than a small multiple of its input size.
 Formats (version 1) are described in each module: building and street parameters in
 :mod:`.params`; PVS, id sets and polygons in :mod:`.pvs`; meshes in :mod:`.mesh`.
 
-The modules: :mod:`.bounded` (bounded unpacking), :mod:`.varint`, :mod:`.params`
+The modules: :mod:`.bounded` (bounded unpacking), :mod:`.varint`, :mod:`.ints` (integer
+sequences in the smallest of four encodings), :mod:`.params`
 (buildings and streets), :mod:`.pvs` (PVS, ids, polygons), :mod:`.mesh` (meshes).
 """
 
 from walkstream.shared.codec.bounded import unpack_bounded
+from walkstream.shared.codec.ints import INT_FORMATS, pack_ints, unpack_ints
 from walkstream.shared.codec.mesh import MESH_FORMAT, decode_mesh, encode_mesh
 from walkstream.shared.codec.params import (
     decode_building,
@@ -52,6 +54,9 @@ __all__ = [
     "encode_polygon",
     "decode_polygon",
     "unpack_bounded",
+    "INT_FORMATS",
+    "pack_ints",
+    "unpack_ints",
     "encode_varints",
     "decode_varints",
     "encode_building",

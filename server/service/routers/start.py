@@ -1,0 +1,166 @@
+"""The start bundle: from nothing to the first cell's objects in one round trip.
+
+``GET /v1/start?path=NAME`` (or ``viewpoint=NAME``, or ``x=&y=``; ``scene=`` picks the
+scene, else the server's first by name) answers with a *stream* of parts, each the
+msgpack map ``{part, etag, body: bin}`` where ``body`` is exactly what the part's
+own endpoint sends (so a client decodes it, and may cache it under ``etag``, as if
+it had asked for it):
+
+1. ``path`` -- the recorded path, when asked by name (a replay can start walking);
+2. ``cell`` -- the record of the cell holding the start (none outside every cell),
+   then those of the cells straight ahead that the viewer reaches in
+   :data:`~walkstream.server.service.scenes.START_LEAD_S` seconds (``heading`` in
+   radians counter-clockwise from +x and ``speed`` in m/s; a path gives its own
+   start heading and speed, a viewpoint its yaw and standing still);
+3. ``index`` -- the index tiles that may hold cells near the start;
+4. ``manifest`` -- the scene manifest (its grammar rebuilds the objects);
+5. ``objects`` -- the map ``{part: "objects", etag: null, count: n}`` followed by
+   ``n`` plain object frames (as the objects stream sends them): the first cell's
+   PVS, highest ACH first, then each next cell's new objects.
+
+On a 500 ms link each round trip is a visible wait: scene list, manifest, path,
+locate, cell and objects asked one after the other cost six of them.  With
+``Accept: application/json`` the body is a JSON array of ``{part, etag, body}``
+with each body in its JSON form, the objects part's body being the array of its
+frames (``{id, kind, params: base64}``).
+``GET /v1/scenes/{scene}/start`` is the same for a named scene.
+"""
+
+from __future__ import annotations
+
+import base64
+from collections.abc import Iterable
+from typing import Annotated
+
+import msgpack
+from fastapi import APIRouter, Depends, Query, Request
+from fastapi.responses import StreamingResponse
+from starlette.concurrency import run_in_threadpool
+
+from walkstream.server.service.dependencies import RepDep, SceneDep, get_registry
+from walkstream.server.service.http import Rep, dump_json, dump_msgpack, stream_response
+from walkstream.server.service.models import ERRORS, StartPartOut, error_doc
+from walkstream.server.service.routers.objects import coalesce
+from walkstream.server.service.scenes import Scene, SceneRegistry, StartPart
+from walkstream.shared.errors import ApiError
+from walkstream.shared.wire import JSON, MSGPACK
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/v1", responses=ERRORS)
+
+_DOC = {
+    200: {
+        "description": "concatenated msgpack maps {part, etag, body} (see the module docs); a "
+        "JSON array with Accept: application/json",
+        "content": {
+            MSGPACK: {},
+            JSON: {"schema": {"type": "array", "items": StartPartOut.model_json_schema()}},
+        },
+    },
+    422: error_doc("not exactly one of path, viewpoint, or x and y"),
+}
+
+Coord = Annotated[float | None, Query(allow_inf_nan=False, description="scene-local metres")]
+Heading = Annotated[
+    float | None,
+    Query(allow_inf_nan=False, description="radians counter-clockwise from +x (x, y starts)"),
+]
+Speed = Annotated[
+    float | None, Query(allow_inf_nan=False, ge=0, le=100, description="m/s (x, y starts)")
+]
+Name = Annotated[str | None, Query(max_length=256)]
+
+
+@router.get("/start", responses=_DOC, summary="Start bundle (any scene)")
+async def start_any(
+    request: Request,
+    registry: Annotated[SceneRegistry, Depends(get_registry)],
+    rep: RepDep,
+    scene: Name = None,
+    path: Name = None,
+    viewpoint: Name = None,
+    x: Coord = None,
+    y: Coord = None,
+    heading: Heading = None,
+    speed: Speed = None,
+) -> StreamingResponse:
+    """The start bundle of ``scene`` (default: the first scene by name); see the module docs."""
+    if scene is None:
+        if not registry.scenes:
+            raise ApiError("the server serves no scene", status=404)
+        scene = next(iter(registry.scenes))
+    return await _bundle(request, registry.get(scene), rep, path, viewpoint, x, y, heading, speed)
+
+
+@router.get("/scenes/{scene}/start", responses=_DOC, summary="Start bundle")
+async def start_scene(
+    request: Request,
+    scene: SceneDep,
+    rep: RepDep,
+    path: Name = None,
+    viewpoint: Name = None,
+    x: Coord = None,
+    y: Coord = None,
+    heading: Heading = None,
+    speed: Speed = None,
+) -> StreamingResponse:
+    """The start bundle of a named scene; see the module docs."""
+    return await _bundle(request, scene, rep, path, viewpoint, x, y, heading, speed)
+
+
+async def _bundle(
+    request: Request,
+    scene: Scene,
+    rep: Rep,
+    path: str | None,
+    viewpoint: str | None,
+    x: float | None,
+    y: float | None,
+    heading: float | None,
+    speed: float | None,
+) -> StreamingResponse:
+    xy, h, v = await run_in_threadpool(
+        lambda: scene.start_position(path=path, viewpoint=viewpoint, x=x, y=y)
+    )
+    h = h if heading is None else heading
+    v = v if speed is None else speed
+    parts = await run_in_threadpool(scene.start_parts, xy, rep, path, h, v)
+    headers = {"X-Scene-Version": scene.version, "X-Scene": scene.name, "Cache-Control": "no-cache"}
+    if rep == "json":
+        return stream_response(request, coalesce(_json_parts(parts)), JSON, headers)
+    return stream_response(request, coalesce(_msgpack_parts(parts)), MSGPACK, headers)
+
+
+def _msgpack_parts(parts: list[StartPart]) -> Iterable[bytes]:
+    for name, body in parts:
+        if name == "objects":
+            assert isinstance(body, list)
+            yield dump_msgpack({"part": name, "etag": None, "count": len(body)})
+            yield from body
+        else:
+            assert not isinstance(body, list)
+            yield dump_msgpack({"part": name, "etag": body.etag or None, "body": body.content})
+
+
+def _json_parts(parts: list[StartPart]) -> Iterable[bytes]:
+    yield b"["
+    for k, (name, body) in enumerate(parts):
+        if isinstance(body, list):
+            frames = [msgpack.unpackb(f) for f in body]
+            content = dump_json(
+                [
+                    {
+                        "id": o["id"],
+                        "kind": o["kind"],
+                        "params": base64.b64encode(o["params"]).decode(),
+                    }
+                    for o in frames
+                ]
+            )
+            etag = None
+        else:
+            content, etag = body.content, body.etag or None
+        head = dump_json({"part": name, "etag": etag})[:-1]
+        yield (b",\n" if k else b"\n") + head + b',"body":' + content + b"}"
+    yield b"\n]\n"
