@@ -88,6 +88,8 @@ class CellMap:
         Cell id -> kind.
     tiles : dict
         Tile -> ids of its cells.
+    tile_of : dict
+        Cell id -> its tile, for the cells held.
     current : int or None
         The cell the viewer is in (or was last in).
     """
@@ -97,6 +99,7 @@ class CellMap:
         self.neighbours: dict[int, tuple[int, ...]] = {}
         self.kinds: dict[int, str] = {}
         self.tiles: dict[Tile, tuple[int, ...]] = {}
+        self.tile_of: dict[int, Tile] = {}
         self.current: int | None = None
         self._portals: dict[tuple[int, int], F64] = {}
         self._stack: tuple[NDArray[np.int64], F64, F64, F64] | None = None
@@ -115,6 +118,7 @@ class CellMap:
             self.outlines[c] = np.asarray(outlines[k], dtype=np.float64).reshape(-1, 2)
             self.neighbours[c] = tuple(sorted(int(n) for n in neighbours[k]))
             self.kinds[c] = kinds[k] if kinds is not None else ""
+            self.tile_of[c] = tile
         self.tiles[tile] = tuple(sorted(set(self.tiles.get(tile, ())) | set(ids)))
         self._stack = None
 
@@ -126,6 +130,7 @@ class CellMap:
             self.outlines.pop(c, None)
             self.neighbours.pop(c, None)
             self.kinds.pop(c, None)
+            self.tile_of.pop(c, None)
         self._portals = {k: v for k, v in self._portals.items() if not (set(k) & gone)}
         self._stack = None
         return ids

@@ -76,8 +76,6 @@ def safe_name(name: str) -> str:
     return safe
 
 
-
-
 @contextlib.contextmanager
 def _dir_lock(directory: Path) -> Iterator[None]:
     """An exclusive lock on a scene's cache directory (open, repair and prune)."""

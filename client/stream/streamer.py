@@ -54,11 +54,13 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.client.clock import Clock
 from walkstream.client.net.api import SceneClient
 from walkstream.client.rewrite.pool import ObjectGeometry, RewritePool, geometry_of
+from walkstream.client.stream.bundle import StartBundle
 from walkstream.client.stream.cache import Cache, Kind
 from walkstream.client.stream.cellmap import CellMap
 from walkstream.client.stream.diskcache import DiskCache
+from walkstream.client.stream.plan import Tile, plan_needs, tile_key, tile_of_key, wanted_objects
 from walkstream.client.stream.predict import MotionPredictor
-from walkstream.client.stream.route import horizon_m, predict_route, turn_cost_m
+from walkstream.client.stream.route import horizon_m, turn_cost_m
 from walkstream.shared.cells import TileGrid
 from walkstream.shared.codec import decode_mesh, decode_object, unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
@@ -73,18 +75,7 @@ from walkstream.shared.wire import (
     decode_cell_index,
 )
 
-__all__ = ["StreamerConfig", "StreamStats", "Streamer", "tile_key"]
-
-Tile = tuple[int, int] | None
-
-
-def tile_key(tile: Tile) -> int:
-    """The cache id of an index tile (``-1`` for the whole-scene index)."""
-    return -1 if tile is None else tile[0] * 65536 + tile[1]
-
-
-def _tile_of_key(key: int) -> Tile:
-    return None if key < 0 else (key // 65536, key % 65536)
+__all__ = ["StreamerConfig", "StreamStats", "Streamer"]
 
 
 @dataclass(frozen=True)
@@ -231,9 +222,8 @@ class Streamer:
         self._in_flight_ids: set[int] = set()
         self._in_flight_cells: set[int] = set()
         self._wanted: dict[int, tuple[float, float]] = {}
-        self._bundle: asyncio.Task[None] | None = None
-        self._bundle_ids: set[int] = set()
-        self._bundle_left = 0.0  # bytes the bundle is still expected to bring
+        self._bundle: StartBundle | None = None
+        self._bundle_task: asyncio.Task[None] | None = None
         self._last_plan = -math.inf
         self._last_locate = -math.inf
         self._xy = np.zeros(2)
@@ -259,8 +249,7 @@ class Streamer:
         self._now = now
         self._xy = np.asarray(xy, dtype=np.float64).reshape(2)
         self._velocity = predictor.velocity()
-        if float(np.hypot(*self._velocity)) > 0.3:
-            self._heading = self._velocity.copy()
+        self._heading = predictor.heading()
         before = self.cellmap.current
         cur, found = self.cellmap.update(self._xy)
         if cur != before and cur is not None:
@@ -299,7 +288,7 @@ class Streamer:
 
     def _pin(self, need: dict[int, float]) -> None:
         """Pin the current cell with its PVS (params and geometry), the records and params
-        of the cells about to be entered, and the index tiles around the viewer: evicting
+        of the cells about to be entered, and the index tiles the prediction needs: evicting
         what the next seconds need would only download it again (geometry can be
         rebuilt, so only the current cell's is pinned)."""
         cur = self.cellmap.current
@@ -311,7 +300,8 @@ class Streamer:
         hold = self.config.pin_hold_s
         for c in [c for c, t in self._needed_at.items() if self._now - t > hold]:
             del self._needed_at[c]
-        keys: list[tuple[str, int]] = [("cell", c) for c in self._needed_at if c in self.cells]
+        # (a key not cached yet is pinned when it arrives)
+        keys: list[tuple[str, int]] = [("cell", c) for c in self._needed_at]
         if rec is not None:
             keys += [(self.kind, i) for i in rec.pvs.tolist()]
             keys += [("geom", i) for i in rec.pvs.tolist()]
@@ -322,7 +312,8 @@ class Streamer:
                 if need.get(c, math.inf) <= self.config.pin_geometry_s:
                     # about to be entered: its geometry too, or a frame shows the gap
                     keys += [("geom", i) for i in r.pvs.tolist()]
-        keys += [("index", tile_key(t)) for t, s in self.need_tiles.items() if s <= 0.0]
+        # every tile the prediction needs: one evicted would be asked for again at once
+        keys += [("index", tile_key(t)) for t in self.need_tiles]
         if self.grid is not None:
             keys.append(("index", tile_key(self.grid.tile_of(self._xy))))
         self.cache.set_pins(keys)
@@ -357,81 +348,31 @@ class Streamer:
 
     def _plan(self) -> None:
         c = self.config
-        need: dict[int, float] = {}
-        records: dict[int, float] = {}
-        tiles: dict[Tile, float] = {}
-        cur = self.cellmap.current
         speed = float(np.hypot(*self._velocity))
         v_eff = max(speed, c.min_speed)
         left = max(0.0, self.walk_end - self._now)  # a recorded walk ends: nothing after it
         reach = min(self.horizon_distance(), left * v_eff) if c.prefetch else 0.0
         # records (and index tiles) a little further: objects can be asked for only
         # once a cell's record is in, a round trip later
-        reach_rec = (
-            reach + max(c.record_ahead_m, speed * (2.0 * self._rtt() + 1.0)) if c.prefetch else 0.0
+        extra = max(c.record_ahead_m, speed * (2.0 * self._rtt() + 1.0))
+        needs = plan_needs(
+            self.cellmap,
+            self.grid,
+            self._xy,
+            self._velocity,
+            self._heading,
+            reach_m=reach,
+            reach_records_m=reach + extra if c.prefetch else 0.0,
+            turn_m=turn_cost_m(speed, c.turn_base_m, c.turn_s),
+            min_speed=c.min_speed,
+            prefetch=c.prefetch,
         )
-        if cur is not None:
-            need[cur] = 0.0
-            records[cur] = 0.0
-        grid = self.grid
-        if grid is not None:
-            for _d, t in grid.tiles_near(self._xy):
-                tiles[t] = 0.0  # the viewer may be in a cell of any of these
-        if cur is not None and self.cellmap.knows(cur) and c.prefetch:
-            route = predict_route(
-                self.cellmap,
-                cur,
-                self._xy,
-                self._heading if speed > 0.3 else None,
-                reach_rec,
-                turn_cost_m(speed, c.turn_base_m, c.turn_s),
-            )
-            for s in route.steps:
-                t = s.cost_m / v_eff
-                records.setdefault(s.cell, t)
-                if s.cost_m <= reach:
-                    need.setdefault(s.cell, t)
-            if grid is not None:
-                # the route runs into cells whose tile is missing: the tiles around
-                # the held cell it leaves from
-                for st in route.frontier.values():
-                    poly = self.cellmap.outlines[st.cell]
-                    lo, hi = poly.min(axis=0), poly.max(axis=0)
-                    for _d, t in grid.tiles_near(
-                        (lo + hi) / 2.0, float(np.hypot(*(hi - lo))) / 2.0
-                    ):
-                        if t not in tiles or tiles[t] > st.cost_m / v_eff:
-                            tiles[t] = st.cost_m / v_eff
-        found = cur is not None and self.cellmap.find(self._xy, cur) == cur
-        if grid is not None and not found:
-            # outside every held cell: look around (the track ahead may enter cells)
-            for d, t in grid.tiles_near(self._xy, reach):
-                tiles.setdefault(t, d / v_eff)
-        if c.prefetch and not found and speed > 0.2:
-            # outside every known cell: the straight line ahead
-            step = max(0.05, min(0.5, 2.0 / speed))
-            dts = np.arange(step, reach / speed + 1e-9, step)
-            track = self._xy[None, :] + dts[:, None] * self._velocity[None, :]
-            for dt, cell in zip(dts.tolist(), self.cellmap.find_along(track, None), strict=True):
-                if cell is not None:
-                    need.setdefault(cell, dt)
-                    records.setdefault(cell, dt)
+        need, records, tiles = needs.need, needs.records, needs.tiles
         self.need = need
         self.need_records = records
         self.need_tiles = tiles
         self._pin(need)
-        wanted: dict[int, tuple[float, float]] = {}
-        for cell, t in need.items():
-            rec = self.cells.get(cell)
-            if rec is None:
-                continue
-            for oid, a in zip(rec.pvs.tolist(), rec.ach.tolist(), strict=True):
-                if self.has_object(oid):
-                    continue
-                key = (t, -a)
-                old = wanted.get(oid)
-                if old is None or key < old:
-                    wanted[oid] = key
+        wanted = wanted_objects(need, self.cells, self.has_object)
         self._wanted = wanted
         if self.rewrite is not None:
             # what the cache evicted and the next seconds need is rebuilt ahead
@@ -465,7 +406,7 @@ class Streamer:
 
     def _outstanding(self) -> float:
         """Bytes asked for and not yet received (estimated)."""
-        n = self._bundle_left
+        n = self._bundle.left if self._bundle is not None else 0.0
         for b in self._batches.values():
             each = self._frame_bytes if b.kind == "objects" else self._record_bytes
             n += len(b.left) * each + self._head_bytes
@@ -543,7 +484,7 @@ class Streamer:
             len(self._tile_tasks)
             + len(self._batches)
             + (self._locate_task is not None)
-            + (self._bundle is not None)
+            + (self._bundle_task is not None)
         )
 
     def _next_batch(self, todo: list[tuple[tuple[float, float], int]]) -> list[int]:
@@ -559,7 +500,8 @@ class Streamer:
 
     # -- requests --------------------------------------------------------------
 
-    def _done(self) -> None:
+    def replan(self) -> None:
+        """Plan and dispatch again (something arrived or ended)."""
         if not self._closed:
             self._plan()
             self._dispatch()
@@ -576,7 +518,7 @@ class Streamer:
             pass  # outside the scene or refused: keep the last cell
         finally:
             self._locate_task = None
-        self._done()
+        self.replan()
 
     async def _fetch_tile(self, tile: Tile) -> None:
         try:
@@ -594,7 +536,7 @@ class Streamer:
             pass  # refused (4xx): nothing to wait for
         finally:
             self._tile_tasks.pop(tile, None)
-        self._done()
+        self.replan()
 
     async def _fetch_cells(self, b: _Batch) -> None:
         task = asyncio.current_task()
@@ -621,7 +563,7 @@ class Streamer:
             if task is not None:
                 self._batches.pop(task, None)
             self._in_flight_cells.difference_update(b.ids)
-        self._done()
+        self.replan()
 
     def add_index(self, idx: CellIndex) -> None:
         """Learn an index tile (from a request, the bundle or the disk cache)."""
@@ -660,7 +602,7 @@ class Streamer:
     def evicted(self, kind: str, key: int) -> None:
         """Cache hook: forget an evicted index tile or cell record."""
         if kind == "index":
-            tile = _tile_of_key(key)
+            tile = tile_of_key(key)
             self.tiles_held.discard(tile)
             self.cellmap.forget_tile(tile)
         elif kind == "cell":
@@ -670,7 +612,7 @@ class Streamer:
         task = asyncio.current_task()
         remaining = list(b.ids)
         try:
-            found = self._objects_from_disk(remaining)
+            found = self.objects_from_disk(remaining)
             b.left -= found
             remaining = [i for i in remaining if i not in found]
             if remaining:
@@ -680,18 +622,18 @@ class Streamer:
                     async for frame in self.api.objects(remaining, self.config.form):
                         got.append(frame)
                         b.left.discard(frame.id)
-                        self._add_object(frame)
+                        self.add_object(frame)
                 finally:
-                    self._store_objects(got)
+                    self.store_objects(got)
         except (StreamCut, ApiError):
             pass  # the ids not received are wanted again at the next plan
         finally:
             if task is not None:
                 self._batches.pop(task, None)
             self._in_flight_ids.difference_update(b.ids)
-        self._done()
+        self.replan()
 
-    def _objects_from_disk(self, ids: list[int]) -> set[int]:
+    def objects_from_disk(self, ids: list[int]) -> set[int]:
         """Take what the disk cache holds of ``ids``; the ids taken."""
         if self.disk is None or not ids:
             return set()
@@ -704,18 +646,18 @@ class Streamer:
             except (CodecError, ValueError, TypeError):
                 continue  # damaged on disk: fetched from the server instead
             self.stats.disk_hits += 1
-            self._add_object(ObjectFrame(oid, kind, payload, self.config.form, 0))
+            self.add_object(ObjectFrame(oid, kind, payload, self.config.form, 0))
             if self.has_object(oid):
                 got.add(oid)
         return got
 
-    def _store_objects(self, frames: list[ObjectFrame]) -> None:
+    def store_objects(self, frames: list[ObjectFrame]) -> None:
         if self.disk is not None and frames:
             self.disk.put_objects(
                 [(f.id, msgpack.packb([f.kind, f.payload])) for f in frames], self.config.form
             )
 
-    def _add_object(self, frame: ObjectFrame) -> None:
+    def add_object(self, frame: ObjectFrame) -> None:
         oid = frame.id
         self.geometry_version += 1  # download quality may change
         if frame.nbytes:
@@ -748,75 +690,32 @@ class Streamer:
     ) -> asyncio.Task[None]:
         """Ask for the start bundle at recorded path ``path``'s start; feed its parts in.
 
-        ``on_path`` and ``on_manifest`` are called as those parts arrive; ``on_end``
-        when the bundle ends, with the error that ended it (None when it ended
-        well), e.g. an :class:`ApiError` 404 from a server without one.
+        See :class:`~walkstream.client.stream.bundle.StartBundle` for the callbacks.
         """
-        self._bundle_left = 2000.0  # the manifest, at least
-        self._bundle = asyncio.create_task(self._run_bundle(path, on_path, on_manifest, on_end))
-        return self._bundle
+        bundle = StartBundle(self, on_path, on_manifest, on_end)
+        self._bundle = bundle
+        self._bundle_task = asyncio.create_task(self._run_bundle(bundle, path))
+        return self._bundle_task
 
-    async def _run_bundle(
-        self,
-        path: str | None,
-        on_path: Callable[[RecordedPath, int], None],
-        on_manifest: Callable[[Manifest], None],
-        on_end: Callable[[BaseException | None], None],
-    ) -> None:
-        error: BaseException | None = None
-        frames: list[ObjectFrame] = []
+    async def _run_bundle(self, bundle: StartBundle, path: str | None) -> None:
         try:
-            async for part, item in self.api.start(path=path):
-                if part == "path":
-                    p, n = item
-                    self.stats.bundle_bytes += n
-                    on_path(p, n)
-                elif part == "manifest":
-                    m, n = item
-                    self.stats.bundle_bytes += n
-                    self._bundle_left = max(0.0, self._bundle_left - n)
-                    on_manifest(m)  # binds the disk cache of this scene version, if any
-                    found = self._objects_from_disk(sorted(self._bundle_ids))
-                    self._bundle_ids -= found
-                    self._in_flight_ids -= found
-                    if found and not self._bundle_ids:
-                        break  # the rest of the bundle is on disk: stop it, the link is free
-                elif part == "index":
-                    self.stats.bundle_bytes += item.nbytes
-                    self.add_index(item)
-                elif part == "cell":
-                    self.stats.bundle_bytes += item.nbytes
-                    if self.cellmap.current is None:
-                        self.cellmap.current = item.id  # the server located the start
-                    self.add_cell(item)
-                    ids = [
-                        i
-                        for i in item.pvs.tolist()
-                        if not self.has_object(i) and i not in self._bundle_ids
-                    ]
-                    self._bundle_ids.update(ids)
-                    self._in_flight_ids.update(ids)
-                    self._bundle_left += len(ids) * self._frame_bytes
-                elif part == "objects":
-                    self._bundle_left = item * self._frame_bytes
-                else:
-                    self.stats.bundle_bytes += item.nbytes
-                    self._bundle_ids.discard(item.id)
-                    self._in_flight_ids.discard(item.id)
-                    self._bundle_left = max(0.0, self._bundle_left - self._frame_bytes)
-                    frames.append(item)
-                    self._add_object(item)
-                self._done()
-        except (ApiError, StreamCut) as exc:
-            error = exc
+            await bundle.run(path)
         finally:
-            self._in_flight_ids.difference_update(self._bundle_ids)
-            self._bundle_ids = set()
-            self._bundle_left = 0.0
             self._bundle = None
-            self._store_objects(frames)
-            on_end(error)
-        self._done()
+            self._bundle_task = None
+        self.replan()
+
+    def expect(self, ids: set[int], coming: bool = True) -> None:
+        """Mark objects as on their way (``coming``) or no longer so (the start bundle's)."""
+        if coming:
+            self._in_flight_ids |= ids
+        else:
+            self._in_flight_ids -= ids
+
+    @property
+    def frame_bytes(self) -> float:
+        """The mean bytes of an object frame on the wire (a running estimate)."""
+        return self._frame_bytes
 
     # -- geometry --------------------------------------------------------------
 
@@ -889,8 +788,8 @@ class Streamer:
         tasks: list[asyncio.Task[Any]] = list(self._tile_tasks.values()) + list(self._batches)
         if self._locate_task is not None:
             tasks.append(self._locate_task)
-        if self._bundle is not None:
-            tasks.append(self._bundle)
+        if self._bundle_task is not None:
+            tasks.append(self._bundle_task)
         for t in tasks:
             t.cancel()
         for t in tasks:
