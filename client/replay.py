@@ -95,6 +95,8 @@ class ReplayConfig:
     """Give up (an empty report saying why) when the path has not arrived by then."""
     start_bundle: bool = True
     """Start with the start bundle (one round trip); False: scene list, manifest, path."""
+    gzip: bool = True
+    """Ask for the streams gzip-compressed (``Accept-Encoding: gzip``)."""
 
     def __post_init__(self) -> None:
         if self.stream not in STREAM_FORMS:
@@ -268,7 +270,7 @@ async def replay(
     async with httpx.AsyncClient(
         transport=link, base_url=base_url, timeout=httpx.Timeout(30.0)
     ) as http:
-        api = SceneClient(http, clock, config.scene, seed=config.seed)
+        api = SceneClient(http, clock, config.scene, seed=config.seed, compress=config.gzip)
         t_start = clock.now()
         loop = asyncio.get_running_loop()
         manifest_fut: asyncio.Future[Manifest] = loop.create_future()
@@ -414,6 +416,7 @@ async def replay(
             "locate_requests": streamer.stats.locate_requests,
             "requests": stats.requests,
             "start_bundle": config.start_bundle,
+            "gzip": config.gzip,
             "bundle_bytes": streamer.stats.bundle_bytes,
             "cancelled_batches": streamer.stats.cancelled_batches,
             "retries": api.stats.retries,

@@ -103,8 +103,19 @@ def test_bench_stream_prints_one_table(db: Path, tmp_path: Path, capsys: pytest.
     text = capsys.readouterr().out
     for name in ("SE 56k prefetch", "SE 56k no-prefetch", "SE 56k meshes", "SE 56k cache 8MB"):
         assert name in text
+    assert "util%" in text and "overfetch" in text
     rows = json.loads((out / "bench_stream.json").read_text())
     assert len(rows) == 4 and (out / "index.html").exists()
+    assert all(0.0 <= r["link_utilisation"] <= 1.05 and r["overfetch_ratio"] <= 0.5 for r in rows)
+    # another scene database joins the table: a row per path and link
+    argv = [
+        "bench", "stream", str(db), "--scene", f"other={db}:SE", "--only", "other",
+        "--duration", "5s", "--out", str(out),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    assert "other SE GPRS" in capsys.readouterr().out
+    assert main(["bench", "stream", str(db), "--scene", "nonsense", "--out", str(out)]) == 2
+    assert "LABEL=DB" in capsys.readouterr().err
 
 
 def test_bench_budget_table(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -96,6 +96,8 @@ def config_from_args(args: argparse.Namespace) -> Any:
         lod_distances=(lo, hi),
         seed=args.seed,
         report_dir=Path(args.report),
+        start_bundle=not args.no_start_bundle,
+        gzip=not args.no_gzip,
     )
 
 
@@ -171,6 +173,8 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--lod", choices=("ach", "distance"), default="ach", help="LOD selection: ACH-shared budget or distance")
     r.add_argument("--lod-distances", default="40,120", help="distance selection: LOD2 nearer than D1, LOD1 nearer than D2 (default 40,120)")
     r.add_argument("--seed", type=int, default=0, help="seed of link loss, device noise, backoff jitter")
+    r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
+    r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
 
 
 def add_replay_parser(sub: Any) -> None:
