@@ -331,7 +331,12 @@ class SceneClient:
             raise StreamCut(f"{what}: ended after {got} of {len(ids)} cells", got)
 
     async def start(
-        self, *, path: str | None = None, x: float | None = None, y: float | None = None
+        self,
+        *,
+        path: str | None = None,
+        x: float | None = None,
+        y: float | None = None,
+        form: str = "params",
     ) -> AsyncIterator[StartItem]:
         """Stream the start bundle (``GET /v1/start``) for a path's start or a position.
 
@@ -353,6 +358,8 @@ class SceneClient:
             query["path"] = path
         if x is not None and y is not None:
             query["x"], query["y"] = repr(float(x)), repr(float(y))
+        if form != "params":
+            query["form"] = form
         url = str(httpx.URL("/v1/start", params=query))
         what = "start bundle"
         state: dict[str, Any] = {"objects": 0, "k": 0}
@@ -365,9 +372,7 @@ class SceneClient:
                 frame = obj
                 if not isinstance(frame, dict) or type(frame.get("id")) is not int:
                     raise CodecError(f"{what}: item {k} is not an object frame")
-                return "object", decode_frame(
-                    frame, frame["id"], "params", nbytes, f"{what}: object"
-                )
+                return "object", decode_frame(frame, frame["id"], form, nbytes, f"{what}: object")
             part, etag, body = decode_start_part(obj, f"{what}: item {k}")
             if part == "objects":
                 assert isinstance(body, int)

@@ -69,7 +69,7 @@ class StartBundle:
         error: BaseException | None = None
         frames: list[ObjectFrame] = []
         try:
-            async for part, item in st.api.start(path=path):
+            async for part, item in st.api.start(path=path, form=st.config.form):
                 if part == "path":
                     p, n = item
                     st.stats.bundle_bytes += n

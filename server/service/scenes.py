@@ -419,6 +419,7 @@ class Scene:
         path: str | None = None,
         heading: float | None = None,
         speed: float = 0.0,
+        form: Form = "params",
     ) -> list[StartPart]:
         """The parts of a start bundle at ``xy``, in the order sent.
 
@@ -449,9 +450,9 @@ class Scene:
             parts.append(("index", self.index(tile, rep)))
         parts.append(("manifest", self.manifest[rep]))
         if order:
-            found, missing = self.cached_frames(order)
+            found, missing = self.cached_frames(order, form)
             if missing:
-                found.update(self.load_frames(missing))
+                found.update(self.load_frames(missing, form))
             parts.append(("objects", [found[oid] for oid in order]))
         return parts
 

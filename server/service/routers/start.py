@@ -15,8 +15,9 @@ it had asked for it):
 3. ``index`` -- the index tiles that may hold cells near the start;
 4. ``manifest`` -- the scene manifest (its grammar rebuilds the objects);
 5. ``objects`` -- the map ``{part: "objects", etag: null, count: n}`` followed by
-   ``n`` plain object frames (as the objects stream sends them): the first cell's
-   PVS, highest ACH first, then each next cell's new objects.
+   ``n`` plain object frames (as the objects stream sends them, in the ``form``
+   asked: ``params`` by default, ``lod2`` meshes): the first cell's PVS, highest
+   ACH first, then each next cell's new objects.
 
 On a 500 ms link each round trip is a visible wait: scene list, manifest, path,
 locate, cell and objects asked one after the other cost six of them.  With
@@ -30,7 +31,7 @@ from __future__ import annotations
 
 import base64
 from collections.abc import Iterable
-from typing import Annotated
+from typing import Annotated, cast
 
 import msgpack
 from fastapi import APIRouter, Depends, Query, Request
@@ -41,7 +42,8 @@ from walkstream.server.service.dependencies import RepDep, SceneDep, get_registr
 from walkstream.server.service.http import Rep, dump_json, dump_msgpack, stream_response
 from walkstream.server.service.models import ERRORS, StartPartOut, error_doc
 from walkstream.server.service.routers.objects import coalesce
-from walkstream.server.service.scenes import Scene, SceneRegistry, StartPart
+from walkstream.server.service.scenes import OBJECT_FORMS, Scene, SceneRegistry, StartPart
+from walkstream.server.service.scenes import Form as ObjForm
 from walkstream.shared.errors import ApiError
 from walkstream.shared.wire import JSON, MSGPACK
 
@@ -66,6 +68,10 @@ Heading = Annotated[
     float | None,
     Query(allow_inf_nan=False, description="radians counter-clockwise from +x (x, y starts)"),
 ]
+Form = Annotated[
+    str,
+    Query(max_length=64, description="the objects' form, as in POST .../objects: params or lod2"),
+]
 Speed = Annotated[
     float | None, Query(allow_inf_nan=False, ge=0, le=100, description="m/s (x, y starts)")
 ]
@@ -84,13 +90,16 @@ async def start_any(
     y: Coord = None,
     heading: Heading = None,
     speed: Speed = None,
+    form: Form = "params",
 ) -> StreamingResponse:
     """The start bundle of ``scene`` (default: the first scene by name); see the module docs."""
     if scene is None:
         if not registry.scenes:
             raise ApiError("the server serves no scene", status=404)
         scene = next(iter(registry.scenes))
-    return await _bundle(request, registry.get(scene), rep, path, viewpoint, x, y, heading, speed)
+    return await _bundle(
+        request, registry.get(scene), rep, path, viewpoint, x, y, heading, speed, form
+    )
 
 
 @router.get("/scenes/{scene}/start", responses=_DOC, summary="Start bundle")
@@ -104,9 +113,10 @@ async def start_scene(
     y: Coord = None,
     heading: Heading = None,
     speed: Speed = None,
+    form: Form = "params",
 ) -> StreamingResponse:
     """The start bundle of a named scene; see the module docs."""
-    return await _bundle(request, scene, rep, path, viewpoint, x, y, heading, speed)
+    return await _bundle(request, scene, rep, path, viewpoint, x, y, heading, speed, form)
 
 
 async def _bundle(
@@ -119,13 +129,20 @@ async def _bundle(
     y: float | None,
     heading: float | None,
     speed: float | None,
+    form: str,
 ) -> StreamingResponse:
+    if form not in OBJECT_FORMS:
+        raise ApiError(
+            f"unknown form {form!r:.80}: expected one of {', '.join(OBJECT_FORMS)}",
+            status=422,
+            detail={"form": form[:80], "known": list(OBJECT_FORMS)},
+        )
     xy, h, v = await run_in_threadpool(
         lambda: scene.start_position(path=path, viewpoint=viewpoint, x=x, y=y)
     )
     h = h if heading is None else heading
     v = v if speed is None else speed
-    parts = await run_in_threadpool(scene.start_parts, xy, rep, path, h, v)
+    parts = await run_in_threadpool(scene.start_parts, xy, rep, path, h, v, cast(ObjForm, form))
     headers = {"X-Scene-Version": scene.version, "X-Scene": scene.name, "Cache-Control": "no-cache"}
     if rep == "json":
         return stream_response(request, coalesce(_json_parts(parts)), JSON, headers)
@@ -151,9 +168,8 @@ def _json_parts(parts: list[StartPart]) -> Iterable[bytes]:
             content = dump_json(
                 [
                     {
-                        "id": o["id"],
-                        "kind": o["kind"],
-                        "params": base64.b64encode(o["params"]).decode(),
+                        k: base64.b64encode(v).decode() if isinstance(v, bytes) else v
+                        for k, v in o.items()
                     }
                     for o in frames
                 ]
