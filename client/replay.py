@@ -189,6 +189,17 @@ async def _manifest(api: SceneClient, disk: DiskCache | None) -> Manifest:
     return m
 
 
+def _manifest_task(
+    api: SceneClient, disk: DiskCache | None, arrived: Callable[[Manifest], None]
+) -> asyncio.Task[Manifest]:
+    """Fetch the manifest on its own; ``arrived`` is called with it when it is in."""
+    task = asyncio.create_task(_manifest(api, disk))
+    task.add_done_callback(
+        lambda t: None if t.cancelled() or t.exception() is not None else arrived(t.result())
+    )
+    return task
+
+
 def _view(xyz: NDArray[np.float64], yaw: float, pitch: float) -> NDArray[np.float32]:
     d = np.array(
         [math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch), math.sin(pitch)]
@@ -303,13 +314,7 @@ async def replay(
                 if await _within(clock, config.setup_timeout_s, api.resolve_scene()) is None:
                     api.scene = config.scene or "?"
                 if not manifest_fut.done():
-                    task = asyncio.create_task(_manifest(api, disk))
-                    task.add_done_callback(
-                        lambda t: None
-                        if t.cancelled() or t.exception() is not None
-                        else manifest_arrived(t.result())
-                    )
-                    tasks.append(task)
+                    tasks.append(_manifest_task(api, disk, manifest_arrived))
                 got = await _within(clock, config.setup_timeout_s, api.path(config.path))
             setup_s = clock.now() - t_start
             if got is None:  # no path, no walk: an empty report that says why
@@ -499,13 +504,7 @@ async def _bundle_start(
             path_fut.set_exception(err or ApiError("start bundle: no path in it"))
         elif not manifest_fut.done() and api.scene is not None:
             # cut after the path: the manifest (the grammar) comes on its own
-            task = asyncio.create_task(_manifest(api, disk))
-            task.add_done_callback(
-                lambda t: None
-                if t.cancelled() or t.exception() is not None
-                else manifest_arrived(t.result())
-            )
-            tasks.append(task)
+            tasks.append(_manifest_task(api, disk, manifest_arrived))
 
     streamer.start_bundle(config.path, on_path, on_manifest, on_end)
     try:

@@ -47,7 +47,8 @@ start part
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import contextlib
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -358,6 +359,17 @@ def _floats(x: Any, what: str, shape_cols: int | None = None) -> NDArray[np.floa
     return a
 
 
+@contextlib.contextmanager
+def _fields(what: str) -> Iterator[None]:
+    """Turn a missing or mistyped field of an unpacked record into a :class:`CodecError`."""
+    try:
+        yield
+    except KeyError as exc:
+        raise CodecError(f"{what}: missing field {exc}") from exc
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise CodecError(f"{what}: {exc}") from exc
+
+
 def _cumsum_ids(deltas: list[int], what: str, field: str, strict: bool) -> NDArray[np.int64]:
     """Ids from ``[first, d1, d2, ...]``: non-negative and ascending (strictly if ``strict``)."""
     d = np.asarray(deltas, dtype=np.int64)
@@ -375,7 +387,7 @@ def cell_from_wire(
     """A :class:`CellRecord` from an unpacked record (one of a stream, or a whole body), checked."""
     if not isinstance(obj, dict):
         raise CodecError(f"{what}: expected a map")
-    try:
+    with _fields(what):
         cid = obj["id"]
         if type(cid) is not int or cid < 0:
             raise CodecError(f"{what}: id is not a non-negative integer")
@@ -395,10 +407,6 @@ def cell_from_wire(
             etag=etag,
             body=bytes(body),
         )
-    except KeyError as exc:
-        raise CodecError(f"{what}: missing field {exc}") from exc
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise CodecError(f"{what}: {exc}") from exc
 
 
 def decode_cell(body: bytes, what: str, etag: str | None = None) -> CellRecord:
@@ -426,7 +434,7 @@ def decode_cell_index(body: bytes, what: str, etag: str | None = None) -> CellIn
     )
     if not isinstance(obj, dict):
         raise CodecError(f"{what}: expected a map")
-    try:
+    with _fields(what):
         tile_obj = obj["tile"]
         tile: tuple[int, int] | None = None
         if tile_obj is not None:
@@ -503,10 +511,6 @@ def decode_cell_index(body: bytes, what: str, etag: str | None = None) -> CellIn
             etag=etag,
             body=bytes(body),
         )
-    except KeyError as exc:
-        raise CodecError(f"{what}: missing field {exc}") from exc
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise CodecError(f"{what}: {exc}") from exc
 
 
 def decode_start_part(obj: Any, what: str) -> tuple[str, str | None, bytes | int]:

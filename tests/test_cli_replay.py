@@ -6,11 +6,10 @@ import json
 from pathlib import Path
 
 import pytest
-from scenes import build_city_db
+from scenes import add_default_paths, build_city_db
 
 from walkstream.cli import main
-from walkstream.server.bake.walks import default_paths
-from walkstream.server.store import SceneReader, write_path
+from walkstream.server.store import SceneReader
 
 ISSUE5_KEYS = {
     "frames", "perfect_frame_ratio", "download_quality_mean", "rewrite_quality_mean",
@@ -27,13 +26,7 @@ ISSUE6_KEYS = {
 def db(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("cli-replay") / "city.db"
     build_city_db(path, name="city", size=300.0, k=30)
-    r = SceneReader.open(path)
-    try:
-        cells = list(r.cells())
-    finally:
-        r.close()
-    for p in default_paths(cells):
-        write_path(path, p.name, p.to_msgpack())
+    add_default_paths(path)
     return path
 
 

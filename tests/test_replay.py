@@ -13,14 +13,12 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
-from scenes import build_city_db
+from scenes import add_default_paths, build_city_db
 
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
-from walkstream.server.bake.walks import default_paths
 from walkstream.server.service.main import create_app
 from walkstream.server.service.process import free_port, server_process
-from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.errors import InputError
 
 URL = "http://walkstream.test"
@@ -28,13 +26,7 @@ URL = "http://walkstream.test"
 
 def _scene(db: Path, size: float, k: int) -> Path:
     build_city_db(db, name="city", size=size, k=k)
-    r = SceneReader.open(db)
-    try:
-        cells = list(r.cells())
-    finally:
-        r.close()
-    for p in default_paths(cells):
-        write_path(db, p.name, p.to_msgpack())
+    add_default_paths(db)
     return db
 
 

@@ -463,6 +463,14 @@ class Streamer:
                     return
                 self._start_batch("objects", ids)
 
+    def _end_batch(self, task: asyncio.Task[None] | None, b: _Batch) -> None:
+        """A batch ended (whole, cut or cancelled): what it did not bring is wanted again."""
+        if task is not None:
+            self._batches.pop(task, None)
+        (self._in_flight_ids if b.kind == "objects" else self._in_flight_cells).difference_update(
+            b.ids
+        )
+
     def _start_batch(self, kind: str, ids: list[int]) -> None:
         b = _Batch(kind, ids)
         if kind == "objects":
@@ -560,9 +568,7 @@ class Streamer:
         except (StreamCut, ApiError):
             pass  # the cells not received are wanted again at the next plan
         finally:
-            if task is not None:
-                self._batches.pop(task, None)
-            self._in_flight_cells.difference_update(b.ids)
+            self._end_batch(task, b)
         self.replan()
 
     def add_index(self, idx: CellIndex) -> None:
@@ -628,9 +634,7 @@ class Streamer:
         except (StreamCut, ApiError):
             pass  # the ids not received are wanted again at the next plan
         finally:
-            if task is not None:
-                self._batches.pop(task, None)
-            self._in_flight_ids.difference_update(b.ids)
+            self._end_batch(task, b)
         self.replan()
 
     def objects_from_disk(self, ids: list[int]) -> set[int]:

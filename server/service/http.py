@@ -86,11 +86,12 @@ def _negotiate_cached(accept: str) -> Rep:
     return _negotiate(accept)
 
 
-def _negotiate(accept: str) -> Rep:
-    q_json = q_msgpack = -1.0
-    for part in accept.split(","):
-        media, *params = part.split(";")
-        media = media.strip().lower()
+def _qualities(header: str) -> list[tuple[str, float]]:
+    """``(token, quality)`` of each part of an ``Accept``-like header (lower case; q 1 by
+    default, 0 when it does not parse)."""
+    out = []
+    for part in header.split(","):
+        token, *params = part.split(";")
         q = 1.0
         for p in params:
             key, _, value = p.partition("=")
@@ -101,6 +102,13 @@ def _negotiate(accept: str) -> Rep:
                     q = 0.0
                 if not math.isfinite(q):
                     q = 0.0
+        out.append((token.strip().lower(), q))
+    return out
+
+
+def _negotiate(accept: str) -> Rep:
+    q_json = q_msgpack = -1.0
+    for media, q in _qualities(accept):
         if media == JSON:
             q_json = max(q_json, q)
         elif media in MSGPACK_TYPES:
@@ -178,21 +186,7 @@ def accepts_gzip(accept_encoding: str | None) -> bool:
     >>> accepts_gzip("gzip, deflate"), accepts_gzip("identity"), accepts_gzip("gzip;q=0")
     (True, False, False)
     """
-    for part in (accept_encoding or "").split(","):
-        coding, *params = part.split(";")
-        if coding.strip().lower() not in ("gzip", "*"):
-            continue
-        q = 1.0
-        for p in params:
-            key, _, value = p.partition("=")
-            if key.strip().lower() == "q":
-                try:
-                    q = float(value.strip())
-                except ValueError:
-                    q = 0.0
-        if q > 0:
-            return True
-    return False
+    return any(coding in ("gzip", "*") and q > 0 for coding, q in _qualities(accept_encoding or ""))
 
 
 async def _gzipped(pieces: AsyncIterator[bytes]) -> AsyncIterator[bytes]:

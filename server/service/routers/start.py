@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import base64
 from collections.abc import Iterable
+from dataclasses import dataclass
 from typing import Annotated, cast
 
 import msgpack
@@ -78,71 +79,59 @@ Speed = Annotated[
 Name = Annotated[str | None, Query(max_length=256)]
 
 
+@dataclass(frozen=True)
+class StartQuery:
+    """Where the bundle starts (one of path, viewpoint, or x and y) and in what form."""
+
+    path: Name = None
+    viewpoint: Name = None
+    x: Coord = None
+    y: Coord = None
+    heading: Heading = None
+    speed: Speed = None
+    form: Form = "params"
+
+
+StartDep = Annotated[StartQuery, Depends()]
+
+
 @router.get("/start", responses=_DOC, summary="Start bundle (any scene)")
 async def start_any(
     request: Request,
     registry: Annotated[SceneRegistry, Depends(get_registry)],
     rep: RepDep,
+    q: StartDep,
     scene: Name = None,
-    path: Name = None,
-    viewpoint: Name = None,
-    x: Coord = None,
-    y: Coord = None,
-    heading: Heading = None,
-    speed: Speed = None,
-    form: Form = "params",
 ) -> StreamingResponse:
     """The start bundle of ``scene`` (default: the first scene by name); see the module docs."""
     if scene is None:
         if not registry.scenes:
             raise ApiError("the server serves no scene", status=404)
         scene = next(iter(registry.scenes))
-    return await _bundle(
-        request, registry.get(scene), rep, path, viewpoint, x, y, heading, speed, form
-    )
+    return await _bundle(request, registry.get(scene), rep, q)
 
 
 @router.get("/scenes/{scene}/start", responses=_DOC, summary="Start bundle")
 async def start_scene(
-    request: Request,
-    scene: SceneDep,
-    rep: RepDep,
-    path: Name = None,
-    viewpoint: Name = None,
-    x: Coord = None,
-    y: Coord = None,
-    heading: Heading = None,
-    speed: Speed = None,
-    form: Form = "params",
+    request: Request, scene: SceneDep, rep: RepDep, q: StartDep
 ) -> StreamingResponse:
     """The start bundle of a named scene; see the module docs."""
-    return await _bundle(request, scene, rep, path, viewpoint, x, y, heading, speed, form)
+    return await _bundle(request, scene, rep, q)
 
 
-async def _bundle(
-    request: Request,
-    scene: Scene,
-    rep: Rep,
-    path: str | None,
-    viewpoint: str | None,
-    x: float | None,
-    y: float | None,
-    heading: float | None,
-    speed: float | None,
-    form: str,
-) -> StreamingResponse:
-    if form not in OBJECT_FORMS:
+async def _bundle(request: Request, scene: Scene, rep: Rep, q: StartQuery) -> StreamingResponse:
+    if q.form not in OBJECT_FORMS:
         raise ApiError(
-            f"unknown form {form!r:.80}: expected one of {', '.join(OBJECT_FORMS)}",
+            f"unknown form {q.form!r:.80}: expected one of {', '.join(OBJECT_FORMS)}",
             status=422,
-            detail={"form": form[:80], "known": list(OBJECT_FORMS)},
+            detail={"form": q.form[:80], "known": list(OBJECT_FORMS)},
         )
     xy, h, v = await run_in_threadpool(
-        lambda: scene.start_position(path=path, viewpoint=viewpoint, x=x, y=y)
+        lambda: scene.start_position(path=q.path, viewpoint=q.viewpoint, x=q.x, y=q.y)
     )
-    h = h if heading is None else heading
-    v = v if speed is None else speed
-    parts = await run_in_threadpool(scene.start_parts, xy, rep, path, h, v, cast(ObjForm, form))
+    h = h if q.heading is None else q.heading
+    v = v if q.speed is None else q.speed
+    parts = await run_in_threadpool(scene.start_parts, xy, rep, q.path, h, v, cast(ObjForm, q.form))
     headers = {"X-Scene-Version": scene.version, "X-Scene": scene.name, "Cache-Control": "no-cache"}
     if rep == "json":
         return stream_response(request, coalesce(_json_parts(parts)), JSON, headers)
