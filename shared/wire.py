@@ -409,29 +409,29 @@ def cell_from_wire(
         )
 
 
-def decode_cell(body: bytes, what: str, etag: str | None = None) -> CellRecord:
-    """Decode and check a cell record body (msgpack)."""
-    obj = unpack_bounded(
+def _unpack_record(
+    body: bytes, what: str, max_bytes: int, *, max_array_len: int, max_map_len: int
+) -> Any:
+    """Unpack a record whose binary fields may be as large as the record itself."""
+    return unpack_bounded(
         body,
         what,
-        max_bytes=_MAX_CELL,
-        max_array_len=1 << 20,
-        max_map_len=64,
-        max_bin_len=_MAX_CELL,
+        max_bytes=max_bytes,
+        max_array_len=max_array_len,
+        max_map_len=max_map_len,
+        max_bin_len=max_bytes,
     )
+
+
+def decode_cell(body: bytes, what: str, etag: str | None = None) -> CellRecord:
+    """Decode and check a cell record body (msgpack)."""
+    obj = _unpack_record(body, what, _MAX_CELL, max_array_len=1 << 20, max_map_len=64)
     return cell_from_wire(obj, what, len(body), etag, body)
 
 
 def decode_cell_index(body: bytes, what: str, etag: str | None = None) -> CellIndex:
     """Decode and check a cell index body (msgpack): sizes agree, outlines have >= 3 vertices."""
-    obj = unpack_bounded(
-        body,
-        what,
-        max_bytes=_MAX_INDEX,
-        max_array_len=1 << 24,
-        max_map_len=32,
-        max_bin_len=_MAX_INDEX,
-    )
+    obj = _unpack_record(body, what, _MAX_INDEX, max_array_len=1 << 24, max_map_len=32)
     if not isinstance(obj, dict):
         raise CodecError(f"{what}: expected a map")
     with _fields(what):

@@ -51,6 +51,20 @@ def test_replay_writes_the_report(db: Path, tmp_path: Path, capsys: pytest.Captu
     assert all(f.name in html for f in frames)
 
 
+def test_replay_without_start_bundle_or_gzip(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    report = tmp_path / "plain"
+    argv = [
+        "replay", str(db), "--path", "drive", "--bandwidth", "40kbit", "--rtt", "500ms",
+        "--duration", "6s", "--device", "desktop2003", "--no-start-bundle", "--no-gzip",
+        "--report", str(report),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    summary = json.loads((report / "report.json").read_text())
+    assert summary["start_bundle"] is False and summary["gzip"] is False
+    assert summary["frames"] > 0 and "link_utilisation" in summary
+    assert "link utilisation" in capsys.readouterr().out
+
+
 @pytest.mark.gl
 def test_replay_on_the_gl_device_really_draws(db: Path, tmp_path: Path, gl_ctx: object) -> None:
     report = tmp_path / "gl"

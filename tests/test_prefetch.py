@@ -331,3 +331,17 @@ def test_a_cell_index_larger_than_the_cache_budget(town: Path) -> None:
     first = int(np.flatnonzero(log.cell >= 0)[0])
     assert (log.cell[first:] >= 0).all()
     assert s["perfect_frame_ratio"] > 0.5 and s["frames"] == big["frames"]
+
+
+def test_the_start_bundle_saves_round_trips_and_gzip_saves_bytes(town: Path) -> None:
+    """On a 500 ms link the bundle brings the first frame sooner with fewer requests;
+    without gzip the same walk costs more bytes."""
+    kw: dict[str, Any] = {"path": "drive", "duration_s": 8.0}
+    both = _replay(town, **kw).summary
+    plain = _replay(town, start_bundle=False, **kw).summary
+    assert both["start_bundle"] and not plain["start_bundle"]
+    assert both["time_to_first_perfect_frame_s"] is not None
+    assert plain["time_to_first_perfect_frame_s"] is not None
+    assert both["time_to_first_perfect_frame_s"] + 0.5 <= plain["time_to_first_perfect_frame_s"]
+    raw = _replay(town, gzip=False, **kw).summary
+    assert raw["bytes_received"] > 1.1 * both["bytes_received"]

@@ -43,7 +43,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -463,13 +463,25 @@ class Streamer:
                     return
                 self._start_batch("objects", ids)
 
-    def _end_batch(self, task: asyncio.Task[None] | None, b: _Batch) -> None:
-        """A batch ended (whole, cut or cancelled): what it did not bring is wanted again."""
-        if task is not None:
-            self._batches.pop(task, None)
-        (self._in_flight_ids if b.kind == "objects" else self._in_flight_cells).difference_update(
-            b.ids
-        )
+    @contextlib.contextmanager
+    def _running(self, b: _Batch) -> Iterator[None]:
+        """Scope of one batch's request.
+
+        However it ends (whole, cut, refused or cancelled), the batch leaves the
+        in-flight sets so that what it did not bring is wanted again; a cut or a
+        refusal is no error (the next plan asks again) and is followed by a new plan.
+        """
+        task = asyncio.current_task()
+        try:
+            yield
+        except (StreamCut, ApiError):
+            pass  # what was not received is wanted again at the next plan
+        finally:
+            if task is not None:
+                self._batches.pop(task, None)
+            in_flight = self._in_flight_ids if b.kind == "objects" else self._in_flight_cells
+            in_flight.difference_update(b.ids)
+        self.replan()
 
     def _start_batch(self, kind: str, ids: list[int]) -> None:
         b = _Batch(kind, ids)
@@ -547,8 +559,7 @@ class Streamer:
         self.replan()
 
     async def _fetch_cells(self, b: _Batch) -> None:
-        task = asyncio.current_task()
-        try:
+        with self._running(b):
             remaining = list(b.ids)
             if self.disk is not None:
                 for cid in list(remaining):
@@ -565,11 +576,6 @@ class Streamer:
                 async for rec in self.api.cells(remaining):
                     b.left.discard(rec.id)
                     self.add_cell(rec)
-        except (StreamCut, ApiError):
-            pass  # the cells not received are wanted again at the next plan
-        finally:
-            self._end_batch(task, b)
-        self.replan()
 
     def add_index(self, idx: CellIndex) -> None:
         """Learn an index tile (from a request, the bundle or the disk cache)."""
@@ -615,9 +621,8 @@ class Streamer:
             self.cells.pop(key, None)
 
     async def _fetch_objects(self, b: _Batch) -> None:
-        task = asyncio.current_task()
         remaining = list(b.ids)
-        try:
+        with self._running(b):
             found = self.objects_from_disk(remaining)
             b.left -= found
             remaining = [i for i in remaining if i not in found]
@@ -631,11 +636,6 @@ class Streamer:
                         self.add_object(frame)
                 finally:
                     self.store_objects(got)
-        except (StreamCut, ApiError):
-            pass  # the ids not received are wanted again at the next plan
-        finally:
-            self._end_batch(task, b)
-        self.replan()
 
     def objects_from_disk(self, ids: list[int]) -> set[int]:
         """Take what the disk cache holds of ``ids``; the ids taken."""
