@@ -86,7 +86,7 @@ def stream_scenarios(
         {"name": "SM 56k prefetch", "over": {"path": "SM"}, "goal": "(reported)"},
         {"name": "SE 56k cache 8MB", "over": {"cache": "8MB"}, "goal": "re-downloads counted"},
     ]
-    scenes = [("Vienna", vienna, ("walk",))] if vienna else []
+    scenes: list[tuple[str, str, Sequence[str]]] = [("Vienna", vienna, ("walk",))] if vienna else []
     scenes += list(extra)
     for label, db, paths in scenes:
         assert db is not None

@@ -112,8 +112,8 @@ def plan_needs(
     if cur is not None:
         need[cur] = records[cur] = 0.0
     if grid is not None:
-        for _d, t in grid.tiles_near(p):
-            want_tile(t, 0.0)  # the viewer may be in a cell of any of these
+        for _d, tile in grid.tiles_near(p):
+            want_tile(tile, 0.0)  # the viewer may be in a cell of any of these
     if prefetch and cur is not None and cellmap.knows(cur):
         route = predict_route(
             cellmap, cur, p, heading if speed > 0.3 else None, reach_records_m, turn_m
@@ -123,21 +123,24 @@ def plan_needs(
             records.setdefault(s.cell, t)
             if s.cost_m <= reach_m:
                 need.setdefault(s.cell, t)
-            if grid is not None:
-                want_tile(cellmap.tile_of.get(s.cell), t)  # the tiles it runs through
+            on = cellmap.tile_of.get(s.cell)
+            if grid is not None and on is not None:
+                want_tile(on, t)  # the tiles it runs through
         if grid is not None:
             # the route runs into cells whose tile is missing: the tiles around the
             # held cell it leaves from
             for st in route.frontier.values():
                 poly = cellmap.outlines[st.cell]
                 lo, hi = poly.min(axis=0), poly.max(axis=0)
-                for _d, t in grid.tiles_near((lo + hi) / 2.0, float(np.hypot(*(hi - lo))) / 2.0):
-                    want_tile(t, st.cost_m / v_eff)
+                for _d, tile in grid.tiles_near(
+                    (lo + hi) / 2.0, float(np.hypot(*(hi - lo))) / 2.0
+                ):
+                    want_tile(tile, st.cost_m / v_eff)
     found = cur is not None and cellmap.find(p, cur) == cur
     if grid is not None and not found:
         # outside every held cell: look around (the track ahead may enter cells)
-        for d, t in grid.tiles_near(p, reach_m):
-            want_tile(t, d / v_eff)
+        for d, tile in grid.tiles_near(p, reach_m):
+            want_tile(tile, d / v_eff)
     if prefetch and not found and speed > 0.2:
         step = max(0.05, min(0.5, 2.0 / speed))
         dts = np.arange(step, reach_m / speed + 1e-9, step)

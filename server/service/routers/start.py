@@ -32,7 +32,7 @@ from __future__ import annotations
 import base64
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Annotated, cast
+from typing import Annotated, Any, cast
 
 import msgpack
 from fastapi import APIRouter, Depends, Query, Request
@@ -52,7 +52,7 @@ __all__ = ["router"]
 
 router = APIRouter(prefix="/v1", responses=ERRORS)
 
-_DOC = {
+_DOC: dict[int | str, dict[str, Any]] = {
     200: {
         "description": "concatenated msgpack maps {part, etag, body} (see the module docs); a "
         "JSON array with Accept: application/json",
