@@ -465,12 +465,9 @@ class Streamer:
 
     @contextlib.contextmanager
     def _running(self, b: _Batch) -> Iterator[None]:
-        """Scope of one batch's request.
-
-        However it ends (whole, cut, refused or cancelled), the batch leaves the
-        in-flight sets so that what it did not bring is wanted again; a cut or a
-        refusal is no error (the next plan asks again) and is followed by a new plan.
-        """
+        """Scope of one batch's request: however it ends (whole, cut, refused or
+        cancelled), the batch leaves the in-flight sets, so what it did not bring is
+        wanted again at the next plan (made here unless cancelled)."""
         task = asyncio.current_task()
         try:
             yield

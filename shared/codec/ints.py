@@ -139,9 +139,9 @@ def pack_ints(values: Sequence[int], *, compact: bool = True) -> list[Any]:
 
     >>> pack_ints([1, 2, 3])
     [0, [1, 2, 3]]
-    >>> fmt, payload = pack_ints([1000] * 40)
+    >>> fmt, payload = pack_ints([1000] * 40)  # int16 (varints tie at 2 bytes each)
     >>> fmt, len(payload)
-    (3, 80)
+    (1, 80)
     """
     d = [int(v) for v in values]
     if not compact:
