@@ -1,7 +1,8 @@
 """Replay a recorded path through a scene over a shaped link: the client's main loop.
 
-Setup (the scene, its manifest and the path, fetched concurrently) is followed by
-the walk: a frame loop that ticks at ``fps`` and never waits for the network.  Each
+Setup (the start bundle: path, first cell, index tiles, manifest and the first
+cell's objects in one round trip; against a server without one, the scene, its
+manifest and the path, fetched concurrently) is followed by the walk: a frame loop that ticks at ``fps`` and never waits for the network.  Each
 frame it moves the viewer along the path, lets the :class:`~walkstream.client.stream.streamer.Streamer`
 follow it (locate, predict, prefetch), measures download and rewrite quality of the
 current cell, culls and allocates the polygon budget by ACH, draws (really, with
@@ -38,14 +39,19 @@ from walkstream.client.draw.culling import frustum_cull
 from walkstream.client.draw.devices import make_device
 from walkstream.client.net.api import SceneClient
 from walkstream.client.net.link import LinkProfile, ShapedTransport
-from walkstream.client.report.metrics import FrameLog, FrameLogBuilder, summarise
+from walkstream.client.report.metrics import (
+    FrameLog,
+    FrameLogBuilder,
+    link_utilisation,
+    summarise,
+)
 from walkstream.client.rewrite.pool import ObjectGeometry
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.streamer import Streamer, StreamerConfig
 from walkstream.shared.camera import look_at, perspective
-from walkstream.shared.errors import InputError
+from walkstream.shared.errors import ApiError, InputError, StreamCut
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.wire import Manifest, decode_manifest
@@ -92,6 +98,10 @@ class ReplayConfig:
     ``None``: wait for the manifest to tell (a city walk then starts a little later)."""
     fog_m: float = 40.0
     """Interiors: portals farther than this are not looked through."""
+    start_bundle: bool = True
+    """Start with the start bundle (one round trip); False: scene list, manifest, path."""
+    gzip: bool = True
+    """Ask for the streams gzip-compressed (``Accept-Encoding: gzip``)."""
 
     def __post_init__(self) -> None:
         if self.stream not in STREAM_FORMS:
@@ -184,6 +194,17 @@ async def _manifest(api: SceneClient, disk: DiskCache | None) -> Manifest:
     return m
 
 
+def _manifest_task(
+    api: SceneClient, disk: DiskCache | None, arrived: Callable[[Manifest], None]
+) -> asyncio.Task[Manifest]:
+    """Fetch the manifest on its own; ``arrived`` is called with it when it is in."""
+    task = asyncio.create_task(_manifest(api, disk))
+    task.add_done_callback(
+        lambda t: None if t.cancelled() or t.exception() is not None else arrived(t.result())
+    )
+    return task
+
+
 def _view(xyz: NDArray[np.float64], yaw: float, pitch: float) -> NDArray[np.float32]:
     d = np.array(
         [math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch), math.sin(pitch)]
@@ -265,17 +286,41 @@ async def replay(
     async with httpx.AsyncClient(
         transport=link, base_url=base_url, timeout=httpx.Timeout(30.0)
     ) as http:
-        api = SceneClient(http, clock, config.scene, seed=config.seed)
+        api = SceneClient(http, clock, config.scene, seed=config.seed, compress=config.gzip)
         t_start = clock.now()
-        manifest_task: asyncio.Task[Manifest] | None = None
+        loop = asyncio.get_running_loop()
+        manifest_fut: asyncio.Future[Manifest] = loop.create_future()
+        tasks: list[asyncio.Task[Any]] = []
         try:
-            if await _within(clock, config.setup_timeout_s, api.resolve_scene()) is None:
-                api.scene = config.scene or "?"
             disk = DiskCache(config.cache_dir) if config.cache_dir is not None else None
-            # the walk starts as soon as the path is in; the manifest (grammar) may
-            # still be arriving: cells and objects do not need it, rewriting does
-            manifest_task = asyncio.create_task(_manifest(api, disk))
-            got = await _within(clock, config.setup_timeout_s, api.path(config.path))
+            cache = Cache(config.cache_bytes)
+            scfg = StreamerConfig(
+                prefetch=config.prefetch, form=STREAM_FORMS[config.stream], workers=config.workers
+            )
+            streamer = Streamer(api, clock, cache, scfg)
+            streamer.start()
+
+            def manifest_arrived(m: Manifest) -> None:
+                if manifest_fut.done():
+                    return
+                assert streamer is not None
+                grammar = parse_grammar(m.grammar_text) if streamer.rewrite is not None else None
+                usable = disk is not None and disk.use(m.name, m.version)
+                streamer.on_manifest(m.max_ids, grammar, disk if usable else None, m.index)
+                manifest_fut.set_result(m)
+
+            got = None
+            if config.start_bundle and config.kind != "interior":
+                got = await _bundle_start(
+                    config, clock, api, streamer, disk, manifest_arrived, manifest_fut, tasks
+                )
+            if got is None:
+                # no start bundle (or it failed before the path): scene list, manifest, path
+                if await _within(clock, config.setup_timeout_s, api.resolve_scene()) is None:
+                    api.scene = config.scene or "?"
+                if not manifest_fut.done():
+                    tasks.append(_manifest_task(api, disk, manifest_arrived))
+                got = await _within(clock, config.setup_timeout_s, api.path(config.path))
             setup_s = clock.now() - t_start
             if got is None:  # no path, no walk: an empty report that says why
                 stats = link.stats
@@ -292,18 +337,12 @@ async def replay(
             path, _path_bytes = got
             kind = config.kind
             if kind is None:
-                m0 = await _within(clock, config.setup_timeout_s, asyncio.shield(manifest_task))
+                m0 = await _within(clock, config.setup_timeout_s, asyncio.shield(manifest_fut))
                 kind = "city" if m0 is None else m0.kind
             if kind == "interior":
                 return await _replay_interior(
-                    api, link, clock, config, path, manifest_task, t_start, setup_s, progress
+                    api, link, clock, config, path, manifest_fut, t_start, setup_s, progress
                 )
-            cache = Cache(config.cache_bytes)
-            scfg = StreamerConfig(
-                prefetch=config.prefetch, form=STREAM_FORMS[config.stream], workers=config.workers
-            )
-            streamer = Streamer(api, clock, cache, scfg)
-            streamer.start()
             device = make_device(config.device, config.seed)
             if not device.simulated or config.snapshot_every:
                 from walkstream.client.draw.frames import FrameRenderer
@@ -311,31 +350,24 @@ async def replay(
                 renderer = FrameRenderer(size=config.size, fov_deg=config.fov_deg)
 
             def on_evict(kind: str, oid: int) -> None:
+                assert streamer is not None
+                streamer.evicted(kind, oid)
                 if kind == "geom" and renderer is not None:
                     renderer.forget_object(oid)
 
             cache.on_evict = on_evict
-
-            def manifest_arrived(task: asyncio.Task[Manifest]) -> None:
-                if task.cancelled() or task.exception() is not None:
-                    return
-                m = task.result()
-                assert streamer is not None
-                grammar = parse_grammar(m.grammar_text) if streamer.rewrite is not None else None
-                usable = disk is not None and disk.use(m.name, m.version)
-                streamer.on_manifest(m.max_ids, grammar, disk if usable else None)
-
-            manifest_task.add_done_callback(manifest_arrived)
             log, snapshots, spikes = await _walk(
                 config, clock, path, streamer, cache, device, renderer, progress, t_start, link
             )
-            manifest = manifest_task.result() if manifest_task.done() else None
+            manifest = manifest_fut.result() if manifest_fut.done() else None
             disk_state = (disk.available, disk.last_error) if disk is not None else (False, None)
+            t_end = clock.now()
         finally:
-            if manifest_task is not None and not manifest_task.done():
-                manifest_task.cancel()
-                with contextlib.suppress(asyncio.CancelledError, Exception):
-                    await manifest_task
+            for task in tasks:
+                if not task.done():
+                    task.cancel()
+                    with contextlib.suppress(asyncio.CancelledError, Exception):
+                        await task
             if streamer is not None:
                 await streamer.close()
             if renderer is not None:
@@ -345,12 +377,7 @@ async def replay(
     stats = link.stats
     bytes_log = _bytes_log(stats, t_start)
     entered = {int(c) for c in np.unique(log.cell) if c >= 0}
-    in_pvs: set[int] = set()
-    for c in entered:
-        rec = streamer.cells.get(c)
-        if rec is not None:
-            in_pvs.update(rec.pvs.tolist())
-    over = sum(n for oid, n in streamer.stats.object_bytes.items() if oid not in in_pvs)
+    over = _overfetch(streamer, entered)
     bytes_received = int(stats.bytes_down)
     step = None
     if config.cost_step_at_s is not None and len(log.t):
@@ -365,6 +392,7 @@ async def replay(
         cost_step=step,
         recovery_ignore=spikes,
     )
+    busy = np.array(streamer.busy_intervals(), dtype=np.float64).reshape(-1, 2) - t_start
     summary.update(
         {
             "scene": api.scene,
@@ -384,7 +412,15 @@ async def replay(
             "bytes_received": bytes_received,
             "bytes_sent": int(stats.bytes_up),
             "object_bytes": int(sum(streamer.stats.object_bytes.values())),
-            "overfetch_ratio": over / bytes_received if bytes_received else 0.0,
+            "cell_bytes": int(sum(streamer.stats.cell_bytes.values())),
+            "index_bytes": int(sum(streamer.stats.tile_bytes.values())),
+            "overfetch_ratio": sum(over.values()) / bytes_received if bytes_received else 0.0,
+            "overfetch_bytes": over,
+            "link_utilisation": link_utilisation(
+                bytes_log, config.link.down_bps, [[0.0, t_end - t_start]]
+            ),
+            "link_utilisation_busy": link_utilisation(bytes_log, config.link.down_bps, busy),
+            "link_busy_s": float(np.sum(busy[:, 1] - busy[:, 0])) if len(busy) else 0.0,
             "redownloads": int(cache.redownloads),
             "duplicates": int(
                 sum(n - 1 for n in streamer.stats.object_counts.values()) - cache.redownloads
@@ -393,16 +429,23 @@ async def replay(
             "objects_received": streamer.stats.objects_received,
             "object_requests": streamer.stats.object_requests,
             "cell_requests": streamer.stats.cell_requests,
+            "cells_received": streamer.stats.cells_received,
+            "index_requests": streamer.stats.tile_requests,
+            "locate_requests": streamer.stats.locate_requests,
+            "requests": stats.requests,
+            "start_bundle": config.start_bundle,
+            "gzip": config.gzip,
+            "bundle_bytes": streamer.stats.bundle_bytes,
             "cancelled_batches": streamer.stats.cancelled_batches,
             "retries": api.stats.retries,
             "cut_streams": api.stats.cut_streams,
             "responses_cut_by_link": stats.responses_cut,
             "disk_hits": streamer.stats.disk_hits,
-            "cells_revalidated": streamer.stats.cells_revalidated,
             "measured_bandwidth_bps": _finite(api.stats.bandwidth_bps),
             "measured_rtt_s": _finite(api.stats.rtt_s),
             "cache_bytes": config.cache_bytes,
             "cache_peak_bytes": int(cache.peak_bytes),
+            "cache_over_budget_events": int(cache.over_budget_events),
             "rewrite_cpu_s": streamer.rewrite.cpu_s if streamer.rewrite is not None else 0.0,
             "cells_entered": len(entered),
         }
@@ -424,7 +467,7 @@ async def _replay_interior(
     clock: Clock,
     config: ReplayConfig,
     path: RecordedPath,
-    manifest_task: asyncio.Task[Manifest],
+    manifest_fut: asyncio.Future[Manifest],
     t_start: float,
     setup_s: float,
     progress: Callable[[float, float], None] | None,
@@ -453,7 +496,7 @@ async def _replay_interior(
         await streamer.close()
         if renderer is not None:
             renderer.release()
-    manifest = manifest_task.result() if manifest_task.done() and not manifest_task.cancelled() else None
+    manifest = manifest_fut.result() if manifest_fut.done() and not manifest_fut.cancelled() else None
     stats = link.stats
     summary = summarise(log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0, recovery_ignore=spikes)
     summary.update(_link_summary(config, stats, api))
@@ -482,6 +525,74 @@ async def _replay_interior(
         }
     )
     return ReplayResult(summary, log, _bytes_log(stats, t_start), snapshots, spikes)
+
+
+def _overfetch(streamer: Streamer, entered: set[int]) -> dict[str, int]:
+    """Bytes fetched and never needed for a frame, by kind.
+
+    Objects never in the PVS of a cell the walk entered, records of cells it never
+    entered, index tiles none of whose cells it entered.
+    """
+    in_pvs: set[int] = set()
+    for c in entered:
+        pvs = streamer.pvs_seen.get(c)
+        if pvs is not None:
+            in_pvs.update(pvs.tolist())
+    st = streamer.stats
+    return {
+        "objects": sum(n for oid, n in st.object_bytes.items() if oid not in in_pvs),
+        "cells": sum(n for cid, n in st.cell_bytes.items() if cid not in entered),
+        "index": sum(
+            n
+            for key, n in st.tile_bytes.items()
+            if not (streamer.tile_members.get(key, frozenset()) & entered)
+        ),
+    }
+
+
+async def _bundle_start(
+    config: ReplayConfig,
+    clock: Clock,
+    api: SceneClient,
+    streamer: Streamer,
+    disk: DiskCache | None,
+    manifest_arrived: Callable[[Manifest], None],
+    manifest_fut: asyncio.Future[Manifest],
+    tasks: list[asyncio.Task[Any]],
+) -> tuple[RecordedPath, int] | None:
+    """Start with the start bundle: the path and its bytes.
+
+    None when the bundle failed before the path arrived (the caller then starts the
+    old way).  When it is cut after the path but before the manifest, a task
+    (added to ``tasks``) fetches the manifest on its own.
+    """
+    loop = asyncio.get_running_loop()
+    path_fut: asyncio.Future[tuple[RecordedPath, int]] = loop.create_future()
+
+    def on_path(p: RecordedPath, n: int) -> None:
+        if not path_fut.done():
+            path_fut.set_result((p, n))
+
+    def on_manifest(m: Manifest) -> None:
+        if disk is not None and m.etag:
+            disk.put_manifest(m.name, m.etag, m.body)
+        manifest_arrived(m)
+
+    def on_end(err: BaseException | None) -> None:
+        if not path_fut.done():
+            path_fut.set_exception(err or ApiError("start bundle: no path in it"))
+        elif not manifest_fut.done() and api.scene is not None:
+            # cut after the path: the manifest (the grammar) comes on its own
+            tasks.append(_manifest_task(api, disk, manifest_arrived))
+
+    streamer.start_bundle(config.path, on_path, on_manifest, on_end)
+    try:
+        got: tuple[RecordedPath, int] | None = await _within(
+            clock, config.setup_timeout_s, path_fut
+        )
+    except (ApiError, StreamCut):
+        return None
+    return got
 
 
 async def _within(clock: Clock, seconds: float, coro: Any) -> Any:

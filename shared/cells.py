@@ -1,13 +1,16 @@
 """View cells as both sides see them: the kinds, convex outlines, and which cell holds a point.
 
 The bake cuts a scene into cells (:mod:`walkstream.server.bake`), the store keeps
-them, the service answers ``locate`` with :class:`CellLocator`, and the client
-follows the viewer from outline to outline with :func:`inside_convex`.
+them, the service answers ``locate`` with :class:`CellLocator` and sends the cells'
+outlines and adjacency tile by tile (the cell index, tiles of a :class:`TileGrid`),
+and the client follows the viewer from outline to outline with :func:`inside_convex`.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import shapely
@@ -15,7 +18,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.errors import InputError
 
-__all__ = ["CELL_KINDS", "LOCATABLE_KINDS", "INSIDE_TOL", "LOCATE_TOL", "CellLocator", "inside_convex", "outline_polygons"]
+__all__ = [
+    "CELL_KINDS",
+    "INSIDE_TOL",
+    "LOCATABLE_KINDS",
+    "LOCATE_TOL",
+    "CellLocator",
+    "TileGrid",
+    "inside_convex",
+    "outline_polygons",
+]
 
 CELL_KINDS: tuple[str, ...] = ("crossroad", "street", "square", "grid", "room", "doorway", "outside")
 """Every kind of view cell, in the order the bake numbers cells by kind.
@@ -163,3 +175,102 @@ def inside_convex(poly: NDArray[np.float64], pts: ArrayLike) -> NDArray[np.bool_
     )
     scale = INSIDE_TOL * max(1.0, float(np.abs(poly).max()))
     return np.all(cr >= -scale, axis=1) | np.all(cr <= scale, axis=1)
+
+
+@dataclass(frozen=True, slots=True)
+class TileGrid:
+    """The square tiles the cell index of a scene is cut into.
+
+    Each cell belongs to exactly one tile (the one holding the mean of its
+    outline's vertices); ``reach_m`` bounds how far any cell's outline pokes out of
+    its tile's square, so a point can lie only in cells of the tiles whose squares
+    are within ``reach_m`` of it (:meth:`tiles_near`).  A scene small enough for
+    one index has a ``(1, 1)`` grid.
+
+    Attributes
+    ----------
+    origin : (2,) float
+        South-west corner of tile ``(0, 0)``, scene-local metres.
+    tile_m : float
+        Side of a tile, metres (> 0).
+    shape : (2,) int
+        Tiles along x and y (each >= 1).
+    reach_m : float
+        Largest distance from a cell's outline to its tile's square, metres.
+    """
+
+    origin: tuple[float, float]
+    tile_m: float
+    shape: tuple[int, int]
+    reach_m: float
+
+    def __post_init__(self) -> None:
+        vals = (*self.origin, self.tile_m, self.reach_m)
+        if not all(math.isfinite(v) for v in vals) or self.tile_m <= 0 or self.reach_m < 0:
+            raise InputError(f"tile grid: bad origin, tile size or reach {vals}")
+        if len(self.shape) != 2 or min(self.shape) < 1 or max(self.shape) > 1 << 16:
+            raise InputError(f"tile grid: shape {self.shape} must be two counts in [1, 65536]")
+
+    @property
+    def count(self) -> int:
+        """Number of tiles."""
+        return self.shape[0] * self.shape[1]
+
+    def tile_of(self, xy: ArrayLike) -> tuple[int, int]:
+        """The tile whose square holds ``xy`` (clamped to the grid).
+
+        >>> TileGrid((0.0, 0.0), 100.0, (3, 2), 5.0).tile_of([250.0, -10.0])
+        (2, 0)
+        """
+        i, j = self.tiles_of(np.asarray(xy, dtype=np.float64).reshape(1, 2))[0].tolist()
+        return int(i), int(j)
+
+    def tiles_of(self, xy: ArrayLike) -> NDArray[np.int64]:
+        """Tile index ``(i, j)`` of many points, clamped: ``(k, 2)`` int64 for ``(k, 2)`` points."""
+        p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        hi = np.asarray(self.shape, dtype=np.float64) - 1.0
+        # clip before the cast: points far off the grid (or not finite) give edge tiles
+        f = np.nan_to_num(np.floor((p - np.asarray(self.origin)) / self.tile_m), nan=0.0)
+        out: NDArray[np.int64] = np.clip(f, 0.0, hi).astype(np.int64)
+        return out
+
+    def square(self, i: int, j: int) -> tuple[float, float, float, float]:
+        """``(minx, miny, maxx, maxy)`` of tile ``(i, j)``."""
+        x0 = self.origin[0] + i * self.tile_m
+        y0 = self.origin[1] + j * self.tile_m
+        return (x0, y0, x0 + self.tile_m, y0 + self.tile_m)
+
+    def tiles_near(self, xy: ArrayLike, radius: float = 0.0) -> list[tuple[float, tuple[int, int]]]:
+        """``(distance, tile)`` of the tiles that may hold a cell within ``radius`` of ``xy``.
+
+        Those whose square is within ``radius + reach_m`` of the point, nearest
+        first (distance 0 for the tile holding it).
+
+        >>> g = TileGrid((0.0, 0.0), 100.0, (3, 3), 10.0)
+        >>> [t for _, t in g.tiles_near([150.0, 150.0])]
+        [(1, 1)]
+        >>> [t for _, t in g.tiles_near([195.0, 150.0])]
+        [(1, 1), (2, 1)]
+        """
+        p = np.asarray(xy, dtype=np.float64).reshape(2)
+        r = max(0.0, float(radius)) + self.reach_m
+        if not (np.isfinite(p).all() and math.isfinite(r)):
+            return []
+        top = np.asarray(self.shape, dtype=np.float64) - 1.0
+        o = np.asarray(self.origin)
+        # clip before the cast: far-off points give (at most) edge tiles, never overflow
+        lo = np.clip(np.floor((p - r - o) / self.tile_m), -1.0, top + 1.0).astype(np.int64)
+        hi = np.clip(np.floor((p + r - o) / self.tile_m), -1.0, top + 1.0).astype(np.int64)
+        lo = np.maximum(lo, 0)
+        hi = np.minimum(hi, np.asarray(self.shape) - 1)
+        out = []
+        for i in range(int(lo[0]), int(hi[0]) + 1):
+            for j in range(int(lo[1]), int(hi[1]) + 1):
+                x0, y0, x1, y1 = self.square(i, j)
+                dx = max(x0 - p[0], 0.0, p[0] - x1)
+                dy = max(y0 - p[1], 0.0, p[1] - y1)
+                d = math.hypot(dx, dy)
+                if d <= r:
+                    out.append((d, (i, j)))
+        out.sort()
+        return out

@@ -7,38 +7,57 @@ the client, which reads untrusted bytes: every body is unpacked with hard limits
 corrupt or hostile answer is a :class:`~walkstream.shared.errors.CodecError`, never
 a crash.
 
+Integer sequences below are ``[format, payload]`` pairs
+(:func:`~walkstream.shared.codec.pack_ints`: a plain list in JSON, the smallest of
+list, int16, int32 or zigzag varints in msgpack).
+
 manifest
     ``{name, version, schema_version, crs, origin, bounds, features, grammar: {id,
     text}, viewpoints: [{name, x, y, z, yaw, cell}], paths, objects, cells, limits:
-    {objects_per_request}}``
+    {objects_per_request}, kind: city | interior, index: {origin, tile, shape,
+    reach} | null, offers}``;
+    ``index`` is the :class:`~walkstream.shared.cells.TileGrid` of the cell index,
+    ``offers`` the optional parts of the API this server has (:data:`OFFERS`).
+cell index (a tile, or the whole scene)
+    ``{tile: [i, j] | null, ids, kind_names, kinds, zmin, zmax, counts, anchor,
+    coords, degrees, adjacent}``: cell ids ascending (delta-coded), each cell's kind
+    (an index into ``kind_names``), eye-height range (centimetres, delta-coded),
+    convex outline (``counts`` vertices per cell; ``anchor`` the first vertex in
+    centimetres, ``coords`` the x/y centimetre deltas chained over every outline)
+    and neighbours (``degrees`` per cell, ``adjacent`` their ids, each minus the
+    cell's own id).  Tracking the viewer needs nothing else: a client learns the
+    cells ahead without a request per cell.
 cell
-    ``{id, kind, boundary, zmin, zmax, neighbours: [{id, boundary}], pvs, ach}``
+    ``{id, kind, pvs, ach}``: what is the cell's own: the PVS ids ascending
+    (delta-coded: the first id, then differences) and their ACH in units of
+    1/65535 (:data:`~walkstream.shared.codec.ACH_UNITS`, summing to it exactly).
+    Optional, kind-specific fields may follow; a decoder ignores keys it does not
+    know, so a new field never breaks an older client.  A stream of records (the
+    cells batch) is plain concatenated msgpack, one per asked id in the order asked.
 locate
     ``{cell: id}`` or ``{cell: null, reason}``
-room (interior cell record)
-    ``{id, kind, name, room, storey, outline, zmin, zmax, planes, portals: [{id, kind,
-    polygon, cell}], neighbours, contents: {triangles, vertices, parts, bytes,
-    raw_bytes, max_error}}``
-topology (an interior's topological file, Mulloni et al.)
-    ``{storeys: [{id, name, zmin, zmax}], cells: [{id, kind, name, storey, outline,
-    zmin, zmax, planes, triangles, bytes}], portals: [{id, kind, cells, polygon}],
-    stairs: [{portal, lower, upper, path}]}``
 object frame
     ``{id, kind, params: bin}`` (or ``mesh: bin`` for the ``lod2`` form); a stream of
     them is plain concatenated msgpack, one per asked id in the order asked.
+start part
+    ``{part, etag, body: bin}``: one resource of the start bundle, ``body`` being
+    exactly what the resource's own endpoint sends (``part`` one of
+    :data:`START_PARTS`); the ``objects`` part is ``{part, etag: null, count}``
+    followed in the stream by ``count`` object frames.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import contextlib
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
-from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.shared.codec import unpack_bounded
+from walkstream.shared.cells import CELL_KINDS, TileGrid
+from walkstream.shared.codec import ACH_UNITS, pack_ints, quantise_ach, unpack_bounded, unpack_ints
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import Viewpoint, readonly
 
@@ -47,21 +66,21 @@ __all__ = [
     "JSON",
     "MSGPACK_TYPES",
     "FRAME_KEYS",
+    "OFFERS",
+    "START_PARTS",
     "Manifest",
     "CellRecord",
+    "CellIndex",
     "ObjectFrame",
     "decode_manifest",
     "decode_cell",
+    "cell_from_wire",
+    "decode_cell_index",
     "decode_frame",
+    "decode_start_part",
     "locate_answer",
     "decode_locate",
     "decode_scene_list",
-    "PortalRef",
-    "ContentsRef",
-    "RoomRecord",
-    "Topology",
-    "decode_room",
-    "decode_topology",
 ]
 
 MSGPACK = "application/msgpack"
@@ -74,8 +93,20 @@ MSGPACK_TYPES = frozenset({MSGPACK, "application/x-msgpack", "application/vnd.ms
 FRAME_KEYS: dict[str, str] = {"params": "params", "lod2": "mesh"}
 """The key of an object frame's payload, per form of the objects request."""
 
+OFFERS: tuple[str, ...] = ("cell-index", "cells-batch", "start")
+"""Optional parts of the API a manifest may list in ``offers``: the cell index
+(``GET .../index/{i}/{j}``), cell records in batches (``POST .../cells``) and the
+start bundle (``GET /v1/start``)."""
+
+START_PARTS: tuple[str, ...] = ("path", "cell", "index", "manifest", "objects")
+"""What a start bundle may hold, in the order the service sends it."""
+
 _MAX_MANIFEST = 4 << 20
 _MAX_CELL = 8 << 20
+_MAX_INDEX = 32 << 20
+_MAX_INDEX_CELLS = 1 << 20
+_MAX_INDEX_VERTICES = 1 << 24
+_MAX_CM = 2**53
 
 
 @dataclass(frozen=True)
@@ -107,6 +138,10 @@ class Manifest:
     kind: str = "city"
     """``city`` (view cells with a PVS, buildings from parameters) or ``interior``
     (rooms and portals, cell contents as meshes)."""
+    index: TileGrid | None = None
+    """The tiles of the cell index (None: the server has no cell index)."""
+    offers: tuple[str, ...] = ()
+    """Optional parts of the API the server has (names from :data:`OFFERS`)."""
     etag: str | None = None
     body: bytes = field(default=b"", repr=False)
 
@@ -130,53 +165,165 @@ class Manifest:
             "cells": self.cells,
             "limits": {"objects_per_request": self.max_ids},
             "kind": self.kind,
+            "index": None if self.index is None else _grid_to_wire(self.index),
+            "offers": list(self.offers),
         }
+
+
+def _grid_to_wire(g: TileGrid) -> dict[str, Any]:
+    return {"origin": list(g.origin), "tile": g.tile_m, "shape": list(g.shape), "reach": g.reach_m}
+
+
+def _grid_from_wire(obj: Any) -> TileGrid | None:
+    if obj is None:
+        return None
+    from walkstream.shared.errors import InputError
+
+    try:
+        return TileGrid(
+            origin=(float(obj["origin"][0]), float(obj["origin"][1])),
+            tile_m=float(obj["tile"]),
+            shape=(int(obj["shape"][0]), int(obj["shape"][1])),
+            reach_m=float(obj["reach"]),
+        )
+    except InputError as exc:
+        raise ValueError(str(exc)) from exc
 
 
 @dataclass(frozen=True)
 class CellRecord:
-    """A view cell as the API sends it.
+    """A view cell's own data as the API sends it: its PVS with the ACH of each object.
 
-    ``nbytes``, ``etag`` and ``body`` are what the client received (its cache keeps
-    them); the service leaves them empty.
+    The outline, height range and neighbours of every cell are in the cell index
+    (:class:`CellIndex`).  ``nbytes``, ``etag`` and ``body`` are what the client
+    received (its caches keep them); the service leaves them empty.
     """
 
     id: int
     kind: str
-    boundary: NDArray[np.float64]
-    """(n, 2) convex outline, scene-local metres."""
-    zmin: float
-    zmax: float
-    neighbours: Mapping[int, NDArray[np.float64]]
-    """Neighbour id -> its (m, 2) outline."""
     pvs: NDArray[np.int64]
+    """(k,) object ids, ascending."""
     ach: NDArray[np.float64]
+    """(k,) average coverage of each PVS object (sums to 1 unless empty)."""
     nbytes: int = 0
     etag: str | None = None
     body: bytes = field(default=b"", repr=False)
 
     def __post_init__(self) -> None:
         # records are shared between caches and callers: nothing in them may change
-        object.__setattr__(self, "boundary", readonly(np.asarray(self.boundary, np.float64)))
-        object.__setattr__(self, "pvs", readonly(np.asarray(self.pvs, np.int64)))
-        object.__setattr__(self, "ach", readonly(np.asarray(self.ach, np.float64)))
-        frozen = {int(n): readonly(np.asarray(b, np.float64)) for n, b in self.neighbours.items()}
-        object.__setattr__(self, "neighbours", MappingProxyType(frozen))
+        object.__setattr__(self, "pvs", readonly(np.asarray(self.pvs, np.int64).reshape(-1)))
+        object.__setattr__(self, "ach", readonly(np.asarray(self.ach, np.float64).reshape(-1)))
 
-    def to_wire(self) -> dict[str, Any]:
-        """The record as sent: outlines as nested lists of floats."""
+    def to_wire(self, *, compact: bool = True) -> dict[str, Any]:
+        """The record as sent (``compact=False``: plain integer lists, for JSON)."""
+        ids = np.asarray(self.pvs, dtype=np.int64)
+        units = quantise_ach(self.ach) if len(ids) else np.zeros(0, np.int64)
         return {
             "id": self.id,
             "kind": self.kind,
-            "boundary": np.asarray(self.boundary, dtype=np.float64).tolist(),
-            "zmin": self.zmin,
-            "zmax": self.zmax,
-            "neighbours": [
-                {"id": n, "boundary": np.asarray(b, dtype=np.float64).tolist()}
-                for n, b in self.neighbours.items()
-            ],
-            "pvs": np.asarray(self.pvs).tolist(),
-            "ach": np.asarray(self.ach, dtype=np.float64).tolist(),
+            "pvs": pack_ints(np.diff(ids, prepend=0).tolist(), compact=compact),
+            "ach": pack_ints(units.tolist(), compact=compact),
+        }
+
+
+@dataclass(frozen=True)
+class CellIndex:
+    """Outlines, height ranges and adjacency of the cells of one tile (or of a scene).
+
+    Immutable per scene version, so a client keeps it as long as its cache allows.
+    ``nbytes``, ``etag`` and ``body`` are what the client received; the service
+    leaves them empty.
+
+    Attributes
+    ----------
+    tile : (i, j) or None
+        The tile of the scene's :class:`~walkstream.shared.cells.TileGrid`; None for
+        the whole scene.
+    ids : (n,) int64
+        Cell ids, ascending.
+    kinds : tuple of str
+        Each cell's kind (:data:`~walkstream.shared.cells.CELL_KINDS`).
+    zmin, zmax : (n,) float64
+        Eye-height range of each cell, metres (centimetre precision on the wire).
+    outlines : tuple of (m_i, 2) float64
+        Convex outlines, scene-local metres (centimetre precision on the wire).
+    neighbours : tuple of (k_i,) int64
+        Ids of each cell's neighbours (some may lie in other tiles).
+    """
+
+    tile: tuple[int, int] | None
+    ids: NDArray[np.int64]
+    kinds: tuple[str, ...]
+    zmin: NDArray[np.float64]
+    zmax: NDArray[np.float64]
+    outlines: tuple[NDArray[np.float64], ...]
+    neighbours: tuple[NDArray[np.int64], ...]
+    nbytes: int = 0
+    etag: str | None = None
+    body: bytes = field(default=b"", repr=False)
+
+    def __post_init__(self) -> None:
+        n = len(self.ids)
+        object.__setattr__(self, "ids", readonly(np.asarray(self.ids, np.int64).reshape(-1)))
+        object.__setattr__(self, "zmin", readonly(np.asarray(self.zmin, np.float64).reshape(-1)))
+        object.__setattr__(self, "zmax", readonly(np.asarray(self.zmax, np.float64).reshape(-1)))
+        object.__setattr__(
+            self,
+            "outlines",
+            tuple(readonly(np.asarray(o, np.float64).reshape(-1, 2)) for o in self.outlines),
+        )
+        object.__setattr__(
+            self,
+            "neighbours",
+            tuple(readonly(np.asarray(b, np.int64).reshape(-1)) for b in self.neighbours),
+        )
+        object.__setattr__(self, "kinds", tuple(str(k) for k in self.kinds))
+        sizes = {
+            len(self.kinds),
+            len(self.zmin),
+            len(self.zmax),
+            len(self.outlines),
+            len(self.neighbours),
+        }
+        if sizes != {n}:
+            raise CodecError(f"cell index: {n} ids but fields of lengths {sorted(sizes)}")
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def to_wire(self, *, compact: bool = True) -> dict[str, Any]:
+        """The index as sent (``compact=False``: plain integer lists, for JSON)."""
+        ids = np.asarray(self.ids, dtype=np.int64)
+        names = sorted(
+            set(self.kinds), key=lambda k: (CELL_KINDS.index(k) if k in CELL_KINDS else 99, k)
+        )
+        code = {k: i for i, k in enumerate(names)}
+        counts = [len(o) for o in self.outlines]
+        if counts:
+            q = np.rint(np.concatenate(self.outlines) * 100.0).astype(np.int64)
+            anchor = q[0].tolist()
+            coords = np.diff(q, axis=0).reshape(-1).tolist()
+        else:
+            anchor, coords = [0, 0], []
+        zmin = np.rint(np.asarray(self.zmin) * 100.0).astype(np.int64)
+        zmax = np.rint(np.asarray(self.zmax) * 100.0).astype(np.int64)
+        adjacent = [
+            int(b) - int(c)
+            for c, nb in zip(ids.tolist(), self.neighbours, strict=True)
+            for b in nb.tolist()
+        ]
+        return {
+            "tile": None if self.tile is None else list(self.tile),
+            "ids": pack_ints(np.diff(ids, prepend=0).tolist(), compact=compact),
+            "kind_names": names,
+            "kinds": pack_ints([code[k] for k in self.kinds], compact=compact),
+            "zmin": pack_ints(np.diff(zmin, prepend=0).tolist(), compact=compact),
+            "zmax": pack_ints(np.diff(zmax, prepend=0).tolist(), compact=compact),
+            "counts": pack_ints(counts, compact=compact),
+            "anchor": anchor,
+            "coords": pack_ints(coords, compact=compact),
+            "degrees": pack_ints([len(nb) for nb in self.neighbours], compact=compact),
+            "adjacent": pack_ints(adjacent, compact=compact),
         }
 
 
@@ -205,62 +352,179 @@ def locate_answer(cell: int | None) -> dict[str, Any]:
 # --------------------------------------------------------------------------- decoding
 
 
-def _floats(x: Any, what: str, shape_cols: int | None = None) -> NDArray[np.float64]:
+@contextlib.contextmanager
+def _fields(what: str) -> Iterator[None]:
+    """Turn a missing or mistyped field of an unpacked record into a :class:`CodecError`."""
     try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise CodecError(f"{what}: expected numbers") from exc
-    if not np.all(np.isfinite(a)):
-        raise CodecError(f"{what}: non-finite values")
-    if shape_cols is not None and (a.ndim != 2 or a.shape[1] != shape_cols or len(a) < 3):
-        raise CodecError(f"{what}: expected an (n >= 3, {shape_cols}) array, got shape {a.shape}")
-    return a
+        yield
+    except KeyError as exc:
+        raise CodecError(f"{what}: missing field {exc}") from exc
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise CodecError(f"{what}: {exc}") from exc
 
 
-def decode_cell(body: bytes, what: str, etag: str | None = None) -> CellRecord:
-    """Decode and check a cell record body (msgpack)."""
-    obj = unpack_bounded(
-        body, what, max_bytes=_MAX_CELL, max_array_len=1 << 20, max_map_len=16, max_bin_len=0
-    )
+def _cumsum_ids(deltas: list[int], what: str, field: str, strict: bool) -> NDArray[np.int64]:
+    """Ids from ``[first, d1, d2, ...]``: non-negative and ascending (strictly if ``strict``)."""
+    d = np.asarray(deltas, dtype=np.int64)
+    if len(d) and (d[0] < 0 or (d[1:] <= 0 if strict else d[1:] < 0).any()):
+        raise CodecError(f"{what}: {field} are not ascending non-negative ids")
+    if len(d) and int(np.abs(d).max()) >= 2**62 // max(1, len(d)):
+        raise CodecError(f"{what}: {field}: ids out of range")
+    out: NDArray[np.int64] = np.cumsum(d) if len(d) else np.zeros(0, np.int64)
+    return out
+
+
+def cell_from_wire(
+    obj: Any, what: str, nbytes: int = 0, etag: str | None = None, body: bytes = b""
+) -> CellRecord:
+    """A :class:`CellRecord` from an unpacked record (one of a stream, or a whole body), checked."""
     if not isinstance(obj, dict):
         raise CodecError(f"{what}: expected a map")
-    try:
+    with _fields(what):
         cid = obj["id"]
-        if type(cid) is not int:
-            raise CodecError(f"{what}: id is not an integer")
-        boundary = _floats(obj["boundary"], f"{what}: boundary", 2)
-        neighbours: dict[int, NDArray[np.float64]] = {}
-        for k, n in enumerate(obj["neighbours"]):
-            if not isinstance(n, dict) or type(n.get("id")) is not int:
-                raise CodecError(f"{what}: neighbours[{k}] is not {{id, boundary}}")
-            neighbours[n["id"]] = _floats(n["boundary"], f"{what}: neighbours[{k}]", 2)
-        pvs_list = obj["pvs"]
-        if not isinstance(pvs_list, list) or any(type(i) is not int for i in pvs_list):
-            raise CodecError(f"{what}: pvs is not a list of integers")
-        pvs = np.asarray(pvs_list, dtype=np.int64).reshape(-1)
-        ach = _floats(obj["ach"], f"{what}: ach").reshape(-1)
-        if len(ach) != len(pvs):
-            raise CodecError(f"{what}: {len(pvs)} pvs ids but {len(ach)} ach values")
-        if np.any(ach < 0):
-            raise CodecError(f"{what}: negative ach")
+        if type(cid) is not int or cid < 0:
+            raise CodecError(f"{what}: id is not a non-negative integer")
+        pvs = _cumsum_ids(unpack_ints(obj["pvs"], what, "pvs", 1 << 22), what, "pvs", strict=True)
+        units = np.asarray(unpack_ints(obj["ach"], what, "ach", 1 << 22), dtype=np.int64)
+        if len(units) != len(pvs):
+            raise CodecError(f"{what}: {len(pvs)} pvs ids but {len(units)} ach values")
+        if len(units) and ((units < 0).any() or (units > ACH_UNITS).any()):
+            raise CodecError(f"{what}: ach units outside [0, {ACH_UNITS}]")
         kind = obj.get("kind", "")
         return CellRecord(
             id=cid,
             kind=str(kind),
-            boundary=boundary,
-            zmin=float(obj["zmin"]),
-            zmax=float(obj["zmax"]),
-            neighbours=neighbours,
             pvs=pvs,
-            ach=ach,
+            ach=units.astype(np.float64) / ACH_UNITS,
+            nbytes=nbytes,
+            etag=etag,
+            body=bytes(body),
+        )
+
+
+def _unpack_record(
+    body: bytes, what: str, max_bytes: int, *, max_array_len: int, max_map_len: int
+) -> Any:
+    """Unpack a record whose binary fields may be as large as the record itself."""
+    return unpack_bounded(
+        body,
+        what,
+        max_bytes=max_bytes,
+        max_array_len=max_array_len,
+        max_map_len=max_map_len,
+        max_bin_len=max_bytes,
+    )
+
+
+def decode_cell(body: bytes, what: str, etag: str | None = None) -> CellRecord:
+    """Decode and check a cell record body (msgpack)."""
+    obj = _unpack_record(body, what, _MAX_CELL, max_array_len=1 << 20, max_map_len=64)
+    return cell_from_wire(obj, what, len(body), etag, body)
+
+
+def decode_cell_index(body: bytes, what: str, etag: str | None = None) -> CellIndex:
+    """Decode and check a cell index body (msgpack): sizes agree, outlines have >= 3 vertices."""
+    obj = _unpack_record(body, what, _MAX_INDEX, max_array_len=1 << 24, max_map_len=32)
+    if not isinstance(obj, dict):
+        raise CodecError(f"{what}: expected a map")
+    with _fields(what):
+        tile_obj = obj["tile"]
+        tile: tuple[int, int] | None = None
+        if tile_obj is not None:
+            if not (
+                isinstance(tile_obj, list)
+                and len(tile_obj) == 2
+                and all(type(v) is int and v >= 0 for v in tile_obj)
+            ):
+                raise CodecError(f"{what}: tile is not [i, j]")
+            tile = (tile_obj[0], tile_obj[1])
+        ids = _cumsum_ids(
+            unpack_ints(obj["ids"], what, "ids", _MAX_INDEX_CELLS), what, "ids", strict=True
+        )
+        n = len(ids)
+        names = obj["kind_names"]
+        if not isinstance(names, list) or not all(
+            isinstance(k, str) and len(k) <= 64 for k in names
+        ):
+            raise CodecError(f"{what}: kind_names is not a list of names")
+        codes = unpack_ints(obj["kinds"], what, "kinds", n)
+        if len(codes) != n or any(not 0 <= c < len(names) for c in codes):
+            raise CodecError(f"{what}: kinds: expected {n} indexes into kind_names")
+        z = []
+        for key in ("zmin", "zmax"):
+            v = np.cumsum(np.asarray(unpack_ints(obj[key], what, key, n), dtype=np.int64))
+            if len(v) != n or (len(v) and int(np.abs(v).max()) >= _MAX_CM):
+                raise CodecError(f"{what}: {key}: expected {n} heights")
+            z.append(v.astype(np.float64) / 100.0)
+        counts = unpack_ints(obj["counts"], what, "counts", n)
+        if len(counts) != n or any(c < 3 for c in counts) or sum(counts) > _MAX_INDEX_VERTICES:
+            raise CodecError(f"{what}: counts: expected {n} outlines of >= 3 vertices")
+        total = sum(counts)
+        anchor = obj["anchor"]
+        if not (
+            isinstance(anchor, list)
+            and len(anchor) == 2
+            and all(type(a) is int and abs(a) < _MAX_CM for a in anchor)
+        ):
+            raise CodecError(f"{what}: anchor is not [x, y] in centimetres")
+        d = unpack_ints(obj["coords"], what, "coords", 2 * _MAX_INDEX_VERTICES)
+        if len(d) != 2 * max(0, total - 1):
+            raise CodecError(
+                f"{what}: coords: expected {2 * max(0, total - 1)} deltas, got {len(d)}"
+            )
+        outlines: tuple[NDArray[np.float64], ...] = ()
+        if total:
+            q = np.empty((total, 2), np.int64)
+            q[0] = anchor
+            q[1:] = np.asarray(d, dtype=np.int64).reshape(-1, 2)
+            xy = np.cumsum(q, axis=0)
+            if int(np.abs(xy).max()) >= _MAX_CM:
+                raise CodecError(f"{what}: coords out of range")
+            outlines = tuple(np.split(xy.astype(np.float64) / 100.0, np.cumsum(counts)[:-1]))
+        degrees = unpack_ints(obj["degrees"], what, "degrees", n)
+        if len(degrees) != n or any(k < 0 for k in degrees):
+            raise CodecError(f"{what}: degrees: expected {n} counts")
+        adjacent = unpack_ints(obj["adjacent"], what, "adjacent", _MAX_INDEX_VERTICES)
+        if len(adjacent) != sum(degrees):
+            raise CodecError(f"{what}: adjacent: expected {sum(degrees)} ids, got {len(adjacent)}")
+        own = np.repeat(ids, degrees)
+        nb = np.asarray(adjacent, dtype=np.int64) + own
+        if len(nb) and (nb < 0).any():
+            raise CodecError(f"{what}: adjacent: negative cell ids")
+        neighbours = tuple(np.split(nb, np.cumsum(degrees)[:-1])) if n else ()
+        return CellIndex(
+            tile=tile,
+            ids=ids,
+            kinds=tuple(names[c] for c in codes),
+            zmin=z[0],
+            zmax=z[1],
+            outlines=outlines,
+            neighbours=neighbours,
             nbytes=len(body),
             etag=etag,
             body=bytes(body),
         )
-    except KeyError as exc:
-        raise CodecError(f"{what}: missing field {exc}") from exc
-    except (TypeError, ValueError) as exc:
-        raise CodecError(f"{what}: {exc}") from exc
+
+
+def decode_start_part(obj: Any, what: str) -> tuple[str, str | None, bytes | int]:
+    """``(part, etag, body)`` of one unpacked part of a start bundle, checked.
+
+    For the ``objects`` part, ``body`` is the number of object frames that follow.
+    """
+    if (
+        not isinstance(obj, dict)
+        or obj.get("part") not in START_PARTS
+        or not (obj.get("etag") is None or isinstance(obj.get("etag"), str))
+    ):
+        raise CodecError(f"{what}: not {{part, etag, body}} with a known part")
+    if obj["part"] == "objects":
+        count = obj.get("count")
+        if type(count) is not int or not 0 <= count <= 1 << 20:
+            raise CodecError(f"{what}: objects part without a count")
+        return "objects", None, count
+    if not isinstance(obj.get("body"), bytes):
+        raise CodecError(f"{what}: {obj['part']} part without a body")
+    return obj["part"], obj.get("etag"), obj["body"]
 
 
 def _viewpoint(v: Any) -> Viewpoint:
@@ -297,6 +561,8 @@ def decode_manifest(body: bytes, what: str, etag: str | None = None) -> Manifest
             cells=int(m["cells"]),
             max_ids=max(1, int(m["limits"]["objects_per_request"])),
             kind=str(m.get("kind", "city")),
+            index=_grid_from_wire(m.get("index")),
+            offers=tuple(str(o) for o in m.get("offers", ())),
             etag=etag,
             body=bytes(body),
         )
@@ -334,256 +600,3 @@ def decode_scene_list(body: bytes, what: str = "scene list") -> list[str]:
     if not isinstance(obj, list) or not all(isinstance(s, dict) and "name" in s for s in obj):
         raise CodecError(f"{what}: expected a list of {{name, version}}")
     return sorted(str(s["name"]) for s in obj)
-
-
-# --------------------------------------------------------------------------- interiors
-
-_MAX_ROOM = 4 << 20
-_MAX_TOPOLOGY = 64 << 20
-
-
-def _rows(x: Any, cols: int, what: str, min_rows: int = 0) -> NDArray[np.float64]:
-    a = _floats(x, what)
-    if a.size == 0 and min_rows == 0:
-        return np.zeros((0, cols))
-    if a.ndim != 2 or a.shape[1] != cols or len(a) < min_rows:
-        raise CodecError(f"{what}: expected an (n >= {min_rows}, {cols}) array, got shape {a.shape}")
-    return a
-
-
-def _int(x: Any, what: str) -> int:
-    if type(x) is not int:
-        raise CodecError(f"{what}: expected an integer, got {type(x).__name__}")
-    return int(x)
-
-
-@dataclass(frozen=True)
-class PortalRef:
-    """A portal of an interior cell as its record gives it: the portal's id and kind,
-    its polygon ``(k, 3)`` and the cell on its other side."""
-
-    id: int
-    kind: str
-    polygon: NDArray[np.float64]
-    cell: int
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "polygon", readonly(np.asarray(self.polygon, np.float64).reshape(-1, 3)))
-
-    def to_wire(self) -> dict[str, Any]:
-        """The portal as sent."""
-        return {"id": self.id, "kind": self.kind, "polygon": self.polygon.tolist(), "cell": self.cell}
-
-
-@dataclass(frozen=True)
-class ContentsRef:
-    """What a cell's contents weigh: triangles, vertices, parts, encoded bytes, the same
-    mesh's raw float32 bytes, and the encoding's largest position error (metres)."""
-
-    triangles: int
-    vertices: int
-    parts: int
-    nbytes: int
-    raw_bytes: int
-    max_error: float
-
-    def to_wire(self) -> dict[str, Any]:
-        """The sizes as sent."""
-        return {
-            "triangles": self.triangles,
-            "vertices": self.vertices,
-            "parts": self.parts,
-            "bytes": self.nbytes,
-            "raw_bytes": self.raw_bytes,
-            "max_error": self.max_error,
-        }
-
-
-@dataclass(frozen=True)
-class RoomRecord:
-    """An interior cell as the API sends it (``GET .../rooms/{id}``).
-
-    ``outline`` ``(n, 2)`` is convex, ``planes`` ``(k, 4)`` its plane set (a point is
-    in the cell when ``n . p + d <= 0`` for every row; empty for the outside cell,
-    which nobody is located in); ``portals`` each lead to one other cell;
-    ``contents`` says what ``GET .../rooms/{id}/contents`` weighs.
-    """
-
-    id: int
-    kind: str
-    name: str
-    room: str | None
-    storey: int
-    outline: NDArray[np.float64]
-    zmin: float
-    zmax: float
-    planes: NDArray[np.float64]
-    portals: tuple[PortalRef, ...]
-    neighbours: tuple[int, ...]
-    contents: ContentsRef
-    nbytes: int = 0
-    etag: str | None = None
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "outline", readonly(np.asarray(self.outline, np.float64).reshape(-1, 2)))
-        object.__setattr__(self, "planes", readonly(np.asarray(self.planes, np.float64).reshape(-1, 4)))
-
-    def to_wire(self) -> dict[str, Any]:
-        """The record as sent."""
-        return {
-            "id": self.id,
-            "kind": self.kind,
-            "name": self.name,
-            "room": self.room,
-            "storey": self.storey,
-            "outline": self.outline.tolist(),
-            "zmin": self.zmin,
-            "zmax": self.zmax,
-            "planes": self.planes.tolist(),
-            "portals": [p.to_wire() for p in self.portals],
-            "neighbours": list(self.neighbours),
-            "contents": self.contents.to_wire(),
-        }
-
-
-def _contents_ref(c: Any, what: str) -> ContentsRef:
-    if not isinstance(c, dict):
-        raise CodecError(f"{what}: contents is not a map")
-    return ContentsRef(
-        _int(c["triangles"], f"{what}: triangles"),
-        _int(c["vertices"], f"{what}: vertices"),
-        _int(c["parts"], f"{what}: parts"),
-        _int(c["bytes"], f"{what}: bytes"),
-        _int(c["raw_bytes"], f"{what}: raw_bytes"),
-        float(c["max_error"]),
-    )
-
-
-def decode_room(body: bytes, what: str, etag: str | None = None) -> RoomRecord:
-    """Decode and check an interior cell record body (msgpack)."""
-    obj = unpack_bounded(body, what, max_bytes=_MAX_ROOM, max_array_len=1 << 16, max_map_len=16, max_bin_len=0)
-    if not isinstance(obj, dict):
-        raise CodecError(f"{what}: expected a map")
-    try:
-        portals = []
-        for k, p in enumerate(obj["portals"]):
-            if not isinstance(p, dict):
-                raise CodecError(f"{what}: portals[{k}] is not a map")
-            portals.append(
-                PortalRef(_int(p["id"], f"{what}: portals[{k}].id"), str(p["kind"]),
-                          _rows(p["polygon"], 3, f"{what}: portals[{k}].polygon", 3),
-                          _int(p["cell"], f"{what}: portals[{k}].cell"))
-            )
-        room = obj["room"]
-        return RoomRecord(
-            id=_int(obj["id"], f"{what}: id"),
-            kind=str(obj["kind"]),
-            name=str(obj["name"]),
-            room=None if room is None else str(room),
-            storey=_int(obj["storey"], f"{what}: storey"),
-            outline=_rows(obj["outline"], 2, f"{what}: outline", 3),
-            zmin=float(obj["zmin"]),
-            zmax=float(obj["zmax"]),
-            planes=_rows(obj["planes"], 4, f"{what}: planes"),
-            portals=tuple(portals),
-            neighbours=tuple(_int(n, f"{what}: neighbours") for n in obj["neighbours"]),
-            contents=_contents_ref(obj["contents"], what),
-            nbytes=len(body),
-            etag=etag,
-        )
-    except KeyError as exc:
-        raise CodecError(f"{what}: missing field {exc}") from exc
-    except (TypeError, ValueError) as exc:
-        raise CodecError(f"{what}: {exc}") from exc
-
-
-@dataclass(frozen=True)
-class Topology:
-    """An interior's topological file (Mulloni et al.): everything a client needs to
-    build the visibility graph without loading any cell's contents.
-
-    ``storeys`` are ``(id, name, zmin, zmax)``; ``cells`` the records of every cell
-    without their portals (``portals`` lists each portal once, with both cells);
-    ``stairs`` are ``(portal, lower, upper, path (k, 3))``.
-    """
-
-    storeys: tuple[tuple[int, str, float, float], ...]
-    cells: tuple[RoomRecord, ...]
-    portals: tuple[tuple[int, str, int, int, NDArray[np.float64]], ...]
-    stairs: tuple[tuple[int, int, int, NDArray[np.float64]], ...]
-    nbytes: int = 0
-
-    def to_wire(self) -> dict[str, Any]:
-        """The topology as sent."""
-        return {
-            "storeys": [{"id": i, "name": n, "zmin": a, "zmax": b} for i, n, a, b in self.storeys],
-            "cells": [
-                {
-                    "id": c.id,
-                    "kind": c.kind,
-                    "name": c.name,
-                    "storey": c.storey,
-                    "outline": c.outline.tolist(),
-                    "zmin": c.zmin,
-                    "zmax": c.zmax,
-                    "planes": c.planes.tolist(),
-                    "triangles": c.contents.triangles,
-                    "bytes": c.contents.nbytes,
-                }
-                for c in self.cells
-            ],
-            "portals": [
-                {"id": i, "kind": k, "cells": [a, b], "polygon": np.asarray(pg).tolist()}
-                for i, k, a, b, pg in self.portals
-            ],
-            "stairs": [
-                {"portal": p, "lower": lo, "upper": up, "path": np.asarray(pa).tolist()}
-                for p, lo, up, pa in self.stairs
-            ],
-        }
-
-
-def decode_topology(body: bytes, what: str) -> Topology:
-    """Decode and check a topology body (msgpack)."""
-    obj = unpack_bounded(body, what, max_bytes=_MAX_TOPOLOGY, max_array_len=1 << 20, max_map_len=16, max_bin_len=0)
-    if not isinstance(obj, dict):
-        raise CodecError(f"{what}: expected a map")
-    try:
-        storeys = tuple(
-            (_int(s["id"], f"{what}: storey"), str(s["name"]), float(s["zmin"]), float(s["zmax"]))
-            for s in obj["storeys"]
-        )
-        portals = []
-        ends: dict[int, list[PortalRef]] = {}
-        for k, p in enumerate(obj["portals"]):
-            a, b = (_int(v, f"{what}: portals[{k}].cells") for v in p["cells"])
-            poly = _rows(p["polygon"], 3, f"{what}: portals[{k}].polygon", 3)
-            pid = _int(p["id"], f"{what}: portals[{k}].id")
-            portals.append((pid, str(p["kind"]), a, b, poly))
-            ends.setdefault(a, []).append(PortalRef(pid, str(p["kind"]), poly, b))
-            ends.setdefault(b, []).append(PortalRef(pid, str(p["kind"]), poly, a))
-        cells = []
-        for k, c in enumerate(obj["cells"]):
-            cid = _int(c["id"], f"{what}: cells[{k}].id")
-            refs = tuple(ends.get(cid, ()))
-            cells.append(
-                RoomRecord(
-                    id=cid, kind=str(c["kind"]), name=str(c["name"]), room=None,
-                    storey=_int(c["storey"], f"{what}: cells[{k}].storey"),
-                    outline=_rows(c["outline"], 2, f"{what}: cells[{k}].outline", 3),
-                    zmin=float(c["zmin"]), zmax=float(c["zmax"]),
-                    planes=_rows(c["planes"], 4, f"{what}: cells[{k}].planes"),
-                    portals=refs, neighbours=tuple(sorted({r.cell for r in refs})),
-                    contents=ContentsRef(_int(c["triangles"], what), 0, 0, _int(c["bytes"], what), 0, 0.0),
-                )
-            )
-        stairs = tuple(
-            (_int(s["portal"], what), _int(s["lower"], what), _int(s["upper"], what),
-             _rows(s["path"], 3, f"{what}: stair path", 2))
-            for s in obj["stairs"]
-        )
-        return Topology(storeys, tuple(cells), tuple(portals), stairs, nbytes=len(body))
-    except KeyError as exc:
-        raise CodecError(f"{what}: missing field {exc}") from exc
-    except (TypeError, ValueError) as exc:
-        raise CodecError(f"{what}: {exc}") from exc

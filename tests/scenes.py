@@ -23,7 +23,7 @@ from walkstream.shared.buildings import default_grammar_text
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.paths import RecordedPath
 
-__all__ = ["CityDb", "build_city_db", "PATH_NAME", "PATH", "PATH_DATA"]
+__all__ = ["CityDb", "build_city_db", "add_default_paths", "PATH_NAME", "PATH", "PATH_DATA"]
 
 PATH_NAME = "tour/1"
 """The name of the recorded path every test database holds (with a slash on purpose)."""
@@ -117,3 +117,17 @@ def build_city_db(
         pvs=pvs,
         centroids={c.id: c.centroid for c in cells},
     )
+
+
+def add_default_paths(db: Path) -> None:
+    """Record the bake's default paths (``SE``, ``SM``, ``drive``) into a test database."""
+    from walkstream.server.bake.walks import default_paths
+    from walkstream.server.store import SceneReader, write_path
+
+    r = SceneReader.open(db)
+    try:
+        cells = list(r.cells())
+    finally:
+        r.close()
+    for p in default_paths(cells):
+        write_path(db, p.name, p.to_msgpack())

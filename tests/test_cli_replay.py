@@ -6,11 +6,10 @@ import json
 from pathlib import Path
 
 import pytest
-from scenes import build_city_db
+from scenes import add_default_paths, build_city_db
 
 from walkstream.cli import main
-from walkstream.server.bake.walks import default_paths
-from walkstream.server.store import SceneReader, write_path
+from walkstream.server.store import SceneReader
 
 ISSUE5_KEYS = {
     "frames", "perfect_frame_ratio", "download_quality_mean", "rewrite_quality_mean",
@@ -27,13 +26,7 @@ ISSUE6_KEYS = {
 def db(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("cli-replay") / "city.db"
     build_city_db(path, name="city", size=300.0, k=30)
-    r = SceneReader.open(path)
-    try:
-        cells = list(r.cells())
-    finally:
-        r.close()
-    for p in default_paths(cells):
-        write_path(path, p.name, p.to_msgpack())
+    add_default_paths(path)
     return path
 
 
@@ -56,6 +49,20 @@ def test_replay_writes_the_report(db: Path, tmp_path: Path, capsys: pytest.Captu
     frames = sorted(report.rglob("frame_*.png"))
     assert len(frames) >= 4  # 20 s at 25 fps, every 100th frame
     assert all(f.name in html for f in frames)
+
+
+def test_replay_without_start_bundle_or_gzip(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    report = tmp_path / "plain"
+    argv = [
+        "replay", str(db), "--path", "drive", "--bandwidth", "40kbit", "--rtt", "500ms",
+        "--duration", "6s", "--device", "desktop2003", "--no-start-bundle", "--no-gzip",
+        "--report", str(report),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    summary = json.loads((report / "report.json").read_text())
+    assert summary["start_bundle"] is False and summary["gzip"] is False
+    assert summary["frames"] > 0 and "link_utilisation" in summary
+    assert "link utilisation" in capsys.readouterr().out
 
 
 @pytest.mark.gl
@@ -103,8 +110,19 @@ def test_bench_stream_prints_one_table(db: Path, tmp_path: Path, capsys: pytest.
     text = capsys.readouterr().out
     for name in ("SE 56k prefetch", "SE 56k no-prefetch", "SE 56k meshes", "SE 56k cache 8MB"):
         assert name in text
+    assert "util%" in text and "overfetch" in text
     rows = json.loads((out / "bench_stream.json").read_text())
     assert len(rows) == 4 and (out / "index.html").exists()
+    assert all(0.0 <= r["link_utilisation"] <= 1.05 and r["overfetch_ratio"] <= 0.5 for r in rows)
+    # another scene database joins the table: a row per path and link
+    argv = [
+        "bench", "stream", str(db), "--scene", f"other={db}:SE", "--only", "other",
+        "--duration", "5s", "--out", str(out),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    assert "other SE GPRS" in capsys.readouterr().out
+    assert main(["bench", "stream", str(db), "--scene", "nonsense", "--out", str(out)]) == 2
+    assert "LABEL=DB" in capsys.readouterr().err
 
 
 def test_bench_budget_table(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

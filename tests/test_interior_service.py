@@ -27,15 +27,15 @@ from walkstream.server.service.main import create_app
 from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
 from walkstream.server.store import SceneReader
 from walkstream.shared.codec.cellmesh import decode_cell_mesh
-from walkstream.shared.wire import (
+from walkstream.shared.roomwire import (
     ContentsRef,
     PortalRef,
     RoomRecord,
     Topology,
-    decode_manifest,
     decode_room,
     decode_topology,
 )
+from walkstream.shared.wire import decode_manifest
 
 
 @pytest.fixture(scope="module")

@@ -193,6 +193,13 @@ def test_long_modules_say_why() -> None:
         "walkstream.shared.cells",
         "walkstream.shared.exports",
         "walkstream.server.sources.crs",
+        "walkstream.shared.codec.ints",
+        "walkstream.server.service.http",
+        "walkstream.client.stream.cellmap",
+        "walkstream.client.stream.route",
+        "walkstream.client.stream.plan",
+        "walkstream.client.report.metrics",
+        "walkstream.benchmarks.stream",
     ],
 )
 def test_doctests(module: str) -> None:

@@ -13,14 +13,12 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
-from scenes import build_city_db
+from scenes import add_default_paths, build_city_db
 
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
-from walkstream.server.bake.walks import default_paths
 from walkstream.server.service.main import create_app
 from walkstream.server.service.process import free_port, server_process
-from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.errors import InputError
 
 URL = "http://walkstream.test"
@@ -28,13 +26,7 @@ URL = "http://walkstream.test"
 
 def _scene(db: Path, size: float, k: int) -> Path:
     build_city_db(db, name="city", size=size, k=k)
-    r = SceneReader.open(db)
-    try:
-        cells = list(r.cells())
-    finally:
-        r.close()
-    for p in default_paths(cells):
-        write_path(db, p.name, p.to_msgpack())
+    add_default_paths(db)
     return db
 
 
@@ -117,7 +109,7 @@ def test_disk_cache_persists_between_runs(city: Path, tmp_path: Path) -> None:
     first = replay_in_process(city, cfg).summary
     second = replay_in_process(city, cfg).summary
     assert first["disk_hits"] == 0 and first["disk_cache"]["available"]
-    assert second["disk_hits"] > 0 and second["cells_revalidated"] > 0
+    assert second["disk_hits"] > 0 and second["cell_requests"] < first["cell_requests"]
     assert second["object_bytes"] < first["object_bytes"] / 2
     assert second["time_to_first_perfect_frame_s"] <= first["time_to_first_perfect_frame_s"]
 
@@ -142,7 +134,7 @@ def test_ten_second_round_trip_gives_a_report(city: Path) -> None:
         city, config(link=LinkProfile(56_000.0, 56_000.0, 10.0), duration_s=40.0)
     ).summary
     assert s["frames"] > 0
-    assert s["setup_s"] >= 20.0  # scenes, then the path: two round trips at least
+    assert s["setup_s"] >= 10.0  # the start bundle: one round trip at least
 
 
 def test_lossy_link_loses_and_duplicates_nothing(city: Path) -> None:
@@ -167,11 +159,12 @@ class _Corrupting(httpx.AsyncBaseTransport):
         if not request.url.path.endswith("/objects"):
             return r
         self.n += 1
-        body = await r.aread()
+        body = b"".join([c async for c in r.aiter_raw()])  # as sent (compressed or not)
         if self.n % 3 == 1 and len(body) > 40:
             self.damaged += 1
             body = body[: len(body) // 2] if self.n % 2 else _flip(body)
-        return httpx.Response(r.status_code, headers=r.headers, content=body)
+        headers = [(k, v) for k, v in r.headers.raw if k.lower() != b"content-length"]
+        return httpx.Response(r.status_code, headers=headers, stream=httpx.ByteStream(body))
 
 
 def _flip(b: bytes) -> bytes:
@@ -246,8 +239,9 @@ def test_real_and_simulated_clocks_agree(city400: Path) -> None:
 
 
 class _Restarting(httpx.AsyncBaseTransport):
-    """Real sockets; the server is killed as the second object request goes out and
-    started again on the same port 1.5 s later (in a thread, while the client retries)."""
+    """Real sockets; the server is killed as the second request for objects or cells goes
+    out and started again on the same port 1.5 s later (in a thread, while the client
+    retries)."""
 
     def __init__(self, db: Path, port: int) -> None:
         self.db, self.port = db, port
@@ -264,7 +258,7 @@ class _Restarting(httpx.AsyncBaseTransport):
         self.restarted.set()
 
     async def handle_async_request(self, request: httpx.Request) -> httpx.Response:
-        if request.url.path.endswith("/objects"):
+        if request.url.path.endswith(("/objects", "/cells")):
             self.objects += 1
             if self.objects == 2:
                 self.stack.close()  # the server process is gone now

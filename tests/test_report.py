@@ -324,7 +324,8 @@ def test_headline_text() -> None:
     assert re.search(r"^frames \d+, perfect \d+\.\d %, first perfect frame at ", text)
     assert re.search(r"download quality \d+\.\d %, rewrite quality \d+\.\d %", text)
     assert re.search(r"bytes received [\d,]+, overfetch", text)
-    assert len(text.splitlines()) == 4
+    assert re.search(r"link utilisation (n/a|\d+\.\d %) \(", text)
+    assert len(text.splitlines()) == 5
     empty = format_headline({"time_to_first_perfect_frame_s": None})
     assert "first perfect frame at never" in empty and "within 10 % n/a" in empty
 

@@ -27,16 +27,24 @@ import numpy as np
 import pytest
 from fastapi import FastAPI
 from liveserver import serve_in_thread
-from scenes import PATH_DATA, PATH_NAME, CityDb, build_city_db
+from scenes import PATH, PATH_DATA, PATH_NAME, CityDb, build_city_db
 
 import walkstream.server.service.run as serve_mod
-from walkstream.server.service.http import etag_matches, negotiate
+from walkstream.server.service.http import accepts_gzip, etag_matches, negotiate
 from walkstream.server.service.lru import LRU
 from walkstream.server.service.main import create_app
 from walkstream.server.service.scenes import MAX_IDS
+from walkstream.shared.cells import inside_convex
 from walkstream.shared.codec import decode_object
 from walkstream.shared.errors import StoreError
 from walkstream.shared.records import StreetParams
+from walkstream.shared.wire import (
+    cell_from_wire,
+    decode_cell,
+    decode_cell_index,
+    decode_manifest,
+    decode_start_part,
+)
 
 JSON_ACCEPT = {"accept": "application/json"}
 
@@ -205,18 +213,149 @@ def test_manifest(client: Client, city: CityDb) -> None:
 
 
 def test_cell_record(client: Client, city: CityDb) -> None:
+    """A cell record carries what is the cell's own: its PVS and ACH, compact."""
     for cid, pvs in city.pvs.items():
-        m, j, _, _ = both(client, scene_url(city, f"/cells/{cid}"))
-        assert m == j
-        assert m["id"] == cid and m["kind"] in ("street", "crossroad")
-        assert len(m["boundary"]) >= 3 and m["zmin"] <= m["zmax"]
-        assert tuple(m["pvs"]) == pvs
-        assert len(m["ach"]) == len(pvs) and abs(sum(m["ach"]) - 1) < 1e-9
-        for nb in m["neighbours"]:
-            assert nb["id"] in city.pvs and nb["id"] != cid
-            other = client.get(scene_url(city, f"/cells/{nb['id']}"), headers=JSON_ACCEPT).json()
-            assert other["boundary"] == nb["boundary"]
-            assert cid in [n["id"] for n in other["neighbours"]]  # adjacency is symmetric
+        m, j, rm, _ = both(client, scene_url(city, f"/cells/{cid}"))
+        assert list(m) == list(j) == ["id", "kind", "pvs", "ach"]
+        fast, plain = decode_cell(rm.content, "cell"), cell_from_wire(j, "cell")
+        assert fast.id == plain.id == cid and fast.kind in ("street", "crossroad")
+        assert tuple(fast.pvs) == tuple(plain.pvs) == pvs
+        assert np.array_equal(fast.ach, plain.ach) and abs(fast.ach.sum() - 1) < 1e-9
+        assert j["pvs"][0] == 0 and j["pvs"][1][0] == pvs[0]  # JSON: a plain delta list
+        assert len(rm.content) < 40 + 3 * len(pvs)  # a few bytes per PVS object, all told
+
+
+def test_cell_index_tiles_cover_every_cell_once(client: Client, city: CityDb) -> None:
+    """The tiles of the index hold every cell once, with its outline, heights and neighbours."""
+    m = unpack(client.get(scene_url(city)))
+    grid = m["index"]
+    assert set(grid) == {"origin", "tile", "shape", "reach"} and "cell-index" in m["offers"]
+    nx, ny = grid["shape"]
+    seen: dict[int, Any] = {}
+    for i in range(nx):
+        for j in range(ny):
+            rm = client.get(scene_url(city, f"/index/{i}/{j}"))
+            rj = client.get(scene_url(city, f"/index/{i}/{j}"), headers=JSON_ACCEPT)
+            idx = decode_cell_index(rm.content, "tile")
+            assert idx.tile == (i, j) and rj.json()["tile"] == [i, j]
+            for k, cid in enumerate(idx.ids.tolist()):
+                assert cid not in seen
+                seen[cid] = (idx.outlines[k], set(idx.neighbours[k].tolist()))
+                assert idx.zmin[k] <= idx.zmax[k] and len(idx.outlines[k]) >= 3
+    assert set(seen) == set(city.pvs)
+    for cid, (outline, nbs) in seen.items():
+        assert all(cid in seen[n][1] for n in nbs)  # adjacency is symmetric
+        # the point where the cell was made lies in it (centimetre outlines)
+        assert inside_convex(outline, [city.centroids[cid]])[0]
+    whole = decode_cell_index(client.get(scene_url(city, "/index")).content, "whole")
+    assert whole.tile is None and set(whole.ids.tolist()) == set(city.pvs)
+    assert_error(client.get(scene_url(city, f"/index/{nx}/0")), 404, f"({nx}, 0)", "grid")
+    assert_error(client.get(scene_url(city, "/index/-1/0")), 404, "(-1, 0)")
+    assert_error(client.get(scene_url(city, "/index/a/0")), 422, "i")
+
+
+def test_cells_batch_streams_records_in_the_order_asked(client: Client, city: CityDb) -> None:
+    ids = sorted(city.pvs)[::-1][:7] + [sorted(city.pvs)[0]]
+    r = client.post(scene_url(city, "/cells"), json={"ids": ids})
+    assert r.status_code == 200 and r.headers["x-cell-count"] == str(len(ids))
+    got = [cell_from_wire(o, "batch") for o in frames(r.content)]
+    assert [c.id for c in got] == ids and all(tuple(c.pvs) == city.pvs[c.id] for c in got)
+    js = client.post(scene_url(city, "/cells"), json={"ids": ids}, headers=JSON_ACCEPT).json()
+    assert [c["id"] for c in js] == ids and js[0]["pvs"][0] == 0
+    assert_error(client.post(scene_url(city, "/cells"), json={"ids": [10**9]}), 404, str(10**9))
+    assert_error(client.post(scene_url(city, "/cells"), json={"ids": "x"}), 422, "ids")
+    too_many = client.post(scene_url(city, "/cells"), json={"ids": [0] * (MAX_IDS + 1)})
+    assert_error(too_many, 413, str(MAX_IDS))
+
+
+def _bundle(r: httpx.Response) -> list[tuple[str, Any]]:
+    """The parts of a start bundle, decoded (objects as frames)."""
+    out: list[tuple[str, Any]] = []
+    left = 0
+    for o in frames(r.content):
+        if left:
+            out.append(("object", o))
+            left -= 1
+            continue
+        part, etag, body = decode_start_part(o, "bundle")
+        if part == "objects":
+            assert isinstance(body, int)
+            left = body
+        out.append((part, body))
+    assert left == 0
+    return out
+
+
+def test_start_bundle_brings_everything_for_the_first_frame(client: Client, city: CityDb) -> None:
+    r = client.get("/v1/start?viewpoint=start")
+    assert r.status_code == 200 and r.headers["x-scene"] == city.name
+    parts = _bundle(r)
+    names = [p for p, _ in parts]
+    # cells, index tiles, manifest, then the objects
+    order = [n for k, n in enumerate(names) if k == 0 or n != names[k - 1]]
+    assert order == ["cell", "index", "manifest", "objects", "object"]
+    cells = [decode_cell(b, "cell") for p, b in parts if p == "cell"]
+    x, y = city.centroids[cells[0].id]
+    here = unpack(client.get(scene_url(city, f"/locate?x={x!r}&y={y!r}")))["cell"]
+    assert cells[0].id == here  # the cell at the viewpoint comes first
+    # the objects: the first cell's PVS by ACH, then each next cell's new ones, once
+    want: list[int] = []
+    for c in cells:
+        want += [int(i) for i in c.pvs[np.argsort(-c.ach, kind="stable")] if i not in want]
+    assert [o["id"] for p, o in parts if p == "object"] == want
+    m = decode_manifest([b for p, b in parts if p == "manifest"][0], "manifest")
+    assert m.name == city.name and m.index is not None
+    tiles = [decode_cell_index(b, "tile") for p, b in parts if p == "index"]
+    assert any(here in t.ids.tolist() for t in tiles)
+    # moving fast along the street: the cells ahead come too, in the order entered
+    ahead = _bundle(client.get(f"/v1/start?x={x!r}&y={y!r}&heading=0&speed=15"))
+    ahead_cells = [decode_cell(b, "cell").id for p, b in ahead if p == "cell"]
+    assert ahead_cells[0] == here and len(ahead_cells) > 1
+    # a path: the path first (the walk can start), from its own start (here outside
+    # every cell: no cell, no objects)
+    by_path = _bundle(client.get(f"/v1/start?path={PATH_NAME}"))
+    assert by_path[0][0] == "path" and msgpack.unpackb(by_path[0][1]) == PATH_DATA
+    x0, y0 = (float(v) for v in PATH.xyz[0, :2])
+    if unpack(client.get(scene_url(city, f"/locate?x={x0!r}&y={y0!r}")))["cell"] is None:
+        assert "cell" not in [p for p, _ in by_path]
+    # the same for a named scene; JSON for people
+    assert _bundle(client.get(scene_url(city, "/start?viewpoint=start"))) == parts
+    outside = _bundle(client.get("/v1/start?x=1e6&y=1e6"))
+    assert [p for p, _ in outside] == ["manifest"]  # no cell, no tile, no objects
+    js = client.get("/v1/start?viewpoint=start", headers=JSON_ACCEPT).json()
+    assert [p["part"] for p in js][:1] == ["cell"]
+    assert js[-1]["part"] == "objects" and len(js[-1]["body"]) == len(want)
+
+
+def test_start_bundle_refuses_what_it_cannot_answer(client: Client, city: CityDb) -> None:
+    assert_error(client.get("/v1/start"), 422, "exactly one")
+    assert_error(client.get("/v1/start?x=1"), 422, "exactly one")
+    assert_error(client.get(f"/v1/start?x=1&y=2&path={PATH_NAME}"), 422, "exactly one")
+    assert_error(client.get("/v1/start?path=nope"), 404, "'nope'")
+    assert_error(client.get("/v1/start?viewpoint=nope"), 404, "'nope'")
+    assert_error(client.get("/v1/start?scene=atlantis&x=0&y=0"), 404, "atlantis")
+    assert_error(client.get("/v1/start?x=nan&y=0"), 422, "x")
+    assert_error(client.get("/v1/start?x=0&y=0&speed=-1"), 422, "speed")
+
+
+def test_streams_are_gzipped_when_the_client_accepts_it(client: Client, city: CityDb) -> None:
+    ids = list(city.object_ids[:200])
+    plain = post_ids(client, city, ids, headers={"accept-encoding": "identity"})
+    assert "content-encoding" not in plain.headers
+    zipped = post_ids(client, city, ids, headers={"accept-encoding": "gzip"})
+    assert zipped.headers["content-encoding"] == "gzip"
+    assert zipped.content == plain.content  # httpx inflates it
+    assert "Accept-Encoding" in zipped.headers["vary"]
+    raw = client.loop.run_until_complete(
+        client.http.post(
+            scene_url(city, "/objects"),
+            json={"ids": ids},
+            headers={"accept-encoding": "gzip"},
+            extensions={},
+        )
+    )
+    assert raw.status_code == 200
+    assert accepts_gzip("gzip;q=0.5, identity") and not accepts_gzip("gzip;q=0, br")
 
 
 def test_locate(client: Client, city: CityDb) -> None:
@@ -286,7 +425,7 @@ def test_vary_on_every_response(client: Client, city: CityDb) -> None:
         post_ids(client, city, [0]),
         post_ids(client, city, ["x"]),
     ):
-        assert r.headers["vary"] == "Accept", r.url
+        assert "Accept" in [v.strip() for v in r.headers["vary"].split(",")], r.url
 
 
 # ---------------------------------------------------------------------------
@@ -486,7 +625,7 @@ def test_two_scenes(city: CityDb, tmp_path: Path) -> None:
         names = [s["name"] for s in c.get("/v1/scenes", headers=JSON_ACCEPT).json()]
         assert names == sorted([city.name, "other"])
         cell = c.get("/v1/scenes/other/cells/0", headers=JSON_ACCEPT).json()
-        assert len(cell["pvs"]) == 5
+        assert len(cell_from_wire(cell, "cell").pvs) == 5
     finally:
         c.close()
         app.state.scenes.close()
@@ -537,7 +676,7 @@ def test_schemathesis_finds_no_server_error(app: FastAPI, city: CityDb) -> None:
 
     schema = schemathesis.openapi.from_asgi("/openapi.json", app)
     operations = [result.ok() for result in schema.get_all_operations()]
-    assert len(operations) == 11  # 8, and the interiors' topology, rooms/{cell}, rooms/{cell}/contents
+    assert len(operations) == 16  # and the interiors' topology, rooms/{cell}, rooms/{cell}/contents
     runs: list[str] = []
     for op in operations:
         for mode in GenerationMode:
@@ -602,7 +741,8 @@ def test_real_server_streams_and_survives_vanishing_clients(live_server: str, ci
     got: list[int] = []
     unpacker = msgpack.Unpacker(raw=False)
     with httpx.Client(timeout=10) as http:
-        with http.stream("POST", url, json={"ids": ids}) as r:
+        plain = {"accept-encoding": "identity"}
+        with http.stream("POST", url, json={"ids": ids}, headers=plain) as r:
             assert r.status_code == 200
             assert r.headers.get("transfer-encoding") == "chunked"
             pieces = 0
@@ -640,20 +780,23 @@ def test_real_server_streams_and_survives_vanishing_clients(live_server: str, ci
 def test_documented_shapes_match_the_wire_records() -> None:
     """The pydantic models of /docs describe exactly what shared/wire.py sends."""
     from walkstream.server.service import models
+    from walkstream.shared.cells import TileGrid
     from walkstream.shared.records import Viewpoint
-    from walkstream.shared.wire import CellRecord, Manifest, locate_answer
+    from walkstream.shared.wire import CellIndex, CellRecord, Manifest, locate_answer
 
     manifest = Manifest(
         "s", "v", 1, "EPSG:32633", (0.0, 0.0), (0.0,) * 6, (), "g", "text",
         (Viewpoint("a", 0.0, 0.0, 1.7, 0.0, None),), (), 0, 0, 1000,
+        index=TileGrid((0.0, 0.0), 100.0, (2, 3), 5.0), offers=("cell-index",),
     ).to_wire()
     assert list(manifest) == list(models.Manifest.model_fields)
     assert list(manifest["grammar"]) == list(models.GrammarOut.model_fields)
     assert list(manifest["viewpoints"][0]) == list(models.ViewpointOut.model_fields)
     assert list(manifest["limits"]) == list(models.LimitsOut.model_fields)
+    assert list(manifest["index"]) == list(models.TileGridOut.model_fields)
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
-    cell = CellRecord(3, "street", square, 1.5, 2.0, {4: square}, np.array([1]), np.array([1.0]))
-    wire = cell.to_wire()
-    assert list(wire) == list(models.CellOut.model_fields)
-    assert list(wire["neighbours"][0]) == list(models.NeighbourOut.model_fields)
+    cell = CellRecord(3, "street", np.array([1]), np.array([1.0]))
+    assert list(cell.to_wire()) == list(models.CellOut.model_fields)
+    index = CellIndex((0, 1), [3], ["street"], [1.5], [2.0], [square], [[4]])
+    assert list(index.to_wire()) == list(models.CellIndexOut.model_fields)
     assert set(locate_answer(None)) == set(models.LocateOut.model_fields)

@@ -6,7 +6,7 @@
     walkstream bench visibility scene.db|SOURCE.geojson [--sample N] [--plot out.png]
     walkstream bench render [--size 700] [--cells 40] [--runs 3] ...
     walkstream bench server scene.db [--walkers 10,100,1000] [--workers 1,2] ...
-    walkstream bench stream [scene.db] [--vienna vienna.db] [--only NAMES] [--duration S]
+    walkstream bench stream [scene.db] [--vienna vienna.db] [--scene LABEL=DB[:PATHS]] [--only NAMES] [--duration S]
     walkstream bench budget [scene.db] [--no-gl] [--seed N]
     walkstream bench controller [--frames 3000] [--seeds 1 2 3] [--step 10]
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
@@ -125,7 +125,7 @@ def cmd_bench_server(args: argparse.Namespace) -> int:
 
 def cmd_bench_stream(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench stream``."""
-    from walkstream.benchmarks.stream import format_stream_table, run_stream_bench
+    from walkstream.benchmarks.stream import format_stream_table, parse_extra, run_stream_bench
     from walkstream.cmd_replay import replay_with_options
 
     out = Path(args.out)
@@ -135,6 +135,7 @@ def cmd_bench_stream(args: argparse.Namespace) -> int:
         replay_with_options,
         out=out,
         vienna=args.vienna,
+        extra=[parse_extra(t) for t in args.scene],
         device=args.device,
         duration=args.duration,
         only=only,
@@ -364,6 +365,7 @@ def add_bench_parser(sub: Any) -> None:
     b = besub.add_parser("stream", help="replays under the simulated clock: quality, bytes, overfetch per link and mode")
     b.add_argument("db", nargs="?", default="out/demo/city.db", help="scene database (default out/demo/city.db from make demo)")
     b.add_argument("--vienna", help="a baked Vienna database with the imported walk (path 'walk')")
+    b.add_argument("--scene", action="append", default=[], metavar="LABEL=DB[:PATH,...]", help="more scene databases: rows for each recorded path (or those named), GPRS and 56k; repeatable")
     b.add_argument("--device", default="desktop2003", choices=("gl", "desktop2003", "pda"), help="device (default desktop2003)")
     b.add_argument("--duration", help="limit every walk, e.g. 60s")
     b.add_argument("--only", help="comma-separated scenario name parts to run")

@@ -5,13 +5,14 @@ limits (:func:`~walkstream.shared.codec.unpack_bounded`, or a bounded ``msgpack.
 the object stream) and checked field by field, so a corrupt or hostile response is
 an :class:`ApiError` (and fetched again), never a crash.
 
-Idempotent requests (manifest, path, locate, cell) are retried with capped
-exponential backoff on transport errors, 5xx answers and undecodable bodies: a
-server restart or a dropped connection mid-walk costs time, not the walk.  The
-object stream is *not* retried here: :meth:`SceneClient.objects` yields each object
-as soon as its last byte arrives and raises :class:`StreamCut` when the stream
-ends early or turns bad, so the caller re-queues exactly the ids it did not get
-(nothing lost, nothing duplicated).
+Idempotent requests (manifest, path, locate, cell, index tile) are retried with
+capped exponential backoff on transport errors, 5xx answers and undecodable bodies:
+a server restart or a dropped connection mid-walk costs time, not the walk.  The
+streams -- objects (:meth:`SceneClient.objects`), cell records in a batch
+(:meth:`SceneClient.cells`) and the start bundle (:meth:`SceneClient.start`) -- are
+*not* retried here: each item is yielded as soon as its last byte arrives and
+:class:`StreamCut` is raised when the stream ends early or turns bad, so the caller
+asks again for exactly what it did not get (nothing lost, nothing duplicated).
 
 The client only knows an :class:`httpx.AsyncClient`; whether it talks to a server
 over real sockets or to the app in-process is decided by whoever builds it.
@@ -21,8 +22,9 @@ from __future__ import annotations
 
 import math
 import random
+import zlib
 from collections.abc import AsyncIterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import httpx
@@ -32,38 +34,37 @@ from walkstream.client.clock import Clock
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.roomwire import RoomRecord, Topology, decode_room, decode_topology
 from walkstream.shared.wire import (
     MSGPACK,
+    CellIndex,
     CellRecord,
     Manifest,
     ObjectFrame,
-    RoomRecord,
-    Topology,
+    cell_from_wire,
     decode_cell,
+    decode_cell_index,
     decode_frame,
     decode_locate,
     decode_manifest,
-    decode_room,
     decode_scene_list,
-    decode_topology,
+    decode_start_part,
 )
 
 __all__ = [
+    "StartItem",
     "SceneClient",
 ]
 
 
 _MAX_FRAME = 32 << 20  # one object frame (an LOD2 mesh of a large block fits)
 
-
-
-
-
-
-
-
-
-
+StartItem = tuple[str, Any]
+"""One item of a start bundle as :meth:`SceneClient.start` yields it: ``("path",
+(RecordedPath, nbytes))``, ``("cell", CellRecord)``, ``("index", CellIndex)``,
+``("manifest", (Manifest, nbytes))``, ``("objects", count)`` (the PVS objects that
+follow) or ``("object", ObjectFrame)``; ``nbytes`` (and the records' ``nbytes``) is
+what the part cost on the wire."""
 
 
 @dataclass
@@ -100,12 +101,6 @@ def _req_error(what: str, r: httpx.Response) -> ApiError:
     return ApiError(f"{what}: HTTP {r.status_code} {detail}".rstrip(), r.status_code)
 
 
-
-
-
-
-
-
 class SceneClient:
     """Typed, retrying access to one scene of a walkstream server.
 
@@ -122,6 +117,9 @@ class SceneClient:
         First and largest retry delay in seconds (doubling in between).
     seed:
         Seeds the backoff jitter (deterministic under the simulated clock).
+    compress:
+        Ask for the streams gzip-compressed (``Accept-Encoding: gzip``; they are
+        inflated here, bounded); False asks for them as they are.
     """
 
     def __init__(
@@ -133,8 +131,10 @@ class SceneClient:
         backoff: tuple[float, float] = (0.25, 4.0),
         max_attempts: int = 1_000_000,
         seed: int = 0,
+        compress: bool = True,
     ) -> None:
         self.http = http
+        self.compress = compress
         self.clock = clock
         self.scene = scene
         self.backoff = backoff
@@ -170,7 +170,8 @@ class SceneClient:
                 if r.status_code < 500:
                     raise _req_error(what, r)
                 err: Exception = _req_error(what, r)
-            except httpx.TransportError as exc:  # refused, reset, cut off, timed out
+            except (httpx.TransportError, httpx.DecodingError) as exc:
+                # refused, reset, cut off, timed out; or a body that does not inflate
                 err = exc
             if attempt >= self.max_attempts:
                 raise ApiError(f"{what}: gave up after {attempt} attempts ({err})")
@@ -288,6 +289,22 @@ class SceneClient:
         )
         return mesh
 
+    # -- cell index -------------------------------------------------------------
+
+    async def cell_index(self, tile: tuple[int, int] | None) -> CellIndex:
+        """The cell index of ``tile`` (None: of the whole scene)."""
+        what = "cell index" if tile is None else f"cell index tile {tile}"
+        tail = "/index" if tile is None else f"/index/{tile[0]}/{tile[1]}"
+
+        def dec(r: httpx.Response) -> CellIndex:
+            idx = decode_cell_index(r.content, what, r.headers.get("etag"))
+            if idx.tile != tile:
+                raise CodecError(f"{what}: the answer is tile {idx.tile}")
+            return idx
+
+        _, idx = await self._get_decoded(self._url(tail), what, dec)
+        return idx
+
     async def objects(self, ids: Sequence[int], form: str = "params") -> AsyncIterator[ObjectFrame]:
         """Stream objects ``ids`` in order, each yielded as soon as its last byte is in.
 
@@ -301,30 +318,171 @@ class SceneClient:
             4xx: the server refuses the request (unknown ids, too many ids).
         """
         ids = [int(i) for i in ids]
-        body = msgpack.packb({"ids": ids})
         url = self._url("/objects") + ("" if form == "params" else f"?form={form}")
-        got = 0
         what = f"objects stream ({len(ids)} ids)"
+        got = 0
+
+        def check(obj: Any, nbytes: int) -> ObjectFrame:
+            if got >= len(ids):
+                raise CodecError("more objects than asked")
+            return decode_frame(obj, ids[got], form, nbytes, f"{what}: object {got}")
+
+        async for frame in self._stream("POST", url, what, {"ids": ids}, check, meter=True):
+            got += 1
+            yield frame
+        if got < len(ids):
+            self.stats.cut_streams += 1
+            raise StreamCut(f"{what}: ended after {got} of {len(ids)} objects", got)
+
+    async def cells(self, ids: Sequence[int]) -> AsyncIterator[CellRecord]:
+        """Stream the records of cells ``ids`` in order (``POST .../cells``).
+
+        Raises
+        ------
+        StreamCut
+            As :meth:`objects`; ``received`` counts the records yielded.
+        ApiError
+            4xx: the server refuses the request.
+        """
+        ids = [int(i) for i in ids]
+        what = f"cells stream ({len(ids)} ids)"
+        got = 0
+
+        def check(obj: Any, nbytes: int) -> CellRecord:
+            if got >= len(ids):
+                raise CodecError("more cells than asked")
+            rec = cell_from_wire(obj, f"{what}: cell {got}", nbytes)
+            if rec.id != ids[got]:
+                raise CodecError(f"{what}: cell {rec.id} where {ids[got]} was asked")
+            return rec
+
+        async for rec in self._stream("POST", self._url("/cells"), what, {"ids": ids}, check):
+            got += 1
+            yield rec
+        if got < len(ids):
+            self.stats.cut_streams += 1
+            raise StreamCut(f"{what}: ended after {got} of {len(ids)} cells", got)
+
+    async def start(
+        self,
+        *,
+        path: str | None = None,
+        x: float | None = None,
+        y: float | None = None,
+        form: str = "params",
+    ) -> AsyncIterator[StartItem]:
+        """Stream the start bundle (``GET /v1/start``) for a path's start or a position.
+
+        The scene is :attr:`scene` if set, else the server's first; it is set from
+        the answer's ``X-Scene`` header as soon as the head arrives.  Items are
+        yielded decoded (see :data:`StartItem`), each as soon as its last byte is in.
+
+        Raises
+        ------
+        StreamCut
+            The stream failed; what was yielded stays good.
+        ApiError
+            4xx: unknown scene or path, or a server without the start bundle (404).
+        """
+        query: dict[str, Any] = {}
+        if self.scene is not None:
+            query["scene"] = self.scene
+        if path is not None:
+            query["path"] = path
+        if x is not None and y is not None:
+            query["x"], query["y"] = repr(float(x)), repr(float(y))
+        if form != "params":
+            query["form"] = form
+        url = str(httpx.URL("/v1/start", params=query))
+        what = "start bundle"
+        state: dict[str, Any] = {"objects": 0, "k": 0}
+
+        def item(obj: Any, nbytes: int) -> StartItem:
+            k = state["k"]
+            state["k"] = k + 1
+            if state["objects"] > 0:
+                state["objects"] -= 1
+                frame = obj
+                if not isinstance(frame, dict) or type(frame.get("id")) is not int:
+                    raise CodecError(f"{what}: item {k} is not an object frame")
+                return "object", decode_frame(frame, frame["id"], form, nbytes, f"{what}: object")
+            part, etag, body = decode_start_part(obj, f"{what}: item {k}")
+            if part == "objects":
+                assert isinstance(body, int)
+                state["objects"] = body
+                return "objects", body
+            assert isinstance(body, bytes)
+            label = f"{what}: {part}"
+            if part == "path":
+                return "path", (RecordedPath.from_msgpack(body, label), nbytes)
+            if part == "cell":
+                return "cell", replace(decode_cell(body, label, etag), nbytes=nbytes)
+            if part == "index":
+                return "index", replace(decode_cell_index(body, label, etag), nbytes=nbytes)
+            return "manifest", (decode_manifest(body, label, etag), nbytes)
+
+        def on_head(r: httpx.Response) -> None:
+            name = r.headers.get("x-scene")
+            if name and self.scene is None:
+                self.scene = name
+
+        async for got in self._stream("GET", url, what, None, item, on_head=on_head):
+            yield got
+        if state["objects"] > 0:
+            self.stats.cut_streams += 1
+            raise StreamCut(f"{what}: ended {state['objects']} objects short", state["k"])
+
+    async def _stream(
+        self,
+        method: str,
+        url: str,
+        what: str,
+        body: Any,
+        check: Any,
+        *,
+        meter: bool = False,
+        on_head: Any = None,
+    ) -> AsyncIterator[Any]:
+        """Yield ``check(obj, nbytes)`` for each msgpack object of a streamed answer, bounded.
+
+        ``nbytes`` is what the object cost on the wire: its encoded size, scaled by the
+        stream's compression ratio so far when the answer is gzip-compressed.
+
+        ``meter`` folds the body's throughput into :attr:`stats` (the object streams,
+        long enough to measure).  A transport failure, a bad status or a
+        :class:`CodecError` from ``check`` is a :class:`StreamCut`; 4xx an :class:`ApiError`.
+        """
+        got = 0
         t0 = self.clock.now()
+        kw: dict[str, Any] = {
+            "headers": {
+                "Accept": MSGPACK,
+                "Accept-Encoding": "gzip" if self.compress else "identity",
+            }
+        }
+        if body is not None:
+            kw["content"] = msgpack.packb(body)
+            kw["headers"]["Content-Type"] = MSGPACK
         try:
-            async with self.http.stream(
-                "POST",
-                url,
-                content=body,
-                headers={"Content-Type": MSGPACK, "Accept": MSGPACK},
-            ) as r:
+            async with self.http.stream(method, url, **kw) as r:
                 self.stats.observe_rtt(self.clock.now() - t0)
                 if r.status_code != 200:
                     await r.aread()
                     if 400 <= r.status_code < 500:
                         raise _req_error(what, r)
                     raise StreamCut(f"{what}: HTTP {r.status_code}", 0)
+                if on_head is not None:
+                    on_head(r)
+                coding = r.headers.get("content-encoding", "identity").lower()
+                if coding not in ("identity", "gzip"):
+                    raise StreamCut(f"{what}: unknown content encoding {coding!r:.40}", 0)
+                inflater = zlib.decompressobj(31) if coding == "gzip" else None
                 unpacker = msgpack.Unpacker(
                     raw=False,
                     max_buffer_size=_MAX_FRAME,
-                    max_array_len=16,
-                    max_map_len=8,
-                    max_str_len=64,
+                    max_array_len=1 << 20,
+                    max_map_len=64,
+                    max_str_len=1 << 12,
                     max_bin_len=_MAX_FRAME,
                     max_ext_len=0,
                     strict_map_key=True,
@@ -333,40 +491,44 @@ class SceneClient:
                 first_chunk_t: float | None = None
                 first_chunk_bytes = 0
                 body_bytes = 0
+                inflated = 0
                 async for chunk in r.aiter_raw():
                     if first_chunk_t is None:
                         first_chunk_t = self.clock.now()
                         first_chunk_bytes = len(chunk)
                     body_bytes += len(chunk)
-                    unpacker.feed(chunk)
-                    for obj in unpacker:
-                        pos = unpacker.tell()
-                        frame = self._check_frame(obj, ids, got, form, pos - consumed, what)
-                        consumed = pos
-                        got += 1
-                        yield frame
-                if first_chunk_t is not None:
+                    pending = chunk
+                    while pending:
+                        if inflater is None:
+                            data, pending = pending, b""
+                        else:
+                            # bounded: a compressed bomb cannot make more than this at once
+                            data = inflater.decompress(pending, _MAX_FRAME)
+                            pending = inflater.unconsumed_tail
+                        unpacker.feed(data)
+                        inflated += len(data)
+                        for obj in unpacker:
+                            pos = unpacker.tell()
+                            # what the item cost on the wire: compressed, its share
+                            wire = round((pos - consumed) * body_bytes / max(inflated, 1))
+                            try:
+                                item = check(obj, wire)
+                            except CodecError as exc:
+                                raise StreamCut(f"{what}: {exc}", got) from exc
+                            consumed = pos
+                            got += 1
+                            yield item
+                if meter and first_chunk_t is not None:
                     self.stats.observe_transfer(
                         body_bytes - first_chunk_bytes, self.clock.now() - first_chunk_t
                     )
-        except (httpx.TransportError, httpx.StreamError) as exc:
+        except StreamCut:
             self.stats.cut_streams += 1
-            raise StreamCut(f"{what}: cut after {got} objects ({exc})", got) from exc
-        except (msgpack.UnpackException, ValueError) as exc:
+            raise
+        except (httpx.TransportError, httpx.StreamError, httpx.DecodingError) as exc:
+            self.stats.cut_streams += 1
+            raise StreamCut(f"{what}: cut after {got} items ({exc})", got) from exc
+        except (msgpack.UnpackException, ValueError, zlib.error) as exc:
             # includes msgpack's BufferFull / limits: corrupt bytes, fetch again
             self.stats.cut_streams += 1
-            raise StreamCut(f"{what}: corrupt after {got} objects ({exc})", got) from exc
-        if got < len(ids):
-            self.stats.cut_streams += 1
-            raise StreamCut(f"{what}: ended after {got} of {len(ids)} objects", got)
-
-    @staticmethod
-    def _check_frame(
-        obj: Any, ids: list[int], k: int, form: str, nbytes: int, what: str
-    ) -> ObjectFrame:
-        if k >= len(ids):
-            raise StreamCut(f"{what}: more objects than asked", k)
-        try:
-            return decode_frame(obj, ids[k], form, nbytes, f"{what}: object {k}")
-        except CodecError as exc:
-            raise StreamCut(str(exc), k) from exc
+            raise StreamCut(f"{what}: corrupt after {got} items ({exc})", got) from exc

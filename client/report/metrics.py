@@ -35,6 +35,15 @@ displayed frame rate
 slowdown
     ``max(0, (target - fps) / target)``: the relative frame-rate deficit of a frame
     (0.2 = 20 % slower than the target).
+``link_utilisation``
+    Bytes received over the bytes the link could have carried in the same time:
+    ``bytes / (bandwidth / 8 * seconds)`` from the replay's start to its end
+    (:func:`link_utilisation`).  Bounded by what the walk needs: a slow walk leaves a
+    fast link idle.
+``link_utilisation_busy``
+    The same over only the intervals during which the client wanted something it
+    did not hold (something asked for and not received, or waiting to be asked
+    for): whether the requests kept the link busy when there was work for it.
 recovery (after a cost step)
     Frames from the step until the first of ``hold`` (3) frames in a row whose
     displayed rate is within ``tolerance`` of the target (fewer where the series
@@ -64,6 +73,7 @@ __all__ = [
     "Recovery",
     "displayed_fps",
     "first_perfect_index",
+    "link_utilisation",
     "perfect_mask",
     "recovery_frames",
     "summarise",
@@ -353,6 +363,57 @@ class FrameLogBuilder:
 
 
 # --------------------------------------------------------------------------- definitions
+
+
+def link_utilisation(
+    bytes_log: tuple[ArrayLike, ArrayLike],
+    bandwidth_bps: float,
+    intervals: ArrayLike,
+) -> float | None:
+    """Bytes received over the bytes the link could have carried, within ``intervals``.
+
+    Parameters
+    ----------
+    bytes_log : ((k,) float, (k,) float)
+        Times and cumulative bytes received after each delivery (the link's log).
+    bandwidth_bps : float
+        The link's bandwidth, bits per second.
+    intervals : (m, 2) float
+        ``(start, end)`` times to count (bytes delivered within them, over their
+        total length times the bandwidth); overlapping intervals are merged.
+
+    Returns
+    -------
+    float or None
+        0..1 (a little above 1 only through rounding at interval edges); None when the
+        intervals are empty or the bandwidth is not positive.
+
+    >>> link_utilisation(([1.0, 2.0, 3.0], [500, 1000, 1500]), 8000.0, [[0.0, 2.0]])
+    0.5
+    """
+    t = np.asarray(bytes_log[0], dtype=np.float64).reshape(-1)
+    b = np.asarray(bytes_log[1], dtype=np.float64).reshape(-1)
+    iv = np.asarray(intervals, dtype=np.float64).reshape(-1, 2)
+    if not (math.isfinite(bandwidth_bps) and bandwidth_bps > 0) or len(iv) == 0:
+        return None
+    iv = iv[np.argsort(iv[:, 0])]
+    merged: list[list[float]] = []
+    for lo, hi in iv.tolist():
+        if hi <= lo:
+            continue
+        if merged and lo <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], hi)
+        else:
+            merged.append([lo, hi])
+    seconds = sum(hi - lo for lo, hi in merged)
+    if seconds <= 0:
+        return None
+    inc = np.diff(b, prepend=0.0)  # bytes of each delivery
+    got = 0.0
+    for lo, hi in merged:
+        sel = (t > lo) & (t <= hi)
+        got += float(inc[sel].sum())
+    return _f(got / (bandwidth_bps / 8.0 * seconds))
 
 
 def perfect_mask(log: FrameLog) -> Bool:

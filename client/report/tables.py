@@ -35,6 +35,8 @@ _HEADLINE: tuple[tuple[str, str, Callable[[Any], str]], ...] = (
     ("rtt_s", "round trip", lambda v: f"{1000.0 * v:.0f} ms"),
     ("bytes_received", "bytes received", _fmt_bytes),
     ("overfetch_ratio", "overfetch ratio", lambda v: f"{v:.3f}"),
+    ("link_utilisation", "link utilisation", _ratio),
+    ("link_utilisation_busy", "link utilisation, requests in flight", _ratio),
     ("redownloads", "re-downloads", lambda v: f"{int(v):,}"),
     ("rebuilds", "rebuilds", lambda v: f"{int(v):,}"),
     ("time_to_first_perfect_frame_s", "first perfect frame after", lambda v: f"{v:.2f} s"),
@@ -68,7 +70,7 @@ def headline_rows(summary: Mapping[str, Any]) -> list[tuple[str, str, str]]:
 
 
 def format_headline(summary: Mapping[str, Any]) -> str:
-    """The figures a person looks at first, on four lines (what the CLI prints after a replay)."""
+    """The figures a person looks at first, on five lines (what the CLI prints after a replay)."""
 
     def pct(key: str) -> str:
         v = summary.get(key)
@@ -88,6 +90,8 @@ def format_headline(summary: Mapping[str, Any]) -> str:
             f"bytes received {summary.get('bytes_received') or 0:,}, overfetch "
             f"{ratio('overfetch_ratio')}, re-downloads {summary.get('redownloads', 0)}, rebuilds "
             f"{summary.get('rebuilds', 0)}",
+            f"link utilisation {ratio('link_utilisation')} ({ratio('link_utilisation_busy')} "
+            "while requests were in flight)",
             f"fps mean {summary.get('fps_mean') or 0:.1f} (target {summary.get('fps_target', 0):g}), "
             f"within 10 % {ratio('fps_within_10pct_ratio')}, floor-limited "
             f"{ratio('floor_limited_ratio')}",

@@ -1,13 +1,17 @@
 """The client's memory cache: a byte-budget LRU of cells, parameters and geometry, with pins.
 
-:class:`Cache` holds what the walk needs in memory under one byte budget: cell
-records (``"cell"``), what is downloaded per object -- its parameters (``"params"``),
+:class:`Cache` holds what the walk needs in memory under one byte budget: tiles of
+the cell index (``"index"``), cell records (``"cell"``), what is downloaded per object -- its parameters (``"params"``),
 or its LOD2 mesh when meshes are streamed instead (``"mesh"``) -- and the geometry
 ready to draw (``"geom"``).  What the current view needs (the current cell's record, its PVS
 parameters and their geometry) is *pinned* and never evicted.  Over the budget, the
 unpinned entries go in this order: geometry first, because it can be rebuilt
-without the network; then parameters (or meshes); then cells; least recently used first within
-each kind.  Every operation is O(1) (one ``OrderedDict`` of evictable entries per
+without the network; then parameters (or meshes); then cells; then index tiles
+(small, and what tracking the viewer needs); least recently used first within each
+kind.  Index tiles and cell records together keep a reserve (``metadata_share`` of
+the budget, 1/8 by default) even when the pinned entries alone fill the budget:
+evicting a few kB of them cannot bring a cache that is megabytes over back within
+its budget, it only costs round trips to fetch them again.  Every operation is O(1) (one ``OrderedDict`` of evictable entries per
 kind, pinned entries kept apart so eviction never has to skip them), apart from
 re-pinning, which costs the size of the change.
 
@@ -23,16 +27,20 @@ from typing import Any, Literal
 
 from walkstream.shared.errors import InputError
 
-__all__ = ["Kind", "KINDS", "EVICTION_ORDER", "Key", "Cache"]
+__all__ = ["Kind", "KINDS", "EVICTION_ORDER", "METADATA", "Key", "Cache"]
 
-Kind = Literal["cell", "params", "mesh", "geom"]
-"""What a :class:`Cache` entry is: a cell record, object parameters, a downloaded mesh, geometry."""
+Kind = Literal["index", "cell", "params", "mesh", "geom"]
+"""What a :class:`Cache` entry is: an index tile, a cell record, object parameters, a
+downloaded mesh, geometry."""
 
-KINDS: tuple[Kind, ...] = ("cell", "params", "mesh", "geom")
+KINDS: tuple[Kind, ...] = ("index", "cell", "params", "mesh", "geom")
 """Every entry kind."""
 
-EVICTION_ORDER: tuple[Kind, ...] = ("geom", "params", "mesh", "cell")
+EVICTION_ORDER: tuple[Kind, ...] = ("geom", "params", "mesh", "cell", "index")
 """Over the budget, unpinned entries of these kinds go first to last."""
+
+METADATA: tuple[Kind, ...] = ("cell", "index")
+"""The kinds that share the metadata reserve (see :class:`Cache`)."""
 
 Key = tuple[str, int]
 
@@ -43,17 +51,21 @@ Key = tuple[str, int]
 
 
 class Cache:
-    """A byte-budget LRU of cell records, parameters and geometry with pinning.
+    """A byte-budget LRU of index tiles, cell records, parameters and geometry with pinning.
 
     Parameters
     ----------
     budget_bytes:
         The byte budget (>= 0).  Pinned entries may push the cache over it (counted
-        in :attr:`over_budget_events`); unpinned entries never stay over it.
+        in :attr:`over_budget_events`); unpinned entries never stay over it, except
+        index tiles and cell records within the metadata reserve.
     on_evict:
         Called as ``on_evict(kind, id)`` whenever an entry leaves the cache (evicted
         for the budget, or removed with :meth:`remove`), after the cache is updated,
         e.g. so a renderer frees the entry's GPU buffers.
+    metadata_share:
+        Index tiles and cell records (pinned or not) are evicted for the budget only
+        while together they hold more than this share of it (0 to 1).
 
     Attributes
     ----------
@@ -74,11 +86,18 @@ class Cache:
     """
 
     def __init__(
-        self, budget_bytes: int, on_evict: Callable[[str, int], None] | None = None
+        self,
+        budget_bytes: int,
+        on_evict: Callable[[str, int], None] | None = None,
+        metadata_share: float = 0.125,
     ) -> None:
         if type(budget_bytes) is not int or budget_bytes < 0:
             raise InputError(f"cache budget: expected a non-negative integer, got {budget_bytes!r}")
+        if not 0.0 <= metadata_share <= 1.0:
+            raise InputError(f"cache metadata share: expected 0 to 1, got {metadata_share!r}")
         self.budget_bytes = budget_bytes
+        self.metadata_share = metadata_share
+        self._kind_bytes: dict[str, int] = dict.fromkeys(KINDS, 0)  # pinned or not
         self.on_evict = on_evict
         # evictable entries by kind in LRU order (oldest first); pinned ones apart
         self._lru: dict[str, OrderedDict[int, tuple[Any, int]]] = {k: OrderedDict() for k in KINDS}
@@ -128,9 +147,11 @@ class Cache:
             old = self._lru[kind].pop(oid, None) or self._held[kind].pop(oid, None)
             if old is not None:
                 self.bytes_used -= old[1]
+                self._kind_bytes[kind] -= old[1]
             where = self._held if (kind, oid) in self._pins else self._lru
             where[kind][oid] = (value, nbytes)
             self.bytes_used += nbytes
+            self._kind_bytes[kind] += nbytes
             self._ever.add((kind, oid))
             evicted = self._shrink()
         self._notify(evicted)
@@ -179,6 +200,7 @@ class Cache:
             if e is None:
                 return False
             self.bytes_used -= e[1]
+            self._kind_bytes[kind] -= e[1]
         self._notify([(kind, oid)])
         return True
 
@@ -275,11 +297,15 @@ class Cache:
     def _shrink(self) -> list[Key]:
         """Evict unpinned entries while over budget; the evicted keys.  Holds the lock."""
         evicted: list[Key] = []
+        reserve = self.metadata_share * self.budget_bytes
         for kind in EVICTION_ORDER:
             lru = self._lru[kind]
             while self.bytes_used > self.budget_bytes and lru:
+                if kind in METADATA and sum(self._kind_bytes[k] for k in METADATA) <= reserve:
+                    break
                 oid, (_, n) = lru.popitem(last=False)
                 self.bytes_used -= n
+                self._kind_bytes[kind] -= n
                 self.evictions[kind] += 1
                 evicted.append((kind, oid))
         if self.bytes_used > self.budget_bytes:

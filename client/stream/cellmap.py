@@ -1,57 +1,155 @@
-"""The cells the client knows about, and which one the viewer is in.
+"""The cells the client knows about, which one the viewer is in, and the graph between them.
 
-A cell record carries its own convex outline and those of its neighbours, so the
-client can follow the viewer from cell to cell without asking the server; it asks
-(``locate``) only when the viewer is outside every outline it knows.  The viewer
-keeps the last cell it was known to be in when it steps outside all cells, and a
-point on the shared boundary of two cells stays in the cell it was already in
-(the outline test is inclusive), so the current cell never flickers.
+The client learns cells from the cell index (:class:`~walkstream.shared.wire.CellIndex`),
+tile by tile: every cell's convex outline, eye-height range and neighbours.  With
+the tiles around it the client follows the viewer from cell to cell and sees the
+cells ahead without asking the server.  A tile can be forgotten again (the cache
+evicted it); its cells' outlines go with it, their ids stay known as neighbours of
+the cells that remain.
+
+The viewer keeps the last cell it was known to be in when it steps outside all
+cells, and a point on the shared boundary of two cells stays in the cell it was
+already in (the outline test is inclusive), so the current cell never flickers.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.arrays import F64
 from walkstream.shared.cells import INSIDE_TOL, inside_convex
 
-__all__ = ["CellMap"]
+__all__ = ["CellMap", "portal_between"]
+
+Tile = tuple[int, int] | None
 
 
+def portal_between(a: F64, b: F64, tol: float = 0.05) -> F64:
+    """The segment two adjacent convex outlines share: ``(2, 2)``, its end points.
 
+    The longest overlap of an edge of ``a`` with an edge of ``b`` lying on the same
+    line (within ``tol`` metres); outlines that only touch (or, after centimetre
+    rounding, miss each other by a hair) give the segment between their two
+    closest vertices.
+
+    >>> a = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]])
+    >>> b = np.array([[2.0, 0.5], [3.0, 0.5], [3.0, 2.0], [2.0, 2.0]])
+    >>> portal_between(a, b).tolist()
+    [[2.0, 0.5], [2.0, 1.0]]
+    """
+    a0, a1 = a, np.roll(a, -1, axis=0)
+    b0, b1 = b, np.roll(b, -1, axis=0)
+    d = a1 - a0  # (n, 2)
+    length = np.hypot(d[:, 0], d[:, 1])
+    ok = length > 1e-9
+    u = np.zeros_like(d)
+    u[ok] = d[ok] / length[ok, None]
+
+    # distance of b's edge end points from each of a's edge lines: (n, m)
+    def off(p: F64) -> NDArray[np.float64]:
+        rel = p[None, :, :] - a0[:, None, :]
+        out: NDArray[np.float64] = np.abs(u[:, None, 0] * rel[..., 1] - u[:, None, 1] * rel[..., 0])
+        return out
+
+    on_line = (off(b0) <= tol) & (off(b1) <= tol) & ok[:, None]
+    best, seg = 0.0, None
+    if on_line.any():
+        for i, j in zip(*np.nonzero(on_line), strict=True):
+            t0 = float(np.dot(b0[j] - a0[i], u[i]))
+            t1 = float(np.dot(b1[j] - a0[i], u[i]))
+            lo, hi = max(0.0, min(t0, t1)), min(float(length[i]), max(t0, t1))
+            if hi - lo > best:
+                best = hi - lo
+                seg = np.stack([a0[i] + lo * u[i], a0[i] + hi * u[i]])
+    if seg is not None:
+        return seg
+    dd = np.hypot(*(a[:, None, :] - b[None, :, :]).transpose(2, 0, 1))
+    i, j = np.unravel_index(np.argmin(dd), dd.shape)
+    p = (a[i] + b[j]) / 2.0
+    return np.stack([p, p])
 
 
 class CellMap:
-    """Outlines of the cells seen so far (fetched records and their neighbours).
+    """Outlines and adjacency of the cells of the index tiles held.
 
     The outlines are also kept stacked (padded to the longest) so that many points
     are tested against every known cell in one vectorised step.
+
+    Attributes
+    ----------
+    outlines : dict
+        Cell id -> ``(m, 2)`` outline, for the cells of the tiles held.
+    neighbours : dict
+        Cell id -> ids of its neighbours (some may be in tiles not held).
+    kinds : dict
+        Cell id -> kind.
+    tiles : dict
+        Tile -> ids of its cells.
+    tile_of : dict
+        Cell id -> its tile, for the cells held.
+    current : int or None
+        The cell the viewer is in (or was last in).
     """
 
     def __init__(self) -> None:
-        self.outlines: dict[int, NDArray[np.float64]] = {}
+        self.outlines: dict[int, F64] = {}
         self.neighbours: dict[int, tuple[int, ...]] = {}
+        self.kinds: dict[int, str] = {}
+        self.tiles: dict[Tile, tuple[int, ...]] = {}
+        self.tile_of: dict[int, Tile] = {}
         self.current: int | None = None
-        self._stack: (
-            tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
-            | None
-        ) = None
+        self._portals: dict[tuple[int, int], F64] = {}
+        self._stack: tuple[NDArray[np.int64], F64, F64, F64] | None = None
 
-    def add_record(
-        self, cid: int, boundary: NDArray[np.float64], neighbours: Mapping[int, NDArray[np.float64]]
+    def add_cells(
+        self,
+        ids: Sequence[int],
+        outlines: Sequence[F64],
+        neighbours: Sequence[Sequence[int]],
+        kinds: Sequence[str] | None = None,
+        tile: Tile = None,
     ) -> None:
-        """Learn a fetched cell's outline and its neighbours' outlines."""
-        self.outlines[cid] = boundary
-        for n, b in neighbours.items():
-            self.outlines.setdefault(n, b)
-        self.neighbours[cid] = tuple(sorted(neighbours))
+        """Learn cells: their outlines, neighbours and kinds, as those of ``tile``."""
+        ids = [int(c) for c in ids]
+        for k, c in enumerate(ids):
+            self.outlines[c] = np.asarray(outlines[k], dtype=np.float64).reshape(-1, 2)
+            self.neighbours[c] = tuple(sorted(int(n) for n in neighbours[k]))
+            self.kinds[c] = kinds[k] if kinds is not None else ""
+            self.tile_of[c] = tile
+        self.tiles[tile] = tuple(sorted(set(self.tiles.get(tile, ())) | set(ids)))
         self._stack = None
 
-    def _stacked(
-        self,
-    ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    def forget_tile(self, tile: Tile) -> list[int]:
+        """Drop the cells of ``tile`` (its outlines, neighbours, portals); their ids."""
+        ids = list(self.tiles.pop(tile, ()))
+        gone = set(ids)
+        for c in ids:
+            self.outlines.pop(c, None)
+            self.neighbours.pop(c, None)
+            self.kinds.pop(c, None)
+            self.tile_of.pop(c, None)
+        self._portals = {k: v for k, v in self._portals.items() if not (set(k) & gone)}
+        self._stack = None
+        return ids
+
+    def knows(self, cid: int) -> bool:
+        """Whether cell ``cid``'s outline is held."""
+        return cid in self.outlines
+
+    def portal(self, a: int, b: int) -> F64:
+        """The segment cells ``a`` and ``b`` share, ``(2, 2)`` (both must be held)."""
+        key = (a, b) if a < b else (b, a)
+        seg = self._portals.get(key)
+        if seg is None:
+            seg = portal_between(self.outlines[key[0]], self.outlines[key[1]])
+            seg.flags.writeable = False
+            self._portals[key] = seg
+        return seg
+
+    def _stacked(self) -> tuple[NDArray[np.int64], F64, F64, F64]:
         if self._stack is None:
             ids = np.array(sorted(self.outlines), dtype=np.int64)
             v = max((len(self.outlines[i]) for i in ids.tolist()), default=3)
@@ -88,7 +186,7 @@ class CellMap:
             if inside_convex(self.outlines[prefer], p)[0]:
                 return prefer
             for n in self.neighbours.get(prefer, ()):
-                if inside_convex(self.outlines[n], p)[0]:
+                if n in self.outlines and inside_convex(self.outlines[n], p)[0]:
                     return n
         ids, inside = self.inside_all(p)
         hit = np.flatnonzero(inside[0])
@@ -114,7 +212,7 @@ class CellMap:
         """Move the viewer to ``xy``: ``(current cell, found)``.
 
         ``found`` is False when ``xy`` is outside every known outline; the current
-        cell is then kept (the last known one), and the caller may ask the server.
+        cell is then kept (the last known one).
         """
         cid = self.find(xy, self.current)
         if cid is None:

@@ -1,10 +1,12 @@
-"""m-LOMA's cache on disk: cell records and object frames of a scene version, kept between runs.
+"""m-LOMA's cache on disk: index tiles, cell records and object frames of a scene version.
 
-:class:`DiskCache` keeps cell records and object frames between runs in a real
-SQLite file per scene version, ``cache_dir/<scene>/<version>.sqlite``, plus the
-scene's last manifest and its ETag (``cache_dir/<scene>/manifest.msgpack``) so that
-the client can revalidate the manifest with ``If-None-Match`` and learn whether the
-scene version changed.  Nothing it does may stop a walk: a damaged or foreign file is
+:class:`DiskCache` keeps tiles of the cell index, cell records and object frames
+between runs in a real SQLite file per scene version,
+``cache_dir/<scene>/<version>.sqlite``, plus the scene's last manifest and its ETag
+(``cache_dir/<scene>/manifest.msgpack``) so that the client can revalidate the
+manifest with ``If-None-Match`` and learn whether the scene version changed.  A
+scene version is immutable, so what the version's file holds is used as it is,
+without a request: the manifest's revalidation is the one check.  Nothing it does may stop a walk: a damaged or foreign file is
 moved aside and replaced, a locked database skips the write, and every failure is
 counted in :attr:`DiskCache.errors` instead of raised.
 """
@@ -46,7 +48,7 @@ KEEP_VERSIONS = 3
 # ---------------------------------------------------------------------------
 
 _APP = "walkstream-client-cache"
-_FORMAT = "1"
+_FORMAT = "2"  # 2: slim cell records (PVS and ACH), index tiles
 _MAX_MANIFEST_BYTES = 64 << 20
 _BUSY_TIMEOUT_S = 10.0
 _CHUNK = 500  # ids per query, under SQLite's host-parameter limit
@@ -54,7 +56,8 @@ _SAFE = re.compile(r"[^A-Za-z0-9_-]")
 
 _SCHEMA = (
     "CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL)",
-    "CREATE TABLE cells (id INTEGER PRIMARY KEY, etag TEXT NOT NULL, body BLOB NOT NULL)",
+    "CREATE TABLE cells (id INTEGER PRIMARY KEY, body BLOB NOT NULL)",
+    "CREATE TABLE indexes (id INTEGER PRIMARY KEY, body BLOB NOT NULL)",
     "CREATE TABLE objects (id INTEGER NOT NULL, form TEXT NOT NULL, body BLOB NOT NULL,"
     " PRIMARY KEY (id, form)) WITHOUT ROWID",
 )
@@ -73,8 +76,6 @@ def safe_name(name: str) -> str:
     return safe
 
 
-
-
 @contextlib.contextmanager
 def _dir_lock(directory: Path) -> Iterator[None]:
     """An exclusive lock on a scene's cache directory (open, repair and prune)."""
@@ -90,7 +91,7 @@ def _dir_lock(directory: Path) -> Iterator[None]:
 
 
 class DiskCache:
-    """m-LOMA's local cache: cell records and object frames of one scene version on disk.
+    """m-LOMA's local cache: index tiles, cell records and object frames of one scene version.
 
     Build with :meth:`open`, or construct on a directory, use the manifest methods
     (which need no version), then :meth:`use` a scene version.  Files: ``cache_dir/<scene>/<version>.sqlite``
@@ -232,7 +233,7 @@ class DiskCache:
                             ("bytes", "0"),
                         ],
                     )
-                elif not {"meta", "cells", "objects"} <= tables:
+                elif not {"meta", "cells", "indexes", "objects"} <= tables:
                     raise CacheDamagedError(f"not a walkstream cache (tables {sorted(tables)[:5]})")
                 else:
                     meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
@@ -329,23 +330,34 @@ class DiskCache:
         except (OSError, sqlite3.Error, CacheDamagedError):
             self._conn = None  # no disk cache for the rest of the run
 
-    def get_cell(self, cid: int) -> tuple[str, bytes] | None:
-        """``(etag, body)`` of cell ``cid``, or None (not cached, or unreadable)."""
+    def _get_body(self, table: str, key: int) -> bytes | None:
         with self._lock:
             if self._conn is None:
                 return None
             try:
                 row = self._conn.execute(
-                    "SELECT etag, body FROM cells WHERE id = ?", (int(cid),)
+                    f"SELECT body FROM {table} WHERE id = ?", (int(key),)
                 ).fetchone()
             except sqlite3.Error as exc:
                 self._failed(exc)
                 return None
-            return None if row is None else (str(row[0]), bytes(row[1]))
+            return None if row is None else bytes(row[0])
 
-    def put_cell(self, cid: int, etag: str, body: bytes) -> bool:
-        """Store (or replace) cell ``cid``; False when it was not stored (full or failing)."""
-        return self._write("cells", [(int(cid), str(etag), bytes(body))])
+    def get_cell(self, cid: int) -> bytes | None:
+        """The stored record of cell ``cid``, or None (not cached, or unreadable)."""
+        return self._get_body("cells", cid)
+
+    def put_cell(self, cid: int, body: bytes) -> bool:
+        """Store (or replace) cell ``cid``'s record; False when it was not stored (full or failing)."""
+        return self._write("cells", [(int(cid), bytes(body))])
+
+    def get_index(self, key: int) -> bytes | None:
+        """The stored index tile ``key`` (the streamer's tile key), or None."""
+        return self._get_body("indexes", key)
+
+    def put_index(self, key: int, body: bytes) -> bool:
+        """Store (or replace) index tile ``key``; False when it was not stored."""
+        return self._write("indexes", [(int(key), bytes(body))])
 
     def get_objects(self, ids: Iterable[int], form: str = "params") -> dict[int, bytes]:
         """The stored frames of ``ids`` in ``form`` (those absent are left out)."""
@@ -380,7 +392,7 @@ class DiskCache:
 
     def _write(self, table: str, rows: list[tuple[Any, ...]]) -> bool:
         # one row per key (the last wins), so the byte count sees what is stored
-        keyed = 1 if table == "cells" else 2
+        keyed = 2 if table == "objects" else 1
         rows = list({r[:keyed]: r for r in rows}.values())
         if not rows:
             return True
@@ -394,10 +406,10 @@ class DiskCache:
                     used = int(
                         conn.execute("SELECT value FROM meta WHERE key = 'bytes'").fetchone()[0]
                     )
-                    if table == "cells":
+                    if table != "objects":
                         old = [
                             conn.execute(
-                                "SELECT length(body) FROM cells WHERE id = ?", r[:1]
+                                f"SELECT length(body) FROM {table} WHERE id = ?", r[:1]
                             ).fetchone()
                             for r in rows
                         ]

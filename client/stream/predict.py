@@ -3,9 +3,9 @@
 The velocity is the least-squares slope of the positions seen in the last
 ``window_s`` seconds (not the difference of the last two frames), so a frame-rate
 change or a jittery frame does not change the prediction, and a stop is seen as a
-stop.  Prediction is linear: over the few seconds of a prefetch horizon a walker
-or a car mostly goes on the way it goes; turns are covered by the scheduler, which
-also looks at the neighbours of the cells on the predicted line.
+stop.  Prediction is linear; where the viewer goes next along the streets is the
+cell graph's business (:mod:`.route`), which takes the :meth:`MotionPredictor.heading`
+from here: the way the viewer last went, kept while it stands still.
 """
 
 from __future__ import annotations
@@ -29,12 +29,15 @@ class MotionPredictor:
         Positions older than this (relative to the newest) are forgotten.
     """
 
-    def __init__(self, window_s: float = 1.0) -> None:
+    def __init__(self, window_s: float = 1.0, moving: float = 0.3) -> None:
         if not window_s > 0:
             raise InputError(f"window_s must be > 0, got {window_s!r}")
         self.window_s = float(window_s)
+        self.moving = float(moving)
+        """Below this speed (m/s) the viewer counts as standing still."""
         self._t: deque[float] = deque()
         self._xy: deque[tuple[float, float]] = deque()
+        self._heading: NDArray[np.float64] | None = None
 
     def observe(self, t: float, xy: ArrayLike) -> None:
         """Add the position at time ``t`` (times must not go backwards)."""
@@ -46,6 +49,10 @@ class MotionPredictor:
         while self._t and self._t[0] < t - self.window_s:
             self._t.popleft()
             self._xy.popleft()
+        v = self.velocity()
+        speed = float(np.hypot(*v))
+        if speed > self.moving:
+            self._heading = v / speed
 
     @property
     def position(self) -> NDArray[np.float64]:
@@ -65,6 +72,14 @@ class MotionPredictor:
         tc = t - t.mean()
         v: NDArray[np.float64] = (tc @ (xy - xy.mean(axis=0))) / float(tc @ tc)
         return v
+
+    def heading(self) -> NDArray[np.float64] | None:
+        """Unit vector of the way the viewer last went faster than ``moving`` (None before).
+
+        Kept while the viewer stands still, so that a stop at a junction does not
+        forget which way it came.
+        """
+        return None if self._heading is None else self._heading.copy()
 
     def speed(self) -> float:
         """Magnitude of :meth:`velocity`, m/s."""

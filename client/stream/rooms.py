@@ -32,7 +32,7 @@ from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import ApiError
-from walkstream.shared.wire import RoomRecord, Topology
+from walkstream.shared.roomwire import RoomRecord, Topology
 
 __all__ = ["RoomStreamConfig", "RoomStreamer", "cell_of"]
 

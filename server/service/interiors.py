@@ -1,7 +1,7 @@
 """What the service keeps of an interior scene: its topology, its cell records, its cell contents.
 
 Built once when the scene is loaded (a damaged interior stops the start): every
-cell's :class:`~walkstream.shared.wire.RoomRecord` is assembled from the database's
+cell's :class:`~walkstream.shared.roomwire.RoomRecord` is assembled from the database's
 rooms, portals and contents sizes, and the topology (Mulloni et al.'s topological
 file) is encoded in both representations.  Room records and contents blobs are
 encoded or read on first use and kept in a byte-bounded LRU.  Everything is keyed by
@@ -16,7 +16,7 @@ from walkstream.server.service.http import Encoded, Rep, encode, etag_for
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.errors import ApiError
-from walkstream.shared.wire import ContentsRef, PortalRef, RoomRecord, Topology
+from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology
 
 __all__ = ["CONTENTS_MEDIA", "InteriorState"]
 
@@ -83,7 +83,7 @@ class InteriorState:
         return value
 
     def room(self, cid: int, rep: Rep) -> Encoded:
-        """The encoded :class:`~walkstream.shared.wire.RoomRecord` of cell ``cid``."""
+        """The encoded :class:`~walkstream.shared.roomwire.RoomRecord` of cell ``cid``."""
         self._check(cid)
         enc = self.cached_room(cid, rep)
         if enc is None:

@@ -26,10 +26,12 @@ __all__ = [
     "GrammarOut",
     "ViewpointOut",
     "LimitsOut",
+    "TileGridOut",
     "Manifest",
     "LocateOut",
-    "NeighbourOut",
     "CellOut",
+    "CellIndexOut",
+    "StartPartOut",
     "ObjectsIn",
     "PortalRefOut",
     "ContentsOut",
@@ -39,6 +41,7 @@ __all__ = [
     "TopoPortalOut",
     "StairOut",
     "TopologyOut",
+    "CellsIn",
     "MAX_INT64",
     "ERRORS",
     "both",
@@ -92,6 +95,18 @@ class LimitsOut(BaseModel):
     objects_per_request: int
 
 
+class TileGridOut(BaseModel):
+    """The square tiles of the cell index (``GET .../index/{i}/{j}``)."""
+
+    origin: list[float] = Field(description="south-west corner of tile (0, 0), local metres")
+    tile: float = Field(description="side of a tile, metres")
+    shape: list[int] = Field(description="tiles along x and y")
+    reach: float = Field(
+        description="largest distance from a cell's outline to its tile's square: a point "
+        "lies only in cells of the tiles within this distance"
+    )
+
+
 class Manifest(BaseModel):
     """What a client needs to start walking a scene."""
 
@@ -109,6 +124,10 @@ class Manifest(BaseModel):
     cells: int
     limits: LimitsOut
     kind: str = Field(description="city or interior")
+    index: TileGridOut | None = Field(description="tiles of the cell index; null without one")
+    offers: list[str] = Field(
+        description="optional parts of the API this server has: cell-index, cells-batch, start"
+    )
 
 
 class LocateOut(BaseModel):
@@ -118,24 +137,49 @@ class LocateOut(BaseModel):
     reason: str | None = None
 
 
-class NeighbourOut(BaseModel):
-    """An adjacent cell and its boundary."""
-
-    id: int
-    boundary: list[list[float]]
+IntsOut = list[Any]
+"""An integer sequence ``[format, payload]`` (shared.codec.pack_ints): in JSON always
+``[0, [int, ...]]``; in msgpack format 1 (int16), 2 (int32) or 3 (zigzag varints)
+carry ``bin`` payloads."""
 
 
 class CellOut(BaseModel):
-    """A view cell: convex boundary, eye-height range, neighbours, PVS and ACH."""
+    """A view cell's own data: its PVS and the ACH of each object (outlines are in the index)."""
 
     id: int
     kind: str
-    boundary: list[list[float]] = Field(description="(n, 2) convex outline, local metres")
-    zmin: float
-    zmax: float
-    neighbours: list[NeighbourOut]
-    pvs: list[int] = Field(description="ids of the potentially visible objects, ascending")
-    ach: list[float] = Field(description="average coverage of each PVS object; sums to 1")
+    pvs: IntsOut = Field(
+        description="PVS object ids ascending, delta-coded (the first id, then differences)"
+    )
+    ach: IntsOut = Field(
+        description="average coverage of each PVS object in units of 1/65535, summing to 65535"
+    )
+
+
+class CellIndexOut(BaseModel):
+    """Outlines, height ranges and neighbours of the cells of one tile (or of the scene)."""
+
+    tile: list[int] | None = Field(description="[i, j], or null for the whole scene")
+    ids: IntsOut = Field(description="cell ids ascending, delta-coded")
+    kind_names: list[str]
+    kinds: IntsOut = Field(description="each cell's kind, an index into kind_names")
+    zmin: IntsOut = Field(description="eye-height range bottoms, centimetres, delta-coded")
+    zmax: IntsOut = Field(description="eye-height range tops, centimetres, delta-coded")
+    counts: IntsOut = Field(description="vertices of each cell's convex outline")
+    anchor: list[int] = Field(description="first vertex of the first outline, centimetres")
+    coords: IntsOut = Field(
+        description="x/y centimetre deltas of every further vertex, chained over all outlines"
+    )
+    degrees: IntsOut = Field(description="number of neighbours of each cell")
+    adjacent: IntsOut = Field(description="neighbour ids, each minus its cell's own id")
+
+
+class StartPartOut(BaseModel):
+    """One part of a start bundle: the body its own endpoint sends, with that body's ETag."""
+
+    part: str = Field(description="path, cell, index, manifest or object")
+    etag: str | None
+    body: Any = Field(description="msgpack: the body's bytes; JSON: the body's JSON form")
 
 
 class PortalRefOut(BaseModel):
@@ -232,13 +276,19 @@ class ObjectsIn(BaseModel):
     ids: list[Annotated[int, Field(ge=0, le=MAX_INT64)]] = Field(max_length=MAX_IDS)
 
 
+class CellsIn(BaseModel):
+    """The cells whose records to send, in the order to send them."""
+
+    ids: list[Annotated[int, Field(ge=0, le=MAX_INT64)]] = Field(max_length=MAX_IDS)
+
+
 
 def error_doc(description: str) -> dict[str, Any]:
     return {"model": ErrorOut, "description": description}
 
 
 ERRORS: dict[int | str, dict[str, Any]] = {
-    404: error_doc("unknown scene, cell, path or object, or rooms of a city (named in the error)"),
+    404: error_doc("unknown scene, cell, tile, path, viewpoint or object, or rooms of a city (named in the error)"),
     422: error_doc("a malformed parameter"),
 }
 

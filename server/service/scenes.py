@@ -5,11 +5,17 @@ that needs it, so that answering costs about as much as serving a static file:
 
 * each database is opened read-only with :class:`~walkstream.server.store.reader.SceneReader` (which
   validates it) and every cell is read once, which builds the
-  :class:`~walkstream.shared.cells.CellLocator`, keeps every cell boundary (neighbour records
-  need them) and decodes every PVS, so a damaged file stops the start;
+  :class:`~walkstream.shared.cells.CellLocator`, keeps every cell's outline, height
+  range and neighbours (the cell index needs them) and decodes every PVS, so a
+  damaged file stops the start;
+* the cell index is cut into square tiles (:func:`fit_tile_grid`: one tile for a
+  small scene, else tiles of about :data:`CELLS_PER_TILE` cells), each cell in the
+  tile holding the mean of its vertices;
 * the manifest is encoded at start-up in both representations (msgpack and JSON);
-* cell records and recorded paths are encoded on first use and kept in a
-  byte-bounded LRU;
+* cell records, index tiles and recorded paths are encoded on first use and kept
+  in a byte-bounded LRU;
+* the start bundle (:meth:`Scene.start_parts`) is assembled from those same encoded
+  bodies;
 * object frames (see :mod:`walkstream.server.service.routers`) are encoded on first use and kept in a
   second byte-bounded LRU; which ids exist and their kinds are known from start-up,
   so an unknown id is answered without touching the database;
@@ -47,21 +53,33 @@ from walkstream.server.service.interiors import InteriorState
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.buildings import build_lod
-from walkstream.shared.cells import LOCATABLE_KINDS, CellLocator
+from walkstream.shared.cells import LOCATABLE_KINDS, CellLocator, TileGrid
 from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StoreError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
+from walkstream.shared.paths import RecordedPath
 from walkstream.shared.records import BuildingParams
 from walkstream.shared.streets import build_street
 from walkstream.shared.wire import (
     MSGPACK,
+    OFFERS,
+    CellIndex,
     CellRecord,
     Manifest,
     ObjectFrame,
     locate_answer,
 )
 
-__all__ = ["MAX_IDS", "Form", "OBJECT_FORMS", "Scene", "SceneRegistry"]
+__all__ = [
+    "MAX_IDS",
+    "CELLS_PER_TILE",
+    "Form",
+    "OBJECT_FORMS",
+    "StartPart",
+    "fit_tile_grid",
+    "Scene",
+    "SceneRegistry",
+]
 
 
 MAX_IDS = 1000
@@ -72,6 +90,19 @@ Form = Literal["params", "lod2"]
 
 OBJECT_FORMS: tuple[Form, ...] = ("params", "lod2")
 """The forms ``POST .../objects?form=`` accepts; ``params`` is the default."""
+
+CELLS_PER_TILE = 32
+"""About this many cells per tile of the cell index (a scene with fewer has one tile)."""
+
+START_LEAD_S = 3.0
+"""A start bundle holds the cells the viewer reaches in this many seconds, going straight on."""
+
+START_MAX_AHEAD_M = 200.0
+"""A start bundle looks at most this far ahead."""
+
+StartPart = tuple[str, "Encoded | list[bytes]"]
+"""One part of a start bundle: its name (:data:`~walkstream.shared.wire.START_PARTS`) and
+its encoded body, or for ``objects`` the list of object frames."""
 
 # LRU budgets per scene: enough for every cell and object of a large city, small
 # enough that several scenes fit in one worker
@@ -99,6 +130,53 @@ def _jsonable(obj: Any) -> Any:
     return obj
 
 
+def fit_tile_grid(
+    outlines: Sequence[NDArray[np.float64]], cells_per_tile: int = CELLS_PER_TILE
+) -> tuple[TileGrid, NDArray[np.int64]]:
+    """The tiles of a scene's cell index and the tile of each cell.
+
+    One tile covers the scene when it has at most ``cells_per_tile`` cells; else the
+    tile side (a multiple of 10 m) gives about that many cells per tile on average
+    over the cells' bounding box.  A cell belongs to the tile holding the mean of its
+    vertices; the grid's ``reach_m`` is how far any outline pokes out of its tile.
+
+    Parameters
+    ----------
+    outlines : sequence of (m_i, 2) float
+        The cells' outlines, scene-local metres.
+    cells_per_tile : int
+        Target number of cells per tile.
+
+    Returns
+    -------
+    grid : TileGrid
+    tiles : (n, 2) int64
+        Tile ``(i, j)`` of each cell.
+    """
+    n = len(outlines)
+    if n == 0:
+        return TileGrid((0.0, 0.0), 1.0, (1, 1), 0.0), np.zeros((0, 2), np.int64)
+    pts = np.concatenate([np.asarray(o, np.float64).reshape(-1, 2) for o in outlines])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    w, h = float(hi[0] - lo[0]), float(hi[1] - lo[1])
+    side = max(w, h, 1.0)
+    if n > cells_per_tile:
+        side = min(side, max(10.0, math.ceil(math.sqrt(max(w, 1.0) * max(h, 1.0) * cells_per_tile / n) / 10.0) * 10.0))
+    shape = (max(1, math.ceil(w / side - 1e-9)), max(1, math.ceil(h / side - 1e-9)))
+    centres = np.stack([np.asarray(o, np.float64).reshape(-1, 2).mean(axis=0) for o in outlines])
+    grid0 = TileGrid((float(lo[0]), float(lo[1])), side, shape, 0.0)
+    tiles = grid0.tiles_of(centres)
+    reach = 0.0
+    counts = [len(np.asarray(o).reshape(-1, 2)) for o in outlines]
+    owner = np.repeat(tiles, counts, axis=0)
+    x0 = lo[0] + owner[:, 0] * side
+    y0 = lo[1] + owner[:, 1] * side
+    dx = np.maximum(np.maximum(x0 - pts[:, 0], pts[:, 0] - (x0 + side)), 0.0)
+    dy = np.maximum(np.maximum(y0 - pts[:, 1], pts[:, 1] - (y0 + side)), 0.0)
+    reach = float(np.hypot(dx, dy).max()) + 0.01  # centimetre rounding on the wire
+    return TileGrid((float(lo[0]), float(lo[1])), side, shape, reach), tiles
+
+
 class Scene:
     """One scene database as the service serves it; see the module docstring.
 
@@ -122,14 +200,25 @@ class Scene:
         """Object id -> kind, for every object of the scene."""
         self.path_names = frozenset(path_names)
         self.cell_kinds: dict[int, str] = {c.id: c.kind for c in cells}
-        # every outline, for the neighbour entries of cell records
+        # every outline, height range and (existing) neighbour, for the cell index
         self.boundaries: dict[int, NDArray[np.float64]] = {c.id: c.boundary for c in cells}
+        self._z: dict[int, tuple[float, float]] = {c.id: (c.zmin, c.zmax) for c in cells}
+        # a neighbour the database has no cell for is left out: nobody walks into it
+        self._neighbours: dict[int, NDArray[np.int64]] = {
+            c.id: np.array([n for n in c.neighbours.tolist() if n in self.boundaries], np.int64)
+            for c in cells
+        }
         # interiors stack storeys: their cells are located in 3D, the outside never
         locatable = [c for c in cells if c.kind in LOCATABLE_KINDS]
         zranges = [[c.zmin, c.zmax] for c in locatable] if meta.kind == "interior" else None
         self.locator = CellLocator([c.id for c in locatable], [c.boundary for c in locatable], zranges)
         self.kind: str = meta.kind
         self.interior: InteriorState | None = InteriorState(reader, cells) if meta.kind == "interior" else None
+        self.grid, tiles = fit_tile_grid([c.boundary for c in cells])
+        self.tile_cells: dict[tuple[int, int], list[int]] = {}
+        """Tile -> ids of its cells, ascending."""
+        for c, (i, j) in zip(cells, tiles.tolist(), strict=True):
+            self.tile_cells.setdefault((i, j), []).append(c.id)
         b = reader.bounds()
         vps = reader.viewpoints()
         manifest = Manifest(
@@ -148,7 +237,10 @@ class Scene:
             cells=len(cells),
             max_ids=MAX_IDS,
             kind=meta.kind,
+            index=self.grid,
+            offers=OFFERS,
         ).to_wire()
+        self.manifest_viewpoints = vps
         self.manifest: dict[Rep, Encoded] = {
             rep: encode(manifest, rep, self.version, "manifest") for rep in ("msgpack", "json")
         }
@@ -204,29 +296,174 @@ class Scene:
     def cell(self, cid: int, rep: Rep) -> Encoded:
         """The encoded record of cell ``cid`` (reads the database on a cache miss).
 
-        The record is ``{id, kind, boundary, zmin, zmax, neighbours: [{id,
-        boundary}], pvs, ach}``; a neighbour id the database has no cell for is left
-        out (nobody can walk into it).
+        The record is ``{id, kind, pvs, ach}`` (:class:`~walkstream.shared.wire.CellRecord`):
+        what is the cell's own; outlines and neighbours are in the cell index.
         """
         enc = self.cached_cell(cid, rep)
         if enc is None:
             c = self.reader.cell(cid)
-            record = CellRecord(
-                id=c.id,
-                kind=c.kind,
-                boundary=c.boundary,
-                zmin=c.zmin,
-                zmax=c.zmax,
-                # a neighbour the database has no cell for is left out: nobody walks into it
-                neighbours={
-                    n: self.boundaries[n] for n in c.neighbours.tolist() if n in self.boundaries
-                },
-                pvs=c.pvs,
-                ach=c.ach,
-            ).to_wire()
-            enc = encode(record, rep, self.version, f"cell:{cid}")
+            record = CellRecord(id=c.id, kind=c.kind, pvs=c.pvs, ach=c.ach)
+            enc = encode(record.to_wire(compact=rep == "msgpack"), rep, self.version, f"cell-v2:{cid}")
             self._bodies.put(("cell", cid, rep), enc, len(enc.content))
         return enc
+
+    def cells(self, ids: Sequence[int]) -> list[bytes]:
+        """The msgpack records of cells ``ids`` (known ids), in the order asked.
+
+        Reads the database for those not cached: call it from a worker thread.
+        """
+        return [self.cell(i, "msgpack").content for i in ids]
+
+    def unknown_cells(self, ids: Iterable[int]) -> list[int]:
+        """The ids (first occurrence, in order) the scene has no cell for."""
+        return list(dict.fromkeys(i for i in ids if i not in self.boundaries))
+
+    # -- cell index -----------------------------------------------------------
+
+    def has_tile(self, i: int, j: int) -> bool:
+        """Whether ``(i, j)`` is a tile of the grid (it may hold no cell)."""
+        return 0 <= i < self.grid.shape[0] and 0 <= j < self.grid.shape[1]
+
+    def index(self, tile: tuple[int, int] | None, rep: Rep) -> Encoded:
+        """The encoded cell index of ``tile`` (None: the whole scene); no database access."""
+        key = ("index", tile, rep)
+        enc: Encoded | None = self._bodies.get(key)
+        if enc is None:
+            if tile is None:
+                ids = sorted(self.boundaries)
+            else:
+                ids = self.tile_cells.get(tile, [])
+            record = CellIndex(
+                tile=tile,
+                ids=np.array(ids, np.int64),
+                kinds=tuple(self.cell_kinds[c] for c in ids),
+                zmin=np.array([self._z[c][0] for c in ids]),
+                zmax=np.array([self._z[c][1] for c in ids]),
+                outlines=tuple(self.boundaries[c] for c in ids),
+                neighbours=tuple(self._neighbours[c] for c in ids),
+            )
+            name = "index" if tile is None else f"index:{tile[0]}:{tile[1]}"
+            enc = encode(record.to_wire(compact=rep == "msgpack"), rep, self.version, name)
+            self._bodies.put(key, enc, len(enc.content))
+        return enc
+
+    # -- the start bundle ------------------------------------------------------
+
+    def start_position(
+        self,
+        *,
+        path: str | None = None,
+        viewpoint: str | None = None,
+        x: float | None = None,
+        y: float | None = None,
+    ) -> tuple[tuple[float, float], float | None, float]:
+        """Where a start bundle starts: ``((x, y), heading or None, speed in m/s)``.
+
+        A recorded path's first point, heading and speed over its first second; a
+        viewpoint's position and yaw (standing still); or ``(x, y)`` (no heading).
+
+        Raises
+        ------
+        ApiError
+            404 for an unknown path or viewpoint, 422 when not exactly one of
+            ``path``, ``viewpoint`` or ``x`` and ``y`` is given.
+        """
+        given = [k for k, v in (("path", path), ("viewpoint", viewpoint)) if v is not None]
+        if x is not None or y is not None:
+            given.append("x,y")
+        if len(given) != 1 or ((x is None) != (y is None)):
+            raise ApiError(
+                "start: give exactly one of path, viewpoint, or both x and y",
+                status=422,
+                detail={"given": given},
+            )
+        if path is not None:
+            if path not in self.path_names:
+                raise ApiError(
+                    f"scene {self.name!r} has no path {path!r:.80}",
+                    status=404,
+                    detail={"path": path},
+                )
+            p = RecordedPath.from_msgpack(self.path(path, "msgpack").content, f"path {path!r}")
+            xyz, yaw, _pitch = p.at(0.0)
+            dt = min(1.0, p.duration) or 1.0
+            later, _, _ = p.at(dt)
+            speed = float(np.hypot(*(np.asarray(later[:2]) - np.asarray(xyz[:2])))) / dt
+            return (float(xyz[0]), float(xyz[1])), float(yaw), speed
+        if viewpoint is not None:
+            for v in self.manifest_viewpoints:
+                if v.name == viewpoint:
+                    return (v.x, v.y), v.yaw, 0.0
+            raise ApiError(
+                f"scene {self.name!r} has no viewpoint {viewpoint!r:.80}",
+                status=404,
+                detail={"viewpoint": viewpoint},
+            )
+        assert x is not None and y is not None
+        return (float(x), float(y)), None, 0.0
+
+    def start_cells(
+        self, xy: tuple[float, float], heading: float | None, ahead_m: float
+    ) -> list[int]:
+        """The cell holding ``xy`` and those a straight line ``ahead_m`` long along
+        ``heading`` enters, in the order entered (empty outside every cell)."""
+        first = self.locator.locate(*xy)
+        if first is None:
+            return []
+        out = [first]
+        if heading is not None and ahead_m > 0:
+            d = np.arange(1.0, ahead_m + 1e-9, 1.0)
+            pts = np.asarray(xy)[None, :] + d[:, None] * np.array([math.cos(heading), math.sin(heading)])
+            for c in self.locator.locate_many(pts).tolist():
+                if c < 0:
+                    break  # the line left the cells: what lies beyond is not straight on
+                if c not in out:
+                    out.append(int(c))
+        return out
+
+    def start_parts(
+        self,
+        xy: tuple[float, float],
+        rep: Rep,
+        path: str | None = None,
+        heading: float | None = None,
+        speed: float = 0.0,
+        form: Form = "params",
+    ) -> list[StartPart]:
+        """The parts of a start bundle at ``xy``, in the order sent.
+
+        The path (when asked by name; the walk can start once it is in), the
+        records of the cell holding ``xy`` and of the cells straight ahead that the
+        viewer reaches within :data:`START_LEAD_S` at ``speed`` (none outside every
+        cell), the index tiles that may hold cells near ``xy`` (the client tracks
+        the viewer with them and sees the cells ahead), the manifest, then the
+        objects of those cells' PVS: the first cell's by ACH (highest first), then
+        each next cell's new ones.  Reads the database on cache misses: call it
+        from a worker thread.
+        """
+        parts: list[StartPart] = []
+        if path is not None:
+            parts.append(("path", self.path(path, rep)))
+        ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
+        cells = self.start_cells(xy, heading, ahead)
+        order: list[int] = []
+        seen: set[int] = set()
+        for cid in cells:
+            parts.append(("cell", self.cell(cid, rep)))
+            c = self.reader.cell(cid)
+            for oid in c.pvs[np.argsort(-c.ach, kind="stable")].tolist():
+                if oid not in seen:
+                    seen.add(oid)
+                    order.append(int(oid))
+        for _d, tile in self.grid.tiles_near(xy, ahead):
+            parts.append(("index", self.index(tile, rep)))
+        parts.append(("manifest", self.manifest[rep]))
+        if order:
+            found, missing = self.cached_frames(order, form)
+            if missing:
+                found.update(self.load_frames(missing, form))
+            parts.append(("objects", [found[oid] for oid in order]))
+        return parts
 
     # -- locate --------------------------------------------------------------
 

@@ -17,7 +17,7 @@ from walkstream.shared.codec import (
 )
 from walkstream.shared.errors import StoreError
 from walkstream.shared.records import BuildingParams, StreetParams
-from walkstream.shared.wire import ContentsRef
+from walkstream.shared.roomwire import ContentsRef
 
 try:  # advisory locks between processes; POSIX only
     import fcntl
@@ -318,6 +318,6 @@ class StairInfo:
 @dataclass(frozen=True)
 class ContentsInfo(ContentsRef):
     """The sizes of one cell's contents as the database holds them: the wire's
-    :class:`~walkstream.shared.wire.ContentsRef` and the cell they belong to."""
+    :class:`~walkstream.shared.roomwire.ContentsRef` and the cell they belong to."""
 
     cell: int = -1

@@ -15,9 +15,10 @@ more than a small multiple of its input size.
 Formats (version 1) are described in each module: building and street parameters in
 :mod:`.params`; PVS, id sets and polygons in :mod:`.pvs`; meshes in :mod:`.mesh`.
 
-The modules: :mod:`.bounded` (bounded unpacking), :mod:`.varint`, :mod:`.params`
-(buildings and streets), :mod:`.pvs` (PVS, ids, polygons), :mod:`.mesh` (meshes),
-:mod:`.cellmesh` (the quantised contents of an interior cell, with its error bound).
+The modules: :mod:`.bounded` (bounded unpacking), :mod:`.varint`, :mod:`.ints` (integer
+sequences in the smallest of four encodings), :mod:`.params` (buildings and streets),
+:mod:`.pvs` (PVS, ids, polygons), :mod:`.mesh` (meshes), :mod:`.cellmesh` (the quantised
+contents of an interior cell, with its error bound).
 """
 
 from walkstream.shared.codec.bounded import unpack_bounded
@@ -29,6 +30,7 @@ from walkstream.shared.codec.cellmesh import (
     encode_cell_mesh,
     position_error_bound,
 )
+from walkstream.shared.codec.ints import INT_FORMATS, pack_ints, unpack_ints
 from walkstream.shared.codec.mesh import MESH_FORMAT, decode_mesh, encode_mesh
 from walkstream.shared.codec.params import (
     decode_building,
@@ -61,6 +63,9 @@ __all__ = [
     "encode_polygon",
     "decode_polygon",
     "unpack_bounded",
+    "INT_FORMATS",
+    "pack_ints",
+    "unpack_ints",
     "encode_varints",
     "decode_varints",
     "encode_building",

@@ -17,7 +17,6 @@ street
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Sequence
 from typing import Any
 
@@ -33,14 +32,7 @@ from walkstream.shared.codec.bounded import (
     _is_int,
     unpack_bounded,
 )
-from walkstream.shared.codec.varint import (
-    _py_decode_varints,
-    _py_varints,
-    _unzigzag,
-    _varint_size,
-    _zigzag,
-    decode_varints,
-)
+from walkstream.shared.codec.ints import _FMT_LIST, _mp_list_size, _pack_ints, _unpack_ints
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import (
     BuildingParams,
@@ -53,89 +45,10 @@ _REC_BUILDING = 1
 _REC_STREET = 2
 _STREET_KINDS = ("street", "crossroad", "square")
 
-# Coordinate payload formats, chosen per record by encoded size.
-_FMT_LIST, _FMT_I16, _FMT_I32, _FMT_VARINT = 0, 1, 2, 3
 _NB_SPARSE, _NB_RLE = 0, 1
 _MAX_VERTICES = 1 << 20
 # |centimetres| below 2**53 keep float64 -> int64 conversion exact.
 _MAX_CM = float(2**53)
-
-
-# ---------------------------------------------------------------------------
-# size models (to choose the smallest payload without packing every candidate)
-# ---------------------------------------------------------------------------
-
-
-def _mp_int_size(d: int) -> int:
-    if -32 <= d < 128:
-        return 1
-    if -128 <= d < 256:
-        return 2
-    if -(2**15) <= d < 2**16:
-        return 3
-    if -(2**31) <= d < 2**32:
-        return 5
-    return 9
-
-
-def _mp_list_size(values: list[int]) -> int:
-    n = len(values)
-    return (1 if n < 16 else 3 if n < 65536 else 5) + sum(map(_mp_int_size, values))
-
-
-def _mp_bin_header(n: int) -> int:
-    return 2 if n < 256 else 3 if n < 65536 else 5
-
-
-def _pack_ints(d: list[int]) -> tuple[int, list[int] | bytes]:
-    """The smallest of four encodings of int64 values: ``(format, payload)``."""
-    n = len(d)
-    if n == 0:
-        return _FMT_LIST, []
-    best_fmt, best = _FMT_LIST, _mp_list_size(d)
-    lo, hi = min(d), max(d)
-    if -(2**15) <= lo and hi < 2**15:
-        fixed_fmt, width = _FMT_I16, 2
-    elif -(2**31) <= lo and hi < 2**31:
-        fixed_fmt, width = _FMT_I32, 4
-    else:
-        fixed_fmt, width = _FMT_LIST, 0
-    if width and _mp_bin_header(width * n) + width * n < best:
-        best_fmt, best = fixed_fmt, _mp_bin_header(width * n) + width * n
-    z = [_zigzag(v) for v in d]
-    vb = sum(map(_varint_size, z))
-    if _mp_bin_header(vb) + vb < best:
-        return _FMT_VARINT, _py_varints(z)
-    if best_fmt == _FMT_I16:
-        return best_fmt, struct.pack(f"<{n}h", *d)
-    if best_fmt == _FMT_I32:
-        return best_fmt, struct.pack(f"<{n}i", *d)
-    return _FMT_LIST, d
-
-
-def _unpack_ints(fmt: int, payload: object, what: str, field: str) -> list[int]:
-    if fmt == _FMT_LIST:
-        if not isinstance(payload, list):
-            raise CodecError(f"{what}: {field}: expected a list, got {type(payload).__name__}")
-        if not all(_is_int(v) and -(2**63) <= v < 2**63 for v in payload):
-            raise CodecError(f"{what}: {field}: expected int64 values only")
-        return payload
-    if not isinstance(payload, bytes):
-        raise CodecError(f"{what}: {field}: expected bin, got {type(payload).__name__}")
-    if fmt == _FMT_I16:
-        if len(payload) % 2:
-            raise CodecError(f"{what}: {field}: int16 blob of odd length {len(payload)}")
-        return list(struct.unpack(f"<{len(payload) // 2}h", payload))
-    if fmt == _FMT_I32:
-        if len(payload) % 4:
-            raise CodecError(f"{what}: {field}: int32 blob of length {len(payload)}")
-        return list(struct.unpack(f"<{len(payload) // 4}i", payload))
-    if len(payload) > 256:
-        z = decode_varints(payload, f"{what}: {field}")
-        return (
-            (z >> np.uint64(1)).astype(np.int64) ^ -(z & np.uint64(1)).astype(np.int64)
-        ).tolist()
-    return [_unzigzag(v) for v in _py_decode_varints(payload, f"{what}: {field}")]
 
 
 # ---------------------------------------------------------------------------

@@ -1,4 +1,17 @@
-"""The HTTP API: scene list, manifest, recorded paths, locate, cells, interiors, objects, health, metrics.
+"""The HTTP API: scene list, manifest, start bundle, recorded paths, cell index, locate, cells, interiors, objects, health, metrics.
+
+Cell index, cell records, start bundle
+--------------------------------------
+``GET /v1/scenes/{scene}/index/{i}/{j}`` is the cell index of tile ``(i, j)`` of the
+manifest's ``index`` grid (``.../index`` the whole scene): every cell's convex
+outline, eye-height range and neighbours, compact (centimetre deltas).  A cell record
+``GET .../cells/{id}`` carries only what is the cell's own: its PVS (delta-coded ids)
+and ACH (units of 1/65535); ``POST .../cells`` with ``{"ids": [...]}`` streams several
+records (concatenated msgpack, in the order asked).  ``GET /v1/start?path=NAME``
+(or ``viewpoint=``, or ``x=&y=``) streams a start bundle: path, first cell, index
+tiles, manifest and the first cell's objects in one round trip (see
+:mod:`walkstream.server.service.routers.start`).  The record formats are in
+:mod:`walkstream.shared.wire`.
 
 Every route under ``/v1`` answers in msgpack (``application/msgpack``) unless the
 request's ``Accept`` prefers ``application/json``; every response carries
@@ -47,9 +60,27 @@ thousand times larger than parameters.  ``form=params`` is the default and the
 format described above; any other form is a 422 naming it.
 """
 
-from walkstream.server.service.routers import cells, objects, ops, paths, rooms, scenes
+from walkstream.server.service.routers import (
+    cells,
+    index,
+    objects,
+    ops,
+    paths,
+    rooms,
+    scenes,
+    start,
+)
 
-__all__ = ["ROUTERS", "cells", "objects", "ops", "paths", "rooms", "scenes"]
+__all__ = ["ROUTERS", "cells", "index", "objects", "ops", "paths", "rooms", "scenes", "start"]
 
-ROUTERS = (scenes.router, paths.router, cells.router, rooms.router, objects.router, ops.router)
+ROUTERS = (
+    scenes.router,
+    start.router,
+    paths.router,
+    index.router,
+    cells.router,
+    rooms.router,
+    objects.router,
+    ops.router,
+)
 """Every router, in the order their routes are documented."""

@@ -18,7 +18,7 @@ from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from walkstream.server.service.dependencies import RepDep, SceneDep
-from walkstream.server.service.http import dump_json
+from walkstream.server.service.http import dump_json, stream_response
 from walkstream.server.service.models import (
     ERRORS,
     MAX_INT64,
@@ -30,7 +30,7 @@ from walkstream.shared.codec import unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError
 from walkstream.shared.wire import JSON, MSGPACK, MSGPACK_TYPES
 
-__all__ = ["router", "CHUNK_BYTES", "MAX_BODY_BYTES"]
+__all__ = ["router", "CHUNK_BYTES", "MAX_BODY_BYTES", "read_body", "parse_ids", "json_frames", "coalesce"]
 
 router = APIRouter(prefix="/v1", responses=ERRORS)
 
@@ -94,7 +94,7 @@ async def objects(
             detail={"form": form[:80], "known": list(OBJECT_FORMS)},
         )
     frm = cast(Form, form)
-    ids = _parse_ids(await _read_body(request), request.headers.get("content-type"))
+    ids = parse_ids(await read_body(request), request.headers.get("content-type"))
     unknown = scene.unknown_ids(ids)
     if unknown:
         shown = ", ".join(str(i) for i in unknown[:10]) + (", ..." if len(unknown) > 10 else "")
@@ -110,11 +110,11 @@ async def objects(
     frames = [found[i] for i in ids]
     headers = {"X-Scene-Version": scene.version, "X-Object-Count": str(len(ids))}
     if rep == "json":
-        return StreamingResponse(_coalesce(_json_items(frames)), media_type=JSON, headers=headers)
-    return StreamingResponse(_coalesce(frames), media_type=MSGPACK, headers=headers)
+        return stream_response(request, coalesce(json_frames(frames)), JSON, headers)
+    return stream_response(request, coalesce(frames), MSGPACK, headers)
 
 
-async def _read_body(request: Request) -> bytes:
+async def read_body(request: Request) -> bytes:
     """The request body, refusing (413) more than :data:`MAX_BODY_BYTES` before reading it all."""
     declared = request.headers.get("content-length")
     if declared is not None and declared.isdigit() and int(declared) > MAX_BODY_BYTES:
@@ -137,8 +137,8 @@ async def _read_body(request: Request) -> bytes:
     return b"".join(chunks)
 
 
-def _parse_ids(body: bytes, content_type: str | None) -> list[int]:
-    """Validate an objects request body; see :func:`objects` for the answers."""
+def parse_ids(body: bytes, content_type: str | None) -> list[int]:
+    """Validate an ``{"ids": [...]}`` request body (objects, cells); see :func:`objects`."""
     media = (content_type or "").split(";")[0].strip().lower()
     if media in MSGPACK_TYPES:
         try:
@@ -198,7 +198,7 @@ def _parse_ids(body: bytes, content_type: str | None) -> list[int]:
     return ids
 
 
-def _json_items(frames: Iterable[bytes]) -> Iterable[bytes]:
+def json_frames(frames: Iterable[bytes]) -> Iterable[bytes]:
     """The JSON array of the frames, one element per line, as pieces."""
     yield b"["
     for k, f in enumerate(frames):
@@ -209,7 +209,7 @@ def _json_items(frames: Iterable[bytes]) -> Iterable[bytes]:
     yield b"\n]\n"
 
 
-async def _coalesce(pieces: Iterable[bytes]) -> AsyncIterator[bytes]:
+async def coalesce(pieces: Iterable[bytes]) -> AsyncIterator[bytes]:
     """Join small pieces into chunks of about :data:`CHUNK_BYTES`, keeping their order.
 
     An async generator, so Starlette iterates it on the event loop instead of

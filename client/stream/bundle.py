@@ -1,0 +1,117 @@
+"""The start bundle on the client's side: from nothing to the first cell's objects in one round trip.
+
+:class:`StartBundle` asks for the bundle (``GET /v1/start``, see
+:mod:`walkstream.server.service.routers.start`) and feeds its parts to the
+:class:`~walkstream.client.stream.streamer.Streamer` as they arrive: the path to
+the replay (the walk starts), the cell records and index tiles to the streamer
+(the viewer is tracked from the first frame), the manifest to the replay (the
+grammar lets rewriting start), the objects to the cache.  While it runs, the
+objects of the cells it brought count as in flight, so nobody asks for them twice;
+and the bytes it is still expected to bring count against the link, so that other
+requests queue behind it instead of slowing it down.  When the manifest says the
+disk cache holds this scene version and it holds the objects still to come, the
+bundle is stopped there and the link is free.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from walkstream.shared.errors import ApiError, StreamCut
+from walkstream.shared.paths import RecordedPath
+from walkstream.shared.wire import Manifest, ObjectFrame
+
+if TYPE_CHECKING:
+    from walkstream.client.stream.streamer import Streamer
+
+__all__ = ["StartBundle"]
+
+
+class StartBundle:
+    """One start bundle in flight for a streamer.
+
+    Parameters
+    ----------
+    streamer:
+        Where the parts go.
+    on_path, on_manifest:
+        Called as those parts arrive (the path with its bytes on the wire).
+    on_end:
+        Called when the bundle ends, with the error that ended it (None when it
+        ended well), e.g. an :class:`ApiError` 404 from a server without bundles.
+
+    Attributes
+    ----------
+    ids:
+        Objects the bundle is still expected to bring.
+    left:
+        Bytes it is still expected to bring (an estimate).
+    """
+
+    def __init__(
+        self,
+        streamer: Streamer,
+        on_path: Callable[[RecordedPath, int], None],
+        on_manifest: Callable[[Manifest], None],
+        on_end: Callable[[BaseException | None], None],
+    ) -> None:
+        self.streamer = streamer
+        self.on_path = on_path
+        self.on_manifest = on_manifest
+        self.on_end = on_end
+        self.ids: set[int] = set()
+        self.left = 2000.0  # the manifest, at least
+
+    async def run(self, path: str | None) -> None:
+        """Stream the bundle for recorded path ``path``'s start; never raises for the network."""
+        st = self.streamer
+        error: BaseException | None = None
+        frames: list[ObjectFrame] = []
+        try:
+            async for part, item in st.api.start(path=path, form=st.config.form):
+                if part == "path":
+                    p, n = item
+                    st.stats.bundle_bytes += n
+                    self.on_path(p, n)
+                elif part == "manifest":
+                    m, n = item
+                    st.stats.bundle_bytes += n
+                    self.left = max(0.0, self.left - n)
+                    self.on_manifest(m)  # binds the disk cache of this scene version, if any
+                    found = st.objects_from_disk(sorted(self.ids))
+                    self._arrived(found)
+                    if found and not self.ids:
+                        break  # the rest of the bundle is on disk: stop it, the link is free
+                elif part == "index":
+                    st.stats.bundle_bytes += item.nbytes
+                    st.add_index(item)
+                elif part == "cell":
+                    st.stats.bundle_bytes += item.nbytes
+                    if st.cellmap.current is None:
+                        st.cellmap.current = item.id  # the server located the start
+                    st.add_cell(item)
+                    ids = {i for i in item.pvs.tolist() if not st.has_object(i)} - self.ids
+                    self.ids |= ids
+                    st.expect(ids)
+                    self.left += len(ids) * st.frame_bytes
+                elif part == "objects":
+                    self.left = item * st.frame_bytes
+                else:
+                    st.stats.bundle_bytes += item.nbytes
+                    self._arrived({item.id})
+                    self.left = max(0.0, self.left - st.frame_bytes)
+                    frames.append(item)
+                    st.add_object(item)
+                st.replan()
+        except (ApiError, StreamCut) as exc:
+            error = exc
+        finally:
+            self._arrived(set(self.ids))
+            self.left = 0.0
+            st.store_objects(frames)
+            self.on_end(error)
+
+    def _arrived(self, ids: set[int]) -> None:
+        self.ids -= ids
+        self.streamer.expect(ids, False)

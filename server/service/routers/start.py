@@ -1,0 +1,171 @@
+"""The start bundle: from nothing to the first cell's objects in one round trip.
+
+``GET /v1/start?path=NAME`` (or ``viewpoint=NAME``, or ``x=&y=``; ``scene=`` picks the
+scene, else the server's first by name) answers with a *stream* of parts, each the
+msgpack map ``{part, etag, body: bin}`` where ``body`` is exactly what the part's
+own endpoint sends (so a client decodes it, and may cache it under ``etag``, as if
+it had asked for it):
+
+1. ``path`` -- the recorded path, when asked by name (a replay can start walking);
+2. ``cell`` -- the record of the cell holding the start (none outside every cell),
+   then those of the cells straight ahead that the viewer reaches in
+   :data:`~walkstream.server.service.scenes.START_LEAD_S` seconds (``heading`` in
+   radians counter-clockwise from +x and ``speed`` in m/s; a path gives its own
+   start heading and speed, a viewpoint its yaw and standing still);
+3. ``index`` -- the index tiles that may hold cells near the start;
+4. ``manifest`` -- the scene manifest (its grammar rebuilds the objects);
+5. ``objects`` -- the map ``{part: "objects", etag: null, count: n}`` followed by
+   ``n`` plain object frames (as the objects stream sends them, in the ``form``
+   asked: ``params`` by default, ``lod2`` meshes): the first cell's PVS, highest
+   ACH first, then each next cell's new objects.
+
+On a 500 ms link each round trip is a visible wait: scene list, manifest, path,
+locate, cell and objects asked one after the other cost six of them.  With
+``Accept: application/json`` the body is a JSON array of ``{part, etag, body}``
+with each body in its JSON form, the objects part's body being the array of its
+frames (``{id, kind, params: base64}``).
+``GET /v1/scenes/{scene}/start`` is the same for a named scene.
+"""
+
+from __future__ import annotations
+
+import base64
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Annotated, Any, cast
+
+import msgpack
+from fastapi import APIRouter, Depends, Query, Request
+from fastapi.responses import StreamingResponse
+from starlette.concurrency import run_in_threadpool
+
+from walkstream.server.service.dependencies import RepDep, SceneDep, get_registry
+from walkstream.server.service.http import Rep, dump_json, dump_msgpack, stream_response
+from walkstream.server.service.models import ERRORS, StartPartOut, error_doc
+from walkstream.server.service.routers.objects import coalesce
+from walkstream.server.service.scenes import OBJECT_FORMS, Scene, SceneRegistry, StartPart
+from walkstream.server.service.scenes import Form as ObjForm
+from walkstream.shared.errors import ApiError
+from walkstream.shared.wire import JSON, MSGPACK
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/v1", responses=ERRORS)
+
+_DOC: dict[int | str, dict[str, Any]] = {
+    200: {
+        "description": "concatenated msgpack maps {part, etag, body} (see the module docs); a "
+        "JSON array with Accept: application/json",
+        "content": {
+            MSGPACK: {},
+            JSON: {"schema": {"type": "array", "items": StartPartOut.model_json_schema()}},
+        },
+    },
+    422: error_doc("not exactly one of path, viewpoint, or x and y"),
+}
+
+Coord = Annotated[float | None, Query(allow_inf_nan=False, description="scene-local metres")]
+Heading = Annotated[
+    float | None,
+    Query(allow_inf_nan=False, description="radians counter-clockwise from +x (x, y starts)"),
+]
+Form = Annotated[
+    str,
+    Query(max_length=64, description="the objects' form, as in POST .../objects: params or lod2"),
+]
+Speed = Annotated[
+    float | None, Query(allow_inf_nan=False, ge=0, le=100, description="m/s (x, y starts)")
+]
+Name = Annotated[str | None, Query(max_length=256)]
+
+
+@dataclass(frozen=True)
+class StartQuery:
+    """Where the bundle starts (one of path, viewpoint, or x and y) and in what form."""
+
+    path: Name = None
+    viewpoint: Name = None
+    x: Coord = None
+    y: Coord = None
+    heading: Heading = None
+    speed: Speed = None
+    form: Form = "params"
+
+
+StartDep = Annotated[StartQuery, Depends()]
+
+
+@router.get("/start", responses=_DOC, summary="Start bundle (any scene)")
+async def start_any(
+    request: Request,
+    registry: Annotated[SceneRegistry, Depends(get_registry)],
+    rep: RepDep,
+    q: StartDep,
+    scene: Name = None,
+) -> StreamingResponse:
+    """The start bundle of ``scene`` (default: the first scene by name); see the module docs."""
+    if scene is None:
+        if not registry.scenes:
+            raise ApiError("the server serves no scene", status=404)
+        scene = next(iter(registry.scenes))
+    return await _bundle(request, registry.get(scene), rep, q)
+
+
+@router.get("/scenes/{scene}/start", responses=_DOC, summary="Start bundle")
+async def start_scene(
+    request: Request, scene: SceneDep, rep: RepDep, q: StartDep
+) -> StreamingResponse:
+    """The start bundle of a named scene; see the module docs."""
+    return await _bundle(request, scene, rep, q)
+
+
+async def _bundle(request: Request, scene: Scene, rep: Rep, q: StartQuery) -> StreamingResponse:
+    if q.form not in OBJECT_FORMS:
+        raise ApiError(
+            f"unknown form {q.form!r:.80}: expected one of {', '.join(OBJECT_FORMS)}",
+            status=422,
+            detail={"form": q.form[:80], "known": list(OBJECT_FORMS)},
+        )
+    xy, h, v = await run_in_threadpool(
+        lambda: scene.start_position(path=q.path, viewpoint=q.viewpoint, x=q.x, y=q.y)
+    )
+    h = h if q.heading is None else q.heading
+    v = v if q.speed is None else q.speed
+    parts = await run_in_threadpool(scene.start_parts, xy, rep, q.path, h, v, cast(ObjForm, q.form))
+    headers = {"X-Scene-Version": scene.version, "X-Scene": scene.name, "Cache-Control": "no-cache"}
+    if rep == "json":
+        return stream_response(request, coalesce(_json_parts(parts)), JSON, headers)
+    return stream_response(request, coalesce(_msgpack_parts(parts)), MSGPACK, headers)
+
+
+def _msgpack_parts(parts: list[StartPart]) -> Iterable[bytes]:
+    for name, body in parts:
+        if name == "objects":
+            assert isinstance(body, list)
+            yield dump_msgpack({"part": name, "etag": None, "count": len(body)})
+            yield from body
+        else:
+            assert not isinstance(body, list)
+            yield dump_msgpack({"part": name, "etag": body.etag or None, "body": body.content})
+
+
+def _json_parts(parts: list[StartPart]) -> Iterable[bytes]:
+    yield b"["
+    for k, (name, body) in enumerate(parts):
+        if isinstance(body, list):
+            frames = [msgpack.unpackb(f) for f in body]
+            content = dump_json(
+                [
+                    {
+                        k: base64.b64encode(v).decode() if isinstance(v, bytes) else v
+                        for k, v in o.items()
+                    }
+                    for o in frames
+                ]
+            )
+            etag = None
+        else:
+            content, etag = body.content, body.etag or None
+        head = dump_json({"part": name, "etag": etag})[:-1]
+        yield (b",\n" if k else b"\n") + head + b',"body":' + content + b"}"
+    yield b"\n]\n"
