@@ -38,12 +38,19 @@ from walkstream.client.draw.culling import frustum_cull
 from walkstream.client.draw.devices import make_device
 from walkstream.client.net.api import SceneClient
 from walkstream.client.net.link import LinkProfile, ShapedTransport
-from walkstream.client.report.metrics import FrameLog, FrameLogBuilder, summarise
+from walkstream.client.report.metrics import (
+    FrameLog,
+    FrameLogBuilder,
+    first_perfect_index,
+    summarise,
+)
+from walkstream.client.report.truth import summarise_truth
 from walkstream.client.rewrite.pool import ObjectGeometry
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.streamer import Streamer, StreamerConfig
+from walkstream.client.truth.recorder import TruthRecorder, TruthResult
 from walkstream.shared.camera import look_at, perspective
 from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import parse_grammar
@@ -87,6 +94,8 @@ class ReplayConfig:
     report_dir: Path | None = None
     setup_timeout_s: float = 60.0
     """Give up (an empty report saying why) when the path has not arrived by then."""
+    truth_every: int = 0
+    """Compare every N-th frame with the ground truth after the walk (0: never)."""
 
     def __post_init__(self) -> None:
         if self.stream not in STREAM_FORMS:
@@ -108,6 +117,8 @@ class ReplayConfig:
             raise InputError(f"--workers {self.workers}: at least 1")
         if self.snapshot_every < 0:
             raise InputError(f"--snapshot-every {self.snapshot_every}: must not be negative")
+        if self.truth_every < 0:
+            raise InputError(f"--truth-every {self.truth_every}: must not be negative")
         w, h = self.size
         if not (16 <= w <= 8192 and 16 <= h <= 8192):
             raise InputError(f"--size {w}x{h}: each side from 16 to 8192 pixels")
@@ -128,6 +139,8 @@ class ReplayResult:
     snapshots: list[Path] = field(default_factory=list)
     spikes: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
     """Per frame: the simulated device stalled (its occasional 2x spike)."""
+    truth: TruthResult | None = None
+    """The frames compared with the ground truth (``truth_every``)."""
 
 
 def run_replay(
@@ -135,6 +148,7 @@ def run_replay(
     base_url: str,
     config: ReplayConfig,
     progress: Callable[[float, float], None] | None = None,
+    truth_progress: Callable[[int, int], None] | None = None,
 ) -> ReplayResult:
     """Run a replay to the end on the configured clock (blocking).
 
@@ -149,11 +163,14 @@ def run_replay(
         The replay settings.
     progress:
         Called with ``(walk seconds done, walk seconds in total)`` now and then.
+    truth_progress:
+        Called with ``(frames compared, frames to compare)`` after the walk
+        (``truth_every``).
     """
     if config.clock == "sim":
         sim = SimClock()
-        return sim.run(replay(transport, base_url, config, sim, progress))
-    return asyncio.run(_real(transport, base_url, config, progress))
+        return sim.run(replay(transport, base_url, config, sim, progress, truth_progress))
+    return asyncio.run(_real(transport, base_url, config, progress, truth_progress))
 
 
 async def _real(
@@ -161,8 +178,9 @@ async def _real(
     base_url: str,
     config: ReplayConfig,
     progress: Callable[[float, float], None] | None,
+    truth_progress: Callable[[int, int], None] | None,
 ) -> ReplayResult:
-    return await replay(transport, base_url, config, RealClock(), progress)
+    return await replay(transport, base_url, config, RealClock(), progress, truth_progress)
 
 
 async def _manifest(api: SceneClient, disk: DiskCache | None) -> Manifest:
@@ -177,6 +195,12 @@ async def _manifest(api: SceneClient, disk: DiskCache | None) -> Manifest:
     if disk is not None and m.etag:
         disk.put_manifest(api.scene, m.etag, m.body)
     return m
+
+
+def _projection(config: ReplayConfig) -> NDArray[np.float32]:
+    """The camera's projection: ``fov_deg`` vertical, the frame's aspect, 0.5 m to 2 km."""
+    w, h = config.size
+    return perspective(config.fov_deg, w / h, 0.5, 2000.0)
 
 
 def _view(xyz: NDArray[np.float64], yaw: float, pitch: float) -> NDArray[np.float32]:
@@ -251,10 +275,12 @@ async def replay(
     config: ReplayConfig,
     clock: Clock,
     progress: Callable[[float, float], None] | None = None,
+    truth_progress: Callable[[int, int], None] | None = None,
 ) -> ReplayResult:
     """The replay coroutine (see :func:`run_replay` to run it on a clock)."""
     link = ShapedTransport(transport, config.link, clock)
     renderer: Any = None
+    truth: TruthResult | None = None
     streamer: Streamer | None = None
     disk: DiskCache | None = None
     async with httpx.AsyncClient(
@@ -313,9 +339,28 @@ async def replay(
                 streamer.on_manifest(m.max_ids, grammar, disk if usable else None)
 
             manifest_task.add_done_callback(manifest_arrived)
-            log, snapshots, spikes = await _walk(
-                config, clock, path, streamer, cache, device, renderer, progress, t_start, link
+            recorder = (
+                TruthRecorder(config.truth_every, config.size, _projection(config))
+                if config.truth_every
+                else None
             )
+            log, snapshots, spikes = await _walk(
+                config, clock, path, streamer, cache, device, renderer, progress, t_start, link,
+                recorder,
+            )
+            if recorder is not None:
+                # after the walk, with the streamer stopped (nothing more goes down the
+                # link), on the inner transport; busy(): no simulated time passes
+                await streamer.close()
+                first = first_perfect_index(log)
+                with clock.busy():
+                    truth = await recorder.finish(
+                        transport,
+                        base_url,
+                        api.scene or "",
+                        t_first_perfect=None if first is None else float(log.t[first]),
+                        progress=truth_progress,
+                    )
             manifest = manifest_task.result() if manifest_task.done() else None
             disk_state = (disk.available, disk.last_error) if disk is not None else (False, None)
         finally:
@@ -395,6 +440,13 @@ async def replay(
         }
     )
     summary["spike_frames"] = int(spikes.sum())
+    if truth is not None:
+        first = first_perfect_index(log)
+        summary["truth"] = summarise_truth(
+            truth.log, None if first is None else float(log.t[first])
+        )
+        if truth.error:
+            summary["truth_error"] = truth.error
     if config.cache_dir is not None:
         # the disk cache never raises: say here whether it was usable
         summary["disk_cache"] = {
@@ -402,7 +454,7 @@ async def replay(
             "available": disk_state[0],
             "error": disk_state[1],
         }
-    return ReplayResult(summary, log, bytes_log, snapshots, spikes)
+    return ReplayResult(summary, log, bytes_log, snapshots, spikes, truth)
 
 
 async def _within(clock: Clock, seconds: float, coro: Any) -> Any:
@@ -468,12 +520,11 @@ async def _walk(
     progress: Callable[[float, float], None] | None,
     t_start: float,
     link: ShapedTransport,
+    recorder: TruthRecorder | None = None,
 ) -> tuple[FrameLog, list[Path], NDArray[np.bool_]]:
     tick = 1.0 / config.fps
     total = path.duration if config.duration_s is None else min(config.duration_s, path.duration)
-    w, h = config.size
-    far = 2000.0
-    proj = perspective(config.fov_deg, w / h, 0.5, far)
+    proj = _projection(config)
     controller = BudgetController(config.fps_target, k=config.budget_frames)
     predictor = MotionPredictor()
     inputs = _FrameInputs()
@@ -542,6 +593,20 @@ async def _walk(
             out.parent.mkdir(parents=True, exist_ok=True)
             renderer.save_png(out)
             snapshots.append(out)
+        if recorder is not None and recorder.due(frame):
+            rec = streamer.cells.get(cur) if cur is not None else None
+            recorder.record(
+                frame=frame,
+                t=t - t_start,
+                eye=xyz,
+                view=view,
+                cell=cur,
+                pvs=None if rec is None else rec.pvs,
+                received=cache.ids(streamer.kind) + cache.ids("geom"),
+                built=cache.ids("geom"),
+                geoms=inputs.geoms,
+                lods=alloc.lod,
+            )
         controller.observe(frame_time, int(alloc.triangles))
         builder.append(
             t=t - t_start,

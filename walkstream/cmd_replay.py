@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from walkstream.shared.errors import InputError
-from walkstream.terminal import WalkBar
+from walkstream.terminal import WalkBar, count_bar
 
 __all__ = [
     "add_replay_parser",
@@ -96,6 +96,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         lod_distances=(lo, hi),
         seed=args.seed,
         report_dir=Path(args.report),
+        truth_every=args.truth_every,
     )
 
 
@@ -111,10 +112,17 @@ def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = Fals
             result = run_replay(transport, url, config)
         else:
             bar = WalkBar(f"replay {config.path}")
+            truth_bar = None
             try:
-                result = run_replay(transport, url, config, bar)
+                if config.truth_every:
+                    truth_bar, truth_progress = count_bar("ground truth", "frame")
+                else:
+                    truth_progress = None
+                result = run_replay(transport, url, config, bar, truth_progress)
             finally:
                 bar.close()
+                if truth_bar is not None:
+                    truth_bar.close()
     if config.report_dir is not None:
         write_report(
             config.report_dir,
@@ -123,6 +131,7 @@ def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = Fals
             result.bytes_log,
             snapshots=result.snapshots,
             title=title,
+            truth=result.truth,
         )
     return result
 
@@ -171,6 +180,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--lod", choices=("ach", "distance"), default="ach", help="LOD selection: ACH-shared budget or distance")
     r.add_argument("--lod-distances", default="40,120", help="distance selection: LOD2 nearer than D1, LOD1 nearer than D2 (default 40,120)")
     r.add_argument("--seed", type=int, default=0, help="seed of link loss, device noise, backoff jitter")
+    r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")
 
 
 def add_replay_parser(sub: Any) -> None:
