@@ -203,10 +203,10 @@ def test_a_planted_miss_is_found_with_its_pixels(
     assert frames and any(f.shown.get(obj, 0) > 100 for f in frames)
     lod2 = _lod2(planted)
     for f in frames:
-        pvs_px = int(f.error.missing[CAUSES.index("pvs")])
+        pvs_px = int(f.missing_px[CAUSES.index("pvs")])
         # exactly the building's pixels in the truth, all of them attributed to it
         assert pvs_px == f.shown.get(obj, 0) == f.missing.get(obj, 0)
-        assert f.error.missing[CAUSES.index("culled")] == 0
+        assert f.missing_px[CAUSES.index("culled")] == 0
         # counted again through the client's own renderer: every object at LOD2
         with FrameRenderer((640, 480), ctx=gl) as fr:
             for i, m in lod2.items():
@@ -214,7 +214,7 @@ def test_a_planted_miss_is_found_with_its_pixels(
             ids = fr.draw_ids([(i, 2) for i in lod2], f.view, PROJ)
         assert int((ids == obj + 1).sum()) == pvs_px
     # other cells are untouched
-    assert all(f.error.missing[0] == 0 for f in got.truth.frames if f.cell != cell and f.cell is not None)
+    assert all(f.missing_px[0] == 0 for f in got.truth.frames if f.cell != cell and f.cell is not None)
 
 
 PROJ = np.asarray(perspective(60.0, 640 / 480, 0.5, 2000.0))

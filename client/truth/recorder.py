@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.report.truth import TruthLog
-from walkstream.client.truth.compare import CAUSES, FrameError, compare_frame, missing_mask
+from walkstream.client.truth.compare import CAUSES, compare_frame, missing_mask
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.scene import TruthScene
 from walkstream.shared.errors import InputError, WalkstreamError
@@ -72,7 +72,11 @@ class ComparedFrame:
     cell: int | None
     eye: NDArray[np.float64]
     view: NDArray[np.float32]
-    error: FrameError
+    pixels: int
+    differing: int
+    """Pixels whose colour differs from the truth."""
+    missing_px: NDArray[np.int64]
+    """(6,) missing pixels per cause (:data:`~walkstream.client.truth.compare.CAUSES` order)."""
     shown: dict[int, int]
     """Pixels of each object in the truth."""
     missing: dict[int, int]
@@ -279,8 +283,8 @@ class TruthRecorder:
                 tid = t_ids.astype(np.int64) - 1
                 compared.append(
                     ComparedFrame(
-                        st.frame, st.t, st.cell, st.eye, st.view, err,
-                        _counts(tid[tid >= 0]), _counts(tid[err.cause >= 0]),
+                        st.frame, st.t, st.cell, st.eye, st.view, err.pixels, err.differing,
+                        err.missing, _counts(tid[tid >= 0]), _counts(tid[err.cause >= 0]),
                     )
                 )
                 share = err.missing_share
