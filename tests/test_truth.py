@@ -251,3 +251,20 @@ def test_cli_truth_every(every_db: Path, tmp_path: Path, capsys: pytest.CaptureF
     assert (out / "error.png").exists()
     with pytest.raises(InputError, match="truth-every"):
         ReplayConfig(link=LinkProfile(1.0, 1.0, 0.1), truth_every=-1)
+
+
+def test_bench_stream_truth_every(every_db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], gl_ctx: Any) -> None:
+    """``bench stream --truth-every`` prints a second table, one line per scenario, from each walk's truth."""
+    out = tmp_path / "bench"
+    argv = ["bench", "stream", str(every_db), "--only", "SM 56k", "--duration", "3s", "--truth-every", "25", "--out", str(out)]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "culled% max" in text and "compared" in text
+    rows = json.loads((out / "bench_stream.json").read_text())
+    assert [r["scenario"] for r in rows] == ["SM 56k prefetch"]
+    t = rows[0]["truth"]
+    assert t["frames"] == len(range(0, rows[0]["frames"], 25)) > 0
+    assert t["missing"]["culled"]["max"] == 0.0
+    line = next(ln for ln in text.splitlines() if ln.startswith("SM 56k prefetch") and ln.split()[3] == str(t["frames"]))
+    assert line
+    assert (out / "01-sm-56k-prefetch" / "error.png").exists()
