@@ -612,6 +612,13 @@ def format_table(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _nice_ticks(lo: float, hi: float) -> list[float]:
+    """A few 1-2-5 tick values covering ``lo .. hi`` (> 0) on a log axis."""
+    e0, e1 = math.floor(math.log10(lo)) - 1, math.ceil(math.log10(hi)) + 1
+    cand = [m * 10.0**e for e in range(e0, e1) for m in (1, 2, 5)]
+    return [v for v in cand if lo / 2.5 <= v <= hi * 2.5]
+
+
 def plot_visibility_benchmark(result: dict[str, Any], path: str | os.PathLike[str], *, dpi: int = 120) -> None:
     """A PNG of three panels: misses against bake time, misses against PVS size, missed objects' sizes.
 
@@ -625,6 +632,7 @@ def plot_visibility_benchmark(result: dict[str, Any], path: str | os.PathLike[st
 
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
+    from matplotlib.ticker import FuncFormatter, NullFormatter
 
     rows = result["rows"]
     timed = [r for r in rows if r.get("sec_per_cell")]
@@ -650,6 +658,10 @@ def plot_visibility_benchmark(result: dict[str, Any], path: str | os.PathLike[st
     ax1.plot([], [], "^", color="#555555", markerfacecolor="white", label="largest missed object (one cell)")
     ax1.set_xscale("log")
     ax1.set_yscale("log")
+    # seconds per cell span less than a decade: labelled minor ticks would overlap
+    ax1.xaxis.set_minor_formatter(NullFormatter())
+    ax1.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax1.set_xticks(_nice_ticks(min(r["sec_per_cell"] for r in timed), max(r["sec_per_cell"] for r in timed)) if timed else [])
     ax1.set_xlabel("bake seconds per cell (median, log)")
     ax1.set_ylabel("% of a cell's reference pixels (log)")
     ax1.set_title("misses against bake time (red: first default, green: bake default)", fontsize=9)
