@@ -543,18 +543,25 @@ def _views(
     from walkstream.client.truth.render import TruthRenderer
 
     meshes, ids = meshes_for_scene(scene, 2)
+    lo = np.array([m.positions[:, :2].min(axis=0) if len(m.positions) else (np.inf, np.inf) for m in meshes], np.float64).reshape(-1, 2)
+    hi = np.array([m.positions[:, :2].max(axis=0) if len(m.positions) else (-np.inf, -np.inf) for m in meshes], np.float64).reshape(-1, 2)
     rng = np.random.default_rng([int(seed), 0xE7E])
     out = []
-    with TruthRenderer(dict(zip(ids.tolist(), meshes, strict=True)), size, view_distance=view_distance, ctx=gl) as tr:
-        for k, c in enumerate(cells):
-            eyes = reference_points(
-                c.polygon, c.zmin, c.zmax, per_cell, margin=VIEW_MARGIN, footprints=footprints,
-                seed=seed * 7919 + 500_009 + c.id,
-            )
+    for k, c in enumerate(cells):
+        eyes = reference_points(
+            c.polygon, c.zmin, c.zmax, per_cell, margin=VIEW_MARGIN, footprints=footprints,
+            seed=seed * 7919 + 500_009 + c.id,
+        )
+        # one truth per cell, of the objects within the view distance of the cell's box:
+        # a whole city at LOD2 (3 GB for the Vienna blocks) is more than one GL buffer holds
+        poly = np.asarray(c.polygon, np.float64)
+        gap = np.maximum(np.maximum(lo - poly.max(axis=0), poly.min(axis=0) - hi), 0.0)
+        near = np.flatnonzero(np.einsum("nk,nk->n", gap, gap) <= view_distance**2)
+        with TruthRenderer({int(ids[i]): meshes[i] for i in near}, size, view_distance=view_distance, ctx=gl) as tr:
             for eye in eyes:
                 rgb, img = tr.render(eye, camera(eye, float(rng.uniform(0.0, 2.0 * math.pi))))
                 out.append((k, img, rgb))
-            tick()
+        tick()
     return out
 
 

@@ -268,3 +268,15 @@ def test_bench_stream_truth_every(every_db: Path, tmp_path: Path, capsys: pytest
     line = next(ln for ln in text.splitlines() if ln.startswith("SM 56k prefetch") and ln.split()[3] == str(t["frames"]))
     assert line
     assert (out / "01-sm-56k-prefetch" / "error.png").exists()
+
+
+def test_truth_too_big_for_one_buffer_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A scene too large for one GL buffer fails with a RenderError naming the size, before any GL call."""
+    import walkstream.client.truth.render as render
+    from walkstream.shared.errors import RenderError
+
+    scene = load_geojson_dict(generate_city(120, 3))
+    lod2 = {b.id: build_lods(b)[2] for b in scene.buildings}
+    monkeypatch.setattr(render, "MAX_BUFFER_BYTES", 1024)
+    with pytest.raises(RenderError, match=r"objects at LOD2 need a .* GiB buffer"):
+        TruthRenderer(lod2, (64, 48))

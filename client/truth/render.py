@@ -33,7 +33,7 @@ from walkstream.shared.records import Mesh
 if TYPE_CHECKING:
     import moderngl
 
-__all__ = ["TruthRenderer"]
+__all__ = ["MAX_BUFFER_BYTES", "TruthRenderer"]
 
 _VERTEX_SHADER = """
 #version 330
@@ -69,6 +69,9 @@ void main() {
     f_id = v_id;
 }
 """
+
+#: The largest vertex or index buffer the truth makes (GL sizes are 32-bit ints in places).
+MAX_BUFFER_BYTES = 2**31
 
 _VERTEX = np.dtype([("p", "<f4", 3), ("n", "<f4", 3), ("c", "u1", 4), ("id", "<u4")])
 
@@ -121,6 +124,13 @@ class TruthRenderer:
         v0 = np.concatenate([[0], np.cumsum(nv)]).astype(np.int64)
         i0 = np.concatenate([[0], np.cumsum(ni)]).astype(np.int64)
         self._first, self._stop = i0[:-1], i0[1:]
+        nbytes = max(int(v0[-1]) * _VERTEX.itemsize, int(i0[-1]) * 4)
+        if nbytes >= MAX_BUFFER_BYTES:
+            # drivers take buffer sizes and offsets as 32-bit ints: past this they crash
+            raise RenderError(
+                f"TruthRenderer: {len(ids)} objects at LOD2 need a {nbytes / 2**30:.1f} GiB buffer "
+                f"(at most {MAX_BUFFER_BYTES / 2**30:.0f} GiB): give it the objects near the camera only"
+            )
         verts = np.empty(int(v0[-1]), _VERTEX)
         index = np.empty(int(i0[-1]), np.uint32)
         for k, m in enumerate(parts):
