@@ -33,6 +33,7 @@ __all__ = [
     "stream_scenarios",
     "run_stream_bench",
     "format_stream_table",
+    "format_truth_table",
 ]
 
 Replayer = Callable[[str, Mapping[str, Any], str], Any]
@@ -106,13 +107,15 @@ def run_stream_bench(
     device: str = "desktop2003",
     duration: str | None = None,
     only: Sequence[str] = (),
+    truth_every: int = 0,
 ) -> list[dict[str, Any]]:
     """Replay every scenario (those whose name contains one of ``only``, if given).
 
     Returns one row per scenario that ran (its summary, name and goal); a scenario
     that fails is reported on stderr and left out.  Every row's overfetch is held
     to 0.5 (the issue's bound) besides its own goal.  Writes the comparison page
-    and ``bench_stream.json`` into ``out``.
+    and ``bench_stream.json`` into ``out``.  With ``truth_every`` every N-th frame of
+    each walk is compared with the ground truth (``walkstream replay --truth-every``).
     """
     scenarios = stream_scenarios(vienna, extra)
     if only:
@@ -124,6 +127,8 @@ def run_stream_bench(
         options: dict[str, Any] = {"device": device, "clock": "sim", **sc["over"]}
         if duration:
             options["duration"] = duration
+        if truth_every:
+            options["truth_every"] = truth_every
         options["report"] = str(folder)
         print(f"[{k}/{len(scenarios)}] {sc['name']} ...", file=sys.stderr, flush=True)
         try:
@@ -161,5 +166,30 @@ def format_stream_table(rows: list[dict[str, Any]]) -> str:
             f"{r['overfetch_ratio']:>9.3f} {_pct(r.get('link_utilisation')):>6} "
             f"{_pct(r.get('link_utilisation_busy')):>6} {r['redownloads']:>5} {r['rebuilds']:>7}  "
             f"{r['goal']}"
+        )
+    return "\n".join(lines)
+
+
+def format_truth_table(rows: list[dict[str, Any]]) -> str:
+    """The ground-truth figures of the rows that have them (``--truth-every``), one line each."""
+    have = [r for r in rows if r.get("truth")]
+    if not have:
+        return ""
+
+    def pct(v: Any, digits: int = 2) -> str:
+        return "n/a" if v is None else f"{100 * v:.{digits}f}"
+
+    head = (
+        f"{'scenario':<22} {'compared':>8} {'differ%':>7} {'>0.5%':>6} {'pvs% mean':>9} "
+        f"{'pvs% max':>8} {'lod% mean':>9} {'culled% max':>11}"
+    )
+    lines = [head, "-" * len(head)]
+    for r in have:
+        t = r["truth"]
+        m = t["missing"]
+        lines.append(
+            f"{r['scenario']:<22} {t['frames']:>8} {pct(t['differing_pixels_mean']):>7} "
+            f"{pct(t['over_half_percent_ratio'], 1):>6} {pct(m['pvs']['mean'], 3):>9} "
+            f"{pct(m['pvs']['max'], 3):>8} {pct(m['lod']['mean'], 3):>9} {pct(m['culled']['max'], 3):>11}"
         )
     return "\n".join(lines)

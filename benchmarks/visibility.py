@@ -1,30 +1,55 @@
-"""Error against run time of the visibility bake (``walkstream bench visibility``).
+"""What the visibility bake misses, against its price (``walkstream bench visibility``).
 
-The bake samples a cell's visibility from a few points (the 8 corners of a box fitted
-to the cell, optionally its centre too) at one cube-face resolution with one building
-LOD as occluder geometry.  This module measures what each such setting misses against
-a dense reference on a sample of cells, and how long it takes:
+The bake samples each view cell from a few points (:mod:`walkstream.server.bake.samples`)
+at one cube-face resolution.  This benchmark measures, on a sample of cells spread over
+the scene, what every *setting* of that sampling misses and what it costs, side by
+side in one run:
 
-* the reference renders many viewpoints spread through each sampled cell
-  (:func:`~walkstream.server.bake.samples.dense_points`: ``ref_points`` ground positions times
-  ``ref_levels`` heights, by default 66 points, more than 8 times the 8 corners) at
-  twice the highest resolution (capped at 512) with the finest LOD (2) as occluder;
-* every setting (resolution x centre point x occluder LOD) renders the same cells the
-  way the bake does (:func:`~walkstream.server.bake.samples.sample_points` then
-  :meth:`VisibilityRenderer.cell_counts`) and is timed per cell;
-* a setting's miss rate is the share of reference-visible objects absent from its PVS
-  (mean over cells), its pixel-weighted miss rate the reference pixels of the missed
-  objects over all reference pixels (pooled over cells);
-* the default is the cheapest setting whose pixel-weighted miss rate is at most 1 %.
+reference
+    Per cell :func:`~walkstream.server.bake.samples.reference_points` (default 64)
+    viewpoints spread over the whole cell and its height range, drawn at random
+    independently of where the bake samples, rendered at 512 px per cube face with
+    every object at LOD2 and *no* frustum culling (every object within the view
+    distance drawn in every face).  An object is reference-visible when it covers a
+    pixel.
+settings
+    Each setting (sampling scheme, spacing, resolution, occluder LOD, hardly-visible
+    threshold; :func:`parse_setting`) computes the cells' PVS exactly as the bake does
+    (:func:`~walkstream.server.bake.workers.cell_points`, then
+    :meth:`~walkstream.server.bake.visibility.VisibilityRenderer.cell_counts` and
+    :func:`~walkstream.server.bake.visibility.pvs_from_counts`).  The settings take
+    turns cell by cell, so a slower machine moment hits them all alike; each renders
+    a cell ``repeat`` times and keeps the fastest; a setting's time is the median
+    over cells of those seconds and its ``time x`` the ratio to the first default
+    (``corners-64``) measured in the same run.
+misses by count
+    Mean over cells of the share of reference-visible objects absent from the PVS.
+misses by pixels
+    Reference pixels of the missed objects over all reference pixels (pooled).
+largest miss
+    The largest share of one cell's reference pixels that a single missed object
+    covers (the worst over the cells): "a building seen clearly from part of the cell
+    and never downloaded there".
+image error at random eye points
+    ``views`` per sampled cell: a random eye in the cell (at a random eye height),
+    random heading, level, the client's camera (640 x 480, 60 degrees); the ground
+    truth of that camera (:class:`~walkstream.client.truth.render.TruthRenderer`:
+    every object within the view distance at LOD2) compared with what the cell's
+    PVS would show (:func:`~walkstream.client.truth.compare.compare_frame`, cause
+    ``pvs``): the share of the truth's object pixels showing an object missing from
+    the PVS, the share of the objects it shows that are missing, and the sizes of
+    the missed objects (share of the frame).
 
-All renderers share one GL context; each is built once per (LOD, resolution), used for
-both centre options and released.  Building (mesh upload) time is reported apart from
-the per-cell render time.
+When the scene is a baked database, its stored PVS is scored too (row ``baked``).
+The scene is read from the database itself (objects, cells, PVS, view distance),
+so a database baked from any source works; a source file is read by the caller.
 """
 
 from __future__ import annotations
 
+import math
 import os
+import re
 import statistics
 import time
 from collections.abc import Callable, Sequence
@@ -34,11 +59,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import shapely
+from numpy.typing import NDArray
 
 from walkstream.server.bake.cells import make_cells
-from walkstream.server.bake.samples import dense_points, sample_points
+from walkstream.server.bake.samples import reference_points
+from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
-from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene
+from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
+from walkstream.server.bake.workers import cell_points
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError
 
@@ -49,19 +77,114 @@ from walkstream.shared.arrays import I64
 
 __all__ = [
     "BenchInput",
-    "MAX_MISS_RATE_PX",
+    "Setting",
+    "TODAY",
+    "DEFAULT_SETTINGS",
+    "TARGETS",
     "format_table",
     "load_bench_input",
+    "parse_setting",
     "pick_cells",
     "plot_visibility_benchmark",
-    "setting_label",
+    "scene_from_database",
     "visibility_benchmark",
 ]
 
-#: The default setting is the cheapest one whose pixel-weighted miss rate is at most this.
-MAX_MISS_RATE_PX = 0.01
-
 Progress = Callable[[int, int], None]
+
+#: Eye points of the image error keep this far from walls and the cell's border: the
+#: client's camera has a 0.5 m near plane whose corners reach 0.7 m, and window sills
+#: stand out 0.3 m, so a camera closer to a facade looks through it.
+VIEW_MARGIN = 1.0
+
+#: the issue's targets: misses by count, largest single miss, misses by pixels (shares),
+#: bake time and PVS size as ratios to the first default
+TARGETS = {
+    "miss_count": 0.05,
+    "miss_max": 0.0001,
+    "miss_px": 0.0005,
+    "time_ratio": 2.0,
+    "pvs_ratio": 1.25,
+}
+
+
+# --------------------------------------------------------------------------- settings
+
+
+@dataclass(frozen=True, slots=True)
+class Setting:
+    """A named way of baking a cell's PVS (only the sampling fields of ``bake`` matter)."""
+
+    name: str
+    bake: BakeSettings
+
+
+_SPEC = re.compile(r"^(corners|boundary(\d+(?:\.\d+)?)?)-(\d+)((?:-[a-zA-Z]+\d*(?:\.\d+)?|\+c)*)$")
+
+
+def parse_setting(spec: str) -> Setting:
+    """A setting from its name: ``SAMPLING-RES[-tN][-LK][-hH][+c]``.
+
+    ``corners-64`` is the first bake (8 box corners, 64 px); ``boundary20-128`` samples
+    the outline every 20 m at 128 px; ``-t2`` adds a hardly-visible threshold of 2
+    pixels, ``-L2`` renders LOD2 occluders, ``-h0.25`` samples a height every 0.25 m
+    of the cell's range, ``+c`` the centre too.
+
+    >>> s = parse_setting("boundary10-256-t4+c").bake
+    >>> (s.sampling, s.spacing, s.resolution, s.threshold, s.centre)
+    ('boundary', 10.0, 256, 4, True)
+    """
+    m = _SPEC.match(spec.strip())
+    if m is None:
+        raise InputError(
+            f"setting {spec!r}: expected SAMPLING-RES[-tN][-LK][-hH][+c], e.g. corners-64, "
+            "boundary20-128-t2"
+        )
+    kw: dict[str, Any] = {"resolution": int(m.group(3))}
+    if m.group(1) == "corners":
+        kw["sampling"] = "corners"
+    else:
+        kw["sampling"] = "boundary"
+        if m.group(2):
+            kw["spacing"] = float(m.group(2))
+    for part in re.findall(r"-([a-zA-Z]+)(\d+(?:\.\d+)?)|(\+c)", m.group(4)):
+        key, value, centre = part
+        if centre:
+            kw["centre"] = True
+        elif key == "t":
+            kw["threshold"] = int(float(value))
+        elif key == "L":
+            kw["occluder_lod"] = int(value)
+        elif key == "h":
+            kw["height_step"] = float(value)
+        else:
+            raise InputError(f"setting {spec!r}: unknown part -{key}{value} (t, L, h or +c)")
+    return Setting(spec.strip(), BakeSettings(**kw).check())
+
+
+#: the first bake's default, the yardstick of every ratio
+TODAY = parse_setting("corners-64")
+
+#: the rows ``bench visibility`` runs by default
+DEFAULT_SETTINGS: tuple[str, ...] = (
+    "corners-64",
+    "corners-64+c",
+    "corners-128",
+    "corners-256",
+    "boundary20-64",
+    "boundary10-64",
+    "boundary20-128",
+    "boundary10-128",
+    "boundary20-128-t1",
+    "boundary20-128-t4",
+    "boundary20-256",
+    "boundary20-256-t4",
+)
+
+
+def _same_sampling(a: BakeSettings, b: BakeSettings) -> bool:
+    keys = ("sampling", "spacing", "height_step", "centre", "resolution", "occluder_lod", "threshold")
+    return all(getattr(a, k) == getattr(b, k) for k in keys)
 
 
 # --------------------------------------------------------------------------- input
@@ -69,85 +192,75 @@ Progress = Callable[[int, int], None]
 
 @dataclass(frozen=True, slots=True)
 class BenchInput:
-    """What the benchmark runs on: a scene, its view cells and the bake's view distance."""
+    """What the benchmark runs on: a scene, its view cells, the view distance, a baked PVS."""
 
     scene: SourceScene
     cells: list[ViewCell]
     view_distance: float
     source: str
+    baked: dict[int, I64] | None = None
+    """Cell id -> PVS as stored in the database (None for a source file)."""
+    settings: dict[str, Any] | None = None
+    """The database's bake settings."""
 
 
-def load_bench_input(
-    path: str | os.PathLike[str], *, source: str | os.PathLike[str] | None = None
-) -> BenchInput:
-    """Scene and cells from a scene database or directly from a GeoJSON source.
+def scene_from_database(path: str | os.PathLike[str]) -> tuple[SourceScene, list[ViewCell], dict[int, I64], dict[str, Any]]:
+    """The scene, cells, stored PVS and bake settings of a scene database, from the file alone.
+
+    Objects of kinds other than buildings and street pieces are left out.
+    """
+    from walkstream.server.store import SceneReader
+
+    with SceneReader.open(path) as reader:
+        meta = reader.meta
+        info = reader.object_info(reader.object_ids().tolist())
+        buildings = tuple(reader.building(i) for i, o in info.items() if o.kind == "building")
+        streets = tuple(
+            reader.street(i) for i, o in info.items() if o.kind in ("street", "crossroad", "square")
+        )
+        cells, baked = [], {}
+        for c in reader.cells():
+            cells.append(
+                ViewCell(c.id, c.kind, np.asarray(c.boundary), c.zmin, c.zmax, tuple(int(n) for n in c.neighbours))
+            )
+            baked[c.id] = np.asarray(c.pvs, np.int64)
+    scene = SourceScene(meta.name, meta.crs, meta.origin, buildings, streets)
+    return scene, cells, baked, meta.settings
+
+
+def load_bench_input(path: str | os.PathLike[str], *, scene: SourceScene | None = None) -> BenchInput:
+    """Scene and cells from a scene database, or from a source file.
 
     Parameters
     ----------
     path:
-        A ``.geojson``/``.json`` source (cells made with ``make_cells(scene, "auto")``,
-        view distance 800 m) or a baked scene database, whose cells, view distance and
-        ``--bbox`` clip are used; its scene is rebuilt from the source file recorded in
-        the database's settings (``settings["source"]``) or from ``source``.
-    source:
-        The GeoJSON the database was baked from, when the database does not record it
-        (or it has moved).
+        A baked scene database (its objects, cells, stored PVS and view distance are
+        used; any source it was baked from), or a source file: ``.geojson``/``.json``
+        is read here; for any other kind pass the loaded ``scene``.  A source gets
+        ``make_cells(scene, "auto")`` and an 800 m view distance.
+    scene:
+        The scene of a source file read by the caller.
 
     Raises
     ------
     InputError
-        When the source is unknown, cannot be read, or no longer matches the database.
+        When the file cannot be read as either.
     """
-    from walkstream.server.sources.geojson import load_geojson
-
     p = Path(path)
-    if p.suffix.lower() in (".geojson", ".json"):
+    if not p.is_file():
+        raise InputError(f"{p}: no such file")
+    if scene is None and p.suffix.lower() in (".geojson", ".json"):
+        from walkstream.server.sources.geojson import load_geojson
+
         scene = load_geojson(p)
+    if scene is not None:
         return BenchInput(scene, make_cells(scene, "auto"), 800.0, str(p))
-
-    from walkstream.server.store import SceneReader
-
-    with SceneReader.open(p) as reader:
-        settings = reader.meta.settings
-        db_ids = np.sort(reader.object_ids())
-        db_cells = list(reader.cells())
-    src = source if source is not None else settings.get("source")
-    if not src:
-        raise InputError(
-            f"{p}: the database does not record its source file; pass --source FILE.geojson"
-        )
-    src_path = Path(src)
-    if not src_path.is_file():
-        raise InputError(
-            f"{p}: source file {str(src_path)!r} not found; pass --source FILE.geojson"
-        )
-    scene = load_geojson(src_path)
-    bbox = settings.get("bbox")
-    if bbox is not None:
-        from walkstream.server.sources.clip import clip_scene
-
-        scene = clip_scene(scene, tuple(float(v) for v in bbox))  # type: ignore[arg-type]
-    scene_ids = np.sort(
-        np.array([b.id for b in scene.buildings] + [s.id for s in scene.streets], np.int64)
-    )
-    if not np.array_equal(scene_ids, db_ids):
-        raise InputError(
-            f"{p}: the objects of {str(src_path)!r} do not match the database "
-            f"({len(scene_ids)} vs {len(db_ids)} objects); was it baked from another file?"
-        )
-    cells = [
-        ViewCell(
-            c.id,
-            c.kind,
-            np.asarray(c.boundary),
-            c.zmin,
-            c.zmax,
-            tuple(int(n) for n in c.neighbours),
-        )
-        for c in db_cells
-    ]
-    view_distance = float(settings.get("view_distance", 800.0))
-    return BenchInput(scene, cells, view_distance, str(src_path))
+    with p.open("rb") as f:
+        head = f.read(16)
+    if head != b"SQLite format 3\x00":
+        raise InputError(f"{p}: neither a scene database nor a GeoJSON source")
+    sc, cells, baked, settings = scene_from_database(p)
+    return BenchInput(sc, cells, float(settings.get("view_distance", 800.0)), str(p), baked, settings)
 
 
 # --------------------------------------------------------------------------- cells
@@ -189,106 +302,126 @@ def pick_cells(cells: Sequence[ViewCell], sample: int, *, seed: int = 0) -> list
     return sorted((cand[i] for i in picks), key=lambda c: c.id)
 
 
-# ------------------------------------------------------------------------- benchmark
+# --------------------------------------------------------------------------- benchmark
 
 
-def _as_dict(ids: I64, pixels: I64) -> dict[int, int]:
-    return {int(i): int(n) for i, n in zip(ids, pixels, strict=True) if n > 0}
+def _score(pvs: list[set[int]], ref: list[dict[int, int]]) -> dict[str, Any]:
+    """Misses of one setting's PVS (per cell) against the reference (per cell)."""
+    count, missed_px, total_px, worst, where = [], 0, 0, 0.0, None
+    for k, (p, r) in enumerate(zip(pvs, ref, strict=True)):
+        if not r:
+            continue
+        tot = sum(r.values())
+        missed = [j for j in r if j not in p]
+        count.append(len(missed) / len(r))
+        missed_px += sum(r[j] for j in missed)
+        total_px += tot
+        for j in missed:
+            if r[j] / tot > worst:
+                worst, where = r[j] / tot, (k, j)
+    return {
+        "miss_count": float(np.mean(count)) if count else 0.0,
+        "miss_px": missed_px / total_px if total_px else 0.0,
+        "miss_max": worst,
+        "miss_max_at": where,
+        "pvs_mean": float(np.mean([len(p) for p in pvs])) if pvs else 0.0,
+        "extra_per_cell": float(np.mean([len(p - r.keys()) for p, r in zip(pvs, ref, strict=True)])),
+    }
+
+
+def _view_error(views: list[tuple[int, NDArray[np.uint32], NDArray[np.uint8]]], pvs: list[set[int]]) -> dict[str, Any]:
+    """The image error of one setting's PVS at the random eye points (see the module docs)."""
+    from walkstream.client.truth.compare import compare_frame
+
+    obj_px, miss_px, counts, frame_share, sizes = 0, 0, [], [], []
+    for k, ids, rgb in views:
+        p = np.fromiter(pvs[k], np.int64, len(pvs[k]))
+        tid = ids.astype(np.int64) - 1
+        shows = np.where(np.isin(tid, p), ids, 0).astype(np.uint32)
+        err = compare_frame(ids, rgb, shows, rgb, pvs=p, received=p, built=p, drawn={int(i): 2 for i in p})
+        per = np.bincount(tid[tid >= 0])
+        seen = np.flatnonzero(per)
+        missed = seen[~np.isin(seen, p)]
+        obj_px += int(per.sum())
+        miss_px += int(err.missing[0])
+        counts.append(len(missed) / len(seen) if len(seen) else 0.0)
+        frame_share.append(err.missing[0] / err.pixels)
+        sizes += (per[missed] / err.pixels).tolist()
+    fs = np.array(frame_share) if frame_share else np.zeros(1)
+    return {
+        "view_miss_px": miss_px / obj_px if obj_px else 0.0,
+        "view_miss_count": float(np.mean(counts)) if counts else 0.0,
+        "view_frame_p95": float(np.percentile(fs, 95)),
+        "view_frame_max": float(fs.max()),
+        "view_over_half": float(np.mean(fs > 0.005)),
+        "missed_sizes": sizes,
+    }
 
 
 def visibility_benchmark(
-    scene: SourceScene,
-    cells: list[ViewCell],
+    inp: BenchInput,
     *,
+    settings: Sequence[str | Setting] = DEFAULT_SETTINGS,
     sample: int = 12,
     seed: int = 0,
-    resolutions: Sequence[int] = (64, 128, 256),
-    centres: Sequence[bool] = (False, True),
-    lods: Sequence[int] = (0, 1, 2),
-    view_distance: float = 800.0,
-    ref_points: int = 22,
-    ref_levels: int = 3,
-    ref_resolution: int | None = None,
-    margin: float = 0.3,
+    ref_points: int = 64,
+    ref_resolution: int = 512,
+    views: int = 4,
+    view_size: tuple[int, int] = (640, 480),
+    repeat: int = 3,
     ctx: moderngl.Context | None = None,
     progress: Progress | None = None,
 ) -> dict[str, Any]:
-    """Miss rate against a dense reference and render time of every visibility setting.
+    """Misses against the dense reference, image error at random eye points, and time, per setting.
 
     Parameters
     ----------
-    scene:
-        The scene (its object ids are the ids of the PVS).
-    cells:
-        Its view cells; ``sample`` of them are benchmarked (:func:`pick_cells`).
+    inp:
+        The scene (:func:`load_bench_input`).
+    settings:
+        Names (:func:`parse_setting`) or settings; ``corners-64`` (the yardstick of the
+        ratios) is added first when missing.
     sample, seed:
-        How many cells, and the seed that picks them (and jitters the reference points).
-    resolutions, centres, lods:
-        The settings: every combination of cube-face resolution (pixels), sampling the
-        cell centre too (``True``) or the 8 corners only, and building LOD as occluder.
-    view_distance:
-        Far plane, metres (the bake's view distance).
-    ref_points, ref_levels:
-        Reference viewpoints per cell: ``ref_points`` positions spread through the
-        cell's free space times ``ref_levels`` heights over its height range (default
-        22 x 3 = 66, more than 8 times the 8 corner points).
-    ref_resolution:
-        Cube-face resolution of the reference; default twice the highest resolution,
-        capped at 512.
-    margin:
-        Distance of every viewpoint from the cell border and from footprints, metres.
+        How many cells (:func:`pick_cells`) and the seed of everything random.
+    ref_points, ref_resolution:
+        Reference viewpoints per cell and their cube-face resolution.
+    views, view_size:
+        Random eye points per cell and the frame size for the image error (0: none);
+        the eyes keep :data:`VIEW_MARGIN` from walls and the cell's border.
+    repeat:
+        Each setting renders each cell this many times and keeps the fastest (other
+        work on the machine only ever slows a render down).
     ctx:
-        OpenGL context for all renderers; by default one is made and released.
+        OpenGL context for every renderer; by default one is made and released.
     progress:
-        Called with ``(renders done, renders total)``; one render is one cell of the
-        reference or of one setting.
+        Called with ``(cells done, cells total)``: the reference, then the settings,
+        then the views, each a pass over the cells.
 
     Returns
     -------
     dict
-        ``settings``: one dict per setting with ``resolution``, ``centre``, ``lod``,
-        ``sec_per_cell`` (median over cells of ``cell_counts``), ``cells_per_sec``,
-        ``upload_seconds`` (building the renderer), ``points_per_cell``,
-        ``miss_rate``, ``miss_rate_px``, ``extra_per_cell`` and ``pvs_mean``;
-        ``reference``: ``resolution``, ``lod``, ``points_per_cell`` (mean),
-        ``pvs_mean``, ``pixels_per_cell`` (mean), ``sec_per_cell``,
-        ``upload_seconds``, ``cells`` (the sampled cell ids), ``cells_scored`` (cells
-        whose reference sees something) and ``objects``;
-        ``default``: the cheapest setting (lowest ``sec_per_cell``) with
-        ``miss_rate_px <= 0.01``, or None;
-        ``seconds``: wall time of the whole benchmark.
-
-    Raises
-    ------
-    InputError
-        On empty or out-of-range options.
-    RenderError
-        When OpenGL fails.
+        ``rows`` (one dict per setting, then ``baked`` for a database: the figures of
+        the module docs, ``sec_per_cell``, ``time_ratio``, ``pvs_ratio``,
+        ``points_per_cell``, ``culled`` = 1 - PVS / objects, ``meets`` per target),
+        ``reference`` (points, resolution, PVS and pixels per cell, seconds), ``cells``,
+        ``default`` (the name of the row that matches the bake's default, or None),
+        ``objects``, ``seconds``.
     """
     from walkstream.shared.gl import create_context
 
     t_start = time.perf_counter()
-    resolutions = [int(r) for r in resolutions]
-    centres = [bool(c) for c in centres]
-    lods = [int(lod) for lod in lods]
-    if not resolutions or not centres or not lods:
-        raise InputError("visibility_benchmark: resolutions, centres and lods must not be empty")
-    if min(resolutions) < 1:
-        raise InputError(f"visibility_benchmark: resolutions must be >= 1, got {resolutions}")
-    if any(lod not in (0, 1, 2) for lod in lods):
-        raise InputError(f"visibility_benchmark: lods must be 0, 1 or 2, got {lods}")
-    if int(ref_points) < 1 or int(ref_levels) < 1:
+    rows_in = [s if isinstance(s, Setting) else parse_setting(s) for s in settings]
+    if not any(_same_sampling(s.bake, TODAY.bake) for s in rows_in):
+        rows_in.insert(0, TODAY)
+    if int(ref_points) < 1 or int(ref_resolution) < 8 or int(views) < 0:
         raise InputError(
-            f"visibility_benchmark: ref_points and ref_levels must be >= 1, got "
-            f"{ref_points}, {ref_levels}"
+            f"visibility_benchmark: expected ref_points >= 1, ref_resolution >= 8, views >= 0, got "
+            f"{ref_points}, {ref_resolution}, {views}"
         )
-    ref_res = int(ref_resolution) if ref_resolution is not None else min(2 * max(resolutions), 512)
-    chosen = pick_cells(cells, sample, seed=seed)
-    footprints = shapely.STRtree(
-        [shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings]
-    )
-    n_settings = len(resolutions) * len(centres) * len(lods)
-    total = len(chosen) * (1 + n_settings)
+    scene, vd = inp.scene, inp.view_distance
+    chosen = pick_cells(inp.cells, sample, seed=seed)
+    footprints = shapely.STRtree([shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings])
+    total = len(chosen) * (3 if views else 2)
     done = 0
 
     def tick() -> None:
@@ -299,309 +432,275 @@ def visibility_benchmark(
 
     if progress is not None:
         progress(0, total)
-    own_ctx = ctx is None
+    own = ctx is None
     gl = create_context() if ctx is None else ctx
+    renderers: dict[tuple[int, int], VisibilityRenderer] = {}
     try:
-        # -- the dense reference ----------------------------------------------------
-        ref_pts = [
-            dense_points(
-                c.polygon,
-                c.zmin,
-                c.zmax,
-                int(ref_points),
-                levels=int(ref_levels),
-                margin=margin,
-                footprints=footprints,
-                seed=seed + c.id,
-            )
-            for c in chosen
-        ]
-        meshes, ids = meshes_for_scene(scene, 2)
-        t = time.perf_counter()
-        ref_r = VisibilityRenderer(
-            meshes, ids, resolution=ref_res, view_distance=view_distance, ctx=gl
-        )
-        ref_upload = time.perf_counter() - t
+        meshes2, ids2 = meshes_for_scene(scene, 2)
+        # -- the reference ---------------------------------------------------------
+        ref_r = VisibilityRenderer(meshes2, ids2, resolution=int(ref_resolution), view_distance=vd, ctx=gl, frustum_cull=False)
         ref: list[dict[int, int]] = []
-        ref_times: list[float] = []
+        ref_times, ref_pts = [], []
         try:
-            ref_r.cell_counts(np.zeros((1, 3)) + [0.0, 0.0, 1.7])  # warm-up (shader compile)
-            for pts in ref_pts:
+            for c in chosen:
+                pts = reference_points(c.polygon, c.zmin, c.zmax, int(ref_points), footprints=footprints, seed=seed * 7919 + 100_003 + c.id)
                 t = time.perf_counter()
-                ref.append(_as_dict(*ref_r.cell_counts(pts)))
+                i, px = ref_r.cell_counts(pts)
                 ref_times.append(time.perf_counter() - t)
+                ref_pts.append(len(pts))
+                ref.append({int(a): int(b) for a, b in zip(i, px, strict=True)})
                 tick()
         finally:
             ref_r.release()
-        scored = [k for k, r in enumerate(ref) if r]
-        ref_px_total = sum(sum(ref[k].values()) for k in scored)
-
-        # -- the settings ------------------------------------------------------------
-        points = {
-            centre: [
-                sample_points(
-                    c.polygon, c.zmin, c.zmax, margin=margin, centre=centre, footprints=footprints
-                )
-                for c in chosen
-            ]
-            for centre in centres
-        }
-        rows: list[dict[str, Any]] = []
-        for lod in lods:
-            meshes, ids = meshes_for_scene(scene, lod)
-            for res in resolutions:
-                t = time.perf_counter()
-                r = VisibilityRenderer(
-                    meshes, ids, resolution=res, view_distance=view_distance, ctx=gl
-                )
-                upload = time.perf_counter() - t
-                try:
-                    r.cell_counts(np.zeros((1, 3)) + [0.0, 0.0, 1.7])  # warm-up
-                    for centre in centres:
-                        times: list[float] = []
-                        pvs: list[set[int]] = []
-                        for pts in points[centre]:
-                            t = time.perf_counter()
-                            seen, _pixels = r.cell_counts(pts)
-                            times.append(time.perf_counter() - t)
-                            pvs.append({int(i) for i in seen})
-                            tick()
-                        rows.append(
-                            _score(res, centre, lod, times, upload, pvs, ref, scored, ref_px_total)
-                            | {"points_per_cell": float(np.mean([len(p) for p in points[centre]]))}
-                        )
-                finally:
-                    r.release()
+        # -- the settings, taking turns cell by cell --------------------------------
+        for s in rows_in:
+            key = (s.bake.occluder_lod, s.bake.resolution)
+            if key not in renderers:
+                m, ids = (meshes2, ids2) if key[0] == 2 else meshes_for_scene(scene, key[0])
+                renderers[key] = VisibilityRenderer(m, ids, resolution=key[1], view_distance=vd, ctx=gl)
+                renderers[key].cell_counts(np.array([[0.0, 0.0, 1.7]]))  # compile, warm up
+        pvs: list[list[set[int]]] = [[] for _ in rows_in]
+        times: list[list[float]] = [[] for _ in rows_in]
+        npts: list[list[int]] = [[] for _ in rows_in]
+        for c in chosen:
+            for k, s in enumerate(rows_in):
+                r = renderers[(s.bake.occluder_lod, s.bake.resolution)]
+                best = math.inf
+                for _ in range(max(1, int(repeat))):
+                    t = time.perf_counter()
+                    pts = cell_points(s.bake, np.asarray(c.polygon), c.zmin, c.zmax, footprints)
+                    got = pvs_from_counts(*r.cell_counts(pts), threshold=s.bake.threshold)[0] if len(pts) else np.zeros(0, np.int64)
+                    best = min(best, time.perf_counter() - t)
+                times[k].append(best)
+                npts[k].append(len(pts))
+                pvs[k].append({int(i) for i in got})
+            tick()
+        # -- the image error at random eye points ----------------------------------
+        shots = _views(scene, chosen, int(views), view_size, vd, footprints, seed, gl, tick) if views else []
     finally:
-        if own_ctx:
+        for r in renderers.values():
+            r.release()
+        if own:
             gl.release()
 
-    rows.sort(key=lambda s: (s["resolution"], s["lod"], s["centre"]))
-    ok = [s for s in rows if s["miss_rate_px"] <= MAX_MISS_RATE_PX]
-    default = min(ok, key=lambda s: s["sec_per_cell"]) if ok else None
-    reference = {
-        "resolution": ref_res,
-        "lod": 2,
-        "points_per_cell": float(np.mean([len(p) for p in ref_pts])),
-        "pvs_mean": float(np.mean([len(r) for r in ref])),
-        "pixels_per_cell": float(np.mean([sum(r.values()) for r in ref])),
-        "sec_per_cell": float(statistics.median(ref_times)),
-        "upload_seconds": ref_upload,
-        "cells": [c.id for c in chosen],
-        "cells_scored": len(scored),
-        "objects": len(scene.buildings) + len(scene.streets),
-    }
+    n_obj = len(scene.buildings) + len(scene.streets)
+    rows: list[dict[str, Any]] = []
+    for k, s in enumerate(rows_in):
+        sec = float(statistics.median(times[k]))
+        rows.append(
+            {"name": s.name, "sampling": s.bake.sampling, "spacing": s.bake.spacing if s.bake.sampling == "boundary" else None,
+             "resolution": s.bake.resolution, "lod": s.bake.occluder_lod, "threshold": s.bake.threshold,
+             "centre": s.bake.centre, "points_per_cell": float(np.mean(npts[k])), "sec_per_cell": sec}
+            | _score(pvs[k], ref)
+            | (_view_error(shots, pvs[k]) if shots else {})
+        )
+    if inp.baked is not None:
+        stored = [{int(i) for i in inp.baked.get(c.id, np.zeros(0, np.int64))} for c in chosen]
+        rows.append({"name": "baked", "sec_per_cell": None} | _score(stored, ref) | (_view_error(shots, stored) if shots else {}))
+    base = rows[next(k for k, s in enumerate(rows_in) if _same_sampling(s.bake, TODAY.bake))]
+    for row in rows:
+        sec = row["sec_per_cell"]
+        row["time_ratio"] = sec / base["sec_per_cell"] if sec else None
+        row["pvs_ratio"] = row["pvs_mean"] / base["pvs_mean"] if base["pvs_mean"] else None
+        row["culled"] = 1.0 - row["pvs_mean"] / n_obj if n_obj else None
+        row["meets"] = {k: (row.get(k) is not None and row[k] <= v) for k, v in TARGETS.items()}
+    default = next((s.name for s in rows_in if _same_sampling(s.bake, BakeSettings())), None)
     return {
-        "settings": rows,
-        "reference": reference,
+        "rows": rows,
         "default": default,
+        "cells": [c.id for c in chosen],
+        "objects": n_obj,
+        "source": inp.source,
+        "reference": {
+            "points_per_cell": float(np.mean(ref_pts)),
+            "resolution": int(ref_resolution),
+            "lod": 2,
+            "frustum_culling": False,
+            "pvs_mean": float(np.mean([len(r) for r in ref])),
+            "pixels_per_cell": float(np.mean([sum(r.values()) for r in ref])),
+            "sec_per_cell": float(statistics.median(ref_times)),
+            "cells_scored": sum(1 for r in ref if r),
+        },
+        "views": len(shots),
+        "view_size": list(view_size),
         "seconds": time.perf_counter() - t_start,
     }
 
 
-def _score(
-    res: int,
-    centre: bool,
-    lod: int,
-    times: list[float],
-    upload: float,
-    pvs: list[set[int]],
-    ref: list[dict[int, int]],
-    scored: list[int],
-    ref_px_total: int,
-) -> dict[str, Any]:
-    """One result row: timing and the errors of ``pvs`` against ``ref`` (per cell)."""
-    miss = []
-    missed_px = 0
-    for k in scored:
-        missed = ref[k].keys() - pvs[k]
-        miss.append(len(missed) / len(ref[k]))
-        missed_px += sum(ref[k][i] for i in missed)
-    sec = float(statistics.median(times))
-    return {
-        "resolution": res,
-        "centre": centre,
-        "lod": lod,
-        "sec_per_cell": sec,
-        "cells_per_sec": 1.0 / sec if sec > 0 else float("inf"),
-        "upload_seconds": upload,
-        "miss_rate": float(np.mean(miss)) if miss else 0.0,
-        "miss_rate_px": missed_px / ref_px_total if ref_px_total else 0.0,
-        "extra_per_cell": float(np.mean([len(p - ref[k].keys()) for k, p in enumerate(pvs)])),
-        "pvs_mean": float(np.mean([len(p) for p in pvs])),
-    }
+def _views(
+    scene: SourceScene,
+    cells: list[ViewCell],
+    per_cell: int,
+    size: tuple[int, int],
+    view_distance: float,
+    footprints: shapely.STRtree,
+    seed: int,
+    gl: moderngl.Context,
+    tick: Callable[[], None],
+) -> list[tuple[int, NDArray[np.uint32], NDArray[np.uint8]]]:
+    """Truth frames at random eye points: ``(cell index, ids, rgb)`` per view."""
+    from walkstream.client.draw.frames import camera
+    from walkstream.client.truth.render import TruthRenderer
+
+    meshes, ids = meshes_for_scene(scene, 2)
+    lo = np.array([m.positions[:, :2].min(axis=0) if len(m.positions) else (np.inf, np.inf) for m in meshes], np.float64).reshape(-1, 2)
+    hi = np.array([m.positions[:, :2].max(axis=0) if len(m.positions) else (-np.inf, -np.inf) for m in meshes], np.float64).reshape(-1, 2)
+    rng = np.random.default_rng([int(seed), 0xE7E])
+    out = []
+    for k, c in enumerate(cells):
+        eyes = reference_points(
+            c.polygon, c.zmin, c.zmax, per_cell, margin=VIEW_MARGIN, footprints=footprints,
+            seed=seed * 7919 + 500_009 + c.id,
+        )
+        # one truth per cell, of the objects within the view distance of the cell's box:
+        # a whole city at LOD2 (3 GB for the Vienna blocks) is more than one GL buffer holds
+        poly = np.asarray(c.polygon, np.float64)
+        gap = np.maximum(np.maximum(lo - poly.max(axis=0), poly.min(axis=0) - hi), 0.0)
+        near = np.flatnonzero(np.einsum("nk,nk->n", gap, gap) <= view_distance**2)
+        with TruthRenderer({int(ids[i]): meshes[i] for i in near}, size, view_distance=view_distance, ctx=gl) as tr:
+            for eye in eyes:
+                rgb, img = tr.render(eye, camera(eye, float(rng.uniform(0.0, 2.0 * math.pi))))
+                out.append((k, img, rgb))
+        tick()
+    return out
 
 
 # --------------------------------------------------------------------------- output
 
 
-def setting_label(s: dict[str, Any]) -> str:
-    """Short name of a setting, e.g. ``"128 L0 +c"`` (``+c``: the centre is sampled too)."""
-    return f"{s['resolution']} L{s['lod']}" + (" +c" if s["centre"] else "")
-
-
-def _is_default(result: dict[str, Any], s: dict[str, Any]) -> bool:
-    d = result.get("default")
-    return d is not None and all(d[k] == s[k] for k in ("resolution", "centre", "lod"))
+def _pct(v: float | None, digits: int = 2) -> str:
+    return "n/a" if v is None else f"{100.0 * v:.{digits}f}"
 
 
 def format_table(result: dict[str, Any]) -> str:
-    """A text table of every setting of :func:`visibility_benchmark`'s result, and the default."""
+    """The rows of :func:`visibility_benchmark` as text, with the reference and the targets."""
     ref = result["reference"]
     lines = [
-        f"reference: {len(ref['cells'])} cells ({ref['cells_scored']} see something), "
-        f"{ref['points_per_cell']:.0f} points/cell at {ref['resolution']} px, LOD{ref['lod']}: "
-        f"PVS {ref['pvs_mean']:.1f} of {ref['objects']} objects, "
-        f"{ref['sec_per_cell']:.2f} s/cell",
+        f"reference: {len(result['cells'])} cells ({ref['cells_scored']} see something), "
+        f"{ref['points_per_cell']:.0f} random points/cell over the cell and its height range, "
+        f"{ref['resolution']} px, LOD{ref['lod']}, no frustum culling: PVS {ref['pvs_mean']:.1f} "
+        f"of {result['objects']} objects, {ref['sec_per_cell']:.1f} s/cell",
+        f"image error: {result['views']} random eye points ({result['view_size'][0]}x{result['view_size'][1]}, "
+        "random heading) compared with their ground truth",
         "",
-        f"{'setting':<11} {'res':>4} {'LOD':>3} {'centre':>6} {'pts':>4} {'ms/cell':>8} "
-        f"{'cells/s':>8} {'upload s':>8} {'miss %':>7} {'miss px %':>9} {'extra':>6} {'PVS':>6}",
+        f"{'setting':<20} {'pts':>4} {'ms/cell':>8} {'time x':>6} {'PVS':>6} {'PVS x':>5} {'culled%':>7} "
+        f"{'miss#%':>6} {'miss px%':>8} {'max obj%':>8} {'view px%':>8} {'view #%':>7} {'v>0.5%':>6}",
     ]
-    for s in result["settings"]:
-        mark = "  <- default" if _is_default(result, s) else ""
+    for r in result["rows"]:
+        mark = "  <- bake default" if r["name"] == result.get("default") else ""
+        sec, tr = r.get("sec_per_cell"), r["time_ratio"]
         lines.append(
-            f"{setting_label(s):<11} {s['resolution']:>4} {s['lod']:>3} "
-            f"{'yes' if s['centre'] else 'no':>6} {s['points_per_cell']:>4.0f} "
-            f"{1e3 * s['sec_per_cell']:>8.1f} {s['cells_per_sec']:>8.1f} "
-            f"{s['upload_seconds']:>8.2f} {100 * s['miss_rate']:>7.2f} "
-            f"{100 * s['miss_rate_px']:>9.3f} {s['extra_per_cell']:>6.2f} {s['pvs_mean']:>6.1f}{mark}"
+            f"{r['name']:<20} {r.get('points_per_cell', float('nan')):>4.0f} "
+            f"{'n/a' if sec is None else f'{1e3 * sec:.1f}':>8} "
+            f"{'n/a' if tr is None else f'{tr:.2f}':>6} {r['pvs_mean']:>6.1f} "
+            f"{r['pvs_ratio']:>5.2f} {_pct(r['culled'], 1):>7} {_pct(r['miss_count'], 1):>6} "
+            f"{_pct(r['miss_px'], 4):>8} {_pct(r['miss_max'], 4):>8} {_pct(r.get('view_miss_px'), 3):>8} "
+            f"{_pct(r.get('view_miss_count'), 1):>7} {_pct(r.get('view_over_half'), 1):>6}{mark}"
         )
-    lines.append("")
-    d = result.get("default")
-    if d is None:
-        lines.append(
-            f"default: none (no setting has a pixel-weighted miss rate <= {100 * MAX_MISS_RATE_PX:g} %)"
-        )
-    else:
-        lines.append(
-            f"default: {setting_label(d)} (resolution {d['resolution']}, LOD{d['lod']} occluders, "
-            f"{'corners and centre' if d['centre'] else 'corners only'}): "
-            f"{1e3 * d['sec_per_cell']:.1f} ms/cell, pixel-weighted miss rate "
-            f"{100 * d['miss_rate_px']:.3f} %"
-        )
+    t = TARGETS
+    lines += [
+        "",
+        f"targets: miss# <= {100 * t['miss_count']:g} %, max obj <= {100 * t['miss_max']:g} %, "
+        f"miss px <= {100 * t['miss_px']:g} %, time x <= {t['time_ratio']:g}, PVS x <= {t['pvs_ratio']:g}, "
+        "culled >= 90 %",
+        "view px%: truth pixels showing an object missing from the cell's PVS; view #%: objects "
+        "shown that are missing; v>0.5%: views whose missing pixels exceed 0.5 % of the frame",
+    ]
+    for r in result["rows"]:
+        s = r.get("missed_sizes")
+        if s is not None and not s:
+            lines.append(f"missed objects' sizes in the views, {r['name']}: nothing missed")
+        elif s:
+            a = 100.0 * np.array(s)
+            lines.append(
+                f"missed objects' sizes in the views, {r['name']}: {len(a)} misses, median "
+                f"{np.median(a):.4f} %, p95 {np.percentile(a, 95):.4f} %, max {a.max():.4f} % of the frame"
+            )
     return "\n".join(lines)
 
 
-def plot_visibility_benchmark(
-    result: dict[str, Any], path: str | os.PathLike[str], *, dpi: int = 130
-) -> None:
-    """Write a PNG: seconds per cell (log x) against pixel-weighted miss rate (%) per setting.
+def _nice_ticks(lo: float, hi: float) -> list[float]:
+    """A few 1-2-5 tick values covering ``lo .. hi`` (> 0) on a log axis."""
+    e0, e1 = math.floor(math.log10(lo)) - 1, math.ceil(math.log10(hi)) + 1
+    cand = [m * 10.0**e for e in range(e0, e1) for m in (1, 2, 5)]
+    return [v for v in cand if lo / 2.5 <= v <= hi * 2.5]
 
-    Both axes are logarithmic (a miss rate of 0 is drawn on the floor of the plot).
-    Colour is the resolution, marker shape the occluder LOD, a hollow marker a setting
-    that samples the centre too; each point is labelled (e.g. ``"128 L0 +c"``), the
-    1 % line is drawn and the default setting is ringed in red.
+
+def plot_visibility_benchmark(result: dict[str, Any], path: str | os.PathLike[str], *, dpi: int = 120) -> None:
+    """A PNG of three panels: misses against bake time, misses against PVS size, missed objects' sizes.
+
+    Left: pixel-weighted misses and the largest single miss (%, log) against seconds
+    per cell (log) for every setting, the targets as dashed lines.  Middle: misses by
+    count against the PVS size relative to the first default, the 25 % line.  Right:
+    the distribution of the missed objects' sizes at the random eye points (share of
+    the frame, log bins) for the first default, the bake default and the baked PVS.
     """
     import matplotlib
-    import matplotlib.ticker
 
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
-    from matplotlib.lines import Line2D
+    from matplotlib.ticker import FuncFormatter, NullFormatter
 
-    rows = result["settings"]
-    fig = Figure(figsize=(10, 6.5), dpi=dpi)
-    ax = fig.add_subplot(1, 1, 1)
-    res_values = sorted({s["resolution"] for s in rows})
-    palette = ["#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#17becf"]
-    colour = {r: palette[i % len(palette)] for i, r in enumerate(res_values)}
-    shape = {0: "o", 1: "s", 2: "^"}
-    # Log y so that rates far below the 1 % line stay apart; a rate of 0 sits on the floor.
-    limit = 100 * MAX_MISS_RATE_PX
-    pct = [100 * s["miss_rate_px"] for s in rows]
-    positive = [v for v in pct if v > 0]
-    floor = min(positive + [limit]) / 3.0
-    for s, v in zip(rows, pct, strict=True):
-        x, y = s["sec_per_cell"], max(v, floor)
-        c = colour[s["resolution"]]
-        ax.plot(
-            [x],
-            [y],
-            linestyle="none",
-            marker=shape.get(s["lod"], "D"),
-            markersize=8,
-            markeredgecolor=c,
-            markeredgewidth=1.6,
-            markerfacecolor="white" if s["centre"] else c,
+    rows = result["rows"]
+    timed = [r for r in rows if r.get("sec_per_cell")]
+    fig = Figure(figsize=(17, 6.0), dpi=dpi)
+    ax1, ax2, ax3 = fig.subplots(1, 3)
+    floor = 1e-5
+    for r in timed:
+        x = r["sec_per_cell"]
+        special = r["name"] in (TODAY.name, result.get("default"))
+        colour = "#D55E00" if r["name"] == TODAY.name else ("#009E73" if r["name"] == result.get("default") else "#0072B2")
+        ax1.plot([x], [max(100 * r["miss_px"], floor)], "o", color=colour, markersize=8 if special else 6)
+        ax1.plot([x], [max(100 * r["miss_max"], floor)], "^", color=colour, markersize=8 if special else 6, markerfacecolor="white")
+        ax1.annotate(r["name"], (x, max(100 * r["miss_px"], floor)), xytext=(4, 3), textcoords="offset points", fontsize=7)
+        ax2.plot([r["pvs_ratio"]], [100 * r["miss_count"]], "o", color=colour, markersize=8 if special else 6)
+        ax2.annotate(r["name"], (r["pvs_ratio"], 100 * r["miss_count"]), xytext=(4, 3), textcoords="offset points", fontsize=7)
+    base = next((r for r in timed if r["name"] == TODAY.name), None)
+    if base is not None:
+        ax1.axvline(TARGETS["time_ratio"] * base["sec_per_cell"], color="#888888", linestyle=":", linewidth=1.0)
+        ax1.annotate("2 x the first default's time", (TARGETS["time_ratio"] * base["sec_per_cell"], 0.98), xycoords=("data", "axes fraction"), fontsize=7, rotation=90, va="top", ha="right", color="#555555")
+    ax1.axhline(100 * TARGETS["miss_px"], color="#0072B2", linestyle="--", linewidth=1.0, label="target: misses by pixels")
+    ax1.axhline(100 * TARGETS["miss_max"], color="#555555", linestyle="-.", linewidth=1.0, label="target: largest single miss")
+    ax1.plot([], [], "o", color="#555555", label="misses by pixels (pooled)")
+    ax1.plot([], [], "^", color="#555555", markerfacecolor="white", label="largest missed object (one cell)")
+    ax1.set_xscale("log")
+    ax1.set_yscale("log")
+    # seconds per cell span less than a decade: labelled minor ticks would overlap
+    ax1.xaxis.set_minor_formatter(NullFormatter())
+    ax1.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax1.set_xticks(_nice_ticks(min(r["sec_per_cell"] for r in timed), max(r["sec_per_cell"] for r in timed)) if timed else [])
+    ax1.set_xlabel("bake seconds per cell (median, log)")
+    ax1.set_ylabel("% of a cell's reference pixels (log)")
+    ax1.set_title("misses against bake time (red: first default, green: bake default)", fontsize=9)
+    ax1.legend(fontsize=7, loc="lower left")
+    ax2.axvline(TARGETS["pvs_ratio"], color="#888888", linestyle=":", linewidth=1.0)
+    ax2.axhline(100 * TARGETS["miss_count"], color="#0072B2", linestyle="--", linewidth=1.0)
+    ax2.set_xlabel("mean PVS size / the first default's")
+    ax2.set_ylabel("reference-visible objects missed (% by count)")
+    ax2.set_title("misses by count against PVS growth (targets dashed)", fontsize=9)
+    bins = np.logspace(-6, 0, 37)
+    for name, colour in ((TODAY.name, "#D55E00"), (result.get("default"), "#009E73"), ("baked", "#555555")):
+        r = next((x for x in rows if x["name"] == name), None)
+        if r is None or not r.get("missed_sizes"):
+            continue
+        ax3.hist(
+            np.clip(r["missed_sizes"], 1e-6, 1.0), bins=bins, histtype="step", linewidth=1.6, color=colour,
+            linestyle="--" if name == "baked" else "-",
+            label=f"{name}: {len(r['missed_sizes'])} misses in {result['views']} views",
         )
-        ax.annotate(
-            setting_label(s),
-            (x, y),
-            xytext=(5, -11 if s["centre"] else 5),
-            textcoords="offset points",
-            fontsize=7.5,
-            color="#333333",
-        )
-        if _is_default(result, s):
-            ax.plot(
-                [x],
-                [y],
-                linestyle="none",
-                marker="o",
-                markersize=17,
-                markerfacecolor="none",
-                markeredgecolor="red",
-                markeredgewidth=2.0,
-            )
-    ax.axhline(limit, color="red", linestyle="--", linewidth=1.0)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_ylim(floor / 1.6, max(pct + [limit]) * 2.0)
-    x_all = [s["sec_per_cell"] for s in rows]
-    ax.set_xlim(min(x_all) / 1.4, max(x_all) * 1.6)
-    ax.yaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _pos: f"{v:g}"))
-    ax.set_xlabel("render seconds per cell (median over cells, log scale)")
-    ax.set_ylabel(
-        "pixel-weighted miss rate (%, log scale"
-        + (", 0 on the floor)" if len(positive) < len(pct) else ")")
-    )
-    ax.grid(True, which="both", alpha=0.25)
-    handles = [
-        Line2D([], [], linestyle="none", marker="o", color=colour[r], label=f"{r} px/face")
-        for r in res_values
-    ]
-    handles += [
-        Line2D(
-            [],
-            [],
-            linestyle="none",
-            marker=shape.get(lod, "D"),
-            color="#555555",
-            label=f"LOD{lod} occluders",
-        )
-        for lod in sorted({s["lod"] for s in rows})
-    ]
-    handles += [
-        Line2D(
-            [],
-            [],
-            linestyle="none",
-            marker="o",
-            markerfacecolor="white",
-            color="#555555",
-            label="corners + centre (+c)",
-        ),
-        Line2D([], [], color="red", linestyle="--", label=f"{100 * MAX_MISS_RATE_PX:g} % limit"),
-        Line2D(
-            [],
-            [],
-            linestyle="none",
-            marker="o",
-            markersize=11,
-            markerfacecolor="none",
-            markeredgecolor="red",
-            markeredgewidth=2.0,
-            label="default",
-        ),
-    ]
-    ax.legend(handles=handles, fontsize=8, loc="upper left", framealpha=0.9)
+    ax3.set_xscale("log")
+    ax3.set_xlabel("missed object's pixels / the frame's pixels (log)")
+    ax3.set_ylabel("missed objects")
+    ax3.set_title("sizes of the objects a PVS misses at random eye points", fontsize=9)
+    if ax3.get_legend_handles_labels()[0]:
+        ax3.legend(fontsize=7)
+    for ax in (ax1, ax2, ax3):
+        ax.grid(True, which="both", alpha=0.25)
     ref = result["reference"]
-    d = result.get("default")
-    ax.set_title(
-        f"Visibility: error vs run time on {len(ref['cells'])} cells; reference "
-        f"{ref['points_per_cell']:.0f} points/cell at {ref['resolution']} px, LOD{ref['lod']}\n"
-        + (f"default: {setting_label(d)}" if d is not None else "default: none under the limit"),
+    fig.suptitle(
+        f"Visibility bake against a dense reference: {len(result['cells'])} cells, "
+        f"{ref['points_per_cell']:.0f} random points/cell at {ref['resolution']} px, LOD2, no culling",
         fontsize=10,
     )
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.95))
     fig.savefig(os.fspath(path))

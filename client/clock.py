@@ -41,7 +41,7 @@ from typing import Any, Protocol, TypeVar, runtime_checkable
 
 from walkstream.shared.errors import SimulationStalled, WalkstreamError
 
-__all__ = ["Clock", "RealClock", "SimClock"]
+__all__ = ["Clock", "RealClock", "SimClock", "within"]
 
 T = TypeVar("T")
 
@@ -427,3 +427,21 @@ def _describe(task: asyncio.Task[Any]) -> str:
     coro = task.get_coro()
     name = getattr(coro, "__qualname__", None) or type(coro).__name__
     return f"{task.get_name()}:{name}"
+
+
+async def within(clock: Clock, seconds: float, coro: Any) -> Any:
+    """``await coro``, or ``None`` when it takes longer than ``seconds`` on ``clock``."""
+    task = asyncio.ensure_future(coro)
+    timer = asyncio.ensure_future(clock.sleep(seconds))
+    try:
+        await asyncio.wait({task, timer}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        timer.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await timer
+    if task.done():
+        return task.result()
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task
+    return None

@@ -32,7 +32,7 @@ import httpx
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.clock import Clock, RealClock, SimClock
+from walkstream.client.clock import Clock, RealClock, SimClock, within
 from walkstream.client.draw.allocate import allocate_ach, allocate_distance
 from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.culling import frustum_cull
@@ -42,19 +42,23 @@ from walkstream.client.net.link import LinkProfile, ShapedTransport
 from walkstream.client.report.metrics import (
     FrameLog,
     FrameLogBuilder,
+    first_perfect_index,
     link_utilisation,
     summarise,
 )
+from walkstream.client.report.truth import summarise_truth
 from walkstream.client.rewrite.pool import ObjectGeometry
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.streamer import Streamer, StreamerConfig
+from walkstream.client.stream.walkstart import bundle_start, manifest_task
+from walkstream.client.truth.recorder import TruthRecorder, TruthResult
 from walkstream.shared.camera import look_at, perspective
-from walkstream.shared.errors import ApiError, InputError, StreamCut
+from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.paths import RecordedPath
-from walkstream.shared.wire import Manifest, decode_manifest
+from walkstream.shared.wire import Manifest
 
 __all__ = ["ReplayConfig", "ReplayResult", "run_replay", "replay"]
 
@@ -102,6 +106,8 @@ class ReplayConfig:
     """Start with the start bundle (one round trip); False: scene list, manifest, path."""
     gzip: bool = True
     """Ask for the streams gzip-compressed (``Accept-Encoding: gzip``)."""
+    truth_every: int = 0
+    """Compare every N-th frame with the ground truth after the walk (0: never)."""
 
     def __post_init__(self) -> None:
         if self.stream not in STREAM_FORMS:
@@ -123,6 +129,8 @@ class ReplayConfig:
             raise InputError(f"--workers {self.workers}: at least 1")
         if self.snapshot_every < 0:
             raise InputError(f"--snapshot-every {self.snapshot_every}: must not be negative")
+        if self.truth_every < 0:
+            raise InputError(f"--truth-every {self.truth_every}: must not be negative")
         w, h = self.size
         if not (16 <= w <= 8192 and 16 <= h <= 8192):
             raise InputError(f"--size {w}x{h}: each side from 16 to 8192 pixels")
@@ -143,6 +151,8 @@ class ReplayResult:
     snapshots: list[Path] = field(default_factory=list)
     spikes: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
     """Per frame: the simulated device stalled (its occasional 2x spike)."""
+    truth: TruthResult | None = None
+    """The frames compared with the ground truth (``truth_every``)."""
 
 
 def run_replay(
@@ -150,6 +160,7 @@ def run_replay(
     base_url: str,
     config: ReplayConfig,
     progress: Callable[[float, float], None] | None = None,
+    truth_progress: Callable[[int, int], None] | None = None,
 ) -> ReplayResult:
     """Run a replay to the end on the configured clock (blocking).
 
@@ -164,11 +175,14 @@ def run_replay(
         The replay settings.
     progress:
         Called with ``(walk seconds done, walk seconds in total)`` now and then.
+    truth_progress:
+        Called with ``(frames compared, frames to compare)`` after the walk
+        (``truth_every``).
     """
     if config.clock == "sim":
         sim = SimClock()
-        return sim.run(replay(transport, base_url, config, sim, progress))
-    return asyncio.run(_real(transport, base_url, config, progress))
+        return sim.run(replay(transport, base_url, config, sim, progress, truth_progress))
+    return asyncio.run(_real(transport, base_url, config, progress, truth_progress))
 
 
 async def _real(
@@ -176,33 +190,15 @@ async def _real(
     base_url: str,
     config: ReplayConfig,
     progress: Callable[[float, float], None] | None,
+    truth_progress: Callable[[int, int], None] | None,
 ) -> ReplayResult:
-    return await replay(transport, base_url, config, RealClock(), progress)
+    return await replay(transport, base_url, config, RealClock(), progress, truth_progress)
 
 
-async def _manifest(api: SceneClient, disk: DiskCache | None) -> Manifest:
-    """The manifest, revalidated against the disk cache's copy when there is one."""
-    assert api.scene is not None
-    stored = disk.get_manifest(api.scene) if disk is not None else None
-    etag = stored[0] if stored is not None else None
-    m = await api.manifest(etag)
-    if m is None:  # 304: the stored manifest is current
-        assert stored is not None
-        return decode_manifest(stored[1], f"scene {api.scene!r} manifest (disk cache)", etag)
-    if disk is not None and m.etag:
-        disk.put_manifest(api.scene, m.etag, m.body)
-    return m
-
-
-def _manifest_task(
-    api: SceneClient, disk: DiskCache | None, arrived: Callable[[Manifest], None]
-) -> asyncio.Task[Manifest]:
-    """Fetch the manifest on its own; ``arrived`` is called with it when it is in."""
-    task = asyncio.create_task(_manifest(api, disk))
-    task.add_done_callback(
-        lambda t: None if t.cancelled() or t.exception() is not None else arrived(t.result())
-    )
-    return task
+def _projection(config: ReplayConfig) -> NDArray[np.float32]:
+    """The camera's projection: ``fov_deg`` vertical, the frame's aspect, 0.5 m to 2 km."""
+    w, h = config.size
+    return perspective(config.fov_deg, w / h, 0.5, 2000.0)
 
 
 def _view(xyz: NDArray[np.float64], yaw: float, pitch: float) -> NDArray[np.float32]:
@@ -277,10 +273,12 @@ async def replay(
     config: ReplayConfig,
     clock: Clock,
     progress: Callable[[float, float], None] | None = None,
+    truth_progress: Callable[[int, int], None] | None = None,
 ) -> ReplayResult:
     """The replay coroutine (see :func:`run_replay` to run it on a clock)."""
     link = ShapedTransport(transport, config.link, clock)
     renderer: Any = None
+    truth: TruthResult | None = None
     streamer: Streamer | None = None
     disk: DiskCache | None = None
     async with httpx.AsyncClient(
@@ -311,16 +309,17 @@ async def replay(
 
             got = None
             if config.start_bundle and config.kind != "interior":
-                got = await _bundle_start(
-                    config, clock, api, streamer, disk, manifest_arrived, manifest_fut, tasks
+                got = await bundle_start(
+                    config.path, config.setup_timeout_s, clock, api, streamer, disk,
+                    manifest_arrived, manifest_fut, tasks,
                 )
             if got is None:
                 # no start bundle (or it failed before the path): scene list, manifest, path
-                if await _within(clock, config.setup_timeout_s, api.resolve_scene()) is None:
+                if await within(clock, config.setup_timeout_s, api.resolve_scene()) is None:
                     api.scene = config.scene or "?"
                 if not manifest_fut.done():
-                    tasks.append(_manifest_task(api, disk, manifest_arrived))
-                got = await _within(clock, config.setup_timeout_s, api.path(config.path))
+                    tasks.append(manifest_task(api, disk, manifest_arrived))
+                got = await within(clock, config.setup_timeout_s, api.path(config.path))
             setup_s = clock.now() - t_start
             if got is None:  # no path, no walk: an empty report that says why
                 stats = link.stats
@@ -337,7 +336,7 @@ async def replay(
             path, _path_bytes = got
             kind = config.kind
             if kind is None:
-                m0 = await _within(clock, config.setup_timeout_s, asyncio.shield(manifest_fut))
+                m0 = await within(clock, config.setup_timeout_s, asyncio.shield(manifest_fut))
                 kind = "city" if m0 is None else m0.kind
             if kind == "interior":
                 return await _replay_interior(
@@ -356,9 +355,28 @@ async def replay(
                     renderer.forget_object(oid)
 
             cache.on_evict = on_evict
-            log, snapshots, spikes = await _walk(
-                config, clock, path, streamer, cache, device, renderer, progress, t_start, link
+            recorder = (
+                TruthRecorder(config.truth_every, config.size, _projection(config))
+                if config.truth_every
+                else None
             )
+            log, snapshots, spikes = await _walk(
+                config, clock, path, streamer, cache, device, renderer, progress, t_start, link,
+                recorder,
+            )
+            if recorder is not None:
+                # after the walk, with the streamer stopped (nothing more goes down the
+                # link), on the inner transport; busy(): no simulated time passes
+                await streamer.close()
+                first = first_perfect_index(log)
+                with clock.busy():
+                    truth = await recorder.finish(
+                        transport,
+                        base_url,
+                        api.scene or "",
+                        t_first_perfect=None if first is None else float(log.t[first]),
+                        progress=truth_progress,
+                    )
             manifest = manifest_fut.result() if manifest_fut.done() else None
             disk_state = (disk.available, disk.last_error) if disk is not None else (False, None)
             t_end = clock.now()
@@ -451,6 +469,13 @@ async def replay(
         }
     )
     summary["spike_frames"] = int(spikes.sum())
+    if truth is not None:
+        first = first_perfect_index(log)
+        summary["truth"] = summarise_truth(
+            truth.log, None if first is None else float(log.t[first])
+        )
+        if truth.error:
+            summary["truth_error"] = truth.error
     if config.cache_dir is not None:
         # the disk cache never raises: say here whether it was usable
         summary["disk_cache"] = {
@@ -458,7 +483,7 @@ async def replay(
             "available": disk_state[0],
             "error": disk_state[1],
         }
-    return ReplayResult(summary, log, bytes_log, snapshots, spikes)
+    return ReplayResult(summary, log, bytes_log, snapshots, spikes, truth)
 
 
 async def _replay_interior(
@@ -550,69 +575,6 @@ def _overfetch(streamer: Streamer, entered: set[int]) -> dict[str, int]:
     }
 
 
-async def _bundle_start(
-    config: ReplayConfig,
-    clock: Clock,
-    api: SceneClient,
-    streamer: Streamer,
-    disk: DiskCache | None,
-    manifest_arrived: Callable[[Manifest], None],
-    manifest_fut: asyncio.Future[Manifest],
-    tasks: list[asyncio.Task[Any]],
-) -> tuple[RecordedPath, int] | None:
-    """Start with the start bundle: the path and its bytes.
-
-    None when the bundle failed before the path arrived (the caller then starts the
-    old way).  When it is cut after the path but before the manifest, a task
-    (added to ``tasks``) fetches the manifest on its own.
-    """
-    loop = asyncio.get_running_loop()
-    path_fut: asyncio.Future[tuple[RecordedPath, int]] = loop.create_future()
-
-    def on_path(p: RecordedPath, n: int) -> None:
-        if not path_fut.done():
-            path_fut.set_result((p, n))
-
-    def on_manifest(m: Manifest) -> None:
-        if disk is not None and m.etag:
-            disk.put_manifest(m.name, m.etag, m.body)
-        manifest_arrived(m)
-
-    def on_end(err: BaseException | None) -> None:
-        if not path_fut.done():
-            path_fut.set_exception(err or ApiError("start bundle: no path in it"))
-        elif not manifest_fut.done() and api.scene is not None:
-            # cut after the path: the manifest (the grammar) comes on its own
-            tasks.append(_manifest_task(api, disk, manifest_arrived))
-
-    streamer.start_bundle(config.path, on_path, on_manifest, on_end)
-    try:
-        got: tuple[RecordedPath, int] | None = await _within(
-            clock, config.setup_timeout_s, path_fut
-        )
-    except (ApiError, StreamCut):
-        return None
-    return got
-
-
-async def _within(clock: Clock, seconds: float, coro: Any) -> Any:
-    """``await coro``, or ``None`` when it takes longer than ``seconds`` on ``clock``."""
-    task = asyncio.ensure_future(coro)
-    timer = asyncio.ensure_future(clock.sleep(seconds))
-    try:
-        await asyncio.wait({task, timer}, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        timer.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await timer
-    if task.done():
-        return task.result()
-    task.cancel()
-    with contextlib.suppress(asyncio.CancelledError):
-        await task
-    return None
-
-
 def _bytes_log(stats: Any, t_start: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     return (
         np.array([t for t, _ in stats.down_log], dtype=np.float64) - t_start,
@@ -658,12 +620,11 @@ async def _walk(
     progress: Callable[[float, float], None] | None,
     t_start: float,
     link: ShapedTransport,
+    recorder: TruthRecorder | None = None,
 ) -> tuple[FrameLog, list[Path], NDArray[np.bool_]]:
     tick = 1.0 / config.fps
     total = path.duration if config.duration_s is None else min(config.duration_s, path.duration)
-    w, h = config.size
-    far = 2000.0
-    proj = perspective(config.fov_deg, w / h, 0.5, far)
+    proj = _projection(config)
     controller = BudgetController(config.fps_target, k=config.budget_frames)
     predictor = MotionPredictor()
     inputs = _FrameInputs()
@@ -732,6 +693,20 @@ async def _walk(
             out.parent.mkdir(parents=True, exist_ok=True)
             renderer.save_png(out)
             snapshots.append(out)
+        if recorder is not None and recorder.due(frame):
+            rec = streamer.cells.get(cur) if cur is not None else None
+            recorder.record(
+                frame=frame,
+                t=t - t_start,
+                eye=xyz,
+                view=view,
+                cell=cur,
+                pvs=None if rec is None else rec.pvs,
+                received=cache.ids(streamer.kind) + cache.ids("geom"),
+                built=cache.ids("geom"),
+                geoms=inputs.geoms,
+                lods=alloc.lod,
+            )
         controller.observe(frame_time, int(alloc.triangles))
         builder.append(
             t=t - t_start,

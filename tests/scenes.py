@@ -61,7 +61,13 @@ def _source(size: float, seed: int) -> SourceScene:
 
 
 def build_city_db(
-    path: Path, *, name: str = "tiny", size: float = 200.0, seed: int = 1, k: int = 20
+    path: Path,
+    *,
+    name: str = "tiny",
+    size: float = 200.0,
+    seed: int = 1,
+    k: int = 20,
+    drop: dict[int, set[int]] | None = None,
 ) -> CityDb:
     """Bake a small generated city into ``path`` with made-up PVS lists.
 
@@ -75,6 +81,8 @@ def build_city_db(
         Passed to :func:`~walkstream.server.sources.citygen.generate_city`.
     k:
         PVS size: each cell sees the ``k`` objects nearest to its centroid.
+    drop:
+        Cell id -> objects left out of that cell's PVS (a planted miss).
     """
     scene = _source(size, seed)
     cells = make_cells(scene)
@@ -103,6 +111,7 @@ def build_city_db(
         for c in cells:
             d = np.hypot(*(centres - np.array(c.centroid)).T)
             near = ids[np.argsort(d, kind="stable")[:k]]
+            near = near[~np.isin(near, sorted((drop or {}).get(c.id, set())))]
             w.set_pvs(c.id, near, np.ones(len(near)))
             pvs[c.id] = tuple(sorted(int(i) for i in near))
         first = cells[0]

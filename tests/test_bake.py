@@ -167,8 +167,12 @@ def test_a_killed_bake_process_leaves_the_database_and_resumes(tmp_path: Path, g
 
 def test_bench_visibility_cli(baked: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     db, _ = baked
-    png = tmp_path / "vis.png"
-    assert main(["bench", "visibility", str(db), "--sample", "1", "--plot", str(png)]) == 0
+    png, js = tmp_path / "vis.png", tmp_path / "vis.json"
+    args = ["bench", "visibility", str(db), "--sample", "1", "--ref-points", "4", "--ref-resolution", "32",
+            "--views", "1", "--settings", "corners-16,boundary20-16-t2", "--plot", str(png), "--json", str(js)]
+    assert main(args) == 0
     out = capsys.readouterr().out
-    assert "64 L0" in out and "256 L2 +c" in out and "default:" in out
+    assert "corners-64" in out and "boundary20-16-t2" in out and "baked" in out and "targets:" in out
     assert png.read_bytes()[:4] == b"\x89PNG"
+    assert {r["name"] for r in json.loads(js.read_text())["rows"]} >= {"corners-64", "corners-16", "baked"}
+    assert main(["bench", "visibility", str(db), "--settings", "nonsense"]) == 2

@@ -1,4 +1,4 @@
-"""The visibility error-vs-time benchmark (walkstream.benchmarks.visibility) on a tiny generated city."""
+"""The visibility benchmark (walkstream.benchmarks.visibility) on a tiny generated city."""
 
 from __future__ import annotations
 
@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 
 from walkstream.benchmarks.visibility import (
-    MAX_MISS_RATE_PX,
+    TODAY,
+    BenchInput,
     format_table,
     load_bench_input,
+    parse_setting,
     pick_cells,
     plot_visibility_benchmark,
-    setting_label,
     visibility_benchmark,
 )
 from walkstream.server.bake.cells import make_cells
@@ -26,24 +27,26 @@ from walkstream.shared.errors import InputError
 if TYPE_CHECKING:
     import moderngl
 
+SETTINGS = ["boundary20-32", "boundary20-32-t4", "corners-32", "boundary10-64"]
+
 
 @pytest.fixture(scope="module")
-def city() -> Any:
+def city() -> BenchInput:
     scene = load_geojson_dict(generate_city(150, 2))
-    return scene, make_cells(scene)
+    return BenchInput(scene, make_cells(scene), 800.0, "citygen 150 2")
 
 
 @pytest.fixture(scope="module")
-def result(city: Any, gl_ctx: moderngl.Context) -> dict[str, Any]:
-    scene, cells = city
+def result(city: BenchInput, gl_ctx: moderngl.Context) -> dict[str, Any]:
     calls: list[tuple[int, int]] = []
     out = visibility_benchmark(
-        scene,
-        cells,
+        city,
+        settings=SETTINGS,
         sample=2,
-        resolutions=(32, 64),
-        lods=(0, 2),
-        ref_points=4,
+        ref_points=6,
+        ref_resolution=64,
+        views=1,
+        view_size=(96, 72),
         ctx=gl_ctx,
         progress=lambda d, n: calls.append((d, n)),
     )
@@ -52,84 +55,83 @@ def result(city: Any, gl_ctx: moderngl.Context) -> dict[str, Any]:
 
 
 def test_rows_and_ranges(result: dict[str, Any]) -> None:
-    rows = result["settings"]
-    keys = {(s["resolution"], s["centre"], s["lod"]) for s in rows}
-    assert len(rows) == len(keys) == 2 * 2 * 2
-    assert keys == {(r, c, lod) for r in (32, 64) for c in (False, True) for lod in (0, 2)}
-    for s in rows:
-        assert 0.0 <= s["miss_rate"] <= 1.0
-        assert 0.0 <= s["miss_rate_px"] <= 1.0
-        assert s["sec_per_cell"] > 0 and s["extra_per_cell"] >= 0 and s["pvs_mean"] >= 0
-        assert s["points_per_cell"] <= (10 if s["centre"] else 8)
+    rows = {r["name"]: r for r in result["rows"]}
+    # the first default is the yardstick of the ratios: added when not asked for
+    assert list(rows) == [TODAY.name, *SETTINGS]
+    assert rows[TODAY.name]["time_ratio"] == 1.0 and rows[TODAY.name]["pvs_ratio"] == 1.0
+    for r in rows.values():
+        for key in ("miss_count", "miss_px", "miss_max", "view_miss_px", "view_miss_count", "culled"):
+            assert 0.0 <= r[key] <= 1.0, key
+        assert r["sec_per_cell"] > 0 and r["pvs_mean"] >= 0 and r["points_per_cell"] >= 1
+        assert set(r["meets"]) == {"miss_count", "miss_max", "miss_px", "time_ratio", "pvs_ratio"}
+    # a hardly-visible threshold only ever drops objects
+    plain, thr = rows["boundary20-32"], rows["boundary20-32-t4"]
+    assert thr["pvs_mean"] <= plain["pvs_mean"] and thr["miss_count"] >= plain["miss_count"]
+    assert rows["boundary10-64"]["points_per_cell"] > rows["boundary20-32"]["points_per_cell"]
     ref = result["reference"]
-    assert ref["resolution"] == 128 and ref["lod"] == 2
-    assert len(ref["cells"]) == 2 and ref["cells_scored"] >= 1
-    assert ref["points_per_cell"] <= 4 * 3
-    # progress counts every render: the reference and each setting, once per cell
-    assert result["_progress"][-1] == (2 * 9, 2 * 9)
+    assert ref["resolution"] == 64 and ref["lod"] == 2 and ref["frustum_culling"] is False
+    assert ref["points_per_cell"] <= 6 and ref["cells_scored"] >= 1
+    assert result["views"] == 2
+    assert result["_progress"][-1] == (2 * 3, 2 * 3)
 
 
-def test_finest_setting_misses_no_more_than_coarsest(result: dict[str, Any]) -> None:
-    by = {(s["resolution"], s["centre"], s["lod"]): s for s in result["settings"]}
-    for centre in (False, True):
-        # Point sampling is not monotone pixel for pixel (a thin object can hit a pixel
-        # centre at 32 px and fall between them at 64 px), so allow a sliver of slack.
-        fine, coarse = by[(64, centre, 2)], by[(32, centre, 0)]
-        assert fine["miss_rate_px"] <= coarse["miss_rate_px"] + 1e-3
-
-
-def test_default_is_cheapest_qualifying(result: dict[str, Any]) -> None:
-    ok = [s for s in result["settings"] if s["miss_rate_px"] <= MAX_MISS_RATE_PX]
-    if not ok:
-        assert result["default"] is None
-    else:
-        assert result["default"] in ok
-        assert result["default"]["sec_per_cell"] == min(s["sec_per_cell"] for s in ok)
-
-
-def test_plot_and_table(result: dict[str, Any], tmp_path: Path) -> None:
+def test_table_and_plot(result: dict[str, Any], tmp_path: Path) -> None:
+    table = format_table(result)
+    for name in SETTINGS:
+        assert name in table
+    assert "targets:" in table and "missed objects' sizes" in table
     out = tmp_path / "vis.png"
     plot_visibility_benchmark(result, out)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    table = format_table(result)
-    for s in result["settings"]:
-        assert setting_label(s) in table
-    assert "default" in table
-    if result["default"] is not None:
-        assert "<- default" in table
+    json.dumps(result)  # the CLI writes it as JSON
 
 
-def test_pick_cells_is_deterministic_and_prefers_streets(city: Any) -> None:
-    _scene, cells = city
-    a = pick_cells(cells, 3, seed=5)
-    assert [c.id for c in a] == [c.id for c in pick_cells(cells, 3, seed=5)]
+def test_parse_setting() -> None:
+    s = parse_setting("boundary15-96-t2-L1-h0.5+c").bake
+    assert (s.sampling, s.spacing, s.resolution, s.threshold, s.occluder_lod, s.height_step, s.centre) == (
+        "boundary", 15.0, 96, 2, 1, 0.5, True
+    )
+    assert parse_setting("corners-64").bake.sampling == "corners"
+    for bad in ("random-64", "corners", "boundary20-128-x3", "corners-4"):
+        with pytest.raises(InputError):
+            parse_setting(bad)
+
+
+def test_pick_cells_is_deterministic_and_prefers_streets(city: BenchInput) -> None:
+    a = pick_cells(city.cells, 3, seed=5)
+    assert [c.id for c in a] == [c.id for c in pick_cells(city.cells, 3, seed=5)]
     assert len({c.id for c in a}) == 3
-    if any(c.kind == "street" for c in cells):
+    if any(c.kind == "street" for c in city.cells):
         assert all(c.kind == "street" for c in a)
     with pytest.raises(InputError):
-        pick_cells(cells, 0)
+        pick_cells(city.cells, 0)
 
 
-def test_load_bench_input(city: Any, tmp_path: Path, gl_ctx: moderngl.Context) -> None:
+def test_a_database_is_read_alone_and_its_pvs_scored(tmp_path: Path, gl_ctx: moderngl.Context) -> None:
     from walkstream.server.bake import BakeSettings, bake
 
     src = tmp_path / "city.geojson"
     src.write_text(json.dumps(generate_city(150, 2)))
     direct = load_bench_input(src)
-    assert direct.view_distance == 800.0 and direct.cells
-    assert len(direct.scene.buildings) == len(city[0].buildings)
-
+    assert direct.view_distance == 800.0 and direct.cells and direct.baked is None
     db = tmp_path / "city.db"
-    bake(src, db, settings=BakeSettings(view_distance=500.0, resolution=16))
+    bake(src, db, settings=BakeSettings(view_distance=500.0, resolution=32, sampling="corners"))
+    src.unlink()  # the database alone is enough (a source of any kind)
     baked = load_bench_input(db)
-    assert baked.view_distance == 500.0
+    assert baked.view_distance == 500.0 and baked.baked is not None
     assert [c.id for c in baked.cells] == [c.id for c in direct.cells]
-    assert np.allclose(baked.cells[0].polygon, direct.cells[0].polygon)
-    assert load_bench_input(db, source=src).source == str(src)
-
-    other = tmp_path / "other.geojson"
-    other.write_text(json.dumps(generate_city(200, 3)))
-    with pytest.raises(InputError, match="do not match"):
-        load_bench_input(db, source=other)
-    with pytest.raises(InputError, match="not found"):
-        load_bench_input(db, source=tmp_path / "missing.geojson")
+    assert len(baked.scene.buildings) == len(direct.scene.buildings)
+    assert len(baked.scene.streets) == len(direct.scene.streets)
+    np.testing.assert_allclose(baked.scene.buildings[3].rings[0], direct.scene.buildings[3].rings[0], atol=0.01)
+    res = visibility_benchmark(
+        baked, settings=["corners-32"], sample=2, ref_points=4, ref_resolution=32, views=0, ctx=gl_ctx
+    )
+    rows = {r["name"]: r for r in res["rows"]}
+    # the benchmark computes a PVS exactly as the bake does
+    for key in ("pvs_mean", "miss_count", "miss_px", "miss_max"):
+        assert rows["baked"][key] == pytest.approx(rows["corners-32"][key]), key
+    with pytest.raises(InputError, match="no such file"):
+        load_bench_input(tmp_path / "missing.db")
+    (tmp_path / "junk.db").write_bytes(b"not a database at all")
+    with pytest.raises(InputError, match="neither"):
+        load_bench_input(tmp_path / "junk.db")

@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 import shapely
 
-from walkstream.server.bake.samples import dense_points, sample_points
+from walkstream.server.bake.samples import (
+    bake_points,
+    boundary_points,
+    dense_points,
+    height_levels,
+    reference_points,
+    sample_points,
+)
 from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.buildings import build_lod
@@ -314,3 +321,70 @@ def test_fallback_without_multi_draw_gives_the_same_counts(gl: moderngl.Context)
             got.append(r.cell_counts(pts))
     np.testing.assert_array_equal(got[0][0], got[1][0])
     np.testing.assert_array_equal(got[0][1], got[1][1])
+
+
+def test_boundary_points_follow_the_outline_inside_and_out_of_buildings() -> None:
+    # a 60 m x 10 m street cell with one building over its south-west corner
+    cell = rect(0.0, 0.0, 60.0, 10.0)
+    blds = (block(1, -5.0, -5.0, 4.0, 4.0, 10.0),)
+    tree = footprint_tree(blds)
+    pts = boundary_points(cell, 1.5, 2.0, spacing=20.0, margin=0.3, footprints=tree)
+    # corners and the long edges cut into 3 pieces: 4 + 2 * 2 points, one height (0.5 m range)
+    assert pts.shape == (8, 3) and set(pts[:, 2].tolist()) == {2.0}
+    p = shapely.points(pts[:, :2])
+    poly = shapely.Polygon(cell)
+    assert np.all(shapely.contains(poly, p))
+    assert np.all(shapely.distance(poly.exterior, p) >= 0.3 * 0.98)
+    assert not np.any(shapely.intersects(shapely.Polygon(blds[0].rings[0]), p))
+    # along each long edge the points are at most the spacing apart (plus the margin)
+    south = np.sort(pts[pts[:, 1] < 5, 0])
+    assert len(south) == 4 and np.diff(south).max() <= 20.0 + 1e-6
+    # a finer spacing gives more points; more height range gives more heights
+    assert len(boundary_points(cell, 1.5, 2.0, spacing=5.0)) > len(pts)
+    tall = boundary_points(cell, 0.0, 3.0, spacing=20.0, height_step=1.5)
+    assert sorted(set(tall[:, 2].tolist())) == [0.0, 1.5, 3.0] and len(tall) == 3 * 8
+    # the centre; points pulled into one place are kept once
+    assert len(boundary_points(cell, 1.5, 2.0, centre=True)) == len(pts) + 1
+    tiny = boundary_points(rect(0.0, 0.0, 0.5, 0.5), 1.5, 2.0)
+    assert len(tiny) == 1
+    # no free space: no points
+    assert boundary_points(CELL, 1.5, 2.0, footprints=footprint_tree((block(9, -9.0, -9.0, 9.0, 9.0, 5.0),))).shape == (0, 3)
+
+
+def test_bake_points_and_levels_check_their_input() -> None:
+    np.testing.assert_array_equal(bake_points(CELL, 1.0, 2.0, sampling="corners"), sample_points(CELL, 1.0, 2.0))
+    np.testing.assert_array_equal(bake_points(CELL, 1.0, 2.0), boundary_points(CELL, 1.0, 2.0))
+    assert height_levels(1.5, 2.0, 1.0).tolist() == [2.0]
+    for bad in (
+        lambda: bake_points(CELL, 1.0, 2.0, sampling="random"),
+        lambda: boundary_points(CELL, 1.0, 2.0, spacing=0.0),
+        lambda: boundary_points(CELL, 1.0, 2.0, height_step=-1.0),
+        lambda: boundary_points(CELL, 2.0, 1.0),
+    ):
+        with pytest.raises(InputError):
+            bad()
+
+
+def test_reference_points_cover_the_cell_and_its_heights() -> None:
+    a = reference_points(CELL, 1.0, 3.0, 64, seed=3)
+    np.testing.assert_array_equal(a, reference_points(CELL, 1.0, 3.0, 64, seed=3))
+    assert a.shape == (64, 3)
+    # one point per slice of the height range
+    slices = np.floor((a[:, 2] - 1.0) / 2.0 * 64).astype(int)
+    assert sorted(slices.tolist()) == list(range(64))
+    assert {(bool(x > 0), bool(y > 0)) for x, y in a[:, :2]} == {(True, True), (True, False), (False, True), (False, False)}
+    # not where the bake samples
+    b = boundary_points(CELL, 1.0, 3.0)
+    assert np.min(np.hypot(*(a[:, None, :2] - b[None, :, :2]).transpose(2, 0, 1))) > 1e-6
+
+
+def test_no_frustum_culling_gives_the_same_counts(gl: moderngl.Context) -> None:
+    meshes, ids = meshes_for_scene(SCENE, 2)
+    pts = sample_points(CELL, 1.5, 2.0, centre=True)
+    with VisibilityRenderer(meshes, ids, resolution=48, view_distance=VIEW_DISTANCE, ctx=gl) as a:
+        got = a.cell_counts(pts)
+    with VisibilityRenderer(meshes, ids, resolution=48, view_distance=VIEW_DISTANCE, ctx=gl, frustum_cull=False) as b:
+        ref = b.cell_counts(pts)
+    for x, y in zip(got, ref, strict=True):
+        np.testing.assert_array_equal(x, y)
+    assert BEYOND not in ref[0].tolist()

@@ -3,7 +3,7 @@
 ::
 
     walkstream bench rebuild [FILE] [--repeat 5] [--batch 32,256]
-    walkstream bench visibility scene.db|SOURCE.geojson [--sample N] [--plot out.png]
+    walkstream bench visibility scene.db|SOURCE [--sample N] [--settings ...] [--views N] [--plot out.png]
     walkstream bench render [--size 700] [--cells 40] [--runs 3] ...
     walkstream bench server scene.db [--walkers 10,100,1000] [--workers 1,2] ...
     walkstream bench stream [scene.db] [--vienna vienna.db] [--scene LABEL=DB[:PATHS]] [--only NAMES] [--duration S]
@@ -67,24 +67,47 @@ def cmd_bench_rebuild(args: argparse.Namespace) -> int:
 def cmd_bench_visibility(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench visibility``."""
     from walkstream.benchmarks.visibility import (
+        DEFAULT_SETTINGS,
         format_table,
         load_bench_input,
+        parse_setting,
         plot_visibility_benchmark,
         visibility_benchmark,
     )
+    from walkstream.cmd_build import load_source
 
-    inp = load_bench_input(args.scene, source=args.source)
+    names = [s.strip() for s in args.settings.split(",") if s.strip()] if args.settings else DEFAULT_SETTINGS
+    settings = [parse_setting(n) for n in names]  # a bad name fails before any work
+    path = Path(args.scene)
+    scene = None
+    if path.is_file():
+        with path.open("rb") as f:
+            if f.read(16) != b"SQLite format 3\x00":
+                scene = load_source(path)  # any source the build commands read
+    inp = load_bench_input(path, scene=scene)
     bar, progress = count_bar("rendering", "cell")
     try:
         res = visibility_benchmark(
-            inp.scene, inp.cells, sample=args.sample, view_distance=inp.view_distance, progress=progress
+            inp,
+            settings=settings,
+            sample=args.sample,
+            seed=args.seed,
+            ref_points=args.ref_points,
+            ref_resolution=args.ref_resolution,
+            views=args.views,
+            repeat=args.repeat,
+            progress=progress,
         )
     finally:
         bar.close()
     print(format_table(res))
+    print(f"{res['seconds']:.0f} s in all")
     if args.plot:
         plot_visibility_benchmark(res, args.plot)
         print(f"plot: {args.plot}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(res, indent=1, default=str))
+        print(f"json: {args.json}")
     return 0
 
 
@@ -125,7 +148,12 @@ def cmd_bench_server(args: argparse.Namespace) -> int:
 
 def cmd_bench_stream(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench stream``."""
-    from walkstream.benchmarks.stream import format_stream_table, parse_extra, run_stream_bench
+    from walkstream.benchmarks.stream import (
+        format_stream_table,
+        format_truth_table,
+        parse_extra,
+        run_stream_bench,
+    )
     from walkstream.cmd_replay import replay_with_options
 
     out = Path(args.out)
@@ -139,8 +167,12 @@ def cmd_bench_stream(args: argparse.Namespace) -> int:
         device=args.device,
         duration=args.duration,
         only=only,
+        truth_every=args.truth_every,
     )
     print(format_stream_table(rows))
+    if args.truth_every:
+        print()
+        print(format_truth_table(rows))
     if rows:
         print(f"plots and per-run reports: {out / 'index.html'}")
     return 0
@@ -337,11 +369,17 @@ def add_bench_parser(sub: Any) -> None:
         "--batch", default="32,256", help="batch sizes of the batched rows, comma-separated (default 32,256)"
     )
     bb.set_defaults(func=cmd_bench_rebuild)
-    bv = besub.add_parser("visibility", help="PVS miss rate against a dense reference vs bake seconds per cell, per setting")
-    bv.add_argument("scene", help="scene database (its source GeoJSON is read again) or a GeoJSON source")
-    bv.add_argument("--source", help="the GeoJSON the database was baked from, if it moved")
+    bv = besub.add_parser("visibility", help="what the PVS misses against a dense reference and at random eye points, against bake time, per sampling setting")
+    bv.add_argument("scene", help="scene database (read alone: any source it was baked from) or a scene source file")
     bv.add_argument("--sample", type=int, default=12, help="cells compared (default 12)")
-    bv.add_argument("--plot", help="PNG: miss rate against seconds per cell")
+    bv.add_argument("--seed", type=int, default=0, help="seed of the cells, reference points and eye points (default 0)")
+    bv.add_argument("--settings", help="comma-separated settings, e.g. corners-64,boundary20-128,boundary20-128-t2 (default: a dozen)")
+    bv.add_argument("--ref-points", type=int, default=64, help="reference viewpoints per cell (default 64)")
+    bv.add_argument("--ref-resolution", type=int, default=512, help="reference pixels per cube face (default 512)")
+    bv.add_argument("--views", type=int, default=4, help="random eye points per cell for the image error (default 4; 0: none)")
+    bv.add_argument("--repeat", type=int, default=3, help="renders per cell and setting; the fastest counts (default 3)")
+    bv.add_argument("--plot", help="PNG: misses against bake time and PVS size, missed objects' sizes")
+    bv.add_argument("--json", help="write the full result as JSON here")
     bv.set_defaults(func=cmd_bench_visibility)
     brs = besub.add_parser("render", help="cells per second the visibility renderer bakes, per resolution and LOD")
     brs.add_argument("--size", type=float, default=DEFAULT_SIZE, help="generated city size, metres (default 700)")
@@ -369,6 +407,7 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--device", default="desktop2003", choices=("gl", "desktop2003", "pda"), help="device (default desktop2003)")
     b.add_argument("--duration", help="limit every walk, e.g. 60s")
     b.add_argument("--only", help="comma-separated scenario name parts to run")
+    b.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame of each walk with the ground truth (a second table; default 0: never)")
     b.add_argument("--out", default="out/bench-stream", help="folder for reports and plots")
     b.set_defaults(func=cmd_bench_stream)
 

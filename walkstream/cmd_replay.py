@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from walkstream.shared.errors import InputError, WalkstreamError
-from walkstream.terminal import WalkBar
+from walkstream.terminal import WalkBar, count_bar
 
 __all__ = [
     "add_replay_parser",
@@ -100,6 +100,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         report_dir=Path(args.report),
         start_bundle=not args.no_start_bundle,
         gzip=not args.no_gzip,
+        truth_every=args.truth_every,
     )
 
 
@@ -143,10 +144,17 @@ def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = Fals
             result = run_replay(transport, url, config)
         else:
             bar = WalkBar(f"replay {config.path}")
+            truth_bar = None
             try:
-                result = run_replay(transport, url, config, bar)
+                if config.truth_every:
+                    truth_bar, truth_progress = count_bar("ground truth", "frame")
+                else:
+                    truth_progress = None
+                result = run_replay(transport, url, config, bar, truth_progress)
             finally:
                 bar.close()
+                if truth_bar is not None:
+                    truth_bar.close()
     if config.report_dir is not None:
         write_report(
             config.report_dir,
@@ -155,6 +163,7 @@ def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = Fals
             result.bytes_log,
             snapshots=result.snapshots,
             title=title,
+            truth=result.truth,
         )
     return result
 
@@ -206,6 +215,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--fog", type=float, default=40.0, help="interiors: portals farther than this many metres are not looked through (default 40)")
     r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
+    r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")
 
 
 def add_replay_parser(sub: Any) -> None:

@@ -5,6 +5,12 @@ draws a list of keys per frame with :class:`~walkstream.client.draw.meshes.MeshR
 and lighting, so frames look like the LOD figures: a pale sky background, lit
 buildings, streets as flat ground, back faces culled.
 
+:meth:`FrameRenderer.draw_ids` is a separate path over the same buffers: the same
+keys drawn into an integer image of object ids (which object each pixel shows), for
+comparing the client's frame with the ground truth (:mod:`walkstream.client.truth`).
+It has its own shader program and framebuffer and is never timed: the frame the user
+sees is :meth:`FrameRenderer.draw`.
+
 Timing is honest: the clock starts before the clear and stops after
 ``ctx.finish()``, so the time includes all the GPU work of the frame, not only the
 time to queue it (on llvmpipe the CPU rasterises; on a real GPU ``finish`` waits for
@@ -24,11 +30,33 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.draw.meshes import MeshRenderer
-from walkstream.shared.camera import look_at, perspective
+from walkstream.shared.camera import look_at, mat4_bytes, perspective
 from walkstream.shared.errors import InputError, RenderError
+from walkstream.shared.gl import Framebuffer, check_gl_error
 from walkstream.shared.records import Mesh
 
 __all__ = ["FrameRenderer", "camera", "MAX_PITCH_DEG", "VERTEX_BYTES", "INDEX_BYTES"]
+
+# The id pass: position only (the first 12 of the 28 bytes of a vertex), one id per
+# draw.  ``invariant`` makes its coverage match the truth renderer's exactly.
+_ID_VERTEX_SHADER = """
+#version 330
+uniform mat4 u_view_proj;
+in vec3 in_position;
+invariant gl_Position;
+void main() {
+    gl_Position = u_view_proj * vec4(in_position, 1.0);
+}
+"""
+
+_ID_FRAGMENT_SHADER = """
+#version 330
+uniform uint u_id;
+out uint f_id;
+void main() {
+    f_id = u_id;
+}
+"""
 
 #: Bytes per vertex in the GPU buffers MeshRenderer makes (float32 position and
 #: normal, RGBA8 colour).
@@ -118,6 +146,10 @@ class FrameRenderer:
         self.last_triangles = 0
         #: Keys drawn by the last :meth:`draw` (the ones that were uploaded).
         self.last_drawn = 0
+        # the object-id pass (made on first use)
+        self._id_prog: moderngl.Program | None = None
+        self._id_fb: Framebuffer | None = None
+        self._id_vaos: dict[int, moderngl.VertexArray] = {}
 
     # -- buffers ---------------------------------------------------------------
 
@@ -158,6 +190,9 @@ class FrameRenderer:
             self._refs[mid] = n
             return
         self._refs.pop(mid, None)
+        vao = self._id_vaos.pop(mid, None)
+        if vao is not None:
+            vao.release()
         self._r.forget(mesh)
         self._triangles -= mesh.triangles
         self._bytes -= len(mesh.positions) * VERTEX_BYTES + mesh.triangles * INDEX_BYTES
@@ -220,6 +255,80 @@ class FrameRenderer:
         self.last_triangles = sum(m.triangles for m in meshes)
         return dt
 
+    # -- object ids ------------------------------------------------------------
+
+    def draw_ids(
+        self,
+        keys: Iterable[tuple[int, int]],
+        view: ArrayLike,
+        proj: ArrayLike | None = None,
+    ) -> NDArray[np.uint32]:
+        """The object-id image of a frame of the given keys (not timed).
+
+        The same meshes and camera as :meth:`draw`, back faces culled, drawn in
+        ascending object id (so that surfaces tied in depth resolve the same way in
+        every frame that draws them in that order) into an integer framebuffer of its
+        own.
+
+        Parameters
+        ----------
+        keys : iterable of (object id, lod)
+            Uploaded keys; others are skipped.
+        view, proj : (4, 4) float
+            As for :meth:`draw`.
+
+        Returns
+        -------
+        (h, w) uint32
+            Object id + 1 per pixel, 0 where no object shows; row 0 at the top.
+        """
+        import moderngl
+
+        ctx = self.ctx
+        if self._id_prog is None:
+            try:
+                self._id_prog = ctx.program(
+                    vertex_shader=_ID_VERTEX_SHADER, fragment_shader=_ID_FRAGMENT_SHADER
+                )
+            except Exception as exc:
+                raise RenderError(f"FrameRenderer.draw_ids: shader program failed: {exc}") from exc
+        if self._id_fb is None:
+            self._id_fb = Framebuffer(ctx, self.size, 1, "u4")
+        prog = self._id_prog
+        fb = self._id_fb
+        fb.use()
+        fb.clear((0.0, 0.0, 0.0, 0.0))
+        p = self.proj if proj is None else proj
+        vp = np.asarray(p, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
+        u_vp = prog["u_view_proj"]
+        u_id = prog["u_id"]
+        assert isinstance(u_vp, moderngl.Uniform) and isinstance(u_id, moderngl.Uniform)
+        u_vp.write(mat4_bytes(vp))
+        ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        ctx.depth_func = "<"
+        ctx.front_face = "ccw"
+        ctx.cull_face = "back"
+        for key in sorted(keys, key=lambda k: int(k[0])):
+            mesh = self._keys.get(key)
+            bufs = None if mesh is None else self._r.buffers(mesh)
+            if mesh is None or bufs is None:
+                continue
+            vao = self._id_vaos.get(id(mesh))
+            if vao is None:
+                vbo, ibo = bufs
+                vao = ctx.vertex_array(
+                    prog,
+                    [(vbo, f"3f {VERTEX_BYTES - 12}x", "in_position")],
+                    index_buffer=ibo,
+                    index_element_size=4,
+                )
+                self._id_vaos[id(mesh)] = vao
+            u_id.value = int(key[0]) + 1
+            vao.render()
+        check_gl_error(ctx, "after FrameRenderer.draw_ids")
+        img: NDArray[np.uint32] = fb.read(components=1)[:, :, 0]
+        return img
+
     def snapshot(self) -> NDArray[np.uint8]:
         """The last frame, ``(h, w, 3) uint8``, row 0 at the top."""
         if not self._drawn:
@@ -236,6 +345,15 @@ class FrameRenderer:
 
     def release(self) -> None:
         """Release every buffer (and the context, if it was made here); idempotent."""
+        for vao in self._id_vaos.values():
+            vao.release()
+        self._id_vaos.clear()
+        if self._id_fb is not None:
+            self._id_fb.release()
+            self._id_fb = None
+        if self._id_prog is not None:
+            self._id_prog.release()
+            self._id_prog = None
         self._keys.clear()
         self._refs.clear()
         self._triangles = 0

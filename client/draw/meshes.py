@@ -27,6 +27,7 @@ from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
 __all__ = [
+    "AMBIENT",
     "BACKGROUND_RGB",
     "FIGURE_DIRECTION",
     "LIGHT_DIRECTION",
@@ -36,6 +37,9 @@ __all__ = [
 
 #: Clear colour, sRGB 0-255: a pale sky that no shaded material in the palette matches.
 BACKGROUND_RGB: tuple[int, int, int] = (232, 238, 246)
+
+#: Share of a material's colour lit regardless of the light (the default ``ambient``).
+AMBIENT = 0.35
 
 #: Direction towards the light (world, z-up): high sun from the south-south-west, so
 #: the south, west and top faces a 3/4 view shows all get different shades.
@@ -56,6 +60,7 @@ in vec3 in_normal;
 in vec4 in_color;
 out vec3 v_normal;
 out vec3 v_color;
+invariant gl_Position;
 void main() {
     gl_Position = u_view_proj * vec4(in_position, 1.0);
     v_normal = in_normal;
@@ -134,7 +139,7 @@ class MeshRenderer:
         self,
         ctx: moderngl.Context | None = None,
         light_dir: ArrayLike = LIGHT_DIRECTION,
-        ambient: float = 0.35,
+        ambient: float = AMBIENT,
         background: tuple[int, int, int] = BACKGROUND_RGB,
     ) -> None:
         light = np.asarray(light_dir, dtype=np.float64).reshape(3)
@@ -205,6 +210,15 @@ class MeshRenderer:
             vbo.release()
             raise
         self._meshes[id(mesh)] = _GpuMesh(mesh, vbo, ibo, vao)
+
+    def buffers(self, mesh: Mesh) -> tuple[moderngl.Buffer, moderngl.Buffer] | None:
+        """The vertex and index buffers of an uploaded ``mesh`` (None when it has none).
+
+        Vertices are 28 bytes: float32 position, float32 normal, RGBA8 colour; indices
+        uint32 triangles.  For other passes over the same buffers (object ids).
+        """
+        gm = self._meshes.get(id(mesh))
+        return None if gm is None else (gm.vbo, gm.ibo)
 
     def forget(self, mesh: Mesh) -> None:
         """Release the buffers of ``mesh`` (no-op if it was not uploaded)."""

@@ -16,7 +16,7 @@ from walkstream.client.report.metrics import FrameLog
 from walkstream.shared.errors import InputError
 
 if TYPE_CHECKING:
-    pass
+    from walkstream.client.truth.recorder import TruthResult
 from walkstream.client.report.files import (
     BytesLog,
     _atomic,
@@ -30,10 +30,13 @@ from walkstream.client.report.plots import (
     _make_run,
     _plot_budget,
     _plot_bytes,
+    _plot_error,
     _plot_fps,
     _plot_quality,
 )
 from walkstream.client.report.tables import _HEADLINE, headline_rows
+from walkstream.client.report.truth import write_truth_csv
+from walkstream.client.truth.compare import CAUSE_RGB, CAUSES
 
 __all__ = ["log", "write_report", "write_comparison"]
 
@@ -62,6 +65,9 @@ _CAPTIONS = {
     "fps.png": "Displayed frame rate per frame, with the target and its +-10 % band; red "
     "crosses are floor-limited frames (the LOD0s alone exceed the budget).",
     "budget.png": "Polygon budget set by the controller and triangles drawn per frame.",
+    "error.png": "The frame rate (top) and, for every compared frame, the share of its pixels "
+    "that differ from the ground truth (line) and the pixels where the truth shows an object "
+    "the client's frame does not, stacked by cause (bottom).",
 }
 
 _DEFINITIONS = (
@@ -141,6 +147,70 @@ def _place_snapshots(
     return placed
 
 
+def _save_png(path: Path, rgb: Any) -> None:
+    from PIL import Image
+
+    with _atomic(path, "wb") as f:
+        Image.fromarray(rgb, "RGB").save(f, format="PNG")
+
+
+def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | None) -> str:
+    """The ground-truth part of the page: figures, error.png, the worst frame; files written here."""
+    if truth is None:
+        return ""
+    s = summary.get("truth") or {}
+    parts = ["<h2>Ground truth</h2>"]
+    if truth.error:
+        parts.append(f"<p class='missing'>no ground truth: {html.escape(truth.error)}</p>")
+    write_truth_csv(out / "truth.csv", truth.log)
+
+    def pct(v: Any) -> str:
+        return "n/a" if v is None else f"{100.0 * v:.3f} %"
+
+    rows = [
+        ("frames compared", str(s.get("frames", 0))),
+        ("differing pixels, mean", pct(s.get("differing_pixels_mean"))),
+        ("frames missing > 0.5 % (from the first perfect frame)", pct(s.get("over_half_percent_ratio"))),
+    ]
+    for c in CAUSES:
+        m = (s.get("missing") or {}).get(c) or {}
+        rows.append(
+            (f"missing: {c} (mean / p95 / max)", " / ".join(pct(m.get(k)) for k in ("mean", "p95", "max")))
+        )
+    parts.append(
+        "<table>"
+        + "".join(f"<tr><th>{html.escape(k)}</th><td class='v'>{html.escape(v)}</td></tr>" for k, v in rows)
+        + "</table><p>Per compared frame: <a href='truth.csv'>truth.csv</a></p>"
+    )
+    parts.append(_figures(["error.png"], _CAPTIONS))
+    w = truth.worst
+    if w is not None:
+        (out / "truth").mkdir(exist_ok=True)
+        names = {"client": "worst_client.png", "truth": "worst_truth.png", "mask": "worst_missing.png"}
+        for key, name in names.items():
+            _save_png(out / "truth" / name, getattr(w, key))
+        legend = ", ".join(
+            f"<span style='color:rgb{CAUSE_RGB[c]}'>&#9632;</span> {html.escape(c)}" for c in CAUSES
+        )
+        caps = {
+            "client": "the client's frame",
+            "truth": "the ground truth (every object within the view distance at LOD2)",
+            "mask": "missing pixels by cause",
+        }
+        figs = "".join(
+            f"<figure><a href='truth/{names[k]}'><img src='truth/{names[k]}' alt='{k}'></a>"
+            f"<figcaption>{html.escape(caps[k])}</figcaption></figure>"
+            for k in ("client", "truth", "mask")
+        )
+        parts.append(
+            f"<h3>Worst compared frame: frame {w.frame} at {w.t:.2f} s, "
+            f"{100.0 * float(w.missing[:5].sum()):.3f} % of its pixels missing, "
+            f"{100.0 * w.differing:.2f} % differing</h3>"
+            f"<div class='snaps'>{figs}</div><p>Mask colours: {legend}</p>"
+        )
+    return "\n".join(parts)
+
+
 def _snapshot_section(placed: Sequence[tuple[str, bool]]) -> str:
     if not placed:
         return ""
@@ -168,6 +238,7 @@ def write_report(
     *,
     snapshots: Sequence[str | os.PathLike[str]] = (),
     title: str = "walkstream replay",
+    truth: TruthResult | None = None,
 ) -> Path:
     """Write the report folder of one replay and return the path of its ``index.html``.
 
@@ -188,6 +259,10 @@ def write_report(
         are copied into ``out_dir/snapshots/``; missing ones are listed as missing.
     title : str
         Heading of the page and the plots.
+    truth : TruthResult, optional
+        The frames compared with the ground truth: adds ``error.png``, ``truth.csv``
+        and the worst compared frame (``truth/*.png``) with its truth and its missing
+        pixels to the page.
 
     Returns
     -------
@@ -210,6 +285,9 @@ def write_report(
     _plot_quality(out / "quality.png", [run], f"{title}: download and rewrite quality per frame")
     _plot_fps(out / "fps.png", [run], f"{title}: frame rate")
     _plot_budget(out / "budget.png", [run], f"{title}: polygon budget")
+    if truth is not None:
+        _plot_error(out / "error.png", run, truth.log, f"{title}: frame rate and image error against the truth")
+    truth_html = _truth_section(out, safe, truth)
     placed = _place_snapshots(out, snapshots)
     write_json(out / "report.json", safe)
     summary_json = json.dumps(safe, indent=2, allow_nan=False)
@@ -220,6 +298,7 @@ def write_report(
             " (one row per frame) · <a href='bytes.csv'>bytes.csv</a> (link samples)</p>",
             "<h2>Plots</h2>",
             _figures(PLOT_NAMES, _CAPTIONS),
+            truth_html,
             _snapshot_section(placed),
             "<h2>Definitions</h2><ul>"
             + "".join(

@@ -17,6 +17,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.report.metrics import FrameLog, first_perfect_index
+from walkstream.client.report.truth import OVER_SHARE, TruthLog
+from walkstream.client.truth.compare import CAUSE_RGB, CAUSES
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -365,4 +367,55 @@ def _plot_budget(path: Path, runs: Sequence[_Run], title: str) -> Path:
     ax.set_xlabel("time since replay start (s)")
     ax.set_title(title, fontsize=10)
     _legend(ax, loc="upper right")
+    return _save(fig, path)
+
+
+def _plot_error(path: Path, run: _Run, truth: TruthLog, title: str) -> Path:
+    """``error.png``: the frame rate (top) and the image error against the truth (bottom) over time.
+
+    The bottom panel stacks the missing pixels of each compared frame by cause (% of
+    the frame) and draws the differing pixels as a line; the 0.5 % line is the
+    threshold of ``over_half_percent_ratio``.
+    """
+    fig, (ax_fps, ax_err) = _figure(2, height=3.0)
+    f = run.frames
+    if len(f):
+        x = f.t - run.t0
+        fin = np.isfinite(f.fps)
+        xs, ys = _envelope(x[fin], f.fps[fin])
+        ax_fps.plot(xs, ys, color=run.colour, linewidth=0.9, label="displayed fps")
+        tgt = run.summary.get("fps_target")
+        if tgt:
+            ax_fps.axhline(float(tgt), color="#009E73", linestyle="--", linewidth=1.1, label=f"target {float(tgt):g} fps")
+        ax_fps.set_ylim(0.0, 1.3 * max(float(tgt or 1.0), float(f.fps[fin].max()) if fin.any() else 1.0))
+        first = first_perfect_index(f)
+        for ax in (ax_fps, ax_err):
+            if first is not None:
+                ax.axvline(float(x[first]), color="#009E73", linestyle=":", linewidth=1.1)
+    ax_fps.set_ylabel("frame rate (frames/s)")
+    _legend(ax_fps, loc="lower right")
+    tx = truth.t - run.t0
+    if len(truth):
+        shares = 100.0 * truth.missing
+        colours = ["#{:02x}{:02x}{:02x}".format(*CAUSE_RGB[c]) for c in CAUSES]
+        ax_err.stackplot(tx, shares.T, labels=[f"missing: {c}" for c in CAUSES], colors=colours, alpha=0.85, step="post")
+        ax_err.plot(tx, 100.0 * truth.differing, color="#333333", linewidth=0.9, drawstyle="steps-post", label="differing pixels")
+        top = max(float((100.0 * truth.differing).max()), float(shares.sum(axis=1).max()), 100.0 * OVER_SHARE)
+        # linear up to 1 %, logarithmic above: the start-up frames (everything missing)
+        # must not flatten the fractions of a percent that matter afterwards
+        ax_err.set_yscale("symlog", linthresh=1.0, linscale=2.0)
+        ax_err.set_ylim(0.0, max(2.0, 1.5 * top))
+    ax_err.axhline(100.0 * OVER_SHARE, color="#D55E00", linestyle="--", linewidth=1.0, label="0.5 % of the frame")
+    ax_err.set_ylabel("% of the frame's pixels (log above 1 %)")
+    ax_err.set_xlabel("time since replay start (s)")
+    _legend(ax_err, loc="upper right", ncol=2)
+    s = run.summary.get("truth") or {}
+    notes = []
+    if s.get("frames"):
+        notes.append(f"{s['frames']} frames compared")
+        if s.get("differing_pixels_mean") is not None:
+            notes.append(f"differing {100.0 * s['differing_pixels_mean']:.2f} % mean")
+        if s.get("over_half_percent_ratio") is not None:
+            notes.append(f"frames missing > 0.5 %: {100.0 * s['over_half_percent_ratio']:.1f} %")
+    ax_fps.set_title(title + ("\n" + "; ".join(notes) if notes else ""), fontsize=10)
     return _save(fig, path)

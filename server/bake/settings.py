@@ -1,4 +1,9 @@
-"""What decides a bake's result: resolution, occluder LOD, cells, view distance, threshold."""
+"""What decides a bake's result: resolution, occluder LOD, sampling, cells, view distance, threshold.
+
+Every field is part of the bake's settings record, so changing a default changes
+the content hash (the scene version) of every new bake, and a bake resumes only
+with the settings it started with.
+"""
 
 from __future__ import annotations
 
@@ -8,12 +13,14 @@ import numpy as np
 
 from walkstream.shared.errors import InputError
 
-__all__ = ["DEFAULT_RESOLUTION", "DEFAULT_OCCLUDER_LOD", "BakeSettings"]
+__all__ = ["DEFAULT_RESOLUTION", "DEFAULT_OCCLUDER_LOD", "DEFAULT_SAMPLING", "BakeSettings"]
 
-#: chosen with ``walkstream bench visibility`` (cheapest setting whose
-#: pixel-weighted miss rate against the dense reference is at most 1 %)
-DEFAULT_RESOLUTION = 64
+#: chosen with ``walkstream bench visibility`` against its dense reference (issue 12:
+#: the first default, 64 px at the 8 box corners, missed single buildings covering
+#: 0.1 % of a cell's reference pixels; see the README's benchmark table)
+DEFAULT_RESOLUTION = 128
 DEFAULT_OCCLUDER_LOD = 0
+DEFAULT_SAMPLING = "boundary"
 
 
 @dataclass(frozen=True, slots=True)
@@ -31,13 +38,24 @@ class BakeSettings:
     occluder_lod: int = DEFAULT_OCCLUDER_LOD
     centre: bool = False
     threshold: int = 0
+    """Hardly-visible threshold (m-LOMA): an object needs more than this many pixels
+    over the cell's images to enter its PVS (0: any pixel at all)."""
     margin: float = 0.3
+    sampling: str = DEFAULT_SAMPLING
+    """Where a cell is sampled: ``"boundary"`` (its outline, every ``spacing`` metres)
+    or ``"corners"`` (the 8 box corners of the first bake)."""
+    spacing: float = 20.0
+    """``sampling="boundary"``: largest distance between points along an edge, metres."""
+    height_step: float = 1.0
+    """``sampling="boundary"``: one more sampled height per this many metres of range."""
 
     def check(self) -> BakeSettings:
         """Raise InputError naming the first bad setting."""
         if self.cells not in ("auto", "street", "grid"):
             raise InputError(f"--cells: expected street, grid or auto, got {self.cells!r}")
-        for name in ("cell_size", "max_length", "view_distance", "margin"):
+        if self.sampling not in ("boundary", "corners"):
+            raise InputError(f"--sampling: expected boundary or corners, got {self.sampling!r}")
+        for name in ("cell_size", "max_length", "view_distance", "margin", "spacing", "height_step"):
             v = float(getattr(self, name))
             if not (np.isfinite(v) and v > 0):
                 raise InputError(f"{name.replace('_', '-')}: expected a positive number, got {v}")

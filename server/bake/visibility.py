@@ -225,6 +225,11 @@ class VisibilityRenderer:
         Two visible index ranges of one face separated by at most this many indices of
         culled objects are drawn as one range.  On llvmpipe a draw costs about as much
         as 170 triangles, so bridging short gaps is cheaper; on a GPU it hardly matters.
+    frustum_cull : bool
+        Draw in each cube face only the objects whose bounding box meets its frustum
+        (conservative: the counts are the same either way).  A reference that must
+        not depend on any culling turns it off and draws every object within the view
+        distance in every face.
 
     Raises
     ------
@@ -253,6 +258,7 @@ class VisibilityRenderer:
         max_points_per_pass: int = 16,
         cull_back_faces: bool = True,
         merge_gap: int = 512,
+        frustum_cull: bool = True,
     ) -> None:
         ids = np.asarray(object_ids, dtype=np.int64).reshape(-1)
         if len(ids) != len(meshes):
@@ -280,6 +286,7 @@ class VisibilityRenderer:
         self.near = float(near)
         self.cull_back_faces = bool(cull_back_faces)
         self.merge_gap = int(merge_gap)
+        self.frustum_cull = bool(frustum_cull)
         self._prepare_geometry(meshes, ids)
 
         self._own_ctx = ctx is None
@@ -412,8 +419,11 @@ class VisibilityRenderer:
             lo, hi = lo_c - eye, hi_c - eye  # boxes relative to the eye
             d = np.maximum(np.maximum(lo, -hi), 0.0)
             near_enough = np.einsum("ck,ck->c", d, d) <= reach2
-            best = hi @ self._w_pos.T + lo @ self._w_neg.T  # (c, 36): box maxima per plane
-            inside = (best >= self._t).reshape(len(cand), 6, 6).all(axis=2)  # (c, 6)
+            if self.frustum_cull:
+                best = hi @ self._w_pos.T + lo @ self._w_neg.T  # (c, 36): box maxima per plane
+                inside = (best >= self._t).reshape(len(cand), 6, 6).all(axis=2)  # (c, 6)
+            else:
+                inside = np.ones((len(cand), 6), bool)
             draw[i][:, cand] = (inside & near_enough[:, None]).T
             unsafe[i][:, cand] = (inside & ~near_enough[:, None]).T
         return draw.reshape(p * 6, -1), unsafe.reshape(p * 6, -1)

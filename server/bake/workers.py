@@ -14,14 +14,14 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from walkstream.server.bake.samples import sample_points
+from walkstream.server.bake.samples import bake_points
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError
 
-__all__ = ["cell_task", "dask_client"]
+__all__ = ["cell_task", "cell_points", "dask_client"]
 
 #: cells per task: big enough to amortise a task's overhead, small enough for a smooth bar
 _CHUNK = 8
@@ -57,6 +57,23 @@ def _pool_task(cells: list[tuple[int, NDArray[np.float64], float, float]]) -> li
     return cell_task(_WORKER["scene"], _WORKER["settings"], _WORKER["skey"], cells)
 
 
+def cell_points(
+    settings: BakeSettings, polygon: NDArray[np.float64], zmin: float, zmax: float, footprints: Any
+) -> NDArray[np.float64]:
+    """A cell's sample points under ``settings`` (:func:`~walkstream.server.bake.samples.bake_points`)."""
+    return bake_points(
+        polygon,
+        zmin,
+        zmax,
+        sampling=settings.sampling,
+        spacing=settings.spacing,
+        height_step=settings.height_step,
+        margin=settings.margin,
+        centre=settings.centre,
+        footprints=footprints,
+    )
+
+
 def cell_task(
     scene: SourceScene,
     settings: BakeSettings,
@@ -70,7 +87,7 @@ def cell_task(
     renderer, footprints = _renderer_for(scene, settings, key)
     out = []
     for cid, poly, zmin, zmax in cells:
-        pts = sample_points(poly, zmin, zmax, margin=settings.margin, centre=settings.centre, footprints=footprints)
+        pts = cell_points(settings, poly, zmin, zmax, footprints)
         if len(pts) == 0:
             out.append((cid, np.zeros(0, np.int64), np.zeros(0)))
             continue

@@ -1,0 +1,164 @@
+"""The ground-truth figures of a replay: one row per compared frame, and the ``truth`` summary.
+
+``walkstream replay --truth-every N`` compares every N-th frame with a ground truth
+(:mod:`walkstream.client.truth`).  Each compared frame gives one row of a
+:class:`TruthLog`; :func:`summarise_truth` reduces it to the ``truth`` object of
+``report.json``.  The definitions, used by the report and the benchmarks alike:
+
+``frames``
+    How many frames were compared.
+``differing_pixels_mean``
+    Mean over the compared frames of the share of the frame's pixels whose colour
+    differs from the truth (0..1).
+``missing``
+    Per cause (``pvs``, ``not_received``, ``not_built``, ``lod``, ``culled``, ``fog``;
+    :data:`~walkstream.client.truth.compare.CAUSES`) the ``mean``, ``p95`` and ``max``
+    over the compared frames of the share of the frame's pixels where the truth shows
+    an object that the client's frame does not, attributed to that cause (0..1).
+``over_half_percent_ratio``
+    Among the compared frames from the first perfect frame on (the frame whose ``t``
+    is at least the first perfect frame's), the share whose missing pixels -- every
+    cause but ``fog``, which hides objects on purpose -- exceed 0.5 % of the frame;
+    ``None`` when no compared frame comes after a perfect one.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from walkstream.client.report.files import _atomic
+from walkstream.client.truth.compare import CAUSES, MISS_CAUSES
+from walkstream.shared.arrays import F64, I64
+from walkstream.shared.errors import InputError
+
+__all__ = [
+    "OVER_SHARE",
+    "TruthLog",
+    "summarise_truth",
+    "write_truth_csv",
+    "read_truth_csv",
+]
+
+#: a compared frame is "bad" when its missing pixels exceed this share of the frame
+OVER_SHARE = 0.005
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class TruthLog:
+    """One row per compared frame (read-only arrays of equal length).
+
+    Attributes
+    ----------
+    frame : (n,) int64
+        Index of the frame in the replay's frame log.
+    t : (n,) float64
+        Its ``t`` (the frame log's clock).
+    differing : (n,) float64
+        Share of its pixels whose colour differs from the truth.
+    missing : (n, 6) float64
+        Share of its pixels missing, per cause in :data:`CAUSES` order.
+    """
+
+    frame: I64
+    t: F64
+    differing: F64
+    missing: F64
+
+    def __post_init__(self) -> None:
+        n = len(np.asarray(self.frame))
+        cols = {
+            "frame": np.array(self.frame, np.int64).reshape(-1),
+            "t": np.array(self.t, np.float64).reshape(-1),
+            "differing": np.array(self.differing, np.float64).reshape(-1),
+            "missing": np.array(self.missing, np.float64).reshape(-1, len(CAUSES)),
+        }
+        for name, a in cols.items():
+            if len(a) != n:
+                raise InputError(f"TruthLog column {name!r} has {len(a)} rows, expected {n}")
+            a.flags.writeable = False
+            object.__setattr__(self, name, a)
+
+    def __len__(self) -> int:
+        return len(self.frame)
+
+    @property
+    def missed(self) -> F64:
+        """(n,) share of each frame's pixels missing for a cause that counts (all but fog)."""
+        out: F64 = self.missing[:, : len(MISS_CAUSES)].sum(axis=1)
+        return out
+
+    @classmethod
+    def empty(cls) -> TruthLog:
+        """No compared frame."""
+        return cls(np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros((0, len(CAUSES))))
+
+
+def _stats(a: ArrayLike) -> dict[str, float | None]:
+    v = np.asarray(a, np.float64)
+    if v.size == 0:
+        return {"mean": None, "p95": None, "max": None}
+    return {
+        "mean": float(v.mean()),
+        "p95": float(np.percentile(v, 95)),
+        "max": float(v.max()),
+    }
+
+
+def summarise_truth(log: TruthLog, t_first_perfect: float | None) -> dict[str, Any]:
+    """The ``truth`` object of ``report.json`` (see the module docs for each figure).
+
+    Parameters
+    ----------
+    log : TruthLog
+        The compared frames.
+    t_first_perfect : float or None
+        ``t`` of the replay's first perfect frame (``None``: there was none).
+    """
+    after = (
+        np.zeros(len(log), bool) if t_first_perfect is None else log.t >= float(t_first_perfect)
+    )
+    over = log.missed[after] > OVER_SHARE
+    return {
+        "frames": len(log),
+        "differing_pixels_mean": float(log.differing.mean()) if len(log) else None,
+        "over_half_percent_ratio": float(over.mean()) if over.size else None,
+        "missing": {c: _stats(log.missing[:, k]) for k, c in enumerate(CAUSES)},
+    }
+
+
+def write_truth_csv(path: str | os.PathLike[str], log: TruthLog) -> Path:
+    """One row per compared frame: ``frame, t, differing`` and one column per cause (shares)."""
+    p = Path(path)
+    with _atomic(p) as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(["frame", "t", "differing", *CAUSES])
+        for i in range(len(log)):
+            w.writerow(
+                [int(log.frame[i]), repr(float(log.t[i])), repr(float(log.differing[i]))]
+                + [repr(float(v)) for v in log.missing[i]]
+            )
+    return p
+
+
+def read_truth_csv(path: str | os.PathLike[str]) -> TruthLog:
+    """Read a file written by :func:`write_truth_csv`."""
+    p = Path(path)
+    with p.open(encoding="utf-8", newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or rows[0] != ["frame", "t", "differing", *CAUSES]:
+        raise InputError(f"{p}: not a truth.csv (expected the header frame, t, differing, causes)")
+    try:
+        body = [[float(v) for v in r] for r in rows[1:]]
+    except ValueError as exc:
+        raise InputError(f"{p}: {exc}") from exc
+    if not body:
+        return TruthLog.empty()
+    a = np.array(body, np.float64)
+    return TruthLog(a[:, 0].astype(np.int64), a[:, 1], a[:, 2], a[:, 3:])

@@ -1,0 +1,282 @@
+"""The ground truth of a replay frame (issue 12): comparison, causes, a planted miss, no side effects."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from scenes import build_city_db
+
+import walkstream.client.rewrite.pool as pool
+from walkstream.cli import main
+from walkstream.client.draw.frames import FrameRenderer, camera
+from walkstream.client.net.link import LinkProfile
+from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
+from walkstream.client.report import write_report
+from walkstream.client.truth.compare import CAUSES, compare_frame, missing_mask
+from walkstream.client.truth.render import TruthRenderer
+from walkstream.server.bake.walks import default_paths
+from walkstream.server.service.main import create_app
+from walkstream.server.sources.citygen import generate_city
+from walkstream.server.sources.geojson import load_geojson_dict
+from walkstream.server.store import SceneReader, write_path
+from walkstream.shared.buildings import build_lods
+from walkstream.shared.camera import perspective
+from walkstream.shared.errors import InputError
+from walkstream.shared.streets import build_street
+
+URL = "http://walkstream.test"
+EVERY = 10
+
+
+# --------------------------------------------------------------------------- comparison
+
+
+def _frames() -> tuple[np.ndarray, np.ndarray]:
+    """A 2 x 6 truth: objects 0..5 one per column on row 0, nothing on row 1."""
+    t = np.zeros((2, 6), np.uint32)
+    t[0] = np.arange(6) + 1
+    return t, np.zeros((2, 6, 3), np.uint8)
+
+
+def test_each_cause_in_order() -> None:
+    t, rgb = _frames()
+    c = np.zeros_like(t)
+    c[0, 5] = 6  # object 5 is shown: not missing
+    c[0, 4] = 8  # object 4 hidden behind object 7, drawn at LOD0 (a coarse front)
+    err = compare_frame(
+        t, rgb, c, rgb,
+        pvs=[1, 2, 3, 4, 5, 6, 7],  # 0 is not in it
+        received=[2, 3, 4, 5, 6, 7],  # 1 is not received
+        built=[3, 4, 5, 6, 7],  # 2 is not built
+        drawn={3: 1, 4: 2, 5: 2, 7: 0},  # 3 at LOD1, 6 not drawn
+    )
+    # 0 pvs, 1 not_received, 2 not_built, 3 lod (itself coarse), 4 lod (coarse front)
+    assert err.missing.tolist() == [1, 1, 1, 2, 0, 0]
+    assert err.cause[0].tolist() == [0, 1, 2, 3, 3, -1]
+    assert err.cause[1].tolist() == [-1] * 6 and err.pixels == 12 and err.missed == 5
+    # culled: in the PVS, received, built, not drawn and not beyond any fog
+    t2 = np.array([[7, 7]], np.uint32)
+    z = np.zeros((1, 2, 3), np.uint8)
+    got = compare_frame(t2, z, np.zeros_like(t2), z, pvs=[6], received=[6], built=[6], drawn={})
+    assert got.missing.tolist() == [0, 0, 0, 0, 2, 0]
+    fog = compare_frame(t2, z, np.zeros_like(t2), z, pvs=[6], received=[6], built=[6], drawn={}, fogged=[6])
+    assert fog.missing.tolist() == [0, 0, 0, 0, 0, 2] and fog.missed == 0
+    # without a cell record (pvs None) everything shown is outside the PVS
+    none = compare_frame(t2, z, np.zeros_like(t2), z, pvs=None, received=[6], built=[6], drawn={})
+    assert none.missing[0] == 2
+
+
+def test_colour_differences_count_beyond_the_tolerance() -> None:
+    t, rgb = _frames()
+    other = rgb.copy()
+    other[0, 0] = 2  # within the tolerance
+    other[1, 0] = 3  # beyond it
+    err = compare_frame(t, rgb, t, other, pvs=range(6), received=range(6), built=range(6), drawn=dict.fromkeys(range(6), 2))
+    assert err.differing == 1 and err.missed == 0
+    with pytest.raises(InputError, match="one size"):
+        compare_frame(t, rgb, t[:1], rgb, pvs=None, received=(), built=(), drawn={})
+    mask = missing_mask(np.full((2, 6, 3), 200, np.uint8), np.array([[0, -1, 3, -1, -1, -1]] * 2))
+    assert mask.shape == (2, 6, 3) and tuple(mask[0, 0]) != tuple(mask[0, 1])
+
+
+# --------------------------------------------------------------------------- renderers
+
+
+def test_truth_and_the_client_id_pass_agree(gl: Any) -> None:
+    """Every object at LOD2 through both renderers: the same ids and the same colours."""
+    scene = load_geojson_dict(generate_city(120, 3))
+    lod2 = {b.id: build_lods(b)[2] for b in scene.buildings} | {s.id: build_street(s) for s in scene.streets}
+    eye = np.array([*scene.streets[0].ring.mean(axis=0), 1.7])
+    view = camera(eye, 0.7)
+    with TruthRenderer(lod2, (160, 120), ctx=gl) as tr, FrameRenderer((160, 120), ctx=gl) as fr:
+        t_rgb, t_ids = tr.render(eye, view)
+        keys = [(i, 2) for i in sorted(lod2, reverse=True)]
+        for i, m in lod2.items():
+            fr.upload((i, 2), m)
+        fr.draw(sorted(keys), view)
+        c_rgb = fr.snapshot()
+        c_ids = fr.draw_ids(keys, view)  # any order: the id pass draws in ascending ids
+    assert len(np.unique(t_ids)) > 5
+    np.testing.assert_array_equal(t_ids, c_ids)
+    assert int(np.abs(t_rgb.astype(int) - c_rgb.astype(int)).max()) <= 2
+    # the view distance leaves out what is farther
+    with TruthRenderer(lod2, (160, 120), view_distance=1.0, ctx=gl) as near:
+        _, ids = near.render(eye, view)
+        assert set(np.unique(ids).tolist()) <= {0, *[int(i) + 1 for i in near.within(eye)]}
+
+
+# --------------------------------------------------------------------------- replays
+
+
+def _walkable(db: Path) -> Path:
+    with SceneReader.open(db) as r:
+        cells = list(r.cells())
+    for p in default_paths(cells):
+        write_path(db, p.name, p.to_msgpack())
+    return db
+
+
+@pytest.fixture(scope="module")
+def every_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small city whose every cell sees every object (no visibility misses at all)."""
+    return _walkable(build_city_db(tmp_path_factory.mktemp("truth") / "city.db", name="city", size=150.0, k=100_000).path)
+
+
+def _replay(db: Path, **kw: Any) -> ReplayResult:
+    app = create_app([db])
+    try:
+        cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="desktop2003", duration_s=8.0, **kw)
+        return run_replay(httpx.ASGITransport(app=app), URL, cfg)
+    finally:
+        app.state.scenes.close()
+
+
+@pytest.fixture(scope="module")
+def runs(every_db: Path, gl_ctx: Any) -> tuple[ReplayResult, ReplayResult]:
+    """The same walk without and with the truth; rebuilds charged a fixed CPU time.
+
+    Rewrites are charged the CPU time they really took, which differs from run to run
+    by itself; a fixed charge makes two walks comparable figure by figure.
+    """
+    mp = pytest.MonkeyPatch()
+    ticks = iter(range(10**9))
+    mp.setattr(pool.time, "thread_time", lambda: 0.002 * next(ticks))
+    try:
+        plain = _replay(every_db)
+        ticks = iter(range(10**9))
+        truth = _replay(every_db, truth_every=EVERY)
+    finally:
+        mp.undo()
+    return plain, truth
+
+
+def test_the_truth_changes_no_other_figure(runs: tuple[ReplayResult, ReplayResult]) -> None:
+    plain, with_truth = runs
+    a, b = dict(plain.summary), dict(with_truth.summary)
+    assert "truth" not in a
+    t = b.pop("truth")
+    assert a == b
+    np.testing.assert_array_equal(plain.log.frame_time, with_truth.log.frame_time)
+    # the truth object exactly as specified
+    assert set(t) == {"frames", "differing_pixels_mean", "over_half_percent_ratio", "missing"}
+    assert set(t["missing"]) == set(CAUSES)
+    assert all(set(v) == {"mean", "p95", "max"} for v in t["missing"].values())
+    assert t["frames"] == len(range(0, a["frames"], EVERY))
+    # every object is in every PVS: nothing is missing for visibility, nothing culled
+    assert t["missing"]["pvs"]["max"] == 0.0 and t["missing"]["culled"]["max"] == 0.0
+    assert t["missing"]["fog"]["max"] == 0.0
+    # the start-up frames miss what has not arrived yet
+    assert t["missing"]["not_received"]["max"] > 0.5
+    assert 0.0 <= t["differing_pixels_mean"] <= 1.0
+
+
+def test_a_planted_miss_is_found_with_its_pixels(
+    runs: tuple[ReplayResult, ReplayResult], every_db: Path, tmp_path: Path, gl: Any
+) -> None:
+    """Leave one building out of one cell's PVS: its pixels, and only those, are cause (a)."""
+    _, base = runs
+    assert base.truth is not None and base.truth.frames
+    first = base.summary["time_to_first_perfect_frame_s"]
+    with SceneReader.open(every_db) as r:
+        kinds = {i: o.kind for i, o in r.object_info(r.object_ids().tolist()).items()}
+    # the biggest building of a compared frame after the first perfect one, and its cell
+    best = max(
+        (
+            (n, f.cell, i)
+            for f in base.truth.frames
+            if f.t >= first and f.cell is not None
+            for i, n in f.shown.items()
+            if kinds[i] == "building"
+        ),
+    )
+    _, cell, obj = best
+    planted = _walkable(build_city_db(tmp_path / "city.db", name="city", size=150.0, k=100_000, drop={cell: {obj}}).path)
+    got = _replay(planted, truth_every=EVERY)
+    assert got.truth is not None
+    frames = [f for f in got.truth.frames if f.cell == cell and f.t >= got.summary["time_to_first_perfect_frame_s"]]
+    assert frames and any(f.shown.get(obj, 0) > 100 for f in frames)
+    lod2 = _lod2(planted)
+    for f in frames:
+        pvs_px = int(f.missing_px[CAUSES.index("pvs")])
+        # exactly the building's pixels in the truth, all of them attributed to it
+        assert pvs_px == f.shown.get(obj, 0) == f.missing.get(obj, 0)
+        assert f.missing_px[CAUSES.index("culled")] == 0
+        # counted again through the client's own renderer: every object at LOD2
+        with FrameRenderer((640, 480), ctx=gl) as fr:
+            for i, m in lod2.items():
+                fr.upload((i, 2), m)
+            ids = fr.draw_ids([(i, 2) for i in lod2], f.view, PROJ)
+        assert int((ids == obj + 1).sum()) == pvs_px
+    # other cells are untouched
+    assert all(f.missing_px[0] == 0 for f in got.truth.frames if f.cell != cell and f.cell is not None)
+
+
+PROJ = np.asarray(perspective(60.0, 640 / 480, 0.5, 2000.0))
+"""The replay's camera projection (640 x 480, 60 degrees)."""
+
+
+def _lod2(db: Path) -> dict[int, Any]:
+    with SceneReader.open(db) as r:
+        info = r.object_info(r.object_ids().tolist())
+        out = {}
+        for i, o in info.items():
+            out[i] = build_lods(r.building(i))[2] if o.kind == "building" else build_street(r.street(i))
+    return out
+
+
+def test_report_shows_the_truth(runs: tuple[ReplayResult, ReplayResult], tmp_path: Path) -> None:
+    _, res = runs
+    index = write_report(tmp_path, res.summary, res.log, res.bytes_log, truth=res.truth)
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert res.truth is not None and report["truth"]["frames"] == len(res.truth.log)
+    for name in ("error.png", "truth.csv", "truth/worst_client.png", "truth/worst_truth.png", "truth/worst_missing.png"):
+        assert (tmp_path / name).read_bytes()[:4] in (b"\x89PNG", b"fram"), name
+    page = index.read_text()
+    assert "error.png" in page and "worst_missing.png" in page and "Ground truth" in page
+
+
+def test_cli_truth_every(every_db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], gl_ctx: Any) -> None:
+    out = tmp_path / "rep"
+    t0 = time.perf_counter()
+    assert main(["replay", str(every_db), "--device", "desktop2003", "--duration", "3s", "--truth-every", "25", "--report", str(out)]) == 0
+    assert time.perf_counter() - t0 < 120
+    report = json.loads((out / "report.json").read_text())
+    assert report["truth"]["frames"] == len(range(0, report["frames"], 25))
+    assert (out / "error.png").exists()
+    with pytest.raises(InputError, match="truth-every"):
+        ReplayConfig(link=LinkProfile(1.0, 1.0, 0.1), truth_every=-1)
+
+
+def test_bench_stream_truth_every(every_db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], gl_ctx: Any) -> None:
+    """``bench stream --truth-every`` prints a second table, one line per scenario, from each walk's truth."""
+    out = tmp_path / "bench"
+    argv = ["bench", "stream", str(every_db), "--only", "SM 56k", "--duration", "3s", "--truth-every", "25", "--out", str(out)]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "culled% max" in text and "compared" in text
+    rows = json.loads((out / "bench_stream.json").read_text())
+    assert [r["scenario"] for r in rows] == ["SM 56k prefetch"]
+    t = rows[0]["truth"]
+    assert t["frames"] == len(range(0, rows[0]["frames"], 25)) > 0
+    assert t["missing"]["culled"]["max"] == 0.0
+    line = next(ln for ln in text.splitlines() if ln.startswith("SM 56k prefetch") and ln.split()[3] == str(t["frames"]))
+    assert line
+    assert (out / "01-sm-56k-prefetch" / "error.png").exists()
+
+
+def test_truth_too_big_for_one_buffer_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A scene too large for one GL buffer fails with a RenderError naming the size, before any GL call."""
+    import walkstream.client.truth.render as render
+    from walkstream.shared.errors import RenderError
+
+    scene = load_geojson_dict(generate_city(120, 3))
+    lod2 = {b.id: build_lods(b)[2] for b in scene.buildings}
+    monkeypatch.setattr(render, "MAX_BUFFER_BYTES", 1024)
+    with pytest.raises(RenderError, match=r"objects at LOD2 need a .* GiB buffer"):
+        TruthRenderer(lod2, (64, 48))
