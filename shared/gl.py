@@ -21,7 +21,7 @@ from __future__ import annotations
 import os
 import re
 from types import TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,7 +31,7 @@ from walkstream.shared.errors import InputError, RenderError
 if TYPE_CHECKING:  # moderngl is imported lazily so that importing this module never fails
     import moderngl
 
-__all__ = ["BACKEND_ENV", "Framebuffer", "check_gl_error", "create_context"]
+__all__ = ["BACKEND_ENV", "Framebuffer", "Releasable", "check_gl_error", "create_context"]
 
 #: Environment variable that forces a backend (see the module docstring).
 BACKEND_ENV = "WALKSTREAM_GL_BACKEND"
@@ -136,7 +136,28 @@ def check_gl_error(ctx: moderngl.Context, where: str) -> None:
         raise RenderError(f"OpenGL error {where}: {err}")
 
 
-class Framebuffer:
+class Releasable:
+    """A holder of GL objects: ``release()`` frees them, and ``with`` releases on exit.
+
+    Subclasses define :meth:`release` (safe to call twice).
+    """
+
+    def release(self) -> None:  # pragma: no cover - every subclass defines it
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.release()
+
+
+class Framebuffer(Releasable):
     """An offscreen colour + depth framebuffer, released on exit.
 
     Parameters
@@ -234,13 +255,3 @@ class Framebuffer:
                 obj.release()
                 setattr(self, name, None)
 
-    def __enter__(self) -> Framebuffer:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.release()

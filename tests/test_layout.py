@@ -156,6 +156,14 @@ ONE_HOME = [
     "MSGPACK",
     "Manifest",
     "CellRecord",
+    "CellIndex",
+    "TileGrid",
+    "RoomRecord",
+    "Topology",
+    "read_source",
+    "Releasable",
+    "within",
+    "manifest_task",
 ]
 
 

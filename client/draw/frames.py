@@ -23,7 +23,6 @@ import math
 import os
 import time
 from collections.abc import Hashable, Iterable
-from types import TracebackType
 
 import moderngl
 import numpy as np
@@ -32,7 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.client.draw.meshes import MeshRenderer
 from walkstream.shared.camera import look_at, mat4_bytes, perspective
 from walkstream.shared.errors import InputError, RenderError
-from walkstream.shared.gl import Framebuffer, check_gl_error
+from walkstream.shared.gl import Framebuffer, Releasable, check_gl_error
 from walkstream.shared.records import Mesh
 
 __all__ = ["FrameRenderer", "camera", "MAX_PITCH_DEG", "VERTEX_BYTES", "INDEX_BYTES"]
@@ -98,7 +97,7 @@ def camera(eye: ArrayLike, yaw: float, pitch: float = 0.0) -> NDArray[np.float32
     return look_at(e, e + fwd, (0.0, 0.0, 1.0))
 
 
-class FrameRenderer:
+class FrameRenderer(Releasable):
     """Draws frames of keyed meshes offscreen and times them.
 
     Parameters
@@ -360,13 +359,3 @@ class FrameRenderer:
         self._bytes = 0
         self._r.release()
 
-    def __enter__(self) -> FrameRenderer:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.release()

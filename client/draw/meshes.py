@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterable, Sequence
-from types import TracebackType
 
 import moderngl
 import numpy as np
@@ -22,7 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.camera import fit_view, mat4_bytes
 from walkstream.shared.errors import InputError, RenderError
-from walkstream.shared.gl import Framebuffer, check_gl_error, create_context
+from walkstream.shared.gl import Framebuffer, Releasable, check_gl_error, create_context
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
@@ -112,7 +111,7 @@ class _GpuMesh:
         self.vbo.release()
 
 
-class MeshRenderer:
+class MeshRenderer(Releasable):
     """Uploads :class:`~walkstream.shared.records.Mesh` objects and draws them offscreen.
 
     Parameters
@@ -334,16 +333,6 @@ class MeshRenderer:
             self.ctx.release()
             self._own_ctx = False
 
-    def __enter__(self) -> MeshRenderer:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.release()
 
 
 def _bounds(mesh: Mesh) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:

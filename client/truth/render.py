@@ -17,7 +17,6 @@ in ascending ids too, so ties resolve the same way in both frames.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -26,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.client.draw.meshes import AMBIENT, BACKGROUND_RGB, LIGHT_DIRECTION
 from walkstream.shared.camera import mat4_bytes, perspective
 from walkstream.shared.errors import InputError, RenderError
-from walkstream.shared.gl import check_gl_error, create_context
+from walkstream.shared.gl import Releasable, check_gl_error, create_context
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
@@ -76,7 +75,7 @@ MAX_BUFFER_BYTES = 2**31
 _VERTEX = np.dtype([("p", "<f4", 3), ("n", "<f4", 3), ("c", "u1", 4), ("id", "<u4")])
 
 
-class TruthRenderer:
+class TruthRenderer(Releasable):
     """Draws ground-truth frames of a fixed set of objects (their LOD2 meshes).
 
     Parameters
@@ -269,13 +268,3 @@ class TruthRenderer:
             self.ctx.release()
         self.ctx = None
 
-    def __enter__(self) -> TruthRenderer:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.release()

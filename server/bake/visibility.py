@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from types import TracebackType
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
@@ -36,7 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.camera import cube_face_views, perspective
 from walkstream.shared.errors import InputError, RenderError
-from walkstream.shared.gl import Framebuffer, check_gl_error, create_context
+from walkstream.shared.gl import Framebuffer, Releasable, check_gl_error, create_context
 from walkstream.shared.records import Mesh
 from walkstream.shared.streets import build_street
 
@@ -190,7 +189,7 @@ def _runs(mask: NDArray[np.bool_]) -> tuple[I64, I64, I64]:
 # ------------------------------------------------------------------------ renderer
 
 
-class VisibilityRenderer:
+class VisibilityRenderer(Releasable):
     """Counts the pixels each object covers in cube-face ID images at sample points.
 
     Parameters
@@ -590,16 +589,6 @@ class VisibilityRenderer:
             self.ctx.release()
         self.ctx = None
 
-    def __enter__(self) -> VisibilityRenderer:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.release()
 
 
 # ------------------------------------------------------------------ PVS and ACH
