@@ -235,8 +235,9 @@ def load_bench_input(path: str | os.PathLike[str], *, scene: SourceScene | None 
     ----------
     path:
         A baked scene database (its objects, cells, stored PVS and view distance are
-        used; any source it was baked from), or a source file: ``.geojson``/``.json``
-        is read here; for any other kind pass the loaded ``scene``.  A source gets
+        used; any source it was baked from), or a city source file (GeoJSON,
+        OpenStreetMap: any format :func:`~walkstream.server.sources.read.read_source`
+        reads), or pass the loaded ``scene``.  A source gets
         ``make_cells(scene, "auto")`` and an 800 m view distance.
     scene:
         The scene of a source file read by the caller.
@@ -249,16 +250,22 @@ def load_bench_input(path: str | os.PathLike[str], *, scene: SourceScene | None 
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{p}: no such file")
-    if scene is None and p.suffix.lower() in (".geojson", ".json"):
-        from walkstream.server.sources.geojson import load_geojson
+    if scene is None:
+        with p.open("rb") as f:
+            is_db = f.read(16) == b"SQLite format 3\x00"
+        if not is_db:
+            from walkstream.server.sources.read import READERS, read_source
 
-        scene = load_geojson(p)
+            if not any(p.name.lower().endswith(e) for e in READERS):
+                raise InputError(
+                    f"{p}: neither a scene database nor a scene source ({', '.join(sorted(READERS))})"
+                )
+            source = read_source(p)
+            if not isinstance(source, SourceScene):
+                raise InputError(f"{p}: an interior; bench visibility compares the PVS of city cells")
+            scene = source
     if scene is not None:
         return BenchInput(scene, make_cells(scene, "auto"), 800.0, str(p))
-    with p.open("rb") as f:
-        head = f.read(16)
-    if head != b"SQLite format 3\x00":
-        raise InputError(f"{p}: neither a scene database nor a GeoJSON source")
     sc, cells, baked, settings = scene_from_database(p)
     return BenchInput(sc, cells, float(settings.get("view_distance", 800.0)), str(p), baked, settings)
 

@@ -559,3 +559,13 @@ def test_locate_record_and_replay_over_http_on_a_real_network(tmp_path: Path) ->
     # the walk crossed cells of the real network and fetched them over the socket
     assert report["frames"] > 0 and report["cells_entered"] >= 2 and report["cells_received"] >= 2
     assert report["perfect_frames"] > 0 and report["bytes_received"] > 0
+
+
+def test_the_build_commands_read_openstreetmap_too(capsys: pytest.CaptureFixture[str]) -> None:
+    village = OSM / "village-10.068_48.135.osm"
+    if not village.is_file():
+        pytest.skip(f"{village} is missing (the team's ../shared/data)")
+    # buildings stats (and bench rebuild, bench visibility) take any city source the bake reads
+    assert main(["buildings", "stats", str(village), "--json"]) == 0
+    stats = json.loads(capsys.readouterr().out)
+    assert stats["buildings"] > 0

@@ -135,3 +135,18 @@ def test_a_database_is_read_alone_and_its_pvs_scored(tmp_path: Path, gl_ctx: mod
     (tmp_path / "junk.db").write_bytes(b"not a database at all")
     with pytest.raises(InputError, match="neither"):
         load_bench_input(tmp_path / "junk.db")
+
+
+def test_an_openstreetmap_extract_is_read_as_a_source(gl_ctx: moderngl.Context) -> None:
+    osm = Path(__file__).resolve().parents[2] / "shared" / "data" / "osm" / "village-10.068_48.135.osm"
+    if not osm.is_file():
+        pytest.skip(f"{osm} is missing (the team's ../shared/data)")
+    got = load_bench_input(osm)
+    # street cells of the real network, not quads only, and an 800 m view distance
+    assert got.cells and got.baked is None and got.view_distance == 800.0
+    assert {c.kind for c in got.cells} & {"street", "crossroad"}
+    res = visibility_benchmark(
+        got, settings=["corners-32"], sample=2, ref_points=4, ref_resolution=32, views=0, ctx=gl_ctx
+    )
+    rows = {r["name"]: r for r in res["rows"]}
+    assert "corners-32" in rows and 0.0 <= rows["corners-32"]["miss_count"] <= 1.0

@@ -74,17 +74,10 @@ def cmd_bench_visibility(args: argparse.Namespace) -> int:
         plot_visibility_benchmark,
         visibility_benchmark,
     )
-    from walkstream.cmd_build import load_source
 
     names = [s.strip() for s in args.settings.split(",") if s.strip()] if args.settings else DEFAULT_SETTINGS
     settings = [parse_setting(n) for n in names]  # a bad name fails before any work
-    path = Path(args.scene)
-    scene = None
-    if path.is_file():
-        with path.open("rb") as f:
-            if f.read(16) != b"SQLite format 3\x00":
-                scene = load_source(path)  # any source the build commands read
-    inp = load_bench_input(path, scene=scene)
+    inp = load_bench_input(Path(args.scene))  # a scene database, or any city source
     bar, progress = count_bar("rendering", "cell")
     try:
         res = visibility_benchmark(

@@ -25,10 +25,15 @@ __all__ = ["add_build_parsers", "load_source", "print_rebuild_stats"]
 
 
 def load_source(path: str | Path) -> Any:
-    """The scene of a GeoJSON source file."""
-    from walkstream.server.sources.geojson import load_geojson
+    """The scene of a city source file (GeoJSON, OpenStreetMap: any format the bake reads)."""
+    from walkstream.server.sources.read import read_source
+    from walkstream.server.sources.scene import SourceScene
+    from walkstream.shared.errors import InputError
 
-    return load_geojson(path)
+    scene = read_source(path)
+    if not isinstance(scene, SourceScene):
+        raise InputError(f"{path}: an interior, not a city: this command takes a city source")
+    return scene
 
 
 def cmd_generate_city(args: argparse.Namespace) -> int:
