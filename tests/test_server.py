@@ -800,3 +800,35 @@ def test_documented_shapes_match_the_wire_records() -> None:
     index = CellIndex((0, 1), [3], ["street"], [1.5], [2.0], [square], [[4]])
     assert list(index.to_wire()) == list(models.CellIndexOut.model_fields)
     assert set(locate_answer(None)) == set(models.LocateOut.model_fields)
+
+
+def test_a_file_replaced_by_a_new_version_is_served_without_a_restart(
+    city: CityDb, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import walkstream.server.service.scenes as scenes_mod
+    from walkstream.server.store.edit import write_path
+
+    monkeypatch.setattr(scenes_mod, "RECHECK_S", 0.0)
+    db = tmp_path / "copy.db"
+    shutil.copyfile(city.path, db)
+    app = create_app([db])
+    c = Client(app)
+    try:
+        v1 = c.get(scene_url(city), headers=JSON_ACCEPT).json()["version"]
+        assert c.get(scene_url(city, "/paths/later")).status_code == 404
+        blob = msgpack.packb({**PATH_DATA, "name": "later"})
+        write_path(db, "later", blob)  # a new version, renamed over the served file
+        m = c.get(scene_url(city), headers=JSON_ACCEPT).json()
+        assert m["version"] != v1 and "later" in m["paths"]
+        assert c.get(scene_url(city, "/paths/later")).status_code == 200
+        listed = c.get("/v1/scenes", headers=JSON_ACCEPT).json()
+        assert {"name": city.name, "version": m["version"]} in listed
+        # a damaged replacement leaves the last good version served, never a 500
+        junk = tmp_path / "junk.db"
+        junk.write_bytes(b"SQLite format 3\x00" + b"\x00" * 4096)
+        os.replace(junk, db)
+        again = c.get(scene_url(city), headers=JSON_ACCEPT)
+        assert again.status_code == 200 and again.json()["version"] == m["version"]
+    finally:
+        c.close()
+        app.state.scenes.close()

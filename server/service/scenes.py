@@ -25,15 +25,20 @@ that needs it, so that answering costs about as much as serving a static file:
   are built from the parameters with the scene's grammar (parsed once per scene) on
   first use, in a worker thread, and kept in the same frame LRU under separate keys.
 
-A scene is immutable (a recorded path makes a *new* scene version in a new file), so
-nothing cached here ever needs invalidating; a restart serves the new version."""
+A scene version is immutable, so nothing cached for it ever needs invalidating.  A
+recorded path or a new bake replaces the file with a *new* version (written beside it,
+renamed over it): :meth:`SceneRegistry.get` notices the new file (checked at most once
+per :data:`RECHECK_S`) and serves the new version from then on, with new ETags; a file
+that cannot be loaded leaves the old version served and is reported in the log."""
 
 from __future__ import annotations
 
 import base64
+import logging
 import math
 import os
 import threading
+import time
 from collections.abc import Iterable, Sequence
 from typing import Any, Literal, cast
 
@@ -69,6 +74,11 @@ from walkstream.shared.wire import (
     ObjectFrame,
     locate_answer,
 )
+
+log = logging.getLogger(__name__)
+
+RECHECK_S = 1.0
+"""Seconds between checks whether a served database file was replaced by a new version."""
 
 __all__ = [
     "MAX_IDS",
@@ -589,13 +599,20 @@ class SceneRegistry:
     def __init__(self, scenes: Sequence[Scene]) -> None:
         """Private: use :meth:`open`."""
         self.scenes: dict[str, Scene] = {s.name: s for s in sorted(scenes, key=lambda s: s.name)}
-        listing = [{"name": s.name, "version": s.version} for s in self.scenes.values()]
-        # the list changes only when the service restarts with other files: validated
-        # with the ETag on every use rather than cached for a year
-        tag = _digest(dump_json(listing))
-        self.listing: dict[Rep, Encoded] = {
-            rep: encode(listing, rep, tag, "scenes") for rep in ("msgpack", "json")
+        self._stamps: dict[str, tuple[int, int] | None] = {
+            n: _file_stamp(sc.reader.path) for n, sc in self.scenes.items()
         }
+        self._checked: dict[str, float] = dict.fromkeys(self.scenes, time.monotonic())
+        self._reload_lock = threading.Lock()
+        self.listing: dict[Rep, Encoded] = {}
+        self._encode_listing()
+
+    def _encode_listing(self) -> None:
+        listing = [{"name": s.name, "version": s.version} for s in self.scenes.values()]
+        # the list changes when a file is replaced by a new version: validated with
+        # the ETag on every use rather than cached for a year
+        tag = _digest(dump_json(listing))
+        self.listing = {rep: encode(listing, rep, tag, "scenes") for rep in ("msgpack", "json")}
 
     @classmethod
     def open(cls, paths: Sequence[str | os.PathLike[str]]) -> SceneRegistry:
@@ -642,9 +659,52 @@ class SceneRegistry:
                 status=404,
                 detail={"scene": name, "known": list(self.scenes)},
             )
+        now = time.monotonic()
+        if now - self._checked[name] >= RECHECK_S:
+            self._checked[name] = now
+            if _file_stamp(scene.reader.path) != self._stamps[name]:
+                scene = self._reload(scene)
         return scene
+
+    def _reload(self, old: Scene) -> Scene:
+        """Serve the new version of ``old``'s file; the old one when it cannot be loaded.
+
+        The old scene is not closed: requests still running may be reading it (its
+        connections close when the last of them lets go).
+        """
+        with self._reload_lock:
+            current = self.scenes[old.name]
+            if current is not old:  # another request reloaded it meanwhile
+                return current
+            path = old.reader.path
+            stamp = _file_stamp(path)
+            try:
+                new = Scene.load(path)
+            except StoreError as exc:
+                log.warning("%s changed but cannot be served (%s); still serving version %s", path, exc, old.version)
+                self._stamps[old.name] = stamp  # do not retry until it changes again
+                return old
+            if new.name != old.name:
+                new.close()
+                log.warning("%s now holds scene %r, not %r; still serving version %s", path, new.name, old.name, old.version)
+                self._stamps[old.name] = stamp
+                return old
+            self.scenes[old.name] = new
+            self._stamps[old.name] = stamp
+            self._encode_listing()
+            log.info("%s: now serving version %s (was %s)", path, new.version, old.version)
+            return new
 
     def close(self) -> None:
         """Close every database."""
         for s in self.scenes.values():
             s.close()
+
+
+def _file_stamp(path: str) -> tuple[int, int] | None:
+    """What tells a file replaced by a rename from the one opened: inode and mtime."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return (st.st_ino, st.st_mtime_ns)
