@@ -49,6 +49,13 @@ _HEADLINE: tuple[tuple[str, str, Callable[[Any], str]], ...] = (
     ("floor_limited_ratio", "floor-limited frames", _ratio),
     ("budget_median", "polygon budget, median", lambda v: f"{v:,.0f} triangles"),
     ("triangles_mean", "triangles drawn, mean", lambda v: f"{v:,.0f}"),
+    (
+        "frame_phases_median_ms",
+        "frame loop, median ms per phase",
+        lambda v: " · ".join(f"{k} {float(x):.2f}" for k, x in v.items()),
+    ),
+    ("frame_period_median_ms", "frame period (start to start), median", lambda v: f"{v:.2f} ms"),
+    ("frame_period_within_10pct_ratio", "frame periods within 10 % of target", _ratio),
     ("recovery_frames", "recovery after cost step", lambda v: f"{int(v)} frames"),
 )
 
