@@ -37,6 +37,7 @@ from walkstream.client.draw.allocate import allocate_ach, allocate_distance
 from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.culling import frustum_cull
 from walkstream.client.draw.devices import make_device
+from walkstream.client.draw.phases import FramePhases
 from walkstream.client.net.api import SceneClient
 from walkstream.client.net.link import LinkProfile, ShapedTransport
 from walkstream.client.report.metrics import (
@@ -108,6 +109,8 @@ class ReplayConfig:
     """Ask for the streams gzip-compressed (``Accept-Encoding: gzip``)."""
     truth_every: int = 0
     """Compare every N-th frame with the ground truth after the walk (0: never)."""
+    batched_draws: bool = True
+    """One multi-draw call per frame (False: one draw call per object, as before)."""
 
     def __post_init__(self) -> None:
         if self.stream not in STREAM_FORMS:
@@ -153,6 +156,8 @@ class ReplayResult:
     """Per frame: the simulated device stalled (its occasional 2x spike)."""
     truth: TruthResult | None = None
     """The frames compared with the ground truth (``truth_every``)."""
+    phases: NDArray[np.float64] | None = None
+    """Per frame, seconds of the loop's :data:`~walkstream.client.draw.phases.PHASES`."""
 
 
 def run_replay(
@@ -278,6 +283,7 @@ async def replay(
     """The replay coroutine (see :func:`run_replay` to run it on a clock)."""
     link = ShapedTransport(transport, config.link, clock)
     renderer: Any = None
+    phases = FramePhases()
     truth: TruthResult | None = None
     streamer: Streamer | None = None
     disk: DiskCache | None = None
@@ -346,7 +352,9 @@ async def replay(
             if not device.simulated or config.snapshot_every:
                 from walkstream.client.draw.frames import FrameRenderer
 
-                renderer = FrameRenderer(size=config.size, fov_deg=config.fov_deg)
+                renderer = FrameRenderer(
+                    size=config.size, fov_deg=config.fov_deg, batched=config.batched_draws
+                )
 
             def on_evict(kind: str, oid: int) -> None:
                 assert streamer is not None
@@ -363,6 +371,7 @@ async def replay(
             log, snapshots, spikes = await _walk(
                 config, clock, path, streamer, cache, device, renderer, progress, t_start, link,
                 recorder,
+                phases,
             )
             if recorder is not None:
                 # after the walk, with the streamer stopped (nothing more goes down the
@@ -469,6 +478,8 @@ async def replay(
         }
     )
     summary["spike_frames"] = int(spikes.sum())
+    if config.clock == "real":  # wall-clock figures: a simulated run's summary stays reproducible
+        summary.update(phases.summary(config.fps_target), batched_draws=config.batched_draws)
     if truth is not None:
         first = first_perfect_index(log)
         summary["truth"] = summarise_truth(
@@ -483,7 +494,7 @@ async def replay(
             "available": disk_state[0],
             "error": disk_state[1],
         }
-    return ReplayResult(summary, log, bytes_log, snapshots, spikes, truth)
+    return ReplayResult(summary, log, bytes_log, snapshots, spikes, truth, phases.array())
 
 
 async def _replay_interior(
@@ -621,7 +632,9 @@ async def _walk(
     t_start: float,
     link: ShapedTransport,
     recorder: TruthRecorder | None = None,
+    phases: FramePhases | None = None,
 ) -> tuple[FrameLog, list[Path], NDArray[np.bool_]]:
+    ph = FramePhases() if phases is None else phases
     tick = 1.0 / config.fps
     total = path.duration if config.duration_s is None else min(config.duration_s, path.duration)
     proj = _projection(config)
@@ -641,6 +654,7 @@ async def _walk(
         wt = t - t_walk0
         if wt > total:
             break
+        ph.begin()
         if progress is not None and wt - last_progress >= 1.0:
             last_progress = wt
             progress(wt, total)
@@ -653,9 +667,11 @@ async def _walk(
             rec = streamer.cells.get(cur) if cur is not None else None
             if rec is not None:
                 streamer.ensure_geometry(rec.pvs.tolist())
+        ph.mark("stream")
         view = _view(xyz, float(yaw), float(pitch))
         vp = proj.astype(np.float64) @ view.astype(np.float64)
         visible = frustum_cull(inputs.lo, inputs.hi, vp) if len(inputs.ids) else np.zeros(0, bool)
+        ph.mark("cull")
         budget = int(controller.budget)
         if config.lod_select == "ach":
             alloc = allocate_ach(
@@ -668,6 +684,7 @@ async def _walk(
         if config.cost_step_at_s is not None and not stepped and wt >= config.cost_step_at_s:
             device.cost_scale = device.cost_scale * config.cost_step_factor
             stepped = True
+        ph.mark("allocate")
         draw_keys: list[tuple[int, int]] = []
         if renderer is not None:
             for g, lod in zip(inputs.geoms, alloc.lod.tolist(), strict=True):
@@ -679,6 +696,7 @@ async def _walk(
                             continue
                         renderer.upload(key, mesh)
                     draw_keys.append(key)
+        ph.mark("upload")
         snap = config.snapshot_every and frame % config.snapshot_every == 0
         if device.simulated:
             frame_time = float(device.frame_time(int(alloc.triangles), int((alloc.lod >= 0).sum())))
@@ -688,6 +706,9 @@ async def _walk(
         else:
             frame_time = float(renderer.draw(draw_keys, view, proj))
             spikes.append(False)
+        ph.mark("draw")
+        if renderer is not None and (snap or not device.simulated):
+            ph.move("draw", "finish", renderer.last_finish_s)
         if snap and renderer is not None and config.report_dir is not None:
             out = Path(config.report_dir) / "frames" / f"frame_{frame:06d}.png"
             out.parent.mkdir(parents=True, exist_ok=True)
@@ -723,6 +744,7 @@ async def _walk(
             all_lod2=bool(alloc.all_max),
         )
         frame += 1
+        ph.end()
         await clock.sleep_until(t + max(frame_time, tick))
     if progress is not None:
         progress(total, total)

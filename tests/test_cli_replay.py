@@ -169,3 +169,32 @@ def test_demo_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str], gl_
     assert summary["path"] == "SE" and summary["device"] == "desktop2003"
     assert summary["clock"] == "sim" and summary["bandwidth_bps"] == 56_000
     assert summary["frames"] > 4000  # the whole 200 s walk at 25 fps
+
+
+@pytest.mark.gl
+def test_bench_budget_gl_rows_under_the_real_clock(db: Path, tmp_path: Path, gl: object) -> None:
+    from walkstream.benchmarks.budget import (
+        format_budget_table,
+        format_gl_real_table,
+        run_gl_real_rows,
+    )
+    from walkstream.client.draw.phases import PHASES
+    from walkstream.cmd_replay import replay_with_options
+
+    rows = run_gl_real_rows(
+        str(db), replay_with_options, out=tmp_path, runs=1, duration="2s", cases=(("160x120", 30.0),)
+    )
+    assert [(r["draws"], r["clock"], r["size"]) for r in rows] == [
+        ("batched", "real", "160x120"),
+        ("per-object", "real", "160x120"),
+    ]
+    for r in rows:
+        assert set(r["phases_ms"]) == set(PHASES)
+        assert r["phases_ms"]["finish"] > 0.0 and r["fps_mean"] > 0
+        assert len(r["per_run"]) == 1
+    report = json.loads((tmp_path / "real-160x120-30fps-per-object-1" / "report.json").read_text())
+    assert report["batched_draws"] is False and report["clock"] == "real"
+    assert (tmp_path / "real-160x120-30fps-batched-1" / "phases.png").exists()
+    text = format_gl_real_table(rows)
+    assert "per-object" in text and "finish" in text
+    assert "160x120" not in format_budget_table(rows)  # the real-clock rows have their own table

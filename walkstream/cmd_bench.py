@@ -7,7 +7,7 @@
     walkstream bench render [--size 700] [--cells 40] [--runs 3] ...
     walkstream bench server scene.db [--walkers 10,100,1000] [--workers 1,2] ...
     walkstream bench stream [scene.db] [--vienna vienna.db] [--scene LABEL=DB[:PATHS]] [--only NAMES] [--duration S]
-    walkstream bench budget [scene.db] [--no-gl] [--seed N]
+    walkstream bench budget [scene.db] [--no-gl] [--seed N] [--gl-runs N] [--gl-real-duration S]
     walkstream bench controller [--frames 3000] [--seeds 1 2 3] [--step 10]
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--reuse] [--out DIR]
@@ -173,7 +173,11 @@ def cmd_bench_stream(args: argparse.Namespace) -> int:
 
 def cmd_bench_budget(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench budget``."""
-    from walkstream.benchmarks.budget import format_budget_table, run_budget_bench
+    from walkstream.benchmarks.budget import (
+        format_budget_table,
+        format_gl_real_table,
+        run_budget_bench,
+    )
     from walkstream.cmd_replay import replay_with_options
 
     out = Path(args.out)
@@ -186,8 +190,14 @@ def cmd_bench_budget(args: argparse.Namespace) -> int:
         step_at=args.step_at,
         gl=not args.no_gl,
         seed=args.seed,
+        gl_runs=args.gl_runs,
+        gl_real_duration=args.gl_real_duration,
     )
     print(format_budget_table(rows))
+    real = format_gl_real_table(rows)
+    if real:
+        print()
+        print(real)
     print(f"reports: {out}")
     return 0
 
@@ -409,7 +419,9 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--duration", default="180s", help="walk length for the simulated devices (default 180s)")
     b.add_argument("--gl-duration", default="20s", help="walk length for the gl device (default 20s)")
     b.add_argument("--step-at", type=float, default=60.0, help="walk second of the tenfold cost step (default 60)")
-    b.add_argument("--no-gl", action="store_true", help="skip the gl rows")
+    b.add_argument("--no-gl", action="store_true", help="skip the gl rows (the real-clock ones too)")
+    b.add_argument("--gl-runs", type=int, default=3, help="runs per real-clock gl row, medians reported (default 3; 0: no real-clock rows)")
+    b.add_argument("--gl-real-duration", default="20s", help="walk length of each real-clock gl run (default 20s)")
     b.add_argument("--seed", type=int, default=0, help="seed of the device noise and spikes (default 0)")
     b.add_argument("--out", default="out/bench-budget", help="folder for the reports")
     b.set_defaults(func=cmd_bench_budget)

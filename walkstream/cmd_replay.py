@@ -101,6 +101,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         start_bundle=not args.no_start_bundle,
         gzip=not args.no_gzip,
         truth_every=args.truth_every,
+        batched_draws=not args.per_object_draws,
     )
 
 
@@ -164,6 +165,7 @@ def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = Fals
             snapshots=result.snapshots,
             title=title,
             truth=result.truth,
+            phases=result.phases,
         )
     return result
 
@@ -216,6 +218,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")
+    r.add_argument("--per-object-draws", action="store_true", help="gl device: one draw call per object instead of one multi-draw call per frame (the older path, for comparison)")
 
 
 def add_replay_parser(sub: Any) -> None:

@@ -11,6 +11,11 @@ comparing the client's frame with the ground truth (:mod:`walkstream.client.trut
 It has its own shader program and framebuffer and is never timed: the frame the user
 sees is :meth:`FrameRenderer.draw`.
 
+Draws are batched by default (``batched=True``): every mesh lives in one shared vertex
+and index buffer (:class:`~walkstream.client.draw.arena.MeshArena`) and a frame is one
+multi-draw call, the object-id pass too; ``batched=False`` keeps one buffer pair and
+one draw call per mesh (the path before batching, kept for comparison).
+
 Timing is honest: the clock starts before the clear and stops after
 ``ctx.finish()``, so the time includes all the GPU work of the frame, not only the
 time to queue it (on llvmpipe the CPU rasterises; on a real GPU ``finish`` waits for
@@ -28,6 +33,7 @@ import moderngl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.client.draw.arena import MeshArena
 from walkstream.client.draw.meshes import MeshRenderer
 from walkstream.shared.camera import look_at, mat4_bytes, perspective
 from walkstream.shared.errors import InputError, RenderError
@@ -45,6 +51,29 @@ in vec3 in_position;
 invariant gl_Position;
 void main() {
     gl_Position = u_view_proj * vec4(in_position, 1.0);
+}
+"""
+
+# The batched id pass: the id comes per draw through baseInstance.
+_ID_BATCH_VERTEX_SHADER = """
+#version 330
+uniform mat4 u_view_proj;
+in vec3 in_position;
+in uint in_id;
+flat out uint v_id;
+invariant gl_Position;
+void main() {
+    gl_Position = u_view_proj * vec4(in_position, 1.0);
+    v_id = in_id;
+}
+"""
+
+_ID_BATCH_FRAGMENT_SHADER = """
+#version 330
+flat in uint v_id;
+out uint f_id;
+void main() {
+    f_id = v_id;
 }
 """
 
@@ -110,6 +139,9 @@ class FrameRenderer(Releasable):
         Clip distances of the default projection, metres.
     ctx : moderngl.Context, optional
         Context to draw with; default: a new headless one (released in :meth:`close`).
+    batched : bool
+        One shared buffer pair and one multi-draw call per frame (default); False:
+        one buffer pair and one draw call per mesh.
 
     Notes
     -----
@@ -125,6 +157,7 @@ class FrameRenderer(Releasable):
         near: float = 0.5,
         far: float = 2000.0,
         ctx: moderngl.Context | None = None,
+        batched: bool = True,
     ) -> None:
         w, h = (int(v) for v in size)
         if w <= 0 or h <= 0:
@@ -149,6 +182,12 @@ class FrameRenderer(Releasable):
         self._id_prog: moderngl.Program | None = None
         self._id_fb: Framebuffer | None = None
         self._id_vaos: dict[int, moderngl.VertexArray] = {}
+        self.batched = bool(batched)
+        self._arena = MeshArena(self.ctx, self._r.program) if self.batched else None
+        #: Seconds the last :meth:`draw` spent issuing (clear, uniforms, draw calls)
+        #: and waiting in ``ctx.finish()`` for the device.
+        self.last_issue_s = 0.0
+        self.last_finish_s = 0.0
 
     # -- buffers ---------------------------------------------------------------
 
@@ -165,7 +204,10 @@ class FrameRenderer(Releasable):
             self.forget(key)
         mid = id(mesh)
         if self._refs.get(mid, 0) == 0:
-            self._r.upload(mesh)
+            if self._arena is not None:
+                self._arena.add(mesh)
+            else:
+                self._r.upload(mesh)
             self._triangles += mesh.triangles
             self._bytes += len(mesh.positions) * VERTEX_BYTES + mesh.triangles * INDEX_BYTES
         self._refs[mid] = self._refs.get(mid, 0) + 1
@@ -192,7 +234,10 @@ class FrameRenderer(Releasable):
         vao = self._id_vaos.pop(mid, None)
         if vao is not None:
             vao.release()
-        self._r.forget(mesh)
+        if self._arena is not None:
+            self._arena.remove(mesh)
+        else:
+            self._r.forget(mesh)
         self._triangles -= mesh.triangles
         self._bytes -= len(mesh.positions) * VERTEX_BYTES + mesh.triangles * INDEX_BYTES
 
@@ -246,9 +291,16 @@ class FrameRenderer(Releasable):
         meshes = [m for m in (self._keys.get(k) for k in keys) if m is not None]
         p = self.proj if proj is None else proj
         t0 = time.perf_counter()
-        self._r.draw(meshes, view, p, self.size)
+        if self._arena is not None:
+            self._r.begin(view, p, self.size)
+            self._arena.draw(meshes)
+            check_gl_error(self.ctx, "after FrameRenderer.draw")
+        else:
+            self._r.draw(meshes, view, p, self.size)
+        t1 = time.perf_counter()
         self.ctx.finish()
         dt = time.perf_counter() - t0
+        self.last_issue_s, self.last_finish_s = t1 - t0, dt - (t1 - t0)
         self._drawn = True
         self.last_drawn = len(meshes)
         self.last_triangles = sum(m.triangles for m in meshes)
@@ -285,10 +337,13 @@ class FrameRenderer(Releasable):
 
         ctx = self.ctx
         if self._id_prog is None:
+            vs, fs = (
+                (_ID_BATCH_VERTEX_SHADER, _ID_BATCH_FRAGMENT_SHADER)
+                if self._arena is not None
+                else (_ID_VERTEX_SHADER, _ID_FRAGMENT_SHADER)
+            )
             try:
-                self._id_prog = ctx.program(
-                    vertex_shader=_ID_VERTEX_SHADER, fragment_shader=_ID_FRAGMENT_SHADER
-                )
+                self._id_prog = ctx.program(vertex_shader=vs, fragment_shader=fs)
             except Exception as exc:
                 raise RenderError(f"FrameRenderer.draw_ids: shader program failed: {exc}") from exc
         if self._id_fb is None:
@@ -300,14 +355,24 @@ class FrameRenderer(Releasable):
         p = self.proj if proj is None else proj
         vp = np.asarray(p, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
         u_vp = prog["u_view_proj"]
-        u_id = prog["u_id"]
-        assert isinstance(u_vp, moderngl.Uniform) and isinstance(u_id, moderngl.Uniform)
+        assert isinstance(u_vp, moderngl.Uniform)
         u_vp.write(mat4_bytes(vp))
         ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.depth_func = "<"
         ctx.front_face = "ccw"
         ctx.cull_face = "back"
-        for key in sorted(keys, key=lambda k: int(k[0])):
+        ordered = sorted(keys, key=lambda k: int(k[0]))
+        if self._arena is not None:
+            found = [(k, self._keys.get(k)) for k in ordered]
+            meshes = [m for _, m in found if m is not None]
+            ids = np.array([int(k[0]) + 1 for k, m in found if m is not None], dtype=np.uint32)
+            self._arena.draw_ids(meshes, ids, prog)
+            check_gl_error(ctx, "after FrameRenderer.draw_ids")
+            img_b: NDArray[np.uint32] = fb.read(components=1)[:, :, 0]
+            return img_b
+        u_id = prog["u_id"]
+        assert isinstance(u_id, moderngl.Uniform)
+        for key in ordered:
             mesh = self._keys.get(key)
             bufs = None if mesh is None else self._r.buffers(mesh)
             if mesh is None or bufs is None:
@@ -353,6 +418,8 @@ class FrameRenderer(Releasable):
         if self._id_prog is not None:
             self._id_prog.release()
             self._id_prog = None
+        if self._arena is not None:
+            self._arena.release()
         self._keys.clear()
         self._refs.clear()
         self._triangles = 0

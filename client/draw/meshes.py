@@ -31,6 +31,7 @@ __all__ = [
     "FIGURE_DIRECTION",
     "LIGHT_DIRECTION",
     "MeshRenderer",
+    "pack_vertices",
     "render_lods_figure",
 ]
 
@@ -86,6 +87,23 @@ void main() {
 # every attribute 4-byte aligned; alpha is padding.
 _VERTEX_DTYPE = np.dtype([("p", "<f4", 3), ("n", "<f4", 3), ("c", "u1", 4)])
 _VERTEX_FORMAT = "3f 3f 4f1"
+
+
+def pack_vertices(mesh: Mesh) -> NDArray[np.void]:
+    """The interleaved GPU vertices of ``mesh``: 28 bytes each.
+
+    Returns
+    -------
+    (n_vertices,) structured array
+        float32 position ``p`` (3), float32 normal ``n`` (3), RGBA8 colour ``c`` of the
+        material (alpha 255, padding), in the layout ``"3f 3f 4f1"``.
+    """
+    verts = np.empty(len(mesh.positions), _VERTEX_DTYPE)
+    verts["p"] = mesh.positions
+    verts["n"] = mesh.normals
+    verts["c"][:, :3] = material_rgb(mesh.materials)
+    verts["c"][:, 3] = 255
+    return verts
 
 
 class _GpuMesh:
@@ -190,12 +208,7 @@ class MeshRenderer(Releasable):
             return
         if self._prog is None:
             raise RenderError("MeshRenderer: used after close()")
-        verts = np.empty(len(mesh.positions), _VERTEX_DTYPE)
-        verts["p"] = mesh.positions
-        verts["n"] = mesh.normals
-        verts["c"][:, :3] = material_rgb(mesh.materials)
-        verts["c"][:, 3] = 255
-        vbo = self.ctx.buffer(verts.tobytes())
+        vbo = self.ctx.buffer(pack_vertices(mesh).tobytes())
         ibo = self.ctx.buffer(np.ascontiguousarray(mesh.indices, dtype="<u4").tobytes())
         try:
             vao = self.ctx.vertex_array(
@@ -262,6 +275,34 @@ class MeshRenderer(Releasable):
         clear : bool
             Clear colour and depth of the whole framebuffer first.
         """
+        self.begin(view, proj, size, viewport, clear)
+        for mesh in meshes:
+            self.upload(mesh)
+            gm = self._meshes.get(id(mesh))
+            if gm is not None:
+                gm.vao.render()
+        check_gl_error(self.ctx, "after MeshRenderer.draw")
+
+    @property
+    def program(self) -> moderngl.Program:
+        """The shader program (vertex layout ``"3f 3f 4f1"``: position, normal, colour)."""
+        if self._prog is None:
+            raise RenderError("MeshRenderer: used after close()")
+        return self._prog
+
+    def begin(
+        self,
+        view: ArrayLike,
+        proj: ArrayLike,
+        size: tuple[int, int],
+        viewport: tuple[int, int, int, int] | None = None,
+        clear: bool = True,
+    ) -> None:
+        """Bind and clear the framebuffer and set the camera and GL state for a frame.
+
+        What :meth:`draw` does before its draw calls, for callers that issue their own
+        (batched) draw calls with :attr:`program`; parameters as for :meth:`draw`.
+        """
         if self._prog is None:
             raise RenderError("MeshRenderer: used after close()")
         fb = self._framebuffer(size)
@@ -278,12 +319,6 @@ class MeshRenderer(Releasable):
         self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
         self.ctx.front_face = "ccw"
         self.ctx.cull_face = "back"
-        for mesh in meshes:
-            self.upload(mesh)
-            gm = self._meshes.get(id(mesh))
-            if gm is not None:
-                gm.vao.render()
-        check_gl_error(self.ctx, "after MeshRenderer.draw")
 
     def read(self) -> NDArray[np.uint8]:
         """The last drawn image, ``(h, w, 3) uint8``, row 0 at the top."""

@@ -16,6 +16,9 @@ from walkstream.client.report.metrics import FrameLog
 from walkstream.shared.errors import InputError
 
 if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
     from walkstream.client.truth.recorder import TruthResult
 from walkstream.client.report.files import (
     BytesLog,
@@ -25,6 +28,7 @@ from walkstream.client.report.files import (
     write_frames_csv,
     write_json,
 )
+from walkstream.client.report.phases import plot_phases, write_phases_csv
 from walkstream.client.report.plots import (
     PLOT_NAMES,
     _make_run,
@@ -65,6 +69,10 @@ _CAPTIONS = {
     "fps.png": "Displayed frame rate per frame, with the target and its +-10 % band; red "
     "crosses are floor-limited frames (the LOD0s alone exceed the budget).",
     "budget.png": "Polygon budget set by the controller and triangles drawn per frame.",
+    "phases.png": "Where the frame loop's wall time goes, per frame (top, mean per time bin, "
+    "stacked) and its median (bottom): streaming tick, culling, LOD allocation, buffer "
+    "uploads, draw calls, finish (waiting for the device to draw), the rest of the loop, and "
+    "other (event loop, rebuilding threads, waiting for the tick).",
     "error.png": "The frame rate (top) and, for every compared frame, the share of its pixels "
     "that differ from the ground truth (line) and the pixels where the truth shows an object "
     "the client's frame does not, stacked by cause (bottom).",
@@ -239,6 +247,7 @@ def write_report(
     snapshots: Sequence[str | os.PathLike[str]] = (),
     title: str = "walkstream replay",
     truth: TruthResult | None = None,
+    phases: NDArray[np.float64] | None = None,
 ) -> Path:
     """Write the report folder of one replay and return the path of its ``index.html``.
 
@@ -263,6 +272,10 @@ def write_report(
         The frames compared with the ground truth: adds ``error.png``, ``truth.csv``
         and the worst compared frame (``truth/*.png``) with its truth and its missing
         pixels to the page.
+    phases : (frames, len(PHASES)) float, optional
+        Seconds per phase of the frame loop per frame
+        (:data:`~walkstream.client.draw.phases.PHASES`): adds ``phases.csv`` and
+        ``phases.png``.
 
     Returns
     -------
@@ -285,6 +298,13 @@ def write_report(
     _plot_quality(out / "quality.png", [run], f"{title}: download and rewrite quality per frame")
     _plot_fps(out / "fps.png", [run], f"{title}: frame rate")
     _plot_budget(out / "budget.png", [run], f"{title}: polygon budget")
+    names = list(PLOT_NAMES)
+    if phases is not None and len(phases) == len(log.t):
+        write_phases_csv(out / "phases.csv", log.t, phases)
+        plot_phases(
+            out / "phases.png", log.t - run.t0, phases, f"{title}: frame loop time per phase"
+        )
+        names.append("phases.png")
     if truth is not None:
         _plot_error(out / "error.png", run, truth.log, f"{title}: frame rate and image error against the truth")
     truth_html = _truth_section(out, safe, truth)
@@ -297,7 +317,7 @@ def write_report(
             "<p>Files: <a href='report.json'>report.json</a> · <a href='frames.csv'>frames.csv</a>"
             " (one row per frame) · <a href='bytes.csv'>bytes.csv</a> (link samples)</p>",
             "<h2>Plots</h2>",
-            _figures(PLOT_NAMES, _CAPTIONS),
+            _figures(names, _CAPTIONS),
             truth_html,
             _snapshot_section(placed),
             "<h2>Definitions</h2><ul>"

@@ -49,6 +49,13 @@ _HEADLINE: tuple[tuple[str, str, Callable[[Any], str]], ...] = (
     ("floor_limited_ratio", "floor-limited frames", _ratio),
     ("budget_median", "polygon budget, median", lambda v: f"{v:,.0f} triangles"),
     ("triangles_mean", "triangles drawn, mean", lambda v: f"{v:,.0f}"),
+    (
+        "frame_phases_median_ms",
+        "frame loop, median ms per phase",
+        lambda v: ", ".join(f"{k} {float(x):.2f}" for k, x in v.items()),
+    ),
+    ("frame_period_median_ms", "frame period (start to start), median", lambda v: f"{v:.2f} ms"),
+    ("frame_period_within_10pct_ratio", "frame periods within 10 % of target", _ratio),
     ("recovery_frames", "recovery after cost step", lambda v: f"{int(v)} frames"),
 )
 
@@ -96,7 +103,21 @@ def format_headline(summary: Mapping[str, Any]) -> str:
             f"within 10 % {ratio('fps_within_10pct_ratio')}, floor-limited "
             f"{ratio('floor_limited_ratio')}",
         ]
+        + _phases_line(summary)
     )
+
+
+def _phases_line(summary: Mapping[str, Any]) -> list[str]:
+    """The frame loop's median ms per phase (real-clock runs), or nothing."""
+    ph = summary.get("frame_phases_median_ms")
+    if not ph:
+        return []
+    parts = ", ".join(f"{k} {float(v):.2f}" for k, v in ph.items())
+    period = summary.get("frame_period_median_ms")
+    return [
+        f"frame loop, median ms: {parts}; period {period or 0:.2f} ms, "
+        f"{100 * (summary.get('frame_period_within_10pct_ratio') or 0):.1f} % within 10 %"
+    ]
 
 
 def format_comparison_table(runs: Sequence[tuple[str, Mapping[str, Any]]]) -> str:
