@@ -31,7 +31,26 @@ from walkstream.shared.errors import InputError, RenderError
 if TYPE_CHECKING:  # moderngl is imported lazily so that importing this module never fails
     import moderngl
 
-__all__ = ["BACKEND_ENV", "Framebuffer", "Releasable", "check_gl_error", "create_context"]
+__all__ = [
+    "BACKEND_ENV",
+    "VERTEX_ID_FRAGMENT_SHADER",
+    "Framebuffer",
+    "Releasable",
+    "check_gl_error",
+    "create_context",
+]
+
+VERTEX_ID_FRAGMENT_SHADER = """
+#version 330
+flat in uint v_id;
+out uint f_id;
+void main() {
+    f_id = v_id;
+}
+"""
+"""The fragment shader of an object-ID image: writes the id its vertex shader passes
+as ``flat out uint v_id`` (the bake's visibility renderer, the client's batched id
+pass) into an unsigned-integer colour attachment."""
 
 #: Environment variable that forces a backend (see the module docstring).
 BACKEND_ENV = "WALKSTREAM_GL_BACKEND"

@@ -37,7 +37,7 @@ from walkstream.client.draw.arena import MeshArena
 from walkstream.client.draw.meshes import MeshRenderer
 from walkstream.shared.camera import look_at, mat4_bytes, perspective
 from walkstream.shared.errors import InputError, RenderError
-from walkstream.shared.gl import Framebuffer, Releasable, check_gl_error
+from walkstream.shared.gl import VERTEX_ID_FRAGMENT_SHADER, Framebuffer, Releasable, check_gl_error
 from walkstream.shared.records import Mesh
 
 __all__ = ["FrameRenderer", "camera", "MAX_PITCH_DEG", "VERTEX_BYTES", "INDEX_BYTES"]
@@ -65,15 +65,6 @@ invariant gl_Position;
 void main() {
     gl_Position = u_view_proj * vec4(in_position, 1.0);
     v_id = in_id;
-}
-"""
-
-_ID_BATCH_FRAGMENT_SHADER = """
-#version 330
-flat in uint v_id;
-out uint f_id;
-void main() {
-    f_id = v_id;
 }
 """
 
@@ -338,7 +329,7 @@ class FrameRenderer(Releasable):
         ctx = self.ctx
         if self._id_prog is None:
             vs, fs = (
-                (_ID_BATCH_VERTEX_SHADER, _ID_BATCH_FRAGMENT_SHADER)
+                (_ID_BATCH_VERTEX_SHADER, VERTEX_ID_FRAGMENT_SHADER)
                 if self._arena is not None
                 else (_ID_VERTEX_SHADER, _ID_FRAGMENT_SHADER)
             )

@@ -35,7 +35,13 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.camera import cube_face_views, perspective
 from walkstream.shared.errors import InputError, RenderError
-from walkstream.shared.gl import Framebuffer, Releasable, check_gl_error, create_context
+from walkstream.shared.gl import (
+    VERTEX_ID_FRAGMENT_SHADER,
+    Framebuffer,
+    Releasable,
+    check_gl_error,
+    create_context,
+)
 from walkstream.shared.records import Mesh
 from walkstream.shared.streets import build_street
 
@@ -58,15 +64,6 @@ flat out uint v_id;
 void main() {
     gl_Position = mvp * vec4(in_pos, 1.0);
     v_id = in_id;
-}
-"""
-
-_FRAGMENT_SHADER = """
-#version 330
-flat in uint v_id;
-out uint f_id;
-void main() {
-    f_id = v_id;
 }
 """
 
@@ -366,7 +363,7 @@ class VisibilityRenderer(Releasable):
     def _create_gl_objects(self) -> None:
         ctx = self.ctx
         assert ctx is not None
-        self._prog = ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
+        self._prog = ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=VERTEX_ID_FRAGMENT_SHADER)
         self._mvp = cast("moderngl.Uniform", self._prog["mvp"])
         # Empty buffers are not allowed; a 16-byte placeholder keeps an empty scene valid.
         self._vbo = ctx.buffer(self._verts.tobytes() if len(self._verts) else bytes(16))
