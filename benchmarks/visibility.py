@@ -47,6 +47,7 @@ so a database baked from any source works; a source file is read by the caller.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import re
@@ -69,6 +70,7 @@ from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_sce
 from walkstream.server.bake.workers import cell_points
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError
+from walkstream.shared.records import Mesh
 
 if TYPE_CHECKING:
     import moderngl
@@ -81,6 +83,8 @@ __all__ = [
     "TODAY",
     "DEFAULT_SETTINGS",
     "TARGETS",
+    "default_cache_dir",
+    "reference_cache_key",
     "format_table",
     "load_bench_input",
     "parse_setting",
@@ -119,20 +123,25 @@ class Setting:
     bake: BakeSettings
 
 
-_SPEC = re.compile(r"^(corners|boundary(\d+(?:\.\d+)?)?)-(\d+)((?:-[a-zA-Z]+\d*(?:\.\d+)?|\+c)*)$")
+_SPEC = re.compile(r"^(corners|(?:boundary|region)(\d+(?:\.\d+)?)?)-(\d+)((?:-[a-zA-Z]+\d*(?:\.\d+)?|\+[ce])*)$")
 
 
 def parse_setting(spec: str) -> Setting:
-    """A setting from its name: ``SAMPLING-RES[-tN][-LK][-hH][+c]``.
+    """A setting from its name: ``SAMPLING-RES[-tN][-LK][-hH][+c][+e]``.
 
     ``corners-64`` is the first bake (8 box corners, 64 px); ``boundary20-128`` samples
-    the outline every 20 m at 128 px; ``-t2`` adds a hardly-visible threshold of 2
+    the outline every 20 m at 128 px; ``region20-128`` the outline, a 20 m grid inside
+    and both ends of the height range; ``-t2`` adds a hardly-visible threshold of 2
     pixels, ``-L2`` renders LOD2 occluders, ``-h0.25`` samples a height every 0.25 m
-    of the cell's range, ``+c`` the centre too.
+    of the cell's range, ``+c`` the centre too, ``+e`` the edge pass (objects thinner
+    than a pixel).
 
     >>> s = parse_setting("boundary10-256-t4+c").bake
-    >>> (s.sampling, s.spacing, s.resolution, s.threshold, s.centre)
-    ('boundary', 10.0, 256, 4, True)
+    >>> (s.sampling, s.spacing, s.resolution, s.threshold, s.centre, s.edge_pass)
+    ('boundary', 10.0, 256, 4, True, False)
+    >>> s = parse_setting("region20-128+e").bake
+    >>> (s.sampling, s.spacing, s.edge_pass)
+    ('region', 20.0, True)
     """
     m = _SPEC.match(spec.strip())
     if m is None:
@@ -144,13 +153,15 @@ def parse_setting(spec: str) -> Setting:
     if m.group(1) == "corners":
         kw["sampling"] = "corners"
     else:
-        kw["sampling"] = "boundary"
+        kw["sampling"] = "region" if m.group(1).startswith("region") else "boundary"
         if m.group(2):
             kw["spacing"] = float(m.group(2))
-    for part in re.findall(r"-([a-zA-Z]+)(\d+(?:\.\d+)?)|(\+c)", m.group(4)):
-        key, value, centre = part
-        if centre:
+    for part in re.findall(r"-([a-zA-Z]+)(\d+(?:\.\d+)?)|\+([ce])", m.group(4)):
+        key, value, flag = part
+        if flag == "c":
             kw["centre"] = True
+        elif flag == "e":
+            kw["edge_pass"] = True
         elif key == "t":
             kw["threshold"] = int(float(value))
         elif key == "L":
@@ -183,7 +194,7 @@ DEFAULT_SETTINGS: tuple[str, ...] = (
 
 
 def _same_sampling(a: BakeSettings, b: BakeSettings) -> bool:
-    keys = ("sampling", "spacing", "height_step", "centre", "resolution", "occluder_lod", "threshold")
+    keys = ("sampling", "spacing", "height_step", "centre", "resolution", "occluder_lod", "threshold", "edge_pass")
     return all(getattr(a, k) == getattr(b, k) for k in keys)
 
 
@@ -268,6 +279,42 @@ def load_bench_input(path: str | os.PathLike[str], *, scene: SourceScene | None 
         return BenchInput(scene, make_cells(scene, "auto"), 800.0, str(p))
     sc, cells, baked, settings = scene_from_database(p)
     return BenchInput(sc, cells, float(settings.get("view_distance", 800.0)), str(p), baked, settings)
+
+
+# --------------------------------------------------------------------------- reference cache
+
+
+def _scene_digest(meshes: Sequence[Mesh], ids: I64) -> str:
+    """A digest of what the reference renders: every mesh's vertices and triangles and its id."""
+    h = hashlib.sha256(np.ascontiguousarray(ids, np.int64).tobytes())
+    for m in meshes:
+        h.update(np.ascontiguousarray(m.positions, np.float32).tobytes())
+        h.update(np.ascontiguousarray(m.indices, np.uint32).tobytes())
+    return h.hexdigest()
+
+
+def reference_cache_key(scene_digest: str, points: NDArray[np.float64], resolution: int, view_distance: float) -> str:
+    """The file name (no suffix) of one cell's reference counts.
+
+    Parameters
+    ----------
+    scene_digest:
+        Digest of the scene's LOD2 meshes and ids (what the reference draws).
+    points : (p, 3) float
+        The cell's reference viewpoints (they follow from the cell, its height range,
+        the footprints and the seed, so they stand for all of them).
+    resolution, view_distance:
+        Cube-face pixels and far plane of the reference.
+    """
+    h = hashlib.sha256(f"visref-1|{scene_digest}|{int(resolution)}|{float(view_distance)!r}|".encode())
+    h.update(np.ascontiguousarray(points, np.float64).tobytes())
+    return h.hexdigest()[:32]
+
+
+def default_cache_dir() -> Path:
+    """Where ``bench visibility`` keeps reference counts: ``$XDG_CACHE_HOME/walkstream/visibility-reference``."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "walkstream" / "visibility-reference"
 
 
 # --------------------------------------------------------------------------- cells
@@ -378,6 +425,7 @@ def visibility_benchmark(
     repeat: int = 3,
     ctx: moderngl.Context | None = None,
     progress: Progress | None = None,
+    cache: str | os.PathLike[str] | None = None,
 ) -> dict[str, Any]:
     """Misses against the dense reference, image error at random eye points, and time, per setting.
 
@@ -403,6 +451,10 @@ def visibility_benchmark(
     progress:
         Called with ``(cells done, cells total)``: the reference, then the settings,
         then the views, each a pass over the cells.
+    cache:
+        Folder of reference counts kept between runs (:func:`reference_cache_key`:
+        the scene's LOD2 meshes, the cell, the points and the resolution decide it);
+        None: none kept.  The reference is by far the slowest part of a run.
 
     Returns
     -------
@@ -441,37 +493,58 @@ def visibility_benchmark(
         progress(0, total)
     own = ctx is None
     gl = create_context() if ctx is None else ctx
-    renderers: dict[tuple[int, int], VisibilityRenderer] = {}
+    renderers: dict[tuple[int, int, bool], VisibilityRenderer] = {}
     try:
         meshes2, ids2 = meshes_for_scene(scene, 2)
         # -- the reference ---------------------------------------------------------
-        ref_r = VisibilityRenderer(meshes2, ids2, resolution=int(ref_resolution), view_distance=vd, ctx=gl, frustum_cull=False)
+        ref_r: VisibilityRenderer | None = None
         ref: list[dict[int, int]] = []
-        ref_times, ref_pts = [], []
+        ref_times, ref_pts, ref_cached = [], [], 0
+        scene_key = _scene_digest(meshes2, ids2) if cache is not None else ""
         try:
             for c in chosen:
                 pts = reference_points(c.polygon, c.zmin, c.zmax, int(ref_points), footprints=footprints, seed=seed * 7919 + 100_003 + c.id)
+                ref_pts.append(len(pts))
+                file = None
+                if cache is not None:
+                    key = reference_cache_key(scene_key, pts, int(ref_resolution), vd)
+                    file = Path(cache) / f"{key}.npz"
+                    if file.is_file():
+                        with np.load(file) as z:
+                            i, px, sec = z["ids"], z["pixels"], float(z["seconds"])
+                        ref_cached += 1
+                        ref_times.append(sec)
+                        ref.append({int(a): int(b) for a, b in zip(i, px, strict=True)})
+                        tick()
+                        continue
+                if ref_r is None:
+                    ref_r = VisibilityRenderer(meshes2, ids2, resolution=int(ref_resolution), view_distance=vd, ctx=gl, frustum_cull=False)
                 t = time.perf_counter()
                 i, px = ref_r.cell_counts(pts)
                 ref_times.append(time.perf_counter() - t)
-                ref_pts.append(len(pts))
+                if file is not None:
+                    file.parent.mkdir(parents=True, exist_ok=True)
+                    tmp = file.with_suffix(".tmp.npz")
+                    np.savez(tmp, ids=i, pixels=px, seconds=ref_times[-1])
+                    os.replace(tmp, file)  # a run stopped halfway leaves no half-written entry
                 ref.append({int(a): int(b) for a, b in zip(i, px, strict=True)})
                 tick()
         finally:
-            ref_r.release()
+            if ref_r is not None:
+                ref_r.release()
         # -- the settings, taking turns cell by cell --------------------------------
         for s in rows_in:
-            key = (s.bake.occluder_lod, s.bake.resolution)
+            key = (s.bake.occluder_lod, s.bake.resolution, s.bake.edge_pass)
             if key not in renderers:
                 m, ids = (meshes2, ids2) if key[0] == 2 else meshes_for_scene(scene, key[0])
-                renderers[key] = VisibilityRenderer(m, ids, resolution=key[1], view_distance=vd, ctx=gl)
+                renderers[key] = VisibilityRenderer(m, ids, resolution=key[1], view_distance=vd, ctx=gl, edge_pass=key[2])
                 renderers[key].cell_counts(np.array([[0.0, 0.0, 1.7]]))  # compile, warm up
         pvs: list[list[set[int]]] = [[] for _ in rows_in]
         times: list[list[float]] = [[] for _ in rows_in]
         npts: list[list[int]] = [[] for _ in rows_in]
         for c in chosen:
             for k, s in enumerate(rows_in):
-                r = renderers[(s.bake.occluder_lod, s.bake.resolution)]
+                r = renderers[(s.bake.occluder_lod, s.bake.resolution, s.bake.edge_pass)]
                 best = math.inf
                 for _ in range(max(1, int(repeat))):
                     t = time.perf_counter()
@@ -495,7 +568,7 @@ def visibility_benchmark(
     for k, s in enumerate(rows_in):
         sec = float(statistics.median(times[k]))
         rows.append(
-            {"name": s.name, "sampling": s.bake.sampling, "spacing": s.bake.spacing if s.bake.sampling == "boundary" else None,
+            {"name": s.name, "sampling": s.bake.sampling, "spacing": s.bake.spacing if s.bake.sampling != "corners" else None,
              "resolution": s.bake.resolution, "lod": s.bake.occluder_lod, "threshold": s.bake.threshold,
              "centre": s.bake.centre, "points_per_cell": float(np.mean(npts[k])), "sec_per_cell": sec}
             | _score(pvs[k], ref)
@@ -527,6 +600,7 @@ def visibility_benchmark(
             "pixels_per_cell": float(np.mean([sum(r.values()) for r in ref])),
             "sec_per_cell": float(statistics.median(ref_times)),
             "cells_scored": sum(1 for r in ref if r),
+            "cached": ref_cached,
         },
         "views": len(shots),
         "view_size": list(view_size),
@@ -586,7 +660,8 @@ def format_table(result: dict[str, Any]) -> str:
         f"reference: {len(result['cells'])} cells ({ref['cells_scored']} see something), "
         f"{ref['points_per_cell']:.0f} random points/cell over the cell and its height range, "
         f"{ref['resolution']} px, LOD{ref['lod']}, no frustum culling: PVS {ref['pvs_mean']:.1f} "
-        f"of {result['objects']} objects, {ref['sec_per_cell']:.1f} s/cell",
+        f"of {result['objects']} objects, {ref['sec_per_cell']:.1f} s/cell"
+        + (f" ({ref['cached']} cells from the cache)" if ref.get("cached") else ""),
         f"image error: {result['views']} random eye points ({result['view_size'][0]}x{result['view_size'][1]}, "
         "random heading) compared with their ground truth",
         "",

@@ -15,6 +15,7 @@ from walkstream.server.bake.samples import (
     dense_points,
     height_levels,
     reference_points,
+    region_points,
     sample_points,
 )
 from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
@@ -388,3 +389,50 @@ def test_no_frustum_culling_gives_the_same_counts(gl: moderngl.Context) -> None:
     for x, y in zip(got, ref, strict=True):
         np.testing.assert_array_equal(x, y)
     assert BEYOND not in ref[0].tolist()
+
+
+def test_region_points_cover_the_outline_the_inside_and_both_heights() -> None:
+    square = rect(0.0, 0.0, 60.0, 60.0)
+    pts = region_points(square, 1.5, 2.0, spacing=20.0)
+    ring = boundary_points(square, 1.5, 2.0, spacing=20.0)
+    # the outline points first, then the inside grid
+    np.testing.assert_array_equal(pts[: len(ring), :2], ring[:, :2])
+    inner = pts[len(ring) :, :2]
+    assert len(inner) >= 4
+    assert np.all(shapely.contains_xy(shapely.Polygon(square).buffer(-10.0 + 1e-6), inner[:, 0], inner[:, 1]))
+    gap = np.hypot(*(inner[:, None, :] - ring[None, :, :2]).transpose(2, 0, 1)).min(axis=1)
+    assert gap.min() >= 10.0 - 1e-6
+    # both ends of the height range, alternating along the points
+    assert pts[:, 2].tolist()[:4] == [2.0, 1.5, 2.0, 1.5]
+    assert set(pts[:, 2].tolist()) == {1.5, 2.0}
+    np.testing.assert_array_equal(pts, region_points(square, 1.5, 2.0, spacing=20.0))
+    # a short street cell: the outline only; a long one: a row down its middle too
+    assert len(region_points(rect(0.0, 0.0, 30.0, 10.0), 1.5, 2.0)) == len(boundary_points(rect(0.0, 0.0, 30.0, 10.0), 1.5, 2.0))
+    long_street = region_points(rect(0.0, 0.0, 60.0, 10.0), 1.5, 2.0)
+    assert long_street[8:, 1].tolist() == [5.0, 5.0, 5.0]
+    # a tall range samples every point at every level; inside buildings, nothing
+    tall = region_points(square, 0.0, 3.0, spacing=20.0, height_step=1.5)
+    assert sorted(set(tall[:, 2].tolist())) == [0.0, 1.5, 3.0] and len(tall) == 3 * len(pts)
+    assert region_points(CELL, 1.5, 2.0, footprints=footprint_tree((block(9, -9.0, -9.0, 9.0, 9.0, 5.0),))).shape == (0, 3)
+    # and out of buildings
+    blds = (block(1, 25.0, 25.0, 35.0, 35.0, 10.0),)
+    with_bld = region_points(square, 1.5, 2.0, spacing=20.0, footprints=footprint_tree(blds))
+    assert not np.any(shapely.intersects(shapely.Polygon(blds[0].rings[0]).buffer(0.29), shapely.points(with_bld[:, :2])))
+    np.testing.assert_array_equal(bake_points(square, 1.5, 2.0, sampling="region"), pts)
+
+
+def test_the_edge_pass_adds_an_object_thinner_than_a_pixel_and_drops_nothing(gl: moderngl.Context) -> None:
+    # a flat strip 2 m deep lying on the ground 100 m north: from 1.7 m up it is a band
+    # 0.02 degrees high, far below one 16 px pixel (5.6 degrees)
+    sliver = StreetParams(99, "street", rect(-30.0, 100.0, 30.0, 102.0), 2.0)
+    scene = SourceScene("sliver", "local", (0.0, 0.0), BUILDINGS[:2] + BUILDINGS[3:], (sliver,))
+    meshes, ids = meshes_for_scene(scene, 0)
+    eye = np.array([[0.0, 0.0, 1.7]])
+    got = {}
+    for edge in (False, True):
+        with VisibilityRenderer(meshes, ids, resolution=16, view_distance=VIEW_DISTANCE, ctx=gl, edge_pass=edge) as r:
+            got[edge] = dict(zip(*(a.tolist() for a in r.cell_counts(eye)), strict=True))
+    assert 99 not in got[False] and got[True].get(99, 0) >= 1
+    # the fill's counts stand; the edges only add objects the fill did not see
+    assert {k: got[True][k] for k in got[False]} == got[False]
+    assert HIDDEN not in got[True]

@@ -43,6 +43,7 @@ __all__ = [
     "SAMPLINGS",
     "sample_points",
     "boundary_points",
+    "region_points",
     "height_levels",
     "bake_points",
     "dense_points",
@@ -50,7 +51,7 @@ __all__ = [
 ]
 
 #: the bake's sampling schemes (``BakeSettings.sampling``)
-SAMPLINGS = ("boundary", "corners")
+SAMPLINGS = ("boundary", "corners", "region")
 
 
 # ------------------------------------------------------------------ sample points
@@ -260,6 +261,66 @@ def boundary_points(
     return np.vstack([np.column_stack([xy, np.full(len(xy), z)]) for z in zs])
 
 
+def region_points(
+    polygon: ArrayLike,
+    zmin: float,
+    zmax: float,
+    *,
+    spacing: float = 20.0,
+    height_step: float = 1.0,
+    margin: float = 0.3,
+    centre: bool = False,
+    footprints: STRtree | None = None,
+) -> F64:
+    """The cell's sample points over its outline, its inside and its height range.
+
+    The outline points of :func:`boundary_points`, then a square grid of ``spacing``
+    metres over the cell's free space, centred on it (its nodes closer than
+    ``spacing / 2`` to an outline point dropped: a 30 x 10 m street cell gets none, a
+    60 x 10 m one a row down its middle, a square grid cell about one per
+    ``spacing**2``); the heights alternate along the points
+    between the top and the bottom of the eye-height range (every point at every
+    :func:`height_levels` height when the range is taller than ``height_step``, as
+    the outline does).  The dense reference spreads its eyes over the whole cell and
+    height range; an eye half a metre lower moves a grazing street 60 m away by
+    most of a 128 px pixel, so the two heights are two chances to catch it.
+
+    Returns
+    -------
+    (p, 3) float64
+        The outline points first (in the order of :func:`boundary_points`), then the
+        grid nodes row by row; none when the cell has no free space.
+    """
+    lo, hi = _check_z(zmin, zmax)
+    edge = boundary_points(
+        polygon, lo, hi, spacing=spacing, height_step=height_step, margin=margin, centre=centre, footprints=footprints
+    )
+    if len(edge) == 0:
+        return edge
+    levels = height_levels(lo, hi, height_step)
+    ring = edge[edge[:, 2] == levels[0], :2]
+    poly = _cell_polygon(polygon)
+    free = _free_space(poly, float(margin), footprints)
+    assert free is not None  # boundary_points found free space
+    sp = float(spacing)
+    x0, y0, x1, y1 = free.bounds
+    # the grid centred on the free space, so that a cell's inside is covered evenly
+    nx, ny = int((x1 - x0) // sp), int((y1 - y0) // sp)
+    gx = (x0 + x1) / 2.0 + (np.arange(nx + 1) - nx / 2.0) * sp
+    gy = (y0 + y1) / 2.0 + (np.arange(ny + 1) - ny / 2.0) * sp
+    xx, yy = np.meshgrid(gx, gy, indexing="xy")
+    grid = np.column_stack([xx.reshape(-1), yy.reshape(-1)])
+    grid = grid[shapely.contains_xy(free, grid[:, 0], grid[:, 1])]
+    if len(grid):
+        d = np.hypot(grid[:, None, 0] - ring[None, :, 0], grid[:, None, 1] - ring[None, :, 1]).min(axis=1)
+        grid = grid[d >= sp / 2.0]
+    xy = np.vstack([ring, grid])
+    if len(levels) > 1:
+        return np.vstack([np.column_stack([xy, np.full(len(xy), z)]) for z in levels])
+    z = np.where(np.arange(len(xy)) % 2 == 0, hi, lo)
+    return np.column_stack([xy, z])
+
+
 def bake_points(
     polygon: ArrayLike,
     zmin: float,
@@ -274,11 +335,24 @@ def bake_points(
 ) -> F64:
     """The sample points of one cell as the bake places them (``sampling`` names the scheme).
 
-    ``"boundary"``: :func:`boundary_points`; ``"corners"``: :func:`sample_points`, the
-    first bake's 8 box corners (``spacing`` and ``height_step`` unused).
+    ``"boundary"``: :func:`boundary_points`; ``"region"``: :func:`region_points`
+    (outline, inside and both ends of the height range); ``"corners"``:
+    :func:`sample_points`, the first bake's 8 box corners (``spacing`` and
+    ``height_step`` unused).
     """
     if sampling == "boundary":
         return boundary_points(
+            polygon,
+            zmin,
+            zmax,
+            spacing=spacing,
+            height_step=height_step,
+            margin=margin,
+            centre=centre,
+            footprints=footprints,
+        )
+    if sampling == "region":
+        return region_points(
             polygon,
             zmin,
             zmax,

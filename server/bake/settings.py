@@ -48,13 +48,16 @@ class BakeSettings:
     """``sampling="boundary"``: largest distance between points along an edge, metres."""
     height_step: float = 1.0
     """``sampling="boundary"``: one more sampled height per this many metres of range."""
+    edge_pass: bool = False
+    """Draw every triangle's edges as lines after the fill, adding the objects thinner
+    than a pixel (:class:`~walkstream.server.bake.visibility.VisibilityRenderer`)."""
 
     def check(self) -> BakeSettings:
         """Raise InputError naming the first bad setting."""
         if self.cells not in ("auto", "street", "grid"):
             raise InputError(f"--cells: expected street, grid or auto, got {self.cells!r}")
-        if self.sampling not in ("boundary", "corners"):
-            raise InputError(f"--sampling: expected boundary or corners, got {self.sampling!r}")
+        if self.sampling not in ("boundary", "corners", "region"):
+            raise InputError(f"--sampling: expected boundary, region or corners, got {self.sampling!r}")
         for name in ("cell_size", "max_length", "view_distance", "margin", "spacing", "height_step"):
             v = float(getattr(self, name))
             if not (np.isfinite(v) and v > 0):
