@@ -507,8 +507,7 @@ def visibility_benchmark(
                 ref_pts.append(len(pts))
                 file = None
                 if cache is not None:
-                    key = reference_cache_key(scene_key, pts, int(ref_resolution), vd)
-                    file = Path(cache) / f"{key}.npz"
+                    file = Path(cache) / f"{reference_cache_key(scene_key, pts, int(ref_resolution), vd)}.npz"
                     if file.is_file():
                         with np.load(file) as z:
                             i, px, sec = z["ids"], z["pixels"], float(z["seconds"])
