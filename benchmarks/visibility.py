@@ -15,7 +15,7 @@ reference
 settings
     Each setting (sampling scheme, spacing, resolution, occluder LOD, hardly-visible
     threshold; :func:`parse_setting`) computes the cells' PVS exactly as the bake does
-    (:func:`~walkstream.server.bake.workers.cell_points`, then
+    (:func:`~walkstream.server.bake.workers.cell_counts`: the points, then
     :meth:`~walkstream.server.bake.visibility.VisibilityRenderer.cell_counts` and
     :func:`~walkstream.server.bake.visibility.pvs_from_counts`).  The settings take
     turns cell by cell, so a slower machine moment hits them all alike; each renders
@@ -67,7 +67,7 @@ from walkstream.server.bake.samples import reference_points
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
-from walkstream.server.bake.workers import cell_points
+from walkstream.server.bake.workers import cell_counts
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError
 from walkstream.shared.records import Mesh
@@ -162,6 +162,8 @@ def parse_setting(spec: str) -> Setting:
             kw["centre"] = True
         elif flag == "e":
             kw["edge_pass"] = True
+        elif key == "s":
+            kw["split"] = float(value)
         elif key == "t":
             kw["threshold"] = int(float(value))
         elif key == "L":
@@ -169,7 +171,7 @@ def parse_setting(spec: str) -> Setting:
         elif key == "h":
             kw["height_step"] = float(value)
         else:
-            raise InputError(f"setting {spec!r}: unknown part -{key}{value} (t, L, h or +c)")
+            raise InputError(f"setting {spec!r}: unknown part -{key}{value} (t, L, h, s, +c or +e)")
     return Setting(spec.strip(), BakeSettings(**kw).check())
 
 
@@ -194,7 +196,7 @@ DEFAULT_SETTINGS: tuple[str, ...] = (
 
 
 def _same_sampling(a: BakeSettings, b: BakeSettings) -> bool:
-    keys = ("sampling", "spacing", "height_step", "centre", "resolution", "occluder_lod", "threshold", "edge_pass")
+    keys = ("sampling", "spacing", "height_step", "centre", "resolution", "occluder_lod", "threshold", "edge_pass", "split")
     return all(getattr(a, k) == getattr(b, k) for k in keys)
 
 
@@ -547,11 +549,11 @@ def visibility_benchmark(
                 best = math.inf
                 for _ in range(max(1, int(repeat))):
                     t = time.perf_counter()
-                    pts = cell_points(s.bake, np.asarray(c.polygon), c.zmin, c.zmax, footprints)
-                    got = pvs_from_counts(*r.cell_counts(pts), threshold=s.bake.threshold)[0] if len(pts) else np.zeros(0, np.int64)
+                    ci, cp, n_pts = cell_counts(r, s.bake, np.asarray(c.polygon), c.zmin, c.zmax, footprints)
+                    got = pvs_from_counts(ci, cp, threshold=s.bake.threshold)[0]
                     best = min(best, time.perf_counter() - t)
                 times[k].append(best)
-                npts[k].append(len(pts))
+                npts[k].append(n_pts)
                 pvs[k].append({int(i) for i in got})
             tick()
         # -- the image error at random eye points ----------------------------------

@@ -17,6 +17,7 @@ from walkstream.server.bake.samples import (
     reference_points,
     region_points,
     sample_points,
+    split_points,
 )
 from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
 from walkstream.server.sources.scene import SourceScene
@@ -436,3 +437,36 @@ def test_the_edge_pass_adds_an_object_thinner_than_a_pixel_and_drops_nothing(gl:
     # the fill's counts stand; the edges only add objects the fill did not see
     assert {k: got[True][k] for k in got[False]} == got[False]
     assert HIDDEN not in got[True]
+
+
+def test_point_counts_give_each_points_own_view(gl: moderngl.Context) -> None:
+    meshes, ids = meshes_for_scene(SCENE, 0)
+    # west of the wall's gap and in front of it: only the second sees through it
+    pts = np.array([[-4.0, -4.0, 1.7], [0.0, 4.0, 1.7], [4.0, -4.0, 1.7]])
+    with VisibilityRenderer(meshes, ids, resolution=32, view_distance=VIEW_DISTANCE, ctx=gl) as r:
+        total = r.cell_counts(pts)
+        i, px, seen = r.point_counts(pts)
+        alone = [r.cell_counts(p[None])[0] for p in pts]
+    np.testing.assert_array_equal(i, total[0])
+    np.testing.assert_array_equal(px, total[1])
+    for a, b in zip(seen, alone, strict=True):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(np.unique(np.concatenate(seen)), i)
+
+
+def test_split_points_go_between_views_that_differ() -> None:
+    square = rect(0.0, 0.0, 40.0, 40.0)
+    pts = np.array([[1.0, 1.0, 2.0], [21.0, 1.0, 1.5], [39.0, 39.0, 2.0]])
+    same, other = np.array([1, 2, 3]), np.array([1, 7, 8])
+    # the first two differ (Jaccard distance 0.8) and are neighbours; the third is too far
+    got = split_points(pts, [same, other, other], square, differ=0.5, max_gap=25.0)
+    np.testing.assert_allclose(got, [[11.0, 1.0, 1.75]])
+    assert len(split_points(pts, [same, same, other], square, differ=0.5, max_gap=25.0)) == 0
+    assert len(split_points(pts, [same, other, other], square, differ=0.9, max_gap=25.0)) == 0
+    # not closer than min_gap to a point sampled already; moved out of buildings
+    assert len(split_points(pts, [same, other, other], square, differ=0.5, max_gap=25.0, min_gap=11.0)) == 0
+    blds = (block(1, 9.0, -1.0, 13.0, 3.0, 10.0),)
+    moved = split_points(pts, [same, other, other], square, differ=0.5, max_gap=25.0, footprints=footprint_tree(blds))
+    assert len(moved) == 1 and not shapely.intersects(shapely.Polygon(blds[0].rings[0]), shapely.points(moved[0, :2]))
+    with pytest.raises(InputError):
+        split_points(pts, [same], square, differ=0.5, max_gap=25.0)

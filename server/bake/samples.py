@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.errors import InputError
 
@@ -44,6 +44,7 @@ __all__ = [
     "sample_points",
     "boundary_points",
     "region_points",
+    "split_points",
     "height_levels",
     "bake_points",
     "dense_points",
@@ -319,6 +320,84 @@ def region_points(
         return np.vstack([np.column_stack([xy, np.full(len(xy), z)]) for z in levels])
     z = np.where(np.arange(len(xy)) % 2 == 0, hi, lo)
     return np.column_stack([xy, z])
+
+
+def split_points(
+    points: ArrayLike,
+    seen: list[NDArray[np.int64]],
+    polygon: ArrayLike,
+    *,
+    differ: float,
+    max_gap: float,
+    min_gap: float = 2.0,
+    margin: float = 0.3,
+    footprints: STRtree | None = None,
+) -> F64:
+    """New points between sampled points whose views differ: adaptive sampling.
+
+    For every pair of points at most ``max_gap`` metres apart (in the plane) whose
+    visible sets differ by more than ``differ`` (Jaccard distance: the objects seen
+    from only one of them over the objects seen from either), the midpoint, moved
+    into the cell's free space, at the pair's mean height.  A midpoint closer than
+    ``min_gap`` to a point already sampled or chosen is left out, so that repeated
+    rounds stop by themselves.  Where the views of two neighbours differ a lot, a
+    gap between buildings opens or closes between them, and a walker between the
+    two may see through it what neither sees (a building seen only through a slot a
+    few metres wide in the middle of a street cell).
+
+    Parameters
+    ----------
+    points : (p, 3) float
+        The points sampled so far.
+    seen : list of p (k_i,) int arrays
+        The object ids each point sees (:meth:`VisibilityRenderer.point_counts
+        <walkstream.server.bake.visibility.VisibilityRenderer.point_counts>`).
+    polygon : (n, 2) float
+        The cell outline.
+    differ : float
+        Jaccard distance above which a pair is split, in ``[0, 1)``.
+    max_gap, min_gap : float
+        Pairs farther apart than ``max_gap`` are not neighbours; no new point comes
+        closer than ``min_gap`` to another, metres.
+    margin, footprints :
+        As for :func:`boundary_points`.
+
+    Returns
+    -------
+    (q, 3) float64
+        The new points (none when no pair differs enough).
+    """
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    if len(seen) != len(pts):
+        raise InputError(f"split_points: expected one visible set per point ({len(pts)}), got {len(seen)}")
+    if not 0.0 <= float(differ) < 1.0:
+        raise InputError(f"split_points.differ: expected 0 <= differ < 1, got {differ}")
+    if len(pts) < 2:
+        return np.zeros((0, 3), np.float64)
+    i, j = np.triu_indices(len(pts), 1)
+    d = np.hypot(*(pts[i, :2] - pts[j, :2]).T)
+    near = (d <= float(max_gap)) & (d >= 2.0 * float(min_gap))
+    i, j = i[near], j[near]
+    keep = []
+    for a, b in zip(i.tolist(), j.tolist(), strict=True):  # a few dozen pairs
+        union = len(np.union1d(seen[a], seen[b]))
+        if union and 1.0 - len(np.intersect1d(seen[a], seen[b], assume_unique=True)) / union > float(differ):
+            keep.append((a, b))
+    if not keep:
+        return np.zeros((0, 3), np.float64)
+    ab = np.array(keep, np.int64)
+    mid = (pts[ab[:, 0]] + pts[ab[:, 1]]) / 2.0
+    free = _free_space(_cell_polygon(polygon), float(margin), footprints)
+    if free is None:
+        return np.zeros((0, 3), np.float64)
+    mid[:, :2] = _move_into(free, mid[:, :2])
+    out: list[F64] = []
+    taken = pts[:, :2]
+    for m in mid:
+        if np.min(np.hypot(*(taken - m[:2]).T)) >= float(min_gap):
+            out.append(m)
+            taken = np.vstack([taken, m[:2]])
+    return np.array(out, np.float64).reshape(-1, 3)
 
 
 def bake_points(

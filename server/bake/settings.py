@@ -48,6 +48,9 @@ class BakeSettings:
     """``sampling="boundary"``: largest distance between points along an edge, metres."""
     height_step: float = 1.0
     """``sampling="boundary"``: one more sampled height per this many metres of range."""
+    split: float = 0.0
+    """Adaptive sampling: add the midpoint of two sample points whose visible sets
+    differ by more than this Jaccard distance (two rounds; 0: off)."""
     edge_pass: bool = False
     """Draw every triangle's edges as lines after the fill, adding the objects thinner
     than a pixel (:class:`~walkstream.server.bake.visibility.VisibilityRenderer`)."""
@@ -66,6 +69,8 @@ class BakeSettings:
             raise InputError(f"resolution: expected 8..2048 pixels, got {self.resolution}")
         if self.occluder_lod not in (0, 1, 2):
             raise InputError(f"occluder LOD: expected 0, 1 or 2, got {self.occluder_lod}")
+        if not 0.0 <= self.split < 1.0:
+            raise InputError(f"--split: expected 0 <= split < 1 (a Jaccard distance; 0: off), got {self.split}")
         if self.threshold < 0:
             raise InputError(f"threshold: expected >= 0 pixels, got {self.threshold}")
         if self.bbox_crs not in ("local", "lonlat"):

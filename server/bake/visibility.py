@@ -477,8 +477,11 @@ class VisibilityRenderer(Releasable):
 
     # -- rendering -----------------------------------------------------------------
 
-    def _render_pass(self, points: F64, counts: I64) -> None:
-        """Render up to ``points_per_pass`` points and add each object's pixels to ``counts``."""
+    def _render_pass(self, points: F64, counts: I64, seen: list[I64] | None = None) -> None:
+        """Render up to ``points_per_pass`` points and add each object's pixels to ``counts``.
+
+        With ``seen``, also append per point the local indices + 1 it sees (0 dropped).
+        """
         ctx, fb, vao, indirect = self.ctx, self._fb, self._vao, self._indirect
         assert ctx is not None and fb is not None and vao is not None and indirect is not None
         import moderngl
@@ -531,6 +534,7 @@ class VisibilityRenderer(Releasable):
             fb.fbo.read_into(rows, viewport=used, components=1, dtype="u4", alignment=1)
             filled = np.bincount(rows.reshape(-1), minlength=len(counts))[: len(counts)]
             counts += filled
+            per = [np.unique(rows[i * res : (i + 1) * res]) for i in range(p)] if seen is not None else []
             if self.edge_pass:
                 # Edges over the finished fill, tested against its depth but writing
                 # none: a second image whose ids only ever ADD to the fill's (an edge
@@ -555,10 +559,14 @@ class VisibilityRenderer(Releasable):
                 fb.fbo.read_into(rows, viewport=used, components=1, dtype="u4", alignment=1)
                 edges = np.bincount(rows.reshape(-1), minlength=len(counts))[: len(counts)]
                 counts += np.where(filled == 0, edges, 0)
+                if seen is not None:
+                    per = [np.union1d(a, rows[i * res : (i + 1) * res]) for i, a in enumerate(per)]
         finally:
             ctx.scissor = None
             if self.cull_back_faces:
                 ctx.disable(moderngl.CULL_FACE)
+        if seen is not None:
+            seen.extend(a[a > 0].astype(np.int64) for a in per)
 
     def _draw_face(self, vao: moderngl.VertexArray, indirect: moderngl.Buffer, commands: NDArray[np.uint32], c0: int, c1: int) -> None:
         import moderngl
@@ -591,6 +599,28 @@ class VisibilityRenderer(Releasable):
         RenderError
             When the renderer was released or OpenGL reports an error.
         """
+        pts = self._check_points(points)
+        counts = self._counts(pts, None)
+        return self._ids_pixels(counts)
+
+    def point_counts(self, points: ArrayLike) -> tuple[I64, I64, list[I64]]:
+        """:meth:`cell_counts`, plus the ids each point sees on its own (same render).
+
+        Returns
+        -------
+        ids, pixels : (k,) int64
+            As :meth:`cell_counts`.
+        seen : list of (k_i,) int64
+            Per point, the ids of the objects covering a pixel of its six faces,
+            ascending (for :func:`~walkstream.server.bake.samples.split_points`).
+        """
+        pts = self._check_points(points)
+        per: list[I64] = []
+        counts = self._counts(pts, per)
+        seen = [np.unique(self._ids[a - 1]) for a in per] if len(self._ids) else [np.zeros(0, np.int64) for _ in pts]
+        return *self._ids_pixels(counts), seen
+
+    def _check_points(self, points: ArrayLike) -> F64:
         pts = np.asarray(points, dtype=np.float64)
         if pts.size == 0:
             pts = pts.reshape(0, 3)
@@ -600,11 +630,18 @@ class VisibilityRenderer(Releasable):
             )
         if self._fb is None or self.ctx is None:
             raise RenderError("VisibilityRenderer: used after release()")
+        return pts
+
+    def _counts(self, pts: F64, seen: list[I64] | None) -> I64:
         counts = np.zeros(len(self._ids) + 1, np.int64)
         if len(pts) and len(self._ids):
             for s in range(0, len(pts), self.points_per_pass):
-                self._render_pass(pts[s : s + self.points_per_pass], counts)
+                self._render_pass(pts[s : s + self.points_per_pass], counts, seen)
+            assert self.ctx is not None
             check_gl_error(self.ctx, f"after rendering {len(pts)} visibility sample points")
+        return counts
+
+    def _ids_pixels(self, counts: I64) -> tuple[I64, I64]:
         seen = np.flatnonzero(counts[1:])
         ids, inverse = np.unique(self._ids[seen], return_inverse=True)
         # Several meshes may carry one id; their pixels add up.
