@@ -81,6 +81,7 @@ __all__ = [
     "BenchInput",
     "Setting",
     "TODAY",
+    "PREVIOUS",
     "DEFAULT_SETTINGS",
     "TARGETS",
     "default_cache_dir",
@@ -178,6 +179,9 @@ def parse_setting(spec: str) -> Setting:
 #: the first bake's default, the yardstick of every ratio
 TODAY = parse_setting("corners-64")
 
+#: the bake's default before region sampling (issue 12 item 2): the second yardstick
+PREVIOUS = parse_setting("boundary20-128")
+
 #: the rows ``bench visibility`` runs by default
 DEFAULT_SETTINGS: tuple[str, ...] = (
     "corners-64",
@@ -192,6 +196,12 @@ DEFAULT_SETTINGS: tuple[str, ...] = (
     "boundary20-128-t4",
     "boundary20-256",
     "boundary20-256-t4",
+    "region20-128",
+    "region10-128",
+    "region20-128-t1",
+    "region20-128-t4",
+    "region20-128+e",
+    "region20-128-s0.5",
 )
 
 
@@ -364,11 +374,13 @@ def pick_cells(cells: Sequence[ViewCell], sample: int, *, seed: int = 0) -> list
 def _score(pvs: list[set[int]], ref: list[dict[int, int]]) -> dict[str, Any]:
     """Misses of one setting's PVS (per cell) against the reference (per cell)."""
     count, missed_px, total_px, worst, where = [], 0, 0, 0.0, None
+    shares: list[float] = []
     for k, (p, r) in enumerate(zip(pvs, ref, strict=True)):
         if not r:
             continue
         tot = sum(r.values())
         missed = [j for j in r if j not in p]
+        shares += [r[j] / tot for j in missed]
         count.append(len(missed) / len(r))
         missed_px += sum(r[j] for j in missed)
         total_px += tot
@@ -380,6 +392,7 @@ def _score(pvs: list[set[int]], ref: list[dict[int, int]]) -> dict[str, Any]:
         "miss_px": missed_px / total_px if total_px else 0.0,
         "miss_max": worst,
         "miss_max_at": where,
+        "missed_ref_shares": shares,
         "pvs_mean": float(np.mean([len(p) for p in pvs])) if pvs else 0.0,
         "extra_per_cell": float(np.mean([len(p - r.keys()) for p, r in zip(pvs, ref, strict=True)])),
     }
@@ -579,10 +592,13 @@ def visibility_benchmark(
         stored = [{int(i) for i in inp.baked.get(c.id, np.zeros(0, np.int64))} for c in chosen]
         rows.append({"name": "baked", "sec_per_cell": None} | _score(stored, ref) | (_view_error(shots, stored) if shots else {}))
     base = rows[next(k for k, s in enumerate(rows_in) if _same_sampling(s.bake, TODAY.bake))]
+    prev = next((rows[k] for k, s in enumerate(rows_in) if _same_sampling(s.bake, PREVIOUS.bake)), None)
     for row in rows:
         sec = row["sec_per_cell"]
         row["time_ratio"] = sec / base["sec_per_cell"] if sec else None
         row["pvs_ratio"] = row["pvs_mean"] / base["pvs_mean"] if base["pvs_mean"] else None
+        row["time_ratio_previous"] = sec / prev["sec_per_cell"] if sec and prev else None
+        row["pvs_ratio_previous"] = row["pvs_mean"] / prev["pvs_mean"] if prev and prev["pvs_mean"] else None
         row["culled"] = 1.0 - row["pvs_mean"] / n_obj if n_obj else None
         row["meets"] = {k: (row.get(k) is not None and row[k] <= v) for k, v in TARGETS.items()}
     default = next((s.name for s in rows_in if _same_sampling(s.bake, BakeSettings())), None)
@@ -654,6 +670,10 @@ def _pct(v: float | None, digits: int = 2) -> str:
     return "n/a" if v is None else f"{100.0 * v:.{digits}f}"
 
 
+def _ratio(v: float | None) -> str:
+    return "n/a" if v is None else f"{v:.2f}"
+
+
 def format_table(result: dict[str, Any]) -> str:
     """The rows of :func:`visibility_benchmark` as text, with the reference and the targets."""
     ref = result["reference"]
@@ -666,7 +686,7 @@ def format_table(result: dict[str, Any]) -> str:
         f"image error: {result['views']} random eye points ({result['view_size'][0]}x{result['view_size'][1]}, "
         "random heading) compared with their ground truth",
         "",
-        f"{'setting':<20} {'pts':>4} {'ms/cell':>8} {'time x':>6} {'PVS':>6} {'PVS x':>5} {'culled%':>7} "
+        f"{'setting':<20} {'pts':>4} {'ms/cell':>8} {'time x':>6} {'x prev':>6} {'PVS':>6} {'PVS x':>5} {'x prev':>6} {'culled%':>7} "
         f"{'miss#%':>6} {'miss px%':>8} {'max obj%':>8} {'view px%':>8} {'view #%':>7} {'v>0.5%':>6}",
     ]
     for r in result["rows"]:
@@ -675,8 +695,8 @@ def format_table(result: dict[str, Any]) -> str:
         lines.append(
             f"{r['name']:<20} {r.get('points_per_cell', float('nan')):>4.0f} "
             f"{'n/a' if sec is None else f'{1e3 * sec:.1f}':>8} "
-            f"{'n/a' if tr is None else f'{tr:.2f}':>6} {r['pvs_mean']:>6.1f} "
-            f"{r['pvs_ratio']:>5.2f} {_pct(r['culled'], 1):>7} {_pct(r['miss_count'], 1):>6} "
+            f"{'n/a' if tr is None else f'{tr:.2f}':>6} {_ratio(r.get('time_ratio_previous')):>6} {r['pvs_mean']:>6.1f} "
+            f"{r['pvs_ratio']:>5.2f} {_ratio(r.get('pvs_ratio_previous')):>6} {_pct(r['culled'], 1):>7} {_pct(r['miss_count'], 1):>6} "
             f"{_pct(r['miss_px'], 4):>8} {_pct(r['miss_max'], 4):>8} {_pct(r.get('view_miss_px'), 3):>8} "
             f"{_pct(r.get('view_miss_count'), 1):>7} {_pct(r.get('view_over_half'), 1):>6}{mark}"
         )
@@ -686,9 +706,19 @@ def format_table(result: dict[str, Any]) -> str:
         f"targets: miss# <= {100 * t['miss_count']:g} %, max obj <= {100 * t['miss_max']:g} %, "
         f"miss px <= {100 * t['miss_px']:g} %, time x <= {t['time_ratio']:g}, PVS x <= {t['pvs_ratio']:g}, "
         "culled >= 90 %",
+        f"time x, PVS x: against {TODAY.name} (the first bake); x prev: against {PREVIOUS.name} "
+        "(the default before region sampling), when it is a row",
         "view px%: truth pixels showing an object missing from the cell's PVS; view #%: objects "
         "shown that are missing; v>0.5%: views whose missing pixels exceed 0.5 % of the frame",
     ]
+    for r in result["rows"]:
+        sh = r.get("missed_ref_shares")
+        if sh:
+            a = 100.0 * np.array(sh)
+            lines.append(
+                f"missed objects against the reference, {r['name']}: {len(a)} misses, median "
+                f"{np.median(a):.5f} %, p90 {np.percentile(a, 90):.5f} % of the cell's reference pixels"
+            )
     for r in result["rows"]:
         s = r.get("missed_sizes")
         if s is not None and not s:

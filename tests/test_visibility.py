@@ -355,7 +355,8 @@ def test_boundary_points_follow_the_outline_inside_and_out_of_buildings() -> Non
 
 def test_bake_points_and_levels_check_their_input() -> None:
     np.testing.assert_array_equal(bake_points(CELL, 1.0, 2.0, sampling="corners"), sample_points(CELL, 1.0, 2.0))
-    np.testing.assert_array_equal(bake_points(CELL, 1.0, 2.0), boundary_points(CELL, 1.0, 2.0))
+    np.testing.assert_array_equal(bake_points(CELL, 1.0, 2.0, sampling="boundary"), boundary_points(CELL, 1.0, 2.0))
+    np.testing.assert_array_equal(bake_points(CELL, 1.0, 2.0), region_points(CELL, 1.0, 2.0))
     assert height_levels(1.5, 2.0, 1.0).tolist() == [2.0]
     for bad in (
         lambda: bake_points(CELL, 1.0, 2.0, sampling="random"),
