@@ -518,18 +518,7 @@ class VisibilityRenderer(Releasable):
         ctx.scissor = None
         fb.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=used)
         try:
-            for face in range(p * 6):
-                c0, c1 = int(offsets[face]), int(offsets[face + 1])
-                if c1 == c0:
-                    continue
-                i, f = divmod(face, 6)
-                tile = (f * res, i * res, res, res)
-                ctx.viewport = tile
-                # Guard-band clipping may rasterise outside the viewport; the scissor keeps
-                # every face inside its own tile on every driver.
-                ctx.scissor = tile
-                self._mvp.write(mvps[face].tobytes())
-                self._draw_face(vao, indirect, commands, c0, c1)
+            self._draw_faces(commands, offsets, mvps)
             rows = self._pixels[: p * res]
             fb.fbo.read_into(rows, viewport=used, components=1, dtype="u4", alignment=1)
             filled = np.bincount(rows.reshape(-1), minlength=len(counts))[: len(counts)]
@@ -544,14 +533,7 @@ class VisibilityRenderer(Releasable):
                 ctx.depth_func = "<="
                 fb.fbo.depth_mask = False
                 try:
-                    for face in range(p * 6):
-                        c0, c1 = int(offsets[face]), int(offsets[face + 1])
-                        if c1 == c0:
-                            continue
-                        i, f = divmod(face, 6)
-                        ctx.viewport = ctx.scissor = (f * res, i * res, res, res)
-                        self._mvp.write(mvps[face].tobytes())
-                        self._draw_face(vao, indirect, commands, c0, c1)
+                    self._draw_faces(commands, offsets, mvps)
                 finally:
                     ctx.wireframe = False
                     ctx.depth_func = "<"
@@ -568,14 +550,29 @@ class VisibilityRenderer(Releasable):
         if seen is not None:
             seen.extend(a[a > 0].astype(np.int64) for a in per)
 
-    def _draw_face(self, vao: moderngl.VertexArray, indirect: moderngl.Buffer, commands: NDArray[np.uint32], c0: int, c1: int) -> None:
+    def _draw_faces(self, commands: NDArray[np.uint32], offsets: I64, mvps: NDArray[np.float32]) -> None:
+        """Draw every face's commands into its own tile (faces of point ``i`` in row ``i``)."""
         import moderngl
 
-        if self._multi_draw:
-            vao.render_indirect(indirect, moderngl.TRIANGLES, count=c1 - c0, first=c0)
-        else:
-            for cmd in commands[c0:c1]:
-                vao.render(moderngl.TRIANGLES, vertices=int(cmd[0]), first=int(cmd[2]))
+        ctx, vao, indirect = self.ctx, self._vao, self._indirect
+        assert ctx is not None and vao is not None and indirect is not None
+        res = self.resolution
+        for face in range(len(offsets) - 1):
+            c0, c1 = int(offsets[face]), int(offsets[face + 1])
+            if c1 == c0:
+                continue
+            i, f = divmod(face, 6)
+            tile = (f * res, i * res, res, res)
+            ctx.viewport = tile
+            # Guard-band clipping may rasterise outside the viewport; the scissor keeps
+            # every face inside its own tile on every driver.
+            ctx.scissor = tile
+            self._mvp.write(mvps[face].tobytes())
+            if self._multi_draw:
+                vao.render_indirect(indirect, moderngl.TRIANGLES, count=c1 - c0, first=c0)
+            else:
+                for cmd in commands[c0:c1]:
+                    vao.render(moderngl.TRIANGLES, vertices=int(cmd[0]), first=int(cmd[2]))
 
     def cell_counts(self, points: ArrayLike) -> tuple[I64, I64]:
         """Pixels each object covers in the six cube faces of every sample point.
