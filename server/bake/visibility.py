@@ -523,7 +523,9 @@ class VisibilityRenderer(Releasable):
             fb.fbo.read_into(rows, viewport=used, components=1, dtype="u4", alignment=1)
             filled = np.bincount(rows.reshape(-1), minlength=len(counts))[: len(counts)]
             counts += filled
-            per = [np.unique(rows[i * res : (i + 1) * res]) for i in range(p)] if seen is not None else []
+            # presence by bincount: several times faster than np.unique on a row of tiles
+            n = len(counts)
+            per = [np.bincount(rows[i * res : (i + 1) * res].reshape(-1), minlength=n)[:n] > 0 for i in range(p)] if seen is not None else []
             if self.edge_pass:
                 # Edges over the finished fill, tested against its depth but writing
                 # none: a second image whose ids only ever ADD to the fill's (an edge
@@ -542,13 +544,13 @@ class VisibilityRenderer(Releasable):
                 edges = np.bincount(rows.reshape(-1), minlength=len(counts))[: len(counts)]
                 counts += np.where(filled == 0, edges, 0)
                 if seen is not None:
-                    per = [np.union1d(a, rows[i * res : (i + 1) * res]) for i, a in enumerate(per)]
+                    per = [a | (np.bincount(rows[i * res : (i + 1) * res].reshape(-1), minlength=n)[:n] > 0) for i, a in enumerate(per)]
         finally:
             ctx.scissor = None
             if self.cull_back_faces:
                 ctx.disable(moderngl.CULL_FACE)
         if seen is not None:
-            seen.extend(a[a > 0].astype(np.int64) for a in per)
+            seen.extend(np.flatnonzero(a[1:]).astype(np.int64) + 1 for a in per)
 
     def _draw_faces(self, commands: NDArray[np.uint32], offsets: I64, mvps: NDArray[np.float32]) -> None:
         """Draw every face's commands into its own tile (faces of point ``i`` in row ``i``)."""
