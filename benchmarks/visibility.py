@@ -47,7 +47,6 @@ so a database baked from any source works; a source file is read by the caller.
 
 from __future__ import annotations
 
-import hashlib
 import math
 import os
 import re
@@ -62,6 +61,7 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from walkstream.benchmarks.visref import reference_cache_key, scene_digest
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.samples import reference_points
 from walkstream.server.bake.settings import BakeSettings
@@ -70,7 +70,6 @@ from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_sce
 from walkstream.server.bake.workers import cell_counts
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError
-from walkstream.shared.records import Mesh
 
 if TYPE_CHECKING:
     import moderngl
@@ -84,8 +83,6 @@ __all__ = [
     "PREVIOUS",
     "DEFAULT_SETTINGS",
     "TARGETS",
-    "default_cache_dir",
-    "reference_cache_key",
     "format_table",
     "load_bench_input",
     "parse_setting",
@@ -293,42 +290,6 @@ def load_bench_input(path: str | os.PathLike[str], *, scene: SourceScene | None 
     return BenchInput(sc, cells, float(settings.get("view_distance", 800.0)), str(p), baked, settings)
 
 
-# --------------------------------------------------------------------------- reference cache
-
-
-def _scene_digest(meshes: Sequence[Mesh], ids: I64) -> str:
-    """A digest of what the reference renders: every mesh's vertices and triangles and its id."""
-    h = hashlib.sha256(np.ascontiguousarray(ids, np.int64).tobytes())
-    for m in meshes:
-        h.update(np.ascontiguousarray(m.positions, np.float32).tobytes())
-        h.update(np.ascontiguousarray(m.indices, np.uint32).tobytes())
-    return h.hexdigest()
-
-
-def reference_cache_key(scene_digest: str, points: NDArray[np.float64], resolution: int, view_distance: float) -> str:
-    """The file name (no suffix) of one cell's reference counts.
-
-    Parameters
-    ----------
-    scene_digest:
-        Digest of the scene's LOD2 meshes and ids (what the reference draws).
-    points : (p, 3) float
-        The cell's reference viewpoints (they follow from the cell, its height range,
-        the footprints and the seed, so they stand for all of them).
-    resolution, view_distance:
-        Cube-face pixels and far plane of the reference.
-    """
-    h = hashlib.sha256(f"visref-1|{scene_digest}|{int(resolution)}|{float(view_distance)!r}|".encode())
-    h.update(np.ascontiguousarray(points, np.float64).tobytes())
-    return h.hexdigest()[:32]
-
-
-def default_cache_dir() -> Path:
-    """Where ``bench visibility`` keeps reference counts: ``$XDG_CACHE_HOME/walkstream/visibility-reference``."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "walkstream" / "visibility-reference"
-
-
 # --------------------------------------------------------------------------- cells
 
 
@@ -467,7 +428,8 @@ def visibility_benchmark(
         Called with ``(cells done, cells total)``: the reference, then the settings,
         then the views, each a pass over the cells.
     cache:
-        Folder of reference counts kept between runs (:func:`reference_cache_key`:
+        Folder of reference counts kept between runs
+        (:func:`~walkstream.benchmarks.visref.reference_cache_key`:
         the scene's LOD2 meshes, the cell, the points and the resolution decide it);
         None: none kept.  The reference is by far the slowest part of a run.
 
@@ -515,7 +477,7 @@ def visibility_benchmark(
         ref_r: VisibilityRenderer | None = None
         ref: list[dict[int, int]] = []
         ref_times, ref_pts, ref_cached = [], [], 0
-        scene_key = _scene_digest(meshes2, ids2) if cache is not None else ""
+        scene_key = scene_digest(meshes2, ids2) if cache is not None else ""
         try:
             for c in chosen:
                 pts = reference_points(c.polygon, c.zmin, c.zmax, int(ref_points), footprints=footprints, seed=seed * 7919 + 100_003 + c.id)

@@ -68,13 +68,13 @@ def cmd_bench_visibility(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench visibility``."""
     from walkstream.benchmarks.visibility import (
         DEFAULT_SETTINGS,
-        default_cache_dir,
         format_table,
         load_bench_input,
         parse_setting,
         plot_visibility_benchmark,
         visibility_benchmark,
     )
+    from walkstream.benchmarks.visref import default_cache_dir
 
     names = [s.strip() for s in args.settings.split(",") if s.strip()] if args.settings else DEFAULT_SETTINGS
     settings = [parse_setting(n) for n in names]  # a bad name fails before any work
