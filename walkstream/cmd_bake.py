@@ -82,6 +82,7 @@ def cmd_bake(args: argparse.Namespace) -> int:
         **{k: v for k, v in (("resolution", args.resolution), ("occluder_lod", args.occluder_lod)) if v is not None},
         **{k: v for k, v in (("sampling", args.sampling), ("spacing", args.spacing), ("height_step", args.height_step), ("edge_pass", args.edge_pass), ("split", args.split)) if v is not None},
     )
+    st.check()  # a bad setting fails before any progress bar
     summary = run_bake(source, args.output, settings=st, name=args.name, workers=args.workers, scheduler=args.scheduler)
     print_summary(f"baked {args.output}", summary, args.json)
     return 0
