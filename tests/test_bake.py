@@ -60,12 +60,13 @@ def test_interrupted_bake_keeps_old_database_and_resumes(city: Path, baked: tupl
     target.write_bytes(db.read_bytes())
     before = target.read_bytes()
     # a different setting makes a different scene; stop it after a few cells
-    other = BakeSettings(resolution=32, threshold=1)
+    other = BakeSettings(resolution=32, threshold=1, sampling="region", edge_pass=True, split=0.5)
     assert bake(city, target, settings=other, max_cells=3) == {}
     assert target.read_bytes() == before  # the good database is untouched
     resumed = bake(city, target, settings=other)
     assert resumed["resumed_cells"] == 3
     assert resumed["cells"] == summary["cells"]
+    assert resumed["version"] != summary["version"]
     assert target.read_bytes() != before
 
 

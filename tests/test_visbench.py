@@ -92,6 +92,8 @@ def test_parse_setting() -> None:
         "boundary", 15.0, 96, 2, 1, 0.5, True
     )
     assert parse_setting("corners-64").bake.sampling == "corners"
+    r = parse_setting("region10-128+e+c").bake
+    assert (r.sampling, r.spacing, r.edge_pass, r.centre) == ("region", 10.0, True, True)
     for bad in ("random-64", "corners", "boundary20-128-x3", "corners-4"):
         with pytest.raises(InputError):
             parse_setting(bad)
@@ -150,3 +152,16 @@ def test_an_openstreetmap_extract_is_read_as_a_source(gl_ctx: moderngl.Context) 
     )
     rows = {r["name"]: r for r in res["rows"]}
     assert "corners-32" in rows and 0.0 <= rows["corners-32"]["miss_count"] <= 1.0
+
+
+def test_the_reference_is_cached_on_disk(city: BenchInput, gl_ctx: moderngl.Context, tmp_path: Path) -> None:
+    kw: dict[str, Any] = {"settings": ["corners-16"], "sample": 2, "ref_points": 4, "ref_resolution": 32, "views": 0, "repeat": 1, "ctx": gl_ctx}
+    first = visibility_benchmark(city, cache=tmp_path, **kw)
+    assert first["reference"]["cached"] == 0 and len(list(tmp_path.glob("*.npz"))) == 2
+    again = visibility_benchmark(city, cache=tmp_path, **kw)
+    assert again["reference"]["cached"] == 2
+    for a, b in zip(first["rows"], again["rows"], strict=True):
+        assert (a["miss_count"], a["miss_px"], a["miss_max"]) == (b["miss_count"], b["miss_px"], b["miss_max"])
+    # another resolution is another entry
+    visibility_benchmark(city, cache=tmp_path, **(kw | {"ref_resolution": 48}))
+    assert len(list(tmp_path.glob("*.npz"))) == 4

@@ -15,7 +15,9 @@ from walkstream.server.bake.samples import (
     dense_points,
     height_levels,
     reference_points,
+    region_points,
     sample_points,
+    split_points,
 )
 from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
 from walkstream.server.sources.scene import SourceScene
@@ -353,7 +355,8 @@ def test_boundary_points_follow_the_outline_inside_and_out_of_buildings() -> Non
 
 def test_bake_points_and_levels_check_their_input() -> None:
     np.testing.assert_array_equal(bake_points(CELL, 1.0, 2.0, sampling="corners"), sample_points(CELL, 1.0, 2.0))
-    np.testing.assert_array_equal(bake_points(CELL, 1.0, 2.0), boundary_points(CELL, 1.0, 2.0))
+    np.testing.assert_array_equal(bake_points(CELL, 1.0, 2.0, sampling="boundary"), boundary_points(CELL, 1.0, 2.0))
+    np.testing.assert_array_equal(bake_points(CELL, 1.0, 2.0), region_points(CELL, 1.0, 2.0))
     assert height_levels(1.5, 2.0, 1.0).tolist() == [2.0]
     for bad in (
         lambda: bake_points(CELL, 1.0, 2.0, sampling="random"),
@@ -388,3 +391,83 @@ def test_no_frustum_culling_gives_the_same_counts(gl: moderngl.Context) -> None:
     for x, y in zip(got, ref, strict=True):
         np.testing.assert_array_equal(x, y)
     assert BEYOND not in ref[0].tolist()
+
+
+def test_region_points_cover_the_outline_the_inside_and_both_heights() -> None:
+    square = rect(0.0, 0.0, 60.0, 60.0)
+    pts = region_points(square, 1.5, 2.0, spacing=20.0)
+    ring = boundary_points(square, 1.5, 2.0, spacing=20.0)
+    # the outline points first, then the inside grid
+    np.testing.assert_array_equal(pts[: len(ring), :2], ring[:, :2])
+    inner = pts[len(ring) :, :2]
+    assert len(inner) >= 4
+    assert np.all(shapely.contains_xy(shapely.Polygon(square).buffer(-10.0 + 1e-6), inner[:, 0], inner[:, 1]))
+    gap = np.hypot(*(inner[:, None, :] - ring[None, :, :2]).transpose(2, 0, 1)).min(axis=1)
+    assert gap.min() >= 10.0 - 1e-6
+    # both ends of the height range, alternating along the points
+    assert pts[:, 2].tolist()[:4] == [2.0, 1.5, 2.0, 1.5]
+    assert set(pts[:, 2].tolist()) == {1.5, 2.0}
+    np.testing.assert_array_equal(pts, region_points(square, 1.5, 2.0, spacing=20.0))
+    # a short street cell: the outline only; a long one: a row down its middle too
+    assert len(region_points(rect(0.0, 0.0, 30.0, 10.0), 1.5, 2.0)) == len(boundary_points(rect(0.0, 0.0, 30.0, 10.0), 1.5, 2.0))
+    long_street = region_points(rect(0.0, 0.0, 60.0, 10.0), 1.5, 2.0)
+    assert long_street[8:, 1].tolist() == [5.0, 5.0, 5.0]
+    # a tall range samples every point at every level; inside buildings, nothing
+    tall = region_points(square, 0.0, 3.0, spacing=20.0, height_step=1.5)
+    assert sorted(set(tall[:, 2].tolist())) == [0.0, 1.5, 3.0] and len(tall) == 3 * len(pts)
+    assert region_points(CELL, 1.5, 2.0, footprints=footprint_tree((block(9, -9.0, -9.0, 9.0, 9.0, 5.0),))).shape == (0, 3)
+    # and out of buildings
+    blds = (block(1, 25.0, 25.0, 35.0, 35.0, 10.0),)
+    with_bld = region_points(square, 1.5, 2.0, spacing=20.0, footprints=footprint_tree(blds))
+    assert not np.any(shapely.intersects(shapely.Polygon(blds[0].rings[0]).buffer(0.29), shapely.points(with_bld[:, :2])))
+    np.testing.assert_array_equal(bake_points(square, 1.5, 2.0, sampling="region"), pts)
+
+
+def test_the_edge_pass_adds_an_object_thinner_than_a_pixel_and_drops_nothing(gl: moderngl.Context) -> None:
+    # a flat strip 2 m deep lying on the ground 100 m north: from 1.7 m up it is a band
+    # 0.02 degrees high, far below one 16 px pixel (5.6 degrees)
+    sliver = StreetParams(99, "street", rect(-30.0, 100.0, 30.0, 102.0), 2.0)
+    scene = SourceScene("sliver", "local", (0.0, 0.0), BUILDINGS[:2] + BUILDINGS[3:], (sliver,))
+    meshes, ids = meshes_for_scene(scene, 0)
+    eye = np.array([[0.0, 0.0, 1.7]])
+    got = {}
+    for edge in (False, True):
+        with VisibilityRenderer(meshes, ids, resolution=16, view_distance=VIEW_DISTANCE, ctx=gl, edge_pass=edge) as r:
+            got[edge] = dict(zip(*(a.tolist() for a in r.cell_counts(eye)), strict=True))
+    assert 99 not in got[False] and got[True].get(99, 0) >= 1
+    # the fill's counts stand; the edges only add objects the fill did not see
+    assert {k: got[True][k] for k in got[False]} == got[False]
+    assert HIDDEN not in got[True]
+
+
+def test_point_counts_give_each_points_own_view(gl: moderngl.Context) -> None:
+    meshes, ids = meshes_for_scene(SCENE, 0)
+    # west of the wall's gap and in front of it: only the second sees through it
+    pts = np.array([[-4.0, -4.0, 1.7], [0.0, 4.0, 1.7], [4.0, -4.0, 1.7]])
+    with VisibilityRenderer(meshes, ids, resolution=32, view_distance=VIEW_DISTANCE, ctx=gl) as r:
+        total = r.cell_counts(pts)
+        i, px, seen = r.point_counts(pts)
+        alone = [r.cell_counts(p[None])[0] for p in pts]
+    np.testing.assert_array_equal(i, total[0])
+    np.testing.assert_array_equal(px, total[1])
+    for a, b in zip(seen, alone, strict=True):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(np.unique(np.concatenate(seen)), i)
+
+
+def test_split_points_go_between_views_that_differ() -> None:
+    square = rect(0.0, 0.0, 40.0, 40.0)
+    pts = np.array([[1.0, 1.0, 2.0], [21.0, 1.0, 1.5], [39.0, 39.0, 2.0]])
+    same, other = np.array([1, 2, 3]), np.array([1, 7, 8])
+    # the first two differ (Jaccard distance 0.8) and are neighbours; the third is too far
+    got = split_points(pts, [same, other, other], square, differ=0.5, max_gap=25.0)
+    np.testing.assert_allclose(got, [[11.0, 1.0, 1.75]])
+    assert len(split_points(pts, [same, same, other], square, differ=0.5, max_gap=25.0)) == 0
+    assert len(split_points(pts, [same, other, other], square, differ=0.9, max_gap=25.0)) == 0
+    # not closer than min_gap to a point sampled already; moved out of buildings
+    assert len(split_points(pts, [same, other, other], square, differ=0.5, max_gap=25.0, min_gap=11.0)) == 0
+    blds = (block(1, 9.0, -1.0, 13.0, 3.0, 10.0),)
+    moved = split_points(pts, [same, other, other], square, differ=0.5, max_gap=25.0, footprints=footprint_tree(blds))
+    assert len(moved) == 1 and not shapely.intersects(shapely.Polygon(blds[0].rings[0]), shapely.points(moved[0, :2]))
+    with pytest.raises(InputError):
+        split_points(pts, [same], square, differ=0.5, max_gap=25.0)

@@ -80,8 +80,9 @@ def cmd_bake(args: argparse.Namespace) -> int:
         centre=args.centre,
         threshold=args.threshold,
         **{k: v for k, v in (("resolution", args.resolution), ("occluder_lod", args.occluder_lod)) if v is not None},
-        **{k: v for k, v in (("sampling", args.sampling), ("spacing", args.spacing), ("height_step", args.height_step)) if v is not None},
+        **{k: v for k, v in (("sampling", args.sampling), ("spacing", args.spacing), ("height_step", args.height_step), ("edge_pass", args.edge_pass), ("split", args.split)) if v is not None},
     )
+    st.check()  # a bad setting fails before any progress bar
     summary = run_bake(source, args.output, settings=st, name=args.name, workers=args.workers, scheduler=args.scheduler)
     print_summary(f"baked {args.output}", summary, args.json)
     return 0
@@ -165,9 +166,11 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--network", choices=("walk", "drive"), default="walk", help="street network of OSM highways: what a pedestrian (default) or a car may use")
     bk.add_argument("--resolution", type=int, default=None, help="pixels per cube face (default: see bench visibility)")
     bk.add_argument("--occluder-lod", type=int, choices=(0, 1, 2), default=None, help="LOD rendered as occluder")
-    bk.add_argument("--sampling", choices=("boundary", "corners"), default=None, help="sample points: along the cell's outline (default) or the 8 box corners of the first bake")
-    bk.add_argument("--spacing", type=float, default=None, help="boundary sampling: metres between points along an edge (default 20)")
-    bk.add_argument("--height-step", type=float, default=None, help="boundary sampling: one more sampled eye height per this many metres of the cell's height range (default 1)")
+    bk.add_argument("--sampling", choices=("region", "boundary", "corners"), default=None, help="sample points: the cell's outline, a grid inside and both ends of its height range (region), the outline at the top height (boundary) or the 8 box corners of the first bake (default: see bench visibility)")
+    bk.add_argument("--spacing", type=float, default=None, help="region/boundary sampling: metres between points along an edge and of the inside grid (default 20)")
+    bk.add_argument("--height-step", type=float, default=None, help="region/boundary sampling: every point at one more eye height per this many metres of the cell's height range (default 1)")
+    bk.add_argument("--split", type=float, default=None, help="adaptive sampling: add points between two whose visible sets differ by more than this Jaccard distance (0..1; default 0: off)")
+    bk.add_argument("--edge-pass", action="store_true", default=None, help="also draw every triangle's edges, adding objects thinner than a pixel (about 2x the render time)")
     bk.add_argument("--centre", action="store_true", help="also sample the cell centre")
     bk.add_argument("--threshold", type=int, default=0, help="hardly-visible threshold (m-LOMA): pixels an object must exceed over the cell's images to enter the PVS (default 0)")
     bk.add_argument("--workers", type=int, default=1, help="local processes rendering cells (default 1)")

@@ -74,6 +74,7 @@ def cmd_bench_visibility(args: argparse.Namespace) -> int:
         plot_visibility_benchmark,
         visibility_benchmark,
     )
+    from walkstream.benchmarks.visref import default_cache_dir
 
     names = [s.strip() for s in args.settings.split(",") if s.strip()] if args.settings else DEFAULT_SETTINGS
     settings = [parse_setting(n) for n in names]  # a bad name fails before any work
@@ -90,6 +91,7 @@ def cmd_bench_visibility(args: argparse.Namespace) -> int:
             views=args.views,
             repeat=args.repeat,
             progress=progress,
+            cache=None if args.no_cache else (args.cache or default_cache_dir()),
         )
     finally:
         bar.close()
@@ -381,6 +383,8 @@ def add_bench_parser(sub: Any) -> None:
     bv.add_argument("--ref-resolution", type=int, default=512, help="reference pixels per cube face (default 512)")
     bv.add_argument("--views", type=int, default=4, help="random eye points per cell for the image error (default 4; 0: none)")
     bv.add_argument("--repeat", type=int, default=3, help="renders per cell and setting; the fastest counts (default 3)")
+    bv.add_argument("--cache", help="folder of reference counts kept between runs (default ~/.cache/walkstream/visibility-reference)")
+    bv.add_argument("--no-cache", action="store_true", help="render the reference again and keep nothing")
     bv.add_argument("--plot", help="PNG: misses against bake time and PVS size, missed objects' sizes")
     bv.add_argument("--json", help="write the full result as JSON here")
     bv.set_defaults(func=cmd_bench_visibility)

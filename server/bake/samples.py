@@ -1,15 +1,19 @@
-"""Where a cell's visibility is sampled: points on the cell's boundary, moved inside it and out of buildings.
+"""Where a cell's visibility is sampled: points on the cell's outline and inside it, moved out of buildings.
 
-:func:`boundary_points` gives the bake's points (the default ``sampling="boundary"``):
-every vertex of the cell's outline and points along each edge at most ``spacing``
-metres apart, each moved just inside the cell and out of any building, at the top of
-the cell's eye-height range (more heights when the range is taller than
-``height_step``).  :func:`sample_points` gives the first bake's points
-(``sampling="corners"``: the 8 corners of a box fitted to the cell, at the bottom and
-top of its height range, optionally the centre too).  :func:`bake_points` picks one
-of the two by name.  :func:`dense_points` and :func:`reference_points` give many
-more, spread through the cell, for references that measure what the sampling
-misses.
+:func:`region_points` gives the bake's points (the default ``sampling="region"``): the
+outline points of :func:`boundary_points` -- every vertex of the cell's outline and
+points along each edge at most ``spacing`` metres apart, each moved just inside the
+cell and out of any building -- then a ``spacing`` grid inside the cell, the points
+alternating between the top and the bottom of the cell's eye-height range (every
+point at more heights when the range is taller than ``height_step``).
+:func:`boundary_points` alone (``sampling="boundary"``) is the outline at the top
+height; :func:`sample_points` gives the first bake's points (``sampling="corners"``:
+the 8 corners of a box fitted to the cell, at the bottom and top of its height range,
+optionally the centre too).  :func:`bake_points` picks one by name.
+:func:`split_points` adds points between two whose views differ (adaptive
+sampling, ``BakeSettings.split``).  :func:`dense_points` and :func:`reference_points`
+give many more, spread through the cell, for references that measure what the
+sampling misses.
 
 Why the boundary: a walker anywhere in a convex cell sees nothing that is hidden from
 every point of its outline at the same height, except through gaps that open only
@@ -18,8 +22,15 @@ between two buildings -- open widest from the part of the outline in front of th
 gap, which the four corners of a 40 m street segment do not reach (they see such a
 gap at a grazing angle).  Measured against a dense reference
 (``walkstream bench visibility``), points along the outline at 20 m cut the largest
-missed building tenfold where the corners and the centre did not; the eye-height
-range of street cells (0.5 m) changes next to nothing, so one height is enough there.
+missed building tenfold where the corners and the centre did not.  The eye-height
+range of street cells (0.5 m) changes little of what is seen, but it moves a street
+seen edge-on 60 m away by most of a 128 px pixel: that sliver, a third of a pixel
+high, is caught or not by the pixel rows depending on the eye height, and it was the
+largest miss of every outline setting at 128 px (0.037 % of a cell's reference
+pixels) until the points alternated between the two ends of the range (``"region"``:
+0.005 %, with the same points in the plane on a short street cell).  Inside points
+catch what opens only from the middle of a wide cell (a building seen through a slot
+between two others from a few metres of the cell).
 """
 
 from __future__ import annotations
@@ -29,7 +40,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.errors import InputError
 
@@ -43,6 +54,8 @@ __all__ = [
     "SAMPLINGS",
     "sample_points",
     "boundary_points",
+    "region_points",
+    "split_points",
     "height_levels",
     "bake_points",
     "dense_points",
@@ -50,7 +63,7 @@ __all__ = [
 ]
 
 #: the bake's sampling schemes (``BakeSettings.sampling``)
-SAMPLINGS = ("boundary", "corners")
+SAMPLINGS = ("boundary", "corners", "region")
 
 
 # ------------------------------------------------------------------ sample points
@@ -260,12 +273,150 @@ def boundary_points(
     return np.vstack([np.column_stack([xy, np.full(len(xy), z)]) for z in zs])
 
 
+def region_points(
+    polygon: ArrayLike,
+    zmin: float,
+    zmax: float,
+    *,
+    spacing: float = 20.0,
+    height_step: float = 1.0,
+    margin: float = 0.3,
+    centre: bool = False,
+    footprints: STRtree | None = None,
+) -> F64:
+    """The cell's sample points over its outline, its inside and its height range.
+
+    The outline points of :func:`boundary_points`, then a square grid of ``spacing``
+    metres over the cell's free space, centred on it (its nodes closer than
+    ``spacing / 2`` to an outline point dropped: a 30 x 10 m street cell gets none, a
+    60 x 10 m one a row down its middle, a square grid cell about one per
+    ``spacing**2``); the heights alternate along the points
+    between the top and the bottom of the eye-height range (every point at every
+    :func:`height_levels` height when the range is taller than ``height_step``, as
+    the outline does).  The dense reference spreads its eyes over the whole cell and
+    height range; an eye half a metre lower moves a grazing street 60 m away by
+    most of a 128 px pixel, so the two heights are two chances to catch it.
+
+    Returns
+    -------
+    (p, 3) float64
+        The outline points first (in the order of :func:`boundary_points`), then the
+        grid nodes row by row; none when the cell has no free space.
+    """
+    lo, hi = _check_z(zmin, zmax)
+    edge = boundary_points(
+        polygon, lo, hi, spacing=spacing, height_step=height_step, margin=margin, centre=centre, footprints=footprints
+    )
+    if len(edge) == 0:
+        return edge
+    levels = height_levels(lo, hi, height_step)
+    ring = edge[edge[:, 2] == levels[0], :2]
+    poly = _cell_polygon(polygon)
+    free = _free_space(poly, float(margin), footprints)
+    assert free is not None  # boundary_points found free space
+    sp = float(spacing)
+    x0, y0, x1, y1 = free.bounds
+    # the grid centred on the free space, so that a cell's inside is covered evenly
+    nx, ny = int((x1 - x0) // sp), int((y1 - y0) // sp)
+    gx = (x0 + x1) / 2.0 + (np.arange(nx + 1) - nx / 2.0) * sp
+    gy = (y0 + y1) / 2.0 + (np.arange(ny + 1) - ny / 2.0) * sp
+    xx, yy = np.meshgrid(gx, gy, indexing="xy")
+    grid = np.column_stack([xx.reshape(-1), yy.reshape(-1)])
+    grid = grid[shapely.contains_xy(free, grid[:, 0], grid[:, 1])]
+    if len(grid):
+        d = np.hypot(grid[:, None, 0] - ring[None, :, 0], grid[:, None, 1] - ring[None, :, 1]).min(axis=1)
+        grid = grid[d >= sp / 2.0]
+    xy = np.vstack([ring, grid])
+    if len(levels) > 1:
+        return np.vstack([np.column_stack([xy, np.full(len(xy), z)]) for z in levels])
+    z = np.where(np.arange(len(xy)) % 2 == 0, hi, lo)
+    return np.column_stack([xy, z])
+
+
+def split_points(
+    points: ArrayLike,
+    seen: list[NDArray[np.int64]],
+    polygon: ArrayLike,
+    *,
+    differ: float,
+    max_gap: float,
+    min_gap: float = 2.0,
+    margin: float = 0.3,
+    footprints: STRtree | None = None,
+) -> F64:
+    """New points between sampled points whose views differ: adaptive sampling.
+
+    For every pair of points at most ``max_gap`` metres apart (in the plane) whose
+    visible sets differ by more than ``differ`` (Jaccard distance: the objects seen
+    from only one of them over the objects seen from either), the midpoint, moved
+    into the cell's free space, at the pair's mean height.  A midpoint closer than
+    ``min_gap`` to a point already sampled or chosen is left out, so that repeated
+    rounds stop by themselves.  Where the views of two neighbours differ a lot, a
+    gap between buildings opens or closes between them, and a walker between the
+    two may see through it what neither sees (a building seen only through a slot a
+    few metres wide in the middle of a street cell).
+
+    Parameters
+    ----------
+    points : (p, 3) float
+        The points sampled so far.
+    seen : list of p (k_i,) int arrays
+        The object ids each point sees (:meth:`VisibilityRenderer.point_counts
+        <walkstream.server.bake.visibility.VisibilityRenderer.point_counts>`).
+    polygon : (n, 2) float
+        The cell outline.
+    differ : float
+        Jaccard distance above which a pair is split, in ``[0, 1)``.
+    max_gap, min_gap : float
+        Pairs farther apart than ``max_gap`` are not neighbours; no new point comes
+        closer than ``min_gap`` to another, metres.
+    margin, footprints :
+        As for :func:`boundary_points`.
+
+    Returns
+    -------
+    (q, 3) float64
+        The new points (none when no pair differs enough).
+    """
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    if len(seen) != len(pts):
+        raise InputError(f"split_points: expected one visible set per point ({len(pts)}), got {len(seen)}")
+    if not 0.0 <= float(differ) < 1.0:
+        raise InputError(f"split_points.differ: expected 0 <= differ < 1, got {differ}")
+    if len(pts) < 2:
+        return np.zeros((0, 3), np.float64)
+    i, j = np.triu_indices(len(pts), 1)
+    d = np.hypot(*(pts[i, :2] - pts[j, :2]).T)
+    near = (d <= float(max_gap)) & (d >= 2.0 * float(min_gap))
+    i, j = i[near], j[near]
+    keep = []
+    for a, b in zip(i.tolist(), j.tolist(), strict=True):  # a few dozen pairs
+        union = len(np.union1d(seen[a], seen[b]))
+        if union and 1.0 - len(np.intersect1d(seen[a], seen[b], assume_unique=True)) / union > float(differ):
+            keep.append((a, b))
+    if not keep:
+        return np.zeros((0, 3), np.float64)
+    ab = np.array(keep, np.int64)
+    mid = (pts[ab[:, 0]] + pts[ab[:, 1]]) / 2.0
+    free = _free_space(_cell_polygon(polygon), float(margin), footprints)
+    if free is None:
+        return np.zeros((0, 3), np.float64)
+    mid[:, :2] = _move_into(free, mid[:, :2])
+    out: list[F64] = []
+    taken = pts[:, :2]
+    for m in mid:
+        if np.min(np.hypot(*(taken - m[:2]).T)) >= float(min_gap):
+            out.append(m)
+            taken = np.vstack([taken, m[:2]])
+    return np.array(out, np.float64).reshape(-1, 3)
+
+
 def bake_points(
     polygon: ArrayLike,
     zmin: float,
     zmax: float,
     *,
-    sampling: str = "boundary",
+    sampling: str = "region",
     spacing: float = 20.0,
     height_step: float = 1.0,
     margin: float = 0.3,
@@ -274,11 +425,24 @@ def bake_points(
 ) -> F64:
     """The sample points of one cell as the bake places them (``sampling`` names the scheme).
 
-    ``"boundary"``: :func:`boundary_points`; ``"corners"``: :func:`sample_points`, the
-    first bake's 8 box corners (``spacing`` and ``height_step`` unused).
+    ``"boundary"``: :func:`boundary_points`; ``"region"``: :func:`region_points`
+    (outline, inside and both ends of the height range); ``"corners"``:
+    :func:`sample_points`, the first bake's 8 box corners (``spacing`` and
+    ``height_step`` unused).
     """
     if sampling == "boundary":
         return boundary_points(
+            polygon,
+            zmin,
+            zmax,
+            spacing=spacing,
+            height_step=height_step,
+            margin=margin,
+            centre=centre,
+            footprints=footprints,
+        )
+    if sampling == "region":
+        return region_points(
             polygon,
             zmin,
             zmax,

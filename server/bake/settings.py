@@ -17,10 +17,12 @@ __all__ = ["DEFAULT_RESOLUTION", "DEFAULT_OCCLUDER_LOD", "DEFAULT_SAMPLING", "Ba
 
 #: chosen with ``walkstream bench visibility`` against its dense reference (issue 12:
 #: the first default, 64 px at the 8 box corners, missed single buildings covering
-#: 0.1 % of a cell's reference pixels; see the README's benchmark table)
+#: 0.1 % of a cell's reference pixels; the outline at 128 px left a street seen
+#: edge-on 60 m away (0.037 %) that the outline, the inside and both eye heights of
+#: ``"region"`` catch at the same number of points; see the README's tables)
 DEFAULT_RESOLUTION = 128
 DEFAULT_OCCLUDER_LOD = 0
-DEFAULT_SAMPLING = "boundary"
+DEFAULT_SAMPLING = "region"
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,19 +44,29 @@ class BakeSettings:
     over the cell's images to enter its PVS (0: any pixel at all)."""
     margin: float = 0.3
     sampling: str = DEFAULT_SAMPLING
-    """Where a cell is sampled: ``"boundary"`` (its outline, every ``spacing`` metres)
-    or ``"corners"`` (the 8 box corners of the first bake)."""
+    """Where a cell is sampled: ``"region"`` (its outline and a grid inside, every
+    ``spacing`` metres, alternating between both ends of the eye-height range),
+    ``"boundary"`` (the outline at the top of the range) or ``"corners"`` (the 8 box
+    corners of the first bake)."""
     spacing: float = 20.0
-    """``sampling="boundary"``: largest distance between points along an edge, metres."""
+    """``region``/``boundary``: largest distance between points along an edge (and of
+    the inside grid), metres."""
     height_step: float = 1.0
-    """``sampling="boundary"``: one more sampled height per this many metres of range."""
+    """``region``/``boundary``: every point at one more height per this many metres of
+    range (a shorter range: one height, or the two ends alternating for ``region``)."""
+    split: float = 0.0
+    """Adaptive sampling: add the midpoint of two sample points whose visible sets
+    differ by more than this Jaccard distance (two rounds; 0: off)."""
+    edge_pass: bool = False
+    """Draw every triangle's edges as lines after the fill, adding the objects thinner
+    than a pixel (:class:`~walkstream.server.bake.visibility.VisibilityRenderer`)."""
 
     def check(self) -> BakeSettings:
         """Raise InputError naming the first bad setting."""
         if self.cells not in ("auto", "street", "grid"):
             raise InputError(f"--cells: expected street, grid or auto, got {self.cells!r}")
-        if self.sampling not in ("boundary", "corners"):
-            raise InputError(f"--sampling: expected boundary or corners, got {self.sampling!r}")
+        if self.sampling not in ("boundary", "corners", "region"):
+            raise InputError(f"--sampling: expected boundary, region or corners, got {self.sampling!r}")
         for name in ("cell_size", "max_length", "view_distance", "margin", "spacing", "height_step"):
             v = float(getattr(self, name))
             if not (np.isfinite(v) and v > 0):
@@ -63,6 +75,8 @@ class BakeSettings:
             raise InputError(f"resolution: expected 8..2048 pixels, got {self.resolution}")
         if self.occluder_lod not in (0, 1, 2):
             raise InputError(f"occluder LOD: expected 0, 1 or 2, got {self.occluder_lod}")
+        if not 0.0 <= self.split < 1.0:
+            raise InputError(f"--split: expected 0 <= split < 1 (a Jaccard distance; 0: off), got {self.split}")
         if self.threshold < 0:
             raise InputError(f"threshold: expected >= 0 pixels, got {self.threshold}")
         if self.bbox_crs not in ("local", "lonlat"):

@@ -14,14 +14,14 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from walkstream.server.bake.samples import bake_points
+from walkstream.server.bake.samples import bake_points, split_points
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError
 
-__all__ = ["cell_task", "cell_points", "dask_client"]
+__all__ = ["SPLIT_ROUNDS", "cell_task", "cell_points", "cell_counts", "dask_client"]
 
 #: cells per task: big enough to amortise a task's overhead, small enough for a smooth bar
 _CHUNK = 8
@@ -40,7 +40,8 @@ def _renderer_for(scene: SourceScene, settings: BakeSettings, key: str) -> tuple
             old.release()
         meshes, ids = meshes_for_scene(scene, settings.occluder_lod)
         _WORKER["renderer"] = VisibilityRenderer(
-            meshes, ids, resolution=settings.resolution, view_distance=settings.view_distance
+            meshes, ids, resolution=settings.resolution, view_distance=settings.view_distance,
+            edge_pass=settings.edge_pass,
         )
         _WORKER["footprints"] = shapely.STRtree(
             [shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings]
@@ -74,6 +75,54 @@ def cell_points(
     )
 
 
+#: rounds of adaptive sampling (``BakeSettings.split``): each halves the gaps it splits
+SPLIT_ROUNDS = 2
+
+
+def cell_counts(
+    renderer: VisibilityRenderer,
+    settings: BakeSettings,
+    polygon: NDArray[np.float64],
+    zmin: float,
+    zmax: float,
+    footprints: Any,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], int]:
+    """Pixels per object over a cell's sample points, as the bake counts them.
+
+    The points of :func:`cell_points`; with ``settings.split`` (adaptive sampling),
+    up to :data:`SPLIT_ROUNDS` rounds of :func:`~walkstream.server.bake.samples.split_points`
+    between the points whose views differ, each new point rendered and counted too.
+
+    Returns
+    -------
+    ids, pixels : (k,) int64
+        As :meth:`VisibilityRenderer.cell_counts`.
+    points : int
+        Points rendered in all.
+    """
+    pts = cell_points(settings, polygon, zmin, zmax, footprints)
+    if len(pts) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), 0
+    if not settings.split:
+        ids, pixels = renderer.cell_counts(pts)
+        return ids, pixels, len(pts)
+    ids, pixels, seen = renderer.point_counts(pts)
+    total = dict(zip(ids.tolist(), pixels.tolist(), strict=True))
+    for _ in range(SPLIT_ROUNDS):
+        new = split_points(
+            pts, seen, polygon, differ=settings.split, max_gap=1.5 * settings.spacing,
+            margin=settings.margin, footprints=footprints,
+        )
+        if len(new) == 0:
+            break
+        i2, p2, s2 = renderer.point_counts(new)
+        for a, b in zip(i2.tolist(), p2.tolist(), strict=True):
+            total[a] = total.get(a, 0) + b
+        pts, seen = np.vstack([pts, new]), seen + s2
+    keys = np.array(sorted(total), np.int64)
+    return keys, np.array([total[k] for k in keys.tolist()], np.int64), len(pts)
+
+
 def cell_task(
     scene: SourceScene,
     settings: BakeSettings,
@@ -87,11 +136,10 @@ def cell_task(
     renderer, footprints = _renderer_for(scene, settings, key)
     out = []
     for cid, poly, zmin, zmax in cells:
-        pts = cell_points(settings, poly, zmin, zmax, footprints)
-        if len(pts) == 0:
+        ids, pixels, n = cell_counts(renderer, settings, poly, zmin, zmax, footprints)
+        if n == 0:
             out.append((cid, np.zeros(0, np.int64), np.zeros(0)))
             continue
-        ids, pixels = renderer.cell_counts(pts)
         pvs, ach = pvs_from_counts(ids, pixels, threshold=settings.threshold)
         out.append((cid, pvs, ach))
     return out
