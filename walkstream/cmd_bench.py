@@ -8,6 +8,7 @@
     walkstream bench server scene.db [--walkers 10,100,1000] [--workers 1,2] ...
     walkstream bench stream [scene.db] [--vienna vienna.db] [--scene LABEL=DB[:PATHS]] [--only NAMES] [--duration S]
     walkstream bench budget [scene.db] [--no-gl] [--seed N] [--gl-runs N] [--gl-real-duration S]
+        [--gl-draws batched,per-object] [--rewrite thread,process]
     walkstream bench controller [--frames 3000] [--seeds 1 2 3] [--step 10]
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--reuse] [--out DIR]
@@ -171,13 +172,28 @@ def cmd_bench_stream(args: argparse.Namespace) -> int:
     return 0
 
 
+def _choices(text: str, flag: str, allowed: tuple[str, ...]) -> tuple[str, ...]:
+    """A comma-separated list of some of ``allowed`` (a clear error names the bad one)."""
+    from walkstream.shared.errors import InputError
+
+    got = tuple(x.strip() for x in text.split(",") if x.strip())
+    for x in got:
+        if x not in allowed:
+            raise InputError(f"{flag} {x!r}: choose from {', '.join(allowed)}")
+    if not got:
+        raise InputError(f"{flag}: name at least one of {', '.join(allowed)}")
+    return got
+
+
 def cmd_bench_budget(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench budget``."""
     from walkstream.benchmarks.budget import (
+        DRAWS,
         format_budget_table,
         format_gl_real_table,
         run_budget_bench,
     )
+    from walkstream.client.rewrite.pool import MODES
     from walkstream.cmd_replay import replay_with_options
 
     out = Path(args.out)
@@ -192,6 +208,8 @@ def cmd_bench_budget(args: argparse.Namespace) -> int:
         seed=args.seed,
         gl_runs=args.gl_runs,
         gl_real_duration=args.gl_real_duration,
+        gl_draws=_choices(args.gl_draws, "--gl-draws", DRAWS),
+        rewrites=_choices(args.rewrite, "--rewrite", MODES),
     )
     print(format_budget_table(rows))
     real = format_gl_real_table(rows)
@@ -422,6 +440,8 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--no-gl", action="store_true", help="skip the gl rows (the real-clock ones too)")
     b.add_argument("--gl-runs", type=int, default=3, help="runs per real-clock gl row, medians reported (default 3; 0: no real-clock rows)")
     b.add_argument("--gl-real-duration", default="20s", help="walk length of each real-clock gl run (default 20s)")
+    b.add_argument("--gl-draws", default="batched,per-object", help="draw paths of the real-clock gl rows (default batched,per-object)")
+    b.add_argument("--rewrite", default="process", help="rebuild paths of the real-clock gl rows, e.g. thread,process (default process)")
     b.add_argument("--seed", type=int, default=0, help="seed of the device noise and spikes (default 0)")
     b.add_argument("--out", default="out/bench-budget", help="folder for the reports")
     b.set_defaults(func=cmd_bench_budget)
