@@ -4,7 +4,12 @@ pipe fallback, nothing left in /dev/shm, cancellation, clean shutdown."""
 from __future__ import annotations
 
 import asyncio
+import json
 import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -31,21 +36,34 @@ def _segments() -> set[str]:
     return {p.name for p in SHM.iterdir()} if SHM.is_dir() else set()
 
 
-def _children() -> set[int]:
-    # this process's live children (zombies reaped by multiprocessing do not count)
-    me = os.getpid()
+def _stat(pid: int) -> list[str]:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return ["Z", "0"]
+
+
+def _state(pid: int) -> str:
+    return _stat(pid)[0]
+
+
+def _cmdline(pid: int) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
+
+
+def _children(parent: int | None = None) -> set[int]:
+    # a process's live children (zombies do not count; nor does multiprocessing's resource
+    # tracker, which lives as long as the process)
+    me = os.getpid() if parent is None else parent
     out = set()
     for d in Path("/proc").iterdir():
         if d.name.isdigit():
-            try:
-                stat = (d / "stat").read_text()
-            except OSError:
-                continue
-            fields = stat.rsplit(")", 1)[1].split()
-            if int(fields[1]) == me and fields[0] != "Z":
-                # (multiprocessing's resource tracker lives as long as this process)
-                if b"resource_tracker" not in (d / "cmdline").read_bytes():
-                    out.add(int(d.name))
+            st = _stat(int(d.name))
+            if int(st[1]) == me and st[0] != "Z" and b"resource_tracker" not in _cmdline(int(d.name)):
+                out.add(int(d.name))
     return out
 
 
@@ -71,6 +89,7 @@ def _replay_pool(
     shm_bytes: int,
     workers: int = 2,
     prune_after: int | None = None,
+    wait_ready: bool = True,
 ) -> tuple[dict[int, ObjectGeometry], RewritePool]:
     built: dict[int, ObjectGeometry] = {}
     pool = RewritePool(
@@ -81,6 +100,8 @@ def _replay_pool(
     async def main() -> None:
         pool.start()
         try:
+            if wait_ready:  # (else the first batches run in threads while the workers start)
+                await pool._procs.wait_ready()
             for k, p in enumerate(objects):
                 pool.submit(k, p, (float(k), 0.0))
             if prune_after is not None:
@@ -164,6 +185,17 @@ def test_a_full_arena_waits_for_views_to_go() -> None:
         arena.close()
 
 
+def test_batches_run_in_threads_while_the_workers_start(
+    objects: list[BuildingParams | StreetParams],
+) -> None:
+    before_children = _children()
+    built, pool = _replay_pool(objects, shm_bytes=1 << 20, wait_ready=False)
+    assert sorted(built) == list(range(len(objects)))
+    d = pool.describe()
+    assert d["thread_batches"] >= 1  # (all of them, here: the workers were still starting)
+    assert _children() <= before_children
+
+
 def test_prune_drops_jobs_no_longer_needed(objects: list[BuildingParams | StreetParams]) -> None:
     built, pool = _replay_pool(objects, shm_bytes=1 << 20, workers=1, prune_after=5)
     assert sorted(built) == list(range(5))  # the others were dropped, not rebuilt
@@ -205,3 +237,79 @@ def test_bad_options() -> None:
         RewriteOptions("fork")
     with pytest.raises(InputError, match="--shm -1"):
         RewriteOptions("process", -1)
+
+
+@pytest.fixture(scope="module")
+def db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from scenes import add_default_paths, build_city_db
+
+    path = tmp_path_factory.mktemp("procpool") / "city.db"
+    build_city_db(path, name="city", size=300.0, k=30)
+    add_default_paths(path)
+    return path
+
+
+@pytest.mark.gl
+def test_real_clock_replay_with_the_process_pool_from_the_cli(
+    db: Path, tmp_path: Path, gl: object, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from walkstream.cli import main
+
+    before_segments, before_children = _segments(), _children()
+    report = tmp_path / "gl"
+    argv = [
+        "replay", str(db), "--path", "SE", "--clock", "real", "--device", "gl", "--size", "96x64",
+        "--fps", "30", "--duration", "8s", "--bandwidth", "10mbit", "--rtt", "20ms",
+        "--rewrite", "process", "--shm", "1MB", "--report", str(report),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    summary = json.loads((report / "report.json").read_text())
+    rw = summary["rewrite"]
+    # (batches due before the workers have started run in threads)
+    assert rw["mode"] == "process" and rw["shm_batches"] + rw["pipe_batches"] >= 1
+    assert rw["shm_batches"] + rw["pipe_batches"] + rw["thread_batches"] == rw["batches"]
+    assert rw["shm_peak_bytes"] <= rw["shm_bytes"] == 1_000_000 // 64 * 64
+    assert summary["rebuilds"] >= 0 and summary["rewrite_quality_mean"] > 0
+    assert "rebuilds ran in process" in capsys.readouterr().out
+    assert _segments() <= before_segments and _children() <= before_children
+
+
+def test_bad_rewrite_arguments_are_one_line(
+    db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from walkstream.cli import main
+
+    for extra, message in ((["--rewrite", "fork"], "--rewrite 'fork'"), (["--shm", "lots"], "lots")):
+        argv = ["replay", str(db), "--device", "desktop2003", "--report", str(tmp_path / "r"), *extra]
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("walkstream: error:") and message in err and len(err.splitlines()) == 1
+
+
+def test_ctrl_c_leaves_no_worker_process_or_segment(db: Path, tmp_path: Path) -> None:
+    before = _segments()
+    argv = [
+        sys.executable, "-m", "walkstream.cli", "replay", str(db), "--path", "SE",
+        "--clock", "real", "--device", "desktop2003", "--duration", "60s",
+        "--rewrite", "process", "--report", str(tmp_path / "r"),
+    ]  # fmt: skip
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    workers: set[int] = set()
+    try:
+        deadline = time.monotonic() + 60
+        while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            workers = {p for p in _children(proc.pid) if b"spawn_main" in _cmdline(p)}
+            time.sleep(0.1)
+        assert len(workers) == 2, "the replay did not start its two rewrite workers"
+        time.sleep(1.0)  # rebuilding is under way
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130 and b"interrupted" in err
+    assert b"Traceback" not in err, err.decode()[-2000:]
+    time.sleep(0.2)
+    assert not [p for p in workers if Path(f"/proc/{p}").exists() and _state(p) != "Z"]
+    assert _segments() <= before

@@ -13,7 +13,7 @@ and a job waits no longer than before.
 Under the real clock the jobs run, concurrently with the frame loop, in worker
 processes (``mode="process"``: :mod:`walkstream.client.rewrite.procpool`, geometry
 back through bounded shared memory, else the pipe; a worker that cannot start or dies
-leaves its lane to a thread) or in a thread pool (``mode="thread"``, under the frame
+leaves its lane to a thread, as does one still starting) or in a thread pool (``mode="thread"``, under the frame
 loop's interpreter lock).  There, :meth:`RewritePool.prune` drops queued jobs the
 walker no longer needs (it turned away) before they are rebuilt.  Under the
 simulated clock a job runs at once on the event loop (virtual time is frozen while
@@ -320,7 +320,7 @@ class RewritePool:
 
     async def _run(self, k: int, jobs: list[tuple[int, BuildingParams | StreetParams]]) -> list[ObjectGeometry]:
         assert self.grammar is not None
-        if self._procs is not None and self._procs.alive(k):
+        if self._procs is not None and self._procs.ready(k):
             from walkstream.shared.errors import WorkerGone
 
             # each lane's batches may hold an equal share of the bound
@@ -329,6 +329,8 @@ class RewritePool:
                 return await self._procs.run(k, jobs, self.grammar, cap)
             except WorkerGone:
                 pass  # this lane goes on in a thread
+        # (also while the lane's process is still starting: its start-up must not delay
+        # the first cell's rebuilds)
         self.thread_batches += 1
         loop = asyncio.get_running_loop()
         return await loop.run_in_executor(self._threads(), rebuild_batch, jobs, self.grammar)

@@ -137,6 +137,15 @@ class ProcessWorkers:
         f = self._ready[k]
         return not f.done() or f.exception() is None
 
+    async def wait_ready(self) -> None:
+        """Until every worker has started (or failed to)."""
+        await asyncio.wait(self._ready)
+
+    def ready(self, k: int) -> bool:
+        """Whether worker ``k`` has started and is usable now."""
+        f = self._ready[k]
+        return f.done() and not f.cancelled() and f.exception() is None
+
     def _check_all_ready(self) -> None:
         if all(f.done() for f in self._ready):
             self.arena.unlink()  # every live worker has attached: nothing left in /dev/shm
