@@ -88,8 +88,9 @@ class ReplayConfig:
     snapshot_every: int = 0
     duration_s: float | None = None
     workers: int = 2
-    rewrite: str = "process"
-    """Real clock: rebuild in worker ``process``es or in ``thread``s (see RewritePool)."""
+    rewrite: str = "auto"
+    """Real clock: rebuild in worker ``process``es or ``thread``s; ``auto``: see
+    :func:`~walkstream.client.rewrite.pool.auto_mode`."""
     shm_bytes: int = SHM_BYTES
     """Bound on the shared memory the rewrite processes hand geometry back through."""
     lod_select: str = "ach"

@@ -233,10 +233,18 @@ def test_a_worker_that_dies_leaves_its_lane_to_a_thread(
 
 
 def test_bad_options() -> None:
-    with pytest.raises(InputError, match="--rewrite 'fork'"):
+    with pytest.raises(InputError, match="--rewrite 'fork': choose one of auto, process, thread"):
         RewriteOptions("fork")
     with pytest.raises(InputError, match="--shm -1"):
         RewriteOptions("process", -1)
+
+
+def test_auto_picks_processes_only_with_cores_to_spare() -> None:
+    from walkstream.client.rewrite.pool import auto_mode
+
+    cores = len(os.sched_getaffinity(0))
+    assert auto_mode(cores - 2) == "process" if cores >= 3 else auto_mode(1) == "thread"
+    assert auto_mode(cores - 1) == "thread"
 
 
 @pytest.fixture(scope="module")
@@ -284,6 +292,14 @@ def test_bad_rewrite_arguments_are_one_line(
         assert main(argv) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith("walkstream: error:") and message in err and len(err.splitlines()) == 1
+
+
+def test_bad_bench_rewrite_is_one_line(db: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from walkstream.cli import main
+
+    assert main(["bench", "budget", str(db), "--no-gl", "--rewrite", "thread,fork"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "walkstream: error: --rewrite 'fork': choose from process, thread"
 
 
 def test_ctrl_c_leaves_no_worker_process_or_segment(db: Path, tmp_path: Path) -> None:

@@ -2,7 +2,7 @@
 
 ::
 
-    walkstream bench rebuild [FILE] [--repeat 5] [--batch 32,256]
+    walkstream bench rebuild [FILE] [--repeat 5] [--batch 32,256] [--beside-loop thread,process [--workers 1,2]]
     walkstream bench visibility scene.db|SOURCE [--sample N] [--settings ...] [--views N] [--plot out.png]
     walkstream bench render [--size 700] [--cells 40] [--runs 3] ...
     walkstream bench server scene.db [--walkers 10,100,1000] [--workers 1,2] ...
@@ -57,11 +57,32 @@ def cmd_bench_rebuild(args: argparse.Namespace) -> int:
     batches = _ints(args.batch, "--batch")
     if min(batches) < 1:
         raise WalkstreamError(f"--batch: expected sizes >= 1, got {args.batch!r}")
+    if args.beside_loop:
+        return _bench_beside_loop(args, scene.buildings)
     runs = []
     for r in range(args.repeat):
         with building_bar(len(scene.buildings), f"run {r + 1}/{args.repeat}") as bar:
             runs.append(rebuild_run(scene.buildings, batches, progress=bar.update))
     print(rebuild_table(runs, source))
+    return 0
+
+
+def _bench_beside_loop(args: argparse.Namespace, buildings: Any) -> int:
+    """``bench rebuild --beside-loop``: the rewrite pool's paths beside a frame-loop stand-in."""
+    from walkstream.benchmarks.rebuild import beside_loop, beside_loop_table
+    from walkstream.client.rewrite.pool import MODES
+
+    modes = ("none", *_choices(args.beside_loop, "--beside-loop", MODES))
+    workers = _ints(args.workers, "--workers")
+    if min(workers) < 1:
+        raise WalkstreamError(f"--workers: expected counts >= 1, got {args.workers!r}")
+    cases = [("none", 1)] + [(m, w) for m in modes[1:] for w in workers]
+    runs = []
+    for r in range(args.repeat):
+        for k, (mode, w) in enumerate(cases):  # interleaved: every case sees the same load
+            print(f"[run {r + 1}/{args.repeat}, {k + 1}/{len(cases)}] {mode}, {w} workers ...", file=sys.stderr, flush=True)
+            runs.append(beside_loop(buildings, mode, w))
+    print(beside_loop_table(runs, len(buildings)))
     return 0
 
 
@@ -389,6 +410,8 @@ def add_bench_parser(sub: Any) -> None:
     bb.add_argument(
         "--batch", default="32,256", help="batch sizes of the batched rows, comma-separated (default 32,256)"
     )
+    bb.add_argument("--beside-loop", metavar="PATHS", help="instead: rebuild the scene with the client's rewrite pool in these paths (thread,process) beside a 60 Hz frame-loop stand-in, and time the stand-in")
+    bb.add_argument("--workers", default="1,2", help="with --beside-loop: rewrite workers, comma-separated (default 1,2)")
     bb.set_defaults(func=cmd_bench_rebuild)
     bv = besub.add_parser("visibility", help="what the PVS misses against a dense reference and at random eye points, against bake time, per sampling setting")
     bv.add_argument("scene", help="scene database (read alone: any source it was baked from) or a scene source file")

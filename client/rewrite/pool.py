@@ -27,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import heapq
 import itertools
+import os
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -46,6 +47,7 @@ from walkstream.shared.streets import build_street
 __all__ = [
     "BATCH",
     "MODES",
+    "auto_mode",
     "SHM_BYTES",
     "ObjectGeometry",
     "RewriteOptions",
@@ -59,7 +61,23 @@ BATCH = 32
 """Most jobs one worker rebuilds in one call."""
 
 MODES = ("process", "thread")
-"""Where real-clock rebuilds run."""
+"""Where real-clock rebuilds run (``auto`` picks one: :func:`auto_mode`)."""
+
+
+def auto_mode(workers: int) -> str:
+    """``process`` when this machine has a core for every worker besides two for the frame
+    loop and the GL driver, else ``thread``.
+
+    Measured on 2 cores with llvmpipe (README, issue 15): worker processes compete with the
+    loop and the rasteriser for the cores, and their start-up delays the first perfect
+    frame, while threads cost the loop little there; with a spare core a worker process
+    leaves the loop's time per pass as it is alone, and threads do not.
+    """
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # (not on Linux)
+        cores = os.cpu_count() or 1
+    return "process" if cores >= workers + 2 else "thread"
 
 SHM_BYTES = 16 << 20
 """Default bound on the shared memory the process pool holds (a container's /dev/shm is
@@ -71,13 +89,13 @@ class RewriteOptions:
     """How the real clock's rebuilds run (the simulated clock always rebuilds inline)."""
 
     mode: str = "thread"
-    """``process`` or ``thread``."""
+    """``process``, ``thread`` or ``auto`` (:func:`auto_mode`)."""
     shm_bytes: int = SHM_BYTES
     """Bound on shared memory (process mode; 0: geometry comes through the pipe)."""
 
     def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise InputError(f"--rewrite {self.mode!r}: choose one of {', '.join(MODES)}")
+        if self.mode not in (*MODES, "auto"):
+            raise InputError(f"--rewrite {self.mode!r}: choose one of auto, {', '.join(MODES)}")
         if self.shm_bytes < 0:
             raise InputError(f"--shm {self.shm_bytes}: must not be negative")
 
@@ -284,6 +302,8 @@ class RewritePool:
     def start(self) -> None:
         """Start the workers on the running event loop."""
         if not self.clock.simulated:
+            if self.options.mode == "auto":
+                self.options = replace(self.options, mode=auto_mode(self.workers))
             if self.options.mode == "process":
                 from walkstream.client.rewrite.procpool import ProcessWorkers
 

@@ -9,7 +9,8 @@ the client's bounded shared-memory segment when the region reserved for the batc
 it, else through the pipe (see :mod:`walkstream.client.rewrite.shm`); either way the
 client's meshes are views of the bytes the worker wrote.
 
-Replies are read on the event loop (``add_reader`` on each pipe), so the frame loop only
+Workers run at a lower scheduling priority than the client (:data:`NICE`).  Replies
+are read on the event loop (``add_reader`` on each pipe), so the frame loop only
 unpacks a finished batch's small header.  Worker processes ignore Ctrl-C (the client
 stops them) and leave when their pipe closes, so none outlives the client.
 """
@@ -34,9 +35,13 @@ from walkstream.shared.errors import WorkerGone
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
 from walkstream.shared.records import BuildingParams, StreetParams
 
-__all__ = ["ProcessWorkers", "worker_main"]
+__all__ = ["NICE", "ProcessWorkers", "worker_main"]
 
 Job = tuple[int, BuildingParams | StreetParams]
+
+NICE = 5
+"""How much lower the workers' scheduling priority is than the client's: where cores are
+few, the frame loop (and the GL driver's threads) come first, rebuilding takes the rest."""
 
 
 def worker_main(conn: Connection, shm_name: str | None) -> None:
@@ -106,6 +111,7 @@ class ProcessWorkers:
         self._pending: list[tuple[asyncio.Future[list[ObjectGeometry]], int, int] | None] = []
         self._grammar: list[str | None] = []
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._dead: set[int] = set()
 
     def start(self) -> None:
         """Start the processes (returns at once; they import the building code meanwhile)."""
@@ -129,13 +135,15 @@ class ProcessWorkers:
                 continue
             finally:
                 theirs.close()
+            with contextlib.suppress(OSError, AttributeError):  # (at once: it is importing)
+                os.setpriority(os.PRIO_PROCESS, p.pid, os.getpriority(os.PRIO_PROCESS, 0) + NICE)
             loop.add_reader(ours.fileno(), self._readable, k)
         self._check_all_ready()
 
     def alive(self, k: int) -> bool:
         """Whether worker ``k`` is (or may still become) usable."""
         f = self._ready[k]
-        return not f.done() or f.exception() is None
+        return k not in self._dead and (not f.done() or f.exception() is None)
 
     async def wait_ready(self) -> None:
         """Until every worker has started (or failed to)."""
@@ -144,7 +152,7 @@ class ProcessWorkers:
     def ready(self, k: int) -> bool:
         """Whether worker ``k`` has started and is usable now."""
         f = self._ready[k]
-        return f.done() and not f.cancelled() and f.exception() is None
+        return k not in self._dead and f.done() and not f.cancelled() and f.exception() is None
 
     def _check_all_ready(self) -> None:
         if all(f.done() for f in self._ready):
@@ -153,6 +161,7 @@ class ProcessWorkers:
                 self.ready_s = time.perf_counter() - self.started_at
 
     def _gone(self, k: int, why: str) -> None:
+        self._dead.add(k)
         if self._loop is not None:
             with contextlib.suppress(Exception):
                 self._loop.remove_reader(self._conns[k].fileno())
