@@ -136,7 +136,7 @@ class ProcessWorkers:
             finally:
                 theirs.close()
             with contextlib.suppress(OSError, AttributeError):  # (at once: it is importing)
-                os.setpriority(os.PRIO_PROCESS, p.pid, os.getpriority(os.PRIO_PROCESS, 0) + NICE)
+                os.setpriority(os.PRIO_PROCESS, p.pid or 0, os.getpriority(os.PRIO_PROCESS, 0) + NICE)
             loop.add_reader(ours.fileno(), self._readable, k)
         self._check_all_ready()
 
