@@ -135,8 +135,9 @@ class ProcessWorkers:
                 continue
             finally:
                 theirs.close()
-            with contextlib.suppress(OSError, AttributeError):  # (at once: it is importing)
-                os.setpriority(os.PRIO_PROCESS, p.pid or 0, os.getpriority(os.PRIO_PROCESS, 0) + NICE)
+            if p.pid is not None:  # (at once: it is importing)
+                with contextlib.suppress(OSError, AttributeError):
+                    os.setpriority(os.PRIO_PROCESS, p.pid, os.getpriority(os.PRIO_PROCESS, 0) + NICE)
             loop.add_reader(ours.fileno(), self._readable, k)
         self._check_all_ready()
 
