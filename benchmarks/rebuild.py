@@ -8,6 +8,9 @@ LOD2 geometry bytes; ``walkstream buildings stats`` and the demo print it for on
 some batch sizes and :func:`trimesh.creation.extrude_polygon` per footprint (what a
 plain LOD0 prism costs elsewhere); :func:`rebuild_table` summarises several runs
 (medians, and ratios of the medians) for ``walkstream bench rebuild``.
+:func:`beside_loop` (``--beside-loop``) rebuilds a whole scene with the client's rewrite
+pool in threads or in worker processes while a frame-loop stand-in runs at 60 Hz on the
+same event loop, timing the stand-in: what rebuilding does to the frame loop.
 """
 
 from __future__ import annotations
@@ -16,6 +19,9 @@ import statistics
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
 
 from walkstream.shared.buildings import LODS, build_lod, build_lod_batch
 from walkstream.shared.codec import encode_building
@@ -31,6 +37,8 @@ __all__ = [
     "extrude_rate",
     "rebuild_run",
     "rebuild_table",
+    "beside_loop",
+    "beside_loop_table",
 ]
 
 REBUILD_GOALS: tuple[int | None, int | None, int | None] = (2000, None, 200)
@@ -198,4 +206,105 @@ def rebuild_table(runs: Sequence[dict[str, Any]], source: str) -> str:
         f"parameters {first['param_bytes']:,} B, LOD2 geometry {first['lod2_bytes']:,} B, "
         f"ratio {100 * ratio:.4f} % (goal <= 0.1 %)"
     )
+    return "\n".join(lines)
+
+
+def _loop_work(centres: NDArray[np.float64], eye: NDArray[np.float64]) -> int:
+    """A stand-in for one pass of the frame loop's Python (about 1-2 ms alone): a numpy
+    distance sort over the objects, then per-object interpreter work on each."""
+    d = np.linalg.norm(centres - eye, axis=1)
+    total = 0
+    for k in np.argsort(d).tolist():
+        total += (k * 31 + 7) % 13
+    return total
+
+
+def beside_loop(
+    buildings: Sequence[BuildingParams],
+    mode: str,
+    workers: int,
+    hz: float = 60.0,
+    shm_bytes: int = 16 << 20,
+    passes: int = 3,
+) -> dict[str, Any]:
+    """Rebuild every building (three LODs) ``passes`` times with the client's rewrite pool
+    under the real clock while a frame-loop stand-in runs at ``hz`` on the same event loop.
+
+    ``mode`` is ``"none"`` (the loop alone, no rebuilding), ``"thread"`` or
+    ``"process"``; worker processes are started (and ready) before the clock starts.
+
+    Returns
+    -------
+    dict
+        ``mode``, ``workers``, ``rebuild_s`` (wall seconds to rebuild all), ``per_s``
+        (buildings per second), ``loop_ms`` and ``loop_p95_ms`` (median and 95th
+        percentile of the stand-in's wall time per pass while rebuilding).
+    """
+    import asyncio
+
+    from walkstream.client.clock import RealClock
+    from walkstream.client.rewrite.pool import RewriteOptions, RewritePool
+    from walkstream.shared.buildings import default_grammar
+
+    # a fixed stand-in, whatever the scene: 8,000 objects
+    centres = np.random.default_rng(0).random((8000, 2)) * 700.0
+    eye = np.array([350.0, 350.0])
+    n = len(buildings) * passes
+    built = [0]
+    pool = RewritePool(
+        RealClock(), None, lambda g: built.__setitem__(0, built[0] + 1), workers=workers,
+        options=RewriteOptions("thread" if mode == "none" else mode, shm_bytes),
+    )  # fmt: skip
+    times: list[float] = []
+
+    async def main() -> float:
+        pool.start()
+        try:
+            if pool._procs is not None:
+                await pool._procs.wait_ready()
+            t0 = time.perf_counter()
+            if mode != "none":
+                for k in range(n):
+                    pool.submit(k, buildings[k % len(buildings)], (float(k), 0.0))
+                pool.set_grammar(default_grammar())
+            while (built[0] < n if mode != "none" else time.perf_counter() - t0 < 2.0):
+                t = time.perf_counter()
+                _loop_work(centres, eye)
+                times.append(time.perf_counter() - t)
+                await asyncio.sleep(max(0.0, 1.0 / hz - (time.perf_counter() - t)))
+            return time.perf_counter() - t0
+        finally:
+            await pool.close()
+
+    wall = asyncio.run(main())
+    ms = np.asarray(times) * 1e3
+    return {
+        "mode": mode,
+        "workers": workers,
+        "rebuild_s": wall if mode != "none" else None,
+        "per_s": n / wall if mode != "none" else None,
+        "loop_ms": float(np.median(ms)),
+        "loop_p95_ms": float(np.percentile(ms, 95)),
+    }
+
+
+def beside_loop_table(runs: Sequence[dict[str, Any]], buildings: int) -> str:
+    """Medians per (mode, workers) of several :func:`beside_loop` runs."""
+    med = statistics.median
+    keys = list(dict.fromkeys((r["mode"], r["workers"]) for r in runs))
+    lines = [
+        f"rebuilding {buildings} buildings (3 LODs) 3 times beside a 60 Hz frame-loop stand-in "
+        "(8,000 objects sorted and visited), real clock, medians of the runs (interleaved); "
+        "loop: wall ms per pass of the stand-in while rebuilding",
+        f"{'rebuild in':<12}{'workers':>8}{'rebuild s':>11}{'b/s':>8}{'loop ms':>9}{'loop p95':>10}",
+    ]
+    for mode, w in keys:
+        rs = [r for r in runs if (r["mode"], r["workers"]) == (mode, w)]
+        reb = [r["rebuild_s"] for r in rs if r["rebuild_s"] is not None]
+        rate = [r["per_s"] for r in rs if r["per_s"] is not None]
+        lines.append(
+            f"{mode:<12}{w:>8}{(f'{med(reb):.2f}' if reb else '-'):>11}"
+            f"{(f'{med(rate):,.0f}' if rate else '-'):>8}{med(r['loop_ms'] for r in rs):>9.2f}"
+            f"{med(r['loop_p95_ms'] for r in rs):>10.2f}"
+        )
     return "\n".join(lines)

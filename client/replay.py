@@ -48,7 +48,7 @@ from walkstream.client.report.metrics import (
     summarise,
 )
 from walkstream.client.report.truth import summarise_truth
-from walkstream.client.rewrite.pool import ObjectGeometry
+from walkstream.client.rewrite.pool import SHM_BYTES, ObjectGeometry, RewriteOptions
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.predict import MotionPredictor
@@ -88,6 +88,11 @@ class ReplayConfig:
     snapshot_every: int = 0
     duration_s: float | None = None
     workers: int = 2
+    rewrite: str = "auto"
+    """Real clock: rebuild in worker ``process``es or ``thread``s; ``auto``: see
+    :func:`~walkstream.client.rewrite.pool.auto_mode`."""
+    shm_bytes: int = SHM_BYTES
+    """Bound on the shared memory the rewrite processes hand geometry back through."""
     lod_select: str = "ach"
     lod_distances: tuple[float, float] = (40.0, 120.0)
     budget_frames: int = 4
@@ -130,6 +135,7 @@ class ReplayConfig:
             raise InputError(f"--duration {self.duration_s!r}: must be > 0")
         if self.workers < 1:
             raise InputError(f"--workers {self.workers}: at least 1")
+        RewriteOptions(self.rewrite, self.shm_bytes)  # says what is wrong
         if self.snapshot_every < 0:
             raise InputError(f"--snapshot-every {self.snapshot_every}: must not be negative")
         if self.truth_every < 0:
@@ -299,7 +305,8 @@ async def replay(
             disk = DiskCache(config.cache_dir) if config.cache_dir is not None else None
             cache = Cache(config.cache_bytes)
             scfg = StreamerConfig(
-                prefetch=config.prefetch, form=STREAM_FORMS[config.stream], workers=config.workers
+                prefetch=config.prefetch, form=STREAM_FORMS[config.stream], workers=config.workers,
+                rewrite=RewriteOptions(config.rewrite, config.shm_bytes),
             )
             streamer = Streamer(api, clock, cache, scfg)
             streamer.start()
@@ -480,6 +487,8 @@ async def replay(
     summary["spike_frames"] = int(spikes.sum())
     if config.clock == "real":  # wall-clock figures: a simulated run's summary stays reproducible
         summary.update(phases.summary(config.fps_target), batched_draws=config.batched_draws)
+        if streamer.rewrite is not None:
+            summary["rewrite"] = streamer.rewrite.describe()
     if truth is not None:
         first = first_perfect_index(log)
         summary["truth"] = summarise_truth(

@@ -31,6 +31,7 @@ __all__ = [
     "StreamCut",
     "ServiceError",
     "SimulationStalled",
+    "WorkerGone",
 ]
 
 
@@ -128,3 +129,7 @@ class SimulationStalled(WalkstreamError, RuntimeError):
     (real time) or on an event nobody sets, or everything sleeps forever (a link of
     zero bandwidth with no timeout).
     """
+
+
+class WorkerGone(WalkstreamError, RuntimeError):
+    """A rewrite worker process could not start or died; its batch must run elsewhere."""

@@ -189,6 +189,8 @@ def test_bench_budget_gl_rows_under_the_real_clock(db: Path, tmp_path: Path, gl:
         ("per-object", "real", "160x120"),
     ]
     for r in rows:
+        assert r["rewrite"] == "process" and r["rewrite_path"]["mode"] == "process"
+        assert r["python_ms"] > 0 and r["python_start_ms"] > 0
         assert set(r["phases_ms"]) == set(PHASES)
         assert r["phases_ms"]["finish"] > 0.0 and r["fps_mean"] > 0
         assert len(r["per_run"]) == 1

@@ -2,12 +2,13 @@
 
 ::
 
-    walkstream bench rebuild [FILE] [--repeat 5] [--batch 32,256]
+    walkstream bench rebuild [FILE] [--repeat 5] [--batch 32,256] [--beside-loop thread,process [--workers 1,2]]
     walkstream bench visibility scene.db|SOURCE [--sample N] [--settings ...] [--views N] [--plot out.png]
     walkstream bench render [--size 700] [--cells 40] [--runs 3] ...
     walkstream bench server scene.db [--walkers 10,100,1000] [--workers 1,2] ...
     walkstream bench stream [scene.db] [--vienna vienna.db] [--scene LABEL=DB[:PATHS]] [--only NAMES] [--duration S]
     walkstream bench budget [scene.db] [--no-gl] [--seed N] [--gl-runs N] [--gl-real-duration S]
+        [--gl-draws batched,per-object] [--rewrite thread,process]
     walkstream bench controller [--frames 3000] [--seeds 1 2 3] [--step 10]
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--reuse] [--out DIR]
@@ -56,11 +57,32 @@ def cmd_bench_rebuild(args: argparse.Namespace) -> int:
     batches = _ints(args.batch, "--batch")
     if min(batches) < 1:
         raise WalkstreamError(f"--batch: expected sizes >= 1, got {args.batch!r}")
+    if args.beside_loop:
+        return _bench_beside_loop(args, scene.buildings)
     runs = []
     for r in range(args.repeat):
         with building_bar(len(scene.buildings), f"run {r + 1}/{args.repeat}") as bar:
             runs.append(rebuild_run(scene.buildings, batches, progress=bar.update))
     print(rebuild_table(runs, source))
+    return 0
+
+
+def _bench_beside_loop(args: argparse.Namespace, buildings: Any) -> int:
+    """``bench rebuild --beside-loop``: the rewrite pool's paths beside a frame-loop stand-in."""
+    from walkstream.benchmarks.rebuild import beside_loop, beside_loop_table
+    from walkstream.client.rewrite.pool import MODES
+
+    modes = ("none", *_choices(args.beside_loop, "--beside-loop", MODES))
+    workers = _ints(args.workers, "--workers")
+    if min(workers) < 1:
+        raise WalkstreamError(f"--workers: expected counts >= 1, got {args.workers!r}")
+    cases = [("none", 1)] + [(m, w) for m in modes[1:] for w in workers]
+    runs = []
+    for r in range(args.repeat):
+        for k, (mode, w) in enumerate(cases):  # interleaved: every case sees the same load
+            print(f"[run {r + 1}/{args.repeat}, {k + 1}/{len(cases)}] {mode}, {w} workers ...", file=sys.stderr, flush=True)
+            runs.append(beside_loop(buildings, mode, w))
+    print(beside_loop_table(runs, len(buildings)))
     return 0
 
 
@@ -173,13 +195,28 @@ def cmd_bench_stream(args: argparse.Namespace) -> int:
     return 0
 
 
+def _choices(text: str, flag: str, allowed: tuple[str, ...]) -> tuple[str, ...]:
+    """A comma-separated list of some of ``allowed`` (a clear error names the bad one)."""
+    from walkstream.shared.errors import InputError
+
+    got = tuple(x.strip() for x in text.split(",") if x.strip())
+    for x in got:
+        if x not in allowed:
+            raise InputError(f"{flag} {x!r}: choose from {', '.join(allowed)}")
+    if not got:
+        raise InputError(f"{flag}: name at least one of {', '.join(allowed)}")
+    return got
+
+
 def cmd_bench_budget(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench budget``."""
     from walkstream.benchmarks.budget import (
+        DRAWS,
         format_budget_table,
         format_gl_real_table,
         run_budget_bench,
     )
+    from walkstream.client.rewrite.pool import MODES
     from walkstream.cmd_replay import replay_with_options
 
     out = Path(args.out)
@@ -194,6 +231,8 @@ def cmd_bench_budget(args: argparse.Namespace) -> int:
         seed=args.seed,
         gl_runs=args.gl_runs,
         gl_real_duration=args.gl_real_duration,
+        gl_draws=_choices(args.gl_draws, "--gl-draws", DRAWS),
+        rewrites=_choices(args.rewrite, "--rewrite", MODES),
     )
     print(format_budget_table(rows))
     real = format_gl_real_table(rows)
@@ -373,6 +412,8 @@ def add_bench_parser(sub: Any) -> None:
     bb.add_argument(
         "--batch", default="32,256", help="batch sizes of the batched rows, comma-separated (default 32,256)"
     )
+    bb.add_argument("--beside-loop", metavar="PATHS", help="instead: rebuild the scene with the client's rewrite pool in these paths (thread,process) beside a 60 Hz frame-loop stand-in, and time the stand-in")
+    bb.add_argument("--workers", default="1,2", help="with --beside-loop: rewrite workers, comma-separated (default 1,2)")
     bb.set_defaults(func=cmd_bench_rebuild)
     bv = besub.add_parser("visibility", help="what the PVS misses against a dense reference and at random eye points, against bake time, per sampling setting")
     bv.add_argument("scene", help="scene database (read alone: any source it was baked from) or a scene source file")
@@ -426,6 +467,8 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--no-gl", action="store_true", help="skip the gl rows (the real-clock ones too)")
     b.add_argument("--gl-runs", type=int, default=3, help="runs per real-clock gl row, medians reported (default 3; 0: no real-clock rows)")
     b.add_argument("--gl-real-duration", default="20s", help="walk length of each real-clock gl run (default 20s)")
+    b.add_argument("--gl-draws", default="batched,per-object", help="draw paths of the real-clock gl rows (default batched,per-object)")
+    b.add_argument("--rewrite", default="process", help="rebuild paths of the real-clock gl rows, e.g. thread,process (default process)")
     b.add_argument("--seed", type=int, default=0, help="seed of the device noise and spikes (default 0)")
     b.add_argument("--out", default="out/bench-budget", help="folder for the reports")
     b.set_defaults(func=cmd_bench_budget)

@@ -93,6 +93,8 @@ def config_from_args(args: argparse.Namespace) -> Any:
         snapshot_every=args.snapshot_every,
         duration_s=parse_duration(args.duration) if args.duration else None,
         workers=args.workers,
+        rewrite=args.rewrite,
+        shm_bytes=parse_size(args.shm),
         lod_select=args.lod,
         lod_distances=(lo, hi),
         seed=args.seed,
@@ -211,6 +213,8 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--snapshot-every", type=int, default=0, help="write every Nth frame as PNG into the report")
     r.add_argument("--duration", help="replay only the first part of the path, e.g. 60s")
     r.add_argument("--workers", type=int, default=2, help="rewrite workers (default 2)")
+    r.add_argument("--rewrite", default="auto", help="real clock: rebuild in worker 'process'es or in 'thread's of the client (the older path); default 'auto': processes when there is a core for each worker besides two")
+    r.add_argument("--shm", default="16MB", help="process rewrite: bound on the shared memory geometry comes back through (default 16MB; 0: through the pipe)")
     r.add_argument("--lod", choices=("ach", "distance"), default="ach", help="LOD selection: ACH-shared budget or distance")
     r.add_argument("--lod-distances", default="40,120", help="distance selection: LOD2 nearer than D1, LOD1 nearer than D2 (default 40,120)")
     r.add_argument("--seed", type=int, default=0, help="seed of link loss, device noise, backoff jitter")

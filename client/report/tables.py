@@ -57,7 +57,26 @@ _HEADLINE: tuple[tuple[str, str, Callable[[Any], str]], ...] = (
     ("frame_period_median_ms", "frame period (start to start), median", lambda v: f"{v:.2f} ms"),
     ("frame_period_within_10pct_ratio", "frame periods within 10 % of target", _ratio),
     ("recovery_frames", "recovery after cost step", lambda v: f"{int(v)} frames"),
+    ("rewrite", "rebuilds ran", lambda v: _rewrite_path(v)),
 )
+
+
+def _rewrite_path(d: Mapping[str, Any]) -> str:
+    """Which path the real clock's rebuilds took (``summary["rewrite"]``), in words."""
+    if d.get("mode") != "process":
+        out = f"{d.get('mode')}: {d.get('batches', 0)} batches"
+    else:
+        ready = d.get("workers_ready_s")
+        out = (
+            f"process: {d.get('shm_batches', 0)} batches through shared memory "
+            f"(bound {d.get('shm_bytes', 0) / 2**20:.0f} MB, peak "
+            f"{d.get('shm_peak_bytes', 0) / 2**20:.1f} MB), {d.get('pipe_batches', 0)} through "
+            f"the pipe, {d.get('thread_batches', 0)} in threads; workers ready after "
+            + ("n/a" if ready is None else f"{ready:.2f} s")
+        )
+        if d.get("shm_error"):
+            out += f" ({d['shm_error']})"
+    return out + f"; {d.get('dropped_jobs', 0)} queued jobs dropped"
 
 
 def headline_rows(summary: Mapping[str, Any]) -> list[tuple[str, str, str]]:
@@ -104,6 +123,7 @@ def format_headline(summary: Mapping[str, Any]) -> str:
             f"{ratio('floor_limited_ratio')}",
         ]
         + _phases_line(summary)
+        + ([f"rebuilds ran in {_rewrite_path(summary['rewrite'])}"] if "rewrite" in summary else [])
     )
 
 

@@ -53,7 +53,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.clock import Clock
 from walkstream.client.net.api import SceneClient
-from walkstream.client.rewrite.pool import ObjectGeometry, RewritePool, geometry_of
+from walkstream.client.rewrite.pool import ObjectGeometry, RewriteOptions, RewritePool, geometry_of
 from walkstream.client.stream.bundle import StartBundle
 from walkstream.client.stream.cache import Cache, Kind
 from walkstream.client.stream.cellmap import CellMap
@@ -87,6 +87,8 @@ class StreamerConfig:
     """``params`` (rebuild locally) or ``lod2`` (download LOD2 meshes)."""
     workers: int = 2
     """Rewrite workers (with ``params``)."""
+    rewrite: RewriteOptions = RewriteOptions()
+    """Processes or threads for the real clock's rebuilds, and their shared-memory bound."""
     max_requests: int = 4
     """Most requests in flight at once."""
     cover: float = 1.0
@@ -191,11 +193,9 @@ class Streamer:
         self.config = config
         self.kind: Kind = "params" if config.form == "params" else "mesh"
         """The cache kind of what is downloaded per object."""
-        self.rewrite: RewritePool | None = (
-            RewritePool(clock, None, self.on_built, config.workers)
-            if self.kind == "params"
-            else None
-        )
+        self.rewrite: RewritePool | None = None
+        if self.kind == "params":
+            self.rewrite = RewritePool(clock, None, self.on_built, config.workers, options=config.rewrite)
         self.disk: DiskCache | None = None
         """The persistent cache, once the manifest says which scene version it is for."""
         self.api_max_ids = 1000
@@ -380,7 +380,7 @@ class Streamer:
                 rec = self.cells.get(cell)
                 if rec is not None and t <= c.pin_geometry_s:
                     self.ensure_geometry(rec.pvs.tolist(), t)
-        # cancel in-flight batches nobody needs any more
+            self.rewrite.prune([r.pvs for x in (*need, self.cellmap.current or -1) if (r := self.cells.get(x))])        # cancel in-flight batches nobody needs any more
         for task, b in list(self._batches.items()):
             want = wanted if b.kind == "objects" else records
             if not any(i in want for i in b.left):
