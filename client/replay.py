@@ -103,6 +103,8 @@ class ReplayConfig:
     ``None``: wait for the manifest to tell (a city walk then starts a little later)."""
     fog_m: float = 40.0
     """Interiors: portals farther than this are not looked through."""
+    culling: str = "portals"
+    """Interiors: ``portals``, ``frustum`` or ``none`` (:mod:`walkstream.client.draw.portals`)."""
     start_bundle: bool = True
     """Start with the start bundle (one round trip); False: scene list, manifest, path."""
     gzip: bool = True
@@ -509,14 +511,16 @@ async def _replay_interior(
     progress: Callable[[float, float], None] | None,
 ) -> ReplayResult:
     """The walk through an interior (:mod:`walkstream.client.roomreplay`)."""
-    from walkstream.client.roomreplay import walk_interior
+    from walkstream.client.roomreplay import InteriorFrames, walk_interior
     from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 
     topology = await api.topology()
     cache = Cache(config.cache_bytes)
     streamer = RoomStreamer(
-        api, clock, cache, topology, RoomStreamConfig(prefetch=config.prefetch, fog_m=config.fog_m)
+        api, clock, cache, topology,
+        RoomStreamConfig(prefetch=config.prefetch, fog_m=config.fog_m, culling=config.culling),
     )
+    frames = InteriorFrames()
     device = make_device(config.device, config.seed)
     renderer: Any = None
     try:
@@ -526,7 +530,7 @@ async def _replay_interior(
             renderer = FrameRenderer(size=config.size, fov_deg=config.fov_deg, near=0.1)
         log, snapshots, spikes = await walk_interior(
             config, clock, path, streamer, device, renderer, progress, t_start,
-            lambda: int(link.stats.bytes_down),
+            lambda: int(link.stats.bytes_down), frames,
         )
     finally:
         await streamer.close()
@@ -555,12 +559,27 @@ async def _replay_interior(
             "cells_flushed": streamer.stats.flushed,
             "redownloads": streamer.stats.refetched,
             "fog_m": config.fog_m,
-            "culling": "frustum culling of the visible cells' contents (cells seen through portals in the frustum)",
+            "culling": config.culling,
+            **_culling_figures(frames.cull_s, frames.portals),
             "cache_bytes": config.cache_bytes,
             "cache_peak_bytes": int(cache.peak_bytes),
         }
     )
     return ReplayResult(summary, log, _bytes_log(stats, t_start), snapshots, spikes)
+
+
+def _culling_figures(cull_s: list[float], portals: list[int]) -> dict[str, float]:
+    """Median, p95 and max culling milliseconds per frame, and portals opened per frame."""
+    if not cull_s:
+        return {}
+    ms = np.asarray(cull_s) * 1e3
+    return {
+        "culling_ms_median": float(np.median(ms)),
+        "culling_ms_p95": float(np.percentile(ms, 95)),
+        "culling_ms_max": float(ms.max()),
+        "portals_mean": float(np.mean(portals)),
+        "portals_max": int(np.max(portals)),
+    }
 
 
 def _overfetch(streamer: Streamer, entered: set[int]) -> dict[str, int]:

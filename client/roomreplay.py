@@ -4,11 +4,13 @@ runs when the manifest's kind is ``interior``).
 Setup fetches the topology (one request: every cell's planes and every portal).  Then,
 frame by frame: move the eye along the path, let the
 :class:`~walkstream.client.stream.rooms.RoomStreamer` locate it by the cells' planes,
-find the visible cells (through portals in the frustum, within the fog distance) and
-fetch their contents; draw the parts of the visible cells' contents whose boxes meet
-the frustum (frustum culling of the visible cells' contents; the portal culling with
-visible screen areas is Interiors II).  Indoors there is one LOD per part, so no
-polygon budget is shared; the budget column of the log stays 0.
+find the visible cells and fetch their contents; draw the parts of the visible cells'
+contents that the culling keeps (``config.culling``, :mod:`walkstream.client.draw.portals`):
+``portals`` tests each part's box against the VSAs through which its cell is seen,
+the fog and the frustum; ``frustum`` the frustum and the fog; ``none`` keeps every
+part.  Indoors there is one LOD per part, so no polygon budget is shared; the budget
+column of the log stays 0.  The CPU time of the culling (cells and parts) and the
+portals opened per frame are kept in :class:`InteriorFrames`.
 
 Per frame, download quality is the share of the visible cells whose contents are in
 memory and rewrite quality the share that is also on the GPU (the same here: decoded
@@ -19,7 +21,9 @@ everything visible has arrived.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -27,15 +31,25 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
-from walkstream.client.draw.culling import frustum_cull
 from walkstream.client.draw.frames import camera
+from walkstream.client.draw.portals import cull_parts
 from walkstream.client.report.metrics import FrameLog, FrameLogBuilder
 from walkstream.client.stream.rooms import RoomStreamer
 from walkstream.shared.camera import perspective
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.records import Mesh
 
-__all__ = ["walk_interior"]
+__all__ = ["InteriorFrames", "walk_interior"]
+
+
+@dataclass
+class InteriorFrames:
+    """Per-frame figures of an interior walk beyond the frame log: culling seconds
+    (cells and parts), portals opened, and the fog distance in force."""
+
+    cull_s: list[float] = field(default_factory=list)
+    portals: list[int] = field(default_factory=list)
+    fog_m: list[float] = field(default_factory=list)
 
 
 async def walk_interior(
@@ -48,12 +62,15 @@ async def walk_interior(
     progress: Callable[[float, float], None] | None,
     t_start: float,
     bytes_down: Callable[[], int],
+    frames: InteriorFrames | None = None,
 ) -> tuple[FrameLog, list[Path], NDArray[np.bool_]]:
     """Walk ``path`` through an interior (see the module docstring).
 
     Returns the frame log, the snapshot files and the per-frame spike flags, like
-    the city's walk.
+    the city's walk; ``frames``, when given, gets the culling figures of each frame.
     """
+    culling = streamer.config.culling
+    boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
     tick = 1.0 / config.fps
     total = path.duration if config.duration_s is None else min(config.duration_s, path.duration)
     w, h = config.size
@@ -76,22 +93,36 @@ async def walk_interior(
         xyz, yaw, pitch = path.at(wt)
         eye = np.asarray(xyz, dtype=np.float64)
         view = camera(eye, float(yaw), float(pitch))
-        vp = proj.astype(np.float64) @ view.astype(np.float64)
-        vis = streamer.tick(t, eye, vp)
-        draw_keys: list[Hashable] = []
-        triangles = 0
-        parts = 0
-        have = 0
+        v64, p64 = view.astype(np.float64), proj.astype(np.float64)
+        vp = p64 @ v64
+        t_cull = time.perf_counter()
+        vis = streamer.tick(t, eye, vp, v64, p64, (w, h))
+        loaded = {}
         for cid in vis:
             cm = streamer.mesh(cid)
             if cm is None:
                 continue
-            have += 1
+            loaded[cid] = cm
+            if cid not in boxes:
+                b = [p.bbox for p in cm.parts]
+                boxes[cid] = (np.array([x[0] for x in b]).reshape(-1, 3), np.array([x[1] for x in b]).reshape(-1, 3))
+        pc = streamer.last_cull
+        masks = cull_parts(
+            culling, list(loaded), boxes, eye, v64, p64, (w, h),
+            vsas=None if pc is None else pc.vsas, fog_m=streamer.config.fog_m,
+        )
+        if frames is not None:
+            frames.cull_s.append(time.perf_counter() - t_cull)
+            frames.portals.append(0 if pc is None else pc.portals)
+            frames.fog_m.append(streamer.config.fog_m)
+        draw_keys: list[Hashable] = []
+        triangles = 0
+        parts = 0
+        have = len(loaded)
+        for cid, cm in loaded.items():
             if not cm.parts:
                 continue
-            boxes = [p.bbox for p in cm.parts]
-            keep = frustum_cull(np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]), vp)
-            for k, (part, ok) in enumerate(zip(cm.parts, keep.tolist(), strict=True)):
+            for k, (part, ok) in enumerate(zip(cm.parts, masks[cid].tolist(), strict=True)):
                 if not ok:
                     continue
                 triangles += part.triangles
@@ -138,6 +169,9 @@ async def walk_interior(
                 if renderer.has(key):
                     renderer.forget(key)
                 del meshes[key]
+        if frame % 25 == 0:
+            for c in [c for c in boxes if streamer.mesh(c) is None]:
+                del boxes[c]
         await clock.sleep_until(t + max(frame_time, tick))
     if renderer is not None:
         for key in list(meshes):

@@ -55,6 +55,7 @@ from walkstream.shared.errors import InputError
 
 __all__ = [
     "CULLING_MODES",
+    "OPEN_KINDS",
     "PortalGraph",
     "PortalCull",
     "cull_portals",
@@ -120,6 +121,12 @@ class PortalGraph:
                 if int(r.cell) in index:
                     rows.append((index[int(r.cell)], int(r.id), np.asarray(r.polygon, np.float64)))
             start.append(len(rows))
+        kinds = {int(pid): str(kind) for pid, kind, _, _, _ in topology.portals}
+        byid = {int(c.id): c for c in cells}
+        rows = [
+            (t, pid, _open_face(p, byid[int(c.id)], cells[t]) if kinds.get(pid) in OPEN_KINDS else p)
+            for c, (t, pid, p) in zip(_owners(cells, index), rows, strict=True)
+        ]
         k = max((len(p) for _, _, p in rows), default=3)
         poly = np.zeros((len(rows), k, 3))
         for i, (_, _, p) in enumerate(rows):
@@ -150,6 +157,57 @@ class PortalGraph:
             plane=plane,
             index=index,
         )
+
+
+#: Portal kinds with no wall about them (the boundary between two parts of one space,
+#: a virtual space boundary): the whole face the two cells share is open, whatever
+#: polygon the source gave (IFC virtual boundaries are often narrower than it).
+OPEN_KINDS = frozenset({"opening", "virtual", "split", "void"})
+
+
+def _owners(cells: list[Any], index: dict[int, int]) -> list[Any]:
+    """The owning cell of each directed portal row, in the order of ``from_topology``."""
+    return [c for c in cells for r in c.portals if int(r.cell) in index]
+
+
+def _open_face(poly: NDArray[np.float64], a: Any, b: Any) -> NDArray[np.float64]:
+    """A vertical portal grown to the face its two cells share (see :data:`OPEN_KINDS`).
+
+    The cells' outline edges that lie in the portal's plane (within 1 cm) give each
+    cell's extent along the plane; the shared face is their overlap, times the overlap
+    of the cells' height ranges.  The polygon returned is the rectangle spanning both
+    the source polygon and that face; a portal that is not vertical, or whose cells
+    have no edge in its plane, is returned as it is.
+    """
+    p = np.asarray(poly, np.float64)
+    n = np.cross(p[1] - p[0], p[2] - p[0])
+    nh = float(np.hypot(n[0], n[1]))
+    if nh < 1e-9 or abs(n[2]) > 0.1 * nh:
+        return p
+    nrm = np.array([n[0], n[1]]) / nh
+    tan = np.array([-nrm[1], nrm[0]])
+    off = float(nrm @ p[0, :2])
+
+    def extent(cell: Any) -> tuple[float, float] | None:
+        o = np.asarray(cell.outline, np.float64)
+        q = np.roll(o, -1, axis=0)
+        on = (np.abs(o @ nrm - off) < 0.01) & (np.abs(q @ nrm - off) < 0.01)
+        if not on.any():
+            return None
+        s = np.concatenate([o[on] @ tan, q[on] @ tan])
+        return float(s.min()), float(s.max())
+
+    ea, eb = extent(a), extent(b)
+    if ea is None or eb is None:
+        return p
+    s0, s1 = max(ea[0], eb[0]), min(ea[1], eb[1])
+    z0, z1 = max(a.zmin, b.zmin), min(a.zmax, b.zmax)
+    ps = p[:, :2] @ tan
+    s0, s1 = min(s0, float(ps.min())), max(s1, float(ps.max()))
+    z0, z1 = min(z0, float(p[:, 2].min())), max(z1, float(p[:, 2].max()))
+    base = nrm * off
+    c0, c1 = base + s0 * tan, base + s1 * tan
+    return np.array([[c0[0], c0[1], z0], [c1[0], c1[1], z0], [c1[0], c1[1], z1], [c0[0], c0[1], z1]])
 
 
 @dataclass

@@ -80,6 +80,16 @@ class TruthCheck:
     missed: frozenset[tuple[int, int]]
     visible: frozenset[tuple[int, int]]
     visible_triangles: int
+    pinholes: int = 0
+    """Missed pixels that are single pixels (no missed neighbour) where the eight
+    neighbours all show a kept part nearer, or one of them a kept part at the same
+    depth (within 1 %): a crack between two pieces of a wall seen through at one
+    pixel, or a piece of the outside cell lying on a kept surface's edge; not a cell
+    culled (that shows through a portal's whole area)."""
+    mask: NDArray[np.bool_] | None = None
+    """``(h, w)`` the missed pixels (row 0 at the top)."""
+    depth: NDArray[np.float64] | None = None
+    """``(h, w)`` the truth's depth, metres."""
 
 
 class InteriorTruth(Releasable):
@@ -212,19 +222,41 @@ class InteriorTruth(Releasable):
         ids, depth = self.render(eye, view, None, fog_m)
         shown = ids >= 0
         culled = shown & ~keep[np.maximum(ids, 0)]
+        pinholes = 0
         if culled.any():
             _, kdepth = self.render(eye, view, keep, fog_m)
             culled &= kdepth > depth + TIE_M
+            # a pinhole: no missed neighbour, and every neighbour nearer than the miss
+            pad = np.pad(culled, 1)
+            dpad = np.pad(depth, 1, constant_values=np.inf)
+            h, w = culled.shape
+            alone = culled.copy()
+            nearer = np.ones_like(culled)
+            same = np.zeros_like(culled)
+            for dy in (-1, 0, 1):
+                for dx in (-1, 0, 1):
+                    if dy or dx:
+                        nb = (slice(1 + dy, 1 + dy + h), slice(1 + dx, 1 + dx + w))
+                        alone &= ~pad[nb]
+                        nearer &= dpad[nb] < depth
+                        with np.errstate(invalid="ignore"):
+                            same |= np.abs(dpad[nb] - depth) <= 0.01 * depth
+            pinholes = int(np.count_nonzero(alone & (nearer | same)))
         seen = np.unique(ids[shown])
         return TruthCheck(
             missed_pixels=int(np.count_nonzero(culled)),
             missed=frozenset(self.keys[i] for i in np.unique(ids[culled]).tolist()),
             visible=frozenset(self.keys[i] for i in seen.tolist()),
             visible_triangles=int(self.triangles[seen].sum()),
+            pinholes=pinholes,
+            mask=culled,
+            depth=depth,
         )
 
     def release(self) -> None:
         """Release the GL objects (and the context if made here); idempotent."""
+        if self.ctx is not None and self._gl:
+            self.ctx.detect_framebuffer(0).use()
         for obj in self._gl:
             obj.release()
         self._gl = []
