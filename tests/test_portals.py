@@ -83,7 +83,7 @@ def test_vsa_is_the_portal_rectangle_rounded_outward() -> None:
     e, view, proj = _cam((2.0, 0.0, 1.0), 0.0)
     pc = cull_portals(g, 0, e, view, proj, SIZE)
     assert pc.order == [0, 1]
-    rect = pc.vsas[1][0]
+    rect = np.array(pc.vsas[1][0])
     # the door x = 4, y in [-0.5, 0.5], z in [0, 2] seen from 2 m: project its corners
     vp = proj @ view
     c = np.array([[4, -0.5, 0, 1], [4, 0.5, 0, 1], [4, 0.5, 2, 1], [4, -0.5, 2, 1]], float) @ vp.T
@@ -114,7 +114,7 @@ def test_eye_on_the_portal_plane_passes_the_parent_vsa_through() -> None:
         for yaw in (0.0, 0.7, -0.7, math.pi / 2 - 0.1):
             e, view, proj = _cam((4.0 + dx, 0.0, 1.0), yaw)
             pc = cull_portals(g, 0, e, view, proj, SIZE)
-            assert 1 in pc.order and pc.vsas[1].tolist() == [[0, 0, SIZE[0] - 1, SIZE[1] - 1]], (dx, yaw)
+            assert 1 in pc.order and [list(v) for v in pc.vsas[1]] == [[0, 0, SIZE[0] - 1, SIZE[1] - 1]], (dx, yaw)
 
 
 def test_many_paths_do_not_grow_exponentially_and_depth_and_fog_stop() -> None:

@@ -218,8 +218,9 @@ class PortalCull:
     ----------
     order : list of int
         The render queue: visible cell ids, each once, in the order first reached.
-    vsas : dict of int -> (k, 4) int64
-        Per visible cell, the VSAs through which it is seen (whole pixels, inclusive).
+    vsas : dict of int -> list of (x0, y0, x1, y1)
+        Per visible cell, the VSAs through which it is seen (whole pixels, inclusive;
+        plain ints: ``np.asarray`` makes a ``(k, 4)`` array of them).
     depth : dict of int -> int
         Portals passed on the shortest way to each visible cell.
     portals : int
@@ -231,7 +232,7 @@ class PortalCull:
     """
 
     order: list[int]
-    vsas: dict[int, NDArray[np.int64]]
+    vsas: dict[int, list[tuple[int, int, int, int]]]
     depth: dict[int, int]
     portals: int = 0
     tested: int = 0
@@ -355,13 +356,35 @@ def cull_portals(
     V = np.asarray(view, np.float64)
     P = np.asarray(proj, np.float64)
     w, h = int(size[0]), int(size[1])
+    # A portal's rectangle depends on the camera only, not on the VSA it is seen
+    # through: every portal within the fog is projected at once, vectorised, and the
+    # walk below only intersects whole-pixel rectangles (plain ints, no numpy per cell).
+    m = len(graph.target)
+    near = _box_distance(graph.lo, graph.hi, e) if m else np.zeros(0)
+    rows = np.flatnonzero(near <= fog_m)
     k = graph.poly.shape[1]
     edges = np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1)
-    near_pass = max(pass_m, clip_m * _corner_secant(P) * 1.01)
+    rect, front = _rects(graph.poly[rows], edges, V, P, (w, h), clip_m, naive)
+    through = np.zeros(len(rows), bool)
+    if not naive and len(rows):
+        near_pass = max(pass_m, clip_m * _corner_secant(P) * 1.01)
+        dist = np.abs(graph.plane[rows, :3] @ e + graph.plane[rows, 3])
+        inside = np.all((e >= graph.lo[rows] - near_pass) & (e <= graph.hi[rows] + near_pass), axis=1)
+        through = (dist <= near_pass) & inside
+    # per directed row: None (culled: beyond the fog or wholly behind the eye),
+    # "through" (pass the parent's VSA), or its rectangle
+    R: list[Any] = [None] * m
+    for r, rc, ok, th in zip(rows.tolist(), rect.tolist(), front.tolist(), through.tolist(), strict=True):
+        if th:
+            R[r] = True
+        elif ok:
+            R[r] = rc
+    target = graph.target.tolist()
+    starts = graph.start.tolist()
     s = graph.index[start]
-    full = full_vsa((w, h))
-    bound: dict[int, NDArray[np.int64]] = {s: full}
-    lists: dict[int, list[NDArray[np.int64]]] = {s: [full]}
+    full = (0, 0, w - 1, h - 1)
+    bound: dict[int, tuple[int, int, int, int]] = {s: full}
+    lists: dict[int, list[tuple[int, int, int, int]]] = {s: [full]}
     depth = {s: 0}
     order = [s]
     queue = deque([s])
@@ -370,34 +393,28 @@ def cull_portals(
     while queue:
         c = queue.popleft()
         queued.discard(c)
-        if depth[c] >= max_depth:
+        dc = depth[c]
+        if dc >= max_depth:
             continue
-        a, b = int(graph.start[c]), int(graph.start[c + 1])
-        if a == b:
-            continue
-        vsa = bound[c]
-        rows = np.arange(a, b)
-        near = _box_distance(graph.lo[rows], graph.hi[rows], e)
-        rows = rows[near <= fog_m]
-        if len(rows) == 0:
-            continue
-        tested += len(rows)
-        rect, front = _rects(graph.poly[rows], edges, V, P, (w, h), clip_m, naive)
-        if not naive:
-            dist = np.abs(graph.plane[rows, :3] @ e + graph.plane[rows, 3])
-            inside = np.all((e >= graph.lo[rows] - near_pass) & (e <= graph.hi[rows] + near_pass), axis=1)
-            through = (dist <= near_pass) & inside
-            rect[through] = vsa
-            front |= through
-        new = _meet(rect, vsa)
-        open_ = front & (new[:, 0] <= new[:, 2]) & (new[:, 1] <= new[:, 3])
-        for r, n in zip(rows[open_].tolist(), new[open_], strict=True):
+        vx0, vy0, vx1, vy1 = bound[c]
+        for r in range(starts[c], starts[c + 1]):
+            pr = R[r]
+            if pr is None:
+                continue
+            tested += 1
+            if pr is True:
+                n = (vx0, vy0, vx1, vy1)
+            else:
+                n = (max(pr[0], vx0), max(pr[1], vy0), min(pr[2], vx1), min(pr[3], vy1))
+                if n[0] > n[2] or n[1] > n[3]:
+                    continue
             opened += 1
-            t = int(graph.target[r])
-            if t not in bound:
+            t = target[r]
+            ob = bound.get(t)
+            if ob is None:
                 bound[t] = n
                 lists[t] = [n]
-                depth[t] = depth[c] + 1
+                depth[t] = dc + 1
                 order.append(t)
             else:
                 have = lists[t]
@@ -406,23 +423,22 @@ def cull_portals(
                 have = [q for q in have if not (n[0] <= q[0] and n[1] <= q[1] and n[2] >= q[2] and n[3] >= q[3])]
                 have.append(n)
                 if len(have) > max_vsas:
-                    arr = np.array(have)
-                    have = [np.concatenate([arr[:, :2].min(axis=0), arr[:, 2:].max(axis=0)])]
+                    have = [(min(q[0] for q in have), min(q[1] for q in have),
+                             max(q[2] for q in have), max(q[3] for q in have))]
                 lists[t] = have
-                ob = bound[t]
-                nb = np.concatenate([np.minimum(ob[:2], n[:2]), np.maximum(ob[2:], n[2:])])
-                if np.array_equal(nb, ob):
+                nb = (min(ob[0], n[0]), min(ob[1], n[1]), max(ob[2], n[2]), max(ob[3], n[3]))
+                if nb == ob:
                     continue
                 bound[t] = nb
-                depth[t] = min(depth[t], depth[c] + 1)
+                depth[t] = min(depth[t], dc + 1)
             if t not in queued:
                 queue.append(t)
                 queued.add(t)
-    ids = graph.ids
+    ids = graph.ids.tolist()
     return PortalCull(
-        order=[int(ids[i]) for i in order],
-        vsas={int(ids[i]): np.array(lists[i], np.int64).reshape(-1, 4) for i in order},
-        depth={int(ids[i]): depth[i] for i in order},
+        order=[ids[i] for i in order],
+        vsas={ids[i]: lists[i] for i in order},
+        depth={ids[i]: depth[i] for i in order},
         portals=opened,
         tested=tested,
         seconds=time.perf_counter() - t0,
@@ -449,7 +465,7 @@ def box_rects(
 def cull_boxes(
     lo: ArrayLike,
     hi: ArrayLike,
-    vsas: NDArray[np.int64],
+    vsas: ArrayLike,
     eye: ArrayLike,
     view: ArrayLike,
     proj: ArrayLike,
@@ -542,7 +558,7 @@ def cull_parts(
     proj: ArrayLike,
     size: tuple[int, int],
     *,
-    vsas: dict[int, NDArray[np.int64]] | None = None,
+    vsas: dict[int, list[tuple[int, int, int, int]]] | None = None,
     fog_m: float = math.inf,
     clip_m: float = 0.03,
 ) -> dict[int, NDArray[np.bool_]]:
@@ -579,10 +595,33 @@ def cull_parts(
             keep = _box_distance(lo, hi, e) <= fog_m
             keep[keep] = frustum_cull(lo[keep], hi[keep], vp)
             out[c] = keep
-        else:
-            v = vsas.get(c) if vsas is not None else None
-            if v is None:
-                out[c] = np.zeros(len(lo), bool)
-            else:
-                out[c] = cull_boxes(lo, hi, v, e, view, proj, size, fog_m=fog_m, clip_m=clip_m)
+    if mode != "portals":
+        return out
+    # every visible cell's boxes in one vectorised pass, each against its own cell's VSAs
+    seen = [c for c in cells if c in boxes and vsas is not None and c in vsas and len(boxes[c][0])]
+    for c in cells:
+        if c in boxes and c not in seen:
+            out[c] = np.zeros(len(boxes[c][0]), bool)
+    if not seen or vsas is None:
+        return out
+    counts = [len(boxes[c][0]) for c in seen]
+    lo = np.concatenate([boxes[c][0] for c in seen])
+    hi = np.concatenate([boxes[c][1] for c in seen])
+    owner = np.repeat(np.arange(len(seen)), counts)
+    kmax = max(len(vsas[c]) for c in seen)
+    v = np.tile(np.array([1, 1, 0, 0], np.int64), (len(seen), kmax, 1))  # empty rectangles
+    for i, c in enumerate(seen):
+        v[i, : len(vsas[c])] = vsas[c]
+    keep = _box_distance(lo, hi, e) <= fog_m
+    rect, front = box_rects(lo, hi, view, proj, size, clip_m)
+    vv = v[owner]  # (n, kmax, 4)
+    meet = (
+        (rect[:, None, 0] <= vv[:, :, 2]) & (rect[:, None, 2] >= vv[:, :, 0])
+        & (rect[:, None, 1] <= vv[:, :, 3]) & (rect[:, None, 3] >= vv[:, :, 1])
+        & (vv[:, :, 0] <= vv[:, :, 2])
+    )
+    keep &= front & np.any(meet, axis=1)
+    keep[keep] = frustum_cull(lo[keep], hi[keep], vp)
+    for c, part in zip(seen, np.split(keep, np.cumsum(counts)[:-1]), strict=True):
+        out[c] = part
     return out
