@@ -279,26 +279,59 @@ def _rects(
         lo, hi = ndc.min(axis=1), ndc.max(axis=1)
     else:
         depth = -v[..., 2]
-        a, b = v[:, edges[:, 0]], v[:, edges[:, 1]]  # (m, e, 3)
-        da, db = depth[:, edges[:, 0]], depth[:, edges[:, 1]]
-        cross = (da - clip_m) * (db - clip_m) < 0
-        t = np.where(cross, (clip_m - da) / np.where(cross, db - da, 1.0), 0.0)
-        xpts = a + t[..., None] * (b - a)
-        allp = np.concatenate([v, xpts], axis=1)  # (m, k + e, 3)
-        ok = np.concatenate([depth >= clip_m, cross], axis=1)
-        d = np.where(ok, -allp[..., 2], 1.0)
-        # a perspective projection: x_ndc = (P00 x + P02 z) / -z, likewise y
-        x = (proj[0, 0] * allp[..., 0] + proj[0, 2] * allp[..., 2]) / d
-        y = (proj[1, 1] * allp[..., 1] + proj[1, 2] * allp[..., 2]) / d
-        front = np.any(ok, axis=1)
-        big = 1e30
-        lo = np.stack([np.where(ok, x, big).min(axis=1), np.where(ok, y, big).min(axis=1)], axis=1)
-        hi = np.stack([np.where(ok, x, -big).max(axis=1), np.where(ok, y, -big).max(axis=1)], axis=1)
+        ahead = np.all(depth >= clip_m, axis=1)
+        rect = np.empty((m, 4), np.int64)
+        front = np.ones(m, bool)
+        if ahead.any():
+            # the common case, nothing to clip: the vertices' projections bound the set
+            va, da = v[ahead], depth[ahead]
+            x = (proj[0, 0] * va[..., 0] + proj[0, 2] * va[..., 2]) / da
+            y = (proj[1, 1] * va[..., 1] + proj[1, 2] * va[..., 2]) / da
+            rect[ahead] = _pixels(np.stack([x.min(axis=1), y.min(axis=1)], axis=1),
+                                  np.stack([x.max(axis=1), y.max(axis=1)], axis=1), size)
+        behind = np.all(depth < clip_m, axis=1)
+        front[behind] = False
+        rect[behind] = (1, 1, 0, 0)
+        rest = ~ahead & ~behind
+        if rest.any():
+            rect[rest], front[rest] = _clipped(v[rest], depth[rest], edges, proj, size, clip_m)
+        return rect, front
+    return _pixels(lo, hi, size), front
+
+
+def _clipped(
+    v: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    edges: NDArray[np.int64],
+    proj: NDArray[np.float64],
+    size: tuple[int, int],
+    clip_m: float,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """:func:`_rects` of eye-space point sets ``(m, k, 3)`` that cross the clip plane."""
+    a, b = v[:, edges[:, 0]], v[:, edges[:, 1]]  # (m, e, 3)
+    da, db = depth[:, edges[:, 0]], depth[:, edges[:, 1]]
+    cross = (da - clip_m) * (db - clip_m) < 0
+    t = np.where(cross, (clip_m - da) / np.where(cross, db - da, 1.0), 0.0)
+    xpts = a + t[..., None] * (b - a)
+    allp = np.concatenate([v, xpts], axis=1)  # (m, k + e, 3)
+    ok = np.concatenate([depth >= clip_m, cross], axis=1)
+    d = np.where(ok, -allp[..., 2], 1.0)
+    # a perspective projection: x_ndc = (P00 x + P02 z) / -z, likewise y
+    x = (proj[0, 0] * allp[..., 0] + proj[0, 2] * allp[..., 2]) / d
+    y = (proj[1, 1] * allp[..., 1] + proj[1, 2] * allp[..., 2]) / d
+    front = np.any(ok, axis=1)
+    big = 1e30
+    lo = np.stack([np.where(ok, x, big).min(axis=1), np.where(ok, y, big).min(axis=1)], axis=1)
+    hi = np.stack([np.where(ok, x, -big).max(axis=1), np.where(ok, y, -big).max(axis=1)], axis=1)
+    return _pixels(lo, hi, size), front
+
+
+def _pixels(lo: NDArray[np.float64], hi: NDArray[np.float64], size: tuple[int, int]) -> NDArray[np.int64]:
+    """NDC bounds ``(m, 2)`` each to inclusive whole-pixel rectangles ``(m, 4)``, rounded outward."""
     wh = np.array([size[0], size[1]], np.float64)
     plo = np.clip((lo + 1.0) * 0.5 * wh, -1e9, 1e9)
     phi = np.clip((hi + 1.0) * 0.5 * wh, -1e9, 1e9)
-    rect = np.concatenate([np.floor(plo - _EPS_PX), np.floor(phi + _EPS_PX)], axis=1).astype(np.int64)
-    return rect, front
+    return np.concatenate([np.floor(plo - _EPS_PX), np.floor(phi + _EPS_PX)], axis=1).astype(np.int64)
 
 
 def _meet(r: NDArray[np.int64], vsa: NDArray[np.int64]) -> NDArray[np.int64]:
