@@ -39,7 +39,13 @@ from numpy.typing import NDArray
 
 from walkstream.client.draw.devices import make_device
 from walkstream.client.draw.frames import FrameRenderer, camera
-from walkstream.client.draw.portals import CULLING_MODES, PortalGraph, cull_parts, cull_portals, frustum_cells
+from walkstream.client.draw.portals import (
+    CULLING_MODES,
+    PortalGraph,
+    cull_parts,
+    cull_portals,
+    frustum_cells,
+)
 from walkstream.client.stream.rooms import _stack_planes, cell_of
 from walkstream.client.truth.interior import InteriorTruth
 from walkstream.server.bake import bake

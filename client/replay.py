@@ -348,7 +348,7 @@ async def replay(
                 kind = "city" if m0 is None else m0.kind
             if kind == "interior":
                 return await _replay_interior(
-                    api, link, clock, config, path, manifest_fut, t_start, setup_s, progress
+                    api, link, clock, config, path, manifest_fut, t_start, setup_s, progress, (transport, base_url)
                 )
             device = make_device(config.device, config.seed)
             if not device.simulated or config.snapshot_every:
@@ -509,8 +509,10 @@ async def _replay_interior(
     t_start: float,
     setup_s: float,
     progress: Callable[[float, float], None] | None,
+    inner: tuple[httpx.AsyncBaseTransport, str] | None = None,
 ) -> ReplayResult:
-    """The walk through an interior (:mod:`walkstream.client.roomreplay`)."""
+    """The walk through an interior (:mod:`walkstream.client.roomreplay`); ``inner``
+    (the unshaped transport and URL) is where the ground truth fetches the cells."""
     from walkstream.client.roomreplay import InteriorFrames, walk_interior
     from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 
@@ -536,6 +538,15 @@ async def _replay_interior(
         await streamer.close()
         if renderer is not None:
             renderer.release()
+    truth_figures = None
+    if config.truth_every and inner is not None:
+        from walkstream.client.truth.interior import interior_truth
+
+        with clock.busy():
+            truth_figures = await interior_truth(
+                inner[0], inner[1], api.scene or "", [c.id for c in topology.cells], frames.notes,
+                config.size, config.fov_deg, clock,
+            )
     manifest = manifest_fut.result() if manifest_fut.done() and not manifest_fut.cancelled() else None
     stats = link.stats
     summary = summarise(log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0, recovery_ignore=spikes)
@@ -561,6 +572,7 @@ async def _replay_interior(
             "fog_m": config.fog_m,
             "culling": config.culling,
             **_culling_figures(frames.cull_s, frames.portals),
+            "truth": truth_figures,
             "cache_bytes": config.cache_bytes,
             "cache_peak_bytes": int(cache.peak_bytes),
         }

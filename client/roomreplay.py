@@ -50,6 +50,11 @@ class InteriorFrames:
     cull_s: list[float] = field(default_factory=list)
     portals: list[int] = field(default_factory=list)
     fog_m: list[float] = field(default_factory=list)
+    notes: list[tuple[int, NDArray[np.float64], NDArray[np.float64], list[tuple[int, int]], float]] = field(
+        default_factory=list
+    )
+    """Every ``truth_every``-th frame: index, eye, view, the parts drawn (and ``(cell, -1)``
+    for each visible cell not received yet), the fog in force."""
 
 
 async def walk_interior(
@@ -135,6 +140,12 @@ async def walk_interior(
                             m = meshes[key] = part.mesh()
                         renderer.upload(key, m)
                     draw_keys.append(key)
+        every = int(getattr(config, "truth_every", 0) or 0)
+        if frames is not None and every and frame % every == 0:
+            drawn = [(c, k) for c, m in masks.items() for k in np.flatnonzero(m).tolist()]
+            # a visible cell not yet received is not a culled one: its parts count as kept
+            waiting = [(c, -1) for c in vis if c not in loaded]
+            frames.notes.append((frame, eye.copy(), v64.copy(), drawn + waiting, float(streamer.config.fog_m)))
         quality = have / len(vis) if vis else 0.0
         snap = config.snapshot_every and frame % config.snapshot_every == 0
         if device.simulated:

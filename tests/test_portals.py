@@ -338,9 +338,26 @@ def test_replay_culling_switch_on_an_interior(office_db: Path, tmp_path: Path) -
     for mode in ("portals", "frustum"):
         rep = tmp_path / mode
         assert main(["replay", str(office_db), "--path", "tour", "--duration", "8", "--culling", mode,
-                     "--report", str(rep)]) == 0
+                     "--truth-every", "40", "--size", "160x120", "--report", str(rep)]) == 0
         s = json.loads((rep / "report.json").read_text())
         s = s.get("summary", s)
         assert s["culling"] == mode and s["culling_ms_median"] > 0
+        # the ground truth on an interior: no part culled shows (late cells are not culled)
+        assert s["truth"]["frames"] >= 4 and s["truth"]["culled_pixels"] == 0, s["truth"]
         got[mode] = s["triangles_mean"]
     assert got["portals"] < got["frustum"]
+
+
+def test_bench_portals_figures(office_db: Path, gl_ctx: Any) -> None:
+    from walkstream.benchmarks.portals import hall_figures, portal_figures, portals_tables
+
+    fig = portal_figures(office_db, frames=8, step_s=10.0, size=(160, 120), truth_frames=4)
+    m = fig["modes"]
+    assert fig["frames"] == 8 and fig["missed_pixels"] == 0
+    assert m["portals"]["tris"]["mean"] <= m["frustum"]["tris"]["mean"] <= m["none"]["tris"]["mean"]
+    assert m["none"]["cells"]["mean"] == fig["cells"] + 1  # every cell, the outside too
+    assert fig["tightness"]["portals"]["mean"] <= fig["tightness"]["frustum"]["mean"]
+    assert all(v["gl_ms"]["median"] > 0 and v["pda_ms"]["median"] > 0 for v in m.values())
+    halls = hall_figures((3, 6), repeats=2)
+    assert [h["visible"] for h in halls][0] == 9 and halls[1]["visible"] > 20
+    assert "Table 1" in portals_tables([fig], halls)

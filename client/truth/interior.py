@@ -33,7 +33,7 @@ from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import RenderError
 from walkstream.shared.gl import Releasable, check_gl_error, create_context
 
-__all__ = ["TIE_M", "InteriorTruth", "TruthCheck"]
+__all__ = ["TIE_M", "InteriorTruth", "TruthCheck", "interior_truth"]
 
 #: Depth difference (metres) below which two surfaces count as the same surface.
 TIE_M = 0.005
@@ -149,7 +149,7 @@ class InteriorTruth(Releasable):
         self._gl: list[Any] = []
         try:
             c = self.ctx
-            self._prog = c.program(vertex_shader=_VS, fragment_shader=_FS)
+            self._prog: Any = c.program(vertex_shader=_VS, fragment_shader=_FS)
             self._vbo = c.buffer(verts.tobytes() if nv else bytes(16))
             self._ibo = c.buffer(index.astype(np.uint32).tobytes())
             self._vao = c.vertex_array(self._prog, [(self._vbo, "3f u4", "in_position", "in_id")],
@@ -263,3 +263,67 @@ class InteriorTruth(Releasable):
         if self._own and self.ctx is not None:
             self.ctx.release()
         self.ctx = None
+
+
+async def interior_truth(
+    transport: Any,
+    base_url: str,
+    scene: str,
+    cells: Iterable[int],
+    notes: Iterable[tuple[int, Any, Any, list[tuple[int, int]], float]],
+    size: tuple[int, int],
+    fov_deg: float,
+    clock: Any,
+) -> dict[str, Any]:
+    """The replay's ground-truth comparison of an interior walk (``--truth-every``).
+
+    Every cell's contents are fetched on the unshaped ``transport`` (nothing counted
+    on the walk's link); each noted frame ``(index, eye, view, parts drawn, fog)`` is
+    checked against the whole building's id frame with the truth's far distance at
+    the fog in force.  A noted part ``(cell, -1)`` stands for a visible cell not yet
+    received (all its parts count as kept: not culled, only late).  Returns: frames
+    compared, ``culled`` pixels (a part culled that shows: must be 0) and frames with any, the pinholes apart, the share of the
+    pixels the fog hides on purpose (shown without fog, not with it), and the
+    tightness (triangles drawn over truly visible), mean and p95.
+    """
+    import httpx
+
+    from walkstream.client.net.api import SceneClient
+    from walkstream.client.truth.scene import _Unshaped
+
+    notes = list(notes)
+    async with httpx.AsyncClient(transport=_Unshaped(transport), base_url=base_url,
+                                 timeout=httpx.Timeout(120.0)) as http:
+        api = SceneClient(http, clock, scene)
+        meshes = {int(c): await api.contents(int(c)) for c in cells}
+    truth = InteriorTruth(meshes, size, fov_deg=fov_deg)
+    culled = frames_culled = pinholes = 0
+    fog_share: list[float] = []
+    tight: list[float] = []
+    try:
+        for _, eye, view, noted, fog in notes:
+            drawn = [k for k in noted if k[1] >= 0]
+            waiting = {k[0] for k in noted if k[1] < 0}
+            kept = drawn + [k for k in truth.keys if k[0] in waiting]
+            chk = truth.check(kept, eye, view, fog)
+            culled += chk.missed_pixels - chk.pinholes
+            frames_culled += chk.missed_pixels - chk.pinholes > 0
+            pinholes += chk.pinholes
+            if math.isfinite(fog):
+                ids_all, _ = truth.render(eye, view)
+                ids_fog, _ = truth.render(eye, view, None, fog)
+                fog_share.append(float(np.mean((ids_all >= 0) & (ids_fog < 0))))
+            drawn_tris = sum(truth.triangles[truth.index[k]] for k in drawn if k in truth.index)
+            if chk.visible_triangles:
+                tight.append(drawn_tris / chk.visible_triangles)
+    finally:
+        truth.release()
+    return {
+        "frames": len(notes),
+        "culled_pixels": int(culled),
+        "culled_frames": int(frames_culled),
+        "pinholes": int(pinholes),
+        "fog_hidden_pct": 100.0 * float(np.mean(fog_share)) if fog_share else 0.0,
+        "tightness_mean": float(np.mean(tight)) if tight else 0.0,
+        "tightness_p95": float(np.percentile(tight, 95)) if tight else 0.0,
+    }
