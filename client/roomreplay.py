@@ -5,7 +5,8 @@ Setup fetches the topology (one request: every cell's planes and every portal). 
 frame by frame: move the eye along the path, let the
 :class:`~walkstream.client.stream.rooms.RoomStreamer` locate it by the cells' planes,
 find the visible cells and fetch their contents; draw the parts of the visible cells'
-contents that the culling keeps (``config.culling``, :mod:`walkstream.client.draw.portals`):
+contents that the culling keeps (``config.culling``, :mod:`walkstream.client.draw.portals`),
+fading into the background near the fog distance (``--fog``):
 ``portals`` tests each part's box against the VSAs through which its cell is seen,
 the fog and the frustum; ``frustum`` the frustum and the fog; ``none`` keeps every
 part.  Indoors there is one LOD per part, so no polygon budget is shared; the budget
@@ -75,6 +76,8 @@ async def walk_interior(
     the city's walk; ``frames``, when given, gets the culling figures of each frame.
     """
     culling = streamer.config.culling
+    if renderer is not None:
+        renderer.fog_m = streamer.config.fog_m
     boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
     tick = 1.0 / config.fps
     total = path.duration if config.duration_s is None else min(config.duration_s, path.duration)

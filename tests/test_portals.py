@@ -361,3 +361,30 @@ def test_bench_portals_figures(office_db: Path, gl_ctx: Any) -> None:
     halls = hall_figures((3, 6), repeats=2)
     assert [h["visible"] for h in halls][0] == 9 and halls[1]["visible"] > 20
     assert "Table 1" in portals_tables([fig], halls)
+
+
+def test_fog_fades_surfaces_into_the_background(gl_ctx: Any) -> None:
+    from walkstream.client.draw.frames import FrameRenderer
+    from walkstream.client.draw.meshes import BACKGROUND_RGB
+    from walkstream.shared.records import Mesh
+
+    # a wall 10 m ahead, facing the eye
+    pos = np.array([[10, -5, -5], [10, 5, -5], [10, 5, 5], [10, -5, 5]], np.float32)
+    wall = Mesh(pos, np.tile(np.float32([-1, 0, 0]), (4, 1)), np.array([[0, 2, 1], [0, 3, 2]], np.uint32),
+                np.zeros(4, np.uint8))
+    r = FrameRenderer(size=(64, 48), near=0.1, far=100.0, ctx=gl_ctx)
+    try:
+        r.upload("wall", wall)
+        view = camera(np.zeros(3), 0.0)
+        centre = []
+        for fog in (0.0, 100.0, 11.0, 9.0):
+            r.fog_m = fog
+            r.draw(["wall"], view)
+            centre.append(r.snapshot()[24, 32].astype(int))
+        bg = np.array(BACKGROUND_RGB)
+        assert np.abs(centre[0] - bg).sum() > 30  # no fog: the wall
+        assert np.array_equal(centre[1], centre[0])  # fog far beyond: unchanged
+        assert 0 < np.abs(centre[2] - bg).sum() < np.abs(centre[0] - bg).sum()  # fading
+        assert np.abs(centre[3] - bg).sum() <= 3  # beyond the fog: the background
+    finally:
+        r.release()
