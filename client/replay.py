@@ -105,6 +105,8 @@ class ReplayConfig:
     """Interiors: portals farther than this are not looked through."""
     culling: str = "portals"
     """Interiors: ``portals``, ``frustum`` or ``none`` (:mod:`walkstream.client.draw.portals`)."""
+    fog_budget: bool = True
+    """Interiors: the budget controller sets the fog distance (one LOD per part)."""
     start_bundle: bool = True
     """Start with the start bundle (one round trip); False: scene list, manifest, path."""
     gzip: bool = True
@@ -549,7 +551,11 @@ async def _replay_interior(
             )
     manifest = manifest_fut.result() if manifest_fut.done() and not manifest_fut.cancelled() else None
     stats = link.stats
-    summary = summarise(log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0, recovery_ignore=spikes)
+    step = None
+    if config.cost_step_at_s is not None and len(log.t):
+        step = int(np.searchsorted(log.t - log.t[0], config.cost_step_at_s))
+    summary = summarise(log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0, cost_step=step,
+                        recovery_ignore=spikes)
     summary.update(_link_summary(config, stats, api))
     entered = {int(c) for c in np.unique(log.cell) if c >= 0}
     summary.update(
@@ -572,6 +578,10 @@ async def _replay_interior(
             "fog_m": config.fog_m,
             "culling": config.culling,
             **_culling_figures(frames.cull_s, frames.portals),
+            "fog_budget": config.fog_budget,
+            "fog_m_median": float(np.median(frames.fog_m)) if frames.fog_m else config.fog_m,
+            "fog_m_min": float(np.min(frames.fog_m)) if frames.fog_m else config.fog_m,
+            "fog_tightened_frames": frames.tightened,
             "truth": truth_figures,
             "cache_bytes": config.cache_bytes,
             "cache_peak_bytes": int(cache.peak_bytes),

@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Hashable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -32,8 +32,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
+from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.frames import camera
-from walkstream.client.draw.portals import cull_parts
+from walkstream.client.draw.portals import box_distance, cull_parts
 from walkstream.client.report.metrics import FrameLog, FrameLogBuilder
 from walkstream.client.stream.rooms import RoomStreamer
 from walkstream.shared.camera import perspective
@@ -51,6 +52,10 @@ class InteriorFrames:
     cull_s: list[float] = field(default_factory=list)
     portals: list[int] = field(default_factory=list)
     fog_m: list[float] = field(default_factory=list)
+    budget: list[int] = field(default_factory=list)
+    tightened: int = 0
+    """Frames on which the visible cells did not fit the memory budget at the default
+    fog, so the fog was tightened until they did (the paper's use of fog)."""
     notes: list[tuple[int, NDArray[np.float64], NDArray[np.float64], list[tuple[int, int]], float]] = field(
         default_factory=list
     )
@@ -76,8 +81,11 @@ async def walk_interior(
     the city's walk; ``frames``, when given, gets the culling figures of each frame.
     """
     culling = streamer.config.culling
-    if renderer is not None:
-        renderer.fog_m = streamer.config.fog_m
+    default_fog = streamer.config.fog_m
+    # one LOD per part: the polygon budget has nothing to choose, so it sets the fog
+    # distance (the nearest parts that fit the budget are drawn, the fog just beyond)
+    controller = BudgetController(config.fps_target, k=config.budget_frames) if getattr(config, "fog_budget", True) else None
+    stepped = False
     boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
     tick = 1.0 / config.fps
     total = path.duration if config.duration_s is None else min(config.duration_s, path.duration)
@@ -104,7 +112,19 @@ async def walk_interior(
         v64, p64 = view.astype(np.float64), proj.astype(np.float64)
         vp = p64 @ v64
         t_cull = time.perf_counter()
+        # the perfect frame is defined at the scene's default fog: the visible cells
+        # (fetched, and counted in the quality) are those within it, unless they do not
+        # fit the memory budget, when the fog tightens until they do
+        streamer.config = replace(streamer.config, fog_m=default_fog)
         vis = streamer.tick(t, eye, vp, v64, p64, (w, h))
+        vis_default = list(vis)
+        fog = default_fog
+        while streamer.visible_bytes(vis) > streamer.cache.budget_bytes and fog > 2.0:
+            fog *= 0.8
+            streamer.config = replace(streamer.config, fog_m=fog)
+            vis = streamer.visible_cells(eye, vp, v64, p64, (w, h))
+        if fog < default_fog and frames is not None:
+            frames.tightened += 1
         loaded = {}
         for cid in vis:
             cm = streamer.mesh(cid)
@@ -117,16 +137,25 @@ async def walk_interior(
         pc = streamer.last_cull
         masks = cull_parts(
             culling, list(loaded), boxes, eye, v64, p64, (w, h),
-            vsas=None if pc is None else pc.vsas, fog_m=streamer.config.fog_m,
+            vsas=None if pc is None else pc.vsas, fog_m=fog,
         )
+        budget = 0
+        if controller is not None:
+            budget = int(controller.budget)
+            fog = _fog_for_budget(masks, boxes, loaded, eye, budget, fog)
+            for cid, mask in masks.items():
+                lo, hi = boxes[cid]
+                mask &= box_distance(lo, hi, eye) <= fog
+        if renderer is not None:
+            renderer.fog_m = fog
         if frames is not None:
             frames.cull_s.append(time.perf_counter() - t_cull)
             frames.portals.append(0 if pc is None else pc.portals)
-            frames.fog_m.append(streamer.config.fog_m)
+            frames.fog_m.append(fog)
+            frames.budget.append(budget)
         draw_keys: list[Hashable] = []
         triangles = 0
         parts = 0
-        have = len(loaded)
         for cid, cm in loaded.items():
             if not cm.parts:
                 continue
@@ -145,12 +174,15 @@ async def walk_interior(
                     draw_keys.append(key)
         every = int(getattr(config, "truth_every", 0) or 0)
         if frames is not None and every and frame % every == 0:
-            drawn = [(c, k) for c, m in masks.items() for k in np.flatnonzero(m).tolist()]
+            drawn = [(c, k) for c, mk in masks.items() for k in np.flatnonzero(mk).tolist()]
             # a visible cell not yet received is not a culled one: its parts count as kept
             waiting = [(c, -1) for c in vis if c not in loaded]
             frames.notes.append((frame, eye.copy(), v64.copy(), drawn + waiting, float(streamer.config.fog_m)))
-        quality = have / len(vis) if vis else 0.0
+        quality = sum(1 for c in vis_default if streamer.mesh(c) is not None) / len(vis_default) if vis_default else 0.0
         snap = config.snapshot_every and frame % config.snapshot_every == 0
+        if config.cost_step_at_s is not None and not stepped and wt >= config.cost_step_at_s:
+            device.cost_scale = device.cost_scale * config.cost_step_factor
+            stepped = True
         if device.simulated:
             frame_time = float(device.frame_time(triangles, parts))
             spikes.append(bool(getattr(device, "last_spike", False)))
@@ -172,10 +204,12 @@ async def walk_interior(
             download_quality=quality,
             rewrite_quality=quality,
             bytes_down=bytes_down(),
-            budget=0,
+            budget=budget,
             triangles=triangles,
             visible=parts,
         )
+        if controller is not None:
+            controller.observe(frame_time, triangles)
         frame += 1
         if renderer is not None and frame % 25 == 0:
             # a flushed cell's GPU buffers go with it
@@ -187,6 +221,7 @@ async def walk_interior(
             for c in [c for c in boxes if streamer.mesh(c) is None]:
                 del boxes[c]
         await clock.sleep_until(t + max(frame_time, tick))
+    streamer.config = replace(streamer.config, fog_m=default_fog)
     if renderer is not None:
         for key in list(meshes):
             if renderer.has(key):
@@ -194,3 +229,33 @@ async def walk_interior(
     if progress is not None:
         progress(total, total)
     return builder.build(fps_cap=config.fps), snapshots, np.array(spikes, dtype=bool)
+
+
+def _fog_for_budget(
+    masks: dict[int, NDArray[np.bool_]],
+    boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]],
+    loaded: dict[int, Any],
+    eye: NDArray[np.float64],
+    budget: int,
+    fog: float,
+) -> float:
+    """The fog distance at which the kept parts, nearest first, fit ``budget`` triangles
+    (``fog`` itself when they all fit; never below 2 m)."""
+    dist: list[NDArray[np.float64]] = []
+    tris: list[NDArray[np.int64]] = []
+    for cid, m in masks.items():
+        if not m.any():
+            continue
+        lo, hi = boxes[cid]
+        dist.append(box_distance(lo[m], hi[m], eye))
+        tris.append(np.array([p.triangles for p in loaded[cid].parts], np.int64)[m])
+    if not dist:
+        return fog
+    d = np.concatenate(dist)
+    n = np.concatenate(tris)
+    order = np.argsort(d, kind="stable")
+    total = np.cumsum(n[order])
+    if total[-1] <= budget:
+        return fog
+    k = int(np.searchsorted(total, budget, side="right"))  # parts 0..k-1 fit
+    return max(2.0, min(fog, float(d[order[k]]) - 1e-6))

@@ -367,11 +367,21 @@ def cmd_bench_portals(args: argparse.Namespace) -> int:
         Path(args.out), args.presets, frames=args.frames, step_s=args.step, truth_frames=args.truth,
         gl=not args.no_gl, log=lambda s: print(s, file=sys.stderr),
     )
+    replays = []
+    if args.replays:
+        from walkstream.benchmarks.portals import replay_rows, replay_table
+        from walkstream.cmd_replay import replay_with_options
+
+        db = Path(args.out) / f"{args.presets[0]}.db"
+        replays = replay_rows(db, replay_with_options, Path(args.out), duration=args.replays)
     if args.json:
-        print(json.dumps({"scenes": scenes, "halls": halls}, indent=2))
+        print(json.dumps({"scenes": scenes, "halls": halls, "replays": replays}, indent=2))
     else:
         print(portals_tables(scenes, halls))
         print("(culling CPU and gl frame times measured here; pda: the cost model fitted to Table 1, no fog)")
+        if replays:
+            print(replay_table(replays))
+            print("(simulated clock; tour of the first preset)")
     return 0
 
 
@@ -465,6 +475,8 @@ def add_bench_parser(sub: Any) -> None:
     bp.add_argument("--truth", type=int, default=60, help="frames of the first scene compared with the id truth (default 60)")
     bp.add_argument("--no-gl", action="store_true", help="no gl frame times (the pda model only)")
     bp.add_argument("--out", default="out/bench-portals", help="folder for the generated files and databases")
+    bp.add_argument("--replays", metavar="DURATION", help="also replay the first preset's tour this long (e.g. 180s): "
+                    "56 kbit/s with the default and a small cache, pda with the fog set by the budget through a cost step")
     bp.add_argument("--json", action="store_true", help="print the figures as JSON")
     bp.set_defaults(func=cmd_bench_portals)
 

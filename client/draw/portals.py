@@ -64,6 +64,7 @@ __all__ = [
     "box_rects",
     "cull_boxes",
     "full_vsa",
+    "box_distance",
 ]
 
 #: The replay's ``--culling`` choices: portal culling with VSAs, the frustum alone
@@ -339,7 +340,8 @@ def _meet(r: NDArray[np.int64], vsa: NDArray[np.int64]) -> NDArray[np.int64]:
     return np.concatenate([np.maximum(r[:, :2], vsa[:2]), np.minimum(r[:, 2:], vsa[2:])], axis=1)
 
 
-def _box_distance(lo: NDArray[np.float64], hi: NDArray[np.float64], eye: NDArray[np.float64]) -> NDArray[np.float64]:
+def box_distance(lo: NDArray[np.float64], hi: NDArray[np.float64], eye: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(n,)`` distances from ``eye`` ``(3,)`` to boxes ``(n, 3)`` (0 inside)."""
     gap = np.maximum(np.maximum(lo - eye, eye - hi), 0.0)
     return np.sqrt(np.einsum("nk,nk->n", gap, gap))
 
@@ -390,28 +392,38 @@ def cull_portals(
     P = np.asarray(proj, np.float64)
     w, h = int(size[0]), int(size[1])
     # A portal's rectangle depends on the camera only, not on the VSA it is seen
-    # through: every portal within the fog is projected at once, vectorised, and the
-    # walk below only intersects whole-pixel rectangles (plain ints, no numpy per cell).
+    # through: the portals of the cells waiting in the queue are projected together,
+    # vectorised, the first time one of them is taken (a few batches per frame, and
+    # only the cells reached), and the walk below intersects whole-pixel rectangles
+    # as plain ints, no numpy per cell.
     m = len(graph.target)
-    near = _box_distance(graph.lo, graph.hi, e) if m else np.zeros(0)
-    rows = np.flatnonzero(near <= fog_m)
     k = graph.poly.shape[1]
     edges = np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1)
-    rect, front = _rects(graph.poly[rows], edges, V, P, (w, h), clip_m, naive)
-    through = np.zeros(len(rows), bool)
-    if not naive and len(rows):
-        near_pass = max(pass_m, clip_m * _corner_secant(P) * 1.01)
-        dist = np.abs(graph.plane[rows, :3] @ e + graph.plane[rows, 3])
-        inside = np.all((e >= graph.lo[rows] - near_pass) & (e <= graph.hi[rows] + near_pass), axis=1)
-        through = (dist <= near_pass) & inside
+    near_pass = max(pass_m, clip_m * _corner_secant(P) * 1.01)
     # per directed row: None (culled: beyond the fog or wholly behind the eye),
-    # "through" (pass the parent's VSA), or its rectangle
+    # True (pass the parent's VSA through), or its rectangle
     R: list[Any] = [None] * m
-    for r, rc, ok, th in zip(rows.tolist(), rect.tolist(), front.tolist(), through.tolist(), strict=True):
-        if th:
-            R[r] = True
-        elif ok:
-            R[r] = rc
+    done = [False] * len(graph.ids)
+
+    def project(cells: list[int]) -> None:
+        rows = np.concatenate([np.arange(graph.start[c], graph.start[c + 1]) for c in cells])
+        for c in cells:
+            done[c] = True
+        if len(rows) == 0:
+            return
+        rows = rows[box_distance(graph.lo[rows], graph.hi[rows], e) <= fog_m]
+        rect, front = _rects(graph.poly[rows], edges, V, P, (w, h), clip_m, naive)
+        through = np.zeros(len(rows), bool)
+        if not naive and len(rows):
+            dist = np.abs(graph.plane[rows, :3] @ e + graph.plane[rows, 3])
+            inside = np.all((e >= graph.lo[rows] - near_pass) & (e <= graph.hi[rows] + near_pass), axis=1)
+            through = (dist <= near_pass) & inside
+        for r, rc, ok, th in zip(rows.tolist(), rect.tolist(), front.tolist(), through.tolist(), strict=True):
+            if th:
+                R[r] = True
+            elif ok:
+                R[r] = rc
+
     target = graph.target.tolist()
     starts = graph.start.tolist()
     s = graph.index[start]
@@ -429,6 +441,8 @@ def cull_portals(
         dc = depth[c]
         if dc >= max_depth:
             continue
+        if not done[c]:
+            project([c] + [q for q in queue if not done[q]])
         vx0, vy0, vx1, vy1 = bound[c]
         for r in range(starts[c], starts[c + 1]):
             pr = R[r]
@@ -529,7 +543,7 @@ def cull_boxes(
     if len(lo_) == 0:
         return np.zeros(0, bool)
     e = np.asarray(eye, np.float64).reshape(3)
-    keep = _box_distance(lo_, hi_, e) <= fog_m
+    keep = box_distance(lo_, hi_, e) <= fog_m
     rect, front = box_rects(lo_, hi_, view, proj, size, clip_m)
     v = np.asarray(vsas, np.int64).reshape(-1, 4)
     meet = (
@@ -572,7 +586,7 @@ def frustum_cells(
         if depth[c] >= max_depth or a == b:
             continue
         rows = np.arange(a, b)
-        near = _box_distance(graph.lo[rows], graph.hi[rows], e)
+        near = box_distance(graph.lo[rows], graph.hi[rows], e)
         seen = (frustum_cull(graph.lo[rows], graph.hi[rows], view_proj) | (near < near_m)) & (near <= fog_m)
         for r in rows[seen].tolist():
             t = int(graph.target[r])
@@ -625,7 +639,7 @@ def cull_parts(
         if mode == "none":
             out[c] = np.ones(len(lo), bool)
         elif mode == "frustum":
-            keep = _box_distance(lo, hi, e) <= fog_m
+            keep = box_distance(lo, hi, e) <= fog_m
             keep[keep] = frustum_cull(lo[keep], hi[keep], vp)
             out[c] = keep
     if mode != "portals":
@@ -645,7 +659,7 @@ def cull_parts(
     v = np.tile(np.array([1, 1, 0, 0], np.int64), (len(seen), kmax, 1))  # empty rectangles
     for i, c in enumerate(seen):
         v[i, : len(vsas[c])] = vsas[c]
-    keep = _box_distance(lo, hi, e) <= fog_m
+    keep = box_distance(lo, hi, e) <= fog_m
     rect, front = box_rects(lo, hi, view, proj, size, clip_m)
     vv = v[owner]  # (n, kmax, 4)
     meet = (

@@ -14,8 +14,8 @@ An interior is walked like this (Mulloni et al.'s cell manager):
 * **contents** (one immutable response per cell) are fetched for the visible cells
   in that order, then, with prefetch, for the cells one portal beyond them (where
   the walker may turn next); a cell not visible for :attr:`RoomStreamConfig.flush_s`
-  seconds is flushed (the paper's policy), and the cache's byte budget stays in
-  charge as well.  A cell fetched again after a flush counts as a re-download.
+  seconds is flushed (the paper's policy) once the cache is fuller than
+  :attr:`RoomStreamConfig.flush_fill`, and the cache's byte budget stays in charge.  A cell fetched again after a flush counts as a re-download.
 """
 
 from __future__ import annotations
@@ -48,7 +48,11 @@ class RoomStreamConfig:
     max_depth: int = 8
     """Portals passed on the way to a visible cell, at most."""
     flush_s: float = 30.0
-    """A cell not visible for this long is flushed from memory."""
+    """A cell not visible for this long is flushed from memory (while the cache is
+    fuller than :attr:`flush_fill`)."""
+    flush_fill: float = 0.5
+    """The paper flushes to make room: with the cache less full than this share of its
+    budget nothing is flushed, so a walk that fits the cache downloads nothing twice."""
     max_in_flight: int = 2
     culling: str = "portals"
     """``portals`` (VSAs), ``frustum`` (portals in the frustum) or ``none`` (as
@@ -160,6 +164,19 @@ class RoomStreamer:
             return self.last_cull.order
         return frustum_cells(self.graph, self.current, eye, view_proj, fog_m=cfg.fog_m, max_depth=cfg.max_depth)
 
+    def visible_bytes(self, cells: list[int]) -> int:
+        """Memory the decoded contents of ``cells`` take (cached ones as cached; the
+        others estimated from the topology's triangles: 12 bytes of indices per
+        triangle and about one float32 vertex per triangle)."""
+        total = 0
+        for c in cells:
+            m = self.mesh(c)
+            if m is not None:
+                total += sum(p.positions.nbytes + p.indices.nbytes for p in m.parts)
+            else:
+                total += 24 * self.cells[c].contents.triangles
+        return total
+
     # -- what is loaded ---------------------------------------------------------
 
     def mesh(self, cid: int) -> CellMesh | None:
@@ -190,7 +207,8 @@ class RoomStreamer:
                     if n not in want and self.cells[n].kind != "outside":
                         want.append(n)
         self.cache.set_pins([("mesh", c) for c in vis])
-        for c in list(self.last_visible):
+        crowded = self.cache.bytes_used > self.config.flush_fill * self.cache.budget_bytes
+        for c in list(self.last_visible) if crowded else []:
             if c not in vis and t - self.last_visible[c] > self.config.flush_s and self.cache.has("mesh", c):
                 self.cache.remove("mesh", c)
                 self.stats.flushed += 1
