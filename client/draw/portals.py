@@ -74,6 +74,10 @@ CULLING_MODES: tuple[str, ...] = ("portals", "frustum", "none")
 
 _EPS_PX = 1e-3
 
+#: Directed portals up to which a frame projects every portal of the building at once
+#: (one numpy batch); above, the portals of the cells reached are projected a wave at a time.
+_PROJECT_ALL = 2048
+
 
 @dataclass(frozen=True)
 class PortalGraph:
@@ -424,6 +428,9 @@ def cull_portals(
             elif ok:
                 R[r] = rc
 
+    if m <= _PROJECT_ALL:
+        # a small building: one batch for all is cheaper than a batch per wave
+        project(list(range(len(graph.ids))))
     target = graph.target.tolist()
     starts = graph.start.tolist()
     s = graph.index[start]
