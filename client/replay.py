@@ -162,6 +162,8 @@ class ReplayResult:
     """The frames compared with the ground truth (``truth_every``)."""
     phases: NDArray[np.float64] | None = None
     """Per frame, seconds of the loop's :data:`~walkstream.client.draw.phases.PHASES`."""
+    interior: dict[str, NDArray[np.float64]] | None = None
+    """Interiors, per frame: visible cells, portals opened, triangles, culling ms, fog m."""
 
 
 def run_replay(
@@ -577,7 +579,7 @@ async def _replay_interior(
             "redownloads": streamer.stats.refetched,
             "fog_m": config.fog_m,
             "culling": config.culling,
-            **_culling_figures(frames.cull_s, frames.portals),
+            **frames.figures(),
             "fog_budget": config.fog_budget,
             "fog_m_median": float(np.median(frames.fog_m)) if frames.fog_m else config.fog_m,
             "fog_m_min": float(np.min(frames.fog_m)) if frames.fog_m else config.fog_m,
@@ -587,21 +589,7 @@ async def _replay_interior(
             "cache_peak_bytes": int(cache.peak_bytes),
         }
     )
-    return ReplayResult(summary, log, _bytes_log(stats, t_start), snapshots, spikes)
-
-
-def _culling_figures(cull_s: list[float], portals: list[int]) -> dict[str, float]:
-    """Median, p95 and max culling milliseconds per frame, and portals opened per frame."""
-    if not cull_s:
-        return {}
-    ms = np.asarray(cull_s) * 1e3
-    return {
-        "culling_ms_median": float(np.median(ms)),
-        "culling_ms_p95": float(np.percentile(ms, 95)),
-        "culling_ms_max": float(ms.max()),
-        "portals_mean": float(np.mean(portals)),
-        "portals_max": int(np.max(portals)),
-    }
+    return ReplayResult(summary, log, _bytes_log(stats, t_start), snapshots, spikes, interior=frames.series(log))
 
 
 def _overfetch(streamer: Streamer, entered: set[int]) -> dict[str, int]:

@@ -62,6 +62,29 @@ class InteriorFrames:
     """Every ``truth_every``-th frame: index, eye, view, the parts drawn (and ``(cell, -1)``
     for each visible cell not received yet), the fog in force."""
 
+    def figures(self) -> dict[str, float]:
+        """Median, p95 and max culling milliseconds per frame, and portals opened per frame."""
+        if not self.cull_s:
+            return {}
+        ms = np.asarray(self.cull_s) * 1e3
+        return {
+            "culling_ms_median": float(np.median(ms)),
+            "culling_ms_p95": float(np.percentile(ms, 95)),
+            "culling_ms_max": float(ms.max()),
+            "portals_mean": float(np.mean(self.portals)),
+            "portals_max": int(np.max(self.portals)),
+        }
+
+    def series(self, log: FrameLog) -> dict[str, NDArray[np.float64]]:
+        """Per frame: visible cells, portals opened, triangles, culling ms, fog m (the report's plot)."""
+        return {
+            "cells": np.asarray(log.pvs, np.float64),
+            "portals": np.asarray(self.portals, np.float64),
+            "triangles": np.asarray(log.triangles, np.float64),
+            "cull_ms": 1e3 * np.asarray(self.cull_s, np.float64),
+            "fog_m": np.asarray(self.fog_m, np.float64),
+        }
+
 
 async def walk_interior(
     config: Any,

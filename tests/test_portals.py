@@ -344,6 +344,7 @@ def test_replay_culling_switch_on_an_interior(office_db: Path, tmp_path: Path) -
         assert s["culling"] == mode and s["culling_ms_median"] > 0
         # the ground truth on an interior: no part culled shows (late cells are not culled)
         assert s["truth"]["frames"] >= 4 and s["truth"]["culled_pixels"] == 0, s["truth"]
+        assert (rep / "interior.png").read_bytes()[:4] == b"\x89PNG" and "interior.png" in (rep / "index.html").read_text()
         got[mode] = s["triangles_mean"]
     assert got["portals"] < got["frustum"]
 

@@ -168,6 +168,7 @@ def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = Fals
             title=title,
             truth=result.truth,
             phases=result.phases,
+            interior=result.interior,
         )
     return result
 
