@@ -108,6 +108,10 @@ class ReplayConfig:
     ``None``: wait for the manifest to tell (a city walk then starts a little later)."""
     fog_m: float = 40.0
     """Interiors: portals farther than this are not looked through."""
+    culling: str = "portals"
+    """Interiors: ``portals``, ``frustum`` or ``none`` (:mod:`walkstream.client.draw.portals`)."""
+    fog_budget: bool = True
+    """Interiors: the budget controller sets the fog distance (one LOD per part)."""
     start_bundle: bool = True
     """Start with the start bundle (one round trip); False: scene list, manifest, path."""
     gzip: bool = True
@@ -164,6 +168,8 @@ class ReplayResult:
     """The frames compared with the ground truth (``truth_every``)."""
     phases: NDArray[np.float64] | None = None
     """Per frame, seconds of the loop's :data:`~walkstream.client.draw.phases.PHASES`."""
+    interior: dict[str, NDArray[np.float64]] | None = None
+    """Interiors, per frame: visible cells, portals opened, triangles, culling ms, fog m."""
 
 
 def run_replay(
@@ -353,7 +359,7 @@ async def replay(
                 kind = "city" if m0 is None else m0.kind
             if kind == "interior":
                 return await _replay_interior(
-                    api, link, clock, config, path, manifest_fut, t_start, setup_s, progress
+                    api, link, clock, config, path, manifest_fut, t_start, setup_s, progress, (transport, base_url)
                 )
             device = make_device(config.device, config.seed)
             if not device.simulated or config.snapshot_every:
@@ -516,16 +522,20 @@ async def _replay_interior(
     t_start: float,
     setup_s: float,
     progress: Callable[[float, float], None] | None,
+    inner: tuple[httpx.AsyncBaseTransport, str] | None = None,
 ) -> ReplayResult:
-    """The walk through an interior (:mod:`walkstream.client.roomreplay`)."""
-    from walkstream.client.roomreplay import walk_interior
+    """The walk through an interior (:mod:`walkstream.client.roomreplay`); ``inner``
+    (the unshaped transport and URL) is where the ground truth fetches the cells."""
+    from walkstream.client.roomreplay import InteriorFrames, walk_interior
     from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 
     topology = await api.topology()
     cache = Cache(config.cache_bytes)
     streamer = RoomStreamer(
-        api, clock, cache, topology, RoomStreamConfig(prefetch=config.prefetch, fog_m=config.fog_m)
+        api, clock, cache, topology,
+        RoomStreamConfig(prefetch=config.prefetch, fog_m=config.fog_m, culling=config.culling),
     )
+    frames = InteriorFrames()
     device = make_device(config.device, config.seed)
     renderer: Any = None
     try:
@@ -535,15 +545,28 @@ async def _replay_interior(
             renderer = FrameRenderer(size=config.size, fov_deg=config.fov_deg, near=0.1)
         log, snapshots, spikes = await walk_interior(
             config, clock, path, streamer, device, renderer, progress, t_start,
-            lambda: int(link.stats.bytes_down),
+            lambda: int(link.stats.bytes_down), frames,
         )
     finally:
         await streamer.close()
         if renderer is not None:
             renderer.release()
+    truth_figures = None
+    if config.truth_every and inner is not None:
+        from walkstream.client.truth.interior import interior_truth
+
+        with clock.busy():
+            truth_figures = await interior_truth(
+                inner[0], inner[1], api.scene or "", [c.id for c in topology.cells], frames.notes,
+                config.size, config.fov_deg, clock,
+            )
     manifest = manifest_fut.result() if manifest_fut.done() and not manifest_fut.cancelled() else None
     stats = link.stats
-    summary = summarise(log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0, recovery_ignore=spikes)
+    step = None
+    if config.cost_step_at_s is not None and len(log.t):
+        step = int(np.searchsorted(log.t - log.t[0], config.cost_step_at_s))
+    summary = summarise(log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0, cost_step=step,
+                        recovery_ignore=spikes)
     summary.update(_link_summary(config, stats, api))
     entered = {int(c) for c in np.unique(log.cell) if c >= 0}
     summary.update(
@@ -564,12 +587,18 @@ async def _replay_interior(
             "cells_flushed": streamer.stats.flushed,
             "redownloads": streamer.stats.refetched,
             "fog_m": config.fog_m,
-            "culling": "frustum culling of the visible cells' contents (cells seen through portals in the frustum)",
+            "culling": config.culling,
+            **frames.figures(),
+            "fog_budget": config.fog_budget,
+            "fog_m_median": float(np.median(frames.fog_m)) if frames.fog_m else config.fog_m,
+            "fog_m_min": float(np.min(frames.fog_m)) if frames.fog_m else config.fog_m,
+            "fog_tightened_frames": frames.tightened,
+            "truth": truth_figures,
             "cache_bytes": config.cache_bytes,
             "cache_peak_bytes": int(cache.peak_bytes),
         }
     )
-    return ReplayResult(summary, log, _bytes_log(stats, t_start), snapshots, spikes)
+    return ReplayResult(summary, log, _bytes_log(stats, t_start), snapshots, spikes, interior=frames.series(log))
 
 
 def _overfetch(streamer: Streamer, entered: set[int]) -> dict[str, int]:

@@ -4,11 +4,14 @@ runs when the manifest's kind is ``interior``).
 Setup fetches the topology (one request: every cell's planes and every portal).  Then,
 frame by frame: move the eye along the path, let the
 :class:`~walkstream.client.stream.rooms.RoomStreamer` locate it by the cells' planes,
-find the visible cells (through portals in the frustum, within the fog distance) and
-fetch their contents; draw the parts of the visible cells' contents whose boxes meet
-the frustum (frustum culling of the visible cells' contents; the portal culling with
-visible screen areas is Interiors II).  Indoors there is one LOD per part, so no
-polygon budget is shared; the budget column of the log stays 0.
+find the visible cells and fetch their contents; draw the parts of the visible cells'
+contents that the culling keeps (``config.culling``, :mod:`walkstream.client.draw.portals`),
+fading into the background near the fog distance (``--fog``):
+``portals`` tests each part's box against the VSAs through which its cell is seen,
+the fog and the frustum; ``frustum`` the frustum and the fog; ``none`` keeps every
+part.  Indoors there is one LOD per part, so no polygon budget is shared; the budget
+column of the log stays 0.  The CPU time of the culling (cells and parts) and the
+portals opened per frame are kept in :class:`InteriorFrames`.
 
 Per frame, download quality is the share of the visible cells whose contents are in
 memory and rewrite quality the share that is also on the GPU (the same here: decoded
@@ -19,7 +22,9 @@ everything visible has arrived.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,15 +32,58 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
-from walkstream.client.draw.culling import frustum_cull
+from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.frames import camera
+from walkstream.client.draw.portals import box_distance, cull_parts
 from walkstream.client.report.metrics import FrameLog, FrameLogBuilder
 from walkstream.client.stream.rooms import RoomStreamer
 from walkstream.shared.camera import perspective
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.records import Mesh
 
-__all__ = ["walk_interior"]
+__all__ = ["InteriorFrames", "walk_interior"]
+
+
+@dataclass
+class InteriorFrames:
+    """Per-frame figures of an interior walk beyond the frame log: culling seconds
+    (cells and parts), portals opened, and the fog distance in force."""
+
+    cull_s: list[float] = field(default_factory=list)
+    portals: list[int] = field(default_factory=list)
+    fog_m: list[float] = field(default_factory=list)
+    budget: list[int] = field(default_factory=list)
+    tightened: int = 0
+    """Frames on which the visible cells did not fit the memory budget at the default
+    fog, so the fog was tightened until they did (the paper's use of fog)."""
+    notes: list[tuple[int, NDArray[np.float64], NDArray[np.float64], list[tuple[int, int]], float]] = field(
+        default_factory=list
+    )
+    """Every ``truth_every``-th frame: index, eye, view, the parts drawn (and ``(cell, -1)``
+    for each visible cell not received yet), the fog in force."""
+
+    def figures(self) -> dict[str, float]:
+        """Median, p95 and max culling milliseconds per frame, and portals opened per frame."""
+        if not self.cull_s:
+            return {}
+        ms = np.asarray(self.cull_s) * 1e3
+        return {
+            "culling_ms_median": float(np.median(ms)),
+            "culling_ms_p95": float(np.percentile(ms, 95)),
+            "culling_ms_max": float(ms.max()),
+            "portals_mean": float(np.mean(self.portals)),
+            "portals_max": int(np.max(self.portals)),
+        }
+
+    def series(self, log: FrameLog) -> dict[str, NDArray[np.float64]]:
+        """Per frame: visible cells, portals opened, triangles, culling ms, fog m (the report's plot)."""
+        return {
+            "cells": np.asarray(log.pvs, np.float64),
+            "portals": np.asarray(self.portals, np.float64),
+            "triangles": np.asarray(log.triangles, np.float64),
+            "cull_ms": 1e3 * np.asarray(self.cull_s, np.float64),
+            "fog_m": np.asarray(self.fog_m, np.float64),
+        }
 
 
 async def walk_interior(
@@ -48,12 +96,20 @@ async def walk_interior(
     progress: Callable[[float, float], None] | None,
     t_start: float,
     bytes_down: Callable[[], int],
+    frames: InteriorFrames | None = None,
 ) -> tuple[FrameLog, list[Path], NDArray[np.bool_]]:
     """Walk ``path`` through an interior (see the module docstring).
 
     Returns the frame log, the snapshot files and the per-frame spike flags, like
-    the city's walk.
+    the city's walk; ``frames``, when given, gets the culling figures of each frame.
     """
+    culling = streamer.config.culling
+    default_fog = streamer.config.fog_m
+    # one LOD per part: the polygon budget has nothing to choose, so it sets the fog
+    # distance (the nearest parts that fit the budget are drawn, the fog just beyond)
+    controller = BudgetController(config.fps_target, k=config.budget_frames) if getattr(config, "fog_budget", True) else None
+    stepped = False
+    boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
     tick = 1.0 / config.fps
     total = path.duration if config.duration_s is None else min(config.duration_s, path.duration)
     w, h = config.size
@@ -76,22 +132,57 @@ async def walk_interior(
         xyz, yaw, pitch = path.at(wt)
         eye = np.asarray(xyz, dtype=np.float64)
         view = camera(eye, float(yaw), float(pitch))
-        vp = proj.astype(np.float64) @ view.astype(np.float64)
-        vis = streamer.tick(t, eye, vp)
-        draw_keys: list[Hashable] = []
-        triangles = 0
-        parts = 0
-        have = 0
+        v64, p64 = view.astype(np.float64), proj.astype(np.float64)
+        vp = p64 @ v64
+        t_cull = time.perf_counter()
+        # the perfect frame is defined at the scene's default fog: the visible cells
+        # (fetched, and counted in the quality) are those within it, unless they do not
+        # fit the memory budget, when the fog tightens until they do
+        streamer.config = replace(streamer.config, fog_m=default_fog)
+        vis = streamer.tick(t, eye, vp, v64, p64, (w, h))
+        vis_default = list(vis)
+        fog = default_fog
+        while streamer.visible_bytes(vis) > streamer.cache.budget_bytes and fog > 2.0:
+            fog *= 0.8
+            streamer.config = replace(streamer.config, fog_m=fog)
+            vis = streamer.visible_cells(eye, vp, v64, p64, (w, h))
+        if fog < default_fog and frames is not None:
+            frames.tightened += 1
+        loaded = {}
         for cid in vis:
             cm = streamer.mesh(cid)
             if cm is None:
                 continue
-            have += 1
+            loaded[cid] = cm
+            if cid not in boxes:
+                b = [p.bbox for p in cm.parts]
+                boxes[cid] = (np.array([x[0] for x in b]).reshape(-1, 3), np.array([x[1] for x in b]).reshape(-1, 3))
+        pc = streamer.last_cull
+        masks = cull_parts(
+            culling, list(loaded), boxes, eye, v64, p64, (w, h),
+            vsas=None if pc is None else pc.vsas, fog_m=fog,
+        )
+        budget = 0
+        if controller is not None:
+            budget = int(controller.budget)
+            fog = _fog_for_budget(masks, boxes, loaded, eye, budget, fog)
+            for cid, mask in masks.items():
+                lo, hi = boxes[cid]
+                mask &= box_distance(lo, hi, eye) <= fog
+        if renderer is not None:
+            renderer.fog_m = fog
+        if frames is not None:
+            frames.cull_s.append(time.perf_counter() - t_cull)
+            frames.portals.append(0 if pc is None else pc.portals)
+            frames.fog_m.append(fog)
+            frames.budget.append(budget)
+        draw_keys: list[Hashable] = []
+        triangles = 0
+        parts = 0
+        for cid, cm in loaded.items():
             if not cm.parts:
                 continue
-            boxes = [p.bbox for p in cm.parts]
-            keep = frustum_cull(np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]), vp)
-            for k, (part, ok) in enumerate(zip(cm.parts, keep.tolist(), strict=True)):
+            for k, (part, ok) in enumerate(zip(cm.parts, masks[cid].tolist(), strict=True)):
                 if not ok:
                     continue
                 triangles += part.triangles
@@ -104,8 +195,17 @@ async def walk_interior(
                             m = meshes[key] = part.mesh()
                         renderer.upload(key, m)
                     draw_keys.append(key)
-        quality = have / len(vis) if vis else 0.0
+        every = int(getattr(config, "truth_every", 0) or 0)
+        if frames is not None and every and frame % every == 0:
+            drawn = [(c, k) for c, mk in masks.items() for k in np.flatnonzero(mk).tolist()]
+            # a visible cell not yet received is not a culled one: its parts count as kept
+            waiting = [(c, -1) for c in vis if c not in loaded]
+            frames.notes.append((frame, eye.copy(), v64.copy(), drawn + waiting, float(streamer.config.fog_m)))
+        quality = sum(1 for c in vis_default if streamer.mesh(c) is not None) / len(vis_default) if vis_default else 0.0
         snap = config.snapshot_every and frame % config.snapshot_every == 0
+        if config.cost_step_at_s is not None and not stepped and wt >= config.cost_step_at_s:
+            device.cost_scale = device.cost_scale * config.cost_step_factor
+            stepped = True
         if device.simulated:
             frame_time = float(device.frame_time(triangles, parts))
             spikes.append(bool(getattr(device, "last_spike", False)))
@@ -127,10 +227,12 @@ async def walk_interior(
             download_quality=quality,
             rewrite_quality=quality,
             bytes_down=bytes_down(),
-            budget=0,
+            budget=budget,
             triangles=triangles,
             visible=parts,
         )
+        if controller is not None:
+            controller.observe(frame_time, triangles)
         frame += 1
         if renderer is not None and frame % 25 == 0:
             # a flushed cell's GPU buffers go with it
@@ -138,7 +240,11 @@ async def walk_interior(
                 if renderer.has(key):
                     renderer.forget(key)
                 del meshes[key]
+        if frame % 25 == 0:
+            for c in [c for c in boxes if streamer.mesh(c) is None]:
+                del boxes[c]
         await clock.sleep_until(t + max(frame_time, tick))
+    streamer.config = replace(streamer.config, fog_m=default_fog)
     if renderer is not None:
         for key in list(meshes):
             if renderer.has(key):
@@ -146,3 +252,33 @@ async def walk_interior(
     if progress is not None:
         progress(total, total)
     return builder.build(fps_cap=config.fps), snapshots, np.array(spikes, dtype=bool)
+
+
+def _fog_for_budget(
+    masks: dict[int, NDArray[np.bool_]],
+    boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]],
+    loaded: dict[int, Any],
+    eye: NDArray[np.float64],
+    budget: int,
+    fog: float,
+) -> float:
+    """The fog distance at which the kept parts, nearest first, fit ``budget`` triangles
+    (``fog`` itself when they all fit; never below 2 m)."""
+    dist: list[NDArray[np.float64]] = []
+    tris: list[NDArray[np.int64]] = []
+    for cid, m in masks.items():
+        if not m.any():
+            continue
+        lo, hi = boxes[cid]
+        dist.append(box_distance(lo[m], hi[m], eye))
+        tris.append(np.array([p.triangles for p in loaded[cid].parts], np.int64)[m])
+    if not dist:
+        return fog
+    d = np.concatenate(dist)
+    n = np.concatenate(tris)
+    order = np.argsort(d, kind="stable")
+    total = np.cumsum(n[order])
+    if total[-1] <= budget:
+        return fog
+    k = int(np.searchsorted(total, budget, side="right"))  # parts 0..k-1 fit
+    return max(2.0, min(fog, float(d[order[k]]) - 1e-6))

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
@@ -35,3 +36,45 @@ def gl(gl_ctx: moderngl.Context) -> Iterator[moderngl.Context]:
     check_gl_error(gl_ctx, "before the test (left by an earlier one)")
     yield gl_ctx
     check_gl_error(gl_ctx, "after the test")
+
+
+# --------------------------------------------------------------------------- interiors
+# Baked once per session: Interiors I's tests and the portal culling tests share them.
+
+_INDOOR = Path(__file__).resolve().parents[2] / "shared" / "data" / "indoor"
+
+
+def _baked_ifc(tmp_path_factory: pytest.TempPathFactory, name: str) -> tuple[Path, dict[str, Any]]:
+    pytest.importorskip("ifcopenshell", reason="the ifc extra (make test installs it)")
+    from walkstream.server.bake import bake
+
+    src = _INDOOR / name
+    if not src.exists():
+        pytest.skip(f"no {src} (the shared test data)")
+    out = tmp_path_factory.mktemp(src.stem) / f"{src.stem}.db"
+    return out, bake(src, out)
+
+
+@pytest.fixture(scope="session")
+def office_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small generated office (2 storeys, 20 x 14 m), baked."""
+    from walkstream.server.bake import bake
+    from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
+
+    d = tmp_path_factory.mktemp("office")
+    src = d / "office.json"
+    write_interior(src, InteriorPlan(storeys=2, length=20, width=14, seed=2))
+    bake(src, d / "office.db")
+    return d / "office.db"
+
+
+@pytest.fixture(scope="session")
+def duplex_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+    """../shared/data/indoor/duplex.ifc, baked, and the bake's summary."""
+    return _baked_ifc(tmp_path_factory, "duplex.ifc")
+
+
+@pytest.fixture(scope="session")
+def fzk_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+    """../shared/data/indoor/AC20-FZK-Haus.ifc, baked, and the bake's summary."""
+    return _baked_ifc(tmp_path_factory, "AC20-FZK-Haus.ifc")

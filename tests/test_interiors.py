@@ -367,15 +367,6 @@ def test_clip_polygons_keeps_winding_and_area() -> None:
 # --------------------------------------------------------------------------- generated interiors
 
 
-@pytest.fixture(scope="module")
-def office_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    d = tmp_path_factory.mktemp("office")
-    src = d / "office.json"
-    write_interior(src, InteriorPlan(storeys=2, length=20, width=14, seed=2))
-    bake(src, d / "office.db")
-    return d / "office.db"
-
-
 def test_generated_office_bakes_into_cells_portals_and_a_tour(office_db: Path) -> None:
     with SceneReader.open(office_db) as r:
         s = r.summary()
@@ -421,18 +412,6 @@ def test_paper_preset_has_the_papers_scale() -> None:
 
 
 # --------------------------------------------------------------------------- real models
-
-
-@pytest.fixture(scope="module")
-def duplex_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
-    out = tmp_path_factory.mktemp("duplex") / "duplex.db"
-    return out, bake(_real(DUPLEX), out)
-
-
-@pytest.fixture(scope="module")
-def fzk_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
-    out = tmp_path_factory.mktemp("fzk") / "fzk.db"
-    return out, bake(_real(FZK), out)
 
 
 def test_duplex(duplex_db: tuple[Path, dict]) -> None:

@@ -13,6 +13,7 @@
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--reuse] [--out DIR]
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
+    walkstream bench portals [--presets paper paper10] [--frames N] [--truth N] [--no-gl] [--out DIR] [--json]
 
 The benchmarks themselves are :mod:`walkstream.benchmarks`; this module parses their
 options, hands the replaying ones a way to run a replay
@@ -399,9 +400,36 @@ def cmd_bench_interiors(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_portals(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench portals``."""
+    from walkstream.benchmarks.portals import portals_tables, run_portals_bench
+
+    scenes, halls = run_portals_bench(
+        Path(args.out), args.presets, frames=args.frames, step_s=args.step, truth_frames=args.truth,
+        gl=not args.no_gl, log=lambda s: print(s, file=sys.stderr),
+    )
+    replays = []
+    if args.replays:
+        from walkstream.benchmarks.portals import replay_rows, replay_table
+        from walkstream.cmd_replay import replay_with_options
+
+        db = Path(args.out) / f"{args.presets[0]}.db"
+        replays = replay_rows(db, replay_with_options, Path(args.out), duration=args.replays)
+    if args.json:
+        print(json.dumps({"scenes": scenes, "halls": halls, "replays": replays}, indent=2))
+    else:
+        print(portals_tables(scenes, halls))
+        print("(culling CPU and gl frame times measured here; pda: the cost model fitted to Table 1, no fog)")
+        if replays:
+            print(replay_table(replays))
+            print("(simulated clock; tour of the first preset)")
+    return 0
+
+
 def add_bench_parser(sub: Any) -> None:
     """Register ``bench`` and every benchmark under it."""
     from walkstream.server.sources.citygen import DEFAULT_SIZE
+    from walkstream.server.sources.interiorgen import PRESETS as PRESETS_NAMES
 
     be = sub.add_parser("bench", help="benchmarks that print a table")
     besub = be.add_subparsers(dest="what", metavar="WHAT", required=True)
@@ -485,6 +513,19 @@ def add_bench_parser(sub: Any) -> None:
     bi.add_argument("--out", default="out/bench-interiors", help="folder for the generated files and databases")
     bi.add_argument("--json", action="store_true", help="print the figures as JSON")
     bi.set_defaults(func=cmd_bench_interiors)
+
+    bp = besub.add_parser("portals", help="portal culling against frustum culling alone and drawing all (Table 1, tightness, cost)")
+    bp.add_argument("--presets", nargs="*", default=["paper", "paper10"], choices=sorted(PRESETS_NAMES),
+                    help="generated interiors (default: paper paper10)")
+    bp.add_argument("--frames", type=int, default=200, help="frames along each tour (default 200)")
+    bp.add_argument("--step", type=float, default=1.0, help="seconds of tour between frames (default 1)")
+    bp.add_argument("--truth", type=int, default=60, help="frames of the first scene compared with the id truth (default 60)")
+    bp.add_argument("--no-gl", action="store_true", help="no gl frame times (the pda model only)")
+    bp.add_argument("--out", default="out/bench-portals", help="folder for the generated files and databases")
+    bp.add_argument("--replays", metavar="DURATION", help="also replay the first preset's tour this long (e.g. 180s): "
+                    "56 kbit/s with the default and a small cache, pda with the fog set by the budget through a cost step")
+    bp.add_argument("--json", action="store_true", help="print the figures as JSON")
+    bp.set_defaults(func=cmd_bench_portals)
 
     _add_lod(besub)
 

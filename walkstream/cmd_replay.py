@@ -99,6 +99,8 @@ def config_from_args(args: argparse.Namespace) -> Any:
         lod_distances=(lo, hi),
         seed=args.seed,
         fog_m=args.fog,
+        culling=args.culling,
+        fog_budget=not args.no_fog_budget,
         report_dir=Path(args.report),
         start_bundle=not args.no_start_bundle,
         gzip=not args.no_gzip,
@@ -168,6 +170,7 @@ def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = Fals
             title=title,
             truth=result.truth,
             phases=result.phases,
+            interior=result.interior,
         )
     return result
 
@@ -219,6 +222,11 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--lod-distances", default="40,120", help="distance selection: LOD2 nearer than D1, LOD1 nearer than D2 (default 40,120)")
     r.add_argument("--seed", type=int, default=0, help="seed of link loss, device noise, backoff jitter")
     r.add_argument("--fog", type=float, default=40.0, help="interiors: portals farther than this many metres are not looked through (default 40)")
+    r.add_argument("--no-fog-budget", action="store_true",
+                   help="interiors: keep the fog at --fog (default: the budget controller sets it, at most --fog)")
+    r.add_argument("--culling", choices=("portals", "frustum", "none"), default="portals",
+                   help="interiors: portal culling with visible screen areas (default), portals in the frustum "
+                   "only, or every part of the visible cells")
     r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")

@@ -204,6 +204,16 @@ class FrameRenderer(Releasable):
         self._refs[mid] = self._refs.get(mid, 0) + 1
         self._keys[key] = mesh
 
+    @property
+    def fog_m(self) -> float:
+        """Fog distance of the drawn frames: surfaces fade into the background over its
+        last fifth (interiors, ``--fog``); 0: none."""
+        return self._r.fog_m
+
+    @fog_m.setter
+    def fog_m(self, value: float) -> None:
+        self._r.fog_m = float(value) if math.isfinite(value) else 0.0
+
     def has(self, key: Hashable) -> bool:
         """Whether ``key`` has been uploaded (and not forgotten)."""
         return key in self._keys

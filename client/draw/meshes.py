@@ -60,11 +60,13 @@ in vec3 in_normal;
 in vec4 in_color;
 out vec3 v_normal;
 out vec3 v_color;
+out vec3 v_world;
 invariant gl_Position;
 void main() {
     gl_Position = u_view_proj * vec4(in_position, 1.0);
     v_normal = in_normal;
     v_color = in_color.rgb;
+    v_world = in_position;
 }
 """
 
@@ -72,14 +74,22 @@ _FRAGMENT_SHADER = """
 #version 330
 uniform vec3 u_light_dir;
 uniform float u_ambient;
+uniform vec3 u_eye;
+uniform float u_fog;
+uniform vec3 u_background;
 in vec3 v_normal;
 in vec3 v_color;
+in vec3 v_world;
 out vec4 f_color;
 void main() {
     // Meshes are in scene-local world space (no model matrix), so the normal needs no
     // transform; renormalise because interpolation shortens it.
     float diffuse = max(dot(normalize(v_normal), u_light_dir), 0.0);
-    f_color = vec4(v_color * (u_ambient + (1.0 - u_ambient) * diffuse), 1.0);
+    vec3 lit = v_color * (u_ambient + (1.0 - u_ambient) * diffuse);
+    // fog (interiors, u_fog > 0): surfaces fade into the background over the last
+    // fifth of the fog distance, so that what the fog culls does not pop
+    float fade = u_fog > 0.0 ? smoothstep(0.8 * u_fog, u_fog, distance(v_world, u_eye)) : 0.0;
+    f_color = vec4(mix(lit, u_background, fade), 1.0);
 }
 """
 
@@ -168,6 +178,9 @@ class MeshRenderer(Releasable):
             raise InputError(f"MeshRenderer.ambient: expected 0..1, got {ambient}")
         r, g, b = (int(c) for c in background)
         self.background: tuple[int, int, int] = (r, g, b)
+        self.fog_m: float = 0.0
+        """Fog distance (metres) over whose last fifth surfaces fade into the
+        background; 0: no fog (the city)."""
         # Validate before creating a context, so a bad argument leaks nothing.
         self._own_ctx = ctx is None
         self.ctx: moderngl.Context = create_context() if ctx is None else ctx
@@ -315,6 +328,10 @@ class MeshRenderer(Releasable):
             self.ctx.viewport = (x, y, vw, vh)
         vp = np.asarray(proj, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
         self._uniform("u_view_proj").write(mat4_bytes(vp))
+        eye = np.linalg.inv(np.asarray(view, dtype=np.float64))[:3, 3]
+        self._uniform("u_eye").value = tuple(float(v) for v in eye)
+        self._uniform("u_fog").value = float(self.fog_m)
+        self._uniform("u_background").value = tuple(c / 255.0 for c in self.background)
         # Set on every draw: the context may be shared with code that changes state.
         self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
         self.ctx.front_face = "ccw"

@@ -73,6 +73,9 @@ _CAPTIONS = {
     "stacked) and its median (bottom): streaming tick, culling, LOD allocation, buffer "
     "uploads, draw calls, finish (waiting for the device to draw), the rest of the loop, and "
     "other (event loop, rebuilding threads, waiting for the tick).",
+    "interior.png": "An interior walk per frame: visible cells and portals opened, triangles "
+    "drawn, culling CPU milliseconds (cells and parts), and the fog distance in force (set by "
+    "the budget controller, tightened when the visible cells exceed the memory budget).",
     "error.png": "The frame rate (top) and, for every compared frame, the share of its pixels "
     "that differ from the ground truth (line) and the pixels where the truth shows an object "
     "the client's frame does not, stacked by cause (bottom).",
@@ -248,6 +251,7 @@ def write_report(
     title: str = "walkstream replay",
     truth: TruthResult | None = None,
     phases: NDArray[np.float64] | None = None,
+    interior: Mapping[str, NDArray[np.float64]] | None = None,
 ) -> Path:
     """Write the report folder of one replay and return the path of its ``index.html``.
 
@@ -276,6 +280,9 @@ def write_report(
         Seconds per phase of the frame loop per frame
         (:data:`~walkstream.client.draw.phases.PHASES`): adds ``phases.csv`` and
         ``phases.png``.
+    interior : dict of (frames,) arrays, optional
+        An interior walk's ``cells``, ``portals``, ``triangles``, ``cull_ms``,
+        ``fog_m`` per frame: adds ``interior.png``.
 
     Returns
     -------
@@ -305,6 +312,11 @@ def write_report(
             out / "phases.png", log.t - run.t0, phases, f"{title}: frame loop time per phase"
         )
         names.append("phases.png")
+    if interior is not None and len(log.t):
+        from walkstream.client.report.plots import plot_interior
+
+        plot_interior(out / "interior.png", log.t - run.t0, dict(interior), f"{title}: cells, culling and fog")
+        names.append("interior.png")
     if truth is not None:
         _plot_error(out / "error.png", run, truth.log, f"{title}: frame rate and image error against the truth")
     truth_html = _truth_section(out, safe, truth)

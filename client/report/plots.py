@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 from walkstream.client.report.files import BytesLog, _atomic, _bytes_arrays
 from walkstream.shared.arrays import F64
 
-__all__ = ["PLOT_NAMES", "SERIES_COLOURS"]
+__all__ = ["PLOT_NAMES", "SERIES_COLOURS", "plot_interior"]
 
 #: The plots of one report, in page order.
 PLOT_NAMES: tuple[str, ...] = ("bytes.png", "quality.png", "fps.png", "budget.png")
@@ -418,4 +418,35 @@ def _plot_error(path: Path, run: _Run, truth: TruthLog, title: str) -> Path:
         if s.get("over_half_percent_ratio") is not None:
             notes.append(f"frames missing > 0.5 %: {100.0 * s['over_half_percent_ratio']:.1f} %")
     ax_fps.set_title(title + ("\n" + "; ".join(notes) if notes else ""), fontsize=10)
+    return _save(fig, path)
+
+
+def plot_interior(path: Path, t: ArrayLike, series: dict[str, ArrayLike], title: str) -> Path:
+    """An interior walk per frame: visible cells and portals opened, triangles drawn,
+    culling milliseconds, and the fog distance in force (one panel each).
+
+    Parameters
+    ----------
+    path : Path
+    t : (n,) float
+        Seconds since the walk started.
+    series : dict
+        ``cells``, ``portals``, ``triangles``, ``cull_ms``, ``fog_m``: ``(n,)`` each.
+    title : str
+    """
+    x = np.asarray(t, np.float64)
+    fig, axes = _figure(4, 2.2)
+    fig.suptitle(title)
+    panels = (
+        (("cells", "visible cells"), ("portals", "portals opened")),
+        (("triangles", "triangles drawn"),),
+        (("cull_ms", "culling ms (cells and parts)"),),
+        (("fog_m", "fog distance m"),),
+    )
+    for ax, lines in zip(axes, panels, strict=True):
+        for k, (key, label) in enumerate(lines):
+            y = np.asarray(series[key], np.float64)
+            ax.plot(x[: len(y)], y, lw=0.8, color=SERIES_COLOURS[k], label=label)
+        _legend(ax, loc="upper right")
+    axes[-1].set_xlabel("walk time, s")
     return _save(fig, path)

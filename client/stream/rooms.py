@@ -1,20 +1,21 @@
 """Interior streaming: which cell the viewer is in, which cells it may see, their contents fetched.
 
-Until the client culls through portals properly (Interiors II), an interior is
-walked like this (Mulloni et al.'s cell manager, without visible screen areas):
+An interior is walked like this (Mulloni et al.'s cell manager):
 
 * the **viewer's cell** is the cell whose plane set holds the eye (a linear check of
   the current cell, its neighbours, then all cells; the eye on a shared plane stays
   in the cell it was in; outside every cell it keeps the last one);
-* the **visible cells** are the current cell and the cells reached from it through
-  portals whose bounding box meets the view frustum and lies within the fog
-  distance, breadth first, to a depth of :attr:`RoomStreamConfig.max_depth` (the
-  ``outside`` cell is entered but not gone through);
+* the **visible cells** are found by portal culling with visible screen areas
+  (:func:`~walkstream.client.draw.portals.cull_portals`, the default
+  :attr:`RoomStreamConfig.culling` ``portals``) or, with ``frustum`` or ``none``,
+  through the portals whose bounding box meets the view frustum
+  (:func:`~walkstream.client.draw.portals.frustum_cells`), within the fog distance,
+  to a depth of :attr:`RoomStreamConfig.max_depth`;
 * **contents** (one immutable response per cell) are fetched for the visible cells
   in that order, then, with prefetch, for the cells one portal beyond them (where
   the walker may turn next); a cell not visible for :attr:`RoomStreamConfig.flush_s`
-  seconds is flushed (the paper's policy), and the cache's byte budget stays in
-  charge as well.  A cell fetched again after a flush counts as a re-download.
+  seconds is flushed (the paper's policy) once the cache is fuller than
+  :attr:`RoomStreamConfig.flush_fill`, and the cache's byte budget stays in charge.  A cell fetched again after a flush counts as a re-download.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
-from walkstream.client.draw.culling import frustum_cull
+from walkstream.client.draw.portals import PortalCull, PortalGraph, cull_portals, frustum_cells
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
 from walkstream.shared.codec.cellmesh import CellMesh
@@ -47,8 +48,15 @@ class RoomStreamConfig:
     max_depth: int = 8
     """Portals passed on the way to a visible cell, at most."""
     flush_s: float = 30.0
-    """A cell not visible for this long is flushed from memory."""
+    """A cell not visible for this long is flushed from memory (while the cache is
+    fuller than :attr:`flush_fill`)."""
+    flush_fill: float = 0.5
+    """The paper flushes to make room: with the cache less full than this share of its
+    budget nothing is flushed, so a walk that fits the cache downloads nothing twice."""
     max_in_flight: int = 2
+    culling: str = "portals"
+    """``portals`` (VSAs), ``frustum`` (portals in the frustum) or ``none`` (as
+    ``frustum`` for the cells, every part of them drawn)."""
 
 
 @dataclass
@@ -111,6 +119,8 @@ class RoomStreamer:
         self.last_visible: dict[int, float] = {}
         self._tasks: dict[int, asyncio.Task[None]] = {}
         self.visible: list[int] = []
+        self.graph = PortalGraph.from_topology(topology)
+        self.last_cull: PortalCull | None = None
 
     # -- where the viewer is ---------------------------------------------------
 
@@ -131,32 +141,41 @@ class RoomStreamer:
             self.current = int(self._ids[hit[0]])
         return self.current
 
-    def visible_cells(self, eye: NDArray[np.float64], view_proj: NDArray[np.float64]) -> list[int]:
-        """The current cell and those seen through portals in the frustum (breadth first)."""
+    def visible_cells(
+        self,
+        eye: NDArray[np.float64],
+        view_proj: NDArray[np.float64],
+        view: NDArray[np.float64] | None = None,
+        proj: NDArray[np.float64] | None = None,
+        size: tuple[int, int] | None = None,
+    ) -> list[int]:
+        """The current cell and those seen from it: through portal culling when
+        ``config.culling`` is ``portals`` and the camera (``view``, ``proj``, ``size``) is
+        given (its result is kept in :attr:`last_cull`), otherwise through the portals in
+        the frustum (breadth first)."""
+        self.last_cull = None
         if self.current is None:
             return []
-        e = np.asarray(eye, dtype=np.float64)
-        order = [self.current]
-        depth = {self.current: 0}
-        i = 0
-        while i < len(order):
-            c = order[i]
-            i += 1
-            rec = self.cells[c]
-            if rec.kind == "outside" and c != self.current or depth[c] >= self.config.max_depth:
-                continue
-            refs = [r for r in rec.portals if r.cell not in depth]
-            if not refs:
-                continue
-            lo = np.array([r.polygon.min(axis=0) for r in refs])
-            hi = np.array([r.polygon.max(axis=0) for r in refs])
-            near = np.linalg.norm(np.clip(e, lo, hi) - e, axis=1)
-            seen = frustum_cull(lo, hi, view_proj) | (near < 0.5)
-            for r, ok, d in zip(refs, seen.tolist(), near.tolist(), strict=True):
-                if ok and d <= self.config.fog_m and r.cell not in depth:
-                    depth[r.cell] = depth[c] + 1
-                    order.append(r.cell)
-        return order
+        cfg = self.config
+        if cfg.culling == "portals" and view is not None and proj is not None and size is not None:
+            self.last_cull = cull_portals(
+                self.graph, self.current, eye, view, proj, size, fog_m=cfg.fog_m, max_depth=cfg.max_depth
+            )
+            return self.last_cull.order
+        return frustum_cells(self.graph, self.current, eye, view_proj, fog_m=cfg.fog_m, max_depth=cfg.max_depth)
+
+    def visible_bytes(self, cells: list[int]) -> int:
+        """Memory the decoded contents of ``cells`` take (cached ones as cached; the
+        others estimated from the topology's triangles: 12 bytes of indices per
+        triangle and about one float32 vertex per triangle)."""
+        total = 0
+        for c in cells:
+            m = self.mesh(c)
+            if m is not None:
+                total += sum(p.positions.nbytes + p.indices.nbytes for p in m.parts)
+            else:
+                total += 24 * self.cells[c].contents.triangles
+        return total
 
     # -- what is loaded ---------------------------------------------------------
 
@@ -165,10 +184,19 @@ class RoomStreamer:
         value: CellMesh | None = self.cache.peek("mesh", cid)
         return value
 
-    def tick(self, t: float, eye: NDArray[np.float64], view_proj: NDArray[np.float64]) -> list[int]:
-        """Move the viewer: locate, find the visible cells, fetch and flush; returns the visible cells."""
+    def tick(
+        self,
+        t: float,
+        eye: NDArray[np.float64],
+        view_proj: NDArray[np.float64],
+        view: NDArray[np.float64] | None = None,
+        proj: NDArray[np.float64] | None = None,
+        size: tuple[int, int] | None = None,
+    ) -> list[int]:
+        """Move the viewer: locate, find the visible cells (:meth:`visible_cells`), fetch
+        and flush; returns the visible cells."""
         self.locate(eye)
-        vis = self.visible_cells(eye, view_proj)
+        vis = self.visible_cells(eye, view_proj, view, proj, size)
         self.visible = vis
         for c in vis:
             self.last_visible[c] = t
@@ -179,7 +207,8 @@ class RoomStreamer:
                     if n not in want and self.cells[n].kind != "outside":
                         want.append(n)
         self.cache.set_pins([("mesh", c) for c in vis])
-        for c in list(self.last_visible):
+        crowded = self.cache.bytes_used > self.config.flush_fill * self.cache.budget_bytes
+        for c in list(self.last_visible) if crowded else []:
             if c not in vis and t - self.last_visible[c] > self.config.flush_s and self.cache.has("mesh", c):
                 self.cache.remove("mesh", c)
                 self.stats.flushed += 1

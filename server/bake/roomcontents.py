@@ -38,13 +38,25 @@ Part = tuple[int, int, F64, NDArray[np.int64]]
 
 
 def grown_planes(planes: F64, reach: float = REACH) -> F64:
-    """A cell's planes moved outward by ``reach``, except the ceiling, moved down by it
-    (so the floor of the storey above, at the ceiling plane, stays out)."""
+    """A cell's planes moved outward by ``reach`` (the ceiling too: a roof's underside
+    at the top storey's ceiling plane is that storey's ceiling; what lies on or above
+    the ceiling plane and does not face down, such as the floor of the storey above,
+    is dropped by :func:`_above_ceiling`)."""
     g = np.array(planes, dtype=np.float64)
     g[:, 3] -= reach
-    top = g[:, 2] > 0.5
-    g[top, 3] += 2.0 * reach
     return g
+
+
+def _above_ceiling(tris: F64, planes: F64) -> NDArray[np.bool_]:
+    """``(t,)`` triangles on or above a cell's ceiling plane that do not face down
+    (the storey above's floor and the feet of its walls)."""
+    top = planes[planes[:, 2] > 0.5]
+    if len(tris) == 0 or len(top) == 0:
+        return np.zeros(len(tris), bool)
+    zmax = -float(top[0, 3]) / float(top[0, 2])
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    down = n[:, 2] < -0.5 * np.linalg.norm(n, axis=1)
+    return np.all(tris[:, :, 2] >= zmax - 1e-6, axis=1) & ~down
 
 
 def _inside(points: F64, planes: F64) -> NDArray[np.bool_]:
@@ -158,7 +170,10 @@ def contents_task(
                 pieces.append(ft)
                 pe.append(elem[cand][src[fsrc]])
                 pm.append(mat[cand][src[fsrc]])
-        out.append((cid, _parts(np.concatenate(pieces), np.concatenate(pe), np.concatenate(pm)), cand[whole]))
+        allp, alle, allm = np.concatenate(pieces), np.concatenate(pe), np.concatenate(pm)
+        keep = ~_above_ceiling(allp, planes)
+        held = cand[whole][~_above_ceiling(tri[whole], planes)]
+        out.append((cid, _parts(allp[keep], alle[keep], allm[keep]), held))
     return out
 
 

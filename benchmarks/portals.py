@@ -1,0 +1,369 @@
+"""``walkstream bench portals``: portal culling against frustum culling alone and drawing everything.
+
+For each generated interior (default: the presets ``paper``, the paper's 93-cell
+scale, and ``paper10``, ten times its cells), baked once into ``--out``: frames along
+its tour (every ``--step`` seconds, at most ``--frames``), each culled three ways
+(:data:`~walkstream.client.draw.portals.CULLING_MODES`: ``portals`` with visible
+screen areas; ``frustum``, the cells behind portals in the frustum and their parts in
+the frustum; ``none``, every part of every cell of the building, the paper's "draw
+all").  Per mode: visible cells, triangles drawn, culling CPU microseconds (cells and
+parts, measured here), the frame time on the ``gl`` device (moderngl, measured) and
+on the ``pda`` cost model (fitted to the paper's Table 1, no fog column).
+
+Tightness (the first scene only, ``--truth`` frames): triangles drawn over the
+triangles of the parts truly visible in an id frame of the whole building
+(:class:`~walkstream.client.truth.interior.InteriorTruth`), mean and 95th percentile,
+for portal culling and the frustum alone; the missed pixels of portal culling are
+counted too (they must be 0).
+
+Table 1 scenes: frames of the first scene where portal culling sees 1, 2, 3 and 4
+cells, the one whose visible cells hold the triangles nearest the paper's (188, 532,
+766, 1,156) chosen for each; the triangles drawn beyond the visible cells' own, the
+culling microseconds and the pda model's frame rate at the triangles drawn.
+
+Culling cost at scale: an open hall of ``k x k`` cells of 4 m (every wall between two
+cells an open portal) looked across from a corner, so that about a hundred cells are
+visible: cells-to-cells microseconds per frame against the visible cells.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.draw.devices import make_device
+from walkstream.client.draw.frames import FrameRenderer, camera
+from walkstream.client.draw.portals import (
+    CULLING_MODES,
+    PortalGraph,
+    cull_parts,
+    cull_portals,
+    frustum_cells,
+)
+from walkstream.client.stream.rooms import _stack_planes, cell_of
+from walkstream.client.truth.interior import InteriorTruth
+from walkstream.server.bake import bake
+from walkstream.server.service.interiors import InteriorState
+from walkstream.server.sources.interiorgen import PRESETS, write_interior
+from walkstream.server.store import SceneReader
+from walkstream.shared.camera import perspective
+from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
+from walkstream.shared.paths import RecordedPath
+from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology, decode_topology
+
+__all__ = [
+    "TABLE1",
+    "hall_topology",
+    "portal_figures",
+    "hall_figures",
+    "portals_tables",
+    "run_portals_bench",
+    "replay_rows",
+    "replay_table",
+]
+
+#: The paper's Table 1: visible cells, triangles, fps without fog, fps with fog.
+TABLE1: tuple[tuple[int, int, float, float], ...] = (
+    (1, 188, 56.4, 42.7), (2, 532, 35.8, 34.7), (3, 766, 22.6, 20.7), (4, 1156, 19.4, 18.6),
+)
+
+
+def _scene(preset: str, out: Path, log: Callable[[str], None]) -> Path:
+    db = out / f"{preset}.db"
+    if not db.exists():
+        src = out / f"{preset}.json"
+        write_interior(src, PRESETS[preset])
+        log(f"bench portals: baking {preset}")
+        bake(src, db)
+    return db
+
+
+def _load(db: Path) -> tuple[Topology, dict[int, CellMesh], RecordedPath]:
+    with SceneReader.open(db) as r:
+        state = InteriorState(r, list(r.cells()))
+        topo = decode_topology(state.topology["msgpack"].content, f"{db}: topology")
+        meshes = {c.id: decode_cell_mesh(r.contents(c.id), f"{db}: cell {c.id}") for c in topo.cells}
+        tour = RecordedPath.from_msgpack(r.path_blob("tour"))
+    return topo, meshes, tour
+
+
+def _stats(x: Sequence[float]) -> dict[str, float]:
+    a = np.asarray(x, np.float64)
+    if len(a) == 0:
+        return {"mean": 0.0, "median": 0.0, "p95": 0.0, "max": 0.0}
+    return {"mean": float(a.mean()), "median": float(np.median(a)), "p95": float(np.percentile(a, 95)), "max": float(a.max())}
+
+
+def portal_figures(
+    db: Path,
+    *,
+    frames: int = 200,
+    step_s: float = 1.0,
+    size: tuple[int, int] = (640, 480),
+    truth_frames: int = 0,
+    gl: bool = True,
+    fog_m: float = 40.0,
+    log: Callable[[str], None] = lambda s: None,
+) -> dict[str, Any]:
+    """Cull the frames of ``db``'s tour three ways and measure them (module docstring)."""
+    topo, meshes, tour = _load(db)
+    graph = PortalGraph.from_topology(topo)
+    inside = [c for c in topo.cells if c.kind != "outside" and len(c.planes)]
+    ids, planes = _stack_planes(inside)
+    boxes = {
+        cid: (np.array([p.bbox[0] for p in m.parts]).reshape(-1, 3), np.array([p.bbox[1] for p in m.parts]).reshape(-1, 3))
+        for cid, m in meshes.items()
+    }
+    tris = {cid: np.array([p.triangles for p in m.parts], np.int64) for cid, m in meshes.items()}
+    proj = perspective(60.0, size[0] / size[1], 0.1, 100.0).astype(np.float64)
+    pda = make_device("pda", noise=False)
+    renderer = FrameRenderer(size=size, fov_deg=60.0, near=0.1, far=100.0) if gl else None
+    # one context for both: a second one made current would leave the renderer's objects invalid
+    truth = InteriorTruth(meshes, (160, 120), far=100.0, ctx=None if renderer is None else renderer.ctx) if truth_frames else None
+    try:
+        if renderer is not None:
+            for cid, m in meshes.items():
+                for k, part in enumerate(m.parts):
+                    if part.triangles:
+                        renderer.upload((cid, k), part.mesh())
+        ts = np.arange(0.0, tour.duration, step_s)[:frames]
+        per: dict[str, dict[str, list[float]]] = {
+            m: {"cells": [], "tris": [], "cull_us": [], "gl_ms": [], "gl_fog_ms": [], "pda_ms": [], "parts": []}
+            for m in CULLING_MODES
+        }
+        tight: dict[str, list[float]] = {"portals": [], "frustum": []}
+        missed = 0
+        table1: list[dict[str, Any]] = []
+        current: int | None = None
+        for i, t in enumerate(ts.tolist()):
+            xyz, yaw, pitch = tour.at(t)
+            eye = np.asarray(xyz, np.float64)
+            hit = np.flatnonzero(cell_of(planes, eye))
+            if len(hit):
+                current = int(ids[hit[0]]) if current not in {int(ids[h]) for h in hit} else current
+            if current is None:
+                continue
+            view = camera(eye, float(yaw), float(pitch)).astype(np.float64)
+            kept_by: dict[str, dict[int, NDArray[np.bool_]]] = {}
+            for mode in CULLING_MODES:
+                t0 = time.perf_counter()
+                if mode == "portals":
+                    pc = cull_portals(graph, current, eye, view, proj, size)
+                    cells = pc.order
+                    keep = cull_parts(mode, cells, boxes, eye, view, proj, size, vsas=pc.vsas)
+                elif mode == "frustum":
+                    cells = frustum_cells(graph, current, eye, proj @ view)
+                    keep = cull_parts(mode, cells, boxes, eye, view, proj, size)
+                else:
+                    cells = list(meshes)
+                    keep = {c: np.ones(len(tris[c]), bool) for c in cells}
+                dt = time.perf_counter() - t0
+                kept_by[mode] = keep
+                n = int(sum(int(tris[c][m].sum()) for c, m in keep.items()))
+                parts = int(sum(int(m.sum()) for m in keep.values()))
+                rec = per[mode]
+                rec["cells"].append(len(cells))
+                rec["tris"].append(n)
+                rec["parts"].append(parts)
+                rec["cull_us"].append(dt * 1e6)
+                rec["pda_ms"].append(1e3 * float(pda.frame_time(n, parts)))
+                if renderer is not None:
+                    keys = [(c, k) for c, m in keep.items() for k in np.flatnonzero(m).tolist()]
+                    rec["gl_ms"].append(1e3 * renderer.draw(keys, view, proj))
+                    if mode == "portals":
+                        # the same frame with fog fading on (the fragment's distance, a smoothstep, a mix)
+                        renderer.fog_m = fog_m
+                        rec["gl_fog_ms"].append(1e3 * renderer.draw(keys, view, proj))
+                        renderer.fog_m = 0.0
+                if mode == "portals" and 1 <= len(cells) <= 4:
+                    own = int(sum(int(tris[c].sum()) for c in cells))
+                    table1.append({"t": t, "cells": len(cells), "cell_triangles": own, "drawn": n,
+                                   "cull_us": dt * 1e6, "pda_fps": 1.0 / float(pda.frame_time(n, parts))})
+            if truth is not None and i < truth_frames:
+                for mode in ("portals", "frustum"):
+                    kept = [(c, k) for c, m in kept_by[mode].items() for k in np.flatnonzero(m).tolist()]
+                    chk = truth.check(kept, eye, view)
+                    if mode == "portals":
+                        missed += chk.missed_pixels - chk.pinholes
+                    if chk.visible_triangles:
+                        tight[mode].append(per[mode]["tris"][-1] / chk.visible_triangles)
+            if i % 50 == 0:
+                log(f"bench portals: {db.stem} frame {i}/{len(ts)}")
+    finally:
+        if truth is not None:
+            truth.release()
+        if renderer is not None:
+            renderer.release()
+    picked = []
+    for k, want, fps, fps_fog in TABLE1:
+        cand = [r for r in table1 if r["cells"] == k]
+        if cand:
+            best = min(cand, key=lambda r: abs(r["cell_triangles"] - want))
+            picked.append({**best, "paper_triangles": want, "paper_fps": fps, "paper_fps_fog": fps_fog})
+    return {
+        "scene": db.stem,
+        "cells": len(inside),
+        "portals": len(topo.portals),
+        "triangles": int(sum(int(t.sum()) for t in tris.values())),
+        "frames": len(per["portals"]["tris"]),
+        "modes": {m: {k: _stats(v) for k, v in rec.items()} for m, rec in per.items()},
+        "tightness": {m: _stats(v) for m, v in tight.items()},
+        "truth_frames": len(tight["portals"]),
+        "missed_pixels": missed,
+        "table1": picked,
+    }
+
+
+def hall_topology(k: int, cell_m: float = 4.0, height: float = 3.0) -> Topology:
+    """An open hall of ``k x k`` square cells, every shared wall an open portal (no contents)."""
+    cells = []
+    refs: dict[int, list[PortalRef]] = {i: [] for i in range(k * k)}
+    pid = 0
+    for y in range(k):
+        for x in range(k):
+            i = y * k + x
+            x0, y0 = x * cell_m, y * cell_m
+            if x + 1 < k:
+                poly = np.array([[x0 + cell_m, y0, 0], [x0 + cell_m, y0 + cell_m, 0], [x0 + cell_m, y0 + cell_m, height], [x0 + cell_m, y0, height]])
+                refs[i].append(PortalRef(pid, "opening", poly, i + 1))
+                refs[i + 1].append(PortalRef(pid, "opening", poly, i))
+                pid += 1
+            if y + 1 < k:
+                poly = np.array([[x0, y0 + cell_m, 0], [x0 + cell_m, y0 + cell_m, 0], [x0 + cell_m, y0 + cell_m, height], [x0, y0 + cell_m, height]])
+                refs[i].append(PortalRef(pid, "opening", poly, i + k))
+                refs[i + k].append(PortalRef(pid, "opening", poly, i))
+                pid += 1
+    for y in range(k):
+        for x in range(k):
+            i = y * k + x
+            x0, y0, x1, y1 = x * cell_m, y * cell_m, (x + 1) * cell_m, (y + 1) * cell_m
+            planes = np.array([[-1, 0, 0, x0], [1, 0, 0, -x1], [0, -1, 0, y0], [0, 1, 0, -y1], [0, 0, -1, 0], [0, 0, 1, -height]], float)
+            cells.append(RoomRecord(
+                id=i, kind="room", name=f"hall {x},{y}", room=None, storey=0,
+                outline=np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float), zmin=0.0, zmax=height,
+                planes=planes, portals=tuple(refs[i]), neighbours=tuple(sorted({r.cell for r in refs[i]})),
+                contents=ContentsRef(0, 0, 0, 0, 0, 0.0),
+            ))
+    return Topology((), tuple(cells), (), ())
+
+
+def hall_figures(sizes: Sequence[int] = (4, 8, 12, 16, 24), repeats: int = 50,
+                 size: tuple[int, int] = (640, 480)) -> list[dict[str, Any]]:
+    """Cells-to-cells culling microseconds in open halls looked across from a corner."""
+    proj = perspective(60.0, size[0] / size[1], 0.1, 1000.0).astype(np.float64)
+    rows = []
+    for k in sizes:
+        graph = PortalGraph.from_topology(hall_topology(k))
+        eye = np.array([0.5, 0.5, 1.6])
+        view = camera(eye, math.pi / 4, 0.0).astype(np.float64)
+        us = []
+        pc = None
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            pc = cull_portals(graph, 0, eye, view, proj, size)
+            us.append((time.perf_counter() - t0) * 1e6)
+        assert pc is not None
+        rows.append({"hall": f"{k}x{k}", "cells": k * k, "visible": len(pc.order), "tested": pc.tested,
+                     "us_median": float(np.median(us)), "us_p95": float(np.percentile(us, 95))})
+    return rows
+
+
+def portals_tables(scenes: Sequence[dict[str, Any]], halls: Sequence[dict[str, Any]]) -> str:
+    """The benchmark's tables as text."""
+    out = []
+    out.append(f"{'scene':<9}{'cells':>6}{'mode':>9}{'vis cells':>10}{'tris mean':>10}{'tris p95':>9}"
+               f"{'cull us med':>12}{'p95':>7}{'gl ms med':>10}{'pda ms med':>11}")
+    for s in scenes:
+        for m in CULLING_MODES:
+            r = s["modes"][m]
+            out.append(
+                f"{s['scene']:<9}{s['cells']:>6}{m:>9}{r['cells']['mean']:>10.1f}{r['tris']['mean']:>10,.0f}"
+                f"{r['tris']['p95']:>9,.0f}{r['cull_us']['median']:>12,.0f}{r['cull_us']['p95']:>7,.0f}"
+                f"{r['gl_ms']['median']:>10.2f}{r['pda_ms']['median']:>11.1f}"
+            )
+    for s in scenes:
+        if s["truth_frames"]:
+            tp, tf = s["tightness"]["portals"], s["tightness"]["frustum"]
+            out.append(
+                f"tightness {s['scene']} ({s['truth_frames']} frames, drawn / truly visible triangles): portals mean "
+                f"{tp['mean']:.2f} p95 {tp['p95']:.2f}; frustum alone mean {tf['mean']:.2f} p95 {tf['p95']:.2f}; "
+                f"missed pixels {s['missed_pixels']}"
+            )
+    for s in scenes:
+        r = s["modes"]["portals"]
+        if r["gl_fog_ms"]["median"]:
+            out.append(f"fog fading on gl, {s['scene']}, portal culling's frames: {r['gl_ms']['median']:.2f} ms without, "
+                       f"{r['gl_fog_ms']['median']:.2f} ms with (medians, drawn back to back)")
+    for s in scenes[:1]:
+        out.append(f"Table 1 scenes ({s['scene']}): cells, triangles of the visible cells (paper), drawn, culling us, pda fps (paper)")
+        for r in s["table1"]:
+            out.append(
+                f"  {r['cells']} cells  {r['cell_triangles']:>6,} ({r['paper_triangles']:,})  drawn {r['drawn']:>6,}"
+                f"  {r['cull_us']:>6,.0f} us  {r['pda_fps']:>5.1f} fps ({r['paper_fps']})"
+            )
+    out.append("open hall, cells-to-cells culling: hall, cells, visible, portal tests, us median, us p95")
+    for h in halls:
+        out.append(f"  {h['hall']:>6} {h['cells']:>5} {h['visible']:>5} {h['tested']:>6} {h['us_median']:>8,.0f} {h['us_p95']:>8,.0f}")
+    return "\n".join(out)
+
+
+def run_portals_bench(out: Path, presets: Sequence[str], *, frames: int, step_s: float, truth_frames: int,
+                      gl: bool, log: Callable[[str], None]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """Bake (once) and measure every preset, then the halls."""
+    out.mkdir(parents=True, exist_ok=True)
+    scenes = []
+    for k, p in enumerate(presets):
+        db = _scene(p, out, log)
+        scenes.append(portal_figures(db, frames=frames, step_s=step_s, truth_frames=truth_frames if k == 0 else 0,
+                                     gl=gl, log=log))
+    return scenes, hall_figures()
+
+
+def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out: Path,
+                duration: str = "180s", step_at: float = 60.0) -> list[dict[str, Any]]:
+    """Replays of ``db``'s tour (simulated clock): the walk at 56 kbit/s / 200 ms with the
+    default cache and with a cache smaller than the building, and on the pda model at
+    25 fps with the fog set by the budget controller (and kept fixed, to compare)
+    through a tenfold per-triangle cost step at ``step_at`` seconds."""
+    link = {"bandwidth": "56kbit", "rtt": "200ms", "duration": duration, "path": "tour", "kind": "interior"}
+    cases: list[tuple[str, dict[str, Any]]] = [
+        ("56 kbit/s, default cache", dict(link)),
+        ("56 kbit/s, cache 400 kB", {**link, "cache": "400kB"}),
+        ("pda 25 fps, fog by budget, cost x10", {**link, "device": "pda", "fps": 25.0, "cost_step_at_s": step_at}),
+        ("pda 25 fps, fixed fog, cost x10", {**link, "device": "pda", "fps": 25.0, "cost_step_at_s": step_at,
+                                              "no_fog_budget": True}),
+    ]
+    rows = []
+    for k, (name, options) in enumerate(cases, 1):
+        options["report"] = str(out / f"replay-{k:02d}")
+        s = replay(str(db), options, f"bench portals: {name}").summary
+        rows.append({"case": name, **{key: s.get(key) for key in (
+            "perfect_frame_ratio", "time_to_first_perfect_frame_s", "redownloads", "cells_flushed", "fps_mean",
+            "fps_within_10pct_ratio", "recovery_frames", "fog_m_median", "fog_m_min", "fog_tightened_frames",
+            "culling_ms_median", "visible_cells_mean", "triangles_mean")}})
+    return rows
+
+
+def replay_table(rows: Sequence[dict[str, Any]]) -> str:
+    """The replays as text."""
+    def f(v: Any, fmt: str) -> str:
+        return "-" if v is None else format(v, fmt)
+
+    out = [f"{'case':<38}{'perfect%':>9}{'1st perf s':>11}{'redl':>5}{'flushed':>8}{'fps':>6}{'within10%':>10}"
+           f"{'recover':>8}{'fog med':>8}{'fog min':>8}{'tightened':>10}"]
+    for r in rows:
+        pf = r["perfect_frame_ratio"]
+        w10 = r["fps_within_10pct_ratio"]
+        out.append(
+            f"{r['case']:<38}{f(None if pf is None else 100 * pf, '.2f'):>9}{f(r['time_to_first_perfect_frame_s'], '.2f'):>11}"
+            f"{f(r['redownloads'], 'd'):>5}{f(r['cells_flushed'], 'd'):>8}{f(r['fps_mean'], '.1f'):>6}"
+            f"{f(None if w10 is None else 100 * w10, '.1f'):>10}{f(r['recovery_frames'], ''):>8}"
+            f"{f(r['fog_m_median'], '.1f'):>8}{f(r['fog_m_min'], '.1f'):>8}{f(r['fog_tightened_frames'], 'd'):>10}"
+        )
+    return "\n".join(out)
