@@ -36,6 +36,7 @@ __all__ = [
     "VERTEX_ID_FRAGMENT_SHADER",
     "Framebuffer",
     "Releasable",
+    "release_objects",
     "check_gl_error",
     "create_context",
 ]
@@ -174,6 +175,21 @@ class Releasable:
         tb: TracebackType | None,
     ) -> None:
         self.release()
+
+
+def release_objects(ctx: Any, objects: list[Any], own_ctx: bool) -> None:
+    """Release ``objects`` (GL objects made in ``ctx``), then ``ctx`` itself if ``own_ctx``.
+
+    The default framebuffer is bound first, for the reason :meth:`Framebuffer.release`
+    gives.  ``objects`` is emptied, so a second call releases nothing twice.
+    """
+    if ctx is not None and objects:
+        ctx.detect_framebuffer(0).use()
+    for obj in objects:
+        obj.release()
+    objects.clear()
+    if own_ctx and ctx is not None:
+        ctx.release()
 
 
 class Framebuffer(Releasable):

@@ -31,7 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.camera import mat4_bytes, perspective
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import RenderError
-from walkstream.shared.gl import Releasable, check_gl_error, create_context
+from walkstream.shared.gl import Releasable, check_gl_error, create_context, release_objects
 
 __all__ = ["TIE_M", "InteriorTruth", "TruthCheck", "interior_truth"]
 
@@ -255,13 +255,7 @@ class InteriorTruth(Releasable):
 
     def release(self) -> None:
         """Release the GL objects (and the context if made here); idempotent."""
-        if self.ctx is not None and self._gl:
-            self.ctx.detect_framebuffer(0).use()
-        for obj in self._gl:
-            obj.release()
-        self._gl = []
-        if self._own and self.ctx is not None:
-            self.ctx.release()
+        release_objects(self.ctx, self._gl, self._own)
         self.ctx = None
 
 

@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.client.draw.meshes import AMBIENT, BACKGROUND_RGB, LIGHT_DIRECTION
 from walkstream.shared.camera import mat4_bytes, perspective
 from walkstream.shared.errors import InputError, RenderError
-from walkstream.shared.gl import Releasable, check_gl_error, create_context
+from walkstream.shared.gl import Releasable, check_gl_error, create_context, release_objects
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
@@ -259,12 +259,6 @@ class TruthRenderer(Releasable):
 
     def release(self) -> None:
         """Release every GL object (and the context if it was made here); idempotent."""
-        if self.ctx is not None and self._gl:
-            self.ctx.detect_framebuffer(0).use()
-        for obj in self._gl:
-            obj.release()
-        self._gl = []
-        if self._own_ctx and self.ctx is not None:
-            self.ctx.release()
+        release_objects(self.ctx, self._gl, self._own_ctx)
         self.ctx = None
 
