@@ -56,8 +56,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     except WalkstreamError as exc:
         print(f"(no LOD figure: {exc})")
     db = out / "city.db"
-    if db.exists() and not _has_paths(db, ("SE",)):
-        print(f"scene database {db} has no recorded path SE (an older bake): baking again")
+    stale = _stale_reason(db, ("SE",)) if db.exists() else None
+    if stale is not None:
+        print(f"scene database {db} {stale} (an older bake): baking again")
         db.unlink()
     if db.exists():
         print(f"scene database {db} exists (delete it to bake again)")
@@ -84,19 +85,35 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return _demo_replay(db, out / "report", args)
 
 
-def _has_paths(db: Path, names: tuple[str, ...]) -> bool:
-    """Whether ``db`` is a readable scene database holding every path in ``names``."""
+def _stale_reason(db: Path, names: tuple[str, ...]) -> str | None:
+    """Why the demo must bake ``db`` again, or ``None`` when it can keep it.
+
+    It bakes again when ``db`` is unreadable, lacks a path in ``names``, or was baked
+    with bake settings other than today's defaults (an upgrade that changed the
+    default sampling must show its own figures, not the last release's).
+    """
+    from dataclasses import asdict
+
+    from walkstream.server.bake import BakeSettings
     from walkstream.server.store import SceneReader
     from walkstream.shared.errors import StoreError
 
     try:
         reader = SceneReader.open(db)
     except StoreError:
-        return False
+        return "is not a readable scene database"
     try:
-        return set(names) <= set(reader.path_names())
+        missing = sorted(set(names) - set(reader.path_names()))
+        stored = reader.meta.settings
     finally:
         reader.close()
+    if missing:
+        return f"has no recorded path {', '.join(missing)}"
+    changed = [k for k, v in asdict(BakeSettings()).items() if k in stored and stored[k] != v]
+    changed += [k for k in asdict(BakeSettings()) if k not in stored]
+    if changed:
+        return f"was baked with other settings than today's defaults ({', '.join(sorted(changed))})"
+    return None
 
 
 def _demo_replay(db: Path, report: Path, args: argparse.Namespace) -> int:
