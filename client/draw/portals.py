@@ -74,10 +74,6 @@ CULLING_MODES: tuple[str, ...] = ("portals", "frustum", "none")
 
 _EPS_PX = 1e-3
 
-#: Directed portals up to which a frame projects every portal of the building at once
-#: (one numpy batch); above, the portals of the cells reached are projected a wave at a time.
-_PROJECT_ALL = 2048
-
 
 @dataclass(frozen=True)
 class PortalGraph:
@@ -113,6 +109,20 @@ class PortalGraph:
     hi: NDArray[np.float64]
     plane: NDArray[np.float64]
     index: dict[int, int] = field(default_factory=dict)
+    #: Per cell (by index) its directed portals as ``(row, target index)`` pairs: the
+    #: walk's adjacency as plain ints, built once per scene, not per frame.
+    adjacency: list[list[tuple[int, int]]] = field(init=False, repr=False, compare=False)
+    #: ``(k, 2)`` the vertex index pairs joining a padded polygon's sides.
+    edges: NDArray[np.int64] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        target = self.target.tolist()
+        starts = self.start.tolist()
+        adjacency = [[(r, target[r]) for r in range(a, b)] for a, b in zip(starts[:-1], starts[1:], strict=True)]
+        k = self.poly.shape[1]
+        # frozen: the derived tables are set once, here
+        object.__setattr__(self, "adjacency", adjacency)
+        object.__setattr__(self, "edges", np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1))
 
     @classmethod
     def from_topology(cls, topology: Any) -> PortalGraph:
@@ -284,17 +294,17 @@ def _rects(
         lo, hi = ndc.min(axis=1), ndc.max(axis=1)
     else:
         depth = -v[..., 2]
-        ahead = np.all(depth >= clip_m, axis=1)
-        rect = np.empty((m, 4), np.int64)
+        near_d, far_d = _kmin(depth), _kmax(depth)
+        ahead = near_d >= clip_m
         front = np.ones(m, bool)
-        if ahead.any():
-            # the common case, nothing to clip: the vertices' projections bound the set
-            va, da = v[ahead], depth[ahead]
-            x = (proj[0, 0] * va[..., 0] + proj[0, 2] * va[..., 2]) / da
-            y = (proj[1, 1] * va[..., 1] + proj[1, 2] * va[..., 2]) / da
-            rect[ahead] = _pixels(np.stack([x.min(axis=1), y.min(axis=1)], axis=1),
-                                  np.stack([x.max(axis=1), y.max(axis=1)], axis=1), size)
-        behind = np.all(depth < clip_m, axis=1)
+        # the common case, nothing to clip: the vertices' projections bound the set;
+        # computed for every row (elementwise, so each row's figures are the same as
+        # alone) and the others overwritten below
+        d = np.where(ahead[:, None], depth, 1.0)
+        x = (proj[0, 0] * v[..., 0] + proj[0, 2] * v[..., 2]) / d
+        y = (proj[1, 1] * v[..., 1] + proj[1, 2] * v[..., 2]) / d
+        rect = _pixels(np.stack([_kmin(x), _kmin(y)], axis=1), np.stack([_kmax(x), _kmax(y)], axis=1), size)
+        behind = far_d < clip_m
         front[behind] = False
         rect[behind] = (1, 1, 0, 0)
         rest = ~ahead & ~behind
@@ -302,6 +312,23 @@ def _rects(
             rect[rest], front[rest] = _clipped(v[rest], depth[rest], edges, proj, size, clip_m)
         return rect, front
     return _pixels(lo, hi, size), front
+
+
+def _kmin(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(m,)`` minima over the second axis of ``(m, k)``: ``k - 1`` elementwise minima,
+    cheaper than a reduction along a short axis for the few vertices of a portal or box."""
+    out = a[:, 0].copy()
+    for j in range(1, a.shape[1]):
+        np.minimum(out, a[:, j], out=out)
+    return out
+
+
+def _kmax(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(m,)`` maxima over the second axis of ``(m, k)`` (see :func:`_kmin`)."""
+    out = a[:, 0].copy()
+    for j in range(1, a.shape[1]):
+        np.maximum(out, a[:, j], out=out)
+    return out
 
 
 def _clipped(
@@ -396,43 +423,13 @@ def cull_portals(
     P = np.asarray(proj, np.float64)
     w, h = int(size[0]), int(size[1])
     # A portal's rectangle depends on the camera only, not on the VSA it is seen
-    # through: the portals of the cells waiting in the queue are projected together,
-    # vectorised, the first time one of them is taken (a few batches per frame, and
-    # only the cells reached), and the walk below intersects whole-pixel rectangles
-    # as plain ints, no numpy per cell.
-    m = len(graph.target)
-    k = graph.poly.shape[1]
-    edges = np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1)
-    near_pass = max(pass_m, clip_m * _corner_secant(P) * 1.01)
-    # per directed row: None (culled: beyond the fog or wholly behind the eye),
-    # True (pass the parent's VSA through), or its rectangle
-    R: list[Any] = [None] * m
-    done = [False] * len(graph.ids)
-
-    def project(cells: list[int]) -> None:
-        rows = np.concatenate([np.arange(graph.start[c], graph.start[c + 1]) for c in cells])
-        for c in cells:
-            done[c] = True
-        if len(rows) == 0:
-            return
-        rows = rows[box_distance(graph.lo[rows], graph.hi[rows], e) <= fog_m]
-        rect, front = _rects(graph.poly[rows], edges, V, P, (w, h), clip_m, naive)
-        through = np.zeros(len(rows), bool)
-        if not naive and len(rows):
-            dist = np.abs(graph.plane[rows, :3] @ e + graph.plane[rows, 3])
-            inside = np.all((e >= graph.lo[rows] - near_pass) & (e <= graph.hi[rows] + near_pass), axis=1)
-            through = (dist <= near_pass) & inside
-        for r, rc, ok, th in zip(rows.tolist(), rect.tolist(), front.tolist(), through.tolist(), strict=True):
-            if th:
-                R[r] = True
-            elif ok:
-                R[r] = rc
-
-    if m <= _PROJECT_ALL:
-        # a small building: one batch for all is cheaper than a batch per wave
-        project(list(range(len(graph.ids))))
-    target = graph.target.tolist()
-    starts = graph.start.tolist()
+    # through: every directed portal is projected in one numpy batch (one per frame,
+    # its table built once per scene: graph.adjacency), and the walk below intersects
+    # whole-pixel rectangles as plain ints.  The walk is the round-one FIFO walk
+    # (client/draw/portals_ref.py) step for step, so its cells, VSAs and depths are the
+    # same; only the constant work per portal is less.
+    R = _portal_table(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive)
+    adj = graph.adjacency
     s = graph.index[start]
     full = (0, 0, w - 1, h - 1)
     bound: dict[int, tuple[int, int, int, int]] = {s: full}
@@ -441,53 +438,79 @@ def cull_portals(
     order = [s]
     queue = deque([s])
     queued = {s}
+    pop, push, enq, deq = queue.popleft, queue.append, queued.add, queued.discard
     opened = tested = 0
     while queue:
-        c = queue.popleft()
-        queued.discard(c)
+        c = pop()
+        deq(c)
         dc = depth[c]
         if dc >= max_depth:
             continue
-        if not done[c]:
-            project([c] + [q for q in queue if not done[q]])
+        dn = dc + 1
         vx0, vy0, vx1, vy1 = bound[c]
-        for r in range(starts[c], starts[c + 1]):
+        for r, t in adj[c]:
             pr = R[r]
             if pr is None:
                 continue
             tested += 1
             if pr is True:
-                n = (vx0, vy0, vx1, vy1)
+                a0, a1, a2, a3 = vx0, vy0, vx1, vy1
             else:
-                n = (max(pr[0], vx0), max(pr[1], vy0), min(pr[2], vx1), min(pr[3], vy1))
-                if n[0] > n[2] or n[1] > n[3]:
+                a0, a1, a2, a3 = pr
+                # the portal's rectangle met the parent's VSA (max / min, inlined)
+                if a0 < vx0:
+                    a0 = vx0
+                if a2 > vx1:
+                    a2 = vx1
+                if a0 > a2:
+                    continue
+                if a1 < vy0:
+                    a1 = vy0
+                if a3 > vy1:
+                    a3 = vy1
+                if a1 > a3:
                     continue
             opened += 1
-            t = target[r]
             ob = bound.get(t)
             if ob is None:
+                n = (a0, a1, a2, a3)
                 bound[t] = n
                 lists[t] = [n]
-                depth[t] = dc + 1
+                depth[t] = dn
                 order.append(t)
             else:
                 have = lists[t]
-                if any(q[0] <= n[0] and q[1] <= n[1] and q[2] >= n[2] and q[3] >= n[3] for q in have):
+                covered = False
+                for q in have:
+                    if q[0] <= a0 and q[1] <= a1 and q[2] >= a2 and q[3] >= a3:
+                        covered = True
+                        break
+                if covered:
                     continue
-                have = [q for q in have if not (n[0] <= q[0] and n[1] <= q[1] and n[2] >= q[2] and n[3] >= q[3])]
+                n = (a0, a1, a2, a3)
+                have = [q for q in have if not (a0 <= q[0] and a1 <= q[1] and a2 >= q[2] and a3 >= q[3])]
                 have.append(n)
                 if len(have) > max_vsas:
-                    have = [(min(q[0] for q in have), min(q[1] for q in have),
-                             max(q[2] for q in have), max(q[3] for q in have))]
+                    have = [_bounding(have)]
                 lists[t] = have
-                nb = (min(ob[0], n[0]), min(ob[1], n[1]), max(ob[2], n[2]), max(ob[3], n[3]))
-                if nb == ob:
+                b0, b1, b2, b3 = ob
+                grew = False
+                if a0 < b0:
+                    b0, grew = a0, True
+                if a1 < b1:
+                    b1, grew = a1, True
+                if a2 > b2:
+                    b2, grew = a2, True
+                if a3 > b3:
+                    b3, grew = a3, True
+                if not grew:
                     continue
-                bound[t] = nb
-                depth[t] = min(depth[t], dc + 1)
+                bound[t] = (b0, b1, b2, b3)
+                if dn < depth[t]:
+                    depth[t] = dn
             if t not in queued:
-                queue.append(t)
-                queued.add(t)
+                push(t)
+                enq(t)
     ids = graph.ids.tolist()
     return PortalCull(
         order=[ids[i] for i in order],
@@ -497,6 +520,64 @@ def cull_portals(
         tested=tested,
         seconds=time.perf_counter() - t0,
     )
+
+
+def _bounding(rects: list[tuple[int, int, int, int]]) -> tuple[int, int, int, int]:
+    """The bounding rectangle of whole-pixel rectangles."""
+    x0, y0, x1, y1 = rects[0]
+    for q in rects[1:]:
+        x0, y0, x1, y1 = min(x0, q[0]), min(y0, q[1]), max(x1, q[2]), max(y1, q[3])
+    return (x0, y0, x1, y1)
+
+
+def _portal_table(
+    graph: PortalGraph,
+    e: NDArray[np.float64],
+    V: NDArray[np.float64],
+    P: NDArray[np.float64],
+    size: tuple[int, int],
+    clip_m: float,
+    pass_m: float,
+    fog_m: float,
+    naive: bool,
+) -> list[Any]:
+    """Per directed portal row: ``None`` (culled: beyond the fog or wholly behind the
+    clip plane), ``True`` (pass the parent's VSA through) or its whole-pixel rectangle
+    ``(x0, y0, x1, y1)``; all rows in one numpy batch."""
+    m = len(graph.target)
+    if m == 0:
+        return []
+    rows: NDArray[np.int64] | None = None
+    if math.isfinite(fog_m):
+        rows = np.flatnonzero(box_distance(graph.lo, graph.hi, e) <= fog_m)
+        if len(rows) == m:
+            rows = None
+    poly = graph.poly if rows is None else graph.poly[rows]
+    rect, front = _rects(poly, graph.edges, V, P, size, clip_m, naive)
+    table: list[Any] = list(map(tuple, rect.tolist()))
+    culled = np.flatnonzero(~front).tolist()
+    through: list[int] = []
+    if not naive:
+        near_pass = max(pass_m, clip_m * _corner_secant(P) * 1.01)
+        lo, hi = graph.lo, graph.hi
+        pl = graph.plane
+        if rows is not None:
+            lo, hi, pl = lo[rows], hi[rows], pl[rows]
+        dist = np.abs(pl[:, :3] @ e + pl[:, 3])
+        near = np.flatnonzero(dist <= near_pass)
+        if len(near):
+            inside = np.all((e >= lo[near] - near_pass) & (e <= hi[near] + near_pass), axis=1)
+            through = near[inside].tolist()
+    for i in culled:
+        table[i] = None
+    for i in through:
+        table[i] = True
+    if rows is None:
+        return table
+    out: list[Any] = [None] * m
+    for r, v in zip(rows.tolist(), table, strict=True):
+        out[r] = v
+    return out
 
 
 _BOX_EDGES = np.array(
