@@ -554,7 +554,7 @@ def _portal_table(
             rows = None
     poly = graph.poly if rows is None else graph.poly[rows]
     rect, front = _rects(poly, graph.edges, V, P, size, clip_m, naive)
-    table: list[Any] = list(map(tuple, rect.tolist()))
+    table: list[Any] = rect.tolist()
     culled = np.flatnonzero(~front).tolist()
     through: list[int] = []
     if not naive:
