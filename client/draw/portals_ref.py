@@ -49,29 +49,8 @@ def cull_portals_reference(
     max_vsas: int = 4,
     naive: bool = False,
 ) -> PortalCull:
-    """The round-one walk: same parameters and result as :func:`~walkstream.client.draw.portals.cull_portals`.
-
-    Parameters
-    ----------
-    graph : PortalGraph
-    start : int
-        The viewer's cell id.
-    eye : (3,) float
-    view, proj : (4, 4) float
-        The camera (``proj`` a perspective projection).
-    size : (int, int)
-        Viewport width and height, pixels.
-    fog_m : float
-        Portals whose box is farther than this are culled.
-    max_depth : int
-        Portals passed, at most.
-    clip_m, pass_m : float
-        The clip plane's depth and the pass-through distance, metres.
-    max_vsas : int
-        VSAs kept per cell before they are merged into one.
-    naive : bool
-        The paper's test (no clipping, no pass-through); for the tests only.
-    """
+    """Round one's walk: the parameters and result of
+    :func:`~walkstream.client.draw.portals.cull_portals` (see there), kept unchanged."""
     t0 = time.perf_counter()
     if start not in graph.index:
         raise InputError(f"cull_portals: no cell {start} in the interior")
