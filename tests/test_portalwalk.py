@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from walkstream.benchmarks.portals import hall_topology
+from walkstream.client.draw import portals
 from walkstream.client.draw.frames import camera
 from walkstream.client.draw.portals import (
     _BOX_EDGES,
@@ -85,17 +86,23 @@ def _poses(office: dict[str, Any], n: int, seed: int) -> list[tuple[np.ndarray, 
     return out
 
 
-@pytest.mark.parametrize("options", [
-    {},
-    {"fog_m": 6.0},
-    {"max_depth": 2, "max_vsas": 1},
-    {"naive": True},
+@pytest.mark.parametrize(("options", "lazy"), [
+    ({}, False),
+    ({}, True),
+    ({"fog_m": 6.0}, True),
+    ({"max_depth": 2, "max_vsas": 1}, False),
+    ({"naive": True}, False),
 ])
-def test_walk_keeps_round_ones_cells_vsas_and_parts_in_the_office(office: dict[str, Any], options: dict[str, Any]) -> None:
+def test_walk_keeps_round_ones_cells_vsas_and_parts_in_the_office(
+    office: dict[str, Any], options: dict[str, Any], lazy: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``lazy``: the office's portals turned into ints a cell at a time, as a large building's are."""
+    if lazy:
+        monkeypatch.setattr(portals, "_LIST_ALL", 0)
     proj = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 100.0).astype(np.float64)
     graph: PortalGraph = office["graph"]
     frames = visible = 0
-    for eye, yaw, pitch in _poses(office, 150, seed=len(options)):
+    for eye, yaw, pitch in _poses(office, 150, seed=len(options) + 10 * lazy):
         hit = np.flatnonzero(cell_of(office["planes"], eye))
         if not len(hit):
             continue

@@ -54,6 +54,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -119,19 +120,23 @@ class PortalGraph:
     hi: NDArray[np.float64]
     plane: NDArray[np.float64]
     index: dict[int, int] = field(default_factory=dict)
-    #: Per cell (by index) its directed portals as ``(row, target index)`` pairs: the
-    #: walk's adjacency as plain ints, built once per scene, not per frame.
-    adjacency: list[list[tuple[int, int]]] = field(init=False, repr=False, compare=False)
+    #: Per cell (by index) the target indices of its directed portals (rows
+    #: ``start[i]:start[i + 1]``): the walk's adjacency as plain ints, built once per
+    #: scene, not per frame.
+    adjacency: list[list[int]] = field(init=False, repr=False, compare=False)
+    #: :attr:`start` as plain ints.
+    row_start: list[int] = field(init=False, repr=False, compare=False)
     #: ``(k, 2)`` the vertex index pairs joining a padded polygon's sides.
     edges: NDArray[np.int64] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         target = self.target.tolist()
         starts = self.start.tolist()
-        adjacency = [[(r, target[r]) for r in range(a, b)] for a, b in zip(starts[:-1], starts[1:], strict=True)]
+        adjacency = [target[a:b] for a, b in zip(starts[:-1], starts[1:], strict=True)]
         k = self.poly.shape[1]
         # frozen: the derived tables are set once, here
         object.__setattr__(self, "adjacency", adjacency)
+        object.__setattr__(self, "row_start", starts)
         object.__setattr__(self, "edges", np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1))
 
     @classmethod
@@ -293,7 +298,8 @@ def _rects(
     m = len(pts)
     if m == 0:
         return np.zeros((0, 4), np.int64), np.zeros(0, bool)
-    v = pts @ view[:3, :3].T + view[:3, 3]  # (m, k, 3) eye space
+    # eye space (m, k, 3); one 2-d product (a stack of m small ones is several times slower)
+    v = (pts.reshape(-1, 3) @ view[:3, :3].T + view[:3, 3]).reshape(pts.shape)
     if naive:
         # the paper's Figure 4: culled only when every vertex is behind the eye; the
         # others projected as they are, a vertex behind the eye flipped through it
@@ -433,13 +439,12 @@ def cull_portals(
     P = np.asarray(proj, np.float64)
     w, h = int(size[0]), int(size[1])
     # A portal's rectangle depends on the camera only, not on the VSA it is seen
-    # through: every directed portal is projected in one numpy batch (one per frame,
-    # its table built once per scene: graph.adjacency), and the walk below intersects
+    # through: every directed portal is projected in one numpy batch per frame
+    # (_portal_rows; the adjacency is built once per scene), and the walk below intersects
     # whole-pixel rectangles as plain ints.  The walk is the round-one FIFO walk
     # (client/draw/portals_ref.py) step for step, so its cells, VSAs and depths are the
     # same; only the constant work per portal is less.
-    R = _portal_table(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive)
-    adj = graph.adjacency
+    rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive)
     s = graph.index[start]
     full = (0, 0, w - 1, h - 1)
     # per cell index (lists, not dicts: indexing is the walk's most frequent step)
@@ -461,8 +466,7 @@ def cull_portals(
             continue
         dn = dc + 1
         vx0, vy0, vx1, vy1 = bound[c]
-        for r, t in adj[c]:
-            pr = R[r]
+        for t, pr in rows_of(c):
             if pr is None:
                 continue
             tested += 1
@@ -543,7 +547,13 @@ def _bounding(rects: list[tuple[int, int, int, int]]) -> tuple[int, int, int, in
     return (x0, y0, x1, y1)
 
 
-def _portal_table(
+#: Directed portals up to which a frame turns every portal's rectangle into Python ints
+#: at once; above, a cell's are turned when the walk first reaches it (a large building
+#: of which a few cells are seen).  Either way all are projected in one numpy batch.
+_LIST_ALL = 1024
+
+
+def _portal_rows(
     graph: PortalGraph,
     e: NDArray[np.float64],
     V: NDArray[np.float64],
@@ -553,44 +563,48 @@ def _portal_table(
     pass_m: float,
     fog_m: float,
     naive: bool,
-) -> list[Any]:
-    """Per directed portal row: ``None`` (culled: beyond the fog or wholly behind the
-    clip plane), ``True`` (pass the parent's VSA through) or its whole-pixel rectangle
-    ``(x0, y0, x1, y1)``; all rows in one numpy batch."""
+) -> Callable[[int], Iterable[tuple[int, Any]]]:
+    """A function giving, for a cell index, its directed portals as ``(target index, what)``
+    pairs: ``what`` is ``None`` (culled: beyond the fog or wholly behind the clip plane),
+    ``True`` (pass the parent's VSA through) or the portal's whole-pixel rectangle
+    ``[x0, y0, x1, y1]``; every portal projected in one numpy batch."""
     m = len(graph.target)
+    adjacency, starts = graph.adjacency, graph.row_start
     if m == 0:
-        return []
-    rows: NDArray[np.int64] | None = None
-    if math.isfinite(fog_m):
-        rows = np.flatnonzero(box_distance(graph.lo, graph.hi, e) <= fog_m)
-        if len(rows) == m:
-            rows = None
-    poly = graph.poly if rows is None else graph.poly[rows]
-    rect, front = _rects(poly, graph.edges, V, P, size, clip_m, naive)
-    table: list[Any] = rect.tolist()
-    culled = np.flatnonzero(~front).tolist()
-    through: list[int] = []
+        return lambda c: ()
+    rect, front = _rects(graph.poly, graph.edges, V, P, size, clip_m, naive)
+    # 0 culled, 1 pass through, 2 the rectangle
+    what = np.where(front, 2, 0).astype(np.int8)
     if not naive:
         near_pass = max(pass_m, clip_m * _corner_secant(P) * 1.01)
-        lo, hi = graph.lo, graph.hi
-        pl = graph.plane
-        if rows is not None:
-            lo, hi, pl = lo[rows], hi[rows], pl[rows]
-        dist = np.abs(pl[:, :3] @ e + pl[:, 3])
+        dist = np.abs(graph.plane[:, :3] @ e + graph.plane[:, 3])
         near = np.flatnonzero(dist <= near_pass)
         if len(near):
-            inside = np.all((e >= lo[near] - near_pass) & (e <= hi[near] + near_pass), axis=1)
-            through = near[inside].tolist()
-    for i in culled:
-        table[i] = None
-    for i in through:
-        table[i] = True
-    if rows is None:
-        return table
-    out: list[Any] = [None] * m
-    for r, v in zip(rows.tolist(), table, strict=True):
-        out[r] = v
-    return out
+            inside = np.all((e >= graph.lo[near] - near_pass) & (e <= graph.hi[near] + near_pass), axis=1)
+            what[near[inside]] = 1
+    if math.isfinite(fog_m):
+        what[box_distance(graph.lo, graph.hi, e) > fog_m] = 0
+    if m <= _LIST_ALL:
+        table: list[Any] = rect.tolist()
+        for i in np.flatnonzero(what == 0).tolist():
+            table[i] = None
+        for i in np.flatnonzero(what == 1).tolist():
+            table[i] = True
+        return lambda c: zip(adjacency[c], table[starts[c] : starts[c + 1]], strict=True)
+    done: dict[int, list[tuple[int, Any]]] = {}
+
+    def rows_of(c: int) -> list[tuple[int, Any]]:
+        got = done.get(c)
+        if got is None:
+            a, b = starts[c], starts[c + 1]
+            got = [
+                (t, r if k == 2 else (None if k == 0 else True))
+                for t, r, k in zip(adjacency[c], rect[a:b].tolist(), what[a:b].tolist(), strict=True)
+            ]
+            done[c] = got
+        return got
+
+    return rows_of
 
 
 _BOX_EDGES = np.array(
