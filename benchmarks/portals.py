@@ -23,7 +23,9 @@ culling microseconds and the pda model's frame rate at the triangles drawn.
 
 Culling cost at scale: an open hall of ``k x k`` cells of 4 m (every wall between two
 cells an open portal) looked across from a corner, so that about a hundred cells are
-visible: cells-to-cells microseconds per frame against the visible cells.
+visible: cells-to-cells microseconds per frame against the visible cells, for the walk
+and, timed alternately with it, round one's walk (``before``); the tour's portal
+culling is timed both ways too (``cull us`` and ``before``, cells and parts).
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from walkstream.client.draw.portals import (
     cull_portals,
     frustum_cells,
 )
+from walkstream.client.draw.portals_ref import cull_portals_reference
 from walkstream.client.stream.rooms import _stack_planes, cell_of
 from walkstream.client.truth.interior import InteriorTruth
 from walkstream.server.bake import bake
@@ -54,6 +57,7 @@ from walkstream.server.sources.interiorgen import PRESETS, write_interior
 from walkstream.server.store import SceneReader
 from walkstream.shared.camera import perspective
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
+from walkstream.shared.errors import WalkstreamError
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology, decode_topology
 
@@ -134,7 +138,8 @@ def portal_figures(
                         renderer.upload((cid, k), part.mesh())
         ts = np.arange(0.0, tour.duration, step_s)[:frames]
         per: dict[str, dict[str, list[float]]] = {
-            m: {"cells": [], "tris": [], "cull_us": [], "gl_ms": [], "gl_fog_ms": [], "pda_ms": [], "parts": []}
+            m: {"cells": [], "tris": [], "cull_us": [], "cull_before_us": [], "gl_ms": [], "gl_fog_ms": [], "pda_ms": [],
+                "parts": []}
             for m in CULLING_MODES
         }
         tight: dict[str, list[float]] = {"portals": [], "frustum": []}
@@ -164,6 +169,11 @@ def portal_figures(
                     cells = list(meshes)
                     keep = {c: np.ones(len(tris[c]), bool) for c in cells}
                 dt = time.perf_counter() - t0
+                if mode == "portals":
+                    t1 = time.perf_counter()
+                    ref = cull_portals_reference(graph, current, eye, view, proj, size)
+                    cull_parts(mode, ref.order, boxes, eye, view, proj, size, vsas=ref.vsas)
+                    per[mode]["cull_before_us"].append((time.perf_counter() - t1) * 1e6)
                 kept_by[mode] = keep
                 n = int(sum(int(tris[c][m].sum()) for c, m in keep.items()))
                 parts = int(sum(int(m.sum()) for m in keep.values()))
@@ -253,38 +263,54 @@ def hall_topology(k: int, cell_m: float = 4.0, height: float = 3.0) -> Topology:
     return Topology((), tuple(cells), (), ())
 
 
-def hall_figures(sizes: Sequence[int] = (4, 8, 12, 16, 24), repeats: int = 50,
+def hall_figures(sizes: Sequence[int] = (4, 8, 12, 16, 24), repeats: int = 100,
                  size: tuple[int, int] = (640, 480)) -> list[dict[str, Any]]:
-    """Cells-to-cells culling microseconds in open halls looked across from a corner."""
+    """Cells-to-cells culling microseconds in open halls looked across from a corner:
+    the walk (``us_*``) and round one's (``before_us_*``, :mod:`~walkstream.client.draw.portals_ref`)
+    timed alternately, frame by frame, so that both see the same load."""
     proj = perspective(60.0, size[0] / size[1], 0.1, 1000.0).astype(np.float64)
     rows = []
     for k in sizes:
         graph = PortalGraph.from_topology(hall_topology(k))
         eye = np.array([0.5, 0.5, 1.6])
         view = camera(eye, math.pi / 4, 0.0).astype(np.float64)
-        us = []
+        us: list[float] = []
+        before: list[float] = []
         pc = None
         for _ in range(repeats):
             t0 = time.perf_counter()
             pc = cull_portals(graph, 0, eye, view, proj, size)
-            us.append((time.perf_counter() - t0) * 1e6)
+            t1 = time.perf_counter()
+            ref = cull_portals_reference(graph, 0, eye, view, proj, size)
+            before.append((time.perf_counter() - t1) * 1e6)
+            us.append((t1 - t0) * 1e6)
+            if ref.order != pc.order or ref.vsas != pc.vsas:
+                raise WalkstreamError(f"hall {k}x{k}: the walk and round one's disagree")
         assert pc is not None
         rows.append({"hall": f"{k}x{k}", "cells": k * k, "visible": len(pc.order), "tested": pc.tested,
-                     "us_median": float(np.median(us)), "us_p95": float(np.percentile(us, 95))})
+                     "us_median": float(np.median(us)), "us_p95": float(np.percentile(us, 95)),
+                     "before_us_median": float(np.median(before)), "before_us_p95": float(np.percentile(before, 95))})
     return rows
+
+
+def _before(r: dict[str, Any]) -> str:
+    """Round one's culling microseconds (median) beside the walk's, portal culling only."""
+    b = r.get("cull_before_us", {}).get("median", 0.0)
+    return f"{b:,.0f}" if b else "-"
 
 
 def portals_tables(scenes: Sequence[dict[str, Any]], halls: Sequence[dict[str, Any]]) -> str:
     """The benchmark's tables as text."""
     out = []
     out.append(f"{'scene':<9}{'cells':>6}{'mode':>9}{'vis cells':>10}{'tris mean':>10}{'tris p95':>9}"
-               f"{'cull us med':>12}{'p95':>7}{'gl ms med':>10}{'pda ms med':>11}")
+               f"{'cull us med':>12}{'p95':>7}{'before':>8}{'gl ms med':>10}{'pda ms med':>11}")
     for s in scenes:
         for m in CULLING_MODES:
             r = s["modes"][m]
             out.append(
                 f"{s['scene']:<9}{s['cells']:>6}{m:>9}{r['cells']['mean']:>10.1f}{r['tris']['mean']:>10,.0f}"
                 f"{r['tris']['p95']:>9,.0f}{r['cull_us']['median']:>12,.0f}{r['cull_us']['p95']:>7,.0f}"
+                f"{_before(r):>8}"
                 f"{r['gl_ms']['median']:>10.2f}{r['pda_ms']['median']:>11.1f}"
             )
     for s in scenes:
@@ -307,9 +333,13 @@ def portals_tables(scenes: Sequence[dict[str, Any]], halls: Sequence[dict[str, A
                 f"  {r['cells']} cells  {r['cell_triangles']:>6,} ({r['paper_triangles']:,})  drawn {r['drawn']:>6,}"
                 f"  {r['cull_us']:>6,.0f} us  {r['pda_fps']:>5.1f} fps ({r['paper_fps']})"
             )
-    out.append("open hall, cells-to-cells culling: hall, cells, visible, portal tests, us median, us p95")
+    out.append("open hall, cells-to-cells culling (median of the frames; before = round one's walk, timed alternately):")
+    out.append(f"  {'hall':>6} {'cells':>5} {'visible':>7} {'tests':>6} {'before us':>10} {'us':>7} {'speed-up':>8}"
+               f" {'before p95':>10} {'p95':>7}")
     for h in halls:
-        out.append(f"  {h['hall']:>6} {h['cells']:>5} {h['visible']:>5} {h['tested']:>6} {h['us_median']:>8,.0f} {h['us_p95']:>8,.0f}")
+        out.append(f"  {h['hall']:>6} {h['cells']:>5} {h['visible']:>7} {h['tested']:>6} {h['before_us_median']:>10,.0f}"
+                   f" {h['us_median']:>7,.0f} {h['before_us_median'] / h['us_median']:>7.1f}x"
+                   f" {h['before_us_p95']:>10,.0f} {h['us_p95']:>7,.0f}")
     return "\n".join(out)
 
 

@@ -37,6 +37,16 @@ the pass-through takes (its threshold is the larger of that and ``pass_m``).
 
 ``naive=True`` is the paper's test as printed (no clipping, no pass-through), kept to
 show that the conservative test catches it.
+
+Cost: a portal's rectangle depends on the camera only, so every directed portal of the
+building is clipped and projected in one numpy batch per frame; the walk is then a FIFO
+walk over plain ints (per-scene adjacency lists built once, in :class:`PortalGraph`),
+about 4-6 us per visible cell on the 2-core machine.  It is round one's walk step for
+step (:mod:`.portals_ref` keeps that one; tests/test_portalwalk.py checks they agree):
+a walk by levels with numpy batches per level was not taken, since the FIFO order
+decides the VSA lists (which VSAs reach a cell before it is looked through) and a
+level costs tens of numpy calls whatever its size, more than the few cells of a
+level cost in Python.
 """
 
 from __future__ import annotations
@@ -44,6 +54,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -73,10 +84,6 @@ __all__ = [
 CULLING_MODES: tuple[str, ...] = ("portals", "frustum", "none")
 
 _EPS_PX = 1e-3
-
-#: Directed portals up to which a frame projects every portal of the building at once
-#: (one numpy batch); above, the portals of the cells reached are projected a wave at a time.
-_PROJECT_ALL = 2048
 
 
 @dataclass(frozen=True)
@@ -113,6 +120,24 @@ class PortalGraph:
     hi: NDArray[np.float64]
     plane: NDArray[np.float64]
     index: dict[int, int] = field(default_factory=dict)
+    #: Per cell (by index) the target indices of its directed portals (rows
+    #: ``start[i]:start[i + 1]``): the walk's adjacency as plain ints, built once per
+    #: scene, not per frame.
+    adjacency: list[list[int]] = field(init=False, repr=False, compare=False)
+    #: :attr:`start` as plain ints.
+    row_start: list[int] = field(init=False, repr=False, compare=False)
+    #: ``(k, 2)`` the vertex index pairs joining a padded polygon's sides.
+    edges: NDArray[np.int64] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        target = self.target.tolist()
+        starts = self.start.tolist()
+        adjacency = [target[a:b] for a, b in zip(starts[:-1], starts[1:], strict=True)]
+        k = self.poly.shape[1]
+        # frozen: the derived tables are set once, here
+        object.__setattr__(self, "adjacency", adjacency)
+        object.__setattr__(self, "row_start", starts)
+        object.__setattr__(self, "edges", np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1))
 
     @classmethod
     def from_topology(cls, topology: Any) -> PortalGraph:
@@ -273,7 +298,8 @@ def _rects(
     m = len(pts)
     if m == 0:
         return np.zeros((0, 4), np.int64), np.zeros(0, bool)
-    v = pts @ view[:3, :3].T + view[:3, 3]  # (m, k, 3) eye space
+    # eye space (m, k, 3); one 2-d product (a stack of m small ones is several times slower)
+    v = (pts.reshape(-1, 3) @ view[:3, :3].T + view[:3, 3]).reshape(pts.shape)
     if naive:
         # the paper's Figure 4: culled only when every vertex is behind the eye; the
         # others projected as they are, a vertex behind the eye flipped through it
@@ -284,17 +310,17 @@ def _rects(
         lo, hi = ndc.min(axis=1), ndc.max(axis=1)
     else:
         depth = -v[..., 2]
-        ahead = np.all(depth >= clip_m, axis=1)
-        rect = np.empty((m, 4), np.int64)
+        near_d, far_d = _kmin(depth), _kmax(depth)
+        ahead = near_d >= clip_m
         front = np.ones(m, bool)
-        if ahead.any():
-            # the common case, nothing to clip: the vertices' projections bound the set
-            va, da = v[ahead], depth[ahead]
-            x = (proj[0, 0] * va[..., 0] + proj[0, 2] * va[..., 2]) / da
-            y = (proj[1, 1] * va[..., 1] + proj[1, 2] * va[..., 2]) / da
-            rect[ahead] = _pixels(np.stack([x.min(axis=1), y.min(axis=1)], axis=1),
-                                  np.stack([x.max(axis=1), y.max(axis=1)], axis=1), size)
-        behind = np.all(depth < clip_m, axis=1)
+        # the common case, nothing to clip: the vertices' projections bound the set;
+        # computed for every row (elementwise, so each row's figures are the same as
+        # alone) and the others overwritten below
+        d = np.where(ahead[:, None], depth, 1.0)
+        x = (proj[0, 0] * v[..., 0] + proj[0, 2] * v[..., 2]) / d
+        y = (proj[1, 1] * v[..., 1] + proj[1, 2] * v[..., 2]) / d
+        rect = _pixels(np.stack([_kmin(x), _kmin(y)], axis=1), np.stack([_kmax(x), _kmax(y)], axis=1), size)
+        behind = far_d < clip_m
         front[behind] = False
         rect[behind] = (1, 1, 0, 0)
         rest = ~ahead & ~behind
@@ -302,6 +328,23 @@ def _rects(
             rect[rest], front[rest] = _clipped(v[rest], depth[rest], edges, proj, size, clip_m)
         return rect, front
     return _pixels(lo, hi, size), front
+
+
+def _kmin(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(m,)`` minima over the second axis of ``(m, k)``: ``k - 1`` elementwise minima,
+    cheaper than a reduction along a short axis for the few vertices of a portal or box."""
+    out = a[:, 0].copy()
+    for j in range(1, a.shape[1]):
+        np.minimum(out, a[:, j], out=out)
+    return out
+
+
+def _kmax(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(m,)`` maxima over the second axis of ``(m, k)`` (see :func:`_kmin`)."""
+    out = a[:, 0].copy()
+    for j in range(1, a.shape[1]):
+        np.maximum(out, a[:, j], out=out)
+    return out
 
 
 def _clipped(
@@ -396,98 +439,95 @@ def cull_portals(
     P = np.asarray(proj, np.float64)
     w, h = int(size[0]), int(size[1])
     # A portal's rectangle depends on the camera only, not on the VSA it is seen
-    # through: the portals of the cells waiting in the queue are projected together,
-    # vectorised, the first time one of them is taken (a few batches per frame, and
-    # only the cells reached), and the walk below intersects whole-pixel rectangles
-    # as plain ints, no numpy per cell.
-    m = len(graph.target)
-    k = graph.poly.shape[1]
-    edges = np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1)
-    near_pass = max(pass_m, clip_m * _corner_secant(P) * 1.01)
-    # per directed row: None (culled: beyond the fog or wholly behind the eye),
-    # True (pass the parent's VSA through), or its rectangle
-    R: list[Any] = [None] * m
-    done = [False] * len(graph.ids)
-
-    def project(cells: list[int]) -> None:
-        rows = np.concatenate([np.arange(graph.start[c], graph.start[c + 1]) for c in cells])
-        for c in cells:
-            done[c] = True
-        if len(rows) == 0:
-            return
-        rows = rows[box_distance(graph.lo[rows], graph.hi[rows], e) <= fog_m]
-        rect, front = _rects(graph.poly[rows], edges, V, P, (w, h), clip_m, naive)
-        through = np.zeros(len(rows), bool)
-        if not naive and len(rows):
-            dist = np.abs(graph.plane[rows, :3] @ e + graph.plane[rows, 3])
-            inside = np.all((e >= graph.lo[rows] - near_pass) & (e <= graph.hi[rows] + near_pass), axis=1)
-            through = (dist <= near_pass) & inside
-        for r, rc, ok, th in zip(rows.tolist(), rect.tolist(), front.tolist(), through.tolist(), strict=True):
-            if th:
-                R[r] = True
-            elif ok:
-                R[r] = rc
-
-    if m <= _PROJECT_ALL:
-        # a small building: one batch for all is cheaper than a batch per wave
-        project(list(range(len(graph.ids))))
-    target = graph.target.tolist()
-    starts = graph.start.tolist()
+    # through: every directed portal is projected in one numpy batch per frame
+    # (_portal_rows; the adjacency is built once per scene), and the walk below intersects
+    # whole-pixel rectangles as plain ints.  The walk is the round-one FIFO walk
+    # (client/draw/portals_ref.py) step for step, so its cells, VSAs and depths are the
+    # same; only the constant work per portal is less.
+    rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive)
     s = graph.index[start]
     full = (0, 0, w - 1, h - 1)
-    bound: dict[int, tuple[int, int, int, int]] = {s: full}
-    lists: dict[int, list[tuple[int, int, int, int]]] = {s: [full]}
-    depth = {s: 0}
+    # per cell index (lists, not dicts: indexing is the walk's most frequent step)
+    nc = len(graph.ids)
+    bound: list[Any] = [None] * nc
+    lists: list[Any] = [None] * nc
+    depth = [0] * nc
+    queued = [False] * nc
+    bound[s], lists[s], queued[s] = full, [full], True
     order = [s]
     queue = deque([s])
-    queued = {s}
+    pop, push = queue.popleft, queue.append
     opened = tested = 0
     while queue:
-        c = queue.popleft()
-        queued.discard(c)
+        c = pop()
+        queued[c] = False
         dc = depth[c]
         if dc >= max_depth:
             continue
-        if not done[c]:
-            project([c] + [q for q in queue if not done[q]])
+        dn = dc + 1
         vx0, vy0, vx1, vy1 = bound[c]
-        for r in range(starts[c], starts[c + 1]):
-            pr = R[r]
+        for t, pr in rows_of(c):
             if pr is None:
                 continue
             tested += 1
             if pr is True:
-                n = (vx0, vy0, vx1, vy1)
+                a0, a1, a2, a3 = vx0, vy0, vx1, vy1
             else:
-                n = (max(pr[0], vx0), max(pr[1], vy0), min(pr[2], vx1), min(pr[3], vy1))
-                if n[0] > n[2] or n[1] > n[3]:
+                a0, a1, a2, a3 = pr
+                # the portal's rectangle met the parent's VSA (max / min, inlined)
+                if a0 < vx0:
+                    a0 = vx0
+                if a2 > vx1:
+                    a2 = vx1
+                if a0 > a2:
+                    continue
+                if a1 < vy0:
+                    a1 = vy0
+                if a3 > vy1:
+                    a3 = vy1
+                if a1 > a3:
                     continue
             opened += 1
-            t = target[r]
-            ob = bound.get(t)
+            ob = bound[t]
             if ob is None:
+                n = (a0, a1, a2, a3)
                 bound[t] = n
                 lists[t] = [n]
-                depth[t] = dc + 1
+                depth[t] = dn
                 order.append(t)
             else:
                 have = lists[t]
-                if any(q[0] <= n[0] and q[1] <= n[1] and q[2] >= n[2] and q[3] >= n[3] for q in have):
+                covered = False
+                for q in have:
+                    if q[0] <= a0 and q[1] <= a1 and q[2] >= a2 and q[3] >= a3:
+                        covered = True
+                        break
+                if covered:
                     continue
-                have = [q for q in have if not (n[0] <= q[0] and n[1] <= q[1] and n[2] >= q[2] and n[3] >= q[3])]
+                n = (a0, a1, a2, a3)
+                have = [q for q in have if not (a0 <= q[0] and a1 <= q[1] and a2 >= q[2] and a3 >= q[3])]
                 have.append(n)
                 if len(have) > max_vsas:
-                    have = [(min(q[0] for q in have), min(q[1] for q in have),
-                             max(q[2] for q in have), max(q[3] for q in have))]
+                    have = [_bounding(have)]
                 lists[t] = have
-                nb = (min(ob[0], n[0]), min(ob[1], n[1]), max(ob[2], n[2]), max(ob[3], n[3]))
-                if nb == ob:
+                b0, b1, b2, b3 = ob
+                grew = False
+                if a0 < b0:
+                    b0, grew = a0, True
+                if a1 < b1:
+                    b1, grew = a1, True
+                if a2 > b2:
+                    b2, grew = a2, True
+                if a3 > b3:
+                    b3, grew = a3, True
+                if not grew:
                     continue
-                bound[t] = nb
-                depth[t] = min(depth[t], dc + 1)
-            if t not in queued:
-                queue.append(t)
-                queued.add(t)
+                bound[t] = (b0, b1, b2, b3)
+                if dn < depth[t]:
+                    depth[t] = dn
+            if not queued[t]:
+                push(t)
+                queued[t] = True
     ids = graph.ids.tolist()
     return PortalCull(
         order=[ids[i] for i in order],
@@ -497,6 +537,74 @@ def cull_portals(
         tested=tested,
         seconds=time.perf_counter() - t0,
     )
+
+
+def _bounding(rects: list[tuple[int, int, int, int]]) -> tuple[int, int, int, int]:
+    """The bounding rectangle of whole-pixel rectangles."""
+    x0, y0, x1, y1 = rects[0]
+    for q in rects[1:]:
+        x0, y0, x1, y1 = min(x0, q[0]), min(y0, q[1]), max(x1, q[2]), max(y1, q[3])
+    return (x0, y0, x1, y1)
+
+
+#: Directed portals up to which a frame turns every portal's rectangle into Python ints
+#: at once; above, a cell's are turned when the walk first reaches it (a large building
+#: of which a few cells are seen).  Either way all are projected in one numpy batch.
+_LIST_ALL = 1024
+
+
+def _portal_rows(
+    graph: PortalGraph,
+    e: NDArray[np.float64],
+    V: NDArray[np.float64],
+    P: NDArray[np.float64],
+    size: tuple[int, int],
+    clip_m: float,
+    pass_m: float,
+    fog_m: float,
+    naive: bool,
+) -> Callable[[int], Iterable[tuple[int, Any]]]:
+    """A function giving, for a cell index, its directed portals as ``(target index, what)``
+    pairs: ``what`` is ``None`` (culled: beyond the fog or wholly behind the clip plane),
+    ``True`` (pass the parent's VSA through) or the portal's whole-pixel rectangle
+    ``[x0, y0, x1, y1]``; every portal projected in one numpy batch."""
+    m = len(graph.target)
+    adjacency, starts = graph.adjacency, graph.row_start
+    if m == 0:
+        return lambda c: ()
+    rect, front = _rects(graph.poly, graph.edges, V, P, size, clip_m, naive)
+    # 0 culled, 1 pass through, 2 the rectangle
+    what = np.where(front, 2, 0).astype(np.int8)
+    if not naive:
+        near_pass = max(pass_m, clip_m * _corner_secant(P) * 1.01)
+        dist = np.abs(graph.plane[:, :3] @ e + graph.plane[:, 3])
+        near = np.flatnonzero(dist <= near_pass)
+        if len(near):
+            inside = np.all((e >= graph.lo[near] - near_pass) & (e <= graph.hi[near] + near_pass), axis=1)
+            what[near[inside]] = 1
+    if math.isfinite(fog_m):
+        what[box_distance(graph.lo, graph.hi, e) > fog_m] = 0
+    if m <= _LIST_ALL:
+        table: list[Any] = rect.tolist()
+        for i in np.flatnonzero(what == 0).tolist():
+            table[i] = None
+        for i in np.flatnonzero(what == 1).tolist():
+            table[i] = True
+        return lambda c: zip(adjacency[c], table[starts[c] : starts[c + 1]], strict=True)
+    done: dict[int, list[tuple[int, Any]]] = {}
+
+    def rows_of(c: int) -> list[tuple[int, Any]]:
+        got = done.get(c)
+        if got is None:
+            a, b = starts[c], starts[c + 1]
+            got = [
+                (t, r if k == 2 else (None if k == 0 else True))
+                for t, r, k in zip(adjacency[c], rect[a:b].tolist(), what[a:b].tolist(), strict=True)
+            ]
+            done[c] = got
+        return got
+
+    return rows_of
 
 
 _BOX_EDGES = np.array(
