@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.benchmarks.portalwalk import cull_portals_reference
 from walkstream.client.draw.devices import make_device
 from walkstream.client.draw.frames import FrameRenderer, camera
 from walkstream.client.draw.portals import (
@@ -48,7 +49,6 @@ from walkstream.client.draw.portals import (
     cull_portals,
     frustum_cells,
 )
-from walkstream.client.draw.portals_ref import cull_portals_reference
 from walkstream.client.stream.rooms import _stack_planes, cell_of
 from walkstream.client.truth.interior import InteriorTruth
 from walkstream.server.bake import bake
@@ -266,7 +266,7 @@ def hall_topology(k: int, cell_m: float = 4.0, height: float = 3.0) -> Topology:
 def hall_figures(sizes: Sequence[int] = (4, 8, 12, 16, 24), repeats: int = 100,
                  size: tuple[int, int] = (640, 480)) -> list[dict[str, Any]]:
     """Cells-to-cells culling microseconds in open halls looked across from a corner:
-    the walk (``us_*``) and round one's (``before_us_*``, :mod:`~walkstream.client.draw.portals_ref`)
+    the walk (``us_*``) and round one's (``before_us_*``, :mod:`~walkstream.benchmarks.portalwalk`)
     timed alternately, frame by frame, so that both see the same load."""
     proj = perspective(60.0, size[0] / size[1], 0.1, 1000.0).astype(np.float64)
     rows = []

@@ -1,4 +1,4 @@
-"""The faster portal walk (client/draw/portals.py) against round one's (client/draw/portals_ref.py).
+"""The faster portal walk (client/draw/portals.py) against round one's (benchmarks/portalwalk.py).
 
 The walk was made faster without changing what it culls: on random poses in the
 generated office (anywhere in a cell, and on and beside its portals' planes, where the
@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from walkstream.benchmarks.portals import hall_topology
+from walkstream.benchmarks.portalwalk import cull_portals_reference, rects_reference
 from walkstream.client.draw import portals
 from walkstream.client.draw.frames import camera
 from walkstream.client.draw.portals import (
@@ -29,7 +30,6 @@ from walkstream.client.draw.portals import (
     cull_parts,
     cull_portals,
 )
-from walkstream.client.draw.portals_ref import cull_portals_reference, rects_reference
 from walkstream.client.stream.rooms import _stack_planes, cell_of
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.store import SceneReader

@@ -42,7 +42,7 @@ Cost: a portal's rectangle depends on the camera only, so every directed portal 
 building is clipped and projected in one numpy batch per frame; the walk is then a FIFO
 walk over plain ints (per-scene adjacency lists built once, in :class:`PortalGraph`),
 about 4-6 us per visible cell on the 2-core machine.  It is round one's walk step for
-step (:mod:`.portals_ref` keeps that one; tests/test_portalwalk.py checks they agree):
+step (:mod:`walkstream.benchmarks.portalwalk` keeps that one; tests/test_portalwalk.py checks they agree):
 a walk by levels with numpy batches per level was not taken, since the FIFO order
 decides the VSA lists (which VSAs reach a cell before it is looked through) and a
 level costs tens of numpy calls whatever its size, more than the few cells of a
@@ -442,7 +442,7 @@ def cull_portals(
     # through: every directed portal is projected in one numpy batch per frame
     # (_portal_rows; the adjacency is built once per scene), and the walk below intersects
     # whole-pixel rectangles as plain ints.  The walk is the round-one FIFO walk
-    # (client/draw/portals_ref.py) step for step, so its cells, VSAs and depths are the
+    # (benchmarks/portalwalk.py) step for step, so its cells, VSAs and depths are the
     # same; only the constant work per portal is less.
     rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive)
     s = graph.index[start]

@@ -4,7 +4,7 @@
 as merged for issue 14 (a FIFO walk over Python ints, the portals projected in lazy
 waves above ``_PROJECT_ALL`` directed portals).  The walk that replaced it must give
 exactly the same cells, VSAs and depths in the same order (tests/test_portalwalk.py),
-and ``walkstream bench portals`` times both side by side.  Nothing else calls it.
+and ``walkstream bench portals`` times both side by side.  It lives with the benchmarks, not in the client: nothing the client runs calls it.
 """
 
 from __future__ import annotations
