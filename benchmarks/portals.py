@@ -349,7 +349,7 @@ def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out
         rows.append({"case": name, **{key: s.get(key) for key in (
             "perfect_frame_ratio", "time_to_first_perfect_frame_s", "redownloads", "cells_flushed", "fps_mean",
             "fps_within_10pct_ratio", "recovery_frames", "fog_m_median", "fog_m_min", "fog_tightened_frames",
-            "culling_ms_median", "visible_cells_mean", "triangles_mean", "topology_bytes")}})
+            "culling_ms_median", "visible_cells_mean", "triangles_mean", "topology_bytes", "contents_bytes")}})
     return rows
 
 

@@ -20,7 +20,12 @@ from walkstream.cli import main
 from walkstream.client.clock import SimClock
 from walkstream.client.draw.frames import camera
 from walkstream.client.stream.cache import Cache
-from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer, predicted_view
+from walkstream.client.stream.rooms import (
+    RoomStreamConfig,
+    RoomStreamer,
+    predicted_view,
+    turned_view,
+)
 from walkstream.server.service.main import create_app
 from walkstream.shared.camera import perspective
 from walkstream.shared.errors import CodecError, InputError
@@ -128,7 +133,7 @@ def test_flush_after_from_the_cli(office_db: Path, tmp_path: Path) -> None:
 
 def test_prefetch_follows_the_predicted_motion_in_order(office_db: Path) -> None:
     topo = _topology(office_db)
-    s = _streamer(topo, RoomStreamConfig())
+    s = _streamer(topo, RoomStreamConfig(turns_deg=()))
     size = (160, 120)
     proj = perspective(60.0, size[0] / size[1], 0.1, 80.0).astype(np.float64)
     # the longest corridor cell: walk along it, looking along it
@@ -165,6 +170,15 @@ def test_prefetch_follows_the_predicted_motion_in_order(office_db: Path) -> None
             first_seen.setdefault(x, h)
     times = [first_seen[x] for x in ahead]
     assert times == sorted(times) and len(set(times)) > 1
+    # the turned views: from where the eye is, the other way round, after the motion's cells
+    turned = _streamer(topo, RoomStreamConfig(turns_deg=(180.0,)))
+    turned._track, turned.current = list(s._track), s.current
+    both = turned.predicted(eye, proj @ view, view, proj, size)
+    back = turned_view(view, eye, 180.0)
+    behind = s._cells_from(s.current, eye, proj @ back, back, proj, size)[1]
+    assert both[: len(ahead)] == ahead and set(both) == set(ahead) | set(behind)
+    assert behind and s.current in behind
+    assert np.allclose(back[:3, :3] @ step, -(view[:3, :3] @ step)) and np.allclose(back @ [*eye, 1], view @ [*eye, 1])
     # no prefetch beyond its share of the cache
     small = _streamer(topo, RoomStreamConfig(prefetch_share=0.5), budget=20_000)
     small._track = list(s._track)

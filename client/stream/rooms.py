@@ -16,8 +16,9 @@ An interior is walked like this (Mulloni et al.'s cell manager):
   the cells that the *predicted* motion (the eye moving on at its velocity of the last
   :attr:`RoomStreamConfig.velocity_s` seconds, looking the same way) makes visible
   through the portal graph within the fog, :attr:`RoomStreamConfig.lookahead_s` ahead
-  and nearest in time first, then the cells one portal beyond the visible ones (where
-  the walker may turn).  What is fetched ahead stops at
+  and nearest in time first, then the cells visible in the last
+  :attr:`RoomStreamConfig.recent_s` seconds (the walker may turn round), then the cells
+  one portal beyond the visible ones (where the walker may turn).  What is fetched ahead stops at
   :attr:`RoomStreamConfig.prefetch_share` of the cache's byte budget and is pinned
   with the visible cells, so prefetching never pushes out a cell needed sooner;
 * **flush**: a cell not visible for :attr:`RoomStreamConfig.flush_s` seconds
@@ -33,6 +34,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -46,7 +48,7 @@ from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import ApiError, InputError
 from walkstream.shared.roomwire import RoomRecord, Topology
 
-__all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "cell_of", "predicted_view"]
+__all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "cell_of", "predicted_view", "turned_view"]
 
 #: ``--flush-policy`` choices (see :attr:`RoomStreamConfig.flush_policy`).
 FLUSH_POLICIES: tuple[str, ...] = ("crowded", "paper")
@@ -74,6 +76,11 @@ class RoomStreamConfig:
     lookahead_s: tuple[float, ...] = (0.5, 1.0, 2.0, 3.0, 4.0)
     """Prefetch: how far ahead (seconds of predicted motion) the visible cells are
     predicted, nearest first."""
+    turns_deg: tuple[float, ...] = ()
+    """Prefetch: after the predicted motion, the cells seen from where the eye is now
+    turned by these angles about the vertical.  None by default: on the office tour
+    with a 400 kB cache (90, -90, 180) fetched 28 % more bytes for no more perfect
+    frames (93.6 % both)."""
     velocity_s: float = 0.5
     """Prefetch: the eye's velocity is measured over this many seconds."""
     replan_s: float = 0.25
@@ -81,9 +88,10 @@ class RoomStreamConfig:
     recent_s: float = 10.0
     """Cells visible within this many seconds are kept ahead of the cells one portal
     beyond (the walker who turns round sees them again)."""
-    prefetch_share: float = 0.9
+    prefetch_share: float = 0.7
     """Prefetch stops once the wanted cells (visible first) fill this share of the
-    cache's budget."""
+    cache's budget (the rest keeps cells seen earlier; on the office tour with a 400 kB
+    cache 0.5 / 0.7 / 0.9 gave 92.7 / 95.6 / 93.6 % perfect frames)."""
     max_in_flight: int = 2
     culling: str = "portals"
     """``portals`` (VSAs), ``frustum`` (portals in the frustum) or ``none`` (as
@@ -125,6 +133,18 @@ def predicted_view(view: NDArray[np.float64], eye: NDArray[np.float64], eye2: ND
     out = np.array(view, dtype=np.float64)
     out[:3, 3] -= out[:3, :3] @ (np.asarray(eye2, np.float64) - np.asarray(eye, np.float64))
     return out
+
+
+def turned_view(view: NDArray[np.float64], eye: NDArray[np.float64], deg: float) -> NDArray[np.float64]:
+    """The ``(4, 4)`` view matrix ``view`` turned by ``deg`` degrees about the vertical
+    through ``eye`` ``(3,)``."""
+    a = np.radians(deg)
+    rot = np.eye(4)
+    rot[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    move, back = np.eye(4), np.eye(4)
+    move[:3, 3] = eye
+    back[:3, 3] = -np.asarray(eye, np.float64)
+    return np.asarray(view, np.float64) @ move @ rot @ back
 
 
 def cell_of(planes: NDArray[np.float64], eye: NDArray[np.float64], tol: float = 1e-6) -> NDArray[np.bool_]:
@@ -170,6 +190,8 @@ class RoomStreamer:
         self._ahead: list[int] = []
         self._planned_t = -np.inf
         self._bytes_per_triangle = 32.0
+        self.plan_s = 0.0
+        """CPU seconds the last :meth:`tick` spent predicting (not the frame's culling)."""
         self._received = [0, 0]  # decoded bytes, triangles
 
     # -- where the viewer is ---------------------------------------------------
@@ -323,18 +345,16 @@ class RoomStreamer:
     ) -> list[int]:
         """The cells the predicted motion makes visible, in the order it reaches them:
         for each horizon of ``lookahead_s`` the eye moved on at :meth:`velocity`, looking
-        the same way, culled from its cell as the frame is.  The prediction stops where
-        the moved eye leaves the cells through a wall (its cell is none of the last
-        one's neighbours)."""
+        the same way, culled from its cell as the frame is (the prediction stops where
+        the moved eye leaves the cells through a wall: its cell is none of the last
+        one's neighbours); then those seen from here turned by ``turns_deg``."""
         if self.current is None or view is None:
             return []
         v = self.velocity()
-        if not np.any(v):
-            return []
         out: list[int] = []
         seen: set[int] = set()
         cell: int | None = self.current
-        for h in self.config.lookahead_s:
+        for h in self.config.lookahead_s if np.any(v) else ():
             e2 = eye + h * v
             nxt = self._locate_from(cell, e2, anywhere=False)
             if nxt is None or not self._holds(nxt, e2):
@@ -343,6 +363,13 @@ class RoomStreamer:
             view2 = predicted_view(view, eye, e2)
             vp2 = view_proj @ np.linalg.inv(view) @ view2
             for c in self._cells_from(cell, e2, vp2, view2, proj, size)[1]:
+                if c not in seen:
+                    seen.add(c)
+                    out.append(c)
+        for deg in self.config.turns_deg:
+            view2 = turned_view(view, eye, deg)
+            vp2 = view_proj @ np.linalg.inv(view) @ view2
+            for c in self._cells_from(self.current, eye, vp2, view2, proj, size)[1]:
                 if c not in seen:
                     seen.add(c)
                     out.append(c)
@@ -365,9 +392,12 @@ class RoomStreamer:
         want = list(vis)
         if not self.config.prefetch:
             return want
+        self.plan_s = 0.0
         if t - self._planned_t >= self.config.replan_s:
             self._planned_t = t
+            t0 = time.perf_counter()
             self._ahead = self.predicted(eye, view_proj, view, proj, size)
+            self.plan_s = time.perf_counter() - t0
         have = set(want)
         room = self.config.prefetch_share * self.cache.budget_bytes - self.visible_bytes(want)
         beyond = [n for c in vis for n in self.cells[c].neighbours]
