@@ -336,6 +336,7 @@ def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out
     cases: list[tuple[str, dict[str, Any]]] = [
         ("56 kbit/s, default cache", dict(link)),
         ("56 kbit/s, cache 400 kB", {**link, "cache": "400kB"}),
+        ("56 kbit/s, cache 600 kB", {**link, "cache": "600kB"}),
         ("56 kbit/s, paper flush (30 s)", {**link, "flush_policy": "paper"}),
         ("56 kbit/s, cache 400 kB, paper flush", {**link, "cache": "400kB", "flush_policy": "paper"}),
         ("pda 25 fps, fog by budget, cost x10", {**link, "device": "pda", "fps": 25.0, "cost_step_at_s": step_at}),

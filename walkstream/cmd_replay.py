@@ -231,7 +231,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--flush-after", type=float, default=30.0, metavar="S",
                    help="interiors: a cell not visible for S seconds is flushed (default 30)")
     r.add_argument("--flush-policy", choices=("crowded", "paper"), default="crowded",
-                   help="interiors: flush only while the cache is more than half full (default: nothing is "
+                   help="interiors: flush only while the cache is more than 90 %% full (default: nothing is "
                    "downloaded twice while the walk fits the cache), or always (the paper's policy)")
     r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")

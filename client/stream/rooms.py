@@ -24,7 +24,7 @@ An interior is walked like this (Mulloni et al.'s cell manager):
 * **flush**: a cell not visible for :attr:`RoomStreamConfig.flush_s` seconds
   (``--flush-after``) is flushed, the paper's policy; by default
   (:attr:`RoomStreamConfig.flush_policy` ``crowded``) only while the cache is fuller
-  than :attr:`RoomStreamConfig.flush_fill` of its budget, so a walk that fits the cache
+  than :attr:`RoomStreamConfig.flush_fill` (90 %) of its budget, so a walk that fits the cache
   downloads nothing twice; ``paper`` flushes whatever the fill.  The cache's byte-budget
   LRU stays in charge either way.  A cell fetched again after a flush or an eviction
   counts as a re-download.
@@ -67,12 +67,14 @@ class RoomStreamConfig:
     """A cell not visible for this long is flushed from memory (``--flush-after``)."""
     flush_policy: str = "crowded"
     """``paper``: flush every cell not visible for :attr:`flush_s` (Mulloni et al.);
-    ``crowded`` (default): only while the cache is fuller than :attr:`flush_fill`.
+    ``crowded`` (default): only while the cache is fuller than :attr:`flush_fill` (90 %).
     The default is a choice: flushing frees memory nobody else wants while the cache
     has room, and every flushed cell the walk sees again is downloaded twice (on the
     3-minute office tour with the default cache, 39 re-downloads against 0)."""
-    flush_fill: float = 0.5
-    """The ``crowded`` policy's gate, a share of the cache's budget."""
+    flush_fill: float = 0.9
+    """The ``crowded`` policy's gate, a share of the cache's budget (0.5 flushed cells that
+    came back: on the office tour with a 600 kB cache 97.5 % perfect frames and 38
+    re-downloads against 99.4 % and 14 with 0.9)."""
     lookahead_s: tuple[float, ...] = (0.5, 1.0, 2.0, 3.0, 4.0)
     """Prefetch: how far ahead (seconds of predicted motion) the visible cells are
     predicted, nearest first."""
