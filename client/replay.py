@@ -112,6 +112,8 @@ class ReplayConfig:
     """Interiors: ``portals``, ``frustum`` or ``none`` (:mod:`walkstream.client.draw.portals`)."""
     fog_budget: bool = True
     """Interiors: the budget controller sets the fog distance (one LOD per part)."""
+    rooms: dict[str, Any] = field(default_factory=dict)
+    """Interiors: further :class:`~walkstream.client.stream.rooms.RoomStreamConfig` knobs."""
     start_bundle: bool = True
     """Start with the start bundle (one round trip); False: scene list, manifest, path."""
     gzip: bool = True
@@ -533,7 +535,7 @@ async def _replay_interior(
     cache = Cache(config.cache_bytes)
     streamer = RoomStreamer(
         api, clock, cache, topology,
-        RoomStreamConfig(prefetch=config.prefetch, fog_m=config.fog_m, culling=config.culling),
+        RoomStreamConfig(prefetch=config.prefetch, fog_m=config.fog_m, culling=config.culling, **config.rooms),
     )
     frames = InteriorFrames()
     device = make_device(config.device, config.seed)
@@ -586,6 +588,7 @@ async def _replay_interior(
             "cells_fetched": len(streamer.stats.fetched),
             "cells_flushed": streamer.stats.flushed,
             "redownloads": streamer.stats.refetched,
+            "flush_policy": streamer.config.flush_policy, "flush_after_s": streamer.config.flush_s,
             "fog_m": config.fog_m,
             "culling": config.culling,
             **frames.figures(),

@@ -1,7 +1,8 @@
 """The replay's frame loop on an interior scene (what :func:`~walkstream.client.replay.replay`
 runs when the manifest's kind is ``interior``).
 
-Setup fetches the topology (one request: every cell's planes and every portal).  Then,
+Setup fetches the topology (one request: every cell's planes and every portal; packed,
+that is gzip-compressed, unless the replay asks for nothing compressed).  Then,
 frame by frame: move the eye along the path, let the
 :class:`~walkstream.client.stream.rooms.RoomStreamer` locate it by the cells' planes,
 find the visible cells and fetch their contents; draw the parts of the visible cells'
@@ -172,7 +173,8 @@ async def walk_interior(
         if renderer is not None:
             renderer.fog_m = fog
         if frames is not None:
-            frames.cull_s.append(time.perf_counter() - t_cull)
+            # the prefetch's prediction is streaming work, not this frame's culling
+            frames.cull_s.append(time.perf_counter() - t_cull - streamer.plan_s)
             frames.portals.append(0 if pc is None else pc.portals)
             frames.fog_m.append(fog)
             frames.budget.append(budget)

@@ -11,10 +11,15 @@ topology (an interior's topological file, Mulloni et al.)
     ``{storeys: [{id, name, zmin, zmax}], cells: [{id, kind, name, storey, outline,
     zmin, zmax, planes, triangles, bytes}], portals: [{id, kind, cells, polygon}],
     stairs: [{portal, lower, upper, path}]}``
+packed topology (``walkstream-topology/1+gzip``, :data:`TOPOLOGY_PACKED_MEDIA`)
+    the topology's msgpack body, gzip-compressed: the same record for a seventh of
+    the bytes on a generated office (57.6 kB -> 7.9 kB), so a walk on a slow link
+    starts sooner; :func:`decode_topology_packed` inflates it bounded.
 """
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,7 +37,12 @@ __all__ = [
     "Topology",
     "decode_room",
     "decode_topology",
+    "decode_topology_packed",
+    "TOPOLOGY_PACKED_MEDIA",
 ]
+
+TOPOLOGY_PACKED_MEDIA = "application/vnd.walkstream.topology+gzip"
+"""Media type of the packed topology (``walkstream-topology/1+gzip``)."""
 
 _MAX_ROOM = 4 << 20
 _MAX_TOPOLOGY = 64 << 20
@@ -288,3 +298,19 @@ def decode_topology(body: bytes, what: str) -> Topology:
         raise CodecError(f"{what}: missing field {exc}") from exc
     except (TypeError, ValueError) as exc:
         raise CodecError(f"{what}: {exc}") from exc
+
+
+def decode_topology_packed(body: bytes, what: str) -> Topology:
+    """Decode a packed topology body (gzip of the msgpack topology), inflating at most
+    the topology's bound; its ``nbytes`` is the packed size (what crossed the link)."""
+    inflater = zlib.decompressobj(31)
+    try:
+        raw = inflater.decompress(body, _MAX_TOPOLOGY + 1)
+    except zlib.error as exc:
+        raise CodecError(f"{what}: not a gzip body ({exc})") from exc
+    if len(raw) > _MAX_TOPOLOGY or inflater.unconsumed_tail:
+        raise CodecError(f"{what}: inflates to more than {_MAX_TOPOLOGY} bytes")
+    if not inflater.eof:
+        raise CodecError(f"{what}: truncated gzip body")
+    t = decode_topology(raw, what)
+    return Topology(t.storeys, t.cells, t.portals, t.stairs, nbytes=len(body))

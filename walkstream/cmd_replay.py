@@ -101,6 +101,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         fog_m=args.fog,
         culling=args.culling,
         fog_budget=not args.no_fog_budget,
+        rooms={"flush_s": args.flush_after, "flush_policy": args.flush_policy},
         report_dir=Path(args.report),
         start_bundle=not args.no_start_bundle,
         gzip=not args.no_gzip,
@@ -227,6 +228,11 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--culling", choices=("portals", "frustum", "none"), default="portals",
                    help="interiors: portal culling with visible screen areas (default), portals in the frustum "
                    "only, or every part of the visible cells")
+    r.add_argument("--flush-after", type=float, default=30.0, metavar="S",
+                   help="interiors: a cell not visible for S seconds is flushed (default 30)")
+    r.add_argument("--flush-policy", choices=("crowded", "paper"), default="crowded",
+                   help="interiors: flush only while the cache is more than 90 %% full (default: nothing is "
+                   "downloaded twice while the walk fits the cache), or always (the paper's policy)")
     r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")

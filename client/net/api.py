@@ -34,7 +34,13 @@ from walkstream.client.clock import Clock
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.paths import RecordedPath
-from walkstream.shared.roomwire import RoomRecord, Topology, decode_room, decode_topology
+from walkstream.shared.roomwire import (
+    RoomRecord,
+    Topology,
+    decode_room,
+    decode_topology,
+    decode_topology_packed,
+)
 from walkstream.shared.wire import (
     MSGPACK,
     CellIndex,
@@ -262,10 +268,16 @@ class SceneClient:
 
     # -- interiors ------------------------------------------------------------
 
-    async def topology(self) -> Topology:
-        """The interior's topology: storeys, cells (plane sets), portals, stairs."""
+    async def topology(self, packed: bool | None = None) -> Topology:
+        """The interior's topology: storeys, cells (plane sets), portals, stairs; ``packed``
+        (default: :attr:`compress`) asks for it gzip-compressed (``/topology/packed``)."""
         what = f"scene {self.scene!r} topology"
-        _, t = await self._get_decoded(self._url("/topology"), what, lambda r: decode_topology(r.content, what))
+        if self.compress if packed is None else packed:
+            _, t = await self._get_decoded(
+                self._url("/topology/packed"), what, lambda r: decode_topology_packed(r.content, what)
+            )
+        else:
+            _, t = await self._get_decoded(self._url("/topology"), what, lambda r: decode_topology(r.content, what))
         return t
 
     async def room(self, cid: int) -> RoomRecord:

@@ -10,13 +10,20 @@ the scene version, so it never needs invalidating.
 
 from __future__ import annotations
 
+import gzip
 from collections.abc import Sequence
 
 from walkstream.server.service.http import Encoded, Rep, encode, etag_for
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.errors import ApiError
-from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology
+from walkstream.shared.roomwire import (
+    TOPOLOGY_PACKED_MEDIA,
+    ContentsRef,
+    PortalRef,
+    RoomRecord,
+    Topology,
+)
 
 __all__ = ["CONTENTS_MEDIA", "InteriorState"]
 
@@ -67,6 +74,10 @@ class InteriorState:
         self.topology: dict[Rep, Encoded] = {
             rep: encode(topology, rep, self.version, "topology") for rep in ("msgpack", "json")
         }
+        # mtime 0: the same bytes (and ETag) from every start of the service
+        packed = gzip.compress(self.topology["msgpack"].content, 9, mtime=0)
+        self.topology_packed = Encoded(packed, TOPOLOGY_PACKED_MEDIA, etag_for(self.version, "topology", "msgpack-gzip"))
+        """The topology's msgpack body gzip-compressed (``walkstream-topology/1+gzip``)."""
         self._cache = LRU(_CACHE_BYTES)
 
     def has(self, cid: int) -> bool:

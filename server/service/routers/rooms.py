@@ -4,6 +4,11 @@
     The topological file of Mulloni et al.: storeys, every cell (plane set, outline,
     height range, triangles and contents bytes), every portal (polygon and its two
     cells), every stair.  One request gives a client the whole visibility graph.
+``GET /v1/scenes/{scene}/topology/packed``
+    The same topology's msgpack body gzip-compressed (``walkstream-topology/1+gzip``,
+    media type ``application/vnd.walkstream.topology+gzip``; decode with
+    :func:`walkstream.shared.roomwire.decode_topology_packed`): about a seventh of the
+    bytes, what a client on a slow link asks for first.
 ``GET /v1/scenes/{scene}/rooms/{cell}``
     One cell: planes, outline, portals (polygon and the other cell), neighbours and
     what its contents weigh.
@@ -29,6 +34,7 @@ from walkstream.server.service.interiors import CONTENTS_MEDIA, InteriorState
 from walkstream.server.service.models import ERRORS, RoomOut, TopologyOut, both
 from walkstream.server.service.scenes import Scene
 from walkstream.shared.errors import ApiError
+from walkstream.shared.roomwire import TOPOLOGY_PACKED_MEDIA
 
 __all__ = ["router"]
 
@@ -54,6 +60,20 @@ def _interior(scene: Scene) -> InteriorState:
 async def topology(request: Request, scene: SceneDep, rep: RepDep) -> Response:
     """Every cell as a plane set with its outline, every portal with its two cells."""
     return cached(request, _interior(scene).topology[rep])
+
+
+@router.get(
+    "/scenes/{scene}/topology/packed",
+    responses={
+        200: {"description": "the topology, gzip-compressed msgpack (walkstream-topology/1+gzip)",
+              "content": {TOPOLOGY_PACKED_MEDIA: {}}},
+        304: {"description": "not modified (If-None-Match matched the ETag)"},
+    },
+    summary="Interior topology, packed",
+)
+async def topology_packed(request: Request, scene: SceneDep) -> Response:
+    """The topology's msgpack body gzip-compressed (the same bytes whatever ``Accept`` says)."""
+    return cached(request, _interior(scene).topology_packed)
 
 
 @router.get(
