@@ -11,6 +11,7 @@ Each module is one benchmark that ``walkstream bench ...`` runs and prints as a 
 - :mod:`.budget`: frame rate and polygon budget per device, with a cost step;
 - :mod:`.controller`: the budget controller alone on the device cost models;
 - :mod:`.lod`: image error against frame time, ACH against distance LODs;
+- :mod:`.fill`: where the gl device's frame time goes, lighting per fragment vs per vertex;
 - :mod:`.city`: OpenStreetMap extracts, street cells against grid cells.
 
 A new benchmark is a module here with a ``run_...`` function and a ``format_...``
@@ -29,6 +30,7 @@ _EXPORTS = {
     "run_budget_bench": "walkstream.benchmarks.budget",
     "run_controller_bench": "walkstream.benchmarks.controller",
     "run_lod_bench": "walkstream.benchmarks.lod",
+    "run_fill_bench": "walkstream.benchmarks.fill",
     "run_city_bench": "walkstream.benchmarks.city",
 }
 

@@ -11,6 +11,7 @@
         [--gl-draws batched,per-object] [--rewrite thread,process]
     walkstream bench controller [--frames 3000] [--seeds 1 2 3] [--step 10]
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
+    walkstream bench fill [scene.db] [--views 6] [--size 1280x960] [--repeat 6] [--json]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--reuse] [--out DIR]
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
     walkstream bench portals [--presets paper paper10] [--frames N] [--truth N] [--no-gl] [--out DIR] [--json]
@@ -294,6 +295,31 @@ def _ratio(text: str) -> float | None:
     return v
 
 
+def cmd_bench_fill(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench fill``."""
+    from walkstream.benchmarks.fill import format_fill_table, run_fill_bench
+
+    result = run_fill_bench(
+        args.db, views=args.views, path_name=args.path, size=args.size, repeats=args.repeat
+    )
+    print(json.dumps(result) if args.json else format_fill_table(result))
+    return 0
+
+
+def _add_fill(besub: Any) -> None:
+    p = besub.add_parser(
+        "fill",
+        help="ctx.finish() ms of clear / streets / floor / LOD2 frames, per-fragment vs per-vertex lighting",
+    )
+    p.add_argument("db", nargs="?", default="out/demo/city.db", help="scene database (default out/demo/city.db)")
+    p.add_argument("--views", type=int, default=6, help="viewpoints along the path (default 6)")
+    p.add_argument("--path", default="SE", help="recorded path for viewpoints (default SE)")
+    p.add_argument("--size", type=_lod_size, default=(1280, 960), help="frame size (default 1280x960)")
+    p.add_argument("--repeat", type=int, default=6, help="timed rounds per viewpoint (default 6)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=cmd_bench_fill)
+
+
 def _add_lod(besub: Any) -> argparse.ArgumentParser:
     from walkstream.benchmarks.lod import DEFAULT_DB, DEFAULT_SHARES, DISTANCE_RATIO, PATH_NAME
 
@@ -528,6 +554,7 @@ def add_bench_parser(sub: Any) -> None:
     bp.set_defaults(func=cmd_bench_portals)
 
     _add_lod(besub)
+    _add_fill(besub)
 
     b = besub.add_parser("city", help="OpenStreetMap extracts: street cells against grid cells (bake, PVS, replay)")
     b.add_argument("--data", default="../shared/data/osm", help="folder of the extracts (default ../shared/data/osm)")

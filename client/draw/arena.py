@@ -98,7 +98,8 @@ class MeshArena:
         self._id_buf = ctx.buffer(reserve=64 * 4)
         # slot per mesh: (first index, index count, first vertex, vertex count)
         self._slots: dict[int, tuple[Mesh, int, int, int, int]] = {}
-        self._vao: moderngl.VertexArray | None = None
+        # colour VAOs per program (MeshRenderer has one without fog and one with it)
+        self._vaos: dict[int, tuple[moderngl.Program, moderngl.VertexArray]] = {}
         self._id_vao: moderngl.VertexArray | None = None
         self._id_prog: moderngl.Program | None = None
         self._released = False
@@ -150,10 +151,15 @@ class MeshArena:
         else:
             self._ibo = new
             self._ir.grow(capacity)
-        for vao in (self._vao, self._id_vao):
-            if vao is not None:
-                vao.release()
-        self._vao = self._id_vao = None
+        self._release_vaos()
+
+    def _release_vaos(self) -> None:
+        for _, vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+        if self._id_vao is not None:
+            self._id_vao.release()
+        self._id_vao = None
 
     def _commands(self, meshes: list[Mesh]) -> NDArray[np.uint32]:
         """``(n, 5)`` indirect commands (count, 1, first index, base vertex, k)."""
@@ -172,24 +178,32 @@ class MeshArena:
             self._cmd_buf = self.ctx.buffer(reserve=2 * len(data))
         self._cmd_buf.write(data)
 
-    def draw(self, meshes: list[Mesh]) -> None:
-        """Issue one multi-draw of ``meshes`` (the ones here) with the colour program.
+    def draw(self, meshes: list[Mesh], program: moderngl.Program | None = None) -> None:
+        """Issue one multi-draw of ``meshes`` (the ones here, in this order).
 
+        ``program`` reads the vertex layout ``"3f 3f 4f1"`` (default: the one given at
+        construction; :attr:`MeshRenderer.program
+        <walkstream.client.draw.meshes.MeshRenderer.program>` changes with the fog).
         The caller has bound the framebuffer and set the uniforms and state
         (:meth:`~walkstream.client.draw.meshes.MeshRenderer.begin`).
         """
         cmd = self._commands(meshes)
         if not len(cmd):
             return
-        if self._vao is None:
-            self._vao = self.ctx.vertex_array(
-                self._prog,
+        prog = self._prog if program is None else program
+        entry = self._vaos.get(id(prog))
+        if entry is None or entry[0] is not prog:
+            if entry is not None:
+                entry[1].release()
+            vao = self.ctx.vertex_array(
+                prog,
                 [(self._vbo, _FORMAT, "in_position", "in_normal", "in_color")],
                 index_buffer=self._ibo,
                 index_element_size=4,
             )
+            entry = self._vaos[id(prog)] = (prog, vao)
         self._write_commands(cmd)
-        self._vao.render_indirect(self._cmd_buf, moderngl.TRIANGLES, count=len(cmd))
+        entry[1].render_indirect(self._cmd_buf, moderngl.TRIANGLES, count=len(cmd))
 
     def draw_ids(
         self, meshes: list[Mesh], ids: NDArray[np.uint32], program: moderngl.Program
@@ -231,10 +245,7 @@ class MeshArena:
         if self._released:
             return
         self._released = True
-        for vao in (self._vao, self._id_vao):
-            if vao is not None:
-                vao.release()
-        self._vao = self._id_vao = None
+        self._release_vaos()
         for b in (self._vbo, self._ibo, self._cmd_buf, self._id_buf):
             b.release()
         self._slots.clear()

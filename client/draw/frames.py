@@ -133,6 +133,10 @@ class FrameRenderer(Releasable):
     batched : bool
         One shared buffer pair and one multi-draw call per frame (default); False:
         one buffer pair and one draw call per mesh.
+    shading : {"vertex", "fragment"}
+        Lighting per vertex (default, cheap on llvmpipe) or per fragment (the path
+        before, for comparison) when there is no fog; see
+        :class:`~walkstream.client.draw.meshes.MeshRenderer`.
 
     Notes
     -----
@@ -149,6 +153,7 @@ class FrameRenderer(Releasable):
         far: float = 2000.0,
         ctx: moderngl.Context | None = None,
         batched: bool = True,
+        shading: str = "vertex",
     ) -> None:
         w, h = (int(v) for v in size)
         if w <= 0 or h <= 0:
@@ -158,7 +163,7 @@ class FrameRenderer(Releasable):
         self.proj: NDArray[np.float32] = perspective(fov_deg, w / h, near, far)
         self.fov_deg = float(fov_deg)
         self.near, self.far = float(near), float(far)
-        self._r = MeshRenderer(ctx)
+        self._r = MeshRenderer(ctx, shading=shading)
         self.ctx: moderngl.Context = self._r.ctx
         self._keys: dict[Hashable, Mesh] = {}
         self._refs: dict[int, int] = {}  # id(mesh) -> number of keys holding it
@@ -294,7 +299,7 @@ class FrameRenderer(Releasable):
         t0 = time.perf_counter()
         if self._arena is not None:
             self._r.begin(view, p, self.size)
-            self._arena.draw(meshes)
+            self._arena.draw(meshes, self._r.program)
             check_gl_error(self.ctx, "after FrameRenderer.draw")
         else:
             self._r.draw(meshes, view, p, self.size)

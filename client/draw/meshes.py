@@ -31,6 +31,7 @@ __all__ = [
     "FIGURE_DIRECTION",
     "LIGHT_DIRECTION",
     "MeshRenderer",
+    "SHADINGS",
     "pack_vertices",
     "render_lods_figure",
 ]
@@ -52,7 +53,42 @@ FIGURE_DIRECTION: tuple[float, float, float] = (
     math.sin(math.radians(25.0)),
 )
 
+# Two programs share the vertex layout.  Without fog (the city) the lighting is done
+# per vertex and the fragment shader only writes the interpolated colour: on llvmpipe
+# the fragment shader is most of a frame's cost (the budget's floor is a few hundred
+# triangles covering the screen), and a fog branch is paid per fragment even when fog
+# is off (llvmpipe runs both sides of a branch under a mask).  Every triangle the client
+# builds is flat (its three normals are equal), so per-vertex lighting computes the same
+# colour; frames differ from per-fragment lighting by at most one level of 255 in a
+# channel (rounding: ``walkstream bench fill`` measures it).  With fog
+# (interiors) or ``shading="fragment"`` the per-fragment program below is used.
 _VERTEX_SHADER = """
+#version 330
+uniform mat4 u_view_proj;
+uniform vec3 u_light_dir;
+uniform float u_ambient;
+in vec3 in_position;
+in vec3 in_normal;
+in vec4 in_color;
+out vec3 v_lit;
+invariant gl_Position;
+void main() {
+    gl_Position = u_view_proj * vec4(in_position, 1.0);
+    float diffuse = max(dot(normalize(in_normal), u_light_dir), 0.0);
+    v_lit = in_color.rgb * (u_ambient + (1.0 - u_ambient) * diffuse);
+}
+"""
+
+_FRAGMENT_SHADER = """
+#version 330
+in vec3 v_lit;
+out vec4 f_color;
+void main() {
+    f_color = vec4(v_lit, 1.0);
+}
+"""
+
+_FOG_VERTEX_SHADER = """
 #version 330
 uniform mat4 u_view_proj;
 in vec3 in_position;
@@ -70,7 +106,7 @@ void main() {
 }
 """
 
-_FRAGMENT_SHADER = """
+_FOG_FRAGMENT_SHADER = """
 #version 330
 uniform vec3 u_light_dir;
 uniform float u_ambient;
@@ -92,6 +128,14 @@ void main() {
     f_color = vec4(mix(lit, u_background, fade), 1.0);
 }
 """
+
+_PROGRAMS: dict[str, tuple[str, str]] = {
+    "plain": (_VERTEX_SHADER, _FRAGMENT_SHADER),
+    "fog": (_FOG_VERTEX_SHADER, _FOG_FRAGMENT_SHADER),
+}
+
+#: Values of ``MeshRenderer(shading=...)``: where the lighting is computed without fog.
+SHADINGS: tuple[str, ...] = ("vertex", "fragment")
 
 # Interleaved vertex: position, normal (float32) and an RGBA8 colour. 28 bytes keeps
 # every attribute 4-byte aligned; alpha is padding.
@@ -119,22 +163,30 @@ def pack_vertices(mesh: Mesh) -> NDArray[np.void]:
 class _GpuMesh:
     """The GL objects of one uploaded mesh (holds the mesh so its id() stays unique)."""
 
-    __slots__ = ("mesh", "vbo", "ibo", "vao")
+    __slots__ = ("mesh", "vbo", "ibo", "vaos")
 
-    def __init__(
-        self,
-        mesh: Mesh,
-        vbo: moderngl.Buffer,
-        ibo: moderngl.Buffer,
-        vao: moderngl.VertexArray,
-    ) -> None:
+    def __init__(self, mesh: Mesh, vbo: moderngl.Buffer, ibo: moderngl.Buffer) -> None:
         self.mesh = mesh
         self.vbo = vbo
         self.ibo = ibo
-        self.vao = vao
+        # one vertex array per program ("plain", "fog"), made on first use
+        self.vaos: dict[str, moderngl.VertexArray] = {}
+
+    def vao(self, name: str, program: moderngl.Program) -> moderngl.VertexArray:
+        vao = self.vaos.get(name)
+        if vao is None:
+            vao = self.vaos[name] = program.ctx.vertex_array(
+                program,
+                [(self.vbo, _VERTEX_FORMAT, "in_position", "in_normal", "in_color")],
+                index_buffer=self.ibo,
+                index_element_size=4,
+            )
+        return vao
 
     def release(self) -> None:
-        self.vao.release()
+        for vao in self.vaos.values():
+            vao.release()
+        self.vaos.clear()
         self.ibo.release()
         self.vbo.release()
 
@@ -154,6 +206,11 @@ class MeshRenderer(Releasable):
         Share of the base colour lit regardless of the light (0..1).
     background : (3,) int
         Clear colour, sRGB 0-255.
+    shading : {"vertex", "fragment"}
+        Where the lighting is computed when there is no fog: ``"vertex"`` (default,
+        the cheap program) or ``"fragment"`` (the per-fragment program that fog uses;
+        the path before, kept for comparison).  With fog the per-fragment program is
+        always used.
 
     Notes
     -----
@@ -168,7 +225,11 @@ class MeshRenderer(Releasable):
         light_dir: ArrayLike = LIGHT_DIRECTION,
         ambient: float = AMBIENT,
         background: tuple[int, int, int] = BACKGROUND_RGB,
+        shading: str = "vertex",
     ) -> None:
+        if shading not in SHADINGS:
+            raise InputError(f"MeshRenderer.shading: expected one of {SHADINGS}, got {shading!r}")
+        self.shading: str = shading
         light = np.asarray(light_dir, dtype=np.float64).reshape(3)
         if not np.linalg.norm(light) > 0:
             raise InputError(
@@ -186,23 +247,38 @@ class MeshRenderer(Releasable):
         self.ctx: moderngl.Context = create_context() if ctx is None else ctx
         self._meshes: dict[int, _GpuMesh] = {}
         self._fb: Framebuffer | None = None
-        self._prog: moderngl.Program | None = None
+        self._light = tuple(float(v) for v in light / np.linalg.norm(light))
+        self._ambient = float(ambient)
+        self._progs: dict[str, moderngl.Program] = {}
+        self._closed = False
+        self._make_program("plain")  # a driver that cannot compile it fails here, early
+
+    def _make_program(self, name: str) -> moderngl.Program:
+        prog = self._progs.get(name)
+        if prog is not None:
+            return prog
+        vs, fs = _PROGRAMS[name]
         try:
-            self._prog = self.ctx.program(
-                vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER
-            )
+            prog = self.ctx.program(vertex_shader=vs, fragment_shader=fs)
         except Exception as exc:
             self.release()
             raise RenderError(f"MeshRenderer: shader program failed: {exc}") from exc
-        self._uniform("u_light_dir").value = tuple(light / np.linalg.norm(light))
-        self._uniform("u_ambient").value = float(ambient)
+        self._progs[name] = prog
+        self._set(prog, "u_light_dir", self._light)
+        self._set(prog, "u_ambient", self._ambient)
+        return prog
 
-    def _uniform(self, name: str) -> moderngl.Uniform:
-        if self._prog is None:
-            raise RenderError("MeshRenderer: used after close()")
-        u = self._prog[name]
+    @staticmethod
+    def _set(prog: moderngl.Program, name: str, value: object) -> None:
+        u = prog[name]
         assert isinstance(u, moderngl.Uniform), f"{name} is not a uniform"
-        return u
+        u.value = value
+
+    @property
+    def program_name(self) -> str:
+        """Which program a frame is drawn with now: ``"fog"`` (per-fragment lighting and
+        fog: fog is on or ``shading="fragment"``) or ``"plain"`` (per-vertex lighting)."""
+        return "fog" if self.fog_m > 0.0 or self.shading == "fragment" else "plain"
 
     # -- buffers -------------------------------------------------------------------
 
@@ -219,22 +295,11 @@ class MeshRenderer(Releasable):
         """
         if id(mesh) in self._meshes or mesh.triangles == 0:
             return
-        if self._prog is None:
+        if self._closed:
             raise RenderError("MeshRenderer: used after close()")
         vbo = self.ctx.buffer(pack_vertices(mesh).tobytes())
         ibo = self.ctx.buffer(np.ascontiguousarray(mesh.indices, dtype="<u4").tobytes())
-        try:
-            vao = self.ctx.vertex_array(
-                self._prog,
-                [(vbo, _VERTEX_FORMAT, "in_position", "in_normal", "in_color")],
-                index_buffer=ibo,
-                index_element_size=4,
-            )
-        except Exception:
-            ibo.release()
-            vbo.release()
-            raise
-        self._meshes[id(mesh)] = _GpuMesh(mesh, vbo, ibo, vao)
+        self._meshes[id(mesh)] = _GpuMesh(mesh, vbo, ibo)
 
     def buffers(self, mesh: Mesh) -> tuple[moderngl.Buffer, moderngl.Buffer] | None:
         """The vertex and index buffers of an uploaded ``mesh`` (None when it has none).
@@ -289,19 +354,22 @@ class MeshRenderer(Releasable):
             Clear colour and depth of the whole framebuffer first.
         """
         self.begin(view, proj, size, viewport, clear)
+        name = self.program_name
+        prog = self.program
         for mesh in meshes:
             self.upload(mesh)
             gm = self._meshes.get(id(mesh))
             if gm is not None:
-                gm.vao.render()
+                gm.vao(name, prog).render()
         check_gl_error(self.ctx, "after MeshRenderer.draw")
 
     @property
     def program(self) -> moderngl.Program:
-        """The shader program (vertex layout ``"3f 3f 4f1"``: position, normal, colour)."""
-        if self._prog is None:
+        """The shader program a frame is drawn with now (:attr:`program_name`; vertex
+        layout ``"3f 3f 4f1"``: position, normal, colour)."""
+        if self._closed:
             raise RenderError("MeshRenderer: used after close()")
-        return self._prog
+        return self._make_program(self.program_name)
 
     def begin(
         self,
@@ -316,8 +384,7 @@ class MeshRenderer(Releasable):
         What :meth:`draw` does before its draw calls, for callers that issue their own
         (batched) draw calls with :attr:`program`; parameters as for :meth:`draw`.
         """
-        if self._prog is None:
-            raise RenderError("MeshRenderer: used after close()")
+        prog = self.program
         fb = self._framebuffer(size)
         fb.use()
         if clear:
@@ -327,11 +394,14 @@ class MeshRenderer(Releasable):
             x, y, vw, vh = (int(v) for v in viewport)
             self.ctx.viewport = (x, y, vw, vh)
         vp = np.asarray(proj, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
-        self._uniform("u_view_proj").write(mat4_bytes(vp))
-        eye = np.linalg.inv(np.asarray(view, dtype=np.float64))[:3, 3]
-        self._uniform("u_eye").value = tuple(float(v) for v in eye)
-        self._uniform("u_fog").value = float(self.fog_m)
-        self._uniform("u_background").value = tuple(c / 255.0 for c in self.background)
+        u_vp = prog["u_view_proj"]
+        assert isinstance(u_vp, moderngl.Uniform)
+        u_vp.write(mat4_bytes(vp))
+        if self.program_name == "fog":
+            eye = np.linalg.inv(np.asarray(view, dtype=np.float64))[:3, 3]
+            self._set(prog, "u_eye", tuple(float(v) for v in eye))
+            self._set(prog, "u_fog", max(float(self.fog_m), 0.0))
+            self._set(prog, "u_background", tuple(c / 255.0 for c in self.background))
         # Set on every draw: the context may be shared with code that changes state.
         self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
         self.ctx.front_face = "ccw"
@@ -378,9 +448,10 @@ class MeshRenderer(Releasable):
         if self._fb is not None:
             self._fb.release()
             self._fb = None
-        if self._prog is not None:
-            self._prog.release()
-            self._prog = None
+        for prog in self._progs.values():
+            prog.release()
+        self._progs.clear()
+        self._closed = True
         if self._own_ctx:
             self.ctx.release()
             self._own_ctx = False
