@@ -49,7 +49,7 @@ from walkstream.client.draw.portals import (
     cull_portals,
     frustum_cells,
 )
-from walkstream.client.stream.rooms import _stack_planes, cell_of
+from walkstream.client.stream.rooms import cell_of, stack_planes
 from walkstream.client.truth.interior import InteriorTruth
 from walkstream.server.bake import bake
 from walkstream.server.service.interiors import InteriorState
@@ -119,7 +119,7 @@ def portal_figures(
     topo, meshes, tour = _load(db)
     graph = PortalGraph.from_topology(topo)
     inside = [c for c in topo.cells if c.kind != "outside" and len(c.planes)]
-    ids, planes = _stack_planes(inside)
+    ids, planes = stack_planes(inside)
     boxes = {
         cid: (np.array([p.bbox[0] for p in m.parts]).reshape(-1, 3), np.array([p.bbox[1] for p in m.parts]).reshape(-1, 3))
         for cid, m in meshes.items()

@@ -28,7 +28,7 @@ from walkstream.client.draw.portals import (
     cull_portals,
     frustum_cells,
 )
-from walkstream.client.stream.rooms import _stack_planes, cell_of
+from walkstream.client.stream.rooms import cell_of, stack_planes
 from walkstream.client.truth.interior import InteriorTruth, TruthCheck
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.store import SceneReader
@@ -152,7 +152,7 @@ class _Scene:
             self.meshes: dict[int, CellMesh] = {c.id: decode_cell_mesh(r.contents(c.id)) for c in self.topology.cells}
         self.graph = PortalGraph.from_topology(self.topology)
         inside = [c for c in self.topology.cells if c.kind != "outside" and len(c.planes)]
-        self.ids, self.planes = _stack_planes(inside)
+        self.ids, self.planes = stack_planes(inside)
         self.boxes = {
             cid: (np.array([p.bbox[0] for p in m.parts]).reshape(-1, 3), np.array([p.bbox[1] for p in m.parts]).reshape(-1, 3))
             for cid, m in self.meshes.items()

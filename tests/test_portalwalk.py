@@ -30,7 +30,7 @@ from walkstream.client.draw.portals import (
     cull_parts,
     cull_portals,
 )
-from walkstream.client.stream.rooms import _stack_planes, cell_of
+from walkstream.client.stream.rooms import cell_of, stack_planes
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.store import SceneReader
 from walkstream.shared.camera import perspective
@@ -54,7 +54,7 @@ def office(office_db: Path) -> dict[str, Any]:
         topology = decode_topology(state.topology["msgpack"].content, "topology")
         meshes = {c.id: decode_cell_mesh(r.contents(c.id)) for c in topology.cells}
     inside = [c for c in topology.cells if c.kind != "outside" and len(c.planes)]
-    ids, planes = _stack_planes(inside)
+    ids, planes = stack_planes(inside)
     boxes = {
         cid: (np.array([p.bbox[0] for p in m.parts]).reshape(-1, 3), np.array([p.bbox[1] for p in m.parts]).reshape(-1, 3))
         for cid, m in meshes.items()

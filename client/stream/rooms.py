@@ -48,7 +48,7 @@ from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import ApiError, InputError
 from walkstream.shared.roomwire import RoomRecord, Topology
 
-__all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "cell_of", "predicted_view", "turned_view"]
+__all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "cell_of", "predicted_view", "stack_planes", "turned_view"]
 
 #: ``--flush-policy`` choices (see :attr:`RoomStreamConfig.flush_policy`).
 FLUSH_POLICIES: tuple[str, ...] = ("crowded", "paper")
@@ -119,7 +119,7 @@ class RoomStreamStats:
     fetched: set[int] = field(default_factory=set)
 
 
-def _stack_planes(cells: list[RoomRecord]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+def stack_planes(cells: list[RoomRecord]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Ids and ``(n, k, 4)`` planes padded with rows that every point satisfies."""
     k = max((len(c.planes) for c in cells), default=1)
     out = np.zeros((len(cells), k, 4))
@@ -179,7 +179,7 @@ class RoomStreamer:
         self.topology = topology
         self.cells: dict[int, RoomRecord] = {c.id: c for c in topology.cells}
         inside = [c for c in topology.cells if c.kind != "outside" and len(c.planes)]
-        self._ids, self._planes = _stack_planes(inside)
+        self._ids, self._planes = stack_planes(inside)
         self._row = {int(c): i for i, c in enumerate(self._ids)}
         self.current: int | None = None
         self.stats = RoomStreamStats()
