@@ -323,7 +323,7 @@ async def replay(
                 if manifest_fut.done():
                     return
                 assert streamer is not None
-                grammar = parse_grammar(m.grammar_text) if streamer.rewrite is not None else None
+                grammar = parse_grammar(m.grammar_text) if streamer.rewrite is not None and m.kind == "city" else None
                 usable = disk is not None and disk.use(m.name, m.version)
                 streamer.on_manifest(m.max_ids, grammar, disk if usable else None, m.index)
                 manifest_fut.set_result(m)
