@@ -69,8 +69,8 @@ def path_error_bound(blob: bytes) -> tuple[float, ...]:
 
     Half the steps the blob was written with, ``(t, x, y, z, yaw, pitch)``.
     """
-    obj = _header(blob, "compact path")
-    return tuple(0.5 * s for s in obj["steps"])
+    steps: list[float] = _header(blob, "compact path")["steps"]  # type: ignore[assignment]
+    return tuple(0.5 * s for s in steps)
 
 
 def encode_path_q(path: RecordedPath, steps: tuple[float, ...] = STEPS) -> bytes:

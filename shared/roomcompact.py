@@ -192,15 +192,15 @@ def _topology(obj: dict[str, Any], what: str, nbytes: int) -> Topology:
     ids = np.cumsum(_ints(c["id"], f"{what}: cells.id")).tolist()
     ncell = len(ids)
     columns = {k: c[k] for k in ("kind", "name", "storey", "n", "outline", "triangles", "bytes")}
-    for k, v in columns.items():
+    for key, v in columns.items():
         if not isinstance(v, list) or len(v) != ncell:
-            raise CodecError(f"{what}: cells.{k}: expected {ncell} values, got {len(v) if isinstance(v, list) else v!r:.40}")
+            raise CodecError(f"{what}: cells.{key}: expected {ncell} values, got {len(v) if isinstance(v, list) else v!r:.40}")
     z = _rows(c["z"], 2, f"{what}: cells.z", ncell)
     if len(z) != ncell:
         raise CodecError(f"{what}: cells.z: expected {ncell} rows, got {len(z)}")
     explicit: dict[int, F64] = {}
-    for k, flat in c["planes"]:
-        explicit[int(k)] = np.asarray(flat, np.float64).reshape(-1, 4)
+    for row, flat in c["planes"]:
+        explicit[int(row)] = np.asarray(flat, np.float64).reshape(-1, 4)
     portals = []
     ends: dict[int, list[PortalRef]] = {}
     for k, (pid, kind, a, b, flat) in enumerate(obj["portals"]):

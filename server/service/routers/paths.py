@@ -55,8 +55,8 @@ async def recorded_path(
             detail={"path": name, "known": sorted(scene.path_names)},
         )
     if PATH_Q_MEDIA in request.headers.get("accept", ""):
-        enc = scene.cached_path(name, "q1")
-        return cached(request, enc or await run_in_threadpool(scene.path_q, name))
+        q1 = scene.cached_path(name, "q1")
+        return cached(request, q1 if q1 is not None else await run_in_threadpool(scene.path_q, name))
     enc = scene.cached_path(name, rep)
     if enc is None:  # read and decode in a worker thread, off the event loop
         enc = await run_in_threadpool(scene.path, name, rep)
