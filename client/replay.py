@@ -538,6 +538,7 @@ async def _replay_interior(
     from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 
     topology = topology or await api.topology()
+    setup_s = clock.now() - t_start  # the walk starts once the topology is in too
     cache = Cache(config.cache_bytes)
     streamer = RoomStreamer(
         api, clock, cache, topology,
@@ -631,6 +632,7 @@ def _link_summary(config: ReplayConfig, stats: Any, api: SceneClient) -> dict[st
         "retries": api.stats.retries,
         "cut_streams": api.stats.cut_streams,
         "responses_cut_by_link": stats.responses_cut,
+        "requests": stats.requests, "start_bundle": config.start_bundle,
     }
 
 
