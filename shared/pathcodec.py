@@ -37,7 +37,7 @@ import zlib
 import msgpack
 import numpy as np
 
-from walkstream.shared.codec import decode_varints, encode_varints, unpack_bounded
+from walkstream.shared.codec import decode_varints, encode_varints, inflate_tagged, unpack_bounded
 from walkstream.shared.errors import CodecError, InputError
 from walkstream.shared.paths import MAX_SAMPLES, RecordedPath
 
@@ -115,24 +115,7 @@ def encode_path_q(path: RecordedPath, steps: tuple[float, ...] = STEPS) -> bytes
 
 
 def _header(blob: bytes, what: str) -> dict[str, object]:
-    if not isinstance(blob, bytes | bytearray | memoryview):
-        raise CodecError(f"{what}: expected bytes, got {type(blob).__name__}")
-    b = bytes(blob)
-    if len(b) < 5 or b[:4] != PATH_Q_MAGIC:
-        raise CodecError(f"{what}: not a compact path (no {PATH_Q_MAGIC.decode()} header)")
-    if b[4] != _VERSION:
-        raise CodecError(f"{what}: compact path version {b[4]} is not supported (this reader knows {_VERSION})")
-    inflater = zlib.decompressobj()
-    try:
-        raw = inflater.decompress(b[5:], _MAX_INFLATED + 1)
-    except zlib.error as exc:
-        raise CodecError(f"{what}: corrupt compact path ({exc})") from exc
-    if len(raw) > _MAX_INFLATED or inflater.unconsumed_tail:
-        raise CodecError(f"{what}: compact path inflates to more than {_MAX_INFLATED} bytes")
-    if not inflater.eof:
-        raise CodecError(f"{what}: truncated compact path")
-    if inflater.unused_data:
-        raise CodecError(f"{what}: {len(inflater.unused_data)} stray bytes after the compact path")
+    raw = inflate_tagged(blob, what, PATH_Q_MAGIC, _VERSION, _MAX_INFLATED, "compact path")
     obj = unpack_bounded(raw, what, max_bytes=_MAX_INFLATED, max_array_len=8, max_map_len=8,
                          max_str_len=1024, max_bin_len=_MAX_INFLATED)
     if not isinstance(obj, dict):

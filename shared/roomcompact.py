@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.arrays import F64
-from walkstream.shared.codec import unpack_bounded
+from walkstream.shared.codec import inflate_tagged, unpack_bounded
 from walkstream.shared.errors import CodecError
 from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology
 
@@ -159,26 +159,13 @@ def decode_topology_compact(body: bytes, what: str) -> Topology:
         Not a compact topology, truncated, inflating past the bound, or a field
         missing, malformed or with counts that disagree.
     """
-    b = bytes(body)
-    if len(b) < 5 or b[:4] != TOPOLOGY_COMPACT_MAGIC:
-        raise CodecError(f"{what}: not a compact topology (no {TOPOLOGY_COMPACT_MAGIC.decode()} header)")
-    if b[4] != _VERSION:
-        raise CodecError(f"{what}: compact topology version {b[4]} is not supported (this reader knows {_VERSION})")
-    inflater = zlib.decompressobj()
-    try:
-        raw = inflater.decompress(b[5:], _MAX_INFLATED + 1)
-    except zlib.error as exc:
-        raise CodecError(f"{what}: corrupt compact topology ({exc})") from exc
-    if len(raw) > _MAX_INFLATED or inflater.unconsumed_tail:
-        raise CodecError(f"{what}: compact topology inflates to more than {_MAX_INFLATED} bytes")
-    if not inflater.eof:
-        raise CodecError(f"{what}: truncated compact topology")
+    raw = inflate_tagged(body, what, TOPOLOGY_COMPACT_MAGIC, _VERSION, _MAX_INFLATED, "compact topology")
     obj = unpack_bounded(raw, what, max_bytes=_MAX_INFLATED, max_array_len=_MAX_COUNT, max_map_len=16,
                          max_bin_len=0)
     if not isinstance(obj, dict):
         raise CodecError(f"{what}: expected a map")
     try:
-        return _topology(obj, what, len(b))
+        return _topology(obj, what, len(body))
     except KeyError as exc:
         raise CodecError(f"{what}: missing field {exc}") from exc
     except (TypeError, ValueError, IndexError) as exc:
