@@ -53,12 +53,13 @@ from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.streamer import Streamer, StreamerConfig
-from walkstream.client.stream.walkstart import bundle_start, manifest_task
+from walkstream.client.stream.walkstart import bundle_start, interior_start, manifest_task
 from walkstream.client.truth.recorder import TruthRecorder, TruthResult
 from walkstream.shared.camera import look_at, perspective
 from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.roomwire import Topology
 from walkstream.shared.wire import Manifest
 
 __all__ = ["ReplayConfig", "ReplayResult", "run_replay", "replay"]
@@ -328,8 +329,11 @@ async def replay(
                 streamer.on_manifest(m.max_ids, grammar, disk if usable else None, m.index)
                 manifest_fut.set_result(m)
 
-            got = None
-            if config.start_bundle and config.kind != "interior":
+            got, topology = None, None
+            if config.start_bundle and config.kind == "interior":  # path, topology, manifest at once
+                got, topology = await interior_start(
+                    config.path, config.setup_timeout_s, clock, api, disk, manifest_arrived, tasks)
+            elif config.start_bundle:
                 got = await bundle_start(
                     config.path, config.setup_timeout_s, clock, api, streamer, disk,
                     manifest_arrived, manifest_fut, tasks,
@@ -361,8 +365,8 @@ async def replay(
                 kind = "city" if m0 is None else m0.kind
             if kind == "interior":
                 return await _replay_interior(
-                    api, link, clock, config, path, manifest_fut, t_start, setup_s, progress, (transport, base_url)
-                )
+                    api, link, clock, config, path, manifest_fut, t_start, setup_s, progress, (transport, base_url),
+                    topology)
             device = make_device(config.device, config.seed)
             if not device.simulated or config.snapshot_every:
                 from walkstream.client.draw.frames import FrameRenderer
@@ -525,13 +529,16 @@ async def _replay_interior(
     setup_s: float,
     progress: Callable[[float, float], None] | None,
     inner: tuple[httpx.AsyncBaseTransport, str] | None = None,
+    topology: Topology | None = None,
 ) -> ReplayResult:
     """The walk through an interior (:mod:`walkstream.client.roomreplay`); ``inner``
-    (the unshaped transport and URL) is where the ground truth fetches the cells."""
-    from walkstream.client.roomreplay import InteriorFrames, walk_interior
+    (the unshaped transport and URL) is where the ground truth fetches the cells;
+    ``topology`` the one the start bundle brought (None: fetch it)."""
+    from walkstream.client.roomreplay import InteriorFrames, interior_summary, walk_interior
     from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 
-    topology = await api.topology()
+    topology = topology or await api.topology()
+    setup_s = clock.now() - t_start  # the walk starts once the topology is in too
     cache = Cache(config.cache_bytes)
     streamer = RoomStreamer(
         api, clock, cache, topology,
@@ -570,37 +577,8 @@ async def _replay_interior(
     summary = summarise(log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0, cost_step=step,
                         recovery_ignore=spikes)
     summary.update(_link_summary(config, stats, api))
-    entered = {int(c) for c in np.unique(log.cell) if c >= 0}
-    summary.update(
-        {
-            "kind": "interior",
-            "scene_version": None if manifest is None else manifest.version,
-            "path_duration_s": path.duration,
-            "walk_s": float(log.t[-1] - log.t[0]) if len(log.t) else 0.0,
-            "setup_s": setup_s,
-            "cells_entered": len(entered),
-            "cells_in_scene": len(topology.cells),
-            "topology_bytes": topology.nbytes,
-            "visible_cells_mean": float(np.mean(log.pvs)) if len(log.pvs) else 0.0,
-            "visible_cells_max": int(np.max(log.pvs)) if len(log.pvs) else 0,
-            "contents_requests": streamer.stats.requests,
-            "contents_bytes": streamer.stats.bytes_received,
-            "cells_fetched": len(streamer.stats.fetched),
-            "cells_flushed": streamer.stats.flushed,
-            "redownloads": streamer.stats.refetched,
-            "flush_policy": streamer.config.flush_policy, "flush_after_s": streamer.config.flush_s,
-            "fog_m": config.fog_m,
-            "culling": config.culling,
-            **frames.figures(),
-            "fog_budget": config.fog_budget,
-            "fog_m_median": float(np.median(frames.fog_m)) if frames.fog_m else config.fog_m,
-            "fog_m_min": float(np.min(frames.fog_m)) if frames.fog_m else config.fog_m,
-            "fog_tightened_frames": frames.tightened,
-            "truth": truth_figures,
-            "cache_bytes": config.cache_bytes,
-            "cache_peak_bytes": int(cache.peak_bytes),
-        }
-    )
+    summary.update(interior_summary(config, log, streamer, frames, topology, cache, setup_s, path, manifest))
+    summary["truth"] = truth_figures
     return ReplayResult(summary, log, _bytes_log(stats, t_start), snapshots, spikes, interior=frames.series(log))
 
 
@@ -654,6 +632,7 @@ def _link_summary(config: ReplayConfig, stats: Any, api: SceneClient) -> dict[st
         "retries": api.stats.retries,
         "cut_streams": api.stats.cut_streams,
         "responses_cut_by_link": stats.responses_cut,
+        "requests": stats.requests, "start_bundle": config.start_bundle,
     }
 
 

@@ -1,8 +1,11 @@
-"""The replay's frame loop on an interior scene (what :func:`~walkstream.client.replay.replay`
+"""The replay's start and frame loop on an interior scene (what :func:`~walkstream.client.replay.replay`
 runs when the manifest's kind is ``interior``).
 
-Setup fetches the topology (one request: every cell's planes and every portal; packed,
-that is gzip-compressed, unless the replay asks for nothing compressed).  Then,
+Setup (:func:`~walkstream.client.stream.walkstart.interior_start`) asks for the interior start bundle: the path (compact),
+the topology (compact: every cell's outline and every portal, in millimetres) and the
+manifest in one round trip.  When that fails before the path and the topology are
+in, the replay falls back to scene list, manifest and path, then the topology
+(compact, unless the replay asks for nothing compressed).  Then,
 frame by frame: move the eye along the path, let the
 :class:`~walkstream.client.stream.rooms.RoomStreamer` locate it by the cells' planes,
 find the visible cells and fetch their contents; draw the parts of the visible cells'
@@ -41,8 +44,10 @@ from walkstream.client.stream.rooms import RoomStreamer
 from walkstream.shared.camera import perspective
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.records import Mesh
+from walkstream.shared.roomwire import Topology
+from walkstream.shared.wire import Manifest
 
-__all__ = ["InteriorFrames", "walk_interior"]
+__all__ = ["InteriorFrames", "interior_summary", "walk_interior"]
 
 
 @dataclass
@@ -254,6 +259,48 @@ async def walk_interior(
     if progress is not None:
         progress(total, total)
     return builder.build(fps_cap=config.fps), snapshots, np.array(spikes, dtype=bool)
+
+
+def interior_summary(
+    config: Any,
+    log: FrameLog,
+    streamer: RoomStreamer,
+    frames: InteriorFrames,
+    topology: Topology,
+    cache: Any,
+    setup_s: float,
+    path: RecordedPath,
+    manifest: Manifest | None,
+) -> dict[str, Any]:
+    """The interior figures of a replay's summary (beyond the frame log's and the link's)."""
+    entered = {int(c) for c in np.unique(log.cell) if c >= 0}
+    return {
+        "kind": "interior",
+        "scene_version": None if manifest is None else manifest.version,
+        "path_duration_s": path.duration,
+        "walk_s": float(log.t[-1] - log.t[0]) if len(log.t) else 0.0,
+        "setup_s": setup_s,
+        "cells_entered": len(entered),
+        "cells_in_scene": len(topology.cells),
+        "topology_bytes": topology.nbytes,
+        "visible_cells_mean": float(np.mean(log.pvs)) if len(log.pvs) else 0.0,
+        "visible_cells_max": int(np.max(log.pvs)) if len(log.pvs) else 0,
+        "contents_requests": streamer.stats.requests,
+        "contents_bytes": streamer.stats.bytes_received,
+        "cells_fetched": len(streamer.stats.fetched),
+        "cells_flushed": streamer.stats.flushed,
+        "redownloads": streamer.stats.refetched,
+        "flush_policy": streamer.config.flush_policy, "flush_after_s": streamer.config.flush_s,
+        "fog_m": config.fog_m,
+        "culling": config.culling,
+        **frames.figures(),
+        "fog_budget": config.fog_budget,
+        "fog_m_median": float(np.median(frames.fog_m)) if frames.fog_m else config.fog_m,
+        "fog_m_min": float(np.min(frames.fog_m)) if frames.fog_m else config.fog_m,
+        "fog_tightened_frames": frames.tightened,
+        "cache_bytes": config.cache_bytes,
+        "cache_peak_bytes": int(cache.peak_bytes),
+    }
 
 
 def _fog_for_budget(

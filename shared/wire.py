@@ -98,7 +98,7 @@ OFFERS: tuple[str, ...] = ("cell-index", "cells-batch", "start")
 (``GET .../index/{i}/{j}``), cell records in batches (``POST .../cells``) and the
 start bundle (``GET /v1/start``)."""
 
-START_PARTS: tuple[str, ...] = ("path", "cell", "index", "manifest", "objects")
+START_PARTS: tuple[str, ...] = ("path", "topology", "cell", "index", "manifest", "objects")
 """What a start bundle may hold, in the order the service sends it."""
 
 _MAX_MANIFEST = 4 << 20

@@ -34,7 +34,8 @@ from walkstream.server.service.interiors import InteriorState
 from walkstream.server.store import SceneReader
 from walkstream.shared.camera import perspective
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
-from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology, decode_topology
+from walkstream.shared.roomcompact import decode_topology_compact
+from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology
 
 SIZE = (160, 120)
 EYE = 1.6
@@ -148,7 +149,8 @@ class _Scene:
     def __init__(self, db: Path, ctx: Any) -> None:
         with SceneReader.open(db) as r:
             state = InteriorState(r, list(r.cells()))
-            self.topology = decode_topology(state.topology["msgpack"].content, "topology")
+            # the compact topology, as the client gets it (portals rounded outward to mm)
+            self.topology = decode_topology_compact(state.topology_compact.content, "topology")
             self.meshes: dict[int, CellMesh] = {c.id: decode_cell_mesh(r.contents(c.id)) for c in self.topology.cells}
         self.graph = PortalGraph.from_topology(self.topology)
         inside = [c for c in self.topology.cells if c.kind != "outside" and len(c.planes)]

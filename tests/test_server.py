@@ -37,6 +37,7 @@ from walkstream.server.service.scenes import MAX_IDS
 from walkstream.shared.cells import inside_convex
 from walkstream.shared.codec import decode_object
 from walkstream.shared.errors import StoreError
+from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_q
 from walkstream.shared.records import StreetParams
 from walkstream.shared.wire import (
     cell_from_wire,
@@ -314,7 +315,9 @@ def test_start_bundle_brings_everything_for_the_first_frame(client: Client, city
     # a path: the path first (the walk can start), from its own start (here outside
     # every cell: no cell, no objects)
     by_path = _bundle(client.get(f"/v1/start?path={PATH_NAME}"))
-    assert by_path[0][0] == "path" and msgpack.unpackb(by_path[0][1]) == PATH_DATA
+    # (in the compact encoding: within half a millimetre, millisecond, milliradian)
+    assert by_path[0][0] == "path"
+    assert np.allclose(decode_path_q(by_path[0][1], "p").table(), PATH.table(), rtol=0, atol=5e-4)
     x0, y0 = (float(v) for v in PATH.xyz[0, :2])
     if unpack(client.get(scene_url(city, f"/locate?x={x0!r}&y={y0!r}")))["cell"] is None:
         assert "cell" not in [p for p, _ in by_path]
@@ -386,6 +389,12 @@ def test_recorded_path(client: Client, city: CityDb) -> None:
     rj = client.get(url, headers=JSON_ACCEPT)
     assert rj.json() == {"name": PATH_NAME, "data": PATH_DATA}
     assert rm.headers["etag"] != rj.headers["etag"]
+    # the compact encoding when Accept names it: its own media type and ETag
+    rq = client.get(url, headers={"accept": f"{PATH_Q_MEDIA}, application/msgpack;q=0.5"})
+    assert rq.headers["content-type"] == PATH_Q_MEDIA and rq.headers["etag"] not in (rm.headers["etag"], rj.headers["etag"])
+    assert np.allclose(decode_path_q(rq.content, "p").table(), PATH.table(), rtol=0, atol=5e-4)
+    again = client.get(url, headers={"accept": PATH_Q_MEDIA, "if-none-match": rq.headers["etag"]})
+    assert again.status_code == 304
     assert_error(client.get(scene_url(city, "/paths/nope")), 404, "'nope'")
 
 
@@ -676,7 +685,7 @@ def test_schemathesis_finds_no_server_error(app: FastAPI, city: CityDb) -> None:
 
     schema = schemathesis.openapi.from_asgi("/openapi.json", app)
     operations = [result.ok() for result in schema.get_all_operations()]
-    assert len(operations) == 17  # and the interiors' topology, topology/packed, rooms/{cell}, rooms/{cell}/contents
+    assert len(operations) == 18  # and the interiors' topology, topology/packed, topology/compact, rooms/{cell}, rooms/{cell}/contents
     runs: list[str] = []
     for op in operations:
         for mode in GenerationMode:

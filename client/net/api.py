@@ -33,7 +33,9 @@ import msgpack
 from walkstream.client.clock import Clock
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
+from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_any
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.roomcompact import TOPOLOGY_COMPACT_MAGIC, decode_topology_compact
 from walkstream.shared.roomwire import (
     RoomRecord,
     Topology,
@@ -68,7 +70,7 @@ _MAX_FRAME = 32 << 20  # one object frame (an LOD2 mesh of a large block fits)
 StartItem = tuple[str, Any]
 """One item of a start bundle as :meth:`SceneClient.start` yields it: ``("path",
 (RecordedPath, nbytes))``, ``("cell", CellRecord)``, ``("index", CellIndex)``,
-``("manifest", (Manifest, nbytes))``, ``("objects", count)`` (the PVS objects that
+``("topology", Topology)`` (interiors), ``("manifest", (Manifest, nbytes))``, ``("objects", count)`` (the PVS objects that
 follow) or ``("object", ObjectFrame)``; ``nbytes`` (and the records' ``nbytes``) is
 what the part cost on the wire."""
 
@@ -236,7 +238,8 @@ class SceneClient:
         _, (p, n) = await self._get_decoded(
             self._url(f"/paths/{name}"),
             what,
-            lambda r: (RecordedPath.from_msgpack(r.content, what), len(r.content)),
+            lambda r: (decode_path_any(r.content, what), len(r.content)),
+            headers={"Accept": f"{PATH_Q_MEDIA}, {MSGPACK};q=0.5"},  # compact when the server has it
         )
         return p, n
 
@@ -268,11 +271,16 @@ class SceneClient:
 
     # -- interiors ------------------------------------------------------------
 
-    async def topology(self, packed: bool | None = None) -> Topology:
+    async def topology(self, packed: bool | None = None, compact: bool = True) -> Topology:
         """The interior's topology: storeys, cells (plane sets), portals, stairs; ``packed``
-        (default: :attr:`compress`) asks for it gzip-compressed (``/topology/packed``)."""
+        (default: :attr:`compress`) asks for it compact (``/topology/compact``, in
+        millimetres) or, ``compact=False``, gzip-compressed (``/topology/packed``)."""
         what = f"scene {self.scene!r} topology"
-        if self.compress if packed is None else packed:
+        if (self.compress if packed is None else packed) and compact:
+            _, t = await self._get_decoded(
+                self._url("/topology/compact"), what, lambda r: decode_topology_compact(r.content, what)
+            )
+        elif self.compress if packed is None else packed:
             _, t = await self._get_decoded(
                 self._url("/topology/packed"), what, lambda r: decode_topology_packed(r.content, what)
             )
@@ -426,7 +434,10 @@ class SceneClient:
             assert isinstance(body, bytes)
             label = f"{what}: {part}"
             if part == "path":
-                return "path", (RecordedPath.from_msgpack(body, label), nbytes)
+                return "path", (decode_path_any(body, label), nbytes)
+            if part == "topology":
+                dec = decode_topology_compact if body[:4] == TOPOLOGY_COMPACT_MAGIC else decode_topology
+                return "topology", replace(dec(body, label), nbytes=nbytes)
             if part == "cell":
                 return "cell", replace(decode_cell(body, label, etag), nbytes=nbytes)
             if part == "index":

@@ -83,6 +83,8 @@ class StartBundle:
                     self._arrived(found)
                     if found and not self.ids:
                         break  # the rest of the bundle is on disk: stop it, the link is free
+                elif part == "topology":  # an interior's: the replay fetches it for its walk
+                    st.stats.bundle_bytes += item.nbytes
                 elif part == "index":
                     st.stats.bundle_bytes += item.nbytes
                     st.add_index(item)

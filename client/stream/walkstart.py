@@ -3,7 +3,9 @@
 :func:`bundle_start` asks for the start bundle (path, first cells, index tiles,
 manifest and objects in one round trip) through the streamer; when it fails before
 the path is in, the replay falls back to fetching scene, manifest and path one by
-one, :func:`manifest_task` fetching the manifest on its own.
+one, :func:`manifest_task` fetching the manifest on its own.  An interior walk
+starts with :func:`interior_start` instead: its bundle is the path, the topology and
+the manifest (the cells' contents come by the room streamer's own requests).
 """
 
 from __future__ import annotations
@@ -18,9 +20,10 @@ from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.streamer import Streamer
 from walkstream.shared.errors import ApiError, StreamCut
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.roomwire import Topology
 from walkstream.shared.wire import Manifest, decode_manifest
 
-__all__ = ["fetch_manifest", "manifest_task", "bundle_start"]
+__all__ = ["fetch_manifest", "manifest_task", "bundle_start", "interior_start"]
 
 
 async def fetch_manifest(api: SceneClient, disk: DiskCache | None) -> Manifest:
@@ -92,3 +95,43 @@ async def bundle_start(
     except (ApiError, StreamCut):
         return None
     return got
+
+
+async def interior_start(
+    path: str,
+    timeout_s: float,
+    clock: Clock,
+    api: SceneClient,
+    disk: DiskCache | None,
+    manifest_arrived: Callable[[Manifest], None],
+    tasks: list[asyncio.Task[Any]],
+) -> tuple[tuple[RecordedPath, int] | None, Topology | None]:
+    """The interior start bundle of recorded path ``path``: ``((path, its bytes), topology)``.
+
+    ``(None, None)`` when the bundle failed (or took longer than ``timeout_s``)
+    before both the path and the topology were in: the caller then starts the old
+    way.  The manifest goes to ``manifest_arrived`` (and the disk cache) as it
+    arrives; when the bundle is cut after the topology but before the manifest, a
+    task (added to ``tasks``) fetches the manifest on its own.
+    """
+    got: dict[str, Any] = {}
+
+    async def run() -> None:
+        async for part, item in api.start(path=path):
+            if part == "manifest":
+                m = item[0]
+                if disk is not None and m.etag:
+                    disk.put_manifest(m.name, m.etag, m.body)
+                manifest_arrived(m)
+            got[part] = item
+
+    try:
+        await within(clock, timeout_s, run())
+    except (ApiError, StreamCut):
+        pass
+    if "path" not in got or "topology" not in got:
+        return None, None
+    if "manifest" not in got and api.scene is not None:
+        tasks.append(manifest_task(api, disk, manifest_arrived))
+    return got["path"], got["topology"]
+

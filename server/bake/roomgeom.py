@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.arrays import F64
 from walkstream.shared.geometry import triangulate_rings
+from walkstream.shared.roomcompact import prism_planes
 
 __all__ = [
     "orient_ccw",
@@ -180,16 +181,7 @@ def cell_planes(outline: ArrayLike, zmin: float, zmax: float) -> F64:
     >>> cell_planes([[0, 0], [1, 0], [1, 1], [0, 1]], 0.0, 3.0)[[0, -2, -1]].tolist()
     [[0.0, -1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0], [0.0, 0.0, 1.0, -3.0]]
     """
-    r = orient_ccw(outline)
-    e = np.roll(r, -1, axis=0) - r
-    n = np.column_stack([e[:, 1], -e[:, 0]])
-    n /= np.maximum(np.hypot(n[:, 0], n[:, 1]), _EPS)[:, None]
-    d = -np.einsum("ij,ij->i", n, r)
-    sides = np.column_stack([n, np.zeros(len(r)), d])
-    caps = np.array([[0.0, 0.0, -1.0, zmin], [0.0, 0.0, 1.0, -zmax]])
-    out = np.concatenate([sides, caps])
-    out[out == 0.0] = 0.0  # no negative zeros in stored planes
-    return out
+    return prism_planes(orient_ccw(outline), zmin, zmax)
 
 
 def clip_polygons(

@@ -17,12 +17,14 @@ from walkstream.server.service.http import Encoded, Rep, encode, etag_for
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.errors import ApiError
+from walkstream.shared.roomcompact import TOPOLOGY_COMPACT_MEDIA, encode_topology_compact
 from walkstream.shared.roomwire import (
     TOPOLOGY_PACKED_MEDIA,
     ContentsRef,
     PortalRef,
     RoomRecord,
     Topology,
+    decode_topology,
 )
 
 __all__ = ["CONTENTS_MEDIA", "InteriorState"]
@@ -78,6 +80,9 @@ class InteriorState:
         packed = gzip.compress(self.topology["msgpack"].content, 9, mtime=0)
         self.topology_packed = Encoded(packed, TOPOLOGY_PACKED_MEDIA, etag_for(self.version, "topology", "msgpack-gzip"))
         """The topology's msgpack body gzip-compressed (``walkstream-topology/1+gzip``)."""
+        compact = encode_topology_compact(decode_topology(self.topology["msgpack"].content, "topology"))
+        self.topology_compact = Encoded(compact, TOPOLOGY_COMPACT_MEDIA, etag_for(self.version, "topology", "c2"))
+        """The topology in millimetres, planes rebuilt from outlines (``walkstream-topology/2``)."""
         self._cache = LRU(_CACHE_BYTES)
 
     def has(self, cid: int) -> bool:

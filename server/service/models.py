@@ -177,7 +177,7 @@ class CellIndexOut(BaseModel):
 class StartPartOut(BaseModel):
     """One part of a start bundle: the body its own endpoint sends, with that body's ETag."""
 
-    part: str = Field(description="path, cell, index, manifest or object")
+    part: str = Field(description="path, topology (interiors), cell, index, manifest or objects")
     etag: str | None
     body: Any = Field(description="msgpack: the body's bytes; JSON: the body's JSON form")
 

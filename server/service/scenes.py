@@ -62,6 +62,7 @@ from walkstream.shared.cells import LOCATABLE_KINDS, CellLocator, TileGrid
 from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StoreError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
+from walkstream.shared.pathcodec import PATH_Q_MEDIA, encode_path_q
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.records import BuildingParams
 from walkstream.shared.streets import build_street
@@ -453,7 +454,12 @@ class Scene:
         """
         parts: list[StartPart] = []
         if path is not None:
-            parts.append(("path", self.path(path, rep)))
+            parts.append(("path", self.path_q(path) if rep == "msgpack" else self.path(path, rep)))
+        if self.interior is not None:
+            # an interior walk needs its topology before its first frame, then the
+            # manifest; the visible cells' contents come by their own requests
+            topology = self.interior.topology_compact if rep == "msgpack" else self.interior.topology[rep]
+            return [*parts, ("topology", topology), ("manifest", self.manifest[rep])]
         ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
         cells = self.start_cells(xy, heading, ahead)
         order: list[int] = []
@@ -486,8 +492,8 @@ class Scene:
 
     # -- paths ---------------------------------------------------------------
 
-    def cached_path(self, name: str, rep: Rep) -> Encoded | None:
-        """The encoded path ``name`` if it is cached."""
+    def cached_path(self, name: str, rep: Rep | Literal["q1"]) -> Encoded | None:
+        """The encoded path ``name`` if it is cached (``q1``: the compact encoding)."""
         value: Encoded | None = self._bodies.get(("path", name, rep))
         return value
 
@@ -521,6 +527,15 @@ class Scene:
                 body = {"name": name, "base64": base64.b64encode(blob).decode("ascii")}
             enc = encode(body, rep, self.version, tag)
         self._bodies.put(("path", name, rep), enc, len(enc.content))
+        return enc
+
+    def path_q(self, name: str) -> Encoded:
+        """Recorded path ``name`` in the compact encoding (``walkstream-path-q/1``)."""
+        enc = self.cached_path(name, "q1")
+        if enc is None:
+            p = RecordedPath.from_msgpack(self.path(name, "msgpack").content, f"path {name!r}")
+            enc = Encoded(encode_path_q(p), PATH_Q_MEDIA, etag_for(self.version, f"path:{name}", "q1"))
+            self._bodies.put(("path", name, "q1"), enc, len(enc.content))
         return enc
 
     # -- objects -------------------------------------------------------------

@@ -21,7 +21,7 @@ sequences in the smallest of four encodings), :mod:`.params` (buildings and stre
 contents of an interior cell, with its error bound).
 """
 
-from walkstream.shared.codec.bounded import unpack_bounded
+from walkstream.shared.codec.bounded import inflate_tagged, unpack_bounded
 from walkstream.shared.codec.cellmesh import (
     CELLMESH_FORMAT,
     CellMesh,
@@ -63,6 +63,7 @@ __all__ = [
     "encode_polygon",
     "decode_polygon",
     "unpack_bounded",
+    "inflate_tagged",
     "INT_FORMATS",
     "pack_ints",
     "unpack_ints",

@@ -8,13 +8,14 @@ raised as :class:`~walkstream.shared.errors.CodecError` naming what was being de
 
 from __future__ import annotations
 
+import zlib
 from typing import Any
 
 import msgpack
 
 from walkstream.shared.errors import CodecError
 
-__all__ = ["unpack_bounded"]
+__all__ = ["unpack_bounded", "inflate_tagged"]
 
 # Bounds for untrusted input.  A building with a million vertices is already absurd;
 # the limits only have to stop a forged length from allocating gigabytes.
@@ -108,3 +109,33 @@ def _int(x: object, what: str, field: str, lo: int | None = None, hi: int | None
     if hi is not None and x > hi:
         raise CodecError(f"{what}: {field}: expected <= {hi}, got {x}")
     return x
+
+
+def inflate_tagged(body: bytes, what: str, magic: bytes, version: int, max_bytes: int, name: str) -> bytes:
+    """The zlib payload of a ``magic version:u8 zlib(...)`` body, inflated bounded.
+
+    Raises
+    ------
+    CodecError
+        One line naming ``name``: no ``magic``, another version, corrupt, truncated,
+        inflating past ``max_bytes`` (a bomb), or stray bytes after the stream.
+    """
+    _nbytes(body, what)
+    b = bytes(body)
+    k = len(magic)
+    if len(b) <= k or b[:k] != magic:
+        raise CodecError(f"{what}: not a {name} (no {magic.decode()} header)")
+    if b[k] != version:
+        raise CodecError(f"{what}: {name} version {b[k]} is not supported (this reader knows {version})")
+    inflater = zlib.decompressobj()
+    try:
+        raw = inflater.decompress(b[k + 1 :], max_bytes + 1)
+    except zlib.error as exc:
+        raise CodecError(f"{what}: corrupt {name} ({exc})") from exc
+    if len(raw) > max_bytes or inflater.unconsumed_tail:
+        raise CodecError(f"{what}: {name} inflates to more than {max_bytes} bytes")
+    if not inflater.eof:
+        raise CodecError(f"{what}: truncated {name}")
+    if inflater.unused_data:
+        raise CodecError(f"{what}: {len(inflater.unused_data)} stray bytes after the {name}")
+    return raw

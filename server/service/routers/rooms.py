@@ -9,6 +9,11 @@
     media type ``application/vnd.walkstream.topology+gzip``; decode with
     :func:`walkstream.shared.roomwire.decode_topology_packed`): about a seventh of the
     bytes, what a client on a slow link asks for first.
+``GET /v1/scenes/{scene}/topology/compact``
+    The same topology in millimetres with the planes rebuilt from the outlines
+    (``walkstream-topology/2``, media type ``application/vnd.walkstream.topology-c2``;
+    decode with :func:`walkstream.shared.roomcompact.decode_topology_compact`): half
+    the packed one's bytes.
 ``GET /v1/scenes/{scene}/rooms/{cell}``
     One cell: planes, outline, portals (polygon and the other cell), neighbours and
     what its contents weigh.
@@ -34,6 +39,7 @@ from walkstream.server.service.interiors import CONTENTS_MEDIA, InteriorState
 from walkstream.server.service.models import ERRORS, RoomOut, TopologyOut, both
 from walkstream.server.service.scenes import Scene
 from walkstream.shared.errors import ApiError
+from walkstream.shared.roomcompact import TOPOLOGY_COMPACT_MEDIA
 from walkstream.shared.roomwire import TOPOLOGY_PACKED_MEDIA
 
 __all__ = ["router"]
@@ -74,6 +80,20 @@ async def topology(request: Request, scene: SceneDep, rep: RepDep) -> Response:
 async def topology_packed(request: Request, scene: SceneDep) -> Response:
     """The topology's msgpack body gzip-compressed (the same bytes whatever ``Accept`` says)."""
     return cached(request, _interior(scene).topology_packed)
+
+
+@router.get(
+    "/scenes/{scene}/topology/compact",
+    responses={
+        200: {"description": "the topology in millimetres (walkstream-topology/2)",
+              "content": {TOPOLOGY_COMPACT_MEDIA: {}}},
+        304: {"description": "not modified (If-None-Match matched the ETag)"},
+    },
+    summary="Interior topology, compact",
+)
+async def topology_compact(request: Request, scene: SceneDep) -> Response:
+    """The topology in millimetres (the same bytes whatever ``Accept`` says)."""
+    return cached(request, _interior(scene).topology_compact)
 
 
 @router.get(

@@ -19,6 +19,13 @@ it had asked for it):
    asked: ``params`` by default, ``lod2`` meshes): the first cell's PVS, highest
    ACH first, then each next cell's new objects.
 
+On an interior the bundle is what the walk needs before its first frame: ``path``
+(when asked), ``topology`` (the compact ``walkstream-topology/2``, as ``GET
+.../topology/compact`` sends it) and ``manifest``; the visible cells' contents follow
+by their own requests.  The ``path`` part is the compact ``walkstream-path-q/1``
+encoding (as ``GET .../paths/{name}`` sends it when ``Accept`` names it); with
+``Accept: application/json`` each body is its JSON form.
+
 On a 500 ms link each round trip is a visible wait: scene list, manifest, path,
 locate, cell and objects asked one after the other cost six of them.  With
 ``Accept: application/json`` the body is a JSON array of ``{part, etag, body}``

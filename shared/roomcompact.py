@@ -1,0 +1,219 @@
+"""The compact topology (``walkstream-topology/2``): an interior's topological file in millimetres.
+
+The packed topology (``walkstream-topology/1+gzip``) is gzip of msgpack float64
+lists; most of its bytes are the float64s and every cell's planes, which are the
+prism of its outline between its floor and ceiling.  This encoding stores
+coordinates as integer millimetres, outlines and paths as differences of
+consecutive vertices, a cell's planes only when they are not its outline's prism
+(the decoder rebuilds those with :func:`prism_planes`), and deflates the msgpack
+body: 7.9 kB -> about 3.9 kB on the generated office.
+
+Layout (media type :data:`TOPOLOGY_COMPACT_MEDIA`)::
+
+    b"WSTC" version:u8 zlib(msgpack {storeys, kinds, cells, portals, stairs})
+
+Exactness: outlines, heights and stair paths are rounded to the nearest
+millimetre (half a millimetre at most; the generators and the IFC importer put
+them on a millimetre grid already, so they come back as they were, to float32
+noise), so cell location by the planes is unchanged away from a wall by more than
+that.  Portal polygons are rounded *outward* (each coordinate away from the
+polygon's centroid, or to the nearest millimetre where it equals the centroid's,
+as on a wall's plane), so a decoded portal never shrinks and the conservative
+portal culling stays conservative.
+
+Decoding is bounded (inflated size, counts) and a malformed body raises a one-line
+:class:`~walkstream.shared.errors.CodecError`.
+"""
+
+from __future__ import annotations
+
+import zlib
+from typing import Any
+
+import msgpack
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from walkstream.shared.arrays import F64
+from walkstream.shared.codec import inflate_tagged, unpack_bounded
+from walkstream.shared.errors import CodecError
+from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology
+
+__all__ = [
+    "TOPOLOGY_COMPACT_MEDIA",
+    "TOPOLOGY_COMPACT_MAGIC",
+    "prism_planes",
+    "encode_topology_compact",
+    "decode_topology_compact",
+]
+
+TOPOLOGY_COMPACT_MEDIA = "application/vnd.walkstream.topology-c2"
+"""Media type of the compact topology (``walkstream-topology/2``)."""
+TOPOLOGY_COMPACT_MAGIC = b"WSTC"
+"""The first bytes of a compact topology."""
+_VERSION = 2
+_MM = 1000.0
+_MAX_INFLATED = 64 << 20
+_MAX_COUNT = 1 << 20
+
+
+def prism_planes(outline: ArrayLike, zmin: float, zmax: float) -> F64:
+    """The planes of the prism over a counter-clockwise ``outline`` ``(k, 2)``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(k + 2, 4)`` rows ``nx, ny, nz, d`` with unit outward normals (the sides,
+        then floor and ceiling); a point ``p`` is inside when ``n . p + d <= 0``.
+    """
+    r = np.asarray(outline, dtype=np.float64).reshape(-1, 2)
+    e = np.roll(r, -1, axis=0) - r
+    n = np.column_stack([e[:, 1], -e[:, 0]])
+    n /= np.maximum(np.hypot(n[:, 0], n[:, 1]), 1e-9)[:, None]
+    d = -np.einsum("ij,ij->i", n, r)
+    sides = np.column_stack([n, np.zeros(len(r)), d])
+    caps = np.array([[0.0, 0.0, -1.0, zmin], [0.0, 0.0, 1.0, -zmax]])
+    out = np.concatenate([sides, caps])
+    out[out == 0.0] = 0.0  # no negative zeros in stored planes
+    return out
+
+
+def _mm(a: ArrayLike) -> NDArray[np.int64]:
+    return np.rint(np.asarray(a, np.float64) * _MM).astype(np.int64)
+
+
+def _outward_mm(poly: F64) -> NDArray[np.int64]:
+    """A polygon ``(k, 3)`` in millimetres, each coordinate rounded away from the centroid."""
+    x = np.asarray(poly, np.float64) * _MM
+    c = x.mean(axis=0)
+    out = np.where(x > c, np.ceil(x), np.where(x < c, np.floor(x), np.rint(x)))
+    # a coordinate that is the centroid's in exact arithmetic may differ from it by
+    # float noise: within a thousandth of a millimetre it is rounded to nearest
+    near = np.abs(x - c) < 1e-3
+    out = np.where(near, np.rint(x), out)
+    return out.astype(np.int64)
+
+
+def _deltas(rows: NDArray[np.int64]) -> list[int]:
+    """Flattened differences of consecutive rows (the first row as it is)."""
+    d = np.diff(rows, axis=0, prepend=np.zeros((1, rows.shape[1]), np.int64))
+    out: list[int] = d.reshape(-1).tolist()
+    return out
+
+
+def encode_topology_compact(t: Topology) -> bytes:
+    """Encode ``t`` as ``walkstream-topology/2`` (see the module docstring)."""
+    kinds = sorted({c.kind for c in t.cells} | {p[1] for p in t.portals})
+    kind_of = {k: i for i, k in enumerate(kinds)}
+    planes: list[list[Any]] = []
+    for i, c in enumerate(t.cells):
+        ol = _mm(c.outline) / _MM
+        rebuilt = prism_planes(ol, round(c.zmin * _MM) / _MM, round(c.zmax * _MM) / _MM)
+        if len(c.planes) == 0 or c.planes.shape != rebuilt.shape or not np.allclose(c.planes, rebuilt, atol=1e-6, rtol=0):
+            planes.append([i, c.planes.reshape(-1).tolist()])
+    body = {
+        "storeys": [[i, n, int(_mm(a)), int(_mm(b))] for i, n, a, b in t.storeys],
+        "kinds": kinds,
+        "cells": {
+            "id": _deltas(np.array([[c.id] for c in t.cells], np.int64).reshape(-1, 1)),
+            "kind": [kind_of[c.kind] for c in t.cells],
+            "name": [c.name for c in t.cells],
+            "storey": [c.storey for c in t.cells],
+            "z": _deltas(_mm([[c.zmin, c.zmax] for c in t.cells]).reshape(-1, 2)),
+            "n": [len(c.outline) for c in t.cells],
+            "outline": [_deltas(_mm(c.outline)) for c in t.cells],
+            "planes": planes,
+            "triangles": [c.contents.triangles for c in t.cells],
+            "bytes": [c.contents.nbytes for c in t.cells],
+        },
+        "portals": [
+            [pid, kind_of[k], a, b, _deltas(_outward_mm(pg))] for pid, k, a, b, pg in t.portals
+        ],
+        "stairs": [[p, lo, up, _deltas(_mm(pa).reshape(-1, 3))] for p, lo, up, pa in t.stairs],
+    }
+    return TOPOLOGY_COMPACT_MAGIC + bytes([_VERSION]) + zlib.compress(msgpack.packb(body), 9)
+
+
+def _ints(x: Any, what: str) -> list[int]:
+    if not isinstance(x, list) or not all(type(v) is int for v in x):
+        raise CodecError(f"{what}: expected a list of integers")
+    return x
+
+
+def _rows(flat: Any, cols: int, what: str, min_rows: int) -> F64:
+    """Rows of millimetre differences back to metres ``(k, cols)``."""
+    v = _ints(flat, what)
+    if len(v) % cols or len(v) < cols * min_rows:
+        raise CodecError(f"{what}: expected at least {min_rows} rows of {cols} integers, got {len(v)} values")
+    a = np.asarray(v, np.int64).reshape(-1, cols)
+    return np.cumsum(a, axis=0).astype(np.float64) / _MM
+
+
+def decode_topology_compact(body: bytes, what: str) -> Topology:
+    """Decode a ``walkstream-topology/2`` body from untrusted bytes; its ``nbytes`` is
+    the body's size (what crossed the link).
+
+    Raises
+    ------
+    CodecError
+        Not a compact topology, truncated, inflating past the bound, or a field
+        missing, malformed or with counts that disagree.
+    """
+    raw = inflate_tagged(body, what, TOPOLOGY_COMPACT_MAGIC, _VERSION, _MAX_INFLATED, "compact topology")
+    obj = unpack_bounded(raw, what, max_bytes=_MAX_INFLATED, max_array_len=_MAX_COUNT, max_map_len=16,
+                         max_bin_len=0)
+    if not isinstance(obj, dict):
+        raise CodecError(f"{what}: expected a map")
+    try:
+        return _topology(obj, what, len(body))
+    except KeyError as exc:
+        raise CodecError(f"{what}: missing field {exc}") from exc
+    except (TypeError, ValueError, IndexError) as exc:
+        raise CodecError(f"{what}: {exc}") from exc
+
+
+def _topology(obj: dict[str, Any], what: str, nbytes: int) -> Topology:
+    kinds = [str(k) for k in obj["kinds"]]
+    storeys = tuple((int(i), str(n), a / _MM, b / _MM) for i, n, a, b in obj["storeys"])
+    c = obj["cells"]
+    ids = np.cumsum(_ints(c["id"], f"{what}: cells.id")).tolist()
+    ncell = len(ids)
+    columns = {k: c[k] for k in ("kind", "name", "storey", "n", "outline", "triangles", "bytes")}
+    for key, v in columns.items():
+        if not isinstance(v, list) or len(v) != ncell:
+            raise CodecError(f"{what}: cells.{key}: expected {ncell} values, got {len(v) if isinstance(v, list) else v!r:.40}")
+    z = _rows(c["z"], 2, f"{what}: cells.z", ncell)
+    if len(z) != ncell:
+        raise CodecError(f"{what}: cells.z: expected {ncell} rows, got {len(z)}")
+    explicit: dict[int, F64] = {}
+    for row, flat in c["planes"]:
+        explicit[int(row)] = np.asarray(flat, np.float64).reshape(-1, 4)
+    portals = []
+    ends: dict[int, list[PortalRef]] = {}
+    for k, (pid, kind, a, b, flat) in enumerate(obj["portals"]):
+        poly = _rows(flat, 3, f"{what}: portals[{k}].polygon", 3)
+        kname = kinds[kind]
+        portals.append((int(pid), kname, int(a), int(b), poly))
+        ends.setdefault(int(a), []).append(PortalRef(int(pid), kname, poly, int(b)))
+        ends.setdefault(int(b), []).append(PortalRef(int(pid), kname, poly, int(a)))
+    cells = []
+    for i, cid in enumerate(ids):
+        outline = _rows(c["outline"][i], 2, f"{what}: cells[{i}].outline", 3)
+        if len(outline) != c["n"][i]:
+            raise CodecError(f"{what}: cells[{i}].outline: {len(outline)} vertices, n says {c['n'][i]}")
+        zmin, zmax = float(z[i, 0]), float(z[i, 1])
+        planes = explicit.get(i)
+        if planes is None:
+            planes = prism_planes(outline, zmin, zmax)
+        refs = tuple(ends.get(cid, ()))
+        cells.append(RoomRecord(
+            id=int(cid), kind=kinds[c["kind"][i]], name=str(c["name"][i]), room=None, storey=int(c["storey"][i]),
+            outline=outline, zmin=zmin, zmax=zmax, planes=planes, portals=refs,
+            neighbours=tuple(sorted({r.cell for r in refs})),
+            contents=ContentsRef(int(c["triangles"][i]), 0, 0, int(c["bytes"][i]), 0, 0.0),
+        ))
+    stairs = tuple(
+        (int(p), int(lo), int(up), _rows(flat, 3, f"{what}: stairs[{k}].path", 2))
+        for k, (p, lo, up, flat) in enumerate(obj["stairs"])
+    )
+    return Topology(storeys, tuple(cells), tuple(portals), stairs, nbytes=nbytes)
