@@ -68,6 +68,7 @@ from walkstream.shared.records import Mesh, readonly
 
 __all__ = [
     "CELLMESH_FORMAT",
+    "CELLMESH_V1",
     "POSITION_BITS",
     "MAX_CELLMESH_BYTES",
     "CellPart",
@@ -79,8 +80,10 @@ __all__ = [
     "flat_normals",
 ]
 
-CELLMESH_FORMAT = "walkstream-cellmesh/1"
-"""The format tag inside every cell-contents blob."""
+CELLMESH_FORMAT = "walkstream-cellmesh/2"
+"""The format tag of the cell-contents blobs the bake writes (planar polygons, 1 mm grid)."""
+CELLMESH_V1 = "walkstream-cellmesh/1"
+"""The first version's tag (every triangle, 16 bits over the cell's box): still decoded."""
 POSITION_BITS = 16
 """Bits per quantised coordinate."""
 MAX_CELLMESH_BYTES = 64 << 20
@@ -211,6 +214,8 @@ class CellMesh:
     extent: tuple[float, float, float]
     nbytes: int = 0
     """Bytes of the encoded blob."""
+    grid: float = 0.0
+    """Absolute grid step of the positions (metres; ``walkstream-cellmesh/2``), 0 for version 1."""
     _cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -225,7 +230,9 @@ class CellMesh:
 
     @cached_property
     def error_bound(self) -> float:
-        """Largest quantisation error of any coordinate, metres."""
+        """Largest quantisation error of any coordinate, metres (half a grid step for version 2)."""
+        if self.grid:
+            return 0.5 * self.grid
         return float(position_error_bound(self.extent).max())
 
     def mesh(self) -> Mesh:
@@ -246,6 +253,7 @@ def encode_cell_mesh(
     parts: Sequence[tuple[int, int, ArrayLike, ArrayLike]],
     *,
     compress: str = "best",
+    version: int = 2,
 ) -> bytes:
     """Encode a cell's parts.
 
@@ -256,6 +264,10 @@ def encode_cell_mesh(
         part; parts without triangles are dropped.
     compress:
         ``"zlib"``, ``"lzma"``, ``"none"`` or ``"best"`` (the smallest of the three).
+    version:
+        2 (:data:`CELLMESH_FORMAT`, planar polygons on a 1 mm grid,
+        :mod:`~walkstream.shared.codec.planarmesh`) or 1 (:data:`CELLMESH_V1`, every
+        triangle, 16 bits over the cell's box; kept for comparison and old databases).
 
     Returns
     -------
@@ -288,6 +300,15 @@ def encode_cell_mesh(
         idx_list.append(t)
     if len(elements) > _MAX_PARTS:
         raise CodecError(f"cell mesh: {len(elements)} parts, at most {_MAX_PARTS}")
+    if compress not in ("best", "zlib", "lzma", "none"):
+        raise CodecError(f"cell mesh: compress must be best, zlib, lzma or none, got {compress!r}")
+    if version == 2:
+        from walkstream.shared.codec.planarmesh import encode_planar_body
+
+        rows = list(zip(elements, materials, pos_list, idx_list, strict=True))
+        return _compress(msgpack.packb(encode_planar_body(rows), use_bin_type=True), compress)
+    if version != 1:
+        raise CodecError(f"cell mesh: version must be 1 or 2, got {version!r}")
     vcount = np.array([len(p) for p in pos_list], dtype=np.int64)
     tcount = np.array([len(t) for t in idx_list], dtype=np.int64)
     if int(vcount.sum()) > _MAX_VERTICES:
@@ -309,7 +330,7 @@ def encode_cell_mesh(
     di = _part_deltas(alli, istarts)
     eid = np.asarray(elements, dtype=np.int64)
     body = {
-        "format": CELLMESH_FORMAT,
+        "format": CELLMESH_V1,
         "lo": [float(v) for v in lo],
         "ext": [float(v) for v in ext],
         "parts": len(elements),
@@ -320,7 +341,11 @@ def encode_cell_mesh(
         "positions": encode_varints(_zigzag(dq.T.reshape(-1))),
         "indices": encode_varints(_zigzag(di)),
     }
-    packed: bytes = msgpack.packb(body, use_bin_type=True)
+    return _compress(msgpack.packb(body, use_bin_type=True), compress)
+
+
+def _compress(packed: bytes, compress: str) -> bytes:
+    """The tag byte and the compressed map (``compress`` as :func:`encode_cell_mesh`)."""
     options = {
         "none": lambda: b"N" + packed,
         "zlib": lambda: b"Z" + zlib.compress(packed, 9),
@@ -328,8 +353,6 @@ def encode_cell_mesh(
     }
     if compress == "best":
         return min((f() for f in options.values()), key=len)
-    if compress not in options:
-        raise CodecError(f"cell mesh: compress must be best, zlib, lzma or none, got {compress!r}")
     return options[compress]()
 
 
@@ -403,8 +426,10 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
         packed, what, max_bytes=MAX_CELLMESH_BYTES, max_array_len=8, max_map_len=16,
         max_bin_len=MAX_CELLMESH_BYTES,
     )
-    if not isinstance(body, dict) or body.get("format") != CELLMESH_FORMAT:
-        raise CodecError(f"{what}: not a {CELLMESH_FORMAT} map")
+    if isinstance(body, dict) and body.get("format") == CELLMESH_FORMAT:
+        return _decode_v2(body, what, len(blob))
+    if not isinstance(body, dict) or body.get("format") != CELLMESH_V1:
+        raise CodecError(f"{what}: not a {CELLMESH_FORMAT} or {CELLMESH_V1} map")
     if set(body) - _KEYS:
         raise CodecError(f"{what}: unknown keys {sorted(set(body) - _KEYS)}")
     try:
@@ -451,4 +476,21 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
         (float(lo[0]), float(lo[1]), float(lo[2])),
         (float(ext[0]), float(ext[1]), float(ext[2])),
         nbytes=len(blob),
+    )
+
+
+def _decode_v2(body: dict[str, Any], what: str, nbytes: int) -> CellMesh:
+    """A version 2 map as a :class:`CellMesh` (its box measured from the decoded positions)."""
+    from walkstream.shared.codec.planarmesh import GRID, decode_planar_body
+
+    parts = tuple(CellPart(e, m, p, t) for e, m, p, t in decode_planar_body(body, what))
+    allp = np.concatenate([p.positions for p in parts]).astype(np.float64) if parts else np.zeros((0, 3))
+    lo = allp.min(axis=0) if len(allp) else np.zeros(3)
+    ext = allp.max(axis=0) - lo if len(allp) else np.zeros(3)
+    return CellMesh(
+        parts,
+        (float(lo[0]), float(lo[1]), float(lo[2])),
+        (float(ext[0]), float(ext[1]), float(ext[2])),
+        nbytes=nbytes,
+        grid=GRID,
     )
