@@ -146,7 +146,10 @@ def _newell(ring: NDArray[Any]) -> NDArray[np.float64]:
     """``(3,)`` area vector (Newell) of a ring ``(k, 3)``: twice the area along its normal."""
     r = np.asarray(ring, dtype=np.float64)
     r = r - r[0]
-    return np.cross(r, np.roll(r, -1, axis=0)).sum(axis=0)
+    x, y, z = r[:, 0], r[:, 1], r[:, 2]
+    x1, y1, z1 = np.append(x[1:], x[0]), np.append(y[1:], y[0]), np.append(z[1:], z[0])
+    # written out: np.cross costs more than the ring on the small rings most regions have
+    return np.array([(y * z1 - z * y1).sum(), (z * x1 - x * z1).sum(), (x * y1 - y * x1).sum()])
 
 
 _CYCLIC = ((1, 2), (2, 0), (0, 1))  # the kept axes when axis k is dropped, so that (a x b)_k > 0
@@ -430,28 +433,89 @@ def decode_planar_body(
     starts = np.concatenate([[0], np.cumsum(tcount * 3)[:-1]]).astype(np.int64)
     offset = np.where(starts > 0, run[np.maximum(starts - 1, 0)] if len(run) else 0, 0)
     idx = run - np.repeat(offset, tcount * 3)
+    # every region's first vertex (global), then its triangles (global indices)
+    part_v0 = np.concatenate([[0], np.cumsum(vcount + _per_part(rings, sizes, rcount))])
+    rtris, rpart = _region_triangles(q, rings, sizes, vcount, rcount, part_v0)
     out: list[tuple[int, int, NDArray[np.float32], NDArray[np.int64]]] = []
-    v0 = t0 = reg = ring = 0
+    t0 = 0
+    rbounds = np.searchsorted(rpart, np.arange(n_parts + 1))
     for k in range(n_parts):
         nvk, ntk = int(vcount[k]), int(tcount[k])
         t = idx[3 * t0 : 3 * (t0 + ntk)].reshape(-1, 3)
         if len(t) and (t.min() < 0 or t.max() >= nvk):
             raise CodecError(f"{what}: part {k}: index out of range")
-        tris = [t]
-        start = v0 + nvk
-        base = nvk
-        for _ in range(int(rcount[k])):
-            nr = int(rings[reg])
-            reg += 1
-            rs = sizes[ring : ring + nr]
-            ring += nr
-            ends = start + np.cumsum(rs)
-            region = [q[a:b] for a, b in zip(np.concatenate([[start], ends[:-1]]), ends, strict=True)]
-            tris.append(triangulate_region(region) + base)
-            size = int(rs.sum())
-            start += size
-            base += size
-        out.append((int(eid[k]), mats[k], pos[v0:start], np.concatenate(tris)))
-        v0 = start
+        v0, v1 = int(part_v0[k]), int(part_v0[k + 1])
+        region = rtris[rbounds[k] : rbounds[k + 1]] - v0
+        out.append((int(eid[k]), mats[k], pos[v0:v1], np.concatenate([t, region])))
         t0 += ntk
     return out
+
+
+def _per_part(rings: NDArray[np.int64], sizes: NDArray[np.int64], rcount: NDArray[np.int64]) -> NDArray[np.int64]:
+    """``(parts,)`` ring vertices per part."""
+    ring_part = np.repeat(np.repeat(np.arange(len(rcount)), rcount), rings)
+    return np.bincount(ring_part, weights=sizes, minlength=len(rcount)).astype(np.int64)
+
+
+def _region_triangles(
+    q: NDArray[np.int64],
+    rings: NDArray[np.int64],
+    sizes: NDArray[np.int64],
+    vcount: NDArray[np.int64],
+    rcount: NDArray[np.int64],
+    part_v0: NDArray[np.int64],
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """All regions' triangles (global vertex indices, region order) and each one's part.
+
+    Triangles and convex quadrilaterals without holes (most regions) are split with
+    array operations; the rest go through earcut one by one.
+    """
+    n_regions = len(rings)
+    if n_regions == 0:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    region_part = np.repeat(np.arange(len(rcount)), rcount)
+    ring_first = np.concatenate([[0], np.cumsum(rings)[:-1]])
+    ring_vstart = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    # a part's ring vertices come after its kept-triangle vertices
+    part_ring0 = part_v0[:-1] + vcount - np.concatenate([[0], np.cumsum(_per_part(rings, sizes, rcount))[:-1]])
+    start = ring_vstart[ring_first] + part_ring0[region_part]
+    total = np.add.reduceat(sizes, ring_first) if len(sizes) else np.zeros(0, np.int64)
+    tris: list[NDArray[np.int64]] = []
+    owner: list[NDArray[np.int64]] = []
+    tri3 = np.flatnonzero((rings == 1) & (total == 3))
+    tris.append(start[tri3, None] + np.arange(3))
+    owner.append(tri3)
+    quad = np.flatnonzero((rings == 1) & (total == 4))
+    if len(quad):
+        v = q[start[quad, None] + np.arange(4)].astype(np.float64)  # (k, 4, 3)
+        rel = v - v[:, :1]
+        n = np.cross(rel[:, 1], rel[:, 2]) + np.cross(rel[:, 2], rel[:, 3])
+        d1 = np.einsum("ij,ij->i", np.cross(rel[:, 1], rel[:, 2]), n)
+        d2 = np.einsum("ij,ij->i", np.cross(rel[:, 2], rel[:, 3]), n)
+        split = np.where(((d1 > 0) & (d2 > 0))[:, None, None], [[0, 1, 2], [0, 2, 3]], [[1, 2, 3], [1, 3, 0]])
+        ok = (d1 > 0) & (d2 > 0)
+        other = ~ok
+        if other.any():  # the 1-3 diagonal must be inside too, else earcut decides
+            r2 = rel[other] - rel[other][:, 1:2]
+            e1 = np.einsum("ij,ij->i", np.cross(r2[:, 2], r2[:, 3]), n[other])
+            e2 = np.einsum("ij,ij->i", np.cross(r2[:, 3], r2[:, 0]), n[other])
+            ok[np.flatnonzero(other)] = (e1 > 0) & (e2 > 0)
+        tris.append((start[quad, None, None] + split)[ok].reshape(-1, 3))
+        owner.append(np.repeat(quad[ok], 2))
+        rest_quads = quad[~ok]
+    else:
+        rest_quads = quad
+    fast = np.zeros(n_regions, bool)
+    fast[tri3] = True
+    fast[quad] = True
+    fast[rest_quads] = False
+    for r in np.flatnonzero(~fast).tolist():
+        bounds = start[r] + np.concatenate([[0], np.cumsum(sizes[ring_first[r] : ring_first[r] + rings[r]])])
+        region = [q[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        t = triangulate_region(region) + start[r]
+        tris.append(t)
+        owner.append(np.full(len(t), r, np.int64))
+    allt = np.concatenate(tris)
+    own = np.concatenate(owner)
+    order = np.argsort(own, kind="stable")
+    return allt[order], region_part[own[order]]
