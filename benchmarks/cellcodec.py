@@ -26,10 +26,12 @@ from walkstream.client.draw.portals import PortalGraph, cull_portals
 from walkstream.client.stream.rooms import cell_of, stack_planes
 from walkstream.server.bake.interior import bake_interior
 from walkstream.server.service.interiors import InteriorState
+from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
 from walkstream.server.store import SceneReader
 from walkstream.shared.camera import perspective
 from walkstream.shared.codec.cellmesh import decode_cell_mesh
+from walkstream.shared.errors import InputError
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomwire import decode_topology
 
@@ -86,7 +88,10 @@ def codec_figures(db: Path, cells: Sequence[int] | None = None) -> dict[str, Any
 def codec_rows(source: Path, db_v2: Path, v2_encode_s: float, folder: Path) -> list[dict[str, Any]]:
     """Bake ``source`` with version 1 beside ``db_v2`` (the default bake) and measure both."""
     db_v1 = folder / f"{source.stem}.cellmesh1.db"
-    summary = bake_interior(read_source(source), source, db_v1, cellmesh_version=1)
+    scene = read_source(source)
+    if not isinstance(scene, InteriorScene):
+        raise InputError(f"{source}: not an interior (IFC or a walkstream-interior file)")
+    summary = bake_interior(scene, source, db_v1, cellmesh_version=1)
     start = start_cells(db_v2)
     rows = []
     for version, db, enc in ((1, db_v1, float(summary.get("contents_encode_s", 0.0))), (2, db_v2, v2_encode_s)):

@@ -226,11 +226,11 @@ def bake_interior(
             if ps:
                 back = decode_cell_mesh(blob, f"cell {c.id}")
                 nv, nt = back.vertices, back.triangles
-                err = max(grid_error(p[2]) for p in ps)
-                for q, p in zip(back.parts, ps, strict=True):
-                    a0, a1 = mesh_area(p[2], p[3]), mesh_area(q.positions, q.indices)
-                    if abs(a1 - a0) > area_tolerance(p[2], p[3]):
-                        raise InputError(f"cell {c.id}: element {p[0]}: area {a1} m2 after encoding, {a0} m2 before")
+                err = max(grid_error(part[2]) for part in ps)
+                for q, part in zip(back.parts, ps, strict=True):
+                    a0, a1 = mesh_area(part[2], part[3]), mesh_area(q.positions, q.indices)
+                    if abs(a1 - a0) > area_tolerance(part[2], part[3]):
+                        raise InputError(f"cell {c.id}: element {part[0]}: area {a1} m2 after encoding, {a0} m2 before")
             writer.add_contents(ContentsInfo(nt, nv, len(ps), len(blob), raw_bytes(nv, nt), err, cell=c.id), blob)
         x, y, z = walk.xyz[0]
         writer.add_viewpoint("entrance", float(x), float(y), float(z), float(walk.yaw[0]), start)

@@ -254,10 +254,10 @@ def _merge_group(
         for ring in [poly.exterior, *poly.interiors]:
             pts = []
             for x, y in list(ring.coords)[:-1]:
-                p3 = lookup.get((x, y))
-                if p3 is None:
+                hit = lookup.get((x, y))
+                if hit is None:
                     return None  # a new intersection point: not a clean union of the triangles
-                pts.append(p3)
+                pts.append(hit)
             rings.append(_drop_collinear(np.array(pts, dtype=np.int64), shared))
         tris = triangulate_region(rings)
         if abs(_area3(np.concatenate(rings), tris) - poly.area) > 1e-6 * max(poly.area, 1.0):
@@ -292,7 +292,7 @@ def _encode_part(
     # how many plane groups use each grid point: a point of two groups is shared
     gp = np.unique(np.column_stack([np.repeat(group, 3), q[t].reshape(-1, 3)]), axis=0)
     pts, uses = np.unique(gp[:, 1:], axis=0, return_counts=True)
-    shared = {tuple(int(v) for v in p) for p in pts[uses > 1]}
+    shared: set[tuple[int, int, int]] = {(int(a), int(b), int(c)) for a, b, c in pts[uses > 1].tolist()}
     kept = np.ones(len(t), bool)
     polys: list[Rings] = []
     for g in np.flatnonzero(counts >= 2):
