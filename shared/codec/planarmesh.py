@@ -196,32 +196,47 @@ def _area3(q: NDArray[np.int64], t: NDArray[np.int64]) -> float:
     if len(t) == 0:
         return 0.0
     p = q.astype(np.float64)
-    return float(0.5 * np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1).sum())
+    return 0.5 * float(np.sqrt((_cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]) ** 2).sum(axis=1)).sum())
+
+
+def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Row-wise cross product of ``(n, 3)`` arrays (np.cross's overhead dominates on small ones)."""
+    return np.column_stack(
+        [a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2], a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]]
+    )
 
 
 def _frame(n: NDArray[np.float64]) -> NDArray[np.float64]:
     """``(3, 2)`` an orthonormal ``u, v`` of the plane with normal ``n``, ``u x v = n``."""
     axis = np.eye(3)[int(np.argmin(np.abs(n)))]
-    u = np.cross(axis, n)
+    u = _cross(axis[None], n[None])[0]
     u /= np.linalg.norm(u)
-    v = np.cross(n, u)
+    v = _cross(n[None], u[None])[0]
     return np.column_stack([u, v])
 
 
 def _drop_collinear(ring: NDArray[np.int64], keep: set[tuple[int, int, int]]) -> NDArray[np.int64]:
-    """``ring`` without the vertices between two collinear edges that no one else uses."""
-    out: list[NDArray[np.int64]] = []
-    pts = list(ring)
+    """``ring`` without the vertices between two collinear edges that no one else uses
+    (exact: integer cross products)."""
+    pts = [tuple(p) for p in ring.tolist()]
     n = len(pts)
+    out: list[tuple[int, ...]] = []
     for i in range(n):
         cur = pts[i]
-        if tuple(int(c) for c in cur) in keep:
+        if cur in keep:
             out.append(cur)
             continue
         prev = out[-1] if out else pts[i - 1]
         nxt = pts[(i + 1) % n]
-        d0, d1 = cur - prev, nxt - cur
-        if np.any(np.cross(d0, d1)) or int(np.dot(d0, d1)) <= 0:
+        d0 = (cur[0] - prev[0], cur[1] - prev[1], cur[2] - prev[2])
+        d1 = (nxt[0] - cur[0], nxt[1] - cur[1], nxt[2] - cur[2])
+        straight = (
+            d0[1] * d1[2] == d0[2] * d1[1]
+            and d0[2] * d1[0] == d0[0] * d1[2]
+            and d0[0] * d1[1] == d0[1] * d1[0]
+            and d0[0] * d1[0] + d0[1] * d1[1] + d0[2] * d1[2] > 0
+        )
+        if not straight:
             out.append(cur)
     if len(out) < 3:
         return ring
@@ -235,8 +250,8 @@ def _merge_group(
     frame = _frame(normal)
     corners = q[tri]  # (m, 3, 3)
     xy = corners.astype(np.float64) @ frame  # (m, 3, 2)
-    lookup: dict[tuple[float, float], NDArray[np.int64]] = {}
-    for p2, p3 in zip(xy.reshape(-1, 2).tolist(), corners.reshape(-1, 3), strict=True):
+    lookup: dict[tuple[float, float], list[int]] = {}
+    for p2, p3 in zip(xy.reshape(-1, 2).tolist(), corners.reshape(-1, 3).tolist(), strict=True):
         lookup.setdefault((p2[0], p2[1]), p3)
     area2 = 0.5 * np.abs(
         (xy[:, 1, 0] - xy[:, 0, 0]) * (xy[:, 2, 1] - xy[:, 0, 1]) - (xy[:, 1, 1] - xy[:, 0, 1]) * (xy[:, 2, 0] - xy[:, 0, 0])
@@ -252,20 +267,33 @@ def _merge_group(
         poly = orient(poly, 1.0)
         rings: Rings = []
         for ring in [poly.exterior, *poly.interiors]:
-            pts = []
+            pts: list[list[int]] = []
             for x, y in list(ring.coords)[:-1]:
                 hit = lookup.get((x, y))
                 if hit is None:
                     return None  # a new intersection point: not a clean union of the triangles
                 pts.append(hit)
             rings.append(_drop_collinear(np.array(pts, dtype=np.int64), shared))
-        tris = triangulate_region(rings)
-        if abs(_area3(np.concatenate(rings), tris) - poly.area) > 1e-6 * max(poly.area, 1.0):
-            return None
+        if len(rings) > 1 or len(rings[0]) > 4:  # the decoder splits triangles and quads itself
+            tris = triangulate_region(rings)
+            if abs(_area3(np.concatenate(rings), tris) - poly.area) > 1e-6 * max(poly.area, 1.0):
+                return None
         out.append(rings)
     if sum(len(r) for rings in out for r in rings) > len(np.unique(tri)):
         return None
     return out
+
+
+def _quad(a: list[list[int]], b: list[list[int]]) -> NDArray[np.int64] | None:
+    """The ring of two coplanar triangles (corner lists, same winding) that share an edge
+    ``u -> v`` in ``a`` and ``v -> u`` in ``b``: ``v, w, u, x`` (``w``, ``x`` their third
+    corners), or ``None`` when they share no such edge."""
+    for k in range(3):
+        u, v, w = a[k], a[(k + 1) % 3], a[(k + 2) % 3]
+        for m in range(3):
+            if b[m] == v and b[(m + 1) % 3] == u:
+                return np.array([v, w, u, b[(m + 2) % 3]], dtype=np.int64)
+    return None
 
 
 def _encode_part(
@@ -295,6 +323,18 @@ def _encode_part(
     shared: set[tuple[int, int, int]] = {(int(a), int(b), int(c)) for a, b, c in pts[uses > 1].tolist()}
     kept = np.ones(len(t), bool)
     polys: list[Rings] = []
+    # two triangles of one plane sharing an edge (a box's face): a quadrilateral, no union needed
+    pairs = np.flatnonzero(counts == 2)
+    if len(pairs):
+        order = np.argsort(group, kind="stable")
+        first = np.searchsorted(group[order], pairs)
+        for i, j in zip(order[first].tolist(), order[first + 1].tolist(), strict=True):
+            ring = _quad(q[t[i]].tolist(), q[t[j]].tolist())
+            if ring is not None:
+                polys.append([ring])
+                kept[i] = kept[j] = False
+        counts = counts.copy()
+        counts[pairs] = 0
     for g in np.flatnonzero(counts >= 2):
         members = np.flatnonzero(group == g)
         nn = n[members].mean(axis=0)
