@@ -1,4 +1,13 @@
-"""The contents of an interior cell as one compact, immutable blob (``walkstream-cellmesh/1``).
+"""The contents of an interior cell as one compact, immutable blob (``walkstream-cellmesh/2``, and /1).
+
+The bake writes version 2 (:data:`CELLMESH_FORMAT`, planar polygons on an absolute 1 mm
+grid: :mod:`~walkstream.shared.codec.planarmesh` says how and states its error bound,
+half a millimetre per coordinate plus float32 rounding); :func:`decode_cell_mesh`
+reads both, so a database baked before keeps working.  What follows describes
+version 1 (:data:`CELLMESH_V1`), which :func:`encode_cell_mesh` still writes with
+``version=1`` for comparison (``walkstream bench interiors``).  Both start with the
+same tag byte saying how the rest is compressed, so a batch can inflate stored blobs
+to their ``N`` form and compress many together.
 
 Each interior cell's geometry is a unit the client loads when the cell becomes
 visible and flushes later (Mulloni et al.), so it travels as one response: every
