@@ -71,7 +71,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.codec.bounded import unpack_bounded
-from walkstream.shared.codec.varint import decode_varints, encode_varints
+from walkstream.shared.codec.varint import encode_varints, unzigzag, varint_field, zigzag
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import Mesh, readonly
 
@@ -249,15 +249,6 @@ class CellMesh:
         return Mesh.concat([p.mesh() for p in self.parts])
 
 
-def _zigzag(d: NDArray[np.int64]) -> NDArray[np.uint64]:
-    return ((d << 1) ^ (d >> 63)).astype(np.uint64)
-
-
-def _unzigzag(u: NDArray[np.uint64]) -> NDArray[np.int64]:
-    v = u.astype(np.int64)
-    return (v >> 1) ^ -(v & 1)
-
-
 def encode_cell_mesh(
     parts: Sequence[tuple[int, int, ArrayLike, ArrayLike]],
     *,
@@ -343,12 +334,12 @@ def encode_cell_mesh(
         "lo": [float(v) for v in lo],
         "ext": [float(v) for v in ext],
         "parts": len(elements),
-        "elements": encode_varints(_zigzag(np.diff(eid, prepend=0))),
+        "elements": encode_varints(zigzag(np.diff(eid, prepend=0))),
         "materials": bytes(np.asarray(materials, dtype=np.uint8)),
         "vertices": encode_varints(vcount.astype(np.uint64)),
         "triangles": encode_varints(tcount.astype(np.uint64)),
-        "positions": encode_varints(_zigzag(dq.T.reshape(-1))),
-        "indices": encode_varints(_zigzag(di)),
+        "positions": encode_varints(zigzag(dq.T.reshape(-1))),
+        "indices": encode_varints(zigzag(di)),
     }
     return _compress(msgpack.packb(body, use_bin_type=True), compress)
 
@@ -412,16 +403,6 @@ def _decompress(blob: bytes, what: str) -> bytes:
     raise CodecError(f"{what}: unknown compression tag {tag!r}")
 
 
-def _varints(body: dict[str, Any], key: str, count: int, what: str) -> NDArray[np.uint64]:
-    raw = body.get(key)
-    if not isinstance(raw, bytes):
-        raise CodecError(f"{what}: {key} is not bytes")
-    v = decode_varints(raw, f"{what}: {key}")
-    if len(v) != count:
-        raise CodecError(f"{what}: {key}: expected {count} values, got {len(v)}")
-    return np.asarray(v, dtype=np.uint64)
-
-
 def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
     """Decode and check a cell-contents blob (see the module docstring).
 
@@ -454,20 +435,20 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
     mats = body.get("materials")
     if not isinstance(mats, bytes) or len(mats) != n_parts:
         raise CodecError(f"{what}: materials: expected {n_parts} bytes")
-    eid = np.cumsum(_unzigzag(_varints(body, "elements", n_parts, what)))
-    vcount = _varints(body, "vertices", n_parts, what).astype(np.int64)
-    tcount = _varints(body, "triangles", n_parts, what).astype(np.int64)
+    eid = np.cumsum(unzigzag(varint_field(body, "elements", n_parts, what)))
+    vcount = varint_field(body, "vertices", n_parts, what).astype(np.int64)
+    tcount = varint_field(body, "triangles", n_parts, what).astype(np.int64)
     nv, nt = int(vcount.sum()), int(tcount.sum())
     if nv > _MAX_VERTICES or nt > 4 * _MAX_VERTICES:
         raise CodecError(f"{what}: {nv} vertices / {nt} triangles is too many")
-    dq = _unzigzag(_varints(body, "positions", 3 * nv, what)).reshape(3, nv).T
+    dq = unzigzag(varint_field(body, "positions", 3 * nv, what)).reshape(3, nv).T
     vstarts = np.concatenate([[0], np.cumsum(vcount)[:-1]]).astype(np.int64) if n_parts else np.zeros(0, np.int64)
     q = _part_cumsum(dq, vstarts)
     if len(q) and (q.min() < 0 or q.max() > _LEVELS):
         raise CodecError(f"{what}: quantised position out of range")
     step = ext / _LEVELS
     pos = (lo + q.astype(np.float64) * step).astype(np.float32)
-    di = _unzigzag(_varints(body, "indices", 3 * nt, what))
+    di = unzigzag(varint_field(body, "indices", 3 * nt, what))
     istarts = np.concatenate([[0], np.cumsum(tcount * 3)[:-1]]).astype(np.int64) if n_parts else np.zeros(0, np.int64)
     idx = _part_cumsum(di, istarts)
     parts: list[CellPart] = []

@@ -69,7 +69,13 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 from shapely.geometry.polygon import orient
 
-from walkstream.shared.codec.varint import decode_varints, encode_varints
+from walkstream.shared.codec.varint import (
+    decode_varints,
+    encode_varints,
+    unzigzag,
+    varint_field,
+    zigzag,
+)
 from walkstream.shared.errors import CodecError
 
 __all__ = [
@@ -131,15 +137,6 @@ def area_tolerance(positions: ArrayLike, indices: ArrayLike) -> float:
     c = p[t]
     edges = np.linalg.norm(c - np.roll(c, -1, axis=1), axis=2).sum()
     return float(edges * GRID + 1e-6 * mesh_area(p, t) + 1e-9)
-
-
-def _zigzag(d: NDArray[np.int64]) -> NDArray[np.uint64]:
-    return ((d << 1) ^ (d >> 63)).astype(np.uint64)
-
-
-def _unzigzag(u: NDArray[np.uint64]) -> NDArray[np.int64]:
-    v = u.astype(np.int64)
-    return (v >> 1) ^ -(v & 1)
 
 
 def _newell(ring: NDArray[Any]) -> NDArray[np.float64]:
@@ -394,25 +391,20 @@ def encode_planar_body(parts: list[tuple[int, int, NDArray[np.float64], NDArray[
     return {
         "format": PLANAR_FORMAT,
         "parts": len(parts),
-        "elements": encode_varints(_zigzag(np.diff(eid, prepend=0))),
+        "elements": encode_varints(zigzag(np.diff(eid, prepend=0))),
         "materials": bytes(np.asarray([p[1] for p in parts], dtype=np.uint8)),
         "vertices": encode_varints(np.asarray(vcount, np.uint64)),
         "triangles": encode_varints(np.asarray(tcount, np.uint64)),
         "regions": encode_varints(np.asarray(rcount, np.uint64)),
         "rings": encode_varints(np.asarray(ring_counts, np.uint64)),
         "ring_sizes": encode_varints(np.asarray(ring_sizes, np.uint64)),
-        "positions": encode_varints(_zigzag(dq.T.reshape(-1))),
-        "indices": encode_varints(_zigzag(di)),
+        "positions": encode_varints(zigzag(dq.T.reshape(-1))),
+        "indices": encode_varints(zigzag(di)),
     }
 
 
 def _counts(body: dict[str, Any], key: str, count: int, what: str, hi: int) -> NDArray[np.int64]:
-    raw = body.get(key)
-    if not isinstance(raw, bytes):
-        raise CodecError(f"{what}: {key} is not bytes")
-    v = decode_varints(raw, f"{what}: {key}")
-    if len(v) != count:
-        raise CodecError(f"{what}: {key}: expected {count} values, got {len(v)}")
+    v = varint_field(body, key, count, what)
     if len(v) and int(v.max()) > hi:
         raise CodecError(f"{what}: {key}: a value above {hi}")
     return np.asarray(v, dtype=np.int64)
@@ -436,7 +428,7 @@ def decode_planar_body(
     mats = body.get("materials")
     if not isinstance(mats, bytes) or len(mats) != n_parts:
         raise CodecError(f"{what}: materials: expected {n_parts} bytes")
-    eid = np.cumsum(_unzigzag(_counts(body, "elements", n_parts, what, 2**64 - 1).astype(np.uint64)))
+    eid = np.cumsum(unzigzag(_counts(body, "elements", n_parts, what, 2**64 - 1).astype(np.uint64)))
     vcount = _counts(body, "vertices", n_parts, what, _MAX_VERTICES)
     tcount = _counts(body, "triangles", n_parts, what, 4 * _MAX_VERTICES)
     rcount = _counts(body, "regions", n_parts, what, _MAX_VERTICES)
@@ -458,7 +450,7 @@ def decode_planar_body(
     raw = body.get("positions")
     if not isinstance(raw, bytes):
         raise CodecError(f"{what}: positions is not bytes")
-    dq = _unzigzag(decode_varints(raw, f"{what}: positions"))
+    dq = unzigzag(decode_varints(raw, f"{what}: positions"))
     if len(dq) != 3 * nv:
         raise CodecError(f"{what}: positions: expected {3 * nv} values, got {len(dq)}")
     if len(dq) and int(np.abs(dq).max()) >= _MAX_Q:
@@ -467,7 +459,7 @@ def decode_planar_body(
     if len(q) and int(np.abs(q).max()) >= _MAX_Q:
         raise CodecError(f"{what}: a position beyond the grid's range")
     pos = (q.astype(np.float64) * GRID).astype(np.float32)
-    di = _unzigzag(_counts(body, "indices", 3 * nt, what, 2**64 - 1).astype(np.uint64))
+    di = unzigzag(_counts(body, "indices", 3 * nt, what, 2**64 - 1).astype(np.uint64))
     # a running sum restarting at every part start (where the stored value is absolute)
     run = np.cumsum(di)
     starts = np.concatenate([[0], np.cumsum(tcount * 3)[:-1]]).astype(np.int64)
