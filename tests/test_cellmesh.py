@@ -147,6 +147,11 @@ def _same_surface(before: tuple, after, rng: np.random.Generator) -> None:
     # covered sample points agree both ways, to the bound (0.5 mm a coordinate: 0.87 mm)
     assert _distance(_tri_points(pos, idx, 300, rng), after.positions, after.indices).max() < 0.9e-3
     assert _distance(_tri_points(after.positions, after.indices, 300, rng), pos, idx).max() < 0.9e-3
+    # every decoded vertex is a corner of a triangle with area: none is left on another
+    # triangle's edge alone (a T-junction, where a hairline crack can open)
+    p, t = after.positions.astype(np.float64), after.indices.astype(np.int64)
+    live = np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1) > 1e-9
+    assert len(np.unique(t[live])) == len(p)
 
 
 def _grid_wall(nx: int, ny: int, hole: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -259,6 +259,12 @@ def test_a_database_baked_with_cellmesh_1_keeps_working(office: Path, tmp_path: 
         assert db_new.meta.settings["cellmesh"] == CELLMESH_FORMAT
         cid = next(c.id for c in db_old.cells() if c.kind == "room")
         new = decode_cell_mesh(db_new.contents(cid))
+        # no decoded vertex is left only in flat triangles (a T-junction with its neighbour)
+        for c in db_new.cells():
+            for part in decode_cell_mesh(db_new.contents(c.id)).parts:
+                p, t = part.positions.astype(np.float64), part.indices.astype(np.int64)
+                live = np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1) > 1e-9
+                assert len(np.unique(t[live])) == len(p), (c.id, part.element)
     served = _get(create_app([old]), f"/v1/scenes/old/rooms/{cid}/contents")
     assert served.status_code == 200
     cm = decode_cell_mesh(served.content)

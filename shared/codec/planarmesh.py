@@ -30,10 +30,12 @@ triangles are kept as they are:
   intersection points) and whose area is the sum of the triangles' areas (they do not
   overlap);
 * the triangulation the decoder will make has that area too (earcut can fail on
-  rings that touch themselves);
+  rings that touch themselves) and uses every ring vertex in a triangle with area
+  (a vertex left only in flat triangles would be a T-junction);
 * it takes no more vertices than the triangles did.
 
-A ring vertex between two collinear edges is dropped only when no other plane group
+Two triangles sharing an edge become a quadrilateral without a union (most box
+faces).  A ring vertex between two collinear edges is dropped only when no other plane group
 or kept triangle of the part uses the same point: a vertex another region shares stays,
 so no T-junction (and no hairline crack) appears between a part's regions that was not
 there before.
@@ -274,6 +276,10 @@ def _merge_group(
         if len(rings) > 1 or len(rings[0]) > 4:  # the decoder splits triangles and quads itself
             tris = triangulate_region(rings)
             if abs(_area3(np.concatenate(rings), tris) - poly.area) > 1e-6 * max(poly.area, 1.0):
+                return None
+            # a vertex earcut leaves in flat triangles only would be a T-junction with the
+            # region that shares it: keep the triangles instead
+            if len(np.unique(tris)) < sum(len(r) for r in rings):
                 return None
         out.append(rings)
     if sum(len(r) for rings in out for r in rings) > len(np.unique(tri)):
