@@ -22,7 +22,7 @@ from walkstream.server.bake import bake
 from walkstream.server.sources.interiorgen import PRESETS, write_interior
 from walkstream.server.sources.read import read_source
 from walkstream.server.store import SceneReader
-from walkstream.shared.codec.cellmesh import decode_cell_mesh, position_error_bound
+from walkstream.shared.codec.cellmesh import decode_cell_mesh
 
 __all__ = ["default_ifc_files", "generated_sources", "interior_figures", "interiors_table"]
 
@@ -54,7 +54,7 @@ def interior_figures(source: Path, db: Path, log: Callable[[str], None] | None =
         bound = 0.0
         for cid in info:
             cm = decode_cell_mesh(r.contents(cid), f"cell {cid}")
-            bound = max(bound, float(position_error_bound(cm.extent).max()))
+            bound = max(bound, cm.error_bound)
         err = max(i.max_error for i in info.values())
         inside = [c for c, k in kinds.items() if k != "outside"]
         tris = np.array([info[c].triangles for c in inside])
@@ -74,6 +74,7 @@ def interior_figures(source: Path, db: Path, log: Callable[[str], None] | None =
         "cells_per_storey": summary["cells_per_storey"],
         "import_s": import_s,
         "bake_s": bake_s,
+        "contents_encode_s": float(summary.get("contents_encode_s", 0.0)),
         "db_bytes": summary["db_bytes"],
         "bytes_per_cell_mean": float(nbytes.mean()),
         "bytes_per_cell_max": int(nbytes.max()),

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from walkstream.shared.codec.cellmesh import (
     CELLMESH_FORMAT,
+    CELLMESH_V1,
     decode_cell_mesh,
     encode_cell_mesh,
     flat_normals,
@@ -38,7 +39,7 @@ def parts(draw: st.DrawFn) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
 @given(parts(), st.sampled_from(["best", "zlib", "lzma", "none"]))
 @settings(max_examples=60, deadline=None)
 def test_round_trip_within_the_stated_bound(ps: list, compress: str) -> None:
-    blob = encode_cell_mesh(ps, compress=compress)
+    blob = encode_cell_mesh(ps, compress=compress, version=1)
     cm = decode_cell_mesh(blob)
     allp = np.concatenate([p[2] for p in ps])
     bound = position_error_bound(np.ptp(allp, axis=0))
@@ -68,19 +69,19 @@ def test_it_is_smaller_than_raw_float32_on_a_real_looking_cell() -> None:
          rng.uniform(0, 3, 40), np.zeros(40), rng.uniform(0.3, 2.5, 40)]
     )
     v, t = box_mesh(rows)
-    blob = encode_cell_mesh([(7, 13, v, t)])
+    blob = encode_cell_mesh([(7, 13, v, t)], version=1)
     assert len(blob) < 0.35 * raw_bytes(len(v), len(t))
 
 
 def test_damaged_blobs_are_codec_errors() -> None:
     v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
-    blob = encode_cell_mesh([(1, 2, v, [[0, 1, 2]])], compress="zlib")
+    blob = encode_cell_mesh([(1, 2, v, [[0, 1, 2]])], compress="zlib", version=1)
     for bad in (b"", b"Z", blob[:-5], b"Q" + blob[1:], b"N" + b"\x81\xa1x\x01", b"Z" + b"\x00" * 20):
         with pytest.raises(CodecError):
             decode_cell_mesh(bad)
     # a well-formed map whose index points past its vertices
     body = msgpack.unpackb(decode_cell_mesh.__globals__["_decompress"](blob, "x"), raw=False)
-    assert body["format"] == CELLMESH_FORMAT
+    assert body["format"] == CELLMESH_V1
     body["indices"] = bytes([2, 2, 2])  # zigzag varints of +1 +1 +1: indices 1, 2, 3
     with pytest.raises(CodecError, match="out of range"):
         decode_cell_mesh(b"N" + msgpack.packb(body, use_bin_type=True))
@@ -100,3 +101,167 @@ def test_flat_normals_of_a_box_point_outwards() -> None:
     assert np.all(np.einsum("ij,ij->i", n, centre - np.array([0, 0, 1.0])) > 0)
     vn = flat_normals(v, t)
     assert np.allclose(np.linalg.norm(vn, axis=1), 1.0, atol=1e-6)
+
+
+# ---- walkstream-cellmesh/2: planar polygons on a 1 mm grid
+
+
+def _tri_points(pos: np.ndarray, idx: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``(n, 3)`` points spread over a mesh's triangles (by area)."""
+    c = np.asarray(pos, np.float64)[np.asarray(idx, np.int64)]
+    area = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+    k = rng.choice(len(c), n, p=area / area.sum())
+    u, v = rng.uniform(0, 1, (2, n))
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    t = c[k]
+    return t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
+
+
+def _distance(points: np.ndarray, pos: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """``(n,)`` distance of each point to the nearest triangle (closest point: face or edges)."""
+    c = np.asarray(pos, np.float64)[np.asarray(idx, np.int64)]  # (t, 3, 3)
+    p = points[:, None, :]  # (n, 1, 3)
+    a, b, cc = c[None, :, 0], c[None, :, 1], c[None, :, 2]
+    n = np.cross(b - a, cc - a)
+    nn = np.maximum(np.einsum("...i,...i", n, n), 1e-30)
+    d = np.einsum("...i,...i", p - a, n) / nn
+    q = p - d[..., None] * n  # projection on the plane
+    inside = np.ones(q.shape[:2], bool)
+    for s, e in ((a, b), (b, cc), (cc, a)):
+        inside &= np.einsum("...i,...i", np.cross(e - s, q - s), n) >= -1e-12
+    best = np.where(inside, np.abs(d) * np.sqrt(nn), np.inf)
+    for s, e in ((a, b), (b, cc), (cc, a)):
+        se = e - s
+        t = np.clip(np.einsum("...i,...i", p - s, se) / np.maximum(np.einsum("...i,...i", se, se), 1e-30), 0, 1)
+        best = np.minimum(best, np.linalg.norm(p - (s + t[..., None] * se), axis=-1))
+    return best.min(axis=1)
+
+
+def _same_surface(before: tuple, after, rng: np.random.Generator) -> None:
+    from walkstream.shared.codec.planarmesh import area_tolerance, mesh_area
+
+    _, _, pos, idx = before
+    a0, a1 = mesh_area(pos, idx), mesh_area(after.positions, after.indices)
+    assert abs(a1 - a0) <= area_tolerance(pos, idx)
+    # covered sample points agree both ways, to the bound (0.5 mm a coordinate: 0.87 mm)
+    assert _distance(_tri_points(pos, idx, 300, rng), after.positions, after.indices).max() < 0.9e-3
+    assert _distance(_tri_points(after.positions, after.indices, 300, rng), pos, idx).max() < 0.9e-3
+    # every decoded vertex is a corner of a triangle with area: none is left on another
+    # triangle's edge alone (a T-junction, where a hairline crack can open)
+    p, t = after.positions.astype(np.float64), after.indices.astype(np.int64)
+    live = np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1) > 1e-9
+    assert len(np.unique(t[live])) == len(p)
+
+
+def _grid_wall(nx: int, ny: int, hole: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """A 4 m x 3 m wall in the x-z plane cut into ``nx * ny`` quads (two triangles each),
+    facing -y; with ``hole`` the middle quads are left out (a door opening)."""
+    xs, zs = np.linspace(0.0, 4.0, nx + 1), np.linspace(0.0, 3.0, ny + 1)
+    gx, gz = np.meshgrid(xs, zs, indexing="ij")
+    pos = np.column_stack([gx.ravel() + 10.0, np.full(gx.size, 5.0), gz.ravel()])
+    tris = []
+    for i in range(nx):
+        for j in range(ny):
+            if hole and 0 < i < nx - 1 and 0 < j < ny - 1:
+                continue
+            v0, v1, v2, v3 = i * (ny + 1) + j, (i + 1) * (ny + 1) + j, (i + 1) * (ny + 1) + j + 1, i * (ny + 1) + j + 1
+            tris += [[v0, v1, v2], [v0, v2, v3]]
+    return pos, np.array(tris)
+
+
+def test_v2_merges_a_clipped_wall_into_one_polygon_with_its_hole() -> None:
+    rng = np.random.default_rng(3)
+    pos, tri = _grid_wall(8, 6, hole=True)
+    part = (42, 7, pos, tri)
+    blob2, blob1 = encode_cell_mesh([part]), encode_cell_mesh([part], version=1)
+    cm = decode_cell_mesh(blob2)
+    assert msgpack.unpackb(decode_cell_mesh.__globals__["_decompress"](blob2, "x"))["format"] == CELLMESH_FORMAT
+    got = cm.parts[0]
+    assert (got.element, got.material) == (42, 7)
+    assert got.triangles < len(tri) // 4  # 8 corners of the outline and the hole: 8 triangles
+    assert len(blob2) < len(blob1)
+    _same_surface(part, got, rng)
+    # the faces still face -y (the winding is kept) and the normals are flat
+    n = got.mesh().normals
+    assert np.allclose(n, [0.0, -1.0, 0.0], atol=1e-6)
+    assert cm.error_bound == pytest.approx(0.0005)
+
+
+def test_v2_keeps_a_vertex_another_plane_of_the_part_uses() -> None:
+    # two walls meeting at a corner; the first is cut at x=12 and so has a vertex on
+    # the corner edge's mid-height that the second (one quad) has too: dropping it from
+    # either would open a T-junction
+    rng = np.random.default_rng(4)
+    a_pos, a_tri = _grid_wall(2, 2)  # x 10..14, y = 5, z 0..3, vertex (14, 5, 1.5) on the edge
+    b_pos = np.array([[14.0, 5.0, 0.0], [14.0, 8.0, 0.0], [14.0, 8.0, 3.0], [14.0, 5.0, 3.0], [14.0, 5.0, 1.5]])
+    b_tri = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4]])
+    pos = np.concatenate([a_pos, b_pos])
+    tri = np.concatenate([a_tri, b_tri + len(a_pos)])
+    got = decode_cell_mesh(encode_cell_mesh([(1, 1, pos, tri)])).parts[0]
+    _same_surface((1, 1, pos, tri), got, rng)
+    p = got.positions.astype(np.float64)
+    on_edge = np.all(np.isclose(p, [14.0, 5.0, 1.5]), axis=1)
+    assert on_edge.sum() == 2  # kept by both regions
+    # and the middle vertices of the first wall that only it uses are gone
+    assert not np.any(np.all(np.isclose(p, [12.0, 5.0, 1.5]), axis=1))
+
+
+def test_v2_keeps_triangles_where_merging_is_unsafe() -> None:
+    rng = np.random.default_rng(5)
+    # overlapping coplanar triangles (their union is smaller than their sum) and a
+    # non-planar fan: both come back as the same surface
+    over = np.array([[0.0, 0, 0], [2, 0, 0], [0, 2, 0], [1, 0, 0], [3, 0, 0], [1, 2, 0]])
+    fan = np.array([[0.0, 0, 1], [1, 0, 1.3], [1, 1, 1.1], [0, 1, 1.6], [0.5, 0.5, 2.0]])
+    parts = [(1, 3, over, [[0, 1, 2], [3, 4, 5]]), (2, 3, fan, [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])]
+    cm = decode_cell_mesh(encode_cell_mesh(parts))
+    assert [p.triangles for p in cm.parts] == [2, 4]
+    for before, after in zip(parts, cm.parts, strict=True):
+        _same_surface((before[0], before[1], np.asarray(before[2]), np.asarray(before[3])), after, rng)
+
+
+@given(parts())
+@settings(max_examples=30, deadline=None)
+def test_v2_random_soups_keep_their_surface(ps: list) -> None:
+    from walkstream.shared.codec.planarmesh import area_tolerance, mesh_area
+
+    cm = decode_cell_mesh(encode_cell_mesh(ps))
+    assert len(cm.parts) == len(ps)
+    for (element, material, pos, tri), got in zip(ps, cm.parts, strict=True):
+        assert (got.element, got.material) == (element, material)
+        q = np.rint(np.asarray(pos) / 0.001) * 0.001
+        # every decoded vertex is an encoded vertex on the grid
+        d = np.abs(got.positions.astype(np.float64)[:, None, :] - q[None]).max(axis=2).min(axis=1)
+        assert np.all(d <= 2.0**-24 * np.abs(q).max() + 1e-9)
+        assert abs(mesh_area(got.positions, got.indices) - mesh_area(pos, tri)) <= area_tolerance(pos, tri) + 1e-6 * (
+            1 + np.abs(pos).max()
+        ) ** 2 * len(tri)
+
+
+def test_v2_bad_input_is_a_codec_error() -> None:
+    pos, tri = _grid_wall(2, 2, hole=False)
+    blob = encode_cell_mesh([(1, 2, pos, tri), (3, 4, pos + 1.0, tri)], compress="none")
+    body = msgpack.unpackb(blob[1:], raw=False)
+    assert body["format"] == CELLMESH_FORMAT and body["regions"] == bytes([1, 1])
+
+    def bad(**change: object) -> None:
+        b = dict(body, **change)
+        with pytest.raises(CodecError) as exc:
+            decode_cell_mesh(b"N" + msgpack.packb(b, use_bin_type=True))
+        assert "\n" not in str(exc.value)
+
+    bad(regions=bytes([1, 2]))  # a region more than the rings say
+    bad(rings=bytes([0, 1]))  # a region without rings
+    bad(ring_sizes=bytes([2] * (len(body["ring_sizes"]))))  # a ring of 2 vertices
+    bad(ring_sizes=bytes([0xFF, 0xFF, 0x7F]) + body["ring_sizes"][1:])  # a ring over the limit
+    bad(positions=body["positions"][:-3])  # truncated positions
+    bad(positions=bytes([0xFF] * 9 + [0x01]) + body["positions"][10:])  # a position beyond the grid's range
+    bad(parts=3)
+    bad(materials=b"\x02")
+    bad(extra=b"")
+    bad(indices=b"\xff")
+    bad(vertices="3")
+    with pytest.raises(CodecError, match="version"):
+        encode_cell_mesh([(1, 2, pos, tri)], version=3)
+    with pytest.raises(CodecError, match="beyond"):
+        encode_cell_mesh([(1, 2, pos + 2e9, tri)])

@@ -241,3 +241,34 @@ def test_generate_and_bench_interiors_cli(tmp_path: Path, capsys: pytest.Capture
     assert main(["bench", "interiors", "--ifc", str(ifc), "--presets", "--out", str(tmp_path / "b")]) == 0
     table = capsys.readouterr().out
     assert "two.ifc" in table and "B/cell mean" in table and "max err mm" in table
+
+
+def test_a_database_baked_with_cellmesh_1_keeps_working(office: Path, tmp_path: Path) -> None:
+    # a database baked before walkstream-cellmesh/2: the service serves its blobs as they
+    # are and the client decodes them; the same cells in /2 cover the same area
+    from walkstream.server.bake.interior import bake_interior
+    from walkstream.server.sources.read import read_source
+    from walkstream.shared.codec.cellmesh import CELLMESH_FORMAT, CELLMESH_V1
+    from walkstream.shared.codec.planarmesh import mesh_area
+
+    src = office.parent / "office.json"
+    old = tmp_path / "old.db"
+    bake_interior(read_source(src), src, old, cellmesh_version=1)  # type: ignore[arg-type]
+    with SceneReader.open(old) as db_old, SceneReader.open(office) as db_new:
+        assert db_old.meta.settings["cellmesh"] == CELLMESH_V1
+        assert db_new.meta.settings["cellmesh"] == CELLMESH_FORMAT
+        cid = next(c.id for c in db_old.cells() if c.kind == "room")
+        new = decode_cell_mesh(db_new.contents(cid))
+        # no decoded vertex is left only in flat triangles (a T-junction with its neighbour)
+        for c in db_new.cells():
+            for part in decode_cell_mesh(db_new.contents(c.id)).parts:
+                p, t = part.positions.astype(np.float64), part.indices.astype(np.int64)
+                live = np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1) > 1e-9
+                assert len(np.unique(t[live])) == len(p), (c.id, part.element)
+    served = _get(create_app([old]), f"/v1/scenes/old/rooms/{cid}/contents")
+    assert served.status_code == 200
+    cm = decode_cell_mesh(served.content)
+    assert cm.grid == 0.0 and new.grid == 0.001 and cm.triangles >= new.triangles
+    for a, b in zip(cm.parts, new.parts, strict=True):
+        assert a.element == b.element
+        assert mesh_area(a.positions, a.indices) == pytest.approx(mesh_area(b.positions, b.indices), rel=1e-3, abs=1e-4)

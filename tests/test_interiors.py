@@ -449,7 +449,8 @@ def test_fzk_haus(fzk_db: tuple[Path, dict]) -> None:
         heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
         assert np.ptp(heading) > np.pi
         info = r.contents_info()
-        assert max(i.max_error for i in info.values()) < 5e-4
+        # walkstream-cellmesh/2: half the 1 mm grid plus float32 rounding (a 100 m model: 6 um)
+        assert max(i.max_error for i in info.values()) <= 5e-4 + 2.0**-24 * 100
         _tour_stays_in_cells(r)
 
 

@@ -415,14 +415,22 @@ def cmd_bench_interiors(args: argparse.Namespace) -> int:
     if not ifc:
         print("walkstream: note: no IFC models given or found in ../shared/data/indoor", file=sys.stderr)
     sources = ifc + generated_sources(out, args.presets)
+    from walkstream.benchmarks.cellcodec import codec_rows, codec_table
+
     rows = []
+    codec: list[dict[str, Any]] = []
     for src in sources:
         print(f"bench interiors: {src.name}", file=sys.stderr)
         rows.append(interior_figures(src, out / f"{src.stem}.db"))
+        if not args.no_codec:
+            codec += codec_rows(src, out / f"{src.stem}.db", rows[-1]["contents_encode_s"], out)
     if args.json:
-        print(json.dumps(rows, indent=2))
+        print(json.dumps({"interiors": rows, "cellmesh": codec}, indent=2))
     else:
         print(interiors_table(rows))
+        if codec:
+            print()
+            print(codec_table(codec))
     return 0
 
 
@@ -538,6 +546,8 @@ def add_bench_parser(sub: Any) -> None:
     bi.add_argument("--presets", nargs="*", default=["paper", "paper10"], help="generated interiors (default: paper paper10)")
     bi.add_argument("--out", default="out/bench-interiors", help="folder for the generated files and databases")
     bi.add_argument("--json", action="store_true", help="print the figures as JSON")
+    bi.add_argument("--no-codec", action="store_true",
+                    help="skip the cellmesh /1 against /2 table (it bakes each source a second time)")
     bi.set_defaults(func=cmd_bench_interiors)
 
     bp = besub.add_parser("portals", help="portal culling against frustum culling alone and drawing all (Table 1, tightness, cost)")

@@ -30,7 +30,7 @@ from walkstream.shared.roomwire import (
 __all__ = ["CONTENTS_MEDIA", "InteriorState"]
 
 CONTENTS_MEDIA = "application/vnd.walkstream.cellmesh"
-"""Media type of a cell's contents (``walkstream-cellmesh/1``, see :mod:`walkstream.shared.codec.cellmesh`)."""
+"""Media type of a cell's contents (``walkstream-cellmesh/2 or /1``, see :mod:`walkstream.shared.codec.cellmesh`)."""
 
 _CACHE_BYTES = 64 << 20
 

@@ -28,7 +28,7 @@ Interiors (version 2): the features ``rooms`` (tables ``rooms(cell, name, room, 
 planes)`` and ``storeys(id, name, zmin, zmax)``), ``portals`` (``portals(id, cell_a,
 cell_b, polygon, kind, source, name)`` and ``stairs(id, portal, lower, upper, path,
 name)``) and ``meshes`` (``contents(cell, data, triangles, vertices, parts, raw_bytes,
-max_error)``, the ``walkstream-cellmesh/1`` blob of each cell); an interior has no
+max_error)``, the ``walkstream-cellmesh/2 or /1`` blob of each cell); an interior has no
 objects and an empty PVS per cell.  Version 1 files (cities baked before interiors
 existed) are read as they are.
 

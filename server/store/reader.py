@@ -444,7 +444,7 @@ class SceneReader:
                 for r in rows}
 
     def contents(self, cid: int) -> bytes:
-        """Cell ``cid``'s contents as stored (``walkstream-cellmesh/1`` bytes), for streaming.
+        """Cell ``cid``'s contents as stored (``walkstream-cellmesh/2 or /1`` bytes), for streaming.
 
         Raises
         ------

@@ -88,7 +88,7 @@ OPTIONAL_TABLES: dict[str, dict[str, str]] = {
         ),
     },
     "meshes": {
-        # a cell's contents: walkstream-cellmesh/1 (shared/codec/cellmesh.py)
+        # a cell's contents: walkstream-cellmesh/2 or /1 (shared/codec/cellmesh.py)
         "contents": (
             "CREATE TABLE contents(cell INTEGER PRIMARY KEY, data BLOB NOT NULL, "
             "triangles INTEGER NOT NULL, vertices INTEGER NOT NULL, parts INTEGER NOT NULL, "

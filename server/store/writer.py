@@ -452,7 +452,7 @@ class SceneWriter:
         return len(out)
 
     def add_contents(self, info: ContentsInfo, blob: bytes) -> None:
-        """Store (or replace) a cell's encoded contents (``walkstream-cellmesh/1``)."""
+        """Store (or replace) a cell's encoded contents (``walkstream-cellmesh/2 or /1``)."""
         self._require("contents", "meshes")
         what = f"cell {info.cell}: contents"
         if not isinstance(blob, bytes) or not blob:

@@ -1,4 +1,13 @@
-"""The contents of an interior cell as one compact, immutable blob (``walkstream-cellmesh/1``).
+"""The contents of an interior cell as one compact, immutable blob (``walkstream-cellmesh/2``, and /1).
+
+The bake writes version 2 (:data:`CELLMESH_FORMAT`, planar polygons on an absolute 1 mm
+grid: :mod:`~walkstream.shared.codec.planarmesh` says how and states its error bound,
+half a millimetre per coordinate plus float32 rounding); :func:`decode_cell_mesh`
+reads both, so a database baked before keeps working.  What follows describes
+version 1 (:data:`CELLMESH_V1`), which :func:`encode_cell_mesh` still writes with
+``version=1`` for comparison (``walkstream bench interiors``).  Both start with the
+same tag byte saying how the rest is compressed, so a batch can inflate stored blobs
+to their ``N`` form and compress many together.
 
 Each interior cell's geometry is a unit the client loads when the cell becomes
 visible and flushes later (Mulloni et al.), so it travels as one response: every
@@ -62,12 +71,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.codec.bounded import unpack_bounded
-from walkstream.shared.codec.varint import decode_varints, encode_varints
+from walkstream.shared.codec.varint import encode_varints, unzigzag, varint_field, zigzag
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import Mesh, readonly
 
 __all__ = [
     "CELLMESH_FORMAT",
+    "CELLMESH_V1",
     "POSITION_BITS",
     "MAX_CELLMESH_BYTES",
     "CellPart",
@@ -79,8 +89,10 @@ __all__ = [
     "flat_normals",
 ]
 
-CELLMESH_FORMAT = "walkstream-cellmesh/1"
-"""The format tag inside every cell-contents blob."""
+CELLMESH_FORMAT = "walkstream-cellmesh/2"
+"""The format tag of the cell-contents blobs the bake writes (planar polygons, 1 mm grid)."""
+CELLMESH_V1 = "walkstream-cellmesh/1"
+"""The first version's tag (every triangle, 16 bits over the cell's box): still decoded."""
 POSITION_BITS = 16
 """Bits per quantised coordinate."""
 MAX_CELLMESH_BYTES = 64 << 20
@@ -211,6 +223,8 @@ class CellMesh:
     extent: tuple[float, float, float]
     nbytes: int = 0
     """Bytes of the encoded blob."""
+    grid: float = 0.0
+    """Absolute grid step of the positions (metres; ``walkstream-cellmesh/2``), 0 for version 1."""
     _cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -225,7 +239,9 @@ class CellMesh:
 
     @cached_property
     def error_bound(self) -> float:
-        """Largest quantisation error of any coordinate, metres."""
+        """Largest quantisation error of any coordinate, metres (half a grid step for version 2)."""
+        if self.grid:
+            return 0.5 * self.grid
         return float(position_error_bound(self.extent).max())
 
     def mesh(self) -> Mesh:
@@ -233,19 +249,11 @@ class CellMesh:
         return Mesh.concat([p.mesh() for p in self.parts])
 
 
-def _zigzag(d: NDArray[np.int64]) -> NDArray[np.uint64]:
-    return ((d << 1) ^ (d >> 63)).astype(np.uint64)
-
-
-def _unzigzag(u: NDArray[np.uint64]) -> NDArray[np.int64]:
-    v = u.astype(np.int64)
-    return (v >> 1) ^ -(v & 1)
-
-
 def encode_cell_mesh(
     parts: Sequence[tuple[int, int, ArrayLike, ArrayLike]],
     *,
     compress: str = "best",
+    version: int = 2,
 ) -> bytes:
     """Encode a cell's parts.
 
@@ -256,6 +264,10 @@ def encode_cell_mesh(
         part; parts without triangles are dropped.
     compress:
         ``"zlib"``, ``"lzma"``, ``"none"`` or ``"best"`` (the smallest of the three).
+    version:
+        2 (:data:`CELLMESH_FORMAT`, planar polygons on a 1 mm grid,
+        :mod:`~walkstream.shared.codec.planarmesh`) or 1 (:data:`CELLMESH_V1`, every
+        triangle, 16 bits over the cell's box; kept for comparison and old databases).
 
     Returns
     -------
@@ -288,6 +300,15 @@ def encode_cell_mesh(
         idx_list.append(t)
     if len(elements) > _MAX_PARTS:
         raise CodecError(f"cell mesh: {len(elements)} parts, at most {_MAX_PARTS}")
+    if compress not in ("best", "zlib", "lzma", "none"):
+        raise CodecError(f"cell mesh: compress must be best, zlib, lzma or none, got {compress!r}")
+    if version == 2:
+        from walkstream.shared.codec.planarmesh import encode_planar_body
+
+        rows = list(zip(elements, materials, pos_list, idx_list, strict=True))
+        return _compress(msgpack.packb(encode_planar_body(rows), use_bin_type=True), compress)
+    if version != 1:
+        raise CodecError(f"cell mesh: version must be 1 or 2, got {version!r}")
     vcount = np.array([len(p) for p in pos_list], dtype=np.int64)
     tcount = np.array([len(t) for t in idx_list], dtype=np.int64)
     if int(vcount.sum()) > _MAX_VERTICES:
@@ -309,18 +330,22 @@ def encode_cell_mesh(
     di = _part_deltas(alli, istarts)
     eid = np.asarray(elements, dtype=np.int64)
     body = {
-        "format": CELLMESH_FORMAT,
+        "format": CELLMESH_V1,
         "lo": [float(v) for v in lo],
         "ext": [float(v) for v in ext],
         "parts": len(elements),
-        "elements": encode_varints(_zigzag(np.diff(eid, prepend=0))),
+        "elements": encode_varints(zigzag(np.diff(eid, prepend=0))),
         "materials": bytes(np.asarray(materials, dtype=np.uint8)),
         "vertices": encode_varints(vcount.astype(np.uint64)),
         "triangles": encode_varints(tcount.astype(np.uint64)),
-        "positions": encode_varints(_zigzag(dq.T.reshape(-1))),
-        "indices": encode_varints(_zigzag(di)),
+        "positions": encode_varints(zigzag(dq.T.reshape(-1))),
+        "indices": encode_varints(zigzag(di)),
     }
-    packed: bytes = msgpack.packb(body, use_bin_type=True)
+    return _compress(msgpack.packb(body, use_bin_type=True), compress)
+
+
+def _compress(packed: bytes, compress: str) -> bytes:
+    """The tag byte and the compressed map (``compress`` as :func:`encode_cell_mesh`)."""
     options = {
         "none": lambda: b"N" + packed,
         "zlib": lambda: b"Z" + zlib.compress(packed, 9),
@@ -328,8 +353,6 @@ def encode_cell_mesh(
     }
     if compress == "best":
         return min((f() for f in options.values()), key=len)
-    if compress not in options:
-        raise CodecError(f"cell mesh: compress must be best, zlib, lzma or none, got {compress!r}")
     return options[compress]()
 
 
@@ -380,16 +403,6 @@ def _decompress(blob: bytes, what: str) -> bytes:
     raise CodecError(f"{what}: unknown compression tag {tag!r}")
 
 
-def _varints(body: dict[str, Any], key: str, count: int, what: str) -> NDArray[np.uint64]:
-    raw = body.get(key)
-    if not isinstance(raw, bytes):
-        raise CodecError(f"{what}: {key} is not bytes")
-    v = decode_varints(raw, f"{what}: {key}")
-    if len(v) != count:
-        raise CodecError(f"{what}: {key}: expected {count} values, got {len(v)}")
-    return np.asarray(v, dtype=np.uint64)
-
-
 def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
     """Decode and check a cell-contents blob (see the module docstring).
 
@@ -403,8 +416,10 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
         packed, what, max_bytes=MAX_CELLMESH_BYTES, max_array_len=8, max_map_len=16,
         max_bin_len=MAX_CELLMESH_BYTES,
     )
-    if not isinstance(body, dict) or body.get("format") != CELLMESH_FORMAT:
-        raise CodecError(f"{what}: not a {CELLMESH_FORMAT} map")
+    if isinstance(body, dict) and body.get("format") == CELLMESH_FORMAT:
+        return _decode_v2(body, what, len(blob))
+    if not isinstance(body, dict) or body.get("format") != CELLMESH_V1:
+        raise CodecError(f"{what}: not a {CELLMESH_FORMAT} or {CELLMESH_V1} map")
     if set(body) - _KEYS:
         raise CodecError(f"{what}: unknown keys {sorted(set(body) - _KEYS)}")
     try:
@@ -420,20 +435,20 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
     mats = body.get("materials")
     if not isinstance(mats, bytes) or len(mats) != n_parts:
         raise CodecError(f"{what}: materials: expected {n_parts} bytes")
-    eid = np.cumsum(_unzigzag(_varints(body, "elements", n_parts, what)))
-    vcount = _varints(body, "vertices", n_parts, what).astype(np.int64)
-    tcount = _varints(body, "triangles", n_parts, what).astype(np.int64)
+    eid = np.cumsum(unzigzag(varint_field(body, "elements", n_parts, what)))
+    vcount = varint_field(body, "vertices", n_parts, what).astype(np.int64)
+    tcount = varint_field(body, "triangles", n_parts, what).astype(np.int64)
     nv, nt = int(vcount.sum()), int(tcount.sum())
     if nv > _MAX_VERTICES or nt > 4 * _MAX_VERTICES:
         raise CodecError(f"{what}: {nv} vertices / {nt} triangles is too many")
-    dq = _unzigzag(_varints(body, "positions", 3 * nv, what)).reshape(3, nv).T
+    dq = unzigzag(varint_field(body, "positions", 3 * nv, what)).reshape(3, nv).T
     vstarts = np.concatenate([[0], np.cumsum(vcount)[:-1]]).astype(np.int64) if n_parts else np.zeros(0, np.int64)
     q = _part_cumsum(dq, vstarts)
     if len(q) and (q.min() < 0 or q.max() > _LEVELS):
         raise CodecError(f"{what}: quantised position out of range")
     step = ext / _LEVELS
     pos = (lo + q.astype(np.float64) * step).astype(np.float32)
-    di = _unzigzag(_varints(body, "indices", 3 * nt, what))
+    di = unzigzag(varint_field(body, "indices", 3 * nt, what))
     istarts = np.concatenate([[0], np.cumsum(tcount * 3)[:-1]]).astype(np.int64) if n_parts else np.zeros(0, np.int64)
     idx = _part_cumsum(di, istarts)
     parts: list[CellPart] = []
@@ -451,4 +466,21 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
         (float(lo[0]), float(lo[1]), float(lo[2])),
         (float(ext[0]), float(ext[1]), float(ext[2])),
         nbytes=len(blob),
+    )
+
+
+def _decode_v2(body: dict[str, Any], what: str, nbytes: int) -> CellMesh:
+    """A version 2 map as a :class:`CellMesh` (its box measured from the decoded positions)."""
+    from walkstream.shared.codec.planarmesh import GRID, decode_planar_body
+
+    parts = tuple(CellPart(e, m, p, t) for e, m, p, t in decode_planar_body(body, what))
+    allp = np.concatenate([p.positions for p in parts]).astype(np.float64) if parts else np.zeros((0, 3))
+    lo = allp.min(axis=0) if len(allp) else np.zeros(3)
+    ext = allp.max(axis=0) - lo if len(allp) else np.zeros(3)
+    return CellMesh(
+        parts,
+        (float(lo[0]), float(lo[1]), float(lo[2])),
+        (float(ext[0]), float(ext[1]), float(ext[2])),
+        nbytes=nbytes,
+        grid=GRID,
     )

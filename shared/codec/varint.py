@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -12,7 +13,7 @@ from walkstream.shared.arrays import U64
 from walkstream.shared.codec.bounded import _nbytes
 from walkstream.shared.errors import CodecError
 
-__all__ = ["encode_varints", "decode_varints"]
+__all__ = ["encode_varints", "decode_varints", "zigzag", "unzigzag", "varint_field"]
 
 
 # ---------------------------------------------------------------------------
@@ -157,3 +158,31 @@ def _zigzag(d: int) -> int:
 
 def _unzigzag(z: int) -> int:
     return (z >> 1) ^ -(z & 1)
+
+
+def zigzag(d: NDArray[np.int64]) -> NDArray[np.uint64]:
+    """Signed ``(k,)`` integers as unsigned (0, -1, 1, -2, ... -> 0, 1, 2, 3, ...)."""
+    return ((d << 1) ^ (d >> 63)).astype(np.uint64)
+
+
+def unzigzag(u: NDArray[np.uint64]) -> NDArray[np.int64]:
+    """Inverse of :func:`zigzag`."""
+    v = u.astype(np.int64)
+    return (v >> 1) ^ -(v & 1)
+
+
+def varint_field(body: dict[str, Any], key: str, count: int, what: str) -> U64:
+    """The ``count`` varints stored as bytes under ``body[key]`` (a decoded msgpack map).
+
+    Raises
+    ------
+    CodecError
+        ``key`` missing or not bytes, damaged varints, or another count.
+    """
+    raw = body.get(key)
+    if not isinstance(raw, bytes):
+        raise CodecError(f"{what}: {key} is not bytes")
+    v = decode_varints(raw, f"{what}: {key}")
+    if len(v) != count:
+        raise CodecError(f"{what}: {key}: expected {count} values, got {len(v)}")
+    return np.asarray(v, dtype=np.uint64)

@@ -18,7 +18,7 @@
     One cell: planes, outline, portals (polygon and the other cell), neighbours and
     what its contents weigh.
 ``GET /v1/scenes/{scene}/rooms/{cell}/contents``
-    The cell's geometry as one immutable blob (``walkstream-cellmesh/1``, media type
+    The cell's geometry as one immutable blob (``walkstream-cellmesh/2``, media type
     ``application/vnd.walkstream.cellmesh``; decode with
     :func:`walkstream.shared.codec.decode_cell_mesh`): a cell is one request.
 
@@ -116,7 +116,7 @@ async def room(
 @router.get(
     "/scenes/{scene}/rooms/{cell}/contents",
     responses={
-        200: {"description": "the cell's geometry (walkstream-cellmesh/1)", "content": {CONTENTS_MEDIA: {}}},
+        200: {"description": "the cell's geometry (walkstream-cellmesh/2; /1 from older bakes)", "content": {CONTENTS_MEDIA: {}}},
         304: {"description": "not modified (If-None-Match matched the ETag)"},
     },
     summary="Interior cell contents",

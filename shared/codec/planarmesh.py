@@ -1,0 +1,559 @@
+"""Cell contents as planar polygons on an absolute millimetre grid (``walkstream-cellmesh/2``).
+
+The bake clips every element to the cells it occupies (``server/bake/roomcontents.py``),
+so a door frame, a piece of wall or the outside cell arrive as many small coplanar
+triangles.  Version 2 of the cell-contents blob sends each part's planar regions as
+polygons (with holes) and lets the decoder triangulate them again (earcut), which
+takes fewer bytes and gives fewer triangles; what cannot be merged safely stays as
+triangles.
+
+Error bound
+-----------
+Every position is rounded to an absolute grid of :data:`GRID` = 1 mm in scene-local
+metres, ``q = round(p / 0.001)``; the decoder gives ``q * 0.001`` as float32.  Every
+decoded vertex is therefore one of the encoded vertices, each coordinate within
+**0.5 mm** plus the float32 rounding of the scene-local value (``2**-24 * |p|``, 6 um
+at 100 m), and every point of the decoded surface lies within the same bound (per
+coordinate) of the encoded surface: a polygon's triangulation covers exactly the
+union of its triangles in the plane of the rounded vertices.  Generated scenes are on
+a millimetre grid already; the bake's clipping planes (``REACH`` = 6 cm) keep them there
+for axis-aligned walls.
+
+Merging (encoder)
+-----------------
+Per part, triangles are grouped by plane (unit normal to 1e-3, offset to 1 mm).  A
+group of two or more triangles becomes polygons when all of these hold, else its
+triangles are kept as they are:
+
+* the union (shapely, in the plane's 2D frame, on the already rounded vertices) is a
+  polygon or a multipolygon whose every vertex is one of the group's vertices (no new
+  intersection points) and whose area is the sum of the triangles' areas (they do not
+  overlap);
+* the triangulation the decoder will make has that area too (earcut can fail on
+  rings that touch themselves) and uses every ring vertex in a triangle with area
+  (a vertex left only in flat triangles would be a T-junction);
+* it takes no more vertices than the triangles did.
+
+Two triangles sharing an edge become a quadrilateral without a union (most box
+faces).  A ring vertex between two collinear edges is dropped only when no other plane group
+or kept triangle of the part uses the same point: a vertex another region shares stays,
+so no T-junction (and no hairline crack) appears between a part's regions that was not
+there before.
+
+Layout
+------
+One tag byte (``Z`` zlib level 9, ``X`` lzma preset 6, ``N`` none, as version 1),
+then the msgpack map::
+
+    {"format": "walkstream-cellmesh/2", "parts": p, "elements": bin, "materials": bin,
+     "vertices": bin, "triangles": bin, "regions": bin, "rings": bin, "ring_sizes": bin,
+     "positions": bin, "indices": bin}
+
+``elements``, ``materials``, ``vertices``, ``triangles`` and ``indices`` are as in
+version 1 (the kept triangles: per-part counts, per-part local indices as zigzag
+varint deltas).  ``regions`` is each part's polygon count, ``rings`` each polygon's
+ring count (exterior first, then holes), ``ring_sizes`` each ring's vertex count, all
+varints.  ``positions`` are the millimetre integers of every part's kept-triangle
+vertices followed by its ring vertices, part after part, axis by axis (all x, then all
+y, then all z), each as a zigzag varint of the difference to the previous vertex (the
+grid is absolute, so the differences run on across parts).  Exteriors wind
+counter-clockwise seen from the front of the face; the decoder orients the triangles
+it makes by the ring's Newell normal and recomputes flat normals.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mapbox_earcut
+import numpy as np
+import shapely
+from numpy.typing import ArrayLike, NDArray
+from shapely.geometry.polygon import orient
+
+from walkstream.shared.codec.varint import (
+    decode_varints,
+    encode_varints,
+    unzigzag,
+    varint_field,
+    zigzag,
+)
+from walkstream.shared.errors import CodecError
+
+__all__ = [
+    "PLANAR_FORMAT",
+    "GRID",
+    "grid_error",
+    "mesh_area",
+    "area_tolerance",
+    "encode_planar_body",
+    "decode_planar_body",
+    "triangulate_region",
+]
+
+PLANAR_FORMAT = "walkstream-cellmesh/2"
+"""The format tag of version 2 blobs."""
+GRID = 0.001
+"""Metres per grid step (positions are ``q * GRID``, ``q`` integer)."""
+
+_MAX_VERTICES = 1 << 22
+_MAX_PARTS = 1 << 16
+_MAX_RING = 1 << 16
+_MAX_Q = 1 << 40  # 1.1e9 m: far beyond any scene, small enough for exact float64 products
+_KEYS = frozenset(
+    {"format", "parts", "elements", "materials", "vertices", "triangles", "regions", "rings", "ring_sizes",
+     "positions", "indices"}
+)
+
+Rings = list[NDArray[np.int64]]
+"""A polygon: its rings of ``(k, 3)`` millimetre integers, exterior first."""
+
+
+def grid_error(positions: ArrayLike) -> float:
+    """Largest coordinate error (metres) of ``positions (n, 3)`` after the 1 mm grid and float32."""
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if len(p) == 0:
+        return 0.0
+    back = (np.rint(p / GRID) * GRID).astype(np.float32).astype(np.float64)
+    return float(np.abs(back - p).max())
+
+
+def mesh_area(positions: ArrayLike, indices: ArrayLike) -> float:
+    """Summed area (m^2) of triangles ``indices (m, 3)`` over ``positions (n, 3)``."""
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    t = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
+    if len(t) == 0:
+        return 0.0
+    a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
+    return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+
+
+def area_tolerance(positions: ArrayLike, indices: ArrayLike) -> float:
+    """How much the grid may change the area of a mesh (m^2): every edge moves by at most
+    half a grid step diagonal (``sqrt(3) / 2`` mm) across itself, so the summed edge
+    length times one grid step bounds it (plus float32 rounding)."""
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    t = np.asarray(indices, dtype=np.int64).reshape(-1, 3)
+    if len(t) == 0:
+        return 1e-9
+    c = p[t]
+    edges = np.linalg.norm(c - np.roll(c, -1, axis=1), axis=2).sum()
+    return float(edges * GRID + 1e-6 * mesh_area(p, t) + 1e-9)
+
+
+def _newell(ring: NDArray[Any]) -> NDArray[np.float64]:
+    """``(3,)`` area vector (Newell) of a ring ``(k, 3)``: twice the area along its normal."""
+    r = np.asarray(ring, dtype=np.float64)
+    r = r - r[0]
+    x, y, z = r[:, 0], r[:, 1], r[:, 2]
+    x1, y1, z1 = np.append(x[1:], x[0]), np.append(y[1:], y[0]), np.append(z[1:], z[0])
+    # written out: np.cross costs more than the ring on the small rings most regions have
+    return np.array([(y * z1 - z * y1).sum(), (z * x1 - x * z1).sum(), (x * y1 - y * x1).sum()])
+
+
+_CYCLIC = ((1, 2), (2, 0), (0, 1))  # the kept axes when axis k is dropped, so that (a x b)_k > 0
+
+
+def triangulate_region(rings: Rings) -> NDArray[np.int64]:
+    """Triangulate one polygon given as 3D rings (exterior first).
+
+    The rings are projected onto the axis plane their normal is closest to; earcut
+    triangulates them there, and every triangle is wound like the exterior.
+
+    Parameters
+    ----------
+    rings : list of (k, 3) int
+        Millimetre integers; the exterior counter-clockwise seen from the front.
+
+    Returns
+    -------
+    (t, 3) int64
+        Indices into the rings' concatenated vertices; triangles of zero area dropped.
+    """
+    n = _newell(rings[0])
+    k = int(np.argmax(np.abs(n)))
+    a, b = _CYCLIC[k]
+    verts = np.concatenate(rings)
+    local = (verts[:, (a, b)] - verts[0, (a, b)]).astype(np.int64)
+    if len(rings) == 1 and len(local) == 3:
+        idx = np.array([[0, 1, 2]], np.int64)
+    else:
+        ends = np.cumsum([len(r) for r in rings]).astype(np.uint32)
+        idx = np.asarray(mapbox_earcut.triangulate_int64(local, ends), dtype=np.int64).reshape(-1, 3)
+    if len(idx) == 0:
+        return idx
+    p, q, r = local[idx[:, 0]], local[idx[:, 1]], local[idx[:, 2]]
+    cross = (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+    idx = idx[cross != 0]
+    flip = (cross[cross != 0] > 0) != (n[k] > 0)
+    idx[flip] = idx[flip][:, ::-1]
+    return idx
+
+
+def _area3(q: NDArray[np.int64], t: NDArray[np.int64]) -> float:
+    """Summed area of triangles ``t`` over integer points ``q`` (square grid steps)."""
+    if len(t) == 0:
+        return 0.0
+    p = q.astype(np.float64)
+    return 0.5 * float(np.sqrt((_cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]) ** 2).sum(axis=1)).sum())
+
+
+def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Row-wise cross product of ``(n, 3)`` arrays (np.cross's overhead dominates on small ones)."""
+    return np.column_stack(
+        [a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2], a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]]
+    )
+
+
+def _frame(n: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(3, 2)`` an orthonormal ``u, v`` of the plane with normal ``n``, ``u x v = n``."""
+    axis = np.eye(3)[int(np.argmin(np.abs(n)))]
+    u = _cross(axis[None], n[None])[0]
+    u /= np.linalg.norm(u)
+    v = _cross(n[None], u[None])[0]
+    return np.column_stack([u, v])
+
+
+def _drop_collinear(ring: NDArray[np.int64], keep: set[tuple[int, int, int]]) -> NDArray[np.int64]:
+    """``ring`` without the vertices between two collinear edges that no one else uses
+    (exact: integer cross products)."""
+    pts = [tuple(p) for p in ring.tolist()]
+    n = len(pts)
+    out: list[tuple[int, ...]] = []
+    for i in range(n):
+        cur = pts[i]
+        if cur in keep:
+            out.append(cur)
+            continue
+        prev = out[-1] if out else pts[i - 1]
+        nxt = pts[(i + 1) % n]
+        d0 = (cur[0] - prev[0], cur[1] - prev[1], cur[2] - prev[2])
+        d1 = (nxt[0] - cur[0], nxt[1] - cur[1], nxt[2] - cur[2])
+        straight = (
+            d0[1] * d1[2] == d0[2] * d1[1]
+            and d0[2] * d1[0] == d0[0] * d1[2]
+            and d0[0] * d1[1] == d0[1] * d1[0]
+            and d0[0] * d1[0] + d0[1] * d1[1] + d0[2] * d1[2] > 0
+        )
+        if not straight:
+            out.append(cur)
+    if len(out) < 3:
+        return ring
+    return np.array(out, dtype=np.int64)
+
+
+def _merge_group(
+    q: NDArray[np.int64], tri: NDArray[np.int64], normal: NDArray[np.float64], shared: set[tuple[int, int, int]]
+) -> list[Rings] | None:
+    """The polygons of one plane group's triangles, or ``None`` where merging is unsafe or no smaller."""
+    frame = _frame(normal)
+    corners = q[tri]  # (m, 3, 3)
+    xy = corners.astype(np.float64) @ frame  # (m, 3, 2)
+    lookup: dict[tuple[float, float], list[int]] = {}
+    for p2, p3 in zip(xy.reshape(-1, 2).tolist(), corners.reshape(-1, 3).tolist(), strict=True):
+        lookup.setdefault((p2[0], p2[1]), p3)
+    area2 = 0.5 * np.abs(
+        (xy[:, 1, 0] - xy[:, 0, 0]) * (xy[:, 2, 1] - xy[:, 0, 1]) - (xy[:, 1, 1] - xy[:, 0, 1]) * (xy[:, 2, 0] - xy[:, 0, 0])
+    ).sum()
+    union = shapely.union_all(shapely.polygons(xy))
+    polys = list(getattr(union, "geoms", [union]))
+    if not union.is_valid or any(p.geom_type != "Polygon" for p in polys):
+        return None
+    if abs(union.area - area2) > 1e-6 * max(area2, 1.0):
+        return None
+    out: list[Rings] = []
+    for poly in polys:
+        poly = orient(poly, 1.0)
+        rings: Rings = []
+        for ring in [poly.exterior, *poly.interiors]:
+            pts: list[list[int]] = []
+            for x, y in list(ring.coords)[:-1]:
+                hit = lookup.get((x, y))
+                if hit is None:
+                    return None  # a new intersection point: not a clean union of the triangles
+                pts.append(hit)
+            rings.append(_drop_collinear(np.array(pts, dtype=np.int64), shared))
+        if len(rings) > 1 or len(rings[0]) > 4:  # the decoder splits triangles and quads itself
+            tris = triangulate_region(rings)
+            if abs(_area3(np.concatenate(rings), tris) - poly.area) > 1e-6 * max(poly.area, 1.0):
+                return None
+            # a vertex earcut leaves in flat triangles only would be a T-junction with the
+            # region that shares it: keep the triangles instead
+            if len(np.unique(tris)) < sum(len(r) for r in rings):
+                return None
+        out.append(rings)
+    if sum(len(r) for rings in out for r in rings) > len(np.unique(tri)):
+        return None
+    return out
+
+
+def _quad(a: list[list[int]], b: list[list[int]]) -> NDArray[np.int64] | None:
+    """The ring of two coplanar triangles (corner lists, same winding) that share an edge
+    ``u -> v`` in ``a`` and ``v -> u`` in ``b``: ``v, w, u, x`` (``w``, ``x`` their third
+    corners), or ``None`` when they share no such edge."""
+    for k in range(3):
+        u, v, w = a[k], a[(k + 1) % 3], a[(k + 2) % 3]
+        for m in range(3):
+            if b[m] == v and b[(m + 1) % 3] == u:
+                return np.array([v, w, u, b[(m + 2) % 3]], dtype=np.int64)
+    return None
+
+
+def _encode_part(
+    positions: NDArray[np.float64], indices: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64], list[Rings]]:
+    """One part: ``(kept vertices (n, 3) mm ints, kept triangles (m, 3), polygons)``."""
+    q = np.rint(positions / GRID).astype(np.int64)
+    t = indices
+    cq = q[t].astype(np.float64)
+    cross = np.cross(cq[:, 1] - cq[:, 0], cq[:, 2] - cq[:, 0])
+    norm = np.linalg.norm(cross, axis=1)
+    live = norm > 0  # triangles that collapse on the grid have no area to draw
+    t, cross, norm = t[live], cross[live], norm[live]
+    if len(t) == 0:
+        return np.zeros((0, 3), np.int64), np.zeros((0, 3), np.int64), []
+    # group by the plane of the original (unrounded) triangle
+    c = positions[t]
+    n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    d = np.einsum("ij,ij->i", n, c.mean(axis=1))
+    key = np.column_stack([np.rint(n * 1000), np.rint(d / GRID)]).astype(np.int64)
+    _, group, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    group = group.reshape(-1)
+    # how many plane groups use each grid point: a point of two groups is shared
+    gp = np.unique(np.column_stack([np.repeat(group, 3), q[t].reshape(-1, 3)]), axis=0)
+    pts, uses = np.unique(gp[:, 1:], axis=0, return_counts=True)
+    shared: set[tuple[int, int, int]] = {(int(a), int(b), int(c)) for a, b, c in pts[uses > 1].tolist()}
+    kept = np.ones(len(t), bool)
+    polys: list[Rings] = []
+    # two triangles of one plane sharing an edge (a box's face): a quadrilateral, no union needed
+    pairs = np.flatnonzero(counts == 2)
+    if len(pairs):
+        order = np.argsort(group, kind="stable")
+        first = np.searchsorted(group[order], pairs)
+        for i, j in zip(order[first].tolist(), order[first + 1].tolist(), strict=True):
+            ring = _quad(q[t[i]].tolist(), q[t[j]].tolist())
+            if ring is not None:
+                polys.append([ring])
+                kept[i] = kept[j] = False
+        counts = counts.copy()
+        counts[pairs] = 0
+    for g in np.flatnonzero(counts >= 2):
+        members = np.flatnonzero(group == g)
+        nn = n[members].mean(axis=0)
+        merged = _merge_group(q, t[members], nn / np.linalg.norm(nn), shared)
+        if merged is not None:
+            polys.extend(merged)
+            kept[members] = False
+    kt = t[kept]
+    used, first = np.unique(kt.reshape(-1), return_index=True)
+    order = used[np.argsort(first)]  # vertices in the order they first appear
+    remap = np.full(len(q), -1, np.int64)
+    remap[order] = np.arange(len(order))
+    return q[order], remap[kt], polys
+
+
+def encode_planar_body(parts: list[tuple[int, int, NDArray[np.float64], NDArray[np.int64]]]) -> dict[str, Any]:
+    """The msgpack map of a version 2 blob (see the module docstring).
+
+    Parameters
+    ----------
+    parts:
+        ``(element, material, positions (n, 3) float64, indices (m, 3) int64)``, checked
+        by the caller (finite, in range, non-empty).
+
+    Raises
+    ------
+    CodecError
+        A position beyond the grid's range.
+    """
+    vcount, tcount, rcount = [], [], []
+    ring_counts: list[int] = []
+    ring_sizes: list[int] = []
+    qs: list[NDArray[np.int64]] = []
+    idx: list[NDArray[np.int64]] = []
+    for k, (element, _m, p, t) in enumerate(parts):
+        if np.abs(p).max(initial=0.0) / GRID >= _MAX_Q:
+            raise CodecError(f"cell mesh part {k} (element {element}): positions beyond {_MAX_Q * GRID:.0f} m")
+        kq, kt, polys = _encode_part(p, t)
+        vcount.append(len(kq))
+        tcount.append(len(kt))
+        rcount.append(len(polys))
+        qs.append(kq)
+        idx.append(kt.reshape(-1))
+        for rings in polys:
+            ring_counts.append(len(rings))
+            for r in rings:
+                ring_sizes.append(len(r))
+                qs.append(r)
+    allq = np.concatenate(qs) if qs else np.zeros((0, 3), np.int64)
+    dq = np.diff(allq, axis=0, prepend=np.zeros((1, 3), np.int64))
+    istarts = np.concatenate([[0], np.cumsum(np.asarray(tcount, np.int64) * 3)[:-1]]).astype(np.int64)
+    alli = np.concatenate(idx) if idx else np.zeros(0, np.int64)
+    di = np.diff(alli, prepend=0)
+    live = istarts[istarts < len(alli)]
+    di[live] = alli[live]
+    eid = np.asarray([p[0] for p in parts], dtype=np.int64)
+    return {
+        "format": PLANAR_FORMAT,
+        "parts": len(parts),
+        "elements": encode_varints(zigzag(np.diff(eid, prepend=0))),
+        "materials": bytes(np.asarray([p[1] for p in parts], dtype=np.uint8)),
+        "vertices": encode_varints(np.asarray(vcount, np.uint64)),
+        "triangles": encode_varints(np.asarray(tcount, np.uint64)),
+        "regions": encode_varints(np.asarray(rcount, np.uint64)),
+        "rings": encode_varints(np.asarray(ring_counts, np.uint64)),
+        "ring_sizes": encode_varints(np.asarray(ring_sizes, np.uint64)),
+        "positions": encode_varints(zigzag(dq.T.reshape(-1))),
+        "indices": encode_varints(zigzag(di)),
+    }
+
+
+def _counts(body: dict[str, Any], key: str, count: int, what: str, hi: int) -> NDArray[np.int64]:
+    v = varint_field(body, key, count, what)
+    if len(v) and int(v.max()) > hi:
+        raise CodecError(f"{what}: {key}: a value above {hi}")
+    return np.asarray(v, dtype=np.int64)
+
+
+def decode_planar_body(
+    body: dict[str, Any], what: str
+) -> list[tuple[int, int, NDArray[np.float32], NDArray[np.int64]]]:
+    """Check and decode a version 2 map: ``(element, material, positions, indices)`` per part.
+
+    Raises
+    ------
+    CodecError
+        Unknown keys, counts that disagree or exceed the limits, indices out of range.
+    """
+    if set(body) - _KEYS:
+        raise CodecError(f"{what}: unknown keys {sorted(set(body) - _KEYS)}")
+    n_parts = body.get("parts")
+    if type(n_parts) is not int or not 0 <= n_parts <= _MAX_PARTS:
+        raise CodecError(f"{what}: parts must be 0..{_MAX_PARTS}")
+    mats = body.get("materials")
+    if not isinstance(mats, bytes) or len(mats) != n_parts:
+        raise CodecError(f"{what}: materials: expected {n_parts} bytes")
+    eid = np.cumsum(unzigzag(_counts(body, "elements", n_parts, what, 2**64 - 1).astype(np.uint64)))
+    vcount = _counts(body, "vertices", n_parts, what, _MAX_VERTICES)
+    tcount = _counts(body, "triangles", n_parts, what, 4 * _MAX_VERTICES)
+    rcount = _counts(body, "regions", n_parts, what, _MAX_VERTICES)
+    n_regions = int(rcount.sum())
+    if n_regions > _MAX_VERTICES:
+        raise CodecError(f"{what}: {n_regions} regions is too many")
+    rings = _counts(body, "rings", n_regions, what, _MAX_RING)
+    if len(rings) and int(rings.min()) < 1:
+        raise CodecError(f"{what}: a region without rings")
+    n_rings = int(rings.sum())
+    if n_rings > _MAX_VERTICES:
+        raise CodecError(f"{what}: {n_rings} rings is too many")
+    sizes = _counts(body, "ring_sizes", n_rings, what, _MAX_RING)
+    if len(sizes) and int(sizes.min()) < 3:
+        raise CodecError(f"{what}: a ring of fewer than 3 vertices")
+    nv, nt = int(vcount.sum()) + int(sizes.sum()), int(tcount.sum())
+    if nv > _MAX_VERTICES or nt > 4 * _MAX_VERTICES:
+        raise CodecError(f"{what}: {nv} vertices / {nt} triangles is too many")
+    raw = body.get("positions")
+    if not isinstance(raw, bytes):
+        raise CodecError(f"{what}: positions is not bytes")
+    dq = unzigzag(decode_varints(raw, f"{what}: positions"))
+    if len(dq) != 3 * nv:
+        raise CodecError(f"{what}: positions: expected {3 * nv} values, got {len(dq)}")
+    if len(dq) and int(np.abs(dq).max()) >= _MAX_Q:
+        raise CodecError(f"{what}: a position step beyond the grid's range")
+    q = np.cumsum(dq.reshape(3, nv).T, axis=0)
+    if len(q) and int(np.abs(q).max()) >= _MAX_Q:
+        raise CodecError(f"{what}: a position beyond the grid's range")
+    pos = (q.astype(np.float64) * GRID).astype(np.float32)
+    di = unzigzag(_counts(body, "indices", 3 * nt, what, 2**64 - 1).astype(np.uint64))
+    # a running sum restarting at every part start (where the stored value is absolute)
+    run = np.cumsum(di)
+    starts = np.concatenate([[0], np.cumsum(tcount * 3)[:-1]]).astype(np.int64)
+    offset = np.where(starts > 0, run[np.maximum(starts - 1, 0)] if len(run) else 0, 0)
+    idx = run - np.repeat(offset, tcount * 3)
+    # every region's first vertex (global), then its triangles (global indices)
+    part_v0 = np.concatenate([[0], np.cumsum(vcount + _per_part(rings, sizes, rcount))])
+    rtris, rpart = _region_triangles(q, rings, sizes, vcount, rcount, part_v0)
+    out: list[tuple[int, int, NDArray[np.float32], NDArray[np.int64]]] = []
+    t0 = 0
+    rbounds = np.searchsorted(rpart, np.arange(n_parts + 1))
+    for k in range(n_parts):
+        nvk, ntk = int(vcount[k]), int(tcount[k])
+        t = idx[3 * t0 : 3 * (t0 + ntk)].reshape(-1, 3)
+        if len(t) and (t.min() < 0 or t.max() >= nvk):
+            raise CodecError(f"{what}: part {k}: index out of range")
+        v0, v1 = int(part_v0[k]), int(part_v0[k + 1])
+        region = rtris[rbounds[k] : rbounds[k + 1]] - v0
+        out.append((int(eid[k]), mats[k], pos[v0:v1], np.concatenate([t, region])))
+        t0 += ntk
+    return out
+
+
+def _per_part(rings: NDArray[np.int64], sizes: NDArray[np.int64], rcount: NDArray[np.int64]) -> NDArray[np.int64]:
+    """``(parts,)`` ring vertices per part."""
+    ring_part = np.repeat(np.repeat(np.arange(len(rcount)), rcount), rings)
+    return np.bincount(ring_part, weights=sizes, minlength=len(rcount)).astype(np.int64)
+
+
+def _region_triangles(
+    q: NDArray[np.int64],
+    rings: NDArray[np.int64],
+    sizes: NDArray[np.int64],
+    vcount: NDArray[np.int64],
+    rcount: NDArray[np.int64],
+    part_v0: NDArray[np.int64],
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """All regions' triangles (global vertex indices, region order) and each one's part.
+
+    Triangles and convex quadrilaterals without holes (most regions) are split with
+    array operations; the rest go through earcut one by one.
+    """
+    n_regions = len(rings)
+    if n_regions == 0:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    region_part = np.repeat(np.arange(len(rcount)), rcount)
+    ring_first = np.concatenate([[0], np.cumsum(rings)[:-1]])
+    ring_vstart = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    # a part's ring vertices come after its kept-triangle vertices
+    part_ring0 = part_v0[:-1] + vcount - np.concatenate([[0], np.cumsum(_per_part(rings, sizes, rcount))[:-1]])
+    start = ring_vstart[ring_first] + part_ring0[region_part]
+    total = np.add.reduceat(sizes, ring_first) if len(sizes) else np.zeros(0, np.int64)
+    tris: list[NDArray[np.int64]] = []
+    owner: list[NDArray[np.int64]] = []
+    tri3 = np.flatnonzero((rings == 1) & (total == 3))
+    tris.append(start[tri3, None] + np.arange(3))
+    owner.append(tri3)
+    quad = np.flatnonzero((rings == 1) & (total == 4))
+    if len(quad):
+        v = q[start[quad, None] + np.arange(4)].astype(np.float64)  # (k, 4, 3)
+        rel = v - v[:, :1]
+        n = np.cross(rel[:, 1], rel[:, 2]) + np.cross(rel[:, 2], rel[:, 3])
+        d1 = np.einsum("ij,ij->i", np.cross(rel[:, 1], rel[:, 2]), n)
+        d2 = np.einsum("ij,ij->i", np.cross(rel[:, 2], rel[:, 3]), n)
+        split = np.where(((d1 > 0) & (d2 > 0))[:, None, None], [[0, 1, 2], [0, 2, 3]], [[1, 2, 3], [1, 3, 0]])
+        ok = (d1 > 0) & (d2 > 0)
+        other = ~ok
+        if other.any():  # the 1-3 diagonal must be inside too, else earcut decides
+            r2 = rel[other] - rel[other][:, 1:2]
+            e1 = np.einsum("ij,ij->i", np.cross(r2[:, 2], r2[:, 3]), n[other])
+            e2 = np.einsum("ij,ij->i", np.cross(r2[:, 3], r2[:, 0]), n[other])
+            ok[np.flatnonzero(other)] = (e1 > 0) & (e2 > 0)
+        tris.append((start[quad, None, None] + split)[ok].reshape(-1, 3))
+        owner.append(np.repeat(quad[ok], 2))
+        rest_quads = quad[~ok]
+    else:
+        rest_quads = quad
+    fast = np.zeros(n_regions, bool)
+    fast[tri3] = True
+    fast[quad] = True
+    fast[rest_quads] = False
+    for r in np.flatnonzero(~fast).tolist():
+        bounds = start[r] + np.concatenate([[0], np.cumsum(sizes[ring_first[r] : ring_first[r] + rings[r]])])
+        region = [q[a:b] for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        t = triangulate_region(region) + start[r]
+        tris.append(t)
+        owner.append(np.full(len(t), r, np.int64))
+    allt = np.concatenate(tris)
+    own = np.concatenate(owner)
+    order = np.argsort(own, kind="stable")
+    return allt[order], region_part[own[order]]
