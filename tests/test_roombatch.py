@@ -137,6 +137,8 @@ def test_bad_parts_are_codec_errors() -> None:
         check_contents_part({"cell": -1, "etag": "", "body": b""}, "p")
     with pytest.raises(InputError, match="contents batch of -1 bytes"):
         RoomStreamConfig(batch_bytes=-1)
+    with pytest.raises(InputError, match="flush fill 1.5"):
+        RoomStreamConfig(flush_fill=1.5)
 
 
 class _Cut(httpx.AsyncBaseTransport):

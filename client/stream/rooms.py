@@ -110,6 +110,8 @@ class RoomStreamConfig:
     def __post_init__(self) -> None:
         if self.flush_policy not in FLUSH_POLICIES:
             raise InputError(f"flush policy {self.flush_policy!r}: expected one of {', '.join(FLUSH_POLICIES)}")
+        if not 0.0 <= self.flush_fill <= 1.0:
+            raise InputError(f"flush fill {self.flush_fill!r}: expected a share of the cache from 0 to 1")
         if self.batch_bytes < 0:
             raise InputError(f"contents batch of {self.batch_bytes} bytes: expected 0 (one cell per request) or more")
         if not (self.flush_s >= 0.0 and np.isfinite(self.flush_s)):
