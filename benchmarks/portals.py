@@ -358,7 +358,8 @@ def run_portals_bench(out: Path, presets: Sequence[str], *, frames: int, step_s:
 def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out: Path,
                 duration: str = "180s", step_at: float = 60.0) -> list[dict[str, Any]]:
     """Replays of ``db``'s tour (simulated clock): the walk at 56 kbit/s / 200 ms with the
-    default cache and with a cache smaller than the building, each with the default
+    default cache and with a cache smaller than the building (and the same three with one
+    contents request per cell, as before the batches), each with the default
     (``crowded``) and the paper's flush policy, and on the pda model at
     25 fps with the fog set by the budget controller (and kept fixed, to compare)
     through a tenfold per-triangle cost step at ``step_at`` seconds."""
@@ -367,6 +368,10 @@ def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out
         ("56 kbit/s, default cache", dict(link)),
         ("56 kbit/s, cache 400 kB", {**link, "cache": "400kB"}),
         ("56 kbit/s, cache 600 kB", {**link, "cache": "600kB"}),
+        # before the contents batch: one request per cell (the same sitting, to compare)
+        ("56 kbit/s, default cache, 1 cell/req", {**link, "contents_batch": "0"}),
+        ("56 kbit/s, cache 400 kB, 1 cell/req", {**link, "cache": "400kB", "contents_batch": "0"}),
+        ("56 kbit/s, cache 600 kB, 1 cell/req", {**link, "cache": "600kB", "contents_batch": "0"}),
         ("56 kbit/s, paper flush (30 s)", {**link, "flush_policy": "paper"}),
         ("56 kbit/s, cache 400 kB, paper flush", {**link, "cache": "400kB", "flush_policy": "paper"}),
         ("pda 25 fps, fog by budget, cost x10", {**link, "device": "pda", "fps": 25.0, "cost_step_at_s": step_at}),
@@ -380,7 +385,8 @@ def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out
         rows.append({"case": name, **{key: s.get(key) for key in (
             "perfect_frame_ratio", "time_to_first_perfect_frame_s", "redownloads", "cells_flushed", "fps_mean",
             "fps_within_10pct_ratio", "recovery_frames", "fog_m_median", "fog_m_min", "fog_tightened_frames",
-            "culling_ms_median", "visible_cells_mean", "triangles_mean", "topology_bytes", "contents_bytes")}})
+            "culling_ms_median", "visible_cells_mean", "triangles_mean", "topology_bytes", "contents_bytes",
+            "contents_requests", "bytes_received")}})
     return rows
 
 
@@ -389,15 +395,16 @@ def replay_table(rows: Sequence[dict[str, Any]]) -> str:
     def f(v: Any, fmt: str) -> str:
         return "-" if v is None else format(v, fmt)
 
-    out = [f"{'case':<38}{'perfect%':>9}{'1st perf s':>11}{'topo kB':>8}{'redl':>5}{'flushed':>8}{'fps':>6}{'within10%':>10}"
-           f"{'recover':>8}{'fog med':>8}{'fog min':>8}{'tightened':>10}"]
+    out = [f"{'case':<38}{'perfect%':>9}{'1st perf s':>11}{'topo kB':>8}{'redl':>5}{'flushed':>8}{'reqs':>6}{'kB down':>8}"
+           f"{'fps':>6}{'within10%':>10}{'recover':>8}{'fog med':>8}{'fog min':>8}{'tightened':>10}"]
     for r in rows:
         pf = r["perfect_frame_ratio"]
         w10 = r["fps_within_10pct_ratio"]
         out.append(
             f"{r['case']:<38}{f(None if pf is None else 100 * pf, '.2f'):>9}{f(r['time_to_first_perfect_frame_s'], '.2f'):>11}"
             f"{f(None if r.get('topology_bytes') is None else r['topology_bytes'] / 1e3, '.1f'):>8}"
-            f"{f(r['redownloads'], 'd'):>5}{f(r['cells_flushed'], 'd'):>8}{f(r['fps_mean'], '.1f'):>6}"
+            f"{f(r['redownloads'], 'd'):>5}{f(r['cells_flushed'], 'd'):>8}{f(r.get('contents_requests'), 'd'):>6}"
+            f"{f(None if r.get('bytes_received') is None else r['bytes_received'] / 1e3, '.1f'):>8}{f(r['fps_mean'], '.1f'):>6}"
             f"{f(None if w10 is None else 100 * w10, '.1f'):>10}{f(r['recovery_frames'], ''):>8}"
             f"{f(r['fog_m_median'], '.1f'):>8}{f(r['fog_m_min'], '.1f'):>8}{f(r['fog_tightened_frames'], 'd'):>10}"
         )

@@ -101,7 +101,8 @@ def config_from_args(args: argparse.Namespace) -> Any:
         fog_m=args.fog,
         culling=args.culling,
         fog_budget=not args.no_fog_budget,
-        rooms={"flush_s": args.flush_after, "flush_policy": args.flush_policy},
+        rooms={"flush_s": args.flush_after, "flush_policy": args.flush_policy, "flush_fill": args.flush_fill,
+               "batch_bytes": parse_size(args.contents_batch)},
         report_dir=Path(args.report),
         start_bundle=not args.no_start_bundle,
         gzip=not args.no_gzip,
@@ -233,6 +234,12 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--flush-policy", choices=("crowded", "paper"), default="crowded",
                    help="interiors: flush only while the cache is more than 90 %% full (default: nothing is "
                    "downloaded twice while the walk fits the cache), or always (the paper's policy)")
+    r.add_argument("--flush-fill", type=float, default=0.9, metavar="SHARE",
+                   help="interiors: the crowded policy flushes only while the cache is fuller than this share "
+                   "of its budget (default 0.9; 1: never, the byte-budget LRU alone)")
+    r.add_argument("--contents-batch", default="8kB", metavar="BYTES",
+                   help="interiors: cells' contents in batches (every missing visible cell, then predicted ones "
+                   "up to BYTES stored; one gzip stream, default 8kB); 0: one request per cell")
     r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")

@@ -31,6 +31,7 @@ import httpx
 import msgpack
 
 from walkstream.client.clock import Clock
+from walkstream.shared.codec.cellbatch import check_contents_part
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_any
@@ -310,6 +311,37 @@ class SceneClient:
         return mesh
 
     # -- cell index -------------------------------------------------------------
+
+    async def contents_batch(self, ids: Sequence[int]) -> AsyncIterator[tuple[int, CellMesh]]:
+        """Interior cells ``ids``' contents in one request (``POST .../rooms/contents``),
+        each yielded decoded as soon as its part is in, in the order asked; ``nbytes`` is
+        the part's share of the (compressed) stream.
+
+        Raises
+        ------
+        StreamCut
+            As :meth:`objects`; ``received`` counts the cells yielded.
+        ApiError
+            4xx: the server refuses the request.
+        """
+        ids = [int(i) for i in ids]
+        what = f"contents batch ({len(ids)} cells)"
+        got = 0
+
+        def check(obj: Any, nbytes: int) -> tuple[int, CellMesh]:
+            if got >= len(ids):
+                raise CodecError("more cells than asked")
+            cid, _etag, body = check_contents_part(obj, f"{what}: part {got}")
+            if cid != ids[got]:
+                raise CodecError(f"{what}: cell {cid} where {ids[got]} was asked")
+            return cid, replace(decode_cell_mesh(body, f"contents of cell {cid}"), nbytes=nbytes)
+
+        async for part in self._stream("POST", self._url("/rooms/contents"), what, {"ids": ids}, check):
+            got += 1
+            yield part
+        if got < len(ids):
+            self.stats.cut_streams += 1
+            raise StreamCut(f"{what}: ended after {got} of {len(ids)} cells", got)
 
     async def cell_index(self, tile: tuple[int, int] | None) -> CellIndex:
         """The cell index of ``tile`` (None: of the whole scene)."""

@@ -11,8 +11,10 @@ An interior is walked like this (Mulloni et al.'s cell manager):
   through the portals whose bounding box meets the view frustum
   (:func:`~walkstream.client.draw.portals.frustum_cells`), within the fog distance,
   to a depth of :attr:`RoomStreamConfig.max_depth`;
-* **contents** (one immutable response per cell) are fetched in the order the walk
-  will need them (:meth:`RoomStreamer.wanted`): the visible cells, then, with prefetch,
+* **contents** are fetched in the order the walk will need them, in batches
+  (``POST .../rooms/contents``, :meth:`SceneClient.contents_batch`: every missing visible
+  cell, then predicted ones up to :attr:`RoomStreamConfig.batch_bytes`; each cell is
+  usable as soon as its part is in; ``batch_bytes`` 0: one request per cell) (:meth:`RoomStreamer.wanted`): the visible cells, then, with prefetch,
   the cells that the *predicted* motion (the eye moving on at its velocity of the last
   :attr:`RoomStreamConfig.velocity_s` seconds, looking the same way) makes visible
   through the portal graph within the fog, :attr:`RoomStreamConfig.lookahead_s` ahead
@@ -44,8 +46,9 @@ from walkstream.client.clock import Clock
 from walkstream.client.draw.portals import PortalCull, PortalGraph, cull_portals, frustum_cells
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
+from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.codec.cellmesh import CellMesh
-from walkstream.shared.errors import ApiError, InputError
+from walkstream.shared.errors import ApiError, InputError, StreamCut
 from walkstream.shared.roomwire import RoomRecord, Topology
 
 __all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "cell_of", "predicted_view", "stack_planes", "turned_view"]
@@ -95,6 +98,11 @@ class RoomStreamConfig:
     cache's budget (the rest keeps cells seen earlier; on the office tour with a 400 kB
     cache and a 50 % flush gate 0.5 / 0.7 / 0.9 gave 93.3 / 95.6 / 93.6 % perfect frames)."""
     max_in_flight: int = 2
+    """Contents requests (batches or single cells) in flight at once."""
+    batch_bytes: int = 8000
+    """A batch holds every missing visible cell, then the predicted ones while the stored
+    bytes of its cells stay within this (a long batch of prefetch would hold back a cell
+    that becomes visible meanwhile); 0: one request per cell (the older path)."""
     culling: str = "portals"
     """``portals`` (VSAs), ``frustum`` (portals in the frustum) or ``none`` (as
     ``frustum`` for the cells, every part of them drawn)."""
@@ -102,6 +110,10 @@ class RoomStreamConfig:
     def __post_init__(self) -> None:
         if self.flush_policy not in FLUSH_POLICIES:
             raise InputError(f"flush policy {self.flush_policy!r}: expected one of {', '.join(FLUSH_POLICIES)}")
+        if not 0.0 <= self.flush_fill <= 1.0:
+            raise InputError(f"flush fill {self.flush_fill!r}: expected a share of the cache from 0 to 1")
+        if self.batch_bytes < 0:
+            raise InputError(f"contents batch of {self.batch_bytes} bytes: expected 0 (one cell per request) or more")
         if not (self.flush_s >= 0.0 and np.isfinite(self.flush_s)):
             raise InputError(f"flush after {self.flush_s!r} s: expected a finite number of seconds >= 0")
 
@@ -302,13 +314,45 @@ class RoomStreamer:
         # what is wanted and in memory stays: the LRU evicts only what nobody needs soon
         # pinned before they arrive too: a wanted cell is never evicted by its own arrival
         self.cache.set_pins([("mesh", c) for c in want])
-        for c in want:
-            if len(self._tasks) >= self.config.max_in_flight:
-                break
-            if c in self._tasks or self.cache.has("mesh", c):
-                continue
-            self._tasks[c] = asyncio.ensure_future(self._fetch(c))
+        self._request(want, set(vis))
         return vis
+
+    def _request(self, want: list[int], vis: set[int]) -> None:
+        """Start requests for the wanted cells neither in memory nor in flight, in order:
+        one per cell, or batches (every missing visible cell, then more up to
+        ``batch_bytes``), at most ``max_in_flight`` requests at once (one more for
+        visible cells when only prefetch is in flight; no prefetch while visible cells are)."""
+        cfg = self.config
+        missing = [c for c in want if c not in self._tasks and not self.cache.has("mesh", c)]
+        while missing:
+            busy = len(set(self._tasks.values()))
+            if not cfg.batch_bytes:
+                if busy >= cfg.max_in_flight:
+                    break
+                c = missing.pop(0)
+                self._tasks[c] = asyncio.ensure_future(self._fetch(c))
+                continue
+            visible_in_flight = any(c in vis for c in self._tasks)
+            if missing[0] not in vis and visible_in_flight:
+                # a second stream only splits the link: prefetch waits for the visible cells
+                break
+            # a newly visible cell never waits behind batches of prefetch: it may take one more
+            if busy >= cfg.max_in_flight + (0 if visible_in_flight or missing[0] not in vis else 1):
+                break
+            # while visible cells are on their way, a batch for newly visible ones takes no prefetch
+            cap = 0 if any(c in vis for c in self._tasks) else cfg.batch_bytes
+            batch: list[int] = []
+            size = 0
+            for c in missing[:CELLBATCH_MAX_CELLS]:
+                nbytes = self.cells[c].contents.nbytes
+                if batch and c not in vis and size + nbytes > cap:
+                    break
+                batch.append(c)
+                size += nbytes
+            del missing[: len(batch)]
+            task = asyncio.ensure_future(self._fetch_batch(batch))
+            for c in batch:
+                self._tasks[c] = task
 
     def _flush(self, t: float, want: list[int]) -> None:
         """The paper's policy: drop cells not visible for ``flush_s`` (``crowded``: only
@@ -411,26 +455,44 @@ class RoomStreamer:
     async def _fetch(self, cid: int) -> None:
         try:
             self.stats.requests += 1
-            mesh = await self.api.contents(cid)
-            if cid in self.stats.fetched:
-                self.stats.refetched += 1
-            self.stats.fetched.add(cid)
-            self.stats.cells_received += 1
-            self.stats.bytes_received += mesh.nbytes
-            size = sum(p.positions.nbytes + p.indices.nbytes for p in mesh.parts)
-            self._received[0] += size
-            self._received[1] += self.cells[cid].contents.triangles
-            if self._received[1]:
-                self._bytes_per_triangle = self._received[0] / self._received[1]
-            self.cache.put("mesh", cid, mesh, max(size, 1))
+            self._store(cid, await self.api.contents(cid))
         except ApiError:
             self.stats.errors += 1
         finally:
             self._tasks.pop(cid, None)
 
+    async def _fetch_batch(self, cells: list[int]) -> None:
+        """One batch: each cell stored as its part arrives, and no longer in flight; a batch
+        cut short leaves the cells it did not bring to be asked for again."""
+        try:
+            self.stats.requests += 1
+            async for cid, mesh in self.api.contents_batch(cells):
+                self._store(cid, mesh)
+                self._tasks.pop(cid, None)
+        except (ApiError, StreamCut):
+            self.stats.errors += 1
+        finally:
+            for c in cells:
+                if self._tasks.get(c) is asyncio.current_task():
+                    del self._tasks[c]
+
+    def _store(self, cid: int, mesh: CellMesh) -> None:
+        """Keep a received cell's contents (and count it)."""
+        if cid in self.stats.fetched:
+            self.stats.refetched += 1
+        self.stats.fetched.add(cid)
+        self.stats.cells_received += 1
+        self.stats.bytes_received += mesh.nbytes
+        size = sum(p.positions.nbytes + p.indices.nbytes for p in mesh.parts)
+        self._received[0] += size
+        self._received[1] += self.cells[cid].contents.triangles
+        if self._received[1]:
+            self._bytes_per_triangle = self._received[0] / self._received[1]
+        self.cache.put("mesh", cid, mesh, max(size, 1))
+
     async def close(self) -> None:
         """Cancel what is in flight."""
-        for task in list(self._tasks.values()):
+        for task in set(self._tasks.values()):
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task

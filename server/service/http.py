@@ -189,9 +189,9 @@ def accepts_gzip(accept_encoding: str | None) -> bool:
     return any(coding in ("gzip", "*") and q > 0 for coding, q in _qualities(accept_encoding or ""))
 
 
-async def _gzipped(pieces: AsyncIterator[bytes]) -> AsyncIterator[bytes]:
+async def _gzipped(pieces: AsyncIterator[bytes], level: int = 6) -> AsyncIterator[bytes]:
     """gzip the pieces, flushing after each so the receiver can decode all that came."""
-    co = zlib.compressobj(6, zlib.DEFLATED, 31)
+    co = zlib.compressobj(level, zlib.DEFLATED, 31)
     async for p in pieces:
         out = co.compress(p) + co.flush(zlib.Z_SYNC_FLUSH)
         if out:
@@ -200,11 +200,12 @@ async def _gzipped(pieces: AsyncIterator[bytes]) -> AsyncIterator[bytes]:
 
 
 def stream_response(
-    request: Request, pieces: AsyncIterator[bytes], media_type: str, headers: dict[str, str]
+    request: Request, pieces: AsyncIterator[bytes], media_type: str, headers: dict[str, str], level: int = 6
 ) -> StreamingResponse:
-    """A streamed answer, gzip-compressed when the request's ``Accept-Encoding`` allows it."""
+    """A streamed answer, gzip-compressed (zlib ``level``) when the request's
+    ``Accept-Encoding`` allows it."""
     headers = {**headers, "Vary": "Accept, Accept-Encoding"}
     if accepts_gzip(request.headers.get("accept-encoding")):
         headers["Content-Encoding"] = "gzip"
-        return StreamingResponse(_gzipped(pieces), media_type=media_type, headers=headers)
+        return StreamingResponse(_gzipped(pieces, level), media_type=media_type, headers=headers)
     return StreamingResponse(pieces, media_type=media_type, headers=headers)

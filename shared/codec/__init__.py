@@ -18,7 +18,8 @@ Formats (version 1) are described in each module: building and street parameters
 The modules: :mod:`.bounded` (bounded unpacking), :mod:`.varint`, :mod:`.ints` (integer
 sequences in the smallest of four encodings), :mod:`.params` (buildings and streets),
 :mod:`.pvs` (PVS, ids, polygons), :mod:`.mesh` (meshes), :mod:`.cellmesh` (the quantised
-contents of an interior cell, with its error bound).
+contents of an interior cell, with its error bound), :mod:`.cellbatch` (many cells'
+contents in one answer).
 """
 
 from walkstream.shared.codec.bounded import inflate_tagged, unpack_bounded

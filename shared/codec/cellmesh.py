@@ -87,6 +87,7 @@ __all__ = [
     "position_error_bound",
     "raw_bytes",
     "flat_normals",
+    "inflate_cell_mesh",
 ]
 
 CELLMESH_FORMAT = "walkstream-cellmesh/2"
@@ -401,6 +402,15 @@ def _decompress(blob: bytes, what: str) -> bytes:
     except (zlib.error, lzma.LZMAError) as exc:
         raise CodecError(f"{what}: damaged compressed data ({exc})") from exc
     raise CodecError(f"{what}: unknown compression tag {tag!r}")
+
+
+def inflate_cell_mesh(blob: bytes, what: str = "cell mesh") -> bytes:
+    """The blob with its body decompressed: tag ``N`` and the bytes that followed ``Z`` or
+    ``X`` inflated (bounded as :func:`decode_cell_mesh`); an ``N`` blob comes back as it is.
+    Many such blobs compress together better than each on its own (the contents batch)."""
+    if blob[:1] == b"N":
+        return bytes(blob)
+    return b"N" + _decompress(bytes(blob), what)
 
 
 def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:

@@ -21,26 +21,41 @@
     The cell's geometry as one immutable blob (``walkstream-cellmesh/2``, media type
     ``application/vnd.walkstream.cellmesh``; decode with
     :func:`walkstream.shared.codec.decode_cell_mesh`): a cell is one request.
+``POST /v1/scenes/{scene}/rooms/contents``
+    Many cells' contents in one answer (``walkstream-cellbatch/1``, see
+    :mod:`walkstream.shared.codec.cellbatch`): body ``{"ids": [...]}`` (JSON or msgpack,
+    at most :data:`~walkstream.shared.codec.cellbatch.CELLBATCH_MAX_CELLS` ids, no
+    duplicates), answer a stream of ``{cell, etag, body}`` maps in the order asked.
+    gzip-compressed when the client accepts it, the blobs inflated and compressed
+    together and flushed after each part: one round trip and one set of headers for
+    the cells a walk needs, a fifth fewer body bytes than the blobs one by one.
 
-Each has a strong ETag and a year-long immutable Cache-Control (304 on a matching
+Each GET has a strong ETag and a year-long immutable Cache-Control (304 on a matching
 ``If-None-Match``).  A city scene answers them with a 404 that says so.
 """
 
 from __future__ import annotations
 
+from collections import Counter
+from collections.abc import AsyncIterator
 from typing import Annotated
 
 from fastapi import APIRouter, Path, Request, Response
+from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from walkstream.server.service.dependencies import RepDep, SceneDep
-from walkstream.server.service.http import cached
+from walkstream.server.service.http import accepts_gzip, cached, stream_response
 from walkstream.server.service.interiors import CONTENTS_MEDIA, InteriorState
-from walkstream.server.service.models import ERRORS, RoomOut, TopologyOut, both
+from walkstream.server.service.models import ERRORS, CellsIn, RoomOut, TopologyOut, both, error_doc
+from walkstream.server.service.routers.objects import MAX_BODY_BYTES, parse_ids, read_body
 from walkstream.server.service.scenes import Scene
-from walkstream.shared.errors import ApiError
+from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS, pack_contents_part
+from walkstream.shared.codec.cellmesh import inflate_cell_mesh
+from walkstream.shared.errors import ApiError, CodecError
 from walkstream.shared.roomcompact import TOPOLOGY_COMPACT_MEDIA
 from walkstream.shared.roomwire import TOPOLOGY_PACKED_MEDIA
+from walkstream.shared.wire import JSON, MSGPACK
 
 __all__ = ["router"]
 
@@ -128,3 +143,83 @@ async def contents(request: Request, scene: SceneDep, cell: Annotated[int, Path(
     if enc is None:  # a database read: in a worker thread, off the event loop
         enc = await run_in_threadpool(state.contents, cell)
     return cached(request, enc)
+
+
+_BATCH_BODY = {
+    "required": True,
+    "content": {
+        JSON: {"schema": CellsIn.model_json_schema()},
+        MSGPACK: {"schema": CellsIn.model_json_schema()},
+    },
+}
+
+
+@router.post(
+    "/scenes/{scene}/rooms/contents",
+    responses={
+        200: {
+            "description": "concatenated msgpack maps {cell, etag, body} (walkstream-cellbatch/1), one per "
+            "id in the order asked; body is the cell's walkstream-cellmesh blob, inflated to its N form "
+            "when the answer is gzip-compressed (the stream compressed together, flushed after each part)",
+            "content": {MSGPACK: {}},
+        },
+        400: error_doc("the body is not JSON / msgpack"),
+        404: error_doc("an id that is no cell of the interior, or a scene without rooms"),
+        413: error_doc(f"more than {CELLBATCH_MAX_CELLS} ids, or a body over {MAX_BODY_BYTES} bytes"),
+        415: error_doc("a Content-Type other than JSON or msgpack"),
+        422: error_doc("ids not a list of integers, or an id asked twice"),
+    },
+    openapi_extra={"requestBody": _BATCH_BODY},
+    summary="Interior cells' contents in a batch",
+)
+async def contents_batch(request: Request, scene: SceneDep) -> StreamingResponse:
+    """The contents of the cells asked for (body ``{"ids": [...]}``), streamed in the order asked.
+
+    One request for every missing cell instead of one per cell: on a 56 kbit/s link the
+    headers of 21 single answers are 4.3 kB, and 21 blobs compressed together are a fifth
+    smaller than compressed one by one (the same bytes whatever ``Accept`` says).
+    """
+    state = _interior(scene)
+    ids = parse_ids(await read_body(request), request.headers.get("content-type"))
+    if len(ids) > CELLBATCH_MAX_CELLS:
+        raise ApiError(
+            f"{len(ids)} cells asked, at most {CELLBATCH_MAX_CELLS} per batch: split the batch",
+            status=413,
+            detail={"count": len(ids), "limit": CELLBATCH_MAX_CELLS},
+        )
+    twice = [i for i, n in Counter(ids).items() if n > 1]
+    if twice:
+        raise ApiError(
+            f"ids: cell {twice[0]} asked more than once (each cell once per batch)",
+            status=422,
+            detail={"ids": twice[:100]},
+        )
+    unknown = [i for i in ids if not state.has(i)]
+    if unknown:
+        shown = ", ".join(str(i) for i in unknown[:10]) + (", ..." if len(unknown) > 10 else "")
+        raise ApiError(
+            f"scene {scene.name!r} has no cell{'s' if len(unknown) > 1 else ''} {shown}",
+            status=404,
+            detail={"ids": unknown[:100]},
+        )
+    inflate = accepts_gzip(request.headers.get("accept-encoding"))
+    headers = {"X-Scene-Version": scene.version, "X-Cell-Count": str(len(ids))}
+    # level 9: 1 % smaller than 6 on the office's start cells, and the server's cost is small
+    return stream_response(request, _parts(state, ids, inflate), MSGPACK, headers, level=9)
+
+
+async def _parts(state: InteriorState, ids: list[int], inflate: bool) -> AsyncIterator[bytes]:
+    """Each cell's part, read (off the event loop on a cache miss) as the stream goes, so
+    the first part leaves before the last blob is read; one piece per part, so the
+    gzip stream is flushed after each."""
+    for cid in ids:
+        enc = state.cached_contents(cid)
+        if enc is None:
+            enc = await run_in_threadpool(state.contents, cid)
+        blob = enc.content
+        if inflate:
+            try:
+                blob = inflate_cell_mesh(blob, f"contents of cell {cid}")
+            except CodecError:  # a damaged stored blob goes as stored: the client says so
+                pass
+        yield pack_contents_part(cid, enc.etag, blob)
