@@ -180,7 +180,8 @@ def test_replay_walks_the_tour_end_to_end(office: Path, tmp_path: Path, capsys: 
     assert s["kind"] == "interior" and s["frames"] > 900
     assert s["cells_entered"] >= 3 and s["visible_cells_mean"] >= 1
     assert s["perfect_frame_ratio"] > 0.9 and s["triangles_mean"] > 0
-    assert s["redownloads"] == 0 and s["contents_requests"] == s["cells_fetched"]
+    # each cell fetched once; batches carry several cells per request
+    assert s["redownloads"] == 0 and 0 < s["contents_requests"] < s["cells_fetched"]
     assert (report / "index.html").exists()
     capsys.readouterr()
 
