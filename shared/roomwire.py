@@ -19,7 +19,6 @@ packed topology (``walkstream-topology/1+gzip``, :data:`TOPOLOGY_PACKED_MEDIA`)
 
 from __future__ import annotations
 
-import zlib
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.shared.codec import unpack_bounded
+from walkstream.shared.codec.bounded import inflate_bounded
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import readonly
 
@@ -303,14 +303,6 @@ def decode_topology(body: bytes, what: str) -> Topology:
 def decode_topology_packed(body: bytes, what: str) -> Topology:
     """Decode a packed topology body (gzip of the msgpack topology), inflating at most
     the topology's bound; its ``nbytes`` is the packed size (what crossed the link)."""
-    inflater = zlib.decompressobj(31)
-    try:
-        raw = inflater.decompress(body, _MAX_TOPOLOGY + 1)
-    except zlib.error as exc:
-        raise CodecError(f"{what}: not a gzip body ({exc})") from exc
-    if len(raw) > _MAX_TOPOLOGY or inflater.unconsumed_tail:
-        raise CodecError(f"{what}: inflates to more than {_MAX_TOPOLOGY} bytes")
-    if not inflater.eof:
-        raise CodecError(f"{what}: truncated gzip body")
+    raw = inflate_bounded(body, what, _MAX_TOPOLOGY, "gzip body", wbits=31)
     t = decode_topology(raw, what)
     return Topology(t.storeys, t.cells, t.portals, t.stairs, nbytes=len(body))

@@ -15,7 +15,7 @@ import msgpack
 
 from walkstream.shared.errors import CodecError
 
-__all__ = ["unpack_bounded", "inflate_tagged"]
+__all__ = ["unpack_bounded", "inflate_tagged", "inflate_bounded"]
 
 # Bounds for untrusted input.  A building with a million vertices is already absurd;
 # the limits only have to stop a forged length from allocating gigabytes.
@@ -127,9 +127,22 @@ def inflate_tagged(body: bytes, what: str, magic: bytes, version: int, max_bytes
         raise CodecError(f"{what}: not a {name} (no {magic.decode()} header)")
     if b[k] != version:
         raise CodecError(f"{what}: {name} version {b[k]} is not supported (this reader knows {version})")
-    inflater = zlib.decompressobj()
+    return inflate_bounded(b[k + 1 :], what, max_bytes, name)
+
+
+def inflate_bounded(data: bytes, what: str, max_bytes: int, name: str, wbits: int = 15) -> bytes:
+    """One zlib stream (``wbits`` 15) or gzip member (``wbits`` 31), inflated to at most
+    ``max_bytes``.
+
+    Raises
+    ------
+    CodecError
+        One line naming ``name``: corrupt, inflating past ``max_bytes`` (a bomb),
+        truncated, or stray bytes after the stream.
+    """
+    inflater = zlib.decompressobj(wbits)
     try:
-        raw = inflater.decompress(b[k + 1 :], max_bytes + 1)
+        raw = inflater.decompress(data, max_bytes + 1)
     except zlib.error as exc:
         raise CodecError(f"{what}: corrupt {name} ({exc})") from exc
     if len(raw) > max_bytes or inflater.unconsumed_tail:
