@@ -340,7 +340,7 @@ class RoomStreamer:
             if busy >= cfg.max_in_flight + (0 if visible_in_flight or missing[0] not in vis else 1):
                 break
             # while visible cells are on their way, a batch for newly visible ones takes no prefetch
-            cap = 0 if any(c in vis for c in self._tasks) else cfg.batch_bytes
+            cap = 0 if visible_in_flight else cfg.batch_bytes
             batch: list[int] = []
             size = 0
             for c in missing[:CELLBATCH_MAX_CELLS]:
