@@ -21,18 +21,17 @@ from typing import Any
 
 import numpy as np
 
-from walkstream.client.draw.frames import camera
-from walkstream.client.draw.portals import PortalGraph, cull_portals
-from walkstream.client.stream.rooms import cell_of, stack_planes
 from walkstream.server.bake.interior import bake_interior
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
 from walkstream.server.store import SceneReader
-from walkstream.shared.camera import perspective
+from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellmesh import decode_cell_mesh
 from walkstream.shared.errors import InputError
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.portals import PortalGraph, cull_portals
+from walkstream.shared.roomview import cell_of, stack_planes
 from walkstream.shared.roomwire import decode_topology
 
 __all__ = ["start_cells", "codec_figures", "codec_rows", "codec_table"]

@@ -82,9 +82,10 @@ def run_fill_bench(
     """
     from tqdm import tqdm
 
-    from walkstream.client.draw.culling import frustum_cull
-    from walkstream.client.draw.frames import FrameRenderer, camera
+    from walkstream.client.draw.frames import FrameRenderer
     from walkstream.client.draw.meshes import SHADINGS
+    from walkstream.shared.camera import camera
+    from walkstream.shared.frustum import frustum_cull
     from walkstream.shared.gl import create_context
     from walkstream.shared.lsystem.grammar import parse_grammar
 

@@ -307,7 +307,7 @@ def _configs(
         allocate_distance,
         distance_thresholds_for_budget,
     )
-    from walkstream.client.draw.culling import frustum_cull
+    from walkstream.shared.frustum import frustum_cull
 
     k = len(objs)
     tri = np.array([o.tri for o in objs], dtype=np.int64).reshape(k, 3)
@@ -402,7 +402,8 @@ def run_lod_bench(
     """
     from tqdm import tqdm
 
-    from walkstream.client.draw.frames import FrameRenderer, camera
+    from walkstream.client.draw.frames import FrameRenderer
+    from walkstream.shared.camera import camera
     from walkstream.shared.lsystem.grammar import parse_grammar
 
     sh = [float(s) for s in shares]

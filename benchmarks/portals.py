@@ -3,7 +3,7 @@
 For each generated interior (default: the presets ``paper``, the paper's 93-cell
 scale, and ``paper10``, ten times its cells), baked once into ``--out``: frames along
 its tour (every ``--step`` seconds, at most ``--frames``), each culled three ways
-(:data:`~walkstream.client.draw.portals.CULLING_MODES`: ``portals`` with visible
+(:data:`~walkstream.shared.portals.CULLING_MODES`: ``portals`` with visible
 screen areas; ``frustum``, the cells behind portals in the frustum and their parts in
 the frustum; ``none``, every part of every cell of the building, the paper's "draw
 all").  Per mode: visible cells, triangles drawn, culling CPU microseconds (cells and
@@ -41,24 +41,24 @@ from numpy.typing import NDArray
 
 from walkstream.benchmarks.portalwalk import cull_portals_reference
 from walkstream.client.draw.devices import make_device
-from walkstream.client.draw.frames import FrameRenderer, camera
-from walkstream.client.draw.portals import (
+from walkstream.client.draw.frames import FrameRenderer
+from walkstream.client.truth.interior import InteriorTruth
+from walkstream.server.bake import bake
+from walkstream.server.service.interiors import InteriorState
+from walkstream.server.sources.interiorgen import PRESETS, write_interior
+from walkstream.server.store import SceneReader
+from walkstream.shared.camera import camera, perspective
+from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
+from walkstream.shared.errors import WalkstreamError
+from walkstream.shared.paths import RecordedPath
+from walkstream.shared.portals import (
     CULLING_MODES,
     PortalGraph,
     cull_parts,
     cull_portals,
     frustum_cells,
 )
-from walkstream.client.stream.rooms import cell_of, stack_planes
-from walkstream.client.truth.interior import InteriorTruth
-from walkstream.server.bake import bake
-from walkstream.server.service.interiors import InteriorState
-from walkstream.server.sources.interiorgen import PRESETS, write_interior
-from walkstream.server.store import SceneReader
-from walkstream.shared.camera import perspective
-from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
-from walkstream.shared.errors import WalkstreamError
-from walkstream.shared.paths import RecordedPath
+from walkstream.shared.roomview import cell_of, stack_planes
 from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology, decode_topology
 
 __all__ = [
@@ -358,7 +358,8 @@ def run_portals_bench(out: Path, presets: Sequence[str], *, frames: int, step_s:
 def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out: Path,
                 duration: str = "180s", step_at: float = 60.0) -> list[dict[str, Any]]:
     """Replays of ``db``'s tour (simulated clock): the walk at 56 kbit/s / 200 ms with the
-    default cache and with a cache smaller than the building (and the same three with one
+    default cache (and without the first view's contents in the start bundle, as
+    before) and with a cache smaller than the building (and the same three with one
     contents request per cell, as before the batches), each with the default
     (``crowded``) and the paper's flush policy, and on the pda model at
     25 fps with the fog set by the budget controller (and kept fixed, to compare)
@@ -366,6 +367,8 @@ def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out
     link = {"bandwidth": "56kbit", "rtt": "200ms", "duration": duration, "path": "tour", "kind": "interior"}
     cases: list[tuple[str, dict[str, Any]]] = [
         ("56 kbit/s, default cache", dict(link)),
+        # before the first view's contents came in the start bundle (the same sitting)
+        ("56 kbit/s, default cache, no 1st view", {**link, "no_start_contents": True}),
         ("56 kbit/s, cache 400 kB", {**link, "cache": "400kB"}),
         ("56 kbit/s, cache 600 kB", {**link, "cache": "600kB"}),
         # before the contents batch: one request per cell (the same sitting, to compare)
@@ -386,7 +389,7 @@ def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out
             "perfect_frame_ratio", "time_to_first_perfect_frame_s", "redownloads", "cells_flushed", "fps_mean",
             "fps_within_10pct_ratio", "recovery_frames", "fog_m_median", "fog_m_min", "fog_tightened_frames",
             "culling_ms_median", "visible_cells_mean", "triangles_mean", "topology_bytes", "contents_bytes",
-            "contents_requests", "bytes_received")}})
+            "contents_requests", "bytes_received", "start_contents_cells")}})
     return rows
 
 

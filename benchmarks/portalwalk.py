@@ -1,6 +1,6 @@
 """The round-one portal walk, kept as the reference the faster walk is checked against.
 
-:func:`cull_portals_reference` is :func:`~walkstream.client.draw.portals.cull_portals`
+:func:`cull_portals_reference` is :func:`~walkstream.shared.portals.cull_portals`
 as merged for issue 14 (a FIFO walk over Python ints, the portals projected in lazy
 waves above ``_PROJECT_ALL`` directed portals).  The walk that replaced it must give
 exactly the same cells, VSAs and depths in the same order (tests/test_portalwalk.py),
@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.client.draw.portals import (
+from walkstream.shared.errors import InputError
+from walkstream.shared.portals import (
     PortalCull,
     PortalGraph,
     _clipped,
@@ -25,7 +26,6 @@ from walkstream.client.draw.portals import (
     _pixels,
     box_distance,
 )
-from walkstream.shared.errors import InputError
 
 __all__ = ["cull_portals_reference", "rects_reference"]
 
@@ -50,7 +50,7 @@ def cull_portals_reference(
     naive: bool = False,
 ) -> PortalCull:
     """Round one's walk: the parameters and result of
-    :func:`~walkstream.client.draw.portals.cull_portals` (see there), kept unchanged."""
+    :func:`~walkstream.shared.portals.cull_portals` (see there), kept unchanged."""
     t0 = time.perf_counter()
     if start not in graph.index:
         raise InputError(f"cull_portals: no cell {start} in the interior")

@@ -599,8 +599,8 @@ def _views(
     tick: Callable[[], None],
 ) -> list[tuple[int, NDArray[np.uint32], NDArray[np.uint8]]]:
     """Truth frames at random eye points: ``(cell index, ids, rgb)`` per view."""
-    from walkstream.client.draw.frames import camera
     from walkstream.client.truth.render import TruthRenderer
+    from walkstream.shared.camera import camera
 
     meshes, ids = meshes_for_scene(scene, 2)
     lo = np.array([m.positions[:, :2].min(axis=0) if len(m.positions) else (np.inf, np.inf) for m in meshes], np.float64).reshape(-1, 2)

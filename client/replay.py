@@ -35,7 +35,6 @@ from numpy.typing import NDArray
 from walkstream.client.clock import Clock, RealClock, SimClock, within
 from walkstream.client.draw.allocate import allocate_ach, allocate_distance
 from walkstream.client.draw.budget import BudgetController
-from walkstream.client.draw.culling import frustum_cull
 from walkstream.client.draw.devices import make_device
 from walkstream.client.draw.phases import FramePhases
 from walkstream.client.net.api import SceneClient
@@ -53,12 +52,19 @@ from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.streamer import Streamer, StreamerConfig
-from walkstream.client.stream.walkstart import bundle_start, interior_start, manifest_task
+from walkstream.client.stream.walkstart import (
+    StartContents,
+    bundle_start,
+    interior_start,
+    manifest_task,
+)
 from walkstream.client.truth.recorder import TruthRecorder, TruthResult
 from walkstream.shared.camera import look_at, perspective
 from walkstream.shared.errors import InputError
+from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.roomview import RoomView
 from walkstream.shared.roomwire import Topology
 from walkstream.shared.wire import Manifest
 
@@ -110,13 +116,15 @@ class ReplayConfig:
     fog_m: float = 40.0
     """Interiors: portals farther than this are not looked through."""
     culling: str = "portals"
-    """Interiors: ``portals``, ``frustum`` or ``none`` (:mod:`walkstream.client.draw.portals`)."""
+    """Interiors: ``portals``, ``frustum`` or ``none`` (:mod:`walkstream.shared.portals`)."""
     fog_budget: bool = True
     """Interiors: the budget controller sets the fog distance (one LOD per part)."""
     rooms: dict[str, Any] = field(default_factory=dict)
     """Interiors: further :class:`~walkstream.client.stream.rooms.RoomStreamConfig` knobs."""
     start_bundle: bool = True
     """Start with the start bundle (one round trip); False: scene list, manifest, path."""
+    start_contents: bool = True
+    """Interiors: the start bundle brings the first view's contents too."""
     gzip: bool = True
     """Ask for the streams gzip-compressed (``Accept-Encoding: gzip``)."""
     truth_every: int = 0
@@ -329,10 +337,11 @@ async def replay(
                 streamer.on_manifest(m.max_ids, grammar, disk if usable else None, m.index)
                 manifest_fut.set_result(m)
 
-            got, topology = None, None
-            if config.start_bundle and config.kind == "interior":  # path, topology, manifest at once
-                got, topology = await interior_start(
-                    config.path, config.setup_timeout_s, clock, api, disk, manifest_arrived, tasks)
+            got, topology, first_view = None, None, None
+            if config.start_bundle and config.kind == "interior":  # path, topology, first view at once
+                got, topology, first_view = await interior_start(
+                    config.path, config.setup_timeout_s, clock, api, disk, manifest_arrived, tasks,
+                    _room_view(config) if config.start_contents else None)
             elif config.start_bundle:
                 got = await bundle_start(
                     config.path, config.setup_timeout_s, clock, api, streamer, disk,
@@ -366,7 +375,7 @@ async def replay(
             if kind == "interior":
                 return await _replay_interior(
                     api, link, clock, config, path, manifest_fut, t_start, setup_s, progress, (transport, base_url),
-                    topology)
+                    topology, first_view)
             device = make_device(config.device, config.seed)
             if not device.simulated or config.snapshot_every:
                 from walkstream.client.draw.frames import FrameRenderer
@@ -518,6 +527,12 @@ async def replay(
     return ReplayResult(summary, log, bytes_log, snapshots, spikes, truth, phases.array())
 
 
+def _room_view(config: ReplayConfig) -> RoomView:
+    """How the walk views an interior (what the server culls the start bundle's first view with)."""
+    depth = config.rooms.get("max_depth", RoomView.max_depth)
+    return RoomView(config.size, config.fov_deg, config.fog_m, int(depth))
+
+
 async def _replay_interior(
     api: SceneClient,
     link: ShapedTransport,
@@ -530,10 +545,12 @@ async def _replay_interior(
     progress: Callable[[float, float], None] | None,
     inner: tuple[httpx.AsyncBaseTransport, str] | None = None,
     topology: Topology | None = None,
+    first_view: StartContents | None = None,
 ) -> ReplayResult:
     """The walk through an interior (:mod:`walkstream.client.roomreplay`); ``inner``
     (the unshaped transport and URL) is where the ground truth fetches the cells;
-    ``topology`` the one the start bundle brought (None: fetch it)."""
+    ``topology`` the one the start bundle brought (None: fetch it), ``first_view`` the
+    first view's contents still coming in it."""
     from walkstream.client.roomreplay import InteriorFrames, interior_summary, walk_interior
     from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 
@@ -544,6 +561,8 @@ async def _replay_interior(
         api, clock, cache, topology,
         RoomStreamConfig(prefetch=config.prefetch, fog_m=config.fog_m, culling=config.culling, **config.rooms),
     )
+    if first_view is not None:
+        streamer.adopt(first_view.cells, first_view.parts)
     frames = InteriorFrames()
     device = make_device(config.device, config.seed)
     renderer: Any = None

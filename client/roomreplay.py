@@ -9,7 +9,7 @@ in, the replay falls back to scene list, manifest and path, then the topology
 frame by frame: move the eye along the path, let the
 :class:`~walkstream.client.stream.rooms.RoomStreamer` locate it by the cells' planes,
 find the visible cells and fetch their contents; draw the parts of the visible cells'
-contents that the culling keeps (``config.culling``, :mod:`walkstream.client.draw.portals`),
+contents that the culling keeps (``config.culling``, :mod:`walkstream.shared.portals`),
 fading into the background near the fog distance (``--fog``):
 ``portals`` tests each part's box against the VSAs through which its cell is seen,
 the fog and the frustum; ``frustum`` the frustum and the fog; ``none`` keeps every
@@ -37,13 +37,13 @@ from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
 from walkstream.client.draw.budget import BudgetController
-from walkstream.client.draw.frames import camera
-from walkstream.client.draw.portals import box_distance, cull_parts
 from walkstream.client.report.metrics import FrameLog, FrameLogBuilder
 from walkstream.client.stream.rooms import RoomStreamer
-from walkstream.shared.camera import perspective
+from walkstream.shared.camera import camera
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.portals import box_distance, cull_parts
 from walkstream.shared.records import Mesh
+from walkstream.shared.roomview import room_projection
 from walkstream.shared.roomwire import Topology
 from walkstream.shared.wire import Manifest
 
@@ -119,7 +119,7 @@ async def walk_interior(
     tick = 1.0 / config.fps
     total = path.duration if config.duration_s is None else min(config.duration_s, path.duration)
     w, h = config.size
-    proj = perspective(config.fov_deg, w / h, 0.1, max(2.0 * streamer.config.fog_m, 50.0))
+    proj = room_projection(config.fov_deg, (w, h), streamer.config.fog_m)
     builder = FrameLogBuilder()
     snapshots: list[Path] = []
     spikes: list[bool] = []
@@ -138,7 +138,7 @@ async def walk_interior(
         xyz, yaw, pitch = path.at(wt)
         eye = np.asarray(xyz, dtype=np.float64)
         view = camera(eye, float(yaw), float(pitch))
-        v64, p64 = view.astype(np.float64), proj.astype(np.float64)
+        v64, p64 = view.astype(np.float64), proj
         vp = p64 @ v64
         t_cull = time.perf_counter()
         # the perfect frame is defined at the scene's default fog: the visible cells
@@ -286,6 +286,7 @@ def interior_summary(
         "visible_cells_mean": float(np.mean(log.pvs)) if len(log.pvs) else 0.0,
         "visible_cells_max": int(np.max(log.pvs)) if len(log.pvs) else 0,
         "contents_requests": streamer.stats.requests,
+        "start_contents_cells": streamer.stats.bundled,
         "contents_bytes": streamer.stats.bytes_received,
         "cells_fetched": len(streamer.stats.fetched),
         "cells_flushed": streamer.stats.flushed,

@@ -24,6 +24,8 @@ from walkstream.shared.arrays import F32
 from walkstream.shared.errors import InputError
 
 __all__ = [
+    "MAX_PITCH_DEG",
+    "camera",
     "CUBE_FACE_DIRECTIONS",
     "CUBE_FACE_NAMES",
     "CUBE_FACE_UPS",
@@ -240,3 +242,38 @@ def mat4_bytes(m: ArrayLike) -> bytes:
     if a.shape != (4, 4):
         raise InputError(f"mat4_bytes: expected a (4, 4) matrix, got shape {a.shape}")
     return np.ascontiguousarray(a.T).tobytes()
+
+
+#: :func:`camera` clamps the pitch to this many degrees up or down: straight up or
+#: down the z-up look-at has no defined screen-up.
+MAX_PITCH_DEG = 89.0
+
+
+def camera(eye: ArrayLike, yaw: float, pitch: float = 0.0) -> NDArray[np.float32]:
+    """View matrix of a walker's camera.
+
+    Parameters
+    ----------
+    eye : (3,) float
+        Eye position, scene-local metres (z up).
+    yaw : float
+        Heading in radians, 0 looking east (+x), counter-clockwise (pi/2 looks north).
+    pitch : float
+        Radians above the horizon (negative looks down); clamped to
+        :data:`MAX_PITCH_DEG`.
+
+    Returns
+    -------
+    (4, 4) float32
+        As :func:`look_at` with world up +z.
+    """
+    e = np.asarray(eye, dtype=np.float64).reshape(-1)
+    y, p = float(yaw), float(pitch)
+    if e.shape != (3,) or not np.all(np.isfinite(e)) or not math.isfinite(y + p):
+        raise InputError(
+            f"camera: expected a finite eye (3,) and angles, got {eye!r}, {yaw}, {pitch}"
+        )
+    lim = math.radians(MAX_PITCH_DEG)
+    p = min(max(p, -lim), lim)
+    fwd = np.array([math.cos(p) * math.cos(y), math.cos(p) * math.sin(y), math.sin(p)])
+    return look_at(e, e + fwd, (0.0, 0.0, 1.0))

@@ -43,7 +43,9 @@ start part
     ``{part, etag, body: bin}``: one resource of the start bundle, ``body`` being
     exactly what the resource's own endpoint sends (``part`` one of
     :data:`START_PARTS`); the ``objects`` part is ``{part, etag: null, count}``
-    followed in the stream by ``count`` object frames.
+    followed in the stream by ``count`` object frames; an interior's ``contents``
+    part is ``{part, etag: null, cells: [ids]}`` followed by one contents part
+    ``{cell, etag, body}`` per cell (:mod:`walkstream.shared.codec.cellbatch`).
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ from numpy.typing import NDArray
 
 from walkstream.shared.cells import CELL_KINDS, TileGrid
 from walkstream.shared.codec import ACH_UNITS, pack_ints, quantise_ach, unpack_bounded, unpack_ints
+from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import Viewpoint, readonly
 
@@ -98,7 +101,7 @@ OFFERS: tuple[str, ...] = ("cell-index", "cells-batch", "start")
 (``GET .../index/{i}/{j}``), cell records in batches (``POST .../cells``) and the
 start bundle (``GET /v1/start``)."""
 
-START_PARTS: tuple[str, ...] = ("path", "topology", "cell", "index", "manifest", "objects")
+START_PARTS: tuple[str, ...] = ("path", "topology", "contents", "cell", "index", "manifest", "objects")
 """What a start bundle may hold, in the order the service sends it."""
 
 _MAX_MANIFEST = 4 << 20
@@ -506,10 +509,11 @@ def decode_cell_index(body: bytes, what: str, etag: str | None = None) -> CellIn
         )
 
 
-def decode_start_part(obj: Any, what: str) -> tuple[str, str | None, bytes | int]:
+def decode_start_part(obj: Any, what: str) -> tuple[str, str | None, bytes | int | list[int]]:
     """``(part, etag, body)`` of one unpacked part of a start bundle, checked.
 
-    For the ``objects`` part, ``body`` is the number of object frames that follow.
+    For the ``objects`` part, ``body`` is the number of object frames that follow; for
+    ``contents``, the ids of the cells whose contents parts follow, in order.
     """
     if (
         not isinstance(obj, dict)
@@ -522,6 +526,16 @@ def decode_start_part(obj: Any, what: str) -> tuple[str, str | None, bytes | int
         if type(count) is not int or not 0 <= count <= 1 << 20:
             raise CodecError(f"{what}: objects part without a count")
         return "objects", None, count
+    if obj["part"] == "contents":
+        cells = obj.get("cells")
+        if (
+            not isinstance(cells, list)
+            or len(cells) > CELLBATCH_MAX_CELLS
+            or not all(type(c) is int and c >= 0 for c in cells)
+            or len(set(cells)) != len(cells)
+        ):
+            raise CodecError(f"{what}: contents part without its cells (distinct ids >= 0, at most {CELLBATCH_MAX_CELLS})")
+        return "contents", None, list(cells)
     if not isinstance(obj.get("body"), bytes):
         raise CodecError(f"{what}: {obj['part']} part without a body")
     return obj["part"], obj.get("etag"), obj["body"]

@@ -1,4 +1,4 @@
-"""Tests of walkstream.client.draw.culling and .allocate: frustum culling, ACH budget sharing, distance LODs."""
+"""Tests of walkstream.shared.frustum and .allocate: frustum culling, ACH budget sharing, distance LODs."""
 
 from __future__ import annotations
 
@@ -13,10 +13,9 @@ from walkstream.client.draw.allocate import (
     allocate_distance,
     distance_thresholds_for_budget,
 )
-from walkstream.client.draw.culling import frustum_cull, frustum_planes
-from walkstream.client.draw.frames import camera
-from walkstream.shared.camera import look_at, perspective
+from walkstream.shared.camera import camera, look_at, perspective
 from walkstream.shared.errors import InputError
+from walkstream.shared.frustum import frustum_cull, frustum_planes
 
 
 def ones(k: int) -> np.ndarray:

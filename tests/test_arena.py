@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 
 from walkstream.client.draw.arena import MeshArena, Ranges
-from walkstream.client.draw.frames import FrameRenderer, camera
+from walkstream.client.draw.frames import FrameRenderer
 from walkstream.client.draw.meshes import MeshRenderer
 from walkstream.client.draw.phases import PHASES, FramePhases
 from walkstream.client.report import format_headline, headline_rows
 from walkstream.client.report.phases import plot_phases, write_phases_csv
 from walkstream.shared.buildings import build_lods
+from walkstream.shared.camera import camera
 from walkstream.shared.errors import InputError
 from walkstream.shared.records import BuildingParams, StreetParams
 from walkstream.shared.streets import build_street

@@ -12,9 +12,10 @@ from scenes import build_city_db
 
 from walkstream.benchmarks.fill import CASES, format_fill_table, run_fill_bench
 from walkstream.cli import build_parser
-from walkstream.client.draw.frames import FrameRenderer, camera
+from walkstream.client.draw.frames import FrameRenderer
 from walkstream.client.draw.meshes import MeshRenderer
 from walkstream.shared.buildings import build_lods
+from walkstream.shared.camera import camera
 from walkstream.shared.errors import InputError
 from walkstream.shared.records import BuildingParams, StreetParams
 from walkstream.shared.streets import build_street

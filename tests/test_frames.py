@@ -9,10 +9,10 @@ import moderngl
 import numpy as np
 import pytest
 
-from walkstream.client.draw.frames import VERTEX_BYTES, FrameRenderer, camera
+from walkstream.client.draw.frames import VERTEX_BYTES, FrameRenderer
 from walkstream.client.draw.meshes import BACKGROUND_RGB
 from walkstream.shared.buildings import build_lods
-from walkstream.shared.camera import look_at
+from walkstream.shared.camera import camera, look_at
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.records import BuildingParams, Mesh, StreetParams
 from walkstream.shared.streets import build_street

@@ -1,4 +1,4 @@
-"""Interiors II: portal culling with visible screen areas (client/draw/portals.py).
+"""Interiors II: portal culling with visible screen areas (shared/portals.py).
 
 The conservative test renders the whole building with object ids and no culling
 (:class:`~walkstream.client.truth.interior.InteriorTruth`, 160 x 120) and checks that
@@ -20,21 +20,20 @@ from typing import Any
 import numpy as np
 
 from walkstream.cli import main
-from walkstream.client.draw.frames import camera
-from walkstream.client.draw.portals import (
+from walkstream.client.truth.interior import InteriorTruth, TruthCheck
+from walkstream.server.service.interiors import InteriorState
+from walkstream.server.store import SceneReader
+from walkstream.shared.camera import camera, perspective
+from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
+from walkstream.shared.portals import (
     PortalGraph,
     box_rects,
     cull_parts,
     cull_portals,
     frustum_cells,
 )
-from walkstream.client.stream.rooms import cell_of, stack_planes
-from walkstream.client.truth.interior import InteriorTruth, TruthCheck
-from walkstream.server.service.interiors import InteriorState
-from walkstream.server.store import SceneReader
-from walkstream.shared.camera import perspective
-from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
 from walkstream.shared.roomcompact import decode_topology_compact
+from walkstream.shared.roomview import cell_of, stack_planes
 from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology
 
 SIZE = (160, 120)

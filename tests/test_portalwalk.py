@@ -1,4 +1,4 @@
-"""The faster portal walk (client/draw/portals.py) against round one's (benchmarks/portalwalk.py).
+"""The faster portal walk (shared/portals.py) against round one's (benchmarks/portalwalk.py).
 
 The walk was made faster without changing what it culls: on random poses in the
 generated office (anywhere in a cell, and on and beside its portals' planes, where the
@@ -19,9 +19,12 @@ import pytest
 
 from walkstream.benchmarks.portals import hall_topology
 from walkstream.benchmarks.portalwalk import cull_portals_reference, rects_reference
-from walkstream.client.draw import portals
-from walkstream.client.draw.frames import camera
-from walkstream.client.draw.portals import (
+from walkstream.server.service.interiors import InteriorState
+from walkstream.server.store import SceneReader
+from walkstream.shared import portals
+from walkstream.shared.camera import camera, perspective
+from walkstream.shared.codec.cellmesh import decode_cell_mesh
+from walkstream.shared.portals import (
     _BOX_EDGES,
     PortalCull,
     PortalGraph,
@@ -30,11 +33,7 @@ from walkstream.client.draw.portals import (
     cull_parts,
     cull_portals,
 )
-from walkstream.client.stream.rooms import cell_of, stack_planes
-from walkstream.server.service.interiors import InteriorState
-from walkstream.server.store import SceneReader
-from walkstream.shared.camera import perspective
-from walkstream.shared.codec.cellmesh import decode_cell_mesh
+from walkstream.shared.roomview import cell_of, stack_planes
 from walkstream.shared.roomwire import decode_topology
 
 SIZE = (160, 120)

@@ -20,12 +20,11 @@ import pytest
 
 from walkstream.cli import main
 from walkstream.client.clock import SimClock
-from walkstream.client.draw.frames import camera
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 from walkstream.server.service.main import create_app
-from walkstream.shared.camera import perspective
+from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS, check_contents_part
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
 from walkstream.shared.errors import CodecError, InputError, StreamCut

@@ -17,11 +17,12 @@ import pytest
 
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayConfig, run_replay
-from walkstream.client.stream.rooms import cell_of, stack_planes
 from walkstream.server.bake import bake
 from walkstream.server.service.main import create_app
 from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
 from walkstream.server.store import SceneReader
+from walkstream.shared.codec.cellbatch import check_contents_part
+from walkstream.shared.codec.cellmesh import decode_cell_mesh
 from walkstream.shared.errors import CodecError
 from walkstream.shared.pathcodec import (
     PATH_Q_MAGIC,
@@ -32,12 +33,14 @@ from walkstream.shared.pathcodec import (
     path_error_bound,
 )
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.portals import PortalGraph
 from walkstream.shared.roomcompact import (
     TOPOLOGY_COMPACT_MAGIC,
     TOPOLOGY_COMPACT_MEDIA,
     decode_topology_compact,
     encode_topology_compact,
 )
+from walkstream.shared.roomview import RoomLocator, RoomView, cell_of, cells_seen, stack_planes
 from walkstream.shared.roomwire import Topology, decode_topology, decode_topology_packed
 from walkstream.shared.wire import decode_start_part
 
@@ -250,13 +253,17 @@ class _NoBundle(httpx.AsyncBaseTransport):
         return await self.inner.handle_async_request(request)
 
 
-def _replay(office: Path, no_bundle: bool = False, **kw: Any) -> dict[str, Any]:
+def _replay(office: Path, no_bundle: bool = False, cut: int = 0, **kw: Any) -> dict[str, Any]:
     cfg = ReplayConfig(**{"link": MODEM, "device": "desktop2003", "path": "tour", "kind": "interior",
                           "duration_s": 3.0, **kw})
     app = create_app([office])
     try:
         inner: httpx.AsyncBaseTransport = httpx.ASGITransport(app=app)
-        r = run_replay(_NoBundle(inner) if no_bundle else inner, "http://walkstream.test", cfg)
+        if no_bundle:
+            inner = _NoBundle(inner)
+        elif cut:
+            inner = _CutBundle(inner, cut)
+        r = run_replay(inner, "http://walkstream.test", cfg)
         s: dict[str, Any] = r.summary
         s["first_bytes"] = int(r.log.bytes_down[0])  # what came down before the first frame
         assert r.log.t[0] == pytest.approx(s["setup_s"], abs=0.05)
@@ -278,3 +285,116 @@ def test_the_interior_replay_starts_with_the_bundle_and_falls_back(office: Path)
     # refused: the old sequence, one wasted round trip later
     assert refused["setup_s"] >= plain["setup_s"]
     assert refused["perfect_frame_ratio"] == pytest.approx(plain["perfect_frame_ratio"], abs=0.05)
+
+
+# -- the first view's contents in the start bundle -------------------------------
+
+
+def _items(r: httpx.Response) -> list[tuple[str, Any]]:
+    """The bundle's parts, each contents part as ``("room", (cell, etag, body))``."""
+    assert r.status_code == 200, r.text
+    out: list[tuple[str, Any]] = []
+    rooms: list[int] = []
+    for obj in _unpack(r.content):
+        if rooms:
+            cid, etag, body = check_contents_part(obj, "bundle")
+            assert cid == rooms.pop(0)
+            out.append(("room", (cid, etag, body)))
+            continue
+        part, _etag, body = decode_start_part(obj, "bundle")
+        if part == "contents":
+            assert isinstance(body, list)
+            rooms.extend(body)
+        out.append((part, body))
+    assert not rooms
+    return out
+
+
+def test_the_start_bundle_brings_what_the_first_view_sees(office: Path) -> None:
+    app = create_app([office])
+    try:
+        for enc in ("gzip", "identity"):
+            items = _items(_get(app, "/v1/scenes/office/start?path=tour&view=320x240&fov=60&fog=40",
+                                **{"accept-encoding": enc}))
+            names = [p for p, _ in items]
+            assert names[:3] == ["path", "topology", "contents"] and names[-1] == "manifest"
+            cells = items[2][1]
+            assert cells and names[3:-1] == ["room"] * len(cells)
+            # the cells the client's own culling keeps from the path's first pose come
+            # first, in its order (the server culls the compact topology and path as sent)
+            topo = decode_topology_compact(items[1][1], "topology")
+            path = decode_path_q(items[0][1], "path")
+            xyz, yaw, pitch = path.at(0.0)
+            seen = cells_seen(PortalGraph.from_topology(topo), RoomLocator(topo.cells), [(xyz, yaw, pitch)],
+                              RoomView((320, 240), 60.0, 40.0))[0]
+            seen = [c for c in seen if topo.cells[[x.id for x in topo.cells].index(c)].contents.nbytes]
+            assert cells[: len(seen)] == seen
+            # each cell's contents as its own endpoint sends them (inflated when gzip is on)
+            for _, (cid, etag, body) in items[3:-1]:
+                own = _get(app, f"/v1/scenes/office/rooms/{cid}/contents", **{"accept-encoding": "identity"})
+                assert etag == own.headers["etag"]
+                a, b = decode_cell_mesh(body, "bundle"), decode_cell_mesh(own.content, "own")
+                assert a.triangles == b.triangles and np.array_equal(a.parts[0].positions, b.parts[0].positions)
+        # a narrower field of view and a nearer fog see no more
+        narrow = _items(_get(app, "/v1/scenes/office/start?path=tour&view=320x240&fov=20&fog=5"))[2][1]
+        assert set(narrow) <= set(cells) and len(narrow) < len(cells)
+        # JSON for people: the contents part is the array of its cells' parts
+        js = _get(app, "/v1/start?path=tour&view=320x240", accept="application/json").json()
+        assert [p["part"] for p in js] == ["path", "topology", "contents", "manifest"]
+        assert [c["cell"] for c in js[2]["body"]] == cells
+        # without view= the bundle is as before (no contents)
+        assert "contents" not in [p for p, _ in _items(_get(app, "/v1/start?path=tour"))]
+    finally:
+        app.state.scenes.close()
+
+
+@pytest.mark.parametrize(
+    "query, word",
+    [("view=10x10", "view"), ("view=640", "view"), ("view=640x480&fov=500", "fov"),
+     ("view=640x480&fog=-1", "fog"), ("view=640x480&depth=9999", "depth"), ("view=9999x480", "9999")],
+)
+def test_a_bad_view_is_a_422_that_names_it(office: Path, query: str, word: str) -> None:
+    app = create_app([office])
+    try:
+        r = _get(app, f"/v1/scenes/office/start?path=tour&{query}")
+        assert r.status_code == 422 and word in r.text, r.text
+    finally:
+        app.state.scenes.close()
+
+
+class _CutBundle(httpx.AsyncBaseTransport):
+    """The app, but the start bundle's body stops after ``keep`` bytes (plain, not gzip)."""
+
+    def __init__(self, inner: httpx.AsyncBaseTransport, keep: int) -> None:
+        self.inner, self.keep = inner, keep
+
+    async def handle_async_request(self, request: httpx.Request) -> httpx.Response:
+        if not request.url.path.endswith("/start"):
+            return await self.inner.handle_async_request(request)
+        headers = [(k, v) for k, v in request.headers.raw if k.lower() != b"accept-encoding"]
+        r = await self.inner.handle_async_request(httpx.Request(request.method, request.url, headers=headers))
+        body = b"".join([c async for c in r.stream])  # type: ignore[union-attr]
+        return httpx.Response(r.status_code, headers=r.headers, content=body[: self.keep])
+
+
+def test_the_walk_starts_with_the_first_views_contents(office: Path) -> None:
+    with_contents = _replay(office)
+    without = _replay(office, start_contents=False)
+    for s in (with_contents, without):
+        assert "error" not in s and s["redownloads"] == 0 and s["perfect_frame_ratio"] > 0
+    assert with_contents["start_contents_cells"] > 0 and without["start_contents_cells"] == 0
+    # no round trip between the bundle and the first view's contents
+    assert with_contents["time_to_first_perfect_frame_s"] < without["time_to_first_perfect_frame_s"]
+    assert with_contents["contents_requests"] < without["contents_requests"]
+    # a bundle cut among the contents: the cells it did not bring are asked for, once
+    app = create_app([office])
+    try:
+        whole = _items(_get(app, "/v1/scenes/office/start?path=tour&view=640x480", **{"accept-encoding": "identity"}))
+        head = sum(len(msgpack.packb(o)) for o in _unpack(
+            _get(app, "/v1/scenes/office/start?path=tour&view=640x480", **{"accept-encoding": "identity"}).content)[:5])
+    finally:
+        app.state.scenes.close()
+    assert len(whole[2][1]) > 2  # the cut falls among the contents
+    cut = _replay(office, cut=head + 7)
+    assert "error" not in cut and cut["start_contents_cells"] == 2 and cut["redownloads"] == 0
+    assert cut["perfect_frame_ratio"] > 0 and cut["scene_version"]  # the manifest came on its own

@@ -18,7 +18,6 @@ import pytest
 
 from walkstream.cli import main
 from walkstream.client.clock import SimClock
-from walkstream.client.draw.frames import camera
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.rooms import (
     RoomStreamConfig,
@@ -27,7 +26,7 @@ from walkstream.client.stream.rooms import (
     turned_view,
 )
 from walkstream.server.service.main import create_app
-from walkstream.shared.camera import perspective
+from walkstream.shared.camera import camera, perspective
 from walkstream.shared.errors import CodecError, InputError
 from walkstream.shared.roomwire import Topology, decode_topology, decode_topology_packed
 
@@ -167,7 +166,7 @@ def test_prefetch_follows_the_predicted_motion_in_order(office_db: Path) -> None
     for h in s.config.lookahead_s:
         e2 = eye + h * step
         v2 = predicted_view(view, eye, e2)
-        cell = s._locate_from(s.current, e2, anywhere=True)
+        cell = s._where.locate(e2, s.current)
         assert cell is not None
         for x in s._cells_from(cell, e2, proj @ v2, v2, proj, size)[1]:
             first_seen.setdefault(x, h)

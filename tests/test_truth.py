@@ -14,7 +14,7 @@ from scenes import build_city_db
 
 import walkstream.client.rewrite.pool as pool
 from walkstream.cli import main
-from walkstream.client.draw.frames import FrameRenderer, camera
+from walkstream.client.draw.frames import FrameRenderer
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
 from walkstream.client.report import write_report
@@ -26,7 +26,7 @@ from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict
 from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.buildings import build_lods
-from walkstream.shared.camera import perspective
+from walkstream.shared.camera import camera, perspective
 from walkstream.shared.errors import InputError
 from walkstream.shared.streets import build_street
 

@@ -105,6 +105,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
                "batch_bytes": parse_size(args.contents_batch)},
         report_dir=Path(args.report),
         start_bundle=not args.no_start_bundle,
+        start_contents=not args.no_start_contents,
         gzip=not args.no_gzip,
         truth_every=args.truth_every,
         batched_draws=not args.per_object_draws,
@@ -241,6 +242,8 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
                    help="interiors: cells' contents in batches (every missing visible cell, then predicted ones "
                    "up to BYTES stored; one gzip stream, default 8kB); 0: one request per cell")
     r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
+    r.add_argument("--no-start-contents", action="store_true",
+                   help="interiors: the start bundle leaves out the first view's contents (they come by the streamer's own requests)")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")
     r.add_argument("--per-object-draws", action="store_true", help="gl device: one draw call per object instead of one multi-draw call per frame (the older path, for comparison)")

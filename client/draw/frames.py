@@ -35,12 +35,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.draw.arena import MeshArena
 from walkstream.client.draw.meshes import MeshRenderer
-from walkstream.shared.camera import look_at, mat4_bytes, perspective
+from walkstream.shared.camera import mat4_bytes, perspective
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import VERTEX_ID_FRAGMENT_SHADER, Framebuffer, Releasable, check_gl_error
 from walkstream.shared.records import Mesh
 
-__all__ = ["FrameRenderer", "camera", "MAX_PITCH_DEG", "VERTEX_BYTES", "INDEX_BYTES"]
+__all__ = ["FrameRenderer", "VERTEX_BYTES", "INDEX_BYTES"]
 
 # The id pass: position only (the first 12 of the 28 bytes of a vertex), one id per
 # draw.  ``invariant`` makes its coverage match the truth renderer's exactly.
@@ -82,41 +82,6 @@ void main() {
 VERTEX_BYTES = 28
 #: Bytes per triangle of the index buffer (three uint32).
 INDEX_BYTES = 12
-#: :func:`camera` clamps the pitch to this many degrees up or down: straight up or
-#: down the z-up look-at has no defined screen-up.
-MAX_PITCH_DEG = 89.0
-
-
-def camera(eye: ArrayLike, yaw: float, pitch: float = 0.0) -> NDArray[np.float32]:
-    """View matrix of a walker's camera.
-
-    Parameters
-    ----------
-    eye : (3,) float
-        Eye position, scene-local metres (z up).
-    yaw : float
-        Heading in radians, 0 looking east (+x), counter-clockwise (pi/2 looks north).
-    pitch : float
-        Radians above the horizon (negative looks down); clamped to
-        :data:`MAX_PITCH_DEG`.
-
-    Returns
-    -------
-    (4, 4) float32
-        As :func:`~walkstream.shared.camera.look_at` with world up +z.
-    """
-    e = np.asarray(eye, dtype=np.float64).reshape(-1)
-    y, p = float(yaw), float(pitch)
-    if e.shape != (3,) or not np.all(np.isfinite(e)) or not math.isfinite(y + p):
-        raise InputError(
-            f"camera: expected a finite eye (3,) and angles, got {eye!r}, {yaw}, {pitch}"
-        )
-    lim = math.radians(MAX_PITCH_DEG)
-    p = min(max(p, -lim), lim)
-    fwd = np.array([math.cos(p) * math.cos(y), math.cos(p) * math.sin(y), math.sin(p)])
-    return look_at(e, e + fwd, (0.0, 0.0, 1.0))
-
-
 class FrameRenderer(Releasable):
     """Draws frames of keyed meshes offscreen and times them.
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import random
 import zlib
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncGenerator, AsyncIterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -37,6 +37,7 @@ from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_any
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomcompact import TOPOLOGY_COMPACT_MAGIC, decode_topology_compact
+from walkstream.shared.roomview import RoomView
 from walkstream.shared.roomwire import (
     RoomRecord,
     Topology,
@@ -72,7 +73,8 @@ StartItem = tuple[str, Any]
 """One item of a start bundle as :meth:`SceneClient.start` yields it: ``("path",
 (RecordedPath, nbytes))``, ``("cell", CellRecord)``, ``("index", CellIndex)``,
 ``("topology", Topology)`` (interiors), ``("manifest", (Manifest, nbytes))``, ``("objects", count)`` (the PVS objects that
-follow) or ``("object", ObjectFrame)``; ``nbytes`` (and the records' ``nbytes``) is
+follow), ``("object", ObjectFrame)``, ``("contents", [cell ids])`` (interiors: the
+contents that follow) or ``("room", (cell id, CellMesh))``; ``nbytes`` (and the records' ``nbytes``) is
 what the part cost on the wire."""
 
 
@@ -331,10 +333,7 @@ class SceneClient:
         def check(obj: Any, nbytes: int) -> tuple[int, CellMesh]:
             if got >= len(ids):
                 raise CodecError("more cells than asked")
-            cid, _etag, body = check_contents_part(obj, f"{what}: part {got}")
-            if cid != ids[got]:
-                raise CodecError(f"{what}: cell {cid} where {ids[got]} was asked")
-            return cid, replace(decode_cell_mesh(body, f"contents of cell {cid}"), nbytes=nbytes)
+            return _contents_part(obj, nbytes, ids[got], f"{what}: part {got}")
 
         async for part in self._stream("POST", self._url("/rooms/contents"), what, {"ids": ids}, check):
             got += 1
@@ -422,7 +421,8 @@ class SceneClient:
         x: float | None = None,
         y: float | None = None,
         form: str = "params",
-    ) -> AsyncIterator[StartItem]:
+        view: RoomView | None = None,
+    ) -> AsyncGenerator[StartItem, None]:
         """Stream the start bundle (``GET /v1/start``) for a path's start or a position.
 
         The scene is :attr:`scene` if set, else the server's first; it is set from
@@ -445,13 +445,19 @@ class SceneClient:
             query["x"], query["y"] = repr(float(x)), repr(float(y))
         if form != "params":
             query["form"] = form
+        if view is not None:  # an interior's bundle then brings the first view's contents
+            query.update(view=f"{view.size[0]}x{view.size[1]}", fov=repr(view.fov_deg), fog=repr(view.fog_m),
+                         depth=str(view.max_depth))
         url = str(httpx.URL("/v1/start", params=query))
         what = "start bundle"
         state: dict[str, Any] = {"objects": 0, "k": 0}
+        rooms: list[int] = []  # the contents parts still to come, in order
 
         def item(obj: Any, nbytes: int) -> StartItem:
             k = state["k"]
             state["k"] = k + 1
+            if rooms:
+                return "room", _contents_part(obj, nbytes, rooms.pop(0), f"{what}: item {k}")
             if state["objects"] > 0:
                 state["objects"] -= 1
                 frame = obj
@@ -463,6 +469,10 @@ class SceneClient:
                 assert isinstance(body, int)
                 state["objects"] = body
                 return "objects", body
+            if part == "contents":
+                assert isinstance(body, list)
+                rooms.extend(body)
+                return "contents", list(body)
             assert isinstance(body, bytes)
             label = f"{what}: {part}"
             if part == "path":
@@ -483,9 +493,10 @@ class SceneClient:
 
         async for got in self._stream("GET", url, what, None, item, on_head=on_head):
             yield got
-        if state["objects"] > 0:
+        if state["objects"] > 0 or rooms:
             self.stats.cut_streams += 1
-            raise StreamCut(f"{what}: ended {state['objects']} objects short", state["k"])
+            short = f"{state['objects']} objects" if state["objects"] else f"{len(rooms)} cells' contents"
+            raise StreamCut(f"{what}: ended {short} short", state["k"])
 
     async def _stream(
         self,
@@ -587,3 +598,12 @@ class SceneClient:
             # includes msgpack's BufferFull / limits: corrupt bytes, fetch again
             self.stats.cut_streams += 1
             raise StreamCut(f"{what}: corrupt after {got} items ({exc})", got) from exc
+
+
+def _contents_part(obj: Any, nbytes: int, expected: int, what: str) -> tuple[int, CellMesh]:
+    """``(cell, contents)`` of one unpacked contents part, which must be cell
+    ``expected``'s; ``nbytes`` is its share of the stream."""
+    cid, _etag, body = check_contents_part(obj, what)
+    if cid != expected:
+        raise CodecError(f"{what}: cell {cid} where {expected} was asked")
+    return cid, replace(decode_cell_mesh(body, f"contents of cell {cid}"), nbytes=nbytes)

@@ -6,10 +6,10 @@ An interior is walked like this (Mulloni et al.'s cell manager):
   the current cell, its neighbours, then all cells; the eye on a shared plane stays
   in the cell it was in; outside every cell it keeps the last one);
 * the **visible cells** are found by portal culling with visible screen areas
-  (:func:`~walkstream.client.draw.portals.cull_portals`, the default
+  (:func:`~walkstream.shared.portals.cull_portals`, the default
   :attr:`RoomStreamConfig.culling` ``portals``) or, with ``frustum`` or ``none``,
   through the portals whose bounding box meets the view frustum
-  (:func:`~walkstream.client.draw.portals.frustum_cells`), within the fog distance,
+  (:func:`~walkstream.shared.portals.frustum_cells`), within the fog distance,
   to a depth of :attr:`RoomStreamConfig.max_depth`;
 * **contents** are fetched in the order the walk will need them, in batches
   (``POST .../rooms/contents``, :meth:`SceneClient.contents_batch`: every missing visible
@@ -37,21 +37,23 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
+from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
-from walkstream.client.draw.portals import PortalCull, PortalGraph, cull_portals, frustum_cells
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import ApiError, InputError, StreamCut
+from walkstream.shared.portals import PortalCull, PortalGraph, cull_portals, frustum_cells
+from walkstream.shared.roomview import RoomLocator
 from walkstream.shared.roomwire import RoomRecord, Topology
 
-__all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "cell_of", "predicted_view", "stack_planes", "turned_view"]
+__all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "predicted_view", "turned_view"]
 
 #: ``--flush-policy`` choices (see :attr:`RoomStreamConfig.flush_policy`).
 FLUSH_POLICIES: tuple[str, ...] = ("crowded", "paper")
@@ -128,17 +130,9 @@ class RoomStreamStats:
     flushed: int = 0
     refetched: int = 0
     errors: int = 0
+    bundled: int = 0
+    """Cells whose contents came in the start bundle (:meth:`RoomStreamer.adopt`)."""
     fetched: set[int] = field(default_factory=set)
-
-
-def stack_planes(cells: list[RoomRecord]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """Ids and ``(n, k, 4)`` planes padded with rows that every point satisfies."""
-    k = max((len(c.planes) for c in cells), default=1)
-    out = np.zeros((len(cells), k, 4))
-    out[:, :, 3] = -1.0
-    for i, c in enumerate(cells):
-        out[i, : len(c.planes)] = c.planes
-    return np.array([c.id for c in cells], dtype=np.int64), out
 
 
 def predicted_view(view: NDArray[np.float64], eye: NDArray[np.float64], eye2: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -159,11 +153,6 @@ def turned_view(view: NDArray[np.float64], eye: NDArray[np.float64], deg: float)
     move[:3, 3] = eye
     back[:3, 3] = -np.asarray(eye, np.float64)
     return np.asarray(view, np.float64) @ move @ rot @ back
-
-
-def cell_of(planes: NDArray[np.float64], eye: NDArray[np.float64], tol: float = 1e-6) -> NDArray[np.bool_]:
-    """``(n,)`` whether the eye ``(3,)`` is behind every plane of each of ``(n, k, 4)`` cells."""
-    return np.all(planes[:, :, :3] @ eye + planes[:, :, 3] <= tol, axis=1)
 
 
 class RoomStreamer:
@@ -190,13 +179,12 @@ class RoomStreamer:
         self.config = config
         self.topology = topology
         self.cells: dict[int, RoomRecord] = {c.id: c for c in topology.cells}
-        inside = [c for c in topology.cells if c.kind != "outside" and len(c.planes)]
-        self._ids, self._planes = stack_planes(inside)
-        self._row = {int(c): i for i, c in enumerate(self._ids)}
+        self._where = RoomLocator(topology.cells)
         self.current: int | None = None
         self.stats = RoomStreamStats()
         self.last_visible: dict[int, float] = {}
         self._tasks: dict[int, asyncio.Task[None]] = {}
+        self._adopted: set[asyncio.Task[None]] = set()
         self.visible: list[int] = []
         self.graph = PortalGraph.from_topology(topology)
         self.last_cull: PortalCull | None = None
@@ -213,28 +201,8 @@ class RoomStreamer:
     def locate(self, eye: NDArray[np.float64]) -> int | None:
         """The viewer's cell by the planes: the current one while it holds the eye, then
         a neighbour, then any; outside every cell the current one is kept."""
-        self.current = self._locate_from(self.current, eye, anywhere=True)
+        self.current = self._where.locate(eye, self.current)
         return self.current
-
-    def _holds(self, cid: int, e: NDArray[np.float64]) -> bool:
-        row = self._row.get(cid)
-        return row is not None and bool(cell_of(self._planes[row : row + 1], e)[0])
-
-    def _locate_from(self, cur: int | None, eye: NDArray[np.float64], anywhere: bool) -> int | None:
-        """The cell holding ``eye`` looked for from ``cur``: ``cur``, a neighbour, then
-        (``anywhere``) every cell; ``cur`` when none holds it."""
-        e = np.asarray(eye, dtype=np.float64).reshape(3)
-        if cur is not None and cur in self._row:
-            if self._holds(cur, e):
-                return cur
-            for n in self.cells[cur].neighbours:
-                if self._holds(n, e):
-                    return n
-        if anywhere:
-            hit = np.flatnonzero(cell_of(self._planes, e))
-            if len(hit):
-                return int(self._ids[hit[0]])
-        return cur
 
     def visible_cells(
         self,
@@ -401,8 +369,8 @@ class RoomStreamer:
         cell: int | None = self.current
         for h in self.config.lookahead_s if np.any(v) else ():
             e2 = eye + h * v
-            nxt = self._locate_from(cell, e2, anywhere=False)
-            if nxt is None or not self._holds(nxt, e2):
+            nxt = self._where.locate(e2, cell, anywhere=False)
+            if nxt is None or not self._where.holds(nxt, e2):
                 break
             cell = nxt
             view2 = predicted_view(view, eye, e2)
@@ -462,12 +430,29 @@ class RoomStreamer:
             self._tasks.pop(cid, None)
 
     async def _fetch_batch(self, cells: list[int]) -> None:
-        """One batch: each cell stored as its part arrives, and no longer in flight; a batch
-        cut short leaves the cells it did not bring to be asked for again."""
+        """One batch: each cell stored as its part arrives (:meth:`_receive`)."""
+        self.stats.requests += 1
+        await self._receive(cells, self.api.contents_batch(cells))
+
+    def adopt(self, cells: list[int], parts: AsyncIterator[tuple[int, CellMesh]]) -> None:
+        """Take the contents of ``cells`` already on their way (the interior start
+        bundle's first view): in flight, so not asked for again, until their part
+        arrives from ``parts``."""
+        task = asyncio.ensure_future(self._receive(cells, parts, bundled=True))
+        self._adopted.add(task)  # it may read on (the manifest) after its last cell
+        task.add_done_callback(self._adopted.discard)
+        for c in cells:
+            self._tasks[c] = task
+
+    async def _receive(
+        self, cells: list[int], parts: AsyncIterator[tuple[int, CellMesh]], bundled: bool = False
+    ) -> None:
+        """Store each cell as its part arrives, and no longer in flight; a stream cut
+        short leaves the cells it did not bring to be asked for again."""
         try:
-            self.stats.requests += 1
-            async for cid, mesh in self.api.contents_batch(cells):
+            async for cid, mesh in parts:
                 self._store(cid, mesh)
+                self.stats.bundled += bundled
                 self._tasks.pop(cid, None)
         except (ApiError, StreamCut):
             self.stats.errors += 1
@@ -492,7 +477,7 @@ class RoomStreamer:
 
     async def close(self) -> None:
         """Cancel what is in flight."""
-        for task in set(self._tasks.values()):
+        for task in set(self._tasks.values()) | self._adopted:
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task

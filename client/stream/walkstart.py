@@ -4,26 +4,30 @@
 manifest and objects in one round trip) through the streamer; when it fails before
 the path is in, the replay falls back to fetching scene, manifest and path one by
 one, :func:`manifest_task` fetching the manifest on its own.  An interior walk
-starts with :func:`interior_start` instead: its bundle is the path, the topology and
-the manifest (the cells' contents come by the room streamer's own requests).
+starts with :func:`interior_start` instead: its bundle is the path, the topology, the
+contents of the cells the first view sees (:class:`StartContents`, handed to the room
+streamer while they arrive) and the manifest.
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass
 from typing import Any
 
 from walkstream.client.clock import Clock, within
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.streamer import Streamer
+from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import ApiError, StreamCut
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.roomview import RoomView
 from walkstream.shared.roomwire import Topology
 from walkstream.shared.wire import Manifest, decode_manifest
 
-__all__ = ["fetch_manifest", "manifest_task", "bundle_start", "interior_start"]
+__all__ = ["fetch_manifest", "manifest_task", "bundle_start", "StartContents", "interior_start"]
 
 
 async def fetch_manifest(api: SceneClient, disk: DiskCache | None) -> Manifest:
@@ -97,6 +101,17 @@ async def bundle_start(
     return got
 
 
+@dataclass
+class StartContents:
+    """The first view's contents, still coming in the interior start bundle after the walk starts."""
+
+    cells: list[int]
+    """The cells whose contents follow, in order."""
+    parts: AsyncIterator[tuple[int, CellMesh]]
+    """Each cell's contents as it arrives (:class:`~walkstream.shared.errors.StreamCut`
+    when the bundle ends early); the manifest after them goes to ``manifest_arrived``."""
+
+
 async def interior_start(
     path: str,
     timeout_s: float,
@@ -105,33 +120,63 @@ async def interior_start(
     disk: DiskCache | None,
     manifest_arrived: Callable[[Manifest], None],
     tasks: list[asyncio.Task[Any]],
-) -> tuple[tuple[RecordedPath, int] | None, Topology | None]:
-    """The interior start bundle of recorded path ``path``: ``((path, its bytes), topology)``.
+    view: RoomView | None = None,
+) -> tuple[tuple[RecordedPath, int] | None, Topology | None, StartContents | None]:
+    """The interior start bundle of recorded path ``path``: ``((path, its bytes), topology,
+    the first view's contents)``.
 
-    ``(None, None)`` when the bundle failed (or took longer than ``timeout_s``)
-    before both the path and the topology were in: the caller then starts the old
-    way.  The manifest goes to ``manifest_arrived`` (and the disk cache) as it
-    arrives; when the bundle is cut after the topology but before the manifest, a
-    task (added to ``tasks``) fetches the manifest on its own.
+    With ``view`` (how the client will view the interior) the server adds the contents
+    of the cells that view sees first; this returns as soon as their list is in, so the
+    walk starts while they arrive (the :class:`StartContents` carries the rest of the
+    stream).  ``(None, None, None)`` when the bundle failed (or took longer than
+    ``timeout_s``) before both the path and the topology were in: the caller then
+    starts the old way.  The manifest goes to ``manifest_arrived`` (and the disk
+    cache) as it arrives; when the bundle ends without it, a task (added to ``tasks``)
+    fetches it on its own.
     """
     got: dict[str, Any] = {}
+    stream = api.start(path=path, view=view)
 
-    async def run() -> None:
-        async for part, item in api.start(path=path):
+    def on_manifest(m: Manifest) -> None:
+        got["manifest"] = m
+        if disk is not None and m.etag:
+            disk.put_manifest(m.name, m.etag, m.body)
+        manifest_arrived(m)
+
+    def without_manifest() -> None:
+        if "manifest" not in got and api.scene is not None:
+            tasks.append(manifest_task(api, disk, manifest_arrived))
+
+    async def head() -> None:
+        async for part, item in stream:
             if part == "manifest":
-                m = item[0]
-                if disk is not None and m.etag:
-                    disk.put_manifest(m.name, m.etag, m.body)
-                manifest_arrived(m)
+                on_manifest(item[0])
             got[part] = item
+            if part == "contents":
+                return  # the walk can start: the contents follow as it goes
 
     try:
-        await within(clock, timeout_s, run())
+        await within(clock, timeout_s, head())
     except (ApiError, StreamCut):
         pass
     if "path" not in got or "topology" not in got:
-        return None, None
-    if "manifest" not in got and api.scene is not None:
-        tasks.append(manifest_task(api, disk, manifest_arrived))
-    return got["path"], got["topology"]
+        await stream.aclose()
+        return None, None, None
+    if "contents" not in got:
+        await stream.aclose()
+        without_manifest()
+        return got["path"], got["topology"], None
 
+    async def rest() -> AsyncIterator[tuple[int, CellMesh]]:
+        try:
+            async for part, item in stream:
+                if part == "room":
+                    yield item
+                elif part == "manifest":
+                    on_manifest(item[0])
+        except (ApiError, StreamCut):
+            without_manifest()
+            raise
+        without_manifest()
+
+    return got["path"], got["topology"], StartContents(list(got["contents"]), rest())

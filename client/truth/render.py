@@ -1,6 +1,6 @@
 """The ground-truth renderer: every object within the view distance at LOD2, colour and object id.
 
-It shares no code with the client's frame path (no culling of :mod:`walkstream.client.draw.culling`,
+It shares no code with the client's frame path (no culling of :mod:`walkstream.shared.frustum`,
 no LOD choice of :mod:`walkstream.client.draw.allocate`, not even its mesh buffers): all
 objects live in one vertex buffer in ascending id order, each vertex carrying its
 object's id, and a frame draws every object whose bounding box comes within the view

@@ -12,12 +12,23 @@ from __future__ import annotations
 
 import gzip
 from collections.abc import Sequence
+from functools import cached_property
+
+from numpy.typing import ArrayLike
 
 from walkstream.server.service.http import Encoded, Rep, encode, etag_for
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
-from walkstream.shared.errors import ApiError
-from walkstream.shared.roomcompact import TOPOLOGY_COMPACT_MEDIA, encode_topology_compact
+from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS, pack_contents_part
+from walkstream.shared.codec.cellmesh import inflate_cell_mesh
+from walkstream.shared.errors import ApiError, CodecError
+from walkstream.shared.portals import PortalGraph
+from walkstream.shared.roomcompact import (
+    TOPOLOGY_COMPACT_MEDIA,
+    decode_topology_compact,
+    encode_topology_compact,
+)
+from walkstream.shared.roomview import RoomLocator, RoomView, cells_seen
 from walkstream.shared.roomwire import (
     TOPOLOGY_PACKED_MEDIA,
     ContentsRef,
@@ -122,3 +133,48 @@ class InteriorState:
             self._cache.put(("contents", cid), enc, len(blob))
         return enc
 
+    def contents_part(self, cid: int, inflate: bool) -> bytes:
+        """Cell ``cid``'s part of a contents stream (:mod:`~walkstream.shared.codec.cellbatch`):
+        its blob as stored, or (``inflate``, for a stream gzip-compressed as a whole)
+        inflated to its ``N`` form so the cells share one dictionary."""
+        enc = self.contents(cid)
+        blob = enc.content
+        if inflate:
+            try:
+                blob = inflate_cell_mesh(blob, f"contents of cell {cid}")
+            except CodecError:  # a damaged stored blob goes as stored: the client says so
+                pass
+        return pack_contents_part(cid, enc.etag, blob)
+
+    @cached_property
+    def _view_model(self) -> tuple[PortalGraph, RoomLocator]:
+        # the compact topology, as the client decodes it: the server culls as the client will
+        topo = decode_topology_compact(self.topology_compact.content, "topology")
+        return PortalGraph.from_topology(topo), RoomLocator(topo.cells)
+
+    def first_view(
+        self, poses: Sequence[tuple[ArrayLike, float, float]], view: RoomView, max_bytes: int
+    ) -> list[int]:
+        """The cells a client walking with ``view`` sees from ``poses`` (``(eye, yaw,
+        pitch)``, the first where the walk starts, the others where it may lead) while
+        their stored contents stay within ``max_bytes`` (the first cell always); cells
+        without contents are left out.
+
+        Order: the first view's cells as the culling found them (nearest first), then
+        each next pose's new ones.  (Ordering the first view's cells by how long they
+        stay in view, which helps when the walk goes straight on, made the office
+        tour's first perfect frame later, 3.21 s against 3.17 s: the tour turns.)
+        """
+        graph, locator = self._view_model
+        order = list(dict.fromkeys(c for seen in cells_seen(graph, locator, poses, view) for c in seen))
+        out: list[int] = []
+        total = 0
+        for cid in order:
+            nbytes = self.records[cid].contents.nbytes
+            if not nbytes:
+                continue
+            if out and (total + nbytes > max_bytes or len(out) >= CELLBATCH_MAX_CELLS):
+                break
+            out.append(cid)
+            total += nbytes
+        return out

@@ -40,6 +40,7 @@ import os
 import threading
 import time
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from typing import Any, Literal, cast
 
 import numpy as np
@@ -62,9 +63,10 @@ from walkstream.shared.cells import LOCATABLE_KINDS, CellLocator, TileGrid
 from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StoreError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
-from walkstream.shared.pathcodec import PATH_Q_MEDIA, encode_path_q
+from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_q, encode_path_q
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.records import BuildingParams
+from walkstream.shared.roomview import RoomView
 from walkstream.shared.streets import build_street
 from walkstream.shared.wire import (
     MSGPACK,
@@ -87,6 +89,9 @@ __all__ = [
     "Form",
     "OBJECT_FORMS",
     "StartPart",
+    "Frames",
+    "START_ROOM_LEAD_S",
+    "START_ROOM_BYTES",
     "fit_tile_grid",
     "Scene",
     "SceneRegistry",
@@ -111,9 +116,26 @@ START_LEAD_S = 3.0
 START_MAX_AHEAD_M = 200.0
 """A start bundle looks at most this far ahead."""
 
-StartPart = tuple[str, "Encoded | list[bytes]"]
+START_ROOM_LEAD_S: tuple[float, ...] = (0.5, 1.0, 2.0)
+"""An interior start bundle holds the contents of the cells seen from the path's first
+pose and from where it leads, going straight on, after these many seconds."""
+
+START_ROOM_BYTES = 32_000
+"""An interior start bundle holds at most this many bytes of stored contents (the
+first cell's always)."""
+
+
+@dataclass(frozen=True)
+class Frames:
+    """The frames that follow a start bundle part's header: ``ids`` in order, each packed."""
+
+    ids: list[int]
+    frames: list[bytes]
+
+
+StartPart = tuple[str, "Encoded | Frames"]
 """One part of a start bundle: its name (:data:`~walkstream.shared.wire.START_PARTS`) and
-its encoded body, or for ``objects`` the list of object frames."""
+its encoded body, or for ``objects`` and ``contents`` the frames that follow its header."""
 
 # LRU budgets per scene: enough for every cell and object of a large city, small
 # enough that several scenes fit in one worker
@@ -440,6 +462,8 @@ class Scene:
         heading: float | None = None,
         speed: float = 0.0,
         form: Form = "params",
+        view: RoomView | None = None,
+        inflate: bool = False,
     ) -> list[StartPart]:
         """The parts of a start bundle at ``xy``, in the order sent.
 
@@ -451,15 +475,25 @@ class Scene:
         objects of those cells' PVS: the first cell's by ACH (highest first), then
         each next cell's new ones.  Reads the database on cache misses: call it
         from a worker thread.
+
+        An interior's bundle is the path, the topology, then (for a path and a client
+        ``view``) the contents of the cells that view sees from the path's first pose
+        and from where the path leads in :data:`START_ROOM_LEAD_S` (up to
+        :data:`START_ROOM_BYTES`; ``inflate``: each blob inflated, for a gzip-compressed
+        answer), then the manifest.
         """
         parts: list[StartPart] = []
         if path is not None:
             parts.append(("path", self.path_q(path) if rep == "msgpack" else self.path(path, rep)))
         if self.interior is not None:
-            # an interior walk needs its topology before its first frame, then the
-            # manifest; the visible cells' contents come by their own requests
+            # an interior walk needs its topology before its first frame, then the first
+            # view's contents; the manifest (not needed to walk) goes last
             topology = self.interior.topology_compact if rep == "msgpack" else self.interior.topology[rep]
-            return [*parts, ("topology", topology), ("manifest", self.manifest[rep])]
+            parts.append(("topology", topology))
+            if path is not None and view is not None:
+                cells = self.interior.first_view(self._room_lead(path), view, START_ROOM_BYTES)
+                parts.append(("contents", Frames(cells, [self.interior.contents_part(c, inflate) for c in cells])))
+            return [*parts, ("manifest", self.manifest[rep])]
         ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
         cells = self.start_cells(xy, heading, ahead)
         order: list[int] = []
@@ -478,8 +512,20 @@ class Scene:
             found, missing = self.cached_frames(order, form)
             if missing:
                 found.update(self.load_frames(missing, form))
-            parts.append(("objects", [found[oid] for oid in order]))
+            parts.append(("objects", Frames(order, [found[oid] for oid in order])))
         return parts
+
+    def _room_lead(self, path: str) -> list[tuple[NDArray[np.float64], float, float]]:
+        """The poses of an interior start: the path's first (as the client decodes the
+        compact path) and, going straight on at its velocity over its first half second
+        and looking the same way, those after :data:`START_ROOM_LEAD_S` (the client's
+        own prediction, :class:`~walkstream.client.stream.rooms.RoomStreamer`, does the same)."""
+        p = decode_path_q(self.path_q(path).content, f"path {path!r}")
+        xyz, yaw, pitch = p.at(0.0)
+        eye = np.asarray(xyz, dtype=np.float64)
+        dt = min(0.5, p.duration)
+        v = (np.asarray(p.at(dt)[0], dtype=np.float64) - eye) / dt if dt > 0 else np.zeros(3)
+        return [(eye + h * v, float(yaw), float(pitch)) for h in (0.0, *START_ROOM_LEAD_S)]
 
     # -- locate --------------------------------------------------------------
 

@@ -50,9 +50,8 @@ from walkstream.server.service.interiors import CONTENTS_MEDIA, InteriorState
 from walkstream.server.service.models import ERRORS, CellsIn, RoomOut, TopologyOut, both, error_doc
 from walkstream.server.service.routers.objects import MAX_BODY_BYTES, parse_ids, read_body
 from walkstream.server.service.scenes import Scene
-from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS, pack_contents_part
-from walkstream.shared.codec.cellmesh import inflate_cell_mesh
-from walkstream.shared.errors import ApiError, CodecError
+from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
+from walkstream.shared.errors import ApiError
 from walkstream.shared.roomcompact import TOPOLOGY_COMPACT_MEDIA
 from walkstream.shared.roomwire import TOPOLOGY_PACKED_MEDIA
 from walkstream.shared.wire import JSON, MSGPACK
@@ -213,13 +212,6 @@ async def _parts(state: InteriorState, ids: list[int], inflate: bool) -> AsyncIt
     the first part leaves before the last blob is read; one piece per part, so the
     gzip stream is flushed after each."""
     for cid in ids:
-        enc = state.cached_contents(cid)
-        if enc is None:
-            enc = await run_in_threadpool(state.contents, cid)
-        blob = enc.content
-        if inflate:
-            try:
-                blob = inflate_cell_mesh(blob, f"contents of cell {cid}")
-            except CodecError:  # a damaged stored blob goes as stored: the client says so
-                pass
-        yield pack_contents_part(cid, enc.etag, blob)
+        if state.cached_contents(cid) is None:
+            await run_in_threadpool(state.contents, cid)
+        yield state.contents_part(cid, inflate)

@@ -19,10 +19,16 @@ it had asked for it):
    asked: ``params`` by default, ``lod2`` meshes): the first cell's PVS, highest
    ACH first, then each next cell's new objects.
 
-On an interior the bundle is what the walk needs before its first frame: ``path``
-(when asked), ``topology`` (the compact ``walkstream-topology/2``, as ``GET
-.../topology/compact`` sends it) and ``manifest``; the visible cells' contents follow
-by their own requests.  The ``path`` part is the compact ``walkstream-path-q/1``
+On an interior the bundle is what the walk needs before its first perfect frame:
+``path`` (when asked), ``topology`` (the compact ``walkstream-topology/2``, as ``GET
+.../topology/compact`` sends it), then, when the client says how it views the scene
+(``view=WxH`` pixels, and ``fov`` degrees, ``fog`` metres, ``depth`` portals, which
+default to the replay's 60, 40 and 8), ``contents``: the map ``{part: "contents",
+etag: null, cells: [ids]}`` followed by one ``{cell, etag, body}`` part per cell, as
+``POST .../rooms/contents`` sends them (:mod:`walkstream.shared.codec.cellbatch`), for the
+cells portal culling keeps from the path's first pose and from where it leads in a
+couple of seconds (:meth:`~walkstream.server.service.scenes.Scene.start_parts`); then
+``manifest``.  The walk's other cells come by the client's own requests.  The ``path`` part is the compact ``walkstream-path-q/1``
 encoding (as ``GET .../paths/{name}`` sends it when ``Accept`` names it); with
 ``Accept: application/json`` each body is its JSON form.
 
@@ -37,7 +43,7 @@ frames (``{id, kind, params: base64}``).
 from __future__ import annotations
 
 import base64
-from collections.abc import Iterable
+from collections.abc import AsyncIterator, Iterable
 from dataclasses import dataclass
 from typing import Annotated, Any, cast
 
@@ -47,12 +53,19 @@ from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from walkstream.server.service.dependencies import RepDep, SceneDep, get_registry
-from walkstream.server.service.http import Rep, dump_json, dump_msgpack, stream_response
+from walkstream.server.service.http import (
+    Rep,
+    accepts_gzip,
+    dump_json,
+    dump_msgpack,
+    stream_response,
+)
 from walkstream.server.service.models import ERRORS, StartPartOut, error_doc
 from walkstream.server.service.routers.objects import coalesce
-from walkstream.server.service.scenes import OBJECT_FORMS, Scene, SceneRegistry, StartPart
+from walkstream.server.service.scenes import OBJECT_FORMS, Frames, Scene, SceneRegistry, StartPart
 from walkstream.server.service.scenes import Form as ObjForm
-from walkstream.shared.errors import ApiError
+from walkstream.shared.errors import ApiError, InputError
+from walkstream.shared.roomview import RoomView
 from walkstream.shared.wire import JSON, MSGPACK
 
 __all__ = ["router"]
@@ -84,6 +97,14 @@ Speed = Annotated[
     float | None, Query(allow_inf_nan=False, ge=0, le=100, description="m/s (x, y starts)")
 ]
 Name = Annotated[str | None, Query(max_length=256)]
+View = Annotated[
+    str | None,
+    Query(max_length=16, pattern=r"^[0-9]{1,5}x[0-9]{1,5}$",
+          description="interiors: the client's viewport WIDTHxHEIGHT in pixels (asks for the first view's contents)"),
+]
+Fov = Annotated[float | None, Query(allow_inf_nan=False, ge=1, le=170, description="interiors: vertical field of view, degrees")]
+Fog = Annotated[float | None, Query(allow_inf_nan=False, gt=0, le=10_000, description="interiors: fog distance, metres")]
+Depth = Annotated[int | None, Query(ge=0, le=256, description="interiors: portals passed at most")]
 
 
 @dataclass(frozen=True)
@@ -97,6 +118,26 @@ class StartQuery:
     heading: Heading = None
     speed: Speed = None
     form: Form = "params"
+    view: View = None
+    fov: Fov = None
+    fog: Fog = None
+    depth: Depth = None
+
+    def room_view(self) -> RoomView | None:
+        """The client's interior view when it gave its viewport (else None)."""
+        if self.view is None:
+            return None
+        w, h = (int(v) for v in self.view.split("x"))
+        d = RoomView()
+        try:
+            return RoomView(
+                (w, h),
+                d.fov_deg if self.fov is None else self.fov,
+                d.fog_m if self.fog is None else self.fog,
+                d.max_depth if self.depth is None else self.depth,
+            )
+        except InputError as e:
+            raise ApiError(str(e), status=422, detail={"view": self.view}) from e
 
 
 StartDep = Annotated[StartQuery, Depends()]
@@ -138,29 +179,46 @@ async def _bundle(request: Request, scene: Scene, rep: Rep, q: StartQuery) -> St
     )
     h = h if q.heading is None else q.heading
     v = v if q.speed is None else q.speed
-    parts = await run_in_threadpool(scene.start_parts, xy, rep, q.path, h, v, cast(ObjForm, q.form))
+    view = q.room_view()
+    inflate = accepts_gzip(request.headers.get("accept-encoding"))
+    parts = await run_in_threadpool(
+        lambda: scene.start_parts(xy, rep, q.path, h, v, cast(ObjForm, q.form), view=view, inflate=inflate)
+    )
     headers = {"X-Scene-Version": scene.version, "X-Scene": scene.name, "Cache-Control": "no-cache"}
     if rep == "json":
         return stream_response(request, coalesce(_json_parts(parts)), JSON, headers)
+    if scene.interior is not None:
+        # one piece per part, so a gzip stream is flushed after each: the walk starts
+        # once the topology and the contents' list are in, and each cell is usable
+        # as soon as its part is (level 9, as for a contents batch)
+        return stream_response(request, _each(_msgpack_parts(parts)), MSGPACK, headers, level=9)
     return stream_response(request, coalesce(_msgpack_parts(parts)), MSGPACK, headers)
+
+
+async def _each(pieces: Iterable[bytes]) -> AsyncIterator[bytes]:
+    for p in pieces:
+        yield p
 
 
 def _msgpack_parts(parts: list[StartPart]) -> Iterable[bytes]:
     for name, body in parts:
-        if name == "objects":
-            assert isinstance(body, list)
-            yield dump_msgpack({"part": name, "etag": None, "count": len(body)})
-            yield from body
+        if isinstance(body, Frames):
+            head: dict[str, Any] = {"part": name, "etag": None}
+            if name == "contents":
+                head["cells"] = body.ids
+            else:
+                head["count"] = len(body.frames)
+            yield dump_msgpack(head)
+            yield from body.frames
         else:
-            assert not isinstance(body, list)
             yield dump_msgpack({"part": name, "etag": body.etag or None, "body": body.content})
 
 
 def _json_parts(parts: list[StartPart]) -> Iterable[bytes]:
     yield b"["
     for k, (name, body) in enumerate(parts):
-        if isinstance(body, list):
-            frames = [msgpack.unpackb(f) for f in body]
+        if isinstance(body, Frames):
+            frames = [msgpack.unpackb(f) for f in body.frames]
             content = dump_json(
                 [
                     {

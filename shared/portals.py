@@ -61,8 +61,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.client.draw.culling import frustum_cull
 from walkstream.shared.errors import InputError
+from walkstream.shared.frustum import frustum_cull
 
 __all__ = [
     "CULLING_MODES",

@@ -1,8 +1,9 @@
-"""Culling steps of a frame: what of the current cell's PVS can be seen at all.
+"""The conservative frustum test of bounding boxes: what can be seen at all.
 
-Today one step, the conservative frustum test of bounding boxes; a step that
-removes more (portals, fog distance) is a function here that narrows the same
-``visible`` mask before the budget is shared (:mod:`.allocate`).
+The city's frame culls its cell's PVS with it before the budget is shared
+(:mod:`walkstream.client.draw.allocate`); portal culling (:mod:`.portals`) uses it
+after the visible screen areas, as the paper does.  It lives in ``shared/`` because
+the server runs portal culling too (the first view of an interior start bundle).
 """
 
 from __future__ import annotations
