@@ -424,15 +424,21 @@ def encode_planar_body(
         kq, kt, polys, found = _encode_part(p, t, boxes=version == 3)
         if version == 3:
             box_counts.append(len(found))
-            boxes.append(found)
+            # by low corner (x, then y, z): the steps between them get small and alike
+            boxes.append(found[np.lexsort(found[:, 2::-1].T)])
             kept = []
+            mine = []
             for rings in polys:
                 rect = rect_of(rings[0]) if len(rings) == 1 else None
                 if rect is None:
                     kept.append(rings)
                 else:
-                    rect_kinds.append(rect[0])
-                    rects.append((*rect[1].tolist(), rect[2], rect[3]))
+                    mine.append((rect[0], *rect[1].tolist(), rect[2], rect[3]))
+            # by low corner (then kind), as the boxes
+            mine.sort(key=lambda r: (r[1], r[2], r[3], r[0]))
+            for r in mine:
+                rect_kinds.append(r[0])
+                rects.append(r[1:])
             rect_counts.append(len(polys) - len(kept))
             polys = kept
         vcount.append(len(kq))
