@@ -295,14 +295,17 @@ def _signed_areas(pos: np.ndarray, idx: np.ndarray) -> np.ndarray:
 def test_v3_sends_a_box_as_six_numbers_and_keeps_its_faces_outwards() -> None:
     rng = np.random.default_rng(6)
     whole = _box([1.0, 2.0, 0.0], [1.2, 0.6, 0.75])
-    open_top = _box([3.0, 2.0, 0.0], [0.45, 0.45, 0.9], drop=(5,))  # clipped: its rectangles stay
-    inside_out = _box([5.0, 2.0, 0.0], [0.3, 0.3, 0.3], flip=True)
-    ps = [(10, 4, *whole), (11, 4, *open_top), (12, 5, *inside_out)]
+    open_top = _box([3.0, 2.0, 0.0], [0.45, 0.45, 0.9], drop=(5,))  # clipped by a cell's ceiling
+    reveal = _box([5.0, 2.0, 0.0], [0.3, 0.3, 0.3], drop=(2, 3), flip=True)  # a window's opening
+    floor = _grid_wall(1, 1)  # one rectangle
+    ps = [(10, 4, *whole), (11, 4, *open_top), (12, 5, *reveal), (13, 6, *floor)]
     blob = encode_cell_mesh(ps, compress="none")
     body = msgpack.unpackb(blob[1:], raw=False)
     assert body["format"] == CELLMESH_FORMAT
-    assert body["box_counts"] == bytes([1, 0, 0]) and len(body["boxes"]) <= 12  # six varints
-    assert body["rect_counts"] == bytes([0, 5, 6]) and body["positions"] == b""
+    assert body["box_counts"] == bytes([1, 1, 1, 0]) and len(body["boxes"]) <= 3 * 12  # six varints a box
+    assert body["box_faces"] == bytes([63, 31, 64 | 0b110011])  # all; no +z; inwards, no y faces
+    assert body["rect_counts"] == bytes([0, 0, 0, 1]) and body["rect_kinds"] == bytes([2])  # facing -y
+    assert body["positions"] == b"" and body["indices"] == b""
     cm = decode_cell_mesh(blob)
     for before, after in zip(ps, cm.parts, strict=True):
         _same_surface(before, after, rng)
@@ -361,9 +364,10 @@ def test_v3_random_box_furniture_keeps_its_surface(seed: int, n: int) -> None:
 
 def test_v3_bad_input_is_a_codec_error() -> None:
     ps = [(1, 2, *_box([0.0, 0, 0], [1.0, 1, 1])), (3, 4, *_box([2.0, 0, 0], [1.0, 1, 1], drop=(0,)))]
+    ps += [(5, 6, *_grid_wall(1, 1))]
     blob = encode_cell_mesh(ps, compress="none")
     body = msgpack.unpackb(blob[1:], raw=False)
-    assert body["box_counts"] == bytes([1, 0]) and body["rect_counts"] == bytes([0, 5])
+    assert body["box_counts"] == bytes([1, 1, 0]) and body["rect_counts"] == bytes([0, 0, 1])
 
     def bad(drop: tuple[str, ...] = (), **change: object) -> None:
         b = {k: v for k, v in dict(body, **change).items() if k not in drop}
@@ -371,12 +375,15 @@ def test_v3_bad_input_is_a_codec_error() -> None:
             decode_cell_mesh(b"N" + msgpack.packb(b, use_bin_type=True))
         assert "\n" not in str(exc.value)
 
-    bad(rect_kinds=b"\x06" * 5)  # no such kind
-    bad(rect_kinds=b"\x00" * 4)  # a kind short
+    bad(rect_kinds=b"\x06")  # no such kind
+    bad(rect_kinds=b"")  # a kind short
+    bad(box_faces=b"\x3f\x40")  # a box of no faces
+    bad(box_faces=b"\x3f\x80")  # an unknown bit
+    bad(box_faces=b"\x3f")  # a box's faces missing
     bad(rects=body["rects"][:-1])  # truncated
     bad(boxes=body["boxes"][:-1] + b"\x00")  # a box of no size
     bad(boxes=body["boxes"][:3] + bytes([0xFF] * 9 + [0x01]) + body["boxes"][4:])  # beyond the grid
-    bad(box_counts=bytes([2, 0]))  # more boxes than sent
+    bad(box_counts=bytes([2, 1, 0]))  # more boxes than sent
     bad(drop=("rect_counts",))  # rectangles without counts
     bad(drop=("boxes",))
     bad(format=CELLMESH_V2)  # /2 knows no boxes

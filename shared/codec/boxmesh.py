@@ -132,3 +132,61 @@ def box_rects(boxes: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.i
     flo[:, np.arange(6), ax] += shift
     ext = s[:, _OTHER[ax]]  # (k, 6, 2)
     return np.tile(np.arange(6), len(boxes)), flo.reshape(-1, 3), ext.reshape(-1, 2)
+
+
+Rect = tuple[int, int, int, int, int, int]
+"""A rectangle: ``(kind, x, y, z, extent a, extent b)`` (:func:`rect_of`)."""
+
+
+def _face(box: tuple[int, ...], f: int, inward: bool) -> Rect:
+    """Face ``f`` (0..5: -x, +x, -y, +y, -z, +z) of ``box`` ``(x0, y0, z0, x1, y1, z1)`` as a
+    rectangle, facing out of the box or, when ``inward``, into it."""
+    ax, top = f // 2, f % 2
+    lo = list(box[:3])
+    lo[ax] = box[3 + ax] if top else box[ax]
+    a, b = _OTHER[ax]
+    return (2 * ax + (top ^ int(inward)), lo[0], lo[1], lo[2], box[3 + a] - box[a], box[3 + b] - box[b])
+
+
+def group_rects(rects: list[Rect]) -> tuple[list[tuple[int, ...]], list[Rect]]:
+    """Rectangles that are faces of one box, as that box: ``(boxes, the other rectangles)``.
+
+    A box here is ``(x0, y0, z0, x1, y1, z1, faces)``: ``faces`` bits 0..5 say which of
+    its faces (-x, +x, -y, +y, -z, +z) there are, bit 6 that they face into the box (a
+    window's reveals).  It needs two opposite faces; a clipped wall (its four long faces)
+    or a reveal (four faces round the opening) is six numbers and a byte where its
+    rectangles were five numbers and a kind each.
+    """
+    index = {r: i for i, r in enumerate(rects)}
+    # the faces a box could pair with: by axis, way and extent (the plane comes second)
+    far: dict[tuple[int, ...], list[int]] = {}
+    for r in rects:
+        ax = r[0] // 2
+        a, b = _OTHER[ax]
+        far.setdefault((r[0], r[1 + a], r[1 + b], r[4], r[5]), []).append(r[1 + ax])
+    used = [False] * len(rects)
+    boxes: list[tuple[int, ...]] = []
+    for i, r in enumerate(rects):
+        if used[i]:
+            continue
+        ax = r[0] // 2
+        a, b = _OTHER[ax]
+        inward = r[0] % 2 == 1  # a face towards +axis at the low side faces into its box
+        c0 = r[1 + ax]
+        for c1 in sorted(c for c in far.get((r[0] ^ 1, r[1 + a], r[1 + b], r[4], r[5]), []) if c > c0):
+            lo = [r[1], r[2], r[3]]
+            hi = [lo[0], lo[1], lo[2]]
+            hi[ax], hi[a], hi[b] = c1, lo[a] + r[4], lo[b] + r[5]
+            box = (*lo, *hi)
+            faces = [index.get(_face(box, f, inward)) for f in range(6)]
+            k0, k1 = faces[2 * ax], faces[2 * ax + 1]
+            if k0 is None or k1 is None or used[k0] or used[k1]:
+                continue
+            mask = 0
+            for f, k in enumerate(faces):
+                if k is not None and not used[k]:
+                    used[k] = True
+                    mask |= 1 << f
+            boxes.append((*box, mask | (64 if inward else 0)))
+            break
+    return boxes, [r for r, u in zip(rects, used, strict=True) if not u]

@@ -428,7 +428,7 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
     """
     packed = _decompress(bytes(blob), what)
     body = unpack_bounded(
-        packed, what, max_bytes=MAX_CELLMESH_BYTES, max_array_len=8, max_map_len=16,
+        packed, what, max_bytes=MAX_CELLMESH_BYTES, max_array_len=8, max_map_len=24,
         max_bin_len=MAX_CELLMESH_BYTES,
     )
     if isinstance(body, dict) and body.get("format") in (CELLMESH_FORMAT, CELLMESH_V2):

@@ -63,27 +63,36 @@ it makes by the ring's Newell normal and recomputes flat normals.
 Version 3: boxes and axis rectangles
 ------------------------------------
 Generated furniture, window frames and glass are axis-aligned boxes (a window frame is
-five overlapping ones), and most walls' regions are rectangles in an axis plane; as
-rings they cost 24 and 4 vertices.  Version 3 (:data:`BOXED_FORMAT`) first takes each
-part's whole boxes out (:func:`_find_boxes`: twelve triangles, two halves of each face's
-rectangle, facing out) and then sends every single-ring region that is an axis
-rectangle with axis-parallel edges in its own field; the rest is version 2.  The map
-adds, each key only when the blob has any::
+five overlapping ones), walls and window reveals are boxes with some faces left out
+(the bake clips them to cells), and most other regions are rectangles in an axis
+plane; as rings they cost 24 and 4 vertices.  Version 3 (:data:`BOXED_FORMAT`) first
+takes each part's whole boxes out of its triangles
+(:func:`~walkstream.shared.codec.boxmesh.find_boxes`: twelve triangles, two halves of
+each face's rectangle, facing out), merges the rest as version 2, and then sends every
+single-ring region that is an axis rectangle with axis-parallel edges on its own; two
+opposite such rectangles of one part, and those of the same box's other faces, go as
+that box with a face mask (:func:`~walkstream.shared.codec.boxmesh.group_rects`).
+What is left is version 2.  The map adds, each key only when the blob has any::
 
-    "box_counts": bin, "boxes": bin, "rect_counts": bin, "rect_kinds": bin, "rects": bin
+    "box_counts": bin, "boxes": bin, "box_faces": bin,
+    "rect_counts": bin, "rect_kinds": bin, "rects": bin
 
 ``box_counts`` and ``rect_counts`` are per-part varints; ``boxes`` six zigzag varints a
 box, box after box: the step from the previous box's low corner (running across
-parts), then its size (> 0); ``rect_kinds`` one byte a rectangle, ``2 * axis + (1 if
-it faces +axis)``; ``rects`` five zigzag varints a rectangle, field by field (all x
-steps of the low corners, then y, z, then the extents along the two other axes in
-increasing order; extents > 0).  The decoder appends to each part its rectangles and
-then its boxes' six faces, four vertices and two triangles each (no vertex shared
-between faces, so the normals stay flat).  Same error bound: every corner is an
-encoded grid point.  A box's corners count as used by another plane when merging the
-part's other regions, so no ring drops a vertex a box has (no T-junction).  On the
+parts), then its size (> 0); ``box_faces`` a byte a box, bits 0 to 5 its faces (-x, +x,
+-y, +y, -z, +z; at least one), bit 6 that they face into the box; ``rect_kinds`` a
+byte a rectangle, ``2 * axis + (1 if it faces +axis)``; ``rects`` five zigzag varints a
+rectangle, field by field (all x steps of the low corners, then y, z, then the extents
+along the two other axes in increasing order; extents > 0).  Within a part boxes and
+rectangles are sorted by low corner (small, alike steps).  The decoder appends to each
+part its rectangles and then its boxes' faces, four vertices and two triangles each
+(no vertex shared between faces, so the normals stay flat).  Same error bound: every
+corner is an encoded grid point; every rectangle is one the triangles covered, so the
+surface is the same.  A box's corners count as used by another plane when merging
+the part's other regions, so no ring drops a vertex a box has (no T-junction).  On the
 generated office (``--preset paper``) this takes the 21 cells the tour starts with
-from 13.2 kB to 9.2 kB as one gzip stream, and the whole building from 53.9 to 28.7 kB.
+from 13.2 kB to 8.2 kB as one gzip stream (as ``POST .../rooms/contents`` sends them),
+and the whole building from 53.9 to 26.1 kB.
 """
 
 from __future__ import annotations
@@ -96,7 +105,15 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 from shapely.geometry.polygon import orient
 
-from walkstream.shared.codec.boxmesh import box_corners, box_rects, find_boxes, rect_mesh, rect_of
+from walkstream.shared.codec.boxmesh import (
+    Rect,
+    box_corners,
+    box_rects,
+    find_boxes,
+    group_rects,
+    rect_mesh,
+    rect_of,
+)
 from walkstream.shared.codec.varint import (
     decode_varints,
     encode_varints,
@@ -134,7 +151,7 @@ _KEYS = frozenset(
      "positions", "indices"}
 )
 
-_KEYS3 = frozenset({"box_counts", "boxes", "rect_counts", "rect_kinds", "rects"})
+_KEYS3 = frozenset({"box_counts", "boxes", "box_faces", "rect_counts", "rect_kinds", "rects"})
 
 Rings = list[NDArray[np.int64]]
 """A polygon: its rings of ``(k, 3)`` millimetre integers, exterior first."""
@@ -416,30 +433,31 @@ def encode_planar_body(
     qs: list[NDArray[np.int64]] = []
     idx: list[NDArray[np.int64]] = []
     box_counts, rect_counts, rect_kinds = [], [], []
-    boxes: list[NDArray[np.int64]] = []
-    rects: list[tuple[int, int, int, int, int]] = []
+    boxes: list[tuple[int, ...]] = []
+    rects: list[tuple[int, ...]] = []
     for k, (element, _m, p, t) in enumerate(parts):
         if np.abs(p).max(initial=0.0) / GRID >= _MAX_Q:
             raise CodecError(f"cell mesh part {k} (element {element}): positions beyond {_MAX_Q * GRID:.0f} m")
         kq, kt, polys, found = _encode_part(p, t, boxes=version == 3)
         if version == 3:
-            box_counts.append(len(found))
-            # by low corner (x, then y, z): the steps between them get small and alike
-            boxes.append(found[np.lexsort(found[:, 2::-1].T)])
             kept = []
-            mine = []
+            mine: list[Rect] = []
             for rings in polys:
                 rect = rect_of(rings[0]) if len(rings) == 1 else None
                 if rect is None:
                     kept.append(rings)
                 else:
                     mine.append((rect[0], *rect[1].tolist(), rect[2], rect[3]))
-            # by low corner (then kind), as the boxes
+            # by low corner (then kind), so that the steps between them get small and alike
             mine.sort(key=lambda r: (r[1], r[2], r[3], r[0]))
-            for r in mine:
-                rect_kinds.append(r[0])
-                rects.append(r[1:])
-            rect_counts.append(len(polys) - len(kept))
+            grouped, mine = group_rects(mine)
+            part_boxes = sorted([(*b, 63) for b in found.tolist()] + grouped)
+            box_counts.append(len(part_boxes))
+            boxes.extend(part_boxes)
+            for rect_row in mine:
+                rect_kinds.append(rect_row[0])
+                rects.append(rect_row[1:])
+            rect_counts.append(len(mine))
             polys = kept
         vcount.append(len(kq))
         tcount.append(len(kt))
@@ -473,7 +491,7 @@ def encode_planar_body(
         "indices": encode_varints(zigzag(di)),
     }
     if version == 3:
-        bx = np.concatenate(boxes) if boxes else np.zeros((0, 6), np.int64)
+        bx = np.asarray(boxes, np.int64).reshape(-1, 7)
         blo = np.diff(bx[:, :3], axis=0, prepend=np.zeros((1, 3), np.int64))
         rc = np.asarray(rects, np.int64).reshape(-1, 5)
         rlo = np.diff(rc[:, :3], axis=0, prepend=np.zeros((1, 3), np.int64))
@@ -482,7 +500,8 @@ def encode_planar_body(
         if len(bx):
             body["box_counts"] = encode_varints(np.asarray(box_counts, np.uint64))
             # box after box (its corner's step, then its size): a box repeated is one long match
-            body["boxes"] = encode_varints(zigzag(np.column_stack([blo, bx[:, 3:] - bx[:, :3]]).reshape(-1)))
+            body["boxes"] = encode_varints(zigzag(np.column_stack([blo, bx[:, 3:6] - bx[:, :3]]).reshape(-1)))
+            body["box_faces"] = bytes(bx[:, 6].astype(np.uint8))
         if len(rc):
             body["rect_counts"] = encode_varints(np.asarray(rect_counts, np.uint64))
             body["rect_kinds"] = bytes(np.asarray(rect_kinds, np.uint8))
@@ -602,7 +621,7 @@ def _decode_rects(
     none = np.zeros(n_parts, np.int64)
     rcount = _counts(body, "rect_counts", n_parts, what, _MAX_VERTICES) if "rect_counts" in body else none
     bcount = _counts(body, "box_counts", n_parts, what, _MAX_VERTICES) if "box_counts" in body else none
-    body = {"rect_kinds": b"", "rects": b"", "boxes": b"", **body}
+    body = {"rect_kinds": b"", "rects": b"", "boxes": b"", "box_faces": b"", **body}
     nr, nb = int(rcount.sum()), int(bcount.sum())
     if nv + 4 * nr + 24 * nb > _MAX_VERTICES:
         raise CodecError(f"{what}: {nr} rectangles and {nb} boxes are too many")
@@ -612,6 +631,12 @@ def _decode_rects(
     rk = np.frombuffer(kinds, np.uint8).astype(np.int64)
     if len(rk) and int(rk.max()) > 5:
         raise CodecError(f"{what}: rect_kinds: a kind above 5")
+    masks = body.get("box_faces")
+    if not isinstance(masks, bytes) or len(masks) != nb:
+        raise CodecError(f"{what}: box_faces: expected {nb} bytes")
+    bm = np.frombuffer(masks, np.uint8).astype(np.int64)
+    if len(bm) and (int(bm.max()) > 127 or int((bm & 63).min()) == 0):
+        raise CodecError(f"{what}: box_faces: a box of no faces or an unknown bit")
     r = _steps(body, "rects", nr, 5, what).reshape(5, nr).T
     b = _steps(body, "boxes", nb, 6, what).reshape(nb, 6)
     rlo, blo = np.cumsum(r[:, :3], axis=0), np.cumsum(b[:, :3], axis=0)
@@ -620,16 +645,19 @@ def _decode_rects(
     if max(int(np.abs(rlo).max(initial=0)), int(np.abs(blo).max(initial=0))) >= _MAX_Q:
         raise CodecError(f"{what}: a rectangle or box beyond the grid's range")
     bk, bflo, bext = box_rects(np.column_stack([blo, b[:, 3:]]))
+    has = (bm[:, None] >> np.arange(6)) & 1 == 1  # (nb, 6) the faces each box has
+    bk = (bk.reshape(nb, 6) ^ (bm[:, None] >> 6)).reshape(-1)  # bit 6: facing into the box
     rfaces = rect_mesh(rk, rlo, r[:, 3:]).reshape(-1, 4, 3)
     bfaces = rect_mesh(bk, bflo, bext).reshape(nb, 6, 4, 3)
     # part by part: its rectangles, then its boxes' faces
     rb = np.concatenate([[0], np.cumsum(rcount)])
     bb = np.concatenate([[0], np.cumsum(bcount)])
     faces = np.concatenate(
-        [np.concatenate([rfaces[rb[k] : rb[k + 1]], bfaces[bb[k] : bb[k + 1]].reshape(-1, 4, 3)]) for k in range(n_parts)]
+        [np.concatenate([rfaces[rb[k] : rb[k + 1]], bfaces[bb[k] : bb[k + 1]][has[bb[k] : bb[k + 1]]]]) for k in range(n_parts)]
         or [np.zeros((0, 4, 3), np.int64)]
     )
-    return faces, np.concatenate([[0], np.cumsum(rcount + 6 * bcount)])
+    per_box = np.concatenate([[0], np.cumsum(has.sum(axis=1))])
+    return faces, np.concatenate([[0], np.cumsum(rcount + per_box[bb[1:]] - per_box[bb[:-1]])])
 
 
 def _per_part(rings: NDArray[np.int64], sizes: NDArray[np.int64], rcount: NDArray[np.int64]) -> NDArray[np.int64]:
