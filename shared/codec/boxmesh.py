@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["find_boxes", "box_corners", "rect_of", "rect_mesh", "box_rects"]
+__all__ = ["find_boxes", "rect_pairs", "rect_ring", "box_corners", "rect_of", "rect_mesh", "box_rects", "group_rects", "Rect"]
 
 _OTHER = np.array([[1, 2], [0, 2], [0, 1]])
 """The in-plane axes (increasing) of a face whose normal is along axis 0, 1, 2."""
@@ -27,36 +27,7 @@ def find_boxes(q: NDArray[np.int64], t: NDArray[np.int64]) -> tuple[NDArray[np.i
     pointing out of the box.  Generated furniture, frames and glass are made of such
     boxes, and six numbers say what 24 ring vertices did.
     """
-    none = np.zeros((0, 6), np.int64), np.zeros(len(t), bool)
-    if len(t) < 12:
-        return none
-    c = q[t]  # (m, 3, 3)
-    lo, hi = c.min(axis=1), c.max(axis=1)
-    flat = lo == hi
-    cand = np.flatnonzero(flat.sum(axis=1) == 1)
-    if len(cand) < 12:
-        return none
-    cc, lo, hi = c[cand], lo[cand], hi[cand]
-    ax = np.argmax(flat[cand], axis=1)
-    ab = _OTHER[ax]
-    uv = np.take_along_axis(cc, ab[:, None, :], axis=2)  # (k, 3 corners, 2)
-    l2, h2 = np.take_along_axis(lo, ab, axis=1), np.take_along_axis(hi, ab, axis=1)
-    at_hi = uv == h2[:, None, :]
-    code = 2 * at_hi[..., 0] + at_hi[..., 1]  # which rectangle corner each triangle corner is
-    ok = (at_hi | (uv == l2[:, None, :])).all(axis=(1, 2))
-    ok &= (code[:, 0] != code[:, 1]) & (code[:, 0] != code[:, 2]) & (code[:, 1] != code[:, 2])
-    nz = np.cross(cc[:, 1] - cc[:, 0], cc[:, 2] - cc[:, 0])[np.arange(len(cand)), ax]
-    keys = np.column_stack([ax, nz > 0, np.take_along_axis(lo, ax[:, None], axis=1)[:, 0], l2[:, 0], h2[:, 0], l2[:, 1], h2[:, 1]])
-    halves: dict[tuple[int, ...], dict[int, int]] = {}
-    faces: dict[tuple[int, ...], tuple[int, int]] = {}
-    for key, miss, i in zip(map(tuple, keys[ok].tolist()), (6 - code[ok].sum(axis=1)).tolist(), cand[ok].tolist(), strict=True):
-        if key in faces:
-            continue
-        h = halves.setdefault(key, {})
-        if 3 - miss in h:  # the other half: its missing corner is the opposite one
-            faces[key] = (h[3 - miss], i)
-        else:
-            h.setdefault(miss, i)
+    faces = rect_pairs(q, t) if len(t) >= 12 else {}
     plus: dict[tuple[int, ...], list[int]] = {}
     for key in faces:
         if key[0] == 0 and key[1] == 1:
@@ -81,10 +52,53 @@ def find_boxes(q: NDArray[np.int64], t: NDArray[np.int64]) -> tuple[NDArray[np.i
     return np.array(boxes, np.int64).reshape(-1, 6), used
 
 
+def rect_pairs(q: NDArray[np.int64], t: NDArray[np.int64]) -> dict[tuple[int, ...], tuple[int, int]]:
+    """Pairs of triangles ``t`` that are the two halves of a rectangle in an axis plane with
+    axis-parallel edges (three of its corners each, the missing corners opposite, wound
+    alike), by rectangle ``(axis, faces +axis, plane, a0, a1, b0, b1)`` (``a``, ``b`` the
+    other axes in increasing order); each triangle in one pair at most."""
+    c = q[t]  # (m, 3, 3)
+    lo, hi = c.min(axis=1), c.max(axis=1)
+    flat = lo == hi
+    cand = np.flatnonzero(flat.sum(axis=1) == 1)
+    if len(cand) < 2:
+        return {}
+    cc, lo, hi = c[cand], lo[cand], hi[cand]
+    ax = np.argmax(flat[cand], axis=1)
+    ab = _OTHER[ax]
+    uv = np.take_along_axis(cc, ab[:, None, :], axis=2)  # (k, 3 corners, 2)
+    l2, h2 = np.take_along_axis(lo, ab, axis=1), np.take_along_axis(hi, ab, axis=1)
+    at_hi = uv == h2[:, None, :]
+    code = 2 * at_hi[..., 0] + at_hi[..., 1]  # which rectangle corner each triangle corner is
+    ok = (at_hi | (uv == l2[:, None, :])).all(axis=(1, 2))
+    ok &= (code[:, 0] != code[:, 1]) & (code[:, 0] != code[:, 2]) & (code[:, 1] != code[:, 2])
+    nz = np.cross(cc[:, 1] - cc[:, 0], cc[:, 2] - cc[:, 0])[np.arange(len(cand)), ax]
+    keys = np.column_stack([ax, nz > 0, np.take_along_axis(lo, ax[:, None], axis=1)[:, 0], l2[:, 0], h2[:, 0], l2[:, 1], h2[:, 1]])
+    halves: dict[tuple[int, ...], dict[int, int]] = {}
+    faces: dict[tuple[int, ...], tuple[int, int]] = {}
+    for key, miss, i in zip(map(tuple, keys[ok].tolist()), (6 - code[ok].sum(axis=1)).tolist(), cand[ok].tolist(), strict=True):
+        if key in faces:
+            continue
+        h = halves.setdefault(key, {})
+        if 3 - miss in h:  # the other half: its missing corner is the opposite one
+            faces[key] = (h[3 - miss], i)
+        else:
+            h.setdefault(miss, i)
+    return faces
+
+
 def box_corners(boxes: NDArray[np.int64]) -> NDArray[np.int64]:
     """``(8 k, 3)`` the corners of boxes ``(k, 6)`` (``lo, hi``)."""
     pick = np.array([[i, j, k] for i in (0, 3) for j in (1, 4) for k in (2, 5)])
     return boxes[:, pick].reshape(-1, 3)
+
+
+def rect_ring(key: tuple[int, ...]) -> NDArray[np.int64]:
+    """``(4, 3)`` the corners of a :func:`rect_pairs` rectangle, counter-clockwise seen from its front."""
+    ax, up, plane, a0, a1, b0, b1 = key
+    lo = np.zeros(3, np.int64)
+    lo[ax], lo[_OTHER[ax]] = plane, (a0, b0)
+    return rect_mesh(np.array([2 * ax + up]), lo[None], np.array([[a1 - a0, b1 - b0]]))[0]
 
 
 def rect_of(ring: NDArray[np.int64]) -> tuple[int, NDArray[np.int64], int, int] | None:

@@ -113,6 +113,8 @@ from walkstream.shared.codec.boxmesh import (
     group_rects,
     rect_mesh,
     rect_of,
+    rect_pairs,
+    rect_ring,
 )
 from walkstream.shared.codec.varint import (
     decode_varints,
@@ -400,6 +402,13 @@ def _encode_part(
         if merged is not None:
             polys.extend(merged)
             kept[members] = False
+    if boxes and kept.sum() >= 2:
+        # what could not merge (overlapping rectangles: a clipped window frame) may still
+        # pair into rectangles, which version 3 sends as five numbers or box faces
+        rest = np.flatnonzero(kept)
+        for rect_key, (i, j) in rect_pairs(q, t[rest]).items():
+            polys.append([rect_ring(rect_key)])
+            kept[rest[[i, j]]] = False
     kt = t[kept]
     used, first = np.unique(kt.reshape(-1), return_index=True)
     order = used[np.argsort(first)]  # vertices in the order they first appear
