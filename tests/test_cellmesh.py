@@ -387,3 +387,21 @@ def test_v3_bad_input_is_a_codec_error() -> None:
     bad(drop=("rect_counts",))  # rectangles without counts
     bad(drop=("boxes",))
     bad(format=CELLMESH_V2)  # /2 knows no boxes
+
+
+def test_v3_pairs_overlapping_rectangles_that_cannot_merge() -> None:
+    # a window frame's jamb and sill overlap in the frame's front plane: the union is
+    # smaller than the sum, so version 2 keeps the four triangles; version 3 sends two
+    # rectangles (their halves pair up), with the same surface
+    jamb = np.array([[0.0, 0, 0], [0.06, 0, 0], [0.06, 0, 1.5], [0.0, 0, 1.5]])
+    sill = np.array([[0.0, 0, 0], [1.4, 0, 0], [1.4, 0, 0.06], [0.0, 0, 0.06]])
+    pos = np.concatenate([jamb, sill])
+    tri = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    part = (9, 17, pos, tri)
+    body2 = msgpack.unpackb(encode_cell_mesh([part], compress="none", version=2)[1:], raw=False)
+    body3 = msgpack.unpackb(encode_cell_mesh([part], compress="none")[1:], raw=False)
+    assert body2["triangles"] == bytes([4]) and body3["triangles"] == bytes([0])
+    assert body3["rect_counts"] == bytes([2]) and body3["rect_kinds"] == bytes([2, 2])  # both face -y
+    got = decode_cell_mesh(encode_cell_mesh([part])).parts[0]
+    _same_surface(part, got, np.random.default_rng(8))
+    assert np.allclose(_signed_areas(pos, tri), _signed_areas(got.positions, got.indices), atol=1e-6)
