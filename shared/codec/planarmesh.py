@@ -654,19 +654,17 @@ def _decode_rects(
     if max(int(np.abs(rlo).max(initial=0)), int(np.abs(blo).max(initial=0))) >= _MAX_Q:
         raise CodecError(f"{what}: a rectangle or box beyond the grid's range")
     bk, bflo, bext = box_rects(np.column_stack([blo, b[:, 3:]]))
-    has = (bm[:, None] >> np.arange(6)) & 1 == 1  # (nb, 6) the faces each box has
+    has = ((bm[:, None] >> np.arange(6)) & 1) == 1  # (nb, 6) the faces each box has
     bk = (bk.reshape(nb, 6) ^ (bm[:, None] >> 6)).reshape(-1)  # bit 6: facing into the box
-    rfaces = rect_mesh(rk, rlo, r[:, 3:]).reshape(-1, 4, 3)
-    bfaces = rect_mesh(bk, bflo, bext).reshape(nb, 6, 4, 3)
-    # part by part: its rectangles, then its boxes' faces
-    rb = np.concatenate([[0], np.cumsum(rcount)])
-    bb = np.concatenate([[0], np.cumsum(bcount)])
-    faces = np.concatenate(
-        [np.concatenate([rfaces[rb[k] : rb[k + 1]], bfaces[bb[k] : bb[k + 1]][has[bb[k] : bb[k + 1]]]]) for k in range(n_parts)]
-        or [np.zeros((0, 4, 3), np.int64)]
-    )
-    per_box = np.concatenate([[0], np.cumsum(has.sum(axis=1))])
-    return faces, np.concatenate([[0], np.cumsum(rcount + per_box[bb[1:]] - per_box[bb[:-1]])])
+    kinds_all = np.concatenate([rk, bk.reshape(nb, 6)[has]])
+    lo_all = np.concatenate([rlo, bflo.reshape(nb, 6, 3)[has]])
+    ext_all = np.concatenate([r[:, 3:], bext.reshape(nb, 6, 2)[has]])
+    # part by part: its rectangles, then its boxes' faces (a stable sort keeps that order)
+    parts = np.arange(n_parts)
+    owner = np.concatenate([np.repeat(parts, rcount), np.repeat(np.repeat(parts, bcount), 6)[has.reshape(-1)]])
+    order = np.argsort(owner, kind="stable")
+    faces = rect_mesh(kinds_all[order], lo_all[order], ext_all[order])
+    return faces, np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n_parts))])
 
 
 def _per_part(rings: NDArray[np.int64], sizes: NDArray[np.int64], rcount: NDArray[np.int64]) -> NDArray[np.int64]:
