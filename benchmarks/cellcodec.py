@@ -1,13 +1,16 @@
-"""The cell-contents codec, version 1 against version 2 (a table of ``walkstream bench interiors``).
+"""The cell-contents codec, versions 1, 2 and 3 side by side (a table of ``walkstream bench interiors``).
 
-Per source, the same interior baked twice (``walkstream-cellmesh/1``: every triangle,
-16 bits over each cell's box; ``/2``: planar polygons on a 1 mm grid), for all cells and
-for the **start cells** (those the tour's first pose sees within the 40 m fog, through
-the portals in the frustum, as the RoomStreamer asks for them before the first perfect
-frame): bytes of the blobs each on its own, bytes of the blobs compressed jointly (each
-inflated to its ``N`` form, concatenated, the smaller of zlib 9 and lzma 6: what a batch
-response could send), triangles after decoding, the median client-CPU milliseconds to
-decode one cell, and the seconds the bake spent encoding.
+Per source, the same interior baked three times (``walkstream-cellmesh/1``: every
+triangle, 16 bits over each cell's box; ``/2``: planar polygons on a 1 mm grid; ``/3``,
+the default: ``/2`` with boxes and axis rectangles in their own fields), for all cells
+and for the **start cells** (those the tour's first pose sees within the 40 m fog,
+through the portals in the frustum, as the RoomStreamer asks for them before the first
+perfect frame): bytes of the blobs each on its own, bytes of the blobs compressed
+jointly (each inflated to its ``N`` form, concatenated, the smaller of zlib 9 and lzma
+6), bytes of the **gzip stream** ``POST .../rooms/contents`` sends for them (every part
+``{cell, etag, body}`` with the body inflated, gzip level 9, flushed after each part:
+what the link carries), triangles after decoding, the median client-CPU milliseconds
+to decode one cell, and the seconds the bake spent encoding.
 """
 
 from __future__ import annotations
@@ -27,7 +30,8 @@ from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
 from walkstream.server.store import SceneReader
 from walkstream.shared.camera import camera, perspective
-from walkstream.shared.codec.cellmesh import decode_cell_mesh
+from walkstream.shared.codec.cellbatch import pack_contents_part
+from walkstream.shared.codec.cellmesh import decode_cell_mesh, inflate_cell_mesh
 from walkstream.shared.errors import InputError
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.portals import PortalGraph, cull_portals
@@ -63,11 +67,25 @@ def _joint(blobs: Sequence[bytes]) -> int:
     return min(len(zlib.compress(raw, 9)), len(lzma.compress(raw, preset=6))) + 1
 
 
+def _batch_gzip(state: InteriorState, ids: Sequence[int]) -> int:
+    """Bytes of the gzip stream the contents batch sends for ``ids`` (as ``routers/rooms.py``
+    and ``service/http.py`` make it: inflated bodies, level 9, a sync flush after each part)."""
+    co = zlib.compressobj(9, zlib.DEFLATED, 31)
+    n = 0
+    for cid in ids:
+        enc = state.contents(cid)
+        part = pack_contents_part(cid, enc.etag, inflate_cell_mesh(enc.content, f"cell {cid}"))
+        n += len(co.compress(part)) + len(co.flush(zlib.Z_SYNC_FLUSH))
+    return n + len(co.flush())
+
+
 def codec_figures(db: Path, cells: Sequence[int] | None = None) -> dict[str, Any]:
-    """Bytes (separately, jointly), triangles and median decode ms of ``db``'s cells (all, or ``cells``)."""
+    """Bytes (separately, jointly, as the batch's gzip stream), triangles and median decode
+    ms of ``db``'s cells (all, or ``cells``)."""
     with SceneReader.open(db) as r:
         ids = list(r.contents_info()) if cells is None else list(cells)
         blobs = [r.contents(c) for c in ids]
+        gz = _batch_gzip(InteriorState(r, list(r.cells())), ids) if ids else 0
     tris = 0
     ms = []
     for b in blobs:
@@ -79,21 +97,25 @@ def codec_figures(db: Path, cells: Sequence[int] | None = None) -> dict[str, Any
         "cells": len(ids),
         "bytes": sum(len(b) for b in blobs),
         "joint": _joint(blobs) if blobs else 0,
+        "gzip": gz,
         "triangles": tris,
         "decode_ms": float(np.median(ms)) if ms else 0.0,
     }
 
 
-def codec_rows(source: Path, db_v2: Path, v2_encode_s: float, folder: Path) -> list[dict[str, Any]]:
-    """Bake ``source`` with version 1 beside ``db_v2`` (the default bake) and measure both."""
-    db_v1 = folder / f"{source.stem}.cellmesh1.db"
+def codec_rows(source: Path, db_v3: Path, v3_encode_s: float, folder: Path) -> list[dict[str, Any]]:
+    """Bake ``source`` with versions 1 and 2 beside ``db_v3`` (the default bake) and measure all three."""
     scene = read_source(source)
     if not isinstance(scene, InteriorScene):
         raise InputError(f"{source}: not an interior (IFC or a walkstream-interior file)")
-    summary = bake_interior(scene, source, db_v1, cellmesh_version=1)
-    start = start_cells(db_v2)
+    runs = []
+    for version in (1, 2):
+        db = folder / f"{source.stem}.cellmesh{version}.db"
+        summary = bake_interior(scene, source, db, cellmesh_version=version)
+        runs.append((version, db, float(summary.get("contents_encode_s", 0.0))))
+    start = start_cells(db_v3)
     rows = []
-    for version, db, enc in ((1, db_v1, float(summary.get("contents_encode_s", 0.0))), (2, db_v2, v2_encode_s)):
+    for version, db, enc in (*runs, (3, db_v3, v3_encode_s)):
         rows.append(
             {
                 "source": source.name,
@@ -109,20 +131,21 @@ def codec_rows(source: Path, db_v2: Path, v2_encode_s: float, folder: Path) -> l
 def codec_table(rows: Sequence[dict[str, Any]]) -> str:
     """The codec figures as a table (one row per source and version)."""
     head = (
-        f"{'source':<19}{'codec':>6}{'cells':>6}{'bytes':>9}{'joint':>9}{'tris':>8}{'dec ms':>8}"
-        f"{'start':>6}{'bytes':>8}{'joint':>8}{'tris':>7}{'encode s':>9}"
+        f"{'source':<19}{'codec':>6}{'cells':>6}{'bytes':>9}{'joint':>9}{'gzip':>9}{'tris':>8}{'dec ms':>8}"
+        f"{'start':>6}{'bytes':>8}{'joint':>8}{'gzip':>8}{'tris':>7}{'encode s':>9}"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
         a, s = r["all"], r["start"]
         lines.append(
             f"{r['source'][:18]:<19}{'/' + str(r['version']):>6}{a['cells']:>6}{a['bytes']:>9,}{a['joint']:>9,}"
-            f"{a['triangles']:>8,}{a['decode_ms']:>8.2f}{s['cells']:>6}{s['bytes']:>8,}{s['joint']:>8,}"
+            f"{a['gzip']:>9,}{a['triangles']:>8,}{a['decode_ms']:>8.2f}{s['cells']:>6}{s['bytes']:>8,}{s['joint']:>8,}{s['gzip']:>8,}"
             f"{s['triangles']:>7,}{r['encode_s']:>9.2f}"
         )
     lines.append(
-        "(cellmesh /1: 16 bits over each cell's box; /2: planar polygons on a 1 mm grid; joint = all the blobs' "
-        "N forms compressed together; start = the cells the tour's first pose sees within 40 m; "
+        "(cellmesh /1: 16 bits over each cell's box; /2: planar polygons on a 1 mm grid; /3: /2 with boxes and "
+        "axis rectangles; joint = all the blobs' N forms compressed together; gzip = the contents batch's gzip "
+        "stream (what the link carries); start = the cells the tour's first pose sees within 40 m; "
         "dec ms = median per cell, client CPU)"
     )
     return "\n".join(lines)

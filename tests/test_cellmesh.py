@@ -1,4 +1,4 @@
-"""The cell-contents codec (walkstream-cellmesh/1): round trips, its error bound, bounded decoding."""
+"""The cell-contents codec (walkstream-cellmesh/1, /2, /3): round trips, its error bound, bounded decoding."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from walkstream.shared.codec.cellmesh import (
     CELLMESH_FORMAT,
     CELLMESH_V1,
+    CELLMESH_V2,
     decode_cell_mesh,
     encode_cell_mesh,
     flat_normals,
@@ -240,9 +241,9 @@ def test_v2_random_soups_keep_their_surface(ps: list) -> None:
 
 def test_v2_bad_input_is_a_codec_error() -> None:
     pos, tri = _grid_wall(2, 2, hole=False)
-    blob = encode_cell_mesh([(1, 2, pos, tri), (3, 4, pos + 1.0, tri)], compress="none")
+    blob = encode_cell_mesh([(1, 2, pos, tri), (3, 4, pos + 1.0, tri)], compress="none", version=2)
     body = msgpack.unpackb(blob[1:], raw=False)
-    assert body["format"] == CELLMESH_FORMAT and body["regions"] == bytes([1, 1])
+    assert body["format"] == CELLMESH_V2 and body["regions"] == bytes([1, 1])
 
     def bad(**change: object) -> None:
         b = dict(body, **change)
@@ -262,6 +263,145 @@ def test_v2_bad_input_is_a_codec_error() -> None:
     bad(indices=b"\xff")
     bad(vertices="3")
     with pytest.raises(CodecError, match="version"):
-        encode_cell_mesh([(1, 2, pos, tri)], version=3)
+        encode_cell_mesh([(1, 2, pos, tri)], version=4)
     with pytest.raises(CodecError, match="beyond"):
         encode_cell_mesh([(1, 2, pos + 2e9, tri)])
+
+
+# ---- walkstream-cellmesh/3: boxes and axis rectangles in their own fields
+
+_BOX_FACES = np.array(  # a unit box's twelve triangles over its corners (bit 0: x, 1: y, 2: z), facing out
+    [[0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5], [0, 1, 5], [0, 5, 4],
+     [2, 6, 7], [2, 7, 3], [0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6]]
+)
+
+
+def _box(lo: np.ndarray, size: np.ndarray, drop: tuple[int, ...] = (), flip: bool = False) -> tuple:
+    """``(positions (8, 3), triangles)`` of an axis-aligned box, without the faces in ``drop``
+    (0..5: -x, +x, -y, +y, -z, +z) and wound inwards when ``flip``."""
+    bits = (np.arange(8)[:, None] >> np.arange(3)) & 1
+    pos = np.asarray(lo, np.float64) + bits * np.asarray(size, np.float64)
+    tri = np.concatenate([_BOX_FACES[2 * f : 2 * f + 2] for f in range(6) if f not in drop])
+    return pos, tri[:, ::-1] if flip else tri
+
+
+def _signed_areas(pos: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """``(6,)`` the area facing +x, +y, +z and -x, -y, -z: a face turned round changes it."""
+    c = np.asarray(pos, np.float64)[np.asarray(idx, np.int64)]
+    n = 0.5 * np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    return np.concatenate([np.clip(n, 0, None).sum(axis=0), np.clip(n, None, 0).sum(axis=0)])
+
+
+def test_v3_sends_a_box_as_six_numbers_and_keeps_its_faces_outwards() -> None:
+    rng = np.random.default_rng(6)
+    whole = _box([1.0, 2.0, 0.0], [1.2, 0.6, 0.75])
+    open_top = _box([3.0, 2.0, 0.0], [0.45, 0.45, 0.9], drop=(5,))  # clipped by a cell's ceiling
+    reveal = _box([5.0, 2.0, 0.0], [0.3, 0.3, 0.3], drop=(2, 3), flip=True)  # a window's opening
+    floor = _grid_wall(1, 1)  # one rectangle
+    ps = [(10, 4, *whole), (11, 4, *open_top), (12, 5, *reveal), (13, 6, *floor)]
+    blob = encode_cell_mesh(ps, compress="none")
+    body = msgpack.unpackb(blob[1:], raw=False)
+    assert body["format"] == CELLMESH_FORMAT
+    assert body["box_counts"] == bytes([1, 1, 1, 0]) and len(body["boxes"]) <= 3 * 12  # six varints a box
+    assert body["box_faces"] == bytes([63, 31, 64 | 0b110011])  # all; no +z; inwards, no y faces
+    assert body["rect_counts"] == bytes([0, 0, 0, 1]) and body["rect_kinds"] == bytes([2])  # facing -y
+    assert body["positions"] == b"" and body["indices"] == b""
+    cm = decode_cell_mesh(blob)
+    for before, after in zip(ps, cm.parts, strict=True):
+        _same_surface(before, after, rng)
+        assert np.allclose(_signed_areas(before[2], before[3]), _signed_areas(after.positions, after.indices), atol=1e-6)
+    # flat normals point out of the whole box (no vertex shared by two faces)
+    got = cm.parts[0]
+    centre = np.array([1.6, 2.3, 0.375])
+    tri_c = got.positions[got.indices.astype(np.int64)].mean(axis=1)
+    fn = got.mesh().normals[got.indices[:, 0]]
+    assert np.all(np.einsum("ij,ij->i", fn, tri_c - centre) > 0)
+    v2 = encode_cell_mesh(ps, compress="none", version=2)
+    assert len(blob) < 0.75 * len(v2)
+    # the older format still decodes to the same surface
+    for before, after in zip(ps, decode_cell_mesh(v2).parts, strict=True):
+        _same_surface(before, after, rng)
+
+
+def test_v3_keeps_a_wall_vertex_a_box_corner_uses() -> None:
+    # a desk against a wall cut in four: the wall's vertex (12, 5, 0) lies on its straight
+    # bottom edge, and the desk's corner is there too: dropping it would be a T-junction
+    wall_pos, wall_tri = _grid_wall(2, 2)
+    desk_pos, desk_tri = _box([12.0, 4.0, 0.0], [1.0, 1.0, 0.75])
+    pos = np.concatenate([wall_pos, desk_pos])
+    tri = np.concatenate([wall_tri, desk_tri + len(wall_pos)])
+    got = decode_cell_mesh(encode_cell_mesh([(1, 1, pos, tri)])).parts[0]
+    _same_surface((1, 1, pos, tri), got, np.random.default_rng(7))
+    p = got.positions.astype(np.float64)
+    assert np.all(np.isclose(p, [12.0, 5.0, 0.0]), axis=1).sum() >= 3  # the wall's ring and two desk faces
+    assert not np.any(np.all(np.isclose(p, [12.0, 5.0, 1.5]), axis=1))  # the wall's own middle: dropped
+
+
+@given(st.integers(0, 2**31 - 1), st.integers(1, 6))
+@settings(max_examples=25, deadline=None)
+def test_v3_random_box_furniture_keeps_its_surface(seed: int, n: int) -> None:
+    rng = np.random.default_rng(seed)
+    ps = []
+    for k in range(n):
+        lo = rng.integers(-5000, 5000, 3) * 0.001 + rng.choice([0.0, 100.0])
+        size = rng.integers(1, 2000, 3) * 0.001
+        drop = tuple(rng.choice(6, rng.integers(0, 3), replace=False).tolist())
+        pos, tri = _box(lo, size, drop, flip=bool(rng.integers(0, 4) == 0))
+        if rng.integers(0, 2):  # another diagonal, another vertex order
+            order = rng.permutation(8)
+            pos, tri = pos[order], np.argsort(order)[tri]
+        if rng.integers(0, 3) == 0:  # two boxes in one part, overlapping (a frame)
+            p2, t2 = _box(lo + np.floor(size / 0.002) * 0.001, size, ())  # on the grid: no rounding
+            pos, tri = np.concatenate([pos, p2]), np.concatenate([tri, t2 + 8])
+        ps.append((k, k % 3, pos, tri))
+    from walkstream.shared.codec.planarmesh import area_tolerance
+
+    for before, after in zip(ps, decode_cell_mesh(encode_cell_mesh(ps)).parts, strict=True):
+        _same_surface(before, after, rng)
+        turned = _signed_areas(before[2], before[3]) - _signed_areas(after.positions, after.indices)
+        assert np.abs(turned).max() <= area_tolerance(before[2], before[3])
+
+
+def test_v3_bad_input_is_a_codec_error() -> None:
+    ps = [(1, 2, *_box([0.0, 0, 0], [1.0, 1, 1])), (3, 4, *_box([2.0, 0, 0], [1.0, 1, 1], drop=(0,)))]
+    ps += [(5, 6, *_grid_wall(1, 1))]
+    blob = encode_cell_mesh(ps, compress="none")
+    body = msgpack.unpackb(blob[1:], raw=False)
+    assert body["box_counts"] == bytes([1, 1, 0]) and body["rect_counts"] == bytes([0, 0, 1])
+
+    def bad(drop: tuple[str, ...] = (), **change: object) -> None:
+        b = {k: v for k, v in dict(body, **change).items() if k not in drop}
+        with pytest.raises(CodecError) as exc:
+            decode_cell_mesh(b"N" + msgpack.packb(b, use_bin_type=True))
+        assert "\n" not in str(exc.value)
+
+    bad(rect_kinds=b"\x06")  # no such kind
+    bad(rect_kinds=b"")  # a kind short
+    bad(box_faces=b"\x3f\x40")  # a box of no faces
+    bad(box_faces=b"\x3f\x80")  # an unknown bit
+    bad(box_faces=b"\x3f")  # a box's faces missing
+    bad(rects=body["rects"][:-1])  # truncated
+    bad(boxes=body["boxes"][:-1] + b"\x00")  # a box of no size
+    bad(boxes=body["boxes"][:3] + bytes([0xFF] * 9 + [0x01]) + body["boxes"][4:])  # beyond the grid
+    bad(box_counts=bytes([2, 1, 0]))  # more boxes than sent
+    bad(drop=("rect_counts",))  # rectangles without counts
+    bad(drop=("boxes",))
+    bad(format=CELLMESH_V2)  # /2 knows no boxes
+
+
+def test_v3_pairs_overlapping_rectangles_that_cannot_merge() -> None:
+    # a window frame's jamb and sill overlap in the frame's front plane: the union is
+    # smaller than the sum, so version 2 keeps the four triangles; version 3 sends two
+    # rectangles (their halves pair up), with the same surface
+    jamb = np.array([[0.0, 0, 0], [0.06, 0, 0], [0.06, 0, 1.5], [0.0, 0, 1.5]])
+    sill = np.array([[0.0, 0, 0], [1.4, 0, 0], [1.4, 0, 0.06], [0.0, 0, 0.06]])
+    pos = np.concatenate([jamb, sill])
+    tri = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    part = (9, 17, pos, tri)
+    body2 = msgpack.unpackb(encode_cell_mesh([part], compress="none", version=2)[1:], raw=False)
+    body3 = msgpack.unpackb(encode_cell_mesh([part], compress="none")[1:], raw=False)
+    assert body2["triangles"] == bytes([4]) and body3["triangles"] == bytes([0])
+    assert body3["rect_counts"] == bytes([2]) and body3["rect_kinds"] == bytes([2, 2])  # both face -y
+    got = decode_cell_mesh(encode_cell_mesh([part])).parts[0]
+    _same_surface(part, got, np.random.default_rng(8))
+    assert np.allclose(_signed_areas(pos, tri), _signed_areas(got.positions, got.indices), atol=1e-6)

@@ -547,7 +547,7 @@ def add_bench_parser(sub: Any) -> None:
     bi.add_argument("--out", default="out/bench-interiors", help="folder for the generated files and databases")
     bi.add_argument("--json", action="store_true", help="print the figures as JSON")
     bi.add_argument("--no-codec", action="store_true",
-                    help="skip the cellmesh /1 against /2 table (it bakes each source a second time)")
+                    help="skip the cellmesh /1, /2, /3 table (it bakes each source twice more)")
     bi.set_defaults(func=cmd_bench_interiors)
 
     bp = besub.add_parser("portals", help="portal culling against frustum culling alone and drawing all (Table 1, tightness, cost)")

@@ -44,6 +44,7 @@ from walkstream.shared.arrays import F64
 from walkstream.shared.codec.cellmesh import (
     CELLMESH_FORMAT,
     CELLMESH_V1,
+    CELLMESH_V2,
     decode_cell_mesh,
     encode_cell_mesh,
     raw_bytes,
@@ -106,12 +107,12 @@ def bake_interior(
     progress: Callable[[int, int], None] | None = None,
     log: Callable[[str], None] | None = None,
     import_seconds: float = 0.0,
-    cellmesh_version: int = 2,
+    cellmesh_version: int = 3,
 ) -> dict[str, Any]:
     """Bake an interior into the scene database ``output`` (replaced atomically).
 
-    ``cellmesh_version`` picks the cell-contents codec (2, planar polygons on a 1 mm
-    grid; 1 only to compare, as ``walkstream bench interiors`` does).
+    ``cellmesh_version`` picks the cell-contents codec (3, planar polygons, boxes and
+    rectangles on a 1 mm grid; 2 and 1 only to compare, as ``walkstream bench interiors`` does).
 
     Returns
     -------
@@ -179,7 +180,7 @@ def bake_interior(
         "source_digest": file_digest(src),
         "source_format": scene.source_format,
         "reach": REACH,
-        "cellmesh": CELLMESH_FORMAT if cellmesh_version == 2 else CELLMESH_V1,
+        "cellmesh": {1: CELLMESH_V1, 2: CELLMESH_V2}.get(cellmesh_version, CELLMESH_FORMAT),
         "origin_z": scene.origin[2],
     }
     neighbours: dict[int, set[int]] = {c.id: set() for c in layout.cells}

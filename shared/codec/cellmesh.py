@@ -1,9 +1,9 @@
-"""The contents of an interior cell as one compact, immutable blob (``walkstream-cellmesh/2``, and /1).
+"""The contents of an interior cell as one compact, immutable blob (``walkstream-cellmesh/3``, /2 and /1).
 
-The bake writes version 2 (:data:`CELLMESH_FORMAT`, planar polygons on an absolute 1 mm
-grid: :mod:`~walkstream.shared.codec.planarmesh` says how and states its error bound,
-half a millimetre per coordinate plus float32 rounding); :func:`decode_cell_mesh`
-reads both, so a database baked before keeps working.  What follows describes
+The bake writes version 3 (:data:`CELLMESH_FORMAT`, planar polygons, boxes and axis
+rectangles on an absolute 1 mm grid: :mod:`~walkstream.shared.codec.planarmesh` says how
+and states its error bound, half a millimetre per coordinate plus float32 rounding);
+:func:`decode_cell_mesh` reads all three, so a database baked before keeps working.  What follows describes
 version 1 (:data:`CELLMESH_V1`), which :func:`encode_cell_mesh` still writes with
 ``version=1`` for comparison (``walkstream bench interiors``).  Both start with the
 same tag byte saying how the rest is compressed, so a batch can inflate stored blobs
@@ -78,6 +78,7 @@ from walkstream.shared.records import Mesh, readonly
 __all__ = [
     "CELLMESH_FORMAT",
     "CELLMESH_V1",
+    "CELLMESH_V2",
     "POSITION_BITS",
     "MAX_CELLMESH_BYTES",
     "CellPart",
@@ -90,8 +91,11 @@ __all__ = [
     "inflate_cell_mesh",
 ]
 
-CELLMESH_FORMAT = "walkstream-cellmesh/2"
-"""The format tag of the cell-contents blobs the bake writes (planar polygons, 1 mm grid)."""
+CELLMESH_FORMAT = "walkstream-cellmesh/3"
+"""The format tag of the cell-contents blobs the bake writes (planar polygons, boxes and
+rectangles on a 1 mm grid)."""
+CELLMESH_V2 = "walkstream-cellmesh/2"
+"""The second version's tag (planar polygons on a 1 mm grid, no boxes): still decoded."""
 CELLMESH_V1 = "walkstream-cellmesh/1"
 """The first version's tag (every triangle, 16 bits over the cell's box): still decoded."""
 POSITION_BITS = 16
@@ -254,7 +258,7 @@ def encode_cell_mesh(
     parts: Sequence[tuple[int, int, ArrayLike, ArrayLike]],
     *,
     compress: str = "best",
-    version: int = 2,
+    version: int = 3,
 ) -> bytes:
     """Encode a cell's parts.
 
@@ -266,9 +270,10 @@ def encode_cell_mesh(
     compress:
         ``"zlib"``, ``"lzma"``, ``"none"`` or ``"best"`` (the smallest of the three).
     version:
-        2 (:data:`CELLMESH_FORMAT`, planar polygons on a 1 mm grid,
-        :mod:`~walkstream.shared.codec.planarmesh`) or 1 (:data:`CELLMESH_V1`, every
-        triangle, 16 bits over the cell's box; kept for comparison and old databases).
+        3 (:data:`CELLMESH_FORMAT`, planar polygons, boxes and axis rectangles on a 1 mm
+        grid, :mod:`~walkstream.shared.codec.planarmesh`), 2 (:data:`CELLMESH_V2`, the
+        same without boxes and rectangles) or 1 (:data:`CELLMESH_V1`, every triangle, 16
+        bits over the cell's box); 2 and 1 kept for comparison and old databases.
 
     Returns
     -------
@@ -303,13 +308,13 @@ def encode_cell_mesh(
         raise CodecError(f"cell mesh: {len(elements)} parts, at most {_MAX_PARTS}")
     if compress not in ("best", "zlib", "lzma", "none"):
         raise CodecError(f"cell mesh: compress must be best, zlib, lzma or none, got {compress!r}")
-    if version == 2:
+    if version in (2, 3):
         from walkstream.shared.codec.planarmesh import encode_planar_body
 
         rows = list(zip(elements, materials, pos_list, idx_list, strict=True))
-        return _compress(msgpack.packb(encode_planar_body(rows), use_bin_type=True), compress)
+        return _compress(msgpack.packb(encode_planar_body(rows, version), use_bin_type=True), compress)
     if version != 1:
-        raise CodecError(f"cell mesh: version must be 1 or 2, got {version!r}")
+        raise CodecError(f"cell mesh: version must be 1, 2 or 3, got {version!r}")
     vcount = np.array([len(p) for p in pos_list], dtype=np.int64)
     tcount = np.array([len(t) for t in idx_list], dtype=np.int64)
     if int(vcount.sum()) > _MAX_VERTICES:
@@ -423,13 +428,13 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
     """
     packed = _decompress(bytes(blob), what)
     body = unpack_bounded(
-        packed, what, max_bytes=MAX_CELLMESH_BYTES, max_array_len=8, max_map_len=16,
+        packed, what, max_bytes=MAX_CELLMESH_BYTES, max_array_len=8, max_map_len=24,
         max_bin_len=MAX_CELLMESH_BYTES,
     )
-    if isinstance(body, dict) and body.get("format") == CELLMESH_FORMAT:
+    if isinstance(body, dict) and body.get("format") in (CELLMESH_FORMAT, CELLMESH_V2):
         return _decode_v2(body, what, len(blob))
     if not isinstance(body, dict) or body.get("format") != CELLMESH_V1:
-        raise CodecError(f"{what}: not a {CELLMESH_FORMAT} or {CELLMESH_V1} map")
+        raise CodecError(f"{what}: not a {CELLMESH_FORMAT}, {CELLMESH_V2} or {CELLMESH_V1} map")
     if set(body) - _KEYS:
         raise CodecError(f"{what}: unknown keys {sorted(set(body) - _KEYS)}")
     try:
@@ -480,7 +485,7 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
 
 
 def _decode_v2(body: dict[str, Any], what: str, nbytes: int) -> CellMesh:
-    """A version 2 map as a :class:`CellMesh` (its box measured from the decoded positions)."""
+    """A version 2 or 3 map as a :class:`CellMesh` (its box measured from the decoded positions)."""
     from walkstream.shared.codec.planarmesh import GRID, decode_planar_body
 
     parts = tuple(CellPart(e, m, p, t) for e, m, p, t in decode_planar_body(body, what))
