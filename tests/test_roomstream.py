@@ -90,7 +90,9 @@ def test_packed_topology_brings_the_first_perfect_frame_forward(office_db: Path,
     saved = (plain_bytes - packed["topology_bytes"]) * 8 / 56_000
     assert saved > 1.0
     assert packed["time_to_first_perfect_frame_s"] < plain["time_to_first_perfect_frame_s"] - 0.8 * saved
-    assert packed["perfect_frame_ratio"] >= plain["perfect_frame_ratio"]
+    # and no fewer perfect frames over the walk (not the ratio: that counts from each run's own
+    # first perfect frame, and an earlier one can be followed by a frame or two still waiting)
+    assert packed["perfect_frames"] >= plain["perfect_frames"]
 
 
 def _streamer(topo: Topology, config: RoomStreamConfig, budget: int = 64 << 20) -> RoomStreamer:
