@@ -30,8 +30,7 @@ from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
 from walkstream.server.store import SceneReader
 from walkstream.shared.camera import camera, perspective
-from walkstream.shared.codec.cellbatch import pack_contents_part
-from walkstream.shared.codec.cellmesh import decode_cell_mesh, inflate_cell_mesh
+from walkstream.shared.codec.cellmesh import decode_cell_mesh
 from walkstream.shared.errors import InputError
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.portals import PortalGraph, cull_portals
@@ -73,9 +72,7 @@ def _batch_gzip(state: InteriorState, ids: Sequence[int]) -> int:
     co = zlib.compressobj(9, zlib.DEFLATED, 31)
     n = 0
     for cid in ids:
-        enc = state.contents(cid)
-        part = pack_contents_part(cid, enc.etag, inflate_cell_mesh(enc.content, f"cell {cid}"))
-        n += len(co.compress(part)) + len(co.flush(zlib.Z_SYNC_FLUSH))
+        n += len(co.compress(state.contents_part(cid, inflate=True))) + len(co.flush(zlib.Z_SYNC_FLUSH))
     return n + len(co.flush())
 
 
