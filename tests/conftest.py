@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
+from teamdata import team_data
 
 pytest_plugins = ["ci_skips"]
 
@@ -41,16 +42,11 @@ def gl(gl_ctx: moderngl.Context) -> Iterator[moderngl.Context]:
 # --------------------------------------------------------------------------- interiors
 # Baked once per session: Interiors I's tests and the portal culling tests share them.
 
-_INDOOR = Path(__file__).resolve().parents[2] / "shared" / "data" / "indoor"
-
-
 def _baked_ifc(tmp_path_factory: pytest.TempPathFactory, name: str) -> tuple[Path, dict[str, Any]]:
     pytest.importorskip("ifcopenshell", reason="the ifc extra (make test installs it)")
     from walkstream.server.bake import bake
 
-    src = _INDOOR / name
-    if not src.exists():
-        pytest.skip(f"no {src} (the shared test data)")
+    src = team_data("indoor", name)
     out = tmp_path_factory.mktemp(src.stem) / f"{src.stem}.db"
     return out, bake(src, out)
 

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 import pytest
+from teamdata import team_data
 
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson, load_geojson_dict
@@ -25,8 +25,6 @@ from walkstream.shared.lsystem.batch import derive_batch
 from walkstream.shared.lsystem.derive import derive
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.records import BuildingParams, Mesh
-
-VIENNA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "vienna" / "blocks.geojson"
 
 
 def assert_same(single: Sequence[Mesh], batch: Sequence[Mesh]) -> None:
@@ -50,9 +48,7 @@ def city() -> list[BuildingParams]:
 
 @pytest.fixture(scope="module")
 def vienna() -> list[BuildingParams]:
-    if not VIENNA.exists():
-        pytest.skip(f"Vienna sample data not found at {VIENNA}")
-    return list(load_geojson(VIENNA).buildings)
+    return list(load_geojson(team_data("vienna", "blocks.geojson")).buildings)
 
 
 @pytest.mark.parametrize("lod", [0, 1, 2])

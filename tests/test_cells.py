@@ -5,11 +5,11 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 import pytest
 import shapely
+from teamdata import team_data
 
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.gridcells import grid_cells
@@ -21,9 +21,6 @@ from walkstream.server.sources.geojson import load_geojson, load_geojson_dict
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError
 from walkstream.shared.records import BuildingParams, StreetParams
-
-VIENNA = Path(__file__).resolve().parents[2] / "shared" / "data" / "vienna" / "blocks.geojson"
-
 
 # --------------------------------------------------------------------------- helpers
 
@@ -284,9 +281,8 @@ def test_grid_min_free_and_default_bbox(two_buildings: SourceScene) -> None:
         grid_cells(scene_of())
 
 
-@pytest.mark.skipif(not VIENNA.exists(), reason="Vienna sample data not present")
 def test_vienna_grid_in_a_2km_bbox() -> None:
-    scene = load_geojson(VIENNA)
+    scene = load_geojson(team_data("vienna", "blocks.geojson"))
     assert not scene.streets
     t0 = time.perf_counter()
     cells = make_cells(scene, bbox=(-1000, -1000, 1000, 1000))

@@ -10,15 +10,13 @@ from typing import Any
 
 import numpy as np
 import pytest
+from teamdata import team_data
 
 from walkstream.server.sources.geojson import load_geojson, load_geojson_dict
 from walkstream.server.sources.heights import default_floors, parse_length
 from walkstream.server.sources.scene import FeatureIssue, SourceScene
 from walkstream.shared.errors import InputError, SourceError
 
-VIENNA = (
-    Path(__file__).resolve().parents[1].parent / "shared" / "data" / "vienna" / "blocks.geojson"
-)
 UTM33 = "EPSG:32633"
 
 
@@ -465,10 +463,10 @@ def test_load_from_file_names_the_scene(tmp_path: Path) -> None:
 # ------------------------------------------------------------------------- Vienna
 
 
-@pytest.mark.skipif(not VIENNA.exists(), reason=f"Vienna sample data not found at {VIENNA}")
 def test_vienna_blocks() -> None:
+    vienna = team_data("vienna", "blocks.geojson")
     t0 = time.perf_counter()
-    scene = load_geojson(VIENNA)
+    scene = load_geojson(vienna)
     elapsed = time.perf_counter() - t0
     assert elapsed < 10.0, f"loading took {elapsed:.1f} s"
     assert scene.name == "blocks" and scene.crs == UTM33

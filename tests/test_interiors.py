@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import shapely
 from ifcmodels import IfcBuilder, l_room_model, stair_model, stairwell_model, two_rooms_model
+from teamdata import TEAM_DATA, team_data
 
 from walkstream.cli import main
 from walkstream.server.bake import bake
@@ -39,17 +40,14 @@ from walkstream.shared.codec.cellmesh import decode_cell_mesh
 from walkstream.shared.errors import InputError, RouteError, SourceError
 from walkstream.shared.paths import RecordedPath
 
-INDOOR = Path(__file__).resolve().parents[2] / "shared" / "data" / "indoor"
-DUPLEX = INDOOR / "duplex.ifc"
-FZK = INDOOR / "AC20-FZK-Haus.ifc"
+DUPLEX = TEAM_DATA / "indoor" / "duplex.ifc"
+FZK = TEAM_DATA / "indoor" / "AC20-FZK-Haus.ifc"
 
 pytest.importorskip("ifcopenshell", reason="the ifc extra (make test installs it)")
 
 
 def _real(path: Path) -> Path:
-    if not path.exists():
-        pytest.skip(f"no {path} (the shared test data)")
-    return path
+    return team_data(*path.relative_to(TEAM_DATA).parts)
 
 
 def _locator(reader: SceneReader) -> CellLocator:

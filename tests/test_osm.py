@@ -17,6 +17,7 @@ import pytest
 import shapely
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from teamdata import team_data
 
 from walkstream.cli import main
 from walkstream.server.bake.navgraph import CellGraph
@@ -33,7 +34,6 @@ from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError, RouteError, SourceError, WalkstreamError
 from walkstream.shared.records import BuildingParams, StreetParams
 
-OSM = Path(__file__).resolve().parents[2] / "shared" / "data" / "osm"
 UTM = "EPSG:32633"
 #: Snap-rounding grid (metres) of the checks' overlays: robust where float overlay is not.
 GRID = 1e-6
@@ -464,13 +464,13 @@ def test_bad_sources_are_one_line_errors(tmp_path: Path, capsys: pytest.CaptureF
 
 
 def test_the_three_extracts() -> None:
-    kv = load_osm(OSM / "kouvola.osm.pbf")
+    kv = load_osm(team_data("osm", "kouvola.osm.pbf"))
     assert 2100 < len(kv.buildings) <= 2219
     assert any("highway ways cut" in n for n in kv.notes)
     assert sum(i.feature_id.startswith("way/") and i.action == "skipped" for i in kv.issues) >= 40
-    village = load_osm(OSM / "village-10.068_48.135.osm")
+    village = load_osm(team_data("osm", "village-10.068_48.135.osm"))
     assert any(i.feature_id == "relation/318560" for i in village.issues)
-    oak = load_osm(OSM / "west-oakland.osm")
+    oak = load_osm(team_data("osm", "west-oakland.osm"))
     assert len(oak.buildings) == 23 and oak.crs == "EPSG:32610"
     cells = street_cells(oak)
     assert_cells_ok(cells, oak)
@@ -522,7 +522,7 @@ def test_locate_record_and_replay_over_http_on_a_real_network(tmp_path: Path) ->
     from walkstream.server.store import SceneReader
 
     db = tmp_path / "village.db"
-    src = OSM / "village-10.068_48.135.osm"
+    src = team_data("osm", "village-10.068_48.135.osm")
     assert main(["bake", str(src), "-o", str(db), "--resolution", "16", "--cell-size", "30"]) == 0
     with SceneReader.open(db) as r:
         infos = list(r.cells())
@@ -562,9 +562,7 @@ def test_locate_record_and_replay_over_http_on_a_real_network(tmp_path: Path) ->
 
 
 def test_the_build_commands_read_openstreetmap_too(capsys: pytest.CaptureFixture[str]) -> None:
-    village = OSM / "village-10.068_48.135.osm"
-    if not village.is_file():
-        pytest.skip(f"{village} is missing (the team's ../shared/data)")
+    village = team_data("osm", "village-10.068_48.135.osm")
     # buildings stats (and bench rebuild, bench visibility) take any city source the bake reads
     assert main(["buildings", "stats", str(village), "--json"]) == 0
     stats = json.loads(capsys.readouterr().out)

@@ -14,6 +14,7 @@ import pyproj
 import pytest
 import shapely
 from scenes import PATH_NAME, build_city_db
+from teamdata import team_data
 
 import walkstream.server.store.edit
 from walkstream.cmd_path import add_path_parser
@@ -36,8 +37,6 @@ from walkstream.shared.errors import (
     WalkstreamError,
 )
 from walkstream.shared.paths import RecordedPath
-
-VIENNA = Path(__file__).resolve().parents[2] / "shared" / "data" / "vienna"
 
 
 @lru_cache(maxsize=4)
@@ -474,13 +473,12 @@ def test_import_path_into_a_scene(db: Path, tmp_path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def vienna_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[ViewCell]]:
-    if not (VIENNA / "blocks.geojson").exists():
-        pytest.skip(f"no Vienna data at {VIENNA}")
+    blocks = team_data("vienna", "blocks.geojson")
     from walkstream.server.sources.clip import clip_scene
     from walkstream.server.sources.geojson import load_geojson
 
     bbox = (-800.0, -900.0, 600.0, 1100.0)  # the part of the city the walk goes through
-    scene = clip_scene(load_geojson(VIENNA / "blocks.geojson"), bbox)
+    scene = clip_scene(load_geojson(blocks), bbox)
     cells = make_cells(scene, "grid", bbox=bbox)
     path = tmp_path_factory.mktemp("vienna") / "vienna.db"
     with SceneWriter.create(
@@ -510,7 +508,7 @@ def test_vienna_walk_imports_into_the_baked_part_of_vienna(
 ) -> None:
     db, cells = vienna_db
     assert set(paths_in(db)) == {"SE", "SM", "drive"}
-    walk = VIENNA / "walk.geojson"
+    walk = team_data("vienna", "walk.geojson")
     path, _, inside = import_path(db, "vienna", walk, 5.0)
     assert path.length_m() == pytest.approx(5535.0, abs=25.0)  # "a 5.5 km walk"
     assert 0.8 * path.length_m() < inside <= path.length_m()

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pytest
+from teamdata import team_data
 
 from walkstream.benchmarks.visibility import (
     TODAY,
@@ -140,9 +141,7 @@ def test_a_database_is_read_alone_and_its_pvs_scored(tmp_path: Path, gl_ctx: mod
 
 
 def test_an_openstreetmap_extract_is_read_as_a_source(gl_ctx: moderngl.Context) -> None:
-    osm = Path(__file__).resolve().parents[2] / "shared" / "data" / "osm" / "village-10.068_48.135.osm"
-    if not osm.is_file():
-        pytest.skip(f"{osm} is missing (the team's ../shared/data)")
+    osm = team_data("osm", "village-10.068_48.135.osm")
     got = load_bench_input(osm)
     # street cells of the real network, not quads only, and an 800 m view distance
     assert got.cells and got.baked is None and got.view_distance == 800.0
