@@ -12,7 +12,19 @@ Each module is one benchmark that ``walkstream bench ...`` runs and prints as a 
 - :mod:`.controller`: the budget controller alone on the device cost models;
 - :mod:`.lod`: image error against frame time, ACH against distance LODs;
 - :mod:`.fill`: where the gl device's frame time goes, lighting per fragment vs per vertex;
-- :mod:`.city`: OpenStreetMap extracts, street cells against grid cells.
+- :mod:`.city`: OpenStreetMap extracts, street cells against grid cells;
+- :mod:`.interiors`: interiors per IFC model and generated size (cells, portals,
+  triangles, bake time, bytes per cell);
+- :mod:`.portals`: portal culling against frustum culling alone and drawing everything,
+  culling cost in open halls, the office tour's replays.
+
+Helpers of those, not commands of their own:
+
+- :mod:`.visref`: the dense reference of :mod:`.visibility`, kept on disk between runs;
+- :mod:`.cellcodec`: the cell-contents codec's versions side by side (a table of
+  ``walkstream bench interiors``);
+- :mod:`.portalwalk`: the first portal walk, the reference that :mod:`.portals` times
+  and tests/test_portalwalk.py checks the faster walk against.
 
 A new benchmark is a module here with a ``run_...`` function and a ``format_...``
 table, and a subcommand in :mod:`walkstream.cmd_bench`.  The ``run_...`` functions are

@@ -24,7 +24,8 @@ culling microseconds and the pda model's frame rate at the triangles drawn.
 Culling cost at scale: an open hall of ``k x k`` cells of 4 m (every wall between two
 cells an open portal) looked across from a corner, so that about a hundred cells are
 visible: cells-to-cells microseconds per frame against the visible cells, for the walk
-and, timed alternately with it, round one's walk (``before``); the tour's portal
+and, timed alternately with it, the reference walk of
+:mod:`~walkstream.benchmarks.portalwalk` (``before``); the tour's portal
 culling is timed both ways too (``cull us`` and ``before``, cells and parts).
 """
 
@@ -266,7 +267,7 @@ def hall_topology(k: int, cell_m: float = 4.0, height: float = 3.0) -> Topology:
 def hall_figures(sizes: Sequence[int] = (4, 8, 12, 16, 24), repeats: int = 100,
                  size: tuple[int, int] = (640, 480)) -> list[dict[str, Any]]:
     """Cells-to-cells culling microseconds in open halls looked across from a corner:
-    the walk (``us_*``) and round one's (``before_us_*``, :mod:`~walkstream.benchmarks.portalwalk`)
+    the walk (``us_*``) and the reference walk's (``before_us_*``, :mod:`~walkstream.benchmarks.portalwalk`)
     timed alternately, frame by frame, so that both see the same load."""
     proj = perspective(60.0, size[0] / size[1], 0.1, 1000.0).astype(np.float64)
     rows = []
@@ -285,7 +286,7 @@ def hall_figures(sizes: Sequence[int] = (4, 8, 12, 16, 24), repeats: int = 100,
             before.append((time.perf_counter() - t1) * 1e6)
             us.append((t1 - t0) * 1e6)
             if ref.order != pc.order or ref.vsas != pc.vsas:
-                raise WalkstreamError(f"hall {k}x{k}: the walk and round one's disagree")
+                raise WalkstreamError(f"hall {k}x{k}: the walk and the reference walk disagree")
         assert pc is not None
         rows.append({"hall": f"{k}x{k}", "cells": k * k, "visible": len(pc.order), "tested": pc.tested,
                      "us_median": float(np.median(us)), "us_p95": float(np.percentile(us, 95)),
@@ -294,7 +295,7 @@ def hall_figures(sizes: Sequence[int] = (4, 8, 12, 16, 24), repeats: int = 100,
 
 
 def _before(r: dict[str, Any]) -> str:
-    """Round one's culling microseconds (median) beside the walk's, portal culling only."""
+    """The reference walk's culling microseconds (median) beside the walk's, portal culling only."""
     b = r.get("cull_before_us", {}).get("median", 0.0)
     return f"{b:,.0f}" if b else "-"
 
@@ -333,7 +334,7 @@ def portals_tables(scenes: Sequence[dict[str, Any]], halls: Sequence[dict[str, A
                 f"  {r['cells']} cells  {r['cell_triangles']:>6,} ({r['paper_triangles']:,})  drawn {r['drawn']:>6,}"
                 f"  {r['cull_us']:>6,.0f} us  {r['pda_fps']:>5.1f} fps ({r['paper_fps']})"
             )
-    out.append("open hall, cells-to-cells culling (median of the frames; before = round one's walk, timed alternately):")
+    out.append("open hall, cells-to-cells culling (median of the frames; before = the reference walk, timed alternately):")
     out.append(f"  {'hall':>6} {'cells':>5} {'visible':>7} {'tests':>6} {'before us':>10} {'us':>7} {'speed-up':>8}"
                f" {'before p95':>10} {'p95':>7}")
     for h in halls:

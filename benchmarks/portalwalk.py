@@ -1,4 +1,4 @@
-"""The round-one portal walk, kept as the reference the faster walk is checked against.
+"""The first portal walk, kept as the reference the faster walk is checked against.
 
 :func:`cull_portals_reference` is :func:`~walkstream.shared.portals.cull_portals`
 as merged for issue 14 (a FIFO walk over Python ints, the portals projected in lazy
@@ -49,7 +49,7 @@ def cull_portals_reference(
     max_vsas: int = 4,
     naive: bool = False,
 ) -> PortalCull:
-    """Round one's walk: the parameters and result of
+    """The reference walk: the parameters and result of
     :func:`~walkstream.shared.portals.cull_portals` (see there), kept unchanged."""
     t0 = time.perf_counter()
     if start not in graph.index:
@@ -171,7 +171,7 @@ def rects_reference(
     clip_m: float,
     naive: bool = False,
 ) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-    """Round one's ``_rects``: whole-pixel rectangles of point sets clipped at depth ``clip_m``.
+    """The reference walk's ``_rects``: whole-pixel rectangles of point sets clipped at depth ``clip_m``.
 
     ``pts`` ``(m, k, 3)`` world points, ``edges`` ``(e, 2)`` the index pairs joining
     them (the polygon's sides or a box's edges).  Returns ``(m, 4)`` inclusive pixel

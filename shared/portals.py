@@ -41,7 +41,7 @@ show that the conservative test catches it.
 Cost: a portal's rectangle depends on the camera only, so every directed portal of the
 building is clipped and projected in one numpy batch per frame; the walk is then a FIFO
 walk over plain ints (per-scene adjacency lists built once, in :class:`PortalGraph`),
-about 4-6 us per visible cell on the 2-core machine.  It is round one's walk step for
+about 4-6 us per visible cell on the 2-core machine.  It is the reference walk step for
 step (:mod:`walkstream.benchmarks.portalwalk` keeps that one; tests/test_portalwalk.py checks they agree):
 a walk by levels with numpy batches per level was not taken, since the FIFO order
 decides the VSA lists (which VSAs reach a cell before it is looked through) and a

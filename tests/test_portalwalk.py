@@ -1,11 +1,11 @@
-"""The faster portal walk (shared/portals.py) against round one's (benchmarks/portalwalk.py).
+"""The faster portal walk (shared/portals.py) against the reference walk (benchmarks/portalwalk.py).
 
 The walk was made faster without changing what it culls: on random poses in the
 generated office (anywhere in a cell, and on and beside its portals' planes, where the
-clipping and the pass-through take over) and in open halls large enough for round
-one's lazy projection waves, both walks must give the same render queue, the same VSAs
+clipping and the pass-through take over) and in open halls large enough for the
+reference walk's lazy projection waves, both walks must give the same render queue, the same VSAs
 per cell in the same order, the same depths and counts, and so the same parts drawn;
-the portal and box rectangles must be the same as round one's to the pixel.
+the portal and box rectangles must be the same as the reference walk's to the pixel.
 """
 
 from __future__ import annotations
@@ -145,7 +145,7 @@ def test_rectangles_match_round_ones_to_the_pixel(office: dict[str, Any]) -> Non
 
 @pytest.mark.parametrize("k", [6, 24])
 def test_walk_keeps_round_ones_cells_in_open_halls(k: int) -> None:
-    """24 x 24 has 2,208 directed portals: round one projected those a wave at a time."""
+    """24 x 24 has 2,208 directed portals: the reference walk projects those a wave at a time."""
     graph = PortalGraph.from_topology(hall_topology(k))
     proj = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 1000.0).astype(np.float64)
     rng = np.random.default_rng(k)

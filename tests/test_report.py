@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from walkstream.client.report import (
+    BASE_PLOT_NAMES,
     PLOT_NAMES,
     SERIES_COLOURS,
     format_comparison_table,
@@ -202,7 +203,7 @@ def written(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
 def test_report_files_exist(written: dict[str, Any]) -> None:
     out: Path = written["out"]
     assert written["index"] == out / "index.html"
-    for name in ("report.json", "frames.csv", "bytes.csv", "index.html", *PLOT_NAMES):
+    for name in ("report.json", "frames.csv", "bytes.csv", "index.html", *BASE_PLOT_NAMES):
         assert (out / name).is_file(), name
         assert (out / name).stat().st_size > 0
     assert not list(out.glob(".*.tmp"))
@@ -232,7 +233,7 @@ def test_frames_csv_round_trips(written: dict[str, Any]) -> None:
 
 def test_pngs_are_images_with_data_drawn(written: dict[str, Any]) -> None:
     out: Path = written["out"]
-    for name in PLOT_NAMES:
+    for name in BASE_PLOT_NAMES:
         img = png_pixels(out / name)
         assert img.ndim == 3 and img.shape[0] > 200 and img.shape[1] > 400, name
         assert np.ptp(img[..., :3]) > 0.5, f"{name} is one colour"
@@ -247,7 +248,7 @@ def test_pngs_are_images_with_data_drawn(written: dict[str, Any]) -> None:
 def test_html_references_every_plot_and_snapshot_and_they_exist(written: dict[str, Any]) -> None:
     out: Path = written["out"]
     refs = html_refs(written["index"])
-    for name in (*PLOT_NAMES, "report.json", "frames.csv"):
+    for name in (*BASE_PLOT_NAMES, "report.json", "frames.csv"):
         assert name in refs, name
     for ref in refs:
         assert not ref.startswith("/") and "://" not in ref, f"not relative: {ref}"
@@ -282,7 +283,7 @@ def test_writing_over_a_report_replaces_files_atomically(tmp_path: Path) -> None
 def test_empty_log_and_no_bytes_log_still_give_a_report(tmp_path: Path) -> None:
     s = summarise(FrameLog.empty(), fps_target=25.0, fps_cap=25.0, bytes_received=0)
     index = write_report(tmp_path, s, FrameLog.empty(), None, title="empty")
-    for name in PLOT_NAMES:
+    for name in BASE_PLOT_NAMES:
         png_pixels(tmp_path / name)
     data = json.loads((tmp_path / "report.json").read_text())
     assert data["frames"] == 0 and data["fps_mean"] is None
@@ -381,3 +382,18 @@ def test_comparison_rejects_bad_runs(tmp_path: Path) -> None:
         write_comparison(tmp_path, [("a", s, log)], "x")  # type: ignore[list-item]
     with pytest.raises(InputError, match="unknown run labels"):
         write_comparison(tmp_path, [("a", s, log, b)], "x", reports={"b": tmp_path})
+
+
+def test_plot_names_hold_every_plot_a_report_writes(tmp_path: Path) -> None:
+    """With phases and an interior walk's series the optional plots come too, all named."""
+    from walkstream.client.draw.phases import PHASES
+
+    s, log, b = run_parts(60)
+    n = len(log.t)
+    rng = np.random.default_rng(0)
+    interior = {k: rng.random(n) for k in ("cells", "portals", "triangles", "cull_ms", "fog_m")}
+    write_report(tmp_path, s, log, b, title="all", phases=rng.random((n, len(PHASES))) / 100, interior=interior)
+    written = {p.name for p in tmp_path.glob("*.png")}
+    assert written <= set(PLOT_NAMES), written - set(PLOT_NAMES)
+    assert {*BASE_PLOT_NAMES, "phases.png", "interior.png"} <= written
+    assert PLOT_NAMES[: len(BASE_PLOT_NAMES)] == BASE_PLOT_NAMES and "error.png" in PLOT_NAMES

@@ -1,4 +1,4 @@
-"""Interior streaming, round two: the packed topology, the flush policy, prefetch in the
+"""Interior streaming: the packed topology, the flush policy, prefetch in the
 order the predicted motion needs the cells.
 
 One small generated office (two storeys), shared with test_portals.py (``office_db``).

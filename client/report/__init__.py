@@ -11,6 +11,10 @@ its :class:`~walkstream.client.report.metrics.FrameLog` and the link's bytes log
     fps.png       displayed frame rate over time, target and +-10 % band, floor-limited
                   frames marked, the uncounted first second shaded
     budget.png    polygon budget and triangles drawn over time
+    phases.png    the frame loop's milliseconds per phase (with ``phases.csv``), when timed
+    interior.png  an interior walk: visible cells, portals, triangles, culling ms, fog
+    error.png     the image error against the ground truth (with ``truth.csv`` and the
+                  worst compared frame under ``truth/``), with ``--truth-every``
     index.html    a self-contained page: headline table, every plot and snapshot
                   (relative links), the summary JSON
 
@@ -25,8 +29,10 @@ The modules: :mod:`.metrics` (the per-frame log and every figure computed from i
 the one definition of frame rate, perfect frame and recovery), :mod:`.files`
 (``report.json`` and the CSVs, written atomically), :mod:`.tables` (headline figures
 as text), :mod:`.plots` (one function per figure), :mod:`.html` (the folder and its
-index page).  A new plot is a function in :mod:`.plots` and a name in
-:data:`PLOT_NAMES`.
+index page), :mod:`.phases` (``phases.csv`` and ``phases.png``), :mod:`.truth` (the
+``truth`` figures).  A new plot is a function in :mod:`.plots`, a name in
+:data:`PLOT_NAMES` (and in :data:`BASE_PLOT_NAMES` when every report holds it) and a
+caption in :mod:`.html`.
 """
 
 from walkstream.client.report.files import (
@@ -51,7 +57,7 @@ from walkstream.client.report.metrics import (
     within_ratio,
     within_target_mask,
 )
-from walkstream.client.report.plots import PLOT_NAMES, SERIES_COLOURS
+from walkstream.client.report.plots import BASE_PLOT_NAMES, PLOT_NAMES, SERIES_COLOURS
 from walkstream.client.report.tables import format_comparison_table, format_headline, headline_rows
 
 __all__ = [
@@ -74,6 +80,7 @@ __all__ = [
     "write_bytes_csv",
     "read_bytes_csv",
     "load_run",
+    "BASE_PLOT_NAMES",
     "PLOT_NAMES",
     "SERIES_COLOURS",
     "headline_rows",

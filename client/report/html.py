@@ -30,7 +30,7 @@ from walkstream.client.report.files import (
 )
 from walkstream.client.report.phases import plot_phases, write_phases_csv
 from walkstream.client.report.plots import (
-    PLOT_NAMES,
+    BASE_PLOT_NAMES,
     _make_run,
     _plot_budget,
     _plot_bytes,
@@ -305,7 +305,7 @@ def write_report(
     _plot_quality(out / "quality.png", [run], f"{title}: download and rewrite quality per frame")
     _plot_fps(out / "fps.png", [run], f"{title}: frame rate")
     _plot_budget(out / "budget.png", [run], f"{title}: polygon budget")
-    names = list(PLOT_NAMES)
+    names = list(BASE_PLOT_NAMES)
     if phases is not None and len(phases) == len(log.t):
         write_phases_csv(out / "phases.csv", log.t, phases)
         plot_phases(

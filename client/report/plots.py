@@ -1,4 +1,5 @@
-"""The report's figures, one function per PNG: bytes, quality, frame rate, budget over time.
+"""The report's figures, one function per PNG: bytes, quality, frame rate, budget over time,
+an interior walk's cells and fog, the image error against the truth.
 
 Long logs are drawn through a min/max envelope of at most a few thousand points per
 line, so 15,000 frames plot as fast as 1,500 and spikes still show.
@@ -26,10 +27,15 @@ if TYPE_CHECKING:
 from walkstream.client.report.files import BytesLog, _atomic, _bytes_arrays
 from walkstream.shared.arrays import F64
 
-__all__ = ["PLOT_NAMES", "SERIES_COLOURS", "plot_interior"]
+__all__ = ["BASE_PLOT_NAMES", "PLOT_NAMES", "SERIES_COLOURS", "plot_interior"]
 
-#: The plots of one report, in page order.
-PLOT_NAMES: tuple[str, ...] = ("bytes.png", "quality.png", "fps.png", "budget.png")
+#: The plots every report holds, in page order.
+BASE_PLOT_NAMES: tuple[str, ...] = ("bytes.png", "quality.png", "fps.png", "budget.png")
+
+#: Every plot a report can hold, in page order: the base plots, then ``phases.png``
+#: (when the replay timed its phases), ``interior.png`` (an interior walk) and
+#: ``error.png`` (frames compared with the ground truth).
+PLOT_NAMES: tuple[str, ...] = (*BASE_PLOT_NAMES, "phases.png", "interior.png", "error.png")
 
 #: Line colours for runs and series (Okabe-Ito, readable for colour-blind readers).
 #: ``shared.palette`` holds material colours only, which are meant for buildings.

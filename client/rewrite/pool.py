@@ -68,7 +68,7 @@ def auto_mode(workers: int) -> str:
     """``process`` when this machine has a core for every worker besides two for the frame
     loop and the GL driver, else ``thread``.
 
-    Measured on 2 cores with llvmpipe (README, issue 15): worker processes compete with the
+    Measured on 2 cores with llvmpipe (docs/benchmarks.md): worker processes compete with the
     loop and the rasteriser for the cores, and their start-up delays the first perfect
     frame, while threads cost the loop little there; with a spare core a worker process
     leaves the loop's time per pass as it is alone, and threads do not.

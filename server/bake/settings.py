@@ -19,7 +19,7 @@ __all__ = ["DEFAULT_RESOLUTION", "DEFAULT_OCCLUDER_LOD", "DEFAULT_SAMPLING", "Ba
 #: the first default, 64 px at the 8 box corners, missed single buildings covering
 #: 0.1 % of a cell's reference pixels; the outline at 128 px left a street seen
 #: edge-on 60 m away (0.037 %) that the outline, the inside and both eye heights of
-#: ``"region"`` catch at the same number of points; see the README's tables)
+#: ``"region"`` catch at the same number of points; see docs/benchmarks.md)
 DEFAULT_RESOLUTION = 128
 DEFAULT_OCCLUDER_LOD = 0
 DEFAULT_SAMPLING = "region"

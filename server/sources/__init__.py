@@ -1,11 +1,17 @@
 """Scene sources: what the bake reads, made into buildings and street pieces in local metres.
 
-:mod:`.geojson` (footprints and streets, with :mod:`.features`, :mod:`.rings`,
-:mod:`.heights`, :mod:`.partywalls`), :mod:`.citygen` (generated cities),
-:mod:`.crs` (coordinate systems, the one lon/lat check), :mod:`.jsonfile`,
-:mod:`.geojsonlines` (a walk recorded as a line), :mod:`.clip` (``--bbox``);
-:mod:`.scene` is what every source hands to the bake.  A new source (an
-OpenStreetMap reader) is a module here returning a :class:`SourceScene`.
+:mod:`.read` picks the reader by the file's ending (one table).  Cities:
+:mod:`.geojson` and :mod:`.osm` (OpenStreetMap ``.osm`` / ``.osm.pbf``), both finished by
+:mod:`.assemble` (with :mod:`.features`, :mod:`.rings`, :mod:`.heights`,
+:mod:`.partywalls`), :mod:`.osmtags` (networks, widths, layers, squares),
+:mod:`.network` (street networks), :mod:`.citygen` (generated cities); :mod:`.scene` is
+what a city source hands to the bake.  Interiors: :mod:`.ifc` (IFC models),
+:mod:`.interiorfile` (the ``walkstream-interior`` format, with :mod:`.interiormesh`),
+:mod:`.interiorgen` (generated offices); :mod:`.interior` is what an interior source
+hands to the bake.  Shared: :mod:`.crs` (coordinate systems, the one lon/lat check),
+:mod:`.jsonfile`, :mod:`.geojsonlines` and :mod:`.gpx` (a walk recorded as a line or a
+track), :mod:`.clip` (``--bbox``).  A new source format is a module here returning a
+:class:`SourceScene` (or an interior) and one row of :data:`.read.READERS`.
 """
 
 from walkstream.server.sources.citygen import city_summary, generate_city, write_city
