@@ -1,0 +1,274 @@
+"""An interior placed in a city building's footprint, its entrance facing the street.
+
+The interior is moved rigidly (a turn about the vertical and a shift; its lowest
+floor put on the city's ground, z = 0) so that
+
+1. its **entrance** (the outer door of :func:`entrance_door`: a doorway cell with a
+   door portal to the outside, on the lowest storey, next to the room a tour starts
+   in) lies on one edge of the building's footprint, its outer face flush with the
+   facade and facing out of the footprint;
+2. the interior's **shell** (the plan of its walls, slabs and roof) lies inside the
+   footprint (5 cm of slack);
+3. the door faces the **nearest street cell**: of the footprint edges long enough
+   for the door, each tried with the door at the edge's middle, then slid to either
+   end, the placement kept is the one whose point just in front of the door is
+   closest to a street, crossroad or square cell (ties: the earlier edge, in the
+   footprint's vertex order).
+
+A generated office (``walkstream generate interior``) is laid out along x with its
+entrance in the west wall: generate it with ``--size LxW`` no larger than the
+building's footprint less 0.6 m each way (the outer walls); when it does not fit,
+:func:`place_in_footprint` says the footprint's size.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+import shapely
+
+from walkstream.server.bake.rooms import Portal, RoomCell, RoomLayout
+from walkstream.server.bake.roomwalks import entrance_cell
+from walkstream.server.sources.interior import (
+    Element,
+    InteriorScene,
+    Opening,
+    Stair,
+    Storey,
+    mesh_footprint,
+)
+from walkstream.shared.arrays import F64
+from walkstream.shared.errors import InputError
+
+__all__ = [
+    "MAX_ENTRANCE_GAP",
+    "EntranceDoor",
+    "Placement",
+    "door_face",
+    "entrance_door",
+    "interior_shell",
+    "place_in_footprint",
+    "placed",
+]
+
+MAX_ENTRANCE_GAP = 3.0
+"""Metres from the door's outer face to the nearest street cell, at most."""
+
+_SLACK = 0.05  # the shell may stick out of the footprint this much (metres)
+_FRONT = 0.1  # the point probed for the nearest street lies this far in front of the door
+_SHELL_KINDS = ("wall", "slab", "roof")
+
+
+@dataclass(frozen=True)
+class EntranceDoor:
+    """The interior's entrance: its doorway cell, the portal from that cell to the
+    outside, and the door's outer face (``ends`` ``(2, 2)``, floor and head heights,
+    ``normal`` ``(2,)`` unit, out of the building)."""
+
+    doorway: int
+    portal: int
+    ends: F64
+    zmin: float
+    zmax: float
+    normal: F64
+
+    @property
+    def middle(self) -> F64:
+        """``(2,)`` the middle of the door's outer face."""
+        return np.asarray(self.ends.mean(axis=0))
+
+
+@dataclass(frozen=True)
+class Placement:
+    """A rigid move of an interior into a city: local point ``p`` goes to
+    ``R(angle) p + shift`` and heights ``z`` to ``z + dz``."""
+
+    angle: float
+    shift: tuple[float, float]
+    dz: float
+
+    def xy(self, pts: F64) -> F64:
+        """Moved ``(n, 2)`` points."""
+        p = np.asarray(pts, np.float64).reshape(-1, 2)
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        return np.column_stack([c * p[:, 0] - s * p[:, 1] + self.shift[0], s * p[:, 0] + c * p[:, 1] + self.shift[1]])
+
+    def xyz(self, pts: F64) -> F64:
+        """Moved ``(n, 3)`` points."""
+        p = np.asarray(pts, np.float64).reshape(-1, 3)
+        return np.column_stack([self.xy(p[:, :2]), p[:, 2] + self.dz])
+
+    def turn(self, v: F64) -> F64:
+        """A turned direction ``(2,)``."""
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def entrance_door(layout: RoomLayout) -> EntranceDoor:
+    """The outer door the interior is entered by (see the module docstring).
+
+    Raises
+    ------
+    InputError
+        No doorway of the interior has a door to the outside.
+    """
+    cells = {c.id: c for c in layout.cells}
+    out = layout.outside
+    doors = [p for p in layout.portals if p.kind == "door" and out in (p.a, p.b) and cells[p.a + p.b - out].kind == "doorway"]
+    if not doors:
+        raise InputError("the interior has no outer door to enter it by (a door from a doorway to the outside)")
+    low = min(cells[p.a + p.b - out].storey for p in doors)
+    doors = [p for p in doors if cells[p.a + p.b - out].storey == low]
+    room = entrance_cell(layout.cells, layout.portals)
+    next_to_room = {q.a + q.b - room for q in layout.portals if room in (q.a, q.b)}
+    best = min(doors, key=lambda p: (p.a + p.b - out not in next_to_room, p.id))
+    return _door_face(best, cells[best.a + best.b - out])
+
+
+def _door_face(p: Portal, doorway: RoomCell) -> EntranceDoor:
+    ends, normal = door_face(p.polygon, doorway.outline)
+    return EntranceDoor(doorway.id, p.id, ends, float(p.polygon[:, 2].min()), float(p.polygon[:, 2].max()), normal)
+
+
+def door_face(polygon: F64, outline: F64) -> tuple[F64, F64]:
+    """The ends ``(2, 2)`` of a door portal's bottom edge and its unit normal ``(2,)``
+    pointing away from the cell of ``outline`` (out of the building for an outer door)."""
+    poly = np.asarray(polygon, np.float64).reshape(-1, 3)
+    low = poly[poly[:, 2] <= poly[:, 2].min() + 1e-6][:, :2]
+    d = np.hypot(*(low - low[0]).T)
+    ends = np.array([low[0], low[int(np.argmax(d))]])
+    seg = ends[1] - ends[0]
+    n = np.array([seg[1], -seg[0]]) / max(float(np.hypot(*seg)), 1e-12)
+    centre = np.asarray(outline, np.float64).mean(axis=0)
+    if float(n @ (ends.mean(axis=0) - centre)) < 0:
+        n = -n
+    return ends, n
+
+
+def interior_shell(scene: InteriorScene) -> shapely.Geometry:
+    """The plan of an interior's walls, slabs and roof (its outer outline, holes filled)."""
+    parts = [mesh_footprint(e.vertices, e.triangles) for e in scene.elements if e.kind in _SHELL_KINDS and len(e.triangles)]
+    parts = [p for p in parts if not p.is_empty]
+    if not parts:
+        pts = np.concatenate([r.outline for r in scene.rooms])
+        return shapely.MultiPoint(pts).convex_hull
+    union = shapely.union_all(parts)
+    polys = [g for g in shapely.get_parts(union) if isinstance(g, shapely.Polygon)]
+    return shapely.union_all([shapely.Polygon(g.exterior) for g in polys])
+
+
+def place_in_footprint(
+    door: EntranceDoor,
+    shell: shapely.Geometry,
+    footprint: F64,
+    streets: Sequence[shapely.Geometry],
+    *,
+    dz: float = 0.0,
+    what: str = "the building",
+) -> tuple[Placement, float]:
+    """The placement of the module docstring and the gap (metres) from the door to the
+    nearest street cell.
+
+    Parameters
+    ----------
+    door, shell:
+        The interior's entrance (:func:`entrance_door`) and shell (:func:`interior_shell`),
+        in the interior's own frame.
+    footprint:
+        ``(n, 2)`` the building's outer ring, city-local metres.
+    streets:
+        The city's street, crossroad and square cells as polygons.
+    dz:
+        Added to every height (the interior's lowest floor onto the ground).
+
+    Raises
+    ------
+    InputError
+        The shell fits in the footprint nowhere with the door on an edge, or the
+        door ends more than :data:`MAX_ENTRANCE_GAP` from a street.
+    """
+    ring = np.asarray(footprint, np.float64).reshape(-1, 2)
+    poly = shapely.Polygon(ring)
+    if not poly.is_valid:
+        poly = shapely.make_valid(poly)
+    room = poly.buffer(_SLACK, join_style="mitre")
+    shapely.prepare(room)
+    ccw = shapely.Polygon(ring).exterior.is_ccw
+    width = float(np.hypot(*(door.ends[1] - door.ends[0])))
+    shell_pts = np.asarray(shapely.get_coordinates(shell))
+    tree = shapely.STRtree(list(streets)) if len(streets) else None
+    best: tuple[float, Placement] | None = None
+    for k in range(len(ring)):
+        a, b = ring[k], ring[(k + 1) % len(ring)]
+        e = b - a
+        length = float(np.hypot(*e))
+        if length < width + 0.2:
+            continue
+        u = e / length
+        out = np.array([u[1], -u[0]]) if ccw else np.array([-u[1], u[0]])
+        angle = math.atan2(out[1], out[0]) - math.atan2(door.normal[1], door.normal[0])
+        turned = Placement(angle, (0.0, 0.0), dz)
+        mid = turned.xy(door.middle[None])[0]
+        along = (turned.xy(shell_pts) - mid) @ u
+        lo, hi = float(along.min()), float(along.max())
+        # the door at the edge's middle, then the shell flush with either end
+        for t in (0.5 * (length - lo - hi), -lo, length - hi):
+            if not -1e-9 <= t <= length:
+                continue
+            at = a + u * t
+            p = Placement(angle, (float(at[0] - mid[0]), float(at[1] - mid[1])), dz)
+            moved = shapely.Polygon(p.xy(np.asarray(shell.exterior.coords))) if isinstance(shell, shapely.Polygon) else None
+            if moved is None or not room.contains(moved):
+                continue
+            front = shapely.Point(at + out * _FRONT)
+            gap = math.inf
+            if tree is not None:
+                near = int(tree.query_nearest(front)[0])
+                gap = float(shapely.distance(streets[near], front))
+            if best is None or gap < best[0] - 1e-9:
+                best = (gap, p)
+    if best is None:
+        size = poly.minimum_rotated_rectangle
+        c = np.asarray(size.exterior.coords)[:3]
+        sides = sorted((float(np.hypot(*(c[1] - c[0]))), float(np.hypot(*(c[2] - c[1])))), reverse=True)
+        ext = shell.minimum_rotated_rectangle
+        d = np.asarray(ext.exterior.coords)[:3]
+        own = sorted((float(np.hypot(*(d[1] - d[0]))), float(np.hypot(*(d[2] - d[1])))), reverse=True)
+        raise InputError(
+            f"the interior ({own[0]:.1f} x {own[1]:.1f} m outside its walls) does not fit {what} "
+            f"({sides[0]:.1f} x {sides[1]:.1f} m) with its entrance on the facade: make it smaller "
+            "(walkstream generate interior --size LxW) or pick another --building"
+        )
+    if best[0] > MAX_ENTRANCE_GAP:
+        raise InputError(
+            f"the entrance of the interior in {what} is {best[0]:.1f} m from the nearest street cell "
+            f"(at most {MAX_ENTRANCE_GAP:g} m): pick a building on a street"
+        )
+    return best[1], best[0]
+
+
+def placed(scene: InteriorScene, p: Placement, crs: str, origin: tuple[float, float]) -> InteriorScene:
+    """The interior moved by ``p`` into a city of ``crs`` and ``origin`` (its local frame)."""
+    rooms = tuple(replace(r, outline=p.xy(r.outline), zmin=r.zmin + p.dz, zmax=r.zmax + p.dz) for r in scene.rooms)
+    openings = tuple(_opening(o, p) for o in scene.openings)
+    stairs = tuple(Stair(s.key, s.name, s.storey, p.xyz(s.path)) for s in scene.stairs)
+    elements = tuple(
+        Element(e.id, e.key, e.kind, e.name, p.xyz(e.vertices), e.triangles, e.materials) for e in scene.elements
+    )
+    storeys = tuple(Storey(s.name, s.elevation + p.dz) for s in scene.storeys)
+    return replace(
+        scene, crs=crs, origin=(origin[0], origin[1], scene.origin[2] - p.dz), storeys=storeys, rooms=rooms,
+        openings=openings, stairs=stairs, elements=elements,
+    )
+
+
+def _opening(o: Opening, p: Placement) -> Opening:
+    c = np.concatenate([p.xy(o.centre[None, :2])[0], [o.centre[2] + p.dz]])
+    return replace(
+        o, centre=c, normal=p.turn(o.normal), zmin=o.zmin + p.dz, zmax=o.zmax + p.dz,
+        polygon=None if o.polygon is None else p.xyz(o.polygon),
+    )
+
