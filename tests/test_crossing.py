@@ -174,3 +174,31 @@ def test_cli_inspect_map_and_record(baked: tuple[Path, dict[str, Any], Path], ca
     assert main(["path", "record", str(db), "cli-in", f"--from={start[0]:.3f},{start[1]:.3f}", "--to-room", "0.01"]) == 0
     assert main(["path", "record", str(db), "cli-out", "--from-room", "0.01", f"--to={start[0]:.3f},{start[1]:.3f}"]) == 0
     assert "recorded path 'cli-out'" in capsys.readouterr().out
+
+
+def test_the_replay_says_in_one_line_that_it_cannot_walk_a_crossing_yet(
+    baked: tuple[Path, dict[str, Any], Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    from walkstream.cli import main
+
+    db, _, d = baked
+    assert main(["replay", str(db), "--path", "enter", "--report", str(d / "report")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not supported by the replay yet" in err[0]
+    assert not (d / "report").exists()
+
+
+def test_an_ifc_model_enters_from_the_street_too(baked: tuple[Path, dict[str, Any], Path]) -> None:
+    """The FZK house (its door 0.5 m behind the shell's front) in the same city."""
+    pytest.importorskip("ifcopenshell", reason="the ifc extra (make test installs it)")
+    src = Path(__file__).resolve().parents[2] / "shared" / "data" / "indoor" / "AC20-FZK-Haus.ifc"
+    if not src.exists():
+        pytest.skip(f"no {src} (the shared test data)")
+    _, _, d = baked
+    summary = bake(d / "city.geojson", d / "fzk.db", settings=FAST, interior=src)
+    assert summary["kind"] == "crossing" and summary["entrance_gap_m"] <= 1.0
+    with SceneReader.open(d / "fzk.db") as r:
+        (e,) = r.entrances()
+        seq = _visits(r, RecordedPath.from_msgpack(r.path_blob("enter"), "enter"))
+    pairs = list(zip(seq, seq[1:], strict=False))
+    assert (e.street, e.doorway) in pairs and (e.doorway, e.street) in pairs

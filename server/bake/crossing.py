@@ -125,7 +125,7 @@ def pick_building(
     layout = room_layout(interior)
     door = entrance_door(layout)
     shell = interior_shell(interior)
-    dz = -interior.storeys[0].elevation if interior.storeys else 0.0
+    dz = -door.zmin  # the entrance's floor on the ground
     _, polys = _streets(cells)
     if building not in (None, "auto"):
         want = str(building)

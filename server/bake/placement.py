@@ -4,9 +4,11 @@ The interior is moved rigidly (a turn about the vertical and a shift; its lowest
 floor put on the city's ground, z = 0) so that
 
 1. its **entrance** (the outer door of :func:`entrance_door`: a doorway cell with a
-   door portal to the outside, on the lowest storey, next to the room a tour starts
-   in) lies on one edge of the building's footprint, its outer face flush with the
-   facade and facing out of the footprint;
+   door portal to the outside, on the lowest storey that has one, next to the room a
+   tour starts in) faces out of one edge of the building's footprint, the shell's
+   front on that edge: the door's outer face flush with the facade, or behind it by
+   as much as the shell reaches out in front of the door (a porch, a roof); the
+   entrance's floor is put on the city's ground;
 2. the interior's **shell** (the plan of its walls, slabs and roof) lies inside the
    footprint (5 cm of slack);
 3. the door faces the **nearest street cell**: of the footprint edges long enough
@@ -55,7 +57,7 @@ __all__ = [
 ]
 
 MAX_ENTRANCE_GAP = 3.0
-"""Metres from the door's outer face to the nearest street cell, at most."""
+"""Metres from the facade in front of the door to the nearest street cell, at most."""
 
 _SLACK = 0.05  # the shell may stick out of the footprint this much (metres)
 _FRONT = 0.1  # the point probed for the nearest street lies this far in front of the door
@@ -169,8 +171,8 @@ def place_in_footprint(
     dz: float = 0.0,
     what: str = "the building",
 ) -> tuple[Placement, float]:
-    """The placement of the module docstring and the gap (metres) from the door to the
-    nearest street cell.
+    """The placement of the module docstring and the gap (metres) from the facade in
+    front of the door to the nearest street cell.
 
     Parameters
     ----------
@@ -212,14 +214,19 @@ def place_in_footprint(
         angle = math.atan2(out[1], out[0]) - math.atan2(door.normal[1], door.normal[0])
         turned = Placement(angle, (0.0, 0.0), dz)
         mid = turned.xy(door.middle[None])[0]
-        along = (turned.xy(shell_pts) - mid) @ u
+        moved_pts = turned.xy(shell_pts)
+        along = (moved_pts - mid) @ u
+        # a door recessed behind the shell's front (a porch, a roof reaching out) sits
+        # that far behind the facade
+        recess = max(0.0, float(((moved_pts - mid) @ out).max()))
         lo, hi = float(along.min()), float(along.max())
         # the door at the edge's middle, then the shell flush with either end
         for t in (0.5 * (length - lo - hi), -lo, length - hi):
             if not -1e-9 <= t <= length:
                 continue
             at = a + u * t
-            p = Placement(angle, (float(at[0] - mid[0]), float(at[1] - mid[1])), dz)
+            door_at = at - out * recess
+            p = Placement(angle, (float(door_at[0] - mid[0]), float(door_at[1] - mid[1])), dz)
             moved = shapely.Polygon(p.xy(np.asarray(shell.exterior.coords))) if isinstance(shell, shapely.Polygon) else None
             if moved is None or not room.contains(moved):
                 continue
