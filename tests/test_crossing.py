@@ -202,3 +202,22 @@ def test_an_ifc_model_enters_from_the_street_too(baked: tuple[Path, dict[str, An
         seq = _visits(r, RecordedPath.from_msgpack(r.path_blob("enter"), "enter"))
     pairs = list(zip(seq, seq[1:], strict=False))
     assert (e.street, e.doorway) in pairs and (e.doorway, e.street) in pairs
+
+
+def test_the_suggested_office_size_fits_the_building_it_names(baked: tuple[Path, dict[str, Any], Path]) -> None:
+    from walkstream.server.bake.cells import make_cells
+    from walkstream.server.bake.crossing import office_size, pick_building
+    from walkstream.server.sources.read import read_source
+
+    _, _, d = baked
+    city = read_source(d / "city.geojson")
+    cells = make_cells(city)
+    size = office_size(city, cells)
+    assert size is not None
+    length, width, building = size
+    write_interior(d / "fit.json", InteriorPlan(storeys=1, length=length, width=width, seed=3))
+    k, _, gap = pick_building(city, cells, read_source(d / "fit.json"), building)
+    assert city.buildings[k].source_id == building and gap <= 1.0
+    write_interior(d / "wide.json", InteriorPlan(storeys=1, length=length, width=width + 2, seed=3))
+    with pytest.raises(InputError, match="does not fit"):
+        pick_building(city, cells, read_source(d / "wide.json"), building)

@@ -90,7 +90,14 @@ from walkstream.shared.buildings import default_grammar, default_grammar_text, p
 from walkstream.shared.errors import InputError
 from walkstream.shared.records import BuildingParams
 
-__all__ = ["CROSSING_FEATURE", "STAND_IN_INSET", "STAND_IN_PARAPET", "bake_crossing", "pick_building"]
+__all__ = [
+    "CROSSING_FEATURE",
+    "STAND_IN_INSET",
+    "STAND_IN_PARAPET",
+    "bake_crossing",
+    "office_size",
+    "pick_building",
+]
 
 CROSSING_FEATURE = "entrances"
 """The feature a crossing scene lists (with the interior's ``rooms``, ``portals``, ``meshes``)."""
@@ -155,9 +162,50 @@ def pick_building(
         if best is None or d < best[0]:
             best = (d, k, p, gap)
     if best is None:
-        raise InputError("no building of the city holds the interior with its entrance on a street: "
-                         "make the interior smaller (walkstream generate interior --size LxW)")
+        hint = office_size(scene, cells)
+        more = (f": a generated office of --size {hint[0]:g}x{hint[1]:g} fits building {hint[2]}" if hint else "")
+        raise InputError("no building of the city holds the interior with its entrance on a street: make the "
+                         f"interior smaller (walkstream generate interior --size LxW){more}")
     return best[1], best[2], best[3]
+
+
+def office_size(scene: SourceScene, cells: list[ViewCell], *, near: float = 1.0) -> tuple[float, float, str] | None:
+    """The largest generated office (``walkstream generate interior --size LxW``) that fits a
+    building of the city with its entrance on a street.
+
+    A generated office enters by its west wall, ``W`` long, and reaches ``L`` inwards;
+    its outer walls add 0.3 m on each side.  Of the rectangular footprints (at least
+    97 % of their smallest enclosing rectangle) with a side at most ``near`` metres
+    from a street cell, the one with the largest ``L x W`` (whole metres, 0.1 m of
+    slack) is taken.
+
+    Returns
+    -------
+    (L, W, building) or None
+        The size and the building's feature id; None when no building has room for
+        the smallest office (10 x 8 m).
+    """
+    _, polys = _streets(cells)
+    streets = shapely.union_all(polys)
+    best: tuple[float, float, float, str] | None = None
+    for b in scene.buildings:
+        fp = shapely.Polygon(b.rings[0])
+        rect = fp.minimum_rotated_rectangle
+        if len(b.rings) != 1 or fp.area < 0.97 * rect.area:
+            continue
+        c = np.asarray(rect.exterior.coords)[:4]
+        for k in range(4):
+            side, other = c[(k + 1) % 4] - c[k], c[(k + 2) % 4] - c[(k + 1) % 4]
+            mid = shapely.Point(0.5 * (c[k] + c[(k + 1) % 4]))
+            if streets.distance(mid) > near:
+                continue
+            w = math.floor(float(np.hypot(*side)) - 0.7)
+            length = math.floor(float(np.hypot(*other)) - 0.7)
+            if length < 10 or w < 8:
+                continue
+            if best is None or length * w > best[0] * best[1]:
+                best = (float(length), float(w), 0.0, b.source_id or str(b.id))
+    return None if best is None else (best[0], best[1], best[3])
 
 
 def _stand_in(b: BuildingParams, shell: shapely.Geometry, top: float) -> BuildingParams:

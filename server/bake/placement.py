@@ -19,8 +19,10 @@ floor put on the city's ground, z = 0) so that
 
 A generated office (``walkstream generate interior``) is laid out along x with its
 entrance in the west wall: generate it with ``--size LxW`` no larger than the
-building's footprint less 0.6 m each way (the outer walls); when it does not fit,
-:func:`place_in_footprint` says the footprint's size.
+building's footprint less 0.6 m each way (the outer walls), ``W`` along the street;
+when it does not fit, :func:`place_in_footprint` says the footprint's size, and
+:func:`~.crossing.office_size` finds the largest size some building of a city takes
+(the bake names it when no building holds the interior).
 """
 
 from __future__ import annotations
