@@ -221,3 +221,23 @@ def test_the_suggested_office_size_fits_the_building_it_names(baked: tuple[Path,
     write_interior(d / "wide.json", InteriorPlan(storeys=1, length=length, width=width + 2, seed=3))
     with pytest.raises(InputError, match="does not fit"):
         pick_building(city, cells, read_source(d / "wide.json"), building)
+
+
+def test_the_service_serves_a_crossing_scene_with_its_kind(baked: tuple[Path, dict[str, Any], Path]) -> None:
+    import asyncio
+
+    import httpx
+
+    from walkstream.server.service.main import create_app
+    from walkstream.shared.wire import decode_manifest
+
+    db, _, _ = baked
+
+    async def get(url: str) -> httpx.Response:
+        async with httpx.AsyncClient(transport=httpx.ASGITransport(app=create_app([db])), base_url="http://t") as c:
+            return await c.get(url)
+
+    r = asyncio.run(get("/v1/scenes/scene"))
+    assert r.status_code == 200
+    m = decode_manifest(r.content, "m")
+    assert m.kind == "crossing" and "entrances" in m.features and {"enter", "tour", "SE"} <= set(m.paths)
