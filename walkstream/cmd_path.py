@@ -218,7 +218,7 @@ def add_path_parser(sub: argparse._SubParsersAction) -> None:
     )
     r.add_argument("--from-room", metavar="NAME", help="interiors and crossing scenes: start in this room (its name, or "
                    "part of it); in a crossing scene X,Y in a street cell is on the street")
-    r.add_argument("--to-room", metavar="NAME", help="interiors: end in this room")
+    r.add_argument("--to-room", metavar="NAME", help="interiors and crossing scenes: end in this room")
     r.add_argument("--via-room", action="append", metavar="NAME", help="interiors: a room to pass (repeatable)")
     r.add_argument(
         "--speed", type=float, metavar="KMH",
