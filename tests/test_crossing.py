@@ -241,3 +241,38 @@ def test_the_service_serves_a_crossing_scene_with_its_kind(baked: tuple[Path, di
     assert r.status_code == 200
     m = decode_manifest(r.content, "m")
     assert m.kind == "crossing" and "entrances" in m.features and {"enter", "tour", "SE"} <= set(m.paths)
+
+
+def test_the_service_serves_the_rooms_of_a_crossing_and_locates_in_3d(baked: tuple[Path, dict[str, Any], Path]) -> None:
+    import asyncio
+    import json
+
+    import httpx
+
+    from walkstream.server.service.main import create_app
+    from walkstream.shared.roomwire import decode_topology
+
+    db, _, _ = baked
+    app = create_app([db])
+
+    async def get(url: str) -> httpx.Response:
+        async with httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://t") as c:
+            return await c.get(url, headers={"accept": "application/json"} if "locate" in url else {})
+
+    with SceneReader.open(db) as r:
+        rooms = r.rooms()
+        (e,) = r.entrances()
+        stair = r.stairs()[0]
+        storeys = r.storeys()
+        cells = _cells(r)
+    topo = decode_topology(asyncio.run(get("/v1/scenes/scene/topology")).content, "t")
+    assert {c.id for c in topo.cells} == set(rooms)
+    doorway = next(c for c in topo.cells if c.id == e.doorway)
+    assert any(p.cell == e.street for p in doorway.portals)  # the entrance leads to the street
+    assert asyncio.run(get(f"/v1/scenes/scene/rooms/{e.doorway}/contents")).status_code == 200
+    x, y = np.asarray(cells[stair.lower].boundary).mean(axis=0)
+    found = [json.loads(asyncio.run(get(f"/v1/scenes/scene/locate?x={x}&y={y}&z={s.zmin + 1.6}")).text)["cell"]
+             for s in storeys]
+    assert found == [stair.lower, stair.upper]
+    sx, sy = np.asarray(cells[e.street].boundary).mean(axis=0)
+    assert json.loads(asyncio.run(get(f"/v1/scenes/scene/locate?x={sx}&y={sy}&z=1.6")).text)["cell"] == e.street
