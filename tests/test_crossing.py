@@ -92,15 +92,13 @@ def test_the_entrance_portal_joins_the_street_in_front_to_the_doorway(baked: tup
         # the same face as the doorway's portal to the interior's outside (the hole in the shell)
         outer = [p for p in r.portals() if {p.a, p.b} == {e.doorway, e.shell}]
         assert len(outer) == 1 and np.allclose(outer[0].polygon, portal.polygon)
-        # the building's stand-in lies inside the shell: it hides nothing the shell would not
-        box = r.object_info([e.building])[e.building].bbox
-        shell = shapely.Polygon(cells[e.shell].boundary)
-        assert shell.buffer(1e-6).contains(shapely.box(box[0], box[1], box[3], box[4]))
-        b = r.building(e.building)
-        ring = shapely.Polygon(b.rings[0])
+        # the building's stand-in, ledges and parapet included, lies inside the shell (the
+        # rooms' plan and the 0.3 m outer walls): it hides nothing the shell would not
+        ring = shapely.Polygon(r.building(e.building).rings[0])
         inside = [c for c in cells.values() if c.kind in ("room", "doorway")]
-        plan = shapely.union_all([shapely.Polygon(c.boundary) for c in inside]).buffer(0.31 + 1e-3, join_style="mitre")
-        assert plan.contains(ring.buffer(STAND_IN_INSET - 0.31, join_style="mitre"))
+        plan = shapely.union_all([shapely.Polygon(c.boundary) for c in inside])
+        assert plan.buffer(0.3 + 0.01, join_style="mitre").contains(ring.buffer(STAND_IN_INSET - 0.01, join_style="mitre"))
+        assert r.object_info([e.building])[e.building].bbox[5] <= cells[e.shell].zmax
 
 
 def test_the_enter_walk_goes_from_the_street_through_the_door_and_back(baked: tuple[Path, dict[str, Any], Path]) -> None:
@@ -276,3 +274,24 @@ def test_the_service_serves_the_rooms_of_a_crossing_and_locates_in_3d(baked: tup
     assert found == [stair.lower, stair.upper]
     sx, sy = np.asarray(cells[e.street].boundary).mean(axis=0)
     assert json.loads(asyncio.run(get(f"/v1/scenes/scene/locate?x={sx}&y={sy}&z=1.6")).text)["cell"] == e.street
+
+
+def test_the_interior_keeps_its_own_cells_and_portals(baked: tuple[Path, dict[str, Any], Path]) -> None:
+    """The interior is cut into cells in its own frame and moved whole: the same layout as alone."""
+    from collections import Counter
+
+    from walkstream.server.bake.rooms import room_layout
+    from walkstream.server.sources.read import read_source
+
+    db, _, d = baked
+    alone = room_layout(read_source(d / "office.json"))
+    with SceneReader.open(db) as r:
+        rooms = r.rooms()
+        cells = _cells(r)
+        kinds = Counter(p.kind for p in r.portals() if p.source != "entrance")
+        offset = min(rooms)
+        for c in alone.cells:
+            mine = cells[c.id + offset]
+            assert (mine.kind, rooms[mine.id].name, len(mine.boundary)) == (c.kind, c.name, len(c.outline))
+            assert shapely.Polygon(mine.boundary).area == pytest.approx(c.polygon.area, abs=1e-6)
+    assert kinds == Counter(p.kind for p in alone.portals) and len(rooms) == len(alone.cells)

@@ -17,6 +17,11 @@ floor put on the city's ground, z = 0) so that
    closest to a street, crossroad or square cell (ties: the earlier edge, in the
    footprint's vertex order).
 
+:func:`moved` moves a baked interior (cells, plane sets, portals, stairs, contents)
+rather than cutting the moved model into cells again: room layout is not exactly
+invariant under a turn (touching tolerances), and the interior should stay the one
+that was baked alone.
+
 A generated office (``walkstream generate interior``) is laid out along x with its
 entrance in the west wall: generate it with ``--size LxW`` no larger than the
 building's footprint less 0.6 m each way (the outer walls), ``W`` along the street;
@@ -29,21 +34,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import shapely
 
-from walkstream.server.bake.rooms import Portal, RoomCell, RoomLayout
-from walkstream.server.bake.roomwalks import entrance_cell
-from walkstream.server.sources.interior import (
-    Element,
-    InteriorScene,
-    Opening,
-    Stair,
-    Storey,
-    mesh_footprint,
-)
+from walkstream.server.bake.interior import InteriorParts
+from walkstream.server.bake.roomnav import RoomGraph
+from walkstream.server.bake.rooms import Portal, RoomCell, RoomLayout, StairLink
+from walkstream.server.bake.roomwalks import entrance_cell, tour
+from walkstream.server.sources.interior import InteriorScene, mesh_footprint
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
 
@@ -54,8 +54,8 @@ __all__ = [
     "door_face",
     "entrance_door",
     "interior_shell",
+    "moved",
     "place_in_footprint",
-    "placed",
 ]
 
 MAX_ENTRANCE_GAP = 3.0
@@ -259,25 +259,32 @@ def place_in_footprint(
     return best[1], best[0]
 
 
-def placed(scene: InteriorScene, p: Placement, crs: str, origin: tuple[float, float]) -> InteriorScene:
-    """The interior moved by ``p`` into a city of ``crs`` and ``origin`` (its local frame)."""
-    rooms = tuple(replace(r, outline=p.xy(r.outline), zmin=r.zmin + p.dz, zmax=r.zmax + p.dz) for r in scene.rooms)
-    openings = tuple(_opening(o, p) for o in scene.openings)
-    stairs = tuple(Stair(s.key, s.name, s.storey, p.xyz(s.path)) for s in scene.stairs)
-    elements = tuple(
-        Element(e.id, e.key, e.kind, e.name, p.xyz(e.vertices), e.triangles, e.materials) for e in scene.elements
-    )
-    storeys = tuple(Storey(s.name, s.elevation + p.dz) for s in scene.storeys)
-    return replace(
-        scene, crs=crs, origin=(origin[0], origin[1], scene.origin[2] - p.dz), storeys=storeys, rooms=rooms,
-        openings=openings, stairs=stairs, elements=elements,
-    )
+def moved(baked: InteriorParts, p: Placement) -> InteriorParts:
+    """A baked interior moved rigidly by ``p``: cells (outlines, plane sets, heights),
+    portals, stairs and contents; the walking graph rebuilt and the tour walked again.
+
+    The layout is not cut again in the city's frame, so the interior of a crossing
+    scene has exactly the cells, portals and contents of the interior alone.
+    """
+    lay = baked.layout
+    cells = [
+        RoomCell(c.id, c.kind, c.name, c.room, c.storey, p.xy(c.outline), c.zmin + p.dz, c.zmax + p.dz,
+                 _planes(c.planes, p))
+        for c in lay.cells
+    ]
+    portals = [Portal(q.id, q.kind, q.a, q.b, p.xyz(q.polygon), q.source, q.name) for q in lay.portals]
+    stairs = [StairLink(st.portal, st.lower, st.upper, p.xyz(st.path), st.name) for st in lay.stairs]
+    layout = RoomLayout(cells, portals, stairs, lay.ranges + p.dz, list(lay.notes), lay.sources)
+    parts = {cid: [(e, m, p.xyz(v), t) for e, m, v, t in ps] for cid, ps in baked.parts.items()}
+    graph = RoomGraph(cells, portals, stairs)
+    walk, coverage = tour(graph, baked.start)
+    return InteriorParts(layout, parts, list(baked.notes), graph, baked.start, walk, coverage)
 
 
-def _opening(o: Opening, p: Placement) -> Opening:
-    c = np.concatenate([p.xy(o.centre[None, :2])[0], [o.centre[2] + p.dz]])
-    return replace(
-        o, centre=c, normal=p.turn(o.normal), zmin=o.zmin + p.dz, zmax=o.zmax + p.dz,
-        polygon=None if o.polygon is None else p.xyz(o.polygon),
-    )
-
+def _planes(planes: F64, p: Placement) -> F64:
+    """Plane rows ``(nx, ny, nz, d)`` (inside where ``n . x + d <= 0``) after the move."""
+    if not len(planes):
+        return np.asarray(planes, np.float64).reshape(0, 4)
+    n = np.column_stack([p.xy(planes[:, :2]) - np.asarray(p.shift), planes[:, 2]])
+    t = np.array([p.shift[0], p.shift[1], p.dz])
+    return np.column_stack([n, planes[:, 3] - n @ t])
