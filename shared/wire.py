@@ -14,7 +14,7 @@ list, int16, int32 or zigzag varints in msgpack).
 manifest
     ``{name, version, schema_version, crs, origin, bounds, features, grammar: {id,
     text}, viewpoints: [{name, x, y, z, yaw, cell}], paths, objects, cells, limits:
-    {objects_per_request}, kind: city | interior, index: {origin, tile, shape,
+    {objects_per_request}, kind: city | interior | crossing, index: {origin, tile, shape,
     reach} | null, offers}``;
     ``index`` is the :class:`~walkstream.shared.cells.TileGrid` of the cell index,
     ``offers`` the optional parts of the API this server has (:data:`OFFERS`).
@@ -139,8 +139,9 @@ class Manifest:
     max_ids: int
     """Most object ids one objects request may ask for."""
     kind: str = "city"
-    """``city`` (view cells with a PVS, buildings from parameters) or ``interior``
-    (rooms and portals, cell contents as meshes)."""
+    """``city`` (view cells with a PVS, buildings from parameters), ``interior``
+    (rooms and portals, cell contents as meshes) or ``crossing`` (both, joined at a
+    building's entrance)."""
     index: TileGrid | None = None
     """The tiles of the cell index (None: the server has no cell index)."""
     offers: tuple[str, ...] = ()

@@ -5,6 +5,7 @@
     walkstream bake SOURCE.geojson|.osm|.osm.pbf -o scene.db [--cells street|grid] [--cell-size M]
                    [--network walk|drive] [--bbox X0,Y0,X1,Y1 [--bbox-crs local|lonlat]] ...
     walkstream bake --default-city -o scene.db
+    walkstream bake city.geojson -o scene.db --interior office.json [--building ID|auto]
     walkstream inspect scene.db [--json] [--map map.png]
     walkstream cutaway interior.db [--storey N] [--cut 1.4] -o cut.png
     walkstream serve scene.db [more.db ...] [--host H] [--port P] [--workers N]
@@ -83,7 +84,10 @@ def cmd_bake(args: argparse.Namespace) -> int:
         **{k: v for k, v in (("sampling", args.sampling), ("spacing", args.spacing), ("height_step", args.height_step), ("edge_pass", args.edge_pass), ("split", args.split)) if v is not None},
     )
     st.check()  # a bad setting fails before any progress bar
-    summary = run_bake(source, args.output, settings=st, name=args.name, workers=args.workers, scheduler=args.scheduler)
+    if args.building is not None and args.interior is None:
+        raise WalkstreamError("--building: give --interior FILE too (the interior to place in the building)")
+    extra: dict[str, Any] = {} if args.interior is None else {"interior": args.interior, "building": args.building}
+    summary = run_bake(source, args.output, settings=st, name=args.name, workers=args.workers, scheduler=args.scheduler, **extra)
     print_summary(f"baked {args.output}", summary, args.json)
     return 0
 
@@ -95,7 +99,11 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     reader = SceneReader.open(args.db)
     try:
         summary = reader.summary()
-        if args.map and reader.meta.kind == "interior":
+        if args.map and reader.meta.kind == "crossing":
+            from walkstream.server.bake.crossplot import draw_crossing_map
+
+            draw_crossing_map(reader, args.map)
+        elif args.map and reader.meta.kind == "interior":
             from walkstream.server.bake.roomplot import draw_interior_map
 
             draw_interior_map(reader, args.map)
@@ -175,13 +183,18 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--threshold", type=int, default=0, help="hardly-visible threshold (m-LOMA): pixels an object must exceed over the cell's images to enter the PVS (default 0)")
     bk.add_argument("--workers", type=int, default=1, help="local processes rendering cells (default 1)")
     bk.add_argument("--scheduler", help="tcp://HOST:PORT of a Dask scheduler to run the cell tasks on")
+    bk.add_argument("--interior", metavar="FILE", help="an interior (.ifc or walkstream-interior .json) to place in one of the city's "
+                    "buildings, its entrance joined to the street in front: one scene of streets and rooms (kind crossing)")
+    bk.add_argument("--building", metavar="ID", help="with --interior: the building to put it in, an object id or the source's "
+                    "feature id (default auto: one it fits with its door on a street, nearest the middle)")
     bk.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     bk.set_defaults(func=cmd_bake)
 
     ins = sub.add_parser("inspect", help="summary of a scene database; --map draws its cells")
     ins.add_argument("db", help="scene database")
     ins.add_argument("--map", help="PNG: top view of the cells coloured by PVS size over the footprints; "
-                     "an interior: a plan per storey, cells coloured by triangles, portals as thick lines")
+                     "an interior: a plan per storey, cells coloured by triangles, portals as thick lines; "
+                     "a crossing scene: the city with the building's plan, its entrance and the enter walk, and a close-up")
     ins.add_argument("--json", action="store_true", help="print one JSON object")
     ins.set_defaults(func=cmd_inspect)
 

@@ -5,6 +5,7 @@
     walkstream path record DB NAME --from X,Y --to X,Y [--via X,Y ...] --speed KMH [--replace]
     walkstream path record INTERIOR.db NAME --from-room NAME --to-room NAME [--via-room NAME] [--speed KMH]
     walkstream path record INTERIOR.db NAME --from X,Y,Z --to X,Y,Z [--speed KMH]
+    walkstream path record CROSSING.db NAME --from X,Y --to-room NAME [--speed KMH]   (and --from-room NAME --to X,Y)
     walkstream path import DB NAME FILE.geojson|FILE.gpx --speed KMH [--clip] [--replace]
     walkstream path list DB [--json]
     walkstream path export DB NAME -o FILE.json
@@ -73,8 +74,9 @@ def cmd_path_record(args: argparse.Namespace) -> int:
 
     with SceneReader.open(args.db) as reader:
         kind = reader.meta.kind
-    if kind == "interior":
+    if kind in ("interior", "crossing"):
         from walkstream.server.bake.roomnav import INDOOR_SPEED_KMH
+        from walkstream.server.paths.crossing import record_crossing_path
 
         ends: list[Any] = []
         for room, xy, flag in ((args.from_room, args.from_xy, "--from"), (args.to_room, args.to_xy, "--to")):
@@ -83,9 +85,8 @@ def cmd_path_record(args: argparse.Namespace) -> int:
             ends.append(room if room is not None else _place(xy, flag))
         via_places: list[Any] = [*(args.via_room or []), *(_place(v, "--via") for v in args.via or [])]
         speed = INDOOR_SPEED_KMH if args.speed is None else _speed(args.speed)
-        path, version = record_interior_path(
-            args.db, args.name, ends[0], ends[1], speed, via_places, replace=args.replace
-        )
+        record = record_crossing_path if kind == "crossing" else record_interior_path
+        path, version = record(args.db, args.name, ends[0], ends[1], speed, via_places, replace=args.replace)
     else:
         if args.from_room or args.to_room or args.via_room:
             raise WalkstreamError(f"{args.db}: a city scene has no rooms: use --from X,Y --to X,Y")
@@ -215,8 +216,9 @@ def add_path_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument(
         "--via", action="append", metavar="X,Y[,Z]", help="a point to pass on the way (repeatable)"
     )
-    r.add_argument("--from-room", metavar="NAME", help="interiors: start in this room (its name, or part of it)")
-    r.add_argument("--to-room", metavar="NAME", help="interiors: end in this room")
+    r.add_argument("--from-room", metavar="NAME", help="interiors and crossing scenes: start in this room (its name, or "
+                   "part of it); in a crossing scene X,Y in a street cell is on the street")
+    r.add_argument("--to-room", metavar="NAME", help="interiors and crossing scenes: end in this room")
     r.add_argument("--via-room", action="append", metavar="NAME", help="interiors: a room to pass (repeatable)")
     r.add_argument(
         "--speed", type=float, metavar="KMH",

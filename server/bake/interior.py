@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,7 @@ from numpy.typing import NDArray
 from walkstream.server.bake.pipeline import file_digest
 from walkstream.server.bake.roomcontents import REACH, Part, contents_task, outside_mask, weld
 from walkstream.server.bake.roomnav import RoomGraph
-from walkstream.server.bake.rooms import room_layout
+from walkstream.server.bake.rooms import RoomLayout, room_layout
 from walkstream.server.bake.roomwalks import TOUR_NAME, entrance_cell, tour
 from walkstream.server.bake.workers import dask_client
 from walkstream.server.sources.interior import InteriorScene
@@ -51,8 +52,16 @@ from walkstream.shared.codec.cellmesh import (
 )
 from walkstream.shared.codec.planarmesh import area_tolerance, grid_error, mesh_area
 from walkstream.shared.errors import InputError, RouteError
+from walkstream.shared.paths import RecordedPath
 
-__all__ = ["INTERIOR_FEATURES", "bake_interior"]
+__all__ = [
+    "INTERIOR_FEATURES",
+    "InteriorParts",
+    "bake_interior",
+    "interior_parts",
+    "interior_settings",
+    "write_interior_tables",
+]
 
 INTERIOR_FEATURES = ("rooms", "portals", "meshes")
 """The features an interior lists (and the optional tables it gets)."""
@@ -96,38 +105,30 @@ def _run_contents(
             yield contents_task(c, soup, elem, mat)
 
 
-def bake_interior(
+@dataclass
+class InteriorParts:
+    """What an interior bake computes before it writes: the cells and portals, each
+    cell's contents, the walking graph and the tour (see :func:`interior_parts`)."""
+
+    layout: RoomLayout
+    parts: dict[int, list[Part]]
+    notes: list[str]
+    graph: RoomGraph
+    start: int
+    walk: RecordedPath
+    coverage: dict[str, Any]
+
+
+def interior_parts(
     scene: InteriorScene,
-    source: str | os.PathLike[str],
-    output: str | os.PathLike[str],
+    src: Path,
     *,
-    name: str | None = None,
     workers: int = 1,
     scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
-    log: Callable[[str], None] | None = None,
-    import_seconds: float = 0.0,
-    cellmesh_version: int = 3,
-) -> dict[str, Any]:
-    """Bake an interior into the scene database ``output`` (replaced atomically).
-
-    ``cellmesh_version`` picks the cell-contents codec (3, planar polygons, boxes and
-    rectangles on a 1 mm grid; 2 and 1 only to compare, as ``walkstream bench interiors`` does).
-
-    Returns
-    -------
-    dict
-        The database summary (``SceneReader.summary``) plus ``bake_seconds``,
-        ``import_seconds``, ``contents_encode_s`` (encoding the cells' contents),
-        ``source``, ``notes`` (what the bake wants the user to
-        know, e.g. portals found from the geometry), ``portal_sources`` and ``tour``
-        (what the default walk covers).
-    """
-    if workers < 1:
-        raise InputError(f"--workers: expected >= 1, got {workers}")
-    say = log or (lambda _msg: None)
-    src, out = Path(source), Path(output)
-    t0 = time.perf_counter()
+    say: Callable[[str], None] = lambda _msg: None,
+) -> InteriorParts:
+    """Cells, portals, contents and tour of an interior (the bake's work before the database)."""
     layout = room_layout(scene)
     inside = [c for c in layout.cells if c.kind != "outside"]
     say(
@@ -174,8 +175,12 @@ def bake_interior(
         walk, coverage = tour(graph, start)
     except RouteError as exc:  # pragma: no cover - a tour always exists from a room cell
         raise InputError(f"{src}: no tour could be recorded ({exc})") from exc
-    # ---- the database
-    settings = {
+    return InteriorParts(layout, parts, notes, graph, start, walk, coverage)
+
+
+def interior_settings(scene: InteriorScene, src: Path, cellmesh_version: int = 3) -> dict[str, Any]:
+    """The bake settings an interior records (what identifies its input and codec)."""
+    return {
         "source": str(src),
         "source_digest": file_digest(src),
         "source_format": scene.source_format,
@@ -183,10 +188,106 @@ def bake_interior(
         "cellmesh": {1: CELLMESH_V1, 2: CELLMESH_V2}.get(cellmesh_version, CELLMESH_FORMAT),
         "origin_z": scene.origin[2],
     }
-    neighbours: dict[int, set[int]] = {c.id: set() for c in layout.cells}
+
+
+def write_interior_tables(
+    writer: SceneWriter,
+    scene: InteriorScene,
+    baked: InteriorParts,
+    *,
+    offset: int = 0,
+    links: dict[int, list[int]] | None = None,
+    cellmesh_version: int = 3,
+) -> float:
+    """Write an interior's cells, storeys, rooms, portals, stairs and contents.
+
+    ``offset`` is added to every cell id (an interior placed in a scene after its
+    city cells); ``links`` adds neighbours from outside the interior (cell id with
+    the offset -> ids of other cells: the street cell an entrance joins).  Portal,
+    stair and storey ids are the interior's own.  Returns the seconds spent encoding
+    contents.
+    """
+    layout, parts = baked.layout, baked.parts
+    neighbours: dict[int, set[int]] = {c.id + offset: set() for c in layout.cells}
     for p in layout.portals:
-        neighbours[p.a].add(p.b)
-        neighbours[p.b].add(p.a)
+        neighbours[p.a + offset].add(p.b + offset)
+        neighbours[p.b + offset].add(p.a + offset)
+    for cid, others in (links or {}).items():
+        neighbours[cid].update(others)
+    writer.add_cells(
+        CellRow(c.id + offset, c.kind, c.outline, c.zmin, c.zmax, np.array(sorted(neighbours[c.id + offset]), np.int64))
+        for c in layout.cells
+    )
+    for c in layout.cells:
+        writer.set_pvs(c.id + offset, np.zeros(0, np.int64), np.zeros(0))
+    writer.add_storeys(
+        StoreyInfo(k, s.name, float(layout.ranges[k][0]), float(layout.ranges[k][1]))
+        for k, s in enumerate(scene.storeys)
+    )
+    writer.add_rooms(RoomInfo(c.id + offset, c.name, c.room, c.storey, c.planes) for c in layout.cells)
+    writer.add_portals(
+        PortalInfo(p.id, p.a + offset, p.b + offset, p.polygon, p.kind, p.source, p.name) for p in layout.portals
+    )
+    writer.add_stairs(
+        StairInfo(k, s.portal, s.lower + offset, s.upper + offset, s.path, s.name) for k, s in enumerate(layout.stairs)
+    )
+    encode_s = 0.0
+    for c in layout.cells:
+        ps = [p for p in parts.get(c.id, []) if len(p[3])]
+        t_enc = time.perf_counter()
+        blob = encode_cell_mesh(ps, version=cellmesh_version)
+        encode_s += time.perf_counter() - t_enc
+        nv = nt = 0
+        # the error as measured (the grid's rounding of what was encoded), not the bound;
+        # the decoded surface must keep each part's area (the codec's merging checks it too)
+        err = 0.0
+        if ps:
+            back = decode_cell_mesh(blob, f"cell {c.id}")
+            nv, nt = back.vertices, back.triangles
+            err = max(grid_error(part[2]) for part in ps)
+            for q, part in zip(back.parts, ps, strict=True):
+                a0, a1 = mesh_area(part[2], part[3]), mesh_area(q.positions, q.indices)
+                if abs(a1 - a0) > area_tolerance(part[2], part[3]):
+                    raise InputError(f"cell {c.id}: element {part[0]}: area {a1} m2 after encoding, {a0} m2 before")
+        writer.add_contents(ContentsInfo(nt, nv, len(ps), len(blob), raw_bytes(nv, nt), err, cell=c.id + offset), blob)
+    return encode_s
+
+
+def bake_interior(
+    scene: InteriorScene,
+    source: str | os.PathLike[str],
+    output: str | os.PathLike[str],
+    *,
+    name: str | None = None,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    log: Callable[[str], None] | None = None,
+    import_seconds: float = 0.0,
+    cellmesh_version: int = 3,
+) -> dict[str, Any]:
+    """Bake an interior into the scene database ``output`` (replaced atomically).
+
+    ``cellmesh_version`` picks the cell-contents codec (3, planar polygons, boxes and
+    rectangles on a 1 mm grid; 2 and 1 only to compare, as ``walkstream bench interiors`` does).
+
+    Returns
+    -------
+    dict
+        The database summary (``SceneReader.summary``) plus ``bake_seconds``,
+        ``import_seconds``, ``contents_encode_s`` (encoding the cells' contents),
+        ``source``, ``notes`` (what the bake wants the user to
+        know, e.g. portals found from the geometry), ``portal_sources`` and ``tour``
+        (what the default walk covers).
+    """
+    if workers < 1:
+        raise InputError(f"--workers: expected >= 1, got {workers}")
+    say = log or (lambda _msg: None)
+    src, out = Path(source), Path(output)
+    t0 = time.perf_counter()
+    baked = interior_parts(scene, src, workers=workers, scheduler=scheduler, progress=progress, say=say)
+    layout, walk, coverage, start, notes = baked.layout, baked.walk, baked.coverage, baked.start, baked.notes
+    # ---- the database
     writer = SceneWriter.create(
         out,
         name=name or out.stem,
@@ -195,44 +296,11 @@ def bake_interior(
         grammar_text="",
         grammar_version="",
         features=list(INTERIOR_FEATURES),
-        settings=settings,
+        settings=interior_settings(scene, src, cellmesh_version),
         resume=False,
     )
     try:
-        writer.add_cells(
-            CellRow(c.id, c.kind, c.outline, c.zmin, c.zmax, np.array(sorted(neighbours[c.id]), np.int64))
-            for c in layout.cells
-        )
-        for c in layout.cells:
-            writer.set_pvs(c.id, np.zeros(0, np.int64), np.zeros(0))
-        writer.add_storeys(
-            StoreyInfo(k, s.name, float(layout.ranges[k][0]), float(layout.ranges[k][1]))
-            for k, s in enumerate(scene.storeys)
-        )
-        writer.add_rooms(RoomInfo(c.id, c.name, c.room, c.storey, c.planes) for c in layout.cells)
-        writer.add_portals(PortalInfo(p.id, p.a, p.b, p.polygon, p.kind, p.source, p.name) for p in layout.portals)
-        writer.add_stairs(
-            StairInfo(k, s.portal, s.lower, s.upper, s.path, s.name) for k, s in enumerate(layout.stairs)
-        )
-        encode_s = 0.0
-        for c in layout.cells:
-            ps = [p for p in parts.get(c.id, []) if len(p[3])]
-            t_enc = time.perf_counter()
-            blob = encode_cell_mesh(ps, version=cellmesh_version)
-            encode_s += time.perf_counter() - t_enc
-            nv = nt = 0
-            # the error as measured (the grid's rounding of what was encoded), not the bound;
-            # the decoded surface must keep each part's area (the codec's merging checks it too)
-            err = 0.0
-            if ps:
-                back = decode_cell_mesh(blob, f"cell {c.id}")
-                nv, nt = back.vertices, back.triangles
-                err = max(grid_error(part[2]) for part in ps)
-                for q, part in zip(back.parts, ps, strict=True):
-                    a0, a1 = mesh_area(part[2], part[3]), mesh_area(q.positions, q.indices)
-                    if abs(a1 - a0) > area_tolerance(part[2], part[3]):
-                        raise InputError(f"cell {c.id}: element {part[0]}: area {a1} m2 after encoding, {a0} m2 before")
-            writer.add_contents(ContentsInfo(nt, nv, len(ps), len(blob), raw_bytes(nv, nt), err, cell=c.id), blob)
+        encode_s = write_interior_tables(writer, scene, baked, cellmesh_version=cellmesh_version)
         x, y, z = walk.xyz[0]
         writer.add_viewpoint("entrance", float(x), float(y), float(z), float(walk.yaw[0]), start)
         writer.add_path(TOUR_NAME, walk.to_msgpack())

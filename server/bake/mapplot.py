@@ -8,12 +8,14 @@ outlines, the building footprints on top, and the recorded path ``SE``.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
-from walkstream.server.store import SceneReader
+from walkstream.server.store import CellInfo, SceneReader
 
-__all__ = ["draw_map"]
+__all__ = ["draw_map", "draw_city"]
 
 
 def draw_map(reader: SceneReader, path: str | os.PathLike[str], *, dpi: int = 130) -> None:
@@ -21,13 +23,34 @@ def draw_map(reader: SceneReader, path: str | os.PathLike[str], *, dpi: int = 13
     import matplotlib
 
     matplotlib.use("Agg")
-    from matplotlib.collections import PatchCollection
     from matplotlib.figure import Figure
-    from matplotlib.patches import Polygon as MplPolygon
 
     cells = list(reader.cells())
     fig = Figure(figsize=(9, 8), dpi=dpi)
     ax = fig.add_subplot(1, 1, 1)
+    draw_city(fig, ax, reader, cells)
+    x0, y0, _, x1, y1, _ = reader.bounds()
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    s = reader.summary()
+    ax.set_title(
+        f"{s['name']} ({s['version']}): {s['cells']} cells, {s['objects']} objects, "
+        f"PVS mean {s['pvs_mean']:.0f} / max {s['pvs_max']}, culled {100 * s['culled_ratio']:.1f} %",
+        fontsize=9,
+    )
+    ax.set_xlabel("x (m, scene-local)")
+    ax.set_ylabel("y (m)")
+    fig.tight_layout()
+    fig.savefig(os.fspath(path))
+
+
+def draw_city(fig: Any, ax: Any, reader: SceneReader, cells: Sequence[CellInfo]) -> None:
+    """Draw the streets, ``cells`` coloured by PVS size (with a colour bar), the building
+    footprints, the walk ``SE`` and the viewpoints on a matplotlib ``ax`` of ``fig``."""
+    from matplotlib.collections import PatchCollection
+    from matplotlib.patches import Polygon as MplPolygon
+
     buildings = []
     streets, street_colours = [], []
     infos = reader.object_info(int(i) for i in reader.object_ids())
@@ -65,17 +88,3 @@ def draw_map(reader: SceneReader, path: str | os.PathLike[str], *, dpi: int = 13
     for vp in reader.viewpoints():
         ax.annotate("", xy=(vp.x + 25 * np.cos(vp.yaw), vp.y + 25 * np.sin(vp.yaw)), xytext=(vp.x, vp.y),
                     arrowprops={"arrowstyle": "->", "color": "red", "lw": 1.5})
-    x0, y0, _, x1, y1, _ = reader.bounds()
-    ax.set_xlim(x0, x1)
-    ax.set_ylim(y0, y1)
-    ax.set_aspect("equal")
-    s = reader.summary()
-    ax.set_title(
-        f"{s['name']} ({s['version']}): {s['cells']} cells, {s['objects']} objects, "
-        f"PVS mean {s['pvs_mean']:.0f} / max {s['pvs_max']}, culled {100 * s['culled_ratio']:.1f} %",
-        fontsize=9,
-    )
-    ax.set_xlabel("x (m, scene-local)")
-    ax.set_ylabel("y (m)")
-    fig.tight_layout()
-    fig.savefig(os.fspath(path))

@@ -19,9 +19,8 @@ its kept neighbours and that line stays inside the route's cells.
 
 from __future__ import annotations
 
-import heapq
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,6 +32,7 @@ from walkstream.server.bake.viewcell import ViewCell, cell_locator, cell_polygon
 from walkstream.server.store import CellInfo
 from walkstream.shared.arrays import F64, I64
 from walkstream.shared.errors import InputError, RouteError
+from walkstream.shared.nav import shortest_paths
 
 __all__ = ["TURN_COST", "STRAIGHTEN_TOL", "Route", "CellGraph"]
 
@@ -255,24 +255,21 @@ class CellGraph:
         heading_cost: float = TURN_COST,
         turn_cost: float = TURN_COST,
     ) -> tuple[F64, I64, int, float]:
-        """Dijkstra over portal crossings.
+        """Dijkstra over portal crossings (:func:`~walkstream.shared.nav.shortest_paths`).
 
         Returns the cost of every state, the predecessor of every state (-1: the
         start), and, with a target, the state the best route reaches the target cell
         by (-1 for the start cell itself, -2 when unreachable) and its total cost.
         """
         m = 2 * len(self.portal_cells)
-        dist = np.full(m, np.inf)
-        prev = np.full(m, -1, np.int64)
-        done = np.zeros(m, bool)
         mid = self.portal_mid
         fac = factor if factor is not None else np.ones(len(self.cells))
-        heap: list[tuple[float, int]] = []
         end_state, end_cost = -2, math.inf
         sx, sy = float(start[0]), float(start[1])
         if target is not None and target_cell == start_cell:
             end_state = -1
             end_cost = float(np.hypot(*(target - start))) * float(fac[start_cell])
+        seeds = []
         for k in self.cell_portals[start_cell]:
             other = int(self.portal_cells[k, 0] + self.portal_cells[k, 1] - start_cell)
             if allowed is not None and not allowed[other]:
@@ -283,16 +280,10 @@ class CellGraph:
             cost = math.hypot(lx, ly) * float(fac[start_cell]) + turn_cost * _angle(lx, ly, nx, ny)
             if heading is not None:
                 cost += heading_cost * _angle(heading[0], heading[1], lx, ly)
-            if cost < dist[s]:
-                dist[s] = cost
-                heapq.heappush(heap, (cost, s))
-        while heap:
-            d, s = heapq.heappop(heap)
-            if done[s]:
-                continue
-            if d >= end_cost:
-                break
-            done[s] = True
+            seeds.append((s, cost))
+
+        def expand(s: int, d: float) -> Iterator[tuple[int, float]]:
+            nonlocal end_state, end_cost
             c = self._into(s)
             k0 = s >> 1
             mx, my = float(mid[k0, 0]), float(mid[k0, 1])
@@ -311,19 +302,15 @@ class CellGraph:
                 if allowed is not None and not allowed[other]:
                     continue
                 s2 = self._state(k, other)
-                if done[s2]:
-                    continue
                 lx, ly = float(mid[k, 0]) - mx, float(mid[k, 1]) - my
                 ox, oy = self._normal(s2)
-                cost = (
+                yield s2, (
                     d
                     + math.hypot(lx, ly) * float(fac[c])
                     + turn_cost * (_angle(inx, iny, lx, ly) + _angle(lx, ly, ox, oy))
                 )
-                if cost < dist[s2]:
-                    dist[s2] = cost
-                    prev[s2] = s
-                    heapq.heappush(heap, (cost, s2))
+
+        dist, prev = shortest_paths(m, seeds, expand, stop=lambda d: d >= end_cost)
         return dist, prev, end_state, end_cost
 
     def _states_to(self, prev: I64, s: int) -> list[int]:

@@ -50,6 +50,8 @@ def bake(
     progress: Callable[[int, int], None] | None = None,
     log: Callable[[str], None] | None = None,
     max_cells: int | None = None,
+    interior: str | os.PathLike[str] | None = None,
+    building: str | None = None,
 ) -> dict[str, Any]:
     """Bake ``source`` (GeoJSON, OpenStreetMap, an IFC model or an interior file) into ``output``.
 
@@ -75,6 +77,10 @@ def bake(
     max_cells:
         Stop after this many new cells without finishing the database (for tests of
         interruption and resume; the work file stays for the next run).
+    interior, building:
+        An interior to place in one of the city's buildings (an object or feature
+        id, or ``auto``), joined to the street at its entrance: a crossing scene
+        (:func:`~walkstream.server.bake.crossing.bake_crossing`).
 
     Returns
     -------
@@ -82,6 +88,13 @@ def bake(
         The database summary (``SceneReader.summary``) plus ``bake_seconds``,
         ``resumed_cells`` and ``source``; empty when ``max_cells`` stopped it early.
     """
+    if interior is not None:
+        from walkstream.server.bake.crossing import bake_crossing
+
+        return bake_crossing(
+            source, interior, output, building=building, settings=settings, name=name, workers=workers,
+            scheduler=scheduler, progress=progress, log=log,
+        )
     st = (settings or BakeSettings()).check()
     if workers < 1:
         raise InputError(f"--workers: expected >= 1, got {workers}")

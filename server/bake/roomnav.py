@@ -6,7 +6,7 @@ middles of the walkable portals at floor level (a door's threshold, the middle o
 open stretch between two rooms), the centre of every room cell and the two ends of
 every stair; within a convex cell every pair of its nodes is joined by a straight
 line (it stays inside the cell), and a stair joins its ends along its walking line.
-Routes are shortest paths (Dijkstra).
+Routes are shortest paths (the one Dijkstra of :mod:`walkstream.shared.nav`).
 
 Positions are located in 3D: a point's height picks the storey (the cells' height
 ranges), its ``x, y`` the cell among that storey's; a recorded walk keeps its eye
@@ -16,9 +16,7 @@ treads).
 
 from __future__ import annotations
 
-import heapq
-import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 import shapely
@@ -27,6 +25,7 @@ from walkstream.server.bake.rooms import Portal, RoomCell, StairLink
 from walkstream.shared.arrays import F64
 from walkstream.shared.cells import CellLocator
 from walkstream.shared.errors import RouteError
+from walkstream.shared.nav import shortest_paths
 from walkstream.shared.paths import RecordedPath
 
 __all__ = [
@@ -142,20 +141,18 @@ class RoomGraph:
         return n
 
     def distances(self, start: int) -> tuple[dict[int, float], dict[int, int]]:
-        """Dijkstra from node ``start``: ``(distance, previous node)`` of every reachable node."""
-        dist = {start: 0.0}
-        prev: dict[int, int] = {}
-        heap = [(0.0, start)]
-        while heap:
-            d, n = heapq.heappop(heap)
-            if d > dist.get(n, math.inf):
-                continue
-            for m, w, _ in self.adj.get(n, ()):
-                nd = d + w
-                if nd < dist.get(m, math.inf) - 1e-12:
-                    dist[m] = nd
-                    prev[m] = n
-                    heapq.heappush(heap, (nd, m))
+        """Dijkstra (:func:`~walkstream.shared.nav.shortest_paths`) from node ``start``: ``(distance,
+        previous node)`` of every reachable node."""
+        adj = self.adj
+
+        def expand(n: int, d: float) -> Iterator[tuple[int, float]]:
+            for m, w, _ in adj.get(n, ()):
+                yield m, d + w
+
+        far, before = shortest_paths(len(self.nodes), [(start, 0.0)], expand, tol=1e-12)
+        reached = np.flatnonzero(np.isfinite(far)).tolist()
+        dist = {n: float(far[n]) for n in reached}
+        prev = {n: int(before[n]) for n in reached if before[n] >= 0}
         return dist, prev
 
     def polyline(self, nodes: Sequence[int]) -> F64:

@@ -66,8 +66,11 @@ class InteriorState:
         portals = reader.portals()
         refs: dict[int, list[PortalRef]] = {c.id: [] for c in cells}
         for p in portals:
-            refs[p.a].append(PortalRef(p.id, p.kind, p.polygon, p.b))
-            refs[p.b].append(PortalRef(p.id, p.kind, p.polygon, p.a))
+            # an entrance joins a street cell (no room record) to a doorway
+            if p.a in refs:
+                refs[p.a].append(PortalRef(p.id, p.kind, p.polygon, p.b))
+            if p.b in refs:
+                refs[p.b].append(PortalRef(p.id, p.kind, p.polygon, p.a))
         self.records: dict[int, RoomRecord] = {}
         for c in cells:
             r = rooms[c.id]

@@ -143,6 +143,7 @@ _BODY_CACHE_BYTES = 64 << 20
 _FRAME_CACHE_BYTES = 128 << 20
 # a recorded path larger than this is not decoded for the JSON representation
 _MAX_PATH_JSON_BYTES = 8 << 20
+_ANY_HEIGHT = 1e9  # a street cell of a crossing scene holds a point at any height (metres)
 
 
 # ---------------------------------------------------------------------------
@@ -244,9 +245,18 @@ class Scene:
         # interiors stack storeys: their cells are located in 3D, the outside never
         locatable = [c for c in cells if c.kind in LOCATABLE_KINDS]
         zranges = [[c.zmin, c.zmax] for c in locatable] if meta.kind == "interior" else None
+        inside = cells
+        if meta.kind == "crossing":
+            # rooms stack storeys, streets do not: a street cell holds a point at any height
+            # (no street cell overlaps a room in plan; the interior's outside is not located)
+            rooms = reader.rooms()
+            inside = [c for c in cells if c.id in rooms]
+            zranges = [[c.zmin, c.zmax] if c.id in rooms else [-_ANY_HEIGHT, _ANY_HEIGHT] for c in locatable]
         self.locator = CellLocator([c.id for c in locatable], [c.boundary for c in locatable], zranges)
         self.kind: str = meta.kind
-        self.interior: InteriorState | None = InteriorState(reader, cells) if meta.kind == "interior" else None
+        self.interior: InteriorState | None = (
+            InteriorState(reader, inside) if meta.kind in ("interior", "crossing") else None
+        )
         self.grid, tiles = fit_tile_grid([c.boundary for c in cells])
         self.tile_cells: dict[tuple[int, int], list[int]] = {}
         """Tile -> ids of its cells, ascending."""

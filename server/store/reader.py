@@ -33,6 +33,7 @@ from walkstream.server.store.files import _label
 from walkstream.server.store.records import (
     CellInfo,
     ContentsInfo,
+    EntranceInfo,
     ObjectInfo,
     PortalInfo,
     RoomInfo,
@@ -433,6 +434,13 @@ class SceneReader:
             for i, p, lo, up, pa, n in rows
         ]
 
+    def entrances(self) -> list[EntranceInfo]:
+        """The entrances joining streets to rooms, by portal id (empty but in a crossing scene)."""
+        if not self._has_table("entrances"):
+            return []
+        rows = self._query("SELECT portal, building, street, doorway, shell FROM entrances ORDER BY portal")
+        return [EntranceInfo(*(int(v) for v in r)) for r in rows]
+
     def contents_info(self) -> dict[int, ContentsInfo]:
         """Cell id -> the sizes of its contents (empty for a city)."""
         if not self._has_table("contents"):
@@ -502,24 +510,27 @@ class SceneReader:
             "paths": len(self.path_names()),
             "kind": m.kind,
             "portals": len(self.portals()),
-        } | (self._interior_summary() if m.kind == "interior" else {})
+        } | (self._interior_summary() if m.kind in ("interior", "crossing") else {}) | (
+            {"entrances": len(self.entrances())} if m.kind == "crossing" else {}
+        )
 
     def _interior_summary(self) -> dict[str, Any]:
         rooms = self.rooms()
         info = self.contents_info()
         storeys = self.storeys()
-        kinds = {c.id: c.kind for c in self.cells()}
+        kinds = {c.id: c.kind for c in self.cells() if c.id in rooms}
         inside = [c for c, k in kinds.items() if k != "outside"]
         per_storey = {s.name: sum(1 for c in inside if rooms[c].storey == s.id) for s in storeys}
         nbytes = np.array([info[c].nbytes for c in info], dtype=np.float64)
         raw = np.array([info[c].raw_bytes for c in info], dtype=np.float64)
         tris = np.array([info[c].triangles for c in inside if c in info], dtype=np.int64)
         portals = self.portals()
-        ends = np.zeros(len(kinds), np.int64)
+        ends = dict.fromkeys(kinds, 0)
         for p in portals:
-            ends[p.a] += 1
-            ends[p.b] += 1
-        pin = ends[inside] if inside else np.zeros(1, np.int64)
+            for c in (p.a, p.b):
+                if c in ends:
+                    ends[c] += 1
+        pin = np.array([ends[c] for c in inside] if inside else [0], np.int64)
         return {
             "storeys": len(storeys),
             "rooms": len({r.room for r in rooms.values() if r.room is not None}),

@@ -36,6 +36,7 @@ __all__ = [
     "StairInfo",
     "ContentsInfo",
     "StoreyInfo",
+    "EntranceInfo",
 ]
 _MAX_PATH_NAME = 200
 _MAX_PATH_BYTES = 64 << 20
@@ -79,7 +80,11 @@ class SceneMeta:
 
     @property
     def kind(self) -> str:
-        """``interior`` for a scene of rooms and portals, else ``city``."""
+        """``crossing`` for a city with a building's interior joined at its entrance
+        (the ``entrances`` feature), ``interior`` for a scene of rooms and portals,
+        else ``city``."""
+        if "entrances" in self.features:
+            return "crossing"
         return "interior" if "rooms" in self.features else "city"
 
 
@@ -178,6 +183,20 @@ class CellInfo:
     neighbours: NDArray[np.int64]
     pvs: NDArray[np.int64]
     ach: NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class EntranceInfo:
+    """A building's entrance in a crossing scene: ``portal`` (an id of the portals
+    table) joins ``street`` (a city cell) to ``doorway`` (a room-model cell); the
+    city object ``building`` is drawn as the contents of cell ``shell`` (the
+    interior's outside: its outer walls, with the door, and its roof)."""
+
+    portal: int
+    building: int
+    street: int
+    doorway: int
+    shell: int
 
 
 def _finite(x: object, what: str) -> float:

@@ -95,6 +95,15 @@ OPTIONAL_TABLES: dict[str, dict[str, str]] = {
             "raw_bytes INTEGER NOT NULL, max_error REAL NOT NULL)"
         ),
     },
+    "entrances": {
+        # a building's entrance in a scene of streets and rooms: the portal (in the
+        # portals table) joining a street cell to a doorway cell, the city object the
+        # interior replaces and the cell whose contents stand for it from the street
+        "entrances": (
+            "CREATE TABLE entrances(portal INTEGER PRIMARY KEY, building INTEGER NOT NULL, "
+            "street INTEGER NOT NULL, doorway INTEGER NOT NULL, shell INTEGER NOT NULL)"
+        ),
+    },
 }
 """Tables that exist only in scenes using a feature, declared in this one place."""
 

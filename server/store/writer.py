@@ -31,6 +31,7 @@ from walkstream.server.store.records import (
     _MAX_PATH_BYTES,
     CellRow,
     ContentsInfo,
+    EntranceInfo,
     ObjectRow,
     PortalInfo,
     RoomInfo,
@@ -460,6 +461,16 @@ class SceneWriter:
         row = (_index(info.cell, what), blob, _index(info.triangles, what), _index(info.vertices, what),
                _index(info.parts, what), _index(info.raw_bytes, what), _finite(info.max_error, what))
         self._run("contents", "INSERT OR REPLACE INTO contents VALUES (?,?,?,?,?,?,?)", [row])
+
+    def add_entrances(self, rows: Iterable[EntranceInfo]) -> int:
+        """Insert (or replace) the entrances of a crossing scene; returns how many."""
+        self._require("entrances", "entrances")
+        out = []
+        for r in rows:
+            what = f"entrance {r.portal}"
+            out.append(tuple(_index(v, what) for v in (r.portal, r.building, r.street, r.doorway, r.shell)))
+        self._run("entrances", "INSERT OR REPLACE INTO entrances VALUES (?,?,?,?,?)", out)
+        return len(out)
 
     # -- finishing -----------------------------------------------------------
 
