@@ -39,6 +39,7 @@ from walkstream.client.draw.devices import make_device
 from walkstream.client.draw.phases import FramePhases
 from walkstream.client.net.api import SceneClient
 from walkstream.client.net.link import LinkProfile, ShapedTransport
+from walkstream.client.report.link import bytes_series, link_figures
 from walkstream.client.report.metrics import (
     FrameLog,
     FrameLogBuilder,
@@ -68,12 +69,7 @@ from walkstream.shared.roomview import RoomView
 from walkstream.shared.roomwire import Topology
 from walkstream.shared.wire import Manifest
 
-__all__ = ["CROSSING_NOT_YET", "ReplayConfig", "ReplayResult", "run_replay", "replay"]
-
-CROSSING_NOT_YET = (
-    "a crossing scene (streets and rooms joined at an entrance): its walk is not supported by the replay yet "
-    "(it replays city and interior scenes)"
-)
+__all__ = ["ReplayConfig", "ReplayResult", "run_replay", "replay"]
 
 STREAM_FORMS = {"params": "params", "meshes": "lod2"}
 """--stream choice -> the server's objects ``form``."""
@@ -212,8 +208,6 @@ def run_replay(
         Called with ``(frames compared, frames to compare)`` after the walk
         (``truth_every``).
     """
-    if config.kind == "crossing":
-        raise InputError(CROSSING_NOT_YET)
     if config.clock == "sim":
         sim = SimClock()
         return sim.run(replay(transport, base_url, config, sim, progress, truth_progress))
@@ -339,7 +333,7 @@ async def replay(
                 if manifest_fut.done():
                     return
                 assert streamer is not None
-                grammar = parse_grammar(m.grammar_text) if streamer.rewrite is not None and m.kind == "city" else None
+                grammar = parse_grammar(m.grammar_text) if streamer.rewrite is not None and m.kind != "interior" else None
                 usable = disk is not None and disk.use(m.name, m.version)
                 streamer.on_manifest(m.max_ids, grammar, disk if usable else None, m.index)
                 manifest_fut.set_result(m)
@@ -368,19 +362,24 @@ async def replay(
                 summary = summarise(
                     log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0
                 )
-                summary.update(_link_summary(config, stats, api))
+                summary.update(link_figures(config, stats, api))
                 summary["error"] = (
                     f"the scene, manifest or path {config.path!r} did not arrive within "
                     f"{config.setup_timeout_s:g} s"
                 )
-                return ReplayResult(summary, log, _bytes_log(stats, t_start))
+                return ReplayResult(summary, log, bytes_series(stats, t_start))
             path, _path_bytes = got
             kind = config.kind
             if kind is None:
                 m0 = await within(clock, config.setup_timeout_s, asyncio.shield(manifest_fut))
                 kind = "city" if m0 is None else m0.kind
-            if kind == "crossing":
-                raise InputError(CROSSING_NOT_YET)
+            if kind == "crossing":  # streets and rooms: one loop, this link, this cache, this streamer
+                from walkstream.client.walk.crossing import replay_crossing
+
+                summary, log, snapshots, spikes = await replay_crossing(
+                    api, link, clock, config, path, streamer, cache, manifest_fut, t_start, setup_s, progress,
+                    (transport, base_url))
+                return ReplayResult(summary, log, bytes_series(link.stats, t_start), snapshots, spikes)
             if kind == "interior":
                 return await _replay_interior(
                     api, link, clock, config, path, manifest_fut, t_start, setup_s, progress, (transport, base_url),
@@ -439,7 +438,7 @@ async def replay(
             if disk is not None:
                 disk.close()
     stats = link.stats
-    bytes_log = _bytes_log(stats, t_start)
+    bytes_log = bytes_series(stats, t_start)
     entered = {int(c) for c in np.unique(log.cell) if c >= 0}
     over = _overfetch(streamer, entered)
     bytes_received = int(stats.bytes_down)
@@ -604,10 +603,10 @@ async def _replay_interior(
         step = int(np.searchsorted(log.t - log.t[0], config.cost_step_at_s))
     summary = summarise(log, fps_target=config.fps_target, fps_cap=config.fps, t_start=0.0, cost_step=step,
                         recovery_ignore=spikes)
-    summary.update(_link_summary(config, stats, api))
+    summary.update(link_figures(config, stats, api))
     summary.update(interior_summary(config, log, streamer, frames, topology, cache, setup_s, path, manifest))
     summary["truth"] = truth_figures
-    return ReplayResult(summary, log, _bytes_log(stats, t_start), snapshots, spikes, interior=frames.series(log))
+    return ReplayResult(summary, log, bytes_series(stats, t_start), snapshots, spikes, interior=frames.series(log))
 
 
 def _overfetch(streamer: Streamer, entered: set[int]) -> dict[str, int]:
@@ -630,37 +629,6 @@ def _overfetch(streamer: Streamer, entered: set[int]) -> dict[str, int]:
             for key, n in st.tile_bytes.items()
             if not (streamer.tile_members.get(key, frozenset()) & entered)
         ),
-    }
-
-
-def _bytes_log(stats: Any, t_start: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    return (
-        np.array([t for t, _ in stats.down_log], dtype=np.float64) - t_start,
-        np.array([b for _, b in stats.down_log], dtype=np.float64),
-    )
-
-
-def _link_summary(config: ReplayConfig, stats: Any, api: SceneClient) -> dict[str, Any]:
-    return {
-        "scene": api.scene,
-        "path": config.path,
-        "clock": config.clock,
-        "device": config.device,
-        "prefetch": config.prefetch,
-        "stream": config.stream,
-        "bandwidth_bps": config.link.down_bps,
-        "rtt_s": config.link.rtt_s,
-        "loss": config.link.loss,
-        "bytes_received": int(stats.bytes_down),
-        "bytes_sent": int(stats.bytes_up),
-        "overfetch_ratio": 0.0,
-        "redownloads": 0,
-        "rebuilds": 0,
-        "duplicates": 0,
-        "retries": api.stats.retries,
-        "cut_streams": api.stats.cut_streams,
-        "responses_cut_by_link": stats.responses_cut,
-        "requests": stats.requests, "start_bundle": config.start_bundle,
     }
 
 

@@ -47,7 +47,7 @@ from walkstream.shared.roomview import room_projection
 from walkstream.shared.roomwire import Topology
 from walkstream.shared.wire import Manifest
 
-__all__ = ["InteriorFrames", "interior_summary", "walk_interior"]
+__all__ = ["InteriorFrames", "fog_for_budget", "interior_summary", "walk_interior"]
 
 
 @dataclass
@@ -171,7 +171,7 @@ async def walk_interior(
         budget = 0
         if controller is not None:
             budget = int(controller.budget)
-            fog = _fog_for_budget(masks, boxes, loaded, eye, budget, fog)
+            fog = fog_for_budget(masks, boxes, loaded, eye, budget, fog)
             for cid, mask in masks.items():
                 lo, hi = boxes[cid]
                 mask &= box_distance(lo, hi, eye) <= fog
@@ -304,7 +304,7 @@ def interior_summary(
     }
 
 
-def _fog_for_budget(
+def fog_for_budget(
     masks: dict[int, NDArray[np.bool_]],
     boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]],
     loaded: dict[int, Any],

@@ -23,6 +23,7 @@ __all__ = [
     "INSIDE_TOL",
     "LOCATABLE_KINDS",
     "LOCATE_TOL",
+    "PORTAL_KINDS",
     "CellLocator",
     "TileGrid",
     "inside_convex",
@@ -37,6 +38,10 @@ opening of a door or inner window through a thick wall, so that an eye standing 
 is in a cell) and ``outside`` (one per interior: everything seen through windows and
 outer doors; no viewer is ever located in it).
 """
+
+PORTAL_KINDS: frozenset[str] = frozenset({"room", "doorway", "outside"})
+"""The kinds whose visible set is found by walking portals; the others have a PVS
+(a crossing scene holds cells of both, joined at its entrances)."""
 
 LOCATABLE_KINDS: frozenset[str] = frozenset(k for k in CELL_KINDS if k != "outside")
 """The kinds a viewer can be located in (every kind but ``outside``)."""

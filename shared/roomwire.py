@@ -39,6 +39,8 @@ __all__ = [
     "decode_topology",
     "decode_topology_packed",
     "TOPOLOGY_PACKED_MEDIA",
+    "Entrance",
+    "decode_entrances",
 ]
 
 TOPOLOGY_PACKED_MEDIA = "application/vnd.walkstream.topology+gzip"
@@ -306,3 +308,41 @@ def decode_topology_packed(body: bytes, what: str) -> Topology:
     raw = inflate_bounded(body, what, _MAX_TOPOLOGY, "gzip body", wbits=31)
     t = decode_topology(raw, what)
     return Topology(t.storeys, t.cells, t.portals, t.stairs, nbytes=len(body))
+
+
+@dataclass(frozen=True)
+class Entrance:
+    """A building's entrance in a crossing scene as the API sends it (``GET .../entrances``).
+
+    ``portal`` joins the city cell ``street`` to the room cell ``doorway``; the city
+    object ``building`` (named by street PVS) is drawn as the contents of the room cell
+    ``shell`` (the interior's outside: its outer walls with the door, and its roof),
+    never from its own parameters (they are a stand-in inside the shell).
+    """
+
+    portal: int
+    building: int
+    street: int
+    doorway: int
+    shell: int
+
+    def to_wire(self) -> dict[str, int]:
+        """The entrance as sent."""
+        return {"portal": self.portal, "building": self.building, "street": self.street,
+                "doorway": self.doorway, "shell": self.shell}
+
+
+def decode_entrances(body: bytes, what: str) -> tuple[Entrance, ...]:
+    """Decode and check a crossing scene's entrances (msgpack: a list of maps)."""
+    obj = unpack_bounded(body, what, max_bytes=1 << 20, max_array_len=1 << 16, max_map_len=8, max_bin_len=0)
+    if not isinstance(obj, list):
+        raise CodecError(f"{what}: expected a list")
+    out = []
+    for k, e in enumerate(obj):
+        if not isinstance(e, dict):
+            raise CodecError(f"{what}: [{k}] is not a map")
+        try:
+            out.append(Entrance(*(_int(e[f], f"{what}: [{k}].{f}") for f in ("portal", "building", "street", "doorway", "shell"))))
+        except KeyError as exc:
+            raise CodecError(f"{what}: [{k}] has no {exc.args[0]!r}") from None
+    return tuple(out)

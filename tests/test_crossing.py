@@ -174,18 +174,6 @@ def test_cli_inspect_map_and_record(baked: tuple[Path, dict[str, Any], Path], ca
     assert "recorded path 'cli-out'" in capsys.readouterr().out
 
 
-def test_the_replay_says_in_one_line_that_it_cannot_walk_a_crossing_yet(
-    baked: tuple[Path, dict[str, Any], Path], capsys: pytest.CaptureFixture[str]
-) -> None:
-    from walkstream.cli import main
-
-    db, _, d = baked
-    assert main(["replay", str(db), "--path", "enter", "--report", str(d / "report")]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "not supported by the replay yet" in err[0]
-    assert not (d / "report").exists()
-
-
 def test_an_ifc_model_enters_from_the_street_too(baked: tuple[Path, dict[str, Any], Path]) -> None:
     """The FZK house (its door 0.5 m behind the shell's front) in the same city."""
     pytest.importorskip("ifcopenshell", reason="the ifc extra (make test installs it)")

@@ -39,8 +39,10 @@ from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomcompact import TOPOLOGY_COMPACT_MAGIC, decode_topology_compact
 from walkstream.shared.roomview import RoomView
 from walkstream.shared.roomwire import (
+    Entrance,
     RoomRecord,
     Topology,
+    decode_entrances,
     decode_room,
     decode_topology,
     decode_topology_packed,
@@ -290,6 +292,12 @@ class SceneClient:
         else:
             _, t = await self._get_decoded(self._url("/topology"), what, lambda r: decode_topology(r.content, what))
         return t
+
+    async def entrances(self) -> tuple[Entrance, ...]:
+        """A crossing scene's entrances (street cell, doorway, the building and its shell)."""
+        what = f"scene {self.scene!r} entrances"
+        _, got = await self._get_decoded(self._url("/entrances"), what, lambda r: decode_entrances(r.content, what))
+        return got
 
     async def room(self, cid: int) -> RoomRecord:
         """Interior cell ``cid``'s record."""

@@ -2,8 +2,9 @@
 
 :class:`Cache` holds what the walk needs in memory under one byte budget: tiles of
 the cell index (``"index"``), cell records (``"cell"``), what is downloaded per object -- its parameters (``"params"``),
-or its LOD2 mesh when meshes are streamed instead (``"mesh"``) -- and the geometry
-ready to draw (``"geom"``).  What the current view needs (the current cell's record, its PVS
+or its LOD2 mesh when meshes are streamed instead (``"mesh"``) -- the geometry
+ready to draw (``"geom"``), and a room cell's contents (``"cellmesh"``, by cell id: a
+crossing scene keeps both in one cache, and object ids and cell ids overlap).  What the current view needs (the current cell's record, its PVS
 parameters and their geometry) is *pinned* and never evicted.  Over the budget, the
 unpinned entries go in this order: geometry first, because it can be rebuilt
 without the network; then parameters (or meshes); then cells; then index tiles
@@ -27,17 +28,20 @@ from typing import Any, Literal
 
 from walkstream.shared.errors import InputError
 
-__all__ = ["Kind", "KINDS", "EVICTION_ORDER", "METADATA", "Key", "Cache"]
+__all__ = ["Kind", "KINDS", "CITY_KINDS", "EVICTION_ORDER", "METADATA", "Key", "Cache"]
 
-Kind = Literal["index", "cell", "params", "mesh", "geom"]
+Kind = Literal["index", "cell", "params", "mesh", "geom", "cellmesh"]
 """What a :class:`Cache` entry is: an index tile, a cell record, object parameters, a
-downloaded mesh, geometry."""
+downloaded mesh, geometry, a room cell's contents."""
 
-KINDS: tuple[Kind, ...] = ("index", "cell", "params", "mesh", "geom")
+KINDS: tuple[Kind, ...] = ("index", "cell", "params", "mesh", "geom", "cellmesh")
 """Every entry kind."""
 
-EVICTION_ORDER: tuple[Kind, ...] = ("geom", "params", "mesh", "cell", "index")
+EVICTION_ORDER: tuple[Kind, ...] = ("geom", "params", "mesh", "cellmesh", "cell", "index")
 """Over the budget, unpinned entries of these kinds go first to last."""
+
+CITY_KINDS: tuple[Kind, ...] = ("index", "cell", "params", "mesh", "geom")
+"""The kinds the city streamer pins (a room streamer sharing the cache pins ``"cellmesh"``)."""
 
 METADATA: tuple[Kind, ...] = ("cell", "index")
 """The kinds that share the metadata reserve (see :class:`Cache`)."""
@@ -265,14 +269,17 @@ class Cache:
             evicted = self._shrink()
         self._notify(evicted)
 
-    def set_pins(self, keys: Iterable[tuple[str, int]]) -> None:
-        """Pin exactly ``keys`` (``(kind, id)``), unpinning every other key, then shrink.
+    def set_pins(self, keys: Iterable[tuple[str, int]], kinds: Iterable[str] | None = None) -> None:
+        """Pin exactly ``keys`` (``(kind, id)``), unpinning every other key of ``kinds``
+        (default: every kind), then shrink.
 
-        One step, so nothing that stays pinned is evicted in between.
+        One step, so nothing that stays pinned is evicted in between.  ``kinds`` lets two
+        streamers share one cache, each owning the pins of its own kinds.
         """
         want: set[Key] = {(self._kind(k), int(i)) for k, i in keys}
+        owned = set(KINDS) if kinds is None else {self._kind(k) for k in kinds}
         with self._lock:
-            for kind, oid in self._pins - want:
+            for kind, oid in {p for p in self._pins if p[0] in owned} - want:
                 self._unpin_one(kind, oid)
             for kind, oid in want - self._pins:
                 self._pin_one(kind, oid)

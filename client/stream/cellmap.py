@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.arrays import F64
-from walkstream.shared.cells import INSIDE_TOL, inside_convex
+from walkstream.shared.cells import INSIDE_TOL, PORTAL_KINDS, inside_convex
 
 __all__ = ["CellMap", "portal_between"]
 
@@ -112,7 +112,17 @@ class CellMap:
         kinds: Sequence[str] | None = None,
         tile: Tile = None,
     ) -> None:
-        """Learn cells: their outlines, neighbours and kinds, as those of ``tile``."""
+        """Learn cells: their outlines, neighbours and kinds, as those of ``tile``.
+
+        Cells whose visible set is by portals (:data:`~walkstream.shared.cells.PORTAL_KINDS`:
+        a crossing scene's rooms) are left out: they are the room streamer's, and the
+        map tracks the viewer over the cells with a PVS."""
+        keep = [k for k in range(len(ids)) if kinds is None or kinds[k] not in PORTAL_KINDS]
+        if len(keep) < len(ids):
+            ids = [ids[k] for k in keep]
+            outlines = [outlines[k] for k in keep]
+            neighbours = [neighbours[k] for k in keep]
+            kinds = [kinds[k] for k in keep] if kinds is not None else None
         ids = [int(c) for c in ids]
         for k, c in enumerate(ids):
             self.outlines[c] = np.asarray(outlines[k], dtype=np.float64).reshape(-1, 2)

@@ -37,8 +37,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -165,15 +166,23 @@ class RoomStreamer:
     clock:
         The replay's clock.
     cache:
-        The byte-budget cache; contents are kept as kind ``"mesh"`` under the cell id.
+        The byte-budget cache; contents are kept as kind ``"cellmesh"`` under the cell id.
     topology:
         The interior's topology (fetched once, before the walk).
     config:
         Knobs.
+    foreign:
+        Cells the topology holds for the portal walk only (see :attr:`foreign`).
     """
 
-    def __init__(self, api: SceneClient, clock: Clock, cache: Cache, topology: Topology, config: RoomStreamConfig) -> None:
+    def __init__(
+        self, api: SceneClient, clock: Clock, cache: Cache, topology: Topology, config: RoomStreamConfig,
+        foreign: Iterable[int] = (),
+    ) -> None:
         self.api = api
+        self.foreign = frozenset(int(c) for c in foreign)
+        """Cells of another model in the topology (a street cell joined at an entrance):
+        the portal walk passes them, their contents are never asked for."""
         self.clock = clock
         self.cache = cache
         self.config = config
@@ -203,6 +212,10 @@ class RoomStreamer:
         a neighbour, then any; outside every cell the current one is kept."""
         self.current = self._where.locate(eye, self.current)
         return self.current
+
+    def holds(self, cid: int, eye: NDArray[np.float64]) -> bool:
+        """Whether cell ``cid``'s planes hold ``eye`` (a crossing walk is indoors then)."""
+        return self._where.holds(cid, eye)
 
     def visible_cells(
         self,
@@ -238,6 +251,18 @@ class RoomStreamer:
             return pc, pc.order
         return None, frustum_cells(self.graph, cell, eye, view_proj, fog_m=cfg.fog_m, max_depth=cfg.max_depth)
 
+    def seen_from(
+        self,
+        cell: int,
+        eye: NDArray[np.float64],
+        view: NDArray[np.float64],
+        proj: NDArray[np.float64],
+        size: tuple[int, int],
+    ) -> list[int]:
+        """The cells seen from ``cell`` with the camera ``view``, ``proj`` at ``eye`` (a
+        predicted pose: nothing is kept of it)."""
+        return self._cells_from(cell, eye, proj @ view, view, proj, size)[1]
+
     def visible_bytes(self, cells: list[int]) -> int:
         """Memory the decoded contents of ``cells`` take (cached ones as cached; the
         others estimated from the topology's triangles at the bytes per triangle of the
@@ -255,7 +280,7 @@ class RoomStreamer:
 
     def mesh(self, cid: int) -> CellMesh | None:
         """Cell ``cid``'s contents if they are in memory."""
-        value: CellMesh | None = self.cache.peek("mesh", cid)
+        value: CellMesh | None = self.cache.peek("cellmesh", cid)
         return value
 
     def tick(
@@ -266,24 +291,41 @@ class RoomStreamer:
         view: NDArray[np.float64] | None = None,
         proj: NDArray[np.float64] | None = None,
         size: tuple[int, int] | None = None,
+        *,
+        cell: int | None | Literal["locate"] = "locate",
+        shown: Sequence[int] = (),
+        ahead: Sequence[int] = (),
     ) -> list[int]:
         """Move the viewer: locate, find the visible cells (:meth:`visible_cells`), flush,
         and fetch what the walk will need, in the order it will need it (:meth:`wanted`);
-        returns the visible cells."""
+        returns the visible cells.
+
+        A walk that leaves the interior (a crossing) says where the portal walk starts
+        (``cell``: a street cell joined at an entrance, or None for no portal walk),
+        which cells it draws besides the visible ones (``shown``, fetched as visible),
+        and which it will need soon (``ahead``, fetched before any other prefetch)."""
         e = np.asarray(eye, dtype=np.float64).reshape(3)
-        self.locate(e)
+        if cell == "locate":
+            self.locate(e)
+        else:
+            self.current = cell
         vis = self.visible_cells(e, view_proj, view, proj, size)
         self.visible = vis
         for c in vis:
             self.last_visible[c] = t
         self.observe(t, e)
         want = self.wanted(t, e, vis, view_proj, view, proj, size)
+        seen = list(dict.fromkeys([*vis, *shown]))
+        if shown or ahead or self.foreign:
+            first = [c for c in seen if c not in self.foreign]
+            want = [c for c in dict.fromkeys([*first, *ahead, *want]) if c not in self.foreign]
+            vis = first
         self._flush(t, want)
         # what is wanted and in memory stays: the LRU evicts only what nobody needs soon
         # pinned before they arrive too: a wanted cell is never evicted by its own arrival
-        self.cache.set_pins([("mesh", c) for c in want])
+        self.cache.set_pins([("cellmesh", c) for c in want], kinds=("cellmesh",))
         self._request(want, set(vis))
-        return vis
+        return seen
 
     def _request(self, want: list[int], vis: set[int]) -> None:
         """Start requests for the wanted cells neither in memory nor in flight, in order:
@@ -291,7 +333,7 @@ class RoomStreamer:
         ``batch_bytes``), at most ``max_in_flight`` requests at once (one more for
         visible cells when only prefetch is in flight; no prefetch while visible cells are)."""
         cfg = self.config
-        missing = [c for c in want if c not in self._tasks and not self.cache.has("mesh", c)]
+        missing = [c for c in want if c not in self._tasks and not self.cache.has("cellmesh", c)]
         while missing:
             busy = len(set(self._tasks.values()))
             if not cfg.batch_bytes:
@@ -331,8 +373,8 @@ class RoomStreamer:
         shown = set(want)
         for c in list(self.last_visible):
             if c not in shown and t - self.last_visible[c] > cfg.flush_s:
-                if self.cache.has("mesh", c):
-                    self.cache.remove("mesh", c)
+                if self.cache.has("cellmesh", c):
+                    self.cache.remove("cellmesh", c)
                     self.stats.flushed += 1
                 del self.last_visible[c]
 
@@ -411,7 +453,7 @@ class RoomStreamer:
         recent = sorted((c for c, seen in self.last_visible.items() if t - seen <= self.config.recent_s),
                         key=lambda c: -self.last_visible[c])
         for c in [*self._ahead, *recent, *beyond]:
-            if c in have or self.cells[c].kind == "outside":
+            if c in have or self.cells[c].kind == "outside" or c in self.foreign:
                 continue
             room -= self.visible_bytes([c])
             if room < 0:
@@ -473,7 +515,7 @@ class RoomStreamer:
         self._received[1] += self.cells[cid].contents.triangles
         if self._received[1]:
             self._bytes_per_triangle = self._received[0] / self._received[1]
-        self.cache.put("mesh", cid, mesh, max(size, 1))
+        self.cache.put("cellmesh", cid, mesh, max(size, 1))
 
     async def close(self) -> None:
         """Cancel what is in flight."""

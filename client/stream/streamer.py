@@ -55,7 +55,7 @@ from walkstream.client.clock import Clock
 from walkstream.client.net.api import SceneClient
 from walkstream.client.rewrite.pool import ObjectGeometry, RewriteOptions, RewritePool, geometry_of
 from walkstream.client.stream.bundle import StartBundle
-from walkstream.client.stream.cache import Cache, Kind
+from walkstream.client.stream.cache import CITY_KINDS, Cache, Kind
 from walkstream.client.stream.cellmap import CellMap
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.plan import Tile, plan_needs, tile_key, tile_of_key, wanted_objects
@@ -316,7 +316,7 @@ class Streamer:
         keys += [("index", tile_key(t)) for t in self.need_tiles]
         if self.grid is not None:
             keys.append(("index", tile_key(self.grid.tile_of(self._xy))))
-        self.cache.set_pins(keys)
+        self.cache.set_pins(keys, kinds=CITY_KINDS)
 
     def _entered(self, cid: int) -> None:
         rec = self.cells.get(cid)

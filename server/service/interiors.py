@@ -32,6 +32,7 @@ from walkstream.shared.roomview import RoomLocator, RoomView, cells_seen
 from walkstream.shared.roomwire import (
     TOPOLOGY_PACKED_MEDIA,
     ContentsRef,
+    Entrance,
     PortalRef,
     RoomRecord,
     Topology,
@@ -97,6 +98,11 @@ class InteriorState:
         compact = encode_topology_compact(decode_topology(self.topology["msgpack"].content, "topology"))
         self.topology_compact = Encoded(compact, TOPOLOGY_COMPACT_MEDIA, etag_for(self.version, "topology", "c2"))
         """The topology in millimetres, planes rebuilt from outlines (``walkstream-topology/2``)."""
+        entrances = [Entrance(e.portal, e.building, e.street, e.doorway, e.shell).to_wire() for e in reader.entrances()]
+        self.entrances: dict[Rep, Encoded] = {
+            rep: encode(entrances, rep, self.version, "entrances") for rep in ("msgpack", "json")
+        }
+        """The entrances joining streets to rooms (a crossing scene's; empty for an interior)."""
         self._cache = LRU(_CACHE_BYTES)
 
     def has(self, cid: int) -> bool:

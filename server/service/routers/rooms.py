@@ -14,6 +14,10 @@
     (``walkstream-topology/2``, media type ``application/vnd.walkstream.topology-c2``;
     decode with :func:`walkstream.shared.roomcompact.decode_topology_compact`): half
     the packed one's bytes.
+``GET /v1/scenes/{scene}/entrances``
+    A crossing scene's entrances: per entrance its portal, the city object it stands
+    for (``building``), the street cell and the doorway it joins, and the cell whose
+    contents are drawn for the building (``shell``); an empty list for an interior.
 ``GET /v1/scenes/{scene}/rooms/{cell}``
     One cell: planes, outline, portals (polygon and the other cell), neighbours and
     what its contents weigh.
@@ -108,6 +112,16 @@ async def topology_packed(request: Request, scene: SceneDep) -> Response:
 async def topology_compact(request: Request, scene: SceneDep) -> Response:
     """The topology in millimetres (the same bytes whatever ``Accept`` says)."""
     return cached(request, _interior(scene).topology_compact)
+
+
+@router.get(
+    "/scenes/{scene}/entrances",
+    responses=both("the entrances joining streets to rooms"),
+    summary="Entrances of a crossing scene",
+)
+async def entrances(request: Request, scene: SceneDep, rep: RepDep) -> Response:
+    """Portal, building, street cell, doorway and shell cell of each entrance."""
+    return cached(request, _interior(scene).entrances[rep])
 
 
 @router.get(
