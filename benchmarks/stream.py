@@ -13,6 +13,13 @@ More scene databases join the table with ``extra`` (``--scene LABEL=DB[:PATH,...
 on the command line): each of their recorded paths (or those named) is replayed
 over GPRS (5 kB/s, 500 ms) and over 56 kbit/s (200 ms), as rows ``LABEL PATH
 GPRS`` and ``LABEL PATH 56k``; ``--vienna DB`` is ``--scene Vienna=DB:walk``.
+
+A crossing scene (``--crossing DB``: a city and an interior joined at an entrance)
+adds the street-to-room-and-back walk ``enter`` at 56 kbit/s and over GPRS, each
+compared with the ground truth every :data:`CROSSING_TRUTH_EVERY` frames (unless
+``truth_every`` says otherwise); :func:`format_crossing_table` prints their own
+figures: the visible set's model switches, the doorway's frames without the first
+room's contents, and the culled pixels.
 """
 
 from __future__ import annotations
@@ -34,6 +41,9 @@ __all__ = [
     "run_stream_bench",
     "format_stream_table",
     "format_truth_table",
+    "CROSSING_TRUTH_EVERY",
+    "crossing_scenarios",
+    "format_crossing_table",
 ]
 
 Replayer = Callable[[str, Mapping[str, Any], str], Any]
@@ -44,6 +54,9 @@ GPRS: dict[str, Any] = {"bandwidth": "5kB/s", "rtt": "500ms"}
 """The GPRS-class link of m-LOMA: 5 kB/s, 500 ms round trip."""
 
 _FIRST = "first perfect frame"
+
+CROSSING_TRUTH_EVERY = 25
+"""The crossing rows compare every this many frames with the ground truth (the issue's measure)."""
 
 
 def parse_extra(text: str) -> tuple[str, str, tuple[str, ...]]:
@@ -97,6 +110,17 @@ def stream_scenarios(
     return rows
 
 
+def crossing_scenarios(db: str, path: str = "enter") -> list[dict[str, Any]]:
+    """The crossing walk's rows: ``path`` of the crossing scene ``db`` at 56 kbit/s and over GPRS."""
+    both = "no door frame without the first room, culled pixels 0"
+    return [
+        {"name": f"crossing {path} 56k", "server": db, "over": {"path": path}, "crossing": True,
+         "goal": f"perfect >= 99.5 %, {both}"},
+        {"name": f"crossing {path} GPRS", "server": db, "over": {"path": path, **GPRS}, "crossing": True,
+         "goal": f"perfect >= 99 %, {both}"},
+    ]
+
+
 def run_stream_bench(
     db: str,
     replay: Replayer,
@@ -108,6 +132,7 @@ def run_stream_bench(
     duration: str | None = None,
     only: Sequence[str] = (),
     truth_every: int = 0,
+    crossing: str | None = None,
 ) -> list[dict[str, Any]]:
     """Replay every scenario (those whose name contains one of ``only``, if given).
 
@@ -116,8 +141,10 @@ def run_stream_bench(
     to 0.5 (the issue's bound) besides its own goal.  Writes the comparison page
     and ``bench_stream.json`` into ``out``.  With ``truth_every`` every N-th frame of
     each walk is compared with the ground truth (``walkstream replay --truth-every``).
+    ``crossing``: a crossing scene whose walk ``enter`` joins the table
+    (:func:`crossing_scenarios`).
     """
-    scenarios = stream_scenarios(vienna, extra)
+    scenarios = stream_scenarios(vienna, extra) + (crossing_scenarios(crossing) if crossing else [])
     if only:
         scenarios = [s for s in scenarios if any(k.lower() in s["name"].lower() for k in only)]
     rows = []
@@ -127,8 +154,8 @@ def run_stream_bench(
         options: dict[str, Any] = {"device": device, "clock": "sim", **sc["over"]}
         if duration:
             options["duration"] = duration
-        if truth_every:
-            options["truth_every"] = truth_every
+        if truth_every or sc.get("crossing"):
+            options["truth_every"] = truth_every or CROSSING_TRUTH_EVERY
         options["report"] = str(folder)
         print(f"[{k}/{len(scenarios)}] {sc['name']} ...", file=sys.stderr, flush=True)
         try:
@@ -172,7 +199,7 @@ def format_stream_table(rows: list[dict[str, Any]]) -> str:
 
 def format_truth_table(rows: list[dict[str, Any]]) -> str:
     """The ground-truth figures of the rows that have them (``--truth-every``), one line each."""
-    have = [r for r in rows if r.get("truth")]
+    have = [r for r in rows if r.get("truth") and r.get("kind") != "crossing"]
     if not have:
         return ""
 
@@ -191,5 +218,29 @@ def format_truth_table(rows: list[dict[str, Any]]) -> str:
             f"{r['scenario']:<22} {t['frames']:>8} {pct(t['differing_pixels_mean']):>7} "
             f"{pct(t['over_half_percent_ratio'], 1):>6} {pct(m['pvs']['mean'], 3):>9} "
             f"{pct(m['pvs']['max'], 3):>8} {pct(m['lod']['mean'], 3):>9} {pct(m['culled']['max'], 3):>11}"
+        )
+    return "\n".join(lines)
+
+
+def format_crossing_table(rows: list[dict[str, Any]]) -> str:
+    """The crossing rows' own figures, one line each ("" when there are none)."""
+    have = [r for r in rows if r.get("kind") == "crossing"]
+    if not have:
+        return ""
+    head = (
+        f"{'scenario':<22} {'perfect%':>8} {'switches':>24} {'prefetch s':>10} {'door s':>6} "
+        f"{'door fr':>7} {'no room':>7} {'compared':>8} {'culled px':>9} {'requests':>8}"
+    )
+    lines = [head, "-" * len(head)]
+    for r in have:
+        t = r.get("truth") or {}
+        sw = " ".join(f"{m}@{x:.1f}" for x, m in r["model_switches"])
+        pre = r.get("interior_prefetch_from_s")
+        door = r.get("door_reached_s")
+        lines.append(
+            f"{r['scenario']:<22} {100 * r['perfect_frame_ratio']:>8.2f} {sw:>24} "
+            f"{'never' if pre is None else f'{pre:.1f}':>10} {'n/a' if door is None else f'{door:.1f}':>6} "
+            f"{r['door_frames']:>7} {r['door_frames_without_first_room']:>7} "
+            f"{t.get('frames', 0) - t.get('unknown', 0):>8} {t.get('culled_pixels', 'n/a'):>9} {r['requests']:>8}"
         )
     return "\n".join(lines)

@@ -6,7 +6,8 @@
     walkstream bench visibility scene.db|SOURCE [--sample N] [--settings ...] [--views N] [--plot out.png]
     walkstream bench render [--size 700] [--cells 40] [--runs 3] ...
     walkstream bench server scene.db [--walkers 10,100,1000] [--workers 1,2] ...
-    walkstream bench stream [scene.db] [--vienna vienna.db] [--scene LABEL=DB[:PATHS]] [--only NAMES] [--duration S]
+    walkstream bench stream [scene.db] [--vienna vienna.db] [--scene LABEL=DB[:PATHS]] [--crossing crossing.db]
+        [--only NAMES] [--duration S]
     walkstream bench budget [scene.db] [--no-gl] [--seed N] [--gl-runs N] [--gl-real-duration S]
         [--gl-draws batched,per-object] [--rewrite thread,process]
     walkstream bench controller [--frames 3000] [--seeds 1 2 3] [--step 10]
@@ -168,6 +169,7 @@ def cmd_bench_server(args: argparse.Namespace) -> int:
 def cmd_bench_stream(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench stream``."""
     from walkstream.benchmarks.stream import (
+        format_crossing_table,
         format_stream_table,
         format_truth_table,
         parse_extra,
@@ -187,11 +189,15 @@ def cmd_bench_stream(args: argparse.Namespace) -> int:
         duration=args.duration,
         only=only,
         truth_every=args.truth_every,
+        crossing=args.crossing,
     )
     print(format_stream_table(rows))
-    if args.truth_every:
+    if args.truth_every and format_truth_table(rows):
         print()
         print(format_truth_table(rows))
+    if format_crossing_table(rows):
+        print()
+        print(format_crossing_table(rows))
     if rows:
         print(f"plots and per-run reports: {out / 'index.html'}")
     return 0
@@ -514,6 +520,7 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("db", nargs="?", default="out/demo/city.db", help="scene database (default out/demo/city.db from make demo)")
     b.add_argument("--vienna", help="a baked Vienna database with the imported walk (path 'walk')")
     b.add_argument("--scene", action="append", default=[], metavar="LABEL=DB[:PATH,...]", help="more scene databases: rows for each recorded path (or those named), GPRS and 56k; repeatable")
+    b.add_argument("--crossing", metavar="DB", help="a crossing scene (bake CITY --interior FILE): rows for its walk 'enter' at 56k and GPRS, compared with the ground truth")
     b.add_argument("--device", default="desktop2003", choices=("gl", "desktop2003", "pda"), help="device (default desktop2003)")
     b.add_argument("--duration", help="limit every walk, e.g. 60s")
     b.add_argument("--only", help="comma-separated scenario name parts to run")

@@ -100,7 +100,7 @@ DOOR_AHEAD_S = 8.0
 LOOK_AHEAD_S: tuple[float, ...] = (0.0, 1.0, 2.0, 3.0, 5.0, 8.0)
 """Prefetch: the seconds ahead at which the rooms seen through the entrance are predicted."""
 
-DOOR_DEPTH = 2
+DOOR_DEPTH = 8
 """Prefetch of the interior: the doorway and the rooms up to this many portals beyond it."""
 
 OUTDOOR_FOG_M = 800.0
