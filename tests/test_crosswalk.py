@@ -1,0 +1,123 @@
+"""The replay of a crossing scene: from a street through the door into the rooms and back, one loop."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+
+from walkstream.client.net.link import LinkProfile
+from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
+from walkstream.client.stream.cache import CITY_KINDS, Cache
+from walkstream.server.bake import BakeSettings, bake
+from walkstream.server.service.main import create_app
+from walkstream.server.sources.citygen import write_city
+from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
+from walkstream.server.store import SceneReader
+
+LINK_56K = LinkProfile(down_bps=56_000.0, up_bps=56_000.0, rtt_s=0.2)
+
+
+class _Counting(httpx.AsyncBaseTransport):
+    """The server's side of the link: counts the requests that reach it."""
+
+    def __init__(self, inner: httpx.AsyncBaseTransport) -> None:
+        self.inner = inner
+        self.requests = 0
+
+    async def handle_async_request(self, request: httpx.Request) -> httpx.Response:
+        self.requests += 1
+        return await self.inner.handle_async_request(request)
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("crosswalk")
+    write_city(d / "city.geojson", 250, 1)
+    write_interior(d / "office.json", InteriorPlan(storeys=2, length=16, width=14, seed=2))
+    bake(d / "city.geojson", d / "scene.db", settings=BakeSettings(resolution=16), interior=d / "office.json")
+    return d / "scene.db"
+
+
+@pytest.fixture(scope="module")
+def walked(scene: Path) -> ReplayResult:
+    """The walk ``enter`` at 56 kbit/s, 200 ms, every 25th frame compared with the truth."""
+    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", truth_every=25, kind="crossing")
+    return run_replay(httpx.ASGITransport(app=create_app([scene])), "http://t", cfg)
+
+
+def test_the_replay_walks_the_crossing_end_to_end(scene: Path, walked: ReplayResult) -> None:
+    s = walked.summary
+    with SceneReader.open(scene) as r:
+        (e,) = r.entrances()
+        rooms = r.rooms()
+    assert s["kind"] == "crossing" and s["entrance"]["doorway"] == e.doorway
+    assert s["walk_s"] == pytest.approx(s["path_duration_s"], abs=0.1)
+    cells = walked.log.cell[walked.log.cell >= 0]
+    # the frame log's cells: streets (by the city's map) and rooms (by their planes)
+    assert {int(c) for c in cells} & set(rooms) and {int(c) for c in cells} - set(rooms)
+    assert s["perfect_frame_ratio"] > 0.9
+
+
+def test_the_visible_set_switches_model_at_the_door_and_back(walked: ReplayResult) -> None:
+    s = walked.summary
+    assert [m for _, m in s["model_switches"]] == ["pvs", "portals", "pvs"]
+    t_in, t_out = s["model_switches"][1][0], s["model_switches"][2][0]
+    assert s["door_reached_s"] == pytest.approx(t_in, abs=0.1) and t_out > t_in
+    assert s["frames_pvs"] > 0 and s["frames_portals"] > 0
+
+
+def test_the_first_room_has_arrived_before_the_door(walked: ReplayResult) -> None:
+    s = walked.summary
+    assert s["first_room"] is not None and s["door_frames"] > 0
+    assert s["door_frames_without_first_room"] == 0
+    assert s["interior_prefetch_from_s"] is not None and s["interior_prefetch_from_s"] < s["door_reached_s"]
+
+
+def test_the_truth_finds_no_culled_pixel(walked: ReplayResult) -> None:
+    truth = walked.summary["truth"]
+    assert truth["frames"] - truth["unknown"] >= 40
+    assert truth["culled_pixels"] == 0 and truth["culled_frames"] == 0
+
+
+def test_one_link_one_cache_no_collision(scene: Path, walked: ReplayResult) -> None:
+    s = walked.summary
+    entries: dict[str, Any] = s["cache_entries"]
+    # room contents and city objects side by side in the one cache, under their own kinds
+    assert entries["cellmesh"] == s["cells_fetched"] > 0 and entries["params"] > 0 and entries["mesh"] == 0
+    with SceneReader.open(scene) as r:
+        shared_ids = set(r.rooms()) & set(r.object_ids().tolist())
+    assert shared_ids  # ids overlap: the kinds keep them apart
+    server = _Counting(httpx.ASGITransport(app=create_app([scene])))
+    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", kind="crossing", duration_s=15.0)
+    got = run_replay(server, "http://t", cfg).summary
+    assert got["requests"] == server.requests  # every request went down the one link, once
+    assert got["contents_requests"] + got["object_requests"] + got["cell_requests"] < got["requests"]
+
+
+def test_each_streamer_pins_its_own_kinds() -> None:
+    c = Cache(100)
+    c.put("params", 7, "object 7", 40)
+    c.put("cellmesh", 7, "cell 7", 40)
+    c.set_pins([("cellmesh", 7)], kinds=("cellmesh",))
+    c.set_pins([("params", 7)], kinds=CITY_KINDS)
+    assert c.pinned == {("cellmesh", 7), ("params", 7)}
+    c.put("geom", 1, "big", 60)  # over budget: only the unpinned entry can go
+    assert c.peek("params", 7) == "object 7" and c.peek("cellmesh", 7) == "cell 7"
+    assert not c.has("geom", 1)
+    c.set_pins([])
+    assert c.pinned == frozenset()
+
+
+def test_a_street_walk_of_a_crossing_stays_on_the_streets(scene: Path) -> None:
+    """The crossing's rooms do not enter the city's cell map: the city's walk SE stays on the streets."""
+    cfg = ReplayConfig(link=LINK_56K, path="SE", device="desktop2003", duration_s=10.0, kind="crossing")
+    got = run_replay(httpx.ASGITransport(app=create_app([scene])), "http://t", cfg)
+    with SceneReader.open(scene) as r:
+        rooms = set(r.rooms())
+    assert got.summary["frames_portals"] == 0
+    assert not rooms & set(np.unique(got.log.cell).tolist())
+    assert got.summary["perfect_frame_ratio"] > 0.9
