@@ -85,6 +85,7 @@ __all__ = [
     "DOOR_AHEAD_S",
     "DOOR_DEPTH",
     "LOOK_AHEAD_S",
+    "ENTRANCE_POSES_M",
     "OUTDOOR_FOG_M",
     "MODEL_PVS",
     "MODEL_PORTALS",
@@ -101,6 +102,10 @@ LOOK_AHEAD_S: tuple[float, ...] = (0.0, 1.0, 2.0, 3.0, 5.0, 8.0)
 """Prefetch: the seconds ahead at which the rooms seen through the entrance are predicted."""
 
 DOOR_DEPTH = 8
+
+ENTRANCE_POSES_M: tuple[float, ...] = (10.0, 5.0, 2.0, 0.5)
+"""Prefetch: the rooms seen through the entrance from these distances in front of it come
+right after those the predicted motion sees."""
 """Prefetch of the interior: the doorway and the rooms up to this many portals beyond it."""
 
 OUTDOOR_FOG_M = 800.0
@@ -207,6 +212,24 @@ class _Objects:
             self.lo = self.hi = np.zeros((0, 3))
 
 
+def _entrance_view(
+    rooms: RoomStreamer, e: Entrance, door: NDArray[np.float64], proj: NDArray[np.float64], size: tuple[int, int]
+) -> list[int]:
+    """The rooms seen through the entrance from in front of it, looking every way
+    (:data:`ENTRANCE_POSES_M` metres out, every 30 degrees), farthest pose first: what
+    the walk will see on its way in, whichever way it comes and looks."""
+    inner = np.asarray(rooms.cells[e.doorway].outline, np.float64).mean(axis=0)
+    out_dir = door[:2] - inner
+    out_dir = out_dir / max(float(np.linalg.norm(out_dir)), 1e-9)
+    zmin = min(float(p[4][:, 2].min()) for p in rooms.topology.portals if p[0] == e.portal)
+    out: list[int] = []
+    for d in ENTRANCE_POSES_M:
+        eye = np.array([*(door[:2] + d * out_dir), zmin + 1.6])
+        for yaw in np.radians(np.arange(0.0, 360.0, 30.0)):
+            out += rooms.seen_from(e.street, eye, camera(eye, float(yaw), 0.0).astype(np.float64), proj, size)
+    return [c for c in dict.fromkeys(out) if c not in rooms.foreign]
+
+
 def _door_ahead(rooms: RoomStreamer, e: Entrance) -> list[int]:
     """The doorway, then the cells up to :data:`DOOR_DEPTH` portals beyond it, nearest first
     (neither the street nor the building's outside)."""
@@ -298,6 +321,7 @@ async def walk_crossing(
     last_progress = -math.inf
     planned = -math.inf
     seen: list[int] = []
+    entrance_view: list[int] | None = None
     door = np.asarray(next(p[4] for p in rooms.topology.portals if p[0] == e.portal), np.float64).mean(axis=0)
     while True:
         t = clock.now()
@@ -329,7 +353,9 @@ async def walk_crossing(
             if t - planned >= rooms.config.replan_s:
                 planned = t
                 seen = _seen_ahead(rooms, e, eye, view, proj, (w, h), predictor.velocity(), door)
-            ahead = [*seen, *_door_ahead(rooms, e)]
+            if entrance_view is None:
+                entrance_view = _entrance_view(rooms, e, door, proj, (w, h))
+            ahead = [*seen, *entrance_view, *_door_ahead(rooms, e)]
         pvs_cells: list[int] = []
         shown: list[int] = []
         if indoors:
