@@ -58,11 +58,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.shared.cells import CELL_KINDS, TileGrid
+from walkstream.shared.cells import TileGrid
 from walkstream.shared.codec import ACH_UNITS, pack_ints, quantise_ach, unpack_bounded, unpack_ints
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import Viewpoint, readonly
+from walkstream.shared.scene.cellkinds import CELL_KINDS
 
 __all__ = [
     "MSGPACK",

@@ -199,6 +199,7 @@ def test_long_modules_say_why() -> None:
     [
         "walkstream.shared.geometry",
         "walkstream.shared.cells",
+        "walkstream.shared.scene.cellkinds",
         "walkstream.shared.exports",
         "walkstream.server.sources.crs",
         "walkstream.shared.codec.ints",

@@ -59,7 +59,7 @@ from walkstream.server.service.interiors import InteriorState
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.buildings import build_lod
-from walkstream.shared.cells import LOCATABLE_KINDS, CellLocator, TileGrid
+from walkstream.shared.cells import CellLocator, TileGrid
 from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StoreError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
@@ -241,10 +241,11 @@ class Scene:
             c.id: np.array([n for n in c.neighbours.tolist() if n in self.boundaries], np.int64)
             for c in cells
         }
-        # interiors stack storeys: their cells are located in 3D, the outside never
-        locatable = [c for c in cells if c.kind in LOCATABLE_KINDS]
-        zranges = [[c.zmin, c.zmax] for c in locatable] if meta.kind == "interior" else None
-        self.locator = CellLocator([c.id for c in locatable], [c.boundary for c in locatable], zranges)
+        # interior cells stack storeys: located in 3D, the outside never (see their kinds)
+        self.locator = CellLocator.of_kinds(
+            [c.id for c in cells], [c.kind for c in cells], [c.boundary for c in cells],
+            [[c.zmin, c.zmax] for c in cells],
+        )
         self.kind: str = meta.kind
         self.interior: InteriorState | None = InteriorState(reader, cells) if meta.kind == "interior" else None
         self.grid, tiles = fit_tile_grid([c.boundary for c in cells])
