@@ -15,7 +15,9 @@ the budget, 1/8 by default) even when the pinned entries alone fill the budget:
 evicting a few kB of them cannot bring a cache that is megabytes over back within
 its budget, it only costs round trips to fetch them again.  Every operation is O(1) (one ``OrderedDict`` of evictable entries per
 kind, pinned entries kept apart so eviction never has to skip them), apart from
-re-pinning, which costs the size of the change.
+re-pinning, which costs the size of the change.  Re-pinning unpins in key order, so
+the order in which entries become evictable again does not hang on string hashing
+(which differs from one process to the next): a simulated walk evicts alike every run.
 
 The cache on disk is :mod:`.diskcache`.
 """
@@ -264,9 +266,9 @@ class Cache:
             want.add(("params", int(i)))
             want.add(("geom", int(i)))
         with self._lock:
-            for kind, oid in self._pins - want:
+            for kind, oid in sorted(self._pins - want):
                 self._unpin_one(kind, oid)
-            for kind, oid in want - self._pins:
+            for kind, oid in sorted(want - self._pins):
                 self._pin_one(kind, oid)
             evicted = self._shrink()
         self._notify(evicted)
@@ -278,9 +280,9 @@ class Cache:
         """
         want: set[Key] = {(self._kind(k), int(i)) for k, i in keys}
         with self._lock:
-            for kind, oid in self._pins - want:
+            for kind, oid in sorted(self._pins - want):
                 self._unpin_one(kind, oid)
-            for kind, oid in want - self._pins:
+            for kind, oid in sorted(want - self._pins):
                 self._pin_one(kind, oid)
             evicted = self._shrink()
         self._notify(evicted)
