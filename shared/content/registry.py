@@ -1,22 +1,26 @@
 """Content kinds: what the objects and cells of a scene carry, each named in one module.
 
-A new content kind is one new module and one registry line.  The module (beside
-:mod:`.params`, :mod:`.mesh` and :mod:`.cellmesh`) defines one
-:class:`~walkstream.shared.content.kind.ContentKind`:
-its name; whether it belongs to an object or to a cell; where the store keeps it (a
-table and column, and the scene feature that creates the table when it is not a core
-table); how it travels (the ``form`` of ``POST .../objects`` that streams it, or its
-own route's media type, and the key or media type of its wire record); the client
-cache kind it is held under; and its decoder.  Adding its module's ``KIND`` to
-:data:`CONTENT_KINDS` below is the registry line: the store (which tables hold
-content), the service (the forms it accepts), the client cache (its kinds and their
-eviction order) and the wire (the payload key of each form) all read this tuple, and
-``tests/test_content.py`` checks that every kind names all its parts and that each of
-those accepts exactly the registered kinds.  The client's GPU upload and draw of each
-kind are registered by the same name in :mod:`walkstream.client.content`.  What the
-new kind still needs besides: its table's DDL in the store's schema (a new optional
-table keyed by a new feature), the bake step that writes it, and the route that
-serves it when it is not an object form.
+A new content kind (impostor images, wall textures) is one new module and one registry
+line on each side.  Here, the module (beside :mod:`.params`, :mod:`.mesh` and
+:mod:`.cellmesh`) defines one :class:`~walkstream.shared.content.kind.ContentKind`
+that names every place the kind has a name: whether it belongs to an object or a
+cell; the store's table and columns, and the scene feature that creates the table
+when it is not a core one; how it travels (the ``form`` of ``POST .../objects`` that
+streams it and its frame key, or the media type its own route answers with); the
+client cache kind it is held under; and its decoder.  The registry line adds its
+``KIND`` to :data:`CONTENT_KINDS` below, which the store (:meth:`SceneReader.content_blobs
+<walkstream.server.store.reader.SceneReader.content_blobs>`), the service (the forms
+it accepts), the wire (each form's payload key) and the client cache (its kinds and
+their eviction order) read.  On the client, a module of :mod:`walkstream.client.content`
+says what the cache holds of it and how it is uploaded to the GPU, and one line of
+:mod:`walkstream.client.content.registry` registers it by the same name.  What it takes
+beyond that is its own work, not bookkeeping: the DDL of its table (a new optional
+table under a new feature, :data:`walkstream.server.store.OPTIONAL_TABLES`), the bake
+step that writes it, the route that serves it when it is not an object form, and the
+name in the typed literals that mypy checks (the cache's ``Kind``, the service's
+``Form``).  ``tests/test_content.py`` checks that every registered kind names all its
+parts and that the store, the service, the wire and the cache take exactly the
+registered kinds.
 
 >>> [k.name for k in CONTENT_KINDS]
 ['params', 'mesh', 'cellmesh']
