@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
+import sqlite3
+from pathlib import Path
+
 import pytest
 
-from walkstream.server.store.schema import _CORE_TABLES
 from walkstream.shared.cells import CellLocator
 from walkstream.shared.errors import InputError
 from walkstream.shared.scene.cellkinds import (
@@ -33,9 +36,10 @@ def test_the_order_the_bake_numbers_cells_by_is_kept() -> None:
     assert CELL_KINDS == ("crossroad", "street", "square", "grid", "room", "doorway", "outside")
 
 
-def test_the_store_takes_exactly_the_kinds() -> None:
-    ddl = _CORE_TABLES["cells"]
-    assert f"({', '.join(repr(k) for k in CELL_KINDS)})" in ddl
+def test_the_store_takes_exactly_the_kinds(office_db: Path) -> None:
+    with contextlib.closing(sqlite3.connect(f"file:{office_db}?mode=ro", uri=True)) as c:
+        ddl = c.execute("SELECT sql FROM sqlite_master WHERE name = 'cells'").fetchone()[0]
+    assert f"kind IN ({', '.join(repr(k) for k in CELL_KINDS)})" in ddl
 
 
 def test_unknown_kinds_and_models_are_refused() -> None:
