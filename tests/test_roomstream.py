@@ -106,20 +106,20 @@ def test_flush_after_is_honoured_by_both_policies(office_db: Path) -> None:
     for policy, fill_flushes in (("paper", True), ("crowded", False)):
         s = _streamer(topo, RoomStreamConfig(flush_s=5.0, flush_policy=policy))
         for k, c in enumerate(rooms):
-            s.cache.put("mesh", c, object(), 1000)
+            s.cache.put("cellmesh", c, object(), 1000)
             s.last_visible[c] = float(k)  # seen last at 0, 1, 2, 3 s
         s._flush(7.5, [])
         # the cache is nearly empty: only the paper's policy flushes, what is older than 5 s
-        gone = [c for c in rooms if not s.cache.has("mesh", c)]
+        gone = [c for c in rooms if not s.cache.has("cellmesh", c)]
         assert gone == (rooms[:3] if fill_flushes else []), policy
         assert s.stats.flushed == len(gone)
     # crowded: the same once the cache is more than 90 % full; a wanted cell stays
     s = _streamer(topo, RoomStreamConfig(flush_s=5.0), budget=2100)
     for k, c in enumerate(rooms[:2]):
-        s.cache.put("mesh", c, object(), 1000)
+        s.cache.put("cellmesh", c, object(), 1000)
         s.last_visible[c] = float(k)
     s._flush(10.0, [rooms[1]])
-    assert not s.cache.has("mesh", rooms[0]) and s.cache.has("mesh", rooms[1])
+    assert not s.cache.has("cellmesh", rooms[0]) and s.cache.has("cellmesh", rooms[1])
     with pytest.raises(InputError, match="flush policy 'never'"):
         RoomStreamConfig(flush_policy="never")
     with pytest.raises(InputError, match="flush after -1"):

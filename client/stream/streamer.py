@@ -45,13 +45,14 @@ import contextlib
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import msgpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.clock import Clock
+from walkstream.client.content.registry import client_content_for_form
 from walkstream.client.net.api import SceneClient
 from walkstream.client.rewrite.pool import ObjectGeometry, RewriteOptions, RewritePool, geometry_of
 from walkstream.client.stream.bundle import StartBundle
@@ -62,7 +63,7 @@ from walkstream.client.stream.plan import Tile, plan_needs, tile_key, tile_of_ke
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.route import horizon_m, turn_cost_m
 from walkstream.shared.cells import TileGrid
-from walkstream.shared.codec import decode_mesh, decode_object, unpack_bounded
+from walkstream.shared.codec import unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.lsystem.grammar import Grammar
 from walkstream.shared.paths import RecordedPath
@@ -191,7 +192,7 @@ class Streamer:
         self.clock = clock
         self.cache = cache
         self.config = config
-        self.kind: Kind = "params" if config.form == "params" else "mesh"
+        self.kind: Kind = cast(Kind, client_content_for_form(config.form).kind.cache_kind)
         """The cache kind of what is downloaded per object."""
         self.rewrite: RewritePool | None = None
         if self.kind == "params":
@@ -668,15 +669,14 @@ class Streamer:
             self._frame_bytes = 0.95 * self._frame_bytes + 0.05 * frame.nbytes
             self.cache.note_download(oid)
         what = f"object {oid}"
+        content = client_content_for_form(frame.form)
         try:
-            if frame.form == "params":
-                params = decode_object(frame.payload, what)
-                self.cache.put("params", oid, params, max(len(frame.payload), 16))
-                self._submit_rewrite(oid, params)
-            else:
-                mesh = decode_mesh(frame.payload, what)
-                self.cache.put("mesh", oid, frame.payload, max(len(frame.payload), 16))
-                self._geometry_ready(geometry_of(oid, (None, None, mesh)))
+            decoded = content.kind.decode(frame.payload, what)
+            self.cache.put(content.kind.cache_kind, oid, *content.cache_entry(frame.payload, decoded))
+            if content.kind.name == "params":
+                self._submit_rewrite(oid, decoded)
+            else:  # a downloaded mesh is the LOD2 geometry
+                self._geometry_ready(geometry_of(oid, (None, None, decoded)))
         except CodecError:
             return  # a bad record: not cached, so it is wanted (and fetched) again
 

@@ -20,10 +20,11 @@ from numpy.typing import NDArray
 
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
-from walkstream.shared.cells import CELL_KINDS, CellLocator, outline_polygons
+from walkstream.shared.cells import CellLocator, outline_polygons
 from walkstream.shared.errors import InputError
 from walkstream.shared.geometry import signed_area
 from walkstream.shared.records import readonly
+from walkstream.shared.scene.cellkinds import CELL_KINDS
 
 __all__ = ["MIN_SHARED_EDGE", "ViewCell", "cell_polygons", "cell_locator"]
 

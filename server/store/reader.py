@@ -22,6 +22,9 @@ from walkstream.shared.codec import (
     decode_street,
     pvs_size,
 )
+from walkstream.shared.content.cellmesh import KIND as CELLMESH
+from walkstream.shared.content.params import KIND as PARAMS
+from walkstream.shared.content.registry import content_kind
 from walkstream.shared.errors import NotFoundError, StoreError
 from walkstream.shared.records import BuildingParams, StreetParams, Viewpoint
 
@@ -177,15 +180,17 @@ class SceneReader:
         with self._conn() as c:
             return c.execute(sql, args).fetchall()
 
-    def _by_ids(self, columns: str, ids: Iterable[int]) -> list[Any]:
-        want = sorted({_index(i, "object id") for i in ids})
+    def _by_ids(
+        self, columns: str, ids: Iterable[int], table: str = "objects", key: str = "id", what: str = "object id"
+    ) -> list[Any]:
+        want = sorted({_index(i, what) for i in ids})
         out: list[Any] = []
         with self._conn() as c:
             for k in range(0, len(want), 500):  # stay below SQLite's bound-variable limit
                 chunk = want[k : k + 500]
                 marks = ",".join("?" * len(chunk))
                 out += c.execute(
-                    f"SELECT {columns} FROM objects WHERE id IN ({marks})", chunk
+                    f"SELECT {columns} FROM {table} WHERE {key} IN ({marks})", chunk
                 ).fetchall()
         return out
 
@@ -231,7 +236,25 @@ class SceneReader:
         Unknown ids are left out of the result (the caller decides whether that is
         an error).  The dict is ordered by id.
         """
-        return {int(r[0]): bytes(r[1]) for r in self._by_ids("id, params", ids)}
+        return self.content_blobs(PARAMS.name, ids)
+
+    def content_blobs(self, kind: str, ids: Iterable[int]) -> dict[int, bytes]:
+        """The stored bytes of content ``kind`` of the given objects or cells, as stored.
+
+        The kind (:mod:`walkstream.shared.content.registry`) names the table and
+        columns; a scene without the kind's optional table has none.  Unknown ids are
+        left out of the result.
+
+        Raises
+        ------
+        InputError
+            ``kind`` is not a registered content kind.
+        """
+        k = content_kind(kind)
+        if k.feature is not None and not self._has_table(k.table):
+            return {}
+        rows = self._by_ids(f"{k.key_column}, {k.column}", ids, k.table, k.key_column, f"{k.owner} id")
+        return {int(r[0]): bytes(r[1]) for r in rows}
 
     def object_info(self, ids: Iterable[int]) -> dict[int, ObjectInfo]:
         """Kind, box and LOD triangle counts of the given objects (unknown ids left out)."""
@@ -460,10 +483,10 @@ class SceneReader:
             No such cell, or the scene has no cell contents.
         """
         i = _index(cid, "cell id")
-        rows = self._query("SELECT data FROM contents WHERE cell = ?", (i,)) if self._has_table("contents") else []
-        if not rows:
+        blob = self.content_blobs(CELLMESH.name, [i]).get(i)
+        if blob is None:
             raise NotFoundError(f"{self._label}: no contents for cell {i}")
-        return bytes(rows[0][0])
+        return blob
 
     # -- summary -------------------------------------------------------------
 

@@ -11,8 +11,8 @@ from typing import Any
 
 import msgpack
 
-from walkstream.shared.cells import CELL_KINDS
 from walkstream.shared.errors import StoreError
+from walkstream.shared.scene.cellkinds import CELL_KINDS
 
 try:  # advisory locks between processes; POSIX only
     import fcntl

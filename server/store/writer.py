@@ -14,13 +14,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from walkstream.shared.cells import CELL_KINDS
 from walkstream.shared.codec import (
     encode_ids,
     encode_polygon,
     encode_pvs,
 )
 from walkstream.shared.errors import CodecError, NotFoundError, StoreError
+from walkstream.shared.scene.cellkinds import CELL_KINDS
 
 try:  # advisory locks between processes; POSIX only
     import fcntl
