@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 
 from walkstream.server.bake.cells import make_cells
+from walkstream.server.bake.digest import file_digest
+from walkstream.server.bake.interior import bake_interior
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
@@ -24,19 +26,10 @@ from walkstream.server.store import CellRow, ObjectRow, SceneReader, SceneWriter
 from walkstream.shared.buildings import default_grammar, default_grammar_text, predict_triangles
 from walkstream.shared.errors import InputError
 
-__all__ = ["bake", "file_digest"]
+__all__ = ["bake"]
 
 
 # ------------------------------------------------------------------ the bake
-
-
-def file_digest(path: Path) -> str:
-    """First 16 hex digits of the sha256 of a file (what identifies a bake's input)."""
-    h = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()[:16]
 
 
 def bake(
@@ -92,8 +85,6 @@ def bake(
 
     scene = read_source(src, network=st.network)
     if isinstance(scene, InteriorScene):
-        from walkstream.server.bake.interior import bake_interior
-
         return bake_interior(
             scene, src, out, name=name, workers=workers, scheduler=scheduler, progress=progress,
             log=log, import_seconds=time.perf_counter() - t0,
