@@ -6,7 +6,7 @@ first) and turns each object's parameters into its three LODs with the grammar t
 manifest named (a street is one flat surface used at every LOD).  A worker takes
 the jobs at the head of the queue together, up to :data:`BATCH` (and no more than
 its share when several workers are idle), and rebuilds their buildings in one call
-(:func:`~walkstream.client.rewrite.rebuild.rebuild_batch`), so the per-building
+(:func:`~walkstream.client.rewrite.geometry.rebuild_batch`), so the per-building
 interpreter overhead is paid once per batch; when few jobs wait, a batch is small
 and a job waits no longer than before.
 
@@ -37,8 +37,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
+from walkstream.client.rewrite.geometry import ObjectGeometry, rebuild_batch
 from walkstream.client.rewrite.procpool import ProcessWorkers
-from walkstream.client.rewrite.rebuild import ObjectGeometry, rebuild_batch
 from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import Grammar
 from walkstream.shared.records import BuildingParams, StreetParams

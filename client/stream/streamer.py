@@ -53,8 +53,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.clock import Clock
 from walkstream.client.net.api import SceneClient
+from walkstream.client.rewrite.geometry import ObjectGeometry, geometry_of
 from walkstream.client.rewrite.pool import RewriteOptions, RewritePool
-from walkstream.client.rewrite.rebuild import ObjectGeometry, geometry_of
 from walkstream.client.stream.bundle import StartBundle
 from walkstream.client.stream.cache import Cache, Kind
 from walkstream.client.stream.cellmap import CellMap

@@ -1,4 +1,4 @@
-"""Rebuilding one batch of objects: parameters in, each object's three LODs out.
+"""An object's geometry per LOD, and how a batch of objects is rebuilt from parameters.
 
 :func:`rebuild_batch` is the job every rewrite worker runs, in the frame loop's process
 (:mod:`walkstream.client.rewrite.pool`) or in a worker process
