@@ -18,7 +18,7 @@ from walkstream.server.bake.interior import bake_interior
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
-from walkstream.server.bake.workers import _run_tasks
+from walkstream.server.bake.workers import run_tasks
 from walkstream.server.sources.clip import clip_scene, local_bbox
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
@@ -142,7 +142,7 @@ def bake(
         finished = len(done)
         if progress:
             progress(finished, len(cells))
-        for results in _run_tasks(scene, st, key, todo, workers, scheduler):
+        for results in run_tasks(scene, st, key, todo, workers, scheduler):
             for cid, pvs, ach in results:
                 writer.set_pvs(cid, pvs, ach)
                 finished += 1
