@@ -49,7 +49,8 @@ from walkstream.client.stream.cache import Cache
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import ApiError, InputError, StreamCut
-from walkstream.shared.portals import PortalCull, PortalGraph, cull_portals, frustum_cells
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import PortalCull, cull_portals, frustum_cells
 from walkstream.shared.roomview import RoomLocator
 from walkstream.shared.roomwire import RoomRecord, Topology
 

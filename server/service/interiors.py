@@ -22,7 +22,7 @@ from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS, pack_contents_part
 from walkstream.shared.codec.cellmesh import inflate_cell_mesh
 from walkstream.shared.errors import ApiError, CodecError
-from walkstream.shared.portals import PortalGraph
+from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.roomcompact import (
     TOPOLOGY_COMPACT_MEDIA,
     decode_topology_compact,
