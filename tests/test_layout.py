@@ -241,6 +241,45 @@ def test_the_cycle_check_sees_a_cycle() -> None:
     assert _cycles({"a": {"b"}, "b": set()}) == []
 
 
+def _private_uses(module: str) -> list[str]:
+    """The ``_private`` names of other walkstream modules that ``module`` uses.
+
+    Both ``from walkstream.x import _name`` and ``alias._name`` where ``alias`` is a
+    walkstream module (``import walkstream.x as alias``, ``from walkstream import x``).
+    """
+    tree = ast.parse(MODULES[module].read_text(encoding="utf-8"))
+    out: list[str] = []
+    aliases: dict[str, str] = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            if not node.module.startswith("walkstream"):
+                continue
+            for a in node.names:
+                if f"{node.module}.{a.name}" in MODULES:
+                    aliases[a.asname or a.name] = f"{node.module}.{a.name}"
+                elif a.name.startswith("_") and not a.name.startswith("__"):
+                    out.append(f"{node.module}.{a.name}")
+        elif isinstance(node, ast.Import):
+            aliases.update({a.asname: a.name for a in node.names if a.asname and a.name in MODULES})
+    for node in ast.walk(tree):
+        if (
+            isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and node.value.id in aliases
+            and node.attr.startswith("_")
+            and not node.attr.startswith("__")
+        ):
+            out.append(f"{aliases[node.value.id]}.{node.attr}")
+    return out
+
+
+def test_no_module_uses_another_modules_private_names() -> None:
+    """A name another module needs is public in its home: listed in its ``__all__``,
+    documented, and imported without an underscore."""
+    bad = [f"{m} uses {name}" for m in MODULES for name in _private_uses(m)]
+    assert not bad
+
+
 # ideas that once had several homes (issue 10): each is defined exactly once now
 ONE_HOME = [
     "signed_area",
