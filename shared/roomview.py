@@ -20,7 +20,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.errors import InputError
-from walkstream.shared.portals import PortalGraph, cull_portals
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import cull_portals
 from walkstream.shared.scene.cellkinds import LOCATABLE_KINDS
 
 __all__ = [

@@ -51,7 +51,8 @@ from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.errors import ApiError, InputError, StreamCut
-from walkstream.shared.portals import PortalCull, PortalGraph, cull_portals, frustum_cells
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import PortalCull, cull_portals, frustum_cells
 from walkstream.shared.roomview import RoomLocator
 from walkstream.shared.roomwire import RoomRecord, Topology
 

@@ -23,7 +23,7 @@ from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS, pack_contents
 from walkstream.shared.codec.cellmesh import inflate_cell_mesh
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.errors import ApiError, CodecError
-from walkstream.shared.portals import PortalGraph
+from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.roomcompact import (
     TOPOLOGY_COMPACT_MEDIA,
     decode_topology_compact,

@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from walkstream.server.service.http import (
     Encoded,
     Rep,
-    _digest,
+    content_digest,
     dump_json,
     dump_msgpack,
     encode,
@@ -696,7 +696,7 @@ class SceneRegistry:
         listing = [{"name": s.name, "version": s.version} for s in self.scenes.values()]
         # the list changes when a file is replaced by a new version: validated with
         # the ETag on every use rather than cached for a year
-        tag = _digest(dump_json(listing))
+        tag = content_digest(dump_json(listing))
         self.listing = {rep: encode(listing, rep, tag, "scenes") for rep in ("msgpack", "json")}
 
     @classmethod
