@@ -4,7 +4,9 @@ Each module is one benchmark that ``walkstream bench ...`` runs and prints as a 
 (the command line only parses options and prints); none is part of the product:
 
 - :mod:`.rebuild`: rebuild throughput per LOD, parameter against geometry bytes;
-- :mod:`.visibility`: PVS misses against a dense reference, against bake time;
+- :mod:`.visibility`: PVS misses against a dense reference, against bake time (the
+  settings compared in :mod:`.vissettings`, the scene in :mod:`.visinput`, the table
+  and plot in :mod:`.visreport`);
 - :mod:`.renderspeed`: cells per second of the visibility renderer;
 - :mod:`.load`: simulated walkers against a real server;
 - :mod:`.stream`: replays per link and mode (quality, bytes, overfetch);

@@ -33,7 +33,8 @@ from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellmesh import decode_cell_mesh
 from walkstream.shared.errors import InputError
 from walkstream.shared.paths import RecordedPath
-from walkstream.shared.portals import PortalGraph, cull_portals
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import cull_portals
 from walkstream.shared.roomview import cell_of, stack_planes
 from walkstream.shared.roomwire import decode_topology
 

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from walkstream.benchmarks.lod import _Geometry, _open, load_views
+from walkstream.benchmarks.lod import LodGeometry, load_views, open_scene
 from walkstream.shared.errors import InputError
 
 if TYPE_CHECKING:
@@ -91,12 +91,12 @@ def run_fill_bench(
 
     if repeats < 1:
         raise InputError(f"bench fill: --repeat must be >= 1, got {repeats}")
-    reader = _open(db_path)
+    reader = open_scene(db_path)
     grammar = parse_grammar(reader.meta.grammar_text)
     bench_views, source = load_views(reader, views, path_name)
     x0, y0, z0, x1, y1, z1 = reader.bounds()
     far = max(100.0, 1.2 * math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2 + (z1 - z0) ** 2))
-    geometry = _Geometry(reader, grammar)
+    geometry = LodGeometry(reader, grammar)
     own_ctx = ctx is None
     gl = create_context() if ctx is None else ctx
     # one context for both renderers: moderngl does not switch between contexts

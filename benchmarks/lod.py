@@ -65,6 +65,8 @@ __all__ = [
     "plot_lod_bench",
     "run_lod_bench",
     "summary_line",
+    "LodGeometry",
+    "open_scene",
 ]
 
 #: The scene ``make demo`` bakes.
@@ -216,7 +218,7 @@ class _Object:
         self.centre = (self.lo + self.hi) / 2.0
 
 
-class _Geometry:
+class LodGeometry:
     """Rebuilds the three LODs of objects on demand and keeps them across viewpoints."""
 
     def __init__(self, reader: SceneReader, grammar: Grammar) -> None:
@@ -339,7 +341,8 @@ def _configs(
 # --------------------------------------------------------------------------- run
 
 
-def _open(db_path: str | os.PathLike[str]) -> SceneReader:
+def open_scene(db_path: str | os.PathLike[str]) -> SceneReader:
+    """The scene database at ``db_path``, or a clear error when there is none."""
     from walkstream.server.store import SceneReader
 
     if not os.path.exists(db_path):
@@ -411,13 +414,13 @@ def run_lod_bench(
         raise InputError(f"bench lod: budget shares must be in (0, 1], got {list(shares)}")
     if repeats < 1:
         raise InputError(f"bench lod: --repeat must be >= 1, got {repeats}")
-    reader = _open(db_path)
+    reader = open_scene(db_path)
     try:
         grammar = parse_grammar(reader.meta.grammar_text)
         bench_views, source = load_views(reader, views, path_name)
         x0, y0, z0, x1, y1, z1 = reader.bounds()
         far = max(100.0, 1.2 * math.sqrt((x1 - x0) ** 2 + (y1 - y0) ** 2 + (z1 - z0) ** 2))
-        geometry = _Geometry(reader, grammar)
+        geometry = LodGeometry(reader, grammar)
         per_view: list[tuple[BenchView, list[_Config]]] = []
         with FrameRenderer(size, fov_deg=fov_deg, far=far, ctx=ctx) as fr:
             renderer = str(fr.ctx.info.get("GL_RENDERER", "?"))

@@ -52,13 +52,8 @@ from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
 from walkstream.shared.errors import WalkstreamError
 from walkstream.shared.paths import RecordedPath
-from walkstream.shared.portals import (
-    CULLING_MODES,
-    PortalGraph,
-    cull_parts,
-    cull_portals,
-    frustum_cells,
-)
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import CULLING_MODES, cull_parts, cull_portals, frustum_cells
 from walkstream.shared.roomview import cell_of, stack_planes
 from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology, decode_topology
 

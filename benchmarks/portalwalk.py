@@ -18,14 +18,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.errors import InputError
-from walkstream.shared.portals import (
-    PortalCull,
-    PortalGraph,
-    _clipped,
-    _corner_secant,
-    _pixels,
-    box_distance,
-)
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import PortalCull, box_distance
+from walkstream.shared.screenrects import clipped_rects, corner_secant, ndc_pixels
 
 __all__ = ["cull_portals_reference", "rects_reference"]
 
@@ -66,7 +61,7 @@ def cull_portals_reference(
     m = len(graph.target)
     k = graph.poly.shape[1]
     edges = np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1)
-    near_pass = max(pass_m, clip_m * _corner_secant(P) * 1.01)
+    near_pass = max(pass_m, clip_m * corner_secant(P) * 1.01)
     # per directed row: None (culled: beyond the fog or wholly behind the eye),
     # True (pass the parent's VSA through), or its rectangle
     R: list[Any] = [None] * m
@@ -171,7 +166,8 @@ def rects_reference(
     clip_m: float,
     naive: bool = False,
 ) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-    """The reference walk's ``_rects``: whole-pixel rectangles of point sets clipped at depth ``clip_m``.
+    """The reference form of :func:`~walkstream.shared.screenrects.point_rects`: whole-pixel
+    rectangles of point sets clipped at depth ``clip_m``.
 
     ``pts`` ``(m, k, 3)`` world points, ``edges`` ``(e, 2)`` the index pairs joining
     them (the polygon's sides or a box's edges).  Returns ``(m, 4)`` inclusive pixel
@@ -199,13 +195,13 @@ def rects_reference(
             va, da = v[ahead], depth[ahead]
             x = (proj[0, 0] * va[..., 0] + proj[0, 2] * va[..., 2]) / da
             y = (proj[1, 1] * va[..., 1] + proj[1, 2] * va[..., 2]) / da
-            rect[ahead] = _pixels(np.stack([x.min(axis=1), y.min(axis=1)], axis=1),
-                                  np.stack([x.max(axis=1), y.max(axis=1)], axis=1), size)
+            rect[ahead] = ndc_pixels(np.stack([x.min(axis=1), y.min(axis=1)], axis=1),
+                                     np.stack([x.max(axis=1), y.max(axis=1)], axis=1), size)
         behind = np.all(depth < clip_m, axis=1)
         front[behind] = False
         rect[behind] = (1, 1, 0, 0)
         rest = ~ahead & ~behind
         if rest.any():
-            rect[rest], front[rest] = _clipped(v[rest], depth[rest], edges, proj, size, clip_m)
+            rect[rest], front[rest] = clipped_rects(v[rest], depth[rest], edges, proj, size, clip_m)
         return rect, front
-    return _pixels(lo, hi, size), front
+    return ndc_pixels(lo, hi, size), front

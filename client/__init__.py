@@ -24,7 +24,7 @@ _EXPORTS = {
     "Streamer": "walkstream.client.stream.streamer",
     "StreamerConfig": "walkstream.client.stream.streamer",
     "RewritePool": "walkstream.client.rewrite.pool",
-    "ObjectGeometry": "walkstream.client.rewrite.pool",
+    "ObjectGeometry": "walkstream.client.rewrite.geometry",
     "BudgetController": "walkstream.client.draw.budget",
     "make_device": "walkstream.client.draw.devices",
     "FrameRenderer": "walkstream.client.draw.frames",

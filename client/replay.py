@@ -48,7 +48,8 @@ from walkstream.client.report.metrics import (
     summarise,
 )
 from walkstream.client.report.truth import summarise_truth
-from walkstream.client.rewrite.pool import SHM_BYTES, ObjectGeometry, RewriteOptions
+from walkstream.client.rewrite.geometry import ObjectGeometry
+from walkstream.client.rewrite.pool import SHM_BYTES, RewriteOptions
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.predict import MotionPredictor

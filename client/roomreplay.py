@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
+from walkstream.client.content.cellmesh import CELLMESH_CONTENT
 from walkstream.client.draw.budget import BudgetController
 from walkstream.client.report.metrics import FrameLog, FrameLogBuilder
 from walkstream.client.stream.rooms import RoomStreamer
@@ -195,13 +196,10 @@ async def walk_interior(
                 triangles += part.triangles
                 parts += 1
                 if renderer is not None:
-                    key: tuple[int, int] = (cid, k)
-                    if not renderer.has(key):
-                        m = meshes.get(key)
-                        if m is None:
-                            m = meshes[key] = part.mesh()
-                        renderer.upload(key, m)
-                    draw_keys.append(key)
+                    m = meshes.get((cid, k))
+                    if m is None:
+                        m = meshes[(cid, k)] = part.mesh()
+                    draw_keys.append(CELLMESH_CONTENT.upload(renderer, cid, k, m))
         every = int(getattr(config, "truth_every", 0) or 0)
         if frames is not None and every and frame % every == 0:
             drawn = [(c, k) for c, mk in masks.items() for k in np.flatnonzero(mk).tolist()]
@@ -244,8 +242,7 @@ async def walk_interior(
         if renderer is not None and frame % 25 == 0:
             # a flushed cell's GPU buffers go with it
             for key in [k for k in meshes if streamer.mesh(k[0]) is None]:
-                if renderer.has(key):
-                    renderer.forget(key)
+                renderer.forget(CELLMESH_CONTENT.gpu_key(*key))
                 del meshes[key]
         if frame % 25 == 0:
             for c in [c for c in boxes if streamer.mesh(c) is None]:
@@ -254,8 +251,7 @@ async def walk_interior(
     streamer.config = replace(streamer.config, fog_m=default_fog)
     if renderer is not None:
         for key in list(meshes):
-            if renderer.has(key):
-                renderer.forget(key)
+            renderer.forget(CELLMESH_CONTENT.gpu_key(*key))
     if progress is not None:
         progress(total, total)
     return builder.build(fps_cap=config.fps), snapshots, np.array(spikes, dtype=bool)

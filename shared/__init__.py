@@ -3,10 +3,11 @@
 The public names below are imported lazily (on first use), so that a small module
 such as :mod:`.errors` can be imported alone.  The modules: :mod:`.errors` (every
 error class), :mod:`.records` (parameters, meshes, viewpoints), :mod:`.wire` (the
-API's records), :mod:`.codec` (compact encodings), :mod:`.cells` (cell kinds,
-locating points), :mod:`.geometry`, :mod:`.paths` (recorded paths), :mod:`.lsystem`
-and :mod:`.buildings` (procedural buildings), :mod:`.streets`, :mod:`.camera`,
-:mod:`.gl` (headless OpenGL), :mod:`.palette`, :mod:`.export` (glTF).
+API's records), :mod:`.codec` (compact encodings), :mod:`.scene` (cell kinds and
+their visibility models), :mod:`.cells` (locating points), :mod:`.geometry`,
+:mod:`.paths` (recorded paths), :mod:`.lsystem` and :mod:`.buildings` (procedural
+buildings), :mod:`.streets`, :mod:`.camera`, :mod:`.gl` (headless OpenGL),
+:mod:`.palette`, :mod:`.export` (glTF).
 """
 
 from walkstream.shared.exports import lazy_exports
@@ -35,7 +36,7 @@ _EXPORTS = {
     "Manifest": "walkstream.shared.wire",
     "CellRecord": "walkstream.shared.wire",
     "ObjectFrame": "walkstream.shared.wire",
-    "CELL_KINDS": "walkstream.shared.cells",
+    "CELL_KINDS": "walkstream.shared.scene.cellkinds",
     "CellLocator": "walkstream.shared.cells",
     "inside_convex": "walkstream.shared.cells",
     "signed_area": "walkstream.shared.geometry",

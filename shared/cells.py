@@ -1,9 +1,10 @@
-"""View cells as both sides see them: the kinds, convex outlines, and which cell holds a point.
+"""View cells as both sides see them: convex outlines, and which cell holds a point.
 
 The bake cuts a scene into cells (:mod:`walkstream.server.bake`), the store keeps
 them, the service answers ``locate`` with :class:`CellLocator` and sends the cells'
 outlines and adjacency tile by tile (the cell index, tiles of a :class:`TileGrid`),
 and the client follows the viewer from outline to outline with :func:`inside_convex`.
+The kinds of cell and their visibility models are :mod:`walkstream.shared.scene.cellkinds`.
 """
 
 from __future__ import annotations
@@ -17,34 +18,16 @@ import shapely
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.errors import InputError
+from walkstream.shared.scene.cellkinds import cell_kind
 
 __all__ = [
-    "CELL_KINDS",
     "INSIDE_TOL",
-    "LOCATABLE_KINDS",
     "LOCATE_TOL",
-    "PORTAL_KINDS",
     "CellLocator",
     "TileGrid",
     "inside_convex",
     "outline_polygons",
 ]
-
-CELL_KINDS: tuple[str, ...] = ("crossroad", "street", "square", "grid", "room", "doorway", "outside")
-"""Every kind of view cell, in the order the bake numbers cells by kind.
-
-Interiors use the last three: ``room`` (a convex part of a room), ``doorway`` (the
-opening of a door or inner window through a thick wall, so that an eye standing in it
-is in a cell) and ``outside`` (one per interior: everything seen through windows and
-outer doors; no viewer is ever located in it).
-"""
-
-PORTAL_KINDS: frozenset[str] = frozenset({"room", "doorway", "outside"})
-"""The kinds whose visible set is found by walking portals; the others have a PVS
-(a crossing scene holds cells of both, joined at its entrances)."""
-
-LOCATABLE_KINDS: frozenset[str] = frozenset(k for k in CELL_KINDS if k != "outside")
-"""The kinds a viewer can be located in (every kind but ``outside``)."""
 
 LOCATE_TOL = 1e-6
 """A point this close to a cell (metres) is in it: points on shared edges find a cell."""
@@ -116,6 +99,46 @@ class CellLocator:
             if len(z) != len(self._ids):
                 raise InputError(f"CellLocator: {len(self._ids)} ids but {len(z)} height ranges")
             self._z = z
+
+    @classmethod
+    def of_kinds(
+        cls, ids: ArrayLike, kinds: Sequence[str], outlines: Sequence[ArrayLike], zranges: ArrayLike
+    ) -> CellLocator:
+        """A locator of the cells a viewer can stand in, each located as its kind says.
+
+        Cells of a kind no viewer is located in (``outside``) are left out; cells of a
+        kind located in 3D (interior cells, which stack storeys) hold a point by their
+        height range too, the others (street and grid cells) at any height.  A scene
+        with no cell located in 3D gets a 2D locator, as a city always had.
+
+        Parameters
+        ----------
+        ids : (n,) int
+            Cell ids.
+        kinds : sequence of str
+            Each cell's kind (:data:`~walkstream.shared.scene.cellkinds.CELL_KINDS`).
+        outlines : sequence of (m_i, 2) float
+            The cells' outlines.
+        zranges : (n, 2) float
+            ``zmin, zmax`` of each cell.
+
+        >>> sq, street = [[0, 0], [1, 0], [1, 1], [0, 1]], [[1, 0], [2, 0], [2, 1], [1, 1]]
+        >>> loc = CellLocator.of_kinds([1, 2, 3], ["street", "room", "room"], [street, sq, sq],
+        ...                            [[0, 0], [0, 3], [3, 6]])
+        >>> loc.locate(1.5, 0.5, 9.0), loc.locate(0.5, 0.5, 1.0), loc.locate(0.5, 0.5, 4.0)
+        (1, 2, 3)
+        """
+        i = np.asarray(ids, dtype=np.int64).reshape(-1)
+        z = np.asarray(zranges, dtype=np.float64).reshape(-1, 2)
+        if not len(i) == len(kinds) == len(outlines) == len(z):
+            raise InputError(
+                f"CellLocator: {len(i)} ids, {len(kinds)} kinds, {len(outlines)} outlines, {len(z)} height ranges"
+            )
+        models = [cell_kind(k) for k in kinds]
+        keep = [n for n, m in enumerate(models) if m.locatable]
+        in_3d = any(models[n].located_in_3d for n in keep)
+        ranges = [z[n] if models[n].located_in_3d else [-math.inf, math.inf] for n in keep]
+        return cls(i[keep], [outlines[n] for n in keep], ranges if in_3d else None)
 
     def __len__(self) -> int:
         return len(self._ids)

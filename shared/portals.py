@@ -1,6 +1,7 @@
 """Portal culling with visible screen areas (Mulloni et al., Figures 3 and 4), near-plane safe.
 
-Pure numpy, no GL.  One frame:
+Pure numpy, no GL.  The portals come as a :class:`~walkstream.shared.portalgraph.PortalGraph`
+(built once per scene), the rectangles from :mod:`walkstream.shared.screenrects`.  One frame:
 
 1. The viewer's cell gets the whole viewport as its **visible screen area** (VSA), an
    axis-aligned rectangle of whole pixels ``(x0, y0, x1, y1)``, inclusive, row 0 at
@@ -40,7 +41,8 @@ show that the conservative test catches it.
 
 Cost: a portal's rectangle depends on the camera only, so every directed portal of the
 building is clipped and projected in one numpy batch per frame; the walk is then a FIFO
-walk over plain ints (per-scene adjacency lists built once, in :class:`PortalGraph`),
+walk over plain ints (per-scene adjacency lists built once, in
+:class:`~walkstream.shared.portalgraph.PortalGraph`),
 about 4-6 us per visible cell on the 2-core machine.  It is the reference walk step for
 step (:mod:`walkstream.benchmarks.portalwalk` keeps that one; tests/test_portalwalk.py checks they agree):
 a walk by levels with numpy batches per level was not taken, since the FIFO order
@@ -55,7 +57,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -63,18 +65,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.errors import InputError
 from walkstream.shared.frustum import frustum_cull
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.screenrects import box_rects, corner_secant, point_rects
 
 __all__ = [
     "CULLING_MODES",
-    "OPEN_KINDS",
-    "PortalGraph",
     "PortalCull",
     "cull_portals",
     "frustum_cells",
     "cull_parts",
-    "box_rects",
     "cull_boxes",
-    "full_vsa",
     "box_distance",
 ]
 
@@ -82,162 +82,6 @@ __all__ = [
 #: (every cell reached through portals whose box meets the frustum, no VSA), or
 #: drawing every part of every loaded visible cell.
 CULLING_MODES: tuple[str, ...] = ("portals", "frustum", "none")
-
-_EPS_PX = 1e-3
-
-
-@dataclass(frozen=True)
-class PortalGraph:
-    """The portals of an interior as arrays, each portal once per direction.
-
-    Attributes
-    ----------
-    ids : (n,) int64
-        Cell ids, in the topology's order.
-    outside : (n,) bool
-        Whether each cell is the ``outside`` cell.
-    start : (n + 1,) int64
-        Cell ``i``'s directed portals are rows ``start[i]:start[i + 1]``.
-    target : (m,) int64
-        Index (into ``ids``) of the cell on the portal's other side.
-    portal : (m,) int64
-        Portal id.
-    poly : (m, k, 3) float64
-        Portal polygons, padded by repeating their last vertex.
-    lo, hi : (m, 3) float64
-        Their boxes.
-    plane : (m, 4) float64
-        Their planes ``n . p + d = 0``, ``|n| = 1``.
-    """
-
-    ids: NDArray[np.int64]
-    outside: NDArray[np.bool_]
-    start: NDArray[np.int64]
-    target: NDArray[np.int64]
-    portal: NDArray[np.int64]
-    poly: NDArray[np.float64]
-    lo: NDArray[np.float64]
-    hi: NDArray[np.float64]
-    plane: NDArray[np.float64]
-    index: dict[int, int] = field(default_factory=dict)
-    #: Per cell (by index) the target indices of its directed portals (rows
-    #: ``start[i]:start[i + 1]``): the walk's adjacency as plain ints, built once per
-    #: scene, not per frame.
-    adjacency: list[list[int]] = field(init=False, repr=False, compare=False)
-    #: :attr:`start` as plain ints.
-    row_start: list[int] = field(init=False, repr=False, compare=False)
-    #: ``(k, 2)`` the vertex index pairs joining a padded polygon's sides.
-    edges: NDArray[np.int64] = field(init=False, repr=False, compare=False)
-
-    def __post_init__(self) -> None:
-        target = self.target.tolist()
-        starts = self.start.tolist()
-        adjacency = [target[a:b] for a, b in zip(starts[:-1], starts[1:], strict=True)]
-        k = self.poly.shape[1]
-        # frozen: the derived tables are set once, here
-        object.__setattr__(self, "adjacency", adjacency)
-        object.__setattr__(self, "row_start", starts)
-        object.__setattr__(self, "edges", np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1))
-
-    @classmethod
-    def from_topology(cls, topology: Any) -> PortalGraph:
-        """Build from a :class:`~walkstream.shared.roomwire.Topology` (its cells' portal refs)."""
-        cells = list(topology.cells)
-        index = {int(c.id): i for i, c in enumerate(cells)}
-        rows: list[tuple[int, int, NDArray[np.float64]]] = []
-        start = [0]
-        for c in cells:
-            for r in c.portals:
-                if int(r.cell) in index:
-                    rows.append((index[int(r.cell)], int(r.id), np.asarray(r.polygon, np.float64)))
-            start.append(len(rows))
-        kinds = {int(pid): str(kind) for pid, kind, _, _, _ in topology.portals}
-        byid = {int(c.id): c for c in cells}
-        rows = [
-            (t, pid, _open_face(p, byid[int(c.id)], cells[t]) if kinds.get(pid) in OPEN_KINDS else p)
-            for c, (t, pid, p) in zip(_owners(cells, index), rows, strict=True)
-        ]
-        k = max((len(p) for _, _, p in rows), default=3)
-        poly = np.zeros((len(rows), k, 3))
-        for i, (_, _, p) in enumerate(rows):
-            poly[i, : len(p)] = p
-            poly[i, len(p) :] = p[-1]
-        plane = np.zeros((len(rows), 4))
-        for i, (_, _, p) in enumerate(rows):
-            # Newell's normal: robust for any planar polygon's winding
-            q = np.roll(p, -1, axis=0)
-            n = np.array([
-                np.sum((p[:, 1] - q[:, 1]) * (p[:, 2] + q[:, 2])),
-                np.sum((p[:, 2] - q[:, 2]) * (p[:, 0] + q[:, 0])),
-                np.sum((p[:, 0] - q[:, 0]) * (p[:, 1] + q[:, 1])),
-            ])
-            norm = float(np.linalg.norm(n))
-            n = n / norm if norm > 0 else np.array([0.0, 0.0, 1.0])
-            plane[i, :3] = n
-            plane[i, 3] = -float(n @ p.mean(axis=0))
-        return cls(
-            ids=np.array([int(c.id) for c in cells], np.int64),
-            outside=np.array([c.kind == "outside" for c in cells], bool),
-            start=np.array(start, np.int64),
-            target=np.array([t for t, _, _ in rows], np.int64),
-            portal=np.array([pid for _, pid, _ in rows], np.int64),
-            poly=poly,
-            lo=poly.min(axis=1) if len(rows) else np.zeros((0, 3)),
-            hi=poly.max(axis=1) if len(rows) else np.zeros((0, 3)),
-            plane=plane,
-            index=index,
-        )
-
-
-#: Portal kinds with no wall about them (the boundary between two parts of one space,
-#: a virtual space boundary): the whole face the two cells share is open, whatever
-#: polygon the source gave (IFC virtual boundaries are often narrower than it).
-OPEN_KINDS = frozenset({"opening", "virtual", "split", "void"})
-
-
-def _owners(cells: list[Any], index: dict[int, int]) -> list[Any]:
-    """The owning cell of each directed portal row, in the order of ``from_topology``."""
-    return [c for c in cells for r in c.portals if int(r.cell) in index]
-
-
-def _open_face(poly: NDArray[np.float64], a: Any, b: Any) -> NDArray[np.float64]:
-    """A vertical portal grown to the face its two cells share (see :data:`OPEN_KINDS`).
-
-    The cells' outline edges that lie in the portal's plane (within 1 cm) give each
-    cell's extent along the plane; the shared face is their overlap, times the overlap
-    of the cells' height ranges.  The polygon returned is the rectangle spanning both
-    the source polygon and that face; a portal that is not vertical, or whose cells
-    have no edge in its plane, is returned as it is.
-    """
-    p = np.asarray(poly, np.float64)
-    n = np.cross(p[1] - p[0], p[2] - p[0])
-    nh = float(np.hypot(n[0], n[1]))
-    if nh < 1e-9 or abs(n[2]) > 0.1 * nh:
-        return p
-    nrm = np.array([n[0], n[1]]) / nh
-    tan = np.array([-nrm[1], nrm[0]])
-    off = float(nrm @ p[0, :2])
-
-    def extent(cell: Any) -> tuple[float, float] | None:
-        o = np.asarray(cell.outline, np.float64)
-        q = np.roll(o, -1, axis=0)
-        on = (np.abs(o @ nrm - off) < 0.01) & (np.abs(q @ nrm - off) < 0.01)
-        if not on.any():
-            return None
-        s = np.concatenate([o[on] @ tan, q[on] @ tan])
-        return float(s.min()), float(s.max())
-
-    ea, eb = extent(a), extent(b)
-    if ea is None or eb is None:
-        return p
-    s0, s1 = max(ea[0], eb[0]), min(ea[1], eb[1])
-    z0, z1 = max(a.zmin, b.zmin), min(a.zmax, b.zmax)
-    ps = p[:, :2] @ tan
-    s0, s1 = min(s0, float(ps.min())), max(s1, float(ps.max()))
-    z0, z1 = min(z0, float(p[:, 2].min())), max(z1, float(p[:, 2].max()))
-    base = nrm * off
-    c0, c1 = base + s0 * tan, base + s1 * tan
-    return np.array([[c0[0], c0[1], z0], [c1[0], c1[1], z0], [c1[0], c1[1], z1], [c0[0], c0[1], z1]])
 
 
 @dataclass
@@ -267,124 +111,6 @@ class PortalCull:
     portals: int = 0
     tested: int = 0
     seconds: float = 0.0
-
-
-def full_vsa(size: tuple[int, int]) -> NDArray[np.int64]:
-    """The whole viewport ``(4,)`` as a VSA."""
-    return np.array([0, 0, int(size[0]) - 1, int(size[1]) - 1], np.int64)
-
-
-def _corner_secant(proj: NDArray[np.float64]) -> float:
-    """Secant of the angle between the view axis and the frustum's corner rays."""
-    tx, ty = 1.0 / abs(float(proj[0, 0])), 1.0 / abs(float(proj[1, 1]))
-    return math.sqrt(1.0 + tx * tx + ty * ty)
-
-
-def _rects(
-    pts: NDArray[np.float64],
-    edges: NDArray[np.int64],
-    view: NDArray[np.float64],
-    proj: NDArray[np.float64],
-    size: tuple[int, int],
-    clip_m: float,
-    naive: bool = False,
-) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-    """Whole-pixel rectangles of point sets clipped against depth ``clip_m``.
-
-    ``pts`` ``(m, k, 3)`` world points, ``edges`` ``(e, 2)`` the index pairs joining
-    them (the polygon's sides or a box's edges).  Returns ``(m, 4)`` inclusive pixel
-    rectangles (unclamped) and ``(m,)`` whether anything of each set lies in front.
-    """
-    m = len(pts)
-    if m == 0:
-        return np.zeros((0, 4), np.int64), np.zeros(0, bool)
-    # eye space (m, k, 3); one 2-d product (a stack of m small ones is several times slower)
-    v = (pts.reshape(-1, 3) @ view[:3, :3].T + view[:3, 3]).reshape(pts.shape)
-    if naive:
-        # the paper's Figure 4: culled only when every vertex is behind the eye; the
-        # others projected as they are, a vertex behind the eye flipped through it
-        h = np.concatenate([v, np.ones((*v.shape[:2], 1))], axis=2) @ proj.T
-        w = np.where(np.abs(h[..., 3]) < 1e-12, 1e-12, h[..., 3])
-        ndc = h[..., :2] / w[..., None]
-        front = np.any(-v[..., 2] > 0, axis=1)
-        lo, hi = ndc.min(axis=1), ndc.max(axis=1)
-    else:
-        depth = -v[..., 2]
-        near_d, far_d = _kmin(depth), _kmax(depth)
-        ahead = near_d >= clip_m
-        front = np.ones(m, bool)
-        # the common case, nothing to clip: the vertices' projections bound the set;
-        # computed for every row (elementwise, so each row's figures are the same as
-        # alone) and the others overwritten below
-        d = np.where(ahead[:, None], depth, 1.0)
-        x = (proj[0, 0] * v[..., 0] + proj[0, 2] * v[..., 2]) / d
-        y = (proj[1, 1] * v[..., 1] + proj[1, 2] * v[..., 2]) / d
-        rect = _pixels(np.stack([_kmin(x), _kmin(y)], axis=1), np.stack([_kmax(x), _kmax(y)], axis=1), size)
-        behind = far_d < clip_m
-        front[behind] = False
-        rect[behind] = (1, 1, 0, 0)
-        rest = ~ahead & ~behind
-        if rest.any():
-            rect[rest], front[rest] = _clipped(v[rest], depth[rest], edges, proj, size, clip_m)
-        return rect, front
-    return _pixels(lo, hi, size), front
-
-
-def _kmin(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``(m,)`` minima over the second axis of ``(m, k)``: ``k - 1`` elementwise minima,
-    cheaper than a reduction along a short axis for the few vertices of a portal or box."""
-    out = a[:, 0].copy()
-    for j in range(1, a.shape[1]):
-        np.minimum(out, a[:, j], out=out)
-    return out
-
-
-def _kmax(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``(m,)`` maxima over the second axis of ``(m, k)`` (see :func:`_kmin`)."""
-    out = a[:, 0].copy()
-    for j in range(1, a.shape[1]):
-        np.maximum(out, a[:, j], out=out)
-    return out
-
-
-def _clipped(
-    v: NDArray[np.float64],
-    depth: NDArray[np.float64],
-    edges: NDArray[np.int64],
-    proj: NDArray[np.float64],
-    size: tuple[int, int],
-    clip_m: float,
-) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-    """:func:`_rects` of eye-space point sets ``(m, k, 3)`` that cross the clip plane."""
-    a, b = v[:, edges[:, 0]], v[:, edges[:, 1]]  # (m, e, 3)
-    da, db = depth[:, edges[:, 0]], depth[:, edges[:, 1]]
-    cross = (da - clip_m) * (db - clip_m) < 0
-    t = np.where(cross, (clip_m - da) / np.where(cross, db - da, 1.0), 0.0)
-    xpts = a + t[..., None] * (b - a)
-    allp = np.concatenate([v, xpts], axis=1)  # (m, k + e, 3)
-    ok = np.concatenate([depth >= clip_m, cross], axis=1)
-    d = np.where(ok, -allp[..., 2], 1.0)
-    # a perspective projection: x_ndc = (P00 x + P02 z) / -z, likewise y
-    x = (proj[0, 0] * allp[..., 0] + proj[0, 2] * allp[..., 2]) / d
-    y = (proj[1, 1] * allp[..., 1] + proj[1, 2] * allp[..., 2]) / d
-    front = np.any(ok, axis=1)
-    big = 1e30
-    lo = np.stack([np.where(ok, x, big).min(axis=1), np.where(ok, y, big).min(axis=1)], axis=1)
-    hi = np.stack([np.where(ok, x, -big).max(axis=1), np.where(ok, y, -big).max(axis=1)], axis=1)
-    return _pixels(lo, hi, size), front
-
-
-def _pixels(lo: NDArray[np.float64], hi: NDArray[np.float64], size: tuple[int, int]) -> NDArray[np.int64]:
-    """NDC bounds ``(m, 2)`` each to inclusive whole-pixel rectangles ``(m, 4)``, rounded outward."""
-    wh = np.array([size[0], size[1]], np.float64)
-    plo = np.clip((lo + 1.0) * 0.5 * wh, -1e9, 1e9)
-    phi = np.clip((hi + 1.0) * 0.5 * wh, -1e9, 1e9)
-    return np.concatenate([np.floor(plo - _EPS_PX), np.floor(phi + _EPS_PX)], axis=1).astype(np.int64)
-
-
-def _meet(r: NDArray[np.int64], vsa: NDArray[np.int64]) -> NDArray[np.int64]:
-    """Intersections ``(m, 4)`` of rectangles with one VSA ``(4,)`` (empty when x0 > x1 or y0 > y1)."""
-    return np.concatenate([np.maximum(r[:, :2], vsa[:2]), np.minimum(r[:, 2:], vsa[2:])], axis=1)
 
 
 def box_distance(lo: NDArray[np.float64], hi: NDArray[np.float64], eye: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -572,11 +298,11 @@ def _portal_rows(
     adjacency, starts = graph.adjacency, graph.row_start
     if m == 0:
         return lambda c: ()
-    rect, front = _rects(graph.poly, graph.edges, V, P, size, clip_m, naive)
+    rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive)
     # 0 culled, 1 pass through, 2 the rectangle
     what = np.where(front, 2, 0).astype(np.int8)
     if not naive:
-        near_pass = max(pass_m, clip_m * _corner_secant(P) * 1.01)
+        near_pass = max(pass_m, clip_m * corner_secant(P) * 1.01)
         dist = np.abs(graph.plane[:, :3] @ e + graph.plane[:, 3])
         near = np.flatnonzero(dist <= near_pass)
         if len(near):
@@ -605,23 +331,6 @@ def _portal_rows(
         return got
 
     return rows_of
-
-
-_BOX_EDGES = np.array(
-    [[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], [5, 7], [0, 4], [1, 5], [2, 6], [3, 7]], np.int64
-)
-
-
-def box_rects(
-    lo: ArrayLike, hi: ArrayLike, view: ArrayLike, proj: ArrayLike, size: tuple[int, int], clip_m: float = 0.03
-) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-    """Whole-pixel rectangles ``(n, 4)`` of boxes ``(n, 3)`` clipped at depth ``clip_m``, and
-    ``(n,)`` whether any part of each box lies in front of that plane."""
-    lo_ = np.asarray(lo, np.float64).reshape(-1, 3)
-    hi_ = np.asarray(hi, np.float64).reshape(-1, 3)
-    bits = (np.arange(8)[:, None] >> np.arange(3)[None, :]) & 1  # (8, 3)
-    corners = np.where(bits[None, :, :] == 1, hi_[:, None, :], lo_[:, None, :])
-    return _rects(corners, _BOX_EDGES, np.asarray(view, np.float64), np.asarray(proj, np.float64), size, clip_m)
 
 
 def cull_boxes(

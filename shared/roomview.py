@@ -20,7 +20,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.errors import InputError
-from walkstream.shared.portals import PortalGraph, cull_portals
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import cull_portals
+from walkstream.shared.scene.cellkinds import LOCATABLE_KINDS
 
 __all__ = [
     "VIEW_NEAR_M",
@@ -96,12 +98,13 @@ class RoomLocator:
     ----------
     cells:
         The topology's cells (records with ``id``, ``kind``, ``planes``,
-        ``neighbours``); ``outside`` cells and cells without planes hold no point.
+        ``neighbours``); cells of a kind no viewer is located in (``outside``) and
+        cells without planes hold no point.
     """
 
     def __init__(self, cells: Sequence[Any]) -> None:
         self.cells = {c.id: c for c in cells}
-        inside = [c for c in cells if c.kind != "outside" and len(c.planes)]
+        inside = [c for c in cells if c.kind in LOCATABLE_KINDS and len(c.planes)]
         self.ids, self.planes = stack_planes(inside)
         self.row = {int(c): i for i, c in enumerate(self.ids)}
 

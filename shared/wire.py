@@ -58,11 +58,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.shared.cells import CELL_KINDS, TileGrid
+from walkstream.shared.cells import TileGrid
 from walkstream.shared.codec import ACH_UNITS, pack_ints, quantise_ach, unpack_bounded, unpack_ints
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
+from walkstream.shared.content.registry import frame_keys
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import Viewpoint, readonly
+from walkstream.shared.scene.cellkinds import CELL_KINDS
 
 __all__ = [
     "MSGPACK",
@@ -93,8 +95,9 @@ JSON = "application/json"
 MSGPACK_TYPES = frozenset({MSGPACK, "application/x-msgpack", "application/vnd.msgpack"})
 """Media types accepted as msgpack in ``Accept`` and ``Content-Type``."""
 
-FRAME_KEYS: dict[str, str] = {"params": "params", "lod2": "mesh"}
-"""The key of an object frame's payload, per form of the objects request."""
+FRAME_KEYS: dict[str, str] = frame_keys()
+"""The key of an object frame's payload, per form of the objects request (``params``:
+``params``, ``lod2``: ``mesh``; from the content kinds, :mod:`walkstream.shared.content.registry`)."""
 
 OFFERS: tuple[str, ...] = ("cell-index", "cells-batch", "start")
 """Optional parts of the API a manifest may list in ``offers``: the cell index

@@ -181,14 +181,14 @@ def test_bench_visibility_cli(baked: tuple[Path, dict], tmp_path: Path, capsys: 
 
 def test_demo_bakes_again_when_the_bake_defaults_changed(city: Path, baked: tuple[Path, dict], tmp_path: Path) -> None:
     """`make demo` keeps its database only while it matches today's bake defaults."""
-    from walkstream.cmd_demo import _stale_reason
+    from walkstream.cmd_demo import stale_reason
 
     db, _ = baked
-    assert _stale_reason(db, ()) == "was baked with other settings than today's defaults (resolution)"
+    assert stale_reason(db, ()) == "was baked with other settings than today's defaults (resolution)"
     fresh = tmp_path / "default.db"
     bake(city, fresh)
-    assert _stale_reason(fresh, ()) is None
-    assert _stale_reason(fresh, ("no-such-path",)) == "has no recorded path no-such-path"
+    assert stale_reason(fresh, ()) is None
+    assert stale_reason(fresh, ("no-such-path",)) == "has no recorded path no-such-path"
     junk = tmp_path / "junk.db"
     junk.write_bytes(b"not a database")
-    assert _stale_reason(junk, ()) == "is not a readable scene database"
+    assert stale_reason(junk, ()) == "is not a readable scene database"

@@ -136,6 +136,157 @@ def test_a_module_lists_only_what_it_defines() -> None:
     assert not bad
 
 
+def _bindings(package: str) -> dict[str, str]:
+    """What a package ``__init__`` re-exports: name -> the module it comes from.
+
+    Both eager re-exports (``from walkstream.x.y import name``) and lazy ones (the
+    ``_EXPORTS`` table that :func:`~walkstream.shared.exports.lazy_exports` serves).
+    """
+    path = MODULES.get(package)
+    if path is None or path.name != "__init__.py":
+        return {}
+    out: dict[str, str] = {}
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.update({a.asname or a.name: node.module for a in node.names})
+        elif isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == "_EXPORTS" for t in node.targets
+        ):
+            out.update(ast.literal_eval(node.value))
+    return out
+
+
+def _resolve(importer: str, package: str, name: str) -> str:
+    """The module that ``from package import name`` in ``importer`` depends on.
+
+    A submodule is that submodule.  A name a package re-exports is its home module,
+    unless the importer lives in that package: the package's ``__init__`` imports its
+    own modules, so one of them importing the ``__init__`` back is a real cycle.
+    """
+    if f"{package}.{name}" in MODULES:
+        return f"{package}.{name}"
+    home = _bindings(package).get(name)
+    if home is None or _in(importer, package):
+        return package
+    return _resolve(importer, home, name)  # (a package may re-export another's re-export)
+
+
+def _depends(module: str) -> set[str]:
+    """The walkstream modules ``module`` imports, at any depth of its file.
+
+    Imports inside functions and under ``TYPE_CHECKING`` count: a cycle that only a
+    lazy import lets load is still two modules that need each other.  Importing
+    ``walkstream.a.b`` also runs ``walkstream.a``'s ``__init__`` first, but that is
+    not counted: Python always runs a package before its modules, so it never closes a
+    cycle, and counting it would make every ``__init__`` that re-exports its modules
+    one.  See :func:`_resolve` for ``from package import name``.
+    """
+    out = set()
+    for node in ast.walk(ast.parse(MODULES[module].read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            if node.module.startswith("walkstream"):
+                out.update(_resolve(module, node.module, a.name) for a in node.names)
+        elif isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+    return {m for m in out if m in MODULES and m != module}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            part = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                part.append(w)
+                if w == v:
+                    break
+            if len(part) > 1:
+                found.append(sorted(part))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_import_cycles() -> None:
+    """No two walkstream modules import each other, directly or through others."""
+    graph = {m: _depends(m) for m in MODULES}
+    cycles = [
+        " <-> ".join(f"{m} (imports {sorted(graph[m] & set(c))})" for m in c)
+        for c in _cycles(graph)
+    ]
+    assert not cycles
+
+
+def test_the_cycle_check_sees_a_cycle() -> None:
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+    # a re-exported name is its home module (eager and lazy re-exports) ...
+    store, client = "walkstream.server.store", "walkstream.client"
+    assert _resolve("walkstream.server.bake.pipeline", store, "SceneWriter") == f"{store}.writer"
+    assert _resolve("walkstream.cli", client, "Streamer") == f"{client}.stream.streamer"
+    assert _resolve("walkstream.cli", client, "stream") == f"{client}.stream"
+    # ... except from inside the package, whose __init__ imports the importer
+    assert _resolve(f"{store}.edit", store, "SceneWriter") == store
+
+
+def _private_uses(module: str) -> list[str]:
+    """The ``_private`` names of other walkstream modules that ``module`` uses.
+
+    Both ``from walkstream.x import _name`` and ``alias._name`` where ``alias`` is a
+    walkstream module (``import walkstream.x as alias``, ``from walkstream import x``).
+    """
+    tree = ast.parse(MODULES[module].read_text(encoding="utf-8"))
+    out: list[str] = []
+    aliases: dict[str, str] = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            if not node.module.startswith("walkstream"):
+                continue
+            for a in node.names:
+                if f"{node.module}.{a.name}" in MODULES:
+                    aliases[a.asname or a.name] = f"{node.module}.{a.name}"
+                elif a.name.startswith("_") and not a.name.startswith("__"):
+                    out.append(f"{node.module}.{a.name}")
+        elif isinstance(node, ast.Import):
+            aliases.update({a.asname: a.name for a in node.names if a.asname and a.name in MODULES})
+    for node in ast.walk(tree):
+        if (
+            isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and node.value.id in aliases
+            and node.attr.startswith("_")
+            and not node.attr.startswith("__")
+        ):
+            out.append(f"{aliases[node.value.id]}.{node.attr}")
+    return out
+
+
+def test_no_module_uses_another_modules_private_names() -> None:
+    """A name another module needs is public in its home: listed in its ``__all__``,
+    documented, and imported without an underscore."""
+    bad = [f"{m} uses {name}" for m in MODULES for name in _private_uses(m)]
+    assert not bad
+
+
 # ideas that once had several homes (issue 10): each is defined exactly once now
 ONE_HOME = [
     "signed_area",
@@ -146,6 +297,11 @@ ONE_HOME = [
     "ApiError",
     "StreamCut",
     "CELL_KINDS",
+    "LOCATABLE_KINDS",
+    "CellKind",
+    "ContentKind",
+    "CONTENT_KINDS",
+    "CONTENTS_MEDIA",
     "CellLocator",
     "inside_convex",
     "outside_lonlat",
@@ -199,6 +355,8 @@ def test_long_modules_say_why() -> None:
     [
         "walkstream.shared.geometry",
         "walkstream.shared.cells",
+        "walkstream.shared.scene.cellkinds",
+        "walkstream.shared.content.registry",
         "walkstream.shared.exports",
         "walkstream.server.sources.crs",
         "walkstream.shared.codec.ints",

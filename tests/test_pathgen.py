@@ -433,7 +433,7 @@ def test_a_failed_write_leaves_the_file_intact(db: Path, monkeypatch: pytest.Mon
     def broken(conn: sqlite3.Connection) -> str:
         raise sqlite3.DatabaseError("disk I/O error")
 
-    monkeypatch.setattr(walkstream.server.store.edit, "_content_version", broken)
+    monkeypatch.setattr(walkstream.server.store.edit, "content_version", broken)
     with SceneReader.open(db) as r:
         start = next(iter(r.cells())).boundary.mean(axis=0)
     with pytest.raises(StoreError, match="cannot write path"):

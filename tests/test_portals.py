@@ -25,16 +25,12 @@ from walkstream.server.service.interiors import InteriorState
 from walkstream.server.store import SceneReader
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
-from walkstream.shared.portals import (
-    PortalGraph,
-    box_rects,
-    cull_parts,
-    cull_portals,
-    frustum_cells,
-)
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import cull_parts, cull_portals, frustum_cells
 from walkstream.shared.roomcompact import decode_topology_compact
 from walkstream.shared.roomview import cell_of, stack_planes
 from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology
+from walkstream.shared.screenrects import box_rects
 
 SIZE = (160, 120)
 EYE = 1.6

@@ -24,17 +24,11 @@ from walkstream.server.store import SceneReader
 from walkstream.shared import portals
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellmesh import decode_cell_mesh
-from walkstream.shared.portals import (
-    _BOX_EDGES,
-    PortalCull,
-    PortalGraph,
-    _rects,
-    box_rects,
-    cull_parts,
-    cull_portals,
-)
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import PortalCull, cull_parts, cull_portals
 from walkstream.shared.roomview import cell_of, stack_planes
 from walkstream.shared.roomwire import decode_topology
+from walkstream.shared.screenrects import BOX_EDGES, box_rects, point_rects
 
 SIZE = (160, 120)
 
@@ -132,11 +126,11 @@ def test_rectangles_match_round_ones_to_the_pixel(office: dict[str, Any]) -> Non
     for eye, yaw, pitch in _poses(office, 40, seed=7):
         view = camera(eye, yaw, pitch).astype(np.float64)
         for naive in (False, True):
-            got = _rects(graph.poly, graph.edges, view, proj, SIZE, 0.03, naive)
+            got = point_rects(graph.poly, graph.edges, view, proj, SIZE, 0.03, naive)
             want = rects_reference(graph.poly, graph.edges, view, proj, SIZE, 0.03, naive)
             assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
         rect, front = box_rects(lo, hi, view, proj, SIZE)
-        want = rects_reference(corners, _BOX_EDGES, view, proj, SIZE, 0.03)
+        want = rects_reference(corners, BOX_EDGES, view, proj, SIZE, 0.03)
         assert np.array_equal(rect, want[0]) and np.array_equal(front, want[1])
         depth = -(corners @ view[:3, :3].T + view[:3, 3])[..., 2]
         crossing += int(np.sum((depth.min(axis=1) < 0.03) & (depth.max(axis=1) >= 0.03)))

@@ -16,12 +16,8 @@ import numpy as np
 import pytest
 
 from walkstream.client.clock import RealClock
-from walkstream.client.rewrite.pool import (
-    ObjectGeometry,
-    RewriteOptions,
-    RewritePool,
-    rebuild_batch,
-)
+from walkstream.client.rewrite.geometry import ObjectGeometry, rebuild_batch
+from walkstream.client.rewrite.pool import RewriteOptions, RewritePool
 from walkstream.client.rewrite.shm import ShmArena, pack_layout, unpack, write_packed
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict

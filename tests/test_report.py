@@ -168,7 +168,7 @@ def test_write_json_leaves_no_trace_when_the_value_is_bad(tmp_path: Path) -> Non
 
 def test_atomic_write_keeps_the_old_file_when_writing_fails(tmp_path: Path) -> None:
     p = write_json(tmp_path / "r.json", {"x": 1})
-    with pytest.raises(RuntimeError), report_files._atomic(p) as f:
+    with pytest.raises(RuntimeError), report_files.atomic_open(p) as f:
         f.write('{"x": 2')
         raise RuntimeError("disk full")
     assert json.loads(p.read_text()) == {"x": 1}

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from walkstream.client.clock import RealClock, SimClock
-from walkstream.client.rewrite.pool import ObjectGeometry, RewritePool, rebuild, rebuild_batch
+from walkstream.client.rewrite.geometry import ObjectGeometry, rebuild, rebuild_batch
+from walkstream.client.rewrite.pool import RewritePool
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict
 from walkstream.shared.buildings import default_grammar

@@ -33,7 +33,7 @@ from walkstream.shared.pathcodec import (
     path_error_bound,
 )
 from walkstream.shared.paths import RecordedPath
-from walkstream.shared.portals import PortalGraph
+from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.roomcompact import (
     TOPOLOGY_COMPACT_MAGIC,
     TOPOLOGY_COMPACT_MEDIA,

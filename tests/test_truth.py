@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scenes import build_city_db
 
-import walkstream.client.rewrite.pool as pool
+import walkstream.client.rewrite.geometry as geometry
 from walkstream.cli import main
 from walkstream.client.draw.frames import FrameRenderer
 from walkstream.client.net.link import LinkProfile
@@ -146,7 +146,7 @@ def runs(every_db: Path, gl_ctx: Any) -> tuple[ReplayResult, ReplayResult]:
     """
     mp = pytest.MonkeyPatch()
     ticks = iter(range(10**9))
-    mp.setattr(pool.time, "thread_time", lambda: 0.002 * next(ticks))
+    mp.setattr(geometry.time, "thread_time", lambda: 0.002 * next(ticks))
     try:
         plain = _replay(every_db)
         ticks = iter(range(10**9))

@@ -10,16 +10,10 @@ import numpy as np
 import pytest
 from teamdata import team_data
 
-from walkstream.benchmarks.visibility import (
-    TODAY,
-    BenchInput,
-    format_table,
-    load_bench_input,
-    parse_setting,
-    pick_cells,
-    plot_visibility_benchmark,
-    visibility_benchmark,
-)
+from walkstream.benchmarks.visibility import visibility_benchmark
+from walkstream.benchmarks.visinput import BenchInput, load_bench_input, pick_cells
+from walkstream.benchmarks.visreport import format_table, plot_visibility_benchmark
+from walkstream.benchmarks.vissettings import TODAY, parse_setting
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict

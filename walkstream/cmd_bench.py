@@ -91,15 +91,11 @@ def _bench_beside_loop(args: argparse.Namespace, buildings: Any) -> int:
 
 def cmd_bench_visibility(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench visibility``."""
-    from walkstream.benchmarks.visibility import (
-        DEFAULT_SETTINGS,
-        format_table,
-        load_bench_input,
-        parse_setting,
-        plot_visibility_benchmark,
-        visibility_benchmark,
-    )
+    from walkstream.benchmarks.visibility import visibility_benchmark
+    from walkstream.benchmarks.visinput import load_bench_input
     from walkstream.benchmarks.visref import default_cache_dir
+    from walkstream.benchmarks.visreport import format_table, plot_visibility_benchmark
+    from walkstream.benchmarks.vissettings import DEFAULT_SETTINGS, parse_setting
 
     names = [s.strip() for s in args.settings.split(",") if s.strip()] if args.settings else DEFAULT_SETTINGS
     settings = [parse_setting(n) for n in names]  # a bad name fails before any work

@@ -19,7 +19,7 @@ from walkstream.cmd_build import load_source
 from walkstream.shared.errors import WalkstreamError
 from walkstream.terminal import building_bar, print_summary
 
-__all__ = ["add_demo_parser"]
+__all__ = ["add_demo_parser", "stale_reason"]
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -56,7 +56,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     except WalkstreamError as exc:
         print(f"(no LOD figure: {exc})")
     db = out / "city.db"
-    stale = _stale_reason(db, ("SE",)) if db.exists() else None
+    stale = stale_reason(db, ("SE",)) if db.exists() else None
     if stale is not None:
         print(f"scene database {db} {stale} (an older bake): baking again")
         db.unlink()
@@ -85,7 +85,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return _demo_replay(db, out / "report", args)
 
 
-def _stale_reason(db: Path, names: tuple[str, ...]) -> str | None:
+def stale_reason(db: Path, names: tuple[str, ...]) -> str | None:
     """Why the demo must bake ``db`` again, or ``None`` when it can keep it.
 
     It bakes again when ``db`` is unreadable, lacks a path in ``names``, or was baked

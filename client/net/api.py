@@ -32,7 +32,8 @@ import msgpack
 
 from walkstream.client.clock import Clock
 from walkstream.shared.codec.cellbatch import check_contents_part
-from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
+from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_any
 from walkstream.shared.paths import RecordedPath
@@ -316,7 +317,7 @@ class SceneClient:
         """Interior cell ``cid``'s contents (one immutable response), decoded."""
         what = f"contents of cell {cid}"
         _, mesh = await self._get_decoded(
-            self._url(f"/rooms/{cid}/contents"), what, lambda r: decode_cell_mesh(r.content, what)
+            self._url(f"/rooms/{cid}/contents"), what, lambda r: CELLMESH.decode(r.content, what)
         )
         return mesh
 
@@ -614,4 +615,4 @@ def _contents_part(obj: Any, nbytes: int, expected: int, what: str) -> tuple[int
     cid, _etag, body = check_contents_part(obj, what)
     if cid != expected:
         raise CodecError(f"{what}: cell {cid} where {expected} was asked")
-    return cid, replace(decode_cell_mesh(body, f"contents of cell {cid}"), nbytes=nbytes)
+    return cid, replace(CELLMESH.decode(body, f"contents of cell {cid}"), nbytes=nbytes)

@@ -33,6 +33,8 @@ __all__ = [
     "write_bytes_csv",
     "read_bytes_csv",
     "load_run",
+    "atomic_open",
+    "bytes_arrays",
 ]
 
 
@@ -75,7 +77,7 @@ def json_safe(obj: Any) -> Any:
 
 
 @contextmanager
-def _atomic(path: Path, mode: str = "w") -> Iterator[IO[Any]]:
+def atomic_open(path: Path, mode: str = "w") -> Iterator[IO[Any]]:
     """Open a temporary file next to ``path``; on success move it over ``path``."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -98,7 +100,7 @@ def write_json(path: str | os.PathLike[str], obj: Any) -> Path:
     """Write ``json_safe(obj)`` to ``path`` atomically (indented, keys in given order)."""
     p = Path(path)
     text = json.dumps(json_safe(obj), indent=2, allow_nan=False) + "\n"
-    with _atomic(p) as f:
+    with atomic_open(p) as f:
         f.write(text)
     return p
 
@@ -110,7 +112,7 @@ def write_frames_csv(path: str | os.PathLike[str], frames: FrameLog) -> Path:
     for name, dtype in COLUMNS:
         a = getattr(frames, name)
         cols.append(a.astype(np.int64).tolist() if dtype is np.bool_ else a.tolist())
-    with _atomic(p) as f:
+    with atomic_open(p) as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow([name for name, _ in COLUMNS])
         w.writerows(zip(*cols, strict=True))
@@ -151,7 +153,8 @@ def read_frames_csv(path: str | os.PathLike[str]) -> FrameLog:
     return FrameLog(**out)
 
 
-def _bytes_arrays(bytes_log: BytesLog | None) -> tuple[F64, F64]:
+def bytes_arrays(bytes_log: BytesLog | None) -> tuple[F64, F64]:
+    """``(times, cumulative bytes)`` of a link's bytes log as float arrays (empty without one)."""
     if bytes_log is None:
         return np.empty(0), np.empty(0)
     t = np.asarray(bytes_log[0], dtype=np.float64).reshape(-1)
@@ -166,8 +169,8 @@ def _bytes_arrays(bytes_log: BytesLog | None) -> tuple[F64, F64]:
 def write_bytes_csv(path: str | os.PathLike[str], bytes_log: BytesLog | None) -> Path:
     """Write the link's ``(t, cumulative bytes)`` samples as CSV atomically."""
     p = Path(path)
-    t, b = _bytes_arrays(bytes_log)
-    with _atomic(p) as f:
+    t, b = bytes_arrays(bytes_log)
+    with atomic_open(p) as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(["t", "bytes"])
         w.writerows(zip(t.tolist(), b.astype(np.int64).tolist(), strict=True))

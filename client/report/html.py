@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from walkstream.client.truth.recorder import TruthResult
 from walkstream.client.report.files import (
     BytesLog,
-    _atomic,
+    atomic_open,
     json_safe,
     write_bytes_csv,
     write_frames_csv,
@@ -31,14 +31,14 @@ from walkstream.client.report.files import (
 from walkstream.client.report.phases import plot_phases, write_phases_csv
 from walkstream.client.report.plots import (
     BASE_PLOT_NAMES,
-    _make_run,
-    _plot_budget,
-    _plot_bytes,
-    _plot_error,
-    _plot_fps,
-    _plot_quality,
+    make_run,
+    plot_budget,
+    plot_bytes,
+    plot_error,
+    plot_fps,
+    plot_quality,
 )
-from walkstream.client.report.tables import _HEADLINE, headline_rows
+from walkstream.client.report.tables import HEADLINE, headline_rows
 from walkstream.client.report.truth import write_truth_csv
 from walkstream.client.truth.compare import CAUSE_RGB, CAUSES
 
@@ -151,7 +151,7 @@ def _place_snapshots(
             while f"snapshots/{name}" in used:
                 name, k = f"{stem}_{k}{p.suffix}", k + 1
             rel = f"snapshots/{name}"
-            with _atomic(out / rel, "wb") as f, rp.open("rb") as src:
+            with atomic_open(out / rel, "wb") as f, rp.open("rb") as src:
                 shutil.copyfileobj(src, f)
         used.add(rel)
         placed.append((rel, True))
@@ -161,7 +161,7 @@ def _place_snapshots(
 def _save_png(path: Path, rgb: Any) -> None:
     from PIL import Image
 
-    with _atomic(path, "wb") as f:
+    with atomic_open(path, "wb") as f:
         Image.fromarray(rgb, "RGB").save(f, format="PNG")
 
 
@@ -298,13 +298,13 @@ def write_report(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     safe = json_safe(summary)  # fail before writing anything when it is not serialisable
-    run = _make_run(title, safe, log, bytes_log, 0)
+    run = make_run(title, safe, log, bytes_log, 0)
     write_frames_csv(out / "frames.csv", log)
     write_bytes_csv(out / "bytes.csv", bytes_log)
-    _plot_bytes(out / "bytes.png", [run], f"{title}: bytes downloaded")
-    _plot_quality(out / "quality.png", [run], f"{title}: download and rewrite quality per frame")
-    _plot_fps(out / "fps.png", [run], f"{title}: frame rate")
-    _plot_budget(out / "budget.png", [run], f"{title}: polygon budget")
+    plot_bytes(out / "bytes.png", [run], f"{title}: bytes downloaded")
+    plot_quality(out / "quality.png", [run], f"{title}: download and rewrite quality per frame")
+    plot_fps(out / "fps.png", [run], f"{title}: frame rate")
+    plot_budget(out / "budget.png", [run], f"{title}: polygon budget")
     names = list(BASE_PLOT_NAMES)
     if phases is not None and len(phases) == len(log.t):
         write_phases_csv(out / "phases.csv", log.t, phases)
@@ -318,7 +318,7 @@ def write_report(
         plot_interior(out / "interior.png", log.t - run.t0, dict(interior), f"{title}: cells, culling and fog")
         names.append("interior.png")
     if truth is not None:
-        _plot_error(out / "error.png", run, truth.log, f"{title}: frame rate and image error against the truth")
+        plot_error(out / "error.png", run, truth.log, f"{title}: frame rate and image error against the truth")
     truth_html = _truth_section(out, safe, truth)
     placed = _place_snapshots(out, snapshots)
     write_json(out / "report.json", safe)
@@ -341,7 +341,7 @@ def write_report(
         ]
     )
     index = out / "index.html"
-    with _atomic(index) as f:
+    with atomic_open(index) as f:
         f.write(_page(title, body))
     return index
 
@@ -408,13 +408,13 @@ def write_comparison(
     out.mkdir(parents=True, exist_ok=True)
     safe = [json_safe(r[1]) for r in runs]
     prepared = [
-        _make_run(r[0], s, r[2], r[3], i) for i, (r, s) in enumerate(zip(runs, safe, strict=True))
+        make_run(r[0], s, r[2], r[3], i) for i, (r, s) in enumerate(zip(runs, safe, strict=True))
     ]
     written = [
-        _plot_bytes(out / "compare_bytes.png", prepared, f"{title}: bytes downloaded"),
-        _plot_quality(out / "compare_quality.png", prepared, f"{title}: quality per frame"),
-        _plot_fps(out / "compare_fps.png", prepared, f"{title}: frame rate"),
-        _plot_budget(out / "compare_budget.png", prepared, f"{title}: polygon budget"),
+        plot_bytes(out / "compare_bytes.png", prepared, f"{title}: bytes downloaded"),
+        plot_quality(out / "compare_quality.png", prepared, f"{title}: quality per frame"),
+        plot_fps(out / "compare_fps.png", prepared, f"{title}: frame rate"),
+        plot_budget(out / "compare_budget.png", prepared, f"{title}: polygon budget"),
     ]
     links: dict[str, str] = {}
     for label, d in folders.items():
@@ -433,8 +433,8 @@ def write_comparison(
         )
     )
     # Table: one row per headline figure, one column per run.
-    keys = [k for k, _, _ in _HEADLINE if any(k in s for s in safe)]
-    names = {k: label for k, label, _ in _HEADLINE}
+    keys = [k for k, _, _ in HEADLINE if any(k in s for s in safe)]
+    names = {k: label for k, label, _ in HEADLINE}
     vals = [{k: v for k, _, v in headline_rows(s)} for s in safe]
     head = "".join(
         "<th>"
@@ -479,7 +479,7 @@ def write_comparison(
         ]
     )
     index = out / "index.html"
-    with _atomic(index) as f:
+    with atomic_open(index) as f:
         f.write(_page(title, body))
     written.append(index)
     return written

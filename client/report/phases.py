@@ -13,8 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.draw.phases import PHASES
-from walkstream.client.report.files import _atomic
-from walkstream.client.report.plots import _figure, _save
+from walkstream.client.report.files import atomic_open
+from walkstream.client.report.plots import grid_figure, save_figure
 from walkstream.shared.errors import InputError
 
 __all__ = ["write_phases_csv", "plot_phases"]
@@ -42,7 +42,7 @@ def write_phases_csv(path: Path, t: NDArray[np.float64], phases: NDArray[np.floa
     """
     _check(t, phases)
     rows = np.column_stack([t, 1000.0 * phases])
-    with _atomic(path) as f:
+    with atomic_open(path) as f:
         f.write("t_s," + ",".join(f"{p}_ms" for p in PHASES) + "\n")
         np.savetxt(f, rows, fmt="%.4f", delimiter=",")
     return path
@@ -61,7 +61,7 @@ def plot_phases(
         Seconds per phase.
     """
     _check(t, phases)
-    fig, (ax, bx) = _figure(2, height=3.0, sharex=False)
+    fig, (ax, bx) = grid_figure(2, height=3.0, sharex=False)
     ms = 1000.0 * phases
     if len(t):
         # mean per time bin (at most 400), stacked: the plot stays readable at any length
@@ -86,4 +86,4 @@ def plot_phases(
         bx.annotate(f"{v:.2f} ms", (v, y), xytext=(3, -3), textcoords="offset points", fontsize=8)
     bx.set_xlabel("median ms per frame")
     fig.suptitle(title)
-    return _save(fig, path)
+    return save_figure(fig, path)

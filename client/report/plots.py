@@ -24,10 +24,24 @@ from walkstream.client.truth.compare import CAUSE_RGB, CAUSES
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
-from walkstream.client.report.files import BytesLog, _atomic, _bytes_arrays
+from walkstream.client.report.files import BytesLog, atomic_open, bytes_arrays
 from walkstream.shared.arrays import F64
 
-__all__ = ["BASE_PLOT_NAMES", "PLOT_NAMES", "SERIES_COLOURS", "plot_interior"]
+__all__ = [
+    "BASE_PLOT_NAMES",
+    "PLOT_NAMES",
+    "SERIES_COLOURS",
+    "plot_interior",
+    "PlotRun",
+    "make_run",
+    "grid_figure",
+    "save_figure",
+    "plot_bytes",
+    "plot_quality",
+    "plot_fps",
+    "plot_budget",
+    "plot_error",
+]
 
 #: The plots every report holds, in page order.
 BASE_PLOT_NAMES: tuple[str, ...] = ("bytes.png", "quality.png", "fps.png", "budget.png")
@@ -59,7 +73,8 @@ _MAX_MARKERS = 2500
 
 
 @dataclasses.dataclass(frozen=True, slots=True)
-class _Run:
+class PlotRun:
+    """One run's figures, frames and link samples, as the plots draw them."""
     label: str
     summary: Mapping[str, Any]
     frames: FrameLog
@@ -69,10 +84,11 @@ class _Run:
     colour: str
 
 
-def _make_run(
+def make_run(
     label: str, summary: Mapping[str, Any], frames: FrameLog, bytes_log: BytesLog | None, i: int
-) -> _Run:
-    bt, bb = _bytes_arrays(bytes_log)
+) -> PlotRun:
+    """The :class:`PlotRun` of one replay (``i``: its place, which picks its colour)."""
+    bt, bb = bytes_arrays(bytes_log)
     if bt.size == 0 and len(frames):
         # No link samples: the per-frame cumulative count is the next best thing.
         bt, bb = frames.t.astype(np.float64), frames.bytes_down.astype(np.float64)
@@ -80,7 +96,7 @@ def _make_run(
     if t0 is None or not math.isfinite(float(t0)):
         starts = [a[0] for a in (frames.t, bt) if a.size]
         t0 = float(min(starts)) if starts else 0.0
-    return _Run(label, summary, frames, bt, bb, float(t0), SERIES_COLOURS[i % len(SERIES_COLOURS)])
+    return PlotRun(label, summary, frames, bt, bb, float(t0), SERIES_COLOURS[i % len(SERIES_COLOURS)])
 
 
 def _envelope(x: ArrayLike, y: ArrayLike, max_points: int = _MAX_POINTS) -> tuple[F64, F64]:
@@ -112,7 +128,7 @@ def _thin(idx: NDArray[np.intp], limit: int = _MAX_MARKERS) -> NDArray[np.intp]:
     return idx[np.linspace(0, idx.size - 1, limit).astype(np.intp)]
 
 
-def _figure(
+def grid_figure(
     rows: int = 1, height: float = 3.2, *, cols: int = 1, sharex: bool = True
 ) -> tuple[Figure, list[Axes]]:
     """A figure of ``rows x cols`` axes (row-major list), gridded, on the Agg backend."""
@@ -134,7 +150,8 @@ def _legend(ax: Axes, **kw: Any) -> None:
         ax.legend(fontsize=8, **kw)
 
 
-def _save(fig: Figure, path: Path) -> Path:
+def save_figure(fig: Figure, path: Path) -> Path:
+    """Lay ``fig`` out and write it to ``path`` as PNG (atomically); returns ``path``."""
     if fig.get_suptitle():  # keep the figure title clear of the top row's titles
         top = 1.0 - 0.35 / fig.get_figheight()
         fig.tight_layout(rect=(0.0, 0.0, 1.0, top))
@@ -142,7 +159,7 @@ def _save(fig: Figure, path: Path) -> Path:
         fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
-    with _atomic(path, "wb") as f:
+    with atomic_open(path, "wb") as f:
         f.write(buf.getvalue())
     return path
 
@@ -153,7 +170,7 @@ def _thousands(ax: Axes) -> None:
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:,.0f}"))
 
 
-def _rate_bins(run: _Run) -> tuple[F64, F64, float]:
+def _rate_bins(run: PlotRun) -> tuple[F64, F64, float]:
     """Download rate per time bin: (bin starts s, kbit/s, bin width s)."""
     if run.bytes_t.size == 0:
         return np.empty(0), np.empty(0), 1.0
@@ -168,8 +185,9 @@ def _rate_bins(run: _Run) -> tuple[F64, F64, float]:
     return starts, rate, width
 
 
-def _plot_bytes(path: Path, runs: Sequence[_Run], title: str) -> Path:
-    fig, (ax_cum, ax_rate) = _figure(2)
+def plot_bytes(path: Path, runs: Sequence[PlotRun], title: str) -> Path:
+    """``bytes.png``: the bytes received over time (top) and the rate (bottom), one line per run."""
+    fig, (ax_cum, ax_rate) = grid_figure(2)
     top, widths = 1.0, set()
     for r in runs:
         if r.bytes_t.size == 0:
@@ -212,10 +230,10 @@ def _plot_bytes(path: Path, runs: Sequence[_Run], title: str) -> Path:
     if len(runs) > 1:
         _legend(ax_cum, loc="upper left")
     ax_cum.set_title(title, fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
-def _quality_axes(ax: Axes, r: _Run, column: str, first: int | None, *, note: bool) -> None:
+def _quality_axes(ax: Axes, r: PlotRun, column: str, first: int | None, *, note: bool) -> None:
     f = r.frames
     x = f.t - r.t0
     xs, ys = _envelope(x, 100.0 * getattr(f, column))
@@ -234,10 +252,11 @@ def _quality_axes(ax: Axes, r: _Run, column: str, first: int | None, *, note: bo
     ax.set_ylim(-3.0, 103.0)
 
 
-def _plot_quality(path: Path, runs: Sequence[_Run], title: str) -> Path:
+def plot_quality(path: Path, runs: Sequence[PlotRun], title: str) -> Path:
+    """``quality.png``: download and rewrite quality over time, one row per run."""
     # One row per run, download and rewrite quality side by side (the layout of the
     # paper's Figure 1): overlaid lines that all sit at 100 % would hide each other.
-    fig, axes = _figure(len(runs), height=2.4 if len(runs) > 1 else 3.4, cols=2)
+    fig, axes = grid_figure(len(runs), height=2.4 if len(runs) > 1 else 3.4, cols=2)
     columns = (
         ("download_quality", "download quality", "download_quality_mean", "% of PVS received"),
         ("rewrite_quality", "rewrite quality", "rewrite_quality_mean", "% of PVS built"),
@@ -257,11 +276,12 @@ def _plot_quality(path: Path, runs: Sequence[_Run], title: str) -> Path:
     for ax in axes[-2:]:
         ax.set_xlabel("time since replay start (s)")
     fig.suptitle(title, fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
-def _plot_fps(path: Path, runs: Sequence[_Run], title: str) -> Path:
-    fig, (ax,) = _figure(1, height=4.2)
+def plot_fps(path: Path, runs: Sequence[PlotRun], title: str) -> Path:
+    """``fps.png``: the displayed frame rate over time against its target band."""
+    fig, (ax,) = grid_figure(1, height=4.2)
     ymax = 1.0
     for tgt in sorted(
         {float(r.summary["fps_target"]) for r in runs if r.summary.get("fps_target")}
@@ -339,11 +359,12 @@ def _plot_fps(path: Path, runs: Sequence[_Run], title: str) -> Path:
             )
     ax.set_title(title + ("\n" + "; ".join(notes) if notes else ""), fontsize=10)
     _legend(ax, loc="lower right")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
-def _plot_budget(path: Path, runs: Sequence[_Run], title: str) -> Path:
-    fig, (ax,) = _figure(1, height=4.2)
+def plot_budget(path: Path, runs: Sequence[PlotRun], title: str) -> Path:
+    """``budget.png``: the budget controller's triangle budget and what was drawn."""
+    fig, (ax,) = grid_figure(1, height=4.2)
     top = 1.0
     for r in runs:
         f = r.frames
@@ -373,17 +394,17 @@ def _plot_budget(path: Path, runs: Sequence[_Run], title: str) -> Path:
     ax.set_xlabel("time since replay start (s)")
     ax.set_title(title, fontsize=10)
     _legend(ax, loc="upper right")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
-def _plot_error(path: Path, run: _Run, truth: TruthLog, title: str) -> Path:
+def plot_error(path: Path, run: PlotRun, truth: TruthLog, title: str) -> Path:
     """``error.png``: the frame rate (top) and the image error against the truth (bottom) over time.
 
     The bottom panel stacks the missing pixels of each compared frame by cause (% of
     the frame) and draws the differing pixels as a line; the 0.5 % line is the
     threshold of ``over_half_percent_ratio``.
     """
-    fig, (ax_fps, ax_err) = _figure(2, height=3.0)
+    fig, (ax_fps, ax_err) = grid_figure(2, height=3.0)
     f = run.frames
     if len(f):
         x = f.t - run.t0
@@ -424,7 +445,7 @@ def _plot_error(path: Path, run: _Run, truth: TruthLog, title: str) -> Path:
         if s.get("over_half_percent_ratio") is not None:
             notes.append(f"frames missing > 0.5 %: {100.0 * s['over_half_percent_ratio']:.1f} %")
     ax_fps.set_title(title + ("\n" + "; ".join(notes) if notes else ""), fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_interior(path: Path, t: ArrayLike, series: dict[str, ArrayLike], title: str) -> Path:
@@ -441,7 +462,7 @@ def plot_interior(path: Path, t: ArrayLike, series: dict[str, ArrayLike], title:
     title : str
     """
     x = np.asarray(t, np.float64)
-    fig, axes = _figure(4, 2.2)
+    fig, axes = grid_figure(4, 2.2)
     fig.suptitle(title)
     panels = (
         (("cells", "visible cells"), ("portals", "portals opened")),
@@ -455,4 +476,4 @@ def plot_interior(path: Path, t: ArrayLike, series: dict[str, ArrayLike], title:
             ax.plot(x[: len(y)], y, lw=0.8, color=SERIES_COLOURS[k], label=label)
         _legend(ax, loc="upper right")
     axes[-1].set_xlabel("walk time, s")
-    return _save(fig, path)
+    return save_figure(fig, path)

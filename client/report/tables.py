@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     pass
 
-__all__ = ["headline_rows", "format_headline", "format_comparison_table"]
+__all__ = ["headline_rows", "format_headline", "format_comparison_table", "HEADLINE"]
 
 
 # --------------------------------------------------------------------------- headline
@@ -24,7 +24,7 @@ def _fmt_bytes(v: Any) -> str:
 
 
 # (key, label, formatter): what the page and the CLI show first, when present.
-_HEADLINE: tuple[tuple[str, str, Callable[[Any], str]], ...] = (
+HEADLINE: tuple[tuple[str, str, Callable[[Any], str]], ...] = (
     ("frames", "frames", lambda v: f"{int(v):,}"),
     ("duration_s", "duration", lambda v: f"{v:.1f} s"),
     ("path", "path", str),
@@ -59,6 +59,7 @@ _HEADLINE: tuple[tuple[str, str, Callable[[Any], str]], ...] = (
     ("recovery_frames", "recovery after cost step", lambda v: f"{int(v)} frames"),
     ("rewrite", "rebuilds ran", lambda v: _rewrite_path(v)),
 )
+"""The headline rows of a report: ``(label, summary key, format)``."""
 
 
 def _rewrite_path(d: Mapping[str, Any]) -> str:
@@ -85,7 +86,7 @@ def headline_rows(summary: Mapping[str, Any]) -> list[tuple[str, str, str]]:
     A key that is present with value ``None`` shows as ``"n/a"``.
     """
     rows = []
-    for key, label, fmt in _HEADLINE:
+    for key, label, fmt in HEADLINE:
         if key not in summary:
             continue
         v = summary[key]
@@ -142,8 +143,8 @@ def _phases_line(summary: Mapping[str, Any]) -> list[str]:
 
 def format_comparison_table(runs: Sequence[tuple[str, Mapping[str, Any]]]) -> str:
     """A plain-text table: one row per headline figure, one column per run."""
-    keys = [k for k, _, _ in _HEADLINE if any(k in s for _, s in runs)]
-    labels = {k: label for k, label, _ in _HEADLINE}
+    keys = [k for k, _, _ in HEADLINE if any(k in s for _, s in runs)]
+    labels = {k: label for k, label, _ in HEADLINE}
     cells = []
     for _, s in runs:
         values = {k: v for k, _, v in headline_rows(s)}

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from walkstream.client.report.files import _atomic
+from walkstream.client.report.files import atomic_open
 from walkstream.client.truth.compare import CAUSES, MISS_CAUSES
 from walkstream.shared.arrays import F64, I64
 from walkstream.shared.errors import InputError
@@ -136,7 +136,7 @@ def summarise_truth(log: TruthLog, t_first_perfect: float | None) -> dict[str, A
 def write_truth_csv(path: str | os.PathLike[str], log: TruthLog) -> Path:
     """One row per compared frame: ``frame, t, differing`` and one column per cause (shares)."""
     p = Path(path)
-    with _atomic(p) as f:
+    with atomic_open(p) as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(["frame", "t", "differing", *CAUSES])
         for i in range(len(log)):

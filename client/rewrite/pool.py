@@ -6,7 +6,7 @@ first) and turns each object's parameters into its three LODs with the grammar t
 manifest named (a street is one flat surface used at every LOD).  A worker takes
 the jobs at the head of the queue together, up to :data:`BATCH` (and no more than
 its share when several workers are idle), and rebuilds their buildings in one call
-(:func:`~walkstream.shared.buildings.build_lods_batch`), so the per-building
+(:func:`~walkstream.client.rewrite.geometry.rebuild_batch`), so the per-building
 interpreter overhead is paid once per batch; when few jobs wait, a batch is small
 and a job waits no longer than before.
 
@@ -28,8 +28,7 @@ import asyncio
 import heapq
 import itertools
 import os
-import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Any
@@ -38,22 +37,18 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
-from walkstream.shared.buildings import build_lods, build_lods_batch
+from walkstream.client.rewrite.geometry import ObjectGeometry, rebuild_batch
+from walkstream.client.rewrite.procpool import ProcessWorkers
 from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import Grammar
-from walkstream.shared.records import BuildingParams, Mesh, StreetParams, readonly
-from walkstream.shared.streets import build_street
+from walkstream.shared.records import BuildingParams, StreetParams
 
 __all__ = [
     "BATCH",
     "MODES",
     "auto_mode",
     "SHM_BYTES",
-    "ObjectGeometry",
     "RewriteOptions",
-    "geometry_of",
-    "rebuild",
-    "rebuild_batch",
     "RewritePool",
 ]
 
@@ -104,78 +99,6 @@ Priority = tuple[float, float]
 """(seconds until needed, -ACH): smaller is sooner."""
 
 
-@dataclass(frozen=True)
-class ObjectGeometry:
-    """An object's rebuilt (or downloaded) geometry per LOD, with what the renderer needs."""
-
-    id: int
-    meshes: tuple[Mesh | None, Mesh | None, Mesh | None]
-    triangles: NDArray[np.int64]
-    """(3,) triangles per LOD; 0 where the LOD is missing."""
-    available: NDArray[np.bool_]
-    """(3,) whether each LOD is there."""
-    bbox_min: NDArray[np.float64]
-    bbox_max: NDArray[np.float64]
-    nbytes: int
-    """Memory the meshes take (what the cache counts)."""
-    cpu_s: float = 0.0
-
-    def __post_init__(self) -> None:
-        # the cache hands this record to every frame: nothing in it may change
-        for name in ("triangles", "available", "bbox_min", "bbox_max"):
-            object.__setattr__(self, name, readonly(np.asarray(getattr(self, name))))
-
-
-def geometry_of(
-    oid: int, meshes: tuple[Mesh | None, Mesh | None, Mesh | None], cpu_s: float = 0.0
-) -> ObjectGeometry:
-    """Wrap meshes (``None`` for a missing LOD) with triangle counts, bounds and size."""
-    tri = np.array([0 if m is None else m.triangles for m in meshes], dtype=np.int64)
-    avail = np.array([m is not None for m in meshes], dtype=bool)
-    present = [m for m in meshes if m is not None and len(m.positions)]
-    if present:
-        pos = np.concatenate([m.positions for m in present])
-        lo, hi = pos.min(axis=0).astype(np.float64), pos.max(axis=0).astype(np.float64)
-    else:
-        lo = hi = np.zeros(3)
-    # a street shares one mesh across LODs: count it once
-    nbytes = sum(m.gpu_bytes for m in {id(m): m for m in meshes if m is not None}.values())
-    return ObjectGeometry(oid, meshes, tri, avail, lo, hi, int(nbytes), cpu_s)
-
-
-def rebuild(oid: int, params: BuildingParams | StreetParams, grammar: Grammar) -> ObjectGeometry:
-    """The three LODs of one object, timed in CPU seconds of this thread."""
-    t0 = time.thread_time()
-    if isinstance(params, StreetParams):
-        m = build_street(params)
-        meshes: tuple[Mesh | None, Mesh | None, Mesh | None] = (m, m, m)
-    else:
-        meshes = build_lods(params, grammar)
-    return geometry_of(oid, meshes, time.thread_time() - t0)
-
-
-def rebuild_batch(
-    jobs: Sequence[tuple[int, BuildingParams | StreetParams]], grammar: Grammar
-) -> list[ObjectGeometry]:
-    """The three LODs of several objects, buildings in one batched call; same order as ``jobs``.
-
-    Each object is charged an equal share of the CPU seconds (of this thread) the whole
-    call took.
-    """
-    t0 = time.thread_time()
-    buildings = [(k, p) for k, (_, p) in enumerate(jobs) if isinstance(p, BuildingParams)]
-    meshes: list[tuple[Mesh | None, Mesh | None, Mesh | None]] = [(None, None, None)] * len(jobs)
-    for (k, _), lods in zip(buildings, build_lods_batch([p for _, p in buildings], grammar), strict=True):
-        meshes[k] = lods
-    for k, (_, p) in enumerate(jobs):
-        if isinstance(p, StreetParams):
-            m = build_street(p)
-            meshes[k] = (m, m, m)
-    geoms = [geometry_of(oid, ms) for (oid, _), ms in zip(jobs, meshes, strict=True)]
-    share = (time.thread_time() - t0) / max(1, len(jobs))
-    return [replace(g, cpu_s=share) for g in geoms]
-
-
 class RewritePool:
     """Rebuild jobs in priority order on ``workers`` workers.
 
@@ -224,7 +147,7 @@ class RewritePool:
         self._running: set[int] = set()
         self._executor: ThreadPoolExecutor | None = None
         self.options = options or RewriteOptions()
-        self._procs: Any = None
+        self._procs: ProcessWorkers | None = None
         self.built = 0
         self.cpu_s = 0.0
         self.dropped = 0
@@ -305,8 +228,6 @@ class RewritePool:
             if self.options.mode == "auto":
                 self.options = replace(self.options, mode=auto_mode(self.workers))
             if self.options.mode == "process":
-                from walkstream.client.rewrite.procpool import ProcessWorkers
-
                 self._procs = ProcessWorkers(self.workers, self.options.shm_bytes)
                 self._procs.start()
             else:

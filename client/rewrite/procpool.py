@@ -4,7 +4,7 @@
 method (a fresh interpreter: nothing of the client, least of all its GL context, is
 forked).  Each process imports the building code once at start-up, parses the grammar
 once when the client first sends it, and then rebuilds the batches it is sent with
-:func:`~walkstream.client.rewrite.pool.rebuild_batch`.  Its geometry comes back through
+:func:`~walkstream.client.rewrite.geometry.rebuild_batch`.  Its geometry comes back through
 the client's bounded shared-memory segment when the region reserved for the batch holds
 it, else through the pipe (see :mod:`walkstream.client.rewrite.shm`); either way the
 client's meshes are views of the bytes the worker wrote.
@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from walkstream.client.rewrite.pool import ObjectGeometry, rebuild_batch
+from walkstream.client.rewrite.geometry import ObjectGeometry, rebuild_batch
 from walkstream.client.rewrite.shm import ShmArena, pack_layout, unpack, write_packed
 from walkstream.shared.errors import WorkerGone
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar

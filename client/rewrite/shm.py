@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.rewrite.pool import ObjectGeometry
+from walkstream.client.rewrite.geometry import ObjectGeometry
 from walkstream.shared.records import Mesh
 
 __all__ = ["ALIGN", "ShmArena", "pack_layout", "write_packed", "unpack"]

@@ -1,8 +1,9 @@
 """The start bundle on the client's side: from nothing to the first cell's objects in one round trip.
 
 :class:`StartBundle` asks for the bundle (``GET /v1/start``, see
-:mod:`walkstream.server.service.routers.start`) and feeds its parts to the
-:class:`~walkstream.client.stream.streamer.Streamer` as they arrive: the path to
+:mod:`walkstream.server.service.routers.start`) and feeds its parts to a
+:class:`BundleTarget` (the :class:`~walkstream.client.stream.streamer.Streamer`) as
+they arrive: the path to
 the replay (the walk starts), the cell records and index tiles to the streamer
 (the viewer is tracked from the first frame), the manifest to the replay (the
 grammar lets rewriting start), the objects to the cache.  While it runs, the
@@ -16,16 +17,68 @@ bundle is stopped there and the link is free.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import Protocol
 
+from walkstream.client.net.api import SceneClient
+from walkstream.client.stream.stats import StreamStats
 from walkstream.shared.errors import ApiError, StreamCut
 from walkstream.shared.paths import RecordedPath
-from walkstream.shared.wire import Manifest, ObjectFrame
+from walkstream.shared.wire import CellIndex, CellRecord, Manifest, ObjectFrame
 
-if TYPE_CHECKING:
-    from walkstream.client.stream.streamer import Streamer
+__all__ = ["BundleTarget", "StartBundle"]
 
-__all__ = ["StartBundle"]
+
+class BundleTarget(Protocol):
+    """What a start bundle feeds its parts to: the streamer's side of the bundle.
+
+    The target owns what it learns (cells, index tiles, objects, the current cell); the
+    bundle owns what it still expects to bring (:attr:`StartBundle.ids`,
+    :attr:`StartBundle.left`), which the target reads to count the link's load.
+    """
+
+    api: SceneClient
+    stats: StreamStats
+
+    @property
+    def frame_bytes(self) -> float:
+        """The mean bytes of an object frame on the wire."""
+        ...
+
+    def located(self, cid: int) -> None:
+        """The server located the walk's start in cell ``cid``."""
+        ...
+
+    def add_index(self, idx: CellIndex) -> None:
+        """Learn an index tile."""
+        ...
+
+    def add_cell(self, rec: CellRecord) -> None:
+        """Learn a cell record."""
+        ...
+
+    def add_object(self, frame: ObjectFrame) -> None:
+        """Learn an object."""
+        ...
+
+    def has_object(self, oid: int) -> bool:
+        """Whether ``oid`` is held."""
+        ...
+
+    def expect(self, ids: set[int], coming: bool = True) -> None:
+        """Mark objects as on their way (``coming``) or no longer so."""
+        ...
+
+    def objects_from_disk(self, ids: list[int]) -> set[int]:
+        """Take what the disk cache holds of ``ids``; the ids taken."""
+        ...
+
+    def store_objects(self, frames: list[ObjectFrame]) -> None:
+        """Keep arrived objects in the disk cache."""
+        ...
+
+    def replan(self) -> None:
+        """Plan and dispatch again (a part arrived)."""
+        ...
 
 
 class StartBundle:
@@ -35,6 +88,8 @@ class StartBundle:
     ----------
     streamer:
         Where the parts go.
+    form:
+        The object form asked for (``params`` or ``lod2``).
     on_path, on_manifest:
         Called as those parts arrive (the path with its bytes on the wire).
     on_end:
@@ -51,12 +106,14 @@ class StartBundle:
 
     def __init__(
         self,
-        streamer: Streamer,
+        streamer: BundleTarget,
+        form: str,
         on_path: Callable[[RecordedPath, int], None],
         on_manifest: Callable[[Manifest], None],
         on_end: Callable[[BaseException | None], None],
     ) -> None:
         self.streamer = streamer
+        self.form = form
         self.on_path = on_path
         self.on_manifest = on_manifest
         self.on_end = on_end
@@ -69,7 +126,7 @@ class StartBundle:
         error: BaseException | None = None
         frames: list[ObjectFrame] = []
         try:
-            async for part, item in st.api.start(path=path, form=st.config.form):
+            async for part, item in st.api.start(path=path, form=self.form):
                 if part == "path":
                     p, n = item
                     st.stats.bundle_bytes += n
@@ -90,8 +147,7 @@ class StartBundle:
                     st.add_index(item)
                 elif part == "cell":
                     st.stats.bundle_bytes += item.nbytes
-                    if st.cellmap.current is None:
-                        st.cellmap.current = item.id  # the server located the start
+                    st.located(item.id)
                     st.add_cell(item)
                     ids = {i for i in item.pvs.tolist() if not st.has_object(i)} - self.ids
                     self.ids |= ids

@@ -1,20 +1,23 @@
-"""The client's memory cache: a byte-budget LRU of cells, parameters and geometry, with pins.
+"""The client's memory cache: a byte-budget LRU of cells, contents and geometry, with pins.
 
-:class:`Cache` holds what the walk needs in memory under one byte budget: tiles of
-the cell index (``"index"``), cell records (``"cell"``), what is downloaded per object -- its parameters (``"params"``),
-or its LOD2 mesh when meshes are streamed instead (``"mesh"``) -- the geometry
-ready to draw (``"geom"``), and a room cell's contents (``"cellmesh"``, by cell id: a
-crossing scene keeps both in one cache, and object ids and cell ids overlap).  What the current view needs (the current cell's record, its PVS
+:class:`Cache` holds what the walk needs in memory under one byte budget, keyed by
+``(kind, id)``: tiles of the cell index (``"index"``), cell records (``"cell"``), the
+contents downloaded, one kind per content kind (:mod:`walkstream.shared.content.registry`:
+an object's parameters, ``"params"``; or its LOD2 mesh when meshes are streamed
+instead, ``"mesh"``; an interior cell's meshes by cell id, ``"cellmesh"``, apart from
+the objects' entries with the same ids), and the geometry ready to draw (``"geom"``).  What the current view needs (the current cell's record, its PVS
 parameters and their geometry) is *pinned* and never evicted.  Over the budget, the
 unpinned entries go in this order: geometry first, because it can be rebuilt
-without the network; then parameters (or meshes); then cells; then index tiles
+without the network; then contents (parameters, meshes, cell meshes); then cells; then index tiles
 (small, and what tracking the viewer needs); least recently used first within each
 kind.  Index tiles and cell records together keep a reserve (``metadata_share`` of
 the budget, 1/8 by default) even when the pinned entries alone fill the budget:
 evicting a few kB of them cannot bring a cache that is megabytes over back within
 its budget, it only costs round trips to fetch them again.  Every operation is O(1) (one ``OrderedDict`` of evictable entries per
 kind, pinned entries kept apart so eviction never has to skip them), apart from
-re-pinning, which costs the size of the change.
+re-pinning, which costs the size of the change.  Re-pinning unpins in key order, so
+the order in which entries become evictable again does not hang on string hashing
+(which differs from one process to the next): a simulated walk evicts alike every run.
 
 The cache on disk is :mod:`.diskcache`.
 """
@@ -24,20 +27,24 @@ from __future__ import annotations
 import threading
 from collections import OrderedDict
 from collections.abc import Callable, Iterable
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
+from walkstream.shared.content.registry import cache_kinds
 from walkstream.shared.errors import InputError
 
-__all__ = ["Kind", "KINDS", "CITY_KINDS", "EVICTION_ORDER", "METADATA", "Key", "Cache"]
+__all__ = ["Kind", "CONTENTS", "KINDS", "CITY_KINDS", "EVICTION_ORDER", "METADATA", "Key", "Cache"]
 
-Kind = Literal["index", "cell", "params", "mesh", "geom", "cellmesh"]
-"""What a :class:`Cache` entry is: an index tile, a cell record, object parameters, a
-downloaded mesh, geometry, a room cell's contents."""
+Kind = Literal["index", "cell", "params", "mesh", "cellmesh", "geom"]
+"""What a :class:`Cache` entry is: an index tile, a cell record, the contents of one
+content kind (object parameters, a downloaded object mesh, a cell's meshes), geometry."""
 
-KINDS: tuple[Kind, ...] = ("index", "cell", "params", "mesh", "geom", "cellmesh")
+CONTENTS: tuple[Kind, ...] = cast(tuple[Kind, ...], cache_kinds())
+"""The kinds of downloaded contents, one per content kind, in the registry's order."""
+
+KINDS: tuple[Kind, ...] = ("index", "cell", *CONTENTS, "geom")
 """Every entry kind."""
 
-EVICTION_ORDER: tuple[Kind, ...] = ("geom", "params", "mesh", "cellmesh", "cell", "index")
+EVICTION_ORDER: tuple[Kind, ...] = ("geom", *CONTENTS, "cell", "index")
 """Over the budget, unpinned entries of these kinds go first to last."""
 
 CITY_KINDS: tuple[Kind, ...] = ("index", "cell", "params", "mesh", "geom")
@@ -262,9 +269,9 @@ class Cache:
             want.add(("params", int(i)))
             want.add(("geom", int(i)))
         with self._lock:
-            for kind, oid in self._pins - want:
+            for kind, oid in sorted(self._pins - want):
                 self._unpin_one(kind, oid)
-            for kind, oid in want - self._pins:
+            for kind, oid in sorted(want - self._pins):
                 self._pin_one(kind, oid)
             evicted = self._shrink()
         self._notify(evicted)
@@ -279,9 +286,9 @@ class Cache:
         want: set[Key] = {(self._kind(k), int(i)) for k, i in keys}
         owned = set(KINDS) if kinds is None else {self._kind(k) for k in kinds}
         with self._lock:
-            for kind, oid in {p for p in self._pins if p[0] in owned} - want:
+            for kind, oid in sorted({p for p in self._pins if p[0] in owned} - want):
                 self._unpin_one(kind, oid)
-            for kind, oid in want - self._pins:
+            for kind, oid in sorted(want - self._pins):
                 self._pin_one(kind, oid)
             evicted = self._shrink()
         self._notify(evicted)

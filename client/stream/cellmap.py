@@ -20,7 +20,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.arrays import F64
-from walkstream.shared.cells import INSIDE_TOL, PORTAL_KINDS, inside_convex
+from walkstream.shared.cells import INSIDE_TOL, inside_convex
+from walkstream.shared.scene.cellkinds import CELL_KINDS, visibility_of
 
 __all__ = ["CellMap", "portal_between"]
 
@@ -114,10 +115,11 @@ class CellMap:
     ) -> None:
         """Learn cells: their outlines, neighbours and kinds, as those of ``tile``.
 
-        Cells whose visible set is by portals (:data:`~walkstream.shared.cells.PORTAL_KINDS`:
-        a crossing scene's rooms) are left out: they are the room streamer's, and the
+        Cells whose visible set is walked through portals
+        (:func:`~walkstream.shared.scene.cellkinds.visibility_of`: a crossing scene's rooms) are left out: they are the room streamer's, and the
         map tracks the viewer over the cells with a PVS."""
-        keep = [k for k in range(len(ids)) if kinds is None or kinds[k] not in PORTAL_KINDS]
+        keep = [k for k in range(len(ids))
+                if kinds is None or kinds[k] not in CELL_KINDS or visibility_of(kinds[k]) != "portals"]
         if len(keep) < len(ids):
             ids = [ids[k] for k in keep]
             outlines = [outlines[k] for k in keep]

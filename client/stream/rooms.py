@@ -45,12 +45,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
+from walkstream.client.content.cellmesh import CELLMESH_CONTENT, decoded_bytes
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.errors import ApiError, InputError, StreamCut
-from walkstream.shared.portals import PortalCull, PortalGraph, cull_portals, frustum_cells
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import PortalCull, cull_portals, frustum_cells
 from walkstream.shared.roomview import RoomLocator
 from walkstream.shared.roomwire import RoomRecord, Topology
 
@@ -166,7 +169,8 @@ class RoomStreamer:
     clock:
         The replay's clock.
     cache:
-        The byte-budget cache; contents are kept as kind ``"cellmesh"`` under the cell id.
+        The byte-budget cache; contents are kept as kind ``"cellmesh"`` under the cell id
+        (:mod:`walkstream.shared.content.cellmesh`), apart from any object's entries.
     topology:
         The interior's topology (fetched once, before the walk).
     config:
@@ -271,7 +275,7 @@ class RoomStreamer:
         for c in cells:
             m = self.mesh(c)
             if m is not None:
-                total += sum(p.positions.nbytes + p.indices.nbytes for p in m.parts)
+                total += decoded_bytes(m)
             else:
                 total += round(self._bytes_per_triangle * self.cells[c].contents.triangles)
         return total
@@ -280,7 +284,7 @@ class RoomStreamer:
 
     def mesh(self, cid: int) -> CellMesh | None:
         """Cell ``cid``'s contents if they are in memory."""
-        value: CellMesh | None = self.cache.peek("cellmesh", cid)
+        value: CellMesh | None = self.cache.peek(CELLMESH.cache_kind, cid)
         return value
 
     def tick(
@@ -323,7 +327,7 @@ class RoomStreamer:
         self._flush(t, want)
         # what is wanted and in memory stays: the LRU evicts only what nobody needs soon
         # pinned before they arrive too: a wanted cell is never evicted by its own arrival
-        self.cache.set_pins([("cellmesh", c) for c in want], kinds=("cellmesh",))
+        self.cache.set_pins([(CELLMESH.cache_kind, c) for c in want], kinds=(CELLMESH.cache_kind,))
         self._request(want, set(vis))
         return seen
 
@@ -333,7 +337,7 @@ class RoomStreamer:
         ``batch_bytes``), at most ``max_in_flight`` requests at once (one more for
         visible cells when only prefetch is in flight; no prefetch while visible cells are)."""
         cfg = self.config
-        missing = [c for c in want if c not in self._tasks and not self.cache.has("cellmesh", c)]
+        missing = [c for c in want if c not in self._tasks and not self.cache.has(CELLMESH.cache_kind, c)]
         while missing:
             busy = len(set(self._tasks.values()))
             if not cfg.batch_bytes:
@@ -373,8 +377,8 @@ class RoomStreamer:
         shown = set(want)
         for c in list(self.last_visible):
             if c not in shown and t - self.last_visible[c] > cfg.flush_s:
-                if self.cache.has("cellmesh", c):
-                    self.cache.remove("cellmesh", c)
+                if self.cache.has(CELLMESH.cache_kind, c):
+                    self.cache.remove(CELLMESH.cache_kind, c)
                     self.stats.flushed += 1
                 del self.last_visible[c]
 
@@ -510,12 +514,11 @@ class RoomStreamer:
         self.stats.fetched.add(cid)
         self.stats.cells_received += 1
         self.stats.bytes_received += mesh.nbytes
-        size = sum(p.positions.nbytes + p.indices.nbytes for p in mesh.parts)
-        self._received[0] += size
+        self._received[0] += decoded_bytes(mesh)
         self._received[1] += self.cells[cid].contents.triangles
         if self._received[1]:
             self._bytes_per_triangle = self._received[0] / self._received[1]
-        self.cache.put("cellmesh", cid, mesh, max(size, 1))
+        self.cache.put(CELLMESH.cache_kind, cid, *CELLMESH_CONTENT.cache_entry(b"", mesh))
 
     async def close(self) -> None:
         """Cancel what is in flight."""

@@ -44,25 +44,29 @@ import asyncio
 import contextlib
 import math
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, cast
 
 import msgpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.clock import Clock
+from walkstream.client.content.registry import client_content_for_form
 from walkstream.client.net.api import SceneClient
-from walkstream.client.rewrite.pool import ObjectGeometry, RewriteOptions, RewritePool, geometry_of
+from walkstream.client.rewrite.geometry import ObjectGeometry, geometry_of
+from walkstream.client.rewrite.pool import RewriteOptions, RewritePool
 from walkstream.client.stream.bundle import StartBundle
 from walkstream.client.stream.cache import CITY_KINDS, Cache, Kind
 from walkstream.client.stream.cellmap import CellMap
 from walkstream.client.stream.diskcache import DiskCache
+from walkstream.client.stream.pins import Pins
 from walkstream.client.stream.plan import Tile, plan_needs, tile_key, tile_of_key, wanted_objects
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.route import horizon_m, turn_cost_m
+from walkstream.client.stream.stats import StreamStats
 from walkstream.shared.cells import TileGrid
-from walkstream.shared.codec import decode_mesh, decode_object, unpack_bounded
+from walkstream.shared.codec import unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.lsystem.grammar import Grammar
 from walkstream.shared.paths import RecordedPath
@@ -75,7 +79,7 @@ from walkstream.shared.wire import (
     decode_cell_index,
 )
 
-__all__ = ["StreamerConfig", "StreamStats", "Streamer"]
+__all__ = ["StreamerConfig", "Streamer"]
 
 
 @dataclass(frozen=True)
@@ -117,33 +121,6 @@ class StreamerConfig:
     pin_geometry_s: float = 3.0
     """The geometry of the cells entered within this many seconds is pinned and, when
     the cache evicted it, rebuilt ahead."""
-
-
-@dataclass
-class StreamStats:
-    """Counters of what was fetched."""
-
-    cell_requests: int = 0
-    """Requests for cell records (single or batched)."""
-    cells_received: int = 0
-    cell_bytes: dict[int, int] = field(default_factory=dict)
-    """Record bytes received per cell id (re-downloads add up)."""
-    tile_requests: int = 0
-    tile_bytes: dict[int, int] = field(default_factory=dict)
-    """Index bytes received per tile (:func:`tile_key`)."""
-    locate_requests: int = 0
-    object_requests: int = 0
-    objects_received: int = 0
-    object_bytes: dict[int, int] = field(default_factory=dict)
-    """Frame bytes received per object id (re-downloads add up)."""
-    object_counts: dict[int, int] = field(default_factory=dict)
-    """Times each object id was received."""
-    cancelled_batches: int = 0
-    disk_hits: int = 0
-    bundle_bytes: int = 0
-    """Bytes of the start bundle's path, cell, index, manifest and objects parts."""
-    busy: list[tuple[float, float]] = field(default_factory=list)
-    """Intervals (clock times) during which a request was in flight."""
 
 
 class _Batch:
@@ -191,7 +168,7 @@ class Streamer:
         self.clock = clock
         self.cache = cache
         self.config = config
-        self.kind: Kind = "params" if config.form == "params" else "mesh"
+        self.kind: Kind = cast(Kind, client_content_for_form(config.form).kind.cache_kind)
         """The cache kind of what is downloaded per object."""
         self.rewrite: RewritePool | None = None
         if self.kind == "params":
@@ -238,7 +215,7 @@ class Streamer:
         self.walk_end = math.inf
         """Clock time at which the walk ends (the replay sets it; prefetch stops short of it)."""
         self._now = 0.0
-        self._needed_at: dict[int, float] = {}
+        self.pins = Pins(config.pin_hold_s, config.pin_geometry_s)
         self._busy_since: float | None = None
         self._closed = False
 
@@ -287,36 +264,12 @@ class Streamer:
         return out
 
     def _pin(self, need: dict[int, float]) -> None:
-        """Pin the current cell with its PVS (params and geometry), the records and params
-        of the cells about to be entered, and the index tiles the prediction needs: evicting
-        what the next seconds need would only download it again (geometry can be
-        rebuilt, so only the current cell's is pinned)."""
+        """Pin what the next seconds need (see :class:`~walkstream.client.stream.pins.Pins`)."""
         cur = self.cellmap.current
-        rec = self.cells.get(cur) if cur is not None else None
-        # hysteresis: a cell that drops out of the prediction for a moment (the
-        # prediction wobbles at 10 Hz) keeps its pins for pin_hold_s
-        for c in need:
-            self._needed_at[c] = self._now
-        hold = self.config.pin_hold_s
-        for c in [c for c, t in self._needed_at.items() if self._now - t > hold]:
-            del self._needed_at[c]
-        # (a key not cached yet is pinned when it arrives)
-        keys: list[tuple[str, int]] = [("cell", c) for c in self._needed_at]
-        if rec is not None:
-            keys += [(self.kind, i) for i in rec.pvs.tolist()]
-            keys += [("geom", i) for i in rec.pvs.tolist()]
-        for c in self._needed_at:
-            r = self.cells.get(c)
-            if r is not None and c != cur:
-                keys += [(self.kind, i) for i in r.pvs.tolist()]
-                if need.get(c, math.inf) <= self.config.pin_geometry_s:
-                    # about to be entered: its geometry too, or a frame shows the gap
-                    keys += [("geom", i) for i in r.pvs.tolist()]
-        # every tile the prediction needs: one evicted would be asked for again at once
-        keys += [("index", tile_key(t)) for t in self.need_tiles]
+        tiles = [tile_key(t) for t in self.need_tiles]
         if self.grid is not None:
-            keys.append(("index", tile_key(self.grid.tile_of(self._xy))))
-        self.cache.set_pins(keys, kinds=CITY_KINDS)
+            tiles.append(tile_key(self.grid.tile_of(self._xy)))
+        self.cache.set_pins(self.pins.keys(self._now, need, cur, self.cells, self.kind, tiles), kinds=CITY_KINDS)
 
     def _entered(self, cid: int) -> None:
         rec = self.cells.get(cid)
@@ -380,7 +333,10 @@ class Streamer:
                 rec = self.cells.get(cell)
                 if rec is not None and t <= c.pin_geometry_s:
                     self.ensure_geometry(rec.pvs.tolist(), t)
-            self.rewrite.prune([r.pvs for x in (*need, self.cellmap.current or -1) if (r := self.cells.get(x))])        # cancel in-flight batches nobody needs any more
+            self.rewrite.prune(
+                [r.pvs for x in (*need, self.cellmap.current or -1) if (r := self.cells.get(x))]
+            )
+        # cancel in-flight batches nobody needs any more
         for task, b in list(self._batches.items()):
             want = wanted if b.kind == "objects" else records
             if not any(i in want for i in b.left):
@@ -668,15 +624,14 @@ class Streamer:
             self._frame_bytes = 0.95 * self._frame_bytes + 0.05 * frame.nbytes
             self.cache.note_download(oid)
         what = f"object {oid}"
+        content = client_content_for_form(frame.form)
         try:
-            if frame.form == "params":
-                params = decode_object(frame.payload, what)
-                self.cache.put("params", oid, params, max(len(frame.payload), 16))
-                self._submit_rewrite(oid, params)
-            else:
-                mesh = decode_mesh(frame.payload, what)
-                self.cache.put("mesh", oid, frame.payload, max(len(frame.payload), 16))
-                self._geometry_ready(geometry_of(oid, (None, None, mesh)))
+            decoded = content.kind.decode(frame.payload, what)
+            self.cache.put(content.kind.cache_kind, oid, *content.cache_entry(frame.payload, decoded))
+            if content.kind.name == "params":
+                self._submit_rewrite(oid, decoded)
+            else:  # a downloaded mesh is the LOD2 geometry
+                self._geometry_ready(geometry_of(oid, (None, None, decoded)))
         except CodecError:
             return  # a bad record: not cached, so it is wanted (and fetched) again
 
@@ -693,7 +648,7 @@ class Streamer:
 
         See :class:`~walkstream.client.stream.bundle.StartBundle` for the callbacks.
         """
-        bundle = StartBundle(self, on_path, on_manifest, on_end)
+        bundle = StartBundle(self, self.config.form, on_path, on_manifest, on_end)
         self._bundle = bundle
         self._bundle_task = asyncio.create_task(self._run_bundle(bundle, path))
         return self._bundle_task
@@ -705,6 +660,12 @@ class Streamer:
             self._bundle = None
             self._bundle_task = None
         self.replan()
+
+    def located(self, cid: int) -> None:
+        """The server located the walk's start in cell ``cid``: it is the current cell
+        unless the viewer was found in one already."""
+        if self.cellmap.current is None:
+            self.cellmap.current = cid
 
     def expect(self, ids: set[int], coming: bool = True) -> None:
         """Mark objects as on their way (``coming``) or no longer so (the start bundle's)."""

@@ -283,10 +283,10 @@ async def interior_truth(
     import httpx
 
     from walkstream.client.net.api import SceneClient
-    from walkstream.client.truth.scene import _Unshaped
+    from walkstream.client.truth.scene import UnshapedTransport
 
     notes = list(notes)
-    async with httpx.AsyncClient(transport=_Unshaped(transport), base_url=base_url,
+    async with httpx.AsyncClient(transport=UnshapedTransport(transport), base_url=base_url,
                                  timeout=httpx.Timeout(120.0)) as http:
         api = SceneClient(http, clock, scene)
         meshes = {int(c): await api.contents(int(c)) for c in cells}

@@ -163,7 +163,7 @@ class TruthRecorder:
     ) -> None:
         """Note one frame's state (cheap: ids and references to meshes already built).
 
-        ``geoms`` are the :class:`~walkstream.client.rewrite.pool.ObjectGeometry` the
+        ``geoms`` are the :class:`~walkstream.client.rewrite.geometry.ObjectGeometry` the
         frame's allocation ran over and ``lods`` the LOD chosen for each (-1: not drawn).
         """
         drawn = tuple(

@@ -40,12 +40,12 @@ from walkstream.shared.wire import (
     decode_manifest,
 )
 
-__all__ = ["TruthScene"]
+__all__ = ["TruthScene", "UnshapedTransport"]
 
 _MAX_STREAM = 256 << 20
 
 
-class _Unshaped(httpx.AsyncBaseTransport):
+class UnshapedTransport(httpx.AsyncBaseTransport):
     """The inner transport, borrowed: closing this client must not close the walk's."""
 
     def __init__(self, inner: httpx.AsyncBaseTransport) -> None:
@@ -93,7 +93,7 @@ class TruthScene:
             The service refuses or sends something unusable.
         """
         http = httpx.AsyncClient(
-            transport=_Unshaped(transport), base_url=base_url, timeout=httpx.Timeout(120.0)
+            transport=UnshapedTransport(transport), base_url=base_url, timeout=httpx.Timeout(120.0)
         )
         try:
             r = await http.get(f"/v1/scenes/{scene}", headers={"Accept": MSGPACK})

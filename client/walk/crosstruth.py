@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from walkstream.client.net.api import SceneClient
 from walkstream.client.truth.interior import InteriorTruth
-from walkstream.client.truth.scene import TruthScene
+from walkstream.client.truth.scene import TruthScene, UnshapedTransport
 from walkstream.shared.roomwire import Entrance
 
 __all__ = ["UNKNOWN", "crossing_truth"]
@@ -70,8 +70,6 @@ async def crossing_truth(
     ``culled`` pixels (must be 0) and the frames with any, the pinholes apart, and the
     frames compared on each side of the door.
     """
-    from walkstream.client.truth.scene import _Unshaped
-
     notes = list(notes)
     ts = await TruthScene.fetch(transport, base_url, scene)
     try:
@@ -82,7 +80,7 @@ async def crossing_truth(
             whole[-1 - oid] = _Whole((_Part(m.positions, np.asarray(m.indices, np.uint32), tris),))
     finally:
         await ts.close()
-    async with httpx.AsyncClient(transport=_Unshaped(transport), base_url=base_url,
+    async with httpx.AsyncClient(transport=UnshapedTransport(transport), base_url=base_url,
                                  timeout=httpx.Timeout(120.0)) as http:
         api = SceneClient(http, clock, scene)
         for c in cells:

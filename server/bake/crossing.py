@@ -58,6 +58,7 @@ from shapely.geometry.polygon import orient
 
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.crossnav import ENTER_NAME, SceneGraph, front_of
+from walkstream.server.bake.digest import file_digest
 from walkstream.server.bake.interior import (
     INTERIOR_FEATURES,
     interior_parts,
@@ -65,7 +66,7 @@ from walkstream.server.bake.interior import (
     write_interior_tables,
 )
 from walkstream.server.bake.navgraph import CellGraph
-from walkstream.server.bake.pipeline import _building_box, file_digest
+from walkstream.server.bake.objectrows import object_rows
 from walkstream.server.bake.placement import (
     entrance_door,
     interior_shell,
@@ -78,19 +79,18 @@ from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
-from walkstream.server.bake.workers import _run_tasks
+from walkstream.server.bake.workers import run_tasks
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
 from walkstream.server.sources.scene import SourceScene
 from walkstream.server.store import (
     CellRow,
     EntranceInfo,
-    ObjectRow,
     PortalInfo,
     SceneReader,
     SceneWriter,
 )
-from walkstream.shared.buildings import default_grammar, default_grammar_text, predict_triangles
+from walkstream.shared.buildings import default_grammar, default_grammar_text
 from walkstream.shared.errors import InputError
 from walkstream.shared.records import BuildingParams
 
@@ -309,9 +309,7 @@ def bake_crossing(
         grammar_version=grammar.id, features=features, settings=settings_dict, resume=False,
     )
     try:
-        rows = [ObjectRow.of(b, tris=predict_triangles(b, grammar), bbox=_building_box(b)) for b in city.buildings]
-        rows += [ObjectRow.of(s, tris=(len(s.ring) - 2,) * 3) for s in city.streets]
-        writer.add_objects(rows)
+        writer.add_objects(object_rows(city, grammar))
         doorway = door.doorway + offset
         writer.add_cells(
             CellRow(c.id, c.kind, np.asarray(c.polygon), c.zmin, c.zmax,
@@ -328,7 +326,7 @@ def bake_crossing(
         finished = 0
         if progress:
             progress(0, len(cells))
-        for results in _run_tasks(city, st, key, cells, workers, scheduler):
+        for results in run_tasks(city, st, key, cells, workers, scheduler):
             for cid, pvs, ach in results:
                 writer.set_pvs(cid, pvs, ach)
                 finished += 1

@@ -13,12 +13,17 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from walkstream.server.bake.viewcell import ViewCell, _footprints, _height_range, _positive
+from walkstream.server.bake.viewcell import (
+    ViewCell,
+    check_height_range,
+    footprint_polygons,
+    positive_metres,
+)
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
 
-__all__ = ["grid_cells"]
+__all__ = ["grid_cells", "free_share"]
 
 
 def grid_cells(
@@ -62,8 +67,8 @@ def grid_cells(
     InputError
         If a parameter is out of range, or the scene is empty and no bbox is given.
     """
-    cell_size = _positive("cell_size", cell_size)
-    zmin, zmax = _height_range(height_range)
+    cell_size = positive_metres("cell_size", cell_size)
+    zmin, zmax = check_height_range(height_range)
     if not 0.0 <= float(min_free) <= 1.0:
         raise InputError(f"min_free must lie in [0, 1], got {min_free}")
     x0, y0, x1, y1 = _grid_bbox(scene, bbox)
@@ -78,7 +83,7 @@ def grid_cells(
     bx0 = x0 + cols * cell_size
     by0 = y0 + rows * cell_size
     boxes = shapely.box(bx0, by0, bx0 + cell_size, by0 + cell_size)
-    free = _free_share(boxes, _footprints(scene))
+    free = free_share(boxes, footprint_polygons(scene))
     keep = free >= float(min_free) - 1e-12
 
     # id of each kept square by (row, col); -1 where dropped
@@ -125,7 +130,7 @@ def _grid_bbox(
     return float(x0), float(y0), float(x1), float(y1)
 
 
-def _free_share(boxes: NDArray[np.object_], footprints: NDArray[np.object_]) -> F64:
+def free_share(boxes: NDArray[np.object_], footprints: NDArray[np.object_]) -> F64:
     """``(n,)`` share of each polygon's area not covered by footprints."""
     area = shapely.area(boxes)
     built = np.zeros(len(boxes))

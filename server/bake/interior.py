@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.server.bake.pipeline import file_digest
+from walkstream.server.bake.digest import file_digest
 from walkstream.server.bake.roomcontents import REACH, Part, contents_task, outside_mask, weld
 from walkstream.server.bake.roomnav import RoomGraph
 from walkstream.server.bake.rooms import RoomLayout, room_layout

@@ -13,30 +13,24 @@ from typing import Any
 import numpy as np
 
 from walkstream.server.bake.cells import make_cells
+from walkstream.server.bake.digest import file_digest
+from walkstream.server.bake.interior import bake_interior
+from walkstream.server.bake.objectrows import object_rows
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
-from walkstream.server.bake.workers import _run_tasks
+from walkstream.server.bake.workers import run_tasks
 from walkstream.server.sources.clip import clip_scene, local_bbox
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
-from walkstream.server.store import CellRow, ObjectRow, SceneReader, SceneWriter
-from walkstream.shared.buildings import default_grammar, default_grammar_text, predict_triangles
+from walkstream.server.store import CellRow, SceneReader, SceneWriter
+from walkstream.shared.buildings import default_grammar, default_grammar_text
 from walkstream.shared.errors import InputError
 
-__all__ = ["bake", "file_digest"]
+__all__ = ["bake"]
 
 
 # ------------------------------------------------------------------ the bake
-
-
-def file_digest(path: Path) -> str:
-    """First 16 hex digits of the sha256 of a file (what identifies a bake's input)."""
-    h = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()[:16]
 
 
 def bake(
@@ -105,8 +99,6 @@ def bake(
 
     scene = read_source(src, network=st.network)
     if isinstance(scene, InteriorScene):
-        from walkstream.server.bake.interior import bake_interior
-
         return bake_interior(
             scene, src, out, name=name, workers=workers, scheduler=scheduler, progress=progress,
             log=log, import_seconds=time.perf_counter() - t0,
@@ -143,12 +135,7 @@ def bake(
     try:
         done = writer.done_cells() if writer.resumed else set()
         if not writer.resumed:
-            rows = [
-                ObjectRow.of(b, tris=predict_triangles(b, grammar), bbox=_building_box(b))
-                for b in scene.buildings
-            ]
-            rows += [ObjectRow.of(s, tris=(len(s.ring) - 2,) * 3) for s in scene.streets]
-            writer.add_objects(rows)
+            writer.add_objects(object_rows(scene, grammar))
             writer.add_cells(
                 CellRow(c.id, c.kind, np.asarray(c.polygon), c.zmin, c.zmax, np.asarray(c.neighbours, np.int64))
                 for c in cells
@@ -164,7 +151,7 @@ def bake(
         finished = len(done)
         if progress:
             progress(finished, len(cells))
-        for results in _run_tasks(scene, st, key, todo, workers, scheduler):
+        for results in run_tasks(scene, st, key, todo, workers, scheduler):
             for cid, pvs, ach in results:
                 writer.set_pvs(cid, pvs, ach)
                 finished += 1
@@ -194,8 +181,3 @@ def bake(
         summary["source_notes"] = " | ".join(scene.notes)
     return summary
 
-
-def _building_box(b: Any) -> tuple[float, float, float, float, float, float]:
-    lo, hi = b.rings[0].min(axis=0), b.rings[0].max(axis=0)
-    # the grammar builds a parapet above the eaves and ledges just outside the walls
-    return (float(lo[0]) - 0.5, float(lo[1]) - 0.5, 0.0, float(hi[0]) + 0.5, float(hi[1]) + 0.5, b.height + 1.0)

@@ -27,16 +27,16 @@ import shapely
 from walkstream.server.bake.viewcell import (
     F64,
     ViewCell,
-    _finish,
-    _footprints,
-    _height_range,
-    _positive,
+    check_height_range,
+    finish_cells,
+    footprint_polygons,
+    positive_metres,
 )
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError
 from walkstream.shared.geometry import signed_area
 
-__all__ = ["MIN_CELL_AREA", "street_cells"]
+__all__ = ["MIN_CELL_AREA", "street_cells", "polygon_parts"]
 #: Parts of street pieces smaller than this (m²) after clipping by footprints are dropped.
 MIN_CELL_AREA = 0.5
 
@@ -89,8 +89,8 @@ def street_cells(
     InputError
         If the scene has no street pieces, or a parameter is out of range.
     """
-    max_length = _positive("max_length", max_length)
-    zmin, zmax = _height_range(height_range)
+    max_length = positive_metres("max_length", max_length)
+    zmin, zmax = check_height_range(height_range)
     if not zmin <= float(eye_height) <= zmax:
         raise InputError(f"eye_height {eye_height} m is outside height_range ({zmin}, {zmax})")
     if not scene.streets:
@@ -114,7 +114,7 @@ def street_cells(
                     v = np.array([-u[1], u[0]])
                     parts.extend((kind, p) for p in _cut(piece, v, max_length))
     parts = [(k, p) for k, p in parts if signed_area(p) >= _SLIVER_AREA]
-    return _finish(parts, zmin, zmax)
+    return finish_cells(parts, zmin, zmax)
 
 
 def _clean_ring(ring: F64) -> F64:
@@ -141,7 +141,8 @@ def _clean_ring(ring: F64) -> F64:
     return np.ascontiguousarray(r)
 
 
-def _polygon_parts(geom: shapely.Geometry) -> list[shapely.Polygon]:
+def polygon_parts(geom: shapely.Geometry) -> list[shapely.Polygon]:
+    """The non-sliver polygons of ``geom``, however a repair nested them."""
     # a repair may nest a MultiPolygon in a GeometryCollection: flatten both levels
     return [
         p
@@ -161,7 +162,7 @@ def _disjoint_sources(scene: SourceScene) -> list[tuple[str, shapely.Polygon]]:
         poly = shapely.Polygon(s.ring)
         if not poly.is_valid:
             poly = shapely.make_valid(poly)
-        for p in _polygon_parts(poly):
+        for p in polygon_parts(poly):
             kinds.append(s.kind)
             geoms.append(p)
             passage.append(s.id in scene.passages)
@@ -183,7 +184,7 @@ def _disjoint_sources(scene: SourceScene) -> list[tuple[str, shapely.Polygon]]:
         # clipping leaves slivers along walls: too small, or too thin to stand in
         out.extend(
             (kind, p)
-            for p in _polygon_parts(g)
+            for p in polygon_parts(g)
             if p.area >= MIN_CELL_AREA and p.area >= _MIN_WIDTH * 0.5 * p.length
         )
     return out
@@ -193,7 +194,7 @@ def _clip_footprints(
     scene: SourceScene, geoms: list[shapely.Geometry], passage: list[bool]
 ) -> list[shapely.Geometry]:
     """Street geometries minus the building footprints (passages are left whole)."""
-    fps = _footprints(scene)
+    fps = footprint_polygons(scene)
     if not len(fps) or not geoms:
         return geoms
     fps = np.array([f if f.is_valid else shapely.make_valid(f) for f in fps], dtype=object)
@@ -363,7 +364,7 @@ def _cut_by_strips(whole: shapely.Polygon, u: F64, cuts: F64, tmin: float, tmax:
     out = []
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         strip = shapely.Polygon([a * u + lo_v * v, b * u + lo_v * v, b * u + hi_v * v, a * u + hi_v * v])
-        for part in _polygon_parts(shapely.intersection(whole, strip)):
+        for part in polygon_parts(shapely.intersection(whole, strip)):
             ring = _clean_ring(np.asarray(part.exterior.coords))
             if len(ring) >= 3:
                 out.append(ring)

@@ -20,12 +20,22 @@ from numpy.typing import NDArray
 
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
-from walkstream.shared.cells import CELL_KINDS, CellLocator, outline_polygons
+from walkstream.shared.cells import CellLocator, outline_polygons
 from walkstream.shared.errors import InputError
 from walkstream.shared.geometry import signed_area
 from walkstream.shared.records import readonly
+from walkstream.shared.scene.cellkinds import CELL_KINDS
 
-__all__ = ["MIN_SHARED_EDGE", "ViewCell", "cell_polygons", "cell_locator"]
+__all__ = [
+    "MIN_SHARED_EDGE",
+    "ViewCell",
+    "cell_polygons",
+    "cell_locator",
+    "positive_metres",
+    "check_height_range",
+    "finish_cells",
+    "footprint_polygons",
+]
 
 
 #: Cell kinds in id order.
@@ -100,14 +110,16 @@ def cell_locator(cells: Sequence[ViewCell]) -> CellLocator:
 # --------------------------------------------------------------------------- helpers
 
 
-def _positive(name: str, value: float) -> float:
+def positive_metres(name: str, value: float) -> float:
+    """``value`` as a float, or an :class:`InputError` naming ``name`` when it is not positive and finite."""
     v = float(value)
     if not (math.isfinite(v) and v > 0):
         raise InputError(f"{name} must be a positive number of metres, got {value}")
     return v
 
 
-def _height_range(height_range: tuple[float, float]) -> tuple[float, float]:
+def check_height_range(height_range: tuple[float, float]) -> tuple[float, float]:
+    """``(zmin, zmax)`` as floats, checked: finite and ``0 <= zmin <= zmax``."""
     try:
         zmin, zmax = (float(z) for z in height_range)
     except (TypeError, ValueError) as exc:
@@ -133,7 +145,7 @@ def _centroid(ring: F64) -> tuple[float, float]:
     return float(c[0] + o[0]), float(c[1] + o[1])
 
 
-def _finish(parts: list[tuple[str, F64]], zmin: float, zmax: float) -> list[ViewCell]:
+def finish_cells(parts: list[tuple[str, F64]], zmin: float, zmax: float) -> list[ViewCell]:
     """Order parts deterministically, find neighbours and build the cells."""
     order = sorted(
         range(len(parts)),
@@ -175,7 +187,7 @@ def _neighbours(polys: NDArray[np.object_]) -> list[list[int]]:
     return [sorted(n) for n in out]
 
 
-def _footprints(scene: SourceScene) -> NDArray[np.object_]:
+def footprint_polygons(scene: SourceScene) -> NDArray[np.object_]:
     """Building footprints as a ``(b,)`` array of shapely Polygons (holes kept)."""
     polys = [shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings]
     return np.array(polys, dtype=object) if polys else np.empty(0, object)

@@ -9,9 +9,9 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
-from walkstream.server.bake.gridcells import _free_share
-from walkstream.server.bake.streetcells import _polygon_parts
-from walkstream.server.bake.viewcell import ViewCell, _footprints, cell_polygons
+from walkstream.server.bake.gridcells import free_share
+from walkstream.server.bake.streetcells import polygon_parts
+from walkstream.server.bake.viewcell import ViewCell, cell_polygons, footprint_polygons
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
@@ -68,13 +68,13 @@ def viewpoints(
     if int(count) < 1:
         raise InputError(f"viewpoint count must be >= 1, got {count}")
     by_id = {c.id: c for c in cells}
-    footprints = _footprints(scene)
+    footprints = footprint_polygons(scene)
     tree = shapely.STRtree(footprints)
     grid = all(c.kind == "grid" for c in cells)
 
     if grid:
         boxes = cell_polygons(cells)
-        free = _free_share(boxes, footprints)
+        free = free_share(boxes, footprints)
         cand = [c for c, f in zip(cells, free, strict=True) if f >= 0.95 and len(c.neighbours) == 4]
         if len(cand) < count:
             cand = list(cells)
@@ -147,7 +147,7 @@ def _free_point(
     free = shapely.difference(box, shapely.union_all(hits))
     inner = shapely.buffer(free, -0.5)
     region = inner if not inner.is_empty else free
-    parts = _polygon_parts(region) or _polygon_parts(free)
+    parts = polygon_parts(region) or polygon_parts(free)
     if not parts:
         return x, y
     best = max(parts, key=lambda p: p.area)

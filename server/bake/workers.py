@@ -21,7 +21,7 @@ from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_sce
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError
 
-__all__ = ["SPLIT_ROUNDS", "cell_task", "cell_points", "cell_counts", "dask_client"]
+__all__ = ["SPLIT_ROUNDS", "cell_task", "cell_points", "cell_counts", "dask_client", "run_tasks"]
 
 #: cells per task: big enough to amortise a task's overhead, small enough for a smooth bar
 _CHUNK = 8
@@ -150,7 +150,7 @@ def _chunks(cells: Sequence[ViewCell], n: int) -> Iterator[list[tuple[int, NDArr
         yield [(c.id, np.asarray(c.polygon), c.zmin, c.zmax) for c in cells[i : i + n]]
 
 
-def _run_tasks(
+def run_tasks(
     scene: SourceScene,
     st: BakeSettings,
     key: str,
@@ -158,6 +158,10 @@ def _run_tasks(
     workers: int,
     scheduler: str | None,
 ) -> Iterator[list[tuple[int, NDArray[np.int64], NDArray[np.float64]]]]:
+    """Render the PVS of the cells ``todo`` in chunks: here, in ``workers`` local
+    processes or on the Dask ``scheduler``; yields each chunk's ``(cell id, pvs, ach)``
+    as it finishes (``key`` names the bake's settings: a worker keeps its renderer while it
+    stays the same)."""
     chunks = list(_chunks(todo, _CHUNK))
     if not chunks:
         return

@@ -15,7 +15,7 @@ import shapely
 
 from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.viewcell import ViewCell
-from walkstream.server.paths.record import _existing
+from walkstream.server.paths.record import open_existing
 from walkstream.server.sources.geojsonlines import read_linestring
 from walkstream.server.sources.gpx import read_gpx
 from walkstream.server.store import CellInfo, write_path
@@ -187,7 +187,7 @@ def import_path(
     StoreError
         Not a scene database, or the name is taken and ``replace`` is false.
     """
-    reader = _existing(db, name, replace)
+    reader = open_existing(db, name, replace)
     try:
         meta = reader.meta
         graph = CellGraph(reader.cells())

@@ -15,7 +15,7 @@ from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.errors import RouteError, StoreError
 from walkstream.shared.paths import WALK_EYE_HEIGHT, RecordedPath
 
-__all__ = ["record_path", "interior_graph", "record_interior_path", "Place"]
+__all__ = ["record_path", "interior_graph", "record_interior_path", "Place", "open_existing"]
 
 Place = str | tuple[float, float] | tuple[float, float, float]
 """Where an interior walk starts or ends: a room's name, or a position ``x, y[, z]``
@@ -26,7 +26,8 @@ lowest storey)."""
 # --------------------------------------------------------------------------- storing
 
 
-def _existing(db: str | os.PathLike[str], name: str, replace: bool) -> SceneReader:
+def open_existing(db: str | os.PathLike[str], name: str, replace: bool) -> SceneReader:
+    """Open the scene ``db`` to add path ``name``: refused when it exists unless ``replace``."""
     reader = SceneReader.open(db)
     if not replace and name in reader.path_names():
         reader.close()
@@ -74,7 +75,7 @@ def record_path(
     RouteError
         A point outside every cell, or no route.
     """
-    reader = _existing(db, name, replace)
+    reader = open_existing(db, name, replace)
     try:
         graph = CellGraph(reader.cells())
     finally:
@@ -133,7 +134,7 @@ def record_interior_path(
         An unknown or ambiguous room name, a position outside every cell, or rooms
         with no walkable connection.
     """
-    reader = _existing(db, name, replace)
+    reader = open_existing(db, name, replace)
     try:
         if reader.meta.kind != "interior":
             raise StoreError(f"{os.fspath(db)}: a city scene: record its paths with --from X,Y --to X,Y")

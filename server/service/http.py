@@ -45,6 +45,7 @@ __all__ = [
     "encode",
     "accepts_gzip",
     "stream_response",
+    "content_digest",
 ]
 
 IMMUTABLE = "public, max-age=31536000, immutable"
@@ -118,7 +119,7 @@ def _negotiate(accept: str) -> Rep:
 
 def etag_for(version: str, resource: str, rep: str) -> str:
     """A strong ETag naming the scene version, the resource and the representation."""
-    tag = resource if _SAFE_TAG.fullmatch(resource) else "h" + _digest(resource.encode())
+    tag = resource if _SAFE_TAG.fullmatch(resource) else "h" + content_digest(resource.encode())
     return f'"{version}-{tag}-{rep}"'
 
 
@@ -137,7 +138,8 @@ def etag_matches(if_none_match: str | None, etag: str) -> bool:
     return False
 
 
-def _digest(data: bytes) -> str:
+def content_digest(data: bytes) -> str:
+    """First 20 hex digits of the sha256 of ``data`` (what an ETag is made of)."""
     return hashlib.sha256(data).hexdigest()[:20]
 
 

@@ -21,8 +21,9 @@ from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS, pack_contents_part
 from walkstream.shared.codec.cellmesh import inflate_cell_mesh
+from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.errors import ApiError, CodecError
-from walkstream.shared.portals import PortalGraph
+from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.roomcompact import (
     TOPOLOGY_COMPACT_MEDIA,
     decode_topology_compact,
@@ -39,10 +40,7 @@ from walkstream.shared.roomwire import (
     decode_topology,
 )
 
-__all__ = ["CONTENTS_MEDIA", "InteriorState"]
-
-CONTENTS_MEDIA = "application/vnd.walkstream.cellmesh"
-"""Media type of a cell's contents (``walkstream-cellmesh/2 or /1``, see :mod:`walkstream.shared.codec.cellmesh`)."""
+__all__ = ["InteriorState"]
 
 _CACHE_BYTES = 64 << 20
 
@@ -138,7 +136,7 @@ class InteriorState:
         enc = self.cached_contents(cid)
         if enc is None:
             blob = self.reader.contents(cid)
-            enc = Encoded(blob, CONTENTS_MEDIA, etag_for(self.version, f"contents:{cid}", "cellmesh"))
+            enc = Encoded(blob, CELLMESH.wire, etag_for(self.version, f"contents:{cid}", CELLMESH.name))
             self._cache.put(("contents", cid), enc, len(blob))
         return enc
 

@@ -39,7 +39,7 @@ import math
 import os
 import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, cast
 
@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from walkstream.server.service.http import (
     Encoded,
     Rep,
-    _digest,
+    content_digest,
     dump_json,
     dump_msgpack,
     encode,
@@ -59,8 +59,11 @@ from walkstream.server.service.interiors import InteriorState
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.buildings import build_lod
-from walkstream.shared.cells import LOCATABLE_KINDS, CellLocator, TileGrid
+from walkstream.shared.cells import CellLocator, TileGrid
 from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
+from walkstream.shared.content.mesh import KIND as MESH
+from walkstream.shared.content.params import KIND as PARAMS
+from walkstream.shared.content.registry import by_form, object_forms
 from walkstream.shared.errors import ApiError, CodecError, StoreError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_q, encode_path_q
@@ -102,10 +105,12 @@ MAX_IDS = 1000
 """Most object ids one ``POST .../objects`` may ask for (more: 413)."""
 
 Form = Literal["params", "lod2"]
-"""What an object frame carries: the stored parameters, or the rebuilt LOD2 mesh."""
+"""What an object frame carries: the stored parameters, or the rebuilt LOD2 mesh (the
+forms of the object content kinds, :func:`~walkstream.shared.content.registry.object_forms`)."""
 
-OBJECT_FORMS: tuple[Form, ...] = ("params", "lod2")
-"""The forms ``POST .../objects?form=`` accepts; ``params`` is the default."""
+OBJECT_FORMS: tuple[Form, ...] = cast(tuple[Form, ...], object_forms())
+"""The forms ``POST .../objects?form=`` accepts, one per object content kind; ``params``
+is the default."""
 
 CELLS_PER_TILE = 32
 """About this many cells per tile of the cell index (a scene with fewer has one tile)."""
@@ -143,7 +148,6 @@ _BODY_CACHE_BYTES = 64 << 20
 _FRAME_CACHE_BYTES = 128 << 20
 # a recorded path larger than this is not decoded for the JSON representation
 _MAX_PATH_JSON_BYTES = 8 << 20
-_ANY_HEIGHT = 1e9  # a street cell of a crossing scene holds a point at any height (metres)
 
 
 # ---------------------------------------------------------------------------
@@ -242,17 +246,16 @@ class Scene:
             c.id: np.array([n for n in c.neighbours.tolist() if n in self.boundaries], np.int64)
             for c in cells
         }
-        # interiors stack storeys: their cells are located in 3D, the outside never
-        locatable = [c for c in cells if c.kind in LOCATABLE_KINDS]
-        zranges = [[c.zmin, c.zmax] for c in locatable] if meta.kind == "interior" else None
+        # interior cells stack storeys: located in 3D, the outside never (see their kinds);
+        # a street cell of a crossing scene holds a point at any height
+        self.locator = CellLocator.of_kinds(
+            [c.id for c in cells], [c.kind for c in cells], [c.boundary for c in cells],
+            [[c.zmin, c.zmax] for c in cells],
+        )
         inside = cells
         if meta.kind == "crossing":
-            # rooms stack storeys, streets do not: a street cell holds a point at any height
-            # (no street cell overlaps a room in plan; the interior's outside is not located)
             rooms = reader.rooms()
             inside = [c for c in cells if c.id in rooms]
-            zranges = [[c.zmin, c.zmax] if c.id in rooms else [-_ANY_HEIGHT, _ANY_HEIGHT] for c in locatable]
-        self.locator = CellLocator([c.id for c in locatable], [c.boundary for c in locatable], zranges)
         self.kind: str = meta.kind
         self.interior: InteriorState | None = (
             InteriorState(reader, inside) if meta.kind in ("interior", "crossing") else None
@@ -292,6 +295,11 @@ class Scene:
         self._grammar_text = meta.grammar_text
         self._grammar: Grammar | None = None
         self._grammar_lock = threading.Lock()
+        self._payloads: dict[str, Callable[[int, bytes], bytes]] = {
+            PARAMS.name: lambda _oid, blob: blob,
+            MESH.name: self._lod2_mesh,
+        }
+        """Object content kind -> its frame's payload from the stored bytes (see :attr:`payload_kinds`)."""
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Scene:
@@ -628,10 +636,11 @@ class Scene:
         Runs a database query, and for ``lod2`` real geometry work: call it from a
         worker thread.
         """
-        params = self.reader.object_params(ids)
+        kind = by_form(form)
+        make = self._payloads[kind.name]
         out: dict[int, bytes] = {}
-        for oid, blob in params.items():
-            payload = blob if form == "params" else self._lod2_mesh(oid, blob)
+        for oid, blob in self.reader.content_blobs(kind.name, ids).items():
+            payload = make(oid, blob)
             frame = dump_msgpack(ObjectFrame(oid, self.kinds[oid], payload, form).to_wire())
             self._frames.put(oid if form == "params" else (form, oid), frame, len(frame))
             out[oid] = frame
@@ -639,6 +648,11 @@ class Scene:
         if missing:
             raise ApiError(f"scene {self.name!r}: no object {missing[0]}", status=404, detail={"ids": missing})
         return out
+
+    @property
+    def payload_kinds(self) -> frozenset[str]:
+        """The object content kinds whose frames this scene can make."""
+        return frozenset(self._payloads)
 
     def grammar(self) -> Grammar:
         """The scene's building grammar, parsed on first use (once per scene)."""
@@ -682,7 +696,7 @@ class SceneRegistry:
         listing = [{"name": s.name, "version": s.version} for s in self.scenes.values()]
         # the list changes when a file is replaced by a new version: validated with
         # the ETag on every use rather than cached for a year
-        tag = _digest(dump_json(listing))
+        tag = content_digest(dump_json(listing))
         self.listing = {rep: encode(listing, rep, tag, "scenes") for rep in ("msgpack", "json")}
 
     @classmethod

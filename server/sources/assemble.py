@@ -19,8 +19,8 @@ import pyproj
 import shapely
 
 from walkstream.server.sources.crs import crs_label, metric_crs, outside_lonlat, project
-from walkstream.server.sources.features import _IssueLog, _Line, _Part, _Poly
-from walkstream.server.sources.heights import _levels, _positive, parse_length
+from walkstream.server.sources.features import CleanPart, IssueLog, LineFeature, PolyFeature
+from walkstream.server.sources.heights import floor_levels, is_positive, parse_length
 from walkstream.server.sources.network import NetArea, NetLine, split_holes, street_network
 from walkstream.server.sources.osmtags import (
     NETWORKS,
@@ -30,7 +30,7 @@ from walkstream.server.sources.osmtags import (
     street_width,
 )
 from walkstream.server.sources.partywalls import find_party_walls
-from walkstream.server.sources.rings import _clean_and_repair, _dedupe
+from walkstream.server.sources.rings import clean_and_repair, dedupe
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError, SourceError
@@ -43,10 +43,10 @@ DEFAULT_STREET_WIDTH = 10.0
 
 
 def assemble_scene(
-    polys: list[_Poly],
-    lines: list[_Line],
+    polys: list[PolyFeature],
+    lines: list[LineFeature],
     src_crs: pyproj.CRS | None,
-    log: _IssueLog,
+    log: IssueLog,
     *,
     name: str,
     source: str,
@@ -74,18 +74,18 @@ def assemble_scene(
     if network not in NETWORKS:
         raise InputError(f"--network: expected one of {', '.join(NETWORKS)}, got {network!r}")
     crs_name, origin = _to_local(polys, lines, src_crs, log)
-    buildings_raw: list[_Part] = []
-    pieces: list[_Part] = []
-    areas: list[_Part] = []
+    buildings_raw: list[CleanPart] = []
+    pieces: list[CleanPart] = []
+    areas: list[CleanPart] = []
     for poly in polys:
         if poly.local is None:
             continue
         if poly.kind == "square":
-            areas.extend(_clean_and_repair(poly, log))
+            areas.extend(clean_and_repair(poly, log))
         elif poly.kind is None:
-            buildings_raw.extend(_clean_and_repair(poly, log))
+            buildings_raw.extend(clean_and_repair(poly, log))
         else:
-            pieces.extend(_clean_and_repair(poly, log))
+            pieces.extend(clean_and_repair(poly, log))
     buildings = _make_buildings(buildings_raw, default_floor_height, tol, log)
     out_notes = list(notes or [])
     streets, passages = _make_streets(pieces, areas, lines, len(buildings), network, log, out_notes)
@@ -115,20 +115,20 @@ def assemble_scene(
 
 
 def _to_local(
-    polys: list[_Poly], lines: list[_Line], src: pyproj.CRS | None, log: _IssueLog
+    polys: list[PolyFeature], lines: list[LineFeature], src: pyproj.CRS | None, log: IssueLog
 ) -> tuple[str, tuple[float, float]]:
     """Project every coordinate (one vectorised transform) and move it to the origin.
 
     Fills ``.local`` of each usable polygon and line (left ``None`` for skipped ones)
     and returns the projected CRS name and the origin.
     """
-    items: list[_Poly | _Line] = [*polys, *lines]
+    items: list[PolyFeature | LineFeature] = [*polys, *lines]
     geographic = src is None or src.is_geographic
     if geographic:
         # Out-of-range lon/lat usually means projected data without a 'crs' member.
         kept = []
         for it in items:
-            rings = it.raw if isinstance(it, _Poly) else [it.raw]
+            rings = it.raw if isinstance(it, PolyFeature) else [it.raw]
             if not any(outside_lonlat(r).any() for r in rings):
                 kept.append(it)
             else:
@@ -142,7 +142,7 @@ def _to_local(
     if not items:
         return ("EPSG:4326" if geographic else crs_label(src)), (0.0, 0.0)
 
-    arrays = [r for it in items for r in (it.raw if isinstance(it, _Poly) else [it.raw])]
+    arrays = [r for it in items for r in (it.raw if isinstance(it, PolyFeature) else [it.raw])]
     allpts = np.concatenate(arrays)
     # lon/lat, and projections not true to scale here (Web Mercator), go to UTM
     crs_name = metric_crs(src, allpts)
@@ -154,7 +154,7 @@ def _to_local(
     per_item: list[list[F64]] = []
     pos = 0
     for it in items:
-        n = len(it.raw) if isinstance(it, _Poly) else 1
+        n = len(it.raw) if isinstance(it, PolyFeature) else 1
         per_item.append(chunks[pos : pos + n])
         pos += n
     finite = [all(np.isfinite(c).all() for c in chs) for chs in per_item]
@@ -171,7 +171,7 @@ def _to_local(
         if not ok:
             continue
         local = [c - origin for c in chs]
-        if isinstance(it, _Poly):
+        if isinstance(it, PolyFeature):
             it.local = local
         else:
             it.local = local[0]
@@ -181,7 +181,7 @@ def _to_local(
 
 
 def _make_buildings(
-    parts: list[_Part], default_floor_height: float, tol: float, log: _IssueLog
+    parts: list[CleanPart], default_floor_height: float, tol: float, log: IssueLog
 ) -> list[BuildingParams]:
     """Heights per feature, party walls over all buildings, then the records."""
     levels: dict[int, tuple[int, float]] = {}
@@ -189,7 +189,7 @@ def _make_buildings(
         poly = part.poly
         if poly.index in levels:
             continue
-        floors, fh, bad, how = _levels(poly.props, poly.fid, default_floor_height)
+        floors, fh, bad, how = floor_levels(poly.props, poly.fid, default_floor_height)
         levels[poly.index] = (floors, fh)
         if bad:
             log.add(
@@ -227,7 +227,7 @@ def _make_buildings(
 # --------------------------------------------------------------------------- streets
 
 
-def _line_width(line: _Line, log: _IssueLog) -> float:
+def _line_width(line: LineFeature, log: IssueLog) -> float:
     props = line.props
     if "highway" in props:
         width, note = street_width(props)
@@ -238,7 +238,7 @@ def _line_width(line: _Line, log: _IssueLog) -> float:
     if raw is None or raw == "":
         return DEFAULT_STREET_WIDTH
     value = parse_length(raw)
-    if value is not None and _positive(value):
+    if value is not None and is_positive(value):
         return value
     log.add(line.index, line.uid, f"bad width={raw!r} ignored; {DEFAULT_STREET_WIDTH:g} m used", "repaired")
     return DEFAULT_STREET_WIDTH
@@ -255,19 +255,19 @@ def _left_out(counts: Counter[str], network: str) -> str | None:
 
 
 def _make_streets(
-    pieces: list[_Part],
-    areas: list[_Part],
-    lines: list[_Line],
+    pieces: list[CleanPart],
+    areas: list[CleanPart],
+    lines: list[LineFeature],
     first_id: int,
     network: str,
-    log: _IssueLog,
+    log: IssueLog,
     notes: list[str],
 ) -> tuple[list[StreetParams], list[int]]:
     """Street pieces: given pieces as they are, lines and areas through the network."""
     out: list[tuple[str, F64, float, str, bool]] = []  # kind, ring, width, source id, passage
     for part in pieces:
         assert part.poly.kind is not None
-        width = _line_width(_Line(part.poly.index, part.poly.fid, part.poly.uid, part.poly.props, part.rings[0]), log)
+        width = _line_width(LineFeature(part.poly.index, part.poly.fid, part.poly.uid, part.poly.props, part.rings[0]), log)
         shape = shapely.Polygon(part.rings[0], part.rings[1:])
         for k, piece in enumerate(split_holes(shape)):
             ring = np.asarray(piece.exterior.coords, np.float64)[:-1]
@@ -287,7 +287,7 @@ def _make_streets(
         if not ground:
             left["tunnels" if why == "tunnel" else f"ways on {why}"] += 1
             continue
-        pts = _dedupe(line.local, closed=False)
+        pts = dedupe(line.local, closed=False)
         if len(pts) < 2:
             log.add(line.index, line.uid, f"fewer than 2 distinct points ({len(pts)})", "skipped")
             continue

@@ -8,15 +8,14 @@ from typing import Any
 from walkstream.server.sources.scene import FeatureIssue
 from walkstream.shared.arrays import F64
 
-__all__: list[str] = []
+__all__ = ["PolyFeature", "LineFeature", "CleanPart", "IssueLog"]
 
 
-
-# ------------------------------------------------------------------ internal records
+# ------------------------------------------------------------------ records
 
 
 @dataclass
-class _Poly:
+class PolyFeature:
     """One polygon (a Polygon feature or one MultiPolygon part) being loaded."""
 
     index: int  # feature index in the file, for ordering issues
@@ -30,7 +29,7 @@ class _Poly:
 
 
 @dataclass
-class _Line:
+class LineFeature:
     """One street line (a LineString or one MultiLineString part)."""
 
     index: int
@@ -42,16 +41,16 @@ class _Line:
 
 
 @dataclass
-class _Part:
+class CleanPart:
     """A cleaned, valid polygon ready to become a building or street piece."""
 
-    poly: _Poly
+    poly: PolyFeature
     source_id: str
     rings: list[F64]  # exterior CCW, holes CW, scene-local metres
 
 
 @dataclass
-class _IssueLog:
+class IssueLog:
     """Issues in feature order (then in the order they were found)."""
 
     items: list[tuple[int, int, FeatureIssue]] = field(default_factory=list)

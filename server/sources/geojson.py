@@ -101,7 +101,7 @@ import numpy as np
 
 from walkstream.server.sources.assemble import assemble_scene
 from walkstream.server.sources.crs import parse_crs_member
-from walkstream.server.sources.features import _IssueLog, _Line, _Poly
+from walkstream.server.sources.features import IssueLog, LineFeature, PolyFeature
 from walkstream.server.sources.jsonfile import read_json_file
 from walkstream.server.sources.osmtags import is_square
 from walkstream.server.sources.scene import SourceScene
@@ -222,7 +222,7 @@ def load_geojson_dict(
         name = obj["name"] if isinstance(obj.get("name"), str) else "geojson"
 
     src_crs = parse_crs_member(obj.get("crs"), source)
-    log = _IssueLog()
+    log = IssueLog()
     not_buildings: Counter[str] = Counter()
     polys, lines = _read_features(features, log, not_buildings)
     notes = []
@@ -284,11 +284,11 @@ def _polygon_kind(props: dict[str, Any], kind: str | None) -> str | None:
 
 
 def _read_features(
-    features: list[Any], log: _IssueLog, not_buildings: Counter[str]
-) -> tuple[list[_Poly], list[_Line]]:
+    features: list[Any], log: IssueLog, not_buildings: Counter[str]
+) -> tuple[list[PolyFeature], list[LineFeature]]:
     """Sort features into polygons and street lines; skip what cannot be used."""
-    polys: list[_Poly] = []
-    lines: list[_Line] = []
+    polys: list[PolyFeature] = []
+    lines: list[LineFeature] = []
     for index, feat in enumerate(features):
         if not isinstance(feat, dict) or feat.get("type") != "Feature":
             log.add(index, str(index), "not a GeoJSON Feature", "skipped")
@@ -326,7 +326,7 @@ def _read_features(
                     log.add(index, uid, str(bad), "skipped")
                     continue
                 ok_rings = [r for r in rings if not isinstance(r, str)]
-                polys.append(_Poly(index, fid, uid, is_multi, kind, props, ok_rings))
+                polys.append(PolyFeature(index, fid, uid, is_multi, kind, props, ok_rings))
         elif gtype in ("LineString", "MultiLineString"):
             if kind in ("crossroad", "square"):
                 log.add(index, fid, f"a {kind} must be a Polygon, got {gtype}", "skipped")
@@ -346,7 +346,7 @@ def _read_features(
                 if isinstance(pts, str):
                     log.add(index, uid, pts, "skipped")
                     continue
-                lines.append(_Line(index, fid, uid, props, pts))
+                lines.append(LineFeature(index, fid, uid, props, pts))
         else:
             log.add(index, fid, f"unsupported geometry type {gtype!r}", "skipped")
     return polys, lines

@@ -7,7 +7,7 @@ import re
 import zlib
 from typing import Any
 
-__all__ = ["parse_length", "default_floors", "FLOORS_BY_TYPE"]
+__all__ = ["parse_length", "default_floors", "FLOORS_BY_TYPE", "floor_levels", "is_positive"]
 _FOOT = 0.3048
 _HEIGHT_KEYS = ("height", "building:height", "est_height")
 _FLOOR_KEYS = ("building:levels", "levels", "floors")
@@ -70,11 +70,12 @@ def default_floors(feature_id: str, building: object = None) -> int:
 # ----------------------------------------------------------------------- assembly
 
 
-def _positive(value: float | None) -> bool:
+def is_positive(value: float | None) -> bool:
+    """Whether ``value`` is a finite number above zero."""
     return value is not None and math.isfinite(value) and value > 0
 
 
-def _levels(
+def floor_levels(
     props: dict[str, Any], fid: str, default_floor_height: float
 ) -> tuple[int, float, list[str], str]:
     """Floors and floor height of a feature by the module's rules.
@@ -90,7 +91,7 @@ def _levels(
             if raw is None or raw == "":
                 continue
             value = parse(raw)
-            if _positive(value):
+            if is_positive(value):
                 return key, float(value)
             bad.append(f"{key}={raw!r}")
         return None

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from walkstream.server.sources.assemble import assemble_scene
-from walkstream.server.sources.features import _IssueLog, _Line, _Poly
+from walkstream.server.sources.features import IssueLog, LineFeature, PolyFeature
 from walkstream.server.sources.osmtags import is_square
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
@@ -139,9 +139,9 @@ class _Reader:
     """Collects polygons and lines from one pass of osmium over a file."""
 
     def __init__(self) -> None:
-        self.polys: list[_Poly] = []
-        self.lines: list[_Line] = []
-        self.log = _IssueLog()
+        self.polys: list[PolyFeature] = []
+        self.lines: list[LineFeature] = []
+        self.log = IssueLog()
         self.features = 0
         self.building_relations: set[int] = set()
         self.areas_made: set[int] = set()
@@ -209,7 +209,7 @@ class _Reader:
                 return
             self._raised(tags)
             kind = None if building else "square"
-            self.polys.append(_Poly(index, fid, fid, False, kind, tags, [xy]))
+            self.polys.append(PolyFeature(index, fid, fid, False, kind, tags, [xy]))
             return
         # a street centre line: keep every run of located nodes
         ok = np.isfinite(xy[:, 0])
@@ -227,7 +227,7 @@ class _Reader:
         runs = [(a, b) for a, b in runs if b - a >= 2]
         for k, (a, b) in enumerate(runs):
             uid = fid if len(runs) == 1 else f"{fid}#{k}"
-            self.lines.append(_Line(index, fid, uid, tags, xy[a:b]))
+            self.lines.append(LineFeature(index, fid, uid, tags, xy[a:b]))
 
     def _area(self, area: Any) -> None:
         rid = int(area.orig_id())
@@ -251,7 +251,7 @@ class _Reader:
         for k, rings in enumerate(outers):
             uid = fid if len(outers) == 1 else f"{fid}#{k}"
             self.polys.append(
-                _Poly(self.features, fid, uid, len(outers) > 1, None if building else "square", tags, rings)
+                PolyFeature(self.features, fid, uid, len(outers) > 1, None if building else "square", tags, rings)
             )
 
     def _raised(self, tags: dict[str, str]) -> None:

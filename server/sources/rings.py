@@ -7,11 +7,11 @@ import math
 import numpy as np
 import shapely
 
-from walkstream.server.sources.features import _IssueLog, _Part, _Poly
+from walkstream.server.sources.features import CleanPart, IssueLog, PolyFeature
 from walkstream.shared.arrays import F64
 from walkstream.shared.geometry import signed_area
 
-__all__ = ["MIN_AREA"]
+__all__ = ["MIN_AREA", "clean_and_repair", "dedupe"]
 #: Polygons (and holes and repaired parts) smaller than this many m² are degenerate.
 MIN_AREA = 0.01
 #: Vertices closer than this (metres) are duplicates; a vertex this close to the
@@ -24,7 +24,7 @@ _VERTEX_TOL = 1e-3
 
 
 
-def _dedupe(r: F64, closed: bool = True) -> F64:
+def dedupe(r: F64, closed: bool = True) -> F64:
     """Drop repeated vertices (within 1 mm), and for a ring the closing vertex."""
     if len(r) < 2:
         return r
@@ -63,7 +63,7 @@ def _clean_rings(rings: list[F64]) -> tuple[list[F64] | None, str | None, list[s
     Returns ``(rings, skip_reason, hole_notes)``: ``rings`` is None when the exterior
     is unusable (``skip_reason`` says why); ``hole_notes`` describe dropped holes.
     """
-    ext = _dedupe(rings[0])
+    ext = dedupe(rings[0])
     if len(ext) < 3:
         return None, f"fewer than 3 distinct points ({len(ext)})", []
     area = signed_area(ext)
@@ -75,7 +75,7 @@ def _clean_rings(rings: list[F64]) -> tuple[list[F64] | None, str | None, list[s
     out = [ext]
     notes = []
     for j, hole in enumerate(rings[1:], start=1):
-        h = _dedupe(hole)
+        h = dedupe(hole)
         if len(h) < 3:
             notes.append(f"degenerate hole {j} ({len(h)} distinct points); hole dropped")
             continue
@@ -88,14 +88,14 @@ def _clean_rings(rings: list[F64]) -> tuple[list[F64] | None, str | None, list[s
     return out, None, notes
 
 
-def _clean_and_repair(poly: _Poly, log: _IssueLog) -> list[_Part]:
+def clean_and_repair(poly: PolyFeature, log: IssueLog) -> list[CleanPart]:
     """Clean one polygon; repair a self-intersecting one with make_valid."""
     assert poly.local is not None
-    ext = _dedupe(poly.local[0])
+    ext = dedupe(poly.local[0])
     if len(ext) >= 3 and not shapely.is_simple(shapely.LinearRing(ext)):
         # A self-crossing exterior (bow-tie) has a meaningless shoelace area, so it
         # must be repaired before the area and collinearity tests, not after.
-        holes = [h for h in map(_dedupe, poly.local[1:]) if len(h) >= 3]
+        holes = [h for h in map(dedupe, poly.local[1:]) if len(h) >= 3]
         return _repair(poly, shapely.Polygon(ext, holes), log)
     rings, skip, notes = _clean_rings(poly.local)
     for note in notes:
@@ -105,11 +105,11 @@ def _clean_and_repair(poly: _Poly, log: _IssueLog) -> list[_Part]:
         return []
     shape = shapely.Polygon(rings[0], rings[1:])
     if shape.is_valid:
-        return [_Part(poly, poly.uid, rings)]
+        return [CleanPart(poly, poly.uid, rings)]
     return _repair(poly, shape, log)
 
 
-def _repair(poly: _Poly, shape: shapely.Polygon, log: _IssueLog) -> list[_Part]:
+def _repair(poly: PolyFeature, shape: shapely.Polygon, log: IssueLog) -> list[CleanPart]:
     """make_valid an invalid polygon; every polygonal part of >= MIN_AREA is kept."""
     reason = shapely.is_valid_reason(shape)
     fixed = shapely.make_valid(shape)
@@ -145,4 +145,4 @@ def _repair(poly: _Poly, shape: shapely.Polygon, log: _IssueLog) -> list[_Part]:
         + (f", {dropped} part(s) under {MIN_AREA} m² dropped" if dropped else ""),
         "repaired",
     )
-    return [_Part(poly, sid, c) for sid, c in zip(ids, cleaned, strict=True)]
+    return [CleanPart(poly, sid, c) for sid, c in zip(ids, cleaned, strict=True)]

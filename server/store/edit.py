@@ -14,10 +14,10 @@ try:  # advisory locks between processes; POSIX only
     import fcntl
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
-from walkstream.server.store.files import _flock, _fsync_dir, _fsync_file, _label
+from walkstream.server.store.files import db_label, exclusive_lock, fsync_dir, fsync_file
 from walkstream.server.store.reader import SceneReader
-from walkstream.server.store.records import _MAX_PATH_BYTES, _check_path_name
-from walkstream.server.store.schema import _CORE_TABLES, _check_header, _content_version
+from walkstream.server.store.records import MAX_PATH_BYTES, check_path_name
+from walkstream.server.store.schema import CORE_TABLES, check_header, content_version
 
 __all__ = ["write_path"]
 
@@ -54,34 +54,34 @@ def write_path(path_db: str | os.PathLike[str], name: str, blob: bytes) -> str:
     StoreError
         Bad name or blob, or the file is not a valid scene database.
     """
-    label = _label(path_db)
-    name = _check_path_name(name)
-    if not isinstance(blob, bytes) or len(blob) > _MAX_PATH_BYTES:
-        raise StoreError(f"path {name!r}: expected bytes of at most {_MAX_PATH_BYTES}")
-    _check_header(path_db)
+    label = db_label(path_db)
+    name = check_path_name(name)
+    if not isinstance(blob, bytes) or len(blob) > MAX_PATH_BYTES:
+        raise StoreError(f"path {name!r}: expected bytes of at most {MAX_PATH_BYTES}")
+    check_header(path_db)
     tmp = f"{label}.tmp-{os.getpid()}-{secrets.token_hex(4)}"
     try:
-        with _flock(label + ".lock", blocking=True, what=label):
+        with exclusive_lock(label + ".lock", blocking=True, what=label):
             shutil.copyfile(path_db, tmp)
-            _check_header(tmp)
+            check_header(tmp)
             conn = sqlite3.connect(tmp, isolation_level=None)
             try:
                 SceneReader._load_meta(conn, label)  # a finished walkstream scene?
                 conn.execute("BEGIN")
                 conn.execute(
-                    _CORE_TABLES["paths"].replace("CREATE TABLE", "CREATE TABLE IF NOT EXISTS")
+                    CORE_TABLES["paths"].replace("CREATE TABLE", "CREATE TABLE IF NOT EXISTS")
                 )
                 conn.execute("INSERT OR REPLACE INTO paths(name, data) VALUES (?, ?)", (name, blob))
-                version = _content_version(conn)
+                version = content_version(conn)
                 conn.execute("UPDATE meta SET value = ? WHERE key = 'version'", (version,))
                 conn.execute("COMMIT")
             except sqlite3.DatabaseError as exc:
                 raise StoreError(f"{label}: cannot write path {name!r} ({exc})") from exc
             finally:
                 conn.close()
-            _fsync_file(tmp)
+            fsync_file(tmp)
             os.replace(tmp, path_db)
-        _fsync_dir(label)
+        fsync_dir(label)
     finally:
         with suppress(FileNotFoundError):
             os.remove(tmp)

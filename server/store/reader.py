@@ -22,6 +22,9 @@ from walkstream.shared.codec import (
     decode_street,
     pvs_size,
 )
+from walkstream.shared.content.cellmesh import KIND as CELLMESH
+from walkstream.shared.content.params import KIND as PARAMS
+from walkstream.shared.content.registry import content_kind
 from walkstream.shared.errors import NotFoundError, StoreError
 from walkstream.shared.records import BuildingParams, StreetParams, Viewpoint
 
@@ -29,7 +32,7 @@ try:  # advisory locks between processes; POSIX only
     import fcntl
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
-from walkstream.server.store.files import _label
+from walkstream.server.store.files import db_label
 from walkstream.server.store.records import (
     CellInfo,
     ContentsInfo,
@@ -40,11 +43,11 @@ from walkstream.server.store.records import (
     SceneMeta,
     StairInfo,
     StoreyInfo,
-    _f64,
-    _index,
-    _parse_meta,
+    f64_array,
+    parse_meta,
+    row_index,
 )
-from walkstream.server.store.schema import _CORE_TABLES, _check_header
+from walkstream.server.store.schema import CORE_TABLES, check_header
 
 __all__ = ["SceneReader"]
 
@@ -104,8 +107,8 @@ class SceneReader:
             code does not read, an unfinished bake, or a damaged file.  The message
             starts with the file name.
         """
-        label = _label(path)
-        wal = _check_header(path)
+        label = db_label(path)
+        wal = check_header(path)
         uri = Path(os.path.abspath(path)).as_uri() + "?mode=ro"
         if not wal:
             # finished files are never modified in place (only replaced), so SQLite
@@ -136,13 +139,13 @@ class SceneReader:
             tables = {
                 r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")
             }
-            missing = [t for t in _CORE_TABLES if t not in tables and t != "paths"]
+            missing = [t for t in CORE_TABLES if t not in tables and t != "paths"]
             if missing:
                 raise StoreError(
                     f"{label}: not a walkstream scene database (no table {missing[0]!r})"
                 )
             raw = dict(conn.execute("SELECT key, value FROM meta").fetchall())
-            meta = _parse_meta(raw, label)
+            meta = parse_meta(raw, label)
             conn.execute("SELECT count(*) FROM objects").fetchone()
             conn.execute("SELECT count(*) FROM cells").fetchone()
             return meta
@@ -177,15 +180,17 @@ class SceneReader:
         with self._conn() as c:
             return c.execute(sql, args).fetchall()
 
-    def _by_ids(self, columns: str, ids: Iterable[int]) -> list[Any]:
-        want = sorted({_index(i, "object id") for i in ids})
+    def _by_ids(
+        self, columns: str, ids: Iterable[int], table: str = "objects", key: str = "id", what: str = "object id"
+    ) -> list[Any]:
+        want = sorted({row_index(i, what) for i in ids})
         out: list[Any] = []
         with self._conn() as c:
             for k in range(0, len(want), 500):  # stay below SQLite's bound-variable limit
                 chunk = want[k : k + 500]
                 marks = ",".join("?" * len(chunk))
                 out += c.execute(
-                    f"SELECT {columns} FROM objects WHERE id IN ({marks})", chunk
+                    f"SELECT {columns} FROM {table} WHERE {key} IN ({marks})", chunk
                 ).fetchall()
         return out
 
@@ -231,7 +236,25 @@ class SceneReader:
         Unknown ids are left out of the result (the caller decides whether that is
         an error).  The dict is ordered by id.
         """
-        return {int(r[0]): bytes(r[1]) for r in self._by_ids("id, params", ids)}
+        return self.content_blobs(PARAMS.name, ids)
+
+    def content_blobs(self, kind: str, ids: Iterable[int]) -> dict[int, bytes]:
+        """The stored bytes of content ``kind`` of the given objects or cells, as stored.
+
+        The kind (:mod:`walkstream.shared.content.registry`) names the table and
+        columns; a scene without the kind's optional table has none.  Unknown ids are
+        left out of the result.
+
+        Raises
+        ------
+        InputError
+            ``kind`` is not a registered content kind.
+        """
+        k = content_kind(kind)
+        if k.feature is not None and not self._has_table(k.table):
+            return {}
+        rows = self._by_ids(f"{k.key_column}, {k.column}", ids, k.table, k.key_column, f"{k.owner} id")
+        return {int(r[0]): bytes(r[1]) for r in rows}
 
     def object_info(self, ids: Iterable[int]) -> dict[int, ObjectInfo]:
         """Kind, box and LOD triangle counts of the given objects (unknown ids left out)."""
@@ -245,7 +268,7 @@ class SceneReader:
         return out
 
     def _object(self, oid: int, kinds: tuple[str, ...], what: str) -> bytes:
-        i = _index(oid, "object id")
+        i = row_index(oid, "object id")
         rows = self._query("SELECT kind, params FROM objects WHERE id = ?", (i,))
         if not rows:
             raise NotFoundError(f"{self._label}: no object {i}")
@@ -324,7 +347,7 @@ class SceneReader:
         NotFoundError
             No such cell.
         """
-        i = _index(cid, "cell id")
+        i = row_index(cid, "cell id")
         rows = self._query(f"SELECT {self._CELL_COLUMNS} FROM cells WHERE id = ?", (i,))
         if not rows:
             raise NotFoundError(f"{self._label}: no cell {i}")
@@ -332,7 +355,7 @@ class SceneReader:
 
     def cell_pvs_blob(self, cid: int) -> bytes:
         """Cell ``cid``'s PVS as stored (:func:`~walkstream.shared.codec.encode_pvs` bytes), for streaming."""
-        i = _index(cid, "cell id")
+        i = row_index(cid, "cell id")
         rows = self._query("SELECT pvs FROM cells WHERE id = ?", (i,))
         if not rows:
             raise NotFoundError(f"{self._label}: no cell {i}")
@@ -409,7 +432,7 @@ class SceneReader:
         rows = self._query("SELECT cell, name, room, storey, planes FROM rooms ORDER BY cell")
         return {
             int(c): RoomInfo(int(c), str(n), None if r is None else str(r), int(k),
-                             _f64(pl, 4, f"{self._label}: cell {c}: planes"))
+                             f64_array(pl, 4, f"{self._label}: cell {c}: planes"))
             for c, n, r, k, pl in rows
         }
 
@@ -419,7 +442,7 @@ class SceneReader:
             return []
         rows = self._query("SELECT id, cell_a, cell_b, polygon, kind, source, name FROM portals ORDER BY id")
         return [
-            PortalInfo(int(i), int(a), int(b), _f64(pg, 3, f"{self._label}: portal {i}: polygon"), str(k),
+            PortalInfo(int(i), int(a), int(b), f64_array(pg, 3, f"{self._label}: portal {i}: polygon"), str(k),
                        str(s), str(n))
             for i, a, b, pg, k, s, n in rows
         ]
@@ -430,7 +453,7 @@ class SceneReader:
             return []
         rows = self._query("SELECT id, portal, lower, upper, path, name FROM stairs ORDER BY id")
         return [
-            StairInfo(int(i), int(p), int(lo), int(up), _f64(pa, 3, f"{self._label}: stair {i}: path"), str(n))
+            StairInfo(int(i), int(p), int(lo), int(up), f64_array(pa, 3, f"{self._label}: stair {i}: path"), str(n))
             for i, p, lo, up, pa, n in rows
         ]
 
@@ -459,11 +482,11 @@ class SceneReader:
         NotFoundError
             No such cell, or the scene has no cell contents.
         """
-        i = _index(cid, "cell id")
-        rows = self._query("SELECT data FROM contents WHERE cell = ?", (i,)) if self._has_table("contents") else []
-        if not rows:
+        i = row_index(cid, "cell id")
+        blob = self.content_blobs(CELLMESH.name, [i]).get(i)
+        if blob is None:
             raise NotFoundError(f"{self._label}: no contents for cell {i}")
-        return bytes(rows[0][0])
+        return blob
 
     # -- summary -------------------------------------------------------------
 

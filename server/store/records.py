@@ -37,9 +37,17 @@ __all__ = [
     "ContentsInfo",
     "StoreyInfo",
     "EntranceInfo",
+    "MAX_PATH_BYTES",
+    "finite_number",
+    "row_index",
+    "check_path_name",
+    "parse_meta",
+    "f64_array",
+    "f64_blob",
 ]
 _MAX_PATH_NAME = 200
-_MAX_PATH_BYTES = 64 << 20
+MAX_PATH_BYTES = 64 << 20
+"""Most bytes one recorded path's blob may take."""
 
 
 
@@ -199,7 +207,8 @@ class EntranceInfo:
     shell: int
 
 
-def _finite(x: object, what: str) -> float:
+def finite_number(x: object, what: str) -> float:
+    """``x`` as a finite float, or a :class:`StoreError` naming ``what``."""
     try:
         v = float(x)  # type: ignore[arg-type]
     except (TypeError, ValueError) as exc:
@@ -209,7 +218,8 @@ def _finite(x: object, what: str) -> float:
     return v
 
 
-def _index(x: object, what: str) -> int:
+def row_index(x: object, what: str) -> int:
+    """``x`` as a non-negative int64 (an id or count), or a :class:`StoreError` naming ``what``."""
     if isinstance(x, bool) or not isinstance(x, int | np.integer):
         raise StoreError(f"{what}: expected an integer, got {type(x).__name__}")
     v = int(x)
@@ -218,7 +228,8 @@ def _index(x: object, what: str) -> int:
     return v
 
 
-def _check_path_name(name: object) -> str:
+def check_path_name(name: object) -> str:
+    """``name`` when it is a valid recorded path name (printable, not too long), else a :class:`StoreError`."""
     if not isinstance(name, str) or not 0 < len(name) <= _MAX_PATH_NAME:
         raise StoreError(f"path name: expected 1 to {_MAX_PATH_NAME} characters, got {name!r:.60}")
     if not name.isprintable():
@@ -226,7 +237,8 @@ def _check_path_name(name: object) -> str:
     return name
 
 
-def _parse_meta(raw: dict[str, Any], label: str) -> SceneMeta:
+def parse_meta(raw: dict[str, Any], label: str) -> SceneMeta:
+    """The :class:`SceneMeta` of a ``meta`` table's rows, checked (``label`` names the file in errors)."""
     try:
         if raw.get("app") != "walkstream":
             raise StoreError(f"{label}: meta table does not name walkstream")
@@ -266,7 +278,7 @@ def _parse_meta(raw: dict[str, Any], label: str) -> SceneMeta:
 # ---------------------------------------------------------------------------
 
 
-def _f64(blob: bytes, cols: int, what: str) -> NDArray[np.float64]:
+def f64_array(blob: bytes, cols: int, what: str) -> NDArray[np.float64]:
     """A float64 little-endian ``(n, cols)`` array stored as bytes, read-only."""
     if not isinstance(blob, bytes | bytearray | memoryview) or len(blob) % (8 * cols):
         raise StoreError(f"{what}: expected float64 rows of {cols}")
@@ -277,7 +289,8 @@ def _f64(blob: bytes, cols: int, what: str) -> NDArray[np.float64]:
     return a
 
 
-def _blob(a: object, cols: int, what: str) -> bytes:
+def f64_blob(a: object, cols: int, what: str) -> bytes:
+    """A finite float64 array as little-endian ``(n, cols)`` bytes (see :func:`f64_array`)."""
     arr = np.asarray(a, dtype=np.float64).reshape(-1, cols)
     if not np.all(np.isfinite(arr)):
         raise StoreError(f"{what}: non-finite values")

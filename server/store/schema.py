@@ -11,16 +11,28 @@ from typing import Any
 
 import msgpack
 
-from walkstream.shared.cells import CELL_KINDS
 from walkstream.shared.errors import StoreError
+from walkstream.shared.scene.cellkinds import CELL_KINDS
 
 try:  # advisory locks between processes; POSIX only
     import fcntl
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
-from walkstream.server.store.files import _label
+from walkstream.server.store.files import db_label
 
-__all__ = ["SCHEMA_VERSION", "READABLE_VERSIONS", "APPLICATION_ID", "OBJECT_KINDS", "OPTIONAL_TABLES"]
+__all__ = [
+    "SCHEMA_VERSION",
+    "READABLE_VERSIONS",
+    "APPLICATION_ID",
+    "OBJECT_KINDS",
+    "OPTIONAL_TABLES",
+    "CORE_TABLES",
+    "canonical_json",
+    "content_version",
+    "settings_hash",
+    "read_header",
+    "check_header",
+]
 
 SCHEMA_VERSION = 2
 """The schema version this code writes (``PRAGMA user_version``).
@@ -40,7 +52,7 @@ OBJECT_KINDS = ("building", "street", "crossroad", "square")
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 
 # Core tables.  Convention relied on by the content hash: column 1 is the key.
-_CORE_TABLES: dict[str, str] = {
+CORE_TABLES: dict[str, str] = {
     "meta": "CREATE TABLE meta(key TEXT PRIMARY KEY NOT NULL, value)",
     "objects": (
         "CREATE TABLE objects(id INTEGER PRIMARY KEY, kind TEXT NOT NULL, params BLOB NOT NULL, "
@@ -60,6 +72,7 @@ _CORE_TABLES: dict[str, str] = {
     ),
     "paths": "CREATE TABLE paths(name TEXT PRIMARY KEY NOT NULL, data BLOB NOT NULL)",
 }
+"""The tables every scene has: name -> ``CREATE TABLE`` statement."""
 
 OPTIONAL_TABLES: dict[str, dict[str, str]] = {
     # feature name -> {table name: DDL}; created only when the scene lists the feature
@@ -112,7 +125,8 @@ OPTIONAL_TABLES: dict[str, dict[str, str]] = {
 _VOLATILE_META = ("version", "bake_seconds", "created")
 
 
-def _canonical_json(value: Any, what: str) -> str:
+def canonical_json(value: Any, what: str) -> str:
+    """``value`` as canonical JSON (sorted keys, no spaces, no NaN), or a :class:`StoreError`."""
     try:
         return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False)
     except (TypeError, ValueError) as exc:
@@ -122,11 +136,11 @@ def _canonical_json(value: Any, what: str) -> str:
 def _tables(conn: sqlite3.Connection) -> list[str]:
     """Tables of a scene in hashing order: core first, then optional by feature order."""
     present = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-    order = list(_CORE_TABLES) + [t for tables in OPTIONAL_TABLES.values() for t in tables]
+    order = list(CORE_TABLES) + [t for tables in OPTIONAL_TABLES.values() for t in tables]
     return [t for t in order if t in present]
 
 
-def _content_version(conn: sqlite3.Connection) -> str:
+def content_version(conn: sqlite3.Connection) -> str:
     """First 16 hex digits of sha256 over a canonical dump of the scene.
 
     Every table is dumped in key order as a stream of msgpack arrays (msgpack is
@@ -151,11 +165,12 @@ def _content_version(conn: sqlite3.Connection) -> str:
     return h.hexdigest()[:16]
 
 
-def _settings_hash(fields: dict[str, Any]) -> str:
-    return hashlib.sha256(_canonical_json(fields, "settings").encode()).hexdigest()
+def settings_hash(fields: dict[str, Any]) -> str:
+    """The sha256 of the canonical JSON of bake settings (what a resumed bake must match)."""
+    return hashlib.sha256(canonical_json(fields, "settings").encode()).hexdigest()
 
 
-def _read_header(path: str | os.PathLike[str]) -> tuple[int, int, bool]:
+def read_header(path: str | os.PathLike[str]) -> tuple[int, int, bool]:
     """Check a file's SQLite header: ``(application_id, user_version, wal)``.
 
     Raises
@@ -163,7 +178,7 @@ def _read_header(path: str | os.PathLike[str]) -> tuple[int, int, bool]:
     StoreError
         Missing, not a regular file, unreadable or not SQLite.
     """
-    label = _label(path)
+    label = db_label(path)
     p = Path(path)
     if not p.exists():
         raise StoreError(f"{label}: no such file")
@@ -181,10 +196,10 @@ def _read_header(path: str | os.PathLike[str]) -> tuple[int, int, bool]:
     return app_id, user_version, head[18] == 2 or head[19] == 2
 
 
-def _check_header(path: str | os.PathLike[str]) -> bool:
+def check_header(path: str | os.PathLike[str]) -> bool:
     """Validate the header of a walkstream database; returns whether it is in WAL mode."""
-    label = _label(path)
-    app_id, user_version, wal = _read_header(path)
+    label = db_label(path)
+    app_id, user_version, wal = read_header(path)
     if app_id != APPLICATION_ID:
         raise StoreError(
             f"{label}: an SQLite database but not a walkstream scene database "

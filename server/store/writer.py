@@ -14,21 +14,27 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from walkstream.shared.cells import CELL_KINDS
 from walkstream.shared.codec import (
     encode_ids,
     encode_polygon,
     encode_pvs,
 )
 from walkstream.shared.errors import CodecError, NotFoundError, StoreError
+from walkstream.shared.scene.cellkinds import CELL_KINDS
 
 try:  # advisory locks between processes; POSIX only
     import fcntl
 except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
-from walkstream.server.store.files import _flock, _fsync_dir, _fsync_file, _label, _remove_db_files
+from walkstream.server.store.files import (
+    db_label,
+    exclusive_lock,
+    fsync_dir,
+    fsync_file,
+    remove_db_files,
+)
 from walkstream.server.store.records import (
-    _MAX_PATH_BYTES,
+    MAX_PATH_BYTES,
     CellRow,
     ContentsInfo,
     EntranceInfo,
@@ -37,21 +43,21 @@ from walkstream.server.store.records import (
     RoomInfo,
     StairInfo,
     StoreyInfo,
-    _blob,
-    _check_path_name,
-    _finite,
-    _index,
+    check_path_name,
+    f64_blob,
+    finite_number,
+    row_index,
 )
 from walkstream.server.store.schema import (
-    _CORE_TABLES,
     APPLICATION_ID,
+    CORE_TABLES,
     OBJECT_KINDS,
     OPTIONAL_TABLES,
     SCHEMA_VERSION,
-    _canonical_json,
-    _content_version,
-    _read_header,
-    _settings_hash,
+    canonical_json,
+    content_version,
+    read_header,
+    settings_hash,
 )
 
 __all__ = ["SceneWriter"]
@@ -132,7 +138,7 @@ class SceneWriter:
             Bad arguments, another process is baking the same path, or the work file
             cannot be created.
         """
-        label = _label(path)
+        label = db_label(path)
         for what, v in (("name", name), ("crs", crs), ("grammar_text", grammar_text)):
             if not isinstance(v, str):
                 raise StoreError(f"{label}: {what}: expected a string, got {type(v).__name__}")
@@ -148,8 +154,8 @@ class SceneWriter:
             raise StoreError(f"{label}: settings: expected a dict, got {type(settings).__name__}")
         if len(origin) != 2:
             raise StoreError(f"{label}: origin: expected (x, y), got {origin!r:.80}")
-        ox, oy = (_finite(v, f"{label}: origin") for v in origin)
-        settings_json = _canonical_json(settings, f"{label}: settings")
+        ox, oy = (finite_number(v, f"{label}: origin") for v in origin)
+        settings_json = canonical_json(settings, f"{label}: settings")
         fields = {
             "schema_version": SCHEMA_VERSION,
             "name": name,
@@ -160,7 +166,7 @@ class SceneWriter:
             "features": list(features),
             "settings": settings,
         }
-        shash = _settings_hash(fields)
+        shash = settings_hash(fields)
         work = label + ".partial"
         if not os.path.isdir(os.path.dirname(os.path.abspath(work))):
             raise StoreError(f"{label}: the folder does not exist")
@@ -175,7 +181,7 @@ class SceneWriter:
             conn = cls._reopen(work, shash) if resume else None
             resumed = conn is not None
             if conn is None:
-                _remove_db_files(work)
+                remove_db_files(work)
                 conn = cls._new(work, fields, settings_json, shash)
         except BaseException:
             os.close(lock_fd)
@@ -204,7 +210,7 @@ class SceneWriter:
         if not os.path.isfile(work):
             return None
         try:
-            _read_header(work)  # is it SQLite at all? (sqlite3 would happily overwrite junk)
+            read_header(work)  # is it SQLite at all? (sqlite3 would happily overwrite junk)
             conn = cls._connect(work)
         except (StoreError, sqlite3.DatabaseError):
             return None
@@ -231,7 +237,7 @@ class SceneWriter:
             raise StoreError(f"{work}: cannot create ({exc})") from exc
         try:
             conn.execute("BEGIN")
-            for ddl in _CORE_TABLES.values():
+            for ddl in CORE_TABLES.values():
                 conn.execute(ddl)
             for feature in fields["features"]:
                 for ddl in OPTIONAL_TABLES.get(feature, {}).values():
@@ -287,19 +293,19 @@ class SceneWriter:
         out = []
         for r in rows:
             what = f"object {r.id}"
-            oid = _index(r.id, what)
+            oid = row_index(r.id, what)
             if r.kind not in OBJECT_KINDS:
                 raise StoreError(
                     f"{what}: kind: expected one of {'|'.join(OBJECT_KINDS)}, got {r.kind!r}"
                 )
             if not isinstance(r.params, bytes) or not r.params:
                 raise StoreError(f"{what}: params: expected non-empty bytes")
-            b = [_finite(v, f"{what}: bbox") for v in r.bbox]
+            b = [finite_number(v, f"{what}: bbox") for v in r.bbox]
             if len(b) != 6 or b[0] > b[3] or b[1] > b[4] or b[2] > b[5]:
                 raise StoreError(
                     f"{what}: bbox: expected (minx, miny, minz, maxx, maxy, maxz), got {r.bbox}"
                 )
-            t = [_index(v, f"{what}: tris") for v in r.tris]
+            t = [row_index(v, f"{what}: tris") for v in r.tris]
             if len(t) != 3:
                 raise StoreError(f"{what}: tris: expected 3 counts, got {len(t)}")
             out.append((oid, r.kind, r.params, *b, *t))
@@ -315,12 +321,12 @@ class SceneWriter:
         out = []
         for c in cells:
             what = f"cell {c.id}"
-            cid = _index(c.id, what)
+            cid = row_index(c.id, what)
             if c.kind not in CELL_KINDS:
                 raise StoreError(
                     f"{what}: kind: expected one of {'|'.join(CELL_KINDS)}, got {c.kind!r}"
                 )
-            zmin, zmax = _finite(c.zmin, f"{what}: zmin"), _finite(c.zmax, f"{what}: zmax")
+            zmin, zmax = finite_number(c.zmin, f"{what}: zmin"), finite_number(c.zmax, f"{what}: zmax")
             if zmin > zmax:
                 raise StoreError(f"{what}: zmin {zmin} > zmax {zmax}")
             try:
@@ -357,7 +363,7 @@ class SceneWriter:
             ``(k,)`` their coverage, e.g. pixel counts (see
             :func:`~walkstream.shared.codec.encode_pvs`).
         """
-        cid = _index(cell_id, "cell id")
+        cid = row_index(cell_id, "cell id")
         try:
             blob = encode_pvs(
                 np.asarray(ids).reshape(-1), np.asarray(ach, dtype=np.float64).reshape(-1)
@@ -385,16 +391,16 @@ class SceneWriter:
         what = f"viewpoint {name!r}"
         row = (
             name,
-            *(_finite(v, what) for v in (x, y, z, yaw)),
-            None if cell is None else _index(cell, f"{what}: cell"),
+            *(finite_number(v, what) for v in (x, y, z, yaw)),
+            None if cell is None else row_index(cell, f"{what}: cell"),
         )
         self._run("viewpoints", "INSERT OR REPLACE INTO viewpoints VALUES (?,?,?,?,?,?)", [row])
 
     def add_path(self, name: str, blob: bytes) -> None:
         """Add (or replace) a recorded path during the bake (see also :func:`write_path`)."""
-        name = _check_path_name(name)
-        if not isinstance(blob, bytes) or len(blob) > _MAX_PATH_BYTES:
-            raise StoreError(f"path {name!r}: expected bytes of at most {_MAX_PATH_BYTES}")
+        name = check_path_name(name)
+        if not isinstance(blob, bytes) or len(blob) > MAX_PATH_BYTES:
+            raise StoreError(f"path {name!r}: expected bytes of at most {MAX_PATH_BYTES}")
         self._run("paths", "INSERT OR REPLACE INTO paths VALUES (?, ?)", [(name, blob)])
 
     # -- interiors (features rooms, portals, meshes) ---------------------------
@@ -412,7 +418,7 @@ class SceneWriter:
         out = []
         for r in rows:
             what = f"storey {r.id}"
-            out.append((_index(r.id, what), str(r.name), _finite(r.zmin, what), _finite(r.zmax, what)))
+            out.append((row_index(r.id, what), str(r.name), finite_number(r.zmin, what), finite_number(r.zmax, what)))
         self._run("storeys", "INSERT OR REPLACE INTO storeys VALUES (?,?,?,?)", out)
         return len(out)
 
@@ -423,7 +429,7 @@ class SceneWriter:
         for r in rows:
             what = f"cell {r.cell}"
             storey = int(r.storey)
-            out.append((_index(r.cell, what), str(r.name), r.room, storey, _blob(r.planes, 4, f"{what}: planes")))
+            out.append((row_index(r.cell, what), str(r.name), r.room, storey, f64_blob(r.planes, 4, f"{what}: planes")))
         self._run("rooms", "INSERT OR REPLACE INTO rooms VALUES (?,?,?,?,?)", out)
         return len(out)
 
@@ -433,10 +439,10 @@ class SceneWriter:
         out = []
         for r in rows:
             what = f"portal {r.id}"
-            poly = _blob(r.polygon, 3, f"{what}: polygon")
+            poly = f64_blob(r.polygon, 3, f"{what}: polygon")
             if len(poly) < 3 * 24:
                 raise StoreError(f"{what}: a polygon needs at least 3 points")
-            out.append((_index(r.id, what), _index(r.a, what), _index(r.b, what), poly, str(r.kind),
+            out.append((row_index(r.id, what), row_index(r.a, what), row_index(r.b, what), poly, str(r.kind),
                         str(r.source), str(r.name)))
         self._run("portals", "INSERT OR REPLACE INTO portals VALUES (?,?,?,?,?,?,?)", out)
         return len(out)
@@ -447,8 +453,8 @@ class SceneWriter:
         out = []
         for r in rows:
             what = f"stair {r.id}"
-            out.append((_index(r.id, what), _index(r.portal, what), _index(r.lower, what), _index(r.upper, what),
-                        _blob(r.path, 3, f"{what}: path"), str(r.name)))
+            out.append((row_index(r.id, what), row_index(r.portal, what), row_index(r.lower, what), row_index(r.upper, what),
+                        f64_blob(r.path, 3, f"{what}: path"), str(r.name)))
         self._run("stairs", "INSERT OR REPLACE INTO stairs VALUES (?,?,?,?,?,?)", out)
         return len(out)
 
@@ -458,8 +464,8 @@ class SceneWriter:
         what = f"cell {info.cell}: contents"
         if not isinstance(blob, bytes) or not blob:
             raise StoreError(f"{what}: expected non-empty bytes")
-        row = (_index(info.cell, what), blob, _index(info.triangles, what), _index(info.vertices, what),
-               _index(info.parts, what), _index(info.raw_bytes, what), _finite(info.max_error, what))
+        row = (row_index(info.cell, what), blob, row_index(info.triangles, what), row_index(info.vertices, what),
+               row_index(info.parts, what), row_index(info.raw_bytes, what), finite_number(info.max_error, what))
         self._run("contents", "INSERT OR REPLACE INTO contents VALUES (?,?,?,?,?,?,?)", [row])
 
     def add_entrances(self, rows: Iterable[EntranceInfo]) -> int:
@@ -468,7 +474,7 @@ class SceneWriter:
         out = []
         for r in rows:
             what = f"entrance {r.portal}"
-            out.append(tuple(_index(v, what) for v in (r.portal, r.building, r.street, r.doorway, r.shell)))
+            out.append(tuple(row_index(v, what) for v in (r.portal, r.building, r.street, r.doorway, r.shell)))
         self._run("entrances", "INSERT OR REPLACE INTO entrances VALUES (?,?,?,?,?)", out)
         return len(out)
 
@@ -488,7 +494,7 @@ class SceneWriter:
             The scene version: the first 16 hex digits of the content hash.
         """
         db = self._db
-        seconds = _finite(bake_seconds, "bake_seconds")
+        seconds = finite_number(bake_seconds, "bake_seconds")
         missing = [
             r[0] for r in db.execute("SELECT id FROM cells WHERE done = 0 ORDER BY id LIMIT 6")
         ]
@@ -504,15 +510,15 @@ class SceneWriter:
             db.execute("BEGIN")
             db.execute("UPDATE meta SET value = ? WHERE key = 'bake_seconds'", (seconds,))
             db.execute("UPDATE meta SET value = ? WHERE key = 'created'", (created,))
-            version = _content_version(db)
+            version = content_version(db)
             db.execute("UPDATE meta SET value = ? WHERE key = 'version'", (version,))
             db.execute("COMMIT")
             # VACUUM INTO writes a compact rollback-journal file: no -wal to carry along
             db.execute("VACUUM INTO ?", (tmp,))
-            _fsync_file(tmp)
-            with _flock(self.path + ".lock", blocking=True, what=self.path):
+            fsync_file(tmp)
+            with exclusive_lock(self.path + ".lock", blocking=True, what=self.path):
                 os.replace(tmp, self.path)
-            _fsync_dir(self.path)
+            fsync_dir(self.path)
         except sqlite3.Error as exc:
             if db.in_transaction:
                 db.execute("ROLLBACK")
@@ -525,7 +531,7 @@ class SceneWriter:
             raise
         db.close()
         self._conn = None
-        _remove_db_files(self.work_path)
+        remove_db_files(self.work_path)
         # safe to unlink while held: a rival create() never waits on this lock, it
         # fails at once, and one arriving later may start afresh
         with suppress(FileNotFoundError):

@@ -15,16 +15,27 @@ import msgpack
 
 from walkstream.shared.errors import CodecError
 
-__all__ = ["unpack_bounded", "inflate_tagged", "inflate_bounded"]
+__all__ = [
+    "unpack_bounded",
+    "inflate_tagged",
+    "inflate_bounded",
+    "INT64_MAX",
+    "DECODE_ERRORS",
+    "byte_length",
+    "is_int",
+    "checked_int",
+]
 
 # Bounds for untrusted input.  A building with a million vertices is already absurd;
 # the limits only have to stop a forged length from allocating gigabytes.
 _MAX_RECORD_BYTES = 1 << 22
 _MAX_STR = 1 << 12
-_INT64_MAX = 2**63 - 1
+INT64_MAX = 2**63 - 1
+"""The largest int64."""
 
 
-_DECODE_ERRORS = (ValueError, TypeError, KeyError, IndexError, OverflowError, ZeroDivisionError)
+DECODE_ERRORS = (ValueError, TypeError, KeyError, IndexError, OverflowError, ZeroDivisionError)
+"""What a decoder may raise on malformed input (each is turned into a :class:`CodecError`)."""
 
 
 # ---------------------------------------------------------------------------
@@ -32,7 +43,8 @@ _DECODE_ERRORS = (ValueError, TypeError, KeyError, IndexError, OverflowError, Ze
 # ---------------------------------------------------------------------------
 
 
-def _nbytes(data: object, what: str) -> int:
+def byte_length(data: object, what: str) -> int:
+    """The length of ``data`` in bytes, or a :class:`CodecError` when it is not bytes-like."""
     if isinstance(data, bytes | bytearray):
         return len(data)
     if isinstance(data, memoryview):
@@ -71,7 +83,7 @@ def unpack_bounded(
         The bytes are too long, truncated, not msgpack, exceed a limit, or have
         trailing bytes.
     """
-    n = _nbytes(data, what)
+    n = byte_length(data, what)
     if n == 0:
         raise CodecError(f"{what}: no bytes")
     if n > max_bytes:
@@ -95,13 +107,14 @@ def unpack_bounded(
         raise CodecError(f"{what}: not valid msgpack ({detail})") from exc
 
 
-def _is_int(x: object) -> bool:
-    # bool is an int subclass; msgpack true/false must not pass as 1/0
+def is_int(x: object) -> bool:
+    """Whether ``x`` is a plain int (a msgpack bool must not pass as 1 or 0)."""
     return type(x) is int
 
 
-def _int(x: object, what: str, field: str, lo: int | None = None, hi: int | None = None) -> int:
-    if not _is_int(x):
+def checked_int(x: object, what: str, field: str, lo: int | None = None, hi: int | None = None) -> int:
+    """``x`` when it is an int within ``[lo, hi]``, else a :class:`CodecError` naming ``what`` and ``field``."""
+    if not is_int(x):
         raise CodecError(f"{what}: {field}: expected an integer, got {type(x).__name__}")
     assert isinstance(x, int)
     if lo is not None and x < lo:
@@ -120,7 +133,7 @@ def inflate_tagged(body: bytes, what: str, magic: bytes, version: int, max_bytes
         One line naming ``name``: no ``magic``, another version, corrupt, truncated,
         inflating past ``max_bytes`` (a bomb), or stray bytes after the stream.
     """
-    _nbytes(body, what)
+    byte_length(body, what)
     b = bytes(body)
     k = len(magic)
     if len(b) <= k or b[:k] != magic:

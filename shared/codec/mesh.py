@@ -29,7 +29,7 @@ import msgpack
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.shared.codec.bounded import _int, unpack_bounded
+from walkstream.shared.codec.bounded import checked_int, unpack_bounded
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import (
     Mesh,  # noqa: E402  (this section was appended to the module)
@@ -200,12 +200,12 @@ def decode_mesh(data: bytes | bytearray | memoryview, what: str = "mesh") -> Mes
     unknown = sorted(str(k) for k in obj if k not in _MESH_KEYS)
     if unknown:
         raise CodecError(f"{what}: unknown field {unknown[0]!r:.80}")
-    n = _int(obj.get("vertices"), what, "vertices", 0, _MAX_MESH_VERTICES)
+    n = checked_int(obj.get("vertices"), what, "vertices", 0, _MAX_MESH_VERTICES)
     pos_b = _mesh_bin(obj, "positions", 12 * n, f"3 float32 per vertex, {n} vertices", what)
     pos = np.frombuffer(pos_b, "<f4").reshape(n, 3)
     if not np.isfinite(pos).all():
         raise CodecError(f"{what}: positions: not finite")
-    width = _int(obj.get("index_bytes"), what, "index_bytes", 1, 4)
+    width = checked_int(obj.get("index_bytes"), what, "index_bytes", 1, 4)
     if width not in (1, 2, 4):
         raise CodecError(f"{what}: index_bytes: expected 1, 2 or 4, got {width}")
     ib = obj.get("indices")

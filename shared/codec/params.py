@@ -26,13 +26,13 @@ from numpy.typing import ArrayLike
 
 from walkstream.shared.arrays import F64, I64
 from walkstream.shared.codec.bounded import (
-    _DECODE_ERRORS,
-    _INT64_MAX,
-    _int,
-    _is_int,
+    DECODE_ERRORS,
+    INT64_MAX,
+    checked_int,
+    is_int,
     unpack_bounded,
 )
-from walkstream.shared.codec.ints import _FMT_LIST, _mp_list_size, _pack_ints, _unpack_ints
+from walkstream.shared.codec.ints import FMT_LIST, mp_list_size, smallest_payload, unpack_payload
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import (
     BuildingParams,
@@ -69,12 +69,12 @@ def _pack_rings(
 ) -> tuple[int, int, int, list[int], list[int] | bytes]:
     counts = [len(r) for r in rings]
     if sum(counts) == 0:
-        return _FMT_LIST, 0, 0, counts, []
+        return FMT_LIST, 0, 0, counts, []
     q = _quantise_cm(np.concatenate(rings).reshape(-1), what).tolist()
     # the anchor is vertex 0 itself, so its delta is always zero and is left out;
     # ring boundaries need no marker because the counts say where they fall
     d = [b - a for a, b in zip(q, q[2:], strict=False)]
-    fmt, payload = _pack_ints(d)
+    fmt, payload = smallest_payload(d)
     return fmt, q[0], q[1], counts, payload
 
 
@@ -82,7 +82,7 @@ def _unpack_rings(
     fmt: int, ax: object, ay: object, counts: list[int], payload: object, what: str
 ) -> list[F64]:
     total = sum(counts)
-    d = _unpack_ints(fmt, payload, what, "coords")
+    d = unpack_payload(fmt, payload, what, "coords")
     expected = 2 * (total - 1) if total else 0
     if len(d) != expected:
         raise CodecError(
@@ -91,8 +91,8 @@ def _unpack_rings(
     if total == 0:
         return [np.zeros((0, 2)) for _ in counts]
     q = np.empty(2 * total, np.int64)
-    q[0] = _int(ax, what, "anchor x", -(2**62), 2**62)
-    q[1] = _int(ay, what, "anchor y", -(2**62), 2**62)
+    q[0] = checked_int(ax, what, "anchor x", -(2**62), 2**62)
+    q[1] = checked_int(ay, what, "anchor y", -(2**62), 2**62)
     q[2:] = d
     # x and y chains are independent cumulative sums over every other value
     xy = np.cumsum(q.reshape(-1, 2), axis=0).astype(np.float64) / 100.0
@@ -102,10 +102,10 @@ def _unpack_rings(
 
 
 def _counts(x: object, what: str, min_count: int) -> list[int]:
-    counts = [x] if _is_int(x) else x
+    counts = [x] if is_int(x) else x
     if not isinstance(counts, list) or not counts:
         raise CodecError(f"{what}: counts: expected an int or a non-empty list of ints")
-    out = [_int(c, what, "counts", min_count, _MAX_VERTICES) for c in counts]
+    out = [checked_int(c, what, "counts", min_count, _MAX_VERTICES) for c in counts]
     if sum(out) > _MAX_VERTICES:
         raise CodecError(f"{what}: {sum(out)} vertices, more than the limit of {_MAX_VERTICES}")
     return out
@@ -126,13 +126,13 @@ def _pack_heights(h: list[int]) -> tuple[int, list[int]]:
             rle[-1] += 1
         else:
             rle += (v, 1)
-    if _mp_list_size(rle) < _mp_list_size(sparse):
+    if mp_list_size(rle) < mp_list_size(sparse):
         return _NB_RLE, rle
     return _NB_SPARSE, sparse
 
 
 def _unpack_heights(fmt: int, payload: object, n: int, what: str) -> F64:
-    v = _unpack_ints(_FMT_LIST, payload, what, "neighbour heights")
+    v = unpack_payload(FMT_LIST, payload, what, "neighbour heights")
     if len(v) % 2:
         raise CodecError(f"{what}: neighbour heights: expected pairs, got {len(v)} values")
     if fmt == _NB_SPARSE:
@@ -218,7 +218,7 @@ def _header(rec: object, what: str, kind: int, n_fields: int) -> tuple[list[Any]
     if not isinstance(rec, list) or len(rec) != n_fields:
         got = f"{len(rec)} fields" if isinstance(rec, list) else type(rec).__name__
         raise CodecError(f"{what}: expected an array of {n_fields} fields, got {got}")
-    h = _int(rec[0], what, "header", 0, 127)
+    h = checked_int(rec[0], what, "header", 0, 127)
     if h >> 5 != kind:
         raise CodecError(f"{what}: record type {h >> 5}, expected {kind}")
     return rec, h & 0x1F
@@ -251,14 +251,14 @@ def decode_building(
         return _decode_building(obj, what)
     except CodecError:
         raise
-    except _DECODE_ERRORS as exc:
+    except DECODE_ERRORS as exc:
         raise CodecError(f"{what}: {exc}") from exc
 
 
 def _decode_building(obj: object, what: str) -> BuildingParams:
     rec, flags = _header(obj, what, _REC_BUILDING, 11)
     _, oid, ax, ay, counts_f, coords, heights, floors, fh_cm, style, source_id = rec
-    oid = _int(oid, what, "id", 0, _INT64_MAX)
+    oid = checked_int(oid, what, "id", 0, INT64_MAX)
     what = f"{what} (id {oid})"
     if flags >> 3:
         raise CodecError(f"{what}: unknown header flags {flags:#x}")
@@ -271,9 +271,9 @@ def _decode_building(obj: object, what: str) -> BuildingParams:
         id=oid,
         rings=tuple(rings),
         neighbour_heights=tuple(np.split(h, np.cumsum(counts)[:-1])),
-        floors=_int(floors, what, "floors", 1, 2**31),
-        floor_height=_int(fh_cm, what, "floor_height", 1, 2**31) / 100.0,
-        style=_int(style, what, "style", -(2**63), 2**64 - 1),
+        floors=checked_int(floors, what, "floors", 1, 2**31),
+        floor_height=checked_int(fh_cm, what, "floor_height", 1, 2**31) / 100.0,
+        style=checked_int(style, what, "style", -(2**63), 2**64 - 1),
         source_id=source_id,
     )
 
@@ -322,19 +322,19 @@ def decode_street(
         return _decode_street(obj, what)
     except CodecError:
         raise
-    except _DECODE_ERRORS as exc:
+    except DECODE_ERRORS as exc:
         raise CodecError(f"{what}: {exc}") from exc
 
 
 def _decode_street(obj: object, what: str) -> StreetParams:
     rec, flags = _header(obj, what, _REC_STREET, 8)
     _, oid, n, ax, ay, coords, width_cm, source_id = rec
-    oid = _int(oid, what, "id", 0, _INT64_MAX)
+    oid = checked_int(oid, what, "id", 0, INT64_MAX)
     what = f"{what} (id {oid})"
     kind = (flags >> 2) & 3
     if kind >= len(_STREET_KINDS) or flags >> 4:
         raise CodecError(f"{what}: unknown header flags {flags:#x}")
-    counts = [_int(n, what, "vertex count", 0, _MAX_VERTICES)]
+    counts = [checked_int(n, what, "vertex count", 0, _MAX_VERTICES)]
     (ring,) = _unpack_rings(flags & 3, ax, ay, counts, coords, what)
     if not isinstance(source_id, str):
         raise CodecError(f"{what}: source_id: expected a string, got {type(source_id).__name__}")
@@ -342,7 +342,7 @@ def _decode_street(obj: object, what: str) -> StreetParams:
         id=oid,
         kind=_STREET_KINDS[kind],
         ring=ring,
-        width=_int(width_cm, what, "width", -(2**53), 2**53) / 100.0,
+        width=checked_int(width_cm, what, "width", -(2**53), 2**53) / 100.0,
         source_id=source_id,
     )
 
@@ -353,10 +353,10 @@ def decode_object(
     """Decode a building or street record, whichever the header says it is."""
     obj = unpack_bounded(data, what, max_array_len=2 * _MAX_VERTICES)
     try:
-        if isinstance(obj, list) and obj and _is_int(obj[0]) and obj[0] >> 5 == _REC_STREET:
+        if isinstance(obj, list) and obj and is_int(obj[0]) and obj[0] >> 5 == _REC_STREET:
             return _decode_street(obj, what)
         return _decode_building(obj, what)
     except CodecError:
         raise
-    except _DECODE_ERRORS as exc:
+    except DECODE_ERRORS as exc:
         raise CodecError(f"{what}: {exc}") from exc

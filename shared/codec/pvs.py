@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.arrays import F64, I64, U64
-from walkstream.shared.codec.bounded import _INT64_MAX, _nbytes, unpack_bounded
+from walkstream.shared.codec.bounded import INT64_MAX, byte_length, unpack_bounded
 from walkstream.shared.codec.varint import decode_varints, encode_varints
 from walkstream.shared.errors import CodecError
 
@@ -140,7 +140,7 @@ def encode_pvs(ids: ArrayLike, ach: ArrayLike) -> bytes:
         raise CodecError(f"PVS: {len(i)} ids but {len(a)} ACH values")
     if i.dtype.kind == "i" and (i < 0).any():
         raise CodecError("PVS: ids must be non-negative")
-    if i.dtype == np.uint64 and (i > np.uint64(_INT64_MAX)).any():
+    if i.dtype == np.uint64 and (i > np.uint64(INT64_MAX)).any():
         raise CodecError("PVS: ids must fit in int64")
     order = np.argsort(i, kind="stable")
     si = i[order].astype(np.uint64)
@@ -153,7 +153,7 @@ def encode_pvs(ids: ArrayLike, ach: ArrayLike) -> bytes:
 
 
 def _pvs_varints(data: bytes | bytearray | memoryview, what: str) -> U64:
-    n = _nbytes(data, what)
+    n = byte_length(data, what)
     if n > _MAX_PVS_BYTES:
         raise CodecError(f"{what}: {n} bytes, more than the limit of {_MAX_PVS_BYTES}")
     if n < 2:
@@ -192,11 +192,11 @@ def decode_pvs(data: bytes | bytearray | memoryview, what: str = "PVS") -> tuple
     deltas, units = v[1 : 1 + k], v[1 + k :]
     if len(deltas) > 1 and (deltas[1:] == 0).any():
         raise CodecError(f"{what}: ids repeat")
-    if (deltas > np.uint64(_INT64_MAX)).any():
+    if (deltas > np.uint64(INT64_MAX)).any():
         raise CodecError(f"{what}: id out of the int64 range")
     ids = np.cumsum(deltas, dtype=np.uint64)
     # each delta < 2**63, so a wrap past 2**64 shows up as a decrease
-    if (ids[1:] < ids[:-1]).any() or ids[-1] > np.uint64(_INT64_MAX):
+    if (ids[1:] < ids[:-1]).any() or ids[-1] > np.uint64(INT64_MAX):
         raise CodecError(f"{what}: id out of the int64 range")
     if (units > np.uint64(ACH_UNITS)).any() or int(units.sum()) != ACH_UNITS:
         raise CodecError(f"{what}: ACH units must sum to {ACH_UNITS}")
@@ -205,7 +205,7 @@ def decode_pvs(data: bytes | bytearray | memoryview, what: str = "PVS") -> tuple
 
 def pvs_size(data: bytes | bytearray | memoryview, what: str = "PVS") -> int:
     """Number of objects in an encoded PVS, reading only its first varint."""
-    n = _nbytes(data, what)
+    n = byte_length(data, what)
     if n < 2:
         raise CodecError(f"{what}: {n} bytes, too short for a PVS")
     mv = memoryview(data).cast("B")
@@ -252,7 +252,7 @@ def encode_ids(ids: ArrayLike) -> bytes:
 
 def decode_ids(data: bytes | bytearray | memoryview, what: str = "ids") -> I64:
     """Decode :func:`encode_ids` bytes to ``(k,) int64`` strictly ascending ids."""
-    n = _nbytes(data, what)
+    n = byte_length(data, what)
     if n > _MAX_IDS_BYTES:
         raise CodecError(f"{what}: {n} bytes, more than the limit of {_MAX_IDS_BYTES}")
     d = decode_varints(data, what)
@@ -260,10 +260,10 @@ def decode_ids(data: bytes | bytearray | memoryview, what: str = "ids") -> I64:
         return np.zeros(0, np.int64)
     if (d[1:] == 0).any():
         raise CodecError(f"{what}: ids repeat")
-    if (d > np.uint64(_INT64_MAX)).any():
+    if (d > np.uint64(INT64_MAX)).any():
         raise CodecError(f"{what}: id out of the int64 range")
     ids = np.cumsum(d, dtype=np.uint64)
-    if (ids[1:] < ids[:-1]).any() or ids[-1] > np.uint64(_INT64_MAX):
+    if (ids[1:] < ids[:-1]).any() or ids[-1] > np.uint64(INT64_MAX):
         raise CodecError(f"{what}: id out of the int64 range")
     return ids.astype(np.int64)
 

@@ -10,10 +10,21 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.arrays import U64
-from walkstream.shared.codec.bounded import _nbytes
+from walkstream.shared.codec.bounded import byte_length
 from walkstream.shared.errors import CodecError
 
-__all__ = ["encode_varints", "decode_varints", "zigzag", "unzigzag", "varint_field"]
+__all__ = [
+    "encode_varints",
+    "decode_varints",
+    "zigzag",
+    "unzigzag",
+    "varint_field",
+    "py_varints",
+    "py_decode_varints",
+    "varint_size",
+    "zigzag_int",
+    "unzigzag_int",
+]
 
 
 # ---------------------------------------------------------------------------
@@ -86,7 +97,7 @@ def decode_varints(data: bytes | bytearray | memoryview, what: str = "varints") 
         The last varint is truncated, a varint is longer than 10 bytes, overflows 64
         bits, or is not in shortest form.
     """
-    n = _nbytes(data, what)
+    n = byte_length(data, what)
     if n == 0:
         return np.zeros(0, np.uint64)
     buf = np.frombuffer(data, dtype=np.uint8)
@@ -116,7 +127,8 @@ def decode_varints(data: bytes | bytearray | memoryview, what: str = "varints") 
 # at that size a plain loop beats the fixed cost of a dozen numpy calls.
 
 
-def _py_varints(values: Iterable[int]) -> bytes:
+def py_varints(values: Iterable[int]) -> bytes:
+    """Scalar twin of :func:`encode_varints` for non-negative ints."""
     out = bytearray()
     for v in values:
         while v >= 0x80:
@@ -126,7 +138,7 @@ def _py_varints(values: Iterable[int]) -> bytes:
     return bytes(out)
 
 
-def _py_decode_varints(data: bytes, what: str) -> list[int]:
+def py_decode_varints(data: bytes, what: str) -> list[int]:
     """Scalar twin of :func:`decode_varints` (same checks, same messages)."""
     vals: list[int] = []
     v = shift = nb = 0
@@ -148,15 +160,18 @@ def _py_decode_varints(data: bytes, what: str) -> list[int]:
     return vals
 
 
-def _varint_size(z: int) -> int:
+def varint_size(z: int) -> int:
+    """Bytes the varint of non-negative ``z`` takes."""
     return max(1, (z.bit_length() + 6) // 7)
 
 
-def _zigzag(d: int) -> int:
+def zigzag_int(d: int) -> int:
+    """Scalar twin of :func:`zigzag`."""
     return (d << 1) ^ (d >> 63)
 
 
-def _unzigzag(z: int) -> int:
+def unzigzag_int(z: int) -> int:
+    """Scalar twin of :func:`unzigzag`."""
     return (z >> 1) ^ -(z & 1)
 
 

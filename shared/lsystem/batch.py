@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from walkstream.shared.errors import DerivationLimitError, GrammarError
 from walkstream.shared.lsystem.derive import Modules, depth_error
 from walkstream.shared.lsystem.grammar import Grammar, Production
-from walkstream.shared.lsystem.interpret import _BOX, _QUAD, EdgeFrames, _instance, _valid
+from walkstream.shared.lsystem.interpret import BOX, QUAD, EdgeFrames, instance, valid_rows
 from walkstream.shared.records import Mesh
 
 __all__ = ["Owners", "FrameBatch", "derive_batch", "interpret_batch", "block_offsets"]
@@ -350,7 +350,7 @@ def interpret_batch(modules: Modules, owners: Owners, batch: FrameBatch) -> list
         own = owners["Cap"]
         nv_all = np.diff(batch.cap_start)
         nt_all = np.diff(batch.tri_start)
-        ok = _valid("Cap", caps, 0) & (nt_all[own] > 0)
+        ok = valid_rows("Cap", caps, 0) & (nt_all[own] > 0)
         caps, own = caps[ok], own[ok]
         nv, nt = nv_all[own], nt_all[own]
         # vertex j of cap module c: cap vertex cap_start[owner] + j
@@ -372,13 +372,13 @@ def interpret_batch(modules: Modules, owners: Owners, batch: FrameBatch) -> list
         tris = tris + v_before[t_mod][:, None]
         asm.add(pos, nor, tris, caps[v_mod, 2], own[v_mod], own[t_mod])
 
-    for sym, template in (("Quad", _QUAD), ("Box", _BOX)):
+    for sym, template in (("Quad", QUAD), ("Box", BOX)):
         p = modules.get(sym)
         if p is None or len(p) == 0:
             continue
         own = owners[sym]
         e_local = p[:, 0]
-        ok = _valid(sym, p, 1 << 62) & (e_local < n_edges[own])
+        ok = valid_rows(sym, p, 1 << 62) & (e_local < n_edges[own])
         p, own = p[ok], own[ok]
         if len(p) == 0:
             continue
@@ -386,7 +386,7 @@ def interpret_batch(modules: Modules, owners: Owners, batch: FrameBatch) -> list
         u0, z0, u1, z1, off = p[:, 1], p[:, 2], p[:, 3], p[:, 4], p[:, 5]
         depth, mat = (np.zeros(len(p)), p[:, 6]) if sym == "Quad" else (p[:, 6], p[:, 7])
         v, t = len(template[0]), len(template[2])
-        pos, nor, _ = _instance(template, fr, e, u0, z0, u1 - u0, z1 - z0, off, depth)
+        pos, nor, _ = instance(template, fr, e, u0, z0, u1 - u0, z1 - z0, off, depth)
         rank = np.arange(len(p)) - _starts(np.bincount(own, minlength=B))[own]
         tris = (template[2][None, :, :] + (rank * v)[:, None, None]).reshape(-1, 3)
         asm.add(pos, nor, tris, np.repeat(mat, v), np.repeat(own, v), np.repeat(own, t))

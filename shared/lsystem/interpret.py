@@ -16,7 +16,16 @@ from numpy.typing import NDArray
 
 from walkstream.shared.records import Mesh
 
-__all__ = ["EdgeFrames", "interpret", "count_triangles", "TEMPLATE_TRIANGLES"]
+__all__ = [
+    "EdgeFrames",
+    "interpret",
+    "count_triangles",
+    "TEMPLATE_TRIANGLES",
+    "QUAD",
+    "BOX",
+    "valid_rows",
+    "instance",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,8 +61,9 @@ def _template(faces: list[tuple[list[tuple[int, int, int]], tuple[int, int, int]
 
 # Unit templates in right-handed (a along u, b along z, c along n) coordinates,
 # faces counter-clockwise seen from outside.
-_QUAD = _template([([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], (0, 0, 1))])
-_BOX = _template(
+QUAD = _template([([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], (0, 0, 1))])
+"""The unit quad template: one face, normal +z in template space."""
+BOX = _template(
     [
         ([(0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)], (0, 0, 1)),  # front
         ([(0, 1, 0), (0, 1, 1), (1, 1, 1), (1, 1, 0)], (0, 1, 0)),  # top
@@ -62,12 +72,13 @@ _BOX = _template(
         ([(0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0)], (-1, 0, 0)),  # left end
     ]
 )
+"""The unit box template: front, top, bottom and the two ends (no back face)."""
 
 #: triangles one module of each terminal makes (Cap depends on the footprint)
-TEMPLATE_TRIANGLES = {"Quad": len(_QUAD[2]), "Box": len(_BOX[2])}
+TEMPLATE_TRIANGLES = {"Quad": len(QUAD[2]), "Box": len(BOX[2])}
 
 
-def _valid(sym: str, p: NDArray[np.float64], n_edges: int) -> NDArray[np.bool_]:
+def valid_rows(sym: str, p: NDArray[np.float64], n_edges: int) -> NDArray[np.bool_]:
     """Rows that make real geometry: finite, on an existing edge, positive extent."""
     ok = np.isfinite(p).all(axis=1)
     if sym in ("Quad", "Box"):
@@ -85,14 +96,14 @@ def count_triangles(modules: dict[str, NDArray[np.float64]], frames: EdgeFrames)
     for sym, per in TEMPLATE_TRIANGLES.items():
         p = modules.get(sym)
         if p is not None and len(p):
-            total += per * int(_valid(sym, p, n_edges).sum())
+            total += per * int(valid_rows(sym, p, n_edges).sum())
     caps = modules.get("Cap")
     if caps is not None and len(caps):
-        total += len(frames.cap_tris) * int(_valid("Cap", caps, n_edges).sum())
+        total += len(frames.cap_tris) * int(valid_rows("Cap", caps, n_edges).sum())
     return total
 
 
-def _instance(
+def instance(
     template: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]],
     frames: EdgeFrames,
     e: NDArray[np.int64],
@@ -103,6 +114,12 @@ def _instance(
     c0: NDArray[np.float64],
     dc: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """``k`` copies of ``template`` placed on edges ``e`` of ``frames``: positions and
+    normals ``(k * v, 3)`` and triangles ``(k * t, 3)``.
+
+    Copy ``i`` spans ``u0[i] .. u0[i] + du[i]`` along its edge, ``z0[i] .. z0[i] + dz[i]``
+    up and ``c0[i] .. c0[i] + dc[i]`` out along the edge's normal (all ``(k,)``).
+    """
     corners, tnormals, ttris = template
     d = frames.direction[e]  # (k, 2)
     nrm = frames.normal[e]
@@ -140,7 +157,7 @@ def interpret(modules: dict[str, NDArray[np.float64]], frames: EdgeFrames) -> Me
 
     caps = modules.get("Cap")
     if caps is not None and len(caps) and len(frames.cap_tris):
-        caps = caps[_valid("Cap", caps, n_edges)]
+        caps = caps[valid_rows("Cap", caps, n_edges)]
         nv = len(frames.cap_xy)
         for z, direction, mat in caps:
             pos = np.column_stack([frames.cap_xy, np.full(nv, z)])
@@ -150,11 +167,11 @@ def interpret(modules: dict[str, NDArray[np.float64]], frames: EdgeFrames) -> Me
             tris = frames.cap_tris if up > 0 else frames.cap_tris[:, ::-1]
             add(pos, nor, tris, np.full(nv, mat))
 
-    for sym, template in (("Quad", _QUAD), ("Box", _BOX)):
+    for sym, template in (("Quad", QUAD), ("Box", BOX)):
         p = modules.get(sym)
         if p is None or len(p) == 0:
             continue
-        p = p[_valid(sym, p, n_edges)]
+        p = p[valid_rows(sym, p, n_edges)]
         if len(p) == 0:
             continue
         e = p[:, 0].astype(np.int64)
@@ -163,7 +180,7 @@ def interpret(modules: dict[str, NDArray[np.float64]], frames: EdgeFrames) -> Me
             depth, mat = np.zeros(len(p)), p[:, 6]
         else:
             depth, mat = p[:, 6], p[:, 7]
-        pos, nor, tris = _instance(template, frames, e, u0, z0, u1 - u0, z1 - z0, off, depth)
+        pos, nor, tris = instance(template, frames, e, u0, z0, u1 - u0, z1 - z0, off, depth)
         add(pos, nor, tris, np.repeat(mat, len(template[0])))
 
     if not parts_p:

@@ -50,11 +50,12 @@ from starlette.concurrency import run_in_threadpool
 
 from walkstream.server.service.dependencies import RepDep, SceneDep
 from walkstream.server.service.http import accepts_gzip, cached, stream_response
-from walkstream.server.service.interiors import CONTENTS_MEDIA, InteriorState
+from walkstream.server.service.interiors import InteriorState
 from walkstream.server.service.models import ERRORS, CellsIn, RoomOut, TopologyOut, both, error_doc
 from walkstream.server.service.routers.objects import MAX_BODY_BYTES, parse_ids, read_body
 from walkstream.server.service.scenes import Scene
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
+from walkstream.shared.content.cellmesh import CONTENTS_MEDIA
 from walkstream.shared.errors import ApiError
 from walkstream.shared.roomcompact import TOPOLOGY_COMPACT_MEDIA
 from walkstream.shared.roomwire import TOPOLOGY_PACKED_MEDIA
