@@ -215,18 +215,33 @@ class _Objects:
 def _entrance_view(
     rooms: RoomStreamer, e: Entrance, door: NDArray[np.float64], proj: NDArray[np.float64], size: tuple[int, int]
 ) -> list[int]:
-    """The rooms seen through the entrance from in front of it, looking every way
-    (:data:`ENTRANCE_POSES_M` metres out, every 30 degrees), farthest pose first: what
-    the walk will see on its way in, whichever way it comes and looks."""
+    """The rooms the walk in will see, in the order it comes to them: through the
+    entrance from :data:`ENTRANCE_POSES_M` metres in front of it (farthest first),
+    facing the door (within 60 degrees either way; from the nearest pose every way),
+    then from the doorway and from a metre into each cell beyond it, every way."""
     inner = np.asarray(rooms.cells[e.doorway].outline, np.float64).mean(axis=0)
     out_dir = door[:2] - inner
     out_dir = out_dir / max(float(np.linalg.norm(out_dir)), 1e-9)
-    zmin = min(float(p[4][:, 2].min()) for p in rooms.topology.portals if p[0] == e.portal)
+    facing = math.atan2(-out_dir[1], -out_dir[0])
+    z = min(float(p[4][:, 2].min()) for p in rooms.topology.portals if p[0] == e.portal) + 1.6
+    every = np.radians(np.arange(0.0, 360.0, 30.0))
+    poses: list[tuple[int, NDArray[np.float64], NDArray[np.float64]]] = []
+    for k, d in enumerate(ENTRANCE_POSES_M):
+        near = k == len(ENTRANCE_POSES_M) - 1
+        yaws = every if near else facing + np.radians(np.arange(-60.0, 61.0, 30.0))
+        poses.append((e.street, np.array([*(door[:2] + d * out_dir), z]), yaws))
+    poses.append((e.doorway, np.array([*inner, z]), every))
+    for r in rooms.cells[e.doorway].portals:
+        if r.cell in rooms.foreign or rooms.cells[r.cell].kind == "outside":
+            continue
+        mid = np.asarray(r.polygon, np.float64).mean(axis=0)[:2]
+        step = mid - inner
+        step = step / max(float(np.linalg.norm(step)), 1e-9)
+        poses.append((r.cell, np.array([*(mid + step), z]), every))
     out: list[int] = []
-    for d in ENTRANCE_POSES_M:
-        eye = np.array([*(door[:2] + d * out_dir), zmin + 1.6])
-        for yaw in np.radians(np.arange(0.0, 360.0, 30.0)):
-            out += rooms.seen_from(e.street, eye, camera(eye, float(yaw), 0.0).astype(np.float64), proj, size)
+    for cell, eye, yaws in poses:
+        for yaw in yaws:
+            out += rooms.seen_from(cell, eye, camera(eye, float(yaw), 0.0).astype(np.float64), proj, size)
     return [c for c in dict.fromkeys(out) if c not in rooms.foreign]
 
 
