@@ -121,3 +121,22 @@ def test_a_street_walk_of_a_crossing_stays_on_the_streets(scene: Path) -> None:
     assert got.summary["frames_portals"] == 0
     assert not rooms & set(np.unique(got.log.cell).tolist())
     assert got.summary["perfect_frame_ratio"] > 0.9
+
+
+def test_the_service_names_the_entrances(scene: Path) -> None:
+    import asyncio
+    import json
+
+    from walkstream.shared.roomwire import decode_entrances
+
+    async def get(accept: str) -> httpx.Response:
+        async with httpx.AsyncClient(transport=httpx.ASGITransport(app=create_app([scene])), base_url="http://t") as c:
+            return await c.get("/v1/scenes/scene/entrances", headers={"accept": accept})
+
+    with SceneReader.open(scene) as r:
+        want = [(e.portal, e.building, e.street, e.doorway, e.shell) for e in r.entrances()]
+    packed = asyncio.run(get("application/msgpack"))
+    assert packed.status_code == 200 and packed.headers["etag"]
+    got = decode_entrances(packed.content, "entrances")
+    assert [(e.portal, e.building, e.street, e.doorway, e.shell) for e in got] == want
+    assert [tuple(e.values()) for e in json.loads(asyncio.run(get("application/json")).text)] == want

@@ -685,8 +685,8 @@ def test_schemathesis_finds_no_server_error(app: FastAPI, city: CityDb) -> None:
 
     schema = schemathesis.openapi.from_asgi("/openapi.json", app)
     operations = [result.ok() for result in schema.get_all_operations()]
-    assert len(operations) == 19  # and the interiors' topology, topology/packed, topology/compact, rooms/{cell},
-    # rooms/{cell}/contents, POST rooms/contents (a batch)
+    assert len(operations) == 20  # and the interiors' topology, topology/packed, topology/compact, rooms/{cell},
+    # rooms/{cell}/contents, POST rooms/contents (a batch), a crossing's entrances
     runs: list[str] = []
     for op in operations:
         for mode in GenerationMode:
