@@ -11,7 +11,7 @@ server only through an httpx transport.  Public names are imported lazily.
 from walkstream.shared.exports import lazy_exports
 
 _EXPORTS = {
-    "ReplayConfig": "walkstream.client.replay",
+    "ReplayConfig": "walkstream.client.config",
     "ReplayResult": "walkstream.client.replay",
     "run_replay": "walkstream.client.replay",
     "RealClock": "walkstream.client.clock",

@@ -33,12 +33,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock, RealClock, SimClock, within
+from walkstream.client.config import STREAM_FORMS, ReplayConfig
 from walkstream.client.draw.allocate import allocate_ach, allocate_distance
 from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.devices import make_device
 from walkstream.client.draw.phases import FramePhases
 from walkstream.client.net.api import SceneClient
-from walkstream.client.net.link import LinkProfile, ShapedTransport
+from walkstream.client.net.link import ShapedTransport
 from walkstream.client.report.link import bytes_series, link_figures
 from walkstream.client.report.metrics import (
     FrameLog,
@@ -49,7 +50,7 @@ from walkstream.client.report.metrics import (
 )
 from walkstream.client.report.truth import summarise_truth
 from walkstream.client.rewrite.geometry import ObjectGeometry
-from walkstream.client.rewrite.pool import SHM_BYTES, RewriteOptions
+from walkstream.client.rewrite.pool import RewriteOptions
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.predict import MotionPredictor
@@ -62,7 +63,6 @@ from walkstream.client.stream.walkstart import (
 )
 from walkstream.client.truth.recorder import TruthRecorder, TruthResult
 from walkstream.shared.camera import look_at, perspective
-from walkstream.shared.errors import InputError
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.paths import RecordedPath
@@ -70,102 +70,7 @@ from walkstream.shared.roomview import RoomView
 from walkstream.shared.roomwire import Topology
 from walkstream.shared.wire import Manifest
 
-__all__ = ["ReplayConfig", "ReplayResult", "run_replay", "replay"]
-
-STREAM_FORMS = {"params": "params", "meshes": "lod2"}
-"""--stream choice -> the server's objects ``form``."""
-
-
-@dataclass(frozen=True)
-class ReplayConfig:
-    """Everything a replay needs besides the server."""
-
-    link: LinkProfile
-    path: str = "SE"
-    scene: str | None = None
-    fps: float = 25.0
-    target_fps: float | None = None
-    """Minimum frame rate the budget holds (default: ``fps``)."""
-    prefetch: bool = True
-    stream: str = "params"
-    cache_bytes: int = 64 << 20
-    cache_dir: Path | None = None
-    clock: str = "sim"
-    device: str = "gl"
-    size: tuple[int, int] = (640, 480)
-    fov_deg: float = 60.0
-    snapshot_every: int = 0
-    duration_s: float | None = None
-    workers: int = 2
-    rewrite: str = "auto"
-    """Real clock: rebuild in worker ``process``es or ``thread``s; ``auto``: see
-    :func:`~walkstream.client.rewrite.pool.auto_mode`."""
-    shm_bytes: int = SHM_BYTES
-    """Bound on the shared memory the rewrite processes hand geometry back through."""
-    lod_select: str = "ach"
-    lod_distances: tuple[float, float] = (40.0, 120.0)
-    budget_frames: int = 4
-    seed: int = 0
-    cost_step_at_s: float | None = None
-    """Walk time at which the device's per-triangle cost is multiplied (benchmarks)."""
-    cost_step_factor: float = 10.0
-    report_dir: Path | None = None
-    setup_timeout_s: float = 60.0
-    """Give up (an empty report saying why) when the path has not arrived by then."""
-    kind: str | None = None
-    """``city`` or ``interior`` when the caller knows the scene's kind (the CLI does);
-    ``None``: wait for the manifest to tell (a city walk then starts a little later)."""
-    fog_m: float = 40.0
-    """Interiors: portals farther than this are not looked through."""
-    culling: str = "portals"
-    """Interiors: ``portals``, ``frustum`` or ``none`` (:mod:`walkstream.shared.portals`)."""
-    fog_budget: bool = True
-    """Interiors: the budget controller sets the fog distance (one LOD per part)."""
-    rooms: dict[str, Any] = field(default_factory=dict)
-    """Interiors: further :class:`~walkstream.client.stream.rooms.RoomStreamConfig` knobs."""
-    start_bundle: bool = True
-    """Start with the start bundle (one round trip); False: scene list, manifest, path."""
-    start_contents: bool = True
-    """Interiors: the start bundle brings the first view's contents too."""
-    gzip: bool = True
-    """Ask for the streams gzip-compressed (``Accept-Encoding: gzip``)."""
-    truth_every: int = 0
-    """Compare every N-th frame with the ground truth after the walk (0: never)."""
-    batched_draws: bool = True
-    """One multi-draw call per frame (False: one draw call per object, as before)."""
-
-    def __post_init__(self) -> None:
-        if self.stream not in STREAM_FORMS:
-            raise InputError(f"--stream {self.stream!r}: choose one of {', '.join(STREAM_FORMS)}")
-        if self.clock not in ("sim", "real"):
-            raise InputError(f"--clock {self.clock!r}: choose sim or real")
-        if self.lod_select not in ("ach", "distance"):
-            raise InputError(f"--lod {self.lod_select!r}: choose ach or distance")
-        if not (math.isfinite(self.fps) and 0 < self.fps <= 1000):
-            raise InputError(f"--fps {self.fps!r}: expected a number in (0, 1000]")
-        tf = self.target_fps
-        if tf is not None and not (math.isfinite(tf) and 0 < tf <= 1000):
-            raise InputError(f"--target-fps {tf!r}: expected a number in (0, 1000]")
-        if self.cache_bytes < 0:
-            raise InputError(f"--cache {self.cache_bytes}: must not be negative")
-        if self.duration_s is not None and not self.duration_s > 0:
-            raise InputError(f"--duration {self.duration_s!r}: must be > 0")
-        if self.workers < 1:
-            raise InputError(f"--workers {self.workers}: at least 1")
-        RewriteOptions(self.rewrite, self.shm_bytes)  # says what is wrong
-        if self.snapshot_every < 0:
-            raise InputError(f"--snapshot-every {self.snapshot_every}: must not be negative")
-        if self.truth_every < 0:
-            raise InputError(f"--truth-every {self.truth_every}: must not be negative")
-        w, h = self.size
-        if not (16 <= w <= 8192 and 16 <= h <= 8192):
-            raise InputError(f"--size {w}x{h}: each side from 16 to 8192 pixels")
-
-    @property
-    def fps_target(self) -> float:
-        """The budget's target frame rate."""
-        return self.target_fps if self.target_fps is not None else self.fps
-
+__all__ = ["ReplayResult", "run_replay", "replay"]
 
 @dataclass
 class ReplayResult:

@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Hashable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
+from walkstream.client.config import ReplayConfig
 from walkstream.client.content.cellmesh import CELLMESH_CONTENT
 from walkstream.client.draw.budget import BudgetController
 from walkstream.client.report.metrics import FrameLog, FrameLogBuilder
@@ -94,7 +95,7 @@ class InteriorFrames:
 
 
 async def walk_interior(
-    config: Any,
+    config: ReplayConfig,
     clock: Clock,
     path: RecordedPath,
     streamer: RoomStreamer,
@@ -114,7 +115,7 @@ async def walk_interior(
     default_fog = streamer.config.fog_m
     # one LOD per part: the polygon budget has nothing to choose, so it sets the fog
     # distance (the nearest parts that fit the budget are drawn, the fog just beyond)
-    controller = BudgetController(config.fps_target, k=config.budget_frames) if getattr(config, "fog_budget", True) else None
+    controller = BudgetController(config.fps_target, k=config.budget_frames) if config.fog_budget else None
     stepped = False
     boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
     tick = 1.0 / config.fps
@@ -145,13 +146,13 @@ async def walk_interior(
         # the perfect frame is defined at the scene's default fog: the visible cells
         # (fetched, and counted in the quality) are those within it, unless they do not
         # fit the memory budget, when the fog tightens until they do
-        streamer.config = replace(streamer.config, fog_m=default_fog)
+        streamer.fog_m = default_fog
         vis = streamer.tick(t, eye, vp, v64, p64, (w, h))
         vis_default = list(vis)
         fog = default_fog
         while streamer.visible_bytes(vis) > streamer.cache.budget_bytes and fog > 2.0:
             fog *= 0.8
-            streamer.config = replace(streamer.config, fog_m=fog)
+            streamer.fog_m = fog
             vis = streamer.visible_cells(eye, vp, v64, p64, (w, h))
         if fog < default_fog and frames is not None:
             frames.tightened += 1
@@ -200,12 +201,12 @@ async def walk_interior(
                     if m is None:
                         m = meshes[(cid, k)] = part.mesh()
                     draw_keys.append(CELLMESH_CONTENT.upload(renderer, cid, k, m))
-        every = int(getattr(config, "truth_every", 0) or 0)
+        every = config.truth_every
         if frames is not None and every and frame % every == 0:
             drawn = [(c, k) for c, mk in masks.items() for k in np.flatnonzero(mk).tolist()]
             # a visible cell not yet received is not a culled one: its parts count as kept
             waiting = [(c, -1) for c in vis if c not in loaded]
-            frames.notes.append((frame, eye.copy(), v64.copy(), drawn + waiting, float(streamer.config.fog_m)))
+            frames.notes.append((frame, eye.copy(), v64.copy(), drawn + waiting, float(streamer.fog_m)))
         quality = sum(1 for c in vis_default if streamer.mesh(c) is not None) / len(vis_default) if vis_default else 0.0
         snap = config.snapshot_every and frame % config.snapshot_every == 0
         if config.cost_step_at_s is not None and not stepped and wt >= config.cost_step_at_s:
@@ -248,7 +249,7 @@ async def walk_interior(
             for c in [c for c in boxes if streamer.mesh(c) is None]:
                 del boxes[c]
         await clock.sleep_until(t + max(frame_time, tick))
-    streamer.config = replace(streamer.config, fog_m=default_fog)
+    streamer.fog_m = default_fog
     if renderer is not None:
         for key in list(meshes):
             renderer.forget(CELLMESH_CONTENT.gpu_key(*key))
@@ -258,7 +259,7 @@ async def walk_interior(
 
 
 def interior_summary(
-    config: Any,
+    config: ReplayConfig,
     log: FrameLog,
     streamer: RoomStreamer,
     frames: InteriorFrames,

@@ -9,8 +9,9 @@ import httpx
 import numpy as np
 import pytest
 
+from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
-from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
+from walkstream.client.replay import ReplayResult, run_replay
 from walkstream.client.stream.cache import CITY_KINDS, Cache
 from walkstream.server.bake import BakeSettings, bake
 from walkstream.server.service.main import create_app

@@ -18,8 +18,9 @@ import numpy as np
 import pytest
 from scenes import add_default_paths, build_city_db
 
+from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
-from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
+from walkstream.client.replay import ReplayResult, run_replay
 from walkstream.client.report.metrics import link_utilisation
 from walkstream.client.stream.cellmap import CellMap
 from walkstream.client.stream.plan import plan_needs, tile_key, tile_of_key, wanted_objects

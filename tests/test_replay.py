@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 from scenes import add_default_paths, build_city_db
 
+from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
-from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
+from walkstream.client.replay import ReplayResult, run_replay
 from walkstream.server.service.main import create_app
 from walkstream.server.service.process import free_port, server_process
 from walkstream.shared.errors import InputError

@@ -15,8 +15,9 @@ import msgpack
 import numpy as np
 import pytest
 
+from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
-from walkstream.client.replay import ReplayConfig, run_replay
+from walkstream.client.replay import run_replay
 from walkstream.server.bake import bake
 from walkstream.server.service.main import create_app
 from walkstream.server.sources.interiorgen import InteriorPlan, write_interior

@@ -14,9 +14,10 @@ from scenes import build_city_db
 
 import walkstream.client.rewrite.geometry as geometry
 from walkstream.cli import main
+from walkstream.client.config import ReplayConfig
 from walkstream.client.draw.frames import FrameRenderer
 from walkstream.client.net.link import LinkProfile
-from walkstream.client.replay import ReplayConfig, ReplayResult, run_replay
+from walkstream.client.replay import ReplayResult, run_replay
 from walkstream.client.report import write_report
 from walkstream.client.truth.compare import CAUSES, compare_frame, missing_mask
 from walkstream.client.truth.render import TruthRenderer

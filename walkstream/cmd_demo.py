@@ -118,8 +118,8 @@ def stale_reason(db: Path, names: tuple[str, ...]) -> str | None:
 
 def _demo_replay(db: Path, report: Path, args: argparse.Namespace) -> int:
     """Replay SE against the real server on a free local port (simulated 56 kbit/s link)."""
+    from walkstream.client.config import ReplayConfig
     from walkstream.client.net.link import LinkProfile
-    from walkstream.client.replay import ReplayConfig
     from walkstream.client.report import format_headline
     from walkstream.cmd_replay import replay_to_report
     from walkstream.server.service.process import server_process

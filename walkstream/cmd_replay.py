@@ -66,9 +66,9 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def config_from_args(args: argparse.Namespace) -> Any:
-    """A :class:`~walkstream.client.replay.ReplayConfig` from parsed replay arguments."""
+    """A :class:`~walkstream.client.config.ReplayConfig` from parsed replay arguments."""
+    from walkstream.client.config import ReplayConfig
     from walkstream.client.net.link import LinkProfile
-    from walkstream.client.replay import ReplayConfig
     from walkstream.client.units import parse_bandwidth, parse_duration, parse_size
 
     down = parse_bandwidth(args.bandwidth)
@@ -271,10 +271,10 @@ def replay_with_options(server: str, options: Mapping[str, Any], title: str) -> 
     """One replay with ``walkstream replay`` options over its defaults; writes the report.
 
     ``options`` are argument names (``bandwidth="5kB/s"``, ``no_prefetch=True``,
-    ``report=folder``, ...); a :class:`~walkstream.client.replay.ReplayConfig` field
+    ``report=folder``, ...); a :class:`~walkstream.client.config.ReplayConfig` field
     that has no option (``cost_step_at_s``) is set on the config directly.
     """
-    from walkstream.client.replay import ReplayConfig
+    from walkstream.client.config import ReplayConfig
 
     ns = _defaults()
     direct = {}

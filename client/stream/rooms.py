@@ -190,6 +190,9 @@ class RoomStreamer:
         self.clock = clock
         self.cache = cache
         self.config = config
+        self.fog_m: float = config.fog_m
+        """The fog distance in force this frame: portals farther are not looked through.
+        The frame loop's lever (the budget tightens it); ``config.fog_m`` is the default."""
         self.topology = topology
         self.cells: dict[int, RoomRecord] = {c.id: c for c in topology.cells}
         self._where = RoomLocator(topology.cells)
@@ -251,9 +254,9 @@ class RoomStreamer:
     ) -> tuple[PortalCull | None, list[int]]:
         cfg = self.config
         if cfg.culling == "portals" and view is not None and proj is not None and size is not None:
-            pc = cull_portals(self.graph, cell, eye, view, proj, size, fog_m=cfg.fog_m, max_depth=cfg.max_depth)
+            pc = cull_portals(self.graph, cell, eye, view, proj, size, fog_m=self.fog_m, max_depth=cfg.max_depth)
             return pc, pc.order
-        return None, frustum_cells(self.graph, cell, eye, view_proj, fog_m=cfg.fog_m, max_depth=cfg.max_depth)
+        return None, frustum_cells(self.graph, cell, eye, view_proj, fog_m=self.fog_m, max_depth=cfg.max_depth)
 
     def seen_from(
         self,

@@ -58,6 +58,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
+from walkstream.client.config import ReplayConfig
 from walkstream.client.draw.allocate import allocate_ach
 from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.devices import make_device
@@ -293,7 +294,7 @@ def _seen_ahead(
 
 
 async def walk_crossing(
-    config: Any,
+    config: ReplayConfig,
     clock: Clock,
     path: RecordedPath,
     city: Streamer,
@@ -374,8 +375,7 @@ async def walk_crossing(
         pvs_cells: list[int] = []
         shown: list[int] = []
         if indoors:
-            if rooms.config.fog_m != indoor_fog:
-                rooms.config = replace(rooms.config, fog_m=indoor_fog)
+            rooms.fog_m = indoor_fog
             vis = rooms.tick(t, eye, vp, view, proj, (w, h), cell=room)
             if e.street in vis or e.shell in vis:  # the street through the door or a window
                 pvs_cells = list(dict.fromkeys([e.street, *([street] if street is not None else [])]))
@@ -385,8 +385,7 @@ async def walk_crossing(
                 pvs_cells = [street]
             rec = city.cells.get(street) if street is not None else None
             shows_building = rec is not None and bool(np.any(rec.pvs == e.building))
-            if rooms.config.fog_m != OUTDOOR_FOG_M:
-                rooms.config = replace(rooms.config, fog_m=OUTDOOR_FOG_M)
+            rooms.fog_m = OUTDOOR_FOG_M
             shown = [e.shell] if shows_building else []
             vis = rooms.tick(t, eye, vp, view, proj, (w, h), cell=e.street if street == e.street else None,
                              shown=shown, ahead=ahead)
@@ -484,7 +483,7 @@ async def walk_crossing(
             for c in [c for c in boxes if rooms.mesh(c) is None]:
                 del boxes[c]
         await clock.sleep_until(t + max(frame_time, tick))
-    rooms.config = replace(rooms.config, fog_m=indoor_fog)
+    rooms.fog_m = indoor_fog
     if progress is not None:
         progress(total, total)
     return builder.build(fps_cap=config.fps), snapshots, np.array(spikes, dtype=bool)
@@ -523,7 +522,7 @@ async def replay_crossing(
     api: SceneClient,
     link: ShapedTransport,
     clock: Clock,
-    config: Any,
+    config: ReplayConfig,
     path: RecordedPath,
     city: Streamer,
     cache: Cache,
@@ -588,7 +587,7 @@ async def replay_crossing(
 
 
 def _figures(
-    config: Any,
+    config: ReplayConfig,
     log: FrameLog,
     frames: CrossingFrames,
     city: Streamer,
