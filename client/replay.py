@@ -38,6 +38,7 @@ from walkstream.client.draw.allocate import allocate_ach, allocate_distance
 from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.devices import make_device
 from walkstream.client.draw.phases import FramePhases
+from walkstream.client.draw.present import present, save_snapshot
 from walkstream.client.net.api import SceneClient
 from walkstream.client.net.link import ShapedTransport
 from walkstream.client.report.link import bytes_series, link_figures
@@ -620,22 +621,14 @@ async def _walk(
                     draw_keys.append(key)
         ph.mark("upload")
         snap = config.snapshot_every and frame % config.snapshot_every == 0
-        if device.simulated:
-            frame_time = float(device.frame_time(int(alloc.triangles), int((alloc.lod >= 0).sum())))
-            spikes.append(bool(getattr(device, "last_spike", False)))
-            if snap and renderer is not None:
-                renderer.draw(draw_keys, view, proj)
-        else:
-            frame_time = float(renderer.draw(draw_keys, view, proj))
-            spikes.append(False)
+        frame_time, spike = present(device, renderer, draw_keys, view, proj, int(alloc.triangles), int((alloc.lod >= 0).sum()), bool(snap))
+        spikes.append(spike)
         ph.mark("draw")
         if renderer is not None and (snap or not device.simulated):
             ph.move("draw", "finish", renderer.last_finish_s)
-        if snap and renderer is not None and config.report_dir is not None:
-            out = Path(config.report_dir) / "frames" / f"frame_{frame:06d}.png"
-            out.parent.mkdir(parents=True, exist_ok=True)
-            renderer.save_png(out)
-            snapshots.append(out)
+        shot = save_snapshot(renderer, config.report_dir, frame) if snap else None
+        if shot is not None:
+            snapshots.append(shot)
         if recorder is not None and recorder.due(frame):
             rec = streamer.cells.get(cur) if cur is not None else None
             recorder.record(

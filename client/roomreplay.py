@@ -39,6 +39,7 @@ from walkstream.client.clock import Clock
 from walkstream.client.config import ReplayConfig
 from walkstream.client.content.cellmesh import CELLMESH_CONTENT
 from walkstream.client.draw.budget import BudgetController
+from walkstream.client.draw.present import present, save_snapshot
 from walkstream.client.report.metrics import FrameLog, FrameLogBuilder
 from walkstream.client.stream.rooms import RoomStreamer
 from walkstream.shared.camera import camera
@@ -212,19 +213,11 @@ async def walk_interior(
         if config.cost_step_at_s is not None and not stepped and wt >= config.cost_step_at_s:
             device.cost_scale = device.cost_scale * config.cost_step_factor
             stepped = True
-        if device.simulated:
-            frame_time = float(device.frame_time(triangles, parts))
-            spikes.append(bool(getattr(device, "last_spike", False)))
-            if snap and renderer is not None:
-                renderer.draw(draw_keys, view, proj)
-        else:
-            frame_time = float(renderer.draw(draw_keys, view, proj))
-            spikes.append(False)
-        if snap and renderer is not None and config.report_dir is not None:
-            out = Path(config.report_dir) / "frames" / f"frame_{frame:06d}.png"
-            out.parent.mkdir(parents=True, exist_ok=True)
-            renderer.save_png(out)
-            snapshots.append(out)
+        frame_time, spike = present(device, renderer, draw_keys, view, proj, triangles, parts, bool(snap))
+        spikes.append(spike)
+        shot = save_snapshot(renderer, config.report_dir, frame) if snap else None
+        if shot is not None:
+            snapshots.append(shot)
         builder.append(
             t=t - t_start,
             frame_time=frame_time,

@@ -62,6 +62,7 @@ from walkstream.client.config import ReplayConfig
 from walkstream.client.draw.allocate import allocate_ach
 from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.devices import make_device
+from walkstream.client.draw.present import present, save_snapshot
 from walkstream.client.net.api import SceneClient
 from walkstream.client.net.link import ShapedTransport
 from walkstream.client.report.link import link_figures
@@ -432,22 +433,15 @@ async def walk_crossing(
         drawn = room_parts + int((alloc.lod >= 0).sum())
         # -- draw
         snap = config.snapshot_every and frame % config.snapshot_every == 0
+        keys: list[Hashable] = []
         if renderer is not None and (snap or not device.simulated):
             renderer.fog_m = fog if indoors else _FAR
             keys = _upload(renderer, objects.geoms, alloc.lod, loaded, masks, meshes)
-        if device.simulated:
-            frame_time = float(device.frame_time(triangles, drawn))
-            spikes.append(bool(getattr(device, "last_spike", False)))
-            if snap and renderer is not None:
-                renderer.draw(keys, view, proj)
-        else:
-            frame_time = float(renderer.draw(keys, view, proj))
-            spikes.append(False)
-        if snap and renderer is not None and config.report_dir is not None:
-            out = Path(config.report_dir) / "frames" / f"frame_{frame:06d}.png"
-            out.parent.mkdir(parents=True, exist_ok=True)
-            renderer.save_png(out)
-            snapshots.append(out)
+        frame_time, spike = present(device, renderer, keys, view, proj, triangles, drawn, bool(snap))
+        spikes.append(spike)
+        shot = save_snapshot(renderer, config.report_dir, frame) if snap else None
+        if shot is not None:
+            snapshots.append(shot)
         # -- measure
         have_obj = sum(1 for i in objects.pvs if city.has_object(i))
         have_rooms = sum(1 for c in room_cells if c in loaded)
