@@ -815,10 +815,10 @@ def test_documented_shapes_match_the_wire_records() -> None:
 def test_a_file_replaced_by_a_new_version_is_served_without_a_restart(
     city: CityDb, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import walkstream.server.service.scenes as scenes_mod
+    import walkstream.server.service.registry as registry_mod
     from walkstream.server.store.edit import write_path
 
-    monkeypatch.setattr(scenes_mod, "RECHECK_S", 0.0)
+    monkeypatch.setattr(registry_mod, "RECHECK_S", 0.0)
     db = tmp_path / "copy.db"
     shutil.copyfile(city.path, db)
     app = create_app([db])

@@ -7,7 +7,8 @@ from typing import Annotated
 from fastapi import Depends, Request
 
 from walkstream.server.service.http import Rep, negotiate
-from walkstream.server.service.scenes import Scene, SceneRegistry
+from walkstream.server.service.registry import SceneRegistry
+from walkstream.server.service.scenes import Scene
 
 __all__ = [
     "SceneDep",

@@ -26,7 +26,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from walkstream.server.service import routers
 from walkstream.server.service.metrics import Metrics, MetricsMiddleware
-from walkstream.server.service.scenes import SceneRegistry
+from walkstream.server.service.registry import SceneRegistry
 from walkstream.shared.errors import (
     ApiError,
     CodecError,

@@ -13,7 +13,7 @@ from typing import Any
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from walkstream.server.service.scenes import SceneRegistry
+from walkstream.server.service.registry import SceneRegistry
 
 __all__ = ["LATENCY_BUCKETS", "Metrics", "MetricsMiddleware"]
 

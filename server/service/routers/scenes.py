@@ -17,7 +17,7 @@ from walkstream.server.service.models import (
     SceneRef,
     both,
 )
-from walkstream.server.service.scenes import SceneRegistry
+from walkstream.server.service.registry import SceneRegistry
 from walkstream.shared.wire import JSON, MSGPACK
 
 __all__ = ["router"]

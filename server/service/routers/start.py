@@ -61,8 +61,9 @@ from walkstream.server.service.http import (
     stream_response,
 )
 from walkstream.server.service.models import ERRORS, StartPartOut, error_doc
+from walkstream.server.service.registry import SceneRegistry
 from walkstream.server.service.routers.objects import coalesce
-from walkstream.server.service.scenes import OBJECT_FORMS, Frames, Scene, SceneRegistry, StartPart
+from walkstream.server.service.scenes import OBJECT_FORMS, Frames, Scene, StartPart
 from walkstream.server.service.scenes import Form as ObjForm
 from walkstream.shared.errors import ApiError, InputError
 from walkstream.shared.roomview import RoomView
