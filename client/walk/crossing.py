@@ -28,8 +28,9 @@ Each frame runs these steps, in order:
 ``wants``
     The rooms' streamer fetches the visible cells, the shell, then (prefetch) the
     interior ahead of the door: once the city's predicted route reaches the
-    entrance's street cell, or the door is within :data:`DOOR_AHEAD_S` seconds'
-    walk, the doorway and the rooms :data:`DOOR_DEPTH` portals beyond it; the city
+    entrance's street cell, or the door is within
+    :data:`~walkstream.client.stream.entrance.DOOR_AHEAD_S` seconds' walk, the rooms
+    :mod:`~walkstream.client.stream.entrance` names, in the order the walk comes to them; the city
     streamer plans its own wants (records and objects by need time).
 ``build``
     Geometry the current PVS lacks is rebuilt from parameters.
@@ -69,11 +70,12 @@ from walkstream.client.report.link import link_figures
 from walkstream.client.report.metrics import FrameLog, FrameLogBuilder, summarise
 from walkstream.client.roomreplay import fog_for_budget
 from walkstream.client.stream.cache import Cache
+from walkstream.client.stream.entrance import DOOR_AHEAD_S, door_ahead, entrance_view, seen_ahead
 from walkstream.client.stream.predict import MotionPredictor
-from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer, predicted_view
+from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 from walkstream.client.stream.streamer import Streamer
 from walkstream.client.walk.crosstruth import UNKNOWN
-from walkstream.shared.camera import camera, look_at, perspective
+from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import ApiError
 from walkstream.shared.frustum import frustum_cull
@@ -84,10 +86,6 @@ from walkstream.shared.roomwire import ContentsRef, Entrance, RoomRecord, Topolo
 from walkstream.shared.wire import Manifest
 
 __all__ = [
-    "DOOR_AHEAD_S",
-    "DOOR_DEPTH",
-    "LOOK_AHEAD_S",
-    "ENTRANCE_POSES_M",
     "OUTDOOR_FOG_M",
     "MODEL_PVS",
     "MODEL_PORTALS",
@@ -96,19 +94,6 @@ __all__ = [
     "walk_crossing",
     "replay_crossing",
 ]
-
-DOOR_AHEAD_S = 8.0
-"""Prefetch the interior once the door is this many seconds' walk away (at the eye's speed)."""
-
-LOOK_AHEAD_S: tuple[float, ...] = (0.0, 1.0, 2.0, 3.0, 5.0, 8.0)
-"""Prefetch: the seconds ahead at which the rooms seen through the entrance are predicted."""
-
-DOOR_DEPTH = 8
-
-ENTRANCE_POSES_M: tuple[float, ...] = (10.0, 5.0, 2.0, 0.5)
-"""Prefetch: the rooms seen through the entrance from these distances in front of it come
-right after those the predicted motion sees."""
-"""Prefetch of the interior: the doorway and the rooms up to this many portals beyond it."""
 
 OUTDOOR_FOG_M = 800.0
 """Outdoors the rooms are seen through the shell's openings out to the bake's view
@@ -214,86 +199,6 @@ class _Objects:
             self.lo = self.hi = np.zeros((0, 3))
 
 
-def _entrance_view(
-    rooms: RoomStreamer, e: Entrance, door: NDArray[np.float64], proj: NDArray[np.float64], size: tuple[int, int]
-) -> list[int]:
-    """The rooms the walk in will see, in the order it comes to them: through the
-    entrance from :data:`ENTRANCE_POSES_M` metres in front of it (farthest first),
-    facing the door (within 60 degrees either way; from the nearest pose every way),
-    then from the doorway and from a metre into each cell beyond it, every way."""
-    inner = np.asarray(rooms.cells[e.doorway].outline, np.float64).mean(axis=0)
-    out_dir = door[:2] - inner
-    out_dir = out_dir / max(float(np.linalg.norm(out_dir)), 1e-9)
-    facing = math.atan2(-out_dir[1], -out_dir[0])
-    z = min(float(p[4][:, 2].min()) for p in rooms.topology.portals if p[0] == e.portal) + 1.6
-    every = np.radians(np.arange(0.0, 360.0, 30.0))
-    poses: list[tuple[int, NDArray[np.float64], NDArray[np.float64]]] = []
-    for k, d in enumerate(ENTRANCE_POSES_M):
-        near = k == len(ENTRANCE_POSES_M) - 1
-        yaws = every if near else facing + np.radians(np.arange(-60.0, 61.0, 30.0))
-        poses.append((e.street, np.array([*(door[:2] + d * out_dir), z]), yaws))
-    poses.append((e.doorway, np.array([*inner, z]), every))
-    for r in rooms.cells[e.doorway].portals:
-        if r.cell in rooms.foreign or rooms.cells[r.cell].kind == "outside":
-            continue
-        mid = np.asarray(r.polygon, np.float64).mean(axis=0)[:2]
-        step = mid - inner
-        step = step / max(float(np.linalg.norm(step)), 1e-9)
-        poses.append((r.cell, np.array([*(mid + step), z]), every))
-    out: list[int] = []
-    for cell, eye, yaws in poses:
-        for yaw in yaws:
-            out += rooms.seen_from(cell, eye, camera(eye, float(yaw), 0.0).astype(np.float64), proj, size)
-    return [c for c in dict.fromkeys(out) if c not in rooms.foreign]
-
-
-def _door_ahead(rooms: RoomStreamer, e: Entrance) -> list[int]:
-    """The doorway, then the cells up to :data:`DOOR_DEPTH` portals beyond it, nearest first
-    (neither the street nor the building's outside)."""
-    out = [e.doorway]
-    frontier = [e.doorway]
-    for _ in range(DOOR_DEPTH):
-        nxt = []
-        for c in frontier:
-            for n in rooms.cells[c].neighbours:
-                if n not in out and n in rooms.cells and n not in rooms.foreign and rooms.cells[n].kind != "outside":
-                    out.append(n)
-                    nxt.append(n)
-        frontier = nxt
-    return out
-
-
-def _seen_ahead(
-    rooms: RoomStreamer,
-    e: Entrance,
-    eye: NDArray[np.float64],
-    view: NDArray[np.float64],
-    proj: NDArray[np.float64],
-    size: tuple[int, int],
-    velocity: NDArray[np.float64],
-    door: NDArray[np.float64],
-) -> list[int]:
-    """The rooms seen through the entrance from where the eye will be (moving on at
-    ``velocity`` for each of :data:`LOOK_AHEAD_S`, while it comes nearer the door),
-    looking the way it looks now and straight at the door, nearest in time first."""
-    out: list[int] = []
-    v = np.array([*np.asarray(velocity, np.float64).reshape(2), 0.0])
-    last = float(np.linalg.norm(eye[:2] - door[:2]))
-    for h in LOOK_AHEAD_S:
-        e2 = eye + h * v
-        d = float(np.linalg.norm(e2[:2] - door[:2]))
-        if h and d >= last:
-            break
-        last = d
-        aim = np.array([door[0], door[1], e2[2]])
-        views = [predicted_view(view, eye, e2)]
-        if d > 0.5:
-            views.append(look_at(e2, aim).astype(np.float64))
-        for v2 in views:
-            out += rooms.seen_from(e.street, e2, v2, proj, size)
-    return [c for c in dict.fromkeys(out) if c not in rooms.foreign]
-
-
 async def walk_crossing(
     config: ReplayConfig,
     clock: Clock,
@@ -338,7 +243,7 @@ async def walk_crossing(
     last_progress = -math.inf
     planned = -math.inf
     seen: list[int] = []
-    entrance_view: list[int] | None = None
+    from_entrance: list[int] | None = None
     door = np.asarray(next(p[4] for p in rooms.topology.portals if p[0] == e.portal), np.float64).mean(axis=0)
     while True:
         t = clock.now()
@@ -369,10 +274,10 @@ async def walk_crossing(
         if soon and not indoors:
             if t - planned >= rooms.config.replan_s:
                 planned = t
-                seen = _seen_ahead(rooms, e, eye, view, proj, (w, h), predictor.velocity(), door)
-            if entrance_view is None:
-                entrance_view = _entrance_view(rooms, e, door, proj, (w, h))
-            ahead = [*seen, *entrance_view, *_door_ahead(rooms, e)]
+                seen = seen_ahead(rooms, e, eye, view, proj, (w, h), predictor.velocity(), door)
+            if from_entrance is None:
+                from_entrance = entrance_view(rooms, e, door, proj, (w, h))
+            ahead = [*seen, *from_entrance, *door_ahead(rooms, e)]
         pvs_cells: list[int] = []
         shown: list[int] = []
         if indoors:
