@@ -29,6 +29,7 @@ from walkstream.shared.codec import unpack_bounded
 from walkstream.shared.codec.bounded import inflate_bounded
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import readonly
+from walkstream.shared.scene.placement import ContentsPlacement
 
 __all__ = [
     "PortalRef",
@@ -318,6 +319,9 @@ class Entrance:
     object ``building`` (named by street PVS) is drawn as the contents of the room cell
     ``shell`` (the interior's outside: its outer walls with the door, and its roof),
     never from its own parameters (they are a stand-in inside the shell).
+    ``placement``, when sent, says that the contents of the interior's cells are in the
+    interior's own frame and how to move them into the scene's (None: they are in the
+    scene's frame already, as a crossing scene baked before stores them).
     """
 
     portal: int
@@ -325,11 +329,15 @@ class Entrance:
     street: int
     doorway: int
     shell: int
+    placement: ContentsPlacement | None = None
 
-    def to_wire(self) -> dict[str, int]:
-        """The entrance as sent."""
-        return {"portal": self.portal, "building": self.building, "street": self.street,
-                "doorway": self.doorway, "shell": self.shell}
+    def to_wire(self) -> dict[str, Any]:
+        """The entrance as sent (``placement`` only when there is one)."""
+        out: dict[str, Any] = {"portal": self.portal, "building": self.building, "street": self.street,
+                               "doorway": self.doorway, "shell": self.shell}
+        if self.placement is not None:
+            out["placement"] = self.placement.to_wire()
+        return out
 
 
 def decode_entrances(body: bytes, what: str) -> tuple[Entrance, ...]:
@@ -342,7 +350,10 @@ def decode_entrances(body: bytes, what: str) -> tuple[Entrance, ...]:
         if not isinstance(e, dict):
             raise CodecError(f"{what}: [{k}] is not a map")
         try:
-            out.append(Entrance(*(_int(e[f], f"{what}: [{k}].{f}") for f in ("portal", "building", "street", "doorway", "shell"))))
+            ids = [_int(e[f], f"{what}: [{k}].{f}") for f in ("portal", "building", "street", "doorway", "shell")]
         except KeyError as exc:
             raise CodecError(f"{what}: [{k}] has no {exc.args[0]!r}") from None
+        placed = e.get("placement")
+        out.append(Entrance(ids[0], ids[1], ids[2], ids[3], ids[4],
+                            None if placed is None else ContentsPlacement.from_wire(placed, f"{what}: [{k}].placement")))
     return tuple(out)

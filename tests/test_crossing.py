@@ -283,3 +283,78 @@ def test_the_interior_keeps_its_own_cells_and_portals(baked: tuple[Path, dict[st
             assert (mine.kind, rooms[mine.id].name, len(mine.boundary)) == (c.kind, c.name, len(c.outline))
             assert shapely.Polygon(mine.boundary).area == pytest.approx(c.polygon.area, abs=1e-6)
     assert kinds == Counter(p.kind for p in alone.portals) and len(rooms) == len(alone.cells)
+
+
+def _nearest(points: np.ndarray, to: np.ndarray) -> np.ndarray:
+    """Each of ``points``' distance to the nearest of ``to`` (both ``(n, 3)``)."""
+    return np.sqrt(((points[:, None, :] - to[None, :, :]) ** 2).sum(axis=2)).min(axis=1)
+
+
+def test_a_turned_interiors_contents_stay_in_its_own_frame(baked: tuple[Path, dict[str, Any], Path]) -> None:
+    """The contents of the turned office are the office alone's, byte for byte (cellmesh/3
+    keeps its boxes, 27 kB rather than 68 kB placed), and the entrance says how to place them."""
+    db, _, d = baked
+    bake(d / "office.json", d / "office.db")
+    with SceneReader.open(d / "office.db") as r:
+        alone = {c: r.contents(c) for c in r.contents_info()}
+    with SceneReader.open(db) as r:
+        (e,) = r.entrances()
+        rooms = r.rooms()
+        got = {c - min(rooms): r.contents(c) for c in r.contents_info()}
+    p = e.placement
+    assert p is not None and p.cells == (min(rooms), max(rooms)) and abs(p.angle) > 0.01  # turned to the facade
+    assert got == alone
+    assert sum(map(len, got.values())) < 30_000
+
+
+def test_placed_contents_match_the_contents_encoded_placed(baked: tuple[Path, dict[str, Any], Path]) -> None:
+    """Decoded and placed by the entrance's placement, each cell's parts are those a crossing
+    bake stored placed before (encoded after the move), within the codec's error."""
+    from walkstream.server.bake.interior import interior_parts
+    from walkstream.server.bake.placement import Placement, moved
+    from walkstream.server.sources.interior import InteriorScene
+    from walkstream.server.sources.read import read_source
+    from walkstream.shared.codec.cellmesh import decode_cell_mesh, encode_cell_mesh
+    from walkstream.shared.codec.planarmesh import area_tolerance, mesh_area
+
+    db, _, d = baked
+    scene = read_source(d / "office.json")
+    assert isinstance(scene, InteriorScene)
+    local = interior_parts(scene, d / "office.json")
+    with SceneReader.open(db) as r:
+        (e,) = r.entrances()
+        offset = min(r.rooms())
+        blobs = {c: r.contents(c) for c in r.contents_info()}
+    p = e.placement
+    assert p is not None
+    exact = moved(local, Placement(p.angle, p.shift, p.dz)).parts
+    c, s = abs(np.cos(p.angle)), abs(np.sin(p.angle))
+    # half a millimetre per coordinate in the interior's frame (turned: up to 0.5 (|c| + |s|) mm
+    # in x and y), float32 rounding on top
+    bound = np.array([0.5e-3 * (c + s), 0.5e-3 * (c + s), 0.5e-3]) + 1e-5
+    parts = 0
+    for cid, blob in blobs.items():
+        new = p.place(decode_cell_mesh(blob, f"cell {cid}"))
+        ps = [q for q in exact.get(cid - offset, []) if len(q[3])]
+        was = decode_cell_mesh(encode_cell_mesh(ps), "placed before") if ps else None
+        assert len(new.parts) == len(ps) == (len(was.parts) if was else 0)
+        for a, b, q in zip(new.parts, was.parts if was else (), ps, strict=True):
+            parts += 1
+            assert (a.element, a.material) == (b.element, b.material) == (q[0], q[1])
+            # every placed vertex is one of the part's own, moved, within the bound
+            assert _nearest(a.positions.astype(np.float64), np.asarray(q[2], np.float64)).max() <= float(np.linalg.norm(bound))
+            assert np.all(np.abs(a.bbox[0] - b.bbox[0]) <= bound + 0.5e-3)
+            assert np.all(np.abs(a.bbox[1] - b.bbox[1]) <= bound + 0.5e-3)
+            area = mesh_area(q[2], q[3])
+            assert abs(mesh_area(a.positions, a.indices) - area) <= area_tolerance(q[2], q[3])
+            assert abs(mesh_area(b.positions, b.indices) - area) <= area_tolerance(q[2], q[3])
+            # the faces still face out: the same area facing each axis way as before
+            assert np.allclose(_facing(a), _facing(b), atol=0.01 * max(area, 1.0))
+    assert parts > 100
+
+
+def _facing(part: Any) -> np.ndarray:
+    """Area facing +x, -x, +y, -y, +z, -z."""
+    t = part.positions.astype(np.float64)[part.indices.astype(np.int64)]
+    n = 0.5 * np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    return np.concatenate([np.clip(n, 0, None).sum(axis=0), np.clip(-n, 0, None).sum(axis=0)])

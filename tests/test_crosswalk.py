@@ -18,6 +18,7 @@ from walkstream.server.service.main import create_app
 from walkstream.server.sources.citygen import write_city
 from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
 from walkstream.server.store import SceneReader
+from walkstream.shared.scene.placement import ContentsPlacement, placement_for
 
 LINK_56K = LinkProfile(down_bps=56_000.0, up_bps=56_000.0, rtt_s=0.2)
 
@@ -136,8 +137,84 @@ def test_the_service_names_the_entrances(scene: Path) -> None:
 
     with SceneReader.open(scene) as r:
         want = [(e.portal, e.building, e.street, e.doorway, e.shell) for e in r.entrances()]
+        placed = [e.placement for e in r.entrances()]
     packed = asyncio.run(get("application/msgpack"))
     assert packed.status_code == 200 and packed.headers["etag"]
     got = decode_entrances(packed.content, "entrances")
     assert [(e.portal, e.building, e.street, e.doorway, e.shell) for e in got] == want
-    assert [tuple(e.values()) for e in json.loads(asyncio.run(get("application/json")).text)] == want
+    assert [e.placement for e in got] == placed and placed[0] is not None  # exact: float64 on the wire
+    keys = ("portal", "building", "street", "doorway", "shell")
+    sent = json.loads(asyncio.run(get("application/json")).text)
+    assert [tuple(e[k] for k in keys) for e in sent] == want
+    assert [ContentsPlacement.from_wire(e["placement"], "json") for e in sent] == placed
+
+
+def test_an_entrance_without_a_placement_and_bad_placements() -> None:
+    import msgpack
+
+    from walkstream.shared.errors import CodecError
+    from walkstream.shared.roomwire import Entrance, decode_entrances
+
+    plain = Entrance(1, 2, 3, 4, 5)
+    assert "placement" not in plain.to_wire()  # as a crossing scene baked before sends it
+    assert decode_entrances(msgpack.packb([plain.to_wire()]), "e") == (plain,)
+    p = ContentsPlacement(0.5, (10.0, -3.0), 0.25, (7, 9))
+    assert decode_entrances(msgpack.packb([Entrance(1, 2, 3, 4, 5, p).to_wire()]), "e")[0].placement == p
+    for bad in ({"angle": 0.5, "shift": [1.0], "dz": 0.0, "cells": [0, 1]},
+                {"angle": float("nan"), "shift": [1.0, 2.0], "dz": 0.0, "cells": [0, 1]},
+                {"angle": 0.5, "shift": [1.0, 2.0], "dz": 0.0, "cells": [3, 1]},
+                {"angle": 0.5, "shift": [1.0, 2.0], "cells": [0, 1]}, [1, 2]):
+        with pytest.raises(CodecError):
+            decode_entrances(msgpack.packb([plain.to_wire() | {"placement": bad}]), "e")
+    # the move: a quarter turn, then the shift and the lift; a cell outside the range is not the placement's
+    assert np.allclose(ContentsPlacement(np.pi / 2, (10.0, 0.0), 1.0, (7, 9)).xyz([[1.0, 0.0, 0.0]]), [[10.0, 1.0, 1.0]])
+    assert p.holds(7) and p.holds(9) and not p.holds(10) and placement_for([p], 6) is None
+    assert np.allclose(p.matrix() @ [1.0, 2.0, 3.0, 1.0], [*p.xyz([[1.0, 2.0, 3.0]])[0], 1.0])
+
+
+def _placed_before(scene: Path, out: Path) -> Path:
+    """``scene`` as a crossing bake stored it before contents kept their own frame: the
+    contents encoded after the move into the city, no placements table."""
+    import shutil
+    import sqlite3
+
+    from walkstream.server.bake.interior import interior_parts
+    from walkstream.server.bake.placement import Placement, moved
+    from walkstream.server.sources.read import read_source
+    from walkstream.shared.codec.cellmesh import decode_cell_mesh, encode_cell_mesh, raw_bytes
+
+    with SceneReader.open(scene) as r:
+        (e,) = r.entrances()
+        offset = min(r.rooms())
+    p = e.placement
+    assert p is not None
+    src = scene.parent / "office.json"
+    parts = moved(interior_parts(read_source(src), src), Placement(p.angle, p.shift, p.dz)).parts  # type: ignore[arg-type]
+    shutil.copyfile(scene, out)
+    db = sqlite3.connect(out)
+    with db:
+        db.execute("DROP TABLE placements")
+        for (cid,) in db.execute("SELECT cell FROM contents").fetchall():
+            blob = encode_cell_mesh([q for q in parts.get(cid - offset, []) if len(q[3])])
+            m = decode_cell_mesh(blob, "placed")
+            db.execute("UPDATE contents SET data = ?, triangles = ?, vertices = ?, raw_bytes = ? WHERE cell = ?",
+                       (blob, m.triangles, m.vertices, raw_bytes(m.vertices, m.triangles), cid))
+    db.close()
+    return out
+
+
+def test_a_crossing_baked_before_placements_still_replays(scene: Path, walked: ReplayResult) -> None:
+    """A crossing scene whose contents are stored placed (no placement: the identity) replays
+    as before: the rooms where they were, nothing culled against its truth."""
+    old = _placed_before(scene, scene.parent / "before.db")
+    with SceneReader.open(old) as r:
+        assert r.entrances()[0].placement is None
+        stored = sum(c.nbytes for c in r.contents_info().values())
+    with SceneReader.open(scene) as r:
+        assert sum(c.nbytes for c in r.contents_info().values()) < 0.5 * stored  # the turn cost the boxes
+    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", truth_every=25, kind="crossing")
+    got = run_replay(httpx.ASGITransport(app=create_app([old])), "http://t", cfg).summary
+    assert got["entrance"] == {k: v for k, v in walked.summary["entrance"].items() if k != "placement"}
+    assert got["truth"]["culled_pixels"] == 0 and got["truth"]["frames"] - got["truth"]["unknown"] >= 40
+    assert got["door_frames_without_first_room"] == 0 and got["perfect_frame_ratio"] > 0.9
+    assert got["contents_bytes"] > walked.summary["contents_bytes"]

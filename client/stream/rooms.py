@@ -56,6 +56,7 @@ from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.portals import PortalCull, cull_portals, frustum_cells
 from walkstream.shared.roomview import RoomLocator
 from walkstream.shared.roomwire import RoomRecord, Topology
+from walkstream.shared.scene.placement import ContentsPlacement, placement_for
 
 __all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "predicted_view", "turned_view"]
 
@@ -177,13 +178,19 @@ class RoomStreamer:
         Knobs.
     foreign:
         Cells the topology holds for the portal walk only (see :attr:`foreign`).
+    placements:
+        Where contents come in an interior's own frame (a crossing scene's entrances'
+        :class:`~walkstream.shared.scene.placement.ContentsPlacement`): each cell they
+        hold is placed in the scene's frame as it is stored, before the cache sees it.
     """
 
     def __init__(
         self, api: SceneClient, clock: Clock, cache: Cache, topology: Topology, config: RoomStreamConfig,
-        foreign: Iterable[int] = (),
+        foreign: Iterable[int] = (), placements: Iterable[ContentsPlacement] = (),
     ) -> None:
         self.api = api
+        self.placements = tuple(placements)
+        """Moves of contents from an interior's own frame into the scene's (none: in the scene's)."""
         self.foreign = frozenset(int(c) for c in foreign)
         """Cells of another model in the topology (a street cell joined at an entrance):
         the portal walk passes them, their contents are never asked for."""
@@ -511,7 +518,10 @@ class RoomStreamer:
                     del self._tasks[c]
 
     def _store(self, cid: int, mesh: CellMesh) -> None:
-        """Keep a received cell's contents (and count it)."""
+        """Keep a received cell's contents, placed in the scene's frame (and count it)."""
+        placed = placement_for(self.placements, cid)
+        if placed is not None:
+            mesh = placed.place(mesh)
         if cid in self.stats.fetched:
             self.stats.refetched += 1
         self.stats.fetched.add(cid)

@@ -84,7 +84,10 @@ async def crossing_truth(
                                  timeout=httpx.Timeout(120.0)) as http:
         api = SceneClient(http, clock, scene)
         for c in cells:
-            whole[int(c)] = await api.contents(int(c))
+            mesh = await api.contents(int(c))
+            # placed as the walk's streamer places them (contents in the interior's own frame)
+            placed = entrance.placement
+            whole[int(c)] = placed.place(mesh) if placed is not None and placed.holds(int(c)) else mesh
     truth = InteriorTruth(whole, size, fov_deg=fov_deg, near=0.1, far=2000.0)
     culled = frames_culled = pinholes = 0
     worst: tuple[int, int] = (0, -1)

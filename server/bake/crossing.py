@@ -10,11 +10,16 @@ One id space: the city's cells keep their ids ``0 .. n-1`` (the same cells, PVS
 and ACH as the city alone would get), the interior's cells follow from ``n`` (rooms,
 doorways and the interior's ``outside``) with their portals, rooms, stairs and
 contents.  The interior is cut into cells in its own frame and moved whole
-(:func:`~.placement.moved`): the same cells and portals as the interior alone.  Its
-contents are encoded in the city's frame; cellmesh/3's boxes and axis rectangles need
-faces along the axes, so a turned interior's contents are larger (the 16 x 14 m
-office of the tests turned 3.6 degrees: 27.3 kB alone, 67.8 kB placed).  The manifest lists the city's features plus ``rooms``, ``portals``,
-``meshes`` and ``entrances``; its ``kind`` is ``crossing``.
+(:func:`~.placement.moved`): the same cells and portals as the interior alone, in
+the city's frame (locating the eye and the portal walk need them there).  Its
+**contents** stay in the interior's own frame, as the interior alone stores them, and
+the entrance's :class:`~walkstream.shared.scene.placement.ContentsPlacement` (the
+``placements`` table, sent with ``GET .../entrances``) moves them into the city's
+where the client decodes them.  Why: cellmesh/3's boxes and axis rectangles need faces
+along the axes, so contents encoded after the turn lose them (the 16 x 14 m office of
+the tests, turned 3.6 degrees: 67.8 kB placed against 27.3 kB in its own frame).  The
+manifest lists the city's features plus ``rooms``, ``portals``, ``meshes`` and
+``entrances``; its ``kind`` is ``crossing``.
 
 **What stands for the building from the street.**  The interior's own outer shell:
 the contents of its ``outside`` cell (its outer walls with the entrance's real hole
@@ -68,6 +73,7 @@ from walkstream.server.bake.interior import (
 from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.objectrows import object_rows
 from walkstream.server.bake.placement import (
+    Placement,
     entrance_door,
     interior_shell,
     moved,
@@ -93,6 +99,7 @@ from walkstream.server.store import (
 from walkstream.shared.buildings import default_grammar, default_grammar_text
 from walkstream.shared.errors import InputError
 from walkstream.shared.records import BuildingParams
+from walkstream.shared.scene.placement import ContentsPlacement
 
 __all__ = [
     "CROSSING_FEATURE",
@@ -214,6 +221,12 @@ def office_size(scene: SourceScene, cells: list[ViewCell], *, near: float = 1.0)
     return None if best is None else (best[0], best[1], best[3])
 
 
+def _contents_placement(p: Placement, cells: tuple[int, int]) -> ContentsPlacement:
+    """The move of the interior's contents (cells ``cells[0] .. cells[1]``) into the city, as stored."""
+    return ContentsPlacement(float(p.angle), (float(p.shift[0]), float(p.shift[1])), float(p.dz),
+                             (int(cells[0]), int(cells[1])))
+
+
 def _stand_in(b: BuildingParams, shell: shapely.Geometry, top: float) -> BuildingParams:
     inner = shapely.buffer(shell, -STAND_IN_INSET, join_style="mitre")
     parts = [g for g in shapely.get_parts(inner) if isinstance(g, shapely.Polygon) and not g.is_empty]
@@ -318,10 +331,14 @@ def bake_crossing(
         )
         for vp in viewpoints(cells, city):
             writer.add_viewpoint(vp.name, vp.x, vp.y, vp.z, vp.yaw, vp.cell)
-        encode_s = write_interior_tables(writer, inner, baked, offset=offset, links={doorway: [street.id]})
+        # the topology moved into the city, the contents as they were baked (own frame)
+        own = replace(baked, parts=local.parts)
+        encode_s = write_interior_tables(writer, inner, own, offset=offset, links={doorway: [street.id]})
         outer = layout.portals[door.portal]
         writer.add_portals([PortalInfo(entrance.portal, street.id, doorway, outer.polygon, "door", "entrance", "entrance")])
-        writer.add_entrances([EntranceInfo(entrance.portal, int(old.id), street.id, doorway, layout.outside + offset)])
+        cells_in = (offset, offset + max(c.id for c in layout.cells))
+        writer.add_entrances([EntranceInfo(entrance.portal, int(old.id), street.id, doorway, layout.outside + offset,
+                                           _contents_placement(placement, cells_in))])
         key = hashlib.sha256(repr(sorted(settings_dict.items())).encode()).hexdigest()[:16]
         finished = 0
         if progress:

@@ -96,7 +96,7 @@ class InteriorState:
         compact = encode_topology_compact(decode_topology(self.topology["msgpack"].content, "topology"))
         self.topology_compact = Encoded(compact, TOPOLOGY_COMPACT_MEDIA, etag_for(self.version, "topology", "c2"))
         """The topology in millimetres, planes rebuilt from outlines (``walkstream-topology/2``)."""
-        entrances = [Entrance(e.portal, e.building, e.street, e.doorway, e.shell).to_wire() for e in reader.entrances()]
+        entrances = [Entrance(e.portal, e.building, e.street, e.doorway, e.shell, e.placement).to_wire() for e in reader.entrances()]
         self.entrances: dict[Rep, Encoded] = {
             rep: encode(entrances, rep, self.version, "entrances") for rep in ("msgpack", "json")
         }

@@ -27,6 +27,7 @@ from walkstream.shared.content.params import KIND as PARAMS
 from walkstream.shared.content.registry import content_kind
 from walkstream.shared.errors import NotFoundError, StoreError
 from walkstream.shared.records import BuildingParams, StreetParams, Viewpoint
+from walkstream.shared.scene.placement import ContentsPlacement
 
 try:  # advisory locks between processes; POSIX only
     import fcntl
@@ -44,6 +45,7 @@ from walkstream.server.store.records import (
     StairInfo,
     StoreyInfo,
     f64_array,
+    finite_number,
     parse_meta,
     row_index,
 )
@@ -462,7 +464,17 @@ class SceneReader:
         if not self._has_table("entrances"):
             return []
         rows = self._query("SELECT portal, building, street, doorway, shell FROM entrances ORDER BY portal")
-        return [EntranceInfo(*(int(v) for v in r)) for r in rows]
+        placed: dict[int, ContentsPlacement] = {}
+        if self._has_table("placements"):  # a crossing scene baked before has none: contents placed already
+            for pid, angle, x, y, dz, first, last in self._query(
+                "SELECT portal, angle, x, y, dz, first, last FROM placements ORDER BY portal"
+            ):
+                what = f"{self._label}: placement of entrance {pid}"
+                placed[int(pid)] = ContentsPlacement(
+                    finite_number(angle, what), (finite_number(x, what), finite_number(y, what)),
+                    finite_number(dz, what), (row_index(first, what), row_index(last, what)),
+                )
+        return [EntranceInfo(int(p), int(b), int(s), int(d), int(sh), placed.get(int(p))) for p, b, s, d, sh in rows]
 
     def contents_info(self) -> dict[int, ContentsInfo]:
         """Cell id -> the sizes of its contents (empty for a city)."""

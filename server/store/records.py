@@ -18,6 +18,7 @@ from walkstream.shared.codec import (
 from walkstream.shared.errors import StoreError
 from walkstream.shared.records import BuildingParams, StreetParams
 from walkstream.shared.roomwire import ContentsRef
+from walkstream.shared.scene.placement import ContentsPlacement
 
 try:  # advisory locks between processes; POSIX only
     import fcntl
@@ -198,13 +199,16 @@ class EntranceInfo:
     """A building's entrance in a crossing scene: ``portal`` (an id of the portals
     table) joins ``street`` (a city cell) to ``doorway`` (a room-model cell); the
     city object ``building`` is drawn as the contents of cell ``shell`` (the
-    interior's outside: its outer walls, with the door, and its roof)."""
+    interior's outside: its outer walls, with the door, and its roof).  ``placement``:
+    the interior's contents are stored in its own frame, moved into the city's by it
+    (None: stored in the city's frame, as a crossing scene baked before keeps them)."""
 
     portal: int
     building: int
     street: int
     doorway: int
     shell: int
+    placement: ContentsPlacement | None = None
 
 
 def finite_number(x: object, what: str) -> float:

@@ -116,6 +116,13 @@ OPTIONAL_TABLES: dict[str, dict[str, str]] = {
             "CREATE TABLE entrances(portal INTEGER PRIMARY KEY, building INTEGER NOT NULL, "
             "street INTEGER NOT NULL, doorway INTEGER NOT NULL, shell INTEGER NOT NULL)"
         ),
+        # the interior's contents are in its own frame: the move into the city's (a turn
+        # about z by angle radians, a shift x, y and a lift dz) for cells first .. last;
+        # a crossing scene without this table (baked before) stores them moved already
+        "placements": (
+            "CREATE TABLE placements(portal INTEGER PRIMARY KEY, angle REAL NOT NULL, x REAL NOT NULL, "
+            "y REAL NOT NULL, dz REAL NOT NULL, first INTEGER NOT NULL, last INTEGER NOT NULL)"
+        ),
     },
 }
 """Tables that exist only in scenes using a feature, declared in this one place."""

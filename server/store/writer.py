@@ -472,10 +472,20 @@ class SceneWriter:
         """Insert (or replace) the entrances of a crossing scene; returns how many."""
         self._require("entrances", "entrances")
         out = []
+        placed = []
         for r in rows:
             what = f"entrance {r.portal}"
             out.append(tuple(row_index(v, what) for v in (r.portal, r.building, r.street, r.doorway, r.shell)))
+            p = r.placement
+            if p is not None:
+                if p.cells[0] > p.cells[1]:
+                    raise StoreError(f"{what}: placement's cells {p.cells[0]} .. {p.cells[1]}: first after last")
+                placed.append((row_index(r.portal, what), finite_number(p.angle, what), finite_number(p.shift[0], what),
+                               finite_number(p.shift[1], what), finite_number(p.dz, what),
+                               row_index(p.cells[0], what), row_index(p.cells[1], what)))
         self._run("entrances", "INSERT OR REPLACE INTO entrances VALUES (?,?,?,?,?)", out)
+        if placed:
+            self._run("placements", "INSERT OR REPLACE INTO placements VALUES (?,?,?,?,?,?,?)", placed)
         return len(out)
 
     # -- finishing -----------------------------------------------------------

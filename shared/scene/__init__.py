@@ -1,7 +1,8 @@
 """The scene model both sides share: the kinds of view cell and how each finds what it sees.
 
 The modules: :mod:`.cellkinds` (every cell kind, its visibility model -- a baked PVS
-with ACH, or portals walked per frame -- and whether a viewer can stand in it).
+with ACH, or portals walked per frame -- and whether a viewer can stand in it), :mod:`.placement` (contents kept in an interior's own frame
+and the move that places them in the scene).
 """
 
 from walkstream.shared.exports import lazy_exports
@@ -12,6 +13,8 @@ _EXPORTS = {
     "VISIBILITY_MODELS": "walkstream.shared.scene.cellkinds",
     "CellKind": "walkstream.shared.scene.cellkinds",
     "cell_kind": "walkstream.shared.scene.cellkinds",
+    "ContentsPlacement": "walkstream.shared.scene.placement",
+    "placement_for": "walkstream.shared.scene.placement",
     "visibility_of": "walkstream.shared.scene.cellkinds",
 }
 
