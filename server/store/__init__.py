@@ -30,7 +30,11 @@ cell_b, polygon, kind, source, name)`` and ``stairs(id, portal, lower, upper, pa
 name)``) and ``meshes`` (``contents(cell, data, triangles, vertices, parts, raw_bytes,
 max_error)``, the ``walkstream-cellmesh/2 or /1`` blob of each cell); an interior has no
 objects and an empty PVS per cell.  Version 1 files (cities baked before interiors
-existed) are read as they are.
+existed) are read as they are.  A crossing scene (a city with an interior) adds the
+feature ``entrances``: ``entrances(portal, building, street, doorway, shell)`` and
+``placements(portal, angle, x, y, dz, first, last)``, the move of the contents of cells
+``first .. last`` from the interior's own frame into the city's (a crossing scene baked
+before has no ``placements``: its contents are stored moved).
 
 Optional tables are declared once in :data:`OPTIONAL_TABLES`, keyed by the feature
 name that needs them, and only created for scenes that list that feature.  The file
