@@ -218,3 +218,42 @@ def test_a_crossing_baked_before_placements_still_replays(scene: Path, walked: R
     assert got["truth"]["culled_pixels"] == 0 and got["truth"]["frames"] - got["truth"]["unknown"] >= 40
     assert got["door_frames_without_first_room"] == 0 and got["perfect_frame_ratio"] > 0.9
     assert got["contents_bytes"] > walked.summary["contents_bytes"]
+
+
+def test_the_room_streamer_places_contents_in_the_city(scene: Path) -> None:
+    """Contents come in the office's own frame; the room streamer stores them placed: every
+    part of a room or doorway cell lies in its cell's outline (in the city's frame), which
+    the unplaced parts of the turned office do not."""
+    import asyncio
+
+    import shapely
+
+    from walkstream.client.clock import RealClock
+    from walkstream.client.net.api import SceneClient
+    from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
+
+    async def fetch() -> tuple[Any, dict[int, Any], dict[int, Any]]:
+        async with httpx.AsyncClient(transport=httpx.ASGITransport(app=create_app([scene])), base_url="http://t") as http:
+            clock = RealClock()
+            api = SceneClient(http, clock, "scene")
+            topo, entrances = await asyncio.gather(api.topology(), api.entrances())
+            rooms = RoomStreamer(api, clock, Cache(1 << 30), topo, RoomStreamConfig(),
+                                 placements=[e.placement for e in entrances if e.placement is not None])
+            cells = [c.id for c in topo.cells]
+            rooms.adopt(cells, api.contents_batch(cells))
+            while any(rooms.mesh(c) is None for c in cells):
+                await asyncio.sleep(0.01)
+            raw = {c: await api.contents(c) for c in cells}
+            await rooms.close()
+            return topo, {c: rooms.mesh(c) for c in cells}, raw
+
+    topo, placed, raw = asyncio.run(fetch())
+    outside = 0
+    for rec in topo.cells:
+        if rec.kind == "outside":
+            continue
+        plan = shapely.Polygon(rec.outline).buffer(0.35, join_style="mitre")  # walls reach half their thickness out
+        for p, q in zip(placed[rec.id].parts, raw[rec.id].parts, strict=True):
+            assert plan.contains(shapely.Point(0.5 * (p.bbox[0] + p.bbox[1])[:2]))
+            outside += not plan.contains(shapely.Point(0.5 * (q.bbox[0] + q.bbox[1])[:2]))
+    assert outside > 0
