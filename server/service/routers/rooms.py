@@ -17,7 +17,9 @@
 ``GET /v1/scenes/{scene}/entrances``
     A crossing scene's entrances: per entrance its portal, the city object it stands
     for (``building``), the street cell and the doorway it joins, and the cell whose
-    contents are drawn for the building (``shell``); an empty list for an interior.
+    contents are drawn for the building (``shell``), and the ``placement`` that moves
+    the interior's contents from its own frame into the scene's (absent for a crossing
+    scene baked before, whose contents are stored moved); an empty list for an interior.
 ``GET /v1/scenes/{scene}/rooms/{cell}``
     One cell: planes, outline, portals (polygon and the other cell), neighbours and
     what its contents weigh.
