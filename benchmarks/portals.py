@@ -12,7 +12,7 @@ on the ``pda`` cost model (fitted to the paper's Table 1, no fog column).
 
 Tightness (the first scene only, ``--truth`` frames): triangles drawn over the
 triangles of the parts truly visible in an id frame of the whole building
-(:class:`~walkstream.client.truth.interior.InteriorTruth`), mean and 95th percentile,
+(:class:`~walkstream.client.truth.render.TruthRenderer`), mean and 95th percentile,
 for portal culling and the frustum alone; the missed pixels of portal culling are
 counted too (they must be 0).
 
@@ -43,7 +43,8 @@ from numpy.typing import NDArray
 from walkstream.benchmarks.portalwalk import cull_portals_reference
 from walkstream.client.draw.devices import make_device
 from walkstream.client.draw.frames import FrameRenderer
-from walkstream.client.truth.interior import InteriorTruth
+from walkstream.client.truth.culled import check_kept
+from walkstream.client.truth.render import TruthRenderer
 from walkstream.server.bake import bake
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.sources.interiorgen import PRESETS, write_interior
@@ -125,7 +126,8 @@ def portal_figures(
     pda = make_device("pda", noise=False)
     renderer = FrameRenderer(size=size, fov_deg=60.0, near=0.1, far=100.0) if gl else None
     # one context for both: a second one made current would leave the renderer's objects invalid
-    truth = InteriorTruth(meshes, (160, 120), far=100.0, ctx=None if renderer is None else renderer.ctx) if truth_frames else None
+    truth = (TruthRenderer(size=(160, 120), rooms=meshes, near=0.1, far=100.0, two_sided=True,
+                           ctx=None if renderer is None else renderer.ctx) if truth_frames else None)
     try:
         if renderer is not None:
             for cid, m in meshes.items():
@@ -194,7 +196,7 @@ def portal_figures(
             if truth is not None and i < truth_frames:
                 for mode in ("portals", "frustum"):
                     kept = [(c, k) for c, m in kept_by[mode].items() for k in np.flatnonzero(m).tolist()]
-                    chk = truth.check(kept, eye, view)
+                    chk = check_kept(truth, kept, eye, view)
                     if mode == "portals":
                         missed += chk.missed_pixels - chk.pinholes
                     if chk.visible_triangles:

@@ -381,7 +381,7 @@ def _views(
         near = np.flatnonzero(np.einsum("nk,nk->n", gap, gap) <= view_distance**2)
         with TruthRenderer({int(ids[i]): meshes[i] for i in near}, size, view_distance=view_distance, ctx=gl) as tr:
             for eye in eyes:
-                rgb, img = tr.render(eye, camera(eye, float(rng.uniform(0.0, 2.0 * math.pi))))
+                rgb, img = tr.colour_frame(eye, camera(eye, float(rng.uniform(0.0, 2.0 * math.pi))))
                 out.append((k, img, rgb))
         tick()
     return out

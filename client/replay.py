@@ -49,7 +49,6 @@ from walkstream.client.report.metrics import (
     link_utilisation,
     summarise,
 )
-from walkstream.client.report.truth import summarise_truth
 from walkstream.client.rewrite.geometry import ObjectGeometry
 from walkstream.client.rewrite.pool import RewriteOptions
 from walkstream.client.stream.cache import Cache
@@ -62,7 +61,7 @@ from walkstream.client.stream.walkstart import (
     interior_start,
     manifest_task,
 )
-from walkstream.client.truth.recorder import TruthRecorder, TruthResult
+from walkstream.client.truth.recorder import INTERIOR_FAR_M, TruthRecorder, TruthResult
 from walkstream.shared.camera import look_at, perspective
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.lsystem.grammar import parse_grammar
@@ -307,7 +306,7 @@ async def replay(
 
             cache.on_evict = on_evict
             recorder = (
-                TruthRecorder(config.truth_every, config.size, _projection(config))
+                TruthRecorder(config.truth_every, config.size, config.fov_deg, near=0.5, far=2000.0)  # _projection's
                 if config.truth_every
                 else None
             )
@@ -326,6 +325,7 @@ async def replay(
                         transport,
                         base_url,
                         api.scene or "",
+                        clock=clock,
                         t_first_perfect=None if first is None else float(log.t[first]),
                         progress=truth_progress,
                     )
@@ -426,10 +426,7 @@ async def replay(
         if streamer.rewrite is not None:
             summary["rewrite"] = streamer.rewrite.describe()
     if truth is not None:
-        first = first_perfect_index(log)
-        summary["truth"] = summarise_truth(
-            truth.log, None if first is None else float(log.t[first])
-        )
+        summary["truth"] = truth.figures
         if truth.error:
             summary["truth_error"] = truth.error
     if config.cache_dir is not None:
@@ -481,6 +478,8 @@ async def _replay_interior(
     frames = InteriorFrames()
     device = make_device(config.device, config.seed)
     renderer: Any = None
+    recorder = (TruthRecorder(config.truth_every, config.size, config.fov_deg, near=0.1, far=INTERIOR_FAR_M)
+                if config.truth_every else None)
     try:
         if not device.simulated or config.snapshot_every:
             from walkstream.client.draw.frames import FrameRenderer
@@ -488,21 +487,17 @@ async def _replay_interior(
             renderer = FrameRenderer(size=config.size, fov_deg=config.fov_deg, near=0.1)
         log, snapshots, spikes = await walk_interior(
             config, clock, path, streamer, device, renderer, progress, t_start,
-            lambda: int(link.stats.bytes_down), frames,
+            lambda: int(link.stats.bytes_down), frames, recorder,
         )
     finally:
         await streamer.close()
         if renderer is not None:
             renderer.release()
-    truth_figures = None
-    if config.truth_every and inner is not None:
-        from walkstream.client.truth.interior import interior_truth
-
+    truth = None
+    if recorder is not None and inner is not None:
         with clock.busy():
-            truth_figures = await interior_truth(
-                inner[0], inner[1], api.scene or "", [c.id for c in topology.cells], frames.notes,
-                config.size, config.fov_deg, clock,
-            )
+            truth = await recorder.finish(inner[0], inner[1], api.scene or "", clock=clock,
+                                          cells=[c.id for c in topology.cells])
     manifest = manifest_fut.result() if manifest_fut.done() and not manifest_fut.cancelled() else None
     stats = link.stats
     step = None
@@ -512,7 +507,9 @@ async def _replay_interior(
                         recovery_ignore=spikes)
     summary.update(link_figures(config, stats, api))
     summary.update(interior_summary(config, log, streamer, frames, topology, cache, setup_s, path, manifest))
-    summary["truth"] = truth_figures
+    summary["truth"] = None if truth is None else truth.figures
+    if truth is not None and truth.error:
+        summary["truth_error"] = truth.error
     return ReplayResult(summary, log, bytes_series(stats, t_start), snapshots, spikes, interior=frames.series(log))
 
 

@@ -42,6 +42,7 @@ from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.present import present, save_snapshot
 from walkstream.client.report.metrics import FrameLog, FrameLogBuilder
 from walkstream.client.stream.rooms import RoomStreamer
+from walkstream.client.truth.recorder import TruthRecorder
 from walkstream.shared.camera import camera
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.portals import box_distance, cull_parts
@@ -65,11 +66,6 @@ class InteriorFrames:
     tightened: int = 0
     """Frames on which the visible cells did not fit the memory budget at the default
     fog, so the fog was tightened until they did (the paper's use of fog)."""
-    notes: list[tuple[int, NDArray[np.float64], NDArray[np.float64], list[tuple[int, int]], float]] = field(
-        default_factory=list
-    )
-    """Every ``truth_every``-th frame: index, eye, view, the parts drawn (and ``(cell, -1)``
-    for each visible cell not received yet), the fog in force."""
 
     def figures(self) -> dict[str, float]:
         """Median, p95 and max culling milliseconds per frame, and portals opened per frame."""
@@ -106,11 +102,13 @@ async def walk_interior(
     t_start: float,
     bytes_down: Callable[[], int],
     frames: InteriorFrames | None = None,
+    recorder: TruthRecorder | None = None,
 ) -> tuple[FrameLog, list[Path], NDArray[np.bool_]]:
     """Walk ``path`` through an interior (see the module docstring).
 
     Returns the frame log, the snapshot files and the per-frame spike flags, like
-    the city's walk; ``frames``, when given, gets the culling figures of each frame.
+    the city's walk; ``frames``, when given, gets the culling figures of each frame,
+    ``recorder`` what the ground truth needs of every N-th.
     """
     culling = streamer.config.culling
     default_fog = streamer.config.fog_m
@@ -202,12 +200,11 @@ async def walk_interior(
                     if m is None:
                         m = meshes[(cid, k)] = part.mesh()
                     draw_keys.append(CELLMESH_CONTENT.upload(renderer, cid, k, m))
-        every = config.truth_every
-        if frames is not None and every and frame % every == 0:
-            drawn = [(c, k) for c, mk in masks.items() for k in np.flatnonzero(mk).tolist()]
+        if recorder is not None and recorder.due(frame):
             # a visible cell not yet received is not a culled one: its parts count as kept
-            waiting = [(c, -1) for c in vis if c not in loaded]
-            frames.notes.append((frame, eye.copy(), v64.copy(), drawn + waiting, float(streamer.fog_m)))
+            recorder.record(frame=frame, t=t - t_start, eye=eye, view=v64,
+                            parts=[(c, k) for c, mk in masks.items() for k in np.flatnonzero(mk).tolist()],
+                            waiting=[c for c in vis if c not in loaded], fog=float(streamer.fog_m))
         quality = sum(1 for c in vis_default if streamer.mesh(c) is not None) / len(vis_default) if vis_default else 0.0
         snap = config.snapshot_every and frame % config.snapshot_every == 0
         if config.cost_step_at_s is not None and not stepped and wt >= config.cost_step_at_s:

@@ -1,7 +1,7 @@
 """Interiors II: portal culling with visible screen areas (shared/portals.py).
 
 The conservative test renders the whole building with object ids and no culling
-(:class:`~walkstream.client.truth.interior.InteriorTruth`, 160 x 120) and checks that
+(:class:`~walkstream.client.truth.render.TruthRenderer`, 160 x 120) and checks that
 no part showing in it was culled, at frames through every door, opening and stair of
 a generated office, FZK-Haus and duplex: the eye on the portal plane (1 cm either
 side, and on it), looking through it and obliquely, looking along the wall that holds
@@ -20,7 +20,8 @@ from typing import Any
 import numpy as np
 
 from walkstream.cli import main
-from walkstream.client.truth.interior import InteriorTruth, TruthCheck
+from walkstream.client.truth.culled import TruthCheck, check_kept
+from walkstream.client.truth.render import TruthRenderer
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.store import SceneReader
 from walkstream.shared.camera import camera, perspective
@@ -154,7 +155,7 @@ class _Scene:
             cid: (np.array([p.bbox[0] for p in m.parts]).reshape(-1, 3), np.array([p.bbox[1] for p in m.parts]).reshape(-1, 3))
             for cid, m in self.meshes.items()
         }
-        self.truth = InteriorTruth(self.meshes, SIZE, ctx=ctx)
+        self.truth = TruthRenderer(size=SIZE, rooms=self.meshes, near=0.1, far=100.0, two_sided=True, ctx=ctx)
         self.proj = self.truth.proj
 
     def frame(self, eye: np.ndarray, yaw: float, pitch: float = 0.0, naive: bool = False,
@@ -174,7 +175,7 @@ class _Scene:
                 cells = frustum_cells(self.graph, start, eye, self.proj @ view)
                 keep = cull_parts(mode, cells, self.boxes, eye, view, self.proj, SIZE)
             kept = [(c, k) for c, m in keep.items() for k in np.flatnonzero(m).tolist()]
-            chk = self.truth.check(kept, eye, view)
+            chk = check_kept(self.truth, kept, eye, view)
             if worst is None or chk.missed_pixels - chk.pinholes > worst[0].missed_pixels - worst[0].pinholes:
                 worst = (chk, start, view)
         return worst
@@ -341,6 +342,8 @@ def test_replay_culling_switch_on_an_interior(office_db: Path, tmp_path: Path) -
         assert s["culling"] == mode and s["culling_ms_median"] > 0
         # the ground truth on an interior: no part culled shows (late cells are not culled)
         assert s["truth"]["frames"] >= 4 and s["truth"]["culled_pixels"] == 0, s["truth"]
+        assert set(s["truth"]) == {"frames", "culled_pixels", "culled_frames", "pinholes", "fog_hidden_pct",
+                                   "tightness_mean", "tightness_p95"}
         assert (rep / "interior.png").read_bytes()[:4] == b"\x89PNG" and "interior.png" in (rep / "index.html").read_text()
         got[mode] = s["triangles_mean"]
     assert got["portals"] < got["frustum"]

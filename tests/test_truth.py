@@ -96,7 +96,7 @@ def test_truth_and_the_client_id_pass_agree(gl: Any) -> None:
     eye = np.array([*scene.streets[0].ring.mean(axis=0), 1.7])
     view = camera(eye, 0.7)
     with TruthRenderer(lod2, (160, 120), ctx=gl) as tr, FrameRenderer((160, 120), ctx=gl) as fr:
-        t_rgb, t_ids = tr.render(eye, view)
+        t_rgb, t_ids = tr.colour_frame(eye, view)
         keys = [(i, 2) for i in sorted(lod2, reverse=True)]
         for i, m in lod2.items():
             fr.upload((i, 2), m)
@@ -108,7 +108,7 @@ def test_truth_and_the_client_id_pass_agree(gl: Any) -> None:
     assert int(np.abs(t_rgb.astype(int) - c_rgb.astype(int)).max()) <= 2
     # the view distance leaves out what is farther
     with TruthRenderer(lod2, (160, 120), view_distance=1.0, ctx=gl) as near:
-        _, ids = near.render(eye, view)
+        _, ids = near.colour_frame(eye, view)
         assert set(np.unique(ids).tolist()) <= {0, *[int(i) + 1 for i in near.within(eye)]}
 
 

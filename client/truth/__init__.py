@@ -1,12 +1,15 @@
-"""The ground truth of a replay frame, and what the client's frame gets wrong against it (issue 12).
+"""The ground truth of a replay frame, for every scene kind, and what the client's frame gets wrong against it.
 
-(:mod:`.interior`: object-id frames of a whole interior, for portal culling's
-conservative test.) :mod:`.compare` (the pixel comparison and the causes (a)-(f) of a missing pixel),
-:mod:`.render` (the truth renderer: every object within the view distance at LOD2,
-sharing nothing of the client's culling or LOD code), :mod:`.scene` (every object of
-the scene, fetched through the API on an unshaped path), :mod:`.recorder` (notes the
-compared frames during the walk and compares them after it).  The figures computed
-from the compared frames are :mod:`walkstream.client.report.truth`.  Public names are
+:mod:`.render` (the one truth renderer: every city object at LOD2 and every room
+part, colour, key and depth, sharing nothing of the client's culling or LOD code),
+:mod:`.scene` (what the truth fetches of a scene through the API on an unshaped path:
+every object, every room cell's contents), :mod:`.notes` (what a frame loop notes of a
+compared frame), :mod:`.recorder` (notes the compared frames during the walk and
+produces the scene's figures after it), :mod:`.missing` (a city's frames compared in
+colour, missing pixels by cause) with :mod:`.compare` (the pixel comparison and the
+causes (a)-(f) of a missing pixel), :mod:`.culled` (what a frame with rooms kept
+against the truth: culled pixels and pinholes).  The figures computed from the
+colour-compared frames are :mod:`walkstream.client.report.truth`.  Public names are
 imported lazily.
 """
 
@@ -18,9 +21,12 @@ _EXPORTS = {
     "compare_frame": "walkstream.client.truth.compare",
     "missing_mask": "walkstream.client.truth.compare",
     "TruthRenderer": "walkstream.client.truth.render",
-    "InteriorTruth": "walkstream.client.truth.interior",
-    "TruthCheck": "walkstream.client.truth.interior",
+    "object_key": "walkstream.client.truth.render",
+    "TruthCheck": "walkstream.client.truth.culled",
+    "check_kept": "walkstream.client.truth.culled",
+    "FrameNote": "walkstream.client.truth.notes",
     "TruthScene": "walkstream.client.truth.scene",
+    "fetch_contents": "walkstream.client.truth.scene",
     "TruthRecorder": "walkstream.client.truth.recorder",
     "TruthResult": "walkstream.client.truth.recorder",
 }

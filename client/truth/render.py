@@ -1,13 +1,28 @@
-"""The ground-truth renderer: every object within the view distance at LOD2, colour and object id.
+"""The ground-truth renderer: every city object at LOD2 and every room part, nothing culled.
 
-It shares no code with the client's frame path (no culling of :mod:`walkstream.shared.frustum`,
-no LOD choice of :mod:`walkstream.client.draw.allocate`, not even its mesh buffers): all
-objects live in one vertex buffer in ascending id order, each vertex carrying its
-object's id, and a frame draws every object whose bounding box comes within the view
-distance of the eye (plus any objects named in ``also``), in one pass into two colour
-attachments -- the lit colour and the object id.  Only the lighting constants are the
-client's (:mod:`walkstream.client.draw.meshes`), so that where both frames show the same
-surface they show the same colour.
+One renderer for every scene, whatever it holds: city objects (their LOD2 meshes,
+lit in their materials' colours) and room parts (each part of each cell's contents,
+:class:`~walkstream.shared.codec.cellmesh.CellPart`, in its material's colour, unlit).
+Each thing drawn has a key: a room part ``(cell, part)``, a city object
+``(-1 - id, 0)`` (:func:`object_key`); :attr:`TruthRenderer.keys` lists them in draw
+order -- the objects in ascending ids, then the parts by cell and part -- and a
+frame gives, per pixel, the index of the key it shows, its eye-space depth and its
+colour.
+
+It shares no code with the client's frame path (no culling of
+:mod:`walkstream.shared.frustum` or :mod:`walkstream.shared.portals`, no LOD choice of
+:mod:`walkstream.client.draw.allocate`, not even its mesh buffers): everything lives in
+one vertex buffer and a frame draws the runs of what it is asked to draw in one pass
+into three attachments -- colour, key index and depth.  Only the lighting constants
+are the client's (:mod:`walkstream.client.draw.meshes`), so that where both frames
+show the same object they show the same colour.
+
+What differs by scene kind on purpose is the caller's: the projection (the city's
+near plane is 0.5 m, the rooms' and a crossing's 0.1 m), whether back faces are
+culled (``two_sided``: a city object is a closed solid and the client culls its back
+faces too; room parts clipped to cells are not closed, so interiors and crossings
+draw both sides), and the fog (``fog_m`` of :meth:`TruthRenderer.render`: fragments
+farther from the eye are not drawn, so what the fog hides on purpose is no miss).
 
 Why ascending ids: two coplanar surfaces (a street piece meeting a crossroad) tie in
 depth, and the depth test ``<`` keeps the one drawn first; the client's ID pass draws
@@ -16,6 +31,7 @@ in ascending ids too, so ties resolve the same way in both frames.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -24,6 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.draw.meshes import AMBIENT, BACKGROUND_RGB, LIGHT_DIRECTION
 from walkstream.shared.camera import mat4_bytes, perspective
+from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import Releasable, check_gl_error, create_context, release_objects
 from walkstream.shared.palette import material_rgb
@@ -32,7 +49,7 @@ from walkstream.shared.records import Mesh
 if TYPE_CHECKING:
     import moderngl
 
-__all__ = ["MAX_BUFFER_BYTES", "TruthRenderer"]
+__all__ = ["MAX_BUFFER_BYTES", "TruthRenderer", "object_key"]
 
 _VERTEX_SHADER = """
 #version 330
@@ -41,12 +58,14 @@ in vec3 in_position;
 in vec3 in_normal;
 in vec4 in_color;
 in uint in_id;
+out vec3 v_world;
 out vec3 v_normal;
 out vec3 v_color;
 flat out uint v_id;
 invariant gl_Position;
 void main() {
     gl_Position = u_view_proj * vec4(in_position, 1.0);
+    v_world = in_position;
     v_normal = in_normal;
     v_color = in_color.rgb;
     v_id = in_id;
@@ -57,12 +76,16 @@ _FRAGMENT_SHADER = """
 #version 330
 uniform vec3 u_light_dir;
 uniform float u_ambient;
+uniform vec3 u_eye;
+uniform float u_fog;
+in vec3 v_world;
 in vec3 v_normal;
 in vec3 v_color;
 flat in uint v_id;
 layout(location = 0) out vec4 f_color;
 layout(location = 1) out uint f_id;
 void main() {
+    if (distance(v_world, u_eye) > u_fog) discard;
     float diffuse = max(dot(normalize(v_normal), u_light_dir), 0.0);
     f_color = vec4(v_color * (u_ambient + (1.0 - u_ambient) * diffuse), 1.0);
     f_id = v_id;
@@ -75,71 +98,112 @@ MAX_BUFFER_BYTES = 2**31
 _VERTEX = np.dtype([("p", "<f4", 3), ("n", "<f4", 3), ("c", "u1", 4), ("id", "<u4")])
 
 
+def object_key(oid: int) -> tuple[int, int]:
+    """The key of city object ``oid`` among the truth's keys (room parts are ``(cell, part)``, cells >= 0)."""
+    return (-1 - int(oid), 0)
+
+
 class TruthRenderer(Releasable):
-    """Draws ground-truth frames of a fixed set of objects (their LOD2 meshes).
+    """Draws ground-truth frames of a fixed set of city objects and room parts.
 
     Parameters
     ----------
-    meshes : mapping id -> Mesh
-        Every object that may be drawn, at LOD2, scene-local metres.
+    objects : mapping id -> Mesh
+        Every city object that may be drawn, at LOD2, scene-local metres.
     size : (int, int)
         Frame width and height in pixels.
+    rooms : mapping cell id -> CellMesh
+        Every room cell's contents whose parts may be drawn (parts without a
+        triangle are left out).
     fov_deg, near, far : float
-        The default projection (the client's: 60 degrees, 0.5 m, 2000 m).
+        The projection (the client's: the city's 0.5 m to 2000 m by default).
     view_distance : float
-        An object is drawn when its bounding box comes this close to the eye.
+        :meth:`within` and :meth:`colour_frame` take the objects whose bounding box
+        comes this close to the eye.
+    two_sided : bool
+        Draw back faces too (room parts are not closed solids); by default they are
+        culled, as the client culls a city object's.
     ctx : moderngl.Context, optional
         Context to draw with; by default one is made (and released by :meth:`release`).
     """
 
     def __init__(
         self,
-        meshes: Mapping[int, Mesh],
+        objects: Mapping[int, Mesh] | None = None,
         size: tuple[int, int] = (640, 480),
         *,
+        rooms: Mapping[int, CellMesh] | None = None,
         fov_deg: float = 60.0,
         near: float = 0.5,
         far: float = 2000.0,
         view_distance: float = 800.0,
+        two_sided: bool = False,
         ctx: moderngl.Context | None = None,
     ) -> None:
+        objects = objects or {}
+        rooms = rooms or {}
         w, h = (int(v) for v in size)
         if w <= 0 or h <= 0:
             raise InputError(f"TruthRenderer.size: expected positive width and height, got {size}")
         if not float(view_distance) > 0:
             raise InputError(f"TruthRenderer.view_distance: expected > 0, got {view_distance}")
         self.size = (w, h)
-        self.proj = perspective(fov_deg, w / h, near, far)
+        self.near, self.far = float(near), float(far)
+        self.proj = perspective(fov_deg, w / h, near, far).astype(np.float64)
         self.view_distance = float(view_distance)
-        ids = np.array(sorted(int(i) for i in meshes), np.int64)
+        self.two_sided = bool(two_sided)
+        ids = np.array(sorted(int(i) for i in objects), np.int64)
         if len(ids) and ids[0] < 0:
             raise InputError(f"TruthRenderer: object ids must be >= 0, got {ids[0]}")
         self.ids = ids
-        parts = [meshes[int(i)] for i in ids]
-        self._lo = np.array([m.positions.min(axis=0) if len(m.positions) else np.full(3, np.inf) for m in parts], np.float64).reshape(-1, 3)
-        self._hi = np.array([m.positions.max(axis=0) if len(m.positions) else np.full(3, -np.inf) for m in parts], np.float64).reshape(-1, 3)
-        nv = np.array([len(m.positions) for m in parts], np.int64)
-        ni = np.array([m.indices.size for m in parts], np.int64)
+        """The objects' ids, ascending: key index ``k < len(ids)`` is object ``ids[k]``."""
+        meshes = [objects[int(i)] for i in ids]
+        self._lo = np.array([m.positions.min(axis=0) if len(m.positions) else np.full(3, np.inf) for m in meshes], np.float64).reshape(-1, 3)
+        self._hi = np.array([m.positions.max(axis=0) if len(m.positions) else np.full(3, -np.inf) for m in meshes], np.float64).reshape(-1, 3)
+        self.keys: list[tuple[int, int]] = [object_key(i) for i in ids.tolist()]
+        """What each key index draws, in draw order (:func:`object_key`, ``(cell, part)``)."""
+        parts: list[Any] = []
+        for cid in sorted(rooms):
+            if int(cid) < 0:
+                raise InputError(f"TruthRenderer: room cell ids must be >= 0, got {cid}")
+            for k, part in enumerate(rooms[cid].parts):
+                if part.triangles:
+                    self.keys.append((int(cid), k))
+                    parts.append(part)
+        self.index = {key: i for i, key in enumerate(self.keys)}
+        self.triangles = np.array([len(m.indices) for m in meshes] + [p.triangles for p in parts], np.int64)
+        """Triangles of each key."""
+        nv = np.array([len(m.positions) for m in meshes] + [len(p.positions) for p in parts], np.int64)
+        ni = np.array([m.indices.size for m in meshes] + [p.indices.size for p in parts], np.int64)
         v0 = np.concatenate([[0], np.cumsum(nv)]).astype(np.int64)
         i0 = np.concatenate([[0], np.cumsum(ni)]).astype(np.int64)
         self._first, self._stop = i0[:-1], i0[1:]
         nbytes = max(int(v0[-1]) * _VERTEX.itemsize, int(i0[-1]) * 4)
         if nbytes >= MAX_BUFFER_BYTES:
             # drivers take buffer sizes and offsets as 32-bit ints: past this they crash
+            also = f" and {len(parts)} room parts" if parts else ""
             raise RenderError(
-                f"TruthRenderer: {len(ids)} objects at LOD2 need a {nbytes / 2**30:.1f} GiB buffer "
+                f"TruthRenderer: {len(ids)} objects at LOD2{also} need a {nbytes / 2**30:.1f} GiB buffer "
                 f"(at most {MAX_BUFFER_BYTES / 2**30:.0f} GiB): give it the objects near the camera only"
             )
         verts = np.empty(int(v0[-1]), _VERTEX)
         index = np.empty(int(i0[-1]), np.uint32)
-        for k, m in enumerate(parts):
+        light = np.asarray(LIGHT_DIRECTION, np.float32)
+        for k, m in enumerate(meshes):
             s, e = int(v0[k]), int(v0[k + 1])
             verts["p"][s:e] = m.positions
             verts["n"][s:e] = m.normals
             verts["c"][s:e, :3] = material_rgb(m.materials)
-            verts["c"][s:e, 3] = 255
-            verts["id"][s:e] = ids[k] + 1  # 0 is the clear value: no object
             index[i0[k] : i0[k + 1]] = m.indices.reshape(-1) + np.uint32(s)
+        for j, p in enumerate(parts):
+            k = len(meshes) + j
+            s, e = int(v0[k]), int(v0[k + 1])
+            verts["p"][s:e] = p.positions
+            verts["n"][s:e] = light  # unlit: facing the light, a part shows its material's colour
+            verts["c"][s:e, :3] = material_rgb(np.full(e - s, p.material))
+            index[i0[k] : i0[k + 1]] = p.indices.reshape(-1) + np.uint32(s)
+        verts["c"][:, 3] = 255
+        verts["id"] = np.repeat(np.arange(1, len(nv) + 1, dtype=np.uint32), nv)  # 0 is the clear value: nothing
         self._own_ctx = ctx is None
         self.ctx: Any = None
         self._gl: list[Any] = []
@@ -172,7 +236,7 @@ class TruthRenderer(Releasable):
         w, h = self.size
         self._colour = ctx.renderbuffer((w, h), components=4)
         self._idbuf = ctx.renderbuffer((w, h), components=1, dtype="u4")
-        self._depth = ctx.depth_renderbuffer((w, h))
+        self._depth = ctx.depth_texture((w, h))
         self._fbo = ctx.framebuffer(color_attachments=[self._colour, self._idbuf], depth_attachment=self._depth)
         # an integer attachment must not be cleared with the float sky colour: each is
         # cleared through a framebuffer of its own
@@ -182,23 +246,127 @@ class TruthRenderer(Releasable):
         self._gl += [self._colour, self._idbuf, self._depth]
         check_gl_error(ctx, "after creating the truth renderer")
 
+    # -- what to draw ---------------------------------------------------------------
+
     def within(self, eye: ArrayLike) -> NDArray[np.int64]:
         """Ids of the objects whose bounding box comes within the view distance of ``eye``."""
+        out: NDArray[np.int64] = self.ids[self._near(eye)]
+        return out
+
+    def _near(self, eye: ArrayLike) -> NDArray[np.bool_]:
         e = np.asarray(eye, np.float64).reshape(3)
         gap = np.maximum(np.maximum(self._lo - e, e - self._hi), 0.0)
-        near = np.einsum("nk,nk->n", gap, gap) <= self.view_distance**2
-        out: NDArray[np.int64] = self.ids[near]
+        out: NDArray[np.bool_] = np.einsum("nk,nk->n", gap, gap) <= self.view_distance**2
         return out
+
+    def flags(self, keys: Iterable[tuple[int, int]]) -> NDArray[np.bool_]:
+        """``(len(keys),)`` which of :attr:`keys` ``keys`` names (unknown keys are ignored)."""
+        out = np.zeros(len(self.keys), bool)
+        for key in keys:
+            i = self.index.get((int(key[0]), int(key[1])))
+            if i is not None:
+                out[i] = True
+        return out
+
+    def object_ids(self, index: ArrayLike) -> NDArray[np.uint32]:
+        """A frame's key indices as object id + 1 per pixel (0 where no object shows)."""
+        k = np.asarray(index, np.int64)
+        obj = (k >= 0) & (k < len(self.ids))
+        out = np.zeros(k.shape, np.uint32)
+        out[obj] = (self.ids[k[obj]] + 1).astype(np.uint32)
+        return out
+
+    # -- frames ---------------------------------------------------------------------
 
     def render(
         self,
         eye: ArrayLike,
         view: ArrayLike,
-        proj: ArrayLike | None = None,
+        only: NDArray[np.bool_] | None = None,
+        fog_m: float = math.inf,
         *,
-        also: Iterable[int] = (),
+        proj: ArrayLike | None = None,
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """Draw the keys (all, or those flagged in ``only``) from one camera.
+
+        Parameters
+        ----------
+        eye : (3,) float
+            The camera position (for the fog).
+        view : (4, 4) float
+            The camera.
+        only : (len(keys),) bool, optional
+            What to draw (default: everything).
+        fog_m : float
+            Fragments farther from the eye are not drawn.
+        proj : (4, 4) float, optional
+            The projection (default: the renderer's).
+
+        Returns
+        -------
+        ids : (h, w) int64
+            Index into :attr:`keys` of what each pixel shows, -1 for nothing; row 0 at the top.
+        depth : (h, w) float64
+            Eye-space depth, metres (``inf`` where nothing shows).
+
+        The colour of the same frame is :meth:`colour`.
+        """
+        if self.ctx is None:
+            raise RenderError("TruthRenderer: used after release()")
+        import moderngl
+
+        ctx = self.ctx
+        p = self.proj if proj is None else np.asarray(proj, np.float64)
+        vp = p @ np.asarray(view, np.float64)
+        self._prog["u_view_proj"].write(mat4_bytes(vp))
+        self._prog["u_eye"].value = tuple(float(v) for v in np.asarray(eye, np.float64).reshape(3))
+        self._prog["u_fog"].value = float(min(fog_m, 1e30))
+        w, h = self.size
+        r, g, b = (c / 255.0 for c in BACKGROUND_RGB)
+        self._fbo_colour.clear(r, g, b, 1.0, depth=1.0)
+        self._fbo_ids.clear(0.0, 0.0, 0.0, 0.0)
+        self._fbo.use()
+        ctx.viewport = (0, 0, w, h)
+        ctx.disable(moderngl.BLEND)
+        if self.two_sided:
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.disable(moderngl.CULL_FACE)
+        else:
+            ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+            ctx.front_face = "ccw"
+            ctx.cull_face = "back"
+        ctx.depth_func = "<"
+        flags = np.ones(len(self.keys), bool) if only is None else np.asarray(only, bool)
+        padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
+        step = np.diff(padded)
+        starts, stops = np.flatnonzero(step == 1), np.flatnonzero(step == -1)
+        for s, t in zip(starts.tolist(), stops.tolist(), strict=True):
+            first, last = int(self._first[s]), int(self._stop[t - 1])
+            if last > first:
+                self._vao.render(moderngl.TRIANGLES, vertices=last - first, first=first)
+        check_gl_error(ctx, "after drawing a truth frame")
+        raw = self._fbo.read(components=1, attachment=1, dtype="u4", alignment=1)
+        ids = np.frombuffer(raw, np.uint32).reshape(h, w)[::-1].astype(np.int64) - 1
+        d = np.frombuffer(self._depth.read(alignment=1), np.float32).astype(np.float64)
+        n, f = self.near, self.far
+        if proj is not None:  # the depth range of the projection drawn with
+            n, f = p[2, 3] / (p[2, 2] - 1.0), p[2, 3] / (p[2, 2] + 1.0)
+        ndc = 2.0 * d - 1.0
+        lin = np.where(d >= 1.0, np.inf, 2.0 * n * f / (f + n - ndc * (f - n)))
+        return ids, lin.reshape(h, w)[::-1]
+
+    def colour(self) -> NDArray[np.uint8]:
+        """``(h, w, 3)`` the lit colour of the last frame drawn, row 0 at the top."""
+        if self.ctx is None:
+            raise RenderError("TruthRenderer: used after release()")
+        w, h = self.size
+        raw = self._fbo.read(components=3, attachment=0, alignment=1)
+        return np.frombuffer(raw, np.uint8).reshape(h, w, 3)[::-1].copy()
+
+    def colour_frame(
+        self, eye: ArrayLike, view: ArrayLike, proj: ArrayLike | None = None, *, also: Iterable[int] = ()
     ) -> tuple[NDArray[np.uint8], NDArray[np.uint32]]:
-        """Draw the truth of one camera.
+        """The city's truth of one camera: every object within the view distance, and ``also``.
 
         Parameters
         ----------
@@ -217,48 +385,16 @@ class TruthRenderer(Releasable):
         ids : (h, w) uint32
             Object id + 1 per pixel, 0 where none shows.
         """
-        if self.ctx is None:
-            raise RenderError("TruthRenderer: used after release()")
-        import moderngl
-
-        ctx = self.ctx
-        e = np.asarray(eye, np.float64).reshape(3)
-        gap = np.maximum(np.maximum(self._lo - e, e - self._hi), 0.0)
-        draw = np.einsum("nk,nk->n", gap, gap) <= self.view_distance**2
+        draw = np.zeros(len(self.keys), bool)
+        draw[: len(self.ids)] = self._near(eye)
         extra = np.fromiter((int(i) for i in also), np.int64)
         if len(extra) and len(self.ids):
             pos = np.clip(np.searchsorted(self.ids, extra), 0, len(self.ids) - 1)
             draw[pos[self.ids[pos] == extra]] = True
-        p = self.proj if proj is None else np.asarray(proj)
-        vp = np.asarray(p, np.float64) @ np.asarray(view, np.float64)
-        self._prog["u_view_proj"].write(mat4_bytes(vp))
-        w, h = self.size
-        r, g, b = (c / 255.0 for c in BACKGROUND_RGB)
-        self._fbo_colour.clear(r, g, b, 1.0, depth=1.0)
-        self._fbo_ids.clear(0.0, 0.0, 0.0, 0.0)
-        self._fbo.use()
-        ctx.viewport = (0, 0, w, h)
-        ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-        ctx.disable(moderngl.BLEND)
-        ctx.depth_func = "<"
-        ctx.front_face = "ccw"
-        ctx.cull_face = "back"
-        padded = np.concatenate([[False], draw, [False]]).astype(np.int8)
-        step = np.diff(padded)
-        starts, stops = np.flatnonzero(step == 1), np.flatnonzero(step == -1)
-        for s, t in zip(starts.tolist(), stops.tolist(), strict=True):
-            first, last = int(self._first[s]), int(self._stop[t - 1])
-            if last > first:
-                self._vao.render(moderngl.TRIANGLES, vertices=last - first, first=first)
-        check_gl_error(ctx, "after drawing a truth frame")
-        raw = self._fbo.read(components=3, attachment=0, alignment=1)
-        rgb = np.frombuffer(raw, np.uint8).reshape(h, w, 3)[::-1].copy()
-        raw = self._fbo.read(components=1, attachment=1, dtype="u4", alignment=1)
-        ids = np.frombuffer(raw, np.uint32).reshape(h, w)[::-1].copy()
-        return rgb, ids
+        ids, _ = self.render(eye, view, draw, proj=proj)
+        return self.colour(), self.object_ids(ids)
 
     def release(self) -> None:
         """Release every GL object (and the context if it was made here); idempotent."""
         release_objects(self.ctx, self._gl, self._own_ctx)
         self.ctx = None
-

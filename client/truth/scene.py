@@ -1,7 +1,8 @@
 """What the ground truth needs of a scene, fetched through the HTTP API on an unshaped path.
 
-The truth must know every object of the scene, not only those some PVS names, so it
-asks the service for all of them -- but not over the walk's link: it talks to the
+The truth must know every object of the scene, not only those some PVS names, and
+every room cell's contents (:func:`fetch_contents`), so it asks the service for all of
+them -- but not over the walk's link: it talks to the
 same server through the *inner* httpx transport (the one the shaped link wraps),
 with a client of its own, after the walk is over.  Nothing it fetches is counted in
 the link's bytes, and under the simulated clock it runs inside ``clock.busy()``, so
@@ -17,7 +18,7 @@ pass).
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import httpx
@@ -25,11 +26,14 @@ import msgpack
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.client.net.api import SceneClient
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.codec import decode_object
+from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import ApiError, CodecError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
 from walkstream.shared.records import BuildingParams, Mesh, StreetParams
+from walkstream.shared.scene.placement import ContentsPlacement
 from walkstream.shared.streets import build_street
 from walkstream.shared.wire import (
     MSGPACK,
@@ -40,7 +44,7 @@ from walkstream.shared.wire import (
     decode_manifest,
 )
 
-__all__ = ["TruthScene", "UnshapedTransport"]
+__all__ = ["TruthScene", "UnshapedTransport", "fetch_contents"]
 
 _MAX_STREAM = 256 << 20
 
@@ -77,7 +81,7 @@ class TruthScene:
         self.scene = scene
         self.manifest = manifest
         self.params = params
-        self.grammar: Grammar = parse_grammar(manifest.grammar_text)
+        self._grammar: Grammar | None = None
         self._pvs: dict[int, NDArray[np.int64]] = {}
         self._meshes: dict[int, Mesh] = {}
 
@@ -108,6 +112,13 @@ class TruthScene:
     async def close(self) -> None:
         """Close the truth's own HTTP client (the transport stays the walk's)."""
         await self._http.aclose()
+
+    @property
+    def grammar(self) -> Grammar:
+        """The scene's building grammar (parsed when first needed: an interior has none to build)."""
+        if self._grammar is None:
+            self._grammar = parse_grammar(self.manifest.grammar_text)
+        return self._grammar
 
     # -- geometry -------------------------------------------------------------------
 
@@ -161,6 +172,32 @@ class TruthScene:
         )
         _check(r, what)
         return decode_locate(r.content, what)
+
+
+async def fetch_contents(
+    transport: httpx.AsyncBaseTransport,
+    base_url: str,
+    scene: str,
+    cells: Iterable[int],
+    clock: Any,
+    placements: Sequence[ContentsPlacement] = (),
+) -> dict[int, CellMesh]:
+    """Room cells ``cells``' contents of ``scene``, decoded, over ``transport`` as it is.
+
+    The one place the truth fetches room contents (by the client's own call,
+    :meth:`~walkstream.client.net.api.SceneClient.contents`), one cell at a time;
+    a cell one of ``placements`` holds (a crossing's interior, kept in its own frame) is
+    placed as the walk's streamer places it.
+    """
+    out: dict[int, CellMesh] = {}
+    async with httpx.AsyncClient(transport=UnshapedTransport(transport), base_url=base_url,
+                                 timeout=httpx.Timeout(120.0)) as http:
+        api = SceneClient(http, clock, scene)
+        for c in cells:
+            mesh = await api.contents(int(c))
+            placed = next((p for p in placements if p.holds(int(c))), None)
+            out[int(c)] = mesh if placed is None else placed.place(mesh)
+    return out
 
 
 def _check(r: httpx.Response, what: str) -> None:

@@ -74,7 +74,7 @@ from walkstream.client.stream.entrance import DOOR_AHEAD_S, door_ahead, entrance
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 from walkstream.client.stream.streamer import Streamer
-from walkstream.client.walk.crosstruth import UNKNOWN
+from walkstream.client.truth.recorder import TruthRecorder
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import ApiError
@@ -125,12 +125,6 @@ class CrossingFrames:
     """Frames in the entrance's doorway: the room cells whose contents were in memory."""
     prefetch_from: float | None = None
     """Walk time at which the interior's prefetch began (None: never)."""
-    notes: list[tuple[int, NDArray[np.float64], NDArray[np.float64], list[tuple[int, int]], float]] = field(
-        default_factory=list
-    )
-    """Every ``truth_every``-th frame: index, eye, view, what was drawn or waited for
-    (room parts ``(cell, part)``, ``(cell, -1)`` for a visible cell not received, city
-    objects ``(-1 - id, 0)``), the fog in force."""
 
     def switches(self, t: NDArray[np.float64]) -> list[tuple[float, str]]:
         """``(walk time, model)`` each time the visible set's model changes (the first frame's too)."""
@@ -213,11 +207,13 @@ async def walk_crossing(
     t_start: float,
     bytes_down: Callable[[], int],
     frames: CrossingFrames,
+    recorder: TruthRecorder | None = None,
 ) -> tuple[FrameLog, list[Path], NDArray[np.bool_]]:
     """Walk ``path`` through a crossing scene (see the module docstring).
 
     Returns the frame log, the snapshot files and the per-frame spike flags, like the
-    city's and the interior's walks; ``frames`` gets the crossing's own figures.
+    city's and the interior's walks; ``frames`` gets the crossing's own figures,
+    ``recorder`` what the ground truth needs of every N-th frame.
     """
     e = entrance
     indoor_fog = rooms.config.fog_m
@@ -233,7 +229,6 @@ async def walk_crossing(
     proj = perspective(config.fov_deg, w / h, _NEAR, _FAR).astype(np.float64)
     tick = 1.0 / config.fps
     total = path.duration if config.duration_s is None else min(config.duration_s, path.duration)
-    every = int(config.truth_every or 0)
     t_walk0 = clock.now()
     city.walk_end = t_walk0 + total
     frame = 0
@@ -353,15 +348,13 @@ async def walk_crossing(
         items = len(objects.pvs) + len(room_cells)
         dq = (have_obj + have_rooms) / items if items else 1.0
         rq = (len(objects.geoms) + have_rooms) / items if items else 1.0
-        if every and frame % every == 0:
-            kept = [(c, k) for c, mk in masks.items() for k in np.flatnonzero(mk).tolist()]
-            kept += [(c, -1) for c in room_cells if c not in loaded]
-            built = {g.id for g in objects.geoms}
-            kept += [(-1 - g.id, 0) for g, lod in zip(objects.geoms, alloc.lod.tolist(), strict=True) if lod >= 0]
-            kept += [(-1 - i, 0) for i in objects.pvs if i not in built]  # late, not culled
-            if not indoors and (street is None or street not in city.cells):
-                kept.append(UNKNOWN)
-            frames.notes.append((frame, eye.copy(), view.copy(), kept, fog if indoors else OUTDOOR_FOG_M))
+        if recorder is not None and recorder.due(frame):
+            # outdoors before the street cell's record: no visible set known, nothing culled
+            unknown = not indoors and (street is None or street not in city.cells)
+            recorder.record(frame=frame, t=t - t_start, eye=eye, view=view, geoms=objects.geoms, lods=alloc.lod,
+                            pvs=None if unknown else objects.pvs, built=[g.id for g in objects.geoms],
+                            parts=[(c, k) for c, mk in masks.items() for k in np.flatnonzero(mk).tolist()],
+                            waiting=[c for c in room_cells if c not in loaded], fog=fog if indoors else OUTDOOR_FOG_M)
         if held and room == e.doorway:
             frames.loaded[frame] = frozenset(c for c in rooms.cells if rooms.mesh(c) is not None)
         frames.model.append(MODEL_PORTALS if indoors else MODEL_PVS)
@@ -450,6 +443,7 @@ async def replay_crossing(
     device = make_device(config.device, config.seed)
     renderer: Any = None
     frames = CrossingFrames()
+    recorder = TruthRecorder(config.truth_every, config.size, config.fov_deg, near=_NEAR, far=_FAR) if config.truth_every else None
     try:
         if not device.simulated or config.snapshot_every:
             from walkstream.client.draw.frames import FrameRenderer
@@ -457,7 +451,7 @@ async def replay_crossing(
             renderer = FrameRenderer(size=config.size, fov_deg=config.fov_deg, near=_NEAR)
         log, snapshots, spikes = await walk_crossing(
             config, clock, path, city, rooms, cache, entrance, device, renderer, progress, t_start,
-            lambda: int(link.stats.bytes_down), frames,
+            lambda: int(link.stats.bytes_down), frames, recorder,
         )
     finally:
         await rooms.close()
@@ -465,14 +459,11 @@ async def replay_crossing(
         if renderer is not None:
             renderer.release()
     truth = None
-    if config.truth_every:
-        from walkstream.client.walk.crosstruth import crossing_truth
-
-        with clock.busy():
-            truth = await crossing_truth(
-                inner[0], inner[1], api.scene or "", [c.id for c in topology.cells], entrance, frames.notes,
-                config.size, config.fov_deg, clock,
-            )
+    if recorder is not None:
+        with clock.busy():  # the building's parameters are a stand-in inside the shell: not drawn
+            truth = await recorder.finish(inner[0], inner[1], api.scene or "", clock=clock,
+                                          cells=[c.id for c in topology.cells], leave_out=[entrance.building],
+                                          placements=[x.placement for x in entrances if x.placement is not None])
     manifest = manifest_fut.result() if manifest_fut.done() and not manifest_fut.cancelled() else None
     step = None
     if config.cost_step_at_s is not None and len(log.t):
@@ -481,7 +472,9 @@ async def replay_crossing(
                         recovery_ignore=spikes)
     summary.update(link_figures(config, link.stats, api))
     summary.update(_figures(config, log, frames, city, rooms, cache, entrance, setup_s, path, manifest))
-    summary["truth"] = truth
+    summary["truth"] = None if truth is None else truth.figures
+    if truth is not None and truth.error:
+        summary["truth_error"] = truth.error
     return summary, log, snapshots, spikes
 
 

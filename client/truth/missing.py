@@ -1,0 +1,172 @@
+"""Missing pixels by cause: a city walk's frames drawn again, each beside its truth, compared in colour and id.
+
+The figures of a walk over city objects only.  Each noted frame is drawn twice -- the
+client's own choice of objects and LODs through the client's renderer
+(:meth:`~walkstream.client.draw.frames.FrameRenderer.draw` and its separate id pass
+:meth:`~walkstream.client.draw.frames.FrameRenderer.draw_ids`), and the truth
+(:meth:`~walkstream.client.truth.render.TruthRenderer.colour_frame`: every object
+within the view distance at LOD2, and whatever the client drew) -- and compared
+(:func:`~walkstream.client.truth.compare.compare_frame`): differing pixels, and missing
+pixels attributed to a cause, (a) the PVS to (f) the fog.  A PVS object not received or
+not built is late (causes (b), (c)); one drawn at a coarser LOD is the budget's (d);
+what is left is culled (e).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.report.truth import TruthLog
+from walkstream.client.truth.compare import CAUSES, compare_frame, missing_mask
+from walkstream.client.truth.notes import FrameNote
+from walkstream.client.truth.render import TruthRenderer
+from walkstream.client.truth.scene import TruthScene
+
+__all__ = ["ComparedFrame", "WorstFrame", "needed_objects", "missing_figures"]
+
+
+@dataclass(frozen=True)
+class ComparedFrame:
+    """One compared frame: its camera, its cell, what the truth showed and what was missing."""
+
+    frame: int
+    t: float
+    cell: int | None
+    eye: NDArray[np.float64]
+    view: NDArray[np.floating[Any]]
+    pixels: int
+    differing: int
+    """Pixels whose colour differs from the truth."""
+    missing_px: NDArray[np.int64]
+    """(6,) missing pixels per cause (:data:`~walkstream.client.truth.compare.CAUSES` order)."""
+    shown: dict[int, int]
+    """Pixels of each object in the truth."""
+    missing: dict[int, int]
+    """Missing pixels of each object (whatever the cause)."""
+
+
+@dataclass(frozen=True)
+class WorstFrame:
+    """The compared frame with the most missing pixels, as images (``(h, w, 3) uint8``)."""
+
+    frame: int
+    t: float
+    missing: NDArray[np.float64]
+    """(6,) shares of its pixels missing per cause."""
+    differing: float
+    client: NDArray[np.uint8]
+    truth: NDArray[np.uint8]
+    mask: NDArray[np.uint8]
+
+
+def needed_objects(ts: TruthScene, notes: Sequence[FrameNote], view_distance: float) -> list[int]:
+    """Objects any noted frame may show: within the view distance of its eye, or drawn."""
+    ids, lo, hi = ts.boxes()
+    need = np.zeros(len(ids), bool)
+    for st in notes:
+        gap = np.maximum(np.maximum(lo - st.eye, st.eye - hi), 0.0)
+        need |= np.einsum("nk,nk->n", gap, gap) <= view_distance**2
+    drawn = {i for st in notes for i, _, _ in st.drawn}
+    return sorted(set(ids[need].tolist()) | (drawn & set(ts.params)))
+
+
+def missing_figures(
+    ts: TruthScene,
+    truth: TruthRenderer,
+    notes: Sequence[FrameNote],
+    pvs_of: Sequence[NDArray[np.int64] | None],
+    proj: NDArray[np.float32],
+    t_first_perfect: float | None,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[TruthLog, WorstFrame | None, list[ComparedFrame]]:
+    """Compare every noted frame with its truth (see the module docstring).
+
+    ``truth`` holds the objects :func:`needed_objects` names; ``pvs_of`` is each
+    frame's PVS (the service's where the client knew none); ``proj`` the client's
+    projection.  Returns one row per frame, the worst frame (from the first perfect
+    frame on first) as images, and every frame in detail.
+    """
+    from walkstream.client.draw.frames import FrameRenderer
+
+    fov = float(np.degrees(2.0 * np.arctan(1.0 / float(proj[1, 1]))))
+    client = FrameRenderer(truth.size, fov_deg=fov, ctx=truth.ctx)
+    rows: list[tuple[int, float, float, NDArray[np.float64]]] = []
+    compared: list[ComparedFrame] = []
+    worst: WorstFrame | None = None
+    worst_key = (-1, -1.0)
+    n = len(notes)
+    try:
+        for k, (st, pvs) in enumerate(zip(notes, pvs_of, strict=True)):
+            keys = [(i, lod) for i, lod, _ in st.drawn]
+            wanted = set(keys)
+            for key in client.keys():
+                if key not in wanted:
+                    client.forget(key)
+            for i, lod, mesh in st.drawn:
+                client.upload((i, lod), mesh)
+            client.draw(keys, st.view, proj)
+            c_rgb = client.snapshot()
+            c_ids = client.draw_ids(keys, st.view, proj)
+            t_rgb, t_ids = truth.colour_frame(st.eye, st.view, proj, also=[i for i, _, _ in st.drawn])
+            knows = st.pvs is not None
+            fogged: list[int] = []
+            if np.isfinite(st.fog):
+                fogged = _beyond(ts, st.eye, st.fog)
+            err = compare_frame(
+                t_ids,
+                t_rgb,
+                c_ids,
+                c_rgb,
+                pvs=pvs,
+                # without the cell record the client knows no PVS: nothing of it is
+                # usable yet, whatever happens to be in its cache
+                received=st.received if knows else (),
+                built=st.built if knows else (),
+                drawn={i: lod for i, lod, _ in st.drawn},
+                fogged=fogged,
+            )
+            tid = t_ids.astype(np.int64) - 1
+            compared.append(
+                ComparedFrame(
+                    st.frame, st.t, st.cell, st.eye, st.view, err.pixels, err.differing,
+                    err.missing, _counts(tid[tid >= 0]), _counts(tid[err.cause >= 0]),
+                )
+            )
+            share = err.missing_share
+            rows.append((st.frame, st.t, err.differing / err.pixels, share))
+            after = t_first_perfect is not None and st.t >= t_first_perfect
+            key = (int(after), err.missed / err.pixels)
+            if key > worst_key:
+                worst_key = key
+                worst = WorstFrame(
+                    st.frame, st.t, share, err.differing / err.pixels, c_rgb, t_rgb,
+                    missing_mask(t_rgb, err.cause),
+                )
+            if progress is not None:
+                progress(k + 1, n)
+    finally:
+        client.release()
+    log = TruthLog(
+        np.array([r[0] for r in rows], np.int64),
+        np.array([r[1] for r in rows]),
+        np.array([r[2] for r in rows]),
+        np.array([r[3] for r in rows]).reshape(-1, len(CAUSES)),
+    )
+    return log, worst, compared
+
+
+def _counts(ids: NDArray[np.int64]) -> dict[int, int]:
+    u, n = np.unique(ids, return_counts=True)
+    return dict(zip(u.tolist(), n.tolist(), strict=True))
+
+
+def _beyond(ts: TruthScene, eye: NDArray[np.float64], distance: float) -> list[int]:
+    ids, lo, hi = ts.boxes()
+    gap = np.maximum(np.maximum(lo - eye, eye - hi), 0.0)
+    out: list[int] = ids[np.einsum("nk,nk->n", gap, gap) > distance**2].tolist()
+    return out
