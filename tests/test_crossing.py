@@ -283,3 +283,43 @@ def test_the_interior_keeps_its_own_cells_and_portals(baked: tuple[Path, dict[st
             assert (mine.kind, rooms[mine.id].name, len(mine.boundary)) == (c.kind, c.name, len(c.outline))
             assert shapely.Polygon(mine.boundary).area == pytest.approx(c.polygon.area, abs=1e-6)
     assert kinds == Counter(p.kind for p in alone.portals) and len(rooms) == len(alone.cells)
+
+
+def test_a_stopped_crossing_bake_resumes_to_the_same_version(
+    baked: tuple[Path, dict[str, Any], Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One driver for every scene: a crossing resumes like a city, and its room contents and
+    its street cells' PVS both go through the one chunk runner."""
+    from walkstream.server.bake import chunks
+
+    _, summary, d = baked
+    ran: list[str] = []
+    run = chunks._run
+
+    def spy(task: Any, *args: Any) -> Any:
+        ran.append(task.__name__)
+        return run(task, *args)
+
+    monkeypatch.setattr(chunks, "_run", spy)
+    out = d / "resumed" / "x.db"
+    out.parent.mkdir()
+    args = (d / "city.geojson", out)
+    assert bake(*args, settings=FAST, interior=d / "office.json", name="scene", max_cells=3) == {}
+    assert ran == ["contents_task", "pvs_task"] and not out.exists()
+    ran.clear()
+    again = bake(*args, settings=FAST, interior=d / "office.json", name="scene")
+    assert again["resumed_cells"] == 3 and ran == ["pvs_task"]  # the contents were kept
+    assert again["version"] == summary["version"]
+
+
+def test_a_crossing_on_a_dask_local_cluster_bakes_the_same_scene(baked: tuple[Path, dict[str, Any], Path]) -> None:
+    from distributed import LocalCluster
+
+    _, summary, d = baked
+    out = d / "dask" / "x.db"
+    out.parent.mkdir()
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        got = bake(d / "city.geojson", out, settings=FAST, interior=d / "office.json", name="scene",
+                   scheduler=cluster.scheduler_address)
+    assert got["version"] == summary["version"]
+
