@@ -11,7 +11,8 @@ import shapely
 
 from walkstream.server.bake import BakeSettings, bake
 from walkstream.server.bake.crossing import STAND_IN_INSET
-from walkstream.server.paths.crossing import record_crossing_path, scene_graph
+from walkstream.server.paths.graph import scene_graph
+from walkstream.server.paths.record import record_walk
 from walkstream.server.sources.citygen import write_city
 from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
 from walkstream.server.store import SceneReader
@@ -124,8 +125,8 @@ def test_record_a_path_from_a_street_to_a_named_room_and_back(baked: tuple[Path,
         graph = scene_graph(r)
     start = (float(enter.xyz[0, 0]), float(enter.xyz[0, 1]))
     room = "0.c00 corridor"
-    path, version = record_crossing_path(db, "in", start, room)
-    back, _ = record_crossing_path(db, "out", room, start)
+    path, version = record_walk(db, "in", start, room)
+    back, _ = record_walk(db, "out", room, start)
     with SceneReader.open(db) as r:
         assert r.version == version or "out" in r.path_names()
         for p in (path, back):
@@ -323,3 +324,24 @@ def test_a_crossing_on_a_dask_local_cluster_bakes_the_same_scene(baked: tuple[Pa
                    scheduler=cluster.scheduler_address)
     assert got["version"] == summary["version"]
 
+
+def test_one_graph_walks_every_scene_kind(baked: tuple[Path, dict[str, Any], Path]) -> None:
+    """The same graph class routes a city (streets only), a crossing (streets, the entrance,
+    rooms) and refuses what a scene does not have."""
+    db, _, d = baked
+    with SceneReader.open(d / "city.db") as r:
+        city = scene_graph(r)
+    with SceneReader.open(db) as r:
+        both = scene_graph(r)
+        rooms = r.rooms()
+    a, b = city.streets.cells[0].centroid, city.streets.cells[-1].centroid
+    assert np.array_equal(city.route(a, b)[:, :2], city.streets.plan(a, b).xy)
+    with pytest.raises(RouteError, match="no rooms"):
+        city.route(a, "0.c00 corridor")
+    with pytest.raises(RouteError, match="no rooms"):
+        _ = city.rooms
+    (e,) = both.entrances
+    floor = both.route(tuple(a), "0.c00 corridor")
+    at_front = int(np.flatnonzero(np.all(np.isclose(floor[:, :2], e.front), axis=1))[0])
+    assert np.allclose(floor[at_front + 1], e.threshold)  # from the street's front of the door to its threshold
+    assert (floor[: at_front + 1, 2] == 0).all() and both.rooms.locate(*floor[-1] + [0, 0, 1.6]) in rooms

@@ -55,7 +55,6 @@ import shapely
 from shapely.geometry.polygon import orient
 
 from walkstream.server.bake.cells import make_cells
-from walkstream.server.bake.crossnav import ENTER_NAME, SceneGraph, front_of
 from walkstream.server.bake.digest import file_digest
 from walkstream.server.bake.interior import (
     INTERIOR_FEATURES,
@@ -75,6 +74,7 @@ from walkstream.server.bake.plan import BakePlan, PvsCells, RoomCells, Say, Walk
 from walkstream.server.bake.roomcontents import Part
 from walkstream.server.bake.rooms import RoomLayout, room_layout
 from walkstream.server.bake.roomwalks import TOUR_NAME
+from walkstream.server.bake.scenenav import ENTER_NAME, SceneGraph, front_of
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.viewpoints import viewpoints
@@ -278,9 +278,8 @@ def crossing_plan(
     entrance = front_of(shapely.Polygon(street.polygon), door.middle, door.normal, floor, len(layout.portals),
                         street.id, door.doorway)
     # ---- the walks
-    city_graph = CellGraph(cells)
-    scene_graph = SceneGraph(city_graph, baked.graph, [entrance])
-    enter, room = scene_graph.enter_walk(ENTER_NAME)
+    nav = SceneGraph(CellGraph(cells), baked.graph, [entrance])
+    enter, room = nav.enter_walk(ENTER_NAME)
     # ---- the database
     features = (["buildings"] + (["streets"] if city.streets else []) + [f"{kind}_cells"]
                 + list(INTERIOR_FEATURES) + [CROSSING_FEATURE])
@@ -314,7 +313,7 @@ def crossing_plan(
     def walks(say: Say) -> list[Walk]:
         out = [(path, f"recorded path {path.name}: {path.duration:.0f} s, {path.length_m():.0f} m at "
                       f"{path.speed_kmh:g} km/h")
-               for path in default_paths(cells, footprints=[b.rings[0] for b in city.buildings], graph=city_graph,
+               for path in default_paths(cells, footprints=[b.rings[0] for b in city.buildings], graph=nav.streets,
                                          say=say)]
         return out + [(walk, f"recorded path {TOUR_NAME}: {walk.duration:.0f} s, {walk.length_m():.0f} m"),
                       (enter, f"recorded path {ENTER_NAME}: {enter.duration:.0f} s, {enter.length_m():.0f} m, "

@@ -32,6 +32,7 @@ from walkstream.server.bake.roomcontents import REACH, Part, contents_task, outs
 from walkstream.server.bake.roomnav import RoomGraph
 from walkstream.server.bake.rooms import RoomLayout, room_layout
 from walkstream.server.bake.roomwalks import TOUR_NAME, entrance_cell, tour
+from walkstream.server.bake.scenenav import SceneGraph
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.store import (
     CellRow,
@@ -142,7 +143,7 @@ def interior_parts(
     for n in notes:
         say(f"note: {n}")
     # ---- the tour
-    graph = RoomGraph(layout.cells, layout.portals, layout.stairs)
+    graph = SceneGraph(rooms=RoomGraph(layout.cells, layout.portals, layout.stairs)).rooms
     start = entrance_cell(layout.cells, layout.portals)
     try:
         walk, coverage = tour(graph, start)

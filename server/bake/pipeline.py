@@ -22,8 +22,10 @@ from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.digest import file_digest
 from walkstream.server.bake.driver import drive
 from walkstream.server.bake.interior import interior_plan
+from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.objectrows import object_rows
 from walkstream.server.bake.plan import BakePlan, PvsCells, Say, Walk, settings_key
+from walkstream.server.bake.scenenav import SceneGraph
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
@@ -149,7 +151,8 @@ def city_plan(
     name: str | None = None,
     say: Callable[[str], None] = lambda _msg: None,
 ) -> BakePlan:
-    """The :class:`~.plan.BakePlan` of a city: its view cells (street or grid), PVS cells only.
+    """The :class:`~.plan.BakePlan` of a city: its view cells (street or grid), PVS cells only;
+    its default walks routed on the street part of its :class:`~.scenenav.SceneGraph`.
 
     The plan's summary adds ``source``, ``source_issues`` and ``source_notes``.
     """
@@ -182,10 +185,13 @@ def city_plan(
         for vp in viewpoints(cells, city):
             writer.add_viewpoint(vp.name, vp.x, vp.y, vp.z, vp.yaw, vp.cell)
 
+    nav = SceneGraph(CellGraph(cells))
+
     def walks(say: Say) -> list[Walk]:
         return [(path, f"recorded path {path.name}: {path.duration:.0f} s, {path.length_m():.0f} m at "
                        f"{path.speed_kmh:g} km/h")
-                for path in default_paths(cells, footprints=[b.rings[0] for b in city.buildings], say=say)]
+                for path in default_paths(cells, footprints=[b.rings[0] for b in city.buildings],
+                                          graph=nav.streets, say=say)]
 
     summary: dict[str, Any] = {"source": str(src), "source_issues": len(scene.issues)}
     if scene.notes:
