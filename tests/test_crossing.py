@@ -345,3 +345,24 @@ def test_one_graph_walks_every_scene_kind(baked: tuple[Path, dict[str, Any], Pat
     at_front = int(np.flatnonzero(np.all(np.isclose(floor[:, :2], e.front), axis=1))[0])
     assert np.allclose(floor[at_front + 1], e.threshold)  # from the street's front of the door to its threshold
     assert (floor[: at_front + 1, 2] == 0).all() and both.rooms.locate(*floor[-1] + [0, 0, 1.6]) in rooms
+
+
+def test_a_crossing_killed_while_writing_its_tables_resumes(
+    baked: tuple[Path, dict[str, Any], Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from walkstream.server.store import SceneWriter
+
+    _, summary, d = baked
+    out = d / "tables" / "x.db"
+    out.parent.mkdir()
+
+    def killed(*_: Any) -> None:
+        raise RuntimeError("killed")
+
+    with monkeypatch.context() as m:
+        m.setattr(SceneWriter, "add_portals", killed)  # after the city's tables, before the rooms'
+        with pytest.raises(RuntimeError, match="killed"):
+            bake(d / "city.geojson", out, settings=FAST, interior=d / "office.json", name="scene")
+    assert Path(str(out) + ".partial").exists() and not out.exists()
+    again = bake(d / "city.geojson", out, settings=FAST, interior=d / "office.json", name="scene")
+    assert again["version"] == summary["version"]

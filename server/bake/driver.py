@@ -5,8 +5,8 @@ both) and
 
 1. opens the work file (:meth:`~walkstream.server.store.SceneWriter.create`); a work
    file left by a killed bake with the same header is resumed;
-2. on a fresh start writes the plan's tables (objects, cells, viewpoints, rooms,
-   portals, stairs, entrances);
+2. writes the plan's tables (objects, cells, viewpoints, rooms, portals, stairs,
+   entrances; on resume again, as upserts that keep every stored PVS);
 3. bakes the room cells' contents, unless a resumed work file has them all: clipped
    in chunks by the one chunk runner (:func:`~.chunks.run_chunks`), placed, encoded;
 4. bakes the PVS of the PVS cells not yet done, in chunks by the same runner, each
@@ -91,8 +91,9 @@ def drive(
     extra: dict[str, Any] = {}
     try:
         done = writer.done_cells() if writer.resumed else set()
-        if not writer.resumed:
-            plan.write_tables(writer)
+        # on resume too: every write is an upsert that keeps a cell's stored PVS, so a
+        # bake killed while it wrote the tables resumes as well
+        plan.write_tables(writer)
         resumed = len([c for c in pvs_cells if c.id in done])
         if writer.resumed:
             say(f"resuming: {resumed} of {len(pvs_cells)} cells already baked")

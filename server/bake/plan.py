@@ -80,8 +80,9 @@ class BakePlan:
     pvs, rooms:
         The scene's cells by kind (either may be None).
     write_tables:
-        Writes everything but the PVS and the contents, once per bake (not again on
-        resume): objects, cells, viewpoints, rooms, portals, stairs, entrances.
+        Writes everything but the PVS and the contents: objects, cells, viewpoints,
+        rooms, portals, stairs, entrances (on resume again: the writer's upserts keep
+        every stored PVS).
     walks:
         The default walks, in the order they are stored, made after the cells.
     summary:
