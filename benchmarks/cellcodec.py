@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from walkstream.server.bake.interior import bake_interior
+from walkstream.server.bake.pipeline import bake_interior
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source

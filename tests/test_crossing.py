@@ -11,7 +11,8 @@ import shapely
 
 from walkstream.server.bake import BakeSettings, bake
 from walkstream.server.bake.crossing import STAND_IN_INSET
-from walkstream.server.paths.crossing import record_crossing_path, scene_graph
+from walkstream.server.paths.graph import scene_graph
+from walkstream.server.paths.record import record_walk
 from walkstream.server.sources.citygen import write_city
 from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
 from walkstream.server.store import SceneReader
@@ -124,8 +125,8 @@ def test_record_a_path_from_a_street_to_a_named_room_and_back(baked: tuple[Path,
         graph = scene_graph(r)
     start = (float(enter.xyz[0, 0]), float(enter.xyz[0, 1]))
     room = "0.c00 corridor"
-    path, version = record_crossing_path(db, "in", start, room)
-    back, _ = record_crossing_path(db, "out", room, start)
+    path, version = record_walk(db, "in", start, room)
+    back, _ = record_walk(db, "out", room, start)
     with SceneReader.open(db) as r:
         assert r.version == version or "out" in r.path_names()
         for p in (path, back):
@@ -310,8 +311,8 @@ def test_a_turned_interiors_contents_stay_in_its_own_frame(baked: tuple[Path, di
 def test_placed_contents_match_the_contents_encoded_placed(baked: tuple[Path, dict[str, Any], Path]) -> None:
     """Decoded and placed by the entrance's placement, each cell's parts are those a crossing
     bake stored placed before (encoded after the move), within the codec's error."""
-    from walkstream.server.bake.interior import interior_parts
-    from walkstream.server.bake.placement import Placement, moved
+    from walkstream.server.bake.interior import interior_parts, room_contents
+    from walkstream.server.bake.placement import Placement
     from walkstream.server.sources.interior import InteriorScene
     from walkstream.server.sources.read import read_source
     from walkstream.shared.codec.cellmesh import decode_cell_mesh, encode_cell_mesh
@@ -327,7 +328,8 @@ def test_placed_contents_match_the_contents_encoded_placed(baked: tuple[Path, di
         blobs = {c: r.contents(c) for c in r.contents_info()}
     p = e.placement
     assert p is not None
-    exact = moved(local, Placement(p.angle, p.shift, p.dz)).parts
+    turn = Placement(p.angle, p.shift, p.dz)
+    exact = {cid: [(e, m, turn.xyz(v), t) for e, m, v, t in ps] for cid, ps in room_contents(scene, local.layout).items()}
     c, s = abs(np.cos(p.angle)), abs(np.sin(p.angle))
     # half a millimetre per coordinate in the interior's frame (turned: up to 0.5 (|c| + |s|) mm
     # in x and y), float32 rounding on top
@@ -358,3 +360,85 @@ def _facing(part: Any) -> np.ndarray:
     t = part.positions.astype(np.float64)[part.indices.astype(np.int64)]
     n = 0.5 * np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
     return np.concatenate([np.clip(n, 0, None).sum(axis=0), np.clip(-n, 0, None).sum(axis=0)])
+
+
+def test_a_stopped_crossing_bake_resumes_to_the_same_version(
+    baked: tuple[Path, dict[str, Any], Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One driver for every scene: a crossing resumes like a city, and its room contents and
+    its street cells' PVS both go through the one chunk runner."""
+    from walkstream.server.bake import chunks
+
+    _, summary, d = baked
+    ran: list[str] = []
+    run = chunks._run
+
+    def spy(task: Any, *args: Any) -> Any:
+        ran.append(task.__name__)
+        return run(task, *args)
+
+    monkeypatch.setattr(chunks, "_run", spy)
+    out = d / "resumed" / "x.db"
+    out.parent.mkdir()
+    args = (d / "city.geojson", out)
+    assert bake(*args, settings=FAST, interior=d / "office.json", name="scene", max_cells=3) == {}
+    assert ran == ["contents_task", "pvs_task"] and not out.exists()
+    ran.clear()
+    again = bake(*args, settings=FAST, interior=d / "office.json", name="scene")
+    assert again["resumed_cells"] == 3 and ran == ["pvs_task"]  # the contents were kept
+    assert again["version"] == summary["version"]
+
+
+def test_a_crossing_on_a_dask_local_cluster_bakes_the_same_scene(baked: tuple[Path, dict[str, Any], Path]) -> None:
+    from distributed import LocalCluster
+
+    _, summary, d = baked
+    out = d / "dask" / "x.db"
+    out.parent.mkdir()
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        got = bake(d / "city.geojson", out, settings=FAST, interior=d / "office.json", name="scene",
+                   scheduler=cluster.scheduler_address)
+    assert got["version"] == summary["version"]
+
+
+def test_one_graph_walks_every_scene_kind(baked: tuple[Path, dict[str, Any], Path]) -> None:
+    """The same graph class routes a city (streets only), a crossing (streets, the entrance,
+    rooms) and refuses what a scene does not have."""
+    db, _, d = baked
+    with SceneReader.open(d / "city.db") as r:
+        city = scene_graph(r)
+    with SceneReader.open(db) as r:
+        both = scene_graph(r)
+        rooms = r.rooms()
+    a, b = city.streets.cells[0].centroid, city.streets.cells[-1].centroid
+    assert np.array_equal(city.route(a, b)[:, :2], city.streets.plan(a, b).xy)
+    with pytest.raises(RouteError, match="no rooms"):
+        city.route(a, "0.c00 corridor")
+    with pytest.raises(RouteError, match="no rooms"):
+        _ = city.rooms
+    (e,) = both.entrances
+    floor = both.route(tuple(a), "0.c00 corridor")
+    at_front = int(np.flatnonzero(np.all(np.isclose(floor[:, :2], e.front), axis=1))[0])
+    assert np.allclose(floor[at_front + 1], e.threshold)  # from the street's front of the door to its threshold
+    assert (floor[: at_front + 1, 2] == 0).all() and both.rooms.locate(*floor[-1] + [0, 0, 1.6]) in rooms
+
+
+def test_a_crossing_killed_while_writing_its_tables_resumes(
+    baked: tuple[Path, dict[str, Any], Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from walkstream.server.store import SceneWriter
+
+    _, summary, d = baked
+    out = d / "tables" / "x.db"
+    out.parent.mkdir()
+
+    def killed(*_: Any) -> None:
+        raise RuntimeError("killed")
+
+    with monkeypatch.context() as m:
+        m.setattr(SceneWriter, "add_portals", killed)  # after the city's tables, before the rooms'
+        with pytest.raises(RuntimeError, match="killed"):
+            bake(d / "city.geojson", out, settings=FAST, interior=d / "office.json", name="scene")
+    assert Path(str(out) + ".partial").exists() and not out.exists()
+    again = bake(d / "city.geojson", out, settings=FAST, interior=d / "office.json", name="scene")
+    assert again["version"] == summary["version"]

@@ -247,7 +247,7 @@ def test_generate_and_bench_interiors_cli(tmp_path: Path, capsys: pytest.Capture
 def test_a_database_baked_with_cellmesh_1_keeps_working(office: Path, tmp_path: Path) -> None:
     # a database baked before walkstream-cellmesh/2: the service serves its blobs as they
     # are and the client decodes them; the same cells in /2 cover the same area
-    from walkstream.server.bake.interior import bake_interior
+    from walkstream.server.bake.pipeline import bake_interior
     from walkstream.server.sources.read import read_source
     from walkstream.shared.codec.cellmesh import CELLMESH_FORMAT, CELLMESH_V1
     from walkstream.shared.codec.planarmesh import mesh_area

@@ -24,7 +24,8 @@ from walkstream.server.bake import bake
 from walkstream.server.bake.roomgeom import clip_polygons, convex_parts, is_convex
 from walkstream.server.bake.roomnav import EYE_HEIGHT
 from walkstream.server.bake.rooms import room_layout
-from walkstream.server.paths.record import interior_graph, record_interior_path
+from walkstream.server.paths.graph import interior_graph
+from walkstream.server.paths.record import record_walk
 from walkstream.server.sources.ifc import load_ifc
 from walkstream.server.sources.interiorfile import load_interior, load_interior_dict
 from walkstream.server.sources.interiorgen import (
@@ -260,15 +261,15 @@ def test_a_stair_joins_two_storeys_and_the_tour_climbs_it(tmp_path: Path) -> Non
         line_z = st.path[d.argmin(axis=1), 2]
         assert np.abs(mid[on_stair, 2] - EYE_HEIGHT - line_z).max() < 0.25
     # routed by room name, and in 3D by the storey's height
-    path, _ = record_interior_path(tmp_path / "stair.db", "up", "Hall", "Landing")
+    path, _ = record_walk(tmp_path / "stair.db", "up", "Hall", "Landing")
     assert path.xyz[-1, 2] == pytest.approx(3.0 + EYE_HEIGHT)
     # scene-local metres (the origin is the centre of the rooms, (4, 2) in the model)
-    path, _ = record_interior_path(tmp_path / "stair.db", "down", (3.0, 2.0, 4.6), (3.0, 2.0, 1.6))
+    path, _ = record_walk(tmp_path / "stair.db", "down", (3.0, 2.0, 4.6), (3.0, 2.0, 1.6))
     assert path.xyz[0, 2] == pytest.approx(3.0 + EYE_HEIGHT) and path.xyz[-1, 2] == pytest.approx(EYE_HEIGHT)
     with pytest.raises(RouteError, match="no room named"):
-        record_interior_path(tmp_path / "stair.db", "x", "Cellar", "Hall")
+        record_walk(tmp_path / "stair.db", "x", "Cellar", "Hall")
     with pytest.raises(RouteError, match="outside every cell"):
-        record_interior_path(tmp_path / "stair.db", "x", (50.0, 50.0, 1.6), "Hall")
+        record_walk(tmp_path / "stair.db", "x", (50.0, 50.0, 1.6), "Hall")
 
 
 def _triangles_in_holes(reader: SceneReader, openings: object, kinds: tuple[str, ...]) -> int:
@@ -333,7 +334,7 @@ def test_a_stair_space_on_one_storey_is_a_room_of_both(tmp_path: Path) -> None:
         ids = {loc.locate(float(x), float(y), z) for z in (EYE_HEIGHT, 3.0 + EYE_HEIGHT)}
         assert ids == {wells[0][1], wells[1][1]}
     assert summary["tour"]["visited"] == 3 and summary["tour"]["storeys_visited"] == 2
-    path, _ = record_interior_path(tmp_path / "well.db", "up", "Hall", "Landing")
+    path, _ = record_walk(tmp_path / "well.db", "up", "Hall", "Landing")
     assert path.xyz[0, 2] == pytest.approx(EYE_HEIGHT) and path.xyz[-1, 2] == pytest.approx(3.0 + EYE_HEIGHT)
 
 

@@ -320,6 +320,16 @@ ONE_HOME = [
     "Releasable",
     "within",
     "manifest_task",
+    # the bake (issue 23): one chunk runner (its pool's worker set-up and task), one
+    # driver's plan, one navigation graph over one Dijkstra, one notion of a walk's place
+    "run_chunks",
+    "dask_client",
+    "init_worker",
+    "pool_task",
+    "BakePlan",
+    "SceneGraph",
+    "shortest_paths",
+    "Place",
 ]
 
 

@@ -69,14 +69,13 @@ def _summary(path: Any) -> str:
 
 def cmd_path_record(args: argparse.Namespace) -> int:
     """Handler of ``walkstream path record``."""
-    from walkstream.server.paths.record import record_interior_path, record_path
+    from walkstream.server.paths.record import record_path, record_walk
     from walkstream.server.store import SceneReader
 
     with SceneReader.open(args.db) as reader:
         kind = reader.meta.kind
     if kind in ("interior", "crossing"):
         from walkstream.server.bake.roomnav import INDOOR_SPEED_KMH
-        from walkstream.server.paths.crossing import record_crossing_path
 
         ends: list[Any] = []
         for room, xy, flag in ((args.from_room, args.from_xy, "--from"), (args.to_room, args.to_xy, "--to")):
@@ -85,8 +84,7 @@ def cmd_path_record(args: argparse.Namespace) -> int:
             ends.append(room if room is not None else _place(xy, flag))
         via_places: list[Any] = [*(args.via_room or []), *(_place(v, "--via") for v in args.via or [])]
         speed = INDOOR_SPEED_KMH if args.speed is None else _speed(args.speed)
-        record = record_crossing_path if kind == "crossing" else record_interior_path
-        path, version = record(args.db, args.name, ends[0], ends[1], speed, via_places, replace=args.replace)
+        path, version = record_walk(args.db, args.name, ends[0], ends[1], speed, via_places, replace=args.replace)
     else:
         if args.from_room or args.to_room or args.via_room:
             raise WalkstreamError(f"{args.db}: a city scene has no rooms: use --from X,Y --to X,Y")

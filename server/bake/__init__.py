@@ -9,9 +9,12 @@ and the next bake with the same settings resumes from the cells already stored.
 
 The modules, in the order of the flow: :mod:`.settings`, :mod:`.cells` (with
 :mod:`.streetcells`, :mod:`.gridcells`), :mod:`.viewpoints`, :mod:`.samples`,
-:mod:`.visibility` (the ID-buffer renderer), :mod:`.workers` (cell tasks in this
-process, local processes or Dask), :mod:`.navgraph` and :mod:`.walks` (the default
-recorded paths), :mod:`.pipeline` (:func:`bake`), :mod:`.mapplot` (a top view).
+:mod:`.visibility` (the ID-buffer renderer), :mod:`.workers` (the PVS tasks),
+:mod:`.navgraph` and :mod:`.walks` (the default recorded paths), :mod:`.mapplot` (a top
+view); the one bake of every scene kind: :mod:`.pipeline` (:func:`bake`: read, plan),
+:mod:`.plan` (cells by kind), :mod:`.driver` (bakes them, resumes), :mod:`.chunks`
+(the one chunk runner: this process, local processes or Dask); interiors
+:mod:`.interior`, crossing scenes :mod:`.crossing`.
 """
 
 from walkstream.server.bake.pipeline import bake

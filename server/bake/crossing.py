@@ -43,16 +43,14 @@ object id (the ``entrances`` table: ``building`` is drawn as cell ``shell``).  W
 
 A party wall the building shared keeps the neighbour's blank side, and the shell's
 windows face it: what the data says of the building is replaced by the interior.
-Resuming an interrupted crossing bake is not offered: it starts over.
+A crossing is baked by the one driver (:func:`~.driver.drive`) like any scene:
+:func:`crossing_plan` plans it (PVS cells for the city, room cells for the interior),
+and an interrupted bake resumes like a city's, to the same version.
 """
 
 from __future__ import annotations
 
-import hashlib
 import math
-import os
-import time
-from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
@@ -62,7 +60,6 @@ import shapely
 from shapely.geometry.polygon import orient
 
 from walkstream.server.bake.cells import make_cells
-from walkstream.server.bake.crossnav import ENTER_NAME, SceneGraph, front_of
 from walkstream.server.bake.digest import file_digest
 from walkstream.server.bake.interior import (
     INTERIOR_FEATURES,
@@ -79,13 +76,14 @@ from walkstream.server.bake.placement import (
     moved,
     place_in_footprint,
 )
+from walkstream.server.bake.plan import BakePlan, PvsCells, RoomCells, Say, Walk, settings_key
 from walkstream.server.bake.rooms import RoomLayout, room_layout
 from walkstream.server.bake.roomwalks import TOUR_NAME
+from walkstream.server.bake.scenenav import ENTER_NAME, SceneGraph, front_of
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
-from walkstream.server.bake.workers import run_tasks
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
 from walkstream.server.sources.scene import SourceScene
@@ -93,7 +91,6 @@ from walkstream.server.store import (
     CellRow,
     EntranceInfo,
     PortalInfo,
-    SceneReader,
     SceneWriter,
 )
 from walkstream.shared.buildings import default_grammar, default_grammar_text
@@ -105,7 +102,7 @@ __all__ = [
     "CROSSING_FEATURE",
     "STAND_IN_INSET",
     "STAND_IN_PARAPET",
-    "bake_crossing",
+    "crossing_plan",
     "office_size",
     "pick_building",
 ]
@@ -240,35 +237,25 @@ def _stand_in(b: BuildingParams, shell: shapely.Geometry, top: float) -> Buildin
                    floor_height=height / floors)
 
 
-def bake_crossing(
-    source: str | os.PathLike[str],
-    interior_source: str | os.PathLike[str],
-    output: str | os.PathLike[str],
+def crossing_plan(
+    source: Path,
+    interior_source: Path,
+    output: Path,
     *,
     building: str | None = None,
     settings: BakeSettings | None = None,
     name: str | None = None,
-    workers: int = 1,
-    scheduler: str | None = None,
-    progress: Callable[[int, int], None] | None = None,
-    log: Callable[[str], None] | None = None,
-) -> dict[str, Any]:
-    """Bake a city ``source`` with the interior ``interior_source`` in one of its buildings.
+    say: Say = lambda _msg: None,
+) -> BakePlan:
+    """The :class:`~.plan.BakePlan` of a city ``source`` with the interior ``interior_source``
+    in one of its buildings: PVS cells (the city's) and room cells (the interior's).
 
     Arguments as for :func:`~.pipeline.bake`; ``building`` as for :func:`pick_building`.
-
-    Returns
-    -------
-    dict
-        The database summary plus ``source``, ``interior``, ``building``,
-        ``entrance_gap_m`` (door to street cell) and ``enter`` (the crossing walk).
+    The plan's summary adds ``source``, ``interior``, ``building``, ``entrance_gap_m``
+    (door to street cell) and ``enter`` (the crossing walk).
     """
     st = (settings or BakeSettings()).check()
-    if workers < 1:
-        raise InputError(f"--workers: expected >= 1, got {workers}")
     src, isrc, out = Path(source), Path(interior_source), Path(output)
-    say = log or (lambda _msg: None)
-    t0 = time.perf_counter()
     city = read_source(src, network=st.network)
     if isinstance(city, InteriorScene):
         raise InputError(f"{src}: an interior; the first source of a crossing scene is a city")
@@ -281,8 +268,8 @@ def bake_crossing(
     if not cells:
         raise InputError(f"{src}: no view cell could be made (no free space?)")
     kind = "grid" if cells[0].kind == "grid" else "street"
-    # ---- the interior, baked in its own frame, then moved into its building
-    local = interior_parts(inner, isrc, workers=workers, scheduler=scheduler, say=say)
+    # ---- the interior, planned in its own frame, then moved into its building
+    local = interior_parts(inner, isrc, say=say)
     k, placement, gap = pick_building(city, cells, inner, building, layout=local.layout)
     old = city.buildings[k]
     baked = moved(local, placement)
@@ -303,9 +290,8 @@ def bake_crossing(
     entrance = front_of(shapely.Polygon(street.polygon), door.middle, door.normal, floor, len(layout.portals),
                         street.id, door.doorway)
     # ---- the walks
-    city_graph = CellGraph(cells)
-    scene_graph = SceneGraph(city_graph, baked.graph, [entrance])
-    enter, room = scene_graph.enter_walk(ENTER_NAME)
+    nav = SceneGraph(CellGraph(cells), baked.graph, [entrance])
+    enter, room = nav.enter_walk(ENTER_NAME)
     # ---- the database
     features = (["buildings"] + (["streets"] if city.streets else []) + [f"{kind}_cells"]
                 + list(INTERIOR_FEATURES) + [CROSSING_FEATURE])
@@ -317,13 +303,11 @@ def bake_crossing(
         "building": int(old.id),
         "placement": {"angle": placement.angle, "shift": list(placement.shift), "dz": placement.dz},
     }
-    writer = SceneWriter.create(
-        out, name=name or out.stem, crs=city.crs, origin=city.origin, grammar_text=default_grammar_text(),
-        grammar_version=grammar.id, features=features, settings=settings_dict, resume=False,
-    )
-    try:
+    doorway = door.doorway + offset
+    walk = baked.walk
+
+    def write_tables(writer: SceneWriter) -> None:
         writer.add_objects(object_rows(city, grammar))
-        doorway = door.doorway + offset
         writer.add_cells(
             CellRow(c.id, c.kind, np.asarray(c.polygon), c.zmin, c.zmax,
                     np.asarray(sorted(set(c.neighbours) | ({doorway} if c.id == street.id else set())), np.int64))
@@ -331,41 +315,33 @@ def bake_crossing(
         )
         for vp in viewpoints(cells, city):
             writer.add_viewpoint(vp.name, vp.x, vp.y, vp.z, vp.yaw, vp.cell)
-        # the topology moved into the city, the contents as they were baked (own frame)
-        own = replace(baked, parts=local.parts)
-        encode_s = write_interior_tables(writer, inner, own, offset=offset, links={doorway: [street.id]})
+        # the topology moved into the city; the contents stay in the interior's own frame
+        # (the driver writes them unmoved) and the entrance says where they stand
+        write_interior_tables(writer, inner, baked, offset=offset, links={doorway: [street.id]})
         outer = layout.portals[door.portal]
         writer.add_portals([PortalInfo(entrance.portal, street.id, doorway, outer.polygon, "door", "entrance", "entrance")])
         cells_in = (offset, offset + max(c.id for c in layout.cells))
         writer.add_entrances([EntranceInfo(entrance.portal, int(old.id), street.id, doorway, layout.outside + offset,
                                            _contents_placement(placement, cells_in))])
-        key = hashlib.sha256(repr(sorted(settings_dict.items())).encode()).hexdigest()[:16]
-        finished = 0
-        if progress:
-            progress(0, len(cells))
-        for results in run_tasks(city, st, key, cells, workers, scheduler):
-            for cid, pvs, ach in results:
-                writer.set_pvs(cid, pvs, ach)
-                finished += 1
-            if progress:
-                progress(finished, len(cells))
-        for path in default_paths(cells, footprints=[b.rings[0] for b in city.buildings], graph=city_graph, say=say):
-            writer.add_path(path.name, path.to_msgpack())
-            say(f"recorded path {path.name}: {path.duration:.0f} s, {path.length_m():.0f} m at {path.speed_kmh:g} km/h")
-        walk = baked.walk
         x, y, z = walk.xyz[0]
         writer.add_viewpoint("entrance", float(x), float(y), float(z), float(walk.yaw[0]), baked.start + offset)
-        writer.add_path(TOUR_NAME, walk.to_msgpack())
-        writer.add_path(ENTER_NAME, enter.to_msgpack())
-        say(f"recorded path {ENTER_NAME}: {enter.duration:.0f} s, {enter.length_m():.0f} m, from the street to {room} and back")
-        writer.finish(time.perf_counter() - t0)
-    finally:
-        writer.close()
-    with SceneReader.open(out) as reader:
-        summary = reader.summary()
-    summary.update({
-        "source": str(src), "interior": str(isrc), "building": int(old.id), "entrance_gap_m": round(gap, 3),
-        "enter": {"seconds": round(enter.duration, 1), "metres": round(enter.length_m(), 1), "room": room},
-        "contents_encode_s": encode_s, "resumed_cells": 0,
-    })
-    return summary
+
+    def walks(say: Say) -> list[Walk]:
+        out = [(path, f"recorded path {path.name}: {path.duration:.0f} s, {path.length_m():.0f} m at "
+                      f"{path.speed_kmh:g} km/h")
+               for path in default_paths(cells, footprints=[b.rings[0] for b in city.buildings], graph=nav.streets,
+                                         say=say)]
+        return out + [(walk, f"recorded path {TOUR_NAME}: {walk.duration:.0f} s, {walk.length_m():.0f} m"),
+                      (enter, f"recorded path {ENTER_NAME}: {enter.duration:.0f} s, {enter.length_m():.0f} m, "
+                              f"from the street to {room} and back")]
+
+    return BakePlan(
+        name=name or out.stem, crs=city.crs, origin=city.origin, grammar_text=default_grammar_text(),
+        grammar_version=grammar.id, features=features, settings=settings_dict,
+        pvs=PvsCells(city, st, cells, settings_key(settings_dict)),
+        rooms=RoomCells(inner, local.layout, offset=offset), write_tables=write_tables, walks=walks,
+        summary={
+            "source": str(src), "interior": str(isrc), "building": int(old.id), "entrance_gap_m": round(gap, 3),
+            "enter": {"seconds": round(enter.duration, 1), "metres": round(enter.length_m(), 1), "room": room},
+        },
+    )

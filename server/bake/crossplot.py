@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from walkstream.server.bake.crossnav import ENTER_NAME
 from walkstream.server.bake.mapplot import draw_city
+from walkstream.server.bake.scenenav import ENTER_NAME
 from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.paths import RecordedPath
 

@@ -1,47 +1,48 @@
-"""The bake of an interior: cells and portals, each cell's contents, the tour, the database.
+"""An interior's part of a bake: cells and portals, each cell's contents, the tour, its tables.
 
-Called by :func:`~walkstream.server.bake.pipeline.bake` when the source is an
-interior (an IFC model or a ``walkstream-interior`` file).  No visibility is baked:
+:func:`interior_plan` plans an interior alone (an IFC model or a
+``walkstream-interior`` file) for the one driver (:func:`~.driver.drive`); a
+crossing scene (:mod:`~.crossing`) uses the same parts.  No visibility is baked:
 the client culls through portals (Mulloni et al.), so what the database holds is the
 paper's topological file (cells as plane sets with outline and height range, portals
 as polygons with the two cells they join, triangles per cell) plus the contents of
 every cell as one compact blob.
 
 The contents of cells are independent tasks on plain arrays
-(:func:`~.roomcontents.contents_task`): they run here, in ``workers`` local processes
-or on a Dask cluster, and this process alone writes the database.
+(:func:`~.roomcontents.contents_task`), run by the one chunk runner
+(:func:`~.chunks.run_chunks`: here, in ``workers`` local processes or on a Dask
+cluster) from :func:`room_contents`; the driver alone writes the database.
 """
 
 from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from walkstream.server.bake.chunks import run_chunks
 from walkstream.server.bake.digest import file_digest
+from walkstream.server.bake.plan import BakePlan, RoomCells
 from walkstream.server.bake.roomcontents import REACH, Part, contents_task, outside_mask, weld
 from walkstream.server.bake.roomnav import RoomGraph
 from walkstream.server.bake.rooms import RoomLayout, room_layout
 from walkstream.server.bake.roomwalks import TOUR_NAME, entrance_cell, tour
-from walkstream.server.bake.workers import dask_client
+from walkstream.server.bake.scenenav import SceneGraph
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.store import (
     CellRow,
     ContentsInfo,
     PortalInfo,
     RoomInfo,
-    SceneReader,
     SceneWriter,
     StairInfo,
     StoreyInfo,
 )
-from walkstream.shared.arrays import F64
 from walkstream.shared.codec.cellmesh import (
     CELLMESH_FORMAT,
     CELLMESH_V1,
@@ -55,108 +56,48 @@ from walkstream.shared.errors import InputError, RouteError
 from walkstream.shared.paths import RecordedPath
 
 __all__ = [
+    "CONTENTS_CHUNK",
     "INTERIOR_FEATURES",
     "InteriorParts",
-    "bake_interior",
     "interior_parts",
+    "interior_plan",
     "interior_settings",
+    "room_contents",
+    "write_contents",
     "write_interior_tables",
 ]
 
 INTERIOR_FEATURES = ("rooms", "portals", "meshes")
 """The features an interior lists (and the optional tables it gets)."""
 
-_CHUNK = 16
-_WORKER: dict[str, Any] = {}
+CONTENTS_CHUNK = 16
+"""Cells per contents task (plain numpy, quicker than a cell's PVS)."""
 
 
-def _init_worker(soup: F64, elem: NDArray[np.int64], mat: NDArray[np.int64]) -> None:
-    _WORKER["arrays"] = (soup, elem, mat)
-
-
-def _pool_task(cells: list[tuple[int, F64]]) -> list[tuple[int, list[Part], NDArray[np.int64]]]:
-    soup, elem, mat = _WORKER["arrays"]
-    return contents_task(cells, soup, elem, mat)
-
-
-def _run_contents(
-    chunks: list[list[tuple[int, F64]]], soup: F64, elem: NDArray[np.int64], mat: NDArray[np.int64],
-    workers: int, scheduler: str | None,
-) -> Iterator[list[tuple[int, list[Part], NDArray[np.int64]]]]:
-    if scheduler:
-        from distributed import as_completed
-
-        client = dask_client(scheduler)
-        try:
-            remote = client.scatter([soup, elem, mat], broadcast=True)
-            futures = [client.submit(contents_task, c, *remote, pure=False) for c in chunks]
-            for fut in as_completed(futures):
-                yield fut.result()
-        finally:
-            client.close()
-    elif workers > 1:
-        import multiprocessing as mp
-
-        ctx = mp.get_context("spawn")
-        with ctx.Pool(workers, initializer=_init_worker, initargs=(soup, elem, mat)) as pool:
-            yield from pool.imap_unordered(_pool_task, chunks)
-    else:
-        for c in chunks:
-            yield contents_task(c, soup, elem, mat)
-
-
-@dataclass
-class InteriorParts:
-    """What an interior bake computes before it writes: the cells and portals, each
-    cell's contents, the walking graph and the tour (see :func:`interior_parts`)."""
-
-    layout: RoomLayout
-    parts: dict[int, list[Part]]
-    notes: list[str]
-    graph: RoomGraph
-    start: int
-    walk: RecordedPath
-    coverage: dict[str, Any]
-
-
-def interior_parts(
+def room_contents(
     scene: InteriorScene,
-    src: Path,
+    layout: RoomLayout,
     *,
     workers: int = 1,
     scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
-    say: Callable[[str], None] = lambda _msg: None,
-) -> InteriorParts:
-    """Cells, portals, contents and tour of an interior (the bake's work before the database)."""
-    layout = room_layout(scene)
+) -> dict[int, list[Part]]:
+    """Every cell's contents (:mod:`~.roomcontents`): the element triangles clipped to
+    each room and doorway in chunks by the one chunk runner (:func:`~.chunks.run_chunks`),
+    and what no cell holds whole to the ``outside`` cell."""
     inside = [c for c in layout.cells if c.kind != "outside"]
-    say(
-        f"{src.name}: {len(scene.rooms)} rooms on {len(scene.storeys)} storeys -> {len(inside)} cells "
-        f"({sum(1 for c in inside if c.kind == 'doorway')} doorways), {len(layout.portals)} portals, "
-        f"{len(layout.stairs)} stairs, {scene.triangles:,} triangles"
-    )
-    notes = list(scene.notes) + layout.notes
-    for n in notes:
-        say(f"note: {n}")
-    # ---- contents: every element triangle clipped to the cells it occupies
     soup = np.concatenate([e.soup for e in scene.elements]) if scene.elements else np.zeros((0, 3, 3))
     elem = np.concatenate([np.full(len(e.triangles), e.id, np.int64) for e in scene.elements]) if scene.elements else np.zeros(0, np.int64)
     mat = np.concatenate([e.materials.astype(np.int64) for e in scene.elements]) if scene.elements else np.zeros(0, np.int64)
-    tasks = [(c.id, c.planes) for c in inside]
-    chunks = [tasks[i : i + _CHUNK] for i in range(0, len(tasks), _CHUNK)]
     parts: dict[int, list[Part]] = {}
     held = np.zeros(len(soup), bool)
-    done = 0
-    if progress:
-        progress(0, len(layout.cells))
-    for res in _run_contents(chunks, soup, elem, mat, workers, scheduler):
+    for res in run_chunks(
+        contents_task, [(c.id, c.planes) for c in inside], (soup, elem, mat), size=CONTENTS_CHUNK,
+        workers=workers, scheduler=scheduler, progress=progress, total=len(layout.cells),
+    ):
         for cid, ps, whole in res:
             parts[cid] = ps
             held[whole] = True
-            done += 1
-        if progress:
-            progress(done, len(layout.cells))
     om = outside_mask(soup, [(c.outline, c.zmin, c.zmax) for c in inside], held)
     outside_parts: list[Part] = []
     if om.any():
@@ -168,14 +109,47 @@ def interior_parts(
     parts[layout.outside] = outside_parts
     if progress:
         progress(len(layout.cells), len(layout.cells))
+    return parts
+
+
+@dataclass
+class InteriorParts:
+    """What an interior bake plans before it writes: the cells and portals, the walking
+    graph and the tour (see :func:`interior_parts`); ``parts`` (each cell's contents)
+    stays empty until the driver clips them (:func:`room_contents`)."""
+
+    layout: RoomLayout
+    parts: dict[int, list[Part]]
+    notes: list[str]
+    graph: RoomGraph
+    start: int
+    walk: RecordedPath
+    coverage: dict[str, Any]
+
+
+def interior_parts(
+    scene: InteriorScene, src: Path, *, say: Callable[[str], None] = lambda _msg: None
+) -> InteriorParts:
+    """Cells, portals, walking graph and tour of an interior (its plan; the contents are
+    the driver's, :func:`room_contents`)."""
+    layout = room_layout(scene)
+    inside = [c for c in layout.cells if c.kind != "outside"]
+    say(
+        f"{src.name}: {len(scene.rooms)} rooms on {len(scene.storeys)} storeys -> {len(inside)} cells "
+        f"({sum(1 for c in inside if c.kind == 'doorway')} doorways), {len(layout.portals)} portals, "
+        f"{len(layout.stairs)} stairs, {scene.triangles:,} triangles"
+    )
+    notes = list(scene.notes) + layout.notes
+    for n in notes:
+        say(f"note: {n}")
     # ---- the tour
-    graph = RoomGraph(layout.cells, layout.portals, layout.stairs)
+    graph = SceneGraph(rooms=RoomGraph(layout.cells, layout.portals, layout.stairs)).rooms
     start = entrance_cell(layout.cells, layout.portals)
     try:
         walk, coverage = tour(graph, start)
     except RouteError as exc:  # pragma: no cover - a tour always exists from a room cell
         raise InputError(f"{src}: no tour could be recorded ({exc})") from exc
-    return InteriorParts(layout, parts, notes, graph, start, walk, coverage)
+    return InteriorParts(layout, {}, notes, graph, start, walk, coverage)
 
 
 def interior_settings(scene: InteriorScene, src: Path, cellmesh_version: int = 3) -> dict[str, Any]:
@@ -197,17 +171,16 @@ def write_interior_tables(
     *,
     offset: int = 0,
     links: dict[int, list[int]] | None = None,
-    cellmesh_version: int = 3,
-) -> float:
-    """Write an interior's cells, storeys, rooms, portals, stairs and contents.
+) -> None:
+    """Write an interior's cells, storeys, rooms, portals and stairs (the contents are
+    :func:`write_contents`'s).
 
     ``offset`` is added to every cell id (an interior placed in a scene after its
     city cells); ``links`` adds neighbours from outside the interior (cell id with
     the offset -> ids of other cells: the street cell an entrance joins).  Portal,
-    stair and storey ids are the interior's own.  Returns the seconds spent encoding
-    contents.
+    stair and storey ids are the interior's own.
     """
-    layout, parts = baked.layout, baked.parts
+    layout = baked.layout
     neighbours: dict[int, set[int]] = {c.id + offset: set() for c in layout.cells}
     for p in layout.portals:
         neighbours[p.a + offset].add(p.b + offset)
@@ -218,8 +191,6 @@ def write_interior_tables(
         CellRow(c.id + offset, c.kind, c.outline, c.zmin, c.zmax, np.array(sorted(neighbours[c.id + offset]), np.int64))
         for c in layout.cells
     )
-    for c in layout.cells:
-        writer.set_pvs(c.id + offset, np.zeros(0, np.int64), np.zeros(0))
     writer.add_storeys(
         StoreyInfo(k, s.name, float(layout.ranges[k][0]), float(layout.ranges[k][1]))
         for k, s in enumerate(scene.storeys)
@@ -231,6 +202,21 @@ def write_interior_tables(
     writer.add_stairs(
         StairInfo(k, s.portal, s.lower + offset, s.upper + offset, s.path, s.name) for k, s in enumerate(layout.stairs)
     )
+
+
+def write_contents(
+    writer: SceneWriter, layout: RoomLayout, parts: dict[int, list[Part]], *, offset: int = 0,
+    cellmesh_version: int = 3,
+) -> float:
+    """Encode and write every cell's contents (ids plus ``offset``), then mark the cells
+    done (a room cell has no PVS: once its contents are stored it is baked).  Returns
+    the seconds spent encoding.
+
+    Raises
+    ------
+    InputError
+        A part's area changed in encoding.
+    """
     encode_s = 0.0
     for c in layout.cells:
         ps = [p for p in parts.get(c.id, []) if len(p[3])]
@@ -250,83 +236,56 @@ def write_interior_tables(
                 if abs(a1 - a0) > area_tolerance(part[2], part[3]):
                     raise InputError(f"cell {c.id}: element {part[0]}: area {a1} m2 after encoding, {a0} m2 before")
         writer.add_contents(ContentsInfo(nt, nv, len(ps), len(blob), raw_bytes(nv, nt), err, cell=c.id + offset), blob)
+    for c in layout.cells:
+        writer.set_pvs(c.id + offset, np.zeros(0, np.int64), np.zeros(0))
     return encode_s
 
 
-def bake_interior(
+def interior_plan(
     scene: InteriorScene,
     source: str | os.PathLike[str],
     output: str | os.PathLike[str],
     *,
     name: str | None = None,
-    workers: int = 1,
-    scheduler: str | None = None,
-    progress: Callable[[int, int], None] | None = None,
-    log: Callable[[str], None] | None = None,
+    say: Callable[[str], None] = lambda _msg: None,
     import_seconds: float = 0.0,
     cellmesh_version: int = 3,
-) -> dict[str, Any]:
-    """Bake an interior into the scene database ``output`` (replaced atomically).
+) -> BakePlan:
+    """The :class:`~.plan.BakePlan` of an interior alone: room cells only.
 
     ``cellmesh_version`` picks the cell-contents codec (3, planar polygons, boxes and
     rectangles on a 1 mm grid; 2 and 1 only to compare, as ``walkstream bench interiors`` does).
-
-    Returns
-    -------
-    dict
-        The database summary (``SceneReader.summary``) plus ``bake_seconds``,
-        ``import_seconds``, ``contents_encode_s`` (encoding the cells' contents),
-        ``source``, ``notes`` (what the bake wants the user to
-        know, e.g. portals found from the geometry), ``portal_sources`` and ``tour``
-        (what the default walk covers).
+    The plan's summary adds ``source``, ``import_seconds``, ``notes`` (what the bake
+    wants the user to know, e.g. portals found from the geometry), ``portal_sources``,
+    ``issues`` and ``tour`` (what the default walk covers).
     """
-    if workers < 1:
-        raise InputError(f"--workers: expected >= 1, got {workers}")
-    say = log or (lambda _msg: None)
     src, out = Path(source), Path(output)
-    t0 = time.perf_counter()
-    baked = interior_parts(scene, src, workers=workers, scheduler=scheduler, progress=progress, say=say)
-    layout, walk, coverage, start, notes = baked.layout, baked.walk, baked.coverage, baked.start, baked.notes
-    # ---- the database
-    writer = SceneWriter.create(
-        out,
-        name=name or out.stem,
-        crs=scene.crs,
-        origin=(scene.origin[0], scene.origin[1]),
-        grammar_text="",
-        grammar_version="",
-        features=list(INTERIOR_FEATURES),
-        settings=interior_settings(scene, src, cellmesh_version),
-        resume=False,
-    )
-    try:
-        encode_s = write_interior_tables(writer, scene, baked, cellmesh_version=cellmesh_version)
+    baked = interior_parts(scene, src, say=say)
+    layout, walk, coverage, start = baked.layout, baked.walk, baked.coverage, baked.start
+
+    def write_tables(writer: SceneWriter) -> None:
+        write_interior_tables(writer, scene, baked)
         x, y, z = walk.xyz[0]
         writer.add_viewpoint("entrance", float(x), float(y), float(z), float(walk.yaw[0]), start)
-        writer.add_path(TOUR_NAME, walk.to_msgpack())
-        writer.finish(time.perf_counter() - t0 + import_seconds)
-    finally:
-        writer.close()
-    say(
-        f"recorded path {TOUR_NAME}: {walk.duration:.0f} s, {walk.length_m():.0f} m; passes "
-        f"{coverage['visited']} of {coverage['reachable']} reachable rooms ({coverage['rooms']} in all) on "
-        f"{coverage['storeys_visited']} of {coverage['storeys_reachable']} storeys"
-    )
-    reader = SceneReader.open(out)
-    try:
-        summary = reader.summary()
-    finally:
-        reader.close()
-    summary.update(
-        {
-            "contents_encode_s": encode_s,
+
+    def walks(_say: Callable[[str], None]) -> list[tuple[RecordedPath, str]]:
+        return [(walk, (
+            f"recorded path {TOUR_NAME}: {walk.duration:.0f} s, {walk.length_m():.0f} m; passes "
+            f"{coverage['visited']} of {coverage['reachable']} reachable rooms ({coverage['rooms']} in all) on "
+            f"{coverage['storeys_visited']} of {coverage['storeys_reachable']} storeys"
+        ))]
+
+    return BakePlan(
+        name=name or out.stem, crs=scene.crs, origin=(scene.origin[0], scene.origin[1]), grammar_text="",
+        grammar_version="", features=list(INTERIOR_FEATURES),
+        settings=interior_settings(scene, src, cellmesh_version), pvs=None,
+        rooms=RoomCells(scene, layout, cellmesh_version=cellmesh_version), write_tables=write_tables, walks=walks,
+        summary={
             "source": str(src),
             "import_seconds": import_seconds,
-            "notes": notes,
+            "notes": baked.notes,
             "portal_sources": dict(layout.sources),
             "issues": [f"{i.feature_id}: {i.problem} ({i.action})" for i in scene.issues],
             "tour": coverage,
-            "resumed_cells": 0,
-        }
+        },
     )
-    return summary

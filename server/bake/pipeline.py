@@ -1,8 +1,14 @@
-"""The bake, end to end: load the source, cut cells, store objects, render each cell's PVS, record walks."""
+"""The bake's entry: read the sources, plan the scene by its kind, hand it to the one driver.
+
+:func:`bake` reads a city (GeoJSON, OpenStreetMap), an interior (an IFC model, a
+``walkstream-interior`` file) or both (a crossing scene, ``--interior``), turns it
+into a :class:`~.plan.BakePlan` (:func:`city_plan` here,
+:func:`~.interior.interior_plan`, :func:`~.crossing.crossing_plan`) and bakes it with
+:func:`~.driver.drive`, which bakes the cells by their kind and resumes any of them.
+"""
 
 from __future__ import annotations
 
-import hashlib
 import os
 import time
 from collections.abc import Callable
@@ -14,20 +20,24 @@ import numpy as np
 
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.digest import file_digest
-from walkstream.server.bake.interior import bake_interior
+from walkstream.server.bake.driver import drive
+from walkstream.server.bake.interior import interior_plan
+from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.objectrows import object_rows
+from walkstream.server.bake.plan import BakePlan, PvsCells, Say, Walk, settings_key
+from walkstream.server.bake.scenenav import SceneGraph
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
-from walkstream.server.bake.workers import run_tasks
 from walkstream.server.sources.clip import clip_scene, local_bbox
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
-from walkstream.server.store import CellRow, SceneReader, SceneWriter
+from walkstream.server.sources.scene import SourceScene
+from walkstream.server.store import CellRow, SceneWriter
 from walkstream.shared.buildings import default_grammar, default_grammar_text
 from walkstream.shared.errors import InputError
 
-__all__ = ["bake"]
+__all__ = ["bake", "bake_interior", "city_plan"]
 
 
 # ------------------------------------------------------------------ the bake
@@ -50,7 +60,8 @@ def bake(
     """Bake ``source`` (GeoJSON, OpenStreetMap, an IFC model or an interior file) into ``output``.
 
     The reader is chosen by the file's ending (:func:`~walkstream.server.sources.read.read_source`);
-    an interior goes to :func:`~walkstream.server.bake.interior.bake_interior`.
+    the scene is planned by its kind (a city, an interior, with ``interior`` a crossing)
+    and baked by the one driver (:func:`~walkstream.server.bake.driver.drive`).
 
     Parameters
     ----------
@@ -74,35 +85,77 @@ def bake(
     interior, building:
         An interior to place in one of the city's buildings (an object or feature
         id, or ``auto``), joined to the street at its entrance: a crossing scene
-        (:func:`~walkstream.server.bake.crossing.bake_crossing`).
+        (:func:`~walkstream.server.bake.crossing.crossing_plan`).
 
     Returns
     -------
     dict
-        The database summary (``SceneReader.summary``) plus ``bake_seconds``,
-        ``resumed_cells`` and ``source``; empty when ``max_cells`` stopped it early.
+        The database summary (``SceneReader.summary``) plus ``resumed_cells``, what
+        the scene kind's plan adds (``source``, ...) and, with rooms,
+        ``contents_encode_s``; empty when ``max_cells`` stopped it early.
     """
-    if interior is not None:
-        from walkstream.server.bake.crossing import bake_crossing
-
-        return bake_crossing(
-            source, interior, output, building=building, settings=settings, name=name, workers=workers,
-            scheduler=scheduler, progress=progress, log=log,
-        )
     st = (settings or BakeSettings()).check()
     if workers < 1:
         raise InputError(f"--workers: expected >= 1, got {workers}")
-    src = Path(source)
-    out = Path(output)
     say = log or (lambda _msg: None)
     t0 = time.perf_counter()
+    src = Path(source)
+    if interior is not None:
+        from walkstream.server.bake.crossing import crossing_plan
 
-    scene = read_source(src, network=st.network)
-    if isinstance(scene, InteriorScene):
-        return bake_interior(
-            scene, src, out, name=name, workers=workers, scheduler=scheduler, progress=progress,
-            log=log, import_seconds=time.perf_counter() - t0,
-        )
+        plan = crossing_plan(src, Path(interior), Path(output), building=building, settings=st, name=name, say=say)
+    else:
+        scene = read_source(src, network=st.network)
+        if isinstance(scene, InteriorScene):
+            plan = interior_plan(scene, src, output, name=name, say=say, import_seconds=time.perf_counter() - t0)
+        else:
+            plan = city_plan(scene, src, Path(output), st, name=name, say=say)
+    return drive(plan, output, workers=workers, scheduler=scheduler, progress=progress, log=log,
+                 max_cells=max_cells, started=t0)
+
+
+def bake_interior(
+    scene: InteriorScene,
+    source: str | os.PathLike[str],
+    output: str | os.PathLike[str],
+    *,
+    name: str | None = None,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    log: Callable[[str], None] | None = None,
+    import_seconds: float = 0.0,
+    cellmesh_version: int = 3,
+) -> dict[str, Any]:
+    """Bake an interior already read (``source`` its file) into ``output``: :func:`bake`
+    with the contents codec ``cellmesh_version`` picked (3; 2 and 1 only to compare, as
+    ``walkstream bench interiors`` does).
+
+    Returns
+    -------
+    dict
+        As :func:`bake`, with the summary of :func:`~.interior.interior_plan`.
+    """
+    t0 = time.perf_counter() - import_seconds
+    plan = interior_plan(scene, source, output, name=name, say=log or (lambda _msg: None),
+                         import_seconds=import_seconds, cellmesh_version=cellmesh_version)
+    return drive(plan, output, workers=workers, scheduler=scheduler, progress=progress, log=log, started=t0)
+
+
+def city_plan(
+    scene: SourceScene,
+    src: Path,
+    out: Path,
+    st: BakeSettings,
+    *,
+    name: str | None = None,
+    say: Callable[[str], None] = lambda _msg: None,
+) -> BakePlan:
+    """The :class:`~.plan.BakePlan` of a city: its view cells (street or grid), PVS cells only;
+    its default walks routed on the street part of its :class:`~.scenenav.SceneGraph`.
+
+    The plan's summary adds ``source``, ``source_issues`` and ``source_notes``.
+    """
     for note in scene.notes:
         say(f"{src.name}: {note}")
     bbox = st.bbox
@@ -119,65 +172,34 @@ def bake(
     kind = "grid" if cells[0].kind == "grid" else "street"
     features = ["buildings"] + (["streets"] if scene.streets else []) + [f"{kind}_cells"]
     say(f"{src.name}: {len(scene.buildings)} buildings, {len(scene.streets)} street pieces, {len(cells)} {kind} cells")
-
     grammar = default_grammar()
     settings_dict = asdict(st) | {"source": str(src), "source_digest": file_digest(src)}
-    writer = SceneWriter.create(
-        out,
-        name=name or out.stem,
-        crs=scene.crs,
-        origin=scene.origin,
-        grammar_text=default_grammar_text(),
-        grammar_version=grammar.id,
-        features=features,
-        settings=settings_dict,
-    )
-    try:
-        done = writer.done_cells() if writer.resumed else set()
-        if not writer.resumed:
-            writer.add_objects(object_rows(scene, grammar))
-            writer.add_cells(
-                CellRow(c.id, c.kind, np.asarray(c.polygon), c.zmin, c.zmax, np.asarray(c.neighbours, np.int64))
-                for c in cells
-            )
-            for vp in viewpoints(cells, scene):
-                writer.add_viewpoint(vp.name, vp.x, vp.y, vp.z, vp.yaw, vp.cell)
-        else:
-            say(f"resuming: {len(done)} of {len(cells)} cells already baked")
-        todo = [c for c in cells if c.id not in done]
-        if max_cells is not None:
-            todo = todo[:max_cells]
-        key = hashlib.sha256(repr(sorted(settings_dict.items())).encode()).hexdigest()[:16]
-        finished = len(done)
-        if progress:
-            progress(finished, len(cells))
-        for results in run_tasks(scene, st, key, todo, workers, scheduler):
-            for cid, pvs, ach in results:
-                writer.set_pvs(cid, pvs, ach)
-                finished += 1
-            if progress:
-                progress(finished, len(cells))
-        if max_cells is not None and finished < len(cells):
-            writer.close()
-            return {}
-        # the default recorded paths: made from the cells alone, so a resumed bake
-        # records the same ones (INSERT OR REPLACE) just before sealing the file
-        for path in default_paths(cells, footprints=[b.rings[0] for b in scene.buildings], say=say):
-            writer.add_path(path.name, path.to_msgpack())
-            say(f"recorded path {path.name}: {path.duration:.0f} s, {path.length_m():.0f} m at {path.speed_kmh:g} km/h")
-        seconds = time.perf_counter() - t0
-        writer.finish(seconds)
-    finally:
-        writer.close()
-    reader = SceneReader.open(out)
-    try:
-        summary = reader.summary()
-    finally:
-        reader.close()
-    summary["resumed_cells"] = len(done)
-    summary["source"] = str(src)
-    summary["source_issues"] = len(scene.issues)
+    city = scene
+
+    def write_tables(writer: SceneWriter) -> None:
+        writer.add_objects(object_rows(city, grammar))
+        writer.add_cells(
+            CellRow(c.id, c.kind, np.asarray(c.polygon), c.zmin, c.zmax, np.asarray(c.neighbours, np.int64))
+            for c in cells
+        )
+        for vp in viewpoints(cells, city):
+            writer.add_viewpoint(vp.name, vp.x, vp.y, vp.z, vp.yaw, vp.cell)
+
+    nav = SceneGraph(CellGraph(cells))
+
+    def walks(say: Say) -> list[Walk]:
+        return [(path, f"recorded path {path.name}: {path.duration:.0f} s, {path.length_m():.0f} m at "
+                       f"{path.speed_kmh:g} km/h")
+                for path in default_paths(cells, footprints=[b.rings[0] for b in city.buildings],
+                                          graph=nav.streets, say=say)]
+
+    summary: dict[str, Any] = {"source": str(src), "source_issues": len(scene.issues)}
     if scene.notes:
         summary["source_notes"] = " | ".join(scene.notes)
-    return summary
+    return BakePlan(
+        name=name or out.stem, crs=scene.crs, origin=scene.origin, grammar_text=default_grammar_text(),
+        grammar_version=grammar.id, features=features, settings=settings_dict,
+        pvs=PvsCells(scene, st, cells, settings_key(settings_dict)), rooms=None, write_tables=write_tables,
+        walks=walks, summary=summary,
+    )
 

@@ -1,13 +1,14 @@
-"""The bake's cell tasks, run in this process, in local worker processes or on a Dask cluster.
+"""The bake's visibility tasks: the PVS and ACH of view cells, for the one chunk runner.
 
-Each worker builds one :class:`~walkstream.server.bake.visibility.VisibilityRenderer`
+The tasks run wherever :func:`~.chunks.run_chunks` sends them (this process, local
+processes, a Dask cluster).  Each worker builds one :class:`~walkstream.server.bake.visibility.VisibilityRenderer`
 (its own GL context) on first use and keeps it; a task takes plain arrays (cell id,
 polygon, height range) and returns plain arrays (id, PVS, ACH), so it pickles.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -19,12 +20,20 @@ from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
 from walkstream.server.sources.scene import SourceScene
-from walkstream.shared.errors import InputError
 
-__all__ = ["SPLIT_ROUNDS", "cell_task", "cell_points", "cell_counts", "dask_client", "run_tasks"]
+__all__ = [
+    "PVS_CHUNK",
+    "SPLIT_ROUNDS",
+    "cell_counts",
+    "cell_points",
+    "cell_task",
+    "pvs_items",
+    "pvs_task",
+    "release_renderer",
+]
 
-#: cells per task: big enough to amortise a task's overhead, small enough for a smooth bar
-_CHUNK = 8
+PVS_CHUNK = 8
+"""Cells per task: big enough to amortise a task's overhead, small enough for a smooth bar."""
 
 
 # ------------------------------------------------------------------ cell tasks
@@ -48,14 +57,6 @@ def _renderer_for(scene: SourceScene, settings: BakeSettings, key: str) -> tuple
         )
         _WORKER["key"] = key
     return _WORKER["renderer"], _WORKER["footprints"]
-
-
-def _init_worker(scene: SourceScene, settings: BakeSettings, key: str) -> None:
-    _WORKER["scene"], _WORKER["settings"], _WORKER["skey"] = scene, settings, key
-
-
-def _pool_task(cells: list[tuple[int, NDArray[np.float64], float, float]]) -> list[tuple[int, NDArray[np.int64], NDArray[np.float64]]]:
-    return cell_task(_WORKER["scene"], _WORKER["settings"], _WORKER["skey"], cells)
 
 
 def cell_points(
@@ -145,79 +146,24 @@ def cell_task(
     return out
 
 
-def _chunks(cells: Sequence[ViewCell], n: int) -> Iterator[list[tuple[int, NDArray[np.float64], float, float]]]:
-    for i in range(0, len(cells), n):
-        yield [(c.id, np.asarray(c.polygon), c.zmin, c.zmax) for c in cells[i : i + n]]
+def pvs_items(cells: Sequence[ViewCell]) -> list[tuple[int, NDArray[np.float64], float, float]]:
+    """The work items of :func:`pvs_task`: ``(cell id, polygon, zmin, zmax)`` of each cell."""
+    return [(c.id, np.asarray(c.polygon), c.zmin, c.zmax) for c in cells]
 
 
-def run_tasks(
+def pvs_task(
+    cells: list[tuple[int, NDArray[np.float64], float, float]],
     scene: SourceScene,
-    st: BakeSettings,
+    settings: BakeSettings,
     key: str,
-    todo: list[ViewCell],
-    workers: int,
-    scheduler: str | None,
-) -> Iterator[list[tuple[int, NDArray[np.int64], NDArray[np.float64]]]]:
-    """Render the PVS of the cells ``todo`` in chunks: here, in ``workers`` local
-    processes or on the Dask ``scheduler``; yields each chunk's ``(cell id, pvs, ach)``
-    as it finishes (``key`` names the bake's settings: a worker keeps its renderer while it
-    stays the same)."""
-    chunks = list(_chunks(todo, _CHUNK))
-    if not chunks:
-        return
-    if scheduler:
-        yield from _run_dask(scene, st, key, chunks, scheduler)
-    elif workers > 1:
-        import multiprocessing as mp
-
-        # spawn: a forked child would inherit this process's GL state
-        ctx = mp.get_context("spawn")
-        with ctx.Pool(workers, initializer=_init_worker, initargs=(scene, st, key)) as pool:
-            yield from pool.imap_unordered(_pool_task, chunks)
-    else:
-        try:
-            for chunk in chunks:
-                yield cell_task(scene, st, key, chunk)
-        finally:
-            r = _WORKER.pop("renderer", None)
-            _WORKER.pop("key", None)
-            if r is not None:
-                r.release()
+) -> list[tuple[int, NDArray[np.int64], NDArray[np.float64]]]:
+    """:func:`cell_task` with the chunk first, as :func:`~.chunks.run_chunks` calls a task."""
+    return cell_task(scene, settings, key, cells)
 
 
-def dask_client(scheduler: str) -> Any:
-    """A ``distributed.Client`` of the scheduler at ``tcp://HOST:PORT`` (close it when done).
-
-    Raises
-    ------
-    InputError
-        Dask is not installed, or the scheduler cannot be reached.
-    """
-    try:
-        from distributed import Client
-    except ImportError as exc:  # optional dependency: fail only when used
-        raise InputError("--scheduler needs Dask: pip install 'dask[distributed]'") from exc
-    try:
-        return Client(scheduler, timeout=20)
-    except OSError as exc:
-        raise InputError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc})") from exc
-
-
-def _run_dask(
-    scene: SourceScene,
-    st: BakeSettings,
-    key: str,
-    chunks: list[list[tuple[int, NDArray[np.float64], float, float]]],
-    scheduler: str,
-) -> Iterator[list[tuple[int, NDArray[np.int64], NDArray[np.float64]]]]:
-    from distributed import as_completed
-
-    client = dask_client(scheduler)
-    try:
-        # ship the scene once; every task refers to the same scattered copy
-        [remote] = client.scatter([scene], broadcast=True)
-        futures = [client.submit(cell_task, remote, st, key, c, pure=False) for c in chunks]
-        for fut in as_completed(futures):
-            yield fut.result()
-    finally:
-        client.close()
+def release_renderer() -> None:
+    """Free this process's renderer (its GL context) after a bake run here."""
+    r = _WORKER.pop("renderer", None)
+    _WORKER.pop("key", None)
+    if r is not None:
+        r.release()

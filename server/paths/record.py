@@ -1,4 +1,9 @@
-"""A recorded path routed along a finished scene's cells and stored in it (a new scene version)."""
+"""A recorded path routed on a finished scene's navigation graph and stored in it (a new scene version).
+
+Every scene kind routes on its one graph (:func:`~.graph.scene_graph`): a city's path
+along its streets (:func:`record_path`), a walk through an interior's rooms or from a
+crossing scene's streets into its rooms and out (:func:`record_walk`).
+"""
 
 from __future__ import annotations
 
@@ -8,19 +13,14 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from walkstream.server.bake.navgraph import CellGraph
-from walkstream.server.bake.roomnav import EYE_HEIGHT, INDOOR_SPEED_KMH, RoomGraph, walk_path
-from walkstream.server.bake.rooms import Portal, RoomCell, StairLink
+from walkstream.server.bake.roomnav import INDOOR_SPEED_KMH, walk_path
+from walkstream.server.bake.scenenav import Place
+from walkstream.server.paths.graph import scene_graph
 from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.errors import RouteError, StoreError
 from walkstream.shared.paths import WALK_EYE_HEIGHT, RecordedPath
 
-__all__ = ["record_path", "interior_graph", "record_interior_path", "Place", "open_existing"]
-
-Place = str | tuple[float, float] | tuple[float, float, float]
-"""Where an interior walk starts or ends: a room's name, or a position ``x, y[, z]``
-(scene-local metres; ``z`` the eye height, which picks the storey; without it the
-lowest storey)."""
+__all__ = ["open_existing", "record_path", "record_walk"]
 
 
 # --------------------------------------------------------------------------- storing
@@ -48,7 +48,7 @@ def record_path(
     replace: bool = False,
     eye_height: float = WALK_EYE_HEIGHT,
 ) -> tuple[RecordedPath, str]:
-    """Record a path along the street graph and store it in a finished scene.
+    """Record a path along the street part of a scene's graph and store it in a finished scene.
 
     Parameters
     ----------
@@ -77,7 +77,7 @@ def record_path(
     """
     reader = open_existing(db, name, replace)
     try:
-        graph = CellGraph(reader.cells())
+        graph = scene_graph(reader).streets
     finally:
         reader.close()
     route = graph.plan(from_xy, to_xy, via=via)
@@ -85,33 +85,10 @@ def record_path(
     return path, write_path(db, name, path.to_msgpack())
 
 
-# --------------------------------------------------------------------------- interiors
+# --------------------------------------------------------------------------- rooms and crossings
 
 
-def interior_graph(reader: SceneReader) -> RoomGraph:
-    """The walking graph of an interior scene database."""
-    rooms = reader.rooms()
-    cells = [
-        RoomCell(c.id, c.kind, rooms[c.id].name, rooms[c.id].room, rooms[c.id].storey, np.asarray(c.boundary),
-                 c.zmin, c.zmax, np.asarray(rooms[c.id].planes))
-        for c in reader.cells()
-    ]
-    portals = [Portal(p.id, p.kind, p.a, p.b, np.asarray(p.polygon), p.source, p.name) for p in reader.portals()]
-    stairs = [StairLink(s.portal, s.lower, s.upper, np.asarray(s.path), s.name) for s in reader.stairs()]
-    return RoomGraph(cells, portals, stairs)
-
-
-def _place(graph: RoomGraph, place: Place) -> int | np.ndarray:
-    if isinstance(place, str):
-        return graph.room_cells(place)[0]
-    q = [float(v) for v in place]
-    if len(q) == 2:
-        low = min(c.zmin for c in graph.cells.values())
-        q.append(low + EYE_HEIGHT)
-    return np.array(q, dtype=np.float64)
-
-
-def record_interior_path(
+def record_walk(
     db: str | os.PathLike[str],
     name: str,
     start: Place,
@@ -121,28 +98,31 @@ def record_interior_path(
     *,
     replace: bool = False,
 ) -> tuple[RecordedPath, str]:
-    """Record a walk through an interior (room to room through doors, up stairs) and store it.
+    """Record a walk through an interior or a crossing scene and store it: room to room
+    through doors, up stairs, and between streets and rooms through an entrance.
 
-    The eye stays :data:`~walkstream.server.bake.roomnav.EYE_HEIGHT` above the floor
-    under it (the storey's floor, or a stair's treads).
+    Places are room names or positions (:data:`~walkstream.server.bake.scenenav.Place`);
+    the eye stays :data:`~walkstream.server.bake.roomnav.EYE_HEIGHT` above the ground or
+    floor under it (the storey's floor, or a stair's treads).
 
     Raises
     ------
     StoreError
-        Not a scene database, not an interior, or the name is taken.
+        Not a scene database, a city (record its paths with :func:`record_path`), or
+        the name is taken.
     RouteError
-        An unknown or ambiguous room name, a position outside every cell, or rooms
-        with no walkable connection.
+        An unknown or ambiguous room name, a position outside every cell, or no
+        walkable connection.
     """
     reader = open_existing(db, name, replace)
     try:
-        if reader.meta.kind != "interior":
+        if reader.meta.kind == "city":
             raise StoreError(f"{os.fspath(db)}: a city scene: record its paths with --from X,Y --to X,Y")
-        graph = interior_graph(reader)
+        graph = scene_graph(reader)
     finally:
         reader.close()
     places = [start, *via, end]
-    legs = [graph.route(_place(graph, a), _place(graph, b)) for a, b in zip(places, places[1:], strict=False)]
+    legs = [graph.route(a, b) for a, b in zip(places, places[1:], strict=False)]
     floor = np.concatenate([legs[0]] + [leg[1:] for leg in legs[1:]])
     if len(floor) < 2 or float(np.linalg.norm(floor[-1] - floor[0])) < 1e-3 and len(floor) < 3:
         raise RouteError(f"path {name!r}: start and end are the same place")

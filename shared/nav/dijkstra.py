@@ -2,9 +2,9 @@
 
 Streets route over portal crossings with turn costs
 (:class:`~walkstream.server.bake.navgraph.CellGraph`), rooms over door thresholds,
-room centres and stair ends (:class:`~walkstream.server.bake.roomnav.RoomGraph`), and a
-scene that holds both joins them at its entrances
-(:mod:`~walkstream.server.bake.crossnav`).  Each graph says what its states are and
+room centres and stair ends (:class:`~walkstream.server.bake.roomnav.RoomGraph`): the
+street part and the room part of a scene's one navigation graph, joined at its
+entrances (:class:`~walkstream.server.bake.scenenav.SceneGraph`).  Each graph says what its states are and
 what stepping from a settled state costs; the search itself lives here once.
 
 The caller's ``expand`` gives the *total* cost of each next state (not an edge

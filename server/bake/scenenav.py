@@ -1,13 +1,22 @@
-"""Walking a scene of streets and rooms: one route from a street through a door into a room.
+"""The one navigation graph of a scene: street cells and rooms, joined at the entrance portals.
 
-:class:`SceneGraph` joins the street graph (:class:`~.navgraph.CellGraph`, routes over
-portal crossings between street cells) and the room graph (:class:`~.roomnav.RoomGraph`,
-routes over door thresholds and stairs) at the scene's entrances; both search with the
-one Dijkstra of :mod:`walkstream.shared.nav`.  An entrance is the portal between a street
-cell and a doorway cell: a route that crosses it runs along the streets to the point
-in front of the door (:attr:`Entrance.front`, in the street cell), straight to the
-threshold (:attr:`Entrance.threshold`, just inside the doorway) and on through the
-rooms.  With several entrances the shortest sum of the three legs wins.
+:class:`SceneGraph` is what every walk of a scene is routed on: the default walks of
+the bake (a city's along its streets, an interior's tour through its rooms, a
+crossing's ``enter`` walk through its door), ``walkstream path record`` and the routes
+of a crossing scene.  It holds the scene's *street part* (:class:`~.navgraph.CellGraph`:
+its states are crossings of the portals between street cells, with turn costs), its
+*room part* (:class:`~.roomnav.RoomGraph`: its nodes are door thresholds, room
+centres and stair ends) and the *entrances* that join them; a city has the first
+only, an interior the second, a crossing scene both.  Each part searches with the
+one Dijkstra of :mod:`walkstream.shared.nav`.
+
+An entrance is the portal between a street cell and a doorway cell: a route that
+crosses it runs along the streets to the point in front of the door
+(:attr:`Entrance.front`, in the street cell), straight to the threshold
+(:attr:`Entrance.threshold`, just inside the doorway) and on through the rooms.  With
+several entrances the shortest sum of the three legs wins.  (The legs are searched
+one by one, not as one search over both parts: a room leg's costs then start at zero,
+so its sums, and the routes that tie, stay those of the interior alone.)
 
 Heights: the streets are the ground (``z = 0``), an interior placed in a city has its
 lowest floor there too (:mod:`~.placement`), so one walk keeps its eye
@@ -69,49 +78,95 @@ def front_of(street: shapely.Geometry, door_middle: F64, normal: F64, floor: flo
 
 
 class SceneGraph:
-    """Routes through streets and rooms joined at entrances (see the module docstring).
+    """Routes through a scene's streets and rooms, joined at entrances (see the module docstring).
 
     Parameters
     ----------
-    city:
-        The street graph (city cells only).
+    streets:
+        The street part (the scene's street or grid cells), or None (an interior).
     rooms:
-        The room graph of the interior.
+        The room part (the interior's cells, portals and stairs), or None (a city).
     entrances:
-        Where they meet (ids as in ``city`` and ``rooms``).
+        Where they meet (ids as in ``streets`` and ``rooms``); needed when both are given.
+
+    Raises
+    ------
+    RouteError
+        No part, or both without an entrance.
     """
 
-    def __init__(self, city: CellGraph, rooms: RoomGraph, entrances: Sequence[Entrance]) -> None:
-        if not entrances:
+    def __init__(
+        self, streets: CellGraph | None = None, rooms: RoomGraph | None = None, entrances: Sequence[Entrance] = ()
+    ) -> None:
+        if streets is None and rooms is None:
+            raise RouteError("the scene has neither street cells nor rooms to walk")
+        if streets is not None and rooms is not None and not entrances:
             raise RouteError("the scene has no entrance joining its streets to its rooms")
-        self.city = city
-        self.rooms = rooms
+        self._streets = streets
+        self._rooms = rooms
         self.entrances = list(entrances)
 
+    @property
+    def streets(self) -> CellGraph:
+        """The street part.
+
+        Raises
+        ------
+        RouteError
+            The scene has no street cells (an interior).
+        """
+        if self._streets is None:
+            raise RouteError("the scene has no street cells (an interior): walk it by rooms or X,Y,Z")
+        return self._streets
+
+    @property
+    def rooms(self) -> RoomGraph:
+        """The room part.
+
+        Raises
+        ------
+        RouteError
+            The scene has no rooms (a city).
+        """
+        if self._rooms is None:
+            raise RouteError("the scene has no rooms (a city): walk it by X,Y")
+        return self._rooms
+
     def _where(self, place: Place) -> tuple[str, Any]:
+        if self._rooms is None:
+            if isinstance(place, str) or len(place) != 2:
+                raise RouteError(f"{place!r}: a city scene has no rooms; give a point X,Y")
+            return "street", np.array([float(v) for v in place])
         if isinstance(place, str):
             return "room", self.rooms.room_cells(place)[0]
         q = [float(v) for v in place]
+        if self._streets is None:
+            # an interior alone: a point without a height is on the lowest storey; the
+            # room part says which point lies outside its cells
+            if len(q) == 2:
+                q.append(min(c.zmin for c in self.rooms.cells.values()) + EYE_HEIGHT)
+            return "room", np.array(q)
         if len(q) == 2:
-            if self.city.locator.locate(q[0], q[1]) is not None:
+            if self.streets.locator.locate(q[0], q[1]) is not None:
                 return "street", np.array(q)
             low = min(c.zmin for c in self.rooms.cells.values())
             q.append(low + EYE_HEIGHT)
         if self.rooms.locate(q[0], q[1], q[2]) is None:
-            if self.city.locator.locate(q[0], q[1]) is not None:
+            if self.streets.locator.locate(q[0], q[1]) is not None:
                 return "street", np.array(q[:2])
             raise RouteError(f"({q[0]:.1f}, {q[1]:.1f}) is outside every street cell and every room of the scene")
         return "room", np.array(q)
 
     def _street(self, a: F64, b: F64) -> F64:
-        xy = self.city.plan(a, b).xy
+        xy = self.streets.plan(a, b).xy
         return np.column_stack([xy, np.zeros(len(xy))])
 
-    def _rooms(self, a: Any, b: Any) -> F64:
+    def _room(self, a: Any, b: Any) -> F64:
         return self.rooms.route(a, b)
 
     def route(self, start: Place, end: Place) -> F64:
-        """Floor points ``(k, 3)`` of the shortest walk from ``start`` to ``end``.
+        """Floor points ``(k, 3)`` of the shortest walk from ``start`` to ``end`` (the
+        streets at ``z = 0``), through an entrance when one is a street and the other a room.
 
         Raises
         ------
@@ -122,16 +177,16 @@ class SceneGraph:
         if ka == kb == "street":
             return self._street(a, b)
         if ka == kb == "room":
-            return self._rooms(a, b)
+            return self._room(a, b)
         best: tuple[float, F64] | None = None
         errors = []
         for e in self.entrances:
             door = np.array([e.threshold[0], e.threshold[1], e.threshold[2] + EYE_HEIGHT])
             try:
                 if ka == "street":
-                    legs = [self._street(a, e.front), self._rooms(door, b)]
+                    legs = [self._street(a, e.front), self._room(door, b)]
                 else:
-                    legs = [self._rooms(a, door), self._street(e.front, b)]
+                    legs = [self._room(a, door), self._street(e.front, b)]
             except RouteError as exc:
                 errors.append(str(exc))
                 continue
@@ -150,7 +205,7 @@ class SceneGraph:
         start = None
         for d in _IN_FRONT:
             p = e.front + e.normal * d
-            if self.city.locator.locate(float(p[0]), float(p[1])) is not None:
+            if self.streets.locator.locate(float(p[0]), float(p[1])) is not None:
                 start = p
                 break
         if start is None:

@@ -1,0 +1,139 @@
+"""The one bake driver: a planned scene's cells baked by their kind into one database, resumable.
+
+:func:`drive` takes a :class:`~.plan.BakePlan` (a city, an interior or a crossing of
+both) and
+
+1. opens the work file (:meth:`~walkstream.server.store.SceneWriter.create`); a work
+   file left by a killed bake with the same header is resumed;
+2. writes the plan's tables (objects, cells, viewpoints, rooms, portals, stairs,
+   entrances; on resume again, as upserts that keep every stored PVS);
+3. bakes the room cells' contents, unless a resumed work file has them all: clipped
+   in chunks by the one chunk runner (:func:`~.chunks.run_chunks`), placed, encoded;
+4. bakes the PVS of the PVS cells not yet done, in chunks by the same runner, each
+   cell committed as it comes (a kill loses only the cells in flight);
+5. records the default walks and seals the database.
+
+So every scene kind resumes alike, to the same version an uninterrupted bake gets.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from walkstream.server.bake.chunks import run_chunks
+from walkstream.server.bake.interior import room_contents, write_contents
+from walkstream.server.bake.plan import BakePlan
+from walkstream.server.bake.workers import PVS_CHUNK, pvs_items, pvs_task, release_renderer
+from walkstream.server.store import SceneReader, SceneWriter
+from walkstream.shared.errors import InputError
+
+__all__ = ["drive"]
+
+
+def drive(
+    plan: BakePlan,
+    output: str | os.PathLike[str],
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    log: Callable[[str], None] | None = None,
+    max_cells: int | None = None,
+    started: float | None = None,
+    resume: bool = True,
+) -> dict[str, Any]:
+    """Bake ``plan`` into the database ``output`` (replaced atomically on success).
+
+    Parameters
+    ----------
+    plan:
+        The scene (:mod:`~.plan`).
+    output:
+        The database to write.
+    workers, scheduler:
+        Local processes, or a Dask scheduler ``tcp://HOST:PORT``, for the chunks.
+    progress:
+        Called with ``(cells done, cells total)`` of the step running (contents,
+        then PVS).
+    log:
+        Called with one-line messages about the stages.
+    max_cells:
+        Stop after this many new PVS cells without finishing the database (for tests
+        of interruption and resume; the work file stays for the next run).
+    started:
+        ``time.perf_counter()`` when the bake began (reading the sources counts);
+        default now.
+    resume:
+        Reuse a matching work file (default) or start over.
+
+    Returns
+    -------
+    dict
+        The database summary (``SceneReader.summary``), the plan's summary,
+        ``resumed_cells`` (PVS cells found done in a resumed work file) and, with
+        room cells, ``contents_encode_s``; empty when ``max_cells`` stopped it early.
+    """
+    if workers < 1:
+        raise InputError(f"--workers: expected >= 1, got {workers}")
+    say = log or (lambda _msg: None)
+    t0 = time.perf_counter() if started is None else started
+    out = Path(output)
+    writer = SceneWriter.create(
+        out, name=plan.name, crs=plan.crs, origin=plan.origin, grammar_text=plan.grammar_text,
+        grammar_version=plan.grammar_version, features=plan.features, settings=plan.settings, resume=resume,
+    )
+    pvs, rooms = plan.pvs, plan.rooms
+    pvs_cells = pvs.cells if pvs is not None else []
+    extra: dict[str, Any] = {}
+    try:
+        done = writer.done_cells() if writer.resumed else set()
+        # on resume too: every write is an upsert that keeps a cell's stored PVS, so a
+        # bake killed while it wrote the tables resumes as well
+        plan.write_tables(writer)
+        resumed = len([c for c in pvs_cells if c.id in done])
+        if writer.resumed:
+            say(f"resuming: {resumed} of {len(pvs_cells)} cells already baked")
+        if rooms is not None:
+            ids = {c.id + rooms.offset for c in rooms.layout.cells}
+            encode_s = 0.0
+            if not ids <= done:
+                parts = rooms.place(room_contents(rooms.scene, rooms.layout, workers=workers, scheduler=scheduler,
+                                                  progress=progress))
+                encode_s = write_contents(writer, rooms.layout, parts, offset=rooms.offset,
+                                          cellmesh_version=rooms.cellmesh_version)
+            extra["contents_encode_s"] = encode_s
+        todo = [c for c in pvs_cells if c.id not in done]
+        if max_cells is not None:
+            todo = todo[:max_cells]
+        finished = resumed
+        if pvs is not None:
+            for results in run_chunks(
+                pvs_task, pvs_items(todo), (pvs.scene, pvs.settings, pvs.key), size=PVS_CHUNK, workers=workers,
+                scheduler=scheduler, progress=progress, done=resumed, total=len(pvs_cells),
+                release=release_renderer,
+            ):
+                for cid, ids_, ach in results:
+                    writer.set_pvs(cid, ids_, ach)
+                    finished += 1
+        if max_cells is not None and finished < len(pvs_cells):
+            writer.close()
+            return {}
+        # the default walks: made from the cells alone, so a resumed bake records the
+        # same ones (INSERT OR REPLACE) just before sealing the file
+        for path, line in plan.walks(say):
+            writer.add_path(path.name, path.to_msgpack())
+            say(line)
+        writer.finish(time.perf_counter() - t0)
+    finally:
+        writer.close()
+    with SceneReader.open(out) as reader:
+        summary = reader.summary()
+    summary.update(plan.summary)
+    summary.update(extra)
+    summary["resumed_cells"] = resumed
+    return summary
+
