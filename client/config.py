@@ -1,8 +1,7 @@
 """What a replay is asked to do: the link, the path, the device, the clock and every knob of the walk.
 
-One record that every frame loop reads (:mod:`walkstream.client.replay` for cities and
-interiors, :mod:`walkstream.client.walk.crossing` for a walk from a street into a room),
-so the loops type their config instead of taking ``Any``.
+One record that the frame loop (:mod:`walkstream.client.walk.loop`) and the replay's
+wiring (:mod:`walkstream.client.replay`) read, typed instead of ``Any``.
 """
 
 from __future__ import annotations

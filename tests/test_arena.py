@@ -127,7 +127,7 @@ def test_frame_phases_marks_moves_and_summary() -> None:
     for _ in range(4):
         ph.begin()
         time.sleep(0.002)
-        ph.mark("cull")
+        ph.mark("visible")
         time.sleep(0.004)
         ph.mark("draw")
         ph.move("draw", "finish", 0.003)
@@ -137,7 +137,7 @@ def test_frame_phases_marks_moves_and_summary() -> None:
     a = ph.array()
     assert a.shape == (4, len(PHASES)) and len(ph) == 4
     i = {p: k for k, p in enumerate(PHASES)}
-    assert np.all(a[:, i["cull"]] >= 0.002)
+    assert np.all(a[:, i["visible"]] >= 0.002)
     assert np.all(a[:, i["draw"]] == 0.0) and np.all(a[:, i["finish"]] >= 0.004)
     assert np.all(a[:-1, i["other"]] >= 0.003) and a[-1, i["other"]] == 0.0
     s = ph.summary(fps_target=1000.0)

@@ -405,3 +405,11 @@ def test_v3_pairs_overlapping_rectangles_that_cannot_merge() -> None:
     got = decode_cell_mesh(encode_cell_mesh([part])).parts[0]
     _same_surface(part, got, np.random.default_rng(8))
     assert np.allclose(_signed_areas(pos, tri), _signed_areas(got.positions, got.indices), atol=1e-6)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_cell_without_parts_round_trips(version: int) -> None:
+    """An empty cell (nothing of the model inside it) encodes and decodes to no part,
+    never a numpy error."""
+    m = decode_cell_mesh(encode_cell_mesh([], version=version), "empty")
+    assert m.parts == () and m.triangles == 0 and m.vertices == 0

@@ -179,8 +179,9 @@ def _placed_before(scene: Path, out: Path) -> Path:
     import shutil
     import sqlite3
 
-    from walkstream.server.bake.interior import interior_parts
-    from walkstream.server.bake.placement import Placement, moved
+    from walkstream.server.bake.interior import interior_parts, room_contents
+    from walkstream.server.bake.placement import Placement
+    from walkstream.server.sources.interior import InteriorScene
     from walkstream.server.sources.read import read_source
     from walkstream.shared.codec.cellmesh import decode_cell_mesh, encode_cell_mesh, raw_bytes
 
@@ -190,7 +191,11 @@ def _placed_before(scene: Path, out: Path) -> Path:
     p = e.placement
     assert p is not None
     src = scene.parent / "office.json"
-    parts = moved(interior_parts(read_source(src), src), Placement(p.angle, p.shift, p.dz)).parts  # type: ignore[arg-type]
+    inner = read_source(src)
+    assert isinstance(inner, InteriorScene)
+    turn = Placement(p.angle, p.shift, p.dz)
+    parts = {c: [(e, m, turn.xyz(v), t) for e, m, v, t in ps]
+             for c, ps in room_contents(inner, interior_parts(inner, src).layout).items()}
     shutil.copyfile(scene, out)
     db = sqlite3.connect(out)
     with db:

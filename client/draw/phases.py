@@ -1,17 +1,20 @@
 """Where a frame loop's wall time goes: per-frame phase timing.
 
-:class:`FramePhases` splits each pass of the replay's frame loop into :data:`PHASES`
-with ``time.perf_counter`` marks (real seconds under either clock):
+:class:`FramePhases` splits each pass of the frame loop (:mod:`walkstream.client.walk.loop`)
+into :data:`PHASES` with ``time.perf_counter`` marks (real seconds under either clock);
+the first are the loop's steps (:data:`~walkstream.client.walk.loop.STEPS`):
 
-``stream``    the streamer's tick and the frame's inputs (what is known and built)
-``cull``      the view-frustum test
-``allocate``  the LOD choice under the budget
+``locate``    which cell holds the eye (the streamers' ticks that follow it)
+``wants``     what the walk asks for beyond the streamers' plans (an entrance's interior)
+``visible``   the visible set by the cell's model (PVS or portal walk; the rooms' requests)
+``build``     rebuilds the visible PVS lacks
+``allocate``  the room parts' culling, the frustum test and the LOD or fog choice under the budget
 ``upload``    making GPU buffers of newly drawn meshes
-``draw``      clear, uniforms and draw calls (issuing the frame)
+``draw``      clear, uniforms and draw calls (issuing the frame), the snapshot
 ``finish``    ``ctx.finish()``: waiting until the device has drawn it (on llvmpipe
               this is the rasterisation itself, on a GPU the GPU's time)
-``rest``      everything else in the loop (snapshots, the ground truth's bookkeeping,
-              the budget controller, the frame log)
+``measure``   the frame log, the walk's figures, the ground truth's notes, the controller
+``rest``      everything else in the loop (forgetting flushed rooms' buffers)
 ``other``     from the end of one pass to the start of the next: the event loop's
               other work (downloads, decoding) and threads holding the interpreter
               lock (rebuilding), plus the wait for the next tick.
@@ -32,12 +35,15 @@ __all__ = ["PHASES", "FramePhases"]
 
 #: Phase names, in loop order; ``other`` is derived from the frame starts.
 PHASES: tuple[str, ...] = (
-    "stream",
-    "cull",
+    "locate",
+    "wants",
+    "visible",
+    "build",
     "allocate",
     "upload",
     "draw",
     "finish",
+    "measure",
     "rest",
     "other",
 )

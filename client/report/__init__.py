@@ -30,7 +30,8 @@ the one definition of frame rate, perfect frame and recovery), :mod:`.files`
 (``report.json`` and the CSVs, written atomically), :mod:`.tables` (headline figures
 as text), :mod:`.plots` (one function per figure), :mod:`.html` (the folder and its
 index page), :mod:`.phases` (``phases.csv`` and ``phases.png``), :mod:`.truth` (the
-``truth`` figures).  A new plot is a function in :mod:`.plots`, a name in
+``truth`` figures), :mod:`.link` (a walk's link figures), :mod:`.city`,
+:mod:`.interior` and :mod:`.crossing` (each scene kind's figures of the summary).  A new plot is a function in :mod:`.plots`, a name in
 :data:`PLOT_NAMES` (and in :data:`BASE_PLOT_NAMES` when every report holds it) and a
 caption in :mod:`.html`.
 """

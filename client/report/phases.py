@@ -19,8 +19,11 @@ from walkstream.shared.errors import InputError
 
 __all__ = ["write_phases_csv", "plot_phases"]
 
-# Okabe-Ito colours, one per phase ("other" grey).
-_COLOURS = ("#56B4E9", "#009E73", "#F0E442", "#CC79A7", "#0072B2", "#D55E00", "#E69F00", "#999999")
+# Okabe-Ito colours and their darker kin, one per phase ("other" grey).
+_COLOURS = (
+    "#56B4E9", "#2A7AB0", "#009E73", "#F0E442", "#CC79A7", "#0072B2", "#D55E00", "#E69F00", "#8C510A",
+    "#000000", "#999999",
+)
 
 
 def _check(t: NDArray[np.float64], phases: NDArray[np.float64]) -> None:

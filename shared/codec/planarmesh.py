@@ -580,7 +580,7 @@ def decode_planar_body(
     di = unzigzag(_counts(body, "indices", 3 * nt, what, 2**64 - 1).astype(np.uint64))
     # a running sum restarting at every part start (where the stored value is absolute)
     run = np.cumsum(di)
-    starts = np.concatenate([[0], np.cumsum(tcount * 3)[:-1]]).astype(np.int64)
+    starts = (np.cumsum(tcount * 3) - tcount * 3).astype(np.int64)  # each part's first index (none: no part)
     offset = np.where(starts > 0, run[np.maximum(starts - 1, 0)] if len(run) else 0, 0)
     idx = run - np.repeat(offset, tcount * 3)
     # every region's first vertex (global), then its triangles (global indices)

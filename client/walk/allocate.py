@@ -1,0 +1,124 @@
+"""The frame step ``allocate``: what the frame draws under the budget, its lever chosen by the current cell's model.
+
+Room parts first: the visible cells' parts culled by ``config.culling`` (against the
+portal walk's visible screen areas, the fog and the frustum), a cell drawn besides the
+portal walk's (an entrance's shell from the street) by the frustum.  Then one budget
+controller, two levers: *indoors* the fog (one LOD per part, so the nearest parts that
+fit the budget are drawn and the fog is set just beyond, :func:`fog_for_budget`), *on
+the street* the triangles (the ACH allocation of the PVS objects in the frustum,
+``lod_select == "distance"`` the usual distance bands instead), after the room parts
+drawn.  The device's cost step (``cost_step_at_s``) is applied here too.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.draw.allocate import allocate_ach, allocate_distance
+from walkstream.client.walk.state import Frame, WalkState
+from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.frustum import frustum_cull
+from walkstream.shared.portals import box_distance, cull_parts
+
+__all__ = ["allocate", "fog_for_budget"]
+
+
+def allocate(w: WalkState, f: Frame) -> None:
+    """Set the frame's room parts (``f.masks``), object LODs (``f.alloc``), triangles and draws."""
+    cfg, rooms = w.config, w.scene.rooms
+    room_tris = room_parts = 0
+    if rooms is not None:
+        _cull_rooms(w, f)
+        room_tris = sum(p.triangles for cid, cm in f.loaded.items()
+                        for p, ok in zip(cm.parts, f.masks[cid].tolist(), strict=True) if ok)
+        room_parts = sum(int(m.sum()) for m in f.masks.values())
+    else:
+        f.budget = int(w.controller.budget) if w.controller is not None else 0
+    if w.scene.streets is not None:
+        o = w.objects
+        seen = frustum_cull(o.lo, o.hi, f.vp) if o.geoms else np.zeros(0, bool)
+        if w.indoors and len(seen):  # what the fog hides indoors is hidden outdoors too
+            seen &= box_distance(o.lo, o.hi, f.eye) <= f.fog
+        if cfg.lod_select == "ach":
+            f.alloc = allocate_ach(o.ach, o.tri, o.avail, seen, max(f.budget - room_tris, 0), reserve_floor=True)
+        else:
+            centre = (o.lo + o.hi) / 2.0
+            dist = np.hypot(centre[:, 0] - f.eye[0], centre[:, 1] - f.eye[1])
+            f.alloc = allocate_distance(dist, o.tri, o.avail, seen, cfg.lod_distances)
+    if cfg.cost_step_at_s is not None and not w.stepped and f.wt >= cfg.cost_step_at_s:
+        w.device.cost_scale = w.device.cost_scale * cfg.cost_step_factor
+        w.stepped = True
+    lods = f.lods
+    f.triangles = room_tris + (0 if f.alloc is None else int(f.alloc.triangles))
+    f.drawn = room_parts + int((lods >= 0).sum())
+
+
+def _cull_rooms(w: WalkState, f: Frame) -> None:
+    """The visible room cells' parts to draw (``f.loaded``, ``f.masks``), the fog's lever indoors."""
+    rooms = w.scene.rooms
+    assert rooms is not None
+    boxes = w.boxes
+    for cid in f.room_cells:
+        cm = rooms.mesh(cid)
+        if cm is None:
+            continue
+        f.loaded[cid] = cm
+        if cid not in boxes:
+            b = [p.bbox for p in cm.parts]
+            boxes[cid] = (np.array([x[0] for x in b]).reshape(-1, 3), np.array([x[1] for x in b]).reshape(-1, 3))
+    pc = rooms.last_cull
+    culling = rooms.config.culling
+    if pc is not None:
+        walked = [c for c in f.loaded if c in pc.vsas]
+    else:  # no portal walk: the chosen culling on its own ("portals" without one keeps nothing)
+        walked = [] if culling == "portals" else list(f.loaded)
+    masks = cull_parts(culling, walked, boxes, f.eye, f.view, w.proj, w.size,
+                       vsas=None if pc is None else pc.vsas, fog_m=f.fog)
+    # a cell drawn besides the portal walk's (the shell from the street): the frustum's test
+    whole = [c for c in f.loaded if c not in masks or c in f.shown]
+    for c, m in cull_parts("frustum", whole, boxes, f.eye, f.view, w.proj, w.size, fog_m=f.fog).items():
+        masks[c] = masks[c] | m if c in masks else m
+    lever = w.controller is not None and (w.scene.streets is not None or w.config.fog_budget)
+    f.budget = int(w.controller.budget) if lever and w.controller is not None else 0
+    if w.indoors and w.config.fog_budget:  # indoors the budget's lever is the fog
+        f.fog = fog_for_budget(masks, boxes, f.loaded, f.eye, f.budget, f.fog)
+        for cid, mask in masks.items():
+            lo, hi = boxes[cid]
+            mask &= box_distance(lo, hi, f.eye) <= f.fog
+    f.masks = masks
+    w.frames.cull_s.append(time.perf_counter() - f.t_cull - rooms.plan_s)
+    w.frames.portals.append(0 if pc is None else pc.portals)
+
+
+def fog_for_budget(
+    masks: dict[int, NDArray[np.bool_]],
+    boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]],
+    loaded: dict[int, CellMesh] | dict[int, Any],
+    eye: NDArray[np.float64],
+    budget: int,
+    fog: float,
+) -> float:
+    """The fog distance at which the kept parts, nearest first, fit ``budget`` triangles
+    (``fog`` itself when they all fit; never below 2 m)."""
+    dist: list[NDArray[np.float64]] = []
+    tris: list[NDArray[np.int64]] = []
+    for cid, m in masks.items():
+        if not m.any():
+            continue
+        lo, hi = boxes[cid]
+        dist.append(box_distance(lo[m], hi[m], eye))
+        tris.append(np.array([p.triangles for p in loaded[cid].parts], np.int64)[m])
+    if not dist:
+        return fog
+    d = np.concatenate(dist)
+    n = np.concatenate(tris)
+    order = np.argsort(d, kind="stable")
+    total = np.cumsum(n[order])
+    if total[-1] <= budget:
+        return fog
+    k = int(np.searchsorted(total, budget, side="right"))  # parts 0..k-1 fit
+    return max(2.0, min(fog, float(d[order[k]]) - 1e-6))

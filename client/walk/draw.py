@@ -1,0 +1,68 @@
+"""The frame steps ``upload`` and ``draw``: what the frame draws onto the renderer, and the frame shown.
+
+The simulated device's frame time comes from its cost model (the renderer draws only
+when a snapshot is due), the ``gl`` device's from the real draw
+(:func:`~walkstream.client.draw.present.present`).  Objects are uploaded as
+``(id, lod)``, room parts under their content kind's key
+(:data:`~walkstream.client.content.cellmesh.CELLMESH_CONTENT`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable
+
+from walkstream.client.content.cellmesh import CELLMESH_CONTENT
+from walkstream.client.draw.present import present, save_snapshot
+from walkstream.client.walk.scene import STREET_FAR_M
+from walkstream.client.walk.state import Frame, WalkState
+
+__all__ = ["upload", "draw", "forget_flushed"]
+
+
+def upload(w: WalkState, f: Frame) -> None:
+    """Upload what the frame draws (when it is drawn: a real device, or a snapshot due)."""
+    snap = w.config.snapshot_every
+    f.snap = bool(snap and w.frame % snap == 0)
+    r = w.renderer
+    if r is None or not (f.snap or not w.device.simulated):
+        return
+    if w.scene.rooms is not None:
+        r.fog_m = f.fog if w.indoors else STREET_FAR_M
+    keys: list[Hashable] = []
+    for g, lod in zip(w.objects.geoms, f.lods.tolist(), strict=True):
+        if lod >= 0 and g.meshes[lod] is not None:
+            key: Hashable = (g.id, int(lod))
+            if not r.has(key):
+                r.upload(key, g.meshes[lod])
+            keys.append(key)
+    for cid, cm in f.loaded.items():
+        for k, ok in enumerate(f.masks[cid].tolist()):
+            if ok:
+                m = w.meshes.get((cid, k))
+                if m is None:
+                    m = w.meshes[(cid, k)] = cm.parts[k].mesh()
+                keys.append(CELLMESH_CONTENT.upload(r, cid, k, m))
+    f.keys = keys
+
+
+def draw(w: WalkState, f: Frame) -> None:
+    """Show the frame: its time on the device, the device's stall, the snapshot."""
+    f.frame_time, spike = present(w.device, w.renderer, f.keys, f.view, w.proj, f.triangles, f.drawn, f.snap)
+    w.spikes.append(spike)
+    shot = save_snapshot(w.renderer, w.config.report_dir, w.frame) if f.snap else None
+    if shot is not None:
+        w.snapshots.append(shot)
+
+
+def forget_flushed(w: WalkState) -> None:
+    """Forget what the frame loop keeps of room cells whose contents were flushed (boxes,
+    meshes, GPU buffers)."""
+    rooms = w.scene.rooms
+    if rooms is None:
+        return
+    for key in [k for k in w.meshes if rooms.mesh(k[0]) is None]:
+        if w.renderer is not None:
+            w.renderer.forget(CELLMESH_CONTENT.gpu_key(*key))
+        del w.meshes[key]
+    for c in [c for c in w.boxes if rooms.mesh(c) is None]:
+        del w.boxes[c]

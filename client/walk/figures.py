@@ -1,0 +1,83 @@
+"""A walk's per-frame figures beyond the frame log: the visible set's model, the rooms, the fog, the culling.
+
+One record for every scene (:class:`WalkFrames`); each scene's summary reads what it
+needs of it (``client/report/interior.py``, ``client/report/crossing.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.report.metrics import FrameLog
+
+__all__ = ["MODEL_PVS", "MODEL_PORTALS", "WalkFrames"]
+
+MODEL_PVS = 0
+"""The frame's visible set came from the street cell's PVS."""
+
+MODEL_PORTALS = 1
+"""The frame's visible set came from the portal walk of a room cell."""
+
+@dataclass
+class WalkFrames:
+    """Per-frame figures of a walk beyond the frame log."""
+
+    model: list[int] = field(default_factory=list)
+    """:data:`MODEL_PVS` or :data:`MODEL_PORTALS`."""
+    room: list[int] = field(default_factory=list)
+    """The room cell holding the eye (-1 when none does)."""
+    rooms_visible: list[int] = field(default_factory=list)
+    """Room cells visible (drawn or waiting)."""
+    objects_visible: list[int] = field(default_factory=list)
+    """City objects in the visible PVS (an entrance's building left out)."""
+    fog_m: list[float] = field(default_factory=list)
+    """The fog in force (after the budget's lever indoors)."""
+    budget: list[int] = field(default_factory=list)
+    """The budget of the frame log (0 where no lever takes it)."""
+    cull_s: list[float] = field(default_factory=list)
+    """CPU seconds of the rooms' culling (cells and parts; 0 without rooms)."""
+    portals: list[int] = field(default_factory=list)
+    """Portals opened by the portal walk."""
+    tightened: int = 0
+    """Frames on which the visible cells did not fit the memory budget at the default
+    fog, so the fog was tightened until they did (the paper's use of fog)."""
+    loaded: dict[int, frozenset[int]] = field(default_factory=dict)
+    """Frames in an entrance's doorway: the room cells whose contents were in memory."""
+    prefetch_from: float | None = None
+    """Walk time at which the interior's prefetch before an entrance began (None: never)."""
+
+    def switches(self, t: NDArray[np.float64]) -> list[tuple[float, str]]:
+        """``(walk time, model)`` each time the visible set's model changes (the first frame's too)."""
+        out: list[tuple[float, str]] = []
+        last = None
+        for k, m in enumerate(self.model):
+            if m != last:
+                out.append((float(t[k]), "pvs" if m == MODEL_PVS else "portals"))
+                last = m
+        return out
+
+    def figures(self) -> dict[str, float]:
+        """Median, p95 and max culling milliseconds per frame, and portals opened per frame."""
+        if not self.cull_s:
+            return {}
+        ms = np.asarray(self.cull_s) * 1e3
+        return {
+            "culling_ms_median": float(np.median(ms)),
+            "culling_ms_p95": float(np.percentile(ms, 95)),
+            "culling_ms_max": float(ms.max()),
+            "portals_mean": float(np.mean(self.portals)),
+            "portals_max": int(np.max(self.portals)),
+        }
+
+    def series(self, log: FrameLog) -> dict[str, NDArray[np.float64]]:
+        """Per frame: visible cells, portals opened, triangles, culling ms, fog m (the report's plot)."""
+        return {
+            "cells": np.asarray(log.pvs, np.float64),
+            "portals": np.asarray(self.portals, np.float64),
+            "triangles": np.asarray(log.triangles, np.float64),
+            "cull_ms": 1e3 * np.asarray(self.cull_s, np.float64),
+            "fog_m": np.asarray(self.fog_m, np.float64),
+        }

@@ -1,0 +1,124 @@
+"""One frame loop for every scene: a pipeline of named steps, each timed.
+
+A city scene is a scene with street cells only, an interior one with room cells
+only, a crossing one with both (:class:`~walkstream.client.walk.scene.WalkScene`);
+the loop asks each frame which model the current cell has, never the scene's kind.
+Each frame, at the clock's tick (``fps``), the viewer moves along the path and these
+steps run in order, each a module of this package and a phase of
+:class:`~walkstream.client.draw.phases.FramePhases` (``phases.csv``, ``phases.png``):
+
+``locate`` (:mod:`.locate`)
+    Which cell holds the eye: a street cell (PVS) or a room cell (portals).
+``wants`` (:mod:`.wants`)
+    What the walk asks for beyond the streamers' own plans (the interior ahead of an entrance).
+``visible`` (:mod:`.visible`)
+    The visible set by the current cell's model: the street cell's PVS or the portal walk.
+``build`` (:mod:`.build`)
+    Rebuilds the visible PVS lacks (room contents are decoded as they arrive).
+``allocate`` (:mod:`.allocate`)
+    One budget controller, its lever by the model: triangles outdoors, fog indoors.
+``upload``, ``draw`` (:mod:`.draw`)
+    The frame's meshes onto the renderer; the frame shown (a simulated device's cost
+    model or the real draw), the snapshot.
+``measure`` (:mod:`.measure`)
+    The frame log, the walk's figures, the ground truth's notes, the controller fed.
+
+A frame that finished before the next tick waits for it; one that took longer is
+shown late and the next starts at once.  Under the simulated clock the same code runs
+on virtual time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.content.cellmesh import CELLMESH_CONTENT
+from walkstream.client.draw.phases import FramePhases
+from walkstream.client.report.metrics import FrameLog
+from walkstream.client.walk.allocate import allocate
+from walkstream.client.walk.build import build
+from walkstream.client.walk.draw import draw, forget_flushed, upload
+from walkstream.client.walk.locate import locate
+from walkstream.client.walk.measure import measure
+from walkstream.client.walk.state import Frame, WalkState
+from walkstream.client.walk.visible import visible
+from walkstream.client.walk.wants import wants
+from walkstream.shared.camera import camera
+
+__all__ = ["STEPS", "walk"]
+
+STEPS: tuple[tuple[str, Callable[[WalkState, Frame], None]], ...] = (
+    ("locate", locate),
+    ("wants", wants),
+    ("visible", visible),
+    ("build", build),
+    ("allocate", allocate),
+    ("upload", upload),
+    ("draw", draw),
+    ("measure", measure),
+)
+"""The frame's steps in order, each with its phase name."""
+
+FORGET_EVERY = 25
+"""Frames between two passes forgetting what the loop keeps of flushed room cells."""
+
+
+async def walk(
+    w: WalkState, phases: FramePhases, progress: Callable[[float, float], None] | None = None
+) -> tuple[FrameLog, list[Path], NDArray[np.bool_]]:
+    """Walk ``w.path`` through ``w.scene`` (see the module docstring).
+
+    Returns the frame log, the snapshot files and the per-frame spike flags (the
+    simulated device's stalls); ``w.frames`` gets the walk's own figures and ``phases``
+    each step's seconds.
+    """
+    cfg, clock, scene = w.config, w.clock, w.scene
+    tick = 1.0 / cfg.fps
+    total = w.path.duration if cfg.duration_s is None else min(cfg.duration_s, w.path.duration)
+    t_walk0 = clock.now()
+    if scene.streets is not None:
+        scene.streets.walk_end = t_walk0 + total
+    rooms = scene.rooms
+    if rooms is not None:
+        w.indoor_fog = rooms.config.fog_m
+    w.indoors = scene.starts_indoors
+    e = scene.entrance
+    if e is not None and rooms is not None:
+        w.door = np.asarray(next(p[4] for p in rooms.topology.portals if p[0] == e.portal), np.float64).mean(axis=0)
+    last_progress = -math.inf
+    while True:
+        t = clock.now()
+        wt = t - t_walk0
+        if wt > total:
+            break
+        phases.begin()
+        if progress is not None and wt - last_progress >= 1.0:
+            last_progress = wt
+            progress(wt, total)
+        xyz, yaw, pitch = w.path.at(wt)
+        eye = np.asarray(xyz, dtype=np.float64)
+        view = camera(eye, float(yaw), float(pitch)).astype(np.float64)
+        f = Frame(t=t, wt=wt, eye=eye, view=view, vp=w.proj @ view)
+        for name, step in STEPS:
+            step(w, f)
+            phases.mark(name)
+            if name == "draw" and w.renderer is not None and (f.snap or not w.device.simulated):
+                phases.move("draw", "finish", w.renderer.last_finish_s)
+        w.frame += 1
+        if w.frame % FORGET_EVERY == 0:
+            forget_flushed(w)
+        phases.end()
+        await clock.sleep_until(t + max(f.frame_time, tick))
+    if rooms is not None:
+        rooms.fog_m = w.indoor_fog
+        if w.renderer is not None:
+            for key in list(w.meshes):
+                w.renderer.forget(CELLMESH_CONTENT.gpu_key(*key))
+    if progress is not None:
+        progress(total, total)
+    return w.builder.build(fps_cap=cfg.fps), w.snapshots, np.array(w.spikes, dtype=bool)

@@ -1,0 +1,132 @@
+"""The frame step ``measure``: the frame log, the walk's per-frame figures, the notes for the ground truth.
+
+Download quality is the share of what the frame's model makes visible (the PVS
+objects and the visible room cells, at the rooms' default fog) that has arrived,
+rewrite quality the share also built; a frame whose visible set is not known yet
+counts :attr:`~walkstream.client.walk.scene.WalkScene.unknown_quality`.  The frame's
+time goes to the budget controller.
+
+Everything the ground truth needs is noted here, in the one
+:class:`~walkstream.client.truth.recorder.TruthRecorder`, and compared after the walk
+(:func:`compare_truth`): every city object and every room part at full detail.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import httpx
+import numpy as np
+
+from walkstream.client.clock import Clock
+from walkstream.client.report.metrics import FrameLog, first_perfect_index
+from walkstream.client.truth.recorder import TruthResult
+from walkstream.client.walk.figures import MODEL_PORTALS, MODEL_PVS
+from walkstream.client.walk.state import Frame, WalkState
+from walkstream.client.walk.visible import OUTDOOR_FOG_M
+from walkstream.shared.roomwire import Topology
+
+__all__ = ["measure", "note_truth", "compare_truth"]
+
+
+def measure(w: WalkState, f: Frame) -> None:
+    """Log the frame, its figures and its truth notes; feed the controller."""
+    scene, city, rooms = w.scene, w.scene.streets, w.scene.rooms
+    o = w.objects
+    have_obj = sum(1 for i in o.pvs if city.has_object(i)) if city is not None else 0
+    have_rooms = sum(1 for c in f.default_room_cells if rooms is not None and rooms.mesh(c) is not None)
+    items = len(o.pvs) + len(f.default_room_cells)
+    known = (f.room is not None) if w.indoors else (city is not None and f.street is not None and f.street in city.cells)
+    empty = 1.0 if known else scene.unknown_quality
+    dq = (have_obj + have_rooms) / items if items else empty
+    rq = (len(o.geoms) + have_rooms) / items if items else empty
+    note_truth(w, f)
+    fr = w.frames
+    if rooms is not None:
+        e = scene.entrance
+        if e is not None and f.held and f.room == e.doorway:
+            fr.loaded[w.frame] = frozenset(c for c in rooms.cells if rooms.mesh(c) is not None)
+        fr.model.append(MODEL_PORTALS if w.indoors else MODEL_PVS)
+        fr.room.append(f.room if f.held and f.room is not None else -1)
+        fr.rooms_visible.append(len(f.room_cells))
+        fr.objects_visible.append(len(o.pvs))
+        fr.fog_m.append(f.fog)
+        fr.budget.append(f.budget)
+    if w.indoors:  # the room held, or kept on a threshold where no street cell takes over
+        cell = f.room if f.room is not None and (f.held or city is None) else -1
+    else:
+        cell = -1 if f.street is None else int(f.street)
+    alloc = f.alloc
+    w.builder.append(
+        t=f.t - w.t_start, frame_time=f.frame_time, cell=cell, pvs=len(o.pvs) + len(f.room_cells),
+        download_quality=dq, rewrite_quality=rq, bytes_down=w.bytes_down(), budget=f.budget,
+        triangles=f.triangles, visible=f.drawn,
+        floor_limited=alloc is not None and bool(alloc.floor_limited),
+        all_lod2=alloc is not None and bool(alloc.all_max),
+    )
+    if w.controller is not None:
+        w.controller.observe(f.frame_time, f.triangles)
+
+
+def note_truth(w: WalkState, f: Frame) -> None:
+    """Note the frame for the ground truth when it is due (``truth_every``): the city
+    objects drawn (with their LOD) and the visible set's, the room parts drawn, the
+    visible cells still waiting for their contents, the fog in force."""
+    rec = w.recorder
+    if rec is None or not rec.due(w.frame):
+        return
+    city, rooms = w.scene.streets, w.scene.rooms
+    parts = [(c, k) for c, mk in f.masks.items() for k in np.flatnonzero(mk).tolist()]
+    waiting = [c for c in f.room_cells if c not in f.loaded]
+    t = f.t - w.t_start
+    if rooms is None:  # streets only: the city's figures (late and missed pixels by cause)
+        assert city is not None
+        cache = w.scene.cache
+        cell = city.cells.get(f.street) if f.street is not None else None
+        rec.record(
+            frame=w.frame, t=t, eye=f.eye, view=f.view.astype(np.float32), cell=f.street,
+            pvs=None if cell is None else cell.pvs,
+            received=cache.ids(city.kind) + cache.ids("geom"), built=cache.ids("geom"),
+            geoms=w.objects.geoms, lods=f.lods,
+        )
+    elif city is None:  # rooms only: drawn at the fog the portal walk used
+        rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(rooms.fog_m))
+    else:
+        # outdoors before the street cell's record: no visible set known, nothing culled
+        unknown = not w.indoors and (f.street is None or f.street not in city.cells)
+        o = w.objects
+        rec.record(
+            frame=w.frame, t=t, eye=f.eye, view=f.view, geoms=o.geoms, lods=f.lods,
+            pvs=None if unknown else o.pvs, built=[g.id for g in o.geoms], parts=parts, waiting=waiting,
+            fog=f.fog if w.indoors else OUTDOOR_FOG_M,
+        )
+
+
+async def compare_truth(
+    w: WalkState,
+    log: FrameLog,
+    inner: tuple[httpx.AsyncBaseTransport, str],
+    scene_name: str,
+    topology: Topology | None,
+    clock: Clock,
+    progress: Callable[[int, int], None] | None,
+) -> TruthResult | None:
+    """After the walk (the streamers closed; ``clock.busy()``: no simulated time passes),
+    compare the noted frames with the ground truth on the unshaped transport ``inner``.
+
+    The entrance's building is left out of the truth (its parameters are a stand-in
+    inside the rooms' shell, which stands for it), and the contents of an interior kept
+    in its own frame are placed where the walk placed them.
+    """
+    if w.recorder is None:
+        return None
+    e = w.scene.entrance
+    first = first_perfect_index(log)
+    with clock.busy():
+        return await w.recorder.finish(
+            inner[0], inner[1], scene_name, clock=clock,
+            cells=[] if topology is None else [c.id for c in topology.cells],
+            leave_out=[] if e is None else [e.building],
+            placements=[] if e is None or e.placement is None else [e.placement],
+            t_first_perfect=None if first is None else float(log.t[first]), progress=progress,
+        )

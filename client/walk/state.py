@@ -1,0 +1,138 @@
+"""The frame loop's state: what lasts the whole walk (:class:`WalkState`) and what one frame found (:class:`Frame`).
+
+Each step of :mod:`.loop` reads the walk's state and the frame so far and adds its
+own findings to the frame; nothing else passes between the steps.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.clock import Clock
+from walkstream.client.config import ReplayConfig
+from walkstream.client.draw.allocate import Allocation
+from walkstream.client.draw.budget import BudgetController
+from walkstream.client.report.metrics import FrameLogBuilder
+from walkstream.client.stream.predict import MotionPredictor
+from walkstream.client.truth.recorder import TruthRecorder
+from walkstream.client.walk.figures import WalkFrames
+from walkstream.client.walk.objects import PvsObjects
+from walkstream.client.walk.scene import WalkScene
+from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.paths import RecordedPath
+from walkstream.shared.records import Mesh
+
+__all__ = ["WalkState", "Frame"]
+
+
+@dataclass
+class WalkState:
+    """What the frame loop keeps from frame to frame."""
+
+    config: ReplayConfig
+    clock: Clock
+    path: RecordedPath
+    scene: WalkScene
+    device: Any
+    """The simulated device (a cost model) or the ``gl`` one."""
+    renderer: Any
+    """The GL renderer, or None (a simulated device without snapshots)."""
+    proj: NDArray[np.float64]
+    t_start: float
+    bytes_down: Callable[[], int]
+    frames: WalkFrames
+    recorder: TruthRecorder | None = None
+    """The city's ground-truth recorder (``truth_every``); scenes with rooms note in ``frames``."""
+    controller: BudgetController | None = None
+    predictor: MotionPredictor = field(default_factory=MotionPredictor)
+    objects: PvsObjects = field(default_factory=PvsObjects)
+    builder: FrameLogBuilder = field(default_factory=FrameLogBuilder)
+    snapshots: list[Path] = field(default_factory=list)
+    spikes: list[bool] = field(default_factory=list)
+    boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(default_factory=dict)
+    """Per loaded room cell, its parts' boxes."""
+    meshes: dict[tuple[int, int], Mesh] = field(default_factory=dict)
+    """Room parts made into meshes for the renderer, by ``(cell, part)``."""
+    frame: int = 0
+    indoors: bool = False
+    """The portal model holds the eye (the last room kept on a threshold)."""
+    stepped: bool = False
+    """The cost step (``cost_step_at_s``) was applied."""
+    planned: float = -math.inf
+    """Clock time of the last look ahead through an entrance."""
+    seen: list[int] = field(default_factory=list)
+    """The rooms the last look ahead through an entrance saw."""
+    from_entrance: list[int] | None = None
+    """The rooms seen from the entrance's street cell (once)."""
+    door: NDArray[np.float64] | None = None
+    """The entrance door's centre."""
+    indoor_fog: float = 0.0
+    """The rooms' default fog (the lever starts from it each frame)."""
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """The frame's size in pixels."""
+        return self.config.size
+
+
+@dataclass
+class Frame:
+    """What one frame's steps found, in step order."""
+
+    t: float
+    """Clock time of the frame's start."""
+    wt: float
+    """Walk time."""
+    eye: NDArray[np.float64]
+    view: NDArray[np.float64]
+    vp: NDArray[np.float64]
+    # -- locate
+    street: int | None = None
+    """The street cell the city streamer located (None: none, or no street cells)."""
+    room: int | None = None
+    """The room cell the rooms' locator keeps (None: none, or no room cells)."""
+    held: bool = False
+    """The room's planes hold the eye."""
+    # -- wants
+    ahead: list[int] = field(default_factory=list)
+    """Rooms to fetch before the entrance's door."""
+    # -- visible
+    rooms_seen: list[int] = field(default_factory=list)
+    """What the rooms' streamer returned: visible cells (foreign ones too) and the shown."""
+    room_cells: list[int] = field(default_factory=list)
+    """Visible room cells (their contents drawn or waited for)."""
+    default_room_cells: list[int] = field(default_factory=list)
+    """Visible room cells at the default fog (the frame's quality counts them)."""
+    shown: list[int] = field(default_factory=list)
+    """Room cells drawn besides the portal walk's (an entrance's shell from the street)."""
+    pvs_cells: list[int] = field(default_factory=list)
+    """Street cells whose PVS is visible."""
+    fog: float = math.inf
+    """The fog in force."""
+    t_cull: float = 0.0
+    """``perf_counter`` at the start of the rooms' culling."""
+    # -- allocate
+    loaded: dict[int, CellMesh] = field(default_factory=dict)
+    masks: dict[int, NDArray[np.bool_]] = field(default_factory=dict)
+    budget: int = 0
+    alloc: Allocation | None = None
+    """The objects' LODs (None: no street cells, nothing to allocate)."""
+    triangles: int = 0
+    drawn: int = 0
+    """Room parts and objects drawn."""
+    # -- draw
+    snap: bool = False
+    keys: list[Hashable] = field(default_factory=list)
+    frame_time: float = 0.0
+
+    @property
+    def lods(self) -> NDArray[np.integer[Any]]:
+        """The objects' LODs (-1: not drawn)."""
+        return np.zeros(0, np.int8) if self.alloc is None else self.alloc.lod
