@@ -293,8 +293,10 @@ async def walk_crossing(
             shows_building = rec is not None and bool(np.any(rec.pvs == e.building))
             rooms.fog_m = OUTDOOR_FOG_M
             shown = [e.shell] if shows_building else []
-            vis = rooms.tick(t, eye, vp, view, proj, (w, h), cell=e.street if street == e.street else None,
-                             shown=shown, ahead=ahead)
+            # the walk from the shell passes every outer door and window in view (a door
+            # back from the street is seen from street cells other than its own)
+            start = e.shell if shows_building else (e.street if street == e.street else None)
+            vis = rooms.tick(t, eye, vp, view, proj, (w, h), cell=start, shown=shown, ahead=ahead)
             fog = OUTDOOR_FOG_M
         room_cells = [c for c in vis if c not in rooms.foreign]
         objects.update(pvs_cells, city, cache, e.building)

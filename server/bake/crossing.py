@@ -2,9 +2,11 @@
 
 ``walkstream bake city.geojson -o scene.db --interior office.json [--building ID|auto]``.
 The interior is placed in the building's footprint with its entrance door on the
-facade that faces the nearest street cell (:mod:`~.placement` says how the entrance
-is matched); a portal of kind ``door`` (source ``entrance``) joins that street cell to
-the door's doorway cell, and the ``entrances`` table records it.
+facade that faces the nearest street cell (:mod:`~.siting` says which building, which
+door and what fits; :mod:`~.placement` how it is turned and moved; a door set back from
+the street gets a front path cell, :mod:`~.frontpath`); a portal of kind ``door``
+(source ``entrance``) joins that street cell to the door's doorway cell, and the
+``entrances`` table records it.
 
 One id space: the city's cells keep their ids ``0 .. n-1`` (the same cells, PVS
 and ACH as the city alone would get), the interior's cells follow from ``n`` (rooms,
@@ -71,7 +73,7 @@ from walkstream.server.bake.objectrows import object_rows
 from walkstream.server.bake.placement import entrance_door, interior_shell, moved
 from walkstream.server.bake.roomwalks import TOUR_NAME
 from walkstream.server.bake.settings import BakeSettings
-from walkstream.server.bake.siting import office_size, pick_building, site_interior, street_cells
+from walkstream.server.bake.siting import site_interior, street_cells
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
 from walkstream.server.bake.workers import run_tasks
@@ -94,8 +96,6 @@ __all__ = [
     "STAND_IN_INSET",
     "STAND_IN_PARAPET",
     "bake_crossing",
-    "office_size",
-    "pick_building",
 ]
 
 CROSSING_FEATURE = "entrances"
@@ -133,7 +133,7 @@ def bake_crossing(
 ) -> dict[str, Any]:
     """Bake a city ``source`` with the interior ``interior_source`` in one of its buildings.
 
-    Arguments as for :func:`~.pipeline.bake`; ``building`` as for :func:`pick_building`.
+    Arguments as for :func:`~.pipeline.bake`; ``building`` as for :func:`~.siting.site_interior`.
 
     Returns
     -------

@@ -172,23 +172,20 @@ def site_interior(
             raise InputError(f"the interior does not fit building {b.id} ({b.source_id}): {why}{_hint(interior)}")
         return got
     best: Siting | None = None
-    nearest: tuple[float, int] | None = None
     for k, b in enumerate(scene.buildings):
         if len(b.rings) != 1 or not _within_reach(shell, footprints[k]):
             continue
         got, _ = _try(scene, cells, doors, shell, k, dz, tree, footprints)
-        if got is None:
-            area = abs(footprints[k].area - shell.area)
-            if nearest is None or area < nearest[0]:
-                nearest = (area, k)
-            continue
-        if best is None or (-round(got.fit.match, 3), got.fit.gap) < (-round(best.fit.match, 3), best.fit.gap):
+        if got is not None and (best is None or (-round(got.fit.match, 3), got.fit.gap)
+                                < (-round(best.fit.match, 3), best.fit.gap)):
             best = got
     if best is None:
         more = ""
-        if nearest is not None:
-            b = scene.buildings[nearest[1]]
-            _, why = _try(scene, cells, doors, shell, nearest[1], dz, tree, footprints)
+        sizes = [(abs(footprints[k].area - shell.area), k) for k, b in enumerate(scene.buildings) if len(b.rings) == 1]
+        if sizes:
+            k = min(sizes)[1]
+            b = scene.buildings[k]
+            _, why = _try(scene, cells, doors, shell, k, dz, tree, footprints)
             more = f"; the nearest in size, building {b.id} ({b.source_id}): {why}"
         sides = sorted(_sides(shell), reverse=True)
         raise InputError(f"no building of the city holds the interior ({sides[0]:.1f} x {sides[1]:.1f} m) "
