@@ -3,19 +3,24 @@
 The interior is moved rigidly (a turn about the vertical and a shift; its lowest
 floor put on the city's ground, z = 0) so that
 
-1. its **entrance** (the outer door of :func:`entrance_door`: a doorway cell with a
-   door portal to the outside, on the lowest storey that has one, next to the room a
-   tour starts in) faces out of one edge of the building's footprint, the shell's
-   front on that edge: the door's outer face flush with the facade, or behind it by
-   as much as the shell reaches out in front of the door (a porch, a roof); the
-   entrance's floor is put on the city's ground;
-2. the interior's **shell** (the plan of its walls, slabs and roof) lies inside the
-   footprint (5 cm of slack);
-3. the door faces the **nearest street cell**: of the footprint edges long enough
-   for the door, each tried with the door at the edge's middle, then slid to either
-   end, the placement kept is the one whose point just in front of the door is
-   closest to a street, crossroad or square cell (ties: the earlier edge, in the
-   footprint's vertex order).
+1. its **entrance** (an outer door of :func:`entrance_doors`: a doorway cell with a
+   door portal to the outside, on the lowest storey that has one) faces out of one
+   edge of the building's footprint, the shell's front on that edge: the door's outer
+   face flush with the facade, or behind it by as much as the shell reaches out in
+   front of the door (a porch, a roof); the entrance's floor is put on the city's
+   ground;
+2. the interior's **shell** (the plan of its walls, slabs and roof) reaches at most
+   :data:`FIT_TOLERANCE` outside the footprint and overlaps no street cell and no
+   other building (5 cm of slack) — what *fits* means;
+3. along each footprint edge long enough for the door, the door's middle is tried
+   every half metre (and with the shell centred, flush with either end, centred on
+   the footprint's centroid); on an edge the position that **matches** best is kept
+   (the placed shell and the footprint: area of intersection over area of union), and
+   of the edges the one whose point just in front of the door is **nearest a street**,
+   crossroad or square cell (ties: the better match, then the earlier edge in the
+   footprint's vertex order): :func:`fit_in_footprint`.
+
+Which building and which door are :mod:`~.siting`'s choice.
 
 :func:`moved` moves a baked interior (cells, plane sets, portals, stairs, contents)
 rather than cutting the moved model into cells again: room layout is not exactly
@@ -25,8 +30,8 @@ that was baked alone.
 A generated office (``walkstream generate interior``) is laid out along x with its
 entrance in the west wall: generate it with ``--size LxW`` no larger than the
 building's footprint less 0.6 m each way (the outer walls), ``W`` along the street;
-when it does not fit, :func:`place_in_footprint` says the footprint's size, and
-:func:`~.crossing.office_size` finds the largest size some building of a city takes
+when it does not fit, :func:`misfit` says the footprint's size, and
+:func:`~.siting.office_size` finds the largest size some building of a city takes
 (the bake names it when no building holds the interior).
 """
 
