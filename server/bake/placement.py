@@ -340,7 +340,7 @@ def place_in_footprint(
     """
     fit = fit_in_footprint(door, shell, footprint, streets, obstacles=obstacles, dz=dz)
     if fit is None:
-        raise InputError(f"the interior does not fit {what}: {misfit(shell, footprint)}")
+        raise InputError(f"the interior does not fit {what}: {misfit(door, shell, footprint)}")
     if fit.gap > MAX_ENTRANCE_GAP:
         raise InputError(
             f"the entrance of the interior in {what} is {fit.gap:.1f} m from the nearest street cell "
@@ -349,14 +349,16 @@ def place_in_footprint(
     return fit.placement, fit.gap
 
 
-def misfit(shell: shapely.Geometry, footprint: F64) -> str:
-    """Why a shell fits no footprint: the two sizes (sides of their smallest enclosing
-    rectangles) and the tolerance."""
+def misfit(door: EntranceDoor, shell: shapely.Geometry, footprint: F64) -> str:
+    """Why a shell fits a footprint nowhere: the two sizes (sides of their smallest
+    enclosing rectangles) and which rule failed (the tolerance, or the street cells and
+    neighbours when the footprint alone would take it)."""
     own = _sides(_outer(shell))
     sides = _sides(shapely.Polygon(np.asarray(footprint, np.float64).reshape(-1, 2)))
-    return (f"its outline ({own[0]:.1f} x {own[1]:.1f} m outside its walls) against the footprint's "
-            f"({sides[0]:.1f} x {sides[1]:.1f} m) leaves it more than {FIT_TOLERANCE:g} m outside wherever its "
-            "door is on a facade, or over a street or a neighbour")
+    sizes = f"its outline ({own[0]:.1f} x {own[1]:.1f} m outside its walls) against the footprint's ({sides[0]:.1f} x {sides[1]:.1f} m)"
+    if fit_in_footprint(door, shell, footprint, []) is None:
+        return f"{sizes} leaves it more than {FIT_TOLERANCE:g} m outside wherever a door of it is on a facade"
+    return f"{sizes}: wherever it is within {FIT_TOLERANCE:g} m of the footprint it stands over a street cell or a neighbour"
 
 
 def _sides(g: shapely.Geometry) -> tuple[float, float]:

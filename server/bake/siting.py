@@ -138,7 +138,7 @@ def _try(
     if far is not None:
         return None, (f"its door would be {far:.1f} m from the nearest street cell (at most "
                       f"{MAX_ENTRANCE_GAP:g} m, with a front path clear of other buildings and streets)")
-    return None, misfit(shell, b.rings[0])
+    return None, misfit(doors[0], shell, b.rings[0])
 
 
 def site_interior(
