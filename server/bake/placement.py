@@ -190,16 +190,18 @@ def door_face(polygon: F64, outline: F64) -> tuple[F64, F64]:
     return ends, n
 
 
-def interior_shell(scene: InteriorScene) -> shapely.Geometry:
-    """The plan of an interior's walls, slabs and roof (its outer outline, holes filled)."""
+def interior_shell(scene: InteriorScene) -> shapely.Polygon:
+    """The plan of an interior's walls, slabs and roof (its outer outline, holes filled).
+
+    One polygon: of a plan in parts (a detached shed) the largest, which is what is
+    fitted to the footprint and what the stand-in lies inside (a smaller occluder
+    keeps the PVS conservative)."""
     parts = [mesh_footprint(e.vertices, e.triangles) for e in scene.elements if e.kind in _SHELL_KINDS and len(e.triangles)]
     parts = [p for p in parts if not p.is_empty]
     if not parts:
         pts = np.concatenate([r.outline for r in scene.rooms])
         return shapely.MultiPoint(pts).convex_hull
-    union = shapely.union_all(parts)
-    polys = [g for g in shapely.get_parts(union) if isinstance(g, shapely.Polygon)]
-    return shapely.union_all([shapely.Polygon(g.exterior) for g in polys])
+    return _outer(shapely.union_all(parts))
 
 
 @dataclass(frozen=True)
