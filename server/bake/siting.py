@@ -172,12 +172,17 @@ def site_interior(
             raise InputError(f"the interior does not fit building {b.id} ({b.source_id}): {why}{_hint(interior)}")
         return got
     best: Siting | None = None
-    for k, b in enumerate(scene.buildings):
-        if len(b.rings) != 1 or not _within_reach(shell, footprints[k]):
+    # the match is at most the smaller area over the larger: buildings are tried in the
+    # order of that bound, and once it falls below the best match found the search ends
+    bound = sorted((-min(fp.area, shell.area) / max(fp.area, shell.area, 1e-12), k) for k, fp in enumerate(footprints))
+    for neg, k in bound:
+        if best is not None and -neg < round(best.fit.match, 3):
+            break
+        if len(scene.buildings[k].rings) != 1 or not _within_reach(shell, footprints[k]):
             continue
         got, _ = _try(scene, cells, doors, shell, k, dz, tree, footprints)
-        if got is not None and (best is None or (-round(got.fit.match, 3), got.fit.gap)
-                                < (-round(best.fit.match, 3), best.fit.gap)):
+        if got is not None and (best is None or (-round(got.fit.match, 3), got.fit.gap, got.index)
+                                < (-round(best.fit.match, 3), best.fit.gap, best.index)):
             best = got
     if best is None:
         more = ""
