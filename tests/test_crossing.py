@@ -193,7 +193,7 @@ def test_an_ifc_model_enters_from_the_street_too(baked: tuple[Path, dict[str, An
 
 def test_the_suggested_office_size_fits_the_building_it_names(baked: tuple[Path, dict[str, Any], Path]) -> None:
     from walkstream.server.bake.cells import make_cells
-    from walkstream.server.bake.crossing import office_size, pick_building
+    from walkstream.server.bake.siting import office_size, pick_building
     from walkstream.server.sources.read import read_source
 
     _, _, d = baked

@@ -56,7 +56,9 @@ def visible(w: WalkState, f: Frame) -> None:
             shows = e is not None and rec is not None and bool((rec.pvs == e.building).any())
             rooms.fog_m = OUTDOOR_FOG_M
             f.shown = [e.shell] if shows and e is not None else []
-            start = e.street if e is not None and f.street == e.street else None
+            # the walk from the shell passes every outer door and window in view (a door
+            # back from the street is seen from street cells other than its own)
+            start = e.shell if shows and e is not None else (e.street if e is not None and f.street == e.street else None)
             default = vis = rooms.tick(f.t, f.eye, f.vp, f.view, w.proj, w.size, cell=start,
                                        shown=f.shown, ahead=f.ahead)
             f.fog = OUTDOOR_FOG_M

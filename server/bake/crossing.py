@@ -2,9 +2,11 @@
 
 ``walkstream bake city.geojson -o scene.db --interior office.json [--building ID|auto]``.
 The interior is placed in the building's footprint with its entrance door on the
-facade that faces the nearest street cell (:mod:`~.placement` says how the entrance
-is matched); a portal of kind ``door`` (source ``entrance``) joins that street cell to
-the door's doorway cell, and the ``entrances`` table records it.
+facade that faces the nearest street cell (:mod:`~.siting` says which building, which
+door and what fits; :mod:`~.placement` how it is turned and moved; a door set back from
+the street gets a front path cell, :mod:`~.frontpath`); a portal of kind ``door``
+(source ``entrance``) joins that street cell to the door's doorway cell, and the
+``entrances`` table records it.
 
 One id space: the city's cells keep their ids ``0 .. n-1`` (the same cells, PVS
 and ACH as the city alone would get), the interior's cells follow from ``n`` (rooms,
@@ -53,7 +55,6 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import shapely
@@ -61,6 +62,7 @@ from shapely.geometry.polygon import orient
 
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.digest import file_digest
+from walkstream.server.bake.frontpath import with_front_path
 from walkstream.server.bake.interior import (
     INTERIOR_FEATURES,
     interior_parts,
@@ -69,24 +71,17 @@ from walkstream.server.bake.interior import (
 )
 from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.objectrows import object_rows
-from walkstream.server.bake.placement import (
-    Placement,
-    entrance_door,
-    interior_shell,
-    moved,
-    place_in_footprint,
-)
+from walkstream.server.bake.placement import Placement, entrance_door, interior_shell, moved
 from walkstream.server.bake.plan import BakePlan, PvsCells, RoomCells, Say, Walk, settings_key
-from walkstream.server.bake.rooms import RoomLayout, room_layout
 from walkstream.server.bake.roomwalks import TOUR_NAME
 from walkstream.server.bake.scenenav import ENTER_NAME, SceneGraph, front_of
 from walkstream.server.bake.settings import BakeSettings
-from walkstream.server.bake.viewcell import ViewCell
+from walkstream.server.bake.siting import site_interior, street_cells
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
+from walkstream.server.sources.clip import clip_scene, local_bbox
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
-from walkstream.server.sources.scene import SourceScene
 from walkstream.server.store import (
     CellRow,
     EntranceInfo,
@@ -103,8 +98,6 @@ __all__ = [
     "STAND_IN_INSET",
     "STAND_IN_PARAPET",
     "crossing_plan",
-    "office_size",
-    "pick_building",
 ]
 
 CROSSING_FEATURE = "entrances"
@@ -113,110 +106,6 @@ STAND_IN_INSET = 0.5
 """Metres the stand-in building's footprint lies inside the shell's plan."""
 STAND_IN_PARAPET = 1.0
 """Metres the stand-in's eaves lie below the shell's top (the grammar's parapet)."""
-
-_STREET_KINDS = ("street", "crossroad", "square")
-
-
-def _streets(cells: list[ViewCell]) -> tuple[list[ViewCell], list[shapely.Geometry]]:
-    street = [c for c in cells if c.kind in _STREET_KINDS] or list(cells)
-    return street, [shapely.Polygon(c.polygon) for c in street]
-
-
-def pick_building(
-    scene: SourceScene, cells: list[ViewCell], interior: InteriorScene, building: str | None,
-    *, layout: RoomLayout | None = None,
-) -> tuple[int, Any, float]:
-    """The building the interior goes into and its placement.
-
-    ``building`` is an object id, a source feature id (``b103``) or ``auto``/None:
-    of the buildings the interior fits with its door at most 1 m from a street cell,
-    the one nearest the middle of the city's cells (ties: the lowest id).
-
-    ``layout`` is the interior's (:func:`~.rooms.room_layout`), if already made.
-
-    Returns
-    -------
-    index, placement, gap:
-        Position in ``scene.buildings``, the :class:`~.placement.Placement` and the
-        door's distance to the street cell.
-    """
-    door = entrance_door(layout if layout is not None else room_layout(interior))
-    shell = interior_shell(interior)
-    dz = -door.zmin  # the entrance's floor on the ground
-    _, polys = _streets(cells)
-    if building not in (None, "auto"):
-        want = str(building)
-        hits = [k for k, b in enumerate(scene.buildings) if str(b.id) == want or b.source_id == want]
-        if not hits:
-            raise InputError(f"--building {want}: no building with that object or feature id")
-        k = hits[0]
-        b = scene.buildings[k]
-        p, gap = place_in_footprint(door, shell, b.rings[0], polys, dz=dz, what=f"building {b.id} ({b.source_id})")
-        return k, p, gap
-    cen = np.array([c.centroid for c in cells])
-    middle = 0.5 * (cen.min(axis=0) + cen.max(axis=0))
-    best: tuple[float, int, Any, float] | None = None
-    for k, b in enumerate(scene.buildings):
-        if len(b.rings) != 1:
-            continue
-        fp = shapely.Polygon(b.rings[0])
-        if fp.area < shell.area:
-            continue
-        try:
-            p, gap = place_in_footprint(door, shell, b.rings[0], polys, dz=dz)
-        except InputError:
-            continue
-        if gap > 1.0:
-            continue
-        d = float(np.hypot(*(np.asarray(fp.centroid.coords)[0] - middle)))
-        if best is None or d < best[0]:
-            best = (d, k, p, gap)
-    if best is None:
-        hint = office_size(scene, cells)
-        more = (f": a generated office of --size {hint[0]:g}x{hint[1]:g} fits building {hint[2]}" if hint else "")
-        raise InputError("no building of the city holds the interior with its entrance on a street: make the "
-                         f"interior smaller (walkstream generate interior --size LxW){more}")
-    return best[1], best[2], best[3]
-
-
-def office_size(scene: SourceScene, cells: list[ViewCell], *, near: float = 1.0) -> tuple[float, float, str] | None:
-    """The largest generated office (``walkstream generate interior --size LxW``) that fits a
-    building of the city with its entrance on a street.
-
-    A generated office enters by its west wall, ``W`` long, and reaches ``L`` inwards;
-    its outer walls add 0.3 m on each side.  Of the rectangular footprints (at least
-    97 % of their smallest enclosing rectangle) with a side at most ``near`` metres
-    from a street cell, the one with the largest ``L x W`` (whole metres, 0.1 m of
-    slack) is taken.
-
-    Returns
-    -------
-    (L, W, building) or None
-        The size and the building's feature id; None when no building has room for
-        the smallest office (10 x 8 m).
-    """
-    _, polys = _streets(cells)
-    streets = shapely.union_all(polys)
-    best: tuple[float, float, float, str] | None = None
-    for b in scene.buildings:
-        fp = shapely.Polygon(b.rings[0])
-        rect = fp.minimum_rotated_rectangle
-        if len(b.rings) != 1 or fp.area < 0.97 * rect.area:
-            continue
-        c = np.asarray(rect.exterior.coords)[:4]
-        for k in range(4):
-            side, other = c[(k + 1) % 4] - c[k], c[(k + 2) % 4] - c[(k + 1) % 4]
-            mid = shapely.Point(0.5 * (c[k] + c[(k + 1) % 4]))
-            if streets.distance(mid) > near:
-                continue
-            w = math.floor(float(np.hypot(*side)) - 0.7)
-            length = math.floor(float(np.hypot(*other)) - 0.7)
-            if length < 10 or w < 8:
-                continue
-            if best is None or length * w > best[0] * best[1]:
-                best = (float(length), float(w), 0.0, b.source_id or str(b.id))
-    return None if best is None else (best[0], best[1], best[3])
-
 
 def _contents_placement(p: Placement, cells: tuple[int, int]) -> ContentsPlacement:
     """The move of the interior's contents (cells ``cells[0] .. cells[1]``) into the city, as stored."""
@@ -250,7 +139,7 @@ def crossing_plan(
     """The :class:`~.plan.BakePlan` of a city ``source`` with the interior ``interior_source``
     in one of its buildings: PVS cells (the city's) and room cells (the interior's).
 
-    Arguments as for :func:`~.pipeline.bake`; ``building`` as for :func:`pick_building`.
+    Arguments as for :func:`~.pipeline.bake`; ``building`` as for :func:`~.siting.site_interior`.
     The plan's summary adds ``source``, ``interior``, ``building``, ``entrance_gap_m``
     (door to street cell) and ``enter`` (the crossing walk).
     """
@@ -262,15 +151,17 @@ def crossing_plan(
     inner = read_source(isrc, network=st.network)
     if not isinstance(inner, InteriorScene):
         raise InputError(f"--interior {isrc}: not an interior (an IFC model or a walkstream-interior file)")
-    if st.bbox is not None:
-        raise InputError("--bbox: not offered with --interior")
-    cells = make_cells(city, st.cells, max_length=st.max_length, cell_size=st.cell_size)
+    bbox = None if st.bbox is None else local_bbox(city, st.bbox, st.bbox_crs)
+    if bbox is not None:
+        city = clip_scene(city, bbox)
+    cells = make_cells(city, st.cells, max_length=st.max_length, cell_size=st.cell_size, bbox=bbox)
     if not cells:
         raise InputError(f"{src}: no view cell could be made (no free space?)")
     kind = "grid" if cells[0].kind == "grid" else "street"
     # ---- the interior, planned in its own frame, then moved into its building
     local = interior_parts(inner, isrc, say=say)
-    k, placement, gap = pick_building(city, cells, inner, building, layout=local.layout)
+    siting = site_interior(city, cells, inner, building, layout=local.layout)
+    k, placement, gap = siting.index, siting.placement, siting.fit.gap
     old = city.buildings[k]
     baked = moved(local, placement)
     layout = baked.layout
@@ -279,13 +170,15 @@ def crossing_plan(
     stand_in = _stand_in(old, shell, top)
     city = replace(city, buildings=tuple(stand_in if i == k else b for i, b in enumerate(city.buildings)))
     say(f"{isrc.name} placed in building {old.id} ({old.source_id}): turned {math.degrees(placement.angle):.1f} deg, "
-        f"its entrance {gap:.2f} m from the street")
+        f"its entrance {gap:.2f} m from the street (match {siting.fit.match:.2f})")
+    door = entrance_door(layout, siting.door.portal)
+    if siting.path is not None:  # a front path from the street to the door (server/bake/frontpath.py)
+        cells = with_front_path(cells, siting.path, door.middle + door.normal * 0.1)
     offset = len(cells)
-    door = entrance_door(layout)
-    street_cells, polys = _streets(cells)
+    streets, polys = street_cells(cells)
     tree = shapely.STRtree(polys)
     front_pt = shapely.Point(door.middle + door.normal * 0.1)
-    street = street_cells[int(tree.query_nearest(front_pt)[0])]
+    street = streets[int(tree.query_nearest(front_pt)[0])]
     floor = float(layout.cells[door.doorway].zmin)
     entrance = front_of(shapely.Polygon(street.polygon), door.middle, door.normal, floor, len(layout.portals),
                         street.id, door.doorway)

@@ -3,19 +3,24 @@
 The interior is moved rigidly (a turn about the vertical and a shift; its lowest
 floor put on the city's ground, z = 0) so that
 
-1. its **entrance** (the outer door of :func:`entrance_door`: a doorway cell with a
-   door portal to the outside, on the lowest storey that has one, next to the room a
-   tour starts in) faces out of one edge of the building's footprint, the shell's
-   front on that edge: the door's outer face flush with the facade, or behind it by
-   as much as the shell reaches out in front of the door (a porch, a roof); the
-   entrance's floor is put on the city's ground;
-2. the interior's **shell** (the plan of its walls, slabs and roof) lies inside the
-   footprint (5 cm of slack);
-3. the door faces the **nearest street cell**: of the footprint edges long enough
-   for the door, each tried with the door at the edge's middle, then slid to either
-   end, the placement kept is the one whose point just in front of the door is
-   closest to a street, crossroad or square cell (ties: the earlier edge, in the
-   footprint's vertex order).
+1. its **entrance** (an outer door of :func:`entrance_doors`: a doorway cell with a
+   door portal to the outside, on the lowest storey that has one) faces out of one
+   edge of the building's footprint, the shell's front on that edge: the door's outer
+   face flush with the facade, or behind it by as much as the shell reaches out in
+   front of the door (a porch, a roof); the entrance's floor is put on the city's
+   ground;
+2. the interior's **shell** (the plan of its walls, slabs and roof) reaches at most
+   :data:`FIT_TOLERANCE` outside the footprint and overlaps no street cell and no
+   other building (5 cm of slack) — what *fits* means;
+3. along each footprint edge long enough for the door, the door's middle is tried
+   every half metre (and with the shell centred, flush with either end, centred on
+   the footprint's centroid); on an edge the position that **matches** best is kept
+   (the placed shell and the footprint: area of intersection over area of union), and
+   of the edges the one whose point just in front of the door is **nearest a street**,
+   crossroad or square cell (ties: the better match, then the earlier edge in the
+   footprint's vertex order): :func:`fit_in_footprint`.
+
+Which building and which door are :mod:`~.siting`'s choice.
 
 :func:`moved` moves a baked interior (cells, plane sets, portals, stairs, contents)
 rather than cutting the moved model into cells again: room layout is not exactly
@@ -25,8 +30,8 @@ that was baked alone.
 A generated office (``walkstream generate interior``) is laid out along x with its
 entrance in the west wall: generate it with ``--size LxW`` no larger than the
 building's footprint less 0.6 m each way (the outer walls), ``W`` along the street;
-when it does not fit, :func:`place_in_footprint` says the footprint's size, and
-:func:`~.crossing.office_size` finds the largest size some building of a city takes
+when it does not fit, :func:`misfit` says the footprint's size, and
+:func:`~.siting.office_size` finds the largest size some building of a city takes
 (the bake names it when no building holds the interior).
 """
 
@@ -49,19 +54,29 @@ from walkstream.shared.errors import InputError
 
 __all__ = [
     "MAX_ENTRANCE_GAP",
+    "FIT_TOLERANCE",
     "EntranceDoor",
+    "Fit",
     "Placement",
     "door_face",
     "entrance_door",
+    "entrance_doors",
+    "fit_in_footprint",
     "interior_shell",
+    "misfit",
     "moved",
     "place_in_footprint",
 ]
 
-MAX_ENTRANCE_GAP = 3.0
-"""Metres from the facade in front of the door to the nearest street cell, at most."""
+MAX_ENTRANCE_GAP = 10.0
+"""Metres from the facade in front of the door to the nearest street cell, at most (a
+front garden; :mod:`~.frontpath` lays a path cell across it)."""
+FIT_TOLERANCE = 1.0
+"""Metres the placed shell may reach outside the building's footprint (a footprint
+traced from aerial images is about this far off the architect's outline)."""
 
-_SLACK = 0.05  # the shell may stick out of the footprint this much (metres)
+_SLACK = 0.05  # the shell may touch a street cell or a neighbour this much (metres)
+_STEP = 0.5  # metres between the positions tried along a facade
 _FRONT = 0.1  # the point probed for the nearest street lies this far in front of the door
 _SHELL_KINDS = ("wall", "slab", "roof")
 
@@ -111,8 +126,13 @@ class Placement:
         return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
 
 
-def entrance_door(layout: RoomLayout) -> EntranceDoor:
-    """The outer door the interior is entered by (see the module docstring).
+def entrance_doors(layout: RoomLayout) -> list[EntranceDoor]:
+    """The outer doors the interior may be entered by, in order of preference.
+
+    An outer door is a door portal between a doorway cell and the ``outside`` cell (in
+    an IFC model: an ``IfcDoor`` that bounds a space and the outside).  Only those of
+    the lowest storey that has one are entrances; of them first the doors next to the
+    room a tour starts in, then by portal id.
 
     Raises
     ------
@@ -128,8 +148,26 @@ def entrance_door(layout: RoomLayout) -> EntranceDoor:
     doors = [p for p in doors if cells[p.a + p.b - out].storey == low]
     room = entrance_cell(layout.cells, layout.portals)
     next_to_room = {q.a + q.b - room for q in layout.portals if room in (q.a, q.b)}
-    best = min(doors, key=lambda p: (p.a + p.b - out not in next_to_room, p.id))
-    return _door_face(best, cells[best.a + best.b - out])
+    doors.sort(key=lambda p: (p.a + p.b - out not in next_to_room, p.id))
+    return [_door_face(p, cells[p.a + p.b - out]) for p in doors]
+
+
+def entrance_door(layout: RoomLayout, portal: int | None = None) -> EntranceDoor:
+    """The outer door the interior is entered by: the first of :func:`entrance_doors`,
+    or the one whose portal id is ``portal``.
+
+    Raises
+    ------
+    InputError
+        No doorway of the interior has a door to the outside (or none by ``portal``).
+    """
+    doors = entrance_doors(layout)
+    if portal is None:
+        return doors[0]
+    hit = [d for d in doors if d.portal == portal]
+    if not hit:
+        raise InputError(f"the interior has no outer door by portal {portal}")
+    return hit[0]
 
 
 def _door_face(p: Portal, doorway: RoomCell) -> EntranceDoor:
@@ -152,29 +190,46 @@ def door_face(polygon: F64, outline: F64) -> tuple[F64, F64]:
     return ends, n
 
 
-def interior_shell(scene: InteriorScene) -> shapely.Geometry:
-    """The plan of an interior's walls, slabs and roof (its outer outline, holes filled)."""
+def interior_shell(scene: InteriorScene) -> shapely.Polygon:
+    """The plan of an interior's walls, slabs and roof (its outer outline, holes filled).
+
+    One polygon: of a plan in parts (a detached shed) the largest, which is what is
+    fitted to the footprint and what the stand-in lies inside (a smaller occluder
+    keeps the PVS conservative)."""
     parts = [mesh_footprint(e.vertices, e.triangles) for e in scene.elements if e.kind in _SHELL_KINDS and len(e.triangles)]
     parts = [p for p in parts if not p.is_empty]
     if not parts:
         pts = np.concatenate([r.outline for r in scene.rooms])
         return shapely.MultiPoint(pts).convex_hull
-    union = shapely.union_all(parts)
-    polys = [g for g in shapely.get_parts(union) if isinstance(g, shapely.Polygon)]
-    return shapely.union_all([shapely.Polygon(g.exterior) for g in polys])
+    return _outer(shapely.union_all(parts))
 
 
-def place_in_footprint(
+@dataclass(frozen=True)
+class Fit:
+    """One placement of an interior in a footprint and how well it matches.
+
+    ``gap``: metres from the point just in front of the door to the nearest street
+    cell; ``match``: the placed shell's plan and the footprint, area of their
+    intersection over area of their union (1 = the same outline); ``overhang``:
+    metres the shell reaches outside the footprint at most."""
+
+    placement: Placement
+    gap: float
+    match: float
+    overhang: float
+
+
+def fit_in_footprint(
     door: EntranceDoor,
     shell: shapely.Geometry,
     footprint: F64,
     streets: Sequence[shapely.Geometry],
     *,
+    obstacles: Sequence[shapely.Geometry] = (),
     dz: float = 0.0,
-    what: str = "the building",
-) -> tuple[Placement, float]:
-    """The placement of the module docstring and the gap (metres) from the facade in
-    front of the door to the nearest street cell.
+) -> Fit | None:
+    """The best placement of the module docstring, or None when the shell fits the
+    footprint nowhere with its door on a facade.
 
     Parameters
     ----------
@@ -185,26 +240,26 @@ def place_in_footprint(
         ``(n, 2)`` the building's outer ring, city-local metres.
     streets:
         The city's street, crossroad and square cells as polygons.
+    obstacles:
+        What the placed shell may not overlap besides the street cells: the other
+        buildings' footprints.
     dz:
         Added to every height (the interior's lowest floor onto the ground).
-
-    Raises
-    ------
-    InputError
-        The shell fits in the footprint nowhere with the door on an edge, or the
-        door ends more than :data:`MAX_ENTRANCE_GAP` from a street.
     """
     ring = np.asarray(footprint, np.float64).reshape(-1, 2)
     poly = shapely.Polygon(ring)
     if not poly.is_valid:
         poly = shapely.make_valid(poly)
-    room = poly.buffer(_SLACK, join_style="mitre")
-    shapely.prepare(room)
+    shapely.prepare(poly)
     ccw = shapely.Polygon(ring).exterior.is_ccw
     width = float(np.hypot(*(door.ends[1] - door.ends[0])))
-    shell_pts = np.asarray(shapely.get_coordinates(shell))
+    outline = np.asarray(_outer(shell).exterior.coords)
+    centre = np.asarray(_outer(shell).centroid.coords)[0]
+    fp_centre = np.asarray(poly.centroid.coords)[0]
     tree = shapely.STRtree(list(streets)) if len(streets) else None
-    best: tuple[float, Placement] | None = None
+    blocks = [*streets, *obstacles]
+    block_tree = shapely.STRtree(blocks) if blocks else None
+    facades: list[Fit] = []
     for k in range(len(ring)):
         a, b = ring[k], ring[(k + 1) % len(ring)]
         e = b - a
@@ -216,47 +271,102 @@ def place_in_footprint(
         angle = math.atan2(out[1], out[0]) - math.atan2(door.normal[1], door.normal[0])
         turned = Placement(angle, (0.0, 0.0), dz)
         mid = turned.xy(door.middle[None])[0]
-        moved_pts = turned.xy(shell_pts)
+        moved_pts = turned.xy(outline)
         along = (moved_pts - mid) @ u
         # a door recessed behind the shell's front (a porch, a roof reaching out) sits
         # that far behind the facade
         recess = max(0.0, float(((moved_pts - mid) @ out).max()))
         lo, hi = float(along.min()), float(along.max())
-        # the door at the edge's middle, then the shell flush with either end
-        for t in (0.5 * (length - lo - hi), -lo, length - hi):
-            if not -1e-9 <= t <= length:
-                continue
+        here: list[Fit] = []
+        for t in _positions(length, width, lo, hi, float((fp_centre - a) @ u - (turned.xy(centre[None])[0] - mid) @ u)):
             at = a + u * t
             door_at = at - out * recess
             p = Placement(angle, (float(door_at[0] - mid[0]), float(door_at[1] - mid[1])), dz)
-            moved = shapely.Polygon(p.xy(np.asarray(shell.exterior.coords))) if isinstance(shell, shapely.Polygon) else None
-            if moved is None or not room.contains(moved):
+            placed = shapely.Polygon(p.xy(outline))
+            over = float(shapely.distance(poly, shapely.points(p.xy(outline))).max())
+            if over > FIT_TOLERANCE + 1e-9:
                 continue
+            if block_tree is not None and len(block_tree.query(placed.buffer(-_SLACK, join_style="mitre"),
+                                                                predicate="intersects")):
+                continue
+            union = float(shapely.union(placed, poly).area)
+            match = float(shapely.intersection(placed, poly).area) / max(union, 1e-12)
             front = shapely.Point(at + out * _FRONT)
             gap = math.inf
             if tree is not None:
                 near = int(tree.query_nearest(front)[0])
                 gap = float(shapely.distance(streets[near], front))
-            if best is None or gap < best[0] - 1e-9:
-                best = (gap, p)
-    if best is None:
-        size = poly.minimum_rotated_rectangle
-        c = np.asarray(size.exterior.coords)[:3]
-        sides = sorted((float(np.hypot(*(c[1] - c[0]))), float(np.hypot(*(c[2] - c[1])))), reverse=True)
-        ext = shell.minimum_rotated_rectangle
-        d = np.asarray(ext.exterior.coords)[:3]
-        own = sorted((float(np.hypot(*(d[1] - d[0]))), float(np.hypot(*(d[2] - d[1])))), reverse=True)
+            here.append(Fit(p, gap, match, over))
+        if here:
+            # on a facade the best match (ties: the door nearer a street)
+            facades.append(min(here, key=lambda f: (-round(f.match, 3), f.gap)))
+    # of the facades, the one whose door is nearest a street (ties: the better match,
+    # then the earlier edge)
+    return min(facades, key=lambda f: (round(f.gap, 3), -round(f.match, 3)), default=None)
+
+
+def _outer(shell: shapely.Geometry) -> shapely.Polygon:
+    """The shell as one polygon: its largest part, holes left out."""
+    parts = [g for g in shapely.get_parts(shell) if isinstance(g, shapely.Polygon)]
+    return shapely.Polygon(max(parts, key=lambda g: g.area).exterior)
+
+
+def _positions(length: float, width: float, lo: float, hi: float, centred: float) -> list[float]:
+    """Where the door's middle is tried along a facade ``length`` long: the shell
+    centred on the facade, flush with either end, centred on the footprint's centroid,
+    and every :data:`_STEP` metres between, each with the whole door on the facade."""
+    first, last = 0.5 * width, length - 0.5 * width
+    ts = [0.5 * (length - lo - hi), -lo, length - hi, centred]
+    ts += list(np.arange(first, last + 1e-9, _STEP))
+    return [float(t) for t in dict.fromkeys(round(t, 6) for t in ts) if first - 1e-9 <= t <= last + 1e-9]
+
+
+def place_in_footprint(
+    door: EntranceDoor,
+    shell: shapely.Geometry,
+    footprint: F64,
+    streets: Sequence[shapely.Geometry],
+    *,
+    obstacles: Sequence[shapely.Geometry] = (),
+    dz: float = 0.0,
+    what: str = "the building",
+) -> tuple[Placement, float]:
+    """The placement of :func:`fit_in_footprint` and the gap (metres) from the facade in
+    front of the door to the nearest street cell.
+
+    Raises
+    ------
+    InputError
+        The shell fits in the footprint nowhere with the door on a facade, or the
+        door ends more than :data:`MAX_ENTRANCE_GAP` from a street.
+    """
+    fit = fit_in_footprint(door, shell, footprint, streets, obstacles=obstacles, dz=dz)
+    if fit is None:
+        raise InputError(f"the interior does not fit {what}: {misfit(door, shell, footprint)}")
+    if fit.gap > MAX_ENTRANCE_GAP:
         raise InputError(
-            f"the interior ({own[0]:.1f} x {own[1]:.1f} m outside its walls) does not fit {what} "
-            f"({sides[0]:.1f} x {sides[1]:.1f} m) with its entrance on the facade: make it smaller "
-            "(walkstream generate interior --size LxW) or pick another --building"
-        )
-    if best[0] > MAX_ENTRANCE_GAP:
-        raise InputError(
-            f"the entrance of the interior in {what} is {best[0]:.1f} m from the nearest street cell "
+            f"the entrance of the interior in {what} is {fit.gap:.1f} m from the nearest street cell "
             f"(at most {MAX_ENTRANCE_GAP:g} m): pick a building on a street"
         )
-    return best[1], best[0]
+    return fit.placement, fit.gap
+
+
+def misfit(door: EntranceDoor, shell: shapely.Geometry, footprint: F64) -> str:
+    """Why a shell fits a footprint nowhere: the two sizes (sides of their smallest
+    enclosing rectangles) and which rule failed (the tolerance, or the street cells and
+    neighbours when the footprint alone would take it)."""
+    own = _sides(_outer(shell))
+    sides = _sides(shapely.Polygon(np.asarray(footprint, np.float64).reshape(-1, 2)))
+    sizes = f"its outline ({own[0]:.1f} x {own[1]:.1f} m outside its walls) against the footprint's ({sides[0]:.1f} x {sides[1]:.1f} m)"
+    if fit_in_footprint(door, shell, footprint, []) is None:
+        return f"{sizes} leaves it more than {FIT_TOLERANCE:g} m outside wherever a door of it is on a facade"
+    return f"{sizes}: wherever it is within {FIT_TOLERANCE:g} m of the footprint it stands over a street cell or a neighbour"
+
+
+def _sides(g: shapely.Geometry) -> tuple[float, float]:
+    c = np.asarray(g.minimum_rotated_rectangle.exterior.coords)[:3]
+    s = sorted((float(np.hypot(*(c[1] - c[0]))), float(np.hypot(*(c[2] - c[1])))), reverse=True)
+    return s[0], s[1]
 
 
 def moved(baked: InteriorParts, p: Placement) -> InteriorParts:
