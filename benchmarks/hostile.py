@@ -124,7 +124,7 @@ async def _slow_one(host: str, port: int, rep: HostileReport, until: float) -> N
         while time.monotonic() < until:
             try:
                 got = await asyncio.wait_for(reader.read(4096), 1.0)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 writer.write(b"a")  # one more byte of a head that never ends
                 continue
             if got.startswith(b"HTTP/1.1 503"):
@@ -147,7 +147,7 @@ async def _batches(host: str, port: int, scene: str, ids: list[int], rep: Hostil
         ask = [ids[(pos + j) % len(ids)] for j in range(n)]
         try:
             status, data = await _request(host, port, _post(path, json.dumps({"ids": ask}).encode()), "127.0.0.3")
-        except (OSError, asyncio.TimeoutError):
+        except (TimeoutError, OSError):
             rep.batches_other += 1
             continue
         if status == 413:
