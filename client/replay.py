@@ -408,6 +408,7 @@ async def replay(
             "bundle_bytes": streamer.stats.bundle_bytes,
             "cancelled_batches": streamer.stats.cancelled_batches,
             "retries": api.stats.retries,
+            **api.stats.outage_figures(api.clock.now()),  # outages survived or not (issue 25)
             "cut_streams": api.stats.cut_streams,
             "responses_cut_by_link": stats.responses_cut,
             "disk_hits": streamer.stats.disk_hits,
