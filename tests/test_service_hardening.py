@@ -172,3 +172,13 @@ def test_a_damaged_database_is_503_with_retry_after(city: CityDb, tmp_path: Path
     assert r.status_code == 503, r.text
     assert r.headers["retry-after"].isdigit() and "damaged database" in r.json()["error"]
     assert r.json()["detail"]["retry_after_s"] == int(r.headers["retry-after"])
+
+
+def test_what_the_openapi_allows_is_accepted(http: Client, city: CityDb) -> None:
+    # JSON Schema's integer includes 3.0; form is an enum in the OpenAPI
+    oid = city.object_ids[0]
+    r = http.post(f"/v1/scenes/{city.name}/objects", json={"ids": [float(oid)]})
+    assert r.status_code == 200
+    r = http.get("/openapi.json")
+    form = next(p for p in r.json()["paths"]["/v1/scenes/{scene}/objects"]["post"]["parameters"] if p["name"] == "form")
+    assert form["schema"]["enum"] == ["params", "lod2"]

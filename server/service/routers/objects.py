@@ -104,6 +104,7 @@ async def objects(
             "against streaming parameters",
             examples=list(OBJECT_FORMS),
             max_length=64,
+            json_schema_extra={"enum": list(OBJECT_FORMS)},
         ),
     ] = "params",
 ) -> StreamingResponse:
@@ -251,6 +252,8 @@ def parse_ids(body: bytes, content_type: str | None) -> list[int]:
             status=422,
             detail={"count": len(ids), "limit": MAX_IDS},
         )
+    # JSON Schema's integer includes 3.0: take an integer-valued float as its int
+    ids = [int(v) if type(v) is float and v.is_integer() and 0 <= v <= MAX_INT64 else v for v in ids]
     # bool is an int subclass: true/false are not ids
     bad = [(k, v) for k, v in enumerate(ids) if type(v) is not int or not 0 <= v <= MAX_INT64]
     if bad:
