@@ -69,3 +69,40 @@ def test_a_replay_against_a_closed_port_exits_3_with_one_line(
     err = [ln for ln in capsys.readouterr().err.replace("\r", "\n").splitlines() if ln.startswith("walkstream:")]
     assert rc == REPLAY_FAILED
     assert len(err) == 1 and err[0].startswith("walkstream: error:") and "did not arrive" in err[0]
+
+
+class _GoneAfter(httpx.AsyncBaseTransport):
+    """The app in-process until ``n`` requests have been answered, then no server at all."""
+
+    def __init__(self, inner: httpx.AsyncBaseTransport, n: int) -> None:
+        self.inner, self.left = inner, n
+
+    async def handle_async_request(self, request: httpx.Request) -> httpx.Response:
+        if self.left <= 0:
+            raise httpx.ConnectError("connection refused", request=request)
+        self.left -= 1
+        return await self.inner.handle_async_request(request)
+
+
+def test_a_server_gone_mid_walk_fails_the_replay(tmp_path: Path) -> None:
+    from scenes import add_default_paths, build_city_db
+
+    from walkstream.client.replay import run_replay
+    from walkstream.cmd_replay import _defaults, config_from_args
+    from walkstream.server.service.main import create_app
+
+    db = tmp_path / "city.db"
+    build_city_db(db, name="city", size=300.0, k=30)
+    add_default_paths(db)
+    ns = _defaults()
+    ns.device, ns.duration = "desktop2003", "40s"
+    app = create_app([db])
+    try:
+        result = run_replay(_GoneAfter(httpx.ASGITransport(app=app), 3), "http://x", config_from_args(ns))
+    finally:
+        app.state.scenes.close()
+    s = result.summary
+    assert s["frames"] > 0 and s["outages"] == 1 and s["down_at_end"] and s["retries"] > 0
+    why = replay_failure(s)
+    assert why is not None and "unreachable for" in why
+    assert outage_line(s) is not None and "still unreachable at the end" in str(outage_line(s))
