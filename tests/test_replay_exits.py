@@ -4,6 +4,7 @@ named in the printed summary."""
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 from pathlib import Path
 
@@ -88,14 +89,16 @@ def test_a_server_gone_mid_walk_fails_the_replay(tmp_path: Path) -> None:
     from scenes import add_default_paths, build_city_db
 
     from walkstream.client.replay import run_replay
-    from walkstream.cmd_replay import _defaults, config_from_args
+    from walkstream.cmd_replay import add_replay_arguments, config_from_args
     from walkstream.server.service.main import create_app
 
     db = tmp_path / "city.db"
     build_city_db(db, name="city", size=300.0, k=30)
     add_default_paths(db)
-    ns = _defaults()
-    ns.device, ns.duration = "desktop2003", "40s"
+    parser = argparse.ArgumentParser()
+    add_replay_arguments(parser)
+    ns = parser.parse_args(["--device", "desktop2003", "--duration", "40s"])
+    ns.report = str(tmp_path / "report")
     app = create_app([db])
     try:
         result = run_replay(_GoneAfter(httpx.ASGITransport(app=app), 3), "http://x", config_from_args(ns))
