@@ -316,7 +316,8 @@ async def _drive(
 
 @contextlib.contextmanager
 def _server(db: str, port: int, workers: int, pin: bool) -> Iterator[tuple[str, int]]:
-    with server_process([db], port, workers, SERVER_CORE if pin else -1) as where:
+    # every walker is a connection from 127.0.0.1: no per-address cap here
+    with server_process([db], port, workers, SERVER_CORE if pin else -1, per_client=0) as where:
         yield where
 
 

@@ -17,6 +17,7 @@ _EXPORTS = {
     "InputError": "walkstream.shared.errors",
     "GrammarError": "walkstream.shared.errors",
     "DerivationLimitError": "walkstream.shared.errors",
+    "DatabaseDamagedError": "walkstream.shared.errors",
     "SourceError": "walkstream.shared.errors",
     "CodecError": "walkstream.shared.errors",
     "RenderError": "walkstream.shared.errors",

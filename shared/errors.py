@@ -5,7 +5,9 @@ derive from the built-in they refine (mostly ``ValueError``) so callers that onl
 built-ins still catch them.  The server maps them to 4xx responses and the CLI to one
 clear line and a non-zero exit.
 
-Inputs: :class:`InputError` and its kinds (grammar, source, codec, store, route).
+Inputs: :class:`InputError` and its kinds (grammar, source, codec, store, route); a
+damaged scene database (:class:`DatabaseDamagedError`) is a store error the service
+answers 503.
 Runtime: :class:`RenderError`, :class:`DerivationLimitError`, :class:`ServiceError`,
 :class:`SimulationStalled`.  The HTTP API: :class:`ApiError` (a refused request, on
 either side of the wire) and :class:`StreamCut` (an object stream cut short).
@@ -20,6 +22,7 @@ __all__ = [
     "InputError",
     "GrammarError",
     "DerivationLimitError",
+    "DatabaseDamagedError",
     "SourceError",
     "CodecError",
     "RenderError",
@@ -77,6 +80,14 @@ class StoreError(InputError):
 
 class NotFoundError(StoreError):
     """An object, cell or path asked for is not in the scene."""
+
+
+class DatabaseDamagedError(StoreError):
+    """A scene database's stored pages or blobs cannot be read: the server's fault, not the request's.
+
+    The service answers it 503 with ``Retry-After`` (a replaced file is picked up
+    within a second); at start it stops the start like any :class:`StoreError`.
+    """
 
 
 class CacheDamagedError(StoreError):

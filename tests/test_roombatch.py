@@ -113,7 +113,7 @@ def test_the_gzip_stream_is_smaller_and_each_part_decodes_as_it_comes(office_db:
     [
         ({"ids": [1, 99999]}, 404, "has no cell 99999"),
         ({"ids": [2, 3, 2]}, 422, "cell 2 asked more than once"),
-        ({"ids": list(range(CELLBATCH_MAX_CELLS + 1))}, 413, f"at most {CELLBATCH_MAX_CELLS} per batch"),
+        ({"ids": list(range(CELLBATCH_MAX_CELLS + 1))}, 422, f"at most {CELLBATCH_MAX_CELLS} per batch"),
         ({"ids": 5}, 422, "ids: expected an array"),
         ([1, 2], 422, 'expected an object {"ids"'),
         ({"ids": ["a"]}, 422, "ids[0] = 'a'"),

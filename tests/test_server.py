@@ -266,7 +266,7 @@ def test_cells_batch_streams_records_in_the_order_asked(client: Client, city: Ci
     assert_error(client.post(scene_url(city, "/cells"), json={"ids": [10**9]}), 404, str(10**9))
     assert_error(client.post(scene_url(city, "/cells"), json={"ids": "x"}), 422, "ids")
     too_many = client.post(scene_url(city, "/cells"), json={"ids": [0] * (MAX_IDS + 1)})
-    assert_error(too_many, 413, str(MAX_IDS))
+    assert_error(too_many, 422, str(MAX_IDS))
 
 
 def _bundle(r: httpx.Response) -> list[tuple[str, Any]]:
@@ -498,7 +498,7 @@ def test_objects_limit(client: Client, city: CityDb) -> None:
     ok = [city.object_ids[i % len(city.object_ids)] for i in range(MAX_IDS)]
     r = post_ids(client, city, ok)
     assert r.status_code == 200 and len(frames(r.content)) == MAX_IDS
-    assert_error(post_ids(client, city, ok + ok[:1]), 413, str(MAX_IDS + 1), str(MAX_IDS))
+    assert_error(post_ids(client, city, ok + ok[:1]), 422, str(MAX_IDS + 1), str(MAX_IDS))
     big = b'{"ids": [' + b" " * 70_000 + b"]}"
     r = client.post(
         scene_url(city, "/objects"), content=big, headers={"content-type": "application/json"}
@@ -511,7 +511,6 @@ def test_objects_limit(client: Client, city: CityDb) -> None:
     [
         ["1"],
         [1.5],
-        [1.0],
         [True],
         [-1],
         [2**63],

@@ -57,9 +57,14 @@ def _place(text: str, option: str) -> tuple[float, ...]:
     return parts
 
 
+#: The fastest path speed taken (km/h): an aircraft's; beyond it a speed is a mistake
+#: (a path of 1e308 km/h lasted 0.0 s and replayed as no frame).
+MAX_SPEED_KMH = 1000.0
+
+
 def _speed(value: float) -> float:
-    if not (math.isfinite(value) and value > 0):
-        raise WalkstreamError(f"--speed: expected a positive number of km/h, got {value}")
+    if not (math.isfinite(value) and 0 < value <= MAX_SPEED_KMH):
+        raise WalkstreamError(f"--speed: expected a number of km/h above 0 and at most {MAX_SPEED_KMH:g}, got {value:g}")
     return value
 
 

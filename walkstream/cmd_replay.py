@@ -22,6 +22,10 @@ from walkstream.shared.errors import InputError, WalkstreamError
 from walkstream.terminal import WalkBar, count_bar
 
 __all__ = [
+    "MAX_OUTAGE_SHARE",
+    "REPLAY_FAILED",
+    "outage_line",
+    "replay_failure",
     "add_replay_parser",
     "add_replay_arguments",
     "transport_for",
@@ -189,14 +193,57 @@ def cmd_replay(args: argparse.Namespace) -> int:
     disk = result.summary.get("disk_cache")
     if disk and not disk["available"]:
         print(f"walkstream: warning: --cache-dir not used: {disk['error']}", file=sys.stderr)
-    if result.summary.get("error"):
-        print(f"walkstream: warning: {result.summary['error']}", file=sys.stderr)
     if args.json:
         print(json.dumps(result.summary, indent=2, default=str))
     else:
         print(format_headline(result.summary))
+        outages = outage_line(result.summary)
+        if outages:
+            print(outages)
         print(f"report: {Path(args.report) / 'index.html'}")
+    failure = replay_failure(result.summary)
+    if failure:
+        print(f"walkstream: error: {failure}", file=sys.stderr)
+        return REPLAY_FAILED
     return 0
+
+
+#: Exit status of a replay that ran but did not walk as asked (the scene never
+#: arrived, or the server was unreachable for more than :data:`MAX_OUTAGE_SHARE` of
+#: the walk); 2 stays for input errors.
+REPLAY_FAILED = 3
+#: The share of the walk the server may be unreachable before the replay fails.
+MAX_OUTAGE_SHARE = 0.2
+
+
+def outage_line(summary: Mapping[str, Any]) -> str | None:
+    """One line naming the outages a replay lived through, or None when there was none."""
+    n = int(summary.get("outages") or 0)
+    if not n:
+        return None
+    end = ", still unreachable at the end" if summary.get("down_at_end") else ""
+    return (
+        f"server unreachable {n} time{'s' if n > 1 else ''}, {summary.get('outage_s', 0.0):.1f} s in all "
+        f"(longest {summary.get('longest_outage_s', 0.0):.1f} s), {summary.get('retries', 0)} retries{end}"
+    )
+
+
+def replay_failure(summary: Mapping[str, Any]) -> str | None:
+    """Why a replay's exit status is :data:`REPLAY_FAILED`, in one line; None when it walked.
+
+    The scene (or its path) never arrived, or the server was unreachable for more
+    than :data:`MAX_OUTAGE_SHARE` of the walk (outages counted on the walk's clock).
+    """
+    if summary.get("error"):
+        return str(summary["error"])
+    walk = float(summary.get("duration_s") or 0.0)
+    out = float(summary.get("outage_s") or 0.0)
+    if walk > 0 and out > MAX_OUTAGE_SHARE * walk:
+        return (
+            f"the server was unreachable for {out:.1f} s of the {walk:.1f} s walk ({100 * out / walk:.0f} %, "
+            f"more than {100 * MAX_OUTAGE_SHARE:.0f} %; {summary.get('retries', 0)} retries): the figures are not the link's"
+        )
+    return None
 
 
 def add_replay_arguments(r: argparse.ArgumentParser) -> None:

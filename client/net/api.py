@@ -92,6 +92,44 @@ class TransferStats:
     retries: int = 0
     cut_streams: int = 0
     samples: list[tuple[float, float]] = field(default_factory=list)
+    outages: int = 0
+    """Times the server could not be reached (a refused or timed-out connection, or a
+    5xx) until it answered again."""
+    outage_s: float = 0.0
+    """Seconds (the walk's clock) from each outage's first failure to the next answer;
+    an outage still going on at the end counts up to :meth:`outage_figures`' ``now``."""
+    longest_outage_s: float = 0.0
+    _down_since: float | None = None
+
+    def failed(self, now: float) -> None:
+        """A request found no server (transport error, 5xx): an outage starts, unless one has."""
+        if self._down_since is None:
+            self._down_since = now
+
+    def reached(self, now: float) -> None:
+        """The server answered (any status below 500): an outage going on ends."""
+        if self._down_since is not None:
+            self._end_outage(now)
+
+    def _end_outage(self, now: float) -> None:
+        assert self._down_since is not None
+        lasted = max(0.0, now - self._down_since)
+        self.outages += 1
+        self.outage_s += lasted
+        self.longest_outage_s = max(self.longest_outage_s, lasted)
+        self._down_since = None
+
+    def outage_figures(self, now: float) -> dict[str, Any]:
+        """``outages``, ``outage_s``, ``longest_outage_s`` and ``down_at_end`` as of ``now``."""
+        down = self._down_since is not None
+        if down:
+            self._end_outage(now)
+        return {
+            "outages": self.outages,
+            "outage_s": round(self.outage_s, 3),
+            "longest_outage_s": round(self.longest_outage_s, 3),
+            "down_at_end": down,
+        }
 
     def observe_rtt(self, seconds: float) -> None:
         """Fold one request/headers time into the estimate."""
@@ -179,14 +217,19 @@ class SceneClient:
             try:
                 r = await self.http.get(url, headers={"Accept": MSGPACK, **(headers or {})})
                 self.stats.observe_rtt(self.clock.now() - t0)
+                if r.status_code < 500:
+                    self.stats.reached(self.clock.now())
                 if r.status_code in ok:
                     return r
                 if r.status_code < 500:
                     raise _req_error(what, r)
                 err: Exception = _req_error(what, r)
+                self.stats.failed(t0)
             except (httpx.TransportError, httpx.DecodingError) as exc:
                 # refused, reset, cut off, timed out; or a body that does not inflate
                 err = exc
+                if isinstance(exc, httpx.ConnectError | httpx.ConnectTimeout):
+                    self.stats.failed(t0)  # no server (a body cut by the link is not an outage)
             if attempt >= self.max_attempts:
                 raise ApiError(f"{what}: gave up after {attempt} attempts ({err})")
             await self._backoff(attempt)
@@ -541,6 +584,10 @@ class SceneClient:
         try:
             async with self.http.stream(method, url, **kw) as r:
                 self.stats.observe_rtt(self.clock.now() - t0)
+                if r.status_code < 500:
+                    self.stats.reached(self.clock.now())
+                else:
+                    self.stats.failed(t0)
                 if r.status_code != 200:
                     await r.aread()
                     if 400 <= r.status_code < 500:
@@ -602,6 +649,8 @@ class SceneClient:
             raise
         except (httpx.TransportError, httpx.StreamError, httpx.DecodingError) as exc:
             self.stats.cut_streams += 1
+            if got == 0 and isinstance(exc, httpx.ConnectError | httpx.ConnectTimeout):
+                self.stats.failed(t0)  # no server to connect to, not a cut stream
             raise StreamCut(f"{what}: cut after {got} items ({exc})", got) from exc
         except (msgpack.UnpackException, ValueError, zlib.error) as exc:
             # includes msgpack's BufferFull / limits: corrupt bytes, fetch again

@@ -90,6 +90,7 @@ def city_summary(
         "bundle_bytes": streamer.stats.bundle_bytes,
         "cancelled_batches": streamer.stats.cancelled_batches,
         "retries": api.stats.retries,
+        **api.stats.outage_figures(api.clock.now()),  # outages survived or not
         "cut_streams": api.stats.cut_streams,
         "responses_cut_by_link": stats.responses_cut,
         "disk_hits": streamer.stats.disk_hits,

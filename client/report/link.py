@@ -60,6 +60,7 @@ def link_figures(config: Any, stats: Any, api: Any) -> dict[str, Any]:
         "rebuilds": 0,
         "duplicates": 0,
         "retries": api.stats.retries,
+        **api.stats.outage_figures(api.clock.now()),  # outages survived or not (issue 25)
         "cut_streams": api.stats.cut_streams,
         "responses_cut_by_link": stats.responses_cut,
         "requests": stats.requests, "start_bundle": config.start_bundle,

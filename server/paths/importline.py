@@ -23,9 +23,11 @@ from walkstream.shared.arrays import F64
 from walkstream.shared.errors import RouteError
 from walkstream.shared.paths import WALK_EYE_HEIGHT, RecordedPath
 
-__all__ = ["CLIP_GAP", "import_linestring", "import_path"]
+__all__ = ["CLIP_GAP", "MIN_PATH_SECONDS", "import_linestring", "import_path"]
 #: Gaps (metres) outside the cells that a clipped GeoJSON line may bridge.
 CLIP_GAP = 60.0
+#: The shortest path imported (seconds): a shorter one replays as no frame at all.
+MIN_PATH_SECONDS = 1.0
 
 
 def _inside_intervals(g: CellGraph, xy: F64) -> F64:
@@ -204,6 +206,11 @@ def import_path(
         eye_height=eye_height,
     )
     assert inside is not None
+    if path.duration < MIN_PATH_SECONDS:
+        raise RouteError(
+            f"{name}: {path.length_m():.0f} m at {speed_kmh:g} km/h lasts {path.duration:.3g} s, "
+            f"under the {MIN_PATH_SECONDS:g} s a path must last to replay a frame (a speed in m/s?)"
+        )
     if inside <= 0:
         raise RouteError(
             f"{os.fspath(file) if not isinstance(file, Mapping) else 'the line'}: no part of "

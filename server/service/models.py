@@ -12,6 +12,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, Field
 
 from walkstream.server.service.scenes import MAX_IDS
+from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.wire import MSGPACK
 
 MAX_INT64 = 2**63 - 1
@@ -42,6 +43,7 @@ __all__ = [
     "StairOut",
     "TopologyOut",
     "CellsIn",
+    "ContentsIn",
     "MAX_INT64",
     "ERRORS",
     "both",
@@ -280,6 +282,14 @@ class CellsIn(BaseModel):
     """The cells whose records to send, in the order to send them."""
 
     ids: list[Annotated[int, Field(ge=0, le=MAX_INT64)]] = Field(max_length=MAX_IDS)
+
+
+class ContentsIn(BaseModel):
+    """The interior cells whose contents to send, each once, in the order to send them."""
+
+    ids: list[Annotated[int, Field(ge=0, le=MAX_INT64)]] = Field(
+        max_length=CELLBATCH_MAX_CELLS, json_schema_extra={"uniqueItems": True}
+    )
 
 
 

@@ -51,8 +51,8 @@ core = int(sys.argv[3])
 if core >= 0:
     os.sched_setaffinity(0, {core})
 from walkstream.server.service.run import serve
-serve(sys.argv[4:], host="127.0.0.1", port=int(sys.argv[1]), workers=int(sys.argv[2]),
-      log_level="warning")
+serve(sys.argv[5:], host="127.0.0.1", port=int(sys.argv[1]), workers=int(sys.argv[2]),
+      log_level="warning", **({"per_client": int(sys.argv[4])} if int(sys.argv[4]) >= 0 else {}))
 """
 
 
@@ -63,6 +63,7 @@ def server_process(
     workers: int = 1,
     core: int = -1,
     timeout_s: float = 60.0,
+    per_client: int | None = None,
 ) -> Iterator[tuple[str, int]]:
     """Serve ``dbs`` from a child process; yields ``(host, port)`` once it is healthy.
 
@@ -78,6 +79,9 @@ def server_process(
         Pin the server to this CPU core (>= 0), e.g. to keep it off a benchmark's core.
     timeout_s:
         How long to wait for ``/v1/health``.
+    per_client:
+        Connections one address may hold (0: no limit; None: the server's default),
+        see :mod:`~walkstream.server.service.guard`.
 
     Raises
     ------
@@ -90,7 +94,7 @@ def server_process(
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     proc = subprocess.Popen(
-        [sys.executable, "-c", _SERVER_CODE, str(port), str(workers), str(core)]
+        [sys.executable, "-c", _SERVER_CODE, str(port), str(workers), str(core), str(-1 if per_client is None else per_client)]
         + [os.fspath(d) for d in dbs],
         env=env,
         stdout=subprocess.DEVNULL,

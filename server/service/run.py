@@ -18,15 +18,19 @@ from collections.abc import Sequence
 import uvicorn
 from fastapi import FastAPI
 
+from walkstream.server.service.guard import MAX_HEAD_BYTES, PER_CLIENT, READ_TIMEOUT, configure
 from walkstream.server.service.main import create_app
 from walkstream.shared.errors import InputError, StoreError
 
-__all__ = ["ENV_PATHS", "serve", "app_from_env"]
+__all__ = ["ENV_PATHS", "LIMIT_CONCURRENCY", "serve", "app_from_env"]
 
 ENV_PATHS = "WALKSTREAM_SERVE_PATHS"
 """Environment variable carrying the database paths (JSON list) to worker processes."""
 
 log = logging.getLogger(__name__)
+
+#: uvicorn's ``limit_concurrency``: connections and request tasks at once, per process.
+LIMIT_CONCURRENCY = 4096
 
 
 def _check_args(host: str, port: int, workers: int) -> None:
@@ -46,6 +50,8 @@ def serve(
     *,
     log_level: str = "info",
     access_log: bool = False,
+    per_client: int = PER_CLIENT,
+    read_timeout: float = READ_TIMEOUT,
 ) -> None:
     """Serve scene databases read-only until interrupted.
 
@@ -63,6 +69,9 @@ def serve(
     access_log:
         Log every request (off by default: at thousands of requests per second the
         log costs more than the answers; ``/metrics`` counts them instead).
+    per_client, read_timeout:
+        Connections one client address may hold open (0: no limit) and the seconds
+        a request may take to arrive (:mod:`~walkstream.server.service.guard`).
 
     Raises
     ------
@@ -84,6 +93,12 @@ def serve(
         # an idle keep-alive connection is dropped after this many seconds, so
         # vanished clients do not pile up
         "timeout_keep_alive": 5,
+        # every connection and request task together; beyond, uvicorn answers 503
+        "limit_concurrency": LIMIT_CONCURRENCY,
+        # the request head's size under h11 (the guard bounds it under httptools)
+        "h11_max_incomplete_event_size": MAX_HEAD_BYTES,
+        # uvicorn's httptools protocol with a read deadline and a per-address cap
+        "http": configure(read_timeout, per_client),
     }
     if workers == 1:
         try:

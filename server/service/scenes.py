@@ -61,7 +61,7 @@ from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
 from walkstream.shared.content.mesh import KIND as MESH
 from walkstream.shared.content.params import KIND as PARAMS
 from walkstream.shared.content.registry import by_form, object_forms
-from walkstream.shared.errors import ApiError, CodecError, StoreError
+from walkstream.shared.errors import ApiError, CodecError, DatabaseDamagedError, StoreError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_q, encode_path_q
 from walkstream.shared.paths import RecordedPath
@@ -317,7 +317,7 @@ class Scene:
             return cls(reader, cells, kinds, reader.path_names())
         except CodecError as exc:
             reader.close()
-            raise StoreError(f"{label}: damaged database ({exc})") from exc
+            raise DatabaseDamagedError(f"{label}: damaged database ({exc})") from exc
         except BaseException:
             reader.close()
             raise
@@ -660,7 +660,7 @@ class Scene:
             p = decode_object(blob, f"scene {self.name!r}: object {oid}")
         except CodecError as exc:
             # stored bytes, not the request, are at fault: a server-side error
-            raise StoreError(f"{self.reader.path}: damaged database ({exc})") from exc
+            raise DatabaseDamagedError(f"{self.reader.path}: damaged database ({exc})") from exc
         if isinstance(p, BuildingParams):
             return encode_mesh(build_lod(p, 2, self.grammar()))
         return encode_mesh(build_street(p, 2))

@@ -11,6 +11,7 @@ the ways, :mod:`.network` cuts them into crossroads and street pieces).
 
 from __future__ import annotations
 
+import dataclasses
 import zlib
 from collections import Counter
 
@@ -30,16 +31,21 @@ from walkstream.server.sources.osmtags import (
     street_width,
 )
 from walkstream.server.sources.partywalls import find_party_walls
-from walkstream.server.sources.rings import clean_and_repair, dedupe
+from walkstream.server.sources.rings import bound_vertices, clean_and_repair
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError, SourceError
 from walkstream.shared.records import BuildingParams, StreetParams
 
-__all__ = ["DEFAULT_STREET_WIDTH", "assemble_scene"]
+__all__ = ["DEFAULT_STREET_WIDTH", "MAX_PROJECTED", "assemble_scene"]
 
 #: Width in metres of a ``kind=street`` line or polygon without ``highway`` or ``width``.
 DEFAULT_STREET_WIDTH = 10.0
+#: Metres from a projected CRS's origin beyond which a feature is skipped (the Earth's
+#: circumference is 4e7 m, so no real position is this far).
+MAX_PROJECTED = 1e8
+#: Skipped features named in the scene's notes (the rest are counted).
+_SHOWN_SKIPS = 5
 
 
 def assemble_scene(
@@ -99,13 +105,20 @@ def assemble_scene(
             + ")"
             + ("".join(f"; {n}" for n in out_notes))
         )
+    issues = log.sorted()
+    skipped = [i for i in issues if i.action == "skipped"]
+    if skipped:
+        # one line the bake prints: how many were skipped, and the first few by id
+        shown = "; ".join(f"{i.feature_id}: {i.problem}" for i in skipped[:_SHOWN_SKIPS])
+        more = f"; {len(skipped) - _SHOWN_SKIPS} more" if len(skipped) > _SHOWN_SKIPS else ""
+        out_notes.append(f"skipped {len(skipped)} feature(s): {shown}{more}")
     return SourceScene(
         name=name,
         crs=crs_name,
         origin=origin,
         buildings=tuple(buildings),
         streets=tuple(streets),
-        issues=tuple(log.sorted()),
+        issues=tuple(issues),
         passages=frozenset(passages),
         notes=tuple(out_notes),
     )
@@ -137,6 +150,19 @@ def _to_local(
                     it.uid,
                     "coordinates outside the lon/lat range (projected data needs a 'crs' member)",
                     "skipped",
+                )
+        items = kept
+    else:
+        # Nothing on Earth is further than MAX_PROJECTED from a projected CRS's origin;
+        # beyond it the centre of the bounding box (the scene origin) is meaningless.
+        kept = []
+        for it in items:
+            rings = it.raw if isinstance(it, PolyFeature) else [it.raw]
+            if all(float(np.abs(r).max()) <= MAX_PROJECTED for r in rings):
+                kept.append(it)
+            else:
+                log.add(
+                    it.index, it.uid, f"coordinates beyond {MAX_PROJECTED:.0e} m of the CRS origin", "skipped"
                 )
         items = kept
     if not items:
@@ -219,6 +245,39 @@ def _make_buildings(
                 source_id=part.source_id,
             )
         )
+    return _within_module_limit(out, parts, log)
+
+
+def _within_module_limit(
+    buildings: list[BuildingParams], parts: list[CleanPart], log: IssueLog
+) -> list[BuildingParams]:
+    """The buildings the grammar can derive within its module limit, ids renumbered.
+
+    The building grammar makes about 1.1 modules per floor and metre of wall at LOD 2,
+    so only a building whose floors × perimeter reaches half the limit is
+    derived here (once, at LOD 2, the largest); one over the limit is skipped and
+    named instead of ending the bake where its objects are written.
+    """
+    from walkstream.shared.buildings import default_grammar, derive_building
+    from walkstream.shared.errors import DerivationLimitError
+
+    grammar = default_grammar()
+    out: list[BuildingParams] = []
+    if not buildings:
+        return out
+    rings = [r for b in buildings for r in b.rings]
+    counts = [len(r) for r in rings]
+    owner = np.repeat(np.arange(len(buildings)), [len(b.rings) for b in buildings])
+    closed = shapely.linearrings(np.concatenate(rings), indices=np.repeat(np.arange(len(rings)), counts))
+    walls = np.bincount(owner, weights=shapely.length(closed), minlength=len(buildings))
+    for b, part, wall in zip(buildings, parts, walls.tolist(), strict=True):
+        if b.floors * wall >= grammar.max_modules / 2:
+            try:
+                derive_building(b, 2, grammar)
+            except DerivationLimitError as exc:
+                log.add(part.poly.index, part.source_id, f"{b.floors} floors, {wall:.0f} m of wall: {exc}", "skipped")
+                continue
+        out.append(b if b.id == len(out) else dataclasses.replace(b, id=len(out)))
     return out
 
 
@@ -287,7 +346,12 @@ def _make_streets(
         if not ground:
             left["tunnels" if why == "tunnel" else f"ways on {why}"] += 1
             continue
-        pts = dedupe(line.local, closed=False)
+        pts, note = bound_vertices(line.local, closed=False)
+        if pts is None:
+            log.add(line.index, line.uid, str(note), "skipped")
+            continue
+        if note:
+            log.add(line.index, line.uid, note, "repaired")
         if len(pts) < 2:
             log.add(line.index, line.uid, f"fewer than 2 distinct points ({len(pts)})", "skipped")
             continue

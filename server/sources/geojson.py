@@ -72,7 +72,12 @@ Bad features
     (``feature_id`` = the feature id, ``"<fid>#<k>"`` for a MultiPolygon part):
 
     - unknown geometry type (Point, ...), missing or malformed geometry: skipped;
-    - NaN / infinite coordinates, or lon/lat out of range: skipped;
+    - NaN / infinite coordinates (an integer of more than 400 digits is read as NaN),
+      lon/lat out of range, or projected coordinates beyond 1e8 m: skipped;
+    - a ring of more than 5,000 vertices: simplified to 5 cm, skipped if still over
+      (:func:`~walkstream.server.sources.rings.bound_vertices`);
+    - a height over 1,000 m, more than 200 floors: ignored like a bad value; a building
+      the grammar cannot derive within its module limit: skipped;
     - fewer than 3 distinct points (2 for a street line): skipped;
     - area below 0.01 m² (after cleaning): skipped;
     - a degenerate hole (fewer than 3 points or area below 0.01 m²): hole dropped,

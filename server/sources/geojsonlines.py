@@ -19,11 +19,16 @@ import pyproj
 from walkstream.server.sources.crs import outside_lonlat, parse_crs_member, project
 from walkstream.server.sources.geojson import as_points
 from walkstream.server.sources.jsonfile import read_json_file
+from walkstream.server.sources.rings import bound_vertices
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError, SourceError
 
-__all__ = ["line_to_scene", "read_linestring"]
+__all__ = ["MAX_LINE_POINTS", "line_to_scene", "read_linestring"]
 _MAX_GEOJSON_BYTES = 256 << 20
+#: Points a path keeps: a day's walk logged every second is 86,400; a longer line is
+#: simplified to 5 cm, and refused if that is not enough
+#: (:func:`~walkstream.server.sources.rings.bound_vertices`).
+MAX_LINE_POINTS = 100_000
 
 
 # --------------------------------------------------------------------------- GeoJSON lines
@@ -105,6 +110,10 @@ def line_to_scene(
 ) -> F64:
     """Project a read line into scene-local metres, repeated positions dropped.
 
+    A position within 1 mm of the last one kept is dropped (so a track of points
+    0.5 mm apart thins out instead of collapsing); more than :data:`MAX_LINE_POINTS`
+    are simplified to 5 cm.
+
     Parameters
     ----------
     raw:
@@ -138,8 +147,10 @@ def line_to_scene(
     if not np.isfinite(xy).all():
         i = int(np.flatnonzero(~np.isfinite(xy).all(axis=1))[0])
         raise SourceError(f"{label}: {point} {i} cannot be projected to {crs}")
-    keep = np.concatenate([[True], np.hypot(*np.diff(xy, axis=0).T) > 1e-3])
-    xy = xy[keep]
+    bounded, note = bound_vertices(xy, closed=False, limit=MAX_LINE_POINTS)
+    if bounded is None:
+        raise SourceError(f"{label}: the {line}: {note}")
+    xy = bounded
     if len(xy) < 2:
         raise SourceError(f"{label}: the {line} has fewer than 2 distinct {point}s")
     return xy

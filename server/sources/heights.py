@@ -7,7 +7,17 @@ import re
 import zlib
 from typing import Any
 
-__all__ = ["parse_length", "default_floors", "FLOORS_BY_TYPE", "floor_levels", "is_positive"]
+__all__ = [
+    "parse_length", "default_floors", "FLOORS_BY_TYPE", "floor_levels", "is_positive",
+    "MAX_HEIGHT", "MAX_FLOORS", "MAX_FLOOR_HEIGHT",
+]  # fmt: skip
+#: The largest height (m), floor count and floor height (m) taken from a feature; a
+#: larger value is a bad value (ignored, the rules go on without it, reported).  The
+#: tallest building has 828 m and 163 floors; the grammar derives one module per
+#: storey and bay, so 100,000 floors ended the bake at the module limit.
+MAX_HEIGHT = 1000.0
+MAX_FLOORS = 200
+MAX_FLOOR_HEIGHT = 50.0
 _FOOT = 0.3048
 _HEIGHT_KEYS = ("height", "building:height", "est_height")
 _FLOOR_KEYS = ("building:levels", "levels", "floors")
@@ -85,25 +95,25 @@ def floor_levels(
     """
     bad: list[str] = []
 
-    def first_valid(keys: tuple[str, ...], parse: Any) -> tuple[str, float] | None:
+    def first_valid(keys: tuple[str, ...], parse: Any, limit: float) -> tuple[str, float] | None:
         for key in keys:
             raw = props.get(key)
             if raw is None or raw == "":
                 continue
             value = parse(raw)
-            if is_positive(value):
+            if is_positive(value) and value <= limit:
                 return key, float(value)
             bad.append(f"{key}={raw!r}")
         return None
 
-    height = first_valid(_HEIGHT_KEYS, parse_length)
-    floors_v = first_valid(_FLOOR_KEYS, _parse_count)
+    height = first_valid(_HEIGHT_KEYS, parse_length, MAX_HEIGHT)
+    floors_v = first_valid(_FLOOR_KEYS, _parse_count, MAX_FLOORS)
     roof_v = _parse_count(props.get("roof:levels"))
-    roof = ("roof:levels", roof_v) if roof_v is not None and math.isfinite(roof_v) and roof_v > 0 else None
+    roof = ("roof:levels", roof_v) if roof_v is not None and math.isfinite(roof_v) and 0 < roof_v <= MAX_FLOORS else None
     if floors_v and roof:
         # OSM counts the floors under the roof apart; the grammar has only floors
-        floors_v = (f"{floors_v[0]} + roof:levels", floors_v[1] + roof[1])
-    fh_v = first_valid(("floor_height",), parse_length)
+        floors_v = (f"{floors_v[0]} + roof:levels", min(floors_v[1] + roof[1], MAX_FLOORS))
+    fh_v = first_valid(("floor_height",), parse_length, MAX_FLOOR_HEIGHT)
     floor_height = fh_v[1] if fh_v else default_floor_height
     floors = int(math.floor(floors_v[1] + 0.5)) if floors_v else 0
     if floors_v and floors < 1:
@@ -112,7 +122,7 @@ def floor_levels(
     if height and floors_v:
         return floors, height[1] / floors, bad, f"{height[0]} and {floors_v[0]} used"
     if height:
-        floors = max(1, int(math.floor(height[1] / floor_height + 0.5)))
+        floors = min(MAX_FLOORS, max(1, int(math.floor(height[1] / floor_height + 0.5))))
         return floors, height[1] / floors, bad, f"{height[0]} used"
     if floors_v:
         return floors, floor_height, bad, f"{floors_v[0]} used"

@@ -84,6 +84,12 @@ INTERIOR_VERSION = 1
 
 _MAT = {name: mid for mid, name, _ in MATERIALS}
 _MAX_BYTES = 512 << 20
+#: The highest storey (floor to floor, metres) and the widest interior (metres) read:
+#: far above any real storey or building, far below what the cell-mesh codec's
+#: fixed-point positions hold (about 1,000 km), so a wrong unit or a stray
+#: exponent is named here, at the storey or room, not deep in the bake.
+MAX_STOREY_HEIGHT = 100.0
+MAX_EXTENT = 10_000.0
 _FABRIC = {"chair", "sofa", "bench"}
 
 
@@ -111,12 +117,17 @@ def load_interior(path: str | os.PathLike[str]) -> InteriorScene:
         size = p.stat().st_size
         if size > _MAX_BYTES:
             raise SourceError(f"{p}: {size} bytes, more than {_MAX_BYTES} for an interior file")
-        doc = json.loads(p.read_text(encoding="utf-8"))
+        doc = json.loads(p.read_text(encoding="utf-8"), parse_int=_parse_int)
     except OSError as exc:
         raise SourceError(f"{p}: cannot read ({exc.strerror or exc})") from exc
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise SourceError(f"{p}: not a JSON file ({exc})") from exc
     return load_interior_dict(doc, p.stem, str(p))
+
+
+def _parse_int(text: str) -> int | float:
+    # Python refuses ints of more than 4,300 digits (ValueError); NaN is named by _num
+    return int(text) if len(text) <= 400 else math.nan
 
 
 def _num(v: Any, what: str) -> float:
@@ -185,6 +196,11 @@ def load_interior_dict(doc: Any, name: str = "interior", label: str = "interior"
         raise SourceError(f"{label}: no storeys")
     elev = [_num(s.get("elevation"), f"{label}: storey {k}: elevation") for k, s in enumerate(storeys_in)]
     height = [_num(s.get("height"), f"{label}: storey {k}: height") for k, s in enumerate(storeys_in)]
+    for k, h in enumerate(height):
+        if h > MAX_STOREY_HEIGHT:
+            raise SourceError(f"{label}: storey {k}: height {h:g} m, more than the {MAX_STOREY_HEIGHT:g} m a storey may be")
+    if elev[-1] - elev[0] > MAX_EXTENT:
+        raise SourceError(f"{label}: storeys span {elev[-1] - elev[0]:g} m, more than {MAX_EXTENT:g} m")
     if any(h <= slab + 1.8 for h in height) or any(b <= a for a, b in zip(elev, elev[1:], strict=False)):
         raise SourceError(f"{label}: storeys must go up and be at least {slab + 1.8:g} m high")
     rooms_in = _items(doc, "rooms", label)
@@ -192,6 +208,8 @@ def load_interior_dict(doc: Any, name: str = "interior", label: str = "interior"
         raise SourceError(f"{label}: no rooms; an interior needs rooms to make cells of")
     ring_pts = np.concatenate([_ring(r.get("outline"), f"{label}: room {r.get('id')!r}: outline") for r in rooms_in])
     lo, hi = ring_pts.min(axis=0), ring_pts.max(axis=0)
+    if float((hi - lo).max()) > MAX_EXTENT:
+        raise SourceError(f"{label}: rooms span {float((hi - lo).max()):.4g} m, more than {MAX_EXTENT:g} m")
     # a round origin near the centre: local coordinates stay small and exact
     ox, oy = (float(np.round(0.5 * (lo[k] + hi[k]))) for k in range(2))
     oz = float(elev[0])

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +43,7 @@ import numpy as np
 from walkstream.server.sources.assemble import assemble_scene
 from walkstream.server.sources.features import IssueLog, LineFeature, PolyFeature
 from walkstream.server.sources.osmtags import is_square
+from walkstream.server.sources.pbfcheck import check_pbf_framing
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError, SourceError
@@ -92,13 +94,20 @@ def load_osm(
     p = Path(path)
     if not p.is_file():
         raise SourceError(f"{p}: no such file")
+    if p.name.lower().endswith(".pbf"):
+        check_pbf_framing(p)
+    import osmium
+
     reader = _Reader()
     try:
         reader.read(p)
-    except (RuntimeError, ValueError, KeyError) as exc:
-        # osmium reports a malformed file as a RuntimeError with libosmium's text
+    except (RuntimeError, ValueError, KeyError, osmium.InvalidLocationError) as exc:
+        # osmium reports a malformed file as a RuntimeError with libosmium's text, a
+        # coordinate it cannot parse (lat="nan") as InvalidLocationError, neither
+        # with the node: find it for the message
         text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise SourceError(f"{p}: not a readable OpenStreetMap file ({text})") from exc
+        node = _bad_node(p) if isinstance(exc, osmium.InvalidLocationError) else None
+        raise SourceError(f"{p}: not a readable OpenStreetMap file ({node + ': ' if node else ''}{text})") from exc
     stem = p.name
     for suffix in sorted(OSM_SUFFIXES, key=len, reverse=True):
         if stem.lower().endswith(suffix):
@@ -120,6 +129,28 @@ def load_osm(
 
 
 # --------------------------------------------------------------------------- reading
+
+
+_NODE_RE = re.compile(rb"<node\b[^>]*>")
+_ATTR_RE = re.compile(rb'\b(id|lat|lon)\s*=\s*["\']([^"\']*)["\']')
+
+
+def _bad_node(path: Path) -> str | None:
+    """``node/ID`` of the first XML node whose lat or lon is not a finite number in range."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    for m in _NODE_RE.finditer(data):
+        attrs = {k.decode(): v.decode("utf-8", "replace") for k, v in _ATTR_RE.findall(m.group(0))}
+        try:
+            lat, lon = float(attrs.get("lat", "")), float(attrs.get("lon", ""))
+            if abs(lat) <= 90 and abs(lon) <= 180:
+                continue
+        except ValueError:
+            pass
+        return f"node/{attrs.get('id', '?')} lat={attrs.get('lat')!r} lon={attrs.get('lon')!r}"
+    return None
 
 
 def _ring_xy(nodes: Any) -> tuple[F64, int]:

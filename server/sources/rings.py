@@ -11,12 +11,24 @@ from walkstream.server.sources.features import CleanPart, IssueLog, PolyFeature
 from walkstream.shared.arrays import F64
 from walkstream.shared.geometry import signed_area
 
-__all__ = ["MIN_AREA", "clean_and_repair", "dedupe"]
+__all__ = ["MAX_RING_VERTICES", "MAX_RAW_VERTICES", "MIN_AREA", "SIMPLIFY_TOL", "bound_vertices", "clean_and_repair", "dedupe"]
 #: Polygons (and holes and repaired parts) smaller than this many m² are degenerate.
 MIN_AREA = 0.01
 #: Vertices closer than this (metres) are duplicates; a vertex this close to the
 #: line through its neighbours is collinear.
 _VERTEX_TOL = 1e-3
+#: Vertices a ring (or a street line) may keep.  OpenStreetMap caps a way at 2,000
+#: nodes; a footprint over this many is simplified (:data:`SIMPLIFY_TOL`) and skipped
+#: if it is still over: the repair (``is_simple``, ``make_valid``), the party walls
+#: and the grammar's per-edge modules grow faster than linearly with it (a
+#: 100,000-vertex star took 50 s and 8.6 GB before this limit).
+MAX_RING_VERTICES = 5_000
+#: Vertices a ring may have as read, before anything is done with it: more is
+#: skipped without looking (removing repeated vertices is one pass in Python).
+MAX_RAW_VERTICES = 2_000_000
+#: Douglas-Peucker tolerance (metres) for rings over :data:`MAX_RING_VERTICES`.
+SIMPLIFY_TOL = 0.05
+_CHUNK = 256
 
 
 # ------------------------------------------------------------------------ cleaning
@@ -25,17 +37,84 @@ _VERTEX_TOL = 1e-3
 
 
 def dedupe(r: F64, closed: bool = True) -> F64:
-    """Drop repeated vertices (within 1 mm), and for a ring the closing vertex."""
+    """Drop repeated vertices (within 1 mm of the last vertex kept), and for a ring the closing vertex.
+
+    Compared with the last vertex kept, not the previous one, so a run of points
+    each under 1 mm from the one before (a 10 m circle of 100,000 points) thins out
+    to points 1 mm apart instead of collapsing to one.
+    """
     if len(r) < 2:
         return r
     step = np.hypot(*np.diff(r, axis=0).T)
-    keep = np.ones(len(r), dtype=bool)
-    keep[1:] = step >= _VERTEX_TOL
+    if not (step < _VERTEX_TOL).any():
+        keep = np.ones(len(r), dtype=bool)
+    else:
+        keep = _keep_spaced(r)
     r = r[keep]
     if closed:
         while len(r) > 1 and math.hypot(*(r[-1] - r[0])) < _VERTEX_TOL:
             r = r[:-1]
     return r
+
+
+def _keep_spaced(r: F64) -> np.ndarray:
+    """Which vertices are at least 1 mm from the last vertex kept before them (one pass)."""
+    keep = np.zeros(len(r), dtype=bool)
+    keep[0] = True
+    xs, ys = r[:, 0].tolist(), r[:, 1].tolist()
+    lx, ly = xs[0], ys[0]
+    tol2 = _VERTEX_TOL * _VERTEX_TOL
+    for i in range(1, len(xs)):
+        dx, dy = xs[i] - lx, ys[i] - ly
+        if dx * dx + dy * dy >= tol2:
+            keep[i] = True
+            lx, ly = xs[i], ys[i]
+    return keep
+
+
+def _simplify_chunked(r: F64, closed: bool) -> F64:
+    """Douglas-Peucker (:data:`SIMPLIFY_TOL`) over runs of 256 vertices, in one GEOS call.
+
+    Whole-ring Douglas-Peucker is quadratic on a star (10 s for 100,000 vertices, a
+    crash for 1,000,000); runs that share their end vertices bound it, and each run
+    is still within the tolerance of the original.
+    """
+    pts = np.vstack([r, r[:1]]) if closed else r
+    n = len(pts)
+    starts = range(0, n - 1, _CHUNK - 1)
+    idx = np.concatenate([np.arange(a, min(a + _CHUNK, n)) for a in starts])
+    owner = np.concatenate([np.full(min(a + _CHUNK, n) - a, k) for k, a in enumerate(starts)])
+    runs = shapely.linestrings(pts[idx], indices=owner)
+    done = shapely.get_coordinates(shapely.simplify(runs, SIMPLIFY_TOL, preserve_topology=False), return_index=True)
+    coords, which = done
+    first = np.ones(len(which), dtype=bool)
+    first[1:] = which[1:] != which[:-1]
+    first[0] = False  # every run after the first repeats the previous run's last vertex
+    out = coords[~first]
+    return out[:-1] if closed else out
+
+
+def bound_vertices(r: F64, closed: bool = True, limit: int = MAX_RING_VERTICES) -> tuple[F64 | None, str | None]:
+    """A ring (or line) within ``limit`` vertices (:data:`MAX_RING_VERTICES`), repeated vertices dropped.
+
+    Returns ``(points, note)``: ``points`` None when it cannot be brought under the
+    limit (``note`` says why, with the counts), else the points and, when they were
+    simplified, a note saying so.
+    """
+    if len(r) > MAX_RAW_VERTICES:
+        return None, f"{len(r)} vertices, more than the {MAX_RAW_VERTICES} read"
+    d = dedupe(r, closed)
+    if len(d) <= limit:
+        return d, None
+    if len(d) > 20 * limit:
+        return None, f"{len(d)} distinct vertices, more than the {20 * limit} simplified"
+    simple = dedupe(_simplify_chunked(d, closed), closed)
+    if len(simple) > limit:
+        return None, (
+            f"{len(d)} vertices, {len(simple)} after simplifying to {SIMPLIFY_TOL * 100:g} cm, "
+            f"more than the limit of {limit}"
+        )
+    return simple, f"{len(d)} vertices simplified to {len(simple)} ({SIMPLIFY_TOL * 100:g} cm)"
 
 
 def _drop_collinear(r: F64) -> F64:
@@ -91,11 +170,24 @@ def _clean_rings(rings: list[F64]) -> tuple[list[F64] | None, str | None, list[s
 def clean_and_repair(poly: PolyFeature, log: IssueLog) -> list[CleanPart]:
     """Clean one polygon; repair a self-intersecting one with make_valid."""
     assert poly.local is not None
-    ext = dedupe(poly.local[0])
+    bounded: list[F64] = []
+    for j, ring in enumerate(poly.local):
+        pts, note = bound_vertices(ring)
+        if pts is None:
+            if j == 0:
+                log.add(poly.index, poly.uid, str(note), "skipped")
+                return []
+            log.add(poly.index, poly.uid, f"hole {j}: {note}; hole dropped", "repaired")
+            continue
+        if note:
+            log.add(poly.index, poly.uid, note if j == 0 else f"hole {j}: {note}", "repaired")
+        bounded.append(pts)
+    poly.local = bounded  # repeated vertices dropped
+    ext = bounded[0]
     if len(ext) >= 3 and not shapely.is_simple(shapely.LinearRing(ext)):
         # A self-crossing exterior (bow-tie) has a meaningless shoelace area, so it
         # must be repaired before the area and collinearity tests, not after.
-        holes = [h for h in map(dedupe, poly.local[1:]) if len(h) >= 3]
+        holes = [h for h in bounded[1:] if len(h) >= 3]
         return _repair(poly, shapely.Polygon(ext, holes), log)
     rings, skip, notes = _clean_rings(poly.local)
     for note in notes:

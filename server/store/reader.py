@@ -25,7 +25,7 @@ from walkstream.shared.codec import (
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.content.params import KIND as PARAMS
 from walkstream.shared.content.registry import content_kind
-from walkstream.shared.errors import NotFoundError, StoreError
+from walkstream.shared.errors import DatabaseDamagedError, NotFoundError, StoreError
 from walkstream.shared.records import BuildingParams, StreetParams, Viewpoint
 from walkstream.shared.scene.placement import ContentsPlacement
 
@@ -152,17 +152,17 @@ class SceneReader:
             conn.execute("SELECT count(*) FROM cells").fetchone()
             return meta
         except sqlite3.DatabaseError as exc:
-            raise StoreError(f"{label}: damaged database ({exc})") from exc
+            raise DatabaseDamagedError(f"{label}: damaged database ({exc})") from exc
 
     @staticmethod
     def _quick_check(conn: sqlite3.Connection, label: str) -> None:
         try:
             rows = conn.execute("PRAGMA quick_check(5)").fetchall()
         except sqlite3.DatabaseError as exc:
-            raise StoreError(f"{label}: damaged database ({exc})") from exc
+            raise DatabaseDamagedError(f"{label}: damaged database ({exc})") from exc
         if rows != [("ok",)]:
             detail = "; ".join(str(r[0]) for r in rows)
-            raise StoreError(f"{label}: damaged database ({detail})")
+            raise DatabaseDamagedError(f"{label}: damaged database ({detail})")
 
     # -- plumbing -----------------------------------------------------------
 
@@ -174,7 +174,7 @@ class SceneReader:
         try:
             yield conn
         except sqlite3.DatabaseError as exc:
-            raise StoreError(f"{self._label}: damaged database ({exc})") from exc
+            raise DatabaseDamagedError(f"{self._label}: damaged database ({exc})") from exc
         finally:
             self._pool.put(conn)
 

@@ -29,7 +29,7 @@ from walkstream.shared.errors import CodecError
 __all__ = ["CELLBATCH_MAX_CELLS", "pack_contents_part", "check_contents_part"]
 
 CELLBATCH_MAX_CELLS = 256
-"""Cells one batch may ask for (more is a 413: split the batch)."""
+"""Cells one batch may ask for (more is a 422, as the OpenAPI's maxItems says: split the batch)."""
 
 _KEYS = frozenset(("cell", "etag", "body"))
 

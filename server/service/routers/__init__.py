@@ -25,7 +25,8 @@ Object stream framing
 ---------------------
 ``POST /v1/scenes/{scene}/objects`` with body ``{"ids": [int, ...]}`` (msgpack when
 the ``Content-Type`` is ``application/msgpack``, JSON otherwise; at most
-:data:`MAX_IDS` = 1000 ids, else 413) answers with a *streamed* body
+:data:`MAX_IDS` = 1000 ids, else 422; at most 4 MiB of frames, else 413 with
+``detail.limit_bytes`` and ``detail.ids_that_fit``) answers with a *streamed* body
 made of **plain concatenated msgpack objects, one per id in the order asked**
 (repeats included), with no length prefix or separator: msgpack is
 self-delimiting, so a client feeds the bytes to ``msgpack.Unpacker`` as they

@@ -7,8 +7,10 @@ The framing (plain concatenated msgpack maps, one per id in the order asked; the
 
 from __future__ import annotations
 
+import asyncio
 import base64
 import json
+import weakref
 from collections.abc import AsyncIterator, Iterable
 from typing import Annotated, cast
 
@@ -25,12 +27,15 @@ from walkstream.server.service.models import (
     ObjectsIn,
     error_doc,
 )
-from walkstream.server.service.scenes import MAX_IDS, OBJECT_FORMS, Form
+from walkstream.server.service.scenes import MAX_IDS, OBJECT_FORMS, Form, Scene
 from walkstream.shared.codec import unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError
 from walkstream.shared.wire import JSON, MSGPACK, MSGPACK_TYPES
 
-__all__ = ["router", "CHUNK_BYTES", "MAX_BODY_BYTES", "read_body", "parse_ids", "json_frames", "coalesce"]
+__all__ = [
+    "router", "CHUNK_BYTES", "MAX_BODY_BYTES", "MAX_RESPONSE_BYTES", "REBUILDS_AT_ONCE",
+    "mesh_bytes_estimate", "read_body", "parse_ids", "json_frames", "coalesce",
+]  # fmt: skip
 
 router = APIRouter(prefix="/v1", responses=ERRORS)
 
@@ -40,6 +45,21 @@ CHUNK_BYTES = 16 << 10
 
 MAX_BODY_BYTES = 64 << 10
 """Largest accepted request body (1000 ids as JSON need about 20 KiB); more: 413."""
+
+MAX_RESPONSE_BYTES = 4 << 20
+"""Largest objects response (msgpack bytes; its JSON is about 4/3 of it): more is a 413
+naming the limit and how many ids fit.  1000 ``params`` frames are about 200 kB; a
+``lod2`` frame of the demo city about 39 kB, so about 100 meshes fit (1000 made 31.8
+MB, and 20 such requests held ``/v1/health`` for 19.6 s)."""
+
+REBUILDS_AT_ONCE = 2
+"""``lod2`` requests rebuilding meshes at once per process; the others wait their turn
+off the event loop's critical path (each rebuild holds the GIL in Python code, and
+twenty at once starved the loop)."""
+
+_MESH_BYTES_PER_TRIANGLE = 24  # the demo city's meshes take 30-36: a lower bound
+_MESH_BYTES_PER_TRIANGLE_MAX = 48
+_FRAME_BYTES = 16
 
 
 _OBJECTS_BODY = {
@@ -61,7 +81,11 @@ _OBJECTS_BODY = {
             "content": {MSGPACK: {}, JSON: {}},
         },
         400: error_doc("the body is not JSON / msgpack"),
-        413: error_doc(f"more than {MAX_IDS} ids, or a body over {MAX_BODY_BYTES} bytes"),
+        413: error_doc(
+            f"a body over {MAX_BODY_BYTES} bytes, or a response over {MAX_RESPONSE_BYTES} bytes "
+            "(form=lod2: about 100 meshes; detail.ids_that_fit says how many)"
+        ),
+        422: error_doc(f"not an object {{\"ids\": [...]}} of at most {MAX_IDS} integers, or an unknown form"),
         415: error_doc("a Content-Type other than JSON or msgpack"),
     },
     openapi_extra={"requestBody": _OBJECTS_BODY},
@@ -80,6 +104,7 @@ async def objects(
             "against streaming parameters",
             examples=list(OBJECT_FORMS),
             max_length=64,
+            json_schema_extra={"enum": list(OBJECT_FORMS)},
         ),
     ] = "params",
 ) -> StreamingResponse:
@@ -104,14 +129,56 @@ async def objects(
             detail={"ids": unknown},
         )
     found, missing = scene.cached_frames(ids, frm)
+    if frm == "lod2":
+        estimate = await run_in_threadpool(mesh_bytes_estimate, scene, ids)
+        _refuse_over_budget(estimate, len(ids), "estimated from the objects' triangles")
     if missing:
-        # reads the database and, for meshes, rebuilds geometry: off the event loop
-        found.update(await run_in_threadpool(scene.load_frames, missing, frm))
+        # reads the database and, for meshes, rebuilds geometry: off the event loop,
+        # and mesh rebuilds only a few at a time (see REBUILDS_AT_ONCE)
+        if frm == "lod2":
+            async with _rebuild_slots():
+                found.update(await run_in_threadpool(scene.load_frames, missing, frm))
+        else:
+            found.update(await run_in_threadpool(scene.load_frames, missing, frm))
     frames = [found[i] for i in ids]
+    _refuse_over_budget(sum(map(len, frames)), len(ids), "")
     headers = {"X-Scene-Version": scene.version, "X-Object-Count": str(len(ids))}
     if rep == "json":
         return stream_response(request, coalesce(json_frames(frames)), JSON, headers)
     return stream_response(request, coalesce(frames), MSGPACK, headers)
+
+
+def mesh_bytes_estimate(scene: Scene, ids: list[int]) -> int:
+    """A lower bound of the ``lod2`` frames' bytes from the stored LOD 2 triangle counts."""
+    info = scene.reader.object_info(ids)
+    return sum(_FRAME_BYTES + _MESH_BYTES_PER_TRIANGLE * info[i].tris[2] for i in ids if i in info)
+
+
+def _refuse_over_budget(nbytes: int, count: int, how: str) -> None:
+    if nbytes <= MAX_RESPONSE_BYTES:
+        return
+    # an estimate is a lower bound: advise from the largest bytes per triangle seen;
+    # real bytes vary from frame to frame: leave a margin
+    spread = _MESH_BYTES_PER_TRIANGLE_MAX / _MESH_BYTES_PER_TRIANGLE if how else 1.25
+    fit = max(1, int(count * MAX_RESPONSE_BYTES / (nbytes * spread)))
+    raise ApiError(
+        f"{count} objects make {nbytes} bytes{f' ({how})' if how else ''}, more than the "
+        f"response limit of {MAX_RESPONSE_BYTES}: ask for about {fit} at a time",
+        status=413,
+        detail={"limit_bytes": MAX_RESPONSE_BYTES, "bytes": nbytes, "ids_that_fit": fit},
+    )
+
+
+_SLOTS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, asyncio.Semaphore] = weakref.WeakKeyDictionary()
+
+
+def _rebuild_slots() -> asyncio.Semaphore:
+    """This event loop's semaphore of :data:`REBUILDS_AT_ONCE` mesh rebuilds."""
+    loop = asyncio.get_running_loop()
+    sem = _SLOTS.get(loop)
+    if sem is None:
+        sem = _SLOTS[loop] = asyncio.Semaphore(REBUILDS_AT_ONCE)
+    return sem
 
 
 async def read_body(request: Request) -> bytes:
@@ -182,9 +249,11 @@ def parse_ids(body: bytes, content_type: str | None) -> list[int]:
     if len(ids) > MAX_IDS:
         raise ApiError(
             f"{len(ids)} ids asked, at most {MAX_IDS} per request: split the batch",
-            status=413,
+            status=422,
             detail={"count": len(ids), "limit": MAX_IDS},
         )
+    # JSON Schema's integer includes 3.0: take an integer-valued float as its int
+    ids = [int(v) if type(v) is float and v.is_integer() and 0 <= v <= MAX_INT64 else v for v in ids]
     # bool is an int subclass: true/false are not ids
     bad = [(k, v) for k, v in enumerate(ids) if type(v) is not int or not 0 <= v <= MAX_INT64]
     if bad:

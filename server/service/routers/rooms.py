@@ -53,7 +53,14 @@ from starlette.concurrency import run_in_threadpool
 from walkstream.server.service.dependencies import RepDep, SceneDep
 from walkstream.server.service.http import accepts_gzip, cached, stream_response
 from walkstream.server.service.interiors import InteriorState
-from walkstream.server.service.models import ERRORS, CellsIn, RoomOut, TopologyOut, both, error_doc
+from walkstream.server.service.models import (
+    ERRORS,
+    ContentsIn,
+    RoomOut,
+    TopologyOut,
+    both,
+    error_doc,
+)
 from walkstream.server.service.routers.objects import MAX_BODY_BYTES, parse_ids, read_body
 from walkstream.server.service.scenes import Scene
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
@@ -164,8 +171,8 @@ async def contents(request: Request, scene: SceneDep, cell: Annotated[int, Path(
 _BATCH_BODY = {
     "required": True,
     "content": {
-        JSON: {"schema": CellsIn.model_json_schema()},
-        MSGPACK: {"schema": CellsIn.model_json_schema()},
+        JSON: {"schema": ContentsIn.model_json_schema()},
+        MSGPACK: {"schema": ContentsIn.model_json_schema()},
     },
 }
 
@@ -181,9 +188,9 @@ _BATCH_BODY = {
         },
         400: error_doc("the body is not JSON / msgpack"),
         404: error_doc("an id that is no cell of the interior, or a scene without rooms"),
-        413: error_doc(f"more than {CELLBATCH_MAX_CELLS} ids, or a body over {MAX_BODY_BYTES} bytes"),
+        413: error_doc(f"a body over {MAX_BODY_BYTES} bytes"),
         415: error_doc("a Content-Type other than JSON or msgpack"),
-        422: error_doc("ids not a list of integers, or an id asked twice"),
+        422: error_doc(f"ids not a list of at most {CELLBATCH_MAX_CELLS} integers, or an id asked twice"),
     },
     openapi_extra={"requestBody": _BATCH_BODY},
     summary="Interior cells' contents in a batch",
@@ -200,7 +207,7 @@ async def contents_batch(request: Request, scene: SceneDep) -> StreamingResponse
     if len(ids) > CELLBATCH_MAX_CELLS:
         raise ApiError(
             f"{len(ids)} cells asked, at most {CELLBATCH_MAX_CELLS} per batch: split the batch",
-            status=413,
+            status=422,
             detail={"count": len(ids), "limit": CELLBATCH_MAX_CELLS},
         )
     twice = [i for i, n in Counter(ids).items() if n > 1]
