@@ -445,7 +445,7 @@ async def replay_crossing(
     rooms = RoomStreamer(
         api, clock, cache, crossing_topology(topology, entrances),
         RoomStreamConfig(prefetch=config.prefetch, fog_m=config.fog_m, culling=config.culling, **config.rooms),
-        foreign=[x.street for x in entrances],
+        foreign=[x.street for x in entrances], scheduler=city.scheduler,  # one scheduler owns the link
     )
     device = make_device(config.device, config.seed)
     renderer: Any = None
