@@ -41,6 +41,9 @@ class _Lane:
     def in_flight(self) -> int:
         return len(self.flying)
 
+    def outstanding_bytes(self) -> float:
+        return 1000.0 * len(self.flying)
+
 
 def _sched(slots: int) -> RequestScheduler:
     s = RequestScheduler(slots)
@@ -160,6 +163,9 @@ def test_a_landed_flight_frees_its_slot() -> None:
             def in_flight(self) -> int:
                 return len(s.flights(self))
 
+            def outstanding_bytes(self) -> float:
+                return 0.0
+
         async def run(f: Flight) -> None:
             try:
                 await asyncio.sleep(0)
@@ -189,3 +195,31 @@ def test_never_more_in_flight_than_the_slots(slots: int) -> None:
                 lane.flying.pop(0)
                 break
     assert s.in_flight() <= slots
+
+
+def test_between_lanes_a_request_not_due_waits_while_the_link_is_covered() -> None:
+    """56 kbit/s, 100 ms: a round trip of transfer is 700 B, the cover (3 of them) 2100 B;
+    each fake request holds 1000 B."""
+    s = _sched(slots=4)
+    s.measure = lambda: (56_000.0, 0.1)
+    city = _Lane(s, "city", [0.0, 30.0])
+    rooms = _Lane(s, "rooms", [0.5, 1.0, 20.0])
+    s.dispatch()
+    # the needs due now go out; once 3 kB (more than the cover) are on the link, the
+    # requests needed in 20 s and 30 s wait
+    assert s.started_order == ["city0", "rooms0.5", "rooms1"]  # type: ignore[attr-defined]
+    assert s.in_flight() == 3 and s.waits(20.0) and not s.waits(1.0)
+    city.flying.clear()
+    rooms.flying.pop(0)  # 1 kB left on the link: less than the cover, so the next ones may go
+    s.dispatch()
+    assert s.started_order[3:] == ["rooms20", "city30"]  # type: ignore[attr-defined]
+    assert s.waits(40.0)  # 3 kB on the link again
+
+
+def test_a_lane_alone_never_waits_for_the_cover() -> None:
+    """Alone, a lane's own flow control decides (a scene of one kind: the decisions it made
+    before the scheduler)."""
+    s = _sched(slots=4)
+    s.measure = lambda: (56_000.0, 0.2)
+    _Lane(s, "rooms", [0.0, 10.0, 20.0, 30.0])
+    assert s.dispatch() == 4 and not s.waits(99.0)

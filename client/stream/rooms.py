@@ -65,6 +65,9 @@ from walkstream.shared.roomwire import RoomRecord, Topology
 
 __all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "predicted_view", "turned_view"]
 
+_HEAD_BYTES = 200
+"""A response's status line and headers (the scheduler's estimate of the bytes on the link)."""
+
 #: ``--flush-policy`` choices (see :attr:`RoomStreamConfig.flush_policy`).
 FLUSH_POLICIES: tuple[str, ...] = ("crowded", "paper")
 
@@ -360,6 +363,10 @@ class RoomStreamer:
     def in_flight(self) -> int:
         """Contents requests on the link now (the start bundle's too)."""
         return len(set(self._tasks.values()))
+
+    def outstanding_bytes(self) -> float:
+        """Stored bytes of the cells asked for and not received yet, and each request's head."""
+        return float(sum(self.cells[c].contents.nbytes for c in self._tasks) + _HEAD_BYTES * self.in_flight())
 
     def offer(self) -> Offer | None:
         """The next request for the wanted cells neither in memory nor in flight, in

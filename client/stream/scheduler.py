@@ -10,8 +10,12 @@ scheduler (:meth:`RequestScheduler.dispatch`) starts, while the link has a free 
 (:attr:`RequestScheduler.slots`, counted over every lane), the offer needed soonest;
 lanes that tie go in the order they joined.  A lane keeps its own flow control (the
 city's cover of a round trip of bytes, the rooms' requests in flight), so a lane alone
-on the link makes exactly the decisions it made before there was a scheduler; what the
-scheduler adds is the choice between kinds and the one count of slots.
+on the link makes exactly the decisions it made before there was a scheduler.  What the
+scheduler adds is the choice between kinds, the one count of slots, and, once two lanes
+share the link, a wait (:meth:`RequestScheduler.waits`): a request not due yet stays
+back while the bytes on the link, every lane's, cover a few round trips of transfer, so
+that what comes up meanwhile (a room coming into view through a door) is not queued
+behind another kind's prefetch, and what goes later is picked from fresher wants.
 
 Every request a lane starts through :meth:`RequestScheduler.launch` is a
 :class:`Flight` (its items, those not yet received, its task) until the lane says it
@@ -56,6 +60,9 @@ class Lane(Protocol):
     def in_flight(self) -> int:
         """Requests of this lane on the link now (those started outside the scheduler too)."""
 
+    def outstanding_bytes(self) -> float:
+        """Bytes this lane asked for and has not received yet (estimated)."""
+
 
 @dataclass(eq=False)
 class Flight:
@@ -89,10 +96,24 @@ class RequestScheduler:
     ----------
     slots
         Most requests on the link at once, over every lane.
+    cover
+        Between lanes, a request not due yet waits while the bytes asked for and not
+        received, every lane's, cover this many round trips of transfer (on the
+        crossing walk ``enter`` 1, 2 and 3 gave 96.5, 97.1 and 98.7 % perfect frames at
+        56 kbit/s and 99.6, 99.6 and 98.0 % over GPRS; without the wait 97.0 and 98.0 %;
+        on a 400 m city 3 gave 99.9 and 98.3 % against 98.9 and 96.6 % without).
+    margin_s
+        A request is due when its need is within two round trips, the transfer of what
+        is on the link, and this margin.
     """
 
-    def __init__(self, slots: int = 4) -> None:
+    def __init__(self, slots: int = 4, cover: float = 3.0, margin_s: float = 1.5) -> None:
         self.slots = slots
+        self.cover = cover
+        self.margin_s = margin_s
+        self.measure: Callable[[], tuple[float, float]] | None = None
+        """The link's bandwidth (bit/s) and round trip (s) as measured (set by the
+        first lane that measures them); without it no request waits for the cover."""
         self.lanes: list[Lane] = []
         """The lanes, in the order they joined (the order of ties)."""
         self._flights: dict[asyncio.Task[None], Flight] = {}
@@ -108,9 +129,14 @@ class RequestScheduler:
         """Requests on the link now, every lane's."""
         return sum(lane.in_flight() for lane in self.lanes)
 
+    def outstanding_bytes(self) -> float:
+        """Bytes asked for and not received yet, every lane's."""
+        return sum(lane.outstanding_bytes() for lane in self.lanes)
+
     def dispatch(self) -> int:
         """Start requests while the link has a free slot: each time the offer needed
-        soonest (the earlier lane on a tie).  Returns how many were started."""
+        soonest (the earlier lane on a tie), unless it :meth:`waits`.  Returns how many
+        were started."""
         n = 0
         while self.in_flight() < self.slots:
             best: tuple[float, int, Offer] | None = None
@@ -118,12 +144,28 @@ class RequestScheduler:
                 o = lane.offer()
                 if o is not None and (best is None or o.need_s < best[0]):
                     best = (o.need_s, k, o)
-            if best is None:
+            if best is None or self.waits(best[0]):
                 break
             best[2].start()
             self.started[best[1]] = self.started.get(best[1], 0) + 1
             n += 1
         return n
+
+    def waits(self, need_s: float) -> bool:
+        """Whether a request needed in ``need_s`` seconds waits: with more than one lane,
+        while the link's outstanding bytes cover :attr:`cover` round trips and it is not
+        due (its need beyond two round trips, the transfer of those bytes and
+        :attr:`margin_s`).  Asking later keeps the link free for a need that comes up
+        meanwhile (a room that comes into view), and what is asked later is chosen
+        from fresher wants; a lane alone keeps only its own flow control."""
+        if len(self.lanes) < 2 or self.measure is None or not self.in_flight():
+            return False
+        bps, rtt = self.measure()
+        bps8 = max(bps, 1.0) / 8.0
+        out = self.outstanding_bytes()
+        if out < self.cover * bps8 * rtt:
+            return False
+        return need_s > 2.0 * rtt + out / bps8 + self.margin_s
 
     # -- flights ---------------------------------------------------------------
 

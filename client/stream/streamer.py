@@ -166,6 +166,8 @@ class Streamer:
         self.scheduler = scheduler if scheduler is not None else RequestScheduler(config.max_requests)
         """The link's request scheduler (this streamer is one of its lanes)."""
         self.scheduler.join(self)
+        if self.scheduler.measure is None:
+            self.scheduler.measure = lambda: (self._bps(), self._rtt())
         self.clock = clock
         self.cache = cache
         self.config = config
@@ -355,6 +357,10 @@ class Streamer:
             ),
             key=lambda x: (x[0], tile_key(x[1])),
         )
+
+    def outstanding_bytes(self) -> float:
+        """Bytes asked for and not yet received (estimated; the scheduler's cover counts them)."""
+        return self._outstanding()
 
     def _outstanding(self) -> float:
         """Bytes asked for and not yet received (estimated)."""
