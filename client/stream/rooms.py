@@ -355,10 +355,17 @@ class RoomStreamer:
 
     def _request(self, want: list[int], vis: set[int]) -> None:
         """Hand the scheduler the wanted cells (``vis`` needed now) and let it start
-        what the link has room for (see :meth:`offer`)."""
+        what the link has room for (see :meth:`offer`).
+
+        The wants hold for this dispatch only: when another lane's request ends
+        between frames, this streamer offers nothing until its next tick (asking then
+        from the last frame's wants moved the crossing walk over GPRS on a 400 m city
+        from 99.9 to 98.3 % perfect frames: prefetch batches went out a frame early,
+        made of other cells)."""
         self._want = want
         self._vis = vis
         self.scheduler.dispatch()
+        self._want = []
 
     def in_flight(self) -> int:
         """Contents requests on the link now (the start bundle's too)."""
