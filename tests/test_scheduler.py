@@ -7,6 +7,7 @@ its own limit of requests in flight, as a streamer's own flow control would.
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 
 import pytest
 
@@ -223,3 +224,47 @@ def test_a_lane_alone_never_waits_for_the_cover() -> None:
     s.measure = lambda: (56_000.0, 0.2)
     _Lane(s, "rooms", [0.0, 10.0, 20.0, 30.0])
     assert s.dispatch() == 4 and not s.waits(99.0)
+
+
+def test_the_rooms_lane_shares_the_slots_and_offers_at_its_own_tick_only(office_db: Path) -> None:
+    """A room streamer on a shared scheduler: while the other lane holds the one slot its
+    tick starts nothing; when the slot frees between its ticks it offers nothing (its
+    wants are a frame's), and its next tick takes the slot."""
+    import httpx
+    import numpy as np
+
+    from walkstream.client.clock import SimClock
+    from walkstream.client.net.api import SceneClient
+    from walkstream.client.stream.cache import Cache
+    from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
+    from walkstream.server.service.main import create_app
+    from walkstream.shared.camera import camera, perspective
+
+    async def go() -> list[tuple[int, int]]:
+        clock = SimClock()
+        s = _sched(slots=1)
+        other = _Lane(s, "city", [])
+        other.flying.append("city-bundle")  # the one slot, taken by the other lane
+        transport = httpx.ASGITransport(app=create_app([office_db]))
+        async with httpx.AsyncClient(transport=transport, base_url="http://t") as http:
+            api = SceneClient(http, clock, office_db.stem)
+            topo = await api.topology()
+            rooms = RoomStreamer(api, clock, Cache(64 << 20), topo, RoomStreamConfig(), scheduler=s)
+            size = (160, 120)
+            proj = perspective(60.0, size[0] / size[1], 0.1, 80.0).astype(np.float64)
+            room = next(c for c in topo.cells if c.kind == "room")
+            lo, hi = room.outline.min(axis=0), room.outline.max(axis=0)
+            eye = np.array([*(lo + hi) / 2, room.zmin + 1.6])
+            view = camera(eye, 0.3, 0.0).astype(np.float64)
+            seen: list[tuple[int, int]] = []
+            rooms.tick(0.0, eye, proj @ view, view, proj, size)
+            seen.append((rooms.in_flight(), s.in_flight()))  # the slot is taken: nothing
+            other.flying.clear()
+            s.dispatch()  # the other lane's request ended: a dispatch between the rooms' ticks
+            seen.append((rooms.in_flight(), s.in_flight()))
+            rooms.tick(0.04, eye, proj @ view, view, proj, size)
+            seen.append((rooms.in_flight(), s.in_flight()))  # its tick: the visible cells go
+            await rooms.close()
+            return seen
+
+    assert asyncio.run(go()) == [(0, 1), (0, 0), (1, 1)]
