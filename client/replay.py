@@ -217,12 +217,14 @@ async def replay(
                 if not entrances:
                     raise ApiError(f"scene {api.scene!r} is a crossing without an entrance")
                 entrance = entrances[0]
+                assert streamer is not None  # a crossing has street cells: made above
                 setup_s = clock.now() - t_start  # the walk starts once the rooms' topology is in too
                 rooms = RoomStreamer(
                     api, clock, cache, crossing_topology(inside, entrances),
                     RoomStreamConfig(prefetch=config.prefetch, fog_m=config.fog_m, culling=config.culling, **config.rooms),
                     foreign=[x.street for x in entrances],
                     placements=[x.placement for x in entrances if x.placement is not None],
+                    scheduler=streamer.scheduler,  # one scheduler owns the link: both kinds' requests
                 )
             elif kind == "interior":
                 topology = topology or await api.topology()

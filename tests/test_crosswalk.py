@@ -263,3 +263,25 @@ def test_the_room_streamer_places_contents_in_the_city(scene: Path) -> None:
             assert plan.contains(shapely.Point(0.5 * (p.bbox[0] + p.bbox[1])[:2]))
             outside += not plan.contains(shapely.Point(0.5 * (q.bbox[0] + q.bbox[1])[:2]))
     assert outside > 0
+
+
+def test_one_scheduler_owns_the_link_for_both_streamers(scene: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The city's and the rooms' requests go out through one scheduler, whose slots bound
+    them together (each streamer alone would allow its own limit)."""
+    from walkstream.client.stream.scheduler import RequestScheduler
+
+    seen: list[tuple[int, int, int]] = []
+    real = RequestScheduler.dispatch
+
+    def spy(self: RequestScheduler) -> int:
+        n = real(self)
+        seen.append((id(self), len(self.lanes), self.in_flight()))
+        return n
+
+    monkeypatch.setattr(RequestScheduler, "dispatch", spy)
+    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", kind="crossing", duration_s=12.0)
+    got = run_replay(httpx.ASGITransport(app=create_app([scene])), "http://t", cfg).summary
+    assert got["contents_requests"] > 0 and got["object_requests"] > 0
+    shared = [x for x in seen if x[1] == 2]
+    assert shared and len({x[0] for x in shared}) == 1  # one scheduler with both lanes
+    assert max(x[2] for x in shared) <= 4  # StreamerConfig.max_requests: the link's slots

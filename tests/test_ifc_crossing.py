@@ -14,7 +14,7 @@ from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayResult, run_replay
 from walkstream.server.bake import BakeSettings, bake
-from walkstream.server.paths.crossing import record_crossing_path
+from walkstream.server.paths.record import record_walk
 from walkstream.server.service.main import create_app
 from walkstream.server.store import SceneReader
 from walkstream.shared.paths import RecordedPath
@@ -68,7 +68,7 @@ def walked(placed: Path) -> ReplayResult:
     # the enter walk passes the door: start where it is 6 m before it
     eyes = (np.asarray(enter.at(float(t))[0])[:2] for t in np.arange(0.0, enter.duration, 0.1))
     start = next(p for p in eyes if float(np.hypot(*(p - mid))) < 6.0)
-    record_crossing_path(placed, "in-and-out", (float(start[0]), float(start[1])), (float(start[0]), float(start[1])),
+    record_walk(placed, "in-and-out", (float(start[0]), float(start[1])), (float(start[0]), float(start[1])),
                          via=["Wohnen"])
     link = LinkProfile(down_bps=1_000_000.0, up_bps=1_000_000.0, rtt_s=0.2)
     cfg = ReplayConfig(link=link, path="in-and-out", device="desktop2003", truth_every=25, kind="crossing")

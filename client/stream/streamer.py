@@ -21,7 +21,10 @@ frame loop, and whenever a request ends) works out what is needed and when:
 
 Requests go out most urgent first -- an index tile, a batch of cell records, or a
 batch of objects ordered by the time each is needed and then by ACH (highest
-first) -- while fewer than ``max_requests`` are in flight and the bytes asked for
+first) -- through the link's :class:`~walkstream.client.stream.scheduler.RequestScheduler`
+(the streamer is one of its lanes: a crossing walk's room streamer is another, and
+the scheduler starts whichever lane's next request is needed sooner), while fewer
+than ``max_requests`` are in flight and the bytes asked for
 but not yet received cover less than ``cover`` round trips of transfer at the
 measured bandwidth: enough to keep the link busy across a round trip, no more, so
 that a new prediction can still re-order what is not yet asked for.  An object
@@ -64,6 +67,7 @@ from walkstream.client.stream.pins import Pins
 from walkstream.client.stream.plan import Tile, plan_needs, tile_key, tile_of_key, wanted_objects
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.route import horizon_m, turn_cost_m
+from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
 from walkstream.client.stream.stats import StreamStats
 from walkstream.shared.cells import TileGrid
 from walkstream.shared.codec import unpack_bounded
@@ -123,17 +127,6 @@ class StreamerConfig:
     the cache evicted it, rebuilt ahead."""
 
 
-class _Batch:
-    """An in-flight request for several items (cells or objects)."""
-
-    __slots__ = ("kind", "ids", "left")
-
-    def __init__(self, kind: str, ids: list[int]) -> None:
-        self.kind = kind
-        self.ids = ids
-        self.left = set(ids)
-
-
 class Streamer:
     """Keeps the cache filled ahead of the viewer, and the geometry built.
 
@@ -155,6 +148,9 @@ class Streamer:
         streamer forgets what it evicts (chain :meth:`evicted` into its ``on_evict``).
     config:
         Scheduling knobs.
+    scheduler:
+        The link's request scheduler, shared with the walk's other streamers (by
+        default one of its own, with ``config.max_requests`` slots).
     """
 
     def __init__(
@@ -163,8 +159,15 @@ class Streamer:
         clock: Clock,
         cache: Cache,
         config: StreamerConfig,
+        *,
+        scheduler: RequestScheduler | None = None,
     ) -> None:
         self.api = api
+        self.scheduler = scheduler if scheduler is not None else RequestScheduler(config.max_requests)
+        """The link's request scheduler (this streamer is one of its lanes)."""
+        self.scheduler.join(self)
+        if self.scheduler.measure is None:
+            self.scheduler.measure = lambda: (self._bps(), self._rtt())
         self.clock = clock
         self.cache = cache
         self.config = config
@@ -195,7 +198,6 @@ class Streamer:
         self.need_tiles: dict[Tile, float] = {}
         self._tile_tasks: dict[Tile, asyncio.Task[None]] = {}
         self._locate_task: asyncio.Task[None] | None = None
-        self._batches: dict[asyncio.Task[None], _Batch] = {}
         self._in_flight_ids: set[int] = set()
         self._in_flight_cells: set[int] = set()
         self._wanted: dict[int, tuple[float, float]] = {}
@@ -244,7 +246,7 @@ class Streamer:
         if now - self._last_plan >= self.config.plan_interval_s or cur != before:
             self._last_plan = now
             self._plan()
-            self._dispatch()
+            self.scheduler.dispatch()
         self._note_busy()
         return cur
 
@@ -337,11 +339,7 @@ class Streamer:
                 [r.pvs for x in (*need, self.cellmap.current or -1) if (r := self.cells.get(x))]
             )
         # cancel in-flight batches nobody needs any more
-        for task, b in list(self._batches.items()):
-            want = wanted if b.kind == "objects" else records
-            if not any(i in want for i in b.left):
-                task.cancel()
-                self.stats.cancelled_batches += 1
+        self.stats.cancelled_batches += self.scheduler.cancel_unwanted(self, {"objects": wanted, "cells": records})
 
     def _missing_records(self) -> list[tuple[float, int]]:
         return sorted(
@@ -360,91 +358,92 @@ class Streamer:
             key=lambda x: (x[0], tile_key(x[1])),
         )
 
+    def outstanding_bytes(self) -> float:
+        """Bytes asked for and not yet received (estimated; the scheduler's cover counts them)."""
+        return self._outstanding()
+
     def _outstanding(self) -> float:
         """Bytes asked for and not yet received (estimated)."""
         n = self._bundle.left if self._bundle is not None else 0.0
-        for b in self._batches.values():
+        for b in self.scheduler.flights(self):
             each = self._frame_bytes if b.kind == "objects" else self._record_bytes
             n += len(b.left) * each + self._head_bytes
         n += len(self._tile_tasks) * (self._tile_bytes + self._head_bytes)
         return n
 
-    def _dispatch(self) -> None:
-        """Start requests, most urgent first, while the in-flight bounds allow.
+    def offer(self) -> Offer | None:
+        """The request to start next, most urgent first, while the in-flight bounds
+        allow (the scheduler's :meth:`~walkstream.client.stream.scheduler.Lane.offer`).
 
         A batch waits while it is small and nothing in it is due soon: a request
         costs a round trip and its headers, so several small ones cost more than
         one full one (see the module docs).
         """
-        if self._closed:
-            return
         c = self.config
+        if self._closed or self._in_flight() >= c.max_requests:
+            return None
         bps8 = self._bps() / 8.0
         rtt = self._rtt()
+        out = self._outstanding()
+        if self._in_flight() and out >= c.cover * bps8 * rtt:
+            return None
+        # an item is due when asking later would bring it too late: a round trip,
+        # the transfer of what is ahead of it, and a margin
+        due = 2.0 * rtt + out / bps8 + c.batch_seconds + 1.0
+        full = bps8 * c.batch_seconds
         records = self._missing_records()
         tiles = self._missing_tiles()
-        while self._in_flight() < c.max_requests:
-            out = self._outstanding()
-            if self._in_flight() and out >= c.cover * bps8 * rtt:
-                return
-            # an item is due when asking later would bring it too late: a round trip,
-            # the transfer of what is ahead of it, and a margin
-            due = 2.0 * rtt + out / bps8 + c.batch_seconds + 1.0
-            full = bps8 * c.batch_seconds
-            options: list[tuple[float, int, str]] = []
-            if tiles:
-                options.append((tiles[0][0], 0, "tile"))
-            # a record is due a round trip before its cell's objects are
-            if records and (
-                records[0][0] <= due + 2.0 * rtt or len(records) * self._record_bytes >= full
-            ):
-                options.append((records[0][0], 1, "cells"))
-            todo = self._todo_objects()
-            if todo and (todo[0][0][0] <= due or len(todo) * self._frame_bytes >= full):
-                options.append((todo[0][0][0], 2, "objects"))
-            if not options:
-                return
-            _, _, what = min(options)
-            if what == "tile":
-                _, tile = tiles.pop(0)
-                self._tile_tasks[tile] = asyncio.create_task(self._fetch_tile(tile))
-            elif what == "cells":
-                n = max(4, int(full / max(self._record_bytes, 16.0)))
-                ids = [cid for _, cid in records[:n]]
-                del records[:n]
-                self._start_batch("cells", ids)
-            else:
-                ids = self._next_batch(todo)
-                if not ids:
-                    return
-                self._start_batch("objects", ids)
+        options: list[tuple[float, int, str]] = []
+        if tiles:
+            options.append((tiles[0][0], 0, "tile"))
+        # a record is due a round trip before its cell's objects are
+        if records and (
+            records[0][0] <= due + 2.0 * rtt or len(records) * self._record_bytes >= full
+        ):
+            options.append((records[0][0], 1, "cells"))
+        todo = self._todo_objects()
+        if todo and (todo[0][0][0] <= due or len(todo) * self._frame_bytes >= full):
+            options.append((todo[0][0][0], 2, "objects"))
+        if not options:
+            return None
+        need, _, what = min(options)
+        if what == "tile":
+            tile = tiles[0][1]
+            return Offer(need, lambda: self._start_tile(tile))
+        if what == "cells":
+            n = max(4, int(full / max(self._record_bytes, 16.0)))
+            cells = [cid for _, cid in records[:n]]
+            return Offer(need, lambda: self._start_batch("cells", cells))
+        ids = self._next_batch(todo)
+        if not ids:
+            return None
+        return Offer(need, lambda: self._start_batch("objects", ids))
+
+    def _start_tile(self, tile: Tile) -> None:
+        self._tile_tasks[tile] = asyncio.create_task(self._fetch_tile(tile))
 
     @contextlib.contextmanager
-    def _running(self, b: _Batch) -> Iterator[None]:
+    def _running(self, b: Flight) -> Iterator[None]:
         """Scope of one batch's request: however it ends (whole, cut, refused or
         cancelled), the batch leaves the in-flight sets, so what it did not bring is
         wanted again at the next plan (made here unless cancelled)."""
-        task = asyncio.current_task()
         try:
             yield
         except (StreamCut, ApiError):
             pass  # what was not received is wanted again at the next plan
         finally:
-            if task is not None:
-                self._batches.pop(task, None)
+            self.scheduler.landed(b)
             in_flight = self._in_flight_ids if b.kind == "objects" else self._in_flight_cells
             in_flight.difference_update(b.ids)
         self.replan()
 
     def _start_batch(self, kind: str, ids: list[int]) -> None:
-        b = _Batch(kind, ids)
         if kind == "objects":
             self._in_flight_ids.update(ids)
-            task = asyncio.create_task(self._fetch_objects(b))
+            self.scheduler.launch(self, kind, ids, self._fetch_objects)
         else:
             self._in_flight_cells.update(ids)
-            task = asyncio.create_task(self._fetch_cells(b))
-        self._batches[task] = b
+            self.scheduler.launch(self, kind, ids, self._fetch_cells)
 
     def _todo_objects(self) -> list[tuple[tuple[float, float], int]]:
         """Wanted objects not asked for yet, most urgent first: ``((t, -ach), id)``."""
@@ -452,10 +451,14 @@ class Streamer:
         todo.sort()
         return todo
 
+    def in_flight(self) -> int:
+        """Requests of this streamer on the link now (the scheduler counts its slots by them)."""
+        return self._in_flight()
+
     def _in_flight(self) -> int:
         return (
             len(self._tile_tasks)
-            + len(self._batches)
+            + len(self.scheduler.flights(self))
             + (self._locate_task is not None)
             + (self._bundle_task is not None)
         )
@@ -477,7 +480,7 @@ class Streamer:
         """Plan and dispatch again (something arrived or ended)."""
         if not self._closed:
             self._plan()
-            self._dispatch()
+            self.scheduler.dispatch()
             self._note_busy()
 
     async def _locate(self, xy: NDArray[np.float64]) -> None:
@@ -511,7 +514,7 @@ class Streamer:
             self._tile_tasks.pop(tile, None)
         self.replan()
 
-    async def _fetch_cells(self, b: _Batch) -> None:
+    async def _fetch_cells(self, b: Flight) -> None:
         with self._running(b):
             remaining = list(b.ids)
             if self.disk is not None:
@@ -573,7 +576,7 @@ class Streamer:
         elif kind == "cell":
             self.cells.pop(key, None)
 
-    async def _fetch_objects(self, b: _Batch) -> None:
+    async def _fetch_objects(self, b: Flight) -> None:
         remaining = list(b.ids)
         with self._running(b):
             found = self.objects_from_disk(remaining)
@@ -747,7 +750,9 @@ class Streamer:
     async def close(self) -> None:
         """Cancel everything in flight and stop the rewrite workers."""
         self._closed = True
-        tasks: list[asyncio.Task[Any]] = list(self._tile_tasks.values()) + list(self._batches)
+        tasks: list[asyncio.Task[Any]] = list(self._tile_tasks.values()) + [
+            f.task for f in self.scheduler.flights(self) if f.task is not None
+        ]
         if self._locate_task is not None:
             tasks.append(self._locate_task)
         if self._bundle_task is not None:
