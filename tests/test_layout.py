@@ -330,6 +330,16 @@ ONE_HOME = [
     "SceneGraph",
     "shortest_paths",
     "Place",
+    # the walk (issue 23): one frame loop's state and scene, one request scheduler, one
+    # cache, one ground truth (its renderer and its recorder), one topology of a crossing
+    "WalkState",
+    "WalkScene",
+    "RequestScheduler",
+    "Cache",
+    "TruthRenderer",
+    "TruthRecorder",
+    "crossing_topology",
+    "fog_for_budget",
 ]
 
 
