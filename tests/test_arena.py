@@ -144,7 +144,7 @@ def test_frame_phases_marks_moves_and_summary() -> None:
     assert set(s["frame_phases_median_ms"]) == set(PHASES)
     assert s["frame_loop_median_ms"] >= 6.0 and s["frame_period_median_ms"] >= 9.0
     assert s["frame_period_within_10pct_ratio"] == 0.0  # 9 ms periods are far from 1 ms
-    assert ph.summary(fps_target=50.0)["frame_period_within_10pct_ratio"] == 1.0
+    assert ph.summary(fps_target=5.0)["frame_period_within_10pct_ratio"] == 1.0  # 200 ms: room for a loaded machine
     assert FramePhases().summary() == {}
 
 

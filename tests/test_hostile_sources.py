@@ -82,6 +82,7 @@ def baked_with_skip(r: Run, fid: str, objects: int) -> None:
     skips = [ln for ln in r.lines() if "skipped" in ln and "feature(s)" in ln]
     assert len(skips) == 1 and f"{fid}: " in skips[0], r.lines()
     assert f"objects         {objects}" in r.out, r.out
+    assert "source_skipped  1" in r.out, r.out  # the summary counts it
 
 
 # --------------------------------------------------------------------------- files

@@ -693,7 +693,7 @@ def test_schemathesis_finds_no_server_error(app: FastAPI, city: CityDb) -> None:
             variants = [(op.as_strategy(generation_mode=mode), 10)]
             if "{scene}" in op.path:
                 fixed = {"scene": city.name}
-                variants.append((op.as_strategy(generation_mode=mode, path_parameters=fixed), 50))
+                variants.append((op.as_strategy(generation_mode=mode, path_parameters=fixed), 35))
             for strategy, examples in variants:
 
                 @given(case=strategy)

@@ -154,7 +154,8 @@ def city_plan(
     """The :class:`~.plan.BakePlan` of a city: its view cells (street or grid), PVS cells only;
     its default walks routed on the street part of its :class:`~.scenenav.SceneGraph`.
 
-    The plan's summary adds ``source``, ``source_issues`` and ``source_notes``.
+    The plan's summary adds ``source``, ``source_issues`` (features skipped or repaired),
+    ``source_skipped`` (skipped) and ``source_notes``.
     """
     for note in scene.notes:
         say(f"{src.name}: {note}")
@@ -193,7 +194,11 @@ def city_plan(
                 for path in default_paths(cells, footprints=[b.rings[0] for b in city.buildings],
                                           graph=nav.streets, say=say)]
 
-    summary: dict[str, Any] = {"source": str(src), "source_issues": len(scene.issues)}
+    summary: dict[str, Any] = {
+        "source": str(src),
+        "source_issues": len(scene.issues),
+        "source_skipped": sum(1 for i in scene.issues if i.action == "skipped"),
+    }
     if scene.notes:
         summary["source_notes"] = " | ".join(scene.notes)
     return BakePlan(
