@@ -116,7 +116,7 @@ async def compare_truth(
 
     The entrance's building is left out of the truth (its parameters are a stand-in
     inside the rooms' shell, which stands for it), and the contents of an interior kept
-    in its own frame are placed where the walk placed them.
+    in its own frame are placed as the rooms' streamer placed them.
     """
     if w.recorder is None:
         return None
@@ -127,6 +127,6 @@ async def compare_truth(
             inner[0], inner[1], scene_name, clock=clock,
             cells=[] if topology is None else [c.id for c in topology.cells],
             leave_out=[] if e is None else [e.building],
-            placements=[] if e is None or e.placement is None else [e.placement],
+            placements=() if w.scene.rooms is None else w.scene.rooms.placements,
             t_first_perfect=None if first is None else float(log.t[first]), progress=progress,
         )

@@ -49,7 +49,7 @@ class WalkState:
     bytes_down: Callable[[], int]
     frames: WalkFrames
     recorder: TruthRecorder | None = None
-    """The city's ground-truth recorder (``truth_every``); scenes with rooms note in ``frames``."""
+    """The ground-truth recorder (``truth_every``), of every scene kind."""
     controller: BudgetController | None = None
     predictor: MotionPredictor = field(default_factory=MotionPredictor)
     objects: PvsObjects = field(default_factory=PvsObjects)
