@@ -403,48 +403,60 @@ class Scene:
     ) -> tuple[tuple[float, float], float | None, float]:
         """Where a start bundle starts: ``((x, y), heading or None, speed in m/s)``.
 
-        A recorded path's first point, heading and speed over its first second; a
-        viewpoint's position and yaw (standing still); or ``(x, y)`` (no heading).
+        Every combination of the parameters is an answer, each one overriding the one
+        before: the scene's default start (its first viewpoint, else the start of its
+        first path by name, else the middle of its bounds); a named ``path``'s first
+        point, heading and speed over its first second; a named ``viewpoint``'s position
+        and yaw (standing still); then ``x`` and ``y``, each replacing its coordinate (a
+        start moved this way has no heading and stands still).  So ``path=P&x=..&y=..``
+        sends path ``P`` and starts at the point given.
 
         Raises
         ------
         ApiError
-            404 for an unknown path or viewpoint, 422 when not exactly one of
-            ``path``, ``viewpoint`` or ``x`` and ``y`` is given.
+            404 for an unknown path or viewpoint.
         """
-        given = [k for k, v in (("path", path), ("viewpoint", viewpoint)) if v is not None]
-        if x is not None or y is not None:
-            given.append("x,y")
-        if len(given) != 1 or ((x is None) != (y is None)):
+        if path is not None and path not in self.path_names:
             raise ApiError(
-                "start: give exactly one of path, viewpoint, or both x and y",
-                status=422,
-                detail={"given": given},
+                f"scene {self.name!r} has no path {path!r:.80}", status=404, detail={"path": path}
             )
-        if path is not None:
-            if path not in self.path_names:
-                raise ApiError(
-                    f"scene {self.name!r} has no path {path!r:.80}",
-                    status=404,
-                    detail={"path": path},
-                )
-            p = RecordedPath.from_msgpack(self.path(path, "msgpack").content, f"path {path!r}")
-            xyz, yaw, _pitch = p.at(0.0)
-            dt = min(1.0, p.duration) or 1.0
-            later, _, _ = p.at(dt)
-            speed = float(np.hypot(*(np.asarray(later[:2]) - np.asarray(xyz[:2])))) / dt
-            return (float(xyz[0]), float(xyz[1])), float(yaw), speed
+        heading: float | None
         if viewpoint is not None:
-            for v in self.manifest_viewpoints:
-                if v.name == viewpoint:
-                    return (v.x, v.y), v.yaw, 0.0
-            raise ApiError(
-                f"scene {self.name!r} has no viewpoint {viewpoint!r:.80}",
-                status=404,
-                detail={"viewpoint": viewpoint},
-            )
-        assert x is not None and y is not None
-        return (float(x), float(y)), None, 0.0
+            vp = next((v for v in self.manifest_viewpoints if v.name == viewpoint), None)
+            if vp is None:
+                raise ApiError(
+                    f"scene {self.name!r} has no viewpoint {viewpoint!r:.80}",
+                    status=404,
+                    detail={"viewpoint": viewpoint},
+                )
+            xy, heading, speed = (vp.x, vp.y), vp.yaw, 0.0
+        elif path is not None:
+            xy, heading, speed = self._path_start(path)
+        else:
+            xy, heading, speed = self.default_start()
+        if x is None and y is None:
+            return (float(xy[0]), float(xy[1])), heading, speed
+        return (float(xy[0] if x is None else x), float(xy[1] if y is None else y)), None, 0.0
+
+    def default_start(self) -> tuple[tuple[float, float], float | None, float]:
+        """The start of a bundle that names none: the first viewpoint, else the first
+        path's start (by name), else the middle of the scene's bounds (no heading)."""
+        if self.manifest_viewpoints:
+            v = self.manifest_viewpoints[0]
+            return (v.x, v.y), v.yaw, 0.0
+        if self.path_names:
+            return self._path_start(min(self.path_names))
+        b = self.reader.bounds()
+        return ((b[0] + b[3]) / 2.0, (b[1] + b[4]) / 2.0), None, 0.0
+
+    def _path_start(self, path: str) -> tuple[tuple[float, float], float, float]:
+        """A recorded path's first point, heading, and speed over its first second."""
+        p = RecordedPath.from_msgpack(self.path(path, "msgpack").content, f"path {path!r}")
+        xyz, yaw, _pitch = p.at(0.0)
+        dt = min(1.0, p.duration) or 1.0
+        later, _, _ = p.at(dt)
+        speed = float(np.hypot(*(np.asarray(later[:2]) - np.asarray(xyz[:2])))) / dt
+        return (float(xyz[0]), float(xyz[1])), float(yaw), speed
 
     def start_cells(
         self, xy: tuple[float, float], heading: float | None, ahead_m: float

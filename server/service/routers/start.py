@@ -1,7 +1,9 @@
 """The start bundle: from nothing to the first cell's objects in one round trip.
 
-``GET /v1/start?path=NAME`` (or ``viewpoint=NAME``, or ``x=&y=``; ``scene=`` picks the
-scene, else the server's first by name) answers with a *stream* of parts, each the
+``GET /v1/start?path=NAME`` (or ``viewpoint=NAME``, or ``x=&y=``, or nothing: the scene's
+default start; ``scene=`` picks the scene, else the server's first by name; see
+:meth:`~walkstream.server.service.scenes.Scene.start_position` for how they combine)
+answers with a *stream* of parts, each the
 msgpack map ``{part, etag, body: bin}`` where ``body`` is exactly what the part's
 own endpoint sends (so a client decodes it, and may cache it under ``etag``, as if
 it had asked for it):
@@ -82,25 +84,34 @@ _DOC: dict[int | str, dict[str, Any]] = {
             JSON: {"schema": {"type": "array", "items": StartPartOut.model_json_schema()}},
         },
     },
-    422: error_doc("not exactly one of path, viewpoint, or x and y"),
+    422: error_doc("an unknown form, or a view the interior cannot take"),
 }
 
-Coord = Annotated[float | None, Query(allow_inf_nan=False, description="scene-local metres")]
+Coord = Annotated[
+    float | None,
+    Query(allow_inf_nan=False, description="scene-local metres; replaces this coordinate of the start"),
+]
 Heading = Annotated[
     float | None,
     Query(allow_inf_nan=False, description="radians counter-clockwise from +x (x, y starts)"),
 ]
 Form = Annotated[
     str,
-    Query(max_length=64, description="the objects' form, as in POST .../objects: params or lod2"),
+    Query(
+        max_length=64,
+        description="the objects' form, as in POST .../objects: params or lod2",
+        json_schema_extra={"enum": list(OBJECT_FORMS)},
+    ),
 ]
 Speed = Annotated[
     float | None, Query(allow_inf_nan=False, ge=0, le=100, description="m/s (x, y starts)")
 ]
 Name = Annotated[str | None, Query(max_length=256)]
+_PIXELS = r"(1[6-9]|[2-9][0-9]|[1-9][0-9]{2}|[1-7][0-9]{3}|80[0-9]{2}|81[0-8][0-9]|819[0-2])"
+"""16 to 8192, the sizes a :class:`~walkstream.shared.roomview.RoomView` takes, as a pattern."""
 View = Annotated[
     str | None,
-    Query(max_length=16, pattern=r"^[0-9]{1,5}x[0-9]{1,5}$",
+    Query(max_length=16, pattern=f"^{_PIXELS}x{_PIXELS}$",
           description="interiors: the client's viewport WIDTHxHEIGHT in pixels (asks for the first view's contents)"),
 ]
 Fov = Annotated[float | None, Query(allow_inf_nan=False, ge=1, le=170, description="interiors: vertical field of view, degrees")]
@@ -110,10 +121,16 @@ Depth = Annotated[int | None, Query(ge=0, le=256, description="interiors: portal
 
 @dataclass(frozen=True)
 class StartQuery:
-    """Where the bundle starts (one of path, viewpoint, or x and y) and in what form."""
+    """Where the bundle starts and in what form: any of path, viewpoint, x and y, each
+    overriding the one before (none: the scene's default start)."""
 
-    path: Name = None
-    viewpoint: Name = None
+    path: Annotated[
+        str | None,
+        Query(max_length=256, description="send this path; start at its start unless a viewpoint or x, y say otherwise"),
+    ] = None
+    viewpoint: Annotated[
+        str | None, Query(max_length=256, description="start at this viewpoint unless x, y say otherwise")
+    ] = None
     x: Coord = None
     y: Coord = None
     heading: Heading = None
