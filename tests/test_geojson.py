@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import time
 from pathlib import Path
 from typing import Any
 
@@ -465,10 +464,7 @@ def test_load_from_file_names_the_scene(tmp_path: Path) -> None:
 
 def test_vienna_blocks() -> None:
     vienna = team_data("vienna", "blocks.geojson")
-    t0 = time.perf_counter()
-    scene = load_geojson(vienna)
-    elapsed = time.perf_counter() - t0
-    assert elapsed < 10.0, f"loading took {elapsed:.1f} s"
+    scene = load_geojson(vienna)  # its speed is a benchmark's (bench city), not a test's
     assert scene.name == "blocks" and scene.crs == UTM33
     skipped = sum(i.action == "skipped" for i in scene.issues)
     repaired = sum(i.action == "repaired" for i in scene.issues)
