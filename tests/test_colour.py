@@ -180,11 +180,12 @@ def test_report_keys_and_truth_csv_with_colour(tmp_path: Path) -> None:
     log = TruthLog([0, 25, 50], [0.0, 1.0, 2.0], [0.1, 0.2, 0.0], np.zeros((3, len(CAUSES))), colour)
     s = summarise_truth(log, 0.5)["colour"]
     assert set(s) == {"metric", "visible_threshold", "frames", "mean_error", "delta_e_mean", "visible_pixels",
-                      "frames_over_visible_ratio", "psnr_db", "causes"}
+                      "frames_over_visible_ratio", "psnr_db", "causes", "per_frame"}
     assert s["metric"] == "CIEDE2000" and s["visible_threshold"] == VISIBLE_DE and s["frames"] == 3
     assert s["mean_error"]["median"] == pytest.approx(0.02) and set(s["mean_error"]) == {"median", "p95", "max", "mean"}
     assert s["frames_over_visible_ratio"] == pytest.approx(2 / 3) and s["psnr_db"]["median"] == 20.0
     assert set(s["causes"]) == set(COLOUR_CAUSES)
+    assert s["per_frame"]["frame"] == [0, 25, 50] and s["per_frame"]["psnr_db"] == [20.0, 19.0, PSNR_CAP_DB]
     back = read_truth_csv(write_truth_csv(tmp_path / "truth.csv", log))
     assert back.colour is not None
     np.testing.assert_array_equal(back.colour.psnr_db, colour.psnr_db)

@@ -26,6 +26,10 @@ frames (the start-up frames, before anything has arrived, count too):
 ``causes``
     Per cause of :data:`~walkstream.client.truth.colour.COLOUR_CAUSES` the mean share
     of a frame's pixels visibly wrong for it.
+``per_frame``
+    The rows, as columns: ``frame``, ``t``, ``mean_error``, ``delta_e_mean``,
+    ``visible`` and ``psnr_db`` (capped) per compared frame (``truth.csv`` has the
+    causes too).
 """
 
 from __future__ import annotations
@@ -129,4 +133,12 @@ def summarise_colour(log: ColourLog) -> dict[str, Any]:
         "frames_over_visible_ratio": float((log.visible > COLOUR_OVER_SHARE).mean()) if n else None,
         "psnr_db": _stats(np.minimum(log.psnr_db, PSNR_CAP_DB), ("median", "p5", "min")),
         "causes": {c: (float(log.causes[:, k].mean()) if n else None) for k, c in enumerate(COLOUR_CAUSES)},
+        "per_frame": {
+            "frame": log.frame.tolist(),
+            "t": [round(float(v), 4) for v in log.t],
+            "mean_error": [round(float(v), 6) for v in log.mean_error],
+            "delta_e_mean": [round(float(v), 4) for v in log.delta_e_mean],
+            "visible": [round(float(v), 6) for v in log.visible],
+            "psnr_db": [round(float(v), 3) for v in np.minimum(log.psnr_db, PSNR_CAP_DB)],
+        },
     }
