@@ -267,7 +267,7 @@ def test_bench_stream_truth_every(every_db: Path, tmp_path: Path, capsys: pytest
     argv = ["bench", "stream", str(every_db), "--only", "SM 56k", "--duration", "3s", "--truth-every", "25", "--out", str(out)]
     assert main(argv) == 0
     text = capsys.readouterr().out
-    assert "culled% max" in text and "compared" in text
+    assert "culled% max" in text and "compared" in text and "PSNR med" in text  # and the colour table
     rows = json.loads((out / "bench_stream.json").read_text())
     assert [r["scenario"] for r in rows] == ["SM 56k prefetch"]
     t = rows[0]["truth"]
