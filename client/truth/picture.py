@@ -8,7 +8,10 @@ at the fog in force (:func:`client_picture`).  Both come from the same
 :class:`~walkstream.client.truth.render.TruthRenderer` (same shader, light and
 palette; the client's coarser forms uploaded as ``forms``, :func:`forms_of`), so a
 frame drawn at LOD2 throughout has no colour error at all and any error left is the
-client's choice of what and how to draw.
+client's choice of what and how to draw.  An object the client drew at LOD2 is drawn
+from the truth's own LOD2 mesh (the same parameters through the same grammar: the id
+comparison already holds the client's LOD2 to it); its coarser forms are the client's
+own meshes as the frame noted them.
 
 The ``impostor`` hook: the client's picture is geometry only.  A part that draws an
 image in place of an object (an impostor) passes ``overlay``: a callable given the
