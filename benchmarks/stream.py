@@ -41,6 +41,7 @@ __all__ = [
     "run_stream_bench",
     "format_stream_table",
     "format_truth_table",
+    "format_colour_table",
     "CROSSING_TRUTH_EVERY",
     "crossing_scenarios",
     "format_crossing_table",
@@ -133,6 +134,7 @@ def run_stream_bench(
     only: Sequence[str] = (),
     truth_every: int = 0,
     crossing: str | None = None,
+    clock: str = "sim",
 ) -> list[dict[str, Any]]:
     """Replay every scenario (those whose name contains one of ``only``, if given).
 
@@ -142,7 +144,9 @@ def run_stream_bench(
     and ``bench_stream.json`` into ``out``.  With ``truth_every`` every N-th frame of
     each walk is compared with the ground truth (``walkstream replay --truth-every``).
     ``crossing``: a crossing scene whose walk ``enter`` joins the table
-    (:func:`crossing_scenarios`).
+    (:func:`crossing_scenarios`).  ``clock``: ``"sim"`` (the table's figures) or
+    ``"real"`` (the ``gl`` device drawing and timing for real, for the colour error
+    of what a real frame rate lets it draw).
     """
     scenarios = stream_scenarios(vienna, extra) + (crossing_scenarios(crossing) if crossing else [])
     if only:
@@ -151,7 +155,7 @@ def run_stream_bench(
     runs = []
     for k, sc in enumerate(scenarios, 1):
         folder = out / f"{k:02d}-{sc['name'].replace(' ', '-').replace('/', '-').lower()}"
-        options: dict[str, Any] = {"device": device, "clock": "sim", **sc["over"]}
+        options: dict[str, Any] = {"device": device, "clock": clock, **sc["over"]}
         if duration:
             options["duration"] = duration
         if truth_every or sc.get("crossing"):
@@ -218,6 +222,43 @@ def format_truth_table(rows: list[dict[str, Any]]) -> str:
             f"{r['scenario']:<22} {t['frames']:>8} {pct(t['differing_pixels_mean']):>7} "
             f"{pct(t['over_half_percent_ratio'], 1):>6} {pct(m['pvs']['mean'], 3):>9} "
             f"{pct(m['pvs']['max'], 3):>8} {pct(m['lod']['mean'], 3):>9} {pct(m['culled']['max'], 3):>11}"
+        )
+    return "\n".join(lines)
+
+
+def format_colour_table(rows: list[dict[str, Any]]) -> str:
+    """The colour error of the rows that have it (``--truth-every`` on a city walk), one line each.
+
+    Per row: the device and clock, the frames compared, frames within 10 % of the
+    target rate, triangles per frame (mean), the mean linear-RGB error per pixel (%
+    of full scale, median and p95 over the compared frames), the mean ΔE00 (median),
+    the pixels over the visible threshold (median %), the frames with more than 0.5 %
+    of their pixels over it, the PSNR (median, dB) and the share of pixels visibly
+    wrong because of a coarser LOD's colour (``lod_colour``, mean %).
+    """
+    have = [r for r in rows if (r.get("truth") or {}).get("colour")]
+    if not have:
+        return ""
+
+    def pct(v: Any, digits: int = 2) -> str:
+        return "n/a" if v is None else f"{100 * v:.{digits}f}"
+
+    head = (
+        f"{'scenario':<22} {'device':<6} {'clock':<5} {'compared':>8} {'fps10%':>6} {'tri/fr':>6} "
+        f"{'err% med':>8} {'err% p95':>8} {'dE med':>6} {'vis% med':>8} {'fr>0.5%':>7} {'PSNR med':>8} {'lod_col%':>8}"
+    )
+    lines = [head, "-" * len(head)]
+    for r in have:
+        c = r["truth"]["colour"]
+        ps = c["psnr_db"]["median"]
+        de = c["delta_e_mean"]["median"]
+        lines.append(
+            f"{r['scenario']:<22} {r.get('device', '?'):<6} {r.get('clock', '?'):<5} {c['frames']:>8} "
+            f"{pct(r.get('fps_within_10pct_ratio'), 1):>6} {r.get('triangles_mean') or 0:>6.0f} "
+            f"{pct(c['mean_error']['median']):>8} {pct(c['mean_error']['p95']):>8} "
+            f"{'n/a' if de is None else f'{de:.2f}':>6} {pct(c['visible_pixels']['median']):>8} "
+            f"{pct(c['frames_over_visible_ratio'], 1):>7} {'n/a' if ps is None else f'{ps:.1f}':>8} "
+            f"{pct(c['causes']['lod_colour']):>8}"
         )
     return "\n".join(lines)
 

@@ -165,7 +165,7 @@ def test_the_truth_changes_no_other_figure(runs: tuple[ReplayResult, ReplayResul
     assert a == b
     np.testing.assert_array_equal(plain.log.frame_time, with_truth.log.frame_time)
     # the truth object exactly as specified
-    assert set(t) == {"frames", "differing_pixels_mean", "over_half_percent_ratio", "missing"}
+    assert set(t) == {"frames", "differing_pixels_mean", "over_half_percent_ratio", "missing", "colour"}
     assert set(t["missing"]) == set(CAUSES)
     assert all(set(v) == {"mean", "p95", "max"} for v in t["missing"].values())
     assert t["frames"] == len(range(0, a["frames"], EVERY))
@@ -236,10 +236,17 @@ def test_report_shows_the_truth(runs: tuple[ReplayResult, ReplayResult], tmp_pat
     index = write_report(tmp_path, res.summary, res.log, res.bytes_log, truth=res.truth)
     report = json.loads((tmp_path / "report.json").read_text())
     assert res.truth is not None and report["truth"]["frames"] == len(res.truth.log)
-    for name in ("error.png", "truth.csv", "truth/worst_client.png", "truth/worst_truth.png", "truth/worst_missing.png"):
+    for name in ("error.png", "truth.csv", "truth/worst_client.png", "truth/worst_truth.png", "truth/worst_missing.png",
+                 "truth/worst_colour.png", "truth/worst_colour_client.png", "truth/worst_colour_de.png"):
         assert (tmp_path / name).read_bytes()[:4] in (b"\x89PNG", b"fram"), name
     page = index.read_text()
     assert "error.png" in page and "worst_missing.png" in page and "Ground truth" in page
+    assert "worst_colour.png" in page and "dE00" in page
+    colour = report["truth"]["colour"]
+    assert colour["frames"] == len(res.truth.log) and colour["metric"] == "CIEDE2000"
+    for key in ("mean_error", "visible_pixels", "psnr_db", "delta_e_mean", "causes"):
+        assert all(v is not None for v in colour[key].values()), key
+    assert colour["causes"]["other"] == 0.0  # the right object at LOD2 is never the wrong colour
 
 
 def test_cli_truth_every(every_db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], gl_ctx: Any) -> None:
@@ -260,7 +267,7 @@ def test_bench_stream_truth_every(every_db: Path, tmp_path: Path, capsys: pytest
     argv = ["bench", "stream", str(every_db), "--only", "SM 56k", "--duration", "3s", "--truth-every", "25", "--out", str(out)]
     assert main(argv) == 0
     text = capsys.readouterr().out
-    assert "culled% max" in text and "compared" in text
+    assert "culled% max" in text and "compared" in text and "PSNR med" in text  # and the colour table
     rows = json.loads((out / "bench_stream.json").read_text())
     assert [r["scenario"] for r in rows] == ["SM 56k prefetch"]
     t = rows[0]["truth"]

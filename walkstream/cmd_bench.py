@@ -7,7 +7,7 @@
     walkstream bench render [--size 700] [--cells 40] [--runs 3] ...
     walkstream bench server scene.db [--walkers 10,100,1000] [--workers 1,2] ...
     walkstream bench stream [scene.db] [--vienna vienna.db] [--scene LABEL=DB[:PATHS]] [--crossing crossing.db]
-        [--only NAMES] [--duration S]
+        [--only NAMES] [--duration S] [--truth-every N] [--clock sim|real]
     walkstream bench budget [scene.db] [--no-gl] [--seed N] [--gl-runs N] [--gl-real-duration S]
         [--gl-draws batched,per-object] [--rewrite thread,process]
     walkstream bench controller [--frames 3000] [--seeds 1 2 3] [--step 10]
@@ -165,6 +165,7 @@ def cmd_bench_server(args: argparse.Namespace) -> int:
 def cmd_bench_stream(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench stream``."""
     from walkstream.benchmarks.stream import (
+        format_colour_table,
         format_crossing_table,
         format_stream_table,
         format_truth_table,
@@ -186,11 +187,16 @@ def cmd_bench_stream(args: argparse.Namespace) -> int:
         only=only,
         truth_every=args.truth_every,
         crossing=args.crossing,
+        clock=args.clock,
     )
     print(format_stream_table(rows))
     if args.truth_every and format_truth_table(rows):
         print()
         print(format_truth_table(rows))
+    if args.truth_every and format_colour_table(rows):
+        print()
+        print("colour error of the client's picture against the full scene (CIEDE2000; % of full scale, linear RGB):")
+        print(format_colour_table(rows))
     if format_crossing_table(rows):
         print()
         print(format_crossing_table(rows))
@@ -520,7 +526,8 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--device", default="desktop2003", choices=("gl", "desktop2003", "pda"), help="device (default desktop2003)")
     b.add_argument("--duration", help="limit every walk, e.g. 60s")
     b.add_argument("--only", help="comma-separated scenario name parts to run")
-    b.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame of each walk with the ground truth (a second table; default 0: never)")
+    b.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame of each walk with the ground truth (a second table, and the colour error; default 0: never)")
+    b.add_argument("--clock", default="sim", choices=("sim", "real"), help="simulated clock (default) or real time (with --device gl: frames drawn and timed for real)")
     b.add_argument("--out", default="out/bench-stream", help="folder for reports and plots")
     b.set_defaults(func=cmd_bench_stream)
 

@@ -13,8 +13,10 @@ its :class:`~walkstream.client.report.metrics.FrameLog` and the link's bytes log
     budget.png    polygon budget and triangles drawn over time
     phases.png    the frame loop's milliseconds per phase (with ``phases.csv``), when timed
     interior.png  an interior walk: visible cells, portals, triangles, culling ms, fog
-    error.png     the image error against the ground truth (with ``truth.csv`` and the
-                  worst compared frame under ``truth/``), with ``--truth-every``
+    error.png     the image error against the ground truth: missing pixels by cause and,
+                  on a city walk, the colour error (with ``truth.csv`` and the worst
+                  compared frames, by missing pixels and by colour error, under
+                  ``truth/``), with ``--truth-every``
     index.html    a self-contained page: headline table, every plot and snapshot
                   (relative links), the summary JSON
 
@@ -30,7 +32,8 @@ the one definition of frame rate, perfect frame and recovery), :mod:`.files`
 (``report.json`` and the CSVs, written atomically), :mod:`.tables` (headline figures
 as text), :mod:`.plots` (one function per figure), :mod:`.html` (the folder and its
 index page), :mod:`.phases` (``phases.csv`` and ``phases.png``), :mod:`.truth` (the
-``truth`` figures), :mod:`.link` (a walk's link figures), :mod:`.city`,
+``truth`` figures) with :mod:`.colour` (their colour figures) and :mod:`.colourview`
+(the worst frame by colour error as pictures), :mod:`.link` (a walk's link figures), :mod:`.city`,
 :mod:`.interior` and :mod:`.crossing` (each scene kind's figures of the summary).  A new plot is a function in :mod:`.plots`, a name in
 :data:`PLOT_NAMES` (and in :data:`BASE_PLOT_NAMES` when every report holds it) and a
 caption in :mod:`.html`.

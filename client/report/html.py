@@ -7,7 +7,7 @@ import json
 import logging
 import os
 import shutil
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import quote
@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from walkstream.client.truth.recorder import TruthResult
+from walkstream.client.report.colourview import write_colour_worst
 from walkstream.client.report.files import (
     BytesLog,
     atomic_open,
@@ -78,7 +79,9 @@ _CAPTIONS = {
     "the budget controller, tightened when the visible cells exceed the memory budget).",
     "error.png": "The frame rate (top) and, for every compared frame, the share of its pixels "
     "that differ from the ground truth (line) and the pixels where the truth shows an object "
-    "the client's frame does not, stacked by cause (bottom).",
+    "the client's frame does not, stacked by cause (middle); on a city walk the colour error of "
+    "the client's picture against the full scene (bottom): the mean linear-RGB error per pixel "
+    "(line, % of full scale) and the pixels over the visible CIEDE2000 threshold, stacked by cause.",
 }
 
 _DEFINITIONS = (
@@ -188,6 +191,7 @@ def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | N
         rows.append(
             (f"missing: {c} (mean / p95 / max)", " / ".join(pct(m.get(k)) for k in ("mean", "p95", "max")))
         )
+    rows += _colour_rows(s.get("colour"), pct)
     parts.append(
         "<table>"
         + "".join(f"<tr><th>{html.escape(k)}</th><td class='v'>{html.escape(v)}</td></tr>" for k, v in rows)
@@ -219,7 +223,28 @@ def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | N
             f"{100.0 * w.differing:.2f} % differing</h3>"
             f"<div class='snaps'>{figs}</div><p>Mask colours: {legend}</p>"
         )
+    if truth.colour_worst is not None:
+        parts.append(write_colour_worst(out, truth.colour_worst))
     return "\n".join(parts)
+
+
+def _colour_rows(c: Mapping[str, Any] | None, pct: Callable[[Any], str]) -> list[tuple[str, str]]:
+    """The colour figures' rows of the ground-truth table (none without them)."""
+    if not c or not c.get("frames"):
+        return []
+    me, vp, ps = c.get("mean_error") or {}, c.get("visible_pixels") or {}, c.get("psnr_db") or {}
+    de = c.get("delta_e_mean") or {}
+
+    def num(v: Any, unit: str) -> str:
+        return "n/a" if v is None else f"{v:.2f}{unit}"
+
+    return [
+        ("colour error, linear RGB, % of full scale (median / p95 / max)", " / ".join(pct(me.get(k)) for k in ("median", "p95", "max"))),
+        ("mean dE00 per pixel (median / p95 / max)", " / ".join(num(de.get(k), "") for k in ("median", "p95", "max"))),
+        (f"pixels over dE00 {c.get('visible_threshold')} (median / p95 / max)", " / ".join(pct(vp.get(k)) for k in ("median", "p95", "max"))),
+        ("frames with > 0.5 % of pixels over it", pct(c.get("frames_over_visible_ratio"))),
+        ("PSNR (median / worst 5 % / min)", " / ".join(num(ps.get(k), " dB") for k in ("median", "p5", "min"))),
+    ]
 
 
 def _snapshot_section(placed: Sequence[tuple[str, bool]]) -> str:

@@ -17,8 +17,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.client.report.colour import ColourLog
 from walkstream.client.report.metrics import FrameLog, first_perfect_index
 from walkstream.client.report.truth import OVER_SHARE, TruthLog
+from walkstream.client.truth.colour import COLOUR_CAUSE_RGB, COLOUR_CAUSES, VISIBLE_DE
 from walkstream.client.truth.compare import CAUSE_RGB, CAUSES
 
 if TYPE_CHECKING:
@@ -26,6 +28,8 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 from walkstream.client.report.files import BytesLog, atomic_open, bytes_arrays
 from walkstream.shared.arrays import F64
+
+_COLOUR_RGB = {**CAUSE_RGB, **COLOUR_CAUSE_RGB}
 
 __all__ = [
     "BASE_PLOT_NAMES",
@@ -400,11 +404,16 @@ def plot_budget(path: Path, runs: Sequence[PlotRun], title: str) -> Path:
 def plot_error(path: Path, run: PlotRun, truth: TruthLog, title: str) -> Path:
     """``error.png``: the frame rate (top) and the image error against the truth (bottom) over time.
 
-    The bottom panel stacks the missing pixels of each compared frame by cause (% of
+    The middle panel stacks the missing pixels of each compared frame by cause (% of
     the frame) and draws the differing pixels as a line; the 0.5 % line is the
-    threshold of ``over_half_percent_ratio``.
+    threshold of ``over_half_percent_ratio``.  With colour figures (a city walk) a
+    bottom panel shows the colour error of the client's picture against the full
+    scene: the mean linear-RGB error (% of full scale) and the pixels over the
+    visible ΔE00 threshold stacked by cause (% of the frame), the 0.5 % line theirs.
     """
-    fig, (ax_fps, ax_err) = grid_figure(2, height=3.0)
+    colour = truth.colour
+    fig, axes = grid_figure(3 if colour is not None else 2, height=3.0)
+    ax_fps, ax_err = axes[0], axes[1]
     f = run.frames
     if len(f):
         x = f.t - run.t0
@@ -416,7 +425,7 @@ def plot_error(path: Path, run: PlotRun, truth: TruthLog, title: str) -> Path:
             ax_fps.axhline(float(tgt), color="#009E73", linestyle="--", linewidth=1.1, label=f"target {float(tgt):g} fps")
         ax_fps.set_ylim(0.0, 1.3 * max(float(tgt or 1.0), float(f.fps[fin].max()) if fin.any() else 1.0))
         first = first_perfect_index(f)
-        for ax in (ax_fps, ax_err):
+        for ax in axes:
             if first is not None:
                 ax.axvline(float(x[first]), color="#009E73", linestyle=":", linewidth=1.1)
     ax_fps.set_ylabel("frame rate (frames/s)")
@@ -434,8 +443,11 @@ def plot_error(path: Path, run: PlotRun, truth: TruthLog, title: str) -> Path:
         ax_err.set_ylim(0.0, max(2.0, 1.5 * top))
     ax_err.axhline(100.0 * OVER_SHARE, color="#D55E00", linestyle="--", linewidth=1.0, label="0.5 % of the frame")
     ax_err.set_ylabel("% of the frame's pixels (log above 1 %)")
-    ax_err.set_xlabel("time since replay start (s)")
+    if colour is None:
+        ax_err.set_xlabel("time since replay start (s)")
     _legend(ax_err, loc="upper right", ncol=2)
+    if colour is not None:
+        _colour_panel(axes[2], colour, run.t0)
     s = run.summary.get("truth") or {}
     notes = []
     if s.get("frames"):
@@ -444,8 +456,37 @@ def plot_error(path: Path, run: PlotRun, truth: TruthLog, title: str) -> Path:
             notes.append(f"differing {100.0 * s['differing_pixels_mean']:.2f} % mean")
         if s.get("over_half_percent_ratio") is not None:
             notes.append(f"frames missing > 0.5 %: {100.0 * s['over_half_percent_ratio']:.1f} %")
-    ax_fps.set_title(title + ("\n" + "; ".join(notes) if notes else ""), fontsize=10)
+    c = s.get("colour") or {}
+    colour_note = ""
+    if c.get("frames") and (c.get("mean_error") or {}).get("median") is not None:
+        colour_note = (
+            f"\ncolour error median {100.0 * c['mean_error']['median']:.2f} % (p95 {100.0 * c['mean_error']['p95']:.2f} %) "
+            f"of full scale; frames with > 0.5 % of pixels over dE00 {c['visible_threshold']:g}: "
+            f"{100.0 * c['frames_over_visible_ratio']:.1f} %"
+        )
+    ax_fps.set_title(title + ("\n" + "; ".join(notes) if notes else "") + colour_note, fontsize=10)
     return save_figure(fig, path)
+
+
+def _colour_panel(ax: Axes, colour: ColourLog, t0: float) -> None:
+    """The colour error of the compared frames over time (the bottom panel of ``error.png``)."""
+    if len(colour):
+        tx = colour.t - t0
+        shares = 100.0 * colour.causes
+        some = [k for k in range(len(COLOUR_CAUSES)) if shares[:, k].any()]  # a legend of the causes seen
+        if some:
+            colours = ["#{:02x}{:02x}{:02x}".format(*_COLOUR_RGB[COLOUR_CAUSES[k]]) for k in some]
+            ax.stackplot(tx, shares[:, some].T, labels=[f"over dE00 {VISIBLE_DE:g}: {COLOUR_CAUSES[k]}" for k in some],
+                         colors=colours, alpha=0.85, step="post")
+        ax.plot(tx, 100.0 * colour.mean_error, color="#000000", linewidth=1.1, drawstyle="steps-post",
+                label="mean error, linear RGB (% of full scale)")
+        top = max(float(shares.sum(axis=1).max()), float((100.0 * colour.mean_error).max()), 100.0 * OVER_SHARE)
+        ax.set_yscale("symlog", linthresh=1.0, linscale=2.0)
+        ax.set_ylim(0.0, max(2.0, 1.5 * top))
+    ax.axhline(100.0 * OVER_SHARE, color="#D55E00", linestyle="--", linewidth=1.0, label="0.5 % of the frame")
+    ax.set_ylabel("colour error, % (log above 1 %)")
+    ax.set_xlabel("time since replay start (s)")
+    _legend(ax, loc="upper right", ncol=2)
 
 
 def plot_interior(path: Path, t: ArrayLike, series: dict[str, ArrayLike], title: str) -> Path:

@@ -20,6 +20,9 @@
     is at least the first perfect frame's), the share whose missing pixels -- every
     cause but ``fog``, which hides objects on purpose -- exceed 0.5 % of the frame;
     ``None`` when no compared frame comes after a perfect one.
+``colour``
+    The colour error of the client's picture against the full scene (a city walk's
+    frames): :func:`~walkstream.client.report.colour.summarise_colour`.
 """
 
 from __future__ import annotations
@@ -33,7 +36,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from walkstream.client.report.colour import ColourLog, summarise_colour
 from walkstream.client.report.files import atomic_open
+from walkstream.client.truth.colour import COLOUR_CAUSES
 from walkstream.client.truth.compare import CAUSES, MISS_CAUSES
 from walkstream.shared.arrays import F64, I64
 from walkstream.shared.errors import InputError
@@ -64,12 +69,15 @@ class TruthLog:
         Share of its pixels whose colour differs from the truth.
     missing : (n, 6) float64
         Share of its pixels missing, per cause in :data:`CAUSES` order.
+    colour : ColourLog, optional
+        The same frames' colour error (a city walk's; None where there is none).
     """
 
     frame: I64
     t: F64
     differing: F64
     missing: F64
+    colour: ColourLog | None = None
 
     def __post_init__(self) -> None:
         n = len(np.asarray(self.frame))
@@ -84,6 +92,8 @@ class TruthLog:
                 raise InputError(f"TruthLog column {name!r} has {len(a)} rows, expected {n}")
             a.flags.writeable = False
             object.__setattr__(self, name, a)
+        if self.colour is not None and len(self.colour) != n:
+            raise InputError(f"TruthLog colour has {len(self.colour)} rows, expected {n}")
 
     def __len__(self) -> int:
         return len(self.frame)
@@ -125,24 +135,37 @@ def summarise_truth(log: TruthLog, t_first_perfect: float | None) -> dict[str, A
         np.zeros(len(log), bool) if t_first_perfect is None else log.t >= float(t_first_perfect)
     )
     over = log.missed[after] > OVER_SHARE
-    return {
+    out: dict[str, Any] = {
         "frames": len(log),
         "differing_pixels_mean": float(log.differing.mean()) if len(log) else None,
         "over_half_percent_ratio": float(over.mean()) if over.size else None,
         "missing": {c: _stats(log.missing[:, k]) for k, c in enumerate(CAUSES)},
     }
+    if log.colour is not None:
+        out["colour"] = summarise_colour(log.colour)
+    return out
+
+
+_COLOUR_COLUMNS = ["mean_error", "delta_e_mean", "visible", "psnr_db", *(f"colour_{c}" for c in COLOUR_CAUSES)]
 
 
 def write_truth_csv(path: str | os.PathLike[str], log: TruthLog) -> Path:
-    """One row per compared frame: ``frame, t, differing`` and one column per cause (shares)."""
+    """One row per compared frame: ``frame, t, differing`` and one column per cause (shares);
+    with colour figures also ``mean_error, delta_e_mean, visible, psnr_db`` and one
+    ``colour_<cause>`` column per colour cause."""
     p = Path(path)
+    c = log.colour
     with atomic_open(p) as f:
         w = csv.writer(f, lineterminator="\n")
-        w.writerow(["frame", "t", "differing", *CAUSES])
+        w.writerow(["frame", "t", "differing", *CAUSES, *(_COLOUR_COLUMNS if c is not None else [])])
         for i in range(len(log)):
+            extra = [] if c is None else [
+                c.mean_error[i], c.delta_e_mean[i], c.visible[i], c.psnr_db[i], *c.causes[i]
+            ]
             w.writerow(
                 [int(log.frame[i]), repr(float(log.t[i])), repr(float(log.differing[i]))]
                 + [repr(float(v)) for v in log.missing[i]]
+                + [repr(float(v)) for v in extra]
             )
     return p
 
@@ -152,13 +175,20 @@ def read_truth_csv(path: str | os.PathLike[str]) -> TruthLog:
     p = Path(path)
     with p.open(encoding="utf-8", newline="") as f:
         rows = list(csv.reader(f))
-    if not rows or rows[0] != ["frame", "t", "differing", *CAUSES]:
-        raise InputError(f"{p}: not a truth.csv (expected the header frame, t, differing, causes)")
+    head = ["frame", "t", "differing", *CAUSES]
+    if not rows or rows[0] not in (head, head + _COLOUR_COLUMNS):
+        raise InputError(f"{p}: not a truth.csv (expected the header frame, t, differing, causes[, colour figures])")
+    with_colour = len(rows[0]) > len(head)
     try:
         body = [[float(v) for v in r] for r in rows[1:]]
     except ValueError as exc:
         raise InputError(f"{p}: {exc}") from exc
     if not body:
-        return TruthLog.empty()
+        e = TruthLog.empty()
+        return TruthLog(e.frame, e.t, e.differing, e.missing, ColourLog.empty()) if with_colour else e
     a = np.array(body, np.float64)
-    return TruthLog(a[:, 0].astype(np.int64), a[:, 1], a[:, 2], a[:, 3:])
+    k = len(head)
+    colour = None if not with_colour else ColourLog(
+        a[:, 0].astype(np.int64), a[:, 1], a[:, k], a[:, k + 1], a[:, k + 2], a[:, k + 3], a[:, k + 4 :]
+    )
+    return TruthLog(a[:, 0].astype(np.int64), a[:, 1], a[:, 2], a[:, 3:k], colour)

@@ -8,7 +8,10 @@ compared frame), :mod:`.recorder` (notes the compared frames during the walk and
 produces the scene's figures after it), :mod:`.missing` (a city's frames compared in
 colour, missing pixels by cause) with :mod:`.compare` (the pixel comparison and the
 causes (a)-(f) of a missing pixel), :mod:`.culled` (what a frame with rooms kept
-against the truth: culled pixels and pinholes).  The figures computed from the
+against the truth: culled pixels and pinholes), :mod:`.colour` (a frame's colour error:
+linear-RGB error, CIEDE2000, visible pixels, PSNR, colour causes) with
+:mod:`.picture` (the client's picture drawn by the truth renderer, and the
+``impostor`` hook).  The figures computed from the
 colour-compared frames are :mod:`walkstream.client.report.truth`.  Public names are
 imported lazily.
 """
@@ -21,6 +24,16 @@ _EXPORTS = {
     "compare_frame": "walkstream.client.truth.compare",
     "missing_mask": "walkstream.client.truth.compare",
     "TruthRenderer": "walkstream.client.truth.render",
+    "form_key": "walkstream.client.truth.render",
+    "COLOUR_CAUSES": "walkstream.client.truth.colour",
+    "VISIBLE_DE": "walkstream.client.truth.colour",
+    "ColourError": "walkstream.client.truth.colour",
+    "compare_colour": "walkstream.client.truth.colour",
+    "delta_e_2000": "walkstream.client.truth.colour",
+    "psnr": "walkstream.client.truth.colour",
+    "ClientPicture": "walkstream.client.truth.picture",
+    "Overlay": "walkstream.client.truth.picture",
+    "client_picture": "walkstream.client.truth.picture",
     "object_key": "walkstream.client.truth.render",
     "TruthCheck": "walkstream.client.truth.culled",
     "check_kept": "walkstream.client.truth.culled",

@@ -10,6 +10,14 @@ within the view distance at LOD2, and whatever the client drew) -- and compared
 pixels attributed to a cause, (a) the PVS to (f) the fog.  A PVS object not received or
 not built is late (causes (b), (c)); one drawn at a coarser LOD is the budget's (d);
 what is left is culled (e).
+
+Each frame's colour error (:mod:`walkstream.client.truth.colour`) compares the full
+scene with the client's picture drawn by the same truth renderer
+(:func:`~walkstream.client.truth.picture.colour_error`: the objects the client drew at
+the LOD it drew them; the renderer must hold their coarser forms,
+:func:`~walkstream.client.truth.picture.forms_of`); the frame with the largest mean
+error (from the first perfect frame on first) is kept as images
+(:class:`ColourWorst`).
 """
 
 from __future__ import annotations
@@ -21,13 +29,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.client.report.colour import ColourLog
 from walkstream.client.report.truth import TruthLog
+from walkstream.client.truth.colour import COLOUR_CAUSES
 from walkstream.client.truth.compare import CAUSES, compare_frame, missing_mask
 from walkstream.client.truth.notes import FrameNote
+from walkstream.client.truth.picture import Overlay, colour_error
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.scene import TruthScene
 
-__all__ = ["ComparedFrame", "WorstFrame", "needed_objects", "missing_figures"]
+__all__ = ["ComparedFrame", "WorstFrame", "ColourWorst", "needed_objects", "missing_figures"]
 
 
 @dataclass(frozen=True)
@@ -64,6 +75,25 @@ class WorstFrame:
     mask: NDArray[np.uint8]
 
 
+@dataclass(frozen=True)
+class ColourWorst:
+    """The compared frame with the largest colour error, as images."""
+
+    frame: int
+    t: float
+    mean_error: float
+    """Mean absolute linear-RGB error per pixel and channel, 0..1."""
+    visible: float
+    """Share of its pixels over the visible threshold."""
+    psnr_db: float
+    client: NDArray[np.uint8]
+    """``(h, w, 3)`` the client's picture (drawn by the truth renderer)."""
+    truth: NDArray[np.uint8]
+    """``(h, w, 3)`` the full scene."""
+    delta_e: NDArray[np.float32]
+    """``(h, w)`` ΔE00 per pixel."""
+
+
 def needed_objects(ts: TruthScene, notes: Sequence[FrameNote], view_distance: float) -> list[int]:
     """Objects any noted frame may show: within the view distance of its eye, or drawn."""
     ids, lo, hi = ts.boxes()
@@ -83,13 +113,16 @@ def missing_figures(
     proj: NDArray[np.float32],
     t_first_perfect: float | None,
     progress: Callable[[int, int], None] | None = None,
-) -> tuple[TruthLog, WorstFrame | None, list[ComparedFrame]]:
+    overlay: Overlay | None = None,
+) -> tuple[TruthLog, WorstFrame | None, list[ComparedFrame], ColourWorst | None]:
     """Compare every noted frame with its truth (see the module docstring).
 
-    ``truth`` holds the objects :func:`needed_objects` names; ``pvs_of`` is each
-    frame's PVS (the service's where the client knew none); ``proj`` the client's
-    projection.  Returns one row per frame, the worst frame (from the first perfect
-    frame on first) as images, and every frame in detail.
+    ``truth`` holds the objects :func:`needed_objects` names and the coarser forms
+    the frames drew; ``pvs_of`` is each frame's PVS (the service's where the client
+    knew none); ``proj`` the client's projection; ``overlay`` the ``impostor`` hook of
+    :mod:`walkstream.client.truth.picture`.  Returns one row per frame (with its
+    colour figures), the worst frame by missing pixels (from the first perfect frame
+    on first) as images, every frame in detail, and the worst frame by colour error.
     """
     from walkstream.client.draw.frames import FrameRenderer
 
@@ -99,6 +132,9 @@ def missing_figures(
     compared: list[ComparedFrame] = []
     worst: WorstFrame | None = None
     worst_key = (-1, -1.0)
+    colour_rows: list[tuple[float, float, float, float, NDArray[np.float64]]] = []
+    cworst: ColourWorst | None = None
+    cworst_key = (-1, -1.0)
     n = len(notes)
     try:
         for k, (st, pvs) in enumerate(zip(notes, pvs_of, strict=True)):
@@ -147,17 +183,35 @@ def missing_figures(
                     st.frame, st.t, share, err.differing / err.pixels, c_rgb, t_rgb,
                     missing_mask(t_rgb, err.cause),
                 )
+            cerr, pic = colour_error(truth, st, t_rgb, err.cause, proj, overlay)
+            colour_rows.append((cerr.mean_error, cerr.delta_e_mean, cerr.visible_share, cerr.psnr_db, cerr.cause_shares))
+            ckey = (int(after), cerr.mean_error)
+            if ckey > cworst_key:
+                cworst_key = ckey
+                cworst = ColourWorst(
+                    st.frame, st.t, cerr.mean_error, cerr.visible_share, cerr.psnr_db, pic.rgb, t_rgb, cerr.delta_e
+                )
             if progress is not None:
                 progress(k + 1, n)
     finally:
         client.release()
+    frames = np.array([r[0] for r in rows], np.int64)
+    times = np.array([r[1] for r in rows])
+    def col(j: int) -> NDArray[np.float64]:
+        return np.array([r[j] for r in colour_rows], np.float64)
+
+    colour = ColourLog(
+        frames, times, col(0), col(1), col(2), col(3),
+        np.array([r[4] for r in colour_rows]).reshape(-1, len(COLOUR_CAUSES)),
+    )
     log = TruthLog(
-        np.array([r[0] for r in rows], np.int64),
-        np.array([r[1] for r in rows]),
+        frames,
+        times,
         np.array([r[2] for r in rows]),
         np.array([r[3] for r in rows]).reshape(-1, len(CAUSES)),
+        colour,
     )
-    return log, worst, compared
+    return log, worst, compared, cworst
 
 
 def _counts(ids: NDArray[np.int64]) -> dict[int, int]:

@@ -16,7 +16,10 @@ figures:
 - city objects only (a city walk): each frame drawn again through the client's
   renderer and compared in colour and id, missing pixels by cause, the worst frame as
   images (:mod:`walkstream.client.truth.missing`; the figures of
-  :func:`~walkstream.client.report.truth.summarise_truth`);
+  :func:`~walkstream.client.report.truth.summarise_truth`); and its colour error: the
+  client's picture (the coarser forms it drew are given to the truth renderer,
+  :func:`~walkstream.client.truth.picture.forms_of`) against the full scene, with
+  the frame of the largest error as images;
 - room cells (an interior walk, and a crossing walk's streets and rooms): the culled
   pixels and the pinholes (:mod:`walkstream.client.truth.culled`), with the fog hidden
   and the tightness for an interior, the frames that knew no visible set yet and the
@@ -37,12 +40,14 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.client.report.truth import TruthLog, summarise_truth
 from walkstream.client.truth.culled import CROSSING_FIGURES, INTERIOR_FIGURES, culled_figures
 from walkstream.client.truth.missing import (
+    ColourWorst,
     ComparedFrame,
     WorstFrame,
     missing_figures,
     needed_objects,
 )
 from walkstream.client.truth.notes import FrameNote
+from walkstream.client.truth.picture import Overlay, forms_of
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.scene import TruthScene, fetch_contents
 from walkstream.shared.camera import perspective
@@ -76,6 +81,8 @@ class TruthResult:
     """Every frame compared in colour, in detail."""
     figures: dict[str, Any] | None = None
     """The ``truth`` object of ``report.json`` (None when a walk with rooms found no truth)."""
+    colour_worst: ColourWorst | None = None
+    """The compared frame with the largest colour error (a city walk's), as images."""
 
 
 class TruthRecorder:
@@ -112,6 +119,9 @@ class TruthRecorder:
         self.proj = perspective(fov_deg, self.size[0] / self.size[1], near, far)
         self.view_distance = float(view_distance)
         self.notes: list[FrameNote] = []
+        self.overlay: Overlay | None = None
+        """The ``impostor`` hook of the colour error (:mod:`walkstream.client.truth.picture`):
+        set by a part that draws images in place of objects; None: geometry only."""
 
     def due(self, frame: int) -> bool:
         """Whether frame ``frame`` is one to compare."""
@@ -228,9 +238,12 @@ class TruthRecorder:
                 truth = TruthRenderer(
                     ts.lod2(needed_objects(ts, self.notes, self.view_distance)), self.size,
                     fov_deg=self.fov_deg, near=self.near, far=self.far, view_distance=self.view_distance,
+                    forms=forms_of(self.notes),
                 )
-                log, worst, frames = missing_figures(ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress)
-                return TruthResult(log, worst, None, frames, summarise_truth(log, t_first_perfect))
+                log, worst, frames, cworst = missing_figures(
+                    ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, self.overlay
+                )
+                return TruthResult(log, worst, None, frames, summarise_truth(log, t_first_perfect), cworst)
             skip = {int(i) for i in leave_out}
             objects = ts.lod2([i for i in sorted(ts.params) if i not in skip])
             await ts.close()

@@ -24,6 +24,12 @@ faces too; room parts clipped to cells are not closed, so interiors and crossing
 draw both sides), and the fog (``fog_m`` of :meth:`TruthRenderer.render`: fragments
 farther from the eye are not drawn, so what the fog hides on purpose is no miss).
 
+Besides, it draws the coarser forms a client drew (``forms``: an object's LOD0 or LOD1
+mesh, key :func:`form_key`), so that the client's picture is drawn by the same shader,
+light and palette as the full scene and the two differ only where the client's choice
+of forms makes them differ (:mod:`walkstream.client.truth.picture`, the colour error of
+:mod:`walkstream.client.truth.colour`).
+
 Why ascending ids: two coplanar surfaces (a street piece meeting a crossroad) tie in
 depth, and the depth test ``<`` keeps the one drawn first; the client's ID pass draws
 in ascending ids too, so ties resolve the same way in both frames.
@@ -49,7 +55,7 @@ from walkstream.shared.records import Mesh
 if TYPE_CHECKING:
     import moderngl
 
-__all__ = ["MAX_BUFFER_BYTES", "TruthRenderer", "object_key"]
+__all__ = ["MAX_BUFFER_BYTES", "TruthRenderer", "form_key", "object_key"]
 
 _VERTEX_SHADER = """
 #version 330
@@ -103,6 +109,16 @@ def object_key(oid: int) -> tuple[int, int]:
     return (-1 - int(oid), 0)
 
 
+def form_key(oid: int, lod: int) -> tuple[int, int]:
+    """The key of city object ``oid`` drawn at a coarser ``lod`` (0 or 1) than LOD2, as a client drew it.
+
+    ``(-1 - id, 1 + lod)``: the object's own key is ``(-1 - id, 0)`` (:func:`object_key`).
+    """
+    if not 0 <= int(lod) < 2:
+        raise InputError(f"form_key: expected a LOD coarser than LOD2 (0 or 1), got {lod}")
+    return (-1 - int(oid), 1 + int(lod))
+
+
 class TruthRenderer(Releasable):
     """Draws ground-truth frames of a fixed set of city objects and room parts.
 
@@ -125,6 +141,13 @@ class TruthRenderer(Releasable):
         culled, as the client culls a city object's.
     ctx : moderngl.Context, optional
         Context to draw with; by default one is made (and released by :meth:`release`).
+    forms : mapping (object id, lod) -> Mesh
+        Coarser forms (LOD0, LOD1) of objects, as the client drew them: drawn with the
+        same shader, light and palette, so that a picture of what the client drew
+        (:mod:`walkstream.client.truth.picture`) and the full scene differ only where
+        the client's picture does.  Their keys (:func:`form_key`) come after the room
+        parts; a frame that draws any of them draws everything in ascending object
+        id, as the client's id pass does (ties in depth resolve alike).
     """
 
     def __init__(
@@ -139,9 +162,11 @@ class TruthRenderer(Releasable):
         view_distance: float = 800.0,
         two_sided: bool = False,
         ctx: moderngl.Context | None = None,
+        forms: Mapping[tuple[int, int], Mesh] | None = None,
     ) -> None:
         objects = objects or {}
         rooms = rooms or {}
+        forms = forms or {}
         w, h = (int(v) for v in size)
         if w <= 0 or h <= 0:
             raise InputError(f"TruthRenderer.size: expected positive width and height, got {size}")
@@ -170,11 +195,35 @@ class TruthRenderer(Releasable):
                 if part.triangles:
                     self.keys.append((int(cid), k))
                     parts.append(part)
+        self._forms0 = len(self.keys)
+        form_ids = sorted((int(i), int(lod)) for i, lod in forms)
+        oid = [*ids.tolist(), *([-1] * len(parts))]
+        lods = [*([2] * len(ids)), *([-1] * len(parts))]
+        for i, lod in form_ids:
+            if i < 0:
+                raise InputError(f"TruthRenderer: object ids must be >= 0, got {i}")
+            self.keys.append(form_key(i, lod))
+            oid.append(i)
+            lods.append(lod)
+        form_meshes = [forms[k] for k in form_ids]
+        self._key_oid = np.array(oid, np.int64)
+        self._key_lod = np.array(lods, np.int64)
+        # the order of a frame with forms: objects and forms by id, room parts after
+        self._order_key = np.where(self._key_oid >= 0, self._key_oid, np.iinfo(np.int64).max)
         self.index = {key: i for i, key in enumerate(self.keys)}
-        self.triangles = np.array([len(m.indices) for m in meshes] + [p.triangles for p in parts], np.int64)
+        self.triangles = np.array(
+            [len(m.indices) for m in meshes] + [p.triangles for p in parts] + [len(m.indices) for m in form_meshes],
+            np.int64,
+        )
         """Triangles of each key."""
-        nv = np.array([len(m.positions) for m in meshes] + [len(p.positions) for p in parts], np.int64)
-        ni = np.array([m.indices.size for m in meshes] + [p.indices.size for p in parts], np.int64)
+        nv = np.array(
+            [len(m.positions) for m in meshes] + [len(p.positions) for p in parts] + [len(m.positions) for m in form_meshes],
+            np.int64,
+        )
+        ni = np.array(
+            [m.indices.size for m in meshes] + [p.indices.size for p in parts] + [m.indices.size for m in form_meshes],
+            np.int64,
+        )
         v0 = np.concatenate([[0], np.cumsum(nv)]).astype(np.int64)
         i0 = np.concatenate([[0], np.cumsum(ni)]).astype(np.int64)
         self._first, self._stop = i0[:-1], i0[1:]
@@ -189,14 +238,15 @@ class TruthRenderer(Releasable):
         verts = np.empty(int(v0[-1]), _VERTEX)
         index = np.empty(int(i0[-1]), np.uint32)
         light = np.asarray(LIGHT_DIRECTION, np.float32)
-        for k, m in enumerate(meshes):
+        lit = [*enumerate(meshes), *((self._forms0 + j, m) for j, m in enumerate(form_meshes))]
+        for k, m in lit:
             s, e = int(v0[k]), int(v0[k + 1])
             verts["p"][s:e] = m.positions
             verts["n"][s:e] = m.normals
             verts["c"][s:e, :3] = material_rgb(m.materials)
             index[i0[k] : i0[k + 1]] = m.indices.reshape(-1) + np.uint32(s)
         for j, p in enumerate(parts):
-            k = len(meshes) + j
+            k = len(ids) + j
             s, e = int(v0[k]), int(v0[k + 1])
             verts["p"][s:e] = p.positions
             verts["n"][s:e] = light  # unlit: facing the light, a part shows its material's colour
@@ -269,11 +319,17 @@ class TruthRenderer(Releasable):
         return out
 
     def object_ids(self, index: ArrayLike) -> NDArray[np.uint32]:
-        """A frame's key indices as object id + 1 per pixel (0 where no object shows)."""
+        """A frame's key indices as object id + 1 per pixel (0 where no object shows), forms included."""
         k = np.asarray(index, np.int64)
-        obj = (k >= 0) & (k < len(self.ids))
-        out = np.zeros(k.shape, np.uint32)
-        out[obj] = (self.ids[k[obj]] + 1).astype(np.uint32)
+        oid = np.where(k >= 0, self._key_oid[np.clip(k, 0, None)] if len(self._key_oid) else -1, -1)
+        out: NDArray[np.uint32] = (np.maximum(oid, -1) + 1).astype(np.uint32)
+        return out
+
+    def lods(self, index: ArrayLike) -> NDArray[np.int64]:
+        """A frame's key indices as the LOD each pixel's object is drawn at (2: the object's
+        own key, 0 or 1: a form), -1 where no object shows."""
+        k = np.asarray(index, np.int64)
+        out: NDArray[np.int64] = np.where(k >= 0, self._key_lod[np.clip(k, 0, None)] if len(self._key_lod) else -1, -1)
         return out
 
     # -- frames ---------------------------------------------------------------------
@@ -337,10 +393,7 @@ class TruthRenderer(Releasable):
             ctx.cull_face = "back"
         ctx.depth_func = "<"
         flags = np.ones(len(self.keys), bool) if only is None else np.asarray(only, bool)
-        padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
-        step = np.diff(padded)
-        starts, stops = np.flatnonzero(step == 1), np.flatnonzero(step == -1)
-        for s, t in zip(starts.tolist(), stops.tolist(), strict=True):
+        for s, t in self._runs(flags):
             first, last = int(self._first[s]), int(self._stop[t - 1])
             if last > first:
                 self._vao.render(moderngl.TRIANGLES, vertices=last - first, first=first)
@@ -354,6 +407,18 @@ class TruthRenderer(Releasable):
         ndc = 2.0 * d - 1.0
         lin = np.where(d >= 1.0, np.inf, 2.0 * n * f / (f + n - ndc * (f - n)))
         return ids, lin.reshape(h, w)[::-1]
+
+    def _runs(self, flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
+        """``(start, stop)`` runs of key indices to draw, in draw order."""
+        if not flags[self._forms0 :].any():  # key order: objects by id, then room parts
+            padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
+            step = np.diff(padded)
+            starts, stops = np.flatnonzero(step == 1), np.flatnonzero(step == -1)
+            return list(zip(starts.tolist(), stops.tolist(), strict=True))
+        keys = np.flatnonzero(flags)
+        keys = keys[np.argsort(self._order_key[keys], kind="stable")]
+        cut = np.flatnonzero(np.diff(keys) != 1) + 1
+        return [(int(r[0]), int(r[-1]) + 1) for r in np.split(keys, cut)]
 
     def colour(self) -> NDArray[np.uint8]:
         """``(h, w, 3)`` the lit colour of the last frame drawn, row 0 at the top."""

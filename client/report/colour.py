@@ -1,0 +1,144 @@
+"""The colour figures of a replay's compared frames: one row per frame, and the ``truth.colour`` summary.
+
+Each frame compared with the ground truth (``--truth-every N``) on a city walk gives
+one row of a :class:`ColourLog` (:mod:`walkstream.client.truth.colour` defines the
+figures); :func:`summarise_colour` reduces it to the ``colour`` object inside the
+``truth`` object of ``report.json``.  Every figure is over *all* compared frames, so
+that two runs of one walk with the same ``--truth-every`` are measured on the same
+frames (the start-up frames, before anything has arrived, count too):
+
+``metric``, ``visible_threshold``
+    ``"CIEDE2000"`` and the ΔE00 above which a pixel is visibly wrong (2.3).
+``mean_error``
+    ``median``, ``p95``, ``max``, ``mean`` over the frames of the mean absolute
+    linear-RGB error per pixel and channel, a share of full scale (0..1).
+``delta_e_mean``
+    ``median``, ``p95``, ``max`` of the frames' mean ΔE00 per pixel.
+``visible_pixels``
+    ``median``, ``p95``, ``max``, ``mean`` of the share of a frame's pixels over the
+    visible threshold.
+``frames_over_visible_ratio``
+    The share of frames whose visible pixels exceed 0.5 % of the frame
+    (:data:`~walkstream.client.report.truth.OVER_SHARE`).
+``psnr_db``
+    ``median``, ``p5`` (the worst twentieth) and ``min`` of the frames' PSNR, dB;
+    identical pictures count as :data:`~walkstream.client.truth.colour.PSNR_CAP_DB`.
+``causes``
+    Per cause of :data:`~walkstream.client.truth.colour.COLOUR_CAUSES` the mean share
+    of a frame's pixels visibly wrong for it.
+``per_frame``
+    The rows, as columns: ``frame``, ``t``, ``mean_error``, ``delta_e_mean``,
+    ``visible`` and ``psnr_db`` (capped) per compared frame (``truth.csv`` has the
+    causes too).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from walkstream.client.truth.colour import COLOUR_CAUSES, PSNR_CAP_DB, VISIBLE_DE
+from walkstream.shared.arrays import F64, I64
+from walkstream.shared.errors import InputError
+
+__all__ = ["COLOUR_OVER_SHARE", "ColourLog", "summarise_colour"]
+
+#: a compared frame is over the visible threshold when more than this share of its pixels are
+COLOUR_OVER_SHARE = 0.005
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ColourLog:
+    """One row per compared frame (read-only arrays of equal length).
+
+    Attributes
+    ----------
+    frame : (n,) int64
+    t : (n,) float64
+    mean_error : (n,) float64
+        Mean absolute linear-RGB error per pixel and channel, 0..1.
+    delta_e_mean : (n,) float64
+        Mean ΔE00 per pixel.
+    visible : (n,) float64
+        Share of the pixels with ΔE00 over the visible threshold.
+    psnr_db : (n,) float64
+        PSNR, dB (``inf``: identical pictures).
+    causes : (n, len(COLOUR_CAUSES)) float64
+        Share of the pixels visibly wrong, per cause.
+    """
+
+    frame: I64
+    t: F64
+    mean_error: F64
+    delta_e_mean: F64
+    visible: F64
+    psnr_db: F64
+    causes: F64
+
+    def __post_init__(self) -> None:
+        n = len(np.asarray(self.frame))
+        cols = {
+            "frame": np.array(self.frame, np.int64).reshape(-1),
+            "t": np.array(self.t, np.float64).reshape(-1),
+            "mean_error": np.array(self.mean_error, np.float64).reshape(-1),
+            "delta_e_mean": np.array(self.delta_e_mean, np.float64).reshape(-1),
+            "visible": np.array(self.visible, np.float64).reshape(-1),
+            "psnr_db": np.array(self.psnr_db, np.float64).reshape(-1),
+            "causes": np.array(self.causes, np.float64).reshape(-1, len(COLOUR_CAUSES)),
+        }
+        for name, a in cols.items():
+            if len(a) != n:
+                raise InputError(f"ColourLog column {name!r} has {len(a)} rows, expected {n}")
+            a.flags.writeable = False
+            object.__setattr__(self, name, a)
+
+    def __len__(self) -> int:
+        return len(self.frame)
+
+    @classmethod
+    def empty(cls) -> ColourLog:
+        """No compared frame."""
+        z = np.zeros(0)
+        return cls(np.zeros(0, np.int64), z, z, z, z, z, np.zeros((0, len(COLOUR_CAUSES))))
+
+
+def _stats(a: ArrayLike, keys: tuple[str, ...]) -> dict[str, float | None]:
+    v = np.asarray(a, np.float64)
+    if v.size == 0:
+        return dict.fromkeys(keys)
+    table = {
+        "median": lambda: np.median(v),
+        "mean": lambda: v.mean(),
+        "p95": lambda: np.percentile(v, 95),
+        "p5": lambda: np.percentile(v, 5),
+        "max": lambda: v.max(),
+        "min": lambda: v.min(),
+    }
+    return {k: float(table[k]()) for k in keys}
+
+
+def summarise_colour(log: ColourLog) -> dict[str, Any]:
+    """The ``colour`` object inside ``truth`` of ``report.json`` (see the module docs)."""
+    n = len(log)
+    return {
+        "metric": "CIEDE2000",
+        "visible_threshold": VISIBLE_DE,
+        "frames": n,
+        "mean_error": _stats(log.mean_error, ("median", "p95", "max", "mean")),
+        "delta_e_mean": _stats(log.delta_e_mean, ("median", "p95", "max")),
+        "visible_pixels": _stats(log.visible, ("median", "p95", "max", "mean")),
+        "frames_over_visible_ratio": float((log.visible > COLOUR_OVER_SHARE).mean()) if n else None,
+        "psnr_db": _stats(np.minimum(log.psnr_db, PSNR_CAP_DB), ("median", "p5", "min")),
+        "causes": {c: (float(log.causes[:, k].mean()) if n else None) for k, c in enumerate(COLOUR_CAUSES)},
+        "per_frame": {
+            "frame": log.frame.tolist(),
+            "t": [round(float(v), 4) for v in log.t],
+            "mean_error": [round(float(v), 6) for v in log.mean_error],
+            "delta_e_mean": [round(float(v), 4) for v in log.delta_e_mean],
+            "visible": [round(float(v), 6) for v in log.visible],
+            "psnr_db": [round(float(v), 3) for v in np.minimum(log.psnr_db, PSNR_CAP_DB)],
+        },
+    }

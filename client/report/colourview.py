@@ -1,0 +1,82 @@
+"""The worst frame by colour error as pictures: the client's picture, the full scene and a ΔE00 heat map.
+
+:func:`write_colour_worst` writes ``truth/worst_colour.png`` (the three side by side
+with the heat map's scale) and each alone (``worst_colour_client.png``,
+``worst_colour_truth.png``, ``worst_colour_de.png``) into a report folder and returns
+the page's section.  The frame is :class:`~walkstream.client.truth.missing.ColourWorst`.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import numpy as np
+
+from walkstream.client.report.files import atomic_open
+from walkstream.client.report.plots import grid_figure, save_figure
+from walkstream.client.truth.colour import PSNR_CAP_DB, VISIBLE_DE, heat_map
+from walkstream.client.truth.missing import ColourWorst
+
+__all__ = ["HEAT_TOP_DE", "write_colour_worst"]
+
+#: ΔE00 at the top of the heat map's scale (white): a window drawn as wall is about 40.
+HEAT_TOP_DE = 20.0
+
+_NAMES = {
+    "client": "worst_colour_client.png",
+    "truth": "worst_colour_truth.png",
+    "heat": "worst_colour_de.png",
+}
+
+
+def _save(path: Path, rgb: np.ndarray) -> None:
+    from PIL import Image
+
+    with atomic_open(path, "wb") as f:
+        Image.fromarray(rgb, "RGB").save(f, format="PNG")
+
+
+def write_colour_worst(out: Path, w: ColourWorst) -> str:
+    """Write the worst colour frame's pictures into ``out/truth`` and return its HTML section."""
+    folder = out / "truth"
+    folder.mkdir(exist_ok=True)
+    heat = heat_map(w.delta_e, HEAT_TOP_DE)
+    for key, rgb in (("client", w.client), ("truth", w.truth), ("heat", heat)):
+        _save(folder / _NAMES[key], rgb)
+    psnr = "identical" if not np.isfinite(w.psnr_db) else f"PSNR {min(w.psnr_db, PSNR_CAP_DB):.1f} dB"
+    head = (
+        f"frame {w.frame} at {w.t:.2f} s: mean error {100.0 * w.mean_error:.2f} % of full scale (linear RGB), "
+        f"{100.0 * w.visible:.2f} % of its pixels over dE00 {VISIBLE_DE:g}, {psnr}"
+    )
+    fig, axes = grid_figure(1, 3.4, cols=3, sharex=False)
+    for ax, img, cap in zip(
+        axes, (w.client, w.truth), ("the client's picture (its LODs)", "the full scene (every object at LOD2)"), strict=False
+    ):
+        ax.imshow(img)
+        ax.set_title(cap, fontsize=9)
+    im = axes[2].imshow(w.delta_e, cmap="magma", vmin=0.0, vmax=HEAT_TOP_DE)
+    axes[2].set_title(f"dE00 per pixel (visible above {VISIBLE_DE:g})", fontsize=9)
+    bar = fig.colorbar(im, ax=axes[2], fraction=0.046, pad=0.03)
+    bar.ax.axhline(VISIBLE_DE, color="#00c0ff", linewidth=1.5)
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.grid(False)
+    fig.suptitle("Worst compared frame by colour error: " + head, fontsize=9)
+    save_figure(fig, folder / "worst_colour.png")
+    caps = {
+        "client": "the client's picture: its objects at the LOD it drew them",
+        "truth": "the full scene: every object within the view distance at LOD2",
+        "heat": f"dE00 per pixel: black none, white {HEAT_TOP_DE:g} or more",
+    }
+    figs = "".join(
+        f"<figure><a href='truth/{_NAMES[k]}'><img src='truth/{_NAMES[k]}' alt='{k}'></a>"
+        f"<figcaption>{html.escape(caps[k])}</figcaption></figure>"
+        for k in ("client", "truth", "heat")
+    )
+    return (
+        f"<h3>Worst compared frame by colour error: {html.escape(head)}</h3>"
+        f"<div class='snaps'>{figs}</div><p>Side by side with the scale: "
+        "<a href='truth/worst_colour.png'>worst_colour.png</a></p>"
+    )

@@ -1,0 +1,99 @@
+"""The client's picture of a compared frame, drawn by the one truth renderer, and its colour error.
+
+A compared frame's colour error (:mod:`walkstream.client.truth.colour`) needs two
+pictures of one camera drawn alike: the full scene (every object within the view
+distance at LOD2: :meth:`~walkstream.client.truth.render.TruthRenderer.colour_frame`)
+and the client's picture -- the objects the client drew, each at the LOD it drew it,
+at the fog in force (:func:`client_picture`).  Both come from the same
+:class:`~walkstream.client.truth.render.TruthRenderer` (same shader, light and
+palette; the client's coarser forms uploaded as ``forms``, :func:`forms_of`), so a
+frame drawn at LOD2 throughout has no colour error at all and any error left is the
+client's choice of what and how to draw.  An object the client drew at LOD2 is drawn
+from the truth's own LOD2 mesh (the same parameters through the same grammar: the id
+comparison already holds the client's LOD2 to it); its coarser forms are the client's
+own meshes as the frame noted them.
+
+The ``impostor`` hook: the client's picture is geometry only.  A part that draws an
+image in place of an object (an impostor) passes ``overlay``: a callable given the
+frame's note, the picture (``(h, w, 3)`` uint8, written in place) and the per-pixel
+key index of the geometry under it, that paints the images the client drew over the
+picture and returns the ``(h, w)`` bool mask of the pixels it painted; those pixels'
+error is attributed to ``impostor`` (:data:`~walkstream.client.truth.colour.COLOUR_CAUSES`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from walkstream.client.truth.colour import ColourError, compare_colour
+from walkstream.client.truth.notes import FrameNote
+from walkstream.client.truth.render import TruthRenderer, form_key, object_key
+from walkstream.shared.records import Mesh
+
+__all__ = ["Overlay", "ClientPicture", "forms_of", "client_picture", "colour_error"]
+
+Overlay = Callable[[FrameNote, NDArray[np.uint8], NDArray[np.int64]], NDArray[np.bool_]]
+"""``overlay(note, rgb, keys) -> painted``: the ``impostor`` hook (see the module docs)."""
+
+
+@dataclass(frozen=True)
+class ClientPicture:
+    """What the client drew on one frame, as the truth renderer draws it."""
+
+    rgb: NDArray[np.uint8]
+    """``(h, w, 3)`` the picture, row 0 at the top."""
+    ids: NDArray[np.uint32]
+    """``(h, w)`` object id + 1 per pixel, 0 where none shows (images an ``overlay`` painted aside)."""
+    coarse: NDArray[np.bool_]
+    """``(h, w)`` pixels showing an object drawn at a coarser LOD than LOD2."""
+    stand_in: NDArray[np.bool_] | None
+    """``(h, w)`` pixels an ``overlay`` painted (None without one)."""
+
+
+def forms_of(notes: Iterable[FrameNote]) -> dict[tuple[int, int], Mesh]:
+    """``(object id, lod) -> mesh`` of every form coarser than LOD2 the noted frames drew."""
+    out: dict[tuple[int, int], Mesh] = {}
+    for st in notes:
+        for i, lod, mesh in st.drawn:
+            if 0 <= lod < 2:
+                out.setdefault((int(i), int(lod)), mesh)
+    return out
+
+
+def client_picture(
+    truth: TruthRenderer, note: FrameNote, proj: ArrayLike | None = None, overlay: Overlay | None = None
+) -> ClientPicture:
+    """Draw the objects ``note`` says the client drew, each at its LOD, from its camera and at its fog.
+
+    ``truth`` must hold the coarser forms the note drew (``forms=forms_of(notes)``);
+    objects it lacks are left out, as :meth:`TruthRenderer.colour_frame` leaves them.
+    """
+    keys = [object_key(i) if lod >= 2 else form_key(i, lod) for i, lod, _ in note.drawn]
+    idx, _ = truth.render(note.eye, note.view, truth.flags(keys), note.fog, proj=proj)
+    rgb = truth.colour()
+    lods = truth.lods(idx)
+    coarse = (lods >= 0) & (lods < 2)
+    stand_in = None if overlay is None else np.asarray(overlay(note, rgb, idx), bool)
+    return ClientPicture(rgb, truth.object_ids(idx), coarse, stand_in)
+
+
+def colour_error(
+    truth: TruthRenderer,
+    note: FrameNote,
+    truth_rgb: ArrayLike,
+    id_cause: ArrayLike,
+    proj: ArrayLike | None = None,
+    overlay: Overlay | None = None,
+) -> tuple[ColourError, ClientPicture]:
+    """The colour error of one compared frame: its client picture against the full scene ``truth_rgb``.
+
+    ``id_cause`` is the frame's id-based cause per pixel
+    (:attr:`~walkstream.client.truth.compare.FrameError.cause`).
+    """
+    pic = client_picture(truth, note, proj, overlay)
+    err = compare_colour(truth_rgb, pic.rgb, id_cause=id_cause, coarse=pic.coarse, stand_in=pic.stand_in)
+    return err, pic
