@@ -6,7 +6,8 @@ one of two ways, and which one is a property of the cell's kind, not of the scen
 * ``pvs``: baked.  The bake renders ID buffers from sample points in the cell and keeps
   the objects seen with their average coverage (the cell's PVS with ACH, Marvie et
   al.); the client fetches the cell's record and draws its PVS.  Street, crossroad,
-  square and grid cells.
+  square and grid cells, and sections: axis-aligned rectangles grown over a dense
+  visibility field (Brosnan et al.), whose PVS is the union of their field points'.
 * ``portals``: walked per frame.  The cell is a convex volume whose doors and windows
   are portals; the client walks the portal graph from the viewer's cell through the
   visible screen areas (Mulloni et al.) and draws the contents of the cells reached.
@@ -86,6 +87,7 @@ CELL_KIND_TABLE: tuple[CellKind, ...] = (
     CellKind("street", "pvs"),
     CellKind("square", "pvs"),
     CellKind("grid", "pvs"),
+    CellKind("section", "pvs"),
     CellKind("room", "portals", located_in_3d=True),
     CellKind("doorway", "portals", located_in_3d=True),
     CellKind("outside", "portals", locatable=False),
