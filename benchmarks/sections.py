@@ -127,7 +127,8 @@ def format_sections_table(rows: list[dict[str, Any]]) -> str:
 
 def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]) -> None:
     """The paper's trade as a plot: per walk, bytes per km and cells entered per km against
-    the sections' redundancy (one point per ``(R, M)``, labelled), street cells as lines."""
+    the sections' mean PVS (one point per ``(R, M)``, labelled with its redundancy where
+    the bake measured it), street cells as dotted lines."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -139,8 +140,10 @@ def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]
     fig = Figure(figsize=(5.0 * max(1, len(walks)), 4.2), dpi=120)
     for k, w in enumerate(walks):
         ax = fig.add_subplot(1, max(1, len(walks)), k + 1)
-        pts = [(r["section_redundancy_mean"], r["walks"][w]["bytes_per_km"] / 1000, r["walks"][w]["cells_per_km"],
-                f"R{r['redundancy']} M{r['min_size']:g}") for r in secs if w in r["walks"]]
+        pts = [(r["pvs_mean"], r["walks"][w]["bytes_per_km"] / 1000, r["walks"][w]["cells_per_km"],
+                f"R{r['redundancy']} M{r['min_size']:g}"
+                + ("" if r["section_redundancy_mean"] is None else f" (redundancy {r['section_redundancy_mean']:.0f})"))
+               for r in secs if w in r["walks"]]
         if pts:
             x, b, c, lab = zip(*pts, strict=True)
             ax.plot(x, b, "o-", color="#1f77b4", label="sections: kB/km")
@@ -153,9 +156,9 @@ def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]
                 ax.axhline(street["walks"][w]["bytes_per_km"] / 1000, color="#1f77b4", lw=0.8, ls=":",
                            label="street cells: kB/km")
                 ax2.axhline(street["walks"][w]["cells_per_km"], color="#d62728", lw=0.8, ls=":")
-        ax.set_xlabel("redundancy (objects held, not seen where the walker is)")
+        ax.set_xlabel("mean section PVS (objects; larger: more redundancy)")
         ax.set_ylabel("kB per km", color="#1f77b4")
         ax.set_title(f"{w}: the section-size trade (56 kbit/s)", fontsize=9)
-        ax.legend(loc="upper left", fontsize=7)
+        ax.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
     fig.savefig(os.fspath(path))
