@@ -87,17 +87,19 @@ CELL_KIND_TABLE: tuple[CellKind, ...] = (
     CellKind("street", "pvs"),
     CellKind("square", "pvs"),
     CellKind("grid", "pvs"),
-    CellKind("section", "pvs"),
     CellKind("room", "portals", located_in_3d=True),
     CellKind("doorway", "portals", located_in_3d=True),
     CellKind("outside", "portals", locatable=False),
+    CellKind("section", "pvs"),
 )
 """Every kind of view cell, in the order the bake numbers cells by kind.
 
-Interiors use the last three: ``room`` (a convex part of a room), ``doorway`` (the
-opening of a door or inner window through a thick wall, so that an eye standing in it
-is in a cell) and ``outside`` (one per interior: everything seen through windows and
-outer doors; no viewer is ever located in it)."""
+Interiors use ``room`` (a convex part of a room), ``doorway`` (the opening of a door or
+inner window through a thick wall, so that an eye standing in it is in a cell) and
+``outside`` (one per interior: everything seen through windows and outer doors; no
+viewer is ever located in it).  ``section`` is a rectangle grown over a dense
+visibility field (Brosnan et al.).  The order may only grow at the end: the cell ids
+of every baked scene follow it."""
 
 _BY_NAME: dict[str, CellKind] = {k.name: k for k in CELL_KIND_TABLE}
 
