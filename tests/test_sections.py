@@ -209,3 +209,15 @@ def test_bad_section_flags_get_one_line(city: Path, tmp_path: Path, capsys: pyte
     assert main(["bake", str(city), "-o", str(tmp_path / "x.db"), "--cells", "sections", flag, value]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0]
+
+
+def test_locating_in_an_overlap_keeps_the_section_the_viewer_is_in() -> None:
+    a = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 4.0], [0.0, 4.0]])
+    b = np.array([[6.0, 0.0], [20.0, 0.0], [20.0, 4.0], [6.0, 4.0]])  # overlaps a over x 6..10
+    m = CellMap()
+    m.add_cells([0, 1], [a, b], [[1], [0]], ["section", "section"])
+    assert m.update([2.0, 2.0]) == (0, True) and m.update([8.0, 2.0]) == (0, True)  # into the overlap: still 0
+    assert m.update([15.0, 2.0]) == (1, True) and m.update([8.0, 2.0]) == (1, True)  # back: still 1
+    # the service answers the lowest id in an overlap, deterministically
+    loc = CellLocator.of_kinds([0, 1], ["section", "section"], [a, b], [[1.5, 2.0], [1.5, 2.0]])
+    assert loc.locate(8.0, 2.0) == 0 and loc.locate(15.0, 2.0) == 1
