@@ -46,6 +46,9 @@ _EXPORTS = {
     "run_lod_bench": "walkstream.benchmarks.lod",
     "run_fill_bench": "walkstream.benchmarks.fill",
     "run_city_bench": "walkstream.benchmarks.city",
+    "run_sections_bench": "walkstream.benchmarks.sections",
+    "format_sections_table": "walkstream.benchmarks.sections",
+    "plot_sections_trade": "walkstream.benchmarks.sections",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -26,14 +26,14 @@ def test_every_kind_has_one_visibility_model() -> None:
     assert all(k.visibility in VISIBILITY_MODELS for k in CELL_KIND_TABLE)
     assert {k: visibility_of(k) for k in CELL_KINDS} == {
         "crossroad": "pvs", "street": "pvs", "square": "pvs", "grid": "pvs",
-        "room": "portals", "doorway": "portals", "outside": "portals",
+        "room": "portals", "doorway": "portals", "outside": "portals", "section": "pvs",
     }
     assert LOCATABLE_KINDS == set(CELL_KINDS) - {"outside"}
 
 
 def test_the_order_the_bake_numbers_cells_by_is_kept() -> None:
     # cell ids of every baked scene follow this order: it may only grow at the end
-    assert CELL_KINDS == ("crossroad", "street", "square", "grid", "room", "doorway", "outside")
+    assert CELL_KINDS == ("crossroad", "street", "square", "grid", "room", "doorway", "outside", "section")
 
 
 def test_the_store_takes_exactly_the_kinds(office_db: Path) -> None:
@@ -43,10 +43,10 @@ def test_the_store_takes_exactly_the_kinds(office_db: Path) -> None:
 
 
 def test_unknown_kinds_and_models_are_refused() -> None:
-    with pytest.raises(InputError, match="cell kind 'section'"):
-        cell_kind("section")
+    with pytest.raises(InputError, match="cell kind 'hexagon'"):
+        cell_kind("hexagon")
     with pytest.raises(InputError, match="visibility 'field'"):
-        CellKind("section", "field")  # type: ignore[arg-type]
+        CellKind("hexagon", "field")  # type: ignore[arg-type]
 
 
 def test_a_scene_of_both_models_locates_each_cell_by_its_kind() -> None:

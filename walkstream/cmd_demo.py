@@ -92,8 +92,6 @@ def stale_reason(db: Path, names: tuple[str, ...]) -> str | None:
     with bake settings other than today's defaults (an upgrade that changed the
     default sampling must show its own figures, not the last release's).
     """
-    from dataclasses import asdict
-
     from walkstream.server.bake import BakeSettings
     from walkstream.server.store import SceneReader
     from walkstream.shared.errors import StoreError
@@ -109,8 +107,9 @@ def stale_reason(db: Path, names: tuple[str, ...]) -> str | None:
         reader.close()
     if missing:
         return f"has no recorded path {', '.join(missing)}"
-    changed = [k for k, v in asdict(BakeSettings()).items() if k in stored and stored[k] != v]
-    changed += [k for k in asdict(BakeSettings()) if k not in stored]
+    today = BakeSettings().record()
+    changed = [k for k, v in today.items() if k in stored and stored[k] != v]
+    changed += [k for k in today if k not in stored]
     if changed:
         return f"was baked with other settings than today's defaults ({', '.join(sorted(changed))})"
     return None

@@ -53,7 +53,7 @@ and an interrupted bake resumes like a city's, to the same version.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -189,7 +189,7 @@ def crossing_plan(
     features = (["buildings"] + (["streets"] if city.streets else []) + [f"{kind}_cells"]
                 + list(INTERIOR_FEATURES) + [CROSSING_FEATURE])
     grammar = default_grammar()
-    settings_dict = asdict(st) | {
+    settings_dict = st.record() | {
         "source": str(src),
         "source_digest": file_digest(src),
         "interior": interior_settings(inner, isrc),

@@ -5,13 +5,16 @@ both) and
 
 1. opens the work file (:meth:`~walkstream.server.store.SceneWriter.create`); a work
    file left by a killed bake with the same header is resumed;
-2. writes the plan's tables (objects, cells, viewpoints, rooms, portals, stairs,
+2. with field cells (sections), renders the dense visibility field (each block kept
+   as it comes, so a killed bake resumes with the blocks done) and grows the cells
+   from it (their PVS written after the tables);
+3. writes the plan's tables (objects, cells, viewpoints, rooms, portals, stairs,
    entrances; on resume again, as upserts that keep every stored PVS);
-3. bakes the room cells' contents, unless a resumed work file has them all: clipped
+4. bakes the room cells' contents, unless a resumed work file has them all: clipped
    in chunks by the one chunk runner (:func:`~.chunks.run_chunks`), placed, encoded;
-4. bakes the PVS of the PVS cells not yet done, in chunks by the same runner, each
+5. bakes the PVS of the PVS cells not yet done, in chunks by the same runner, each
    cell committed as it comes (a kill loses only the cells in flight);
-5. records the default walks and seals the database.
+6. records the default walks and seals the database.
 
 So every scene kind resumes alike, to the same version an uninterrupted bake gets.
 """
@@ -25,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from walkstream.server.bake.chunks import run_chunks
+from walkstream.server.bake.field import bake_field, field_folder
 from walkstream.server.bake.interior import room_contents, write_contents
 from walkstream.server.bake.plan import BakePlan
 from walkstream.server.bake.workers import PVS_CHUNK, pvs_items, pvs_task, release_renderer
@@ -62,8 +66,9 @@ def drive(
     log:
         Called with one-line messages about the stages.
     max_cells:
-        Stop after this many new PVS cells without finishing the database (for tests
-        of interruption and resume; the work file stays for the next run).
+        Stop after this many new PVS cells (or about as many new field points)
+        without finishing the database (for tests of interruption and resume; the
+        work file stays for the next run).
     started:
         ``time.perf_counter()`` when the bake began (reading the sources counts);
         default now.
@@ -91,6 +96,15 @@ def drive(
     extra: dict[str, Any] = {}
     try:
         done = writer.done_cells() if writer.resumed else set()
+        grown: list[tuple[int, Any, Any]] = []
+        if plan.field is not None:
+            fc = plan.field
+            sets = bake_field(fc.lattice, fc.scene, fc.settings, fc.key, field_folder(out, fc.key), workers=workers,
+                              scheduler=scheduler, progress=progress, max_points=max_cells)
+            if sets is None:
+                writer.close()
+                return {}
+            grown = fc.grow(sets)  # the cells the tables and the walks are made of
         # on resume too: every write is an upsert that keeps a cell's stored PVS, so a
         # bake killed while it wrote the tables resumes as well
         plan.write_tables(writer)
@@ -106,6 +120,8 @@ def drive(
                 encode_s = write_contents(writer, rooms.layout, parts, offset=rooms.offset,
                                           cellmesh_version=rooms.cellmesh_version)
             extra["contents_encode_s"] = encode_s
+        for cid, ids_, ach in grown:
+            writer.set_pvs(cid, ids_, ach)
         todo = [c for c in pvs_cells if c.id not in done]
         if max_cells is not None:
             todo = todo[:max_cells]

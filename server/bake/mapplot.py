@@ -2,7 +2,7 @@
 
 What a user looks at to see what a street network became: the street pieces
 (grey, crossroads darker), over them the view cells coloured by PVS size with thin
-outlines, the building footprints on top, and the recorded path ``SE``.
+outlines (sections see-through, so that their rectangles and overlaps show), the building footprints on top, and the recorded path ``SE``.
 """
 
 from __future__ import annotations
@@ -67,12 +67,14 @@ def draw_city(fig: Any, ax: Any, reader: SceneReader, cells: Sequence[CellInfo])
     )
     sizes = np.array([len(c.pvs) for c in cells], dtype=float)
     thin = 0.15 if len(cells) > 1500 else 0.3
+    # sections may overlap: see-through, so an overlap shows as a darker rectangle
+    sections = bool(cells) and all(c.kind == "section" for c in cells)
     coll = PatchCollection(
         [MplPolygon(c.boundary, closed=True) for c in cells],
         cmap="viridis",
         edgecolor="#202020",
         linewidth=thin,
-        alpha=0.9,
+        alpha=0.6 if sections else 0.9,
     )
     coll.set_array(sizes)
     ax.add_collection(coll)

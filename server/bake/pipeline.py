@@ -12,7 +12,6 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -152,7 +151,8 @@ def city_plan(
     say: Callable[[str], None] = lambda _msg: None,
 ) -> BakePlan:
     """The :class:`~.plan.BakePlan` of a city: its view cells (street or grid), PVS cells only;
-    its default walks routed on the street part of its :class:`~.scenenav.SceneGraph`.
+    its default walks routed on the street part of its :class:`~.scenenav.SceneGraph`
+    (sections: :func:`~.sectionplan.section_plan`).
 
     The plan's summary adds ``source``, ``source_issues`` (features skipped or repaired),
     ``source_skipped`` (skipped) and ``source_notes``.
@@ -163,6 +163,10 @@ def city_plan(
     if bbox is not None:
         bbox = local_bbox(scene, bbox, st.bbox_crs)
         scene = clip_scene(scene, bbox)
+    if st.cells == "sections":
+        from walkstream.server.bake.sectionplan import section_plan
+
+        return section_plan(scene, src, out, st, bbox=bbox, say=say, name=name, summary=_source_summary(scene, src))
     if st.cells == "auto" and not scene.streets:
         say(f"{src.name}: no street network (after filtering): grid cells")
     cells = make_cells(
@@ -174,7 +178,7 @@ def city_plan(
     features = ["buildings"] + (["streets"] if scene.streets else []) + [f"{kind}_cells"]
     say(f"{src.name}: {len(scene.buildings)} buildings, {len(scene.streets)} street pieces, {len(cells)} {kind} cells")
     grammar = default_grammar()
-    settings_dict = asdict(st) | {"source": str(src), "source_digest": file_digest(src)}
+    settings_dict = st.record() | {"source": str(src), "source_digest": file_digest(src)}
     city = scene
 
     def write_tables(writer: SceneWriter) -> None:
@@ -194,13 +198,7 @@ def city_plan(
                 for path in default_paths(cells, footprints=[b.rings[0] for b in city.buildings],
                                           graph=nav.streets, say=say)]
 
-    summary: dict[str, Any] = {
-        "source": str(src),
-        "source_issues": len(scene.issues),
-        "source_skipped": sum(1 for i in scene.issues if i.action == "skipped"),
-    }
-    if scene.notes:
-        summary["source_notes"] = " | ".join(scene.notes)
+    summary = _source_summary(scene, src)
     return BakePlan(
         name=name or out.stem, crs=scene.crs, origin=scene.origin, grammar_text=default_grammar_text(),
         grammar_version=grammar.id, features=features, settings=settings_dict,
@@ -208,3 +206,14 @@ def city_plan(
         walks=walks, summary=summary,
     )
 
+
+
+def _source_summary(scene: SourceScene, src: Path) -> dict[str, Any]:
+    summary: dict[str, Any] = {
+        "source": str(src),
+        "source_issues": len(scene.issues),
+        "source_skipped": sum(1 for i in scene.issues if i.action == "skipped"),
+    }
+    if scene.notes:
+        summary["source_notes"] = " | ".join(scene.notes)
+    return summary

@@ -11,6 +11,11 @@ Every scene kind (a city, an interior, a crossing of both) is turned into a
   their contents clipped in chunks (:func:`~.roomcontents.contents_task`) and
   encoded; their portals are written with the plan's tables.
 
+- :class:`FieldCells`, cells grown over a dense visibility field (sections): the
+  field rendered in blocks (:func:`~.workers.field_task`, resumed block by block),
+  then the planner's ``grow`` makes the cells and their PVS from it, before the
+  tables are written.
+
 A planner does the cheap work (reading, cells, placement, the walking graphs); the
 chunked work, the database and resuming are the driver's.
 """
@@ -22,6 +27,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from walkstream.server.bake.field import FieldLattice, PointSets
 from walkstream.server.bake.roomcontents import Part
 from walkstream.server.bake.rooms import RoomLayout
 from walkstream.server.bake.settings import BakeSettings
@@ -29,9 +35,10 @@ from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.scene import SourceScene
 from walkstream.server.store import SceneWriter
+from walkstream.shared.arrays import F64, I64
 from walkstream.shared.paths import RecordedPath
 
-__all__ = ["BakePlan", "PvsCells", "RoomCells", "Say", "Walk", "settings_key"]
+__all__ = ["BakePlan", "FieldCells", "PvsCells", "RoomCells", "Say", "Walk", "settings_key"]
 
 Say = Callable[[str], None]
 """A one-line message about the bake's stages."""
@@ -69,6 +76,23 @@ class RoomCells:
 
 
 @dataclass
+class FieldCells:
+    """Cells grown over a dense visibility field (sections, :mod:`~.sections`).
+
+    The driver renders the field of ``lattice`` in ``scene`` under ``settings``
+    (``key`` names the scene and the field's settings: the folder its blocks are kept
+    in) and hands it to ``grow``, which makes the cells (the plan's ``write_tables``
+    and ``walks`` then see them) and returns each cell's ``(id, pvs, ach)``.
+    """
+
+    scene: SourceScene
+    settings: BakeSettings
+    lattice: FieldLattice
+    key: str
+    grow: Callable[[PointSets], list[tuple[int, I64, F64]]]
+
+
+@dataclass
 class BakePlan:
     """A scene to bake (see the module docstring).
 
@@ -77,8 +101,8 @@ class BakePlan:
     name, crs, origin, grammar_text, grammar_version, features, settings:
         The database header (:meth:`~walkstream.server.store.SceneWriter.create`);
         ``settings`` identifies the input, so a work file with equal ones resumes.
-    pvs, rooms:
-        The scene's cells by kind (either may be None).
+    pvs, rooms, field:
+        The scene's cells by kind (any may be None).
     write_tables:
         Writes everything but the PVS and the contents: objects, cells, viewpoints,
         rooms, portals, stairs, entrances (on resume again: the writer's upserts keep
@@ -101,6 +125,7 @@ class BakePlan:
     write_tables: Callable[[SceneWriter], None]
     walks: Callable[[Say], list[Walk]]
     summary: dict[str, Any] = field(default_factory=dict)
+    field: FieldCells | None = None
 
 
 def settings_key(settings: dict[str, Any]) -> str:

@@ -7,13 +7,23 @@ with the settings it started with.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
 from walkstream.shared.errors import InputError
 
-__all__ = ["DEFAULT_RESOLUTION", "DEFAULT_OCCLUDER_LOD", "DEFAULT_SAMPLING", "BakeSettings"]
+__all__ = [
+    "DEFAULT_RESOLUTION",
+    "DEFAULT_OCCLUDER_LOD",
+    "DEFAULT_SAMPLING",
+    "DEFAULT_FIELD_SPACING",
+    "DEFAULT_REDUNDANCY",
+    "DEFAULT_MIN_SIZE",
+    "SECTION_FIELDS",
+    "BakeSettings",
+]
 
 #: chosen with ``walkstream bench visibility`` against its dense reference (issue 12:
 #: the first default, 64 px at the 8 box corners, missed single buildings covering
@@ -23,6 +33,15 @@ __all__ = ["DEFAULT_RESOLUTION", "DEFAULT_OCCLUDER_LOD", "DEFAULT_SAMPLING", "Ba
 DEFAULT_RESOLUTION = 128
 DEFAULT_OCCLUDER_LOD = 0
 DEFAULT_SAMPLING = "region"
+
+#: sections (Brosnan et al. sample every 2 m; see docs/benchmarks.md for the cost of
+#: the field on the demo city at 2 and 4 m)
+DEFAULT_FIELD_SPACING = 4.0
+DEFAULT_REDUNDANCY = 8
+DEFAULT_MIN_SIZE = 64.0
+
+#: the settings only a bake of sections stores (:meth:`BakeSettings.record`)
+SECTION_FIELDS = ("field_spacing", "redundancy", "min_size")
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,11 +79,35 @@ class BakeSettings:
     edge_pass: bool = False
     """Draw every triangle's edges as lines after the fill, adding the objects thinner
     than a pixel (:class:`~walkstream.server.bake.visibility.VisibilityRenderer`)."""
+    field_spacing: float = DEFAULT_FIELD_SPACING
+    """``cells="sections"``: metres between the points of the dense visibility field."""
+    redundancy: int = DEFAULT_REDUNDANCY
+    """``cells="sections"``: objects a section may hold beyond what its seed point sees."""
+    min_size: float = DEFAULT_MIN_SIZE
+    """``cells="sections"``: smallest section (square metres) the first pass accepts."""
+
+    def record(self) -> dict[str, Any]:
+        """The settings as stored in a database's header (what identifies a bake).
+
+        The section settings are stored only by a bake of sections, so that every
+        other bake keeps the header (and the scene version) it had before they existed.
+        """
+        out = asdict(self)
+        if self.cells != "sections":
+            for name in SECTION_FIELDS:
+                out.pop(name)
+        return out
 
     def check(self) -> BakeSettings:
         """Raise InputError naming the first bad setting."""
-        if self.cells not in ("auto", "street", "grid"):
-            raise InputError(f"--cells: expected street, grid or auto, got {self.cells!r}")
+        if self.cells not in ("auto", "street", "grid", "sections"):
+            raise InputError(f"--cells: expected street, grid, sections or auto, got {self.cells!r}")
+        if not (np.isfinite(self.field_spacing) and self.field_spacing > 0):
+            raise InputError(f"--field-spacing: expected a positive number of metres, got {self.field_spacing}")
+        if not (np.isfinite(self.redundancy) and self.redundancy >= 0):
+            raise InputError(f"--redundancy: expected >= 0 objects, got {self.redundancy}")
+        if not (np.isfinite(self.min_size) and self.min_size >= 0):
+            raise InputError(f"--min-size: expected >= 0 square metres, got {self.min_size}")
         if self.sampling not in ("boundary", "corners", "region"):
             raise InputError(f"--sampling: expected boundary, region or corners, got {self.sampling!r}")
         for name in ("cell_size", "max_length", "view_distance", "margin", "spacing", "height_step"):

@@ -477,10 +477,13 @@ class VisibilityRenderer(Releasable):
 
     # -- rendering -----------------------------------------------------------------
 
-    def _render_pass(self, points: F64, counts: I64, seen: list[I64] | None = None) -> None:
+    def _render_pass(
+        self, points: F64, counts: I64, seen: list[I64] | None = None, each: list[I64] | None = None
+    ) -> None:
         """Render up to ``points_per_pass`` points and add each object's pixels to ``counts``.
 
-        With ``seen``, also append per point the local indices + 1 it sees (0 dropped).
+        With ``seen``, also append per point the local indices + 1 it sees (0 dropped);
+        with ``each``, per point its own pixel counts (indexed as ``counts``).
         """
         ctx, fb, vao, indirect = self.ctx, self._fb, self._vao, self._indirect
         assert ctx is not None and fb is not None and vao is not None and indirect is not None
@@ -526,6 +529,7 @@ class VisibilityRenderer(Releasable):
             # presence by bincount: several times faster than np.unique on a row of tiles
             n = len(counts)
             per = [np.bincount(rows[i * res : (i + 1) * res].reshape(-1), minlength=n)[:n] > 0 for i in range(p)] if seen is not None else []
+            own = [np.bincount(rows[i * res : (i + 1) * res].reshape(-1), minlength=n)[:n] for i in range(p)] if each is not None else []
             if self.edge_pass:
                 # Edges over the finished fill, tested against its depth but writing
                 # none: a second image whose ids only ever ADD to the fill's (an edge
@@ -545,12 +549,17 @@ class VisibilityRenderer(Releasable):
                 counts += np.where(filled == 0, edges, 0)
                 if seen is not None:
                     per = [a | (np.bincount(rows[i * res : (i + 1) * res].reshape(-1), minlength=n)[:n] > 0) for i, a in enumerate(per)]
+                if each is not None:
+                    own = [np.where(a == 0, np.bincount(rows[i * res : (i + 1) * res].reshape(-1), minlength=n)[:n], a)
+                           for i, a in enumerate(own)]
         finally:
             ctx.scissor = None
             if self.cull_back_faces:
                 ctx.disable(moderngl.CULL_FACE)
         if seen is not None:
             seen.extend(np.flatnonzero(a[1:]).astype(np.int64) + 1 for a in per)
+        if each is not None:
+            each.extend(own)
 
     def _draw_faces(self, commands: NDArray[np.uint32], offsets: I64, mvps: NDArray[np.float32]) -> None:
         """Draw every face's commands into its own tile (faces of point ``i`` in row ``i``)."""
@@ -618,6 +627,29 @@ class VisibilityRenderer(Releasable):
         counts = self._counts(pts, per)
         seen = [np.unique(self._ids[a - 1]) for a in per] if len(self._ids) else [np.zeros(0, np.int64) for _ in pts]
         return *self._ids_pixels(counts), seen
+
+    def each_point_counts(self, points: ArrayLike) -> list[tuple[I64, I64]]:
+        """Per sample point, the pixels each object covers in that point's six cube faces.
+
+        The same render as :meth:`cell_counts`, kept apart by point (the dense
+        visibility field of :mod:`~walkstream.server.bake.field` keeps every point's
+        visible set with its pixel counts).
+
+        Returns
+        -------
+        list of (ids, pixels)
+            Per point, as :meth:`cell_counts` returns for that point alone.
+        """
+        pts = self._check_points(points)
+        own: list[I64] = []
+        if len(pts) and len(self._ids):
+            counts = np.zeros(len(self._ids) + 1, np.int64)
+            for s in range(0, len(pts), self.points_per_pass):
+                self._render_pass(pts[s : s + self.points_per_pass], counts, None, own)
+            assert self.ctx is not None
+            check_gl_error(self.ctx, f"after rendering {len(pts)} visibility sample points")
+            return [self._ids_pixels(c.astype(np.int64)) for c in own]
+        return [(np.zeros(0, np.int64), np.zeros(0, np.int64)) for _ in pts]
 
     def _check_points(self, points: ArrayLike) -> F64:
         pts = np.asarray(points, dtype=np.float64)

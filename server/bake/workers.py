@@ -27,6 +27,7 @@ __all__ = [
     "cell_counts",
     "cell_points",
     "cell_task",
+    "field_task",
     "pvs_items",
     "pvs_task",
     "release_renderer",
@@ -159,6 +160,39 @@ def pvs_task(
 ) -> list[tuple[int, NDArray[np.int64], NDArray[np.float64]]]:
     """:func:`cell_task` with the chunk first, as :func:`~.chunks.run_chunks` calls a task."""
     return cell_task(scene, settings, key, cells)
+
+
+def field_task(
+    blocks: list[tuple[int, NDArray[np.float64], tuple[float, float]]],
+    scene: SourceScene,
+    settings: BakeSettings,
+    key: str,
+) -> list[tuple[int, NDArray[np.int64], NDArray[np.int32], NDArray[np.uint32]]]:
+    """The dense visibility field of some blocks of points (:mod:`~.field`).
+
+    ``(block, eyes (k, 2), heights)`` in: every eye rendered at both heights (a full
+    spin up and down); ``(block, offsets (k + 1,), ids, pixels)`` out, each point's
+    visible set with the pixels each object covers over its twelve images.
+    """
+    renderer, _ = _renderer_for(scene, settings, key)
+    out = []
+    for block, eyes, heights in blocks:
+        k = len(eyes)
+        pts = np.vstack([np.column_stack([eyes, np.full(k, z)]) for z in heights])
+        per = renderer.each_point_counts(pts)
+        offsets = np.zeros(k + 1, np.int64)
+        ids_l, pix_l = [], []
+        for i in range(k):
+            both = [per[i + h * k] for h in range(len(heights))]
+            ids = np.concatenate([b[0] for b in both])
+            u, inv = np.unique(ids, return_inverse=True)
+            px = np.bincount(inv.reshape(-1), weights=np.concatenate([b[1] for b in both]), minlength=len(u))
+            ids_l.append(u.astype(np.int32))
+            pix_l.append(np.minimum(px, 2**32 - 1).astype(np.uint32))
+            offsets[i + 1] = offsets[i] + len(u)
+        out.append((block, offsets, np.concatenate(ids_l) if ids_l else np.zeros(0, np.int32),
+                    np.concatenate(pix_l) if pix_l else np.zeros(0, np.uint32)))
+    return out
 
 
 def release_renderer() -> None:

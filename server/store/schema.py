@@ -23,6 +23,8 @@ from walkstream.server.store.files import db_label
 __all__ = [
     "SCHEMA_VERSION",
     "READABLE_VERSIONS",
+    "SECTIONS_SCHEMA_VERSION",
+    "schema_version_of",
     "APPLICATION_ID",
     "OBJECT_KINDS",
     "OPTIONAL_TABLES",
@@ -41,8 +43,20 @@ Version 2 added interiors: the cell kinds ``doorway`` and ``outside`` and the
 optional tables of the ``rooms``, ``portals`` and ``meshes`` features.  A version 1
 file (every city baked before) has none of them and is read as it is."""
 
-READABLE_VERSIONS = (1, 2)
+READABLE_VERSIONS = (1, 2, 3)
 """Schema versions this code reads."""
+
+SECTIONS_SCHEMA_VERSION = 3
+"""The schema version of a scene with sections (the cell kind ``section``): an older
+reader, whose ``cells`` table does not know the kind, refuses the file by its header."""
+
+
+def schema_version_of(features: Any) -> int:
+    """The schema version a scene with ``features`` is written with.
+
+    Version 3 only for a scene of sections, so every other scene keeps version 2 (and
+    its scene version, which hashes the header)."""
+    return SECTIONS_SCHEMA_VERSION if "section_cells" in features else SCHEMA_VERSION
 
 APPLICATION_ID = 0x57534442  # "WSDB"
 """``PRAGMA application_id`` of every walkstream scene database."""

@@ -57,6 +57,7 @@ from walkstream.server.store.schema import (
     canonical_json,
     content_version,
     read_header,
+    schema_version_of,
     settings_hash,
 )
 
@@ -156,8 +157,9 @@ class SceneWriter:
             raise StoreError(f"{label}: origin: expected (x, y), got {origin!r:.80}")
         ox, oy = (finite_number(v, f"{label}: origin") for v in origin)
         settings_json = canonical_json(settings, f"{label}: settings")
+        version = schema_version_of(features)
         fields = {
-            "schema_version": SCHEMA_VERSION,
+            "schema_version": version,
             "name": name,
             "crs": crs,
             "origin": [ox, oy],
@@ -178,7 +180,7 @@ class SceneWriter:
                     fcntl.flock(lock_fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 except BlockingIOError as exc:
                     raise StoreError(f"{label}: another bake is writing {work}") from exc
-            conn = cls._reopen(work, shash) if resume else None
+            conn = cls._reopen(work, shash, version) if resume else None
             resumed = conn is not None
             if conn is None:
                 remove_db_files(work)
@@ -189,13 +191,13 @@ class SceneWriter:
         return cls(conn, label, work, resumed, lock_fd)
 
     @staticmethod
-    def _connect(work: str, *, new: bool = False) -> sqlite3.Connection:
+    def _connect(work: str, *, new: bool = False, version: int = SCHEMA_VERSION) -> sqlite3.Connection:
         conn = sqlite3.connect(work, isolation_level=None)
         try:
             if new:
                 # before WAL, so that they land in the file header itself, not in the WAL
                 conn.execute(f"PRAGMA application_id={APPLICATION_ID}")
-                conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+                conn.execute(f"PRAGMA user_version={int(version)}")
             # WAL + NORMAL: each commit is an append without fsync; a killed process
             # loses nothing committed, a power cut at most the last few cells
             conn.execute("PRAGMA journal_mode=WAL")
@@ -206,7 +208,7 @@ class SceneWriter:
         return conn
 
     @classmethod
-    def _reopen(cls, work: str, shash: str) -> sqlite3.Connection | None:
+    def _reopen(cls, work: str, shash: str, version: int) -> sqlite3.Connection | None:
         if not os.path.isfile(work):
             return None
         try:
@@ -220,7 +222,7 @@ class SceneWriter:
             app_id = conn.execute("PRAGMA application_id").fetchone()[0]
             user_version = conn.execute("PRAGMA user_version").fetchone()[0]
             row = conn.execute("SELECT value FROM meta WHERE key = 'settings_hash'").fetchone()
-            if (app_id, user_version) == (APPLICATION_ID, SCHEMA_VERSION) and row == (shash,):
+            if (app_id, user_version) == (APPLICATION_ID, version) and row == (shash,):
                 return conn
         except sqlite3.DatabaseError:
             pass
@@ -232,7 +234,7 @@ class SceneWriter:
         cls, work: str, fields: dict[str, Any], settings_json: str, shash: str
     ) -> sqlite3.Connection:
         try:
-            conn = cls._connect(work, new=True)
+            conn = cls._connect(work, new=True, version=fields["schema_version"])
         except sqlite3.Error as exc:
             raise StoreError(f"{work}: cannot create ({exc})") from exc
         try:
@@ -244,7 +246,7 @@ class SceneWriter:
                     conn.execute(ddl)
             meta = {
                 "app": "walkstream",
-                "schema_version": SCHEMA_VERSION,
+                "schema_version": fields["schema_version"],
                 "name": fields["name"],
                 "version": None,
                 "crs": fields["crs"],

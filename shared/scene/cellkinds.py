@@ -6,7 +6,8 @@ one of two ways, and which one is a property of the cell's kind, not of the scen
 * ``pvs``: baked.  The bake renders ID buffers from sample points in the cell and keeps
   the objects seen with their average coverage (the cell's PVS with ACH, Marvie et
   al.); the client fetches the cell's record and draws its PVS.  Street, crossroad,
-  square and grid cells.
+  square and grid cells, and sections: axis-aligned rectangles grown over a dense
+  visibility field (Brosnan et al.), whose PVS is the union of their field points'.
 * ``portals``: walked per frame.  The cell is a convex volume whose doors and windows
   are portals; the client walks the portal graph from the viewer's cell through the
   visible screen areas (Mulloni et al.) and draws the contents of the cells reached.
@@ -89,13 +90,16 @@ CELL_KIND_TABLE: tuple[CellKind, ...] = (
     CellKind("room", "portals", located_in_3d=True),
     CellKind("doorway", "portals", located_in_3d=True),
     CellKind("outside", "portals", locatable=False),
+    CellKind("section", "pvs"),
 )
 """Every kind of view cell, in the order the bake numbers cells by kind.
 
-Interiors use the last three: ``room`` (a convex part of a room), ``doorway`` (the
-opening of a door or inner window through a thick wall, so that an eye standing in it
-is in a cell) and ``outside`` (one per interior: everything seen through windows and
-outer doors; no viewer is ever located in it)."""
+Interiors use ``room`` (a convex part of a room), ``doorway`` (the opening of a door or
+inner window through a thick wall, so that an eye standing in it is in a cell) and
+``outside`` (one per interior: everything seen through windows and outer doors; no
+viewer is ever located in it).  ``section`` is a rectangle grown over a dense
+visibility field (Brosnan et al.).  The order may only grow at the end: the cell ids
+of every baked scene follow it."""
 
 _BY_NAME: dict[str, CellKind] = {k.name: k for k in CELL_KIND_TABLE}
 

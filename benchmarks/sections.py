@@ -1,0 +1,164 @@
+"""The section-size trade, measured: ``walkstream bench sections``.
+
+One city is baked with street cells (the default) and into sections for every
+redundancy ``R`` and minimum size ``M`` asked for; the dense visibility field is
+rendered once (the first sections bake) and reused by the others (their field
+folders point at it), so the sweep costs one field.  Every database holds the same
+default walks (sections take the walks of the street partition), and each walk is
+replayed in each at 56 kbit/s, 200 ms round trip, under the simulated clock.  A row
+gives the cells, their mean PVS, the redundancy (objects a section holds that the
+field point where the walker stands does not see, averaged over every section and
+field point in it), the bake seconds, and per walk the cells entered per km, the
+bytes per km and the perfect frames.  A replay is run by the ``replay`` callable the
+command line hands in.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from walkstream.server.bake import BakeSettings, bake
+from walkstream.server.store import SceneReader
+from walkstream.shared.errors import WalkstreamError
+from walkstream.shared.paths import RecordedPath
+
+__all__ = ["run_sections_bench", "format_sections_table", "plot_sections_trade"]
+
+Replayer = Callable[[str, Mapping[str, Any], str], Any]
+
+
+def _bake(src: Path, db: Path, st: BakeSettings, reuse: bool, workers: int) -> dict[str, Any]:
+    if reuse and db.exists():
+        with SceneReader.open(db) as reader:
+            return reader.summary() | {"bake_seconds": float(reader.summary().get("bake_seconds") or 0.0)}
+    print(f"  baking {db.name} ...", file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    summary = bake(src, db, settings=st, workers=workers)
+    summary["bake_seconds"] = time.perf_counter() - t0
+    return summary
+
+
+def run_sections_bench(
+    replay: Replayer,
+    *,
+    source: Path,
+    out: Path,
+    redundancies: Sequence[int] = (8, 16, 32),
+    min_sizes: Sequence[float] = (64.0,),
+    field_spacing: float = 4.0,
+    walks: Sequence[str] = ("SE", "drive"),
+    reuse: bool = False,
+    workers: int = 1,
+) -> list[dict[str, Any]]:
+    """Bake ``source`` with street cells and in sections for every ``(R, M)``; replay ``walks``.
+
+    Returns one row per database; writes ``bench_sections.json`` and the replay
+    reports into ``out``.
+    """
+    if not source.exists():
+        raise WalkstreamError(f"{source}: no such source")
+    out.mkdir(parents=True, exist_ok=True)
+    runs: list[tuple[str, Path, BakeSettings, int | None, float | None]] = [
+        ("street", out / "street.db", BakeSettings(), None, None)
+    ]
+    for rr in redundancies:
+        for mm in min_sizes:
+            st = BakeSettings(cells="sections", field_spacing=field_spacing, redundancy=int(rr), min_size=float(mm))
+            runs.append(("sections", out / f"sections-R{rr}-M{mm:g}.db", st, int(rr), float(mm)))
+    first_field: Path | None = None
+    rows: list[dict[str, Any]] = []
+    for kind, db, st, r, m in runs:
+        if kind == "sections":
+            folder = Path(os.fspath(db) + ".field")
+            if first_field is None:
+                first_field = folder
+            elif not folder.exists() and first_field.exists():
+                folder.symlink_to(first_field.resolve(), target_is_directory=True)
+        s = _bake(source, db, st, reuse, workers)
+        with SceneReader.open(db) as reader:
+            paths = {w: RecordedPath.from_msgpack(reader.path_blob(w), w) for w in walks if w in reader.path_names()}
+        row: dict[str, Any] = {
+            "cells_kind": kind, "redundancy": r, "min_size": m, "cells": s["cells"], "pvs_mean": s["pvs_mean"],
+            "section_redundancy_mean": s.get("section_redundancy_mean"), "bake_seconds": s["bake_seconds"],
+            "field_points": s.get("field_points"), "field_bytes": s.get("field_bytes"), "walks": {},
+        }
+        for w, path in paths.items():
+            km = path.length_m() / 1000.0
+            options = {"path": w, "bandwidth": "56kbit", "rtt": "200ms", "clock": "sim", "device": "desktop2003",
+                       "report": str(out / f"{db.stem}-{w}")}
+            print(f"  replaying {w} in {db.name} ...", file=sys.stderr, flush=True)
+            res = replay(str(db), options, f"{db.stem} {w}")
+            rs = res.summary
+            row["walks"][w] = {
+                "km": km, "perfect_frame_ratio": rs["perfect_frame_ratio"],
+                "first_perfect_s": rs.get("time_to_first_perfect_frame_s"),
+                "bytes_per_km": rs["bytes_received"] / km if km > 0 else None,
+                "cells_per_km": rs["cells_entered"] / km if km > 0 else None,
+            }
+        rows.append(row)
+    (out / "bench_sections.json").write_text(json.dumps(rows, indent=2, default=str))
+    return rows
+
+
+def format_sections_table(rows: list[dict[str, Any]]) -> str:
+    """One line per database and walk."""
+    head = (f"{'cells':<9} {'R':>3} {'M m2':>5} {'n cells':>7} {'PVS mean':>8} {'redund.':>7} {'bake s':>7} "
+            f"{'walk':>6} {'cells/km':>8} {'bytes/km':>9} {'perfect%':>8} {'first s':>7}")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        red = "-" if r["section_redundancy_mean"] is None else f"{r['section_redundancy_mean']:.1f}"
+        big = "-" if r["min_size"] is None else f"{r['min_size']:g}"
+        for w, f in r["walks"].items():
+            first = f["first_perfect_s"]
+            lines.append(
+                f"{r['cells_kind']:<9} {'-' if r['redundancy'] is None else r['redundancy']:>3} "
+                f"{big:>5} {r['cells']:>7,} {r['pvs_mean']:>8.1f} "
+                f"{red:>7} {r['bake_seconds']:>7.0f} {w:>6} {f['cells_per_km']:>8.1f} {f['bytes_per_km']:>9,.0f} "
+                f"{100 * f['perfect_frame_ratio']:>8.2f} {'never' if first is None else f'{first:.2f}':>7}"
+            )
+    return "\n".join(lines)
+
+
+def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]) -> None:
+    """The paper's trade as a plot: per walk, bytes per km and cells entered per km against
+    the sections' mean PVS (one point per ``(R, M)``, labelled with its redundancy where
+    the bake measured it), street cells as dotted lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    secs = [r for r in rows if r["cells_kind"] == "sections"]
+    street = next((r for r in rows if r["cells_kind"] == "street"), None)
+    walks = sorted({w for r in rows for w in r["walks"]})
+    fig = Figure(figsize=(5.0 * max(1, len(walks)), 4.2), dpi=120)
+    for k, w in enumerate(walks):
+        ax = fig.add_subplot(1, max(1, len(walks)), k + 1)
+        pts = [(r["pvs_mean"], r["walks"][w]["bytes_per_km"] / 1000, r["walks"][w]["cells_per_km"],
+                f"R{r['redundancy']} M{r['min_size']:g}"
+                + ("" if r["section_redundancy_mean"] is None else f" (redundancy {r['section_redundancy_mean']:.0f})"))
+               for r in secs if w in r["walks"]]
+        if pts:
+            x, b, c, lab = zip(*pts, strict=True)
+            ax.plot(x, b, "o-", color="#1f77b4", label="sections: kB/km")
+            for xi, bi, li in zip(x, b, lab, strict=True):
+                ax.annotate(li, (xi, bi), fontsize=7, xytext=(3, 3), textcoords="offset points")
+            ax2 = ax.twinx()
+            ax2.plot(x, c, "s--", color="#d62728", label="sections: cells entered/km")
+            ax2.set_ylabel("cells entered per km", color="#d62728")
+            if street is not None and w in street["walks"]:
+                ax.axhline(street["walks"][w]["bytes_per_km"] / 1000, color="#1f77b4", lw=0.8, ls=":",
+                           label="street cells: kB/km")
+                ax2.axhline(street["walks"][w]["cells_per_km"], color="#d62728", lw=0.8, ls=":")
+        ax.set_xlabel("mean section PVS (objects; larger: more redundancy)")
+        ax.set_ylabel("kB per km", color="#1f77b4")
+        ax.set_title(f"{w}: the section-size trade (56 kbit/s)", fontsize=9)
+        ax.legend(loc="upper right", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.fspath(path))

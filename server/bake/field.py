@@ -1,0 +1,267 @@
+"""The dense visibility field (Brosnan et al., section 3): a full spin at every point of a 2D lattice.
+
+A lattice of points every ``spacing`` metres is laid over the scene; a point is a
+*field point* when its square (the ``spacing`` x ``spacing`` square around it) holds
+free space, i.e. space outside every building footprint grown by the bake's wall
+margin.  Every field point is rendered where it stands, or, when it stands inside a
+building, at a point of its square's free part (so no sample is ever taken inside a
+building, and every bit of free space lies in some field point's square).  At each
+field point the bake's ID renderer (:class:`~.visibility.VisibilityRenderer`, the
+one the PVS cells use, on a real GPU as well) renders the six faces of a cube at
+two eye heights, the eye height and the top of the eye range: a full spin up and
+down.  Each point keeps its visible set with the pixels each object covers
+(:class:`PointSets`, compressed sparse rows: 8 bytes per (point, object) pair).
+
+The field is rendered in blocks of points by the one chunk runner
+(:func:`~.chunks.run_chunks`: this process, local processes or Dask); every block is
+saved to the field's folder as it comes (``<database>.field/<key>/``), so a killed
+bake resumes with the blocks done, and a bake of the same scene with other section
+settings (``--redundancy``, ``--min-size``) reuses the whole field.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+from walkstream.server.bake.chunks import run_chunks
+from walkstream.server.bake.settings import BakeSettings
+from walkstream.server.bake.workers import field_task, release_renderer
+from walkstream.server.sources.scene import SourceScene
+from walkstream.shared.arrays import F64, I64
+from walkstream.shared.errors import InputError
+
+__all__ = ["FIELD_BLOCK", "FieldLattice", "PointSets", "bake_field", "field_lattice", "field_folder"]
+
+FIELD_BLOCK = 64
+"""Field points per task (and per saved block)."""
+
+_MAX_POINTS = 4_000_000
+
+
+@dataclass(frozen=True)
+class FieldLattice:
+    """The field points of a scene: lattice positions and where each is rendered.
+
+    Attributes
+    ----------
+    origin : (x0, y0)
+        Scene-local position of lattice point ``(0, 0)``.
+    spacing : float
+        Metres between lattice points.
+    shape : (ny, nx)
+        Lattice rows (y) and columns (x).
+    index : (n,) int64
+        Each field point's lattice position, ``row * nx + col``, ascending.
+    eyes : (n, 2) float64
+        Where each field point is rendered (the point itself when it is free).
+    heights : (2,) float64
+        The eye heights every point is rendered at.
+    """
+
+    origin: tuple[float, float]
+    spacing: float
+    shape: tuple[int, int]
+    index: I64
+    eyes: F64
+    heights: tuple[float, float]
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def grid(self) -> I64:
+        """``(ny, nx)`` field point number of every lattice position, ``-1`` where none."""
+        g = np.full(self.shape[0] * self.shape[1], -1, np.int64)
+        g[self.index] = np.arange(len(self.index))
+        return g.reshape(self.shape)
+
+    def xy(self) -> F64:
+        """``(n, 2)`` lattice position of every field point, scene-local metres."""
+        r, c = np.divmod(self.index, self.shape[1])
+        out: F64 = np.stack([self.origin[0] + c * self.spacing, self.origin[1] + r * self.spacing], axis=1)
+        return out
+
+
+@dataclass(frozen=True)
+class PointSets:
+    """Every field point's visible set with pixel counts, as compressed sparse rows.
+
+    Point ``k`` sees objects ``ids[offsets[k]:offsets[k + 1]]`` (ascending), covering
+    ``pixels[...]`` pixels over its images.
+    """
+
+    offsets: I64
+    ids: I64
+    pixels: I64
+
+    def __len__(self) -> int:
+        return len(self.offsets) - 1
+
+    def of(self, k: int) -> tuple[I64, I64]:
+        """``(ids, pixels)`` of point ``k``."""
+        a, b = int(self.offsets[k]), int(self.offsets[k + 1])
+        return self.ids[a:b], self.pixels[a:b]
+
+    def sizes(self) -> I64:
+        """``(n,)`` objects each point sees."""
+        out: I64 = np.diff(self.offsets)
+        return out
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the compact store (int32 ids and uint32 pixels, int64 offsets)."""
+        return 8 * len(self.ids) + 8 * len(self.offsets)
+
+
+def field_lattice(
+    scene: SourceScene,
+    spacing: float,
+    heights: tuple[float, float],
+    *,
+    margin: float = 0.3,
+    bbox: tuple[float, float, float, float] | None = None,
+) -> FieldLattice:
+    """The field points of ``scene`` every ``spacing`` metres (see the module docstring).
+
+    The lattice covers ``bbox`` (default: the bounding box of the buildings and the
+    street pieces) from its lower-left corner.
+
+    Raises
+    ------
+    InputError
+        A bad spacing, an empty scene without ``bbox``, or a lattice too large.
+    """
+    s = float(spacing)
+    if not (math.isfinite(s) and s > 0):
+        raise InputError(f"--field-spacing: expected a positive number of metres, got {spacing}")
+    if bbox is None:
+        rings = [b.rings[0] for b in scene.buildings] + [st.ring for st in scene.streets]
+        if not rings:
+            raise InputError(f"scene {scene.name!r} has no buildings or streets: give a bbox")
+        pts = np.concatenate(rings)
+        (x0, y0), (x1, y1) = pts.min(axis=0), pts.max(axis=0)
+    else:
+        x0, y0, x1, y1 = (float(v) for v in bbox)
+    nx = int(math.floor((x1 - x0) / s + 1e-9)) + 1
+    ny = int(math.floor((y1 - y0) / s + 1e-9)) + 1
+    if nx * ny > _MAX_POINTS:
+        raise InputError(f"--field-spacing {s:g}: a lattice of {nx} x {ny} points is too large; space it wider")
+    r, c = np.divmod(np.arange(nx * ny, dtype=np.int64), nx)
+    x, y = x0 + c * s, y0 + r * s
+    blocked = _built(scene, margin)
+    if blocked is None:
+        return FieldLattice((float(x0), float(y0)), s, (ny, nx), np.arange(nx * ny, dtype=np.int64),
+                            np.stack([x, y], axis=1), (float(heights[0]), float(heights[1])))
+    inside = shapely.contains_xy(blocked, x, y)
+    eyes = np.stack([x, y], axis=1)
+    keep = ~inside
+    todo = np.flatnonzero(inside)
+    if len(todo):
+        h = s / 2.0
+        squares = shapely.box(x[todo] - h, y[todo] - h, x[todo] + h, y[todo] + h)
+        free = shapely.difference(squares, blocked)
+        ok = ~shapely.is_empty(free) & (shapely.area(free) > 1e-6 * s * s)
+        if ok.any():
+            # a point of the free part that lies inside it (a polygon's representative point)
+            p = shapely.get_coordinates(shapely.point_on_surface(free[ok]))
+            eyes[todo[ok]] = p
+            keep[todo[ok]] = True
+    idx = np.flatnonzero(keep).astype(np.int64)
+    return FieldLattice((float(x0), float(y0)), s, (ny, nx), idx, eyes[idx], (float(heights[0]), float(heights[1])))
+
+
+def _built(scene: SourceScene, margin: float) -> shapely.Geometry | None:
+    polys = [shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings]
+    if not polys:
+        return None
+    u = shapely.union_all(shapely.make_valid(np.array(polys, dtype=object)))
+    grown = shapely.buffer(u, float(margin), quad_segs=2) if margin > 0 else u
+    shapely.prepare(grown)
+    return grown
+
+
+def field_folder(output: str | os.PathLike[str], key: str) -> Path:
+    """Where the field of a bake of ``output`` keeps its blocks: ``<output>.field/<key>``."""
+    return Path(os.fspath(output) + ".field") / key
+
+
+def bake_field(
+    lattice: FieldLattice,
+    scene: SourceScene,
+    settings: BakeSettings,
+    key: str,
+    folder: Path,
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    max_points: int | None = None,
+) -> PointSets | None:
+    """Render the field of ``lattice`` (resuming the blocks saved in ``folder``).
+
+    Parameters
+    ----------
+    lattice, scene, settings:
+        The field points, the scene and the renderer's settings (resolution,
+        occluder LOD, view distance, edge pass).
+    key:
+        Names the scene and those settings (a worker keeps its renderer while it stays).
+    folder:
+        Where each block is saved as it comes (:func:`field_folder`).
+    workers, scheduler:
+        As :func:`~.chunks.run_chunks`.
+    progress:
+        Called with ``(points done, points total)``.
+    max_points:
+        Stop after about this many new points (for tests of interruption and resume);
+        None is returned then.
+
+    Returns
+    -------
+    PointSets or None
+        The field, or None when ``max_points`` stopped it first.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    n = len(lattice)
+    blocks = [(b, lattice.eyes[s : s + FIELD_BLOCK]) for b, s in enumerate(range(0, n, FIELD_BLOCK))]
+    done = {b for b, _ in blocks if (folder / f"{b:06d}.npz").exists()}
+    todo = [(b, e, lattice.heights) for b, e in blocks if b not in done]
+    if max_points is not None:
+        todo = todo[: max(0, math.ceil(max_points / FIELD_BLOCK))]
+    done_points = sum(len(e) for b, e in blocks if b in done)
+    count = done_points
+    if progress is not None:
+        progress(count, n)
+    for results in run_chunks(field_task, todo, (scene, settings, key), size=1, workers=workers,
+                              scheduler=scheduler, release=release_renderer):
+        for b, offsets, ids, pixels in results:
+            tmp = folder / f"{b:06d}.tmp.npz"
+            np.savez_compressed(tmp, offsets=offsets, ids=ids, pixels=pixels)
+            os.replace(tmp, folder / f"{b:06d}.npz")
+            done.add(b)
+            count += len(offsets) - 1
+        if progress is not None:
+            progress(count, n)
+    if len(done) < len(blocks):
+        return None
+    return _load(folder, len(blocks))
+
+
+def _load(folder: Path, blocks: int) -> PointSets:
+    offs, ids, pix = [np.zeros(1, np.int64)], [], []
+    base = 0
+    for b in range(blocks):
+        with np.load(folder / f"{b:06d}.npz") as z:
+            o = z["offsets"].astype(np.int64)
+            offs.append(o[1:] + base)
+            base += int(o[-1])
+            ids.append(z["ids"].astype(np.int64))
+            pix.append(z["pixels"].astype(np.int64))
+    return PointSets(np.concatenate(offs), np.concatenate(ids) if ids else np.zeros(0, np.int64),
+                     np.concatenate(pix) if pix else np.zeros(0, np.int64))

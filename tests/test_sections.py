@@ -1,0 +1,223 @@
+"""Sections from a dense visibility field (Brosnan et al.): the growth rules, the bake, the walk.
+
+The rules are tested on a synthetic field (no rendering): a lattice with a building
+in it and made-up visible sets.  The bake, the map and a replay on a small generated
+city with a coarse field at a low resolution.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+import shapely
+
+from walkstream.cli import main
+from walkstream.client.config import ReplayConfig
+from walkstream.client.net.link import LinkProfile
+from walkstream.client.replay import run_replay
+from walkstream.client.stream.cellmap import CellMap
+from walkstream.client.stream.plan import plan_needs
+from walkstream.server.bake import BakeSettings, bake
+from walkstream.server.bake.field import FieldLattice, PointSets, field_folder, field_lattice
+from walkstream.server.bake.sections import grow_sections, section_points, section_pvs
+from walkstream.server.service.main import create_app
+from walkstream.server.sources.citygen import write_city
+from walkstream.server.sources.read import read_source
+from walkstream.server.store import SceneReader
+from walkstream.shared.cells import CellLocator
+from walkstream.shared.paths import RecordedPath
+
+# --------------------------------------------------------------------- synthetic field
+
+
+def _field() -> tuple[FieldLattice, PointSets]:
+    """A 12 x 8 lattice (2 m) with a 4 x 3 building in it; two 'streets' (rows 0-2 and
+    rows 6-7) that see different objects, joined by a column on the west."""
+    ny, nx = 8, 12
+    r, c = np.divmod(np.arange(nx * ny), nx)
+    building = (r >= 3) & (r <= 5) & (c >= 3) & (c <= 6)
+    index = np.flatnonzero(~building)
+    sets: list[list[int]] = []
+    for k in index.tolist():
+        rr, cc = divmod(k, nx)
+        s = {0, 1} | ({2, 3} if rr <= 2 else {4, 5} if rr >= 6 else {2, 4})
+        if cc >= 8:
+            s.add(6 + cc)  # the east sees a new object every column
+        sets.append(sorted(s))
+    offsets = np.concatenate([[0], np.cumsum([len(s) for s in sets])]).astype(np.int64)
+    ids = np.array([i for s in sets for i in s], np.int64)
+    xy = np.stack([c[index] * 2.0, r[index] * 2.0], axis=1)
+    lat = FieldLattice((0.0, 0.0), 2.0, (ny, nx), index.astype(np.int64), xy, (1.7, 2.0))
+    return lat, PointSets(offsets, ids, np.ones(len(ids), np.int64))
+
+
+def _set(sets: PointSets, k: int) -> set[int]:
+    return set(sets.of(k)[0].tolist())
+
+
+@pytest.mark.parametrize(("redundancy", "min_size"), [(0, 0.0), (2, 16.0), (5, 64.0), (100, 400.0)])
+def test_growth_rules_on_a_synthetic_field(redundancy: int, min_size: float) -> None:
+    lat, sets = _field()
+    secs = grow_sections(lat, sets, redundancy=redundancy, min_size=min_size)
+    grid = lat.grid()
+    covered = np.zeros(len(lat), bool)
+    for s in secs:
+        pts = section_points(s, grid)
+        covered[pts] = True
+        union = set().union(*(_set(sets, int(k)) for k in pts))
+        pvs, ach = section_pvs(s, grid, sets)
+        assert set(pvs.tolist()) == union  # the PVS is the union of its points' sets
+        assert ach.sum() == pytest.approx(1.0)
+        seed = _set(sets, s.seed)
+        i0, j0, i1, j1 = s.inner
+        inner = grid[j0 : j1 + 1, i0 : i1 + 1]
+        assert (inner >= 0).all()  # no gaps in the inner rectangle
+        assert all(_set(sets, int(k)) <= seed for k in inner.ravel())  # the subset rule
+        assert len(union - seed) == s.redundancy <= redundancy
+        if not s.relaxed:
+            assert s.points * lat.spacing**2 >= min_size
+    assert covered.all()  # every field point lies in a section
+
+
+def test_a_row_of_building_alone_does_not_join_two_streets() -> None:
+    lat, sets = _field()
+    grid = lat.grid()
+    for s in grow_sections(lat, sets, redundancy=0, min_size=0.0):
+        pts = section_points(s, grid)
+        rows = {int(k) // 12 for k in lat.index[pts].tolist()}
+        assert not (min(rows) <= 2 and max(rows) >= 6 and s.i0 >= 3)  # only via the west column
+
+
+def test_overlaps_only_where_they_add_points() -> None:
+    lat, sets = _field()
+    grid = lat.grid()
+    secs = grow_sections(lat, sets, redundancy=3, min_size=0.0)
+    seen = np.zeros(len(lat), bool)
+    for s in secs:
+        pts = section_points(s, grid)
+        assert not seen[pts].all()  # every section brings a point no earlier one has
+        seen[pts] = True
+
+
+# --------------------------------------------------------------------- the bake
+
+FAST = BakeSettings(cells="sections", resolution=32, field_spacing=6.0)
+
+
+@pytest.fixture(scope="module")
+def city(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("sections") / "city.geojson"
+    write_city(path, 150, 2)
+    return path
+
+
+@pytest.fixture(scope="module")
+def baked(city: Path, gl_ctx: object) -> tuple[Path, dict]:
+    out = city.parent / "sections.db"
+    return out, bake(city, out, settings=FAST)
+
+
+@pytest.mark.gl
+def test_the_bake_covers_every_free_point_and_unions_the_field(city: Path, baked: tuple[Path, dict]) -> None:
+    db, summary = baked
+    assert summary["schema_version"] == 3 and summary["cells"] == summary["sections"] > 1
+    scene = read_source(city)
+    lat = field_lattice(scene, FAST.field_spacing, (1.7, 2.0), margin=FAST.margin)
+    # no sample inside a building: every eye lies outside every footprint
+    foot = shapely.union_all([shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings])
+    assert not shapely.contains_xy(foot, lat.eyes[:, 0], lat.eyes[:, 1]).any()
+    with SceneReader.open(db) as r:
+        cells = list(r.cells())
+        assert {c.kind for c in cells} == {"section"} and "section_cells" in r.meta.features
+        loc = CellLocator.of_kinds([c.id for c in cells], [c.kind for c in cells], [c.boundary for c in cells],
+                                   [[c.zmin, c.zmax] for c in cells])
+        # every field point (its lattice position and where it was rendered) lies in a section
+        assert (loc.locate_many(lat.xy()) >= 0).all() and (loc.locate_many(lat.eyes) >= 0).all()
+        folders = list(Path(str(db) + ".field").iterdir())
+        assert len(folders) == 1
+        blocks = sorted(folders[0].glob("*.npz"))
+        ids = [np.load(b)["ids"] for b in blocks]
+        offs = [np.load(b)["offsets"] for b in blocks]
+        sets = [set(i[o[k] : o[k + 1]].tolist()) for i, o in zip(ids, offs, strict=True) for k in range(len(o) - 1)]
+        xy = lat.xy()
+        for c in cells:
+            lo, hi = c.boundary.min(axis=0), c.boundary.max(axis=0)
+            inside = np.flatnonzero(((xy >= lo) & (xy <= hi)).all(axis=1))
+            assert set(c.pvs.tolist()) == set().union(*(sets[k] for k in inside.tolist()))
+            if len(c.pvs):
+                assert c.ach.sum() == pytest.approx(1.0)
+        # sections that share an edge are neighbours
+        for c in cells:
+            for n in c.neighbours:
+                assert c.id in cells[n].neighbours
+        assert r.viewpoints() and all(v.name.startswith("start") and v.cell is not None for v in r.viewpoints())
+
+
+@pytest.mark.gl
+def test_a_field_resumes_after_a_kill(city: Path, baked: tuple[Path, dict], tmp_path: Path) -> None:
+    db, summary = baked
+    out = tmp_path / "again.db"
+    assert bake(city, out, settings=FAST, max_cells=64, name="sections") == {}
+    folder = next(Path(str(out) + ".field").iterdir())
+    assert 0 < len(list(folder.glob("*.npz"))) < len(list(next(Path(str(db) + ".field").iterdir()).glob("*.npz")))
+    again = bake(city, out, settings=FAST, name="sections")  # the same scene: the same version
+    assert again["version"] == summary["version"]
+    assert field_folder(out, folder.name) == folder
+
+
+@pytest.mark.gl
+def test_a_replay_on_sections_locates_every_frame_and_prefetches_neighbours(baked: tuple[Path, dict]) -> None:
+    db, _ = baked
+    cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="desktop2003", path="SE", duration_s=10.0)
+    app = create_app([db])
+    try:
+        res = run_replay(httpx.ASGITransport(app=app), "http://walkstream.test", cfg)
+    finally:
+        app.state.scenes.close()
+    with SceneReader.open(db) as r:
+        cells = {c.id: c for c in r.cells()}
+        se = RecordedPath.from_msgpack(r.path_blob("SE"), "SE")
+    cell = np.asarray(res.log.cell)
+    assert (cell >= 0).all() and set(cell.tolist()) <= set(cells)
+    # the prefetch follows the sections' adjacency: the cells ahead are planned from the index
+    m = CellMap()
+    m.add_cells(list(cells), [c.boundary for c in cells.values()], [c.neighbours for c in cells.values()],
+                [c.kind for c in cells.values()])
+    xy = np.asarray(se.xyz)[0, :2]
+    m.update(xy)
+    assert m.current is not None
+    needs = plan_needs(m, None, xy, np.array([1.4, 0.0]), None, reach_m=300.0, reach_records_m=400.0,
+                       turn_m=10.0, min_speed=1.0)
+    assert set(cells[m.current].neighbours) <= set(needs.records)
+
+
+@pytest.mark.gl
+def test_the_map_draws_the_sections(baked: tuple[Path, dict], tmp_path: Path) -> None:
+    db, _ = baked
+    assert main(["inspect", str(db), "--map", str(tmp_path / "map.png")]) == 0
+    assert (tmp_path / "map.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(("flag", "value", "says"), [("--field-spacing", "0", "--field-spacing"),
+                                                      ("--redundancy", "-1", "--redundancy"),
+                                                      ("--min-size", "-5", "--min-size")])
+def test_bad_section_flags_get_one_line(city: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                        flag: str, value: str, says: str) -> None:
+    assert main(["bake", str(city), "-o", str(tmp_path / "x.db"), "--cells", "sections", flag, value]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0]
+
+
+def test_locating_in_an_overlap_keeps_the_section_the_viewer_is_in() -> None:
+    a = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 4.0], [0.0, 4.0]])
+    b = np.array([[6.0, 0.0], [20.0, 0.0], [20.0, 4.0], [6.0, 4.0]])  # overlaps a over x 6..10
+    m = CellMap()
+    m.add_cells([0, 1], [a, b], [[1], [0]], ["section", "section"])
+    assert m.update([2.0, 2.0]) == (0, True) and m.update([8.0, 2.0]) == (0, True)  # into the overlap: still 0
+    assert m.update([15.0, 2.0]) == (1, True) and m.update([8.0, 2.0]) == (1, True)  # back: still 1
+    # the service answers the lowest id in an overlap, deterministically
+    loc = CellLocator.of_kinds([0, 1], ["section", "section"], [a, b], [[1.5, 2.0], [1.5, 2.0]])
+    assert loc.locate(8.0, 2.0) == 0 and loc.locate(15.0, 2.0) == 1
