@@ -9,7 +9,10 @@ Every scene kind (a city, an interior, a crossing of both) is turned into a
   grid cells): their PVS and ACH rendered in chunks (:func:`~.workers.pvs_task`);
 - :class:`RoomCells`, cells seen through portals (room, doorway and outside cells):
   their contents clipped in chunks (:func:`~.roomcontents.contents_task`) and
-  encoded; their portals are written with the plan's tables.
+  encoded; their portals are written with the plan's tables;
+- :class:`ImpostorCells` (a city baked with ``--impostors``): after the PVS, the
+  impostor images its PVS cells need (:mod:`~.impostorplan`), rendered and encoded
+  in chunks (:func:`~.impostorrender.impostor_task`).
 
 A planner does the cheap work (reading, cells, placement, the walking graphs); the
 chunked work, the database and resuming are the driver's.
@@ -22,6 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from walkstream.server.bake.impostorsettings import ImpostorSettings
 from walkstream.server.bake.roomcontents import Part
 from walkstream.server.bake.rooms import RoomLayout
 from walkstream.server.bake.settings import BakeSettings
@@ -31,7 +35,7 @@ from walkstream.server.sources.scene import SourceScene
 from walkstream.server.store import SceneWriter
 from walkstream.shared.paths import RecordedPath
 
-__all__ = ["BakePlan", "PvsCells", "RoomCells", "Say", "Walk", "settings_key"]
+__all__ = ["BakePlan", "ImpostorCells", "PvsCells", "RoomCells", "Say", "Walk", "settings_key"]
 
 Say = Callable[[str], None]
 """A one-line message about the bake's stages."""
@@ -69,6 +73,19 @@ class RoomCells:
 
 
 @dataclass
+class ImpostorCells:
+    """The impostor images of a city's PVS cells: ``settings`` (D, A, S, N, codec), the
+    buildings' stored ``boxes`` and LOD2 triangles ``tris2`` by object id; ``key``
+    names the scene (a worker keeps its renderer while it stays)."""
+
+    scene: SourceScene
+    settings: ImpostorSettings
+    boxes: dict[int, tuple[float, float, float, float, float, float]]
+    tris2: dict[int, int]
+    key: str
+
+
+@dataclass
 class BakePlan:
     """A scene to bake (see the module docstring).
 
@@ -79,6 +96,8 @@ class BakePlan:
         ``settings`` identifies the input, so a work file with equal ones resumes.
     pvs, rooms:
         The scene's cells by kind (either may be None).
+    impostors:
+        The impostor images of the PVS cells (None: a bake without ``--impostors``).
     write_tables:
         Writes everything but the PVS and the contents: objects, cells, viewpoints,
         rooms, portals, stairs, entrances (on resume again: the writer's upserts keep
@@ -101,6 +120,7 @@ class BakePlan:
     write_tables: Callable[[SceneWriter], None]
     walks: Callable[[Say], list[Walk]]
     summary: dict[str, Any] = field(default_factory=dict)
+    impostors: ImpostorCells | None = None
 
 
 def settings_key(settings: dict[str, Any]) -> str:
