@@ -138,10 +138,11 @@ def image_basis(direction: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.f
     :func:`~walkstream.shared.camera.look_at` does; texel column ``j`` of ``n`` (row
     ``i`` from the top) shows ``c + R (2 (j + 0.5) / n - 1) right + R (1 - 2 (i + 0.5) / n) up``.
     """
-    u = np.asarray(direction, np.float64).reshape(3)
-    u = u / np.linalg.norm(u)
-    right = np.cross(-u, (0.0, 0.0, 1.0))
-    norm = np.linalg.norm(right)
-    right = np.array([1.0, 0.0, 0.0]) if norm < 1e-9 else right / norm
-    up = np.cross(right, -u)
+    x, y, z = (float(v) for v in np.asarray(direction, np.float64).reshape(3))
+    n = math.sqrt(x * x + y * y + z * z)
+    x, y, z = x / n, y / n, z / n
+    h = math.hypot(x, y)
+    # right = -u x z_up, normalised; up = right x -u (plain arithmetic: this runs per image)
+    right = np.array([1.0, 0.0, 0.0]) if h < 1e-9 else np.array([-y / h, x / h, 0.0])
+    up = np.array([-right[1] * z, right[0] * z, -(right[0] * y - right[1] * x)])
     return right, up / np.linalg.norm(up)

@@ -75,6 +75,7 @@ __all__ = [
     "START_PARTS",
     "Manifest",
     "CellRecord",
+    "ImpostorRow",
     "CellIndex",
     "ObjectFrame",
     "decode_manifest",
@@ -197,6 +198,59 @@ def _grid_from_wire(obj: Any) -> TileGrid | None:
         raise ValueError(str(exc)) from exc
 
 
+@dataclass(frozen=True, slots=True)
+class ImpostorRow:
+    """One object a cell draws as an impostor, and its images by direction bin.
+
+    The images of azimuth bins ``az0 .. az0 + n_az - 1`` (modulo the level's count)
+    and elevation bins ``el0 .. el0 + n_el - 1`` at ``level``
+    (:mod:`walkstream.shared.impostors`): ``images[j * n_az + i]``.  ``centre`` and
+    ``radius`` (metres) place the quad: the object's bounding sphere.
+    On the wire: ``[object, level, az0, n_az, el0, n_el, cx, cy, cz, r, ids...]``,
+    the four lengths in centimetres.
+    """
+
+    object: int
+    level: int
+    az0: int
+    n_az: int
+    el0: int
+    n_el: int
+    centre: tuple[float, float, float]
+    radius: float
+    images: tuple[int, ...]
+
+    def to_wire(self) -> list[int]:
+        """The row as sent."""
+        cm = [int(round(v * 100.0)) for v in (*self.centre, self.radius)]
+        return [self.object, self.level, self.az0, self.n_az, self.el0, self.n_el, *cm, *self.images]
+
+    def image_for(self, ia: int, ie: int) -> int | None:
+        """The image of bin ``(ia, ie)`` at :attr:`level`, or None when the cell lists no image for it."""
+        n = 8 << self.level  # azimuth bins at the level (shared/impostors.py: 45 degrees / 2**level)
+        i, j = (ia - self.az0) % n, ie - self.el0
+        if 0 <= i < self.n_az and 0 <= j < self.n_el:
+            return self.images[j * self.n_az + i]
+        return None
+
+
+_MAX_IMPOSTOR_LEVEL = 16
+
+
+def _impostor_row(row: Any, what: str) -> ImpostorRow:
+    """An :class:`ImpostorRow` from its wire list, checked."""
+    if not isinstance(row, list) or len(row) < 11 or not all(type(v) is int for v in row):
+        raise CodecError(f"{what}: an impostor row is not a list of at least 11 integers")
+    oid, level, az0, n_az, el0, n_el = row[:6]
+    cx, cy, cz, r = (v / 100.0 for v in row[6:10])
+    images = tuple(row[10:])
+    if oid < 0 or not 0 <= level <= _MAX_IMPOSTOR_LEVEL or min(az0, el0) < 0 or min(n_az, n_el) < 1:
+        raise CodecError(f"{what}: impostor row of object {oid}: bad bins")
+    if n_az * n_el != len(images) or min(images) < 1 or r <= 0:
+        raise CodecError(f"{what}: impostor row of object {oid}: {len(images)} images for {n_az} x {n_el} bins")
+    return ImpostorRow(oid, level, az0, n_az, el0, n_el, (cx, cy, cz), r, images)
+
+
 @dataclass(frozen=True)
 class CellRecord:
     """A view cell's own data as the API sends it: its PVS with the ACH of each object.
@@ -215,6 +269,9 @@ class CellRecord:
     nbytes: int = 0
     etag: str | None = None
     body: bytes = field(default=b"", repr=False)
+    impostors: tuple[ImpostorRow, ...] = ()
+    """The objects of the PVS the cell draws as impostors (a scene baked with
+    ``--impostors``; empty otherwise, and then the record is what it was before)."""
 
     def __post_init__(self) -> None:
         # records are shared between caches and callers: nothing in them may change
@@ -225,12 +282,15 @@ class CellRecord:
         """The record as sent (``compact=False``: plain integer lists, for JSON)."""
         ids = np.asarray(self.pvs, dtype=np.int64)
         units = quantise_ach(self.ach) if len(ids) else np.zeros(0, np.int64)
-        return {
+        out: dict[str, Any] = {
             "id": self.id,
             "kind": self.kind,
             "pvs": pack_ints(np.diff(ids, prepend=0).tolist(), compact=compact),
             "ach": pack_ints(units.tolist(), compact=compact),
         }
+        if self.impostors:  # only then: a scene without impostors sends the very same bytes
+            out["imp"] = [r.to_wire() for r in self.impostors]
+        return out
 
 
 @dataclass(frozen=True)
@@ -398,6 +458,9 @@ def cell_from_wire(
         if len(units) and ((units < 0).any() or (units > ACH_UNITS).any()):
             raise CodecError(f"{what}: ach units outside [0, {ACH_UNITS}]")
         kind = obj.get("kind", "")
+        imp = obj.get("imp", [])
+        if not isinstance(imp, list):
+            raise CodecError(f"{what}: imp is not a list")
         return CellRecord(
             id=cid,
             kind=str(kind),
@@ -406,6 +469,7 @@ def cell_from_wire(
             nbytes=nbytes,
             etag=etag,
             body=bytes(body),
+            impostors=tuple(_impostor_row(r, what) for r in imp),
         )
 
 

@@ -1,23 +1,31 @@
-"""Impostors (issue 27): the error bound and its bins, the bake's plan, the images, the stored tables.
+"""Impostors (issue 27): the error bound and its bins, the bake's plan, the images, the stored tables, the service.
 
 The traps: an object straddling the distance D, a building seen from both sides of a
 cell, an image shared by two cells, premultiplied alpha at the silhouette (no dark
-fringes), a database baked without impostors, a bake killed among its images.
+fringes), a database baked without impostors (served to a client asking for them),
+a bake killed among its images.
 """
 
 from __future__ import annotations
 
+import asyncio
+import io
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
+import httpx
+import msgpack
 import numpy as np
 import pytest
 
 from walkstream.server.bake import BakeSettings, ImpostorSettings, bake
 from walkstream.server.bake.impostorplan import plan_impostors
 from walkstream.server.bake.viewcell import ViewCell
+from walkstream.server.service.main import create_app
 from walkstream.server.sources.citygen import write_city
 from walkstream.server.store import SceneReader, SceneWriter
+from walkstream.shared.codec.cellbatch import check_contents_part
 from walkstream.shared.codec.image import decode_image, encode_image
 from walkstream.shared.errors import CodecError, InputError
 from walkstream.shared.impostors import (
@@ -29,6 +37,7 @@ from walkstream.shared.impostors import (
     level_for,
     level_step,
 )
+from walkstream.shared.wire import MSGPACK, CellRecord, decode_cell
 
 BOUND = math.radians(2.0)
 
@@ -163,6 +172,11 @@ def test_premultiplied_silhouette_has_no_dark_fringe(gl: object) -> None:
     try:
         u = np.array([0.2, -1.0, 0.13])
         img = decode_image(encode_image(r.render(1, u / np.linalg.norm(u), 32)), "image")
+        # images drawn as tiles of one framebuffer are those drawn one by one
+        views = [(1, bin_direction(2, a, 15)) for a in (10, 12, 14)]
+        tiled = r.render_many(views, 16)
+        assert all(np.array_equal(t, r.render(o, d, 16)) for t, (o, d) in zip(tiled, views, strict=True))
+        assert len({t.tobytes() for t in tiled}) == 3
     finally:
         r.release()
     a = img[..., 3].astype(np.float64) / 255.0
@@ -256,3 +270,84 @@ def test_a_bake_killed_among_its_images_resumes(
 def test_impostors_refuse_an_interior(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="--impostors"):
         bake(tmp_path / "x.geojson", tmp_path / "x.db", interior=tmp_path / "y.json", impostors=ImpostorSettings())
+
+
+# ------------------------------------------------------------------ the service
+
+
+@pytest.fixture(scope="module")
+def plain(city: Path, gl_ctx: object) -> Path:
+    out = city.parent / "plain.db"
+    bake(city, out, settings=FAST, name="plain")
+    return out
+
+
+class Http:
+    """A synchronous face on ``httpx.AsyncClient`` over the ASGI app (one event loop)."""
+
+    def __init__(self, app: object) -> None:
+        self.loop = asyncio.new_event_loop()
+        self.client = httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://testserver")  # type: ignore[arg-type]
+
+    def get(self, url: str, **kw: object) -> httpx.Response:
+        return self.loop.run_until_complete(self.client.get(url, **kw))  # type: ignore[arg-type]
+
+    def post(self, url: str, **kw: object) -> httpx.Response:
+        return self.loop.run_until_complete(self.client.post(url, **kw))  # type: ignore[arg-type]
+
+    def close(self) -> None:
+        self.loop.run_until_complete(self.client.aclose())
+        self.loop.close()
+
+
+@pytest.fixture(scope="module")
+def http(baked: tuple[Path, dict], plain: Path) -> Iterator[Http]:
+    app = create_app([baked[0], plain])
+    c = Http(app)
+    yield c
+    c.close()
+    app.state.scenes.close()
+
+
+@pytest.mark.gl
+def test_a_scene_without_impostors_serves_its_cells_as_before_and_404s_images(
+    http: Http, plain: Path
+) -> None:
+    with SceneReader.open(plain) as r:
+        c = r.cell(0)
+        before = msgpack.packb(CellRecord(id=c.id, kind=c.kind, pvs=c.pvs, ach=c.ach).to_wire(), use_bin_type=True)
+    got = http.get("/v1/scenes/plain/cells/0", headers={"Accept": MSGPACK})
+    assert got.status_code == 200 and got.content == before and b"imp" not in got.content
+    for resp in (http.get("/v1/scenes/plain/impostors/1"), http.post("/v1/scenes/plain/impostors", json={"ids": [1]})):
+        assert resp.status_code == 404
+        assert "without --impostors" in resp.json()["error"]
+
+
+@pytest.mark.gl
+def test_images_are_listed_by_cells_and_served_immutable_in_batches(http: Http) -> None:
+    rows = []
+    for cid in range(40):
+        resp = http.get(f"/v1/scenes/imp/cells/{cid}", headers={"Accept": MSGPACK})
+        if resp.status_code != 200:
+            break
+        rows += decode_cell(resp.content, "cell").impostors
+    assert rows, "no cell lists an impostor"
+    row = rows[0]
+    assert row.radius > 0 and len(row.images) == row.n_az * row.n_el
+    assert row.image_for(row.az0, row.el0) == row.images[0]
+    image = row.images[0]
+    one = http.get(f"/v1/scenes/imp/impostors/{image}")
+    assert one.status_code == 200 and one.headers["content-type"] == "image/webp"
+    assert "immutable" in one.headers["cache-control"]
+    assert decode_image(one.content, "image").shape[2] == 4
+    again = http.get(f"/v1/scenes/imp/impostors/{image}", headers={"If-None-Match": one.headers["etag"]})
+    assert again.status_code == 304
+    ids = sorted({i for r in rows for i in r.images})[:3]
+    batch = http.post("/v1/scenes/imp/impostors", json={"ids": ids})
+    assert batch.status_code == 200
+    parts = [check_contents_part(p, "part") for p in msgpack.Unpacker(io.BytesIO(batch.content), raw=False)]
+    assert [p[0] for p in parts] == ids
+    first = http.get(f"/v1/scenes/imp/impostors/{ids[0]}")
+    assert parts[0][1] == first.headers["etag"] and parts[0][2] == first.content
+    assert http.get("/v1/scenes/imp/impostors/999999").status_code == 404
+    assert http.post("/v1/scenes/imp/impostors", json={"ids": [ids[0], ids[0]]}).status_code == 422

@@ -196,7 +196,7 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--building", metavar="ID", help="with --interior: the building to put it in, an object id or the source's "
                     "feature id (default auto: one it fits with its door on a street, nearest the middle)")
     bk.add_argument("--impostors", action="store_true", help="also bake impostor images of far and complex buildings (docs/bake.md, impostors)")
-    bk.add_argument("--impostor-distance", type=float, default=None, metavar="D", help="with --impostors: a building at least D metres from every point of a cell is far (default 200)")
+    bk.add_argument("--impostor-distance", type=float, default=None, metavar="D", help="with --impostors: a building at least D metres from every point of a cell is far (default 250)")
     bk.add_argument("--impostor-error", type=float, default=None, metavar="A", help="with --impostors: the largest angle, degrees, under which a point of an impostor may move (default 2)")
     bk.add_argument("--impostor-size", type=int, default=None, metavar="S", help="with --impostors: the largest image side, texels, a power of two (default 128)")
     bk.add_argument("--complex-triangles", type=int, default=None, metavar="N", help="with --impostors: buildings over N triangles at LOD2 are impostors wherever the error bound allows (default 12000)")

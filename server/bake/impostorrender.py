@@ -17,6 +17,7 @@ list of images to make in, their encoded bytes out.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -25,7 +26,7 @@ from numpy.typing import NDArray
 
 from walkstream.server.bake.objectrows import building_box
 from walkstream.shared.buildings import build_lod_batch
-from walkstream.shared.camera import look_at, mat4_bytes
+from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.codec.image import encode_image
 from walkstream.shared.errors import InputError
 from walkstream.shared.gl import (
@@ -35,7 +36,7 @@ from walkstream.shared.gl import (
     create_context,
     release_objects,
 )
-from walkstream.shared.impostors import bin_direction
+from walkstream.shared.impostors import bin_direction, image_basis
 from walkstream.shared.lighting import AMBIENT, LIGHT_DIRECTION
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
@@ -44,6 +45,9 @@ __all__ = ["SUPERSAMPLE", "ImageJob", "ImpostorRenderer", "impostor_task", "rele
 
 SUPERSAMPLE = 2
 """Rendered samples per image texel along each axis (averaged: soft silhouettes)."""
+
+_ATLAS_SIDE = 2048
+"""Largest side of the framebuffer the images of one read are tiled in, pixels."""
 
 ImageJob = tuple[int, int, int, int, int, int]
 """One image to make: ``(image id, object id, level, azimuth bin, elevation bin, size)``."""
@@ -154,37 +158,59 @@ class ImpostorRenderer(Releasable):
             fb = self._fbs[side] = Framebuffer(self.ctx, (side, side))
         return fb
 
-    def render(
-        self, oid: int, direction: NDArray[np.float64], size: int,
-        centre: NDArray[np.float64] | None = None, radius: float | None = None,
-    ) -> NDArray[np.uint8]:
-        """The premultiplied ``(size, size, 4) uint8`` image of object ``oid`` seen along
-        ``-direction`` (row 0 at the top), centred on ``centre`` over ``2 radius``
-        metres (default: the object's own box)."""
+    def _mvp(self, oid: int, direction: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The orthographic view of object ``oid`` along ``-direction`` over its bounding square."""
         if oid not in self._range:
             raise InputError(f"impostor: no mesh of object {oid}")
-        c0, r0 = self._bounds[oid]
-        c = c0 if centre is None else np.asarray(centre, np.float64)
-        r = max(r0 if radius is None else float(radius), 1e-3)
+        c, r = self._bounds[oid]
+        r = max(r, 1e-3)
         u = np.asarray(direction, np.float64)
         u = u / np.linalg.norm(u)
-        view = look_at(c + u * (r + 1.0), c).astype(np.float64)
-        mvp = _ortho(r, 2.0 * r + 2.0) @ view
+        right, up = image_basis(u)
+        eye = c + u * (r + 1.0)
+        view = np.eye(4)  # look_at(eye, c) written out: numpy's cross costs more than the draw
+        view[0, :3], view[1, :3], view[2, :3] = right, up, u
+        view[:3, 3] = -view[:3, :3] @ eye
+        out: NDArray[np.float64] = _ortho(r, 2.0 * r + 2.0) @ view
+        return out
+
+    def render(self, oid: int, direction: NDArray[np.float64], size: int) -> NDArray[np.uint8]:
+        """The premultiplied ``(size, size, 4) uint8`` image of object ``oid`` seen along
+        ``-direction`` (row 0 at the top), over its bounding square."""
+        return self.render_many([(oid, direction)], size)[0]
+
+    def render_many(self, views: Sequence[tuple[int, NDArray[np.float64]]], size: int) -> list[NDArray[np.uint8]]:
+        """:meth:`render` of several ``(object, direction)`` at one size, drawn as tiles of
+        one framebuffer and read back once: llvmpipe's cost is mostly the wait for each
+        read (its threads handing a frame over), so one read per tile grid, not per image."""
         side = int(size) * SUPERSAMPLE
-        fb = self._framebuffer(side)
-        fb.use()
-        fb.clear((0.0, 0.0, 0.0, 0.0))
-        self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
+        per_row = max(1, min(_ATLAS_SIDE // side, math.ceil(math.sqrt(len(views)))))
+        per_fb = per_row * per_row
+        out: list[NDArray[np.uint8]] = []
         prog: Any = self.prog
-        prog["u_view_proj"].write(mat4_bytes(mvp))
-        first, count = self._range[oid]
-        self.vao.render(vertices=count, first=first)
-        check_gl_error(self.ctx, "impostor image")
-        img = fb.read().reshape(size, SUPERSAMPLE, size, SUPERSAMPLE, 4)
-        # the mean of the samples, rounded (integer sums: a float mean costs more than the render)
         n = SUPERSAMPLE * SUPERSAMPLE
-        total = img.sum(axis=(1, 3), dtype=np.uint16)
-        return ((total + n // 2) // n).astype(np.uint8)
+        for k in range(0, len(views), per_fb):
+            part = views[k : k + per_fb]
+            fb = self._framebuffer(per_row * side)
+            fb.use()
+            fb.clear((0.0, 0.0, 0.0, 0.0))
+            self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
+            for t, (oid, direction) in enumerate(part):
+                # tile t: column t % per_row, row t // per_row from the top (GL's y from the bottom)
+                col, row = t % per_row, t // per_row
+                self.ctx.viewport = (col * side, (per_row - 1 - row) * side, side, side)
+                prog["u_view_proj"].write(mat4_bytes(self._mvp(oid, direction)))
+                first, count = self._range[oid]
+                self.vao.render(vertices=count, first=first)
+            check_gl_error(self.ctx, "impostor images")
+            atlas = fb.read()
+            for t in range(len(part)):
+                col, row = t % per_row, t // per_row
+                img = atlas[row * side : (row + 1) * side, col * side : (col + 1) * side]
+                # the mean of the samples, rounded (integer sums: a float mean costs more than the render)
+                total = img.reshape(size, SUPERSAMPLE, size, SUPERSAMPLE, 4).sum(axis=(1, 3), dtype=np.uint16)
+                out.append(((total + n // 2) // n).astype(np.uint8))
+        return out
 
     def release(self) -> None:
         """Free the GL objects (and the context when it made it)."""
@@ -223,11 +249,12 @@ def impostor_task(
     """
     renderer = _renderer_for(scene, key)
     out = []
-    for job in jobs:
-        _, oid, level, ia, ie, size = job
-        img = renderer.render(oid, bin_direction(level, ia, ie), size)
-        out.append((job, encode_image(img, codec, quality)))
-    return out
+    for size in sorted({job[5] for job in jobs}):
+        same = [job for job in jobs if job[5] == size]
+        images = renderer.render_many([(job[1], bin_direction(*job[2:5])) for job in same], size)
+        out += [(job, encode_image(img, codec, quality)) for job, img in zip(same, images, strict=True)]
+    order = {job[0]: k for k, job in enumerate(jobs)}
+    return sorted(out, key=lambda r: order[r[0][0]])
 
 
 def release_impostor_renderer() -> None:

@@ -25,7 +25,7 @@ __all__ = [
 
 #: D, metres: a building at least this far from every point of a cell is far from it
 #: (measured with ``walkstream bake --impostors`` on the demo city: see docs/benchmarks.md)
-DEFAULT_IMPOSTOR_DISTANCE = 200.0
+DEFAULT_IMPOSTOR_DISTANCE = 250.0
 #: A, degrees: the largest angle under which a point of an object may move
 DEFAULT_IMPOSTOR_ERROR = 2.0
 #: S, texels: the largest image side (the paper's PocketGL limit, 128)

@@ -156,6 +156,13 @@ class CellOut(BaseModel):
     ach: IntsOut = Field(
         description="average coverage of each PVS object in units of 1/65535, summing to 65535"
     )
+    imp: list[list[int]] | None = Field(
+        default=None,
+        description="only in a scene baked with --impostors, for a cell with impostors: one row per "
+        "object drawn as an impostor, [object, level, az0, n_az, el0, n_el, cx, cy, cz, r, image ids...] "
+        "(centre and radius of its bounding sphere in centimetres; image j * n_az + i is the one of "
+        "azimuth bin (az0 + i) mod 8 * 2**level and elevation bin el0 + j; see docs/formats.md)",
+    )
 
 
 class CellIndexOut(BaseModel):

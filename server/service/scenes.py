@@ -58,6 +58,7 @@ from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.cells import CellLocator, TileGrid
 from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
+from walkstream.shared.content.impostor import KIND as IMPOSTOR
 from walkstream.shared.content.mesh import KIND as MESH
 from walkstream.shared.content.params import KIND as PARAMS
 from walkstream.shared.content.registry import by_form, object_forms
@@ -73,6 +74,7 @@ from walkstream.shared.wire import (
     OFFERS,
     CellIndex,
     CellRecord,
+    ImpostorRow,
     Manifest,
     ObjectFrame,
     locate_answer,
@@ -288,6 +290,8 @@ class Scene:
         self._grammar_text = meta.grammar_text
         self._grammar: Grammar | None = None
         self._grammar_lock = threading.Lock()
+        self.impostor_ids: frozenset[int] = frozenset(reader.impostor_info())
+        """The impostor images the scene has (empty when baked without ``--impostors``)."""
         self._payloads: dict[str, Callable[[int, bytes], bytes]] = {
             PARAMS.name: lambda _oid, blob: blob,
             MESH.name: self._lod2_mesh,
@@ -346,9 +350,43 @@ class Scene:
         enc = self.cached_cell(cid, rep)
         if enc is None:
             c = self.reader.cell(cid)
-            record = CellRecord(id=c.id, kind=c.kind, pvs=c.pvs, ach=c.ach)
+            record = CellRecord(id=c.id, kind=c.kind, pvs=c.pvs, ach=c.ach, impostors=self._impostor_rows(cid))
             enc = encode(record.to_wire(compact=rep == "msgpack"), rep, self.version, f"cell-v2:{cid}")
             self._bodies.put(("cell", cid, rep), enc, len(enc.content))
+        return enc
+
+    def _impostor_rows(self, cid: int) -> tuple[ImpostorRow, ...]:
+        """Cell ``cid``'s impostors with each object's bounding sphere (none without impostors)."""
+        if not self.impostor_ids:
+            return ()
+        rows = self.reader.cell_impostors(cid)
+        info = self.reader.object_info(r[0] for r in rows)
+        out = []
+        for oid, level, az0, n_az, el0, n_el, *images in rows:
+            b = np.asarray(info[oid].bbox, np.float64)
+            centre = (b[:3] + b[3:]) / 2.0
+            radius = float(np.linalg.norm(b[3:] - b[:3]) / 2.0)
+            out.append(ImpostorRow(oid, level, az0, n_az, el0, n_el, (float(centre[0]), float(centre[1]),
+                                   float(centre[2])), radius, tuple(images)))
+        return tuple(out)
+
+    def has_impostor(self, image: int) -> bool:
+        """Whether the scene has impostor image ``image``."""
+        return image in self.impostor_ids
+
+    def cached_impostor(self, image: int) -> Encoded | None:
+        """Impostor image ``image`` if it is cached (no database access)."""
+        value: Encoded | None = self._bodies.get(("impostor", image))
+        return value
+
+    def impostor(self, image: int) -> Encoded:
+        """Impostor image ``image`` (a known one) as stored: immutable, its ETag naming the
+        scene version and the image (reads the database on a cache miss)."""
+        enc = self.cached_impostor(image)
+        if enc is None:
+            media, data = self.reader.impostor_images([image])[image]
+            enc = Encoded(data, media, etag_for(self.version, f"impostor:{image}", IMPOSTOR.name))
+            self._bodies.put(("impostor", image), enc, len(data))
         return enc
 
     def cells(self, ids: Sequence[int]) -> list[bytes]:
