@@ -75,6 +75,7 @@ __all__ = [
     "START_PARTS",
     "Manifest",
     "CellRecord",
+    "CellImpostors",
     "ImpostorRow",
     "CellIndex",
     "ObjectFrame",
@@ -204,10 +205,11 @@ class ImpostorRow:
 
     The images of azimuth bins ``az0 .. az0 + n_az - 1`` (modulo the level's count)
     and elevation bins ``el0 .. el0 + n_el - 1`` at ``level``
-    (:mod:`walkstream.shared.impostors`): ``images[j * n_az + i]``.  ``centre`` and
-    ``radius`` (metres) place the quad: the object's bounding sphere.
-    On the wire: ``[object, level, az0, n_az, el0, n_el, cx, cy, cz, r, ids...]``,
-    the four lengths in centimetres.
+    (:mod:`walkstream.shared.impostors`): ``images[j * n_az + i]``.  ``box`` is the
+    object's ``(minx, miny, minz, maxx, maxy, maxz)`` (metres): the bake measured the
+    distance D to its footprint, and its bounding sphere places the quad.
+    On the wire: ``[object, level, az0, n_az, el0, n_el, minx, ..., maxz, ids...]``,
+    the box in centimetres.
     """
 
     object: int
@@ -216,13 +218,24 @@ class ImpostorRow:
     n_az: int
     el0: int
     n_el: int
-    centre: tuple[float, float, float]
-    radius: float
+    box: tuple[float, float, float, float, float, float]
     images: tuple[int, ...]
+
+    @property
+    def centre(self) -> tuple[float, float, float]:
+        """The centre of the box (and of the bounding sphere)."""
+        b = self.box
+        return ((b[0] + b[3]) / 2.0, (b[1] + b[4]) / 2.0, (b[2] + b[5]) / 2.0)
+
+    @property
+    def radius(self) -> float:
+        """The bounding sphere's radius: half the box's diagonal."""
+        b = self.box
+        return float(np.linalg.norm(np.subtract(b[3:], b[:3]))) / 2.0
 
     def to_wire(self) -> list[int]:
         """The row as sent."""
-        cm = [int(round(v * 100.0)) for v in (*self.centre, self.radius)]
+        cm = [int(round(v * 100.0)) for v in self.box]
         return [self.object, self.level, self.az0, self.n_az, self.el0, self.n_el, *cm, *self.images]
 
     def image_for(self, ia: int, ie: int) -> int | None:
@@ -239,16 +252,44 @@ _MAX_IMPOSTOR_LEVEL = 16
 
 def _impostor_row(row: Any, what: str) -> ImpostorRow:
     """An :class:`ImpostorRow` from its wire list, checked."""
-    if not isinstance(row, list) or len(row) < 11 or not all(type(v) is int for v in row):
-        raise CodecError(f"{what}: an impostor row is not a list of at least 11 integers")
+    if not isinstance(row, list) or len(row) < 13 or not all(type(v) is int for v in row):
+        raise CodecError(f"{what}: an impostor row is not a list of at least 13 integers")
     oid, level, az0, n_az, el0, n_el = row[:6]
-    cx, cy, cz, r = (v / 100.0 for v in row[6:10])
-    images = tuple(row[10:])
+    box = tuple(v / 100.0 for v in row[6:12])
+    images = tuple(row[12:])
     if oid < 0 or not 0 <= level <= _MAX_IMPOSTOR_LEVEL or min(az0, el0) < 0 or min(n_az, n_el) < 1:
         raise CodecError(f"{what}: impostor row of object {oid}: bad bins")
-    if n_az * n_el != len(images) or min(images) < 1 or r <= 0:
+    if n_az * n_el != len(images) or min(images) < 1 or any(box[k + 3] < box[k] for k in range(3)):
         raise CodecError(f"{what}: impostor row of object {oid}: {len(images)} images for {n_az} x {n_el} bins")
-    return ImpostorRow(oid, level, az0, n_az, el0, n_el, (cx, cy, cz), r, images)
+    return ImpostorRow(oid, level, az0, n_az, el0, n_el, box, images)
+
+
+@dataclass(frozen=True, slots=True)
+class CellImpostors:
+    """What a cell draws as impostors: the rows, and the bake's distance ``d`` (metres)
+    and error bound ``bound`` (radians) the client blends by.
+    On the wire: ``{"d": centimetres, "a": microradians, "rows": [...]}``."""
+
+    d: float
+    bound: float
+    rows: tuple[ImpostorRow, ...]
+
+    def to_wire(self) -> dict[str, Any]:
+        """The record's ``imp`` as sent."""
+        return {"d": int(round(self.d * 100.0)), "a": int(round(self.bound * 1e6)),
+                "rows": [r.to_wire() for r in self.rows]}
+
+
+def _cell_impostors(obj: Any, what: str) -> CellImpostors | None:
+    """A record's ``imp`` (None when absent), checked."""
+    if obj is None:
+        return None
+    if not isinstance(obj, dict) or set(obj) != {"d", "a", "rows"}:
+        raise CodecError(f"{what}: imp is not a map of d, a and rows")
+    d, a, rows = obj["d"], obj["a"], obj["rows"]
+    if type(d) is not int or type(a) is not int or d <= 0 or a <= 0 or not isinstance(rows, list):
+        raise CodecError(f"{what}: imp: d and a must be positive integers and rows a list")
+    return CellImpostors(d / 100.0, a / 1e6, tuple(_impostor_row(r, what) for r in rows))
 
 
 @dataclass(frozen=True)
@@ -269,9 +310,10 @@ class CellRecord:
     nbytes: int = 0
     etag: str | None = None
     body: bytes = field(default=b"", repr=False)
-    impostors: tuple[ImpostorRow, ...] = ()
+    impostors: CellImpostors | None = None
     """The objects of the PVS the cell draws as impostors (a scene baked with
-    ``--impostors``; empty otherwise, and then the record is what it was before)."""
+    ``--impostors``, a cell with some; None otherwise, and then the record is what it
+    was before)."""
 
     def __post_init__(self) -> None:
         # records are shared between caches and callers: nothing in them may change
@@ -288,8 +330,8 @@ class CellRecord:
             "pvs": pack_ints(np.diff(ids, prepend=0).tolist(), compact=compact),
             "ach": pack_ints(units.tolist(), compact=compact),
         }
-        if self.impostors:  # only then: a scene without impostors sends the very same bytes
-            out["imp"] = [r.to_wire() for r in self.impostors]
+        if self.impostors is not None:  # only then: a scene without impostors sends the very same bytes
+            out["imp"] = self.impostors.to_wire()
         return out
 
 
@@ -458,9 +500,6 @@ def cell_from_wire(
         if len(units) and ((units < 0).any() or (units > ACH_UNITS).any()):
             raise CodecError(f"{what}: ach units outside [0, {ACH_UNITS}]")
         kind = obj.get("kind", "")
-        imp = obj.get("imp", [])
-        if not isinstance(imp, list):
-            raise CodecError(f"{what}: imp is not a list")
         return CellRecord(
             id=cid,
             kind=str(kind),
@@ -469,7 +508,7 @@ def cell_from_wire(
             nbytes=nbytes,
             etag=etag,
             body=bytes(body),
-            impostors=tuple(_impostor_row(r, what) for r in imp),
+            impostors=_cell_impostors(obj.get("imp"), what),
         )
 
 

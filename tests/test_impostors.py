@@ -3,7 +3,8 @@
 The traps: an object straddling the distance D, a building seen from both sides of a
 cell, an image shared by two cells, premultiplied alpha at the silhouette (no dark
 fringes), a database baked without impostors (served to a client asking for them),
-a bake killed among its images.
+a bake killed among its images; the client's choice: the blend at the exact switch
+distance, a texture budget smaller than the images of one cell.
 """
 
 from __future__ import annotations
@@ -19,6 +20,13 @@ import msgpack
 import numpy as np
 import pytest
 
+from walkstream.client.draw.impostors import (
+    BLEND_M,
+    ImpostorChoice,
+    choose_impostors,
+    fit_textures,
+    impostor_alpha,
+)
 from walkstream.server.bake import BakeSettings, ImpostorSettings, bake
 from walkstream.server.bake.impostorplan import plan_impostors
 from walkstream.server.bake.viewcell import ViewCell
@@ -37,7 +45,7 @@ from walkstream.shared.impostors import (
     level_for,
     level_step,
 )
-from walkstream.shared.wire import MSGPACK, CellRecord, decode_cell
+from walkstream.shared.wire import MSGPACK, CellRecord, ImpostorRow, decode_cell
 
 BOUND = math.radians(2.0)
 
@@ -330,7 +338,10 @@ def test_images_are_listed_by_cells_and_served_immutable_in_batches(http: Http) 
         resp = http.get(f"/v1/scenes/imp/cells/{cid}", headers={"Accept": MSGPACK})
         if resp.status_code != 200:
             break
-        rows += decode_cell(resp.content, "cell").impostors
+        imp = decode_cell(resp.content, "cell").impostors
+        if imp is not None:
+            assert imp.d == SMALL.distance and abs(imp.bound - math.radians(SMALL.error_deg)) < 1e-6
+            rows += imp.rows
     assert rows, "no cell lists an impostor"
     row = rows[0]
     assert row.radius > 0 and len(row.images) == row.n_az * row.n_el
@@ -351,3 +362,49 @@ def test_images_are_listed_by_cells_and_served_immutable_in_batches(http: Http) 
     assert parts[0][1] == first.headers["etag"] and parts[0][2] == first.content
     assert http.get("/v1/scenes/imp/impostors/999999").status_code == 404
     assert http.post("/v1/scenes/imp/impostors", json={"ids": [ids[0], ids[0]]}).status_code == 422
+
+
+# ------------------------------------------------------------------ the client's choice
+
+
+def _row(images: tuple[int, ...] = (5,), box: tuple[float, ...] = (295.0, -5.0, 0.0, 305.0, 5.0, 20.0)) -> ImpostorRow:
+    centre = np.array([(box[0] + box[3]) / 2, (box[1] + box[4]) / 2, (box[2] + box[5]) / 2])
+    az, el = directions(np.array([0.0, 0.0, 1.7]), centre)
+    ia, ie = bin_of(0, az, el)
+    return ImpostorRow(9, 0, int(ia), len(images), int(ie), 1, box, images)
+
+
+def test_the_blend_at_the_exact_switch_distance() -> None:
+    d, bound = 250.0, math.radians(2.0)
+    alpha = impostor_alpha([d - 1.0, d, d + BLEND_M / 2, d + BLEND_M, d + 100.0], 0.0, d, bound)
+    assert alpha[0] == 0.0 and alpha[1] == 0.0, "at D and nearer: geometry only"
+    assert 0.0 < alpha[2] < 1.0 and alpha[3] == 1.0 and alpha[4] == 1.0
+    eps = 1e-6  # continuous at the switch: no pop
+    assert impostor_alpha(d + eps, 0.0, d, bound) < 1e-9
+    steps = impostor_alpha(np.linspace(d, d + BLEND_M, 201), 0.0, d, bound)
+    assert (np.diff(steps) >= 0).all() and np.abs(np.diff(steps)).max() < 0.02
+    # the error bound: full opacity well inside it, none at it, continuous between
+    errs = impostor_alpha(d + 100.0, [0.5 * bound, 0.75 * bound, 0.9 * bound, bound, 1.1 * bound], d, bound)
+    assert errs[0] == 1.0 and errs[1] == 1.0 and 0.0 < errs[2] < 1.0 and errs[3] == 0.0 and errs[4] == 0.0
+
+
+def test_choice_picks_the_bin_of_the_viewers_direction() -> None:
+    row = _row()
+    (c,) = choose_impostors([row], (0.0, 0.0, 1.7), 250.0, math.radians(4.0))
+    assert c.image == 5 and c.alpha > 0.0 and abs(c.distance - 295.0) < 1e-9
+    # a viewer whose direction falls in a bin the cell does not list: geometry
+    (c,) = choose_impostors([row], (300.0, 400.0, 1.7), 250.0, math.radians(4.0))
+    assert c.image is None and c.alpha == 0.0
+
+
+def test_a_texture_budget_smaller_than_one_cells_images() -> None:
+    choices = [ImpostorChoice(k, 100 + k, 1.0, 300.0 + 10.0 * k, 0.0) for k in range(6)]
+    sizes = {100 + k: 4 * 64 * 64 for k in range(6)}
+    fitted = fit_textures(choices, sizes, budget=3 * 4 * 64 * 64 + 10)
+    assert [c.image for c in fitted] == [100, 101, 102, None, None, None], "the farthest dropped first"
+    assert all(c.alpha == 0.0 for c in fitted[3:])
+    # a budget under one image: every building is geometry, none is lost
+    assert [c.image for c in fit_textures(choices, sizes, budget=100)] == [None] * 6
+    # an image two buildings share counts once
+    shared = [ImpostorChoice(1, 7, 1.0, 300.0, 0.0), ImpostorChoice(2, 7, 1.0, 310.0, 0.0)]
+    assert [c.image for c in fit_textures(shared, {7: 1000}, budget=1000)] == [7, 7]

@@ -72,6 +72,7 @@ from walkstream.shared.streets import build_street
 from walkstream.shared.wire import (
     MSGPACK,
     OFFERS,
+    CellImpostors,
     CellIndex,
     CellRecord,
     ImpostorRow,
@@ -355,20 +356,20 @@ class Scene:
             self._bodies.put(("cell", cid, rep), enc, len(enc.content))
         return enc
 
-    def _impostor_rows(self, cid: int) -> tuple[ImpostorRow, ...]:
-        """Cell ``cid``'s impostors with each object's bounding sphere (none without impostors)."""
+    def _impostor_rows(self, cid: int) -> CellImpostors | None:
+        """Cell ``cid``'s impostors with each object's box and the bake's D and A (None
+        for a cell without impostors or a scene baked without them)."""
         if not self.impostor_ids:
-            return ()
+            return None
         rows = self.reader.cell_impostors(cid)
+        if not rows:
+            return None
         info = self.reader.object_info(r[0] for r in rows)
-        out = []
-        for oid, level, az0, n_az, el0, n_el, *images in rows:
-            b = np.asarray(info[oid].bbox, np.float64)
-            centre = (b[:3] + b[3:]) / 2.0
-            radius = float(np.linalg.norm(b[3:] - b[:3]) / 2.0)
-            out.append(ImpostorRow(oid, level, az0, n_az, el0, n_el, (float(centre[0]), float(centre[1]),
-                                   float(centre[2])), radius, tuple(images)))
-        return tuple(out)
+        st = self.reader.meta.settings["impostors"]
+        return CellImpostors(float(st["distance"]), math.radians(float(st["error_deg"])), tuple(
+            ImpostorRow(oid, level, az0, n_az, el0, n_el, info[oid].bbox, tuple(images))
+            for oid, level, az0, n_az, el0, n_el, *images in rows
+        ))
 
     def has_impostor(self, image: int) -> bool:
         """Whether the scene has impostor image ``image``."""
