@@ -204,12 +204,14 @@ class ImpostorRenderer(Releasable):
                 self.vao.render(vertices=count, first=first)
             check_gl_error(self.ctx, "impostor images")
             atlas = fb.read()
+            # the mean of the samples, rounded, over the whole atlas at once (integer sums of
+            # contiguous rows: per tile, or in floats, it costs more than the render)
+            wide = atlas.astype(np.uint16)
+            total = sum(wide[i::SUPERSAMPLE, j::SUPERSAMPLE] for i in range(SUPERSAMPLE) for j in range(SUPERSAMPLE))
+            small = ((total + n // 2) // n).astype(np.uint8)
             for t in range(len(part)):
                 col, row = t % per_row, t // per_row
-                img = atlas[row * side : (row + 1) * side, col * side : (col + 1) * side]
-                # the mean of the samples, rounded (integer sums: a float mean costs more than the render)
-                total = img.reshape(size, SUPERSAMPLE, size, SUPERSAMPLE, 4).sum(axis=(1, 3), dtype=np.uint16)
-                out.append(((total + n // 2) // n).astype(np.uint8))
+                out.append(small[row * size : (row + 1) * size, col * size : (col + 1) * size].copy())
         return out
 
     def release(self) -> None:
