@@ -207,8 +207,11 @@ class ImpostorRenderer(Releasable):
             # the mean of the samples, rounded, over the whole atlas at once (integer sums of
             # contiguous rows: per tile, or in floats, it costs more than the render)
             wide = atlas.astype(np.uint16)
-            total = sum(wide[i::SUPERSAMPLE, j::SUPERSAMPLE] for i in range(SUPERSAMPLE) for j in range(SUPERSAMPLE))
-            small = ((total + n // 2) // n).astype(np.uint8)
+            total = np.full_like(wide[::SUPERSAMPLE, ::SUPERSAMPLE], n // 2)
+            for i in range(SUPERSAMPLE):
+                for j in range(SUPERSAMPLE):
+                    total += wide[i::SUPERSAMPLE, j::SUPERSAMPLE]
+            small = (total // n).astype(np.uint8)
             for t in range(len(part)):
                 col, row = t % per_row, t // per_row
                 out.append(small[row * size : (row + 1) * size, col * size : (col + 1) * size].copy())
