@@ -408,3 +408,21 @@ def test_a_texture_budget_smaller_than_one_cells_images() -> None:
     # an image two buildings share counts once
     shared = [ImpostorChoice(1, 7, 1.0, 300.0, 0.0), ImpostorChoice(2, 7, 1.0, 310.0, 0.0)]
     assert [c.image for c in fit_textures(shared, {7: 1000}, budget=1000)] == [7, 7]
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--impostors", "--impostor-size", "100"], "--impostor-size"),
+        (["--impostors", "--impostor-error", "0"], "--impostor-error"),
+        (["--impostor-distance", "100"], "give --impostors too"),
+    ],
+)
+def test_bad_impostor_flags_are_one_clear_line(
+    flags: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from walkstream.cli import main
+
+    assert main(["bake", str(tmp_path / "c.geojson"), "-o", str(tmp_path / "x.db"), *flags]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("walkstream: error:") and message in err and "Traceback" not in err
