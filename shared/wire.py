@@ -75,6 +75,8 @@ __all__ = [
     "START_PARTS",
     "Manifest",
     "CellRecord",
+    "CellImpostors",
+    "ImpostorRow",
     "CellIndex",
     "ObjectFrame",
     "decode_manifest",
@@ -197,6 +199,99 @@ def _grid_from_wire(obj: Any) -> TileGrid | None:
         raise ValueError(str(exc)) from exc
 
 
+@dataclass(frozen=True, slots=True)
+class ImpostorRow:
+    """One object a cell draws as an impostor, and its images by direction bin.
+
+    The images of azimuth bins ``az0 .. az0 + n_az - 1`` (modulo the level's count)
+    and elevation bins ``el0 .. el0 + n_el - 1`` at ``level``
+    (:mod:`walkstream.shared.impostors`): ``images[j * n_az + i]``.  ``box`` is the
+    object's ``(minx, miny, minz, maxx, maxy, maxz)`` (metres): the bake measured the
+    distance D to its footprint, and its bounding sphere places the quad.
+    On the wire: ``[object, level, az0, n_az, el0, n_el, minx, ..., maxz, ids...]``,
+    the box in centimetres.
+    """
+
+    object: int
+    level: int
+    az0: int
+    n_az: int
+    el0: int
+    n_el: int
+    box: tuple[float, float, float, float, float, float]
+    images: tuple[int, ...]
+
+    @property
+    def centre(self) -> tuple[float, float, float]:
+        """The centre of the box (and of the bounding sphere)."""
+        b = self.box
+        return ((b[0] + b[3]) / 2.0, (b[1] + b[4]) / 2.0, (b[2] + b[5]) / 2.0)
+
+    @property
+    def radius(self) -> float:
+        """The bounding sphere's radius: half the box's diagonal."""
+        b = self.box
+        return float(np.linalg.norm(np.subtract(b[3:], b[:3]))) / 2.0
+
+    def to_wire(self) -> list[int]:
+        """The row as sent."""
+        cm = [int(round(v * 100.0)) for v in self.box]
+        return [self.object, self.level, self.az0, self.n_az, self.el0, self.n_el, *cm, *self.images]
+
+    def image_for(self, ia: int, ie: int) -> int | None:
+        """The image of bin ``(ia, ie)`` at :attr:`level`, or None when the cell lists no image for it."""
+        n = 8 << self.level  # azimuth bins at the level (shared/impostors.py: 45 degrees / 2**level)
+        i, j = (ia - self.az0) % n, ie - self.el0
+        if 0 <= i < self.n_az and 0 <= j < self.n_el:
+            return self.images[j * self.n_az + i]
+        return None
+
+
+_MAX_IMPOSTOR_LEVEL = 16
+
+
+def _impostor_row(row: Any, what: str) -> ImpostorRow:
+    """An :class:`ImpostorRow` from its wire list, checked."""
+    if not isinstance(row, list) or len(row) < 13 or not all(type(v) is int for v in row):
+        raise CodecError(f"{what}: an impostor row is not a list of at least 13 integers")
+    oid, level, az0, n_az, el0, n_el = row[:6]
+    box = tuple(v / 100.0 for v in row[6:12])
+    images = tuple(row[12:])
+    if oid < 0 or not 0 <= level <= _MAX_IMPOSTOR_LEVEL or min(az0, el0) < 0 or min(n_az, n_el) < 1:
+        raise CodecError(f"{what}: impostor row of object {oid}: bad bins")
+    if n_az * n_el != len(images) or min(images) < 1 or any(box[k + 3] < box[k] for k in range(3)):
+        raise CodecError(f"{what}: impostor row of object {oid}: {len(images)} images for {n_az} x {n_el} bins")
+    return ImpostorRow(oid, level, az0, n_az, el0, n_el, box, images)
+
+
+@dataclass(frozen=True, slots=True)
+class CellImpostors:
+    """What a cell draws as impostors: the rows, and the bake's distance ``d`` (metres)
+    and error bound ``bound`` (radians) the client blends by.
+    On the wire: ``{"d": centimetres, "a": microradians, "rows": [...]}``."""
+
+    d: float
+    bound: float
+    rows: tuple[ImpostorRow, ...]
+
+    def to_wire(self) -> dict[str, Any]:
+        """The record's ``imp`` as sent."""
+        return {"d": int(round(self.d * 100.0)), "a": int(round(self.bound * 1e6)),
+                "rows": [r.to_wire() for r in self.rows]}
+
+
+def _cell_impostors(obj: Any, what: str) -> CellImpostors | None:
+    """A record's ``imp`` (None when absent), checked."""
+    if obj is None:
+        return None
+    if not isinstance(obj, dict) or set(obj) != {"d", "a", "rows"}:
+        raise CodecError(f"{what}: imp is not a map of d, a and rows")
+    d, a, rows = obj["d"], obj["a"], obj["rows"]
+    if type(d) is not int or type(a) is not int or d <= 0 or a <= 0 or not isinstance(rows, list):
+        raise CodecError(f"{what}: imp: d and a must be positive integers and rows a list")
+    return CellImpostors(d / 100.0, a / 1e6, tuple(_impostor_row(r, what) for r in rows))
+
+
 @dataclass(frozen=True)
 class CellRecord:
     """A view cell's own data as the API sends it: its PVS with the ACH of each object.
@@ -215,6 +310,10 @@ class CellRecord:
     nbytes: int = 0
     etag: str | None = None
     body: bytes = field(default=b"", repr=False)
+    impostors: CellImpostors | None = None
+    """The objects of the PVS the cell draws as impostors (a scene baked with
+    ``--impostors``, a cell with some; None otherwise, and then the record is what it
+    was before)."""
 
     def __post_init__(self) -> None:
         # records are shared between caches and callers: nothing in them may change
@@ -225,12 +324,15 @@ class CellRecord:
         """The record as sent (``compact=False``: plain integer lists, for JSON)."""
         ids = np.asarray(self.pvs, dtype=np.int64)
         units = quantise_ach(self.ach) if len(ids) else np.zeros(0, np.int64)
-        return {
+        out: dict[str, Any] = {
             "id": self.id,
             "kind": self.kind,
             "pvs": pack_ints(np.diff(ids, prepend=0).tolist(), compact=compact),
             "ach": pack_ints(units.tolist(), compact=compact),
         }
+        if self.impostors is not None:  # only then: a scene without impostors sends the very same bytes
+            out["imp"] = self.impostors.to_wire()
+        return out
 
 
 @dataclass(frozen=True)
@@ -406,6 +508,7 @@ def cell_from_wire(
             nbytes=nbytes,
             etag=etag,
             body=bytes(body),
+            impostors=_cell_impostors(obj.get("imp"), what),
         )
 
 

@@ -42,7 +42,7 @@ def tables(office_db: Path) -> dict[str, str]:
 @pytest.mark.parametrize("kind", CONTENT_KINDS, ids=lambda k: k.name)
 def test_every_kind_names_all_its_parts(kind: ContentKind, tables: dict[str, str]) -> None:
     assert kind.name and kind.cache_kind and kind.wire
-    assert kind.owner in ("object", "cell")
+    assert kind.owner in ("object", "cell", "image")
     assert callable(kind.decode)
     # the store: its table (a core one, or one of its feature's) with both columns
     optional = {t for ts in OPTIONAL_TABLES.values() for t in ts}
@@ -50,13 +50,15 @@ def test_every_kind_names_all_its_parts(kind: ContentKind, tables: dict[str, str
         assert kind.table not in optional
     else:
         assert kind.table in OPTIONAL_TABLES[kind.feature]
-    cols = re.findall(r"[(,]\s*(\w+) ", tables[kind.table])
+    # (a table the office has not: its declared DDL)
+    ddl = tables.get(kind.table) or OPTIONAL_TABLES[kind.feature or ""][kind.table]
+    cols = re.findall(r"[(,]\s*(\w+) ", ddl)
     assert kind.key_column in cols and kind.column in cols
     # the wire: an object kind streams by a form and a frame key; a cell kind has a media type
     if kind.owner == "object":
         assert kind.form and FRAME_KEYS[kind.form] == kind.wire
     else:
-        assert kind.form is None and kind.wire.startswith("application/")
+        assert kind.form is None and kind.wire.startswith(("application/", "image/"))
     # the client: a cache kind and a client side registered under its name
     assert kind.cache_kind in KINDS
     assert client_content(kind.name).kind is kind
@@ -79,10 +81,10 @@ def test_the_service_and_the_wire_take_exactly_the_registered_forms() -> None:
 
 
 def test_the_cache_takes_exactly_the_registered_kinds() -> None:
-    assert CONTENTS == cache_kinds() == ("params", "mesh", "cellmesh")
+    assert CONTENTS == cache_kinds() == ("params", "mesh", "cellmesh", "impostor")
     assert get_args(Kind) == KINDS == ("index", "cell", *CONTENTS, "geom")
     # the eviction order of the kinds there were before cell meshes is unchanged
-    assert [k for k in EVICTION_ORDER if k != "cellmesh"] == ["geom", "params", "mesh", "cell", "index"]
+    assert [k for k in EVICTION_ORDER if k not in ("cellmesh", "impostor")] == ["geom", "params", "mesh", "cell", "index"]
     with pytest.raises(InputError, match="cache kind"):
         Cache(100).put("image", 1, b"", 1)
     assert set(CLIENT_CONTENT) == {k.name for k in CONTENT_KINDS}

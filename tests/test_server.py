@@ -702,8 +702,9 @@ def test_schemathesis_finds_no_answer_outside_the_schema(city: CityDb) -> None:
     report = run_fuzz([city.path], examples=25)
     assert len(CHECKS) == 7
     operations = {r.operation for r in report.rows}
-    assert len(operations) == 20  # and the interiors' topology, topology/packed, topology/compact,
-    # rooms/{cell}, rooms/{cell}/contents, POST rooms/contents (a batch), a crossing's entrances
+    assert len(operations) == 22  # and the interiors' topology, topology/packed, topology/compact,
+    # rooms/{cell}, rooms/{cell}/contents, POST rooms/contents (a batch), a crossing's entrances;
+    # impostors/{image} and POST impostors (this scene has none: their 404s)
     assert {r.mode for r in report.rows} == {"positive", "negative"}
     assert not report.total(), format_table(report)
 
@@ -779,7 +780,14 @@ def test_documented_shapes_match_the_wire_records() -> None:
     from walkstream.server.service import models
     from walkstream.shared.cells import TileGrid
     from walkstream.shared.records import Viewpoint
-    from walkstream.shared.wire import CellIndex, CellRecord, Manifest, locate_answer
+    from walkstream.shared.wire import (
+        CellImpostors,
+        CellIndex,
+        CellRecord,
+        ImpostorRow,
+        Manifest,
+        locate_answer,
+    )
 
     manifest = Manifest(
         "s", "v", 1, "EPSG:32633", (0.0, 0.0), (0.0,) * 6, (), "g", "text",
@@ -793,7 +801,11 @@ def test_documented_shapes_match_the_wire_records() -> None:
     assert list(manifest["index"]) == list(models.TileGridOut.model_fields)
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
     cell = CellRecord(3, "street", np.array([1]), np.array([1.0]))
-    assert list(cell.to_wire()) == list(models.CellOut.model_fields)
+    assert list(cell.to_wire()) == [k for k in models.CellOut.model_fields if k != "imp"]
+    row = ImpostorRow(1, 0, 2, 1, 3, 1, (0.0, 0.0, 0.0, 1.0, 1.0, 1.0), (1,))
+    imp = CellRecord(3, "street", np.array([1]), np.array([1.0]), impostors=CellImpostors(250.0, 0.03, (row,)))
+    assert list(imp.to_wire()) == list(models.CellOut.model_fields)
+    assert list(imp.to_wire()["imp"]) == list(models.ImpostorsOut.model_fields)
     index = CellIndex((0, 1), [3], ["street"], [1.5], [2.0], [square], [[4]])
     assert list(index.to_wire()) == list(models.CellIndexOut.model_fields)
     assert set(locate_answer(None)) == set(models.LocateOut.model_fields)

@@ -89,6 +89,14 @@ def cmd_bake(args: argparse.Namespace) -> int:
     if args.building is not None and args.interior is None:
         raise WalkstreamError("--building: give --interior FILE too (the interior to place in the building)")
     extra: dict[str, Any] = {} if args.interior is None else {"interior": args.interior, "building": args.building}
+    imp_flags = (args.impostor_distance, args.impostor_error, args.impostor_size, args.complex_triangles)
+    if args.impostors:
+        from walkstream.server.bake import ImpostorSettings
+
+        names = ("distance", "error_deg", "size", "complex_triangles")
+        extra["impostors"] = ImpostorSettings(**{k: v for k, v in zip(names, imp_flags, strict=True) if v is not None}).check()
+    elif any(v is not None for v in imp_flags):
+        raise WalkstreamError("--impostor-distance/-error/-size, --complex-triangles: give --impostors too")
     summary = run_bake(source, args.output, settings=st, name=args.name, workers=args.workers, scheduler=args.scheduler, **extra)
     print_summary(f"baked {args.output}", summary, args.json)
     return 0
@@ -193,6 +201,11 @@ def add_bake_parsers(sub: Any) -> None:
                     "buildings, its entrance joined to the street in front: one scene of streets and rooms (kind crossing)")
     bk.add_argument("--building", metavar="ID", help="with --interior: the building to put it in, an object id or the source's "
                     "feature id (default auto: one it fits with its door on a street, nearest the middle)")
+    bk.add_argument("--impostors", action="store_true", help="also bake impostor images of far and complex buildings (docs/bake.md, impostors)")
+    bk.add_argument("--impostor-distance", type=float, default=None, metavar="D", help="with --impostors: a building at least D metres from every point of a cell is far (default 250)")
+    bk.add_argument("--impostor-error", type=float, default=None, metavar="A", help="with --impostors: the largest angle, degrees, under which a point of an impostor may move (default 2)")
+    bk.add_argument("--impostor-size", type=int, default=None, metavar="S", help="with --impostors: the largest image side, texels, a power of two (default 128)")
+    bk.add_argument("--complex-triangles", type=int, default=None, metavar="N", help="with --impostors: buildings over N triangles at LOD2 are impostors wherever the error bound allows (default 12000)")
     bk.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     bk.set_defaults(func=cmd_bake)
 

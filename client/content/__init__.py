@@ -2,7 +2,7 @@
 
 The modules: :mod:`.base` (the protocol a kind's client side follows), :mod:`.objects`
 (``params`` and ``mesh``: an object's LODs), :mod:`.cellmesh` (an interior cell's
-parts), :mod:`.registry` (every kind's client side by name).
+parts), :mod:`.impostor` (an impostor image), :mod:`.registry` (every kind's client side by name).
 """
 
 from walkstream.shared.exports import lazy_exports

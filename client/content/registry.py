@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from walkstream.client.content.base import ClientContent
 from walkstream.client.content.cellmesh import CELLMESH_CONTENT
+from walkstream.client.content.impostor import IMPOSTOR_CONTENT
 from walkstream.client.content.objects import MESH_CONTENT, PARAMS_CONTENT
 from walkstream.shared.content.registry import by_form
 from walkstream.shared.errors import InputError
@@ -21,6 +22,7 @@ CLIENT_CONTENT: dict[str, ClientContent] = {
         PARAMS_CONTENT,
         MESH_CONTENT,
         CELLMESH_CONTENT,
+        IMPOSTOR_CONTENT,
     )
 }
 """Content kind name -> its client side."""

@@ -19,6 +19,7 @@ import moderngl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared import lighting
 from walkstream.shared.camera import fit_view, mat4_bytes
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import Framebuffer, Releasable, check_gl_error, create_context
@@ -36,15 +37,11 @@ __all__ = [
     "render_lods_figure",
 ]
 
-#: Clear colour, sRGB 0-255: a pale sky that no shaded material in the palette matches.
-BACKGROUND_RGB: tuple[int, int, int] = (232, 238, 246)
-
-#: Share of a material's colour lit regardless of the light (the default ``ambient``).
-AMBIENT = 0.35
-
-#: Direction towards the light (world, z-up): high sun from the south-south-west, so
-#: the south, west and top faces a 3/4 view shows all get different shades.
-LIGHT_DIRECTION: tuple[float, float, float] = (-0.3, -0.8, 0.6)
+#: Clear colour, ambient share and light direction: the one lighting of city objects
+#: (:mod:`walkstream.shared.lighting`, which the bake's impostor images use too).
+BACKGROUND_RGB: tuple[int, int, int] = lighting.BACKGROUND_RGB
+AMBIENT = lighting.AMBIENT
+LIGHT_DIRECTION: tuple[float, float, float] = lighting.LIGHT_DIRECTION
 
 #: From the object towards the eye in :func:`render_lods_figure`: south-west, 25 degrees up.
 FIGURE_DIRECTION: tuple[float, float, float] = (

@@ -34,9 +34,10 @@ from walkstream.shared.errors import InputError
 
 __all__ = ["Kind", "CONTENTS", "KINDS", "CITY_KINDS", "EVICTION_ORDER", "METADATA", "Key", "Cache"]
 
-Kind = Literal["index", "cell", "params", "mesh", "cellmesh", "geom"]
+Kind = Literal["index", "cell", "params", "mesh", "cellmesh", "impostor", "geom"]
 """What a :class:`Cache` entry is: an index tile, a cell record, the contents of one
-content kind (object parameters, a downloaded object mesh, a cell's meshes), geometry."""
+content kind (object parameters, a downloaded object mesh, a cell's meshes, an
+impostor image), geometry."""
 
 CONTENTS: tuple[Kind, ...] = cast(tuple[Kind, ...], cache_kinds())
 """The kinds of downloaded contents, one per content kind, in the registry's order."""

@@ -14,9 +14,12 @@ The modules, in the order of the flow: :mod:`.settings`, :mod:`.cells` (with
 view); the one bake of every scene kind: :mod:`.pipeline` (:func:`bake`: read, plan),
 :mod:`.plan` (cells by kind), :mod:`.driver` (bakes them, resumes), :mod:`.chunks`
 (the one chunk runner: this process, local processes or Dask); interiors
-:mod:`.interior`, crossing scenes :mod:`.crossing`.
+:mod:`.interior`, crossing scenes :mod:`.crossing`; impostor images :mod:`.impostorsettings`,
+:mod:`.impostorplan` (which objects, which images), :mod:`.impostorrender` (the images),
+:mod:`.impostors` (the driver's step).
 """
 
+from walkstream.server.bake.impostorsettings import ImpostorSettings
 from walkstream.server.bake.pipeline import bake
 from walkstream.server.bake.settings import DEFAULT_OCCLUDER_LOD, DEFAULT_RESOLUTION, BakeSettings
 from walkstream.server.bake.workers import cell_task
@@ -25,6 +28,7 @@ __all__ = [
     "DEFAULT_RESOLUTION",
     "DEFAULT_OCCLUDER_LOD",
     "BakeSettings",
+    "ImpostorSettings",
     "cell_task",
     "bake",
 ]

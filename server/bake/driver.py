@@ -14,7 +14,10 @@ both) and
    in chunks by the one chunk runner (:func:`~.chunks.run_chunks`), placed, encoded;
 5. bakes the PVS of the PVS cells not yet done, in chunks by the same runner, each
    cell committed as it comes (a kill loses only the cells in flight);
-6. records the default walks and seals the database.
+6. with impostors (``--impostors``), plans the PVS cells' images, makes those not
+   yet stored in chunks by the same runner and lists them per cell
+   (:func:`~.impostors.bake_impostors`);
+7. records the default walks and seals the database.
 
 So every scene kind resumes alike, to the same version an uninterrupted bake gets.
 """
@@ -29,6 +32,7 @@ from typing import Any
 
 from walkstream.server.bake.chunks import run_chunks
 from walkstream.server.bake.field import bake_field, field_folder
+from walkstream.server.bake.impostors import bake_impostors
 from walkstream.server.bake.interior import room_contents, write_contents
 from walkstream.server.bake.plan import BakePlan
 from walkstream.server.bake.workers import PVS_CHUNK, pvs_items, pvs_task, release_renderer
@@ -79,8 +83,9 @@ def drive(
     -------
     dict
         The database summary (``SceneReader.summary``), the plan's summary,
-        ``resumed_cells`` (PVS cells found done in a resumed work file) and, with
-        room cells, ``contents_encode_s``; empty when ``max_cells`` stopped it early.
+        ``resumed_cells`` (PVS cells found done in a resumed work file), with
+        room cells ``contents_encode_s``, with impostors the figures of
+        :func:`~.impostors.bake_impostors`; empty when ``max_cells`` stopped it early.
     """
     if workers < 1:
         raise InputError(f"--workers: expected >= 1, got {workers}")
@@ -138,6 +143,9 @@ def drive(
         if max_cells is not None and finished < len(pvs_cells):
             writer.close()
             return {}
+        if plan.impostors is not None and pvs is not None:
+            extra.update(bake_impostors(writer, plan.impostors, pvs_cells, workers=workers, scheduler=scheduler,
+                                        progress=progress, say=say))
         # the default walks: made from the cells alone, so a resumed bake records the
         # same ones (INSERT OR REPLACE) just before sealing the file
         for path, line in plan.walks(say):

@@ -20,10 +20,11 @@ import numpy as np
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.digest import file_digest
 from walkstream.server.bake.driver import drive
+from walkstream.server.bake.impostorsettings import ImpostorSettings
 from walkstream.server.bake.interior import interior_plan
 from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.objectrows import object_rows
-from walkstream.server.bake.plan import BakePlan, PvsCells, Say, Walk, settings_key
+from walkstream.server.bake.plan import BakePlan, ImpostorCells, PvsCells, Say, Walk, settings_key
 from walkstream.server.bake.scenenav import SceneGraph
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewpoints import viewpoints
@@ -55,6 +56,7 @@ def bake(
     max_cells: int | None = None,
     interior: str | os.PathLike[str] | None = None,
     building: str | None = None,
+    impostors: ImpostorSettings | None = None,
 ) -> dict[str, Any]:
     """Bake ``source`` (GeoJSON, OpenStreetMap, an IFC model or an interior file) into ``output``.
 
@@ -85,6 +87,10 @@ def bake(
         An interior to place in one of the city's buildings (an object or feature
         id, or ``auto``), joined to the street at its entrance: a crossing scene
         (:func:`~walkstream.server.bake.crossing.crossing_plan`).
+    impostors:
+        Bake impostor images of a city's far and complex buildings
+        (:mod:`~walkstream.server.bake.impostorplan`; None: none, the database as
+        before impostors existed).
 
     Returns
     -------
@@ -94,11 +100,15 @@ def bake(
         ``contents_encode_s``; empty when ``max_cells`` stopped it early.
     """
     st = (settings or BakeSettings()).check()
+    if impostors is not None:
+        impostors.check()
     if workers < 1:
         raise InputError(f"--workers: expected >= 1, got {workers}")
     say = log or (lambda _msg: None)
     t0 = time.perf_counter()
     src = Path(source)
+    if impostors is not None and interior is not None:
+        raise InputError("--impostors: a city's option; a scene with --interior has no impostors yet")
     if interior is not None:
         from walkstream.server.bake.crossing import crossing_plan
 
@@ -106,9 +116,11 @@ def bake(
     else:
         scene = read_source(src, network=st.network)
         if isinstance(scene, InteriorScene):
+            if impostors is not None:
+                raise InputError(f"--impostors: {src.name} is an interior; impostors are a city's")
             plan = interior_plan(scene, src, output, name=name, say=say, import_seconds=time.perf_counter() - t0)
         else:
-            plan = city_plan(scene, src, Path(output), st, name=name, say=say)
+            plan = city_plan(scene, src, Path(output), st, name=name, say=say, impostors=impostors)
     return drive(plan, output, workers=workers, scheduler=scheduler, progress=progress, log=log,
                  max_cells=max_cells, started=t0)
 
@@ -149,10 +161,14 @@ def city_plan(
     *,
     name: str | None = None,
     say: Callable[[str], None] = lambda _msg: None,
+    impostors: ImpostorSettings | None = None,
 ) -> BakePlan:
     """The :class:`~.plan.BakePlan` of a city: its view cells (street or grid), PVS cells only;
     its default walks routed on the street part of its :class:`~.scenenav.SceneGraph`
-    (sections: :func:`~.sectionplan.section_plan`).
+    (sections: :func:`~.sectionplan.section_plan`); with ``impostors`` the images of its
+    far and complex buildings too (:class:`~.plan.ImpostorCells`: the settings record
+    gains the key ``impostors`` and the features ``impostors``, so a bake without them
+    is unchanged).
 
     The plan's summary adds ``source``, ``source_issues`` (features skipped or repaired),
     ``source_skipped`` (skipped) and ``source_notes``.
@@ -165,6 +181,9 @@ def city_plan(
         scene = clip_scene(scene, bbox)
     if st.cells == "sections":
         from walkstream.server.bake.sectionplan import section_plan
+
+        if impostors is not None:
+            raise InputError(f"{src}: --impostors works with street or grid cells, not sections")
 
         return section_plan(scene, src, out, st, bbox=bbox, say=say, name=name, summary=_source_summary(scene, src))
     if st.cells == "auto" and not scene.streets:
@@ -179,6 +198,9 @@ def city_plan(
     say(f"{src.name}: {len(scene.buildings)} buildings, {len(scene.streets)} street pieces, {len(cells)} {kind} cells")
     grammar = default_grammar()
     settings_dict = st.record() | {"source": str(src), "source_digest": file_digest(src)}
+    if impostors is not None:
+        settings_dict["impostors"] = impostors.record()
+        features.append("impostors")
     city = scene
 
     def write_tables(writer: SceneWriter) -> None:
@@ -199,11 +221,16 @@ def city_plan(
                                           graph=nav.streets, say=say)]
 
     summary = _source_summary(scene, src)
+    imp = None
+    if impostors is not None:
+        rows = [r for r in object_rows(city, grammar) if r.kind == "building"]
+        imp = ImpostorCells(city, impostors, {r.id: r.bbox for r in rows}, {r.id: r.tris[2] for r in rows},
+                            settings_key(settings_dict))
     return BakePlan(
         name=name or out.stem, crs=scene.crs, origin=scene.origin, grammar_text=default_grammar_text(),
         grammar_version=grammar.id, features=features, settings=settings_dict,
         pvs=PvsCells(scene, st, cells, settings_key(settings_dict)), rooms=None, write_tables=write_tables,
-        walks=walks, summary=summary,
+        walks=walks, summary=summary, impostors=imp,
     )
 
 

@@ -9,7 +9,10 @@ Every scene kind (a city, an interior, a crossing of both) is turned into a
   grid cells): their PVS and ACH rendered in chunks (:func:`~.workers.pvs_task`);
 - :class:`RoomCells`, cells seen through portals (room, doorway and outside cells):
   their contents clipped in chunks (:func:`~.roomcontents.contents_task`) and
-  encoded; their portals are written with the plan's tables.
+  encoded; their portals are written with the plan's tables;
+- :class:`ImpostorCells` (a city baked with ``--impostors``): after the PVS, the
+  impostor images its PVS cells need (:mod:`~.impostorplan`), rendered and encoded
+  in chunks (:func:`~.impostorrender.impostor_task`).
 
 - :class:`FieldCells`, cells grown over a dense visibility field (sections): the
   field rendered in blocks (:func:`~.workers.field_task`, resumed block by block),
@@ -28,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from walkstream.server.bake.field import FieldLattice, PointSets
+from walkstream.server.bake.impostorsettings import ImpostorSettings
 from walkstream.server.bake.roomcontents import Part
 from walkstream.server.bake.rooms import RoomLayout
 from walkstream.server.bake.settings import BakeSettings
@@ -38,7 +42,7 @@ from walkstream.server.store import SceneWriter
 from walkstream.shared.arrays import F64, I64
 from walkstream.shared.paths import RecordedPath
 
-__all__ = ["BakePlan", "FieldCells", "PvsCells", "RoomCells", "Say", "Walk", "settings_key"]
+__all__ = ["BakePlan", "FieldCells", "ImpostorCells", "PvsCells", "RoomCells", "Say", "Walk", "settings_key"]
 
 Say = Callable[[str], None]
 """A one-line message about the bake's stages."""
@@ -93,6 +97,19 @@ class FieldCells:
 
 
 @dataclass
+class ImpostorCells:
+    """The impostor images of a city's PVS cells: ``settings`` (D, A, S, N, codec), the
+    buildings' stored ``boxes`` and LOD2 triangles ``tris2`` by object id; ``key``
+    names the scene (a worker keeps its renderer while it stays)."""
+
+    scene: SourceScene
+    settings: ImpostorSettings
+    boxes: dict[int, tuple[float, float, float, float, float, float]]
+    tris2: dict[int, int]
+    key: str
+
+
+@dataclass
 class BakePlan:
     """A scene to bake (see the module docstring).
 
@@ -103,6 +120,8 @@ class BakePlan:
         ``settings`` identifies the input, so a work file with equal ones resumes.
     pvs, rooms, field:
         The scene's cells by kind (any may be None).
+    impostors:
+        The impostor images of the PVS cells (None: a bake without ``--impostors``).
     write_tables:
         Writes everything but the PVS and the contents: objects, cells, viewpoints,
         rooms, portals, stairs, entrances (on resume again: the writer's upserts keep
@@ -126,6 +145,7 @@ class BakePlan:
     walks: Callable[[Say], list[Walk]]
     summary: dict[str, Any] = field(default_factory=dict)
     field: FieldCells | None = None
+    impostors: ImpostorCells | None = None
 
 
 def settings_key(settings: dict[str, Any]) -> str:

@@ -145,6 +145,18 @@ IntsOut = list[Any]
 carry ``bin`` payloads."""
 
 
+class ImpostorsOut(BaseModel):
+    """What a cell draws as impostors: the bake's distance and error bound, one row per building."""
+
+    d: int = Field(description="D: a listed building is at least this far from every point of the cell, centimetres")
+    a: int = Field(description="A: the angular error bound, microradians")
+    rows: list[list[int]] = Field(
+        description="[object, level, az0, n_az, el0, n_el, minx, miny, minz, maxx, maxy, maxz, image ids...]: "
+        "the box in centimetres; image j * n_az + i is the one of azimuth bin (az0 + i) mod 8 * 2**level "
+        "and elevation bin el0 + j"
+    )
+
+
 class CellOut(BaseModel):
     """A view cell's own data: its PVS and the ACH of each object (outlines are in the index)."""
 
@@ -155,6 +167,10 @@ class CellOut(BaseModel):
     )
     ach: IntsOut = Field(
         description="average coverage of each PVS object in units of 1/65535, summing to 65535"
+    )
+    imp: ImpostorsOut | None = Field(
+        default=None,
+        description="only in a scene baked with --impostors, for a cell with impostors (see docs/formats.md)",
     )
 
 

@@ -58,6 +58,7 @@ from walkstream.server.store import CellInfo, SceneReader
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.cells import CellLocator, TileGrid
 from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
+from walkstream.shared.content.impostor import KIND as IMPOSTOR
 from walkstream.shared.content.mesh import KIND as MESH
 from walkstream.shared.content.params import KIND as PARAMS
 from walkstream.shared.content.registry import by_form, object_forms
@@ -71,8 +72,10 @@ from walkstream.shared.streets import build_street
 from walkstream.shared.wire import (
     MSGPACK,
     OFFERS,
+    CellImpostors,
     CellIndex,
     CellRecord,
+    ImpostorRow,
     Manifest,
     ObjectFrame,
     locate_answer,
@@ -288,6 +291,8 @@ class Scene:
         self._grammar_text = meta.grammar_text
         self._grammar: Grammar | None = None
         self._grammar_lock = threading.Lock()
+        self.impostor_ids: frozenset[int] = frozenset(reader.impostor_info())
+        """The impostor images the scene has (empty when baked without ``--impostors``)."""
         self._payloads: dict[str, Callable[[int, bytes], bytes]] = {
             PARAMS.name: lambda _oid, blob: blob,
             MESH.name: self._lod2_mesh,
@@ -346,9 +351,43 @@ class Scene:
         enc = self.cached_cell(cid, rep)
         if enc is None:
             c = self.reader.cell(cid)
-            record = CellRecord(id=c.id, kind=c.kind, pvs=c.pvs, ach=c.ach)
+            record = CellRecord(id=c.id, kind=c.kind, pvs=c.pvs, ach=c.ach, impostors=self._impostor_rows(cid))
             enc = encode(record.to_wire(compact=rep == "msgpack"), rep, self.version, f"cell-v2:{cid}")
             self._bodies.put(("cell", cid, rep), enc, len(enc.content))
+        return enc
+
+    def _impostor_rows(self, cid: int) -> CellImpostors | None:
+        """Cell ``cid``'s impostors with each object's box and the bake's D and A (None
+        for a cell without impostors or a scene baked without them)."""
+        if not self.impostor_ids:
+            return None
+        rows = self.reader.cell_impostors(cid)
+        if not rows:
+            return None
+        info = self.reader.object_info(r[0] for r in rows)
+        st = self.reader.meta.settings["impostors"]
+        return CellImpostors(float(st["distance"]), math.radians(float(st["error_deg"])), tuple(
+            ImpostorRow(oid, level, az0, n_az, el0, n_el, info[oid].bbox, tuple(images))
+            for oid, level, az0, n_az, el0, n_el, *images in rows
+        ))
+
+    def has_impostor(self, image: int) -> bool:
+        """Whether the scene has impostor image ``image``."""
+        return image in self.impostor_ids
+
+    def cached_impostor(self, image: int) -> Encoded | None:
+        """Impostor image ``image`` if it is cached (no database access)."""
+        value: Encoded | None = self._bodies.get(("impostor", image))
+        return value
+
+    def impostor(self, image: int) -> Encoded:
+        """Impostor image ``image`` (a known one) as stored: immutable, its ETag naming the
+        scene version and the image (reads the database on a cache miss)."""
+        enc = self.cached_impostor(image)
+        if enc is None:
+            media, data = self.reader.impostor_images([image])[image]
+            enc = Encoded(data, media, etag_for(self.version, f"impostor:{image}", IMPOSTOR.name))
+            self._bodies.put(("impostor", image), enc, len(data))
         return enc
 
     def cells(self, ids: Sequence[int]) -> list[bytes]:

@@ -11,6 +11,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import msgpack
 import numpy as np
 from numpy.typing import NDArray
 
@@ -500,6 +501,42 @@ class SceneReader:
             raise NotFoundError(f"{self._label}: no contents for cell {i}")
         return blob
 
+    # -- impostors -----------------------------------------------------------
+
+    def has_impostors(self) -> bool:
+        """Whether the scene was baked with impostor images (``--impostors``)."""
+        return self._has_table("impostors")
+
+    def impostor_images(self, ids: Iterable[int]) -> dict[int, tuple[str, bytes]]:
+        """Image id -> ``(media type, file bytes)`` of the stored ones among ``ids`` (empty without impostors)."""
+        if not self.has_impostors():
+            return {}
+        want = [row_index(i, "impostor id") for i in ids]
+        out: dict[int, tuple[str, bytes]] = {}
+        for k in range(0, len(want), 500):
+            part = want[k:k + 500]
+            marks = ",".join("?" * len(part))
+            for i, media, data in self._query(f"SELECT id, media, data FROM impostors WHERE id IN ({marks})", part):
+                out[int(i)] = (str(media), bytes(data))
+        return out
+
+    def impostor_info(self) -> dict[int, tuple[int, int, int, int, int, int]]:
+        """Image id -> ``(object, level, az, el, size, bytes)`` of every stored image."""
+        if not self.has_impostors():
+            return {}
+        rows = self._query("SELECT id, object, level, az, el, size, length(data) FROM impostors ORDER BY id")
+        return {int(r[0]): tuple(int(v) for v in r[1:]) for r in rows}  # type: ignore[misc]
+
+    def cell_impostors(self, cid: int) -> list[list[int]]:
+        """Cell ``cid``'s impostor rows ``[object, level, az0, n_az, el0, n_el, image ids...]``
+        (empty for a cell without impostors or a scene baked without them)."""
+        if not self._has_table("cell_impostors"):
+            return []
+        rows = self._query("SELECT data FROM cell_impostors WHERE cell = ?", (row_index(cid, "cell id"),))
+        if not rows:
+            return []
+        return [list(map(int, r)) for r in msgpack.unpackb(rows[0][0])]
+
     # -- summary -------------------------------------------------------------
 
     def summary(self) -> dict[str, Any]:
@@ -545,9 +582,15 @@ class SceneReader:
             "paths": len(self.path_names()),
             "kind": m.kind,
             "portals": len(self.portals()),
-        } | (self._interior_summary() if m.kind in ("interior", "crossing") else {}) | (
+        } | (self._impostor_summary() if self.has_impostors() else {}) | (
+            self._interior_summary() if m.kind in ("interior", "crossing") else {}) | (
             {"entrances": len(self.entrances())} if m.kind == "crossing" else {}
         )
+
+    def _impostor_summary(self) -> dict[str, Any]:
+        n, nbytes, texels = self._query("SELECT count(*), coalesce(sum(length(data)), 0), "
+                                        "coalesce(sum(size * size), 0) FROM impostors")[0]
+        return {"impostor_images": int(n), "impostor_bytes": int(nbytes), "impostor_texels": int(texels)}
 
     def _interior_summary(self) -> dict[str, Any]:
         rooms = self.rooms()

@@ -138,6 +138,18 @@ OPTIONAL_TABLES: dict[str, dict[str, str]] = {
             "y REAL NOT NULL, dz REAL NOT NULL, first INTEGER NOT NULL, last INTEGER NOT NULL)"
         ),
     },
+    "impostors": {
+        # an impostor image of a building (shared/impostors.py): its direction bin
+        # (level, az, el), its side in texels and the image file (shared/codec/image.py)
+        "impostors": (
+            "CREATE TABLE impostors(id INTEGER PRIMARY KEY, object INTEGER NOT NULL, level INTEGER NOT NULL, "
+            "az INTEGER NOT NULL, el INTEGER NOT NULL, size INTEGER NOT NULL, media TEXT NOT NULL, "
+            "data BLOB NOT NULL)"
+        ),
+        # which buildings a cell draws as impostors and with which images: msgpack
+        # rows [object, level, az0, n_az, el0, n_el, image ids...] (server/bake/impostorplan.py)
+        "cell_impostors": "CREATE TABLE cell_impostors(cell INTEGER PRIMARY KEY, data BLOB NOT NULL)",
+    },
 }
 """Tables that exist only in scenes using a feature, declared in this one place."""
 

@@ -11,10 +11,12 @@ from collections.abc import Iterable, Sequence
 from contextlib import suppress
 from typing import Any
 
+import msgpack
 import numpy as np
 from numpy.typing import ArrayLike
 
 from walkstream.shared.codec import (
+    decode_pvs,
     encode_ids,
     encode_polygon,
     encode_pvs,
@@ -488,6 +490,51 @@ class SceneWriter:
         self._run("entrances", "INSERT OR REPLACE INTO entrances VALUES (?,?,?,?,?)", out)
         if placed:
             self._run("placements", "INSERT OR REPLACE INTO placements VALUES (?,?,?,?,?,?,?)", placed)
+        return len(out)
+
+    # -- impostors (feature impostors) -----------------------------------------
+
+    def stored_pvs(self) -> dict[int, np.ndarray]:
+        """Each done cell's PVS object ids, by cell id (the impostor step plans from them)."""
+        out = {}
+        for cid, blob in self._db.execute("SELECT id, pvs FROM cells WHERE done = 1 AND pvs IS NOT NULL"):
+            try:
+                out[int(cid)] = decode_pvs(blob, f"cell {cid}: pvs")[0]
+            except CodecError as exc:
+                raise StoreError(f"{self.work_path}: {exc}") from exc
+        return out
+
+    def add_impostor(self, image: int, obj: int, bin_: tuple[int, int, int], size: int, media: str, data: bytes) -> None:
+        """Store (or replace) one impostor image, committed at once (a kill loses only those in flight).
+
+        ``bin_`` is its ``(level, azimuth bin, elevation bin)``
+        (:mod:`walkstream.shared.impostors`), ``size`` its side in texels, ``media``
+        the file's media type.
+        """
+        self._require("impostors", "impostors")
+        what = f"impostor {image}"
+        if not isinstance(data, bytes) or not data:
+            raise StoreError(f"{what}: expected non-empty bytes")
+        row = (row_index(image, what), row_index(obj, what), *(row_index(v, what) for v in bin_),
+               row_index(size, what), str(media), data)
+        self._run("impostors", "INSERT OR REPLACE INTO impostors VALUES (?,?,?,?,?,?,?,?)", [row])
+
+    def done_impostors(self) -> set[int]:
+        """Ids of the impostor images stored (empty without the feature)."""
+        if not self._db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'impostors'").fetchone():
+            return set()
+        return {int(r[0]) for r in self._db.execute("SELECT id FROM impostors")}
+
+    def set_cell_impostors(self, cells: Iterable[tuple[int, list[list[int]]]]) -> int:
+        """Store (or replace) which objects each cell draws as impostors: ``(cell, rows)`` with
+        rows ``[object, level, az0, n_az, el0, n_el, image ids...]``; returns how many cells."""
+        self._require("cell_impostors", "impostors")
+        out = []
+        for cid, rows in cells:
+            what = f"cell {cid}: impostors"
+            clean = [[row_index(v, what) for v in r] for r in rows]
+            out.append((row_index(cid, what), msgpack.packb(clean)))
+        self._run("cell_impostors", "INSERT OR REPLACE INTO cell_impostors VALUES (?,?)", out)
         return len(out)
 
     # -- finishing -----------------------------------------------------------

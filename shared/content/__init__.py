@@ -3,7 +3,8 @@
 The modules: :mod:`.kind` (the record that names a kind's parts), :mod:`.registry`
 (every kind, and what a new one takes), :mod:`.params` (procedural parameters of
 buildings and streets), :mod:`.mesh` (objects' LOD2 meshes rebuilt by the service),
-:mod:`.cellmesh` (an interior cell's meshes).
+:mod:`.cellmesh` (an interior cell's meshes), :mod:`.impostor` (an image standing in for a
+far or complex building).
 """
 
 from walkstream.shared.exports import lazy_exports

@@ -17,8 +17,9 @@ class ContentKind:
     ----------
     name : str
         The kind's name (also its ETag's representation tag where it has its own route).
-    owner : {"object", "cell"}
-        What the id of an item is: an object id, or a cell id.
+    owner : {"object", "cell", "image"}
+        What the id of an item is: an object id, a cell id, or an image id of its own
+        (an impostor image, listed by the cell records).
     table, key_column, column : str
         The store's table, the column of the owner's id, and the column of the bytes.
     feature : str or None
@@ -37,7 +38,7 @@ class ContentKind:
     """
 
     name: str
-    owner: Literal["object", "cell"]
+    owner: Literal["object", "cell", "image"]
     table: str
     key_column: str
     column: str

@@ -63,6 +63,7 @@ format described above; any other form is a 422 naming it.
 
 from walkstream.server.service.routers import (
     cells,
+    impostors,
     index,
     objects,
     ops,
@@ -72,7 +73,7 @@ from walkstream.server.service.routers import (
     start,
 )
 
-__all__ = ["ROUTERS", "cells", "index", "objects", "ops", "paths", "rooms", "scenes", "start"]
+__all__ = ["ROUTERS", "cells", "impostors", "index", "objects", "ops", "paths", "rooms", "scenes", "start"]
 
 ROUTERS = (
     scenes.router,
@@ -81,6 +82,7 @@ ROUTERS = (
     index.router,
     cells.router,
     rooms.router,
+    impostors.router,
     objects.router,
     ops.router,
 )

@@ -1,0 +1,45 @@
+"""The client side of the content kind ``impostor``: an image in the cache.
+
+The cache holds the decoded premultiplied RGBA array (:func:`~walkstream.shared.codec.image.decode_image`)
+under ``("impostor", image id)``, counted at its texels' bytes (4 per texel), which is
+also what it takes as a texture.  An impostor is a texture, not a mesh: the client's
+frame path does not draw impostors yet (issue 27, item 3), so :meth:`ImpostorContent.upload`
+refuses a mesh.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable
+from dataclasses import dataclass
+from typing import Any
+
+from walkstream.client.content.base import Uploader
+from walkstream.shared.content.impostor import KIND as IMPOSTOR
+from walkstream.shared.content.kind import ContentKind
+from walkstream.shared.errors import InputError
+from walkstream.shared.records import Mesh
+
+__all__ = ["IMPOSTOR_CONTENT", "ImpostorContent"]
+
+
+@dataclass(frozen=True)
+class ImpostorContent:
+    """The ``impostor`` content kind on the client."""
+
+    kind: ContentKind = IMPOSTOR
+
+    def cache_entry(self, payload: bytes, decoded: Any) -> tuple[Any, int]:
+        """``(the premultiplied RGBA image, its bytes)``; ``payload`` is not kept."""
+        return decoded, max(int(decoded.nbytes), 1)
+
+    def gpu_key(self, item: int, part: int) -> Hashable:
+        """``("impostor", image id, part)``: no object's or cell's key."""
+        return (self.kind.name, item, part)
+
+    def upload(self, renderer: Uploader, item: int, part: int, mesh: Mesh) -> Hashable:
+        """Refused: an impostor is an image, uploaded as a texture, never as a mesh."""
+        raise InputError(f"impostor {item}: an image, not a mesh (textures are not uploaded through meshes)")
+
+
+IMPOSTOR_CONTENT = ImpostorContent()
+"""The ``impostor`` content kind on the client."""

@@ -1,0 +1,116 @@
+"""Which far buildings a frame draws as impostors, how opaque, and which images fit the texture budget.
+
+Pure numpy over the rows of the current cell's record
+(:class:`~walkstream.shared.wire.ImpostorRow`, with the bake's distance ``D`` and
+error bound ``A`` of :class:`~walkstream.shared.wire.CellImpostors`); the frame path
+that uploads the images as textures and draws the quads is still to come (issue 27,
+item 3), so nothing here changes what a replay draws.
+
+- **The image**: the bin of the viewer's direction from the building's centre at the
+  row's level (:func:`~walkstream.shared.impostors.bin_of`); a bin the cell lists no
+  image for means geometry.
+- **The blend** (:func:`impostor_alpha`): the impostor's opacity is 0 (geometry only)
+  at the distance ``D`` from the building's box and below, rises smoothly to 1
+  (impostor only) at ``D + blend_m``, and falls back to 0 as the angular error
+  (:func:`~walkstream.shared.impostors.angular_error` of the image's direction against
+  the viewer's) climbs over the last quarter of ``A`` to ``A``; in between both are
+  drawn, the impostor over the geometry, so nothing pops at either end.
+- **The texture budget** (:func:`fit_textures`): when the images wanted do not all
+  fit, the farthest buildings' images are dropped first (their buildings are drawn as
+  geometry), so a budget smaller than one cell's images still draws every building.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from walkstream.shared.impostors import angular_error, bin_direction, bin_of, directions
+from walkstream.shared.wire import ImpostorRow
+
+__all__ = ["BLEND_M", "ERROR_BLEND", "ImpostorChoice", "choose_impostors", "fit_textures", "impostor_alpha"]
+
+BLEND_M = 20.0
+"""Metres beyond ``D`` over which an impostor fades in over its geometry."""
+
+ERROR_BLEND = 0.25
+"""Share of the error bound over which an impostor fades out as its error nears the bound."""
+
+
+def _smoothstep(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    t = np.clip(x, 0.0, 1.0)
+    out: NDArray[np.float64] = t * t * (3.0 - 2.0 * t)
+    return out
+
+
+def impostor_alpha(
+    distance: ArrayLike, error: ArrayLike, d: float, bound: float, blend_m: float = BLEND_M
+) -> NDArray[np.float64]:
+    """The impostor's opacity (0: geometry only, 1: impostor only) at ``distance`` from
+    the building's box (metres) with angular ``error`` (radians), for the bake's ``d``
+    and ``bound``."""
+    near = _smoothstep((np.asarray(distance, np.float64) - d) / max(blend_m, 1e-9))
+    err = _smoothstep((bound - np.asarray(error, np.float64)) / (ERROR_BLEND * bound))
+    out: NDArray[np.float64] = np.minimum(near, err)
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class ImpostorChoice:
+    """One listed building in one frame: the image to draw (None: geometry only), its
+    opacity over the geometry, the distance to its box and the angular error."""
+
+    object: int
+    image: int | None
+    alpha: float
+    distance: float
+    error: float
+
+
+def choose_impostors(
+    rows: Sequence[ImpostorRow], eye: ArrayLike, d: float, bound: float, blend_m: float = BLEND_M
+) -> list[ImpostorChoice]:
+    """Each listed building's image and opacity for a viewer at ``eye`` (see the module docstring)."""
+    e = np.asarray(eye, np.float64).reshape(3)
+    out = []
+    for r in rows:
+        lo, hi = np.asarray(r.box[:3]), np.asarray(r.box[3:])
+        centre, radius = (lo + hi) / 2.0, float(np.linalg.norm(hi - lo)) / 2.0
+        # the bake's distance: from the eye to the box's footprint
+        dist = float(np.hypot(*np.maximum(np.maximum(lo[:2] - e[:2], e[:2] - hi[:2]), 0.0)))
+        az, el = directions(e, centre)
+        ia, ie = bin_of(r.level, az, el)
+        image = r.image_for(int(ia), int(ie))
+        v = e - centre
+        span = float(np.linalg.norm(v))
+        if image is None or span <= radius:
+            out.append(ImpostorChoice(r.object, None, 0.0, dist, math.inf))
+            continue
+        theta = math.acos(float(np.clip(v @ bin_direction(r.level, int(ia), int(ie)) / span, -1.0, 1.0)))
+        err = float(angular_error(radius, span, theta))
+        alpha = float(impostor_alpha(dist, err, d, bound, blend_m))
+        out.append(ImpostorChoice(r.object, image if alpha > 0.0 else None, alpha, dist, err))
+    return out
+
+
+def fit_textures(choices: Sequence[ImpostorChoice], nbytes: Mapping[int, int], budget: int) -> list[ImpostorChoice]:
+    """``choices`` with the images that do not fit ``budget`` bytes of textures dropped,
+    farthest first: the nearest images are kept while they fit, and from the first that
+    does not, every farther one is dropped (their buildings: geometry); an image two
+    buildings share counts once."""
+    kept: set[int] = set()
+    used = 0
+    for c in sorted((c for c in choices if c.image is not None), key=lambda c: c.distance):
+        if c.image is None or c.image in kept:
+            continue
+        size = nbytes.get(c.image, 0)
+        if used + size > budget:
+            break  # this one and every farther one: geometry
+        kept.add(c.image)
+        used += size
+    return [c if c.image is None or c.image in kept else ImpostorChoice(c.object, None, 0.0, c.distance, c.error)
+            for c in choices]

@@ -1,0 +1,270 @@
+"""The impostor images of the bake: one object alone, orthographic, in the client's palette and light.
+
+:class:`ImpostorRenderer` holds the LOD2 meshes of a city's buildings in one vertex
+buffer (one context, made headless through EGL like every renderer of the project)
+and renders one object at a time along a bin's direction
+(:func:`~walkstream.shared.impostors.bin_direction`) into a square of ``2 R`` metres
+(:func:`~walkstream.shared.impostors.image_basis`), over transparent black, at
+:data:`SUPERSAMPLE` times the size asked; averaging the supersamples gives
+premultiplied colour with soft silhouettes (:mod:`walkstream.shared.codec.image`).
+The lighting is the client's per-vertex lighting (:mod:`walkstream.shared.lighting`,
+material colours of :mod:`walkstream.shared.palette`), so an image shows an object as
+the client draws its LOD2.
+
+:func:`impostor_task` is the chunk task the one chunk runner (:mod:`.chunks`) runs: a
+list of images to make in, their encoded bytes out.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.server.bake.objectrows import building_box
+from walkstream.shared.buildings import build_lod_batch
+from walkstream.shared.camera import mat4_bytes
+from walkstream.shared.codec.image import encode_image
+from walkstream.shared.errors import InputError
+from walkstream.shared.gl import (
+    Framebuffer,
+    Releasable,
+    check_gl_error,
+    create_context,
+    release_objects,
+)
+from walkstream.shared.impostors import bin_direction, image_basis
+from walkstream.shared.lighting import AMBIENT, LIGHT_DIRECTION
+from walkstream.shared.palette import material_rgb
+from walkstream.shared.records import Mesh
+
+__all__ = ["SUPERSAMPLE", "ImageJob", "ImpostorRenderer", "impostor_task", "release_impostor_renderer"]
+
+SUPERSAMPLE = 2
+"""Rendered samples per image texel along each axis (averaged: soft silhouettes)."""
+
+_ATLAS_SIDE = 2048
+"""Largest side of the framebuffer the images of one read are tiled in, pixels."""
+
+ImageJob = tuple[int, int, int, int, int, int]
+"""One image to make: ``(image id, object id, level, azimuth bin, elevation bin, size)``."""
+
+_VERTEX_SHADER = """
+#version 330
+uniform mat4 u_view_proj;
+uniform vec3 u_light_dir;
+uniform float u_ambient;
+in vec3 in_position;
+in vec3 in_normal;
+in vec3 in_color;
+out vec3 v_lit;
+void main() {
+    gl_Position = u_view_proj * vec4(in_position, 1.0);
+    float diffuse = max(dot(normalize(in_normal), u_light_dir), 0.0);
+    v_lit = in_color * (u_ambient + (1.0 - u_ambient) * diffuse);
+}
+"""
+
+_FRAGMENT_SHADER = """
+#version 330
+in vec3 v_lit;
+out vec4 f_color;
+void main() {
+    f_color = vec4(v_lit, 1.0);
+}
+"""
+
+
+def _ortho(radius: float, far: float) -> NDArray[np.float64]:
+    """Orthographic projection of a ``2 radius`` square, depth 0.01..``far``."""
+    n = 0.01
+    m = np.zeros((4, 4))
+    m[0, 0] = m[1, 1] = 1.0 / radius
+    m[2, 2] = -2.0 / (far - n)
+    m[2, 3] = -(far + n) / (far - n)
+    m[3, 3] = 1.0
+    return m
+
+
+class ImpostorRenderer(Releasable):
+    """Renders impostor images of objects (see the module docstring).
+
+    Parameters
+    ----------
+    meshes, ids:
+        The objects' LOD2 meshes and their object ids.
+    boxes:
+        Each object's ``(minx, miny, minz, maxx, maxy, maxz)``, whose centre and half
+        diagonal an image covers (default: its mesh's box); the bake passes the
+        stored boxes (:func:`~.objectrows.building_box`) so the client places the
+        quad from the same numbers.
+    ctx:
+        A context to use (default: a new headless one, released with the renderer).
+    """
+
+    def __init__(
+        self, meshes: Sequence[Mesh], ids: Sequence[int], boxes: Sequence[Sequence[float]] | None = None,
+        ctx: Any = None,
+    ) -> None:
+        if len(meshes) != len(ids):
+            raise InputError(f"ImpostorRenderer: {len(meshes)} meshes but {len(ids)} ids")
+        self._own_ctx = ctx is None
+        self.ctx = create_context() if ctx is None else ctx
+        self._objects: list[Any] = []
+        self._fbs: dict[int, Framebuffer] = {}
+        pos, nor, col, idx = [], [], [], []
+        self._range: dict[int, tuple[int, int]] = {}
+        self._bounds: dict[int, tuple[NDArray[np.float64], float]] = {}
+        base = first = 0
+        for k, (oid, m) in enumerate(zip(ids, meshes, strict=True)):
+            pos.append(m.positions)
+            nor.append(m.normals)
+            col.append(material_rgb(m.materials).astype(np.float32) / 255.0)
+            idx.append(m.indices.reshape(-1) + base)
+            self._range[int(oid)] = (first, m.indices.size)
+            if boxes is not None:
+                lo, hi = np.asarray(boxes[k][:3], np.float64), np.asarray(boxes[k][3:], np.float64)
+            else:
+                lo, hi = m.positions.min(axis=0).astype(np.float64), m.positions.max(axis=0).astype(np.float64)
+            self._bounds[int(oid)] = ((lo + hi) / 2.0, float(np.linalg.norm(hi - lo) / 2.0))
+            base += len(m.positions)
+            first += m.indices.size
+        verts = np.hstack([np.vstack(pos), np.vstack(nor), np.vstack(col)]).astype(np.float32)
+        light = np.asarray(LIGHT_DIRECTION, np.float64)
+        prog: Any = self.ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
+        self.prog = prog
+        self._objects.append(prog)
+        prog["u_light_dir"].value = tuple(float(v) for v in light / np.linalg.norm(light))
+        prog["u_ambient"].value = float(AMBIENT)
+        vbo = self.ctx.buffer(np.ascontiguousarray(verts).tobytes())
+        ibo = self.ctx.buffer(np.concatenate(idx).astype(np.uint32).tobytes())
+        self._objects += [vbo, ibo]
+        self.vao = self.ctx.vertex_array(
+            self.prog, [(vbo, "3f 3f 3f", "in_position", "in_normal", "in_color")],
+            index_buffer=ibo, index_element_size=4,
+        )
+        self._objects.append(self.vao)
+
+    def bounds(self, oid: int) -> tuple[NDArray[np.float64], float]:
+        """The centre and bounding-sphere radius of object ``oid``'s box."""
+        return self._bounds[oid]
+
+    def _framebuffer(self, side: int) -> Framebuffer:
+        fb = self._fbs.get(side)
+        if fb is None:
+            fb = self._fbs[side] = Framebuffer(self.ctx, (side, side))
+        return fb
+
+    def _mvp(self, oid: int, direction: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The orthographic view of object ``oid`` along ``-direction`` over its bounding square."""
+        if oid not in self._range:
+            raise InputError(f"impostor: no mesh of object {oid}")
+        c, r = self._bounds[oid]
+        r = max(r, 1e-3)
+        u = np.asarray(direction, np.float64)
+        u = u / np.linalg.norm(u)
+        right, up = image_basis(u)
+        eye = c + u * (r + 1.0)
+        view = np.eye(4)  # look_at(eye, c) written out: numpy's cross costs more than the draw
+        view[0, :3], view[1, :3], view[2, :3] = right, up, u
+        view[:3, 3] = -view[:3, :3] @ eye
+        out: NDArray[np.float64] = _ortho(r, 2.0 * r + 2.0) @ view
+        return out
+
+    def render(self, oid: int, direction: NDArray[np.float64], size: int) -> NDArray[np.uint8]:
+        """The premultiplied ``(size, size, 4) uint8`` image of object ``oid`` seen along
+        ``-direction`` (row 0 at the top), over its bounding square."""
+        return self.render_many([(oid, direction)], size)[0]
+
+    def render_many(self, views: Sequence[tuple[int, NDArray[np.float64]]], size: int) -> list[NDArray[np.uint8]]:
+        """:meth:`render` of several ``(object, direction)`` at one size, drawn as tiles of
+        one framebuffer and read back once: llvmpipe's cost is mostly the wait for each
+        read (its threads handing a frame over), so one read per tile grid, not per image."""
+        side = int(size) * SUPERSAMPLE
+        per_row = max(1, min(_ATLAS_SIDE // side, math.ceil(math.sqrt(len(views)))))
+        per_fb = per_row * per_row
+        out: list[NDArray[np.uint8]] = []
+        prog: Any = self.prog
+        n = SUPERSAMPLE * SUPERSAMPLE
+        for k in range(0, len(views), per_fb):
+            part = views[k : k + per_fb]
+            fb = self._framebuffer(per_row * side)
+            fb.use()
+            fb.clear((0.0, 0.0, 0.0, 0.0))
+            self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
+            for t, (oid, direction) in enumerate(part):
+                # tile t: column t % per_row, row t // per_row from the top (GL's y from the bottom)
+                col, row = t % per_row, t // per_row
+                self.ctx.viewport = (col * side, (per_row - 1 - row) * side, side, side)
+                prog["u_view_proj"].write(mat4_bytes(self._mvp(oid, direction)))
+                first, count = self._range[oid]
+                self.vao.render(vertices=count, first=first)
+            check_gl_error(self.ctx, "impostor images")
+            atlas = fb.read()
+            # the mean of the samples, rounded, over the whole atlas at once (integer sums of
+            # contiguous rows: per tile, or in floats, it costs more than the render)
+            wide = atlas.astype(np.uint16)
+            total = np.full_like(wide[::SUPERSAMPLE, ::SUPERSAMPLE], n // 2)
+            for i in range(SUPERSAMPLE):
+                for j in range(SUPERSAMPLE):
+                    total += wide[i::SUPERSAMPLE, j::SUPERSAMPLE]
+            small = (total // n).astype(np.uint8)
+            for t in range(len(part)):
+                col, row = t % per_row, t // per_row
+                out.append(small[row * size : (row + 1) * size, col * size : (col + 1) * size].copy())
+        return out
+
+    def release(self) -> None:
+        """Free the GL objects (and the context when it made it)."""
+        for fb in self._fbs.values():
+            fb.release()
+        self._fbs.clear()
+        release_objects(self.ctx, self._objects, self._own_ctx)
+        self._objects = []
+
+
+# ------------------------------------------------------------------ chunk task
+
+_WORKER: dict[str, Any] = {}
+
+
+def _renderer_for(scene: Any, key: str) -> ImpostorRenderer:
+    """One renderer per process (and per scene), built on first use and kept."""
+    if _WORKER.get("key") != key:
+        release_impostor_renderer()
+        meshes = build_lod_batch(scene.buildings, 2)
+        boxes = [building_box(b) for b in scene.buildings]
+        _WORKER["renderer"] = ImpostorRenderer(meshes, [b.id for b in scene.buildings], boxes)
+        _WORKER["key"] = key
+    renderer: ImpostorRenderer = _WORKER["renderer"]
+    return renderer
+
+
+def impostor_task(
+    jobs: list[ImageJob], scene: Any, key: str, codec: str, quality: int
+) -> list[tuple[ImageJob, bytes]]:
+    """Render and encode images (:data:`ImageJob` each); ``(job, bytes)`` out, in order.
+
+    Runs wherever the one chunk runner sends it; ``scene`` is the city's
+    :class:`~walkstream.server.sources.scene.SourceScene`, ``key`` names it (a worker
+    keeps its renderer while the key stays).
+    """
+    renderer = _renderer_for(scene, key)
+    out = []
+    for size in sorted({job[5] for job in jobs}):
+        same = [job for job in jobs if job[5] == size]
+        images = renderer.render_many([(job[1], bin_direction(*job[2:5])) for job in same], size)
+        out += [(job, encode_image(img, codec, quality)) for job, img in zip(same, images, strict=True)]
+    order = {job[0]: k for k, job in enumerate(jobs)}
+    return sorted(out, key=lambda r: order[r[0][0]])
+
+
+def release_impostor_renderer() -> None:
+    """Free this process's impostor renderer (its GL context)."""
+    r = _WORKER.pop("renderer", None)
+    _WORKER.pop("key", None)
+    if r is not None:
+        r.release()

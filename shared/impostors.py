@@ -1,0 +1,148 @@
+"""Impostor geometry shared by the bake and the client: the error bound, direction bins, image size.
+
+An impostor image of an object is its orthographic projection along a direction
+``u`` (from the object's centre towards the eye) onto the plane through the centre
+perpendicular to ``u``, covering the object's bounding sphere (centre ``c``, radius
+``R``): a square of side ``2 R``.
+
+**The error.**  A viewer at distance ``d`` from ``c`` in direction ``v`` sees a point
+of the object at distance ``r <= R`` from ``c`` where the image shows it displaced by
+at most ``r sin(theta)``, ``theta`` the angle between ``u`` and ``v`` (the point's
+depth along ``u`` becomes a sideways shift when the view turns by ``theta``).  Seen
+from the eye that shift subtends the angle
+
+    error(R, d, theta) = atan(R sin(theta) / d)
+
+:func:`angular_error` -- the angle under which a point of the object moves between
+the image's direction and the viewer's.  An image may stand in while this stays at
+or under the bound ``A``: ``theta <= asin(min(1, d tan(A) / R))``
+(:func:`allowed_angle`).
+
+**Direction bins.**  Directions are binned on a fixed grid of azimuth and elevation,
+one grid per *level*: level ``l`` has steps of ``BASE_STEP / 2**l`` radians.  A bin's
+image is rendered from the bin's centre direction, and any direction in the bin is
+within half the bin's diagonal of it (``step / sqrt(2)``, an upper bound of the
+angle on the sphere), so a cell at least ``d`` from an object uses the coarsest level
+whose half-diagonal is at most ``allowed_angle(R, d, A)`` (:func:`level_for`).  The
+grid is the same for every cell, so cells that need the same bin of the same object
+at the same level share one image.
+
+**Size.**  An image of ``n`` texels over ``2 R`` metres keeps a texel at or under a
+screen pixel of a ``height``-pixel view of vertical field ``fov`` at distance ``d``
+when ``n >= 2 R height / (2 d tan(fov / 2))`` (:func:`texels_needed`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "BASE_STEP",
+    "MAX_LEVEL",
+    "allowed_angle",
+    "angular_error",
+    "bin_direction",
+    "bin_of",
+    "directions",
+    "image_basis",
+    "image_size",
+    "level_for",
+    "level_step",
+    "texels_needed",
+]
+
+BASE_STEP = math.pi / 4.0
+"""Bin step of level 0, radians (8 azimuth bins around an object)."""
+
+MAX_LEVEL = 6
+"""Finest level (steps of 0.70 degrees); a cell needing finer bins gets no impostor."""
+
+
+def level_step(level: int) -> float:
+    """The bin step of ``level``, radians."""
+    return BASE_STEP / (1 << int(level))
+
+
+def angular_error(radius: ArrayLike, distance: ArrayLike, theta: ArrayLike) -> NDArray[np.float64]:
+    """The angle (radians) under which a point of an object moves when an image from a
+    direction ``theta`` away from the viewer's stands in (see the module docstring)."""
+    r = np.asarray(radius, np.float64)
+    d = np.maximum(np.asarray(distance, np.float64), 1e-9)
+    return np.arctan(r * np.sin(np.asarray(theta, np.float64)) / d)
+
+
+def allowed_angle(radius: ArrayLike, distance: ArrayLike, bound: float) -> NDArray[np.float64]:
+    """The largest angle between an image's direction and the viewer's that keeps the
+    error at or under ``bound`` (radians), for objects of ``radius`` at ``distance``."""
+    r = np.maximum(np.asarray(radius, np.float64), 1e-9)
+    ratio = np.asarray(distance, np.float64) * math.tan(bound) / r
+    return np.arcsin(np.clip(ratio, 0.0, 1.0))
+
+
+def level_for(radius: ArrayLike, distance: ArrayLike, bound: float) -> NDArray[np.int64]:
+    """The coarsest level whose bins keep the error bound at ``distance`` (-1: none does)."""
+    theta = allowed_angle(radius, distance, bound)
+    # half-diagonal step/sqrt(2) <= theta  <=>  l >= log2(BASE_STEP / (sqrt(2) theta))
+    with np.errstate(divide="ignore"):
+        need = np.log2(BASE_STEP / (math.sqrt(2.0) * np.maximum(theta, 1e-12)))
+    level = np.maximum(np.ceil(need - 1e-9), 0).astype(np.int64)
+    return np.where(level > MAX_LEVEL, -1, level)
+
+
+def directions(points: ArrayLike, centre: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Azimuth and elevation (radians) of ``points - centre`` (the direction to the eye)."""
+    d = np.asarray(points, np.float64) - np.asarray(centre, np.float64)
+    az = np.arctan2(d[..., 1], d[..., 0])
+    el = np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1]))
+    return az, el
+
+
+def bin_of(level: int, az: ArrayLike, el: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The azimuth and elevation bin indices of directions at ``level``."""
+    step = level_step(level)
+    n_az = int(round(2.0 * math.pi / step))
+    ia = np.floor((np.asarray(az, np.float64) + math.pi) / step).astype(np.int64) % n_az
+    ie = np.floor((np.asarray(el, np.float64) + math.pi / 2.0) / step).astype(np.int64)
+    return ia, np.clip(ie, 0, int(round(math.pi / step)) - 1)
+
+
+def bin_direction(level: int, ia: int, ie: int) -> NDArray[np.float64]:
+    """The unit direction (object towards eye) an image of bin ``(ia, ie)`` at ``level`` is rendered from."""
+    step = level_step(level)
+    az = -math.pi + (ia + 0.5) * step
+    el = -math.pi / 2.0 + (ie + 0.5) * step
+    return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+
+
+def texels_needed(radius: ArrayLike, distance: ArrayLike, height_px: int, fov_deg: float) -> NDArray[np.float64]:
+    """Texels across an image so that one is at most a screen pixel at ``distance``."""
+    d = np.maximum(np.asarray(distance, np.float64), 1e-9)
+    per_m = height_px / (2.0 * d * math.tan(math.radians(fov_deg) / 2.0))
+    return 2.0 * np.asarray(radius, np.float64) * per_m
+
+
+def image_size(texels: ArrayLike, cap: int, floor: int = 8) -> NDArray[np.int64]:
+    """The power of two at or above ``texels``, between ``floor`` and ``cap``."""
+    t = np.maximum(np.asarray(texels, np.float64), 1.0)
+    p = np.exp2(np.ceil(np.log2(t))).astype(np.int64)
+    return np.clip(p, floor, cap)
+
+
+def image_basis(direction: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The image's right and up vectors (world, unit) for a direction ``u`` (object towards eye).
+
+    The image looks along ``-u`` with the world's z as its screen-up, as
+    :func:`~walkstream.shared.camera.look_at` does; texel column ``j`` of ``n`` (row
+    ``i`` from the top) shows ``c + R (2 (j + 0.5) / n - 1) right + R (1 - 2 (i + 0.5) / n) up``.
+    """
+    x, y, z = (float(v) for v in np.asarray(direction, np.float64).reshape(3))
+    n = math.sqrt(x * x + y * y + z * z)
+    x, y, z = x / n, y / n, z / n
+    h = math.hypot(x, y)
+    # right = -u x z_up, normalised; up = right x -u (plain arithmetic: this runs per image)
+    right = np.array([1.0, 0.0, 0.0]) if h < 1e-9 else np.array([-y / h, x / h, 0.0])
+    up = np.array([-right[1] * z, right[0] * z, -(right[0] * y - right[1] * x)])
+    return right, up / np.linalg.norm(up)
