@@ -342,8 +342,8 @@ def test_replay_culling_switch_on_an_interior(office_db: Path, tmp_path: Path) -
         assert s["culling"] == mode and s["culling_ms_median"] > 0
         # the ground truth on an interior: no part culled shows (late cells are not culled)
         assert s["truth"]["frames"] >= 4 and s["truth"]["culled_pixels"] == 0, s["truth"]
-        assert set(s["truth"]) == {"frames", "culled_pixels", "culled_frames", "pinholes", "fog_hidden_pct",
-                                   "tightness_mean", "tightness_p95"}
+        assert set(s["truth"]) == {"frames", "culled_pixels", "culled_frames", "pinholes", "refused_poses",
+                                   "fog_hidden_pct", "tightness_mean", "tightness_p95"}
         assert (rep / "interior.png").read_bytes()[:4] == b"\x89PNG" and "interior.png" in (rep / "index.html").read_text()
         got[mode] = s["triangles_mean"]
     assert got["portals"] < got["frustum"]
@@ -389,3 +389,19 @@ def test_fog_fades_surfaces_into_the_background(gl_ctx: Any) -> None:
         assert np.abs(centre[3] - bg).sum() <= 3  # beyond the fog: the background
     finally:
         r.release()
+
+
+def test_the_walk_stops_at_the_fog_not_at_a_depth_the_fog_still_shows() -> None:
+    """A corridor of 12 segments, 4 m each: at the client's and the server's default fog
+    (40 m) every segment whose door is within the fog is seen, however many doors on."""
+    from walkstream.client.stream.rooms import RoomStreamConfig
+    from walkstream.shared.roomview import RoomView
+
+    g = PortalGraph.from_topology(_corridor(12))
+    e, view, proj = _cam((0.5, 0.0, 1.5), 0.0)
+    for fog, depth in ((RoomView().fog_m, RoomView().max_depth),
+                       (RoomStreamConfig().fog_m, RoomStreamConfig().max_depth)):
+        pc = cull_portals(g, 0, e, view, proj, SIZE, fog_m=fog, max_depth=depth)
+        # the door at x = 40 is 39.5 m away (within the fog), the one at x = 44 43.5 m
+        assert pc.order == list(range(11)), pc.order
+        assert frustum_cells(g, 0, e, proj @ view, fog_m=fog, max_depth=depth) == list(range(11))

@@ -9,8 +9,8 @@ An interior is walked like this (Mulloni et al.'s cell manager):
   (:func:`~walkstream.shared.portals.cull_portals`, the default
   :attr:`RoomStreamConfig.culling` ``portals``) or, with ``frustum`` or ``none``,
   through the portals whose bounding box meets the view frustum
-  (:func:`~walkstream.shared.portals.frustum_cells`), within the fog distance,
-  to a depth of :attr:`RoomStreamConfig.max_depth`;
+  (:func:`~walkstream.shared.portals.frustum_cells`), within the fog distance
+  (no depth limit unless :attr:`RoomStreamConfig.max_depth` gives one);
 * **contents** are fetched in the order the walk will need them, in batches
   (``POST .../rooms/contents``, :meth:`SceneClient.contents_batch`: every missing visible
   cell, then predicted ones up to :attr:`RoomStreamConfig.batch_bytes`; each cell is
@@ -80,8 +80,9 @@ class RoomStreamConfig:
     prefetch: bool = True
     fog_m: float = 40.0
     """Portals farther than this from the eye are not looked through."""
-    max_depth: int = 8
-    """Portals passed on the way to a visible cell, at most."""
+    max_depth: int | None = None
+    """Portals passed on the way to a visible cell, at most (None: no limit, the walk
+    stops at the fog; see :class:`~walkstream.shared.roomview.RoomView`)."""
     flush_s: float = 30.0
     """A cell not visible for this long is flushed from memory (``--flush-after``)."""
     flush_policy: str = "crowded"
