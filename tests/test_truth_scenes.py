@@ -16,6 +16,7 @@ from walkstream.client.truth.culled import (
 )
 from walkstream.client.truth.recorder import TruthRecorder
 from walkstream.client.truth.render import TruthRenderer, object_key
+from walkstream.client.truth.solid import SolidProbe
 from walkstream.shared.camera import camera
 from walkstream.shared.codec.cellmesh import CellMesh, CellPart
 from walkstream.shared.records import Mesh
@@ -79,6 +80,20 @@ def test_a_culled_part_is_culled_and_a_late_object_late(gl: Any) -> None:
         rec.record(frame=1, t=0.1, eye=EYE, view=view, pvs=None)  # no visible set known yet
         got = culled_figures(truth, rec.notes, CROSSING_FIGURES)
         assert got == {"frames": 2, "unknown": 1, "culled_pixels": 0, "culled_frames": 0, "pinholes": 0,
-                       "worst_frame": None}
+                       "refused_poses": 0, "worst_frame": None}
         got = culled_figures(truth, _recorder(parts=[]).notes, INTERIOR_FIGURES)
         assert set(got) == set(INTERIOR_FIGURES) and got["culled_pixels"] > 0 and got["culled_frames"] == 1
+
+
+def test_a_pose_in_solid_geometry_is_refused_not_culled(gl: Any) -> None:
+    objects, rooms = _scene()
+    probe = SolidProbe(rooms)
+    assert probe.nearest(EYE, 0.15) == math.inf
+    with TruthRenderer({}, SIZE, rooms=rooms, near=0.1, far=100.0, two_sided=True, ctx=gl) as truth:
+        rec = _recorder(parts=[])  # the part culled, seen from 10 m: counted
+        for eye, yaw in (([9.9, 1.0, 1.5], 0.0), ([10.0, 1.0, 1.5], math.pi / 2)):  # 10 cm from it, in its face
+            e = np.array(eye)
+            assert probe.nearest(e, 0.15) < 0.15
+            rec.record(frame=len(rec.notes), t=0.0, eye=e, view=camera(e, yaw).astype(np.float64), parts=[])
+        got = culled_figures(truth, rec.notes, INTERIOR_FIGURES, solid=probe)
+        assert got["refused_poses"] == 2 and got["culled_frames"] == 1 and got["frames"] == 3

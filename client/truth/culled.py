@@ -14,8 +14,15 @@ quantisation), and which of two such surfaces wins a pixel is the depth buffer's
 toss.  The keys that show anywhere are the **truly visible** ones, against which the
 triangles drawn are compared (tightness).
 
-Both frames are drawn with the fog in force: fragments farther from the eye are not
-drawn, so what the fog hides on purpose is not a miss.
+Both frames are drawn with the fog the frame was drawn at (an interior's budget
+fog, noted with the frame): fragments farther from the eye are not drawn, so what the
+fog hides on purpose is not a miss.
+
+A pose in solid geometry is **refused**, not compared: where the eye comes nearer
+to a room surface than :data:`SOLID_NEAR` near planes
+(:class:`~walkstream.client.truth.solid.SolidProbe`: the eye in a wall's face, or the
+near plane cutting a wall), the frame looks through the cut into what lies behind,
+which no walker sees; it is counted (``refused_poses``), not counted as culled.
 """
 
 from __future__ import annotations
@@ -30,17 +37,24 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.render import TruthRenderer, object_key
+from walkstream.client.truth.solid import SolidProbe
 
-__all__ = ["TIE_M", "INTERIOR_FIGURES", "CROSSING_FIGURES", "TruthCheck", "check_kept", "kept_keys", "culled_figures"]
+__all__ = ["TIE_M", "SOLID_NEAR", "INTERIOR_FIGURES", "CROSSING_FIGURES", "TruthCheck", "check_kept", "kept_keys", "culled_figures"]
 
 #: Depth difference (metres) below which two surfaces count as the same surface.
 TIE_M = 0.005
 
+#: A pose is in solid geometry when a room surface is nearer to the eye than this many
+#: near planes (0.15 m at the rooms' 0.1 m): the near plane's corners are 1.39 near
+#: planes away (60 degrees, 4:3), so a surface that near may be cut; a walk keeps 0.3 m.
+SOLID_NEAR = 1.5
+
 #: The ``truth`` figures of an interior walk (rooms only) in ``report.json``.
-INTERIOR_FIGURES = ("frames", "culled_pixels", "culled_frames", "pinholes", "fog_hidden_pct",
+INTERIOR_FIGURES = ("frames", "culled_pixels", "culled_frames", "pinholes", "refused_poses", "fog_hidden_pct",
                     "tightness_mean", "tightness_p95")
 #: The ``truth`` figures of a crossing walk (city objects and rooms) in ``report.json``.
-CROSSING_FIGURES = ("frames", "unknown", "culled_pixels", "culled_frames", "pinholes", "worst_frame")
+CROSSING_FIGURES = ("frames", "unknown", "culled_pixels", "culled_frames", "pinholes", "refused_poses",
+                    "worst_frame")
 
 
 @dataclass(frozen=True)
@@ -124,18 +138,20 @@ def culled_figures(
     notes: Sequence[FrameNote],
     figures: Sequence[str],
     progress: Callable[[int, int], None] | None = None,
+    solid: SolidProbe | None = None,
 ) -> dict[str, Any]:
     """The ``truth`` figures of a walk with rooms: ``figures`` of :data:`INTERIOR_FIGURES` or
     :data:`CROSSING_FIGURES`.
 
     ``frames`` noted; ``unknown``: those that knew no visible set yet (not compared);
-    ``culled_pixels`` (a key culled that shows: must be 0) and ``culled_frames``
+    ``refused_poses``: those whose eye was in solid geometry by ``solid`` (not
+    compared, see the module docstring); ``culled_pixels`` (a key culled that shows: must be 0) and ``culled_frames``
     (frames with any), the ``pinholes`` apart; ``worst_frame`` (the frame with the most
     culled pixels, or None); ``fog_hidden_pct`` (the share of the pixels the fog hides
     on purpose: shown without fog, not with it); ``tightness_mean`` and
     ``tightness_p95`` (triangles drawn over truly visible).
     """
-    culled = frames_culled = pinholes = 0
+    culled = frames_culled = pinholes = refused = 0
     worst: tuple[int, int] = (0, -1)
     fog_share: list[float] = []
     tight: list[float] = []
@@ -143,6 +159,9 @@ def culled_figures(
         if progress is not None:
             progress(k + 1, len(notes))
         if note.pvs is None:
+            continue
+        if solid is not None and math.isfinite(solid.nearest(note.eye, SOLID_NEAR * truth.near)):
+            refused += 1
             continue
         drawn, kept = kept_keys(truth, note)
         chk = check_kept(truth, kept, note.eye, note.view, note.fog)
@@ -165,6 +184,7 @@ def culled_figures(
         "culled_pixels": int(culled),
         "culled_frames": int(frames_culled),
         "pinholes": int(pinholes),
+        "refused_poses": int(refused),
         "worst_frame": None if worst[1] < 0 else {"frame": worst[1], "culled_pixels": worst[0]},
         "fog_hidden_pct": 100.0 * float(np.mean(fog_share)) if fog_share else 0.0,
         "tightness_mean": float(np.mean(tight)) if tight else 0.0,

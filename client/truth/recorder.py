@@ -18,9 +18,10 @@ figures:
   images (:mod:`walkstream.client.truth.missing`; the figures of
   :func:`~walkstream.client.report.truth.summarise_truth`);
 - room cells (an interior walk, and a crossing walk's streets and rooms): the culled
-  pixels and the pinholes (:mod:`walkstream.client.truth.culled`), with the fog hidden
-  and the tightness for an interior, the frames that knew no visible set yet and the
-  worst frame for a crossing.
+  pixels and the pinholes (:mod:`walkstream.client.truth.culled`), poses in solid
+  geometry refused (:mod:`walkstream.client.truth.solid`), with the fog hidden and the
+  tightness for an interior, the frames that knew no visible set yet and the worst
+  frame for a crossing.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from walkstream.client.truth.missing import (
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.scene import TruthScene, fetch_contents
+from walkstream.client.truth.solid import SolidProbe
 from walkstream.shared.camera import perspective
 from walkstream.shared.errors import InputError, WalkstreamError
 from walkstream.shared.scene.placement import ContentsPlacement
@@ -237,7 +239,8 @@ class TruthRecorder:
             rooms = await fetch_contents(transport, base_url, scene, cells, clock, placements)
             truth = TruthRenderer(objects, self.size, rooms=rooms, fov_deg=self.fov_deg, near=self.near,
                                   far=self.far, two_sided=True)
-            figures = culled_figures(truth, self.notes, CROSSING_FIGURES if objects else INTERIOR_FIGURES, progress)
+            figures = culled_figures(truth, self.notes, CROSSING_FIGURES if objects else INTERIOR_FIGURES, progress,
+                                     solid=SolidProbe(rooms))
             return TruthResult(TruthLog.empty(), figures=figures)
         except (WalkstreamError, httpx.HTTPError) as exc:
             return self._failed(exc, cells, t_first_perfect)

@@ -12,6 +12,7 @@ drawn.  The device's cost step (``cost_step_at_s``) is applied here too.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -22,9 +23,10 @@ from walkstream.client.draw.allocate import allocate_ach, allocate_distance
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.frustum import frustum_cull
-from walkstream.shared.portals import box_distance, cull_parts
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import PortalCull, box_distance, cull_parts
 
-__all__ = ["allocate", "fog_for_budget"]
+__all__ = ["allocate", "fog_for_budget", "nearest_portal_in_view"]
 
 
 def allocate(w: WalkState, f: Frame) -> None:
@@ -89,9 +91,27 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
         for cid, mask in masks.items():
             lo, hi = boxes[cid]
             mask &= box_distance(lo, hi, f.eye) <= f.fog
+        if pc is not None and f.fog < nearest_portal_in_view(rooms.graph, pc, f.eye):
+            w.frames.fog_below_portal += 1
     f.masks = masks
     w.frames.cull_s.append(time.perf_counter() - f.t_cull - rooms.plan_s)
     w.frames.portals.append(0 if pc is None else pc.portals)
+
+
+def nearest_portal_in_view(graph: PortalGraph, pc: PortalCull, eye: NDArray[np.float64]) -> float:
+    """The distance from ``eye`` to the nearest portal of the walk's first cell that the
+    portal walk looked through (``inf`` when it looked through none): a fog nearer than
+    this hides every room beyond the viewer's own."""
+    if not pc.order or pc.order[0] not in graph.index:
+        return math.inf
+    i = graph.index[pc.order[0]]
+    rows = np.arange(int(graph.start[i]), int(graph.start[i + 1]))
+    if not len(rows):
+        return math.inf
+    seen = np.array([int(graph.ids[t]) in pc.vsas for t in graph.target[rows].tolist()], bool)
+    if not seen.any():
+        return math.inf
+    return float(box_distance(graph.lo[rows[seen]], graph.hi[rows[seen]], eye).min())
 
 
 def fog_for_budget(
