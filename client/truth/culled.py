@@ -39,7 +39,7 @@ from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.render import TruthRenderer, object_key
 from walkstream.client.truth.solid import SolidProbe
 
-__all__ = ["TIE_M", "SOLID_NEAR", "INTERIOR_FIGURES", "CROSSING_FIGURES", "TruthCheck", "check_kept", "kept_keys", "culled_figures"]
+__all__ = ["TIE_M", "SOLID_NEAR", "CulledRow", "INTERIOR_FIGURES", "CROSSING_FIGURES", "TruthCheck", "check_kept", "kept_keys", "culled_figures"]
 
 #: Depth difference (metres) below which two surfaces count as the same surface.
 TIE_M = 0.005
@@ -55,6 +55,17 @@ INTERIOR_FIGURES = ("frames", "culled_pixels", "culled_frames", "pinholes", "ref
 #: The ``truth`` figures of a crossing walk (city objects and rooms) in ``report.json``.
 CROSSING_FIGURES = ("frames", "unknown", "culled_pixels", "culled_frames", "pinholes", "refused_poses",
                     "worst_frame")
+
+
+@dataclass(frozen=True)
+class CulledRow:
+    """One noted frame's culled pixels (pinholes apart), or its refusal."""
+
+    frame: int
+    t: float
+    culled_pixels: int
+    pinholes: int
+    refused: bool
 
 
 @dataclass(frozen=True)
@@ -80,6 +91,10 @@ class TruthCheck:
     """``(h, w)`` the missed pixels (row 0 at the top)."""
     depth: NDArray[np.float64] | None = None
     """``(h, w)`` the truth's depth, metres."""
+    pinhole_mask: NDArray[np.bool_] | None = None
+    """``(h, w)`` the missed pixels that are pinholes (a part of :attr:`mask`)."""
+    ids: NDArray[np.int64] | None = None
+    """``(h, w)`` the truth's key index per pixel (-1: nothing)."""
 
 
 def check_kept(
@@ -92,6 +107,7 @@ def check_kept(
     shown = ids >= 0
     culled = shown & ~keep[np.maximum(ids, 0)]
     pinholes = 0
+    holes = np.zeros_like(culled)
     if culled.any():
         _, kdepth = truth.render(eye, view, keep, fog_m)
         culled &= kdepth > depth + TIE_M
@@ -110,7 +126,8 @@ def check_kept(
                     nearer &= dpad[nb] < depth
                     with np.errstate(invalid="ignore"):
                         same |= np.abs(dpad[nb] - depth) <= 0.01 * depth
-        pinholes = int(np.count_nonzero(alone & (nearer | same)))
+        holes = alone & (nearer | same)
+        pinholes = int(np.count_nonzero(holes))
     seen = np.unique(ids[shown])
     return TruthCheck(
         missed_pixels=int(np.count_nonzero(culled)),
@@ -120,6 +137,8 @@ def check_kept(
         pinholes=pinholes,
         mask=culled,
         depth=depth,
+        pinhole_mask=holes,
+        ids=ids,
     )
 
 
@@ -139,6 +158,7 @@ def culled_figures(
     figures: Sequence[str],
     progress: Callable[[int, int], None] | None = None,
     solid: SolidProbe | None = None,
+    rows: list[CulledRow] | None = None,
 ) -> dict[str, Any]:
     """The ``truth`` figures of a walk with rooms: ``figures`` of :data:`INTERIOR_FIGURES` or
     :data:`CROSSING_FIGURES`.
@@ -149,7 +169,8 @@ def culled_figures(
     (frames with any), the ``pinholes`` apart; ``worst_frame`` (the frame with the most
     culled pixels, or None); ``fog_hidden_pct`` (the share of the pixels the fog hides
     on purpose: shown without fog, not with it); ``tightness_mean`` and
-    ``tightness_p95`` (triangles drawn over truly visible).
+    ``tightness_p95`` (triangles drawn over truly visible).  ``rows``, when given,
+    gets one :class:`CulledRow` per compared or refused frame (the report's plot).
     """
     culled = frames_culled = pinholes = refused = 0
     worst: tuple[int, int] = (0, -1)
@@ -162,6 +183,8 @@ def culled_figures(
             continue
         if solid is not None and math.isfinite(solid.nearest(note.eye, SOLID_NEAR * truth.near)):
             refused += 1
+            if rows is not None:
+                rows.append(CulledRow(note.frame, note.t, 0, 0, True))
             continue
         drawn, kept = kept_keys(truth, note)
         chk = check_kept(truth, kept, note.eye, note.view, note.fog)
@@ -169,6 +192,8 @@ def culled_figures(
         culled += miss
         frames_culled += miss > 0
         pinholes += chk.pinholes
+        if rows is not None:
+            rows.append(CulledRow(note.frame, note.t, miss, chk.pinholes, False))
         if miss > worst[0]:
             worst = (miss, note.frame)
         if "fog_hidden_pct" in figures and math.isfinite(note.fog):
