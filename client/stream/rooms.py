@@ -235,6 +235,7 @@ class RoomStreamer:
         self._ahead: list[int] = []
         self._planned_t = -np.inf
         self._bytes_per_triangle = 32.0
+        self._decoded: dict[int, tuple[CellMesh, int]] = {}
         self.plan_s = 0.0
         """CPU seconds the last :meth:`tick` spent predicting (not the frame's culling)."""
         self._received = [0, 0]  # decoded bytes, triangles
@@ -302,10 +303,15 @@ class RoomStreamer:
         others estimated from the topology's triangles at the bytes per triangle of the
         contents received so far, 32 before any)."""
         total = 0
+        sizes = self._decoded
         for c in cells:
             m = self.mesh(c)
             if m is not None:
-                total += decoded_bytes(m)
+                # summed over the parts once per mesh (asked for every visible cell, every frame)
+                known = sizes.get(c)
+                if known is None or known[0] is not m:
+                    known = sizes[c] = (m, decoded_bytes(m))
+                total += known[1]
             else:
                 total += round(self._bytes_per_triangle * self.cells[c].contents.triangles)
         return total

@@ -35,8 +35,7 @@ def allocate(w: WalkState, f: Frame) -> None:
     room_tris = room_parts = 0
     if rooms is not None:
         _cull_rooms(w, f)
-        room_tris = sum(p.triangles for cid, cm in f.loaded.items()
-                        for p, ok in zip(cm.parts, f.masks[cid].tolist(), strict=True) if ok)
+        room_tris = sum(int(w.part_triangles[cid][f.masks[cid]].sum()) for cid in f.loaded)
         room_parts = sum(int(m.sum()) for m in f.masks.values())
     else:
         f.budget = int(w.controller.budget) if w.controller is not None else 0
@@ -72,6 +71,7 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
         if cid not in boxes:
             b = [p.bbox for p in cm.parts]
             boxes[cid] = (np.array([x[0] for x in b]).reshape(-1, 3), np.array([x[1] for x in b]).reshape(-1, 3))
+            w.part_triangles[cid] = np.array([p.triangles for p in cm.parts], np.int64)
     pc = rooms.last_cull
     culling = rooms.config.culling
     if pc is not None:
@@ -87,7 +87,7 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
     lever = w.controller is not None and (w.scene.streets is not None or w.config.fog_budget)
     f.budget = int(w.controller.budget) if lever and w.controller is not None else 0
     if w.indoors and w.config.fog_budget:  # indoors the budget's lever is the fog
-        f.fog = fog_for_budget(masks, boxes, f.loaded, f.eye, f.budget, f.fog)
+        f.fog = fog_for_budget(masks, boxes, f.loaded, f.eye, f.budget, f.fog, w.part_triangles)
         for cid, mask in masks.items():
             lo, hi = boxes[cid]
             mask &= box_distance(lo, hi, f.eye) <= f.fog
@@ -121,9 +121,11 @@ def fog_for_budget(
     eye: NDArray[np.float64],
     budget: int,
     fog: float,
+    part_triangles: dict[int, NDArray[np.int64]] | None = None,
 ) -> float:
     """The fog distance at which the kept parts, nearest first, fit ``budget`` triangles
-    (``fog`` itself when they all fit; never below 2 m)."""
+    (``fog`` itself when they all fit; never below 2 m); ``part_triangles``: each cell's
+    triangles per part, when the caller keeps them (else counted here)."""
     dist: list[NDArray[np.float64]] = []
     tris: list[NDArray[np.int64]] = []
     for cid, m in masks.items():
@@ -131,7 +133,10 @@ def fog_for_budget(
             continue
         lo, hi = boxes[cid]
         dist.append(box_distance(lo[m], hi[m], eye))
-        tris.append(np.array([p.triangles for p in loaded[cid].parts], np.int64)[m])
+        counts = part_triangles.get(cid) if part_triangles is not None else None
+        if counts is None:
+            counts = np.array([p.triangles for p in loaded[cid].parts], np.int64)
+        tris.append(counts[m])
     if not dist:
         return fog
     d = np.concatenate(dist)
