@@ -507,7 +507,7 @@ def plot_culled(path: Path, t: ArrayLike, culled: ArrayLike, pinholes: ArrayLike
     if r.any():
         ax.plot(x[r], np.zeros(int(r.sum())), "x", color="#333333", ms=5, label="refused: eye in solid geometry")
     ax.set_yscale("symlog", linthresh=1.0)
-    ax.set_ylim(bottom=0.0)
+    ax.set_ylim(0.0, max(10.0, 1.5 * float(max(c.max(initial=0.0), p.max(initial=0.0)))))
     ax.set_xlabel("walk time, s")
     ax.set_ylabel("pixels per compared frame")
     _legend(ax, loc="upper right")
