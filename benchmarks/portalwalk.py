@@ -38,7 +38,7 @@ def cull_portals_reference(
     size: tuple[int, int],
     *,
     fog_m: float = math.inf,
-    max_depth: int = 32,
+    max_depth: int | None = None,
     clip_m: float = 0.03,
     pass_m: float = 0.05,
     max_vsas: int = 4,
@@ -104,7 +104,7 @@ def cull_portals_reference(
         c = queue.popleft()
         queued.discard(c)
         dc = depth[c]
-        if dc >= max_depth:
+        if max_depth is not None and dc >= max_depth:
             continue
         if not done[c]:
             project([c] + [q for q in queue if not done[q]])

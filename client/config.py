@@ -76,6 +76,11 @@ class ReplayConfig:
     """Ask for the streams gzip-compressed (``Accept-Encoding: gzip``)."""
     truth_every: int = 0
     """Compare every N-th frame with the ground truth after the walk (0: never)."""
+    frame_times: tuple[float, ...] | None = None
+    """A recorded frame schedule (``--frame-times``): frame ``k`` takes ``frame_times[k]``
+    seconds on the clock instead of the time measured (the ``gl`` device measures
+    llvmpipe, whose times differ from run to run), so that a walk -- and the frames its
+    ground truth compares -- repeats exactly; frames past its end are measured."""
     batched_draws: bool = True
     """One multi-draw call per frame (False: one draw call per object, as before)."""
 
@@ -100,6 +105,8 @@ class ReplayConfig:
         RewriteOptions(self.rewrite, self.shm_bytes)  # says what is wrong
         if self.snapshot_every < 0:
             raise InputError(f"--snapshot-every {self.snapshot_every}: must not be negative")
+        if self.frame_times is not None and not all(math.isfinite(v) and v > 0 for v in self.frame_times):
+            raise InputError("--frame-times: every frame time must be a positive number of seconds")
         if self.truth_every < 0:
             raise InputError(f"--truth-every {self.truth_every}: must not be negative")
         w, h = self.size

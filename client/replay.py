@@ -350,4 +350,4 @@ async def _close(streamer: Streamer | None, rooms: RoomStreamer | None) -> None:
 def _room_view(config: ReplayConfig) -> RoomView:
     """How the walk views an interior (what the server culls the start bundle's first view with)."""
     depth = config.rooms.get("max_depth", RoomView.max_depth)
-    return RoomView(config.size, config.fov_deg, config.fog_m, int(depth))
+    return RoomView(config.size, config.fov_deg, config.fog_m, None if depth is None else int(depth))

@@ -17,11 +17,15 @@ LEB128 varints: for each column in turn, its first quantised value then the ``n 
 1`` differences.  Decoding rebuilds ``value = step * cumsum(d)``.
 
 Error bound: every decoded value is within half its step of the source value (0.5
-ms, 0.5 mm, 0.5 mrad by default).  When rounding times to 1 ms would make two times
+ms, 0.5 mm, 0.5 mrad by default; for a yaw see below).  When rounding times to 1 ms would make two times
 equal (key points closer than 1 ms), the encoder halves the time step until it does
 not, so the decoded times always increase strictly and the bound is that step's
 half.  Yaw is quantised as it is stored (not wrapped), so the shorter-arc
-interpolation between key points is unchanged.
+interpolation between key points is unchanged -- every turn keeps its direction, a
+turn of exactly half a circle included: where rounding would tip such a turn the
+other way round (its two ends a rounding apart from pi), the encoder moves the
+later yaw (and the samples after it that keep that yaw) one step the way the path
+turns, so those yaws are within 1.5 steps (1.5 mrad by default) of their source.
 
 Decoding is bounded (the inflated body may not exceed what :data:`MAX_SAMPLES`
 samples can take) and every malformed body -- truncated, a zlib bomb, counts that
@@ -39,7 +43,7 @@ import numpy as np
 
 from walkstream.shared.codec import decode_varints, encode_varints, inflate_tagged, unpack_bounded
 from walkstream.shared.errors import CodecError, InputError
-from walkstream.shared.paths import MAX_SAMPLES, RecordedPath
+from walkstream.shared.paths import MAX_SAMPLES, RecordedPath, wrap_angle
 
 __all__ = [
     "PATH_Q_MEDIA",
@@ -67,10 +71,11 @@ _MAX_Q = float(1 << 52)  # quantised values stay exact in float64
 def path_error_bound(blob: bytes) -> tuple[float, ...]:
     """The largest difference between a decoded value and its source, per column.
 
-    Half the steps the blob was written with, ``(t, x, y, z, yaw, pitch)``.
+    Half the steps the blob was written with, ``(t, x, y, z, yaw, pitch)``; for the yaw
+    one and a half (a half turn's end may be moved a step to keep its direction).
     """
     steps: list[float] = _header(blob, "compact path")["steps"]  # type: ignore[assignment]
-    return tuple(0.5 * s for s in steps)
+    return tuple((1.5 if k == 4 else 0.5) * s for k, s in enumerate(steps))
 
 
 def encode_path_q(path: RecordedPath, steps: tuple[float, ...] = STEPS) -> bytes:
@@ -99,6 +104,7 @@ def encode_path_q(path: RecordedPath, steps: tuple[float, ...] = STEPS) -> bytes
             break
         st[0] /= 2.0
     q = np.rint(table / np.asarray(st)[None, :])
+    _keep_turns(q[:, 4], table[:, 4], st[4])
     if np.abs(q).max(initial=0.0) >= _MAX_Q:
         raise InputError(f"path {path.name!r:.60}: compact encoding: values too large for the steps")
     qi = q.astype(np.int64)
@@ -112,6 +118,24 @@ def encode_path_q(path: RecordedPath, steps: tuple[float, ...] = STEPS) -> bytes
         "d": encode_varints(z.T.reshape(-1)),
     }
     return PATH_Q_MAGIC + bytes([_VERSION]) + zlib.compress(msgpack.packb(body, use_bin_type=True), 9)
+
+
+def _keep_turns(qyaw: np.ndarray, yaw: np.ndarray, step: float) -> None:
+    """Nudge quantised yaws ``qyaw`` (in place) so that every step between samples turns
+    the way the source's does (the shorter arc, an exact half turn as ``wrap_angle`` has it)."""
+    want = np.sign(wrap_angle(np.diff(yaw)))
+    near = np.abs(np.abs(wrap_angle(np.diff(yaw))) - np.pi) < 4.0 * step
+    # only turns near half a circle can tip (rounding moves the others far less than pi);
+    # in order, since a nudged yaw starts the next step too
+    for i in np.flatnonzero(near).tolist():
+        for k in (0.0, 1.0, -1.0, 2.0, -2.0):
+            if np.sign(wrap_angle((qyaw[i + 1] + k - qyaw[i]) * step)) == want[i]:
+                # the samples after it at the same yaw move with it (standing still stays still)
+                j = i + 2
+                while j < len(yaw) and yaw[j] == yaw[i + 1]:
+                    j += 1
+                qyaw[i + 1 : j] += k
+                break
 
 
 def _header(blob: bytes, what: str) -> dict[str, object]:

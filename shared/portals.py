@@ -22,8 +22,10 @@ Pure numpy, no GL.  The portals come as a :class:`~walkstream.shared.portalgraph
    with their bounding rectangle.  A cell enters the render queue **once per frame**;
    it is only looked through again when its rectangle grew, which happens at most a
    few times per frame (the rectangle grows by whole pixels within the viewport),
-   so paths through many portals cannot grow exponentially.  A **depth limit**
-   bounds the portals passed on the way to a cell.
+   so paths through many portals cannot grow exponentially.  The walk **stops on
+   distance**, not on depth: a portal whose box is beyond the fog is not looked
+   through, and no depth limit cuts a cell the fog still shows (a corridor split into
+   a dozen segments is seen to its end); a caller may still give one (``max_depth``).
 5. Each queued cell's contents are culled by their boxes: a box is kept when it comes
    within the fog distance and its clipped, projected rectangle meets one of the
    cell's VSAs; the frustum test follows (for the far plane), as in the paper.
@@ -128,7 +130,7 @@ def cull_portals(
     size: tuple[int, int],
     *,
     fog_m: float = math.inf,
-    max_depth: int = 32,
+    max_depth: int | None = None,
     clip_m: float = 0.03,
     pass_m: float = 0.05,
     max_vsas: int = 4,
@@ -148,8 +150,9 @@ def cull_portals(
         Viewport width and height, pixels.
     fog_m : float
         Portals whose box is farther than this are culled.
-    max_depth : int
-        Portals passed, at most.
+    max_depth : int, optional
+        Portals passed, at most (None, the default: no limit; the fog bounds the walk,
+        and a cell is looked through again only when its rectangle grows).
     clip_m, pass_m : float
         The clip plane's depth and the pass-through distance, metres.
     max_vsas : int
@@ -184,11 +187,12 @@ def cull_portals(
     queue = deque([s])
     pop, push = queue.popleft, queue.append
     opened = tested = 0
+    limit = nc + 1 if max_depth is None else max_depth  # a chain of first visits has at most nc cells
     while queue:
         c = pop()
         queued[c] = False
         dc = depth[c]
-        if dc >= max_depth:
+        if dc >= limit:
             continue
         dn = dc + 1
         vx0, vy0, vx1, vy1 = bound[c]
@@ -387,12 +391,12 @@ def frustum_cells(
     view_proj: ArrayLike,
     *,
     fog_m: float = math.inf,
-    max_depth: int = 32,
+    max_depth: int | None = None,
     near_m: float = 0.5,
 ) -> list[int]:
     """Frustum culling alone: the cells reached from ``start`` through portals whose box
     meets the view frustum (or comes within ``near_m`` of the eye) and lies within the
-    fog, breadth first, to ``max_depth`` portals; no VSA narrows the view.
+    fog, breadth first (to ``max_depth`` portals when one is given); no VSA narrows the view.
 
     Returns the cell ids, ``start`` first.
     """
@@ -407,7 +411,7 @@ def frustum_cells(
         c = order[i]
         i += 1
         a, b = int(graph.start[c]), int(graph.start[c + 1])
-        if depth[c] >= max_depth or a == b:
+        if (max_depth is not None and depth[c] >= max_depth) or a == b:
             continue
         rows = np.arange(a, b)
         near = box_distance(graph.lo[rows], graph.hi[rows], e)

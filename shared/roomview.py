@@ -51,8 +51,10 @@ class RoomView:
     """Vertical field of view, degrees."""
     fog_m: float = 40.0
     """Portals farther than this are not looked through (metres)."""
-    max_depth: int = 8
-    """Portals passed on the way to a visible cell, at most."""
+    max_depth: int | None = None
+    """Portals passed on the way to a visible cell, at most; None (the default): no
+    limit, the walk stops at the fog (a limit would cut a long corridor's far end that
+    the fog still shows)."""
 
     def __post_init__(self) -> None:
         w, h = self.size
@@ -62,7 +64,7 @@ class RoomView:
             raise InputError(f"field of view {self.fov_deg!r} degrees: expected 1 to 170")
         if not 0.0 < self.fog_m <= 10_000.0:
             raise InputError(f"fog {self.fog_m!r} m: expected more than 0 and at most 10000")
-        if not 0 <= self.max_depth <= 256:
+        if self.max_depth is not None and not 0 <= self.max_depth <= 256:
             raise InputError(f"depth {self.max_depth!r}: expected 0 to 256 portals")
 
 

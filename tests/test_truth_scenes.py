@@ -10,12 +10,15 @@ import numpy as np
 from walkstream.client.truth.culled import (
     CROSSING_FIGURES,
     INTERIOR_FIGURES,
+    CulledRow,
     check_kept,
     culled_figures,
     kept_keys,
 )
+from walkstream.client.truth.culledview import cell_rgb, culled_view, worst_row
 from walkstream.client.truth.recorder import TruthRecorder
 from walkstream.client.truth.render import TruthRenderer, object_key
+from walkstream.client.truth.solid import SolidProbe
 from walkstream.shared.camera import camera
 from walkstream.shared.codec.cellmesh import CellMesh, CellPart
 from walkstream.shared.records import Mesh
@@ -79,6 +82,38 @@ def test_a_culled_part_is_culled_and_a_late_object_late(gl: Any) -> None:
         rec.record(frame=1, t=0.1, eye=EYE, view=view, pvs=None)  # no visible set known yet
         got = culled_figures(truth, rec.notes, CROSSING_FIGURES)
         assert got == {"frames": 2, "unknown": 1, "culled_pixels": 0, "culled_frames": 0, "pinholes": 0,
-                       "worst_frame": None}
+                       "refused_poses": 0, "worst_frame": None}
         got = culled_figures(truth, _recorder(parts=[]).notes, INTERIOR_FIGURES)
         assert set(got) == set(INTERIOR_FIGURES) and got["culled_pixels"] > 0 and got["culled_frames"] == 1
+
+
+def test_a_pose_in_solid_geometry_is_refused_not_culled(gl: Any) -> None:
+    objects, rooms = _scene()
+    probe = SolidProbe(rooms)
+    assert probe.nearest(EYE, 0.15) == math.inf
+    with TruthRenderer({}, SIZE, rooms=rooms, near=0.1, far=100.0, two_sided=True, ctx=gl) as truth:
+        rec = _recorder(parts=[])  # the part culled, seen from 10 m: counted
+        for eye, yaw in (([9.9, 1.0, 1.5], 0.0), ([10.0, 1.0, 1.5], math.pi / 2)):  # 10 cm from it, in its face
+            e = np.array(eye)
+            assert probe.nearest(e, 0.15) < 0.15
+            rec.record(frame=len(rec.notes), t=0.0, eye=e, view=camera(e, yaw).astype(np.float64), parts=[])
+        got = culled_figures(truth, rec.notes, INTERIOR_FIGURES, solid=probe)
+        assert got["refused_poses"] == 2 and got["culled_frames"] == 1 and got["frames"] == 3
+
+
+def test_the_worst_culled_frame_as_images_with_a_mask_by_cell(gl: Any) -> None:
+    _, rooms = _scene()
+    with TruthRenderer({}, SIZE, rooms=rooms, near=0.1, far=100.0, two_sided=True, ctx=gl) as truth:
+        rec = _recorder(parts=[])  # the part culled
+        rec.record(frame=1, t=0.1, eye=EYE, view=camera(EYE, 0.0).astype(np.float64), parts=[(CELL, 0)])
+        rows: list[CulledRow] = []
+        culled_figures(truth, rec.notes, INTERIOR_FIGURES, rows=rows)
+        assert [r.frame for r in rows] == [0, 1] and rows[0].culled_pixels > 0 == rows[1].culled_pixels
+        worst = worst_row(rows)
+        assert worst is not None and worst.frame == 0
+        view = culled_view(truth, rec.notes[0])
+        assert view.client.shape == view.truth.shape == view.mask.shape == (SIZE[1], SIZE[0], 3)
+        assert view.cells == (CELL,) and view.culled_pixels == rows[0].culled_pixels
+        painted = np.all(view.mask == np.array(cell_rgb(CELL), np.uint8), axis=2)
+        assert int(painted.sum()) == view.culled_pixels
+        assert (view.client != view.truth).any(axis=2).sum() >= view.culled_pixels  # the part missing in the frame

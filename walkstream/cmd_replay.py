@@ -69,6 +69,17 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _frame_times(source: str) -> tuple[float, ...]:
+    """The ``frame_time`` column of a report's ``frames.csv`` (the report folder or the file)."""
+    from walkstream.client.report.files import read_frames_csv
+
+    p = Path(source)
+    p = p / "frames.csv" if p.is_dir() else p
+    if not p.is_file():
+        raise InputError(f"--frame-times {source}: no such report folder or frames.csv")
+    return tuple(float(v) for v in read_frames_csv(p).frame_time.tolist())
+
+
 def config_from_args(args: argparse.Namespace) -> Any:
     """A :class:`~walkstream.client.config.ReplayConfig` from parsed replay arguments."""
     from walkstream.client.config import ReplayConfig
@@ -112,6 +123,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         start_contents=not args.no_start_contents,
         gzip=not args.no_gzip,
         truth_every=args.truth_every,
+        frame_times=_frame_times(args.frame_times) if args.frame_times else None,
         batched_draws=not args.per_object_draws,
     )
 
@@ -292,6 +304,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--no-start-contents", action="store_true",
                    help="interiors: the start bundle leaves out the first view's contents (they come by the streamer's own requests)")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
+    r.add_argument("--frame-times", metavar="REPORT", help="a recorded frame schedule: take each frame's time from an earlier report's frames.csv (its folder or the file) instead of measuring it, so that a gl replay, and the frames --truth-every compares, repeat exactly")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")
     r.add_argument("--per-object-draws", action="store_true", help="gl device: one draw call per object instead of one multi-draw call per frame (the older path, for comparison)")
 

@@ -76,6 +76,22 @@ The algorithm, per observed frame
    (the initial budget if there never was one); otherwise it holds.  A budget driven
    to zero climbs back, and a long look at an empty sky does not blow it up.
 
+Noise or cost, on the fog's lever
+---------------------------------
+Indoors the budget sets the fog (:func:`~walkstream.client.walk.allocate.fog_for_budget`),
+and a frame facing a wall draws ten triangles whatever its budget: its time above the
+overhead is the device's jitter (2-15 ms on llvmpipe), and divided by ten triangles it
+reads as a huge cost per triangle -- the budget, and with it the fog, collapsed to the
+2 m clamp.  The city's triangle lever does not meet this, since its frames draw their
+budget (ACH allocation fills it), and when one does not (everything at LOD2), the
+regime test's ``n >= BUDGET_BOUND * b`` already keeps it from counting as "fast".
+So a caller whose lever leaves frames under budget passes ``under_budget_is_noise``:
+a frame that drew under :data:`BUDGET_BOUND` of its budget and was not more than
+:data:`SLOW_RATIO` slower than the aim tells nothing about the triangles and is left
+out of the cost, as a suspected spike is; with none of the last ``k`` frames telling,
+the budget holds or probes upwards (step 6).  A real cost rise still shows: it makes
+under-budget frames more than 15 % slow, and those count.
+
 What remains: where the overhead is nearly the whole frame (``desktop2003`` at
 40 fps: 1.35 ms of triangles under 1.2 ms of jitter), four frames cannot measure the
 triangle cost well, and the budget wanders by some 15-25 % while the frame rate holds.
@@ -252,7 +268,7 @@ class BudgetController:
 
     # -- update --------------------------------------------------------------------
 
-    def observe(self, frame_time_s: float, triangles: int) -> None:
+    def observe(self, frame_time_s: float, triangles: int, *, under_budget_is_noise: bool = False) -> None:
         """Record one finished frame and set the budget of the next.
 
         Parameters
@@ -262,6 +278,9 @@ class BudgetController:
         triangles : int
             Triangles it drew (>= 0 and finite, else ignored).  Call once per frame,
             after the frame drawn with the current :attr:`budget`.
+        under_budget_is_noise : bool
+            A frame under :data:`BUDGET_BOUND` of its budget and not slow tells nothing
+            about the triangle cost (the fog's lever; see the module docstring).
         """
         try:
             t = float(frame_time_s)
@@ -280,7 +299,9 @@ class BudgetController:
             and t > self.aim_s
             and t > OUTLIER_RATIO * (self._overhead + self._cost * n)
         )
-        self._hist.append((t, n, self._budget, outlier))
+        noise = (under_budget_is_noise and n < BUDGET_BOUND * self._budget
+                 and t <= self.aim_s * SLOW_RATIO)
+        self._hist.append((t, n, self._budget, outlier or noise))
         if not outlier:
             self._fit_hist.append((t, n))
         self._frames += 1

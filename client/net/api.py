@@ -498,8 +498,9 @@ class SceneClient:
         if form != "params":
             query["form"] = form
         if view is not None:  # an interior's bundle then brings the first view's contents
-            query.update(view=f"{view.size[0]}x{view.size[1]}", fov=repr(view.fov_deg), fog=repr(view.fog_m),
-                         depth=str(view.max_depth))
+            query.update(view=f"{view.size[0]}x{view.size[1]}", fov=repr(view.fov_deg), fog=repr(view.fog_m))
+            if view.max_depth is not None:  # none: as deep as the fog reaches
+                query["depth"] = str(view.max_depth)
         url = str(httpx.URL("/v1/start", params=query))
         what = "start bundle"
         state: dict[str, Any] = {"objects": 0, "k": 0}

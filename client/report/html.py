@@ -82,6 +82,9 @@ _CAPTIONS = {
     "the client's frame does not, stacked by cause (middle); on a city walk the colour error of "
     "the client's picture against the full scene (bottom): the mean linear-RGB error per pixel "
     "(line, % of full scale) and the pixels over the visible CIEDE2000 threshold, stacked by cause.",
+    "culled.png": "A walk with rooms: for every compared frame, the pixels where the truth shows "
+    "a part the frame culled (must be 0; pinholes apart) and the pinholes; crosses mark poses "
+    "refused as in solid geometry.",
 }
 
 _DEFINITIONS = (
@@ -176,6 +179,8 @@ def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | N
     parts = ["<h2>Ground truth</h2>"]
     if truth.error:
         parts.append(f"<p class='missing'>no ground truth: {html.escape(truth.error)}</p>")
+    if truth.culled:
+        return "\n".join([*parts, _culled_section(out, s, truth)])
     write_truth_csv(out / "truth.csv", truth.log)
 
     def pct(v: Any) -> str:
@@ -245,6 +250,41 @@ def _colour_rows(c: Mapping[str, Any] | None, pct: Callable[[Any], str]) -> list
         ("frames with > 0.5 % of pixels over it", pct(c.get("frames_over_visible_ratio"))),
         ("PSNR (median / worst 5 % / min)", " / ".join(num(ps.get(k), " dB") for k in ("median", "p5", "min"))),
     ]
+
+
+def _culled_section(out: Path, s: Mapping[str, Any], truth: TruthResult) -> str:
+    """A walk with rooms: its culled-pixel figures, ``culled.png`` and the worst frame
+    beside its truth with a mask of its culled pixels coloured by cell."""
+    from walkstream.client.report.plots import plot_culled
+    from walkstream.client.truth.culledview import PINHOLE_RGB, cell_rgb
+
+    rows = truth.culled
+    plot_culled(out / "culled.png", [r.t for r in rows], [r.culled_pixels for r in rows],
+                [r.pinholes for r in rows], [r.refused for r in rows], "culled pixels per compared frame")
+    keys = ("frames", "culled_pixels", "culled_frames", "pinholes", "refused_poses", "tightness_p95")
+    table = "".join(f"<tr><th>{html.escape(k)}</th><td class='v'>{html.escape(str(s.get(k)))}</td></tr>"
+                    for k in keys if k in s)
+    parts = [f"<table>{table}</table>", _figures(["culled.png"], _CAPTIONS)]
+    w = truth.culled_worst
+    if w is None:
+        parts.append("<p>No compared frame culled a pixel the truth shows (nor a pinhole).</p>")
+        return "\n".join(parts)
+    (out / "truth").mkdir(exist_ok=True)
+    names = {"client": "worst_client.png", "truth": "worst_truth.png", "mask": "worst_culled.png"}
+    for key, name in names.items():
+        _save_png(out / "truth" / name, getattr(w, key))
+    caps = {"client": "the client's frame (what it drew)", "truth": "the ground truth (every room part)",
+            "mask": "culled pixels coloured by the cell shown there; pinholes white"}
+    figs = "".join(
+        f"<figure><a href='truth/{names[k]}'><img src='truth/{names[k]}' alt='{k}'></a>"
+        f"<figcaption>{html.escape(caps[k])}</figcaption></figure>"
+        for k in ("client", "truth", "mask")
+    )
+    legend = ", ".join(f"<span style='color:rgb{cell_rgb(c)}'>&#9632;</span> cell {c}" for c in w.cells[:12])
+    legend += f", <span style='color:rgb{PINHOLE_RGB}'>&#9632;</span> pinhole"
+    parts.append(f"<h3>Worst compared frame: frame {w.frame} at {w.t:.2f} s, {w.culled_pixels:,} culled pixels, "
+                 f"{w.pinholes} pinholes</h3><div class='snaps'>{figs}</div><p>Mask colours: {legend}</p>")
+    return "\n".join(parts)
 
 
 def _snapshot_section(placed: Sequence[tuple[str, bool]]) -> str:
@@ -342,7 +382,7 @@ def write_report(
 
         plot_interior(out / "interior.png", log.t - run.t0, dict(interior), f"{title}: cells, culling and fog")
         names.append("interior.png")
-    if truth is not None:
+    if truth is not None and not truth.culled:
         plot_error(out / "error.png", run, truth.log, f"{title}: frame rate and image error against the truth")
     truth_html = _truth_section(out, safe, truth)
     placed = _place_snapshots(out, snapshots)

@@ -56,6 +56,7 @@ def interior_summary(
         "fog_m_median": float(np.median(frames.fog_m)) if frames.fog_m else config.fog_m,
         "fog_m_min": float(np.min(frames.fog_m)) if frames.fog_m else config.fog_m,
         "fog_tightened_frames": frames.tightened,
+        "fog_below_portal_frames": frames.fog_below_portal,
         "cache_bytes": config.cache_bytes,
         "cache_peak_bytes": int(cache.peak_bytes),
     }

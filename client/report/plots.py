@@ -45,6 +45,7 @@ __all__ = [
     "plot_fps",
     "plot_budget",
     "plot_error",
+    "plot_culled",
 ]
 
 #: The plots every report holds, in page order.
@@ -52,8 +53,9 @@ BASE_PLOT_NAMES: tuple[str, ...] = ("bytes.png", "quality.png", "fps.png", "budg
 
 #: Every plot a report can hold, in page order: the base plots, then ``phases.png``
 #: (when the replay timed its phases), ``interior.png`` (an interior walk) and
-#: ``error.png`` (frames compared with the ground truth).
-PLOT_NAMES: tuple[str, ...] = (*BASE_PLOT_NAMES, "phases.png", "interior.png", "error.png")
+#: ``error.png`` (frames compared with the ground truth), ``culled.png`` (a walk with
+#: rooms compared with the ground truth).
+PLOT_NAMES: tuple[str, ...] = (*BASE_PLOT_NAMES, "phases.png", "interior.png", "error.png", "culled.png")
 
 #: Line colours for runs and series (Okabe-Ito, readable for colour-blind readers).
 #: ``shared.palette`` holds material colours only, which are meant for buildings.
@@ -517,4 +519,39 @@ def plot_interior(path: Path, t: ArrayLike, series: dict[str, ArrayLike], title:
             ax.plot(x[: len(y)], y, lw=0.8, color=SERIES_COLOURS[k], label=label)
         _legend(ax, loc="upper right")
     axes[-1].set_xlabel("walk time, s")
+    return save_figure(fig, path)
+
+
+def plot_culled(path: Path, t: ArrayLike, culled: ArrayLike, pinholes: ArrayLike, refused: ArrayLike,
+                title: str) -> Path:
+    """``culled.png``: a walk with rooms, per compared frame: the culled pixels (pinholes
+    apart, must be 0), the pinholes, and the frames refused as poses in solid geometry.
+
+    Parameters
+    ----------
+    path : Path
+    t : (n,) float
+        Each compared frame's walk time, seconds.
+    culled, pinholes : (n,) int
+        Its culled pixels and pinholes.
+    refused : (n,) bool
+        Whether it was refused (not compared).
+    title : str
+    """
+    x = np.asarray(t, np.float64)
+    c = np.asarray(culled, np.float64)
+    p = np.asarray(pinholes, np.float64)
+    r = np.asarray(refused, bool)
+    fig, (ax,) = grid_figure(1, height=3.2)
+    ax.plot(x, c, lw=0.9, color=SERIES_COLOURS[1], marker=".", ms=3, label="culled pixels (must be 0)")
+    ax.plot(x, p, lw=0.8, color=SERIES_COLOURS[0], marker=".", ms=2, label="pinholes")
+    if r.any():
+        ax.plot(x[r], np.zeros(int(r.sum())), "x", color="#333333", ms=5, label="refused: eye in solid geometry")
+    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_ylim(0.0, max(10.0, 1.5 * float(max(c.max(initial=0.0), p.max(initial=0.0)))))
+    ax.set_xlabel("walk time, s")
+    ax.set_ylabel("pixels per compared frame")
+    _legend(ax, loc="upper right")
+    ax.set_title(f"{title}\n{len(x)} frames compared, {int(c.sum()):,} culled pixels on {int((c > 0).sum())}, "
+                 f"{int(p.sum()):,} pinholes, {int(r.sum())} refused", fontsize=10)
     return save_figure(fig, path)

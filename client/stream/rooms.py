@@ -9,8 +9,8 @@ An interior is walked like this (Mulloni et al.'s cell manager):
   (:func:`~walkstream.shared.portals.cull_portals`, the default
   :attr:`RoomStreamConfig.culling` ``portals``) or, with ``frustum`` or ``none``,
   through the portals whose bounding box meets the view frustum
-  (:func:`~walkstream.shared.portals.frustum_cells`), within the fog distance,
-  to a depth of :attr:`RoomStreamConfig.max_depth`;
+  (:func:`~walkstream.shared.portals.frustum_cells`), within the fog distance
+  (no depth limit unless :attr:`RoomStreamConfig.max_depth` gives one);
 * **contents** are fetched in the order the walk will need them, in batches
   (``POST .../rooms/contents``, :meth:`SceneClient.contents_batch`: every missing visible
   cell, then predicted ones up to :attr:`RoomStreamConfig.batch_bytes`; each cell is
@@ -80,8 +80,9 @@ class RoomStreamConfig:
     prefetch: bool = True
     fog_m: float = 40.0
     """Portals farther than this from the eye are not looked through."""
-    max_depth: int = 8
-    """Portals passed on the way to a visible cell, at most."""
+    max_depth: int | None = None
+    """Portals passed on the way to a visible cell, at most (None: no limit, the walk
+    stops at the fog; see :class:`~walkstream.shared.roomview.RoomView`)."""
     flush_s: float = 30.0
     """A cell not visible for this long is flushed from memory (``--flush-after``)."""
     flush_policy: str = "crowded"
@@ -234,6 +235,7 @@ class RoomStreamer:
         self._ahead: list[int] = []
         self._planned_t = -np.inf
         self._bytes_per_triangle = 32.0
+        self._decoded: dict[int, tuple[CellMesh, int]] = {}
         self.plan_s = 0.0
         """CPU seconds the last :meth:`tick` spent predicting (not the frame's culling)."""
         self._received = [0, 0]  # decoded bytes, triangles
@@ -301,10 +303,15 @@ class RoomStreamer:
         others estimated from the topology's triangles at the bytes per triangle of the
         contents received so far, 32 before any)."""
         total = 0
+        sizes = self._decoded
         for c in cells:
             m = self.mesh(c)
             if m is not None:
-                total += decoded_bytes(m)
+                # summed over the parts once per mesh (asked for every visible cell, every frame)
+                known = sizes.get(c)
+                if known is None or known[0] is not m:
+                    known = sizes[c] = (m, decoded_bytes(m))
+                total += known[1]
             else:
                 total += round(self._bytes_per_triangle * self.cells[c].contents.triangles)
         return total

@@ -14,8 +14,15 @@ quantisation), and which of two such surfaces wins a pixel is the depth buffer's
 toss.  The keys that show anywhere are the **truly visible** ones, against which the
 triangles drawn are compared (tightness).
 
-Both frames are drawn with the fog in force: fragments farther from the eye are not
-drawn, so what the fog hides on purpose is not a miss.
+Both frames are drawn with the fog the frame was drawn at (an interior's budget
+fog, noted with the frame): fragments farther from the eye are not drawn, so what the
+fog hides on purpose is not a miss.
+
+A pose in solid geometry is **refused**, not compared: where the eye comes nearer
+to a room surface than :data:`SOLID_NEAR` near planes
+(:class:`~walkstream.client.truth.solid.SolidProbe`: the eye in a wall's face, or the
+near plane cutting a wall), the frame looks through the cut into what lies behind,
+which no walker sees; it is counted (``refused_poses``), not counted as culled.
 """
 
 from __future__ import annotations
@@ -30,17 +37,35 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.render import TruthRenderer, object_key
+from walkstream.client.truth.solid import SolidProbe
 
-__all__ = ["TIE_M", "INTERIOR_FIGURES", "CROSSING_FIGURES", "TruthCheck", "check_kept", "kept_keys", "culled_figures"]
+__all__ = ["TIE_M", "SOLID_NEAR", "CulledRow", "INTERIOR_FIGURES", "CROSSING_FIGURES", "TruthCheck", "check_kept", "kept_keys", "culled_figures"]
 
 #: Depth difference (metres) below which two surfaces count as the same surface.
 TIE_M = 0.005
 
+#: A pose is in solid geometry when a room surface is nearer to the eye than this many
+#: near planes (0.15 m at the rooms' 0.1 m): the near plane's corners are 1.39 near
+#: planes away (60 degrees, 4:3), so a surface that near may be cut; a walk keeps 0.3 m.
+SOLID_NEAR = 1.5
+
 #: The ``truth`` figures of an interior walk (rooms only) in ``report.json``.
-INTERIOR_FIGURES = ("frames", "culled_pixels", "culled_frames", "pinholes", "fog_hidden_pct",
+INTERIOR_FIGURES = ("frames", "culled_pixels", "culled_frames", "pinholes", "refused_poses", "fog_hidden_pct",
                     "tightness_mean", "tightness_p95")
 #: The ``truth`` figures of a crossing walk (city objects and rooms) in ``report.json``.
-CROSSING_FIGURES = ("frames", "unknown", "culled_pixels", "culled_frames", "pinholes", "worst_frame")
+CROSSING_FIGURES = ("frames", "unknown", "culled_pixels", "culled_frames", "pinholes", "refused_poses",
+                    "worst_frame")
+
+
+@dataclass(frozen=True)
+class CulledRow:
+    """One noted frame's culled pixels (pinholes apart), or its refusal."""
+
+    frame: int
+    t: float
+    culled_pixels: int
+    pinholes: int
+    refused: bool
 
 
 @dataclass(frozen=True)
@@ -66,6 +91,10 @@ class TruthCheck:
     """``(h, w)`` the missed pixels (row 0 at the top)."""
     depth: NDArray[np.float64] | None = None
     """``(h, w)`` the truth's depth, metres."""
+    pinhole_mask: NDArray[np.bool_] | None = None
+    """``(h, w)`` the missed pixels that are pinholes (a part of :attr:`mask`)."""
+    ids: NDArray[np.int64] | None = None
+    """``(h, w)`` the truth's key index per pixel (-1: nothing)."""
 
 
 def check_kept(
@@ -78,6 +107,7 @@ def check_kept(
     shown = ids >= 0
     culled = shown & ~keep[np.maximum(ids, 0)]
     pinholes = 0
+    holes = np.zeros_like(culled)
     if culled.any():
         _, kdepth = truth.render(eye, view, keep, fog_m)
         culled &= kdepth > depth + TIE_M
@@ -96,7 +126,8 @@ def check_kept(
                     nearer &= dpad[nb] < depth
                     with np.errstate(invalid="ignore"):
                         same |= np.abs(dpad[nb] - depth) <= 0.01 * depth
-        pinholes = int(np.count_nonzero(alone & (nearer | same)))
+        holes = alone & (nearer | same)
+        pinholes = int(np.count_nonzero(holes))
     seen = np.unique(ids[shown])
     return TruthCheck(
         missed_pixels=int(np.count_nonzero(culled)),
@@ -106,6 +137,8 @@ def check_kept(
         pinholes=pinholes,
         mask=culled,
         depth=depth,
+        pinhole_mask=holes,
+        ids=ids,
     )
 
 
@@ -124,18 +157,22 @@ def culled_figures(
     notes: Sequence[FrameNote],
     figures: Sequence[str],
     progress: Callable[[int, int], None] | None = None,
+    solid: SolidProbe | None = None,
+    rows: list[CulledRow] | None = None,
 ) -> dict[str, Any]:
     """The ``truth`` figures of a walk with rooms: ``figures`` of :data:`INTERIOR_FIGURES` or
     :data:`CROSSING_FIGURES`.
 
     ``frames`` noted; ``unknown``: those that knew no visible set yet (not compared);
-    ``culled_pixels`` (a key culled that shows: must be 0) and ``culled_frames``
+    ``refused_poses``: those whose eye was in solid geometry by ``solid`` (not
+    compared, see the module docstring); ``culled_pixels`` (a key culled that shows: must be 0) and ``culled_frames``
     (frames with any), the ``pinholes`` apart; ``worst_frame`` (the frame with the most
     culled pixels, or None); ``fog_hidden_pct`` (the share of the pixels the fog hides
     on purpose: shown without fog, not with it); ``tightness_mean`` and
-    ``tightness_p95`` (triangles drawn over truly visible).
+    ``tightness_p95`` (triangles drawn over truly visible).  ``rows``, when given,
+    gets one :class:`CulledRow` per compared or refused frame (the report's plot).
     """
-    culled = frames_culled = pinholes = 0
+    culled = frames_culled = pinholes = refused = 0
     worst: tuple[int, int] = (0, -1)
     fog_share: list[float] = []
     tight: list[float] = []
@@ -144,12 +181,19 @@ def culled_figures(
             progress(k + 1, len(notes))
         if note.pvs is None:
             continue
+        if solid is not None and math.isfinite(solid.nearest(note.eye, SOLID_NEAR * truth.near)):
+            refused += 1
+            if rows is not None:
+                rows.append(CulledRow(note.frame, note.t, 0, 0, True))
+            continue
         drawn, kept = kept_keys(truth, note)
         chk = check_kept(truth, kept, note.eye, note.view, note.fog)
         miss = chk.missed_pixels - chk.pinholes
         culled += miss
         frames_culled += miss > 0
         pinholes += chk.pinholes
+        if rows is not None:
+            rows.append(CulledRow(note.frame, note.t, miss, chk.pinholes, False))
         if miss > worst[0]:
             worst = (miss, note.frame)
         if "fog_hidden_pct" in figures and math.isfinite(note.fog):
@@ -165,6 +209,7 @@ def culled_figures(
         "culled_pixels": int(culled),
         "culled_frames": int(frames_culled),
         "pinholes": int(pinholes),
+        "refused_poses": int(refused),
         "worst_frame": None if worst[1] < 0 else {"frame": worst[1], "culled_pixels": worst[0]},
         "fog_hidden_pct": 100.0 * float(np.mean(fog_share)) if fog_share else 0.0,
         "tightness_mean": float(np.mean(tight)) if tight else 0.0,

@@ -21,9 +21,11 @@ figures:
   :func:`~walkstream.client.truth.picture.forms_of`) against the full scene, with
   the frame of the largest error as images;
 - room cells (an interior walk, and a crossing walk's streets and rooms): the culled
-  pixels and the pinholes (:mod:`walkstream.client.truth.culled`), with the fog hidden
-  and the tightness for an interior, the frames that knew no visible set yet and the
-  worst frame for a crossing.
+  pixels and the pinholes (:mod:`walkstream.client.truth.culled`), poses in solid
+  geometry refused (:mod:`walkstream.client.truth.solid`), with the fog hidden and the
+  tightness for an interior, the frames that knew no visible set yet and the worst
+  frame for a crossing; the worst frame as images beside its truth, with a mask of its
+  culled pixels by cell (:mod:`walkstream.client.truth.culledview`).
 """
 
 from __future__ import annotations
@@ -38,7 +40,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.report.truth import TruthLog, summarise_truth
-from walkstream.client.truth.culled import CROSSING_FIGURES, INTERIOR_FIGURES, culled_figures
+from walkstream.client.truth.culled import (
+    CROSSING_FIGURES,
+    INTERIOR_FIGURES,
+    CulledRow,
+    culled_figures,
+)
+from walkstream.client.truth.culledview import CulledFrame, culled_view, worst_row
 from walkstream.client.truth.missing import (
     ColourWorst,
     ComparedFrame,
@@ -50,6 +58,7 @@ from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.picture import Overlay, forms_of
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.scene import TruthScene, fetch_contents
+from walkstream.client.truth.solid import SolidProbe
 from walkstream.shared.camera import perspective
 from walkstream.shared.errors import InputError, WalkstreamError
 from walkstream.shared.scene.placement import ContentsPlacement
@@ -83,6 +92,10 @@ class TruthResult:
     """The ``truth`` object of ``report.json`` (None when a walk with rooms found no truth)."""
     colour_worst: ColourWorst | None = None
     """The compared frame with the largest colour error (a city walk's), as images."""
+    culled: list[CulledRow] = field(default_factory=list, repr=False)
+    """A walk with rooms: each noted frame's culled pixels and pinholes (or its refusal)."""
+    culled_worst: CulledFrame | None = None
+    """A walk with rooms: the frame with the most culled pixels as images (None: none culled any)."""
 
 
 class TruthRecorder:
@@ -250,8 +263,12 @@ class TruthRecorder:
             rooms = await fetch_contents(transport, base_url, scene, cells, clock, placements)
             truth = TruthRenderer(objects, self.size, rooms=rooms, fov_deg=self.fov_deg, near=self.near,
                                   far=self.far, two_sided=True)
-            figures = culled_figures(truth, self.notes, CROSSING_FIGURES if objects else INTERIOR_FIGURES, progress)
-            return TruthResult(TruthLog.empty(), figures=figures)
+            rows: list[CulledRow] = []
+            figures = culled_figures(truth, self.notes, CROSSING_FIGURES if objects else INTERIOR_FIGURES, progress,
+                                     solid=SolidProbe(rooms), rows=rows)
+            top = worst_row(rows)
+            view = None if top is None else culled_view(truth, next(n for n in self.notes if n.frame == top.frame))
+            return TruthResult(TruthLog.empty(), figures=figures, culled=rows, culled_worst=view)
         except (WalkstreamError, httpx.HTTPError) as exc:
             return self._failed(exc, cells, t_first_perfect)
         finally:

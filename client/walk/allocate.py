@@ -12,6 +12,7 @@ drawn.  The device's cost step (``cost_step_at_s``) is applied here too.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -22,9 +23,10 @@ from walkstream.client.draw.allocate import allocate_ach, allocate_distance
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.frustum import frustum_cull
-from walkstream.shared.portals import box_distance, cull_parts
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import PortalCull, box_distance, cull_parts
 
-__all__ = ["allocate", "fog_for_budget"]
+__all__ = ["allocate", "fog_for_budget", "nearest_portal_in_view"]
 
 
 def allocate(w: WalkState, f: Frame) -> None:
@@ -33,8 +35,7 @@ def allocate(w: WalkState, f: Frame) -> None:
     room_tris = room_parts = 0
     if rooms is not None:
         _cull_rooms(w, f)
-        room_tris = sum(p.triangles for cid, cm in f.loaded.items()
-                        for p, ok in zip(cm.parts, f.masks[cid].tolist(), strict=True) if ok)
+        room_tris = sum(int(w.part_triangles[cid][f.masks[cid]].sum()) for cid in f.loaded)
         room_parts = sum(int(m.sum()) for m in f.masks.values())
     else:
         f.budget = int(w.controller.budget) if w.controller is not None else 0
@@ -70,6 +71,7 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
         if cid not in boxes:
             b = [p.bbox for p in cm.parts]
             boxes[cid] = (np.array([x[0] for x in b]).reshape(-1, 3), np.array([x[1] for x in b]).reshape(-1, 3))
+            w.part_triangles[cid] = np.array([p.triangles for p in cm.parts], np.int64)
     pc = rooms.last_cull
     culling = rooms.config.culling
     if pc is not None:
@@ -85,13 +87,31 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
     lever = w.controller is not None and (w.scene.streets is not None or w.config.fog_budget)
     f.budget = int(w.controller.budget) if lever and w.controller is not None else 0
     if w.indoors and w.config.fog_budget:  # indoors the budget's lever is the fog
-        f.fog = fog_for_budget(masks, boxes, f.loaded, f.eye, f.budget, f.fog)
+        f.fog = fog_for_budget(masks, boxes, f.loaded, f.eye, f.budget, f.fog, w.part_triangles)
         for cid, mask in masks.items():
             lo, hi = boxes[cid]
             mask &= box_distance(lo, hi, f.eye) <= f.fog
+        if pc is not None and f.fog < nearest_portal_in_view(rooms.graph, pc, f.eye):
+            w.frames.fog_below_portal += 1
     f.masks = masks
     w.frames.cull_s.append(time.perf_counter() - f.t_cull - rooms.plan_s)
     w.frames.portals.append(0 if pc is None else pc.portals)
+
+
+def nearest_portal_in_view(graph: PortalGraph, pc: PortalCull, eye: NDArray[np.float64]) -> float:
+    """The distance from ``eye`` to the nearest portal of the walk's first cell that the
+    portal walk looked through (``inf`` when it looked through none): a fog nearer than
+    this hides every room beyond the viewer's own."""
+    if not pc.order or pc.order[0] not in graph.index:
+        return math.inf
+    i = graph.index[pc.order[0]]
+    rows = np.arange(int(graph.start[i]), int(graph.start[i + 1]))
+    if not len(rows):
+        return math.inf
+    seen = np.array([int(graph.ids[t]) in pc.vsas for t in graph.target[rows].tolist()], bool)
+    if not seen.any():
+        return math.inf
+    return float(box_distance(graph.lo[rows[seen]], graph.hi[rows[seen]], eye).min())
 
 
 def fog_for_budget(
@@ -101,9 +121,11 @@ def fog_for_budget(
     eye: NDArray[np.float64],
     budget: int,
     fog: float,
+    part_triangles: dict[int, NDArray[np.int64]] | None = None,
 ) -> float:
     """The fog distance at which the kept parts, nearest first, fit ``budget`` triangles
-    (``fog`` itself when they all fit; never below 2 m)."""
+    (``fog`` itself when they all fit; never below 2 m); ``part_triangles``: each cell's
+    triangles per part, when the caller keeps them (else counted here)."""
     dist: list[NDArray[np.float64]] = []
     tris: list[NDArray[np.int64]] = []
     for cid, m in masks.items():
@@ -111,7 +133,10 @@ def fog_for_budget(
             continue
         lo, hi = boxes[cid]
         dist.append(box_distance(lo[m], hi[m], eye))
-        tris.append(np.array([p.triangles for p in loaded[cid].parts], np.int64)[m])
+        counts = part_triangles.get(cid) if part_triangles is not None else None
+        if counts is None:
+            counts = np.array([p.triangles for p in loaded[cid].parts], np.int64)
+        tris.append(counts[m])
     if not dist:
         return fog
     d = np.concatenate(dist)

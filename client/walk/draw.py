@@ -2,7 +2,8 @@
 
 The simulated device's frame time comes from its cost model (the renderer draws only
 when a snapshot is due), the ``gl`` device's from the real draw
-(:func:`~walkstream.client.draw.present.present`).  Objects are uploaded as
+(:func:`~walkstream.client.draw.present.present`), or from a recorded frame schedule
+(``--frame-times``: a replay repeated exactly).  Objects are uploaded as
 ``(id, lod)``, room parts under their content kind's key
 (:data:`~walkstream.client.content.cellmesh.CELLMESH_CONTENT`).
 """
@@ -48,6 +49,9 @@ def upload(w: WalkState, f: Frame) -> None:
 def draw(w: WalkState, f: Frame) -> None:
     """Show the frame: its time on the device, the device's stall, the snapshot."""
     f.frame_time, spike = present(w.device, w.renderer, f.keys, f.view, w.proj, f.triangles, f.drawn, f.snap)
+    schedule = w.config.frame_times
+    if schedule is not None and w.frame < len(schedule):  # a recorded schedule: the walk repeats
+        f.frame_time = schedule[w.frame]
     w.spikes.append(spike)
     shot = save_snapshot(w.renderer, w.config.report_dir, w.frame) if f.snap else None
     if shot is not None:
@@ -66,3 +70,4 @@ def forget_flushed(w: WalkState) -> None:
         del w.meshes[key]
     for c in [c for c in w.boxes if rooms.mesh(c) is None]:
         del w.boxes[c]
+        w.part_triangles.pop(c, None)

@@ -44,6 +44,9 @@ class WalkFrames:
     tightened: int = 0
     """Frames on which the visible cells did not fit the memory budget at the default
     fog, so the fog was tightened until they did (the paper's use of fog)."""
+    fog_below_portal: int = 0
+    """Frames whose budget fog was nearer than the nearest portal the portal walk looked
+    through: everything beyond the viewer's own room fogged out (said in the report)."""
     loaded: dict[int, frozenset[int]] = field(default_factory=dict)
     """Frames in an entrance's doorway: the room cells whose contents were in memory."""
     prefetch_from: float | None = None

@@ -65,7 +65,10 @@ def measure(w: WalkState, f: Frame) -> None:
         all_lod2=alloc is not None and bool(alloc.all_max),
     )
     if w.controller is not None:
-        w.controller.observe(f.frame_time, f.triangles)
+        # on the fog's lever a frame under its budget (facing a wall) times the device's
+        # jitter, not its triangles (client/draw/budget.py, "Noise or cost")
+        w.controller.observe(f.frame_time, f.triangles,
+                             under_budget_is_noise=w.indoors and w.config.fog_budget)
 
 
 def note_truth(w: WalkState, f: Frame) -> None:
@@ -89,8 +92,8 @@ def note_truth(w: WalkState, f: Frame) -> None:
             received=cache.ids(city.kind) + cache.ids("geom"), built=cache.ids("geom"),
             geoms=w.objects.geoms, lods=f.lods,
         )
-    elif city is None:  # rooms only: drawn at the fog the portal walk used
-        rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(rooms.fog_m))
+    elif city is None:  # rooms only: at the fog the frame was drawn at (the budget's lever)
+        rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(f.fog))
     else:
         # outdoors before the street cell's record: no visible set known, nothing culled
         unknown = not w.indoors and (f.street is None or f.street not in city.cells)

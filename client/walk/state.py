@@ -58,6 +58,8 @@ class WalkState:
     spikes: list[bool] = field(default_factory=list)
     boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(default_factory=dict)
     """Per loaded room cell, its parts' boxes."""
+    part_triangles: dict[int, NDArray[np.int64]] = field(default_factory=dict)
+    """Per loaded room cell, its parts' triangles (kept with :attr:`boxes`)."""
     meshes: dict[tuple[int, int], Mesh] = field(default_factory=dict)
     """Room parts made into meshes for the renderer, by ``(cell, part)``."""
     frame: int = 0

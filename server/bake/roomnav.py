@@ -2,11 +2,19 @@
 
 :class:`RoomGraph` is built from a baked interior's cells, portals and stairs (as the
 bake makes them or as the scene database gives them back).  Its nodes are the
-middles of the walkable portals at floor level (a door's threshold, the middle of an
-open stretch between two rooms), the centre of every room cell and the two ends of
-every stair; within a convex cell every pair of its nodes is joined by a straight
-line (it stays inside the cell), and a stair joins its ends along its walking line.
+middles of the walkable portals at floor level (a door's threshold: the middle of the
+portal's bottom edge, on the portal; the middle of an open stretch between two rooms),
+the centre of every room cell and the two ends of every stair; within a convex cell
+every pair of its nodes is joined, and a stair joins its ends along its walking line.
 Routes are shortest paths (the one Dijkstra of :mod:`walkstream.shared.nav`).
+
+A walker has a body: a leg inside a cell keeps :data:`CLEARANCE` (0.3 m, a person's
+half-width) from the cell's walls.  Each node steps into the cell to its nearest point
+of the cell's outline shrunk by the clearance (shapely's negative buffer; straight
+through a door, since the door's node is in its middle), and the leg runs between
+those points, which a convex cell's shrunk outline joins with a straight line.  A
+cell too narrow for the clearance (a doorway through a wall, a slim leftover) is
+crossed on the straight line between its nodes, as before.
 
 Positions are located in 3D: a point's height picks the storey (the cells' height
 ranges), its ``x, y`` the cell among that storey's; a recorded walk keeps its eye
@@ -20,15 +28,17 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 import shapely
+import shapely.ops
 
 from walkstream.server.bake.rooms import Portal, RoomCell, StairLink
 from walkstream.shared.arrays import F64
 from walkstream.shared.cells import CellLocator
 from walkstream.shared.errors import RouteError
 from walkstream.shared.nav import shortest_paths
-from walkstream.shared.paths import RecordedPath
+from walkstream.shared.paths import RecordedPath, wrap_angle
 
 __all__ = [
+    "CLEARANCE",
     "EYE_HEIGHT",
     "INDOOR_SPEED_KMH",
     "RoomGraph",
@@ -39,6 +49,8 @@ EYE_HEIGHT = 1.6
 """Eye height of a walker indoors, above the floor under it (metres)."""
 INDOOR_SPEED_KMH = 4.0
 """Walking speed indoors (km/h)."""
+CLEARANCE = 0.3
+"""How far a walk inside a cell keeps from the cell's walls (metres): a person's half-width."""
 
 _WALKABLE = frozenset({"door", "opening", "virtual", "split"})
 
@@ -73,8 +85,7 @@ class RoomGraph:
         for p in portals:
             if p.kind not in _WALKABLE or p.a not in self.cells or p.b not in self.cells:
                 continue
-            bottom = p.polygon[p.polygon[:, 2] <= p.polygon[:, 2].min() + 1e-6]
-            mid = bottom[:, :2].mean(axis=0) if len(bottom) else p.polygon[:, :2].mean(axis=0)
+            mid = _bottom_middle(p.polygon)
             z = max(self.cells[p.a].zmin, self.cells[p.b].zmin)
             n = self._node([mid[0], mid[1], z], p.a, members)
             members[p.b].append(n)
@@ -86,11 +97,41 @@ class RoomGraph:
             length = float(np.linalg.norm(np.diff(s.path, axis=0), axis=1).sum())
             self._edge(a, b, length, s.path)
         self.members = members
-        for nodes in members.values():
+        self._free: dict[int, shapely.Polygon | None] = {}
+        for cid, nodes in members.items():
             for x in range(len(nodes)):
                 for y in range(x + 1, len(nodes)):
-                    a, b = nodes[x], nodes[y]
-                    self._edge(a, b, float(np.linalg.norm(self.nodes[a] - self.nodes[b])), None)
+                    self._leg(cid, nodes[x], nodes[y])
+
+    def _leg(self, cell: int, a: int, b: int) -> None:
+        """Join nodes ``a`` and ``b`` of ``cell`` by a leg that keeps the clearance."""
+        line = np.array([self.nodes[a], self.step_in(cell, self.nodes[a]),
+                         self.step_in(cell, self.nodes[b]), self.nodes[b]])
+        keep = np.concatenate([[True], np.linalg.norm(np.diff(line, axis=0), axis=1) > 1e-6])
+        line = line[keep]
+        if len(line) < 2:
+            line = np.array([self.nodes[a], self.nodes[b]])
+        self._edge(a, b, float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum()), line)
+
+    def free(self, cell: int) -> shapely.Polygon | None:
+        """The part of ``cell``'s floor a walker's middle may stand on: its outline shrunk
+        by :data:`CLEARANCE`; None where nothing is left (a doorway, a slim cell)."""
+        if cell not in self._free:
+            poly = shapely.Polygon(self.cells[cell].outline).buffer(-CLEARANCE)
+            self._free[cell] = poly if isinstance(poly, shapely.Polygon) and not poly.is_empty else None
+        return self._free[cell]
+
+    def step_in(self, cell: int, xyz: F64) -> F64:
+        """Where a walker at floor point ``xyz`` of ``cell`` stands with its clearance: the
+        nearest point of :meth:`free` (``xyz`` itself where it is in it, or none is left)."""
+        free = self.free(cell)
+        if free is None:
+            return xyz
+        p = shapely.Point(float(xyz[0]), float(xyz[1]))
+        if free.covers(p):
+            return xyz
+        q = shapely.ops.nearest_points(free, p)[0]
+        return np.array([q.x, q.y, xyz[2]], dtype=np.float64)
 
     def _node(self, xyz: Sequence[float] | F64, cell: int, members: dict[int, list[int]]) -> int:
         self.nodes.append(np.asarray(xyz, dtype=np.float64).reshape(3))
@@ -137,7 +178,7 @@ class RoomGraph:
         others = list(self.members[cell])
         n = self._node(xyz, cell, self.members)
         for m in others:
-            self._edge(n, m, float(np.linalg.norm(self.nodes[n] - self.nodes[m])), None)
+            self._leg(cell, n, m)
         return n
 
     def distances(self, start: int) -> tuple[dict[int, float], dict[int, int]]:
@@ -208,10 +249,22 @@ class RoomGraph:
         return self.polyline(self.route_nodes(nodes[0], nodes[1]))
 
 
+def _bottom_middle(polygon: F64) -> F64:
+    """The middle of a portal's bottom edge ``(2,)``: halfway between the two farthest
+    apart points at its lowest height (a door's threshold, however many vertices lie on it)."""
+    bottom = polygon[polygon[:, 2] <= polygon[:, 2].min() + 1e-6][:, :2]
+    if len(bottom) < 2:
+        return polygon[:, :2].mean(axis=0)
+    d = np.linalg.norm(bottom[:, None, :] - bottom[None, :, :], axis=2)
+    i, j = np.unravel_index(int(np.argmax(d)), d.shape)
+    return 0.5 * (bottom[i] + bottom[j])
+
+
 def walk_path(name: str, floor: F64, speed_kmh: float = INDOOR_SPEED_KMH, eye: float = EYE_HEIGHT) -> RecordedPath:
     """A recorded path along floor points ``(k, 3)``, the eye ``eye`` above them.
 
-    Timed and turned like :meth:`RecordedPath.from_polyline` over the ground plan;
+    Timed and turned like :meth:`RecordedPath.from_polyline` over the ground plan (its
+    turns on the spot kept: a U-turn is made standing, also on a walk with stairs);
     key points are added where the floor starts or stops rising (a stair's ends), so
     that the eye follows the treads and not a straight line between far-apart key
     points.
@@ -230,22 +283,23 @@ def walk_path(name: str, floor: F64, speed_kmh: float = INDOOR_SPEED_KMH, eye: f
     breaks = s_pts[1:-1][np.abs(np.diff(slope)) > 1e-6]
     extra = [s for s in breaks if np.min(np.abs(s_key - s)) > 1e-3]
     if extra:
-        s_all = np.concatenate([s_key, extra])
-        order = np.argsort(s_all, kind="stable")
-        tt = np.interp(s_all, s_key, t)[order]
-        xx = np.interp(s_all, s_key, xyz[:, 0])[order]
-        yy = np.interp(s_all, s_key, xyz[:, 1])[order]
-        # yaw: take the key before (turns happen at keys; between them the yaw is steady)
-        idx = np.clip(np.searchsorted(s_key, s_all, side="right") - 1, 0, len(yaw) - 1)
-        idx[: len(s_key)] = np.arange(len(s_key))
-        ww = yaw[idx][order]
-        s_sorted = s_all[order]
-        # keys with the same arclength (turning on the spot) keep their time order
-        t, xyz, yaw = tt, np.column_stack([xx, yy, np.zeros(len(tt))]), ww
-        s_key = s_sorted
+        # the new keys lie strictly between keys of distinct arclength, so their time and
+        # place interpolate along the legs; the keys already there keep theirs, those of a
+        # turn on the spot (equal arclength, increasing times) included
+        s_new = np.asarray(extra, dtype=np.float64)
+        seg = np.clip(np.searchsorted(s_key, s_new, side="right") - 1, 0, len(s_key) - 2)
+        f = (s_new - s_key[seg]) / np.maximum(s_key[seg + 1] - s_key[seg], 1e-12)
+        t_new = t[seg] + f * (t[seg + 1] - t[seg])
+        xy_new = xyz[seg, :2] + f[:, None] * (xyz[seg + 1, :2] - xyz[seg, :2])
+        # between keys the yaw is steady except over a walked corner: interpolate it the short way
+        yaw_new = wrap_angle(yaw[seg] + f * wrap_angle(yaw[seg + 1] - yaw[seg]))
+        order = np.argsort(np.concatenate([t, t_new]), kind="stable")
+        t = np.concatenate([t, t_new])[order]
+        xy = np.concatenate([xyz[:, :2], xy_new])[order]
+        yaw = np.concatenate([yaw, yaw_new])[order]
+        s_key = np.concatenate([s_key, s_new])[order]
+        xyz = np.column_stack([xy, np.zeros(len(t))])
         pitch = np.zeros(len(t))
-        _, first = np.unique(np.round(t, 9), return_index=True)
-        t, xyz, yaw, pitch, s_key = t[first], xyz[first], yaw[first], pitch[first], s_key[first]
     z = np.interp(s_key, s_pts, pts[:, 2]) + eye
     xyz = np.column_stack([xyz[:, 0], xyz[:, 1], z])
     return RecordedPath(name, t, xyz, yaw, pitch, base.speed_kmh)

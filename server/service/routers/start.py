@@ -25,7 +25,7 @@ On an interior the bundle is what the walk needs before its first perfect frame:
 ``path`` (when asked), ``topology`` (the compact ``walkstream-topology/2``, as ``GET
 .../topology/compact`` sends it), then, when the client says how it views the scene
 (``view=WxH`` pixels, and ``fov`` degrees, ``fog`` metres, ``depth`` portals, which
-default to the replay's 60, 40 and 8), ``contents``: the map ``{part: "contents",
+default to the replay's 60, 40 and no limit: as deep as the fog reaches), ``contents``: the map ``{part: "contents",
 etag: null, cells: [ids]}`` followed by one ``{cell, etag, body}`` part per cell, as
 ``POST .../rooms/contents`` sends them (:mod:`walkstream.shared.codec.cellbatch`), for the
 cells portal culling keeps from the path's first pose and from where it leads in a

@@ -1,0 +1,77 @@
+"""Walks through an interior keep a body's clearance from the walls and turn on the spot.
+
+A generated two-storey office (small, with a stair) is planned without baking its
+contents: the tour is sampled every few centimetres and checked against each room
+cell's walls (its outline less the walkable portals in it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+
+from walkstream.server.bake.interior import InteriorParts, interior_parts
+from walkstream.server.bake.roomnav import CLEARANCE, walk_path
+from walkstream.server.sources.interiorfile import load_interior
+from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
+from walkstream.shared.pathcodec import decode_path_q, encode_path_q
+from walkstream.shared.paths import wrap_angle
+
+_WALKABLE = ("door", "opening", "virtual", "split")
+
+
+@pytest.fixture(scope="module")
+def office(tmp_path_factory: pytest.TempPathFactory) -> InteriorParts:
+    src = tmp_path_factory.mktemp("roomwalk") / "office.json"
+    write_interior(src, InteriorPlan(storeys=2, length=24, width=14, seed=11))
+    return interior_parts(load_interior(src), src)
+
+
+def _walls(ip: InteriorParts, cid: int) -> shapely.Geometry:
+    """A room cell's walls: its outline less the walkable portals it has."""
+    ring = shapely.LinearRing(ip.graph.cells[cid].outline)
+    holes = [shapely.LineString(p.polygon[:, :2]).buffer(0.02) for p in ip.layout.portals
+             if p.kind in _WALKABLE and cid in (p.a, p.b)]
+    return ring.difference(shapely.union_all(holes)) if holes else ring
+
+
+def test_the_tour_keeps_its_clearance_from_every_wall(office: InteriorParts) -> None:
+    g, walk = office.graph, office.walk
+    assert len(office.layout.stairs) >= 1 and walk.xyz[:, 2].max() > 3.0  # it climbs a stair
+    xyz = walk.sample(np.arange(0.0, walk.duration, 0.02))[0]
+    ids = g.locator.locate_many(np.column_stack([xyz[:, :2], xyz[:, 2] - 1.0]))
+    assert (ids >= 0).all()
+    seen = 0
+    for cid in np.unique(ids).tolist():
+        if g.cells[cid].kind != "room":
+            continue
+        d = shapely.distance(_walls(office, cid), shapely.points(xyz[ids == cid, :2]))
+        assert d.min() >= CLEARANCE - 1e-6, (g.cells[cid].name, float(d.min()))
+        seen += int((ids == cid).sum())
+    assert seen > 0.8 * len(xyz)
+
+
+def test_sharp_turns_are_made_on_the_spot_with_stairs_in_the_walk(office: InteriorParts) -> None:
+    walk = office.walk
+    turn = np.abs(wrap_angle(np.diff(walk.yaw)))
+    moved = np.linalg.norm(np.diff(walk.xyz, axis=0)[:, :2], axis=1) > 1e-6
+    assert (turn > np.radians(120)).sum() == 0  # split into steps of at most 90 degrees
+    assert not (moved & (turn > np.radians(60))).any()  # a sharp turn stands still
+    on_spot = ~moved & (turn > np.radians(45))
+    assert on_spot.sum() >= 2  # the tour's U-turns in rooms
+    # the compact path keeps every one of them turning the same way
+    back = decode_path_q(encode_path_q(walk))
+    assert np.array_equal(np.sign(wrap_angle(np.diff(walk.yaw))[on_spot]),
+                          np.sign(wrap_angle(np.diff(back.yaw))[on_spot]))
+
+
+def test_walk_path_keeps_a_u_turn_before_a_stair() -> None:
+    # along a corridor, back, then up a ramp: the U-turn is two standing quarter turns
+    floor = np.array([[0, 0, 0], [6, 0, 0], [2, 0, 0], [2, 4, 0], [2, 8, 3], [2, 10, 3]], float)
+    p = walk_path("u", floor)
+    at = np.flatnonzero(np.all(np.abs(p.xyz[:, :2] - [6, 0]) < 1e-9, axis=1))
+    assert len(at) == 3  # arrive, a quarter turn, another: standing
+    assert np.abs(wrap_angle(p.yaw[at[-1]] - p.yaw[at[0]])) == pytest.approx(np.pi)
+    z = p.sample(np.linspace(0, p.duration, 200))[0][:, 2]
+    assert z.min() == pytest.approx(1.6) and z.max() == pytest.approx(4.6)
