@@ -35,6 +35,8 @@ MATERIALS: tuple[tuple[int, str, tuple[int, int, int]], ...] = (
     (17, "frame", (246, 246, 240)),  # door and window frames
     (18, "metal", (104, 106, 112)),  # railings, beams, members
     (19, "fixture", (214, 218, 222)),  # sanitary and kitchen fittings, coverings
+    # the ground plane under a scene with outdoor space (shared/ground.py)
+    (20, "ground", (146, 156, 118)),  # dry grass and earth, darker than any paving
 )
 
 #: Colour of a material id outside the table: loud magenta, so that a grammar bug

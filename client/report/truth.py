@@ -20,6 +20,12 @@
     is at least the first perfect frame's), the share whose missing pixels -- every
     cause but ``fog``, which hides objects on purpose -- exceed 0.5 % of the frame;
     ``None`` when no compared frame comes after a perfect one.
+``below_horizon``
+    A city's compared frames only (added by the recorder,
+    :mod:`walkstream.client.truth.horizon`): per share of the client's frame's pixels
+    below the horizon -- ``sky`` (in the background colour) and ``no_object`` (no
+    object shows: the ground plane, or the sky where there is no plane) -- the
+    ``mean``, ``p95`` and ``max`` over the compared frames (0..1).
 """
 
 from __future__ import annotations
