@@ -77,11 +77,15 @@ def run_city_bench(
     only: Sequence[str] = (),
     reuse: bool = False,
     workers: int = 1,
+    truth_every: int = 0,
 ) -> list[dict[str, Any]]:
     """Bake and replay every extract (those whose label contains one of ``only``).
 
     Returns one row per extract and cell kind; writes ``bench_city.json`` and the
-    replay reports into ``out``.
+    replay reports into ``out``.  With ``truth_every`` each replay compares every Nth
+    frame with the ground truth, and the rows gain what its frames show below the
+    horizon (:mod:`walkstream.client.truth.horizon`): the largest share in the sky's
+    colour and the mean share with no object.
     """
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
@@ -106,7 +110,7 @@ def run_city_bench(
                 "clock": "sim",
                 "device": "desktop2003",
                 "report": str(out / f"{label}-{kind}-report"),
-            }
+            } | ({"truth_every": truth_every} if truth_every else {})
             print(f"  replaying {which} in {db.name} ...", file=sys.stderr, flush=True)
             result = replay(str(db), options, f"{label} {kind} cells, {which}")
             s = summaries[kind]
@@ -128,17 +132,27 @@ def run_city_bench(
                     "bytes_received": r["bytes_received"],
                     "bytes_per_km": r["bytes_received"] / km if km > 0 else None,
                 }
+                | _below_horizon(r.get("truth"))
             )
     (out / "bench_city.json").write_text(json.dumps(rows, indent=2, default=str))
     return rows
 
 
+def _below_horizon(truth: Any) -> dict[str, float]:
+    """``sky_max`` and ``no_object_mean`` of a replay's truth figures (none without a truth)."""
+    below = (truth or {}).get("below_horizon") or {}
+    if not below or below["sky"]["max"] is None:
+        return {}
+    return {"sky_max": below["sky"]["max"], "no_object_mean": below["no_object"]["mean"]}
+
+
 def format_city_table(rows: list[dict[str, Any]]) -> str:
-    """One line per extract and cell kind."""
+    """One line per extract and cell kind (with the truth: two more columns, the sky below the horizon)."""
+    truth = any("sky_max" in r for r in rows)
     head = (
         f"{'extract':<13} {'cells':<6} {'n cells':>7} {'PVS mean':>8} {'culled%':>7} "
         f"{'bake s':>7} {'db bytes':>10} {'walk':>12} {'perfect%':>8} {'first s':>7} {'bytes/km':>9}"
-    )
+    ) + (f" {'sky% max':>8} {'no obj%':>7}" if truth else "")
     lines = [head, "-" * len(head)]
     for r in rows:
         first = r["first_perfect_s"]
@@ -150,5 +164,10 @@ def format_city_table(rows: list[dict[str, Any]]) -> str:
             f"{walk:>12} {100 * r['perfect_frame_ratio']:>8.2f} "
             f"{'never' if first is None else f'{first:.2f}':>7} "
             f"{per_km:>9}"
+            + (
+                f" {100 * r['sky_max']:>8.2f} {100 * r['no_object_mean']:>7.1f}"
+                if "sky_max" in r
+                else (f" {'-':>8} {'-':>7}" if truth else "")
+            )
         )
     return "\n".join(lines)

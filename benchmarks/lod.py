@@ -227,6 +227,7 @@ class LodGeometry:
         self.objects: dict[int, _Object] = {}
 
     def get(self, ids: Sequence[int]) -> list[_Object]:
+        from walkstream.shared.areas import build_area
         from walkstream.shared.buildings import build_lods
         from walkstream.shared.streets import build_street
 
@@ -239,8 +240,8 @@ class LodGeometry:
             if inf.kind == "building":
                 meshes = build_lods(self.reader.building(oid), self.grammar)
             else:
-                street = build_street(self.reader.street(oid))
-                meshes = (street, street, street)
+                flat = build_area(self.reader.area(oid)) if inf.kind == "area" else build_street(self.reader.street(oid))
+                meshes = (flat, flat, flat)
             lo = np.array(inf.bbox[:3], dtype=np.float64)
             hi = np.array(inf.bbox[3:], dtype=np.float64)
             # the grammar may build above the stored box (roofs): take the meshes too

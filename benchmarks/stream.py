@@ -212,16 +212,18 @@ def format_truth_table(rows: list[dict[str, Any]]) -> str:
 
     head = (
         f"{'scenario':<22} {'compared':>8} {'differ%':>7} {'>0.5%':>6} {'pvs% mean':>9} "
-        f"{'pvs% max':>8} {'lod% mean':>9} {'culled% max':>11}"
+        f"{'pvs% max':>8} {'lod% mean':>9} {'culled% max':>11} {'sky% max':>8} {'no obj% mean':>12}"
     )
     lines = [head, "-" * len(head)]
     for r in have:
         t = r["truth"]
         m = t["missing"]
+        below = t.get("below_horizon") or {}
         lines.append(
             f"{r['scenario']:<22} {t['frames']:>8} {pct(t['differing_pixels_mean']):>7} "
             f"{pct(t['over_half_percent_ratio'], 1):>6} {pct(m['pvs']['mean'], 3):>9} "
-            f"{pct(m['pvs']['max'], 3):>8} {pct(m['lod']['mean'], 3):>9} {pct(m['culled']['max'], 3):>11}"
+            f"{pct(m['pvs']['max'], 3):>8} {pct(m['lod']['mean'], 3):>9} {pct(m['culled']['max'], 3):>11} "
+            f"{pct(below.get('sky', {}).get('max')):>8} {pct(below.get('no_object', {}).get('mean')):>12}"
         )
     return "\n".join(lines)
 

@@ -301,7 +301,7 @@ def visibility_benchmark(
         if own:
             gl.release()
 
-    n_obj = len(scene.buildings) + len(scene.streets)
+    n_obj = len(scene.buildings) + len(scene.streets) + len(scene.areas)
     rows: list[dict[str, Any]] = []
     for k, s in enumerate(rows_in):
         sec = float(statistics.median(times[k]))

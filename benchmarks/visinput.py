@@ -42,7 +42,7 @@ class BenchInput:
 def scene_from_database(path: str | os.PathLike[str]) -> tuple[SourceScene, list[ViewCell], dict[int, I64], dict[str, Any]]:
     """The scene, cells, stored PVS and bake settings of a scene database, from the file alone.
 
-    Objects of kinds other than buildings and street pieces are left out.
+    Buildings, street pieces and typed areas (kind ``area``).
     """
     from walkstream.server.store import SceneReader
 
@@ -53,13 +53,14 @@ def scene_from_database(path: str | os.PathLike[str]) -> tuple[SourceScene, list
         streets = tuple(
             reader.street(i) for i, o in info.items() if o.kind in ("street", "crossroad", "square")
         )
+        areas = tuple(reader.area(i) for i, o in info.items() if o.kind == "area")
         cells, baked = [], {}
         for c in reader.cells():
             cells.append(
                 ViewCell(c.id, c.kind, np.asarray(c.boundary), c.zmin, c.zmax, tuple(int(n) for n in c.neighbours))
             )
             baked[c.id] = np.asarray(c.pvs, np.int64)
-    scene = SourceScene(meta.name, meta.crs, meta.origin, buildings, streets)
+    scene = SourceScene(meta.name, meta.crs, meta.origin, buildings, streets, areas=areas)
     return scene, cells, baked, meta.settings
 
 

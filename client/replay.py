@@ -63,6 +63,7 @@ from walkstream.client.walk.measure import compare_truth
 from walkstream.client.walk.scene import STREET_FAR_M, STREET_NEAR_M, WalkScene, walk_projection
 from walkstream.client.walk.state import WalkState
 from walkstream.shared.errors import ApiError
+from walkstream.shared.ground import GROUND_Z
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.roomview import VIEW_NEAR_M, RoomView
 from walkstream.shared.wire import Manifest
@@ -241,6 +242,8 @@ async def replay(
             near = VIEW_NEAR_M if rooms is not None else STREET_NEAR_M  # the projection's near plane
             # the truth draws as far as the streets reach, or the rooms beyond any fog
             far = STREET_FAR_M if streamer is not None else INTERIOR_FAR_M
+            # a scene with street cells has outdoor space: the ground plane under it
+            ground_z = GROUND_Z if streamer is not None else None
             device = make_device(config.device, config.seed)
             if not device.simulated or config.snapshot_every:
                 from walkstream.client.draw.frames import FrameRenderer
@@ -249,6 +252,7 @@ async def replay(
                     size=config.size, fov_deg=config.fov_deg, batched=config.batched_draws,
                     near=near,
                 )
+                renderer.ground_z = ground_z
 
             def on_evict(kind: str, oid: int) -> None:
                 assert streamer is not None
@@ -259,7 +263,7 @@ async def replay(
             if streamer is not None:
                 cache.on_evict = on_evict
             recorder = (  # the one ground truth, at the walk's near and far planes
-                TruthRecorder(config.truth_every, config.size, config.fov_deg, near=near, far=far)
+                TruthRecorder(config.truth_every, config.size, config.fov_deg, near=near, far=far, ground_z=ground_z)
                 if config.truth_every
                 else None
             )

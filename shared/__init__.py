@@ -29,6 +29,7 @@ _EXPORTS = {
     "StreamCut": "walkstream.shared.errors",
     "ServiceError": "walkstream.shared.errors",
     "SimulationStalled": "walkstream.shared.errors",
+    "AreaParams": "walkstream.shared.records",
     "BuildingParams": "walkstream.shared.records",
     "StreetParams": "walkstream.shared.records",
     "Mesh": "walkstream.shared.records",
@@ -53,6 +54,7 @@ _EXPORTS = {
     "default_grammar": "walkstream.shared.buildings",
     "default_grammar_text": "walkstream.shared.buildings",
     "build_street": "walkstream.shared.streets",
+    "build_area": "walkstream.shared.areas",
     "create_context": "walkstream.shared.gl",
     "export_glb": "walkstream.shared.export",
 }

@@ -35,6 +35,18 @@ MATERIALS: tuple[tuple[int, str, tuple[int, int, int]], ...] = (
     (17, "frame", (246, 246, 240)),  # door and window frames
     (18, "metal", (104, 106, 112)),  # railings, beams, members
     (19, "fixture", (214, 218, 222)),  # sanitary and kitchen fittings, coverings
+    # the ground plane under a scene with outdoor space (shared/ground.py)
+    (20, "ground", (146, 156, 118)),  # dry grass and earth, darker than any paving
+    # typed areas on the ground (shared/areas.py), one per area kind
+    (21, "area_built", (178, 170, 160)),  # residential, commercial, industrial land: pale grey-brown
+    (22, "area_farmland", (196, 190, 128)),  # fields, orchards, allotments
+    (23, "area_grass", (122, 170, 92)),  # parks, lawns, meadows
+    (24, "area_wood", (72, 122, 70)),  # forest, wood, scrub
+    (25, "area_sport", (150, 186, 120)),  # pitches, tracks
+    (26, "area_sand", (222, 206, 160)),  # sand, beach, bare rock
+    (27, "area_parking", (150, 150, 156)),  # parking: lighter than the street
+    (28, "area_pedestrian", (206, 196, 182)),  # plazas and pedestrian areas
+    (29, "area_water", (104, 150, 204)),  # lakes, rivers, ponds
 )
 
 #: Colour of a material id outside the table: loud magenta, so that a grammar bug

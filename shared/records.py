@@ -13,10 +13,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.shared.areakinds import AREA_KINDS
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
 
-__all__ = ["BuildingParams", "StreetParams", "Mesh", "Viewpoint", "readonly"]
+__all__ = ["AreaParams", "BuildingParams", "StreetParams", "Mesh", "Viewpoint", "readonly"]
 
 
 
@@ -132,6 +133,38 @@ class StreetParams:
             raise InputError(f"StreetParams.kind: expected street|crossroad|square, got {self.kind!r}")
         object.__setattr__(self, "ring", readonly(np.asarray(self.ring, dtype=np.float64).reshape(-1, 2)))
         object.__setattr__(self, "width", float(self.width))
+
+
+@dataclass(frozen=True, slots=True)
+class AreaParams:
+    """A typed flat area on the ground: grass, water, parking, ... (:mod:`walkstream.shared.areas`).
+
+    ``kind`` is one of :data:`~walkstream.shared.areas.AREA_KINDS`; ``rings`` its
+    polygon, each ``(n, 2) float64`` scene-local metres without a repeated closing
+    vertex, the exterior first (counter-clockwise), then the holes (clockwise): an
+    island in a lake is a hole of the lake.
+    """
+
+    id: int
+    kind: str
+    rings: tuple[F64, ...]
+    source_id: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in AREA_KINDS:
+            raise InputError(f"AreaParams.kind: expected one of {', '.join(AREA_KINDS)}, got {self.kind!r}")
+        rings = tuple(readonly(np.asarray(r, dtype=np.float64).reshape(-1, 2)) for r in self.rings)
+        if not rings:
+            raise InputError("AreaParams.rings: expected at least one ring, got none")
+        for k, r in enumerate(rings):
+            if len(r) < 3:
+                raise InputError(f"AreaParams.rings[{k}]: expected >= 3 vertices, got {len(r)}")
+        out = []
+        for k, r in enumerate(rings):  # exterior counter-clockwise, holes clockwise
+            x, y = r[:, 0], r[:, 1]
+            ccw = float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y)) > 0
+            out.append(r if ccw == (k == 0) else readonly(r[::-1]))
+        object.__setattr__(self, "rings", tuple(out))
 
 
 @dataclass(frozen=True, slots=True)

@@ -187,8 +187,9 @@ def test_pedestrian_area_with_a_hole_and_landuse() -> None:
             poly([box(70, 0, 80, 10)], "b", building="yes"),
         )
     )
-    assert len(scene.buildings) == 1  # the park and the field are not buildings
-    assert any("not buildings" in n for n in scene.notes)
+    assert len(scene.buildings) == 1  # the park and the field are not buildings: typed areas
+    # the park is kept; the field lies beyond the scene's box (its objects' box grown by 50 m)
+    assert [(a.source_id, a.kind) for a in scene.areas] == [("park", "grass")]
     squares = [s for s in scene.streets if s.kind == "square"]
     assert len(squares) >= 2
     area = sum(shapely.Polygon(s.ring).area for s in squares)

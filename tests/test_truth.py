@@ -165,7 +165,7 @@ def test_the_truth_changes_no_other_figure(runs: tuple[ReplayResult, ReplayResul
     assert a == b
     np.testing.assert_array_equal(plain.log.frame_time, with_truth.log.frame_time)
     # the truth object exactly as specified
-    assert set(t) == {"frames", "differing_pixels_mean", "over_half_percent_ratio", "missing", "colour"}
+    assert set(t) == {"frames", "differing_pixels_mean", "over_half_percent_ratio", "missing", "colour", "below_horizon"}
     assert set(t["missing"]) == set(CAUSES)
     assert all(set(v) == {"mean", "p95", "max"} for v in t["missing"].values())
     assert t["frames"] == len(range(0, a["frames"], EVERY))
@@ -175,6 +175,9 @@ def test_the_truth_changes_no_other_figure(runs: tuple[ReplayResult, ReplayResul
     # the start-up frames miss what has not arrived yet
     assert t["missing"]["not_received"]["max"] > 0.5
     assert 0.0 <= t["differing_pixels_mean"] <= 1.0
+    # the ground plane: below the horizon no sky, whatever shows no object
+    below = t["below_horizon"]
+    assert below["sky"]["max"] < 0.01 and below["no_object"]["max"] >= below["sky"]["max"]
 
 
 def test_a_planted_miss_is_found_with_its_pixels(
@@ -288,3 +291,41 @@ def test_truth_too_big_for_one_buffer_is_a_clear_error(monkeypatch: pytest.Monke
     monkeypatch.setattr(render, "MAX_BUFFER_BYTES", 1024)
     with pytest.raises(RenderError, match=r"objects at LOD2 need a .* GiB buffer"):
         TruthRenderer(lod2, (64, 48))
+
+
+def test_the_ground_plane_changes_colours_below_the_horizon_and_no_id(gl: Any) -> None:
+    """Both renderers draw the ground plane (shared/ground.py): the same colours, the ids
+    of frames without it, no sky below the horizon, the sky above it."""
+    from walkstream.client.draw.meshes import BACKGROUND_RGB
+    from walkstream.client.truth.horizon import below_horizon, horizon_shares
+    from walkstream.shared.ground import GROUND_Z
+
+    scene = load_geojson_dict(generate_city(120, 3))
+    lod2 = {b.id: build_lods(b)[2] for b in scene.buildings[:4]} | {s.id: build_street(s) for s in scene.streets[:3]}
+    eye = np.array([*scene.streets[0].ring.mean(axis=0), 1.7])
+    view = camera(eye, 0.7)
+    keys = [(i, 2) for i in sorted(lod2)]
+    with TruthRenderer(lod2, (160, 120), ctx=gl) as bare, TruthRenderer(lod2, (160, 120), ground_z=GROUND_Z, ctx=gl) as tr:
+        bare_rgb, bare_ids = bare.colour_frame(eye, view)
+        t_rgb, t_ids = tr.colour_frame(eye, view)
+        with FrameRenderer((160, 120), ctx=gl) as fr:
+            fr.ground_z = GROUND_Z
+            for i, m in lod2.items():
+                fr.upload((i, 2), m)
+            fr.draw(keys, view)
+            c_rgb = fr.snapshot()
+            c_ids = fr.draw_ids(keys, view)
+    np.testing.assert_array_equal(t_ids, bare_ids)  # the plane is key 0: no pixel's id changes
+    np.testing.assert_array_equal(t_ids, c_ids)
+    assert int(np.abs(t_rgb.astype(int) - c_rgb.astype(int)).max()) <= 2
+    sky = np.all(np.abs(c_rgb.astype(int) - BACKGROUND_RGB) <= 2, axis=2)
+    # the camera looks level: the horizon is the middle row; below it the ground or an object
+    assert not sky[61:].any() and sky[:59][c_ids[:59] == 0].all()
+    ground = (c_ids == 0) & ~sky
+    assert ground[61:].sum() > 100  # the few objects leave ground in view
+    # the figures below the horizon: without the plane whatever shows no object is sky
+    below = below_horizon(view, tr.proj, (160, 120))
+    assert below[61:].all() and not below[:59].any()
+    sky_share, bare_share = horizon_shares(bare_rgb, bare_ids, below)
+    assert sky_share == bare_share > 0.05
+    assert horizon_shares(c_rgb, c_ids, below) == (0.0, bare_share)

@@ -3,7 +3,8 @@
 :class:`FrameRenderer` keeps GPU buffers per key (usually ``(object id, lod)``) and
 draws a list of keys per frame with :class:`~walkstream.client.draw.meshes.MeshRenderer`'s shaders
 and lighting, so frames look like the LOD figures: a pale sky background, lit
-buildings, streets as flat ground, back faces culled.
+buildings, streets as flat ground, back faces culled; with :attr:`FrameRenderer.ground_z`
+set, the ground plane of :mod:`walkstream.shared.ground` under everything.
 
 :meth:`FrameRenderer.draw_ids` is a separate path over the same buffers: the same
 keys drawn into an integer image of object ids (which object each pixel shows), for
@@ -183,6 +184,16 @@ class FrameRenderer(Releasable):
     @fog_m.setter
     def fog_m(self, value: float) -> None:
         self._r.fog_m = float(value) if math.isfinite(value) else 0.0
+
+    @property
+    def ground_z(self) -> float | None:
+        """Height of the ground plane under the drawn frames (:mod:`walkstream.shared.ground`);
+        None (the default): no plane.  The id pass never draws it."""
+        return self._r.ground_z
+
+    @ground_z.setter
+    def ground_z(self, value: float | None) -> None:
+        self._r.ground_z = None if value is None else float(value)
 
     def has(self, key: Hashable) -> bool:
         """Whether ``key`` has been uploaded (and not forgotten)."""

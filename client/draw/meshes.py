@@ -23,6 +23,7 @@ from walkstream.shared import lighting
 from walkstream.shared.camera import fit_view, mat4_bytes
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import Framebuffer, Releasable, check_gl_error, create_context
+from walkstream.shared.ground import GROUND_MATERIAL, ground_quad
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
@@ -162,7 +163,7 @@ class _GpuMesh:
 
     __slots__ = ("mesh", "vbo", "ibo", "vaos")
 
-    def __init__(self, mesh: Mesh, vbo: moderngl.Buffer, ibo: moderngl.Buffer) -> None:
+    def __init__(self, mesh: Mesh | None, vbo: moderngl.Buffer, ibo: moderngl.Buffer) -> None:
         self.mesh = mesh
         self.vbo = vbo
         self.ibo = ibo
@@ -239,6 +240,11 @@ class MeshRenderer(Releasable):
         self.fog_m: float = 0.0
         """Fog distance (metres) over whose last fifth surfaces fade into the
         background; 0: no fog (the city)."""
+        self.ground_z: float | None = None
+        """Height of the ground plane drawn under every frame (:mod:`walkstream.shared.ground`:
+        after the clear, depth test off, so it hides nothing); None: no plane (an interior,
+        a figure)."""
+        self._ground: _GpuMesh | None = None
         # Validate before creating a context, so a bad argument leaks nothing.
         self._own_ctx = ctx is None
         self.ctx: moderngl.Context = create_context() if ctx is None else ctx
@@ -399,10 +405,35 @@ class MeshRenderer(Releasable):
             self._set(prog, "u_eye", tuple(float(v) for v in eye))
             self._set(prog, "u_fog", max(float(self.fog_m), 0.0))
             self._set(prog, "u_background", tuple(c / 255.0 for c in self.background))
+        if clear and self.ground_z is not None:
+            self._draw_ground(view, proj)
         # Set on every draw: the context may be shared with code that changes state.
         self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
         self.ctx.front_face = "ccw"
         self.ctx.cull_face = "back"
+
+    def _draw_ground(self, view: ArrayLike, proj: ArrayLike) -> None:
+        # The plane under the eye, reaching twice the far plane, drawn with the depth test
+        # off: it writes no depth, so whatever is drawn next covers it, and a street or
+        # an area lying on it never fights with it.  Seen from below it is left out.
+        assert self.ground_z is not None
+        eye = np.linalg.inv(np.asarray(view, dtype=np.float64))[:3, 3]
+        if eye[2] <= self.ground_z:
+            return
+        p = np.asarray(proj, dtype=np.float64)
+        far = p[2, 3] / (p[2, 2] + 1.0)
+        verts = np.empty(4, _VERTEX_DTYPE)
+        verts["p"] = ground_quad(eye, 2.0 * far, self.ground_z)
+        verts["n"] = (0.0, 0.0, 1.0)
+        verts["c"][:, :3] = material_rgb([GROUND_MATERIAL])
+        verts["c"][:, 3] = 255
+        if self._ground is None:
+            quad = np.array([0, 1, 2, 0, 2, 3], "<u4")
+            self._ground = _GpuMesh(None, self.ctx.buffer(verts.tobytes()), self.ctx.buffer(quad.tobytes()))
+        else:
+            self._ground.vbo.write(verts.tobytes())
+        self.ctx.disable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
+        self._ground.vao(self.program_name, self.program).render()
 
     def read(self) -> NDArray[np.uint8]:
         """The last drawn image, ``(h, w, 3) uint8``, row 0 at the top."""
@@ -442,6 +473,9 @@ class MeshRenderer(Releasable):
         for gm in self._meshes.values():
             gm.release()
         self._meshes.clear()
+        if self._ground is not None:
+            self._ground.release()
+            self._ground = None
         if self._fb is not None:
             self._fb.release()
             self._fb = None

@@ -191,6 +191,11 @@ def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | N
         ("differing pixels, mean", pct(s.get("differing_pixels_mean"))),
         ("frames missing > 0.5 % (from the first perfect frame)", pct(s.get("over_half_percent_ratio"))),
     ]
+    for name, b in (s.get("below_horizon") or {}).items():
+        rows.append(
+            (f"below the horizon: {name.replace('_', ' ')} (mean / p95 / max)",
+             " / ".join(pct(b.get(k)) for k in ("mean", "p95", "max")))
+        )
     for c in CAUSES:
         m = (s.get("missing") or {}).get(c) or {}
         rows.append(

@@ -23,6 +23,12 @@
 ``colour``
     The colour error of the client's picture against the full scene (a city walk's
     frames): :func:`~walkstream.client.report.colour.summarise_colour`.
+``below_horizon``
+    A city's compared frames only (added by the recorder,
+    :mod:`walkstream.client.truth.horizon`): per share of the client's frame's pixels
+    below the horizon -- ``sky`` (in the background colour) and ``no_object`` (no
+    object shows: the ground plane, or the sky where there is no plane) -- the
+    ``mean``, ``p95`` and ``max`` over the compared frames (0..1).
 """
 
 from __future__ import annotations

@@ -15,10 +15,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.shared.areas import build_flat
 from walkstream.shared.buildings import build_lods, build_lods_batch
 from walkstream.shared.lsystem.grammar import Grammar
-from walkstream.shared.records import BuildingParams, Mesh, StreetParams, readonly
-from walkstream.shared.streets import build_street
+from walkstream.shared.records import AreaParams, BuildingParams, Mesh, StreetParams, readonly
 
 __all__ = ["ObjectGeometry", "geometry_of", "rebuild", "rebuild_batch"]
 
@@ -62,11 +62,11 @@ def geometry_of(
     return ObjectGeometry(oid, meshes, tri, avail, lo, hi, int(nbytes), cpu_s)
 
 
-def rebuild(oid: int, params: BuildingParams | StreetParams, grammar: Grammar) -> ObjectGeometry:
+def rebuild(oid: int, params: BuildingParams | StreetParams | AreaParams, grammar: Grammar) -> ObjectGeometry:
     """The three LODs of one object, timed in CPU seconds of this thread."""
     t0 = time.thread_time()
-    if isinstance(params, StreetParams):
-        m = build_street(params)
+    if not isinstance(params, BuildingParams):
+        m = build_flat(params)
         meshes: tuple[Mesh | None, Mesh | None, Mesh | None] = (m, m, m)
     else:
         meshes = build_lods(params, grammar)
@@ -74,7 +74,7 @@ def rebuild(oid: int, params: BuildingParams | StreetParams, grammar: Grammar) -
 
 
 def rebuild_batch(
-    jobs: Sequence[tuple[int, BuildingParams | StreetParams]], grammar: Grammar
+    jobs: Sequence[tuple[int, BuildingParams | StreetParams | AreaParams]], grammar: Grammar
 ) -> list[ObjectGeometry]:
     """The three LODs of several objects, buildings in one batched call; same order as ``jobs``.
 
@@ -87,8 +87,8 @@ def rebuild_batch(
     for (k, _), lods in zip(buildings, build_lods_batch([p for _, p in buildings], grammar), strict=True):
         meshes[k] = lods
     for k, (_, p) in enumerate(jobs):
-        if isinstance(p, StreetParams):
-            m = build_street(p)
+        if not isinstance(p, BuildingParams):
+            m = build_flat(p)
             meshes[k] = (m, m, m)
     geoms = [geometry_of(oid, ms) for (oid, _), ms in zip(jobs, meshes, strict=True)]
     share = (time.thread_time() - t0) / max(1, len(jobs))

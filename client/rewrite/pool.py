@@ -41,7 +41,7 @@ from walkstream.client.rewrite.geometry import ObjectGeometry, rebuild_batch
 from walkstream.client.rewrite.procpool import ProcessWorkers
 from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import Grammar
-from walkstream.shared.records import BuildingParams, StreetParams
+from walkstream.shared.records import AreaParams, BuildingParams, StreetParams
 
 __all__ = [
     "BATCH",
@@ -140,7 +140,7 @@ class RewritePool:
         self._busy = 0
         self.batches = 0
         self._heap: list[tuple[Priority, int, int]] = []
-        self._jobs: dict[int, tuple[BuildingParams | StreetParams, Priority]] = {}
+        self._jobs: dict[int, tuple[BuildingParams | StreetParams | AreaParams, Priority]] = {}
         self._seq = itertools.count()
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
@@ -159,7 +159,7 @@ class RewritePool:
         self.grammar = grammar
         self._wake.set()
 
-    def submit(self, oid: int, params: BuildingParams | StreetParams, priority: Priority) -> None:
+    def submit(self, oid: int, params: BuildingParams | StreetParams | AreaParams, priority: Priority) -> None:
         """Queue (or re-prioritise) the rebuild of ``oid``."""
         old = self._jobs.get(oid)
         if old is not None and old[1] <= priority:
@@ -200,7 +200,7 @@ class RewritePool:
         self.dropped += len(gone)
         return len(gone)
 
-    def _pop(self) -> tuple[int, BuildingParams | StreetParams] | None:
+    def _pop(self) -> tuple[int, BuildingParams | StreetParams | AreaParams] | None:
         while self._heap:
             prio, _, oid = heapq.heappop(self._heap)
             job = self._jobs.get(oid)
@@ -209,12 +209,12 @@ class RewritePool:
                 return oid, job[0]
         return None
 
-    def _take(self) -> list[tuple[int, BuildingParams | StreetParams]]:
+    def _take(self) -> list[tuple[int, BuildingParams | StreetParams | AreaParams]]:
         """The jobs at the head of the queue, in priority order: at most :data:`BATCH`, and
         no more than an equal share of what waits among the workers not busy."""
         idle = max(1, self.workers - self._busy)
         want = min(self.batch, max(1, -(-len(self._jobs) // idle)))
-        out: list[tuple[int, BuildingParams | StreetParams]] = []
+        out: list[tuple[int, BuildingParams | StreetParams | AreaParams]] = []
         while len(out) < want:
             job = self._pop()
             if job is None:
@@ -259,7 +259,7 @@ class RewritePool:
             )
         return out
 
-    async def _run(self, k: int, jobs: list[tuple[int, BuildingParams | StreetParams]]) -> list[ObjectGeometry]:
+    async def _run(self, k: int, jobs: list[tuple[int, BuildingParams | StreetParams | AreaParams]]) -> list[ObjectGeometry]:
         assert self.grammar is not None
         if self._procs is not None and self._procs.ready(k):
             from walkstream.shared.errors import WorkerGone

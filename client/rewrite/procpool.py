@@ -33,11 +33,11 @@ from walkstream.client.rewrite.geometry import ObjectGeometry, rebuild_batch
 from walkstream.client.rewrite.shm import ShmArena, pack_layout, unpack, write_packed
 from walkstream.shared.errors import WorkerGone
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
-from walkstream.shared.records import BuildingParams, StreetParams
+from walkstream.shared.records import AreaParams, BuildingParams, StreetParams
 
 __all__ = ["NICE", "ProcessWorkers", "worker_main"]
 
-Job = tuple[int, BuildingParams | StreetParams]
+Job = tuple[int, BuildingParams | StreetParams | AreaParams]
 
 NICE = 5
 """How much lower the workers' scheduling priority is than the client's: where cores are

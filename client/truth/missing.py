@@ -33,6 +33,7 @@ from walkstream.client.report.colour import ColourLog
 from walkstream.client.report.truth import TruthLog
 from walkstream.client.truth.colour import COLOUR_CAUSES
 from walkstream.client.truth.compare import CAUSES, compare_frame, missing_mask
+from walkstream.client.truth.horizon import below_horizon, horizon_shares
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.picture import Overlay, colour_error
 from walkstream.client.truth.render import TruthRenderer
@@ -59,6 +60,9 @@ class ComparedFrame:
     """Pixels of each object in the truth."""
     missing: dict[int, int]
     """Missing pixels of each object (whatever the cause)."""
+    below: tuple[float, float] = (0.0, 0.0)
+    """The client's frame below the horizon: shares in the sky's colour and with no object
+    (:func:`~walkstream.client.truth.horizon.horizon_shares`)."""
 
 
 @dataclass(frozen=True)
@@ -128,6 +132,7 @@ def missing_figures(
 
     fov = float(np.degrees(2.0 * np.arctan(1.0 / float(proj[1, 1]))))
     client = FrameRenderer(truth.size, fov_deg=fov, ctx=truth.ctx)
+    client.ground_z = truth.ground_z  # the same plane under both frames
     rows: list[tuple[int, float, float, NDArray[np.float64]]] = []
     compared: list[ComparedFrame] = []
     worst: WorstFrame | None = None
@@ -171,6 +176,7 @@ def missing_figures(
                 ComparedFrame(
                     st.frame, st.t, st.cell, st.eye, st.view, err.pixels, err.differing,
                     err.missing, _counts(tid[tid >= 0]), _counts(tid[err.cause >= 0]),
+                    horizon_shares(c_rgb, c_ids, below_horizon(st.view, proj, truth.size)),
                 )
             )
             share = err.missing_share

@@ -47,6 +47,7 @@ from walkstream.client.truth.culled import (
     culled_figures,
 )
 from walkstream.client.truth.culledview import CulledFrame, culled_view, worst_row
+from walkstream.client.truth.horizon import horizon_figures
 from walkstream.client.truth.missing import (
     ColourWorst,
     ComparedFrame,
@@ -112,6 +113,9 @@ class TruthRecorder:
         0.5 m, rooms' and a crossing's 0.1 m), a far plane beyond what the walk sees.
     view_distance : float
         A city's objects within this distance of the eye are in its truth.
+    ground_z : float, optional
+        Height of the ground plane both frames draw (a scene with outdoor space:
+        :data:`~walkstream.shared.ground.GROUND_Z`); None: none (an interior).
     """
 
     def __init__(
@@ -123,6 +127,7 @@ class TruthRecorder:
         near: float,
         far: float,
         view_distance: float = TRUTH_VIEW_DISTANCE,
+        ground_z: float | None = None,
     ) -> None:
         if int(every) < 1:
             raise InputError(f"--truth-every {every}: expected a frame count >= 1")
@@ -131,6 +136,7 @@ class TruthRecorder:
         self.fov_deg, self.near, self.far = float(fov_deg), float(near), float(far)
         self.proj = perspective(fov_deg, self.size[0] / self.size[1], near, far)
         self.view_distance = float(view_distance)
+        self.ground_z = None if ground_z is None else float(ground_z)
         self.notes: list[FrameNote] = []
         self.overlay: Overlay | None = None
         """The ``impostor`` hook of the colour error (:mod:`walkstream.client.truth.picture`):
@@ -239,7 +245,8 @@ class TruthRecorder:
         """
         cells = [int(c) for c in cells]
         if not cells and not self.notes:
-            return TruthResult(TruthLog.empty(), figures=summarise_truth(TruthLog.empty(), t_first_perfect))
+            figures = summarise_truth(TruthLog.empty(), t_first_perfect) | {"below_horizon": horizon_figures(())}
+            return TruthResult(TruthLog.empty(), figures=figures)
         try:
             ts = await TruthScene.fetch(transport, base_url, scene)
         except (WalkstreamError, httpx.HTTPError) as exc:
@@ -252,17 +259,20 @@ class TruthRecorder:
                     ts.lod2(needed_objects(ts, self.notes, self.view_distance)), self.size,
                     fov_deg=self.fov_deg, near=self.near, far=self.far, view_distance=self.view_distance,
                     forms=forms_of(self.notes),
+                    ground_z=self.ground_z,
                 )
                 log, worst, frames, cworst = missing_figures(
                     ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, self.overlay
                 )
-                return TruthResult(log, worst, None, frames, summarise_truth(log, t_first_perfect), cworst)
+                figures = summarise_truth(log, t_first_perfect)
+                figures["below_horizon"] = horizon_figures(f.below for f in frames)
+                return TruthResult(log, worst, None, frames, figures, cworst)
             skip = {int(i) for i in leave_out}
             objects = ts.lod2([i for i in sorted(ts.params) if i not in skip])
             await ts.close()
             rooms = await fetch_contents(transport, base_url, scene, cells, clock, placements)
             truth = TruthRenderer(objects, self.size, rooms=rooms, fov_deg=self.fov_deg, near=self.near,
-                                  far=self.far, two_sided=True)
+                                  far=self.far, two_sided=True, ground_z=self.ground_z)
             rows: list[CulledRow] = []
             figures = culled_figures(truth, self.notes, CROSSING_FIGURES if objects else INTERIOR_FIGURES, progress,
                                      solid=SolidProbe(rooms), rows=rows)

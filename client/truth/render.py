@@ -30,6 +30,10 @@ light and palette as the full scene and the two differ only where the client's c
 of forms makes them differ (:mod:`walkstream.client.truth.picture`, the colour error of
 :mod:`walkstream.client.truth.colour`).
 
+Under a scene with outdoor space (``ground_z``) the truth draws the ground plane of
+:mod:`walkstream.shared.ground` first, depth test off, key 0 (nothing): it changes the
+colour below the horizon from the sky's to the ground's and no key of any pixel.
+
 Why ascending ids: two coplanar surfaces (a street piece meeting a crossroad) tie in
 depth, and the depth test ``<`` keeps the one drawn first; the client's ID pass draws
 in ascending ids too, so ties resolve the same way in both frames.
@@ -49,6 +53,7 @@ from walkstream.shared.camera import mat4_bytes, perspective
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import Releasable, check_gl_error, create_context, release_objects
+from walkstream.shared.ground import GROUND_MATERIAL, ground_quad
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
@@ -139,6 +144,9 @@ class TruthRenderer(Releasable):
     two_sided : bool
         Draw back faces too (room parts are not closed solids); by default they are
         culled, as the client culls a city object's.
+    ground_z : float, optional
+        Height of the ground plane drawn under every frame (a scene with outdoor
+        space: :data:`~walkstream.shared.ground.GROUND_Z`); None: no plane.
     ctx : moderngl.Context, optional
         Context to draw with; by default one is made (and released by :meth:`release`).
     forms : mapping (object id, lod) -> Mesh
@@ -161,6 +169,7 @@ class TruthRenderer(Releasable):
         far: float = 2000.0,
         view_distance: float = 800.0,
         two_sided: bool = False,
+        ground_z: float | None = None,
         ctx: moderngl.Context | None = None,
         forms: Mapping[tuple[int, int], Mesh] | None = None,
     ) -> None:
@@ -177,6 +186,8 @@ class TruthRenderer(Releasable):
         self.proj = perspective(fov_deg, w / h, near, far).astype(np.float64)
         self.view_distance = float(view_distance)
         self.two_sided = bool(two_sided)
+        self.ground_z = None if ground_z is None else float(ground_z)
+        """Height of the ground plane under every frame; None: none."""
         ids = np.array(sorted(int(i) for i in objects), np.int64)
         if len(ids) and ids[0] < 0:
             raise InputError(f"TruthRenderer: object ids must be >= 0, got {ids[0]}")
@@ -292,6 +303,16 @@ class TruthRenderer(Releasable):
         # cleared through a framebuffer of its own
         self._fbo_colour = ctx.framebuffer(color_attachments=[self._colour], depth_attachment=self._depth)
         self._fbo_ids = ctx.framebuffer(color_attachments=[self._idbuf])
+        # the ground plane: four vertices rewritten per frame around the eye, key 0
+        self._ground_vbo = ctx.buffer(reserve=4 * _VERTEX.itemsize)
+        self._ground_ibo = ctx.buffer(np.array([0, 1, 2, 0, 2, 3], "<u4").tobytes())
+        self._ground_vao = ctx.vertex_array(
+            self._prog,
+            [(self._ground_vbo, "3f 3f 4f1 u4", "in_position", "in_normal", "in_color", "in_id")],
+            index_buffer=self._ground_ibo,
+            index_element_size=4,
+        )
+        self._gl += [self._ground_vao, self._ground_ibo, self._ground_vbo]
         self._gl += [self._vao, self._ibo, self._vbo, self._fbo, self._fbo_colour, self._fbo_ids]
         self._gl += [self._colour, self._idbuf, self._depth]
         check_gl_error(ctx, "after creating the truth renderer")
@@ -384,6 +405,8 @@ class TruthRenderer(Releasable):
         self._fbo.use()
         ctx.viewport = (0, 0, w, h)
         ctx.disable(moderngl.BLEND)
+        if self.ground_z is not None:
+            self._draw_ground(eye, p)
         if self.two_sided:
             ctx.enable(moderngl.DEPTH_TEST)
             ctx.disable(moderngl.CULL_FACE)
@@ -419,6 +442,25 @@ class TruthRenderer(Releasable):
         keys = keys[np.argsort(self._order_key[keys], kind="stable")]
         cut = np.flatnonzero(np.diff(keys) != 1) + 1
         return [(int(r[0]), int(r[-1]) + 1) for r in np.split(keys, cut)]
+
+    def _draw_ground(self, eye: ArrayLike, proj: NDArray[np.float64]) -> None:
+        # depth test off: the plane writes no depth and whatever is drawn next covers it;
+        # its key is 0 (nothing), so no pixel's key changes.  Seen from below it is left out.
+        import moderngl
+
+        assert self.ground_z is not None
+        e = np.asarray(eye, np.float64).reshape(3)
+        if e[2] <= self.ground_z:
+            return
+        far = proj[2, 3] / (proj[2, 2] + 1.0)
+        v = np.zeros(4, _VERTEX)
+        v["p"] = ground_quad(e, 2.0 * far, self.ground_z)
+        v["n"] = (0.0, 0.0, 1.0)
+        v["c"][:, :3] = material_rgb([GROUND_MATERIAL])
+        v["c"][:, 3] = 255
+        self._ground_vbo.write(v.tobytes())
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        self._ground_vao.render(moderngl.TRIANGLES)
 
     def colour(self) -> NDArray[np.uint8]:
         """``(h, w, 3)`` the lit colour of the last frame drawn, row 0 at the top."""

@@ -27,14 +27,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.net.api import SceneClient
+from walkstream.shared.areakinds import AREA_Z_LOWEST
+from walkstream.shared.areas import build_flat
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.codec import decode_object
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import ApiError, CodecError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
-from walkstream.shared.records import BuildingParams, Mesh, StreetParams
+from walkstream.shared.records import AreaParams, BuildingParams, Mesh, StreetParams
 from walkstream.shared.scene.placement import ContentsPlacement
-from walkstream.shared.streets import build_street
 from walkstream.shared.wire import (
     MSGPACK,
     Manifest,
@@ -75,7 +76,7 @@ class TruthScene:
         http: httpx.AsyncClient,
         scene: str,
         manifest: Manifest,
-        params: dict[int, BuildingParams | StreetParams],
+        params: dict[int, BuildingParams | StreetParams | AreaParams],
     ) -> None:
         self._http = http
         self.scene = scene
@@ -133,9 +134,11 @@ class TruthScene:
         hi = np.zeros((len(ids), 3))
         for k, i in enumerate(ids.tolist()):
             p = self.params[i]
-            ring = p.rings[0] if isinstance(p, BuildingParams) else p.ring
+            ring = p.ring if isinstance(p, StreetParams) else p.rings[0]
             lo[k, :2], hi[k, :2] = ring.min(axis=0) - 1.0, ring.max(axis=0) + 1.0
             hi[k, 2] = (p.height if isinstance(p, BuildingParams) else 0.0) + 2.0
+            if isinstance(p, AreaParams):
+                lo[k, 2] = min(lo[k, 2], AREA_Z_LOWEST)
         return ids, lo, hi
 
     def lod2(self, ids: Iterable[int]) -> dict[int, Mesh]:
@@ -145,7 +148,7 @@ class TruthScene:
             m = self._meshes.get(int(i))
             if m is None:
                 p = self.params[int(i)]
-                m = build_street(p) if isinstance(p, StreetParams) else build_lod(p, 2, self.grammar)
+                m = build_lod(p, 2, self.grammar) if isinstance(p, BuildingParams) else build_flat(p)
                 self._meshes[int(i)] = m
             out[int(i)] = m
         return out
@@ -214,11 +217,11 @@ def _detail(r: httpx.Response) -> Any:
 
 async def _all_objects(
     http: httpx.AsyncClient, scene: str, manifest: Manifest
-) -> dict[int, BuildingParams | StreetParams]:
+) -> dict[int, BuildingParams | StreetParams | AreaParams]:
     """Every object of the scene: ids from 0 up, in batches, until the manifest's count is found."""
     want = int(manifest.objects)
     batch = max(1, int(manifest.max_ids))
-    out: dict[int, BuildingParams | StreetParams] = {}
+    out: dict[int, BuildingParams | StreetParams | AreaParams] = {}
     start = 0
     # ids beyond 0 .. n - 1 are looked for, but not forever
     limit = 4 * want + 100_000

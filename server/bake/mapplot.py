@@ -1,8 +1,10 @@
 """A top view of a baked scene: the streets, the cells coloured by PVS size, the buildings, the walks.
 
-What a user looks at to see what a street network became: the street pieces
-(grey, crossroads darker), over them the view cells coloured by PVS size with thin
-outlines (sections see-through, so that their rectangles and overlaps show), the building footprints on top, and the recorded path ``SE``.
+What a user looks at to see what a street network became: the typed areas in their
+palette colours (grass, water, parking, ...), the street pieces (grey, crossroads
+darker), over them the view cells coloured by PVS size with thin outlines (sections
+see-through, so that their rectangles and overlaps show), the building footprints on
+top, and the recorded path ``SE``.
 """
 
 from __future__ import annotations
@@ -14,6 +16,9 @@ from typing import Any
 import numpy as np
 
 from walkstream.server.store import CellInfo, SceneReader
+from walkstream.shared.areakinds import AREA_MATERIALS, area_z
+from walkstream.shared.palette import PALETTE
+from walkstream.shared.records import AreaParams
 
 __all__ = ["draw_map", "draw_city"]
 
@@ -53,15 +58,22 @@ def draw_city(fig: Any, ax: Any, reader: SceneReader, cells: Sequence[CellInfo])
 
     buildings = []
     streets, street_colours = [], []
+    areas: list[tuple[float, Any, Any]] = []  # height (drawing order), path, colour
     infos = reader.object_info(int(i) for i in reader.object_ids())
     for oid, info in infos.items():
         if info.kind == "building":
             buildings.append(MplPolygon(reader.building(oid).rings[0], closed=True))
+        elif info.kind == "area":
+            a = reader.area(oid)
+            areas.append((area_z(a.kind), _area_patch(a), PALETTE[AREA_MATERIALS[a.kind]] / 255.0))
         else:
             piece = reader.street(oid)
             streets.append(MplPolygon(piece.ring, closed=True))
             street_colours.append({"crossroad": "#a9a9a9", "square": "#cfd8c4"}.get(piece.kind, "#d4d4d4"))
-    # the streets first, a little wider than their cells where footprints clipped them
+    if areas:  # the areas first, lowest kind first, holes kept
+        areas.sort(key=lambda t: t[0])
+        ax.add_collection(PatchCollection([p for _, p, _ in areas], facecolor=[c for _, _, c in areas], edgecolor="none"))
+    # the streets next, a little wider than their cells where footprints clipped them
     ax.add_collection(
         PatchCollection(streets, facecolor=street_colours, edgecolor="#8c8c8c", linewidth=0.3)
     )
@@ -90,3 +102,15 @@ def draw_city(fig: Any, ax: Any, reader: SceneReader, cells: Sequence[CellInfo])
     for vp in reader.viewpoints():
         ax.annotate("", xy=(vp.x + 25 * np.cos(vp.yaw), vp.y + 25 * np.sin(vp.yaw)), xytext=(vp.x, vp.y),
                     arrowprops={"arrowstyle": "->", "color": "red", "lw": 1.5})
+
+
+def _area_patch(a: AreaParams) -> Any:
+    """A matplotlib patch of an area's polygon with its holes."""
+    from matplotlib.patches import PathPatch
+    from matplotlib.path import Path as MplPath
+
+    verts, codes = [], []
+    for r in a.rings:
+        verts += [*r.tolist(), r[0].tolist()]
+        codes += [MplPath.MOVETO] + [MplPath.LINETO] * (len(r) - 1) + [MplPath.CLOSEPOLY]
+    return PathPatch(MplPath(verts, codes))

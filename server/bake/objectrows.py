@@ -1,4 +1,4 @@
-"""A city scene's objects as store rows: buildings with their predicted triangles and box, street pieces."""
+"""A city scene's objects as store rows: buildings with their predicted triangles and box, street pieces, areas."""
 
 from __future__ import annotations
 
@@ -13,9 +13,10 @@ __all__ = ["building_box", "object_rows"]
 
 
 def object_rows(scene: SourceScene, grammar: Grammar) -> list[ObjectRow]:
-    """Every building (triangles per LOD predicted by ``grammar``) and street piece of ``scene``."""
+    """Every building (triangles per LOD predicted by ``grammar``), street piece and area of ``scene``."""
     rows = [ObjectRow.of(b, tris=predict_triangles(b, grammar), bbox=building_box(b)) for b in scene.buildings]
     rows += [ObjectRow.of(s, tris=(len(s.ring) - 2,) * 3) for s in scene.streets]
+    rows += [ObjectRow.of(a, tris=(sum(len(r) for r in a.rings) + 2 * len(a.rings) - 4,) * 3) for a in scene.areas]
     return rows
 
 

@@ -195,7 +195,8 @@ def city_plan(
         raise InputError(f"{src}: no view cell could be made (no free space?)")
     kind = "grid" if cells[0].kind == "grid" else "street"
     features = ["buildings"] + (["streets"] if scene.streets else []) + [f"{kind}_cells"]
-    say(f"{src.name}: {len(scene.buildings)} buildings, {len(scene.streets)} street pieces, {len(cells)} {kind} cells")
+    areas = f", {len(scene.areas)} areas" if scene.areas else ""
+    say(f"{src.name}: {len(scene.buildings)} buildings, {len(scene.streets)} street pieces{areas}, {len(cells)} {kind} cells")
     grammar = default_grammar()
     settings_dict = st.record() | {"source": str(src), "source_digest": file_digest(src)}
     if impostors is not None:

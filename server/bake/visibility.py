@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.areas import build_area
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.camera import cube_face_views, perspective
 from walkstream.shared.errors import InputError, RenderError
@@ -89,13 +90,15 @@ def meshes_for_scene(scene: SourceScene, lod: int) -> tuple[list[Mesh], I64]:
     Returns
     -------
     meshes : list of Mesh
-        Buildings first (``build_lod``), then street pieces (``build_street``).
+        Buildings first (``build_lod``), then street pieces (``build_street``), then
+        areas (``build_area``).
     ids : (n,) int64
         The object id of each mesh.
     """
     meshes = [build_lod(b, lod) for b in scene.buildings]
     meshes += [build_street(s, lod) for s in scene.streets]
-    ids = np.array([b.id for b in scene.buildings] + [s.id for s in scene.streets], dtype=np.int64)
+    meshes += [build_area(a, lod) for a in scene.areas]
+    ids = np.array([b.id for b in scene.buildings] + [s.id for s in scene.streets] + [a.id for a in scene.areas], dtype=np.int64)
     return meshes, ids
 
 

@@ -55,6 +55,7 @@ from walkstream.server.service.http import (
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
+from walkstream.shared.areas import build_flat
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.cells import CellLocator, TileGrid
 from walkstream.shared.codec import decode_object, encode_mesh, unpack_bounded
@@ -68,7 +69,6 @@ from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_q, encode_path
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.records import BuildingParams
 from walkstream.shared.roomview import RoomView
-from walkstream.shared.streets import build_street
 from walkstream.shared.wire import (
     MSGPACK,
     OFFERS,
@@ -676,7 +676,7 @@ class Scene:
         A ``params`` frame is the msgpack map ``{"id": int, "kind": str, "params":
         bin}``; a ``lod2`` frame is ``{"id", "kind", "mesh": bin}`` with the object's
         LOD2 mesh encoded by :func:`~walkstream.shared.codec.encode_mesh` (buildings rebuilt with
-        the scene's grammar, street pieces with :func:`~walkstream.shared.streets.build_street`).
+        the scene's grammar, street pieces and areas with :func:`~walkstream.shared.areas.build_flat`).
         Runs a database query, and for ``lod2`` real geometry work: call it from a
         worker thread.
         """
@@ -714,7 +714,7 @@ class Scene:
             raise DatabaseDamagedError(f"{self.reader.path}: damaged database ({exc})") from exc
         if isinstance(p, BuildingParams):
             return encode_mesh(build_lod(p, 2, self.grammar()))
-        return encode_mesh(build_street(p, 2))
+        return encode_mesh(build_flat(p, 2))
 
 
 # ---------------------------------------------------------------------------

@@ -19,6 +19,7 @@ import numpy as np
 import pyproj
 import shapely
 
+from walkstream.server.sources.areas import AREA_PREFIX, make_areas, scene_box
 from walkstream.server.sources.crs import crs_label, metric_crs, outside_lonlat, project
 from walkstream.server.sources.features import CleanPart, IssueLog, LineFeature, PolyFeature
 from walkstream.server.sources.heights import floor_levels, is_positive, parse_length
@@ -65,7 +66,8 @@ def assemble_scene(
     """Project, clean and build the buildings and the street network of a source.
 
     ``polys`` have ``kind`` None (a building), ``"square"`` (a street area, holes
-    kept) or ``"street"`` / ``"crossroad"`` (a ready street piece); ``lines`` are
+    kept), ``"street"`` / ``"crossroad"`` (a ready street piece) or ``"area:<kind>"``
+    (a typed area, :mod:`.areas`: clipped to the scene, ids after the streets); ``lines`` are
     street centre lines whose ``props`` decide network, layer and width
     (:mod:`.osmtags`).  ``notes`` (the reader's own remarks) come first in the
     scene's notes.
@@ -83,10 +85,13 @@ def assemble_scene(
     buildings_raw: list[CleanPart] = []
     pieces: list[CleanPart] = []
     areas: list[CleanPart] = []
+    typed: list[CleanPart] = []
     for poly in polys:
         if poly.local is None:
             continue
-        if poly.kind == "square":
+        if poly.kind is not None and poly.kind.startswith(AREA_PREFIX):
+            typed.extend(clean_and_repair(poly, log))
+        elif poly.kind == "square":
             areas.extend(clean_and_repair(poly, log))
         elif poly.kind is None:
             buildings_raw.extend(clean_and_repair(poly, log))
@@ -95,6 +100,8 @@ def assemble_scene(
     buildings = _make_buildings(buildings_raw, default_floor_height, tol, log)
     out_notes = list(notes or [])
     streets, passages = _make_streets(pieces, areas, lines, len(buildings), network, log, out_notes)
+    box = scene_box([b.rings[0] for b in buildings] + [s.ring for s in streets])
+    typed_areas = make_areas(typed, len(buildings) + len(streets), box, log)
     if not buildings and not streets:
         skipped = [i for i in log.sorted() if i.action == "skipped"]
         examples = "; ".join(f"{i.feature_id}: {i.problem}" for i in skipped[:3])
@@ -121,6 +128,7 @@ def assemble_scene(
         issues=tuple(issues),
         passages=frozenset(passages),
         notes=tuple(out_notes),
+        areas=tuple(typed_areas),
     )
 
 

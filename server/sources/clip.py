@@ -4,7 +4,7 @@ Objects that cross the box are clipped to it (not kept or dropped by their centr
 a building cut by the box keeps the part inside (each part of at least
 :data:`~walkstream.server.sources.rings.MIN_AREA` m² becomes a building, source id
 ``"<id>.<k>"`` when there are several) and party walls are found again over the kept
-buildings; a street piece keeps its parts inside.  A box in lon/lat
+buildings; a street piece and an area keep their parts inside (an area's holes too).  A box in lon/lat
 (``bbox_crs="lonlat"``) is projected to the scene's CRS and its bounding box there
 is used.
 """
@@ -23,7 +23,7 @@ from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
 from walkstream.shared.geometry import signed_area
-from walkstream.shared.records import BuildingParams, StreetParams
+from walkstream.shared.records import AreaParams, BuildingParams, StreetParams
 
 __all__ = ["local_bbox", "clip_scene"]
 
@@ -116,8 +116,18 @@ def clip_scene(scene: SourceScene, bbox: Box, bbox_crs: str = "local") -> Source
             streets.append(replace(s, id=new, ring=ring, source_id=sid))
     if not buildings and not streets:
         raise InputError(f"--bbox {bbox}: no object of the scene lies inside it")
+    areas: list[AreaParams] = []
+    for a in scene.areas:
+        poly = shapely.Polygon(a.rings[0], a.rings[1:])
+        if not box.intersects(poly):
+            continue
+        parts = [poly] if box.contains(poly) else [p for p in _parts(shapely.intersection(poly, box)) if p.area >= MIN_AREA]
+        for k, part in enumerate(parts):
+            sid = a.source_id if len(parts) == 1 else f"{a.source_id}.{k}"
+            kept_rings = a.rings if part is poly else tuple(_rings(part))
+            areas.append(replace(a, id=len(buildings) + len(streets) + len(areas), rings=kept_rings, source_id=sid))
     return replace(
-        scene, buildings=tuple(buildings), streets=tuple(streets), passages=frozenset(passages)
+        scene, buildings=tuple(buildings), streets=tuple(streets), passages=frozenset(passages), areas=tuple(areas)
     )
 
 

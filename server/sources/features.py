@@ -22,7 +22,7 @@ class PolyFeature:
     fid: str  # feature id
     uid: str  # fid, or "fid#k" for MultiPolygon part k
     is_part: bool  # True for a MultiPolygon part
-    kind: str | None  # None for a building, else street|crossroad|square
+    kind: str | None  # None for a building, else street|crossroad|square|area:<kind>
     props: dict[str, Any]
     raw: list[F64]  # rings, source CRS, (n, 2)
     local: list[F64] | None = None  # rings, scene-local metres, once projected

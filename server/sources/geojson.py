@@ -11,9 +11,15 @@ Features
     - a street area (:func:`~walkstream.server.sources.osmtags.is_square`:
       ``area:highway``, ``place=square``, ``highway=*`` with ``area=yes``): a square of
       the street network;
+    - a typed area: a polygon without a ``building`` property (or with ``building=no``)
+      whose ``kind`` is an area kind (``water``, ``grass``, ``parking``, ...:
+      :data:`~walkstream.shared.areakinds.AREA_KINDS`) or whose tags make one
+      (``landuse``, ``leisure``, ``natural``, water, ``amenity=parking``:
+      :func:`~walkstream.server.sources.areatags.area_kind`); holes kept, clipped to
+      the scene (:mod:`.areas`);
     - a polygon without a ``building`` property (or with ``building=no``) that has
-      one of :data:`NOT_BUILDING_KEYS` (``landuse``, ``leisure``, ``natural``, ...):
-      not a building; left out and counted in the scene's notes.
+      one of :data:`NOT_BUILDING_KEYS` and is no area: not a building; left out and
+      counted in the scene's notes.
 
     Every ``MultiPolygon`` part is its own building with source id ``"<fid>#<k>"``
     (k = 0-based part index).  ``LineString`` / ``MultiLineString`` features with
@@ -104,6 +110,8 @@ from typing import Any
 
 import numpy as np
 
+from walkstream.server.sources.areas import AREA_PREFIX
+from walkstream.server.sources.areatags import area_kind
 from walkstream.server.sources.assemble import assemble_scene
 from walkstream.server.sources.crs import parse_crs_member
 from walkstream.server.sources.features import IssueLog, LineFeature, PolyFeature
@@ -273,8 +281,8 @@ def as_points(coords: object) -> F64 | str:
 
 
 def _polygon_kind(props: dict[str, Any], kind: str | None) -> str | None:
-    """``kind`` of a polygon feature: a street kind, ``"square"``, None (a building) or
-    ``"-key=value"`` for a polygon that is not a building."""
+    """``kind`` of a polygon feature: a street kind, ``"square"``, ``"area:<kind>"`` (a
+    typed area), None (a building) or ``"-key=value"`` for a polygon that is neither."""
     if kind is not None:
         return kind
     building = props.get("building")
@@ -282,6 +290,9 @@ def _polygon_kind(props: dict[str, Any], kind: str | None) -> str | None:
         return None
     if is_square(props):
         return "square"
+    area = area_kind(props)
+    if area is not None:
+        return AREA_PREFIX + area
     for key in NOT_BUILDING_KEYS:
         if props.get(key) not in (None, ""):
             return f"-{key}={props[key]}"

@@ -27,7 +27,15 @@ Extracts cut at their borders
     when there are several); a building with a missing node is skipped, and so is
     a multipolygon whose rings cannot be closed.  Every such way is reported as a
     :class:`~walkstream.server.sources.scene.FeatureIssue` and counted in the notes.
-Polygons that are neither (``landuse``, ``leisure``, ``natural``, ...) are ignored.
+Areas
+    Closed ways and multipolygon relations that are neither, tagged as a typed area
+    (``landuse``, ``leisure``, ``natural``, water, ``amenity=parking``, pedestrian
+    areas: :func:`~walkstream.server.sources.areatags.area_kind`), assembled by
+    osmium's area handler (holes kept: an island is a hole of its lake), clipped to
+    the scene (:mod:`.areas`).  An area way with a node missing from the extract and
+    a relation whose rings cannot be closed (members missing, cut at the extract's
+    edge) are skipped with a line naming the way or relation; a self-intersecting one
+    is repaired with ``make_valid``.  Other polygons are ignored.
 """
 
 from __future__ import annotations
@@ -40,6 +48,8 @@ from typing import Any
 
 import numpy as np
 
+from walkstream.server.sources.areas import AREA_PREFIX
+from walkstream.server.sources.areatags import area_kind
 from walkstream.server.sources.assemble import assemble_scene
 from walkstream.server.sources.features import IssueLog, LineFeature, PolyFeature
 from walkstream.server.sources.osmtags import is_square
@@ -175,6 +185,8 @@ class _Reader:
         self.log = IssueLog()
         self.features = 0
         self.building_relations: set[int] = set()
+        self.area_relations: set[int] = set()
+        self.skipped_areas = 0
         self.areas_made: set[int] = set()
         self.cut_highways = 0
         self.skipped_buildings = 0
@@ -195,6 +207,8 @@ class _Reader:
                     _is_building(tags) or is_square(tags)
                 ):
                     self.building_relations.add(int(obj.id))
+                elif tags.get("type") == "multipolygon" and area_kind(tags) is not None:
+                    self.area_relations.add(int(obj.id))
                 elif "building:part" in tags:
                     self.parts += 1
             elif obj.is_area() and not obj.from_way():
@@ -208,6 +222,15 @@ class _Reader:
                 "skipped",
             )
             self.skipped_buildings += 1
+        for rid in sorted(self.area_relations - self.areas_made):
+            self.features += 1
+            self.log.add(
+                self.features,
+                f"relation/{rid}",
+                "area multipolygon cannot be assembled (members missing from the extract?)",
+                "skipped",
+            )
+            self.skipped_areas += 1
 
     def _way(self, way: Any) -> None:
         tags = dict(way.tags)
@@ -216,14 +239,19 @@ class _Reader:
             return
         building = _is_building(tags)
         square = is_square(tags)
+        nodes = way.nodes
+        closed = len(nodes) >= 4 and nodes[0].ref == nodes[len(nodes) - 1].ref
+        # a closed highway way is a loop of street (with area=yes a square, above)
+        area = None if building or square or not closed or "highway" in tags else area_kind(tags)
+        if area is not None:
+            self._area_way(way, tags, area)
+            return
         if not building and not square and "highway" not in tags:
             return
         self.features += 1
         index = self.features
         fid = f"way/{way.id}"
-        nodes = way.nodes
         xy, missing = _ring_xy(nodes)
-        closed = len(nodes) >= 4 and nodes[0].ref == nodes[len(nodes) - 1].ref
         if building or (square and closed):
             if missing:
                 self.log.add(
@@ -260,11 +288,24 @@ class _Reader:
             uid = fid if len(runs) == 1 else f"{fid}#{k}"
             self.lines.append(LineFeature(index, fid, uid, tags, xy[a:b]))
 
+    def _area_way(self, way: Any, tags: dict[str, str], kind: str) -> None:
+        """A closed way that is a typed area: kept whole, or skipped when a node is missing."""
+        self.features += 1
+        fid = f"way/{way.id}"
+        xy, missing = _ring_xy(way.nodes)
+        if missing:
+            self.log.add(self.features, fid, f"area: {missing} of {len(xy)} nodes missing from the extract", "skipped")
+            self.skipped_areas += 1
+            return
+        self.polys.append(PolyFeature(self.features, fid, fid, False, AREA_PREFIX + kind, tags, [xy]))
+
     def _area(self, area: Any) -> None:
         rid = int(area.orig_id())
         tags = dict(area.tags)
         building = _is_building(tags)
-        if not building and not is_square(tags):
+        square = is_square(tags)
+        kind = None if building or square else area_kind(tags)
+        if not building and not square and kind is None:
             return
         outers = []
         for outer in area.outer_rings():
@@ -278,12 +319,12 @@ class _Reader:
         self.areas_made.add(rid)
         self.features += 1
         fid = f"relation/{rid}"
-        self._raised(tags)
+        if kind is None:
+            self._raised(tags)
+        what = None if building else "square" if kind is None else AREA_PREFIX + kind
         for k, rings in enumerate(outers):
             uid = fid if len(outers) == 1 else f"{fid}#{k}"
-            self.polys.append(
-                PolyFeature(self.features, fid, uid, len(outers) > 1, None if building else "square", tags, rings)
-            )
+            self.polys.append(PolyFeature(self.features, fid, uid, len(outers) > 1, what, tags, rings))
 
     def _raised(self, tags: dict[str, str]) -> None:
         for key in ("min_height", "building:min_level"):
@@ -305,6 +346,8 @@ class _Reader:
             out.append(
                 f"{self.skipped_buildings} buildings skipped: nodes or members missing from the extract"
             )
+        if self.skipped_areas:
+            out.append(f"{self.skipped_areas} areas skipped: nodes or members missing from the extract")
         if self.parts:
             out.append(f"{self.parts} building:part objects left out (their building is drawn whole)")
         if self.raised:

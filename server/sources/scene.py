@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from walkstream.shared.records import BuildingParams, StreetParams
+from walkstream.shared.records import AreaParams, BuildingParams, StreetParams
 
 __all__ = ["FeatureIssue", "SourceScene"]
 
@@ -24,11 +24,11 @@ class FeatureIssue:
 
 @dataclass(frozen=True, slots=True)
 class SourceScene:
-    """Buildings and street pieces in scene-local metres, plus where that frame sits.
+    """Buildings, street pieces and typed areas in scene-local metres, plus where that frame sits.
 
     ``origin`` is the position of local (0, 0) in ``crs`` (projected metres, float64);
     local coordinates = projected coordinates - origin.  Object ids are unique over
-    buildings and streets together (buildings first).  ``passages`` are the ids of
+    buildings, streets and areas together (buildings first, areas last).  ``passages`` are the ids of
     street pieces that pass under buildings (``tunnel=building_passage``): their
     cells are not clipped by footprints.  ``notes`` are one-line remarks for the
     summary (what a reader left out on purpose, and how much).
@@ -42,3 +42,4 @@ class SourceScene:
     issues: tuple[FeatureIssue, ...] = ()
     passages: frozenset[int] = frozenset()
     notes: tuple[str, ...] = ()
+    areas: tuple[AreaParams, ...] = ()

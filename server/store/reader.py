@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.shared.codec import (
+    decode_area,
     decode_building,
     decode_ids,
     decode_polygon,
@@ -27,7 +28,7 @@ from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.content.params import KIND as PARAMS
 from walkstream.shared.content.registry import content_kind
 from walkstream.shared.errors import DatabaseDamagedError, NotFoundError, StoreError
-from walkstream.shared.records import BuildingParams, StreetParams, Viewpoint
+from walkstream.shared.records import AreaParams, BuildingParams, StreetParams, Viewpoint
 from walkstream.shared.scene.placement import ContentsPlacement
 
 try:  # advisory locks between processes; POSIX only
@@ -299,6 +300,11 @@ class SceneReader:
         """The decoded parameters of street piece (street, crossroad or square) ``oid``."""
         blob = self._object(oid, ("street", "crossroad", "square"), "street piece")
         return decode_street(blob, f"{self._label}: street {oid}")
+
+    def area(self, oid: int) -> AreaParams:
+        """The decoded parameters of typed area ``oid`` (kind ``"area"``)."""
+        blob = self._object(oid, ("area",), "area")
+        return decode_area(blob, f"{self._label}: area {oid}")
 
     def bounds(self) -> tuple[float, float, float, float, float, float]:
         """Box over all objects ``(minx, miny, minz, maxx, maxy, maxz)``; for an interior

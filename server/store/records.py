@@ -11,12 +11,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.shared.areakinds import area_z
 from walkstream.shared.codec import (
+    encode_area,
     encode_building,
     encode_street,
 )
 from walkstream.shared.errors import StoreError
-from walkstream.shared.records import BuildingParams, StreetParams
+from walkstream.shared.records import AreaParams, BuildingParams, StreetParams
 from walkstream.shared.roomwire import ContentsRef
 from walkstream.shared.scene.placement import ContentsPlacement
 
@@ -114,7 +116,7 @@ class ObjectRow:
     @classmethod
     def of(
         cls,
-        p: BuildingParams | StreetParams,
+        p: BuildingParams | StreetParams | AreaParams,
         *,
         tris: tuple[int, int, int] = (0, 0, 0),
         bbox: Sequence[float] | None = None,
@@ -122,9 +124,10 @@ class ObjectRow:
     ) -> ObjectRow:
         """Encode ``p`` and, unless given, derive its box from the footprint.
 
-        The derived box spans z from 0 to ``p.height`` for a building and 0 to 0 for
-        a street piece; pass ``bbox`` when the grammar builds above the eaves.
+        The derived box spans z from 0 to ``p.height`` for a building, 0 to 0 for
+        a street piece and its kind's height for an area (kind ``"area"``); pass ``bbox`` when the grammar builds above the eaves.
         """
+        bottom = 0.0
         if isinstance(p, BuildingParams):
             blob, kind, xy, top = (
                 encode_building(p, with_source_id=with_source_id),
@@ -132,6 +135,9 @@ class ObjectRow:
                 p.rings[0],
                 p.height,
             )
+        elif isinstance(p, AreaParams):
+            blob, kind, xy = encode_area(p, with_source_id=with_source_id), "area", p.rings[0]
+            bottom = top = area_z(p.kind)
         else:
             blob, kind, xy, top = (
                 encode_street(p, with_source_id=with_source_id),
@@ -143,7 +149,7 @@ class ObjectRow:
             if len(xy) == 0:
                 raise StoreError(f"object {p.id}: no vertices, pass bbox explicitly")
             lo, hi = xy.min(axis=0), xy.max(axis=0)
-            bbox = (float(lo[0]), float(lo[1]), 0.0, float(hi[0]), float(hi[1]), float(top))
+            bbox = (float(lo[0]), float(lo[1]), bottom, float(hi[0]), float(hi[1]), float(top))
         b = tuple(float(v) for v in bbox)
         if len(b) != 6:
             raise StoreError(f"object {p.id}: bbox: expected 6 numbers, got {len(b)}")

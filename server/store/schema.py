@@ -61,7 +61,11 @@ def schema_version_of(features: Any) -> int:
 APPLICATION_ID = 0x57534442  # "WSDB"
 """``PRAGMA application_id`` of every walkstream scene database."""
 
-OBJECT_KINDS = ("building", "street", "crossroad", "square")
+OBJECT_KINDS = ("building", "street", "crossroad", "square", "area")
+"""Kinds of the ``objects`` table's rows (checked by the writer, not the DDL).  ``area``
+(a typed area, :class:`~walkstream.shared.records.AreaParams`) came without a new schema
+version: a database without areas is the same file as before, and one with them is read
+by the same reader."""
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 

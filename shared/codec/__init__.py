@@ -34,9 +34,11 @@ from walkstream.shared.codec.cellmesh import (
 from walkstream.shared.codec.ints import INT_FORMATS, pack_ints, unpack_ints
 from walkstream.shared.codec.mesh import MESH_FORMAT, decode_mesh, encode_mesh
 from walkstream.shared.codec.params import (
+    decode_area,
     decode_building,
     decode_object,
     decode_street,
+    encode_area,
     encode_building,
     encode_street,
 )
@@ -74,6 +76,8 @@ __all__ = [
     "decode_building",
     "encode_street",
     "decode_street",
+    "encode_area",
+    "decode_area",
     "decode_object",
     "MESH_FORMAT",
     "encode_mesh",
