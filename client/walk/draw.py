@@ -4,7 +4,9 @@ The simulated device's frame time comes from its cost model (the renderer draws 
 when a snapshot is due), the ``gl`` device's from the real draw
 (:func:`~walkstream.client.draw.present.present`).  Objects are uploaded as
 ``(id, lod)``, room parts under their content kind's key
-(:data:`~walkstream.client.content.cellmesh.CELLMESH_CONTENT`).
+(:data:`~walkstream.client.content.cellmesh.CELLMESH_CONTENT`); the frame's impostors
+(:mod:`walkstream.client.walk.impostors`) go to the renderer as textured quads
+(:mod:`walkstream.client.draw.quads`), drawn over the meshes.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from collections.abc import Hashable
 
 from walkstream.client.content.cellmesh import CELLMESH_CONTENT
 from walkstream.client.draw.present import present, save_snapshot
+from walkstream.client.draw.quads import quads_of
 from walkstream.client.walk.scene import STREET_FAR_M
 from walkstream.client.walk.state import Frame, WalkState
 
@@ -43,6 +46,9 @@ def upload(w: WalkState, f: Frame) -> None:
                     m = w.meshes[(cid, k)] = cm.parts[k].mesh()
                 keys.append(CELLMESH_CONTENT.upload(r, cid, k, m))
     f.keys = keys
+    lane = w.scene.images
+    if lane is not None and hasattr(r, "impostors"):  # over the meshes: the frame's impostor quads
+        r.impostors = quads_of(f.impostors, lane.image)
 
 
 def draw(w: WalkState, f: Frame) -> None:

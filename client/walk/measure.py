@@ -52,6 +52,9 @@ def measure(w: WalkState, f: Frame) -> None:
         fr.objects_visible.append(len(o.pvs))
         fr.fog_m.append(f.fog)
         fr.budget.append(f.budget)
+    if w.scene.images is not None:
+        fr.impostors.append(len(f.impostors))
+        fr.texture_bytes.append(sum({d.image: d.nbytes for d in f.impostors}.values()))
     if w.indoors:  # the room held, or kept on a threshold where no street cell takes over
         cell = f.room if f.room is not None and (f.held or city is None) else -1
     else:
