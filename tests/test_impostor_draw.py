@@ -16,6 +16,7 @@ from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayResult, run_replay
 from walkstream.client.stream.images import IMAGE_LEAD_S, ImpostorImages
 from walkstream.client.stream.scheduler import RequestScheduler
+from walkstream.client.truth.standin import stand_in_ids
 from walkstream.client.walk.impostors import quad_corners
 from walkstream.server.bake import BakeSettings, ImpostorSettings, bake
 from walkstream.server.service.main import create_app
@@ -127,3 +128,18 @@ def test_quad_is_upright_and_premultiplied_without_dark_fringe(gl: object) -> No
     bg = px[0, 0, :3].sum()
     grey = (px[..., 0] < 150) & (px[..., 2] < 150) | (np.abs(px[..., 0] - px[..., 2]) < 20)
     assert grey.any() and px[..., :3].sum(axis=2)[grey].min() >= 0.9 * bg
+
+
+@pytest.mark.gl
+def test_the_truth_paints_impostors_under_their_own_cause(dbs: tuple[Path, Path]) -> None:
+    with_imp = _replay(dbs[0], truth_every=25, size=(160, 120)).summary["truth"]["colour"]["causes"]
+    without = _replay(dbs[0], truth_every=25, size=(160, 120), impostors=False).summary["truth"]["colour"]["causes"]
+    assert with_imp["impostor"] > 0.0 and without["impostor"] == 0.0
+
+
+def test_a_building_drawn_as_its_image_is_shown_where_the_image_painted() -> None:
+    truth = np.array([[3, 3, 5], [3, 0, 5]], np.uint32)  # ids + 1: buildings 2 and 4
+    client = np.zeros_like(truth)
+    painted = np.array([[True, False, True], [True, True, True]])
+    got = stand_in_ids(client, truth, painted, [2])  # building 2 drawn as an impostor, 4 not
+    assert got.tolist() == [[3, 0, 0], [3, 0, 0]]

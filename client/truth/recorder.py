@@ -50,6 +50,7 @@ from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.picture import Overlay, forms_of
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.scene import TruthScene, fetch_contents
+from walkstream.client.truth.standin import impostor_overlay
 from walkstream.shared.camera import perspective
 from walkstream.shared.errors import InputError, WalkstreamError
 from walkstream.shared.scene.placement import ContentsPlacement
@@ -121,7 +122,9 @@ class TruthRecorder:
         self.notes: list[FrameNote] = []
         self.overlay: Overlay | None = None
         """The ``impostor`` hook of the colour error (:mod:`walkstream.client.truth.picture`):
-        set by a part that draws images in place of objects; None: geometry only."""
+        set by a part that draws images in place of objects; None: geometry only, or,
+        when the notes carry impostors, their quads painted by the truth renderer
+        (:func:`~walkstream.client.truth.standin.impostor_overlay`)."""
 
     def due(self, frame: int) -> bool:
         """Whether frame ``frame`` is one to compare."""
@@ -143,6 +146,7 @@ class TruthRecorder:
         parts: Iterable[tuple[int, int]] = (),
         waiting: Iterable[int] = (),
         fog: float = math.inf,
+        impostors: Iterable[tuple[int, Any]] = (),
     ) -> None:
         """Note one frame (cheap: ids and references to meshes already built).
 
@@ -167,6 +171,8 @@ class TruthRecorder:
             Room cells visible whose contents had not arrived.
         fog : float
             The fog distance in force (``inf``: none).
+        impostors : (object id, quad) pairs
+            The impostors drawn (:data:`~walkstream.client.draw.quads.Quad`).
         """
         drawn = tuple(
             (int(g.id), int(lod), g.meshes[lod])
@@ -187,6 +193,7 @@ class TruthRecorder:
                 parts=tuple((int(c), int(k)) for c, k in parts),
                 waiting=tuple(int(c) for c in waiting),
                 fog=float(fog),
+                impostors=tuple((int(i), q) for i, q in impostors),
             )
         )
 
@@ -240,8 +247,11 @@ class TruthRecorder:
                     fov_deg=self.fov_deg, near=self.near, far=self.far, view_distance=self.view_distance,
                     forms=forms_of(self.notes),
                 )
+                overlay = self.overlay
+                if overlay is None and any(st.impostors for st in self.notes):
+                    overlay = impostor_overlay(truth, self.proj)
                 log, worst, frames, cworst = missing_figures(
-                    ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, self.overlay
+                    ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, overlay
                 )
                 return TruthResult(log, worst, None, frames, summarise_truth(log, t_first_perfect), cworst)
             skip = {int(i) for i in leave_out}

@@ -14,11 +14,13 @@ Everything the ground truth needs is noted here, in the one
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import httpx
 import numpy as np
 
 from walkstream.client.clock import Clock
+from walkstream.client.draw.quads import quads_of
 from walkstream.client.report.metrics import FrameLog, first_perfect_index
 from walkstream.client.truth.recorder import TruthResult
 from walkstream.client.walk.figures import MODEL_PORTALS, MODEL_PVS
@@ -90,7 +92,7 @@ def note_truth(w: WalkState, f: Frame) -> None:
             frame=w.frame, t=t, eye=f.eye, view=f.view.astype(np.float32), cell=f.street,
             pvs=None if cell is None else cell.pvs,
             received=cache.ids(city.kind) + cache.ids("geom"), built=cache.ids("geom"),
-            geoms=w.objects.geoms, lods=f.lods,
+            geoms=w.objects.geoms, lods=f.lods, impostors=_quads(w, f),
         )
     elif city is None:  # rooms only: drawn at the fog the portal walk used
         rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(rooms.fog_m))
@@ -133,3 +135,11 @@ async def compare_truth(
             placements=() if w.scene.rooms is None else w.scene.rooms.placements,
             t_first_perfect=None if first is None else float(log.t[first]), progress=progress,
         )
+
+
+def _quads(w: WalkState, f: Frame) -> list[tuple[int, Any]]:
+    """``(object id, quad)`` of the frame's impostors whose images are held."""
+    lane = w.scene.images
+    if lane is None or not f.impostors:
+        return []
+    return [(d.object, q) for d in f.impostors for q in quads_of([d], lane.image)]
