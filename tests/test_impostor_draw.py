@@ -143,3 +143,15 @@ def test_a_building_drawn_as_its_image_is_shown_where_the_image_painted() -> Non
     painted = np.array([[True, False, True], [True, True, True]])
     got = stand_in_ids(client, truth, painted, [2])  # building 2 drawn as an impostor, 4 not
     assert got.tolist() == [[3, 0, 0], [3, 0, 0]]
+
+
+@pytest.mark.gl
+def test_bench_impostors_replays_one_walk_both_ways(dbs: tuple[Path, Path], tmp_path: Path) -> None:
+    from walkstream.benchmarks.impostors import format_impostor_table, run_impostor_bench
+    from walkstream.cmd_replay import replay_with_options
+
+    rows = run_impostor_bench(str(dbs[0]), replay_with_options, out=tmp_path, duration="2s")
+    assert [r["with_impostors"] for r in rows] == [True, False]
+    assert rows[0]["impostors"]["image_bytes"] > 0 and "impostors" not in rows[1]
+    table = format_impostor_table(rows)
+    assert "SE impostors" in table and "SE geometry" in table and (tmp_path / "bench_impostors.json").is_file()

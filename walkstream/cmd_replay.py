@@ -113,6 +113,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         gzip=not args.no_gzip,
         truth_every=args.truth_every,
         batched_draws=not args.per_object_draws,
+        impostors=not args.no_impostors,
     )
 
 
@@ -293,6 +294,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
                    help="interiors: the start bundle leaves out the first view's contents (they come by the streamer's own requests)")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")
+    r.add_argument("--no-impostors", action="store_true", help="draw geometry only on a scene baked with --impostors (no image asked for)")
     r.add_argument("--per-object-draws", action="store_true", help="gl device: one draw call per object instead of one multi-draw call per frame (the older path, for comparison)")
 
 
