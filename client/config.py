@@ -83,6 +83,11 @@ class ReplayConfig:
     ground truth compares -- repeats exactly; frames past its end are measured."""
     batched_draws: bool = True
     """One multi-draw call per frame (False: one draw call per object, as before)."""
+    impostors: bool = True
+    """Draw the far buildings a scene baked with ``--impostors`` lists as their images
+    (False: geometry only, as a scene without impostors; :mod:`walkstream.client.walk.impostors`)."""
+    texture_budget_bytes: int = 8 << 20
+    """Bytes of impostor textures a frame may draw (the farthest dropped first)."""
 
     def __post_init__(self) -> None:
         if self.stream not in STREAM_FORMS:

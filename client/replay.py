@@ -52,6 +52,7 @@ from walkstream.client.report.metrics import (
 from walkstream.client.rewrite.pool import RewriteOptions
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache
+from walkstream.client.stream.images import ImpostorImages
 from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 from walkstream.client.stream.streamer import Streamer, StreamerConfig
 from walkstream.client.stream.walkstart import bundle_start, interior_start, manifest_task
@@ -238,6 +239,8 @@ async def replay(
                     rooms.adopt(first_view.cells, first_view.parts)
             scene = WalkScene(cache, streets=streamer, rooms=rooms, entrance=entrance,
                               unknown_quality=1.0 if kind == "crossing" else 0.0)
+            if streamer is not None and config.impostors:
+                scene.images = ImpostorImages(api, cache, streamer.scheduler)
             proj = walk_projection(config, scene)
             near = VIEW_NEAR_M if rooms is not None else STREET_NEAR_M  # the projection's near plane
             # the truth draws as far as the streets reach, or the rooms beyond any fog
@@ -275,6 +278,8 @@ async def replay(
             log, snapshots, spikes = await walk(state, phases, progress)
             t_end = clock.now()
             # the streamers stopped (nothing more goes down the link) before the truth
+            if scene.images is not None:
+                await scene.images.close()
             await _close(streamer, rooms)
             streamer_closed = True
             truth = await compare_truth(
@@ -322,6 +327,14 @@ async def replay(
         summary.update(city_summary(config, log, streamer, cache, stats, api, bytes_log, t_end - t_start,
                                     t_start, setup_s, path, manifest))
         summary["spike_frames"] = int(spikes.sum())
+        images = scene.images
+        if images is not None and images.requests:  # only then: a scene without impostors keeps its summary
+            summary["impostors"] = {
+                **frames.impostor_figures(),
+                "images_received": images.received,
+                "image_bytes": images.bytes_received,
+                "image_requests": images.requests,
+            }
     if config.clock == "real":  # wall-clock figures: a simulated run's summary stays reproducible
         summary.update(phases.summary(config.fps_target), batched_draws=config.batched_draws)
         if streamer is not None and streamer.rewrite is not None:

@@ -163,6 +163,24 @@ def cmd_bench_server(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_impostors(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench impostors``."""
+    from walkstream.benchmarks.impostors import format_impostor_table, run_impostor_bench
+    from walkstream.cmd_replay import replay_with_options
+    from walkstream.shared.errors import InputError
+
+    if not str(args.db).startswith(("http://", "https://")) and not Path(args.db).is_file():
+        raise InputError(f"{args.db}: no such scene database")
+    paths = [p.strip() for p in args.paths.split(",") if p.strip()]
+    link = {"bandwidth": args.bandwidth, "rtt": args.rtt}
+    rows = run_impostor_bench(args.db, replay_with_options, out=Path(args.out), paths=paths, device=args.device,
+                              truth_every=args.truth_every, duration=args.duration, link=link)
+    if not rows:
+        return 1  # each failed walk said why on stderr
+    print(format_impostor_table(rows))
+    return 0
+
+
 def cmd_bench_stream(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench stream``."""
     from walkstream.benchmarks.stream import (
@@ -558,6 +576,17 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--clock", default="sim", choices=("sim", "real"), help="simulated clock (default) or real time (with --device gl: frames drawn and timed for real)")
     b.add_argument("--out", default="out/bench-stream", help="folder for reports and plots")
     b.set_defaults(func=cmd_bench_stream)
+
+    b = besub.add_parser("impostors", help="the same walks with and without impostors: triangles, bytes, textures, colour error")
+    b.add_argument("db", help="scene database baked with --impostors")
+    b.add_argument("--paths", default="SE", help="comma-separated recorded paths (default SE)")
+    b.add_argument("--device", default="pda", choices=("gl", "desktop2003", "pda"), help="device (default pda)")
+    b.add_argument("--bandwidth", default="56kbit", help="link bandwidth (default 56kbit)")
+    b.add_argument("--rtt", default="200ms", help="round-trip time (default 200ms)")
+    b.add_argument("--truth-every", type=int, default=25, metavar="N", help="compare every Nth frame with the ground truth, colour error included (default 25; 0: never)")
+    b.add_argument("--duration", help="limit every walk, e.g. 60s")
+    b.add_argument("--out", default="out/bench-impostors", help="folder for the reports")
+    b.set_defaults(func=cmd_bench_impostors)
 
     b = besub.add_parser("budget", help="frame rate and polygon budget per device and target, with a tenfold cost step")
     b.add_argument("db", nargs="?", default="out/demo/city.db", help="scene database (default out/demo/city.db)")

@@ -2,9 +2,9 @@
 
 The cache holds the decoded premultiplied RGBA array (:func:`~walkstream.shared.codec.image.decode_image`)
 under ``("impostor", image id)``, counted at its texels' bytes (4 per texel), which is
-also what it takes as a texture.  An impostor is a texture, not a mesh: the client's
-frame path does not draw impostors yet (issue 27, item 3), so :meth:`ImpostorContent.upload`
-refuses a mesh.
+also what it takes as a texture.  An impostor is a texture, not a mesh: the frame
+draws it as a textured quad (:mod:`walkstream.client.draw.quads`), so
+:meth:`ImpostorContent.upload` refuses a mesh.
 """
 
 from __future__ import annotations

@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.draw.arena import MeshArena
 from walkstream.client.draw.meshes import MeshRenderer
+from walkstream.client.draw.quads import Quad, QuadRenderer
 from walkstream.shared.camera import mat4_bytes, perspective
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import VERTEX_ID_FRAGMENT_SHADER, Framebuffer, Releasable, check_gl_error
@@ -150,6 +151,10 @@ class FrameRenderer(Releasable):
         #: and waiting in ``ctx.finish()`` for the device.
         self.last_issue_s = 0.0
         self.last_finish_s = 0.0
+        self._quads: QuadRenderer | None = None
+        #: The impostor quads the next :meth:`draw` draws over its meshes (the frame's
+        #: ``upload`` step sets them; :mod:`walkstream.client.draw.quads`).
+        self.impostors: list[Quad] = []
 
     # -- buffers ---------------------------------------------------------------
 
@@ -279,6 +284,10 @@ class FrameRenderer(Releasable):
             check_gl_error(self.ctx, "after FrameRenderer.draw")
         else:
             self._r.draw(meshes, view, p, self.size)
+        if self.impostors or self._quads is not None:
+            if self._quads is None:
+                self._quads = QuadRenderer(self.ctx)
+            self._quads.draw(self.impostors, np.asarray(p, np.float64) @ np.asarray(view, np.float64))
         t1 = time.perf_counter()
         self.ctx.finish()
         dt = time.perf_counter() - t0
@@ -391,6 +400,9 @@ class FrameRenderer(Releasable):
 
     def release(self) -> None:
         """Release every buffer (and the context, if it was made here); idempotent."""
+        if self._quads is not None:
+            self._quads.release()
+            self._quads = None
         for vao in self._id_vaos.values():
             vao.release()
         self._id_vaos.clear()

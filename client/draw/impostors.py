@@ -2,9 +2,9 @@
 
 Pure numpy over the rows of the current cell's record
 (:class:`~walkstream.shared.wire.ImpostorRow`, with the bake's distance ``D`` and
-error bound ``A`` of :class:`~walkstream.shared.wire.CellImpostors`); the frame path
-that uploads the images as textures and draws the quads is still to come (issue 27,
-item 3), so nothing here changes what a replay draws.
+error bound ``A`` of :class:`~walkstream.shared.wire.CellImpostors`); the frame step
+that calls it, wants the images and makes the quads is
+:mod:`walkstream.client.walk.impostors`, the draw :mod:`walkstream.client.draw.quads`.
 
 - **The image**: the bin of the viewer's direction from the building's centre at the
   row's level (:func:`~walkstream.shared.impostors.bin_of`); a bin the cell lists no

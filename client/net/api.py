@@ -34,6 +34,7 @@ from walkstream.client.clock import Clock
 from walkstream.shared.codec.cellbatch import check_contents_part
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
+from walkstream.shared.content.impostor import KIND as IMPOSTOR
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_any
 from walkstream.shared.paths import RecordedPath
@@ -393,6 +394,37 @@ class SceneClient:
         if got < len(ids):
             self.stats.cut_streams += 1
             raise StreamCut(f"{what}: ended after {got} of {len(ids)} cells", got)
+
+    async def impostors(self, ids: Sequence[int]) -> AsyncIterator[tuple[int, Any, int]]:
+        """Impostor images ``ids`` in one request (``POST .../impostors``), each yielded as
+        ``(image id, premultiplied RGBA array, bytes on the wire)`` as soon as its part
+        is in, in the order asked.
+
+        Raises
+        ------
+        StreamCut
+            As :meth:`objects`; ``received`` counts the images yielded.
+        ApiError
+            4xx: the server refuses the request (a scene baked without impostors: 404).
+        """
+        ids = [int(i) for i in ids]
+        what = f"impostors batch ({len(ids)} images)"
+        got = 0
+
+        def check(obj: Any, nbytes: int) -> tuple[int, Any, int]:
+            if got >= len(ids):
+                raise CodecError("more images than asked")
+            iid, _etag, body = check_contents_part(obj, f"{what}: part {got}")
+            if iid != ids[got]:
+                raise CodecError(f"{what}: image {iid} where {ids[got]} was asked")
+            return iid, IMPOSTOR.decode(body, f"impostor image {iid}"), nbytes
+
+        async for part in self._stream("POST", self._url("/impostors"), what, {"ids": ids}, check):
+            got += 1
+            yield part
+        if got < len(ids):
+            self.stats.cut_streams += 1
+            raise StreamCut(f"{what}: ended after {got} of {len(ids)} images", got)
 
     async def cell_index(self, tile: tuple[int, int] | None) -> CellIndex:
         """The cell index of ``tile`` (None: of the whole scene)."""

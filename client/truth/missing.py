@@ -9,7 +9,9 @@ within the view distance at LOD2, and whatever the client drew) -- and compared
 (:func:`~walkstream.client.truth.compare.compare_frame`): differing pixels, and missing
 pixels attributed to a cause, (a) the PVS to (f) the fog.  A PVS object not received or
 not built is late (causes (b), (c)); one drawn at a coarser LOD is the budget's (d);
-what is left is culled (e).
+what is left is culled (e).  Impostors the frame drew are drawn over its meshes; a
+building drawn as its image counts as shown where the image painted
+(:func:`~walkstream.client.truth.standin.stand_in_ids`).
 
 Each frame's colour error (:mod:`walkstream.client.truth.colour`) compares the full
 scene with the client's picture drawn by the same truth renderer
@@ -38,6 +40,7 @@ from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.picture import Overlay, colour_error
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.scene import TruthScene
+from walkstream.client.truth.standin import stand_in_ids
 
 __all__ = ["ComparedFrame", "WorstFrame", "ColourWorst", "needed_objects", "missing_figures"]
 
@@ -150,10 +153,16 @@ def missing_figures(
                     client.forget(key)
             for i, lod, mesh in st.drawn:
                 client.upload((i, lod), mesh)
+            client.impostors = [q for _, q in st.impostors]
             client.draw(keys, st.view, proj)
             c_rgb = client.snapshot()
             c_ids = client.draw_ids(keys, st.view, proj)
             t_rgb, t_ids = truth.colour_frame(st.eye, st.view, proj, also=[i for i, _, _ in st.drawn])
+            if st.impostors:  # a building drawn as its image shows where the image painted
+                client.impostors = []
+                client.draw(keys, st.view, proj)
+                painted = np.any(client.snapshot() != c_rgb, axis=2)
+                c_ids = stand_in_ids(c_ids, t_ids, painted, [i for i, _ in st.impostors])
             knows = st.pvs is not None
             fogged: list[int] = []
             if np.isfinite(st.fog):

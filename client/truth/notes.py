@@ -3,7 +3,8 @@
 One note for every scene kind (:meth:`~walkstream.client.truth.recorder.TruthRecorder.record`
 makes them): the camera, the city objects drawn with their LOD, the objects the visible
 set named (its PVS) and which of them had arrived and were built, the room parts drawn,
-the room cells visible whose contents had not arrived, and the fog in force.  The
+the room cells visible whose contents had not arrived, the fog in force, and the
+impostors drawn (their quads and images).  The
 figures compare against it: a city's missing pixels by cause
 (:mod:`walkstream.client.truth.missing`), the culled pixels of a walk with rooms
 (:mod:`walkstream.client.truth.culled`).
@@ -48,3 +49,6 @@ class FrameNote:
     """Room cells visible whose contents had not arrived: late, not culled."""
     fog: float
     """The fog distance in force (``inf``: none)."""
+    impostors: tuple[tuple[int, Any], ...] = ()
+    """``(object id, quad)`` of each impostor drawn (:data:`~walkstream.client.draw.quads.Quad`:
+    corners, image id, premultiplied RGBA, opacity), in draw order."""

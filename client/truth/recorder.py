@@ -60,6 +60,7 @@ from walkstream.client.truth.picture import Overlay, forms_of
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.scene import TruthScene, fetch_contents
 from walkstream.client.truth.solid import SolidProbe
+from walkstream.client.truth.standin import impostor_overlay
 from walkstream.shared.camera import perspective
 from walkstream.shared.errors import InputError, WalkstreamError
 from walkstream.shared.scene.placement import ContentsPlacement
@@ -140,7 +141,9 @@ class TruthRecorder:
         self.notes: list[FrameNote] = []
         self.overlay: Overlay | None = None
         """The ``impostor`` hook of the colour error (:mod:`walkstream.client.truth.picture`):
-        set by a part that draws images in place of objects; None: geometry only."""
+        set by a part that draws images in place of objects; None: geometry only, or,
+        when the notes carry impostors, their quads painted by the truth renderer
+        (:func:`~walkstream.client.truth.standin.impostor_overlay`)."""
 
     def due(self, frame: int) -> bool:
         """Whether frame ``frame`` is one to compare."""
@@ -162,6 +165,7 @@ class TruthRecorder:
         parts: Iterable[tuple[int, int]] = (),
         waiting: Iterable[int] = (),
         fog: float = math.inf,
+        impostors: Iterable[tuple[int, Any]] = (),
     ) -> None:
         """Note one frame (cheap: ids and references to meshes already built).
 
@@ -186,6 +190,8 @@ class TruthRecorder:
             Room cells visible whose contents had not arrived.
         fog : float
             The fog distance in force (``inf``: none).
+        impostors : (object id, quad) pairs
+            The impostors drawn (:data:`~walkstream.client.draw.quads.Quad`).
         """
         drawn = tuple(
             (int(g.id), int(lod), g.meshes[lod])
@@ -206,6 +212,7 @@ class TruthRecorder:
                 parts=tuple((int(c), int(k)) for c, k in parts),
                 waiting=tuple(int(c) for c in waiting),
                 fog=float(fog),
+                impostors=tuple((int(i), q) for i, q in impostors),
             )
         )
 
@@ -261,8 +268,11 @@ class TruthRecorder:
                     forms=forms_of(self.notes),
                     ground_z=self.ground_z,
                 )
+                overlay = self.overlay
+                if overlay is None and any(st.impostors for st in self.notes):
+                    overlay = impostor_overlay(truth, self.proj)
                 log, worst, frames, cworst = missing_figures(
-                    ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, self.overlay
+                    ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, overlay
                 )
                 figures = summarise_truth(log, t_first_perfect)
                 figures["below_horizon"] = horizon_figures(f.below for f in frames)

@@ -42,7 +42,7 @@ in ascending ids too, so ties resolve the same way in both frames.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -59,6 +59,8 @@ from walkstream.shared.records import Mesh
 
 if TYPE_CHECKING:
     import moderngl
+
+    from walkstream.client.draw.quads import Quad, QuadRenderer
 
 __all__ = ["MAX_BUFFER_BYTES", "TruthRenderer", "form_key", "object_key"]
 
@@ -182,6 +184,7 @@ class TruthRenderer(Releasable):
         if not float(view_distance) > 0:
             raise InputError(f"TruthRenderer.view_distance: expected > 0, got {view_distance}")
         self.size = (w, h)
+        self._quads: QuadRenderer | None = None
         self.near, self.far = float(near), float(far)
         self.proj = perspective(fov_deg, w / h, near, far).astype(np.float64)
         self.view_distance = float(view_distance)
@@ -501,7 +504,24 @@ class TruthRenderer(Releasable):
         ids, _ = self.render(eye, view, draw, proj=proj)
         return self.colour(), self.object_ids(ids)
 
+    def paint_quads(self, quads: Sequence[Quad], view: ArrayLike, proj: ArrayLike | None = None) -> NDArray[np.uint8]:
+        """Draw textured ``quads`` over the last frame drawn (its depth tested, not written;
+        premultiplied blend, as the client draws impostors) and return the colour, row 0 at the top."""
+        if self.ctx is None:
+            raise RenderError("TruthRenderer: used after release()")
+        from walkstream.client.draw.quads import QuadRenderer
+
+        if self._quads is None:
+            self._quads = QuadRenderer(self.ctx)
+        self._fbo_colour.use()
+        p = self.proj if proj is None else proj
+        self._quads.draw(quads, np.asarray(p, np.float64) @ np.asarray(view, np.float64))
+        return self.colour()
+
     def release(self) -> None:
         """Release every GL object (and the context if it was made here); idempotent."""
+        if self._quads is not None:
+            self._quads.release()
+            self._quads = None
         release_objects(self.ctx, self._gl, self._own_ctx)
         self.ctx = None

@@ -7,7 +7,8 @@ controller, two levers: *indoors* the fog (one LOD per part, so the nearest part
 fit the budget are drawn and the fog is set just beyond, :func:`fog_for_budget`), *on
 the street* the triangles (the ACH allocation of the PVS objects in the frustum,
 ``lod_select == "distance"`` the usual distance bands instead), after the room parts
-drawn.  The device's cost step (``cost_step_at_s``) is applied here too.
+drawn; the impostors of the current cell (:mod:`.impostors`) first, two triangles and
+one draw each, their buildings' geometry left out where the image stands alone.  The device's cost step (``cost_step_at_s``) is applied here too.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.draw.allocate import allocate_ach, allocate_distance
+from walkstream.client.walk.impostors import frame_impostors, replaced
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.frustum import frustum_cull
@@ -44,8 +46,12 @@ def allocate(w: WalkState, f: Frame) -> None:
         seen = frustum_cull(o.lo, o.hi, f.vp) if o.geoms else np.zeros(0, bool)
         if w.indoors and len(seen):  # what the fog hides indoors is hidden outdoors too
             seen &= box_distance(o.lo, o.hi, f.eye) <= f.fog
+        f.impostors = [] if w.indoors else frame_impostors(w, f)
+        if f.impostors and len(seen):  # a building drawn as its image alone: no geometry
+            seen &= ~replaced([g.id for g in o.geoms], f.impostors)
+        quad_tris = 2 * len(f.impostors)
         if cfg.lod_select == "ach":
-            f.alloc = allocate_ach(o.ach, o.tri, o.avail, seen, max(f.budget - room_tris, 0), reserve_floor=True)
+            f.alloc = allocate_ach(o.ach, o.tri, o.avail, seen, max(f.budget - room_tris - quad_tris, 0), reserve_floor=True)
         else:
             centre = (o.lo + o.hi) / 2.0
             dist = np.hypot(centre[:, 0] - f.eye[0], centre[:, 1] - f.eye[1])
@@ -54,8 +60,8 @@ def allocate(w: WalkState, f: Frame) -> None:
         w.device.cost_scale = w.device.cost_scale * cfg.cost_step_factor
         w.stepped = True
     lods = f.lods
-    f.triangles = room_tris + (0 if f.alloc is None else int(f.alloc.triangles))
-    f.drawn = room_parts + int((lods >= 0).sum())
+    f.triangles = room_tris + 2 * len(f.impostors) + (0 if f.alloc is None else int(f.alloc.triangles))
+    f.drawn = room_parts + len(f.impostors) + int((lods >= 0).sum())
 
 
 def _cull_rooms(w: WalkState, f: Frame) -> None:

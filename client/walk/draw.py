@@ -5,7 +5,9 @@ when a snapshot is due), the ``gl`` device's from the real draw
 (:func:`~walkstream.client.draw.present.present`), or from a recorded frame schedule
 (``--frame-times``: a replay repeated exactly).  Objects are uploaded as
 ``(id, lod)``, room parts under their content kind's key
-(:data:`~walkstream.client.content.cellmesh.CELLMESH_CONTENT`).
+(:data:`~walkstream.client.content.cellmesh.CELLMESH_CONTENT`); the frame's impostors
+(:mod:`walkstream.client.walk.impostors`) go to the renderer as textured quads
+(:mod:`walkstream.client.draw.quads`), drawn over the meshes.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from collections.abc import Hashable
 
 from walkstream.client.content.cellmesh import CELLMESH_CONTENT
 from walkstream.client.draw.present import present, save_snapshot
+from walkstream.client.draw.quads import quads_of
 from walkstream.client.walk.scene import STREET_FAR_M
 from walkstream.client.walk.state import Frame, WalkState
 
@@ -44,6 +47,9 @@ def upload(w: WalkState, f: Frame) -> None:
                     m = w.meshes[(cid, k)] = cm.parts[k].mesh()
                 keys.append(CELLMESH_CONTENT.upload(r, cid, k, m))
     f.keys = keys
+    lane = w.scene.images
+    if lane is not None and hasattr(r, "impostors"):  # over the meshes: the frame's impostor quads
+        r.impostors = quads_of(f.impostors, lane.image)
 
 
 def draw(w: WalkState, f: Frame) -> None:

@@ -51,6 +51,24 @@ class WalkFrames:
     """Frames in an entrance's doorway: the room cells whose contents were in memory."""
     prefetch_from: float | None = None
     """Walk time at which the interior's prefetch before an entrance began (None: never)."""
+    impostors: list[int] = field(default_factory=list)
+    """Impostors drawn per frame (street frames, a scene with impostors; empty otherwise)."""
+    texture_bytes: list[int] = field(default_factory=list)
+    """Bytes of the impostor textures each frame drew (one count per image)."""
+
+    def impostor_figures(self) -> dict[str, float]:
+        """Impostors drawn per frame (mean, max), the share of frames drawing any, and the
+        texture bytes a frame drew (mean, max); empty when no frame drew one."""
+        if not any(self.impostors):
+            return {}
+        n, b = np.asarray(self.impostors, np.float64), np.asarray(self.texture_bytes, np.float64)
+        return {
+            "impostors_mean": float(n.mean()),
+            "impostors_max": int(n.max()),
+            "frames_with_impostors": float((n > 0).mean()),
+            "texture_bytes_mean": float(b.mean()),
+            "texture_bytes_max": int(b.max()),
+        }
 
     def switches(self, t: NDArray[np.float64]) -> list[tuple[float, str]]:
         """``(walk time, model)`` each time the visible set's model changes (the first frame's too)."""

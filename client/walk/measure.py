@@ -14,11 +14,13 @@ Everything the ground truth needs is noted here, in the one
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import httpx
 import numpy as np
 
 from walkstream.client.clock import Clock
+from walkstream.client.draw.quads import quads_of
 from walkstream.client.report.metrics import FrameLog, first_perfect_index
 from walkstream.client.truth.recorder import TruthResult
 from walkstream.client.walk.figures import MODEL_PORTALS, MODEL_PVS
@@ -52,6 +54,9 @@ def measure(w: WalkState, f: Frame) -> None:
         fr.objects_visible.append(len(o.pvs))
         fr.fog_m.append(f.fog)
         fr.budget.append(f.budget)
+    if w.scene.images is not None:
+        fr.impostors.append(len(f.impostors))
+        fr.texture_bytes.append(sum({d.image: d.nbytes for d in f.impostors}.values()))
     if w.indoors:  # the room held, or kept on a threshold where no street cell takes over
         cell = f.room if f.room is not None and (f.held or city is None) else -1
     else:
@@ -90,7 +95,7 @@ def note_truth(w: WalkState, f: Frame) -> None:
             frame=w.frame, t=t, eye=f.eye, view=f.view.astype(np.float32), cell=f.street,
             pvs=None if cell is None else cell.pvs,
             received=cache.ids(city.kind) + cache.ids("geom"), built=cache.ids("geom"),
-            geoms=w.objects.geoms, lods=f.lods,
+            geoms=w.objects.geoms, lods=f.lods, impostors=_quads(w, f),
         )
     elif city is None:  # rooms only: at the fog the frame was drawn at (the budget's lever)
         rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(f.fog))
@@ -133,3 +138,11 @@ async def compare_truth(
             placements=() if w.scene.rooms is None else w.scene.rooms.placements,
             t_first_perfect=None if first is None else float(log.t[first]), progress=progress,
         )
+
+
+def _quads(w: WalkState, f: Frame) -> list[tuple[int, Any]]:
+    """``(object id, quad)`` of the frame's impostors whose images are held."""
+    lane = w.scene.images
+    if lane is None or not f.impostors:
+        return []
+    return [(d.object, q) for d in f.impostors for q in quads_of([d], lane.image)]

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from walkstream.client.config import ReplayConfig
 from walkstream.client.stream.cache import Cache
+from walkstream.client.stream.images import ImpostorImages
 from walkstream.client.stream.rooms import RoomStreamer
 from walkstream.client.stream.streamer import Streamer
 from walkstream.shared.camera import perspective
@@ -43,6 +44,9 @@ class WalkScene:
     """Room cells (portals) and their contents; None: the scene has none."""
     entrance: Entrance | None = None
     """Where a street cell joins a room cell (a crossing scene)."""
+    images: ImpostorImages | None = None
+    """The impostor images' lane (street cells, ``config.impostors``); it asks for
+    nothing on a scene without impostors."""
     unknown_quality: float = 0.0
     """Download and rewrite quality of a frame whose visible set is not known yet (the
     street cell's record or the room not in): 0 (nothing has arrived); a crossing scene

@@ -128,7 +128,9 @@ class Frame:
     """The objects' LODs (None: no street cells, nothing to allocate)."""
     triangles: int = 0
     drawn: int = 0
-    """Room parts and objects drawn."""
+    """Room parts, objects and impostors drawn."""
+    impostors: list[Any] = field(default_factory=list)
+    """The impostors drawn (:class:`~walkstream.client.walk.impostors.DrawnImpostor`)."""
     # -- draw
     snap: bool = False
     keys: list[Hashable] = field(default_factory=list)

@@ -1,0 +1,141 @@
+"""Impostor quads on the GPU: each image a texture, each impostor a textured quad blended premultiplied.
+
+The frame's impostors (:class:`~walkstream.client.walk.impostors.DrawnImpostor`) are
+drawn after its meshes, into the framebuffer they left bound: depth tested against
+the geometry, depth not written (an image is a stand-in with no depth of its own, and
+a building fading from its image to its geometry draws both), blended with
+premultiplied alpha (``ONE, ONE_MINUS_SRC_ALPHA``: the bake stores premultiplied
+texels, so a silhouette's half-covered texels add their share of colour over what is
+behind and no dark fringe appears; the blend's opacity scales all four channels).
+Textures live while a frame draws them: the frame's images are already within the
+texture budget (:func:`~walkstream.client.draw.impostors.fit_textures`), and one no
+frame drew is released at the next draw.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import moderngl
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from walkstream.shared.camera import mat4_bytes
+from walkstream.shared.errors import RenderError
+
+__all__ = ["Quad", "QuadRenderer", "quads_of"]
+
+Quad = tuple[NDArray[np.float64], int, NDArray[np.uint8], float]
+"""``(corners (4, 3), image id, premultiplied RGBA (h, w, 4), opacity)``; corners bottom-left,
+bottom-right, top-right, top-left of the image (its row 0 is the top)."""
+
+_VS = """
+#version 330
+uniform mat4 u_view_proj;
+in vec3 in_pos;
+in vec2 in_uv;
+out vec2 v_uv;
+void main() {
+    v_uv = in_uv;
+    gl_Position = u_view_proj * vec4(in_pos, 1.0);
+}
+"""
+
+_FS = """
+#version 330
+uniform sampler2D u_image;
+uniform float u_alpha;
+in vec2 v_uv;
+out vec4 f_colour;
+void main() {
+    f_colour = texture(u_image, v_uv) * u_alpha;  // premultiplied: every channel scales
+}
+"""
+
+# texture v: row 0 of the array (the image's top) is at v = 0
+_UV = np.array([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]], np.float32)
+
+
+class QuadRenderer:
+    """Textures and draws impostor quads on ``ctx`` (see the module docstring)."""
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self.ctx = ctx
+        try:
+            self._prog = ctx.program(vertex_shader=_VS, fragment_shader=_FS)
+        except Exception as exc:
+            raise RenderError(f"QuadRenderer: shader program failed: {exc}") from exc
+        self._vbo = ctx.buffer(reserve=4 * 5 * 4)
+        self._vao = ctx.vertex_array(self._prog, [(self._vbo, "3f 2f", "in_pos", "in_uv")])
+        self._textures: dict[int, moderngl.Texture] = {}
+        self.texture_bytes = 0
+        """Bytes of the textures held."""
+        self.last_quads = 0
+        """Quads the last :meth:`draw` drew."""
+
+    def _texture(self, image: int, rgba: NDArray[np.uint8]) -> moderngl.Texture:
+        tex = self._textures.get(image)
+        if tex is None:
+            a = np.ascontiguousarray(rgba, np.uint8)
+            tex = self.ctx.texture((a.shape[1], a.shape[0]), 4, a.tobytes())
+            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            tex.repeat_x = tex.repeat_y = False
+            self._textures[image] = tex
+            self.texture_bytes += a.nbytes
+        return tex
+
+    def draw(self, quads: Sequence[Quad], view_proj: ArrayLike) -> None:
+        """Draw ``quads`` into the bound framebuffer with the camera ``view_proj``; release
+        the textures of images not among them."""
+        used = {q[1] for q in quads}
+        for image in [i for i in self._textures if i not in used]:
+            tex = self._textures.pop(image)
+            self.texture_bytes -= tex.width * tex.height * 4
+            tex.release()
+        self.last_quads = len(quads)
+        if not quads:
+            return
+        ctx = self.ctx
+        u = self._prog["u_view_proj"]
+        assert isinstance(u, moderngl.Uniform)
+        u.write(mat4_bytes(view_proj))
+        ua = self._prog["u_alpha"]
+        assert isinstance(ua, moderngl.Uniform)
+        ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        ctx.disable(moderngl.CULL_FACE)  # a quad is seen from its baking side only, but either winding
+        ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
+        fbo = ctx.fbo  # the bound framebuffer (the meshes' own): its depth is tested, not written
+        fbo.depth_mask = False
+        try:
+            for corners, image, rgba, alpha in quads:
+                self._texture(image, rgba).use(0)
+                ua.value = float(alpha)
+                verts = np.hstack([np.asarray(corners, np.float32).reshape(4, 3), _UV])
+                self._vbo.write(verts[[0, 1, 2, 3]].astype("f4").tobytes())
+                self._vao.render(moderngl.TRIANGLE_FAN, vertices=4)
+        finally:
+            fbo.depth_mask = True
+            ctx.disable(moderngl.BLEND)
+            ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+
+    def release(self) -> None:
+        """Release the textures and buffers."""
+        for tex in self._textures.values():
+            tex.release()
+        self._textures.clear()
+        self.texture_bytes = 0
+        self._vao.release()
+        self._vbo.release()
+        self._prog.release()
+
+
+def quads_of(drawn: Sequence[Any], image: Any) -> list[Quad]:
+    """The quads of a frame's impostors (:class:`~walkstream.client.walk.impostors.DrawnImpostor`),
+    ``image(id)`` giving each one's decoded RGBA (those it has none for left out)."""
+    out: list[Quad] = []
+    for d in drawn:
+        rgba = image(d.image)
+        if rgba is not None:
+            out.append((d.corners, d.image, rgba, float(d.alpha)))
+    return out

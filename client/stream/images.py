@@ -1,0 +1,143 @@
+"""The impostor images' lane of the request scheduler: the images the frame wants, fetched in batches.
+
+A scene baked with ``--impostors`` lists, in a cell's record, the images of the
+buildings the cell may draw as impostors (:class:`~walkstream.shared.wire.CellImpostors`).
+The frame loop says which of them it wants and when (:meth:`ImpostorImages.want`:
+the image of the viewer's direction bin of each listed building, needed *now*); this
+lane offers them to the one :class:`~walkstream.client.stream.scheduler.RequestScheduler`
+with a need before anything due now (``need_s`` :data:`IMAGE_LEAD_S`), so a far
+building's image goes out before its parameters, and caches each decoded image
+(premultiplied RGBA) under ``("impostor", image id)`` at its texels' bytes.
+
+The lane joins the scheduler only when something is first wanted: a scene without
+impostors never wants an image, so its walks keep one lane and the very same
+requests.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Mapping
+
+from walkstream.client.net.api import SceneClient
+from walkstream.client.stream.cache import Cache
+from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
+from walkstream.shared.errors import ApiError, StreamCut
+
+__all__ = ["IMAGE_LEAD_S", "ImpostorImages"]
+
+IMAGE_LEAD_S = -1.0
+"""An image's need, seconds from now, as offered: before anything the streamers need now."""
+
+MAX_BATCH = 16
+"""Images asked for in one request."""
+
+MAX_REQUESTS = 2
+"""This lane's requests on the link at once."""
+
+IMAGE_BYTES = 12_000.0
+"""An image's bytes on the wire before one has arrived (the scheduler's cover counts them)."""
+
+
+class ImpostorImages:
+    """One lane of the link: impostor images (see the module docstring).
+
+    Parameters
+    ----------
+    api
+        The walk's API client.
+    cache
+        The walk's cache (images go under ``impostor``).
+    scheduler
+        The link's request scheduler, joined on the first want.
+    """
+
+    def __init__(self, api: SceneClient, cache: Cache, scheduler: RequestScheduler) -> None:
+        self.api = api
+        self.cache = cache
+        self.scheduler = scheduler
+        self.wanted: dict[int, float] = {}
+        """Images wanted and not held, by need (seconds from now)."""
+        self._asked: set[int] = set()
+        self._joined = False
+        self._image_bytes = IMAGE_BYTES
+        self.received = 0
+        """Images received."""
+        self.bytes_received = 0
+        """Their bytes on the wire."""
+        self.requests = 0
+        """Requests made."""
+        self.refused = False
+        """The service refused a request (a scene without impostors): nothing more is asked."""
+
+    def held(self, image: int) -> bool:
+        """Whether ``image`` is in the cache."""
+        return self.cache.has("impostor", image)
+
+    def image(self, image: int) -> object | None:
+        """The decoded image (premultiplied RGBA), or None when it is not held."""
+        return self.cache.peek("impostor", image) if self.held(image) else None
+
+    def want(self, images: Mapping[int, float]) -> None:
+        """The images wanted now (image id -> need, seconds from now); those held are dropped."""
+        self.wanted = {int(i): float(t) for i, t in images.items() if not self.held(int(i))}
+        if self.wanted and not self.refused:
+            if not self._joined:
+                self.scheduler.join(self)
+                self._joined = True
+            self.scheduler.dispatch()
+
+    async def close(self) -> None:
+        """Cancel this lane's requests (the walk ended) and wait for them to end."""
+        self.refused = True  # nothing more is asked
+        tasks = [f.task for f in self.scheduler.flights(self) if f.task is not None]
+        for t in tasks:
+            t.cancel()
+        for t in tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await t
+
+    # -- the scheduler's lane ------------------------------------------------------
+
+    def offer(self) -> Offer | None:
+        """The next batch of wanted images not asked for yet, needed before what is due now."""
+        if self.refused or self.in_flight() >= MAX_REQUESTS:
+            return None
+        todo = sorted((t, i) for i, t in self.wanted.items() if i not in self._asked and not self.held(i))
+        if not todo:
+            return None
+        ids = [i for _, i in todo[:MAX_BATCH]]
+        return Offer(min(todo[0][0], 0.0) + IMAGE_LEAD_S, lambda: self._start(ids))
+
+    def in_flight(self) -> int:
+        """This lane's requests on the link."""
+        return len(self.scheduler.flights(self))
+
+    def outstanding_bytes(self) -> float:
+        """Images asked for and not received, at the mean image's bytes."""
+        return sum(len(f.left) for f in self.scheduler.flights(self)) * self._image_bytes
+
+    def _start(self, ids: list[int]) -> None:
+        self._asked.update(ids)
+        self.requests += 1
+        self.scheduler.launch(self, "impostors", ids, self._fetch)
+
+    async def _fetch(self, f: Flight) -> None:
+        try:
+            async for iid, rgba, nbytes in self.api.impostors(f.ids):
+                f.left.discard(iid)
+                self.cache.put("impostor", iid, rgba, max(int(rgba.nbytes), 1))
+                self.received += 1
+                self.bytes_received += int(nbytes)
+                self._image_bytes = 0.8 * self._image_bytes + 0.2 * max(int(nbytes), 1)
+                self.wanted.pop(iid, None)
+        except ApiError:
+            self.refused = True  # a scene without impostors (or images it does not hold)
+        except StreamCut:
+            pass  # what did not come is wanted again at the next want
+        finally:
+            self.scheduler.landed(f)
+            self._asked.difference_update(f.ids)
+        if not self.refused:
+            self.scheduler.dispatch()
