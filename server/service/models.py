@@ -13,7 +13,7 @@ from pydantic import BaseModel, Field
 
 from walkstream.server.service.scenes import MAX_IDS
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
-from walkstream.shared.wire import MSGPACK
+from walkstream.shared.wire import JSON, MSGPACK
 
 MAX_INT64 = 2**63 - 1
 """Largest object id (SQLite integers are signed 64-bit)."""
@@ -307,6 +307,16 @@ class ContentsIn(BaseModel):
         max_length=CELLBATCH_MAX_CELLS, json_schema_extra={"uniqueItems": True}
     )
 
+
+CONTENTS_BATCH_BODY: dict[str, Any] = {
+    "required": True,
+    "content": {
+        JSON: {"schema": ContentsIn.model_json_schema()},
+        MSGPACK: {"schema": ContentsIn.model_json_schema()},
+    },
+}
+"""The OpenAPI request body of a contents batch (rooms' contents, impostor images): a
+:class:`ContentsIn` as JSON or msgpack (the route reads the body itself)."""
 
 
 def error_doc(description: str) -> dict[str, Any]:

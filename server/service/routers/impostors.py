@@ -27,13 +27,13 @@ from starlette.concurrency import run_in_threadpool
 
 from walkstream.server.service.dependencies import SceneDep
 from walkstream.server.service.http import cached, stream_response
-from walkstream.server.service.models import ERRORS, ContentsIn, error_doc
+from walkstream.server.service.models import CONTENTS_BATCH_BODY, ERRORS, error_doc
 from walkstream.server.service.routers.objects import MAX_BODY_BYTES, parse_ids, read_body
 from walkstream.server.service.scenes import Scene
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS, pack_contents_part
 from walkstream.shared.content.impostor import IMPOSTOR_MEDIA
 from walkstream.shared.errors import ApiError
-from walkstream.shared.wire import JSON, MSGPACK
+from walkstream.shared.wire import MSGPACK
 
 __all__ = ["router"]
 
@@ -74,15 +74,6 @@ async def impostor(request: Request, scene: SceneDep, image: Annotated[int, Path
     return cached(request, enc)
 
 
-_BATCH_BODY = {
-    "required": True,
-    "content": {
-        JSON: {"schema": ContentsIn.model_json_schema()},
-        MSGPACK: {"schema": ContentsIn.model_json_schema()},
-    },
-}
-
-
 @router.post(
     "/scenes/{scene}/impostors",
     responses={
@@ -97,7 +88,7 @@ _BATCH_BODY = {
         415: error_doc("a Content-Type other than JSON or msgpack"),
         422: error_doc(f"ids not a list of at most {CELLBATCH_MAX_CELLS} integers, or an id asked twice"),
     },
-    openapi_extra={"requestBody": _BATCH_BODY},
+    openapi_extra={"requestBody": CONTENTS_BATCH_BODY},
     summary="Impostor images in a batch",
 )
 async def impostors(request: Request, scene: SceneDep) -> StreamingResponse:

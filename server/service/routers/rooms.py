@@ -54,8 +54,8 @@ from walkstream.server.service.dependencies import RepDep, SceneDep
 from walkstream.server.service.http import accepts_gzip, cached, stream_response
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.service.models import (
+    CONTENTS_BATCH_BODY,
     ERRORS,
-    ContentsIn,
     RoomOut,
     TopologyOut,
     both,
@@ -68,7 +68,7 @@ from walkstream.shared.content.cellmesh import CONTENTS_MEDIA
 from walkstream.shared.errors import ApiError
 from walkstream.shared.roomcompact import TOPOLOGY_COMPACT_MEDIA
 from walkstream.shared.roomwire import TOPOLOGY_PACKED_MEDIA
-from walkstream.shared.wire import JSON, MSGPACK
+from walkstream.shared.wire import MSGPACK
 
 __all__ = ["router"]
 
@@ -168,15 +168,6 @@ async def contents(request: Request, scene: SceneDep, cell: Annotated[int, Path(
     return cached(request, enc)
 
 
-_BATCH_BODY = {
-    "required": True,
-    "content": {
-        JSON: {"schema": ContentsIn.model_json_schema()},
-        MSGPACK: {"schema": ContentsIn.model_json_schema()},
-    },
-}
-
-
 @router.post(
     "/scenes/{scene}/rooms/contents",
     responses={
@@ -192,7 +183,7 @@ _BATCH_BODY = {
         415: error_doc("a Content-Type other than JSON or msgpack"),
         422: error_doc(f"ids not a list of at most {CELLBATCH_MAX_CELLS} integers, or an id asked twice"),
     },
-    openapi_extra={"requestBody": _BATCH_BODY},
+    openapi_extra={"requestBody": CONTENTS_BATCH_BODY},
     summary="Interior cells' contents in a batch",
 )
 async def contents_batch(request: Request, scene: SceneDep) -> StreamingResponse:
