@@ -121,7 +121,7 @@ def cluster_lists(
             # every cell still holding the whole set uncovered names it too
             holders = np.flatnonzero(remaining[:, shared].all(axis=1))
             users = sorted(set(group) | set(holders.tolist()))
-            remaining[np.ix_(users, shared)] = False
+            remaining[np.ix_(np.asarray(users, np.int64), shared)] = False
             k = len(clusters)
             clusters.append(objects[shared])
             for u in users:
