@@ -14,11 +14,12 @@ records, :func:`walkstream.shared.codec.pvsclusters.encode_cluster`):
 - **walk traffic**: for each recorded path, the records of the cells it enters (the
   path sampled every 0.25 s, each cell once) and, clustered, the clusters those cells
   name, each fetched once: raw bytes (what ``GET .../cells/{id}`` sends, one record
-  per answer, not compressed); as gzip streams flushed after each record (what the
-  cells batch sends, gzip on as the client asks) in batches of :data:`BATCH_CELLS`
-  cells in walk order (a cluster in the batch of the first cell naming it) and as one
-  stream for the whole walk (gzip at its best); and what that one stream costs for the
-  ids alone and for the ACH alone (delta-coded).
+  per answer, not compressed); as gzip-compressed streamed answers made as the
+  cells batch makes them (gzip on, as the client asks) in batches of
+  :data:`BATCH_CELLS` cells in walk order (a cluster in the batch of the first cell
+  naming it: no request of its own, in favour of the clusters) and as one stream for
+  the whole walk (gzip at its best); and what that one stream costs for the ids
+  alone and for the ACH alone (delta-coded).
 
 Every check that the clustered lists are the cells' lists (expanded, equal) runs here
 too: a table is only printed for clusters that give the same PVS.
@@ -36,6 +37,7 @@ import msgpack
 import numpy as np
 
 from walkstream.server.bake.pvsclusters import ClusterSettings, ListClusters, cluster_lists
+from walkstream.server.service.routers.objects import CHUNK_BYTES
 from walkstream.server.store import SceneReader
 from walkstream.shared.cells import CellLocator
 from walkstream.shared.codec.ints import unpack_ints
@@ -81,9 +83,21 @@ def walk_cells(locator: CellLocator, path: RecordedPath, step_s: float = WALK_ST
 
 
 def _gzip_stream(bodies: Sequence[bytes]) -> int:
-    """Bytes of one gzip stream of ``bodies``, flushed after each (as a streamed batch)."""
+    """Bytes of one gzip-compressed streamed answer of ``bodies``, made as the service
+    makes it: the records joined into chunks of about ``CHUNK_BYTES``, gzip level 6, a
+    sync flush after each chunk (``server/service/http.py``, ``routers/objects.py``)."""
     co = zlib.compressobj(6, zlib.DEFLATED, 31)
-    n = sum(len(co.compress(b)) + len(co.flush(zlib.Z_SYNC_FLUSH)) for b in bodies)
+    n = 0
+    chunk: list[bytes] = []
+    size = 0
+    for b in bodies:
+        chunk.append(b)
+        size += len(b)
+        if size >= CHUNK_BYTES:
+            n += len(co.compress(b"".join(chunk))) + len(co.flush(zlib.Z_SYNC_FLUSH))
+            chunk, size = [], 0
+    if chunk:
+        n += len(co.compress(b"".join(chunk))) + len(co.flush(zlib.Z_SYNC_FLUSH))
     return n + len(co.flush())
 
 
@@ -98,8 +112,9 @@ def cluster_figures(db: Path, settings: ClusterSettings | None = None) -> dict[s
         (every record, and the ids' and ACH's packed fields in it), ``cl_cells, cl_clusters``
         (clustered records, cluster records once), ``cluster_s`` (clustering seconds) and
         ``walks``: per path ``{name, cells, clusters, delta, clustered, delta_gz4,
-        clustered_gz4, delta_gz, clustered_gz, ids_gz, ach_gz}`` (raw bytes, gzip in
-        batches, one gzip stream, the ids' and the ACH's fields alone in one stream).
+        clustered_gz4, delta_gz, clustered_gz, ids_raw, ach_raw, ids_gz, ach_gz}`` (raw
+        bytes, gzip in batches, one gzip stream; the delta-coded records' ids and ACH
+        fields alone, raw and in one gzip stream).
     """
     with SceneReader.open(db) as r:
         infos = [c for c in r.cells() if cell_kind(c.kind).visibility == "pvs"]
@@ -185,6 +200,8 @@ def _walk(
         "delta_gz4": sum(_gzip_stream(p) for p, _ in batches),
         "clustered_gz4": sum(_gzip_stream(s) for _, s in batches),
         # what the one gzip stream spends on each part: the ids alone and the ACH alone
+        "ids_raw": sum(len(fields[c][0]) for c in cells),
+        "ach_raw": sum(len(fields[c][1]) for c in cells),
         "ids_gz": _gzip_stream([fields[c][0] for c in cells]),
         "ach_gz": _gzip_stream([fields[c][1] for c in cells]),
     }
@@ -221,8 +238,8 @@ def format_clusters_table(rows: Sequence[dict[str, Any]]) -> str:
         "",
         "| scene | walk | cells entered | clusters fetched | delta-coded bytes | clustered bytes | clustered / delta "
         "| gzip, batches of 4: delta | clustered | clustered / delta "
-        "| gzip, one stream: delta | clustered | clustered / delta | one stream of the ids alone / the ACH alone |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| gzip, one stream: delta | clustered | clustered / delta | ids alone: raw → one gzip stream | ACH alone: raw → one gzip stream |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         for w in r["walks"]:
@@ -231,7 +248,8 @@ def format_clusters_table(rows: Sequence[dict[str, Any]]) -> str:
                 f"| {_ratio(w['clustered'], w['delta'])} "
                 f"| {w['delta_gz4']:,} | {w['clustered_gz4']:,} | {_ratio(w['clustered_gz4'], w['delta_gz4'])} "
                 f"| {w['delta_gz']:,} | {w['clustered_gz']:,} "
-                f"| {_ratio(w['clustered_gz'], w['delta_gz'])} | {w['ids_gz']:,} / {w['ach_gz']:,} |"
+                f"| {_ratio(w['clustered_gz'], w['delta_gz'])} | {w['ids_raw']:,} → {w['ids_gz']:,} "
+                f"| {w['ach_raw']:,} → {w['ach_gz']:,} |"
             )
     return "\n".join(out)
 

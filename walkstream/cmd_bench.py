@@ -353,7 +353,8 @@ def cmd_bench_clusters(args: argparse.Namespace) -> int:
     else:
         print(format_clusters_table(rows))
         print("(bytes from the real encoders: msgpack records as the service sends them; walks sampled every "
-              "0.25 s, each cell and cluster fetched once; gzip stream: level 6, flushed after each record)")
+              "0.25 s, each cell and cluster fetched once; gzip: as the cells batch sends it, level 6; clusters "
+              "ride in the batch of the first cell naming them)")
     if args.plot:
         print(f"plot: {plot_clusters(rows, Path(args.plot))}")
     return 0
