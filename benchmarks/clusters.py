@@ -2,8 +2,8 @@
 
 Per scene database: the cells' lists clustered along their adjacency
 (:func:`walkstream.server.bake.pvsclusters.cluster_lists`, after m-LOMA), then, from
-the real encoders (:meth:`walkstream.shared.wire.CellRecord.to_wire` packed as the
-service packs it; that record with ``cl`` and the rest,
+the real encoders (the record the service sends for each cell,
+:meth:`walkstream.server.service.scenes.Scene.cell`; that record with ``cl`` and the rest,
 :func:`walkstream.shared.codec.pvsclusters.clustered_cell_to_wire`, and the cluster
 records, :func:`walkstream.shared.codec.pvsclusters.encode_cluster`):
 
@@ -38,7 +38,7 @@ import numpy as np
 
 from walkstream.server.bake.pvsclusters import ClusterSettings, ListClusters, cluster_lists
 from walkstream.server.service.routers.objects import CHUNK_BYTES
-from walkstream.server.store import SceneReader
+from walkstream.server.service.scenes import Scene
 from walkstream.shared.cells import CellLocator
 from walkstream.shared.codec.ints import unpack_ints
 from walkstream.shared.codec.pvsclusters import (
@@ -50,7 +50,6 @@ from walkstream.shared.codec.pvsclusters import (
 from walkstream.shared.errors import InputError
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.scene.cellkinds import cell_kind
-from walkstream.shared.wire import CellRecord
 
 __all__ = [
     "WALK_STEP_S",
@@ -116,11 +115,17 @@ def cluster_figures(db: Path, settings: ClusterSettings | None = None) -> dict[s
         bytes, gzip in batches, one gzip stream; the delta-coded records' ids and ACH
         fields alone, raw and in one gzip stream).
     """
-    with SceneReader.open(db) as r:
+    scene = Scene.load(db)
+    try:
+        r = scene.reader
         infos = [c for c in r.cells() if cell_kind(c.kind).visibility == "pvs"]
         paths = {n: RecordedPath.from_msgpack(r.path_blob(n)) for n in r.path_names()}
-    if not infos:
-        raise InputError(f"{db}: no cell with a PVS")
+        if not infos:
+            raise InputError(f"{db}: no cell with a PVS")
+        # the delta-coded records: the very bytes the service sends for each cell
+        delta = {c.id: scene.cell(c.id, "msgpack").content for c in infos}
+    finally:
+        scene.close()
     pvs = {c.id: c.pvs for c in infos}
     t0 = time.perf_counter()
     lc = cluster_lists(pvs, {c.id: c.neighbours.tolist() for c in infos}, settings)
@@ -129,12 +134,10 @@ def cluster_figures(db: Path, settings: ClusterSettings | None = None) -> dict[s
     # the client's side: clusters decoded from their bytes, each cell's clustered record
     # decoded and expanded with them must give its PVS and ACH exactly
     received = dict(decode_cluster(b, f"cluster {k}") for k, b in cl_bodies.items())
-    delta: dict[int, bytes] = {}
     clustered: dict[int, bytes] = {}
     fields: dict[int, tuple[bytes, bytes]] = {}
     for c in infos:
-        wire = CellRecord(id=c.id, kind=c.kind, pvs=c.pvs, ach=c.ach).to_wire()
-        delta[c.id] = _packed(wire)
+        wire = msgpack.unpackb(delta[c.id])
         fields[c.id] = (_packed(wire["pvs"]), _packed(wire["ach"]))
         clustered[c.id] = _packed(clustered_cell_to_wire(wire, lc.cell_clusters[c.id], lc.rest[c.id]))
         _, ids, units = decode_clustered_cell(clustered[c.id], received, f"cell {c.id}")

@@ -196,3 +196,22 @@ def test_bench_on_a_baked_city(tmp_path: Path, gl_ctx: object) -> None:
         assert min(w["delta"], w["delta_gz"], w["delta_gz4"], w["clustered"], w["ids_gz"], w["ach_gz"]) > 0
     table = format_clusters_table([row])
     assert "| city | " in table and "one stream" in table and "batches of 4" in table
+
+    from walkstream.cli import main
+
+    png = tmp_path / "clusters.png"
+    assert main(["bench", "clusters", str(db), "--plot", str(png)]) == 0
+    assert png.stat().st_size > 1000
+    assert main(["bench", "clusters", str(db), "--min-objects", "0"]) == 2
+    assert main(["bench", "clusters", str(tmp_path / "missing.db")]) == 2
+    assert main(["bench", "clusters", str(src)]) == 2  # not a database: one line, no traceback
+    assert db.read_bytes() == before
+
+
+def test_bench_refuses_a_scene_without_pvs_cells(office_db: Path) -> None:
+    """An interior (room cells, portals) has no visibility list to cluster: a clear error."""
+    from walkstream.benchmarks.clusters import run_clusters_bench
+    from walkstream.shared.errors import InputError
+
+    with pytest.raises(InputError, match="no cell with a PVS"):
+        run_clusters_bench([office_db])
