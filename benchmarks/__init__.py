@@ -15,6 +15,8 @@ Each module is one benchmark that ``walkstream bench ...`` runs and prints as a 
 - :mod:`.lod`: image error against frame time, ACH against distance LODs;
 - :mod:`.fill`: where the gl device's frame time goes, lighting per fragment vs per vertex;
 - :mod:`.city`: OpenStreetMap extracts, street cells against grid cells;
+- :mod:`.clusters`: visibility lists clustered along the cell adjacency (m-LOMA)
+  against the delta-coded records: bytes of the cell records and of the walks' traffic;
 - :mod:`.interiors`: interiors per IFC model and generated size (cells, portals,
   triangles, bake time, bytes per cell);
 - :mod:`.portals`: portal culling against frustum culling alone and drawing everything,
@@ -49,6 +51,9 @@ _EXPORTS = {
     "run_sections_bench": "walkstream.benchmarks.sections",
     "format_sections_table": "walkstream.benchmarks.sections",
     "plot_sections_trade": "walkstream.benchmarks.sections",
+    "run_clusters_bench": "walkstream.benchmarks.clusters",
+    "format_clusters_table": "walkstream.benchmarks.clusters",
+    "plot_clusters": "walkstream.benchmarks.clusters",
 }
 
 __all__ = sorted(_EXPORTS)

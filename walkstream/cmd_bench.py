@@ -15,6 +15,7 @@
     walkstream bench fill [scene.db] [--views 6] [--size 1280x960] [--repeat 6] [--json]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--reuse] [--out DIR] [--truth-every N]
     walkstream bench sections [SRC] [--redundancy R ...] [--min-size M ...] [--field-spacing 4] [--walks SE,drive]
+    walkstream bench clusters DB [DB ...] [--min-objects 12] [--max-cells 64] [--plot clusters.png] [--json]
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
     walkstream bench portals [--presets paper paper10] [--frames N] [--truth N] [--no-gl] [--out DIR] [--json]
 
@@ -333,6 +334,45 @@ def cmd_bench_fill(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_clusters(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench clusters``."""
+    from walkstream.benchmarks.clusters import (
+        format_clusters_table,
+        plot_clusters,
+        run_clusters_bench,
+    )
+    from walkstream.server.bake.pvsclusters import ClusterSettings
+
+    if args.min_objects < 1 or args.max_cells < 2:
+        raise WalkstreamError("--min-objects must be at least 1 and --max-cells at least 2")
+    rows = run_clusters_bench(
+        [Path(d) for d in args.db], ClusterSettings(min_objects=args.min_objects, max_cells=args.max_cells)
+    )
+    if args.json:
+        print(json.dumps(rows))
+    else:
+        print(format_clusters_table(rows))
+        print("(bytes from the real encoders: msgpack records as the service sends them; walks sampled every "
+              "0.25 s, each cell and cluster fetched once; gzip: as the cells batch sends it, level 6; clusters "
+              "ride in the batch of the first cell naming them)")
+    if args.plot:
+        print(f"plot: {plot_clusters(rows, Path(args.plot))}")
+    return 0
+
+
+def _add_clusters(besub: Any) -> None:
+    p = besub.add_parser(
+        "clusters",
+        help="visibility lists clustered along the cell adjacency (m-LOMA) against delta-coded records: bytes of records and walks",
+    )
+    p.add_argument("db", nargs="+", help="scene databases (city scenes: cells with a PVS)")
+    p.add_argument("--min-objects", type=int, default=12, help="smallest shared set made a cluster (default 12)")
+    p.add_argument("--max-cells", type=int, default=64, help="most cells one growth adds (default 64)")
+    p.add_argument("--plot", help="bar plot of clustered / delta-coded bytes per scene (PNG)")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.set_defaults(func=cmd_bench_clusters)
+
+
 def _add_fill(besub: Any) -> None:
     p = besub.add_parser(
         "fill",
@@ -632,6 +672,7 @@ def add_bench_parser(sub: Any) -> None:
 
     _add_lod(besub)
     _add_fill(besub)
+    _add_clusters(besub)
 
     b = besub.add_parser("sections", help="the section-size trade: street cells against sections for every --redundancy and --min-size (bake, replay)")
     b.add_argument("source", nargs="?", help="city source (default: the default 700 m city, generated in --out)")

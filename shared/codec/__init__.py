@@ -19,7 +19,8 @@ The modules: :mod:`.bounded` (bounded unpacking), :mod:`.varint`, :mod:`.ints` (
 sequences in the smallest of four encodings), :mod:`.params` (buildings and streets),
 :mod:`.pvs` (PVS, ids, polygons), :mod:`.mesh` (meshes), :mod:`.cellmesh` (the quantised
 contents of an interior cell, with its error bound), :mod:`.cellbatch` (many cells'
-contents in one answer).
+contents in one answer), :mod:`.pvsclusters` (visibility-list clusters and a cell's list
+expanded from them, measured by ``walkstream bench clusters``).
 """
 
 from walkstream.shared.codec.bounded import inflate_tagged, unpack_bounded
