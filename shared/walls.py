@@ -50,6 +50,7 @@ __all__ = [
     "WallSide",
     "WallView",
     "angular_error",
+    "decode_walls",
     "wall_distance",
     "zone_count",
 ]
@@ -212,3 +213,23 @@ class WallSide:
             raise InputError(f"{what}: bad wall row (zones {zones}, {len(tex)} textures)")
         return cls(int(nums[0]), int(nums[1]), (nums[2], nums[3]), (nums[4], nums[5]), nums[6], nums[7], nums[8],
                    nums[9], nums[10], nums[11], nums[12], zones, tex)
+
+
+def decode_walls(body: bytes, what: str) -> tuple[WallSide, ...]:
+    """The wall sides of ``GET .../walls`` (msgpack ``{"sides": [row, ...]}``), bounded and
+    checked (:class:`~walkstream.shared.errors.CodecError` naming ``what``)."""
+    from walkstream.shared.codec.bounded import unpack_bounded
+    from walkstream.shared.errors import CodecError
+
+    obj = unpack_bounded(body, what, max_bytes=16 << 20, max_array_len=1 << 20, max_map_len=4, max_bin_len=0)
+    if not isinstance(obj, dict) or not isinstance(obj.get("sides"), list):
+        raise CodecError(f"{what}: expected a map with a list 'sides'")
+    out = []
+    for k, row in enumerate(obj["sides"]):
+        if not isinstance(row, list):
+            raise CodecError(f"{what}: sides[{k}] is not a list")
+        try:
+            out.append(WallSide.from_row(row, f"{what}: sides[{k}]"))
+        except InputError as exc:
+            raise CodecError(str(exc)) from None
+    return tuple(out)

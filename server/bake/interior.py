@@ -31,9 +31,9 @@ from walkstream.server.bake.plan import BakePlan, RoomCells
 from walkstream.server.bake.roomcontents import REACH, Part, contents_task, outside_mask, weld
 from walkstream.server.bake.roomnav import RoomGraph
 from walkstream.server.bake.rooms import RoomLayout, room_layout
-from walkstream.server.bake.wallplan import WallSettings, plan_walls
 from walkstream.server.bake.roomwalks import TOUR_NAME, entrance_cell, tour
 from walkstream.server.bake.scenenav import SceneGraph
+from walkstream.server.bake.wallplan import WallSettings, plan_walls
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.store import (
     CellRow,

@@ -22,7 +22,6 @@ from walkstream.server.bake.digest import file_digest
 from walkstream.server.bake.driver import drive
 from walkstream.server.bake.impostorsettings import ImpostorSettings
 from walkstream.server.bake.interior import interior_plan
-from walkstream.server.bake.wallplan import WallSettings
 from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.objectrows import object_rows
 from walkstream.server.bake.plan import BakePlan, ImpostorCells, PvsCells, Say, Walk, settings_key
@@ -30,6 +29,7 @@ from walkstream.server.bake.scenenav import SceneGraph
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
+from walkstream.server.bake.wallplan import WallSettings
 from walkstream.server.sources.clip import clip_scene, local_bbox
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source

@@ -26,7 +26,13 @@ from walkstream.server.bake.wallplan import WallJob, texture_height
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.codec.image import encode_image
-from walkstream.shared.gl import Framebuffer, Releasable, check_gl_error, create_context, release_objects
+from walkstream.shared.gl import (
+    Framebuffer,
+    Releasable,
+    check_gl_error,
+    create_context,
+    release_objects,
+)
 from walkstream.shared.lighting import AMBIENT, LIGHT_DIRECTION
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.walls import WallSide
