@@ -18,8 +18,8 @@ import httpx
 import msgpack
 import numpy as np
 import pytest
-
 from openhall import open_hall
+
 from walkstream.server.bake import bake
 from walkstream.server.bake.rooms import room_layout
 from walkstream.server.bake.wallplan import WallSettings, plan_walls
