@@ -218,6 +218,9 @@ class RoomStreamer:
         self.cache = cache
         self.config = config
         self.fog_m: float = config.fog_m
+        self.closed: frozenset[int] = frozenset()
+        """Virtual walls (portal ids) the portal walk stops at this frame: drawn as their
+        texture (:mod:`walkstream.client.walk.walls`); empty without walls."""
         """The fog distance in force this frame: portals farther are not looked through.
         The frame loop's lever (the budget tightens it); ``config.fog_m`` is the default."""
         self.topology = topology
@@ -282,7 +285,8 @@ class RoomStreamer:
     ) -> tuple[PortalCull | None, list[int]]:
         cfg = self.config
         if cfg.culling == "portals" and view is not None and proj is not None and size is not None:
-            pc = cull_portals(self.graph, cell, eye, view, proj, size, fog_m=self.fog_m, max_depth=cfg.max_depth)
+            pc = cull_portals(self.graph, cell, eye, view, proj, size, fog_m=self.fog_m, max_depth=cfg.max_depth,
+                              closed=self.closed)
             return pc, pc.order
         return None, frustum_cells(self.graph, cell, eye, view_proj, fog_m=self.fog_m, max_depth=cfg.max_depth)
 

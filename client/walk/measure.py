@@ -54,6 +54,10 @@ def measure(w: WalkState, f: Frame) -> None:
         fr.objects_visible.append(len(o.pvs))
         fr.fog_m.append(f.fog)
         fr.budget.append(f.budget)
+    if w.scene.wall_images is not None:
+        fr.walls.append(len(f.walls))
+        fr.walls_closed.append(sum(1 for d in f.walls if d.alpha >= 1.0))
+        fr.wall_bytes.append(sum({d.image: d.nbytes for d in f.walls}.values()))
     if w.scene.images is not None:
         fr.impostors.append(len(f.impostors))
         fr.texture_bytes.append(sum({d.image: d.nbytes for d in f.impostors}.values()))
