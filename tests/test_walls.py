@@ -344,3 +344,60 @@ def test_a_scene_without_walls_serves_as_before_and_404s_walls(http: Http) -> No
                  http.post("/v1/scenes/plain/walls/textures", json={"ids": [0]})):
         assert resp.status_code == 404
         assert "without --virtual-walls" in resp.json()["error"]
+
+
+# ------------------------------------------------------------------ the client
+
+
+@pytest.fixture(scope="module")
+def walked(baked: tuple[Path, dict], tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The hall with walls and a walk across it, from one end to the other and back along the far side."""
+    import shutil
+
+    from walkstream.server.paths.record import record_walk
+
+    db = tmp_path_factory.mktemp("walked") / "walls.db"
+    shutil.copy(baked[0], db)
+    record_walk(db, "cross", (-10.0, -6.0, EYE_HEIGHT), (-10.0, 6.0, EYE_HEIGHT),
+                via=[(10.0, -6.0, EYE_HEIGHT), (10.0, 6.0, EYE_HEIGHT)])
+    return db
+
+
+def _replay(db: Path, **kw: object) -> object:
+    from walkstream.client.config import ReplayConfig
+    from walkstream.client.net.link import LinkProfile
+    from walkstream.client.replay import run_replay
+
+    app = create_app([db])
+    try:
+        cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="pda", path="cross", duration_s=14.0,
+                           fog_budget=False, **kw)  # type: ignore[arg-type]
+        return run_replay(httpx.ASGITransport(app=app), "http://walkstream.test", cfg)
+    finally:
+        app.state.scenes.close()
+
+
+@pytest.mark.gl
+def test_a_replay_draws_walls_and_culls_what_is_behind_them(walked: Path) -> None:
+    on, off = _replay(walked), _replay(walked, virtual_walls=False)
+    s, g = on.summary, off.summary  # type: ignore[attr-defined]
+    w = s["walls"]
+    assert w["wall_sides"] == 14 and w["textures_received"] > 0 and w["texture_bytes"] > 0
+    assert w["walls_closed_mean"] > 0 and w["frames_with_walls"] > 0.5
+    assert "walls" not in g  # --no-walls: no texture asked for, every portal open
+    assert s["visible_cells_mean"] < g["visible_cells_mean"]
+    assert s["triangles_mean"] < g["triangles_mean"]
+    # the textures share the link with the contents: a few frames at the start wait (see docs/benchmarks.md)
+    assert s["perfect_frame_ratio"] >= 0.95 and s["bytes_received"] > g["bytes_received"]
+
+
+@pytest.mark.gl
+def test_a_wall_whose_texture_has_not_arrived_is_geometry_never_a_hole(walked: Path) -> None:
+    on, off = _replay(walked), _replay(walked, virtual_walls=False)
+    a, b = on.interior, off.interior  # type: ignore[attr-defined]
+    assert a is not None and b is not None
+    # the first frame: no texture is in yet (one round trip at 56 kbit/s), so no wall is
+    # closed and the walk sees the cells behind them as geometry, as without walls
+    assert a["cells"][0] == b["cells"][0] and a["triangles"][0] == b["triangles"][0]
+    # later, with textures in, fewer cells
+    assert a["cells"].mean() < b["cells"].mean()

@@ -29,7 +29,7 @@ from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
 from walkstream.shared.errors import ApiError, InputError, StreamCut
 
-__all__ = ["IMAGE_LEAD_S", "ImpostorImages"]
+__all__ = ["IMAGE_LEAD_S", "WALL_LAG_S", "ImpostorImages"]
 
 IMAGE_LEAD_S = -1.0
 """An image's need, seconds from now, as offered: before anything the streamers need now."""
@@ -42,6 +42,12 @@ MAX_REQUESTS = 2
 
 _FETCH = {"impostor": "impostors", "walltex": "wall_textures"}
 """Content kind -> the API client's batch call (and the request's name on the scheduler)."""
+
+WALL_LAG_S = 0.5
+"""A wall texture's need, seconds from now, as offered: after the contents due now (a
+wall without its texture is drawn as geometry, a cell without its contents is a hole)."""
+
+_LEAD = {"impostor": IMAGE_LEAD_S, "walltex": WALL_LAG_S}
 
 IMAGE_BYTES = 12_000.0
 """An image's bytes on the wire before one has arrived (the scheduler's cover counts them)."""
@@ -84,11 +90,11 @@ class ImpostorImages:
 
     def held(self, image: int) -> bool:
         """Whether ``image`` is in the cache."""
-        return self.cache.has(self.kind, image)  # type: ignore[arg-type]
+        return self.cache.has(self.kind, image)
 
     def image(self, image: int) -> object | None:
         """The decoded image (premultiplied RGBA), or None when it is not held."""
-        return self.cache.peek(self.kind, image) if self.held(image) else None  # type: ignore[arg-type]
+        return self.cache.peek(self.kind, image) if self.held(image) else None
 
     def want(self, images: Mapping[int, float]) -> None:
         """The images wanted now (image id -> need, seconds from now); those held are dropped."""
@@ -119,7 +125,7 @@ class ImpostorImages:
         if not todo:
             return None
         ids = [i for _, i in todo[:MAX_BATCH]]
-        return Offer(min(todo[0][0], 0.0) + IMAGE_LEAD_S, lambda: self._start(ids))
+        return Offer(min(todo[0][0], 0.0) + _LEAD[self.kind], lambda: self._start(ids))
 
     def in_flight(self) -> int:
         """This lane's requests on the link."""
@@ -138,7 +144,7 @@ class ImpostorImages:
         try:
             async for iid, rgba, nbytes in getattr(self.api, _FETCH[self.kind])(f.ids):
                 f.left.discard(iid)
-                self.cache.put(self.kind, iid, rgba, max(int(rgba.nbytes), 1))  # type: ignore[arg-type]
+                self.cache.put(self.kind, iid, rgba, max(int(rgba.nbytes), 1))
                 self.received += 1
                 self.bytes_received += int(nbytes)
                 self._image_bytes = 0.8 * self._image_bytes + 0.2 * max(int(nbytes), 1)

@@ -31,6 +31,7 @@ every side's row with its texture ids.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -165,9 +166,7 @@ def plan_walls(scene: InteriorScene, layout: RoomLayout, settings: WallSettings)
             ids = tuple(range(len(jobs), len(jobs) + zones))
             row = tuple(ws.to_row())
             jobs += [(tid, row, k, width, crossing[p.id]) for k, tid in enumerate(ids)]
-            sides.append(WallSide(*[getattr(ws, f) for f in (
-                "portal", "side", "p0", "p1", "z0", "z1", "floor", "x_t", "blend", "depth", "alpha", "zones")],
-                textures=ids))
+            sides.append(dataclasses.replace(ws, textures=ids))
     return WallPlan(sides, jobs, crossing)
 
 
