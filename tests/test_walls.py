@@ -379,7 +379,7 @@ def _replay(db: Path, **kw: object) -> object:
 
 @pytest.mark.gl
 def test_a_replay_draws_walls_and_culls_what_is_behind_them(walked: Path) -> None:
-    on, off = _replay(walked), _replay(walked, virtual_walls=False)
+    on, off = _replay(walked, truth_every=120), _replay(walked, virtual_walls=False)
     s, g = on.summary, off.summary  # type: ignore[attr-defined]
     w = s["walls"]
     assert w["wall_sides"] == 14 and w["textures_received"] > 0 and w["texture_bytes"] > 0
@@ -389,6 +389,9 @@ def test_a_replay_draws_walls_and_culls_what_is_behind_them(walked: Path) -> Non
     assert s["triangles_mean"] < g["triangles_mean"]
     # the textures share the link with the contents: a few frames at the start wait (see docs/benchmarks.md)
     assert s["perfect_frame_ratio"] >= 0.95 and s["bytes_received"] > g["bytes_received"]
+    # the truth: what lies behind a closed wall shows on its texture, not as a culled pixel
+    t = s["truth"]
+    assert t["frames"] >= 2 and t["culled_pixels"] == 0 and t["wall_pixels"] > 0
 
 
 @pytest.mark.gl

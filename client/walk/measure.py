@@ -102,7 +102,8 @@ def note_truth(w: WalkState, f: Frame) -> None:
             geoms=w.objects.geoms, lods=f.lods, impostors=_quads(w, f),
         )
     elif city is None:  # rooms only: at the fog the frame was drawn at (the budget's lever)
-        rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(f.fog))
+        rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(f.fog),
+                   walls=[d.corners for d in f.walls if d.alpha >= 1.0])
     else:
         # outdoors before the street cell's record: no visible set known, nothing culled
         unknown = not w.indoors and (f.street is None or f.street not in city.cells)
