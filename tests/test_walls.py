@@ -404,3 +404,22 @@ def test_a_wall_whose_texture_has_not_arrived_is_geometry_never_a_hole(walked: P
     assert a["cells"][0] == b["cells"][0] and a["triangles"][0] == b["triangles"][0]
     # later, with textures in, fewer cells
     assert a["cells"].mean() < b["cells"].mean()
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--virtual-walls", "--wall-error", "0"], "--wall-error"),
+        (["--virtual-walls", "--wall-pitch", "1"], "--wall-pitch"),
+        (["--wall-error", "10"], "give --virtual-walls too"),
+    ],
+)
+def test_bad_wall_flags_are_one_clear_line(
+    flags: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from walkstream.cli import main
+
+    assert main(["bake", str(tmp_path / "h.json"), "-o", str(tmp_path / "x.db"), *flags]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("walkstream: error:") and message in err and "Traceback" not in err
+    assert not (tmp_path / "x.db").exists()
