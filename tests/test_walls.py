@@ -229,6 +229,8 @@ def test_an_object_crossing_a_wall_is_whole_geometry_and_not_on_the_texture(
         ren.release()
     assert np.array_equal(stored, without)
     assert np.abs(with_it.astype(int) - without.astype(int)).max() > 40  # the shelf would show
+    # where the shelf is, the texture is a transparent hole: its geometry shows through the quad
+    assert (without[..., 3] == 0).sum() > 20 and with_it[..., 3].min() == 255
 
 
 def _centre(e: object) -> tuple[float, float]:

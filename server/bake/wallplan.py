@@ -18,8 +18,10 @@ its two sides:
   front of the wall (between ``x_T`` and the cell's far side) at eye height.
 - **What stays geometry.**  An object (any element but the building's shell: walls,
   slabs, roofs, coverings) that crosses a wall's plane within the wall is never on
-  that wall's textures (the paper's rule: part of it is in front of the wall), and
-  the cells on both sides hold it whole instead of clipped at the wall
+  that wall's textures (the paper's rule: part of it is in front of the wall; the
+  texture has a transparent hole where it stands, so its geometry behind the wall's
+  plane shows through the quad), and the cells on both sides hold it whole instead
+  of clipped at the wall
   (:func:`whole_crossing`), so it is drawn as geometry from either side.  The
   shell is clipped at the wall like any cell boundary: the floor and ceiling behind
   a wall are on its texture.

@@ -7,7 +7,10 @@ project) and renders a wall side's zone with an **off-axis perspective** whose
 near plane is the wall itself (:func:`off_axis`): the frustum from the sampling
 point through the wall's rectangle, so what is in front of the wall is clipped and
 the image lands on the wall's quad exactly as the sampling point sees it.  Elements
-crossing the wall are left out (they stay geometry).  Samples are averaged
+crossing the wall are not on the texture: they are drawn as transparent holes (depth
+written, colour and alpha 0), so the client's quad, drawn over the geometry at the
+wall's depth, lets the object's geometry behind the wall's plane show through instead
+of covering it (the paper's treatment of the geometry that stays geometry).  Samples are averaged
 (:data:`SUPERSAMPLE`) into premultiplied RGBA over transparent black
 (:mod:`walkstream.shared.codec.image`).
 
@@ -62,10 +65,12 @@ void main() {
 
 _FRAGMENT_SHADER = """
 #version 330
+uniform float u_hole;
 in vec3 v_lit;
 out vec4 f_color;
 void main() {
-    f_color = vec4(v_lit, 1.0);
+    // an object crossing the wall: a transparent hole, so its geometry shows through the quad
+    f_color = u_hole > 0.5 ? vec4(0.0) : vec4(v_lit, 1.0);
 }
 """
 
@@ -134,7 +139,7 @@ class WallRenderer(Releasable):
 
     def render(self, side: WallSide, zone: int, width: int, exclude: Sequence[int] = ()) -> NDArray[np.uint8]:
         """The premultiplied ``(height, width, 4) uint8`` texture of ``side``'s zone ``zone``
-        (row 0 at the top), leaving out the elements ``exclude``."""
+        (row 0 at the top), the elements ``exclude`` as transparent holes."""
         height = texture_height(side, width)
         size = (width * SUPERSAMPLE, height * SUPERSAMPLE)
         fb = self._fbs.get(size)
@@ -146,6 +151,7 @@ class WallRenderer(Releasable):
         self.ctx.disable(self.ctx.CULL_FACE)
         self.prog["u_view_proj"].write(mat4_bytes(off_axis(side.sample_point(zone), side)))
         skip = set(int(e) for e in exclude)
+        self.prog["u_hole"].value = 0.0
         run_first = run_count = 0
         for eid, first, count in self._range:
             if eid in skip:
@@ -158,6 +164,11 @@ class WallRenderer(Releasable):
             run_count += count
         if run_count:
             self.vao.render(vertices=run_count, first=run_first)
+        if skip:  # the crossing objects: holes in the texture
+            self.prog["u_hole"].value = 1.0
+            for eid, first, count in self._range:
+                if eid in skip:
+                    self.vao.render(vertices=count, first=first)
         check_gl_error(self.ctx, "wall textures")
         img = fb.read().astype(np.uint16)
         n = SUPERSAMPLE * SUPERSAMPLE
