@@ -49,8 +49,10 @@ def upload(w: WalkState, f: Frame) -> None:
     f.keys = keys
     lane, walls = w.scene.images, w.scene.wall_images
     if hasattr(r, "impostors") and (lane is not None or walls is not None):  # over the meshes: the quads
+        # a wall texture's key is its id turned negative: impostor images and wall
+        # textures share the quad renderer's textures without colliding
         r.impostors = ([] if lane is None else quads_of(f.impostors, lane.image)) + (
-            [] if walls is None else quads_of(f.walls, walls.image))
+            [] if walls is None else [(c, -1 - i, rgba, a) for c, i, rgba, a in quads_of(f.walls, walls.image)])
 
 
 def draw(w: WalkState, f: Frame) -> None:
