@@ -379,9 +379,15 @@ def _replay(db: Path, **kw: object) -> object:
         app.state.scenes.close()
 
 
+@pytest.fixture(scope="module")
+def replays(walked: Path) -> tuple[object, object]:
+    """The walk with walls (the truth on a few frames) and with ``virtual_walls`` off."""
+    return _replay(walked, truth_every=120), _replay(walked, virtual_walls=False)
+
+
 @pytest.mark.gl
-def test_a_replay_draws_walls_and_culls_what_is_behind_them(walked: Path) -> None:
-    on, off = _replay(walked, truth_every=120), _replay(walked, virtual_walls=False)
+def test_a_replay_draws_walls_and_culls_what_is_behind_them(replays: tuple[object, object]) -> None:
+    on, off = replays
     s, g = on.summary, off.summary  # type: ignore[attr-defined]
     w = s["walls"]
     assert w["wall_sides"] == 14 and w["textures_received"] > 0 and w["texture_bytes"] > 0
@@ -397,8 +403,8 @@ def test_a_replay_draws_walls_and_culls_what_is_behind_them(walked: Path) -> Non
 
 
 @pytest.mark.gl
-def test_a_wall_whose_texture_has_not_arrived_is_geometry_never_a_hole(walked: Path) -> None:
-    on, off = _replay(walked), _replay(walked, virtual_walls=False)
+def test_a_wall_whose_texture_has_not_arrived_is_geometry_never_a_hole(replays: tuple[object, object]) -> None:
+    on, off = replays
     a, b = on.interior, off.interior  # type: ignore[attr-defined]
     assert a is not None and b is not None
     # the first frame: no texture is in yet (one round trip at 56 kbit/s), so no wall is
