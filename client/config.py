@@ -86,6 +86,9 @@ class ReplayConfig:
     impostors: bool = True
     """Draw the far buildings a scene baked with ``--impostors`` lists as their images
     (False: geometry only, as a scene without impostors; :mod:`walkstream.client.walk.impostors`)."""
+    virtual_walls: bool = True
+    """Draw the virtual walls of an interior baked with ``--virtual-walls`` as their textures
+    (False: every portal open, as a scene without walls; :mod:`walkstream.client.walk.walls`)."""
     texture_budget_bytes: int = 8 << 20
     """Bytes of impostor textures a frame may draw (the farthest dropped first)."""
 

@@ -119,6 +119,23 @@ def run_replay(
     return asyncio.run(_real(transport, base_url, config, progress, truth_progress))
 
 
+async def _virtual_walls(scene: WalkScene, api: SceneClient, topology: Any, rooms: RoomStreamer) -> None:
+    """An interior's textured virtual walls, when it was baked with them: the wall sides
+    (one request, before the walk), the wall portals' cells and the textures' lane on the
+    rooms' scheduler.  A scene without walls leaves the scene as it was (one 404 more,
+    only when the topology lists a ``wall`` portal, so older scenes ask nothing)."""
+    cells = {int(p[0]): (int(p[2]), int(p[3])) for p in topology.portals if p[1] == "wall"}
+    if not cells:
+        return
+    try:
+        sides = await api.walls()
+    except ApiError:
+        return
+    scene.walls = tuple(s for s in sides if s.portal in cells)
+    scene.wall_cells = cells
+    scene.wall_images = ImpostorImages(api, scene.cache, rooms.scheduler, kind="walltex")
+
+
 async def _real(
     transport: httpx.AsyncBaseTransport,
     base_url: str,
@@ -241,6 +258,8 @@ async def replay(
                               unknown_quality=1.0 if kind == "crossing" else 0.0)
             if streamer is not None and config.impostors:
                 scene.images = ImpostorImages(api, cache, streamer.scheduler)
+            if kind == "interior" and rooms is not None and topology is not None and config.virtual_walls:
+                await _virtual_walls(scene, api, topology, rooms)
             proj = walk_projection(config, scene)
             near = VIEW_NEAR_M if rooms is not None else STREET_NEAR_M  # the projection's near plane
             # the truth draws as far as the streets reach, or the rooms beyond any fog
@@ -280,6 +299,8 @@ async def replay(
             # the streamers stopped (nothing more goes down the link) before the truth
             if scene.images is not None:
                 await scene.images.close()
+            if scene.wall_images is not None:
+                await scene.wall_images.close()
             await _close(streamer, rooms)
             streamer_closed = True
             truth = await compare_truth(
@@ -322,6 +343,15 @@ async def replay(
         assert rooms is not None and topology is not None
         summary.update(link_figures(config, stats, api))
         summary.update(interior_summary(config, log, rooms, frames, topology, cache, setup_s, path, manifest))
+        walls = scene.wall_images
+        if walls is not None:  # only then: a scene without walls keeps its summary
+            summary["walls"] = {
+                **frames.wall_figures(),
+                "wall_sides": len(scene.walls),
+                "textures_received": walls.received,
+                "texture_bytes": walls.bytes_received,
+                "texture_requests": walls.requests,
+            }
     else:
         assert streamer is not None
         summary.update(city_summary(config, log, streamer, cache, stats, api, bytes_log, t_end - t_start,

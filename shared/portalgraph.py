@@ -124,7 +124,7 @@ class PortalGraph:
 #: Portal kinds with no wall about them (the boundary between two parts of one space,
 #: a virtual space boundary): the whole face the two cells share is open, whatever
 #: polygon the source gave (IFC virtual boundaries are often narrower than it).
-OPEN_KINDS = frozenset({"opening", "virtual", "split", "void"})
+OPEN_KINDS = frozenset({"opening", "virtual", "split", "void", "wall"})
 
 
 def _owners(cells: list[Any], index: dict[int, int]) -> list[Any]:

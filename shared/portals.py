@@ -135,6 +135,7 @@ def cull_portals(
     pass_m: float = 0.05,
     max_vsas: int = 4,
     naive: bool = False,
+    closed: frozenset[int] = frozenset(),
 ) -> PortalCull:
     """Cells seen from cell ``start`` through portals, with their VSAs (module docstring).
 
@@ -159,6 +160,9 @@ def cull_portals(
         VSAs kept per cell before they are merged into one.
     naive : bool
         The paper's test (no clipping, no pass-through); for the tests only.
+    closed : frozenset of int
+        Portal ids the walk does not pass (virtual walls drawn as their texture:
+        :mod:`walkstream.shared.walls`).
     """
     t0 = time.perf_counter()
     if start not in graph.index:
@@ -173,7 +177,7 @@ def cull_portals(
     # whole-pixel rectangles as plain ints.  The walk is the round-one FIFO walk
     # (benchmarks/portalwalk.py) step for step, so its cells, VSAs and depths are the
     # same; only the constant work per portal is less.
-    rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive)
+    rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed)
     s = graph.index[start]
     full = (0, 0, w - 1, h - 1)
     # per cell index (lists, not dicts: indexing is the walk's most frequent step)
@@ -293,6 +297,7 @@ def _portal_rows(
     pass_m: float,
     fog_m: float,
     naive: bool,
+    closed: frozenset[int] = frozenset(),
 ) -> Callable[[int], Iterable[tuple[int, Any]]]:
     """A function giving, for a cell index, its directed portals as ``(target index, what)``
     pairs: ``what`` is ``None`` (culled: beyond the fog or wholly behind the clip plane),
@@ -314,6 +319,8 @@ def _portal_rows(
             what[near[inside]] = 1
     if math.isfinite(fog_m):
         what[box_distance(graph.lo, graph.hi, e) > fog_m] = 0
+    if closed:
+        what[np.isin(graph.portal, np.fromiter(closed, np.int64, len(closed)))] = 0
     if m <= _LIST_ALL:
         table: list[Any] = rect.tolist()
         for i in np.flatnonzero(what == 0).tolist():

@@ -81,10 +81,10 @@ def test_the_service_and_the_wire_take_exactly_the_registered_forms() -> None:
 
 
 def test_the_cache_takes_exactly_the_registered_kinds() -> None:
-    assert CONTENTS == cache_kinds() == ("params", "mesh", "cellmesh", "impostor")
+    assert CONTENTS == cache_kinds() == ("params", "mesh", "cellmesh", "impostor", "walltex")
     assert get_args(Kind) == KINDS == ("index", "cell", *CONTENTS, "geom")
     # the eviction order of the kinds there were before cell meshes is unchanged
-    assert [k for k in EVICTION_ORDER if k not in ("cellmesh", "impostor")] == ["geom", "params", "mesh", "cell", "index"]
+    assert [k for k in EVICTION_ORDER if k not in ("cellmesh", "impostor", "walltex")] == ["geom", "params", "mesh", "cell", "index"]
     with pytest.raises(InputError, match="cache kind"):
         Cache(100).put("image", 1, b"", 1)
     assert set(CLIENT_CONTENT) == {k.name for k in CONTENT_KINDS}

@@ -702,9 +702,10 @@ def test_schemathesis_finds_no_answer_outside_the_schema(city: CityDb) -> None:
     report = run_fuzz([city.path], examples=25)
     assert len(CHECKS) == 7
     operations = {r.operation for r in report.rows}
-    assert len(operations) == 22  # and the interiors' topology, topology/packed, topology/compact,
+    assert len(operations) == 25  # and the interiors' topology, topology/packed, topology/compact,
     # rooms/{cell}, rooms/{cell}/contents, POST rooms/contents (a batch), a crossing's entrances;
-    # impostors/{image} and POST impostors (this scene has none: their 404s)
+    # impostors/{image} and POST impostors, walls, walls/textures/{texture} and POST
+    # walls/textures (this scene has none: their 404s)
     assert {r.mode for r in report.rows} == {"positive", "negative"}
     assert not report.total(), format_table(report)
 

@@ -126,6 +126,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         frame_times=_frame_times(args.frame_times) if args.frame_times else None,
         batched_draws=not args.per_object_draws,
         impostors=not args.no_impostors,
+        virtual_walls=not args.no_walls,
     )
 
 
@@ -307,6 +308,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
     r.add_argument("--frame-times", metavar="REPORT", help="a recorded frame schedule: take each frame's time from an earlier report's frames.csv (its folder or the file) instead of measuring it, so that a gl replay, and the frames --truth-every compares, repeat exactly")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")
+    r.add_argument("--no-walls", action="store_true", help="open every virtual wall on an interior baked with --virtual-walls (geometry only, no texture asked for)")
     r.add_argument("--no-impostors", action="store_true", help="draw geometry only on a scene baked with --impostors (no image asked for)")
     r.add_argument("--per-object-draws", action="store_true", help="gl device: one draw call per object instead of one multi-draw call per frame (the older path, for comparison)")
 

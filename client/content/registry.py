@@ -11,6 +11,7 @@ from walkstream.client.content.base import ClientContent
 from walkstream.client.content.cellmesh import CELLMESH_CONTENT
 from walkstream.client.content.impostor import IMPOSTOR_CONTENT
 from walkstream.client.content.objects import MESH_CONTENT, PARAMS_CONTENT
+from walkstream.client.content.walltex import WALLTEX_CONTENT
 from walkstream.shared.content.registry import by_form
 from walkstream.shared.errors import InputError
 
@@ -23,6 +24,7 @@ CLIENT_CONTENT: dict[str, ClientContent] = {
         MESH_CONTENT,
         CELLMESH_CONTENT,
         IMPOSTOR_CONTENT,
+        WALLTEX_CONTENT,
     )
 }
 """Content kind name -> its client side."""

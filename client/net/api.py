@@ -35,6 +35,7 @@ from walkstream.shared.codec.cellbatch import check_contents_part
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.content.impostor import KIND as IMPOSTOR
+from walkstream.shared.content.walltex import KIND as WALLTEX
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_any
 from walkstream.shared.paths import RecordedPath
@@ -49,6 +50,7 @@ from walkstream.shared.roomwire import (
     decode_topology,
     decode_topology_packed,
 )
+from walkstream.shared.walls import WallSide, decode_walls
 from walkstream.shared.wire import (
     MSGPACK,
     CellIndex,
@@ -343,6 +345,43 @@ class SceneClient:
         what = f"scene {self.scene!r} entrances"
         _, got = await self._get_decoded(self._url("/entrances"), what, lambda r: decode_entrances(r.content, what))
         return got
+
+    async def walls(self) -> tuple[WallSide, ...]:
+        """An interior's textured virtual walls (``GET .../walls``); a scene baked without
+        them answers 404 (:class:`~walkstream.shared.errors.ApiError`)."""
+        what = f"scene {self.scene!r} walls"
+        _, got = await self._get_decoded(self._url("/walls"), what, lambda r: decode_walls(r.content, what))
+        return got
+
+    async def wall_textures(self, ids: Sequence[int]) -> AsyncIterator[tuple[int, Any, int]]:
+        """Wall textures ``ids`` in one request (``POST .../walls/textures``), each yielded as
+        ``(texture id, premultiplied RGBA array, bytes on the wire)`` in the order asked.
+
+        Raises
+        ------
+        StreamCut
+            As :meth:`objects`; ``received`` counts the textures yielded.
+        ApiError
+            4xx: the server refuses the request (a scene baked without walls: 404).
+        """
+        ids = [int(i) for i in ids]
+        what = f"wall textures batch ({len(ids)} textures)"
+        got = 0
+
+        def check(obj: Any, nbytes: int) -> tuple[int, Any, int]:
+            if got >= len(ids):
+                raise CodecError("more textures than asked")
+            tid, _etag, body = check_contents_part(obj, f"{what}: part {got}")
+            if tid != ids[got]:
+                raise CodecError(f"{what}: texture {tid} where {ids[got]} was asked")
+            return tid, WALLTEX.decode(body, f"wall texture {tid}"), nbytes
+
+        async for part in self._stream("POST", self._url("/walls/textures"), what, {"ids": ids}, check):
+            got += 1
+            yield part
+        if got < len(ids):
+            self.stats.cut_streams += 1
+            raise StreamCut(f"{what}: ended after {got} of {len(ids)} textures", got)
 
     async def room(self, cid: int) -> RoomRecord:
         """Interior cell ``cid``'s record."""

@@ -34,10 +34,10 @@ from walkstream.shared.errors import InputError
 
 __all__ = ["Kind", "CONTENTS", "KINDS", "CITY_KINDS", "EVICTION_ORDER", "METADATA", "Key", "Cache"]
 
-Kind = Literal["index", "cell", "params", "mesh", "cellmesh", "impostor", "geom"]
+Kind = Literal["index", "cell", "params", "mesh", "cellmesh", "impostor", "walltex", "geom"]
 """What a :class:`Cache` entry is: an index tile, a cell record, the contents of one
 content kind (object parameters, a downloaded object mesh, a cell's meshes, an
-impostor image), geometry."""
+impostor image, a wall texture), geometry."""
 
 CONTENTS: tuple[Kind, ...] = cast(tuple[Kind, ...], cache_kinds())
 """The kinds of downloaded contents, one per content kind, in the registry's order."""

@@ -12,6 +12,10 @@ building's image goes out before its parameters, and caches each decoded image
 The lane joins the scheduler only when something is first wanted: a scene without
 impostors never wants an image, so its walks keep one lane and the very same
 requests.
+
+The same lane carries an interior's wall textures (``kind="walltex"``: textured
+virtual walls, :mod:`walkstream.client.walk.walls`), fetched by ``POST
+.../walls/textures`` and cached under ``("walltex", texture id)``: one image stack.
 """
 
 from __future__ import annotations
@@ -23,9 +27,9 @@ from collections.abc import Mapping
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
-from walkstream.shared.errors import ApiError, StreamCut
+from walkstream.shared.errors import ApiError, InputError, StreamCut
 
-__all__ = ["IMAGE_LEAD_S", "ImpostorImages"]
+__all__ = ["IMAGE_LEAD_S", "WALL_LAG_S", "ImpostorImages"]
 
 IMAGE_LEAD_S = -1.0
 """An image's need, seconds from now, as offered: before anything the streamers need now."""
@@ -35,6 +39,15 @@ MAX_BATCH = 16
 
 MAX_REQUESTS = 2
 """This lane's requests on the link at once."""
+
+_FETCH = {"impostor": "impostors", "walltex": "wall_textures"}
+"""Content kind -> the API client's batch call (and the request's name on the scheduler)."""
+
+WALL_LAG_S = 0.5
+"""A wall texture's need, seconds from now, as offered: after the contents due now (a
+wall without its texture is drawn as geometry, a cell without its contents is a hole)."""
+
+_LEAD = {"impostor": IMAGE_LEAD_S, "walltex": WALL_LAG_S}
 
 IMAGE_BYTES = 12_000.0
 """An image's bytes on the wire before one has arrived (the scheduler's cover counts them)."""
@@ -53,7 +66,11 @@ class ImpostorImages:
         The link's request scheduler, joined on the first want.
     """
 
-    def __init__(self, api: SceneClient, cache: Cache, scheduler: RequestScheduler) -> None:
+    def __init__(self, api: SceneClient, cache: Cache, scheduler: RequestScheduler, *, kind: str = "impostor") -> None:
+        if kind not in _FETCH:
+            raise InputError(f"image lane: kind {kind!r:.40}, expected one of {', '.join(_FETCH)}")
+        self.kind = kind
+        """The content kind carried (``impostor`` or ``walltex``): the cache kind and the request."""
         self.api = api
         self.cache = cache
         self.scheduler = scheduler
@@ -73,11 +90,11 @@ class ImpostorImages:
 
     def held(self, image: int) -> bool:
         """Whether ``image`` is in the cache."""
-        return self.cache.has("impostor", image)
+        return self.cache.has(self.kind, image)
 
     def image(self, image: int) -> object | None:
         """The decoded image (premultiplied RGBA), or None when it is not held."""
-        return self.cache.peek("impostor", image) if self.held(image) else None
+        return self.cache.peek(self.kind, image) if self.held(image) else None
 
     def want(self, images: Mapping[int, float]) -> None:
         """The images wanted now (image id -> need, seconds from now); those held are dropped."""
@@ -108,7 +125,7 @@ class ImpostorImages:
         if not todo:
             return None
         ids = [i for _, i in todo[:MAX_BATCH]]
-        return Offer(min(todo[0][0], 0.0) + IMAGE_LEAD_S, lambda: self._start(ids))
+        return Offer(min(todo[0][0], 0.0) + _LEAD[self.kind], lambda: self._start(ids))
 
     def in_flight(self) -> int:
         """This lane's requests on the link."""
@@ -121,13 +138,13 @@ class ImpostorImages:
     def _start(self, ids: list[int]) -> None:
         self._asked.update(ids)
         self.requests += 1
-        self.scheduler.launch(self, "impostors", ids, self._fetch)
+        self.scheduler.launch(self, _FETCH[self.kind], ids, self._fetch)
 
     async def _fetch(self, f: Flight) -> None:
         try:
-            async for iid, rgba, nbytes in self.api.impostors(f.ids):
+            async for iid, rgba, nbytes in getattr(self.api, _FETCH[self.kind])(f.ids):
                 f.left.discard(iid)
-                self.cache.put("impostor", iid, rgba, max(int(rgba.nbytes), 1))
+                self.cache.put(self.kind, iid, rgba, max(int(rgba.nbytes), 1))
                 self.received += 1
                 self.bytes_received += int(nbytes)
                 self._image_bytes = 0.8 * self._image_bytes + 0.2 * max(int(nbytes), 1)

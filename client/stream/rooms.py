@@ -218,6 +218,9 @@ class RoomStreamer:
         self.cache = cache
         self.config = config
         self.fog_m: float = config.fog_m
+        self.closed: frozenset[int] = frozenset()
+        """Virtual walls (portal ids) the portal walk stops at this frame: drawn as their
+        texture (:mod:`walkstream.client.walk.walls`); empty without walls."""
         """The fog distance in force this frame: portals farther are not looked through.
         The frame loop's lever (the budget tightens it); ``config.fog_m`` is the default."""
         self.topology = topology
@@ -267,7 +270,7 @@ class RoomStreamer:
         self.last_cull = None
         if self.current is None:
             return []
-        cull, order = self._cells_from(self.current, eye, view_proj, view, proj, size)
+        cull, order = self._cells_from(self.current, eye, view_proj, view, proj, size, self.closed)
         self.last_cull = cull
         return order
 
@@ -279,10 +282,15 @@ class RoomStreamer:
         view: NDArray[np.float64] | None,
         proj: NDArray[np.float64] | None,
         size: tuple[int, int] | None,
+        closed: frozenset[int] = frozenset(),
     ) -> tuple[PortalCull | None, list[int]]:
+        # ``closed`` (the virtual walls drawn as textures) only for the frame's view: a
+        # predicted pose's cells (the prefetch) are seen through them, so that the cells
+        # behind a wall are in when the viewer comes near enough to open it
         cfg = self.config
         if cfg.culling == "portals" and view is not None and proj is not None and size is not None:
-            pc = cull_portals(self.graph, cell, eye, view, proj, size, fog_m=self.fog_m, max_depth=cfg.max_depth)
+            pc = cull_portals(self.graph, cell, eye, view, proj, size, fog_m=self.fog_m, max_depth=cfg.max_depth,
+                              closed=closed)
             return pc, pc.order
         return None, frustum_cells(self.graph, cell, eye, view_proj, fog_m=self.fog_m, max_depth=cfg.max_depth)
 

@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.render import TruthRenderer, object_key
 from walkstream.client.truth.solid import SolidProbe
+from walkstream.client.truth.standin import wall_stand_in
 
 __all__ = ["TIE_M", "SOLID_NEAR", "CulledRow", "INTERIOR_FIGURES", "CROSSING_FIGURES", "TruthCheck", "check_kept", "kept_keys", "culled_figures"]
 
@@ -169,10 +170,12 @@ def culled_figures(
     (frames with any), the ``pinholes`` apart; ``worst_frame`` (the frame with the most
     culled pixels, or None); ``fog_hidden_pct`` (the share of the pixels the fog hides
     on purpose: shown without fog, not with it); ``tightness_mean`` and
-    ``tightness_p95`` (triangles drawn over truly visible).  ``rows``, when given,
+    ``tightness_p95`` (triangles drawn over truly visible); with virtual walls drawn,
+``wall_pixels``: pixels the truth shows behind a wall drawn as its texture (stood in
+for by the texture, not culled: :func:`~.standin.wall_stand_in`).  ``rows``, when given,
     gets one :class:`CulledRow` per compared or refused frame (the report's plot).
     """
-    culled = frames_culled = pinholes = refused = 0
+    culled = frames_culled = pinholes = refused = walls = 0
     worst: tuple[int, int] = (0, -1)
     fog_share: list[float] = []
     tight: list[float] = []
@@ -189,6 +192,13 @@ def culled_figures(
         drawn, kept = kept_keys(truth, note)
         chk = check_kept(truth, kept, note.eye, note.view, note.fog)
         miss = chk.missed_pixels - chk.pinholes
+        if note.walls and chk.mask is not None and chk.depth is not None and miss > 0:
+            # behind a virtual wall drawn as its texture: stood in for, not culled
+            stood = chk.mask & ~chk.pinhole_mask if chk.pinhole_mask is not None else chk.mask
+            stood = stood & wall_stand_in(note.walls, truth.proj, note.view, truth.size, chk.depth)
+            n = int(np.count_nonzero(stood))
+            miss -= n
+            walls += n
         culled += miss
         frames_culled += miss > 0
         pinholes += chk.pinholes
@@ -215,4 +225,7 @@ def culled_figures(
         "tightness_mean": float(np.mean(tight)) if tight else 0.0,
         "tightness_p95": float(np.percentile(tight, 95)) if tight else 0.0,
     }
-    return {k: out[k] for k in figures}
+    got = {k: out[k] for k in figures}
+    if any(n.walls for n in notes):  # only then: a walk without walls keeps its figures
+        got["wall_pixels"] = int(walls)
+    return got

@@ -52,3 +52,6 @@ class FrameNote:
     impostors: tuple[tuple[int, Any], ...] = ()
     """``(object id, quad)`` of each impostor drawn (:data:`~walkstream.client.draw.quads.Quad`:
     corners, image id, premultiplied RGBA, opacity), in draw order."""
+    walls: tuple[Any, ...] = ()
+    """The ``(4, 3)`` corners of each virtual wall drawn as its texture alone (its portal
+    closed: the cells behind it not drawn)."""

@@ -166,6 +166,7 @@ class TruthRecorder:
         waiting: Iterable[int] = (),
         fog: float = math.inf,
         impostors: Iterable[tuple[int, Any]] = (),
+        walls: Iterable[Any] = (),
     ) -> None:
         """Note one frame (cheap: ids and references to meshes already built).
 
@@ -213,6 +214,7 @@ class TruthRecorder:
                 waiting=tuple(int(c) for c in waiting),
                 fog=float(fog),
                 impostors=tuple((int(i), q) for i, q in impostors),
+                walls=tuple(np.asarray(c, np.float64) for c in walls),
             )
         )
 

@@ -12,6 +12,9 @@ changed, whose error the colour comparison puts under ``impostor``.
 as showing the building the truth shows there when that building was drawn as an
 impostor on the frame, so a building drawn as its image is not missing where its
 image covers it (and is missing, by its cause, where the image does not).
+:func:`wall_stand_in` is the same for the textured virtual walls of an interior: a
+culled pixel behind a wall drawn as its texture shows the texture, not a hole (the
+culled figures count it under ``wall_pixels``).
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.picture import Overlay
 from walkstream.client.truth.render import TruthRenderer
 
-__all__ = ["impostor_overlay", "stand_in_ids"]
+__all__ = ["impostor_overlay", "stand_in_ids", "wall_stand_in"]
 
 
 def impostor_overlay(truth: TruthRenderer, proj: ArrayLike) -> Overlay:
@@ -53,4 +56,39 @@ def stand_in_ids(
     take = painted & np.isin(truth_ids.astype(np.int64), ids)
     out = client_ids.copy()
     out[take] = truth_ids[take]
+    return out
+
+
+def wall_stand_in(
+    walls: Iterable[ArrayLike], proj: ArrayLike, view: ArrayLike, size: tuple[int, int], depth: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """``(h, w)`` the pixels (row 0 at the top) where a virtual wall drawn as its texture
+    stands in for what lies behind it: the pixel's ray meets one of ``walls`` (each
+    ``(4, 3)`` quad corners: bottom-left, bottom-right, top-right, top-left) nearer than
+    the truth's eye-space ``depth`` there.  What the truth shows there was on the wall's
+    texture, not culled (the id comparison's ``wall`` cause)."""
+    w, h = int(size[0]), int(size[1])
+    out = np.zeros((h, w), bool)
+    quads = [np.asarray(q, np.float64).reshape(4, 3) for q in walls]
+    if not quads:
+        return out
+    inv = np.linalg.inv(np.asarray(proj, np.float64) @ np.asarray(view, np.float64))
+    V = np.asarray(view, np.float64)
+    eye = np.linalg.inv(V)[:3, 3]
+    xs = (np.arange(w) + 0.5) / w * 2.0 - 1.0
+    ys = 1.0 - (np.arange(h) + 0.5) / h * 2.0  # row 0 at the top
+    gx, gy = np.meshgrid(xs, ys)
+    far = np.stack([gx, gy, np.ones_like(gx), np.ones_like(gx)], axis=-1) @ inv.T
+    ray = far[..., :3] / far[..., 3:4] - eye  # (h, w, 3)
+    for q in quads:
+        o, u, v = q[0], q[1] - q[0], q[3] - q[0]
+        n = np.cross(u, v)
+        den = ray @ n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((o - eye) @ n) / den
+            p = eye + ray * t[..., None] - o
+            a, b = (p @ u) / (u @ u), (p @ v) / (v @ v)
+            zview = -((eye + ray * t[..., None]) @ V[2, :3] + V[2, 3])
+            hit = (t > 0) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1) & (zview < depth)
+        out |= np.nan_to_num(hit, nan=0).astype(bool)
     return out

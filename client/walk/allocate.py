@@ -60,8 +60,9 @@ def allocate(w: WalkState, f: Frame) -> None:
         w.device.cost_scale = w.device.cost_scale * cfg.cost_step_factor
         w.stepped = True
     lods = f.lods
-    f.triangles = room_tris + 2 * len(f.impostors) + (0 if f.alloc is None else int(f.alloc.triangles))
-    f.drawn = room_parts + len(f.impostors) + int((lods >= 0).sum())
+    # a wall texture is a quad as an impostor is: two triangles and one draw
+    f.triangles = room_tris + 2 * (len(f.impostors) + len(f.walls)) + (0 if f.alloc is None else int(f.alloc.triangles))
+    f.drawn = room_parts + len(f.impostors) + len(f.walls) + int((lods >= 0).sum())
 
 
 def _cull_rooms(w: WalkState, f: Frame) -> None:

@@ -47,9 +47,12 @@ def upload(w: WalkState, f: Frame) -> None:
                     m = w.meshes[(cid, k)] = cm.parts[k].mesh()
                 keys.append(CELLMESH_CONTENT.upload(r, cid, k, m))
     f.keys = keys
-    lane = w.scene.images
-    if lane is not None and hasattr(r, "impostors"):  # over the meshes: the frame's impostor quads
-        r.impostors = quads_of(f.impostors, lane.image)
+    lane, walls = w.scene.images, w.scene.wall_images
+    if hasattr(r, "impostors") and (lane is not None or walls is not None):  # over the meshes: the quads
+        # a wall texture's key is its id turned negative: impostor images and wall
+        # textures share the quad renderer's textures without colliding
+        r.impostors = ([] if lane is None else quads_of(f.impostors, lane.image)) + (
+            [] if walls is None else [(c, -1 - i, rgba, a) for c, i, rgba, a in quads_of(f.walls, walls.image)])
 
 
 def draw(w: WalkState, f: Frame) -> None:

@@ -56,6 +56,29 @@ class WalkFrames:
     texture_bytes: list[int] = field(default_factory=list)
     """Bytes of the impostor textures each frame drew (one count per image)."""
 
+    walls: list[int] = field(default_factory=list)
+    """Virtual walls drawn as textures per frame (an interior with walls; empty otherwise)."""
+    walls_closed: list[int] = field(default_factory=list)
+    """Of those, the walls that closed the portal walk (drawn at full opacity)."""
+    wall_bytes: list[int] = field(default_factory=list)
+    """Bytes of the wall textures each frame drew."""
+
+    def wall_figures(self) -> dict[str, float]:
+        """Wall textures drawn per frame (mean, max), closed walls per frame, the share of
+        frames drawing any and their texture bytes per frame (mean, max); empty when no
+        frame was counted."""
+        if not self.walls:
+            return {}
+        n, c, b = (np.asarray(v, np.float64) for v in (self.walls, self.walls_closed, self.wall_bytes))
+        return {
+            "walls_mean": float(n.mean()),
+            "walls_max": int(n.max()),
+            "walls_closed_mean": float(c.mean()),
+            "frames_with_walls": float((n > 0).mean()),
+            "wall_texture_bytes_mean": float(b.mean()),
+            "wall_texture_bytes_max": int(b.max()),
+        }
+
     def impostor_figures(self) -> dict[str, float]:
         """Impostors drawn per frame (mean, max), the share of frames drawing any, and the
         texture bytes a frame drew (mean, max); empty when no frame drew one."""

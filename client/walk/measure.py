@@ -54,6 +54,10 @@ def measure(w: WalkState, f: Frame) -> None:
         fr.objects_visible.append(len(o.pvs))
         fr.fog_m.append(f.fog)
         fr.budget.append(f.budget)
+    if w.scene.wall_images is not None:
+        fr.walls.append(len(f.walls))
+        fr.walls_closed.append(sum(1 for d in f.walls if d.alpha >= 1.0))
+        fr.wall_bytes.append(sum({d.image: d.nbytes for d in f.walls}.values()))
     if w.scene.images is not None:
         fr.impostors.append(len(f.impostors))
         fr.texture_bytes.append(sum({d.image: d.nbytes for d in f.impostors}.values()))
@@ -98,7 +102,8 @@ def note_truth(w: WalkState, f: Frame) -> None:
             geoms=w.objects.geoms, lods=f.lods, impostors=_quads(w, f),
         )
     elif city is None:  # rooms only: at the fog the frame was drawn at (the budget's lever)
-        rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(f.fog))
+        rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(f.fog),
+                   walls=[d.corners for d in f.walls if d.alpha >= 1.0])
     else:
         # outdoors before the street cell's record: no visible set known, nothing culled
         unknown = not w.indoors and (f.street is None or f.street not in city.cells)

@@ -9,7 +9,7 @@ joined at an entrance.  The frame loop (:mod:`.loop`) asks the scene, never its 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +22,7 @@ from walkstream.client.stream.streamer import Streamer
 from walkstream.shared.camera import perspective
 from walkstream.shared.roomview import VIEW_MIN_FAR_M, VIEW_NEAR_M
 from walkstream.shared.roomwire import Entrance
+from walkstream.shared.walls import WallSide
 
 __all__ = ["STREET_NEAR_M", "STREET_FAR_M", "WalkScene", "walk_projection"]
 
@@ -47,6 +48,13 @@ class WalkScene:
     images: ImpostorImages | None = None
     """The impostor images' lane (street cells, ``config.impostors``); it asks for
     nothing on a scene without impostors."""
+    walls: tuple[WallSide, ...] = ()
+    """An interior's textured virtual walls (``--virtual-walls``; empty: none, or
+    ``config.virtual_walls`` off)."""
+    wall_cells: dict[int, tuple[int, int]] = field(default_factory=dict)
+    """Each wall's portal id -> its two cells ``(a, b)`` (the topology's)."""
+    wall_images: ImpostorImages | None = None
+    """The wall textures' lane (kind ``walltex``; None without walls)."""
     unknown_quality: float = 0.0
     """Download and rewrite quality of a frame whose visible set is not known yet (the
     street cell's record or the room not in): 0 (nothing has arrived); a crossing scene

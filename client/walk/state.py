@@ -131,6 +131,8 @@ class Frame:
     """Room parts, objects and impostors drawn."""
     impostors: list[Any] = field(default_factory=list)
     """The impostors drawn (:class:`~walkstream.client.walk.impostors.DrawnImpostor`)."""
+    walls: list[Any] = field(default_factory=list)
+    """The virtual walls drawn as textures (:class:`~walkstream.client.walk.walls.DrawnWall`)."""
     # -- draw
     snap: bool = False
     keys: list[Hashable] = field(default_factory=list)

@@ -9,6 +9,10 @@ entrance portal leads to the street cell, which the topology holds as a
 :attr:`~walkstream.client.stream.rooms.RoomStreamer.foreign` cell) or a building's
 outside (its windows), the street cell's PVS is visible too.
 
+On an interior baked with ``--virtual-walls``, the walls whose texture the viewer
+sees close the walk first (:mod:`.walls`): the portal walk stops there and the
+frame draws their textures.
+
 *On the street* (the PVS model): the current street cell's PVS.  An entrance's
 building stands in it as its shell (the interior's ``outside`` cell,
 :class:`~walkstream.shared.roomwire.Entrance`), never as its own parameters, and when it
@@ -21,6 +25,7 @@ from __future__ import annotations
 import time
 
 from walkstream.client.walk.state import Frame, WalkState
+from walkstream.client.walk.walls import drawn_walls, frame_walls
 
 __all__ = ["OUTDOOR_FOG_M", "visible"]
 
@@ -35,6 +40,7 @@ def visible(w: WalkState, f: Frame) -> None:
     f.t_cull = time.perf_counter()
     if rooms is not None and w.indoors:
         rooms.fog_m = w.indoor_fog
+        walls = frame_walls(w, f)  # which virtual walls close the walk this frame
         vis = rooms.tick(f.t, f.eye, f.vp, f.view, w.proj, w.size, cell=f.room)
         default = list(vis)
         fog = w.indoor_fog
@@ -47,7 +53,10 @@ def visible(w: WalkState, f: Frame) -> None:
         if e is not None and (e.street in vis or e.shell in vis):  # the street through the door or a window
             f.pvs_cells = list(dict.fromkeys([e.street, *([f.street] if f.street is not None else [])]))
         f.fog = fog
+        f.walls = drawn_walls(walls, vis)
     else:
+        if rooms is not None:
+            rooms.closed = frozenset()
         if f.street is not None:
             f.pvs_cells = [f.street]
         default = vis = []

@@ -16,7 +16,9 @@ both) and
    cell committed as it comes (a kill loses only the cells in flight);
 6. with impostors (``--impostors``), plans the PVS cells' images, makes those not
    yet stored in chunks by the same runner and lists them per cell
-   (:func:`~.impostors.bake_impostors`);
+   (:func:`~.impostors.bake_impostors`); with virtual walls (``--virtual-walls``),
+   makes the wall textures not yet stored likewise and writes the wall sides
+   (:func:`~.wallplan.bake_walls`);
 7. records the default walks and seals the database.
 
 So every scene kind resumes alike, to the same version an uninterrupted bake gets.
@@ -34,7 +36,8 @@ from walkstream.server.bake.chunks import run_chunks
 from walkstream.server.bake.field import bake_field, field_folder
 from walkstream.server.bake.impostors import bake_impostors
 from walkstream.server.bake.interior import room_contents, write_contents
-from walkstream.server.bake.plan import BakePlan
+from walkstream.server.bake.plan import BakePlan, settings_key
+from walkstream.server.bake.wallplan import bake_walls, whole_crossing
 from walkstream.server.bake.workers import PVS_CHUNK, pvs_items, pvs_task, release_renderer
 from walkstream.server.store import SceneReader, SceneWriter
 from walkstream.shared.errors import InputError
@@ -120,8 +123,11 @@ def drive(
             ids = {c.id + rooms.offset for c in rooms.layout.cells}
             encode_s = 0.0
             if not ids <= done:
-                parts = rooms.place(room_contents(rooms.scene, rooms.layout, workers=workers, scheduler=scheduler,
-                                                  progress=progress))
+                found = room_contents(rooms.scene, rooms.layout, workers=workers, scheduler=scheduler,
+                                      progress=progress)
+                if rooms.wall_plan is not None:  # objects across a virtual wall: whole, as geometry
+                    found = whole_crossing(found, rooms.scene, rooms.layout, rooms.wall_plan.crossing)
+                parts = rooms.place(found)
                 encode_s = write_contents(writer, rooms.layout, parts, offset=rooms.offset,
                                           cellmesh_version=rooms.cellmesh_version)
             extra["contents_encode_s"] = encode_s
@@ -146,6 +152,9 @@ def drive(
         if plan.impostors is not None and pvs is not None:
             extra.update(bake_impostors(writer, plan.impostors, pvs_cells, workers=workers, scheduler=scheduler,
                                         progress=progress, say=say))
+        if rooms is not None and rooms.walls is not None and rooms.wall_plan is not None:
+            extra.update(bake_walls(writer, rooms.scene, rooms.wall_plan, rooms.walls, settings_key(plan.settings),
+                                    workers=workers, scheduler=scheduler, progress=progress, say=say))
         # the default walks: made from the cells alone, so a resumed bake records the
         # same ones (INSERT OR REPLACE) just before sealing the file
         for path, line in plan.walks(say):

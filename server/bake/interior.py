@@ -33,6 +33,7 @@ from walkstream.server.bake.roomnav import RoomGraph
 from walkstream.server.bake.rooms import RoomLayout, room_layout
 from walkstream.server.bake.roomwalks import TOUR_NAME, entrance_cell, tour
 from walkstream.server.bake.scenenav import SceneGraph
+from walkstream.server.bake.wallplan import WallSettings, plan_walls
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.store import (
     CellRow,
@@ -128,11 +129,13 @@ class InteriorParts:
 
 
 def interior_parts(
-    scene: InteriorScene, src: Path, *, say: Callable[[str], None] = lambda _msg: None
+    scene: InteriorScene, src: Path, *, say: Callable[[str], None] = lambda _msg: None,
+    wall_pitch: float | None = None,
 ) -> InteriorParts:
     """Cells, portals, walking graph and tour of an interior (its plan; the contents are
-    the driver's, :func:`room_contents`)."""
-    layout = room_layout(scene)
+    the driver's, :func:`room_contents`); ``wall_pitch`` cuts open rooms by virtual walls
+    (:func:`~.rooms.room_layout`)."""
+    layout = room_layout(scene, wall_pitch)
     inside = [c for c in layout.cells if c.kind != "outside"]
     say(
         f"{src.name}: {len(scene.rooms)} rooms on {len(scene.storeys)} storeys -> {len(inside)} cells "
@@ -250,8 +253,12 @@ def interior_plan(
     say: Callable[[str], None] = lambda _msg: None,
     import_seconds: float = 0.0,
     cellmesh_version: int = 3,
+    walls: WallSettings | None = None,
 ) -> BakePlan:
     """The :class:`~.plan.BakePlan` of an interior alone: room cells only.
+
+    ``walls`` (``--virtual-walls``) cuts open rooms by textured virtual walls
+    (:mod:`~.wallplan`): the ``walls`` feature, its settings recorded.
 
     ``cellmesh_version`` picks the cell-contents codec (3, planar polygons, boxes and
     rectangles on a 1 mm grid; 2 and 1 only to compare, as ``walkstream bench interiors`` does).
@@ -260,8 +267,15 @@ def interior_plan(
     ``issues`` and ``tour`` (what the default walk covers).
     """
     src, out = Path(source), Path(output)
-    baked = interior_parts(scene, src, say=say)
+    baked = interior_parts(scene, src, say=say, wall_pitch=None if walls is None else walls.pitch)
     layout, walk, coverage, start = baked.layout, baked.walk, baked.coverage, baked.start
+    settings = interior_settings(scene, src, cellmesh_version)
+    features = list(INTERIOR_FEATURES)
+    wall_plan = None
+    if walls is not None:
+        settings["walls"] = walls.record()
+        features.append("walls")
+        wall_plan = plan_walls(scene, layout, walls)
 
     def write_tables(writer: SceneWriter) -> None:
         write_interior_tables(writer, scene, baked)
@@ -277,9 +291,9 @@ def interior_plan(
 
     return BakePlan(
         name=name or out.stem, crs=scene.crs, origin=(scene.origin[0], scene.origin[1]), grammar_text="",
-        grammar_version="", features=list(INTERIOR_FEATURES),
-        settings=interior_settings(scene, src, cellmesh_version), pvs=None,
-        rooms=RoomCells(scene, layout, cellmesh_version=cellmesh_version), write_tables=write_tables, walks=walks,
+        grammar_version="", features=features, settings=settings, pvs=None,
+        rooms=RoomCells(scene, layout, cellmesh_version=cellmesh_version, walls=walls, wall_plan=wall_plan),
+        write_tables=write_tables, walks=walks,
         summary={
             "source": str(src),
             "import_seconds": import_seconds,

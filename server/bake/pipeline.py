@@ -29,6 +29,7 @@ from walkstream.server.bake.scenenav import SceneGraph
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
+from walkstream.server.bake.wallplan import WallSettings
 from walkstream.server.sources.clip import clip_scene, local_bbox
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
@@ -57,6 +58,7 @@ def bake(
     interior: str | os.PathLike[str] | None = None,
     building: str | None = None,
     impostors: ImpostorSettings | None = None,
+    walls: WallSettings | None = None,
 ) -> dict[str, Any]:
     """Bake ``source`` (GeoJSON, OpenStreetMap, an IFC model or an interior file) into ``output``.
 
@@ -91,6 +93,9 @@ def bake(
         Bake impostor images of a city's far and complex buildings
         (:mod:`~walkstream.server.bake.impostorplan`; None: none, the database as
         before impostors existed).
+    walls:
+        Textured virtual walls across an interior's open rooms
+        (:mod:`~walkstream.server.bake.wallplan`; None: none, the database as before).
 
     Returns
     -------
@@ -107,6 +112,10 @@ def bake(
     say = log or (lambda _msg: None)
     t0 = time.perf_counter()
     src = Path(source)
+    if walls is not None:
+        walls.check()
+        if interior is not None:
+            raise InputError("--virtual-walls: an interior's option; a crossing scene (--interior) has no walls yet")
     if impostors is not None and interior is not None:
         raise InputError("--impostors: a city's option; a scene with --interior has no impostors yet")
     if interior is not None:
@@ -118,8 +127,11 @@ def bake(
         if isinstance(scene, InteriorScene):
             if impostors is not None:
                 raise InputError(f"--impostors: {src.name} is an interior; impostors are a city's")
-            plan = interior_plan(scene, src, output, name=name, say=say, import_seconds=time.perf_counter() - t0)
+            plan = interior_plan(scene, src, output, name=name, say=say, import_seconds=time.perf_counter() - t0,
+                                 walls=walls)
         else:
+            if walls is not None:
+                raise InputError(f"--virtual-walls: {src.name} is a city; virtual walls are an interior's (for now)")
             plan = city_plan(scene, src, Path(output), st, name=name, say=say, impostors=impostors)
     return drive(plan, output, workers=workers, scheduler=scheduler, progress=progress, log=log,
                  max_cells=max_cells, started=t0)

@@ -36,6 +36,7 @@ from walkstream.server.bake.roomcontents import Part
 from walkstream.server.bake.rooms import RoomLayout
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
+from walkstream.server.bake.wallplan import WallPlan, WallSettings
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.scene import SourceScene
 from walkstream.server.store import SceneWriter
@@ -77,6 +78,10 @@ class RoomCells:
     offset: int = 0
     place: Callable[[dict[int, list[Part]]], dict[int, list[Part]]] = lambda parts: parts
     cellmesh_version: int = 3
+    walls: WallSettings | None = None
+    """With ``--virtual-walls``: their settings (the layout already holds the ``wall`` portals)."""
+    wall_plan: WallPlan | None = None
+    """The walls' sides, textures and crossing objects (:func:`~.wallplan.plan_walls`)."""
 
 
 @dataclass

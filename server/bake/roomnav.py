@@ -52,7 +52,7 @@ INDOOR_SPEED_KMH = 4.0
 CLEARANCE = 0.3
 """How far a walk inside a cell keeps from the cell's walls (metres): a person's half-width."""
 
-_WALKABLE = frozenset({"door", "opening", "virtual", "split"})
+_WALKABLE = frozenset({"door", "opening", "virtual", "split", "wall"})
 
 
 class RoomGraph:

@@ -24,6 +24,7 @@ _PORTAL_COLOURS = {
     "split": "#9467bd",
     "void": "#17becf",
     "stair": "#2ca02c",
+    "wall": "#8c564b",
 }
 
 

@@ -34,6 +34,7 @@ into convex cells, each with its plane set, and the portals between them:
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -66,12 +67,13 @@ __all__ = [
     "portal_counts",
 ]
 
-PORTAL_KINDS = ("door", "window", "opening", "virtual", "split", "void", "stair")
+PORTAL_KINDS = ("door", "window", "opening", "virtual", "split", "void", "stair", "wall")
 """Kinds of portals: door, window, opening (an empty hole or an open stretch of a
 room's edge), virtual (an open boundary of the source), split (between convex parts
-of one room), void (a hole in a floor) and stair (a hole a stair climbs through)."""
+of one room), void (a hole in a floor), stair (a hole a stair climbs through) and
+wall (a textured virtual wall across an open room, baked with ``--virtual-walls``)."""
 
-WALKABLE = frozenset({"door", "opening", "virtual", "split", "stair"})
+WALKABLE = frozenset({"door", "opening", "virtual", "split", "stair", "wall"})
 """Portals a walker may pass (a stair portal only along its stair)."""
 
 _TOUCH = 0.03  # outlines this close touch
@@ -206,8 +208,10 @@ def _slab_cover(scene: InteriorScene, z: float) -> shapely.Geometry:
 
 
 class _Builder:
-    def __init__(self, scene: InteriorScene) -> None:
+    def __init__(self, scene: InteriorScene, wall_pitch: float | None = None) -> None:
         self.scene = scene
+        self.wall_pitch = wall_pitch
+        self._squares = 0  # grid squares numbered so far (wall_grid)
         self.ranges = storey_ranges(scene)
         self.cells: list[RoomCell] = []
         self.portals: list[Portal] = []
@@ -277,14 +281,47 @@ class _Builder:
                     continue
                 taken = taken.union(shapely.union_all([shapely.Polygon(r) for r in rings]))
                 parts: list[RoomCell] = []
+                square: list[int] = []  # the grid square of each part (-1: not cut)
                 for ring in rings:
                     simple = shapely.Polygon(ring).simplify(0.005)
                     for part in convex_parts(np.asarray(simple.exterior.coords)[:-1]):
-                        if shapely.Polygon(part).area > 0.05:
-                            parts.append(self.add_cell("room", room.name, room.key, k, part))
+                        for sq, piece in self.wall_grid(part):
+                            if shapely.Polygon(piece).area > 0.05:
+                                parts.append(self.add_cell("room", room.name, room.key, k, piece))
+                                square.append(sq)
                 for x in range(len(parts)):
                     for y in range(x + 1, len(parts)):
-                        self.edge_portals(parts[x], parts[y], "split", "split", room.zmax, room.name)
+                        # pieces of two grid squares are joined by a virtual wall
+                        wall = square[x] >= 0 and square[y] >= 0 and square[x] != square[y]
+                        kind = "wall" if wall else "split"
+                        self.edge_portals(parts[x], parts[y], kind, kind, room.zmax, room.name)
+
+    def wall_grid(self, part: F64) -> list[tuple[int, F64]]:
+        """A convex part cut by virtual walls: ``(grid square, convex piece)`` each.
+
+        With ``wall_pitch`` ``S`` (``--virtual-walls``), a part whose area is over
+        ``2 S**2`` is cut by lines parallel to its bounding box's sides into
+        ``ceil(width / S)`` by ``ceil(depth / S)`` equal squares (each piece convex: a
+        convex part cut by a box).  Without walls, or a smaller part, the part as it
+        is with square -1.
+        """
+        pitch = self.wall_pitch
+        poly = shapely.Polygon(part)
+        if pitch is None or poly.area <= 2.0 * pitch * pitch:
+            return [(-1, part)]
+        x0, y0, x1, y1 = poly.bounds
+        nx, ny = max(1, math.ceil((x1 - x0) / pitch - 1e-9)), max(1, math.ceil((y1 - y0) / pitch - 1e-9))
+        xs, ys = np.linspace(x0, x1, nx + 1), np.linspace(y0, y1, ny + 1)
+        first = self._squares
+        self._squares += nx * ny
+        out: list[tuple[int, F64]] = []
+        for i in range(nx):
+            for j in range(ny):
+                piece = poly.intersection(shapely.box(xs[i], ys[j], xs[i + 1], ys[j + 1]))
+                if isinstance(piece, shapely.Polygon) and piece.area > 0.05:
+                    ring = np.asarray(piece.exterior.coords)[:-1]
+                    out.append((first + i * ny + j, ring))
+        return out
 
     def edge_portals(self, x: RoomCell, y: RoomCell, kind: str, source: str, top: float, name: str = "",
                      z0: float | None = None) -> int:
@@ -571,15 +608,18 @@ def _vertical(seg: F64, z0: float, z1: float) -> F64:
     return np.array([[a[0], a[1], z0], [b[0], b[1], z0], [b[0], b[1], z1], [a[0], a[1], z1]], dtype=np.float64)
 
 
-def room_layout(scene: InteriorScene) -> RoomLayout:
+def room_layout(scene: InteriorScene, wall_pitch: float | None = None) -> RoomLayout:
     """Cells, portals and stairs of an interior (see the module docstring).
+
+    ``wall_pitch`` (metres; ``--virtual-walls``) cuts every room part over twice its
+    square into a grid of cells joined by ``wall`` portals (:meth:`_Builder.wall_grid`).
 
     Raises
     ------
     SourceError
         No room gives a cell.
     """
-    b = _Builder(scene)
+    b = _Builder(scene, wall_pitch)
     b.rooms()
     if not b.cells:
         raise SourceError(f"{scene.name}: no room gives a cell (all empty or overlapping)")

@@ -63,6 +63,7 @@ from walkstream.shared.content.impostor import KIND as IMPOSTOR
 from walkstream.shared.content.mesh import KIND as MESH
 from walkstream.shared.content.params import KIND as PARAMS
 from walkstream.shared.content.registry import by_form, object_forms
+from walkstream.shared.content.walltex import KIND as WALLTEX
 from walkstream.shared.errors import ApiError, CodecError, DatabaseDamagedError, StoreError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_q, encode_path_q
@@ -293,6 +294,14 @@ class Scene:
         self._grammar_lock = threading.Lock()
         self.impostor_ids: frozenset[int] = frozenset(reader.impostor_info())
         """The impostor images the scene has (empty when baked without ``--impostors``)."""
+        self.has_walls = reader.has_walls()
+        """Whether the scene was baked with textured virtual walls (``--virtual-walls``)."""
+        self.wall_texture_ids: frozenset[int] = frozenset(reader.wall_texture_info())
+        """The wall textures the scene has (empty without walls)."""
+        self.walls: dict[Rep, Encoded] = {
+            rep: encode({"sides": reader.wall_sides()}, rep, self.version, "walls") for rep in ("msgpack", "json")
+        } if self.has_walls else {}
+        """Every wall side (``WallSide.to_row`` lists) in each representation (empty without walls)."""
         self._payloads: dict[str, Callable[[int, bytes], bytes]] = {
             PARAMS.name: lambda _oid, blob: blob,
             MESH.name: self._lod2_mesh,
@@ -370,6 +379,21 @@ class Scene:
             ImpostorRow(oid, level, az0, n_az, el0, n_el, info[oid].bbox, tuple(images))
             for oid, level, az0, n_az, el0, n_el, *images in rows
         ))
+
+    def cached_wall_texture(self, tid: int) -> Encoded | None:
+        """Wall texture ``tid`` if it is cached (no database access)."""
+        value: Encoded | None = self._bodies.get(("walltex", tid))
+        return value
+
+    def wall_texture(self, tid: int) -> Encoded:
+        """Wall texture ``tid`` (a known one) as stored: immutable, its ETag naming the scene
+        version and the texture (reads the database on a cache miss)."""
+        enc = self.cached_wall_texture(tid)
+        if enc is None:
+            media, data = self.reader.wall_textures([tid])[tid]
+            enc = Encoded(data, media, etag_for(self.version, f"walltex:{tid}", WALLTEX.name))
+            self._bodies.put(("walltex", tid), enc, len(data))
+        return enc
 
     def has_impostor(self, image: int) -> bool:
         """Whether the scene has impostor image ``image``."""

@@ -543,6 +543,38 @@ class SceneReader:
             return []
         return [list(map(int, r)) for r in msgpack.unpackb(rows[0][0])]
 
+    # -- virtual walls ---------------------------------------------------------
+
+    def has_walls(self) -> bool:
+        """Whether the scene was baked with textured virtual walls (``--virtual-walls``)."""
+        return self._has_table("wall_sides")
+
+    def wall_sides(self) -> list[list[float | int]]:
+        """Every wall side's row (``WallSide.to_row``), by id (empty without walls)."""
+        if not self.has_walls():
+            return []
+        return [list(msgpack.unpackb(r[0])) for r in self._query("SELECT data FROM wall_sides ORDER BY id")]
+
+    def wall_texture_info(self) -> dict[int, tuple[int, int, int, int, int, int]]:
+        """Texture id -> ``(portal, side, zone, width, height, bytes)`` of every stored texture."""
+        if not self._has_table("wall_textures"):
+            return {}
+        rows = self._query("SELECT id, portal, side, zone, width, height, length(data) FROM wall_textures ORDER BY id")
+        return {int(r[0]): tuple(int(v) for v in r[1:]) for r in rows}  # type: ignore[misc]
+
+    def wall_textures(self, ids: Iterable[int]) -> dict[int, tuple[str, bytes]]:
+        """Texture id -> ``(media type, file bytes)`` of the stored ones among ``ids`` (empty without walls)."""
+        if not self._has_table("wall_textures"):
+            return {}
+        want = [row_index(i, "wall texture id") for i in ids]
+        out: dict[int, tuple[str, bytes]] = {}
+        for k in range(0, len(want), 500):
+            part = want[k:k + 500]
+            marks = ",".join("?" * len(part))
+            for i, media, data in self._query(f"SELECT id, media, data FROM wall_textures WHERE id IN ({marks})", part):
+                out[int(i)] = (str(media), bytes(data))
+        return out
+
     # -- summary -------------------------------------------------------------
 
     def summary(self) -> dict[str, Any]:

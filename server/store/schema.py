@@ -154,6 +154,17 @@ OPTIONAL_TABLES: dict[str, dict[str, str]] = {
         # rows [object, level, az0, n_az, el0, n_el, image ids...] (server/bake/impostorplan.py)
         "cell_impostors": "CREATE TABLE cell_impostors(cell INTEGER PRIMARY KEY, data BLOB NOT NULL)",
     },
+    "walls": {
+        # a textured virtual wall's side (shared/walls.py): id portal * 2 + side, data the
+        # msgpack list of WallSide.to_row (ends, heights, x_T, blend, zones, texture ids)
+        "wall_sides": "CREATE TABLE wall_sides(id INTEGER PRIMARY KEY, data BLOB NOT NULL)",
+        # one zone's texture: its side, zone, size in texels and the image file
+        "wall_textures": (
+            "CREATE TABLE wall_textures(id INTEGER PRIMARY KEY, portal INTEGER NOT NULL, side INTEGER NOT NULL, "
+            "zone INTEGER NOT NULL, width INTEGER NOT NULL, height INTEGER NOT NULL, media TEXT NOT NULL, "
+            "data BLOB NOT NULL)"
+        ),
+    },
 }
 """Tables that exist only in scenes using a feature, declared in this one place."""
 

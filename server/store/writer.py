@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import math
 import os
 import secrets
 import sqlite3
@@ -535,6 +536,43 @@ class SceneWriter:
             clean = [[row_index(v, what) for v in r] for r in rows]
             out.append((row_index(cid, what), msgpack.packb(clean)))
         self._run("cell_impostors", "INSERT OR REPLACE INTO cell_impostors VALUES (?,?)", out)
+        return len(out)
+
+    # -- virtual walls (feature walls) ----------------------------------------
+
+    def add_wall_texture(self, tid: int, portal: int, side: int, zone: int, width: int, height: int, media: str,
+                         data: bytes) -> None:
+        """Store (or replace) one wall texture, committed at once (a kill loses only those in flight)."""
+        self._require("wall_textures", "walls")
+        what = f"wall texture {tid}"
+        if not isinstance(data, bytes) or not data:
+            raise StoreError(f"{what}: expected non-empty bytes")
+        row = (*(row_index(v, what) for v in (tid, portal, side, zone, width, height)), str(media), data)
+        self._run("wall_textures", "INSERT OR REPLACE INTO wall_textures VALUES (?,?,?,?,?,?,?,?)", [row])
+
+    def done_wall_textures(self) -> set[int]:
+        """Ids of the wall textures stored (empty without the feature)."""
+        if not self._db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'wall_textures'").fetchone():
+            return set()
+        return {int(r[0]) for r in self._db.execute("SELECT id FROM wall_textures")}
+
+    def wall_texture_bytes(self) -> int:
+        """Bytes of every stored wall texture."""
+        if not self.done_wall_textures():
+            return 0
+        return int(self._db.execute("SELECT COALESCE(SUM(length(data)), 0) FROM wall_textures").fetchone()[0])
+
+    def set_wall_sides(self, rows: Iterable[list[float | int]]) -> int:
+        """Store (or replace) the wall sides (``WallSide.to_row`` each); returns how many."""
+        self._require("wall_sides", "walls")
+        out = []
+        for r in rows:
+            what = f"wall {r[0]}/{r[1]}"
+            if not all(math.isfinite(float(v)) for v in r):
+                raise StoreError(f"{what}: not finite")
+            out.append((row_index(int(r[0]) * 2 + int(r[1]), what), msgpack.packb([float(v) for v in r[:13]]
+                        + [int(v) for v in r[13:]])))
+        self._run("wall_sides", "INSERT OR REPLACE INTO wall_sides VALUES (?,?)", out)
         return len(out)
 
     # -- finishing -----------------------------------------------------------

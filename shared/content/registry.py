@@ -23,14 +23,14 @@ parts and that the store, the service, the wire and the cache take exactly the
 registered kinds.
 
 >>> [k.name for k in CONTENT_KINDS]
-['params', 'mesh', 'cellmesh', 'impostor']
+['params', 'mesh', 'cellmesh', 'impostor', 'walltex']
 >>> by_form("lod2").cache_kind, content_kind("cellmesh").table
 ('mesh', 'contents')
 """
 
 from __future__ import annotations
 
-from walkstream.shared.content import cellmesh, impostor, mesh, params
+from walkstream.shared.content import cellmesh, impostor, mesh, params, walltex
 from walkstream.shared.content.kind import ContentKind
 from walkstream.shared.errors import InputError
 
@@ -49,6 +49,7 @@ CONTENT_KINDS: tuple[ContentKind, ...] = (
     mesh.KIND,
     cellmesh.KIND,
     impostor.KIND,
+    walltex.KIND,
 )
 """Every content kind, in the order the client cache evicts them (first to last)."""
 

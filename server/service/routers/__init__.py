@@ -71,9 +71,10 @@ from walkstream.server.service.routers import (
     rooms,
     scenes,
     start,
+    walls,
 )
 
-__all__ = ["ROUTERS", "cells", "impostors", "index", "objects", "ops", "paths", "rooms", "scenes", "start"]
+__all__ = ["ROUTERS", "cells", "impostors", "index", "objects", "ops", "paths", "rooms", "scenes", "start", "walls"]
 
 ROUTERS = (
     scenes.router,
@@ -83,6 +84,7 @@ ROUTERS = (
     cells.router,
     rooms.router,
     impostors.router,
+    walls.router,
     objects.router,
     ops.router,
 )

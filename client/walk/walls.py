@@ -1,0 +1,91 @@
+"""Part of the frame step ``visible``: textured virtual walls, which are closed and which texture each shows.
+
+On an interior baked with ``--virtual-walls`` the walk holds every wall side
+(:class:`~walkstream.shared.walls.WallSide`, fetched once at the start).  Each frame,
+before the portal walk (:func:`frame_walls`):
+
+- each side facing the viewer gives its zone and texture weight
+  (:meth:`~walkstream.shared.walls.WallSide.view`): 1 beyond the blend zone, 0 nearer
+  than ``x_T`` (or above or below the eye-height band, or behind the wall), linear
+  between;
+- its zone's texture is wanted from the image lane (the impostors' lane, kind
+  ``walltex``, through the one request scheduler, needed now);
+- a side at weight 1 whose texture is held **closes** its portal: the portal walk
+  stops there (:attr:`~walkstream.client.stream.rooms.RoomStreamer.closed`) and the
+  wall is drawn as one textured quad; a side between 0 and 1 leaves the portal open
+  (the next cell drawn as geometry) and its texture is drawn over it at that opacity
+  (the blend zone); a side whose texture has not arrived leaves the portal open: the
+  cell behind is drawn as geometry (or is past the fog), never a hole;
+- the quads kept are those of walls on the sides of the cells the walk reaches, so
+  a wall two cells away is drawn only when its cell is (:func:`drawn_walls`).
+
+With ``config.virtual_walls`` off, or a scene without walls, nothing is closed and
+the frame is what it was.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.walk.state import Frame, WalkState
+
+__all__ = ["DrawnWall", "drawn_walls", "frame_walls"]
+
+
+@dataclass(frozen=True)
+class DrawnWall:
+    """One wall side a frame draws: its portal, side, zone, texture, opacity and quad
+    (``(4, 3)`` bottom-left, bottom-right, top-right, top-left as the viewer faces it),
+    and the texture's bytes.  ``image`` is the texture id (the quads' common key)."""
+
+    portal: int
+    side: int
+    zone: int
+    image: int
+    alpha: float
+    corners: NDArray[np.float64]
+    nbytes: int
+    cells: tuple[int, int]
+    """``(the viewer's side cell, the hidden cell)``."""
+
+
+def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
+    """The wall sides facing the viewer with a texture to show (held), and which portals
+    close; sets ``rooms.closed`` and wants the missing textures (module docstring)."""
+    rooms, lane = w.scene.rooms, w.scene.wall_images
+    sides = w.scene.walls
+    if rooms is None:
+        return []
+    if lane is None or not sides or not w.config.virtual_walls:
+        rooms.closed = frozenset()
+        return []
+    wanted: dict[int, float] = {}
+    out: list[DrawnWall] = []
+    closed: set[int] = set()
+    portals = w.scene.wall_cells
+    for s in sides:
+        v = s.view(f.eye)
+        if v.weight <= 0.0:
+            continue
+        tid = s.textures[v.zone]
+        if not lane.held(tid):
+            wanted[tid] = 0.0
+            continue  # not here yet: the portal stays open (geometry), never a hole
+        img = lane.image(tid)
+        a, b = portals[s.portal]
+        out.append(DrawnWall(s.portal, s.side, v.zone, tid, v.weight, s.corners(),
+                             int(getattr(img, "nbytes", 0)), (a, b) if s.side == 0 else (b, a)))
+        if v.weight >= 1.0:
+            closed.add(s.portal)
+    lane.want(wanted)
+    rooms.closed = frozenset(closed)
+    return out
+
+
+def drawn_walls(walls: list[DrawnWall], visible: list[int]) -> list[DrawnWall]:
+    """The walls on the viewer's side of a visible cell (those the walk reaches)."""
+    seen = set(visible)
+    return [d for d in walls if d.cells[0] in seen]

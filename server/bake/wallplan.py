@@ -1,0 +1,248 @@
+"""Textured virtual walls of an interior: where they stand, their zones, what stays geometry.
+
+The bake places the walls itself (``--virtual-walls``): :func:`~.rooms.room_layout`
+cuts every convex room part whose area is over ``2 S**2`` (``S``, the pitch,
+``--wall-pitch``, 8 m by default) into a grid of about ``S`` by ``S`` cells, and the
+faces between two of them become portals of kind ``wall``.  A room of ordinary size
+(an office, a corridor piece) is never cut: a scene with no open space gets no walls.
+
+This module plans what each wall side needs (:func:`plan_walls`), from the cells on
+its two sides:
+
+- **Wall distance and zones.**  The side's viewer cell is ``D`` deep (the farthest
+  point of its outline from the wall).  Textures are used from ``x_T = D / 3`` on,
+  fading in over a blend zone of ``D / 16`` (so a viewer in a cell's middle sees
+  every wall of it as texture); the side is cut into
+  ``n = ceil(L / (2 x_T tan A))`` zones (:func:`~walkstream.shared.walls.zone_count`,
+  the paper's equations (3) and (4)), each sampled at its middle ``3 D / 4`` in
+  front of the wall (between ``x_T`` and the cell's far side) at eye height.
+- **What stays geometry.**  An object (any element but the building's shell: walls,
+  slabs, roofs, coverings) that crosses a wall's plane within the wall is never on
+  that wall's textures (the paper's rule: part of it is in front of the wall; the
+  texture has a transparent hole where it stands, so its geometry behind the wall's
+  plane shows through the quad), and the cells on both sides hold it whole instead
+  of clipped at the wall
+  (:func:`whole_crossing`), so it is drawn as geometry from either side.  The
+  shell is clipped at the wall like any cell boundary: the floor and ceiling behind
+  a wall are on its texture.
+
+:func:`bake_walls` is the driver's step: the textures not yet stored rendered and
+encoded in chunks by the one chunk runner (:func:`~.wallrender.wall_task`), then
+every side's row with its texture ids.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from walkstream.server.bake.chunks import run_chunks
+from walkstream.server.bake.roomcontents import Part, weld
+from walkstream.server.bake.rooms import RoomLayout
+from walkstream.server.sources.interior import InteriorScene
+from walkstream.server.store import SceneWriter
+from walkstream.shared.codec.image import IMAGE_MEDIA
+from walkstream.shared.errors import InputError
+from walkstream.shared.walls import DEFAULT_WALL_ERROR_DEG, WallSide, zone_count
+
+__all__ = [
+    "SHELL_KINDS",
+    "WALL_CHUNK",
+    "WallJob",
+    "WallPlan",
+    "WallSettings",
+    "bake_walls",
+    "plan_walls",
+    "texture_height",
+    "whole_crossing",
+]
+
+SHELL_KINDS = frozenset({"wall", "slab", "roof", "covering"})
+"""Element kinds clipped at a virtual wall like at any cell boundary (the building's shell)."""
+
+WALL_CHUNK = 32
+"""Textures per task (a renderer's start, every element uploaded, is paid once per process)."""
+
+
+@dataclass(frozen=True)
+class WallSettings:
+    """``--virtual-walls`` settings: ``pitch`` (grid spacing, m), ``error_deg`` (the angle
+    of error A), ``texels_per_m`` (texture resolution), ``max_side`` (texels), ``codec``."""
+
+    pitch: float = 8.0
+    error_deg: float = DEFAULT_WALL_ERROR_DEG
+    texels_per_m: float = 32.0
+    max_side: int = 512
+    codec: str = "webp-lossless"
+
+    def check(self) -> WallSettings:
+        """These settings, or a one-line :class:`InputError` naming the bad one."""
+        if not (math.isfinite(self.error_deg) and 0.5 <= self.error_deg <= 45.0):
+            raise InputError(f"--wall-error: expected 0.5 to 45 degrees, got {self.error_deg}")
+        if not (math.isfinite(self.pitch) and 2.0 <= self.pitch <= 200.0):
+            raise InputError(f"--wall-pitch: expected 2 to 200 m, got {self.pitch}")
+        if self.codec not in IMAGE_MEDIA:
+            raise InputError(f"wall codec: expected one of {', '.join(IMAGE_MEDIA)}, got {self.codec!r}")
+        return self
+
+    def record(self) -> dict[str, Any]:
+        """What the database's settings record (a change is a different bake)."""
+        return {"pitch": self.pitch, "error_deg": self.error_deg, "texels_per_m": self.texels_per_m,
+                "max_side": self.max_side, "codec": self.codec}
+
+
+WallJob = tuple[int, tuple[Any, ...], int, int, tuple[int, ...]]
+"""One texture to make: ``(texture id, side row, zone, width, excluded element ids)``;
+the side row is :meth:`WallSide.to_row` without textures, the height follows from the width."""
+
+
+@dataclass
+class WallPlan:
+    """Every wall side (texture ids filled in), the textures to make, and per portal the
+    elements crossing it (kept whole as geometry)."""
+
+    sides: list[WallSide]
+    jobs: list[WallJob]
+    crossing: dict[int, tuple[int, ...]]
+
+
+def _depth(outline: np.ndarray, p0: np.ndarray, n: np.ndarray) -> float:
+    """How far the cell's outline reaches from the wall line, on the side opposite ``n``."""
+    return float(np.max(-((outline - p0) @ n)))
+
+
+def plan_walls(scene: InteriorScene, layout: RoomLayout, settings: WallSettings) -> WallPlan:
+    """The walls' sides, zones and textures (the module docstring); the same on every run,
+    so texture ids are the same on resume."""
+    alpha = math.radians(settings.error_deg)
+    cells = {c.id: c for c in layout.cells}
+    objects = [e for e in scene.elements if e.kind not in SHELL_KINDS and len(e.triangles)]
+    boxes = np.array([[*e.vertices.min(axis=0), *e.vertices.max(axis=0)] for e in objects]).reshape(-1, 6)
+    sides: list[WallSide] = []
+    jobs: list[WallJob] = []
+    crossing: dict[int, tuple[int, ...]] = {}
+    for p in layout.portals:
+        if p.kind != "wall":
+            continue
+        poly = p.polygon
+        z0, z1 = float(poly[:, 2].min()), float(poly[:, 2].max())
+        bottom = poly[np.isclose(poly[:, 2], z0)][:, :2]
+        e0, e1 = bottom[0], bottom[-1]
+        length = float(np.hypot(*(e1 - e0)))
+        if length < 0.5:
+            continue
+        u = (e1 - e0) / length
+        n = np.array([-u[1], u[0]])
+        # objects whose box crosses the wall's plane within the wall: geometry on both sides
+        if len(objects):
+            t0, t1 = (boxes[:, :2] - e0) @ u, (boxes[:, 3:5] - e0) @ u
+            d = np.stack([(boxes[:, [0, 1]] - e0) @ n, (boxes[:, [3, 1]] - e0) @ n,
+                          (boxes[:, [0, 4]] - e0) @ n, (boxes[:, [3, 4]] - e0) @ n], axis=1)
+            hit = ((d.min(axis=1) < -1e-6) & (d.max(axis=1) > 1e-6) & (np.maximum(t0, t1) > 0)
+                   & (np.minimum(t0, t1) < length) & (boxes[:, 5] > z0) & (boxes[:, 2] < z1))
+            crossing[p.id] = tuple(sorted(objects[i].id for i in np.flatnonzero(hit)))
+        else:
+            crossing[p.id] = ()
+        for side, (viewer, hidden) in enumerate(((p.a, p.b), (p.b, p.a))):
+            a, b = e0, e1
+            nn = n
+            # the hidden cell to the left of a -> b
+            cb = cells[hidden].outline.mean(axis=0)
+            if float((cb - a) @ nn) < 0:
+                a, b, nn = b, a, -nn
+            depth = _depth(cells[viewer].outline, a, nn)
+            if depth < 0.5:
+                continue
+            x_t = depth / 3.0
+            zones = zone_count(length, x_t, alpha)
+            floor = float(cells[viewer].zmin)
+            ws = WallSide(p.id, side, (float(a[0]), float(a[1])), (float(b[0]), float(b[1])), z0, z1, floor,
+                          x_t, depth / 16.0, 0.75 * depth, alpha, zones)
+            width = int(min(settings.max_side, max(8, round(length * settings.texels_per_m))))
+            ids = tuple(range(len(jobs), len(jobs) + zones))
+            row = tuple(ws.to_row())
+            jobs += [(tid, row, k, width, crossing[p.id]) for k, tid in enumerate(ids)]
+            sides.append(dataclasses.replace(ws, textures=ids))
+    return WallPlan(sides, jobs, crossing)
+
+
+def texture_height(side: WallSide, width: int) -> int:
+    """Texels of a texture ``width`` wide over the wall's height (its aspect kept)."""
+    return max(4, round(width * (side.z1 - side.z0) / max(side.length, 1e-6)))
+
+
+def whole_crossing(
+    parts: dict[int, list[Part]], scene: InteriorScene, layout: RoomLayout, crossing: dict[int, tuple[int, ...]]
+) -> dict[int, list[Part]]:
+    """Each cell's contents with the objects crossing its virtual walls whole (not
+    clipped at the wall): they are drawn as geometry from either side."""
+    if not any(crossing.values()):
+        return parts
+    by_id = {e.id: e for e in scene.elements}
+    want: dict[int, set[int]] = {}
+    for p in layout.portals:
+        for eid in crossing.get(p.id, ()):
+            want.setdefault(p.a, set()).add(eid)
+            want.setdefault(p.b, set()).add(eid)
+    out = dict(parts)
+    for cid, eids in want.items():
+        kept = [q for q in out.get(cid, []) if q[0] not in eids]
+        for eid in sorted(eids):
+            e = by_id[eid]
+            for m in np.unique(e.materials).tolist():
+                v, t = weld(e.soup[e.materials == m])
+                kept.append((int(eid), int(m), v, t))
+        out[cid] = kept
+    return out
+
+
+def bake_walls(
+    writer: SceneWriter,
+    scene: InteriorScene,
+    plan: WallPlan,
+    settings: WallSettings,
+    key: str,
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    say: Callable[[str], None] = lambda _msg: None,
+) -> dict[str, Any]:
+    """Make the wall textures not yet stored and write every side (see the module docstring).
+
+    Returns
+    -------
+    dict
+        ``wall_sides``, ``wall_textures``, ``wall_crossing`` (objects kept whole across
+        a wall), ``wall_resumed`` (textures found done), ``wall_texture_bytes``,
+        ``wall_seconds`` (this step's wall time).
+    """
+    from walkstream.server.bake.wallrender import release_wall_renderer, wall_task
+
+    t0 = time.perf_counter()
+    done = writer.done_wall_textures()
+    todo = [j for j in plan.jobs if j[0] not in done]
+    say(f"virtual walls: {len(plan.sides)} wall sides, {len(plan.jobs)} textures "
+        f"({len(plan.jobs) - len(todo)} already baked)")
+    media = IMAGE_MEDIA[settings.codec]
+    for results in run_chunks(
+        wall_task, todo, (scene, key, settings.codec), size=WALL_CHUNK, workers=workers, scheduler=scheduler,
+        progress=progress, done=len(plan.jobs) - len(todo), total=len(plan.jobs), release=release_wall_renderer,
+    ):
+        for (tid, row, zone, width, _ex), (height, data) in results:
+            writer.add_wall_texture(tid, int(row[0]), int(row[1]), zone, width, height, media, data)
+    writer.set_wall_sides([s.to_row() for s in plan.sides])
+    return {
+        "wall_sides": len(plan.sides),
+        "wall_textures": len(plan.jobs),
+        "wall_crossing": sum(len(v) for v in plan.crossing.values()),
+        "wall_resumed": len(plan.jobs) - len(todo),
+        "wall_texture_bytes": writer.wall_texture_bytes(),
+        "wall_seconds": time.perf_counter() - t0,
+    }

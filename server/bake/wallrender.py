@@ -1,0 +1,216 @@
+"""Wall textures: what lies behind a virtual wall, seen off-axis from a zone's sampling point.
+
+:class:`WallRenderer` holds every element triangle of an interior in one vertex
+buffer (flat normals, the palette's material colours, the client's lighting of
+:mod:`walkstream.shared.lighting`; one headless context as every renderer of the
+project) and renders a wall side's zone with an **off-axis perspective** whose
+near plane is the wall itself (:func:`off_axis`): the frustum from the sampling
+point through the wall's rectangle, so what is in front of the wall is clipped and
+the image lands on the wall's quad exactly as the sampling point sees it.  Elements
+crossing the wall are not on the texture: they are drawn as transparent holes (depth
+written, colour and alpha 0), so the client's quad, drawn over the geometry at the
+wall's depth, lets the object's geometry behind the wall's plane show through instead
+of covering it (the paper's treatment of the geometry that stays geometry).  Samples are averaged
+(:data:`SUPERSAMPLE`) into premultiplied RGBA over transparent black
+(:mod:`walkstream.shared.codec.image`).
+
+:func:`wall_task` is the chunk task of the one chunk runner (:mod:`.chunks`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.server.bake.wallplan import WallJob, texture_height
+from walkstream.server.sources.interior import InteriorScene
+from walkstream.shared.camera import mat4_bytes
+from walkstream.shared.codec.image import encode_image
+from walkstream.shared.gl import (
+    Framebuffer,
+    Releasable,
+    check_gl_error,
+    create_context,
+    release_objects,
+)
+from walkstream.shared.lighting import AMBIENT, LIGHT_DIRECTION
+from walkstream.shared.palette import material_rgb
+from walkstream.shared.walls import WallSide
+
+__all__ = ["SUPERSAMPLE", "WallRenderer", "off_axis", "release_wall_renderer", "wall_task"]
+
+SUPERSAMPLE = 2
+"""Rendered samples per texel along each axis (averaged)."""
+
+_FAR = 400.0
+
+_VERTEX_SHADER = """
+#version 330
+uniform mat4 u_view_proj;
+uniform vec3 u_light_dir;
+uniform float u_ambient;
+in vec3 in_position;
+in vec3 in_normal;
+in vec3 in_color;
+out vec3 v_lit;
+void main() {
+    gl_Position = u_view_proj * vec4(in_position, 1.0);
+    float diffuse = max(dot(normalize(in_normal), u_light_dir), 0.0);
+    v_lit = in_color * (u_ambient + (1.0 - u_ambient) * diffuse);
+}
+"""
+
+_FRAGMENT_SHADER = """
+#version 330
+uniform float u_hole;
+in vec3 v_lit;
+out vec4 f_color;
+void main() {
+    // an object crossing the wall: a transparent hole, so its geometry shows through the quad
+    f_color = u_hole > 0.5 ? vec4(0.0) : vec4(v_lit, 1.0);
+}
+"""
+
+
+def off_axis(eye: NDArray[np.float64], side: WallSide, far: float = _FAR) -> NDArray[np.float64]:
+    """``(4, 4)`` view-projection from ``eye`` ``(3,)`` through the side's quad: the
+    quad fills the image (``p0`` on the left, ``z1`` at the top), the near plane is
+    the wall's plane (what is in front of it is clipped)."""
+    u = np.array([*side.along, 0.0])
+    n = np.array([*side.normal, 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    p0 = np.array([*side.p0, 0.0])
+    near = float((p0 - eye) @ n)
+    left = float((p0 - eye) @ u)
+    right = left + side.length
+    bottom, top = side.z0 - float(eye[2]), side.z1 - float(eye[2])
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = u, up, -n
+    view[:3, 3] = -view[:3, :3] @ eye
+    proj = np.zeros((4, 4))
+    proj[0, 0] = 2 * near / (right - left)
+    proj[0, 2] = (right + left) / (right - left)
+    proj[1, 1] = 2 * near / (top - bottom)
+    proj[1, 2] = (top + bottom) / (top - bottom)
+    proj[2, 2] = -(far + near) / (far - near)
+    proj[2, 3] = -2 * far * near / (far - near)
+    proj[3, 2] = -1.0
+    out: NDArray[np.float64] = proj @ view
+    return out
+
+
+class WallRenderer(Releasable):
+    """Renders wall textures of one interior (see the module docstring)."""
+
+    def __init__(self, scene: InteriorScene, ctx: Any = None) -> None:
+        self._own_ctx = ctx is None
+        self.ctx = create_context() if ctx is None else ctx
+        self._objects: list[Any] = []
+        self._fbs: dict[tuple[int, int], Framebuffer] = {}
+        self._range: list[tuple[int, int, int]] = []  # (element id, first vertex, count)
+        pos, nor, col = [], [], []
+        first = 0
+        for e in scene.elements:
+            if len(e.triangles) == 0:
+                continue
+            tri = e.soup.astype(np.float64)
+            nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
+            pos.append(tri.reshape(-1, 3))
+            nor.append(np.repeat(nrm, 3, axis=0))
+            col.append(np.repeat(material_rgb(e.materials).astype(np.float32) / 255.0, 3, axis=0))
+            self._range.append((e.id, first, 3 * len(tri)))
+            first += 3 * len(tri)
+        verts = np.hstack([np.vstack(pos), np.vstack(nor), np.vstack(col)]).astype(np.float32) if pos else \
+            np.zeros((3, 9), np.float32)
+        light = np.asarray(LIGHT_DIRECTION, np.float64)
+        prog: Any = self.ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
+        self.prog = prog
+        self._objects.append(prog)
+        prog["u_light_dir"].value = tuple(float(v) for v in light / np.linalg.norm(light))
+        prog["u_ambient"].value = float(AMBIENT)
+        vbo = self.ctx.buffer(np.ascontiguousarray(verts).tobytes())
+        self._objects.append(vbo)
+        self.vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f 3f", "in_position", "in_normal", "in_color")])
+        self._objects.append(self.vao)
+
+    def render(self, side: WallSide, zone: int, width: int, exclude: Sequence[int] = ()) -> NDArray[np.uint8]:
+        """The premultiplied ``(height, width, 4) uint8`` texture of ``side``'s zone ``zone``
+        (row 0 at the top), the elements ``exclude`` as transparent holes."""
+        height = texture_height(side, width)
+        size = (width * SUPERSAMPLE, height * SUPERSAMPLE)
+        fb = self._fbs.get(size)
+        if fb is None:
+            fb = self._fbs[size] = Framebuffer(self.ctx, size)
+        fb.use()
+        fb.clear((0.0, 0.0, 0.0, 0.0))
+        self.ctx.enable(self.ctx.DEPTH_TEST)
+        self.ctx.disable(self.ctx.CULL_FACE)
+        self.prog["u_view_proj"].write(mat4_bytes(off_axis(side.sample_point(zone), side)))
+        skip = set(int(e) for e in exclude)
+        self.prog["u_hole"].value = 0.0
+        run_first = run_count = 0
+        for eid, first, count in self._range:
+            if eid in skip:
+                if run_count:
+                    self.vao.render(vertices=run_count, first=run_first)
+                run_first, run_count = first + count, 0
+                continue
+            if run_count == 0:
+                run_first = first
+            run_count += count
+        if run_count:
+            self.vao.render(vertices=run_count, first=run_first)
+        if skip:  # the crossing objects: holes in the texture
+            self.prog["u_hole"].value = 1.0
+            for eid, first, count in self._range:
+                if eid in skip:
+                    self.vao.render(vertices=count, first=first)
+        check_gl_error(self.ctx, "wall textures")
+        img = fb.read().astype(np.uint16)
+        n = SUPERSAMPLE * SUPERSAMPLE
+        total = np.full_like(img[::SUPERSAMPLE, ::SUPERSAMPLE], n // 2)
+        for i in range(SUPERSAMPLE):
+            for j in range(SUPERSAMPLE):
+                total += img[i::SUPERSAMPLE, j::SUPERSAMPLE]
+        out: NDArray[np.uint8] = (total // n).astype(np.uint8)
+        return out
+
+    def release(self) -> None:
+        """Free the GL objects (and the context when it made it)."""
+        for fb in self._fbs.values():
+            fb.release()
+        self._fbs.clear()
+        release_objects(self.ctx, self._objects, self._own_ctx)
+        self._objects = []
+
+
+_WORKER: dict[str, Any] = {}
+
+
+def wall_task(jobs: list[WallJob], scene: InteriorScene, key: str, codec: str) -> list[tuple[WallJob, tuple[int, bytes]]]:
+    """Render and encode textures (:data:`~.wallplan.WallJob` each): ``(job, (height, bytes))``
+    in order.  A worker keeps its renderer while ``key`` (the scene's) stays."""
+    if _WORKER.get("key") != key:
+        release_wall_renderer()
+        _WORKER["renderer"] = WallRenderer(scene)
+        _WORKER["key"] = key
+    r: WallRenderer = _WORKER["renderer"]
+    out = []
+    for job in jobs:
+        tid, row, zone, width, exclude = job
+        side = WallSide.from_row(list(row), f"texture {tid}")
+        img = r.render(side, zone, width, exclude)
+        out.append((job, (img.shape[0], encode_image(img, codec))))
+    return out
+
+
+def release_wall_renderer() -> None:
+    """Free this process's wall renderer (its GL context)."""
+    r = _WORKER.pop("renderer", None)
+    _WORKER.pop("key", None)
+    if r is not None:
+        r.release()

@@ -1,0 +1,235 @@
+"""Textured virtual walls (Ebbesmeyer): zones, their error bound and which texture a viewer sees.
+
+A virtual wall is a vertical quad the bake puts across an open room (a portal of kind
+``wall`` between two cells of one space, :mod:`walkstream.server.bake.rooms`).  Each
+*side* of it carries textures of what lies behind it, one per **zone**: the strip of
+floor in front of the wall whose viewers see that texture.  This module is the pure
+part both sides share: the error metric, the zone layout, the zone and weight of a
+viewer, and the texture's sampling point.
+
+The error metric (the paper's section 4, derived again).  A texture sampled from
+``B`` at distance ``x_s`` from the wall shows a point ``P`` behind it where the ray
+``B -> P`` meets the wall, at ``T``.  A viewer ``B'`` sees ``T`` instead of ``P``;
+the error is the angle ``P B' T``.  For ``B'`` moved by ``Δb`` along the wall, at
+distance ``x`` from it, and ``P`` at depth ``p`` behind the wall straight behind
+``B``, ``T`` is ``B``'s foot on the wall and ``P`` lies at lateral offset ``Δb`` and
+depth ``x + p`` from ``B'``: the error is
+``atan(Δb / x) - atan(Δb / (x + p))``, which grows with ``p`` to ``atan(Δb / x)``
+(``P`` far behind; the paper writes it with ``x_P`` the viewer's distance to ``P``
+and takes the point next to the wall, ``P_T = 0``, as the worst, but its own
+equation (2) shows the error grows with ``x_P``: the worst point is the far one).
+Both give the same bound: within ``Δb`` of the sampling line and at least
+``x_T = Δb / tan A`` from the wall (the paper's equation (3)) the error stays under
+``A``.  So a wall side of length ``L`` seen from ``x_T`` on needs
+``n = ceil(L / (2 x_T tan A))`` zones of width ``L / n`` (the paper's equation (4),
+``z_G = 2 Δb n_T``, solved for ``n_T``).  The same bound holds vertically: the
+texture is sampled at eye height, so a viewer ``Δz`` above or below it at distance
+``x`` errs by at most ``atan(|Δz| / x)``, and the texture is used only while that
+is under ``A`` (stairs, a gallery: geometry instead).  What the paper leaves out, a
+viewer nearer or farther than the sampling point seeing points far to the side, is
+not bounded by this metric; :func:`angular_error` computes any case exactly (the
+tests check the bound where it holds and measure the rest).
+
+Blend: nearer than ``x_T + blend`` the texture fades out linearly, reaching 0 at
+``x_T``; below ``x_T`` the wall is open (the next cell drawn as geometry).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from walkstream.shared.errors import InputError
+
+__all__ = [
+    "DEFAULT_WALL_ERROR_DEG",
+    "EYE_HEIGHT",
+    "WallSide",
+    "WallView",
+    "angular_error",
+    "decode_walls",
+    "wall_distance",
+    "zone_count",
+]
+
+DEFAULT_WALL_ERROR_DEG = 10.0
+"""The paper's angle of error (10 degrees: six textures per wall in its laboratory)."""
+
+EYE_HEIGHT = 1.6
+"""Height above the floor at which textures are sampled (a walking viewer's eye), metres."""
+
+
+def zone_count(length: float, x_t: float, alpha: float) -> int:
+    """Zones a wall side of ``length`` metres needs so that a viewer at least ``x_t``
+    from it errs by under ``alpha`` radians: ``ceil(length / (2 x_t tan alpha))``, at least 1."""
+    if not (length > 0 and x_t > 0 and 0 < alpha < math.pi / 2):
+        raise InputError(f"zone_count: need length, x_t > 0 and 0 < alpha < 90 deg (got {length}, {x_t}, {alpha})")
+    return max(1, math.ceil(length / (2.0 * x_t * math.tan(alpha)) - 1e-9))
+
+
+def wall_distance(half_width: float, alpha: float) -> float:
+    """The least distance from the wall at which a zone ``2 half_width`` wide keeps the
+    error under ``alpha`` radians: ``Δb / tan alpha`` (the paper's equation (3))."""
+    return half_width / math.tan(alpha)
+
+
+def angular_error(sample: ArrayLike, viewer: ArrayLike, point: ArrayLike, origin: ArrayLike, normal: ArrayLike) -> float:
+    """The angle (radians) between where ``viewer`` sees ``point`` and where it sees the
+    texture's picture of it: the ray ``sample -> point`` meets the wall plane (through
+    ``origin``, unit ``normal``) at ``T``; the answer is the angle ``point, viewer, T``.
+
+    All arguments are ``(3,)``; ``point`` must lie behind the plane seen from ``sample``.
+    """
+    s, v, p = (np.asarray(a, np.float64).reshape(3) for a in (sample, viewer, point))
+    o, n = np.asarray(origin, np.float64).reshape(3), np.asarray(normal, np.float64).reshape(3)
+    ds, dp = float((s - o) @ n), float((p - o) @ n)
+    if ds * dp >= 0:
+        raise InputError("angular_error: the point must lie behind the wall seen from the sample")
+    t = s + (p - s) * (ds / (ds - dp))
+    a, b = p - v, t - v
+    c = float(a @ b) / (float(np.linalg.norm(a)) * float(np.linalg.norm(b)))
+    return math.acos(max(-1.0, min(1.0, c)))
+
+
+@dataclass(frozen=True)
+class WallView:
+    """Where a viewer stands for one wall side: its ``zone`` (texture index),
+    ``distance`` in front of the wall (negative behind it), and ``weight``, the
+    texture's opacity (1: texture only, the cell behind not drawn; 0: geometry only;
+    between: the blend zone, both drawn)."""
+
+    zone: int
+    distance: float
+    weight: float
+
+
+@dataclass(frozen=True)
+class WallSide:
+    """One side of a virtual wall with its zones.
+
+    ``portal`` is the wall's portal id and ``side`` 0 for the side cell ``a`` sees, 1
+    for cell ``b``'s; ``p0``, ``p1`` ``(2,)`` its ends, ordered so that the hidden
+    space lies to the left of ``p0 -> p1`` seen from above (so the viewer, facing
+    the wall, has ``p0`` on the left); ``z0``,
+    ``z1`` its height range, ``floor`` the floor the eye height is measured from;
+    ``x_t`` the distance from which textures are used, ``blend`` the width of the
+    blend zone, ``depth`` how far its sampling points stand from the wall, ``alpha``
+    the error bound (radians), ``zones`` how many, ``textures`` their ids (``zones``
+    of them, or empty before the bake has made them).
+    """
+
+    portal: int
+    side: int
+    p0: tuple[float, float]
+    p1: tuple[float, float]
+    z0: float
+    z1: float
+    floor: float
+    x_t: float
+    blend: float
+    depth: float
+    alpha: float
+    zones: int
+    textures: tuple[int, ...] = ()
+
+    @property
+    def length(self) -> float:
+        """Length along the floor, metres."""
+        return math.hypot(self.p1[0] - self.p0[0], self.p1[1] - self.p0[1])
+
+    @property
+    def along(self) -> NDArray[np.float64]:
+        """``(2,)`` unit vector from ``p0`` to ``p1``."""
+        d = np.subtract(self.p1, self.p0).astype(np.float64)
+        out: NDArray[np.float64] = d / max(float(np.linalg.norm(d)), 1e-12)
+        return out
+
+    @property
+    def normal(self) -> NDArray[np.float64]:
+        """``(2,)`` unit normal pointing into the hidden space (to the left of ``p0 -> p1``)."""
+        u = self.along
+        return np.array([-u[1], u[0]])
+
+    def corners(self) -> NDArray[np.float64]:
+        """``(4, 3)`` the quad as the viewer sees it: bottom-left, bottom-right, top-right,
+        top-left (left is ``p0``)."""
+        return np.array([[*self.p0, self.z0], [*self.p1, self.z0], [*self.p1, self.z1], [*self.p0, self.z1]])
+
+    def zone_span(self, k: int) -> tuple[float, float]:
+        """Zone ``k``'s range along the wall, metres from ``p0``."""
+        w = self.length / self.zones
+        return k * w, (k + 1) * w
+
+    def sample_point(self, k: int) -> NDArray[np.float64]:
+        """``(3,)`` zone ``k``'s sampling point: its middle along the wall, ``depth`` in
+        front of it, at eye height above ``floor``."""
+        if not 0 <= k < self.zones:
+            raise InputError(f"wall {self.portal}/{self.side}: no zone {k} (it has {self.zones})")
+        t = (k + 0.5) * self.length / self.zones
+        xy = np.asarray(self.p0, np.float64) + self.along * t - self.normal * self.depth
+        return np.array([xy[0], xy[1], self.floor + EYE_HEIGHT])
+
+    def view(self, eye: ArrayLike) -> WallView:
+        """The zone, distance and texture weight for a viewer at ``eye`` ``(3,)``.
+
+        The zone is the one whose strip the viewer's foot on the wall line falls in
+        (clamped to the wall's ends; a viewer exactly on a border takes the higher
+        zone).  The weight is 0 nearer than ``x_t``, or behind the wall, or where the
+        eye is too far above or below eye height for the error bound
+        (``|dz| > distance tan alpha``); it rises linearly to 1 at ``x_t + blend``.
+        """
+        e = np.asarray(eye, np.float64).reshape(3)
+        rel = e[:2] - np.asarray(self.p0, np.float64)
+        t = float(rel @ self.along)
+        d = -float(rel @ self.normal)
+        w = self.length / self.zones
+        zone = min(self.zones - 1, max(0, int(math.floor(t / w)))) if w > 0 else 0
+        dz = abs(float(e[2]) - (self.floor + EYE_HEIGHT))
+        if d <= self.x_t or dz > d * math.tan(self.alpha):
+            return WallView(zone, d, 0.0)
+        weight = 1.0 if self.blend <= 0 else min(1.0, (d - self.x_t) / self.blend)
+        return WallView(zone, d, weight)
+
+    def to_row(self) -> list[float | int]:
+        """The side as one flat list (the store's and the wire's form; :meth:`from_row`)."""
+        return [self.portal, self.side, *self.p0, *self.p1, self.z0, self.z1, self.floor, self.x_t, self.blend,
+                self.depth, self.alpha, self.zones, *self.textures]
+
+    @classmethod
+    def from_row(cls, row: list[float | int] | tuple[float | int, ...], what: str = "wall") -> WallSide:
+        """A side from :meth:`to_row`'s list (:class:`InputError` naming ``what`` when malformed)."""
+        if len(row) < 14:
+            raise InputError(f"{what}: a wall row has at least 14 numbers, got {len(row)}")
+        try:
+            nums = [float(v) for v in row[:13]]
+            zones = int(row[13])
+            tex = tuple(int(v) for v in row[14:])
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{what}: a wall row holds numbers only ({exc})") from exc
+        if not all(math.isfinite(v) for v in nums) or zones < 1 or (tex and len(tex) != zones):
+            raise InputError(f"{what}: bad wall row (zones {zones}, {len(tex)} textures)")
+        return cls(int(nums[0]), int(nums[1]), (nums[2], nums[3]), (nums[4], nums[5]), nums[6], nums[7], nums[8],
+                   nums[9], nums[10], nums[11], nums[12], zones, tex)
+
+
+def decode_walls(body: bytes, what: str) -> tuple[WallSide, ...]:
+    """The wall sides of ``GET .../walls`` (msgpack ``{"sides": [row, ...]}``), bounded and
+    checked (:class:`~walkstream.shared.errors.CodecError` naming ``what``)."""
+    from walkstream.shared.codec.bounded import unpack_bounded
+    from walkstream.shared.errors import CodecError
+
+    obj = unpack_bounded(body, what, max_bytes=16 << 20, max_array_len=1 << 20, max_map_len=4, max_bin_len=0)
+    if not isinstance(obj, dict) or not isinstance(obj.get("sides"), list):
+        raise CodecError(f"{what}: expected a map with a list 'sides'")
+    out = []
+    for k, row in enumerate(obj["sides"]):
+        if not isinstance(row, list):
+            raise CodecError(f"{what}: sides[{k}] is not a list")
+        try:
+            out.append(WallSide.from_row(row, f"{what}: sides[{k}]"))
+        except InputError as exc:
+            raise CodecError(str(exc)) from None
+    return tuple(out)
