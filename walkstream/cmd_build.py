@@ -55,7 +55,12 @@ def cmd_generate_interior(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from walkstream.server.sources.hallgen import HALL_PRESETS, generate_hall
-    from walkstream.server.sources.interiorgen import PRESETS, InteriorPlan, write_interior, write_interior_doc
+    from walkstream.server.sources.interiorgen import (
+        PRESETS,
+        InteriorPlan,
+        write_interior,
+        write_interior_doc,
+    )
 
     if args.preset in HALL_PRESETS:
         if args.storeys is not None or args.size is not None:
