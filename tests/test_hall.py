@@ -142,3 +142,21 @@ def test_an_ifc_model_whose_one_space_is_an_open_hall(tmp_path: Path) -> None:
     # every furnishing element's triangles are in the hall's contents, with its floor and walls
     assert held >= sum(len(e.triangles) for e in furniture) + 4
     assert float(shapely.Polygon(hall.boundary).area) == pytest.approx(48.0 * 30.0, rel=0.01)
+
+
+def test_the_walk_across_a_lone_hall_keeps_clear_of_its_machines(tmp_path: Path) -> None:
+    from walkstream.server.bake.interior import furniture_footprints
+    from walkstream.server.sources.ifc import load_ifc
+
+    # the machines stand on the hall's middle line: the walk across must go beside them
+    src = open_hall_model(tmp_path / "hall.ifc", rows=1, columns=3)
+    scene = load_ifc(src)
+    feet = furniture_footprints(scene)
+    assert len(feet) == 3 * 3
+    summary = bake(src, tmp_path / "hall.db")
+    assert summary["tour"]["visited"] == 1
+    with SceneReader.open(tmp_path / "hall.db") as reader:
+        tour = RecordedPath.from_msgpack(reader.path_blob("tour"))
+    line = shapely.LineString(tour.xyz[:, :2])
+    assert line.length > 40.0
+    assert min(f.distance(line) for f in feet) >= CLEARANCE - 1e-6
