@@ -64,6 +64,7 @@ SCENES: tuple[str, ...] = ("hall", "city", "west-oakland", "village")
 WALL_ERRORS: tuple[float, ...] = (5.0, 10.0, 15.0, 20.0)
 _OSM = {"west-oakland": "west-oakland.osm", "village": "village-10.068_48.135.osm"}
 _BENCH_PATH = "bench"
+_ROOMS = ("interior", "crossing")
 
 
 def walls_support() -> tuple[bool, bool]:
@@ -147,7 +148,7 @@ def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path 
     """One table row from the pda replay's summary (and the gl one's)."""
     s = pda.summary
     f = _frames(reports[0])
-    interior = s.get("kind") in ("interior", "crossing")
+    interior = s.get("kind") in _ROOMS
     c = (s.get("truth") or {}).get("colour") or {}
     drawn = f.get("visible", np.zeros(0))
     cells = s.get("visible_cells_mean")
@@ -283,19 +284,31 @@ def run_walls_bench(
 
 
 def _f(v: Any, fmt: str, scale: float = 1.0) -> str:
-    return "—" if v is None else format(float(v) * scale, fmt)
+    width = int(fmt.split(".")[0] or 0)
+    return "—".rjust(width) if v is None else format(float(v) * scale, fmt)
 
 
 def format_walls_table(result: Mapping[str, Any]) -> str:
-    """The table (one line per scene and variant), the hall's frustum-alone figures and the notes."""
-    head = (f"{'scene':<13} {'variant':<20} {'tri/fr':>7} {'cells':>6} {'pda ms':>7} {'pda10%':>7} {'gl ms':>7} "
+    """The table (one line per scene and variant), the hall's frustum-alone figures and the notes.
+
+    Columns: ``tri/fr`` triangles per frame (pda, median); ``drawn`` cells drawn per frame
+    indoors, objects drawn as geometry outdoors (mean); ``pda ms`` and ``gl ms`` the
+    frame time (median), ``gl per`` the real frame period on ``gl``; ``pda10%`` and
+    ``gl10%`` frames within 10 % of 25 fps; ``fog m`` the budget's fog (median, pda);
+    ``err %`` the mean linear-RGB error against the full scene (median, % of full
+    scale), ``dE00`` the mean ΔE00 (median), ``over%`` frames with more than 0.5 % of
+    their pixels over ΔE00 2.3, ``fog%`` the mean share of pixels visibly wrong because
+    of the fog; ``cull%`` effective culling; ``tex kB`` and ``tex/wall`` the walls'
+    texture bytes and textures per wall.
+    """
+    head = (f"{'scene':<13} {'variant':<20} {'tri/fr':>7} {'drawn':>6} {'pda ms':>7} {'pda10%':>7} {'gl ms':>7} "
             f"{'gl per':>7} {'gl10%':>6} {'fog m':>6} {'err %':>6} {'dE00':>6} {'over%':>6} {'fog%':>6} "
             f"{'cull%':>6} {'tex kB':>7} {'tex/wall':>8}")
     lines = [head, "-" * len(head)]
     for r in result.get("rows", []):
         lines.append(
             f"{r['scene']:<13} {r['variant']:<20} {_f(r.get('triangles_median'), '7.0f')} "
-            f"{_f(r.get('cells_drawn_mean') if r.get('kind') != 'city' else r.get('objects_drawn_mean'), '6.1f')} "
+            f"{_f(r.get('cells_drawn_mean') if r.get('kind') in _ROOMS else r.get('objects_drawn_mean'), '6.1f')} "
             f"{_f(r.get('pda_frame_ms'), '7.1f')} {_f(r.get('pda_within_10pct'), '7.1f', 100)} "
             f"{_f(r.get('gl_frame_ms'), '7.1f')} {_f(r.get('gl_period_ms'), '7.1f')} {_f(r.get('gl_within_10pct'), '6.1f', 100)} "
             f"{_f(r.get('fog_m_median'), '6.1f')} {_f(r.get('colour_error_median'), '6.2f', 100)} "
