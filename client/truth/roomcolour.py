@@ -19,7 +19,8 @@ the client's picture
 
 Both are compared with :func:`~walkstream.client.truth.colour.compare_colour` (mean
 linear-RGB error, ΔE00, pixels over the visible threshold, PSNR).  Where the client's
-picture shows another thing than the full scene, the pixel's cause (an id cause of
+picture shows another thing than the full scene in another colour (the same colour is
+no loss: coincident surfaces tie in depth either way), the pixel's cause (an id cause of
 :data:`~walkstream.client.truth.compare.CAUSES`) is, in this order: ``fog`` when the
 full scene's surface there lies beyond the frame's fog distance (the budget's fog hid
 it); ``not_received`` for a part of a visible cell whose contents had not arrived, or
@@ -128,7 +129,10 @@ def room_colour(
         shown = t_idx >= 0
         ti = np.maximum(t_idx, 0)
         ci = np.maximum(c_idx, 0)
-        lacks = shown & ((c_idx < 0) | (ident[ti] != ident[ci]))
+        differ = np.any(t_rgb != c_rgb, axis=2)
+        # another thing in the same colour is no loss: coincident surfaces (a slab's top
+        # under a room's floor, a piece of wall in two cells) tie in depth either way
+        lacks = shown & differ & ((c_idx < 0) | (ident[ti] != ident[ci]))
         cause = np.full(t_idx.shape, -1, np.int64)
         if lacks.any():
             beyond = pixel_distance(t_depth, truth.proj) > note.fog
@@ -152,7 +156,7 @@ def room_colour(
         err = compare_colour(t_rgb, c_rgb, id_cause=cause, coarse=(lods >= 0) & (lods < 2))
         pixels = err.pixels
         missing = np.bincount(cause[cause >= 0], minlength=len(CAUSES)).astype(np.float64) / pixels
-        differing = float(np.count_nonzero(np.any(t_rgb != c_rgb, axis=2))) / pixels
+        differing = float(np.count_nonzero(differ)) / pixels
         rows.append((note.frame, note.t, differing, missing,
                      (err.mean_error, err.delta_e_mean, err.visible_share, err.psnr_db, err.cause_shares), note.fog))
         if worst is None or err.mean_error > worst.mean_error:
