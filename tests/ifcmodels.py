@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["IfcBuilder", "two_rooms_model", "l_room_model", "stair_model", "stairwell_model"]
+__all__ = ["IfcBuilder", "two_rooms_model", "l_room_model", "stair_model", "stairwell_model", "open_hall_model"]
 
 
 class IfcBuilder:
@@ -233,4 +233,32 @@ def stairwell_model(path: Path) -> Path:
     b.slab(u, rooms, 3.0)
     b.slab(u, [(0, 0), (9, 0), (9, 5), (0, 5)], 6.0)
     b.stair(g, (7.6, 0.4), (7.6, 4.6), 1.0, 0.0, 3.0)
+    return b.write(path)
+
+
+def open_hall_model(path: Path, length: float = 48.0, width: float = 30.0, rows: int = 3, columns: int = 6) -> Path:
+    """One storey whose one space is a large open hall (``length x width`` metres, 6 m
+    high) with machines in ``rows x columns`` islands (furnishing elements: a base, a
+    housing and a control desk each), an entrance door in the west wall."""
+    b = IfcBuilder((600_000.0, 5_340_000.0))
+    s = b.storey("hall", 0.0)
+    t, h = 0.3, 6.0
+    b.space("Production hall", s, [(0, 0), (length, 0), (length, width), (0, width)], 0.0, h)
+    outer = [(-t / 2, -t / 2), (length + t / 2, -t / 2), (length + t / 2, width + t / 2), (-t / 2, width + t / 2)]
+    for k in range(4):
+        w = b.wall(s, outer[k], outer[(k + 1) % 4], t, 0.0, h)
+        if k == 3:
+            b.opening(s, w, (-t / 2, 0.5 * width), (0, 1), 3.0, t + 0.02, 0.0, 4.0, "door")
+    b.slab(s, outer, 0.0)
+    b.slab(s, outer, h + 0.3, 0.3)
+    dx, dy = length / columns, width / rows
+    for r in range(rows):
+        for c in range(columns):
+            x, y = (c + 0.5) * dx, (r + 0.5) * dy
+            b.furniture(s, [(x - 1.5, y - 1.0), (x + 1.5, y - 1.0), (x + 1.5, y + 1.0), (x - 1.5, y + 1.0)], 0.0, 0.2,
+                        f"machine {r}.{c} base")
+            b.furniture(s, [(x - 1.3, y - 0.8), (x + 1.3, y - 0.8), (x + 1.3, y + 0.8), (x - 1.3, y + 0.8)], 0.2, 2.0,
+                        f"machine {r}.{c} housing")
+            b.furniture(s, [(x + 1.5, y - 0.4), (x + 2.0, y - 0.4), (x + 2.0, y + 0.4), (x + 1.5, y + 0.4)], 0.0, 1.4,
+                        f"machine {r}.{c} desk")
     return b.write(path)

@@ -82,8 +82,10 @@ def test_the_first_room_has_arrived_before_the_door(walked: ReplayResult) -> Non
 def test_the_truth_finds_no_culled_pixel(walked: ReplayResult) -> None:
     truth = walked.summary["truth"]
     assert set(truth) == {
-        "frames", "unknown", "culled_pixels", "culled_frames", "pinholes", "worst_frame", "refused_poses"
+        "frames", "unknown", "culled_pixels", "culled_frames", "pinholes", "worst_frame", "refused_poses", "colour"
     }
+    # the colour error against the full scene without fog, on the frames that knew their visible set
+    assert 0 < truth["colour"]["frames"] <= truth["frames"] - truth["unknown"]
     # poses with the eye within a hand of a wall are refused, not compared: a few at most
     assert truth["refused_poses"] <= 0.1 * truth["frames"]
     assert truth["frames"] - truth["unknown"] - truth["refused_poses"] >= 40

@@ -348,7 +348,9 @@ def test_replay_culling_switch_on_an_interior(office_db: Path, tmp_path: Path) -
         # the ground truth on an interior: no part culled shows (late cells are not culled)
         assert s["truth"]["frames"] >= 4 and s["truth"]["culled_pixels"] == 0, s["truth"]
         assert set(s["truth"]) == {"frames", "culled_pixels", "culled_frames", "pinholes", "refused_poses",
-                                   "fog_hidden_pct", "tightness_mean", "tightness_p95"}
+                                   "fog_hidden_pct", "tightness_mean", "tightness_p95", "colour"}
+        # the colour error against the full scene without fog, and its plot
+        assert s["truth"]["colour"]["frames"] >= 4 and "error.png" in (rep / "index.html").read_text()
         assert (rep / "interior.png").read_bytes()[:4] == b"\x89PNG" and "interior.png" in (rep / "index.html").read_text()
         assert (rep / "culled.png").read_bytes()[:4] == b"\x89PNG" and "culled.png" in (rep / "index.html").read_text()
         got[mode] = s["triangles_mean"]

@@ -18,6 +18,8 @@
     walkstream bench clusters DB [DB ...] [--min-objects 12] [--max-cells 64] [--plot clusters.png] [--json]
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
     walkstream bench portals [--presets paper paper10] [--frames N] [--truth N] [--no-gl] [--out DIR] [--json]
+    walkstream bench walls [--scenes hall,city,west-oakland,village] [--wall-errors 5,10,15,20] [--duration 60s]
+        [--gl-duration 20s] [--truth-every N] [--size WxH] [--no-gl] [--quick] [--out DIR] [--json]
 
 The benchmarks themselves are :mod:`walkstream.benchmarks`; this module parses their
 options, hands the replaying ones a way to run a replay
@@ -179,6 +181,38 @@ def cmd_bench_impostors(args: argparse.Namespace) -> int:
     if not rows:
         return 1  # each failed walk said why on stderr
     print(format_impostor_table(rows))
+    return 0
+
+
+def cmd_bench_walls(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench walls``."""
+    from walkstream.benchmarks.walls import SCENES, format_walls_table, run_walls_bench
+    from walkstream.cmd_replay import replay_with_options
+    from walkstream.shared.errors import InputError
+
+    scenes = [s.strip() for s in args.scenes.split(",") if s.strip()]
+    bad = [s for s in scenes if s not in SCENES]
+    if bad or not scenes:
+        raise InputError(f"--scenes {args.scenes!r}: choose from {', '.join(SCENES)}")
+    try:
+        errors = [float(v) for v in args.wall_errors.split(",") if v.strip()]
+    except ValueError:
+        raise InputError(f"--wall-errors {args.wall_errors!r}: expected degrees such as 5,10,15,20") from None
+    if not errors or any(not 0.5 <= a <= 45.0 for a in errors):
+        raise InputError(f"--wall-errors {args.wall_errors!r}: expected angles from 0.5 to 45 degrees")
+    quick = args.quick
+    result = run_walls_bench(
+        replay_with_options, out=Path(args.out), data=Path(args.data),
+        scenes=["hall"] if quick else scenes, wall_errors=[10.0] if quick else errors,
+        duration="4s" if quick else args.duration, gl_duration="3s" if quick else args.gl_duration,
+        truth_every=40 if quick else args.truth_every, size="160x120" if quick else args.size,
+        gl=not args.no_gl, quick=quick, frustum_frames=5 if quick else args.frames,
+    )
+    if args.json:
+        print(json.dumps(result, default=str))
+    else:
+        print(format_walls_table(result))
+        print(f"(plot: {Path(args.out) / 'bench_walls.png'}; rows: {Path(args.out) / 'bench_walls.json'})")
     return 0
 
 
@@ -627,6 +661,21 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--duration", help="limit every walk, e.g. 60s")
     b.add_argument("--out", default="out/bench-impostors", help="folder for the reports")
     b.set_defaults(func=cmd_bench_impostors)
+
+    b = besub.add_parser("walls", help="the open scenes (hall, city, West Oakland, village) with and without virtual walls")
+    b.add_argument("--scenes", default="hall,city,west-oakland,village", help="comma-separated scenes (default all four)")
+    b.add_argument("--wall-errors", default="5,10,15,20", help="wall errors A in degrees, one walls bake each (default 5,10,15,20)")
+    b.add_argument("--data", default="../shared/data/osm", help="folder of the OpenStreetMap extracts")
+    b.add_argument("--duration", default="60s", help="walk length of the pda replays (default 60s)")
+    b.add_argument("--gl-duration", default="20s", help="walk length of the real-clock gl replays (default 20s)")
+    b.add_argument("--truth-every", type=int, default=25, metavar="N", help="compare every Nth pda frame with the full scene (default 25; 0: never)")
+    b.add_argument("--size", default="640x480", help="frame size (default 640x480)")
+    b.add_argument("--frames", type=int, default=40, help="hall tour frames for frustum culling alone and drawing whole (default 40)")
+    b.add_argument("--no-gl", action="store_true", help="skip the gl replays and gl draws")
+    b.add_argument("--quick", action="store_true", help="a small hall only, short walks, a small frame (a test)")
+    b.add_argument("--json", action="store_true", help="print the rows as JSON")
+    b.add_argument("--out", default="out/bench-walls", help="folder for the databases, reports and plot")
+    b.set_defaults(func=cmd_bench_walls)
 
     b = besub.add_parser("budget", help="frame rate and polygon budget per device and target, with a tenfold cost step")
     b.add_argument("db", nargs="?", default="out/demo/city.db", help="scene database (default out/demo/city.db)")

@@ -3,7 +3,7 @@
 ::
 
     walkstream generate city --size 700 --seed 1 -o city.geojson
-    walkstream generate interior --storeys 3 --seed 1 [--size 60x20] [--preset paper] -o office.json
+    walkstream generate interior --storeys 3 --seed 1 [--size 60x20] [--preset paper|paper10|hall] -o office.json
     walkstream buildings stats FILE.geojson [--json]
     walkstream buildings render FILE.geojson --id ID -o lods.png [--gltf out.glb --lod 2 --all]
     walkstream grammar [FILE] [--check]
@@ -54,11 +54,27 @@ def cmd_generate_interior(args: argparse.Namespace) -> int:
     """Handler of ``walkstream generate interior``."""
     from dataclasses import replace
 
-    from walkstream.server.sources.interiorgen import PRESETS, InteriorPlan, write_interior
+    from walkstream.server.sources.hallgen import HALL_PRESETS, generate_hall
+    from walkstream.server.sources.interiorgen import (
+        PRESETS,
+        InteriorPlan,
+        write_interior,
+        write_interior_doc,
+    )
 
+    if args.preset in HALL_PRESETS:
+        if args.storeys is not None or args.size is not None:
+            raise WalkstreamError(f"--preset {args.preset}: a hall of fixed bays takes --seed only, not --storeys or --size")
+        hall = HALL_PRESETS[args.preset]
+        t0 = time.perf_counter()
+        summary = write_interior_doc(args.output, generate_hall(replace(hall, seed=hall.seed if args.seed is None else args.seed)))
+        summary["seconds"] = round(time.perf_counter() - t0, 2)
+        summary["output"] = str(args.output)
+        print_summary("interior", summary, args.json)
+        return 0
     if args.preset is not None:
         if args.preset not in PRESETS:
-            raise WalkstreamError(f"--preset {args.preset!r}: choose one of {', '.join(PRESETS)}")
+            raise WalkstreamError(f"--preset {args.preset!r}: choose one of {', '.join([*PRESETS, *HALL_PRESETS])}")
         plan = PRESETS[args.preset]
     else:
         plan = InteriorPlan()
@@ -180,7 +196,8 @@ def add_build_parsers(sub: Any) -> None:
     gi.add_argument("--storeys", type=int, help="storeys (default 3)")
     gi.add_argument("--seed", type=int, help="random seed (default 1); same arguments, same file")
     gi.add_argument("--size", help="LENGTHxWIDTH of the building in metres (default 60x20)")
-    gi.add_argument("--preset", help="a named plan: paper (the scale of Mulloni et al.'s model), paper10 (ten times its cells)")
+    gi.add_argument("--preset", help="a named plan: paper (the scale of Mulloni et al.'s model), paper10 (ten times its cells), "
+                    "hall (an open production hall of machines, robots and racks, 96 x 60 m in 40 bays)")
     gi.add_argument("-o", "--output", required=True, help="interior file to write (.json)")
     gi.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     gi.set_defaults(func=cmd_generate_interior)

@@ -180,12 +180,23 @@ def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | N
     if truth.error:
         parts.append(f"<p class='missing'>no ground truth: {html.escape(truth.error)}</p>")
     if truth.culled:
-        return "\n".join([*parts, _culled_section(out, s, truth)])
+        parts.append(_culled_section(out, s, truth))
+        if len(truth.log):  # the colour error against the full scene without fog
+            write_truth_csv(out / "truth.csv", truth.log)
+            pct = _pct
+            rows = _colour_rows(s.get("colour"), pct)
+            parts.append(
+                "<h3>Colour error against the full scene (no fog)</h3><table>"
+                + "".join(f"<tr><th>{html.escape(k)}</th><td class='v'>{html.escape(v)}</td></tr>" for k, v in rows)
+                + "</table><p>Per compared frame: <a href='truth.csv'>truth.csv</a></p>"
+            )
+            parts.append(_figures(["error.png"], _CAPTIONS))
+        if truth.colour_worst is not None:
+            parts.append(write_colour_worst(out, truth.colour_worst))
+        return "\n".join(parts)
     write_truth_csv(out / "truth.csv", truth.log)
 
-    def pct(v: Any) -> str:
-        return "n/a" if v is None else f"{100.0 * v:.3f} %"
-
+    pct = _pct
     rows = [
         ("frames compared", str(s.get("frames", 0))),
         ("differing pixels, mean", pct(s.get("differing_pixels_mean"))),
@@ -236,6 +247,10 @@ def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | N
     if truth.colour_worst is not None:
         parts.append(write_colour_worst(out, truth.colour_worst))
     return "\n".join(parts)
+
+
+def _pct(v: Any) -> str:
+    return "n/a" if v is None else f"{100.0 * v:.3f} %"
 
 
 def _colour_rows(c: Mapping[str, Any] | None, pct: Callable[[Any], str]) -> list[tuple[str, str]]:
@@ -387,7 +402,7 @@ def write_report(
 
         plot_interior(out / "interior.png", log.t - run.t0, dict(interior), f"{title}: cells, culling and fog")
         names.append("interior.png")
-    if truth is not None and not truth.culled:
+    if truth is not None and (not truth.culled or len(truth.log)):
         plot_error(out / "error.png", run, truth.log, f"{title}: frame rate and image error against the truth")
     truth_html = _truth_section(out, safe, truth)
     placed = _place_snapshots(out, snapshots)

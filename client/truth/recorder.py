@@ -25,7 +25,10 @@ figures:
   geometry refused (:mod:`walkstream.client.truth.solid`), with the fog hidden and the
   tightness for an interior, the frames that knew no visible set yet and the worst
   frame for a crossing; the worst frame as images beside its truth, with a mask of its
-  culled pixels by cell (:mod:`walkstream.client.truth.culledview`).
+  culled pixels by cell (:mod:`walkstream.client.truth.culledview`); and the colour
+  error of what the client drew against the full scene without fog, causes ``fog``
+  and ``culled`` among them, with the frame of the largest error as images
+  (:mod:`walkstream.client.truth.roomcolour`).
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ import httpx
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.client.report.colour import ColourLog, summarise_colour
 from walkstream.client.report.truth import TruthLog, summarise_truth
 from walkstream.client.truth.culled import (
     CROSSING_FIGURES,
@@ -58,6 +62,7 @@ from walkstream.client.truth.missing import (
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.picture import Overlay, forms_of
 from walkstream.client.truth.render import TruthRenderer
+from walkstream.client.truth.roomcolour import room_colour
 from walkstream.client.truth.scene import TruthScene, fetch_contents
 from walkstream.client.truth.solid import SolidProbe
 from walkstream.client.truth.standin import impostor_overlay
@@ -85,7 +90,8 @@ class TruthResult:
     """The scene's ``truth`` figures, the compared frames, and why there are none when the truth failed."""
 
     log: TruthLog
-    """One row per frame compared in colour (a city walk; empty otherwise)."""
+    """One row per frame compared in colour (a walk with rooms: against the full scene without fog,
+    :mod:`walkstream.client.truth.roomcolour`)."""
     worst: WorstFrame | None = None
     error: str | None = None
     frames: list[ComparedFrame] = field(default_factory=list, repr=False)
@@ -93,7 +99,7 @@ class TruthResult:
     figures: dict[str, Any] | None = None
     """The ``truth`` object of ``report.json`` (None when a walk with rooms found no truth)."""
     colour_worst: ColourWorst | None = None
-    """The compared frame with the largest colour error (a city walk's), as images."""
+    """The compared frame with the largest colour error, as images."""
     culled: list[CulledRow] = field(default_factory=list, repr=False)
     """A walk with rooms: each noted frame's culled pixels and pinholes (or its refusal)."""
     culled_worst: CulledFrame | None = None
@@ -284,13 +290,17 @@ class TruthRecorder:
             await ts.close()
             rooms = await fetch_contents(transport, base_url, scene, cells, clock, placements)
             truth = TruthRenderer(objects, self.size, rooms=rooms, fov_deg=self.fov_deg, near=self.near,
-                                  far=self.far, two_sided=True, ground_z=self.ground_z)
+                                  far=self.far, two_sided=True, ground_z=self.ground_z,
+                                  forms=forms_of(n for n in self.notes if n.pvs is not None))
             rows: list[CulledRow] = []
+            solid = SolidProbe(rooms)
             figures = culled_figures(truth, self.notes, CROSSING_FIGURES if objects else INTERIOR_FIGURES, progress,
-                                     solid=SolidProbe(rooms), rows=rows)
+                                     solid=solid, rows=rows)
             top = worst_row(rows)
             view = None if top is None else culled_view(truth, next(n for n in self.notes if n.frame == top.frame))
-            return TruthResult(TruthLog.empty(), figures=figures, culled=rows, culled_worst=view)
+            rc = room_colour(truth, self.notes, solid=solid)
+            figures["colour"] = summarise_colour(rc.log.colour or ColourLog.empty())
+            return TruthResult(rc.log, figures=figures, culled=rows, culled_worst=view, colour_worst=rc.worst)
         except (WalkstreamError, httpx.HTTPError) as exc:
             return self._failed(exc, cells, t_first_perfect)
         finally:

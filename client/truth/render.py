@@ -376,7 +376,8 @@ class TruthRenderer(Releasable):
         view : (4, 4) float
             The camera.
         only : (len(keys),) bool, optional
-            What to draw (default: everything).
+            What to draw (default: the full scene, every object at LOD2 and every room
+            part; the coarser ``forms`` only when flagged).
         fog_m : float
             Fragments farther from the eye are not drawn.
         proj : (4, 4) float, optional
@@ -418,7 +419,11 @@ class TruthRenderer(Releasable):
             ctx.front_face = "ccw"
             ctx.cull_face = "back"
         ctx.depth_func = "<"
-        flags = np.ones(len(self.keys), bool) if only is None else np.asarray(only, bool)
+        if only is None:  # the full scene: every object at LOD2 and every room part, no coarser form
+            flags = np.zeros(len(self.keys), bool)
+            flags[: self._forms0] = True
+        else:
+            flags = np.asarray(only, bool)
         for s, t in self._runs(flags):
             first, last = int(self._first[s]), int(self._stop[t - 1])
             if last > first:

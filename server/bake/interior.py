@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import shapely
 
 from walkstream.server.bake.chunks import run_chunks
 from walkstream.server.bake.digest import file_digest
@@ -149,10 +150,25 @@ def interior_parts(
     graph = SceneGraph(rooms=RoomGraph(layout.cells, layout.portals, layout.stairs)).rooms
     start = entrance_cell(layout.cells, layout.portals)
     try:
-        walk, coverage = tour(graph, start)
+        walk, coverage = tour(graph, start, obstacles=furniture_footprints(scene))
     except RouteError as exc:  # pragma: no cover - a tour always exists from a room cell
         raise InputError(f"{src}: no tour could be recorded ({exc})") from exc
     return InteriorParts(layout, {}, notes, graph, start, walk, coverage)
+
+
+def furniture_footprints(scene: InteriorScene, below: float = 2.0) -> list[shapely.Geometry]:
+    """The footprints (convex hulls, scene-local) of the furniture that stands on a floor
+    within ``below`` metres of it: what a walk across a lone room keeps clear of."""
+    floors = np.array([s.elevation for s in scene.storeys], np.float64)
+    out = []
+    for e in scene.elements:
+        if e.kind != "furniture" or len(e.vertices) == 0:
+            continue
+        z0 = float(e.vertices[:, 2].min())
+        if len(floors) and float(np.min(np.abs(z0 - floors))) > below:
+            continue
+        out.append(shapely.MultiPoint(np.asarray(e.vertices[:, :2], np.float64)).convex_hull)
+    return out
 
 
 def interior_settings(scene: InteriorScene, src: Path, cellmesh_version: int = 3) -> dict[str, Any]:

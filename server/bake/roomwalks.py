@@ -17,8 +17,10 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import shapely
 
 from walkstream.server.bake.roomnav import (
+    CLEARANCE,
     EYE_HEIGHT,
     INDOOR_SPEED_KMH,
     RoomGraph,
@@ -86,8 +88,50 @@ def rooms_along(graph: RoomGraph, floor: F64, step: float = 0.4) -> tuple[set[st
     return rooms, storeys
 
 
-def tour(graph: RoomGraph, start: int, speed_kmh: float = INDOOR_SPEED_KMH) -> tuple[RecordedPath, dict[str, Any]]:
+def _across(outline: F64, z: float, obstacles: Sequence[shapely.Geometry]) -> F64:
+    """A walk across a lone room and back, along its longer side: the line nearest the
+    middle that keeps :data:`~.roomnav.CLEARANCE` from every obstacle (furniture
+    footprints), else the line farthest from them.
+
+    Returns
+    -------
+    (3, 3) float64 floor points
+    """
+    a, b = outline.min(axis=0), outline.max(axis=0)
+    along = 0 if b[0] - a[0] >= b[1] - a[1] else 1
+    across = 1 - along
+    lo, hi = a[across] + CLEARANCE, b[across] - CLEARANCE
+    mid = 0.5 * (a[across] + b[across])
+    offsets = np.linspace(lo, hi, 41) if hi > lo else np.array([mid])
+    offsets = offsets[np.argsort(np.abs(offsets - mid), kind="stable")]
+    s0, s1 = a[along] + 0.4, b[along] - 0.4
+    best: tuple[float, float] | None = None
+    for c in offsets.tolist():
+        ends = np.zeros((2, 2))
+        ends[:, along] = (s0, s1)
+        ends[:, across] = c
+        gap = min((shapely.LineString(ends).distance(o) for o in obstacles), default=np.inf)
+        if gap >= CLEARANCE:
+            best = (gap, c)
+            break
+        if best is None or gap > best[0]:
+            best = (gap, c)
+    assert best is not None
+    pts = np.zeros((3, 3))
+    pts[:, along] = (s0, s1, s0)
+    pts[:, across] = best[1]
+    pts[:, 2] = z
+    return pts
+
+
+def tour(
+    graph: RoomGraph, start: int, speed_kmh: float = INDOOR_SPEED_KMH, *,
+    obstacles: Sequence[shapely.Geometry] = (),
+) -> tuple[RecordedPath, dict[str, Any]]:
     """The ``tour`` walk from cell ``start`` (see the module docstring).
+
+    ``obstacles`` (furniture footprints, scene-local) keep a lone room's walk across it
+    clear of them (:data:`~.roomnav.CLEARANCE`): a single open hall full of machines.
 
     Returns
     -------
@@ -137,10 +181,7 @@ def tour(graph: RoomGraph, start: int, speed_kmh: float = INDOOR_SPEED_KMH) -> t
     if len(floor) < 2:
         # one room and nowhere to go: walk across it and back
         only = graph.cells[start]
-        a, b = only.outline.min(axis=0), only.outline.max(axis=0)
-        mid = 0.5 * (a + b)
-        z = only.zmin
-        floor = np.array([[a[0] + 0.4, mid[1], z], [b[0] - 0.4, mid[1], z], [a[0] + 0.4, mid[1], z]])
+        floor = _across(only.outline, only.zmin, obstacles)
     path = walk_path(TOUR_NAME, floor, speed_kmh, EYE_HEIGHT)
     visited.discard("")
     unreachable = sorted(names[r] for r in set(room_cells) - reachable)

@@ -91,6 +91,7 @@ _MAX_BYTES = 512 << 20
 MAX_STOREY_HEIGHT = 100.0
 MAX_EXTENT = 10_000.0
 _FABRIC = {"chair", "sofa", "bench"}
+_METAL = {"machine", "robot"}
 
 
 def is_interior_file(path: str | os.PathLike[str]) -> bool:
@@ -329,7 +330,8 @@ def load_interior_dict(doc: Any, name: str = "interior", label: str = "interior"
         if fkind not in FURNITURE_KINDS:
             raise SourceError(f"{what}: kind must be one of {', '.join(FURNITURE_KINDS)}, got {f.get('kind')!r}")
         rows = furniture_boxes(fkind, _pt(f.get("at"), what) - origin, _num(f.get("yaw", 0.0), what), floor(k))
-        mat = _MAT["fabric"] if fkind in _FABRIC else _MAT["fixture"] if fkind == "plant" else _MAT["furniture"]
+        mat = (_MAT["fabric"] if fkind in _FABRIC else _MAT["metal"] if fkind in _METAL
+               else _MAT["fixture"] if fkind == "plant" else _MAT["furniture"])
         b.boxes(str(f.get("id")), "furniture", f"{fkind} {f.get('id')}", rows, mat)
     return InteriorScene(
         name=str(doc.get("name") or name),

@@ -52,6 +52,7 @@ __all__ = [
     "PRESETS",
     "generate_interior",
     "write_interior",
+    "write_interior_doc",
     "interior_summary",
 ]
 
@@ -340,7 +341,12 @@ def write_interior(path: str | os.PathLike[str], plan: InteriorPlan) -> dict[str
     dict
         :func:`interior_summary` of the written document.
     """
-    doc = generate_interior(plan)
+    return write_interior_doc(path, generate_interior(plan))
+
+
+def write_interior_doc(path: str | os.PathLike[str], doc: dict[str, Any]) -> dict[str, Any]:
+    """Write a generated interior document (an office's or a hall's) as compact JSON (via a
+    temporary file) and return its :func:`interior_summary`."""
     dest = Path(path)
     tmp = dest.with_name(dest.name + ".tmp")
     try:

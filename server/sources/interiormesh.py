@@ -270,8 +270,80 @@ _FURNITURE: dict[str, tuple[tuple[float, float, float], list[tuple[float, ...]]]
         (0.12, 0.12, 0.38, 0.38, 1.3, 1.5),
     ]),
 }
+
+
+def _cylinder(cx: float, cy: float, r: float, z0: float, z1: float, n: int = 6) -> list[tuple[float, ...]]:
+    """A round post as ``n`` boxes turned about its axis (a ``2n``-sided star of faces):
+    seen from anywhere it is round enough, and it is made of boxes like everything here."""
+    w = 2.0 * r * math.tan(math.pi / (2 * n))
+    return [(cx - r, cy - 0.5 * w, cx + r, cy + 0.5 * w, z0, z1, math.pi * q / n) for q in range(n)]
+
+
+def _machine() -> tuple[tuple[float, float, float], list[tuple[float, ...]]]:
+    """A machine tool (a machining centre): housing, door, spindle, table, control panel, chip conveyor."""
+    p: list[tuple[float, ...]] = [
+        (0.0, 0.0, 2.4, 1.8, 0.0, 0.15),  # plinth
+        (0.0, 0.0, 0.06, 1.8, 0.15, 2.2), (1.74, 0.0, 1.8, 1.8, 0.15, 2.2),  # side walls
+        (0.0, 1.74, 1.8, 1.8, 0.15, 2.2), (0.0, 0.0, 1.8, 1.8, 2.2, 2.26),  # back, roof
+        (0.06, 0.0, 1.74, 0.06, 0.15, 0.9), (0.06, 0.0, 1.74, 0.06, 1.9, 2.2),  # front below and above the door
+        (0.06, -0.04, 0.12, 0.0, 0.9, 1.9), (1.68, -0.04, 1.74, 0.0, 0.9, 1.9),  # door frame
+        (0.9, -0.06, 0.94, -0.02, 1.2, 1.6),  # door handle
+        (0.3, 0.6, 1.5, 1.4, 0.15, 0.85), (0.25, 0.55, 1.55, 1.45, 0.85, 0.9),  # bed and table
+        (0.7, 1.2, 1.1, 1.6, 1.5, 2.15),  # spindle head
+        (1.8, 0.0, 2.4, 1.8, 0.15, 1.6),  # cabinet beside it
+        (1.85, -0.3, 2.35, 0.0, 1.0, 1.8),  # control panel
+    ]
+    p += [(0.3 + 0.2 * q, 0.65, 0.34 + 0.2 * q, 1.35, 0.9, 0.93) for q in range(6)]  # T-slots
+    p += _cylinder(0.9, 1.0, 0.08, 1.1, 1.5, 6)  # spindle
+    p += _cylinder(0.9, 1.0, 0.03, 0.95, 1.1, 4)  # tool
+    p += [(1.9 + 0.1 * (q % 4), -0.34, 1.96 + 0.1 * (q % 4), -0.3, 1.1 + 0.15 * (q // 4), 1.16 + 0.15 * (q // 4))
+          for q in range(16)]  # buttons
+    p += [(1.8, 0.2 + 0.1 * q, 1.83, 0.25 + 0.1 * q, 0.4, 1.4) for q in range(12)]  # vents
+    p += [(0.1 + 0.17 * q, 1.8, 0.25 + 0.17 * q, 1.85 + 0.03 * q, 0.15 + 0.05 * q, 0.3 + 0.05 * q)
+          for q in range(9)]  # chip conveyor
+    return (2.4, 1.8, 2.26), p
+
+
+def _robot() -> tuple[tuple[float, float, float], list[tuple[float, ...]]]:
+    """An industrial robot on a pedestal, its arm reaching over a pallet, behind a low fence."""
+    p: list[tuple[float, ...]] = []
+    p += _cylinder(0.6, 0.6, 0.3, 0.0, 0.6, 8)  # pedestal
+    p += _cylinder(0.6, 0.6, 0.25, 0.6, 0.9, 8)  # turret
+    p += [(0.45, 0.45, 0.75, 0.75, 0.9, 1.2)]  # shoulder
+    p += [(0.55 + 0.05 * q, 0.52, 0.7 + 0.05 * q, 0.68, 1.2 + 0.12 * q, 1.35 + 0.12 * q) for q in range(7)]  # upper arm
+    p += _cylinder(0.95, 0.6, 0.1, 1.95, 2.15, 6)  # elbow
+    p += [(0.95 + 0.08 * q, 0.55, 1.05 + 0.08 * q, 0.65, 2.0 - 0.1 * q, 2.1 - 0.1 * q) for q in range(5)]  # forearm
+    p += _cylinder(1.35, 0.6, 0.05, 1.45, 1.65, 6)  # wrist
+    p += [(1.3, 0.55, 1.32, 0.65, 1.3, 1.45), (1.38, 0.55, 1.4, 0.65, 1.3, 1.45)]  # gripper fingers
+    p += [(0.0 + 0.3 * q, 0.0, 0.04 + 0.3 * q, 0.04, 0.0, 1.0) for q in range(5)]  # fence posts
+    p += [(0.0, 0.0, 1.24, 0.03, 0.3 + 0.3 * q, 0.33 + 0.3 * q) for q in range(3)]  # fence rails
+    return (1.25, 1.25, 2.2), p
+
+
+def _rack() -> tuple[tuple[float, float, float], list[tuple[float, ...]]]:
+    """A pallet rack: three bays, four levels, a pallet with goods on most places."""
+    p: list[tuple[float, ...]] = []
+    for q in range(4):
+        x = 0.8 * q - (0.08 if q == 3 else 0.0)
+        p += [(x, 0.0, x + 0.08, 0.08, 0.0, 3.0), (x, 0.92, x + 0.08, 1.0, 0.0, 3.0)]  # uprights
+        p += [(x + 0.02, 0.08, x + 0.06, 0.92, 0.5 + 0.8 * k, 0.53 + 0.8 * k) for k in range(3)]  # braces
+    for k in range(4):
+        z = 0.8 * k
+        p += [(0.0, 0.0, 2.4, 0.06, z + 0.08, z + 0.16), (0.0, 0.94, 2.4, 1.0, z + 0.08, z + 0.16)]  # beams
+        for b in range(3):
+            if (k + b) % 5 == 4:
+                continue  # an empty place
+            x = 0.8 * b + 0.1
+            p += [(x, 0.05, x + 0.6, 0.95, z + 0.16, z + 0.3)]  # pallet
+            p += [(x + 0.05, 0.1, x + 0.3, 0.5, z + 0.3, z + 0.55), (x + 0.32, 0.1, x + 0.55, 0.9, z + 0.3, z + 0.7),
+                  (x + 0.05, 0.52, x + 0.3, 0.9, z + 0.3, z + 0.6)]  # goods
+    return (2.4, 1.0, 3.0), p
+
+
+_FURNITURE |= {"machine": _machine(), "robot": _robot(), "rack": _rack()}
 FURNITURE_KINDS = tuple(sorted(_FURNITURE))
-"""The furniture a generated interior may place."""
+"""The furniture a generated interior may place (an office's, and a production hall's
+machine tools, robots and pallet racks)."""
 
 
 def furniture_boxes(kind: str, at: ArrayLike, yaw: float, z0: float) -> F64:
@@ -281,7 +353,8 @@ def furniture_boxes(kind: str, at: ArrayLike, yaw: float, z0: float) -> F64:
     floor it stands on.
     """
     (sx, sy, _), parts = _FURNITURE[kind]
-    p = np.asarray(parts, dtype=np.float64)
+    # a part may carry a seventh number: its own turn about its centre (a round post's boxes)
+    p = np.array([(*q, 0.0) if len(q) == 6 else q for q in parts], dtype=np.float64)
     c, s = math.cos(yaw), math.sin(yaw)
     lx = 0.5 * (p[:, 0] + p[:, 2]) - 0.5 * sx
     ly = 0.5 * (p[:, 1] + p[:, 3]) - 0.5 * sy
@@ -289,7 +362,7 @@ def furniture_boxes(kind: str, at: ArrayLike, yaw: float, z0: float) -> F64:
     cx = x0 + c * lx - s * ly
     cy = y0 + s * lx + c * ly
     return np.column_stack(
-        [cx, cy, p[:, 2] - p[:, 0], p[:, 3] - p[:, 1], np.full(len(p), yaw), z0 + p[:, 4], z0 + p[:, 5]]
+        [cx, cy, p[:, 2] - p[:, 0], p[:, 3] - p[:, 1], yaw + p[:, 6], z0 + p[:, 4], z0 + p[:, 5]]
     )
 
 

@@ -1,0 +1,352 @@
+"""``walkstream bench walls``: the open scenes with and without textured virtual walls.
+
+Ebbesmeyer's virtual walls cut an open space into cells and carry what lies behind a
+wall as its texture.  This bench measures the scenes they are for, on the same walks
+with and without walls:
+
+- ``hall``: the generated production hall (``walkstream generate interior --preset
+  hall``, :mod:`~walkstream.server.sources.hallgen`), its ``tour``;
+- ``city``: the generated city (700 m, street cells), its ``SE`` walk (past its squares);
+- ``west-oakland`` and ``village``: the OpenStreetMap extracts of the data folder, street
+  cells, the longest walk that does not repeat itself
+  (:func:`~walkstream.server.bake.walks.longest_walk`).
+
+Each scene is baked once into ``--out`` (reused when there) and replayed twice per
+variant at 56 kbit/s, 200 ms, 25 fps: on the ``pda`` cost model (simulated clock, every
+``--truth-every``-th frame compared with the full scene, the colour error of
+:mod:`walkstream.client.truth.roomcolour` indoors and :mod:`walkstream.client.truth.missing`
+outdoors) and on ``gl`` (real clock: frames drawn by moderngl and timed, the real frame
+period).  Per row: triangles and cells drawn per frame, the frame time on ``gl`` and on
+``pda`` (medians), the frames within 10 % of 25 fps, the fog distance the budget sets
+(median, indoors), the colour error against the full scene (median mean linear-RGB
+error, ΔE00, frames with more than 0.5 % of their pixels over ΔE00 2.3, the share of the
+pixels visibly wrong because of the fog), the effective culling (1 - objects drawn as
+geometry per frame / objects in the scene; indoors cells), and for walls texture bytes,
+texture memory and textures per wall (from the replay's ``walls`` summary).
+
+Variants: ``no walls`` always.  A variant with walls needs a bake that places them
+(``BakeSettings.virtual_walls``) and a database whose features name them; then one
+database per wall error ``A`` (``--wall-errors``, degrees) is baked and replayed with
+walls on, and the no-walls row of the same database (``ReplayConfig.virtual_walls``
+off) is the baseline.  Until then each scene's walls row says why there is none.
+
+For the hall, the triangles per frame of **frustum culling alone** and of drawing the
+whole hall are measured on the tour's frames too
+(:func:`~walkstream.benchmarks.portals.portal_figures`: cells behind portals in the
+frustum, no fog; every part), with their ``gl`` and ``pda`` frame times: the issue's
+"5 times fewer than frustum culling alone" is against the first, "drawing all of it
+misses the targets" the second.
+
+``--quick`` (for a test): a hall of two bays only, short walks, a small frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from walkstream.shared.errors import WalkstreamError
+
+__all__ = ["SCENES", "WALL_ERRORS", "run_walls_bench", "format_walls_table", "plot_walls", "walls_support"]
+
+Replayer = Callable[[str, Mapping[str, Any], str], Any]
+
+#: The scenes, in table order.
+SCENES: tuple[str, ...] = ("hall", "city", "west-oakland", "village")
+#: The wall errors A (degrees) the paper's question asks about: 10 good, 15 the limit.
+WALL_ERRORS: tuple[float, ...] = (5.0, 10.0, 15.0, 20.0)
+_OSM = {"west-oakland": "west-oakland.osm", "village": "village-10.068_48.135.osm"}
+_BENCH_PATH = "bench"
+_ROOMS = ("interior", "crossing")
+
+
+def walls_support() -> tuple[bool, bool]:
+    """``(bake, replay)``: whether this walkstream's bake places virtual walls
+    (``BakeSettings.virtual_walls``) and its replay can switch them (``ReplayConfig.virtual_walls``)."""
+    from walkstream.client.config import ReplayConfig
+    from walkstream.server.bake import BakeSettings
+
+    bake = "virtual_walls" in {f.name for f in dataclasses.fields(BakeSettings)}
+    play = "virtual_walls" in {f.name for f in dataclasses.fields(ReplayConfig)}
+    return bake, play
+
+
+def _has_walls(db: Path) -> bool:
+    from walkstream.server.store import SceneReader
+
+    reader = SceneReader.open(db)
+    try:
+        features = reader.summary().get("features") or []
+    finally:
+        reader.close()
+    return any("wall" in str(f) for f in features)
+
+
+def _bake_scene(name: str, out: Path, data: Path, quick: bool, settings: dict[str, Any], tag: str = "") -> tuple[Path, str]:
+    """The scene's database (baked into ``out`` unless there) and the path to replay."""
+    from walkstream.server.bake import BakeSettings, bake
+    from walkstream.server.bake.walks import SE_SPEED_KMH, longest_walk
+    from walkstream.server.store import SceneReader, write_path
+
+    db = out / f"{name}{tag}.db"
+    if name == "hall":
+        from walkstream.server.sources.hallgen import HALL_PRESETS, HallPlan, generate_hall
+        from walkstream.server.sources.interiorgen import write_interior_doc
+
+        src = out / "hall.json"
+        if not src.exists():
+            plan = HallPlan(columns=2, rows=1, side_depth=0.0, seed=2) if quick else HALL_PRESETS["hall"]
+            write_interior_doc(src, generate_hall(plan))
+        path = "tour"
+    elif name == "city":
+        from walkstream.server.sources.citygen import write_city
+
+        src = out / "city.geojson"
+        if not src.exists():
+            write_city(src, 700.0, 1)
+        path = "SE"
+    elif name in _OSM:
+        src = data / _OSM[name]
+        if not src.exists():
+            raise WalkstreamError(f"{src}: extract not found (see {data / 'README.md'})")
+        path = _BENCH_PATH
+    else:
+        raise WalkstreamError(f"bench walls: unknown scene {name!r}; choose from {', '.join(SCENES)}")
+    if not db.exists():
+        print(f"  baking {db.name} ...", file=sys.stderr, flush=True)
+        cells = {} if name == "hall" else {"cells": "street"}
+        bake(src, db, settings=BakeSettings(**(cells | settings)))
+        if path == _BENCH_PATH:
+            reader = SceneReader.open(db)
+            try:
+                walk = longest_walk(reader.cells(), SE_SPEED_KMH, _BENCH_PATH)
+            finally:
+                reader.close()
+            if walk is None:
+                raise WalkstreamError(f"{db}: no walk of two cells or more in its street cells")
+            write_path(db, _BENCH_PATH, replace(walk, name=_BENCH_PATH).to_msgpack())
+    return db, path
+
+
+def _frames(report: Path) -> dict[str, np.ndarray]:
+    import csv
+
+    with open(report / "frames.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    keys = rows[0].keys() if rows else ()
+    return {k: np.array([float(r[k] or "nan") for r in rows]) for k in keys}
+
+
+def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path | None], objects: int) -> dict[str, Any]:
+    """One table row from the pda replay's summary (and the gl one's)."""
+    s = pda.summary
+    f = _frames(reports[0])
+    interior = s.get("kind") in _ROOMS
+    c = (s.get("truth") or {}).get("colour") or {}
+    drawn = f.get("visible", np.zeros(0))
+    cells = s.get("visible_cells_mean")
+    in_scene = s.get("cells_in_scene") if interior else objects
+    walls = s.get("walls") or {}
+    row: dict[str, Any] = {
+        "scene": scene,
+        "variant": variant,
+        "kind": s.get("kind"),
+        "frames": s.get("frames"),
+        "triangles_median": float(np.median(f["triangles"])) if len(f.get("triangles", ())) else None,
+        "triangles_mean": s.get("triangles_mean"),
+        "cells_drawn_mean": cells,
+        "objects_drawn_mean": float(drawn.mean()) if len(drawn) else None,
+        "pda_frame_ms": 1e3 * float(np.median(f["frame_time"])) if len(f.get("frame_time", ())) else None,
+        "pda_within_10pct": s.get("fps_within_10pct_ratio"),
+        "fog_m_median": s.get("fog_m_median"),
+        "colour_error_median": (c.get("mean_error") or {}).get("median"),
+        "delta_e_median": (c.get("delta_e_mean") or {}).get("median"),
+        "frames_over_visible": c.get("frames_over_visible_ratio"),
+        "fog_visible_share": (c.get("causes") or {}).get("fog"),
+        "compared_frames": c.get("frames"),
+        "effective_culling": (1.0 - float(cells if interior else drawn.mean()) / in_scene)
+        if in_scene and (cells is not None if interior else len(drawn)) else None,
+        "texture_bytes": walls.get("texture_bytes", 0),
+        "texture_memory_bytes": walls.get("texture_memory_bytes", 0),
+        "textures_per_wall": walls.get("textures_per_wall"),
+        "perfect_frame_ratio": s.get("perfect_frame_ratio"),
+    }
+    if gl is not None and reports[1] is not None:
+        g = _frames(reports[1])
+        period = np.diff(g["t"]) if len(g.get("t", ())) > 1 else np.zeros(0)
+        row |= {
+            "gl_frame_ms": 1e3 * float(np.median(g["frame_time"])) if len(g.get("frame_time", ())) else None,
+            "gl_period_ms": 1e3 * float(np.median(period)) if len(period) else None,
+            "gl_within_10pct": gl.summary.get("fps_within_10pct_ratio"),
+            "gl_triangles_median": float(np.median(g["triangles"])) if len(g.get("triangles", ())) else None,
+            "gl_fog_m_median": gl.summary.get("fog_m_median"),
+        }
+    return row
+
+
+def _objects(db: Path) -> int:
+    from walkstream.server.store import SceneReader
+
+    reader = SceneReader.open(db)
+    try:
+        return int(reader.summary().get("objects") or 0)
+    finally:
+        reader.close()
+
+
+def run_walls_bench(
+    replay: Replayer,
+    *,
+    out: Path,
+    data: Path,
+    scenes: Sequence[str] = SCENES,
+    wall_errors: Sequence[float] = WALL_ERRORS,
+    duration: str = "60s",
+    gl_duration: str = "20s",
+    truth_every: int = 25,
+    size: str = "640x480",
+    gl: bool = True,
+    quick: bool = False,
+    frustum_frames: int = 40,
+) -> dict[str, Any]:
+    """Bake and replay every scene with and without walls (module docstring).
+
+    Returns ``{"rows": [...], "frustum": {...} or None, "notes": [...]}`` and writes
+    ``bench_walls.json`` and ``bench_walls.png`` into ``out``.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    can_bake, can_play = walls_support()
+    rows: list[dict[str, Any]] = []
+    notes: list[str] = []
+    frustum: dict[str, Any] | None = None
+    link = {"bandwidth": "56kbit", "rtt": "200ms", "fps": 25.0}
+    for scene in scenes:
+        print(f"{scene}:", file=sys.stderr, flush=True)
+        db, path = _bake_scene(scene, out, data, quick, {})
+        variants: list[tuple[str, Path, dict[str, Any]]] = [
+            ("no walls", db, {"virtual_walls": False} if can_play else {})
+        ]
+        if not can_bake:
+            notes.append(f"{scene}: no walls in this database (this walkstream's bake places no virtual walls)")
+        else:
+            for a in wall_errors:
+                wdb, _ = _bake_scene(scene, out, data, quick, {"virtual_walls": True, "wall_error": float(a)},
+                                     tag=f"-walls-{a:g}")
+                if not _has_walls(wdb):
+                    notes.append(f"{scene} A={a:g}: no walls in this database (the bake placed none)")
+                    continue
+                variants.append((f"walls A={a:g}", wdb, {"virtual_walls": True} if can_play else {}))
+                if can_play:
+                    variants.append((f"no walls (A={a:g} db)", wdb, {"virtual_walls": False}))
+        objects = _objects(db)
+        for variant, vdb, extra in variants:
+            tag = f"{scene}-{variant}".replace(" ", "-").replace("(", "").replace(")", "").replace("=", "")
+            rep_pda = out / f"{tag}-pda"
+            opts = {"path": path, "device": "pda", "clock": "sim", "duration": duration, "size": size,
+                    "report": str(rep_pda)} | link | extra | ({"truth_every": truth_every} if truth_every else {})
+            print(f"  {variant}: pda ...", file=sys.stderr, flush=True)
+            pda = replay(str(vdb), opts, f"{scene}, {variant}, pda")
+            g = None
+            rep_gl = None
+            if gl:
+                rep_gl = out / f"{tag}-gl"
+                gopts = {"path": path, "device": "gl", "clock": "real", "duration": gl_duration, "size": size,
+                         "report": str(rep_gl)} | link | extra
+                print(f"  {variant}: gl (real clock) ...", file=sys.stderr, flush=True)
+                g = replay(str(vdb), gopts, f"{scene}, {variant}, gl")
+            rows.append(_row(scene, variant, pda, g, (rep_pda, rep_gl), objects))
+        if scene == "hall":
+            from walkstream.benchmarks.portals import portal_figures
+
+            w, h = (int(v) for v in size.lower().split("x"))
+            fig = portal_figures(db, frames=frustum_frames, step_s=2.0, size=(w, h), gl=gl)
+            frustum = {
+                "frames": fig["frames"],
+                "triangles_in_hall": fig["triangles"],
+                "modes": {m: {"triangles_median": fig["modes"][m]["tris"]["median"],
+                              "cells_median": fig["modes"][m]["cells"]["median"],
+                              "pda_ms_median": fig["modes"][m]["pda_ms"]["median"],
+                              "gl_ms_median": fig["modes"][m]["gl_ms"]["median"] if gl else None}
+                          for m in ("portals", "frustum", "none")},
+            }
+    result = {"rows": rows, "frustum": frustum, "notes": notes, "walls_support": {"bake": can_bake, "replay": can_play}}
+    (out / "bench_walls.json").write_text(json.dumps(result, indent=2, default=str))
+    if rows:
+        plot_walls(out / "bench_walls.png", rows)
+    return result
+
+
+def _f(v: Any, fmt: str, scale: float = 1.0) -> str:
+    width = int(fmt.split(".")[0] or 0)
+    return "—".rjust(width) if v is None else format(float(v) * scale, fmt)
+
+
+def format_walls_table(result: Mapping[str, Any]) -> str:
+    """The table (one line per scene and variant), the hall's frustum-alone figures and the notes.
+
+    Columns: ``tri/fr`` triangles per frame (pda, median); ``drawn`` cells drawn per frame
+    indoors, objects drawn as geometry outdoors (mean); ``pda ms`` and ``gl ms`` the
+    frame time (median), ``gl per`` the real frame period on ``gl``; ``pda10%`` and
+    ``gl10%`` frames within 10 % of 25 fps; ``fog m`` the budget's fog (median, pda);
+    ``err %`` the mean linear-RGB error against the full scene (median, % of full
+    scale), ``dE00`` the mean ΔE00 (median), ``over%`` frames with more than 0.5 % of
+    their pixels over ΔE00 2.3, ``fog%`` the mean share of pixels visibly wrong because
+    of the fog; ``cull%`` effective culling; ``tex kB`` and ``tex/wall`` the walls'
+    texture bytes and textures per wall.
+    """
+    head = (f"{'scene':<13} {'variant':<20} {'tri/fr':>7} {'drawn':>6} {'pda ms':>7} {'pda10%':>7} {'gl ms':>7} "
+            f"{'gl per':>7} {'gl10%':>6} {'fog m':>6} {'err %':>6} {'dE00':>6} {'over%':>6} {'fog%':>6} "
+            f"{'cull%':>6} {'tex kB':>7} {'tex/wall':>8}")
+    lines = [head, "-" * len(head)]
+    for r in result.get("rows", []):
+        lines.append(
+            f"{r['scene']:<13} {r['variant']:<20} {_f(r.get('triangles_median'), '7.0f')} "
+            f"{_f(r.get('cells_drawn_mean') if r.get('kind') in _ROOMS else r.get('objects_drawn_mean'), '6.1f')} "
+            f"{_f(r.get('pda_frame_ms'), '7.1f')} {_f(r.get('pda_within_10pct'), '7.1f', 100)} "
+            f"{_f(r.get('gl_frame_ms'), '7.1f')} {_f(r.get('gl_period_ms'), '7.1f')} {_f(r.get('gl_within_10pct'), '6.1f', 100)} "
+            f"{_f(r.get('fog_m_median'), '6.1f')} {_f(r.get('colour_error_median'), '6.2f', 100)} "
+            f"{_f(r.get('delta_e_median'), '6.2f')} {_f(r.get('frames_over_visible'), '6.1f', 100)} "
+            f"{_f(r.get('fog_visible_share'), '6.1f', 100)} {_f(r.get('effective_culling'), '6.1f', 100)} "
+            f"{_f(r.get('texture_bytes'), '7.1f', 1e-3)} {_f(r.get('textures_per_wall'), '8.1f')}"
+        )
+    fr = result.get("frustum")
+    if fr:
+        lines.append("")
+        lines.append(f"hall, {fr['frames']} tour frames, {fr['triangles_in_hall']:,} triangles in the hall (no fog):")
+        for m, label in (("portals", "portal culling"), ("frustum", "frustum culling alone"), ("none", "drawn whole")):
+            d = fr["modes"][m]
+            lines.append(f"  {label:<22} {d['triangles_median']:>9,.0f} triangles/frame, {d['cells_median']:>5.0f} cells, "
+                         f"pda {d['pda_ms_median']:>8.1f} ms, gl {_f(d['gl_ms_median'], '7.1f')} ms")
+    for n in result.get("notes", []):
+        lines.append(f"note: {n}")
+    return "\n".join(lines)
+
+
+def plot_walls(path: Path, rows: Sequence[Mapping[str, Any]]) -> Path:
+    """``bench_walls.png``: per scene and variant, triangles per frame, the fog distance and the colour error."""
+    from walkstream.client.report.plots import grid_figure, save_figure
+
+    fig, axes = grid_figure(3, height=2.6)
+    labels = [f"{r['scene']}\n{r['variant']}" for r in rows]
+    x = np.arange(len(rows))
+    panels = (
+        ("triangles_median", 1.0, "triangles per frame (pda, median)"),
+        ("fog_m_median", 1.0, "fog distance the budget sets (m, median)"),
+        ("colour_error_median", 100.0, "colour error vs the full scene (% of full scale, median)"),
+    )
+    for ax, (key, scale, title) in zip(axes, panels, strict=True):
+        vals = [float(r[key]) * scale if r.get(key) is not None else 0.0 for r in rows]
+        colours = ["#0072B2" if "no walls" in r["variant"] else "#D55E00" for r in rows]
+        ax.bar(x, vals, color=colours)
+        ax.set_ylabel(title, fontsize=8)
+        ax.set_xticks(x)
+        ax.set_xticklabels(labels, fontsize=7)
+    axes[0].set_title("bench walls: blue without walls, orange with", fontsize=10)
+    return save_figure(fig, path)

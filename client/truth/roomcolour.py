@@ -1,0 +1,175 @@
+"""Colour error of a walk with rooms: what the client drew against the full scene at its full view.
+
+The colour figures of a city walk (:mod:`walkstream.client.truth.missing`) for an
+interior walk and a crossing walk.  Each noted frame is drawn twice by the one truth
+renderer (:class:`~walkstream.client.truth.render.TruthRenderer`, so that a frame
+drawn whole has no error at all):
+
+the full scene
+    every room part and city object (at LOD2), **without fog**: the scene as far as the
+    projection reaches.  This is the difference from the culled-pixel check
+    (:mod:`walkstream.client.truth.culled`), which draws its truth at the frame's fog
+    so that what the fog hides on purpose is not a miss; here what the budget's fog hid
+    is error, because that is what a better way of drawing the far (virtual walls,
+    impostors) must win back.
+the client's picture
+    the room parts it drew and the city objects it drew, each at the LOD it drew it
+    (the coarser forms given to the renderer, :func:`~walkstream.client.truth.picture.forms_of`),
+    at the fog in force.
+
+Both are compared with :func:`~walkstream.client.truth.colour.compare_colour` (mean
+linear-RGB error, ΔE00, pixels over the visible threshold, PSNR).  Where the client's
+picture shows another thing than the full scene in another colour (the same colour is
+no loss: coincident surfaces tie in depth either way), the pixel's cause (an id cause of
+:data:`~walkstream.client.truth.compare.CAUSES`) is, in this order: ``fog`` when the
+full scene's surface there lies beyond the frame's fog distance (the budget's fog hid
+it); ``not_received`` for a part of a visible cell whose contents had not arrived, or
+an object of the visible set not yet received; ``not_built`` for one received and not
+built; ``pvs`` for an object outside the visible set; ``lod`` for an object drawn at a
+coarser LOD; ``culled`` for anything else left out (portal culling; the culled-pixel
+check says whether that was wrong).
+
+Poses in solid geometry are left out as the culled-pixel check leaves them out
+(:data:`~walkstream.client.truth.culled.SOLID_NEAR`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.report.colour import ColourLog
+from walkstream.client.report.truth import TruthLog
+from walkstream.client.truth.colour import COLOUR_CAUSES, compare_colour
+from walkstream.client.truth.compare import CAUSES
+from walkstream.client.truth.culled import SOLID_NEAR
+from walkstream.client.truth.missing import ColourWorst
+from walkstream.client.truth.notes import FrameNote
+from walkstream.client.truth.render import TruthRenderer, form_key, object_key
+from walkstream.client.truth.solid import SolidProbe
+
+__all__ = ["RoomColour", "client_keys", "pixel_distance", "room_colour"]
+
+_PVS, _NOT_RECEIVED, _NOT_BUILT, _LOD, _CULLED, _FOG = (
+    CAUSES.index(c) for c in ("pvs", "not_received", "not_built", "lod", "culled", "fog")
+)
+
+
+@dataclass(frozen=True)
+class RoomColour:
+    """The colour figures of a walk with rooms."""
+
+    log: TruthLog
+    """One row per compared frame: differing pixels, pixels the client lacks by cause
+    (against the full scene without fog) and the colour figures (``log.colour``)."""
+    worst: ColourWorst | None
+    """The compared frame with the largest mean colour error, as images."""
+    fog_m: NDArray[np.float64]
+    """``(n,)`` the fog distance of each compared frame (``inf``: none)."""
+
+
+def client_keys(note: FrameNote) -> list[tuple[int, int]]:
+    """The truth renderer's keys of what a noted frame drew: its room parts, its objects
+    at LOD2 (:func:`~.render.object_key`) or at the coarser LOD it drew them (:func:`~.render.form_key`)."""
+    objs = [object_key(i) if lod >= 2 else form_key(i, lod) for i, lod, _ in note.drawn]
+    return [*note.parts, *objs]
+
+
+def pixel_distance(depth: NDArray[np.float64], proj: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(h, w)`` the distance from the eye of each pixel's surface, metres, from its
+    eye-space depth ``(h, w)`` (row 0 at the top) and the projection: the fog is a
+    distance, the depth buffer a depth along the view axis."""
+    h, w = depth.shape
+    x = (2.0 * (np.arange(w) + 0.5) / w - 1.0) / float(proj[0, 0])
+    y = (1.0 - 2.0 * (np.arange(h) + 0.5) / h) / float(proj[1, 1])
+    factor = np.sqrt(1.0 + x[None, :] ** 2 + y[:, None] ** 2)
+    out: NDArray[np.float64] = depth * factor
+    return out
+
+
+def room_colour(
+    truth: TruthRenderer,
+    notes: Sequence[FrameNote],
+    *,
+    solid: SolidProbe | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> RoomColour:
+    """Compare each noted frame that knew its visible set with the full scene (module docs).
+
+    ``truth`` holds every room part, the city objects at LOD2 and the coarser forms the
+    frames drew (``forms=forms_of(notes)``); it must be drawn with its own projection
+    (the client's).
+    """
+    n_keys = len(truth.keys)
+    # one identity per thing shown: a room part is itself, an object's forms are the object
+    ident = np.arange(n_keys, dtype=np.int64)
+    oid_of = truth.object_ids(np.arange(n_keys)).astype(np.int64) - 1
+    for k in np.flatnonzero(oid_of >= 0).tolist():
+        ident[k] = truth.index.get(object_key(int(oid_of[k])), k)
+    is_part = oid_of < 0
+    cell_of = np.where(is_part, np.array([key[0] for key in truth.keys], np.int64).reshape(-1), -1)
+    rows: list[tuple[int, float, float, NDArray[np.float64], tuple[float, float, float, float, NDArray[np.float64]], float]] = []
+    worst: ColourWorst | None = None
+    for j, note in enumerate(notes):
+        if progress is not None:
+            progress(j + 1, len(notes))
+        if note.pvs is None:
+            continue
+        if solid is not None and math.isfinite(solid.nearest(note.eye, SOLID_NEAR * truth.near)):
+            continue
+        t_idx, t_depth = truth.render(note.eye, note.view)
+        t_rgb = truth.colour()
+        drawn = client_keys(note)
+        c_idx, _ = truth.render(note.eye, note.view, truth.flags(drawn), note.fog)
+        c_rgb = truth.colour()
+        shown = t_idx >= 0
+        ti = np.maximum(t_idx, 0)
+        ci = np.maximum(c_idx, 0)
+        differ = np.any(t_rgb != c_rgb, axis=2)
+        # another thing in the same colour is no loss: coincident surfaces (a slab's top
+        # under a room's floor, a piece of wall in two cells) tie in depth either way
+        lacks = shown & differ & ((c_idx < 0) | (ident[ti] != ident[ci]))
+        cause = np.full(t_idx.shape, -1, np.int64)
+        if lacks.any():
+            beyond = pixel_distance(t_depth, truth.proj) > note.fog
+            oid = oid_of[ti]
+            waiting = np.isin(cell_of[ti], np.asarray(note.waiting, np.int64)) & is_part[ti]
+            pvs = note.pvs
+            in_pvs = np.isin(oid, pvs)
+            received = np.isin(oid, note.received)
+            built = np.isin(oid, note.built)
+            coarse = np.isin(oid, np.array([i for i, lod, _ in note.drawn if lod < 2], np.int64))
+            obj = oid >= 0
+            c = np.full(t_idx.shape, _CULLED, np.int64)
+            c = np.where(obj & coarse, _LOD, c)
+            c = np.where(obj & in_pvs & received & ~built, _NOT_BUILT, c)
+            c = np.where(obj & in_pvs & ~received, _NOT_RECEIVED, c)
+            c = np.where(obj & ~in_pvs, _PVS, c)
+            c = np.where(waiting, _NOT_RECEIVED, c)
+            c = np.where(beyond, _FOG, c)
+            cause = np.where(lacks, c, -1)
+        lods = truth.lods(c_idx)
+        err = compare_colour(t_rgb, c_rgb, id_cause=cause, coarse=(lods >= 0) & (lods < 2))
+        pixels = err.pixels
+        missing = np.bincount(cause[cause >= 0], minlength=len(CAUSES)).astype(np.float64) / pixels
+        differing = float(np.count_nonzero(differ)) / pixels
+        rows.append((note.frame, note.t, differing, missing,
+                     (err.mean_error, err.delta_e_mean, err.visible_share, err.psnr_db, err.cause_shares), note.fog))
+        if worst is None or err.mean_error > worst.mean_error:
+            worst = ColourWorst(note.frame, note.t, err.mean_error, err.visible_share, err.psnr_db, c_rgb, t_rgb,
+                                err.delta_e)
+    frames = np.array([r[0] for r in rows], np.int64)
+    times = np.array([r[1] for r in rows], np.float64)
+
+    def col(k: int) -> NDArray[np.float64]:
+        return np.array([r[4][k] for r in rows], np.float64)
+
+    colour = ColourLog(frames, times, col(0), col(1), col(2), col(3),
+                       np.array([r[4][4] for r in rows]).reshape(-1, len(COLOUR_CAUSES)))
+    log = TruthLog(frames, times, np.array([r[2] for r in rows], np.float64),
+                   np.array([r[3] for r in rows]).reshape(-1, len(CAUSES)), colour)
+    return RoomColour(log, worst, np.array([r[5] for r in rows], np.float64))

@@ -1,0 +1,46 @@
+"""``walkstream bench walls --quick``: today's rows without walls, and the note that there are none."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from walkstream.benchmarks.walls import format_walls_table, walls_support
+from walkstream.cli import main
+
+pytestmark = pytest.mark.gl
+
+
+def test_bench_walls_quick_measures_the_hall_without_walls(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "bench"
+    assert main(["bench", "walls", "--quick", "--no-gl", "--out", str(out), "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    rows = result["rows"]
+    base = [r for r in rows if r["variant"] == "no walls"]
+    assert [r["scene"] for r in base] == ["hall"]
+    r = base[0]
+    # the budget holds the pda's rate by its fog, and the fog hides what the full scene shows
+    assert r["kind"] == "interior" and r["pda_within_10pct"] > 0.9
+    assert r["fog_m_median"] is not None and r["fog_m_median"] < 40.0
+    assert r["compared_frames"] >= 1 and r["colour_error_median"] > 0.0 and r["fog_visible_share"] > 0.0
+    assert 0.0 <= r["effective_culling"] < 1.0 and r["texture_bytes"] == 0
+    # frustum culling alone against drawing the whole hall, on the tour's frames
+    modes = result["frustum"]["modes"]
+    assert 0 < modes["frustum"]["triangles_median"] <= modes["none"]["triangles_median"] == result["frustum"]["triangles_in_hall"]
+    assert modes["none"]["pda_ms_median"] > 1000.0 / 25.0
+    bake, _ = walls_support()
+    if not bake:
+        assert any("no walls in this database" in n for n in result["notes"])
+    assert (out / "bench_walls.png").stat().st_size > 0
+    table = format_walls_table(result)
+    assert "frustum culling alone" in table and "hall" in table
+
+
+def test_bench_walls_refuses_an_unknown_scene_in_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "walls", "--scenes", "hall,atlantis"]) != 0
+    err = capsys.readouterr().err
+    assert "--scenes" in err and "atlantis" in err and "Traceback" not in err
+    assert main(["bench", "walls", "--wall-errors", "10,ninety"]) != 0
+    assert "--wall-errors" in capsys.readouterr().err

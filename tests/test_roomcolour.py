@@ -1,0 +1,94 @@
+"""Colour error of a walk with rooms against the full scene without fog (client/truth/roomcolour.py).
+
+On a small baked office: a frame that drew everything without fog has no error; the
+same frame under a near fog has error whose visible pixels are the fog's (what the
+budget's fog hid); a frame that left out the cells beyond its own has error caused by
+culling and none by fog; parts of a cell whose contents had not arrived are late.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from walkstream.client.truth.compare import CAUSES
+from walkstream.client.truth.notes import FrameNote
+from walkstream.client.truth.render import TruthRenderer
+from walkstream.client.truth.roomcolour import pixel_distance, room_colour
+from walkstream.server.store import SceneReader
+from walkstream.shared.camera import camera, perspective
+from walkstream.shared.codec.cellmesh import decode_cell_mesh
+from walkstream.shared.paths import RecordedPath
+
+pytestmark = pytest.mark.gl
+
+
+def _note(frame: int, eye: np.ndarray, view: np.ndarray, parts: list[tuple[int, int]], fog: float,
+          cell: int, waiting: tuple[int, ...] = ()) -> FrameNote:
+    z = np.zeros(0, np.int64)
+    return FrameNote(frame=frame, t=float(frame), eye=eye, view=view, cell=cell, pvs=z, received=z, built=z,
+                     drawn=(), parts=tuple(parts), waiting=waiting, fog=fog)
+
+
+def test_fog_and_culling_show_as_colour_error_with_their_causes(office_db: Path, gl: object) -> None:
+    with SceneReader.open(office_db) as r:
+        rooms = {c.id: decode_cell_mesh(r.contents(c.id)) for c in r.cells()}
+        tour = RecordedPath.from_msgpack(r.path_blob("tour"))
+        cells = [c for c in r.cells() if c.kind != "outside"]
+    truth = TruthRenderer(size=(160, 120), rooms=rooms, near=0.1, far=100.0, two_sided=True, ctx=gl)
+    try:
+        # a pose looking along the corridor: much to see, some of it far
+        best = None
+        for t in np.linspace(0.0, tour.duration, 40).tolist():
+            xyz, yaw, pitch = tour.at(t)
+            eye = np.asarray(xyz, np.float64)
+            view = camera(eye, float(yaw), float(pitch)).astype(np.float64)
+            ids, depth = truth.render(eye, view)
+            far = float(np.mean(np.isfinite(depth) & (depth > 3.0)))
+            if best is None or far > best[0]:
+                best = (far, eye, view)
+        assert best is not None and best[0] > 0.2
+        _, eye, view = best
+        here = next(c.id for c in cells if _inside(c, eye))
+        everything = list(truth.keys)
+        own = [k for k in truth.keys if k[0] == here]
+        notes = [
+            _note(0, eye, view, everything, math.inf, here),  # drawn whole: no error
+            _note(1, eye, view, everything, 2.5, here),  # a near fog: error, all of it the fog's
+            _note(2, eye, view, own, math.inf, here),  # only its own cell: the rest culled
+            _note(3, eye, view, own, math.inf, here, waiting=tuple(c for c in rooms if c != here)),  # the rest late
+        ]
+        rc = room_colour(truth, notes)
+    finally:
+        truth.release()
+    c = rc.log.colour
+    assert c is not None and len(c) == 4
+    fog, culled, late = (CAUSES.index(k) for k in ("fog", "culled", "not_received"))
+    # drawn whole, no fog: the same picture
+    assert c.mean_error[0] == 0.0 and c.visible[0] == 0.0 and math.isinf(c.psnr_db[0])
+    # under the fog: visible error, every visible pixel the fog's
+    assert c.visible[1] > 0.05 and c.mean_error[1] > 0.0
+    assert c.causes[1, fog] == pytest.approx(c.visible[1])
+    assert rc.log.missing[1, fog] > 0.2 and rc.log.missing[1, culled] == 0.0
+    # its own cell only: what the other cells show is culled, nothing of it the fog's
+    assert c.causes[2, culled] > 0.0 and c.causes[2, fog] == 0.0
+    # the other cells' contents had not arrived: late, not culled
+    assert c.causes[3, late] == pytest.approx(c.causes[2, culled]) and c.causes[3, culled] == 0.0
+    assert rc.worst is not None and rc.worst.frame in (1, 2, 3)
+    np.testing.assert_array_equal(rc.fog_m[:2], [math.inf, 2.5])
+
+
+def _inside(cell: object, eye: np.ndarray) -> bool:
+    import shapely
+
+    return bool(shapely.Polygon(cell.boundary).contains(shapely.Point(eye[:2])) and cell.zmin <= eye[2] <= cell.zmax)
+
+
+def test_pixel_distance_is_the_distance_along_each_pixels_ray() -> None:
+    proj = perspective(90.0, 1.0, 0.1, 100.0).astype(np.float64)
+    d = pixel_distance(np.full((2, 2), 1.0), proj)
+    # at 90 degrees the pixel centres of a 2 x 2 frame look at (+-0.5, +-0.5, -1)
+    assert d == pytest.approx(np.full((2, 2), math.sqrt(1.5)))
