@@ -22,8 +22,10 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/python scripts/typecheck.py
 
+# pytest on every core (pytest-xdist): one worker per core; --dist loadfile keeps each test
+# file on one worker, so a module's baked fixture is built once (docs/architecture.md, "Tests")
 test: $(STAMP) lint
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q -n auto --dist loadfile
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache build *.egg-info

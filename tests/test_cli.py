@@ -62,20 +62,23 @@ def test_buildings_render_png_and_glb(city: Path, tmp_path: Path, gl_ctx: object
     ("argv", "message"),
     [
         (["buildings", "stats", "/nonexistent/x.geojson"], "x.geojson"),
-        (["generate", "city", "--size", "50", "-o", "/tmp/never.geojson"], "size"),
+        (["generate", "city", "--size", "50", "-o", "{tmp}/never.geojson"], "size"),
         (["grammar", "/nonexistent/g.lsys"], "g.lsys"),
     ],
 )
-def test_bad_input_is_one_clear_line(argv: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(argv) == 2
+def test_bad_input_is_one_clear_line(
+    argv: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # (a file the command would write goes in the test's own folder, never a shared one)
+    assert main([a.replace("{tmp}", str(tmp_path)) for a in argv]) == 2
     err = capsys.readouterr().err
     assert err.startswith("walkstream: error:")
     assert message in err
     assert "Traceback" not in err
 
 
-def test_unknown_building_id(city: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["buildings", "render", str(city), "--id", "nope", "-o", "/tmp/x.png"]) == 2
+def test_unknown_building_id(city: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["buildings", "render", str(city), "--id", "nope", "-o", str(tmp_path / "x.png")]) == 2
     assert "no building with id 'nope'" in capsys.readouterr().err
 
 

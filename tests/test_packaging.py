@@ -63,6 +63,11 @@ def test_a_skip_fails_under_ci(tmp_path: Path) -> None:
     assert local.returncode == 0 and "1 skipped" in local.stdout
     ci = subprocess.run(argv, env={**env, "CI": "true"}, capture_output=True, text=True, check=False)
     assert ci.returncode == 1 and "skipped under CI" in ci.stdout and "no GL context" in ci.stdout
+    # and so it does in a pytest-xdist worker, as `make test` runs the suite
+    xdist = [*argv[:4], "-n", "1", *argv[4:]]
+    ci = subprocess.run(xdist, env={**env, "CI": "true"}, capture_output=True, text=True, check=False)
+    assert ci.returncode == 1 and "skipped under CI" in ci.stdout and "no GL context" in ci.stdout
+    assert ci.stdout.rstrip().splitlines()[-1].startswith("1 failed")
 
 
 def test_the_wheel_holds_one_top_level_name_and_the_grammar(tmp_path: Path) -> None:

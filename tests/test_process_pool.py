@@ -18,7 +18,7 @@ import pytest
 from walkstream.client.clock import RealClock
 from walkstream.client.rewrite.geometry import ObjectGeometry, rebuild_batch
 from walkstream.client.rewrite.pool import RewriteOptions, RewritePool
-from walkstream.client.rewrite.shm import ShmArena, pack_layout, unpack, write_packed
+from walkstream.client.rewrite.shm import SHM_PREFIX, ShmArena, pack_layout, unpack, write_packed
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict
 from walkstream.shared.buildings import default_grammar
@@ -28,8 +28,11 @@ from walkstream.shared.records import BuildingParams, StreetParams
 SHM = Path("/dev/shm")
 
 
-def _segments() -> set[str]:
-    return {p.name for p in SHM.iterdir()} if SHM.is_dir() else set()
+def _segments(pid: int | None = None) -> set[str]:
+    # the segments a client process made (this one by default): only our own, since other
+    # pytest-xdist workers and other programs create and remove segments meanwhile
+    prefix = f"{SHM_PREFIX}{os.getpid() if pid is None else pid}_"
+    return {p.name for p in SHM.glob(f"{prefix}*")} if SHM.is_dir() else set()
 
 
 def _stat(pid: int) -> list[str]:
@@ -168,6 +171,10 @@ def test_tiny_or_zero_bound_falls_back_to_the_pipe(objects: list[BuildingParams 
 def test_a_full_arena_waits_for_views_to_go() -> None:
     arena = ShmArena(1 << 16)
     try:
+        # the segment is named after this process, so tests can tell their own apart
+        assert arena.name is not None and _segments() == {arena.name}
+        arena.unlink()
+        assert arena.name is None and not _segments()
         off, size = arena.reserve(1 << 16)
         assert size == 1 << 16 and arena.reserve(64) == (0, 0)  # full: the pipe is used
         base = arena.view(off, size, 1000)
@@ -290,16 +297,18 @@ def test_bad_rewrite_arguments_are_one_line(
         assert err.startswith("walkstream: error:") and message in err and len(err.splitlines()) == 1
 
 
-def test_bad_bench_rewrite_is_one_line(db: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_bench_rewrite_is_one_line(
+    db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from walkstream.cli import main
 
-    assert main(["bench", "budget", str(db), "--no-gl", "--rewrite", "thread,fork"]) == 2
+    argv = ["bench", "budget", str(db), "--no-gl", "--rewrite", "thread,fork", "--out", str(tmp_path)]
+    assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err == "walkstream: error: --rewrite 'fork': choose from process, thread"
 
 
 def test_ctrl_c_leaves_no_worker_process_or_segment(db: Path, tmp_path: Path) -> None:
-    before = _segments()
     argv = [
         sys.executable, "-m", "walkstream.cli", "replay", str(db), "--path", "SE",
         "--clock", "real", "--device", "desktop2003", "--duration", "60s",
@@ -324,4 +333,4 @@ def test_ctrl_c_leaves_no_worker_process_or_segment(db: Path, tmp_path: Path) ->
     assert b"Traceback" not in err, err.decode()[-2000:]
     time.sleep(0.2)
     assert not [p for p in workers if Path(f"/proc/{p}").exists() and _state(p) != "Z"]
-    assert _segments() <= before
+    assert not _segments(proc.pid)  # the replay's segment went with it

@@ -11,12 +11,16 @@ a hard bound on the shared memory the client holds, whatever the cache keeps.
 
 The segment's name is unlinked as soon as every worker has attached (:meth:`ShmArena.unlink`),
 so nothing is left in ``/dev/shm`` even when the client is killed; the memory itself goes
-when the last mapping does.
+when the last mapping does.  The name carries the client's process id
+(``walkstream_<pid>_<random>``), so a segment can be told apart from other programs' ones
+(the tests look only at their own).
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
+import secrets
 import weakref
 from collections.abc import Sequence
 from multiprocessing import shared_memory
@@ -28,10 +32,13 @@ from numpy.typing import NDArray
 from walkstream.client.rewrite.geometry import ObjectGeometry
 from walkstream.shared.records import Mesh
 
-__all__ = ["ALIGN", "ShmArena", "pack_layout", "write_packed", "unpack"]
+__all__ = ["ALIGN", "SHM_PREFIX", "ShmArena", "pack_layout", "write_packed", "unpack"]
 
 ALIGN = 64
 """Byte alignment of every array in a block and of every region of the segment."""
+
+SHM_PREFIX = "walkstream_"
+"""Start of every segment's name; the creating process's id and ``_`` follow."""
 
 Layout = tuple[list[tuple[Any, ...]], list[tuple[int, int, int, int, int, int]], int]
 """(objects, meshes, total bytes): what :func:`unpack` needs besides the bytes.
@@ -118,6 +125,17 @@ class _Segment(shared_memory.SharedMemory):
             self.close()
 
 
+def _new_segment(nbytes: int) -> _Segment:
+    # a name of our own (the process id, then random), tried again on the rare clash
+    for _ in range(8):
+        name = f"{SHM_PREFIX}{os.getpid()}_{secrets.token_hex(4)}"
+        try:
+            return _Segment(name=name, create=True, size=nbytes)
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"no free shared-memory name starting {SHM_PREFIX}{os.getpid()}_")
+
+
 class ShmArena:
     """The client's bounded shared-memory segment, cut into regions for batches.
 
@@ -135,7 +153,7 @@ class ShmArena:
         self.shm: _Segment | None = None
         if self.nbytes > 0:
             try:
-                self.shm = _Segment(create=True, size=self.nbytes)
+                self.shm = _new_segment(self.nbytes)
             except (OSError, ValueError) as e:
                 self.error = f"shared memory unavailable: {e}"
         # (imported here: a worker process needs the packing, not the draw module)
