@@ -23,9 +23,11 @@ lint: $(STAMP)
 	$(BIN)/python scripts/typecheck.py
 
 # pytest on every core (pytest-xdist): one worker per core; --dist loadfile keeps each test
-# file on one worker, so a module's baked fixture is built once (docs/architecture.md, "Tests")
+# file on one worker, so a module's baked fixture is built once; the tests marked solo
+# (asserting on real time) run alone afterwards (docs/architecture.md, "A new test")
 test: $(STAMP) lint
-	$(BIN)/pytest -q -n auto --dist loadfile
+	$(BIN)/pytest -q -n auto --dist loadfile -m 'not solo'
+	$(BIN)/pytest -q -m solo
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache build *.egg-info

@@ -260,6 +260,7 @@ def db(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+@pytest.mark.solo
 @pytest.mark.gl
 def test_real_clock_replay_with_the_process_pool_from_the_cli(
     db: Path, tmp_path: Path, gl: object, capsys: pytest.CaptureFixture[str]

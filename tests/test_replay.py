@@ -227,6 +227,7 @@ def _server(db: Path, port: int = 0) -> Iterator[str]:
         yield f"http://{host}:{p}"
 
 
+@pytest.mark.solo
 @pytest.mark.slow
 def test_real_and_simulated_clocks_agree(city400: Path) -> None:
     """30 s of SE under both clocks against the same real server (issue 5, item 2)."""
@@ -276,6 +277,7 @@ class _Restarting(httpx.AsyncBaseTransport):
         self.stack.close()
 
 
+@pytest.mark.solo
 @pytest.mark.slow
 def test_server_restart_mid_walk_is_survived(city: Path) -> None:
     port = free_port()
