@@ -77,6 +77,7 @@ WALKABLE = frozenset({"door", "opening", "virtual", "split", "stair"})
 _TOUCH = 0.03  # outlines this close touch
 _MIN_PORTAL = 0.3  # shorter open stretches are no passage
 _PROBES = (0.05, 0.15, 0.3, 0.5)  # beyond an opening's faces, metres
+_GROW = 0.5  # a space is grown over free floor up to its walls this far at most
 
 
 @dataclass(frozen=True)
@@ -158,12 +159,20 @@ class RoomLayout:
 
 def storey_ranges(scene: InteriorScene) -> F64:
     """``(storeys, 2)`` height ranges: from each storey's elevation to the next one's;
-    the top storey up to the highest room solid on it (at least 2.5 m)."""
+    the top storey up to its ceiling: the highest room solid on it, slab, roof,
+    covering or wall rising over its floor (at least 2.5 m).  A space drawn short of
+    the ceiling (or an attic's space under a pitched roof) must not leave the ceiling
+    and what hangs from it out of the top storey's cells."""
     elev = np.array([s.elevation for s in scene.storeys], dtype=np.float64)
     out = np.zeros((len(elev), 2))
     out[:, 0] = elev
     out[:-1, 1] = elev[1:]
     top = [r.zmax for r in scene.rooms if r.storey == len(elev) - 1]
+    for e in scene.elements:
+        if e.kind in ("slab", "roof", "covering", "wall") and len(e.vertices):
+            zhi = float(e.vertices[:, 2].max())
+            if zhi > elev[-1] + 1.0:
+                top.append(zhi)
     out[-1, 1] = max([elev[-1] + 2.5] + top)
     return out
 
@@ -262,11 +271,19 @@ class _Builder:
             for k in range(r.storey, len(self.ranges)):
                 if k == r.storey or r.zmax >= self.ranges[k][0] + 1.0:
                     by_storey.setdefault(k, []).append((0 if k == r.storey else 1, area, i))
+        walls = _blocking_footprints(self.scene, self.ranges)
         for k in sorted(by_storey):
             taken = shapely.Polygon()
+            originals = {i: shapely.make_valid(shapely.Polygon(self.scene.rooms[i].outline)) for _, _a, i in by_storey[k]}
+            free = self._free_floor(k, walls[k])
+            grew = 0
             for _, _area, i in sorted(by_storey[k]):
                 room = self.scene.rooms[i]
-                poly = shapely.make_valid(shapely.Polygon(room.outline))
+                poly = originals[i]
+                if not free.is_empty:
+                    others = shapely.union_all([g for j, g in originals.items() if j != i])
+                    poly, more = _grow_to_walls(poly, free, others)
+                    grew += more
                 poly = poly.difference(taken)
                 # drop slivers left by a few centimetres of overlap with a neighbour
                 poly = poly.buffer(-0.01, join_style="mitre").buffer(0.01, join_style="mitre")
@@ -285,6 +302,15 @@ class _Builder:
                 for x in range(len(parts)):
                     for y in range(x + 1, len(parts)):
                         self.edge_portals(parts[x], parts[y], "split", "split", room.zmax, room.name)
+            if grew:
+                self.notes.append(f"storey {k}: {grew} rooms grown to their walls (spaces that stop short of them)")
+
+    def _free_floor(self, k: int, walls: shapely.Geometry) -> shapely.Geometry:
+        """Storey ``k``'s floor (its slabs' level faces) where no wall or column stands."""
+        floor = _slab_cover(self.scene, float(self.ranges[k][0]))
+        if floor.is_empty:
+            return floor
+        return floor.difference(walls) if not walls.is_empty else floor
 
     def edge_portals(self, x: RoomCell, y: RoomCell, kind: str, source: str, top: float, name: str = "",
                      z0: float | None = None) -> int:
@@ -501,6 +527,23 @@ class _Builder:
             self.stair(st.path, st.name, vertical)
 
     def stair(self, path: F64, name: str, vertical: dict[tuple[int, int], int]) -> None:
+        """A stair's links: one per pair of storeys it joins.  A flight that rises past
+        a storey's floor on its way to the next (one stair through three storeys) is
+        cut at the tread on that floor, so each piece joins its own two storeys."""
+        k = int(np.searchsorted(self.ranges[:, 0], path[0, 2] + 0.05, side="right")) - 1
+        floors = [float(z) for z in self.ranges[k + 1:, 0]] if k >= 0 else []
+        start = 0
+        for zb in floors:
+            if zb >= path[-1, 2] - 0.3:
+                break  # the last floor it reaches (or nearly): the piece below ends there
+            j = int(np.argmax(path[:, 2] >= zb - 0.02))
+            if j > start:
+                self._stair_piece(path[start:j + 1], name, vertical)
+                start = j
+        if len(path) - start >= 2:
+            self._stair_piece(path[start:], name, vertical)
+
+    def _stair_piece(self, path: F64, name: str, vertical: dict[tuple[int, int], int]) -> None:
         k = int(np.searchsorted(self.ranges[:, 0], path[0, 2] + 0.05, side="right")) - 1
         if not 0 <= k < len(self.ranges) - 1:
             self.notes.append(f"stair {name}: not between two storeys")
@@ -563,6 +606,24 @@ class _Builder:
         self.portals = [
             Portal(p.id, p.kind, p.a, cid if p.b < 0 else p.b, p.polygon, p.source, p.name) for p in self.portals
         ]
+
+
+def _grow_to_walls(poly: shapely.Geometry, free: shapely.Geometry, others: shapely.Geometry) -> tuple[shapely.Geometry, int]:
+    """A space grown over the floor up to its walls: the free floor (no wall, no other
+    space) within :data:`_GROW` of it and joined to it.  Exporters draw spaces to a
+    lining or leave centimetres before the wall; a cell that stops short of its walls
+    leaves their faces in no cell, where no portal walk can see them.  Returns the
+    polygon and 1 when it grew by more than slivers, else 0."""
+    near = poly.buffer(_GROW, join_style="mitre").intersection(free)
+    if not others.is_empty:
+        near = near.difference(others)
+    extra = near.difference(poly).buffer(-0.01, join_style="mitre").buffer(0.01, join_style="mitre")
+    if extra.is_empty or extra.area < 0.02:
+        return poly, 0
+    grown = shapely.make_valid(poly.union(extra.intersection(near)))
+    parts = [g for g in getattr(grown, "geoms", [grown]) if isinstance(g, shapely.Polygon) and g.intersects(poly)]
+    out = shapely.union_all(parts) if parts else poly
+    return out, int(out.area > poly.area + 0.02)
 
 
 def _vertical(seg: F64, z0: float, z1: float) -> F64:
