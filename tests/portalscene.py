@@ -84,6 +84,8 @@ class PortalScene:
             n = self.graph.plane[rows[pid], :3]
             if abs(n[2]) > 0.9:
                 continue  # a floor portal: the stair frames below walk through it
+            if float(np.asarray(poly)[:, 2].min()) + EYE > float(np.asarray(poly)[:, 2].max()) + 0.5:
+                continue  # high in a wall (over a low wall): no eye stands in it
             c = np.asarray(poly).mean(axis=0)
             c[2] = min(float(np.asarray(poly)[:, 2].min()) + EYE, c[2] + 0.3)
             yaw = math.atan2(n[1], n[0])

@@ -37,6 +37,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 import shapely
@@ -49,6 +50,7 @@ from walkstream.server.bake.roomgeom import (
     polygon_rings,
     ray_distance,
     shared_segments,
+    without_holes,
 )
 from walkstream.server.sources.interior import InteriorScene, Opening, mesh_footprint
 from walkstream.shared.arrays import F64
@@ -77,6 +79,7 @@ WALKABLE = frozenset({"door", "opening", "virtual", "split", "stair"})
 _TOUCH = 0.03  # outlines this close touch
 _MIN_PORTAL = 0.3  # shorter open stretches are no passage
 _PROBES = (0.05, 0.15, 0.3, 0.5)  # beyond an opening's faces, metres
+_LOW_WALL = 0.5  # a wall stopping this far or more below the next floor is seen over
 _GROW = 0.5  # a space is grown over free floor up to its walls this far at most
 
 
@@ -177,18 +180,25 @@ def storey_ranges(scene: InteriorScene) -> F64:
     return out
 
 
-def _blocking_footprints(scene: InteriorScene, ranges: F64) -> list[shapely.Geometry]:
-    """Per storey: where walls and columns stand at eye height (their footprints)."""
-    polys: list[list[shapely.Geometry]] = [[] for _ in range(len(ranges))]
+def _blocking_footprints(scene: InteriorScene, ranges: F64, low: bool = False) -> list[shapely.Geometry]:
+    """Per storey: where walls and columns stand at eye height (their footprints);
+    with ``low``, ``(footprint, top)`` pairs of those among them that stop
+    :data:`_LOW_WALL` or more below the next floor (partitions, a meeting box's walls):
+    what stands beyond them is seen over them."""
+    polys: list[list[Any]] = [[] for _ in range(len(ranges))]
     for e in scene.elements:
         if e.kind not in ("wall", "column") or len(e.triangles) == 0:
             continue
         z0, z1 = float(e.vertices[:, 2].min()), float(e.vertices[:, 2].max())
-        for k, (lo, _hi) in enumerate(ranges):
+        for k, (lo, hi) in enumerate(ranges):
             if z0 < lo + 1.0 and z1 > lo + 1.8:
+                if low and z1 > hi - _LOW_WALL:
+                    continue
                 fp = mesh_footprint(e.vertices, e.triangles)
                 if not fp.is_empty:
-                    polys[k].append(fp)
+                    polys[k].append((fp, z1) if low else fp)
+    if low:
+        return polys  # type: ignore[return-value]
     return [shapely.union_all(p) if p else shapely.Polygon() for p in polys]
 
 
@@ -287,7 +297,7 @@ class _Builder:
                 poly = poly.difference(taken)
                 # drop slivers left by a few centimetres of overlap with a neighbour
                 poly = poly.buffer(-0.01, join_style="mitre").buffer(0.01, join_style="mitre")
-                rings = polygon_rings(poly, 0.25)
+                rings = polygon_rings(without_holes(poly), 0.25)
                 if not rings:
                     if k == room.storey:
                         self.notes.append(f"room {room.name}: nothing left after overlaps, left out")
@@ -301,7 +311,9 @@ class _Builder:
                             parts.append(self.add_cell("room", room.name, room.key, k, part))
                 for x in range(len(parts)):
                     for y in range(x + 1, len(parts)):
-                        self.edge_portals(parts[x], parts[y], "split", "split", room.zmax, room.name)
+                        # parts of one room: nothing between them up to the cells' top,
+                        # wherever the space's solid stops
+                        self.edge_portals(parts[x], parts[y], "split", "split", parts[x].zmax, room.name)
             if grew:
                 self.notes.append(f"storey {k}: {grew} rooms grown to their walls (spaces that stop short of them)")
 
@@ -488,7 +500,7 @@ class _Builder:
                         continue
                     if x.polygon.distance(y.polygon) > _TOUCH:
                         continue
-                    top = min(self._room_top(x), self._room_top(y))
+                    top = min(x.zmax, y.zmax)  # a wall stands at eye height or not at all
                     for seg in shared_segments(x.outline, y.outline, _TOUCH):
                         line = shapely.LineString(seg)
                         free = line.difference(cover) if not cover.is_empty else line
@@ -498,9 +510,31 @@ class _Builder:
                                 self.add_portal("opening", x.id, y.id, _vertical(pts[[0, -1]], x.zmin, top),
                                                 "geometry", "open")
 
-    def _room_top(self, c: RoomCell) -> float:
-        tops = [r.zmax for r in self.scene.rooms if r.key == c.room]
-        return min(max(tops) if tops else c.zmax, c.zmax)
+    def over_low_walls(self) -> None:
+        """Open portals over walls that stop short of the ceiling, from the wall's top
+        to the cells' top, between touching cells of two rooms (linked or not: a door
+        in a low wall is not the only way through)."""
+        low = _blocking_footprints(self.scene, self.ranges, low=True)
+        for k in range(len(self.ranges)):
+            if not low[k]:
+                continue
+            walls: list[tuple[shapely.Geometry, float]] = [(fp.buffer(0.05), top) for fp, top in low[k]]  # type: ignore[misc]
+            cells = self.storey_cells(k, ("room",))
+            for i in range(len(cells)):
+                for j in range(i + 1, len(cells)):
+                    x, y = cells[i], cells[j]
+                    if x.room == y.room or x.polygon.distance(y.polygon) > _TOUCH:
+                        continue
+                    for seg in shared_segments(x.outline, y.outline, _TOUCH):
+                        line = shapely.LineString(seg)
+                        for fp, top in walls:
+                            on = line.intersection(fp)
+                            for g in getattr(on, "geoms", [on]):
+                                if isinstance(g, shapely.LineString) and g.length >= 0.05:
+                                    pts = np.asarray(g.coords)
+                                    self.add_portal("opening", x.id, y.id,
+                                                    _vertical(pts[[0, -1]], top, min(x.zmax, y.zmax)),
+                                                    "geometry", "over a low wall")
 
     # -- 5: holes in floors and stairs ---------------------------------------
 
@@ -647,6 +681,7 @@ def room_layout(scene: InteriorScene) -> RoomLayout:
     b.openings()
     b.virtual()
     b.touching()
+    b.over_low_walls()
     b.floors()
     b.outside()
     return RoomLayout(b.cells, b.portals, b.stairs, b.ranges, b.notes, b.sources)
