@@ -37,7 +37,6 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
 
 import numpy as np
 import shapely
@@ -180,26 +179,24 @@ def storey_ranges(scene: InteriorScene) -> F64:
     return out
 
 
-def _blocking_footprints(scene: InteriorScene, ranges: F64, low: bool = False) -> list[shapely.Geometry]:
-    """Per storey: where walls and columns stand at eye height (their footprints);
-    with ``low``, ``(footprint, top)`` pairs of those among them that stop
-    :data:`_LOW_WALL` or more below the next floor (partitions, a meeting box's walls):
-    what stands beyond them is seen over them."""
-    polys: list[list[Any]] = [[] for _ in range(len(ranges))]
+def _standing_walls(scene: InteriorScene, ranges: F64) -> list[list[tuple[shapely.Geometry, float]]]:
+    """Per storey: the walls and columns standing at eye height, as ``(footprint, top)``."""
+    out: list[list[tuple[shapely.Geometry, float]]] = [[] for _ in range(len(ranges))]
     for e in scene.elements:
         if e.kind not in ("wall", "column") or len(e.triangles) == 0:
             continue
         z0, z1 = float(e.vertices[:, 2].min()), float(e.vertices[:, 2].max())
-        for k, (lo, hi) in enumerate(ranges):
+        for k, (lo, _hi) in enumerate(ranges):
             if z0 < lo + 1.0 and z1 > lo + 1.8:
-                if low and z1 > hi - _LOW_WALL:
-                    continue
                 fp = mesh_footprint(e.vertices, e.triangles)
                 if not fp.is_empty:
-                    polys[k].append((fp, z1) if low else fp)
-    if low:
-        return polys  # type: ignore[return-value]
-    return [shapely.union_all(p) if p else shapely.Polygon() for p in polys]
+                    out[k].append((fp, z1))
+    return out
+
+
+def _blocking_footprints(scene: InteriorScene, ranges: F64) -> list[shapely.Geometry]:
+    """Per storey: where walls and columns stand at eye height (their footprints)."""
+    return [shapely.union_all([fp for fp, _ in w]) if w else shapely.Polygon() for w in _standing_walls(scene, ranges)]
 
 
 def _slab_cover(scene: InteriorScene, z: float) -> shapely.Geometry:
@@ -514,11 +511,12 @@ class _Builder:
         """Open portals over walls that stop short of the ceiling, from the wall's top
         to the cells' top, between touching cells of two rooms (linked or not: a door
         in a low wall is not the only way through)."""
-        low = _blocking_footprints(self.scene, self.ranges, low=True)
+        standing = _standing_walls(self.scene, self.ranges)
         for k in range(len(self.ranges)):
-            if not low[k]:
+            hi = float(self.ranges[k][1])
+            walls = [(fp.buffer(0.05), top) for fp, top in standing[k] if top <= hi - _LOW_WALL]
+            if not walls:
                 continue
-            walls: list[tuple[shapely.Geometry, float]] = [(fp.buffer(0.05), top) for fp, top in low[k]]  # type: ignore[misc]
             cells = self.storey_cells(k, ("room",))
             for i in range(len(cells)):
                 for j in range(i + 1, len(cells)):
