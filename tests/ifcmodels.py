@@ -154,6 +154,28 @@ class IfcBuilder:
         self._contain(st, storey)
         return st
 
+    def flights(self, storey: Any, flights: Sequence[tuple[Sequence[float], Sequence[float], float, float, int]],
+                landings: Sequence[tuple[Sequence[Sequence[float]], float]], width: float) -> Any:
+        """One ``IfcStair`` of several straight flights ``(start, end, z0, rise, steps)``
+        of solid steps and flat ``landings`` ``(ring, top)`` (solid down to ``z0`` of the
+        first flight)."""
+        items = []
+        for start, end, z0, rise, steps in flights:
+            a, b = np.asarray(start, float), np.asarray(end, float)
+            u = (b - a) / np.linalg.norm(b - a)
+            n = np.array([-u[1], u[0]]) * 0.5 * width
+            going = float(np.linalg.norm(b - a)) / steps
+            for k in range(steps):
+                p0, p1 = a + u * going * k, a + u * going * (k + 1)
+                items.append(self._prism([p0 - n, p1 - n, p1 + n, p0 + n], z0, rise * (k + 1) / steps))
+        base = float(flights[0][2])
+        for ring, top in landings:
+            items.append(self._prism(ring, base, top - base))
+        st = self._product("IfcStair", "stair")
+        self._body(st, items)
+        self._contain(st, storey)
+        return st
+
     def write(self, path: Path) -> Path:
         self.f.write(str(path))
         return path

@@ -13,7 +13,6 @@ catches it.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -21,26 +20,17 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from portalscene import EYE, SIZE, PortalScene, walk_every_door
 
 from walkstream.cli import main
-from walkstream.client.truth.culled import TruthCheck, check_kept
-from walkstream.client.truth.render import TruthRenderer
 from walkstream.server.bake import bake
-from walkstream.server.service.interiors import InteriorState
 from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
-from walkstream.server.store import SceneReader
 from walkstream.shared.camera import camera, perspective
-from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
 from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.portals import cull_parts, cull_portals, frustum_cells
-from walkstream.shared.roomcompact import decode_topology_compact
-from walkstream.shared.roomview import cell_of, stack_planes
+from walkstream.shared.roomview import cell_of
 from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology
 from walkstream.shared.screenrects import box_rects
-
-SIZE = (160, 120)
-EYE = 1.6
-
 
 # --------------------------------------------------------------------------- a tiny hand-made interior
 
@@ -144,145 +134,15 @@ def test_box_rects_clip_boxes_that_hold_the_eye() -> None:
 # --------------------------------------------------------------------------- conservative, on real scenes
 
 
-class _Scene:
-    """An interior's topology, every cell's contents, the id truth and the poses."""
-
-    def __init__(self, db: Path, ctx: Any) -> None:
-        with SceneReader.open(db) as r:
-            state = InteriorState(r, list(r.cells()))
-            # the compact topology, as the client gets it (portals rounded outward to mm)
-            self.topology = decode_topology_compact(state.topology_compact.content, "topology")
-            self.meshes: dict[int, CellMesh] = {c.id: decode_cell_mesh(r.contents(c.id)) for c in self.topology.cells}
-        self.graph = PortalGraph.from_topology(self.topology)
-        inside = [c for c in self.topology.cells if c.kind != "outside" and len(c.planes)]
-        self.ids, self.planes = stack_planes(inside)
-        self.boxes = {
-            cid: (np.array([p.bbox[0] for p in m.parts]).reshape(-1, 3), np.array([p.bbox[1] for p in m.parts]).reshape(-1, 3))
-            for cid, m in self.meshes.items()
-        }
-        self.truth = TruthRenderer(size=SIZE, rooms=self.meshes, near=0.1, far=100.0, two_sided=True, ctx=ctx)
-        self.proj = self.truth.proj
-
-    def frame(self, eye: np.ndarray, yaw: float, pitch: float = 0.0, naive: bool = False,
-              mode: str = "portals") -> tuple[TruthCheck, int, np.ndarray] | None:
-        """The worst check over the cells that hold the eye (on a shared plane, either)."""
-        hit = np.flatnonzero(cell_of(self.planes, eye))
-        if not len(hit):
-            return None
-        view = camera(eye, yaw, pitch).astype(np.float64)
-        worst: tuple[TruthCheck, int, np.ndarray] | None = None
-        for h in hit.tolist():
-            start = int(self.ids[h])
-            if mode == "portals":
-                pc = cull_portals(self.graph, start, eye, view, self.proj, SIZE, naive=naive)
-                keep = cull_parts("portals", pc.order, self.boxes, eye, view, self.proj, SIZE, vsas=pc.vsas)
-            else:
-                cells = frustum_cells(self.graph, start, eye, self.proj @ view)
-                keep = cull_parts(mode, cells, self.boxes, eye, view, self.proj, SIZE)
-            kept = [(c, k) for c, m in keep.items() for k in np.flatnonzero(m).tolist()]
-            chk = check_kept(self.truth, kept, eye, view)
-            if worst is None or chk.missed_pixels - chk.pinholes > worst[0].missed_pixels - worst[0].pinholes:
-                worst = (chk, start, view)
-        return worst
-
-    def poses(self) -> Iterator[tuple[np.ndarray, float, float]]:
-        """Frames at every door, opening and stair (module docstring), a few per portal."""
-        yaws = (0.0, math.pi, 0.8, -0.8, math.pi + 0.8, math.pi - 0.8)
-        rows = {int(p): i for i, p in reversed(list(enumerate(self.graph.portal.tolist())))}
-        for j, (pid, kind, _a, _b, poly) in enumerate(self.topology.portals):
-            if kind == "window":
-                continue
-            n = self.graph.plane[rows[pid], :3]
-            if abs(n[2]) > 0.9:
-                continue  # a floor portal: the stair frames below walk through it
-            c = np.asarray(poly).mean(axis=0)
-            c[2] = min(float(np.asarray(poly)[:, 2].min()) + EYE, c[2] + 0.3)
-            yaw = math.atan2(n[1], n[0])
-            for i, d in enumerate((-0.01, 0.0, 0.01)):
-                yield c + d * n, yaw + yaws[(i + j) % len(yaws)], 0.0
-            t = np.array([-n[1], n[0], 0.0])
-            for d in (-0.4, 0.4):  # along the wall that holds the door, from either side
-                yield c + d * n, math.atan2(t[1], t[0]) * (1 if d > 0 else -1) + (0 if d > 0 else math.pi), 0.0
-        for _portal, _lo, _up, path in self.topology.stairs:
-            p = np.asarray(path)
-            for i in range(len(p) - 1):
-                e = 0.5 * (p[i] + p[i + 1]) + np.array([0.0, 0.0, EYE])
-                dv = p[i + 1] - p[i]
-                yaw = math.atan2(dv[1], dv[0])
-                pitch = math.atan2(dv[2], math.hypot(dv[0], dv[1]))
-                yield e, yaw, pitch
-                yield e, yaw + math.pi, -pitch
-
-    def leaks(self, chk: TruthCheck, eye: np.ndarray, view: np.ndarray, start: int, samples: int = 24) -> int:
-        """How many of (up to ``samples``) missed pixels are seen along a ray that leaves
-        the cells (anywhere on its way) other than through a portal: where the source's spaces stop short of
-        their walls (duplex's IFC spaces leave gaps of up to 16 cm), the walls' faces
-        lie beyond every cell's reach and no portal graph can see them; such a miss is
-        the bake's space partition, not the culling."""
-        assert chk.mask is not None and chk.depth is not None
-        rows, cols = np.nonzero(chk.mask)
-        pick = np.linspace(0, len(rows) - 1, min(samples, len(rows))).astype(int)
-        inv = np.linalg.inv(self.proj @ view)
-        fwd = -view[2, :3]
-        n = 0
-        for r, c in zip(rows[pick].tolist(), cols[pick].tolist(), strict=True):
-            ndc = np.array([(c + 0.5) / SIZE[0] * 2 - 1, 1 - (r + 0.5) / SIZE[1] * 2, -1.0, 1.0])
-            q = inv @ ndc
-            d = q[:3] / q[3] - eye
-            d /= np.linalg.norm(d)
-            reach = float(chk.depth[r, c]) / float(d @ fwd)
-            t = np.arange(0.0, max(reach - 0.08, 0.0), 0.01)
-            pts = eye + t[:, None] * d
-            held = np.any(np.all(np.einsum("nkj,tj->tnk", self.planes[:, :, :3], pts) + self.planes[None, :, :, 3] <= 1e-6, axis=2), axis=1)
-            exits = np.flatnonzero(held[:-1] & ~held[1:]) + 1  # every step out of the cells
-            if not held[0]:
-                exits = np.concatenate([[0], exits])
-            # the crossing lies within half a step (5 mm) before the first point outside
-            if any(not self._near_portal(pts[i] - 0.005 * d) for i in exits.tolist()):
-                n += 1
-        return n
-
-    def _near_portal(self, p: np.ndarray, tol: float = 0.01) -> bool:
-        g = self.graph
-        dist = np.abs(g.plane[:, :3] @ p + g.plane[:, 3])
-        inb = np.all((p >= g.lo - tol) & (p <= g.hi + tol), axis=1)
-        return bool(np.any((dist <= tol) & inb))
-
-    def release(self) -> None:
-        self.truth.release()
-
-
-def _walk_every_door(scene: _Scene, naive: bool = False) -> dict[str, int]:
-    out = {"frames": 0, "missed": 0, "pinholes": 0, "leaks": 0, "bad_frames": 0}
-    for eye, yaw, pitch in scene.poses():
-        got = scene.frame(eye, yaw, pitch, naive=naive)
-        if got is None:
-            continue
-        chk, start, view = got
-        out["frames"] += 1
-        out["pinholes"] += chk.pinholes
-        real = chk.missed_pixels - chk.pinholes
-        if real > 0 and not naive:
-            # rays along the walls' insides: a few sampled rays graze a corner where the
-            # 1 cm steps cannot tell; three quarters of them through a gap is a gap
-            leaks = scene.leaks(chk, eye, view, start)
-            if leaks >= 0.75 * min(24, chk.missed_pixels):
-                out["leaks"] += real
-                continue
-        out["missed"] += real
-        out["bad_frames"] += real > 0
-    return out
-
-
 def test_generated_office_every_door_zero_missed_pixels_and_the_papers_bug_is_caught(
     office_db: Path, gl_ctx: Any
 ) -> None:
-    scene = _Scene(office_db, gl_ctx)
+    scene = PortalScene(office_db, gl_ctx)
     try:
-        good = _walk_every_door(scene)
+        good = walk_every_door(scene)
         assert good["frames"] >= 100
         assert good["missed"] == 0 and good["leaks"] == 0 and good["pinholes"] == 0, good
-        bad = _walk_every_door(scene, naive=True)
+        bad = walk_every_door(scene, naive=True)
         assert bad["frames"] == good["frames"]
         assert bad["bad_frames"] >= 0.1 * bad["frames"] and bad["missed"] > 10_000, bad
     finally:
@@ -290,9 +150,9 @@ def test_generated_office_every_door_zero_missed_pixels_and_the_papers_bug_is_ca
 
 
 def test_fzk_haus_every_door_zero_missed_pixels(fzk_db: tuple[Path, dict[str, Any]], gl_ctx: Any) -> None:
-    scene = _Scene(fzk_db[0], gl_ctx)
+    scene = PortalScene(fzk_db[0], gl_ctx)
     try:
-        got = _walk_every_door(scene)
+        got = walk_every_door(scene)
         assert got["frames"] >= 50 and got["missed"] == 0, got
         assert got["leaks"] == 0 and got["pinholes"] <= 3, got
     finally:
@@ -300,9 +160,9 @@ def test_fzk_haus_every_door_zero_missed_pixels(fzk_db: tuple[Path, dict[str, An
 
 
 def test_duplex_every_door_zero_missed_pixels(duplex_db: tuple[Path, dict[str, Any]], gl_ctx: Any) -> None:
-    scene = _Scene(duplex_db[0], gl_ctx)
+    scene = PortalScene(duplex_db[0], gl_ctx)
     try:
-        got = _walk_every_door(scene)
+        got = walk_every_door(scene)
         # duplex's IFC spaces stop short of their walls and its door openings have no
         # reveals: from an eye inside a door hole, rays run inside the wall to faces no
         # cell holds (``leaks``, the source's partition, counted apart); nothing else
@@ -313,7 +173,7 @@ def test_duplex_every_door_zero_missed_pixels(duplex_db: tuple[Path, dict[str, A
 
 
 def test_portal_culling_draws_fewer_triangles_than_frustum_alone(office_db: Path, gl_ctx: Any) -> None:
-    scene = _Scene(office_db, gl_ctx)
+    scene = PortalScene(office_db, gl_ctx)
     try:
         tris = {"portals": 0, "frustum": 0, "none": 0}
         for k, (eye, yaw, pitch) in enumerate(scene.poses()):
@@ -457,9 +317,9 @@ def test_any_generated_interior_culls_no_pixel_the_truth_shows(
     write_interior(d / "gen.json", plan)
     bake(d / "gen.json", d / "gen.db")
     _ = gl_ctx.error  # the shared context: an error an earlier test left pending is not this scene's
-    scene = _Scene(d / "gen.db", gl_ctx)
+    scene = PortalScene(d / "gen.db", gl_ctx)
     try:
-        got = _walk_every_door(scene)
+        got = walk_every_door(scene)
         assert got["frames"] >= 8 and got["missed"] == 0 and got["leaks"] == 0, (plan, got)
         cells = [c for c in scene.topology.cells if c.kind == "room" and len(c.planes)]
         for _ in range(12):

@@ -25,6 +25,7 @@ __all__ = [
     "is_convex",
     "convex_parts",
     "shared_segments",
+    "without_holes",
     "cell_planes",
     "clip_polygons",
     "fan_triangles",
@@ -265,8 +266,37 @@ def ray_distance(start: ArrayLike, direction: ArrayLike, outline: ArrayLike, rea
     return float(min(np.dot(np.asarray(q) - s, d) for q in pts))
 
 
+def without_holes(geom: shapely.Geometry) -> shapely.Geometry:
+    """The polygons of ``geom`` cut into pieces without holes: each polygon with a hole
+    is split by a line across its first hole's middle (along the polygon's longer
+    side) until none is left.  A room holding a smaller room (a meeting box in an open
+    office) keeps the ring around it rather than covering it.
+
+    >>> g = shapely.box(0, 0, 4, 4).difference(shapely.box(1, 1, 2, 2))
+    >>> sorted(round(p.area, 1) for p in without_holes(g).geoms)
+    [6.0, 9.0]
+    """
+    out: list[shapely.Polygon] = []
+    todo = [g for g in getattr(geom, "geoms", [geom]) if isinstance(g, shapely.Polygon)]
+    while todo:
+        g = todo.pop()
+        if not g.interiors:
+            out.append(g)
+            continue
+        x0, y0, x1, y1 = g.bounds
+        c = shapely.Polygon(g.interiors[0]).centroid
+        if x1 - x0 >= y1 - y0:
+            blade = shapely.box(x0 - 1, y0 - 1, c.x, y1 + 1)
+        else:
+            blade = shapely.box(x0 - 1, y0 - 1, x1 + 1, c.y)
+        for half in (g.intersection(blade), g.difference(blade)):
+            todo += [h for h in getattr(half, "geoms", [half]) if isinstance(h, shapely.Polygon) and h.area > 0]
+    return shapely.MultiPolygon(out) if out else shapely.Polygon()
+
+
 def polygon_rings(geom: shapely.Geometry, min_area: float = 1e-3) -> Sequence[F64]:
-    """The exterior rings (CCW, ``(n, 2)``) of the polygons in a shapely geometry."""
+    """The exterior rings (CCW, ``(n, 2)``) of the polygons in a shapely geometry
+    (their holes are dropped; :func:`without_holes` first where they matter)."""
     out = []
     for g in getattr(geom, "geoms", [geom]):
         if isinstance(g, shapely.Polygon) and g.area >= min_area:

@@ -50,6 +50,7 @@ from walkstream.server.bake.roomgeom import (
     polygon_rings,
     ray_distance,
     shared_segments,
+    without_holes,
 )
 from walkstream.server.sources.interior import InteriorScene, Opening, mesh_footprint
 from walkstream.shared.arrays import F64
@@ -79,6 +80,8 @@ WALKABLE = frozenset({"door", "opening", "virtual", "split", "stair", "wall"})
 _TOUCH = 0.03  # outlines this close touch
 _MIN_PORTAL = 0.3  # shorter open stretches are no passage
 _PROBES = (0.05, 0.15, 0.3, 0.5)  # beyond an opening's faces, metres
+_LOW_WALL = 0.5  # a wall stopping this far or more below the next floor is seen over
+_GROW = 0.5  # a space is grown over free floor up to its walls this far at most
 
 
 @dataclass(frozen=True)
@@ -160,19 +163,27 @@ class RoomLayout:
 
 def storey_ranges(scene: InteriorScene) -> F64:
     """``(storeys, 2)`` height ranges: from each storey's elevation to the next one's;
-    the top storey up to the highest room solid on it (at least 2.5 m)."""
+    the top storey up to its ceiling: the highest room solid on it, slab, roof,
+    covering or wall rising over its floor (at least 2.5 m).  A space drawn short of
+    the ceiling (or an attic's space under a pitched roof) must not leave the ceiling
+    and what hangs from it out of the top storey's cells."""
     elev = np.array([s.elevation for s in scene.storeys], dtype=np.float64)
     out = np.zeros((len(elev), 2))
     out[:, 0] = elev
     out[:-1, 1] = elev[1:]
     top = [r.zmax for r in scene.rooms if r.storey == len(elev) - 1]
+    for e in scene.elements:
+        if e.kind in ("slab", "roof", "covering", "wall") and len(e.vertices):
+            zhi = float(e.vertices[:, 2].max())
+            if zhi > elev[-1] + 1.0:
+                top.append(zhi)
     out[-1, 1] = max([elev[-1] + 2.5] + top)
     return out
 
 
-def _blocking_footprints(scene: InteriorScene, ranges: F64) -> list[shapely.Geometry]:
-    """Per storey: where walls and columns stand at eye height (their footprints)."""
-    polys: list[list[shapely.Geometry]] = [[] for _ in range(len(ranges))]
+def _standing_walls(scene: InteriorScene, ranges: F64) -> list[list[tuple[shapely.Geometry, float]]]:
+    """Per storey: the walls and columns standing at eye height, as ``(footprint, top)``."""
+    out: list[list[tuple[shapely.Geometry, float]]] = [[] for _ in range(len(ranges))]
     for e in scene.elements:
         if e.kind not in ("wall", "column") or len(e.triangles) == 0:
             continue
@@ -181,8 +192,13 @@ def _blocking_footprints(scene: InteriorScene, ranges: F64) -> list[shapely.Geom
             if z0 < lo + 1.0 and z1 > lo + 1.8:
                 fp = mesh_footprint(e.vertices, e.triangles)
                 if not fp.is_empty:
-                    polys[k].append(fp)
-    return [shapely.union_all(p) if p else shapely.Polygon() for p in polys]
+                    out[k].append((fp, z1))
+    return out
+
+
+def _blocking_footprints(scene: InteriorScene, ranges: F64) -> list[shapely.Geometry]:
+    """Per storey: where walls and columns stand at eye height (their footprints)."""
+    return [shapely.union_all([fp for fp, _ in w]) if w else shapely.Polygon() for w in _standing_walls(scene, ranges)]
 
 
 def _slab_cover(scene: InteriorScene, z: float) -> shapely.Geometry:
@@ -266,15 +282,23 @@ class _Builder:
             for k in range(r.storey, len(self.ranges)):
                 if k == r.storey or r.zmax >= self.ranges[k][0] + 1.0:
                     by_storey.setdefault(k, []).append((0 if k == r.storey else 1, area, i))
+        walls = _blocking_footprints(self.scene, self.ranges)
         for k in sorted(by_storey):
             taken = shapely.Polygon()
+            originals = {i: shapely.make_valid(shapely.Polygon(self.scene.rooms[i].outline)) for _, _a, i in by_storey[k]}
+            free = self._free_floor(k, walls[k])
+            grew = 0
             for _, _area, i in sorted(by_storey[k]):
                 room = self.scene.rooms[i]
-                poly = shapely.make_valid(shapely.Polygon(room.outline))
+                poly = originals[i]
+                if not free.is_empty:
+                    others = shapely.union_all([g for j, g in originals.items() if j != i])
+                    poly, more = _grow_to_walls(poly, free, others)
+                    grew += more
                 poly = poly.difference(taken)
                 # drop slivers left by a few centimetres of overlap with a neighbour
                 poly = poly.buffer(-0.01, join_style="mitre").buffer(0.01, join_style="mitre")
-                rings = polygon_rings(poly, 0.25)
+                rings = polygon_rings(without_holes(poly), 0.25)
                 if not rings:
                     if k == room.storey:
                         self.notes.append(f"room {room.name}: nothing left after overlaps, left out")
@@ -291,10 +315,14 @@ class _Builder:
                                 square.append(sq)
                 for x in range(len(parts)):
                     for y in range(x + 1, len(parts)):
-                        # pieces of two grid squares are joined by a virtual wall
+                        # pieces of two grid squares are joined by a virtual wall; parts
+                        # of one room otherwise: nothing between them up to the cells' top,
+                        # wherever the space's solid stops
                         wall = square[x] >= 0 and square[y] >= 0 and square[x] != square[y]
                         kind = "wall" if wall else "split"
-                        self.edge_portals(parts[x], parts[y], kind, kind, room.zmax, room.name)
+                        self.edge_portals(parts[x], parts[y], kind, kind, parts[x].zmax, room.name)
+            if grew:
+                self.notes.append(f"storey {k}: {grew} rooms grown to their walls (spaces that stop short of them)")
 
     def wall_grid(self, part: F64) -> list[tuple[int, F64]]:
         """A convex part cut by virtual walls: ``(grid square, convex piece)`` each.
@@ -322,6 +350,13 @@ class _Builder:
                     ring = np.asarray(piece.exterior.coords)[:-1]
                     out.append((first + i * ny + j, ring))
         return out
+
+    def _free_floor(self, k: int, walls: shapely.Geometry) -> shapely.Geometry:
+        """Storey ``k``'s floor (its slabs' level faces) where no wall or column stands."""
+        floor = _slab_cover(self.scene, float(self.ranges[k][0]))
+        if floor.is_empty:
+            return floor
+        return floor.difference(walls) if not walls.is_empty else floor
 
     def edge_portals(self, x: RoomCell, y: RoomCell, kind: str, source: str, top: float, name: str = "",
                      z0: float | None = None) -> int:
@@ -499,7 +534,7 @@ class _Builder:
                         continue
                     if x.polygon.distance(y.polygon) > _TOUCH:
                         continue
-                    top = min(self._room_top(x), self._room_top(y))
+                    top = min(x.zmax, y.zmax)  # a wall stands at eye height or not at all
                     for seg in shared_segments(x.outline, y.outline, _TOUCH):
                         line = shapely.LineString(seg)
                         free = line.difference(cover) if not cover.is_empty else line
@@ -509,9 +544,32 @@ class _Builder:
                                 self.add_portal("opening", x.id, y.id, _vertical(pts[[0, -1]], x.zmin, top),
                                                 "geometry", "open")
 
-    def _room_top(self, c: RoomCell) -> float:
-        tops = [r.zmax for r in self.scene.rooms if r.key == c.room]
-        return min(max(tops) if tops else c.zmax, c.zmax)
+    def over_low_walls(self) -> None:
+        """Open portals over walls that stop short of the ceiling, from the wall's top
+        to the cells' top, between touching cells of two rooms (linked or not: a door
+        in a low wall is not the only way through)."""
+        standing = _standing_walls(self.scene, self.ranges)
+        for k in range(len(self.ranges)):
+            hi = float(self.ranges[k][1])
+            walls = [(fp.buffer(0.05), top) for fp, top in standing[k] if top <= hi - _LOW_WALL]
+            if not walls:
+                continue
+            cells = self.storey_cells(k, ("room",))
+            for i in range(len(cells)):
+                for j in range(i + 1, len(cells)):
+                    x, y = cells[i], cells[j]
+                    if x.room == y.room or x.polygon.distance(y.polygon) > _TOUCH:
+                        continue
+                    for seg in shared_segments(x.outline, y.outline, _TOUCH):
+                        line = shapely.LineString(seg)
+                        for fp, top in walls:
+                            on = line.intersection(fp)
+                            for g in getattr(on, "geoms", [on]):
+                                if isinstance(g, shapely.LineString) and g.length >= 0.05:
+                                    pts = np.asarray(g.coords)
+                                    self.add_portal("opening", x.id, y.id,
+                                                    _vertical(pts[[0, -1]], top, min(x.zmax, y.zmax)),
+                                                    "geometry", "over a low wall")
 
     # -- 5: holes in floors and stairs ---------------------------------------
 
@@ -538,6 +596,23 @@ class _Builder:
             self.stair(st.path, st.name, vertical)
 
     def stair(self, path: F64, name: str, vertical: dict[tuple[int, int], int]) -> None:
+        """A stair's links: one per pair of storeys it joins.  A flight that rises past
+        a storey's floor on its way to the next (one stair through three storeys) is
+        cut at the tread on that floor, so each piece joins its own two storeys."""
+        k = int(np.searchsorted(self.ranges[:, 0], path[0, 2] + 0.05, side="right")) - 1
+        floors = [float(z) for z in self.ranges[k + 1:, 0]] if k >= 0 else []
+        start = 0
+        for zb in floors:
+            if zb >= path[-1, 2] - 0.3:
+                break  # the last floor it reaches (or nearly): the piece below ends there
+            j = int(np.argmax(path[:, 2] >= zb - 0.02))
+            if j > start:
+                self._stair_piece(path[start:j + 1], name, vertical)
+                start = j
+        if len(path) - start >= 2:
+            self._stair_piece(path[start:], name, vertical)
+
+    def _stair_piece(self, path: F64, name: str, vertical: dict[tuple[int, int], int]) -> None:
         k = int(np.searchsorted(self.ranges[:, 0], path[0, 2] + 0.05, side="right")) - 1
         if not 0 <= k < len(self.ranges) - 1:
             self.notes.append(f"stair {name}: not between two storeys")
@@ -602,6 +677,24 @@ class _Builder:
         ]
 
 
+def _grow_to_walls(poly: shapely.Geometry, free: shapely.Geometry, others: shapely.Geometry) -> tuple[shapely.Geometry, int]:
+    """A space grown over the floor up to its walls: the free floor (no wall, no other
+    space) within :data:`_GROW` of it and joined to it.  Exporters draw spaces to a
+    lining or leave centimetres before the wall; a cell that stops short of its walls
+    leaves their faces in no cell, where no portal walk can see them.  Returns the
+    polygon and 1 when it grew by more than slivers, else 0."""
+    near = poly.buffer(_GROW, join_style="mitre").intersection(free)
+    if not others.is_empty:
+        near = near.difference(others)
+    extra = near.difference(poly).buffer(-0.01, join_style="mitre").buffer(0.01, join_style="mitre")
+    if extra.is_empty or extra.area < 0.02:
+        return poly, 0
+    grown = shapely.make_valid(poly.union(extra.intersection(near)))
+    parts = [g for g in getattr(grown, "geoms", [grown]) if isinstance(g, shapely.Polygon) and g.intersects(poly)]
+    out = shapely.union_all(parts) if parts else poly
+    return out, int(out.area > poly.area + 0.02)
+
+
 def _vertical(seg: F64, z0: float, z1: float) -> F64:
     """The vertical rectangle over a segment from ``z0`` to ``z1``, ``(4, 3)``."""
     a, b = seg[0], seg[-1]
@@ -626,6 +719,7 @@ def room_layout(scene: InteriorScene, wall_pitch: float | None = None) -> RoomLa
     b.openings()
     b.virtual()
     b.touching()
+    b.over_low_walls()
     b.floors()
     b.outside()
     return RoomLayout(b.cells, b.portals, b.stairs, b.ranges, b.notes, b.sources)
