@@ -111,3 +111,21 @@ def test_the_manifest_carries_the_whole_grammar_text() -> None:
     too_long = msgpack.packb({"grammar": {"id": "g", "text": "x" * (MAX_GRAMMAR_TEXT + 1)}})
     with pytest.raises(CodecError):
         decode_manifest(too_long, "manifest")
+
+
+def test_the_default_city_of_an_older_generator_is_made_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from walkstream.cmd_bake import default_city_source
+    from walkstream.server.sources import citygen
+
+    monkeypatch.setattr(citygen, "DEFAULT_SIZE", 150.0)  # small and quick; the rule is the same
+    old = tmp_path / "city.geojson"
+    old.write_text(json.dumps({"type": "FeatureCollection", "walkstream": {"version": 1}, "features": []}))
+    assert default_city_source(tmp_path) == old
+    assert "older city generator" in capsys.readouterr().out
+    made = json.loads(old.read_text())
+    assert made["walkstream"]["version"] == citygen.GENERATOR_VERSION and made["features"]
+    before = old.stat().st_mtime_ns
+    default_city_source(tmp_path)  # current: kept as it is
+    assert old.stat().st_mtime_ns == before

@@ -72,6 +72,7 @@ __all__ = [
     "DEFAULT_SEED",
     "CRS_NAME",
     "FRONTAGE_GAP",
+    "GENERATOR_VERSION",
     "MAX_SIZE",
     "MIN_SIZE",
     "ORIGIN",
