@@ -100,6 +100,17 @@ def test_an_image_is_offered_before_what_is_needed_now() -> None:
     assert o is not None and o.need_s == IMAGE_LEAD_S < 0.0
 
 
+def test_the_images_of_the_cells_ahead_are_offered_in_order_of_need() -> None:
+    sched = RequestScheduler()
+    lane = ImpostorImages(None, _Cache(), sched)  # type: ignore[arg-type]
+    # only a cell ahead's images are wanted: offered a lead before that cell's need,
+    # so after what is due now and before the parameters due at the same time
+    lane.wanted = {9: 3.0, 11: 5.0}
+    o = lane.offer()
+    assert o is not None and o.need_s == pytest.approx(3.0 + IMAGE_LEAD_S)
+    assert 0.0 < o.need_s < 3.0
+
+
 @pytest.mark.gl
 def test_quad_is_upright_and_premultiplied_without_dark_fringe(gl: object) -> None:
     from walkstream.client.draw.frames import FrameRenderer

@@ -3,10 +3,11 @@
 A scene baked with ``--impostors`` lists, in a cell's record, the images of the
 buildings the cell may draw as impostors (:class:`~walkstream.shared.wire.CellImpostors`).
 The frame loop says which of them it wants and when (:meth:`ImpostorImages.want`:
-the image of the viewer's direction bin of each listed building, needed *now*); this
-lane offers them to the one :class:`~walkstream.client.stream.scheduler.RequestScheduler`
-with a need before anything due now (``need_s`` :data:`IMAGE_LEAD_S`), so a far
-building's image goes out before its parameters, and caches each decoded image
+the image of the viewer's direction bin of each listed building, needed *now* in the
+current cell, and in the cells ahead at their predicted need times); this lane offers
+them to the one :class:`~walkstream.client.stream.scheduler.RequestScheduler` in order
+of need, each :data:`IMAGE_LEAD_S` before the parameters needed at the same time, so a
+far building's image goes out before its parameters, and caches each decoded image
 (premultiplied RGBA) under ``("impostor", image id)`` at its texels' bytes.
 
 The lane joins the scheduler only when something is first wanted: a scene without
@@ -28,7 +29,8 @@ from walkstream.shared.errors import ApiError, StreamCut
 __all__ = ["IMAGE_LEAD_S", "ImpostorImages"]
 
 IMAGE_LEAD_S = -1.0
-"""An image's need, seconds from now, as offered: before anything the streamers need now."""
+"""Seconds added to an image's need as offered: an image needed now goes before anything
+the streamers need now, one needed in t seconds before what they need in t."""
 
 MAX_BATCH = 16
 """Images asked for in one request."""
@@ -108,7 +110,9 @@ class ImpostorImages:
         if not todo:
             return None
         ids = [i for _, i in todo[:MAX_BATCH]]
-        return Offer(min(todo[0][0], 0.0) + IMAGE_LEAD_S, lambda: self._start(ids))
+        # in order of need: the current cell's images (need 0) before the parameters due
+        # now, a cell ahead's images IMAGE_LEAD_S before that cell's parameters
+        return Offer(todo[0][0] + IMAGE_LEAD_S, lambda: self._start(ids))
 
     def in_flight(self) -> int:
         """This lane's requests on the link."""
