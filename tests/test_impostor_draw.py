@@ -14,7 +14,7 @@ import pytest
 from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayResult, run_replay
-from walkstream.client.stream.images import IMAGE_LEAD_S, ImpostorImages
+from walkstream.client.stream.images import AHEAD_LEAD_S, IMAGE_LEAD_S, ImpostorImages, offered_need
 from walkstream.client.stream.scheduler import RequestScheduler
 from walkstream.client.truth.standin import stand_in_ids
 from walkstream.client.walk.impostors import quad_corners
@@ -107,8 +107,11 @@ def test_the_images_of_the_cells_ahead_are_offered_in_order_of_need() -> None:
     # so after what is due now and before the parameters due at the same time
     lane.wanted = {9: 3.0, 11: 5.0}
     o = lane.offer()
-    assert o is not None and o.need_s == pytest.approx(3.0 + IMAGE_LEAD_S)
+    assert o is not None and o.need_s == pytest.approx(3.0 - AHEAD_LEAD_S)
     assert 0.0 < o.need_s < 3.0
+    # a cell ahead needed in a moment still waits for what is needed now
+    assert 0.0 < offered_need(0.01) < offered_need(0.5) < 0.5
+    assert offered_need(0.0) == IMAGE_LEAD_S < 0.0
 
 
 @pytest.mark.gl

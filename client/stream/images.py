@@ -6,8 +6,9 @@ The frame loop says which of them it wants and when (:meth:`ImpostorImages.want`
 the image of the viewer's direction bin of each listed building, needed *now* in the
 current cell, and in the cells ahead at their predicted need times); this lane offers
 them to the one :class:`~walkstream.client.stream.scheduler.RequestScheduler` in order
-of need, each :data:`IMAGE_LEAD_S` before the parameters needed at the same time, so a
-far building's image goes out before its parameters, and caches each decoded image
+of need (:func:`offered_need`: the current cell's before anything due now, a cell
+ahead's just before that cell's parameters), so a far building's image goes out before
+its parameters, and caches each decoded image
 (premultiplied RGBA) under ``("impostor", image id)`` at its texels' bytes.
 
 The lane joins the scheduler only when something is first wanted: a scene without
@@ -26,11 +27,14 @@ from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
 from walkstream.shared.errors import ApiError, StreamCut
 
-__all__ = ["IMAGE_LEAD_S", "ImpostorImages"]
+__all__ = ["AHEAD_LEAD_S", "IMAGE_LEAD_S", "ImpostorImages", "offered_need"]
 
 IMAGE_LEAD_S = -1.0
-"""Seconds added to an image's need as offered: an image needed now goes before anything
-the streamers need now, one needed in t seconds before what they need in t."""
+"""The need (seconds from now) an image of the current cell is offered at: before
+anything the streamers need now (see :func:`offered_need`)."""
+
+AHEAD_LEAD_S = 0.1
+"""How much earlier than its cell's need an image of a cell ahead is offered."""
 
 MAX_BATCH = 16
 """Images asked for in one request."""
@@ -40,6 +44,19 @@ MAX_REQUESTS = 2
 
 IMAGE_BYTES = 12_000.0
 """An image's bytes on the wire before one has arrived (the scheduler's cover counts them)."""
+
+
+def offered_need(need_s: float) -> float:
+    """The need an image is offered at, given when it is needed (seconds from now).
+
+    The current cell's images (needed now, 0) go :data:`IMAGE_LEAD_S` before anything
+    the streamers need now; an image of a cell ahead just before the parameters that
+    cell needs at the same time (:data:`AHEAD_LEAD_S`), but never before what is needed
+    now: the first perfect frame waits for the current cell's parameters, not images.
+    """
+    if need_s <= 0.0:
+        return IMAGE_LEAD_S
+    return max(need_s - AHEAD_LEAD_S, AHEAD_LEAD_S / 2.0)
 
 
 class ImpostorImages:
@@ -110,9 +127,7 @@ class ImpostorImages:
         if not todo:
             return None
         ids = [i for _, i in todo[:MAX_BATCH]]
-        # in order of need: the current cell's images (need 0) before the parameters due
-        # now, a cell ahead's images IMAGE_LEAD_S before that cell's parameters
-        return Offer(todo[0][0] + IMAGE_LEAD_S, lambda: self._start(ids))
+        return Offer(offered_need(todo[0][0]), lambda: self._start(ids))
 
     def in_flight(self) -> int:
         """This lane's requests on the link."""
