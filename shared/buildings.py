@@ -93,6 +93,12 @@ def _landmark_globals(b: BuildingParams) -> dict[str, float]:
     return {"K": float(b.kind), "LMIN": shortest_edge(b.rings[0]), "T": b.top}
 
 
+def _landmark_arrays(buildings: Sequence[BuildingParams]) -> dict[str, np.ndarray]:
+    """:func:`_landmark_globals` of a batch, ``(count,)`` each (one pass over the buildings)."""
+    rows = [_landmark_globals(b) for b in buildings]
+    return {k: np.array([g[k] for g in rows]) for k in ("K", "LMIN", "T")}
+
+
 def derive_building(
     b: BuildingParams, lod: int, grammar: Grammar | None = None, frames: EdgeFrames | None = None
 ) -> Modules:
@@ -187,7 +193,7 @@ def _derive_batch(
         "H": np.array([b.height for b in buildings]),
         "LOD": float(lod),
         "LMAX": lmax,
-        **{k: np.array([g[k] for g in (_landmark_globals(b) for b in buildings)]) for k in ("K", "LMIN", "T")},
+        **_landmark_arrays(buildings),
     }
     modules, owners = derive_batch(
         grammar,
