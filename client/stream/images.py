@@ -89,6 +89,9 @@ class ImpostorImages:
         """Requests made."""
         self.refused = False
         """The service refused a request (a scene without impostors): nothing more is asked."""
+        self.started = False
+        """Whether the walk's first cell had all its parameters once: until then the frame
+        wants no image (:func:`~walkstream.client.walk.impostors.frame_impostors`)."""
 
     def held(self, image: int) -> bool:
         """Whether ``image`` is in the cache."""

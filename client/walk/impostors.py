@@ -4,7 +4,8 @@ On a scene baked with ``--impostors`` the current street cell's record lists the
 buildings it may draw as images (:class:`~walkstream.shared.wire.CellImpostors`).
 Each frame (:func:`frame_impostors`): the image of the viewer's direction bin and
 its opacity by distance and error (:func:`~walkstream.client.draw.impostors.choose_impostors`);
-the images wanted from the impostor lane (:class:`~walkstream.client.stream.images.ImpostorImages`,
+(once the first cell's parameters are all in: the start-up waits for no image) the
+images wanted from the impostor lane (:class:`~walkstream.client.stream.images.ImpostorImages`,
 needed now, so before the buildings' parameters), and with prefetch on the images the
 predicted cells will draw, at their need times (:func:`ahead_wants`); of those held, the ones that fit
 the texture budget, the farthest dropped first
@@ -72,6 +73,12 @@ def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
     imp = None if rec is None else rec.impostors
     if imp is None or not imp.rows:
         return []
+    if not lane.started:
+        # the start-up: the first cell's parameters before any image, so the first
+        # perfect frame does not wait for images sharing the link (it needs none)
+        if not all(city.has_object(i) for i in w.objects.pvs):
+            return []
+        lane.started = True
     choices = choose_impostors(imp.rows, f.eye, imp.d, imp.bound)
     wants = ahead_wants(w, f) if w.config.prefetch else {}
     wants.update({c.image: 0.0 for c in choices if c.image is not None})
