@@ -17,6 +17,7 @@ import numpy as np
 
 from walkstream.shared.errors import InputError, WalkstreamError
 from walkstream.shared.geometry import ring_edges, triangulate_rings
+from walkstream.shared.landmarks import shortest_edge
 from walkstream.shared.lsystem.batch import FrameBatch, block_offsets, derive_batch, interpret_batch
 from walkstream.shared.lsystem.derive import Modules, derive
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
@@ -79,8 +80,23 @@ def _seeds_and_globals(
         "H": b.height,
         "LOD": float(lod),
         "LMAX": float(free.max()) if len(free) else 0.0,
+        **_landmark_globals(b),
     }
     return {"Building": np.zeros((1, 0)), "Edge": edges}, globals_
+
+
+def _landmark_globals(b: BuildingParams) -> dict[str, float]:
+    """The grammar's landmark globals: kind ``K``, shortest exterior edge ``LMIN``, crown top ``T``."""
+    if b.kind == 0:
+        # a plain building's crown rules never fire; skip the footprint's edges
+        return {"K": 0.0, "LMIN": 0.0, "T": b.height}
+    return {"K": float(b.kind), "LMIN": shortest_edge(b.rings[0]), "T": b.top}
+
+
+def _landmark_arrays(buildings: Sequence[BuildingParams]) -> dict[str, np.ndarray]:
+    """:func:`_landmark_globals` of a batch, ``(count,)`` each (one pass over the buildings)."""
+    rows = [_landmark_globals(b) for b in buildings]
+    return {k: np.array([g[k] for g in rows]) for k in ("K", "LMIN", "T")}
 
 
 def derive_building(
@@ -177,6 +193,7 @@ def _derive_batch(
         "H": np.array([b.height for b in buildings]),
         "LOD": float(lod),
         "LMAX": lmax,
+        **_landmark_arrays(buildings),
     }
     modules, owners = derive_batch(
         grammar,

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from walkstream.shared.areakinds import AREA_KINDS
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
+from walkstream.shared.landmarks import crown_top, shortest_edge
 
 __all__ = ["AreaParams", "BuildingParams", "StreetParams", "Mesh", "Viewpoint", "readonly"]
 
@@ -67,6 +68,10 @@ class BuildingParams:
         Height of one floor in metres (> 0).
     style:
         Style seed; the grammar may vary the facade with it.
+    kind:
+        0 for an ordinary building, else a landmark kind
+        (:mod:`walkstream.shared.landmarks`: 1 tower, 2 spire) whose crown the grammar
+        builds above the eaves.
     source_id:
         The id of the feature the building came from (for error reports).
     """
@@ -78,6 +83,7 @@ class BuildingParams:
     floor_height: float
     style: int = 0
     source_id: str = ""
+    kind: int = 0
 
     def __post_init__(self) -> None:
         if len(self.rings) == 0:
@@ -106,11 +112,20 @@ class BuildingParams:
         object.__setattr__(self, "floors", int(self.floors))
         object.__setattr__(self, "floor_height", float(self.floor_height))
         object.__setattr__(self, "style", int(self.style))
+        object.__setattr__(self, "kind", int(self.kind))
+        crown_top(self.kind, 0.0, 0.0)  # names a bad kind
 
     @property
     def height(self) -> float:
         """Total height in metres (floors times floor height)."""
         return self.floors * self.floor_height
+
+    @property
+    def top(self) -> float:
+        """Height in metres of the highest point the grammar builds: the eaves, or a landmark's crown."""
+        if self.kind == 0:
+            return self.height
+        return crown_top(self.kind, self.height, shortest_edge(self.rings[0]))
 
 
 @dataclass(frozen=True, slots=True)

@@ -68,6 +68,7 @@ from walkstream.shared.scene.cellkinds import CELL_KINDS
 
 __all__ = [
     "MSGPACK",
+    "MAX_GRAMMAR_TEXT",
     "JSON",
     "MSGPACK_TYPES",
     "FRAME_KEYS",
@@ -110,6 +111,10 @@ START_PARTS: tuple[str, ...] = ("path", "topology", "contents", "cell", "index",
 """What a start bundle may hold, in the order the service sends it."""
 
 _MAX_MANIFEST = 4 << 20
+#: the longest string a manifest may hold: the building grammar's text (the default
+#: grammar is about 6 kB; a string bound of 4 kB once refused it, and the client then
+#: never rebuilt a building)
+MAX_GRAMMAR_TEXT = 1 << 16
 _MAX_CELL = 8 << 20
 _MAX_INDEX = 32 << 20
 _MAX_INDEX_CELLS = 1 << 20
@@ -660,7 +665,8 @@ def _viewpoint(v: Any) -> Viewpoint:
 def decode_manifest(body: bytes, what: str, etag: str | None = None) -> Manifest:
     """Decode and check a manifest body (msgpack)."""
     m = unpack_bounded(
-        body, what, max_bytes=_MAX_MANIFEST, max_array_len=1 << 16, max_map_len=64, max_bin_len=0
+        body, what, max_bytes=_MAX_MANIFEST, max_array_len=1 << 16, max_map_len=64, max_bin_len=0,
+        max_str_len=MAX_GRAMMAR_TEXT,
     )
     if not isinstance(m, dict):
         raise CodecError(f"{what}: expected a map")

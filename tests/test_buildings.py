@@ -173,7 +173,7 @@ def test_derivation_reports_terminals_only() -> None:
 
 
 def test_style_seed_varies_the_facade() -> None:
-    scope = [evaluate_lets(default_grammar(), {"S": s, "F": 3, "FH": 3, "H": 9, "LOD": 2, "LMAX": 10})["BAY"] for s in range(20)]
+    scope = [evaluate_lets(default_grammar(), {"S": s, "F": 3, "FH": 3, "H": 9, "LOD": 2, "LMAX": 10, "K": 0, "LMIN": 0, "T": 9})["BAY"] for s in range(20)]
     assert len(set(np.round(scope, 3))) > 10
     a = build_lod(building([rect(40, 10)], floors=2, style=1), 2).triangles
     b = [build_lod(building([rect(40, 10)], floors=2, style=s), 2).triangles for s in range(2, 12)]

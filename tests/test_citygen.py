@@ -114,7 +114,7 @@ def test_collection_metadata_and_coordinates(city700: dict[str, Any]) -> None:
     assert fc["walkstream"]["generator"] == "city"
     assert fc["walkstream"]["size"] == 700
     assert fc["walkstream"]["seed"] == 1
-    assert fc["walkstream"]["version"] == 1
+    assert fc["walkstream"]["version"] == 2
     ids = [f["id"] for f in fc["features"]]
     assert len(set(ids)) == len(ids)
     for f in fc["features"]:
@@ -137,6 +137,9 @@ def test_building_properties(city700: dict[str, Any]) -> None:
     assert [f["id"] for f in buildings] == [f"b{k}" for k in range(len(buildings))]
     for f in buildings:
         p = f["properties"]
+        if p.get("landmark"):  # a tower or a spire: see the landmark test
+            assert p["landmark"] in ("tower", "spire") and 14 <= p["floors"] <= 34
+            continue
         assert isinstance(p["floors"], int) and 1 <= p["floors"] <= 9
         assert 3.0 <= p["floor_height"] <= 3.6
         assert p["height"] == pytest.approx(p["floors"] * p["floor_height"], abs=0.006)
@@ -291,3 +294,51 @@ def test_load_geojson_reads_every_building(tmp_path: Path) -> None:
     assert (
         sum(int(np.count_nonzero(h > 0)) for b in scene.buildings for h in b.neighbour_heights) > 0
     )
+
+
+def test_the_demo_city_has_a_few_deterministic_landmarks(city700: dict[str, Any], loaded700: Any) -> None:
+    from walkstream.server.bake.impostorsettings import DEFAULT_COMPLEX_TRIANGLES
+    from walkstream.shared.buildings import predict_triangles
+
+    marks = [f for f in city700["features"] if f["properties"].get("landmark")]
+    assert 2 <= len(marks) <= 4
+    assert {f["properties"]["landmark"] for f in marks} == {"tower", "spire"}
+    assert city_summary(city700)["landmarks"]["tower"] + city_summary(city700)["landmarks"]["spire"] == len(marks)
+    # the same seed places the same landmarks; another seed other ones
+    again = [f for f in generate_city(700, 1)["features"] if f["properties"].get("landmark")]
+    assert again == marks
+    other = [f for f in generate_city(700, 2)["features"] if f["properties"].get("landmark")]
+    assert other and other != marks
+    by_source = {b.source_id: b for b in loaded700.buildings}
+    for f in marks:
+        b = by_source[f["id"]]
+        assert b.kind in (1, 2)
+        ring = b.rings[0]
+        assert len(b.rings) == 1 and len(ring) == 4
+        sides = np.hypot(*(np.roll(ring, -1, axis=0) - ring).T)
+        assert np.allclose(sides, sides[0], atol=0.02) and 14.0 - 0.02 <= sides[0] <= 24.0 + 0.02
+        # free standing: every wall a frontage, nothing touching it
+        assert not (b.neighbour_heights[0] > 0).any()
+        assert b.top > b.height + 10.0
+        # the complex-impostor path's default threshold is passed at LOD2
+        assert predict_triangles(b)[2] > DEFAULT_COMPLEX_TRIANGLES
+
+
+def test_landmarks_leave_the_rest_of_the_city_as_it_was(monkeypatch: pytest.MonkeyPatch) -> None:
+    from walkstream.server.sources import citygen
+
+    for size in (150, 350):
+        fc = generate_city(size, 3)
+        assert city_summary(fc)["landmarks"] == {"tower": 0, "spire": 0}
+    with_marks = generate_city(500, 3)["features"]
+    monkeypatch.setattr(citygen, "_landmark_count", lambda size: 0)
+    without = generate_city(500, 3)["features"]
+    marks = [f["id"] for f in with_marks if f["properties"].get("landmark")]
+    assert len(marks) == 1
+    # a landmark takes a backyard shed's place (and id) or comes after the last building
+    a, b = {f["id"]: f for f in with_marks}, {f["id"]: f for f in without}
+    assert set(b) <= set(a)
+    differ = [k for k in a if k not in b or a[k] != b[k]]
+    assert differ == marks
+    if marks[0] in b:
+        assert b[marks[0]]["properties"]["floors"] <= 2  # it was a shed

@@ -14,7 +14,7 @@ import pytest
 from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayResult, run_replay
-from walkstream.client.stream.images import IMAGE_LEAD_S, ImpostorImages
+from walkstream.client.stream.images import AHEAD_LEAD_S, IMAGE_LEAD_S, ImpostorImages, offered_need
 from walkstream.client.stream.scheduler import RequestScheduler
 from walkstream.client.truth.standin import stand_in_ids
 from walkstream.client.walk.impostors import quad_corners
@@ -98,6 +98,20 @@ def test_an_image_is_offered_before_what_is_needed_now() -> None:
     lane.wanted = {7: 0.0, 9: 3.0}
     o = lane.offer()
     assert o is not None and o.need_s == IMAGE_LEAD_S < 0.0
+
+
+def test_the_images_of_the_cells_ahead_are_offered_in_order_of_need() -> None:
+    sched = RequestScheduler()
+    lane = ImpostorImages(None, _Cache(), sched)  # type: ignore[arg-type]
+    # only a cell ahead's images are wanted: offered a lead before that cell's need,
+    # so after what is due now and before the parameters due at the same time
+    lane.wanted = {9: 3.0, 11: 5.0}
+    o = lane.offer()
+    assert o is not None and o.need_s == pytest.approx(3.0 - AHEAD_LEAD_S)
+    assert 0.0 < o.need_s < 3.0
+    # a cell ahead needed in a moment still waits for what is needed now
+    assert 0.0 < offered_need(0.01) < offered_need(0.5) < 0.5
+    assert offered_need(0.0) == IMAGE_LEAD_S < 0.0
 
 
 @pytest.mark.gl

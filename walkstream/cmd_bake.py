@@ -39,15 +39,35 @@ def _parse_bbox(text: str | None) -> tuple[float, float, float, float] | None:
 
 
 def default_city_source(folder: Path) -> Path:
-    """The default city's GeoJSON in ``folder``, generated when it is not there yet."""
-    from walkstream.server.sources.citygen import DEFAULT_SEED, DEFAULT_SIZE, write_city
+    """The default city's GeoJSON in ``folder``, generated when it is not there yet or
+    was made by an older generator (its ``walkstream.version``)."""
+    from walkstream.server.sources.citygen import (
+        DEFAULT_SEED,
+        DEFAULT_SIZE,
+        GENERATOR_VERSION,
+        write_city,
+    )
 
     folder.mkdir(parents=True, exist_ok=True)
     city = folder / "city.geojson"
+    if city.exists() and _generator_version(city) != GENERATOR_VERSION:
+        print(f"{city} was made by an older city generator: generating it again")
+        city.unlink()
     if not city.exists():
         print(f"generating the default city ({DEFAULT_SIZE:.0f} m, seed {DEFAULT_SEED}) -> {city}")
         write_city(city, DEFAULT_SIZE, DEFAULT_SEED)
     return city
+
+
+def _generator_version(city: Path) -> object:
+    """The ``walkstream.version`` member of a generated city file (None when unreadable)."""
+    import json
+
+    try:
+        meta = json.loads(city.read_text(encoding="utf-8")).get("walkstream") or {}
+    except (OSError, ValueError, AttributeError):
+        return None
+    return meta.get("version") if isinstance(meta, dict) else None
 
 
 def run_bake(source: str | Path, output: str | Path, **kw: Any) -> dict[str, Any]:

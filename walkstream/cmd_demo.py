@@ -57,6 +57,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print(f"(no LOD figure: {exc})")
     db = out / "city.db"
     stale = stale_reason(db, ("SE",)) if db.exists() else None
+    if stale is None and db.exists() and city.stat().st_mtime > db.stat().st_mtime:
+        stale = "is older than its city"
     if stale is not None:
         print(f"scene database {db} {stale} (an older bake): baking again")
         db.unlink()

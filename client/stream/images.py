@@ -3,10 +3,12 @@
 A scene baked with ``--impostors`` lists, in a cell's record, the images of the
 buildings the cell may draw as impostors (:class:`~walkstream.shared.wire.CellImpostors`).
 The frame loop says which of them it wants and when (:meth:`ImpostorImages.want`:
-the image of the viewer's direction bin of each listed building, needed *now*); this
-lane offers them to the one :class:`~walkstream.client.stream.scheduler.RequestScheduler`
-with a need before anything due now (``need_s`` :data:`IMAGE_LEAD_S`), so a far
-building's image goes out before its parameters, and caches each decoded image
+the image of the viewer's direction bin of each listed building, needed *now* in the
+current cell, and in the cells ahead at their predicted need times); this lane offers
+them to the one :class:`~walkstream.client.stream.scheduler.RequestScheduler` in order
+of need (:func:`offered_need`: the current cell's before anything due now, a cell
+ahead's just before that cell's parameters), so a far building's image goes out before
+its parameters, and caches each decoded image
 (premultiplied RGBA) under ``("impostor", image id)`` at its texels' bytes.
 
 The lane joins the scheduler only when something is first wanted: a scene without
@@ -29,10 +31,14 @@ from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
 from walkstream.shared.errors import ApiError, InputError, StreamCut
 
-__all__ = ["IMAGE_LEAD_S", "WALL_LAG_S", "ImpostorImages"]
+__all__ = ["AHEAD_LEAD_S", "IMAGE_LEAD_S", "WALL_LAG_S", "ImpostorImages", "offered_need"]
 
 IMAGE_LEAD_S = -1.0
-"""An image's need, seconds from now, as offered: before anything the streamers need now."""
+"""The need (seconds from now) an image of the current cell is offered at: before
+anything the streamers need now (see :func:`offered_need`)."""
+
+AHEAD_LEAD_S = 0.1
+"""How much earlier than its cell's need an image of a cell ahead is offered."""
 
 MAX_BATCH = 16
 """Images asked for in one request."""
@@ -47,10 +53,21 @@ WALL_LAG_S = 0.5
 """A wall texture's need, seconds from now, as offered: after the contents due now (a
 wall without its texture is drawn as geometry, a cell without its contents is a hole)."""
 
-_LEAD = {"impostor": IMAGE_LEAD_S, "walltex": WALL_LAG_S}
-
 IMAGE_BYTES = 12_000.0
 """An image's bytes on the wire before one has arrived (the scheduler's cover counts them)."""
+
+
+def offered_need(need_s: float) -> float:
+    """The need an image is offered at, given when it is needed (seconds from now).
+
+    The current cell's images (needed now, 0) go :data:`IMAGE_LEAD_S` before anything
+    the streamers need now; an image of a cell ahead just before the parameters that
+    cell needs at the same time (:data:`AHEAD_LEAD_S`), but never before what is needed
+    now: the first perfect frame waits for the current cell's parameters, not images.
+    """
+    if need_s <= 0.0:
+        return IMAGE_LEAD_S
+    return max(need_s - AHEAD_LEAD_S, AHEAD_LEAD_S / 2.0)
 
 
 class ImpostorImages:
@@ -87,6 +104,9 @@ class ImpostorImages:
         """Requests made."""
         self.refused = False
         """The service refused a request (a scene without impostors): nothing more is asked."""
+        self.started = False
+        """Whether the walk's first cell had all its parameters once: until then the frame
+        wants no image (:func:`~walkstream.client.walk.impostors.frame_impostors`)."""
 
     def held(self, image: int) -> bool:
         """Whether ``image`` is in the cache."""
@@ -125,7 +145,10 @@ class ImpostorImages:
         if not todo:
             return None
         ids = [i for _, i in todo[:MAX_BATCH]]
-        return Offer(min(todo[0][0], 0.0) + _LEAD[self.kind], lambda: self._start(ids))
+        need = todo[0][0]
+        # impostor images by when their cell is needed; wall textures after what is due now
+        offered = offered_need(need) if self.kind == "impostor" else min(need, 0.0) + WALL_LAG_S
+        return Offer(offered, lambda: self._start(ids))
 
     def in_flight(self) -> int:
         """This lane's requests on the link."""

@@ -288,6 +288,11 @@ class Streamer:
         r = self.api.stats.rtt_s
         return r if math.isfinite(r) else self.config.assumed_rtt_s
 
+    @property
+    def velocity(self) -> np.ndarray:
+        """``(2,)`` the viewer's velocity as last predicted, m/s (what :attr:`need` was planned with)."""
+        return self._velocity
+
     def horizon(self) -> float:
         """Seconds of predicted motion to prefetch objects for (see the module docs)."""
         c = self.config

@@ -136,7 +136,7 @@ class TruthScene:
             p = self.params[i]
             ring = p.ring if isinstance(p, StreetParams) else p.rings[0]
             lo[k, :2], hi[k, :2] = ring.min(axis=0) - 1.0, ring.max(axis=0) + 1.0
-            hi[k, 2] = (p.height if isinstance(p, BuildingParams) else 0.0) + 2.0
+            hi[k, 2] = (p.top if isinstance(p, BuildingParams) else 0.0) + 2.0
             if isinstance(p, AreaParams):
                 lo[k, 2] = min(lo[k, 2], AREA_Z_LOWEST)
         return ids, lo, hi

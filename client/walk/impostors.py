@@ -4,8 +4,10 @@ On a scene baked with ``--impostors`` the current street cell's record lists the
 buildings it may draw as images (:class:`~walkstream.shared.wire.CellImpostors`).
 Each frame (:func:`frame_impostors`): the image of the viewer's direction bin and
 its opacity by distance and error (:func:`~walkstream.client.draw.impostors.choose_impostors`);
-the images wanted from the impostor lane (:class:`~walkstream.client.stream.images.ImpostorImages`,
-needed now, so before the buildings' parameters); of those held, the ones that fit
+(once the first cell's parameters are all in: the start-up waits for no image) the
+images wanted from the impostor lane (:class:`~walkstream.client.stream.images.ImpostorImages`,
+needed now, so before the buildings' parameters), and with prefetch on the images the
+predicted cells will draw, at their need times (:func:`ahead_wants`); of those held, the ones that fit
 the texture budget, the farthest dropped first
 (:func:`~walkstream.client.draw.impostors.fit_textures`).  Each kept image is one
 :class:`DrawnImpostor`: a quad fixed to its baking direction (the image is an
@@ -30,7 +32,10 @@ from walkstream.client.draw.impostors import choose_impostors, fit_textures
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.impostors import bin_direction, bin_of, directions, image_basis
 
-__all__ = ["DrawnImpostor", "frame_impostors", "quad_corners", "replaced"]
+__all__ = ["AHEAD_S", "DrawnImpostor", "ahead_wants", "frame_impostors", "quad_corners", "replaced"]
+
+AHEAD_S = 6.0
+"""How far ahead (seconds of predicted motion) the images of the cells ahead are wanted."""
 
 
 @dataclass(frozen=True)
@@ -68,8 +73,16 @@ def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
     imp = None if rec is None else rec.impostors
     if imp is None or not imp.rows:
         return []
+    if not lane.started:
+        # the start-up: the first cell's parameters before any image, so the first
+        # perfect frame does not wait for images sharing the link (it needs none)
+        if not all(city.has_object(i) for i in w.objects.pvs):
+            return []
+        lane.started = True
     choices = choose_impostors(imp.rows, f.eye, imp.d, imp.bound)
-    lane.want({c.image: 0.0 for c in choices if c.image is not None})
+    wants = ahead_wants(w, f) if w.config.prefetch else {}
+    wants.update({c.image: 0.0 for c in choices if c.image is not None})
+    lane.want(wants)
     held = {c.image: int(getattr(lane.image(c.image), "nbytes", 0))
             for c in choices if c.image is not None and lane.held(c.image)}
     # an image not held yet: geometry until it comes
@@ -86,6 +99,36 @@ def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
         ia, ie = bin_of(r.level, az, el)
         out.append(DrawnImpostor(c.object, c.image, c.alpha, quad_corners(r.box, r.level, int(ia), int(ie)),
                                  held[c.image]))
+    return out
+
+
+def ahead_wants(w: WalkState, f: Frame) -> dict[int, float]:
+    """Images the predicted cells will draw: image id -> need, seconds from now.
+
+    For each cell the streamer predicts (its need times, :attr:`Streamer.need`) other
+    than the current one, whose record is in and lists impostors, the images chosen for
+    the viewer where the motion predictor puts them at that time (the eye moved by the
+    velocity times the need), within :data:`AHEAD_S`.  An image two cells want is
+    needed at the earlier time.  The lane asks for them in order of need, the images
+    of the current cell (need 0) first.
+    """
+    city = w.scene.streets
+    if city is None:
+        return {}
+    velocity = np.asarray(city.velocity, np.float64)
+    out: dict[int, float] = {}
+    for cell, t in sorted(city.need.items(), key=lambda kv: kv[1]):
+        if cell == f.street or not 0.0 <= t <= AHEAD_S:
+            continue
+        rec = city.cells.get(cell)
+        imp = None if rec is None else rec.impostors
+        if imp is None or not imp.rows:
+            continue
+        eye = np.asarray(f.eye, np.float64).copy()
+        eye[:2] += velocity * t
+        for c in choose_impostors(imp.rows, eye, imp.d, imp.bound):
+            if c.image is not None and c.image not in out:
+                out[c.image] = float(t)
     return out
 
 

@@ -24,4 +24,4 @@ def building_box(b: Any) -> tuple[float, float, float, float, float, float]:
     """``minx, miny, minz, maxx, maxy, maxz`` of what the grammar builds from building ``b``."""
     lo, hi = b.rings[0].min(axis=0), b.rings[0].max(axis=0)
     # the grammar builds a parapet above the eaves and ledges just outside the walls
-    return (float(lo[0]) - 0.5, float(lo[1]) - 0.5, 0.0, float(hi[0]) + 0.5, float(hi[1]) + 0.5, b.height + 1.0)
+    return (float(lo[0]) - 0.5, float(lo[1]) - 0.5, 0.0, float(hi[0]) + 0.5, float(hi[1]) + 0.5, b.top + 1.0)

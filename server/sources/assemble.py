@@ -36,6 +36,7 @@ from walkstream.server.sources.rings import bound_vertices, clean_and_repair
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError, SourceError
+from walkstream.shared.landmarks import PLAIN, landmark_kind
 from walkstream.shared.records import BuildingParams, StreetParams
 
 __all__ = ["DEFAULT_STREET_WIDTH", "MAX_PROJECTED", "assemble_scene"]
@@ -251,9 +252,20 @@ def _make_buildings(
                 floor_height=fh,
                 style=style,
                 source_id=part.source_id,
+                kind=_landmark(part, log),
             )
         )
     return _within_module_limit(out, parts, log)
+
+
+def _landmark(part: CleanPart, log: IssueLog) -> int:
+    """The landmark kind of a footprint's ``landmark`` property; a bad one is ignored and reported."""
+    value = part.poly.props.get("landmark")
+    try:
+        return landmark_kind(value)
+    except InputError as exc:
+        log.add(part.poly.index, part.poly.fid, f"bad {exc} ignored; a plain building", "repaired")
+        return PLAIN
 
 
 def _within_module_limit(

@@ -26,7 +26,16 @@ Layout
    is only partly shared); a few are vacant; some blocks are one courtyard building
    (the whole band as one polygon with a hole); a few backyards hold a small
    detached building.
-5. **Shared vertices.**  Where a lot's corner lies on a neighbour's wall the wall gets
+5. **Landmarks.**  A few blocks (3 in the 700 m city, one per 16 ha, none below
+   400 m) get a tall, detailed building standing free in the middle of their
+   backyard: a tower (setbacks and a mast) or a spire, alternately.  Its footprint is
+   a square and the feature carries ``landmark: "tower" | "spire"``; the building
+   grammar builds the crown from that kind (:mod:`walkstream.shared.landmarks`), so a
+   landmark travels as parameters like any building.  They are over the bake's
+   ``--complex-triangles`` default at LOD2, so the complex-impostor path runs on every
+   demo.  Landmarks draw from their own random stream: the rest of the city is the
+   same with or without them.
+6. **Shared vertices.**  Where a lot's corner lies on a neighbour's wall the wall gets
    that vertex too (:func:`~walkstream.server.sources.partywalls.split_shared_edges`),
    so that rounding to 1 cm keeps neighbours wall to wall.  The party walls themselves
    (the neighbour height behind each edge) are not written: like any footprint file,
@@ -63,6 +72,7 @@ __all__ = [
     "DEFAULT_SEED",
     "CRS_NAME",
     "FRONTAGE_GAP",
+    "GENERATOR_VERSION",
     "MAX_SIZE",
     "MIN_SIZE",
     "ORIGIN",
@@ -86,7 +96,7 @@ CRS_NAME = "urn:ogc:def:crs:EPSG::32633"
 #: Distance between the street surfaces and the building frontages (see module doc).
 FRONTAGE_GAP = 0.02
 #: Version of the generator's layout rules; bump it when the output changes.
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 
 # Street grid.
 _MEAN_SPACING = 85.0  # metres between grid lines on average
@@ -115,6 +125,15 @@ _FLOORS = (3, 7)  # per block, inclusive
 _FLOOR_VARIATION = 2  # per lot, +-
 _FLOOR_HEIGHT = (3.0, 3.6)
 _STYLE_COUNT = 10000
+
+# Landmarks (towers and spires in some backyards, see _landmarks).
+_LANDMARK_AREA = 160000.0  # one landmark per this many square metres of city
+_LANDMARK_MAX = 4
+_LANDMARK_SIDE = (14.0, 24.0)  # metres, the square footprint's side
+_LANDMARK_STREAM = 27  # the landmarks' own random stream next to the city's seed
+_LANDMARK_FLOOR_HEIGHT = 3.4
+_TOWER_FLOORS = (26, 34)  # [lo, hi)
+_SPIRE_FLOORS = (14, 18)
 
 
 def _check_size(size: float) -> float:
@@ -313,13 +332,14 @@ class _Network:
 class _Building:
     """A generated footprint before its shared vertices are added (local metres)."""
 
-    __slots__ = ("rings", "floors", "floor_height", "style")
+    __slots__ = ("rings", "floors", "floor_height", "style", "use")
 
     def __init__(self, rings: list[F64], floors: int, floor_height: float, style: int) -> None:
         self.rings = rings
         self.floors = floors
         self.floor_height = floor_height
         self.style = style
+        self.use = "lot"  # "lot", "shed" (detached, in a backyard), "tower" or "spire"
 
     @property
     def height(self) -> float:
@@ -429,7 +449,74 @@ def _perimeter_block(
         shed = _detached(inner, rng)
         if shed is not None:
             out.append(_building([shed], int(rng.integers(1, 3)), rng))
+            out[-1].use = "shed"
     return out, lots
+
+
+def _landmark_count(size: float) -> int:
+    """How many landmarks a city of ``size`` metres gets: 3 in the 700 m demo, none below 400 m."""
+    return min(_LANDMARK_MAX, int(size * size // _LANDMARK_AREA))
+
+
+def _landmark_site(yard: F64) -> F64 | None:
+    """The largest square (side at most 24 m) centred in a backyard quad with 3 m of yard
+    around it, aligned with the yard's first edge; None if it would be under 14 m."""
+    u = _unit(yard[1] - yard[0])
+    v = _left(u)
+    c = yard.mean(axis=0)
+    e = np.roll(yard, -1, axis=0) - yard
+    signs = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])  # CCW
+    for half in np.arange(_LANDMARK_SIDE[1] / 2.0, _LANDMARK_SIDE[0] / 2.0 - 1e-9, -0.5):
+        sq = c + signs[:, :1] * half * u + signs[:, 1:] * half * v
+        if bool(np.all(_cross(_unit(e)[None], sq[:, None] - yard[None]) >= 3.0)):
+            return sq
+    return None
+
+
+def _landmarks(
+    size: float, seed: int, yards: list[tuple[F64, int, int]], buildings: list[_Building]
+) -> list[_Building]:
+    """Put a few tall, detailed buildings (towers, spires) in the backyards of some blocks.
+
+    A landmark stands free in the middle of a block's yard, so no party wall touches it
+    and its footprint stays an exact square (the crown the grammar builds fits it).  It
+    takes the place (and the id) of the block's detached shed, if any.  Landmarks draw from their own random
+    stream, so every other building of the city is the same with or without them.
+
+    Parameters
+    ----------
+    size, seed: the city's.
+    yards: ``(yard quad (4, 2), first, end)`` per perimeter block: its backyard and the
+        range of its buildings in ``buildings``.
+    buildings: every building so far.
+
+    Returns
+    -------
+    list of _Building
+        ``buildings`` with the chosen yards' sheds replaced by their landmarks, then
+        the landmarks of yards that had none; alternately a tower and a spire.
+    """
+    rng = np.random.default_rng([seed, _LANDMARK_STREAM])
+    want = _landmark_count(size)
+    chosen: list[tuple[int, F64]] = []
+    for k in rng.permutation(len(yards)).tolist():
+        if len(chosen) == want:
+            break
+        site = _landmark_site(yards[k][0])
+        if site is not None:
+            chosen.append((k, site))
+    out = list(buildings)
+    for n, (k, site) in enumerate(chosen):
+        use = ("tower", "spire")[n % 2]
+        floors = int(rng.integers(*(_TOWER_FLOORS if use == "tower" else _SPIRE_FLOORS)))
+        bd = _Building([site], floors, _LANDMARK_FLOOR_HEIGHT, int(rng.integers(_STYLE_COUNT)))
+        bd.use = use
+        shed = [i for i in range(yards[k][1], yards[k][2]) if buildings[i].use == "shed"]
+        if shed:
+            out[shed[0]] = bd
+        else:
+            out.append(bd)
+    return out
 
 
 def _detached(yard: F64, rng: np.random.Generator) -> F64 | None:
@@ -505,6 +592,7 @@ def generate_city(size: float, seed: int = 1) -> dict[str, Any]:
     inner, nrm = _inset(outer, depth)
 
     buildings: list[_Building] = []
+    yards: list[tuple[F64, int, int]] = []
     lots = 0
     for b in range(nb):
         if square[b]:
@@ -520,8 +608,10 @@ def generate_city(size: float, seed: int = 1) -> dict[str, Any]:
             new, n = _perimeter_block(
                 outer[b], inner[b], nrm[b], depth[b], int(block_floors[b]), rng
             )
+            yards.append((inner[b], len(buildings), len(buildings) + len(new)))
             buildings.extend(new)
             lots += n
+    buildings = _landmarks(size, seed, yards, buildings)
 
     split = split_shared_edges([bd.rings for bd in buildings])
     features: list[dict[str, Any]] = []
@@ -539,6 +629,7 @@ def generate_city(size: float, seed: int = 1) -> dict[str, Any]:
                     "floor_height": bd.floor_height,
                     "height": bd.height,
                     "style": bd.style,
+                    **({"landmark": bd.use} if bd.use in ("tower", "spire") else {}),
                 },
             }
         )
@@ -672,7 +763,8 @@ def city_summary(fc: dict[str, Any]) -> dict[str, Any]:
     dict
         ``buildings``, ``streets``, ``crossroads``, ``squares``, ``lots`` (from the
         ``walkstream`` member, None when absent), ``shapes`` (counts of ``rect``, ``l``,
-        ``courtyard``, ``irregular`` footprints), ``floors`` (``min``, ``mean``,
+        ``courtyard``, ``irregular`` footprints), ``landmarks`` (counts of ``tower``
+        and ``spire``), ``floors`` (``min``, ``mean``,
         ``max``), ``party_wall_edges`` (edges with a neighbour behind, once the
         footprints are loaded: the loader splits partly shared edges),
         ``free_edges``, ``built_area_m2`` (footprint area) and ``area_m2`` (the
@@ -680,6 +772,7 @@ def city_summary(fc: dict[str, Any]) -> dict[str, Any]:
     """
     counts = {"building": 0, "street": 0, "crossroad": 0, "square": 0}
     shapes = {"rect": 0, "l": 0, "courtyard": 0, "irregular": 0}
+    landmarks = {"tower": 0, "spire": 0}
     floors: list[int] = []
     party = free = 0
     built = 0.0
@@ -694,6 +787,8 @@ def city_summary(fc: dict[str, Any]) -> dict[str, Any]:
         shapes[_shape_kind(rings)] += 1
         built += sum(signed_area(r) for r in rings)  # holes are CW: they subtract
         floors.append(int(props["floors"]))
+        if props.get("landmark") in landmarks:
+            landmarks[props["landmark"]] += 1
     if counts["building"]:
         # party walls as the loader finds them (the one place that does)
         from walkstream.server.sources.geojson import load_geojson_dict
@@ -711,6 +806,7 @@ def city_summary(fc: dict[str, Any]) -> dict[str, Any]:
         "squares": counts["square"],
         "lots": meta.get("lots"),
         "shapes": shapes,
+        "landmarks": landmarks,
         "floors": {
             "min": min(floors) if floors else 0,
             "mean": round(float(np.mean(floors)), 2) if floors else 0.0,

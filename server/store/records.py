@@ -124,7 +124,7 @@ class ObjectRow:
     ) -> ObjectRow:
         """Encode ``p`` and, unless given, derive its box from the footprint.
 
-        The derived box spans z from 0 to ``p.height`` for a building, 0 to 0 for
+        The derived box spans z from 0 to ``p.top`` (the eaves, or a landmark's crown) for a building, 0 to 0 for
         a street piece and its kind's height for an area (kind ``"area"``); pass ``bbox`` when the grammar builds above the eaves.
         """
         bottom = 0.0
@@ -133,7 +133,7 @@ class ObjectRow:
                 encode_building(p, with_source_id=with_source_id),
                 "building",
                 p.rings[0],
-                p.height,
+                p.top,
             )
         elif isinstance(p, AreaParams):
             blob, kind, xy = encode_area(p, with_source_id=with_source_id), "area", p.rings[0]

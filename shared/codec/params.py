@@ -223,6 +223,9 @@ def encode_building(b: BuildingParams, *, with_source_id: bool = True) -> bytes:
         b.style,
         b.source_id if with_source_id else "",
     ]
+    if b.kind:
+        # a landmark's kind is a twelfth field; ordinary buildings keep their exact old bytes
+        rec.append(b.kind)
     try:
         return msgpack.packb(rec, use_bin_type=True)
     except (OverflowError, ValueError, TypeError) as exc:
@@ -271,8 +274,10 @@ def decode_building(
 
 
 def _decode_building(obj: object, what: str) -> BuildingParams:
-    rec, flags = _header(obj, what, _REC_BUILDING, 11)
-    _, oid, ax, ay, counts_f, coords, heights, floors, fh_cm, style, source_id = rec
+    n = 12 if isinstance(obj, list) and len(obj) == 12 else 11
+    rec, flags = _header(obj, what, _REC_BUILDING, n)
+    _, oid, ax, ay, counts_f, coords, heights, floors, fh_cm, style, source_id = rec[:11]
+    kind = checked_int(rec[11], what, "kind", 1, 2) if n == 12 else 0
     oid = checked_int(oid, what, "id", 0, INT64_MAX)
     what = f"{what} (id {oid})"
     if flags >> 3:
@@ -290,6 +295,7 @@ def _decode_building(obj: object, what: str) -> BuildingParams:
         floor_height=checked_int(fh_cm, what, "floor_height", 1, 2**31) / 100.0,
         style=checked_int(style, what, "style", -(2**63), 2**64 - 1),
         source_id=source_id,
+        kind=kind,
     )
 
 
