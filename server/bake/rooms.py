@@ -352,11 +352,14 @@ class _Builder:
         return out
 
     def _free_floor(self, k: int, walls: shapely.Geometry) -> shapely.Geometry:
-        """Storey ``k``'s floor (its slabs' level faces) where no wall or column stands."""
+        """Storey ``k``'s floor (its slabs' level faces) where no wall or column stands
+        and no opening goes through a wall: a space grown over it stops at its doors,
+        never reaching through one to the floor beyond (a slab wider than the walls)."""
         floor = _slab_cover(self.scene, float(self.ranges[k][0]))
         if floor.is_empty:
             return floor
-        return floor.difference(walls) if not walls.is_empty else floor
+        blocked = shapely.union_all([walls, *_opening_footprints(self.scene.openings, k)])
+        return floor.difference(blocked) if not blocked.is_empty else floor
 
     def edge_portals(self, x: RoomCell, y: RoomCell, kind: str, source: str, top: float, name: str = "",
                      z0: float | None = None) -> int:
@@ -677,6 +680,23 @@ class _Builder:
         ]
 
 
+def _opening_footprints(openings: tuple[Opening, ...], storey: int) -> list[shapely.Geometry]:
+    """The footprints of storey ``storey``'s holes through walls (doors, windows,
+    openings: ``depth`` > 0), each a rectangle ``width`` along the wall by its
+    thickness across, 2 cm deeper on each side so that it meets both wall faces."""
+    out = []
+    for o in openings:
+        if o.storey != storey or o.depth <= 0.0 or o.width <= 0.0:
+            continue
+        n = np.asarray(o.normal, dtype=np.float64)[:2]
+        n = n / max(float(np.linalg.norm(n)), 1e-12)
+        t = np.array([-n[1], n[0]])
+        c = np.asarray(o.centre, dtype=np.float64)[:2]
+        a, d = 0.5 * o.width * t, (0.5 * o.depth + 0.02) * n
+        out.append(shapely.Polygon([c - a - d, c + a - d, c + a + d, c - a + d]))
+    return out
+
+
 def _grow_to_walls(poly: shapely.Geometry, free: shapely.Geometry, others: shapely.Geometry) -> tuple[shapely.Geometry, int]:
     """A space grown over the floor up to its walls: the free floor (no wall, no other
     space) within :data:`_GROW` of it and joined to it.  Exporters draw spaces to a
@@ -687,6 +707,11 @@ def _grow_to_walls(poly: shapely.Geometry, free: shapely.Geometry, others: shape
     if not others.is_empty:
         near = near.difference(others)
     extra = near.difference(poly).buffer(-0.01, join_style="mitre").buffer(0.01, join_style="mitre")
+    # only floor along the space's edge: a piece that touches it at a corner (the gap
+    # where two walls meet without a join) leads outside, not to its walls
+    edge = poly.boundary
+    extra = shapely.union_all([g for g in getattr(extra, "geoms", [extra])
+                               if not g.is_empty and g.intersection(edge).length > 0.05])
     if extra.is_empty or extra.area < 0.02:
         return poly, 0
     grown = shapely.make_valid(poly.union(extra.intersection(near)))
