@@ -117,6 +117,15 @@ START_LEAD_S = 3.0
 START_MAX_AHEAD_M = 200.0
 """A start bundle looks at most this far ahead."""
 
+START_RECORD_LEAD_S = 2.0
+"""A start bundle also holds the records (and index tiles) of the cells reached in this
+many seconds more, without their objects: a record is small, and a viewer who enters a
+cell whose record has not come cannot even count what it misses; the client's own
+requests queue behind the bundle."""
+
+START_RECORD_AHEAD_M = 20.0
+"""... and at least this many metres more (a walker's next junction)."""
+
 START_ROOM_LEAD_S: tuple[float, ...] = (0.5, 1.0, 2.0)
 """An interior start bundle holds the contents of the cells seen from the path's first
 pose and from where it leads, going straight on, after these many seconds."""
@@ -259,8 +268,11 @@ class Scene:
         self.grid, tiles = fit_tile_grid([c.boundary for c in cells])
         self.tile_cells: dict[tuple[int, int], list[int]] = {}
         """Tile -> ids of its cells, ascending."""
+        self.cell_tile: dict[int, tuple[int, int]] = {}
+        """Cell id -> the tile of the cell index that holds it."""
         for c, (i, j) in zip(cells, tiles.tolist(), strict=True):
             self.tile_cells.setdefault((i, j), []).append(c.id)
+            self.cell_tile[c.id] = (i, j)
         b = reader.bounds()
         vps = reader.viewpoints()
         manifest = Manifest(
@@ -557,24 +569,51 @@ class Scene:
                 parts.append(("contents", Frames(cells, [self.interior.contents_part(c, inflate) for c in cells])))
             return [*parts, ("manifest", self.manifest[rep])]
         ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
-        cells = self.start_cells(xy, heading, ahead)
-        order: list[int] = []
+        more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0
+        cells = self.start_cells(xy, heading, min(START_MAX_AHEAD_M, ahead + more))
+        with_objects = self.start_cells(xy, heading, ahead)
+        # in the order needed: each cell's record, the index tiles that hold it (the
+        # client tracks the viewer into it), then its new objects; the manifest (its
+        # grammar rebuilds them) before the first object.  What the viewer reaches
+        # only later comes after all the objects the first seconds need.
         seen: set[int] = set()
-        for cid in cells:
-            parts.append(("cell", self.cell(cid, rep)))
+        sent: set[tuple[int, int]] = set()
+        later: list[StartPart] = []
+        manifest = False
+
+        def tiles(cid: int | None) -> list[StartPart]:
+            # the tile holding the cell (the client follows the viewer into it by its
+            # outline); outside every cell, those that may hold cells near the start.
+            # Other tiles around the start the client asks for when it needs them.
+            want = [self.cell_tile[cid]] if cid is not None else [t for _d, t in self.grid.tiles_near(xy)]
+            out: list[StartPart] = []
+            for t in want:
+                if t not in sent:
+                    sent.add(t)
+                    out.append(("index", self.index(t, rep)))
+            return out
+
+        for k, cid in enumerate(cells):
+            here = [("cell", self.cell(cid, rep)), *tiles(cid)]
+            if k >= len(with_objects):
+                later += here
+                continue
+            parts += here
+            if not manifest:
+                parts.append(("manifest", self.manifest[rep]))
+                manifest = True
             c = self.reader.cell(cid)
-            for oid in c.pvs[np.argsort(-c.ach, kind="stable")].tolist():
-                if oid not in seen:
-                    seen.add(oid)
-                    order.append(int(oid))
-        for _d, tile in self.grid.tiles_near(xy, ahead):
-            parts.append(("index", self.index(tile, rep)))
-        parts.append(("manifest", self.manifest[rep]))
-        if order:
-            found, missing = self.cached_frames(order, form)
-            if missing:
-                found.update(self.load_frames(missing, form))
-            parts.append(("objects", Frames(order, [found[oid] for oid in order])))
+            order = [int(o) for o in c.pvs[np.argsort(-c.ach, kind="stable")].tolist() if o not in seen]
+            seen.update(order)
+            if order:
+                found, missing = self.cached_frames(order, form)
+                if missing:
+                    found.update(self.load_frames(missing, form))
+                parts.append(("objects", Frames(order, [found[oid] for oid in order])))
+        if not manifest:  # outside every cell: the tiles around the start, the manifest
+            parts += tiles(None)
+            parts.append(("manifest", self.manifest[rep]))
+        parts += later
         return parts
 
     def _room_lead(self, path: str) -> list[tuple[NDArray[np.float64], float, float]]:
