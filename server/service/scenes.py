@@ -572,48 +572,33 @@ class Scene:
         more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0
         cells = self.start_cells(xy, heading, min(START_MAX_AHEAD_M, ahead + more))
         with_objects = self.start_cells(xy, heading, ahead)
-        # in the order needed: each cell's record, the index tiles that hold it (the
-        # client tracks the viewer into it), then its new objects; the manifest (its
-        # grammar rebuilds them) before the first object.  What the viewer reaches
-        # only later comes after all the objects the first seconds need.
-        seen: set[int] = set()
+        # the records first, each with the index tile that holds its cell (the client
+        # follows the viewer into it by its outline; other tiles around the start it
+        # asks for when it needs them), then the manifest (its grammar rebuilds the
+        # objects), then the objects of the cells reached within START_LEAD_S
         sent: set[tuple[int, int]] = set()
-        later: list[StartPart] = []
-        manifest = False
-
-        def tiles(cid: int | None) -> list[StartPart]:
-            # the tile holding the cell (the client follows the viewer into it by its
-            # outline); outside every cell, those that may hold cells near the start.
-            # Other tiles around the start the client asks for when it needs them.
-            want = [self.cell_tile[cid]] if cid is not None else [t for _d, t in self.grid.tiles_near(xy)]
-            out: list[StartPart] = []
-            for t in want:
-                if t not in sent:
-                    sent.add(t)
-                    out.append(("index", self.index(t, rep)))
-            return out
-
-        for k, cid in enumerate(cells):
-            here = [("cell", self.cell(cid, rep)), *tiles(cid)]
-            if k >= len(with_objects):
-                later += here
-                continue
-            parts += here
-            if not manifest:
-                parts.append(("manifest", self.manifest[rep]))
-                manifest = True
+        for cid in cells:
+            parts.append(("cell", self.cell(cid, rep)))
+            tile = self.cell_tile[cid]
+            if tile not in sent:
+                sent.add(tile)
+                parts.append(("index", self.index(tile, rep)))
+        if not cells:  # outside every cell: the tiles that may hold cells near the start
+            parts += [("index", self.index(t, rep)) for _d, t in self.grid.tiles_near(xy)]
+        parts.append(("manifest", self.manifest[rep]))
+        order: list[int] = []
+        seen: set[int] = set()
+        for cid in with_objects:
             c = self.reader.cell(cid)
-            order = [int(o) for o in c.pvs[np.argsort(-c.ach, kind="stable")].tolist() if o not in seen]
-            seen.update(order)
-            if order:
-                found, missing = self.cached_frames(order, form)
-                if missing:
-                    found.update(self.load_frames(missing, form))
-                parts.append(("objects", Frames(order, [found[oid] for oid in order])))
-        if not manifest:  # outside every cell: the tiles around the start, the manifest
-            parts += tiles(None)
-            parts.append(("manifest", self.manifest[rep]))
-        parts += later
+            for oid in c.pvs[np.argsort(-c.ach, kind="stable")].tolist():
+                if oid not in seen:
+                    seen.add(oid)
+                    order.append(int(oid))
+        if order:
+            found, missing = self.cached_frames(order, form)
+            if missing:
+                found.update(self.load_frames(missing, form))
+            parts.append(("objects", Frames(order, [found[oid] for oid in order])))
         return parts
 
     def _room_lead(self, path: str) -> list[tuple[NDArray[np.float64], float, float]]:
