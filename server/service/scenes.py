@@ -543,11 +543,13 @@ class Scene:
 
         The path (when asked by name; the walk can start once it is in), the
         records of the cell holding ``xy`` and of the cells straight ahead that the
-        viewer reaches within :data:`START_LEAD_S` at ``speed`` (none outside every
-        cell), the index tiles that may hold cells near ``xy`` (the client tracks
-        the viewer with them and sees the cells ahead), the manifest, then the
-        objects of those cells' PVS: the first cell's by ACH (highest first), then
-        each next cell's new ones.  Reads the database on cache misses: call it
+        viewer reaches within :data:`START_LEAD_S` at ``speed`` and
+        :data:`START_RECORD_LEAD_S` more (none outside every cell), each followed by
+        the index tile holding it when not sent yet (the client tracks the viewer
+        with them; outside every cell, the tiles that may hold cells near ``xy``),
+        the manifest, then the objects of the PVS of the cells of the first
+        :data:`START_LEAD_S`: the first cell's by ACH (highest first), then each
+        next cell's new ones.  Reads the database on cache misses: call it
         from a worker thread.
 
         An interior's bundle is the path, the topology, then (for a path and a client
