@@ -174,6 +174,26 @@ def test_slowing_down_at_a_junction_keeps_straight_on_wanted() -> None:
         x = min(40.0, x + float(speed) * 0.04)
 
 
+def test_a_record_round_the_corner_is_due_by_distance_not_turn_cost() -> None:
+    """A car 5 m before the junction: the side streets are less likely than the street
+    ahead (their objects later), but whoever turns is in them after the same few metres,
+    so their records are due as soon as the one ahead."""
+    m = _map()
+    m.current = ID["W1"]
+    v = np.array([14.0, 0.0])
+    needs = plan_needs(
+        m, None, [-10.0, 0.0], v, v, reach_m=60.0, reach_records_m=80.0,
+        turn_m=turn_cost_m(14.0), min_speed=1.5,
+    )
+    for side in ("N1", "S1"):
+        assert needs.need[ID[side]] > needs.need[ID["E1"]]  # objects: by cost
+        # records: by distance (5 m to the junction, 7 m across it to the side portal)
+        assert needs.records[ID[side]] == pytest.approx((5.0 + 50.0**0.5) / 14.0)
+        assert needs.records[ID[side]] < needs.need[ID[side]]
+        assert needs.records[ID[side]] <= needs.records[ID["E1"]]
+    assert needs.records[ID["E1"]] == pytest.approx(needs.need[ID["E1"]])  # straight on: the same
+
+
 def test_a_route_leaving_the_cells_keeps_the_last_cell_and_asks_for_tiles() -> None:
     m = _map()
     grid = TileGrid((-45.0, -25.0), 50.0, (2, 2), 1.0)

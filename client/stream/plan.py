@@ -9,7 +9,9 @@ the cell index and answers, in seconds until needed:
   ``reach_m`` of cost, each at its cost over the speed;
 * ``records`` -- the cells whose records are wanted: the same within
   ``reach_records_m`` (a little further: a cell's objects can be asked for only once
-  its record is in);
+  its record is in), each at its *distance* over the speed: the turn cost decides
+  which cells are wanted, but a cell round a corner is entered as soon as the way
+  there is walked, and a late record leaves the viewer with nothing to count;
 * ``tiles`` -- the index tiles wanted: those around the viewer (0 s), those the
   route runs through and into (a neighbour whose tile is not held), and, when the
   viewer is outside every held cell, those within ``reach_m``.
@@ -120,7 +122,9 @@ def plan_needs(
         )
         for s in route.steps:
             t = s.cost_m / v_eff
-            records.setdefault(s.cell, t)
+            # a turn makes a cell less likely, not later: if the viewer takes it, it is
+            # there after the distance alone, so its record (small) is due by that
+            records.setdefault(s.cell, s.distance_m / v_eff)
             if s.cost_m <= reach_m:
                 need.setdefault(s.cell, t)
             on = cellmap.tile_of.get(s.cell)

@@ -118,6 +118,15 @@ START_LEAD_S = 3.0
 START_MAX_AHEAD_M = 200.0
 """A start bundle looks at most this far ahead."""
 
+START_RECORD_LEAD_S = 2.0
+"""A start bundle also holds the records (and index tiles) of the cells reached in this
+many seconds more, without their objects: a record is small, and a viewer who enters a
+cell whose record has not come cannot even count what it misses; the client's own
+requests queue behind the bundle."""
+
+START_RECORD_AHEAD_M = 20.0
+"""... and at least this many metres more (a walker's next junction)."""
+
 START_ROOM_LEAD_S: tuple[float, ...] = (0.5, 1.0, 2.0)
 """An interior start bundle holds the contents of the cells seen from the path's first
 pose and from where it leads, going straight on, after these many seconds."""
@@ -260,8 +269,11 @@ class Scene:
         self.grid, tiles = fit_tile_grid([c.boundary for c in cells])
         self.tile_cells: dict[tuple[int, int], list[int]] = {}
         """Tile -> ids of its cells, ascending."""
+        self.cell_tile: dict[int, tuple[int, int]] = {}
+        """Cell id -> the tile of the cell index that holds it."""
         for c, (i, j) in zip(cells, tiles.tolist(), strict=True):
             self.tile_cells.setdefault((i, j), []).append(c.id)
+            self.cell_tile[c.id] = (i, j)
         b = reader.bounds()
         vps = reader.viewpoints()
         manifest = Manifest(
@@ -555,11 +567,13 @@ class Scene:
 
         The path (when asked by name; the walk can start once it is in), the
         records of the cell holding ``xy`` and of the cells straight ahead that the
-        viewer reaches within :data:`START_LEAD_S` at ``speed`` (none outside every
-        cell), the index tiles that may hold cells near ``xy`` (the client tracks
-        the viewer with them and sees the cells ahead), the manifest, then the
-        objects of those cells' PVS: the first cell's by ACH (highest first), then
-        each next cell's new ones.  Reads the database on cache misses: call it
+        viewer reaches within :data:`START_LEAD_S` at ``speed`` and
+        :data:`START_RECORD_LEAD_S` more (none outside every cell), each followed by
+        the index tile holding it when not sent yet (the client tracks the viewer
+        with them; outside every cell, the tiles that may hold cells near ``xy``),
+        the manifest, then the objects of the PVS of the cells of the first
+        :data:`START_LEAD_S`: the first cell's by ACH (highest first), then each
+        next cell's new ones.  Reads the database on cache misses: call it
         from a worker thread.
 
         An interior's bundle is the path, the topology, then (for a path and a client
@@ -581,19 +595,31 @@ class Scene:
                 parts.append(("contents", Frames(cells, [self.interior.contents_part(c, inflate) for c in cells])))
             return [*parts, ("manifest", self.manifest[rep])]
         ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
-        cells = self.start_cells(xy, heading, ahead)
-        order: list[int] = []
-        seen: set[int] = set()
+        more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0
+        cells = self.start_cells(xy, heading, min(START_MAX_AHEAD_M, ahead + more))
+        with_objects = self.start_cells(xy, heading, ahead)
+        # the records first, each with the index tile that holds its cell (the client
+        # follows the viewer into it by its outline; other tiles around the start it
+        # asks for when it needs them), then the manifest (its grammar rebuilds the
+        # objects), then the objects of the cells reached within START_LEAD_S
+        sent: set[tuple[int, int]] = set()
         for cid in cells:
             parts.append(("cell", self.cell(cid, rep)))
+            tile = self.cell_tile[cid]
+            if tile not in sent:
+                sent.add(tile)
+                parts.append(("index", self.index(tile, rep)))
+        if not cells:  # outside every cell: the tiles that may hold cells near the start
+            parts += [("index", self.index(t, rep)) for _d, t in self.grid.tiles_near(xy)]
+        parts.append(("manifest", self.manifest[rep]))
+        order: list[int] = []
+        seen: set[int] = set()
+        for cid in with_objects:
             c = self.reader.cell(cid)
             for oid in c.pvs[np.argsort(-c.ach, kind="stable")].tolist():
                 if oid not in seen:
                     seen.add(oid)
                     order.append(int(oid))
-        for _d, tile in self.grid.tiles_near(xy, ahead):
-            parts.append(("index", self.index(tile, rep)))
-        parts.append(("manifest", self.manifest[rep]))
         if order:
             found, missing = self.cached_frames(order, form)
             if missing:

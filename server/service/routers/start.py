@@ -13,8 +13,11 @@ it had asked for it):
    then those of the cells straight ahead that the viewer reaches in
    :data:`~walkstream.server.service.scenes.START_LEAD_S` seconds (``heading`` in
    radians counter-clockwise from +x and ``speed`` in m/s; a path gives its own
-   start heading and speed, a viewpoint its yaw and standing still);
-3. ``index`` -- the index tiles that may hold cells near the start;
+   start heading and speed, a viewpoint its yaw and standing still), and those of
+   the cells reached in :data:`~walkstream.server.service.scenes.START_RECORD_LEAD_S`
+   more (records only);
+3. ``index`` -- after each cell, the index tile holding it (when not sent yet); outside
+   every cell, the tiles that may hold cells near the start;
 4. ``manifest`` -- the scene manifest (its grammar rebuilds the objects);
 5. ``objects`` -- the map ``{part: "objects", etag: null, count: n}`` followed by
    ``n`` plain object frames (as the objects stream sends them, in the ``form``
