@@ -65,8 +65,10 @@ class BakeSettings:
     sampling: str = DEFAULT_SAMPLING
     """Where a cell is sampled: ``"region"`` (its outline and a grid inside, every
     ``spacing`` metres, alternating between both ends of the eye-height range),
-    ``"boundary"`` (the outline at the top of the range) or ``"corners"`` (the 8 box
-    corners of the first bake)."""
+    ``"boundary"`` (the outline at the top of the range), ``"corners"`` (the 8 box
+    corners of the first bake) or ``"field"`` (the union of the dense visibility
+    field's points in and around the cell, every ``field_spacing`` metres:
+    :mod:`~walkstream.server.bake.fieldsampling`)."""
     spacing: float = 20.0
     """``region``/``boundary``: largest distance between points along an edge (and of
     the inside grid), metres."""
@@ -80,7 +82,7 @@ class BakeSettings:
     """Draw every triangle's edges as lines after the fill, adding the objects thinner
     than a pixel (:class:`~walkstream.server.bake.visibility.VisibilityRenderer`)."""
     field_spacing: float = DEFAULT_FIELD_SPACING
-    """``cells="sections"``: metres between the points of the dense visibility field."""
+    """``cells="sections"`` or ``sampling="field"``: metres between the points of the dense visibility field."""
     redundancy: int = DEFAULT_REDUNDANCY
     """``cells="sections"``: objects a section may hold beyond what its seed point sees."""
     min_size: float = DEFAULT_MIN_SIZE
@@ -89,13 +91,15 @@ class BakeSettings:
     def record(self) -> dict[str, Any]:
         """The settings as stored in a database's header (what identifies a bake).
 
-        The section settings are stored only by a bake of sections, so that every
-        other bake keeps the header (and the scene version) it had before they existed.
+        The section settings are stored only by a bake of sections (the field's
+        spacing by a bake sampled from the field too), so that every other bake keeps
+        the header (and the scene version) it had before they existed.
         """
         out = asdict(self)
         if self.cells != "sections":
             for name in SECTION_FIELDS:
-                out.pop(name)
+                if name != "field_spacing" or self.sampling != "field":
+                    out.pop(name)
         return out
 
     def check(self) -> BakeSettings:
@@ -108,8 +112,8 @@ class BakeSettings:
             raise InputError(f"--redundancy: expected >= 0 objects, got {self.redundancy}")
         if not (np.isfinite(self.min_size) and self.min_size >= 0):
             raise InputError(f"--min-size: expected >= 0 square metres, got {self.min_size}")
-        if self.sampling not in ("boundary", "corners", "region"):
-            raise InputError(f"--sampling: expected boundary, region or corners, got {self.sampling!r}")
+        if self.sampling not in ("boundary", "corners", "region", "field"):
+            raise InputError(f"--sampling: expected region, boundary, corners or field, got {self.sampling!r}")
         for name in ("cell_size", "max_length", "view_distance", "margin", "spacing", "height_step"):
             v = float(getattr(self, name))
             if not (np.isfinite(v) and v > 0):
