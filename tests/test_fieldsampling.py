@@ -198,3 +198,9 @@ def test_the_field_spacing_is_stored_only_when_it_is_used() -> None:
     assert "field_spacing" not in BakeSettings().record()
     assert BakeSettings(sampling="field").record()["field_spacing"] == 4.0
     assert "redundancy" not in BakeSettings(sampling="field").record()
+
+
+def test_bench_city_refuses_an_unknown_cell_kind(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    assert main(["bench", "city", "--kinds", "street,rooms", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--kinds" in err[0] and "rooms" in err[0]
