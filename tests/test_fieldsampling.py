@@ -15,9 +15,14 @@ import shapely
 
 from walkstream.cli import main
 from walkstream.server.bake import BakeSettings, bake
-from walkstream.server.bake.field import FieldLattice, PointSets, built_space, lattice_from
-from walkstream.server.bake.fieldsampling import (
+from walkstream.server.bake.field import (
     FIELD_HEIGHTS,
+    FieldLattice,
+    PointSets,
+    built_space,
+    lattice_from,
+)
+from walkstream.server.bake.fieldsampling import (
     cell_field_points,
     cells_region,
     field_cell_pvs,

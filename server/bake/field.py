@@ -40,6 +40,7 @@ from walkstream.shared.errors import InputError
 
 __all__ = [
     "FIELD_BLOCK",
+    "FIELD_HEIGHTS",
     "FieldLattice",
     "PointSets",
     "bake_field",
@@ -47,10 +48,14 @@ __all__ = [
     "field_folder",
     "field_lattice",
     "lattice_from",
+    "rotate_xy",
 ]
 
 FIELD_BLOCK = 64
 """Field points per task (and per saved block)."""
+
+FIELD_HEIGHTS = (1.7, 2.0)
+"""The heights every field point is rendered at: the eye height and the top of the eye range."""
 
 _MAX_POINTS = 4_000_000
 
@@ -73,6 +78,11 @@ class FieldLattice:
         Where each field point is rendered (the point itself when it is free).
     heights : (2,) float64
         The eye heights every point is rendered at.
+    angle : float
+        The lattice's rows run at this angle (radians, counter-clockwise) to the
+        scene's x axis: ``origin``, ``spacing`` and ``shape`` are in the lattice's own
+        frame, the scene rotated by ``-angle`` about (0, 0); ``eyes`` and :meth:`xy`
+        are in the scene's.
     """
 
     origin: tuple[float, float]
@@ -81,6 +91,7 @@ class FieldLattice:
     index: I64
     eyes: F64
     heights: tuple[float, float]
+    angle: float = 0.0
 
     def __len__(self) -> int:
         return len(self.index)
@@ -95,7 +106,11 @@ class FieldLattice:
         """``(n, 2)`` lattice position of every field point, scene-local metres."""
         r, c = np.divmod(self.index, self.shape[1])
         out: F64 = np.stack([self.origin[0] + c * self.spacing, self.origin[1] + r * self.spacing], axis=1)
-        return out
+        return self.to_scene(out)
+
+    def to_scene(self, xy: F64) -> F64:
+        """``(n, 2)`` points of the lattice's frame in the scene's (rotated by :attr:`angle`)."""
+        return rotate_xy(xy, self.angle)
 
 
 @dataclass(frozen=True)
@@ -149,6 +164,7 @@ def field_lattice(
     margin: float = 0.3,
     bbox: tuple[float, float, float, float] | None = None,
     within: shapely.Geometry | None = None,
+    angle: float = 0.0,
 ) -> FieldLattice:
     """The field points of ``scene`` every ``spacing`` metres (see the module docstring).
 
@@ -158,13 +174,44 @@ def field_lattice(
     of ``spacing`` instead, so that a cell's field points do not depend on the rest
     of the scene, and only the points whose square meets ``within`` are kept.
 
+    With ``angle`` (radians) the lattice's rows run at that angle to the x axis
+    (sections aligned to the streets): it is laid in the scene rotated by ``-angle``
+    over the rotated box of ``bbox`` (or of the scene), keeping the points whose
+    squares meet that box.
+
     Raises
     ------
     InputError
         A bad spacing, an empty scene without ``bbox``, or a lattice too large.
     """
-    return lattice_from(_built(scene, margin), spacing, heights, bbox=bbox if within is None else None,
-                        within=within, scene=scene)
+    if not angle:
+        return lattice_from(_built(scene, margin), spacing, heights, bbox=bbox if within is None else None,
+                            within=within, scene=scene)
+    if within is not None:
+        raise InputError("field lattice: a rotated lattice is laid over the scene's box, not over cells")
+    if bbox is None:
+        rings = [b.rings[0] for b in scene.buildings] + [st.ring for st in scene.streets]
+        if not rings:
+            raise InputError(f"scene {scene.name!r} has no buildings or streets: give a bbox")
+        pts = np.concatenate(rings)
+        bbox = (*pts.min(axis=0), *pts.max(axis=0))
+    box = shapely.Polygon(rotate_xy(np.asarray(shapely.box(*bbox).exterior.coords)[:-1], -angle))
+    blocked = _built(scene, margin)
+    if blocked is not None:
+        blocked = shapely.transform(blocked, lambda xy: rotate_xy(xy, -angle))
+        shapely.prepare(blocked)
+    lat = lattice_from(blocked, spacing, heights, within=box)
+    return FieldLattice(lat.origin, lat.spacing, lat.shape, lat.index, rotate_xy(lat.eyes, angle), lat.heights, float(angle))
+
+
+def rotate_xy(xy: F64, angle: float) -> F64:
+    """``(n, 2)`` points rotated by ``angle`` radians (counter-clockwise) about (0, 0)."""
+    pts = np.asarray(xy, np.float64)
+    if not angle:
+        return pts
+    c, s = math.cos(angle), math.sin(angle)
+    out: F64 = np.column_stack([c * pts[:, 0] - s * pts[:, 1], s * pts[:, 0] + c * pts[:, 1]])
+    return out
 
 
 def lattice_from(

@@ -29,16 +29,18 @@ from collections.abc import Sequence
 import numpy as np
 import shapely
 
-from walkstream.server.bake.field import FieldLattice, PointSets, built_space, lattice_from
+from walkstream.server.bake.field import (
+    FIELD_HEIGHTS,
+    FieldLattice,
+    PointSets,
+    built_space,
+    lattice_from,
+)
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.visibility import VisibilityRenderer, pvs_from_counts
 from walkstream.shared.arrays import F64, I64
 
-__all__ = ["FIELD_HEIGHTS", "cell_field_counts", "cell_field_points", "cells_region", "field_cell_pvs", "sampling_lattice"]
-
-FIELD_HEIGHTS = (1.7, 2.0)
-"""The heights every field point is rendered at: the eye height and the top of the range."""
-
+__all__ = ["cell_field_counts", "cell_field_points", "cells_region", "field_cell_pvs", "sampling_lattice"]
 
 def cells_region(cells: Sequence[ViewCell]) -> shapely.Geometry:
     """The union of the cells' outlines (where the field's lattice is laid)."""

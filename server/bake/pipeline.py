@@ -21,9 +21,8 @@ import shapely
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.digest import file_digest
 from walkstream.server.bake.driver import drive
-from walkstream.server.bake.field import PointSets
+from walkstream.server.bake.field import FIELD_HEIGHTS, PointSets
 from walkstream.server.bake.fieldsampling import (
-    FIELD_HEIGHTS,
     cell_field_points,
     field_cell_pvs,
     sampling_lattice,

@@ -65,11 +65,11 @@ class Section:
     relaxed: bool
 
     def outline(self, lattice: FieldLattice) -> F64:
-        """The rectangle, counter-clockwise, scene-local metres."""
+        """The rectangle, counter-clockwise, scene-local metres (turned with the lattice)."""
         s, (x0, y0) = lattice.spacing, lattice.origin
         xa, xb = x0 + (self.i0 - 0.5) * s, x0 + (self.i1 + 0.5) * s
         ya, yb = y0 + (self.j0 - 0.5) * s, y0 + (self.j1 + 0.5) * s
-        return np.array([[xa, ya], [xb, ya], [xb, yb], [xa, yb]])
+        return lattice.to_scene(np.array([[xa, ya], [xb, ya], [xb, yb], [xa, yb]]))
 
     @property
     def points(self) -> int:

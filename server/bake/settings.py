@@ -22,6 +22,7 @@ __all__ = [
     "DEFAULT_REDUNDANCY",
     "DEFAULT_MIN_SIZE",
     "SECTION_FIELDS",
+    "SECTION_SHAPES",
     "BakeSettings",
 ]
 
@@ -40,8 +41,10 @@ DEFAULT_FIELD_SPACING = 4.0
 DEFAULT_REDUNDANCY = 8
 DEFAULT_MIN_SIZE = 64.0
 
-#: the settings only a bake of sections stores (:meth:`BakeSettings.record`)
-SECTION_FIELDS = ("field_spacing", "redundancy", "min_size")
+#: the settings only a bake of sections stores (:meth:`BakeSettings.record`;
+#: ``section_shape`` only when not the default)
+SECTION_FIELDS = ("field_spacing", "redundancy", "min_size", "section_shape")
+SECTION_SHAPES = ("axis", "aligned")
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,6 +90,9 @@ class BakeSettings:
     """``cells="sections"``: objects a section may hold beyond what its seed point sees."""
     min_size: float = DEFAULT_MIN_SIZE
     """``cells="sections"``: smallest section (square metres) the first pass accepts."""
+    section_shape: str = "axis"
+    """``cells="sections"``: ``"axis"`` (rectangles along the x and y axes, as the paper's)
+    or ``"aligned"`` (rectangles turned to the scene's prevailing street direction)."""
 
     def record(self) -> dict[str, Any]:
         """The settings as stored in a database's header (what identifies a bake).
@@ -100,6 +106,8 @@ class BakeSettings:
             for name in SECTION_FIELDS:
                 if name != "field_spacing" or self.sampling != "field":
                     out.pop(name)
+        elif self.section_shape == "axis":
+            out.pop("section_shape")
         return out
 
     def check(self) -> BakeSettings:
@@ -110,6 +118,8 @@ class BakeSettings:
             raise InputError(f"--field-spacing: expected a positive number of metres, got {self.field_spacing}")
         if not (np.isfinite(self.redundancy) and self.redundancy >= 0):
             raise InputError(f"--redundancy: expected >= 0 objects, got {self.redundancy}")
+        if self.section_shape not in SECTION_SHAPES:
+            raise InputError(f"--section-shape: expected axis or aligned, got {self.section_shape!r}")
         if not (np.isfinite(self.min_size) and self.min_size >= 0):
             raise InputError(f"--min-size: expected >= 0 square metres, got {self.min_size}")
         if self.sampling not in ("boundary", "corners", "region", "field"):
