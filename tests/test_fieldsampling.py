@@ -178,6 +178,19 @@ def test_a_field_sampled_bake_resumes_after_a_kill(city: Path, baked: tuple[Path
 
 
 @pytest.mark.gl
+def test_the_field_spread_over_local_processes_bakes_the_same_scene(
+    city: Path, baked: tuple[Path, dict], tmp_path: Path
+) -> None:
+    db, summary = baked
+    out = tmp_path / "pool.db"
+    again = bake(city, out, settings=FAST, workers=2, name="field")
+    assert again["version"] == summary["version"]
+    with SceneReader.open(db) as a, SceneReader.open(out) as b:
+        for ca, cb in zip(a.cells(), b.cells(), strict=True):
+            np.testing.assert_array_equal(ca.pvs, cb.pvs)
+
+
+@pytest.mark.gl
 def test_grid_cells_past_the_citys_edge(city: Path, tmp_path: Path) -> None:
     # a bbox reaching 60 m past the buildings: grid cells over empty ground
     out = tmp_path / "edge.db"
