@@ -2,7 +2,7 @@
 
 For each OpenStreetMap extract of ``../shared/data/osm/`` (Kouvola, West Oakland, the
 village) the bench bakes two databases, one with street cells and one with grid cells
-(same source, same settings otherwise), and replays one walk in both at 56 kbit/s,
+(same source, same settings otherwise; ``kinds`` adds sections, :mod:`.sections`), and replays one walk in both at 56 kbit/s,
 200 ms round trip, under the simulated clock: the recorded ``SE`` of the street
 database on Kouvola; on the small extracts, whose networks are too small for a
 three-minute walk, the longest walk that does not repeat itself
@@ -29,7 +29,7 @@ from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.errors import WalkstreamError
 from walkstream.shared.paths import RecordedPath
 
-__all__ = ["EXTRACTS", "run_city_bench", "format_city_table"]
+__all__ = ["EXTRACTS", "KINDS", "run_city_bench", "format_city_table"]
 
 Replayer = Callable[[str, Mapping[str, Any], str], Any]
 
@@ -40,6 +40,10 @@ EXTRACTS: tuple[tuple[str, str, str], ...] = (
     ("village", "village-10.068_48.135.osm", "longest"),
 )
 _BENCH_PATH = "bench"
+
+
+#: the cell kinds a row can bake (``--kinds``): street cells always (their walk is replayed)
+KINDS = ("street", "grid", "sections")
 
 
 def _bake(src: Path, db: Path, cells: str, reuse: bool, workers: int) -> dict[str, Any]:
@@ -78,8 +82,13 @@ def run_city_bench(
     reuse: bool = False,
     workers: int = 1,
     truth_every: int = 0,
+    kinds: Sequence[str] = ("street", "grid"),
 ) -> list[dict[str, Any]]:
     """Bake and replay every extract (those whose label contains one of ``only``).
+
+    ``kinds`` are the cell kinds baked and replayed (:data:`KINDS`; street cells are
+    always baked: the walk is theirs); ``sections`` bakes sections with their defaults
+    (the dense field is kept beside the database, ``--reuse`` reuses it too).
 
     Returns one row per extract and cell kind; writes ``bench_city.json`` and the
     replay reports into ``out``.  With ``truth_every`` each replay compares every Nth
@@ -87,6 +96,10 @@ def run_city_bench(
     horizon (:mod:`walkstream.client.truth.horizon`): the largest share in the sky's
     colour and the mean share with no object.
     """
+    bad = [k for k in kinds if k not in KINDS]
+    if bad or not kinds:
+        raise WalkstreamError(f"--kinds: expected some of {', '.join(KINDS)}, got {', '.join(kinds) or 'none'}")
+    kinds = ["street"] + [k for k in KINDS[1:] if k in kinds]
     out.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
     for label, file, which in EXTRACTS:
@@ -96,7 +109,7 @@ def run_city_bench(
         if not src.exists():
             raise WalkstreamError(f"{src}: extract not found (see {data / 'README.md'})")
         print(f"{label}:", file=sys.stderr, flush=True)
-        dbs = {kind: out / f"{label}-{kind}.db" for kind in ("street", "grid")}
+        dbs = {kind: out / f"{label}-{kind}.db" for kind in kinds}
         summaries = {kind: _bake(src, db, kind, reuse, workers) for kind, db in dbs.items()}
         walk = _walk(dbs["street"], which)
         blob = replace(walk, name=_BENCH_PATH).to_msgpack()
@@ -150,7 +163,7 @@ def format_city_table(rows: list[dict[str, Any]]) -> str:
     """One line per extract and cell kind (with the truth: two more columns, the sky below the horizon)."""
     truth = any("sky_max" in r for r in rows)
     head = (
-        f"{'extract':<13} {'cells':<6} {'n cells':>7} {'PVS mean':>8} {'culled%':>7} "
+        f"{'extract':<13} {'cells':<8} {'n cells':>7} {'PVS mean':>8} {'culled%':>7} "
         f"{'bake s':>7} {'db bytes':>10} {'walk':>12} {'perfect%':>8} {'first s':>7} {'bytes/km':>9}"
     ) + (f" {'sky% max':>8} {'no obj%':>7}" if truth else "")
     lines = [head, "-" * len(head)]
@@ -159,7 +172,7 @@ def format_city_table(rows: list[dict[str, Any]]) -> str:
         walk = f"{r['walk']} {r['walk_m']:.0f}m"
         per_km = "-" if r["bytes_per_km"] is None else f"{r['bytes_per_km']:,.0f}"
         lines.append(
-            f"{r['extract']:<13} {r['cells_kind']:<6} {r['cells']:>7,} {r['pvs_mean']:>8.1f} "
+            f"{r['extract']:<13} {r['cells_kind']:<8} {r['cells']:>7,} {r['pvs_mean']:>8.1f} "
             f"{100 * r['culled_ratio']:>7.1f} {r['bake_seconds']:>7.1f} {r['db_bytes']:>10,} "
             f"{walk:>12} {100 * r['perfect_frame_ratio']:>8.2f} "
             f"{'never' if first is None else f'{first:.2f}':>7} "

@@ -69,9 +69,12 @@ from walkstream.benchmarks.vissettings import (
     TARGETS,
     TODAY,
     Setting,
+    bake_default,
     parse_setting,
     same_sampling,
 )
+from walkstream.server.bake.field import FieldLattice
+from walkstream.server.bake.fieldsampling import cell_field_counts, sampling_lattice
 from walkstream.server.bake.samples import reference_points
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
@@ -112,6 +115,7 @@ def _score(pvs: list[set[int]], ref: list[dict[int, int]]) -> dict[str, Any]:
                 worst, where = r[j] / tot, (k, j)
     return {
         "miss_count": float(np.mean(count)) if count else 0.0,
+        "missed": len(shares),
         "miss_px": missed_px / total_px if total_px else 0.0,
         "miss_max": worst,
         "miss_max_at": where,
@@ -211,6 +215,9 @@ def visibility_benchmark(
     rows_in = [s if isinstance(s, Setting) else parse_setting(s) for s in settings]
     if not any(same_sampling(s.bake, TODAY.bake) for s in rows_in):
         rows_in.insert(0, TODAY)
+    dflt = bake_default()
+    if not any(same_sampling(s.bake, dflt.bake) for s in rows_in):
+        rows_in.insert(1, dflt)
     if int(ref_points) < 1 or int(ref_resolution) < 8 or int(views) < 0:
         raise InputError(
             f"visibility_benchmark: expected ref_points >= 1, ref_resolution >= 8, views >= 0, got "
@@ -277,6 +284,12 @@ def visibility_benchmark(
                 m, ids = (meshes2, ids2) if key[0] == 2 else meshes_for_scene(scene, key[0])
                 renderers[key] = VisibilityRenderer(m, ids, resolution=key[1], view_distance=vd, ctx=gl, edge_pass=key[2])
                 renderers[key].cell_counts(np.array([[0.0, 0.0, 1.7]]))  # compile, warm up
+        # the field settings: the lattice of the whole scene's cells, as the bake lays it
+        lattices: dict[str, FieldLattice] = {}
+        for s in rows_in:
+            if s.bake.sampling == "field":
+                lattices[s.name] = sampling_lattice(inp.cells, list(footprints.geometries), s.bake.field_spacing,
+                                                    margin=s.bake.margin)
         pvs: list[list[set[int]]] = [[] for _ in rows_in]
         times: list[list[float]] = [[] for _ in rows_in]
         npts: list[list[int]] = [[] for _ in rows_in]
@@ -286,7 +299,10 @@ def visibility_benchmark(
                 best = math.inf
                 for _ in range(max(1, int(repeat))):
                     t = time.perf_counter()
-                    ci, cp, n_pts = cell_counts(r, s.bake, np.asarray(c.polygon), c.zmin, c.zmax, footprints)
+                    if s.bake.sampling == "field":
+                        ci, cp, n_pts = cell_field_counts(r, lattices[s.name], np.asarray(c.polygon))
+                    else:
+                        ci, cp, n_pts = cell_counts(r, s.bake, np.asarray(c.polygon), c.zmin, c.zmax, footprints)
                     got = pvs_from_counts(ci, cp, threshold=s.bake.threshold)[0]
                     best = min(best, time.perf_counter() - t)
                 times[k].append(best)
@@ -309,6 +325,8 @@ def visibility_benchmark(
             {"name": s.name, "sampling": s.bake.sampling, "spacing": s.bake.spacing if s.bake.sampling != "corners" else None,
              "resolution": s.bake.resolution, "lod": s.bake.occluder_lod, "threshold": s.bake.threshold,
              "centre": s.bake.centre, "points_per_cell": float(np.mean(npts[k])), "sec_per_cell": sec}
+            | ({"field_spacing": s.bake.field_spacing, "field_points": len(lattices[s.name]),
+                "field_points_per_cell": len(lattices[s.name]) / len(inp.cells)} if s.name in lattices else {})
             | _score(pvs[k], ref)
             | (_view_error(shots, pvs[k]) if shots else {})
         )
@@ -316,10 +334,16 @@ def visibility_benchmark(
         stored = [{int(i) for i in inp.baked.get(c.id, np.zeros(0, np.int64))} for c in chosen]
         rows.append({"name": "baked", "sec_per_cell": None} | _score(stored, ref) | (_view_error(shots, stored) if shots else {}))
     base = rows[next(k for k, s in enumerate(rows_in) if same_sampling(s.bake, TODAY.bake))]
+    base_d = rows[next(k for k, s in enumerate(rows_in) if same_sampling(s.bake, dflt.bake))]
     prev = next((rows[k] for k, s in enumerate(rows_in) if same_sampling(s.bake, PREVIOUS.bake)), None)
     for row in rows:
         sec = row["sec_per_cell"]
         row["time_ratio"] = sec / base["sec_per_cell"] if sec else None
+        row["time_ratio_default"] = sec / base_d["sec_per_cell"] if sec else None
+        if row.get("field_points_per_cell") and row.get("points_per_cell"):
+            # the bake renders a field point once for every cell its square meets
+            row["bake_sec_per_cell"] = sec * row["field_points_per_cell"] / row["points_per_cell"]
+            row["bake_time_ratio_default"] = row["bake_sec_per_cell"] / base_d["sec_per_cell"]
         row["pvs_ratio"] = row["pvs_mean"] / base["pvs_mean"] if base["pvs_mean"] else None
         row["time_ratio_previous"] = sec / prev["sec_per_cell"] if sec and prev else None
         row["pvs_ratio_previous"] = row["pvs_mean"] / prev["pvs_mean"] if prev and prev["pvs_mean"] else None
@@ -329,6 +353,7 @@ def visibility_benchmark(
     return {
         "rows": rows,
         "default": default,
+        "cells_total": len(inp.cells),
         "cells": [c.id for c in chosen],
         "objects": n_obj,
         "source": inp.source,

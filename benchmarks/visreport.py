@@ -33,8 +33,8 @@ def format_table(result: dict[str, Any]) -> str:
         f"image error: {result['views']} random eye points ({result['view_size'][0]}x{result['view_size'][1]}, "
         "random heading) compared with their ground truth",
         "",
-        f"{'setting':<20} {'pts':>4} {'ms/cell':>8} {'time x':>6} {'x prev':>6} {'PVS':>6} {'PVS x':>5} {'x prev':>6} {'culled%':>7} "
-        f"{'miss#%':>6} {'miss px%':>8} {'max obj%':>8} {'view px%':>8} {'view #%':>7} {'v>0.5%':>6}",
+        f"{'setting':<20} {'pts':>4} {'ms/cell':>8} {'time x':>6} {'x dflt':>6} {'x prev':>6} {'PVS':>6} {'PVS x':>5} {'x prev':>6} "
+        f"{'culled%':>7} {'missed':>6} {'miss#%':>6} {'miss px%':>8} {'max obj%':>8} {'view px%':>8} {'view #%':>7} {'v>0.5%':>6}",
     ]
     for r in result["rows"]:
         mark = "  <- bake default" if r["name"] == result.get("default") else ""
@@ -42,22 +42,32 @@ def format_table(result: dict[str, Any]) -> str:
         lines.append(
             f"{r['name']:<20} {r.get('points_per_cell', float('nan')):>4.0f} "
             f"{'n/a' if sec is None else f'{1e3 * sec:.1f}':>8} "
-            f"{'n/a' if tr is None else f'{tr:.2f}':>6} {_ratio(r.get('time_ratio_previous')):>6} {r['pvs_mean']:>6.1f} "
-            f"{r['pvs_ratio']:>5.2f} {_ratio(r.get('pvs_ratio_previous')):>6} {_pct(r['culled'], 1):>7} {_pct(r['miss_count'], 1):>6} "
+            f"{'n/a' if tr is None else f'{tr:.2f}':>6} {_ratio(r.get('time_ratio_default')):>6} "
+            f"{_ratio(r.get('time_ratio_previous')):>6} {r['pvs_mean']:>6.1f} "
+            f"{r['pvs_ratio']:>5.2f} {_ratio(r.get('pvs_ratio_previous')):>6} {_pct(r['culled'], 1):>7} {r['missed']:>6d} "
+            f"{_pct(r['miss_count'], 1):>6} "
             f"{_pct(r['miss_px'], 4):>8} {_pct(r['miss_max'], 4):>8} {_pct(r.get('view_miss_px'), 3):>8} "
             f"{_pct(r.get('view_miss_count'), 1):>7} {_pct(r.get('view_over_half'), 1):>6}{mark}"
         )
     t = TARGETS
     lines += [
         "",
-        f"targets: miss# <= {100 * t['miss_count']:g} %, max obj <= {100 * t['miss_max']:g} %, "
-        f"miss px <= {100 * t['miss_px']:g} %, time x <= {t['time_ratio']:g}, PVS x <= {t['pvs_ratio']:g}, "
-        "culled >= 90 %",
-        f"time x, PVS x: against {TODAY.name} (the first bake); x prev: against {PREVIOUS.name} "
-        "(the default before region sampling), when it is a row",
+        f"targets: miss px <= {100 * t['miss_px']:g} %, max obj <= {100 * t['miss_max']:g} % of a cell's "
+        f"reference pixels, PVS x <= {t['pvs_ratio']:g}, x dflt <= {t['time_ratio_default']:g}, culled >= 90 % "
+        "(missed, miss#%: objects missed over the cells and their mean share, reported, not a goal)",
+        f"time x, PVS x: against {TODAY.name} (the first bake); x dflt: against the bake's default; "
+        f"x prev: against {PREVIOUS.name} (the default before region sampling), when it is a row",
         "view px%: truth pixels showing an object missing from the cell's PVS; view #%: objects "
         "shown that are missing; v>0.5%: views whose missing pixels exceed 0.5 % of the frame",
     ]
+    for r in result["rows"]:
+        if r.get("bake_sec_per_cell") is not None:
+            lines.append(
+                f"{r['name']}: the bench renders a cell's {r['points_per_cell']:.1f} field points alone; the bake "
+                f"renders each of the {r['field_points']} field points once for the {result['cells_total']} cells "
+                f"({r['field_points_per_cell']:.1f} per cell): {1e3 * r['bake_sec_per_cell']:.1f} ms/cell, "
+                f"{r['bake_time_ratio_default']:.2f} x the default"
+            )
     for r in result["rows"]:
         sh = r.get("missed_ref_shares")
         if sh:
@@ -91,7 +101,7 @@ def plot_visibility_benchmark(result: dict[str, Any], path: str | os.PathLike[st
 
     Left: pixel-weighted misses and the largest single miss (%, log) against seconds
     per cell (log) for every setting, the targets as dashed lines.  Middle: misses by
-    count against the PVS size relative to the first default, the 25 % line.  Right:
+    pixels against the PVS size relative to the first default, the targets dashed.  Right:
     the distribution of the missed objects' sizes at the random eye points (share of
     the frame, log bins) for the first default, the bake default and the baked PVS.
     """
@@ -113,12 +123,13 @@ def plot_visibility_benchmark(result: dict[str, Any], path: str | os.PathLike[st
         ax1.plot([x], [max(100 * r["miss_px"], floor)], "o", color=colour, markersize=8 if special else 6)
         ax1.plot([x], [max(100 * r["miss_max"], floor)], "^", color=colour, markersize=8 if special else 6, markerfacecolor="white")
         ax1.annotate(r["name"], (x, max(100 * r["miss_px"], floor)), xytext=(4, 3), textcoords="offset points", fontsize=7)
-        ax2.plot([r["pvs_ratio"]], [100 * r["miss_count"]], "o", color=colour, markersize=8 if special else 6)
-        ax2.annotate(r["name"], (r["pvs_ratio"], 100 * r["miss_count"]), xytext=(4, 3), textcoords="offset points", fontsize=7)
-    base = next((r for r in timed if r["name"] == TODAY.name), None)
-    if base is not None:
-        ax1.axvline(TARGETS["time_ratio"] * base["sec_per_cell"], color="#888888", linestyle=":", linewidth=1.0)
-        ax1.annotate("2 x the first default's time", (TARGETS["time_ratio"] * base["sec_per_cell"], 0.98), xycoords=("data", "axes fraction"), fontsize=7, rotation=90, va="top", ha="right", color="#555555")
+        ax2.plot([r["pvs_ratio"]], [max(100 * r["miss_px"], floor)], "o", color=colour, markersize=8 if special else 6)
+        ax2.annotate(r["name"], (r["pvs_ratio"], max(100 * r["miss_px"], floor)), xytext=(4, 3), textcoords="offset points", fontsize=7)
+    dflt = next((r for r in timed if r["name"] == result.get("default")), None)
+    if dflt is not None:
+        lim = TARGETS["time_ratio_default"] * dflt["sec_per_cell"]
+        ax1.axvline(lim, color="#888888", linestyle=":", linewidth=1.0)
+        ax1.annotate(f"{TARGETS['time_ratio_default']:g} x the bake default's time", (lim, 0.98), xycoords=("data", "axes fraction"), fontsize=7, rotation=90, va="top", ha="right", color="#555555")
     ax1.axhline(100 * TARGETS["miss_px"], color="#0072B2", linestyle="--", linewidth=1.0, label="target: misses by pixels")
     ax1.axhline(100 * TARGETS["miss_max"], color="#555555", linestyle="-.", linewidth=1.0, label="target: largest single miss")
     ax1.plot([], [], "o", color="#555555", label="misses by pixels (pooled)")
@@ -134,19 +145,21 @@ def plot_visibility_benchmark(result: dict[str, Any], path: str | os.PathLike[st
     ax1.set_title("misses against bake time (red: first default, green: bake default)", fontsize=9)
     ax1.legend(fontsize=7, loc="lower left")
     ax2.axvline(TARGETS["pvs_ratio"], color="#888888", linestyle=":", linewidth=1.0)
+    base = next((r for r in timed if r["name"] == TODAY.name), None)
     if base is not None and base["pvs_mean"]:
-        # a PVS missing at most 5 % by count holds at least 95 % of the reference's
-        # objects: where that lies against the PVS limit says whether both can be met
-        need = (1.0 - TARGETS["miss_count"]) * result["reference"]["pvs_mean"] / base["pvs_mean"]
+        # the reference's own PVS against the first default's: no sampling that holds
+        # every reference-visible object stays left of this line
+        need = result["reference"]["pvs_mean"] / base["pvs_mean"]
         ax2.axvline(need, color="#CC79A7", linestyle="-.", linewidth=1.0)
         ax2.annotate(
-            "95 % of the reference PVS", (need, 0.98), xycoords=("data", "axes fraction"),
+            "the reference PVS", (need, 0.98), xycoords=("data", "axes fraction"),
             fontsize=7, rotation=90, va="top", ha="right", color="#CC79A7",
         )
-    ax2.axhline(100 * TARGETS["miss_count"], color="#0072B2", linestyle="--", linewidth=1.0)
+    ax2.axhline(100 * TARGETS["miss_px"], color="#0072B2", linestyle="--", linewidth=1.0)
+    ax2.set_yscale("log")
     ax2.set_xlabel("mean PVS size / the first default's")
-    ax2.set_ylabel("reference-visible objects missed (% by count)")
-    ax2.set_title("misses by count against PVS growth (targets dashed)", fontsize=9)
+    ax2.set_ylabel("reference pixels missed (%, pooled, log)")
+    ax2.set_title("misses by pixels against PVS growth (targets dashed)", fontsize=9)
     bins = np.logspace(-6, 0, 37)
     for name, colour in ((TODAY.name, "#D55E00"), (result.get("default"), "#009E73"), ("baked", "#555555")):
         r = next((x for x in rows if x["name"] == name), None)

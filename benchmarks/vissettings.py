@@ -13,17 +13,28 @@ from typing import Any
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.shared.errors import InputError
 
-__all__ = ["TARGETS", "Setting", "parse_setting", "TODAY", "PREVIOUS", "DEFAULT_SETTINGS", "same_sampling"]
+__all__ = [
+    "TARGETS",
+    "Setting",
+    "parse_setting",
+    "TODAY",
+    "PREVIOUS",
+    "DEFAULT_SETTINGS",
+    "bake_default",
+    "same_sampling",
+]
 
 
-#: the issue's targets: misses by count, largest single miss, misses by pixels (shares),
-#: bake time and PVS size as ratios to the first default
+#: the targets a default is held to: misses by pixels (pooled share of the reference's
+#: pixels), the largest single miss (share of one cell's reference pixels), the PVS
+#: size against the first default's (``corners-64``) and the bake time against the
+#: bake's default's, both measured in the same run; the count of missed objects is
+#: reported, not a goal (what remains is mostly below a pixel)
 TARGETS = {
-    "miss_count": 0.05,
-    "miss_max": 0.0001,
-    "miss_px": 0.0005,
-    "time_ratio": 2.0,
-    "pvs_ratio": 1.25,
+    "miss_px": 0.0001,
+    "miss_max": 0.00005,
+    "pvs_ratio": 1.3,
+    "time_ratio_default": 3.0,
 }
 
 
@@ -35,7 +46,7 @@ class Setting:
     bake: BakeSettings
 
 
-_SPEC = re.compile(r"^(corners|(?:boundary|region)(\d+(?:\.\d+)?)?)-(\d+)((?:-[a-zA-Z]+\d*(?:\.\d+)?|\+[ce])*)$")
+_SPEC = re.compile(r"^(corners|(?:boundary|region|field)(\d+(?:\.\d+)?)?)-(\d+)((?:-[a-zA-Z]+\d*(?:\.\d+)?|\+[ce])*)$")
 
 
 def parse_setting(spec: str) -> Setting:
@@ -46,7 +57,8 @@ def parse_setting(spec: str) -> Setting:
     and both ends of the height range; ``-t2`` adds a hardly-visible threshold of 2
     pixels, ``-L2`` renders LOD2 occluders, ``-h0.25`` samples a height every 0.25 m
     of the cell's range, ``+c`` the centre too, ``+e`` the edge pass (objects thinner
-    than a pixel).
+    than a pixel).  ``field4-128`` samples the cell from the dense visibility field
+    every 4 m (``--sampling field --field-spacing 4``).
 
     >>> s = parse_setting("boundary10-256-t4+c").bake
     >>> (s.sampling, s.spacing, s.resolution, s.threshold, s.centre, s.edge_pass)
@@ -54,6 +66,9 @@ def parse_setting(spec: str) -> Setting:
     >>> s = parse_setting("region20-128+e").bake
     >>> (s.sampling, s.spacing, s.edge_pass)
     ('region', 20.0, True)
+    >>> s = parse_setting("field2-128").bake
+    >>> (s.sampling, s.field_spacing)
+    ('field', 2.0)
     """
     m = _SPEC.match(spec.strip())
     if m is None:
@@ -64,6 +79,10 @@ def parse_setting(spec: str) -> Setting:
     kw: dict[str, Any] = {"resolution": int(m.group(3))}
     if m.group(1) == "corners":
         kw["sampling"] = "corners"
+    elif m.group(1).startswith("field"):
+        kw["sampling"] = "field"
+        if m.group(2):
+            kw["field_spacing"] = float(m.group(2))
     else:
         kw["sampling"] = "region" if m.group(1).startswith("region") else "boundary"
         if m.group(2):
@@ -115,10 +134,27 @@ DEFAULT_SETTINGS: tuple[str, ...] = (
     "region20-128-t4",
     "region20-128+e",
     "region20-128-s0.5",
+    "field4-128",
 )
 
 
 def same_sampling(a: BakeSettings, b: BakeSettings) -> bool:
     """Whether two bake settings sample a cell alike (every field that changes its PVS)."""
-    keys = ("sampling", "spacing", "height_step", "centre", "resolution", "occluder_lod", "threshold", "edge_pass", "split")
+    keys: tuple[str, ...] = (
+        "sampling", "spacing", "height_step", "centre", "resolution", "occluder_lod", "threshold", "edge_pass", "split",
+    )
+    if a.sampling == "field" or b.sampling == "field":
+        keys = ("sampling", "field_spacing", "resolution", "occluder_lod", "threshold", "edge_pass")
     return all(getattr(a, k) == getattr(b, k) for k in keys)
+
+
+def bake_default() -> Setting:
+    """The bake's default sampling as a named setting (the yardstick of ``time x dflt``)."""
+    st = BakeSettings()
+    if st.sampling == "corners":
+        name = f"corners-{st.resolution}"
+    elif st.sampling == "field":
+        name = f"field{st.field_spacing:g}-{st.resolution}"
+    else:
+        name = f"{st.sampling}{st.spacing:g}-{st.resolution}"
+    return Setting(name, st)

@@ -221,3 +221,82 @@ def test_locating_in_an_overlap_keeps_the_section_the_viewer_is_in() -> None:
     # the service answers the lowest id in an overlap, deterministically
     loc = CellLocator.of_kinds([0, 1], ["section", "section"], [a, b], [[1.5, 2.0], [1.5, 2.0]])
     assert loc.locate(8.0, 2.0) == 0 and loc.locate(15.0, 2.0) == 1
+
+
+# --------------------------------------------------------------------- aligned sections
+
+
+def _turned_city(path: Path, degrees: float) -> Path:
+    """The small generated city turned by ``degrees`` about its corner."""
+    import json
+    import math
+
+    from walkstream.server.sources.citygen import generate_city
+
+    d = generate_city(150, 2)
+    a = math.radians(degrees)
+    x0, y0 = 600000.0, 5340000.0
+
+    def turn(c: object) -> object:
+        if isinstance(c, list) and c and isinstance(c[0], (int, float)):
+            x, y = float(c[0]) - x0, float(c[1]) - y0  # type: ignore[arg-type]
+            return [x0 + math.cos(a) * x - math.sin(a) * y, y0 + math.sin(a) * x + math.cos(a) * y]
+        return [turn(v) for v in c] if isinstance(c, list) else c
+
+    for f in d["features"]:
+        f["geometry"]["coordinates"] = turn(f["geometry"]["coordinates"])
+    path.write_text(json.dumps(d))
+    return path
+
+
+def test_street_angle_finds_a_turned_grid(tmp_path: Path) -> None:
+    from walkstream.server.bake.sectionplan import street_angle
+
+    # the generated city's streets bend by a degree or so; a grid's streets and cross
+    # streets count alike: modulo 90 degrees
+    base = np.degrees(street_angle(read_source(_turned_city(tmp_path / "c0.geojson", 0.0))))
+    assert min(base, 90.0 - base) < 1.0
+    for deg in (30.0, 75.0):
+        got = np.degrees(street_angle(read_source(_turned_city(tmp_path / f"c{deg:g}.geojson", deg))))
+        assert (got - deg - base) % 90.0 == pytest.approx(0.0, abs=1e-3) or (got - deg - base) % 90.0 > 90.0 - 1e-3
+
+
+@pytest.mark.gl
+def test_aligned_sections_are_turned_rectangles_that_cover_the_field(tmp_path: Path) -> None:
+    src = _turned_city(tmp_path / "turned.geojson", 30.0)
+    db = tmp_path / "aligned.db"
+    st = BakeSettings(cells="sections", resolution=16, field_spacing=10.0, section_shape="aligned")
+    summary = bake(src, db, settings=st)
+    assert summary["cells"] == summary["sections"] > 1
+    scene = read_source(src)
+    from walkstream.server.bake.sectionplan import street_angle
+
+    angle = street_angle(scene)
+    lat = field_lattice(scene, 10.0, (1.7, 2.0), margin=st.margin, angle=angle)
+    assert lat.angle == pytest.approx(np.radians(30.0), abs=np.radians(1.0))
+    foot = shapely.union_all([shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings])
+    assert not shapely.contains_xy(foot, lat.eyes[:, 0], lat.eyes[:, 1]).any()  # no sample in a building
+    with SceneReader.open(db) as r:
+        cells = list(r.cells())
+        assert r.meta.settings["section_shape"] == "aligned"
+        loc = CellLocator.of_kinds([c.id for c in cells], [c.kind for c in cells], [c.boundary for c in cells],
+                                   [[c.zmin, c.zmax] for c in cells])
+        # every field point, where it stands and where it was rendered, lies in a section
+        assert (loc.locate_many(lat.xy()) >= 0).all() and (loc.locate_many(lat.eyes) >= 0).all()
+        for c in cells:
+            ring = np.asarray(c.boundary)
+            assert len(ring) == 4
+            e = np.roll(ring, -1, axis=0) - ring
+            # a rectangle whose sides run at the street angle (or across it)
+            assert np.allclose(np.sum(e * np.roll(e, -1, axis=0), axis=1), 0.0, atol=1e-6)
+            assert np.degrees(np.arctan2(e[0, 1], e[0, 0])) % 90.0 == pytest.approx(np.degrees(angle) % 90.0, abs=1e-6)
+        for c in cells:
+            for n in c.neighbours:
+                assert c.id in cells[n].neighbours
+    assert main(["inspect", str(db), "--map", str(tmp_path / "map.png")]) == 0
+
+
+def test_a_bad_section_shape_gets_one_line(city: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bake", str(city), "-o", str(tmp_path / "x.db"), "--cells", "sections", "--section-shape", "round"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--section-shape" in err[0]

@@ -13,7 +13,7 @@ from teamdata import team_data
 from walkstream.benchmarks.visibility import visibility_benchmark
 from walkstream.benchmarks.visinput import BenchInput, load_bench_input, pick_cells
 from walkstream.benchmarks.visreport import format_table, plot_visibility_benchmark
-from walkstream.benchmarks.vissettings import TODAY, parse_setting
+from walkstream.benchmarks.vissettings import TODAY, bake_default, parse_setting
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict
@@ -22,7 +22,7 @@ from walkstream.shared.errors import InputError
 if TYPE_CHECKING:
     import moderngl
 
-SETTINGS = ["boundary20-32", "boundary20-32-t4", "corners-32", "boundary10-64"]
+SETTINGS = ["boundary20-32", "boundary20-32-t4", "corners-32", "boundary10-64", "field8-32"]
 
 
 @pytest.fixture(scope="module")
@@ -51,14 +51,21 @@ def result(city: BenchInput, gl_ctx: moderngl.Context) -> dict[str, Any]:
 
 def test_rows_and_ranges(result: dict[str, Any]) -> None:
     rows = {r["name"]: r for r in result["rows"]}
-    # the first default is the yardstick of the ratios: added when not asked for
-    assert list(rows) == [TODAY.name, *SETTINGS]
+    # the first default and the bake's default are the yardsticks of the ratios: added when not asked for
+    dflt = bake_default().name
+    assert list(rows) == [TODAY.name, dflt, *SETTINGS]
     assert rows[TODAY.name]["time_ratio"] == 1.0 and rows[TODAY.name]["pvs_ratio"] == 1.0
+    assert rows[dflt]["time_ratio_default"] == 1.0 and result["default"] == dflt
     for r in rows.values():
         for key in ("miss_count", "miss_px", "miss_max", "view_miss_px", "view_miss_count", "culled"):
             assert 0.0 <= r[key] <= 1.0, key
         assert r["sec_per_cell"] > 0 and r["pvs_mean"] >= 0 and r["points_per_cell"] >= 1
-        assert set(r["meets"]) == {"miss_count", "miss_max", "miss_px", "time_ratio", "pvs_ratio"}
+        assert set(r["meets"]) == {"miss_max", "miss_px", "time_ratio_default", "pvs_ratio"}
+        assert r["missed"] == len(r["missed_ref_shares"])
+    # the field row: a cell's field points, and what the bake would render per cell
+    f = rows["field8-32"]
+    assert f["sampling"] == "field" and f["field_points"] > 0
+    assert f["bake_sec_per_cell"] == pytest.approx(f["sec_per_cell"] * f["field_points_per_cell"] / f["points_per_cell"])
     # a hardly-visible threshold only ever drops objects
     plain, thr = rows["boundary20-32"], rows["boundary20-32-t4"]
     assert thr["pvs_mean"] <= plain["pvs_mean"] and thr["miss_count"] >= plain["miss_count"]
@@ -74,7 +81,8 @@ def test_table_and_plot(result: dict[str, Any], tmp_path: Path) -> None:
     table = format_table(result)
     for name in SETTINGS:
         assert name in table
-    assert "targets:" in table and "missed objects' sizes" in table
+    assert "targets:" in table and "missed objects' sizes" in table and "x dflt" in table
+    assert "field8-32: the bench renders a cell's" in table
     out = tmp_path / "vis.png"
     plot_visibility_benchmark(result, out)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

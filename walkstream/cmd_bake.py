@@ -3,7 +3,8 @@
 ::
 
     walkstream bake SOURCE.geojson|.osm|.osm.pbf -o scene.db [--cells street|grid|sections] [--cell-size M]
-                   [--field-spacing M] [--redundancy R] [--min-size M2]
+                   [--field-spacing M] [--redundancy R] [--min-size M2] [--section-shape axis|aligned]
+                   [--sampling region|boundary|corners|field]
                    [--network walk|drive] [--bbox X0,Y0,X1,Y1 [--bbox-crs local|lonlat]] ...
     walkstream bake --default-city -o scene.db
     walkstream bake city.geojson -o scene.db --interior office.json [--building ID|auto]
@@ -102,7 +103,7 @@ def cmd_bake(args: argparse.Namespace) -> int:
         centre=args.centre,
         threshold=args.threshold,
         **{k: v for k, v in (("resolution", args.resolution), ("occluder_lod", args.occluder_lod)) if v is not None},
-        **{k: v for k, v in (("field_spacing", args.field_spacing), ("redundancy", args.redundancy), ("min_size", args.min_size)) if v is not None},
+        **{k: v for k, v in (("field_spacing", args.field_spacing), ("redundancy", args.redundancy), ("min_size", args.min_size), ("section_shape", args.section_shape)) if v is not None},
         **{k: v for k, v in (("sampling", args.sampling), ("spacing", args.spacing), ("height_step", args.height_step), ("edge_pass", args.edge_pass), ("split", args.split)) if v is not None},
     )
     st.check()  # a bad setting fails before any progress bar
@@ -206,9 +207,10 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--name", help="scene name (default: the database file's stem)")
     bk.add_argument("--cells", choices=("auto", "street", "grid", "sections"), default="auto", help="street cells (needs streets), a grid, "
                     "or sections grown over a dense visibility field (Brosnan et al.; default auto: street cells, else a grid)")
-    bk.add_argument("--field-spacing", type=float, default=None, help="sections: metres between the points of the visibility field (default 4)")
+    bk.add_argument("--field-spacing", type=float, default=None, help="sections and --sampling field: metres between the points of the visibility field (default 4)")
     bk.add_argument("--redundancy", type=int, default=None, help="sections: objects a section may hold beyond what its seed point sees (default 8)")
     bk.add_argument("--min-size", type=float, default=None, help="sections: smallest section the first pass accepts, square metres (default 64)")
+    bk.add_argument("--section-shape", default=None, help="sections: axis (rectangles along the x and y axes, as the paper's; default) or aligned (turned to the scene's prevailing street direction)")
     bk.add_argument("--cell-size", type=float, default=40.0, help="grid cell side / longest street cell, metres (default 40)")
     bk.add_argument("--view-distance", type=float, default=800.0, help="far plane, metres (default 800)")
     bk.add_argument("--bbox", help="MINX,MINY,MAXX,MAXY: bake only this part; objects crossing it are clipped to it")
@@ -216,7 +218,7 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--network", choices=("walk", "drive"), default="walk", help="street network of OSM highways: what a pedestrian (default) or a car may use")
     bk.add_argument("--resolution", type=int, default=None, help="pixels per cube face (default: see bench visibility)")
     bk.add_argument("--occluder-lod", type=int, choices=(0, 1, 2), default=None, help="LOD rendered as occluder")
-    bk.add_argument("--sampling", choices=("region", "boundary", "corners"), default=None, help="sample points: the cell's outline, a grid inside and both ends of its height range (region), the outline at the top height (boundary) or the 8 box corners of the first bake (default: see bench visibility)")
+    bk.add_argument("--sampling", choices=("region", "boundary", "corners", "field"), default=None, help="sample points: the cell's outline, a grid inside and both ends of its height range (region), the outline at the top height (boundary), the 8 box corners of the first bake (corners), or the dense visibility field's points in and around the cell, every --field-spacing metres, rendered once and kept beside the database (field) (default: see bench visibility)")
     bk.add_argument("--spacing", type=float, default=None, help="region/boundary sampling: metres between points along an edge and of the inside grid (default 20)")
     bk.add_argument("--height-step", type=float, default=None, help="region/boundary sampling: every point at one more eye height per this many metres of the cell's height range (default 1)")
     bk.add_argument("--split", type=float, default=None, help="adaptive sampling: add points between two whose visible sets differ by more than this Jaccard distance (0..1; default 0: off)")

@@ -13,7 +13,7 @@
     walkstream bench controller [--frames 3000] [--seeds 1 2 3] [--step 10]
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
     walkstream bench fill [scene.db] [--views 6] [--size 1280x960] [--repeat 6] [--json]
-    walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--reuse] [--out DIR] [--truth-every N]
+    walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--kinds street,grid,sections] [--reuse] [--out DIR] [--truth-every N]
     walkstream bench sections [SRC] [--redundancy R ...] [--min-size M ...] [--field-spacing 4] [--walks SE,drive]
     walkstream bench clusters DB [DB ...] [--min-objects 12] [--max-cells 64] [--plot clusters.png] [--json]
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
@@ -496,6 +496,7 @@ def cmd_bench_city(args: argparse.Namespace) -> int:
         reuse=args.reuse,
         workers=args.workers,
         truth_every=args.truth_every,
+        kinds=[k.strip() for k in args.kinds.split(",") if k.strip()],
     )
     print(format_city_table(rows))
     print("(56 kbit/s, 200 ms, simulated clock, desktop2003; culled% = objects outside the PVS)")
@@ -739,6 +740,7 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--only", help="comma-separated extract names (kouvola, west-oakland, village)")
     b.add_argument("--reuse", action="store_true", help="keep databases already baked in --out")
     b.add_argument("--workers", type=int, default=1, help="local processes rendering cells (default 1)")
+    b.add_argument("--kinds", default="street,grid", help="cell kinds baked and replayed, of street, grid, sections (default street,grid; street is always baked: the walk is its)")
     b.add_argument("--out", default="out/bench-city", help="folder for the databases and reports")
     b.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with the ground truth: the sky below the horizon, in two more columns (default 0: never)")
     b.set_defaults(func=cmd_bench_city)

@@ -5,9 +5,10 @@ both) and
 
 1. opens the work file (:meth:`~walkstream.server.store.SceneWriter.create`); a work
    file left by a killed bake with the same header is resumed;
-2. with field cells (sections), renders the dense visibility field (each block kept
-   as it comes, so a killed bake resumes with the blocks done) and grows the cells
-   from it (their PVS written after the tables);
+2. with field cells (sections, or street and grid cells with ``--sampling field``),
+   renders the dense visibility field (each block kept as it comes, so a killed bake
+   resumes with the blocks done) and grows the cells from it or gives the cells
+   their PVS (written after the tables);
 3. writes the plan's tables (objects, cells, viewpoints, rooms, portals, stairs,
    entrances; on resume again, as upserts that keep every stored PVS);
 4. bakes the room cells' contents, unless a resumed work file has them all: clipped
@@ -149,8 +150,9 @@ def drive(
         if max_cells is not None and finished < len(pvs_cells):
             writer.close()
             return {}
-        if plan.impostors is not None and pvs is not None:
-            extra.update(bake_impostors(writer, plan.impostors, pvs_cells, workers=workers, scheduler=scheduler,
+        imp_cells = pvs_cells or (plan.field.cells if plan.field is not None else [])
+        if plan.impostors is not None and imp_cells:
+            extra.update(bake_impostors(writer, plan.impostors, imp_cells, workers=workers, scheduler=scheduler,
                                         progress=progress, say=say))
         if rooms is not None and rooms.walls is not None and rooms.wall_plan is not None:
             extra.update(bake_walls(writer, rooms.scene, rooms.wall_plan, rooms.walls, settings_key(plan.settings),

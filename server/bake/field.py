@@ -23,12 +23,13 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import shapely
+from numpy.typing import NDArray
 
 from walkstream.server.bake.chunks import run_chunks
 from walkstream.server.bake.settings import BakeSettings
@@ -37,10 +38,24 @@ from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64, I64
 from walkstream.shared.errors import InputError
 
-__all__ = ["FIELD_BLOCK", "FieldLattice", "PointSets", "bake_field", "field_lattice", "field_folder"]
+__all__ = [
+    "FIELD_BLOCK",
+    "FIELD_HEIGHTS",
+    "FieldLattice",
+    "PointSets",
+    "bake_field",
+    "built_space",
+    "field_folder",
+    "field_lattice",
+    "lattice_from",
+    "rotate_xy",
+]
 
 FIELD_BLOCK = 64
 """Field points per task (and per saved block)."""
+
+FIELD_HEIGHTS = (1.7, 2.0)
+"""The heights every field point is rendered at: the eye height and the top of the eye range."""
 
 _MAX_POINTS = 4_000_000
 
@@ -63,6 +78,11 @@ class FieldLattice:
         Where each field point is rendered (the point itself when it is free).
     heights : (2,) float64
         The eye heights every point is rendered at.
+    angle : float
+        The lattice's rows run at this angle (radians, counter-clockwise) to the
+        scene's x axis: ``origin``, ``spacing`` and ``shape`` are in the lattice's own
+        frame, the scene rotated by ``-angle`` about (0, 0); ``eyes`` and :meth:`xy`
+        are in the scene's.
     """
 
     origin: tuple[float, float]
@@ -71,6 +91,7 @@ class FieldLattice:
     index: I64
     eyes: F64
     heights: tuple[float, float]
+    angle: float = 0.0
 
     def __len__(self) -> int:
         return len(self.index)
@@ -85,7 +106,11 @@ class FieldLattice:
         """``(n, 2)`` lattice position of every field point, scene-local metres."""
         r, c = np.divmod(self.index, self.shape[1])
         out: F64 = np.stack([self.origin[0] + c * self.spacing, self.origin[1] + r * self.spacing], axis=1)
-        return out
+        return self.to_scene(out)
+
+    def to_scene(self, xy: F64) -> F64:
+        """``(n, 2)`` points of the lattice's frame in the scene's (rotated by :attr:`angle`)."""
+        return rotate_xy(xy, self.angle)
 
 
 @dataclass(frozen=True)
@@ -108,6 +133,18 @@ class PointSets:
         a, b = int(self.offsets[k]), int(self.offsets[k + 1])
         return self.ids[a:b], self.pixels[a:b]
 
+    def union(self, points: I64) -> tuple[I64, I64]:
+        """``(ids, pixels)``: the objects any of ``points`` sees (ascending), pixels summed."""
+        pts = np.asarray(points, np.int64)
+        if len(pts) == 0:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        a, b = self.offsets[pts], self.offsets[pts + 1]
+        lens = b - a
+        take = np.repeat(a - np.cumsum(lens) + lens, lens) + np.arange(int(lens.sum()))
+        u, inv = np.unique(self.ids[take], return_inverse=True)
+        px = np.bincount(inv.reshape(-1), weights=self.pixels[take], minlength=len(u)).astype(np.int64)
+        return u.astype(np.int64), px
+
     def sizes(self) -> I64:
         """``(n,)`` objects each point sees."""
         out: I64 = np.diff(self.offsets)
@@ -126,21 +163,83 @@ def field_lattice(
     *,
     margin: float = 0.3,
     bbox: tuple[float, float, float, float] | None = None,
+    within: shapely.Geometry | None = None,
+    angle: float = 0.0,
 ) -> FieldLattice:
     """The field points of ``scene`` every ``spacing`` metres (see the module docstring).
 
     The lattice covers ``bbox`` (default: the bounding box of the buildings and the
-    street pieces) from its lower-left corner.
+    street pieces) from its lower-left corner.  With ``within`` (the view cells a
+    field samples, ``--sampling field``) the lattice is anchored at whole multiples
+    of ``spacing`` instead, so that a cell's field points do not depend on the rest
+    of the scene, and only the points whose square meets ``within`` are kept.
+
+    With ``angle`` (radians) the lattice's rows run at that angle to the x axis
+    (sections aligned to the streets): it is laid in the scene rotated by ``-angle``
+    over the rotated box of ``bbox`` (or of the scene), keeping the points whose
+    squares meet that box.
 
     Raises
     ------
     InputError
         A bad spacing, an empty scene without ``bbox``, or a lattice too large.
     """
+    if not angle:
+        return lattice_from(_built(scene, margin), spacing, heights, bbox=bbox if within is None else None,
+                            within=within, scene=scene)
+    if within is not None:
+        raise InputError("field lattice: a rotated lattice is laid over the scene's box, not over cells")
+    if bbox is None:
+        rings = [b.rings[0] for b in scene.buildings] + [st.ring for st in scene.streets]
+        if not rings:
+            raise InputError(f"scene {scene.name!r} has no buildings or streets: give a bbox")
+        pts = np.concatenate(rings)
+        bbox = (*pts.min(axis=0), *pts.max(axis=0))
+    box = shapely.Polygon(rotate_xy(np.asarray(shapely.box(*bbox).exterior.coords)[:-1], -angle))
+    blocked = _built(scene, margin)
+    if blocked is not None:
+        blocked = shapely.transform(blocked, lambda xy: rotate_xy(xy, -angle))
+        shapely.prepare(blocked)
+    lat = lattice_from(blocked, spacing, heights, within=box)
+    return FieldLattice(lat.origin, lat.spacing, lat.shape, lat.index, rotate_xy(lat.eyes, angle), lat.heights, float(angle))
+
+
+def rotate_xy(xy: F64, angle: float) -> F64:
+    """``(n, 2)`` points rotated by ``angle`` radians (counter-clockwise) about (0, 0)."""
+    pts = np.asarray(xy, np.float64)
+    if not angle:
+        return pts
+    c, s = math.cos(angle), math.sin(angle)
+    out: F64 = np.column_stack([c * pts[:, 0] - s * pts[:, 1], s * pts[:, 0] + c * pts[:, 1]])
+    return out
+
+
+def lattice_from(
+    blocked: shapely.Geometry | None,
+    spacing: float,
+    heights: tuple[float, float],
+    *,
+    bbox: tuple[float, float, float, float] | None = None,
+    within: shapely.Geometry | None = None,
+    scene: SourceScene | None = None,
+) -> FieldLattice:
+    """:func:`field_lattice` given the built space ``blocked`` (footprints grown by the margin).
+
+    One of ``bbox``, ``within`` or ``scene`` (its bounding box) places the lattice.
+    """
     s = float(spacing)
     if not (math.isfinite(s) and s > 0):
         raise InputError(f"--field-spacing: expected a positive number of metres, got {spacing}")
-    if bbox is None:
+    if within is not None:
+        if shapely.is_empty(within):
+            raise InputError("the field's cells are empty: no free space to sample")
+        bx0, by0, bx1, by1 = shapely.bounds(within)
+        # whole multiples of the spacing: the squares that meet the region's box
+        x0, y0 = math.floor(bx0 / s + 0.5) * s, math.floor(by0 / s + 0.5) * s
+        x1, y1 = math.ceil(bx1 / s - 0.5) * s, math.ceil(by1 / s - 0.5) * s
+    elif bbox is None:
+        if scene is None:
+            raise InputError("field lattice: give a scene, a bbox or the cells")
         rings = [b.rings[0] for b in scene.buildings] + [st.ring for st in scene.streets]
         if not rings:
             raise InputError(f"scene {scene.name!r} has no buildings or streets: give a bbox")
@@ -154,36 +253,60 @@ def field_lattice(
         raise InputError(f"--field-spacing {s:g}: a lattice of {nx} x {ny} points is too large; space it wider")
     r, c = np.divmod(np.arange(nx * ny, dtype=np.int64), nx)
     x, y = x0 + c * s, y0 + r * s
-    blocked = _built(scene, margin)
-    if blocked is None:
-        return FieldLattice((float(x0), float(y0)), s, (ny, nx), np.arange(nx * ny, dtype=np.int64),
-                            np.stack([x, y], axis=1), (float(heights[0]), float(heights[1])))
-    inside = shapely.contains_xy(blocked, x, y)
     eyes = np.stack([x, y], axis=1)
-    keep = ~inside
-    todo = np.flatnonzero(inside)
+    keep = np.ones(nx * ny, bool)
+    if within is not None:
+        keep &= _meets(within, x, y, s)
+    # a point renders where it stands when that is free (and, with cells, in them);
+    # else at a point of the free part of its square, or not at all
+    stay = keep.copy()
+    if blocked is not None:
+        stay &= ~shapely.contains_xy(blocked, x, y)
+    if within is not None:
+        stay &= shapely.intersects_xy(within, x, y)
+    todo = np.flatnonzero(keep & ~stay)
     if len(todo):
         h = s / 2.0
-        squares = shapely.box(x[todo] - h, y[todo] - h, x[todo] + h, y[todo] + h)
-        free = shapely.difference(squares, blocked)
+        free = shapely.box(x[todo] - h, y[todo] - h, x[todo] + h, y[todo] + h)
+        if within is not None:
+            free = shapely.intersection(free, within)
+        if blocked is not None:
+            free = shapely.difference(free, blocked)
         ok = ~shapely.is_empty(free) & (shapely.area(free) > 1e-6 * s * s)
         if ok.any():
             # a point of the free part that lies inside it (a polygon's representative point)
-            p = shapely.get_coordinates(shapely.point_on_surface(free[ok]))
-            eyes[todo[ok]] = p
-            keep[todo[ok]] = True
-    idx = np.flatnonzero(keep).astype(np.int64)
+            eyes[todo[ok]] = shapely.get_coordinates(shapely.point_on_surface(free[ok]))
+        stay[todo[ok]] = True
+    idx = np.flatnonzero(stay).astype(np.int64)
     return FieldLattice((float(x0), float(y0)), s, (ny, nx), idx, eyes[idx], (float(heights[0]), float(heights[1])))
 
 
-def _built(scene: SourceScene, margin: float) -> shapely.Geometry | None:
-    polys = [shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings]
-    if not polys:
+def _meets(region: shapely.Geometry, x: F64, y: F64, s: float) -> NDArray[np.bool_]:
+    """Whether each lattice point's square meets ``region`` in more than an edge or a corner.
+
+    A point exactly on the region's outline (its square straddles it) meets it; a
+    square that only touches the outline does not (a hair shrunk, so the test does
+    not hang on rounding).
+    """
+    h = s / 2.0 - 1e-7 * s
+    squares = shapely.box(x - h, y - h, x + h, y + h)
+    shapely.prepare(region)
+    out: NDArray[np.bool_] = shapely.intersects(region, squares)
+    return out
+
+
+def built_space(footprints: Sequence[shapely.Geometry], margin: float) -> shapely.Geometry | None:
+    """The footprints' union grown by ``margin`` (where no field point is rendered), prepared."""
+    if not len(footprints):
         return None
-    u = shapely.union_all(shapely.make_valid(np.array(polys, dtype=object)))
+    u = shapely.union_all(shapely.make_valid(np.array(list(footprints), dtype=object)))
     grown = shapely.buffer(u, float(margin), quad_segs=2) if margin > 0 else u
     shapely.prepare(grown)
     return grown
+
+
+def _built(scene: SourceScene, margin: float) -> shapely.Geometry | None:
+    return built_space([shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings], margin)
 
 
 def field_folder(output: str | os.PathLike[str], key: str) -> Path:

@@ -16,17 +16,33 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import shapely
 
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.digest import file_digest
 from walkstream.server.bake.driver import drive
+from walkstream.server.bake.field import FIELD_HEIGHTS, PointSets
+from walkstream.server.bake.fieldsampling import (
+    cell_field_points,
+    field_cell_pvs,
+    sampling_lattice,
+)
 from walkstream.server.bake.impostorsettings import ImpostorSettings
 from walkstream.server.bake.interior import interior_plan
 from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.objectrows import object_rows
-from walkstream.server.bake.plan import BakePlan, ImpostorCells, PvsCells, Say, Walk, settings_key
+from walkstream.server.bake.plan import (
+    BakePlan,
+    FieldCells,
+    ImpostorCells,
+    PvsCells,
+    Say,
+    Walk,
+    settings_key,
+)
 from walkstream.server.bake.scenenav import SceneGraph
 from walkstream.server.bake.settings import BakeSettings
+from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.viewpoints import viewpoints
 from walkstream.server.bake.walks import default_paths
 from walkstream.server.bake.wallplan import WallSettings
@@ -35,6 +51,7 @@ from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.read import read_source
 from walkstream.server.sources.scene import SourceScene
 from walkstream.server.store import CellRow, SceneWriter
+from walkstream.shared.arrays import F64, I64
 from walkstream.shared.buildings import default_grammar, default_grammar_text
 from walkstream.shared.errors import InputError
 
@@ -239,12 +256,40 @@ def city_plan(
         rows = [r for r in object_rows(city, grammar) if r.kind == "building"]
         imp = ImpostorCells(city, impostors, {r.id: r.bbox for r in rows}, {r.id: r.tris[2] for r in rows},
                             settings_key(settings_dict))
+    pvs: PvsCells | None = PvsCells(scene, st, cells, settings_key(settings_dict))
+    fc = None
+    if st.sampling == "field":
+        pvs, fc = None, _field_cells(scene, st, cells, settings_dict, summary, say)
     return BakePlan(
         name=name or out.stem, crs=scene.crs, origin=scene.origin, grammar_text=default_grammar_text(),
         grammar_version=grammar.id, features=features, settings=settings_dict,
-        pvs=PvsCells(scene, st, cells, settings_key(settings_dict)), rooms=None, write_tables=write_tables,
-        walks=walks, summary=summary, impostors=imp,
+        pvs=pvs, rooms=None, write_tables=write_tables,
+        walks=walks, summary=summary, impostors=imp, field=fc,
     )
+
+
+def _field_cells(
+    scene: SourceScene, st: BakeSettings, cells: list[ViewCell], settings_dict: dict[str, Any],
+    summary: dict[str, Any], say: Say,
+) -> FieldCells:
+    """Street or grid cells sampled from the dense field (``--sampling field``, :mod:`~.fieldsampling`)."""
+    lattice = sampling_lattice(cells, [shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings],
+                               st.field_spacing, margin=st.margin)
+    if len(lattice) == 0:
+        raise InputError(f"--sampling field: no free field point in the {len(cells)} cells (no free space?)")
+    # the field's folder: the cells' geometry and what each point renders decide it
+    key = settings_key({k: v for k, v in settings_dict.items() if k not in ("threshold", "source")}
+                       | {"field_heights": FIELD_HEIGHTS, "field": "cells"})
+    say(f"sampling the {len(cells)} cells from a field of {len(lattice)} points every {st.field_spacing:g} m")
+
+    def assign(sets: PointSets) -> list[tuple[int, I64, F64]]:
+        res = field_cell_pvs(lattice, sets, cells, threshold=st.threshold)
+        summary.update({"field_points": len(lattice), "field_bytes": sets.nbytes, "field_spacing": st.field_spacing,
+                        "field_points_per_cell": float(np.mean([len(cell_field_points(lattice, np.asarray(c.polygon)))
+                                                                for c in cells]))})
+        return res
+
+    return FieldCells(scene, st, lattice, key, assign, cells=cells)
 
 
 

@@ -14,9 +14,10 @@ Every scene kind (a city, an interior, a crossing of both) is turned into a
   impostor images its PVS cells need (:mod:`~.impostorplan`), rendered and encoded
   in chunks (:func:`~.impostorrender.impostor_task`).
 
-- :class:`FieldCells`, cells grown over a dense visibility field (sections): the
-  field rendered in blocks (:func:`~.workers.field_task`, resumed block by block),
-  then the planner's ``grow`` makes the cells and their PVS from it, before the
+- :class:`FieldCells`, cells grown over a dense visibility field (sections), or
+  street and grid cells sampled from it (``--sampling field``): the field rendered
+  in blocks (:func:`~.workers.field_task`, resumed block by block), then the
+  planner's ``grow`` makes the cells (sections) and their PVS from it, before the
   tables are written.
 
 A planner does the cheap work (reading, cells, placement, the walking graphs); the
@@ -99,6 +100,9 @@ class FieldCells:
     lattice: FieldLattice
     key: str
     grow: Callable[[PointSets], list[tuple[int, I64, F64]]]
+    cells: list[ViewCell] = field(default_factory=list)
+    """Street or grid cells sampled from the field (``--sampling field``,
+    :mod:`~.fieldsampling`), known before it; empty for sections (grown from it)."""
 
 
 @dataclass

@@ -11,6 +11,7 @@ the section holding it.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ import numpy as np
 
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.digest import file_digest
-from walkstream.server.bake.field import PointSets, field_lattice
+from walkstream.server.bake.field import FIELD_HEIGHTS, PointSets, field_lattice
 from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.objectrows import object_rows
 from walkstream.server.bake.plan import BakePlan, FieldCells, Say, Walk, settings_key
@@ -35,12 +36,12 @@ from walkstream.shared.arrays import F64, I64
 from walkstream.shared.buildings import default_grammar, default_grammar_text
 from walkstream.shared.errors import InputError
 
-__all__ = ["EYE_HEIGHTS", "HEIGHT_RANGE", "section_plan"]
+__all__ = ["EYE_HEIGHTS", "HEIGHT_RANGE", "section_plan", "street_angle"]
 
 HEIGHT_RANGE = (1.5, 2.0)
 """Eye heights a section's PVS is valid for (as street and grid cells)."""
 
-EYE_HEIGHTS = (1.7, 2.0)
+EYE_HEIGHTS = FIELD_HEIGHTS
 """The heights every field point is rendered at: the eye height and the top of the range."""
 
 
@@ -64,7 +65,8 @@ def section_plan(
     base = make_cells(scene, "auto", max_length=st.max_length, cell_size=st.cell_size, bbox=bbox)
     if not base:
         raise InputError(f"{src}: no view cell could be made (no free space?)")
-    lattice = field_lattice(scene, st.field_spacing, EYE_HEIGHTS, margin=st.margin, bbox=bbox)
+    angle = street_angle(scene) if st.section_shape == "aligned" else 0.0
+    lattice = field_lattice(scene, st.field_spacing, EYE_HEIGHTS, margin=st.margin, bbox=bbox, angle=angle)
     if len(lattice) == 0:
         raise InputError(f"{src}: no free field point (no free space?)")
     digest = file_digest(src)
@@ -74,10 +76,11 @@ def section_plan(
         "occluder_lod": st.occluder_lod, "view_distance": st.view_distance, "edge_pass": st.edge_pass,
         "margin": st.margin, "bbox": st.bbox, "bbox_crs": st.bbox_crs, "network": st.network,
         "heights": EYE_HEIGHTS,
-    })
+    } | ({"angle": round(angle, 9)} if angle else {}))
     features = ["buildings"] + (["streets"] if scene.streets else []) + ["section_cells"]
     say(f"{src.name}: {len(scene.buildings)} buildings, {len(scene.streets)} street pieces, "
-        f"a field of {len(lattice)} points every {st.field_spacing:g} m")
+        f"a field of {len(lattice)} points every {st.field_spacing:g} m"
+        + (f", turned {math.degrees(angle):.1f} degrees to the streets" if angle else ""))
     grammar = default_grammar()
     city = scene
     made: list[ViewCell] = []
@@ -128,4 +131,28 @@ def section_plan(
 
 
 def _box(outline: F64) -> tuple[float, ...]:
-    return tuple(round(float(v), 6) for v in (*outline.min(axis=0), *outline.max(axis=0)))
+    # every vertex: two rectangles turned by 45 degrees may share their bounding box
+    return tuple(round(float(v), 6) for v in np.asarray(outline).ravel())
+
+
+def street_angle(scene: SourceScene) -> float:
+    """The scene's prevailing street direction, radians in ``[0, pi/2)``.
+
+    The edges of the street pieces' outlines (of the footprints when there are no
+    streets), weighted by length, each direction taken modulo a right angle: the
+    angle of the mean of ``exp(4i theta)`` over them (a grid of streets and its cross
+    streets count alike).  0 when there is nothing to measure, or when it is within
+    half a degree of the axes.
+    """
+    rings = [st.ring for st in scene.streets] or [b.rings[0] for b in scene.buildings]
+    if not rings:
+        return 0.0
+    d = np.concatenate([np.roll(r, -1, axis=0) - r for r in rings])
+    length = np.hypot(d[:, 0], d[:, 1])
+    z = np.sum(length * np.exp(4j * np.arctan2(d[:, 1], d[:, 0])))
+    if abs(z) < 1e-9 * max(float(length.sum()), 1.0):
+        return 0.0
+    a = float(np.angle(z)) / 4.0
+    a = a % (math.pi / 2)
+    # within half a degree of the axes (a metre over 120 m) the lattice stays axis-aligned
+    return 0.0 if min(a, math.pi / 2 - a) < math.radians(0.5) else a

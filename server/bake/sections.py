@@ -65,11 +65,11 @@ class Section:
     relaxed: bool
 
     def outline(self, lattice: FieldLattice) -> F64:
-        """The rectangle, counter-clockwise, scene-local metres."""
+        """The rectangle, counter-clockwise, scene-local metres (turned with the lattice)."""
         s, (x0, y0) = lattice.spacing, lattice.origin
         xa, xb = x0 + (self.i0 - 0.5) * s, x0 + (self.i1 + 0.5) * s
         ya, yb = y0 + (self.j0 - 0.5) * s, y0 + (self.j1 + 0.5) * s
-        return np.array([[xa, ya], [xb, ya], [xb, yb], [xa, yb]])
+        return lattice.to_scene(np.array([[xa, ya], [xb, ya], [xb, yb], [xa, yb]]))
 
     @property
     def points(self) -> int:
@@ -254,11 +254,7 @@ def section_pvs(section: Section, grid: I64, sets: PointSets, *, threshold: int 
     pts = section_points(section, grid)
     if len(pts) == 0:
         return np.zeros(0, np.int64), np.zeros(0)
-    parts = [sets.of(int(k)) for k in pts]
-    ids = np.concatenate([a for a, _ in parts])
-    u, inv = np.unique(ids, return_inverse=True)
-    px = np.bincount(inv.reshape(-1), weights=np.concatenate([b for _, b in parts]), minlength=len(u))
-    return pvs_from_counts(u, px.astype(np.int64), threshold=threshold)
+    return pvs_from_counts(*sets.union(pts), threshold=threshold)
 
 
 def section_stats(sections: list[Section], grid: I64, sets: PointSets, pvs_sizes: I64) -> dict[str, float]:

@@ -22,6 +22,7 @@ __all__ = [
     "DEFAULT_REDUNDANCY",
     "DEFAULT_MIN_SIZE",
     "SECTION_FIELDS",
+    "SECTION_SHAPES",
     "BakeSettings",
 ]
 
@@ -40,8 +41,10 @@ DEFAULT_FIELD_SPACING = 4.0
 DEFAULT_REDUNDANCY = 8
 DEFAULT_MIN_SIZE = 64.0
 
-#: the settings only a bake of sections stores (:meth:`BakeSettings.record`)
-SECTION_FIELDS = ("field_spacing", "redundancy", "min_size")
+#: the settings only a bake of sections stores (:meth:`BakeSettings.record`;
+#: ``section_shape`` only when not the default)
+SECTION_FIELDS = ("field_spacing", "redundancy", "min_size", "section_shape")
+SECTION_SHAPES = ("axis", "aligned")
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,8 +68,10 @@ class BakeSettings:
     sampling: str = DEFAULT_SAMPLING
     """Where a cell is sampled: ``"region"`` (its outline and a grid inside, every
     ``spacing`` metres, alternating between both ends of the eye-height range),
-    ``"boundary"`` (the outline at the top of the range) or ``"corners"`` (the 8 box
-    corners of the first bake)."""
+    ``"boundary"`` (the outline at the top of the range), ``"corners"`` (the 8 box
+    corners of the first bake) or ``"field"`` (the union of the dense visibility
+    field's points in and around the cell, every ``field_spacing`` metres:
+    :mod:`~walkstream.server.bake.fieldsampling`)."""
     spacing: float = 20.0
     """``region``/``boundary``: largest distance between points along an edge (and of
     the inside grid), metres."""
@@ -80,22 +85,29 @@ class BakeSettings:
     """Draw every triangle's edges as lines after the fill, adding the objects thinner
     than a pixel (:class:`~walkstream.server.bake.visibility.VisibilityRenderer`)."""
     field_spacing: float = DEFAULT_FIELD_SPACING
-    """``cells="sections"``: metres between the points of the dense visibility field."""
+    """``cells="sections"`` or ``sampling="field"``: metres between the points of the dense visibility field."""
     redundancy: int = DEFAULT_REDUNDANCY
     """``cells="sections"``: objects a section may hold beyond what its seed point sees."""
     min_size: float = DEFAULT_MIN_SIZE
     """``cells="sections"``: smallest section (square metres) the first pass accepts."""
+    section_shape: str = "axis"
+    """``cells="sections"``: ``"axis"`` (rectangles along the x and y axes, as the paper's)
+    or ``"aligned"`` (rectangles turned to the scene's prevailing street direction)."""
 
     def record(self) -> dict[str, Any]:
         """The settings as stored in a database's header (what identifies a bake).
 
-        The section settings are stored only by a bake of sections, so that every
-        other bake keeps the header (and the scene version) it had before they existed.
+        The section settings are stored only by a bake of sections (the field's
+        spacing by a bake sampled from the field too), so that every other bake keeps
+        the header (and the scene version) it had before they existed.
         """
         out = asdict(self)
         if self.cells != "sections":
             for name in SECTION_FIELDS:
-                out.pop(name)
+                if name != "field_spacing" or self.sampling != "field":
+                    out.pop(name)
+        elif self.section_shape == "axis":
+            out.pop("section_shape")
         return out
 
     def check(self) -> BakeSettings:
@@ -106,10 +118,12 @@ class BakeSettings:
             raise InputError(f"--field-spacing: expected a positive number of metres, got {self.field_spacing}")
         if not (np.isfinite(self.redundancy) and self.redundancy >= 0):
             raise InputError(f"--redundancy: expected >= 0 objects, got {self.redundancy}")
+        if self.section_shape not in SECTION_SHAPES:
+            raise InputError(f"--section-shape: expected axis or aligned, got {self.section_shape!r}")
         if not (np.isfinite(self.min_size) and self.min_size >= 0):
             raise InputError(f"--min-size: expected >= 0 square metres, got {self.min_size}")
-        if self.sampling not in ("boundary", "corners", "region"):
-            raise InputError(f"--sampling: expected boundary, region or corners, got {self.sampling!r}")
+        if self.sampling not in ("boundary", "corners", "region", "field"):
+            raise InputError(f"--sampling: expected region, boundary, corners or field, got {self.sampling!r}")
         for name in ("cell_size", "max_length", "view_distance", "margin", "spacing", "height_step"):
             v = float(getattr(self, name))
             if not (np.isfinite(v) and v > 0):
