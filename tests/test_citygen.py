@@ -325,13 +325,13 @@ def test_the_demo_city_has_a_few_deterministic_landmarks(city700: dict[str, Any]
 
 
 def test_landmarks_leave_the_rest_of_the_city_as_it_was(monkeypatch: pytest.MonkeyPatch) -> None:
-    from walkstream.server.sources import citygen
+    from walkstream.server.sources import citylandmarks
 
     for size in (150, 350):
         fc = generate_city(size, 3)
         assert city_summary(fc)["landmarks"] == {"tower": 0, "spire": 0}
     with_marks = generate_city(500, 3)["features"]
-    monkeypatch.setattr(citygen, "_landmark_count", lambda size: 0)
+    monkeypatch.setattr(citylandmarks, "landmark_count", lambda size: 0)
     without = generate_city(500, 3)["features"]
     marks = [f["id"] for f in with_marks if f["properties"].get("landmark")]
     assert len(marks) == 1

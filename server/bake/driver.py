@@ -19,7 +19,7 @@ both) and
    yet stored in chunks by the same runner and lists them per cell
    (:func:`~.impostors.bake_impostors`); with virtual walls (``--virtual-walls``),
    makes the wall textures not yet stored likewise and writes the wall sides
-   (:func:`~.wallplan.bake_walls`);
+   (:func:`~.walls.bake_walls`);
 7. records the default walks and seals the database.
 
 So every scene kind resumes alike, to the same version an uninterrupted bake gets.
@@ -38,7 +38,8 @@ from walkstream.server.bake.field import bake_field, field_folder
 from walkstream.server.bake.impostors import bake_impostors
 from walkstream.server.bake.interior import room_contents, write_contents
 from walkstream.server.bake.plan import BakePlan, settings_key
-from walkstream.server.bake.wallplan import bake_walls, whole_crossing
+from walkstream.server.bake.wallplan import whole_crossing
+from walkstream.server.bake.walls import bake_walls
 from walkstream.server.bake.workers import PVS_CHUNK, pvs_items, pvs_task, release_renderer
 from walkstream.server.store import SceneReader, SceneWriter
 from walkstream.shared.errors import InputError

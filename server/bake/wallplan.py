@@ -26,8 +26,8 @@ its two sides:
   shell is clipped at the wall like any cell boundary: the floor and ceiling behind
   a wall are on its texture.
 
-:func:`bake_walls` is the driver's step: the textures not yet stored rendered and
-encoded in chunks by the one chunk runner (:func:`~.wallrender.wall_task`), then
+:func:`~.walls.bake_walls` is the driver's step: the textures not yet stored rendered
+and encoded in chunks by the one chunk runner (:func:`~.wallrender.wall_task`), then
 every side's row with its texture ids.
 """
 
@@ -35,18 +35,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from walkstream.server.bake.chunks import run_chunks
 from walkstream.server.bake.roomcontents import Part, weld
 from walkstream.server.bake.rooms import RoomLayout
 from walkstream.server.sources.interior import InteriorScene
-from walkstream.server.store import SceneWriter
 from walkstream.shared.codec.image import IMAGE_MEDIA
 from walkstream.shared.errors import InputError
 from walkstream.shared.walls import DEFAULT_WALL_ERROR_DEG, WallSide, zone_count
@@ -57,7 +53,6 @@ __all__ = [
     "WallJob",
     "WallPlan",
     "WallSettings",
-    "bake_walls",
     "plan_walls",
     "texture_height",
     "whole_crossing",
@@ -200,49 +195,3 @@ def whole_crossing(
                 kept.append((int(eid), int(m), v, t))
         out[cid] = kept
     return out
-
-
-def bake_walls(
-    writer: SceneWriter,
-    scene: InteriorScene,
-    plan: WallPlan,
-    settings: WallSettings,
-    key: str,
-    *,
-    workers: int = 1,
-    scheduler: str | None = None,
-    progress: Callable[[int, int], None] | None = None,
-    say: Callable[[str], None] = lambda _msg: None,
-) -> dict[str, Any]:
-    """Make the wall textures not yet stored and write every side (see the module docstring).
-
-    Returns
-    -------
-    dict
-        ``wall_sides``, ``wall_textures``, ``wall_crossing`` (objects kept whole across
-        a wall), ``wall_resumed`` (textures found done), ``wall_texture_bytes``,
-        ``wall_seconds`` (this step's wall time).
-    """
-    from walkstream.server.bake.wallrender import release_wall_renderer, wall_task
-
-    t0 = time.perf_counter()
-    done = writer.done_wall_textures()
-    todo = [j for j in plan.jobs if j[0] not in done]
-    say(f"virtual walls: {len(plan.sides)} wall sides, {len(plan.jobs)} textures "
-        f"({len(plan.jobs) - len(todo)} already baked)")
-    media = IMAGE_MEDIA[settings.codec]
-    for results in run_chunks(
-        wall_task, todo, (scene, key, settings.codec), size=WALL_CHUNK, workers=workers, scheduler=scheduler,
-        progress=progress, done=len(plan.jobs) - len(todo), total=len(plan.jobs), release=release_wall_renderer,
-    ):
-        for (tid, row, zone, width, _ex), (height, data) in results:
-            writer.add_wall_texture(tid, int(row[0]), int(row[1]), zone, width, height, media, data)
-    writer.set_wall_sides([s.to_row() for s in plan.sides])
-    return {
-        "wall_sides": len(plan.sides),
-        "wall_textures": len(plan.jobs),
-        "wall_crossing": sum(len(v) for v in plan.crossing.values()),
-        "wall_resumed": len(plan.jobs) - len(todo),
-        "wall_texture_bytes": writer.wall_texture_bytes(),
-        "wall_seconds": time.perf_counter() - t0,
-    }

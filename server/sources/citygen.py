@@ -34,7 +34,7 @@ Layout
    landmark travels as parameters like any building.  They are over the bake's
    ``--complex-triangles`` default at LOD2, so the complex-impostor path runs on every
    demo.  Landmarks draw from their own random stream: the rest of the city is the
-   same with or without them.
+   same with or without them (where they stand: :mod:`.citylandmarks`).
 6. **Shared vertices.**  Where a lot's corner lies on a neighbour's wall the wall gets
    that vertex too (:func:`~walkstream.server.sources.partywalls.split_shared_edges`),
    so that rounding to 1 cm keeps neighbours wall to wall.  The party walls themselves
@@ -62,6 +62,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.server.sources.citylandmarks import LANDMARK_FLOOR_HEIGHT, choose_landmarks
 from walkstream.server.sources.partywalls import split_shared_edges
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError
@@ -126,14 +127,6 @@ _FLOOR_VARIATION = 2  # per lot, +-
 _FLOOR_HEIGHT = (3.0, 3.6)
 _STYLE_COUNT = 10000
 
-# Landmarks (towers and spires in some backyards, see _landmarks).
-_LANDMARK_AREA = 160000.0  # one landmark per this many square metres of city
-_LANDMARK_MAX = 4
-_LANDMARK_SIDE = (14.0, 24.0)  # metres, the square footprint's side
-_LANDMARK_STREAM = 27  # the landmarks' own random stream next to the city's seed
-_LANDMARK_FLOOR_HEIGHT = 3.4
-_TOWER_FLOORS = (26, 34)  # [lo, hi)
-_SPIRE_FLOORS = (14, 18)
 
 
 def _check_size(size: float) -> float:
@@ -453,65 +446,21 @@ def _perimeter_block(
     return out, lots
 
 
-def _landmark_count(size: float) -> int:
-    """How many landmarks a city of ``size`` metres gets: 3 in the 700 m demo, none below 400 m."""
-    return min(_LANDMARK_MAX, int(size * size // _LANDMARK_AREA))
-
-
-def _landmark_site(yard: F64) -> F64 | None:
-    """The largest square (side at most 24 m) centred in a backyard quad with 3 m of yard
-    around it, aligned with the yard's first edge; None if it would be under 14 m."""
-    u = _unit(yard[1] - yard[0])
-    v = _left(u)
-    c = yard.mean(axis=0)
-    e = np.roll(yard, -1, axis=0) - yard
-    signs = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])  # CCW
-    for half in np.arange(_LANDMARK_SIDE[1] / 2.0, _LANDMARK_SIDE[0] / 2.0 - 1e-9, -0.5):
-        sq = c + signs[:, :1] * half * u + signs[:, 1:] * half * v
-        if bool(np.all(_cross(_unit(e)[None], sq[:, None] - yard[None]) >= 3.0)):
-            return sq
-    return None
-
-
 def _landmarks(
     size: float, seed: int, yards: list[tuple[F64, int, int]], buildings: list[_Building]
 ) -> list[_Building]:
-    """Put a few tall, detailed buildings (towers, spires) in the backyards of some blocks.
+    """``buildings`` with a few landmarks (:func:`~.citylandmarks.choose_landmarks`): each
+    takes the place (and the id) of its block's detached shed, if any, else joins the end.
 
-    A landmark stands free in the middle of a block's yard, so no party wall touches it
-    and its footprint stays an exact square (the crown the grammar builds fits it).  It
-    takes the place (and the id) of the block's detached shed, if any.  Landmarks draw from their own random
-    stream, so every other building of the city is the same with or without them.
-
-    Parameters
-    ----------
-    size, seed: the city's.
-    yards: ``(yard quad (4, 2), first, end)`` per perimeter block: its backyard and the
-        range of its buildings in ``buildings``.
-    buildings: every building so far.
-
-    Returns
-    -------
-    list of _Building
-        ``buildings`` with the chosen yards' sheds replaced by their landmarks, then
-        the landmarks of yards that had none; alternately a tower and a spire.
+    ``yards``: ``(yard quad (4, 2), first, end)`` per perimeter block: its backyard and
+    the range of its buildings in ``buildings``.
     """
-    rng = np.random.default_rng([seed, _LANDMARK_STREAM])
-    want = _landmark_count(size)
-    chosen: list[tuple[int, F64]] = []
-    for k in rng.permutation(len(yards)).tolist():
-        if len(chosen) == want:
-            break
-        site = _landmark_site(yards[k][0])
-        if site is not None:
-            chosen.append((k, site))
     out = list(buildings)
-    for n, (k, site) in enumerate(chosen):
-        use = ("tower", "spire")[n % 2]
-        floors = int(rng.integers(*(_TOWER_FLOORS if use == "tower" else _SPIRE_FLOORS)))
-        bd = _Building([site], floors, _LANDMARK_FLOOR_HEIGHT, int(rng.integers(_STYLE_COUNT)))
-        bd.use = use
-        shed = [i for i in range(yards[k][1], yards[k][2]) if buildings[i].use == "shed"]
+    for pick in choose_landmarks(size, seed, [y[0] for y in yards], _STYLE_COUNT):
+        bd = _Building([pick.site], pick.floors, LANDMARK_FLOOR_HEIGHT, pick.style)
+        bd.use = pick.use
+        first, end = yards[pick.yard][1], yards[pick.yard][2]
+        shed = [i for i in range(first, end) if buildings[i].use == "shed"]
         if shed:
             out[shed[0]] = bd
         else:

@@ -1,0 +1,65 @@
+"""The virtual walls' step of the one bake driver: the wall textures not yet stored, then every wall side.
+
+What the walls are, where they stand and what each side needs is planned in
+:mod:`~walkstream.server.bake.wallplan`; a texture is rendered and encoded by
+:func:`~walkstream.server.bake.wallrender.wall_task`, in chunks of the one chunk
+runner, so a killed bake resumes texture by texture.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from walkstream.server.bake.chunks import run_chunks
+from walkstream.server.bake.wallplan import WALL_CHUNK, WallPlan, WallSettings
+from walkstream.server.bake.wallrender import release_wall_renderer, wall_task
+from walkstream.server.sources.interior import InteriorScene
+from walkstream.server.store import SceneWriter
+from walkstream.shared.codec.image import IMAGE_MEDIA
+
+__all__ = ["bake_walls"]
+
+def bake_walls(
+    writer: SceneWriter,
+    scene: InteriorScene,
+    plan: WallPlan,
+    settings: WallSettings,
+    key: str,
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    say: Callable[[str], None] = lambda _msg: None,
+) -> dict[str, Any]:
+    """Make the wall textures not yet stored and write every side (see :mod:`~.wallplan`).
+
+    Returns
+    -------
+    dict
+        ``wall_sides``, ``wall_textures``, ``wall_crossing`` (objects kept whole across
+        a wall), ``wall_resumed`` (textures found done), ``wall_texture_bytes``,
+        ``wall_seconds`` (this step's wall time).
+    """
+    t0 = time.perf_counter()
+    done = writer.done_wall_textures()
+    todo = [j for j in plan.jobs if j[0] not in done]
+    say(f"virtual walls: {len(plan.sides)} wall sides, {len(plan.jobs)} textures "
+        f"({len(plan.jobs) - len(todo)} already baked)")
+    media = IMAGE_MEDIA[settings.codec]
+    for results in run_chunks(
+        wall_task, todo, (scene, key, settings.codec), size=WALL_CHUNK, workers=workers, scheduler=scheduler,
+        progress=progress, done=len(plan.jobs) - len(todo), total=len(plan.jobs), release=release_wall_renderer,
+    ):
+        for (tid, row, zone, width, _ex), (height, data) in results:
+            writer.add_wall_texture(tid, int(row[0]), int(row[1]), zone, width, height, media, data)
+    writer.set_wall_sides([s.to_row() for s in plan.sides])
+    return {
+        "wall_sides": len(plan.sides),
+        "wall_textures": len(plan.jobs),
+        "wall_crossing": sum(len(v) for v in plan.crossing.values()),
+        "wall_resumed": len(plan.jobs) - len(todo),
+        "wall_texture_bytes": writer.wall_texture_bytes(),
+        "wall_seconds": time.perf_counter() - t0,
+    }
