@@ -5,7 +5,7 @@ buffer (one context, made headless through EGL like every renderer of the projec
 and renders one object at a time along a bin's direction
 (:func:`~walkstream.shared.impostors.bin_direction`) into a square of ``2 R`` metres
 (:func:`~walkstream.shared.impostors.image_basis`), over transparent black, at
-:data:`SUPERSAMPLE` times the size asked; averaging the supersamples gives
+:data:`~.litimage.SUPERSAMPLE` times the size asked; averaging the supersamples gives
 premultiplied colour with soft silhouettes (:mod:`walkstream.shared.codec.image`).
 The lighting is the client's per-vertex lighting (:mod:`walkstream.shared.lighting`,
 material colours of :mod:`walkstream.shared.palette`), so an image shows an object as
@@ -41,7 +41,7 @@ from walkstream.shared.impostors import bin_direction, image_basis
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
-__all__ = ["SUPERSAMPLE", "ImageJob", "ImpostorRenderer", "impostor_task", "release_impostor_renderer"]
+__all__ = ["ImageJob", "ImpostorRenderer", "impostor_task", "release_impostor_renderer"]
 
 _ATLAS_SIDE = 2048
 """Largest side of the framebuffer the images of one read are tiled in, pixels."""

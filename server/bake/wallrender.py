@@ -11,7 +11,7 @@ crossing the wall are not on the texture: they are drawn as transparent holes (d
 written, colour and alpha 0), so the client's quad, drawn over the geometry at the
 wall's depth, lets the object's geometry behind the wall's plane show through instead
 of covering it (the paper's treatment of the geometry that stays geometry).  Samples are averaged
-(:data:`SUPERSAMPLE`) into premultiplied RGBA over transparent black
+(:data:`~.litimage.SUPERSAMPLE`) into premultiplied RGBA over transparent black
 (:mod:`walkstream.shared.codec.image`).
 
 :func:`wall_task` is the chunk task of the one chunk runner (:mod:`.chunks`).
@@ -40,7 +40,7 @@ from walkstream.shared.gl import (
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.walls import WallSide
 
-__all__ = ["SUPERSAMPLE", "WallRenderer", "off_axis", "release_wall_renderer", "wall_task"]
+__all__ = ["WallRenderer", "off_axis", "release_wall_renderer", "wall_task"]
 
 _FAR = 400.0
 
