@@ -9,16 +9,15 @@ distance, a texture budget smaller than the images of one cell.
 
 from __future__ import annotations
 
-import asyncio
 import io
 import math
 from collections.abc import Iterator
 from pathlib import Path
 
-import httpx
 import msgpack
 import numpy as np
 import pytest
+from asgiclient import Http
 
 from walkstream.client.draw.impostors import (
     BLEND_M,
@@ -288,24 +287,6 @@ def plain(city: Path, gl_ctx: object) -> Path:
     out = city.parent / "plain.db"
     bake(city, out, settings=FAST, name="plain")
     return out
-
-
-class Http:
-    """A synchronous face on ``httpx.AsyncClient`` over the ASGI app (one event loop)."""
-
-    def __init__(self, app: object) -> None:
-        self.loop = asyncio.new_event_loop()
-        self.client = httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://testserver")  # type: ignore[arg-type]
-
-    def get(self, url: str, **kw: object) -> httpx.Response:
-        return self.loop.run_until_complete(self.client.get(url, **kw))  # type: ignore[arg-type]
-
-    def post(self, url: str, **kw: object) -> httpx.Response:
-        return self.loop.run_until_complete(self.client.post(url, **kw))  # type: ignore[arg-type]
-
-    def close(self) -> None:
-        self.loop.run_until_complete(self.client.aclose())
-        self.loop.close()
 
 
 @pytest.fixture(scope="module")

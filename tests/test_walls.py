@@ -8,7 +8,6 @@ walls), a bake killed among its textures (resumed to the same version).
 
 from __future__ import annotations
 
-import asyncio
 import json
 import math
 from collections.abc import Iterator
@@ -18,6 +17,7 @@ import httpx
 import msgpack
 import numpy as np
 import pytest
+from asgiclient import Http
 from openhall import open_hall
 
 from walkstream.server.bake import bake
@@ -281,24 +281,6 @@ def test_walls_refuse_a_city_and_bad_settings(tmp_path: Path) -> None:
 
 
 # ------------------------------------------------------------------ the service
-
-
-class Http:
-    """A synchronous face on ``httpx.AsyncClient`` over the ASGI app (one event loop)."""
-
-    def __init__(self, app: object) -> None:
-        self.loop = asyncio.new_event_loop()
-        self.client = httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://testserver")  # type: ignore[arg-type]
-
-    def get(self, url: str, **kw: object) -> httpx.Response:
-        return self.loop.run_until_complete(self.client.get(url, **kw))  # type: ignore[arg-type]
-
-    def post(self, url: str, **kw: object) -> httpx.Response:
-        return self.loop.run_until_complete(self.client.post(url, **kw))  # type: ignore[arg-type]
-
-    def close(self) -> None:
-        self.loop.run_until_complete(self.client.aclose())
-        self.loop.close()
 
 
 @pytest.fixture(scope="module")

@@ -35,6 +35,7 @@ from walkstream.shared.codec.cellbatch import check_contents_part
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.content.impostor import KIND as IMPOSTOR
+from walkstream.shared.content.kind import ContentKind
 from walkstream.shared.content.walltex import KIND as WALLTEX
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_any
@@ -364,24 +365,8 @@ class SceneClient:
         ApiError
             4xx: the server refuses the request (a scene baked without walls: 404).
         """
-        ids = [int(i) for i in ids]
-        what = f"wall textures batch ({len(ids)} textures)"
-        got = 0
-
-        def check(obj: Any, nbytes: int) -> tuple[int, Any, int]:
-            if got >= len(ids):
-                raise CodecError("more textures than asked")
-            tid, _etag, body = check_contents_part(obj, f"{what}: part {got}")
-            if tid != ids[got]:
-                raise CodecError(f"{what}: texture {tid} where {ids[got]} was asked")
-            return tid, WALLTEX.decode(body, f"wall texture {tid}"), nbytes
-
-        async for part in self._stream("POST", self._url("/walls/textures"), what, {"ids": ids}, check):
-            got += 1
+        async for part in self._image_batch(ids, "/walls/textures", "wall textures batch", "texture", WALLTEX, "wall texture"):
             yield part
-        if got < len(ids):
-            self.stats.cut_streams += 1
-            raise StreamCut(f"{what}: ended after {got} of {len(ids)} textures", got)
 
     async def room(self, cid: int) -> RoomRecord:
         """Interior cell ``cid``'s record."""
@@ -446,24 +431,55 @@ class SceneClient:
         ApiError
             4xx: the server refuses the request (a scene baked without impostors: 404).
         """
+        async for part in self._image_batch(ids, "/impostors", "impostors batch", "image", IMPOSTOR, "impostor image"):
+            yield part
+
+    async def _image_batch(
+        self, ids: Sequence[int], tail: str, batch: str, short: str, kind: ContentKind, noun: str
+    ) -> AsyncIterator[tuple[int, Any, int]]:
+        """Stored images ``ids`` of one set in one request (``POST`` to ``tail``), each yielded
+        as ``(image id, premultiplied RGBA array, bytes on the wire)`` in the order asked.
+
+        Parameters
+        ----------
+        ids:
+            The image ids, each once.
+        tail:
+            The batch route after the scene (``"/impostors"``).
+        batch:
+            The request in error lines (``"impostors batch"``).
+        short:
+            One image in error lines (``"image"``).
+        kind:
+            The content kind decoding one image (``IMPOSTOR``, ``WALLTEX``).
+        noun:
+            One image in a decoding error (``"impostor image"``).
+
+        Raises
+        ------
+        StreamCut
+            As :meth:`objects`; ``received`` counts the images yielded.
+        ApiError
+            4xx: the server refuses the request.
+        """
         ids = [int(i) for i in ids]
-        what = f"impostors batch ({len(ids)} images)"
+        what = f"{batch} ({len(ids)} {short}s)"
         got = 0
 
         def check(obj: Any, nbytes: int) -> tuple[int, Any, int]:
             if got >= len(ids):
-                raise CodecError("more images than asked")
+                raise CodecError(f"more {short}s than asked")
             iid, _etag, body = check_contents_part(obj, f"{what}: part {got}")
             if iid != ids[got]:
-                raise CodecError(f"{what}: image {iid} where {ids[got]} was asked")
-            return iid, IMPOSTOR.decode(body, f"impostor image {iid}"), nbytes
+                raise CodecError(f"{what}: {short} {iid} where {ids[got]} was asked")
+            return iid, kind.decode(body, f"{noun} {iid}"), nbytes
 
-        async for part in self._stream("POST", self._url("/impostors"), what, {"ids": ids}, check):
+        async for part in self._stream("POST", self._url(tail), what, {"ids": ids}, check):
             got += 1
             yield part
         if got < len(ids):
             self.stats.cut_streams += 1
-            raise StreamCut(f"{what}: ended after {got} of {len(ids)} images", got)
+            raise StreamCut(f"{what}: ended after {got} of {len(ids)} {short}s", got)
 
     async def cell_index(self, tile: tuple[int, int] | None) -> CellIndex:
         """The cell index of ``tile`` (None: of the whole scene)."""

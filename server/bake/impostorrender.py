@@ -5,7 +5,7 @@ buffer (one context, made headless through EGL like every renderer of the projec
 and renders one object at a time along a bin's direction
 (:func:`~walkstream.shared.impostors.bin_direction`) into a square of ``2 R`` metres
 (:func:`~walkstream.shared.impostors.image_basis`), over transparent black, at
-:data:`SUPERSAMPLE` times the size asked; averaging the supersamples gives
+:data:`~.litimage.SUPERSAMPLE` times the size asked; averaging the supersamples gives
 premultiplied colour with soft silhouettes (:mod:`walkstream.shared.codec.image`).
 The lighting is the client's per-vertex lighting (:mod:`walkstream.shared.lighting`,
 material colours of :mod:`walkstream.shared.palette`), so an image shows an object as
@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.server.bake.litimage import SUPERSAMPLE, average_samples, lit_program
 from walkstream.server.bake.objectrows import building_box
 from walkstream.shared.buildings import build_lod_batch
 from walkstream.shared.camera import mat4_bytes
@@ -37,36 +38,16 @@ from walkstream.shared.gl import (
     release_objects,
 )
 from walkstream.shared.impostors import bin_direction, image_basis
-from walkstream.shared.lighting import AMBIENT, LIGHT_DIRECTION
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
-__all__ = ["SUPERSAMPLE", "ImageJob", "ImpostorRenderer", "impostor_task", "release_impostor_renderer"]
-
-SUPERSAMPLE = 2
-"""Rendered samples per image texel along each axis (averaged: soft silhouettes)."""
+__all__ = ["ImageJob", "ImpostorRenderer", "impostor_task", "release_impostor_renderer"]
 
 _ATLAS_SIDE = 2048
 """Largest side of the framebuffer the images of one read are tiled in, pixels."""
 
 ImageJob = tuple[int, int, int, int, int, int]
 """One image to make: ``(image id, object id, level, azimuth bin, elevation bin, size)``."""
-
-_VERTEX_SHADER = """
-#version 330
-uniform mat4 u_view_proj;
-uniform vec3 u_light_dir;
-uniform float u_ambient;
-in vec3 in_position;
-in vec3 in_normal;
-in vec3 in_color;
-out vec3 v_lit;
-void main() {
-    gl_Position = u_view_proj * vec4(in_position, 1.0);
-    float diffuse = max(dot(normalize(in_normal), u_light_dir), 0.0);
-    v_lit = in_color * (u_ambient + (1.0 - u_ambient) * diffuse);
-}
-"""
 
 _FRAGMENT_SHADER = """
 #version 330
@@ -133,12 +114,9 @@ class ImpostorRenderer(Releasable):
             base += len(m.positions)
             first += m.indices.size
         verts = np.hstack([np.vstack(pos), np.vstack(nor), np.vstack(col)]).astype(np.float32)
-        light = np.asarray(LIGHT_DIRECTION, np.float64)
-        prog: Any = self.ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
+        prog = lit_program(self.ctx, _FRAGMENT_SHADER)
         self.prog = prog
         self._objects.append(prog)
-        prog["u_light_dir"].value = tuple(float(v) for v in light / np.linalg.norm(light))
-        prog["u_ambient"].value = float(AMBIENT)
         vbo = self.ctx.buffer(np.ascontiguousarray(verts).tobytes())
         ibo = self.ctx.buffer(np.concatenate(idx).astype(np.uint32).tobytes())
         self._objects += [vbo, ibo]
@@ -188,7 +166,6 @@ class ImpostorRenderer(Releasable):
         per_fb = per_row * per_row
         out: list[NDArray[np.uint8]] = []
         prog: Any = self.prog
-        n = SUPERSAMPLE * SUPERSAMPLE
         for k in range(0, len(views), per_fb):
             part = views[k : k + per_fb]
             fb = self._framebuffer(per_row * side)
@@ -206,12 +183,7 @@ class ImpostorRenderer(Releasable):
             atlas = fb.read()
             # the mean of the samples, rounded, over the whole atlas at once (integer sums of
             # contiguous rows: per tile, or in floats, it costs more than the render)
-            wide = atlas.astype(np.uint16)
-            total = np.full_like(wide[::SUPERSAMPLE, ::SUPERSAMPLE], n // 2)
-            for i in range(SUPERSAMPLE):
-                for j in range(SUPERSAMPLE):
-                    total += wide[i::SUPERSAMPLE, j::SUPERSAMPLE]
-            small = (total // n).astype(np.uint8)
+            small = average_samples(atlas)
             for t in range(len(part)):
                 col, row = t % per_row, t // per_row
                 out.append(small[row * size : (row + 1) * size, col * size : (col + 1) * size].copy())

@@ -11,7 +11,7 @@ crossing the wall are not on the texture: they are drawn as transparent holes (d
 written, colour and alpha 0), so the client's quad, drawn over the geometry at the
 wall's depth, lets the object's geometry behind the wall's plane show through instead
 of covering it (the paper's treatment of the geometry that stays geometry).  Samples are averaged
-(:data:`SUPERSAMPLE`) into premultiplied RGBA over transparent black
+(:data:`~.litimage.SUPERSAMPLE`) into premultiplied RGBA over transparent black
 (:mod:`walkstream.shared.codec.image`).
 
 :func:`wall_task` is the chunk task of the one chunk runner (:mod:`.chunks`).
@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.server.bake.litimage import SUPERSAMPLE, average_samples, lit_program
 from walkstream.server.bake.wallplan import WallJob, texture_height
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.shared.camera import mat4_bytes
@@ -36,32 +37,12 @@ from walkstream.shared.gl import (
     create_context,
     release_objects,
 )
-from walkstream.shared.lighting import AMBIENT, LIGHT_DIRECTION
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.walls import WallSide
 
-__all__ = ["SUPERSAMPLE", "WallRenderer", "off_axis", "release_wall_renderer", "wall_task"]
-
-SUPERSAMPLE = 2
-"""Rendered samples per texel along each axis (averaged)."""
+__all__ = ["WallRenderer", "off_axis", "release_wall_renderer", "wall_task"]
 
 _FAR = 400.0
-
-_VERTEX_SHADER = """
-#version 330
-uniform mat4 u_view_proj;
-uniform vec3 u_light_dir;
-uniform float u_ambient;
-in vec3 in_position;
-in vec3 in_normal;
-in vec3 in_color;
-out vec3 v_lit;
-void main() {
-    gl_Position = u_view_proj * vec4(in_position, 1.0);
-    float diffuse = max(dot(normalize(in_normal), u_light_dir), 0.0);
-    v_lit = in_color * (u_ambient + (1.0 - u_ambient) * diffuse);
-}
-"""
 
 _FRAGMENT_SHADER = """
 #version 330
@@ -126,12 +107,9 @@ class WallRenderer(Releasable):
             first += 3 * len(tri)
         verts = np.hstack([np.vstack(pos), np.vstack(nor), np.vstack(col)]).astype(np.float32) if pos else \
             np.zeros((3, 9), np.float32)
-        light = np.asarray(LIGHT_DIRECTION, np.float64)
-        prog: Any = self.ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
+        prog = lit_program(self.ctx, _FRAGMENT_SHADER)
         self.prog = prog
         self._objects.append(prog)
-        prog["u_light_dir"].value = tuple(float(v) for v in light / np.linalg.norm(light))
-        prog["u_ambient"].value = float(AMBIENT)
         vbo = self.ctx.buffer(np.ascontiguousarray(verts).tobytes())
         self._objects.append(vbo)
         self.vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f 3f", "in_position", "in_normal", "in_color")])
@@ -170,14 +148,7 @@ class WallRenderer(Releasable):
                 if eid in skip:
                     self.vao.render(vertices=count, first=first)
         check_gl_error(self.ctx, "wall textures")
-        img = fb.read().astype(np.uint16)
-        n = SUPERSAMPLE * SUPERSAMPLE
-        total = np.full_like(img[::SUPERSAMPLE, ::SUPERSAMPLE], n // 2)
-        for i in range(SUPERSAMPLE):
-            for j in range(SUPERSAMPLE):
-                total += img[i::SUPERSAMPLE, j::SUPERSAMPLE]
-        out: NDArray[np.uint8] = (total // n).astype(np.uint8)
-        return out
+        return average_samples(fb.read())
 
     def release(self) -> None:
         """Free the GL objects (and the context when it made it)."""

@@ -1,0 +1,85 @@
+"""What the bake's image renderers share: the client's per-vertex lighting as a GL program, and supersample averaging.
+
+The impostor images (:mod:`.impostorrender`) and the wall textures (:mod:`.wallrender`)
+both draw meshes of ``(position, normal, colour)`` vertices lit as the client lights
+them (:mod:`walkstream.shared.lighting`), at :data:`SUPERSAMPLE` times the size asked,
+and average the samples into premultiplied RGBA (:mod:`walkstream.shared.codec.image`).
+Each keeps its own fragment shader and its own way of drawing.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.shared.lighting import AMBIENT, LIGHT_DIRECTION
+
+__all__ = ["LIT_VERTEX_SHADER", "SUPERSAMPLE", "average_samples", "lit_program"]
+
+SUPERSAMPLE = 2
+"""Rendered samples per image texel along each axis (averaged: soft edges)."""
+
+LIT_VERTEX_SHADER = """
+#version 330
+uniform mat4 u_view_proj;
+uniform vec3 u_light_dir;
+uniform float u_ambient;
+in vec3 in_position;
+in vec3 in_normal;
+in vec3 in_color;
+out vec3 v_lit;
+void main() {
+    gl_Position = u_view_proj * vec4(in_position, 1.0);
+    float diffuse = max(dot(normalize(in_normal), u_light_dir), 0.0);
+    v_lit = in_color * (u_ambient + (1.0 - u_ambient) * diffuse);
+}
+"""
+"""Vertex shader of the client's per-vertex lighting (``v_lit`` out; ``u_view_proj`` to set per view)."""
+
+
+def lit_program(ctx: Any, fragment_shader: str) -> Any:
+    """A program of :data:`LIT_VERTEX_SHADER` and ``fragment_shader`` (which reads
+    ``in vec3 v_lit``), its light direction and ambient already set.
+
+    Parameters
+    ----------
+    ctx:
+        The moderngl context.
+    fragment_shader:
+        GLSL 330 source of the fragment shader.
+
+    Returns
+    -------
+    moderngl.Program
+        The caller releases it with its other GL objects.
+    """
+    light = np.asarray(LIGHT_DIRECTION, np.float64)
+    prog: Any = ctx.program(vertex_shader=LIT_VERTEX_SHADER, fragment_shader=fragment_shader)
+    prog["u_light_dir"].value = tuple(float(v) for v in light / np.linalg.norm(light))
+    prog["u_ambient"].value = float(AMBIENT)
+    return prog
+
+
+def average_samples(img: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """The rounded mean of each :data:`SUPERSAMPLE` x :data:`SUPERSAMPLE` block.
+
+    Parameters
+    ----------
+    img:
+        ``(h * SUPERSAMPLE, w * SUPERSAMPLE, 4) uint8`` as read from the framebuffer.
+
+    Returns
+    -------
+    NDArray[np.uint8]
+        ``(h, w, 4)``: integer sums of strided views (cheaper than per tile or in floats).
+    """
+    wide = img.astype(np.uint16)
+    n = SUPERSAMPLE * SUPERSAMPLE
+    total = np.full_like(wide[::SUPERSAMPLE, ::SUPERSAMPLE], n // 2)
+    for i in range(SUPERSAMPLE):
+        for j in range(SUPERSAMPLE):
+            total += wide[i::SUPERSAMPLE, j::SUPERSAMPLE]
+    out: NDArray[np.uint8] = (total // n).astype(np.uint8)
+    return out
