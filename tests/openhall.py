@@ -32,7 +32,9 @@ def open_hall(width: float = 40.0, depth: float = 24.0, *, spacing: float = 2.0,
         walls.append({"id": f"w{k}", "storey": 0, "from": a, "to": b, "thickness": t, "exterior": True,
                       "openings": openings})
     grow = [[x0 - t, y0 - t], [x0 + width + t, y0 - t], [x0 + width + t, y0 + depth + t], [x0 - t, y0 + depth + t]]
-    kinds = [k for k in FURNITURE_KINDS if k not in ("plant",)] or list(FURNITURE_KINDS)
+    # an office's furniture (the production hall's machines, robots and racks are its own
+    # preset's: a few hundred triangles each would make this small hall a heavy one)
+    kinds = [k for k in FURNITURE_KINDS if k not in ("plant", "machine", "robot", "rack")] or list(FURNITURE_KINDS)
     furniture = []
     for i, x in enumerate(np.arange(2.5, width - 2.0, spacing)):
         for j, y in enumerate(np.arange(2.5, depth - 2.0, spacing)):
