@@ -131,6 +131,16 @@ def _bake_scene(name: str, out: Path, data: Path, quick: bool, settings: dict[st
             extra["walls"] = WallSettings(error_deg=float(settings.get("wall_error", 10.0))).check()
         settings = {k: v for k, v in settings.items() if k not in ("virtual_walls", "wall_error")}
         bake(src, db, settings=BakeSettings(**(cells | settings)), **extra)
+        base = out / f"{name}.db"
+        if extra and path != _BENCH_PATH and base.exists():
+            # the same walk as without walls: the walls' smaller cells give the bake's
+            # own tour another route (through the equipment between the bays' middles)
+            reader = SceneReader.open(base)
+            try:
+                blob = reader.path_blob(path)
+            finally:
+                reader.close()
+            write_path(db, path, blob)
         if path == _BENCH_PATH:
             reader = SceneReader.open(db)
             try:

@@ -38,6 +38,11 @@ def test_bench_walls_quick_measures_the_hall_without_walls(tmp_path: Path, capsy
     on, off = walls["walls A=10"], walls["no walls (A=10 db)"]
     assert on["texture_bytes"] > 0 and on["textures_per_wall"] > 0 and off["texture_bytes"] == 0
     assert on["compared_frames"] >= 1 and on["colour_error_median"] is not None
+    # the same walk both ways: the walls' database replays the plain hall's tour
+    from walkstream.server.store import SceneReader
+
+    with SceneReader.open(out / "hall.db") as a, SceneReader.open(out / "hall-walls-10.db") as b:
+        assert a.path_blob("tour") == b.path_blob("tour")
     assert (out / "bench_walls.png").stat().st_size > 0
     table = format_walls_table(result)
     assert "frustum culling alone" in table and "hall" in table
