@@ -2,7 +2,8 @@
 
 One renderer for every scene, whatever it holds: city objects (their LOD2 meshes,
 lit in their materials' colours) and room parts (each part of each cell's contents,
-:class:`~walkstream.shared.codec.cellmesh.CellPart`, in its material's colour, unlit).
+:class:`~walkstream.shared.codec.cellmesh.CellPart`, in its material's colour, lit with flat
+normals as the client lights it).
 Each thing drawn has a key: a room part ``(cell, part)``, a city object
 ``(-1 - id, 0)`` (:func:`object_key`); :attr:`TruthRenderer.keys` lists them in draw
 order -- the objects in ascending ids, then the parts by cell and part -- and a
