@@ -68,12 +68,14 @@ _ROOMS = ("interior", "crossing")
 
 
 def walls_support() -> tuple[bool, bool]:
-    """``(bake, replay)``: whether this walkstream's bake places virtual walls
-    (``BakeSettings.virtual_walls``) and its replay can switch them (``ReplayConfig.virtual_walls``)."""
-    from walkstream.client.config import ReplayConfig
-    from walkstream.server.bake import BakeSettings
+    """``(bake, replay)``: whether this walkstream's bake places virtual walls (``bake(...,
+    walls=WallSettings)``) and its replay can switch them (``ReplayConfig.virtual_walls``)."""
+    import inspect
 
-    bake = "virtual_walls" in {f.name for f in dataclasses.fields(BakeSettings)}
+    from walkstream.client.config import ReplayConfig
+    from walkstream.server.bake import bake as bake_fn
+
+    bake = "walls" in inspect.signature(bake_fn).parameters
     play = "virtual_walls" in {f.name for f in dataclasses.fields(ReplayConfig)}
     return bake, play
 
@@ -122,7 +124,23 @@ def _bake_scene(name: str, out: Path, data: Path, quick: bool, settings: dict[st
     if not db.exists():
         print(f"  baking {db.name} ...", file=sys.stderr, flush=True)
         cells = {} if name == "hall" else {"cells": "street"}
-        bake(src, db, settings=BakeSettings(**(cells | settings)))
+        extra: dict[str, Any] = {}
+        if settings.get("virtual_walls"):
+            from walkstream.server.bake.wallplan import WallSettings
+
+            extra["walls"] = WallSettings(error_deg=float(settings.get("wall_error", 10.0))).check()
+        settings = {k: v for k, v in settings.items() if k not in ("virtual_walls", "wall_error")}
+        bake(src, db, settings=BakeSettings(**(cells | settings)), **extra)
+        base = out / f"{name}.db"
+        if extra and path != _BENCH_PATH and base.exists():
+            # the same walk as without walls: the walls' smaller cells give the bake's
+            # own tour another route (through the equipment between the bays' middles)
+            reader = SceneReader.open(base)
+            try:
+                blob = reader.path_blob(path)
+            finally:
+                reader.close()
+            write_path(db, path, blob)
         if path == _BENCH_PATH:
             reader = SceneReader.open(db)
             try:

@@ -345,9 +345,15 @@ async def replay(
         summary.update(interior_summary(config, log, rooms, frames, topology, cache, setup_s, path, manifest))
         walls = scene.wall_images
         if walls is not None:  # only then: a scene without walls keeps its summary
+            figs = frames.wall_figures()
+            n_walls = len({s.portal for s in scene.walls})
             summary["walls"] = {
-                **frames.wall_figures(),
+                **figs,
                 "wall_sides": len(scene.walls),
+                # both sides' zones: the paper's "textures per wall"
+                "textures_per_wall": sum(len(s.textures) for s in scene.walls) / n_walls if n_walls else 0.0,
+                # decoded RGBA of the textures the busiest frame drew
+                "texture_memory_bytes": int(figs.get("wall_texture_bytes_max", 0)),
                 "textures_received": walls.received,
                 "texture_bytes": walls.bytes_received,
                 "texture_requests": walls.requests,

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from walkstream.client.truth.colour import COLOUR_CAUSES
 from walkstream.client.truth.compare import CAUSES
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.render import TruthRenderer
@@ -92,3 +93,65 @@ def test_pixel_distance_is_the_distance_along_each_pixels_ray() -> None:
     d = pixel_distance(np.full((2, 2), 1.0), proj)
     # at 90 degrees the pixel centres of a 2 x 2 frame look at (+-0.5, +-0.5, -1)
     assert d == pytest.approx(np.full((2, 2), math.sqrt(1.5)))
+
+
+def _screen_quad(view: np.ndarray, proj: np.ndarray, d: float) -> np.ndarray:
+    """``(4, 3)`` the corners (bottom-left, bottom-right, top-right, top-left) of a quad
+    filling the whole view at distance ``d`` in front of the camera."""
+    x, y = d / float(proj[0, 0]), d / float(proj[1, 1])
+    eye_space = np.array([[-x, -y, -d, 1.0], [x, -y, -d, 1.0], [x, y, -d, 1.0], [-x, y, -d, 1.0]])
+    world = eye_space @ np.linalg.inv(view).T
+    out: np.ndarray = world[:, :3] / world[:, 3:4]
+    return out
+
+
+def test_a_wall_texture_is_painted_into_the_picture_with_its_own_cause(office_db: Path, gl: object) -> None:
+    # the frame drew its own cell and one "wall" across the whole view at 1.5 m carrying
+    # what lies behind: a right texture (the full scene itself) leaves little error and
+    # nothing culled; a wrong one (flat magenta) is error, all of it the wall's
+    with SceneReader.open(office_db) as r:
+        rooms = {c.id: decode_cell_mesh(r.contents(c.id)) for c in r.cells()}
+        tour = RecordedPath.from_msgpack(r.path_blob("tour"))
+        cells = [c for c in r.cells() if c.kind != "outside"]
+    truth = TruthRenderer(size=(160, 120), rooms=rooms, near=0.1, far=100.0, two_sided=True, ctx=gl)
+    try:
+        best = None
+        for t in np.linspace(0.0, tour.duration, 40).tolist():
+            xyz, yaw, pitch = tour.at(t)
+            eye = np.asarray(xyz, np.float64)
+            view = camera(eye, float(yaw), float(pitch)).astype(np.float64)
+            _, depth = truth.render(eye, view)
+            far = float(np.mean(np.isfinite(depth) & (depth > 3.0)))
+            if best is None or far > best[0]:
+                best = (far, eye, view)
+        assert best is not None
+        _, eye, view = best
+        here = next(c.id for c in cells if _inside(c, eye))
+        own = [k for k in truth.keys if k[0] == here]
+        truth.render(eye, view)
+        full = truth.colour()
+        corners = _screen_quad(view, np.asarray(truth.proj, np.float64), 1.5)
+        right = np.dstack([full, np.full(full.shape[:2], 255, np.uint8)])
+        wrong = np.zeros_like(right)
+        wrong[..., 0], wrong[..., 2], wrong[..., 3] = 255, 255, 255
+        z = np.zeros(0, np.int64)
+
+        def note(frame: int, quads: tuple = ()) -> FrameNote:
+            return FrameNote(frame=frame, t=float(frame), eye=eye, view=view, cell=here, pvs=z, received=z, built=z,
+                             drawn=(), parts=tuple(own), waiting=(), fog=math.inf, wall_quads=quads)
+
+        rc = room_colour(truth, [note(0), note(1, ((corners, -1, right, 1.0),)),
+                                 note(2, ((corners, -2, wrong, 1.0),))])
+    finally:
+        truth.release()
+    c = rc.log.colour
+    assert c is not None and len(c) == 3
+    culled, wall = CAUSES.index("culled"), COLOUR_CAUSES.index("wall")
+    # without the wall: what lies beyond the own cell is culled
+    assert c.causes[0, culled] > 0.05 and c.causes[0, wall] == 0.0
+    # a right texture: most of that error gone, nothing of it culled any more
+    assert c.mean_error[1] < 0.25 * c.mean_error[0] and c.visible[1] < 0.25 * c.visible[0]
+    assert rc.log.missing[1, culled] < 0.5 * rc.log.missing[0, culled]
+    # a wrong texture: error, the wall's
+    assert c.mean_error[2] > c.mean_error[0] and c.causes[2, wall] > 0.5 * c.visible[2]
+    assert c.causes[2, culled] < c.causes[0, culled]

@@ -36,7 +36,8 @@ causes
     Every visible pixel is attributed to one of :data:`COLOUR_CAUSES`: where the
     client's picture lacks the truth's object, that pixel's id-based cause
     (:data:`~walkstream.client.truth.compare.CAUSES`, unchanged); where an
-    image-based stand-in drew the pixel, ``impostor``; where the client shows the
+    image-based stand-in drew the pixel, ``impostor`` (``wall`` where it is a virtual
+    wall's texture, indoors); where the client shows the
     right object (or an object where the truth shows sky) drawn at a coarser LOD
     than LOD2, ``lod_colour`` (its box has no windows); anything else is ``other``
     (the right object at LOD2 and still the wrong colour: must be zero).
@@ -45,7 +46,8 @@ The ``impostor`` hook: an image-based part that stands in for an object paints i
 pixels into the client's picture and hands their mask as ``stand_in`` to
 :func:`compare_colour` (through the ``overlay`` of
 :func:`~walkstream.client.truth.picture.client_picture`); those pixels are its
-error, whatever the id comparison says of them.
+error, whatever the id comparison says of them.  A virtual wall's texture hands its
+mask as ``wall`` the same way.
 """
 
 from __future__ import annotations
@@ -82,16 +84,17 @@ VISIBLE_DE = 2.3
 PSNR_CAP_DB = 150.0
 
 #: The causes of a visibly wrong pixel: the id-based causes, then the colour ones.
-COLOUR_CAUSES: tuple[str, ...] = (*CAUSES, "impostor", "lod_colour", "other")
+COLOUR_CAUSES: tuple[str, ...] = (*CAUSES, "impostor", "lod_colour", "other", "wall")
 
 #: The colour of each colour cause in pictures and plots (the id causes keep theirs).
 COLOUR_CAUSE_RGB: dict[str, tuple[int, int, int]] = {
     "impostor": (0, 158, 115),
     "lod_colour": (86, 180, 233),
     "other": (90, 90, 90),
+    "wall": (204, 121, 167),
 }
 
-_IMPOSTOR, _LOD_COLOUR, _OTHER = (COLOUR_CAUSES.index(c) for c in ("impostor", "lod_colour", "other"))
+_IMPOSTOR, _LOD_COLOUR, _OTHER, _WALL = (COLOUR_CAUSES.index(c) for c in ("impostor", "lod_colour", "other", "wall"))
 
 # sRGB (IEC 61966-2-1) to XYZ, D65 white
 _RGB_TO_XYZ = np.array(
@@ -237,6 +240,7 @@ def compare_colour(
     id_cause: ArrayLike | None = None,
     coarse: ArrayLike | None = None,
     stand_in: ArrayLike | None = None,
+    wall: ArrayLike | None = None,
 ) -> ColourError:
     """The colour error of the client's picture against the truth's (see the module docs).
 
@@ -252,6 +256,8 @@ def compare_colour(
         Pixels where the client's picture shows an object drawn at a coarser LOD than LOD2.
     stand_in : (h, w) bool, optional
         Pixels an image-based stand-in drew (the ``impostor`` hook).
+    wall : (h, w) bool, optional
+        Pixels a virtual wall's texture drew (cause ``wall``).
 
     Returns
     -------
@@ -274,7 +280,7 @@ def compare_colour(
     cause_id = np.full(shape, -1, np.int64) if id_cause is None else np.asarray(id_cause, np.int64)
     if cause_id.shape != shape:
         raise InputError(f"compare_colour: id_cause is {cause_id.shape}, expected {shape}")
-    coarse_m, stand_m = mask(coarse, "coarse"), mask(stand_in, "stand_in")
+    coarse_m, stand_m, wall_m = mask(coarse, "coarse"), mask(stand_in, "stand_in"), mask(wall, "wall")
     pixels = int(t.shape[0] * t.shape[1])
     # only the pixels that differ at all are converted: most of a frame is the same
     diff = (t[..., 0] != c[..., 0]) | (t[..., 1] != c[..., 1]) | (t[..., 2] != c[..., 2])  # any() over axis 2 is slow
@@ -293,6 +299,7 @@ def compare_colour(
     vis = de > VISIBLE_DE
     sv, cv = stand_m[vis], cause_id[vis]
     cause = np.where(sv, _IMPOSTOR, np.where(cv >= 0, cv, np.where(coarse_m[vis], _LOD_COLOUR, _OTHER)))
+    cause = np.where(wall_m[vis], _WALL, cause)
     counts = np.bincount(cause, minlength=len(COLOUR_CAUSES)).astype(np.int64)
     mse = sq_err / max(3 * pixels, 1)
     return ColourError(

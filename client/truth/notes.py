@@ -55,3 +55,7 @@ class FrameNote:
     walls: tuple[Any, ...] = ()
     """The ``(4, 3)`` corners of each virtual wall drawn as its texture alone (its portal
     closed: the cells behind it not drawn)."""
+    wall_quads: tuple[Any, ...] = ()
+    """Every virtual wall drawn, closed or fading over the geometry in its blend zone,
+    as the client drew it (:data:`~walkstream.client.draw.quads.Quad`: corners, texture
+    key, premultiplied RGBA, opacity), in draw order: the colour truth paints them."""

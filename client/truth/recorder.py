@@ -173,6 +173,7 @@ class TruthRecorder:
         fog: float = math.inf,
         impostors: Iterable[tuple[int, Any]] = (),
         walls: Iterable[Any] = (),
+        wall_quads: Iterable[Any] = (),
     ) -> None:
         """Note one frame (cheap: ids and references to meshes already built).
 
@@ -199,6 +200,11 @@ class TruthRecorder:
             The fog distance in force (``inf``: none).
         impostors : (object id, quad) pairs
             The impostors drawn (:data:`~walkstream.client.draw.quads.Quad`).
+        walls : (4, 3) arrays
+            The corners of each virtual wall drawn closed (its texture alone).
+        wall_quads : quads
+            Every virtual wall drawn (:data:`~walkstream.client.draw.quads.Quad`), painted
+            into the colour truth's client picture.
         """
         drawn = tuple(
             (int(g.id), int(lod), g.meshes[lod])
@@ -221,6 +227,7 @@ class TruthRecorder:
                 fog=float(fog),
                 impostors=tuple((int(i), q) for i, q in impostors),
                 walls=tuple(np.asarray(c, np.float64) for c in walls),
+                wall_quads=tuple(wall_quads),
             )
         )
 

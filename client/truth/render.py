@@ -2,7 +2,8 @@
 
 One renderer for every scene, whatever it holds: city objects (their LOD2 meshes,
 lit in their materials' colours) and room parts (each part of each cell's contents,
-:class:`~walkstream.shared.codec.cellmesh.CellPart`, in its material's colour, unlit).
+:class:`~walkstream.shared.codec.cellmesh.CellPart`, in its material's colour, lit with flat
+normals as the client lights it).
 Each thing drawn has a key: a room part ``(cell, part)``, a city object
 ``(-1 - id, 0)`` (:func:`object_key`); :attr:`TruthRenderer.keys` lists them in draw
 order -- the objects in ascending ids, then the parts by cell and part -- and a
@@ -50,7 +51,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.draw.meshes import AMBIENT, BACKGROUND_RGB, LIGHT_DIRECTION
 from walkstream.shared.camera import mat4_bytes, perspective
-from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.codec.cellmesh import CellMesh, flat_normals
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import Releasable, check_gl_error, create_context, release_objects
 from walkstream.shared.ground import GROUND_MATERIAL, ground_quad
@@ -251,7 +252,6 @@ class TruthRenderer(Releasable):
             )
         verts = np.empty(int(v0[-1]), _VERTEX)
         index = np.empty(int(i0[-1]), np.uint32)
-        light = np.asarray(LIGHT_DIRECTION, np.float32)
         lit = [*enumerate(meshes), *((self._forms0 + j, m) for j, m in enumerate(form_meshes))]
         for k, m in lit:
             s, e = int(v0[k]), int(v0[k + 1])
@@ -263,7 +263,9 @@ class TruthRenderer(Releasable):
             k = len(ids) + j
             s, e = int(v0[k]), int(v0[k + 1])
             verts["p"][s:e] = p.positions
-            verts["n"][s:e] = light  # unlit: facing the light, a part shows its material's colour
+            # lit as the client lights a room part (flat normals: Part.mesh()), so that a
+            # virtual wall's texture, rendered so by the bake, compares with what it carries
+            verts["n"][s:e] = flat_normals(p.positions, p.indices)
             verts["c"][s:e, :3] = material_rgb(np.full(e - s, p.material))
             index[i0[k] : i0[k + 1]] = p.indices.reshape(-1) + np.uint32(s)
         verts["c"][:, 3] = 255

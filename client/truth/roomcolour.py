@@ -15,7 +15,10 @@ the full scene
 the client's picture
     the room parts it drew and the city objects it drew, each at the LOD it drew it
     (the coarser forms given to the renderer, :func:`~walkstream.client.truth.picture.forms_of`),
-    at the fog in force.
+    at the fog in force, and the virtual walls it drew painted over them as it drew
+    them (their textures, depth tested against the parts, premultiplied, at their
+    opacity: :meth:`~walkstream.client.truth.render.TruthRenderer.paint_quads`, the
+    impostors' hook).
 
 Both are compared with :func:`~walkstream.client.truth.colour.compare_colour` (mean
 linear-RGB error, ΔE00, pixels over the visible threshold, PSNR).  Where the client's
@@ -27,7 +30,11 @@ it); ``not_received`` for a part of a visible cell whose contents had not arrive
 an object of the visible set not yet received; ``not_built`` for one received and not
 built; ``pvs`` for an object outside the visible set; ``lod`` for an object drawn at a
 coarser LOD; ``culled`` for anything else left out (portal culling; the culled-pixel
-check says whether that was wrong).
+check says whether that was wrong).  A pixel a wall's texture painted is the wall's:
+its colour cause is ``wall`` (:data:`~walkstream.client.truth.colour.COLOUR_CAUSES`),
+and it is not counted as lacking by an id cause (the texture stands in, as the
+culled-pixel check counts it under ``wall_pixels``), so the error with walls is the
+error of what the viewer saw.
 
 Poses in solid geometry are left out as the culled-pixel check leaves them out
 (:data:`~walkstream.client.truth.culled.SOLID_NEAR`).
@@ -126,6 +133,11 @@ def room_colour(
         drawn = client_keys(note)
         c_idx, _ = truth.render(note.eye, note.view, truth.flags(drawn), note.fog)
         c_rgb = truth.colour()
+        wall = np.zeros(t_idx.shape, bool)
+        if note.wall_quads:  # the walls over the parts, as the client drew them
+            painted = truth.paint_quads(note.wall_quads, note.view)
+            wall = np.any(painted != c_rgb, axis=2)
+            c_rgb = painted
         shown = t_idx >= 0
         ti = np.maximum(t_idx, 0)
         ci = np.maximum(c_idx, 0)
@@ -151,9 +163,9 @@ def room_colour(
             c = np.where(obj & ~in_pvs, _PVS, c)
             c = np.where(waiting, _NOT_RECEIVED, c)
             c = np.where(beyond, _FOG, c)
-            cause = np.where(lacks, c, -1)
+            cause = np.where(lacks & ~wall, c, -1)
         lods = truth.lods(c_idx)
-        err = compare_colour(t_rgb, c_rgb, id_cause=cause, coarse=(lods >= 0) & (lods < 2))
+        err = compare_colour(t_rgb, c_rgb, id_cause=cause, coarse=(lods >= 0) & (lods < 2), wall=wall)
         pixels = err.pixels
         missing = np.bincount(cause[cause >= 0], minlength=len(CAUSES)).astype(np.float64) / pixels
         differing = float(np.count_nonzero(differ)) / pixels

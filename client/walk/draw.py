@@ -19,6 +19,7 @@ from walkstream.client.draw.present import present, save_snapshot
 from walkstream.client.draw.quads import quads_of
 from walkstream.client.walk.scene import STREET_FAR_M
 from walkstream.client.walk.state import Frame, WalkState
+from walkstream.client.walk.walls import wall_quads
 
 __all__ = ["upload", "draw", "forget_flushed"]
 
@@ -49,10 +50,8 @@ def upload(w: WalkState, f: Frame) -> None:
     f.keys = keys
     lane, walls = w.scene.images, w.scene.wall_images
     if hasattr(r, "impostors") and (lane is not None or walls is not None):  # over the meshes: the quads
-        # a wall texture's key is its id turned negative: impostor images and wall
-        # textures share the quad renderer's textures without colliding
         r.impostors = ([] if lane is None else quads_of(f.impostors, lane.image)) + (
-            [] if walls is None else [(c, -1 - i, rgba, a) for c, i, rgba, a in quads_of(f.walls, walls.image)])
+            [] if walls is None else wall_quads(f.walls, walls.image))
 
 
 def draw(w: WalkState, f: Frame) -> None:

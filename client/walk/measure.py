@@ -26,6 +26,7 @@ from walkstream.client.truth.recorder import TruthResult
 from walkstream.client.walk.figures import MODEL_PORTALS, MODEL_PVS
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.client.walk.visible import OUTDOOR_FOG_M
+from walkstream.client.walk.walls import wall_quads
 from walkstream.shared.roomwire import Topology
 
 __all__ = ["measure", "note_truth", "compare_truth"]
@@ -103,7 +104,8 @@ def note_truth(w: WalkState, f: Frame) -> None:
         )
     elif city is None:  # rooms only: at the fog the frame was drawn at (the budget's lever)
         rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(f.fog),
-                   walls=[d.corners for d in f.walls if d.alpha >= 1.0])
+                   walls=[d.corners for d in f.walls if d.alpha >= 1.0],
+                   wall_quads=[] if w.scene.wall_images is None else wall_quads(f.walls, w.scene.wall_images.image))
     else:
         # outdoors before the street cell's record: no visible set known, nothing culled
         unknown = not w.indoors and (f.street is None or f.street not in city.cells)

@@ -25,14 +25,17 @@ the frame is what it was.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.client.draw.quads import Quad, quads_of
 from walkstream.client.walk.state import Frame, WalkState
 
-__all__ = ["DrawnWall", "drawn_walls", "frame_walls"]
+__all__ = ["DrawnWall", "drawn_walls", "frame_walls", "wall_quads"]
 
 
 @dataclass(frozen=True)
@@ -89,3 +92,10 @@ def drawn_walls(walls: list[DrawnWall], visible: list[int]) -> list[DrawnWall]:
     """The walls on the viewer's side of a visible cell (those the walk reaches)."""
     seen = set(visible)
     return [d for d in walls if d.cells[0] in seen]
+
+
+def wall_quads(walls: Sequence[DrawnWall], image: Callable[[int], Any]) -> list[Quad]:
+    """The quads of a frame's walls (``image(id)`` the decoded RGBA of a texture), each
+    keyed by its texture id turned negative: impostor images and wall textures share
+    the quad renderer's textures without colliding."""
+    return [(c, -1 - i, rgba, a) for c, i, rgba, a in quads_of(walls, image)]
