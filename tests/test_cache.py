@@ -34,13 +34,13 @@ def test_get_put_and_counters() -> None:
     assert c.has("params", 1) and ("params", 1) in c and ("geom", 1) not in c
     assert c.hits["params"] == 1 and c.misses["params"] == 1
     # peek and has are not counted
-    assert c.hits == {"index": 0, "cell": 0, "params": 1, "mesh": 0, "cellmesh": 0, "impostor": 0, "geom": 0}
+    assert c.hits == {"index": 0, "cell": 0, "params": 1, "mesh": 0, "cellmesh": 0, "impostor": 0, "walltex": 0, "geom": 0}
     c.put("params", 1, "p1b", 30)  # replaced: bytes follow the new size
     assert c.bytes_used == 30 and c.peek("params", 1) == "p1b" and len(c) == 1
     assert c.size_of("params", 1) == 30 and c.size_of("geom", 1) is None
     s = c.stats()
     assert s["bytes_used"] == 30
-    assert s["entries"] == {"index": 0, "cell": 0, "params": 1, "mesh": 0, "cellmesh": 0, "impostor": 0, "geom": 0}
+    assert s["entries"] == {"index": 0, "cell": 0, "params": 1, "mesh": 0, "cellmesh": 0, "impostor": 0, "walltex": 0, "geom": 0}
 
 
 def test_lru_order_within_a_kind() -> None:
@@ -77,7 +77,7 @@ def test_geometry_goes_before_parameters_before_cells_before_index_tiles() -> No
     assert log[6:] == [("cell", 2), ("cell", 3), ("cell", 4)]
     c.put("index", 3, "i", 30)
     assert log[9:] == [("index", 1)]
-    assert c.evictions == {"index": 1, "geom": 2, "params": 3, "mesh": 0, "cellmesh": 0, "impostor": 0, "cell": 4}
+    assert c.evictions == {"index": 1, "geom": 2, "params": 3, "mesh": 0, "cellmesh": 0, "impostor": 0, "walltex": 0, "cell": 4}
     assert c.bytes_used <= 70
 
 
