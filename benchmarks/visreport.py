@@ -176,6 +176,10 @@ def plot_visibility_benchmark(result: dict[str, Any], path: str | os.PathLike[st
     ax3.set_title("sizes of the objects a PVS misses at random eye points", fontsize=9)
     if ax3.get_legend_handles_labels()[0]:
         ax3.legend(fontsize=7)
+    elif not result["views"]:
+        # an empty panel would read as "nothing missed"
+        ax3.text(0.5, 0.5, "no random eye points\n(--views 0)", ha="center", va="center",
+                 transform=ax3.transAxes, fontsize=9, color="0.4")
     for ax in (ax1, ax2, ax3):
         ax.grid(True, which="both", alpha=0.25)
     ref = result["reference"]
