@@ -42,17 +42,8 @@ def test_fog_and_culling_show_as_colour_error_with_their_causes(office_db: Path,
     truth = TruthRenderer(size=(160, 120), rooms=rooms, near=0.1, far=100.0, two_sided=True, ctx=gl)
     try:
         # a pose looking along the corridor: much to see, some of it far
-        best = None
-        for t in np.linspace(0.0, tour.duration, 40).tolist():
-            xyz, yaw, pitch = tour.at(t)
-            eye = np.asarray(xyz, np.float64)
-            view = camera(eye, float(yaw), float(pitch)).astype(np.float64)
-            ids, depth = truth.render(eye, view)
-            far = float(np.mean(np.isfinite(depth) & (depth > 3.0)))
-            if best is None or far > best[0]:
-                best = (far, eye, view)
-        assert best is not None and best[0] > 0.2
-        _, eye, view = best
+        far, eye, view = _far_pose(truth, tour)
+        assert far > 0.2
         here = next(c.id for c in cells if _inside(c, eye))
         everything = list(truth.keys)
         own = [k for k in truth.keys if k[0] == here]
@@ -80,6 +71,22 @@ def test_fog_and_culling_show_as_colour_error_with_their_causes(office_db: Path,
     assert c.causes[3, late] == pytest.approx(c.causes[2, culled]) and c.causes[3, culled] == 0.0
     assert rc.worst is not None and rc.worst.frame in (1, 2, 3)
     np.testing.assert_array_equal(rc.fog_m[:2], [math.inf, 2.5])
+
+
+def _far_pose(truth: TruthRenderer, tour: RecordedPath) -> tuple[float, np.ndarray, np.ndarray]:
+    """Of 40 poses along ``tour``, the one whose frame shows most beyond 3 m: ``(share of
+    the frame beyond 3 m, eye, view)``."""
+    best: tuple[float, np.ndarray, np.ndarray] | None = None
+    for t in np.linspace(0.0, tour.duration, 40).tolist():
+        xyz, yaw, pitch = tour.at(t)
+        eye = np.asarray(xyz, np.float64)
+        view = camera(eye, float(yaw), float(pitch)).astype(np.float64)
+        _, depth = truth.render(eye, view)
+        far = float(np.mean(np.isfinite(depth) & (depth > 3.0)))
+        if best is None or far > best[0]:
+            best = (far, eye, view)
+    assert best is not None
+    return best
 
 
 def _inside(cell: object, eye: np.ndarray) -> bool:
@@ -115,17 +122,7 @@ def test_a_wall_texture_is_painted_into_the_picture_with_its_own_cause(office_db
         cells = [c for c in r.cells() if c.kind != "outside"]
     truth = TruthRenderer(size=(160, 120), rooms=rooms, near=0.1, far=100.0, two_sided=True, ctx=gl)
     try:
-        best = None
-        for t in np.linspace(0.0, tour.duration, 40).tolist():
-            xyz, yaw, pitch = tour.at(t)
-            eye = np.asarray(xyz, np.float64)
-            view = camera(eye, float(yaw), float(pitch)).astype(np.float64)
-            _, depth = truth.render(eye, view)
-            far = float(np.mean(np.isfinite(depth) & (depth > 3.0)))
-            if best is None or far > best[0]:
-                best = (far, eye, view)
-        assert best is not None
-        _, eye, view = best
+        _, eye, view = _far_pose(truth, tour)
         here = next(c.id for c in cells if _inside(c, eye))
         own = [k for k in truth.keys if k[0] == here]
         truth.render(eye, view)
