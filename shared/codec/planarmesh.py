@@ -437,11 +437,61 @@ def _encode_part(
         rep = np.zeros(int(point.max()) + 1, np.int64)
         rep[point] = kt.reshape(-1)  # any original vertex at that grid point stands for it
         kt = rep[point].reshape(-1, 3)
+        bfs = _by_neighbours(kt)
+        if _raw_size(q, bfs) < _raw_size(q, kt):
+            kt = bfs
     used, first = np.unique(kt.reshape(-1), return_index=True)
     order = used[np.argsort(first)]  # vertices in the order they first appear
     remap = np.full(len(q), -1, np.int64)
     remap[order] = np.arange(len(order))
     return q[order], remap[kt], polys, found
+
+
+def _raw_size(q: NDArray[np.int64], t: NDArray[np.int64]) -> int:
+    """Bytes of version 4's varints (position steps, high-water codes) for triangles ``t``
+    over grid points ``q``, before compression: how the encoder picks an order."""
+    used, first = np.unique(t.reshape(-1), return_index=True)
+    order = used[np.argsort(first)]
+    remap = np.full(len(q), -1, np.int64)
+    remap[order] = np.arange(len(order))
+    steps = np.diff(q[order], axis=0, prepend=np.zeros((1, 3), np.int64))
+    codes = _high_water([remap[t].reshape(-1)], [len(order)], [len(t)])
+    return len(encode_varints(zigzag(steps.T.reshape(-1)))) + len(encode_varints(codes))
+
+
+def _by_neighbours(t: NDArray[np.int64]) -> NDArray[np.int64]:
+    """``(m, 3)`` triangles ``t`` reordered breadth first across shared edges (a
+    triangle's neighbours follow it), so that version 4's high-water codes stay small; the
+    order of triangles changes nothing drawn."""
+    m = len(t)
+    if m < 3:
+        return t
+    e = np.sort(np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
+    _, edge = np.unique(e, axis=0, return_inverse=True)
+    edge = edge.reshape(-1)
+    owner = np.repeat(np.arange(m), 3)
+    by_edge = np.argsort(edge, kind="stable")
+    starts = np.searchsorted(edge[by_edge], np.arange(int(edge.max()) + 2))
+    sharing = [owner[by_edge[a:b]].tolist() for a, b in zip(starts[:-1].tolist(), starts[1:].tolist(), strict=True)]
+    edges = edge.reshape(m, 3).tolist()
+    seen = bytearray(m)
+    order: list[int] = []
+    for s in range(m):
+        if seen[s]:
+            continue
+        seen[s] = 1
+        queue = [s]
+        head = 0
+        while head < len(queue):
+            i = queue[head]
+            head += 1
+            for g in edges[i]:
+                for j in sharing[g]:
+                    if not seen[j]:
+                        seen[j] = 1
+                        queue.append(j)
+        order.extend(queue)
+    return t[np.asarray(order, np.int64)]
 
 
 def encode_planar_body(
