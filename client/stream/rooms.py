@@ -114,6 +114,10 @@ class RoomStreamConfig:
     """Prefetch stops once the wanted cells (visible first) fill this share of the
     cache's budget (the rest keeps cells seen earlier; on the office tour with a 400 kB
     cache and a 50 % flush gate 0.5 / 0.7 / 0.9 gave 93.3 / 95.6 / 93.6 % perfect frames)."""
+    beyond_portals: int = 1
+    """Prefetch, last: the cells up to this many portals beyond the visible ones, nearest
+    first (only while the link has nothing needed sooner: they come after every other
+    wanted cell)."""
     max_in_flight: int = 2
     """Contents requests (batches or single cells) in flight at once."""
     batch_bytes: int = 8000
@@ -129,6 +133,8 @@ class RoomStreamConfig:
             raise InputError(f"flush policy {self.flush_policy!r}: expected one of {', '.join(FLUSH_POLICIES)}")
         if not 0.0 <= self.flush_fill <= 1.0:
             raise InputError(f"flush fill {self.flush_fill!r}: expected a share of the cache from 0 to 1")
+        if self.beyond_portals < 0:
+            raise InputError(f"prefetch {self.beyond_portals} portals beyond: expected 0 or more")
         if self.batch_bytes < 0:
             raise InputError(f"contents batch of {self.batch_bytes} bytes: expected 0 (one cell per request) or more")
         if not (self.flush_s >= 0.0 and np.isfinite(self.flush_s)):
@@ -540,7 +546,7 @@ class RoomStreamer:
             self.plan_s = time.perf_counter() - t0
         have = set(want)
         room = self.config.prefetch_share * self.cache.budget_bytes - self.visible_bytes(want)
-        beyond = [n for c in vis for n in self.cells[c].neighbours]
+        beyond = self._beyond(vis, self.config.beyond_portals)
         recent = sorted((c for c, seen in self.last_visible.items() if t - seen <= self.config.recent_s),
                         key=lambda c: -self.last_visible[c])
         for c in [*self._ahead, *recent, *beyond]:
@@ -552,6 +558,17 @@ class RoomStreamer:
             have.add(c)
             want.append(c)
         return want
+
+    def _beyond(self, vis: list[int], portals: int) -> list[int]:
+        """The cells 1 to ``portals`` portals beyond ``vis``, nearest first (breadth first
+        through the neighbours)."""
+        seen = set(vis)
+        ring = list(vis)
+        out: list[int] = []
+        for _ in range(portals):
+            ring = [n for c in ring for n in self.cells[c].neighbours if n not in seen and not seen.add(n)]
+            out.extend(ring)
+        return out
 
     async def _fetch(self, f: Flight) -> None:
         cid = f.ids[0]
