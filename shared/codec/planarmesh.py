@@ -104,7 +104,7 @@ per grid point, and sends their indices as **high-water codes** over all parts a
 (every part's vertices follow the previous part's, in the order its triangles first use
 them): 0 for the next vertex not used before, else ``h + 1 - i`` with ``h`` the highest
 index used so far; a part's kept triangles go breadth first across shared edges when
-that takes fewer varint bytes than their own order (the duplex's kitchen, its wall cabinets: 10.1 to
+that takes fewer varint bytes than their own order (the duplex's kitchen, its wall cabinets: 9.5 to
 5.2 kB).  The decoder gives each kept triangle its own three corners again, so
 the normals it recomputes stay flat, as before.  Nothing moves on the grid, so the error
 bound is the same.  FZK-Haus's living room (its stair) goes from 14.9 to 8.4 kB, the
