@@ -54,6 +54,7 @@ from walkstream.client.content.cellmesh import CELLMESH_CONTENT, decoded_bytes
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
+from walkstream.shared.camera import camera
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
@@ -65,6 +66,9 @@ from walkstream.shared.roomwire import RoomRecord, Topology
 from walkstream.shared.scene.placement import ContentsPlacement, placement_for
 
 __all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "predicted_view", "turned_view"]
+
+_TURNING = np.radians(20.0)
+"""A heading turning at least this fast (radians a second) is predicted to go on turning."""
 
 _HEAD_BYTES = 200
 """A response's status line and headers (the scheduler's estimate of the bytes on the link)."""
@@ -241,6 +245,7 @@ class RoomStreamer:
         self.graph = PortalGraph.from_topology(topology)
         self.last_cull: PortalCull | None = None
         self._track: list[tuple[float, NDArray[np.float64]]] = []
+        self._headings: list[tuple[float, float, float]] = []  # (t, yaw, pitch) of the frames' views
         self._ahead: list[int] = []
         self._planned_t = -np.inf
         self._bytes_per_triangle = 32.0
@@ -368,6 +373,8 @@ class RoomStreamer:
         for c in vis:
             self.last_visible[c] = t
         self.observe(t, e)
+        if view is not None:
+            self._observe_heading(t, view)
         self._eye = e
         want = self.wanted(t, e, vis, view_proj, view, proj, size)
         seen = list(dict.fromkeys([*vis, *shown]))
@@ -481,6 +488,22 @@ class RoomStreamer:
         while len(self._track) > 2 and t - self._track[1][0] >= self.config.velocity_s:
             self._track.pop(0)
 
+    def _observe_heading(self, t: float, view: NDArray[np.float64]) -> None:
+        """Note the view's heading at time ``t`` (for :meth:`turn_rate`)."""
+        f = -np.asarray(view, np.float64)[2, :3]  # the camera looks down its -z
+        self._headings.append((t, float(np.arctan2(f[1], f[0])), float(np.arcsin(np.clip(f[2], -1.0, 1.0)))))
+        while len(self._headings) > 2 and t - self._headings[1][0] >= self.config.velocity_s:
+            self._headings.pop(0)
+
+    def turn_rate(self) -> float:
+        """The heading's turn over the last ``velocity_s`` seconds (radians a second,
+        counter-clockwise positive)."""
+        if len(self._headings) < 2:
+            return 0.0
+        (t0, y0, _), (t1, y1, _) = self._headings[0], self._headings[-1]
+        turn = (y1 - y0 + np.pi) % (2 * np.pi) - np.pi
+        return float(turn / (t1 - t0)) if t1 > t0 else 0.0
+
     def velocity(self) -> NDArray[np.float64]:
         """``(3,)`` the eye's velocity over the last ``velocity_s`` seconds (m/s)."""
         if len(self._track) < 2:
@@ -504,15 +527,21 @@ class RoomStreamer:
         if self.current is None or view is None:
             return []
         v = self.velocity()
+        w = self.turn_rate()
+        turning = abs(w) >= _TURNING
         out: list[int] = []
         cell: int | None = self.current
-        for h in self.config.lookahead_s if np.any(v) else ():
+        for h in self.config.lookahead_s if np.any(v) or turning else ():
             e2 = eye + h * v
             nxt = self._where.locate(e2, cell, anywhere=False)
             if nxt is None or not self._where.holds(nxt, e2):
                 break
             cell = nxt
-            view2 = predicted_view(view, eye, e2)
+            if turning:  # a walker turning goes on turning (half a turn at most)
+                _, yaw, pitch = self._headings[-1]
+                view2 = camera(e2, yaw + float(np.clip(w * h, -np.pi, np.pi)), pitch).astype(np.float64)
+            else:
+                view2 = predicted_view(view, eye, e2)
             vp2 = view_proj @ np.linalg.inv(view) @ view2
             out.extend(self._cells_from(cell, e2, vp2, view2, proj, size)[1])
         for deg in self.config.turns_deg:
@@ -549,8 +578,11 @@ class RoomStreamer:
         beyond = self._beyond(vis, self.config.beyond_portals)
         recent = sorted((c for c, seen in self.last_visible.items() if t - seen <= self.config.recent_s),
                         key=lambda c: -self.last_visible[c])
+        # the outside cell (the building's shell, seen through any window) is one portal
+        # beyond nearly every room: it comes when the predicted view or a recent one shows it
+        beyond = [c for c in beyond if self.cells[c].kind != "outside"]
         for c in [*self._ahead, *recent, *beyond]:
-            if c in have or self.cells[c].kind == "outside" or c in self.foreign:
+            if c in have or c in self.foreign:
                 continue
             room -= self.visible_bytes([c])
             if room < 0:
