@@ -305,7 +305,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
                    "up to BYTES stored; one gzip stream, default 8kB); 0: one request per cell")
     r.add_argument("--prefetch-portals", type=int, default=None, metavar="N",
                    help="interiors: last in the prefetch, the cells up to N portals beyond the visible ones "
-                   "(default 3)")
+                   "(default 1)")
     r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
     r.add_argument("--no-start-contents", action="store_true",
                    help="interiors: the start bundle leaves out the first view's contents (they come by the streamer's own requests)")
