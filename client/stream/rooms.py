@@ -602,8 +602,14 @@ class RoomStreamer:
         ring = list(vis)
         out: list[int] = []
         for _ in range(portals):
-            ring = [n for c in ring for n in self.cells[c].neighbours if n not in seen and not seen.add(n)]
-            out.extend(ring)
+            nxt: list[int] = []
+            for c in ring:
+                for n in self.cells[c].neighbours:
+                    if n not in seen:
+                        seen.add(n)
+                        nxt.append(n)
+            out.extend(nxt)
+            ring = nxt
         return out
 
     async def _fetch(self, f: Flight) -> None:
