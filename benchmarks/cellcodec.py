@@ -1,8 +1,9 @@
-"""The cell-contents codec, versions 1, 2 and 3 side by side (a table of ``walkstream bench interiors``).
+"""The cell-contents codec, versions 1 to 4 side by side (a table of ``walkstream bench interiors``).
 
-Per source, the same interior baked three times (``walkstream-cellmesh/1``: every
-triangle, 16 bits over each cell's box; ``/2``: planar polygons on a 1 mm grid; ``/3``,
-the default: ``/2`` with boxes and axis rectangles in their own fields), for all cells
+Per source, the same interior baked four times (``walkstream-cellmesh/1``: every
+triangle, 16 bits over each cell's box; ``/2``: planar polygons on a 1 mm grid; ``/3``:
+``/2`` with boxes and axis rectangles in their own fields; ``/4``, the default: ``/3``
+with the remaining triangles sharing their corners), for all cells
 and for the **start cells** (those the tour's first pose sees within the 40 m fog,
 through the portals in the frustum, as the RoomStreamer asks for them before the first
 perfect frame): bytes of the blobs each on its own, bytes of the blobs compressed
@@ -102,18 +103,18 @@ def codec_figures(db: Path, cells: Sequence[int] | None = None) -> dict[str, Any
 
 
 def codec_rows(source: Path, db_v3: Path, v3_encode_s: float, folder: Path) -> list[dict[str, Any]]:
-    """Bake ``source`` with versions 1 and 2 beside ``db_v3`` (the default bake) and measure all three."""
+    """Bake ``source`` with versions 1 to 3 beside ``db_v3`` (the default bake, version 4) and measure all four."""
     scene = read_source(source)
     if not isinstance(scene, InteriorScene):
         raise InputError(f"{source}: not an interior (IFC or a walkstream-interior file)")
     runs = []
-    for version in (1, 2):
+    for version in (1, 2, 3):
         db = folder / f"{source.stem}.cellmesh{version}.db"
         summary = bake_interior(scene, source, db, cellmesh_version=version)
         runs.append((version, db, float(summary.get("contents_encode_s", 0.0))))
     start = start_cells(db_v3)
     rows = []
-    for version, db, enc in (*runs, (3, db_v3, v3_encode_s)):
+    for version, db, enc in (*runs, (4, db_v3, v3_encode_s)):
         rows.append(
             {
                 "source": source.name,

@@ -47,7 +47,7 @@ from walkstream.client.truth.culled import check_kept
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.server.bake import bake
 from walkstream.server.service.interiors import InteriorState
-from walkstream.server.sources.interiorgen import PRESETS, write_interior
+from walkstream.server.sources.interiorgen import PRESETS, InteriorPlan, write_interior
 from walkstream.server.store import SceneReader
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
@@ -389,6 +389,49 @@ def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out
             "culling_ms_median", "visible_cells_mean", "triangles_mean", "topology_bytes", "contents_bytes",
             "contents_requests", "bytes_received", "start_contents_cells")}})
     return rows
+
+
+def seed_rows(seeds: Sequence[int], replay: Callable[[str, dict[str, Any], str], Any], out: Path,
+              duration: str = "30s", storeys: int = 3, log: Callable[[str], None] = lambda s: None) -> list[dict[str, Any]]:
+    """Generated offices of ``seeds`` (``walkstream generate interior --storeys 3 --seed S``),
+    each baked and its tour replayed for ``duration`` as the issue measures a tour: 56
+    kbit/s, 200 ms, simulated clock, ``desktop2003``, every 50th frame against the truth at
+    160x120.  A row per seed: perfect frames, first perfect frame, culled pixels,
+    tightness p95, bytes, the culling's median milliseconds."""
+    rows = []
+    for seed in seeds:
+        src, db = out / f"seed{seed}.json", out / f"seed{seed}.db"
+        if not db.exists():
+            write_interior(src, InteriorPlan(storeys=storeys, seed=seed))
+            log(f"bench portals: baking seed {seed}")
+            bake(src, db)
+        options = {"bandwidth": "56kbit", "rtt": "200ms", "duration": duration, "path": "tour", "kind": "interior",
+                   "device": "desktop2003", "truth_every": 50, "size": "160x120",
+                   "report": str(out / f"seed{seed}-replay")}
+        s = replay(str(db), options, f"bench portals: seed {seed}").summary
+        truth = s.get("truth") or {}
+        rows.append({"seed": seed, "duration": duration, **{key: s.get(key) for key in (
+            "perfect_frame_ratio", "time_to_first_perfect_frame_s", "bytes_received", "start_contents_cells",
+            "culling_ms_median")}, "culled_pixels": truth.get("culled_pixels"), "tightness_p95": truth.get("tightness_p95"),
+            "truth_frames": truth.get("frames")})
+    return rows
+
+
+def seed_table(rows: Sequence[dict[str, Any]]) -> str:
+    """The generated seeds' replays as text."""
+    def f(v: Any, fmt: str) -> str:
+        return "-" if v is None else format(v, fmt)
+
+    out = [f"{'seed':>5}{'walked':>8}{'perfect%':>9}{'1st perf s':>11}{'culled px':>10}{'truth fr':>9}"
+           f"{'tight p95':>10}{'kB down':>8}{'1st view':>9}{'cull ms':>8}"]
+    for r in rows:
+        pf = r["perfect_frame_ratio"]
+        out.append(f"{r['seed']:>5}{r['duration']:>8}{f(None if pf is None else 100 * pf, '.2f'):>9}"
+                   f"{f(r['time_to_first_perfect_frame_s'], '.2f'):>11}{f(r['culled_pixels'], ',d'):>10}"
+                   f"{f(r['truth_frames'], 'd'):>9}{f(r['tightness_p95'], '.2f'):>10}"
+                   f"{f(None if r['bytes_received'] is None else r['bytes_received'] / 1000, '.1f'):>8}"
+                   f"{f(r['start_contents_cells'], 'd'):>9}{f(r['culling_ms_median'], '.2f'):>8}")
+    return "\n".join(out)
 
 
 def replay_table(rows: Sequence[dict[str, Any]]) -> str:

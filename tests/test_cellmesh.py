@@ -263,9 +263,73 @@ def test_v2_bad_input_is_a_codec_error() -> None:
     bad(indices=b"\xff")
     bad(vertices="3")
     with pytest.raises(CodecError, match="version"):
-        encode_cell_mesh([(1, 2, pos, tri)], version=4)
+        encode_cell_mesh([(1, 2, pos, tri)], version=5)
     with pytest.raises(CodecError, match="beyond"):
         encode_cell_mesh([(1, 2, pos + 2e9, tri)])
+
+
+# ---- walkstream-cellmesh/4: the remaining triangles share their corners
+
+
+def _handrail(n: int = 24, m: int = 12, z: float = 0.9) -> tuple[np.ndarray, np.ndarray]:
+    """A bent tube (a handrail round a turn) as an exporter writes it: ``n * m * 2`` small
+    triangles on no common plane, each with corners of its own (none shared)."""
+    a = np.linspace(0.0, np.pi / 2, n + 1)[:, None]  # along the turn
+    b = np.linspace(0.0, 2 * np.pi, m + 1)[None, :]  # round the tube
+    b = b + 3.0 * a  # twisted (rings along a real rail's sweep do not line up): no quad is planar
+    r = 1.0 + 0.025 * np.cos(b)
+    grid = np.stack(np.broadcast_arrays(r * np.cos(a), r * np.sin(a), z + 0.025 * np.sin(b)), axis=-1)  # (n+1, m+1, 3)
+    i, j = np.meshgrid(np.arange(n), np.arange(m), indexing="ij")
+    v = lambda di, dj: (i + di) * (m + 1) + (j + dj)  # noqa: E731
+    tri = np.concatenate([np.stack([v(0, 0), v(1, 0), v(1, 1)], -1), np.stack([v(0, 0), v(1, 1), v(0, 1)], -1)]).reshape(-1, 3)
+    pts = grid.reshape(-1, 3)
+    return pts[tri].reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3)
+
+
+def test_v4_welds_a_curved_part_and_keeps_its_normals_flat() -> None:
+    rng = np.random.default_rng(4)
+    rail = _handrail()
+    ps = [(7, 3, *rail), (8, 3, *_handrail(z=1.9)), (9, 4, *_grid_wall(2, 2))]
+    blob = encode_cell_mesh(ps, compress="none")
+    body = msgpack.unpackb(blob[1:], raw=False)
+    assert body["format"] == CELLMESH_FORMAT == "walkstream-cellmesh/4"
+    v3 = encode_cell_mesh(ps, compress="none", version=3)
+    # a vertex per grid point, not per corner: the positions and indices shrink
+    assert len(blob) < 0.6 * len(v3)
+    assert len(encode_cell_mesh(ps)) < 0.8 * len(encode_cell_mesh(ps, version=3))
+    cm = decode_cell_mesh(blob)
+    for before, after in zip(ps, cm.parts, strict=True):
+        _same_surface(before, after, rng)
+        # facing the same way (a 5 cm tube on a 1 mm grid: its area to 2 %)
+        assert np.allclose(_signed_areas(before[2], before[3]), _signed_areas(after.positions, after.indices), rtol=0.02)
+    # every triangle has corners of its own again: each vertex normal is its face's
+    got = cm.parts[0]
+    c = got.positions.astype(np.float64)[got.indices.astype(np.int64)]
+    fn = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    fn /= np.linalg.norm(fn, axis=1, keepdims=True)
+    # (to the plane groups' 1e-3: nearly flat pairs go as one quadrilateral; smoothing would turn them by ~0.3)
+    assert np.allclose(got.mesh().normals[got.indices.astype(np.int64)], fn[:, None, :], atol=5e-3)
+    # a version 3 blob of the same parts decodes to the same surface
+    for before, after in zip(ps, decode_cell_mesh(v3).parts, strict=True):
+        _same_surface(before, after, rng)
+
+
+def test_v4_refuses_index_codes_out_of_range() -> None:
+    blob = encode_cell_mesh([(7, 3, *_handrail(4, 4)), (8, 3, *_handrail(4, 4, z=2.0))], compress="none")
+    body = msgpack.unpackb(blob[1:], raw=False)
+
+    def bad(**change: object) -> None:
+        with pytest.raises(CodecError, match="indices") as exc:
+            decode_cell_mesh(b"N" + msgpack.packb(dict(body, **change), use_bin_type=True))
+        assert "\n" not in str(exc.value)
+
+    codes = bytearray(body["indices"])
+    assert codes[0] == 0  # the first corner is a new vertex
+    bad(indices=bytes([5]) + bytes(codes[1:]))  # a code reaching before the first vertex
+    bad(indices=bytes([0] * len(codes)))  # every corner new: the first part takes the second's vertices
+    last_new = len(codes) - 1 - codes[::-1].index(0)
+    codes[last_new] = 1
+    bad(indices=bytes(codes))  # the last vertex never brought in
 
 
 # ---- walkstream-cellmesh/3: boxes and axis rectangles in their own fields

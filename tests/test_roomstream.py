@@ -191,3 +191,47 @@ def test_prefetch_follows_the_predicted_motion_in_order(office_db: Path) -> None
     extra = [x for x in got if x not in vis]
     assert small.visible_bytes(extra) <= 0.5 * 20_000 - small.visible_bytes(vis) or not extra
     assert len(got) < len(want)
+
+
+def test_a_walker_turning_on_the_spot_is_predicted_to_go_on_turning(office_db: Path) -> None:
+    topo = _topology(office_db)
+    s = _streamer(topo, RoomStreamConfig())
+    size = (160, 120)
+    proj = perspective(60.0, size[0] / size[1], 0.1, 80.0).astype(np.float64)
+    # the room cell with the most neighbours, the eye in its middle, turning left at 90 degrees a second
+    c = max((c for c in topo.cells if c.kind == "room"), key=lambda c: len(c.neighbours))
+    eye = np.array([*c.outline.mean(axis=0), c.zmin + 1.6])
+    rate = np.pi / 2
+    for k in range(3):
+        t = 0.25 * k
+        view = camera(eye, rate * t, 0.0).astype(np.float64)
+        s.locate(eye)
+        s.observe(t, eye)
+        s._observe_heading(t, view)
+    assert s.turn_rate() == pytest.approx(rate)
+    vis = s.visible_cells(eye, proj @ view, view, proj, size)
+    ahead = s.predicted(eye, proj @ view, view, proj, size)
+    # the cells of the headings the turn reaches, half a turn at most, nearest in time first
+    expect: list[int] = []
+    for h in s.config.lookahead_s:
+        v2 = camera(eye, 0.5 * rate + min(rate * h, np.pi), 0.0).astype(np.float64)
+        expect.extend(s._cells_from(s.current, eye, proj @ v2, v2, proj, size)[1])  # type: ignore[arg-type]
+    assert ahead == list(dict.fromkeys(expect))
+    assert set(ahead) - set(vis), "the turn shows cells the view does not yet"
+    # standing still, looking one way: nothing predicted (as before)
+    still = _streamer(topo, RoomStreamConfig())
+    for k in range(3):
+        still.locate(eye)
+        still.observe(0.25 * k, eye)
+        still._observe_heading(0.25 * k, view)
+    assert still.turn_rate() == 0.0 and still.predicted(eye, proj @ view, view, proj, size) == []
+
+
+def test_prefetch_reaches_cells_portals_beyond_and_refuses_a_negative_reach(office_db: Path) -> None:
+    topo = _topology(office_db)
+    c = max((c for c in topo.cells if c.kind == "room"), key=lambda c: len(c.neighbours))
+    one = _streamer(topo, RoomStreamConfig(beyond_portals=1))._beyond([c.id], 1)
+    three = _streamer(topo, RoomStreamConfig(beyond_portals=3))._beyond([c.id], 3)
+    assert set(one) == set(c.neighbours) - {c.id} and three[: len(one)] == one and len(three) > len(one)
+    with pytest.raises(InputError, match="portals beyond"):
+        RoomStreamConfig(beyond_portals=-1)

@@ -578,14 +578,25 @@ def cmd_bench_portals(args: argparse.Namespace) -> int:
 
         db = Path(args.out) / f"{args.presets[0]}.db"
         replays = replay_rows(db, replay_with_options, Path(args.out), duration=args.replays)
+    seeds = []
+    if args.seeds:
+        from walkstream.benchmarks.portals import seed_rows, seed_table
+        from walkstream.cmd_replay import replay_with_options
+
+        seeds = seed_rows(args.seeds, replay_with_options, Path(args.out), duration=args.seed_duration,
+                          log=lambda s: print(s, file=sys.stderr))
     if args.json:
-        print(json.dumps({"scenes": scenes, "halls": halls, "replays": replays}, indent=2))
+        print(json.dumps({"scenes": scenes, "halls": halls, "replays": replays, "seeds": seeds}, indent=2))
     else:
         print(portals_tables(scenes, halls))
         print("(culling CPU and gl frame times measured here; pda: the cost model fitted to Table 1, no fog)")
         if replays:
             print(replay_table(replays))
             print("(simulated clock; tour of the first preset)")
+        if seeds:
+            print(seed_table(seeds))
+            print(f"(generated offices, 3 storeys; the first {args.seed_duration} of each tour, 56 kbit/s, 200 ms, "
+                  "simulated clock, desktop2003, every 50th frame against the truth at 160x120)")
     return 0
 
 
@@ -704,7 +715,7 @@ def add_bench_parser(sub: Any) -> None:
     bi.add_argument("--out", default="out/bench-interiors", help="folder for the generated files and databases")
     bi.add_argument("--json", action="store_true", help="print the figures as JSON")
     bi.add_argument("--no-codec", action="store_true",
-                    help="skip the cellmesh /1, /2, /3 table (it bakes each source twice more)")
+                    help="skip the cellmesh /1, /2, /3, /4 table (it bakes each source three times more)")
     bi.set_defaults(func=cmd_bench_interiors)
 
     bp = besub.add_parser("portals", help="portal culling against frustum culling alone and drawing all (Table 1, tightness, cost)")
@@ -715,6 +726,11 @@ def add_bench_parser(sub: Any) -> None:
     bp.add_argument("--truth", type=int, default=60, help="frames of the first scene compared with the id truth (default 60)")
     bp.add_argument("--no-gl", action="store_true", help="no gl frame times (the pda model only)")
     bp.add_argument("--out", default="out/bench-portals", help="folder for the generated files and databases")
+    bp.add_argument("--seeds", nargs="*", type=int, default=[], metavar="SEED",
+                    help="also generate offices of these seeds (3 storeys), bake them and replay each tour at "
+                    "56 kbit/s against the truth")
+    bp.add_argument("--seed-duration", default="30s", metavar="DURATION",
+                    help="with --seeds: replay this much of each tour (default 30s)")
     bp.add_argument("--replays", metavar="DURATION", help="also replay the first preset's tour this long (e.g. 180s): "
                     "56 kbit/s with the default and a small cache, pda with the fog set by the budget through a cost step")
     bp.add_argument("--json", action="store_true", help="print the figures as JSON")

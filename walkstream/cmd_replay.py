@@ -117,7 +117,8 @@ def config_from_args(args: argparse.Namespace) -> Any:
         culling=args.culling,
         fog_budget=not args.no_fog_budget,
         rooms={"flush_s": args.flush_after, "flush_policy": args.flush_policy, "flush_fill": args.flush_fill,
-               "batch_bytes": parse_size(args.contents_batch)},
+               "batch_bytes": parse_size(args.contents_batch),
+               **({} if args.prefetch_portals is None else {"beyond_portals": args.prefetch_portals})},
         report_dir=Path(args.report),
         start_bundle=not args.no_start_bundle,
         start_contents=not args.no_start_contents,
@@ -302,6 +303,9 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--contents-batch", default="8kB", metavar="BYTES",
                    help="interiors: cells' contents in batches (every missing visible cell, then predicted ones "
                    "up to BYTES stored; one gzip stream, default 8kB); 0: one request per cell")
+    r.add_argument("--prefetch-portals", type=int, default=None, metavar="N",
+                   help="interiors: last in the prefetch, the cells up to N portals beyond the visible ones "
+                   "(default 1)")
     r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
     r.add_argument("--no-start-contents", action="store_true",
                    help="interiors: the start bundle leaves out the first view's contents (they come by the streamer's own requests)")

@@ -49,6 +49,7 @@ from walkstream.shared.codec.cellmesh import (
     CELLMESH_FORMAT,
     CELLMESH_V1,
     CELLMESH_V2,
+    CELLMESH_V3,
     decode_cell_mesh,
     encode_cell_mesh,
     raw_bytes,
@@ -171,14 +172,14 @@ def furniture_footprints(scene: InteriorScene, below: float = 2.0) -> list[shape
     return out
 
 
-def interior_settings(scene: InteriorScene, src: Path, cellmesh_version: int = 3) -> dict[str, Any]:
+def interior_settings(scene: InteriorScene, src: Path, cellmesh_version: int = 4) -> dict[str, Any]:
     """The bake settings an interior records (what identifies its input and codec)."""
     return {
         "source": str(src),
         "source_digest": file_digest(src),
         "source_format": scene.source_format,
         "reach": REACH,
-        "cellmesh": {1: CELLMESH_V1, 2: CELLMESH_V2}.get(cellmesh_version, CELLMESH_FORMAT),
+        "cellmesh": {1: CELLMESH_V1, 2: CELLMESH_V2, 3: CELLMESH_V3}.get(cellmesh_version, CELLMESH_FORMAT),
         "origin_z": scene.origin[2],
     }
 
@@ -225,7 +226,7 @@ def write_interior_tables(
 
 def write_contents(
     writer: SceneWriter, layout: RoomLayout, parts: dict[int, list[Part]], *, offset: int = 0,
-    cellmesh_version: int = 3,
+    cellmesh_version: int = 4,
 ) -> float:
     """Encode and write every cell's contents (ids plus ``offset``), then mark the cells
     done (a room cell has no PVS: once its contents are stored it is baked).  Returns
@@ -268,7 +269,7 @@ def interior_plan(
     name: str | None = None,
     say: Callable[[str], None] = lambda _msg: None,
     import_seconds: float = 0.0,
-    cellmesh_version: int = 3,
+    cellmesh_version: int = 4,
     walls: WallSettings | None = None,
 ) -> BakePlan:
     """The :class:`~.plan.BakePlan` of an interior alone: room cells only.

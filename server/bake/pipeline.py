@@ -165,7 +165,7 @@ def bake_interior(
     progress: Callable[[int, int], None] | None = None,
     log: Callable[[str], None] | None = None,
     import_seconds: float = 0.0,
-    cellmesh_version: int = 3,
+    cellmesh_version: int = 4,
 ) -> dict[str, Any]:
     """Bake an interior already read (``source`` its file) into ``output``: :func:`bake`
     with the contents codec ``cellmesh_version`` picked (3; 2 and 1 only to compare, as

@@ -78,7 +78,7 @@ class RoomCells:
     layout: RoomLayout
     offset: int = 0
     place: Callable[[dict[int, list[Part]]], dict[int, list[Part]]] = lambda parts: parts
-    cellmesh_version: int = 3
+    cellmesh_version: int = 4
     walls: WallSettings | None = None
     """With ``--virtual-walls``: their settings (the layout already holds the ``wall`` portals)."""
     wall_plan: WallPlan | None = None

@@ -1,9 +1,10 @@
-"""The contents of an interior cell as one compact, immutable blob (``walkstream-cellmesh/3``, /2 and /1).
+"""The contents of an interior cell as one compact, immutable blob (``walkstream-cellmesh/4``, /3, /2 and /1).
 
-The bake writes version 3 (:data:`CELLMESH_FORMAT`, planar polygons, boxes and axis
-rectangles on an absolute 1 mm grid: :mod:`~walkstream.shared.codec.planarmesh` says how
-and states its error bound, half a millimetre per coordinate plus float32 rounding);
-:func:`decode_cell_mesh` reads all three, so a database baked before keeps working.  What follows describes
+The bake writes version 4 (:data:`CELLMESH_FORMAT`, planar polygons, boxes and axis
+rectangles on an absolute 1 mm grid, the remaining triangles sharing their corners:
+:mod:`~walkstream.shared.codec.planarmesh` says how and states its error bound, half a
+millimetre per coordinate plus float32 rounding); :func:`decode_cell_mesh` reads all
+four, so a database baked before keeps working.  What follows describes
 version 1 (:data:`CELLMESH_V1`), which :func:`encode_cell_mesh` still writes with
 ``version=1`` for comparison (``walkstream bench interiors``).  Both start with the
 same tag byte saying how the rest is compressed, so a batch can inflate stored blobs
@@ -79,6 +80,7 @@ __all__ = [
     "CELLMESH_FORMAT",
     "CELLMESH_V1",
     "CELLMESH_V2",
+    "CELLMESH_V3",
     "POSITION_BITS",
     "MAX_CELLMESH_BYTES",
     "CellPart",
@@ -91,9 +93,12 @@ __all__ = [
     "inflate_cell_mesh",
 ]
 
-CELLMESH_FORMAT = "walkstream-cellmesh/3"
+CELLMESH_FORMAT = "walkstream-cellmesh/4"
 """The format tag of the cell-contents blobs the bake writes (planar polygons, boxes and
-rectangles on a 1 mm grid)."""
+rectangles on a 1 mm grid; the remaining triangles share their corners)."""
+CELLMESH_V3 = "walkstream-cellmesh/3"
+"""The third version's tag (as version 4, the remaining triangles' corners repeated per
+plane): still decoded."""
 CELLMESH_V2 = "walkstream-cellmesh/2"
 """The second version's tag (planar polygons on a 1 mm grid, no boxes): still decoded."""
 CELLMESH_V1 = "walkstream-cellmesh/1"
@@ -258,7 +263,7 @@ def encode_cell_mesh(
     parts: Sequence[tuple[int, int, ArrayLike, ArrayLike]],
     *,
     compress: str = "best",
-    version: int = 3,
+    version: int = 4,
 ) -> bytes:
     """Encode a cell's parts.
 
@@ -270,10 +275,12 @@ def encode_cell_mesh(
     compress:
         ``"zlib"``, ``"lzma"``, ``"none"`` or ``"best"`` (the smallest of the three).
     version:
-        3 (:data:`CELLMESH_FORMAT`, planar polygons, boxes and axis rectangles on a 1 mm
-        grid, :mod:`~walkstream.shared.codec.planarmesh`), 2 (:data:`CELLMESH_V2`, the
-        same without boxes and rectangles) or 1 (:data:`CELLMESH_V1`, every triangle, 16
-        bits over the cell's box); 2 and 1 kept for comparison and old databases.
+        4 (:data:`CELLMESH_FORMAT`, planar polygons, boxes and axis rectangles on a 1 mm
+        grid, the remaining triangles welded, :mod:`~walkstream.shared.codec.planarmesh`),
+        3 (:data:`CELLMESH_V3`, the same with every remaining triangle's corners of its
+        own), 2 (:data:`CELLMESH_V2`, without boxes and rectangles) or 1
+        (:data:`CELLMESH_V1`, every triangle, 16 bits over the cell's box); 3, 2 and 1
+        kept for comparison and old databases.
 
     Returns
     -------
@@ -308,13 +315,13 @@ def encode_cell_mesh(
         raise CodecError(f"cell mesh: {len(elements)} parts, at most {_MAX_PARTS}")
     if compress not in ("best", "zlib", "lzma", "none"):
         raise CodecError(f"cell mesh: compress must be best, zlib, lzma or none, got {compress!r}")
-    if version in (2, 3):
+    if version in (2, 3, 4):
         from walkstream.shared.codec.planarmesh import encode_planar_body
 
         rows = list(zip(elements, materials, pos_list, idx_list, strict=True))
         return _compress(msgpack.packb(encode_planar_body(rows, version), use_bin_type=True), compress)
     if version != 1:
-        raise CodecError(f"cell mesh: version must be 1, 2 or 3, got {version!r}")
+        raise CodecError(f"cell mesh: version must be 1, 2, 3 or 4, got {version!r}")
     vcount = np.array([len(p) for p in pos_list], dtype=np.int64)
     tcount = np.array([len(t) for t in idx_list], dtype=np.int64)
     if int(vcount.sum()) > _MAX_VERTICES:
@@ -431,10 +438,10 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
         packed, what, max_bytes=MAX_CELLMESH_BYTES, max_array_len=8, max_map_len=24,
         max_bin_len=MAX_CELLMESH_BYTES,
     )
-    if isinstance(body, dict) and body.get("format") in (CELLMESH_FORMAT, CELLMESH_V2):
+    if isinstance(body, dict) and body.get("format") in (CELLMESH_FORMAT, CELLMESH_V3, CELLMESH_V2):
         return _decode_v2(body, what, len(blob))
     if not isinstance(body, dict) or body.get("format") != CELLMESH_V1:
-        raise CodecError(f"{what}: not a {CELLMESH_FORMAT}, {CELLMESH_V2} or {CELLMESH_V1} map")
+        raise CodecError(f"{what}: not a {CELLMESH_FORMAT}, {CELLMESH_V3}, {CELLMESH_V2} or {CELLMESH_V1} map")
     if set(body) - _KEYS:
         raise CodecError(f"{what}: unknown keys {sorted(set(body) - _KEYS)}")
     try:
@@ -485,7 +492,7 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
 
 
 def _decode_v2(body: dict[str, Any], what: str, nbytes: int) -> CellMesh:
-    """A version 2 or 3 map as a :class:`CellMesh` (its box measured from the decoded positions)."""
+    """A version 2, 3 or 4 map as a :class:`CellMesh` (its box measured from the decoded positions)."""
     from walkstream.shared.codec.planarmesh import GRID, decode_planar_body
 
     parts = tuple(CellPart(e, m, p, t) for e, m, p, t in decode_planar_body(body, what))
