@@ -32,7 +32,7 @@ Replayer = Callable[[str, dict[str, Any], str], Any]
 
 
 def bake_label(db: str) -> str:
-    """``D250 A2 S128`` from a database's settings record (its file stem when it has none)."""
+    """``city D250 A2 S128``: a database's file stem and the D, A, S of its settings record."""
     from walkstream.server.store import SceneReader
 
     if db.startswith(("http://", "https://")):
@@ -47,7 +47,7 @@ def bake_label(db: str) -> str:
         reader.close()
     if not st:
         return f"{Path(db).stem} (no impostors)"
-    return f"D{float(st['distance']):g} A{float(st['error_deg']):g} S{int(st['size'])}"
+    return f"{Path(db).stem} D{float(st['distance']):g} A{float(st['error_deg']):g} S{int(st['size'])}"
 
 
 def run_impostor_bench(
@@ -108,7 +108,7 @@ def _colour(r: Mapping[str, Any]) -> dict[str, Any]:
 def format_impostor_table(rows: list[dict[str, Any]]) -> str:
     """One line per replay (see the module docstring)."""
     head = (
-        f"{'bake':<16} {'walk':<18} {'device':<6} {'fps10%':>6} {'ft ms':>6} {'tri/fr':>6} {'imp/fr':>6} "
+        f"{'bake':<24} {'walk':<18} {'device':<6} {'fps10%':>6} {'ft ms':>6} {'tri/fr':>6} {'imp/fr':>6} "
         f"{'bytes down':>10} {'images B':>9} {'tex kB max':>10} {'perfect%':>8} {'err% med':>8} {'err% p95':>8} "
         f"{'vis% med':>8} {'over%':>6} {'PSNR med':>8} {'e:boxes':>7} {'e:imp':>6} {'e:rest':>6}"
     )
@@ -122,7 +122,7 @@ def format_impostor_table(rows: list[dict[str, Any]]) -> str:
         rest = None if not ec else sum(v or 0.0 for v in ec.values()) - (boxes or 0.0) - (by_imp or 0.0)
         ft = r.get("frame_time_median_ms")
         lines.append(
-            f"{r.get('bake', ''):<16} {r['scenario']:<18} {r.get('device', '?'):<6} "
+            f"{r.get('bake', ''):<24} {r['scenario']:<18} {r.get('device', '?'):<6} "
             f"{_pct(r.get('fps_within_10pct_ratio'), 1):>6} {'n/a' if ft is None else f'{ft:.1f}':>6} "
             f"{r.get('triangles_mean') or 0:>6.0f} {imp.get('impostors_mean', 0.0):>6.1f} "
             f"{r.get('bytes_received') or 0:>10,} {imp.get('image_bytes', 0):>9,} "
@@ -136,22 +136,32 @@ def format_impostor_table(rows: list[dict[str, Any]]) -> str:
 
 def plot_impostors(path: Path, rows: Sequence[Mapping[str, Any]]) -> Path:
     """``bench_impostors.png``: the colour error (median, % of full scale) against the frame
-    time (median, ms), one point per row: filled with impostors, open without, labelled
-    with the bake and the walk."""
+    time (median, ms), one point per row: one colour per bake, filled with impostors, open
+    without; each walk's two points joined."""
     from walkstream.client.report.plots import grid_figure, save_figure
 
     fig, (ax,) = grid_figure(1, height=4.2)
+    colours = ["#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000"]
+    bakes = list(dict.fromkeys(str(r.get("bake", "")) for r in rows))
+    pairs: dict[tuple[str, str], list[tuple[float, float]]] = {}
     for r in rows:
         err = (_colour(r).get("mean_error") or {}).get("median")
         ft = r.get("frame_time_median_ms")
         if err is None or ft is None:
             continue
-        imp = bool(r.get("with_impostors"))
-        ax.scatter([ft], [100.0 * err], s=40, marker="o", facecolors="#D55E00" if imp else "none",
-                   edgecolors="#D55E00" if imp else "#0072B2")
-        ax.annotate(f"{r.get('bake', '')} {r['scenario']}", (ft, 100.0 * err), fontsize=7,
-                    xytext=(4, 3), textcoords="offset points")
+        bake, imp = str(r.get("bake", "")), bool(r.get("with_impostors"))
+        colour = colours[bakes.index(bake) % len(colours)]
+        walk = str(r["scenario"]).rsplit(" ", 1)[0]
+        ax.scatter([ft], [100.0 * err], s=46, marker="o", facecolors=colour if imp else "none", edgecolors=colour,
+                   label=f"{bake} {walk} {'impostors' if imp else 'geometry'}", zorder=3)
+        pairs.setdefault((bake, walk), []).append((float(ft), 100.0 * float(err)))
+    for (bake, _), pts in pairs.items():
+        if len(pts) == 2:
+            (x0, y0), (x1, y1) = pts
+            ax.plot([x0, x1], [y0, y1], color=colours[bakes.index(bake) % len(colours)], lw=0.8, alpha=0.6)
     ax.set_xlabel(f"frame time on the device, ms (median; {rows[0].get('device', '?') if rows else '?'})")
-    ax.set_ylabel("colour error vs the full scene, % of full scale (median)")
-    ax.set_title("bench impostors: filled with impostors, open geometry only", fontsize=10)
+    ax.set_ylabel("colour error vs the full scene,\n% of full scale (median)")
+    ax.set_title("bench impostors: one colour per bake; filled with impostors, open geometry only", fontsize=10)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     return save_figure(fig, path)

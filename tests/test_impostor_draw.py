@@ -167,7 +167,7 @@ def test_bench_impostors_replays_one_walk_both_ways(dbs: tuple[Path, Path], tmp_
     rows = run_impostor_bench([str(dbs[0]), str(dbs[1])], replay_with_options, out=tmp_path, duration="2s",
                               truth_every=25, size="80x60")
     assert [r["with_impostors"] for r in rows] == [True, False, True, False]
-    assert [r["bake"] for r in rows] == ["D50 A4 S16"] * 2 + ["plain (no impostors)"] * 2
+    assert [r["bake"] for r in rows] == ["imp D50 A4 S16"] * 2 + ["plain (no impostors)"] * 2
     assert rows[0]["impostors"]["image_bytes"] > 0 and "impostors" not in rows[1]
     assert all(r["frame_time_median_ms"] > 0 for r in rows)
     c = rows[0]["truth"]["colour"]
