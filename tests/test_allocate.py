@@ -462,3 +462,14 @@ def test_reserve_floor_passes_leftover_on() -> None:
         [0.5, 0.3, 0.2], tri, np.ones((3, 3), bool), np.ones(3, bool), 120, reserve_floor=True
     )
     assert a.lod.tolist() == [0, 0, 1] and a.triangles == 100
+
+
+def test_replay_allocates_greedily_unless_told_the_shares() -> None:
+    import argparse
+
+    from walkstream.cmd_replay import add_replay_arguments, config_from_args
+
+    parser = argparse.ArgumentParser()
+    add_replay_arguments(parser)
+    assert config_from_args(parser.parse_args([])).lod_greedy
+    assert not config_from_args(parser.parse_args(["--ach-shares"])).lod_greedy
