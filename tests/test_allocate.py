@@ -471,6 +471,6 @@ def test_replay_allocates_greedily_unless_told_the_shares() -> None:
 
     parser = argparse.ArgumentParser()
     add_replay_arguments(parser)
-    parser.add_argument("--report")
+    parser.add_argument("--report", default="report")
     assert config_from_args(parser.parse_args([])).lod_greedy
     assert not config_from_args(parser.parse_args(["--ach-shares"])).lod_greedy
