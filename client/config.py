@@ -48,6 +48,9 @@ class ReplayConfig:
     shm_bytes: int = SHM_BYTES
     """Bound on the shared memory the rewrite processes hand geometry back through."""
     lod_select: str = "ach"
+    lod_greedy: bool = True
+    """ACH selection: in descending ACH each object takes the best LOD that still fits
+    (:func:`~walkstream.client.draw.allocate.allocate_ach` ``greedy``); False: the paper's shares."""
     lod_distances: tuple[float, float] = (40.0, 120.0)
     budget_frames: int = 4
     seed: int = 0

@@ -24,10 +24,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import httpx
 import numpy as np
@@ -118,6 +118,8 @@ def run_replay(
         return sim.run(replay(transport, base_url, config, sim, progress, truth_progress))
     return asyncio.run(_real(transport, base_url, config, progress, truth_progress))
 
+_T = TypeVar("_T")
+
 
 async def _virtual_walls(scene: WalkScene, api: SceneClient, topology: Any, rooms: RoomStreamer) -> None:
     """An interior's textured virtual walls, when it was baked with them: the wall sides
@@ -191,22 +193,28 @@ async def replay(
                     streamer.on_manifest(m.max_ids, grammar, disk if usable else None, m.index)
                 manifest_fut.set_result(m)
 
+            def manifest_failed(exc: BaseException) -> None:
+                # a manifest that does not decode: the walk would rebuild no building,
+                # so the replay ends with the error (the walk below stops on it)
+                if not manifest_fut.done():
+                    manifest_fut.set_exception(exc)
+
             got, topology, first_view = None, None, None
             if config.start_bundle and config.kind == "interior":  # path, topology, first view at once
                 got, topology, first_view = await interior_start(
                     config.path, config.setup_timeout_s, clock, api, disk, manifest_arrived, tasks,
-                    _room_view(config) if config.start_contents else None)
+                    _room_view(config) if config.start_contents else None, manifest_failed)
             elif config.start_bundle and streamer is not None:
                 got = await bundle_start(
                     config.path, config.setup_timeout_s, clock, api, streamer, disk,
-                    manifest_arrived, manifest_fut, tasks,
+                    manifest_arrived, manifest_fut, tasks, manifest_failed,
                 )
             if got is None:
                 # no start bundle (or it failed before the path): scene list, manifest, path
                 if await within(clock, config.setup_timeout_s, api.resolve_scene()) is None:
                     api.scene = config.scene or "?"
                 if not manifest_fut.done():
-                    tasks.append(manifest_task(api, disk, manifest_arrived))
+                    tasks.append(manifest_task(api, disk, manifest_arrived, manifest_failed))
                 got = await within(clock, config.setup_timeout_s, api.path(config.path))
             setup_s = clock.now() - t_start
             if got is None:  # no path, no walk: an empty report that says why
@@ -294,7 +302,7 @@ async def replay(
                 lambda: int(link.stats.bytes_down), WalkFrames(), recorder,
                 BudgetController(config.fps_target, k=config.budget_frames),
             )
-            log, snapshots, spikes = await walk(state, phases, progress)
+            log, snapshots, spikes = await _walk_unless_manifest_fails(walk(state, phases, progress), manifest_fut)
             t_end = clock.now()
             # the streamers stopped (nothing more goes down the link) before the truth
             if scene.images is not None:
@@ -390,6 +398,19 @@ async def replay(
         }
     return ReplayResult(summary, log, bytes_log, snapshots, spikes, truth, phases.array(),
                         interior=frames.series(log) if kind == "interior" else None)
+
+
+async def _walk_unless_manifest_fails(walking: Coroutine[Any, Any, _T], manifest: asyncio.Future[Manifest]) -> _T:
+    """Await the walk; a manifest that fails to decode meanwhile stops it with that error."""
+    task: asyncio.Future[Any] = asyncio.ensure_future(walking)
+    both: set[asyncio.Future[Any]] = {task, manifest}
+    await asyncio.wait(both, return_when=asyncio.FIRST_EXCEPTION)
+    if manifest.done() and not manifest.cancelled() and manifest.exception() is not None and not task.done():
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await task
+        raise manifest.exception()  # type: ignore[misc]
+    return await task
 
 
 async def _close(streamer: Streamer | None, rooms: RoomStreamer | None) -> None:

@@ -45,6 +45,25 @@ def test_share_formula_worked_example() -> None:
     assert not a.all_max
 
 
+def test_greedy_gives_a_weak_device_s_budget_to_the_objects_covering_most() -> None:
+    # a weak device: 10 objects of 12 / 177 / 1200 triangles and 520 triangles; each
+    # share (about 40 past the floors) is under every upgrade, so the shares leave the
+    # covering objects as boxes and hand the rest to the last two, least-covering ones
+    ach = np.array([0.05, 0.3, 0.05, 0.2, 0.05, 0.05, 0.1, 0.05, 0.1, 0.05])
+    tri = np.tile([12, 177, 1200], (10, 1))
+    shares = allocate_ach(ach, tri, ones(10), vis(10), 520, reserve_floor=True)
+    assert shares.lod.tolist() == [0, 0, 0, 0, 0, 0, 0, 1, 0, 1] and shares.triangles == 450
+    # greedy: the two highest ACH get LOD1 (165 each past their LOD0); no third fits
+    greedy = allocate_ach(ach, tri, ones(10), vis(10), 520, reserve_floor=True, greedy=True)
+    assert greedy.lod.tolist() == [0, 1, 0, 1, 0, 0, 0, 0, 0, 0] and greedy.triangles == 450 <= 520
+    # a budget that reaches LOD2 for the first: LOD2 before LOD1, never over the budget
+    big = allocate_ach(ach, tri, ones(10), vis(10), 1400, reserve_floor=True, greedy=True)
+    assert big.lod[1] == 2 and big.triangles <= 1400 and (big.lod >= 0).all()
+    # zero ACH (not seen from the cell): no upgrade; every lowest LOD drawn
+    none = allocate_ach(np.zeros(3), tri[:3], ones(3), vis(3), 10**6, reserve_floor=True, greedy=True)
+    assert none.lod.tolist() == [0, 0, 0]
+
+
 def test_order_is_descending_ach_whatever_the_input_order() -> None:
     ach = np.array([0.2, 0.5, 0.3])
     tri = np.array([[10, 50, 200], [10, 100, 400], [10, 100, 300]])
@@ -443,3 +462,15 @@ def test_reserve_floor_passes_leftover_on() -> None:
         [0.5, 0.3, 0.2], tri, np.ones((3, 3), bool), np.ones(3, bool), 120, reserve_floor=True
     )
     assert a.lod.tolist() == [0, 0, 1] and a.triangles == 100
+
+
+def test_replay_allocates_greedily_unless_told_the_shares() -> None:
+    import argparse
+
+    from walkstream.cmd_replay import add_replay_arguments, config_from_args
+
+    parser = argparse.ArgumentParser()
+    add_replay_arguments(parser)
+    parser.add_argument("--report", default="report")
+    assert config_from_args(parser.parse_args([])).lod_greedy
+    assert not config_from_args(parser.parse_args(["--ach-shares"])).lod_greedy

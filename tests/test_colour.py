@@ -127,6 +127,18 @@ def test_colour_causes_take_the_id_cause_then_the_stand_in_then_the_lod() -> Non
     assert dict(zip(COLOUR_CAUSES, err.causes.tolist(), strict=True)) == want
     lin200 = ((200 / 255 + 0.055) / 1.055) ** 2.4  # sRGB 200 in linear light
     assert err.visible == 4 == err.causes.sum() and err.mean_error == pytest.approx(0.8 * lin200)
+    # the error split by cause: the same attribution, weighted by each pixel's error; one
+    # pixel of half the error of the others, so the split is by error, not by count
+    c[0, 3] = 128
+    err = compare_colour(t, c, id_cause=ids, coarse=coarse, stand_in=stand)
+    lin128 = ((128 / 255 + 0.055) / 1.055) ** 2.4
+    by = dict(zip(COLOUR_CAUSES, err.error_shares.tolist(), strict=True))
+    assert by["not_received"] == by["lod_colour"] == by["impostor"] == pytest.approx(lin200 / 5)
+    assert by["other"] == pytest.approx(lin128 / 5) and by["fog"] == by["lod"] == 0.0
+    assert sum(by.values()) == pytest.approx(err.mean_error)
+    log = ColourLog([0], [0.0], [err.mean_error], [0.0], [0.0], [30.0], err.cause_shares[None], err.error_shares[None])
+    assert summarise_colour(log)["error_causes"]["other"] == pytest.approx(lin128 / 5)
+    assert "error_causes" not in summarise_colour(ColourLog.empty())
     with pytest.raises(InputError, match="coarse"):
         compare_colour(t, c, coarse=np.zeros((2, 2), bool))
 

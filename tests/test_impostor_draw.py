@@ -164,8 +164,14 @@ def test_bench_impostors_replays_one_walk_both_ways(dbs: tuple[Path, Path], tmp_
     from walkstream.benchmarks.impostors import format_impostor_table, run_impostor_bench
     from walkstream.cmd_replay import replay_with_options
 
-    rows = run_impostor_bench(str(dbs[0]), replay_with_options, out=tmp_path, duration="2s")
-    assert [r["with_impostors"] for r in rows] == [True, False]
+    rows = run_impostor_bench([str(dbs[0]), str(dbs[1])], replay_with_options, out=tmp_path, duration="2s",
+                              truth_every=25, size="80x60")
+    assert [r["with_impostors"] for r in rows] == [True, False, True, False]
+    assert [r["bake"] for r in rows] == ["imp D50 A4 S16"] * 2 + ["plain (no impostors)"] * 2
     assert rows[0]["impostors"]["image_bytes"] > 0 and "impostors" not in rows[1]
+    assert all(r["frame_time_median_ms"] > 0 for r in rows)
+    c = rows[0]["truth"]["colour"]
+    assert sum(c["error_causes"].values()) == pytest.approx(c["mean_error"]["mean"])
     table = format_impostor_table(rows)
-    assert "SE impostors" in table and "SE geometry" in table and (tmp_path / "bench_impostors.json").is_file()
+    assert "SE impostors" in table and "SE geometry" in table and "e:boxes" in table
+    assert (tmp_path / "bench_impostors.json").is_file() and (tmp_path / "bench_impostors.png").stat().st_size > 0

@@ -109,3 +109,36 @@ def test_a_server_gone_mid_walk_fails_the_replay(tmp_path: Path) -> None:
     why = replay_failure(s)
     assert why is not None and "unreachable for" in why
     assert outage_line(s) is not None and "still unreachable at the end" in str(outage_line(s))
+
+
+def test_a_manifest_that_does_not_decode_ends_the_replay_with_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # a client whose decoder refuses the server's manifest (here: a grammar bound below
+    # the grammar's length, as when the grammar outgrew it) used to drop the manifest
+    # silently and walk on rebuilding no building at all
+    from scenes import add_default_paths, build_city_db
+
+    from walkstream.client.replay import run_replay
+    from walkstream.cmd_replay import add_replay_arguments, config_from_args
+    from walkstream.server.service.main import create_app
+    from walkstream.shared import wire
+    from walkstream.shared.errors import ApiError
+
+    db = tmp_path / "city.db"
+    build_city_db(db, name="city", size=200.0, k=20)
+    add_default_paths(db)
+    parser = argparse.ArgumentParser()
+    add_replay_arguments(parser)
+    app = create_app([db])
+    monkeypatch.setattr(wire, "MAX_GRAMMAR_TEXT", 64)
+    try:
+        for flags in ([], ["--no-start-bundle"]):  # the manifest in the start bundle, and on its own
+            ns = parser.parse_args(["--device", "desktop2003", "--duration", "20s", *flags])
+            ns.report = str(tmp_path / f"report{len(flags)}")
+            with pytest.raises(ApiError) as got:
+                run_replay(httpx.ASGITransport(app=app), "http://x", config_from_args(ns))
+            line = str(got.value)
+            assert "scene 'city' manifest: undecodable answer" in line and "max_str_len" in line and "\n" not in line
+    finally:
+        app.state.scenes.close()

@@ -172,15 +172,20 @@ def cmd_bench_impostors(args: argparse.Namespace) -> int:
     from walkstream.cmd_replay import replay_with_options
     from walkstream.shared.errors import InputError
 
-    if not str(args.db).startswith(("http://", "https://")) and not Path(args.db).is_file():
-        raise InputError(f"{args.db}: no such scene database")
+    for db in args.db:
+        if not str(db).startswith(("http://", "https://")) and not Path(db).is_file():
+            raise InputError(f"{db}: no such scene database")
     paths = [p.strip() for p in args.paths.split(",") if p.strip()]
     link = {"bandwidth": args.bandwidth, "rtt": args.rtt}
+    extra = {"clock": args.clock, **({"ach_shares": True} if args.ach_shares else {})}
     rows = run_impostor_bench(args.db, replay_with_options, out=Path(args.out), paths=paths, device=args.device,
-                              truth_every=args.truth_every, duration=args.duration, link=link)
+                              truth_every=args.truth_every, duration=args.duration, link=link, size=args.size,
+                              extra=extra)
     if not rows:
         return 1  # each failed walk said why on stderr
     print(format_impostor_table(rows))
+    if args.truth_every:
+        print(f"plot: {Path(args.out) / 'bench_impostors.png'}")
     return 0
 
 
@@ -664,9 +669,12 @@ def add_bench_parser(sub: Any) -> None:
     b.set_defaults(func=cmd_bench_stream)
 
     b = besub.add_parser("impostors", help="the same walks with and without impostors: triangles, bytes, textures, colour error")
-    b.add_argument("db", help="scene database baked with --impostors")
+    b.add_argument("db", nargs="+", help="scene databases baked with --impostors (several: a sweep of D, A, S or scenes)")
     b.add_argument("--paths", default="SE", help="comma-separated recorded paths (default SE)")
     b.add_argument("--device", default="pda", choices=("gl", "desktop2003", "pda"), help="device (default pda)")
+    b.add_argument("--clock", default="sim", choices=("sim", "real"), help="simulated clock (default) or real time (with --device gl: frames drawn and timed for real)")
+    b.add_argument("--size", help="frame size WIDTHxHEIGHT of the walks and their truth (default the replay's 640x480)")
+    b.add_argument("--ach-shares", action="store_true", help="share the triangle budget by the paper's ACH shares (the older rule)")
     b.add_argument("--bandwidth", default="56kbit", help="link bandwidth (default 56kbit)")
     b.add_argument("--rtt", default="200ms", help="round-trip time (default 200ms)")
     b.add_argument("--truth-every", type=int, default=25, metavar="N", help="compare every Nth frame with the ground truth, colour error included (default 25; 0: never)")

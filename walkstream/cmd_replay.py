@@ -111,6 +111,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         rewrite=args.rewrite,
         shm_bytes=parse_size(args.shm),
         lod_select=args.lod,
+        lod_greedy=not args.ach_shares,
         lod_distances=(lo, hi),
         seed=args.seed,
         fog_m=args.fog,
@@ -284,6 +285,9 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--rewrite", default="auto", help="real clock: rebuild in worker 'process'es or in 'thread's of the client (the older path); default 'auto': processes when there is a core for each worker besides two")
     r.add_argument("--shm", default="16MB", help="process rewrite: bound on the shared memory geometry comes back through (default 16MB; 0: through the pipe)")
     r.add_argument("--lod", choices=("ach", "distance"), default="ach", help="LOD selection: ACH-shared budget or distance")
+    r.add_argument("--ach-shares", action="store_true",
+                   help="ACH selection by the paper's shares of the budget (the older rule; default: in descending "
+                        "ACH each object takes the best LOD that still fits)")
     r.add_argument("--lod-distances", default="40,120", help="distance selection: LOD2 nearer than D1, LOD1 nearer than D2 (default 40,120)")
     r.add_argument("--seed", type=int, default=0, help="seed of link loss, device noise, backoff jitter")
     r.add_argument("--fog", type=float, default=40.0, help="interiors: portals farther than this many metres are not looked through (default 40)")

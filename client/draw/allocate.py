@@ -164,6 +164,7 @@ def allocate_ach(
     budget: float,
     *,
     reserve_floor: bool = False,
+    greedy: bool = False,
 ) -> Allocation:
     """Share a triangle budget among the visible objects by their ACH.
 
@@ -188,6 +189,13 @@ def allocate_ach(
         rule shares what is left (the *upgrades*: a LOD costs its triangles minus
         the object's lowest LOD), so the frame stays within the budget whenever the
         lowest LODs fit.  The replay uses True.
+    greedy : bool
+        Instead of the shares: in descending ACH each object takes the best LOD whose
+        upgrade still fits what is left.  On a weak device every share falls under each
+        object's next LOD, so the shares leave the first objects at their lowest LOD and
+        hand the accumulated rest to the last, least-covering ones; greedy gives it to
+        the objects that cover the most of the view (never over the budget).  The
+        replay uses True.
 
     Returns
     -------
@@ -227,6 +235,9 @@ def allocate_ach(
         floor = cost[np.arange(len(ids)), low]
         cost = cost - floor[:, None]  # what moving up from the lowest LOD costs
         b = max(0.0, b - float(floor.sum()))
+    if greedy:
+        lod[ids] = _greedy(low.astype(np.int64), cost, ws, b)
+        return _finish(lod, t, av, drawable, _budget(budget, what))
     c0, c1, c2 = (cost[:, level].tolist() for level in range(3))
     low_l = low.tolist()
     chosen_l = [0] * len(ids)
@@ -260,6 +271,26 @@ def allocate_ach(
         chosen[served:] = np.where(free.any(axis=1), best_free, low[served:])
     lod[ids] = chosen
     return _finish(lod, t, av, drawable, _budget(budget, what))
+
+
+def _greedy(
+    chosen: NDArray[np.int64], cost: NDArray[np.float64], ws: NDArray[np.float64], rest: float
+) -> NDArray[np.int64]:
+    """``chosen`` (objects in descending ACH ``ws``) with ``rest`` triangles spent on upgrades:
+    each object with some ACH, in order, moves to its best LOD whose extra cost still fits."""
+    out = chosen.copy()
+    rows = cost.tolist()
+    for j in np.flatnonzero(ws > 0).tolist():
+        now = rows[j][out[j]]
+        for level in (2, 1):
+            extra = rows[j][level] - now
+            if level > out[j] and extra <= rest + 1e-9:
+                out[j] = level
+                rest -= extra
+                break
+        if rest <= 1e-9:
+            break
+    return out
 
 
 # --------------------------------------------------------------------------- distance

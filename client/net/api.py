@@ -20,6 +20,7 @@ over real sockets or to the app in-process is decided by whoever builds it.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import random
 import zlib
@@ -245,16 +246,24 @@ class SceneClient:
         await self.clock.sleep(delay)
 
     async def _get_decoded(self, url: str, what: str, decode: Any, **kw: Any) -> Any:
-        """GET and decode, fetching again when the body cannot be decoded (corrupt/truncated)."""
+        """GET and decode, fetching again when the body cannot be decoded (corrupt/truncated).
+
+        The same body refused twice is no accident of the link (a corrupt or cut body
+        does not repeat byte for byte): the client cannot read it, and fetching again
+        would only repeat the refusal for ever, so it is an :class:`ApiError` at once.
+        """
         attempt = 0
+        refused: bytes | None = None
         while True:
             attempt += 1
             r = await self._get(url, what, **kw)
             try:
                 return r, decode(r)
             except CodecError as exc:
-                if attempt >= self.max_attempts:
+                body = hashlib.blake2b(r.content, digest_size=16).digest()
+                if attempt >= self.max_attempts or body == refused:
                     raise ApiError(f"{what}: undecodable answer ({exc})") from exc
+                refused = body
                 await self._backoff(attempt)
 
     # -- endpoints -----------------------------------------------------------

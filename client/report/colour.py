@@ -26,6 +26,11 @@ frames (the start-up frames, before anything has arrived, count too):
 ``causes``
     Per cause of :data:`~walkstream.client.truth.colour.COLOUR_CAUSES` the mean share
     of a frame's pixels visibly wrong for it.
+``error_causes``
+    Per cause the mean over the frames of its part of the mean linear-RGB error
+    (:attr:`~walkstream.client.truth.colour.ColourError.error_causes`; they sum to
+    ``mean_error.mean``): where the error comes from, weighted by how wrong each
+    pixel is.  Absent when the log was read back from a ``truth.csv``.
 ``per_frame``
     The rows, as columns: ``frame``, ``t``, ``mean_error``, ``delta_e_mean``,
     ``visible`` and ``psnr_db`` (capped) per compared frame (``truth.csv`` has the
@@ -68,6 +73,8 @@ class ColourLog:
         PSNR, dB (``inf``: identical pictures).
     causes : (n, len(COLOUR_CAUSES)) float64
         Share of the pixels visibly wrong, per cause.
+    error_causes : (n, len(COLOUR_CAUSES)) float64 or None
+        The frame's mean error split by cause (None: not measured).
     """
 
     frame: I64
@@ -77,6 +84,7 @@ class ColourLog:
     visible: F64
     psnr_db: F64
     causes: F64
+    error_causes: F64 | None = None
 
     def __post_init__(self) -> None:
         n = len(np.asarray(self.frame))
@@ -89,6 +97,8 @@ class ColourLog:
             "psnr_db": np.array(self.psnr_db, np.float64).reshape(-1),
             "causes": np.array(self.causes, np.float64).reshape(-1, len(COLOUR_CAUSES)),
         }
+        if self.error_causes is not None:
+            cols["error_causes"] = np.array(self.error_causes, np.float64).reshape(-1, len(COLOUR_CAUSES))
         for name, a in cols.items():
             if len(a) != n:
                 raise InputError(f"ColourLog column {name!r} has {len(a)} rows, expected {n}")
@@ -133,6 +143,8 @@ def summarise_colour(log: ColourLog) -> dict[str, Any]:
         "frames_over_visible_ratio": float((log.visible > COLOUR_OVER_SHARE).mean()) if n else None,
         "psnr_db": _stats(np.minimum(log.psnr_db, PSNR_CAP_DB), ("median", "p5", "min")),
         "causes": {c: (float(log.causes[:, k].mean()) if n else None) for k, c in enumerate(COLOUR_CAUSES)},
+        **({} if log.error_causes is None else {"error_causes": {
+            c: (float(log.error_causes[:, k].mean()) if n else None) for k, c in enumerate(COLOUR_CAUSES)}}),
         "per_frame": {
             "frame": log.frame.tolist(),
             "t": [round(float(v), 4) for v in log.t],

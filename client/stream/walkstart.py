@@ -45,13 +45,30 @@ async def fetch_manifest(api: SceneClient, disk: DiskCache | None) -> Manifest:
 
 
 def manifest_task(
-    api: SceneClient, disk: DiskCache | None, arrived: Callable[[Manifest], None]
+    api: SceneClient,
+    disk: DiskCache | None,
+    arrived: Callable[[Manifest], None],
+    failed: Callable[[BaseException], None] | None = None,
 ) -> asyncio.Task[Manifest]:
-    """Fetch the manifest on its own; ``arrived`` is called with it when it is in."""
+    """Fetch the manifest on its own; ``arrived`` is called with it when it is in.
+
+    A fetch that fails (a manifest the client cannot decode: the same body refused
+    twice, :meth:`~walkstream.client.net.api.SceneClient.manifest`) goes to ``failed``,
+    never dropped: without the manifest the client rebuilds no building, so the replay
+    ends with that one-line error.
+    """
     task = asyncio.create_task(fetch_manifest(api, disk))
-    task.add_done_callback(
-        lambda t: None if t.cancelled() or t.exception() is not None else arrived(t.result())
-    )
+
+    def done(t: asyncio.Task[Manifest]) -> None:
+        if t.cancelled():
+            return
+        exc = t.exception()
+        if exc is None:
+            arrived(t.result())
+        elif failed is not None:
+            failed(exc)
+
+    task.add_done_callback(done)
     return task
 
 
@@ -65,6 +82,7 @@ async def bundle_start(
     manifest_arrived: Callable[[Manifest], None],
     manifest_fut: asyncio.Future[Manifest],
     tasks: list[asyncio.Task[Any]],
+    manifest_failed: Callable[[BaseException], None] | None = None,
 ) -> tuple[RecordedPath, int] | None:
     """Start with the start bundle of recorded path ``path``: the path and its bytes.
 
@@ -89,7 +107,7 @@ async def bundle_start(
             path_fut.set_exception(err or ApiError("start bundle: no path in it"))
         elif not manifest_fut.done() and api.scene is not None:
             # cut after the path: the manifest (the grammar) comes on its own
-            tasks.append(manifest_task(api, disk, manifest_arrived))
+            tasks.append(manifest_task(api, disk, manifest_arrived, manifest_failed))
 
     streamer.start_bundle(path, on_path, on_manifest, on_end)
     try:
@@ -121,6 +139,7 @@ async def interior_start(
     manifest_arrived: Callable[[Manifest], None],
     tasks: list[asyncio.Task[Any]],
     view: RoomView | None = None,
+    manifest_failed: Callable[[BaseException], None] | None = None,
 ) -> tuple[tuple[RecordedPath, int] | None, Topology | None, StartContents | None]:
     """The interior start bundle of recorded path ``path``: ``((path, its bytes), topology,
     the first view's contents)``.
@@ -145,7 +164,7 @@ async def interior_start(
 
     def without_manifest() -> None:
         if "manifest" not in got and api.scene is not None:
-            tasks.append(manifest_task(api, disk, manifest_arrived))
+            tasks.append(manifest_task(api, disk, manifest_arrived, manifest_failed))
 
     async def head() -> None:
         async for part, item in stream:

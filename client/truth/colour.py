@@ -211,6 +211,11 @@ class ColourError:
         Visible pixels per cause, in :data:`COLOUR_CAUSES` order (they sum to ``visible``).
     delta_e : (h, w) float32
         ΔE00 per pixel.
+    error_causes : (len(COLOUR_CAUSES),) float64
+        ``mean_error`` split by cause: each differing pixel's linear-RGB error, summed
+        per cause (every differing pixel, visible or not, attributed as the visible
+        ones are) over ``3 * pixels``; they sum to ``mean_error``.  Where the error
+        comes from, weighted by how wrong each pixel is.
     """
 
     pixels: int
@@ -220,11 +225,19 @@ class ColourError:
     psnr_db: float
     causes: NDArray[np.int64]
     delta_e: NDArray[np.float32]
+    error_causes: NDArray[np.float64] | None = None
 
     @property
     def visible_share(self) -> float:
         """Visible pixels as a share of the frame."""
         return self.visible / max(self.pixels, 1)
+
+    @property
+    def error_shares(self) -> NDArray[np.float64]:
+        """``error_causes`` (zeros when not measured)."""
+        if self.error_causes is None:
+            return np.zeros(len(COLOUR_CAUSES))
+        return self.error_causes
 
     @property
     def cause_shares(self) -> NDArray[np.float64]:
@@ -286,9 +299,13 @@ def compare_colour(
     diff = (t[..., 0] != c[..., 0]) | (t[..., 1] != c[..., 1]) | (t[..., 2] != c[..., 2])  # any() over axis 2 is slow
     de = np.zeros(shape, np.float32)
     lin_err = sq_err = 0.0
+    by_cause = np.zeros(len(COLOUR_CAUSES), np.float64)
     if diff.any():
         td, cd = t[diff], c[diff]
-        lin_err = float(np.abs(srgb_to_linear(td) - srgb_to_linear(cd)).sum())
+        lin_px = np.abs(srgb_to_linear(td) - srgb_to_linear(cd)).sum(axis=1)
+        lin_err = float(lin_px.sum())
+        by_cause = np.bincount(_attribute(cause_id[diff], coarse_m[diff], stand_m[diff], wall_m[diff]),
+                               weights=lin_px, minlength=len(COLOUR_CAUSES)).astype(np.float64)
         sq_err = float(np.square(td.astype(np.int32) - cd.astype(np.int32)).sum(dtype=np.int64))
         # flat-shaded pictures hold few colours: ΔE once per distinct pair of colours
         w = np.array([1 << 40, 1 << 32, 1 << 24], np.int64)
@@ -297,9 +314,7 @@ def compare_colour(
         d = delta_e_2000(srgb_to_lab(td[first]), srgb_to_lab(cd[first]))
         de[diff] = d[inv.reshape(-1)].astype(np.float32)
     vis = de > VISIBLE_DE
-    sv, cv = stand_m[vis], cause_id[vis]
-    cause = np.where(sv, _IMPOSTOR, np.where(cv >= 0, cv, np.where(coarse_m[vis], _LOD_COLOUR, _OTHER)))
-    cause = np.where(wall_m[vis], _WALL, cause)
+    cause = _attribute(cause_id[vis], coarse_m[vis], stand_m[vis], wall_m[vis])
     counts = np.bincount(cause, minlength=len(COLOUR_CAUSES)).astype(np.int64)
     mse = sq_err / max(3 * pixels, 1)
     return ColourError(
@@ -310,7 +325,17 @@ def compare_colour(
         psnr_db=math.inf if mse == 0.0 else 10.0 * math.log10(255.0**2 / mse),
         causes=counts,
         delta_e=de,
+        error_causes=by_cause / max(3 * pixels, 1),
     )
+
+
+def _attribute(
+    cause_id: NDArray[np.int64], coarse: NDArray[np.bool_], stand_in: NDArray[np.bool_], wall: NDArray[np.bool_]
+) -> NDArray[np.int64]:
+    """Each given pixel's index in :data:`COLOUR_CAUSES` (the order of the module docs)."""
+    cause = np.where(stand_in, _IMPOSTOR, np.where(cause_id >= 0, cause_id, np.where(coarse, _LOD_COLOUR, _OTHER)))
+    out: NDArray[np.int64] = np.where(wall, _WALL, cause).astype(np.int64)
+    return out
 
 
 def heat_map(delta_e: ArrayLike, top: float = 20.0) -> NDArray[np.uint8]:

@@ -140,7 +140,7 @@ def missing_figures(
     compared: list[ComparedFrame] = []
     worst: WorstFrame | None = None
     worst_key = (-1, -1.0)
-    colour_rows: list[tuple[float, float, float, float, NDArray[np.float64]]] = []
+    colour_rows: list[tuple[float, float, float, float, NDArray[np.float64], NDArray[np.float64]]] = []
     cworst: ColourWorst | None = None
     cworst_key = (-1, -1.0)
     n = len(notes)
@@ -199,7 +199,8 @@ def missing_figures(
                     missing_mask(t_rgb, err.cause),
                 )
             cerr, pic = colour_error(truth, st, t_rgb, err.cause, proj, overlay)
-            colour_rows.append((cerr.mean_error, cerr.delta_e_mean, cerr.visible_share, cerr.psnr_db, cerr.cause_shares))
+            colour_rows.append((cerr.mean_error, cerr.delta_e_mean, cerr.visible_share, cerr.psnr_db, cerr.cause_shares,
+                                cerr.error_shares))
             ckey = (int(after), cerr.mean_error)
             if ckey > cworst_key:
                 cworst_key = ckey
@@ -218,6 +219,7 @@ def missing_figures(
     colour = ColourLog(
         frames, times, col(0), col(1), col(2), col(3),
         np.array([r[4] for r in colour_rows]).reshape(-1, len(COLOUR_CAUSES)),
+        np.array([r[5] for r in colour_rows]).reshape(-1, len(COLOUR_CAUSES)),
     )
     log = TruthLog(
         frames,

@@ -119,7 +119,8 @@ def room_colour(
         ident[k] = truth.index.get(object_key(int(oid_of[k])), k)
     is_part = oid_of < 0
     cell_of = np.where(is_part, np.array([key[0] for key in truth.keys], np.int64).reshape(-1), -1)
-    rows: list[tuple[int, float, float, NDArray[np.float64], tuple[float, float, float, float, NDArray[np.float64]], float]] = []
+    rows: list[tuple[int, float, float, NDArray[np.float64],
+               tuple[float, float, float, float, NDArray[np.float64], NDArray[np.float64]], float]] = []
     worst: ColourWorst | None = None
     for j, note in enumerate(notes):
         if progress is not None:
@@ -170,7 +171,8 @@ def room_colour(
         missing = np.bincount(cause[cause >= 0], minlength=len(CAUSES)).astype(np.float64) / pixels
         differing = float(np.count_nonzero(differ)) / pixels
         rows.append((note.frame, note.t, differing, missing,
-                     (err.mean_error, err.delta_e_mean, err.visible_share, err.psnr_db, err.cause_shares), note.fog))
+                     (err.mean_error, err.delta_e_mean, err.visible_share, err.psnr_db, err.cause_shares, err.error_shares),
+                     note.fog))
         if worst is None or err.mean_error > worst.mean_error:
             worst = ColourWorst(note.frame, note.t, err.mean_error, err.visible_share, err.psnr_db, c_rgb, t_rgb,
                                 err.delta_e)
@@ -181,7 +183,8 @@ def room_colour(
         return np.array([r[4][k] for r in rows], np.float64)
 
     colour = ColourLog(frames, times, col(0), col(1), col(2), col(3),
-                       np.array([r[4][4] for r in rows]).reshape(-1, len(COLOUR_CAUSES)))
+                       np.array([r[4][4] for r in rows]).reshape(-1, len(COLOUR_CAUSES)),
+                       np.array([r[4][5] for r in rows]).reshape(-1, len(COLOUR_CAUSES)))
     log = TruthLog(frames, times, np.array([r[2] for r in rows], np.float64),
                    np.array([r[3] for r in rows]).reshape(-1, len(CAUSES)), colour)
     return RoomColour(log, worst, np.array([r[5] for r in rows], np.float64))

@@ -51,7 +51,8 @@ def allocate(w: WalkState, f: Frame) -> None:
             seen &= ~replaced([g.id for g in o.geoms], f.impostors)
         quad_tris = 2 * len(f.impostors)
         if cfg.lod_select == "ach":
-            f.alloc = allocate_ach(o.ach, o.tri, o.avail, seen, max(f.budget - room_tris - quad_tris, 0), reserve_floor=True)
+            f.alloc = allocate_ach(o.ach, o.tri, o.avail, seen, max(f.budget - room_tris - quad_tris, 0),
+                                   reserve_floor=True, greedy=cfg.lod_greedy)
         else:
             centre = (o.lo + o.hi) / 2.0
             dist = np.hypot(centre[:, 0] - f.eye[0], centre[:, 1] - f.eye[1])
