@@ -67,6 +67,7 @@ from walkstream.shared.errors import ApiError
 from walkstream.shared.ground import GROUND_Z
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.roomview import VIEW_NEAR_M, RoomView
+from walkstream.shared.walls import WallTable
 from walkstream.shared.wire import Manifest
 
 __all__ = ["ReplayResult", "run_replay", "replay"]
@@ -133,6 +134,7 @@ async def _virtual_walls(scene: WalkScene, api: SceneClient, topology: Any, room
         return
     scene.walls = tuple(s for s in sides if s.portal in cells)
     scene.wall_cells = cells
+    scene.wall_table = WallTable(scene.walls)
     scene.wall_images = ImpostorImages(api, scene.cache, rooms.scheduler, kind="walltex")
 
 

@@ -11,7 +11,10 @@ outside (its windows), the street cell's PVS is visible too.
 
 On an interior baked with ``--virtual-walls``, the walls whose texture the viewer
 sees close the walk first (:mod:`.walls`): the portal walk stops there and the
-frame draws their textures.
+frame draws their textures.  The perfect frame is the walk as baked: every wall at
+full texture weight closes it, and the frame needs those walls' textures instead of
+the cells behind them; a texture not in yet leaves its wall open for drawing (the
+cells behind drawn when held), never for what the frame counts as needed.
 
 *On the street* (the PVS model): the current street cell's PVS.  An entrance's
 building stands in it as its shell (the interior's ``outside`` cell,
@@ -42,7 +45,9 @@ def visible(w: WalkState, f: Frame) -> None:
         rooms.fog_m = w.indoor_fog
         walls = frame_walls(w, f)  # which virtual walls close the walk this frame
         vis = rooms.tick(f.t, f.eye, f.vp, f.view, w.proj, w.size, cell=f.room)
-        default = list(vis)
+        # the frame as baked: a wall whose texture is missing does not make the cells
+        # behind it part of the perfect frame (its texture is, in measure)
+        default = list(rooms.due_visible)
         fog = w.indoor_fog
         while rooms.visible_bytes(vis) > rooms.cache.budget_bytes and fog > 2.0:
             fog *= 0.8
@@ -56,7 +61,7 @@ def visible(w: WalkState, f: Frame) -> None:
         f.walls = drawn_walls(walls, vis)
     else:
         if rooms is not None:
-            rooms.closed = frozenset()
+            rooms.closed = rooms.due_closed = frozenset()
         if f.street is not None:
             f.pvs_cells = [f.street]
         default = vis = []
