@@ -194,14 +194,22 @@ class WallSide:
         weight = 1.0 if self.blend <= 0 else min(1.0, (d - self.x_t) / self.blend)
         return WallView(zone, d, weight)
 
-    def to_row(self) -> list[float | int]:
-        """The side as one flat list (the store's and the wire's form; :meth:`from_row`)."""
+    def to_row(self, compact: bool = False) -> list[float | int]:
+        """The side as one flat list (the store's and the wire's form; :meth:`from_row`).
+
+        ``compact`` (the wire's form): textures numbered one after another (as the bake
+        numbers them) are given by the first id alone when there are two or more, so
+        that ``GET .../walls`` of a hall of 600 sides is a few kB, not 90."""
+        tex = list(self.textures)
+        if compact and self.zones > 1 and tex == list(range(tex[0], tex[0] + self.zones)):
+            tex = tex[:1]
         return [self.portal, self.side, *self.p0, *self.p1, self.z0, self.z1, self.floor, self.x_t, self.blend,
-                self.depth, self.alpha, self.zones, *self.textures]
+                self.depth, self.alpha, self.zones, *tex]
 
     @classmethod
     def from_row(cls, row: list[float | int] | tuple[float | int, ...], what: str = "wall") -> WallSide:
-        """A side from :meth:`to_row`'s list (:class:`InputError` naming ``what`` when malformed)."""
+        """A side from :meth:`to_row`'s list, full or compact (one texture id for two or
+        more zones: ids from it on); :class:`InputError` naming ``what`` when malformed."""
         if len(row) < 14:
             raise InputError(f"{what}: a wall row has at least 14 numbers, got {len(row)}")
         try:
@@ -210,6 +218,10 @@ class WallSide:
             tex = tuple(int(v) for v in row[14:])
         except (TypeError, ValueError) as exc:
             raise InputError(f"{what}: a wall row holds numbers only ({exc})") from exc
+        if zones > 1 and len(tex) == 1:  # compact: the ids numbered on from the first
+            if zones > 1 << 16:
+                raise InputError(f"{what}: bad wall row ({zones} zones)")
+            tex = tuple(range(tex[0], tex[0] + zones))
         if not all(math.isfinite(v) for v in nums) or zones < 1 or (tex and len(tex) != zones):
             raise InputError(f"{what}: bad wall row (zones {zones}, {len(tex)} textures)")
         return cls(int(nums[0]), int(nums[1]), (nums[2], nums[3]), (nums[4], nums[5]), nums[6], nums[7], nums[8],

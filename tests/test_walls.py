@@ -116,8 +116,13 @@ def test_a_side_row_round_trips_and_bad_rows_are_refused() -> None:
     assert WallSide.from_row(s.to_row()) == s
     with pytest.raises(InputError, match="wall"):
         WallSide.from_row([1, 2, 3])
+    # the wire's compact form: ids that follow one another by the first alone
+    assert s.to_row(compact=True) == [*s.to_row()[:-2], 7]
+    assert WallSide.from_row(s.to_row(compact=True)) == s
+    odd = WallSide(3, 1, (1.0, 2.0), (5.0, 2.0), 0.0, 4.0, 0.0, 2.0, 0.5, 6.0, A, 3, (7, 9, 8))
+    assert odd.to_row(compact=True) == odd.to_row() and WallSide.from_row(odd.to_row(compact=True)) == odd
     with pytest.raises(InputError, match="bad wall row"):
-        WallSide.from_row(s.to_row()[:-1])  # one texture short
+        WallSide.from_row(odd.to_row()[:-1])  # one texture short
 
 
 # ------------------------------------------------------------------ placement

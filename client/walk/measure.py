@@ -38,11 +38,7 @@ def measure(w: WalkState, f: Frame) -> None:
     o = w.objects
     have_obj = sum(1 for i in o.pvs if city.has_object(i)) if city is not None else 0
     have_rooms = sum(1 for c in f.default_room_cells if rooms is not None and rooms.mesh(c) is not None)
-    # the textures of the walls that close the walk as baked count as the cells do
-    seen = set(f.default_room_cells)
-    due = {tid: held for tid, cell, held in f.wall_due if cell in seen}
-    have_rooms += sum(due.values())
-    items = len(o.pvs) + len(f.default_room_cells) + len(due)
+    items = len(o.pvs) + len(f.default_room_cells)
     known = (f.room is not None) if w.indoors else (city is not None and f.street is not None and f.street in city.cells)
     empty = 1.0 if known else scene.unknown_quality
     dq = (have_obj + have_rooms) / items if items else empty

@@ -133,10 +133,10 @@ class Frame:
     """The impostors drawn (:class:`~walkstream.client.walk.impostors.DrawnImpostor`)."""
     walls: list[Any] = field(default_factory=list)
     """The virtual walls drawn as textures (:class:`~walkstream.client.walk.walls.DrawnWall`)."""
-    wall_due: list[tuple[int, int, bool]] = field(default_factory=list)
-    """The walls that close the frame's walk as baked (texture weight 1, held or not):
-    ``(texture id, the viewer's side cell, held)``; the frame's quality counts those on
-    its visible cells (a texture not in is content missing, as a cell is)."""
+    wall_wants: list[tuple[int, int, float]] = field(default_factory=list)
+    """Wall textures not held that the eye sees now or ahead: ``(texture id, the
+    viewer's side cell, need s)``; those near the walk are asked for
+    (:func:`~walkstream.client.walk.walls.want_wall_textures`)."""
     # -- draw
     snap: bool = False
     keys: list[Hashable] = field(default_factory=list)

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from walkstream.client.draw.quads import Quad, quads_of
 from walkstream.client.walk.state import Frame, WalkState
 
-__all__ = ["WALL_AHEAD_S", "DrawnWall", "drawn_walls", "frame_walls", "wall_quads"]
+__all__ = ["WALL_AHEAD_S", "DrawnWall", "drawn_walls", "frame_walls", "wall_quads", "want_wall_textures"]
 
 
 @dataclass(frozen=True)
@@ -64,12 +64,13 @@ walks into it (a zone is about a metre wide at A = 10 degrees on an 8 m grid).""
 def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     """The wall sides facing the viewer with a texture to show (held), and which portals
     close; sets ``rooms.closed`` (the walls held: the walk drawn), ``rooms.due_closed``
-    (every wall at weight 1: the walk as baked, whose cells are needed now), the frame's
-    :attr:`~walkstream.client.walk.state.Frame.wall_due`, and wants the missing textures,
-    those the eye will see ahead (:data:`WALL_AHEAD_S`) at their need times."""
+    (every wall at weight 1: the walk as baked, whose cells are needed now) and the
+    frame's :attr:`~walkstream.client.walk.state.Frame.wall_wants`: the missing textures
+    now and those the eye will see ahead (:data:`WALL_AHEAD_S`) at their need times
+    (asked for by :func:`want_wall_textures` once the walk is known)."""
     rooms, lane = w.scene.rooms, w.scene.wall_images
     sides, table = w.scene.walls, w.scene.wall_table
-    f.wall_due = []
+    f.wall_wants = []
     if rooms is None:
         return []
     if lane is None or not sides or table is None or not w.config.virtual_walls:
@@ -81,7 +82,7 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     horizons = WALL_AHEAD_S if float(np.linalg.norm(velocity[:2])) > 1e-3 else ()
     eyes = np.array([eye, *[eye + velocity * t for t in horizons]])
     zones, _d, weights = table.views(eyes)
-    wanted: dict[int, float] = {}
+    wanted: list[tuple[int, int, float]] = []
     out: list[DrawnWall] = []
     closed: set[int] = set()
     due: set[int] = set()
@@ -95,9 +96,8 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
         held = lane.held(tid)
         if weights[0, k] >= 1.0:
             due.add(s.portal)
-            f.wall_due.append((tid, cells[0], held))
         if not held:
-            wanted[tid] = 0.0
+            wanted.append((tid, cells[0], 0.0))
             continue  # not here yet: the portal stays open (geometry), never a hole
         img = lane.image(tid)
         out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
@@ -106,13 +106,31 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             closed.add(s.portal)
     for h, t in enumerate(horizons, start=1):
         for k in np.flatnonzero(weights[h] > 0.0).tolist():
-            tid = sides[k].textures[int(zones[h, k])]
-            if tid not in wanted and not lane.held(tid):
-                wanted[tid] = float(t)
-    lane.want(wanted)
+            s = sides[k]
+            tid = s.textures[int(zones[h, k])]
+            if not lane.held(tid):
+                a, b = portals[s.portal]
+                wanted.append((tid, a if s.side == 0 else b, float(t)))
+    f.wall_wants = wanted
     rooms.closed = frozenset(closed)
     rooms.due_closed = frozenset(due)
     return out
+
+
+def want_wall_textures(w: WalkState, f: Frame, cells: Sequence[int]) -> None:
+    """Want the textures of the frame's walls (:func:`frame_walls`), now and ahead, on
+    the sides of ``cells`` (the walk as baked: those its walk reaches): every wall in
+    the hall faces the viewer from somewhere, and asking for all of them filled the
+    link with textures of walls no frame draws."""
+    lane, rooms = w.scene.wall_images, w.scene.rooms
+    if lane is None or rooms is None:
+        return
+    now = set(cells)
+    wanted: dict[int, float] = {}
+    for tid, cell, need in f.wall_wants:
+        if cell in now and need < wanted.get(tid, np.inf):
+            wanted[tid] = need
+    lane.want(wanted)
 
 
 def drawn_walls(walls: list[DrawnWall], visible: list[int]) -> list[DrawnWall]:
