@@ -365,6 +365,17 @@ def test_walls_and_textures_are_served_immutable_and_in_batches(http: Http, bake
     again = http.get("/v1/scenes/walls/walls", headers={"Accept": MSGPACK, "If-None-Match": got.headers["etag"]})
     assert again.status_code == 304
     assert http.get("/v1/scenes/walls/walls", headers={"Accept": "application/json"}).json()["sides"][0][0] == sides[0].portal
+    # the sides as stored, on the wire compact (ids by the first) and gzip-compressed when asked
+    with SceneReader.open(baked[0]) as r:
+        assert [s.to_row() for s in sides] == r.wall_sides()
+    plain = http.get("/v1/scenes/walls/walls", headers={"Accept": MSGPACK, "Accept-Encoding": "identity"})
+    packed = http.get("/v1/scenes/walls/walls", headers={"Accept": MSGPACK, "Accept-Encoding": "gzip"})
+    assert "content-encoding" not in plain.headers and packed.headers["content-encoding"] == "gzip"
+    assert packed.headers["etag"] != plain.headers["etag"] and "Accept-Encoding" in packed.headers["vary"]
+    assert decode_walls(packed.content, "walls") == sides == decode_walls(plain.content, "walls")
+    assert int(packed.headers["content-length"]) < len(plain.content) / 2
+    assert http.get("/v1/scenes/walls/walls", headers={"Accept": MSGPACK, "Accept-Encoding": "gzip",
+                                                        "If-None-Match": packed.headers["etag"]}).status_code == 304
     tid = sides[0].textures[0]
     one = http.get(f"/v1/scenes/walls/walls/textures/{tid}")
     assert one.status_code == 200 and one.headers["content-type"] == "image/webp"
