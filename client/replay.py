@@ -135,6 +135,8 @@ async def _virtual_walls(scene: WalkScene, api: SceneClient, topology: Any, room
     scene.walls = tuple(s for s in sides if s.portal in cells)
     scene.wall_cells = cells
     scene.wall_table = WallTable(scene.walls)
+    corners = np.array([s.corners() for s in scene.walls], np.float64).reshape(-1, 4, 3)
+    scene.wall_boxes = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
     scene.wall_images = ImpostorImages(api, scene.cache, rooms.scheduler, kind="walltex")
 
 

@@ -43,7 +43,7 @@ from walkstream.shared.walls import (
 from walkstream.shared.wire import MSGPACK
 
 A = math.radians(10.0)
-SMALL = WallSettings(texels_per_m=8.0)
+SMALL = WallSettings(texels_per_m=8.0, codec="webp-lossless")  # lossless: the stored texture is the render
 
 
 def _side(length: float = 8.0, x_t: float = 8.0 / 3.0, zones: int | None = None) -> WallSide:

@@ -55,6 +55,9 @@ class WalkScene:
     """Each wall's portal id -> its two cells ``(a, b)`` (the topology's)."""
     wall_table: WallTable | None = None
     """:attr:`walls` as arrays (every side's zone and weight for many eyes at once)."""
+    wall_boxes: NDArray[np.float64] | None = None
+    """``(sides, 2, 3)`` each side's quad's box (min, max corners): the frustum test of
+    the textures a frame asks for."""
     wall_images: ImpostorImages | None = None
     """The wall textures' lane (kind ``walltex``; None without walls)."""
     unknown_quality: float = 0.0

@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 
 from walkstream.client.draw.quads import Quad, quads_of
 from walkstream.client.walk.state import Frame, WalkState
+from walkstream.shared.frustum import frustum_cull
 
 __all__ = ["WALL_AHEAD_S", "DrawnWall", "drawn_walls", "frame_walls", "wall_quads", "want_wall_textures"]
 
@@ -87,6 +88,10 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     closed: set[int] = set()
     due: set[int] = set()
     portals = w.scene.wall_cells
+    # only the walls in view ask for their textures (now and ahead, looking the same
+    # way); one behind the viewer is asked for when the viewer turns to it
+    boxes = w.scene.wall_boxes
+    seen = frustum_cull(boxes[:, 0], boxes[:, 1], f.vp) if boxes is not None else np.ones(len(sides), bool)
     for k in np.flatnonzero(weights[0] > 0.0).tolist():
         s = sides[k]
         zone = int(zones[0, k])
@@ -97,7 +102,8 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
         if weights[0, k] >= 1.0:
             due.add(s.portal)
         if not held:
-            wanted.append((tid, cells[0], 0.0))
+            if seen[k]:
+                wanted.append((tid, cells[0], 0.0))
             continue  # not here yet: the portal stays open (geometry), never a hole
         img = lane.image(tid)
         out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
@@ -105,7 +111,7 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
         if weights[0, k] >= 1.0:
             closed.add(s.portal)
     for h, t in enumerate(horizons, start=1):
-        for k in np.flatnonzero(weights[h] > 0.0).tolist():
+        for k in np.flatnonzero((weights[h] > 0.0) & seen).tolist():
             s = sides[k]
             tid = s.textures[int(zones[h, k])]
             if not lane.held(tid):
