@@ -452,8 +452,11 @@ def test_a_replay_draws_walls_and_culls_what_is_behind_them(replays: tuple[objec
     assert "walls" not in g  # --no-walls: no texture asked for, every portal open
     assert s["visible_cells_mean"] < g["visible_cells_mean"]
     assert s["triangles_mean"] < g["triangles_mean"]
-    # the textures share the link with the contents: a few frames at the start wait (see docs/benchmarks.md)
-    assert s["perfect_frame_ratio"] >= 0.95 and s["bytes_received"] > g["bytes_received"]
+    # only the textures of the walls on the cells due now, in view, are asked for (every
+    # wall faces the viewer from somewhere: asking for all filled the link), so the
+    # walk keeps its perfect frames at 56 kbit/s
+    assert s["perfect_frame_ratio"] >= 0.995 and s["bytes_received"] > g["bytes_received"]
+    assert w["textures_received"] < 0.5 * w["textures_per_wall"] * w["wall_sides"] / 2
     # the truth: what lies behind a closed wall shows on its texture, not as a culled pixel
     t = s["truth"]
     assert t["frames"] >= 2 and t["culled_pixels"] == 0 and t["wall_pixels"] > 0
