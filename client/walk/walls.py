@@ -56,7 +56,7 @@ class DrawnWall:
     """``(the viewer's side cell, the hidden cell)``."""
 
 
-WALL_AHEAD_S = (0.5, 1.0, 1.5, 2.0, 3.0)
+WALL_AHEAD_S = (0.5, 1.0, 1.5, 2.0, 3.0, 4.5, 6.0)
 """Horizons (seconds) at which the eye moved on at its velocity wants its walls'
 textures too, each at that need: the next zone's texture is in before the viewer
 walks into it (a zone is about a metre wide at A = 10 degrees on an 8 m grid)."""
@@ -132,9 +132,10 @@ def want_wall_textures(w: WalkState, f: Frame, cells: Sequence[int]) -> None:
     if lane is None or rooms is None:
         return
     now = set(cells)
+    near = now | {n for c in now if c in rooms.cells for n in rooms.cells[c].neighbours}
     wanted: dict[int, float] = {}
     for tid, cell, need in f.wall_wants:
-        if cell in now and need < wanted.get(tid, np.inf):
+        if cell in (now if need <= 0.0 else near) and need < wanted.get(tid, np.inf):
             wanted[tid] = need
     lane.want(wanted)
 
