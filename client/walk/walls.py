@@ -124,10 +124,11 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
 
 
 def want_wall_textures(w: WalkState, f: Frame, cells: Sequence[int]) -> None:
-    """Want the textures of the frame's walls (:func:`frame_walls`), now and ahead, on
-    the sides of ``cells`` (the walk as baked: those its walk reaches): every wall in
-    the hall faces the viewer from somewhere, and asking for all of them filled the
-    link with textures of walls no frame draws."""
+    """Want the textures of the frame's walls (:func:`frame_walls`) on the sides of
+    ``cells`` (the walk as baked: those its walk reaches), and those ahead on the sides
+    of those cells and of the cells one portal beyond them (the cell the viewer walks
+    into next): every wall in the hall faces the viewer from somewhere, and asking for
+    all of them filled the link with textures of walls no frame draws."""
     lane, rooms = w.scene.wall_images, w.scene.rooms
     if lane is None or rooms is None:
         return
