@@ -576,21 +576,13 @@ class _Builder:
                                                     "geometry", "over a low wall")
 
     def open_walls(self) -> None:
-        """With ``--virtual-walls``: the open stretches between rooms of one large open
-        space become ``wall`` portals too.
-
-        An *open space* is a set of room cells joined by ``split``, ``wall`` and open
-        (``touching``: no wall standing on it) portals; where its floor is over
-        ``2 S**2`` (the same bound that cuts one room part into a grid), every open
-        stretch of at least :data:`_MIN_WALL` between two of its rooms is a virtual
-        wall.  So a hall drawn as many touching bays (each its own room) is split at the
-        bays' borders as well as inside each bay, and the portal walk stops at a
-        textured wall on every side of the viewer's cell; two offices sharing an open
-        stretch stay open (their space is small).  Doors, windows, openings through a
-        wall and the stretches over low walls are never walls.
-        """
-        pitch = self.wall_pitch
-        if pitch is None:
+        """With ``--virtual-walls``, the open stretches between rooms of one large open space
+        become ``wall`` portals too: an open space is room cells joined by ``split``,
+        ``wall`` and open (``touching``) portals; where its floor is over ``2 S**2`` (the
+        bound that cuts one room part into a grid), every open stretch of at least
+        :data:`_MIN_WALL` is a wall.  So a hall drawn as touching bays is split at their
+        borders too; two offices sharing an open stretch stay open."""
+        if self.wall_pitch is None:
             return
         parent = list(range(len(self.cells)))
 
@@ -608,13 +600,12 @@ class _Builder:
                 parent[find(p.a)] = find(p.b)
         area: Counter[int] = Counter()
         for c in self.cells:
-            if c.kind == "room":
-                area[find(c.id)] += c.polygon.area
+            area[find(c.id)] += c.polygon.area if c.kind == "room" else 0.0
         made = 0
         for i, p in enumerate(self.portals):
-            bottom = p.polygon[np.isclose(p.polygon[:, 2], p.polygon[:, 2].min())][:, :2]
-            if (is_open(p) and area[find(p.a)] > 2.0 * pitch * pitch
-                    and float(np.hypot(*(bottom[-1] - bottom[0]))) >= _MIN_WALL):
+            low = p.polygon[np.isclose(p.polygon[:, 2], p.polygon[:, 2].min())][:, :2]
+            if (is_open(p) and area[find(p.a)] > 2.0 * self.wall_pitch ** 2
+                    and float(np.hypot(*(low[-1] - low[0]))) >= _MIN_WALL):
                 self.portals[i] = Portal(p.id, "wall", p.a, p.b, p.polygon, p.source, p.name)
                 made += 1
         if made:
