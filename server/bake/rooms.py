@@ -598,13 +598,13 @@ class _Builder:
         for p in self.portals:
             if p.kind in ("split", "wall") or is_open(p):
                 parent[find(p.a)] = find(p.b)
-        area: Counter[int] = Counter()
+        area: dict[int, float] = {}
         for c in self.cells:
-            area[find(c.id)] += c.polygon.area if c.kind == "room" else 0.0
+            area[find(c.id)] = area.get(find(c.id), 0.0) + (c.polygon.area if c.kind == "room" else 0.0)
         made = 0
         for i, p in enumerate(self.portals):
             low = p.polygon[np.isclose(p.polygon[:, 2], p.polygon[:, 2].min())][:, :2]
-            if (is_open(p) and area[find(p.a)] > 2.0 * self.wall_pitch ** 2
+            if (is_open(p) and area.get(find(p.a), 0.0) > 2.0 * self.wall_pitch ** 2
                     and float(np.hypot(*(low[-1] - low[0]))) >= _MIN_WALL):
                 self.portals[i] = Portal(p.id, "wall", p.a, p.b, p.polygon, p.source, p.name)
                 made += 1
