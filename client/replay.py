@@ -56,7 +56,7 @@ from walkstream.client.stream.images import ImpostorImages
 from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 from walkstream.client.stream.streamer import Streamer, StreamerConfig
 from walkstream.client.stream.walkstart import bundle_start, interior_start, manifest_task
-from walkstream.client.truth.recorder import INTERIOR_FAR_M, TruthRecorder, TruthResult
+from walkstream.client.truth.recorder import TruthRecorder, TruthResult, interior_far_m
 from walkstream.client.walk.crossing import crossing_topology
 from walkstream.client.walk.figures import WalkFrames
 from walkstream.client.walk.loop import walk
@@ -67,6 +67,7 @@ from walkstream.shared.errors import ApiError
 from walkstream.shared.ground import GROUND_Z
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.roomview import VIEW_NEAR_M, RoomView
+from walkstream.shared.walls import WallTable
 from walkstream.shared.wire import Manifest
 
 __all__ = ["ReplayResult", "run_replay", "replay"]
@@ -135,6 +136,9 @@ async def _virtual_walls(scene: WalkScene, api: SceneClient, topology: Any, room
         return
     scene.walls = tuple(s for s in sides if s.portal in cells)
     scene.wall_cells = cells
+    scene.wall_table = WallTable(scene.walls)
+    corners = np.array([s.corners() for s in scene.walls], np.float64).reshape(-1, 4, 3)
+    scene.wall_boxes = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
     scene.wall_images = ImpostorImages(api, scene.cache, rooms.scheduler, kind="walltex")
 
 
@@ -271,7 +275,7 @@ async def replay(
             proj = walk_projection(config, scene)
             near = VIEW_NEAR_M if rooms is not None else STREET_NEAR_M  # the projection's near plane
             # the truth draws as far as the streets reach, or the rooms beyond any fog
-            far = STREET_FAR_M if streamer is not None else INTERIOR_FAR_M
+            far = STREET_FAR_M if streamer is not None or topology is None else interior_far_m(topology)
             # a scene with street cells has outdoor space: the ground plane under it
             ground_z = GROUND_Z if streamer is not None else None
             device = make_device(config.device, config.seed)

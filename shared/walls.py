@@ -48,6 +48,7 @@ __all__ = [
     "DEFAULT_WALL_ERROR_DEG",
     "EYE_HEIGHT",
     "WallSide",
+    "WallTable",
     "WallView",
     "angular_error",
     "decode_walls",
@@ -193,14 +194,22 @@ class WallSide:
         weight = 1.0 if self.blend <= 0 else min(1.0, (d - self.x_t) / self.blend)
         return WallView(zone, d, weight)
 
-    def to_row(self) -> list[float | int]:
-        """The side as one flat list (the store's and the wire's form; :meth:`from_row`)."""
+    def to_row(self, compact: bool = False) -> list[float | int]:
+        """The side as one flat list (the store's and the wire's form; :meth:`from_row`).
+
+        ``compact`` (the wire's form): textures numbered one after another (as the bake
+        numbers them) are given by the first id alone when there are two or more, so
+        that ``GET .../walls`` of a hall of 600 sides is a few kB, not 90."""
+        tex = list(self.textures)
+        if compact and self.zones > 1 and tex == list(range(tex[0], tex[0] + self.zones)):
+            tex = tex[:1]
         return [self.portal, self.side, *self.p0, *self.p1, self.z0, self.z1, self.floor, self.x_t, self.blend,
-                self.depth, self.alpha, self.zones, *self.textures]
+                self.depth, self.alpha, self.zones, *tex]
 
     @classmethod
     def from_row(cls, row: list[float | int] | tuple[float | int, ...], what: str = "wall") -> WallSide:
-        """A side from :meth:`to_row`'s list (:class:`InputError` naming ``what`` when malformed)."""
+        """A side from :meth:`to_row`'s list, full or compact (one texture id for two or
+        more zones: ids from it on); :class:`InputError` naming ``what`` when malformed."""
         if len(row) < 14:
             raise InputError(f"{what}: a wall row has at least 14 numbers, got {len(row)}")
         try:
@@ -209,10 +218,53 @@ class WallSide:
             tex = tuple(int(v) for v in row[14:])
         except (TypeError, ValueError) as exc:
             raise InputError(f"{what}: a wall row holds numbers only ({exc})") from exc
+        if zones > 1 and len(tex) == 1:  # compact: the ids numbered on from the first
+            if zones > 1 << 16:
+                raise InputError(f"{what}: bad wall row ({zones} zones)")
+            tex = tuple(range(tex[0], tex[0] + zones))
         if not all(math.isfinite(v) for v in nums) or zones < 1 or (tex and len(tex) != zones):
             raise InputError(f"{what}: bad wall row (zones {zones}, {len(tex)} textures)")
         return cls(int(nums[0]), int(nums[1]), (nums[2], nums[3]), (nums[4], nums[5]), nums[6], nums[7], nums[8],
                    nums[9], nums[10], nums[11], nums[12], zones, tex)
+
+
+class WallTable:
+    """Many wall sides as arrays: :meth:`WallSide.view` for every side and many eyes at once.
+
+    The frame asks every side for its zone and weight at the eye and at a few eyes the
+    motion predictor puts ahead (so the textures of the zones the viewer walks into
+    are fetched before they are needed); one side at a time that is a Python loop per
+    side per eye.  ``views`` gives the same zones and weights as :meth:`WallSide.view`.
+    """
+
+    def __init__(self, sides: tuple[WallSide, ...] | list[WallSide]) -> None:
+        self.sides = tuple(sides)
+        n = len(self.sides)
+        self.p0 = np.array([s.p0 for s in self.sides], np.float64).reshape(n, 2)
+        self.along = np.array([s.along for s in self.sides], np.float64).reshape(n, 2)
+        self.normal = np.array([s.normal for s in self.sides], np.float64).reshape(n, 2)
+        self.width = np.array([s.length / s.zones for s in self.sides], np.float64)
+        self.zones = np.array([s.zones for s in self.sides], np.int64)
+        self.x_t = np.array([s.x_t for s in self.sides], np.float64)
+        self.blend = np.array([s.blend for s in self.sides], np.float64)
+        self.eye_z = np.array([s.floor + EYE_HEIGHT for s in self.sides], np.float64)
+        self.tan = np.tan(np.array([s.alpha for s in self.sides], np.float64))
+
+    def views(self, eyes: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+        """Zones ``(m, n)``, distances ``(m, n)`` and weights ``(m, n)`` of the ``n`` sides
+        for ``m`` eyes ``(m, 3)`` (each as :meth:`WallSide.view`)."""
+        e = np.asarray(eyes, np.float64).reshape(-1, 3)
+        rel = e[:, None, :2] - self.p0[None]
+        t = np.einsum("mnk,nk->mn", rel, self.along)
+        d = -np.einsum("mnk,nk->mn", rel, self.normal)
+        w = np.where(self.width > 0, self.width, 1.0)
+        zone = np.clip(np.floor(t / w), 0, self.zones - 1).astype(np.int64)
+        zone = np.where(self.width > 0, zone, 0)
+        dz = np.abs(e[:, None, 2] - self.eye_z[None])
+        blend = np.where(self.blend > 0, self.blend, 1.0)
+        weight = np.where(self.blend > 0, np.minimum(1.0, (d - self.x_t) / blend), 1.0)
+        weight = np.where((d <= self.x_t) | (dz > d * self.tan), 0.0, weight)
+        return zone, d, weight
 
 
 def decode_walls(body: bytes, what: str) -> tuple[WallSide, ...]:

@@ -160,3 +160,19 @@ def test_the_walk_across_a_lone_hall_keeps_clear_of_its_machines(tmp_path: Path)
     line = shapely.LineString(tour.xyz[:, :2])
     assert line.length > 40.0
     assert min(f.distance(line) for f in feet) >= CLEARANCE - 1e-6
+
+
+def test_the_truths_far_plane_reaches_the_halls_far_corners() -> None:
+    from walkstream.client.truth.recorder import INTERIOR_FAR_M, interior_far_m
+    from walkstream.server.bake.rooms import room_layout
+
+    plan = HALL_PRESETS["hall"]
+    layout = room_layout(load_interior_dict(generate_hall(plan)))
+    width, depth = plan.columns * plan.bay, plan.rows * plan.bay + plan.side_depth
+    diagonal = float(np.hypot(np.hypot(width, depth), plan.height))
+    far = interior_far_m(layout)
+    # from one far corner at the floor to the other under the roof: nothing clipped
+    assert diagonal > INTERIOR_FAR_M and diagonal < far < diagonal + 5.0
+    # a small building keeps the least far plane
+    small = room_layout(load_interior_dict(generate_hall(HallPlan(columns=2, rows=2, side_depth=0.0, equipment=0.0))))
+    assert interior_far_m(small) == INTERIOR_FAR_M

@@ -31,7 +31,7 @@ from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
 from walkstream.shared.errors import ApiError, InputError, StreamCut
 
-__all__ = ["AHEAD_LEAD_S", "IMAGE_LEAD_S", "WALL_LAG_S", "ImpostorImages", "offered_need"]
+__all__ = ["AHEAD_LEAD_S", "IMAGE_LEAD_S", "WALL_LAG_S", "WALL_SPAN_S", "ImpostorImages", "offered_need"]
 
 IMAGE_LEAD_S = -1.0
 """The need (seconds from now) an image of the current cell is offered at: before
@@ -49,9 +49,13 @@ MAX_REQUESTS = 2
 _FETCH = {"impostor": "impostors", "walltex": "wall_textures"}
 """Content kind -> the API client's batch call (and the request's name on the scheduler)."""
 
-WALL_LAG_S = 0.5
-"""A wall texture's need, seconds from now, as offered: after the contents due now (a
-wall without its texture is drawn as geometry, a cell without its contents is a hole)."""
+WALL_LAG_S = 0.05
+"""How much later than its need a wall texture is offered: a texture needed now goes
+just after the contents due now (a wall without its texture is drawn as geometry, a
+cell without its contents is a hole) and before any prefetch."""
+
+WALL_SPAN_S = 0.5
+"""Wall textures in one request: those needed within this many seconds of the first."""
 
 IMAGE_BYTES = 12_000.0
 """An image's bytes on the wire before one has arrived (the scheduler's cover counts them)."""
@@ -144,10 +148,16 @@ class ImpostorImages:
         todo = sorted((t, i) for i, t in self.wanted.items() if i not in self._asked and not self.held(i))
         if not todo:
             return None
-        ids = [i for _, i in todo[:MAX_BATCH]]
         need = todo[0][0]
-        # impostor images by when their cell is needed; wall textures after what is due now
-        offered = offered_need(need) if self.kind == "impostor" else min(need, 0.0) + WALL_LAG_S
+        if self.kind == "impostor":
+            ids = [i for _, i in todo[:MAX_BATCH]]
+            offered = offered_need(need)  # by when their cell is needed
+        else:
+            # wall textures: those needed now just after the contents due now, those
+            # ahead at their need; one batch holds what is needed within WALL_SPAN_S of
+            # the first, so a texture wanted later is not queued behind far ones
+            ids = [i for t, i in todo[:MAX_BATCH] if t <= need + WALL_SPAN_S]
+            offered = max(need, 0.0) + WALL_LAG_S
         return Offer(offered, lambda: self._start(ids))
 
     def in_flight(self) -> int:

@@ -233,6 +233,14 @@ class RoomStreamer:
         self.closed: frozenset[int] = frozenset()
         """Virtual walls (portal ids) the portal walk stops at this frame: drawn as their
         texture (:mod:`walkstream.client.walk.walls`); empty without walls."""
+        self.due_closed: frozenset[int] = frozenset()
+        """The walls the walk stops at as baked (every one the viewer sees at full
+        texture weight, its texture held or not): the cells needed now are those of
+        that walk (:attr:`due_visible`); a wall whose texture is still missing leaves
+        :attr:`closed` open, so the cells behind it are drawn when held, but they are
+        not needed now: its texture is (the walls' lane asks for it next)."""
+        self.due_visible: list[int] = []
+        """The cells of the walk as baked this frame (:attr:`due_closed`)."""
         """The fog distance in force this frame: portals farther are not looked through.
         The frame loop's lever (the budget tightens it); ``config.fog_m`` is the default."""
         self.topology = topology
@@ -372,16 +380,22 @@ class RoomStreamer:
             self.current = cell
         vis = self.visible_cells(e, view_proj, view, proj, size)
         self.visible = vis
+        due = vis
+        if self.due_closed != self.closed and self.current is not None:
+            # some wall's texture is still missing: what is needed now is the walk as baked
+            due = self._cells_from(self.current, e, view_proj, view, proj, size, self.due_closed)[1]
+        self.due_visible = due
         for c in vis:
             self.last_visible[c] = t
         self.observe(t, e)
         if view is not None:
             self._observe_heading(t, view)
         self._eye = e
-        want = self.wanted(t, e, vis, view_proj, view, proj, size)
+        want = self.wanted(t, e, due, view_proj, view, proj, size)
         seen = list(dict.fromkeys([*vis, *shown]))
+        vis = due
         if shown or ahead or self.foreign:
-            first = [c for c in seen if c not in self.foreign]
+            first = [c for c in dict.fromkeys([*due, *shown]) if c not in self.foreign]
             want = [c for c in dict.fromkeys([*first, *ahead, *want]) if c not in self.foreign]
             vis = first
         self._flush(t, want)

@@ -73,6 +73,7 @@ from walkstream.shared.scene.placement import ContentsPlacement
 __all__ = [
     "TRUTH_VIEW_DISTANCE",
     "INTERIOR_FAR_M",
+    "interior_far_m",
     "TruthResult",
     "TruthRecorder",
 ]
@@ -81,8 +82,31 @@ __all__ = [
 #: bake's default view distance (the API does not carry a scene's own).
 TRUTH_VIEW_DISTANCE = 800.0
 
-#: The far plane of an interior's truth (metres): beyond any room of a building.
+#: The least far plane of an interior's truth (metres); a larger building's is its extent
+#: (:func:`interior_far_m`).
 INTERIOR_FAR_M = 100.0
+
+#: Beyond the building's diagonal, metres (the near plane and rounding never clip a far corner).
+_FAR_SLACK_M = 1.0
+
+
+def interior_far_m(topology: Any) -> float:
+    """The far plane of an interior's truth: the diagonal of the box holding every cell
+    (outlines, floors and tops; the topology's), so that no point of the building is
+    beyond it from any eye inside (the production hall's diagonal is 116 m), and at
+    least :data:`INTERIOR_FAR_M`.
+
+    ``topology`` is a :class:`~walkstream.shared.roomwire.Topology` (its ``cells``, each
+    with an ``outline`` ``(n, 2)`` and ``zmin``/``zmax``)."""
+    pts = [np.asarray(c.outline, np.float64).reshape(-1, 2) for c in topology.cells if len(c.outline)]
+    if not pts:
+        return INTERIOR_FAR_M
+    xy = np.concatenate(pts)
+    z = [v for c in topology.cells if len(c.outline) for v in (float(c.zmin), float(c.zmax))]
+    span = np.array([*np.ptp(xy, axis=0), max(z) - min(z)])
+    if not np.all(np.isfinite(span)):
+        return INTERIOR_FAR_M
+    return max(INTERIOR_FAR_M, float(np.linalg.norm(span)) + _FAR_SLACK_M)
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ from walkstream.client.stream.streamer import Streamer
 from walkstream.shared.camera import perspective
 from walkstream.shared.roomview import VIEW_MIN_FAR_M, VIEW_NEAR_M
 from walkstream.shared.roomwire import Entrance
-from walkstream.shared.walls import WallSide
+from walkstream.shared.walls import WallSide, WallTable
 
 __all__ = ["STREET_NEAR_M", "STREET_FAR_M", "WalkScene", "walk_projection"]
 
@@ -53,6 +53,11 @@ class WalkScene:
     ``config.virtual_walls`` off)."""
     wall_cells: dict[int, tuple[int, int]] = field(default_factory=dict)
     """Each wall's portal id -> its two cells ``(a, b)`` (the topology's)."""
+    wall_table: WallTable | None = None
+    """:attr:`walls` as arrays (every side's zone and weight for many eyes at once)."""
+    wall_boxes: NDArray[np.float64] | None = None
+    """``(sides, 2, 3)`` each side's quad's box (min, max corners): the frustum test of
+    the textures a frame asks for."""
     wall_images: ImpostorImages | None = None
     """The wall textures' lane (kind ``walltex``; None without walls)."""
     unknown_quality: float = 0.0

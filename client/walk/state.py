@@ -133,6 +133,10 @@ class Frame:
     """The impostors drawn (:class:`~walkstream.client.walk.impostors.DrawnImpostor`)."""
     walls: list[Any] = field(default_factory=list)
     """The virtual walls drawn as textures (:class:`~walkstream.client.walk.walls.DrawnWall`)."""
+    wall_wants: list[tuple[int, int, float]] = field(default_factory=list)
+    """Wall textures not held that the eye sees now or ahead: ``(texture id, the
+    viewer's side cell, need s)``; those near the walk are asked for
+    (:func:`~walkstream.client.walk.walls.want_wall_textures`)."""
     # -- draw
     snap: bool = False
     keys: list[Hashable] = field(default_factory=list)

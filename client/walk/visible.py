@@ -11,7 +11,10 @@ outside (its windows), the street cell's PVS is visible too.
 
 On an interior baked with ``--virtual-walls``, the walls whose texture the viewer
 sees close the walk first (:mod:`.walls`): the portal walk stops there and the
-frame draws their textures.
+frame draws their textures.  What is due now is the walk as baked (every wall at full
+texture weight closes it, its texture held or not: those cells, then those
+textures); a texture not in yet leaves its wall open, and the perfect frame is the
+frame with nothing missing: the cells behind that wall are drawn and must be held.
 
 *On the street* (the PVS model): the current street cell's PVS.  An entrance's
 building stands in it as its shell (the interior's ``outside`` cell,
@@ -25,7 +28,7 @@ from __future__ import annotations
 import time
 
 from walkstream.client.walk.state import Frame, WalkState
-from walkstream.client.walk.walls import drawn_walls, frame_walls
+from walkstream.client.walk.walls import drawn_walls, frame_walls, want_wall_textures
 
 __all__ = ["OUTDOOR_FOG_M", "visible"]
 
@@ -43,6 +46,8 @@ def visible(w: WalkState, f: Frame) -> None:
         walls = frame_walls(w, f)  # which virtual walls close the walk this frame
         vis = rooms.tick(f.t, f.eye, f.vp, f.view, w.proj, w.size, cell=f.room)
         default = list(vis)
+        # the textures of the walls of the walk as baked (the cells due now)
+        want_wall_textures(w, f, rooms.due_visible)
         fog = w.indoor_fog
         while rooms.visible_bytes(vis) > rooms.cache.budget_bytes and fog > 2.0:
             fog *= 0.8
@@ -56,7 +61,7 @@ def visible(w: WalkState, f: Frame) -> None:
         f.walls = drawn_walls(walls, vis)
     else:
         if rooms is not None:
-            rooms.closed = frozenset()
+            rooms.closed = rooms.due_closed = frozenset()
         if f.street is not None:
             f.pvs_cells = [f.street]
         default = vis = []

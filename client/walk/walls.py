@@ -34,8 +34,9 @@ from numpy.typing import NDArray
 
 from walkstream.client.draw.quads import Quad, quads_of
 from walkstream.client.walk.state import Frame, WalkState
+from walkstream.shared.frustum import frustum_cull
 
-__all__ = ["DrawnWall", "drawn_walls", "frame_walls", "wall_quads"]
+__all__ = ["WALL_AHEAD_S", "DrawnWall", "drawn_walls", "frame_walls", "wall_quads", "want_wall_textures"]
 
 
 @dataclass(frozen=True)
@@ -55,37 +56,89 @@ class DrawnWall:
     """``(the viewer's side cell, the hidden cell)``."""
 
 
+WALL_AHEAD_S = (0.5, 1.0, 1.5, 2.0, 3.0, 4.5, 6.0)
+"""Horizons (seconds) at which the eye moved on at its velocity wants its walls'
+textures too, each at that need: the next zone's texture is in before the viewer
+walks into it (a zone is about a metre wide at A = 10 degrees on an 8 m grid)."""
+
+
 def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     """The wall sides facing the viewer with a texture to show (held), and which portals
-    close; sets ``rooms.closed`` and wants the missing textures (module docstring)."""
+    close; sets ``rooms.closed`` (the walls held: the walk drawn), ``rooms.due_closed``
+    (every wall at weight 1: the walk as baked, whose cells are needed now) and the
+    frame's :attr:`~walkstream.client.walk.state.Frame.wall_wants`: the missing textures
+    now and those the eye will see ahead (:data:`WALL_AHEAD_S`) at their need times
+    (asked for by :func:`want_wall_textures` once the walk is known)."""
     rooms, lane = w.scene.rooms, w.scene.wall_images
-    sides = w.scene.walls
+    sides, table = w.scene.walls, w.scene.wall_table
+    f.wall_wants = []
     if rooms is None:
         return []
-    if lane is None or not sides or not w.config.virtual_walls:
+    if lane is None or not sides or table is None or not w.config.virtual_walls:
         rooms.closed = frozenset()
+        rooms.due_closed = frozenset()
         return []
-    wanted: dict[int, float] = {}
+    eye = np.asarray(f.eye, np.float64).reshape(3)
+    velocity = rooms.velocity() if w.config.prefetch else np.zeros(3)
+    horizons = WALL_AHEAD_S if float(np.linalg.norm(velocity[:2])) > 1e-3 else ()
+    eyes = np.array([eye, *[eye + velocity * t for t in horizons]])
+    zones, _d, weights = table.views(eyes)
+    wanted: list[tuple[int, int, float]] = []
     out: list[DrawnWall] = []
     closed: set[int] = set()
+    due: set[int] = set()
     portals = w.scene.wall_cells
-    for s in sides:
-        v = s.view(f.eye)
-        if v.weight <= 0.0:
-            continue
-        tid = s.textures[v.zone]
-        if not lane.held(tid):
-            wanted[tid] = 0.0
+    # only the walls in view ask for their textures (now and ahead, looking the same
+    # way); one behind the viewer is asked for when the viewer turns to it
+    boxes = w.scene.wall_boxes
+    seen = frustum_cull(boxes[:, 0], boxes[:, 1], f.vp) if boxes is not None else np.ones(len(sides), bool)
+    for k in np.flatnonzero(weights[0] > 0.0).tolist():
+        s = sides[k]
+        zone = int(zones[0, k])
+        tid = s.textures[zone]
+        a, b = portals[s.portal]
+        cells = (a, b) if s.side == 0 else (b, a)
+        held = lane.held(tid)
+        if weights[0, k] >= 1.0:
+            due.add(s.portal)
+        if not held:
+            if seen[k]:
+                wanted.append((tid, cells[0], 0.0))
             continue  # not here yet: the portal stays open (geometry), never a hole
         img = lane.image(tid)
-        a, b = portals[s.portal]
-        out.append(DrawnWall(s.portal, s.side, v.zone, tid, v.weight, s.corners(),
-                             int(getattr(img, "nbytes", 0)), (a, b) if s.side == 0 else (b, a)))
-        if v.weight >= 1.0:
+        out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
+                             int(getattr(img, "nbytes", 0)), cells))
+        if weights[0, k] >= 1.0:
             closed.add(s.portal)
-    lane.want(wanted)
+    for h, t in enumerate(horizons, start=1):
+        for k in np.flatnonzero((weights[h] > 0.0) & seen).tolist():
+            s = sides[k]
+            tid = s.textures[int(zones[h, k])]
+            if not lane.held(tid):
+                a, b = portals[s.portal]
+                wanted.append((tid, a if s.side == 0 else b, float(t)))
+    f.wall_wants = wanted
     rooms.closed = frozenset(closed)
+    rooms.due_closed = frozenset(due)
     return out
+
+
+def want_wall_textures(w: WalkState, f: Frame, cells: Sequence[int]) -> None:
+    """Want the textures of the frame's walls (:func:`frame_walls`) on the sides of
+    ``cells`` (the walk as baked: those its walk reaches), and those ahead on the sides
+    of those cells and of the cells one portal beyond them (the cell the viewer walks
+    into next): every wall in the hall faces the viewer from somewhere, and asking for
+    all of them filled the link with textures of walls no frame draws."""
+    lane, rooms = w.scene.wall_images, w.scene.rooms
+    if lane is None or rooms is None:
+        return
+    now = set(cells)
+    near = now | {n for c in now if c in rooms.cells for n in rooms.cells[c].neighbours}
+    wanted: dict[int, float] = {}
+    for tid, cell, need in f.wall_wants:
+        if cell in (now if need <= 0.0 else near) and need < wanted.get(tid, np.inf):
+            wanted[tid] = need
+    lane.want(wanted)
 
 
 def drawn_walls(walls: list[DrawnWall], visible: list[int]) -> list[DrawnWall]:

@@ -81,6 +81,7 @@ _TOUCH = 0.03  # outlines this close touch
 _MIN_PORTAL = 0.3  # shorter open stretches are no passage
 _PROBES = (0.05, 0.15, 0.3, 0.5)  # beyond an opening's faces, metres
 _LOW_WALL = 0.5  # a wall stopping this far or more below the next floor is seen over
+_MIN_WALL = 1.0  # an open stretch between two rooms shorter than this stays open (no wall)
 _GROW = 0.5  # a space is grown over free floor up to its walls this far at most
 
 
@@ -574,6 +575,42 @@ class _Builder:
                                                     _vertical(pts[[0, -1]], top, min(x.zmax, y.zmax)),
                                                     "geometry", "over a low wall")
 
+    def open_walls(self) -> None:
+        """With ``--virtual-walls``, the open stretches between rooms of one large open space
+        become ``wall`` portals too: an open space is room cells joined by ``split``,
+        ``wall`` and open (``touching``) portals; where its floor is over ``2 S**2`` (the
+        bound that cuts one room part into a grid), every open stretch of at least
+        :data:`_MIN_WALL` is a wall.  So a hall drawn as touching bays is split at their
+        borders too; two offices sharing an open stretch stay open."""
+        if self.wall_pitch is None:
+            return
+        parent = list(range(len(self.cells)))
+
+        def find(i: int) -> int:
+            while parent[i] != i:
+                parent[i] = parent[parent[i]]
+                i = parent[i]
+            return i
+
+        def is_open(p: Portal) -> bool:
+            return p.kind == "opening" and p.source == "geometry" and p.name == "open"
+
+        for p in self.portals:
+            if p.kind in ("split", "wall") or is_open(p):
+                parent[find(p.a)] = find(p.b)
+        area: dict[int, float] = {}
+        for c in self.cells:
+            area[find(c.id)] = area.get(find(c.id), 0.0) + (c.polygon.area if c.kind == "room" else 0.0)
+        made = 0
+        for i, p in enumerate(self.portals):
+            low = p.polygon[np.isclose(p.polygon[:, 2], p.polygon[:, 2].min())][:, :2]
+            if (is_open(p) and area.get(find(p.a), 0.0) > 2.0 * self.wall_pitch ** 2
+                    and float(np.hypot(*(low[-1] - low[0]))) >= _MIN_WALL):
+                self.portals[i] = Portal(p.id, "wall", p.a, p.b, p.polygon, p.source, p.name)
+                made += 1
+        if made:
+            self.notes.append(f"{made} open stretches between rooms of an open space made virtual walls")
+
     # -- 5: holes in floors and stairs ---------------------------------------
 
     def floors(self) -> None:
@@ -745,6 +782,7 @@ def room_layout(scene: InteriorScene, wall_pitch: float | None = None) -> RoomLa
     b.virtual()
     b.touching()
     b.over_low_walls()
+    b.open_walls()
     b.floors()
     b.outside()
     return RoomLayout(b.cells, b.portals, b.stairs, b.ranges, b.notes, b.sources)

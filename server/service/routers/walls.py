@@ -4,7 +4,9 @@
     Every wall side: ``{"sides": [row, ...]}``, each row the numbers of
     :meth:`~walkstream.shared.walls.WallSide.to_row` (portal, side, ends, heights,
     floor, ``x_T``, blend, sampling depth, angle of error, zones, then one texture id
-    per zone); JSON or msgpack by ``Accept``, with an ETag and a 304.
+    per zone, or the first id alone when they follow one another); JSON or msgpack by
+    ``Accept`` (msgpack gzip-compressed when ``Accept-Encoding`` allows), with an ETag
+    and a 304.
 ``GET /v1/scenes/{scene}/walls/textures/{texture}``
     One texture as stored (``image/webp``, straight alpha, premultiplied on decoding),
     immutable, with an ETag and a 304.
@@ -24,7 +26,7 @@ from fastapi import APIRouter, Path, Request, Response
 from fastapi.responses import StreamingResponse
 
 from walkstream.server.service.dependencies import RepDep, SceneDep
-from walkstream.server.service.http import cached
+from walkstream.server.service.http import IMMUTABLE, accepts_gzip, cached, etag_matches
 from walkstream.server.service.imageroutes import (
     ImageSet,
     batch_responses,
@@ -56,8 +58,15 @@ TEXTURES = ImageSet(
     summary="Virtual walls",
 )
 async def walls(request: Request, scene: SceneDep, rep: RepDep) -> Response:
-    """Every wall side of the scene (``WallSide.to_row`` lists)."""
+    """Every wall side of the scene (``WallSide.to_row(compact=True)`` lists);
+    gzip-compressed msgpack when the request accepts it."""
     check_images(TEXTURES, scene, [])
+    if rep == "msgpack" and scene.walls_gzip is not None and accepts_gzip(request.headers.get("accept-encoding")):
+        enc = scene.walls_gzip
+        headers = {"ETag": enc.etag, "Cache-Control": IMMUTABLE, "Vary": "Accept, Accept-Encoding"}
+        if etag_matches(request.headers.get("if-none-match"), enc.etag):
+            return Response(status_code=304, headers=headers)
+        return Response(enc.content, media_type=enc.media_type, headers={**headers, "Content-Encoding": "gzip"})
     return cached(request, scene.walls[rep])
 
 
