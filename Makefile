@@ -24,10 +24,12 @@ lint: $(STAMP)
 
 # pytest on every core (pytest-xdist): one worker per core; --dist loadfile keeps each test
 # file on one worker, so a module's baked fixture is built once; the tests marked solo
-# (asserting on real time) run alone afterwards (docs/architecture.md, "A new test")
+# (asserting on real time) run alone afterwards, collected from the files that mark any
+# (collecting every file again costs as much as a solo test) (docs/architecture.md, "A new test")
+SOLO_FILES = $(shell grep -l 'mark\.solo' tests/test_*.py)
 test: $(STAMP) lint
 	$(BIN)/pytest -q -n auto --dist loadfile -m 'not solo'
-	$(BIN)/pytest -q -m solo
+	$(BIN)/pytest -q -m solo $(SOLO_FILES)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache build *.egg-info

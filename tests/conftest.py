@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
+from onceperrun import once_per_run
 from teamdata import team_data
 
 pytest_plugins = ["ci_skips"]
@@ -40,28 +41,36 @@ def gl(gl_ctx: moderngl.Context) -> Iterator[moderngl.Context]:
 
 
 # --------------------------------------------------------------------------- interiors
-# Baked once per session: Interiors I's tests and the portal culling tests share them.
+# Baked once per run and shared by every xdist worker (tests/onceperrun.py): Interiors I's
+# tests and the portal culling tests share them, and only read them.
 
 def _baked_ifc(tmp_path_factory: pytest.TempPathFactory, name: str) -> tuple[Path, dict[str, Any]]:
     pytest.importorskip("ifcopenshell", reason="the ifc extra (make test installs it)")
-    from walkstream.server.bake import bake
-
     src = team_data("indoor", name)
-    out = tmp_path_factory.mktemp(src.stem) / f"{src.stem}.db"
-    return out, bake(src, out)
+
+    def build(folder: Path) -> tuple[Path, dict[str, Any]]:
+        from walkstream.server.bake import bake
+
+        out = folder / f"{src.stem}.db"
+        return out, bake(src, out)
+
+    return once_per_run(tmp_path_factory, src.stem, build)
 
 
 @pytest.fixture(scope="session")
 def office_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A small generated office (2 storeys, 20 x 14 m), baked."""
-    from walkstream.server.bake import bake
-    from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
 
-    d = tmp_path_factory.mktemp("office")
-    src = d / "office.json"
-    write_interior(src, InteriorPlan(storeys=2, length=20, width=14, seed=2))
-    bake(src, d / "office.db")
-    return d / "office.db"
+    def build(folder: Path) -> Path:
+        from walkstream.server.bake import bake
+        from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
+
+        src = folder / "office.json"
+        write_interior(src, InteriorPlan(storeys=2, length=20, width=14, seed=2))
+        bake(src, folder / "office.db")
+        return folder / "office.db"
+
+    return once_per_run(tmp_path_factory, "office", build)
 
 
 @pytest.fixture(scope="session")
