@@ -88,7 +88,9 @@ def test_dask_local_cluster(city: Path, baked: tuple[Path, dict], tmp_path: Path
 
     db, _ = baked
     out = tmp_path / "dask.db"
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    # ":0": a free port for the dashboard; None means the fixed 8787, which two xdist workers
+    # (or any other job on the machine) may hold
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
         summary = bake(city, out, settings=FAST, scheduler=cluster.scheduler_address)
     ref = SceneReader.open(db)
     try:

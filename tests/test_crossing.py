@@ -395,7 +395,9 @@ def test_a_crossing_on_a_dask_local_cluster_bakes_the_same_scene(baked: tuple[Pa
     _, summary, d = baked
     out = d / "dask" / "x.db"
     out.parent.mkdir()
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    # ":0": a free port for the dashboard; None means the fixed 8787, which two xdist workers
+    # (or any other job on the machine) may hold
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
         got = bake(d / "city.geojson", out, settings=FAST, interior=d / "office.json", name="scene",
                    scheduler=cluster.scheduler_address)
     assert got["version"] == summary["version"]
