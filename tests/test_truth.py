@@ -350,3 +350,23 @@ def test_the_ground_plane_changes_colours_below_the_horizon_and_no_id(gl: Any) -
     sky_share, bare_share = horizon_shares(bare_rgb, bare_ids, below)
     assert sky_share == bare_share > 0.05
     assert horizon_shares(c_rgb, c_ids, below) == (0.0, bare_share)
+
+
+def test_bench_streams_truth_table_prints_the_pvs_figures() -> None:
+    """``bench stream --truth-every``: the share of frames over 0.01 % and the mean, per row."""
+    from walkstream.benchmarks.stream import format_truth_table
+    from walkstream.client.report.truth import TruthLog, summarise_truth
+
+    k = CAUSES.index("pvs")
+    miss = np.zeros((4, len(CAUSES)))
+    miss[1:3, k] = 3e-4  # two of the four frames from the first perfect one
+    truth = summarise_truth(TruthLog(np.arange(4), np.arange(4.0), np.zeros(4), miss), 0.0)
+    table = format_truth_table([{"scenario": "kouvola SE 56k", "truth": truth}])
+    head, _, line = table.splitlines()
+    assert "pvs>0.01%" in head and "pvs% mean" in head
+    cols = line.split()
+    assert cols[:3] == ["kouvola", "SE", "56k"]
+    assert "50.00" in cols and "0.0150" in cols  # 2 of 4 frames; mean 1.5e-4 as a percentage
+    # a report without the figure (an older report.json) prints n/a, not a KeyError
+    del truth["pvs_over_hundredth_percent_ratio"]
+    assert "n/a" in format_truth_table([{"scenario": "old", "truth": truth}])
