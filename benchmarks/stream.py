@@ -202,7 +202,12 @@ def format_stream_table(rows: list[dict[str, Any]]) -> str:
 
 
 def format_truth_table(rows: list[dict[str, Any]]) -> str:
-    """The ground-truth figures of the rows that have them (``--truth-every``), one line each."""
+    """The ground-truth figures of the rows that have them (``--truth-every``), one line each.
+
+    ``pvs>0.01%``: the share of the compared frames from the first perfect one whose
+    PVS-caused missing pixels exceed 0.01 % of the frame; ``pvs% mean``: their mean
+    share over every compared frame (:mod:`walkstream.client.report.truth`).
+    """
     have = [r for r in rows if r.get("truth") and r.get("kind") != "crossing"]
     if not have:
         return ""
