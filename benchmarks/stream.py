@@ -202,7 +202,12 @@ def format_stream_table(rows: list[dict[str, Any]]) -> str:
 
 
 def format_truth_table(rows: list[dict[str, Any]]) -> str:
-    """The ground-truth figures of the rows that have them (``--truth-every``), one line each."""
+    """The ground-truth figures of the rows that have them (``--truth-every``), one line each.
+
+    ``pvs>0.01%``: the share of the compared frames from the first perfect one whose
+    PVS-caused missing pixels exceed 0.01 % of the frame; ``pvs% mean``: their mean
+    share over every compared frame (:mod:`walkstream.client.report.truth`).
+    """
     have = [r for r in rows if r.get("truth") and r.get("kind") != "crossing"]
     if not have:
         return ""
@@ -211,7 +216,7 @@ def format_truth_table(rows: list[dict[str, Any]]) -> str:
         return "n/a" if v is None else f"{100 * v:.{digits}f}"
 
     head = (
-        f"{'scenario':<22} {'compared':>8} {'differ%':>7} {'>0.5%':>6} {'pvs% mean':>9} "
+        f"{'scenario':<22} {'compared':>8} {'differ%':>7} {'>0.5%':>6} {'pvs>0.01%':>9} {'pvs% mean':>9} "
         f"{'pvs% max':>8} {'lod% mean':>9} {'culled% max':>11} {'sky% max':>8} {'no obj% mean':>12}"
     )
     lines = [head, "-" * len(head)]
@@ -221,7 +226,8 @@ def format_truth_table(rows: list[dict[str, Any]]) -> str:
         below = t.get("below_horizon") or {}
         lines.append(
             f"{r['scenario']:<22} {t['frames']:>8} {pct(t['differing_pixels_mean']):>7} "
-            f"{pct(t['over_half_percent_ratio'], 1):>6} {pct(m['pvs']['mean'], 3):>9} "
+            f"{pct(t['over_half_percent_ratio'], 1):>6} "
+            f"{pct(t.get('pvs_over_hundredth_percent_ratio'), 2):>9} {pct(m['pvs']['mean'], 4):>9} "
             f"{pct(m['pvs']['max'], 3):>8} {pct(m['lod']['mean'], 3):>9} {pct(m['culled']['max'], 3):>11} "
             f"{pct(below.get('sky', {}).get('max')):>8} {pct(below.get('no_object', {}).get('mean')):>12}"
         )

@@ -124,10 +124,36 @@ def city(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+#: the ``(step, unit)`` of every step the ``baked`` bake started, in order
+STAGES: list[tuple[str, str]] = []
+
+
 @pytest.fixture(scope="module")
 def baked(city: Path, gl_ctx: object) -> tuple[Path, dict]:
     out = city.parent / "field.db"
-    return out, bake(city, out, settings=FAST)
+    return out, bake(city, out, settings=FAST, stage=lambda step, unit: STAGES.append((step, unit)))
+
+
+@pytest.mark.gl
+def test_the_progress_bar_counts_field_points_as_points(baked: tuple[Path, dict]) -> None:
+    """The field step is labelled as such (it once counted field points as "cell")."""
+    assert STAGES and STAGES[0] == ("visibility field", "point")
+    assert all(unit != "cell" for step, unit in STAGES if step == "visibility field")
+
+
+def test_the_bar_takes_each_steps_label_and_unit(capsys: pytest.CaptureFixture[str]) -> None:
+    from walkstream.terminal import count_bar, stage_setter
+
+    bar, progress = count_bar("baking cells", "cell")
+    stage = stage_setter(bar)
+    stage("visibility field", "point")
+    progress(3, 10)
+    assert bar.desc.startswith("visibility field") and bar.unit == "point" and bar.n == 3
+    stage("impostor images", "image")
+    assert bar.desc.startswith("impostor images") and bar.unit == "image" and bar.n == 0
+    progress(1, 4)
+    bar.close()
+    assert "visibility field" in capsys.readouterr().err
 
 
 @pytest.mark.gl

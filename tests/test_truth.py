@@ -38,6 +38,23 @@ EVERY = 10
 # --------------------------------------------------------------------------- comparison
 
 
+def test_pvs_misses_over_a_hundredth_percent_count_after_the_first_perfect_frame() -> None:
+    """Only the ``pvs`` column counts, only from the first perfect frame on, over 1e-4 strictly."""
+    from walkstream.client.report.truth import PVS_OVER_SHARE, TruthLog, summarise_truth
+
+    k = CAUSES.index("pvs")
+    miss = np.zeros((5, len(CAUSES)))
+    miss[0, k] = 0.5  # before the first perfect frame: not counted
+    miss[1, k] = PVS_OVER_SHARE  # exactly at the bound: not over it
+    miss[2, k] = 2 * PVS_OVER_SHARE  # over it
+    miss[3, CAUSES.index("not_received")] = 0.5  # the link's miss, not the PVS's
+    log = TruthLog(np.arange(5), np.arange(5.0), np.zeros(5), miss)
+    s = summarise_truth(log, 1.0)
+    assert s["pvs_over_hundredth_percent_ratio"] == pytest.approx(1 / 4)
+    assert s["missing"]["pvs"]["mean"] == pytest.approx((0.5 + 3 * PVS_OVER_SHARE) / 5)
+    assert summarise_truth(log, None)["pvs_over_hundredth_percent_ratio"] is None
+
+
 def _frames() -> tuple[np.ndarray, np.ndarray]:
     """A 2 x 6 truth: objects 0..5 one per column on row 0, nothing on row 1."""
     t = np.zeros((2, 6), np.uint32)
@@ -165,11 +182,15 @@ def test_the_truth_changes_no_other_figure(runs: tuple[ReplayResult, ReplayResul
     assert a == b
     np.testing.assert_array_equal(plain.log.frame_time, with_truth.log.frame_time)
     # the truth object exactly as specified
-    assert set(t) == {"frames", "differing_pixels_mean", "over_half_percent_ratio", "missing", "colour", "below_horizon"}
+    assert set(t) == {
+        "frames", "differing_pixels_mean", "over_half_percent_ratio", "pvs_over_hundredth_percent_ratio",
+        "missing", "colour", "below_horizon",
+    }
     assert set(t["missing"]) == set(CAUSES)
     assert all(set(v) == {"mean", "p95", "max"} for v in t["missing"].values())
     assert t["frames"] == len(range(0, a["frames"], EVERY))
     # every object is in every PVS: nothing is missing for visibility, nothing culled
+    assert t["pvs_over_hundredth_percent_ratio"] == 0.0
     assert t["missing"]["pvs"]["max"] == 0.0 and t["missing"]["culled"]["max"] == 0.0
     assert t["missing"]["fog"]["max"] == 0.0
     # the start-up frames miss what has not arrived yet
@@ -329,3 +350,23 @@ def test_the_ground_plane_changes_colours_below_the_horizon_and_no_id(gl: Any) -
     sky_share, bare_share = horizon_shares(bare_rgb, bare_ids, below)
     assert sky_share == bare_share > 0.05
     assert horizon_shares(c_rgb, c_ids, below) == (0.0, bare_share)
+
+
+def test_bench_streams_truth_table_prints_the_pvs_figures() -> None:
+    """``bench stream --truth-every``: the share of frames over 0.01 % and the mean, per row."""
+    from walkstream.benchmarks.stream import format_truth_table
+    from walkstream.client.report.truth import TruthLog, summarise_truth
+
+    k = CAUSES.index("pvs")
+    miss = np.zeros((4, len(CAUSES)))
+    miss[1:3, k] = 3e-4  # two of the four frames from the first perfect one
+    truth = summarise_truth(TruthLog(np.arange(4), np.arange(4.0), np.zeros(4), miss), 0.0)
+    table = format_truth_table([{"scenario": "kouvola SE 56k", "truth": truth}])
+    head, _, line = table.splitlines()
+    assert "pvs>0.01%" in head and "pvs% mean" in head
+    cols = line.split()
+    assert cols[:3] == ["kouvola", "SE", "56k"]
+    assert "50.00" in cols and "0.0150" in cols  # 2 of 4 frames; mean 1.5e-4 as a percentage
+    # a report without the figure (an older report.json) prints n/a, not a KeyError
+    del truth["pvs_over_hundredth_percent_ratio"]
+    assert "n/a" in format_truth_table([{"scenario": "old", "truth": truth}])

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from walkstream.shared.errors import WalkstreamError
-from walkstream.terminal import count_bar, print_summary
+from walkstream.terminal import count_bar, print_summary, stage_setter
 
 __all__ = ["add_bake_parsers", "default_city_source", "run_bake"]
 
@@ -77,7 +77,8 @@ def run_bake(source: str | Path, output: str | Path, **kw: Any) -> dict[str, Any
 
     bar, progress = count_bar("baking cells", "cell")
     try:
-        return bake(source, output, progress=progress, log=lambda m: bar.write(m, file=sys.stderr), **kw)
+        return bake(source, output, progress=progress, log=lambda m: bar.write(m, file=sys.stderr),
+                    stage=stage_setter(bar), **kw)
     finally:
         bar.close()
 

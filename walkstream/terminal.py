@@ -10,7 +10,7 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["building_bar", "count_bar", "WalkBar", "print_summary"]
+__all__ = ["building_bar", "count_bar", "stage_setter", "WalkBar", "print_summary"]
 
 
 def building_bar(total: int, desc: str) -> Any:
@@ -32,6 +32,20 @@ def count_bar(desc: str, unit: str) -> tuple[Any, Callable[[int, int], None]]:
         bar.refresh()
 
     return bar, progress
+
+
+def stage_setter(bar: Any) -> Callable[[str, str], None]:
+    """A ``(step, unit)`` callback that starts ``bar`` (a :func:`count_bar`) afresh for a step.
+
+    A bake counts field points, then PVS cells, then images, each with its own label.
+    """
+
+    def stage(step: str, unit: str) -> None:
+        bar.set_description(step, refresh=False)
+        bar.unit = unit
+        bar.reset(total=0)
+
+    return stage
 
 
 class WalkBar:

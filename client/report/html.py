@@ -201,6 +201,10 @@ def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | N
         ("frames compared", str(s.get("frames", 0))),
         ("differing pixels, mean", pct(s.get("differing_pixels_mean"))),
         ("frames missing > 0.5 % (from the first perfect frame)", pct(s.get("over_half_percent_ratio"))),
+        (
+            "frames whose PVS misses > 0.01 % (from the first perfect frame)",
+            pct(s.get("pvs_over_hundredth_percent_ratio")),
+        ),
     ]
     for name, b in (s.get("below_horizon") or {}).items():
         rows.append(

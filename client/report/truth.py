@@ -20,6 +20,12 @@
     is at least the first perfect frame's), the share whose missing pixels -- every
     cause but ``fog``, which hides objects on purpose -- exceed 0.5 % of the frame;
     ``None`` when no compared frame comes after a perfect one.
+``pvs_over_hundredth_percent_ratio``
+    Among the same frames, the share whose PVS-caused missing pixels (cause ``pvs``:
+    the object is not in the PVS of the viewer's cell, whatever the link did) exceed
+    :data:`PVS_OVER_SHARE` (0.01 %) of the frame: the misses of the visibility bake a
+    viewer could see; ``None`` as above.  The mean of the same share over every
+    compared frame is ``missing.pvs.mean``.
 ``colour``
     The colour error of the client's picture against the full scene (a city walk's
     frames): :func:`~walkstream.client.report.colour.summarise_colour`.
@@ -51,6 +57,7 @@ from walkstream.shared.errors import InputError
 
 __all__ = [
     "OVER_SHARE",
+    "PVS_OVER_SHARE",
     "TruthLog",
     "summarise_truth",
     "write_truth_csv",
@@ -59,6 +66,8 @@ __all__ = [
 
 #: a compared frame is "bad" when its missing pixels exceed this share of the frame
 OVER_SHARE = 0.005
+#: a compared frame's PVS misses are "visible" when its ``pvs`` pixels exceed this share
+PVS_OVER_SHARE = 1e-4
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -141,10 +150,12 @@ def summarise_truth(log: TruthLog, t_first_perfect: float | None) -> dict[str, A
         np.zeros(len(log), bool) if t_first_perfect is None else log.t >= float(t_first_perfect)
     )
     over = log.missed[after] > OVER_SHARE
+    pvs_over = log.missing[after, CAUSES.index("pvs")] > PVS_OVER_SHARE
     out: dict[str, Any] = {
         "frames": len(log),
         "differing_pixels_mean": float(log.differing.mean()) if len(log) else None,
         "over_half_percent_ratio": float(over.mean()) if over.size else None,
+        "pvs_over_hundredth_percent_ratio": float(pvs_over.mean()) if pvs_over.size else None,
         "missing": {c: _stats(log.missing[:, k]) for k, c in enumerate(CAUSES)},
     }
     if log.colour is not None:

@@ -57,6 +57,7 @@ def drive(
     log: Callable[[str], None] | None = None,
     max_cells: int | None = None,
     started: float | None = None,
+    stage: Callable[[str, str], None] | None = None,
     resume: bool = True,
 ) -> dict[str, Any]:
     """Bake ``plan`` into the database ``output`` (replaced atomically on success).
@@ -70,8 +71,12 @@ def drive(
     workers, scheduler:
         Local processes, or a Dask scheduler ``tcp://HOST:PORT``, for the chunks.
     progress:
-        Called with ``(cells done, cells total)`` of the step running (contents,
-        then PVS).
+        Called with ``(done, total)`` of the step running: field points, room
+        contents, PVS cells, impostor images, wall textures.
+    stage:
+        Called with ``(step, unit)`` as each of those steps starts (``("visibility
+        field", "point")``, ``("PVS", "cell")``, ...), so that a progress bar names
+        what ``progress`` counts.
     log:
         Called with one-line messages about the stages.
     max_cells:
@@ -95,6 +100,7 @@ def drive(
     if workers < 1:
         raise InputError(f"--workers: expected >= 1, got {workers}")
     say = log or (lambda _msg: None)
+    step = stage or (lambda _step, _unit: None)
     t0 = time.perf_counter() if started is None else started
     out = Path(output)
     writer = SceneWriter.create(
@@ -109,6 +115,7 @@ def drive(
         grown: list[tuple[int, Any, Any]] = []
         if plan.field is not None:
             fc = plan.field
+            step("visibility field", "point")
             sets = bake_field(fc.lattice, fc.scene, fc.settings, fc.key, field_folder(out, fc.key), workers=workers,
                               scheduler=scheduler, progress=progress, max_points=max_cells)
             if sets is None:
@@ -125,6 +132,7 @@ def drive(
             ids = {c.id + rooms.offset for c in rooms.layout.cells}
             encode_s = 0.0
             if not ids <= done:
+                step("room contents", "cell")
                 found = room_contents(rooms.scene, rooms.layout, workers=workers, scheduler=scheduler,
                                       progress=progress)
                 if rooms.wall_plan is not None:  # objects across a virtual wall: whole, as geometry
@@ -140,6 +148,7 @@ def drive(
             todo = todo[:max_cells]
         finished = resumed
         if pvs is not None:
+            step("PVS", "cell")
             for results in run_chunks(
                 pvs_task, pvs_items(todo), (pvs.scene, pvs.settings, pvs.key), size=PVS_CHUNK, workers=workers,
                 scheduler=scheduler, progress=progress, done=resumed, total=len(pvs_cells),
@@ -153,9 +162,11 @@ def drive(
             return {}
         imp_cells = pvs_cells or (plan.field.cells if plan.field is not None else [])
         if plan.impostors is not None and imp_cells:
+            step("impostor images", "image")
             extra.update(bake_impostors(writer, plan.impostors, imp_cells, workers=workers, scheduler=scheduler,
                                         progress=progress, say=say))
         if rooms is not None and rooms.walls is not None and rooms.wall_plan is not None:
+            step("wall textures", "texture")
             extra.update(bake_walls(writer, rooms.scene, rooms.wall_plan, rooms.walls, settings_key(plan.settings),
                                     workers=workers, scheduler=scheduler, progress=progress, say=say))
         # the default walks: made from the cells alone, so a resumed bake records the

@@ -76,6 +76,7 @@ def bake(
     building: str | None = None,
     impostors: ImpostorSettings | None = None,
     walls: WallSettings | None = None,
+    stage: Callable[[str, str], None] | None = None,
 ) -> dict[str, Any]:
     """Bake ``source`` (GeoJSON, OpenStreetMap, an IFC model or an interior file) into ``output``.
 
@@ -96,9 +97,12 @@ def bake(
     scheduler:
         ``tcp://HOST:PORT`` of a Dask distributed scheduler to send the cell tasks to.
     progress:
-        Called with ``(cells done, cells total)`` as cells finish.
+        Called with ``(done, total)`` as the running step's items finish.
     log:
         Called with one-line messages about the stages.
+    stage:
+        Called with ``(step, unit)`` as each step starts (what ``progress`` counts;
+        :func:`~walkstream.server.bake.driver.drive`).
     max_cells:
         Stop after this many new cells without finishing the database (for tests of
         interruption and resume; the work file stays for the next run).
@@ -151,7 +155,7 @@ def bake(
                 raise InputError(f"--virtual-walls: {src.name} is a city; virtual walls are an interior's (for now)")
             plan = city_plan(scene, src, Path(output), st, name=name, say=say, impostors=impostors)
     return drive(plan, output, workers=workers, scheduler=scheduler, progress=progress, log=log,
-                 max_cells=max_cells, started=t0)
+                 max_cells=max_cells, started=t0, stage=stage)
 
 
 def bake_interior(
