@@ -100,7 +100,7 @@ The triangles that stay triangles are mostly curved surfaces (a stair's nosing a
 handrail, a round window's frame), which exporters write with every corner repeated on
 every face: on FZK-Haus the stair's 2,146 triangles come with 5,816 corners on 1,136 grid
 points.  Version 4 (:data:`WELDED_FORMAT`) gives each part's kept triangles one vertex
-per grid point, and sends their indices as **high-water codes** over all parts at once
+per grid point, and sends their indices as **high-water codes** (``keptindices``) over all parts at once
 (every part's vertices follow the previous part's, in the order its triangles first use
 them): 0 for the next vertex not used before, else ``h + 1 - i`` with ``h`` the highest
 index used so far; a part's kept triangles go breadth first across shared edges when
@@ -132,6 +132,12 @@ from walkstream.shared.codec.boxmesh import (
     rect_of,
     rect_pairs,
     rect_ring,
+)
+from walkstream.shared.codec.keptindices import (
+    by_neighbours,
+    coded_size,
+    from_high_water_codes,
+    high_water_codes,
 )
 from walkstream.shared.codec.varint import (
     decode_varints,
@@ -440,61 +446,14 @@ def _encode_part(
         rep = np.zeros(int(point.max()) + 1, np.int64)
         rep[point] = kt.reshape(-1)  # any original vertex at that grid point stands for it
         kt = rep[point].reshape(-1, 3)
-        bfs = _by_neighbours(kt)
-        if _raw_size(q, bfs) < _raw_size(q, kt):
+        bfs = by_neighbours(kt)
+        if coded_size(q, bfs) < coded_size(q, kt):
             kt = bfs
     used, first = np.unique(kt.reshape(-1), return_index=True)
     order = used[np.argsort(first)]  # vertices in the order they first appear
     remap = np.full(len(q), -1, np.int64)
     remap[order] = np.arange(len(order))
     return q[order], remap[kt], polys, found
-
-
-def _raw_size(q: NDArray[np.int64], t: NDArray[np.int64]) -> int:
-    """Bytes of version 4's varints (position steps, high-water codes) for triangles ``t``
-    over grid points ``q``, before compression: how the encoder picks an order."""
-    used, first = np.unique(t.reshape(-1), return_index=True)
-    order = used[np.argsort(first)]
-    remap = np.full(len(q), -1, np.int64)
-    remap[order] = np.arange(len(order))
-    steps = np.diff(q[order], axis=0, prepend=np.zeros((1, 3), np.int64))
-    codes = _high_water([remap[t].reshape(-1)], [len(order)], [len(t)])
-    return len(encode_varints(zigzag(steps.T.reshape(-1)))) + len(encode_varints(codes))
-
-
-def _by_neighbours(t: NDArray[np.int64]) -> NDArray[np.int64]:
-    """``(m, 3)`` triangles ``t`` reordered breadth first across shared edges (a
-    triangle's neighbours follow it), so that version 4's high-water codes stay small; the
-    order of triangles changes nothing drawn."""
-    m = len(t)
-    if m < 3:
-        return t
-    e = np.sort(np.stack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
-    _, edge = np.unique(e, axis=0, return_inverse=True)
-    edge = edge.reshape(-1)
-    owner = np.repeat(np.arange(m), 3)
-    by_edge = np.argsort(edge, kind="stable")
-    starts = np.searchsorted(edge[by_edge], np.arange(int(edge.max()) + 2))
-    sharing = [owner[by_edge[a:b]].tolist() for a, b in zip(starts[:-1].tolist(), starts[1:].tolist(), strict=True)]
-    edges = edge.reshape(m, 3).tolist()
-    seen = bytearray(m)
-    order: list[int] = []
-    for s in range(m):
-        if seen[s]:
-            continue
-        seen[s] = 1
-        queue = [s]
-        head = 0
-        while head < len(queue):
-            i = queue[head]
-            head += 1
-            for g in edges[i]:
-                for j in sharing[g]:
-                    if not seen[j]:
-                        seen[j] = 1
-                        queue.append(j)
-        order.extend(queue)
-    return t[np.asarray(order, np.int64)]
 
 
 def encode_planar_body(
@@ -580,7 +539,7 @@ def encode_planar_body(
         "indices": encode_varints(zigzag(di)),
     }
     if version == 4:
-        body["indices"] = encode_varints(_high_water(idx, vcount, tcount))
+        body["indices"] = encode_varints(high_water_codes(idx, vcount, tcount))
     if version >= 3:
         bx = np.asarray(boxes, np.int64).reshape(-1, 7)
         blo = np.diff(bx[:, :3], axis=0, prepend=np.zeros((1, 3), np.int64))
@@ -599,44 +558,6 @@ def encode_planar_body(
             # field by field, as the positions
             body["rects"] = encode_varints(zigzag(np.column_stack([rlo, rc[:, 3:]]).T.reshape(-1)))
     return body
-
-
-def _high_water(idx: list[NDArray[np.int64]], vcount: list[int], tcount: list[int]) -> NDArray[np.uint64]:
-    """Version 4's kept-triangle indices: 0 for a vertex not used before (vertices come in
-    the order the triangles first use them), else how far back it is, ``h + 1 - i`` with
-    ``h`` the highest index used so far; over all parts at once (each part's vertices
-    follow the previous part's, every one of them used)."""
-    nv = np.asarray(vcount, np.int64)
-    g = np.concatenate(idx) + np.repeat(np.cumsum(nv) - nv, np.asarray(tcount, np.int64) * 3) if idx else np.zeros(0, np.int64)
-    if not len(g):
-        return np.zeros(0, np.uint64)
-    high = np.concatenate([[-1], np.maximum.accumulate(g)[:-1]])
-    return np.where(g == high + 1, 0, high + 1 - g).astype(np.uint64)
-
-
-def _from_high_water(
-    code: NDArray[np.int64], vcount: NDArray[np.int64], tcount: NDArray[np.int64], what: str
-) -> NDArray[np.int64]:
-    """``(3 * triangles,)`` each part's local kept-triangle indices from :func:`_high_water`'s codes.
-
-    Raises
-    ------
-    CodecError
-        A code reaching before the first vertex, a part using another part's vertices or
-        leaving one of its own unused.
-    """
-    fresh = np.cumsum(code == 0)  # vertices met so far, this one included
-    g = np.where(code == 0, fresh - 1, fresh - code)
-    if len(g) and int(g.min()) < 0:
-        raise CodecError(f"{what}: indices: a code before the first vertex")
-    part = np.repeat(np.arange(len(tcount)), tcount * 3)
-    v0 = np.cumsum(vcount) - vcount
-    local = g - v0[part]
-    if len(local) and (int(local.min()) < 0 or bool(np.any(local >= vcount[part]))):
-        raise CodecError(f"{what}: indices: a part's index out of its range")
-    if int(fresh[-1] if len(fresh) else 0) != int(vcount[tcount > 0].sum()):
-        raise CodecError(f"{what}: indices: kept vertices unused")
-    return local
 
 
 def _counts(body: dict[str, Any], key: str, count: int, what: str, hi: int) -> NDArray[np.int64]:
@@ -699,7 +620,7 @@ def decode_planar_body(
         raise CodecError(f"{what}: a position beyond the grid's range")
     pos = (q.astype(np.float64) * GRID).astype(np.float32)
     if v4:
-        idx = _from_high_water(_counts(body, "indices", 3 * nt, what, _MAX_VERTICES), vcount, tcount, what)
+        idx = from_high_water_codes(_counts(body, "indices", 3 * nt, what, _MAX_VERTICES), vcount, tcount, what)
     else:
         di = unzigzag(_counts(body, "indices", 3 * nt, what, 2**64 - 1).astype(np.uint64))
         # a running sum restarting at every part start (where the stored value is absolute)
