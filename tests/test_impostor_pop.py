@@ -46,6 +46,10 @@ def test_only_pairs_with_a_switch_count_and_an_unchanged_form_is_plain_motion() 
     assert (s["pairs"], s["switching"], s["plain"]) == (1, 1, 3)
     assert s["switching_change_mean"] == pytest.approx(1.0) and s["plain_change_mean"] == 0.0
     assert s["ratio"] is None  # nothing moved: no plain motion to compare with
+    assert s["kinds"]["fade"]["switching"] == 1 and s["kinds"]["image"]["switching"] == 0
+    other = (quad[0], 4, quad[2], 0.5)
+    m.add(pop_frame(3, lit, ids, [(7, 2), (8, 2)], [(7, other)]))  # another image, the same opacity
+    assert m.kinds == ["fade", "image"] and m.pairs == 2
 
 
 def _box(cx: float, cy: float, half: float = 5.0, h: float = 20.0) -> tuple[tuple[float, ...], Mesh]:

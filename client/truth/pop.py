@@ -12,10 +12,12 @@ successive compared frames:
   in *either* frame (its id in the client's id buffer, a building drawn as its image
   where its image painted it): a building that appears, vanishes or changes colour
   between the frames counts all its pixels;
-- a **switching** object is one drawn in both frames whose impostor opacity differs
-  between them (0 where it was drawn as geometry alone): within its blend, or a hard
-  switch from geometry to image (or back, or an image arriving or dropped by the
-  texture budget);
+- a **switching** object is one drawn in both frames that switches, of one of two kinds:
+  ``fade``, its impostor opacity differs between them (0 where it was drawn as geometry
+  alone) with the same image: within its blend, or a hard switch from geometry to image
+  (or back, or an image arriving or dropped by the texture budget); ``image``, it is
+  drawn as an image in both frames but not the same one (the viewer's direction crossed
+  into another bin);
 - a **plain-motion** object is one drawn in both frames in the same form (the same LOD,
   or the same image) at the same opacity: its pixels change only as the camera moves.
 
@@ -114,6 +116,8 @@ class PopMeter:
 
     switching: list[float] = field(default_factory=list)
     """One change per switching object per frame pair."""
+    kinds: list[str] = field(default_factory=list)
+    """Each switching change's kind: ``fade`` or ``image`` (see the module docs)."""
     plain: list[float] = field(default_factory=list)
     """One change per plain-motion object per frame pair."""
     pairs: int = 0
@@ -126,7 +130,8 @@ class PopMeter:
         if prev is None:
             return
         both = prev.alpha.keys() & cur.alpha.keys()
-        switching = [i for i in both if prev.alpha[i] != cur.alpha[i]]
+        image = [i for i in both if prev.form[i][1] >= 0 and cur.form[i][1] >= 0 and prev.form[i][1] != cur.form[i][1]]
+        fade = [i for i in both if prev.alpha[i] != cur.alpha[i] and i not in set(image)]
         plain = [i for i in both if prev.alpha[i] == cur.alpha[i] and prev.form[i] == cur.form[i]]
         change, count = object_change(prev.rgb, prev.ids, cur.rgb, cur.ids)
 
@@ -135,22 +140,30 @@ class PopMeter:
             k = k[k < len(change)]
             return change[k[count[k] > 0]].tolist()
 
-        s = take(switching)
-        self.pairs += bool(s)
-        self.switching.extend(s)
+        f, s = take(fade), take(image)
+        self.pairs += bool(f or s)
+        self.switching.extend(f + s)
+        self.kinds.extend(["fade"] * len(f) + ["image"] * len(s))
         self.plain.extend(take(plain))
 
 
 def summarise_pop(meter: PopMeter) -> dict[str, Any]:
     """The ``truth.pop`` figures: frame pairs with a switch, the switching objects' mean and
     p95 change, the plain-motion objects' mean change (linear RGB, 0..1),
-    and ``ratio`` (switching mean over plain mean; None without both)."""
+    and ``ratio`` (switching mean over plain mean; None without both); ``kinds``: per kind
+    (``fade``, ``image``) its count, mean change and ratio."""
     s, p = np.asarray(meter.switching, np.float64), np.asarray(meter.plain, np.float64)
 
     def stat(a: NDArray[np.float64], f: Any) -> float | None:
         return float(f(a)) if a.size else None
 
     sm, pm = stat(s, np.mean), stat(p, np.mean)
+    kind = np.asarray(meter.kinds, dtype=object)
+    kinds = {}
+    for k in ("fade", "image"):
+        km = stat(s[kind == k], np.mean)
+        kinds[k] = {"switching": int((kind == k).sum()), "change_mean": km,
+                    "ratio": None if km is None or not pm else km / pm}
     return {
         "pairs": meter.pairs,
         "switching": int(s.size),
@@ -159,5 +172,6 @@ def summarise_pop(meter: PopMeter) -> dict[str, Any]:
         "plain": int(p.size),
         "plain_change_mean": pm,
         "ratio": None if sm is None or not pm else sm / pm,
+        "kinds": kinds,
     }
 
