@@ -52,6 +52,17 @@ def test_only_pairs_with_a_switch_count_and_an_unchanged_form_is_plain_motion() 
     assert m.kinds == ["fade", "image"] and m.pairs == 2
 
 
+def test_a_negative_blend_is_one_clear_line() -> None:
+    from walkstream.client.config import ReplayConfig
+    from walkstream.client.net.link import LinkProfile
+    from walkstream.shared.errors import InputError
+
+    link = LinkProfile(56_000.0, 56_000.0, 0.2)
+    with pytest.raises(InputError, match="--impostor-blend -1.0"):
+        ReplayConfig(link=link, impostor_blend_m=-1.0)
+    assert ReplayConfig(link=link, impostor_blend_m=0.0).impostor_blend_m == 0.0  # 0: a hard switch
+
+
 def _box(cx: float, cy: float, half: float = 5.0, h: float = 20.0) -> tuple[tuple[float, ...], Mesh]:
     box = (cx - half, cy - half, 0.0, cx + half, cy + half, h)
     tm = trimesh.creation.box(bounds=np.reshape(box, (2, 3)))
