@@ -46,10 +46,10 @@ def test_only_pairs_with_a_switch_count_and_an_unchanged_form_is_plain_motion() 
     assert (s["pairs"], s["switching"], s["plain"]) == (1, 1, 3)
     assert s["switching_change_mean"] == pytest.approx(1.0) and s["plain_change_mean"] == 0.0
     assert s["ratio"] is None  # nothing moved: no plain motion to compare with
-    assert s["kinds"]["fade"]["switching"] == 1 and s["kinds"]["image"]["switching"] == 0
+    assert s["kinds"]["blend"]["switching"] == 1 and s["kinds"]["image"]["switching"] == 0
     other = (quad[0], 4, quad[2], 0.5)
     m.add(pop_frame(3, lit, ids, [(7, 2), (8, 2)], [(7, other)]))  # another image, the same opacity
-    assert m.kinds == ["fade", "image"] and m.pairs == 2
+    assert m.kinds == ["blend", "image"] and m.pairs == 2
 
 
 def test_a_negative_blend_is_one_clear_line() -> None:
@@ -116,4 +116,5 @@ def test_a_hard_switch_pops_where_the_blend_does_not(gl: Any) -> None:
     assert hard["pairs"] == 1 and blended["pairs"] > 10  # the blend spreads the switch over its frames
     assert blended["ratio"] is not None and hard["ratio"] is not None
     assert hard["ratio"] > 10.0 * blended["ratio"]  # here 68 against 2.5 (a saturated image over grey)
+    assert hard["kinds"]["hard"]["switching"] == 1 and blended["kinds"]["hard"]["switching"] == 0
     assert hard["switching_change_mean"] > 5.0 * blended["switching_change_mean"]

@@ -12,12 +12,13 @@ successive compared frames:
   in *either* frame (its id in the client's id buffer, a building drawn as its image
   where its image painted it): a building that appears, vanishes or changes colour
   between the frames counts all its pixels;
-- a **switching** object is one drawn in both frames that switches, of one of two kinds:
-  ``fade``, its impostor opacity differs between them (0 where it was drawn as geometry
-  alone) with the same image: within its blend, or a hard switch from geometry to image
-  (or back, or an image arriving or dropped by the texture budget); ``image``, it is
-  drawn as an image in both frames but not the same one (the viewer's direction crossed
-  into another bin);
+- a **switching** object is one drawn in both frames that switches, of one of three
+  kinds: ``blend``, its impostor opacity (0 where it was drawn as geometry alone)
+  differs between them and is strictly between 0 and 1 in at least one (within its
+  blend); ``hard``, it went from geometry alone to its image alone or back in one frame
+  (no blend: ``--impostor-blend 0``, an image arriving at full opacity, or dropped by
+  the texture budget); ``image``, it is drawn as an image in both frames but not the
+  same one (the viewer's direction crossed into another bin);
 - a **plain-motion** object is one drawn in both frames in the same form (the same LOD,
   or the same image) at the same opacity: its pixels change only as the camera moves.
 
@@ -117,7 +118,7 @@ class PopMeter:
     switching: list[float] = field(default_factory=list)
     """One change per switching object per frame pair."""
     kinds: list[str] = field(default_factory=list)
-    """Each switching change's kind: ``fade`` or ``image`` (see the module docs)."""
+    """Each switching change's kind: ``blend``, ``hard`` or ``image`` (see the module docs)."""
     plain: list[float] = field(default_factory=list)
     """One change per plain-motion object per frame pair."""
     pairs: int = 0
@@ -132,6 +133,8 @@ class PopMeter:
         both = prev.alpha.keys() & cur.alpha.keys()
         image = [i for i in both if prev.form[i][1] >= 0 and cur.form[i][1] >= 0 and prev.form[i][1] != cur.form[i][1]]
         fade = [i for i in both if prev.alpha[i] != cur.alpha[i] and i not in set(image)]
+        hard = [i for i in fade if {prev.alpha[i], cur.alpha[i]} == {0.0, 1.0}]
+        fade = [i for i in fade if i not in set(hard)]
         plain = [i for i in both if prev.alpha[i] == cur.alpha[i] and prev.form[i] == cur.form[i]]
         change, count = object_change(prev.rgb, prev.ids, cur.rgb, cur.ids)
 
@@ -140,10 +143,10 @@ class PopMeter:
             k = k[k < len(change)]
             return change[k[count[k] > 0]].tolist()
 
-        f, s = take(fade), take(image)
-        self.pairs += bool(f or s)
-        self.switching.extend(f + s)
-        self.kinds.extend(["fade"] * len(f) + ["image"] * len(s))
+        f, h, s = take(fade), take(hard), take(image)
+        self.pairs += bool(f or h or s)
+        self.switching.extend(f + h + s)
+        self.kinds.extend(["blend"] * len(f) + ["hard"] * len(h) + ["image"] * len(s))
         self.plain.extend(take(plain))
 
 
@@ -151,7 +154,7 @@ def summarise_pop(meter: PopMeter) -> dict[str, Any]:
     """The ``truth.pop`` figures: frame pairs with a switch, the switching objects' mean and
     p95 change, the plain-motion objects' mean change (linear RGB, 0..1),
     and ``ratio`` (switching mean over plain mean; None without both); ``kinds``: per kind
-    (``fade``, ``image``) its count, mean change and ratio."""
+    (``blend``, ``hard``, ``image``) its count, mean change and ratio."""
     s, p = np.asarray(meter.switching, np.float64), np.asarray(meter.plain, np.float64)
 
     def stat(a: NDArray[np.float64], f: Any) -> float | None:
@@ -160,7 +163,7 @@ def summarise_pop(meter: PopMeter) -> dict[str, Any]:
     sm, pm = stat(s, np.mean), stat(p, np.mean)
     kind = np.asarray(meter.kinds, dtype=object)
     kinds = {}
-    for k in ("fade", "image"):
+    for k in ("blend", "hard", "image"):
         km = stat(s[kind == k], np.mean)
         kinds[k] = {"switching": int((kind == k).sum()), "change_mean": km,
                     "ratio": None if km is None or not pm else km / pm}
