@@ -10,7 +10,11 @@ frame time the device took (median), triangles per frame, impostors per frame, b
 down (all, and the images' share), texture bytes per frame, perfect frames, and with
 ``--truth-every`` the colour error against the full scene (median and p95 of the mean
 linear-RGB error, the pixels over ΔE00 2.3, the frames over the visible threshold, PSNR,
-and the error split by cause: the boxes' ``lod_colour``, ``impostor``, the rest);
+and the error split by cause: the boxes' ``lod_colour``, ``impostor``, the rest) and the
+pop at the switch (``pop``: the mean frame-to-frame change of the pixels of buildings
+switching between image and geometry over that of the buildings in plain motion on the
+same frame pairs, :mod:`walkstream.client.truth.pop`; at most 1: no pop; it compares
+successive compared frames, so ``--truth-every 1`` measures it frame to frame);
 ``bench_impostors.png`` plots the colour error against the frame time, one point a row.
 """
 
@@ -110,7 +114,7 @@ def format_impostor_table(rows: list[dict[str, Any]]) -> str:
     head = (
         f"{'bake':<24} {'walk':<18} {'device':<6} {'fps10%':>6} {'ft ms':>6} {'tri/fr':>6} {'imp/fr':>6} "
         f"{'bytes down':>10} {'images B':>9} {'tex kB max':>10} {'perfect%':>8} {'err% med':>8} {'err% p95':>8} "
-        f"{'vis% med':>8} {'over%':>6} {'PSNR med':>8} {'e:boxes':>7} {'e:imp':>6} {'e:rest':>6}"
+        f"{'vis% med':>8} {'over%':>6} {'PSNR med':>8} {'e:boxes':>7} {'e:imp':>6} {'e:rest':>6} {'pop':>5}"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
@@ -121,6 +125,7 @@ def format_impostor_table(rows: list[dict[str, Any]]) -> str:
         boxes, by_imp = ec.get("lod_colour"), ec.get("impostor")
         rest = None if not ec else sum(v or 0.0 for v in ec.values()) - (boxes or 0.0) - (by_imp or 0.0)
         ft = r.get("frame_time_median_ms")
+        pop = ((r.get("truth") or {}).get("pop") or {}).get("ratio")
         lines.append(
             f"{r.get('bake', ''):<24} {r['scenario']:<18} {r.get('device', '?'):<6} "
             f"{_pct(r.get('fps_within_10pct_ratio'), 1):>6} {'n/a' if ft is None else f'{ft:.1f}':>6} "
@@ -129,7 +134,8 @@ def format_impostor_table(rows: list[dict[str, Any]]) -> str:
             f"{imp.get('texture_bytes_max', 0) / 1e3:>10.1f} {_pct(r.get('perfect_frame_ratio')):>8} "
             f"{_pct(err.get('median')):>8} {_pct(err.get('p95')):>8} {_pct(vis.get('median')):>8} "
             f"{_pct(c.get('frames_over_visible_ratio'), 1):>6} "
-            f"{'n/a' if ps is None else f'{ps:.1f}':>8} {_pct(boxes):>7} {_pct(by_imp):>6} {_pct(rest):>6}"
+            f"{'n/a' if ps is None else f'{ps:.1f}':>8} {_pct(boxes):>7} {_pct(by_imp):>6} {_pct(rest):>6} "
+            f"{'n/a' if pop is None else f'{pop:.2f}':>5}"
         )
     return "\n".join(lines)
 

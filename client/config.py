@@ -94,6 +94,10 @@ class ReplayConfig:
     (False: every portal open, as a scene without walls; :mod:`walkstream.client.walk.walls`)."""
     texture_budget_bytes: int = 8 << 20
     """Bytes of impostor textures a frame may draw (the farthest dropped first)."""
+    impostor_blend_m: float | None = None
+    """Metres beyond the bake's ``D`` over which an impostor fades in over its geometry
+    (``--impostor-blend``; None: :data:`~walkstream.client.draw.impostors.BLEND_M`; 0: a
+    hard switch, no blend)."""
 
     def __post_init__(self) -> None:
         if self.stream not in STREAM_FORMS:
@@ -118,6 +122,9 @@ class ReplayConfig:
             raise InputError(f"--snapshot-every {self.snapshot_every}: must not be negative")
         if self.frame_times is not None and not all(math.isfinite(v) and v > 0 for v in self.frame_times):
             raise InputError("--frame-times: every frame time must be a positive number of seconds")
+        ib = self.impostor_blend_m
+        if ib is not None and not (math.isfinite(ib) and ib >= 0):
+            raise InputError(f"--impostor-blend {ib!r}: expected metres >= 0")
         if self.truth_every < 0:
             raise InputError(f"--truth-every {self.truth_every}: must not be negative")
         w, h = self.size

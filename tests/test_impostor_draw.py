@@ -173,5 +173,6 @@ def test_bench_impostors_replays_one_walk_both_ways(dbs: tuple[Path, Path], tmp_
     c = rows[0]["truth"]["colour"]
     assert sum(c["error_causes"].values()) == pytest.approx(c["mean_error"]["mean"])
     table = format_impostor_table(rows)
-    assert "SE impostors" in table and "SE geometry" in table and "e:boxes" in table
+    assert "SE impostors" in table and "SE geometry" in table and "e:boxes" in table and " pop" in table
+    assert "pop" not in rows[1]["truth"]  # geometry only: nothing switches
     assert (tmp_path / "bench_impostors.json").is_file() and (tmp_path / "bench_impostors.png").stat().st_size > 0

@@ -177,7 +177,8 @@ def cmd_bench_impostors(args: argparse.Namespace) -> int:
             raise InputError(f"{db}: no such scene database")
     paths = [p.strip() for p in args.paths.split(",") if p.strip()]
     link = {"bandwidth": args.bandwidth, "rtt": args.rtt}
-    extra = {"clock": args.clock, **({"ach_shares": True} if args.ach_shares else {})}
+    extra = {"clock": args.clock, **({"ach_shares": True} if args.ach_shares else {}),
+             **({} if args.impostor_blend is None else {"impostor_blend": args.impostor_blend})}
     rows = run_impostor_bench(args.db, replay_with_options, out=Path(args.out), paths=paths, device=args.device,
                               truth_every=args.truth_every, duration=args.duration, link=link, size=args.size,
                               extra=extra)
@@ -679,6 +680,7 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--rtt", default="200ms", help="round-trip time (default 200ms)")
     b.add_argument("--truth-every", type=int, default=25, metavar="N", help="compare every Nth frame with the ground truth, colour error included (default 25; 0: never)")
     b.add_argument("--duration", help="limit every walk, e.g. 60s")
+    b.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres over which an impostor fades in over its geometry (default 20; 0: a hard switch; the 'pop' column measures it, with --truth-every 1)")
     b.add_argument("--out", default="out/bench-impostors", help="folder for the reports")
     b.set_defaults(func=cmd_bench_impostors)
 

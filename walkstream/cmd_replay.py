@@ -128,6 +128,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         frame_times=_frame_times(args.frame_times) if args.frame_times else None,
         batched_draws=not args.per_object_draws,
         impostors=not args.no_impostors,
+        impostor_blend_m=args.impostor_blend,
         virtual_walls=not args.no_walls,
     )
 
@@ -318,6 +319,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")
     r.add_argument("--no-walls", action="store_true", help="open every virtual wall on an interior baked with --virtual-walls (geometry only, no texture asked for)")
     r.add_argument("--no-impostors", action="store_true", help="draw geometry only on a scene baked with --impostors (no image asked for)")
+    r.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres beyond the bake's D over which an impostor fades in over its geometry (default 20; 0: a hard switch)")
     r.add_argument("--per-object-draws", action="store_true", help="gl device: one draw call per object instead of one multi-draw call per frame (the older path, for comparison)")
 
 

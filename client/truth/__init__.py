@@ -11,7 +11,7 @@ causes (a)-(f) of a missing pixel), :mod:`.culled` (what a frame with rooms kept
 against the truth: culled pixels and pinholes), :mod:`.colour` (a frame's colour error:
 linear-RGB error, CIEDE2000, visible pixels, PSNR, colour causes) with
 :mod:`.picture` (the client's picture drawn by the truth renderer, and the
-``impostor`` hook).  The figures computed from the
+``impostor`` hook), :mod:`.pop` (the pop at an impostor's switch).  The figures computed from the
 colour-compared frames are :mod:`walkstream.client.report.truth`.  Public names are
 imported lazily.
 """
@@ -42,6 +42,8 @@ _EXPORTS = {
     "fetch_contents": "walkstream.client.truth.scene",
     "TruthRecorder": "walkstream.client.truth.recorder",
     "TruthResult": "walkstream.client.truth.recorder",
+    "PopMeter": "walkstream.client.truth.pop",
+    "summarise_pop": "walkstream.client.truth.pop",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -38,6 +38,7 @@ from walkstream.client.truth.compare import CAUSES, compare_frame, missing_mask
 from walkstream.client.truth.horizon import below_horizon, horizon_shares
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.picture import Overlay, colour_error
+from walkstream.client.truth.pop import PopMeter, pop_frame
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.scene import TruthScene
 from walkstream.client.truth.standin import stand_in_ids
@@ -121,13 +122,15 @@ def missing_figures(
     t_first_perfect: float | None,
     progress: Callable[[int, int], None] | None = None,
     overlay: Overlay | None = None,
+    pop: PopMeter | None = None,
 ) -> tuple[TruthLog, WorstFrame | None, list[ComparedFrame], ColourWorst | None]:
     """Compare every noted frame with its truth (see the module docstring).
 
     ``truth`` holds the objects :func:`needed_objects` names and the coarser forms
     the frames drew; ``pvs_of`` is each frame's PVS (the service's where the client
     knew none); ``proj`` the client's projection; ``overlay`` the ``impostor`` hook of
-    :mod:`walkstream.client.truth.picture`.  Returns one row per frame (with its
+    :mod:`walkstream.client.truth.picture`; ``pop`` is fed each frame as the client
+    drew it (:mod:`walkstream.client.truth.pop`).  Returns one row per frame (with its
     colour figures), the worst frame by missing pixels (from the first perfect frame
     on first) as images, every frame in detail, and the worst frame by colour error.
     """
@@ -163,6 +166,8 @@ def missing_figures(
                 client.draw(keys, st.view, proj)
                 painted = np.any(client.snapshot() != c_rgb, axis=2)
                 c_ids = stand_in_ids(c_ids, t_ids, painted, [i for i, _ in st.impostors])
+            if pop is not None:
+                pop.add(pop_frame(st.frame, c_rgb, c_ids, keys, st.impostors))
             knows = st.pvs is not None
             fogged: list[int] = []
             if np.isfinite(st.fog):

@@ -61,6 +61,7 @@ from walkstream.client.truth.missing import (
 )
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.picture import Overlay, forms_of
+from walkstream.client.truth.pop import PopMeter, summarise_pop
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.roomcolour import room_colour
 from walkstream.client.truth.scene import TruthScene, fetch_contents
@@ -310,10 +311,13 @@ class TruthRecorder:
                 overlay = self.overlay
                 if overlay is None and any(st.impostors for st in self.notes):
                     overlay = impostor_overlay(truth, self.proj)
+                pop = PopMeter() if any(st.impostors for st in self.notes) else None
                 log, worst, frames, cworst = missing_figures(
-                    ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, overlay
+                    ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, overlay, pop
                 )
                 figures = summarise_truth(log, t_first_perfect)
+                if pop is not None:
+                    figures["pop"] = summarise_pop(pop)
                 figures["below_horizon"] = horizon_figures(f.below for f in frames)
                 return TruthResult(log, worst, None, frames, figures, cworst)
             skip = {int(i) for i in leave_out}

@@ -79,7 +79,8 @@ def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
         if not all(city.has_object(i) for i in w.objects.pvs):
             return []
         lane.started = True
-    choices = choose_impostors(imp.rows, f.eye, imp.d, imp.bound)
+    blend = w.config.impostor_blend_m
+    choices = choose_impostors(imp.rows, f.eye, imp.d, imp.bound, *(() if blend is None else (blend,)))
     wants = ahead_wants(w, f) if w.config.prefetch else {}
     wants.update({c.image: 0.0 for c in choices if c.image is not None})
     lane.want(wants)

@@ -1,0 +1,180 @@
+"""Pop at the impostor switch: the frame-to-frame change of a switching building's pixels against plain motion.
+
+An impostor fades in over its geometry across a short distance
+(:func:`~walkstream.client.draw.impostors.impostor_alpha`) so that nothing pops when a
+building goes from geometry to image or back.  This module measures it on the frames
+the client drew (its own ``gl`` renderer, impostors included), for each pair of
+successive compared frames:
+
+- an object's **change** is the mean over its pixels and channels of
+  ``|b - a|`` in *linear* RGB (0..1, the colour error's scale,
+  :func:`~walkstream.client.truth.colour.srgb_to_linear`), over the pixels it covers
+  in *either* frame (its id in the client's id buffer, a building drawn as its image
+  where its image painted it): a building that appears, vanishes or changes colour
+  between the frames counts all its pixels;
+- a **switching** object is one drawn in both frames that switches, of one of three
+  kinds: ``blend``, its impostor opacity (0 where it was drawn as geometry alone)
+  differs between them and is strictly between 0 and 1 in at least one (within its
+  blend); ``hard``, it went from geometry alone to its image alone or back in one frame
+  (no blend: ``--impostor-blend 0``, an image arriving at full opacity, or dropped by
+  the texture budget); ``image``, it is drawn as an image in both frames but not the
+  same one (the viewer's direction crossed into another bin);
+- a **plain-motion** object is one drawn in both frames in the same form (the same LOD,
+  or the same image) at the same opacity: its pixels change only as the camera moves.
+
+The figure (:func:`summarise_pop`): the mean change of the switching objects over the
+mean change of the plain-motion objects over the walk's frame pairs (``ratio``; the
+same walk, so the same camera speed; every pair rather than only those with a switch,
+because a switch is rare and the plain motion of one pair of frames too often none at
+all); at most 1 means the switch is no more visible than the motion itself ("no pop").  A hard switch
+puts all of the image-against-geometry difference into one frame; a blend spreads it
+over the frames of the blend.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.truth.colour import srgb_to_linear
+
+__all__ = ["PopFrame", "PopMeter", "object_change", "pop_frame", "summarise_pop"]
+
+
+@dataclass(frozen=True)
+class PopFrame:
+    """What the pop measure keeps of one compared frame."""
+
+    frame: int
+    rgb: NDArray[np.uint8]
+    """``(h, w, 3)`` the client's picture (sRGB)."""
+    ids: NDArray[np.uint32]
+    """``(h, w)`` object id + 1 per pixel, 0 where none shows."""
+    alpha: dict[int, float]
+    """Impostor opacity of each object drawn (0: geometry alone)."""
+    form: dict[int, tuple[int, int]]
+    """Each object's form: ``(lod, -1)`` for geometry, ``(lod or -1, image)`` with an impostor."""
+
+
+def pop_frame(
+    frame: int,
+    rgb: NDArray[np.uint8],
+    ids: NDArray[np.uint32],
+    drawn: Iterable[tuple[int, int]],
+    impostors: Iterable[tuple[int, Any]],
+) -> PopFrame:
+    """A :class:`PopFrame` of one frame: ``drawn`` ``(object id, lod)`` of its geometry,
+    ``impostors`` ``(object id, quad)`` of its images (a quad's image id at ``[1]``, its
+    opacity at ``[3]``: :data:`~walkstream.client.draw.quads.Quad`)."""
+    lod = {int(i): int(k) for i, k in drawn}
+    alpha = dict.fromkeys(lod, 0.0)
+    form = {i: (k, -1) for i, k in lod.items()}
+    for i, q in impostors:
+        i = int(i)
+        alpha[i] = float(q[3])
+        form[i] = (lod.get(i, -1), int(q[1]))
+    return PopFrame(int(frame), rgb, ids, alpha, form)
+
+
+def object_change(
+    a_rgb: NDArray[np.uint8], a_ids: NDArray[np.uint32], b_rgb: NDArray[np.uint8], b_ids: NDArray[np.uint32]
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Each object's change between two frames (see the module docs).
+
+    Parameters
+    ----------
+    a_rgb, b_rgb : (h, w, 3) uint8
+        The two pictures (sRGB).
+    a_ids, b_ids : (h, w) uint32
+        Object id + 1 per pixel (0: none).
+
+    Returns
+    -------
+    change : (n,) float64
+        Indexed by object id + 1: the mean absolute linear-RGB change over the pixels
+        the object covers in either frame (NaN where it covers none).
+    pixels : (n,) int64
+        Those pixels' count.
+    """
+    d = np.abs(srgb_to_linear(b_rgb) - srgb_to_linear(a_rgb)).mean(axis=2).ravel()
+    a, b = a_ids.astype(np.int64).ravel(), b_ids.astype(np.int64).ravel()
+    n = int(max(a.max(initial=0), b.max(initial=0))) + 1
+    same = a == b  # a pixel of one object in both frames counts once
+    total = np.bincount(a, d, n) + np.bincount(b[~same], d[~same], n)
+    count = np.bincount(a, minlength=n) + np.bincount(b[~same], minlength=n)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        change = total / count
+    return change, count.astype(np.int64)
+
+
+@dataclass
+class PopMeter:
+    """Fed every compared frame in order; keeps the switching and plain-motion changes."""
+
+    switching: list[float] = field(default_factory=list)
+    """One change per switching object per frame pair."""
+    kinds: list[str] = field(default_factory=list)
+    """Each switching change's kind: ``blend``, ``hard`` or ``image`` (see the module docs)."""
+    plain: list[float] = field(default_factory=list)
+    """One change per plain-motion object per frame pair."""
+    pairs: int = 0
+    """Frame pairs with at least one switching object."""
+    _last: PopFrame | None = None
+
+    def add(self, cur: PopFrame) -> None:
+        """Compare ``cur`` with the frame before it (the previous one added)."""
+        prev, self._last = self._last, cur
+        if prev is None:
+            return
+        both = prev.alpha.keys() & cur.alpha.keys()
+        image = [i for i in both if prev.form[i][1] >= 0 and cur.form[i][1] >= 0 and prev.form[i][1] != cur.form[i][1]]
+        fade = [i for i in both if prev.alpha[i] != cur.alpha[i] and i not in set(image)]
+        hard = [i for i in fade if {prev.alpha[i], cur.alpha[i]} == {0.0, 1.0}]
+        fade = [i for i in fade if i not in set(hard)]
+        plain = [i for i in both if prev.alpha[i] == cur.alpha[i] and prev.form[i] == cur.form[i]]
+        change, count = object_change(prev.rgb, prev.ids, cur.rgb, cur.ids)
+
+        def take(objs: Sequence[int]) -> list[float]:
+            k = np.asarray(objs, np.int64) + 1
+            k = k[k < len(change)]
+            return change[k[count[k] > 0]].tolist()
+
+        f, h, s = take(fade), take(hard), take(image)
+        self.pairs += bool(f or h or s)
+        self.switching.extend(f + h + s)
+        self.kinds.extend(["blend"] * len(f) + ["hard"] * len(h) + ["image"] * len(s))
+        self.plain.extend(take(plain))
+
+
+def summarise_pop(meter: PopMeter) -> dict[str, Any]:
+    """The ``truth.pop`` figures: frame pairs with a switch, the switching objects' mean and
+    p95 change, the plain-motion objects' mean change (linear RGB, 0..1),
+    and ``ratio`` (switching mean over plain mean; None without both); ``kinds``: per kind
+    (``blend``, ``hard``, ``image``) its count, mean change and ratio."""
+    s, p = np.asarray(meter.switching, np.float64), np.asarray(meter.plain, np.float64)
+
+    def stat(a: NDArray[np.float64], f: Any) -> float | None:
+        return float(f(a)) if a.size else None
+
+    sm, pm = stat(s, np.mean), stat(p, np.mean)
+    kind = np.asarray(meter.kinds, dtype=object)
+    kinds = {}
+    for k in ("blend", "hard", "image"):
+        km = stat(s[kind == k], np.mean)
+        kinds[k] = {"switching": int((kind == k).sum()), "change_mean": km,
+                    "ratio": None if km is None or not pm else km / pm}
+    return {
+        "pairs": meter.pairs,
+        "switching": int(s.size),
+        "switching_change_mean": sm,
+        "switching_change_p95": stat(s, lambda a: np.percentile(a, 95)),
+        "plain": int(p.size),
+        "plain_change_mean": pm,
+        "ratio": None if sm is None or not pm else sm / pm,
+        "kinds": kinds,
+    }
+

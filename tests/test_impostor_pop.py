@@ -1,0 +1,120 @@
+"""The pop at an impostor's switch (issue 27, "no pop at the switch"): the frame-to-frame change of a
+switching building's pixels against plain motion, drawn by the client's own renderer; a hard switch
+(no blend) pops where the blend does not.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+import trimesh
+
+from walkstream.client.draw.impostors import impostor_alpha
+from walkstream.client.truth.pop import PopMeter, object_change, pop_frame, summarise_pop
+from walkstream.client.walk.impostors import quad_corners
+from walkstream.shared.camera import look_at, perspective
+from walkstream.shared.impostors import bin_of, directions
+from walkstream.shared.records import Mesh
+
+
+def test_object_change_counts_the_pixels_of_either_frame_once() -> None:
+    a_rgb = np.zeros((2, 3, 3), np.uint8)
+    b_rgb = a_rgb.copy()
+    b_rgb[0, 0] = 255  # object 1's pixel turns white
+    a_ids = np.array([[2, 2, 0], [0, 0, 0]], np.uint32)  # object 1 (id + 1 = 2) on two pixels
+    b_ids = np.array([[2, 0, 2], [0, 0, 0]], np.uint32)  # ... moved: one kept, one left, one new
+    change, count = object_change(a_rgb, a_ids, b_rgb, b_ids)
+    assert count[2] == 3  # the union, the shared pixel once
+    assert change[2] == pytest.approx(1.0 / 3.0)
+    assert np.isnan(change[1])
+
+
+def test_only_pairs_with_a_switch_count_and_an_unchanged_form_is_plain_motion() -> None:
+    rgb, ids = np.zeros((4, 4, 3), np.uint8), np.zeros((4, 4), np.uint32)
+    ids[:2], ids[2:] = 8, 9  # objects 7 and 8
+    quad = (np.zeros((4, 3)), 3, np.zeros((1, 1, 4), np.uint8), 0.5)
+    m = PopMeter()
+    m.add(pop_frame(0, rgb, ids, [(7, 2), (8, 2)], []))
+    m.add(pop_frame(1, rgb, ids, [(7, 2), (8, 2)], []))  # nothing switches: plain motion only
+    assert m.pairs == 0 and not m.switching and len(m.plain) == 2
+    lit = rgb.copy()
+    lit[:2] = 255
+    m.add(pop_frame(2, lit, ids, [(7, 2), (8, 2)], [(7, quad)]))  # 7 fades in its image, 8 stays
+    s = summarise_pop(m)
+    assert (s["pairs"], s["switching"], s["plain"]) == (1, 1, 3)
+    assert s["switching_change_mean"] == pytest.approx(1.0) and s["plain_change_mean"] == 0.0
+    assert s["ratio"] is None  # nothing moved: no plain motion to compare with
+    assert s["kinds"]["blend"]["switching"] == 1 and s["kinds"]["image"]["switching"] == 0
+    other = (quad[0], 4, quad[2], 0.5)
+    m.add(pop_frame(3, lit, ids, [(7, 2), (8, 2)], [(7, other)]))  # another image, the same opacity
+    assert m.kinds == ["blend", "image"] and m.pairs == 2
+
+
+def test_a_negative_blend_is_one_clear_line() -> None:
+    from walkstream.client.config import ReplayConfig
+    from walkstream.client.net.link import LinkProfile
+    from walkstream.shared.errors import InputError
+
+    link = LinkProfile(56_000.0, 56_000.0, 0.2)
+    with pytest.raises(InputError, match="--impostor-blend -1.0"):
+        ReplayConfig(link=link, impostor_blend_m=-1.0)
+    assert ReplayConfig(link=link, impostor_blend_m=0.0).impostor_blend_m == 0.0  # 0: a hard switch
+
+
+def _box(cx: float, cy: float, half: float = 5.0, h: float = 20.0) -> tuple[tuple[float, ...], Mesh]:
+    box = (cx - half, cy - half, 0.0, cx + half, cy + half, h)
+    tm = trimesh.creation.box(bounds=np.reshape(box, (2, 3)))
+    faces = np.asarray(tm.faces)
+    normals = np.repeat(np.asarray(tm.face_normals), 3, axis=0)  # flat: three vertices a face
+    return box, Mesh(np.asarray(tm.vertices)[faces.ravel()], normals, np.arange(faces.size).reshape(-1, 3))
+
+
+def _walk(gl: Any, blend_m: float) -> dict[str, Any]:
+    """A viewer walking 30 m towards two buildings 100 m ahead; the left one (object 1) goes from
+    its image (a flat red) to its geometry across ``D`` = 70 m over ``blend_m``, the right one
+    (object 2) is geometry throughout; each frame drawn by the client's renderer and measured."""
+    from walkstream.client.draw.frames import FrameRenderer
+
+    (box_a, mesh_a), (_, mesh_b) = _box(-8.0, 100.0), _box(8.0, 100.0)
+    image = np.zeros((8, 8, 4), np.uint8)
+    image[...] = (230, 40, 30, 255)
+    size = (96, 72)
+    proj = perspective(50.0, size[0] / size[1], 0.5, 400.0)
+    r = FrameRenderer(size=size, fov_deg=50.0, ctx=gl)
+    meter = PopMeter()
+    try:
+        r.upload((1, 2), mesh_a)
+        r.upload((2, 2), mesh_b)
+        for k, y in enumerate(np.linspace(0.0, 30.0, 61)):
+            eye = np.array([0.0, y, 1.7])
+            view = look_at(eye, np.array([0.0, 100.0, 8.0]))
+            alpha = float(impostor_alpha(box_a[1] - y, 0.0, 70.0, 1.0, blend_m))
+            lo, hi = np.asarray(box_a[:3]), np.asarray(box_a[3:])
+            ia, ie = bin_of(2, *directions(eye, (lo + hi) / 2.0))
+            quads = [(quad_corners(box_a, 2, int(ia), int(ie)), 1, image, alpha)] if alpha > 0 else []
+            keys = [(1, 2), (2, 2)] if alpha < 1 else [(2, 2)]
+            r.impostors = quads
+            r.draw(keys, view, proj)
+            rgb = r.snapshot()
+            ids = r.draw_ids(keys, view, proj)
+            if quads:  # where the image painted, it shows object 1
+                r.impostors = []
+                r.draw(keys, view, proj)
+                ids = ids.copy()
+                ids[np.any(r.snapshot() != rgb, axis=2)] = 2
+            meter.add(pop_frame(k, rgb, ids, keys, [(1, q) for q in quads]))
+    finally:
+        r.release()
+    return summarise_pop(meter)
+
+
+@pytest.mark.gl
+def test_a_hard_switch_pops_where_the_blend_does_not(gl: Any) -> None:
+    blended, hard = _walk(gl, 20.0), _walk(gl, 0.0)
+    assert hard["pairs"] == 1 and blended["pairs"] > 10  # the blend spreads the switch over its frames
+    assert blended["ratio"] is not None and hard["ratio"] is not None
+    assert hard["ratio"] > 10.0 * blended["ratio"]  # here 68 against 2.5 (a saturated image over grey)
+    assert hard["kinds"]["hard"]["switching"] == 1 and blended["kinds"]["hard"]["switching"] == 0
+    assert hard["switching_change_mean"] > 5.0 * blended["switching_change_mean"]
