@@ -83,3 +83,34 @@ def duplex_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str,
 def fzk_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
     """../shared/data/indoor/AC20-FZK-Haus.ifc, baked, and the bake's summary."""
     return _baked_ifc(tmp_path_factory, "AC20-FZK-Haus.ifc")
+
+
+# --------------------------------------------------------------------------- crossings
+# The crossing scene (a generated city with the generated office at its entrance) is what
+# tests/test_crossing.py and tests/test_crosswalk.py both walk: one bake per run for both,
+# shared by the xdist workers.  Tests that write (record a path, bake again) work on a copy
+# or in their own tmp_path.
+
+@pytest.fixture(scope="session")
+def crossing_scene(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any], Path]:
+    """The crossing bake ``scene.db``, its summary, and its folder.
+
+    The folder also holds the sources (``city.geojson``: 250 m, seed 1; ``office.json``: 2
+    storeys, 16 x 14 m, seed 2) and ``city.db``, the same city baked alone.  All at
+    ``BakeSettings(resolution=16)``.  Read only: copy the database before writing to it.
+    """
+
+    def build(folder: Path) -> tuple[Path, dict[str, Any], Path]:
+        from walkstream.server.bake import BakeSettings, bake
+        from walkstream.server.sources.citygen import write_city
+        from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
+
+        fast = BakeSettings(resolution=16)
+        write_city(folder / "city.geojson", 250, 1)
+        # 16 m along the street side: the office enters by its 14 m end wall
+        write_interior(folder / "office.json", InteriorPlan(storeys=2, length=16, width=14, seed=2))
+        summary = bake(folder / "city.geojson", folder / "scene.db", settings=fast, interior=folder / "office.json")
+        bake(folder / "city.geojson", folder / "city.db", settings=fast)
+        return folder / "scene.db", summary, folder
+
+    return once_per_run(tmp_path_factory, "crossing", build)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +14,6 @@ from walkstream.server.bake import BakeSettings, bake
 from walkstream.server.bake.crossing import STAND_IN_INSET
 from walkstream.server.paths.graph import scene_graph
 from walkstream.server.paths.record import record_walk
-from walkstream.server.sources.citygen import write_city
 from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
 from walkstream.server.store import SceneReader
 from walkstream.shared.cells import CellLocator
@@ -25,15 +25,17 @@ STREET_KINDS = {"street", "crossroad", "square"}
 ROOM_KINDS = {"room", "doorway", "outside"}
 
 
-@pytest.fixture(scope="module")
-def baked(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any], Path]:
-    d = tmp_path_factory.mktemp("crossing")
-    write_city(d / "city.geojson", 250, 1)
-    # 16 m along the street side: the office enters by its 14 m end wall
-    write_interior(d / "office.json", InteriorPlan(storeys=2, length=16, width=14, seed=2))
-    summary = bake(d / "city.geojson", d / "scene.db", settings=FAST, interior=d / "office.json")
-    bake(d / "city.geojson", d / "city.db", settings=FAST)
-    return d / "scene.db", summary, d
+@pytest.fixture
+def baked(crossing_scene: tuple[Path, dict[str, Any], Path]) -> tuple[Path, dict[str, Any], Path]:
+    """The crossing bake shared with tests/test_crosswalk.py (tests/conftest.py): read only."""
+    return crossing_scene
+
+
+def _own_copy(db: Path, tmp_path: Path) -> Path:
+    """A copy of the shared database to write to (record a path into)."""
+    out = tmp_path / db.name
+    shutil.copyfile(db, out)
+    return out
 
 
 def _cells(reader: SceneReader) -> dict[int, Any]:
@@ -117,8 +119,8 @@ def test_the_enter_walk_goes_from_the_street_through_the_door_and_back(baked: tu
     assert any(rooms[c].room is not None and rooms[c].name == summary["enter"]["room"] for c in seq if c in rooms)
 
 
-def test_record_a_path_from_a_street_to_a_named_room_and_back(baked: tuple[Path, dict[str, Any], Path]) -> None:
-    db, _, _ = baked
+def test_record_a_path_from_a_street_to_a_named_room_and_back(baked: tuple[Path, dict[str, Any], Path], tmp_path: Path) -> None:
+    db = _own_copy(baked[0], tmp_path)
     with SceneReader.open(db) as r:
         enter = RecordedPath.from_msgpack(r.path_blob("enter"), "enter")
         (e,) = r.entrances()
@@ -152,21 +154,23 @@ def test_the_city_part_matches_the_city_alone(baked: tuple[Path, dict[str, Any],
         assert r.object_ids().tolist() == c.object_ids().tolist()
 
 
-def test_an_interior_too_large_for_the_building_says_so(baked: tuple[Path, dict[str, Any], Path]) -> None:
+def test_an_interior_too_large_for_the_building_says_so(baked: tuple[Path, dict[str, Any], Path], tmp_path: Path) -> None:
     _, _, d = baked
-    write_interior(d / "big.json", InteriorPlan(storeys=1, length=80, width=40, seed=1))
+    write_interior(tmp_path / "big.json", InteriorPlan(storeys=1, length=80, width=40, seed=1))
     with pytest.raises(InputError, match="does not fit building"):
-        bake(d / "city.geojson", d / "big.db", settings=FAST, interior=d / "big.json", building="b103")
+        bake(d / "city.geojson", tmp_path / "big.db", settings=FAST, interior=tmp_path / "big.json", building="b103")
     with pytest.raises(InputError, match="no building with that"):
-        bake(d / "city.geojson", d / "big.db", settings=FAST, interior=d / "big.json", building="nope")
+        bake(d / "city.geojson", tmp_path / "big.db", settings=FAST, interior=tmp_path / "big.json", building="nope")
 
 
-def test_cli_inspect_map_and_record(baked: tuple[Path, dict[str, Any], Path], capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_inspect_map_and_record(
+    baked: tuple[Path, dict[str, Any], Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
     from walkstream.cli import main
 
-    db, _, d = baked
-    assert main(["inspect", str(db), "--map", str(d / "map.png")]) == 0
-    assert (d / "map.png").stat().st_size > 10_000
+    db = _own_copy(baked[0], tmp_path)
+    assert main(["inspect", str(db), "--map", str(tmp_path / "map.png")]) == 0
+    assert (tmp_path / "map.png").stat().st_size > 10_000
     assert "entrances" in capsys.readouterr().out
     with SceneReader.open(db) as r:
         start = RecordedPath.from_msgpack(r.path_blob("enter"), "enter").xyz[0]
@@ -175,23 +179,23 @@ def test_cli_inspect_map_and_record(baked: tuple[Path, dict[str, Any], Path], ca
     assert "recorded path 'cli-out'" in capsys.readouterr().out
 
 
-def test_an_ifc_model_enters_from_the_street_too(baked: tuple[Path, dict[str, Any], Path]) -> None:
+def test_an_ifc_model_enters_from_the_street_too(baked: tuple[Path, dict[str, Any], Path], tmp_path: Path) -> None:
     """The FZK house (its door 0.5 m behind the shell's front) in the same city."""
     pytest.importorskip("ifcopenshell", reason="the ifc extra (make test installs it)")
     src = Path(__file__).resolve().parents[2] / "shared" / "data" / "indoor" / "AC20-FZK-Haus.ifc"
     if not src.exists():
         pytest.skip(f"no {src} (the shared test data)")
     _, _, d = baked
-    summary = bake(d / "city.geojson", d / "fzk.db", settings=FAST, interior=src)
+    summary = bake(d / "city.geojson", tmp_path / "fzk.db", settings=FAST, interior=src)
     assert summary["kind"] == "crossing" and summary["entrance_gap_m"] <= 1.0
-    with SceneReader.open(d / "fzk.db") as r:
+    with SceneReader.open(tmp_path / "fzk.db") as r:
         (e,) = r.entrances()
         seq = _visits(r, RecordedPath.from_msgpack(r.path_blob("enter"), "enter"))
     pairs = list(zip(seq, seq[1:], strict=False))
     assert (e.street, e.doorway) in pairs and (e.doorway, e.street) in pairs
 
 
-def test_the_suggested_office_size_fits_the_building_it_names(baked: tuple[Path, dict[str, Any], Path]) -> None:
+def test_the_suggested_office_size_fits_the_building_it_names(baked: tuple[Path, dict[str, Any], Path], tmp_path: Path) -> None:
     from walkstream.server.bake.cells import make_cells
     from walkstream.server.bake.siting import office_size, pick_building
     from walkstream.server.sources.read import read_source
@@ -202,12 +206,12 @@ def test_the_suggested_office_size_fits_the_building_it_names(baked: tuple[Path,
     size = office_size(city, cells)
     assert size is not None
     length, width, building = size
-    write_interior(d / "fit.json", InteriorPlan(storeys=1, length=length, width=width, seed=3))
-    k, _, gap = pick_building(city, cells, read_source(d / "fit.json"), building)
+    write_interior(tmp_path / "fit.json", InteriorPlan(storeys=1, length=length, width=width, seed=3))
+    k, _, gap = pick_building(city, cells, read_source(tmp_path / "fit.json"), building)
     assert city.buildings[k].source_id == building and gap <= 1.0
-    write_interior(d / "wide.json", InteriorPlan(storeys=1, length=length, width=width + 2, seed=3))
+    write_interior(tmp_path / "wide.json", InteriorPlan(storeys=1, length=length, width=width + 2, seed=3))
     with pytest.raises(InputError, match="does not fit"):
-        pick_building(city, cells, read_source(d / "wide.json"), building)
+        pick_building(city, cells, read_source(tmp_path / "wide.json"), building)
 
 
 def test_the_service_serves_a_crossing_scene_with_its_kind(baked: tuple[Path, dict[str, Any], Path]) -> None:
@@ -291,12 +295,12 @@ def _nearest(points: np.ndarray, to: np.ndarray) -> np.ndarray:
     return np.sqrt(((points[:, None, :] - to[None, :, :]) ** 2).sum(axis=2)).min(axis=1)
 
 
-def test_a_turned_interiors_contents_stay_in_its_own_frame(baked: tuple[Path, dict[str, Any], Path]) -> None:
+def test_a_turned_interiors_contents_stay_in_its_own_frame(baked: tuple[Path, dict[str, Any], Path], tmp_path: Path) -> None:
     """The contents of the turned office are the office alone's, byte for byte (cellmesh/3
     keeps its boxes, 27 kB rather than 68 kB placed), and the entrance says how to place them."""
     db, _, d = baked
-    bake(d / "office.json", d / "office.db")
-    with SceneReader.open(d / "office.db") as r:
+    bake(d / "office.json", tmp_path / "office.db")
+    with SceneReader.open(tmp_path / "office.db") as r:
         alone = {c: r.contents(c) for c in r.contents_info()}
     with SceneReader.open(db) as r:
         (e,) = r.entrances()
@@ -363,7 +367,7 @@ def _facing(part: Any) -> np.ndarray:
 
 
 def test_a_stopped_crossing_bake_resumes_to_the_same_version(
-    baked: tuple[Path, dict[str, Any], Path], monkeypatch: pytest.MonkeyPatch
+    baked: tuple[Path, dict[str, Any], Path], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     """One driver for every scene: a crossing resumes like a city, and its room contents and
     its street cells' PVS both go through the one chunk runner."""
@@ -378,7 +382,7 @@ def test_a_stopped_crossing_bake_resumes_to_the_same_version(
         return run(task, *args)
 
     monkeypatch.setattr(chunks, "_run", spy)
-    out = d / "resumed" / "x.db"
+    out = tmp_path / "resumed" / "x.db"
     out.parent.mkdir()
     args = (d / "city.geojson", out)
     assert bake(*args, settings=FAST, interior=d / "office.json", name="scene", max_cells=3) == {}
@@ -389,11 +393,11 @@ def test_a_stopped_crossing_bake_resumes_to_the_same_version(
     assert again["version"] == summary["version"]
 
 
-def test_a_crossing_on_a_dask_local_cluster_bakes_the_same_scene(baked: tuple[Path, dict[str, Any], Path]) -> None:
+def test_a_crossing_on_a_dask_local_cluster_bakes_the_same_scene(baked: tuple[Path, dict[str, Any], Path], tmp_path: Path) -> None:
     from distributed import LocalCluster
 
     _, summary, d = baked
-    out = d / "dask" / "x.db"
+    out = tmp_path / "dask" / "x.db"
     out.parent.mkdir()
     # ":0": a free port for the dashboard; None means the fixed 8787, which two xdist workers
     # (or any other job on the machine) may hold
@@ -426,12 +430,12 @@ def test_one_graph_walks_every_scene_kind(baked: tuple[Path, dict[str, Any], Pat
 
 
 def test_a_crossing_killed_while_writing_its_tables_resumes(
-    baked: tuple[Path, dict[str, Any], Path], monkeypatch: pytest.MonkeyPatch
+    baked: tuple[Path, dict[str, Any], Path], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     from walkstream.server.store import SceneWriter
 
     _, summary, d = baked
-    out = d / "tables" / "x.db"
+    out = tmp_path / "tables" / "x.db"
     out.parent.mkdir()
 
     def killed(*_: Any) -> None:

@@ -13,10 +13,7 @@ from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayResult, run_replay
 from walkstream.client.stream.cache import CITY_KINDS, Cache
-from walkstream.server.bake import BakeSettings, bake
 from walkstream.server.service.main import create_app
-from walkstream.server.sources.citygen import write_city
-from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
 from walkstream.server.store import SceneReader
 from walkstream.shared.scene.placement import ContentsPlacement, placement_for
 
@@ -36,12 +33,9 @@ class _Counting(httpx.AsyncBaseTransport):
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    d = tmp_path_factory.mktemp("crosswalk")
-    write_city(d / "city.geojson", 250, 1)
-    write_interior(d / "office.json", InteriorPlan(storeys=2, length=16, width=14, seed=2))
-    bake(d / "city.geojson", d / "scene.db", settings=BakeSettings(resolution=16), interior=d / "office.json")
-    return d / "scene.db"
+def scene(crossing_scene: tuple[Path, dict[str, Any], Path]) -> Path:
+    """The crossing bake shared with tests/test_crossing.py (tests/conftest.py): read only."""
+    return crossing_scene[0]
 
 
 @pytest.fixture(scope="module")
@@ -215,10 +209,10 @@ def _placed_before(scene: Path, out: Path) -> Path:
     return out
 
 
-def test_a_crossing_baked_before_placements_still_replays(scene: Path, walked: ReplayResult) -> None:
+def test_a_crossing_baked_before_placements_still_replays(scene: Path, walked: ReplayResult, tmp_path: Path) -> None:
     """A crossing scene whose contents are stored placed (no placement: the identity) replays
     as before: the rooms where they were, nothing culled against its truth."""
-    old = _placed_before(scene, scene.parent / "before.db")
+    old = _placed_before(scene, tmp_path / "before.db")
     with SceneReader.open(old) as r:
         assert r.entrances()[0].placement is None
         stored = sum(c.nbytes for c in r.contents_info().values())
