@@ -491,3 +491,31 @@ def test_bad_wall_flags_are_one_clear_line(
     err = capsys.readouterr().err
     assert err.startswith("walkstream: error:") and message in err and "Traceback" not in err
     assert not (tmp_path / "x.db").exists()
+
+
+def test_wall_textures_go_a_few_at_a_time_so_one_needed_now_is_not_queued() -> None:
+    import asyncio
+
+    from walkstream.client.stream.cache import Cache
+    from walkstream.client.stream.images import WALL_BATCH, ImpostorImages
+    from walkstream.client.stream.scheduler import RequestScheduler
+
+    async def go() -> list[list[int]]:
+        sched = RequestScheduler(3)
+        lane = ImpostorImages(None, Cache(1 << 20), sched, kind="walltex")  # type: ignore[arg-type]
+        sched.join(lane)
+        # many textures needed at once (a turn brings a cell's walls into view)
+        lane.wanted = {10 + k: 0.05 * k for k in range(8)}
+        sched.dispatch()
+        started = [list(f.ids) for f in sched.flights(lane)]
+        # a wall that comes into view now goes as soon as one of those lands, not after
+        # a request of 16 textures (2 s of a 56 kbit/s link)
+        for f in sched.flights(lane):
+            assert f.task is not None
+            f.task.cancel()
+        await asyncio.sleep(0)
+        return started
+
+    started = asyncio.run(go())
+    assert WALL_BATCH <= 2 and len(started) == 2
+    assert [i for ids in started for i in ids] == list(range(10, 10 + 2 * WALL_BATCH))  # soonest first
