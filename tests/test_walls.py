@@ -491,3 +491,34 @@ def test_bad_wall_flags_are_one_clear_line(
     err = capsys.readouterr().err
     assert err.startswith("walkstream: error:") and message in err and "Traceback" not in err
     assert not (tmp_path / "x.db").exists()
+
+
+def test_wall_textures_ahead_go_a_few_at_a_time_so_one_needed_now_is_not_queued() -> None:
+    import asyncio
+
+    from walkstream.client.stream.cache import Cache
+    from walkstream.client.stream.images import MAX_REQUESTS, WALL_BATCH, ImpostorImages
+    from walkstream.client.stream.scheduler import RequestScheduler
+
+    async def started(wanted: dict[int, float]) -> list[list[int]]:
+        sched = RequestScheduler(3)
+        lane = ImpostorImages(None, Cache(1 << 20), sched, kind="walltex")  # type: ignore[arg-type]
+        sched.join(lane)
+        lane.wanted = dict(wanted)
+        sched.dispatch()
+        out = [list(f.ids) for f in sched.flights(lane)]
+        for f in sched.flights(lane):
+            assert f.task is not None
+            f.task.cancel()
+        await asyncio.sleep(0)
+        return out
+
+    # textures the eye will see ahead (0.5 s on): a few to a request, soonest first, so
+    # a wall that comes into view meanwhile (a turn) waits for at most a few of them,
+    # not for two requests of 16 (2 s of a 56 kbit/s link)
+    ahead = asyncio.run(started({10 + k: 0.5 + 0.05 * k for k in range(8)}))
+    assert 1 <= WALL_BATCH <= 2 and len(ahead) == MAX_REQUESTS
+    assert [i for ids in ahead for i in ids] == list(range(10, 10 + MAX_REQUESTS * WALL_BATCH))
+    # textures needed now (the first frame, a cell entered): all in one request
+    now = asyncio.run(started({20 + k: 0.0 for k in range(5)}))
+    assert now[0] == [20, 21, 22, 23, 24]

@@ -31,7 +31,7 @@ from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
 from walkstream.shared.errors import ApiError, InputError, StreamCut
 
-__all__ = ["AHEAD_LEAD_S", "IMAGE_LEAD_S", "WALL_LAG_S", "WALL_SPAN_S", "ImpostorImages", "offered_need"]
+__all__ = ["AHEAD_LEAD_S", "IMAGE_LEAD_S", "WALL_BATCH", "WALL_LAG_S", "WALL_SPAN_S", "ImpostorImages", "offered_need"]
 
 IMAGE_LEAD_S = -1.0
 """The need (seconds from now) an image of the current cell is offered at: before
@@ -56,6 +56,16 @@ cell without its contents is a hole) and before any prefetch."""
 
 WALL_SPAN_S = 0.5
 """Wall textures in one request: those needed within this many seconds of the first."""
+
+WALL_BATCH = 2
+"""Wall textures needed ahead (not now) in one request; those needed now go together,
+up to :data:`MAX_BATCH`.  A texture is about 0.9 kB, an eighth of a second at 56 kbit/s:
+a wall that comes into view when the walker turns waits for at most two requests of two
+ahead of it.  With 16 to a request it could wait behind two requests of textures the
+walk would need later (up to 2 s of the link), its wall stayed open and the cells behind
+it, to the fog, were missing.  The production hall's tour: 96.5 -> 97.0 % perfect frames
+(one ahead texture a request: 97.9 %, but the small test hall's walk fell to 99.4 %;
+one a request for every texture: 98.1 % and 96.5 %)."""
 
 IMAGE_BYTES = 12_000.0
 """An image's bytes on the wire before one has arrived (the scheduler's cover counts them)."""
@@ -154,9 +164,10 @@ class ImpostorImages:
             offered = offered_need(need)  # by when their cell is needed
         else:
             # wall textures: those needed now just after the contents due now, those
-            # ahead at their need; one batch holds what is needed within WALL_SPAN_S of
-            # the first, so a texture wanted later is not queued behind far ones
-            ids = [i for t, i in todo[:MAX_BATCH] if t <= need + WALL_SPAN_S]
+            # ahead at their need; a request holds WALL_BATCH of them (needed within
+            # WALL_SPAN_S of the first), so one wanted now is not queued behind far ones
+            n = MAX_BATCH if need <= 0.0 else WALL_BATCH
+            ids = [i for t, i in todo[:n] if t <= need + WALL_SPAN_S]
             offered = max(need, 0.0) + WALL_LAG_S
         return Offer(offered, lambda: self._start(ids))
 
