@@ -408,7 +408,15 @@ async def _walk_unless_manifest_fails(walking: Coroutine[Any, Any, _T], manifest
     """Await the walk; a manifest that fails to decode meanwhile stops it with that error."""
     task: asyncio.Future[Any] = asyncio.ensure_future(walking)
     both: set[asyncio.Future[Any]] = {task, manifest}
-    await asyncio.wait(both, return_when=asyncio.FIRST_EXCEPTION)
+    try:
+        await asyncio.wait(both, return_when=asyncio.FIRST_EXCEPTION)
+    except asyncio.CancelledError:
+        # Ctrl-C (asyncio.run cancels the main task): asyncio.wait does not pass the
+        # cancellation on, so the walk would go on to its end and the replay exit 0
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+        raise
     if manifest.done() and not manifest.cancelled() and manifest.exception() is not None and not task.done():
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError, Exception):
