@@ -417,11 +417,14 @@ def seed_rows(seeds: Sequence[int], replay: Callable[[str, dict[str, Any], str],
     return rows
 
 
+def _or_dash(v: Any, fmt: str) -> str:
+    """``v`` formatted with ``fmt``, or ``-`` when it was not measured."""
+    return "-" if v is None else format(v, fmt)
+
+
 def seed_table(rows: Sequence[dict[str, Any]]) -> str:
     """The generated seeds' replays as text."""
-    def f(v: Any, fmt: str) -> str:
-        return "-" if v is None else format(v, fmt)
-
+    f = _or_dash
     out = [f"{'seed':>5}{'walked':>8}{'perfect%':>9}{'1st perf s':>11}{'culled px':>10}{'truth fr':>9}"
            f"{'tight p95':>10}{'kB down':>8}{'1st view':>9}{'cull ms':>8}"]
     for r in rows:
@@ -436,9 +439,7 @@ def seed_table(rows: Sequence[dict[str, Any]]) -> str:
 
 def replay_table(rows: Sequence[dict[str, Any]]) -> str:
     """The replays as text."""
-    def f(v: Any, fmt: str) -> str:
-        return "-" if v is None else format(v, fmt)
-
+    f = _or_dash
     out = [f"{'case':<38}{'perfect%':>9}{'1st perf s':>11}{'topo kB':>8}{'redl':>5}{'flushed':>8}{'reqs':>6}{'kB down':>8}"
            f"{'fps':>6}{'within10%':>10}{'recover':>8}{'fog med':>8}{'fog min':>8}{'tightened':>10}"]
     for r in rows:
