@@ -39,6 +39,7 @@ from collections.abc import Callable, Coroutine
 from types import TracebackType
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
+from walkstream.client.tasks import reap
 from walkstream.shared.errors import SimulationStalled, WalkstreamError
 
 __all__ = ["Clock", "RealClock", "SimClock", "within"]
@@ -435,13 +436,11 @@ async def within(clock: Clock, seconds: float, coro: Any) -> Any:
     timer = asyncio.ensure_future(clock.sleep(seconds))
     try:
         await asyncio.wait({task, timer}, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        timer.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await timer
+    except asyncio.CancelledError:
+        await reap([task, timer])
+        raise
+    await reap([timer])
     if task.done():
         return task.result()
-    task.cancel()
-    with contextlib.suppress(asyncio.CancelledError):
-        await task
+    await reap([task])
     return None

@@ -23,7 +23,6 @@ for the simulated devices.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,6 +55,7 @@ from walkstream.client.stream.images import ImpostorImages
 from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 from walkstream.client.stream.streamer import Streamer, StreamerConfig
 from walkstream.client.stream.walkstart import bundle_start, interior_start, manifest_task
+from walkstream.client.tasks import reap
 from walkstream.client.truth.recorder import TruthRecorder, TruthResult, interior_far_m
 from walkstream.client.walk.crossing import crossing_topology
 from walkstream.client.walk.figures import WalkFrames
@@ -320,11 +320,7 @@ async def replay(
             manifest = manifest_fut.result() if manifest_fut.done() and not manifest_fut.cancelled() else None
             disk_state = (disk.available, disk.last_error) if disk is not None else (False, None)
         finally:
-            for task in tasks:
-                if not task.done():
-                    task.cancel()
-                    with contextlib.suppress(asyncio.CancelledError, Exception):
-                        await task
+            await reap(t for t in tasks if not t.done())
             if not streamer_closed:  # closed once: the rewrite workers' pool is not closed twice
                 await _close(streamer, rooms)
             if renderer is not None:
@@ -413,14 +409,10 @@ async def _walk_unless_manifest_fails(walking: Coroutine[Any, Any, _T], manifest
     except asyncio.CancelledError:
         # Ctrl-C (asyncio.run cancels the main task): asyncio.wait does not pass the
         # cancellation on, so the walk would go on to its end and the replay exit 0
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
+        await reap([task])
         raise
     if manifest.done() and not manifest.cancelled() and manifest.exception() is not None and not task.done():
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError, Exception):
-            await task
+        await reap([task])
         raise manifest.exception()  # type: ignore[misc]
     return await task
 

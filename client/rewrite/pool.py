@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 from walkstream.client.clock import Clock
 from walkstream.client.rewrite.geometry import ObjectGeometry, rebuild_batch
 from walkstream.client.rewrite.procpool import ProcessWorkers
+from walkstream.client.tasks import reap
 from walkstream.shared.errors import InputError
 from walkstream.shared.lsystem.grammar import Grammar
 from walkstream.shared.records import AreaParams, BuildingParams, StreetParams
@@ -304,13 +305,7 @@ class RewritePool:
     async def close(self) -> None:
         """Stop the workers (jobs in progress in threads finish on their own; worker
         processes are stopped, and terminated when they do not stop at once)."""
-        for t in self._tasks:
-            t.cancel()
-        for t in self._tasks:
-            try:
-                await t
-            except asyncio.CancelledError:
-                pass
+        await reap(self._tasks)
         self._tasks = []
         if self._procs is not None:
             self._procs.close()

@@ -22,13 +22,12 @@ virtual walls, :mod:`walkstream.client.walk.walls`), fetched by ``POST
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 from collections.abc import Mapping
 
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
+from walkstream.client.tasks import reap
 from walkstream.shared.errors import ApiError, InputError, StreamCut
 
 __all__ = ["AHEAD_LEAD_S", "IMAGE_LEAD_S", "WALL_BATCH", "WALL_LAG_S", "WALL_SPAN_S", "ImpostorImages", "offered_need"]
@@ -143,11 +142,7 @@ class ImpostorImages:
         """Cancel this lane's requests (the walk ended) and wait for them to end."""
         self.refused = True  # nothing more is asked
         tasks = [f.task for f in self.scheduler.flights(self) if f.task is not None]
-        for t in tasks:
-            t.cancel()
-        for t in tasks:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await t
+        await reap(tasks)
 
     # -- the scheduler's lane ------------------------------------------------------
 

@@ -42,7 +42,6 @@ An interior is walked like this (Mulloni et al.'s cell manager):
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import time
 from collections.abc import AsyncIterator, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -56,6 +55,7 @@ from walkstream.client.content.cellmesh import CELLMESH_CONTENT, decoded_bytes
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
+from walkstream.client.tasks import reap
 from walkstream.shared.camera import camera
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.codec.cellmesh import CellMesh
@@ -690,8 +690,5 @@ class RoomStreamer:
 
     async def close(self) -> None:
         """Cancel what is in flight."""
-        for task in set(self._tasks.values()) | self._adopted:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
+        await reap(set(self._tasks.values()) | self._adopted)
         self._tasks.clear()

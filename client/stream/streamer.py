@@ -69,6 +69,7 @@ from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.route import horizon_m, turn_cost_m
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
 from walkstream.client.stream.stats import StreamStats
+from walkstream.client.tasks import reap
 from walkstream.shared.cells import TileGrid
 from walkstream.shared.codec import unpack_bounded
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
@@ -762,10 +763,6 @@ class Streamer:
             tasks.append(self._locate_task)
         if self._bundle_task is not None:
             tasks.append(self._bundle_task)
-        for t in tasks:
-            t.cancel()
-        for t in tasks:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await t
+        await reap(tasks)
         if self.rewrite is not None:
             await self.rewrite.close()
