@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from daskcluster import local_cluster
 
 from walkstream.cli import main
 from walkstream.server.bake import BakeSettings, bake
@@ -84,13 +85,9 @@ def test_local_workers_give_the_same_pvs(city: Path, baked: tuple[Path, dict], t
 
 
 def test_dask_local_cluster(city: Path, baked: tuple[Path, dict], tmp_path: Path) -> None:
-    from distributed import LocalCluster
-
     db, _ = baked
     out = tmp_path / "dask.db"
-    # ":0": a free port for the dashboard; None means the fixed 8787, which two xdist workers
-    # (or any other job on the machine) may hold
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+    with local_cluster() as cluster:
         summary = bake(city, out, settings=FAST, scheduler=cluster.scheduler_address)
     ref = SceneReader.open(db)
     try:

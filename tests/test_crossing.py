@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 import shapely
+from daskcluster import local_cluster
 
 from walkstream.server.bake import BakeSettings, bake
 from walkstream.server.bake.crossing import STAND_IN_INSET
@@ -394,14 +395,10 @@ def test_a_stopped_crossing_bake_resumes_to_the_same_version(
 
 
 def test_a_crossing_on_a_dask_local_cluster_bakes_the_same_scene(baked: tuple[Path, dict[str, Any], Path], tmp_path: Path) -> None:
-    from distributed import LocalCluster
-
     _, summary, d = baked
     out = tmp_path / "dask" / "x.db"
     out.parent.mkdir()
-    # ":0": a free port for the dashboard; None means the fixed 8787, which two xdist workers
-    # (or any other job on the machine) may hold
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+    with local_cluster() as cluster:
         got = bake(d / "city.geojson", out, settings=FAST, interior=d / "office.json", name="scene",
                    scheduler=cluster.scheduler_address)
     assert got["version"] == summary["version"]

@@ -70,22 +70,26 @@ def test_a_client_hanging_up_mid_body_is_one_log_line_not_a_500(
 
 def test_a_slowloris_of_1000_connections_is_bounded(city: CityDb, guarded: type) -> None:
     app = create_app([city.path])
+    socks: list[socket.socket] = []
     try:
         with serve_in_thread(app, http=guarded) as url:
             port = _port(url)
-            socks = []
+            t0 = time.perf_counter()
             for _ in range(1000):
                 s = socket.create_connection(("127.0.0.1", port), timeout=5)
                 s.sendall(b"GET /v1/health HTTP/1.1\r\nHost: x\r\nX-Slow: ")  # never ends its head
                 socks.append(s)
+            # a loaded machine may take longer than the 1 s read deadline to open them all,
+            # and each deadline that passes frees the held slots for 50 more
+            deadlines = 1 + int((time.perf_counter() - t0) / 1.0)
             time.sleep(0.3)
-            # the 51st and later connections from this address were refused at once
+            # past the 50 held from this address, connections are refused at once
             refused = 0
             for s in socks[50:]:
                 s.settimeout(2)
                 if s.recv(4096).startswith(b"HTTP/1.1 503"):
                     refused += 1
-            assert refused == 950
+            assert 950 - 50 * (deadlines - 1) <= refused <= 950
             # the first 50 are closed once their read deadline (1 s here) passes
             time.sleep(1.5)
             closed = 0
@@ -100,6 +104,8 @@ def test_a_slowloris_of_1000_connections_is_bounded(city: CityDb, guarded: type)
             assert httpx.get(url + "/v1/health").status_code == 200
             assert time.perf_counter() - t < 1
     finally:
+        for s in socks:  # a failed assertion leaves no open socket to a later test's warnings
+            s.close()
         app.state.scenes.close()
 
 
