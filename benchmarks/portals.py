@@ -50,7 +50,8 @@ from walkstream.server.service.interiors import InteriorState
 from walkstream.server.sources.interiorgen import PRESETS, InteriorPlan, write_interior
 from walkstream.server.store import SceneReader
 from walkstream.shared.camera import camera, perspective
-from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
+from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.codec.cellpieces import decode_cell_pieces
 from walkstream.shared.errors import WalkstreamError
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.portalgraph import PortalGraph
@@ -89,7 +90,7 @@ def _load(db: Path) -> tuple[Topology, dict[int, CellMesh], RecordedPath]:
     with SceneReader.open(db) as r:
         state = InteriorState(r, list(r.cells()))
         topo = decode_topology(state.topology["msgpack"].content, f"{db}: topology")
-        meshes = {c.id: decode_cell_mesh(r.contents(c.id), f"{db}: cell {c.id}") for c in topo.cells}
+        meshes = {c.id: decode_cell_pieces(r.contents(c.id), f"{db}: cell {c.id}") for c in topo.cells}
         tour = RecordedPath.from_msgpack(r.path_blob("tour"))
     return topo, meshes, tour
 

@@ -12,7 +12,8 @@ Pure numpy, no GL.  The portals come as a :class:`~walkstream.shared.portalgraph
    so a vertex behind the eye never projects to a wrong place (the paper's
    ``IsPortalCulled`` projects vertices as they are: a door the walker is passing
    through gets a wrong rectangle and the room behind it vanishes); the clipped
-   polygon's projected bounding rectangle is **rounded outward** to whole pixels and
+   polygon's projected bounding rectangle is taken as the whole pixels whose centres
+   it may cover (:mod:`walkstream.shared.screenrects`: a rasteriser draws no other) and
    intersected with the cell's VSA; an empty intersection culls the portal.
 3. When the eye is within a few centimetres of a portal's plane and inside its
    bounds, the portal's projection degenerates (it fills the screen or nothing):
@@ -68,7 +69,7 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.errors import InputError
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.screenrects import box_rects, corner_secant, point_rects
+from walkstream.shared.screenrects import CENTRE_MARGIN_PX, box_rects, corner_secant, point_rects
 
 __all__ = [
     "CULLING_MODES",
@@ -136,6 +137,7 @@ def cull_portals(
     max_vsas: int = 4,
     naive: bool = False,
     closed: frozenset[int] = frozenset(),
+    margin_px: float = CENTRE_MARGIN_PX,
 ) -> PortalCull:
     """Cells seen from cell ``start`` through portals, with their VSAs (module docstring).
 
@@ -163,6 +165,10 @@ def cull_portals(
     closed : frozenset of int
         Portal ids the walk does not pass (virtual walls drawn as their texture:
         :mod:`walkstream.shared.walls`).
+    margin_px : float
+        Pixels by which a portal's projection is grown before the pixel centres it
+        covers are taken (:func:`~walkstream.shared.screenrects.ndc_pixels`; a
+        predicted view's walk takes every pixel touched, ``TOUCH_MARGIN_PX``).
     """
     t0 = time.perf_counter()
     if start not in graph.index:
@@ -177,7 +183,7 @@ def cull_portals(
     # whole-pixel rectangles as plain ints.  The walk is the round-one FIFO walk
     # (benchmarks/portalwalk.py) step for step, so its cells, VSAs and depths are the
     # same; only the constant work per portal is less.
-    rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed)
+    rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed, margin_px)
     s = graph.index[start]
     full = (0, 0, w - 1, h - 1)
     # per cell index (lists, not dicts: indexing is the walk's most frequent step)
@@ -298,6 +304,7 @@ def _portal_rows(
     fog_m: float,
     naive: bool,
     closed: frozenset[int] = frozenset(),
+    margin_px: float = CENTRE_MARGIN_PX,
 ) -> Callable[[int], Iterable[tuple[int, Any]]]:
     """A function giving, for a cell index, its directed portals as ``(target index, what)``
     pairs: ``what`` is ``None`` (culled: beyond the fog or wholly behind the clip plane),
@@ -307,7 +314,7 @@ def _portal_rows(
     adjacency, starts = graph.adjacency, graph.row_start
     if m == 0:
         return lambda c: ()
-    rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive)
+    rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive, margin_px)
     # 0 culled, 1 pass through, 2 the rectangle
     what = np.where(front, 2, 0).astype(np.int8)
     if not naive:
@@ -381,14 +388,20 @@ def cull_boxes(
     keep = box_distance(lo_, hi_, e) <= fog_m
     rect, front = box_rects(lo_, hi_, view, proj, size, clip_m)
     v = np.asarray(vsas, np.int64).reshape(-1, 4)
-    meet = (
-        (rect[:, None, 0] <= v[None, :, 2]) & (rect[:, None, 2] >= v[None, :, 0])
-        & (rect[:, None, 1] <= v[None, :, 3]) & (rect[:, None, 3] >= v[None, :, 1])
-    )
+    meet = _meet(rect[:, None, :], v[None, :, :])
     keep &= front & np.any(meet, axis=1)
     vp = np.asarray(proj, np.float64) @ np.asarray(view, np.float64)
     keep[keep] = frustum_cull(lo_[keep], hi_[keep], vp)
     return keep
+
+
+def _meet(a: NDArray[np.int64], b: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Whether whole-pixel rectangles ``(..., 4)`` share a pixel (broadcast); an empty one
+    (``x0 > x1`` or ``y0 > y1``: no pixel centre) meets nothing."""
+    return (
+        (np.maximum(a[..., 0], b[..., 0]) <= np.minimum(a[..., 2], b[..., 2]))
+        & (np.maximum(a[..., 1], b[..., 1]) <= np.minimum(a[..., 3], b[..., 3]))
+    )
 
 
 def frustum_cells(
@@ -496,12 +509,7 @@ def cull_parts(
         v[i, : len(vsas[c])] = vsas[c]
     keep = box_distance(lo, hi, e) <= fog_m
     rect, front = box_rects(lo, hi, view, proj, size, clip_m)
-    vv = v[owner]  # (n, kmax, 4)
-    meet = (
-        (rect[:, None, 0] <= vv[:, :, 2]) & (rect[:, None, 2] >= vv[:, :, 0])
-        & (rect[:, None, 1] <= vv[:, :, 3]) & (rect[:, None, 3] >= vv[:, :, 1])
-        & (vv[:, :, 0] <= vv[:, :, 2])
-    )
+    meet = _meet(rect[:, None, :], v[owner])  # (n, kmax)
     keep &= front & np.any(meet, axis=1)
     keep[keep] = frustum_cull(lo[keep], hi[keep], vp)
     for c, part in zip(seen, np.split(keep, np.cumsum(counts)[:-1]), strict=True):

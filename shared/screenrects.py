@@ -2,9 +2,18 @@
 
 A visible screen area (VSA) is an axis-aligned rectangle of whole pixels ``(x0, y0,
 x1, y1)``, inclusive, row 0 at the bottom (GL's window coordinates).  A portal's or a
-box's rectangle is the projected bounding rectangle of its points, **rounded outward**
-to whole pixels; the points are clipped against a plane ``clip_m`` in front of the
-eye first, so that a vertex behind the eye never projects to a wrong place (see
+box's rectangle is the projected bounding rectangle of its points, taken as **the
+pixels whose centres it may cover**: a rasteriser draws a pixel only when the pixel's
+centre is inside a triangle, so what is seen through a portal, or drawn of what lies
+in a box, is drawn at centres inside the projection, and those pixels are all the
+rectangle need hold.  The bounds are grown by :data:`CENTRE_MARGIN_PX` first (float32
+transforms, sub-pixel snapping).  A rectangle with no centre is empty (``x0 > x1`` or
+``y0 > y1``): a door seen edge-on down a corridor, a sliver thinner than the gap
+between two centres, shows nothing through it.  (Rounded outward to every pixel the
+projection touched, such slivers became a pixel-wide rectangle each, and the rooms
+behind them were drawn, twice the triangles the walker saw down a generated office's
+corridor.)  The points are clipped against a plane ``clip_m`` in front of the eye
+first, so that a vertex behind the eye never projects to a wrong place (see
 :mod:`walkstream.shared.portals` for why the plane is not the camera's near plane).
 Pure numpy, every set of a batch at once.
 """
@@ -17,6 +26,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "CENTRE_MARGIN_PX",
+    "TOUCH_MARGIN_PX",
     "BOX_EDGES",
     "full_vsa",
     "corner_secant",
@@ -27,7 +38,15 @@ __all__ = [
 ]
 
 
-_EPS_PX = 1e-3
+#: Pixels by which a projected rectangle is grown before its pixel centres are taken:
+#: room for the float32 transform and the rasteriser's sub-pixel snapping, so a centre
+#: the GPU may find inside an edge is never left out of the rectangle.
+CENTRE_MARGIN_PX = 0.125
+
+#: The margin that keeps every pixel a projection touches (the rule before the centres):
+#: for a predicted view, which is a guess, so that a door about to open beyond a sliver
+#: is fetched before it shows (the prefetch's portal walk, :mod:`walkstream.client.stream.rooms`).
+TOUCH_MARGIN_PX = 0.5
 
 
 def full_vsa(size: tuple[int, int]) -> NDArray[np.int64]:
@@ -49,12 +68,14 @@ def point_rects(
     size: tuple[int, int],
     clip_m: float,
     naive: bool = False,
+    margin_px: float = CENTRE_MARGIN_PX,
 ) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
     """Whole-pixel rectangles of point sets clipped against depth ``clip_m``.
 
     ``pts`` ``(m, k, 3)`` world points, ``edges`` ``(e, 2)`` the index pairs joining
     them (the polygon's sides or a box's edges).  Returns ``(m, 4)`` inclusive pixel
-    rectangles (unclamped) and ``(m,)`` whether anything of each set lies in front.
+    rectangles (unclamped) and ``(m,)`` whether anything of each set lies in front;
+    ``margin_px`` as in :func:`ndc_pixels`.
     """
     m = len(pts)
     if m == 0:
@@ -80,15 +101,16 @@ def point_rects(
         d = np.where(ahead[:, None], depth, 1.0)
         x = (proj[0, 0] * v[..., 0] + proj[0, 2] * v[..., 2]) / d
         y = (proj[1, 1] * v[..., 1] + proj[1, 2] * v[..., 2]) / d
-        rect = ndc_pixels(np.stack([_kmin(x), _kmin(y)], axis=1), np.stack([_kmax(x), _kmax(y)], axis=1), size)
+        rect = ndc_pixels(np.stack([_kmin(x), _kmin(y)], axis=1), np.stack([_kmax(x), _kmax(y)], axis=1), size,
+                          margin_px)
         behind = far_d < clip_m
         front[behind] = False
         rect[behind] = (1, 1, 0, 0)
         rest = ~ahead & ~behind
         if rest.any():
-            rect[rest], front[rest] = clipped_rects(v[rest], depth[rest], edges, proj, size, clip_m)
+            rect[rest], front[rest] = clipped_rects(v[rest], depth[rest], edges, proj, size, clip_m, margin_px)
         return rect, front
-    return ndc_pixels(lo, hi, size), front
+    return ndc_pixels(lo, hi, size, margin_px), front
 
 
 def _kmin(a: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -115,6 +137,7 @@ def clipped_rects(
     proj: NDArray[np.float64],
     size: tuple[int, int],
     clip_m: float,
+    margin_px: float = CENTRE_MARGIN_PX,
 ) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
     """:func:`point_rects` of eye-space point sets ``(m, k, 3)`` that cross the clip plane."""
     a, b = v[:, edges[:, 0]], v[:, edges[:, 1]]  # (m, e, 3)
@@ -132,15 +155,23 @@ def clipped_rects(
     big = 1e30
     lo = np.stack([np.where(ok, x, big).min(axis=1), np.where(ok, y, big).min(axis=1)], axis=1)
     hi = np.stack([np.where(ok, x, -big).max(axis=1), np.where(ok, y, -big).max(axis=1)], axis=1)
-    return ndc_pixels(lo, hi, size), front
+    return ndc_pixels(lo, hi, size, margin_px), front
 
 
-def ndc_pixels(lo: NDArray[np.float64], hi: NDArray[np.float64], size: tuple[int, int]) -> NDArray[np.int64]:
-    """NDC bounds ``(m, 2)`` each to inclusive whole-pixel rectangles ``(m, 4)``, rounded outward."""
+def ndc_pixels(
+    lo: NDArray[np.float64], hi: NDArray[np.float64], size: tuple[int, int], margin_px: float = CENTRE_MARGIN_PX
+) -> NDArray[np.int64]:
+    """NDC bounds ``(m, 2)`` each to inclusive whole-pixel rectangles ``(m, 4)``: the pixels
+    whose centre lies within the bounds grown by ``margin_px`` (empty, ``x0 > x1`` or
+    ``y0 > y1``, when no centre does; module docstring).  ``margin_px`` 0.5 keeps every
+    pixel the bounds touch (a predicted view's, :data:`TOUCH_MARGIN_PX`)."""
     wh = np.array([size[0], size[1]], np.float64)
     plo = np.clip((lo + 1.0) * 0.5 * wh, -1e9, 1e9)
     phi = np.clip((hi + 1.0) * 0.5 * wh, -1e9, 1e9)
-    return np.concatenate([np.floor(plo - _EPS_PX), np.floor(phi + _EPS_PX)], axis=1).astype(np.int64)
+    # pixel i's centre is at i + 0.5: the first centre at or after plo, the last at or before phi
+    return np.concatenate(
+        [np.ceil(plo - 0.5 - margin_px), np.floor(phi - 0.5 + margin_px)], axis=1
+    ).astype(np.int64)
 
 
 BOX_EDGES = np.array(

@@ -21,7 +21,8 @@ from walkstream.client.truth.render import TruthRenderer
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.store import SceneReader
 from walkstream.shared.camera import camera
-from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh
+from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.codec.cellpieces import decode_cell_pieces
 from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.portals import cull_parts, cull_portals, frustum_cells
 from walkstream.shared.roomcompact import decode_topology_compact
@@ -41,7 +42,7 @@ class PortalScene:
             state = InteriorState(r, list(r.cells()))
             # the compact topology, as the client gets it (portals rounded outward to mm)
             self.topology = decode_topology_compact(state.topology_compact.content, "topology")
-            self.meshes: dict[int, CellMesh] = {c.id: decode_cell_mesh(r.contents(c.id)) for c in self.topology.cells}
+            self.meshes: dict[int, CellMesh] = {c.id: decode_cell_pieces(r.contents(c.id)) for c in self.topology.cells}
         self.graph = PortalGraph.from_topology(self.topology)
         inside = [c for c in self.topology.cells if c.kind != "outside" and len(c.planes)]
         self.ids, self.planes = stack_planes(inside)

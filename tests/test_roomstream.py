@@ -29,6 +29,7 @@ from walkstream.server.service.main import create_app
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.errors import CodecError, InputError
 from walkstream.shared.roomwire import Topology, decode_topology, decode_topology_packed
+from walkstream.shared.screenrects import TOUCH_MARGIN_PX
 
 
 def _get(app: Any, url: str, **headers: str) -> httpx.Response:
@@ -170,7 +171,7 @@ def test_prefetch_follows_the_predicted_motion_in_order(office_db: Path) -> None
         v2 = predicted_view(view, eye, e2)
         cell = s._where.locate(e2, s.current)
         assert cell is not None
-        for x in s._cells_from(cell, e2, proj @ v2, v2, proj, size)[1]:
+        for x in s._cells_from(cell, e2, proj @ v2, v2, proj, size, margin_px=TOUCH_MARGIN_PX)[1]:
             first_seen.setdefault(x, h)
     times = [first_seen[x] for x in ahead]
     assert times == sorted(times) and len(set(times)) > 1

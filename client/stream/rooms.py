@@ -66,6 +66,7 @@ from walkstream.shared.portals import PortalCull, cull_portals, frustum_cells
 from walkstream.shared.roomview import RoomLocator
 from walkstream.shared.roomwire import RoomRecord, Topology
 from walkstream.shared.scene.placement import ContentsPlacement, placement_for
+from walkstream.shared.screenrects import CENTRE_MARGIN_PX, TOUCH_MARGIN_PX
 
 __all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "predicted_view", "turned_view"]
 
@@ -304,14 +305,17 @@ class RoomStreamer:
         proj: NDArray[np.float64] | None,
         size: tuple[int, int] | None,
         closed: frozenset[int] = frozenset(),
+        margin_px: float = CENTRE_MARGIN_PX,
     ) -> tuple[PortalCull | None, list[int]]:
         # ``closed`` (the virtual walls drawn as textures) only for the frame's view: a
         # predicted pose's cells (the prefetch) are seen through them, so that the cells
-        # behind a wall are in when the viewer comes near enough to open it
+        # behind a wall are in when the viewer comes near enough to open it; likewise a
+        # predicted pose keeps every pixel a portal touches (``margin_px``), not only the
+        # centres it covers, so a door about to open beyond a sliver is fetched before it shows
         cfg = self.config
         if cfg.culling == "portals" and view is not None and proj is not None and size is not None:
             pc = cull_portals(self.graph, cell, eye, view, proj, size, fog_m=self.fog_m, max_depth=cfg.max_depth,
-                              closed=closed)
+                              closed=closed, margin_px=margin_px)
             return pc, pc.order
         return None, frustum_cells(self.graph, cell, eye, view_proj, fog_m=self.fog_m, max_depth=cfg.max_depth)
 
@@ -325,7 +329,7 @@ class RoomStreamer:
     ) -> list[int]:
         """The cells seen from ``cell`` with the camera ``view``, ``proj`` at ``eye`` (a
         predicted pose: nothing is kept of it)."""
-        return self._cells_from(cell, eye, proj @ view, view, proj, size)[1]
+        return self._cells_from(cell, eye, proj @ view, view, proj, size, margin_px=TOUCH_MARGIN_PX)[1]
 
     def visible_bytes(self, cells: list[int]) -> int:
         """Memory the decoded contents of ``cells`` take (cached ones as cached; the
@@ -561,11 +565,11 @@ class RoomStreamer:
             else:
                 view2 = predicted_view(view, eye, e2)
             vp2 = view_proj @ np.linalg.inv(view) @ view2
-            out.extend(self._cells_from(cell, e2, vp2, view2, proj, size)[1])
+            out.extend(self._cells_from(cell, e2, vp2, view2, proj, size, margin_px=TOUCH_MARGIN_PX)[1])
         for deg in self.config.turns_deg:
             view2 = turned_view(view, eye, deg)
             vp2 = view_proj @ np.linalg.inv(view) @ view2
-            out.extend(self._cells_from(self.current, eye, vp2, view2, proj, size)[1])
+            out.extend(self._cells_from(self.current, eye, vp2, view2, proj, size, margin_px=TOUCH_MARGIN_PX)[1])
         return list(dict.fromkeys(out))  # each cell where it is first needed
 
     def wanted(

@@ -32,6 +32,7 @@ from walkstream.shared.codec.cellmesh import (
     encode_cell_mesh,
     position_error_bound,
 )
+from walkstream.shared.codec.cellpieces import PIECE_TRIANGLES, cell_pieces, decode_cell_pieces
 from walkstream.shared.codec.ints import INT_FORMATS, pack_ints, unpack_ints
 from walkstream.shared.codec.mesh import MESH_FORMAT, decode_mesh, encode_mesh
 from walkstream.shared.codec.params import (
@@ -89,4 +90,7 @@ __all__ = [
     "encode_cell_mesh",
     "decode_cell_mesh",
     "position_error_bound",
+    "PIECE_TRIANGLES",
+    "cell_pieces",
+    "decode_cell_pieces",
 ]

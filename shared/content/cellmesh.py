@@ -6,11 +6,15 @@ feature, :mod:`walkstream.shared.codec.cellmesh`); the service answers
 ``POST .../rooms/contents`` with many of them (:mod:`walkstream.shared.codec.cellbatch`);
 the client caches the decoded :class:`~walkstream.shared.codec.cellmesh.CellMesh` under
 ``cellmesh`` by cell id, apart from the objects' ``mesh`` entries that share ids with it.
+It decodes a blob into the pieces the client culls
+(:func:`~walkstream.shared.codec.cellpieces.decode_cell_pieces`: a part over
+:data:`~walkstream.shared.codec.cellpieces.PIECE_TRIANGLES` triangles cut into pieces),
+so the client and its ground truth key the same pieces.
 """
 
 from __future__ import annotations
 
-from walkstream.shared.codec.cellmesh import decode_cell_mesh
+from walkstream.shared.codec.cellpieces import decode_cell_pieces
 from walkstream.shared.content.kind import ContentKind
 
 __all__ = ["CONTENTS_MEDIA", "KIND"]
@@ -28,6 +32,6 @@ KIND = ContentKind(
     form=None,
     wire=CONTENTS_MEDIA,
     cache_kind="cellmesh",
-    decode=decode_cell_mesh,
+    decode=decode_cell_pieces,
 )
 """The ``cellmesh`` content kind."""

@@ -1,0 +1,45 @@
+"""Whole-pixel rectangles hold the pixels whose centres a projection may cover, no more."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from walkstream.shared.camera import camera, perspective
+from walkstream.shared.portals import cull_boxes
+from walkstream.shared.screenrects import CENTRE_MARGIN_PX, ndc_pixels
+
+SIZE = (10, 10)
+
+
+def _rect(x0: float, x1: float) -> list[int]:
+    """The rectangle of a span ``x0 .. x1`` in pixel coordinates (and the same in y)."""
+    lo = np.array([[x0, x0]]) / 5.0 - 1.0
+    hi = np.array([[x1, x1]]) / 5.0 - 1.0
+    return ndc_pixels(lo, hi, SIZE)[0].tolist()
+
+
+def test_a_span_holds_the_pixels_whose_centres_it_covers() -> None:
+    assert _rect(3.2, 3.8) == [3, 3, 3, 3]  # the centre 3.5 only
+    assert _rect(3.2, 6.9) == [3, 3, 6, 6]  # centres 3.5 .. 6.5; 7.5 is beyond 6.9
+    assert _rect(-4.0, 20.0) == [-4, -4, 19, 19]  # unclamped, as before
+
+
+def test_a_sliver_between_two_centres_is_empty() -> None:
+    x0, x1 = _rect(3.7, 4.3)[0::2]  # touches pixels 3 and 4, covers neither centre
+    assert x0 > x1
+    # within the margin of a centre: kept (float32 transforms, sub-pixel snapping)
+    x0, x1 = _rect(3.5 + 0.9 * CENTRE_MARGIN_PX, 4.3)[0::2]
+    assert (x0, x1) == (3, 3)
+
+
+def test_a_box_between_pixel_centres_is_culled_and_a_box_over_one_is_kept() -> None:
+    eye = np.array([0.0, 0.0, 1.6])
+    view = camera(eye, 0.0, 0.0).astype(np.float64)
+    proj = perspective(60.0, 160 / 120, 0.1, 100.0).astype(np.float64)
+    whole = np.array([[0, 0, 159, 119]])
+    # 1 mm at 10 m straight ahead: it projects onto the corner of four pixels
+    tiny = cull_boxes([[10.0, -0.0005, 1.5995]], [[10.001, 0.0005, 1.6005]], whole, eye, view, proj, (160, 120))
+    assert not tiny[0]
+    # 20 cm there covers centres
+    small = cull_boxes([[10.0, -0.1, 1.5]], [[10.001, 0.1, 1.7]], whole, eye, view, proj, (160, 120))
+    assert small[0]
