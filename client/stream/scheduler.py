@@ -28,6 +28,7 @@ The scheduler never blocks the frame loop: it starts tasks and returns.
 from __future__ import annotations
 
 import asyncio
+import os
 from collections.abc import Callable, Collection, Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -49,6 +50,11 @@ class Offer:
 
     need_s: float
     start: Callable[[], object]
+    urgent: bool = False
+    """It may go out when every slot is taken, in one slot kept beyond
+    :attr:`RequestScheduler.slots` for such requests (a lane offers it for content
+    needed now that came up suddenly, such as the texture of a wall the walker turns
+    to, and never has two of them on the link)."""
 
 
 class Lane(Protocol):
@@ -87,6 +93,8 @@ class Flight:
     ids: list[int]
     left: set[int] = field(default_factory=set)
     task: asyncio.Task[None] | None = None
+    urgent: bool = False
+    """Started from an :attr:`Offer.urgent` offer."""
 
 
 class RequestScheduler:
@@ -119,6 +127,7 @@ class RequestScheduler:
         self.lanes: list[Lane] = []
         """The lanes, in the order they joined (the order of ties)."""
         self._flights: dict[asyncio.Task[None], Flight] = {}
+        self._urgent = False  # the offer being started is urgent
         self.started: dict[int, int] = {}
         """Requests started, by lane (its index in :attr:`lanes`)."""
 
@@ -137,21 +146,34 @@ class RequestScheduler:
 
     def dispatch(self) -> int:
         """Start requests while the link has a free slot: each time the offer needed
-        soonest (the earlier lane on a tie), unless it :meth:`waits`.  Returns how many
-        were started."""
+        soonest (the earlier lane on a tie), unless it :meth:`waits`; with every slot
+        taken, one more for an :attr:`Offer.urgent` offer.  Returns how many were
+        started."""
         n = 0
-        while self.in_flight() < self.slots:
+        while (busy := self.in_flight()) < self.slots + 1:
             best: tuple[float, int, Offer] | None = None
             for k, lane in enumerate(self.lanes):
                 o = lane.offer()
-                if o is not None and (best is None or o.need_s < best[0]):
+                if o is None or (busy >= self.slots and not o.urgent):
+                    continue  # the slot beyond is kept for urgent offers
+                if best is None or o.need_s < best[0]:
                     best = (o.need_s, k, o)
             if best is None or self.waits(best[0]):
                 break
-            best[2].start()
+            if best[0] > 0.0 and self.urgent_in_flight() and not os.environ.get("WL_NOHOLD"):
+                break  # what is not needed now waits for the urgent request (it has the link)
+            self._urgent = best[2].urgent
+            try:
+                best[2].start()
+            finally:
+                self._urgent = False
             self.started[best[1]] = self.started.get(best[1], 0) + 1
             n += 1
         return n
+
+    def urgent_in_flight(self) -> bool:
+        """Whether an urgent request (:attr:`Offer.urgent`) is on the link."""
+        return any(f.urgent for f in self._flights.values())
 
     def waits(self, need_s: float) -> bool:
         """Whether a request needed in ``need_s`` seconds waits: with more than one lane,
@@ -180,7 +202,7 @@ class RequestScheduler:
     ) -> Flight:
         """Start ``run(flight)`` as a task for a request of ``ids``; the lane calls
         :meth:`landed` when it ends, however it ends."""
-        f = Flight(lane, kind, list(ids), set(ids))
+        f = Flight(lane, kind, list(ids), set(ids), urgent=self._urgent)
         f.task = asyncio.ensure_future(run(f))
         self._flights[f.task] = f
         return f
