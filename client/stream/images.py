@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import os
 from collections.abc import Mapping
 
 from walkstream.client.net.api import SceneClient
@@ -182,7 +181,7 @@ class ImpostorImages:
         lane's requests on the link holds textures needed now.  A wall that comes into
         view as the walker turns is then not queued behind the textures of walls needed
         later, nor behind a prefetch of cell contents; else 0."""
-        if self.kind != "walltex" or need > 0.0 or os.environ.get("WL_NOSLOT"):
+        if self.kind != "walltex" or need > 0.0:
             return 0
         return int(not any(f in self._now for f in self.scheduler.flights(self)))
 
@@ -195,11 +194,6 @@ class ImpostorImages:
         return sum(len(f.left) for f in self.scheduler.flights(self)) * self._image_bytes
 
     def _start(self, ids: list[int], now: bool = False) -> None:
-        if os.environ.get("WL_DBG"):
-            import sys
-
-            from walkstream.client.walk import walls as _w
-            print(f"DBG {_w._T:.2f} start {ids} now={now} inflight={self.scheduler.in_flight()}", file=sys.stderr)
         self._asked.update(ids)
         self.requests += 1
         f = self.scheduler.launch(self, _FETCH[self.kind], ids, self._fetch)
@@ -210,11 +204,6 @@ class ImpostorImages:
         try:
             async for iid, rgba, nbytes in getattr(self.api, _FETCH[self.kind])(f.ids):
                 f.left.discard(iid)
-                if os.environ.get("WL_DBG"):
-                    import sys
-
-                    from walkstream.client.walk import walls as _w
-                    print(f"DBG {_w._T:.2f} got {iid}", file=sys.stderr)
                 self.cache.put(self.kind, iid, rgba, max(int(rgba.nbytes), 1))
                 self.received += 1
                 self.bytes_received += int(nbytes)

@@ -520,11 +520,6 @@ class RoomStreamer:
         turn = (y1 - y0 + np.pi) % (2 * np.pi) - np.pi
         return float(turn / (t1 - t0)) if t1 > t0 else 0.0
 
-    @property
-    def ahead_cells(self) -> list[int]:
-        """The cells the predicted motion makes visible (:meth:`predicted`, as last planned)."""
-        return list(self._ahead)
-
     def turning(self) -> bool:
         """Whether the heading turns fast enough (20 degrees a second) to be predicted
         to go on turning."""

@@ -17,6 +17,13 @@ back while the bytes on the link, every lane's, cover a few round trips of trans
 that what comes up meanwhile (a room coming into view through a door) is not queued
 behind another kind's prefetch, and what goes later is picked from fresher wants.
 
+One slot beyond :attr:`RequestScheduler.slots` is kept for an **urgent** offer
+(:attr:`Offer.urgent`): content needed now that came up suddenly, such as the textures
+of the virtual walls a walker turning at a corner sees only then.  It goes out at once
+with every slot taken, and while it is on the link nothing not needed now starts (a
+prefetch or a texture ahead would take a share of the link from it); what is needed
+now still does.
+
 Every request a lane starts through :meth:`RequestScheduler.launch` is a
 :class:`Flight` (its items, those not yet received, its task) until the lane says it
 :meth:`~RequestScheduler.landed`; :meth:`RequestScheduler.cancel_unwanted` cancels a
@@ -28,7 +35,6 @@ The scheduler never blocks the frame loop: it starts tasks and returns.
 from __future__ import annotations
 
 import asyncio
-import os
 from collections.abc import Callable, Collection, Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -150,17 +156,21 @@ class RequestScheduler:
         taken, one more for an :attr:`Offer.urgent` offer.  Returns how many were
         started."""
         n = 0
-        while (busy := self.in_flight()) < self.slots + 1:
+        while True:
+            urgent = self.urgent_in_flight()
+            free = self.in_flight() - int(urgent) < self.slots  # the urgent one has its own slot
+            if not free and urgent:
+                break
             best: tuple[float, int, Offer] | None = None
             for k, lane in enumerate(self.lanes):
                 o = lane.offer()
-                if o is None or (busy >= self.slots and not o.urgent):
-                    continue  # the slot beyond is kept for urgent offers
+                if o is None or not (free or (o.urgent and not urgent)):
+                    continue  # every slot taken: the one beyond is kept for an urgent offer
                 if best is None or o.need_s < best[0]:
                     best = (o.need_s, k, o)
             if best is None or self.waits(best[0]):
                 break
-            if best[0] > 0.0 and self.urgent_in_flight() and not os.environ.get("WL_NOHOLD"):
+            if best[0] > 0.0 and urgent:
                 break  # what is not needed now waits for the urgent request (it has the link)
             self._urgent = best[2].urgent
             try:

@@ -25,10 +25,6 @@ the frame is what it was.
 
 from __future__ import annotations
 
-import os
-import sys
-_DBG = bool(os.environ.get('WL_DBG'))
-_T = 0.0
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -88,8 +84,6 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     (asked for by :func:`want_wall_textures` once the walk is known)."""
     rooms, lane = w.scene.rooms, w.scene.wall_images
     sides, table = w.scene.walls, w.scene.wall_table
-    global _T
-    _T = f.t
     f.wall_wants = []
     if rooms is None:
         return []
@@ -134,8 +128,6 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
         if weights[0, k] >= 1.0:
             due.add(s.portal)
         if not held:
-            if _DBG and weights[0, k] >= 1.0:
-                print(f"DBG {f.t:.2f} open {tid} seen={bool(seen[k])}", file=sys.stderr)
             if seen[k]:
                 wanted.append((tid, cells[0], 0.0))
             continue  # not here yet: the portal stays open (geometry), never a hole
@@ -152,7 +144,7 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
         if weights[0, k] >= 1.0:
             closed.add(s.portal)
     for h, t in enumerate(horizons, start=1):
-        seen_h = seen | in_view(to_eye @ ahead[h - 1][1]) if not os.environ.get("WL_NOTURN") else seen
+        seen_h = seen | in_view(to_eye @ ahead[h - 1][1])
         for k in np.flatnonzero((weights[h] > 0.0) & seen_h).tolist():
             s = sides[k]
             tid = s.textures[int(zones[h, k])]
@@ -160,8 +152,6 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
                 a, b = portals[s.portal]
                 wanted.append((tid, a if s.side == 0 else b, float(t)))
     f.wall_wants = wanted
-    if _DBG:
-        print(f"DBG {f.t:.2f} want {sorted(set((i, round(n, 1)) for i, _c, n in wanted))[:12]} turning={rooms.turning()} rate={rooms.turn_rate():.2f}", file=sys.stderr)
     rooms.closed = frozenset(closed)
     rooms.due_closed = frozenset(due)
     return out
@@ -178,8 +168,6 @@ def want_wall_textures(w: WalkState, f: Frame, cells: Sequence[int]) -> None:
         return
     now = set(cells)
     near = now | {n for c in now if c in rooms.cells for n in rooms.cells[c].neighbours}
-    if not os.environ.get("WL_NOAHEAD"):
-        near |= set(rooms.ahead_cells)  # the predicted walk's: a turn shows another aisle
     wanted: dict[int, float] = {}
     for tid, cell, need in f.wall_wants:
         if cell in (now if need <= 0.0 else near) and need < wanted.get(tid, np.inf):
