@@ -549,18 +549,18 @@ class _Prefetch:
         return 0.0
 
 
-def test_a_texture_needed_now_takes_the_kept_slot_and_what_is_not_due_waits_for_it() -> None:
+def test_a_texture_needed_now_takes_the_slot_kept_beyond_the_links_and_the_far_prefetch_waits() -> None:
     import asyncio
 
     from walkstream.client.stream.cache import Cache
     from walkstream.client.stream.images import MAX_REQUESTS, ImpostorImages
-    from walkstream.client.stream.scheduler import RequestScheduler
+    from walkstream.client.stream.scheduler import HOLD_S, RequestScheduler
 
     async def run() -> None:
         sched = RequestScheduler(3)
         lane = ImpostorImages(None, Cache(1 << 20), sched, kind="walltex")  # type: ignore[arg-type]
         sched.join(lane)
-        rooms = _Prefetch([0.4, 0.9, 1.2])
+        rooms = _Prefetch([0.4, 1.5, 2.0])
         sched.join(rooms)  # type: ignore[arg-type]
         lane.wanted = {10 + k: 0.5 + 0.1 * k for k in range(6)}  # textures ahead
         sched.dispatch()
@@ -571,12 +571,12 @@ def test_a_texture_needed_now_takes_the_kept_slot_and_what_is_not_due_waits_for_
         assert sched.dispatch() == 1
         urgent = [f for f in sched.flights(lane) if f.urgent]
         assert len(urgent) == 1 and urgent[0].ids == [30, 31] and sched.in_flight() == 4
-        # one urgent request at a time; while it flies what is not needed now waits
+        # one urgent request at a time; while it flies what is needed later than HOLD_S waits
         lane.wanted |= {32: 0.0}
         rooms.flying -= 1  # a prefetch landed: its slot stays free for the urgent request's sake
-        assert sched.dispatch() == 0 and rooms.needs == [0.9, 1.2]
+        assert HOLD_S < 1.5 and sched.dispatch() == 0 and rooms.needs == [1.5, 2.0]
         rooms.needs.insert(0, 0.0)  # contents needed now still go
-        assert sched.dispatch() == 1 and rooms.needs == [0.9, 1.2]
+        assert sched.dispatch() == 1 and rooms.needs == [1.5, 2.0]
         for f in sched.flights(lane):
             assert f.task is not None
             f.task.cancel()

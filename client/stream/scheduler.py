@@ -20,9 +20,9 @@ behind another kind's prefetch, and what goes later is picked from fresher wants
 One slot beyond :attr:`RequestScheduler.slots` is kept for an **urgent** offer
 (:attr:`Offer.urgent`): content needed now that came up suddenly, such as the textures
 of the virtual walls a walker turning at a corner sees only then.  It goes out at once
-with every slot taken, and while it is on the link nothing not needed now starts (a
-prefetch or a texture ahead would take a share of the link from it); what is needed
-now still does.
+with every slot taken, and while it is on the link nothing needed later than
+:data:`HOLD_S` starts (a prefetch or a texture far ahead would take a share of the
+link from it); what is needed sooner still does.
 
 Every request a lane starts through :meth:`RequestScheduler.launch` is a
 :class:`Flight` (its items, those not yet received, its task) until the lane says it
@@ -39,7 +39,7 @@ from collections.abc import Callable, Collection, Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-__all__ = ["Flight", "Lane", "Offer", "RequestScheduler"]
+__all__ = ["HOLD_S", "Flight", "Lane", "Offer", "RequestScheduler"]
 
 
 @dataclass(frozen=True)
@@ -61,6 +61,15 @@ class Offer:
     :attr:`RequestScheduler.slots` for such requests (a lane offers it for content
     needed now that came up suddenly, such as the texture of a wall the walker turns
     to, and never has two of them on the link)."""
+
+
+HOLD_S = 1.0
+"""While an urgent request (:attr:`Offer.urgent`) is on the link, offers needed later
+than this many seconds wait.  Perfect frames at 56 kbit/s on the production hall's tour
+(60 s) / the seed-5 hall's (30 s) / the small test hall's walk: 1 s 96.4 / 92.7 /
+100 %; 0 (all but what is needed now wait) 97.8 / 91.9 / 98.1 % (the small hall's
+prefetch stalled behind its second textures request); none waiting 96.3 / 88.3 %;
+without the urgent slot 97.0 / 89.4 / 100 %."""
 
 
 class Lane(Protocol):
@@ -134,6 +143,9 @@ class RequestScheduler:
         """The lanes, in the order they joined (the order of ties)."""
         self._flights: dict[asyncio.Task[None], Flight] = {}
         self._urgent = False  # the offer being started is urgent
+        self.hold_s = HOLD_S
+        """While an urgent request is on the link, offers needed later than this many
+        seconds wait (:data:`HOLD_S`)."""
         self.started: dict[int, int] = {}
         """Requests started, by lane (its index in :attr:`lanes`)."""
 
@@ -170,8 +182,8 @@ class RequestScheduler:
                     best = (o.need_s, k, o)
             if best is None or self.waits(best[0]):
                 break
-            if best[0] > 0.0 and urgent:
-                break  # what is not needed now waits for the urgent request (it has the link)
+            if best[0] > self.hold_s and urgent:
+                break  # what is not needed soon waits for the urgent request (it has the link)
             self._urgent = best[2].urgent
             try:
                 best[2].start()
