@@ -195,6 +195,7 @@ def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path 
         "texture_memory_bytes": walls.get("texture_memory_bytes", 0),
         "textures_per_wall": walls.get("textures_per_wall"),
         "perfect_frame_ratio": s.get("perfect_frame_ratio"),
+        "seam_ratio": ((s.get("truth") or {}).get("seam") or {}).get("ratio"),
     }
     if gl is not None and reports[1] is not None:
         g = _frames(reports[1])
@@ -317,11 +318,14 @@ def format_walls_table(result: Mapping[str, Any]) -> str:
     scale), ``dE00`` the mean ΔE00 (median), ``over%`` frames with more than 0.5 % of
     their pixels over ΔE00 2.3, ``fog%`` the mean share of pixels visibly wrong because
     of the fog; ``cull%`` effective culling; ``tex kB`` and ``tex/wall`` the walls'
-    texture bytes and textures per wall.
+    texture bytes and textures per wall; ``seam`` the change of a wall's pixels across
+    a zone border over that of plain motion (``truth.seam.ratio``; at most 1: no seam;
+    over the pairs of successive compared frames, so measured best with
+    ``--truth-every 1``).
     """
     head = (f"{'scene':<13} {'variant':<20} {'tri/fr':>7} {'drawn':>6} {'pda ms':>7} {'pda10%':>7} {'gl ms':>7} "
             f"{'gl per':>7} {'gl10%':>6} {'fog m':>6} {'err %':>6} {'dE00':>6} {'over%':>6} {'fog%':>6} "
-            f"{'cull%':>6} {'tex kB':>7} {'tex/wall':>8}")
+            f"{'cull%':>6} {'tex kB':>7} {'tex/wall':>8} {'seam':>5}")
     lines = [head, "-" * len(head)]
     for r in result.get("rows", []):
         lines.append(
@@ -332,7 +336,8 @@ def format_walls_table(result: Mapping[str, Any]) -> str:
             f"{_f(r.get('fog_m_median'), '6.1f')} {_f(r.get('colour_error_median'), '6.2f', 100)} "
             f"{_f(r.get('delta_e_median'), '6.2f')} {_f(r.get('frames_over_visible'), '6.1f', 100)} "
             f"{_f(r.get('fog_visible_share'), '6.1f', 100)} {_f(r.get('effective_culling'), '6.1f', 100)} "
-            f"{_f(r.get('texture_bytes'), '7.1f', 1e-3)} {_f(r.get('textures_per_wall'), '8.1f')}"
+            f"{_f(r.get('texture_bytes'), '7.1f', 1e-3)} {_f(r.get('textures_per_wall'), '8.1f')} "
+            f"{_f(r.get('seam_ratio'), '5.2f')}"
         )
     fr = result.get("frustum")
     if fr:

@@ -99,6 +99,11 @@ class ReplayConfig:
     (``--impostor-blend``; None: :data:`~walkstream.client.draw.impostors.BLEND_M`; 0: a
     hard switch, no blend)."""
 
+    wall_zone_blend: float = 0.5
+    """Width of the blend between two zones' textures of a virtual wall around their
+    border, in zone widths (``--wall-zone-blend``; 0: a hard swap at the border;
+    :func:`~walkstream.shared.walls.zone_mix`)."""
+
     def __post_init__(self) -> None:
         if self.stream not in STREAM_FORMS:
             raise InputError(f"--stream {self.stream!r}: choose one of {', '.join(STREAM_FORMS)}")
@@ -125,6 +130,9 @@ class ReplayConfig:
         ib = self.impostor_blend_m
         if ib is not None and not (math.isfinite(ib) and ib >= 0):
             raise InputError(f"--impostor-blend {ib!r}: expected metres >= 0")
+        zb = self.wall_zone_blend
+        if not (math.isfinite(zb) and 0 <= zb <= 1):
+            raise InputError(f"--wall-zone-blend {zb!r}: expected zone widths from 0 to 1")
         if self.truth_every < 0:
             raise InputError(f"--truth-every {self.truth_every}: must not be negative")
         w, h = self.size

@@ -54,6 +54,7 @@ __all__ = [
     "decode_walls",
     "wall_distance",
     "zone_count",
+    "zone_mix",
 ]
 
 DEFAULT_WALL_ERROR_DEG = 10.0
@@ -250,6 +251,12 @@ class WallTable:
         self.eye_z = np.array([s.floor + EYE_HEIGHT for s in self.sides], np.float64)
         self.tan = np.tan(np.array([s.alpha for s in self.sides], np.float64))
 
+    def along_of(self, eyes: ArrayLike) -> NDArray[np.float64]:
+        """``(m, n)`` each eye's ``(m, 3)`` foot on each side's wall line, metres from ``p0``."""
+        e = np.asarray(eyes, np.float64).reshape(-1, 3)
+        out: NDArray[np.float64] = np.einsum("mnk,nk->mn", e[:, None, :2] - self.p0[None], self.along)
+        return out
+
     def views(self, eyes: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
         """Zones ``(m, n)``, distances ``(m, n)`` and weights ``(m, n)`` of the ``n`` sides
         for ``m`` eyes ``(m, 3)`` (each as :meth:`WallSide.view`)."""
@@ -265,6 +272,50 @@ class WallTable:
         weight = np.where(self.blend > 0, np.minimum(1.0, (d - self.x_t) / blend), 1.0)
         weight = np.where((d <= self.x_t) | (dz > d * self.tan), 0.0, weight)
         return zone, d, weight
+
+
+def zone_mix(along: ArrayLike, width: ArrayLike, zones: ArrayLike, band: float) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """The neighbour zone blended in near a zone border, and its share.
+
+    A hard swap of one zone's texture for the next as the viewer crosses the border
+    between them changes every pixel of the wall in one frame.  Within ``band / 2``
+    zone widths of a border the next zone's texture is blended in, its share rising
+    linearly to one half on the border itself, where both zones' textures weigh the
+    same from either side: the picture is continuous across the border.  (At the
+    border the viewer is within ``Δb`` of both sampling lines, so both textures keep
+    the error bound there; ``band / 2`` zone widths inside, the neighbour's errs by
+    up to ``(1 + band) Δb / x``, at a share that falls to 0.)
+
+    Parameters
+    ----------
+    along : (...) float
+        The viewer's foot on the wall line, metres from ``p0``.
+    width, zones : (...) float, int
+        The zones' width and count (broadcast with ``along``).
+    band : float
+        Width of the blend around each border, in zone widths (0: a hard swap; at most 1).
+
+    Returns
+    -------
+    neighbour : (...) int64
+        The zone blended in (-1: none: away from any border, at the wall's ends, or
+        ``band`` 0).
+    share : (...) float64
+        Its share, 0 to 0.5.
+    """
+    t = np.asarray(along, np.float64)
+    w = np.where(np.asarray(width, np.float64) > 0, width, 1.0)
+    n = np.asarray(zones, np.int64)
+    u = t / w
+    zone = np.clip(np.floor(u), 0, n - 1)
+    frac = u - zone  # 0..1 across the viewer's zone
+    right = frac >= 0.5
+    gap = np.where(right, 1.0 - frac, frac)  # zone widths to the nearer border
+    nb = np.where(right, zone + 1, zone - 1).astype(np.int64)
+    half = max(float(band), 0.0) / 2.0
+    share = 0.5 * np.clip(1.0 - gap / half, 0.0, 1.0) if half > 0 else np.zeros_like(gap)
+    ok = (nb >= 0) & (nb < n) & (share > 0) & (u >= 0) & (u <= n)
+    return np.where(ok, nb, -1), np.where(ok, share, 0.0)
 
 
 def decode_walls(body: bytes, what: str) -> tuple[WallSide, ...]:

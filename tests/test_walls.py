@@ -522,3 +522,64 @@ def test_wall_textures_ahead_go_a_few_at_a_time_so_one_needed_now_is_not_queued(
     # textures needed now (the first frame, a cell entered): all in one request
     now = asyncio.run(started({20 + k: 0.0 for k in range(5)}))
     assert now[0] == [20, 21, 22, 23, 24]
+
+
+class _Prefetch:
+    """Another lane on the link (the rooms' contents): requests by need, one slot each."""
+
+    def __init__(self, needs: list[float]) -> None:
+        self.needs, self.flying = sorted(needs), 0
+
+    def offer(self) -> object:
+        from walkstream.client.stream.scheduler import Offer
+
+        if not self.needs:
+            return None
+
+        def start() -> None:
+            self.needs.pop(0)
+            self.flying += 1
+
+        return Offer(self.needs[0], start)
+
+    def in_flight(self) -> int:
+        return self.flying
+
+    def outstanding_bytes(self) -> float:
+        return 0.0
+
+
+def test_a_texture_needed_now_takes_the_slot_kept_beyond_the_links_and_the_far_prefetch_waits() -> None:
+    import asyncio
+
+    from walkstream.client.stream.cache import Cache
+    from walkstream.client.stream.images import MAX_REQUESTS, ImpostorImages
+    from walkstream.client.stream.scheduler import HOLD_S, RequestScheduler
+
+    async def run() -> None:
+        sched = RequestScheduler(3)
+        lane = ImpostorImages(None, Cache(1 << 20), sched, kind="walltex")  # type: ignore[arg-type]
+        sched.join(lane)
+        rooms = _Prefetch([0.4, 1.5, 2.0])
+        sched.join(rooms)  # type: ignore[arg-type]
+        lane.wanted = {10 + k: 0.5 + 0.1 * k for k in range(6)}  # textures ahead
+        sched.dispatch()
+        assert sched.in_flight() == 3 and len(sched.flights(lane)) == MAX_REQUESTS  # every slot taken
+        # the walker turns: two walls' textures needed now go at once, in the slot kept
+        # beyond the link's (and the lane's own) limit, not behind the textures ahead
+        lane.wanted |= {30: 0.0, 31: 0.0}
+        assert sched.dispatch() == 1
+        urgent = [f for f in sched.flights(lane) if f.urgent]
+        assert len(urgent) == 1 and urgent[0].ids == [30, 31] and sched.in_flight() == 4
+        # one urgent request at a time; while it flies what is needed later than HOLD_S waits
+        lane.wanted |= {32: 0.0}
+        rooms.flying -= 1  # a prefetch landed: its slot stays free for the urgent request's sake
+        assert HOLD_S < 1.5 and sched.dispatch() == 0 and rooms.needs == [1.5, 2.0]
+        rooms.needs.insert(0, 0.0)  # contents needed now still go
+        assert sched.dispatch() == 1 and rooms.needs == [1.5, 2.0]
+        for f in sched.flights(lane):
+            assert f.task is not None
+            f.task.cancel()
+        await asyncio.sleep(0)
+
+    asyncio.run(run())

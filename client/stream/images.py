@@ -107,6 +107,7 @@ class ImpostorImages:
         self.wanted: dict[int, float] = {}
         """Images wanted and not held, by need (seconds from now)."""
         self._asked: set[int] = set()
+        self._now: set[Flight] = set()  # requests of textures needed now
         self._joined = False
         self._image_bytes = IMAGE_BYTES
         self.received = 0
@@ -148,12 +149,15 @@ class ImpostorImages:
 
     def offer(self) -> Offer | None:
         """The next batch of wanted images not asked for yet, needed before what is due now."""
-        if self.refused or self.in_flight() >= MAX_REQUESTS:
+        if self.refused:
             return None
         todo = sorted((t, i) for i, t in self.wanted.items() if i not in self._asked and not self.held(i))
         if not todo:
             return None
         need = todo[0][0]
+        urgent = self._urgent(need)
+        if self.in_flight() >= MAX_REQUESTS + urgent:
+            return None
         if self.kind == "impostor":
             ids = [i for _, i in todo[:MAX_BATCH]]
             offered = offered_need(need)  # by when their cell is needed
@@ -164,7 +168,17 @@ class ImpostorImages:
             n = MAX_BATCH if need <= 0.0 else WALL_BATCH
             ids = [i for t, i in todo[:n] if t <= need + WALL_SPAN_S]
             offered = max(need, 0.0) + WALL_LAG_S
-        return Offer(offered, lambda: self._start(ids))
+        return Offer(offered, lambda: self._start(ids, now=need <= 0.0), urgent=bool(urgent))
+
+    def _urgent(self, need: float) -> int:
+        """1 when wall textures needed now may take a request beyond :data:`MAX_REQUESTS`
+        and beyond the link's slots (:attr:`~.scheduler.Offer.urgent`): none of this
+        lane's requests on the link holds textures needed now.  A wall that comes into
+        view as the walker turns is then not queued behind the textures of walls needed
+        later, nor behind a prefetch of cell contents; else 0."""
+        if self.kind != "walltex" or need > 0.0:
+            return 0
+        return int(not any(f in self._now for f in self.scheduler.flights(self)))
 
     def in_flight(self) -> int:
         """This lane's requests on the link."""
@@ -174,10 +188,12 @@ class ImpostorImages:
         """Images asked for and not received, at the mean image's bytes."""
         return sum(len(f.left) for f in self.scheduler.flights(self)) * self._image_bytes
 
-    def _start(self, ids: list[int]) -> None:
+    def _start(self, ids: list[int], now: bool = False) -> None:
         self._asked.update(ids)
         self.requests += 1
-        self.scheduler.launch(self, _FETCH[self.kind], ids, self._fetch)
+        f = self.scheduler.launch(self, _FETCH[self.kind], ids, self._fetch)
+        if now:
+            self._now.add(f)
 
     async def _fetch(self, f: Flight) -> None:
         try:
@@ -194,6 +210,7 @@ class ImpostorImages:
             pass  # what did not come is wanted again at the next want
         finally:
             self.scheduler.landed(f)
+            self._now.discard(f)
             self._asked.difference_update(f.ids)
         if not self.refused:
             self.scheduler.dispatch()

@@ -524,12 +524,30 @@ class RoomStreamer:
         turn = (y1 - y0 + np.pi) % (2 * np.pi) - np.pi
         return float(turn / (t1 - t0)) if t1 > t0 else 0.0
 
+    def turning(self) -> bool:
+        """Whether the heading turns fast enough (20 degrees a second) to be predicted
+        to go on turning."""
+        return len(self._headings) >= 2 and abs(self.turn_rate()) >= _TURNING
+
     def velocity(self) -> NDArray[np.float64]:
         """``(3,)`` the eye's velocity over the last ``velocity_s`` seconds (m/s)."""
         if len(self._track) < 2:
             return np.zeros(3)
         (t0, e0), (t1, e1) = self._track[0], self._track[-1]
         return (e1 - e0) / (t1 - t0) if t1 > t0 else np.zeros(3)
+
+    def view_ahead(
+        self, eye: NDArray[np.float64], view: NDArray[np.float64], h: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The eye ``(3,)`` and view ``(4, 4)`` predicted ``h`` seconds ahead: moved on at
+        :meth:`velocity`, looking the same way, or, while :meth:`turn_rate` is 20 degrees
+        a second or more, turned on at that rate (half a turn at most)."""
+        e2 = np.asarray(eye, np.float64).reshape(3) + h * self.velocity()
+        w = self.turn_rate()
+        if self.turning():  # a walker turning goes on turning
+            _, yaw, pitch = self._headings[-1]
+            return e2, camera(e2, yaw + float(np.clip(w * h, -np.pi, np.pi)), pitch).astype(np.float64)
+        return e2, predicted_view(view, eye, e2)
 
     def predicted(
         self,
@@ -549,21 +567,15 @@ class RoomStreamer:
         if self.current is None or view is None:
             return []
         v = self.velocity()
-        w = self.turn_rate()
-        turning = abs(w) >= _TURNING
+        turning = self.turning()
         out: list[int] = []
         cell: int | None = self.current
         for h in self.config.lookahead_s if np.any(v) or turning else ():
-            e2 = eye + h * v
+            e2, view2 = self.view_ahead(eye, view, h)
             nxt = self._where.locate(e2, cell, anywhere=False)
             if nxt is None or not self._where.holds(nxt, e2):
                 break
             cell = nxt
-            if turning:  # a walker turning goes on turning (half a turn at most)
-                _, yaw, pitch = self._headings[-1]
-                view2 = camera(e2, yaw + float(np.clip(w * h, -np.pi, np.pi)), pitch).astype(np.float64)
-            else:
-                view2 = predicted_view(view, eye, e2)
             vp2 = view_proj @ np.linalg.inv(view) @ view2
             out.extend(self._cells_from(cell, e2, vp2, view2, proj, size, margin_px=TOUCH_MARGIN_PX)[1])
         for deg in self.config.turns_deg:

@@ -44,6 +44,8 @@ _EXPORTS = {
     "TruthResult": "walkstream.client.truth.recorder",
     "PopMeter": "walkstream.client.truth.pop",
     "summarise_pop": "walkstream.client.truth.pop",
+    "SeamMeter": "walkstream.client.truth.seam",
+    "SeamWall": "walkstream.client.truth.seam",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -59,3 +59,6 @@ class FrameNote:
     """Every virtual wall drawn, closed or fading over the geometry in its blend zone,
     as the client drew it (:data:`~walkstream.client.draw.quads.Quad`: corners, texture
     key, premultiplied RGBA, opacity), in draw order: the colour truth paints them."""
+    seam_walls: tuple[Any, ...] = ()
+    """The same walls as :class:`~walkstream.client.truth.seam.SeamWall` (which side, which
+    textures at which shares), in draw order: the seam at zone borders is measured on them."""

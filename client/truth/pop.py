@@ -150,11 +150,14 @@ class PopMeter:
         self.plain.extend(take(plain))
 
 
-def summarise_pop(meter: PopMeter) -> dict[str, Any]:
+def summarise_pop(meter: PopMeter | Any, kinds_of: Sequence[str] = ("blend", "hard", "image")) -> dict[str, Any]:
     """The ``truth.pop`` figures: frame pairs with a switch, the switching objects' mean and
     p95 change, the plain-motion objects' mean change (linear RGB, 0..1),
     and ``ratio`` (switching mean over plain mean; None without both); ``kinds``: per kind
-    (``blend``, ``hard``, ``image``) its count, mean change and ratio."""
+    (``kinds_of``: ``blend``, ``hard``, ``image``) its count, mean change and ratio.
+
+    ``meter`` is a :class:`PopMeter` or anything with its ``switching``, ``kinds``,
+    ``plain`` and ``pairs`` (the walls' seam, :class:`~walkstream.client.truth.seam.SeamMeter`)."""
     s, p = np.asarray(meter.switching, np.float64), np.asarray(meter.plain, np.float64)
 
     def stat(a: NDArray[np.float64], f: Any) -> float | None:
@@ -163,7 +166,7 @@ def summarise_pop(meter: PopMeter) -> dict[str, Any]:
     sm, pm = stat(s, np.mean), stat(p, np.mean)
     kind = np.asarray(meter.kinds, dtype=object)
     kinds = {}
-    for k in ("blend", "hard", "image"):
+    for k in kinds_of:
         km = stat(s[kind == k], np.mean)
         kinds[k] = {"switching": int((kind == k).sum()), "change_mean": km,
                     "ratio": None if km is None or not pm else km / pm}

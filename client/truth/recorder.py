@@ -65,6 +65,7 @@ from walkstream.client.truth.pop import PopMeter, summarise_pop
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.roomcolour import room_colour
 from walkstream.client.truth.scene import TruthScene, fetch_contents
+from walkstream.client.truth.seam import SEAM_KINDS
 from walkstream.client.truth.solid import SolidProbe
 from walkstream.client.truth.standin import impostor_overlay
 from walkstream.shared.camera import perspective
@@ -199,6 +200,7 @@ class TruthRecorder:
         impostors: Iterable[tuple[int, Any]] = (),
         walls: Iterable[Any] = (),
         wall_quads: Iterable[Any] = (),
+        seam_walls: Iterable[Any] = (),
     ) -> None:
         """Note one frame (cheap: ids and references to meshes already built).
 
@@ -230,6 +232,8 @@ class TruthRecorder:
         wall_quads : quads
             Every virtual wall drawn (:data:`~walkstream.client.draw.quads.Quad`), painted
             into the colour truth's client picture.
+        seam_walls : SeamWall
+            The same walls for the seam measure (:class:`~walkstream.client.truth.seam.SeamWall`).
         """
         drawn = tuple(
             (int(g.id), int(lod), g.meshes[lod])
@@ -253,6 +257,7 @@ class TruthRecorder:
                 impostors=tuple((int(i), q) for i, q in impostors),
                 walls=tuple(np.asarray(c, np.float64) for c in walls),
                 wall_quads=tuple(wall_quads),
+                seam_walls=tuple(seam_walls),
             )
         )
 
@@ -335,6 +340,8 @@ class TruthRecorder:
             view = None if top is None else culled_view(truth, next(n for n in self.notes if n.frame == top.frame))
             rc = room_colour(truth, self.notes, solid=solid)
             figures["colour"] = summarise_colour(rc.log.colour or ColourLog.empty())
+            if rc.seam is not None:
+                figures["seam"] = summarise_pop(rc.seam, SEAM_KINDS)
             return TruthResult(rc.log, figures=figures, culled=rows, culled_worst=view, colour_worst=rc.worst)
         except (WalkstreamError, httpx.HTTPError) as exc:
             return self._failed(exc, cells, t_first_perfect)

@@ -57,6 +57,7 @@ from walkstream.client.truth.culled import SOLID_NEAR
 from walkstream.client.truth.missing import ColourWorst
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.render import TruthRenderer, form_key, object_key
+from walkstream.client.truth.seam import SeamMeter, wall_pixels
 from walkstream.client.truth.solid import SolidProbe
 
 __all__ = ["RoomColour", "client_keys", "pixel_distance", "room_colour"]
@@ -77,6 +78,8 @@ class RoomColour:
     """The compared frame with the largest mean colour error, as images."""
     fog_m: NDArray[np.float64]
     """``(n,)`` the fog distance of each compared frame (``inf``: none)."""
+    seam: SeamMeter | None = None
+    """The seam at the walls' zone borders (None: no frame drew a wall)."""
 
 
 def client_keys(note: FrameNote) -> list[tuple[int, int]]:
@@ -122,6 +125,7 @@ def room_colour(
     rows: list[tuple[int, float, float, NDArray[np.float64],
                tuple[float, float, float, float, NDArray[np.float64], NDArray[np.float64]], float]] = []
     worst: ColourWorst | None = None
+    seam: SeamMeter | None = None
     for j, note in enumerate(notes):
         if progress is not None:
             progress(j + 1, len(notes))
@@ -132,13 +136,16 @@ def room_colour(
         t_idx, t_depth = truth.render(note.eye, note.view)
         t_rgb = truth.colour()
         drawn = client_keys(note)
-        c_idx, _ = truth.render(note.eye, note.view, truth.flags(drawn), note.fog)
+        c_idx, c_depth = truth.render(note.eye, note.view, truth.flags(drawn), note.fog)
         c_rgb = truth.colour()
         wall = np.zeros(t_idx.shape, bool)
         if note.wall_quads:  # the walls over the parts, as the client drew them
             painted = truth.paint_quads(note.wall_quads, note.view)
             wall = np.any(painted != c_rgb, axis=2)
             c_rgb = painted
+        if note.seam_walls or seam is not None:
+            seam = seam or SeamMeter()
+            seam.add(c_rgb, note.seam_walls, wall_pixels(note.seam_walls, note.view, truth.proj, c_depth))
         shown = t_idx >= 0
         ti = np.maximum(t_idx, 0)
         ci = np.maximum(c_idx, 0)
@@ -187,4 +194,4 @@ def room_colour(
                        np.array([r[4][5] for r in rows]).reshape(-1, len(COLOUR_CAUSES)))
     log = TruthLog(frames, times, np.array([r[2] for r in rows], np.float64),
                    np.array([r[3] for r in rows]).reshape(-1, len(CAUSES)), colour)
-    return RoomColour(log, worst, np.array([r[5] for r in rows], np.float64))
+    return RoomColour(log, worst, np.array([r[5] for r in rows], np.float64), seam)

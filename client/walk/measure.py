@@ -23,6 +23,7 @@ from walkstream.client.clock import Clock
 from walkstream.client.draw.quads import quads_of
 from walkstream.client.report.metrics import FrameLog, first_perfect_index
 from walkstream.client.truth.recorder import TruthResult
+from walkstream.client.truth.seam import SeamWall
 from walkstream.client.walk.figures import MODEL_PORTALS, MODEL_PVS
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.client.walk.visible import OUTDOOR_FOG_M
@@ -105,7 +106,9 @@ def note_truth(w: WalkState, f: Frame) -> None:
     elif city is None:  # rooms only: at the fog the frame was drawn at (the budget's lever)
         rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(f.fog),
                    walls=[d.corners for d in f.walls if d.alpha >= 1.0],
-                   wall_quads=[] if w.scene.wall_images is None else wall_quads(f.walls, w.scene.wall_images.image))
+                   wall_quads=[] if w.scene.wall_images is None else wall_quads(f.walls, w.scene.wall_images.image),
+                   seam_walls=[SeamWall(d.portal, d.side, d.image, d.mix_image, d.mix, d.alpha, d.corners)
+                               for d in f.walls])
     else:
         # outdoors before the street cell's record: no visible set known, nothing culled
         unknown = not w.indoors and (f.street is None or f.street not in city.cells)

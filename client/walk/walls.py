@@ -32,11 +32,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.draw.quads import Quad, quads_of
+from walkstream.client.draw.quads import Quad
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.frustum import frustum_cull
+from walkstream.shared.walls import zone_mix
 
-__all__ = ["WALL_AHEAD_S", "DrawnWall", "drawn_walls", "frame_walls", "wall_quads", "want_wall_textures"]
+__all__ = ["WALL_AHEAD_S", "WALL_MIX_NEED_S", "DrawnWall", "drawn_walls", "frame_walls", "wall_quads", "want_wall_textures"]
 
 
 @dataclass(frozen=True)
@@ -54,12 +55,24 @@ class DrawnWall:
     nbytes: int
     cells: tuple[int, int]
     """``(the viewer's side cell, the hidden cell)``."""
+    mix_image: int = -1
+    """The texture of the neighbour zone blended in near a zone border (-1: none;
+    :func:`~walkstream.shared.walls.zone_mix`)."""
+    mix: float = 0.0
+    """Its share (0 to 0.5): the wall shows ``(1 - mix)`` of its own zone's texture
+    and ``mix`` of the neighbour's, at :attr:`alpha`."""
 
 
 WALL_AHEAD_S = (0.5, 1.0, 1.5, 2.0, 3.0, 4.5, 6.0)
 """Horizons (seconds) at which the eye moved on at its velocity wants its walls'
 textures too, each at that need: the next zone's texture is in before the viewer
 walks into it (a zone is about a metre wide at A = 10 degrees on an 8 m grid)."""
+
+
+WALL_MIX_NEED_S = 0.5
+"""The need (seconds) a neighbour zone's texture is asked for at when the viewer nears
+its border and it is not held: after the textures needed now (without it the wall
+swaps its texture at the border, it is never open)."""
 
 
 def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
@@ -79,9 +92,15 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
         rooms.due_closed = frozenset()
         return []
     eye = np.asarray(f.eye, np.float64).reshape(3)
-    velocity = rooms.velocity() if w.config.prefetch else np.zeros(3)
-    horizons = WALL_AHEAD_S if float(np.linalg.norm(velocity[:2])) > 1e-3 else ()
-    eyes = np.array([eye, *[eye + velocity * t for t in horizons]])
+    view = np.asarray(f.view, np.float64)
+    moving = w.config.prefetch and (
+        float(np.linalg.norm(rooms.velocity()[:2])) > 1e-3 or rooms.turning())
+    horizons = WALL_AHEAD_S if moving else ()
+    # the eye and view ahead: moved on at its velocity, and turned on while it turns (a
+    # walker turning at a corner sees walls no frame has shown yet; their textures go
+    # out before the turn shows them)
+    ahead = [rooms.view_ahead(eye, view, t) for t in horizons]
+    eyes = np.array([eye, *[e for e, _ in ahead]])
     zones, _d, weights = table.views(eyes)
     wanted: list[tuple[int, int, float]] = []
     out: list[DrawnWall] = []
@@ -91,7 +110,14 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     # only the walls in view ask for their textures (now and ahead, looking the same
     # way); one behind the viewer is asked for when the viewer turns to it
     boxes = w.scene.wall_boxes
-    seen = frustum_cull(boxes[:, 0], boxes[:, 1], f.vp) if boxes is not None else np.ones(len(sides), bool)
+
+    def in_view(vp: NDArray[np.float64]) -> NDArray[np.bool_]:
+        return frustum_cull(boxes[:, 0], boxes[:, 1], vp) if boxes is not None else np.ones(len(sides), bool)
+
+    seen = in_view(f.vp)
+    to_eye = np.asarray(f.vp, np.float64) @ np.linalg.inv(view)  # the projection
+    band = w.config.wall_zone_blend
+    mix_zone, mix_share = zone_mix(table.along_of(eye)[0], table.width, table.zones, band)
     for k in np.flatnonzero(weights[0] > 0.0).tolist():
         s = sides[k]
         zone = int(zones[0, k])
@@ -106,12 +132,20 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
                 wanted.append((tid, cells[0], 0.0))
             continue  # not here yet: the portal stays open (geometry), never a hole
         img = lane.image(tid)
+        mix_tid, mix = -1, 0.0
+        if mix_zone[k] >= 0:  # near a zone border: the neighbour's texture blended in
+            nb = s.textures[int(mix_zone[k])]
+            if lane.held(nb):
+                mix_tid, mix = nb, float(mix_share[k])
+            elif seen[k]:
+                wanted.append((nb, cells[0], WALL_MIX_NEED_S))
         out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
-                             int(getattr(img, "nbytes", 0)), cells))
+                             int(getattr(img, "nbytes", 0)), cells, mix_tid, mix))
         if weights[0, k] >= 1.0:
             closed.add(s.portal)
     for h, t in enumerate(horizons, start=1):
-        for k in np.flatnonzero((weights[h] > 0.0) & seen).tolist():
+        seen_h = seen | in_view(to_eye @ ahead[h - 1][1])
+        for k in np.flatnonzero((weights[h] > 0.0) & seen_h).tolist():
             s = sides[k]
             tid = s.textures[int(zones[h, k])]
             if not lane.held(tid):
@@ -150,5 +184,22 @@ def drawn_walls(walls: list[DrawnWall], visible: list[int]) -> list[DrawnWall]:
 def wall_quads(walls: Sequence[DrawnWall], image: Callable[[int], Any]) -> list[Quad]:
     """The quads of a frame's walls (``image(id)`` the decoded RGBA of a texture), each
     keyed by its texture id turned negative: impostor images and wall textures share
-    the quad renderer's textures without colliding."""
-    return [(c, -1 - i, rgba, a) for c, i, rgba, a in quads_of(walls, image)]
+    the quad renderer's textures without colliding.
+
+    A wall with a neighbour zone blended in (:attr:`DrawnWall.mix` ``m`` at opacity
+    ``a``) is two quads, its own texture at ``a (1 - m) / (1 - a m)`` and then the
+    neighbour's over it at ``a m``: drawn "over" (premultiplied) that is exactly
+    ``a ((1 - m) own + m neighbour) + (1 - a) behind``, for opaque textures."""
+    out: list[Quad] = []
+    for d in walls:
+        rgba = image(d.image)
+        if rgba is None:
+            continue
+        other = image(d.mix_image) if d.mix_image >= 0 and d.mix > 0.0 else None
+        if other is None:
+            out.append((d.corners, -1 - d.image, rgba, float(d.alpha)))
+            continue
+        a, m = float(d.alpha), float(d.mix)
+        out.append((d.corners, -1 - d.image, rgba, a * (1.0 - m) / max(1.0 - a * m, 1e-9)))
+        out.append((d.corners, -1 - d.mix_image, other, a * m))
+    return out

@@ -1,0 +1,122 @@
+"""The seam at a virtual wall's zone border (issue 28, "no visible seam at a zone border"): the
+two zones' textures blend around the border, the frame-to-frame change of the wall's pixels
+across it is measured against plain motion on the client's own renderer, and a hard swap
+shows a seam where the blend does not.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from walkstream.client.config import ReplayConfig
+from walkstream.client.net.link import LinkProfile
+from walkstream.client.truth.pop import summarise_pop
+from walkstream.client.truth.seam import SEAM_KINDS, SeamMeter, SeamWall, wall_pixels
+from walkstream.client.walk.walls import DrawnWall, wall_quads
+from walkstream.shared.camera import look_at, perspective
+from walkstream.shared.errors import InputError
+from walkstream.shared.walls import EYE_HEIGHT, WallSide, WallTable, zone_mix
+
+_SIDE = WallSide(0, 0, (-6.0, 5.0), (6.0, 5.0), 0.0, 3.0, 0.0, 1.0, 1.0, 3.0, float(np.radians(10.0)), 4,
+                 (10, 11, 12, 13))
+"""A wall 12 m long, 5 m ahead of a viewer on the x axis, in four zones 3 m wide."""
+
+
+def _picture(along: float, band: float) -> dict[int, float]:
+    """The share of each zone's texture a viewer ``along`` metres from ``p0`` sees."""
+    zone = _SIDE.view([along - 6.0, 0.0, EYE_HEIGHT]).zone
+    nb, share = zone_mix(along, _SIDE.length / _SIDE.zones, _SIDE.zones, band)
+    out = {zone: 1.0 - float(share)}
+    if int(nb) >= 0:
+        out[int(nb)] = out.get(int(nb), 0.0) + float(share)
+    return out
+
+
+def test_the_zone_blend_is_continuous_across_a_border_and_off_away_from_it() -> None:
+    for border in (3.0, 6.0, 9.0):
+        left, right = _picture(border - 1e-6, 0.5), _picture(border + 1e-6, 0.5)
+        assert left.keys() == right.keys() and all(abs(left[k] - right[k]) < 1e-5 for k in left)
+        assert abs(left[int(border / 3.0) - 1] - 0.5) < 1e-5  # both zones weigh the same on the border
+    assert _picture(4.5, 0.5) == {1: 1.0}  # a zone's middle: its own texture alone
+    assert _picture(3.0 + 0.75 + 1e-6, 0.5) == {1: 1.0}  # the band ends a quarter zone from the border
+    assert _picture(0.2, 0.5) == {0: 1.0} and _picture(11.8, 0.5) == {3: 1.0}  # the wall's ends: no neighbour
+    assert _picture(3.0 - 1e-6, 0.0) == {0: 1.0} and _picture(3.0 + 1e-6, 0.0) == {1: 1.0}  # 0: a hard swap
+    # the table's foot on the wall is the side's
+    assert np.allclose(WallTable([_SIDE]).along_of([[-1.5, 0.0, EYE_HEIGHT]]), [[4.5]])
+    link = LinkProfile(56_000.0, 56_000.0, 0.2)
+    with pytest.raises(InputError, match="--wall-zone-blend 1.5"):
+        ReplayConfig(link=link, wall_zone_blend=1.5)
+
+
+def test_a_blended_wall_is_two_quads_that_compose_the_cross_fade() -> None:
+    a_rgb, b_rgb, bg = np.array([0.9, 0.2, 0.1]), np.array([0.1, 0.3, 0.8]), np.array([0.4, 0.4, 0.4])
+    images = {10: a_rgb, 11: b_rgb}
+    for alpha, mix in ((1.0, 0.5), (1.0, 0.2), (0.6, 0.4), (0.3, 0.0)):
+        d = DrawnWall(0, 0, 0, 10, alpha, _SIDE.corners(), 0, (0, 1), 11, mix)
+        out = bg.copy()
+        quads = wall_quads([d], images.get)
+        assert len(quads) == (2 if mix > 0 else 1)
+        for _c, key, rgb, a in quads:  # premultiplied "over", as the quad renderer blends
+            assert images[-1 - key] is rgb
+            out = a * rgb + (1.0 - a) * out
+        assert np.allclose(out, alpha * ((1.0 - mix) * a_rgb + mix * b_rgb) + (1.0 - alpha) * bg)
+
+
+def _texture(zone: int) -> np.ndarray:
+    """Zone ``zone``'s picture: stripes shifted a fifth of a period a zone (as the parallax
+    of what lies behind shifts it from one sampling point to the next)."""
+    x = np.arange(48) / 48.0
+    v = 0.5 + 0.4 * np.sin(2.0 * np.pi * (4.0 * x + 0.2 * zone))
+    img = np.zeros((16, 48, 4), np.uint8)
+    img[..., 0] = (255 * v)[None, :]
+    img[..., 1] = (255 * (1.0 - v))[None, :]
+    img[..., 2] = 90
+    img[..., 3] = 255
+    return img
+
+
+def _walk(gl: Any, band: float) -> dict[str, Any]:
+    """A viewer walking 9 m along the wall, 5 m from it, looking at it, across three zone
+    borders; each frame drawn by the client's renderer (the walls as the frame loop hands
+    them over) and measured."""
+    from walkstream.client.draw.frames import FrameRenderer
+
+    images = {10 + k: _texture(k) for k in range(4)}
+    size = (96, 72)
+    proj = perspective(60.0, size[0] / size[1], 0.3, 100.0)
+    r = FrameRenderer(size=size, fov_deg=60.0, ctx=gl)
+    meter = SeamMeter()
+    table = WallTable([_SIDE])
+    try:
+        for x in np.linspace(-4.5, 4.5, 91):
+            eye = np.array([x, 0.0, EYE_HEIGHT])
+            view = look_at(eye, np.array([x, 5.0, EYE_HEIGHT]))
+            zones, _d, weights = table.views(eye[None])
+            nb, share = zone_mix(table.along_of(eye)[0], table.width, table.zones, band)
+            zone, alpha = int(zones[0, 0]), float(weights[0, 0])
+            mix_image = _SIDE.textures[int(nb[0])] if nb[0] >= 0 else -1
+            d = DrawnWall(0, 0, zone, _SIDE.textures[zone], alpha, _SIDE.corners(), 0, (0, 1), mix_image,
+                          float(share[0]) if mix_image >= 0 else 0.0)
+            r.impostors = wall_quads([d], images.get)
+            r.draw([], view, proj)
+            rgb = r.snapshot()
+            walls = [SeamWall(d.portal, d.side, d.image, d.mix_image, d.mix, d.alpha, d.corners)]
+            pixels = wall_pixels(walls, view, proj, np.full(size[::-1], np.inf))
+            meter.add(rgb, walls, pixels)
+    finally:
+        r.release()
+    return summarise_pop(meter, SEAM_KINDS)
+
+
+@pytest.mark.gl
+def test_a_hard_swap_at_a_zone_border_shows_a_seam_where_the_blend_does_not(gl: Any) -> None:
+    blended, hard = _walk(gl, 0.5), _walk(gl, 0.0)
+    assert hard["pairs"] == 3 and hard["kinds"]["hard"]["switching"] == 3  # one frame per border
+    assert blended["pairs"] > 3 * 10 and blended["kinds"]["hard"]["switching"] == 0  # spread over the band
+    assert hard["plain"] > 0 and blended["plain"] > 0
+    assert hard["ratio"] is not None and blended["ratio"] is not None
+    assert blended["ratio"] <= 1.5 < 3.0 < hard["ratio"]
+    assert hard["switching_change_mean"] > 3.0 * blended["switching_change_mean"]
