@@ -205,3 +205,18 @@ def test_an_image_arriving_beyond_the_blend_fades_in_rather_than_pops(gl: Any) -
     assert hard["kinds"]["hard"]["switching"] == 1 and faded["kinds"]["hard"]["switching"] == 0
     assert hard["ratio"] > 2.0, hard  # without the fade: the image appears in one frame
     assert faded["ratio"] <= 1.0, faded  # with it: no more change a frame than plain motion
+
+
+def test_the_quad_stands_in_front_of_its_own_building_on_the_same_pixels() -> None:
+    box = (-5.0, 95.0, 0.0, 5.0, 105.0, 20.0)
+    eye = np.array([3.0, 0.0, 1.7])
+    lo, hi = np.asarray(box[:3]), np.asarray(box[3:])
+    ia, ie = (int(v) for v in bin_of(2, *directions(eye, (lo + hi) / 2.0)))
+    at, front = quad_corners(box, 2, ia, ie), toward_eye(quad_corners(box, 2, ia, ie), eye, box)
+    rays_at, rays_front = at - eye, front - eye
+    # the same rays from the eye (the same pixels), nearer than every corner of the box
+    assert np.allclose(rays_at / np.linalg.norm(rays_at, axis=1)[:, None],
+                       rays_front / np.linalg.norm(rays_front, axis=1)[:, None])
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    assert (front - eye)[:, 1].max() <= (corners - eye)[:, 1].min() + 1e-9  # in front along the view
+    assert (at - eye)[:, 1].min() > (corners - eye)[:, 1].min()  # the quad through the centre was not
