@@ -5,6 +5,7 @@ switching building's pixels against plain motion, drawn by the client's own rend
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -121,7 +122,7 @@ def test_a_hard_switch_pops_where_the_blend_does_not(gl: Any) -> None:
     assert hard["switching_change_mean"] > 5.0 * blended["switching_change_mean"]
 
 
-def test_the_fade_moves_the_opacity_at_most_its_rate_and_fades_a_leaving_building_out_on_its_image() -> None:
+def test_the_fade_moves_the_opacity_at_most_its_rate_fades_a_leaving_building_out_and_cross_fades_images() -> None:
     from types import SimpleNamespace
 
     from walkstream.client.draw.impostors import FADE_S, fade_towards
@@ -133,7 +134,7 @@ def test_the_fade_moves_the_opacity_at_most_its_rate_and_fades_a_leaving_buildin
     held = {7}
     lane = SimpleNamespace(held=lambda image: image in held)
     w: Any = SimpleNamespace(scene=SimpleNamespace(images=lane), config=SimpleNamespace(impostor_fade_s=None),
-                             impostors_shown={}, impostors_wt=-math.inf)
+                             impostors_shown={}, impostors_old={}, impostors_wt=-math.inf)
     d = DrawnImpostor(3, 7, 1.0, np.zeros((4, 3)), 256)
     first = _faded(w, SimpleNamespace(wt=0.0), {3: d})
     assert [x.alpha for x in first] == [1.0]  # the first frame: nothing to fade from
@@ -143,7 +144,20 @@ def test_the_fade_moves_the_opacity_at_most_its_rate_and_fades_a_leaving_buildin
     assert all(f[0].image == 7 for f in frames if f)
     assert alphas[0] == pytest.approx(1.0 - 0.04 / FADE_S) and alphas[-1] == 0.0
     assert max(-np.diff([1.0, *alphas])) <= 0.04 / FADE_S + 1e-9
-    w.impostors_shown = {3: d}
+    # the viewer crosses into another bin: image 8 cross-fades over image 7
+    held.add(8)
+    w.impostors_shown, w.impostors_old, w.impostors_wt = {3: d}, {}, 5.0
+    new = dataclasses.replace(d, image=8)
+    cross = [_faded(w, SimpleNamespace(wt=5.0 + 0.04 * k), {3: new}) for k in range(1, int(FADE_S / 0.04) + 3)]
+    assert [q.image for q in cross[0]] == [7, 8] and cross[0][0].alpha == 1.0  # the old under, whole
+    assert cross[0][1].alpha == pytest.approx(0.04 / FADE_S)  # the new over it, rising
+    assert [q.image for q in cross[-1]] == [8] and cross[-1][0].alpha == 1.0
+    # at a partial opacity the geometry keeps 1 - a, the old image a (1 - t), the new a t
+    w.impostors_shown, w.impostors_old, w.impostors_wt = {3: dataclasses.replace(d, alpha=0.5)}, {}, 9.0
+    under, over = _faded(w, SimpleNamespace(wt=9.0 + FADE_S / 4), {3: dataclasses.replace(new, alpha=0.5)})
+    t = 0.25
+    assert over.alpha == pytest.approx(0.5 * t) and under.alpha * (1 - over.alpha) == pytest.approx(0.5 * (1 - t))
+    w.impostors_shown, w.impostors_old = {3: d}, {}
     held.clear()  # an image the lane no longer holds cannot fade out: geometry at once
     assert _faded(w, SimpleNamespace(wt=10.0), {}) == []
 

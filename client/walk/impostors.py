@@ -137,13 +137,15 @@ def _faded(w: WalkState, f: Frame, target: dict[int, DrawnImpostor]) -> list[Dra
     arriving fades in) and follows it down (the distance blend and the error bound fall
     smoothly by themselves); a building the cell no longer lists, or whose image is not
     held or over the texture budget, fades out at that rate on the image it was drawn
-    with while the lane still holds it.  Remembered in ``w.impostors_shown`` for the
-    next frame."""
+    with while the lane still holds it; another image of the same building (the viewer
+    crossed into another direction bin) cross-fades from the last (:func:`_cross_faded`).
+    Remembered in ``w.impostors_shown`` for the next frame."""
     lane = w.scene.images
     fade = FADE_S if w.config.impostor_fade_s is None else w.config.impostor_fade_s
     dt = f.wt - w.impostors_wt if math.isfinite(w.impostors_wt) else math.inf
     w.impostors_wt = f.wt
     out: list[DrawnImpostor] = []
+    shown_next: dict[int, DrawnImpostor] = {}
     for obj in sorted(target.keys() | w.impostors_shown.keys()):
         want, last = target.get(obj), w.impostors_shown.get(obj)
         shown = 0.0 if last is None else last.alpha
@@ -156,10 +158,39 @@ def _faded(w: WalkState, f: Frame, target: dict[int, DrawnImpostor]) -> list[Dra
             alpha = fade_towards(shown, 0.0, dt, fade)
             base = last if last is not None and lane is not None and lane.held(last.image) else None
         if base is None or alpha <= 0.0:
+            w.impostors_old.pop(obj, None)
             continue
-        out.append(dataclasses.replace(base, alpha=alpha))
-    w.impostors_shown = {d.object: d for d in out}
+        shown_now = dataclasses.replace(base, alpha=alpha)
+        shown_next[obj] = shown_now
+        out.extend(_cross_faded(w, last, shown_now, dt, fade))
+    w.impostors_shown = shown_next
     return out
+
+
+def _cross_faded(
+    w: WalkState, last: DrawnImpostor | None, now: DrawnImpostor, dt: float, fade: float
+) -> list[DrawnImpostor]:
+    """``now`` drawn over the image the building showed before, when the viewer's direction
+    crossed into another bin: the old image's share falls from 1 to 0 over the fade
+    (``w.impostors_old``), composed so that the geometry keeps ``1 - alpha``, the old
+    image ``alpha (1 - t)`` and the new ``alpha t`` (``t`` the new one's share): the old
+    drawn first at ``alpha (1 - t) / (1 - alpha t)``, the new over it at ``alpha t``."""
+    lane = w.scene.images
+    if last is not None and last.image != now.image and fade > 0.0 and lane is not None and lane.held(last.image):
+        w.impostors_old[now.object] = (last, 1.0)  # a new crossing starts from what was drawn
+    if now.object in w.impostors_old:
+        old, share = w.impostors_old[now.object]
+        share -= max(dt, 0.0) / fade if fade > 0.0 else 1.0
+        if share <= 0.0 or lane is None or not lane.held(old.image) or old.image == now.image:
+            del w.impostors_old[now.object]
+        else:
+            w.impostors_old[now.object] = (old, share)
+    if now.object not in w.impostors_old:
+        return [now]
+    old, share = w.impostors_old[now.object]
+    a, t = now.alpha, 1.0 - share
+    under = a * (1.0 - t) / (1.0 - a * t) if a * t < 1.0 else 0.0
+    return [dataclasses.replace(old, alpha=under), dataclasses.replace(now, alpha=a * t)]
 
 
 def ahead_wants(w: WalkState, f: Frame) -> dict[int, float]:
