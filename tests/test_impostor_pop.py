@@ -162,7 +162,7 @@ def test_the_fade_moves_the_opacity_at_most_its_rate_fades_a_leaving_building_ou
     assert _faded(w, SimpleNamespace(wt=10.0), {}) == []
 
 
-def _arrival(gl: Any, fade_s: float) -> dict[str, Any]:
+def _arrival(gl: Any, fade_s: float) -> tuple[dict[str, Any], PopMeter]:
     """A viewer walking 10 m in 2.4 s at 25 fps towards a building 100 m ahead (object 1) that is
     beyond ``D`` plus the blend throughout; its image arrives at frame 10 (before: geometry only)
     and is drawn at the opacity :func:`fade_towards` gives.  Object 2, a building 25 m ahead to the
@@ -208,17 +208,21 @@ def _arrival(gl: Any, fade_s: float) -> dict[str, Any]:
             meter.add(pop_frame(k, rgb, ids, keys, [(1, q) for q in quads]))
     finally:
         r.release()
-    return summarise_pop(meter)
+    return summarise_pop(meter), meter
 
 
 @pytest.mark.gl
 def test_an_image_arriving_beyond_the_blend_fades_in_rather_than_pops(gl: Any) -> None:
     from walkstream.client.draw.impostors import FADE_S
 
-    faded, hard = _arrival(gl, FADE_S), _arrival(gl, 0.0)
+    (faded, meter), (hard, _) = _arrival(gl, FADE_S), _arrival(gl, 0.0)
     assert hard["kinds"]["hard"]["switching"] == 1 and faded["kinds"]["hard"]["switching"] == 0
     assert hard["ratio"] > 2.0, hard  # without the fade: the image appears in one frame
     assert faded["ratio"] <= 1.0, faded  # with it: no more change a frame than plain motion
+    # no frame of the fade holds most of the switch either: with the quad through the building's
+    # centre its own faces hid the image until the geometry went (the last frame then changed
+    # 0.10, three quarters of the hard switch's 0.13; here at most a fifth, its edges moving)
+    assert max(meter.switching) <= 0.3 * hard["switching_change_mean"], meter.switching
 
 
 def test_the_quad_stands_in_front_of_its_own_building_on_the_same_pixels() -> None:
