@@ -96,8 +96,12 @@ class ReplayConfig:
     """Bytes of impostor textures a frame may draw (the farthest dropped first)."""
     impostor_blend_m: float | None = None
     """Metres beyond the bake's ``D`` over which an impostor fades in over its geometry
-    (``--impostor-blend``; None: :data:`~walkstream.client.draw.impostors.BLEND_M`; 0: a
-    hard switch, no blend)."""
+    (``--impostor-blend``; None: a share of ``D``,
+    :func:`~walkstream.client.draw.impostors.blend_length`; 0: no blend by distance)."""
+    impostor_fade_s: float | None = None
+    """Seconds the opacity drawn takes at least to go from 0 to 1 (``--impostor-fade``;
+    None: :data:`~walkstream.client.draw.impostors.FADE_S`; 0: none, with
+    ``impostor_blend_m`` 0 a hard switch)."""
 
     wall_zone_blend: float = 0.5
     """Width of the blend between two zones' textures of a virtual wall around their
@@ -133,6 +137,9 @@ class ReplayConfig:
         zb = self.wall_zone_blend
         if not (math.isfinite(zb) and 0 <= zb <= 1):
             raise InputError(f"--wall-zone-blend {zb!r}: expected zone widths from 0 to 1")
+        fs = self.impostor_fade_s
+        if fs is not None and not (math.isfinite(fs) and fs >= 0):
+            raise InputError(f"--impostor-fade {fs!r}: expected seconds >= 0")
         if self.truth_every < 0:
             raise InputError(f"--truth-every {self.truth_every}: must not be negative")
         w, h = self.size

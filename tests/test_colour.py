@@ -192,7 +192,7 @@ def test_report_keys_and_truth_csv_with_colour(tmp_path: Path) -> None:
     log = TruthLog([0, 25, 50], [0.0, 1.0, 2.0], [0.1, 0.2, 0.0], np.zeros((3, len(CAUSES))), colour)
     s = summarise_truth(log, 0.5)["colour"]
     assert set(s) == {"metric", "visible_threshold", "frames", "mean_error", "delta_e_mean", "visible_pixels",
-                      "frames_over_visible_ratio", "psnr_db", "causes", "per_frame"}
+                      "frames_over_visible_ratio", "psnr_db", "causes", "impostor", "per_frame"}
     assert s["metric"] == "CIEDE2000" and s["visible_threshold"] == VISIBLE_DE and s["frames"] == 3
     assert s["mean_error"]["median"] == pytest.approx(0.02) and set(s["mean_error"]) == {"median", "p95", "max", "mean"}
     assert s["frames_over_visible_ratio"] == pytest.approx(2 / 3) and s["psnr_db"]["median"] == 20.0
@@ -204,3 +204,26 @@ def test_report_keys_and_truth_csv_with_colour(tmp_path: Path) -> None:
     np.testing.assert_array_equal(back.colour.causes, colour.causes)
     assert "colour" not in summarise_truth(TruthLog.empty(), None)
     assert read_truth_csv(write_truth_csv(tmp_path / "plain.csv", TruthLog.empty())).colour is None
+
+
+def test_the_impostors_error_frame_by_frame_against_the_figure() -> None:
+    from walkstream.client.report.colour import IMPOSTOR_ERROR_MAX
+
+    k = COLOUR_CAUSES.index("impostor")
+    n = 200
+    causes, errors = np.zeros((n, len(COLOUR_CAUSES))), np.zeros((n, len(COLOUR_CAUSES)))
+    causes[:, k], errors[:, k] = 0.001, 0.002
+    z = np.zeros(n)
+    log = ColourLog(np.arange(n), z, z, z, z, z + 30.0, causes, errors)
+    imp = summarise_colour(log)["impostor"]
+    assert imp["frames_within_ratio"] == 1.0 and imp["reached"] is True
+    assert imp["error"]["p99"] == pytest.approx(0.002) and imp["visible"]["max"] == pytest.approx(0.001)
+    # three frames in 200 over a limit (1.5 %): the 99 % of the figure is not reached
+    causes[0, k], errors[1, k], errors[2, k] = 0.006, 1.5 * IMPOSTOR_ERROR_MAX, 0.02
+    imp = summarise_colour(ColourLog(np.arange(n), z, z, z, z, z + 30.0, causes, errors))
+    imp = imp["impostor"]
+    assert imp["frames_within_ratio"] == pytest.approx(197 / 200) and imp["reached"] is False
+    assert imp["error"]["max"] == pytest.approx(0.02)
+    # a log read back without the error split: the pixels alone decide
+    only = summarise_colour(ColourLog(np.arange(n), z, z, z, z, z + 30.0, causes))["impostor"]
+    assert "error" not in only and only["frames_within_ratio"] == pytest.approx(199 / 200)

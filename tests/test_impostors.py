@@ -20,7 +20,7 @@ import pytest
 from asgiclient import Http
 
 from walkstream.client.draw.impostors import (
-    BLEND_M,
+    BLEND_SHARE,
     ImpostorChoice,
     choose_impostors,
     fit_textures,
@@ -357,12 +357,14 @@ def _row(images: tuple[int, ...] = (5,), box: tuple[float, ...] = (295.0, -5.0, 
 
 def test_the_blend_at_the_exact_switch_distance() -> None:
     d, bound = 250.0, math.radians(2.0)
-    alpha = impostor_alpha([d - 1.0, d, d + BLEND_M / 2, d + BLEND_M, d + 100.0], 0.0, d, bound)
+    blend = BLEND_SHARE * d  # the blend's length scales with D
+    assert impostor_alpha(d + blend / 2, 0.0, d, bound) == pytest.approx(impostor_alpha(d / 10 + blend / 20, 0.0, d / 10, bound))
+    alpha = impostor_alpha([d - 1.0, d, d + blend / 2, d + blend, d + 100.0], 0.0, d, bound)
     assert alpha[0] == 0.0 and alpha[1] == 0.0, "at D and nearer: geometry only"
     assert 0.0 < alpha[2] < 1.0 and alpha[3] == 1.0 and alpha[4] == 1.0
     eps = 1e-6  # continuous at the switch: no pop
     assert impostor_alpha(d + eps, 0.0, d, bound) < 1e-9
-    steps = impostor_alpha(np.linspace(d, d + BLEND_M, 201), 0.0, d, bound)
+    steps = impostor_alpha(np.linspace(d, d + blend, 201), 0.0, d, bound)
     assert (np.diff(steps) >= 0).all() and np.abs(np.diff(steps)).max() < 0.02
     # the error bound: full opacity well inside it, none at it, continuous between
     errs = impostor_alpha(d + 100.0, [0.5 * bound, 0.75 * bound, 0.9 * bound, bound, 1.1 * bound], d, bound)

@@ -178,7 +178,8 @@ def cmd_bench_impostors(args: argparse.Namespace) -> int:
     paths = [p.strip() for p in args.paths.split(",") if p.strip()]
     link = {"bandwidth": args.bandwidth, "rtt": args.rtt}
     extra = {"clock": args.clock, **({"ach_shares": True} if args.ach_shares else {}),
-             **({} if args.impostor_blend is None else {"impostor_blend": args.impostor_blend})}
+             **({} if args.impostor_blend is None else {"impostor_blend": args.impostor_blend}),
+             **({} if args.impostor_fade is None else {"impostor_fade": args.impostor_fade})}
     rows = run_impostor_bench(args.db, replay_with_options, out=Path(args.out), paths=paths, device=args.device,
                               truth_every=args.truth_every, duration=args.duration, link=link, size=args.size,
                               extra=extra)
@@ -680,7 +681,8 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--rtt", default="200ms", help="round-trip time (default 200ms)")
     b.add_argument("--truth-every", type=int, default=25, metavar="N", help="compare every Nth frame with the ground truth, colour error included (default 25; 0: never)")
     b.add_argument("--duration", help="limit every walk, e.g. 60s")
-    b.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres over which an impostor fades in over its geometry (default 20; 0: a hard switch; the 'pop' column measures it, with --truth-every 1)")
+    b.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres over which an impostor fades in over its geometry (default a tenth of the bake's D; 0: none; the 'pop' column measures it, with --truth-every 1)")
+    b.add_argument("--impostor-fade", type=float, default=None, metavar="S", help="seconds an impostor's opacity takes at least from 0 to 1 (default 1; 0 with --impostor-blend 0: a hard switch)")
     b.add_argument("--out", default="out/bench-impostors", help="folder for the reports")
     b.set_defaults(func=cmd_bench_impostors)
 

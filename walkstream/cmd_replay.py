@@ -129,6 +129,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         batched_draws=not args.per_object_draws,
         impostors=not args.no_impostors,
         impostor_blend_m=args.impostor_blend,
+        impostor_fade_s=args.impostor_fade,
         virtual_walls=not args.no_walls,
         wall_zone_blend=args.wall_zone_blend,
     )
@@ -321,7 +322,8 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--wall-zone-blend", type=float, default=0.5, metavar="Z", help="zone widths around a virtual wall's zone border over which the two zones' textures blend (default 0.5; 0: a hard swap; the seam figure, truth.seam, measures it with --truth-every 1)")
     r.add_argument("--no-walls", action="store_true", help="open every virtual wall on an interior baked with --virtual-walls (geometry only, no texture asked for)")
     r.add_argument("--no-impostors", action="store_true", help="draw geometry only on a scene baked with --impostors (no image asked for)")
-    r.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres beyond the bake's D over which an impostor fades in over its geometry (default 20; 0: a hard switch)")
+    r.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres beyond the bake's D over which an impostor fades in over its geometry (default a tenth of D; 0: none)")
+    r.add_argument("--impostor-fade", type=float, default=None, metavar="S", help="seconds an impostor's opacity takes at least from 0 to 1, so an image arriving or a building joining the cell's list does not pop (default 1; 0 with --impostor-blend 0: a hard switch)")
     r.add_argument("--per-object-draws", action="store_true", help="gl device: one draw call per object instead of one multi-draw call per frame (the older path, for comparison)")
 
 

@@ -14,7 +14,21 @@ that calls it, wants the images and makes the quads is
   (impostor only) at ``D + blend_m``, and falls back to 0 as the angular error
   (:func:`~walkstream.shared.impostors.angular_error` of the image's direction against
   the viewer's) climbs over the last quarter of ``A`` to ``A``; in between both are
-  drawn, the impostor over the geometry, so nothing pops at either end.
+  drawn, the impostor over the geometry, so nothing pops at either end.  The blend's
+  length scales with ``D`` (:func:`blend_length`, :data:`BLEND_SHARE` of it): a
+  building at distance ``D`` moves across the screen at a rate proportional to the
+  walker's speed over ``D``, and the blend changes its pixels at the speed over the
+  blend's length, so a length proportional to ``D`` keeps the blend's change the same
+  share of the building's own motion whatever ``D`` (a fixed 20 m was a tenth of the
+  motion's scale at ``D`` 200 m and nearly all of it at ``D`` 25 m).
+- **The fade in time** (:func:`fade_towards`): what the blend cannot see coming --
+  an image arriving while its building is already beyond ``D + blend_m``, a building
+  the next cell lists or no longer lists, an image the texture budget drops -- would
+  switch a building between its geometry and its image in one frame.  The opacity
+  drawn therefore rises towards the blend's at most ``1 / fade_s`` a second
+  (:data:`FADE_S`), and a building leaving the list fades out at that rate on the
+  image it was drawn with; where the blend itself falls (the walker nearing ``D``,
+  the error nearing ``A``) the opacity follows it at once, so the bounds hold.
 - **The texture budget** (:func:`fit_textures`): when the images wanted do not all
   fit, the farthest buildings' images are dropped first (their buildings are drawn as
   geometry), so a budget smaller than one cell's images still draws every building.
@@ -32,10 +46,23 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.impostors import angular_error, bin_direction, bin_of, directions
 from walkstream.shared.wire import ImpostorRow
 
-__all__ = ["BLEND_M", "ERROR_BLEND", "ImpostorChoice", "choose_impostors", "fit_textures", "impostor_alpha"]
+__all__ = [
+    "BLEND_SHARE",
+    "ERROR_BLEND",
+    "FADE_S",
+    "ImpostorChoice",
+    "blend_length",
+    "choose_impostors",
+    "fade_towards",
+    "fit_textures",
+    "impostor_alpha",
+]
 
-BLEND_M = 20.0
-"""Metres beyond ``D`` over which an impostor fades in over its geometry."""
+BLEND_SHARE = 0.1
+"""The blend's length as a share of the bake's ``D`` (25 m at the default ``D`` of 250 m)."""
+
+FADE_S = 2.0
+"""Seconds over which the opacity drawn may go from 0 to 1 at most (:func:`fade_towards`)."""
 
 ERROR_BLEND = 0.25
 """Share of the error bound over which an impostor fades out as its error nears the bound."""
@@ -47,13 +74,29 @@ def _smoothstep(x: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
+def blend_length(d: float, blend_m: float | None = None) -> float:
+    """Metres beyond ``d`` over which an impostor fades in: ``blend_m`` when given (0: a
+    hard switch), else :data:`BLEND_SHARE` of ``d`` (see the module docstring)."""
+    return BLEND_SHARE * float(d) if blend_m is None else float(blend_m)
+
+
+def fade_towards(shown: float, target: float, dt: float, fade_s: float = FADE_S) -> float:
+    """The opacity to draw: ``shown`` (last frame's) moved towards ``target`` (the
+    blend's, :func:`impostor_alpha`) by at most ``dt / fade_s`` (``dt`` seconds since
+    the last frame; ``fade_s`` 0: ``target`` at once)."""
+    if fade_s <= 0.0:
+        return float(target)
+    step = max(float(dt), 0.0) / fade_s
+    return float(min(max(target, shown - step), shown + step))
+
+
 def impostor_alpha(
-    distance: ArrayLike, error: ArrayLike, d: float, bound: float, blend_m: float = BLEND_M
+    distance: ArrayLike, error: ArrayLike, d: float, bound: float, blend_m: float | None = None
 ) -> NDArray[np.float64]:
     """The impostor's opacity (0: geometry only, 1: impostor only) at ``distance`` from
     the building's box (metres) with angular ``error`` (radians), for the bake's ``d``
-    and ``bound``."""
-    near = _smoothstep((np.asarray(distance, np.float64) - d) / max(blend_m, 1e-9))
+    and ``bound``; the blend over ``blend_m`` metres (None: :func:`blend_length`)."""
+    near = _smoothstep((np.asarray(distance, np.float64) - d) / max(blend_length(d, blend_m), 1e-9))
     err = _smoothstep((bound - np.asarray(error, np.float64)) / (ERROR_BLEND * bound))
     out: NDArray[np.float64] = np.minimum(near, err)
     return out
@@ -72,7 +115,7 @@ class ImpostorChoice:
 
 
 def choose_impostors(
-    rows: Sequence[ImpostorRow], eye: ArrayLike, d: float, bound: float, blend_m: float = BLEND_M
+    rows: Sequence[ImpostorRow], eye: ArrayLike, d: float, bound: float, blend_m: float | None = None
 ) -> list[ImpostorChoice]:
     """Each listed building's image and opacity for a viewer at ``eye`` (see the module docstring)."""
     e = np.asarray(eye, np.float64).reshape(3)

@@ -267,12 +267,21 @@ def _colour_rows(c: Mapping[str, Any] | None, pct: Callable[[Any], str]) -> list
     def num(v: Any, unit: str) -> str:
         return "n/a" if v is None else f"{v:.2f}{unit}"
 
+    ic = c.get("impostor") or {}
+    imp = [] if not c.get("error_causes", {}).get("impostor") and not (ic.get("visible") or {}).get("max") else [
+        ("error from impostors, % of full scale (median / p99 / max)",
+         " / ".join(pct((ic.get("error") or {}).get(k)) for k in ("median", "p99", "max"))),
+        ("pixels wrong where an impostor stands in (median / p99 / max)",
+         " / ".join(pct((ic.get("visible") or {}).get(k)) for k in ("median", "p99", "max"))),
+        ("frames within 1 % error and 0.5 % pixels from impostors", pct(ic.get("frames_within_ratio"))),
+    ]
     return [
         ("colour error, linear RGB, % of full scale (median / p95 / max)", " / ".join(pct(me.get(k)) for k in ("median", "p95", "max"))),
         ("mean dE00 per pixel (median / p95 / max)", " / ".join(num(de.get(k), "") for k in ("median", "p95", "max"))),
         (f"pixels over dE00 {c.get('visible_threshold')} (median / p95 / max)", " / ".join(pct(vp.get(k)) for k in ("median", "p95", "max"))),
         ("frames with > 0.5 % of pixels over it", pct(c.get("frames_over_visible_ratio"))),
         ("PSNR (median / worst 5 % / min)", " / ".join(num(ps.get(k), " dB") for k in ("median", "p5", "min"))),
+        *imp,
     ]
 
 

@@ -3,7 +3,10 @@
 On a scene baked with ``--impostors`` the current street cell's record lists the
 buildings it may draw as images (:class:`~walkstream.shared.wire.CellImpostors`).
 Each frame (:func:`frame_impostors`): the image of the viewer's direction bin and
-its opacity by distance and error (:func:`~walkstream.client.draw.impostors.choose_impostors`);
+its opacity by distance and error (:func:`~walkstream.client.draw.impostors.choose_impostors`),
+moved towards it in time (:func:`~walkstream.client.draw.impostors.fade_towards`: an
+image arriving, a building joining or leaving the cell's list fades rather than
+switching in one frame);
 (once the first cell's parameters are all in: the start-up waits for no image) the
 images wanted from the impostor lane (:class:`~walkstream.client.stream.images.ImpostorImages`,
 needed now, so before the buildings' parameters), and with prefetch on the images the
@@ -23,16 +26,18 @@ nothing is chosen and the frame is what it was.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.draw.impostors import choose_impostors, fit_textures
+from walkstream.client.draw.impostors import FADE_S, choose_impostors, fade_towards, fit_textures
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.impostors import bin_direction, bin_of, directions, image_basis
 
-__all__ = ["AHEAD_S", "DrawnImpostor", "ahead_wants", "frame_impostors", "quad_corners", "replaced"]
+__all__ = ["AHEAD_S", "DrawnImpostor", "ahead_wants", "frame_impostors", "quad_corners", "replaced", "toward_eye"]
 
 AHEAD_S = 6.0
 """How far ahead (seconds of predicted motion) the images of the cells ahead are wanted."""
@@ -64,24 +69,47 @@ def quad_corners(box: tuple[float, ...] | NDArray[np.float64], level: int, ia: i
     return np.stack([c - right - up, c + right - up, c + right + up, c - right + up])
 
 
+def toward_eye(
+    corners: NDArray[np.float64], eye: NDArray[np.float64], box: tuple[float, ...] | NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``corners`` ``(4, 3)`` scaled about ``eye`` to the front of the bounding sphere of
+    ``box``: the same quad on the screen, in front of its own building's geometry.
+
+    The quad through the building's centre is depth tested against the meshes, so
+    while the building fades from geometry to image (both drawn) its own front faces
+    hid most of the image, and the image appeared when the geometry went, in one frame:
+    a pop.  Scaled about the eye, every point of the quad projects where it did (the
+    texture lands on the same pixels); only its depth moves, to the sphere's front, so
+    the image covers its own building and is still hidden by any nearer one.
+    """
+    b = np.asarray(box, np.float64).reshape(2, 3)
+    e = np.asarray(eye, np.float64).reshape(3)
+    span = float(np.linalg.norm(b.mean(axis=0) - e))
+    radius = float(np.linalg.norm(b[1] - b[0])) / 2.0
+    if span <= radius:
+        return corners
+    out: NDArray[np.float64] = e + (np.asarray(corners, np.float64) - e) * ((span - radius) / span)
+    return out
+
+
 def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
     """The impostors frame ``f`` draws (see the module docstring); wants the missing images."""
     city, lane = w.scene.streets, w.scene.images
-    if city is None or lane is None or f.street is None:
+    if city is None or lane is None:
         return []
-    rec = city.cells.get(f.street)
+    rec = None if f.street is None else city.cells.get(f.street)
     imp = None if rec is None else rec.impostors
     if imp is None or not imp.rows:
-        return []
+        return _faded(w, f, {})  # no list (yet): the images drawn fade out
     if not lane.started:
         # the start-up: the first cell's parameters before any image, so the first
         # perfect frame does not wait for images sharing the link (it needs none)
         if not all(city.has_object(i) for i in w.objects.pvs):
             return []
         lane.started = True
-    blend = w.config.impostor_blend_m
-    choices = choose_impostors(imp.rows, f.eye, imp.d, imp.bound, *(() if blend is None else (blend,)))
-    wants = ahead_wants(w, f) if w.config.prefetch else {}
+    cfg = w.config
+    choices = choose_impostors(imp.rows, f.eye, imp.d, imp.bound, cfg.impostor_blend_m)
+    wants = ahead_wants(w, f) if cfg.prefetch else {}
     wants.update({c.image: 0.0 for c in choices if c.image is not None})
     lane.want(wants)
     held = {c.image: int(getattr(lane.image(c.image), "nbytes", 0))
@@ -90,17 +118,79 @@ def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
     choices = [c if c.image is None or c.image in held else c.__class__(c.object, None, 0.0, c.distance, c.error)
                for c in choices]
     rows = {r.object: r for r in imp.rows}
-    out = []
-    for c in fit_textures(choices, held, w.config.texture_budget_bytes):
+    target: dict[int, DrawnImpostor] = {}
+    for c in fit_textures(choices, held, cfg.texture_budget_bytes):
         if c.image is None:
             continue
         r = rows[c.object]
         lo, hi = np.asarray(r.box[:3], np.float64), np.asarray(r.box[3:], np.float64)
         az, el = directions(f.eye, (lo + hi) / 2.0)
         ia, ie = bin_of(r.level, az, el)
-        out.append(DrawnImpostor(c.object, c.image, c.alpha, quad_corners(r.box, r.level, int(ia), int(ie)),
-                                 held[c.image]))
+        corners = toward_eye(quad_corners(r.box, r.level, int(ia), int(ie)), f.eye, r.box)
+        target[c.object] = DrawnImpostor(c.object, c.image, c.alpha, corners, held[c.image])
+    return _faded(w, f, target)
+
+
+def _faded(w: WalkState, f: Frame, target: dict[int, DrawnImpostor]) -> list[DrawnImpostor]:
+    """The impostors drawn: each building's opacity rises towards ``target``'s at most at
+    the rate of :func:`~walkstream.client.draw.impostors.fade_towards` (an image
+    arriving fades in) and follows it down (the distance blend and the error bound fall
+    smoothly by themselves); a building the cell no longer lists, or whose image is not
+    held or over the texture budget, fades out at that rate on the image it was drawn
+    with while the lane still holds it; another image of the same building (the viewer
+    crossed into another direction bin) cross-fades from the last (:func:`_cross_faded`).
+    Remembered in ``w.impostors_shown`` for the next frame."""
+    lane = w.scene.images
+    fade = FADE_S if w.config.impostor_fade_s is None else w.config.impostor_fade_s
+    dt = f.wt - w.impostors_wt if math.isfinite(w.impostors_wt) else math.inf
+    w.impostors_wt = f.wt
+    out: list[DrawnImpostor] = []
+    shown_next: dict[int, DrawnImpostor] = {}
+    for obj in sorted(target.keys() | w.impostors_shown.keys()):
+        want, last = target.get(obj), w.impostors_shown.get(obj)
+        shown = 0.0 if last is None else last.alpha
+        if want is not None:
+            # in: at most the fade's rate; out: as the distance blend and the error bound
+            # say (smooth by themselves; held back, the image would outstay its bound)
+            alpha = min(want.alpha, fade_towards(shown, want.alpha, dt, fade))
+            base: DrawnImpostor | None = want
+        else:  # not listed, not held or over the budget: fading out on the last image
+            alpha = fade_towards(shown, 0.0, dt, fade)
+            base = last if last is not None and lane is not None and lane.held(last.image) else None
+        if base is None or alpha <= 0.0:
+            w.impostors_old.pop(obj, None)
+            continue
+        shown_now = dataclasses.replace(base, alpha=alpha)
+        shown_next[obj] = shown_now
+        out.extend(_cross_faded(w, last, shown_now, dt, fade))
+    w.impostors_shown = shown_next
     return out
+
+
+def _cross_faded(
+    w: WalkState, last: DrawnImpostor | None, now: DrawnImpostor, dt: float, fade: float
+) -> list[DrawnImpostor]:
+    """``now`` drawn over the image the building showed before, when the viewer's direction
+    crossed into another bin: the old image's share falls from 1 to 0 over the fade
+    (``w.impostors_old``), composed so that the geometry keeps ``1 - alpha``, the old
+    image ``alpha (1 - t)`` and the new ``alpha t`` (``t`` the new one's share): the old
+    drawn first at ``alpha (1 - t) / (1 - alpha t)``, the new over it at ``alpha t``."""
+    lane = w.scene.images
+    if last is not None and last.image != now.image and fade > 0.0 and lane is not None and lane.held(last.image):
+        w.impostors_old[now.object] = (last, 1.0)  # a new crossing starts from what was drawn
+    if now.object in w.impostors_old:
+        old, share = w.impostors_old[now.object]
+        share -= max(dt, 0.0) / fade if fade > 0.0 else 1.0
+        if share <= 0.0 or lane is None or not lane.held(old.image) or old.image == now.image:
+            del w.impostors_old[now.object]
+        else:
+            w.impostors_old[now.object] = (old, share)
+    if now.object not in w.impostors_old:
+        return [now]
+    old, share = w.impostors_old[now.object]
+    a, t = now.alpha, 1.0 - share
+    under = a * (1.0 - t) / (1.0 - a * t) if a * t < 1.0 else 0.0
+    return [dataclasses.replace(old, alpha=under), dataclasses.replace(now, alpha=a * t)]
 
 
 def ahead_wants(w: WalkState, f: Frame) -> dict[int, float]:
@@ -127,7 +217,7 @@ def ahead_wants(w: WalkState, f: Frame) -> dict[int, float]:
             continue
         eye = np.asarray(f.eye, np.float64).copy()
         eye[:2] += velocity * t
-        for c in choose_impostors(imp.rows, eye, imp.d, imp.bound):
+        for c in choose_impostors(imp.rows, eye, imp.d, imp.bound, w.config.impostor_blend_m):
             if c.image is not None and c.image not in out:
                 out[c.image] = float(t)
     return out

@@ -77,6 +77,14 @@ class WalkState:
     """The entrance door's centre."""
     indoor_fog: float = 0.0
     """The rooms' default fog (the lever starts from it each frame)."""
+    impostors_shown: dict[int, Any] = field(default_factory=dict)
+    """The impostors the last frame drew, by building
+    (:class:`~walkstream.client.walk.impostors.DrawnImpostor`): the fade starts from them."""
+    impostors_old: dict[int, tuple[Any, float]] = field(default_factory=dict)
+    """Per building crossing into another image: the image it showed before and that
+    image's share, falling from 1 to 0 over the fade."""
+    impostors_wt: float = -math.inf
+    """Walk time of the last frame that chose impostors (-inf: none yet)."""
 
     @property
     def size(self) -> tuple[int, int]:
