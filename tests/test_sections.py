@@ -21,7 +21,8 @@ from walkstream.client.replay import run_replay
 from walkstream.client.stream.cellmap import CellMap
 from walkstream.client.stream.plan import plan_needs
 from walkstream.server.bake import BakeSettings, bake
-from walkstream.server.bake.field import FieldLattice, PointSets, field_folder, field_lattice
+from walkstream.server.bake.cells import make_cells
+from walkstream.server.bake.field import FieldLattice, PointSets, field_folder, field_lattice, points_meeting
 from walkstream.server.bake.sections import grow_sections, section_points, section_pvs
 from walkstream.server.service.main import create_app
 from walkstream.server.sources.citygen import write_city
@@ -125,7 +126,12 @@ def test_the_bake_covers_every_free_point_and_unions_the_field(city: Path, baked
     db, summary = baked
     assert summary["schema_version"] == 3 and summary["cells"] == summary["sections"] > 1
     scene = read_source(city)
-    lat = field_lattice(scene, FAST.field_spacing, (1.7, 2.0), margin=FAST.margin)
+    free = field_lattice(scene, FAST.field_spacing, (1.7, 2.0), margin=FAST.margin)
+    # the default cover: the field points whose squares meet the walkable (street) cells
+    streets = shapely.union_all([shapely.Polygon(c.polygon) for c in make_cells(scene, "auto")])
+    walkable = points_meeting(free, streets)
+    assert 0 < walkable.sum() < len(free)  # the free space inside the blocks is left out
+    lat = free.subset(walkable)
     # no sample inside a building: every eye lies outside every footprint
     foot = shapely.union_all([shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings])
     assert not shapely.contains_xy(foot, lat.eyes[:, 0], lat.eyes[:, 1]).any()
@@ -142,6 +148,7 @@ def test_the_bake_covers_every_free_point_and_unions_the_field(city: Path, baked
         ids = [np.load(b)["ids"] for b in blocks]
         offs = [np.load(b)["offsets"] for b in blocks]
         sets = [set(i[o[k] : o[k + 1]].tolist()) for i, o in zip(ids, offs, strict=True) for k in range(len(o) - 1)]
+        assert len(sets) == len(lat)  # only the walkable points were rendered
         xy = lat.xy()
         for c in cells:
             lo, hi = c.boundary.min(axis=0), c.boundary.max(axis=0)
@@ -203,12 +210,32 @@ def test_the_map_draws_the_sections(baked: tuple[Path, dict], tmp_path: Path) ->
 
 @pytest.mark.parametrize(("flag", "value", "says"), [("--field-spacing", "0", "--field-spacing"),
                                                       ("--redundancy", "-1", "--redundancy"),
-                                                      ("--min-size", "-5", "--min-size")])
+                                                      ("--min-size", "-5", "--min-size"),
+                                                      ("--section-cover", "everywhere", "--section-cover")])
 def test_bad_section_flags_get_one_line(city: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                         flag: str, value: str, says: str) -> None:
     assert main(["bake", str(city), "-o", str(tmp_path / "x.db"), "--cells", "sections", flag, value]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0]
+
+
+def test_a_walkable_cover_keeps_the_points_whose_square_meets_the_cells() -> None:
+    # a 10 x 10 m street; a lattice every 2 m over 0..20 (squares from -1 to 21)
+    street = shapely.box(0.0, 0.0, 10.0, 10.0)
+    r, c = np.divmod(np.arange(121), 11)
+    for angle in (0.0, np.radians(30.0)):
+        xy = np.stack([c * 2.0, r * 2.0], axis=1).astype(np.float64)
+        lat = FieldLattice((0.0, 0.0), 2.0, (11, 11), np.arange(121, dtype=np.int64), xy, (1.7, 2.0), float(angle))
+        got = points_meeting(lat, street)
+        squares = [shapely.Polygon(lat.to_scene(np.array([[x - 1, y - 1], [x + 1, y - 1], [x + 1, y + 1], [x - 1, y + 1]])))
+                   for x, y in xy]
+        want = np.array([shapely.intersection(q, street).area > 1e-6 for q in squares])
+        assert (got == want).all() and 0 < got.sum() < 121
+        sub = lat.subset(got)
+        assert len(sub) == got.sum() and (sub.grid() >= 0).sum() == got.sum() and sub.angle == lat.angle
+    # a square that only touches the street at its edge is not kept: (12, 0), its square from x 11
+    edge = FieldLattice((0.0, 0.0), 2.0, (1, 7), np.array([5, 6]), np.array([[10.0, 0.0], [12.0, 0.0]]), (1.7, 2.0))
+    assert points_meeting(edge, shapely.box(0.0, 0.0, 11.0, 10.0)).tolist() == [True, False]
 
 
 def test_locating_in_an_overlap_keeps_the_section_the_viewer_is_in() -> None:
@@ -265,7 +292,7 @@ def test_street_angle_finds_a_turned_grid(tmp_path: Path) -> None:
 def test_aligned_sections_are_turned_rectangles_that_cover_the_field(tmp_path: Path) -> None:
     src = _turned_city(tmp_path / "turned.geojson", 30.0)
     db = tmp_path / "aligned.db"
-    st = BakeSettings(cells="sections", resolution=16, field_spacing=10.0, section_shape="aligned")
+    st = BakeSettings(cells="sections", resolution=16, field_spacing=10.0, section_shape="aligned", section_cover="free")
     summary = bake(src, db, settings=st)
     assert summary["cells"] == summary["sections"] > 1
     scene = read_source(src)
