@@ -53,10 +53,12 @@ def run_sections_bench(
     min_sizes: Sequence[float] = (64.0,),
     field_spacing: float = 4.0,
     walks: Sequence[str] = ("SE", "drive"),
+    covers: Sequence[str] = ("walkable",),
     reuse: bool = False,
     workers: int = 1,
 ) -> list[dict[str, Any]]:
-    """Bake ``source`` with street cells and in sections for every ``(R, M)``; replay ``walks``.
+    """Bake ``source`` with street cells and in sections for every ``(R, M)`` and cover
+    (``--section-cover``); replay ``walks``.
 
     Returns one row per database; writes ``bench_sections.json`` and the replay
     reports into ``out``.
@@ -67,24 +69,29 @@ def run_sections_bench(
     runs: list[tuple[str, Path, BakeSettings, int | None, float | None]] = [
         ("street", out / "street.db", BakeSettings(), None, None)
     ]
-    for rr in redundancies:
-        for mm in min_sizes:
-            st = BakeSettings(cells="sections", field_spacing=field_spacing, redundancy=int(rr), min_size=float(mm))
-            runs.append(("sections", out / f"sections-R{rr}-M{mm:g}.db", st, int(rr), float(mm)))
-    first_field: Path | None = None
+    for cover in covers:
+        for rr in redundancies:
+            for mm in min_sizes:
+                st = BakeSettings(cells="sections", field_spacing=field_spacing, redundancy=int(rr),
+                                  min_size=float(mm), section_cover=cover).check()
+                name = f"sections-R{rr}-M{mm:g}" + ("" if cover == "walkable" else f"-{cover}")
+                runs.append(("sections", out / f"{name}.db", st, int(rr), float(mm)))
+    # one field per cover (the walkable cover renders fewer points): the other bakes
+    # of that cover point at the first one's folder
+    first_field: dict[str, Path] = {}
     rows: list[dict[str, Any]] = []
     for kind, db, st, r, m in runs:
         if kind == "sections":
             folder = Path(os.fspath(db) + ".field")
-            if first_field is None:
-                first_field = folder
-            elif not folder.exists() and first_field.exists():
-                folder.symlink_to(first_field.resolve(), target_is_directory=True)
+            first = first_field.setdefault(st.section_cover, folder)
+            if first != folder and not folder.exists() and first.exists():
+                folder.symlink_to(first.resolve(), target_is_directory=True)
         s = _bake(source, db, st, reuse, workers)
         with SceneReader.open(db) as reader:
             paths = {w: RecordedPath.from_msgpack(reader.path_blob(w), w) for w in walks if w in reader.path_names()}
         row: dict[str, Any] = {
             "cells_kind": kind, "redundancy": r, "min_size": m, "cells": s["cells"], "pvs_mean": s["pvs_mean"],
+            "cover": st.section_cover if kind == "sections" else None,
             "section_redundancy_mean": s.get("section_redundancy_mean"), "bake_seconds": s["bake_seconds"],
             "field_points": s.get("field_points"), "field_bytes": s.get("field_bytes"), "walks": {},
         }
@@ -100,6 +107,10 @@ def run_sections_bench(
                 "first_perfect_s": rs.get("time_to_first_perfect_frame_s"),
                 "bytes_per_km": rs["bytes_received"] / km if km > 0 else None,
                 "cells_per_km": rs["cells_entered"] / km if km > 0 else None,
+                # where the bytes go: objects, cell records (PVS and ACH), index tiles
+                **{f"{part}_bytes_per_km": (rs.get(f"{part}_bytes") or 0) / km if km > 0 else None
+                   for part in ("object", "cell", "index")},
+                "overfetch_ratio": rs.get("overfetch_ratio"),
             }
         rows.append(row)
     (out / "bench_sections.json").write_text(json.dumps(rows, indent=2, default=str))
@@ -108,18 +119,26 @@ def run_sections_bench(
 
 def format_sections_table(rows: list[dict[str, Any]]) -> str:
     """One line per database and walk."""
-    head = (f"{'cells':<9} {'R':>3} {'M m2':>5} {'n cells':>7} {'PVS mean':>8} {'redund.':>7} {'bake s':>7} "
-            f"{'walk':>6} {'cells/km':>8} {'bytes/km':>9} {'perfect%':>8} {'first s':>7}")
+    head = (f"{'cells':<9} {'cover':<8} {'R':>3} {'M m2':>5} {'n cells':>7} {'PVS mean':>8} {'redund.':>7} "
+            f"{'bake s':>7} {'walk':>6} {'cells/km':>8} {'bytes/km':>9} {'objects':>8} {'records':>8} {'index':>7} "
+            f"{'overf.':>6} {'perfect%':>8} {'first s':>7}")
     lines = [head, "-" * len(head)]
+
+    def n(v: float | None) -> str:
+        return "-" if v is None else f"{v:,.0f}"
+
     for r in rows:
         red = "-" if r["section_redundancy_mean"] is None else f"{r['section_redundancy_mean']:.1f}"
         big = "-" if r["min_size"] is None else f"{r['min_size']:g}"
         for w, f in r["walks"].items():
             first = f["first_perfect_s"]
+            over = f.get("overfetch_ratio")
             lines.append(
-                f"{r['cells_kind']:<9} {'-' if r['redundancy'] is None else r['redundancy']:>3} "
+                f"{r['cells_kind']:<9} {r.get('cover') or '-':<8} {'-' if r['redundancy'] is None else r['redundancy']:>3} "
                 f"{big:>5} {r['cells']:>7,} {r['pvs_mean']:>8.1f} "
                 f"{red:>7} {r['bake_seconds']:>7.0f} {w:>6} {f['cells_per_km']:>8.1f} {f['bytes_per_km']:>9,.0f} "
+                f"{n(f.get('object_bytes_per_km')):>8} {n(f.get('cell_bytes_per_km')):>8} "
+                f"{n(f.get('index_bytes_per_km')):>7} {'-' if over is None else f'{over:.2f}':>6} "
                 f"{100 * f['perfect_frame_ratio']:>8.2f} {'never' if first is None else f'{first:.2f}':>7}"
             )
     return "\n".join(lines)
@@ -141,7 +160,7 @@ def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]
     for k, w in enumerate(walks):
         ax = fig.add_subplot(1, max(1, len(walks)), k + 1)
         pts = [(r["pvs_mean"], r["walks"][w]["bytes_per_km"] / 1000, r["walks"][w]["cells_per_km"],
-                f"R{r['redundancy']} M{r['min_size']:g}"
+                f"R{r['redundancy']} M{r['min_size']:g}" + ("" if r.get("cover") in (None, "walkable") else f" {r['cover']}")
                 + ("" if r["section_redundancy_mean"] is None else f" (redundancy {r['section_redundancy_mean']:.0f})"))
                for r in secs if w in r["walks"]]
         if pts:

@@ -22,7 +22,13 @@ from walkstream.client.stream.cellmap import CellMap
 from walkstream.client.stream.plan import plan_needs
 from walkstream.server.bake import BakeSettings, bake
 from walkstream.server.bake.cells import make_cells
-from walkstream.server.bake.field import FieldLattice, PointSets, field_folder, field_lattice, points_meeting
+from walkstream.server.bake.field import (
+    FieldLattice,
+    PointSets,
+    field_folder,
+    field_lattice,
+    points_meeting,
+)
 from walkstream.server.bake.sections import grow_sections, section_points, section_pvs
 from walkstream.server.service.main import create_app
 from walkstream.server.sources.citygen import write_city
