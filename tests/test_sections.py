@@ -18,8 +18,9 @@ from walkstream.cli import main
 from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import run_replay
-from walkstream.client.stream.cellmap import CellMap
+from walkstream.client.stream.cellmap import CellMap, portal_between
 from walkstream.client.stream.plan import plan_needs
+from walkstream.client.stream.route import predict_route
 from walkstream.server.bake import BakeSettings, bake
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.field import (
@@ -254,6 +255,25 @@ def test_locating_in_an_overlap_keeps_the_section_the_viewer_is_in() -> None:
     # the service answers the lowest id in an overlap, deterministically
     loc = CellLocator.of_kinds([0, 1], ["section", "section"], [a, b], [[1.5, 2.0], [1.5, 2.0]])
     assert loc.locate(8.0, 2.0) == 0 and loc.locate(15.0, 2.0) == 1
+
+
+def test_the_route_into_an_overlapping_section_crosses_where_the_viewer_is() -> None:
+    # a street going north (x 0..20) and a wide section across it overlapping its north
+    # end (y 40..60 of the street): the way in is where the viewer goes, not a far corner
+    street = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 60.0], [0.0, 60.0]])
+    across = np.array([[-150.0, 40.0], [150.0, 40.0], [150.0, 90.0], [-150.0, 90.0]])
+    seg = portal_between(street, across)
+    assert np.allclose(seg[:, 1], 50.0) and np.allclose(sorted(seg[:, 0]), [0.0, 20.0])  # the overlap's long axis
+    assert np.allclose(portal_between(across, street), seg)
+    m = CellMap()
+    m.add_cells([0, 1], [street, across], [[1], [0]], ["section", "section"])
+    m.update([10.0, 30.0])
+    route = predict_route(m, 0, [10.0, 30.0], [0.0, 1.0], 100.0, 20.0)
+    assert {s.cell: s.distance_m for s in route.steps}[1] == pytest.approx(20.0)
+    # cells sharing an edge, or only a corner, keep their portal
+    a = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]])
+    assert portal_between(a, a + [2.0, 0.5]).tolist() == [[2.0, 0.5], [2.0, 1.0]]
+    assert portal_between(a, a + [2.0, 1.0]).tolist() == [[2.0, 1.0], [2.0, 1.0]]
 
 
 # --------------------------------------------------------------------- aligned sections
