@@ -1,10 +1,11 @@
 """The section-size trade, measured: ``walkstream bench sections``.
 
-One city is baked with street cells (the default) and into sections for every
-redundancy ``R`` and minimum size ``M`` asked for; the dense visibility field is
+One city is baked with street cells (the default), grid cells and into sections for
+every redundancy ``R``, minimum size ``M`` and cover asked for; the dense visibility field is
 rendered once (the first sections bake) and reused by the others (their field
 folders point at it), so the sweep costs one field.  Every database holds the same
-default walks (sections take the walks of the street partition), and each walk is
+default walks (sections take the walks of the street partition; the street database's
+walks are written into the grid cells' database, whose own differ), and each walk is
 replayed in each at 56 kbit/s, 200 ms round trip, under the simulated clock.  A row
 gives the cells, their mean PVS, the redundancy (objects a section holds that the
 field point where the walker stands does not see, averaged over every section and
@@ -24,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from walkstream.server.bake import BakeSettings, bake
-from walkstream.server.store import SceneReader
+from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.errors import WalkstreamError
 from walkstream.shared.paths import RecordedPath
 
@@ -57,7 +58,7 @@ def run_sections_bench(
     reuse: bool = False,
     workers: int = 1,
 ) -> list[dict[str, Any]]:
-    """Bake ``source`` with street cells and in sections for every ``(R, M)`` and cover
+    """Bake ``source`` with street cells, grid cells and in sections for every ``(R, M)`` and cover
     (``--section-cover``); replay ``walks``.
 
     Returns one row per database; writes ``bench_sections.json`` and the replay
@@ -67,7 +68,8 @@ def run_sections_bench(
         raise WalkstreamError(f"{source}: no such source")
     out.mkdir(parents=True, exist_ok=True)
     runs: list[tuple[str, Path, BakeSettings, int | None, float | None]] = [
-        ("street", out / "street.db", BakeSettings(), None, None)
+        ("street", out / "street.db", BakeSettings(), None, None),
+        ("grid", out / "grid.db", BakeSettings(cells="grid"), None, None),
     ]
     for cover in covers:
         for rr in redundancies:
@@ -79,6 +81,7 @@ def run_sections_bench(
     # one field per cover (the walkable cover renders fewer points): the other bakes
     # of that cover point at the first one's folder
     first_field: dict[str, Path] = {}
+    street_blobs: dict[str, bytes] = {}
     rows: list[dict[str, Any]] = []
     for kind, db, st, r, m in runs:
         if kind == "sections":
@@ -88,7 +91,16 @@ def run_sections_bench(
                 folder.symlink_to(first.resolve(), target_is_directory=True)
         s = _bake(source, db, st, reuse, workers)
         with SceneReader.open(db) as reader:
-            paths = {w: RecordedPath.from_msgpack(reader.path_blob(w), w) for w in walks if w in reader.path_names()}
+            blobs = {w: reader.path_blob(w) for w in walks if w in reader.path_names()}
+        if kind == "street":
+            street_blobs = blobs
+        else:
+            # the same walks in every database: grid cells get walks of their own
+            for w, blob in street_blobs.items():
+                if blobs.get(w) != blob:
+                    write_path(db, w, blob)
+                    blobs[w] = blob
+        paths = {w: RecordedPath.from_msgpack(blob, w) for w, blob in blobs.items()}
         row: dict[str, Any] = {
             "cells_kind": kind, "redundancy": r, "min_size": m, "cells": s["cells"], "pvs_mean": s["pvs_mean"],
             "cover": st.section_cover if kind == "sections" else None,
@@ -147,14 +159,14 @@ def format_sections_table(rows: list[dict[str, Any]]) -> str:
 def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]) -> None:
     """The paper's trade as a plot: per walk, bytes per km and cells entered per km against
     the sections' mean PVS (one point per ``(R, M)``, labelled with its redundancy where
-    the bake measured it), street cells as dotted lines."""
+    the bake measured it), street cells as dotted lines, grid cells as dash-dotted ones."""
     import matplotlib
 
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
 
     secs = [r for r in rows if r["cells_kind"] == "sections"]
-    street = next((r for r in rows if r["cells_kind"] == "street"), None)
+    others = [(r, {"street": ":", "grid": "-."}[r["cells_kind"]]) for r in rows if r["cells_kind"] in ("street", "grid")]
     walks = sorted({w for r in rows for w in r["walks"]})
     fig = Figure(figsize=(5.0 * max(1, len(walks)), 4.2), dpi=120)
     for k, w in enumerate(walks):
@@ -171,10 +183,11 @@ def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]
             ax2 = ax.twinx()
             ax2.plot(x, c, "s--", color="#d62728", label="sections: cells entered/km")
             ax2.set_ylabel("cells entered per km", color="#d62728")
-            if street is not None and w in street["walks"]:
-                ax.axhline(street["walks"][w]["bytes_per_km"] / 1000, color="#1f77b4", lw=0.8, ls=":",
-                           label="street cells: kB/km")
-                ax2.axhline(street["walks"][w]["cells_per_km"], color="#d62728", lw=0.8, ls=":")
+            for other, ls in others:
+                if w in other["walks"]:
+                    ax.axhline(other["walks"][w]["bytes_per_km"] / 1000, color="#1f77b4", lw=0.8, ls=ls,
+                               label=f"{other['cells_kind']} cells: kB/km")
+                    ax2.axhline(other["walks"][w]["cells_per_km"], color="#d62728", lw=0.8, ls=ls)
         ax.set_xlabel("mean section PVS (objects; larger: more redundancy)")
         ax.set_ylabel("kB per km", color="#1f77b4")
         ax.set_title(f"{w}: the section-size trade (56 kbit/s)", fontsize=9)

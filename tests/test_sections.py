@@ -112,7 +112,7 @@ def test_overlaps_only_where_they_add_points() -> None:
 
 # --------------------------------------------------------------------- the bake
 
-FAST = BakeSettings(cells="sections", resolution=32, field_spacing=6.0)
+FAST = BakeSettings(cells="sections", resolution=32, field_spacing=6.0, redundancy=8)
 
 
 @pytest.fixture(scope="module")
@@ -318,7 +318,8 @@ def test_street_angle_finds_a_turned_grid(tmp_path: Path) -> None:
 def test_aligned_sections_are_turned_rectangles_that_cover_the_field(tmp_path: Path) -> None:
     src = _turned_city(tmp_path / "turned.geojson", 30.0)
     db = tmp_path / "aligned.db"
-    st = BakeSettings(cells="sections", resolution=16, field_spacing=10.0, section_shape="aligned", section_cover="free")
+    st = BakeSettings(cells="sections", resolution=16, field_spacing=10.0, redundancy=8, section_shape="aligned",
+                      section_cover="free")
     summary = bake(src, db, settings=st)
     assert summary["cells"] == summary["sections"] > 1
     scene = read_source(src)
@@ -353,3 +354,25 @@ def test_a_bad_section_shape_gets_one_line(city: Path, tmp_path: Path, capsys: p
     assert main(["bake", str(city), "-o", str(tmp_path / "x.db"), "--cells", "sections", "--section-shape", "round"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--section-shape" in err[0]
+
+
+def test_the_bench_table_and_plot_show_every_kind_cover_and_where_the_bytes_go(tmp_path: Path) -> None:
+    from walkstream.benchmarks.sections import format_sections_table, plot_sections_trade
+
+    def walk(b: float, o: float, c: float, i: float) -> dict[str, float | None]:
+        return {"km": 0.8, "perfect_frame_ratio": 0.998, "first_perfect_s": 1.5, "bytes_per_km": b,
+                "cells_per_km": 20.0, "object_bytes_per_km": o, "cell_bytes_per_km": c, "index_bytes_per_km": i,
+                "overfetch_ratio": 0.25}
+
+    def row(kind: str, cover: str | None, r: int | None) -> dict[str, object]:
+        return {"cells_kind": kind, "cover": cover, "redundancy": r, "min_size": None if r is None else 64.0,
+                "cells": 100, "pvs_mean": 80.0, "section_redundancy_mean": None if r is None else 30.0,
+                "bake_seconds": 10.0, "walks": {"SE": walk(60_000.0 + (r or 0), 40_000.0, 12_000.0, 8_000.0)}}
+
+    rows = [row("street", None, None), row("grid", None, None), row("sections", "walkable", 64), row("sections", "free", 64)]
+    lines = format_sections_table(rows).splitlines()
+    assert "records" in lines[0] and "index" in lines[0] and "cover" in lines[0]
+    assert [ln.split()[:2] for ln in lines[2:]] == [["street", "-"], ["grid", "-"], ["sections", "walkable"], ["sections", "free"]]
+    assert "40,000" in lines[4] and "12,000" in lines[4] and "60,064" in lines[4]
+    plot_sections_trade(rows, tmp_path / "trade.png")
+    assert (tmp_path / "trade.png").stat().st_size > 10_000
