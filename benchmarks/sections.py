@@ -50,7 +50,7 @@ def run_sections_bench(
     *,
     source: Path,
     out: Path,
-    redundancies: Sequence[int] = (8, 16, 32),
+    redundancies: Sequence[int] = (32, 64, 96),
     min_sizes: Sequence[float] = (64.0,),
     field_spacing: float = 4.0,
     walks: Sequence[str] = ("SE", "drive"),

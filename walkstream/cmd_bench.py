@@ -753,7 +753,7 @@ def add_bench_parser(sub: Any) -> None:
 
     b = besub.add_parser("sections", help="the section-size trade: street cells against sections for every --redundancy and --min-size (bake, replay)")
     b.add_argument("source", nargs="?", help="city source (default: the default 700 m city, generated in --out)")
-    b.add_argument("--redundancy", type=int, nargs="+", default=[8, 16, 32], help="redundancies R to bake (default 8 16 32)")
+    b.add_argument("--redundancy", type=int, nargs="+", default=[32, 64, 96], help="redundancies R to bake (default 32 64 96)")
     b.add_argument("--min-size", type=float, nargs="+", default=[64.0], help="minimum sizes M to bake, square metres (default 64)")
     b.add_argument("--field-spacing", type=float, default=4.0, help="metres between field points (default 4)")
     b.add_argument("--walks", default="SE,drive", help="comma-separated walks to replay (default SE,drive)")

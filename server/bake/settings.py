@@ -39,7 +39,9 @@ DEFAULT_SAMPLING = "region"
 #: sections (Brosnan et al. sample every 2 m; see docs/benchmarks.md for the cost of
 #: the field on the demo city at 2 and 4 m)
 DEFAULT_FIELD_SPACING = 4.0
-DEFAULT_REDUNDANCY = 8
+#: R 96: on the demo city the smallest R whose sections move fewer bytes per km than
+#: street and grid cells on both walks at 56 kbit/s (docs/benchmarks.md)
+DEFAULT_REDUNDANCY = 96
 DEFAULT_MIN_SIZE = 64.0
 
 #: the settings only a bake of sections stores (:meth:`BakeSettings.record`;
