@@ -1,10 +1,11 @@
 """The section-size trade, measured: ``walkstream bench sections``.
 
-One city is baked with street cells (the default) and into sections for every
-redundancy ``R`` and minimum size ``M`` asked for; the dense visibility field is
+One city is baked with street cells (the default), grid cells and into sections for
+every redundancy ``R``, minimum size ``M`` and cover asked for; the dense visibility field is
 rendered once (the first sections bake) and reused by the others (their field
 folders point at it), so the sweep costs one field.  Every database holds the same
-default walks (sections take the walks of the street partition), and each walk is
+default walks (sections take the walks of the street partition; the street database's
+walks are written into the grid cells' database, whose own differ), and each walk is
 replayed in each at 56 kbit/s, 200 ms round trip, under the simulated clock.  A row
 gives the cells, their mean PVS, the redundancy (objects a section holds that the
 field point where the walker stands does not see, averaged over every section and
@@ -24,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from walkstream.server.bake import BakeSettings, bake
-from walkstream.server.store import SceneReader
+from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.errors import WalkstreamError
 from walkstream.shared.paths import RecordedPath
 
@@ -49,14 +50,16 @@ def run_sections_bench(
     *,
     source: Path,
     out: Path,
-    redundancies: Sequence[int] = (8, 16, 32),
+    redundancies: Sequence[int] = (32, 64, 96),
     min_sizes: Sequence[float] = (64.0,),
     field_spacing: float = 4.0,
     walks: Sequence[str] = ("SE", "drive"),
+    covers: Sequence[str] = ("walkable",),
     reuse: bool = False,
     workers: int = 1,
 ) -> list[dict[str, Any]]:
-    """Bake ``source`` with street cells and in sections for every ``(R, M)``; replay ``walks``.
+    """Bake ``source`` with street cells, grid cells and in sections for every ``(R, M)`` and cover
+    (``--section-cover``); replay ``walks``.
 
     Returns one row per database; writes ``bench_sections.json`` and the replay
     reports into ``out``.
@@ -65,26 +68,42 @@ def run_sections_bench(
         raise WalkstreamError(f"{source}: no such source")
     out.mkdir(parents=True, exist_ok=True)
     runs: list[tuple[str, Path, BakeSettings, int | None, float | None]] = [
-        ("street", out / "street.db", BakeSettings(), None, None)
+        ("street", out / "street.db", BakeSettings(), None, None),
+        ("grid", out / "grid.db", BakeSettings(cells="grid"), None, None),
     ]
-    for rr in redundancies:
-        for mm in min_sizes:
-            st = BakeSettings(cells="sections", field_spacing=field_spacing, redundancy=int(rr), min_size=float(mm))
-            runs.append(("sections", out / f"sections-R{rr}-M{mm:g}.db", st, int(rr), float(mm)))
-    first_field: Path | None = None
+    for cover in covers:
+        for rr in redundancies:
+            for mm in min_sizes:
+                st = BakeSettings(cells="sections", field_spacing=field_spacing, redundancy=int(rr),
+                                  min_size=float(mm), section_cover=cover).check()
+                name = f"sections-R{rr}-M{mm:g}" + ("" if cover == "walkable" else f"-{cover}")
+                runs.append(("sections", out / f"{name}.db", st, int(rr), float(mm)))
+    # one field per cover (the walkable cover renders fewer points): the other bakes
+    # of that cover point at the first one's folder
+    first_field: dict[str, Path] = {}
+    street_blobs: dict[str, bytes] = {}
     rows: list[dict[str, Any]] = []
     for kind, db, st, r, m in runs:
         if kind == "sections":
             folder = Path(os.fspath(db) + ".field")
-            if first_field is None:
-                first_field = folder
-            elif not folder.exists() and first_field.exists():
-                folder.symlink_to(first_field.resolve(), target_is_directory=True)
+            first = first_field.setdefault(st.section_cover, folder)
+            if first != folder and not folder.exists() and first.exists():
+                folder.symlink_to(first.resolve(), target_is_directory=True)
         s = _bake(source, db, st, reuse, workers)
         with SceneReader.open(db) as reader:
-            paths = {w: RecordedPath.from_msgpack(reader.path_blob(w), w) for w in walks if w in reader.path_names()}
+            blobs = {w: reader.path_blob(w) for w in walks if w in reader.path_names()}
+        if kind == "street":
+            street_blobs = blobs
+        else:
+            # the same walks in every database: grid cells get walks of their own
+            for w, blob in street_blobs.items():
+                if blobs.get(w) != blob:
+                    write_path(db, w, blob)
+                    blobs[w] = blob
+        paths = {w: RecordedPath.from_msgpack(blob, w) for w, blob in blobs.items()}
         row: dict[str, Any] = {
             "cells_kind": kind, "redundancy": r, "min_size": m, "cells": s["cells"], "pvs_mean": s["pvs_mean"],
+            "cover": st.section_cover if kind == "sections" else None,
             "section_redundancy_mean": s.get("section_redundancy_mean"), "bake_seconds": s["bake_seconds"],
             "field_points": s.get("field_points"), "field_bytes": s.get("field_bytes"), "walks": {},
         }
@@ -100,6 +119,10 @@ def run_sections_bench(
                 "first_perfect_s": rs.get("time_to_first_perfect_frame_s"),
                 "bytes_per_km": rs["bytes_received"] / km if km > 0 else None,
                 "cells_per_km": rs["cells_entered"] / km if km > 0 else None,
+                # where the bytes go: objects, cell records (PVS and ACH), index tiles
+                **{f"{part}_bytes_per_km": (rs.get(f"{part}_bytes") or 0) / km if km > 0 else None
+                   for part in ("object", "cell", "index")},
+                "overfetch_ratio": rs.get("overfetch_ratio"),
             }
         rows.append(row)
     (out / "bench_sections.json").write_text(json.dumps(rows, indent=2, default=str))
@@ -108,18 +131,26 @@ def run_sections_bench(
 
 def format_sections_table(rows: list[dict[str, Any]]) -> str:
     """One line per database and walk."""
-    head = (f"{'cells':<9} {'R':>3} {'M m2':>5} {'n cells':>7} {'PVS mean':>8} {'redund.':>7} {'bake s':>7} "
-            f"{'walk':>6} {'cells/km':>8} {'bytes/km':>9} {'perfect%':>8} {'first s':>7}")
+    head = (f"{'cells':<9} {'cover':<8} {'R':>3} {'M m2':>5} {'n cells':>7} {'PVS mean':>8} {'redund.':>7} "
+            f"{'bake s':>7} {'walk':>6} {'cells/km':>8} {'bytes/km':>9} {'objects':>8} {'records':>8} {'index':>7} "
+            f"{'overf.':>6} {'perfect%':>8} {'first s':>7}")
     lines = [head, "-" * len(head)]
+
+    def n(v: float | None) -> str:
+        return "-" if v is None else f"{v:,.0f}"
+
     for r in rows:
         red = "-" if r["section_redundancy_mean"] is None else f"{r['section_redundancy_mean']:.1f}"
         big = "-" if r["min_size"] is None else f"{r['min_size']:g}"
         for w, f in r["walks"].items():
             first = f["first_perfect_s"]
+            over = f.get("overfetch_ratio")
             lines.append(
-                f"{r['cells_kind']:<9} {'-' if r['redundancy'] is None else r['redundancy']:>3} "
+                f"{r['cells_kind']:<9} {r.get('cover') or '-':<8} {'-' if r['redundancy'] is None else r['redundancy']:>3} "
                 f"{big:>5} {r['cells']:>7,} {r['pvs_mean']:>8.1f} "
                 f"{red:>7} {r['bake_seconds']:>7.0f} {w:>6} {f['cells_per_km']:>8.1f} {f['bytes_per_km']:>9,.0f} "
+                f"{n(f.get('object_bytes_per_km')):>8} {n(f.get('cell_bytes_per_km')):>8} "
+                f"{n(f.get('index_bytes_per_km')):>7} {'-' if over is None else f'{over:.2f}':>6} "
                 f"{100 * f['perfect_frame_ratio']:>8.2f} {'never' if first is None else f'{first:.2f}':>7}"
             )
     return "\n".join(lines)
@@ -128,20 +159,20 @@ def format_sections_table(rows: list[dict[str, Any]]) -> str:
 def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]) -> None:
     """The paper's trade as a plot: per walk, bytes per km and cells entered per km against
     the sections' mean PVS (one point per ``(R, M)``, labelled with its redundancy where
-    the bake measured it), street cells as dotted lines."""
+    the bake measured it), street cells as dotted lines, grid cells as dash-dotted ones."""
     import matplotlib
 
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
 
     secs = [r for r in rows if r["cells_kind"] == "sections"]
-    street = next((r for r in rows if r["cells_kind"] == "street"), None)
+    others = [(r, {"street": ":", "grid": "-."}[r["cells_kind"]]) for r in rows if r["cells_kind"] in ("street", "grid")]
     walks = sorted({w for r in rows for w in r["walks"]})
     fig = Figure(figsize=(5.0 * max(1, len(walks)), 4.2), dpi=120)
     for k, w in enumerate(walks):
         ax = fig.add_subplot(1, max(1, len(walks)), k + 1)
         pts = [(r["pvs_mean"], r["walks"][w]["bytes_per_km"] / 1000, r["walks"][w]["cells_per_km"],
-                f"R{r['redundancy']} M{r['min_size']:g}"
+                f"R{r['redundancy']} M{r['min_size']:g}" + ("" if r.get("cover") in (None, "walkable") else f" {r['cover']}")
                 + ("" if r["section_redundancy_mean"] is None else f" (redundancy {r['section_redundancy_mean']:.0f})"))
                for r in secs if w in r["walks"]]
         if pts:
@@ -152,10 +183,11 @@ def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]
             ax2 = ax.twinx()
             ax2.plot(x, c, "s--", color="#d62728", label="sections: cells entered/km")
             ax2.set_ylabel("cells entered per km", color="#d62728")
-            if street is not None and w in street["walks"]:
-                ax.axhline(street["walks"][w]["bytes_per_km"] / 1000, color="#1f77b4", lw=0.8, ls=":",
-                           label="street cells: kB/km")
-                ax2.axhline(street["walks"][w]["cells_per_km"], color="#d62728", lw=0.8, ls=":")
+            for other, ls in others:
+                if w in other["walks"]:
+                    ax.axhline(other["walks"][w]["bytes_per_km"] / 1000, color="#1f77b4", lw=0.8, ls=ls,
+                               label=f"{other['cells_kind']} cells: kB/km")
+                    ax2.axhline(other["walks"][w]["cells_per_km"], color="#d62728", lw=0.8, ls=ls)
         ax.set_xlabel("mean section PVS (objects; larger: more redundancy)")
         ax.set_ylabel("kB per km", color="#1f77b4")
         ax.set_title(f"{w}: the section-size trade (56 kbit/s)", fontsize=9)

@@ -18,10 +18,18 @@ from walkstream.cli import main
 from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import run_replay
-from walkstream.client.stream.cellmap import CellMap
+from walkstream.client.stream.cellmap import CellMap, portal_between
 from walkstream.client.stream.plan import plan_needs
+from walkstream.client.stream.route import predict_route
 from walkstream.server.bake import BakeSettings, bake
-from walkstream.server.bake.field import FieldLattice, PointSets, field_folder, field_lattice
+from walkstream.server.bake.cells import make_cells
+from walkstream.server.bake.field import (
+    FieldLattice,
+    PointSets,
+    field_folder,
+    field_lattice,
+    points_meeting,
+)
 from walkstream.server.bake.sections import grow_sections, section_points, section_pvs
 from walkstream.server.service.main import create_app
 from walkstream.server.sources.citygen import write_city
@@ -104,7 +112,7 @@ def test_overlaps_only_where_they_add_points() -> None:
 
 # --------------------------------------------------------------------- the bake
 
-FAST = BakeSettings(cells="sections", resolution=32, field_spacing=6.0)
+FAST = BakeSettings(cells="sections", resolution=32, field_spacing=6.0, redundancy=8)
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +133,12 @@ def test_the_bake_covers_every_free_point_and_unions_the_field(city: Path, baked
     db, summary = baked
     assert summary["schema_version"] == 3 and summary["cells"] == summary["sections"] > 1
     scene = read_source(city)
-    lat = field_lattice(scene, FAST.field_spacing, (1.7, 2.0), margin=FAST.margin)
+    free = field_lattice(scene, FAST.field_spacing, (1.7, 2.0), margin=FAST.margin)
+    # the default cover: the field points whose squares meet the walkable (street) cells
+    streets = shapely.union_all([shapely.Polygon(c.polygon) for c in make_cells(scene, "auto")])
+    walkable = points_meeting(free, streets)
+    assert 0 < walkable.sum() < len(free)  # the free space inside the blocks is left out
+    lat = free.subset(walkable)
     # no sample inside a building: every eye lies outside every footprint
     foot = shapely.union_all([shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings])
     assert not shapely.contains_xy(foot, lat.eyes[:, 0], lat.eyes[:, 1]).any()
@@ -142,6 +155,7 @@ def test_the_bake_covers_every_free_point_and_unions_the_field(city: Path, baked
         ids = [np.load(b)["ids"] for b in blocks]
         offs = [np.load(b)["offsets"] for b in blocks]
         sets = [set(i[o[k] : o[k + 1]].tolist()) for i, o in zip(ids, offs, strict=True) for k in range(len(o) - 1)]
+        assert len(sets) == len(lat)  # only the walkable points were rendered
         xy = lat.xy()
         for c in cells:
             lo, hi = c.boundary.min(axis=0), c.boundary.max(axis=0)
@@ -203,12 +217,32 @@ def test_the_map_draws_the_sections(baked: tuple[Path, dict], tmp_path: Path) ->
 
 @pytest.mark.parametrize(("flag", "value", "says"), [("--field-spacing", "0", "--field-spacing"),
                                                       ("--redundancy", "-1", "--redundancy"),
-                                                      ("--min-size", "-5", "--min-size")])
+                                                      ("--min-size", "-5", "--min-size"),
+                                                      ("--section-cover", "everywhere", "--section-cover")])
 def test_bad_section_flags_get_one_line(city: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                         flag: str, value: str, says: str) -> None:
     assert main(["bake", str(city), "-o", str(tmp_path / "x.db"), "--cells", "sections", flag, value]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0]
+
+
+def test_a_walkable_cover_keeps_the_points_whose_square_meets_the_cells() -> None:
+    # a 10 x 10 m street; a lattice every 2 m over 0..20 (squares from -1 to 21)
+    street = shapely.box(0.0, 0.0, 10.0, 10.0)
+    r, c = np.divmod(np.arange(121), 11)
+    for angle in (0.0, np.radians(30.0)):
+        xy = np.stack([c * 2.0, r * 2.0], axis=1).astype(np.float64)
+        lat = FieldLattice((0.0, 0.0), 2.0, (11, 11), np.arange(121, dtype=np.int64), xy, (1.7, 2.0), float(angle))
+        got = points_meeting(lat, street)
+        squares = [shapely.Polygon(lat.to_scene(np.array([[x - 1, y - 1], [x + 1, y - 1], [x + 1, y + 1], [x - 1, y + 1]])))
+                   for x, y in xy]
+        want = np.array([shapely.intersection(q, street).area > 1e-6 for q in squares])
+        assert (got == want).all() and 0 < got.sum() < 121
+        sub = lat.subset(got)
+        assert len(sub) == got.sum() and (sub.grid() >= 0).sum() == got.sum() and sub.angle == lat.angle
+    # a square that only touches the street at its edge is not kept: (12, 0), its square from x 11
+    edge = FieldLattice((0.0, 0.0), 2.0, (1, 7), np.array([5, 6]), np.array([[10.0, 0.0], [12.0, 0.0]]), (1.7, 2.0))
+    assert points_meeting(edge, shapely.box(0.0, 0.0, 11.0, 10.0)).tolist() == [True, False]
 
 
 def test_locating_in_an_overlap_keeps_the_section_the_viewer_is_in() -> None:
@@ -221,6 +255,25 @@ def test_locating_in_an_overlap_keeps_the_section_the_viewer_is_in() -> None:
     # the service answers the lowest id in an overlap, deterministically
     loc = CellLocator.of_kinds([0, 1], ["section", "section"], [a, b], [[1.5, 2.0], [1.5, 2.0]])
     assert loc.locate(8.0, 2.0) == 0 and loc.locate(15.0, 2.0) == 1
+
+
+def test_the_route_into_an_overlapping_section_crosses_where_the_viewer_is() -> None:
+    # a street going north (x 0..20) and a wide section across it overlapping its north
+    # end (y 40..60 of the street): the way in is where the viewer goes, not a far corner
+    street = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 60.0], [0.0, 60.0]])
+    across = np.array([[-150.0, 40.0], [150.0, 40.0], [150.0, 90.0], [-150.0, 90.0]])
+    seg = portal_between(street, across)
+    assert np.allclose(seg[:, 1], 50.0) and np.allclose(sorted(seg[:, 0]), [0.0, 20.0])  # the overlap's long axis
+    assert np.allclose(portal_between(across, street), seg)
+    m = CellMap()
+    m.add_cells([0, 1], [street, across], [[1], [0]], ["section", "section"])
+    m.update([10.0, 30.0])
+    route = predict_route(m, 0, [10.0, 30.0], [0.0, 1.0], 100.0, 20.0)
+    assert {s.cell: s.distance_m for s in route.steps}[1] == pytest.approx(20.0)
+    # cells sharing an edge, or only a corner, keep their portal
+    a = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]])
+    assert portal_between(a, a + [2.0, 0.5]).tolist() == [[2.0, 0.5], [2.0, 1.0]]
+    assert portal_between(a, a + [2.0, 1.0]).tolist() == [[2.0, 1.0], [2.0, 1.0]]
 
 
 # --------------------------------------------------------------------- aligned sections
@@ -265,7 +318,8 @@ def test_street_angle_finds_a_turned_grid(tmp_path: Path) -> None:
 def test_aligned_sections_are_turned_rectangles_that_cover_the_field(tmp_path: Path) -> None:
     src = _turned_city(tmp_path / "turned.geojson", 30.0)
     db = tmp_path / "aligned.db"
-    st = BakeSettings(cells="sections", resolution=16, field_spacing=10.0, section_shape="aligned")
+    st = BakeSettings(cells="sections", resolution=16, field_spacing=10.0, redundancy=8, section_shape="aligned",
+                      section_cover="free")
     summary = bake(src, db, settings=st)
     assert summary["cells"] == summary["sections"] > 1
     scene = read_source(src)
@@ -300,3 +354,25 @@ def test_a_bad_section_shape_gets_one_line(city: Path, tmp_path: Path, capsys: p
     assert main(["bake", str(city), "-o", str(tmp_path / "x.db"), "--cells", "sections", "--section-shape", "round"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--section-shape" in err[0]
+
+
+def test_the_bench_table_and_plot_show_every_kind_cover_and_where_the_bytes_go(tmp_path: Path) -> None:
+    from walkstream.benchmarks.sections import format_sections_table, plot_sections_trade
+
+    def walk(b: float, o: float, c: float, i: float) -> dict[str, float | None]:
+        return {"km": 0.8, "perfect_frame_ratio": 0.998, "first_perfect_s": 1.5, "bytes_per_km": b,
+                "cells_per_km": 20.0, "object_bytes_per_km": o, "cell_bytes_per_km": c, "index_bytes_per_km": i,
+                "overfetch_ratio": 0.25}
+
+    def row(kind: str, cover: str | None, r: int | None) -> dict[str, object]:
+        return {"cells_kind": kind, "cover": cover, "redundancy": r, "min_size": None if r is None else 64.0,
+                "cells": 100, "pvs_mean": 80.0, "section_redundancy_mean": None if r is None else 30.0,
+                "bake_seconds": 10.0, "walks": {"SE": walk(60_000.0 + (r or 0), 40_000.0, 12_000.0, 8_000.0)}}
+
+    rows = [row("street", None, None), row("grid", None, None), row("sections", "walkable", 64), row("sections", "free", 64)]
+    lines = format_sections_table(rows).splitlines()
+    assert "records" in lines[0] and "index" in lines[0] and "cover" in lines[0]
+    assert [ln.split()[:2] for ln in lines[2:]] == [["street", "-"], ["grid", "-"], ["sections", "walkable"], ["sections", "free"]]
+    assert "40,000" in lines[4] and "12,000" in lines[4] and "60,064" in lines[4]
+    plot_sections_trade(rows, tmp_path / "trade.png")
+    assert (tmp_path / "trade.png").stat().st_size > 10_000

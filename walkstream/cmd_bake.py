@@ -4,6 +4,7 @@
 
     walkstream bake SOURCE.geojson|.osm|.osm.pbf -o scene.db [--cells street|grid|sections] [--cell-size M]
                    [--field-spacing M] [--redundancy R] [--min-size M2] [--section-shape axis|aligned]
+                   [--section-cover walkable|free]
                    [--sampling region|boundary|corners|field]
                    [--network walk|drive] [--bbox X0,Y0,X1,Y1 [--bbox-crs local|lonlat]] ...
     walkstream bake --default-city -o scene.db
@@ -104,7 +105,7 @@ def cmd_bake(args: argparse.Namespace) -> int:
         centre=args.centre,
         threshold=args.threshold,
         **{k: v for k, v in (("resolution", args.resolution), ("occluder_lod", args.occluder_lod)) if v is not None},
-        **{k: v for k, v in (("field_spacing", args.field_spacing), ("redundancy", args.redundancy), ("min_size", args.min_size), ("section_shape", args.section_shape)) if v is not None},
+        **{k: v for k, v in (("field_spacing", args.field_spacing), ("redundancy", args.redundancy), ("min_size", args.min_size), ("section_shape", args.section_shape), ("section_cover", args.section_cover)) if v is not None},
         **{k: v for k, v in (("sampling", args.sampling), ("spacing", args.spacing), ("height_step", args.height_step), ("edge_pass", args.edge_pass), ("split", args.split)) if v is not None},
     )
     st.check()  # a bad setting fails before any progress bar
@@ -209,9 +210,10 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--cells", choices=("auto", "street", "grid", "sections"), default="auto", help="street cells (needs streets), a grid, "
                     "or sections grown over a dense visibility field (Brosnan et al.; default auto: street cells, else a grid)")
     bk.add_argument("--field-spacing", type=float, default=None, help="sections and --sampling field: metres between the points of the visibility field (default 4)")
-    bk.add_argument("--redundancy", type=int, default=None, help="sections: objects a section may hold beyond what its seed point sees (default 8)")
+    bk.add_argument("--redundancy", type=int, default=None, help="sections: objects a section may hold beyond what its seed point sees (default 96)")
     bk.add_argument("--min-size", type=float, default=None, help="sections: smallest section the first pass accepts, square metres (default 64)")
     bk.add_argument("--section-shape", default=None, help="sections: axis (rectangles along the x and y axes, as the paper's; default) or aligned (turned to the scene's prevailing street direction)")
+    bk.add_argument("--section-cover", default=None, help="sections: walkable (over the field points of the walkable cells: the street cells, or the grid cells where the scene has no streets; default) or free (over all the free space, as the paper's)")
     bk.add_argument("--cell-size", type=float, default=40.0, help="grid cell side / longest street cell, metres (default 40)")
     bk.add_argument("--view-distance", type=float, default=800.0, help="far plane, metres (default 800)")
     bk.add_argument("--bbox", help="MINX,MINY,MAXX,MAXY: bake only this part; objects crossing it are clipped to it")

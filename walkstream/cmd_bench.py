@@ -14,7 +14,7 @@
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
     walkstream bench fill [scene.db] [--views 6] [--size 1280x960] [--repeat 6] [--json]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--kinds street,grid,sections] [--reuse] [--out DIR] [--truth-every N]
-    walkstream bench sections [SRC] [--redundancy R ...] [--min-size M ...] [--field-spacing 4] [--walks SE,drive]
+    walkstream bench sections [SRC] [--redundancy R ...] [--min-size M ...] [--section-cover walkable free] [--field-spacing 4] [--walks SE,drive]
     walkstream bench clusters DB [DB ...] [--min-objects 12] [--max-cells 64] [--plot clusters.png] [--json]
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
     walkstream bench portals [--presets paper paper10] [--frames N] [--truth N] [--no-gl] [--out DIR] [--json]
@@ -525,11 +525,12 @@ def cmd_bench_sections(args: argparse.Namespace) -> int:
     rows = run_sections_bench(
         replay_with_options, source=source, out=out, redundancies=args.redundancy, min_sizes=args.min_size,
         field_spacing=args.field_spacing, walks=[w.strip() for w in args.walks.split(",") if w.strip()],
-        reuse=args.reuse, workers=args.workers,
+        covers=args.section_cover, reuse=args.reuse, workers=args.workers,
     )
     print(format_sections_table(rows))
     print("(56 kbit/s, 200 ms, simulated clock, desktop2003; redund. = objects a section holds that the "
-          "field point where the walker stands does not see, mean)")
+          "field point where the walker stands does not see, mean; objects, records, index = bytes/km of the "
+          "objects, the cell records and the index tiles; overf. = share of the bytes never used in a cell entered)")
     plot = out / "sections_trade.png"
     plot_sections_trade(rows, plot)
     print(f"plot: {plot}")
@@ -754,10 +755,11 @@ def add_bench_parser(sub: Any) -> None:
 
     b = besub.add_parser("sections", help="the section-size trade: street cells against sections for every --redundancy and --min-size (bake, replay)")
     b.add_argument("source", nargs="?", help="city source (default: the default 700 m city, generated in --out)")
-    b.add_argument("--redundancy", type=int, nargs="+", default=[8, 16, 32], help="redundancies R to bake (default 8 16 32)")
+    b.add_argument("--redundancy", type=int, nargs="+", default=[32, 64, 96], help="redundancies R to bake (default 32 64 96)")
     b.add_argument("--min-size", type=float, nargs="+", default=[64.0], help="minimum sizes M to bake, square metres (default 64)")
     b.add_argument("--field-spacing", type=float, default=4.0, help="metres between field points (default 4)")
     b.add_argument("--walks", default="SE,drive", help="comma-separated walks to replay (default SE,drive)")
+    b.add_argument("--section-cover", nargs="+", default=["walkable"], help="covers to bake, of walkable and free (default walkable)")
     b.add_argument("--reuse", action="store_true", help="keep databases already baked in --out")
     b.add_argument("--workers", type=int, default=1, help="local processes rendering the field (default 1)")
     b.add_argument("--out", default="out/bench-sections", help="folder for the databases, reports and the plot")

@@ -34,7 +34,8 @@ def portal_between(a: F64, b: F64, tol: float = 0.05) -> F64:
     The longest overlap of an edge of ``a`` with an edge of ``b`` lying on the same
     line (within ``tol`` metres); outlines that only touch (or, after centimetre
     rounding, miss each other by a hair) give the segment between their two
-    closest vertices.
+    closest vertices; outlines that overlap (sections may) give the long axis of their
+    overlap through its centre.
 
     >>> a = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]])
     >>> b = np.array([[2.0, 0.5], [3.0, 0.5], [3.0, 2.0], [2.0, 2.0]])
@@ -67,10 +68,48 @@ def portal_between(a: F64, b: F64, tol: float = 0.05) -> F64:
                 seg = np.stack([a0[i] + lo * u[i], a0[i] + hi * u[i]])
     if seg is not None:
         return seg
+    over = _overlap(a, b)
+    if over is not None:
+        # overlapping cells (sections overlap where they add field points): the
+        # overlap's long axis through its centre, where the way from one into the
+        # other runs (two closest vertices could be a far corner of a long overlap)
+        c = over.mean(axis=0)
+        rel = over - c
+        w, v = np.linalg.eigh(rel.T @ rel)
+        u = v[:, int(np.argmax(w))]
+        t = rel @ u
+        return np.stack([c + float(t.min()) * u, c + float(t.max()) * u])
     dd = np.hypot(*(a[:, None, :] - b[None, :, :]).transpose(2, 0, 1))
     i, j = np.unravel_index(np.argmin(dd), dd.shape)
     p = (a[i] + b[j]) / 2.0
     return np.stack([p, p])
+
+
+def _overlap(a: F64, b: F64, min_area: float = 1e-4) -> F64 | None:
+    """The vertices of the overlap of two convex outlines (``a`` clipped by each edge of
+    ``b``), or None when they overlap by less than ``min_area`` square metres."""
+    sb = 1.0 if _area2(b) >= 0 else -1.0
+    poly = a
+    for p0, p1 in zip(b, np.roll(b, -1, axis=0), strict=True):
+        if len(poly) == 0:
+            return None
+        e = p1 - p0
+        side = sb * (e[0] * (poly[:, 1] - p0[1]) - e[1] * (poly[:, 0] - p0[0]))  # >= 0: inside
+        out: list[F64] = []
+        for k in range(len(poly)):
+            q0, q1, s0, s1 = poly[k], poly[(k + 1) % len(poly)], side[k], side[(k + 1) % len(poly)]
+            if s0 >= 0:
+                out.append(q0)
+            if (s0 >= 0) != (s1 >= 0):
+                out.append(q0 + (q1 - q0) * (s0 / (s0 - s1)))
+        poly = np.array(out).reshape(-1, 2)
+    if len(poly) < 3 or abs(_area2(poly)) / 2.0 < min_area:
+        return None
+    return poly
+
+
+def _area2(p: F64) -> float:
+    return float(np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1]))
 
 
 class CellMap:

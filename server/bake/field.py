@@ -48,6 +48,7 @@ __all__ = [
     "field_folder",
     "field_lattice",
     "lattice_from",
+    "points_meeting",
     "rotate_xy",
 ]
 
@@ -107,6 +108,11 @@ class FieldLattice:
         r, c = np.divmod(self.index, self.shape[1])
         out: F64 = np.stack([self.origin[0] + c * self.spacing, self.origin[1] + r * self.spacing], axis=1)
         return self.to_scene(out)
+
+    def subset(self, keep: NDArray[np.bool_]) -> FieldLattice:
+        """The same lattice with only the field points ``keep`` (``(n,)`` bool) says."""
+        k = np.asarray(keep, bool)
+        return FieldLattice(self.origin, self.spacing, self.shape, self.index[k], self.eyes[k], self.heights, self.angle)
 
     def to_scene(self, xy: F64) -> F64:
         """``(n, 2)`` points of the lattice's frame in the scene's (rotated by :attr:`angle`)."""
@@ -293,6 +299,17 @@ def _meets(region: shapely.Geometry, x: F64, y: F64, s: float) -> NDArray[np.boo
     shapely.prepare(region)
     out: NDArray[np.bool_] = shapely.intersects(region, squares)
     return out
+
+
+def points_meeting(lattice: FieldLattice, region: shapely.Geometry) -> NDArray[np.bool_]:
+    """``(n,)`` whether each field point's square meets ``region`` (scene-local) in more
+    than an edge or a corner (a turned lattice's squares are turned with it)."""
+    r, c = np.divmod(lattice.index, lattice.shape[1])
+    x = lattice.origin[0] + c * lattice.spacing
+    y = lattice.origin[1] + r * lattice.spacing
+    if lattice.angle:
+        region = shapely.transform(region, lambda xy: rotate_xy(xy, -lattice.angle))
+    return _meets(region, x.astype(np.float64), y.astype(np.float64), lattice.spacing)
 
 
 def built_space(footprints: Sequence[shapely.Geometry], margin: float) -> shapely.Geometry | None:

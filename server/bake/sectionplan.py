@@ -11,16 +11,18 @@ the section holding it.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import shapely
 
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.digest import file_digest
-from walkstream.server.bake.field import FIELD_HEIGHTS, PointSets, field_lattice
+from walkstream.server.bake.field import FIELD_HEIGHTS, PointSets, field_lattice, points_meeting
 from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.objectrows import object_rows
 from walkstream.server.bake.plan import BakePlan, FieldCells, Say, Walk, settings_key
@@ -69,6 +71,15 @@ def section_plan(
     lattice = field_lattice(scene, st.field_spacing, EYE_HEIGHTS, margin=st.margin, bbox=bbox, angle=angle)
     if len(lattice) == 0:
         raise InputError(f"{src}: no free field point (no free space?)")
+    free = len(lattice)
+    if st.section_cover == "walkable":
+        # the field only where the walkable cells are: the free space inside the blocks
+        # (courtyards, backyards), where no walk goes, is neither rendered nor covered,
+        # and the sections' adjacency (what the prefetch follows) is the network's
+        lattice = lattice.subset(points_meeting(lattice, shapely.union_all([shapely.Polygon(c.polygon) for c in base])))
+        if len(lattice) == 0:
+            raise InputError(f"{src}: no field point in the walkable cells (try --section-cover free)")
+
     digest = file_digest(src)
     settings_dict = st.record() | {"source": str(src), "source_digest": digest}
     key = settings_key({
@@ -76,10 +87,11 @@ def section_plan(
         "occluder_lod": st.occluder_lod, "view_distance": st.view_distance, "edge_pass": st.edge_pass,
         "margin": st.margin, "bbox": st.bbox, "bbox_crs": st.bbox_crs, "network": st.network,
         "heights": EYE_HEIGHTS,
-    } | ({"angle": round(angle, 9)} if angle else {}))
+    } | ({"angle": round(angle, 9)} if angle else {}) | ({"cover": _digest(lattice.index)} if len(lattice) < free else {}))
     features = ["buildings"] + (["streets"] if scene.streets else []) + ["section_cells"]
     say(f"{src.name}: {len(scene.buildings)} buildings, {len(scene.streets)} street pieces, "
         f"a field of {len(lattice)} points every {st.field_spacing:g} m"
+        + ("" if len(lattice) == free else f" in its {len(base)} walkable cells (of {free} free)")
         + (f", turned {math.degrees(angle):.1f} degrees to the streets" if angle else ""))
     grammar = default_grammar()
     city = scene
@@ -128,6 +140,11 @@ def section_plan(
         write_tables=write_tables, walks=walks, summary=summary,
         field=FieldCells(scene, st, lattice, key, grow),
     )
+
+
+def _digest(index: I64) -> str:
+    # the field points a walkable cover keeps name its field (the blocks hold them in turn)
+    return hashlib.sha1(np.ascontiguousarray(index, np.int64).tobytes()).hexdigest()[:16]
 
 
 def _box(outline: F64) -> tuple[float, ...]:

@@ -23,6 +23,7 @@ __all__ = [
     "DEFAULT_MIN_SIZE",
     "SECTION_FIELDS",
     "SECTION_SHAPES",
+    "SECTION_COVERS",
     "BakeSettings",
 ]
 
@@ -38,13 +39,18 @@ DEFAULT_SAMPLING = "region"
 #: sections (Brosnan et al. sample every 2 m; see docs/benchmarks.md for the cost of
 #: the field on the demo city at 2 and 4 m)
 DEFAULT_FIELD_SPACING = 4.0
-DEFAULT_REDUNDANCY = 8
+#: R 96: on the demo city the smallest R whose sections move fewer bytes per km than
+#: street and grid cells on both walks at 56 kbit/s (docs/benchmarks.md)
+DEFAULT_REDUNDANCY = 96
 DEFAULT_MIN_SIZE = 64.0
 
 #: the settings only a bake of sections stores (:meth:`BakeSettings.record`;
 #: ``section_shape`` only when not the default)
-SECTION_FIELDS = ("field_spacing", "redundancy", "min_size", "section_shape")
+SECTION_FIELDS = ("field_spacing", "redundancy", "min_size", "section_shape", "section_cover")
 SECTION_SHAPES = ("axis", "aligned")
+#: what sections cover: the walkable cells' field points (street cells, grid cells where
+#: a scene has no streets) or every free field point (the paper's)
+SECTION_COVERS = ("walkable", "free")
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,6 +99,10 @@ class BakeSettings:
     section_shape: str = "axis"
     """``cells="sections"``: ``"axis"`` (rectangles along the x and y axes, as the paper's)
     or ``"aligned"`` (rectangles turned to the scene's prevailing street direction)."""
+    section_cover: str = "walkable"
+    """``cells="sections"``: ``"walkable"`` (sections over the field points whose square
+    meets the scene's walkable cells: its street cells, or its grid cells where it has
+    no streets) or ``"free"`` (over every free field point, as the paper's)."""
 
     def record(self) -> dict[str, Any]:
         """The settings as stored in a database's header (what identifies a bake).
@@ -120,6 +130,8 @@ class BakeSettings:
             raise InputError(f"--redundancy: expected >= 0 objects, got {self.redundancy}")
         if self.section_shape not in SECTION_SHAPES:
             raise InputError(f"--section-shape: expected axis or aligned, got {self.section_shape!r}")
+        if self.section_cover not in SECTION_COVERS:
+            raise InputError(f"--section-cover: expected walkable or free, got {self.section_cover!r}")
         if not (np.isfinite(self.min_size) and self.min_size >= 0):
             raise InputError(f"--min-size: expected >= 0 square metres, got {self.min_size}")
         if self.sampling not in ("boundary", "corners", "region", "field"):
