@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import httpx
 import numpy as np
@@ -38,11 +38,42 @@ def scene(crossing_scene: tuple[Path, dict[str, Any], Path]) -> Path:
     return crossing_scene[0]
 
 
+class _Walk(NamedTuple):
+    result: ReplayResult
+    #: the requests that reached the server
+    requests: int
+    #: each dispatch of a request scheduler: (the scheduler's id, its lanes, requests in flight)
+    dispatches: list[tuple[int, int, int]]
+
+
 @pytest.fixture(scope="module")
-def walked(scene: Path) -> ReplayResult:
-    """The walk ``enter`` at 56 kbit/s, 200 ms, every 25th frame compared with the truth."""
+def walk(scene: Path) -> _Walk:
+    """The walk ``enter`` at 56 kbit/s, 200 ms, every 25th frame compared with the truth,
+    through a server side that counts the requests, every scheduler dispatch recorded.
+    One replay for every test that reads a walk of the crossing (each of its own would cost
+    as much as this one)."""
+    from walkstream.client.stream.scheduler import RequestScheduler
+
+    seen: list[tuple[int, int, int]] = []
+    real = RequestScheduler.dispatch
+
+    def spy(self: RequestScheduler) -> int:
+        n = real(self)
+        seen.append((id(self), len(self.lanes), self.in_flight()))
+        return n
+
+    server = _Counting(httpx.ASGITransport(app=create_app([scene])))
     cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", truth_every=25, kind="crossing")
-    return run_replay(httpx.ASGITransport(app=create_app([scene])), "http://t", cfg)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(RequestScheduler, "dispatch", spy)
+        result = run_replay(server, "http://t", cfg)
+    return _Walk(result, server.requests, seen)
+
+
+@pytest.fixture(scope="module")
+def walked(walk: _Walk) -> ReplayResult:
+    """The replay of :func:`walk`."""
+    return walk.result
 
 
 def test_the_replay_walks_the_crossing_end_to_end(scene: Path, walked: ReplayResult) -> None:
@@ -86,19 +117,16 @@ def test_the_truth_finds_no_culled_pixel(walked: ReplayResult) -> None:
     assert truth["culled_pixels"] == 0 and truth["culled_frames"] == 0
 
 
-def test_one_link_one_cache_no_collision(scene: Path, walked: ReplayResult) -> None:
-    s = walked.summary
+def test_one_link_one_cache_no_collision(scene: Path, walk: _Walk) -> None:
+    s = walk.result.summary
     entries: dict[str, Any] = s["cache_entries"]
     # room contents and city objects side by side in the one cache, under their own kinds
     assert entries["cellmesh"] == s["cells_fetched"] > 0 and entries["params"] > 0 and entries["mesh"] == 0
     with SceneReader.open(scene) as r:
         shared_ids = set(r.rooms()) & set(r.object_ids().tolist())
     assert shared_ids  # ids overlap: the kinds keep them apart
-    server = _Counting(httpx.ASGITransport(app=create_app([scene])))
-    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", kind="crossing", duration_s=15.0)
-    got = run_replay(server, "http://t", cfg).summary
-    assert got["requests"] == server.requests  # every request went down the one link, once
-    assert got["contents_requests"] + got["object_requests"] + got["cell_requests"] < got["requests"]
+    assert s["requests"] == walk.requests  # every request went down the one link, once
+    assert s["contents_requests"] + s["object_requests"] + s["cell_requests"] < s["requests"]
 
 
 def test_each_streamer_pins_its_own_kinds() -> None:
@@ -265,23 +293,11 @@ def test_the_room_streamer_places_contents_in_the_city(scene: Path) -> None:
     assert outside > 0
 
 
-def test_one_scheduler_owns_the_link_for_both_streamers(scene: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_one_scheduler_owns_the_link_for_both_streamers(walk: _Walk) -> None:
     """The city's and the rooms' requests go out through one scheduler, whose slots bound
     them together (each streamer alone would allow its own limit)."""
-    from walkstream.client.stream.scheduler import RequestScheduler
-
-    seen: list[tuple[int, int, int]] = []
-    real = RequestScheduler.dispatch
-
-    def spy(self: RequestScheduler) -> int:
-        n = real(self)
-        seen.append((id(self), len(self.lanes), self.in_flight()))
-        return n
-
-    monkeypatch.setattr(RequestScheduler, "dispatch", spy)
-    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", kind="crossing", duration_s=12.0)
-    got = run_replay(httpx.ASGITransport(app=create_app([scene])), "http://t", cfg).summary
+    got = walk.result.summary
     assert got["contents_requests"] > 0 and got["object_requests"] > 0
-    shared = [x for x in seen if x[1] == 2]
+    shared = [x for x in walk.dispatches if x[1] == 2]
     assert shared and len({x[0] for x in shared}) == 1  # one scheduler with both lanes
     assert max(x[2] for x in shared) <= 4  # StreamerConfig.max_requests: the link's slots
