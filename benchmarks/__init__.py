@@ -30,6 +30,12 @@ Helpers of those, not commands of their own:
 - :mod:`.portalwalk`: the first portal walk, the reference that :mod:`.portals` times
   and tests/test_portalwalk.py checks the faster walk against.
 
+A script, not a command (it times product code against itself, no scene needed):
+
+- :mod:`.ringrepair`: footprint cleaning of a generated city, the whole-array GEOS checks
+  against one polygon at a time, and ``city_summary`` (``python -m
+  walkstream.benchmarks.ringrepair [SIZE ...]``).
+
 A new benchmark is a module here with a ``run_...`` function and a ``format_...``
 table, and a subcommand in :mod:`walkstream.cmd_bench`.  The ``run_...`` functions are
 imported lazily.
@@ -54,6 +60,8 @@ _EXPORTS = {
     "run_clusters_bench": "walkstream.benchmarks.clusters",
     "format_clusters_table": "walkstream.benchmarks.clusters",
     "plot_clusters": "walkstream.benchmarks.clusters",
+    "run_ring_bench": "walkstream.benchmarks.ringrepair",
+    "format_ring_table": "walkstream.benchmarks.ringrepair",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -24,7 +24,8 @@ def signed_area(ring: NDArray[np.float64]) -> float:
     -2.0
     """
     x, y = (np.asarray(ring, dtype=np.float64) - ring[0]).T
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+    nxt = np.arange(1, len(x) + 1) % len(x)  # np.roll(-1) by index: cheaper on the small rings this sees by the thousand
+    return 0.5 * float(np.dot(x, y[nxt]) - np.dot(x[nxt], y))
 
 
 def orient_rings(rings: Sequence[NDArray[np.float64]]) -> list[NDArray[np.float64]]:

@@ -36,7 +36,8 @@ def _oriented(
     out_r, out_h = [], []
     for k, (r, h) in enumerate(zip(rings, heights, strict=True)):
         x, y = r[:, 0] - r[0, 0], r[:, 1] - r[0, 1]
-        area2 = float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+        nxt = np.arange(1, len(x) + 1) % len(x)  # np.roll(-1) by index (cheaper on small rings)
+        area2 = float(np.dot(x, y[nxt]) - np.dot(x[nxt], y))
         if area2 != 0 and (area2 > 0) != (k == 0):
             # reversing a ring turns edge i (v_i -> v_i+1) into edge n-2-i
             r = readonly(r[::-1])

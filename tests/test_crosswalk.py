@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import httpx
 import numpy as np
@@ -43,6 +43,37 @@ def walked(scene: Path) -> ReplayResult:
     """The walk ``enter`` at 56 kbit/s, 200 ms, every 25th frame compared with the truth."""
     cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", truth_every=25, kind="crossing")
     return run_replay(httpx.ASGITransport(app=create_app([scene])), "http://t", cfg)
+
+
+class _Counted(NamedTuple):
+    summary: dict[str, Any]
+    #: the requests that reached the server
+    requests: int
+    #: each dispatch of a request scheduler: (the scheduler's id, its lanes, requests in flight)
+    dispatches: list[tuple[int, int, int]]
+
+
+@pytest.fixture(scope="module")
+def counted(scene: Path) -> _Counted:
+    """The first 15 s of ``enter`` without the truth (whose own requests for the full scene
+    reach the server too), through a server side that counts the requests, every
+    scheduler dispatch recorded: one replay for the two tests that count."""
+    from walkstream.client.stream.scheduler import RequestScheduler
+
+    seen: list[tuple[int, int, int]] = []
+    real = RequestScheduler.dispatch
+
+    def spy(self: RequestScheduler) -> int:
+        n = real(self)
+        seen.append((id(self), len(self.lanes), self.in_flight()))
+        return n
+
+    server = _Counting(httpx.ASGITransport(app=create_app([scene])))
+    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", kind="crossing", duration_s=15.0)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(RequestScheduler, "dispatch", spy)
+        got = run_replay(server, "http://t", cfg).summary
+    return _Counted(got, server.requests, seen)
 
 
 def test_the_replay_walks_the_crossing_end_to_end(scene: Path, walked: ReplayResult) -> None:
@@ -86,7 +117,7 @@ def test_the_truth_finds_no_culled_pixel(walked: ReplayResult) -> None:
     assert truth["culled_pixels"] == 0 and truth["culled_frames"] == 0
 
 
-def test_one_link_one_cache_no_collision(scene: Path, walked: ReplayResult) -> None:
+def test_one_link_one_cache_no_collision(scene: Path, walked: ReplayResult, counted: _Counted) -> None:
     s = walked.summary
     entries: dict[str, Any] = s["cache_entries"]
     # room contents and city objects side by side in the one cache, under their own kinds
@@ -94,10 +125,8 @@ def test_one_link_one_cache_no_collision(scene: Path, walked: ReplayResult) -> N
     with SceneReader.open(scene) as r:
         shared_ids = set(r.rooms()) & set(r.object_ids().tolist())
     assert shared_ids  # ids overlap: the kinds keep them apart
-    server = _Counting(httpx.ASGITransport(app=create_app([scene])))
-    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", kind="crossing", duration_s=15.0)
-    got = run_replay(server, "http://t", cfg).summary
-    assert got["requests"] == server.requests  # every request went down the one link, once
+    got = counted.summary
+    assert got["requests"] == counted.requests  # every request went down the one link, once
     assert got["contents_requests"] + got["object_requests"] + got["cell_requests"] < got["requests"]
 
 
@@ -265,23 +294,11 @@ def test_the_room_streamer_places_contents_in_the_city(scene: Path) -> None:
     assert outside > 0
 
 
-def test_one_scheduler_owns_the_link_for_both_streamers(scene: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_one_scheduler_owns_the_link_for_both_streamers(counted: _Counted) -> None:
     """The city's and the rooms' requests go out through one scheduler, whose slots bound
     them together (each streamer alone would allow its own limit)."""
-    from walkstream.client.stream.scheduler import RequestScheduler
-
-    seen: list[tuple[int, int, int]] = []
-    real = RequestScheduler.dispatch
-
-    def spy(self: RequestScheduler) -> int:
-        n = real(self)
-        seen.append((id(self), len(self.lanes), self.in_flight()))
-        return n
-
-    monkeypatch.setattr(RequestScheduler, "dispatch", spy)
-    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", kind="crossing", duration_s=12.0)
-    got = run_replay(httpx.ASGITransport(app=create_app([scene])), "http://t", cfg).summary
+    got = counted.summary
     assert got["contents_requests"] > 0 and got["object_requests"] > 0
-    shared = [x for x in seen if x[1] == 2]
+    shared = [x for x in counted.dispatches if x[1] == 2]
     assert shared and len({x[0] for x in shared}) == 1  # one scheduler with both lanes
     assert max(x[2] for x in shared) <= 4  # StreamerConfig.max_requests: the link's slots

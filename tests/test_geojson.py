@@ -484,3 +484,40 @@ def test_vienna_blocks() -> None:
     extent = np.ptp(allpts, axis=0)
     assert 5_500 < extent[0] < 7_500 and 7_500 < extent[1] < 10_000
     assert np.abs(allpts.mean(axis=0)).max() < 2_000
+
+
+def test_cleaning_many_polygons_at_once_is_cleaning_each_alone() -> None:
+    """clean_and_repair_all (whole-array GEOS checks) gives each polygon the parts and the
+    issues, in the same order, that clean_and_repair gives it alone: a valid square, a
+    bow-tie exterior (split by make_valid), a degenerate hole, a sliver skipped, and a
+    multipolygon's two parts (one a bow-tie) whose issues share one feature index."""
+    import copy
+
+    from walkstream.server.sources.features import IssueLog, PolyFeature
+    from walkstream.server.sources.rings import clean_and_repair, clean_and_repair_all
+
+    def poly(index: int, uid: str, *rings: list[list[float]], part: bool = False) -> PolyFeature:
+        arrays = [np.asarray(r, np.float64) for r in rings]
+        return PolyFeature(index, uid.split("#")[0], uid, part, None, {}, arrays, [a.copy() for a in arrays])
+
+    square = [[0, 0], [10, 0], [10, 10], [0, 10], [0, 0]]
+    bowtie = [[20, 0], [30, 10], [30, 0], [20, 10]]
+    polys = [
+        poly(0, "a", square),
+        poly(1, "b", bowtie),
+        poly(2, "c", square, [[2, 2], [2, 2.001], [2.001, 2]]),  # hole of no area
+        poly(3, "d", [[0, 0], [10, 0], [10, 0.0001], [0, 0.0001]]),  # 0.001 m²: skipped
+        poly(4, "e#0", bowtie, part=True),
+        poly(4, "e#1", [[0, 0], [10, 0], [10, 10], [10, 10], [0, 10]], part=True),
+    ]
+    alone_log, all_log = IssueLog(), IssueLog()
+    alone = [clean_and_repair(p, alone_log) for p in copy.deepcopy(polys)]
+    together = clean_and_repair_all(copy.deepcopy(polys), all_log)
+
+    def parts(found: list[list[Any]]) -> list[list[tuple[str, list[bytes]]]]:
+        return [[(c.source_id, [r.tobytes() for r in c.rings]) for c in p] for p in found]
+
+    assert parts(together) == parts(alone)
+    assert [len(p) for p in together] == [1, 2, 1, 0, 2, 1]
+    assert all_log.items == alone_log.items  # the same issues in the same order
+    assert [i.feature_id for i in all_log.sorted()] == ["b", "c", "d", "e#0"]

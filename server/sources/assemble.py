@@ -32,7 +32,7 @@ from walkstream.server.sources.osmtags import (
     street_width,
 )
 from walkstream.server.sources.partywalls import find_party_walls
-from walkstream.server.sources.rings import bound_vertices, clean_and_repair
+from walkstream.server.sources.rings import bound_vertices, clean_and_repair_all
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import InputError, SourceError
@@ -87,17 +87,16 @@ def assemble_scene(
     pieces: list[CleanPart] = []
     areas: list[CleanPart] = []
     typed: list[CleanPart] = []
-    for poly in polys:
-        if poly.local is None:
-            continue
+    projected = [poly for poly in polys if poly.local is not None]
+    for poly, parts in zip(projected, clean_and_repair_all(projected, log), strict=True):
         if poly.kind is not None and poly.kind.startswith(AREA_PREFIX):
-            typed.extend(clean_and_repair(poly, log))
+            typed.extend(parts)
         elif poly.kind == "square":
-            areas.extend(clean_and_repair(poly, log))
+            areas.extend(parts)
         elif poly.kind is None:
-            buildings_raw.extend(clean_and_repair(poly, log))
+            buildings_raw.extend(parts)
         else:
-            pieces.extend(clean_and_repair(poly, log))
+            pieces.extend(parts)
     buildings = _make_buildings(buildings_raw, default_floor_height, tol, log)
     out_notes = list(notes or [])
     streets, passages = _make_streets(pieces, areas, lines, len(buildings), network, log, out_notes)

@@ -671,8 +671,10 @@ def _simplify(ring: F64, sin_tol: float = 0.01) -> F64:
     """Drop (nearly) collinear vertices, such as the shared vertices added on walls."""
     r = ring
     while len(r) > 3:
-        a = np.roll(r, 1, axis=0) - r
-        b = np.roll(r, -1, axis=0) - r
+        # neighbours by index (-1 wraps): np.roll's bookkeeping was most of this on small rings
+        k = np.arange(len(r))
+        a = r[k - 1] - r
+        b = r[(k + 1) % len(r)] - r
         s = np.abs(_cross(a, b)) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
         straight = (s < sin_tol) & (np.sum(a * b, axis=1) < 0)
         if not straight.any():
@@ -686,8 +688,9 @@ def _shape_kind(rings: list[F64]) -> str:
     if len(rings) > 1:
         return "courtyard"
     r = _simplify(rings[0])
-    a = np.roll(r, 1, axis=0) - r
-    b = np.roll(r, -1, axis=0) - r
+    k = np.arange(len(r))
+    a = r[k - 1] - r
+    b = r[(k + 1) % len(r)] - r
     na = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1)
     cos = np.sum(a * b, axis=1) / na
     turn = _cross(b, a)  # > 0 at a convex vertex of a CCW ring
