@@ -21,7 +21,7 @@ from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.streamer import Streamer
 from walkstream.shared.codec.cellmesh import CellMesh
-from walkstream.shared.errors import ApiError, StreamCut
+from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomview import RoomView
 from walkstream.shared.roomwire import Topology
@@ -140,6 +140,8 @@ async def interior_start(
     tasks: list[asyncio.Task[Any]],
     view: RoomView | None = None,
     manifest_failed: Callable[[BaseException], None] | None = None,
+    path_head_s: float | None = None,
+    path_arrived: Callable[[RecordedPath], None] | None = None,
 ) -> tuple[tuple[RecordedPath, int] | None, Topology | None, StartContents | None]:
     """The interior start bundle of recorded path ``path``: ``((path, its bytes), topology,
     the first view's contents)``.
@@ -152,9 +154,39 @@ async def interior_start(
     starts the old way.  The manifest goes to ``manifest_arrived`` (and the disk
     cache) as it arrives; when the bundle ends without it, a task (added to ``tasks``)
     fetches it on its own.
+
+    With ``view``, ``path_head_s`` and ``path_arrived``, the bundle brings the path's
+    first ``path_head_s`` seconds first and the whole path after the contents: the
+    path returned may then be only the head, and ``path_arrived`` is called once with
+    the whole path -- at once when the server sent it first (one that does not split
+    it), as it arrives, or from a fetch of its own (a task added to ``tasks``) when the
+    bundle ends without it; with the head itself when that fetch fails too, so the
+    walk ends where the head does.
     """
     got: dict[str, Any] = {}
-    stream = api.start(path=path, view=view)
+    split = view is not None and path_head_s is not None and path_arrived is not None
+    stream = api.start(path=path, view=view, path_head_s=path_head_s if split else None)
+
+    def on_whole(p: RecordedPath) -> None:
+        if split and not got.get("whole"):
+            got["whole"] = True
+            assert path_arrived is not None
+            path_arrived(p)
+
+    def without_whole() -> None:
+        if split and not got.get("whole") and "path" in got:
+            got["whole"] = True  # one fetch at most
+            head_path = got["path"][0]
+
+            async def fetch() -> None:
+                assert path_arrived is not None
+                try:
+                    whole = await api.path(path)
+                except (ApiError, StreamCut, CodecError):
+                    whole = None
+                path_arrived(head_path if whole is None else whole[0])
+
+            tasks.append(asyncio.create_task(fetch()))
 
     def on_manifest(m: Manifest) -> None:
         got["manifest"] = m
@@ -170,6 +202,10 @@ async def interior_start(
         async for part, item in stream:
             if part == "manifest":
                 on_manifest(item[0])
+            elif part == "path":
+                on_whole(item[0])
+            elif part == "pathhead":
+                part = "path"  # walk the head while the whole path comes
             got[part] = item
             if part == "contents":
                 return  # the walk can start: the contents follow as it goes
@@ -184,6 +220,7 @@ async def interior_start(
     if "contents" not in got:
         await stream.aclose()
         without_manifest()
+        without_whole()
         return got["path"], got["topology"], None
 
     async def rest() -> AsyncIterator[tuple[int, CellMesh]]:
@@ -191,11 +228,15 @@ async def interior_start(
             async for part, item in stream:
                 if part == "room":
                     yield item
+                elif part == "path":
+                    on_whole(item[0])
                 elif part == "manifest":
                     on_manifest(item[0])
         except (ApiError, StreamCut):
             without_manifest()
+            without_whole()
             raise
         without_manifest()
+        without_whole()
 
     return got["path"], got["topology"], StartContents(list(got["contents"]), rest())
