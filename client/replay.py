@@ -54,7 +54,13 @@ from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.images import ImpostorImages
 from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 from walkstream.client.stream.streamer import Streamer, StreamerConfig
-from walkstream.client.stream.walkstart import bundle_start, interior_start, manifest_task
+from walkstream.client.stream.walkstart import (
+    PATH_LEAD_S,
+    bundle_start,
+    interior_start,
+    manifest_task,
+    whole_path_when_idle,
+)
 from walkstream.client.tasks import reap
 from walkstream.client.truth.recorder import TruthRecorder, TruthResult, interior_far_m
 from walkstream.client.walk.crossing import crossing_topology
@@ -321,6 +327,10 @@ async def replay(
             if headed:  # walking the path's head until the whole path is in
                 state.path, state.path_pending = whole.get("path", path), "path" not in whole
                 whole["state"] = state
+                if state.path_pending and rooms is not None:  # fetched when the link is idle
+                    due = clock.now() + path.duration - PATH_LEAD_S
+                    tasks.append(asyncio.create_task(whole_path_when_idle(
+                        api, clock, config.path, path, due, rooms.busy, path_arrived)))
             log, snapshots, spikes = await _walk_unless_manifest_fails(walk(state, phases, progress), manifest_fut)
             t_end = clock.now()
             # the streamers stopped (nothing more goes down the link) before the truth

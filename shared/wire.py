@@ -109,7 +109,7 @@ start bundle (``GET /v1/start``)."""
 
 START_PARTS: tuple[str, ...] = ("pathhead", "path", "topology", "contents", "cell", "index", "manifest", "objects")
 """What a start bundle may hold, in the order the service sends it (an interior's
-``pathhead``, sent when asked, comes first and its whole ``path`` after the contents)."""
+``pathhead``, when asked, in place of ``path``)."""
 
 _MAX_MANIFEST = 4 << 20
 #: the longest string a manifest may hold: the building grammar's text (the default

@@ -27,7 +27,10 @@ from walkstream.shared.roomview import RoomView
 from walkstream.shared.roomwire import Topology
 from walkstream.shared.wire import Manifest, decode_manifest
 
-__all__ = ["fetch_manifest", "manifest_task", "bundle_start", "StartContents", "interior_start"]
+__all__ = [
+    "fetch_manifest", "manifest_task", "bundle_start", "StartContents", "interior_start",
+    "PATH_LEAD_S", "whole_path_when_idle",
+]
 
 
 async def fetch_manifest(api: SceneClient, disk: DiskCache | None) -> Manifest:
@@ -155,38 +158,20 @@ async def interior_start(
     cache) as it arrives; when the bundle ends without it, a task (added to ``tasks``)
     fetches it on its own.
 
-    With ``view``, ``path_head_s`` and ``path_arrived``, the bundle brings the path's
-    first ``path_head_s`` seconds first and the whole path after the contents: the
-    path returned may then be only the head, and ``path_arrived`` is called once with
-    the whole path -- at once when the server sent it first (one that does not split
-    it), as it arrives, or from a fetch of its own (a task added to ``tasks``) when the
-    bundle ends without it; with the head itself when that fetch fails too, so the
-    walk ends where the head does.
+    With ``view``, ``path_head_s`` and ``path_arrived``, the bundle brings only the
+    path's first ``path_head_s`` seconds: the path returned is then that head, and the
+    caller fetches the whole path (:func:`whole_path_when_idle`).  A server that sends
+    the whole path all the same (one that does not know ``head``) has it go to
+    ``path_arrived`` at once.
     """
     got: dict[str, Any] = {}
     split = view is not None and path_head_s is not None and path_arrived is not None
     stream = api.start(path=path, view=view, path_head_s=path_head_s if split else None)
 
     def on_whole(p: RecordedPath) -> None:
-        if split and not got.get("whole"):
-            got["whole"] = True
+        if split:
             assert path_arrived is not None
             path_arrived(p)
-
-    def without_whole() -> None:
-        if split and not got.get("whole") and "path" in got:
-            got["whole"] = True  # one fetch at most
-            head_path = got["path"][0]
-
-            async def fetch() -> None:
-                assert path_arrived is not None
-                try:
-                    whole = await api.path(path)
-                except (ApiError, StreamCut, CodecError):
-                    whole = None
-                path_arrived(head_path if whole is None else whole[0])
-
-            tasks.append(asyncio.create_task(fetch()))
 
     def on_manifest(m: Manifest) -> None:
         got["manifest"] = m
@@ -220,7 +205,6 @@ async def interior_start(
     if "contents" not in got:
         await stream.aclose()
         without_manifest()
-        without_whole()
         return got["path"], got["topology"], None
 
     async def rest() -> AsyncIterator[tuple[int, CellMesh]]:
@@ -228,15 +212,45 @@ async def interior_start(
             async for part, item in stream:
                 if part == "room":
                     yield item
-                elif part == "path":
-                    on_whole(item[0])
                 elif part == "manifest":
                     on_manifest(item[0])
         except (ApiError, StreamCut):
             without_manifest()
-            without_whole()
             raise
         without_manifest()
-        without_whole()
 
     return got["path"], got["topology"], StartContents(list(got["contents"]), rest())
+
+
+PATH_LEAD_S = 4.0
+"""The whole path is fetched at the latest this many seconds before the walk reaches
+the end of the path's head (its transfer and a round trip at 56 kbit/s, twice over)."""
+PATH_POLL_S = 0.1
+"""Seconds between two looks at whether the link is idle."""
+
+
+async def whole_path_when_idle(
+    api: SceneClient,
+    clock: Clock,
+    name: str,
+    head: RecordedPath,
+    due: float,
+    busy: Callable[[], bool],
+    arrived: Callable[[RecordedPath], None],
+) -> None:
+    """Fetch recorded path ``name`` once the link is idle, or at clock time ``due``.
+
+    The walk runs on ``head`` (the start bundle's ``pathhead``) meanwhile; the whole
+    path is needed only when the walk reaches the head's end, so it waits while
+    ``busy()`` (contents on the link: the first view's, then what the walk comes to)
+    rather than delay them.  ``arrived`` gets the whole path, or ``head`` itself when
+    the fetch fails (the walk then ends where the head does).
+    """
+    while clock.now() < due and busy():
+        await clock.sleep(PATH_POLL_S)
+    try:
+        whole: RecordedPath = (await api.path(name))[0]
+    except (ApiError, StreamCut, CodecError):
+        whole = head
+    arrived(whole)
+

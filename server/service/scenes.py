@@ -592,9 +592,9 @@ class Scene:
         and from where the path leads in :data:`START_ROOM_LEAD_S` (up to
         :data:`START_ROOM_BYTES`; ``inflate``: each blob inflated, for a gzip-compressed
         answer), then the manifest.  With ``path_head_s`` as well (compact parts only),
-        the path's first ``path_head_s`` seconds come first as ``pathhead`` and the whole
-        path after the contents (the walk starts on the head; the whole path is most of
-        the bytes before the contents otherwise).
+        only the path's first ``path_head_s`` seconds come, as ``pathhead`` (the walk
+        starts on the head; the client fetches the whole path when its link is idle: on
+        a long tour it is a third of the bytes before the contents otherwise).
         """
         parts: list[StartPart] = []
         head = None
@@ -611,8 +611,6 @@ class Scene:
             if path is not None and view is not None:
                 cells = self.interior.first_view(self._room_lead(path), view, START_ROOM_BYTES)
                 parts.append(("contents", Frames(cells, [self.interior.contents_part(c, inflate) for c in cells])))
-            if head is not None:
-                parts.append(("path", whole))
             return [*parts, ("manifest", self.manifest[rep])]
         ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
         more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0

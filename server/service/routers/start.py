@@ -34,12 +34,12 @@ etag: null, cells: [ids]}`` followed by one ``{cell, etag, body}`` part per cell
 cells portal culling keeps from the path's first pose and from where it leads in a
 couple of seconds (:meth:`~walkstream.server.service.scenes.Scene.start_parts`); then
 ``manifest``.  With ``head=SECONDS`` as well (a path and a view; compact parts), the
-path comes in two: ``pathhead`` first, the path's samples up to the first at or after
-SECONDS (a compact path of its own, decoding exactly as the whole path's first
-samples), and the whole ``path`` after the contents, before the manifest: the walk
-starts on the head, and the contents are not queued behind the whole path.  A client
-that does not ask gets the order above; a server that does not know ``head`` ignores
-it (the whole path then comes first, as ``path``).  The walk's other cells come by the client's own requests.  The ``path`` part is the compact ``walkstream-path-q/1``
+path's head ``pathhead`` comes in place of ``path``: its samples up to the first at or
+after SECONDS (a compact path of its own, decoding exactly as the whole path's first
+samples).  The walk starts on the head, the contents not queued behind the whole
+path; the client fetches the whole path (``GET .../paths/{name}``) when its link is
+idle, before the head ends.  A client that does not ask gets the order above; a server
+that does not know ``head`` ignores it (the whole path then comes, as ``path``).  The walk's other cells come by the client's own requests.  The ``path`` part is the compact ``walkstream-path-q/1``
 encoding (as ``GET .../paths/{name}`` sends it when ``Accept`` names it); with
 ``Accept: application/json`` each body is its JSON form.
 
@@ -129,8 +129,8 @@ Depth = Annotated[int | None, Query(ge=0, le=256, description="interiors: portal
 Head = Annotated[
     float | None,
     Query(allow_inf_nan=False, ge=0, le=86_400,
-          description="interiors, with view and path: send the path's first SECONDS first (part pathhead) "
-          "and the whole path after the first view's contents"),
+          description="interiors, with view and path: send only the path's first SECONDS "
+          "(part pathhead, in place of path)"),
 ]
 
 
