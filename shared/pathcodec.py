@@ -27,6 +27,10 @@ other way round (its two ends a rounding apart from pi), the encoder moves the
 later yaw (and the samples after it that keep that yaw) one step the way the path
 turns, so those yaws are within 1.5 steps (1.5 mrad by default) of their source.
 
+A path's head (:func:`head_path_q`, the interior start bundle's ``pathhead``) is a
+compact path of its own made from the same quantised values: it decodes to exactly
+the whole path's first samples.
+
 Decoding is bounded (the inflated body may not exceed what :data:`MAX_SAMPLES`
 samples can take) and every malformed body -- truncated, a zlib bomb, counts that
 disagree, a value that does not fit -- raises a one-line

@@ -329,8 +329,8 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--no-start-contents", action="store_true",
                    help="interiors: the start bundle leaves out the first view's contents (they come by the streamer's own requests)")
     r.add_argument("--path-head", type=_path_head, default=10.0, metavar="S",
-                   help="interiors: the start bundle sends the path's first S seconds before the topology and the "
-                   "first view's contents, the whole path after them (default 10; 0: the whole path first)")
+                   help="interiors: the start bundle sends only the path's first S seconds; the whole path is "
+                   "fetched when the link is idle (default 10; 0: the whole path in the bundle)")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
     r.add_argument("--frame-times", metavar="REPORT", help="a recorded frame schedule: take each frame's time from an earlier report's frames.csv (its folder or the file) instead of measuring it, so that a gl replay, and the frames --truth-every compares, repeat exactly")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")
