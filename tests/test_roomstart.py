@@ -475,3 +475,14 @@ def test_the_walk_starts_on_the_paths_head(office: Path, tour: RecordedPath) -> 
     assert headed["path_wait_s"] == whole_first["path_wait_s"] == 0.0
     # the walker waits at the head's end for the whole path, then walks on (no jump)
     assert short["path_wait_s"] > 0.0 and short["frames"] > headed["frames"]
+
+
+def test_the_walk_bar_follows_a_path_that_grows(capsys: pytest.CaptureFixture[str]) -> None:
+    from walkstream.terminal import WalkBar
+
+    bar = WalkBar("replay tour")
+    bar(1.0, 10.5)  # walking the head
+    bar(11.0, 47.8)  # the whole path is in: a longer walk
+    bar(47.8, 47.8)
+    assert bar.bar.total == 47.8 and bar.bar.n == 47.8
+    bar.close()
