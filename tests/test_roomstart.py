@@ -292,7 +292,19 @@ class _NoBundle(httpx.AsyncBaseTransport):
         return await self.inner.handle_async_request(request)
 
 
-def _replay(office: Path, no_bundle: bool = False, cut: int = 0, **kw: Any) -> dict[str, Any]:
+class _Seen(httpx.AsyncBaseTransport):
+    """The app, noting each request's path."""
+
+    def __init__(self, inner: httpx.AsyncBaseTransport, seen: list[str]) -> None:
+        self.inner, self.seen = inner, seen
+
+    async def handle_async_request(self, request: httpx.Request) -> httpx.Response:
+        self.seen.append(request.url.path)
+        return await self.inner.handle_async_request(request)
+
+
+def _replay(office: Path, no_bundle: bool = False, cut: int = 0, seen: list[str] | None = None,
+            **kw: Any) -> dict[str, Any]:
     cfg = ReplayConfig(**{"link": MODEM, "device": "desktop2003", "path": "tour", "kind": "interior",
                           "duration_s": 3.0, **kw})
     app = create_app([office])
@@ -302,6 +314,8 @@ def _replay(office: Path, no_bundle: bool = False, cut: int = 0, **kw: Any) -> d
             inner = _NoBundle(inner)
         elif cut:
             inner = _CutBundle(inner, cut)
+        if seen is not None:
+            inner = _Seen(inner, seen)
         r = run_replay(inner, "http://walkstream.test", cfg)
         s: dict[str, Any] = r.summary
         s["first_bytes"] = int(r.log.bytes_down[0])  # what came down before the first frame
@@ -461,8 +475,12 @@ def test_the_walk_starts_with_the_first_views_contents(office: Path, tour: Recor
 
 def test_the_walk_starts_on_the_paths_head(office: Path, tour: RecordedPath) -> None:
     headed = _replay(office)
-    whole_first = _replay(office, path_head_s=None)
-    short = _replay(office, path_head_s=0.2)  # a head shorter than the contents take to come
+    asked: dict[str, list[str]] = {"whole": [], "short": []}
+    whole_first = _replay(office, path_head_s=None, seen=asked["whole"])
+    short = _replay(office, path_head_s=0.2, seen=asked["short"])  # a head shorter than the contents take to come
+    # the whole path in the bundle is taken as such; a head's whole path is asked for once
+    assert [p for p in asked["whole"] if "/paths/" in p] == []
+    assert [p for p in asked["short"] if "/paths/" in p] == ["/v1/scenes/office/paths/tour"]
     for s in (headed, whole_first, short):
         assert "error" not in s and s["redownloads"] == 0 and s["perfect_frame_ratio"] > 0
     # the path walked: the whole tour, or (a walk of 3 s ending first) its 10 s head
@@ -477,7 +495,7 @@ def test_the_walk_starts_on_the_paths_head(office: Path, tour: RecordedPath) -> 
     assert short["path_wait_s"] > 0.0 and short["frames"] > headed["frames"]
 
 
-def test_the_walk_bar_follows_a_path_that_grows(capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_walk_bar_follows_a_path_that_grows() -> None:
     from walkstream.terminal import WalkBar
 
     bar = WalkBar("replay tour")

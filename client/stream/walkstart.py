@@ -160,17 +160,17 @@ async def interior_start(
 
     With ``view``, ``path_head_s`` and ``path_arrived``, the bundle brings only the
     path's first ``path_head_s`` seconds: the path returned is then that head, and the
-    caller fetches the whole path (:func:`whole_path_when_idle`).  A server that sends
-    the whole path all the same (one that does not know ``head``) has it go to
-    ``path_arrived`` at once.
+    caller fetches the whole path (:func:`whole_path_when_idle`).  Whenever the bundle
+    brings the whole path instead (no head asked for, or a server that does not know
+    ``head``), it goes to ``path_arrived`` at once: a caller that was not called walks
+    a head.
     """
     got: dict[str, Any] = {}
     split = view is not None and path_head_s is not None and path_arrived is not None
     stream = api.start(path=path, view=view, path_head_s=path_head_s if split else None)
 
     def on_whole(p: RecordedPath) -> None:
-        if split:
-            assert path_arrived is not None
+        if path_arrived is not None:
             path_arrived(p)
 
     def on_manifest(m: Manifest) -> None:
