@@ -227,6 +227,9 @@ PATH_LEAD_S = 4.0
 the end of the path's head (its transfer and a round trip at 56 kbit/s, twice over)."""
 PATH_POLL_S = 0.1
 """Seconds between two looks at whether the link is idle."""
+PATH_IDLE_S = 1.0
+"""The link counts as idle once no contents were on it for this long (a moment between
+two of the streamer's requests is not: the next is on its way)."""
 
 
 async def whole_path_when_idle(
@@ -241,12 +244,15 @@ async def whole_path_when_idle(
     """Fetch recorded path ``name`` once the link is idle, or at clock time ``due``.
 
     The walk runs on ``head`` (the start bundle's ``pathhead``) meanwhile; the whole
-    path is needed only when the walk reaches the head's end, so it waits while
+    path is needed only when the walk reaches the head's end, so it waits until
     ``busy()`` (contents on the link: the first view's, then what the walk comes to)
-    rather than delay them.  ``arrived`` gets the whole path, or ``head`` itself when
+    has been false for :data:`PATH_IDLE_S` rather than delay them.  ``arrived`` gets the whole path, or ``head`` itself when
     the fetch fails (the walk then ends where the head does).
     """
-    while clock.now() < due and busy():
+    idle_since = clock.now()
+    while clock.now() < due and clock.now() - idle_since < PATH_IDLE_S:
+        if busy():
+            idle_since = clock.now()
         await clock.sleep(PATH_POLL_S)
     try:
         whole: RecordedPath = (await api.path(name))[0]
