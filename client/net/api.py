@@ -574,6 +574,10 @@ class SceneClient:
     ) -> AsyncGenerator[StartItem, None]:
         """Stream the start bundle (``GET /v1/start``) for a path's start or a position.
 
+        With ``view`` (interiors) the bundle brings the first view's contents; with
+        ``path_head_s`` too, only the path's first seconds (``pathhead``, yielded as
+        such), the caller fetching the whole path itself.
+
         The scene is :attr:`scene` if set, else the server's first; it is set from
         the answer's ``X-Scene`` header as soon as the head arrives.  Items are
         yielded decoded (see :data:`StartItem`), each as soon as its last byte is in.

@@ -597,9 +597,8 @@ class Scene:
         a long tour it is a third of the bytes before the contents otherwise).
         """
         parts: list[StartPart] = []
-        head = None
-        if path is not None and self.interior is not None and view is not None and path_head_s is not None and rep == "msgpack":
-            head = self.path_head_q(path, path_head_s)
+        split = path is not None and self.interior is not None and view is not None and rep == "msgpack"
+        head = self.path_head_q(path, path_head_s) if split and path and path_head_s is not None else None
         if path is not None:
             whole = self.path_q(path) if rep == "msgpack" else self.path(path, rep)
             parts.append(("path", whole) if head is None else ("pathhead", head))
@@ -718,12 +717,8 @@ class Scene:
         """The first ``seconds`` of path ``name``, compact, decoding exactly as the whole
         compact path's first samples (:func:`~walkstream.shared.pathcodec.head_path_q`);
         None when that is the whole path."""
-        key = ("path", name, f"q1head:{seconds!r}")
-        enc: Encoded | None = self._bodies.get(key)
-        if enc is None:
-            blob = head_path_q(self.path_q(name).content, seconds, f"path {name!r}")
-            if blob is None:
-                return None
+        enc: Encoded | None = self._bodies.get(key := ("path", name, f"q1head:{seconds!r}"))
+        if enc is None and (blob := head_path_q(self.path_q(name).content, seconds, f"path {name!r}")):
             enc = Encoded(blob, PATH_Q_MEDIA, etag_for(self.version, f"pathhead:{name}:{seconds!r}", "q1"))
             self._bodies.put(key, enc, len(enc.content))
         return enc
