@@ -4,9 +4,10 @@
 manifest and objects in one round trip) through the streamer; when it fails before
 the path is in, the replay falls back to fetching scene, manifest and path one by
 one, :func:`manifest_task` fetching the manifest on its own.  An interior walk
-starts with :func:`interior_start` instead: its bundle is the path, the topology, the
-contents of the cells the first view sees (:class:`StartContents`, handed to the room
-streamer while they arrive) and the manifest.
+starts with :func:`interior_start` instead: its bundle is the path (or only its first
+seconds, the whole path then fetched by :func:`whole_path_when_idle`), the topology,
+the contents of the cells the first view sees (:class:`StartContents`, handed to the
+room streamer while they arrive) and the manifest.
 """
 
 from __future__ import annotations
@@ -246,8 +247,9 @@ async def whole_path_when_idle(
     The walk runs on ``head`` (the start bundle's ``pathhead``) meanwhile; the whole
     path is needed only when the walk reaches the head's end, so it waits until
     ``busy()`` (contents on the link: the first view's, then what the walk comes to)
-    has been false for :data:`PATH_IDLE_S` rather than delay them.  ``arrived`` gets the whole path, or ``head`` itself when
-    the fetch fails (the walk then ends where the head does).
+    has been false for :data:`PATH_IDLE_S` rather than delay them.  ``arrived`` gets
+    the whole path, or ``head`` itself when the fetch fails (the walk then ends where
+    the head does).
     """
     idle_since = clock.now()
     while clock.now() < due and clock.now() - idle_since < PATH_IDLE_S:
