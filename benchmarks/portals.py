@@ -369,7 +369,7 @@ def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out
         # before the first view's contents came in the start bundle (the same sitting)
         ("56 kbit/s, default cache, no 1st view", {**link, "no_start_contents": True}),
         # before the path's head came first and the whole path after the contents
-        ("56 kbit/s, default cache, whole path 1st", {**link, "path_head": 0.0}),
+        ("56 kbit/s, whole path in bundle", {**link, "path_head": 0.0}),
         ("56 kbit/s, cache 400 kB", {**link, "cache": "400kB"}),
         ("56 kbit/s, cache 600 kB", {**link, "cache": "600kB"}),
         # before the contents batch: one request per cell (the same sitting, to compare)
