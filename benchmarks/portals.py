@@ -357,8 +357,8 @@ def run_portals_bench(out: Path, presets: Sequence[str], *, frames: int, step_s:
 def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out: Path,
                 duration: str = "180s", step_at: float = 60.0) -> list[dict[str, Any]]:
     """Replays of ``db``'s tour (simulated clock): the walk at 56 kbit/s / 200 ms with the
-    default cache (and without the first view's contents in the start bundle, as
-    before) and with a cache smaller than the building (and the same three with one
+    default cache (and without the first view's contents in the start bundle, and with
+    the whole path before them, as before) and with a cache smaller than the building (and the same three with one
     contents request per cell, as before the batches), each with the default
     (``crowded``) and the paper's flush policy, and on the pda model at
     25 fps with the fog set by the budget controller (and kept fixed, to compare)
@@ -368,6 +368,8 @@ def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out
         ("56 kbit/s, default cache", dict(link)),
         # before the first view's contents came in the start bundle (the same sitting)
         ("56 kbit/s, default cache, no 1st view", {**link, "no_start_contents": True}),
+        # before the path's head came first and the whole path after the contents
+        ("56 kbit/s, whole path in bundle", {**link, "path_head": 0.0}),
         ("56 kbit/s, cache 400 kB", {**link, "cache": "400kB"}),
         ("56 kbit/s, cache 600 kB", {**link, "cache": "600kB"}),
         # before the contents batch: one request per cell (the same sitting, to compare)

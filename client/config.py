@@ -75,6 +75,10 @@ class ReplayConfig:
     """Start with the start bundle (one round trip); False: scene list, manifest, path."""
     start_contents: bool = True
     """Interiors: the start bundle brings the first view's contents too."""
+    path_head_s: float | None = 10.0
+    """Interiors, with :attr:`start_contents`: the start bundle brings only the path's
+    first this many seconds; the whole path is fetched when the link is idle (the
+    walker waits at the head's end if it is late); None: the whole path in the bundle."""
     gzip: bool = True
     """Ask for the streams gzip-compressed (``Accept-Encoding: gzip``)."""
     truth_every: int = 0

@@ -54,7 +54,13 @@ from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.images import ImpostorImages
 from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 from walkstream.client.stream.streamer import Streamer, StreamerConfig
-from walkstream.client.stream.walkstart import bundle_start, interior_start, manifest_task
+from walkstream.client.stream.walkstart import (
+    PATH_LEAD_S,
+    bundle_start,
+    interior_start,
+    manifest_task,
+    whole_path_when_idle,
+)
 from walkstream.client.tasks import reap
 from walkstream.client.truth.recorder import TruthRecorder, TruthResult, interior_far_m
 from walkstream.client.walk.crossing import crossing_topology
@@ -66,6 +72,7 @@ from walkstream.client.walk.state import WalkState
 from walkstream.shared.errors import ApiError
 from walkstream.shared.ground import GROUND_Z
 from walkstream.shared.lsystem.grammar import parse_grammar
+from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomview import VIEW_NEAR_M, RoomView
 from walkstream.shared.walls import WallTable
 from walkstream.shared.wire import Manifest
@@ -204,10 +211,21 @@ async def replay(
                     manifest_fut.set_exception(exc)
 
             got, topology, first_view = None, None, None
+            whole: dict[str, Any] = {}  # the whole path, when the bundle sent its head first
+
+            def path_arrived(p: RecordedPath) -> None:
+                whole["path"] = p
+                st = whole.get("state")
+                if st is not None:
+                    st.path, st.path_pending = p, False
+
+            headed = False
             if config.start_bundle and config.kind == "interior":  # path, topology, first view at once
                 got, topology, first_view = await interior_start(
                     config.path, config.setup_timeout_s, clock, api, disk, manifest_arrived, tasks,
-                    _room_view(config) if config.start_contents else None, manifest_failed)
+                    _room_view(config) if config.start_contents else None, manifest_failed,
+                    config.path_head_s, path_arrived)
+                headed = got is not None
             elif config.start_bundle and streamer is not None:
                 got = await bundle_start(
                     config.path, config.setup_timeout_s, clock, api, streamer, disk,
@@ -306,6 +324,13 @@ async def replay(
                 lambda: int(link.stats.bytes_down), WalkFrames(), recorder,
                 BudgetController(config.fps_target, k=config.budget_frames),
             )
+            if headed:  # walking the path's head until the whole path is in
+                state.path, state.path_pending = whole.get("path", path), "path" not in whole
+                whole["state"] = state
+                if state.path_pending and rooms is not None:  # fetched when the link is idle
+                    due = clock.now() + path.duration - PATH_LEAD_S
+                    tasks.append(asyncio.create_task(whole_path_when_idle(
+                        api, clock, config.path, path, due, rooms.busy, path_arrived)))
             log, snapshots, spikes = await _walk_unless_manifest_fails(walk(state, phases, progress), manifest_fut)
             t_end = clock.now()
             # the streamers stopped (nothing more goes down the link) before the truth
@@ -350,7 +375,7 @@ async def replay(
     elif kind == "interior":
         assert rooms is not None and topology is not None
         summary.update(link_figures(config, stats, api))
-        summary.update(interior_summary(config, log, rooms, frames, topology, cache, setup_s, path, manifest))
+        summary.update(interior_summary(config, log, rooms, frames, topology, cache, setup_s, state.path, manifest))
         walls = scene.wall_images
         if walls is not None:  # only then: a scene without walls keeps its summary
             figs = frames.wall_figures()

@@ -27,6 +27,10 @@ other way round (its two ends a rounding apart from pi), the encoder moves the
 later yaw (and the samples after it that keep that yaw) one step the way the path
 turns, so those yaws are within 1.5 steps (1.5 mrad by default) of their source.
 
+A path's head (:func:`head_path_q`, the interior start bundle's ``pathhead``) is a
+compact path of its own made from the same quantised values: it decodes to exactly
+the whole path's first samples.
+
 Decoding is bounded (the inflated body may not exceed what :data:`MAX_SAMPLES`
 samples can take) and every malformed body -- truncated, a zlib bomb, counts that
 disagree, a value that does not fit -- raises a one-line
@@ -52,6 +56,7 @@ __all__ = [
     "encode_path_q",
     "decode_path_q",
     "decode_path_any",
+    "head_path_q",
     "path_error_bound",
 ]
 
@@ -155,16 +160,8 @@ def _header(blob: bytes, what: str) -> dict[str, object]:
     return obj
 
 
-def decode_path_q(blob: bytes, what: str = "compact path") -> RecordedPath:
-    """Decode a ``walkstream-path-q/1`` blob from untrusted bytes.
-
-    Raises
-    ------
-    CodecError
-        A one-line message naming what is wrong (header, truncation, bomb, counts,
-        or the path's own checks).
-    """
-    obj = _header(blob, what)
+def _diffs(obj: dict[str, object], what: str) -> np.ndarray:
+    """The ``(6, n) int64`` quantised differences of a checked header's body."""
     n = obj["n"]
     if type(n) is not int or not 2 <= n <= MAX_SAMPLES:
         raise CodecError(f"{what}: n: expected 2 to {MAX_SAMPLES} samples, got {n!r:.40}")
@@ -177,7 +174,47 @@ def decode_path_q(blob: bytes, what: str = "compact path") -> RecordedPath:
     if (z >= np.uint64(1 << 62)).any():
         raise CodecError(f"{what}: d: a difference is too large")
     zi = z.astype(np.int64)
-    diffs = ((zi >> 1) ^ -(zi & 1)).reshape(6, n)
+    return ((zi >> 1) ^ -(zi & 1)).reshape(6, n)
+
+
+def head_path_q(blob: bytes, seconds: float, what: str = "compact path") -> bytes | None:
+    """The compact path of the first ``seconds`` of compact path ``blob``: its samples up
+    to and including the first at or after ``seconds`` (two at least).
+
+    Made from the blob's own quantised values (same steps, no second rounding), so it
+    decodes to exactly the first samples ``blob`` decodes to: a client may walk the head
+    while the whole path is on its way, then go on along the whole path without a jump.
+    None when the head would be the whole path.
+
+    Raises
+    ------
+    CodecError
+        ``blob`` is not a well-formed compact path (as :func:`decode_path_q`).
+    """
+    obj = _header(blob, what)
+    diffs = _diffs(obj, what)
+    steps = np.asarray(obj["steps"], np.float64)
+    qt = np.cumsum(diffs[0], dtype=np.int64)
+    t = (qt - qt[0]).astype(np.float64) * steps[0]  # as decode_path_q has the times
+    k = max(2, int(np.searchsorted(t, seconds, side="left")) + 1)
+    if k >= diffs.shape[1]:
+        return None
+    z = ((diffs[:, :k] << 1) ^ (diffs[:, :k] >> 63)).astype(np.uint64)  # zigzag, column by column
+    body = {**obj, "n": k, "d": encode_varints(z.reshape(-1))}
+    return PATH_Q_MAGIC + bytes([_VERSION]) + zlib.compress(msgpack.packb(body, use_bin_type=True), 9)
+
+
+def decode_path_q(blob: bytes, what: str = "compact path") -> RecordedPath:
+    """Decode a ``walkstream-path-q/1`` blob from untrusted bytes.
+
+    Raises
+    ------
+    CodecError
+        A one-line message naming what is wrong (header, truncation, bomb, counts,
+        or the path's own checks).
+    """
+    obj = _header(blob, what)
+    diffs = _diffs(obj, what)
     q = np.cumsum(diffs, axis=1, dtype=np.int64)
     table = (q.astype(np.float64) * np.asarray(obj["steps"], np.float64)[:, None]).T
     table[:, 0] -= table[0, 0]  # a path starts at t = 0 (the first time rounds to it)

@@ -107,8 +107,9 @@ OFFERS: tuple[str, ...] = ("cell-index", "cells-batch", "start")
 (``GET .../index/{i}/{j}``), cell records in batches (``POST .../cells``) and the
 start bundle (``GET /v1/start``)."""
 
-START_PARTS: tuple[str, ...] = ("path", "topology", "contents", "cell", "index", "manifest", "objects")
-"""What a start bundle may hold, in the order the service sends it."""
+START_PARTS: tuple[str, ...] = ("pathhead", "path", "topology", "contents", "cell", "index", "manifest", "objects")
+"""What a start bundle may hold, in the order the service sends it (an interior's
+``pathhead``, when asked, in place of ``path``)."""
 
 _MAX_MANIFEST = 4 << 20
 #: the longest string a manifest may hold: the building grammar's text (the default

@@ -31,6 +31,7 @@ from walkstream.shared.pathcodec import (
     decode_path_any,
     decode_path_q,
     encode_path_q,
+    head_path_q,
     path_error_bound,
 )
 from walkstream.shared.paths import RecordedPath, wrap_angle
@@ -116,6 +117,24 @@ def test_compact_path_keeps_the_direction_of_every_turn() -> None:
     # the same through the interpolation the walk samples: halfway through each half turn
     mid = np.arange(n - 1) + 0.5
     assert np.abs(wrap_angle(path.sample(mid)[1] - back.sample(mid)[1])).max() < 2e-3
+
+
+def test_a_paths_head_decodes_exactly_as_the_whole_paths_first_samples(tour: RecordedPath) -> None:
+    # odd steps and a halved time step too: the head re-rounds nothing
+    for steps in ((1e-3,) * 6, (0.007, 0.003, 0.003, 0.01, 0.002, 0.05)):
+        blob = encode_path_q(tour, steps)
+        whole = decode_path_q(blob)
+        for s in (0.0, 1.0, 2.5, whole.duration / 2):
+            head = decode_path_q(head_path_q(blob, s) or b"")
+            k = len(head)
+            assert k >= 2 and head.t[-1] >= min(s, whole.duration) and (k == 2 or head.t[-2] < s)
+            assert head == RecordedPath(whole.name, whole.t[:k], whole.xyz[:k], whole.yaw[:k], whole.pitch[:k],
+                                        whole.speed_kmh)
+            assert len(head_path_q(blob, s) or b"") < len(blob)
+        assert head_path_q(blob, whole.duration) is None  # the head would be the whole path
+    with pytest.raises(CodecError) as exc:
+        head_path_q(b"WSPQ\x01junk", 1.0, "path 'x'")
+    _one_line(exc, "path 'x'")
 
 
 def test_bad_compact_paths_are_one_line_codec_errors(tour: RecordedPath) -> None:
@@ -273,7 +292,19 @@ class _NoBundle(httpx.AsyncBaseTransport):
         return await self.inner.handle_async_request(request)
 
 
-def _replay(office: Path, no_bundle: bool = False, cut: int = 0, **kw: Any) -> dict[str, Any]:
+class _Seen(httpx.AsyncBaseTransport):
+    """The app, noting each request's path."""
+
+    def __init__(self, inner: httpx.AsyncBaseTransport, seen: list[str]) -> None:
+        self.inner, self.seen = inner, seen
+
+    async def handle_async_request(self, request: httpx.Request) -> httpx.Response:
+        self.seen.append(request.url.path)
+        return await self.inner.handle_async_request(request)
+
+
+def _replay(office: Path, no_bundle: bool = False, cut: int = 0, seen: list[str] | None = None,
+            **kw: Any) -> dict[str, Any]:
     cfg = ReplayConfig(**{"link": MODEM, "device": "desktop2003", "path": "tour", "kind": "interior",
                           "duration_s": 3.0, **kw})
     app = create_app([office])
@@ -283,6 +314,8 @@ def _replay(office: Path, no_bundle: bool = False, cut: int = 0, **kw: Any) -> d
             inner = _NoBundle(inner)
         elif cut:
             inner = _CutBundle(inner, cut)
+        if seen is not None:
+            inner = _Seen(inner, seen)
         r = run_replay(inner, "http://walkstream.test", cfg)
         s: dict[str, Any] = r.summary
         s["first_bytes"] = int(r.log.bytes_down[0])  # what came down before the first frame
@@ -369,6 +402,17 @@ def test_the_start_bundle_brings_what_the_first_view_sees(office: Path) -> None:
         assert [c["cell"] for c in js[2]["body"]] == cells
         # without view= the bundle is as before (no contents)
         assert "contents" not in [p for p, _ in _items(_get(app, "/v1/start?path=tour"))]
+        # head=: the path's head in place of the path; the rest unchanged
+        split = _items(_get(app, "/v1/scenes/office/start?path=tour&view=320x240&fov=60&fog=40&head=1.5"))
+        assert [p for p, _ in split] == ["pathhead", *names[1:]] and split[2][1] == cells
+        head, whole = decode_path_q(split[0][1], "head"), decode_path_q(items[0][1], "path")
+        assert 1.5 <= head.duration < whole.duration and np.array_equal(head.xyz, whole.xyz[: len(head)])
+        assert len(split[0][1]) < len(items[0][1]) / 2
+        # a head as long as the path, JSON, or no view: one whole path first, as before
+        for url in ("/v1/start?path=tour&view=320x240&head=1e4", "/v1/start?path=tour&head=1.5"):
+            assert _items(_get(app, url))[0][0] == "path"
+        js = _get(app, "/v1/start?path=tour&view=320x240&head=1.5", accept="application/json").json()
+        assert [p["part"] for p in js] == ["path", "topology", "contents", "manifest"]
     finally:
         app.state.scenes.close()
 
@@ -376,7 +420,8 @@ def test_the_start_bundle_brings_what_the_first_view_sees(office: Path) -> None:
 @pytest.mark.parametrize(
     "query, word",
     [("view=10x10", "view"), ("view=640", "view"), ("view=640x480&fov=500", "fov"),
-     ("view=640x480&fog=-1", "fog"), ("view=640x480&depth=9999", "depth"), ("view=9999x480", "view")],
+     ("view=640x480&fog=-1", "fog"), ("view=640x480&depth=9999", "depth"), ("view=9999x480", "view"),
+     ("view=640x480&head=-1", "head"), ("view=640x480&head=nan", "head")],
 )
 def test_a_bad_view_is_a_422_that_names_it(office: Path, query: str, word: str) -> None:
     app = create_app([office])
@@ -402,7 +447,7 @@ class _CutBundle(httpx.AsyncBaseTransport):
         return httpx.Response(r.status_code, headers=r.headers, content=body[: self.keep])
 
 
-def test_the_walk_starts_with_the_first_views_contents(office: Path) -> None:
+def test_the_walk_starts_with_the_first_views_contents(office: Path, tour: RecordedPath) -> None:
     with_contents = _replay(office)
     without = _replay(office, start_contents=False)
     for s in (with_contents, without):
@@ -414,12 +459,49 @@ def test_the_walk_starts_with_the_first_views_contents(office: Path) -> None:
     # a bundle cut among the contents: the cells it did not bring are asked for, once
     app = create_app([office])
     try:
-        whole = _items(_get(app, "/v1/scenes/office/start?path=tour&view=640x480", **{"accept-encoding": "identity"}))
+        # a head the walk outruns at once: the whole path is due
+        url = "/v1/scenes/office/start?path=tour&view=640x480&head=0.2"
+        whole = _items(_get(app, url, **{"accept-encoding": "identity"}))
         head = sum(len(msgpack.packb(o)) for o in _unpack(
-            _get(app, "/v1/scenes/office/start?path=tour&view=640x480", **{"accept-encoding": "identity"}).content)[:5])
+            _get(app, url, **{"accept-encoding": "identity"}).content)[:5])
     finally:
         app.state.scenes.close()
-    assert len(whole[2][1]) > 2  # the cut falls among the contents
-    cut = _replay(office, cut=head + 7)
+    assert whole[0][0] == "pathhead" and len(whole[2][1]) > 2  # the cut falls among the contents
+    cut = _replay(office, cut=head + 7, path_head_s=0.2)
     assert "error" not in cut and cut["start_contents_cells"] == 2 and cut["redownloads"] == 0
     assert cut["perfect_frame_ratio"] > 0 and cut["scene_version"]  # the manifest came on its own
+    # ... and the whole path by a request of its own: the walk's path is the tour
+    assert cut["path_duration_s"] == pytest.approx(tour.duration, abs=1e-3)
+
+
+def test_the_walk_starts_on_the_paths_head(office: Path, tour: RecordedPath) -> None:
+    headed = _replay(office)
+    asked: dict[str, list[str]] = {"whole": [], "short": []}
+    whole_first = _replay(office, path_head_s=None, seen=asked["whole"])
+    short = _replay(office, path_head_s=0.2, seen=asked["short"])  # a head shorter than the contents take to come
+    # the whole path in the bundle is taken as such; a head's whole path is asked for once
+    assert [p for p in asked["whole"] if "/paths/" in p] == []
+    assert [p for p in asked["short"] if "/paths/" in p] == ["/v1/scenes/office/paths/tour"]
+    for s in (headed, whole_first, short):
+        assert "error" not in s and s["redownloads"] == 0 and s["perfect_frame_ratio"] > 0
+    # the path walked: the whole tour, or (a walk of 3 s ending first) its 10 s head
+    assert whole_first["path_duration_s"] == short["path_duration_s"] == pytest.approx(tour.duration, abs=1e-3)
+    assert headed["path_duration_s"] >= 10.0
+    # less comes before the first frame, the same cells, no later first perfect frame
+    assert headed["first_bytes"] < whole_first["first_bytes"]
+    assert headed["start_contents_cells"] == whole_first["start_contents_cells"]
+    assert headed["time_to_first_perfect_frame_s"] <= whole_first["time_to_first_perfect_frame_s"]
+    assert headed["path_wait_s"] == whole_first["path_wait_s"] == 0.0
+    # the walker waits at the head's end for the whole path, then walks on (no jump)
+    assert short["path_wait_s"] > 0.0 and short["frames"] > headed["frames"]
+
+
+def test_the_walk_bar_follows_a_path_that_grows() -> None:
+    from walkstream.terminal import WalkBar
+
+    bar = WalkBar("replay tour")
+    bar(1.0, 10.5)  # walking the head
+    bar(11.0, 47.8)  # the whole path is in: a longer walk
+    bar(47.8, 47.8)
+    assert bar.bar.total == 47.8 and bar.bar.n == 47.8
+    bar.close()

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import sys
 from collections.abc import Iterator, Mapping
 from dataclasses import replace
@@ -69,6 +70,16 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _path_head(text: str) -> float:
+    try:
+        s = float(text)
+    except ValueError:
+        s = math.nan
+    if not (math.isfinite(s) and 0 <= s <= 86_400):
+        raise argparse.ArgumentTypeError(f"expected seconds from 0 to 86400, got {text!r:.40}")
+    return s
+
+
 def _frame_times(source: str) -> tuple[float, ...]:
     """The ``frame_time`` column of a report's ``frames.csv`` (the report folder or the file)."""
     from walkstream.client.report.files import read_frames_csv
@@ -123,6 +134,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         report_dir=Path(args.report),
         start_bundle=not args.no_start_bundle,
         start_contents=not args.no_start_contents,
+        path_head_s=args.path_head or None,
         gzip=not args.no_gzip,
         truth_every=args.truth_every,
         frame_times=_frame_times(args.frame_times) if args.frame_times else None,
@@ -316,6 +328,9 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
     r.add_argument("--no-start-contents", action="store_true",
                    help="interiors: the start bundle leaves out the first view's contents (they come by the streamer's own requests)")
+    r.add_argument("--path-head", type=_path_head, default=10.0, metavar="S",
+                   help="interiors: the start bundle sends only the path's first S seconds; the whole path is "
+                   "fetched when the link is idle (default 10; 0: the whole path in the bundle)")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
     r.add_argument("--frame-times", metavar="REPORT", help="a recorded frame schedule: take each frame's time from an earlier report's frames.csv (its folder or the file) instead of measuring it, so that a gl replay, and the frames --truth-every compares, repeat exactly")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")

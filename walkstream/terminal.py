@@ -69,6 +69,8 @@ class WalkBar:
                 dynamic_ncols=True,
                 bar_format="{l_bar}{bar}| {n:.0f}/{total:.0f} s walked [{elapsed}]",
             )
+        if total != self.bar.total:  # an interior walk's whole path arrived after its head
+            self.bar.total = max(total, 1e-9)
         self.bar.update(min(done, total) - self.bar.n)  # honours tqdm's refresh interval
 
     def close(self) -> None:

@@ -79,7 +79,7 @@ _MAX_FRAME = 32 << 20  # one object frame (an LOD2 mesh of a large block fits)
 
 StartItem = tuple[str, Any]
 """One item of a start bundle as :meth:`SceneClient.start` yields it: ``("path",
-(RecordedPath, nbytes))``, ``("cell", CellRecord)``, ``("index", CellIndex)``,
+(RecordedPath, nbytes))`` (and ``("pathhead", ...)``, the path's first seconds, when asked), ``("cell", CellRecord)``, ``("index", CellIndex)``,
 ``("topology", Topology)`` (interiors), ``("manifest", (Manifest, nbytes))``, ``("objects", count)`` (the PVS objects that
 follow), ``("object", ObjectFrame)``, ``("contents", [cell ids])`` (interiors: the
 contents that follow) or ``("room", (cell id, CellMesh))``; ``nbytes`` (and the records' ``nbytes``) is
@@ -570,8 +570,13 @@ class SceneClient:
         y: float | None = None,
         form: str = "params",
         view: RoomView | None = None,
+        path_head_s: float | None = None,
     ) -> AsyncGenerator[StartItem, None]:
         """Stream the start bundle (``GET /v1/start``) for a path's start or a position.
+
+        With ``view`` (interiors) the bundle brings the first view's contents; with
+        ``path_head_s`` too, only the path's first seconds (``pathhead``, yielded as
+        such), the caller fetching the whole path itself.
 
         The scene is :attr:`scene` if set, else the server's first; it is set from
         the answer's ``X-Scene`` header as soon as the head arrives.  Items are
@@ -597,6 +602,8 @@ class SceneClient:
             query.update(view=f"{view.size[0]}x{view.size[1]}", fov=repr(view.fov_deg), fog=repr(view.fog_m))
             if view.max_depth is not None:  # none: as deep as the fog reaches
                 query["depth"] = str(view.max_depth)
+            if path is not None and path_head_s is not None:  # the path's head first, the whole after the contents
+                query["head"] = repr(float(path_head_s))
         url = str(httpx.URL("/v1/start", params=query))
         what = "start bundle"
         state: dict[str, Any] = {"objects": 0, "k": 0}
@@ -624,8 +631,8 @@ class SceneClient:
                 return "contents", list(body)
             assert isinstance(body, bytes)
             label = f"{what}: {part}"
-            if part == "path":
-                return "path", (decode_path_any(body, label), nbytes)
+            if part in ("path", "pathhead"):
+                return part, (decode_path_any(body, label), nbytes)
             if part == "topology":
                 dec = decode_topology_compact if body[:4] == TOPOLOGY_COMPACT_MAGIC else decode_topology
                 return "topology", replace(dec(body, label), nbytes=nbytes)

@@ -57,6 +57,7 @@ def interior_summary(
         "fog_m_min": float(np.min(frames.fog_m)) if frames.fog_m else config.fog_m,
         "fog_tightened_frames": frames.tightened,
         "fog_below_portal_frames": frames.fog_below_portal,
+        "path_wait_s": frames.path_wait_s,
         "cache_bytes": config.cache_bytes,
         "cache_peak_bytes": int(cache.peak_bytes),
     }

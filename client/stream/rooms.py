@@ -661,6 +661,11 @@ class RoomStreamer:
         finally:
             self.scheduler.landed(f)
 
+    def busy(self) -> bool:
+        """Whether contents are on the link: a request of this streamer's scheduler, or
+        the start bundle's first view still coming."""
+        return bool(self._adopted) or self.scheduler.in_flight() > 0
+
     def adopt(self, cells: list[int], parts: AsyncIterator[tuple[int, CellMesh]]) -> None:
         """Take the contents of ``cells`` already on their way (the interior start
         bundle's first view): in flight, so not asked for again, until their part

@@ -4,9 +4,10 @@
 manifest and objects in one round trip) through the streamer; when it fails before
 the path is in, the replay falls back to fetching scene, manifest and path one by
 one, :func:`manifest_task` fetching the manifest on its own.  An interior walk
-starts with :func:`interior_start` instead: its bundle is the path, the topology, the
-contents of the cells the first view sees (:class:`StartContents`, handed to the room
-streamer while they arrive) and the manifest.
+starts with :func:`interior_start` instead: its bundle is the path (or only its first
+seconds, the whole path then fetched by :func:`whole_path_when_idle`), the topology,
+the contents of the cells the first view sees (:class:`StartContents`, handed to the
+room streamer while they arrive) and the manifest.
 """
 
 from __future__ import annotations
@@ -21,13 +22,16 @@ from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.streamer import Streamer
 from walkstream.shared.codec.cellmesh import CellMesh
-from walkstream.shared.errors import ApiError, StreamCut
+from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomview import RoomView
 from walkstream.shared.roomwire import Topology
 from walkstream.shared.wire import Manifest, decode_manifest
 
-__all__ = ["fetch_manifest", "manifest_task", "bundle_start", "StartContents", "interior_start"]
+__all__ = [
+    "fetch_manifest", "manifest_task", "bundle_start", "StartContents", "interior_start",
+    "PATH_LEAD_S", "whole_path_when_idle",
+]
 
 
 async def fetch_manifest(api: SceneClient, disk: DiskCache | None) -> Manifest:
@@ -140,6 +144,8 @@ async def interior_start(
     tasks: list[asyncio.Task[Any]],
     view: RoomView | None = None,
     manifest_failed: Callable[[BaseException], None] | None = None,
+    path_head_s: float | None = None,
+    path_arrived: Callable[[RecordedPath], None] | None = None,
 ) -> tuple[tuple[RecordedPath, int] | None, Topology | None, StartContents | None]:
     """The interior start bundle of recorded path ``path``: ``((path, its bytes), topology,
     the first view's contents)``.
@@ -152,9 +158,21 @@ async def interior_start(
     starts the old way.  The manifest goes to ``manifest_arrived`` (and the disk
     cache) as it arrives; when the bundle ends without it, a task (added to ``tasks``)
     fetches it on its own.
+
+    With ``view``, ``path_head_s`` and ``path_arrived``, the bundle brings only the
+    path's first ``path_head_s`` seconds: the path returned is then that head, and the
+    caller fetches the whole path (:func:`whole_path_when_idle`).  Whenever the bundle
+    brings the whole path instead (no head asked for, or a server that does not know
+    ``head``), it goes to ``path_arrived`` at once: a caller that was not called walks
+    a head.
     """
     got: dict[str, Any] = {}
-    stream = api.start(path=path, view=view)
+    split = view is not None and path_head_s is not None and path_arrived is not None
+    stream = api.start(path=path, view=view, path_head_s=path_head_s if split else None)
+
+    def on_whole(p: RecordedPath) -> None:
+        if path_arrived is not None:
+            path_arrived(p)
 
     def on_manifest(m: Manifest) -> None:
         got["manifest"] = m
@@ -170,6 +188,10 @@ async def interior_start(
         async for part, item in stream:
             if part == "manifest":
                 on_manifest(item[0])
+            elif part == "path":
+                on_whole(item[0])
+            elif part == "pathhead":
+                part = "path"  # walk the head while the whole path comes
             got[part] = item
             if part == "contents":
                 return  # the walk can start: the contents follow as it goes
@@ -199,3 +221,44 @@ async def interior_start(
         without_manifest()
 
     return got["path"], got["topology"], StartContents(list(got["contents"]), rest())
+
+
+PATH_LEAD_S = 4.0
+"""The whole path is fetched at the latest this many seconds before the walk reaches
+the end of the path's head (its transfer and a round trip at 56 kbit/s, twice over)."""
+PATH_POLL_S = 0.1
+"""Seconds between two looks at whether the link is idle."""
+PATH_IDLE_S = 1.0
+"""The link counts as idle once no contents were on it for this long (a moment between
+two of the streamer's requests is not: the next is on its way)."""
+
+
+async def whole_path_when_idle(
+    api: SceneClient,
+    clock: Clock,
+    name: str,
+    head: RecordedPath,
+    due: float,
+    busy: Callable[[], bool],
+    arrived: Callable[[RecordedPath], None],
+) -> None:
+    """Fetch recorded path ``name`` once the link is idle, or at clock time ``due``.
+
+    The walk runs on ``head`` (the start bundle's ``pathhead``) meanwhile; the whole
+    path is needed only when the walk reaches the head's end, so it waits until
+    ``busy()`` (contents on the link: the first view's, then what the walk comes to)
+    has been false for :data:`PATH_IDLE_S` rather than delay them.  ``arrived`` gets
+    the whole path, or ``head`` itself when the fetch fails (the walk then ends where
+    the head does).
+    """
+    idle_since = clock.now()
+    while clock.now() < due and clock.now() - idle_since < PATH_IDLE_S:
+        if busy():
+            idle_since = clock.now()
+        await clock.sleep(PATH_POLL_S)
+    try:
+        whole: RecordedPath = (await api.path(name))[0]
+    except (ApiError, StreamCut, CodecError):
+        whole = head
+    arrived(whole)
+

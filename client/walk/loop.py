@@ -79,7 +79,13 @@ async def walk(
     """
     cfg, clock, scene = w.config, w.clock, w.scene
     tick = 1.0 / cfg.fps
-    total = w.path.duration if cfg.duration_s is None else min(cfg.duration_s, w.path.duration)
+
+    def walk_span() -> float:
+        # while only the path's head is in, the walk's end is not known yet
+        end = math.inf if w.path_pending else w.path.duration
+        return end if cfg.duration_s is None else min(cfg.duration_s, end)
+
+    total = walk_span()
     t_walk0 = clock.now()
     if scene.streets is not None:
         scene.streets.walk_end = t_walk0 + total
@@ -94,12 +100,18 @@ async def walk(
     while True:
         t = clock.now()
         wt = t - t_walk0
+        if w.path_pending and wt > w.path.duration:
+            # the whole path is still on its way: the walker waits at the head's end
+            w.frames.path_wait_s += wt - w.path.duration
+            t_walk0 += wt - w.path.duration
+            wt = w.path.duration
+        total = walk_span()
         if wt > total:
             break
         phases.begin()
         if progress is not None and wt - last_progress >= 1.0:
             last_progress = wt
-            progress(wt, total)
+            progress(wt, total if math.isfinite(total) else w.path.duration)
         xyz, yaw, pitch = w.path.at(wt)
         eye = np.asarray(xyz, dtype=np.float64)
         view = camera(eye, float(yaw), float(pitch)).astype(np.float64)
@@ -120,5 +132,5 @@ async def walk(
             for key in list(w.meshes):
                 w.renderer.forget(CELLMESH_CONTENT.gpu_key(*key))
     if progress is not None:
-        progress(total, total)
+        progress(total, total)  # finite: the loop ends only once the whole path is in
     return w.builder.build(fps_cap=cfg.fps), w.snapshots, np.array(w.spikes, dtype=bool)

@@ -39,6 +39,7 @@ class WalkState:
     config: ReplayConfig
     clock: Clock
     path: RecordedPath
+    """The path walked: its head while :attr:`path_pending`, then the whole path."""
     scene: WalkScene
     device: Any
     """The simulated device (a cost model) or the ``gl`` one."""
@@ -63,6 +64,8 @@ class WalkState:
     meshes: dict[tuple[int, int], Mesh] = field(default_factory=dict)
     """Room parts made into meshes for the renderer, by ``(cell, part)``."""
     frame: int = 0
+    path_pending: bool = False
+    """:attr:`path` is the path's head; the whole path replaces it when it arrives."""
     indoors: bool = False
     """The portal model holds the eye (the last room kept on a threshold)."""
     stepped: bool = False

@@ -67,7 +67,7 @@ from walkstream.shared.content.registry import by_form, object_forms
 from walkstream.shared.content.walltex import KIND as WALLTEX
 from walkstream.shared.errors import ApiError, CodecError, DatabaseDamagedError, StoreError
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
-from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_q, encode_path_q
+from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_q, encode_path_q, head_path_q
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.records import BuildingParams
 from walkstream.shared.roomview import RoomView
@@ -572,6 +572,7 @@ class Scene:
         form: Form = "params",
         view: RoomView | None = None,
         inflate: bool = False,
+        path_head_s: float | None = None,
     ) -> list[StartPart]:
         """The parts of a start bundle at ``xy``, in the order sent.
 
@@ -590,11 +591,17 @@ class Scene:
         ``view``) the contents of the cells that view sees from the path's first pose
         and from where the path leads in :data:`START_ROOM_LEAD_S` (up to
         :data:`START_ROOM_BYTES`; ``inflate``: each blob inflated, for a gzip-compressed
-        answer), then the manifest.
+        answer), then the manifest.  With ``path_head_s`` as well (compact parts only),
+        only the path's first ``path_head_s`` seconds come, as ``pathhead`` (the walk
+        starts on the head; the client fetches the whole path when its link is idle: on
+        a long tour it is a third of the bytes before the contents otherwise).
         """
         parts: list[StartPart] = []
+        split = path is not None and self.interior is not None and view is not None and rep == "msgpack"
+        head = self.path_head_q(path, path_head_s) if split and path and path_head_s is not None else None
         if path is not None:
-            parts.append(("path", self.path_q(path) if rep == "msgpack" else self.path(path, rep)))
+            whole = self.path_q(path) if rep == "msgpack" else self.path(path, rep)
+            parts.append(("path", whole) if head is None else ("pathhead", head))
         if self.interior is not None:
             # an interior walk needs its topology before its first frame, then the first
             # view's contents; the manifest (not needed to walk) goes last
@@ -704,6 +711,16 @@ class Scene:
             p = RecordedPath.from_msgpack(self.path(name, "msgpack").content, f"path {name!r}")
             enc = Encoded(encode_path_q(p), PATH_Q_MEDIA, etag_for(self.version, f"path:{name}", "q1"))
             self._bodies.put(("path", name, "q1"), enc, len(enc.content))
+        return enc
+
+    def path_head_q(self, name: str, seconds: float) -> Encoded | None:
+        """The first ``seconds`` of path ``name``, compact, decoding exactly as the whole
+        compact path's first samples (:func:`~walkstream.shared.pathcodec.head_path_q`);
+        None when that is the whole path."""
+        enc: Encoded | None = self._bodies.get(key := ("path", name, f"q1head:{seconds!r}"))
+        if enc is None and (blob := head_path_q(self.path_q(name).content, seconds, f"path {name!r}")):
+            enc = Encoded(blob, PATH_Q_MEDIA, etag_for(self.version, f"pathhead:{name}:{seconds!r}", "q1"))
+            self._bodies.put(key, enc, len(enc.content))
         return enc
 
     # -- objects -------------------------------------------------------------

@@ -33,7 +33,13 @@ etag: null, cells: [ids]}`` followed by one ``{cell, etag, body}`` part per cell
 ``POST .../rooms/contents`` sends them (:mod:`walkstream.shared.codec.cellbatch`), for the
 cells portal culling keeps from the path's first pose and from where it leads in a
 couple of seconds (:meth:`~walkstream.server.service.scenes.Scene.start_parts`); then
-``manifest``.  The walk's other cells come by the client's own requests.  The ``path`` part is the compact ``walkstream-path-q/1``
+``manifest``.  With ``head=SECONDS`` as well (a path and a view; compact parts), the
+path's head ``pathhead`` comes in place of ``path``: its samples up to the first at or
+after SECONDS (a compact path of its own, decoding exactly as the whole path's first
+samples).  The walk starts on the head, the contents not queued behind the whole
+path; the client fetches the whole path (``GET .../paths/{name}``) when its link is
+idle, before the head ends.  A client that does not ask gets the order above; a server
+that does not know ``head`` ignores it (the whole path then comes, as ``path``).  The walk's other cells come by the client's own requests.  The ``path`` part is the compact ``walkstream-path-q/1``
 encoding (as ``GET .../paths/{name}`` sends it when ``Accept`` names it); with
 ``Accept: application/json`` each body is its JSON form.
 
@@ -120,6 +126,12 @@ View = Annotated[
 Fov = Annotated[float | None, Query(allow_inf_nan=False, ge=1, le=170, description="interiors: vertical field of view, degrees")]
 Fog = Annotated[float | None, Query(allow_inf_nan=False, gt=0, le=10_000, description="interiors: fog distance, metres")]
 Depth = Annotated[int | None, Query(ge=0, le=256, description="interiors: portals passed at most")]
+Head = Annotated[
+    float | None,
+    Query(allow_inf_nan=False, ge=0, le=86_400,
+          description="interiors, with view and path: send only the path's first SECONDS "
+          "(part pathhead, in place of path)"),
+]
 
 
 @dataclass(frozen=True)
@@ -143,6 +155,7 @@ class StartQuery:
     fov: Fov = None
     fog: Fog = None
     depth: Depth = None
+    head: Head = None
 
     def room_view(self) -> RoomView | None:
         """The client's interior view when it gave its viewport (else None)."""
@@ -203,7 +216,8 @@ async def _bundle(request: Request, scene: Scene, rep: Rep, q: StartQuery) -> St
     view = q.room_view()
     inflate = accepts_gzip(request.headers.get("accept-encoding"))
     parts = await run_in_threadpool(
-        lambda: scene.start_parts(xy, rep, q.path, h, v, cast(ObjForm, q.form), view=view, inflate=inflate)
+        lambda: scene.start_parts(xy, rep, q.path, h, v, cast(ObjForm, q.form), view=view, inflate=inflate,
+                                 path_head_s=q.head)
     )
     headers = {"X-Scene-Version": scene.version, "X-Scene": scene.name, "Cache-Control": "no-cache"}
     if rep == "json":
