@@ -30,11 +30,13 @@ Helpers of those, not commands of their own:
 - :mod:`.portalwalk`: the first portal walk, the reference that :mod:`.portals` times
   and tests/test_portalwalk.py checks the faster walk against.
 
-A script, not a command (it times product code against itself, no scene needed):
+Scripts, not commands (they time product code against itself, no scene to bake):
 
 - :mod:`.ringrepair`: footprint cleaning of a generated city, the whole-array GEOS checks
   against one polygon at a time, and ``city_summary`` (``python -m
-  walkstream.benchmarks.ringrepair [SIZE ...]``).
+  walkstream.benchmarks.ringrepair [SIZE ...]``);
+- :mod:`.reportplots`: a replay report's plots, axes placed by fixed margins against
+  measured by ``tight_layout`` (``python -m walkstream.benchmarks.reportplots REPORT_DIR``).
 
 A new benchmark is a module here with a ``run_...`` function and a ``format_...``
 table, and a subcommand in :mod:`walkstream.cmd_bench`.  The ``run_...`` functions are
@@ -62,6 +64,8 @@ _EXPORTS = {
     "plot_clusters": "walkstream.benchmarks.clusters",
     "run_ring_bench": "walkstream.benchmarks.ringrepair",
     "format_ring_table": "walkstream.benchmarks.ringrepair",
+    "run_plots_bench": "walkstream.benchmarks.reportplots",
+    "format_plots_table": "walkstream.benchmarks.reportplots",
 }
 
 __all__ = sorted(_EXPORTS)

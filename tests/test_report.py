@@ -304,6 +304,35 @@ def test_long_log_plots(tmp_path: Path) -> None:
     assert colour_pixels(img, SERIES_COLOURS[0]) > 500
 
 
+@pytest.mark.parametrize("draw", ["plot_bytes", "plot_quality", "plot_fps", "plot_budget"])
+def test_fixed_margins_keep_every_label_inside_the_figure_and_clear_of_other_axes(
+    draw: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The report's grids are placed by fixed margins, not measured: no tick label, axis
+    label, title or legend may leave the figure or run into another axes."""
+    figures: list[Any] = []
+    save = report_plots.save_figure
+
+    def keep(fig: Any, path: Path) -> Path:
+        figures.append(fig)
+        return save(fig, path)
+
+    monkeypatch.setattr(report_plots, "save_figure", keep)
+    runs = [report_plots.make_run(f"run {i} 56k prefetch", *run_parts(300, seed=i), i) for i in range(3)]
+    getattr(report_plots, draw)(tmp_path / "p.png", runs, "a title\nof two lines")
+    (fig,) = figures
+    assert report_plots._grid_layout(fig)  # placed by the margins, not by tight_layout
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    page, frames = fig.bbox, [ax.get_window_extent(renderer) for ax in fig.axes]
+    for k, ax in enumerate(fig.axes):
+        drawn = ax.get_tightbbox(renderer)  # the axes with every label, title and legend drawn
+        assert page.x0 - 1 <= drawn.x0 and drawn.x1 <= page.x1 + 1 and page.y0 - 1 <= drawn.y0 and drawn.y1 <= page.y1 + 1
+        assert not any(drawn.overlaps(f) for m, f in enumerate(frames) if m != k), (draw, k)
+
+
 def test_envelope_keeps_extremes_and_bounds_points() -> None:
     x = np.arange(20_000, dtype=float)
     y = np.zeros(20_000)

@@ -156,11 +156,60 @@ def _legend(ax: Axes, **kw: Any) -> None:
         ax.legend(fontsize=8, **kw)
 
 
+# Margins of the grid layout, inches: tick labels and a y label on the left, tick labels
+# and an x label below, a title line of 10 pt above an axes.
+_LEFT_IN, _RIGHT_IN, _BOTTOM_IN, _TOP_IN = 0.95, 0.45, 0.6, 0.15
+_TITLE_LINE_IN, _XLABELS_IN, _COL_GAP_IN = 0.2, 0.55, 1.05
+
+#: True: every figure is laid out by measuring its labels (:meth:`~Figure.tight_layout`),
+#: the grids too: the reference ``python -m walkstream.benchmarks.reportplots`` times
+#: the fixed margins against.
+MEASURED_LAYOUT = False
+
+
+def _grid_layout(fig: Figure) -> bool:
+    """Place the axes of a :func:`grid_figure` by fixed margins in inches; False when ``fig``
+    is not such a grid (a colour bar, an image: :meth:`~Figure.tight_layout` then).
+
+    :meth:`~Figure.tight_layout` measures every tick label and title by drawing them, as
+    long again as writing the PNG; a report's plots are grids of line plots whose labels
+    fit these margins, so the measuring is skipped for them."""
+    axes = fig.axes
+    specs = [ax.get_subplotspec() for ax in axes]
+    if not axes or any(s is None for s in specs) or any(ax.images for ax in axes):
+        return False
+    legends = [leg for leg in (ax.get_legend() for ax in axes) if leg is not None]
+    if any(leg.get_bbox_to_anchor() is not leg.axes.bbox for leg in legends):
+        return False  # a legend placed outside its axes needs its room measured
+    rows, cols = specs[0].get_gridspec().get_geometry()  # type: ignore[union-attr]
+    w, h = fig.get_size_inches()
+
+    def lines(ax: Axes) -> int:
+        titles = [ax.get_title(loc=loc) for loc in ("left", "center", "right")]
+        return max((t.count("\n") + 1 for t in titles if t), default=0)
+
+    top_row = [ax for ax, s in zip(axes, specs, strict=True) if s.is_first_row()]  # type: ignore[union-attr]
+    below = [ax for ax, s in zip(axes, specs, strict=True) if not s.is_first_row()]  # type: ignore[union-attr]
+    shared = all(len(ax.get_shared_x_axes().get_siblings(ax)) > 1 for ax in axes)
+    top = _TOP_IN + _TITLE_LINE_IN * max(map(lines, top_row), default=0)
+    if fig.get_suptitle():  # keep the figure title clear of the top row's titles
+        top += 0.35
+    gap = _TITLE_LINE_IN * max(map(lines, below), default=0) + (0.15 if shared else _XLABELS_IN)
+    ax_h = (h - top - _BOTTOM_IN - (rows - 1) * gap) / rows
+    ax_w = (w - _LEFT_IN - _RIGHT_IN - (cols - 1) * _COL_GAP_IN) / cols
+    if ax_h <= 0.5 or ax_w <= 0.5:
+        return False
+    fig.subplots_adjust(left=_LEFT_IN / w, right=1.0 - _RIGHT_IN / w, bottom=_BOTTOM_IN / h,
+                        top=1.0 - top / h, hspace=gap / ax_h, wspace=_COL_GAP_IN / ax_w)  # fmt: skip
+    return True
+
+
 def save_figure(fig: Figure, path: Path) -> Path:
     """Lay ``fig`` out and write it to ``path`` as PNG (atomically); returns ``path``."""
-    if fig.get_suptitle():  # keep the figure title clear of the top row's titles
-        top = 1.0 - 0.35 / fig.get_figheight()
-        fig.tight_layout(rect=(0.0, 0.0, 1.0, top))
+    if not MEASURED_LAYOUT and _grid_layout(fig):
+        pass  # placed by fixed margins
+    elif fig.get_suptitle():  # keep the figure title clear of the top row's titles
+        fig.tight_layout(rect=(0.0, 0.0, 1.0, 1.0 - 0.35 / fig.get_figheight()))
     else:
         fig.tight_layout()
     buf = io.BytesIO()
@@ -363,7 +412,7 @@ def plot_fps(path: Path, runs: Sequence[PlotRun], title: str) -> Path:
                 + f"{100.0 * s['fps_within_10pct_ratio']:.1f} % of counted frames within 10 %"
                 + (f", mean {s['fps_mean']:.1f} fps" if s.get("fps_mean") is not None else "")
             )
-    ax.set_title(title + ("\n" + "; ".join(notes) if notes else ""), fontsize=10)
+    ax.set_title(title + ("\n" + "\n".join(notes) if notes else ""), fontsize=10)
     _legend(ax, loc="lower right")
     return save_figure(fig, path)
 
