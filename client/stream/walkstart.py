@@ -260,5 +260,8 @@ async def whole_path_when_idle(
         whole: RecordedPath = (await api.path(name))[0]
     except (ApiError, StreamCut, CodecError):
         whole = head
+    except Exception:
+        arrived(head)  # whatever failed, the walk must not wait at the head's end for ever
+        raise
     arrived(whole)
 
