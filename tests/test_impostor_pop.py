@@ -73,6 +73,21 @@ def _box(cx: float, cy: float, half: float = 5.0, h: float = 20.0) -> tuple[tupl
     return box, Mesh(np.asarray(tm.vertices)[faces.ravel()], normals, np.arange(faces.size).reshape(-1, 3))
 
 
+def _measure(r: Any, meter: PopMeter, k: int, keys: list[Any], quads: list[Any], view: Any, proj: Any) -> None:
+    """Draw frame ``k`` with ``quads`` as the impostors and feed it to ``meter``; where the
+    image painted, the ids show object 1 (drawn again without it to find those pixels)."""
+    r.impostors = quads
+    r.draw(keys, view, proj)
+    rgb = r.snapshot()
+    ids = r.draw_ids(keys, view, proj)
+    if quads:
+        r.impostors = []
+        r.draw(keys, view, proj)
+        ids = ids.copy()
+        ids[np.any(r.snapshot() != rgb, axis=2)] = 2
+    meter.add(pop_frame(k, rgb, ids, keys, [(1, q) for q in quads]))
+
+
 def _walk(gl: Any, blend_m: float) -> dict[str, Any]:
     """A viewer walking 30 m towards two buildings 100 m ahead; the left one (object 1) goes from
     its image (a flat red) to its geometry across ``D`` = 70 m over ``blend_m``, the right one
@@ -97,16 +112,7 @@ def _walk(gl: Any, blend_m: float) -> dict[str, Any]:
             ia, ie = bin_of(2, *directions(eye, (lo + hi) / 2.0))
             quads = [(quad_corners(box_a, 2, int(ia), int(ie)), 1, image, alpha)] if alpha > 0 else []
             keys = [(1, 2), (2, 2)] if alpha < 1 else [(2, 2)]
-            r.impostors = quads
-            r.draw(keys, view, proj)
-            rgb = r.snapshot()
-            ids = r.draw_ids(keys, view, proj)
-            if quads:  # where the image painted, it shows object 1
-                r.impostors = []
-                r.draw(keys, view, proj)
-                ids = ids.copy()
-                ids[np.any(r.snapshot() != rgb, axis=2)] = 2
-            meter.add(pop_frame(k, rgb, ids, keys, [(1, q) for q in quads]))
+            _measure(r, meter, k, keys, quads, view, proj)
     finally:
         r.release()
     return summarise_pop(meter)
@@ -196,16 +202,7 @@ def _arrival(gl: Any, fade_s: float) -> tuple[dict[str, Any], PopMeter]:
             shown = fade_towards(shown, 1.0 if k >= 10 else 0.0, dt, fade_s)
             quads = [(toward_eye(quad_corners(box_a, 2, ia, ie), eye, box_a), 1, image, shown)] if shown > 0 else []
             keys = [(1, 2), (2, 2)] if shown < 1 else [(2, 2)]
-            r.impostors = quads
-            r.draw(keys, view, proj)
-            rgb = r.snapshot()
-            ids = r.draw_ids(keys, view, proj)
-            if quads:
-                r.impostors = []
-                r.draw(keys, view, proj)
-                ids = ids.copy()
-                ids[np.any(r.snapshot() != rgb, axis=2)] = 2
-            meter.add(pop_frame(k, rgb, ids, keys, [(1, q) for q in quads]))
+            _measure(r, meter, k, keys, quads, view, proj)
     finally:
         r.release()
     return summarise_pop(meter), meter
