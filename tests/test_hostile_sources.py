@@ -45,7 +45,7 @@ class Run:
     def lines(self) -> list[str]:
         """stderr without the progress bar's redraws."""
         text = self.err.replace("\r", "\n")
-        return [ln for ln in text.splitlines() if ln.strip() and not ln.startswith("baking cells")]
+        return [ln for ln in text.splitlines() if ln.strip() and not ln.startswith("reading the source")]
 
 
 def run_cli(*argv: str | Path, cwd: Path) -> Run:

@@ -76,7 +76,7 @@ def run_bake(source: str | Path, output: str | Path, **kw: Any) -> dict[str, Any
     """Bake with a progress bar on stderr; returns the summary."""
     from walkstream.server.bake import bake
 
-    bar, progress = count_bar("baking cells", "cell")
+    bar, progress = count_bar("reading the source", "step")
     try:
         return bake(source, output, progress=progress, log=lambda m: bar.write(m, file=sys.stderr),
                     stage=stage_setter(bar), **kw)
