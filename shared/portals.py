@@ -69,7 +69,13 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.errors import InputError
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.screenrects import CENTRE_MARGIN_PX, box_rects, corner_secant, point_rects
+from walkstream.shared.screenrects import (
+    CENTRE_MARGIN_PX,
+    box_rects,
+    coord_rects,
+    corner_secant,
+    point_rects,
+)
 
 __all__ = [
     "CULLING_MODES",
@@ -314,7 +320,10 @@ def _portal_rows(
     adjacency, starts = graph.adjacency, graph.row_start
     if m == 0:
         return lambda c: ()
-    rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive, margin_px)
+    if naive:
+        rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive, margin_px)
+    else:
+        rect, front = coord_rects(graph.poly_ckm, graph.edges, V, P, size, clip_m, margin_px)
     # 0 culled, 1 pass through, 2 the rectangle
     what = np.where(front, 2, 0).astype(np.int8)
     if not naive:
@@ -495,23 +504,33 @@ def cull_parts(
     # every visible cell's boxes in one vectorised pass, each against its own cell's VSAs
     seen = [c for c in cells if c in boxes and vsas is not None and c in vsas and len(boxes[c][0])]
     for c in cells:
-        if c in boxes and c not in seen:
+        if c in boxes and not (vsas is not None and c in vsas and len(boxes[c][0])):
             out[c] = np.zeros(len(boxes[c][0]), bool)
     if not seen or vsas is None:
         return out
     counts = [len(boxes[c][0]) for c in seen]
     lo = np.concatenate([boxes[c][0] for c in seen])
     hi = np.concatenate([boxes[c][1] for c in seen])
-    owner = np.repeat(np.arange(len(seen)), counts)
+    # each cell's VSAs padded to the longest list with empty rectangles, made in one call
+    # from plain ints (a numpy assignment per cell costs more than the whole test)
     kmax = max(len(vsas[c]) for c in seen)
-    v = np.tile(np.array([1, 1, 0, 0], np.int64), (len(seen), kmax, 1))  # empty rectangles
-    for i, c in enumerate(seen):
-        v[i, : len(vsas[c])] = vsas[c]
-    keep = box_distance(lo, hi, e) <= fog_m
+    flat: list[tuple[int, int, int, int]] = []
+    for c in seen:
+        have = vsas[c]
+        flat.extend(have)
+        if len(have) < kmax:
+            flat.extend([_NO_PIXEL] * (kmax - len(have)))
+    v = np.array(flat, np.int64).reshape(len(seen), kmax, 4)
+    keep = np.ones(len(lo), bool) if math.isinf(fog_m) else box_distance(lo, hi, e) <= fog_m
     rect, front = box_rects(lo, hi, view, proj, size, clip_m)
-    meet = _meet(rect[:, None, :], v[owner])  # (n, kmax)
+    meet = _meet(rect[:, None, :], v[np.repeat(np.arange(len(seen)), counts)])  # (n, kmax)
     keep &= front & np.any(meet, axis=1)
     keep[keep] = frustum_cull(lo[keep], hi[keep], vp)
-    for c, part in zip(seen, np.split(keep, np.cumsum(counts)[:-1]), strict=True):
-        out[c] = part
+    ends = np.cumsum(counts).tolist()
+    for c, a, b in zip(seen, [0, *ends[:-1]], ends, strict=True):
+        out[c] = keep[a:b]
     return out
+
+
+#: An empty whole-pixel rectangle (no pixel centre): pads a cell's VSAs.
+_NO_PIXEL = (1, 1, 0, 0)

@@ -32,6 +32,7 @@ __all__ = [
     "full_vsa",
     "corner_secant",
     "point_rects",
+    "coord_rects",
     "clipped_rects",
     "ndc_pixels",
     "box_rects",
