@@ -33,6 +33,8 @@ __all__ = [
     "corner_secant",
     "point_rects",
     "coord_rects",
+    "rects_ckm",
+    "box_corners_ckm",
     "clipped_rects",
     "ndc_pixels",
     "box_rects",
@@ -94,8 +96,8 @@ def point_rects(
     return ndc_pixels(ndc.min(axis=1), ndc.max(axis=1), size, margin_px), front
 
 
-#: The empty rectangle (no pixel centre) of a set wholly behind the clip plane.
-_EMPTY = (1, 1, 0, 0)
+#: The empty rectangle (no pixel centre) of a set wholly behind the clip plane, as a column.
+_EMPTY_COL = np.array([[1], [1], [0], [0]], np.int64)
 
 
 def coord_rects(
@@ -114,13 +116,30 @@ def coord_rects(
     set), so each numpy call is one pass over long rows; the vertices' minima and
     maxima are reductions over the leading axis.
     """
+    rect, front, _near, _far = rects_ckm(pts, edges, view, proj, size, clip_m, margin_px)
+    return np.ascontiguousarray(rect.T), front
+
+
+def rects_ckm(
+    pts: NDArray[np.float64],
+    edges: NDArray[np.int64],
+    view: NDArray[np.float64],
+    proj: NDArray[np.float64],
+    size: tuple[int, int],
+    clip_m: float,
+    margin_px: float = CENTRE_MARGIN_PX,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`coord_rects` with the rectangles coordinate-major too, ``(4, m)`` (rows ``x0, y0,
+    x1, y1``), and each set's nearest and farthest vertex depth ``(m,)`` (``-z`` in eye space)."""
     m = pts.shape[2]
     if m == 0:
-        return np.zeros((0, 4), np.int64), np.zeros(0, bool)
+        z = np.zeros(0)
+        return np.zeros((4, 0), np.int64), np.zeros(0, bool), z, z
     v = (view[:3, :3] @ pts.reshape(3, -1) + view[:3, 3:4]).reshape(pts.shape)  # (3, k, m) eye space
     depth = -v[2]
-    ahead = depth.min(axis=0) >= clip_m
-    front = depth.max(axis=0) >= clip_m
+    near_d, far_d = depth.min(axis=0), depth.max(axis=0)
+    ahead = near_d >= clip_m
+    front = far_d >= clip_m
     # the common case, nothing to clip: the vertices' projections bound the set;
     # computed for every set (elementwise, so each set's figures are the same as
     # alone) and the others overwritten below
@@ -128,17 +147,17 @@ def coord_rects(
     x = (proj[0, 0] * v[0] + proj[0, 2] * v[2]) / d
     y = (proj[1, 1] * v[1] + proj[1, 2] * v[2]) / d
     rect = _pixels4(np.stack([x.min(axis=0), y.min(axis=0), x.max(axis=0), y.max(axis=0)]), size, margin_px)
-    rect[~front] = _EMPTY
+    rect[:, ~front] = _EMPTY_COL
     rest = ~ahead & front
     if rest.any():
-        rect[rest], front[rest] = _clipped(v[:, :, rest], depth[:, rest], edges, proj, size, clip_m, margin_px)
-    return rect, front
+        rect[:, rest], front[rest] = _clipped(v[:, :, rest], depth[:, rest], edges, proj, size, clip_m, margin_px)
+    return rect, front, near_d, far_d
 
 
 def _pixels4(b: NDArray[np.float64], size: tuple[int, int], margin_px: float) -> NDArray[np.int64]:
     """:func:`ndc_pixels` of bounds ``(4, m)`` (rows ``lo x, lo y, hi x, hi y``) in one pass,
-    returned ``(m, 4)``: the same operations, a ceiling taken as the negated floor of
-    the negation (exact)."""
+    the rectangles ``(4, m)``: the same operations, a ceiling taken as the negated floor
+    of the negation (exact)."""
     p = (b + 1.0) * 0.5 * np.array([[size[0]], [size[1]], [size[0]], [size[1]]], np.float64)
     np.clip(p, -1e9, 1e9, out=p)
     p -= 0.5
@@ -146,7 +165,7 @@ def _pixels4(b: NDArray[np.float64], size: tuple[int, int], margin_px: float) ->
     p *= _SIGN4
     np.floor(p, out=p)
     p *= _SIGN4
-    return np.ascontiguousarray(p.T.astype(np.int64))
+    return p.astype(np.int64)
 
 
 #: Negates the low sides so that one floor takes their ceiling.
@@ -164,8 +183,9 @@ def clipped_rects(
 ) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
     """:func:`point_rects` of eye-space point sets ``(m, k, 3)`` that cross the clip plane
     (``depth`` ``(m, k)``, their depths ``-z``)."""
-    return _clipped(np.ascontiguousarray(v.transpose(2, 1, 0)), np.ascontiguousarray(depth.T), edges, proj, size,
-                    clip_m, margin_px)
+    rect, front = _clipped(np.ascontiguousarray(v.transpose(2, 1, 0)), np.ascontiguousarray(depth.T), edges, proj,
+                           size, clip_m, margin_px)
+    return np.ascontiguousarray(rect.T), front
 
 
 def _clipped(
@@ -179,7 +199,8 @@ def _clipped(
 ) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
     """:func:`clipped_rects` of eye-space sets coordinate-major, ``v`` ``(3, k, m)``, ``depth``
     ``(k, m)``: the vertices in front and the points where the sides cross the plane,
-    projected; x and y side by side, so each step is one numpy call for both."""
+    projected; x and y side by side, so each step is one numpy call for both.  The
+    rectangles come coordinate-major, ``(4, m)``."""
     a, b = v[:, edges[:, 0]], v[:, edges[:, 1]]  # (3, e, m)
     da, db = depth[edges[:, 0]], depth[edges[:, 1]]
     cross = (da - clip_m) * (db - clip_m) < 0
@@ -224,9 +245,14 @@ def box_rects(
     ``(n,)`` whether any part of each box lies in front of that plane."""
     lo_ = np.asarray(lo, np.float64).reshape(-1, 3)
     hi_ = np.asarray(hi, np.float64).reshape(-1, 3)
-    # the corners coordinate-major (3, 8, n), as coord_rects takes them
-    corners = np.where(_CORNER_BITS[:, :, None], hi_.T[:, None, :], lo_.T[:, None, :])
-    return coord_rects(corners, BOX_EDGES, np.asarray(view, np.float64), np.asarray(proj, np.float64), size, clip_m)
+    return coord_rects(box_corners_ckm(lo_, hi_), BOX_EDGES, np.asarray(view, np.float64),
+                       np.asarray(proj, np.float64), size, clip_m)
+
+
+def box_corners_ckm(lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The corners of boxes ``(n, 3)`` coordinate-major, ``(3, 8, n)`` (as :func:`coord_rects`
+    takes them), in the order :data:`BOX_EDGES` joins."""
+    return np.where(_CORNER_BITS[:, :, None], hi.T[:, None, :], lo.T[:, None, :])
 
 
 #: ``(3, 8)`` whether corner ``c`` of a box takes coordinate ``j`` from its upper corner
