@@ -239,45 +239,52 @@ def cull_portals(
                     continue
             opened += 1
             ob = bound[t]
-            if ob is None:
+            if ob is None:  # the first visit
                 n = (a0, a1, a2, a3)
                 bound[t] = n
                 lists[t] = [n]
                 depth[t] = dn
                 order.append(t)
-            else:
-                have = lists[t]
-                covered = False
-                for q in have:
-                    if q[0] <= a0 and q[1] <= a1 and q[2] >= a2 and q[3] >= a3:
-                        covered = True
-                        break
-                if covered:
-                    continue
-                n = (a0, a1, a2, a3)
-                have = [q for q in have if not (a0 <= q[0] and a1 <= q[1] and a2 >= q[2] and a3 >= q[3])]
-                have.append(n)
-                if len(have) > max_vsas:
-                    have = [_bounding(have)]
-                lists[t] = have
-                b0, b1, b2, b3 = ob
-                grew = False
-                if a0 < b0:
-                    b0, grew = a0, True
-                if a1 < b1:
-                    b1, grew = a1, True
-                if a2 > b2:
-                    b2, grew = a2, True
-                if a3 > b3:
-                    b3, grew = a3, True
-                if not grew:
-                    continue
-                bound[t] = (b0, b1, b2, b3)
-                if dn < depth[t]:
-                    depth[t] = dn
-            if not queued[t]:
                 push(t)
                 queued[t] = True
+            else:
+                have = lists[t]
+                # one pass: is the new VSA covered by one the cell has (nothing to do), or
+                # does it cover some (they go)?  The list is changed in place when none
+                # goes (the common case: no new list per arrival)
+                drop = False
+                for q in have:
+                    q0, q1, q2, q3 = q
+                    if q0 <= a0 and q1 <= a1 and q2 >= a2 and q3 >= a3:
+                        break
+                    if a0 <= q0 and a1 <= q1 and a2 >= q2 and a3 >= q3:
+                        drop = True
+                else:
+                    n = (a0, a1, a2, a3)
+                    if drop:
+                        have = [q for q in have if not (a0 <= q[0] and a1 <= q[1] and a2 >= q[2] and a3 >= q[3])]
+                        lists[t] = have
+                    have.append(n)
+                    if len(have) > max_vsas:
+                        lists[t] = [_bounding(have)]
+                    b0, b1, b2, b3 = ob
+                    grew = False
+                    if a0 < b0:
+                        b0, grew = a0, True
+                    if a1 < b1:
+                        b1, grew = a1, True
+                    if a2 > b2:
+                        b2, grew = a2, True
+                    if a3 > b3:
+                        b3, grew = a3, True
+                    if not grew:
+                        continue
+                    bound[t] = (b0, b1, b2, b3)
+                    if dn < depth[t]:
+                        depth[t] = dn
+                    if not queued[t]:
+                        push(t)
+                        queued[t] = True
     ids = graph.ids.tolist()
     return PortalCull(
         order=[ids[i] for i in order],
