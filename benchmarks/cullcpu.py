@@ -88,8 +88,11 @@ def culling_at(rev: str) -> Culling:
     root = Path(portals.__file__).resolve().parents[1]
     mods: dict[str, types.ModuleType] = {}
     for name in ("screenrects", "portals"):
-        got = subprocess.run(["git", "-C", str(root), "show", f"{rev}:shared/{name}.py"],
-                             capture_output=True, text=True, check=False)
+        try:
+            got = subprocess.run(["git", "-C", str(root), "show", f"{rev}:shared/{name}.py"],
+                                 capture_output=True, text=True, check=False)
+        except OSError as exc:
+            raise InputError(f"--cull-against {rev}: git could not be run ({exc.strerror})") from None
         if got.returncode != 0:
             raise InputError(f"--cull-against {rev}: no shared/{name}.py at that revision of {root}")
         mod_name = f"walkstream_cull_{name}_at_{abs(hash(rev))}"
