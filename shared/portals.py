@@ -574,9 +574,10 @@ def _near_far(proj: NDArray[np.float64]) -> tuple[float, float] | None:
     """The near and far planes' depths of a perspective projection (``-z`` in eye space:
     the frustum test's two planes that are not through the eye), or None for another
     kind of projection."""
-    if proj[3, 0] != 0 or proj[3, 1] != 0 or proj[3, 2] != -1 or proj[3, 3] != 0 or proj[2, 0] != 0 or proj[2, 1] != 0:
+    (a, b, c, d), (e, f, g, h) = proj[2:].tolist()
+    if (a, b, e, f, g, h) != (0.0, 0.0, 0.0, 0.0, -1.0, 0.0):
         return None
-    return float(proj[2, 3] / (proj[2, 2] - 1.0)), float(proj[2, 3] / (proj[2, 2] + 1.0))
+    return d / (c - 1.0), d / (c + 1.0)
 
 
 #: Boxes culled in one numpy batch (:func:`cull_parts`).

@@ -201,6 +201,8 @@ def _clipped(
     ``(k, m)``: the vertices in front and the points where the sides cross the plane,
     projected; x and y side by side, so each step is one numpy call for both.  The
     rectangles come coordinate-major, ``(4, m)``."""
+    if v.shape[2] <= _FEW:
+        return _clipped_few(v, depth, edges, proj, size, clip_m, margin_px)
     a, b = v[:, edges[:, 0]], v[:, edges[:, 1]]  # (3, e, m)
     da, db = depth[edges[:, 0]], depth[edges[:, 1]]
     cross = (da - clip_m) * (db - clip_m) < 0
@@ -215,6 +217,52 @@ def _clipped(
     lo = np.where(ok, xy, big).min(axis=1)
     hi = np.where(ok, xy, -big).max(axis=1)
     return _pixels4(np.concatenate([lo, hi]), size, margin_px), np.any(ok, axis=0)
+
+
+#: Sets up to which :func:`_clipped` works in plain floats (a frame clips a handful:
+#: the portals and boxes that straddle the eye's plane; some forty numpy calls cost more).
+_FEW = 12
+
+
+def _clipped_few(
+    v: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    edges: NDArray[np.int64],
+    proj: NDArray[np.float64],
+    size: tuple[int, int],
+    clip_m: float,
+    margin_px: float,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """:func:`_clipped` of a few sets in plain Python floats: the same operations in the
+    same order (IEEE doubles either way), so the same rectangles."""
+    p00, p02, p11, p12 = float(proj[0, 0]), float(proj[0, 2]), float(proj[1, 1]), float(proj[1, 2])
+    w, h = float(size[0]), float(size[1])
+    pairs = edges.tolist()
+    big = 1e30
+    out: list[list[int]] = [[], [], [], []]
+    fronts = []
+    for pts, dep in zip(v.transpose(2, 1, 0).tolist(), depth.T.tolist(), strict=True):
+        xlo = ylo = big
+        xhi = yhi = -big
+        front = False
+        for (x, y, z), d in zip(pts, dep, strict=True):
+            if d >= clip_m:
+                front = True
+                px, py = (p00 * x + p02 * z) / d, (p11 * y + p12 * z) / d
+                xlo, xhi, ylo, yhi = min(xlo, px), max(xhi, px), min(ylo, py), max(yhi, py)
+        for i, j in pairs:
+            da, db = dep[i], dep[j]
+            if (da - clip_m) * (db - clip_m) < 0:
+                t = (clip_m - da) / (db - da)
+                a, b = pts[i], pts[j]
+                x, y, z = a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]), a[2] + t * (b[2] - a[2])
+                px, py = (p00 * x + p02 * z) / -z, (p11 * y + p12 * z) / -z
+                xlo, xhi, ylo, yhi = min(xlo, px), max(xhi, px), min(ylo, py), max(yhi, py)
+        fronts.append(front)
+        for row, ndc, wh, sign in ((0, xlo, w, -1.0), (1, ylo, h, -1.0), (2, xhi, w, 1.0), (3, yhi, h, 1.0)):
+            q = min(max((ndc + 1.0) * 0.5 * wh, -1e9), 1e9) - 0.5 + sign * margin_px
+            out[row].append(math.ceil(q) if sign < 0 else math.floor(q))
+    return np.array(out, np.int64).reshape(4, -1), np.array(fronts, bool)
 
 
 def ndc_pixels(
