@@ -219,9 +219,9 @@ def _clipped(
     return _pixels4(np.concatenate([lo, hi]), size, margin_px), np.any(ok, axis=0)
 
 
-#: Sets up to which :func:`_clipped` works in plain floats (a frame clips a handful:
+#: Sets up to which :func:`_clipped` works in plain floats (a frame clips a handful or two:
 #: the portals and boxes that straddle the eye's plane; some forty numpy calls cost more).
-_FEW = 12
+_FEW = 16
 
 
 def _clipped_few(
@@ -249,7 +249,14 @@ def _clipped_few(
             if d >= clip_m:
                 front = True
                 px, py = (p00 * x + p02 * z) / d, (p11 * y + p12 * z) / d
-                xlo, xhi, ylo, yhi = min(xlo, px), max(xhi, px), min(ylo, py), max(yhi, py)
+                if px < xlo:
+                    xlo = px
+                if px > xhi:
+                    xhi = px
+                if py < ylo:
+                    ylo = py
+                if py > yhi:
+                    yhi = py
         for i, j in pairs:
             da, db = dep[i], dep[j]
             if (da - clip_m) * (db - clip_m) < 0:
@@ -257,7 +264,14 @@ def _clipped_few(
                 a, b = pts[i], pts[j]
                 x, y, z = a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]), a[2] + t * (b[2] - a[2])
                 px, py = (p00 * x + p02 * z) / -z, (p11 * y + p12 * z) / -z
-                xlo, xhi, ylo, yhi = min(xlo, px), max(xhi, px), min(ylo, py), max(yhi, py)
+                if px < xlo:
+                    xlo = px
+                if px > xhi:
+                    xhi = px
+                if py < ylo:
+                    ylo = py
+                if py > yhi:
+                    yhi = py
         fronts.append(front)
         for row, ndc, wh, sign in ((0, xlo, w, -1.0), (1, ylo, h, -1.0), (2, xhi, w, 1.0), (3, yhi, h, 1.0)):
             q = min(max((ndc + 1.0) * 0.5 * wh, -1e9), 1e9) - 0.5 + sign * margin_px
