@@ -22,6 +22,7 @@ two must keep the same parts, which is checked on every frame.
 
 from __future__ import annotations
 
+import functools
 import math
 import subprocess
 import sys
@@ -168,7 +169,7 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
     then = culling_at(against) if against else None
     proj = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 1000.0).astype(np.float64)
     scenes: list[tuple[str, Callable[[], Any]]] = [("hall 16x16", lambda: _hall_frames(hall_frames))]
-    scenes += [(f"seed {s}", lambda s=s: _seed_frames(s, out, log)) for s in seeds]
+    scenes += [(f"seed {s}", functools.partial(_seed_frames, s, out, log)) for s in seeds]
     rows = []
     for name, make in scenes:
         frames, boxes, fog = make()

@@ -15,7 +15,8 @@ behind them were drawn, twice the triangles the walker saw down a generated offi
 corridor.)  The points are clipped against a plane ``clip_m`` in front of the eye
 first, so that a vertex behind the eye never projects to a wrong place (see
 :mod:`walkstream.shared.portals` for why the plane is not the camera's near plane).
-Pure numpy, every set of a batch at once.
+Pure numpy, every set of a batch at once, coordinate-major (a handful of sets that
+straddle the clip plane in plain floats, the same operations).
 """
 
 from __future__ import annotations
