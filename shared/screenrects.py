@@ -21,6 +21,7 @@ straddle the clip plane in plain floats, the same operations).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -159,14 +160,27 @@ def _pixels4(b: NDArray[np.float64], size: tuple[int, int], margin_px: float) ->
     """:func:`ndc_pixels` of bounds ``(4, m)`` (rows ``lo x, lo y, hi x, hi y``) in one pass,
     the rectangles ``(4, m)``: the same operations, a ceiling taken as the negated floor
     of the negation (exact)."""
-    p = (b + 1.0) * 0.5 * np.array([[size[0]], [size[1]], [size[0]], [size[1]]], np.float64)
+    wh, margin = _columns(int(size[0]), int(size[1]), float(margin_px))
+    p = b + 1.0
+    p *= 0.5
+    p *= wh
     np.clip(p, -1e9, 1e9, out=p)
     p -= 0.5
-    p += np.array([[-margin_px], [-margin_px], [margin_px], [margin_px]])
+    p += margin
     p *= _SIGN4
     np.floor(p, out=p)
     p *= _SIGN4
     return p.astype(np.int64)
+
+
+@functools.lru_cache(maxsize=16)
+def _columns(w: int, h: int, margin_px: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The viewport's size and the margin as ``(4, 1)`` columns for :func:`_pixels4` (made
+    once per size and margin; read only)."""
+    wh = np.array([[w], [h], [w], [h]], np.float64)
+    margin = np.array([[-margin_px], [-margin_px], [margin_px], [margin_px]])
+    wh.flags.writeable = margin.flags.writeable = False
+    return wh, margin
 
 
 #: Negates the low sides so that one floor takes their ceiling.
