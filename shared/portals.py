@@ -84,7 +84,6 @@ from walkstream.shared.screenrects import (
     CENTRE_MARGIN_PX,
     box_corners_ckm,
     box_rects,
-    coord_rects,
     corner_secant,
     point_rects,
     rects_ckm,
@@ -342,8 +341,10 @@ def _portal_rows(
         return lambda c: ()
     if naive:
         rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive, margin_px)
+        rect4 = rect.T
     else:
-        rect, front = coord_rects(graph.poly_ckm, graph.edges, V, P, size, clip_m, margin_px)
+        rect4, front, _near, _far = rects_ckm(graph.poly_ckm, graph.edges, V, P, size, clip_m, margin_px)
+        rect = rect4.T
     # 0 culled, 1 pass through, 2 the rectangle
     what = np.where(front, 2, 0).astype(np.int8)
     if not naive:
@@ -358,11 +359,22 @@ def _portal_rows(
     if closed:
         what[np.isin(graph.portal, np.fromiter(closed, np.int64, len(closed)))] = 0
     if m <= _LIST_ALL:
-        table: list[Any] = rect.tolist()
+        # a rectangle that meets no pixel of the viewport meets no VSA (they all lie
+        # within it): such a portal is tested as before (the counts stay) but against
+        # an empty rectangle, and only the others are turned into ints (a tenth of a
+        # generated office's portals at a time)
+        x0, y0, x1, y1 = rect4
+        opens = np.flatnonzero((what == 2) & (x0 <= x1) & (y0 <= y1) & (x1 >= 0) & (y1 >= 0)
+                               & (x0 < size[0]) & (y0 < size[1]))
+        sparse = 2 * len(opens) < m  # else all at once is cheaper (an open hall)
+        table: list[Any] = [_NO_PIXEL] * m if sparse else rect.tolist()
         for i in np.flatnonzero(what == 0).tolist():
             table[i] = None
         for i in np.flatnonzero(what == 1).tolist():
             table[i] = True
+        if sparse:
+            for i, r in zip(opens.tolist(), rect4[:, opens].T.tolist(), strict=True):
+                table[i] = r
         return lambda c: zip(adjacency[c], table[starts[c] : starts[c + 1]], strict=True)
     done: dict[int, list[tuple[int, Any]]] = {}
 
