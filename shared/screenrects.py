@@ -137,22 +137,30 @@ def rects_ckm(
     if m == 0:
         z = np.zeros(0)
         return np.zeros((4, 0), np.int64), np.zeros(0, bool), z, z
-    v = (view[:3, :3] @ pts.reshape(3, -1) + view[:3, 3:4]).reshape(pts.shape)  # (3, k, m) eye space
-    depth = -v[2]
+    # the projection's numerators and the depth straight from world points: one 3 x 3
+    # product (the camera's rows combined with the projection's) instead of the eye
+    # space and four passes more over every vertex
+    R, t = view[:3, :3], view[:3, 3]
+    p00, p02, p11, p12 = proj[0, 0], proj[0, 2], proj[1, 1], proj[1, 2]
+    rows = np.array([p00 * R[0] + p02 * R[2], p11 * R[1] + p12 * R[2], -R[2]])
+    shift = np.array([[p00 * t[0] + p02 * t[2]], [p11 * t[1] + p12 * t[2]], [-t[2]]])
+    q = (rows @ pts.reshape(3, -1) + shift).reshape(pts.shape)  # (3, k, m): x and y numerators, depth
+    depth = q[2]
     near_d, far_d = depth.min(axis=0), depth.max(axis=0)
     ahead = near_d >= clip_m
     front = far_d >= clip_m
     # the common case, nothing to clip: the vertices' projections bound the set;
     # computed for every set (elementwise, so each set's figures are the same as
     # alone) and the others overwritten below
-    d = np.where(ahead, depth, 1.0)
-    x = (proj[0, 0] * v[0] + proj[0, 2] * v[2]) / d
-    y = (proj[1, 1] * v[1] + proj[1, 2] * v[2]) / d
-    rect = _pixels4(np.stack([x.min(axis=0), y.min(axis=0), x.max(axis=0), y.max(axis=0)]), size, margin_px)
+    xy = q[:2] / np.where(ahead, depth, 1.0)
+    rect = _pixels4(np.concatenate([xy.min(axis=1), xy.max(axis=1)]), size, margin_px)
     rect[:, ~front] = _EMPTY_COL
     rest = ~ahead & front
     if rest.any():
-        rect[:, rest], front[rest] = _clipped(v[:, :, rest], depth[:, rest], edges, proj, size, clip_m, margin_px)
+        # the sets that cross the clip plane, clipped in eye space
+        part = pts[:, :, rest]
+        v = (R @ part.reshape(3, -1) + view[:3, 3:4]).reshape(part.shape)
+        rect[:, rest], front[rest] = _clipped(v, -v[2], edges, proj, size, clip_m, margin_px)
     return rect, front, near_d, far_d
 
 
