@@ -28,7 +28,9 @@ Helpers of those, not commands of their own:
 - :mod:`.cellcodec`: the cell-contents codec's versions side by side (a table of
   ``walkstream bench interiors``);
 - :mod:`.portalwalk`: the first portal walk, the reference that :mod:`.portals` times
-  and tests/test_portalwalk.py checks the faster walk against.
+  and tests/test_portalwalk.py checks the faster walk against;
+- :mod:`.cullcpu`: the culling's CPU time per frame (``walkstream bench portals
+  --cull``), beside the culling of an earlier revision.
 
 Scripts, not commands (they time product code against itself, no scene to bake):
 

@@ -60,6 +60,9 @@ class PortalGraph:
     row_start: list[int] = field(init=False, repr=False, compare=False)
     #: ``(k, 2)`` the vertex index pairs joining a padded polygon's sides.
     edges: NDArray[np.int64] = field(init=False, repr=False, compare=False)
+    #: :attr:`poly` coordinate-major, ``(3, k, m)``: the layout the frame's batch projects
+    #: (:func:`~walkstream.shared.screenrects.coord_rects`), made once per scene.
+    poly_ckm: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         target = self.target.tolist()
@@ -70,6 +73,7 @@ class PortalGraph:
         object.__setattr__(self, "adjacency", adjacency)
         object.__setattr__(self, "row_start", starts)
         object.__setattr__(self, "edges", np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1))
+        object.__setattr__(self, "poly_ckm", np.ascontiguousarray(self.poly.transpose(2, 1, 0)))
 
     @classmethod
     def from_topology(cls, topology: Any) -> PortalGraph:

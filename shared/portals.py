@@ -29,7 +29,10 @@ Pure numpy, no GL.  The portals come as a :class:`~walkstream.shared.portalgraph
    a dozen segments is seen to its end); a caller may still give one (``max_depth``).
 5. Each queued cell's contents are culled by their boxes: a box is kept when it comes
    within the fog distance and its clipped, projected rectangle meets one of the
-   cell's VSAs; the frustum test follows (for the far plane), as in the paper.
+   cell's VSAs; the frustum test follows, as in the paper (of its six planes only the
+   near and the far one can cull such a box: a VSA lies within the viewport, so a
+   box whose rectangle meets one has a point inside each side plane; the two are
+   tested as depths).
 
 Why a clip plane of its own (``clip_m``, 3 cm) and not the camera's near plane
 (0.1 m): a door 5 cm in front of the eye lies wholly before the camera's near plane,
@@ -51,7 +54,13 @@ step (:mod:`walkstream.benchmarks.portalwalk` keeps that one; tests/test_portalw
 a walk by levels with numpy batches per level was not taken, since the FIFO order
 decides the VSA lists (which VSAs reach a cell before it is looked through) and a
 level costs tens of numpy calls whatever its size, more than the few cells of a
-level cost in Python.
+level cost in Python.  A frame's cost is mostly numpy's per-call cost, not the
+elements: the batches run coordinate-major (:func:`~walkstream.shared.screenrects.coord_rects`,
+each call one pass over long rows), the few sets that straddle the clip plane are
+clipped in plain floats, and the parts culling takes every visible cell's boxes in
+chunks of 1,024 (temporaries that stay in a fast cache; twice less CPU than one
+batch of a few thousand boxes); a VSA arriving at a cell is appended in place.
+``walkstream bench portals --cull`` times it (:mod:`walkstream.benchmarks.cullcpu`).
 """
 
 from __future__ import annotations
@@ -61,6 +70,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -69,7 +79,15 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.errors import InputError
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.screenrects import CENTRE_MARGIN_PX, box_rects, corner_secant, point_rects
+from walkstream.shared.screenrects import (
+    BOX_EDGES,
+    CENTRE_MARGIN_PX,
+    box_corners_ckm,
+    box_rects,
+    corner_secant,
+    point_rects,
+    rects_ckm,
+)
 
 __all__ = [
     "CULLING_MODES",
@@ -229,45 +247,52 @@ def cull_portals(
                     continue
             opened += 1
             ob = bound[t]
-            if ob is None:
+            if ob is None:  # the first visit
                 n = (a0, a1, a2, a3)
                 bound[t] = n
                 lists[t] = [n]
                 depth[t] = dn
                 order.append(t)
-            else:
-                have = lists[t]
-                covered = False
-                for q in have:
-                    if q[0] <= a0 and q[1] <= a1 and q[2] >= a2 and q[3] >= a3:
-                        covered = True
-                        break
-                if covered:
-                    continue
-                n = (a0, a1, a2, a3)
-                have = [q for q in have if not (a0 <= q[0] and a1 <= q[1] and a2 >= q[2] and a3 >= q[3])]
-                have.append(n)
-                if len(have) > max_vsas:
-                    have = [_bounding(have)]
-                lists[t] = have
-                b0, b1, b2, b3 = ob
-                grew = False
-                if a0 < b0:
-                    b0, grew = a0, True
-                if a1 < b1:
-                    b1, grew = a1, True
-                if a2 > b2:
-                    b2, grew = a2, True
-                if a3 > b3:
-                    b3, grew = a3, True
-                if not grew:
-                    continue
-                bound[t] = (b0, b1, b2, b3)
-                if dn < depth[t]:
-                    depth[t] = dn
-            if not queued[t]:
                 push(t)
                 queued[t] = True
+            else:
+                have = lists[t]
+                # one pass: is the new VSA covered by one the cell has (nothing to do), or
+                # does it cover some (they go)?  The list is changed in place when none
+                # goes (the common case: no new list per arrival)
+                drop = False
+                for q in have:
+                    q0, q1, q2, q3 = q
+                    if q0 <= a0 and q1 <= a1 and q2 >= a2 and q3 >= a3:
+                        break
+                    if a0 <= q0 and a1 <= q1 and a2 >= q2 and a3 >= q3:
+                        drop = True
+                else:
+                    n = (a0, a1, a2, a3)
+                    if drop:
+                        have = [q for q in have if not (a0 <= q[0] and a1 <= q[1] and a2 >= q[2] and a3 >= q[3])]
+                        lists[t] = have
+                    have.append(n)
+                    if len(have) > max_vsas:
+                        lists[t] = [_bounding(have)]
+                    b0, b1, b2, b3 = ob
+                    grew = False
+                    if a0 < b0:
+                        b0, grew = a0, True
+                    if a1 < b1:
+                        b1, grew = a1, True
+                    if a2 > b2:
+                        b2, grew = a2, True
+                    if a3 > b3:
+                        b3, grew = a3, True
+                    if not grew:
+                        continue
+                    bound[t] = (b0, b1, b2, b3)
+                    if dn < depth[t]:
+                        depth[t] = dn
+                    if not queued[t]:
+                        push(t)
+                        queued[t] = True
     ids = graph.ids.tolist()
     return PortalCull(
         order=[ids[i] for i in order],
@@ -314,7 +339,12 @@ def _portal_rows(
     adjacency, starts = graph.adjacency, graph.row_start
     if m == 0:
         return lambda c: ()
-    rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive, margin_px)
+    if naive:
+        rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive, margin_px)
+        rect4 = rect.T
+    else:
+        rect4, front, _near, _far = rects_ckm(graph.poly_ckm, graph.edges, V, P, size, clip_m, margin_px)
+        rect = rect4.T
     # 0 culled, 1 pass through, 2 the rectangle
     what = np.where(front, 2, 0).astype(np.int8)
     if not naive:
@@ -329,11 +359,22 @@ def _portal_rows(
     if closed:
         what[np.isin(graph.portal, np.fromiter(closed, np.int64, len(closed)))] = 0
     if m <= _LIST_ALL:
-        table: list[Any] = rect.tolist()
+        # a rectangle that meets no pixel of the viewport meets no VSA (they all lie
+        # within it): such a portal is tested as before (the counts stay) but against
+        # an empty rectangle, and only the others are turned into ints (a tenth of a
+        # generated office's portals at a time)
+        x0, y0, x1, y1 = rect4
+        opens = np.flatnonzero((what == 2) & (x0 <= x1) & (y0 <= y1) & (x1 >= 0) & (y1 >= 0)
+                               & (x0 < size[0]) & (y0 < size[1]))
+        sparse = 2 * len(opens) < m  # else all at once is cheaper (an open hall)
+        table: list[Any] = [_NO_PIXEL] * m if sparse else rect.tolist()
         for i in np.flatnonzero(what == 0).tolist():
             table[i] = None
         for i in np.flatnonzero(what == 1).tolist():
             table[i] = True
+        if sparse:
+            for i, r in zip(opens.tolist(), rect4[:, opens].T.tolist(), strict=True):
+                table[i] = r
         return lambda c: zip(adjacency[c], table[starts[c] : starts[c + 1]], strict=True)
     done: dict[int, list[tuple[int, Any]]] = {}
 
@@ -495,23 +536,73 @@ def cull_parts(
     # every visible cell's boxes in one vectorised pass, each against its own cell's VSAs
     seen = [c for c in cells if c in boxes and vsas is not None and c in vsas and len(boxes[c][0])]
     for c in cells:
-        if c in boxes and c not in seen:
+        if c in boxes and not (vsas is not None and c in vsas and len(boxes[c][0])):
             out[c] = np.zeros(len(boxes[c][0]), bool)
     if not seen or vsas is None:
         return out
     counts = [len(boxes[c][0]) for c in seen]
     lo = np.concatenate([boxes[c][0] for c in seen])
     hi = np.concatenate([boxes[c][1] for c in seen])
-    owner = np.repeat(np.arange(len(seen)), counts)
+    # each cell's VSAs padded to the longest list with empty rectangles, made in one call
+    # from plain ints (a numpy assignment per cell costs more than the whole test)
     kmax = max(len(vsas[c]) for c in seen)
-    v = np.tile(np.array([1, 1, 0, 0], np.int64), (len(seen), kmax, 1))  # empty rectangles
-    for i, c in enumerate(seen):
-        v[i, : len(vsas[c])] = vsas[c]
-    keep = box_distance(lo, hi, e) <= fog_m
-    rect, front = box_rects(lo, hi, view, proj, size, clip_m)
-    meet = _meet(rect[:, None, :], v[owner])  # (n, kmax)
-    keep &= front & np.any(meet, axis=1)
-    keep[keep] = frustum_cull(lo[keep], hi[keep], vp)
-    for c, part in zip(seen, np.split(keep, np.cumsum(counts)[:-1]), strict=True):
-        out[c] = part
+    flat: list[tuple[int, int, int, int]] = []
+    for c in seen:
+        have = vsas[c]
+        flat.extend(have)
+        if len(have) < kmax:
+            flat.extend([_NO_PIXEL] * (kmax - len(have)))
+    # (4, kmax, cells): a coordinate of one VSA of every cell per row, as the rectangles come
+    v = np.fromiter(chain.from_iterable(flat), np.int64, 4 * len(flat)).reshape(len(seen), kmax, 4).transpose(2, 1, 0)
+    owner = np.repeat(np.arange(len(seen)), counts)
+    keep = np.ones(len(lo), bool) if math.isinf(fog_m) else box_distance(lo, hi, e) <= fog_m
+    # only the boxes within the fog are projected
+    idx = None if keep.all() else np.flatnonzero(keep)
+    if idx is not None:
+        lo, hi, owner = lo[idx], hi[idx], owner[idx]
+    V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
+    planes = _near_far(P)
+    ok = np.empty(len(lo), bool)
+    # a chunk's temporaries (8 corners of each box) stay within a fast cache: two times
+    # less CPU than one batch of a few thousand boxes
+    for a in range(0, len(lo), _BOX_CHUNK):
+        b = a + _BOX_CHUNK
+        rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo[a:b], hi[a:b]), BOX_EDGES, V, P, size, clip_m)
+        vo = v[:, :, owner[a:b]]  # (4, kmax, n) each box's own cell's VSAs
+        meet = ((np.maximum(rect[0], vo[0]) <= np.minimum(rect[2], vo[2]))
+                & (np.maximum(rect[1], vo[1]) <= np.minimum(rect[3], vo[3])))
+        got = front & np.any(meet, axis=0)
+        if planes is None:
+            got[got] = frustum_cull(lo[a:b][got], hi[a:b][got], vp)
+        else:
+            # the frustum's other four planes cannot cull a box whose rectangle meets a
+            # VSA: a VSA lies within the viewport, so some point of the box lies inside
+            # each of them (by at least a third of a pixel); the near and the far plane
+            # are depths
+            got &= (far_d >= planes[0]) & (near_d <= planes[1])
+        ok[a:b] = got
+    if idx is None:
+        keep = ok
+    else:
+        keep[idx] = ok
+    ends = np.cumsum(counts).tolist()
+    for c, a, b in zip(seen, [0, *ends[:-1]], ends, strict=True):
+        out[c] = keep[a:b]
     return out
+
+
+def _near_far(proj: NDArray[np.float64]) -> tuple[float, float] | None:
+    """The near and far planes' depths of a perspective projection (``-z`` in eye space:
+    the frustum test's two planes that are not through the eye), or None for another
+    kind of projection."""
+    (a, b, c, d), (e, f, g, h) = proj[2:].tolist()
+    if (a, b, e, f, g, h) != (0.0, 0.0, 0.0, 0.0, -1.0, 0.0):
+        return None
+    return d / (c - 1.0), d / (c + 1.0)
+
+
+#: Boxes culled in one numpy batch (:func:`cull_parts`).
+_BOX_CHUNK = 1024
+
+#: An empty whole-pixel rectangle (no pixel centre): pads a cell's VSAs.
+_NO_PIXEL = (1, 1, 0, 0)

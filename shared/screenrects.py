@@ -15,11 +15,13 @@ behind them were drawn, twice the triangles the walker saw down a generated offi
 corridor.)  The points are clipped against a plane ``clip_m`` in front of the eye
 first, so that a vertex behind the eye never projects to a wrong place (see
 :mod:`walkstream.shared.portals` for why the plane is not the camera's near plane).
-Pure numpy, every set of a batch at once.
+Pure numpy, every set of a batch at once, coordinate-major (a handful of sets that
+straddle the clip plane in plain floats, the same operations).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -32,6 +34,9 @@ __all__ = [
     "full_vsa",
     "corner_secant",
     "point_rects",
+    "coord_rects",
+    "rects_ckm",
+    "box_corners_ckm",
     "clipped_rects",
     "ndc_pixels",
     "box_rects",
@@ -80,54 +85,114 @@ def point_rects(
     m = len(pts)
     if m == 0:
         return np.zeros((0, 4), np.int64), np.zeros(0, bool)
+    if not naive:
+        return coord_rects(np.ascontiguousarray(pts.transpose(2, 1, 0)), edges, view, proj, size, clip_m, margin_px)
     # eye space (m, k, 3); one 2-d product (a stack of m small ones is several times slower)
     v = (pts.reshape(-1, 3) @ view[:3, :3].T + view[:3, 3]).reshape(pts.shape)
-    if naive:
-        # the paper's Figure 4: culled only when every vertex is behind the eye; the
-        # others projected as they are, a vertex behind the eye flipped through it
-        h = np.concatenate([v, np.ones((*v.shape[:2], 1))], axis=2) @ proj.T
-        w = np.where(np.abs(h[..., 3]) < 1e-12, 1e-12, h[..., 3])
-        ndc = h[..., :2] / w[..., None]
-        front = np.any(-v[..., 2] > 0, axis=1)
-        lo, hi = ndc.min(axis=1), ndc.max(axis=1)
-    else:
-        depth = -v[..., 2]
-        near_d, far_d = _kmin(depth), _kmax(depth)
-        ahead = near_d >= clip_m
-        front = np.ones(m, bool)
-        # the common case, nothing to clip: the vertices' projections bound the set;
-        # computed for every row (elementwise, so each row's figures are the same as
-        # alone) and the others overwritten below
-        d = np.where(ahead[:, None], depth, 1.0)
-        x = (proj[0, 0] * v[..., 0] + proj[0, 2] * v[..., 2]) / d
-        y = (proj[1, 1] * v[..., 1] + proj[1, 2] * v[..., 2]) / d
-        rect = ndc_pixels(np.stack([_kmin(x), _kmin(y)], axis=1), np.stack([_kmax(x), _kmax(y)], axis=1), size,
-                          margin_px)
-        behind = far_d < clip_m
-        front[behind] = False
-        rect[behind] = (1, 1, 0, 0)
-        rest = ~ahead & ~behind
-        if rest.any():
-            rect[rest], front[rest] = clipped_rects(v[rest], depth[rest], edges, proj, size, clip_m, margin_px)
-        return rect, front
-    return ndc_pixels(lo, hi, size, margin_px), front
+    # the paper's Figure 4: culled only when every vertex is behind the eye; the
+    # others projected as they are, a vertex behind the eye flipped through it
+    h = np.concatenate([v, np.ones((*v.shape[:2], 1))], axis=2) @ proj.T
+    w = np.where(np.abs(h[..., 3]) < 1e-12, 1e-12, h[..., 3])
+    ndc = h[..., :2] / w[..., None]
+    front = np.any(-v[..., 2] > 0, axis=1)
+    return ndc_pixels(ndc.min(axis=1), ndc.max(axis=1), size, margin_px), front
 
 
-def _kmin(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``(m,)`` minima over the second axis of ``(m, k)``: ``k - 1`` elementwise minima,
-    cheaper than a reduction along a short axis for the few vertices of a portal or box."""
-    out = a[:, 0].copy()
-    for j in range(1, a.shape[1]):
-        np.minimum(out, a[:, j], out=out)
-    return out
+#: The empty rectangle (no pixel centre) of a set wholly behind the clip plane, as a column.
+_EMPTY_COL = np.array([[1], [1], [0], [0]], np.int64)
 
 
-def _kmax(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``(m,)`` maxima over the second axis of ``(m, k)`` (see :func:`_kmin`)."""
-    out = a[:, 0].copy()
-    for j in range(1, a.shape[1]):
-        np.maximum(out, a[:, j], out=out)
-    return out
+def coord_rects(
+    pts: NDArray[np.float64],
+    edges: NDArray[np.int64],
+    view: NDArray[np.float64],
+    proj: NDArray[np.float64],
+    size: tuple[int, int],
+    clip_m: float,
+    margin_px: float = CENTRE_MARGIN_PX,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """:func:`point_rects` (not naive) of point sets given coordinate-major, ``pts`` ``(3, k, m)``.
+
+    The same figures as :func:`point_rects` at about two thirds of its cost: every
+    array the frame's batch makes is a run of ``m`` (a coordinate of a vertex of every
+    set), so each numpy call is one pass over long rows; the vertices' minima and
+    maxima are reductions over the leading axis.
+    """
+    rect, front, _near, _far = rects_ckm(pts, edges, view, proj, size, clip_m, margin_px)
+    return np.ascontiguousarray(rect.T), front
+
+
+def rects_ckm(
+    pts: NDArray[np.float64],
+    edges: NDArray[np.int64],
+    view: NDArray[np.float64],
+    proj: NDArray[np.float64],
+    size: tuple[int, int],
+    clip_m: float,
+    margin_px: float = CENTRE_MARGIN_PX,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`coord_rects` with the rectangles coordinate-major too, ``(4, m)`` (rows ``x0, y0,
+    x1, y1``), and each set's nearest and farthest vertex depth ``(m,)`` (``-z`` in eye space)."""
+    m = pts.shape[2]
+    if m == 0:
+        z = np.zeros(0)
+        return np.zeros((4, 0), np.int64), np.zeros(0, bool), z, z
+    # the projection's numerators and the depth straight from world points: one 3 x 3
+    # product (the camera's rows combined with the projection's) instead of the eye
+    # space and four passes more over every vertex
+    R, t = view[:3, :3], view[:3, 3]
+    p00, p02, p11, p12 = proj[0, 0], proj[0, 2], proj[1, 1], proj[1, 2]
+    rows = np.array([p00 * R[0] + p02 * R[2], p11 * R[1] + p12 * R[2], -R[2]])
+    shift = np.array([[p00 * t[0] + p02 * t[2]], [p11 * t[1] + p12 * t[2]], [-t[2]]])
+    q = (rows @ pts.reshape(3, -1) + shift).reshape(pts.shape)  # (3, k, m): x and y numerators, depth
+    depth = q[2]
+    near_d, far_d = depth.min(axis=0), depth.max(axis=0)
+    ahead = near_d >= clip_m
+    front = far_d >= clip_m
+    # the common case, nothing to clip: the vertices' projections bound the set;
+    # computed for every set (elementwise, so each set's figures are the same as
+    # alone) and the others overwritten below
+    xy = q[:2] / np.where(ahead, depth, 1.0)
+    rect = _pixels4(np.concatenate([xy.min(axis=1), xy.max(axis=1)]), size, margin_px)
+    rect[:, ~front] = _EMPTY_COL
+    rest = ~ahead & front
+    if rest.any():
+        # the sets that cross the clip plane, clipped in eye space
+        part = pts[:, :, rest]
+        v = (R @ part.reshape(3, -1) + view[:3, 3:4]).reshape(part.shape)
+        rect[:, rest], front[rest] = _clipped(v, -v[2], edges, proj, size, clip_m, margin_px)
+    return rect, front, near_d, far_d
+
+
+def _pixels4(b: NDArray[np.float64], size: tuple[int, int], margin_px: float) -> NDArray[np.int64]:
+    """:func:`ndc_pixels` of bounds ``(4, m)`` (rows ``lo x, lo y, hi x, hi y``) in one pass,
+    the rectangles ``(4, m)``: the same operations, a ceiling taken as the negated floor
+    of the negation (exact)."""
+    wh, margin = _columns(int(size[0]), int(size[1]), float(margin_px))
+    p = b + 1.0
+    p *= 0.5
+    p *= wh
+    np.clip(p, -1e9, 1e9, out=p)
+    p -= 0.5
+    p += margin
+    p *= _SIGN4
+    np.floor(p, out=p)
+    p *= _SIGN4
+    return p.astype(np.int64)
+
+
+@functools.lru_cache(maxsize=16)
+def _columns(w: int, h: int, margin_px: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The viewport's size and the margin as ``(4, 1)`` columns for :func:`_pixels4` (made
+    once per size and margin; read only)."""
+    wh = np.array([[w], [h], [w], [h]], np.float64)
+    margin = np.array([[-margin_px], [-margin_px], [margin_px], [margin_px]])
+    wh.flags.writeable = margin.flags.writeable = False
+    return wh, margin
+
+
+#: Negates the low sides so that one floor takes their ceiling.
+_SIGN4 = np.array([[-1.0], [-1.0], [1.0], [1.0]])
 
 
 def clipped_rects(
@@ -139,23 +204,102 @@ def clipped_rects(
     clip_m: float,
     margin_px: float = CENTRE_MARGIN_PX,
 ) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
-    """:func:`point_rects` of eye-space point sets ``(m, k, 3)`` that cross the clip plane."""
-    a, b = v[:, edges[:, 0]], v[:, edges[:, 1]]  # (m, e, 3)
-    da, db = depth[:, edges[:, 0]], depth[:, edges[:, 1]]
+    """:func:`point_rects` of eye-space point sets ``(m, k, 3)`` that cross the clip plane
+    (``depth`` ``(m, k)``, their depths ``-z``)."""
+    rect, front = _clipped(np.ascontiguousarray(v.transpose(2, 1, 0)), np.ascontiguousarray(depth.T), edges, proj,
+                           size, clip_m, margin_px)
+    return np.ascontiguousarray(rect.T), front
+
+
+def _clipped(
+    v: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    edges: NDArray[np.int64],
+    proj: NDArray[np.float64],
+    size: tuple[int, int],
+    clip_m: float,
+    margin_px: float,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """:func:`clipped_rects` of eye-space sets coordinate-major, ``v`` ``(3, k, m)``, ``depth``
+    ``(k, m)``: the vertices in front and the points where the sides cross the plane,
+    projected; x and y side by side, so each step is one numpy call for both.  The
+    rectangles come coordinate-major, ``(4, m)``."""
+    if v.shape[2] <= _FEW:
+        return _clipped_few(v, depth, edges, proj, size, clip_m, margin_px)
+    a, b = v[:, edges[:, 0]], v[:, edges[:, 1]]  # (3, e, m)
+    da, db = depth[edges[:, 0]], depth[edges[:, 1]]
     cross = (da - clip_m) * (db - clip_m) < 0
     t = np.where(cross, (clip_m - da) / np.where(cross, db - da, 1.0), 0.0)
-    xpts = a + t[..., None] * (b - a)
-    allp = np.concatenate([v, xpts], axis=1)  # (m, k + e, 3)
-    ok = np.concatenate([depth >= clip_m, cross], axis=1)
-    d = np.where(ok, -allp[..., 2], 1.0)
+    allp = np.concatenate([v, a + t * (b - a)], axis=1)  # (3, k + e, m)
+    ok = np.concatenate([depth >= clip_m, cross], axis=0)
+    d = np.where(ok, -allp[2], 1.0)
     # a perspective projection: x_ndc = (P00 x + P02 z) / -z, likewise y
-    x = (proj[0, 0] * allp[..., 0] + proj[0, 2] * allp[..., 2]) / d
-    y = (proj[1, 1] * allp[..., 1] + proj[1, 2] * allp[..., 2]) / d
-    front = np.any(ok, axis=1)
+    xy = (np.array([[[proj[0, 0]]], [[proj[1, 1]]]]) * allp[:2]
+          + np.array([[[proj[0, 2]]], [[proj[1, 2]]]]) * allp[2]) / d
     big = 1e30
-    lo = np.stack([np.where(ok, x, big).min(axis=1), np.where(ok, y, big).min(axis=1)], axis=1)
-    hi = np.stack([np.where(ok, x, -big).max(axis=1), np.where(ok, y, -big).max(axis=1)], axis=1)
-    return ndc_pixels(lo, hi, size, margin_px), front
+    lo = np.where(ok, xy, big).min(axis=1)
+    hi = np.where(ok, xy, -big).max(axis=1)
+    return _pixels4(np.concatenate([lo, hi]), size, margin_px), np.any(ok, axis=0)
+
+
+#: Sets up to which :func:`_clipped` works in plain floats (a frame clips a handful or two:
+#: the portals and boxes that straddle the eye's plane; some forty numpy calls cost more).
+_FEW = 16
+
+
+def _clipped_few(
+    v: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    edges: NDArray[np.int64],
+    proj: NDArray[np.float64],
+    size: tuple[int, int],
+    clip_m: float,
+    margin_px: float,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """:func:`_clipped` of a few sets in plain Python floats: the same operations in the
+    same order (IEEE doubles either way), so the same rectangles."""
+    p00, p02, p11, p12 = float(proj[0, 0]), float(proj[0, 2]), float(proj[1, 1]), float(proj[1, 2])
+    w, h = float(size[0]), float(size[1])
+    pairs = edges.tolist()
+    big = 1e30
+    out: list[list[int]] = [[], [], [], []]
+    fronts = []
+    for pts, dep in zip(v.transpose(2, 1, 0).tolist(), depth.T.tolist(), strict=True):
+        xlo = ylo = big
+        xhi = yhi = -big
+        front = False
+        for (x, y, z), d in zip(pts, dep, strict=True):
+            if d >= clip_m:
+                front = True
+                px, py = (p00 * x + p02 * z) / d, (p11 * y + p12 * z) / d
+                if px < xlo:
+                    xlo = px
+                if px > xhi:
+                    xhi = px
+                if py < ylo:
+                    ylo = py
+                if py > yhi:
+                    yhi = py
+        for i, j in pairs:
+            da, db = dep[i], dep[j]
+            if (da - clip_m) * (db - clip_m) < 0:
+                t = (clip_m - da) / (db - da)
+                a, b = pts[i], pts[j]
+                x, y, z = a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]), a[2] + t * (b[2] - a[2])
+                px, py = (p00 * x + p02 * z) / -z, (p11 * y + p12 * z) / -z
+                if px < xlo:
+                    xlo = px
+                if px > xhi:
+                    xhi = px
+                if py < ylo:
+                    ylo = py
+                if py > yhi:
+                    yhi = py
+        fronts.append(front)
+        for row, ndc, wh, sign in ((0, xlo, w, -1.0), (1, ylo, h, -1.0), (2, xhi, w, 1.0), (3, yhi, h, 1.0)):
+            q = min(max((ndc + 1.0) * 0.5 * wh, -1e9), 1e9) - 0.5 + sign * margin_px
+            out[row].append(math.ceil(q) if sign < 0 else math.floor(q))
+    return np.array(out, np.int64).reshape(4, -1), np.array(fronts, bool)
 
 
 def ndc_pixels(
@@ -186,6 +330,16 @@ def box_rects(
     ``(n,)`` whether any part of each box lies in front of that plane."""
     lo_ = np.asarray(lo, np.float64).reshape(-1, 3)
     hi_ = np.asarray(hi, np.float64).reshape(-1, 3)
-    bits = (np.arange(8)[:, None] >> np.arange(3)[None, :]) & 1  # (8, 3)
-    corners = np.where(bits[None, :, :] == 1, hi_[:, None, :], lo_[:, None, :])
-    return point_rects(corners, BOX_EDGES, np.asarray(view, np.float64), np.asarray(proj, np.float64), size, clip_m)
+    return coord_rects(box_corners_ckm(lo_, hi_), BOX_EDGES, np.asarray(view, np.float64),
+                       np.asarray(proj, np.float64), size, clip_m)
+
+
+def box_corners_ckm(lo: NDArray[np.float64], hi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The corners of boxes ``(n, 3)`` coordinate-major, ``(3, 8, n)`` (as :func:`coord_rects`
+    takes them), in the order :data:`BOX_EDGES` joins."""
+    return np.where(_CORNER_BITS[:, :, None], hi.T[:, None, :], lo.T[:, None, :])
+
+
+#: ``(3, 8)`` whether corner ``c`` of a box takes coordinate ``j`` from its upper corner
+#: (bit ``j`` of ``c``), the order :data:`BOX_EDGES` joins.
+_CORNER_BITS = ((np.arange(8)[None, :] >> np.arange(3)[:, None]) & 1).astype(bool)

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from walkstream.shared import screenrects
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.portals import cull_boxes
-from walkstream.shared.screenrects import CENTRE_MARGIN_PX, ndc_pixels
+from walkstream.shared.screenrects import BOX_EDGES, CENTRE_MARGIN_PX, TOUCH_MARGIN_PX, ndc_pixels
 
 SIZE = (10, 10)
 
@@ -43,3 +45,22 @@ def test_a_box_between_pixel_centres_is_culled_and_a_box_over_one_is_kept() -> N
     # 20 cm there covers centres
     small = cull_boxes([[10.0, -0.1, 1.5]], [[10.001, 0.1, 1.7]], whole, eye, view, proj, (160, 120))
     assert small[0]
+
+
+def test_a_few_clipped_sets_in_plain_floats_give_numpys_rectangles(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A frame clips a handful of sets in plain Python floats and many with numpy: the
+    same rectangles to the pixel, portals (4 vertices) and boxes (8), at both margins."""
+    proj = perspective(60.0, 4 / 3, 0.1, 100.0).astype(np.float64)
+    rng = np.random.default_rng(0)
+    quad = np.stack([np.arange(4), (np.arange(4) + 1) % 4], axis=1)
+    for k, edges in ((4, quad), (8, BOX_EDGES)):
+        for _ in range(150):
+            m = int(rng.integers(1, 12))
+            v = rng.normal(0.0, 1.0, (3, k, m))
+            v[2] = rng.uniform(-2.0, 0.5, (k, m))  # most sets straddle the clip plane
+            margin = float(rng.choice([CENTRE_MARGIN_PX, TOUCH_MARGIN_PX]))
+            monkeypatch.setattr(screenrects, "_FEW", 0)
+            many = screenrects._clipped(v, -v[2], edges, proj, (640, 480), 0.03, margin)
+            monkeypatch.setattr(screenrects, "_FEW", 100)
+            few = screenrects._clipped(v, -v[2], edges, proj, (640, 480), 0.03, margin)
+            assert np.array_equal(many[0], few[0]) and np.array_equal(many[1], few[1])

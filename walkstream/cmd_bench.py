@@ -18,6 +18,7 @@
     walkstream bench clusters DB [DB ...] [--min-objects 12] [--max-cells 64] [--plot clusters.png] [--json]
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
     walkstream bench portals [--presets paper paper10] [--frames N] [--truth N] [--no-gl] [--out DIR] [--json]
+    walkstream bench portals --cull [SEED ...] [--cull-against REV] [--out DIR] [--json]
     walkstream bench walls [--scenes hall,city,west-oakland,village] [--wall-errors 5,10,15,20] [--duration 60s]
         [--gl-duration 20s] [--truth-every N] [--size WxH] [--no-gl] [--quick] [--out DIR] [--json]
 
@@ -575,6 +576,13 @@ def cmd_bench_portals(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench portals``."""
     from walkstream.benchmarks.portals import portals_tables, run_portals_bench
 
+    if args.cull is not None:
+        from walkstream.benchmarks.cullcpu import cull_cpu_rows, cull_cpu_table
+
+        rows = cull_cpu_rows(args.cull, Path(args.out), against=args.cull_against, hall_frames=args.cull_frames,
+                             log=lambda s: print(s, file=sys.stderr))
+        print(json.dumps({"culling_cpu": rows}, indent=2) if args.json else cull_cpu_table(rows))
+        return 0
     scenes, halls = run_portals_bench(
         Path(args.out), args.presets, frames=args.frames, step_s=args.step, truth_frames=args.truth,
         gl=not args.no_gl, log=lambda s: print(s, file=sys.stderr),
@@ -746,6 +754,13 @@ def add_bench_parser(sub: Any) -> None:
                     help="with --seeds: replay this much of each tour (default 30s)")
     bp.add_argument("--replays", metavar="DURATION", help="also replay the first preset's tour this long (e.g. 180s): "
                     "56 kbit/s with the default and a small cache, pda with the fog set by the budget through a cost step")
+    bp.add_argument("--cull", nargs="*", type=int, metavar="SEED", default=None,
+                    help="only the culling's CPU time per frame (walk, parts, both; median and p99): the open 16x16 "
+                    "hall with 16 parts a cell (200-236 cells visible) and the tours of these generated seeds")
+    bp.add_argument("--cull-against", metavar="REV",
+                    help="with --cull: time the culling of this git revision beside today's, frame by frame")
+    bp.add_argument("--cull-frames", type=int, default=120, metavar="N",
+                    help="with --cull: frames of the hall (default 120), each culled twice")
     bp.add_argument("--json", action="store_true", help="print the figures as JSON")
     bp.set_defaults(func=cmd_bench_portals)
 

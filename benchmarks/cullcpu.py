@@ -1,0 +1,228 @@
+"""``walkstream bench portals --cull``: the portal culling's CPU time per frame.
+
+The culling of a frame is the portal walk (:func:`~walkstream.shared.portals.cull_portals`)
+and the parts culling of the cells it finds (:func:`~walkstream.shared.portals.cull_parts`);
+both are timed with ``time.process_time`` (the process's CPU, not the wall clock a
+loaded machine stretches), apart and together, median and 99th percentile over the
+frames:
+
+- ``hall``: the open 16 x 16 hall of :func:`~walkstream.benchmarks.portals.hall_topology`
+  at 640x480 from a corner, the view swept from 30 to 60 degrees so that 200-236
+  cells are visible; each cell holds :data:`HALL_PARTS` part boxes (floor, ceiling and
+  furniture at fixed random places), so the parts culling tests a few thousand boxes;
+- ``seed S``: the tour of the generated office of seed ``S`` (3 storeys, ``walkstream
+  generate interior --storeys 3 --seed S``, baked into ``--out`` once), a pose every
+  10 s culled from its cell at a 40 m fog, 640x480.
+
+With ``against`` (a git revision of this repository) the culling of that revision is
+loaded beside the current one (its ``shared/screenrects.py`` and ``shared/portals.py``)
+and timed frame by frame alternately with it, so that both see the same load; the
+two must keep the same parts, which is checked on every frame.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import subprocess
+import sys
+import time
+import types
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.benchmarks.portals import hall_topology
+from walkstream.server.bake import bake
+from walkstream.server.service.interiors import InteriorState
+from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
+from walkstream.server.store import SceneReader
+from walkstream.shared import portals
+from walkstream.shared.camera import camera, perspective
+from walkstream.shared.codec.cellpieces import decode_cell_pieces
+from walkstream.shared.errors import InputError, WalkstreamError
+from walkstream.shared.paths import RecordedPath
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.roomview import cell_of, stack_planes
+from walkstream.shared.roomwire import decode_topology
+
+__all__ = ["HALL_PARTS", "hall_boxes", "culling_at", "cull_cpu_rows", "cull_cpu_table"]
+
+#: Part boxes per cell of the benchmark's hall (the generated offices hold about 16 per cell).
+HALL_PARTS = 16
+
+#: The functions timed: ``(cull_portals, cull_parts)``.
+Culling = tuple[Callable[..., Any], Callable[..., Any]]
+
+Frame = tuple[PortalGraph, int, NDArray[np.float64], NDArray[np.float64]]
+
+SIZE = (640, 480)
+
+
+def hall_boxes(k: int, per_cell: int = HALL_PARTS, cell_m: float = 4.0, height: float = 3.0,
+               seed: int = 0) -> dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """Part boxes for the cells of :func:`~walkstream.benchmarks.portals.hall_topology` ``(k)``:
+    per cell ``(lo, hi)`` ``(per_cell, 3)``, a floor and a ceiling slab and furniture (0.4 to
+    1.6 m wide, 0.4 to 2.2 m high) at fixed random places."""
+    rng = np.random.default_rng(seed)
+    out = {}
+    for y in range(k):
+        for x in range(k):
+            x0, y0 = x * cell_m, y * cell_m
+            lo = [(x0, y0, -0.2), (x0, y0, height)]
+            hi = [(x0 + cell_m, y0 + cell_m, 0.0), (x0 + cell_m, y0 + cell_m, height + 0.2)]
+            for _ in range(per_cell - 2):
+                w, d, h = rng.uniform(0.4, 1.6), rng.uniform(0.4, 1.6), rng.uniform(0.4, 2.2)
+                px, py = x0 + rng.uniform(0.0, cell_m - w), y0 + rng.uniform(0.0, cell_m - d)
+                lo.append((px, py, 0.0))
+                hi.append((px + w, py + d, h))
+            out[y * k + x] = (np.array(lo, np.float64), np.array(hi, np.float64))
+    return out
+
+
+def culling_at(rev: str) -> Culling:
+    """``(cull_portals, cull_parts)`` as they were at git revision ``rev`` of this repository,
+    loaded as modules of their own beside the current ones."""
+    root = Path(portals.__file__).resolve().parents[1]
+    mods: dict[str, types.ModuleType] = {}
+    for name in ("screenrects", "portals"):
+        try:
+            got = subprocess.run(["git", "-C", str(root), "show", f"{rev}:shared/{name}.py"],
+                                 capture_output=True, text=True, check=False)
+        except OSError as exc:
+            raise InputError(f"--cull-against {rev}: git could not be run ({exc.strerror})") from None
+        if got.returncode != 0:
+            raise InputError(f"--cull-against {rev}: no shared/{name}.py at that revision of {root}")
+        mod_name = f"walkstream_cull_{name}_at_{abs(hash(rev))}"
+        text = got.stdout.replace("walkstream.shared.screenrects", mods["screenrects"].__name__) if mods else got.stdout
+        mod = types.ModuleType(mod_name)
+        mod.__file__ = f"{rev}:shared/{name}.py"
+        sys.modules[mod_name] = mod  # dataclasses look their module up by name
+        exec(compile(text, mod.__file__, "exec"), mod.__dict__)  # noqa: S102 - this repository's own code
+        mods[name] = mod
+    return mods["portals"].cull_portals, mods["portals"].cull_parts
+
+
+def _hall_frames(frames: int) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
+    k = 16
+    graph = PortalGraph.from_topology(hall_topology(k))
+    eye = np.array([0.5, 0.5, 1.6])
+    yaws = np.linspace(math.radians(30.0), math.radians(60.0), frames)
+    return [(graph, 0, eye, camera(eye, float(a), 0.0).astype(np.float64)) for a in yaws], hall_boxes(k), math.inf
+
+
+def _seed_frames(seed: int, out: Path, log: Callable[[str], None], step_s: float = 10.0,
+                 storeys: int = 3) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
+    src, db = out / f"seed{seed}.json", out / f"seed{seed}.db"
+    if not db.exists():
+        out.mkdir(parents=True, exist_ok=True)
+        write_interior(src, InteriorPlan(storeys=storeys, seed=seed))
+        log(f"bench portals: baking seed {seed}")
+        bake(src, db)
+    with SceneReader.open(db) as r:
+        state = InteriorState(r, list(r.cells()))
+        topo = decode_topology(state.topology["msgpack"].content, f"{db}: topology")
+        meshes = {c.id: decode_cell_pieces(r.contents(c.id), f"{db}: cell {c.id}") for c in topo.cells}
+        tour = RecordedPath.from_msgpack(r.path_blob("tour"))
+    graph = PortalGraph.from_topology(topo)
+    ids, planes = stack_planes([c for c in topo.cells if c.kind != "outside" and len(c.planes)])
+    boxes = {cid: (np.array([p.bbox[0] for p in m.parts]).reshape(-1, 3), np.array([p.bbox[1] for p in m.parts]).reshape(-1, 3))
+             for cid, m in meshes.items()}
+    frames: list[Frame] = []
+    for t in np.arange(0.0, tour.duration, step_s).tolist():
+        xyz, yaw, pitch = tour.at(t)
+        eye = np.asarray(xyz, np.float64)
+        hit = np.flatnonzero(cell_of(planes, eye))
+        if len(hit):
+            frames.append((graph, int(ids[hit[0]]), eye, camera(eye, float(yaw), float(pitch)).astype(np.float64)))
+    return frames, boxes, 40.0
+
+
+def _time(culling: Culling, frame: Frame, boxes: dict[int, Any], proj: NDArray[np.float64],
+          fog_m: float) -> tuple[float, float, int, dict[int, NDArray[np.bool_]]]:
+    """One frame's walk and parts culling: their CPU seconds, the visible cells, the parts kept."""
+    walk, parts = culling
+    graph, start, eye, view = frame
+    t0 = time.process_time()
+    pc = walk(graph, start, eye, view, proj, SIZE, fog_m=fog_m)
+    t1 = time.process_time()
+    keep = parts("portals", pc.order, boxes, eye, view, proj, SIZE, vsas=pc.vsas, fog_m=fog_m)
+    t2 = time.process_time()
+    return t1 - t0, t2 - t1, len(pc.order), keep
+
+
+def _ms(x: Sequence[float]) -> dict[str, float]:
+    a = 1e3 * np.asarray(x, np.float64)
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99))}
+
+
+def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None, hall_frames: int = 120,
+                  repeats: int = 2, log: Callable[[str], None] = lambda s: None) -> list[dict[str, Any]]:
+    """The culling's CPU time on the hall and the tours of ``seeds`` (module docstring): a row per
+    scene with the frames, the visible cells and per part (``walk``, ``parts``, ``total``)
+    the median and p99 milliseconds, now and (``against``) at that revision.  Each frame is
+    culled ``repeats`` times over (every frame once, then again)."""
+    now: Culling = (portals.cull_portals, portals.cull_parts)
+    then = culling_at(against) if against else None
+    proj = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 1000.0).astype(np.float64)
+    scenes: list[tuple[str, Callable[[], Any]]] = [("hall 16x16", lambda: _hall_frames(hall_frames))]
+    scenes += [(f"seed {s}", functools.partial(_seed_frames, s, out, log)) for s in seeds]
+    rows = []
+    for name, make in scenes:
+        frames, boxes, fog = make()
+        log(f"bench portals: culling CPU, {name}, {len(frames)} frames x {repeats}")
+        got: dict[str, dict[str, list[float]]] = {w: {"walk": [], "parts": [], "total": []} for w in ("now", "then")}
+        visible = []
+        for culling in (now, then):
+            if culling is not None:  # warm up (first calls, caches) untimed
+                _time(culling, frames[0], boxes, proj, fog)
+        for _ in range(repeats):
+            for f in frames:
+                for who, culling in (("now", now), ("then", then)):
+                    if culling is None:
+                        continue
+                    w, p, n, keep = _time(culling, f, boxes, proj, fog)
+                    got[who]["walk"].append(w)
+                    got[who]["parts"].append(p)
+                    got[who]["total"].append(w + p)
+                    if who == "now":
+                        visible.append(n)
+                        kept = keep
+                    elif kept.keys() != keep.keys() or not all(np.array_equal(kept[c], keep[c]) for c in kept):
+                        raise WalkstreamError(f"bench portals: {name}: the culling now and at {against} keep different parts")
+        row: dict[str, Any] = {"scene": name, "frames": len(frames) * repeats,
+                               "visible_median": float(np.median(visible)), "visible_max": int(max(visible)),
+                               "now": {k: _ms(v) for k, v in got["now"].items()}}
+        if then is not None:
+            row["then"] = {k: _ms(v) for k, v in got["then"].items()}
+            row["against"] = against
+        rows.append(row)
+    return rows
+
+
+def cull_cpu_table(rows: Sequence[dict[str, Any]]) -> str:
+    """The rows of :func:`cull_cpu_rows` as text: ms median / p99, then (``against``) the same
+    at that revision and the ratio of the total medians."""
+    against = next((r["against"] for r in rows if "against" in r), None)
+    head = f"{'scene':<12}{'frames':>7}{'visible':>9}{'walk ms':>14}{'parts ms':>14}{'total ms':>14}"
+    if against:
+        head += f"  |{'before walk':>14}{'before parts':>14}{'before total':>14}{'speed-up':>9}"
+    out = ["culling CPU per frame (time.process_time; median / p99; 640x480)"
+           + (f"; before = the culling at {against}, timed alternately" if against else "") + ":", head]
+
+    def mp(r: dict[str, float]) -> str:
+        return f"{r['median']:.2f} / {r['p99']:.2f}"
+
+    for r in rows:
+        lo, hi = round(r["visible_median"]), r["visible_max"]
+        line = (f"{r['scene']:<12}{r['frames']:>7}{f'{lo}-{hi}' if lo != hi else str(hi):>9}{mp(r['now']['walk']):>14}"
+                f"{mp(r['now']['parts']):>14}{mp(r['now']['total']):>14}")
+        if "then" in r:
+            t = r["then"]
+            line += (f"  |{mp(t['walk']):>14}{mp(t['parts']):>14}{mp(t['total']):>14}"
+                     f"{t['total']['median'] / r['now']['total']['median']:>8.2f}x")
+        out.append(line)
+    return "\n".join(out)

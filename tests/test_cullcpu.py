@@ -1,0 +1,86 @@
+"""The culling's CPU benchmark (benchmarks/cullcpu.py) and the faster parts culling it measures.
+
+:func:`~walkstream.shared.portals.cull_parts` culls every visible cell's boxes in
+chunks, coordinate-major, and takes the frustum's near and far planes as depths
+(its side planes cannot cull a box whose rectangle meets a VSA).  It must keep
+exactly what the plain per-cell test keeps (:func:`~walkstream.shared.portals.cull_boxes`:
+the box rectangles against the cell's VSAs, then the six-plane frustum test), with
+several chunks, with a fog that leaves some boxes out, and with boxes that hold the
+eye or cross the clip plane.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from walkstream.benchmarks.cullcpu import HALL_PARTS, hall_boxes
+from walkstream.benchmarks.portals import hall_topology
+from walkstream.cli import main
+from walkstream.shared import portals
+from walkstream.shared.camera import camera, perspective
+from walkstream.shared.portalgraph import PortalGraph
+from walkstream.shared.portals import cull_boxes, cull_parts, cull_portals
+
+SIZE = (320, 240)
+
+
+@pytest.mark.parametrize(("chunk", "fog"), [(400, math.inf), (97, math.inf), (97, 18.0)])
+def test_parts_culled_in_chunks_keep_what_the_plain_box_test_keeps(
+    chunk: int, fog: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(portals, "_BOX_CHUNK", chunk)
+    k = 8
+    graph = PortalGraph.from_topology(hall_topology(k))
+    boxes = hall_boxes(k)
+    proj = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 30.0).astype(np.float64)
+    rng = np.random.default_rng(chunk)
+    kept_some = dropped_some = 0
+    for i in range(8):
+        # a corner looking across, then eyes anywhere, low (in the furniture) and high
+        eye = np.array([0.5, 0.5, 1.6]) if i == 0 else np.array([*rng.uniform(0.2, 4.0 * k - 0.2, 2),
+                                                                 rng.choice([0.3, 1.6, 2.9])])
+        start = int(np.floor(eye[1] / 4.0) * k + np.floor(eye[0] / 4.0))
+        view = camera(eye, math.pi / 4 if i == 0 else float(rng.uniform(-math.pi, math.pi)),
+                      float(rng.uniform(-0.5, 0.5))).astype(np.float64)
+        pc = cull_portals(graph, start, eye, view, proj, SIZE, fog_m=fog)
+        got = cull_parts("portals", pc.order, boxes, eye, view, proj, SIZE, vsas=pc.vsas, fog_m=fog)
+        assert got.keys() == set(pc.order)
+        for c in pc.order:
+            lo, hi = boxes[c]
+            want = cull_boxes(lo, hi, pc.vsas[c], eye, view, proj, SIZE, fog_m=fog)
+            assert np.array_equal(got[c], want), (i, c)
+            kept_some += int(want.sum())
+            dropped_some += int((~want).sum())
+        if i == 0:
+            assert len(pc.order) > 20 and sum(len(boxes[c][0]) for c in pc.order) > 2 * chunk  # several chunks
+    assert kept_some > 100 and dropped_some > 100  # both outcomes were compared
+
+
+def test_hall_boxes_lie_in_their_cells() -> None:
+    boxes = hall_boxes(3)
+    assert sorted(boxes) == list(range(9))
+    for c, (lo, hi) in boxes.items():
+        x0, y0 = (c % 3) * 4.0, (c // 3) * 4.0
+        assert lo.shape == hi.shape == (HALL_PARTS, 3) and np.all(hi > lo)
+        assert np.all(lo[:, :2] >= (x0, y0)) and np.all(hi[:, :2] <= (x0 + 4.0, y0 + 4.0))
+
+
+def test_bench_portals_cull_from_the_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "portals", "--cull", "--cull-frames", "3", "--out", str(tmp_path), "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["culling_cpu"]
+    assert [r["scene"] for r in rows] == ["hall 16x16"]
+    r = rows[0]
+    assert r["frames"] == 6 and 200 <= r["visible_median"] <= r["visible_max"] <= 256
+    for part in ("walk", "parts", "total"):
+        assert 0 < r["now"][part]["median"] <= r["now"][part]["p99"]
+    assert r["now"]["total"]["median"] >= r["now"]["walk"]["median"]
+    # a revision that does not exist: one line, no traceback
+    assert main(["bench", "portals", "--cull", "--cull-frames", "1", "--cull-against", "no-such-revision",
+                 "--out", str(tmp_path)]) != 0
+    err = capsys.readouterr().err
+    assert "no-such-revision" in err and "Traceback" not in err
