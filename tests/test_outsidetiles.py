@@ -7,7 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from walkstream.server.bake.outsidetiles import LONG_TILES, outside_parts, tile_triangles
+from walkstream.server.bake.outsidetiles import (
+    LONG_TILES,
+    OUTSIDE_TILE_M,
+    outside_parts,
+    tile_triangles,
+)
 
 
 def _area(tris: np.ndarray) -> float:
@@ -76,8 +81,7 @@ def test_a_generated_offices_facades_reach_the_outside_cell_in_columns(tmp_path:
     whole = room_contents(scene, layout, outside_tile=0.0)[layout.outside]
     spans = [float(np.ptp(v[t].reshape(-1, 3)[:, :2], axis=0).max()) for _, _, v, t in cut]
     assert max(float(np.ptp(v[t].reshape(-1, 3)[:, :2], axis=0).max()) for _, _, v, t in whole) > 12.0
-    assert max(spans) <= LONG_TILES * 4.0 + 1e-6  # cut into columns, or short enough to stay whole
-    assert sum(1 for s in spans if s <= 4.0 + 1e-6) > len(whole)
+    assert max(spans) <= LONG_TILES * OUTSIDE_TILE_M + 1e-6  # cut into columns, or short enough to stay whole
     assert len(cut) > len(whole)
     area = {}
     for e, _, v, t in whole:
