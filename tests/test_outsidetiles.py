@@ -73,14 +73,14 @@ def test_a_generated_offices_facades_reach_the_outside_cell_in_columns(tmp_path:
     from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
     from walkstream.server.sources.read import read_source
 
-    write_interior(tmp_path / "office.json", InteriorPlan(storeys=1, length=12.0, width=8.0, seed=4, furniture=0.0))
+    write_interior(tmp_path / "office.json", InteriorPlan(storeys=1, length=26.0, width=8.0, seed=4, furniture=0.0))
     scene = read_source(tmp_path / "office.json")
     assert isinstance(scene, InteriorScene)
     layout = interior_parts(scene, tmp_path / "office.json").layout
     cut = room_contents(scene, layout)[layout.outside]
     whole = room_contents(scene, layout, outside_tile=0.0)[layout.outside]
     spans = [float(np.ptp(v[t].reshape(-1, 3)[:, :2], axis=0).max()) for _, _, v, t in cut]
-    assert max(float(np.ptp(v[t].reshape(-1, 3)[:, :2], axis=0).max()) for _, _, v, t in whole) > 12.0
+    assert max(float(np.ptp(v[t].reshape(-1, 3)[:, :2], axis=0).max()) for _, _, v, t in whole) > 26.0
     assert max(spans) <= LONG_TILES * OUTSIDE_TILE_M + 1e-6  # cut into columns, or short enough to stay whole
     assert len(cut) > len(whole)
     area = {}
