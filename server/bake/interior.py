@@ -28,8 +28,9 @@ import shapely
 
 from walkstream.server.bake.chunks import run_chunks
 from walkstream.server.bake.digest import file_digest
+from walkstream.server.bake.outsidetiles import OUTSIDE_TILE_M, outside_parts
 from walkstream.server.bake.plan import BakePlan, RoomCells
-from walkstream.server.bake.roomcontents import REACH, Part, contents_task, outside_mask, weld
+from walkstream.server.bake.roomcontents import REACH, Part, contents_task, outside_mask
 from walkstream.server.bake.roomnav import RoomGraph
 from walkstream.server.bake.rooms import RoomLayout, room_layout
 from walkstream.server.bake.roomwalks import TOUR_NAME, entrance_cell, tour
@@ -84,10 +85,13 @@ def room_contents(
     workers: int = 1,
     scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
+    outside_tile: float = OUTSIDE_TILE_M,
 ) -> dict[int, list[Part]]:
     """Every cell's contents (:mod:`~.roomcontents`): the element triangles clipped to
     each room and doorway in chunks by the one chunk runner (:func:`~.chunks.run_chunks`),
-    and what no cell holds whole to the ``outside`` cell."""
+    and what no cell holds whole to the ``outside`` cell, its long groups cut into
+    columns of ``outside_tile`` metres (:mod:`~.outsidetiles`; 0: one part per element
+    and material)."""
     inside = [c for c in layout.cells if c.kind != "outside"]
     soup = np.concatenate([e.soup for e in scene.elements]) if scene.elements else np.zeros((0, 3, 3))
     elem = np.concatenate([np.full(len(e.triangles), e.id, np.int64) for e in scene.elements]) if scene.elements else np.zeros(0, np.int64)
@@ -102,14 +106,8 @@ def room_contents(
             parts[cid] = ps
             held[whole] = True
     om = outside_mask(soup, [(c.outline, c.zmin, c.zmax) for c in inside], held)
-    outside_parts: list[Part] = []
-    if om.any():
-        key = elem[om] * 256 + mat[om]
-        for k in np.unique(key).tolist():
-            sel = np.flatnonzero(om)[key == k]
-            v, t = weld(soup[sel])
-            outside_parts.append((int(k) // 256, int(k) % 256, v, t))
-    parts[layout.outside] = outside_parts
+    # cut into columns (:mod:`~.outsidetiles`): a long facade per column, each culled by its own box
+    parts[layout.outside] = outside_parts(soup[om], elem[om], mat[om], outside_tile)
     if progress:
         progress(len(layout.cells), len(layout.cells))
     return parts
