@@ -47,11 +47,13 @@ from walkstream.shared.errors import InputError
 __all__ = [
     "DEFAULT_WALL_ERROR_DEG",
     "EYE_HEIGHT",
+    "RING_SIDES",
     "WallSide",
     "WallTable",
     "WallView",
     "angular_error",
     "decode_walls",
+    "ring_cell",
     "wall_distance",
     "zone_count",
     "zone_mix",
@@ -62,6 +64,16 @@ DEFAULT_WALL_ERROR_DEG = 10.0
 
 EYE_HEIGHT = 1.6
 """Height above the floor at which textures are sampled (a walking viewer's eye), metres."""
+
+
+RING_SIDES = 4
+"""Walls per ring around an outdoor cell (:mod:`walkstream.server.bake.ringwalls`):
+wall ``k`` (0-3) of cell ``c`` is portal ``4 c + k``, side 0."""
+
+
+def ring_cell(portal: int) -> int:
+    """The outdoor cell whose ring holds wall ``portal``."""
+    return int(portal) // RING_SIDES
 
 
 def zone_count(length: float, x_t: float, alpha: float) -> int:
