@@ -9,15 +9,23 @@ and leaves the cell's geometry PVS; what stands inside the ring or crosses it st
 geometry (and is a transparent hole in every texture of the ring, so its geometry
 behind a wall's plane shows through, as indoors: :mod:`~.wallrender`).
 
-**Which cells.**  A cell gets a ring when its PVS holds more than ``K`` objects
-(``--wall-keep K``, :attr:`~.wallplan.WallSettings.keep`) and a ring removes at least
-one of them.
+**Regions.**  Street cells are short (8 m in the village), and a ring per cell would
+send four new textures at every cell border.  So neighbouring cells are grouped into
+**regions** (:func:`ring_regions`: grown breadth first while the group's smallest
+rotated rectangle stays within ``--wall-region S`` metres square,
+:attr:`~.wallplan.WallSettings.region`, 40 by default) and the cells of a region share
+one ring and its textures: walking along a street the textures change only at a
+region's border or a zone's.
+
+**Which regions.**  A region gets a ring when its cells' PVS together hold more than
+``K`` objects (``--wall-keep K``, :attr:`~.wallplan.WallSettings.keep`) and a ring
+removes at least one of them.
 
 **The distance.**  ``r`` is the largest distance on a 1 m grid from ``r_min``
 (``--wall-ring-min``, :attr:`~.wallplan.WallSettings.ring_min`) up to the bake's view
-distance at which at most ``K`` of the PVS objects reach inside the ring (their box
+distance at which at most ``K`` of those objects reach inside the ring (their box
 meets the ring's rectangle); when even ``r_min`` keeps more than ``K``, ``r = r_min``.
-So the geometry PVS is the ``K`` or so objects nearest the cell, and the walls stand
+So the geometry PVS is the ``K`` or so objects nearest the region, and the walls stand
 as far out as that allows: the farther the wall, the wider a zone may be for the
 same angle of error, so the fewer textures a ring needs.
 
@@ -32,7 +40,8 @@ geometry is left behind the wall to blend with, and the viewer never comes neare
 object removed (a point behind the wall projects onto it below its own height).
 
 Wall ids: ring wall ``k`` (0-3) of cell ``c`` is portal ``4 c + k``, side 0 (one side
-each: the inside of the ring).
+each: the inside of the ring); the cells of one region list the same four walls with
+the same texture ids.
 """
 
 from __future__ import annotations
@@ -49,7 +58,7 @@ from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.wallplan import WallJob, WallPlan, WallSettings
 from walkstream.shared.walls import RING_SIDES, WallSide, zone_count
 
-__all__ = ["RingPlan", "plan_ring_walls", "ring_rectangle"]
+__all__ = ["RingPlan", "plan_ring_walls", "ring_rectangle", "ring_regions"]
 
 _MIN_HEIGHT = 3.0
 """Least wall height, metres (a ring behind which only low objects stand)."""
@@ -100,6 +109,38 @@ def _reach(boxes: NDArray[np.float64], centre: NDArray[np.float64], axes: NDArra
     return np.maximum(gap.max(axis=1), 0.0)
 
 
+def ring_regions(cells: Sequence[ViewCell], size: float) -> list[list[ViewCell]]:
+    """The cells grouped into regions that share one ring: from each cell not yet placed
+    (in id order), its neighbours are added breadth first while the region's smallest
+    rotated rectangle stays within ``size`` by ``size`` metres (a cell larger than that
+    is a region alone).  The same on every run."""
+    by_id = {c.id: c for c in cells}
+    placed: set[int] = set()
+    out: list[list[ViewCell]] = []
+    for cell in sorted(cells, key=lambda c: c.id):
+        if cell.id in placed:
+            continue
+        region = [cell]
+        placed.add(cell.id)
+        pts = np.asarray(cell.polygon, np.float64)
+        queue = list(cell.neighbours)
+        while queue:
+            nid = queue.pop(0)
+            nb = by_id.get(nid)
+            if nb is None or nid in placed:
+                continue
+            both = np.vstack([pts, np.asarray(nb.polygon, np.float64)])
+            _c, _a, half = ring_rectangle(both)
+            if 2.0 * float(half.max()) > size:
+                continue
+            region.append(nb)
+            placed.add(nid)
+            pts = both
+            queue += [n for n in nb.neighbours if n not in placed]
+        out.append(region)
+    return out
+
+
 def plan_ring_walls(
     cells: Sequence[ViewCell],
     pvs: Mapping[int, NDArray[np.int64]],
@@ -125,23 +166,26 @@ def plan_ring_walls(
     all_ids = np.array(sorted(boxes), np.int64)
     all_boxes = np.array([boxes[int(i)] for i in all_ids], np.float64).reshape(-1, 6)
     r_max = max(settings.ring_min, float(view_distance))
-    for cell in sorted(cells, key=lambda c: c.id):
-        ids = np.asarray(pvs.get(cell.id, np.zeros(0, np.int64)), np.int64)
-        ids = ids[np.isin(ids, all_ids)]
+    for region in ring_regions(cells, settings.region):
+        own = {c.id: (lambda a: a[np.isin(a, all_ids)])(np.asarray(pvs.get(c.id, np.zeros(0, np.int64)), np.int64))
+               for c in region}
+        ids = np.unique(np.concatenate(list(own.values()))) if own else np.zeros(0, np.int64)
         if len(ids) <= settings.keep:
             continue
-        centre, axes, half = ring_rectangle(np.asarray(cell.polygon, np.float64))
+        centre, axes, half = ring_rectangle(np.vstack([np.asarray(c.polygon, np.float64) for c in region]))
         reach = _reach(all_boxes[np.searchsorted(all_ids, ids)], centre, axes, half)
         # the largest r (1 m grid) keeping at most K objects: just under the (K+1)-th reach
         order = np.sort(reach)
         r = math.floor(float(order[settings.keep]) - 1e-6) if order[settings.keep] > settings.ring_min else settings.ring_min
         r = float(min(max(r, settings.ring_min), r_max))
-        inside = reach <= r
-        if inside.all():
+        meets = set(ids[reach <= r].tolist())
+        if len(meets) == len(ids):
             continue
-        kept[cell.id] = np.sort(ids[inside])
-        radius[cell.id] = r
-        removed += int((~inside).sum())
+        for c in region:
+            inside = np.isin(own[c.id], list(meets))
+            kept[c.id] = np.sort(own[c.id][inside])
+            radius[c.id] = r
+            removed += int((~inside).sum())
         # every scene object meeting the ring stays geometry: a hole in its textures
         every = _reach(all_boxes, centre, axes, half) <= r
         hole = tuple(int(i) for i in all_ids[every])
@@ -150,19 +194,20 @@ def plan_ring_walls(
         out_half = half + r
         corners = [centre + axes[0] * sx * out_half[0] + axes[1] * sy * out_half[1]
                    for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]  # counter-clockwise
+        first = min(c.id for c in region)
         for k in range(RING_SIDES):
             # clockwise along the ring: the hidden space (outside) lies to the left of p0 -> p1
             p0, p1 = corners[(k + 1) % RING_SIDES], corners[k]
             length = float(np.linalg.norm(p1 - p0))
             across = 2.0 * float(out_half[1 - (k % 2)])  # the ring's depth seen from this wall
-            portal = RING_SIDES * cell.id + k
             zones = zone_count(length, r, alpha)
-            ws = WallSide(portal, 0, (float(p0[0]), float(p0[1])), (float(p1[0]), float(p1[1])), ground,
-                          ground + top, ground, 0.0, 0.0, across / 2.0, alpha, zones)
+            ws = WallSide(RING_SIDES * first + k, 0, (float(p0[0]), float(p0[1])), (float(p1[0]), float(p1[1])),
+                          ground, ground + top, ground, 0.0, 0.0, across / 2.0, alpha, zones)
             width = int(min(settings.max_side, max(8, round(length * settings.texels_per_m))))
             tids = tuple(range(len(jobs), len(jobs) + zones))
             row = tuple(ws.to_row())
             jobs += [(tid, row, z, width, hole) for z, tid in enumerate(tids)]
-            crossing[portal] = hole
-            sides.append(replace(ws, textures=tids))
+            crossing[ws.portal] = hole
+            # every cell of the region lists the same wall (its own portal id), one set of textures
+            sides += [replace(ws, portal=RING_SIDES * c.id + k, textures=tids) for c in sorted(region, key=lambda c: c.id)]
     return RingPlan(WallPlan(sides, jobs, crossing), kept, radius, removed)
