@@ -112,7 +112,6 @@ def test_bad_ring_flags_are_one_clear_line(
 ) -> None:
     from walkstream.cli import main
 
-    write_city(tmp_path / "c.geojson", 100, 1)
     assert main(["bake", str(tmp_path / "c.geojson"), "-o", str(tmp_path / "x.db"), *flags]) == 2
     err = capsys.readouterr().err
     assert err.startswith("walkstream: error:") and message in err and "Traceback" not in err
@@ -120,6 +119,42 @@ def test_bad_ring_flags_are_one_clear_line(
 
 
 # ------------------------------------------------------------------ bake, serve, draw (GL)
+
+
+def _solid(oid: int, box: tuple[float, ...]) -> tuple[int, np.ndarray, np.ndarray]:
+    import trimesh
+
+    lo, hi = np.asarray(box[:3]), np.asarray(box[3:])
+    m = trimesh.creation.box(extents=hi - lo)
+    m.apply_translation((lo + hi) / 2.0)
+    tri = np.asarray(m.vertices, np.float64)[np.asarray(m.faces)]
+    return oid, tri, np.zeros(len(tri), np.uint8)
+
+
+@pytest.mark.gl
+def test_the_far_object_is_painted_on_the_ring_and_a_crossing_one_is_a_hole(gl: object) -> None:
+    from walkstream.server.bake.wallrender import WallRenderer
+
+    cell = _cell(0, 0.0, 0.0)
+    # 1 and 4 near (kept); 2 a long block crossing the north wall; 3 far behind it, beside 2
+    boxes = {1: _box(5, 5, top=4.0), 2: (20.0, 14.0, 0.0, 24.0, 200.0, 15.0), 3: (-40.0, 100.0, 0.0, 0.0, 104.0, 30.0),
+             4: _box(5, -3, top=4.0)}
+    plan = plan_ring_walls([cell], {0: np.array([1, 2, 3, 4])}, boxes, WallSettings(keep=3, ring_min=5.0, region=0.0))
+    assert plan.kept[0].tolist() == [1, 2, 4] and plan.radius[0] < 90.0
+    north = max(plan.walls.sides, key=lambda s: s.p0[1] + s.p1[1])
+    job = next(j for j in plan.walls.jobs if j[0] == north.textures[len(north.textures) // 2])
+    assert job[4] == (1, 2, 4)  # the objects meeting the ring: holes, never painted
+    ren = WallRenderer([_solid(i, boxes[i]) for i in (1, 2, 3, 4)], ctx=gl)
+    try:
+        img = ren.render(north, job[2], 256, job[4])
+        painted = img[..., 3] > 0
+        assert painted.any()  # the far object is on the texture
+        solo = ren.render(north, job[2], 256, ())
+    finally:
+        ren.release()
+    # where the crossing object stands in front of the far one, the texture is a hole (its
+    # geometry behind the wall shows through); without it as a hole it would be painted there
+    assert (solo[..., 3] > 0).sum() > painted.sum()
 
 
 @pytest.fixture(scope="module")
