@@ -198,8 +198,7 @@ def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path 
         "frames_over_visible": c.get("frames_over_visible_ratio"),
         "fog_visible_share": (c.get("causes") or {}).get("fog"),
         "compared_frames": c.get("frames"),
-        "effective_culling": (1.0 - float(cells if interior else geometry) / in_scene)
-        if in_scene and (cells is not None if interior else geometry is not None) else None,
+        "effective_culling": _culling(cells if interior else geometry, in_scene),
         "texture_bytes": walls.get("texture_bytes", 0),
         "texture_memory_bytes": walls.get("texture_memory_bytes", 0),
         "textures_per_wall": walls.get("textures_per_wall"),
@@ -219,6 +218,13 @@ def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path 
             "gl_fog_m_median": gl.summary.get("fog_m_median"),
         }
     return row
+
+
+def _culling(drawn: float | None, in_scene: float | None) -> float | None:
+    """Effective culling: 1 - drawn per frame / in the scene (None when either is unknown)."""
+    if drawn is None or not in_scene:
+        return None
+    return 1.0 - float(drawn) / float(in_scene)
 
 
 def _summary(db: Path) -> dict[str, Any]:

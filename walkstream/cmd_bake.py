@@ -124,8 +124,8 @@ def cmd_bake(args: argparse.Namespace) -> int:
     if args.virtual_walls:
         from walkstream.server.bake.wallplan import WallSettings
 
-        names = ("error_deg", "pitch", "keep", "ring_min", "region")
-        extra["walls"] = WallSettings(**{k: v for k, v in zip(names, wall_flags, strict=True)
+        wall_names = ("error_deg", "pitch", "keep", "ring_min", "region")
+        extra["walls"] = WallSettings(**{k: v for k, v in zip(wall_names, wall_flags, strict=True)
                                          if v is not None}).check()
     elif any(v is not None for v in wall_flags):
         raise WalkstreamError("--wall-error/--wall-pitch/--wall-keep/--wall-ring-min/--wall-region: give --virtual-walls too")

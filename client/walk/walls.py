@@ -102,7 +102,8 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     if lane is None or table is None or city is None or not w.config.virtual_walls or not w.scene.wall_rings:
         return []
     sides = w.scene.walls
-    ring = list(w.scene.wall_rings.get(f.street, ())) if f.street is not None else []
+    street = -1 if f.street is None else int(f.street)
+    ring = list(w.scene.wall_rings.get(street, ()))
     eye = np.asarray(f.eye, np.float64).reshape(3)
     velocity = np.zeros(2)
     if w.config.prefetch:
@@ -142,7 +143,7 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
                     want(nb, WALL_MIX_NEED_S)
             img = lane.image(tid)
             out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
-                                 int(getattr(img, "nbytes", 0)), (int(f.street), -1), mix_tid, mix))
+                                 int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix))
         for h, t in enumerate(horizons, start=1):  # the zones the eye walks into
             for k in ring:
                 if weights[h, k] > 0.0:
