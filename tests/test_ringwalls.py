@@ -212,3 +212,24 @@ def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tupl
     assert w["truth"]["colour"]["mean_error"]["median"] < 0.1
     off = _replay(walls, virtual_walls=False).summary
     assert "walls" not in off  # no ring asked for, no texture on the link
+
+
+def test_the_walls_list_sends_a_regions_ring_once_and_decodes_to_every_cells_walls() -> None:
+    import msgpack
+
+    from walkstream.shared.errors import CodecError
+    from walkstream.shared.walls import decode_walls, walls_wire
+
+    cells = [_cell(0, 0.0, 0.0, neighbours=(1,)), _cell(1, 10.0, 0.0, neighbours=(0,))]
+    boxes = {0: _box(5, 5), 1: _box(15, 5)} | {10 + i: _box(200 + 30 * i, 5) for i in range(4)}
+    plan = plan_ring_walls(cells, {c.id: np.array([0, 1, 10, 11, 12, 13]) for c in cells}, boxes,
+                           WallSettings(keep=2, ring_min=5.0, region=25.0))
+    rows = [s.to_row(compact=True) for s in plan.walls.sides]
+    body = walls_wire(rows)
+    assert len(rows) == 8 and len(body["sides"]) == 4 and len(body["same"]) == 4
+    back = decode_walls(msgpack.packb(body), "walls")
+    assert sorted(s.to_row(compact=True) for s in back) == sorted(rows)
+    own = [r for r in rows if ring_cell(int(r[0])) == 0]
+    assert walls_wire(own) == {"sides": own}  # nothing shared: as before
+    with pytest.raises(CodecError, match="same"):
+        decode_walls(msgpack.packb({"sides": own, "same": [[9, 5]]}), "walls")
