@@ -109,6 +109,13 @@ def _reach(boxes: NDArray[np.float64], centre: NDArray[np.float64], axes: NDArra
     return np.maximum(gap.max(axis=1), 0.0)
 
 
+def _known(ids: NDArray[np.int64] | None, all_ids: NDArray[np.int64]) -> NDArray[np.int64]:
+    """``ids`` (a cell's PVS; None: none) that have a box."""
+    a = np.asarray(ids if ids is not None else np.zeros(0), np.int64).reshape(-1)
+    out: NDArray[np.int64] = a[np.isin(a, all_ids)]
+    return out
+
+
 def ring_regions(cells: Sequence[ViewCell], size: float) -> list[list[ViewCell]]:
     """The cells grouped into regions that share one ring: from each cell not yet placed
     (in id order), its neighbours are added breadth first while the region's smallest
@@ -167,9 +174,8 @@ def plan_ring_walls(
     all_boxes = np.array([boxes[int(i)] for i in all_ids], np.float64).reshape(-1, 6)
     r_max = max(settings.ring_min, float(view_distance))
     for region in ring_regions(cells, settings.region):
-        own = {c.id: (lambda a: a[np.isin(a, all_ids)])(np.asarray(pvs.get(c.id, np.zeros(0, np.int64)), np.int64))
-               for c in region}
-        ids = np.unique(np.concatenate(list(own.values()))) if own else np.zeros(0, np.int64)
+        own = {c.id: _known(pvs.get(c.id), all_ids) for c in region}
+        ids = np.unique(np.concatenate(list(own.values())))
         if len(ids) <= settings.keep:
             continue
         centre, axes, half = ring_rectangle(np.vstack([np.asarray(c.polygon, np.float64) for c in region]))
