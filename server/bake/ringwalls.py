@@ -3,8 +3,8 @@
 Where culling by the PVS is poor (a square, a sparse OpenStreetMap extract whose
 buildings stand in the open) every cell sees most of the scene.  With
 ``--virtual-walls`` a city's bake closes such a cell's far field with a **ring**: four
-walls standing on the sides of the cell's smallest rotated rectangle pushed out by a
-distance ``r``.  Everything wholly beyond the ring is carried by the walls' textures
+walls standing on the sides of the smallest rotated rectangle of the cell's region
+(below) pushed out by a distance ``r``.  Everything wholly beyond the ring is carried by the walls' textures
 and leaves the cell's geometry PVS; what stands inside the ring or crosses it stays
 geometry (and is a transparent hole in every texture of the ring, so its geometry
 behind a wall's plane shows through, as indoors: :mod:`~.wallrender`).
@@ -29,15 +29,16 @@ So the geometry PVS is the ``K`` or so objects nearest the region, and the walls
 as far out as that allows: the farther the wall, the wider a zone may be for the
 same angle of error, so the fewer textures a ring needs.
 
-**Zones.**  A viewer inside the cell is at least ``r`` from every wall of its ring, so
+**Zones.**  A viewer inside the region is at least ``r`` from every wall of its ring, so
 each side is cut into ``n = ceil(L / (2 r tan A))`` zones
 (:func:`~walkstream.shared.walls.zone_count`, the paper's equations (3) and (4) with
-``x_T = r``; ``L`` the side's length), each sampled at its middle on the cell's centre
-line (``r`` plus half the rectangle's depth in front of the wall) at eye height above
+``x_T = r``; ``L`` the side's length), each sampled at its middle on the region's
+centre line (``r`` plus half the rectangle's depth in front of the wall) at eye height above
 the ground.  Textures are used from the wall itself on (``x_T`` 0, no blend): no
 geometry is left behind the wall to blend with, and the viewer never comes nearer than
-``r`` while in the cell.  The walls reach from the ground to the top of the highest
-object removed (a point behind the wall projects onto it below its own height).
+``r`` while in the region.  The walls reach from the ground to 1 m over the top of the
+highest object of the scene beyond the ring (a point behind the wall projects onto it
+below its own height).
 
 Wall ids: ring wall ``k`` (0-3) of cell ``c`` is portal ``4 c + k``, side 0 (one side
 each: the inside of the ring); the cells of one region list the same four walls with
