@@ -27,8 +27,12 @@ texture memory and textures per wall (from the replay's ``walls`` summary).
 Variants: ``no walls`` always.  A variant with walls needs a bake that places them
 (``BakeSettings.virtual_walls``) and a database whose features name them; then one
 database per wall error ``A`` (``--wall-errors``, degrees) is baked and replayed with
-walls on, and the no-walls row of the same database (``ReplayConfig.virtual_walls``
-off) is the baseline.  Until then each scene's walls row says why there is none.
+walls on; for the hall the no-walls row of the same database
+(``ReplayConfig.virtual_walls`` off) is the baseline too.  Outdoors the walls are rings
+around the cells whose PVS is large (:mod:`walkstream.server.bake.ringwalls`), which
+cut the cells' PVS: the baseline is the plain bake's row, on the same walk (the
+cells, hence the walk, are the same).  Until then each scene's walls row says why
+there is none.
 
 For the hall, the triangles per frame of **frustum culling alone** and of drawing the
 whole hall are measured on the tour's frames too
@@ -162,7 +166,8 @@ def _frames(report: Path) -> dict[str, np.ndarray]:
     return {k: np.array([float(r[k] or "nan") for r in rows]) for k in keys}
 
 
-def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path | None], objects: int) -> dict[str, Any]:
+def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path | None], objects: int,
+         bake_s: float | None = None) -> dict[str, Any]:
     """One table row from the pda replay's summary (and the gl one's)."""
     s = pda.summary
     f = _frames(reports[0])
@@ -172,6 +177,10 @@ def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path 
     cells = s.get("visible_cells_mean")
     in_scene = s.get("cells_in_scene") if interior else objects
     walls = s.get("walls") or {}
+    # outdoors with rings: objects drawn as geometry (the frame log's count holds the walls' quads too)
+    geometry = walls.get("geometry_objects_mean")
+    if geometry is None and len(drawn):
+        geometry = float(drawn.mean())
     row: dict[str, Any] = {
         "scene": scene,
         "variant": variant,
@@ -180,7 +189,7 @@ def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path 
         "triangles_median": float(np.median(f["triangles"])) if len(f.get("triangles", ())) else None,
         "triangles_mean": s.get("triangles_mean"),
         "cells_drawn_mean": cells,
-        "objects_drawn_mean": float(drawn.mean()) if len(drawn) else None,
+        "objects_drawn_mean": geometry,
         "pda_frame_ms": 1e3 * float(np.median(f["frame_time"])) if len(f.get("frame_time", ())) else None,
         "pda_within_10pct": s.get("fps_within_10pct_ratio"),
         "fog_m_median": s.get("fog_m_median"),
@@ -189,12 +198,13 @@ def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path 
         "frames_over_visible": c.get("frames_over_visible_ratio"),
         "fog_visible_share": (c.get("causes") or {}).get("fog"),
         "compared_frames": c.get("frames"),
-        "effective_culling": (1.0 - float(cells if interior else drawn.mean()) / in_scene)
-        if in_scene and (cells is not None if interior else len(drawn)) else None,
+        "effective_culling": _culling(cells if interior else geometry, in_scene),
         "texture_bytes": walls.get("texture_bytes", 0),
         "texture_memory_bytes": walls.get("texture_memory_bytes", 0),
         "textures_per_wall": walls.get("textures_per_wall"),
         "perfect_frame_ratio": s.get("perfect_frame_ratio"),
+        "bytes_received": s.get("bytes_received"),
+        "bake_s": bake_s,
         "seam_ratio": ((s.get("truth") or {}).get("seam") or {}).get("ratio"),
     }
     if gl is not None and reports[1] is not None:
@@ -210,14 +220,25 @@ def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path 
     return row
 
 
-def _objects(db: Path) -> int:
+def _culling(drawn: float | None, in_scene: float | None) -> float | None:
+    """Effective culling: 1 - drawn per frame / in the scene (None when either is unknown)."""
+    if drawn is None or not in_scene:
+        return None
+    return 1.0 - float(drawn) / float(in_scene)
+
+
+def _summary(db: Path) -> dict[str, Any]:
     from walkstream.server.store import SceneReader
 
     reader = SceneReader.open(db)
     try:
-        return int(reader.summary().get("objects") or 0)
+        return dict(reader.summary())
     finally:
         reader.close()
+
+
+def _objects(db: Path) -> int:
+    return int(_summary(db).get("objects") or 0)
 
 
 def run_walls_bench(
@@ -262,7 +283,9 @@ def run_walls_bench(
                     notes.append(f"{scene} A={a:g}: no walls in this database (the bake placed none)")
                     continue
                 variants.append((f"walls A={a:g}", wdb, {"virtual_walls": True} if can_play else {}))
-                if can_play:
+                if can_play and scene == "hall":
+                    # indoors the walls' database plays without them too (every portal
+                    # open); a city's rings cut its PVS, so without walls it is the plain bake
                     variants.append((f"no walls (A={a:g} db)", wdb, {"virtual_walls": False}))
         objects = _objects(db)
         for variant, vdb, extra in variants:
@@ -280,7 +303,9 @@ def run_walls_bench(
                          "report": str(rep_gl)} | link | extra
                 print(f"  {variant}: gl (real clock) ...", file=sys.stderr, flush=True)
                 g = replay(str(vdb), gopts, f"{scene}, {variant}, gl")
-            rows.append(_row(scene, variant, pda, g, (rep_pda, rep_gl), objects))
+            bake_s = _summary(vdb).get("bake_seconds")
+            rows.append(_row(scene, variant, pda, g, (rep_pda, rep_gl), objects,
+                             None if bake_s is None else float(bake_s)))
         if scene == "hall":
             from walkstream.benchmarks.portals import portal_figures
 
@@ -321,11 +346,12 @@ def format_walls_table(result: Mapping[str, Any]) -> str:
     texture bytes and textures per wall; ``seam`` the change of a wall's pixels across
     a zone border over that of plain motion (``truth.seam.ratio``; at most 1: no seam;
     over the pairs of successive compared frames, so measured best with
-    ``--truth-every 1``).
+    ``--truth-every 1``); ``perf%`` perfect frames and ``kB`` bytes received (pda walk,
+    56 kbit/s); ``bake s`` the database's bake time.
     """
     head = (f"{'scene':<13} {'variant':<20} {'tri/fr':>7} {'drawn':>6} {'pda ms':>7} {'pda10%':>7} {'gl ms':>7} "
             f"{'gl per':>7} {'gl10%':>6} {'fog m':>6} {'err %':>6} {'dE00':>6} {'over%':>6} {'fog%':>6} "
-            f"{'cull%':>6} {'tex kB':>7} {'tex/wall':>8} {'seam':>5}")
+            f"{'cull%':>6} {'tex kB':>7} {'tex/wall':>8} {'seam':>5} {'perf%':>6} {'kB':>7} {'bake s':>7}")
     lines = [head, "-" * len(head)]
     for r in result.get("rows", []):
         lines.append(
@@ -337,7 +363,8 @@ def format_walls_table(result: Mapping[str, Any]) -> str:
             f"{_f(r.get('delta_e_median'), '6.2f')} {_f(r.get('frames_over_visible'), '6.1f', 100)} "
             f"{_f(r.get('fog_visible_share'), '6.1f', 100)} {_f(r.get('effective_culling'), '6.1f', 100)} "
             f"{_f(r.get('texture_bytes'), '7.1f', 1e-3)} {_f(r.get('textures_per_wall'), '8.1f')} "
-            f"{_f(r.get('seam_ratio'), '5.2f')}"
+            f"{_f(r.get('seam_ratio'), '5.2f')} {_f(r.get('perfect_frame_ratio'), '6.1f', 100)} "
+            f"{_f(r.get('bytes_received'), '7.1f', 1e-3)} {_f(r.get('bake_s'), '7.1f')}"
         )
     fr = result.get("frustum")
     if fr:

@@ -74,7 +74,7 @@ from walkstream.shared.ground import GROUND_Z
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomview import VIEW_NEAR_M, RoomView
-from walkstream.shared.walls import WallTable
+from walkstream.shared.walls import WallTable, ring_cell
 from walkstream.shared.wire import Manifest
 
 __all__ = ["ReplayResult", "run_replay", "replay"]
@@ -147,6 +147,45 @@ async def _virtual_walls(scene: WalkScene, api: SceneClient, topology: Any, room
     corners = np.array([s.corners() for s in scene.walls], np.float64).reshape(-1, 4, 3)
     scene.wall_boxes = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
     scene.wall_images = ImpostorImages(api, scene.cache, rooms.scheduler, kind="walltex")
+
+
+async def _ring_walls(scene: WalkScene, api: SceneClient, streamer: Streamer) -> None:
+    """A city's rings of textured virtual walls (its manifest lists the ``walls``
+    feature): the wall sides (one request, before the walk), each ringed cell's walls
+    and the textures' lane on the streamer's scheduler (:func:`~.walk.walls.ring_walls`)."""
+    try:
+        sides = await api.walls()
+    except ApiError:
+        return
+    scene.walls = tuple(sides)
+    rings: dict[int, list[int]] = {}
+    for k, s in enumerate(scene.walls):
+        rings.setdefault(ring_cell(s.portal), []).append(k)
+    scene.wall_rings = {c: tuple(v) for c, v in rings.items()}
+    scene.wall_cells = {s.portal: (ring_cell(s.portal), -1) for s in scene.walls}
+    scene.wall_table = WallTable(scene.walls)
+    corners = np.array([s.corners() for s in scene.walls], np.float64).reshape(-1, 4, 3)
+    scene.wall_boxes = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
+    scene.wall_images = ImpostorImages(api, scene.cache, streamer.scheduler, kind="walltex")
+
+
+def _walls_summary(scene: WalkScene, frames: Any) -> dict[str, Any]:
+    """The replay summary's ``walls`` (a scene drawn with virtual walls)."""
+    walls = scene.wall_images
+    assert walls is not None
+    figs = frames.wall_figures()
+    n_walls = len({s.portal for s in scene.walls})
+    return {
+        **figs,
+        "wall_sides": len(scene.walls),
+        # both sides' zones: the paper's "textures per wall"
+        "textures_per_wall": sum(len(s.textures) for s in scene.walls) / n_walls if n_walls else 0.0,
+        # decoded RGBA of the textures the busiest frame drew
+        "texture_memory_bytes": int(figs.get("wall_texture_bytes_max", 0)),
+        "textures_received": walls.received,
+        "texture_bytes": walls.bytes_received,
+        "texture_requests": walls.requests,
+    }
 
 
 async def _real(
@@ -290,6 +329,10 @@ async def replay(
                 scene.images = ImpostorImages(api, cache, streamer.scheduler)
             if kind == "interior" and rooms is not None and topology is not None and config.virtual_walls:
                 await _virtual_walls(scene, api, topology, rooms)
+            elif kind == "city" and streamer is not None and config.virtual_walls:
+                m1 = await within(clock, config.setup_timeout_s, asyncio.shield(manifest_fut))
+                if m1 is not None and "walls" in m1.features:
+                    await _ring_walls(scene, api, streamer)
             proj = walk_projection(config, scene)
             near = VIEW_NEAR_M if rooms is not None else STREET_NEAR_M  # the projection's near plane
             # the truth draws as far as the streets reach, or the rooms beyond any fog
@@ -376,26 +419,15 @@ async def replay(
         assert rooms is not None and topology is not None
         summary.update(link_figures(config, stats, api))
         summary.update(interior_summary(config, log, rooms, frames, topology, cache, setup_s, state.path, manifest))
-        walls = scene.wall_images
-        if walls is not None:  # only then: a scene without walls keeps its summary
-            figs = frames.wall_figures()
-            n_walls = len({s.portal for s in scene.walls})
-            summary["walls"] = {
-                **figs,
-                "wall_sides": len(scene.walls),
-                # both sides' zones: the paper's "textures per wall"
-                "textures_per_wall": sum(len(s.textures) for s in scene.walls) / n_walls if n_walls else 0.0,
-                # decoded RGBA of the textures the busiest frame drew
-                "texture_memory_bytes": int(figs.get("wall_texture_bytes_max", 0)),
-                "textures_received": walls.received,
-                "texture_bytes": walls.bytes_received,
-                "texture_requests": walls.requests,
-            }
+        if scene.wall_images is not None:  # only then: a scene without walls keeps its summary
+            summary["walls"] = _walls_summary(scene, frames)
     else:
         assert streamer is not None
         summary.update(city_summary(config, log, streamer, cache, stats, api, bytes_log, t_end - t_start,
                                     t_start, setup_s, path, manifest))
         summary["spike_frames"] = int(spikes.sum())
+        if scene.wall_images is not None:  # a city's rings of walls
+            summary["walls"] = _walls_summary(scene, frames)
         images = scene.images
         if images is not None and images.requests:  # only then: a scene without impostors keeps its summary
             summary["impostors"] = {

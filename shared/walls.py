@@ -36,6 +36,7 @@ Blend: nearer than ``x_T + blend`` the texture fades out linearly, reaching 0 at
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -47,11 +48,14 @@ from walkstream.shared.errors import InputError
 __all__ = [
     "DEFAULT_WALL_ERROR_DEG",
     "EYE_HEIGHT",
+    "RING_SIDES",
     "WallSide",
     "WallTable",
     "WallView",
     "angular_error",
     "decode_walls",
+    "ring_cell",
+    "walls_wire",
     "wall_distance",
     "zone_count",
     "zone_mix",
@@ -62,6 +66,16 @@ DEFAULT_WALL_ERROR_DEG = 10.0
 
 EYE_HEIGHT = 1.6
 """Height above the floor at which textures are sampled (a walking viewer's eye), metres."""
+
+
+RING_SIDES = 4
+"""Walls per ring around an outdoor cell (:mod:`walkstream.server.bake.ringwalls`):
+wall ``k`` (0-3) of cell ``c`` is portal ``4 c + k``, side 0."""
+
+
+def ring_cell(portal: int) -> int:
+    """The outdoor cell whose ring holds wall ``portal``."""
+    return int(portal) // RING_SIDES
 
 
 def zone_count(length: float, x_t: float, alpha: float) -> int:
@@ -318,9 +332,34 @@ def zone_mix(along: ArrayLike, width: ArrayLike, zones: ArrayLike, band: float) 
     return np.where(ok, nb, -1), np.where(ok, share, 0.0)
 
 
+def walls_wire(rows: list[list[float | int]]) -> dict[str, list[list[float | int]]]:
+    """The body of ``GET .../walls`` from the sides' rows (:meth:`WallSide.to_row`):
+    ``{"sides": [row, ...]}``, and where rows differ only in their portal (the cells of
+    an outdoor region list one ring's walls each, :mod:`walkstream.server.bake.ringwalls`)
+    the first alone in ``sides`` and ``"same": [[k, portal, ...], ...]``, the other
+    portals of ``sides[k]`` (a city's 2,000 ring walls were 35 kB gzip-compressed, one
+    per cell)."""
+    first: dict[tuple[float | int, ...], int] = {}
+    sides: list[list[float | int]] = []
+    same: dict[int, list[float | int]] = {}
+    for row in rows:
+        key = tuple(row[1:])
+        k = first.get(key)
+        if k is None:
+            first[key] = len(sides)
+            sides.append(list(row))
+        else:
+            same.setdefault(k, [k]).append(row[0])
+    out = {"sides": sides}
+    if same:
+        out["same"] = [same[k] for k in sorted(same)]
+    return out
+
+
 def decode_walls(body: bytes, what: str) -> tuple[WallSide, ...]:
-    """The wall sides of ``GET .../walls`` (msgpack ``{"sides": [row, ...]}``), bounded and
-    checked (:class:`~walkstream.shared.errors.CodecError` naming ``what``)."""
+    """The wall sides of ``GET .../walls`` (msgpack ``{"sides": [row, ...]}``, with
+    ``"same"`` as :func:`walls_wire` writes it), bounded and checked
+    (:class:`~walkstream.shared.errors.CodecError` naming ``what``)."""
     from walkstream.shared.codec.bounded import unpack_bounded
     from walkstream.shared.errors import CodecError
 
@@ -335,4 +374,13 @@ def decode_walls(body: bytes, what: str) -> tuple[WallSide, ...]:
             out.append(WallSide.from_row(row, f"{what}: sides[{k}]"))
         except InputError as exc:
             raise CodecError(str(exc)) from None
+    same = obj.get("same", [])
+    if not isinstance(same, list):
+        raise CodecError(f"{what}: 'same' is not a list")
+    for g in same:
+        if not (isinstance(g, list) and g and all(isinstance(v, int) and not isinstance(v, bool) for v in g)
+                and 0 <= g[0] < len(obj["sides"])):
+            raise CodecError(f"{what}: bad 'same' entry {str(g)[:40]}")
+        base = out[g[0]]
+        out += [dataclasses.replace(base, portal=int(v)) for v in g[1:]]
     return tuple(out)

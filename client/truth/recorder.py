@@ -314,7 +314,7 @@ class TruthRecorder:
                     ground_z=self.ground_z,
                 )
                 overlay = self.overlay
-                if overlay is None and any(st.impostors for st in self.notes):
+                if overlay is None and any(st.impostors or st.wall_quads for st in self.notes):
                     overlay = impostor_overlay(truth, self.proj)
                 pop = PopMeter() if any(st.impostors for st in self.notes) else None
                 log, worst, frames, cworst = missing_figures(

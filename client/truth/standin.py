@@ -32,12 +32,14 @@ __all__ = ["impostor_overlay", "stand_in_ids", "wall_stand_in"]
 
 
 def impostor_overlay(truth: TruthRenderer, proj: ArrayLike) -> Overlay:
-    """The ``impostor`` hook painting a note's impostors with ``truth`` at projection ``proj``."""
+    """The ``impostor`` hook painting a note's impostors (and a city's ring walls, its
+    ``wall_quads``) with ``truth`` at projection ``proj``."""
 
     def paint(note: FrameNote, rgb: NDArray[np.uint8], keys: NDArray[np.int64]) -> NDArray[np.bool_]:
-        if not note.impostors:
+        quads = [q for _, q in note.impostors] + list(note.wall_quads)
+        if not quads:
             return np.zeros(rgb.shape[:2], bool)
-        out = truth.paint_quads([q for _, q in note.impostors], note.view, proj)
+        out = truth.paint_quads(quads, note.view, proj)
         mask: NDArray[np.bool_] = np.any(out != rgb, axis=2)
         rgb[...] = out
         return mask

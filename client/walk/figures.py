@@ -65,6 +65,8 @@ class WalkFrames:
     """Of those, the walls that closed the portal walk (drawn at full opacity)."""
     wall_bytes: list[int] = field(default_factory=list)
     """Bytes of the wall textures each frame drew."""
+    geometry: list[int] = field(default_factory=list)
+    """Objects drawn as geometry per frame (a scene with walls; empty otherwise)."""
 
     def wall_figures(self) -> dict[str, float]:
         """Wall textures drawn per frame (mean, max), closed walls per frame, the share of
@@ -80,6 +82,7 @@ class WalkFrames:
             "frames_with_walls": float((n > 0).mean()),
             "wall_texture_bytes_mean": float(b.mean()),
             "wall_texture_bytes_max": int(b.max()),
+            **({"geometry_objects_mean": float(np.mean(self.geometry))} if self.geometry else {}),
         }
 
     def impostor_figures(self) -> dict[str, float]:

@@ -39,11 +39,13 @@ def measure(w: WalkState, f: Frame) -> None:
     o = w.objects
     have_obj = sum(1 for i in o.pvs if city.has_object(i)) if city is not None else 0
     have_rooms = sum(1 for c in f.default_room_cells if rooms is not None and rooms.mesh(c) is not None)
-    items = len(o.pvs) + len(f.default_room_cells)
+    # outdoors with rings of walls: the textures of the ring in view are content too
+    have_walls = f.wall_due - f.wall_missing
+    items = len(o.pvs) + len(f.default_room_cells) + f.wall_due
     known = (f.room is not None) if w.indoors else (city is not None and f.street is not None and f.street in city.cells)
     empty = 1.0 if known else scene.unknown_quality
-    dq = (have_obj + have_rooms) / items if items else empty
-    rq = (len(o.geoms) + have_rooms) / items if items else empty
+    dq = (have_obj + have_rooms + have_walls) / items if items else empty
+    rq = (len(o.geoms) + have_rooms + have_walls) / items if items else empty
     note_truth(w, f)
     fr = w.frames
     if rooms is not None:
@@ -60,6 +62,8 @@ def measure(w: WalkState, f: Frame) -> None:
         fr.walls.append(len(f.walls))
         fr.walls_closed.append(sum(1 for d in f.walls if d.alpha >= 1.0))
         fr.wall_bytes.append(sum({d.image: d.nbytes for d in f.walls}.values()))
+        if not w.indoors and city is not None:
+            fr.geometry.append(int((f.lods >= 0).sum()))
     if w.scene.images is not None:
         fr.impostors.append(len(f.impostors))
         fr.texture_bytes.append(sum({d.image: d.nbytes for d in f.impostors}.values()))
@@ -102,6 +106,7 @@ def note_truth(w: WalkState, f: Frame) -> None:
             pvs=None if cell is None else cell.pvs,
             received=cache.ids(city.kind) + cache.ids("geom"), built=cache.ids("geom"),
             geoms=w.objects.geoms, lods=f.lods, impostors=_quads(w, f),
+            wall_quads=[] if w.scene.wall_images is None else wall_quads(f.walls, w.scene.wall_images.image),
         )
     elif city is None:  # rooms only: at the fog the frame was drawn at (the budget's lever)
         rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(f.fog),

@@ -49,10 +49,14 @@ class WalkScene:
     """The impostor images' lane (street cells, ``config.impostors``); it asks for
     nothing on a scene without impostors."""
     walls: tuple[WallSide, ...] = ()
-    """An interior's textured virtual walls (``--virtual-walls``; empty: none, or
-    ``config.virtual_walls`` off)."""
+    """An interior's textured virtual walls, or a city's rings of walls around its
+    cells (``--virtual-walls``; empty: none, or ``config.virtual_walls`` off)."""
     wall_cells: dict[int, tuple[int, int]] = field(default_factory=dict)
-    """Each wall's portal id -> its two cells ``(a, b)`` (the topology's)."""
+    """Each wall's portal id -> its two cells ``(a, b)`` (the topology's; outdoors
+    ``(the ringed cell, -1)``)."""
+    wall_rings: dict[int, tuple[int, ...]] = field(default_factory=dict)
+    """Outdoors: each ringed street cell -> the indices in :attr:`walls` of its ring's
+    walls (:mod:`walkstream.server.bake.ringwalls`; empty indoors)."""
     wall_table: WallTable | None = None
     """:attr:`walls` as arrays (every side's zone and weight for many eyes at once)."""
     wall_boxes: NDArray[np.float64] | None = None

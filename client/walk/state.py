@@ -148,6 +148,11 @@ class Frame:
     """Wall textures not held that the eye sees now or ahead: ``(texture id, the
     viewer's side cell, need s)``; those near the walk are asked for
     (:func:`~walkstream.client.walk.walls.want_wall_textures`)."""
+    wall_due: int = 0
+    """Outdoors: the ring walls in view whose texture the frame needs (the perfect frame
+    needs them as it needs the PVS: the far field left the geometry for them)."""
+    wall_missing: int = 0
+    """Of :attr:`wall_due`, those whose texture is not held yet."""
     # -- draw
     snap: bool = False
     keys: list[Hashable] = field(default_factory=list)

@@ -16,7 +16,9 @@ texture weight closes it, its texture held or not: those cells, then those
 textures); a texture not in yet leaves its wall open, and the perfect frame is the
 frame with nothing missing: the cells behind that wall are drawn and must be held.
 
-*On the street* (the PVS model): the current street cell's PVS.  An entrance's
+*On the street* (the PVS model): the current street cell's PVS, and on a city baked
+with ``--virtual-walls`` the walls of its ring carrying the far field
+(:func:`~.walls.ring_walls`).  An entrance's
 building stands in it as its shell (the interior's ``outside`` cell,
 :class:`~walkstream.shared.roomwire.Entrance`), never as its own parameters, and when it
 does, a portal walk from the shell through its openings (the entrance, the windows)
@@ -28,7 +30,7 @@ from __future__ import annotations
 import time
 
 from walkstream.client.walk.state import Frame, WalkState
-from walkstream.client.walk.walls import drawn_walls, frame_walls, want_wall_textures
+from walkstream.client.walk.walls import drawn_walls, frame_walls, ring_walls, want_wall_textures
 
 __all__ = ["OUTDOOR_FOG_M", "visible"]
 
@@ -64,6 +66,8 @@ def visible(w: WalkState, f: Frame) -> None:
             rooms.closed = rooms.due_closed = frozenset()
         if f.street is not None:
             f.pvs_cells = [f.street]
+        if rooms is None and w.scene.wall_rings:
+            f.walls = ring_walls(w, f)
         default = vis = []
         if rooms is not None:
             rec = city.cells.get(f.street) if city is not None and f.street is not None else None

@@ -21,6 +21,16 @@ before the portal walk (:func:`frame_walls`):
 
 With ``config.virtual_walls`` off, or a scene without walls, nothing is closed and
 the frame is what it was.
+
+**Outdoors** (a city baked with ``--virtual-walls``: a ring of walls around each
+street cell whose PVS was large, :mod:`walkstream.server.bake.ringwalls`), each frame
+(:func:`ring_walls`) draws the walls of the current cell's ring, each with its zone's
+texture (blended with the next zone's near a border, as indoors); their textures are
+wanted now for the walls in view (sooner than those behind the viewer), ahead for the
+zones the eye moves into and for the rings of the cells the streamer predicts, at
+their need times.  The far field is no longer in the cell's PVS, so a texture not
+held is missing content: the frame is not perfect until it arrives
+(:attr:`~walkstream.client.walk.state.Frame.wall_missing`).
 """
 
 from __future__ import annotations
@@ -37,7 +47,10 @@ from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.walls import zone_mix
 
-__all__ = ["WALL_AHEAD_S", "WALL_MIX_NEED_S", "DrawnWall", "drawn_walls", "frame_walls", "wall_quads", "want_wall_textures"]
+__all__ = [
+    "RING_BEHIND_NEED_S", "WALL_AHEAD_S", "WALL_MIX_NEED_S", "DrawnWall", "drawn_walls", "frame_walls", "ring_walls",
+    "wall_quads", "want_wall_textures",
+]
 
 
 @dataclass(frozen=True)
@@ -73,6 +86,80 @@ WALL_MIX_NEED_S = 0.5
 """The need (seconds) a neighbour zone's texture is asked for at when the viewer nears
 its border and it is not held: after the textures needed now (without it the wall
 swaps its texture at the border, it is never open)."""
+
+
+RING_BEHIND_NEED_S = 0.5
+"""The need (seconds) of a ring wall's texture out of view (the viewer turns to it):
+after those in view."""
+
+
+def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
+    """Outdoors: the walls of the current street cell's ring drawn with their textures
+    (see the module docstring); sets the frame's ``wall_due`` and ``wall_missing`` and
+    wants the textures now and ahead from the lane."""
+    lane, table, city = w.scene.wall_images, w.scene.wall_table, w.scene.streets
+    f.wall_due = f.wall_missing = 0
+    if lane is None or table is None or city is None or not w.config.virtual_walls or not w.scene.wall_rings:
+        return []
+    sides = w.scene.walls
+    street = -1 if f.street is None else int(f.street)
+    ring = list(w.scene.wall_rings.get(street, ()))
+    eye = np.asarray(f.eye, np.float64).reshape(3)
+    velocity = np.zeros(2)
+    if w.config.prefetch:
+        velocity = np.asarray(city.velocity, np.float64).reshape(2)
+    moving = float(np.linalg.norm(velocity)) > 1e-3
+    horizons = WALL_AHEAD_S if moving else ()
+    eyes = np.array([eye, *[eye + np.array([*(velocity * t), 0.0]) for t in horizons]])
+    zones, _d, weights = table.views(eyes)
+    wants: dict[int, float] = {}
+
+    def want(tid: int, need: float) -> None:
+        if not lane.held(tid) and need < wants.get(tid, np.inf):
+            wants[tid] = need
+
+    out: list[DrawnWall] = []
+    if ring:
+        boxes = w.scene.wall_boxes
+        seen = frustum_cull(boxes[ring, 0], boxes[ring, 1], f.vp) if boxes is not None else np.ones(len(ring), bool)
+        mix_zone, mix_share = zone_mix(table.along_of(eye)[0], table.width, table.zones, w.config.wall_zone_blend)
+        for j, k in enumerate(ring):
+            if weights[0, k] <= 0.0:
+                continue
+            s = sides[k]
+            zone = int(zones[0, k])
+            tid = s.textures[zone]
+            f.wall_due += int(seen[j])
+            if not lane.held(tid):
+                f.wall_missing += int(seen[j])
+                want(tid, 0.0 if seen[j] else RING_BEHIND_NEED_S)
+                continue
+            mix_tid, mix = -1, 0.0
+            if mix_zone[k] >= 0:  # near a zone border: the neighbour's texture blended in
+                nb = s.textures[int(mix_zone[k])]
+                if lane.held(nb):
+                    mix_tid, mix = nb, float(mix_share[k])
+                else:
+                    want(nb, WALL_MIX_NEED_S)
+            img = lane.image(tid)
+            out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
+                                 int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix))
+        for h, t in enumerate(horizons, start=1):  # the zones the eye walks into
+            for k in ring:
+                if weights[h, k] > 0.0:
+                    want(sides[k].textures[int(zones[h, k])], float(t))
+    if w.config.prefetch:  # the rings of the cells the streamer predicts, where the eye will be
+        ahead = [(c, t) for c, t in sorted(city.need.items(), key=lambda kv: kv[1])
+                 if c != f.street and 0.0 <= t <= WALL_AHEAD_S[-1] and c in w.scene.wall_rings]
+        if ahead:
+            at = np.array([eye + np.array([*(velocity * t), 0.0]) for _, t in ahead])
+            az, _ad, aw = table.views(at)
+            for row, (c, t) in enumerate(ahead):
+                for k in w.scene.wall_rings[c]:
+                    if aw[row, k] > 0.0:
+                        want(sides[k].textures[int(az[row, k])], float(t))
+    lane.want(wants)
+    return out
 
 
 def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:

@@ -19,7 +19,8 @@ both) and
    yet stored in chunks by the same runner and lists them per cell
    (:func:`~.impostors.bake_impostors`); with virtual walls (``--virtual-walls``),
    makes the wall textures not yet stored likewise and writes the wall sides
-   (:func:`~.walls.bake_walls`);
+   (:func:`~.walls.bake_walls`; a city's rings around its cells whose PVS is large
+   and their cut PVS, :func:`~.walls.bake_ring_walls`);
 7. records the default walks and seals the database.
 
 So every scene kind resumes alike, to the same version an uninterrupted bake gets.
@@ -39,7 +40,7 @@ from walkstream.server.bake.impostors import bake_impostors
 from walkstream.server.bake.interior import room_contents, write_contents
 from walkstream.server.bake.plan import BakePlan, settings_key
 from walkstream.server.bake.wallplan import whole_crossing
-from walkstream.server.bake.walls import bake_walls
+from walkstream.server.bake.walls import bake_ring_walls, bake_walls
 from walkstream.server.bake.workers import PVS_CHUNK, pvs_items, pvs_task, release_renderer
 from walkstream.server.store import SceneReader, SceneWriter
 from walkstream.shared.errors import InputError
@@ -165,6 +166,10 @@ def drive(
             step("impostor images", "image")
             extra.update(bake_impostors(writer, plan.impostors, imp_cells, workers=workers, scheduler=scheduler,
                                         progress=progress, say=say))
+        if plan.rings is not None and imp_cells:
+            step("wall textures", "texture")
+            extra.update(bake_ring_walls(writer, plan.rings, imp_cells, workers=workers, scheduler=scheduler,
+                                         progress=progress, say=say))
         if rooms is not None and rooms.walls is not None and rooms.wall_plan is not None:
             step("wall textures", "texture")
             extra.update(bake_walls(writer, rooms.scene, rooms.wall_plan, rooms.walls, settings_key(plan.settings),

@@ -36,6 +36,7 @@ from walkstream.server.bake.plan import (
     FieldCells,
     ImpostorCells,
     PvsCells,
+    RingCells,
     Say,
     Walk,
     settings_key,
@@ -116,7 +117,9 @@ def bake(
         before impostors existed).
     walls:
         Textured virtual walls across an interior's open rooms
-        (:mod:`~walkstream.server.bake.wallplan`; None: none, the database as before).
+        (:mod:`~walkstream.server.bake.wallplan`), or around a city's cells whose
+        PVS is large (:mod:`~walkstream.server.bake.ringwalls`); None: none, the
+        database as before.
 
     Returns
     -------
@@ -151,9 +154,7 @@ def bake(
             plan = interior_plan(scene, src, output, name=name, say=say, import_seconds=time.perf_counter() - t0,
                                  walls=walls)
         else:
-            if walls is not None:
-                raise InputError(f"--virtual-walls: {src.name} is a city; virtual walls are an interior's (for now)")
-            plan = city_plan(scene, src, Path(output), st, name=name, say=say, impostors=impostors)
+            plan = city_plan(scene, src, Path(output), st, name=name, say=say, impostors=impostors, walls=walls)
     return drive(plan, output, workers=workers, scheduler=scheduler, progress=progress, log=log,
                  max_cells=max_cells, started=t0, stage=stage)
 
@@ -195,6 +196,7 @@ def city_plan(
     name: str | None = None,
     say: Callable[[str], None] = lambda _msg: None,
     impostors: ImpostorSettings | None = None,
+    walls: WallSettings | None = None,
 ) -> BakePlan:
     """The :class:`~.plan.BakePlan` of a city: its view cells (street or grid), PVS cells only;
     its default walks routed on the street part of its :class:`~.scenenav.SceneGraph`
@@ -235,6 +237,9 @@ def city_plan(
     if impostors is not None:
         settings_dict["impostors"] = impostors.record()
         features.append("impostors")
+    if walls is not None:
+        settings_dict["walls"] = walls.record_outdoors()
+        features.append("walls")
     city = scene
 
     def write_tables(writer: SceneWriter) -> None:
@@ -260,6 +265,10 @@ def city_plan(
         rows = [r for r in object_rows(city, grammar) if r.kind == "building"]
         imp = ImpostorCells(city, impostors, {r.id: r.bbox for r in rows}, {r.id: r.tris[2] for r in rows},
                             settings_key(settings_dict))
+    rings = None
+    if walls is not None:
+        rings = RingCells(city, walls, {r.id: r.bbox for r in object_rows(city, grammar)}, st.view_distance,
+                          settings_key(settings_dict))
     pvs: PvsCells | None = PvsCells(scene, st, cells, settings_key(settings_dict))
     fc = None
     if st.sampling == "field":
@@ -268,7 +277,7 @@ def city_plan(
         name=name or out.stem, crs=scene.crs, origin=scene.origin, grammar_text=default_grammar_text(),
         grammar_version=grammar.id, features=features, settings=settings_dict,
         pvs=pvs, rooms=None, write_tables=write_tables,
-        walks=walks, summary=summary, impostors=imp, field=fc,
+        walks=walks, summary=summary, impostors=imp, field=fc, rings=rings,
     )
 
 

@@ -44,7 +44,7 @@ from walkstream.server.store import SceneWriter
 from walkstream.shared.arrays import F64, I64
 from walkstream.shared.paths import RecordedPath
 
-__all__ = ["BakePlan", "FieldCells", "ImpostorCells", "PvsCells", "RoomCells", "Say", "Walk", "settings_key"]
+__all__ = ["BakePlan", "FieldCells", "ImpostorCells", "PvsCells", "RingCells", "RoomCells", "Say", "Walk", "settings_key"]
 
 Say = Callable[[str], None]
 """A one-line message about the bake's stages."""
@@ -119,6 +119,20 @@ class ImpostorCells:
 
 
 @dataclass
+class RingCells:
+    """The rings of textured virtual walls around a city's cells (``--virtual-walls`` on
+    a city, :mod:`~.ringwalls`): ``settings``, every object's stored ``boxes`` by id,
+    the bake's ``view_distance``; ``key`` names the scene (a worker keeps its renderer
+    while it stays)."""
+
+    scene: SourceScene
+    settings: WallSettings
+    boxes: dict[int, tuple[float, float, float, float, float, float]]
+    view_distance: float
+    key: str
+
+
+@dataclass
 class BakePlan:
     """A scene to bake (see the module docstring).
 
@@ -131,6 +145,9 @@ class BakePlan:
         The scene's cells by kind (any may be None).
     impostors:
         The impostor images of the PVS cells (None: a bake without ``--impostors``).
+    rings:
+        The rings of virtual walls around the city's cells whose PVS is large (None: a
+        bake without ``--virtual-walls``).
     write_tables:
         Writes everything but the PVS and the contents: objects, cells, viewpoints,
         rooms, portals, stairs, entrances (on resume again: the writer's upserts keep
@@ -155,6 +172,7 @@ class BakePlan:
     summary: dict[str, Any] = field(default_factory=dict)
     field: FieldCells | None = None
     impostors: ImpostorCells | None = None
+    rings: RingCells | None = None
 
 
 def settings_key(settings: dict[str, Any]) -> str:

@@ -1,7 +1,8 @@
 """Wall textures: what lies behind a virtual wall, seen off-axis from a zone's sampling point.
 
-:class:`WallRenderer` holds every element triangle of an interior in one vertex
-buffer (flat normals, the palette's material colours, the client's lighting of
+:class:`WallRenderer` holds every triangle of a scene in one vertex buffer (an
+interior's elements, or a city's objects with buildings at LOD2, as
+:func:`wall_elements` lists them) (flat normals, the palette's material colours, the client's lighting of
 :mod:`walkstream.shared.lighting`; one headless context as every renderer of the
 project) and renders a wall side's zone with an **off-axis perspective** whose
 near plane is the wall itself (:func:`off_axis`): the frustum from the sampling
@@ -28,6 +29,7 @@ from numpy.typing import NDArray
 from walkstream.server.bake.litimage import SUPERSAMPLE, average_samples, lit_program
 from walkstream.server.bake.wallplan import WallJob, texture_height
 from walkstream.server.sources.interior import InteriorScene
+from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.codec.image import encode_image
 from walkstream.shared.gl import (
@@ -40,9 +42,11 @@ from walkstream.shared.gl import (
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.walls import WallSide
 
-__all__ = ["WallRenderer", "off_axis", "release_wall_renderer", "wall_task"]
+__all__ = ["WallElement", "WallRenderer", "off_axis", "release_wall_renderer", "wall_elements", "wall_task"]
 
-_FAR = 400.0
+_FAR = 2000.0
+"""Far plane of a texture's view, metres (as far as the client draws the streets; an
+interior ends long before)."""
 
 _FRAGMENT_SHADER = """
 #version 330
@@ -54,6 +58,31 @@ void main() {
     f_color = u_hole > 0.5 ? vec4(0.0) : vec4(v_lit, 1.0);
 }
 """
+
+
+WallElement = tuple[int, NDArray[np.float64], NDArray[np.uint8]]
+"""One object a wall texture may show: ``(id, triangles (m, 3, 3), materials (m,))``."""
+
+
+def wall_elements(scene: InteriorScene | SourceScene) -> list[WallElement]:
+    """What wall textures of ``scene`` show: an interior's elements, or a city's objects
+    as the bake renders them (:func:`~.visibility.meshes_for_scene`, buildings at LOD2,
+    the detail the client draws near)."""
+    if isinstance(scene, InteriorScene):
+        return [(int(e.id), e.soup.astype(np.float64), np.asarray(e.materials, np.uint8))
+                for e in scene.elements if len(e.triangles)]
+    from walkstream.server.bake.visibility import meshes_for_scene
+
+    meshes, ids = meshes_for_scene(scene, 2)
+    out: list[WallElement] = []
+    for oid, m in zip(ids.tolist(), meshes, strict=True):
+        idx = np.asarray(m.indices, np.int64).reshape(-1, 3)
+        if len(idx) == 0:
+            continue
+        mats = np.asarray(m.materials, np.uint8)
+        tri_mats = mats[idx[:, 0]] if len(mats) == len(m.positions) else np.zeros(len(idx), np.uint8)
+        out.append((int(oid), np.asarray(m.positions, np.float64)[idx], tri_mats))
+    return out
 
 
 def off_axis(eye: NDArray[np.float64], side: WallSide, far: float = _FAR) -> NDArray[np.float64]:
@@ -84,9 +113,10 @@ def off_axis(eye: NDArray[np.float64], side: WallSide, far: float = _FAR) -> NDA
 
 
 class WallRenderer(Releasable):
-    """Renders wall textures of one interior (see the module docstring)."""
+    """Renders wall textures of one scene (see the module docstring); ``scene`` an
+    interior or a city, or the elements themselves (:func:`wall_elements`)."""
 
-    def __init__(self, scene: InteriorScene, ctx: Any = None) -> None:
+    def __init__(self, scene: InteriorScene | SourceScene | Sequence[WallElement], ctx: Any = None) -> None:
         self._own_ctx = ctx is None
         self.ctx = create_context() if ctx is None else ctx
         self._objects: list[Any] = []
@@ -94,16 +124,14 @@ class WallRenderer(Releasable):
         self._range: list[tuple[int, int, int]] = []  # (element id, first vertex, count)
         pos, nor, col = [], [], []
         first = 0
-        for e in scene.elements:
-            if len(e.triangles) == 0:
-                continue
-            tri = e.soup.astype(np.float64)
+        elements = scene if isinstance(scene, Sequence) else wall_elements(scene)
+        for eid, tri, mats in elements:
             nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
             nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-12)
             pos.append(tri.reshape(-1, 3))
             nor.append(np.repeat(nrm, 3, axis=0))
-            col.append(np.repeat(material_rgb(e.materials).astype(np.float32) / 255.0, 3, axis=0))
-            self._range.append((e.id, first, 3 * len(tri)))
+            col.append(np.repeat(material_rgb(mats).astype(np.float32) / 255.0, 3, axis=0))
+            self._range.append((eid, first, 3 * len(tri)))
             first += 3 * len(tri)
         verts = np.hstack([np.vstack(pos), np.vstack(nor), np.vstack(col)]).astype(np.float32) if pos else \
             np.zeros((3, 9), np.float32)
@@ -162,7 +190,7 @@ class WallRenderer(Releasable):
 _WORKER: dict[str, Any] = {}
 
 
-def wall_task(jobs: list[WallJob], scene: InteriorScene, key: str, codec: str) -> list[tuple[WallJob, tuple[int, bytes]]]:
+def wall_task(jobs: list[WallJob], scene: InteriorScene | SourceScene, key: str, codec: str) -> list[tuple[WallJob, tuple[int, bytes]]]:
     """Render and encode textures (:data:`~.wallplan.WallJob` each): ``(job, (height, bytes))``
     in order.  A worker keeps its renderer while ``key`` (the scene's) stays."""
     if _WORKER.get("key") != key:

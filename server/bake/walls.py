@@ -1,7 +1,8 @@
 """The virtual walls' step of the one bake driver: the wall textures not yet stored, then every wall side.
 
 What the walls are, where they stand and what each side needs is planned in
-:mod:`~walkstream.server.bake.wallplan`; a texture is rendered and encoded by
+:mod:`~walkstream.server.bake.wallplan` (an interior's) and
+:mod:`~walkstream.server.bake.ringwalls` (a city's rings); a texture is rendered and encoded by
 :func:`~walkstream.server.bake.wallrender.wall_task`, in chunks of the one chunk
 runner, so a killed bake resumes texture by texture.
 """
@@ -9,21 +10,28 @@ runner, so a killed bake resumes texture by texture.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
+import numpy as np
+
 from walkstream.server.bake.chunks import run_chunks
+from walkstream.server.bake.plan import RingCells
+from walkstream.server.bake.ringwalls import plan_ring_walls
+from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.wallplan import WALL_CHUNK, WallPlan, WallSettings
 from walkstream.server.bake.wallrender import release_wall_renderer, wall_task
 from walkstream.server.sources.interior import InteriorScene
+from walkstream.server.sources.scene import SourceScene
 from walkstream.server.store import SceneWriter
 from walkstream.shared.codec.image import IMAGE_MEDIA
 
-__all__ = ["bake_walls"]
+__all__ = ["bake_ring_walls", "bake_walls"]
+
 
 def bake_walls(
     writer: SceneWriter,
-    scene: InteriorScene,
+    scene: InteriorScene | SourceScene,
     plan: WallPlan,
     settings: WallSettings,
     key: str,
@@ -63,3 +71,40 @@ def bake_walls(
         "wall_texture_bytes": writer.wall_texture_bytes(),
         "wall_seconds": time.perf_counter() - t0,
     }
+
+
+def bake_ring_walls(
+    writer: SceneWriter,
+    rings: RingCells,
+    cells: Sequence[ViewCell],
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    say: Callable[[str], None] = lambda _msg: None,
+) -> dict[str, Any]:
+    """A city's rings (:mod:`~.ringwalls`): planned from the stored PVS, their textures
+    made as an interior's (:func:`bake_walls`), then each ringed cell's PVS cut to what
+    stays geometry.  The cut comes last, so a bake killed while it rendered resumes
+    from the full PVS to the same plan.
+
+    Returns
+    -------
+    dict
+        As :func:`bake_walls`, and ``ring_cells`` (cells with a ring), ``ring_removed``
+        (cell-object pairs taken out of the geometry PVS), ``ring_radius_median`` (m).
+    """
+    st = rings.settings.outdoors()
+    plan = plan_ring_walls(cells, writer.stored_pvs(), rings.boxes, st, view_distance=rings.view_distance)
+    say(f"virtual walls: rings around {len(plan.kept)} of {len(cells)} cells, "
+        f"{plan.removed} cell-object pairs carried by their textures")
+    out = bake_walls(writer, rings.scene, plan.walls, st, rings.key, workers=workers,
+                     scheduler=scheduler, progress=progress, say=say)
+    for cid, ids in sorted(plan.kept.items()):
+        writer.set_pvs(cid, ids, writer.stored_coverage(cid, ids))
+    out.update({
+        "ring_cells": len(plan.kept),
+        "ring_removed": plan.removed,
+        "ring_radius_median": float(np.median(list(plan.radius.values()))) if plan.radius else 0.0,
+    })
+    return out

@@ -71,7 +71,7 @@ from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_q, encode_path
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.records import BuildingParams
 from walkstream.shared.roomview import RoomView
-from walkstream.shared.walls import WallSide
+from walkstream.shared.walls import WallSide, walls_wire
 from walkstream.shared.wire import (
     MSGPACK,
     OFFERS,
@@ -315,7 +315,7 @@ class Scene:
         sides = [WallSide.from_row(r, "stored wall").to_row(compact=True) for r in reader.wall_sides()] \
             if self.has_walls else []
         self.walls: dict[Rep, Encoded] = {
-            rep: encode({"sides": sides}, rep, self.version, "walls") for rep in ("msgpack", "json")
+            rep: encode(walls_wire(sides), rep, self.version, "walls") for rep in ("msgpack", "json")
         } if self.has_walls else {}
         """Every wall side (``WallSide.to_row(compact=True)`` lists) in each representation
         (empty without walls)."""

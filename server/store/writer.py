@@ -505,6 +505,21 @@ class SceneWriter:
                 raise StoreError(f"{self.work_path}: {exc}") from exc
         return out
 
+    def stored_coverage(self, cell_id: int, ids: ArrayLike) -> np.ndarray:
+        """``(k,)`` the stored coverage of objects ``ids`` ``(k,)`` in cell ``cell_id``'s PVS
+        (0 for one not in it): a PVS cut to a subset keeps its objects' figures."""
+        cid = row_index(cell_id, "cell id")
+        want = np.asarray(ids, np.int64).reshape(-1)
+        row = self._db.execute("SELECT pvs FROM cells WHERE id = ? AND pvs IS NOT NULL", (cid,)).fetchone()
+        if row is None:
+            return np.zeros(len(want))
+        try:
+            have, ach = decode_pvs(row[0], f"cell {cid}: pvs")[:2]
+        except CodecError as exc:
+            raise StoreError(f"{self.work_path}: {exc}") from exc
+        by_id = dict(zip(np.asarray(have, np.int64).tolist(), np.asarray(ach, np.float64).tolist(), strict=True))
+        return np.array([by_id.get(int(i), 0.0) for i in want], np.float64)
+
     def add_impostor(self, image: int, obj: int, bin_: tuple[int, int, int], size: int, media: str, data: bytes) -> None:
         """Store (or replace) one impostor image, committed at once (a kill loses only those in flight).
 

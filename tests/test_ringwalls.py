@@ -1,0 +1,235 @@
+"""Textured virtual walls outdoors (issue 28 item 2, a cell's far field): rings of walls
+around a city's cells whose PVS is large, their textures, the cut PVS, the client's draw.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import sqlite3
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from PIL import Image
+
+from walkstream.client.config import ReplayConfig
+from walkstream.client.net.link import LinkProfile
+from walkstream.client.replay import ReplayResult, run_replay
+from walkstream.server.bake import BakeSettings, bake
+from walkstream.server.bake.ringwalls import plan_ring_walls, ring_regions
+from walkstream.server.bake.viewcell import ViewCell
+from walkstream.server.bake.wallplan import WallSettings
+from walkstream.server.service.main import create_app
+from walkstream.server.sources.citygen import write_city
+from walkstream.server.store import SceneReader
+from walkstream.shared.walls import ring_cell, zone_count
+
+URL = "http://walkstream.test"
+FAST = BakeSettings(resolution=32, sampling="corners")
+# few textures (a wide error, large regions, coarse texels): the bake stays a few seconds
+RINGS = WallSettings(keep=5, ring_min=10.0, region=80.0, error_deg=30.0, outdoor_texels_per_m=2.0, outdoor_max_side=64)
+
+
+def _cell(cid: int, x0: float, y0: float, size: float = 10.0, neighbours: tuple[int, ...] = ()) -> ViewCell:
+    poly = np.array([[x0, y0], [x0 + size, y0], [x0 + size, y0 + size], [x0, y0 + size]], np.float64)
+    return ViewCell(cid, "street", poly, 1.0, 2.0, neighbours)
+
+
+def _box(x: float, y: float, half: float = 2.0, top: float = 12.0) -> tuple[float, ...]:
+    return (x - half, y - half, 0.0, x + half, y + half, top)
+
+
+# ------------------------------------------------------------------ the plan (no GL)
+
+
+def test_objects_wholly_beyond_the_ring_leave_the_geometry_pvs_and_crossing_ones_stay() -> None:
+    cell = _cell(0, 0.0, 0.0)  # 10 m square: the viewer is within it
+    boxes = {1: _box(5, 5), 2: _box(-4, 5), 3: _box(14, 5), 4: _box(5, 60), 5: _box(-70, 0), 6: _box(90, 90)}
+    st = WallSettings(keep=3, ring_min=5.0, region=0.0)
+    plan = plan_ring_walls([cell], {0: np.array([1, 2, 3, 4, 5, 6])}, boxes, st)
+    r = plan.radius[0]
+    # the three nearest reach the cell's square within 2 m; the fourth is 53 m out: the ring just inside it
+    assert 5.0 <= r < 53.0
+    assert plan.kept[0].tolist() == [1, 2, 3]
+    assert plan.removed == 3
+    sides = plan.walls.sides
+    assert len(sides) == 4 and {s.portal for s in sides} == {0, 1, 2, 3} and {ring_cell(s.portal) for s in sides} == {0}
+    alpha = math.radians(st.error_deg)
+    for s in sides:
+        assert s.zones == zone_count(s.length, r, alpha) == len(s.textures)
+        # the wall stands r beyond the cell's square, the hidden space (outside) to its left
+        mid = (np.asarray(s.p0) + np.asarray(s.p1)) / 2.0
+        assert float((mid - np.array([5.0, 5.0])) @ s.normal) == pytest.approx(5.0 + r)
+        # a viewer anywhere in the cell sees the texture in full (no geometry behind it to blend with)
+        for eye in ([0.5, 0.5, 1.6], [9.5, 9.5, 1.6], [5.0, 5.0, 1.6]):
+            assert s.view(eye).weight == 1.0
+        # tall enough for the highest object behind it, from the ground
+        assert s.z0 == 0.0 and s.z1 >= 12.0
+    # the objects meeting the ring are holes in every texture of the ring, never painted on it
+    holes = {j[4] for j in plan.walls.jobs}
+    assert holes == {(1, 2, 3)}
+
+
+def test_a_cell_whose_pvs_is_small_gets_no_ring() -> None:
+    cell = _cell(0, 0.0, 0.0)
+    boxes = {1: _box(5, 5), 2: _box(50, 5)}
+    plan = plan_ring_walls([cell], {0: np.array([1, 2])}, boxes, WallSettings(keep=3))
+    assert plan.kept == {} and plan.walls.sides == [] and plan.walls.jobs == []
+
+
+def test_neighbouring_cells_share_one_ring_and_its_textures() -> None:
+    cells = [_cell(0, 0.0, 0.0, neighbours=(1,)), _cell(1, 10.0, 0.0, neighbours=(0, 2)), _cell(2, 20.0, 0.0, neighbours=(1,))]
+    assert [[c.id for c in r] for r in ring_regions(cells, 25.0)] == [[0, 1], [2]]
+    assert [[c.id for c in r] for r in ring_regions(cells, 0.0)] == [[0], [1], [2]]
+    boxes = {i: _box(5 + 10 * i, 5) for i in range(3)} | {10 + i: _box(200 + 30 * i, 5) for i in range(4)}
+    pvs = {c.id: np.array([0, 1, 2, 10, 11, 12, 13]) for c in cells}
+    plan = plan_ring_walls(cells, pvs, boxes, WallSettings(keep=3, ring_min=5.0, region=25.0))
+    by_cell: dict[int, list[Any]] = {}
+    for s in plan.walls.sides:
+        by_cell.setdefault(ring_cell(s.portal), []).append(s)
+    assert sorted(by_cell) == [0, 1, 2] and all(len(v) == 4 for v in by_cell.values())
+    # cells 0 and 1: one region, the same walls and texture ids under their own portal ids
+    assert [s.textures for s in by_cell[0]] == [s.textures for s in by_cell[1]]
+    assert not {t for s in by_cell[2] for t in s.textures} & {t for s in by_cell[0] for t in s.textures}
+    assert len(plan.walls.jobs) == sum(len(s.textures) for s in by_cell[0] + by_cell[2])
+    assert {tuple(k.tolist()) for k in plan.kept.values()} == {(0, 1, 2)}
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--virtual-walls", "--wall-keep", "-1"], "--wall-keep"),
+        (["--virtual-walls", "--wall-ring-min", "0"], "--wall-ring-min"),
+        (["--virtual-walls", "--wall-region", "-5"], "--wall-region"),
+        (["--wall-keep", "4"], "give --virtual-walls too"),
+    ],
+)
+def test_bad_ring_flags_are_one_clear_line(
+    flags: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from walkstream.cli import main
+
+    assert main(["bake", str(tmp_path / "c.geojson"), "-o", str(tmp_path / "x.db"), *flags]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("walkstream: error:") and message in err and "Traceback" not in err
+    assert not (tmp_path / "x.db").exists()
+
+
+# ------------------------------------------------------------------ bake, serve, draw (GL)
+
+
+def _solid(oid: int, box: tuple[float, ...]) -> tuple[int, np.ndarray, np.ndarray]:
+    import trimesh
+
+    lo, hi = np.asarray(box[:3]), np.asarray(box[3:])
+    m = trimesh.creation.box(extents=hi - lo)
+    m.apply_translation((lo + hi) / 2.0)
+    tri = np.asarray(m.vertices, np.float64)[np.asarray(m.faces)]
+    return oid, tri, np.zeros(len(tri), np.uint8)
+
+
+@pytest.mark.gl
+def test_the_far_object_is_painted_on_the_ring_and_a_crossing_one_is_a_hole(gl: object) -> None:
+    from walkstream.server.bake.wallrender import WallRenderer
+
+    cell = _cell(0, 0.0, 0.0)
+    # 1 and 4 near (kept); 2 a long block crossing the north wall; 3 far behind it, beside 2
+    boxes = {1: _box(5, 5, top=4.0), 2: (20.0, 14.0, 0.0, 24.0, 200.0, 15.0), 3: (-40.0, 100.0, 0.0, 0.0, 104.0, 30.0),
+             4: _box(5, -3, top=4.0)}
+    plan = plan_ring_walls([cell], {0: np.array([1, 2, 3, 4])}, boxes, WallSettings(keep=3, ring_min=5.0, region=0.0))
+    assert plan.kept[0].tolist() == [1, 2, 4] and plan.radius[0] < 90.0
+    north = max(plan.walls.sides, key=lambda s: s.p0[1] + s.p1[1])
+    job = next(j for j in plan.walls.jobs if j[0] == north.textures[len(north.textures) // 2])
+    assert job[4] == (1, 2, 4)  # the objects meeting the ring: holes, never painted
+    ren = WallRenderer([_solid(i, boxes[i]) for i in (1, 2, 3, 4)], ctx=gl)
+    try:
+        img = ren.render(north, job[2], 256, job[4])
+        painted = img[..., 3] > 0
+        assert painted.any()  # the far object is on the texture
+        solo = ren.render(north, job[2], 256, ())
+    finally:
+        ren.release()
+    # where the crossing object stands in front of the far one, the texture is a hole (its
+    # geometry behind the wall shows through); without it as a hole it would be painted there
+    assert (solo[..., 3] > 0).sum() > painted.sum()
+
+
+@pytest.fixture(scope="module")
+def dbs(tmp_path_factory: pytest.TempPathFactory, gl_ctx: object) -> tuple[Path, Path, dict[str, Any]]:
+    d = tmp_path_factory.mktemp("ringwalls")
+    write_city(d / "city.geojson", 150, 2)  # 35 cells, 45 objects: both bakes in about 10 s
+    summary = bake(d / "city.geojson", d / "walls.db", settings=FAST, walls=RINGS, name="walls")
+    bake(d / "city.geojson", d / "plain.db", settings=FAST, name="plain")
+    return d / "walls.db", d / "plain.db", summary
+
+
+def _replay(db: Path, **kw: Any) -> ReplayResult:
+    app = create_app([db])
+    try:
+        cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="pda", duration_s=6.0,
+                           size=(160, 120), **kw)
+        return run_replay(httpx.ASGITransport(app=app), URL, cfg)
+    finally:
+        app.state.scenes.close()
+
+
+def _pvs(db: Path) -> dict[int, set[int]]:
+    with SceneReader.open(db) as r:
+        return {c.id: set(np.asarray(c.pvs).tolist()) for c in r.cells()}
+
+
+@pytest.mark.gl
+def test_a_city_bake_rings_its_cells_and_carries_the_far_field_on_the_textures(dbs: tuple[Path, Path, dict[str, Any]]) -> None:
+    walls, plain, summary = dbs
+    assert summary["ring_cells"] > 0 and summary["ring_removed"] > 0 and summary["wall_textures"] > 0
+    cut, full = _pvs(walls), _pvs(plain)
+    assert cut.keys() == full.keys()
+    assert all(cut[c] <= full[c] for c in cut)  # only taken away
+    assert sum(len(full[c]) - len(cut[c]) for c in cut) == summary["ring_removed"]
+    db = sqlite3.connect(walls)
+    try:
+        rows = db.execute("SELECT data FROM wall_textures").fetchall()
+    finally:
+        db.close()
+    alpha = [np.asarray(Image.open(io.BytesIO(r[0])).convert("RGBA"))[..., 3] for r in rows]
+    # what lies beyond the rings is painted on their textures (the far field), the rest transparent
+    assert sum(int((a > 0).any()) for a in alpha) > len(alpha) // 4
+    assert all(int((a == 0).any()) for a in alpha)
+
+
+@pytest.mark.gl
+def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tuple[Path, Path, dict[str, Any]]) -> None:
+    walls, plain, _ = dbs
+    w = _replay(walls, truth_every=25).summary
+    p = _replay(plain, truth_every=25).summary
+    ws = w["walls"]
+    assert ws["frames_with_walls"] > 0.5 and ws["textures_received"] > 0 and ws["texture_bytes"] > 0
+    assert ws["geometry_objects_mean"] < p["visible_mean"]
+    # the far field is on the walls: the truth's colour error stays that of a picture, not of holes
+    assert w["truth"]["colour"]["mean_error"]["median"] < 0.1
+    off = _replay(walls, virtual_walls=False).summary
+    assert "walls" not in off  # no ring asked for, no texture on the link
+
+
+def test_the_walls_list_sends_a_regions_ring_once_and_decodes_to_every_cells_walls() -> None:
+    import msgpack
+
+    from walkstream.shared.errors import CodecError
+    from walkstream.shared.walls import decode_walls, walls_wire
+
+    cells = [_cell(0, 0.0, 0.0, neighbours=(1,)), _cell(1, 10.0, 0.0, neighbours=(0,))]
+    boxes = {0: _box(5, 5), 1: _box(15, 5)} | {10 + i: _box(200 + 30 * i, 5) for i in range(4)}
+    plan = plan_ring_walls(cells, {c.id: np.array([0, 1, 10, 11, 12, 13]) for c in cells}, boxes,
+                           WallSettings(keep=2, ring_min=5.0, region=25.0))
+    rows = [s.to_row(compact=True) for s in plan.walls.sides]
+    body = walls_wire(rows)
+    assert len(rows) == 8 and len(body["sides"]) == 4 and len(body["same"]) == 4
+    back = decode_walls(msgpack.packb(body), "walls")
+    assert sorted(s.to_row(compact=True) for s in back) == sorted(rows)
+    own = [r for r in rows if ring_cell(int(r[0])) == 0]
+    assert walls_wire(own) == {"sides": own}  # nothing shared: as before
+    with pytest.raises(CodecError, match="same"):
+        decode_walls(msgpack.packb({"sides": own, "same": [[9, 5]]}), "walls")
