@@ -64,6 +64,7 @@ from walkstream.client.stream.walkstart import (
 from walkstream.client.tasks import reap
 from walkstream.client.truth.recorder import TruthRecorder, TruthResult, interior_far_m
 from walkstream.client.walk.crossing import crossing_topology
+from walkstream.client.walk.facades import FacadeState, release_facades
 from walkstream.client.walk.figures import WalkFrames
 from walkstream.client.walk.loop import walk
 from walkstream.client.walk.measure import compare_truth
@@ -176,6 +177,7 @@ async def replay(
     rooms: RoomStreamer | None = None
     disk: DiskCache | None = None
     streamer_closed = False
+    state: WalkState | None = None
     async with httpx.AsyncClient(
         transport=link, base_url=base_url, timeout=httpx.Timeout(30.0)
     ) as http:
@@ -324,6 +326,8 @@ async def replay(
                 lambda: int(link.stats.bytes_down), WalkFrames(), recorder,
                 BudgetController(config.fps_target, k=config.budget_frames),
             )
+            if config.facades and scene.streets is not None:  # boxes carrying their LOD2's facades
+                state.facades = FacadeState()
             if headed:  # walking the path's head until the whole path is in
                 state.path, state.path_pending = whole.get("path", path), "path" not in whole
                 whole["state"] = state
@@ -333,6 +337,7 @@ async def replay(
                         api, clock, config.path, path, due, rooms.busy, path_arrived)))
             log, snapshots, spikes = await _walk_unless_manifest_fails(walk(state, phases, progress), manifest_fut)
             t_end = clock.now()
+            release_facades(state)
             # the streamers stopped (nothing more goes down the link) before the truth
             if scene.images is not None:
                 await scene.images.close()
@@ -346,6 +351,8 @@ async def replay(
             disk_state = (disk.available, disk.last_error) if disk is not None else (False, None)
         finally:
             await reap(t for t in tasks if not t.done())
+            if state is not None:
+                release_facades(state)
             if not streamer_closed:  # closed once: the rewrite workers' pool is not closed twice
                 await _close(streamer, rooms)
             if renderer is not None:
@@ -367,6 +374,7 @@ async def replay(
         cost_step=step,
         recovery_ignore=spikes,
     )
+    assert state is not None  # the walk ran (an error before it is raised)
     frames = state.frames
     if kind == "crossing":
         assert streamer is not None and rooms is not None and entrance is not None

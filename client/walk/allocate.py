@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.draw.allocate import allocate_ach, allocate_distance
+from walkstream.client.walk.facades import bake_facades, choose_facades
 from walkstream.client.walk.impostors import frame_impostors, replaced
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.codec.cellmesh import CellMesh
@@ -50,6 +51,9 @@ def allocate(w: WalkState, f: Frame) -> None:
         if f.impostors and len(seen):  # a building drawn as its image alone: no geometry
             seen &= ~replaced([g.id for g in o.geoms], f.impostors)
         quad_tris = 2 * len(f.impostors)
+        if w.facades is not None and not w.indoors:  # the bake and last frame's facade quads come first
+            f.facade_bake = bake_facades(w, f)
+            quad_tris += f.facade_bake + 2 * w.facades.last_quads
         if cfg.lod_select == "ach":
             f.alloc = allocate_ach(o.ach, o.tri, o.avail, seen, max(f.budget - room_tris - quad_tris, 0),
                                    reserve_floor=True, greedy=cfg.lod_greedy)
@@ -64,6 +68,9 @@ def allocate(w: WalkState, f: Frame) -> None:
     # a wall texture is a quad as an impostor is: two triangles and one draw
     f.triangles = room_tris + 2 * (len(f.impostors) + len(f.walls)) + (0 if f.alloc is None else int(f.alloc.triangles))
     f.drawn = room_parts + len(f.impostors) + len(f.walls) + int((lods >= 0).sum())
+    f.triangles += f.facade_bake
+    if w.facades is not None and not w.indoors:
+        choose_facades(w, f)
 
 
 def _cull_rooms(w: WalkState, f: Frame) -> None:

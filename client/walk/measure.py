@@ -101,7 +101,7 @@ def note_truth(w: WalkState, f: Frame) -> None:
             frame=w.frame, t=t, eye=f.eye, view=f.view.astype(np.float32), cell=f.street,
             pvs=None if cell is None else cell.pvs,
             received=cache.ids(city.kind) + cache.ids("geom"), built=cache.ids("geom"),
-            geoms=w.objects.geoms, lods=f.lods, impostors=_quads(w, f),
+            geoms=w.objects.geoms, lods=f.lods, impostors=_quads(w, f), facades=f.facade_quads,
         )
     elif city is None:  # rooms only: at the fog the frame was drawn at (the budget's lever)
         rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(f.fog),
