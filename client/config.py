@@ -111,7 +111,7 @@ class ReplayConfig:
     """Draw a building left at its LOD0 box with facade textures of its LOD2 (rendered by
     the client from the geometry it rebuilt; ``--no-facades``: plain boxes;
     :mod:`walkstream.client.walk.facades`)."""
-    facade_texels_per_m: float = 6.0
+    facade_texels_per_m: float = 8.0
     """Texels per metre of a facade texture (``--facade-texels``)."""
     facade_budget_bytes: int = 8 << 20
     """Bytes of facade textures held and drawn (``--facade-budget``; the least recently drawn dropped first)."""

@@ -404,6 +404,16 @@ async def replay(
         summary.update(city_summary(config, log, streamer, cache, stats, api, bytes_log, t_end - t_start,
                                     t_start, setup_s, path, manifest))
         summary["spike_frames"] = int(spikes.sum())
+        if state.facades is not None:  # boxes with their facades (--no-facades: none)
+            fs = state.facades
+            summary["facades"] = {
+                **frames.facade_figures(),
+                "buildings_baked": fs.baked_buildings,
+                "faces_baked": fs.baked_faces,
+                "bake_triangles": fs.bake_triangles,
+                "dropped": fs.dropped,
+                **({"error": fs.error} if fs.error else {}),
+            }
         images = scene.images
         if images is not None and images.requests:  # only then: a scene without impostors keeps its summary
             summary["impostors"] = {

@@ -342,7 +342,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--no-walls", action="store_true", help="open every virtual wall on an interior baked with --virtual-walls (geometry only, no texture asked for)")
     r.add_argument("--no-impostors", action="store_true", help="draw geometry only on a scene baked with --impostors (no image asked for)")
     r.add_argument("--no-facades", action="store_true", help="draw a building left at its LOD0 box plain (by default its faces carry textures of its LOD2 facades, rendered by the client)")
-    r.add_argument("--facade-texels", type=float, default=6.0, metavar="T", help="texels per metre of a facade texture (default 6)")
+    r.add_argument("--facade-texels", type=float, default=8.0, metavar="T", help="texels per metre of a facade texture (default 8)")
     r.add_argument("--facade-budget", default="8MB", metavar="BYTES", help="bytes of facade textures held and drawn (default 8MB)")
     r.add_argument("--facade-bake-share", type=float, default=0.3, metavar="S", help="share of the frame's triangle budget baking facade textures may take on average (default 0.3)")
     r.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres beyond the bake's D over which an impostor fades in over its geometry (default a tenth of D; 0: none)")

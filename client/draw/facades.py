@@ -270,7 +270,7 @@ class FacadeBaker:
         Largest side of an image in texels.
     """
 
-    def __init__(self, ctx: Any = None, texels_per_m: float = 6.0, max_size: int = 256) -> None:
+    def __init__(self, ctx: Any = None, texels_per_m: float = 8.0, max_size: int = 256) -> None:
         if not (math.isfinite(texels_per_m) and texels_per_m > 0):
             raise InputError(f"facade texels per metre: expected > 0, got {texels_per_m}")
         if int(max_size) < 4:
@@ -282,13 +282,14 @@ class FacadeBaker:
         self._fbos: dict[tuple[int, int], Any] = {}
         self.ctx: Any = create_context() if ctx is None else ctx
         try:
-            self._prog = self.ctx.program(vertex_shader=_VS, fragment_shader=_FS)
+            self._prog: Any = self.ctx.program(vertex_shader=_VS, fragment_shader=_FS)
         except Exception as exc:
             release_objects(self.ctx, [], self._own)
             raise RenderError(f"FacadeBaker: shader program failed: {exc}") from exc
         light = np.asarray(LIGHT_DIRECTION, np.float64)
-        self._prog["u_light_dir"].value = tuple(float(v) for v in light / np.linalg.norm(light))
-        self._prog["u_ambient"].value = float(AMBIENT)
+        prog: Any = self._prog
+        prog["u_light_dir"].value = tuple(float(v) for v in light / np.linalg.norm(light))
+        prog["u_ambient"].value = float(AMBIENT)
         self._gl.append(self._prog)
 
     def _fbo(self, w: int, h: int) -> Any:

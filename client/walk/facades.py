@@ -3,13 +3,15 @@
 A part of the ``allocate`` step (:mod:`.allocate`), on the street only:
 
 1. :func:`bake_facades`, before the ACH allocation: the buildings the last frame drew
-   as their LOD0 box without facade images are baked, nearest first, one face at a
+   as their LOD0 box or at LOD1 without facade images are baked, nearest first, one face at a
    time (:class:`~walkstream.client.draw.facades.FacadeBaker`) while the frame's bake
    credit lasts: each frame adds ``facade_bake_share`` of its triangle budget to the
    credit, each face's bake takes the LOD2 triangles it drew.  Those triangles are
    this frame's: they come off the allocation's budget and go into the triangles the
    device charges, so a cost model (``pda``) pays for the bake in the frame that does it.
-2. :func:`choose_facades`, after it: every building drawn as its LOD0 box whose images
+2. The allocation sees no LOD1 of a building whose images are held (:func:`facade_avail`):
+   its box with facades shows the windows LOD1 lacks, for fewer triangles.
+3. :func:`choose_facades`, after it: every building drawn as its LOD0 box whose images
    are held is drawn with them, nearest first while the facade texture budget
    (``facade_budget_bytes``) lasts; its faces turned to the eye are textured quads,
    two triangles and one draw each.  The images held are dropped least recently drawn
@@ -26,15 +28,17 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from walkstream.client.draw.facades import FacadeBaker, FacadeJob, FacadeSet
 from walkstream.client.draw.quads import Quad
 from walkstream.client.walk.state import Frame, WalkState
+from walkstream.shared.errors import RenderError
 from walkstream.shared.portals import box_distance
 
-__all__ = ["FacadeState", "bake_facades", "choose_facades", "facade_quads", "release_facades"]
+__all__ = ["FacadeState", "bake_facades", "choose_facades", "facade_avail", "facade_quads", "release_facades"]
 
-CREDIT_FRAMES = 4
+CREDIT_FRAMES = 2
 """The bake credit saved up is at most this many frames' share (no burst after a quiet spell)."""
 
 
@@ -60,6 +64,8 @@ class FacadeState:
     """LOD2 triangles drawn by every bake of the walk."""
     dropped: int = 0
     """Buildings' images dropped for the budget."""
+    error: str | None = None
+    """Why no image could be made (no OpenGL here): the boxes are drawn plain."""
 
 
 def _geoms_by_id(w: WalkState) -> dict[int, Any]:
@@ -72,44 +78,43 @@ def _has_facades(g: Any) -> bool:
     return m0 is not None and m2 is not None and m0 is not m2 and m2.triangles > m0.triangles
 
 
-def bake_facades(w: WalkState, f: Frame) -> int:
-    """Bake the next faces the credit allows (see the module docstring); returns the
-    LOD2 triangles drawn, which the frame pays for."""
+def bake_facades(w: WalkState, f: Frame, room: int) -> int:
+    """Bake the next face when the credit allows and its triangles fit ``room`` (the
+    frame's budget left above the visible objects' lowest LODs: a bake never pushes the
+    frame past its budget); returns the LOD2 triangles drawn, which the frame pays for."""
     st: FacadeState | None = w.facades
-    if st is None:
+    if st is None or st.error is not None:
         return 0
     cfg = w.config
     share = cfg.facade_bake_share * max(f.budget, 0)
     st.credit = min(st.credit + share, CREDIT_FRAMES * share)
-    drawn = 0
-    geoms: dict[int, Any] | None = None
-    while st.credit > 0:
-        if st.job is None:
-            if geoms is None:
-                geoms = _geoms_by_id(w)
-            while st.wants and st.job is None:
-                g = geoms.get(st.wants.pop(0))
-                if g is not None and g.id not in st.sets and _has_facades(g):
-                    if st.baker is None:
-                        r = w.renderer
+    if st.job is None:
+        geoms = _geoms_by_id(w)
+        while st.wants and st.job is None:
+            g = geoms.get(st.wants.pop(0))
+            if g is not None and g.id not in st.sets and _has_facades(g):
+                if st.baker is None:
+                    r = w.renderer
+                    try:
                         st.baker = FacadeBaker(None if r is None else r.ctx, cfg.facade_texels_per_m)
-                    st.job = st.baker.job(g.id, g.meshes[0], g.meshes[2])
-            if st.job is None:
-                break
-        assert st.baker is not None
-        if not st.job.done:
-            n = st.baker.bake_face(st.job)
-            drawn += n
-            st.credit -= n
-            st.baked_faces += 1
-        if st.job.done:
-            s = st.job.result()
-            st.job = None
-            st.sets[s.id] = s
-            st.held_bytes += s.nbytes
-            st.baked_buildings += 1
-    st.bake_triangles += drawn
-    return drawn
+                    except RenderError as exc:  # no OpenGL: plain boxes, said in the summary
+                        st.error = str(exc)
+                        return 0
+                st.job = st.baker.job(g.id, g.meshes[0], g.meshes[2])
+    job = st.job
+    if job is None or st.baker is None or st.credit <= 0 or job.next_triangles() > room:
+        return 0
+    n = st.baker.bake_face(job) if not job.done else 0
+    st.credit -= n
+    st.baked_faces += 1
+    st.bake_triangles += n
+    if job.done:
+        s = job.result()
+        st.job = None
+        st.sets[s.id] = s
+        st.held_bytes += s.nbytes
+        st.baked_buildings += 1
+    return n
 
 
 def choose_facades(w: WalkState, f: Frame) -> None:
@@ -120,7 +125,7 @@ def choose_facades(w: WalkState, f: Frame) -> None:
         return
     o = w.objects
     lods = f.lods
-    box = np.flatnonzero(lods == 0)
+    box = np.flatnonzero((lods == 0) | (lods == 1))
     if not len(box):
         st.wants, st.last_quads = [], 0
         return
@@ -135,6 +140,8 @@ def choose_facades(w: WalkState, f: Frame) -> None:
         if s is None:
             if _has_facades(g) and (st.job is None or st.job.id != g.id):
                 wants.append(g.id)
+            continue
+        if lods[k] != 0:  # drawn at LOD1 (its images arrived after the allocation)
             continue
         if used + s.nbytes > budget:
             continue
@@ -156,6 +163,20 @@ def choose_facades(w: WalkState, f: Frame) -> None:
     # a facade is a quad as an impostor is: two triangles and one draw
     f.triangles += 2 * len(quads)
     f.drawn += len(quads)
+
+
+def facade_avail(w: WalkState) -> NDArray[np.bool_]:
+    """The objects' available LODs for the allocation, LOD1 left out where the facade
+    images are held: a box with its facades shows the windows LOD1 lacks, for 165 fewer
+    triangles, so such a building is drawn as that box or at LOD2."""
+    st: FacadeState | None = w.facades
+    o = w.objects
+    if st is None or not st.sets or not len(o.geoms):
+        return o.avail
+    held = np.fromiter((g.id in st.sets for g in o.geoms), bool, len(o.geoms))
+    out = o.avail.copy()
+    out[held, 1] = False
+    return out
 
 
 def facade_quads(f: Frame) -> list[Quad]:

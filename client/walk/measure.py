@@ -60,6 +60,11 @@ def measure(w: WalkState, f: Frame) -> None:
         fr.walls.append(len(f.walls))
         fr.walls_closed.append(sum(1 for d in f.walls if d.alpha >= 1.0))
         fr.wall_bytes.append(sum({d.image: d.nbytes for d in f.walls}.values()))
+    if w.facades is not None and not w.indoors:
+        fr.facades.append(len(f.facades))
+        fr.facade_quads.append(len(f.facade_quads))
+        fr.facade_bake.append(f.facade_bake)
+        fr.facade_bytes.append(sum(s.nbytes for s in f.facades))
     if w.scene.images is not None:
         fr.impostors.append(len(f.impostors))
         fr.texture_bytes.append(sum({d.image: d.nbytes for d in f.impostors}.values()))
