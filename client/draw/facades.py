@@ -241,15 +241,13 @@ class FacadeJob:
     selections: tuple[NDArray[np.int64], ...]
     """Per face, the ``(k, 3)`` LOD2 triangles its camera can see."""
     images: list[FacadeImage] = field(default_factory=list)
+    drawn: int = 0
+    """Triangles of the current face drawn so far (its image is under way)."""
 
     @property
     def done(self) -> bool:
         """Every face has its image."""
         return len(self.images) >= len(self.faces)
-
-    def next_triangles(self) -> int:
-        """LOD2 triangles the next face's bake draws (0 when done)."""
-        return 0 if self.done else int(len(self.selections[len(self.images)]))
 
     def result(self) -> FacadeSet:
         """The images made, as a set to draw."""
@@ -322,8 +320,14 @@ class FacadeBaker:
             sels.append(idx[keep])
         return FacadeJob(int(oid), tuple(faces), verts, tuple(sels))
 
-    def bake_face(self, job: FacadeJob) -> int:
-        """Make the next image of ``job``; returns the LOD2 triangles it drew."""
+    def bake_face(self, job: FacadeJob, max_triangles: int | None = None) -> int:
+        """Draw the next triangles of ``job``'s current face, at most ``max_triangles``
+        (all by default), into its image; once the face's last are drawn its image is
+        read and kept.  Returns the LOD2 triangles drawn.
+
+        A face drawn over several calls keeps its framebuffer between them (one face of
+        one job is under way at a time), so the depth test composes the pieces as one draw.
+        """
         import moderngl
 
         if self.ctx is None:
@@ -335,10 +339,13 @@ class FacadeBaker:
         fbo = self._fbo(w * SUPERSAMPLE, h * SUPERSAMPLE)
         fbo.use()
         ctx.viewport = (0, 0, w * SUPERSAMPLE, h * SUPERSAMPLE)
-        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        if len(sel):
+        if job.drawn == 0:
+            fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        stop = len(sel) if max_triangles is None else min(len(sel), job.drawn + max(int(max_triangles), 0))
+        part = sel[job.drawn : stop]
+        if len(part):
             vbo = ctx.buffer(job.vertices.tobytes())
-            ibo = ctx.buffer(sel.astype("<u4").tobytes())
+            ibo = ctx.buffer(part.astype("<u4").tobytes())
             vao = ctx.vertex_array(self._prog, [(vbo, "3f 3f 3f", "in_position", "in_normal", "in_color")],
                                    index_buffer=ibo, index_element_size=4)
             try:
@@ -352,11 +359,14 @@ class FacadeBaker:
                 vao.release()
                 ibo.release()
                 vbo.release()
-        raw = np.frombuffer(fbo.read(components=4, alignment=1), np.uint8)
-        img = raw.reshape(h * SUPERSAMPLE, w * SUPERSAMPLE, 4)[::-1]
+        job.drawn = stop
+        if stop >= len(sel):
+            raw = np.frombuffer(fbo.read(components=4, alignment=1), np.uint8)
+            img = raw.reshape(h * SUPERSAMPLE, w * SUPERSAMPLE, 4)[::-1]
+            job.images.append(FacadeImage(face, _average(img), int(len(sel))))
+            job.drawn = 0
         check_gl_error(ctx, "after baking a facade image")
-        job.images.append(FacadeImage(face, _average(img), int(len(sel))))
-        return int(len(sel))
+        return int(len(part))
 
     def bake(self, oid: int, coarse: Mesh, lod2: Mesh) -> FacadeSet:
         """Every facade image of building ``oid`` at once (:meth:`job`, then each face)."""
