@@ -115,10 +115,10 @@ def city(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return d / "city.db"
 
 
-def _replay(db: Path, **kw: Any) -> dict[str, Any]:
+def _replay(db: Path, duration: float = 8.0, **kw: Any) -> dict[str, Any]:
     app = create_app([db])
     try:
-        cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="pda", duration_s=8.0, **kw)
+        cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="pda", duration_s=duration, **kw)
         return run_replay(httpx.ASGITransport(app=app), URL, cfg).summary
     finally:
         app.state.scenes.close()
@@ -138,5 +138,5 @@ def test_a_walk_on_pda_draws_boxes_with_facades_and_pays_for_them(city: Path, gl
 
 @pytest.mark.gl
 def test_a_facade_budget_smaller_than_one_building_draws_plain_boxes(city: Path, gl_ctx: object) -> None:
-    f = _replay(city, facade_budget_bytes=1)["facades"]
+    f = _replay(city, 4.0, facade_budget_bytes=1)["facades"]
     assert f["buildings_baked"] > 0 and f["facades_mean"] == 0 and f["dropped"] > 0
