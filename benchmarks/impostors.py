@@ -72,10 +72,11 @@ def run_impostor_bench(
     link: dict[str, Any] | None = None,
     size: str | None = None,
     extra: Mapping[str, Any] | None = None,
-    facades: Sequence[bool] = (True,),
+    facades: Sequence[bool | None] = (None,),
 ) -> list[dict[str, Any]]:
     """Replay each of ``paths`` on each of ``db`` with and without impostors (and with each
-    of ``facades``: facade textures on the boxes or plain boxes); one row (summary,
+    of ``facades``: facade textures on the boxes, plain boxes, or None: the replay's
+    default, on a simulated device only); one row (summary,
     ``scenario``, ``walk``, ``bake``, ``with_impostors``, ``with_facades``,
     ``frame_time_median_ms``) per replay that ran; ``bench_impostors.json`` and
     ``bench_impostors.png`` into ``out``."""
@@ -84,9 +85,10 @@ def run_impostor_bench(
     runs = [(d, p, fac, imp) for d in dbs for p in paths for fac in facades for imp in (True, False)]
     labels = {d: bake_label(d) for d in dbs}
     for k, (d, path, fac, imp) in enumerate(runs, 1):
-        name = f"{path} {'impostors' if imp else 'geometry'}{'' if fac else ' boxes'}"
+        name = f"{path} {'impostors' if imp else 'geometry'}{' boxes' if fac is False else ''}"
         options: dict[str, Any] = {"device": device, "path": path, **(link or {}), **(extra or {}), "impostors": imp,
-                                   "facades": fac, "report": str(out / f"{k:02d}-{name.replace(' ', '-').lower()}")}
+                                   **({} if fac is None else {"facades": fac}),
+                                   "report": str(out / f"{k:02d}-{name.replace(' ', '-').lower()}")}
         if duration:
             options["duration"] = duration
         if truth_every:
@@ -172,7 +174,7 @@ def plot_impostors(path: Path, rows: Sequence[Mapping[str, Any]]) -> Path:
         if err is None or ft is None:
             continue
         bake, imp = str(r.get("bake", "")), bool(r.get("with_impostors"))
-        fac = bool(r.get("with_facades", True))
+        fac = r.get("with_facades") is not False
         colour = colours[bakes.index(bake) % len(colours)]
         walk = str(r.get("walk") or str(r["scenario"]).split(" ", 1)[0]) + ("" if fac else " boxes")
         ax.scatter([ft], [100.0 * err], s=46, marker="o" if fac else "s", facecolors=colour if imp else "none",

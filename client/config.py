@@ -107,10 +107,12 @@ class ReplayConfig:
     None: :data:`~walkstream.client.draw.impostors.FADE_S`; 0: none, with
     ``impostor_blend_m`` 0 a hard switch)."""
 
-    facades: bool = True
+    facades: bool | None = None
     """Draw a building left at its LOD0 box with facade textures of its LOD2 (rendered by
-    the client from the geometry it rebuilt; ``--no-facades``: plain boxes;
-    :mod:`walkstream.client.walk.facades`)."""
+    the client from the geometry it rebuilt; :mod:`walkstream.client.walk.facades`):
+    True always, False never (``--no-facades``: plain boxes), None (``--facades auto``)
+    on a simulated device only (where the cost model's budget leaves the boxes; on
+    ``gl`` the rendering's real time cost frames and LOD2 is drawn nearly everywhere)."""
     facade_texels_per_m: float = 8.0
     """Texels per metre of a facade texture (``--facade-texels``)."""
     facade_budget_bytes: int = 8 << 20

@@ -326,7 +326,8 @@ async def replay(
                 lambda: int(link.stats.bytes_down), WalkFrames(), recorder,
                 BudgetController(config.fps_target, k=config.budget_frames),
             )
-            if config.facades and scene.streets is not None:  # boxes carrying their LOD2's facades
+            facades = device.simulated if config.facades is None else config.facades
+            if facades and scene.streets is not None:  # boxes carrying their LOD2's facades
                 state.facades = FacadeState()
             if headed:  # walking the path's head until the whole path is in
                 state.path, state.path_pending = whole.get("path", path), "path" not in whole
