@@ -140,3 +140,29 @@ def test_a_walk_on_pda_draws_boxes_with_facades_and_pays_for_them(city: Path, gl
 def test_a_facade_budget_smaller_than_one_building_draws_plain_boxes(city: Path, gl_ctx: object) -> None:
     f = _replay(city, 4.0, facade_budget_bytes=1)["facades"]
     assert f["buildings_baked"] > 0 and f["facades_mean"] == 0 and f["dropped"] > 0
+
+
+@pytest.mark.gl
+def test_the_truth_paints_facades_into_the_boxes_picture_not_as_stand_ins(gl: Any) -> None:
+    from walkstream.client.truth.notes import FrameNote
+    from walkstream.client.truth.standin import impostor_overlay
+
+    l0, _, l2 = _building()
+    truth = TruthRenderer({1: l2}, (160, 120), forms={(1, 0): l0}, ctx=gl)
+    baker = FacadeBaker(gl)
+    try:
+        s = baker.bake(1, l0, l2)
+        eye = np.array([10.0, -25.0, 1.7])
+        view = look_at(eye, (10.0, 6.0, 7.0))
+        note = FrameNote(frame=0, t=0.0, eye=eye, view=view, cell=None, pvs=None, received=np.zeros(0, np.int64),
+                         built=np.zeros(0, np.int64), drawn=((1, 0, l0),), parts=(), waiting=(), fog=np.inf,
+                         facades=tuple(s.quads(eye)))
+        keys, _ = truth.render(eye, view, truth.flags([form_key(1, 0)]))
+        rgb = truth.colour()
+        plain = rgb.copy()
+        painted = impostor_overlay(truth, truth.proj)(note, rgb, keys)
+        assert not painted.any()  # no stand-in: the pixels stay the box's
+        assert np.any(rgb != plain, axis=2).mean() > 0.05  # the windows are on the box now
+    finally:
+        baker.release()
+        truth.release()
