@@ -3,7 +3,8 @@
 Each walk (``--path``, default SE, at 56 kbit/s / 200 ms unless told) is replayed twice on
 each database and one device: drawing the far buildings the cell records list as their
 images, and geometry only (``ReplayConfig.impostors`` off: the same cell records, no
-image asked for).  Several databases (bakes of one city at other D, A and S, or of
+image asked for); ``--facades both`` replays each of them again with plain boxes
+(``ReplayConfig.facades`` off), ``fac/fr`` counts the boxes drawn with facade textures.  Several databases (bakes of one city at other D, A and S, or of
 another scene) make a sweep: each row is labelled with its bake's D, A and S (read from
 the database's settings record).  One table: frames within 10 % of the target rate, the
 frame time the device took (median), triangles per frame, impostors per frame, bytes
@@ -71,17 +72,22 @@ def run_impostor_bench(
     link: dict[str, Any] | None = None,
     size: str | None = None,
     extra: Mapping[str, Any] | None = None,
+    facades: Sequence[bool | None] = (None,),
 ) -> list[dict[str, Any]]:
-    """Replay each of ``paths`` on each of ``db`` with and without impostors; one row
-    (summary, ``scenario``, ``bake``, ``with_impostors``, ``frame_time_median_ms``) per replay
-    that ran; ``bench_impostors.json`` and ``bench_impostors.png`` into ``out``."""
+    """Replay each of ``paths`` on each of ``db`` with and without impostors (and with each
+    of ``facades``: facade textures on the boxes, plain boxes, or None: the replay's
+    default, on a simulated device only); one row (summary,
+    ``scenario``, ``walk``, ``bake``, ``with_impostors``, ``with_facades``,
+    ``frame_time_median_ms``) per replay that ran; ``bench_impostors.json`` and
+    ``bench_impostors.png`` into ``out``."""
     dbs = [db] if isinstance(db, str) else list(db)
     rows = []
-    runs = [(d, p, imp) for d in dbs for p in paths for imp in (True, False)]
+    runs = [(d, p, fac, imp) for d in dbs for p in paths for fac in facades for imp in (True, False)]
     labels = {d: bake_label(d) for d in dbs}
-    for k, (d, path, imp) in enumerate(runs, 1):
-        name = f"{path} {'impostors' if imp else 'geometry'}"
+    for k, (d, path, fac, imp) in enumerate(runs, 1):
+        name = f"{path} {'impostors' if imp else 'geometry'}{' boxes' if fac is False else ''}"
         options: dict[str, Any] = {"device": device, "path": path, **(link or {}), **(extra or {}), "impostors": imp,
+                                   **({} if fac is None else {"facades": fac}),
                                    "report": str(out / f"{k:02d}-{name.replace(' ', '-').lower()}")}
         if duration:
             options["duration"] = duration
@@ -96,7 +102,8 @@ def run_impostor_bench(
             print(f"  {name}: {exc}", file=sys.stderr)
             continue
         ft = np.asarray(getattr(getattr(result, "log", None), "frame_time", []), np.float64)
-        rows.append({"scenario": name, "bake": labels[d], "db": d, "with_impostors": imp, **result.summary,
+        rows.append({"scenario": name, "walk": path, "bake": labels[d], "db": d, "with_impostors": imp,
+                     "with_facades": fac, **result.summary,
                      "frame_time_median_ms": float(np.median(ft)) * 1e3 if ft.size else None})
     if rows:
         out.mkdir(parents=True, exist_ok=True)
@@ -117,7 +124,7 @@ def _colour(r: Mapping[str, Any]) -> dict[str, Any]:
 def format_impostor_table(rows: list[dict[str, Any]]) -> str:
     """One line per replay (see the module docstring)."""
     head = (
-        f"{'bake':<24} {'walk':<18} {'device':<6} {'fps10%':>6} {'ft ms':>6} {'tri/fr':>6} {'imp/fr':>6} "
+        f"{'bake':<24} {'walk':<20} {'device':<6} {'fps10%':>6} {'ft ms':>6} {'tri/fr':>6} {'imp/fr':>6} {'fac/fr':>6} "
         f"{'bytes down':>10} {'images B':>9} {'tex kB max':>10} {'perfect%':>8} {'err% med':>8} {'err% p95':>8} "
         f"{'vis% med':>8} {'over%':>6} {'PSNR med':>8} {'e:boxes':>7} {'e:imp':>6} {'e:rest':>6} {'imp p99':>7} {'impv p99':>8} {'imp ok%':>7} {'pop':>5} {'pop~':>5}"
     )
@@ -133,10 +140,12 @@ def format_impostor_table(rows: list[dict[str, Any]]) -> str:
         pops = (r.get("truth") or {}).get("pop") or {}
         pop, pop_m = pops.get("ratio"), pops.get("ratio_matched")
         ic = c.get("impostor") or {}
+        fac = r.get("facades") or {}
         lines.append(
-            f"{r.get('bake', ''):<24} {r['scenario']:<18} {r.get('device', '?'):<6} "
+            f"{r.get('bake', ''):<24} {r['scenario']:<20} {r.get('device', '?'):<6} "
             f"{_pct(r.get('fps_within_10pct_ratio'), 1):>6} {'n/a' if ft is None else f'{ft:.1f}':>6} "
             f"{r.get('triangles_mean') or 0:>6.0f} {imp.get('impostors_mean', 0.0):>6.1f} "
+            f"{fac.get('facades_mean', 0.0):>6.1f} "
             f"{r.get('bytes_received') or 0:>10,} {imp.get('image_bytes', 0):>9,} "
             f"{imp.get('texture_bytes_max', 0) / 1e3:>10.1f} {_pct(r.get('perfect_frame_ratio')):>8} "
             f"{_pct(err.get('median')):>8} {_pct(err.get('p95')):>8} {_pct(vis.get('median')):>8} "
@@ -165,10 +174,11 @@ def plot_impostors(path: Path, rows: Sequence[Mapping[str, Any]]) -> Path:
         if err is None or ft is None:
             continue
         bake, imp = str(r.get("bake", "")), bool(r.get("with_impostors"))
+        fac = r.get("with_facades") is not False
         colour = colours[bakes.index(bake) % len(colours)]
-        walk = str(r["scenario"]).rsplit(" ", 1)[0]
-        ax.scatter([ft], [100.0 * err], s=46, marker="o", facecolors=colour if imp else "none", edgecolors=colour,
-                   label=f"{bake} {walk} {'impostors' if imp else 'geometry'}", zorder=3)
+        walk = str(r.get("walk") or str(r["scenario"]).split(" ", 1)[0]) + ("" if fac else " boxes")
+        ax.scatter([ft], [100.0 * err], s=46, marker="o" if fac else "s", facecolors=colour if imp else "none",
+                   edgecolors=colour, label=f"{bake} {walk} {'impostors' if imp else 'geometry'}", zorder=3)
         pairs.setdefault((bake, walk), []).append((float(ft), 100.0 * float(err)))
     for (bake, _), pts in pairs.items():
         if len(pts) == 2:
@@ -176,7 +186,8 @@ def plot_impostors(path: Path, rows: Sequence[Mapping[str, Any]]) -> Path:
             ax.plot([x0, x1], [y0, y1], color=colours[bakes.index(bake) % len(colours)], lw=0.8, alpha=0.6)
     ax.set_xlabel(f"frame time on the device, ms (median; {rows[0].get('device', '?') if rows else '?'})")
     ax.set_ylabel("colour error vs the full scene,\n% of full scale (median)")
-    ax.set_title("bench impostors: one colour per bake; filled with impostors, open geometry only", fontsize=10)
+    ax.set_title("bench impostors: one colour per bake; filled with impostors, open geometry only;\n"
+                 "circles facade textures on the boxes, squares plain boxes", fontsize=10)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     return save_figure(fig, path)

@@ -107,6 +107,20 @@ class ReplayConfig:
     None: :data:`~walkstream.client.draw.impostors.FADE_S`; 0: none, with
     ``impostor_blend_m`` 0 a hard switch)."""
 
+    facades: bool | None = None
+    """Draw a building left at its LOD0 box with facade textures of its LOD2 (rendered by
+    the client from the geometry it rebuilt; :mod:`walkstream.client.walk.facades`):
+    True always, False never (``--no-facades``: plain boxes), None (``--facades auto``)
+    on a simulated device only (where the cost model's budget leaves the boxes; on
+    ``gl`` the rendering's real time cost frames and LOD2 is drawn nearly everywhere)."""
+    facade_texels_per_m: float = 8.0
+    """Texels per metre of a facade texture (``--facade-texels``)."""
+    facade_budget_bytes: int = 8 << 20
+    """Bytes of facade textures held and drawn (``--facade-budget``; the least recently drawn dropped first)."""
+    facade_bake_share: float = 0.3
+    """Share of the frame's triangle budget that baking facade textures may take on
+    average (``--facade-bake-share``): a face's bake draws its LOD2 triangles, charged to its frame."""
+
     wall_zone_blend: float = 0.5
     """Width of the blend between two zones' textures of a virtual wall around their
     border, in zone widths (``--wall-zone-blend``; 0: a hard swap at the border;
@@ -124,6 +138,12 @@ class ReplayConfig:
         tf = self.target_fps
         if tf is not None and not (math.isfinite(tf) and 0 < tf <= 1000):
             raise InputError(f"--target-fps {tf!r}: expected a number in (0, 1000]")
+        if not (math.isfinite(self.facade_texels_per_m) and 0 < self.facade_texels_per_m <= 64):
+            raise InputError(f"--facade-texels {self.facade_texels_per_m!r}: expected texels per metre in (0, 64]")
+        if self.facade_budget_bytes < 0:
+            raise InputError(f"--facade-budget {self.facade_budget_bytes}: must not be negative")
+        if not (math.isfinite(self.facade_bake_share) and 0 < self.facade_bake_share <= 1):
+            raise InputError(f"--facade-bake-share {self.facade_bake_share!r}: expected a share in (0, 1]")
         if self.cache_bytes < 0:
             raise InputError(f"--cache {self.cache_bytes}: must not be negative")
         if self.duration_s is not None and not self.duration_s > 0:

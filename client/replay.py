@@ -64,6 +64,7 @@ from walkstream.client.stream.walkstart import (
 from walkstream.client.tasks import reap
 from walkstream.client.truth.recorder import TruthRecorder, TruthResult, interior_far_m
 from walkstream.client.walk.crossing import crossing_topology
+from walkstream.client.walk.facades import FacadeState, release_facades
 from walkstream.client.walk.figures import WalkFrames
 from walkstream.client.walk.loop import walk
 from walkstream.client.walk.measure import compare_truth
@@ -215,6 +216,7 @@ async def replay(
     rooms: RoomStreamer | None = None
     disk: DiskCache | None = None
     streamer_closed = False
+    state: WalkState | None = None
     async with httpx.AsyncClient(
         transport=link, base_url=base_url, timeout=httpx.Timeout(30.0)
     ) as http:
@@ -367,6 +369,9 @@ async def replay(
                 lambda: int(link.stats.bytes_down), WalkFrames(), recorder,
                 BudgetController(config.fps_target, k=config.budget_frames),
             )
+            facades = device.simulated if config.facades is None else config.facades
+            if facades and scene.streets is not None:  # boxes carrying their LOD2's facades
+                state.facades = FacadeState()
             if headed:  # walking the path's head until the whole path is in
                 state.path, state.path_pending = whole.get("path", path), "path" not in whole
                 whole["state"] = state
@@ -376,6 +381,7 @@ async def replay(
                         api, clock, config.path, path, due, rooms.busy, path_arrived)))
             log, snapshots, spikes = await _walk_unless_manifest_fails(walk(state, phases, progress), manifest_fut)
             t_end = clock.now()
+            release_facades(state)
             # the streamers stopped (nothing more goes down the link) before the truth
             if scene.images is not None:
                 await scene.images.close()
@@ -389,6 +395,8 @@ async def replay(
             disk_state = (disk.available, disk.last_error) if disk is not None else (False, None)
         finally:
             await reap(t for t in tasks if not t.done())
+            if state is not None:
+                release_facades(state)
             if not streamer_closed:  # closed once: the rewrite workers' pool is not closed twice
                 await _close(streamer, rooms)
             if renderer is not None:
@@ -410,6 +418,7 @@ async def replay(
         cost_step=step,
         recovery_ignore=spikes,
     )
+    assert state is not None  # the walk ran (an error before it is raised)
     frames = state.frames
     if kind == "crossing":
         assert streamer is not None and rooms is not None and entrance is not None
@@ -428,6 +437,16 @@ async def replay(
         summary["spike_frames"] = int(spikes.sum())
         if scene.wall_images is not None:  # a city's rings of walls
             summary["walls"] = _walls_summary(scene, frames)
+        if state.facades is not None:  # boxes with their facades (--no-facades: none)
+            fs = state.facades
+            summary["facades"] = {
+                **frames.facade_figures(),
+                "buildings_baked": fs.baked_buildings,
+                "faces_baked": fs.baked_faces,
+                "bake_triangles": fs.bake_triangles,
+                "dropped": fs.dropped,
+                **({"error": fs.error} if fs.error else {}),
+            }
         images = scene.images
         if images is not None and images.requests:  # only then: a scene without impostors keeps its summary
             summary["impostors"] = {

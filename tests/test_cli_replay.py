@@ -86,6 +86,9 @@ def test_replay_on_the_gl_device_really_draws(db: Path, tmp_path: Path, gl_ctx: 
         (["--loss", "2"], "--loss"),
         (["--size", "640by480"], "--size"),
         (["--path", "nowhere"], "nowhere"),
+        (["--facade-texels", "0"], "--facade-texels"),
+        (["--facade-bake-share", "2"], "--facade-bake-share"),
+        (["--facade-budget", "lots"], "lots"),
     ],
 )
 def test_bad_replay_arguments_are_one_line(

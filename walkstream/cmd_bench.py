@@ -181,9 +181,11 @@ def cmd_bench_impostors(args: argparse.Namespace) -> int:
     extra = {"clock": args.clock, **({"ach_shares": True} if args.ach_shares else {}),
              **({} if args.impostor_blend is None else {"impostor_blend": args.impostor_blend}),
              **({} if args.impostor_fade is None else {"impostor_fade": args.impostor_fade})}
+    facades: tuple[bool | None, ...] = {"auto": (None,), "on": (True,), "off": (False,), "both": (True, False)}[
+        args.facades]
     rows = run_impostor_bench(args.db, replay_with_options, out=Path(args.out), paths=paths, device=args.device,
                               truth_every=args.truth_every, duration=args.duration, link=link, size=args.size,
-                              extra=extra)
+                              extra=extra, facades=facades)
     if not rows:
         return 1  # each failed walk said why on stderr
     print(format_impostor_table(rows))
@@ -692,6 +694,7 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--duration", help="limit every walk, e.g. 60s")
     b.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres over which an impostor fades in over its geometry (default a tenth of the bake's D; 0: none; the 'pop' column measures it, with --truth-every 1)")
     b.add_argument("--impostor-fade", type=float, default=None, metavar="S", help="seconds an impostor's opacity takes at least from 0 to 1 (default 1; 0 with --impostor-blend 0: a hard switch)")
+    b.add_argument("--facades", default="auto", choices=("auto", "on", "off", "both"), help="facade textures on the boxes: the replay's default (auto: on a simulated device), always (on), never (off), or each walk both ways (both)")
     b.add_argument("--out", default="out/bench-impostors", help="folder for the reports")
     b.set_defaults(func=cmd_bench_impostors)
 

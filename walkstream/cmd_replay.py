@@ -144,6 +144,10 @@ def config_from_args(args: argparse.Namespace) -> Any:
         impostor_fade_s=args.impostor_fade,
         virtual_walls=not args.no_walls,
         wall_zone_blend=args.wall_zone_blend,
+        facades=False if args.no_facades else {"auto": None, "on": True, "off": False}[args.facades],
+        facade_texels_per_m=args.facade_texels,
+        facade_budget_bytes=parse_size(args.facade_budget),
+        facade_bake_share=args.facade_bake_share,
     )
 
 
@@ -337,6 +341,11 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--wall-zone-blend", type=float, default=0.5, metavar="Z", help="zone widths around a virtual wall's zone border over which the two zones' textures blend (default 0.5; 0: a hard swap; the seam figure, truth.seam, measures it with --truth-every 1)")
     r.add_argument("--no-walls", action="store_true", help="open every virtual wall on an interior baked with --virtual-walls (geometry only, no texture asked for)")
     r.add_argument("--no-impostors", action="store_true", help="draw geometry only on a scene baked with --impostors (no image asked for)")
+    r.add_argument("--facades", default="auto", choices=("auto", "on", "off"), help="a building left at its LOD0 box carries textures of its LOD2 facades, rendered by the client: on a simulated device (auto, default), always (on) or never (off)")
+    r.add_argument("--no-facades", action="store_true", help="draw a building left at its LOD0 box plain (--facades off)")
+    r.add_argument("--facade-texels", type=float, default=8.0, metavar="T", help="texels per metre of a facade texture (default 8)")
+    r.add_argument("--facade-budget", default="8MB", metavar="BYTES", help="bytes of facade textures held and drawn (default 8MB)")
+    r.add_argument("--facade-bake-share", type=float, default=0.3, metavar="S", help="share of the frame's triangle budget baking facade textures may take on average (default 0.3)")
     r.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres beyond the bake's D over which an impostor fades in over its geometry (default a tenth of D; 0: none)")
     r.add_argument("--impostor-fade", type=float, default=None, metavar="S", help="seconds an impostor's opacity takes at least from 0 to 1, so an image arriving or a building joining the cell's list does not pop (default 1; 0 with --impostor-blend 0: a hard switch)")
     r.add_argument("--per-object-draws", action="store_true", help="gl device: one draw call per object instead of one multi-draw call per frame (the older path, for comparison)")

@@ -156,13 +156,13 @@ def missing_figures(
                     client.forget(key)
             for i, lod, mesh in st.drawn:
                 client.upload((i, lod), mesh)
-            client.impostors = [q for _, q in st.impostors] + list(st.wall_quads)
+            client.impostors = [*st.facades, *(q for _, q in st.impostors), *st.wall_quads]
             client.draw(keys, st.view, proj)
             c_rgb = client.snapshot()
             c_ids = client.draw_ids(keys, st.view, proj)
             t_rgb, t_ids = truth.colour_frame(st.eye, st.view, proj, also=[i for i, _, _ in st.drawn])
             if st.impostors or st.wall_quads:  # a building drawn as its image shows where the image painted
-                client.impostors = []
+                client.impostors = list(st.facades)
                 client.draw(keys, st.view, proj)
                 painted = np.any(client.snapshot() != c_rgb, axis=2)
                 c_ids = stand_in_ids(c_ids, t_ids, painted, [i for i, _ in st.impostors])

@@ -52,6 +52,10 @@ class FrameNote:
     impostors: tuple[tuple[int, Any], ...] = ()
     """``(object id, quad)`` of each impostor drawn (:data:`~walkstream.client.draw.quads.Quad`:
     corners, image id, premultiplied RGBA, opacity), in draw order."""
+    facades: tuple[Any, ...] = ()
+    """The facade quads drawn over boxes (:data:`~walkstream.client.draw.quads.Quad`), in
+    draw order: painted into the client's picture before the impostors, their pixels
+    staying the boxes' (``lod_colour``)."""
     walls: tuple[Any, ...] = ()
     """The ``(4, 3)`` corners of each virtual wall drawn as its texture alone (its portal
     closed: the cells behind it not drawn)."""

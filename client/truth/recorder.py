@@ -198,6 +198,7 @@ class TruthRecorder:
         waiting: Iterable[int] = (),
         fog: float = math.inf,
         impostors: Iterable[tuple[int, Any]] = (),
+        facades: Iterable[Any] = (),
         walls: Iterable[Any] = (),
         wall_quads: Iterable[Any] = (),
         seam_walls: Iterable[Any] = (),
@@ -227,6 +228,8 @@ class TruthRecorder:
             The fog distance in force (``inf``: none).
         impostors : (object id, quad) pairs
             The impostors drawn (:data:`~walkstream.client.draw.quads.Quad`).
+        facades : quads
+            The facade textures drawn over boxes (:data:`~walkstream.client.draw.quads.Quad`).
         walls : (4, 3) arrays
             The corners of each virtual wall drawn closed (its texture alone).
         wall_quads : quads
@@ -255,6 +258,7 @@ class TruthRecorder:
                 waiting=tuple(int(c) for c in waiting),
                 fog=float(fog),
                 impostors=tuple((int(i), q) for i, q in impostors),
+                facades=tuple(facades),
                 walls=tuple(np.asarray(c, np.float64) for c in walls),
                 wall_quads=tuple(wall_quads),
                 seam_walls=tuple(seam_walls),
@@ -314,7 +318,7 @@ class TruthRecorder:
                     ground_z=self.ground_z,
                 )
                 overlay = self.overlay
-                if overlay is None and any(st.impostors or st.wall_quads for st in self.notes):
+                if overlay is None and any(st.impostors or st.wall_quads or st.facades for st in self.notes):
                     overlay = impostor_overlay(truth, self.proj)
                 pop = PopMeter() if any(st.impostors for st in self.notes) else None
                 log, worst, frames, cworst = missing_figures(

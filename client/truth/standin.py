@@ -2,12 +2,14 @@
 
 A compared frame's note carries the impostors the client drew
 (:attr:`~walkstream.client.truth.notes.FrameNote.impostors`: each quad with its image
-and opacity).  :func:`impostor_overlay` is the colour error's hook
+and opacity) and the facade textures drawn over boxes
+(:attr:`~walkstream.client.truth.notes.FrameNote.facades`).  :func:`impostor_overlay` is the colour error's hook
 (:data:`~walkstream.client.truth.picture.Overlay`): it paints the quads over the
 client's picture as the client drew them (the truth renderer's
 :meth:`~walkstream.client.truth.render.TruthRenderer.paint_quads`: depth tested
 against the picture's geometry, premultiplied blend) and returns the pixels they
-changed, whose error the colour comparison puts under ``impostor``.
+changed, whose error the colour comparison puts under ``impostor``; it paints the
+facades first, and their pixels stay the boxes' (``lod_colour``), not stand-ins.
 :func:`stand_in_ids` is the id comparison's side: a pixel an impostor painted counts
 as showing the building the truth shows there when that building was drawn as an
 impostor on the frame, so a building drawn as its image is not missing where its
@@ -36,10 +38,12 @@ def impostor_overlay(truth: TruthRenderer, proj: ArrayLike) -> Overlay:
     ``wall_quads``) with ``truth`` at projection ``proj``."""
 
     def paint(note: FrameNote, rgb: NDArray[np.uint8], keys: NDArray[np.int64]) -> NDArray[np.bool_]:
+        if note.facades:  # the boxes' facades first, part of the boxes' picture (not stand-ins)
+            rgb[...] = truth.paint_quads(list(note.facades), note.view, proj)
         quads = [q for _, q in note.impostors] + list(note.wall_quads)
         if not quads:
             return np.zeros(rgb.shape[:2], bool)
-        out = truth.paint_quads(quads, note.view, proj)
+        out = truth.paint_quads(quads, note.view, proj)  # over the facades painted
         mask: NDArray[np.bool_] = np.any(out != rgb, axis=2)
         rgb[...] = out
         return mask

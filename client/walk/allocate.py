@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.draw.allocate import allocate_ach, allocate_distance
+from walkstream.client.walk.facades import bake_facades, choose_facades, facade_avail
 from walkstream.client.walk.impostors import frame_impostors, replaced
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.codec.cellmesh import CellMesh
@@ -50,13 +51,19 @@ def allocate(w: WalkState, f: Frame) -> None:
         if f.impostors and len(seen):  # a building drawn as its image alone: no geometry
             seen &= ~replaced([g.id for g in o.geoms], f.impostors)
         quad_tris = 2 * len(f.impostors)
+        if w.facades is not None and not w.indoors:  # the bake and last frame's facade quads come first
+            quad_tris += 2 * w.facades.last_quads
+            floor = int(o.tri[seen & o.avail[:, 0], 0].sum()) if len(seen) else 0
+            f.facade_bake = bake_facades(w, f, f.budget - room_tris - quad_tris - floor)
+            quad_tris += f.facade_bake
+        avail = o.avail if w.facades is None or w.indoors else facade_avail(w)
         if cfg.lod_select == "ach":
-            f.alloc = allocate_ach(o.ach, o.tri, o.avail, seen, max(f.budget - room_tris - quad_tris, 0),
+            f.alloc = allocate_ach(o.ach, o.tri, avail, seen, max(f.budget - room_tris - quad_tris, 0),
                                    reserve_floor=True, greedy=cfg.lod_greedy)
         else:
             centre = (o.lo + o.hi) / 2.0
             dist = np.hypot(centre[:, 0] - f.eye[0], centre[:, 1] - f.eye[1])
-            f.alloc = allocate_distance(dist, o.tri, o.avail, seen, cfg.lod_distances)
+            f.alloc = allocate_distance(dist, o.tri, avail, seen, cfg.lod_distances)
     if cfg.cost_step_at_s is not None and not w.stepped and f.wt >= cfg.cost_step_at_s:
         w.device.cost_scale = w.device.cost_scale * cfg.cost_step_factor
         w.stepped = True
@@ -64,6 +71,9 @@ def allocate(w: WalkState, f: Frame) -> None:
     # a wall texture is a quad as an impostor is: two triangles and one draw
     f.triangles = room_tris + 2 * (len(f.impostors) + len(f.walls)) + (0 if f.alloc is None else int(f.alloc.triangles))
     f.drawn = room_parts + len(f.impostors) + len(f.walls) + int((lods >= 0).sum())
+    f.triangles += f.facade_bake
+    if w.facades is not None and not w.indoors:
+        choose_facades(w, f)
 
 
 def _cull_rooms(w: WalkState, f: Frame) -> None:

@@ -7,7 +7,8 @@ when a snapshot is due), the ``gl`` device's from the real draw
 ``(id, lod)``, room parts under their content kind's key
 (:data:`~walkstream.client.content.cellmesh.CELLMESH_CONTENT`); the frame's impostors
 (:mod:`walkstream.client.walk.impostors`) go to the renderer as textured quads
-(:mod:`walkstream.client.draw.quads`), drawn over the meshes.
+(:mod:`walkstream.client.draw.quads`), drawn over the meshes, after the facade
+textures of the boxes (:mod:`walkstream.client.walk.facades`).
 """
 
 from __future__ import annotations
@@ -49,8 +50,9 @@ def upload(w: WalkState, f: Frame) -> None:
                 keys.append(CELLMESH_CONTENT.upload(r, cid, k, m))
     f.keys = keys
     lane, walls = w.scene.images, w.scene.wall_images
-    if hasattr(r, "impostors") and (lane is not None or walls is not None):  # over the meshes: the quads
-        r.impostors = ([] if lane is None else quads_of(f.impostors, lane.image)) + (
+    if hasattr(r, "impostors") and (lane is not None or walls is not None or w.facades is not None):
+        # over the meshes: the quads (the boxes' facades first, then the images)
+        r.impostors = list(f.facade_quads) + ([] if lane is None else quads_of(f.impostors, lane.image)) + (
             [] if walls is None else wall_quads(f.walls, walls.image))
 
 

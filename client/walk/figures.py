@@ -59,6 +59,15 @@ class WalkFrames:
     texture_bytes: list[int] = field(default_factory=list)
     """Bytes of the impostor textures each frame drew (one count per image)."""
 
+    facades: list[int] = field(default_factory=list)
+    """Boxes drawn with facade textures per frame (street frames with facades on; empty otherwise)."""
+    facade_quads: list[int] = field(default_factory=list)
+    """Facade quads drawn per frame (two triangles each)."""
+    facade_bake: list[int] = field(default_factory=list)
+    """LOD2 triangles each frame drew baking facade textures."""
+    facade_bytes: list[int] = field(default_factory=list)
+    """Bytes of the facade textures each frame drew."""
+
     walls: list[int] = field(default_factory=list)
     """Virtual walls drawn as textures per frame (an interior with walls; empty otherwise)."""
     walls_closed: list[int] = field(default_factory=list)
@@ -83,6 +92,25 @@ class WalkFrames:
             "wall_texture_bytes_mean": float(b.mean()),
             "wall_texture_bytes_max": int(b.max()),
             **({"geometry_objects_mean": float(np.mean(self.geometry))} if self.geometry else {}),
+        }
+
+    def facade_figures(self) -> dict[str, float]:
+        """Boxes with facades and their quads per frame (mean), the share of frames drawing
+        any, the bake's triangles per frame (mean, max) and the texture bytes a frame drew
+        (mean, max); empty when no frame was counted."""
+        if not self.facades:
+            return {}
+        n, q, k, b = (np.asarray(v, np.float64) for v in (self.facades, self.facade_quads, self.facade_bake,
+                                                           self.facade_bytes))
+        return {
+            "facades_mean": float(n.mean()),
+            "facade_quads_mean": float(q.mean()),
+            "frames_with_facades": float((n > 0).mean()),
+            "bake_triangles_mean": float(k.mean()),
+            "bake_triangles_max": int(k.max()),
+            "frames_baking": float((k > 0).mean()),
+            "texture_bytes_mean": float(b.mean()),
+            "texture_bytes_max": int(b.max()),
         }
 
     def impostor_figures(self) -> dict[str, float]:

@@ -64,6 +64,11 @@ def measure(w: WalkState, f: Frame) -> None:
         fr.wall_bytes.append(sum({d.image: d.nbytes for d in f.walls}.values()))
         if not w.indoors and city is not None:
             fr.geometry.append(int((f.lods >= 0).sum()))
+    if w.facades is not None and not w.indoors:
+        fr.facades.append(len(f.facades))
+        fr.facade_quads.append(len(f.facade_quads))
+        fr.facade_bake.append(f.facade_bake)
+        fr.facade_bytes.append(sum(s.nbytes for s in f.facades))
     if w.scene.images is not None:
         fr.impostors.append(len(f.impostors))
         fr.texture_bytes.append(sum({d.image: d.nbytes for d in f.impostors}.values()))
@@ -105,7 +110,7 @@ def note_truth(w: WalkState, f: Frame) -> None:
             frame=w.frame, t=t, eye=f.eye, view=f.view.astype(np.float32), cell=f.street,
             pvs=None if cell is None else cell.pvs,
             received=cache.ids(city.kind) + cache.ids("geom"), built=cache.ids("geom"),
-            geoms=w.objects.geoms, lods=f.lods, impostors=_quads(w, f),
+            geoms=w.objects.geoms, lods=f.lods, impostors=_quads(w, f), facades=f.facade_quads,
             wall_quads=[] if w.scene.wall_images is None else wall_quads(f.walls, w.scene.wall_images.image),
         )
     elif city is None:  # rooms only: at the fog the frame was drawn at (the budget's lever)

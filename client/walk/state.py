@@ -86,6 +86,9 @@ class WalkState:
     impostors_old: dict[int, tuple[Any, float]] = field(default_factory=dict)
     """Per building crossing into another image: the image it showed before and that
     image's share, falling from 1 to 0 over the fade."""
+    facades: Any = None
+    """Facade textures held and being baked (:class:`~walkstream.client.walk.facades.FacadeState`;
+    None: boxes drawn plain)."""
     impostors_wt: float = -math.inf
     """Walk time of the last frame that chose impostors (-inf: none yet)."""
 
@@ -142,6 +145,12 @@ class Frame:
     """Room parts, objects and impostors drawn."""
     impostors: list[Any] = field(default_factory=list)
     """The impostors drawn (:class:`~walkstream.client.walk.impostors.DrawnImpostor`)."""
+    facades: list[Any] = field(default_factory=list)
+    """The boxes drawn with facade textures (:class:`~walkstream.client.draw.facades.FacadeSet`)."""
+    facade_quads: list[Any] = field(default_factory=list)
+    """Their faces turned to the eye as quads (:data:`~walkstream.client.draw.quads.Quad`)."""
+    facade_bake: int = 0
+    """LOD2 triangles the frame drew baking facade textures (charged to it)."""
     walls: list[Any] = field(default_factory=list)
     """The virtual walls drawn as textures (:class:`~walkstream.client.walk.walls.DrawnWall`)."""
     wall_wants: list[tuple[int, int, float]] = field(default_factory=list)

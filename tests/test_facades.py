@@ -1,0 +1,168 @@
+"""Facade textures on boxes (issue 27): a building left at its LOD0 box carries images of
+its LOD2 facades, baked by the client, drawn as quads over the box, charged to the frame,
+painted into the colour truth's picture of the client's frame."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+
+from walkstream.client.config import ReplayConfig
+from walkstream.client.draw.facades import FacadeBaker, facade_image_id, texture_size, wall_faces
+from walkstream.client.net.link import LinkProfile
+from walkstream.client.replay import run_replay
+from walkstream.client.truth.render import TruthRenderer, form_key
+from walkstream.server.bake import BakeSettings, bake
+from walkstream.server.service.main import create_app
+from walkstream.server.sources.citygen import write_city
+from walkstream.shared.buildings import build_lods
+from walkstream.shared.camera import look_at
+from walkstream.shared.errors import InputError
+from walkstream.shared.records import BuildingParams, Mesh
+
+URL = "http://walkstream.test"
+
+
+def _building() -> tuple[Mesh, Mesh, Mesh]:
+    ring = np.array([[0.0, 0.0], [20.0, 0.0], [20.0, 12.0], [0.0, 12.0]])
+    return build_lods(BuildingParams(id=1, rings=(ring,), neighbour_heights=(np.zeros(4),), floors=5,
+                                     floor_height=3.0, style=1))
+
+
+def test_the_wall_faces_of_a_box_are_its_four_walls() -> None:
+    l0, _, l2 = _building()
+    top = float(l2.positions[:, 2].max())
+    faces = wall_faces(l0, top)
+    assert sorted(round(f.width, 2) for f in faces) == [12.6, 12.6, 20.6, 20.6]  # grown 0.3 m each side
+    for f in faces:
+        assert abs(f.normal[2]) < 1e-9 and abs(np.linalg.norm(f.normal) - 1) < 1e-9
+        assert abs(f.right @ f.normal) < 1e-9
+        c = f.corners()
+        assert np.isclose(c[2, 2], top) and np.isclose(c[0, 2], -0.3)  # up to LOD2's parapet
+        # the face lies on the box's wall: 0 or 20 (x), 0 or 12 (y)
+        d = float(c[0, :2] @ f.normal[:2])
+        assert np.isclose(abs(d), 0.0) or np.isclose(abs(d), 20.0) or np.isclose(abs(d), 12.0)
+    assert texture_size(faces[0], 8.0, 256) == (165, 128)
+    assert texture_size(faces[0], 100.0, 256) == (256, 256)
+
+
+def test_image_ids_are_negative_and_distinct() -> None:
+    ids = {facade_image_id(o, k) for o in range(50) for k in range(10)}
+    assert len(ids) == 500 and max(ids) < 0
+
+
+def test_bad_facade_settings_are_refused() -> None:
+    link = LinkProfile(56_000.0, 56_000.0, 0.2)
+    with pytest.raises(InputError, match="--facade-texels"):
+        ReplayConfig(link, facade_texels_per_m=0.0)
+    with pytest.raises(InputError, match="--facade-bake-share"):
+        ReplayConfig(link, facade_bake_share=0.0)
+    with pytest.raises(InputError, match="--facade-budget"):
+        ReplayConfig(link, facade_budget_bytes=-1)
+
+
+@pytest.mark.gl
+def test_a_textured_box_is_closer_to_lod2_than_the_plain_box(gl: Any) -> None:
+    l0, _, l2 = _building()
+    truth = TruthRenderer({1: l2}, (160, 120), forms={(1, 0): l0}, ctx=gl)
+    baker = FacadeBaker(gl)
+    try:
+        s = baker.bake(1, l0, l2)
+        eye = np.array([-8.0, -22.0, 1.7])  # the south and west faces, obliquely
+        view = look_at(eye, (10.0, 6.0, 7.0))
+        ids, _ = truth.render(eye, view)
+        full = truth.colour().astype(np.float64)
+        truth.render(eye, view, truth.flags([form_key(1, 0)]))
+        box = truth.colour().astype(np.float64)
+        quads = s.quads(eye)
+        assert len(quads) == 2  # the two faces turned to the eye, not the two behind
+        textured = truth.paint_quads(quads, view).astype(np.float64)
+        on = ids >= 0
+        err_box = float(np.abs(box - full)[on].mean())
+        err_tex = float(np.abs(textured - full)[on].mean())
+        assert err_tex < 0.5 * err_box, (err_tex, err_box)
+    finally:
+        baker.release()
+        truth.release()
+
+
+@pytest.mark.gl
+def test_a_facade_image_is_premultiplied_and_empty_where_lod2_is_not(gl: Any) -> None:
+    l0, _, l2 = _building()
+    baker = FacadeBaker(gl, texels_per_m=4.0)
+    try:
+        s = baker.bake(1, l0, l2)
+    finally:
+        baker.release()
+    assert len(s.images) == 4 and s.nbytes == sum(im.rgba.nbytes for im in s.images)
+    assert s.bake_triangles == sum(im.bake_triangles for im in s.images) > 0
+    for im in s.images:
+        a = im.rgba
+        assert (a[..., :3] <= a[..., 3:4]).all()  # premultiplied: no colour without cover
+        assert a[-1, :, 3].max() == 0  # the bottom margin is below the ground: nothing there
+        assert (a[a.shape[0] // 2, a.shape[1] // 4 : -a.shape[1] // 4, 3] == 255).all()  # the wall itself
+
+
+@pytest.fixture(scope="module")
+def city(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("facades")
+    write_city(d / "city.geojson", 150, 2)
+    bake(d / "city.geojson", d / "city.db", settings=BakeSettings(resolution=32, sampling="corners"), name="city")
+    return d / "city.db"
+
+
+def _replay(db: Path, duration: float = 8.0, **kw: Any) -> dict[str, Any]:
+    app = create_app([db])
+    try:
+        cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="pda", duration_s=duration, **kw)
+        return run_replay(httpx.ASGITransport(app=app), URL, cfg).summary
+    finally:
+        app.state.scenes.close()
+
+
+@pytest.mark.gl
+def test_a_walk_on_pda_draws_boxes_with_facades_and_pays_for_them(city: Path, gl_ctx: object) -> None:
+    fac = _replay(city, truth_every=40, size=(160, 120))
+    box = _replay(city, truth_every=40, size=(160, 120), facades=False)
+    f = fac["facades"]
+    assert f["buildings_baked"] > 0 and f["facades_mean"] > 0 and f["facade_quads_mean"] > 0
+    assert f["bake_triangles"] > 0 and 0 < f["texture_bytes_max"] <= 8 << 20
+    assert "error" not in f and "facades" not in box
+    err = fac["truth"]["colour"]["error_causes"]["lod_colour"], box["truth"]["colour"]["error_causes"]["lod_colour"]
+    assert err[0] < err[1], err  # the boxes' own error falls
+
+
+@pytest.mark.gl
+def test_a_facade_budget_smaller_than_one_building_draws_plain_boxes(city: Path, gl_ctx: object) -> None:
+    f = _replay(city, 4.0, facade_budget_bytes=1)["facades"]
+    assert f["buildings_baked"] > 0 and f["facades_mean"] == 0 and f["dropped"] > 0
+
+
+@pytest.mark.gl
+def test_the_truth_paints_facades_into_the_boxes_picture_not_as_stand_ins(gl: Any) -> None:
+    from walkstream.client.truth.notes import FrameNote
+    from walkstream.client.truth.standin import impostor_overlay
+
+    l0, _, l2 = _building()
+    truth = TruthRenderer({1: l2}, (160, 120), forms={(1, 0): l0}, ctx=gl)
+    baker = FacadeBaker(gl)
+    try:
+        s = baker.bake(1, l0, l2)
+        eye = np.array([10.0, -25.0, 1.7])
+        view = look_at(eye, (10.0, 6.0, 7.0))
+        note = FrameNote(frame=0, t=0.0, eye=eye, view=view, cell=None, pvs=None, received=np.zeros(0, np.int64),
+                         built=np.zeros(0, np.int64), drawn=((1, 0, l0),), parts=(), waiting=(), fog=np.inf,
+                         facades=tuple(s.quads(eye)))
+        keys, _ = truth.render(eye, view, truth.flags([form_key(1, 0)]))
+        rgb = truth.colour()
+        plain = rgb.copy()
+        painted = impostor_overlay(truth, truth.proj)(note, rgb, keys)
+        assert not painted.any()  # no stand-in: the pixels stay the box's
+        assert np.any(rgb != plain, axis=2).mean() > 0.05  # the windows are on the box now
+    finally:
+        baker.release()
+        truth.release()
