@@ -375,7 +375,8 @@ async def replay(
     elif kind == "interior":
         assert rooms is not None and topology is not None
         summary.update(link_figures(config, stats, api))
-        summary.update(interior_summary(config, log, rooms, frames, topology, cache, setup_s, state.path, manifest))
+        summary.update(interior_summary(config, log, rooms, frames, topology, cache, setup_s, state.path, manifest,
+                                        t_start))
         walls = scene.wall_images
         if walls is not None:  # only then: a scene without walls keeps its summary
             figs = frames.wall_figures()

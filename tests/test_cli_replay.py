@@ -86,6 +86,7 @@ def test_replay_on_the_gl_device_really_draws(db: Path, tmp_path: Path, gl_ctx: 
         (["--loss", "2"], "--loss"),
         (["--size", "640by480"], "--size"),
         (["--path", "nowhere"], "nowhere"),
+        (["--start-hold", "-1"], "--start-hold"),
     ],
 )
 def test_bad_replay_arguments_are_one_line(

@@ -505,3 +505,23 @@ def test_the_walk_bar_follows_a_path_that_grows() -> None:
     bar(47.8, 47.8)
     assert bar.bar.total == 47.8 and bar.bar.n == 47.8
     bar.close()
+
+
+def test_the_walker_stands_at_the_start_until_its_first_view_is_in(office: Path) -> None:
+    walking = _replay(office, start_hold_s=0.0)
+    held = _replay(office)  # the default: at most 3 s
+    short = _replay(office, start_hold_s=0.1)  # a bound shorter than the first view takes
+    for s in (walking, held, short):
+        assert "error" not in s and s["redownloads"] == 0 and s["perfect_frame_ratio"] > 0
+    assert walking["start_hold_s"] == 0.0 and 0.0 < short["start_hold_s"] <= 0.1 + 0.05
+    # the walker stood until the first view was in: the first perfect frame ends the
+    # hold, the same 3 s of path walked after it (more frames), none walked half-seen
+    assert 0.0 < held["start_hold_s"] < 3.0
+    assert held["time_to_first_perfect_frame_s"] <= held["setup_s"] + held["start_hold_s"] + 1e-9
+    assert held["frames"] > walking["frames"]
+    assert held["time_to_first_perfect_frame_s"] <= walking["time_to_first_perfect_frame_s"] + 0.5
+    # the report says which cells a frame missed, and why
+    late = walking["late_cells"]
+    assert late["cells"] == len(late["worst"]) or len(late["worst"]) == 20
+    assert sum(late["cell_frames_by_cause"].values()) >= sum(w["frames"] for w in late["worst"])
+    assert all(w["wanted_s"] <= w["missing_s"] for w in late["worst"])
