@@ -86,7 +86,6 @@ def test_replay_on_the_gl_device_really_draws(db: Path, tmp_path: Path, gl_ctx: 
         (["--loss", "2"], "--loss"),
         (["--size", "640by480"], "--size"),
         (["--path", "nowhere"], "nowhere"),
-        (["--start-hold", "-1"], "--start-hold"),
     ],
 )
 def test_bad_replay_arguments_are_one_line(
@@ -201,3 +200,12 @@ def test_bench_budget_gl_rows_under_the_real_clock(db: Path, tmp_path: Path, gl:
     text = format_gl_real_table(rows)
     assert "per-object" in text and "finish" in text
     assert "160x120" not in format_budget_table(rows)  # the real-clock rows have their own table
+
+
+def test_a_bad_start_hold_is_refused_by_name(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    for bad in ("-1", "soon", "nan"):
+        with pytest.raises(SystemExit) as e:
+            main(["replay", str(db), "--report", str(tmp_path / "r"), f"--start-hold={bad}"])
+        assert e.value.code == 2
+        err = capsys.readouterr().err
+        assert "--start-hold" in err.splitlines()[-1] and "Traceback" not in err

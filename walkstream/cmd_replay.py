@@ -334,7 +334,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
                    "fetched when the link is idle (default 10; 0: the whole path in the bundle)")
     r.add_argument("--start-hold", type=_seconds, default=3.0, metavar="S",
                    help="interiors: the walker stands at the path's start until its first view is complete (every "
-                   "cell it shows in, and the start bundle's cells where it leads), at most S seconds (default 3; "
+                   "cell it shows in, and no contents on the link), at most S seconds (default 3; "
                    "0: walks at once)")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
     r.add_argument("--frame-times", metavar="REPORT", help="a recorded frame schedule: take each frame's time from an earlier report's frames.csv (its folder or the file) instead of measuring it, so that a gl replay, and the frames --truth-every compares, repeat exactly")

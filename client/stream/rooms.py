@@ -703,10 +703,6 @@ class RoomStreamer:
         finally:
             self.scheduler.landed(f)
 
-    def bundle_pending(self) -> bool:
-        """Whether cells of the start bundle's first view are still on their way."""
-        return any(t in self._adopted for t in self._tasks.values())
-
     def busy(self) -> bool:
         """Whether contents are on the link: a request of this streamer's scheduler, or
         the start bundle's first view still coming."""

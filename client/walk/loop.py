@@ -128,8 +128,9 @@ async def walk(
             phases.mark(name)
             if name == "draw" and w.renderer is not None and (f.snap or not w.device.simulated):
                 phases.move("draw", "finish", w.renderer.last_finish_s)
-        # the walk leads into the start bundle's other cells within seconds: it waits for them too
-        holding = holding and not (f.perfect and not (rooms is not None and rooms.bundle_pending()))
+        # the walk leads within seconds into the cells still on the link (the start bundle's
+        # other cells, the first prefetch): the walker waits for them too
+        holding = holding and not (f.perfect and not (rooms is not None and rooms.busy()))
         w.frame += 1
         if w.frame % FORGET_EVERY == 0:
             forget_flushed(w)
