@@ -400,7 +400,8 @@ def seed_rows(seeds: Sequence[int], replay: Callable[[str, dict[str, Any], str],
     each baked and its tour replayed for ``duration`` as the issue measures a tour: 56
     kbit/s, 200 ms, simulated clock, ``desktop2003``, every 50th frame against the truth at
     160x120.  A row per seed: perfect frames, first perfect frame, culled pixels,
-    tightness p95, bytes, the culling's median milliseconds."""
+    tightness p95, bytes, the culling's median milliseconds, the cells missing from a frame
+    after the first perfect one (the replay's ``late_cells``: which and why in its report)."""
     rows = []
     for seed in seeds:
         src, db = out / f"seed{seed}.json", out / f"seed{seed}.db"
@@ -416,7 +417,7 @@ def seed_rows(seeds: Sequence[int], replay: Callable[[str, dict[str, Any], str],
         rows.append({"seed": seed, "duration": duration, **{key: s.get(key) for key in (
             "perfect_frame_ratio", "time_to_first_perfect_frame_s", "bytes_received", "start_contents_cells",
             "culling_ms_median")}, "culled_pixels": truth.get("culled_pixels"), "tightness_p95": truth.get("tightness_p95"),
-            "truth_frames": truth.get("frames")})
+            "truth_frames": truth.get("frames"), "late_cells": (s.get("late_cells") or {}).get("cells")})
     return rows
 
 
@@ -429,14 +430,15 @@ def seed_table(rows: Sequence[dict[str, Any]]) -> str:
     """The generated seeds' replays as text."""
     f = _or_dash
     out = [f"{'seed':>5}{'walked':>8}{'perfect%':>9}{'1st perf s':>11}{'culled px':>10}{'truth fr':>9}"
-           f"{'tight p95':>10}{'kB down':>8}{'1st view':>9}{'cull ms':>8}"]
+           f"{'tight p95':>10}{'kB down':>8}{'1st view':>9}{'cull ms':>8}{'late':>5}"]
     for r in rows:
         pf = r["perfect_frame_ratio"]
         out.append(f"{r['seed']:>5}{r['duration']:>8}{f(None if pf is None else 100 * pf, '.2f'):>9}"
                    f"{f(r['time_to_first_perfect_frame_s'], '.2f'):>11}{f(r['culled_pixels'], ',d'):>10}"
                    f"{f(r['truth_frames'], 'd'):>9}{f(r['tightness_p95'], '.2f'):>10}"
                    f"{f(None if r['bytes_received'] is None else r['bytes_received'] / 1000, '.1f'):>8}"
-                   f"{f(r['start_contents_cells'], 'd'):>9}{f(r['culling_ms_median'], '.2f'):>8}")
+                   f"{f(r['start_contents_cells'], 'd'):>9}{f(r['culling_ms_median'], '.2f'):>8}"
+                   f"{f(r.get('late_cells'), 'd'):>5}")
     return "\n".join(out)
 
 

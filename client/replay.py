@@ -427,7 +427,8 @@ async def replay(
     elif kind == "interior":
         assert rooms is not None and topology is not None
         summary.update(link_figures(config, stats, api))
-        summary.update(interior_summary(config, log, rooms, frames, topology, cache, setup_s, state.path, manifest))
+        summary.update(interior_summary(config, log, rooms, frames, topology, cache, setup_s, state.path, manifest,
+                                        t_start))
         if scene.wall_images is not None:  # only then: a scene without walls keeps its summary
             summary["walls"] = _walls_summary(scene, frames)
     else:

@@ -203,3 +203,12 @@ def test_bench_budget_gl_rows_under_the_real_clock(db: Path, tmp_path: Path, gl:
     text = format_gl_real_table(rows)
     assert "per-object" in text and "finish" in text
     assert "160x120" not in format_budget_table(rows)  # the real-clock rows have their own table
+
+
+def test_a_bad_start_hold_is_refused_by_name(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    for bad in ("-1", "soon", "nan"):
+        with pytest.raises(SystemExit) as e:
+            main(["replay", str(db), "--report", str(tmp_path / "r"), f"--start-hold={bad}"])
+        assert e.value.code == 2
+        err = capsys.readouterr().err
+        assert "--start-hold" in err.splitlines()[-1] and "Traceback" not in err

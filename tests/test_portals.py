@@ -350,8 +350,8 @@ def test_bench_portals_seed_rows_are_parsed_and_tabled() -> None:
         build_parser().parse_args(["bench", "portals", "--seeds", "eleven"])
     row = {"seed": 11, "duration": "20s", "perfect_frame_ratio": 0.99637, "time_to_first_perfect_frame_s": 4.0877,
            "culled_pixels": 0, "truth_frames": 12, "tightness_p95": 3.907, "bytes_received": 79662,
-           "start_contents_cells": 39, "culling_ms_median": 2.5}
+           "start_contents_cells": 39, "culling_ms_median": 2.5, "late_cells": 2}
     table = seed_table([row, {**row, "seed": 13, "culled_pixels": None, "tightness_p95": None}]).splitlines()
     assert table[0].split()[:4] == ["seed", "walked", "perfect%", "1st"]
-    assert table[1].split() == ["11", "20s", "99.64", "4.09", "0", "12", "3.91", "79.7", "39", "2.50"]
+    assert table[1].split() == ["11", "20s", "99.64", "4.09", "0", "12", "3.91", "79.7", "39", "2.50", "2"]
     assert table[2].split()[4] == "-" and table[2].split()[6] == "-"  # no truth: said so, not zero

@@ -475,10 +475,11 @@ def test_the_walk_starts_with_the_first_views_contents(office: Path, tour: Recor
 
 
 def test_the_walk_starts_on_the_paths_head(office: Path, tour: RecordedPath) -> None:
-    headed = _replay(office)
+    # the walker walks at once (no start hold): the head's end comes while the link is busy
+    headed = _replay(office, start_hold_s=0.0)
     asked: dict[str, list[str]] = {"whole": [], "short": []}
-    whole_first = _replay(office, path_head_s=None, seen=asked["whole"])
-    short = _replay(office, path_head_s=0.2, seen=asked["short"])  # a head shorter than the contents take to come
+    whole_first = _replay(office, path_head_s=None, seen=asked["whole"], start_hold_s=0.0)
+    short = _replay(office, path_head_s=0.2, seen=asked["short"], start_hold_s=0.0)  # a head shorter than the contents take to come
     # the whole path in the bundle is taken as such; a head's whole path is asked for once
     assert [p for p in asked["whole"] if "/paths/" in p] == []
     assert [p for p in asked["short"] if "/paths/" in p] == ["/v1/scenes/office/paths/tour"]
@@ -505,3 +506,23 @@ def test_the_walk_bar_follows_a_path_that_grows() -> None:
     bar(47.8, 47.8)
     assert bar.bar.total == 47.8 and bar.bar.n == 47.8
     bar.close()
+
+
+def test_the_walker_stands_at_the_start_until_its_first_view_is_in(office: Path) -> None:
+    walking = _replay(office, start_hold_s=0.0)
+    held = _replay(office)  # the default: at most 3 s
+    short = _replay(office, start_hold_s=0.1)  # a bound shorter than the first view takes
+    for s in (walking, held, short):
+        assert "error" not in s and s["redownloads"] == 0 and s["perfect_frame_ratio"] > 0
+    assert walking["start_hold_s"] == 0.0 and 0.0 < short["start_hold_s"] <= 0.1 + 0.05
+    # the walker stood until the first view was in (and no contents were on the link, or
+    # 3 s), the same 3 s of path walked after it (more frames), none walked half-seen
+    assert 0.0 < held["start_hold_s"] <= 3.0 + 0.05
+    assert held["time_to_first_perfect_frame_s"] <= held["setup_s"] + held["start_hold_s"] + 1e-9
+    assert held["frames"] > walking["frames"]
+    assert held["time_to_first_perfect_frame_s"] <= walking["time_to_first_perfect_frame_s"] + 0.5
+    # the report says which cells a frame missed, and why
+    late = walking["late_cells"]
+    assert late["cells"] == len(late["worst"]) or len(late["worst"]) == 20
+    assert sum(late["cell_frames_by_cause"].values()) >= sum(w["frames"] for w in late["worst"])
+    assert all(w["wanted_s"] <= w["missing_s"] for w in late["worst"])

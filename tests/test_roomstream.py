@@ -236,3 +236,113 @@ def test_prefetch_reaches_cells_portals_beyond_and_refuses_a_negative_reach(offi
     assert set(one) == set(c.neighbours) - {c.id} and three[: len(one)] == one and len(three) > len(one)
     with pytest.raises(InputError, match="portals beyond"):
         RoomStreamConfig(beyond_portals=-1)
+
+
+def test_the_outside_cell_comes_last_in_the_prefetch(office_db: Path) -> None:
+    topo = _topology(office_db)
+    outside = next(c.id for c in topo.cells if c.kind == "outside")
+    # a room with a window (the outside one portal beyond), the walker standing still in it
+    c = next(c for c in topo.cells if c.kind == "room" and outside in c.neighbours)
+    s = _streamer(topo, RoomStreamConfig())
+    eye = np.array([*c.outline.mean(axis=0), c.zmin + 1.6])
+    s.locate(eye)
+    view = camera(eye, 0.0, 0.0).astype(np.float64)
+    size = (160, 120)
+    proj = perspective(60.0, size[0] / size[1], 0.1, 80.0).astype(np.float64)
+    want = s.wanted(0.0, eye, [c.id], proj @ view, view, proj, size)
+    # the rooms one portal beyond first, then the shell seen through any window: it comes
+    # when the link has carried everything else (it was never asked for before it showed)
+    assert want[0] == c.id and want[-1] == outside
+    assert set(want) == {c.id, *c.neighbours} and len(want) > 2
+
+
+def test_a_walker_through_a_door_is_predicted_to_look_both_ways(office_db: Path) -> None:
+    topo = _topology(office_db)
+    cells = {c.id: c for c in topo.cells}
+    size = (160, 120)
+    proj = perspective(60.0, size[0] / size[1], 0.1, 80.0).astype(np.float64)
+    found = 0
+    # each doorway of each room, the walker in it at 1.4 m/s on its way out of the room
+    for c in (c for c in topo.cells if c.kind == "room"):
+        for d in (cells[n] for n in c.neighbours if cells[n].kind == "doorway"):
+            eye = np.array([*d.outline.mean(axis=0), c.zmin + 1.6])
+            came = np.array([*c.outline.mean(axis=0), c.zmin + 1.6])
+            if np.linalg.norm(eye - came) < 0.5:
+                continue
+            step = 1.4 * (eye - came) / np.linalg.norm(eye - came)
+            view = camera(eye, float(np.arctan2(step[1], step[0])), 0.0).astype(np.float64)
+            plain, turned = (_streamer(topo, RoomStreamConfig(turns_ahead_deg=t)) for t in ((), (90.0, -90.0)))
+            for s in (plain, turned):
+                for k in range(3):
+                    s.locate(eye - 0.25 * (2 - k) * step)
+                    s.observe(0.25 * k, eye - 0.25 * (2 - k) * step)
+                s.locate(eye)
+            a = plain.predicted(eye, proj @ view, view, proj, size)
+            b = turned.predicted(eye, proj @ view, view, proj, size)
+            # where the predicted eye first enters another cell, the views turned both ways
+            entered = None
+            cell = plain.current
+            for h in plain.config.lookahead_s:
+                e2 = eye + h * step
+                nxt = plain._where.locate(e2, cell, anywhere=False)
+                if nxt is None or not plain._where.holds(nxt, e2):
+                    break
+                cell = nxt
+                if cell != plain.current:
+                    entered = (cell, e2)
+                    break
+            if entered is None:
+                assert b == a  # no door passed: nothing more
+                continue
+            cell, e2 = entered
+            v2 = predicted_view(view, eye, e2)
+            extra: set[int] = set()
+            for deg in (90.0, -90.0):
+                v3 = turned_view(v2, e2, deg)
+                extra |= set(plain._cells_from(cell, e2, proj @ v3, v3, proj, size, margin_px=TOUCH_MARGIN_PX)[1])
+            assert set(a) | extra <= set(b)
+            found += bool(extra - set(a))
+    assert found, "some door shows cells sideways that the walk straight on does not"
+
+
+def test_a_walker_facing_a_wall_is_predicted_to_turn_before_it(office_db: Path) -> None:
+    topo = _topology(office_db)
+    size = (160, 120)
+    proj = perspective(60.0, size[0] / size[1], 0.1, 80.0).astype(np.float64)
+    found = 0
+    for c in (c for c in topo.cells if c.kind == "room"):
+        for yaw in np.radians([0.0, 90.0, 180.0, 270.0]):
+            eye = np.array([*c.outline.mean(axis=0), c.zmin + 1.6])
+            step = 1.4 * np.array([np.cos(yaw), np.sin(yaw), 0.0])
+            view = camera(eye, float(yaw), 0.0).astype(np.float64)
+            plain, turned = (_streamer(topo, RoomStreamConfig(turns_ahead_deg=t)) for t in ((), (90.0, -90.0)))
+            for s in (plain, turned):
+                for k in range(3):
+                    s.locate(eye - 0.25 * (2 - k) * step)
+                    s.observe(0.25 * k, eye - 0.25 * (2 - k) * step)
+                s.locate(eye)
+            a = plain.predicted(eye, proj @ view, view, proj, size)
+            b = turned.predicted(eye, proj @ view, view, proj, size)
+            # the last predicted pose still in the room before the walk would leave it through a wall
+            last = None
+            for h in plain.config.lookahead_s:
+                e2 = eye + h * step
+                nxt = plain._where.locate(e2, c.id, anywhere=False)
+                if nxt is None or not plain._where.holds(nxt, e2):
+                    break  # through a wall
+                if nxt != c.id:
+                    last = None  # through a door: not this case
+                    break
+                last = e2
+            else:
+                continue
+            if last is None:
+                continue
+            v2 = predicted_view(view, eye, last)
+            extra: set[int] = set()
+            for deg in (90.0, -90.0):
+                v3 = turned_view(v2, last, deg)
+                extra |= set(plain._cells_from(c.id, last, proj @ v3, v3, proj, size, margin_px=TOUCH_MARGIN_PX)[1])
+            assert set(a) | extra == set(b)
+            found += bool(extra - set(a))
+    assert found, "some wall ahead turns the view onto cells the walk straight on does not show"

@@ -70,7 +70,7 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def _path_head(text: str) -> float:
+def _seconds(text: str) -> float:
     try:
         s = float(text)
     except ValueError:
@@ -135,6 +135,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         start_bundle=not args.no_start_bundle,
         start_contents=not args.no_start_contents,
         path_head_s=args.path_head or None,
+        start_hold_s=args.start_hold,
         gzip=not args.no_gzip,
         truth_every=args.truth_every,
         frame_times=_frame_times(args.frame_times) if args.frame_times else None,
@@ -332,9 +333,13 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--no-start-bundle", action="store_true", help="start with scene list, manifest and path instead of the one-round-trip start bundle")
     r.add_argument("--no-start-contents", action="store_true",
                    help="interiors: the start bundle leaves out the first view's contents (they come by the streamer's own requests)")
-    r.add_argument("--path-head", type=_path_head, default=10.0, metavar="S",
+    r.add_argument("--path-head", type=_seconds, default=10.0, metavar="S",
                    help="interiors: the start bundle sends only the path's first S seconds; the whole path is "
                    "fetched when the link is idle (default 10; 0: the whole path in the bundle)")
+    r.add_argument("--start-hold", type=_seconds, default=3.0, metavar="S",
+                   help="interiors: the walker stands at the path's start until its first view is complete (every "
+                   "cell it shows in, and no contents on the link), at most S seconds (default 3; "
+                   "0: walks at once)")
     r.add_argument("--no-gzip", action="store_true", help="ask for the streams uncompressed")
     r.add_argument("--frame-times", metavar="REPORT", help="a recorded frame schedule: take each frame's time from an earlier report's frames.csv (its folder or the file) instead of measuring it, so that a gl replay, and the frames --truth-every compares, repeat exactly")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")

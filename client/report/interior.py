@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from walkstream.client.config import ReplayConfig
-from walkstream.client.report.metrics import FrameLog
+from walkstream.client.report.metrics import FrameLog, first_perfect_index
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.rooms import RoomStreamer
 from walkstream.client.walk.figures import WalkFrames
@@ -28,9 +29,13 @@ def interior_summary(
     setup_s: float,
     path: RecordedPath,
     manifest: Manifest | None,
+    t_start: float = 0.0,
 ) -> dict[str, Any]:
-    """The interior figures of a replay's summary (beyond the frame log's and the link's)."""
+    """The interior figures of a replay's summary (beyond the frame log's and the link's);
+    ``t_start``: the walk's clock at the replay's start (``late_cells`` counts from it;
+    they are the frames from the first perfect one on, as the perfect-frame share)."""
     entered = {int(c) for c in np.unique(log.cell) if c >= 0}
+    first = first_perfect_index(log)
     return {
         "kind": "interior",
         "scene_version": None if manifest is None else manifest.version,
@@ -58,6 +63,9 @@ def interior_summary(
         "fog_tightened_frames": frames.tightened,
         "fog_below_portal_frames": frames.fog_below_portal,
         "path_wait_s": frames.path_wait_s,
+        "start_hold_s": frames.start_hold_s,
+        "late_cells": streamer.late.figures(
+            t_start, -math.inf if first is None else t_start + float(log.t[first])),
         "cache_bytes": config.cache_bytes,
         "cache_peak_bytes": int(cache.peak_bytes),
     }

@@ -45,11 +45,14 @@ class WalkFrames:
     """Frames on which the visible cells did not fit the memory budget at the default
     fog, so the fog was tightened until they did (the paper's use of fog)."""
     fog_below_portal: int = 0
+    """Frames whose budget fog was nearer than the nearest portal the portal walk looked
+    through: everything beyond the viewer's own room fogged out (said in the report)."""
     path_wait_s: float = 0.0
     """Seconds the walker stood at the end of the path's head (the start bundle's
     ``pathhead``) because the whole path had not arrived yet."""
-    """Frames whose budget fog was nearer than the nearest portal the portal walk looked
-    through: everything beyond the viewer's own room fogged out (said in the report)."""
+    start_hold_s: float = 0.0
+    """Seconds the walker stood at the path's start until its first view was complete
+    (:attr:`~walkstream.client.config.ReplayConfig.start_hold_s`)."""
     loaded: dict[int, frozenset[int]] = field(default_factory=dict)
     """Frames in an entrance's doorway: the room cells whose contents were in memory."""
     prefetch_from: float | None = None

@@ -97,9 +97,16 @@ async def walk(
     if e is not None and rooms is not None:
         w.door = np.asarray(next(p[4] for p in rooms.topology.portals if p[0] == e.portal), np.float64).mean(axis=0)
     last_progress = -math.inf
+    # an interior walker stands at the start until its first view is complete (at most start_hold_s)
+    holding = cfg.start_hold_s > 0 and rooms is not None and scene.streets is None
+    hold_end = t_walk0 + cfg.start_hold_s
     while True:
         t = clock.now()
         wt = t - t_walk0
+        if holding and t < hold_end:
+            w.frames.start_hold_s += wt
+            t_walk0, wt = t, 0.0
+        holding = holding and t < hold_end
         if w.path_pending and wt > w.path.duration:
             # the whole path is still on its way: the walker waits at the head's end
             w.frames.path_wait_s += wt - w.path.duration
@@ -121,6 +128,9 @@ async def walk(
             phases.mark(name)
             if name == "draw" and w.renderer is not None and (f.snap or not w.device.simulated):
                 phases.move("draw", "finish", w.renderer.last_finish_s)
+        # the walk leads within seconds into the cells still on the link (the start bundle's
+        # other cells, the first prefetch): the walker waits for them too
+        holding = holding and not (f.perfect and not (rooms is not None and rooms.busy()))
         w.frame += 1
         if w.frame % FORGET_EVERY == 0:
             forget_flushed(w)

@@ -38,7 +38,10 @@ def measure(w: WalkState, f: Frame) -> None:
     scene, city, rooms = w.scene, w.scene.streets, w.scene.rooms
     o = w.objects
     have_obj = sum(1 for i in o.pvs if city.has_object(i)) if city is not None else 0
-    have_rooms = sum(1 for c in f.default_room_cells if rooms is not None and rooms.mesh(c) is not None)
+    waiting = [c for c in f.default_room_cells if rooms is not None and rooms.mesh(c) is None]
+    have_rooms = len(f.default_room_cells) - len(waiting)
+    if rooms is not None:
+        rooms.note_missing(f.t, waiting)
     # outdoors with rings of walls: the textures of the ring in view are content too
     have_walls = f.wall_due - f.wall_missing
     items = len(o.pvs) + len(f.default_room_cells) + f.wall_due
@@ -77,6 +80,7 @@ def measure(w: WalkState, f: Frame) -> None:
     else:
         cell = -1 if f.street is None else int(f.street)
     alloc = f.alloc
+    f.perfect = cell >= 0 and min(dq, rq) >= 1.0 - 1e-9  # as the frame log counts it
     w.builder.append(
         t=f.t - w.t_start, frame_time=f.frame_time, cell=cell, pvs=len(o.pvs) + len(f.room_cells),
         download_quality=dq, rewrite_quality=rq, bytes_down=w.bytes_down(), budget=f.budget,

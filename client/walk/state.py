@@ -166,6 +166,9 @@ class Frame:
     snap: bool = False
     keys: list[Hashable] = field(default_factory=list)
     frame_time: float = 0.0
+    # -- measure
+    perfect: bool = False
+    """Everything the frame's model makes visible was in and built (the frame log's perfect frame)."""
 
     @property
     def lods(self) -> NDArray[np.integer[Any]]:

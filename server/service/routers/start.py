@@ -2,7 +2,7 @@
 
 ``GET /v1/start?path=NAME`` (or ``viewpoint=NAME``, or ``x=&y=``, or nothing: the scene's
 default start; ``scene=`` picks the scene, else the server's first by name; see
-:meth:`~walkstream.server.service.scenes.Scene.start_position` for how they combine)
+:func:`~walkstream.server.service.startbundle.start_position` for how they combine)
 answers with a *stream* of parts, each the
 msgpack map ``{part, etag, body: bin}`` where ``body`` is exactly what the part's
 own endpoint sends (so a client decodes it, and may cache it under ``etag``, as if
@@ -11,10 +11,10 @@ it had asked for it):
 1. ``path`` -- the recorded path, when asked by name (a replay can start walking);
 2. ``cell`` -- the record of the cell holding the start (none outside every cell),
    then those of the cells straight ahead that the viewer reaches in
-   :data:`~walkstream.server.service.scenes.START_LEAD_S` seconds (``heading`` in
+   :data:`~walkstream.server.service.startbundle.START_LEAD_S` seconds (``heading`` in
    radians counter-clockwise from +x and ``speed`` in m/s; a path gives its own
    start heading and speed, a viewpoint its yaw and standing still), and those of
-   the cells reached in :data:`~walkstream.server.service.scenes.START_RECORD_LEAD_S`
+   the cells reached in :data:`~walkstream.server.service.startbundle.START_RECORD_LEAD_S`
    more (records only);
 3. ``index`` -- after each cell, the index tile holding it (when not sent yet); outside
    every cell, the tiles that may hold cells near the start;
@@ -32,7 +32,7 @@ default to the replay's 60, 40 and no limit: as deep as the fog reaches), ``cont
 etag: null, cells: [ids]}`` followed by one ``{cell, etag, body}`` part per cell, as
 ``POST .../rooms/contents`` sends them (:mod:`walkstream.shared.codec.cellbatch`), for the
 cells portal culling keeps from the path's first pose and from where it leads in a
-couple of seconds (:meth:`~walkstream.server.service.scenes.Scene.start_parts`); then
+couple of seconds (:func:`~walkstream.server.service.startbundle.start_parts`); then
 ``manifest``.  With ``head=SECONDS`` as well (a path and a view; compact parts), the
 path's head ``pathhead`` comes in place of ``path``: its samples up to the first at or
 after SECONDS (a compact path of its own, decoding exactly as the whole path's first
@@ -74,8 +74,9 @@ from walkstream.server.service.http import (
 from walkstream.server.service.models import ERRORS, StartPartOut, error_doc
 from walkstream.server.service.registry import SceneRegistry
 from walkstream.server.service.routers.objects import coalesce
-from walkstream.server.service.scenes import OBJECT_FORMS, Frames, Scene, StartPart
+from walkstream.server.service.scenes import OBJECT_FORMS, Scene
 from walkstream.server.service.scenes import Form as ObjForm
+from walkstream.server.service.startbundle import Frames, StartPart, start_parts, start_position
 from walkstream.shared.errors import ApiError, InputError
 from walkstream.shared.roomview import RoomView
 from walkstream.shared.wire import JSON, MSGPACK
@@ -209,15 +210,15 @@ async def _bundle(request: Request, scene: Scene, rep: Rep, q: StartQuery) -> St
             detail={"form": q.form[:80], "known": list(OBJECT_FORMS)},
         )
     xy, h, v = await run_in_threadpool(
-        lambda: scene.start_position(path=q.path, viewpoint=q.viewpoint, x=q.x, y=q.y)
+        lambda: start_position(scene, path=q.path, viewpoint=q.viewpoint, x=q.x, y=q.y)
     )
     h = h if q.heading is None else q.heading
     v = v if q.speed is None else q.speed
     view = q.room_view()
     inflate = accepts_gzip(request.headers.get("accept-encoding"))
     parts = await run_in_threadpool(
-        lambda: scene.start_parts(xy, rep, q.path, h, v, cast(ObjForm, q.form), view=view, inflate=inflate,
-                                 path_head_s=q.head)
+        lambda: start_parts(scene, xy, rep, q.path, h, v, cast(ObjForm, q.form), view=view, inflate=inflate,
+                            path_head_s=q.head)
     )
     headers = {"X-Scene-Version": scene.version, "X-Scene": scene.name, "Cache-Control": "no-cache"}
     if rep == "json":

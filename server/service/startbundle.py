@@ -1,0 +1,265 @@
+"""The start bundle: where a walk starts and what it needs before its first frame.
+
+``GET /v1/start`` (:mod:`walkstream.server.service.routers.start`) answers with the parts
+:func:`start_parts` lists, at the position :func:`start_position` picks.  A city's bundle
+is the path, the records of the cells the viewer reaches in the first seconds going
+straight on (with their index tiles), the manifest, then the objects of the first
+cells' PVS; an interior's is the path (or its head), the topology, the contents of the
+cells the client's view sees from the path's first poses, then the manifest.  Every
+body is one the scene's own endpoints send (:class:`~walkstream.server.service.scenes.Scene`
+encodes and caches them), so a client decodes and caches each part as if it had asked
+for it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.server.service.http import Encoded, Rep
+from walkstream.server.service.scenes import Form, Scene
+from walkstream.shared.errors import ApiError
+from walkstream.shared.pathcodec import decode_path_q
+from walkstream.shared.paths import RecordedPath
+from walkstream.shared.roomview import RoomView
+
+__all__ = [
+    "START_LEAD_S",
+    "START_MAX_AHEAD_M",
+    "START_RECORD_LEAD_S",
+    "START_RECORD_AHEAD_M",
+    "START_ROOM_LEAD_S",
+    "START_ROOM_BYTES",
+    "Frames",
+    "StartPart",
+    "start_position",
+    "default_start",
+    "path_start",
+    "start_cells",
+    "start_parts",
+    "room_lead",
+]
+
+
+START_LEAD_S = 3.0
+"""A start bundle holds the cells the viewer reaches in this many seconds, going straight on."""
+
+START_MAX_AHEAD_M = 200.0
+"""A start bundle looks at most this far ahead."""
+
+START_RECORD_LEAD_S = 2.0
+"""A start bundle also holds the records (and index tiles) of the cells reached in this
+many seconds more, without their objects: a record is small, and a viewer who enters a
+cell whose record has not come cannot even count what it misses; the client's own
+requests queue behind the bundle."""
+
+START_RECORD_AHEAD_M = 20.0
+"""... and at least this many metres more (a walker's next junction)."""
+
+START_ROOM_LEAD_S: tuple[float, ...] = (0.5, 1.0, 2.0)
+"""An interior start bundle holds the contents of the cells seen from the path's first
+pose and from where it leads, going straight on, after these many seconds."""
+
+START_ROOM_BYTES = 32_000
+"""An interior start bundle holds at most this many bytes of stored contents (the
+first cell's always)."""
+
+
+@dataclass(frozen=True)
+class Frames:
+    """The frames that follow a start bundle part's header: ``ids`` in order, each packed."""
+
+    ids: list[int]
+    frames: list[bytes]
+
+
+StartPart = tuple[str, "Encoded | Frames"]
+"""One part of a start bundle: its name (:data:`~walkstream.shared.wire.START_PARTS`) and
+its encoded body, or for ``objects`` and ``contents`` the frames that follow its header."""
+
+
+def start_position(
+    scene: Scene,
+    *,
+    path: str | None = None,
+    viewpoint: str | None = None,
+    x: float | None = None,
+    y: float | None = None,
+) -> tuple[tuple[float, float], float | None, float]:
+    """Where a start bundle starts: ``((x, y), heading or None, speed in m/s)``.
+
+    Every combination of the parameters is an answer, each one overriding the one
+    before: the scene's default start (its first viewpoint, else the start of its
+    first path by name, else the middle of its bounds); a named ``path``'s first
+    point, heading and speed over its first second; a named ``viewpoint``'s position
+    and yaw (standing still); then ``x`` and ``y``, each replacing its coordinate (a
+    start moved this way has no heading and stands still).  So ``path=P&x=..&y=..``
+    sends path ``P`` and starts at the point given.
+
+    Raises
+    ------
+    ApiError
+        404 for an unknown path or viewpoint.
+    """
+    if path is not None and path not in scene.path_names:
+        raise ApiError(
+            f"scene {scene.name!r} has no path {path!r:.80}", status=404, detail={"path": path}
+        )
+    heading: float | None
+    if viewpoint is not None:
+        vp = next((v for v in scene.manifest_viewpoints if v.name == viewpoint), None)
+        if vp is None:
+            raise ApiError(
+                f"scene {scene.name!r} has no viewpoint {viewpoint!r:.80}",
+                status=404,
+                detail={"viewpoint": viewpoint},
+            )
+        xy, heading, speed = (vp.x, vp.y), vp.yaw, 0.0
+    elif path is not None:
+        xy, heading, speed = path_start(scene, path)
+    else:
+        xy, heading, speed = default_start(scene)
+    if x is None and y is None:
+        return (float(xy[0]), float(xy[1])), heading, speed
+    return (float(xy[0] if x is None else x), float(xy[1] if y is None else y)), None, 0.0
+
+
+def default_start(scene: Scene) -> tuple[tuple[float, float], float | None, float]:
+    """The start of a bundle that names none: the first viewpoint, else the first
+    path's start (by name), else the middle of the scene's bounds (no heading)."""
+    if scene.manifest_viewpoints:
+        v = scene.manifest_viewpoints[0]
+        return (v.x, v.y), v.yaw, 0.0
+    if scene.path_names:
+        return path_start(scene, min(scene.path_names))
+    b = scene.reader.bounds()
+    return ((b[0] + b[3]) / 2.0, (b[1] + b[4]) / 2.0), None, 0.0
+
+
+def path_start(scene: Scene, path: str) -> tuple[tuple[float, float], float, float]:
+    """A recorded path's first point, heading, and speed over its first second."""
+    p = RecordedPath.from_msgpack(scene.path(path, "msgpack").content, f"path {path!r}")
+    xyz, yaw, _pitch = p.at(0.0)
+    dt = min(1.0, p.duration) or 1.0
+    later, _, _ = p.at(dt)
+    speed = float(np.hypot(*(np.asarray(later[:2]) - np.asarray(xyz[:2])))) / dt
+    return (float(xyz[0]), float(xyz[1])), float(yaw), speed
+
+
+def start_cells(
+    scene: Scene, xy: tuple[float, float], heading: float | None, ahead_m: float
+) -> list[int]:
+    """The cell holding ``xy`` and those a straight line ``ahead_m`` long along
+    ``heading`` enters, in the order entered (empty outside every cell)."""
+    first = scene.locator.locate(*xy)
+    if first is None:
+        return []
+    out = [first]
+    if heading is not None and ahead_m > 0:
+        d = np.arange(1.0, ahead_m + 1e-9, 1.0)
+        pts = np.asarray(xy)[None, :] + d[:, None] * np.array([math.cos(heading), math.sin(heading)])
+        for c in scene.locator.locate_many(pts).tolist():
+            if c < 0:
+                break  # the line left the cells: what lies beyond is not straight on
+            if c not in out:
+                out.append(int(c))
+    return out
+
+
+def start_parts(
+    scene: Scene,
+    xy: tuple[float, float],
+    rep: Rep,
+    path: str | None = None,
+    heading: float | None = None,
+    speed: float = 0.0,
+    form: Form = "params",
+    view: RoomView | None = None,
+    inflate: bool = False,
+    path_head_s: float | None = None,
+) -> list[StartPart]:
+    """The parts of a start bundle at ``xy``, in the order sent.
+
+    The path (when asked by name; the walk can start once it is in), the
+    records of the cell holding ``xy`` and of the cells straight ahead that the
+    viewer reaches within :data:`START_LEAD_S` at ``speed`` and
+    :data:`START_RECORD_LEAD_S` more (none outside every cell), each followed by
+    the index tile holding it when not sent yet (the client tracks the viewer
+    with them; outside every cell, the tiles that may hold cells near ``xy``),
+    the manifest, then the objects of the PVS of the cells of the first
+    :data:`START_LEAD_S`: the first cell's by ACH (highest first), then each
+    next cell's new ones.  Reads the database on cache misses: call it
+    from a worker thread.
+
+    An interior's bundle is the path, the topology, then (for a path and a client
+    ``view``) the contents of the cells that view sees from the path's first pose
+    and from where the path leads in :data:`START_ROOM_LEAD_S` (up to
+    :data:`START_ROOM_BYTES`; ``inflate``: each blob inflated, for a gzip-compressed
+    answer), then the manifest.  With ``path_head_s`` as well (compact parts only),
+    only the path's first ``path_head_s`` seconds come, as ``pathhead`` (the walk
+    starts on the head; the client fetches the whole path when its link is idle: on
+    a long tour it is a third of the bytes before the contents otherwise).
+    """
+    parts: list[StartPart] = []
+    split = path is not None and scene.interior is not None and view is not None and rep == "msgpack"
+    head = scene.path_head_q(path, path_head_s) if split and path and path_head_s is not None else None
+    if path is not None:
+        whole = scene.path_q(path) if rep == "msgpack" else scene.path(path, rep)
+        parts.append(("path", whole) if head is None else ("pathhead", head))
+    if scene.interior is not None:
+        # an interior walk needs its topology before its first frame, then the first
+        # view's contents; the manifest (not needed to walk) goes last
+        topology = scene.interior.topology_compact if rep == "msgpack" else scene.interior.topology[rep]
+        parts.append(("topology", topology))
+        if path is not None and view is not None:
+            cells = scene.interior.first_view(room_lead(scene, path), view, START_ROOM_BYTES)
+            parts.append(("contents", Frames(cells, [scene.interior.contents_part(c, inflate) for c in cells])))
+        return [*parts, ("manifest", scene.manifest[rep])]
+    ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
+    more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0
+    cells = start_cells(scene, xy, heading, min(START_MAX_AHEAD_M, ahead + more))
+    with_objects = start_cells(scene, xy, heading, ahead)
+    # the records first, each with the index tile that holds its cell (the client
+    # follows the viewer into it by its outline; other tiles around the start it
+    # asks for when it needs them), then the manifest (its grammar rebuilds the
+    # objects), then the objects of the cells reached within START_LEAD_S
+    sent: set[tuple[int, int]] = set()
+    for cid in cells:
+        parts.append(("cell", scene.cell(cid, rep)))
+        tile = scene.cell_tile[cid]
+        if tile not in sent:
+            sent.add(tile)
+            parts.append(("index", scene.index(tile, rep)))
+    if not cells:  # outside every cell: the tiles that may hold cells near the start
+        parts += [("index", scene.index(t, rep)) for _d, t in scene.grid.tiles_near(xy)]
+    parts.append(("manifest", scene.manifest[rep]))
+    order: list[int] = []
+    seen: set[int] = set()
+    for cid in with_objects:
+        c = scene.reader.cell(cid)
+        for oid in c.pvs[np.argsort(-c.ach, kind="stable")].tolist():
+            if oid not in seen:
+                seen.add(oid)
+                order.append(int(oid))
+    if order:
+        found, missing = scene.cached_frames(order, form)
+        if missing:
+            found.update(scene.load_frames(missing, form))
+        parts.append(("objects", Frames(order, [found[oid] for oid in order])))
+    return parts
+
+
+def room_lead(scene: Scene, path: str) -> list[tuple[NDArray[np.float64], float, float]]:
+    """The poses of an interior start: the path's first (as the client decodes the
+    compact path) and, going straight on at its velocity over its first half second
+    and looking the same way, those after :data:`START_ROOM_LEAD_S` (the client's
+    own prediction, :class:`~walkstream.client.stream.rooms.RoomStreamer`, does the same)."""
+    p = decode_path_q(scene.path_q(path).content, f"path {path!r}")
+    xyz, yaw, pitch = p.at(0.0)
+    eye = np.asarray(xyz, dtype=np.float64)
+    dt = min(0.5, p.duration)
+    v = (np.asarray(p.at(dt)[0], dtype=np.float64) - eye) / dt if dt > 0 else np.zeros(3)
+    return [(eye + h * v, float(yaw), float(pitch)) for h in (0.0, *START_ROOM_LEAD_S)]
