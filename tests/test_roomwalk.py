@@ -1,8 +1,10 @@
-"""Walks through an interior keep a body's clearance from the walls and turn on the spot.
+"""Walks through an interior keep a body's clearance from the walls and the furniture,
+and turn on the spot.
 
 A generated two-storey office (small, with a stair) is planned without baking its
 contents: the tour is sampled every few centimetres and checked against each room
-cell's walls (its outline less the walkable portals in it).
+cell's walls (its outline less the walkable portals in it) and against every piece of
+furniture on its floor.
 """
 
 from __future__ import annotations
@@ -11,10 +13,11 @@ import numpy as np
 import pytest
 import shapely
 
-from walkstream.server.bake.interior import InteriorParts, interior_parts
+from walkstream.server.bake.floorroute import FloorRoutes, walkable_floor
+from walkstream.server.bake.interior import InteriorParts, floor_obstacles, interior_parts
 from walkstream.server.bake.roomnav import CLEARANCE, walk_path
-from walkstream.server.sources.interiorfile import load_interior
-from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
+from walkstream.server.sources.interiorfile import load_interior, load_interior_dict
+from walkstream.server.sources.interiorgen import InteriorPlan, generate_interior, write_interior
 from walkstream.shared.pathcodec import decode_path_q, encode_path_q
 from walkstream.shared.paths import wrap_angle
 
@@ -50,6 +53,51 @@ def test_the_tour_keeps_its_clearance_from_every_wall(office: InteriorParts) -> 
         assert d.min() >= CLEARANCE - 1e-6, (g.cells[cid].name, float(d.min()))
         seen += int((ids == cid).sum())
     assert seen > 0.8 * len(xyz)
+
+
+def test_the_tour_walks_around_the_furniture(office: InteriorParts, tmp_path_factory: pytest.TempPathFactory) -> None:
+    src = tmp_path_factory.getbasetemp() / "roomwalk0" / "office.json"
+    feet = floor_obstacles(load_interior(src))
+    assert len(feet) > 20  # desks, chairs, shelves, tables, benches
+    walk = office.walk
+    xyz = walk.sample(np.arange(0.0, walk.duration, 0.02))[0]
+    pts = shapely.points(xyz[:, :2])
+    floor = xyz[:, 2] - 1.6
+    near = [float(shapely.distance(o.footprint, pts[np.abs(floor - o.bottom) < 1.0]).min(initial=np.inf))
+            for o in feet]
+    # every piece: never walked through, passed at a body's half-width at least
+    assert min(near) >= CLEARANCE - 1e-6
+
+
+def test_a_leg_bends_around_a_table_and_is_refused_where_furniture_closes_the_room() -> None:
+    room = shapely.box(0.0, 0.0, 8.0, 4.0)
+    table = shapely.box(3.0, 1.0, 5.0, 3.0)
+    routes = FloorRoutes(walkable_floor(room, [table], CLEARANCE))
+    a, b = np.array([1.0, 2.0]), np.array([7.0, 2.0])
+    leg = routes.route(a, b)
+    assert leg is not None and len(leg) == 4  # around two of the table's grown corners
+    line = shapely.LineString(leg)
+    assert line.distance(table) >= CLEARANCE - 1e-6
+    assert line.length == pytest.approx(2 * np.hypot(2.0 - CLEARANCE, 1.0 + CLEARANCE) + 2.0 + 2 * CLEARANCE, rel=1e-6)
+    assert routes.route(a, np.array([1.0, 3.0])).shape == (2, 2)  # a clear line stays straight
+    # a shelf wall to wall parts the room: no walk joins its two ends
+    shelf = shapely.box(3.9, 0.0, 4.1, 4.0)
+    parted = FloorRoutes(walkable_floor(room, [shelf], CLEARANCE))
+    assert parted.route(a, b) is None
+
+
+@pytest.mark.parametrize("seed", [11, 3])
+def test_generated_doors_are_not_blocked_by_furniture(seed: int) -> None:
+    # seed 11 put a corridor bench in front of a door: the walk had to cross it
+    scene = load_interior_dict(generate_interior(InteriorPlan(storeys=3, seed=seed)))
+    feet = floor_obstacles(scene)
+    doors = [o for o in scene.openings if o.kind == "door"]
+    assert len(doors) > 30
+    for d in doors:
+        reach = 0.5 * d.depth + 0.6  # a step beyond the wall on either side
+        line = shapely.LineString([d.centre[:2] - reach * d.normal, d.centre[:2] + reach * d.normal])
+        near = [o for o in feet if abs(o.bottom - d.zmin) < 0.5]
+        assert min(o.footprint.distance(line) for o in near) >= CLEARANCE - 1e-6, d.key
 
 
 def test_sharp_turns_are_made_on_the_spot_with_stairs_in_the_walk(office: InteriorParts) -> None:

@@ -28,6 +28,7 @@ import shapely
 
 from walkstream.server.bake.chunks import run_chunks
 from walkstream.server.bake.digest import file_digest
+from walkstream.server.bake.floorroute import FloorObstacle
 from walkstream.server.bake.outsidetiles import OUTSIDE_TILE_M, outside_parts
 from walkstream.server.bake.plan import BakePlan, RoomCells
 from walkstream.server.bake.roomcontents import REACH, Part, contents_task, outside_mask
@@ -63,6 +64,8 @@ __all__ = [
     "CONTENTS_CHUNK",
     "INTERIOR_FEATURES",
     "InteriorParts",
+    "floor_obstacles",
+    "furniture_footprints",
     "interior_parts",
     "interior_plan",
     "interior_settings",
@@ -146,28 +149,40 @@ def interior_parts(
     for n in notes:
         say(f"note: {n}")
     # ---- the tour
-    graph = SceneGraph(rooms=RoomGraph(layout.cells, layout.portals, layout.stairs)).rooms
+    obstacles = floor_obstacles(scene)
+    graph = SceneGraph(rooms=RoomGraph(layout.cells, layout.portals, layout.stairs, obstacles)).rooms
     start = entrance_cell(layout.cells, layout.portals)
     try:
-        walk, coverage = tour(graph, start, obstacles=furniture_footprints(scene))
+        walk, coverage = tour(graph, start, obstacles=[o.footprint for o in obstacles])
     except RouteError as exc:  # pragma: no cover - a tour always exists from a room cell
         raise InputError(f"{src}: no tour could be recorded ({exc})") from exc
     return InteriorParts(layout, {}, notes, graph, start, walk, coverage)
 
 
-def furniture_footprints(scene: InteriorScene, below: float = 2.0) -> list[shapely.Geometry]:
-    """The footprints (convex hulls, scene-local) of the furniture that stands on a floor
-    within ``below`` metres of it: what a walk across a lone room keeps clear of."""
+_STANDING = frozenset({"furniture", "column"})
+"""Element kinds a walk goes around (walls, stairs and railings bound the cells themselves)."""
+
+
+def floor_obstacles(scene: InteriorScene, below: float = 2.0) -> list[FloorObstacle]:
+    """What stands on a floor and is walked around: furniture and columns whose bottom is
+    within ``below`` metres above a storey's floor, as footprints (convex hulls,
+    scene-local) with their height range."""
     floors = np.array([s.elevation for s in scene.storeys], np.float64)
     out = []
     for e in scene.elements:
-        if e.kind != "furniture" or len(e.vertices) == 0:
+        if e.kind not in _STANDING or len(e.vertices) == 0:
             continue
-        z0 = float(e.vertices[:, 2].min())
+        z0, z1 = float(e.vertices[:, 2].min()), float(e.vertices[:, 2].max())
         if len(floors) and float(np.min(np.abs(z0 - floors))) > below:
             continue
-        out.append(shapely.MultiPoint(np.asarray(e.vertices[:, :2], np.float64)).convex_hull)
+        out.append(FloorObstacle(shapely.MultiPoint(np.asarray(e.vertices[:, :2], np.float64)).convex_hull, z0, z1))
     return out
+
+
+def furniture_footprints(scene: InteriorScene, below: float = 2.0) -> list[shapely.Geometry]:
+    """The footprints of :func:`floor_obstacles`: what a walk across a lone room keeps
+    clear of."""
+    return [o.footprint for o in floor_obstacles(scene, below)]
 
 
 def interior_settings(scene: InteriorScene, src: Path, cellmesh_version: int = 4) -> dict[str, Any]:

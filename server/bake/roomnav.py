@@ -9,12 +9,15 @@ every pair of its nodes is joined, and a stair joins its ends along its walking 
 Routes are shortest paths (the one Dijkstra of :mod:`walkstream.shared.nav`).
 
 A walker has a body: a leg inside a cell keeps :data:`CLEARANCE` (0.3 m, a person's
-half-width) from the cell's walls.  Each node steps into the cell to its nearest point
-of the cell's outline shrunk by the clearance (shapely's negative buffer; straight
-through a door, since the door's node is in its middle), and the leg runs between
-those points, which a convex cell's shrunk outline joins with a straight line.  A
-cell too narrow for the clearance (a doorway through a wall, a slim leftover) is
-crossed on the straight line between its nodes, as before.
+half-width) from the cell's walls and from what stands in it (the obstacles given:
+furniture, machines, columns).  Each node steps into the cell to its nearest point of
+the cell's walkable floor (the outline shrunk by the clearance, less the obstacles
+grown by it: :func:`~.floorroute.walkable_floor`; straight through a door, since the
+door's node is in its middle), and the leg runs between those points: straight where
+the floor holds the line, else bent around the obstacles on the shortest way
+(:class:`~.floorroute.FloorRoutes`).  A cell too narrow for the clearance (a doorway
+through a wall, a slim leftover), or two nodes that furniture parts, is crossed on the
+straight line between its nodes, as before.
 
 Positions are located in 3D: a point's height picks the storey (the cells' height
 ranges), its ``x, y`` the cell among that storey's; a recorded walk keeps its eye
@@ -30,6 +33,7 @@ import numpy as np
 import shapely
 import shapely.ops
 
+from walkstream.server.bake.floorroute import FloorObstacle, FloorRoutes, walkable_floor
 from walkstream.server.bake.rooms import Portal, RoomCell, StairLink
 from walkstream.shared.arrays import F64
 from walkstream.shared.cells import CellLocator
@@ -63,9 +67,17 @@ class RoomGraph:
     cells, portals, stairs:
         The interior (:func:`~.rooms.room_layout`'s, or read back from a scene
         database); the ``outside`` cell is ignored.
+    obstacles:
+        What stands on the floors (a cell's legs go around those that block its floor).
     """
 
-    def __init__(self, cells: Sequence[RoomCell], portals: Sequence[Portal], stairs: Sequence[StairLink]) -> None:
+    def __init__(
+        self, cells: Sequence[RoomCell], portals: Sequence[Portal], stairs: Sequence[StairLink],
+        obstacles: Sequence[FloorObstacle] = (),
+    ) -> None:
+        self.obstacles = list(obstacles)
+        self._free: dict[int, shapely.Geometry | None] = {}
+        self._routes: dict[int, FloorRoutes] = {}
         self.cells = {c.id: c for c in cells if c.kind != "outside"}
         ids = sorted(self.cells)
         self.locator = CellLocator(
@@ -80,7 +92,8 @@ class RoomGraph:
             if c.kind == "room":
                 poly = shapely.Polygon(c.outline)
                 p = poly.centroid if poly.contains(poly.centroid) else poly.representative_point()
-                self.centre[i] = self._node([p.x, p.y, c.zmin], i, members)
+                # a room's middle is often its table's: the walk goes to the nearest free floor
+                self.centre[i] = self._node(self.step_in(i, np.array([p.x, p.y, c.zmin])), i, members)
         self.adj: dict[int, list[tuple[int, float, F64 | None]]] = {}
         for p in portals:
             if p.kind not in _WALKABLE or p.a not in self.cells or p.b not in self.cells:
@@ -97,7 +110,6 @@ class RoomGraph:
             length = float(np.linalg.norm(np.diff(s.path, axis=0), axis=1).sum())
             self._edge(a, b, length, s.path)
         self.members = members
-        self._free: dict[int, shapely.Polygon | None] = {}
         for cid, nodes in members.items():
             for x in range(len(nodes)):
                 for y in range(x + 1, len(nodes)):
@@ -105,20 +117,34 @@ class RoomGraph:
 
     def _leg(self, cell: int, a: int, b: int) -> None:
         """Join nodes ``a`` and ``b`` of ``cell`` by a leg that keeps the clearance."""
-        line = np.array([self.nodes[a], self.step_in(cell, self.nodes[a]),
-                         self.step_in(cell, self.nodes[b]), self.nodes[b]])
+        pa, pb = self.step_in(cell, self.nodes[a]), self.step_in(cell, self.nodes[b])
+        inner = np.array([pa, pb])
+        free = self.free(cell)
+        if free is not None:
+            if cell not in self._routes:
+                self._routes[cell] = FloorRoutes(free)
+            bent = self._routes[cell].route(pa, pb)
+            if bent is not None and len(bent) > 2:
+                s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(bent, axis=0), axis=1))])
+                z = pa[2] + (pb[2] - pa[2]) * s / max(float(s[-1]), 1e-12)
+                inner = np.column_stack([bent, z])
+        line = np.concatenate([self.nodes[a][None], inner, self.nodes[b][None]])
         keep = np.concatenate([[True], np.linalg.norm(np.diff(line, axis=0), axis=1) > 1e-6])
         line = line[keep]
         if len(line) < 2:
             line = np.array([self.nodes[a], self.nodes[b]])
         self._edge(a, b, float(np.linalg.norm(np.diff(line, axis=0), axis=1).sum()), line)
 
-    def free(self, cell: int) -> shapely.Polygon | None:
+    def free(self, cell: int) -> shapely.Geometry | None:
         """The part of ``cell``'s floor a walker's middle may stand on: its outline shrunk
-        by :data:`CLEARANCE`; None where nothing is left (a doorway, a slim cell)."""
+        by :data:`CLEARANCE`, less the obstacles on its floor grown by it
+        (:func:`~.floorroute.walkable_floor`); None where nothing is left (a doorway, a
+        slim cell)."""
         if cell not in self._free:
-            poly = shapely.Polygon(self.cells[cell].outline).buffer(-CLEARANCE)
-            self._free[cell] = poly if isinstance(poly, shapely.Polygon) and not poly.is_empty else None
+            c = self.cells[cell]
+            outline = shapely.Polygon(c.outline)
+            feet = [o.footprint for o in self.obstacles if o.blocks(c.zmin) and o.footprint.intersects(outline)]
+            self._free[cell] = walkable_floor(outline, feet, CLEARANCE)
         return self._free[cell]
 
     def step_in(self, cell: int, xyz: F64) -> F64:

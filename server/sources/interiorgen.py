@@ -237,8 +237,10 @@ def generate_interior(plan: InteriorPlan) -> dict[str, Any]:
             if p.furniture > 0 and rng.random() < 0.5 * p.furniture and cuts[q + 1] - cuts[q] > 3.0:
                 kind = "bench" if rng.random() < 0.5 else "plant"
                 fy = y_cn - 0.3 if kind == "bench" else y_cn - 0.35
-                furn.append({"id": f"f{rid}", "kind": kind, "storey": k,
-                             "at": pt(0.5 * (cuts[q] + cuts[q + 1]), fy), "yaw": 0.0})
+                fx = 0.5 * (cuts[q] + cuts[q + 1])
+                reach = (0.9 if kind == "bench" else 0.25) + 0.5 * _DOOR_W + 0.3  # a walker passes the door
+                if all(abs(fx - dx) >= reach for dx, side in door_xs if side == "n"):
+                    furn.append({"id": f"f{rid}", "kind": kind, "storey": k, "at": pt(fx, fy), "yaw": 0.0})
         # corridor walls (with the doors) and the outer walls (with the windows)
         if not single:
             walls.append({"id": f"cw{k}.s", "storey": k, "from": pt(0.0, y_cs - 0.5 * _TI),
