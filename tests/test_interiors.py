@@ -21,7 +21,7 @@ from teamdata import TEAM_DATA, team_data
 
 from walkstream.cli import main
 from walkstream.server.bake import bake
-from walkstream.server.bake.roomgeom import clip_polygons, convex_parts, is_convex
+from walkstream.server.bake.roomgeom import clip_polygons, convex_parts, is_convex, shared_segments
 from walkstream.server.bake.roomnav import EYE_HEIGHT
 from walkstream.server.bake.rooms import room_layout
 from walkstream.server.paths.graph import interior_graph
@@ -149,6 +149,22 @@ def test_convex_parts_cut_rooms_into_convex_pieces() -> None:
     parts = convex_parts(u)
     assert len(parts) == 3 and all(is_convex(p) for p in parts)
     assert sum(shapely.Polygon(p).area for p in parts) == pytest.approx(shapely.Polygon(u).area)
+
+
+def test_a_straight_side_split_by_a_vertex_is_one_shared_segment() -> None:
+    """The duplex's bedroom door: the doorway cell's face on the bedroom side has a
+    vertex 37 mm from its end (where the room's corner met the wall's hole), and the
+    short edge, under the 5 cm minimum on its own, was dropped: the portal stopped
+    37 mm short of the opening and the bedroom was culled where it showed through."""
+    doorway = [[-1.718, -2.674], [-1.718, -2.55], [-2.582, -2.55], [-2.582, -2.674], [-1.755, -2.674]]
+    room = [[0.125, -2.674], [-3.583, -2.674], [-3.583, -8.383], [0.125, -8.383]]
+    segs = shared_segments(doorway, room, 0.02)
+    assert len(segs) == 1
+    assert np.allclose(sorted(segs[0][:, 0].tolist()), [-2.582, -1.718]) and np.allclose(segs[0][:, 1], -2.674)
+    # the same through the ring's first vertex, and a bend is not a straight side
+    assert len(shared_segments(np.roll(doorway, 1, axis=0), room, 0.02)) == 1
+    bent = [[0, 0], [1, 0], [2, 0.01], [2, 1], [0, 1]]  # a 1 cm bend over a metre
+    assert len(shared_segments(bent, [[0, -1], [3, -1], [3, 0], [0, 0]], 0.02)) == 2
 
 
 def test_l_shaped_room_is_two_convex_cells_joined_by_an_open_portal(tmp_path: Path) -> None:

@@ -172,6 +172,23 @@ def test_duplex_every_door_zero_missed_pixels(duplex_db: tuple[Path, dict[str, A
         scene.release()
 
 
+def test_duplex_bedroom_door_seen_at_the_frames_edge_is_not_culled(
+    duplex_db: tuple[Path, dict[str, Any]], gl_ctx: Any
+) -> None:
+    """A replay's pose on the duplex's upper hallway: the right edge of the frame looks
+    through the bedroom door's doorway cell past the end of its bedroom-side portal,
+    which stopped 37 mm short of the opening (a face split by a vertex, its short
+    piece dropped); 85 pixels of the bedroom were culled."""
+    scene = PortalScene(duplex_db[0], gl_ctx)
+    try:
+        got = scene.frame(np.array([-3.076, -0.908, 4.70]), math.radians(-15.25))
+        assert got is not None
+        chk, _start, _view = got
+        assert chk.missed_pixels - chk.pinholes == 0, sorted(chk.missed)
+    finally:
+        scene.release()
+
+
 def test_portal_culling_draws_fewer_triangles_than_frustum_alone(office_db: Path, gl_ctx: Any) -> None:
     scene = PortalScene(office_db, gl_ctx)
     try:

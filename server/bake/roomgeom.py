@@ -156,6 +156,13 @@ def convex_parts(ring: ArrayLike, tol: float = 1e-3, _depth: int = 0) -> list[F6
 def shared_segments(a: ArrayLike, b: ArrayLike, tol: float = 0.02, min_length: float = 0.05) -> list[F64]:
     """Straight pieces of outline ``a`` that lie within ``tol`` of outline ``b``.
 
+    A straight stretch of ``a`` that its outline splits into several edges (a vertex
+    on a straight side: a doorway cut from a wall's hole where a room's corner meets
+    the hole's face) is one segment, its length counted whole: taken edge by edge, a
+    piece of it shorter than ``min_length`` was dropped and the portal stopped short
+    of the opening, leaving a strip of it through which rays leave the cell where no
+    portal walk follows them.
+
     Returns
     -------
     list of (2, 2) float64
@@ -164,15 +171,37 @@ def shared_segments(a: ArrayLike, b: ArrayLike, tol: float = 0.02, min_length: f
     ra = orient_ccw(a)
     pb = shapely.Polygon(orient_ccw(b))
     zone = pb.buffer(tol, join_style="mitre")
-    out: list[F64] = []
+    pieces: list[F64] = []
     for k in range(len(ra)):
         seg = shapely.LineString([ra[k], ra[(k + 1) % len(ra)]])
         part = seg.intersection(zone)
         for g in getattr(part, "geoms", [part]):
-            if isinstance(g, shapely.LineString) and g.length >= min_length:
+            if isinstance(g, shapely.LineString) and g.length > 0.0:
                 c = np.asarray(g.coords)
-                out.append(np.array([c[0], c[-1]], dtype=np.float64))
-    return out
+                piece = np.array([c[0], c[-1]], dtype=np.float64)
+                if pieces and _continues(pieces[-1], piece):
+                    pieces[-1] = np.array([pieces[-1][0], piece[1]])
+                else:
+                    pieces.append(piece)
+    if len(pieces) > 1 and _continues(pieces[-1], pieces[0]):  # the stretch through the ring's first vertex
+        pieces[0] = np.array([pieces.pop()[0], pieces[0][1]])
+    return [p for p in pieces if float(np.hypot(*(p[1] - p[0]))) >= min_length]
+
+
+#: How far (metres) a piece's end may lie off the line of the piece before it and
+#: still continue it: a vertex on a straight side comes from shapely's overlays, on the
+#: line to rounding; a tenth of the millimetre to which portals are rounded outward.
+_STRAIGHT_M = 1e-4
+
+
+def _continues(a: F64, b: F64) -> bool:
+    """Whether segment ``b`` ``(2, 2)`` starts where ``a`` ends and runs on along its line."""
+    d = a[1] - a[0]
+    n = float(np.hypot(*d))
+    if n == 0.0 or float(np.hypot(*(b[0] - a[1]))) > _STRAIGHT_M:
+        return False
+    e = b[1] - a[0]
+    return abs(float(d[0] * e[1] - d[1] * e[0])) / n <= _STRAIGHT_M and float(d @ (b[1] - b[0])) > 0.0
 
 
 def cell_planes(outline: ArrayLike, zmin: float, zmax: float) -> F64:
