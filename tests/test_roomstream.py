@@ -256,6 +256,21 @@ def test_the_outside_cell_comes_last_in_the_prefetch(office_db: Path) -> None:
     assert set(want) == {c.id, *c.neighbours} and len(want) > 2
 
 
+
+def _plain_and_turned(
+    topo: Any, eye: np.ndarray, step: np.ndarray, view: np.ndarray, proj: np.ndarray, size: tuple[int, int]
+) -> tuple[Any, list[int], list[int]]:
+    """A streamer without turns ahead and one with them (+-90 degrees), both walked up to
+    ``eye`` along ``step``: the plain one and what each predicts from there."""
+    plain, turned = (_streamer(topo, RoomStreamConfig(turns_ahead_deg=t)) for t in ((), (90.0, -90.0)))
+    for s in (plain, turned):
+        for k in range(3):
+            s.locate(eye - 0.25 * (2 - k) * step)
+            s.observe(0.25 * k, eye - 0.25 * (2 - k) * step)
+        s.locate(eye)
+    return (plain, plain.predicted(eye, proj @ view, view, proj, size),
+            turned.predicted(eye, proj @ view, view, proj, size))
+
 def test_a_walker_through_a_door_is_predicted_to_look_both_ways(office_db: Path) -> None:
     topo = _topology(office_db)
     cells = {c.id: c for c in topo.cells}
@@ -271,14 +286,7 @@ def test_a_walker_through_a_door_is_predicted_to_look_both_ways(office_db: Path)
                 continue
             step = 1.4 * (eye - came) / np.linalg.norm(eye - came)
             view = camera(eye, float(np.arctan2(step[1], step[0])), 0.0).astype(np.float64)
-            plain, turned = (_streamer(topo, RoomStreamConfig(turns_ahead_deg=t)) for t in ((), (90.0, -90.0)))
-            for s in (plain, turned):
-                for k in range(3):
-                    s.locate(eye - 0.25 * (2 - k) * step)
-                    s.observe(0.25 * k, eye - 0.25 * (2 - k) * step)
-                s.locate(eye)
-            a = plain.predicted(eye, proj @ view, view, proj, size)
-            b = turned.predicted(eye, proj @ view, view, proj, size)
+            plain, a, b = _plain_and_turned(topo, eye, step, view, proj, size)
             # where the predicted eye first enters another cell, the views turned both ways
             entered = None
             cell = plain.current
@@ -315,14 +323,7 @@ def test_a_walker_facing_a_wall_is_predicted_to_turn_before_it(office_db: Path) 
             eye = np.array([*c.outline.mean(axis=0), c.zmin + 1.6])
             step = 1.4 * np.array([np.cos(yaw), np.sin(yaw), 0.0])
             view = camera(eye, float(yaw), 0.0).astype(np.float64)
-            plain, turned = (_streamer(topo, RoomStreamConfig(turns_ahead_deg=t)) for t in ((), (90.0, -90.0)))
-            for s in (plain, turned):
-                for k in range(3):
-                    s.locate(eye - 0.25 * (2 - k) * step)
-                    s.observe(0.25 * k, eye - 0.25 * (2 - k) * step)
-                s.locate(eye)
-            a = plain.predicted(eye, proj @ view, view, proj, size)
-            b = turned.predicted(eye, proj @ view, view, proj, size)
+            plain, a, b = _plain_and_turned(topo, eye, step, view, proj, size)
             # the last predicted pose still in the room before the walk would leave it through a wall
             last = None
             for h in plain.config.lookahead_s:
