@@ -14,7 +14,7 @@ rectangle grown by :data:`MARGIN_M` (LOD2's ledges and parapet stand out of the 
 depth from :data:`FRONT_M` in front of the face to :data:`BACK_M` behind it (recessed
 windows, not the far side of the building), lit as the client and the truth light a
 surface (:mod:`walkstream.shared.lighting`: a fixed directional light, so the lit
-colour does not depend on where the viewer stands), at :data:`SUPERSAMPLE` samples a
+colour does not depend on where the viewer stands), at :data:`~walkstream.shared.litimage.SUPERSAMPLE` samples a
 texel averaged into premultiplied RGBA.  Texels LOD2 leaves empty are transparent:
 the box shows through them.
 
@@ -43,7 +43,7 @@ from walkstream.client.draw.quads import Quad
 from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import check_gl_error, create_context, release_objects
-from walkstream.shared.lighting import AMBIENT, LIGHT_DIRECTION
+from walkstream.shared.litimage import SUPERSAMPLE, average_samples, set_lighting
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
@@ -53,7 +53,6 @@ __all__ = [
     "LIFT_M",
     "MARGIN_M",
     "MAX_FACES",
-    "SUPERSAMPLE",
     "FacadeBaker",
     "FacadeImage",
     "FacadeJob",
@@ -75,8 +74,6 @@ TOP_M = 1.0
 """Metres a face's rectangle grows at the top (LOD2's parapet above the box's roof)."""
 LIFT_M = 0.02
 """Metres the quad stands outside its face: in front of the box's own wall, so it wins the depth test."""
-SUPERSAMPLE = 2
-"""Rendered samples per texel along each axis."""
 MAX_FACES = 64
 """Wall faces a building's images are counted to (image ids: :func:`facade_image_id`)."""
 
@@ -284,10 +281,7 @@ class FacadeBaker:
         except Exception as exc:
             release_objects(self.ctx, [], self._own)
             raise RenderError(f"FacadeBaker: shader program failed: {exc}") from exc
-        light = np.asarray(LIGHT_DIRECTION, np.float64)
-        prog: Any = self._prog
-        prog["u_light_dir"].value = tuple(float(v) for v in light / np.linalg.norm(light))
-        prog["u_ambient"].value = float(AMBIENT)
+        set_lighting(self._prog)
         self._gl.append(self._prog)
 
     def _fbo(self, w: int, h: int) -> Any:
@@ -363,7 +357,7 @@ class FacadeBaker:
         if stop >= len(sel):
             raw = np.frombuffer(fbo.read(components=4, alignment=1), np.uint8)
             img = raw.reshape(h * SUPERSAMPLE, w * SUPERSAMPLE, 4)[::-1]
-            job.images.append(FacadeImage(face, _average(img), int(len(sel))))
+            job.images.append(FacadeImage(face, average_samples(img), int(len(sel))))
             job.drawn = 0
         check_gl_error(ctx, "after baking a facade image")
         return int(len(part))
@@ -395,12 +389,3 @@ def _face_camera(face: WallFace) -> NDArray[np.float64]:
     m[2, :3], m[2, 3] = -2.0 * n / span, 2.0 * (FRONT_M + float(n @ c)) / span - 1.0
     m[3, 3] = 1.0
     return m
-
-
-def _average(img: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    """The rounded mean of each :data:`SUPERSAMPLE` squared block of ``img`` (premultiplied stays premultiplied)."""
-    s = SUPERSAMPLE
-    h, w = img.shape[0] // s, img.shape[1] // s
-    total = img.astype(np.uint16).reshape(h, s, w, s, 4).sum(axis=(1, 3))
-    out: NDArray[np.uint8] = ((total + (s * s) // 2) // (s * s)).astype(np.uint8)
-    return out

@@ -24,7 +24,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.server.bake.litimage import SUPERSAMPLE, average_samples, lit_program
 from walkstream.server.bake.objectrows import building_box
 from walkstream.shared.buildings import build_lod_batch
 from walkstream.shared.camera import mat4_bytes
@@ -38,6 +37,7 @@ from walkstream.shared.gl import (
     release_objects,
 )
 from walkstream.shared.impostors import bin_direction, image_basis
+from walkstream.shared.litimage import SUPERSAMPLE, average_samples, lit_program
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 

@@ -26,7 +26,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.server.bake.litimage import SUPERSAMPLE, average_samples, lit_program
 from walkstream.server.bake.wallplan import WallJob, texture_height
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.scene import SourceScene
@@ -39,6 +38,7 @@ from walkstream.shared.gl import (
     create_context,
     release_objects,
 )
+from walkstream.shared.litimage import SUPERSAMPLE, average_samples, lit_program
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.walls import WallSide
 

@@ -1,7 +1,8 @@
-"""What the bake's image renderers share: the client's per-vertex lighting as a GL program, and supersample averaging.
+"""What every image renderer shares: the client's lighting on a GL program, and supersample averaging.
 
-The impostor images (:mod:`.impostorrender`) and the wall textures (:mod:`.wallrender`)
-both draw meshes of ``(position, normal, colour)`` vertices lit as the client lights
+The bake's impostor images (:mod:`walkstream.server.bake.impostorrender`) and wall
+textures (:mod:`walkstream.server.bake.wallrender`), and the client's facade textures
+(:mod:`walkstream.client.draw.facades`, lit per fragment as the truth lights), all draw meshes of ``(position, normal, colour)`` vertices lit as the client lights
 them (:mod:`walkstream.shared.lighting`), at :data:`SUPERSAMPLE` times the size asked,
 and average the samples into premultiplied RGBA (:mod:`walkstream.shared.codec.image`).
 Each keeps its own fragment shader and its own way of drawing.
@@ -16,7 +17,7 @@ from numpy.typing import NDArray
 
 from walkstream.shared.lighting import AMBIENT, LIGHT_DIRECTION
 
-__all__ = ["LIT_VERTEX_SHADER", "SUPERSAMPLE", "average_samples", "lit_program"]
+__all__ = ["LIT_VERTEX_SHADER", "SUPERSAMPLE", "average_samples", "lit_program", "set_lighting"]
 
 SUPERSAMPLE = 2
 """Rendered samples per image texel along each axis (averaged: soft edges)."""
@@ -55,11 +56,17 @@ def lit_program(ctx: Any, fragment_shader: str) -> Any:
     moderngl.Program
         The caller releases it with its other GL objects.
     """
-    light = np.asarray(LIGHT_DIRECTION, np.float64)
     prog: Any = ctx.program(vertex_shader=LIT_VERTEX_SHADER, fragment_shader=fragment_shader)
+    set_lighting(prog)
+    return prog
+
+
+def set_lighting(prog: Any) -> None:
+    """Set ``prog``'s ``u_light_dir`` (the unit :data:`~walkstream.shared.lighting.LIGHT_DIRECTION`)
+    and ``u_ambient`` (:data:`~walkstream.shared.lighting.AMBIENT`)."""
+    light = np.asarray(LIGHT_DIRECTION, np.float64)
     prog["u_light_dir"].value = tuple(float(v) for v in light / np.linalg.norm(light))
     prog["u_ambient"].value = float(AMBIENT)
-    return prog
 
 
 def average_samples(img: NDArray[np.uint8]) -> NDArray[np.uint8]:
