@@ -21,24 +21,21 @@ import pytest
 from walkstream.benchmarks.cullcpu import HALL_PARTS, hall_boxes
 from walkstream.benchmarks.portals import hall_topology
 from walkstream.cli import main
-from walkstream.shared import portals
 from walkstream.shared.camera import camera, perspective
+from walkstream.shared.partcull import cull_boxes, cull_parts
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.portals import cull_boxes, cull_parts, cull_portals
+from walkstream.shared.portals import cull_portals
 
 SIZE = (320, 240)
 
 
-@pytest.mark.parametrize(("chunk", "fog"), [(400, math.inf), (97, math.inf), (97, 18.0)])
-def test_parts_culled_in_chunks_keep_what_the_plain_box_test_keeps(
-    chunk: int, fog: float, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    monkeypatch.setattr(portals, "_BOX_CHUNK", chunk)
+@pytest.mark.parametrize(("seed", "fog"), [(400, math.inf), (97, math.inf), (97, 18.0)])
+def test_parts_culled_at_once_keep_what_the_plain_box_test_keeps(seed: int, fog: float) -> None:
     k = 8
     graph = PortalGraph.from_topology(hall_topology(k))
     boxes = hall_boxes(k)
     proj = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 30.0).astype(np.float64)
-    rng = np.random.default_rng(chunk)
+    rng = np.random.default_rng(seed)
     kept_some = dropped_some = 0
     for i in range(8):
         # a corner looking across, then eyes anywhere, low (in the furniture) and high
@@ -57,7 +54,7 @@ def test_parts_culled_in_chunks_keep_what_the_plain_box_test_keeps(
             kept_some += int(want.sum())
             dropped_some += int((~want).sum())
         if i == 0:
-            assert len(pc.order) > 20 and sum(len(boxes[c][0]) for c in pc.order) > 2 * chunk  # several chunks
+            assert len(pc.order) > 20 and sum(len(boxes[c][0]) for c in pc.order) > 300  # a batch of hundreds
     assert kept_some > 100 and dropped_some > 100  # both outcomes were compared
 
 

@@ -1,0 +1,303 @@
+"""The parts culling: which part boxes of each visible cell to draw (portal culling's step 5).
+
+A visible cell's contents are culled by their boxes (:mod:`walkstream.shared.portals`, step
+5): a box is kept when it comes within the fog distance, its clipped, projected rectangle
+(:mod:`walkstream.shared.screenrects`) meets one of the cell's VSAs, and it lies between the
+frustum's near and far planes.  :func:`cull_boxes` is that test for one cell, as plainly as
+it can be written (the reference); :func:`cull_parts` gives every visible cell's answer at
+once and must keep exactly what :func:`cull_boxes` keeps (tests/test_cullcpu.py,
+tests/test_partcull.py).
+
+Cost: at a couple of hundred visible cells a frame (an open hall) the per-cell Python and
+numpy's fresh temporaries, not the arithmetic, were most of the time.  So:
+
+- the boxes of a scene are packed once into one coordinate-major array (a
+  :class:`PartTable`, cached per ``boxes`` mapping and checked by identity: a cell whose
+  ``(lo, hi)`` pair is not the one packed makes the table anew), and a frame gathers its
+  visible cells' boxes by index, not by concatenating one array per cell;
+- every visible box is projected in one batch from its two corners
+  (:func:`~walkstream.shared.screenrects.box_rects_ckm`: 18 products a box, not 72), into
+  buffers reused from frame to frame (:func:`~walkstream.shared.screenrects.thread_buffers`:
+  a fresh array of a few hundred kB costs more than the step that fills it, which is why
+  the boxes were culled in chunks of 1,024 before);
+- the per-cell steps (which cells, their VSAs, the answer's slices) are C-level maps over
+  the cell lists, no Python statement per cell.
+
+``walkstream bench portals --cull`` times it (:mod:`walkstream.benchmarks.cullcpu`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from itertools import chain, repeat
+from operator import is_not
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from walkstream.shared.errors import InputError
+from walkstream.shared.frustum import frustum_cull
+from walkstream.shared.portals import CULLING_MODES, box_distance
+from walkstream.shared.screenrects import box_rects, box_rects_ckm, thread_buffers
+
+__all__ = ["PartTable", "part_table", "cull_parts", "cull_boxes"]
+
+Boxes = Mapping[int, tuple[NDArray[np.float64], NDArray[np.float64]]]
+
+
+def cull_boxes(
+    lo: ArrayLike,
+    hi: ArrayLike,
+    vsas: ArrayLike,
+    eye: ArrayLike,
+    view: ArrayLike,
+    proj: ArrayLike,
+    size: tuple[int, int],
+    *,
+    fog_m: float = math.inf,
+    clip_m: float = 0.03,
+) -> NDArray[np.bool_]:
+    """Which of a cell's boxes to draw: within the fog, meeting one of its VSAs, in the frustum.
+
+    Parameters
+    ----------
+    lo, hi : (n, 3) float
+        The boxes of the cell's contents.
+    vsas : (k, 4) int64
+        The cell's VSAs (:attr:`~walkstream.shared.portals.PortalCull.vsas`).
+    eye : (3,) float
+    view, proj : (4, 4) float
+    size : (int, int)
+    fog_m, clip_m : float
+
+    Returns
+    -------
+    (n,) bool
+    """
+    lo_ = np.asarray(lo, np.float64).reshape(-1, 3)
+    hi_ = np.asarray(hi, np.float64).reshape(-1, 3)
+    if len(lo_) == 0:
+        return np.zeros(0, bool)
+    e = np.asarray(eye, np.float64).reshape(3)
+    keep = box_distance(lo_, hi_, e) <= fog_m
+    rect, front = box_rects(lo_, hi_, view, proj, size, clip_m)
+    v = np.asarray(vsas, np.int64).reshape(-1, 4)
+    meet = _meet(rect[:, None, :], v[None, :, :])
+    keep &= front & np.any(meet, axis=1)
+    vp = np.asarray(proj, np.float64) @ np.asarray(view, np.float64)
+    keep[keep] = frustum_cull(lo_[keep], hi_[keep], vp)
+    return keep
+
+
+def _meet(a: NDArray[np.int64], b: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Whether whole-pixel rectangles ``(..., 4)`` share a pixel (broadcast); an empty one
+    (``x0 > x1`` or ``y0 > y1``: no pixel centre) meets nothing."""
+    return (
+        (np.maximum(a[..., 0], b[..., 0]) <= np.minimum(a[..., 2], b[..., 2]))
+        & (np.maximum(a[..., 1], b[..., 1]) <= np.minimum(a[..., 3], b[..., 3]))
+    )
+
+
+class PartTable:
+    """A scene's part boxes packed once: every cell's boxes in one coordinate-major array.
+
+    Attributes
+    ----------
+    lohi : (3, 2, N) float64
+        ``lohi[j, 0]`` the lower and ``lohi[j, 1]`` the upper bound of coordinate ``j`` of
+        each box, the cells one after another.
+    slot : dict of int -> int
+        A cell id's index into ``start`` and ``count``.
+    start, count : (cells,) int64
+        Each cell's first box in ``lohi`` and its number of boxes.
+    src : dict of int -> (lo, hi)
+        The pair each cell was packed from (a frame checks its cells against it by identity).
+    """
+
+    def __init__(self, boxes: Boxes) -> None:
+        cells = list(boxes)
+        self.src = {c: boxes[c] for c in cells}
+        los = [np.asarray(boxes[c][0], np.float64).reshape(-1, 3) for c in cells]
+        his = [np.asarray(boxes[c][1], np.float64).reshape(-1, 3) for c in cells]
+        self.count = np.array([len(x) for x in los], np.int64)
+        self.start = np.concatenate([[0], np.cumsum(self.count)[:-1]]).astype(np.int64)
+        self.slot = {c: i for i, c in enumerate(cells)}
+        lo = np.concatenate(los) if los else np.zeros((0, 3))
+        hi = np.concatenate(his) if his else np.zeros((0, 3))
+        self.lohi = np.ascontiguousarray(np.stack([lo.T, hi.T], axis=1))
+
+    def current(self, boxes: Boxes, cells: list[int]) -> bool:
+        """Whether ``cells`` (all in ``boxes``) are packed from the pairs ``boxes`` holds now."""
+        return not any(map(is_not, map(self.src.get, cells), map(boxes.__getitem__, cells)))
+
+
+#: The tables of the last few ``boxes`` mappings (held, so that an id is never reused).
+_TABLES: list[tuple[Boxes, PartTable]] = []
+
+
+def part_table(boxes: Boxes, cells: list[int]) -> PartTable:
+    """The :class:`PartTable` of ``boxes``, current for ``cells`` (made anew when one of their
+    ``(lo, hi)`` pairs is not the one packed: a cell loaded, replaced or dropped and loaded
+    again).  The arrays must not be changed in place once given."""
+    for i, (b, t) in enumerate(_TABLES):
+        if b is boxes:
+            if t.current(boxes, cells):
+                return t
+            del _TABLES[i]
+            break
+    t = PartTable(boxes)
+    _TABLES.insert(0, (boxes, t))
+    del _TABLES[4:]
+    return t
+
+
+def cull_parts(
+    mode: str,
+    cells: list[int],
+    boxes: Boxes,
+    eye: ArrayLike,
+    view: ArrayLike,
+    proj: ArrayLike,
+    size: tuple[int, int],
+    *,
+    vsas: dict[int, list[tuple[int, int, int, int]]] | None = None,
+    fog_m: float = math.inf,
+    clip_m: float = 0.03,
+) -> dict[int, NDArray[np.bool_]]:
+    """Which parts of each visible cell to draw, by ``mode`` (:data:`~walkstream.shared.portals.CULLING_MODES`).
+
+    Parameters
+    ----------
+    mode : str
+        ``portals``: boxes against the cell's VSAs, the fog and the frustum
+        (:func:`cull_boxes`, every cell at once); ``frustum``: the frustum and the fog;
+        ``none``: all.
+    cells : list of int
+        Visible cells (those without boxes, i.e. not loaded, are left out).
+    boxes : mapping of int -> ((n, 3), (n, 3))
+        Per cell, its parts' boxes (packed once, :func:`part_table`).
+    vsas : dict of int -> list of (x0, y0, x1, y1)
+        Per cell its VSAs (``portals`` mode; a cell without is culled whole).
+
+    Returns
+    -------
+    dict of int -> (n,) bool
+    """
+    if mode not in CULLING_MODES:
+        raise InputError(f"culling mode {mode!r}: expected one of {', '.join(CULLING_MODES)}")
+    e = np.asarray(eye, np.float64).reshape(3)
+    present = list(filter(boxes.__contains__, cells))
+    if mode == "none":
+        return {c: np.ones(len(boxes[c][0]), bool) for c in present}
+    vp = np.asarray(proj, np.float64) @ np.asarray(view, np.float64)
+    if mode == "frustum":
+        out: dict[int, NDArray[np.bool_]] = {}
+        for c in present:
+            lo, hi = boxes[c]
+            keep = box_distance(lo, hi, e) <= fog_m
+            keep[keep] = frustum_cull(lo[keep], hi[keep], vp)
+            out[c] = keep
+        return out
+    seen = present if vsas is None else list(filter(vsas.__contains__, present))
+    out = {}
+    if vsas is None or len(seen) < len(present):
+        out = {c: np.zeros(len(boxes[c][0]), bool) for c in present if vsas is None or c not in vsas}
+    if vsas is None or not seen:
+        return out
+    table = part_table(boxes, seen)
+    nseen = len(seen)
+    slot = np.fromiter(map(table.slot.__getitem__, seen), np.int64, nseen)
+    counts = table.count[slot]
+    ends = np.cumsum(counts)
+    total = int(ends[-1])
+    if total == 0:
+        out.update(zip(seen, map(np.zeros, counts.tolist(), repeat(bool)), strict=True))
+        return out
+    offsets = ends - counts
+    # each visible box's index into the table and its cell's index into ``seen``
+    owner = np.repeat(np.arange(nseen), counts)
+    idx = np.arange(total) + (table.start[slot] - offsets)[owner]
+    work = thread_buffers()
+    lohi = np.take(table.lohi, idx, axis=2, out=work.take("lohi", (3, 2, total)))
+    keep = np.zeros(total, bool)
+    if not math.isinf(fog_m):
+        near = box_distance(lohi[:, 0].T, lohi[:, 1].T, e) <= fog_m
+        if not near.all():  # only the boxes within the fog are projected
+            sub = np.flatnonzero(near)
+            if not len(sub):
+                out.update(zip(seen, _slices(keep, offsets, ends), strict=True))
+                return out
+            owner = owner[sub]
+            lohi = np.take(lohi, sub, axis=2, out=work.take("lohi_fog", (3, 2, len(sub))))
+        else:
+            sub = None
+    else:
+        sub = None
+    v = _vsa_table(vsas, seen)
+    V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
+    rect, front, near_d, far_d = box_rects_ckm(lohi, V, P, size, clip_m, work=work)
+    n, kmax = len(owner), v.shape[1]
+    vo = np.take(v, owner, axis=2, out=work.take("vsa", (4, kmax, n), np.int64))  # each box's own cell's VSAs
+    lo_ = np.maximum(rect[0], vo[0], out=work.take("meet0", (kmax, n), np.int64))
+    hi_ = np.minimum(rect[2], vo[2], out=work.take("meet1", (kmax, n), np.int64))
+    meet = np.less_equal(lo_, hi_, out=work.take("meetx", (kmax, n), np.bool_))
+    np.maximum(rect[1], vo[1], out=lo_)
+    np.minimum(rect[3], vo[3], out=hi_)
+    meet &= lo_ <= hi_
+    got = meet[0].copy() if kmax == 1 else np.logical_or.reduce(meet, axis=0)
+    got &= front
+    planes = _near_far(P)
+    if planes is None:
+        lo_b, hi_b = lohi[:, 0].T, lohi[:, 1].T
+        got[got] = frustum_cull(lo_b[got], hi_b[got], vp)
+    else:
+        # the frustum's other four planes cannot cull a box whose rectangle meets a
+        # VSA: a VSA lies within the viewport, so some point of the box lies inside
+        # each of them (by at least a third of a pixel); the near and the far plane
+        # are depths
+        got &= (far_d >= planes[0]) & (near_d <= planes[1])
+    if sub is None:
+        keep = got
+    else:
+        keep[sub] = got
+    out.update(zip(seen, _slices(keep, offsets, ends), strict=True))
+    return out
+
+
+def _slices(a: NDArray[np.bool_], starts: NDArray[np.int64], ends: NDArray[np.int64]) -> Any:
+    """Views ``a[s:e]`` for each pair (a C-level map: no Python statement per cell)."""
+    return map(a.__getitem__, map(slice, starts.tolist(), ends.tolist()))
+
+
+def _vsa_table(vsas: dict[int, list[tuple[int, int, int, int]]], cells: list[int]) -> NDArray[np.int64]:
+    """The cells' VSAs ``(4, kmax, cells)``, a coordinate of one VSA of every cell per row,
+    the shorter lists padded with empty rectangles (which meet nothing)."""
+    lists = list(map(vsas.__getitem__, cells))
+    k = np.fromiter(map(len, lists), np.int64, len(lists))
+    nv = int(k.sum())
+    ints = list(chain.from_iterable(chain.from_iterable(lists)))  # a flat list first: half the CPU
+    flat = np.fromiter(ints, np.int64, 4 * nv).reshape(nv, 4)
+    kmax = int(k.max()) if len(k) else 0
+    if nv == kmax * len(cells):  # every cell has as many
+        return np.ascontiguousarray(flat.reshape(len(cells), kmax, 4).transpose(2, 1, 0))
+    v = np.empty((4, kmax, len(cells)), np.int64)
+    v[:] = _EMPTY[:, :, None]
+    col = np.arange(nv) - np.repeat(np.cumsum(k) - k, k)
+    v[:, col, np.repeat(np.arange(len(cells)), k)] = flat.T
+    return v
+
+
+#: An empty whole-pixel rectangle (no pixel centre) as a column: pads a cell's VSAs.
+_EMPTY = np.array([[1], [1], [0], [0]], np.int64)
+
+
+def _near_far(proj: NDArray[np.float64]) -> tuple[float, float] | None:
+    """The near and far planes' depths of a perspective projection (``-z`` in eye space:
+    the frustum test's two planes that are not through the eye), or None for another
+    kind of projection."""
+    (a, b, c, d), (e, f, g, h) = proj[2:].tolist()
+    if (a, b, e, f, g, h) != (0.0, 0.0, 0.0, 0.0, -1.0, 0.0):
+        return None
+    return d / (c - 1.0), d / (c + 1.0)
