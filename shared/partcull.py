@@ -29,6 +29,7 @@ numpy's fresh temporaries, not the arithmetic, were most of the time.  So:
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Mapping
 from itertools import chain, repeat
 from operator import is_not
@@ -239,9 +240,11 @@ def cull_parts(
     V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
     rect, front, near_d, far_d = box_rects_ckm(lohi, V, P, size, clip_m, work=work)
     n, kmax = len(owner), v.shape[1]
-    vo = np.take(v, owner, axis=2, out=work.take("vsa", (4, kmax, n), np.int64))  # each box's own cell's VSAs
-    lo_ = np.maximum(rect[0], vo[0], out=work.take("meet0", (kmax, n), np.int64))
-    hi_ = np.minimum(rect[2], vo[2], out=work.take("meet1", (kmax, n), np.int64))
+    # 32-bit pixels (the bounds are clamped to +-1e9): half the bytes to gather and compare
+    rect = rect.astype(np.int32)
+    vo = np.take(v, owner, axis=2, out=work.take("vsa", (4, kmax, n), np.int32))  # each box's own cell's VSAs
+    lo_ = np.maximum(rect[0], vo[0], out=work.take("meet0", (kmax, n), np.int32))
+    hi_ = np.minimum(rect[2], vo[2], out=work.take("meet1", (kmax, n), np.int32))
     meet = np.less_equal(lo_, hi_, out=work.take("meetx", (kmax, n), np.bool_))
     np.maximum(rect[1], vo[1], out=lo_)
     np.minimum(rect[3], vo[3], out=hi_)
@@ -271,18 +274,19 @@ def _slices(a: NDArray[np.bool_], starts: NDArray[np.int64], ends: NDArray[np.in
     return map(a.__getitem__, map(slice, starts.tolist(), ends.tolist()))
 
 
-def _vsa_table(vsas: dict[int, list[tuple[int, int, int, int]]], cells: list[int]) -> NDArray[np.int64]:
-    """The cells' VSAs ``(4, kmax, cells)``, a coordinate of one VSA of every cell per row,
-    the shorter lists padded with empty rectangles (which meet nothing)."""
+def _vsa_table(vsas: dict[int, list[tuple[int, int, int, int]]], cells: list[int]) -> NDArray[np.int32]:
+    """The cells' VSAs ``(4, kmax, cells)`` as int32, a coordinate of one VSA of every cell
+    per row, the shorter lists padded with empty rectangles (which meet nothing)."""
     lists = list(map(vsas.__getitem__, cells))
     k = np.fromiter(map(len, lists), np.int64, len(lists))
     nv = int(k.sum())
-    ints = list(chain.from_iterable(chain.from_iterable(lists)))  # a flat list first: half the CPU
-    flat = np.fromiter(ints, np.int64, 4 * nv).reshape(nv, 4)
+    # packed as bytes in one C call: a third of the CPU of np.fromiter over the ints
+    flat = np.frombuffer(struct.pack(f"={4 * nv}i", *chain.from_iterable(chain.from_iterable(lists))),
+                         np.int32).reshape(nv, 4)
     kmax = int(k.max()) if len(k) else 0
     if nv == kmax * len(cells):  # every cell has as many
         return np.ascontiguousarray(flat.reshape(len(cells), kmax, 4).transpose(2, 1, 0))
-    v = np.empty((4, kmax, len(cells)), np.int64)
+    v = np.empty((4, kmax, len(cells)), np.int32)
     v[:] = _EMPTY[:, :, None]
     col = np.arange(nv) - np.repeat(np.cumsum(k) - k, k)
     v[:, col, np.repeat(np.arange(len(cells)), k)] = flat.T
@@ -290,7 +294,7 @@ def _vsa_table(vsas: dict[int, list[tuple[int, int, int, int]]], cells: list[int
 
 
 #: An empty whole-pixel rectangle (no pixel centre) as a column: pads a cell's VSAs.
-_EMPTY = np.array([[1], [1], [0], [0]], np.int64)
+_EMPTY = np.array([[1], [1], [0], [0]], np.int32)
 
 
 def _near_far(proj: NDArray[np.float64]) -> tuple[float, float] | None:

@@ -157,8 +157,11 @@ def rects_ckm(
     # the common case, nothing to clip: the vertices' projections bound the set;
     # computed for every set (elementwise, so each set's figures are the same as
     # alone) and the others overwritten below
-    xy = q[:2] / np.where(ahead, depth, 1.0)
-    rect = _pixels4(np.concatenate([xy.min(axis=1), xy.max(axis=1)]), size, margin_px)
+    # a set not wholly ahead divides by depths <= clip_m (0 or negative too): its figures
+    # are overwritten below, so its infinities and NaNs are let through unseen
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        xy = q[:2] / depth
+        rect = _pixels4(np.concatenate([xy.min(axis=1), xy.max(axis=1)]), size, margin_px, inplace=True)
     rect[:, ~front] = _EMPTY_COL
     rest = ~ahead & front
     if rest.any():
@@ -210,11 +213,13 @@ def box_rects_ckm(
     far_d = np.maximum.reduce(depth, axis=0, out=w.take("far", (n,)))
     ahead = near_d >= clip_m
     front = far_d >= clip_m
-    xy = np.divide(q[:2], depth if ahead.all() else np.where(ahead, depth, 1.0), out=w.take("xy", (2, 8, n)))
     b = w.take("bounds", (4, n))
-    np.minimum.reduce(xy, axis=1, out=b[:2])
-    np.maximum.reduce(xy, axis=1, out=b[2:])
-    rect = _pixels4(b, size, margin_px, inplace=True)
+    # as in rects_ckm, the boxes not wholly ahead are overwritten below
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        xy = np.divide(q[:2], depth, out=w.take("xy", (2, 8, n)))
+        np.minimum.reduce(xy, axis=1, out=b[:2])
+        np.maximum.reduce(xy, axis=1, out=b[2:])
+        rect = _pixels4(b, size, margin_px, inplace=True)
     if not front.all():
         rect[:, ~front] = _EMPTY_COL
     rest = ~ahead & front
@@ -260,35 +265,32 @@ def thread_buffers() -> RectBuffers:
 
 def _pixels4(b: NDArray[np.float64], size: tuple[int, int], margin_px: float, inplace: bool = False) -> NDArray[np.int64]:
     """:func:`ndc_pixels` of bounds ``(4, m)`` (rows ``lo x, lo y, hi x, hi y``) in one pass,
-    the rectangles ``(4, m)``: the same operations, a ceiling taken as the negated floor
-    of the negation (exact); ``inplace`` works in ``b`` itself."""
-    wh, margin = _columns(int(size[0]), int(size[1]), float(margin_px))
+    the rectangles ``(4, m)``: the same figures (``(b + 1) * 0.5 * w`` as ``(b + 1) * (w / 2)``:
+    a halving is exact, so both are the one rounding of the exact product; a ceiling and a
+    floor of the two halves); ``inplace`` works in ``b`` itself."""
+    half_wh, margin = _columns(int(size[0]), int(size[1]), float(margin_px))
     p = b if inplace else b + 1.0
     if inplace:
         p += 1.0
-    p *= 0.5
-    p *= wh
-    np.clip(p, -1e9, 1e9, out=p)
+    p *= half_wh
+    np.minimum(p, 1e9, out=p)  # np.clip's bounds, without its per-call cost
+    np.maximum(p, -1e9, out=p)
     p -= 0.5
     p += margin
-    p *= _SIGN4
-    np.floor(p, out=p)
-    p *= _SIGN4
+    # the first centre at or after the low side, the last at or before the high one
+    np.ceil(p[:2], out=p[:2])
+    np.floor(p[2:], out=p[2:])
     return p.astype(np.int64)
 
 
 @functools.lru_cache(maxsize=16)
 def _columns(w: int, h: int, margin_px: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The viewport's size and the margin as ``(4, 1)`` columns for :func:`_pixels4` (made
-    once per size and margin; read only)."""
-    wh = np.array([[w], [h], [w], [h]], np.float64)
+    """Half the viewport's size and the margin as ``(4, 1)`` columns for :func:`_pixels4`
+    (made once per size and margin; read only)."""
+    half_wh = np.array([[w], [h], [w], [h]], np.float64) * 0.5
     margin = np.array([[-margin_px], [-margin_px], [margin_px], [margin_px]])
-    wh.flags.writeable = margin.flags.writeable = False
-    return wh, margin
-
-
-#: Negates the low sides so that one floor takes their ceiling.
-_SIGN4 = np.array([[-1.0], [-1.0], [1.0], [1.0]])
+    half_wh.flags.writeable = margin.flags.writeable = False
+    return half_wh, margin
 
 
 def clipped_rects(
