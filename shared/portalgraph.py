@@ -58,8 +58,6 @@ class PortalGraph:
     adjacency: list[list[int]] = field(init=False, repr=False, compare=False)
     #: :attr:`start` as plain ints.
     row_start: list[int] = field(init=False, repr=False, compare=False)
-    #: :attr:`ids` as plain ints (the walk's answer names its cells by them).
-    id_list: list[int] = field(init=False, repr=False, compare=False)
     #: ``(k, 2)`` the vertex index pairs joining a padded polygon's sides.
     edges: NDArray[np.int64] = field(init=False, repr=False, compare=False)
     #: :attr:`poly` coordinate-major, ``(3, k, m)``: the layout the frame's batch projects
@@ -74,7 +72,6 @@ class PortalGraph:
         # frozen: the derived tables are set once, here
         object.__setattr__(self, "adjacency", adjacency)
         object.__setattr__(self, "row_start", starts)
-        object.__setattr__(self, "id_list", self.ids.tolist())
         object.__setattr__(self, "edges", np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1))
         object.__setattr__(self, "poly_ckm", np.ascontiguousarray(self.poly.transpose(2, 1, 0)))
 

@@ -190,8 +190,7 @@ def cull_portals(
     # whole-pixel rectangles as plain ints.  The walk is the round-one FIFO walk
     # (benchmarks/portalwalk.py) step for step, so its cells, VSAs and depths are the
     # same; only the constant work per portal is less.
-    rows_of, table = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed, margin_px)
-    adjacency, starts = graph.adjacency, graph.row_start
+    rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed, margin_px)
     s = graph.index[start]
     full = (0, 0, w - 1, h - 1)
     # per cell index (lists, not dicts: indexing is the walk's most frequent step)
@@ -214,8 +213,7 @@ def cull_portals(
             continue
         dn = dc + 1
         vx0, vy0, vx1, vy1 = bound[c]
-        # the frame's table sliced here, not through a function per cell, when there is one
-        for t, pr in zip(adjacency[c], table[starts[c] : starts[c + 1]], strict=True) if table is not None else rows_of(c):
+        for t, pr in rows_of(c):
             if pr is None:
                 continue
             tested += 1
@@ -284,12 +282,11 @@ def cull_portals(
                     if not queued[t]:
                         push(t)
                         queued[t] = True
-    # the answer by cell id, in C-level maps (no Python statement per cell)
-    names = list(map(graph.id_list.__getitem__, order))
+    ids = graph.ids.tolist()
     return PortalCull(
-        order=names,
-        vsas=dict(zip(names, map(lists.__getitem__, order), strict=True)),
-        depth=dict(zip(names, map(depth.__getitem__, order), strict=True)),
+        order=[ids[i] for i in order],
+        vsas={ids[i]: lists[i] for i in order},
+        depth={ids[i]: depth[i] for i in order},
         portals=opened,
         tested=tested,
         seconds=time.perf_counter() - t0,
@@ -322,17 +319,15 @@ def _portal_rows(
     naive: bool,
     closed: frozenset[int] = frozenset(),
     margin_px: float = CENTRE_MARGIN_PX,
-) -> tuple[Callable[[int], Iterable[tuple[int, Any]]], list[Any] | None]:
+) -> Callable[[int], Iterable[tuple[int, Any]]]:
     """A function giving, for a cell index, its directed portals as ``(target index, what)``
     pairs: ``what`` is ``None`` (culled: beyond the fog or wholly behind the clip plane),
     ``True`` (pass the parent's VSA through) or the portal's whole-pixel rectangle
-    ``[x0, y0, x1, y1]``; every portal projected in one numpy batch.  With it, the
-    ``what`` of every directed portal in row order when the frame made them all at
-    once (:data:`_LIST_ALL`), else None."""
+    ``[x0, y0, x1, y1]``; every portal projected in one numpy batch."""
     m = len(graph.target)
     adjacency, starts = graph.adjacency, graph.row_start
     if m == 0:
-        return (lambda c: ()), None
+        return lambda c: ()
     if naive:
         rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive, margin_px)
         rect4 = rect.T
@@ -369,7 +364,7 @@ def _portal_rows(
         if sparse:
             for i, r in zip(opens.tolist(), rect4[:, opens].T.tolist(), strict=True):
                 table[i] = r
-        return (lambda c: zip(adjacency[c], table[starts[c] : starts[c + 1]], strict=True)), table
+        return lambda c: zip(adjacency[c], table[starts[c] : starts[c + 1]], strict=True)
     done: dict[int, list[tuple[int, Any]]] = {}
 
     def rows_of(c: int) -> list[tuple[int, Any]]:
@@ -383,7 +378,7 @@ def _portal_rows(
             done[c] = got
         return got
 
-    return rows_of, None
+    return rows_of
 
 
 def frustum_cells(
