@@ -1,12 +1,12 @@
 """The culling's CPU benchmark (benchmarks/cullcpu.py) and the faster parts culling it measures.
 
-:func:`~walkstream.shared.portals.cull_parts` culls every visible cell's boxes in
-chunks, coordinate-major, and takes the frustum's near and far planes as depths
-(its side planes cannot cull a box whose rectangle meets a VSA).  It must keep
-exactly what the plain per-cell test keeps (:func:`~walkstream.shared.portals.cull_boxes`:
-the box rectangles against the cell's VSAs, then the six-plane frustum test), with
-several chunks, with a fog that leaves some boxes out, and with boxes that hold the
-eye or cross the clip plane.
+:func:`~walkstream.shared.partcull.cull_parts` culls every visible cell's boxes in one
+batch, coordinate-major, and takes the frustum's near and far planes as depths (its
+side planes cannot cull a box whose rectangle meets a VSA).  It must keep exactly
+what the plain per-cell test keeps (:func:`~walkstream.shared.partcull.cull_boxes`:
+the box rectangles against the cell's VSAs, then the six-plane frustum test), by
+either projection (two corners' sums, eight corners' product), with a fog that leaves
+some boxes out, and with boxes that hold the eye or cross the clip plane.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import pytest
 from walkstream.benchmarks.cullcpu import HALL_PARTS, hall_boxes
 from walkstream.benchmarks.portals import hall_topology
 from walkstream.cli import main
+from walkstream.shared import partcull
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.partcull import cull_boxes, cull_parts
 from walkstream.shared.portalgraph import PortalGraph
@@ -29,8 +30,12 @@ from walkstream.shared.portals import cull_portals
 SIZE = (320, 240)
 
 
+@pytest.mark.parametrize("few", [0, 10**6])  # the two corners' sums, the eight corners' product
 @pytest.mark.parametrize(("seed", "fog"), [(400, math.inf), (97, math.inf), (97, 18.0)])
-def test_parts_culled_at_once_keep_what_the_plain_box_test_keeps(seed: int, fog: float) -> None:
+def test_parts_culled_at_once_keep_what_the_plain_box_test_keeps(
+    seed: int, fog: float, few: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(partcull, "_FEW_BOXES", few)
     k = 8
     graph = PortalGraph.from_topology(hall_topology(k))
     boxes = hall_boxes(k)
