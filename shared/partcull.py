@@ -228,7 +228,7 @@ def cull_parts(
     owner = np.repeat(np.arange(nseen), counts)
     idx = np.arange(total) + (table.start[slot] - offsets)[owner]
     work = thread_buffers()
-    lohi = np.take(table.lohi, idx, axis=2, out=work.take("lohi", (3, 2, total)))
+    lohi = np.take(table.lohi, idx, axis=2, out=work.take("lohi", (3, 2, total)), mode="clip")
     keep = np.zeros(total, bool)
     if not math.isinf(fog_m):
         near = box_distance(lohi[:, 0].T, lohi[:, 1].T, e) <= fog_m
@@ -238,7 +238,7 @@ def cull_parts(
                 out.update(zip(seen, _slices(keep, offsets, ends), strict=True))
                 return out
             owner = owner[sub]
-            lohi = np.take(lohi, sub, axis=2, out=work.take("lohi_fog", (3, 2, len(sub))))
+            lohi = np.take(lohi, sub, axis=2, out=work.take("lohi_fog", (3, 2, len(sub))), mode="clip")
         else:
             sub = None
     else:
@@ -254,7 +254,9 @@ def cull_parts(
     kmax = v.shape[1]
     # 32-bit pixels (the bounds are clamped to +-1e9): half the bytes to gather and compare
     rect = rect.astype(np.int32)
-    vo = np.take(v, owner, axis=2, out=work.take("vsa", (4, kmax, n), np.int32))  # each box's own cell's VSAs
+    # each box's own cell's VSAs ("clip": the indices are valid, and numpy buffers an
+    # ``out`` under the default "raise")
+    vo = np.take(v, owner, axis=2, out=work.take("vsa", (4, kmax, n), np.int32), mode="clip")
     lo_ = np.maximum(rect[0], vo[0], out=work.take("meet0", (kmax, n), np.int32))
     hi_ = np.minimum(rect[2], vo[2], out=work.take("meet1", (kmax, n), np.int32))
     meet = np.less_equal(lo_, hi_, out=work.take("meetx", (kmax, n), np.bool_))

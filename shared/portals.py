@@ -27,12 +27,12 @@ Pure numpy, no GL.  The portals come as a :class:`~walkstream.shared.portalgraph
    distance**, not on depth: a portal whose box is beyond the fog is not looked
    through, and no depth limit cuts a cell the fog still shows (a corridor split into
    a dozen segments is seen to its end); a caller may still give one (``max_depth``).
-5. Each queued cell's contents are culled by their boxes: a box is kept when it comes
-   within the fog distance and its clipped, projected rectangle meets one of the
-   cell's VSAs; the frustum test follows, as in the paper (of its six planes only the
-   near and the far one can cull such a box: a VSA lies within the viewport, so a
-   box whose rectangle meets one has a point inside each side plane; the two are
-   tested as depths).
+5. Each queued cell's contents are culled by their boxes (:mod:`walkstream.shared.partcull`):
+   a box is kept when it comes within the fog distance and its clipped, projected
+   rectangle meets one of the cell's VSAs; the frustum test follows, as in the paper
+   (of its six planes only the near and the far one can cull such a box: a VSA lies
+   within the viewport, so a box whose rectangle meets one has a point inside each
+   side plane; the two are tested as depths).
 
 Why a clip plane of its own (``clip_m``, 3 cm) and not the camera's near plane
 (0.1 m): a door 5 cm in front of the eye lies wholly before the camera's near plane,
@@ -58,8 +58,8 @@ level cost in Python.  A frame's cost is mostly numpy's per-call cost, not the
 elements: the batches run coordinate-major (:func:`~walkstream.shared.screenrects.coord_rects`,
 each call one pass over long rows), the few sets that straddle the clip plane are
 clipped in plain floats, and the parts culling takes every visible cell's boxes in
-chunks of 1,024 (temporaries that stay in a fast cache; twice less CPU than one
-batch of a few thousand boxes); a VSA arriving at a cell is appended in place.
+one batch (:mod:`walkstream.shared.partcull`); a VSA arriving at a cell is appended
+in place.
 ``walkstream bench portals --cull`` times it (:mod:`walkstream.benchmarks.cullcpu`).
 """
 
