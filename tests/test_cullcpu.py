@@ -4,9 +4,10 @@
 batch, coordinate-major, and takes the frustum's near and far planes as depths (its
 side planes cannot cull a box whose rectangle meets a VSA).  It must keep exactly
 what the plain per-cell test keeps (:func:`~walkstream.shared.partcull.cull_boxes`:
-the box rectangles against the cell's VSAs, then the six-plane frustum test), by
-either projection (two corners' sums, eight corners' product), with a fog that leaves
-some boxes out, and with boxes that hold the eye or cross the clip plane.
+the box rectangles against the cell's VSAs, then the six-plane frustum test), on each
+of its paths (a batch of two corners' sums or of eight corners' product, a few
+cells'), with a fog that leaves some boxes out, and with boxes that hold the eye or
+cross the clip plane.
 """
 
 from __future__ import annotations
@@ -30,12 +31,14 @@ from walkstream.shared.portals import cull_portals
 SIZE = (320, 240)
 
 
-@pytest.mark.parametrize("few", [0, 10**6])  # the two corners' sums, the eight corners' product
+# the batch with the two corners' sums, the batch with the eight corners' product, a few cells' path
+@pytest.mark.parametrize(("few_cells", "few_boxes"), [(0, 0), (0, 10**6), (10**6, 0)])
 @pytest.mark.parametrize(("seed", "fog"), [(400, math.inf), (97, math.inf), (97, 18.0)])
 def test_parts_culled_at_once_keep_what_the_plain_box_test_keeps(
-    seed: int, fog: float, few: int, monkeypatch: pytest.MonkeyPatch
+    seed: int, fog: float, few_cells: int, few_boxes: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(partcull, "_FEW_BOXES", few)
+    monkeypatch.setattr(partcull, "_FEW_CELLS", few_cells)
+    monkeypatch.setattr(partcull, "_FEW_BOXES", few_boxes)
     k = 8
     graph = PortalGraph.from_topology(hall_topology(k))
     boxes = hall_boxes(k)

@@ -14,9 +14,11 @@ import math
 import warnings
 
 import numpy as np
+import pytest
 
 from walkstream.benchmarks.cullcpu import hall_boxes
 from walkstream.benchmarks.portals import hall_topology
+from walkstream.shared import partcull
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.partcull import cull_boxes, cull_parts, part_table
 from walkstream.shared.portalgraph import PortalGraph
@@ -54,6 +56,13 @@ def test_box_rects_from_two_corners_are_the_eight_corner_rects() -> None:
             crossed += int(((want[2] < 0.03) & (want[3] >= 0.03)).sum())
             behind += int((~want[1]).sum())
     assert crossed > 20 and behind > 100  # both special cases were compared
+
+
+@pytest.fixture(autouse=True)
+def _batch(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The batch path (table, buffers, two corners) even on these small halls."""
+    monkeypatch.setattr(partcull, "_FEW_CELLS", 0)
+    monkeypatch.setattr(partcull, "_FEW_BOXES", 0)
 
 
 def test_changed_boxes_are_culled_as_they_are_now_not_as_packed() -> None:
