@@ -21,7 +21,10 @@ numpy's fresh temporaries, not the arithmetic, were most of the time.  So:
   a fresh array of a few hundred kB costs more than the step that fills it, which is why
   the boxes were culled in chunks of 1,024 before);
 - the per-cell steps (which cells, their VSAs, the answer's slices) are C-level maps over
-  the cell lists, no Python statement per cell.
+  the cell lists (one comprehension pads the VSA lists), no Python statement per cell;
+- a frame of a few cells (a tour's 4-40) takes the plain form instead (their arrays
+  joined, the eight corners' one product, fresh arrays): there numpy's calls, not the
+  boxes, are the cost, and the batch's extra steps made it 10-20 % slower.
 
 ``walkstream bench portals --cull`` times it (:mod:`walkstream.benchmarks.cullcpu`).
 """
