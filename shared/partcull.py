@@ -332,8 +332,9 @@ def _cull_few(
         keep = got
     else:
         keep[idx] = got
-    ends = np.cumsum(counts)
-    return dict(zip(seen, _slices(keep, ends - counts, ends), strict=True))
+    n = np.asarray(counts, np.int64)
+    ends = np.cumsum(n)
+    return dict(zip(seen, _slices(keep, ends - n, ends), strict=True))
 
 
 def _slices(a: NDArray[np.bool_], starts: NDArray[np.int64], ends: NDArray[np.int64]) -> Any:
