@@ -1,7 +1,7 @@
 """``walkstream bench portals --cull``: the portal culling's CPU time per frame.
 
 The culling of a frame is the portal walk (:func:`~walkstream.shared.portals.cull_portals`)
-and the parts culling of the cells it finds (:func:`~walkstream.shared.portals.cull_parts`);
+and the parts culling of the cells it finds (:func:`~walkstream.shared.partcull.cull_parts`);
 both are timed with ``time.process_time`` (the process's CPU, not the wall clock a
 loaded machine stretches), apart and together, median and 99th percentile over the
 frames:
@@ -15,7 +15,8 @@ frames:
   10 s culled from its cell at a 40 m fog, 640x480.
 
 With ``against`` (a git revision of this repository) the culling of that revision is
-loaded beside the current one (its ``shared/screenrects.py`` and ``shared/portals.py``)
+loaded beside the current one (its ``shared/screenrects.py``, ``shared/portals.py`` and
+``shared/partcull.py`` where it has one)
 and timed frame by frame alternately with it, so that both see the same load; the
 two must keep the same parts, which is checked on every frame.
 """
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 import subprocess
 import sys
 import time
@@ -40,7 +42,7 @@ from walkstream.server.bake import bake
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
 from walkstream.server.store import SceneReader
-from walkstream.shared import portals
+from walkstream.shared import partcull, portals
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
 from walkstream.shared.errors import InputError, WalkstreamError
@@ -85,25 +87,30 @@ def hall_boxes(k: int, per_cell: int = HALL_PARTS, cell_m: float = 4.0, height: 
 
 def culling_at(rev: str) -> Culling:
     """``(cull_portals, cull_parts)`` as they were at git revision ``rev`` of this repository,
-    loaded as modules of their own beside the current ones."""
+    loaded as modules of their own beside the current ones (``shared/screenrects.py``,
+    ``shared/portals.py`` and, where the revision has it, ``shared/partcull.py``)."""
     root = Path(portals.__file__).resolve().parents[1]
     mods: dict[str, types.ModuleType] = {}
-    for name in ("screenrects", "portals"):
+    for name in ("screenrects", "portals", "partcull"):
         try:
             got = subprocess.run(["git", "-C", str(root), "show", f"{rev}:shared/{name}.py"],
                                  capture_output=True, text=True, check=False)
         except OSError as exc:
             raise InputError(f"--cull-against {rev}: git could not be run ({exc.strerror})") from None
         if got.returncode != 0:
+            if name == "partcull":  # before the parts culling had a module of its own
+                break
             raise InputError(f"--cull-against {rev}: no shared/{name}.py at that revision of {root}")
         mod_name = f"walkstream_cull_{name}_at_{abs(hash(rev))}"
-        text = got.stdout.replace("walkstream.shared.screenrects", mods["screenrects"].__name__) if mods else got.stdout
+        text = got.stdout
+        for dep, mod in mods.items():  # that revision's own modules, not today's
+            text = re.sub(rf"\bwalkstream\.shared\.{dep}\b", mod.__name__, text)
         mod = types.ModuleType(mod_name)
         mod.__file__ = f"{rev}:shared/{name}.py"
         sys.modules[mod_name] = mod  # dataclasses look their module up by name
         exec(compile(text, mod.__file__, "exec"), mod.__dict__)  # noqa: S102 - this repository's own code
         mods[name] = mod
-    return mods["portals"].cull_portals, mods["portals"].cull_parts
+    return mods["portals"].cull_portals, mods.get("partcull", mods["portals"]).cull_parts
 
 
 def _hall_frames(frames: int) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
@@ -165,7 +172,7 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
     scene with the frames, the visible cells and per part (``walk``, ``parts``, ``total``)
     the median and p99 milliseconds, now and (``against``) at that revision.  Each frame is
     culled ``repeats`` times over (every frame once, then again)."""
-    now: Culling = (portals.cull_portals, portals.cull_parts)
+    now: Culling = (portals.cull_portals, partcull.cull_parts)
     then = culling_at(against) if against else None
     proj = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 1000.0).astype(np.float64)
     scenes: list[tuple[str, Callable[[], Any]]] = [("hall 16x16", lambda: _hall_frames(hall_frames))]

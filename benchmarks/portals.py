@@ -53,9 +53,10 @@ from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
 from walkstream.shared.errors import WalkstreamError
+from walkstream.shared.partcull import cull_parts
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.portals import CULLING_MODES, cull_parts, cull_portals, frustum_cells
+from walkstream.shared.portals import CULLING_MODES, cull_portals, frustum_cells
 from walkstream.shared.roomview import cell_of, stack_planes
 from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology, decode_topology
 

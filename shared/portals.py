@@ -27,12 +27,12 @@ Pure numpy, no GL.  The portals come as a :class:`~walkstream.shared.portalgraph
    distance**, not on depth: a portal whose box is beyond the fog is not looked
    through, and no depth limit cuts a cell the fog still shows (a corridor split into
    a dozen segments is seen to its end); a caller may still give one (``max_depth``).
-5. Each queued cell's contents are culled by their boxes: a box is kept when it comes
-   within the fog distance and its clipped, projected rectangle meets one of the
-   cell's VSAs; the frustum test follows, as in the paper (of its six planes only the
-   near and the far one can cull such a box: a VSA lies within the viewport, so a
-   box whose rectangle meets one has a point inside each side plane; the two are
-   tested as depths).
+5. Each queued cell's contents are culled by their boxes (:mod:`walkstream.shared.partcull`):
+   a box is kept when it comes within the fog distance and its clipped, projected
+   rectangle meets one of the cell's VSAs; the frustum test follows, as in the paper
+   (of its six planes only the near and the far one can cull such a box: a VSA lies
+   within the viewport, so a box whose rectangle meets one has a point inside each
+   side plane; the two are tested as depths).
 
 Why a clip plane of its own (``clip_m``, 3 cm) and not the camera's near plane
 (0.1 m): a door 5 cm in front of the eye lies wholly before the camera's near plane,
@@ -58,8 +58,8 @@ level cost in Python.  A frame's cost is mostly numpy's per-call cost, not the
 elements: the batches run coordinate-major (:func:`~walkstream.shared.screenrects.coord_rects`,
 each call one pass over long rows), the few sets that straddle the clip plane are
 clipped in plain floats, and the parts culling takes every visible cell's boxes in
-chunks of 1,024 (temporaries that stay in a fast cache; twice less CPU than one
-batch of a few thousand boxes); a VSA arriving at a cell is appended in place.
+one batch (:mod:`walkstream.shared.partcull`); a VSA arriving at a cell is appended
+in place.
 ``walkstream bench portals --cull`` times it (:mod:`walkstream.benchmarks.cullcpu`).
 """
 
@@ -70,7 +70,6 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -79,23 +78,13 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.errors import InputError
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.screenrects import (
-    BOX_EDGES,
-    CENTRE_MARGIN_PX,
-    box_corners_ckm,
-    box_rects,
-    corner_secant,
-    point_rects,
-    rects_ckm,
-)
+from walkstream.shared.screenrects import CENTRE_MARGIN_PX, corner_secant, point_rects, rects_ckm
 
 __all__ = [
     "CULLING_MODES",
     "PortalCull",
     "cull_portals",
     "frustum_cells",
-    "cull_parts",
-    "cull_boxes",
     "box_distance",
 ]
 
@@ -392,59 +381,6 @@ def _portal_rows(
     return rows_of
 
 
-def cull_boxes(
-    lo: ArrayLike,
-    hi: ArrayLike,
-    vsas: ArrayLike,
-    eye: ArrayLike,
-    view: ArrayLike,
-    proj: ArrayLike,
-    size: tuple[int, int],
-    *,
-    fog_m: float = math.inf,
-    clip_m: float = 0.03,
-) -> NDArray[np.bool_]:
-    """Which of a cell's boxes to draw: within the fog, meeting one of its VSAs, in the frustum.
-
-    Parameters
-    ----------
-    lo, hi : (n, 3) float
-        The boxes of the cell's contents.
-    vsas : (k, 4) int64
-        The cell's VSAs (:attr:`PortalCull.vsas`).
-    eye : (3,) float
-    view, proj : (4, 4) float
-    size : (int, int)
-    fog_m, clip_m : float
-
-    Returns
-    -------
-    (n,) bool
-    """
-    lo_ = np.asarray(lo, np.float64).reshape(-1, 3)
-    hi_ = np.asarray(hi, np.float64).reshape(-1, 3)
-    if len(lo_) == 0:
-        return np.zeros(0, bool)
-    e = np.asarray(eye, np.float64).reshape(3)
-    keep = box_distance(lo_, hi_, e) <= fog_m
-    rect, front = box_rects(lo_, hi_, view, proj, size, clip_m)
-    v = np.asarray(vsas, np.int64).reshape(-1, 4)
-    meet = _meet(rect[:, None, :], v[None, :, :])
-    keep &= front & np.any(meet, axis=1)
-    vp = np.asarray(proj, np.float64) @ np.asarray(view, np.float64)
-    keep[keep] = frustum_cull(lo_[keep], hi_[keep], vp)
-    return keep
-
-
-def _meet(a: NDArray[np.int64], b: NDArray[np.int64]) -> NDArray[np.bool_]:
-    """Whether whole-pixel rectangles ``(..., 4)`` share a pixel (broadcast); an empty one
-    (``x0 > x1`` or ``y0 > y1``: no pixel centre) meets nothing."""
-    return (
-        (np.maximum(a[..., 0], b[..., 0]) <= np.minimum(a[..., 2], b[..., 2]))
-        & (np.maximum(a[..., 1], b[..., 1]) <= np.minimum(a[..., 3], b[..., 3]))
-    )
-
-
 def frustum_cells(
     graph: PortalGraph,
     start: int,
@@ -484,125 +420,6 @@ def frustum_cells(
                 order.append(t)
     return [int(graph.ids[c]) for c in order]
 
-
-def cull_parts(
-    mode: str,
-    cells: list[int],
-    boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]],
-    eye: ArrayLike,
-    view: ArrayLike,
-    proj: ArrayLike,
-    size: tuple[int, int],
-    *,
-    vsas: dict[int, list[tuple[int, int, int, int]]] | None = None,
-    fog_m: float = math.inf,
-    clip_m: float = 0.03,
-) -> dict[int, NDArray[np.bool_]]:
-    """Which parts of each visible cell to draw, by ``mode`` (:data:`CULLING_MODES`).
-
-    Parameters
-    ----------
-    mode : str
-        ``portals``: boxes against the cell's VSAs, the fog and the frustum
-        (:func:`cull_boxes`); ``frustum``: the frustum and the fog; ``none``: all.
-    cells : list of int
-        Visible cells (those without boxes, i.e. not loaded, are left out).
-    boxes : dict of int -> ((n, 3), (n, 3))
-        Per cell, its parts' boxes.
-    vsas : dict of int -> (k, 4) int64
-        Per cell its VSAs (``portals`` mode).
-
-    Returns
-    -------
-    dict of int -> (n,) bool
-    """
-    if mode not in CULLING_MODES:
-        raise InputError(f"culling mode {mode!r}: expected one of {', '.join(CULLING_MODES)}")
-    out: dict[int, NDArray[np.bool_]] = {}
-    e = np.asarray(eye, np.float64).reshape(3)
-    vp = np.asarray(proj, np.float64) @ np.asarray(view, np.float64)
-    for c in cells:
-        if c not in boxes:
-            continue
-        lo, hi = boxes[c]
-        if mode == "none":
-            out[c] = np.ones(len(lo), bool)
-        elif mode == "frustum":
-            keep = box_distance(lo, hi, e) <= fog_m
-            keep[keep] = frustum_cull(lo[keep], hi[keep], vp)
-            out[c] = keep
-    if mode != "portals":
-        return out
-    # every visible cell's boxes in one vectorised pass, each against its own cell's VSAs
-    seen = [c for c in cells if c in boxes and vsas is not None and c in vsas and len(boxes[c][0])]
-    for c in cells:
-        if c in boxes and not (vsas is not None and c in vsas and len(boxes[c][0])):
-            out[c] = np.zeros(len(boxes[c][0]), bool)
-    if not seen or vsas is None:
-        return out
-    counts = [len(boxes[c][0]) for c in seen]
-    lo = np.concatenate([boxes[c][0] for c in seen])
-    hi = np.concatenate([boxes[c][1] for c in seen])
-    # each cell's VSAs padded to the longest list with empty rectangles, made in one call
-    # from plain ints (a numpy assignment per cell costs more than the whole test)
-    kmax = max(len(vsas[c]) for c in seen)
-    flat: list[tuple[int, int, int, int]] = []
-    for c in seen:
-        have = vsas[c]
-        flat.extend(have)
-        if len(have) < kmax:
-            flat.extend([_NO_PIXEL] * (kmax - len(have)))
-    # (4, kmax, cells): a coordinate of one VSA of every cell per row, as the rectangles come
-    v = np.fromiter(chain.from_iterable(flat), np.int64, 4 * len(flat)).reshape(len(seen), kmax, 4).transpose(2, 1, 0)
-    owner = np.repeat(np.arange(len(seen)), counts)
-    keep = np.ones(len(lo), bool) if math.isinf(fog_m) else box_distance(lo, hi, e) <= fog_m
-    # only the boxes within the fog are projected
-    idx = None if keep.all() else np.flatnonzero(keep)
-    if idx is not None:
-        lo, hi, owner = lo[idx], hi[idx], owner[idx]
-    V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
-    planes = _near_far(P)
-    ok = np.empty(len(lo), bool)
-    # a chunk's temporaries (8 corners of each box) stay within a fast cache: two times
-    # less CPU than one batch of a few thousand boxes
-    for a in range(0, len(lo), _BOX_CHUNK):
-        b = a + _BOX_CHUNK
-        rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo[a:b], hi[a:b]), BOX_EDGES, V, P, size, clip_m)
-        vo = v[:, :, owner[a:b]]  # (4, kmax, n) each box's own cell's VSAs
-        meet = ((np.maximum(rect[0], vo[0]) <= np.minimum(rect[2], vo[2]))
-                & (np.maximum(rect[1], vo[1]) <= np.minimum(rect[3], vo[3])))
-        got = front & np.any(meet, axis=0)
-        if planes is None:
-            got[got] = frustum_cull(lo[a:b][got], hi[a:b][got], vp)
-        else:
-            # the frustum's other four planes cannot cull a box whose rectangle meets a
-            # VSA: a VSA lies within the viewport, so some point of the box lies inside
-            # each of them (by at least a third of a pixel); the near and the far plane
-            # are depths
-            got &= (far_d >= planes[0]) & (near_d <= planes[1])
-        ok[a:b] = got
-    if idx is None:
-        keep = ok
-    else:
-        keep[idx] = ok
-    ends = np.cumsum(counts).tolist()
-    for c, a, b in zip(seen, [0, *ends[:-1]], ends, strict=True):
-        out[c] = keep[a:b]
-    return out
-
-
-def _near_far(proj: NDArray[np.float64]) -> tuple[float, float] | None:
-    """The near and far planes' depths of a perspective projection (``-z`` in eye space:
-    the frustum test's two planes that are not through the eye), or None for another
-    kind of projection."""
-    (a, b, c, d), (e, f, g, h) = proj[2:].tolist()
-    if (a, b, e, f, g, h) != (0.0, 0.0, 0.0, 0.0, -1.0, 0.0):
-        return None
-    return d / (c - 1.0), d / (c + 1.0)
-
-
-#: Boxes culled in one numpy batch (:func:`cull_parts`).
-_BOX_CHUNK = 1024
 
 #: An empty whole-pixel rectangle (no pixel centre): pads a cell's VSAs.
 _NO_PIXEL = (1, 1, 0, 0)

@@ -23,8 +23,9 @@ from walkstream.server.store import SceneReader
 from walkstream.shared.camera import camera
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
+from walkstream.shared.partcull import cull_parts
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.portals import cull_parts, cull_portals, frustum_cells
+from walkstream.shared.portals import cull_portals, frustum_cells
 from walkstream.shared.roomcompact import decode_topology_compact
 from walkstream.shared.roomview import cell_of, stack_planes
 

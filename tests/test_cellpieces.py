@@ -16,7 +16,7 @@ from walkstream.shared.codec.cellpieces import (
     split_part,
 )
 from walkstream.shared.content.cellmesh import KIND
-from walkstream.shared.portals import cull_parts
+from walkstream.shared.partcull import cull_parts
 
 SIZE = (160, 120)
 

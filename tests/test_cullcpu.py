@@ -1,12 +1,13 @@
 """The culling's CPU benchmark (benchmarks/cullcpu.py) and the faster parts culling it measures.
 
-:func:`~walkstream.shared.portals.cull_parts` culls every visible cell's boxes in
-chunks, coordinate-major, and takes the frustum's near and far planes as depths
-(its side planes cannot cull a box whose rectangle meets a VSA).  It must keep
-exactly what the plain per-cell test keeps (:func:`~walkstream.shared.portals.cull_boxes`:
-the box rectangles against the cell's VSAs, then the six-plane frustum test), with
-several chunks, with a fog that leaves some boxes out, and with boxes that hold the
-eye or cross the clip plane.
+:func:`~walkstream.shared.partcull.cull_parts` culls every visible cell's boxes in one
+batch, coordinate-major, and takes the frustum's near and far planes as depths (its
+side planes cannot cull a box whose rectangle meets a VSA).  It must keep exactly
+what the plain per-cell test keeps (:func:`~walkstream.shared.partcull.cull_boxes`:
+the box rectangles against the cell's VSAs, then the six-plane frustum test), on each
+of its paths (a batch of two corners' sums or of eight corners' product, a few
+cells'), with a fog that leaves some boxes out, and with boxes that hold the eye or
+cross the clip plane.
 """
 
 from __future__ import annotations
@@ -21,24 +22,28 @@ import pytest
 from walkstream.benchmarks.cullcpu import HALL_PARTS, hall_boxes
 from walkstream.benchmarks.portals import hall_topology
 from walkstream.cli import main
-from walkstream.shared import portals
+from walkstream.shared import partcull
 from walkstream.shared.camera import camera, perspective
+from walkstream.shared.partcull import cull_boxes, cull_parts
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.portals import cull_boxes, cull_parts, cull_portals
+from walkstream.shared.portals import cull_portals
 
 SIZE = (320, 240)
 
 
-@pytest.mark.parametrize(("chunk", "fog"), [(400, math.inf), (97, math.inf), (97, 18.0)])
-def test_parts_culled_in_chunks_keep_what_the_plain_box_test_keeps(
-    chunk: int, fog: float, monkeypatch: pytest.MonkeyPatch
+# the batch with the two corners' sums, the batch with the eight corners' product, a few cells' path
+@pytest.mark.parametrize(("few_cells", "few_boxes"), [(0, 0), (0, 10**6), (10**6, 0)])
+@pytest.mark.parametrize(("seed", "fog"), [(400, math.inf), (97, math.inf), (97, 18.0)])
+def test_parts_culled_at_once_keep_what_the_plain_box_test_keeps(
+    seed: int, fog: float, few_cells: int, few_boxes: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(portals, "_BOX_CHUNK", chunk)
+    monkeypatch.setattr(partcull, "_FEW_CELLS", few_cells)
+    monkeypatch.setattr(partcull, "_FEW_BOXES", few_boxes)
     k = 8
     graph = PortalGraph.from_topology(hall_topology(k))
     boxes = hall_boxes(k)
     proj = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 30.0).astype(np.float64)
-    rng = np.random.default_rng(chunk)
+    rng = np.random.default_rng(seed)
     kept_some = dropped_some = 0
     for i in range(8):
         # a corner looking across, then eyes anywhere, low (in the furniture) and high
@@ -57,7 +62,7 @@ def test_parts_culled_in_chunks_keep_what_the_plain_box_test_keeps(
             kept_some += int(want.sum())
             dropped_some += int((~want).sum())
         if i == 0:
-            assert len(pc.order) > 20 and sum(len(boxes[c][0]) for c in pc.order) > 2 * chunk  # several chunks
+            assert len(pc.order) > 20 and sum(len(boxes[c][0]) for c in pc.order) > 300  # a batch of hundreds
     assert kept_some > 100 and dropped_some > 100  # both outcomes were compared
 
 

@@ -26,8 +26,9 @@ from walkstream.cli import main
 from walkstream.server.bake import bake
 from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
 from walkstream.shared.camera import camera, perspective
+from walkstream.shared.partcull import cull_parts
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.portals import cull_parts, cull_portals, frustum_cells
+from walkstream.shared.portals import cull_portals, frustum_cells
 from walkstream.shared.roomview import cell_of
 from walkstream.shared.roomwire import ContentsRef, PortalRef, RoomRecord, Topology
 from walkstream.shared.screenrects import box_rects

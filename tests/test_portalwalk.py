@@ -24,8 +24,9 @@ from walkstream.server.store import SceneReader
 from walkstream.shared import portals
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellmesh import decode_cell_mesh
+from walkstream.shared.partcull import cull_parts
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.portals import PortalCull, cull_parts, cull_portals
+from walkstream.shared.portals import PortalCull, cull_portals
 from walkstream.shared.roomview import cell_of, stack_planes
 from walkstream.shared.roomwire import decode_topology
 from walkstream.shared.screenrects import BOX_EDGES, box_rects, point_rects

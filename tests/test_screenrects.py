@@ -7,7 +7,7 @@ import pytest
 
 from walkstream.shared import screenrects
 from walkstream.shared.camera import camera, perspective
-from walkstream.shared.portals import cull_boxes
+from walkstream.shared.partcull import cull_boxes
 from walkstream.shared.screenrects import BOX_EDGES, CENTRE_MARGIN_PX, TOUCH_MARGIN_PX, ndc_pixels
 
 SIZE = (10, 10)

@@ -26,8 +26,9 @@ from walkstream.client.walk.impostors import frame_impostors, replaced
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.frustum import frustum_cull
+from walkstream.shared.partcull import cull_parts
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.portals import PortalCull, box_distance, cull_parts
+from walkstream.shared.portals import PortalCull, box_distance
 
 __all__ = ["allocate", "fog_for_budget", "nearest_portal_in_view"]
 

@@ -6,7 +6,7 @@ the outer walls, their window reveals, roofs, the middle of thick walls
 on the generated offices an outer wall 60 m long with a hole for every window, about
 220 triangles in one part whose box spans the building.  The client culls a part by its
 box against the screen rectangles a portal walk leaves for the cell
-(:func:`~walkstream.shared.portals.cull_parts`); a window's rectangle meets the
+(:func:`~walkstream.shared.partcull.cull_parts`); a window's rectangle meets the
 projection of such a box from anywhere in the building (a long slab seen obliquely has
 a screen box covering half the view), so every window drew every storey's facades,
 which the rooms' own outer walls hide: on seed 3's tour up to 1,457 of a frame's 1,904

@@ -2,7 +2,7 @@
 
 A stored part is one element's piece in one cell (:class:`~walkstream.shared.codec.cellmesh.CellPart`),
 and the client culls parts by their boxes against the portal walk's visible screen areas
-(:func:`~walkstream.shared.portals.cull_parts`).  A part of thousands of triangles --
+(:func:`~walkstream.shared.partcull.cull_parts`).  A part of thousands of triangles --
 a curved stair (2,146 triangles on FZK-Haus), a round gable window (1,792), a wall
 cabinet -- is drawn whole as soon as its box touches a door's rectangle by a pixel,
 while what the walker sees of it is a corner or nothing: on FZK-Haus's tour, such parts
