@@ -233,3 +233,24 @@ def test_the_walls_list_sends_a_regions_ring_once_and_decodes_to_every_cells_wal
     assert walls_wire(own) == {"sides": own}  # nothing shared: as before
     with pytest.raises(CodecError, match="same"):
         decode_walls(msgpack.packb({"sides": own, "same": [[9, 5]]}), "walls")
+
+
+def test_a_cell_record_carries_its_rings_far_field_and_streams_it_weighed_by_its_share() -> None:
+    import msgpack
+
+    from walkstream.shared.errors import CodecError
+    from walkstream.shared.wire import CellRecord, cell_from_wire
+
+    rec = CellRecord(id=3, kind="street", pvs=np.array([1, 4]), ach=np.array([0.75, 0.25]),
+                     far=np.array([2, 9, 30]), far_ach=np.array([0.5, 0.25, 0.25]), far_share=0.4)
+    back = cell_from_wire(msgpack.unpackb(msgpack.packb(rec.to_wire())), "cell 3")
+    assert back.pvs.tolist() == [1, 4] and back.far is not None and back.far.tolist() == [2, 9, 30]
+    ids, ach = back.streamed()
+    assert ids.tolist() == [1, 4, 2, 9, 30]
+    assert np.allclose(ach, [0.45, 0.15, 0.2, 0.1, 0.1], atol=1e-4)  # the whole cell's coverage again
+    plain = CellRecord(id=3, kind="street", pvs=np.array([1, 4]), ach=np.array([0.75, 0.25]))
+    assert "far" not in plain.to_wire() and plain.streamed()[0].tolist() == [1, 4]  # no ring: as before
+    loose = rec.to_wire(compact=False)
+    bad = loose | {"fach": loose["fach"][:1]}
+    with pytest.raises(CodecError, match="3 far ids but 1 fach"):
+        cell_from_wire(msgpack.unpackb(msgpack.packb(bad)), "cell 3")

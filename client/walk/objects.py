@@ -30,9 +30,11 @@ class PvsObjects:
         self.lo: NDArray[np.float64] = np.zeros((0, 3))
         self.hi: NDArray[np.float64] = np.zeros((0, 3))
 
-    def update(self, cells: list[int], city: Streamer, cache: Cache, skip: int) -> None:
-        """The union of ``cells``' PVS (each object at its highest ACH), ``skip`` left out."""
-        key = (tuple((c, c in city.cells) for c in cells), city.geometry_version, sum(cache.evictions.values()))
+    def update(self, cells: list[int], city: Streamer, cache: Cache, skip: int, *, far: bool = False) -> None:
+        """The union of ``cells``' PVS (each object at its highest ACH), ``skip`` left out;
+        ``far``: with the far field their rings carry (a ring texture in view is missing,
+        :attr:`~walkstream.client.walk.state.Frame.ring_far`)."""
+        key = (tuple((c, c in city.cells) for c in cells), city.geometry_version, sum(cache.evictions.values()), far)
         if key == self.key:
             return
         self.key = key
@@ -41,7 +43,8 @@ class PvsObjects:
             rec = city.cells.get(c)
             if rec is None:
                 continue
-            for oid, a in zip(rec.pvs.tolist(), rec.ach.tolist(), strict=True):
+            ids, cover = rec.streamed() if far else (rec.pvs, rec.ach)
+            for oid, a in zip(ids.tolist(), cover.tolist(), strict=True):
                 if oid != skip:
                     ach[oid] = max(a, ach.get(oid, 0.0))
         self.pvs = list(ach)

@@ -28,8 +28,13 @@ street cell whose PVS was large, :mod:`walkstream.server.bake.ringwalls`), each 
 texture (blended with the next zone's near a border, as indoors); their textures are
 wanted now for the walls in view (sooner than those behind the viewer), ahead for the
 zones the eye moves into and for the rings of the cells the streamer predicts, at
-their need times.  The far field is no longer in the cell's PVS, so a texture not
-held is missing content: the frame is not perfect until it arrives
+their need times.  The far field is no longer in the cell's geometry PVS, but the
+cell's record lists it apart (:attr:`~walkstream.shared.wire.CellRecord.far`, streamed
+with the PVS: a city's objects are a few parameters each): while a ring wall in view
+has no texture yet, the frame draws that far field as geometry
+(:attr:`~walkstream.client.walk.state.Frame.ring_far`), never a hole, and the perfect
+frame needs it built as it needs the PVS.  Only a scene baked before the far field was
+stored shows the sky there, and then the missing texture is missing content
 (:attr:`~walkstream.client.walk.state.Frame.wall_missing`).
 """
 
@@ -99,6 +104,7 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     wants the textures now and ahead from the lane."""
     lane, table, city = w.scene.wall_images, w.scene.wall_table, w.scene.streets
     f.wall_due = f.wall_missing = 0
+    f.ring_far = False
     if lane is None or table is None or city is None or not w.config.virtual_walls or not w.scene.wall_rings:
         return []
     sides = w.scene.walls
@@ -119,6 +125,8 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             wants[tid] = need
 
     out: list[DrawnWall] = []
+    rec = city.cells.get(street)
+    has_far = rec is not None and rec.far is not None
     if ring:
         boxes = w.scene.wall_boxes
         seen = frustum_cull(boxes[ring, 0], boxes[ring, 1], f.vp) if boxes is not None else np.ones(len(ring), bool)
@@ -129,11 +137,15 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             s = sides[k]
             zone = int(zones[0, k])
             tid = s.textures[zone]
-            f.wall_due += int(seen[j])
             if not lane.held(tid):
-                f.wall_missing += int(seen[j])
+                if has_far:  # the far field drawn as geometry instead: never a hole
+                    f.ring_far = f.ring_far or bool(seen[j])
+                else:
+                    f.wall_due += int(seen[j])
+                    f.wall_missing += int(seen[j])
                 want(tid, 0.0 if seen[j] else RING_BEHIND_NEED_S)
                 continue
+            f.wall_due += int(seen[j])
             mix_tid, mix = -1, 0.0
             if mix_zone[k] >= 0:  # near a zone border: the neighbour's texture blended in
                 nb = s.textures[int(mix_zone[k])]
