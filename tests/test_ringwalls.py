@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import math
+import shutil
 import sqlite3
 from pathlib import Path
 from typing import Any
@@ -189,6 +190,11 @@ def test_a_city_bake_rings_its_cells_and_carries_the_far_field_on_the_textures(d
     assert cut.keys() == full.keys()
     assert all(cut[c] <= full[c] for c in cut)  # only taken away
     assert sum(len(full[c]) - len(cut[c]) for c in cut) == summary["ring_removed"]
+    with SceneReader.open(walls) as r:  # what a ring took is stored apart, with its share of the coverage
+        far = {c: r.ring_far(c) for c in cut}
+    assert sum(f is not None for f in far.values()) == summary["ring_cells"]
+    for c, f in far.items():
+        assert f is None or (set(f[0].tolist()) == full[c] - cut[c] and 0.0 <= f[2] <= 1.0)
     db = sqlite3.connect(walls)
     try:
         rows = db.execute("SELECT data FROM wall_textures").fetchall()
@@ -212,6 +218,29 @@ def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tupl
     assert w["truth"]["colour"]["mean_error"]["median"] < 0.1
     off = _replay(walls, virtual_walls=False).summary
     assert "walls" not in off  # no ring asked for, no texture on the link
+
+
+@pytest.mark.gl
+def test_a_ring_wall_whose_texture_never_arrives_shows_its_far_field_as_geometry_never_a_hole(
+        dbs: tuple[Path, Path, dict[str, Any]], tmp_path: Path) -> None:
+    walls, plain, _ = dbs
+    bare = tmp_path / "bare.db"  # the same bake, its textures gone: none ever arrives
+    shutil.copy(walls, bare)
+    db = sqlite3.connect(bare)
+    try:
+        db.execute("DELETE FROM wall_textures")
+        db.commit()
+    finally:
+        db.close()
+    b = _replay(bare, truth_every=25).summary
+    p = _replay(plain, truth_every=25).summary
+    ws = b["walls"]
+    assert ws.get("textures_received", 0) == 0 and ws["walls_mean"] == 0.0
+    # every frame with a ring wall in view draws the far field as geometry: no hole, and whole
+    assert ws["far_field_frames"] > 0.5 and ws["texture_missing_frames"] == 0.0
+    assert b["visible_mean"] >= 0.95 * p["visible_mean"]  # the objects the plain bake's PVS draws
+    assert b["perfect_frame_ratio"] >= p["perfect_frame_ratio"] - 0.02
+    assert b["truth"]["colour"]["mean_error"]["median"] <= p["truth"]["colour"]["mean_error"]["median"] + 0.005
 
 
 def test_the_walls_list_sends_a_regions_ring_once_and_decodes_to_every_cells_walls() -> None:
@@ -250,7 +279,8 @@ def test_a_cell_record_carries_its_rings_far_field_and_streams_it_weighed_by_its
     assert np.allclose(ach, [0.45, 0.15, 0.2, 0.1, 0.1], atol=1e-4)  # the whole cell's coverage again
     plain = CellRecord(id=3, kind="street", pvs=np.array([1, 4]), ach=np.array([0.75, 0.25]))
     assert "far" not in plain.to_wire() and plain.streamed()[0].tolist() == [1, 4]  # no ring: as before
-    loose = rec.to_wire(compact=False)
-    bad = loose | {"fach": loose["fach"][:1]}
+    from walkstream.shared.codec import pack_ints
+
+    bad = rec.to_wire() | {"fach": pack_ints([65535])}
     with pytest.raises(CodecError, match="3 far ids but 1 fach"):
         cell_from_wire(msgpack.unpackb(msgpack.packb(bad)), "cell 3")
