@@ -124,12 +124,23 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
         if not lane.held(tid) and need < wants.get(tid, np.inf):
             wants[tid] = need
 
+    boxes = w.scene.wall_boxes
+
+    def in_view(walls: list[int], moved: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Which of ``walls`` the view shows from the eye moved by ``moved`` ``(3,)``
+        (looking the same way): the textures ahead are those of walls the walker will
+        see, not of the wall behind it (half the textures asked for were never drawn)."""
+        if boxes is None or not walls:
+            return np.ones(len(walls), bool)
+        shift = np.eye(4)
+        shift[:3, 3] = -np.asarray(moved, np.float64)[:3]
+        return frustum_cull(boxes[walls, 0], boxes[walls, 1], np.asarray(f.vp, np.float64) @ shift)
+
     out: list[DrawnWall] = []
     rec = city.cells.get(street)
     has_far = rec is not None and rec.far is not None
     if ring:
-        boxes = w.scene.wall_boxes
-        seen = frustum_cull(boxes[ring, 0], boxes[ring, 1], f.vp) if boxes is not None else np.ones(len(ring), bool)
+        seen = in_view(ring, np.zeros(3))
         mix_zone, mix_share = zone_mix(table.along_of(eye)[0], table.width, table.zones, w.config.wall_zone_blend)
         for j, k in enumerate(ring):
             if weights[0, k] <= 0.0:
@@ -156,9 +167,10 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             img = lane.image(tid)
             out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
                                  int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix))
-        for h, t in enumerate(horizons, start=1):  # the zones the eye walks into
-            for k in ring:
-                if weights[h, k] > 0.0:
+        for h, t in enumerate(horizons, start=1):  # the zones the eye walks into, of walls it will see
+            ahead = in_view(ring, eyes[h] - eye)
+            for j, k in enumerate(ring):
+                if weights[h, k] > 0.0 and ahead[j]:
                     want(sides[k].textures[int(zones[h, k])], float(t))
     if w.config.prefetch:  # the rings of the cells the streamer predicts, where the eye will be
         ahead = [(c, t) for c, t in sorted(city.need.items(), key=lambda kv: kv[1])
@@ -167,8 +179,10 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             at = np.array([eye + np.array([*(velocity * t), 0.0]) for _, t in ahead])
             az, _ad, aw = table.views(at)
             for row, (c, t) in enumerate(ahead):
-                for k in w.scene.wall_rings[c]:
-                    if aw[row, k] > 0.0:
+                theirs = list(w.scene.wall_rings[c])
+                seen_there = in_view(theirs, at[row] - eye)
+                for j, k in enumerate(theirs):
+                    if aw[row, k] > 0.0 and seen_there[j]:
                         want(sides[k].textures[int(az[row, k])], float(t))
     lane.want(wants)
     return out
