@@ -284,3 +284,32 @@ def test_a_cell_record_carries_its_rings_far_field_and_streams_it_weighed_by_its
     bad = rec.to_wire() | {"fach": pack_ints([65535])}
     with pytest.raises(CodecError, match="3 far ids but 1 fach"):
         cell_from_wire(msgpack.unpackb(msgpack.packb(bad)), "cell 3")
+
+
+def test_a_missing_ring_texture_brings_back_only_the_far_objects_behind_its_wall() -> None:
+    from types import SimpleNamespace
+
+    from walkstream.client.walk.objects import behind_walls
+
+    def box(x: float, y: float) -> Any:
+        return SimpleNamespace(bbox_min=np.array([x - 1.0, y - 1.0, 0.0]), bbox_max=np.array([x + 1.0, y + 1.0, 9.0]))
+
+    # a ring's walls run clockwise, the hidden space to the left: north (-10, 10) -> (10, 10)
+    north = ((-10.0, 10.0, 10.0, 10.0),)
+    east = ((10.0, 10.0, 10.0, -10.0),)
+    geoms = [box(0.0, 30.0), box(30.0, 0.0), box(30.0, 30.0), None]
+    assert behind_walls(geoms, north).tolist() == [True, False, True, True]  # not built yet: must arrive
+    assert behind_walls(geoms, east).tolist() == [False, True, True, True]
+    assert behind_walls(geoms, north + east).tolist() == [True, True, True, True]
+    assert behind_walls(geoms, ()).tolist() == [True] * 4
+
+
+def test_ring_textures_are_lossy_at_the_outdoor_quality_and_a_bad_quality_is_one_line() -> None:
+    from walkstream.shared.errors import InputError
+
+    st = WallSettings()
+    assert st.outdoors().quality == st.outdoor_quality < st.quality
+    assert st.record_outdoors()["quality"] == st.outdoor_quality
+    for bad in (WallSettings(outdoor_quality=0), WallSettings(quality=101)):
+        with pytest.raises(InputError, match="quality: expected 1 to 100"):
+            bad.check()

@@ -105,6 +105,7 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     lane, table, city = w.scene.wall_images, w.scene.wall_table, w.scene.streets
     f.wall_due = f.wall_missing = 0
     f.ring_far = False
+    f.far_walls = ()
     if lane is None or table is None or city is None or not w.config.virtual_walls or not w.scene.wall_rings:
         return []
     sides = w.scene.walls
@@ -149,8 +150,10 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             zone = int(zones[0, k])
             tid = s.textures[zone]
             if not lane.held(tid):
-                if has_far:  # the far field drawn as geometry instead: never a hole
-                    f.ring_far = f.ring_far or bool(seen[j])
+                if has_far:  # the far field behind it drawn as geometry instead: never a hole
+                    if seen[j]:
+                        f.ring_far = True
+                        f.far_walls += ((*s.p0, *s.p1),)
                 else:
                     f.wall_due += int(seen[j])
                     f.wall_missing += int(seen[j])
@@ -168,9 +171,9 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
                                  int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix))
         for h, t in enumerate(horizons, start=1):  # the zones the eye walks into, of walls it will see
-            ahead = in_view(ring, eyes[h] - eye)
+            shown = in_view(ring, eyes[h] - eye)
             for j, k in enumerate(ring):
-                if weights[h, k] > 0.0 and ahead[j]:
+                if weights[h, k] > 0.0 and shown[j]:
                     want(sides[k].textures[int(zones[h, k])], float(t))
     if w.config.prefetch:  # the rings of the cells the streamer predicts, where the eye will be
         ahead = [(c, t) for c, t in sorted(city.need.items(), key=lambda kv: kv[1])
