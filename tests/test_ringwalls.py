@@ -177,6 +177,12 @@ def _replay(db: Path, **kw: Any) -> ReplayResult:
         app.state.scenes.close()
 
 
+@pytest.fixture(scope="module")
+def plain_walk(dbs: tuple[Path, Path, dict[str, Any]]) -> dict[str, Any]:
+    """The plain bake's walk (compared with the walls' in two tests: replayed once)."""
+    return _replay(dbs[1], truth_every=25).summary
+
+
 def _pvs(db: Path) -> dict[int, set[int]]:
     with SceneReader.open(db) as r:
         return {c.id: set(np.asarray(c.pvs).tolist()) for c in r.cells()}
@@ -207,10 +213,11 @@ def test_a_city_bake_rings_its_cells_and_carries_the_far_field_on_the_textures(d
 
 
 @pytest.mark.gl
-def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tuple[Path, Path, dict[str, Any]]) -> None:
-    walls, plain, _ = dbs
+def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tuple[Path, Path, dict[str, Any]],
+                                                                       plain_walk: dict[str, Any]) -> None:
+    walls, _plain, _ = dbs
     w = _replay(walls, truth_every=25).summary
-    p = _replay(plain, truth_every=25).summary
+    p = plain_walk
     ws = w["walls"]
     assert ws["frames_with_walls"] > 0.5 and ws["textures_received"] > 0 and ws["texture_bytes"] > 0
     assert ws["geometry_objects_mean"] < p["visible_mean"]
@@ -222,8 +229,8 @@ def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tupl
 
 @pytest.mark.gl
 def test_a_ring_wall_whose_texture_never_arrives_shows_its_far_field_as_geometry_never_a_hole(
-        dbs: tuple[Path, Path, dict[str, Any]], tmp_path: Path) -> None:
-    walls, plain, _ = dbs
+        dbs: tuple[Path, Path, dict[str, Any]], plain_walk: dict[str, Any], tmp_path: Path) -> None:
+    walls, _plain, _ = dbs
     bare = tmp_path / "bare.db"  # the same bake, its textures gone: none ever arrives
     shutil.copy(walls, bare)
     db = sqlite3.connect(bare)
@@ -233,7 +240,7 @@ def test_a_ring_wall_whose_texture_never_arrives_shows_its_far_field_as_geometry
     finally:
         db.close()
     b = _replay(bare, truth_every=25).summary
-    p = _replay(plain, truth_every=25).summary
+    p = plain_walk
     ws = b["walls"]
     assert ws.get("textures_received", 0) == 0 and ws["walls_mean"] == 0.0
     # every frame with a ring wall in view draws the far field as geometry: no hole, and whole
