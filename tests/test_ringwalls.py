@@ -248,6 +248,14 @@ def test_a_ring_wall_whose_texture_never_arrives_shows_its_far_field_as_geometry
     assert b["visible_mean"] >= 0.95 * p["visible_mean"]  # the objects the plain bake's PVS draws
     assert b["perfect_frame_ratio"] >= p["perfect_frame_ratio"] - 0.02
     assert b["truth"]["colour"]["mean_error"]["median"] <= p["truth"]["colour"]["mean_error"]["median"] + 0.005
+    db = sqlite3.connect(bare)  # a city baked with walls before the far field was stored: served as before
+    try:
+        db.execute("DROP TABLE ring_far")
+        db.commit()
+    finally:
+        db.close()
+    with SceneReader.open(bare) as r:
+        assert all(r.ring_far(c.id) is None for c in r.cells())
 
 
 def test_the_walls_list_sends_a_regions_ring_once_and_decodes_to_every_cells_walls() -> None:
