@@ -206,6 +206,8 @@ def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path 
         "bytes_received": s.get("bytes_received"),
         "bake_s": bake_s,
         "seam_ratio": ((s.get("truth") or {}).get("seam") or {}).get("ratio"),
+        "far_field_frames": walls.get("far_field_frames"),
+        **_visible_shares(reports[0]),
     }
     if gl is not None and reports[1] is not None:
         g = _frames(reports[1])
@@ -218,6 +220,30 @@ def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path 
             "gl_fog_m_median": gl.summary.get("fog_m_median"),
         }
     return row
+
+
+VISIBLE_SHARE = 0.01
+"""The issue's bound on a compared frame's pixels over the visible threshold (ΔE00 2.3)."""
+
+
+def _visible_shares(report: Path) -> dict[str, float | None]:
+    """Of the compared frames (``truth.csv``), the share whose pixels over the visible
+    threshold are at most :data:`VISIBLE_SHARE` of the frame, all causes together
+    (``frames_visible_1pct``) and those the walls' textures caused
+    (``frames_wall_visible_1pct``, the truth's cause ``wall``); None without a truth."""
+    path = report / "truth.csv"
+    if not path.exists():
+        return {"frames_visible_1pct": None, "frames_wall_visible_1pct": None}
+    import csv
+
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows or "visible" not in rows[0]:
+        return {"frames_visible_1pct": None, "frames_wall_visible_1pct": None}
+    vis = np.array([float(r["visible"] or 0.0) for r in rows])
+    wall = np.array([float(r.get("colour_wall") or 0.0) for r in rows])
+    return {"frames_visible_1pct": float((vis <= VISIBLE_SHARE).mean()),
+            "frames_wall_visible_1pct": float((wall <= VISIBLE_SHARE).mean())}
 
 
 def _culling(drawn: float | None, in_scene: float | None) -> float | None:
@@ -347,11 +373,15 @@ def format_walls_table(result: Mapping[str, Any]) -> str:
     a zone border over that of plain motion (``truth.seam.ratio``; at most 1: no seam;
     over the pairs of successive compared frames, so measured best with
     ``--truth-every 1``); ``perf%`` perfect frames and ``kB`` bytes received (pda walk,
-    56 kbit/s); ``bake s`` the database's bake time.
+    56 kbit/s); ``bake s`` the database's bake time; ``far%`` the frames that drew a
+    ring's far field as geometry while a texture was missing (outdoors); ``vis1%`` the
+    compared frames with at most 1 % of their pixels over ΔE00 2.3, and ``wall1%`` those
+    with at most 1 % over it because of the walls (the truth's cause ``wall``).
     """
     head = (f"{'scene':<13} {'variant':<20} {'tri/fr':>7} {'drawn':>6} {'pda ms':>7} {'pda10%':>7} {'gl ms':>7} "
             f"{'gl per':>7} {'gl10%':>6} {'fog m':>6} {'err %':>6} {'dE00':>6} {'over%':>6} {'fog%':>6} "
-            f"{'cull%':>6} {'tex kB':>7} {'tex/wall':>8} {'seam':>5} {'perf%':>6} {'kB':>7} {'bake s':>7}")
+            f"{'cull%':>6} {'tex kB':>7} {'tex/wall':>8} {'seam':>5} {'perf%':>6} {'kB':>7} {'bake s':>7} "
+            f"{'far%':>6} {'vis1%':>6} {'wall1%':>6}")
     lines = [head, "-" * len(head)]
     for r in result.get("rows", []):
         lines.append(
@@ -364,7 +394,9 @@ def format_walls_table(result: Mapping[str, Any]) -> str:
             f"{_f(r.get('fog_visible_share'), '6.1f', 100)} {_f(r.get('effective_culling'), '6.1f', 100)} "
             f"{_f(r.get('texture_bytes'), '7.1f', 1e-3)} {_f(r.get('textures_per_wall'), '8.1f')} "
             f"{_f(r.get('seam_ratio'), '5.2f')} {_f(r.get('perfect_frame_ratio'), '6.1f', 100)} "
-            f"{_f(r.get('bytes_received'), '7.1f', 1e-3)} {_f(r.get('bake_s'), '7.1f')}"
+            f"{_f(r.get('bytes_received'), '7.1f', 1e-3)} {_f(r.get('bake_s'), '7.1f')} "
+            f"{_f(r.get('far_field_frames'), '6.1f', 100)} {_f(r.get('frames_visible_1pct'), '6.1f', 100)} "
+            f"{_f(r.get('frames_wall_visible_1pct'), '6.1f', 100)}"
         )
     fr = result.get("frustum")
     if fr:

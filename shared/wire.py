@@ -320,11 +320,34 @@ class CellRecord:
     """The objects of the PVS the cell draws as impostors (a scene baked with
     ``--impostors``, a cell with some; None otherwise, and then the record is what it
     was before)."""
+    far: NDArray[np.int64] | None = None
+    """(f,) a city baked with ``--virtual-walls``: the objects the cell's ring of walls
+    carries on its textures (not in :attr:`pvs`), ascending; the client streams them
+    with the PVS and draws them as geometry while a ring texture in view has not
+    arrived.  None: no ring (the record is what it was before)."""
+    far_ach: NDArray[np.float64] | None = None
+    """(f,) their coverage (sums to 1 unless empty)."""
+    far_share: float = 0.0
+    """Their share of the cell's whole coverage before the ring: the frame that draws
+    them weighs :attr:`ach` by ``1 - far_share`` and :attr:`far_ach` by ``far_share``."""
 
     def __post_init__(self) -> None:
         # records are shared between caches and callers: nothing in them may change
         object.__setattr__(self, "pvs", readonly(np.asarray(self.pvs, np.int64).reshape(-1)))
         object.__setattr__(self, "ach", readonly(np.asarray(self.ach, np.float64).reshape(-1)))
+        if self.far is not None:
+            object.__setattr__(self, "far", readonly(np.asarray(self.far, np.int64).reshape(-1)))
+            fa = np.zeros(len(self.far)) if self.far_ach is None else self.far_ach
+            object.__setattr__(self, "far_ach", readonly(np.asarray(fa, np.float64).reshape(-1)))
+
+    def streamed(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """``((k + f,) ids, (k + f,) coverage)``: the objects the client streams for this
+        cell, the PVS and then the ring's far field (:attr:`far`) weighed by its share."""
+        if self.far is None or not len(self.far):
+            return self.pvs, self.ach
+        fa = np.asarray(self.far_ach, np.float64)
+        return (np.concatenate([self.pvs, self.far]),
+                np.concatenate([self.ach * (1.0 - self.far_share), fa * self.far_share]))
 
     def to_wire(self, *, compact: bool = True) -> dict[str, Any]:
         """The record as sent (``compact=False``: plain integer lists, for JSON)."""
@@ -338,6 +361,12 @@ class CellRecord:
         }
         if self.impostors is not None:  # only then: a scene without impostors sends the very same bytes
             out["imp"] = self.impostors.to_wire()
+        if self.far is not None:  # only then: a cell without a ring sends the very same bytes
+            far = np.asarray(self.far, np.int64)
+            out["far"] = pack_ints(np.diff(far, prepend=0).tolist(), compact=compact)
+            fa = np.zeros(0) if self.far_ach is None else np.asarray(self.far_ach, np.float64)
+            out["fach"] = pack_ints((quantise_ach(fa) if len(far) else np.zeros(0, np.int64)).tolist(), compact=compact)
+            out["fsh"] = round(float(self.far_share) * ACH_UNITS)
         return out
 
 
@@ -506,6 +535,7 @@ def cell_from_wire(
         if len(units) and ((units < 0).any() or (units > ACH_UNITS).any()):
             raise CodecError(f"{what}: ach units outside [0, {ACH_UNITS}]")
         kind = obj.get("kind", "")
+        far, far_ach, share = _ring_far(obj, what)
         return CellRecord(
             id=cid,
             kind=str(kind),
@@ -515,7 +545,25 @@ def cell_from_wire(
             etag=etag,
             body=bytes(body),
             impostors=_cell_impostors(obj.get("imp"), what),
+            far=far,
+            far_ach=far_ach,
+            far_share=share,
         )
+
+
+def _ring_far(obj: dict[str, Any], what: str) -> tuple[NDArray[np.int64] | None, NDArray[np.float64] | None, float]:
+    """A record's ring far field (:attr:`CellRecord.far`), checked; ``(None, None, 0)`` without one."""
+    if "far" not in obj:
+        return None, None, 0.0
+    far = _cumsum_ids(unpack_ints(obj["far"], what, "far", 1 << 22), what, "far", strict=True)
+    units = np.asarray(unpack_ints(obj.get("fach", []), what, "fach", 1 << 22), dtype=np.int64)
+    share = obj.get("fsh", 0)
+    if len(units) != len(far):
+        raise CodecError(f"{what}: {len(far)} far ids but {len(units)} fach values")
+    if (len(units) and ((units < 0).any() or (units > ACH_UNITS).any())) or type(share) is not int \
+            or not 0 <= share <= ACH_UNITS:
+        raise CodecError(f"{what}: far coverage or share outside [0, {ACH_UNITS}]")
+    return far, units.astype(np.float64) / ACH_UNITS, share / ACH_UNITS
 
 
 def _unpack_record(

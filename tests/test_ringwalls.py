@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import math
+import shutil
 import sqlite3
 from pathlib import Path
 from typing import Any
@@ -176,6 +177,12 @@ def _replay(db: Path, **kw: Any) -> ReplayResult:
         app.state.scenes.close()
 
 
+@pytest.fixture(scope="module")
+def plain_walk(dbs: tuple[Path, Path, dict[str, Any]]) -> dict[str, Any]:
+    """The plain bake's walk (compared with the walls' in two tests: replayed once)."""
+    return _replay(dbs[1], truth_every=25).summary
+
+
 def _pvs(db: Path) -> dict[int, set[int]]:
     with SceneReader.open(db) as r:
         return {c.id: set(np.asarray(c.pvs).tolist()) for c in r.cells()}
@@ -189,6 +196,11 @@ def test_a_city_bake_rings_its_cells_and_carries_the_far_field_on_the_textures(d
     assert cut.keys() == full.keys()
     assert all(cut[c] <= full[c] for c in cut)  # only taken away
     assert sum(len(full[c]) - len(cut[c]) for c in cut) == summary["ring_removed"]
+    with SceneReader.open(walls) as r:  # what a ring took is stored apart, with its share of the coverage
+        far = {c: r.ring_far(c) for c in cut}
+    assert sum(f is not None for f in far.values()) == summary["ring_cells"]
+    for c, f in far.items():
+        assert f is None or (set(f[0].tolist()) == full[c] - cut[c] and 0.0 <= f[2] <= 1.0)
     db = sqlite3.connect(walls)
     try:
         rows = db.execute("SELECT data FROM wall_textures").fetchall()
@@ -201,10 +213,11 @@ def test_a_city_bake_rings_its_cells_and_carries_the_far_field_on_the_textures(d
 
 
 @pytest.mark.gl
-def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tuple[Path, Path, dict[str, Any]]) -> None:
-    walls, plain, _ = dbs
+def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tuple[Path, Path, dict[str, Any]],
+                                                                       plain_walk: dict[str, Any]) -> None:
+    walls, _plain, _ = dbs
     w = _replay(walls, truth_every=25).summary
-    p = _replay(plain, truth_every=25).summary
+    p = plain_walk
     ws = w["walls"]
     assert ws["frames_with_walls"] > 0.5 and ws["textures_received"] > 0 and ws["texture_bytes"] > 0
     assert ws["geometry_objects_mean"] < p["visible_mean"]
@@ -212,6 +225,37 @@ def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tupl
     assert w["truth"]["colour"]["mean_error"]["median"] < 0.1
     off = _replay(walls, virtual_walls=False).summary
     assert "walls" not in off  # no ring asked for, no texture on the link
+
+
+@pytest.mark.gl
+def test_a_ring_wall_whose_texture_never_arrives_shows_its_far_field_as_geometry_never_a_hole(
+        dbs: tuple[Path, Path, dict[str, Any]], plain_walk: dict[str, Any], tmp_path: Path) -> None:
+    walls, _plain, _ = dbs
+    bare = tmp_path / "bare.db"  # the same bake, its textures gone: none ever arrives
+    shutil.copy(walls, bare)
+    db = sqlite3.connect(bare)
+    try:
+        db.execute("DELETE FROM wall_textures")
+        db.commit()
+    finally:
+        db.close()
+    b = _replay(bare, truth_every=25).summary
+    p = plain_walk
+    ws = b["walls"]
+    assert ws.get("textures_received", 0) == 0 and ws["walls_mean"] == 0.0
+    # every frame with a ring wall in view draws the far field as geometry: no hole, and whole
+    assert ws["far_field_frames"] > 0.5 and ws["texture_missing_frames"] == 0.0
+    assert b["visible_mean"] >= 0.95 * p["visible_mean"]  # the objects the plain bake's PVS draws
+    assert b["perfect_frame_ratio"] >= p["perfect_frame_ratio"] - 0.02
+    assert b["truth"]["colour"]["mean_error"]["median"] <= p["truth"]["colour"]["mean_error"]["median"] + 0.005
+    db = sqlite3.connect(bare)  # a city baked with walls before the far field was stored: served as before
+    try:
+        db.execute("DROP TABLE ring_far")
+        db.commit()
+    finally:
+        db.close()
+    with SceneReader.open(bare) as r:
+        assert all(r.ring_far(c.id) is None for c in r.cells())
 
 
 def test_the_walls_list_sends_a_regions_ring_once_and_decodes_to_every_cells_walls() -> None:
@@ -233,3 +277,54 @@ def test_the_walls_list_sends_a_regions_ring_once_and_decodes_to_every_cells_wal
     assert walls_wire(own) == {"sides": own}  # nothing shared: as before
     with pytest.raises(CodecError, match="same"):
         decode_walls(msgpack.packb({"sides": own, "same": [[9, 5]]}), "walls")
+
+
+def test_a_cell_record_carries_its_rings_far_field_and_streams_it_weighed_by_its_share() -> None:
+    import msgpack
+
+    from walkstream.shared.errors import CodecError
+    from walkstream.shared.wire import CellRecord, cell_from_wire
+
+    rec = CellRecord(id=3, kind="street", pvs=np.array([1, 4]), ach=np.array([0.75, 0.25]),
+                     far=np.array([2, 9, 30]), far_ach=np.array([0.5, 0.25, 0.25]), far_share=0.4)
+    back = cell_from_wire(msgpack.unpackb(msgpack.packb(rec.to_wire())), "cell 3")
+    assert back.pvs.tolist() == [1, 4] and back.far is not None and back.far.tolist() == [2, 9, 30]
+    ids, ach = back.streamed()
+    assert ids.tolist() == [1, 4, 2, 9, 30]
+    assert np.allclose(ach, [0.45, 0.15, 0.2, 0.1, 0.1], atol=1e-4)  # the whole cell's coverage again
+    plain = CellRecord(id=3, kind="street", pvs=np.array([1, 4]), ach=np.array([0.75, 0.25]))
+    assert "far" not in plain.to_wire() and plain.streamed()[0].tolist() == [1, 4]  # no ring: as before
+    from walkstream.shared.codec import pack_ints
+
+    bad = rec.to_wire() | {"fach": pack_ints([65535])}
+    with pytest.raises(CodecError, match="3 far ids but 1 fach"):
+        cell_from_wire(msgpack.unpackb(msgpack.packb(bad)), "cell 3")
+
+
+def test_a_missing_ring_texture_brings_back_only_the_far_objects_behind_its_wall() -> None:
+    from types import SimpleNamespace
+
+    from walkstream.client.walk.objects import behind_walls
+
+    def box(x: float, y: float) -> Any:
+        return SimpleNamespace(bbox_min=np.array([x - 1.0, y - 1.0, 0.0]), bbox_max=np.array([x + 1.0, y + 1.0, 9.0]))
+
+    # a ring's walls run clockwise, the hidden space to the left: north (-10, 10) -> (10, 10)
+    north = ((-10.0, 10.0, 10.0, 10.0),)
+    east = ((10.0, 10.0, 10.0, -10.0),)
+    geoms = [box(0.0, 30.0), box(30.0, 0.0), box(30.0, 30.0), None]
+    assert behind_walls(geoms, north).tolist() == [True, False, True, True]  # not built yet: must arrive
+    assert behind_walls(geoms, east).tolist() == [False, True, True, True]
+    assert behind_walls(geoms, north + east).tolist() == [True, True, True, True]
+    assert behind_walls(geoms, ()).tolist() == [True] * 4
+
+
+def test_ring_textures_are_lossy_at_the_outdoor_quality_and_a_bad_quality_is_one_line() -> None:
+    from walkstream.shared.errors import InputError
+
+    st = WallSettings()
+    assert st.outdoors().quality == st.outdoor_quality < st.quality
+    assert st.record_outdoors()["quality"] == st.outdoor_quality
+    for bad in (WallSettings(outdoor_quality=0), WallSettings(quality=101)):
+        with pytest.raises(InputError, match="quality: expected 1 to 100"):
+            bad.check()

@@ -818,9 +818,11 @@ def test_documented_shapes_match_the_wire_records() -> None:
     assert list(manifest["index"]) == list(models.TileGridOut.model_fields)
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
     cell = CellRecord(3, "street", np.array([1]), np.array([1.0]))
-    assert list(cell.to_wire()) == [k for k in models.CellOut.model_fields if k != "imp"]
+    ring = ("far", "fach", "fsh")
+    assert list(cell.to_wire()) == [k for k in models.CellOut.model_fields if k != "imp" and k not in ring]
     row = ImpostorRow(1, 0, 2, 1, 3, 1, (0.0, 0.0, 0.0, 1.0, 1.0, 1.0), (1,))
-    imp = CellRecord(3, "street", np.array([1]), np.array([1.0]), impostors=CellImpostors(250.0, 0.03, (row,)))
+    imp = CellRecord(3, "street", np.array([1]), np.array([1.0]), impostors=CellImpostors(250.0, 0.03, (row,)),
+                     far=np.array([2]), far_ach=np.array([1.0]), far_share=0.5)
     assert list(imp.to_wire()) == list(models.CellOut.model_fields)
     assert list(imp.to_wire()["imp"]) == list(models.ImpostorsOut.model_fields)
     index = CellIndex((0, 1), [3], ["street"], [1.5], [2.0], [square], [[4]])

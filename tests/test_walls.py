@@ -474,6 +474,20 @@ def test_a_wall_whose_texture_has_not_arrived_is_geometry_never_a_hole(replays: 
     assert a["cells"].mean() < b["cells"].mean()
 
 
+
+@pytest.mark.gl
+def test_the_walls_walks_only_imperfect_frames_are_its_start(replays: tuple[object, object]) -> None:
+    on, _off = replays
+    s, log = on.summary, on.log  # type: ignore[attr-defined]
+    perfect = (log.cell >= 0) & (np.minimum(log.download_quality, log.rewrite_quality) >= 1.0 - 1e-9)
+    first = int(np.argmax(perfect))
+    assert perfect.any() and s["time_to_first_perfect_frame_s"] is not None
+    # frame by frame: once the first view is in, no frame misses a cell or a texture's
+    # geometry (a wall whose texture is late leaves its portal open and the cells behind
+    # it count); the frames before it are the walker standing while its first view comes
+    assert perfect[first:].all() and s["perfect_frame_ratio"] == 1.0
+    assert s["late_cells"]["cells"] == 0 and sum(s["late_cells"]["cell_frames_by_cause"].values()) == 0
+    assert s["perfect_frames"] == len(log.t) - first
 @pytest.mark.parametrize(
     ("flags", "message"),
     [

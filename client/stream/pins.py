@@ -69,15 +69,15 @@ class Pins:
         # (a key not cached yet is pinned when it arrives)
         keys: list[tuple[str, int]] = [("cell", c) for c in self.needed_at]
         if rec is not None:
-            keys += [(kind, i) for i in rec.pvs.tolist()]
-            keys += [("geom", i) for i in rec.pvs.tolist()]
+            keys += [(kind, i) for i in rec.streamed()[0].tolist()]
+            keys += [("geom", i) for i in rec.streamed()[0].tolist()]
         for c in self.needed_at:
             r = cells.get(c)
             if r is not None and c != current:
-                keys += [(kind, i) for i in r.pvs.tolist()]
+                keys += [(kind, i) for i in r.streamed()[0].tolist()]
                 if need.get(c, math.inf) <= self.geometry_s:
                     # about to be entered: its geometry too, or a frame shows the gap
-                    keys += [("geom", i) for i in r.pvs.tolist()]
+                    keys += [("geom", i) for i in r.streamed()[0].tolist()]
         # every tile the prediction needs: one evicted would be asked for again at once
         keys += [("index", t) for t in tiles]
         return keys

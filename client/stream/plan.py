@@ -169,7 +169,8 @@ def wanted_objects(
         rec = cells.get(cell)
         if rec is None:
             continue
-        for oid, a in zip(rec.pvs.tolist(), rec.ach.tolist(), strict=True):
+        ids, ach = rec.streamed()  # a ring's far field too (drawn while a texture is missing)
+        for oid, a in zip(ids.tolist(), ach.tolist(), strict=True):
             if has(oid):
                 continue
             key = (t, -a)

@@ -278,7 +278,7 @@ class Streamer:
         rec = self.cells.get(cid)
         self._pin({**self.need, cid: 0.0})
         if rec is not None and self.rewrite is not None:
-            for oid, a in zip(rec.pvs.tolist(), rec.ach.tolist(), strict=True):
+            for oid, a in zip(*(v.tolist() for v in rec.streamed()), strict=True):
                 self.rewrite.bump(oid, (0.0, -a))
 
     def _bps(self) -> float:
@@ -340,9 +340,9 @@ class Streamer:
             for cell, t in need.items():
                 rec = self.cells.get(cell)
                 if rec is not None and t <= c.pin_geometry_s:
-                    self.ensure_geometry(rec.pvs.tolist(), t)
+                    self.ensure_geometry(rec.streamed()[0].tolist(), t)
             self.rewrite.prune(
-                [r.pvs for x in (*need, self.cellmap.current or -1) if (r := self.cells.get(x))]
+                [r.streamed()[0] for x in (*need, self.cellmap.current or -1) if (r := self.cells.get(x))]
             )
         # cancel in-flight batches nobody needs any more
         self.stats.cancelled_batches += self.scheduler.cancel_unwanted(self, {"objects": wanted, "cells": records})

@@ -79,6 +79,12 @@ class WalkFrames:
     """Bytes of the wall textures each frame drew."""
     geometry: list[int] = field(default_factory=list)
     """Objects drawn as geometry per frame (a scene with walls; empty otherwise)."""
+    far_field: list[int] = field(default_factory=list)
+    """Outdoors, per frame: 1 when a ring wall in view had no texture yet and the frame
+    drew the ring's far field as geometry instead, else 0."""
+    texture_missing: list[int] = field(default_factory=list)
+    """Outdoors, per frame: ring walls in view with no texture and nothing drawn for them
+    (a scene baked before the far field was stored)."""
 
     def wall_figures(self) -> dict[str, float]:
         """Wall textures drawn per frame (mean, max), closed walls per frame, the share of
@@ -95,6 +101,9 @@ class WalkFrames:
             "wall_texture_bytes_mean": float(b.mean()),
             "wall_texture_bytes_max": int(b.max()),
             **({"geometry_objects_mean": float(np.mean(self.geometry))} if self.geometry else {}),
+            **({"far_field_frames": float(np.mean(self.far_field))} if self.far_field else {}),
+            **({"texture_missing_frames": float(np.mean(np.asarray(self.texture_missing) > 0))}
+               if self.texture_missing else {}),
         }
 
     def facade_figures(self) -> dict[str, float]:

@@ -67,6 +67,8 @@ def measure(w: WalkState, f: Frame) -> None:
         fr.wall_bytes.append(sum({d.image: d.nbytes for d in f.walls}.values()))
         if not w.indoors and city is not None:
             fr.geometry.append(int((f.lods >= 0).sum()))
+            fr.far_field.append(int(f.ring_far))
+            fr.texture_missing.append(int(f.wall_missing))
     if w.facades is not None and not w.indoors:
         fr.facades.append(len(f.facades))
         fr.facade_quads.append(len(f.facade_quads))

@@ -162,6 +162,13 @@ class Frame:
     needs them as it needs the PVS: the far field left the geometry for them)."""
     wall_missing: int = 0
     """Of :attr:`wall_due`, those whose texture is not held yet."""
+    ring_far: bool = False
+    """Outdoors: a ring wall in view has no texture yet and the cell's record lists what
+    its ring carries: the frame draws that far field as geometry (it joins the frame's
+    PVS, so the perfect frame needs it built), never a hole."""
+    far_walls: tuple[tuple[float, float, float, float], ...] = ()
+    """Those walls' ends ``(x0, y0, x1, y1)`` (the hidden space to the left of ``p0 ->
+    p1``): the far field's objects behind one of them are drawn."""
     # -- draw
     snap: bool = False
     keys: list[Hashable] = field(default_factory=list)

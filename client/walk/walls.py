@@ -28,8 +28,13 @@ street cell whose PVS was large, :mod:`walkstream.server.bake.ringwalls`), each 
 texture (blended with the next zone's near a border, as indoors); their textures are
 wanted now for the walls in view (sooner than those behind the viewer), ahead for the
 zones the eye moves into and for the rings of the cells the streamer predicts, at
-their need times.  The far field is no longer in the cell's PVS, so a texture not
-held is missing content: the frame is not perfect until it arrives
+their need times.  The far field is no longer in the cell's geometry PVS, but the
+cell's record lists it apart (:attr:`~walkstream.shared.wire.CellRecord.far`, streamed
+with the PVS: a city's objects are a few parameters each): while a ring wall in view
+has no texture yet, the frame draws that far field as geometry
+(:attr:`~walkstream.client.walk.state.Frame.ring_far`), never a hole, and the perfect
+frame needs it built as it needs the PVS.  Only a scene baked before the far field was
+stored shows the sky there, and then the missing texture is missing content
 (:attr:`~walkstream.client.walk.state.Frame.wall_missing`).
 """
 
@@ -99,6 +104,8 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     wants the textures now and ahead from the lane."""
     lane, table, city = w.scene.wall_images, w.scene.wall_table, w.scene.streets
     f.wall_due = f.wall_missing = 0
+    f.ring_far = False
+    f.far_walls = ()
     if lane is None or table is None or city is None or not w.config.virtual_walls or not w.scene.wall_rings:
         return []
     sides = w.scene.walls
@@ -118,10 +125,23 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
         if not lane.held(tid) and need < wants.get(tid, np.inf):
             wants[tid] = need
 
+    boxes = w.scene.wall_boxes
+
+    def in_view(walls: list[int], moved: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Which of ``walls`` the view shows from the eye moved by ``moved`` ``(3,)``
+        (looking the same way): the textures ahead are those of walls the walker will
+        see, not of the wall behind it (half the textures asked for were never drawn)."""
+        if boxes is None or not walls:
+            return np.ones(len(walls), bool)
+        shift = np.eye(4)
+        shift[:3, 3] = -np.asarray(moved, np.float64)[:3]
+        return frustum_cull(boxes[walls, 0], boxes[walls, 1], np.asarray(f.vp, np.float64) @ shift)
+
     out: list[DrawnWall] = []
+    rec = city.cells.get(street)
+    has_far = rec is not None and rec.far is not None
     if ring:
-        boxes = w.scene.wall_boxes
-        seen = frustum_cull(boxes[ring, 0], boxes[ring, 1], f.vp) if boxes is not None else np.ones(len(ring), bool)
+        seen = in_view(ring, np.zeros(3))
         mix_zone, mix_share = zone_mix(table.along_of(eye)[0], table.width, table.zones, w.config.wall_zone_blend)
         for j, k in enumerate(ring):
             if weights[0, k] <= 0.0:
@@ -129,11 +149,17 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             s = sides[k]
             zone = int(zones[0, k])
             tid = s.textures[zone]
-            f.wall_due += int(seen[j])
             if not lane.held(tid):
-                f.wall_missing += int(seen[j])
+                if has_far:  # the far field behind it drawn as geometry instead: never a hole
+                    if seen[j]:
+                        f.ring_far = True
+                        f.far_walls += ((*s.p0, *s.p1),)
+                else:
+                    f.wall_due += int(seen[j])
+                    f.wall_missing += int(seen[j])
                 want(tid, 0.0 if seen[j] else RING_BEHIND_NEED_S)
                 continue
+            f.wall_due += int(seen[j])
             mix_tid, mix = -1, 0.0
             if mix_zone[k] >= 0:  # near a zone border: the neighbour's texture blended in
                 nb = s.textures[int(mix_zone[k])]
@@ -144,9 +170,10 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             img = lane.image(tid)
             out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
                                  int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix))
-        for h, t in enumerate(horizons, start=1):  # the zones the eye walks into
-            for k in ring:
-                if weights[h, k] > 0.0:
+        for h, t in enumerate(horizons, start=1):  # the zones the eye walks into, of walls it will see
+            shown = in_view(ring, eyes[h] - eye)
+            for j, k in enumerate(ring):
+                if weights[h, k] > 0.0 and shown[j]:
                     want(sides[k].textures[int(zones[h, k])], float(t))
     if w.config.prefetch:  # the rings of the cells the streamer predicts, where the eye will be
         ahead = [(c, t) for c, t in sorted(city.need.items(), key=lambda kv: kv[1])
@@ -155,8 +182,10 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             at = np.array([eye + np.array([*(velocity * t), 0.0]) for _, t in ahead])
             az, _ad, aw = table.views(at)
             for row, (c, t) in enumerate(ahead):
-                for k in w.scene.wall_rings[c]:
-                    if aw[row, k] > 0.0:
+                theirs = list(w.scene.wall_rings[c])
+                seen_there = in_view(theirs, at[row] - eye)
+                for j, k in enumerate(theirs):
+                    if aw[row, k] > 0.0 and seen_there[j]:
                         want(sides[k].textures[int(az[row, k])], float(t))
     lane.want(wants)
     return out

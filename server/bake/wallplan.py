@@ -83,7 +83,10 @@ class WallSettings:
     outdoor textures are ``outdoor_texels_per_m`` (4: a ring's wall is tens of metres
     long and seen from at least ``ring_min``; on the village's walk 8 texels per metre
     sent 24 % more bytes for the same colour error) and at most ``outdoor_max_side``
-    texels wide."""
+    texels wide, encoded at WebP quality ``outdoor_quality`` (75: the textures of a
+    ring's long walls are 1-4 kB at 90, and a walker along a street needs a new one on
+    each wall beside it every second or so; 75 takes about 40 % off their bytes).
+    ``quality`` is the lossy codecs' quality indoors."""
 
     pitch: float = 8.0
     error_deg: float = DEFAULT_WALL_ERROR_DEG
@@ -95,6 +98,8 @@ class WallSettings:
     region: float = 40.0
     outdoor_texels_per_m: float = 4.0
     outdoor_max_side: int = 256
+    quality: int = 90
+    outdoor_quality: int = 75
 
     def check(self) -> WallSettings:
         """These settings, or a one-line :class:`InputError` naming the bad one."""
@@ -108,6 +113,9 @@ class WallSettings:
             raise InputError(f"--wall-ring-min: expected 1 to 2000 m, got {self.ring_min}")
         if not (math.isfinite(self.region) and 0.0 <= self.region <= 10_000.0):
             raise InputError(f"--wall-region: expected 0 to 10000 m, got {self.region}")
+        for name, q in (("quality", self.quality), ("outdoor quality", self.outdoor_quality)):
+            if not (isinstance(q, int) and 1 <= q <= 100):
+                raise InputError(f"wall {name}: expected 1 to 100, got {q!r:.20}")
         if self.codec not in IMAGE_MEDIA:
             raise InputError(f"wall codec: expected one of {', '.join(IMAGE_MEDIA)}, got {self.codec!r}")
         return self
@@ -119,12 +127,14 @@ class WallSettings:
 
     def outdoors(self) -> WallSettings:
         """These settings for a city's rings: the outdoor texture resolution in force."""
-        return dataclasses.replace(self, texels_per_m=self.outdoor_texels_per_m, max_side=self.outdoor_max_side)
+        return dataclasses.replace(self, texels_per_m=self.outdoor_texels_per_m, max_side=self.outdoor_max_side,
+                                   quality=self.outdoor_quality)
 
     def record_outdoors(self) -> dict[str, Any]:
         """What a city's database records (a change is a different bake)."""
         return {"error_deg": self.error_deg, "keep": self.keep, "ring_min": self.ring_min, "region": self.region,
-                "texels_per_m": self.outdoor_texels_per_m, "max_side": self.outdoor_max_side, "codec": self.codec}
+                "texels_per_m": self.outdoor_texels_per_m, "max_side": self.outdoor_max_side, "codec": self.codec,
+                "quality": self.outdoor_quality}
 
 
 WallJob = tuple[int, tuple[Any, ...], int, int, tuple[int, ...]]

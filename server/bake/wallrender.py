@@ -190,9 +190,10 @@ class WallRenderer(Releasable):
 _WORKER: dict[str, Any] = {}
 
 
-def wall_task(jobs: list[WallJob], scene: InteriorScene | SourceScene, key: str, codec: str) -> list[tuple[WallJob, tuple[int, bytes]]]:
+def wall_task(jobs: list[WallJob], scene: InteriorScene | SourceScene, key: str, codec: str,
+              quality: int = 90) -> list[tuple[WallJob, tuple[int, bytes]]]:
     """Render and encode textures (:data:`~.wallplan.WallJob` each): ``(job, (height, bytes))``
-    in order.  A worker keeps its renderer while ``key`` (the scene's) stays."""
+    in order, lossy codecs at ``quality``.  A worker keeps its renderer while ``key`` (the scene's) stays."""
     if _WORKER.get("key") != key:
         release_wall_renderer()
         _WORKER["renderer"] = WallRenderer(scene)
@@ -203,7 +204,7 @@ def wall_task(jobs: list[WallJob], scene: InteriorScene | SourceScene, key: str,
         tid, row, zone, width, exclude = job
         side = WallSide.from_row(list(row), f"texture {tid}")
         img = r.render(side, zone, width, exclude)
-        out.append((job, (img.shape[0], encode_image(img, codec))))
+        out.append((job, (img.shape[0], encode_image(img, codec, quality))))
     return out
 
 

@@ -57,7 +57,7 @@ def bake_walls(
         f"({len(plan.jobs) - len(todo)} already baked)")
     media = IMAGE_MEDIA[settings.codec]
     for results in run_chunks(
-        wall_task, todo, (scene, key, settings.codec), size=WALL_CHUNK, workers=workers, scheduler=scheduler,
+        wall_task, todo, (scene, key, settings.codec, settings.quality), size=WALL_CHUNK, workers=workers, scheduler=scheduler,
         progress=progress, done=len(plan.jobs) - len(todo), total=len(plan.jobs), release=release_wall_renderer,
     ):
         for (tid, row, zone, width, _ex), (height, data) in results:
@@ -100,6 +100,14 @@ def bake_ring_walls(
         f"{plan.removed} cell-object pairs carried by their textures")
     out = bake_walls(writer, rings.scene, plan.walls, st, rings.key, workers=workers,
                      scheduler=scheduler, progress=progress, say=say)
+    full = writer.stored_pvs()
+    for cid, ids in sorted(plan.kept.items()):
+        # what the ring carries, kept apart (all before the first cut): the client draws
+        # it as geometry while a texture of the ring in view has not arrived
+        whole = full.get(cid, np.zeros(0, np.int64))
+        far = np.setdiff1d(whole, ids)
+        cover, total = writer.stored_coverage(cid, far), float(writer.stored_coverage(cid, whole).sum())
+        writer.set_ring_far(cid, far, cover, float(cover.sum()) / total if total > 0.0 else 0.0)
     for cid, ids in sorted(plan.kept.items()):
         writer.set_pvs(cid, ids, writer.stored_coverage(cid, ids))
     out.update({

@@ -172,6 +172,13 @@ class CellOut(BaseModel):
         default=None,
         description="only in a scene baked with --impostors, for a cell with impostors (see docs/formats.md)",
     )
+    far: IntsOut | None = Field(
+        default=None,
+        description="only in a city baked with --virtual-walls, for a cell with a ring of walls: the objects "
+        "its ring's textures carry, ids ascending, delta-coded (drawn as geometry while a texture is missing)",
+    )
+    fach: IntsOut | None = Field(default=None, description="their coverage in units of 1/65535, summing to 65535")
+    fsh: int | None = Field(default=None, description="their share of the cell's whole coverage, units of 1/65535")
 
 
 class CellIndexOut(BaseModel):

@@ -340,7 +340,10 @@ class Scene:
         enc = self.cached_cell(cid, rep)
         if enc is None:
             c = self.reader.cell(cid)
-            record = CellRecord(id=c.id, kind=c.kind, pvs=c.pvs, ach=c.ach, impostors=self._impostor_rows(cid))
+            far = self.reader.ring_far(cid)
+            record = CellRecord(id=c.id, kind=c.kind, pvs=c.pvs, ach=c.ach, impostors=self._impostor_rows(cid),
+                                far=None if far is None else far[0], far_ach=None if far is None else far[1],
+                                far_share=0.0 if far is None else far[2])
             enc = encode(record.to_wire(compact=rep == "msgpack"), rep, self.version, f"cell-v2:{cid}")
             self._bodies.put(("cell", cid, rep), enc, len(enc.content))
         return enc

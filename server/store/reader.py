@@ -27,7 +27,7 @@ from walkstream.shared.codec import (
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.content.params import KIND as PARAMS
 from walkstream.shared.content.registry import content_kind
-from walkstream.shared.errors import DatabaseDamagedError, NotFoundError, StoreError
+from walkstream.shared.errors import CodecError, DatabaseDamagedError, NotFoundError, StoreError
 from walkstream.shared.records import AreaParams, BuildingParams, StreetParams, Viewpoint
 from walkstream.shared.scene.placement import ContentsPlacement
 
@@ -554,6 +554,21 @@ class SceneReader:
         if not self.has_walls():
             return []
         return [list(msgpack.unpackb(r[0])) for r in self._query("SELECT data FROM wall_sides ORDER BY id")]
+
+    def ring_far(self, cid: int) -> tuple[NDArray[np.int64], NDArray[np.float64], float] | None:
+        """The objects ``(k,)`` and their coverage ``(k,)`` (normalised) that cell ``cid``'s
+        ring of walls carries on its textures, and their share of the cell's whole
+        coverage (None: a cell without a ring, or a scene baked before they were stored)."""
+        if not self._has_table("ring_far"):
+            return None
+        rows = self._query("SELECT pvs, share FROM ring_far WHERE cell = ?", (row_index(cid, "cell id"),))
+        if not rows:
+            return None
+        try:
+            ids, ach = decode_pvs(bytes(rows[0][0]), f"cell {cid}: ring far field")[:2]
+        except CodecError as exc:
+            raise StoreError(f"{self._label}: {exc}") from exc
+        return np.asarray(ids, np.int64), np.asarray(ach, np.float64), float(rows[0][1])
 
     def wall_texture_info(self) -> dict[int, tuple[int, int, int, int, int, int]]:
         """Texture id -> ``(portal, side, zone, width, height, bytes)`` of every stored texture."""

@@ -164,6 +164,10 @@ OPTIONAL_TABLES: dict[str, dict[str, str]] = {
             "zone INTEGER NOT NULL, width INTEGER NOT NULL, height INTEGER NOT NULL, media TEXT NOT NULL, "
             "data BLOB NOT NULL)"
         ),
+        # outdoors: a ringed cell's objects carried by its ring's textures (encode_pvs of
+        # ids and coverage, normalised) and their share of the cell's whole coverage: drawn
+        # as geometry while a texture in view has not arrived
+        "ring_far": "CREATE TABLE ring_far(cell INTEGER PRIMARY KEY, pvs BLOB NOT NULL, share REAL NOT NULL)",
     },
 }
 """Tables that exist only in scenes using a feature, declared in this one place."""

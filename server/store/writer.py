@@ -590,6 +590,20 @@ class SceneWriter:
         self._run("wall_sides", "INSERT OR REPLACE INTO wall_sides VALUES (?,?)", out)
         return len(out)
 
+    def set_ring_far(self, cell_id: int, ids: ArrayLike, ach: ArrayLike, share: float) -> None:
+        """Store the objects ``ids`` ``(k,)`` (coverage ``ach`` ``(k,)``) a ring's textures
+        carry for cell ``cell_id`` (those its geometry PVS lost to the ring), and their
+        share (0..1) of the cell's whole coverage."""
+        self._require("ring_far", "walls")
+        cid = row_index(cell_id, "cell id")
+        if not 0.0 <= float(share) <= 1.0:
+            raise StoreError(f"cell {cid}: ring far field: share {share!r:.20} outside [0, 1]")
+        try:
+            blob = encode_pvs(np.asarray(ids).reshape(-1), np.asarray(ach, dtype=np.float64).reshape(-1))
+        except CodecError as exc:
+            raise StoreError(f"cell {cid}: ring far field: {exc}") from exc
+        self._run("ring_far", "INSERT OR REPLACE INTO ring_far VALUES (?,?,?)", [(cid, blob, float(share))])
+
     # -- finishing -----------------------------------------------------------
 
     def finish(self, bake_seconds: float) -> str:
