@@ -16,6 +16,7 @@ from functools import cached_property
 
 from numpy.typing import ArrayLike
 
+from walkstream.server.service.contentsform import ContentsStream
 from walkstream.server.service.http import Encoded, Rep, encode, etag_for
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
@@ -140,18 +141,22 @@ class InteriorState:
             self._cache.put(("contents", cid), enc, len(blob))
         return enc
 
-    def contents_part(self, cid: int, inflate: bool) -> bytes:
+    def contents_part(self, cid: int, inflate: bool, stream: ContentsStream | None = None) -> bytes:
         """Cell ``cid``'s part of a contents stream (:mod:`~walkstream.shared.codec.cellbatch`):
         its blob as stored, or (``inflate``, for a stream gzip-compressed as a whole)
-        inflated to its ``N`` form so the cells share one dictionary."""
+        inflated to its ``N`` form so the cells share one dictionary; with ``stream``
+        (the mirror of that gzip stream) whichever of the two costs fewer bytes there
+        (:mod:`~walkstream.server.service.contentsform`)."""
         enc = self.contents(cid)
-        blob = enc.content
-        if inflate:
-            try:
-                blob = inflate_cell_mesh(blob, f"contents of cell {cid}")
-            except CodecError:  # a damaged stored blob goes as stored: the client says so
-                pass
-        return pack_contents_part(cid, enc.etag, blob)
+        stored = pack_contents_part(cid, enc.etag, enc.content)
+        if not inflate:
+            return stored
+        try:
+            blob = inflate_cell_mesh(enc.content, f"contents of cell {cid}")
+        except CodecError:  # a damaged stored blob goes as stored: the client says so
+            blob = enc.content
+        part = pack_contents_part(cid, enc.etag, blob)
+        return part if stream is None else stream.cheaper(part, stored)
 
     @cached_property
     def _view_model(self) -> tuple[PortalGraph, RoomLocator]:

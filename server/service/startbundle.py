@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.server.service.contentsform import STREAM_LEVEL, ContentsStream
 from walkstream.server.service.http import Encoded, Rep
 from walkstream.server.service.scenes import Form, Scene
 from walkstream.shared.errors import ApiError
@@ -197,8 +198,9 @@ def start_parts(
     An interior's bundle is the path, the topology, then (for a path and a client
     ``view``) the contents of the cells that view sees from the path's first pose
     and from where the path leads in :data:`START_ROOM_LEAD_S` (up to
-    :data:`START_ROOM_BYTES`; ``inflate``: each blob inflated, for a gzip-compressed
-    answer), then the manifest.  With ``path_head_s`` as well (compact parts only),
+    :data:`START_ROOM_BYTES`; ``inflate``: for a gzip-compressed answer, each blob
+    inflated or as stored, whichever costs fewer bytes in the answer's stream,
+    :mod:`~walkstream.server.service.contentsform`), then the manifest.  With ``path_head_s`` as well (compact parts only),
     only the path's first ``path_head_s`` seconds come, as ``pathhead`` (the walk
     starts on the head; the client fetches the whole path when its link is idle: on
     a long tour it is a third of the bytes before the contents otherwise).
@@ -216,7 +218,10 @@ def start_parts(
         parts.append(("topology", topology))
         if path is not None and view is not None:
             cells = scene.interior.first_view(room_lead(scene, path), view, START_ROOM_BYTES)
-            parts.append(("contents", Frames(cells, [scene.interior.contents_part(c, inflate) for c in cells])))
+            # in a gzip answer, each cell in the form that costs it fewer bytes there
+            stream = ContentsStream(STREAM_LEVEL) if inflate else None
+            frames = [scene.interior.contents_part(c, inflate, stream) for c in cells]
+            parts.append(("contents", Frames(cells, frames)))
         return [*parts, ("manifest", scene.manifest[rep])]
     ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
     more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0

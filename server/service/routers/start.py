@@ -63,6 +63,7 @@ from fastapi import APIRouter, Depends, Query, Request
 from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
+from walkstream.server.service.contentsform import STREAM_LEVEL
 from walkstream.server.service.dependencies import RepDep, SceneDep, get_registry
 from walkstream.server.service.http import (
     Rep,
@@ -227,7 +228,7 @@ async def _bundle(request: Request, scene: Scene, rep: Rep, q: StartQuery) -> St
         # one piece per part, so a gzip stream is flushed after each: the walk starts
         # once the topology and the contents' list are in, and each cell is usable
         # as soon as its part is (level 9, as for a contents batch)
-        return stream_response(request, _each(_msgpack_parts(parts)), MSGPACK, headers, level=9)
+        return stream_response(request, _each(_msgpack_parts(parts)), MSGPACK, headers, level=STREAM_LEVEL)
     return stream_response(request, coalesce(_msgpack_parts(parts)), MSGPACK, headers)
 
 
