@@ -25,7 +25,11 @@ from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 from walkstream.server.service.main import create_app
 from walkstream.shared.camera import camera, perspective
-from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS, check_contents_part, pack_contents_part
+from walkstream.shared.codec.cellbatch import (
+    CELLBATCH_MAX_CELLS,
+    check_contents_part,
+    pack_contents_part,
+)
 from walkstream.shared.codec.cellmesh import CellMesh, decode_cell_mesh, inflate_cell_mesh
 from walkstream.shared.errors import CodecError, InputError, StreamCut
 from walkstream.shared.roomwire import decode_topology

@@ -20,7 +20,11 @@ from walkstream.server.service.contentsform import ContentsStream
 from walkstream.server.service.http import Encoded, Rep, encode, etag_for
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
-from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS, pack_contents_part
+from walkstream.shared.codec.cellbatch import (
+    CELLBATCH_MAX_CELLS,
+    pack_contents_part,
+    pack_head_part,
+)
 from walkstream.shared.codec.cellmesh import inflate_cell_mesh
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.errors import ApiError, CodecError
@@ -158,9 +162,22 @@ class InteriorState:
         part = pack_contents_part(cid, enc.etag, blob)
         return part if stream is None else stream.cheaper(part, stored)
 
+    def head_part(self, cid: int, body: bytes, missing: bytes, inflate: bool,
+                  stream: ContentsStream | None = None) -> bytes:
+        """Cell ``cid``'s head (:mod:`~walkstream.shared.codec.cellhead`) as a part of a
+        contents stream: ``body`` as encoded or (``inflate``) inflated, as
+        :meth:`contents_part` chooses."""
+        etag = self.contents(cid).etag
+        part = pack_head_part(cid, etag, body, missing)
+        if not inflate:
+            return part
+        opened = pack_head_part(cid, etag, inflate_cell_mesh(body, f"head of cell {cid}"), missing)
+        return opened if stream is None else stream.cheaper(opened, part)
+
     @cached_property
-    def _view_model(self) -> tuple[PortalGraph, RoomLocator]:
-        # the compact topology, as the client decodes it: the server culls as the client will
+    def view_model(self) -> tuple[PortalGraph, RoomLocator]:
+        """The portal graph and locator of the compact topology as the client decodes it
+        (the server culls as the client will)."""
         topo = decode_topology_compact(self.topology_compact.content, "topology")
         return PortalGraph.from_topology(topo), RoomLocator(topo.cells)
 
@@ -177,7 +194,7 @@ class InteriorState:
         stay in view, which helps when the walk goes straight on, made the office
         tour's first perfect frame later, 3.21 s against 3.17 s: the tour turns.)
         """
-        graph, locator = self._view_model
+        graph, locator = self.view_model
         order = list(dict.fromkeys(c for seen in cells_seen(graph, locator, poses, view) for c in seen))
         out: list[int] = []
         total = 0

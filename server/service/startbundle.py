@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.server.service.contentsform import STREAM_LEVEL, ContentsStream
+from walkstream.server.service.firstheads import first_heads
 from walkstream.server.service.http import Encoded, Rep
 from walkstream.server.service.scenes import Form, Scene
 from walkstream.shared.errors import ApiError
@@ -181,6 +182,7 @@ def start_parts(
     view: RoomView | None = None,
     inflate: bool = False,
     path_head_s: float | None = None,
+    heads: bool = False,
 ) -> list[StartPart]:
     """The parts of a start bundle at ``xy``, in the order sent.
 
@@ -203,7 +205,10 @@ def start_parts(
     :mod:`~walkstream.server.service.contentsform`), then the manifest.  With ``path_head_s`` as well (compact parts only),
     only the path's first ``path_head_s`` seconds come, as ``pathhead`` (the walk
     starts on the head; the client fetches the whole path when its link is idle: on
-    a long tour it is a third of the bytes before the contents otherwise).
+    a long tour it is a third of the bytes before the contents otherwise).  With
+    ``heads`` as well, a cell the path's first pose sees in part goes first as its head
+    (:mod:`~walkstream.server.service.firstheads`) and whole after every other cell: the
+    contents' list then names it twice.
     """
     parts: list[StartPart] = []
     split = path is not None and scene.interior is not None and view is not None and rep == "msgpack"
@@ -217,11 +222,17 @@ def start_parts(
         topology = scene.interior.topology_compact if rep == "msgpack" else scene.interior.topology[rep]
         parts.append(("topology", topology))
         if path is not None and view is not None:
-            cells = scene.interior.first_view(room_lead(scene, path), view, START_ROOM_BYTES)
+            interior = scene.interior
+            lead = room_lead(scene, path)
+            cells = interior.first_view(lead, view, START_ROOM_BYTES)
+            # the cells the first pose sees in part go first as heads, whole after the others
+            hd = first_heads(interior, cells, lead[0], view) if heads else {}
             # in a gzip answer, each cell in the form that costs it fewer bytes there
             stream = ContentsStream(STREAM_LEVEL) if inflate else None
-            frames = [scene.interior.contents_part(c, inflate, stream) for c in cells]
-            parts.append(("contents", Frames(cells, frames)))
+            frames = [interior.head_part(c, *hd[c], inflate, stream) if c in hd
+                      else interior.contents_part(c, inflate, stream) for c in cells]
+            frames += [interior.contents_part(c, inflate, stream) for c in hd]
+            parts.append(("contents", Frames([*cells, *hd], frames)))
         return [*parts, ("manifest", scene.manifest[rep])]
     ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
     more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0
