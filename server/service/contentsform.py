@@ -50,6 +50,13 @@ class ContentsStream:
         self.nbytes += n
         return n
 
+    def cost(self, *parts: bytes) -> int:
+        """The fewest compressed bytes one of ``parts`` (alternative forms of the same
+        part) would add after what the stream holds so far; nothing is fed."""
+        if not parts:
+            raise ValueError("cost: no part to weigh")
+        return min(len((co := self._co.copy()).compress(p) + co.flush(zlib.Z_SYNC_FLUSH)) for p in parts)
+
     def cheaper(self, *parts: bytes) -> bytes:
         """The one of ``parts`` (alternative forms of the same part) that adds the fewest
         compressed bytes after what the stream holds so far (the first on a tie); it is

@@ -13,7 +13,7 @@ it culls the stand-ins of the missing pieces with every frame, and a frame that 
 one waits for the cell.
 
 FZK-Haus at 160x120 (the outside cell: 13 of 112 pieces drawn from the start room):
-the first view's contents 20.0 -> 13.2 kB on the link before the first perfect frame.
+the first view's parts 20.0 -> 13.3 kB on the link (gzip), the first perfect frame 3.20 -> 2.36 s.
 """
 
 from __future__ import annotations
@@ -35,8 +35,9 @@ __all__ = ["HEAD_SHARE", "first_heads"]
 
 HEAD_SHARE = 0.7
 """A cell goes as a head only when its head (pieces and boxes) is at most this share
-of its stored blob: the whole blob follows anyway, so a head that saves little costs
-bytes twice."""
+of its stored blob, and (in a gzip answer) costs at most this share of the whole
+cell's bytes in the answer's stream where it would go: the whole blob follows anyway,
+so a head that saves little costs bytes twice."""
 
 
 def first_heads(

@@ -145,34 +145,37 @@ class InteriorState:
             self._cache.put(("contents", cid), enc, len(blob))
         return enc
 
-    def contents_part(self, cid: int, inflate: bool, stream: ContentsStream | None = None) -> bytes:
-        """Cell ``cid``'s part of a contents stream (:mod:`~walkstream.shared.codec.cellbatch`):
-        its blob as stored, or (``inflate``, for a stream gzip-compressed as a whole)
-        inflated to its ``N`` form so the cells share one dictionary; with ``stream``
-        (the mirror of that gzip stream) whichever of the two costs fewer bytes there
-        (:mod:`~walkstream.server.service.contentsform`)."""
+    def contents_forms(self, cid: int, inflate: bool) -> list[bytes]:
+        """Cell ``cid``'s part of a contents stream (:mod:`~walkstream.shared.codec.cellbatch`)
+        in each form it may take, the first the one to send without a choice: its blob
+        as stored; or (``inflate``, for a stream gzip-compressed as a whole) inflated to
+        its ``N`` form so the cells share one dictionary, then as stored
+        (:mod:`~walkstream.server.service.contentsform` picks the cheaper)."""
         enc = self.contents(cid)
         stored = pack_contents_part(cid, enc.etag, enc.content)
         if not inflate:
-            return stored
+            return [stored]
         try:
             blob = inflate_cell_mesh(enc.content, f"contents of cell {cid}")
         except CodecError:  # a damaged stored blob goes as stored: the client says so
-            blob = enc.content
-        part = pack_contents_part(cid, enc.etag, blob)
-        return part if stream is None else stream.cheaper(part, stored)
+            return [stored]
+        return [pack_contents_part(cid, enc.etag, blob), stored]
 
-    def head_part(self, cid: int, body: bytes, missing: bytes, inflate: bool,
-                  stream: ContentsStream | None = None) -> bytes:
+    def contents_part(self, cid: int, inflate: bool, stream: ContentsStream | None = None) -> bytes:
+        """Cell ``cid``'s part of a contents stream (:meth:`contents_forms`): with
+        ``stream`` (the mirror of the answer's gzip stream) the form that costs fewer
+        bytes there."""
+        forms = self.contents_forms(cid, inflate)
+        return forms[0] if stream is None else stream.cheaper(*forms)
+
+    def head_forms(self, cid: int, body: bytes, missing: bytes, inflate: bool) -> list[bytes]:
         """Cell ``cid``'s head (:mod:`~walkstream.shared.codec.cellhead`) as a part of a
-        contents stream: ``body`` as encoded or (``inflate``) inflated, as
-        :meth:`contents_part` chooses."""
+        contents stream, in each form it may take (as :meth:`contents_forms`)."""
         etag = self.contents(cid).etag
         part = pack_head_part(cid, etag, body, missing)
         if not inflate:
-            return part
-        opened = pack_head_part(cid, etag, inflate_cell_mesh(body, f"head of cell {cid}"), missing)
-        return opened if stream is None else stream.cheaper(opened, part)
+            return [part]
+        return [pack_head_part(cid, etag, inflate_cell_mesh(body, f"head of cell {cid}"), missing), part]
 
     @cached_property
     def view_model(self) -> tuple[PortalGraph, RoomLocator]:

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.server.service.contentsform import STREAM_LEVEL, ContentsStream
-from walkstream.server.service.firstheads import first_heads
+from walkstream.server.service.firstheads import HEAD_SHARE, first_heads
 from walkstream.server.service.http import Encoded, Rep
 from walkstream.server.service.scenes import Form, Scene
 from walkstream.shared.errors import ApiError
@@ -229,10 +229,20 @@ def start_parts(
             hd = first_heads(interior, cells, lead[0], view) if heads else {}
             # in a gzip answer, each cell in the form that costs it fewer bytes there
             stream = ContentsStream(STREAM_LEVEL) if inflate else None
-            frames = [interior.head_part(c, *hd[c], inflate, stream) if c in hd
-                      else interior.contents_part(c, inflate, stream) for c in cells]
-            frames += [interior.contents_part(c, inflate, stream) for c in hd]
-            parts.append(("contents", Frames([*cells, *hd], frames)))
+            frames: list[bytes] = []
+            later: list[int] = []
+            for cid in cells:
+                whole_forms = interior.contents_forms(cid, inflate)
+                head_forms = interior.head_forms(cid, *hd[cid], inflate) if cid in hd else []
+                cheap = bool(head_forms) and (
+                    stream is None or stream.cost(*head_forms) <= HEAD_SHARE * stream.cost(*whole_forms))
+                if cheap:
+                    frames.append(head_forms[0] if stream is None else stream.cheaper(*head_forms))
+                    later.append(cid)
+                else:
+                    frames.append(whole_forms[0] if stream is None else stream.cheaper(*whole_forms))
+            frames += [interior.contents_part(cid, inflate, stream) for cid in later]
+            parts.append(("contents", Frames([*cells, *later], frames)))
         return [*parts, ("manifest", scene.manifest[rep])]
     ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
     more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0
