@@ -38,7 +38,7 @@ path's head ``pathhead`` comes in place of ``path``: its samples up to the first
 after SECONDS (a compact path of its own, decoding exactly as the whole path's first
 samples).  The walk starts on the head, the contents not queued behind the whole
 path; the client fetches the whole path (``GET .../paths/{name}``) when its link is
-idle, before the head ends.  With ``heads=true`` as well, a cell the first pose sees in
+idle, before the head ends.  With ``heads=true`` as well (a path and a view), a cell the first pose sees in
 part comes first as its *head* (a part with one more field, ``missing``:
 :mod:`walkstream.shared.codec.cellhead`) and whole after every other cell, so the cell
 is named twice in ``cells``.  A client that does not ask gets the order above; a server
