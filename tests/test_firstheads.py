@@ -99,6 +99,8 @@ def test_a_walk_with_heads_is_perfect_sooner_and_hides_nothing(
     heads, _ = _replay(db, tmp_path / "heads")
     whole, _ = _replay(db, tmp_path / "whole", "--no-start-heads")
     assert heads["time_to_first_perfect_frame_s"] < min(3.0, whole["time_to_first_perfect_frame_s"] - 0.5)
+    assert heads["start_head_cells"] >= 1 and whole["start_head_cells"] == 0
+    assert heads["start_contents_cells"] == whole["start_contents_cells"] and heads["redownloads"] == 0
     # walking at once (no hold) turns the walker while the outside cell is still a head:
     # a frame that keeps a stand-in waits for the cell, and no frame hides a pixel
     run, _ = _replay(db, tmp_path / "walk", "--start-hold", "0", "--truth-every", "5")

@@ -172,6 +172,8 @@ class RoomStreamStats:
     errors: int = 0
     bundled: int = 0
     """Cells whose contents came in the start bundle (:meth:`RoomStreamer.adopt`)."""
+    heads: int = 0
+    """... of which first as heads (:mod:`~walkstream.shared.codec.cellhead`)."""
     fetched: set[int] = field(default_factory=set)
 
 
@@ -745,6 +747,7 @@ class RoomStreamer:
         if placed is not None:
             mesh = placed.place(mesh)
         if mesh.missing:  # a cell's head (cellhead.py): drawn meanwhile, counted when whole
+            self.stats.heads += 1
             self.cache.put(CELLMESH.cache_kind, cid, *CELLMESH_CONTENT.cache_entry(b"", mesh))
             return
         if cid in self.stats.fetched:
