@@ -23,9 +23,6 @@ from walkstream.shared.codec.cellhead import STAND_IN_ELEMENT, decode_cell_head
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
 from walkstream.shared.wire import decode_start_part
 
-pytestmark = pytest.mark.gl  # the replays draw the truth
-
-
 def _bundle(app: Any, heads: bool) -> tuple[list[tuple[int, dict[str, Any]]], list[int]]:
     """The start bundle's contents parts in order, and the gzip stream's bytes after each part."""
     url = f"/v1/start?path=tour&view=160x120&head=10{'&heads=true' if heads else ''}"
@@ -92,8 +89,9 @@ def _replay(db: Path, out: Path, *extra: str) -> tuple[dict[str, Any], Path]:
     return json.loads((out / "report.json").read_text()), out
 
 
+@pytest.mark.gl  # the truth draws
 def test_a_walk_with_heads_is_perfect_sooner_and_hides_nothing(
-    fzk_db: tuple[Path, dict[str, Any]], tmp_path: Path
+    fzk_db: tuple[Path, dict[str, Any]], tmp_path: Path, gl_ctx: object
 ) -> None:
     db = fzk_db[0]
     heads, _ = _replay(db, tmp_path / "heads")
