@@ -23,6 +23,7 @@ from walkstream.shared.codec.cellhead import STAND_IN_ELEMENT, decode_cell_head
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
 from walkstream.shared.wire import decode_start_part
 
+
 def _bundle(app: Any, heads: bool) -> tuple[list[tuple[int, dict[str, Any]]], list[int]]:
     """The start bundle's contents parts in order, and the gzip stream's bytes after each part."""
     url = f"/v1/start?path=tour&view=160x120&head=10{'&heads=true' if heads else ''}"
