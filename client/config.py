@@ -79,6 +79,10 @@ class ReplayConfig:
     """Interiors, with :attr:`start_contents`: the start bundle brings only the path's
     first this many seconds; the whole path is fetched when the link is idle (the
     walker waits at the head's end if it is late); None: the whole path in the bundle."""
+    start_heads: bool = True
+    """Interiors, with :attr:`start_contents` and :attr:`path_head_s`: a cell the first
+    pose sees in part comes first as its head (the pieces drawn, stand-ins for the
+    others), whole after the other cells (:mod:`~walkstream.shared.codec.cellhead`)."""
     start_hold_s: float = 3.0
     """Interiors: the walker stands at the path's start until the first frame there is
     perfect (every cell it shows in memory) and no contents are on the link (the start

@@ -265,7 +265,7 @@ async def replay(
                 got, topology, first_view = await interior_start(
                     config.path, config.setup_timeout_s, clock, api, disk, manifest_arrived, tasks,
                     _room_view(config) if config.start_contents else None, manifest_failed,
-                    config.path_head_s, path_arrived)
+                    config.path_head_s, path_arrived, heads=config.start_heads)
                 headed = got is not None
             elif config.start_bundle and streamer is not None:
                 got = await bundle_start(

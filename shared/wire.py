@@ -51,6 +51,7 @@ start part
 from __future__ import annotations
 
 import contextlib
+from collections import Counter
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -674,7 +675,8 @@ def decode_start_part(obj: Any, what: str) -> tuple[str, str | None, bytes | int
     """``(part, etag, body)`` of one unpacked part of a start bundle, checked.
 
     For the ``objects`` part, ``body`` is the number of object frames that follow; for
-    ``contents``, the ids of the cells whose contents parts follow, in order.
+    ``contents``, the ids of the cells whose contents parts follow, in order (a cell
+    named twice comes first as its head, :mod:`~walkstream.shared.codec.cellhead`).
     """
     if (
         not isinstance(obj, dict)
@@ -691,11 +693,13 @@ def decode_start_part(obj: Any, what: str) -> tuple[str, str | None, bytes | int
         cells = obj.get("cells")
         if (
             not isinstance(cells, list)
-            or len(cells) > CELLBATCH_MAX_CELLS
+            or len(cells) > 2 * CELLBATCH_MAX_CELLS
             or not all(type(c) is int and c >= 0 for c in cells)
-            or len(set(cells)) != len(cells)
+            or len(set(cells)) > CELLBATCH_MAX_CELLS
+            or max(Counter(cells).values(), default=0) > 2
         ):
-            raise CodecError(f"{what}: contents part without its cells (distinct ids >= 0, at most {CELLBATCH_MAX_CELLS})")
+            raise CodecError(f"{what}: contents part without its cells (ids >= 0, each at most twice: a head, "
+                             f"then whole; at most {CELLBATCH_MAX_CELLS} cells)")
         return "contents", None, list(cells)
     if not isinstance(obj.get("body"), bytes):
         raise CodecError(f"{what}: {obj['part']} part without a body")

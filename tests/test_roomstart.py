@@ -448,8 +448,12 @@ class _CutBundle(httpx.AsyncBaseTransport):
 
 
 def test_the_walk_starts_with_the_first_views_contents(office: Path, tour: RecordedPath) -> None:
-    with_contents = _replay(office)
+    # every cell whole (heads, which send a cell twice, are tests/test_firstheads.py's)
+    with_contents = _replay(office, start_heads=False)
     without = _replay(office, start_contents=False)
+    headed = _replay(office)
+    assert "error" not in headed and headed["redownloads"] == 0 and headed["perfect_frame_ratio"] > 0
+    assert headed["time_to_first_perfect_frame_s"] < without["time_to_first_perfect_frame_s"]
     for s in (with_contents, without):
         assert "error" not in s and s["redownloads"] == 0 and s["perfect_frame_ratio"] > 0
     assert with_contents["start_contents_cells"] > 0 and without["start_contents_cells"] == 0
@@ -467,11 +471,21 @@ def test_the_walk_starts_with_the_first_views_contents(office: Path, tour: Recor
     finally:
         app.state.scenes.close()
     assert whole[0][0] == "pathhead" and len(whole[2][1]) > 2  # the cut falls among the contents
-    cut = _replay(office, cut=head + 7, path_head_s=0.2)
+    cut = _replay(office, cut=head + 7, path_head_s=0.2, start_heads=False)
     assert "error" not in cut and cut["start_contents_cells"] == 2 and cut["redownloads"] == 0
     assert cut["perfect_frame_ratio"] > 0 and cut["scene_version"]  # the manifest came on its own
     # ... and the whole path by a request of its own: the walk's path is the tour
     assert cut["path_duration_s"] == pytest.approx(tour.duration, abs=1e-3)
+    # a bundle cut just after a cell's head: the cell is asked for whole, once
+    app = create_app([office])
+    try:
+        objs = _unpack(_get(app, url + "&heads=true", **{"accept-encoding": "identity"}).content)
+    finally:
+        app.state.scenes.close()
+    k = next(i for i, o in enumerate(objs) if isinstance(o, dict) and "missing" in o)
+    cut = _replay(office, cut=sum(len(msgpack.packb(o)) for o in objs[: k + 1]) + 7, path_head_s=0.2)
+    assert "error" not in cut and cut["start_head_cells"] == 1 and cut["redownloads"] == 0
+    assert cut["start_contents_cells"] == k - 3 and cut["perfect_frame_ratio"] > 0
 
 
 def test_the_walk_starts_on_the_paths_head(office: Path, tour: RecordedPath) -> None:

@@ -33,6 +33,7 @@ import msgpack
 
 from walkstream.client.clock import Clock
 from walkstream.shared.codec.cellbatch import check_contents_part
+from walkstream.shared.codec.cellhead import decode_cell_head
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.content.impostor import KIND as IMPOSTOR
@@ -571,12 +572,16 @@ class SceneClient:
         form: str = "params",
         view: RoomView | None = None,
         path_head_s: float | None = None,
+        heads: bool = False,
     ) -> AsyncGenerator[StartItem, None]:
         """Stream the start bundle (``GET /v1/start``) for a path's start or a position.
 
         With ``view`` (interiors) the bundle brings the first view's contents; with
         ``path_head_s`` too, only the path's first seconds (``pathhead``, yielded as
-        such), the caller fetching the whole path itself.
+        such), the caller fetching the whole path itself; with ``heads`` too, a cell
+        the first pose sees in part may come first as its head (a ``room`` item whose
+        ``CellMesh.missing`` is not empty, :mod:`~walkstream.shared.codec.cellhead`),
+        then whole.
 
         The scene is :attr:`scene` if set, else the server's first; it is set from
         the answer's ``X-Scene`` header as soon as the head arrives.  Items are
@@ -604,6 +609,8 @@ class SceneClient:
                 query["depth"] = str(view.max_depth)
             if path is not None and path_head_s is not None:  # the path's head first, the whole after the contents
                 query["head"] = repr(float(path_head_s))
+                if heads:  # cells seen in part: their heads first
+                    query["heads"] = "true"
         url = str(httpx.URL("/v1/start", params=query))
         what = "start bundle"
         state: dict[str, Any] = {"objects": 0, "k": 0}
@@ -613,7 +620,7 @@ class SceneClient:
             k = state["k"]
             state["k"] = k + 1
             if rooms:
-                return "room", _contents_part(obj, nbytes, rooms.pop(0), f"{what}: item {k}")
+                return "room", _contents_part(obj, nbytes, rooms.pop(0), f"{what}: item {k}", heads)
             if state["objects"] > 0:
                 state["objects"] -= 1
                 frame = obj
@@ -762,10 +769,15 @@ class SceneClient:
             raise StreamCut(f"{what}: corrupt after {got} items ({exc})", got) from exc
 
 
-def _contents_part(obj: Any, nbytes: int, expected: int, what: str) -> tuple[int, CellMesh]:
+def _contents_part(obj: Any, nbytes: int, expected: int, what: str, heads: bool = False) -> tuple[int, CellMesh]:
     """``(cell, contents)`` of one unpacked contents part, which must be cell
     ``expected``'s; ``nbytes`` is its share of the stream."""
+    missing = obj.pop("missing", None) if heads and isinstance(obj, dict) else None
     cid, _etag, body = check_contents_part(obj, what)
     if cid != expected:
         raise CodecError(f"{what}: cell {cid} where {expected} was asked")
+    if missing is not None:  # a head: the pieces drawn first, stand-ins for the others
+        if not isinstance(missing, bytes):
+            raise CodecError(f"{what}: missing must be bytes")
+        return cid, replace(decode_cell_head(body, missing, f"head of cell {cid}"), nbytes=nbytes)
     return cid, replace(CELLMESH.decode(body, f"contents of cell {cid}"), nbytes=nbytes)

@@ -49,6 +49,7 @@ def interior_summary(
         "visible_cells_max": int(np.max(log.pvs)) if len(log.pvs) else 0,
         "contents_requests": streamer.stats.requests,
         "start_contents_cells": streamer.stats.bundled,
+        "start_head_cells": streamer.stats.heads,
         "contents_bytes": streamer.stats.bytes_received,
         "cells_fetched": len(streamer.stats.fetched),
         "cells_flushed": streamer.stats.flushed,

@@ -172,6 +172,8 @@ class RoomStreamStats:
     errors: int = 0
     bundled: int = 0
     """Cells whose contents came in the start bundle (:meth:`RoomStreamer.adopt`)."""
+    heads: int = 0
+    """... of which first as heads (:mod:`~walkstream.shared.codec.cellhead`)."""
     fetched: set[int] = field(default_factory=set)
 
 
@@ -727,20 +729,27 @@ class RoomStreamer:
         try:
             async for cid, mesh in parts:
                 self._store(cid, mesh)
-                self.stats.bundled += bundled
-                self._tasks.pop(cid, None)
+                if not mesh.missing:  # a head's cell stays in flight: it comes whole later
+                    self.stats.bundled += bundled
+                    self._tasks.pop(cid, None)
         except (ApiError, StreamCut):
             self.stats.errors += 1
         finally:
             for c in cells:
                 if self._tasks.get(c) is asyncio.current_task():
                     del self._tasks[c]
+                    if (m := self.mesh(c)) is not None and m.missing:  # a head alone: ask for it whole
+                        self.cache.remove(CELLMESH.cache_kind, c)
 
     def _store(self, cid: int, mesh: CellMesh) -> None:
         """Keep a received cell's contents, placed in the scene's frame (and count it)."""
         placed = placement_for(self.placements, cid)
         if placed is not None:
             mesh = placed.place(mesh)
+        if mesh.missing:  # a cell's head (cellhead.py): drawn meanwhile, counted when whole
+            self.stats.heads += 1
+            self.cache.put(CELLMESH.cache_kind, cid, *CELLMESH_CONTENT.cache_entry(b"", mesh))
+            return
         if cid in self.stats.fetched:
             self.stats.refetched += 1
         self.stats.fetched.add(cid)

@@ -146,6 +146,7 @@ async def interior_start(
     manifest_failed: Callable[[BaseException], None] | None = None,
     path_head_s: float | None = None,
     path_arrived: Callable[[RecordedPath], None] | None = None,
+    heads: bool = False,
 ) -> tuple[tuple[RecordedPath, int] | None, Topology | None, StartContents | None]:
     """The interior start bundle of recorded path ``path``: ``((path, its bytes), topology,
     the first view's contents)``.
@@ -164,11 +165,12 @@ async def interior_start(
     caller fetches the whole path (:func:`whole_path_when_idle`).  Whenever the bundle
     brings the whole path instead (no head asked for, or a server that does not know
     ``head``), it goes to ``path_arrived`` at once: a caller that was not called walks
-    a head.
+    a head.  With the path's head, ``heads``: a cell the first pose sees in part may
+    come first as its head, then whole (``StartContents.cells`` names each cell once).
     """
     got: dict[str, Any] = {}
     split = view is not None and path_head_s is not None and path_arrived is not None
-    stream = api.start(path=path, view=view, path_head_s=path_head_s if split else None)
+    stream = api.start(path=path, view=view, path_head_s=path_head_s if split else None, heads=split and heads)
 
     def on_whole(p: RecordedPath) -> None:
         if path_arrived is not None:
@@ -220,7 +222,7 @@ async def interior_start(
             raise
         without_manifest()
 
-    return got["path"], got["topology"], StartContents(list(got["contents"]), rest())
+    return got["path"], got["topology"], StartContents(list(dict.fromkeys(got["contents"])), rest())
 
 
 PATH_LEAD_S = 4.0

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.draw.allocate import allocate_ach, allocate_distance
+from walkstream.client.walk.draw import forget_cell
 from walkstream.client.walk.facades import bake_facades, choose_facades, facade_avail
 from walkstream.client.walk.impostors import frame_impostors, replaced
 from walkstream.client.walk.state import Frame, WalkState
@@ -87,7 +88,10 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
         if cm is None:
             continue
         f.loaded[cid] = cm
+        if cid in boxes and w.boxed.get(cid) is not cm:  # a head made whole
+            forget_cell(w, cid)
         if cid not in boxes:
+            w.boxed[cid] = cm
             b = [p.bbox for p in cm.parts]
             boxes[cid] = (np.array([x[0] for x in b]).reshape(-1, 3), np.array([x[1] for x in b]).reshape(-1, 3))
             w.part_triangles[cid] = np.array([p.triangles for p in cm.parts], np.int64)
@@ -103,6 +107,15 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
     whole = [c for c in f.loaded if c not in masks or c in f.shown]
     for c, m in cull_parts("frustum", whole, boxes, f.eye, f.view, w.proj, w.size, fog_m=f.fog).items():
         masks[c] = masks[c] | m if c in masks else m
+    # a head walked to whose stand-ins the culling drops, at the default fog, draws all it
+    # would draw whole; any other head is waiting for its cell
+    for c in walked:
+        gone = np.asarray(f.loaded[c].missing, np.int64)
+        if len(gone) and c not in whole and pc is not None:
+            lo, hi = boxes[c]
+            if not cull_parts(culling, [c], {c: (lo[gone], hi[gone])}, f.eye, f.view, w.proj, w.size,
+                              vsas=pc.vsas, fog_m=rooms.config.fog_m)[c].any():
+                f.heads_clear.add(c)
     lever = w.controller is not None and (w.scene.streets is not None or w.config.fog_budget)
     f.budget = int(w.controller.budget) if lever and w.controller is not None else 0
     if w.indoors and w.config.fog_budget:  # indoors the budget's lever is the fog

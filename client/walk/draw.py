@@ -22,7 +22,7 @@ from walkstream.client.walk.scene import STREET_FAR_M
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.client.walk.walls import wall_quads
 
-__all__ = ["upload", "draw", "forget_flushed"]
+__all__ = ["upload", "draw", "forget_flushed", "forget_cell"]
 
 
 def upload(w: WalkState, f: Frame) -> None:
@@ -43,7 +43,7 @@ def upload(w: WalkState, f: Frame) -> None:
             keys.append(key)
     for cid, cm in f.loaded.items():
         for k, ok in enumerate(f.masks[cid].tolist()):
-            if ok:
+            if ok and cm.parts[k].triangles:  # a head's stand-in has none
                 m = w.meshes.get((cid, k))
                 if m is None:
                     m = w.meshes[(cid, k)] = cm.parts[k].mesh()
@@ -74,10 +74,17 @@ def forget_flushed(w: WalkState) -> None:
     rooms = w.scene.rooms
     if rooms is None:
         return
-    for key in [k for k in w.meshes if rooms.mesh(k[0]) is None]:
+    for c in [c for c in w.boxes if rooms.mesh(c) is None]:
+        forget_cell(w, c)
+
+
+def forget_cell(w: WalkState, cid: int) -> None:
+    """Forget what the frame loop made of room cell ``cid``'s contents (boxes, meshes,
+    GPU buffers): flushed, or a head replaced by the whole cell."""
+    for key in [k for k in w.meshes if k[0] == cid]:
         if w.renderer is not None:
             w.renderer.forget(CELLMESH_CONTENT.gpu_key(*key))
         del w.meshes[key]
-    for c in [c for c in w.boxes if rooms.mesh(c) is None]:
-        del w.boxes[c]
-        w.part_triangles.pop(c, None)
+    w.boxes.pop(cid, None)
+    w.part_triangles.pop(cid, None)
+    w.boxed.pop(cid, None)

@@ -28,9 +28,16 @@ from walkstream.client.walk.figures import MODEL_PORTALS, MODEL_PVS
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.client.walk.visible import OUTDOOR_FOG_M
 from walkstream.client.walk.walls import wall_quads
+from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.roomwire import Topology
 
 __all__ = ["measure", "note_truth", "compare_truth"]
+
+
+def _whole_enough(mesh: CellMesh | None, cid: int, f: Frame) -> bool:
+    """Whether a visible cell's contents serve the frame: in memory, whole or a head
+    whose missing pieces the frame's culling drops (:attr:`Frame.heads_clear`)."""
+    return mesh is not None and (not mesh.missing or cid in f.heads_clear)
 
 
 def measure(w: WalkState, f: Frame) -> None:
@@ -38,7 +45,7 @@ def measure(w: WalkState, f: Frame) -> None:
     scene, city, rooms = w.scene, w.scene.streets, w.scene.rooms
     o = w.objects
     have_obj = sum(1 for i in o.pvs if city.has_object(i)) if city is not None else 0
-    waiting = [c for c in f.default_room_cells if rooms is not None and rooms.mesh(c) is None]
+    waiting = [c for c in f.default_room_cells if rooms is not None and not _whole_enough(rooms.mesh(c), c, f)]
     have_rooms = len(f.default_room_cells) - len(waiting)
     if rooms is not None:
         rooms.note_missing(f.t, waiting)
@@ -106,7 +113,7 @@ def note_truth(w: WalkState, f: Frame) -> None:
         return
     city, rooms = w.scene.streets, w.scene.rooms
     parts = [(c, k) for c, mk in f.masks.items() for k in np.flatnonzero(mk).tolist()]
-    waiting = [c for c in f.room_cells if c not in f.loaded]
+    waiting = [c for c in f.room_cells if not _whole_enough(f.loaded.get(c), c, f)]
     t = f.t - w.t_start
     if rooms is None:  # streets only: the city's figures (late and missed pixels by cause)
         assert city is not None

@@ -63,6 +63,9 @@ class WalkState:
     """Per loaded room cell, its parts' triangles (kept with :attr:`boxes`)."""
     meshes: dict[tuple[int, int], Mesh] = field(default_factory=dict)
     """Room parts made into meshes for the renderer, by ``(cell, part)``."""
+    boxed: dict[int, CellMesh] = field(default_factory=dict)
+    """Per loaded room cell, the contents :attr:`boxes` and :attr:`meshes` were made from
+    (a cell's head is replaced by the whole cell: both are made again)."""
     frame: int = 0
     path_pending: bool = False
     """:attr:`path` is the path's head; the whole path replaces it when it arrives."""
@@ -137,6 +140,10 @@ class Frame:
     # -- allocate
     loaded: dict[int, CellMesh] = field(default_factory=dict)
     masks: dict[int, NDArray[np.bool_]] = field(default_factory=dict)
+    heads_clear: set[int] = field(default_factory=set)
+    """Loaded cells that are still heads (:mod:`~walkstream.shared.codec.cellhead`) whose
+    missing pieces' stand-ins this frame's culling drops at the default fog: a head not
+    here is waiting for its cell."""
     budget: int = 0
     alloc: Allocation | None = None
     """The objects' LODs (None: no street cells, nothing to allocate)."""

@@ -16,10 +16,15 @@ from functools import cached_property
 
 from numpy.typing import ArrayLike
 
+from walkstream.server.service.contentsform import ContentsStream
 from walkstream.server.service.http import Encoded, Rep, encode, etag_for
 from walkstream.server.service.lru import LRU
 from walkstream.server.store import CellInfo, SceneReader
-from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS, pack_contents_part
+from walkstream.shared.codec.cellbatch import (
+    CELLBATCH_MAX_CELLS,
+    pack_contents_part,
+    pack_head_part,
+)
 from walkstream.shared.codec.cellmesh import inflate_cell_mesh
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.errors import ApiError, CodecError
@@ -140,22 +145,42 @@ class InteriorState:
             self._cache.put(("contents", cid), enc, len(blob))
         return enc
 
-    def contents_part(self, cid: int, inflate: bool) -> bytes:
-        """Cell ``cid``'s part of a contents stream (:mod:`~walkstream.shared.codec.cellbatch`):
-        its blob as stored, or (``inflate``, for a stream gzip-compressed as a whole)
-        inflated to its ``N`` form so the cells share one dictionary."""
+    def contents_forms(self, cid: int, inflate: bool) -> list[bytes]:
+        """Cell ``cid``'s part of a contents stream (:mod:`~walkstream.shared.codec.cellbatch`)
+        in each form it may take, the first the one to send without a choice: its blob
+        as stored; or (``inflate``, for a stream gzip-compressed as a whole) inflated to
+        its ``N`` form so the cells share one dictionary, then as stored
+        (:mod:`~walkstream.server.service.contentsform` picks the cheaper)."""
         enc = self.contents(cid)
-        blob = enc.content
-        if inflate:
-            try:
-                blob = inflate_cell_mesh(blob, f"contents of cell {cid}")
-            except CodecError:  # a damaged stored blob goes as stored: the client says so
-                pass
-        return pack_contents_part(cid, enc.etag, blob)
+        stored = pack_contents_part(cid, enc.etag, enc.content)
+        if not inflate:
+            return [stored]
+        try:
+            blob = inflate_cell_mesh(enc.content, f"contents of cell {cid}")
+        except CodecError:  # a damaged stored blob goes as stored: the client says so
+            return [stored]
+        return [pack_contents_part(cid, enc.etag, blob), stored]
+
+    def contents_part(self, cid: int, inflate: bool, stream: ContentsStream | None = None) -> bytes:
+        """Cell ``cid``'s part of a contents stream (:meth:`contents_forms`): with
+        ``stream`` (the mirror of the answer's gzip stream) the form that costs fewer
+        bytes there."""
+        forms = self.contents_forms(cid, inflate)
+        return forms[0] if stream is None else stream.cheaper(*forms)
+
+    def head_forms(self, cid: int, body: bytes, missing: bytes, inflate: bool) -> list[bytes]:
+        """Cell ``cid``'s head (:mod:`~walkstream.shared.codec.cellhead`) as a part of a
+        contents stream, in each form it may take (as :meth:`contents_forms`)."""
+        etag = self.contents(cid).etag
+        part = pack_head_part(cid, etag, body, missing)
+        if not inflate:
+            return [part]
+        return [pack_head_part(cid, etag, inflate_cell_mesh(body, f"head of cell {cid}"), missing), part]
 
     @cached_property
-    def _view_model(self) -> tuple[PortalGraph, RoomLocator]:
-        # the compact topology, as the client decodes it: the server culls as the client will
+    def view_model(self) -> tuple[PortalGraph, RoomLocator]:
+        """The portal graph and locator of the compact topology as the client decodes it
+        (the server culls as the client will)."""
         topo = decode_topology_compact(self.topology_compact.content, "topology")
         return PortalGraph.from_topology(topo), RoomLocator(topo.cells)
 
@@ -172,7 +197,7 @@ class InteriorState:
         stay in view, which helps when the walk goes straight on, made the office
         tour's first perfect frame later, 3.21 s against 3.17 s: the tour turns.)
         """
-        graph, locator = self._view_model
+        graph, locator = self.view_model
         order = list(dict.fromkeys(c for seen in cells_seen(graph, locator, poses, view) for c in seen))
         out: list[int] = []
         total = 0

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.server.service.contentsform import STREAM_LEVEL, ContentsStream
+from walkstream.server.service.firstheads import HEAD_SHARE, first_heads
 from walkstream.server.service.http import Encoded, Rep
 from walkstream.server.service.scenes import Form, Scene
 from walkstream.shared.errors import ApiError
@@ -180,6 +182,7 @@ def start_parts(
     view: RoomView | None = None,
     inflate: bool = False,
     path_head_s: float | None = None,
+    heads: bool = False,
 ) -> list[StartPart]:
     """The parts of a start bundle at ``xy``, in the order sent.
 
@@ -197,11 +200,15 @@ def start_parts(
     An interior's bundle is the path, the topology, then (for a path and a client
     ``view``) the contents of the cells that view sees from the path's first pose
     and from where the path leads in :data:`START_ROOM_LEAD_S` (up to
-    :data:`START_ROOM_BYTES`; ``inflate``: each blob inflated, for a gzip-compressed
-    answer), then the manifest.  With ``path_head_s`` as well (compact parts only),
+    :data:`START_ROOM_BYTES`; ``inflate``: for a gzip-compressed answer, each blob
+    inflated or as stored, whichever costs fewer bytes in the answer's stream,
+    :mod:`~walkstream.server.service.contentsform`), then the manifest.  With ``path_head_s`` as well (compact parts only),
     only the path's first ``path_head_s`` seconds come, as ``pathhead`` (the walk
     starts on the head; the client fetches the whole path when its link is idle: on
-    a long tour it is a third of the bytes before the contents otherwise).
+    a long tour it is a third of the bytes before the contents otherwise).  With
+    ``heads`` as well, a cell the path's first pose sees in part goes first as its head
+    (:mod:`~walkstream.server.service.firstheads`) and whole after every other cell: the
+    contents' list then names it twice.
     """
     parts: list[StartPart] = []
     split = path is not None and scene.interior is not None and view is not None and rep == "msgpack"
@@ -215,8 +222,27 @@ def start_parts(
         topology = scene.interior.topology_compact if rep == "msgpack" else scene.interior.topology[rep]
         parts.append(("topology", topology))
         if path is not None and view is not None:
-            cells = scene.interior.first_view(room_lead(scene, path), view, START_ROOM_BYTES)
-            parts.append(("contents", Frames(cells, [scene.interior.contents_part(c, inflate) for c in cells])))
+            interior = scene.interior
+            lead = room_lead(scene, path)
+            cells = interior.first_view(lead, view, START_ROOM_BYTES)
+            # the cells the first pose sees in part go first as heads, whole after the others
+            hd = first_heads(interior, cells, lead[0], view) if heads else {}
+            # in a gzip answer, each cell in the form that costs it fewer bytes there
+            stream = ContentsStream(STREAM_LEVEL) if inflate else None
+            frames: list[bytes] = []
+            later: list[int] = []
+            for cid in cells:
+                whole_forms = interior.contents_forms(cid, inflate)
+                head_forms = interior.head_forms(cid, *hd[cid], inflate) if cid in hd else []
+                cheap = bool(head_forms) and (
+                    stream is None or stream.cost(*head_forms) <= HEAD_SHARE * stream.cost(*whole_forms))
+                if cheap:
+                    frames.append(head_forms[0] if stream is None else stream.cheaper(*head_forms))
+                    later.append(cid)
+                else:
+                    frames.append(whole_forms[0] if stream is None else stream.cheaper(*whole_forms))
+            frames += [interior.contents_part(cid, inflate, stream) for cid in later]
+            parts.append(("contents", Frames([*cells, *later], frames)))
         return [*parts, ("manifest", scene.manifest[rep])]
     ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
     more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0

@@ -8,12 +8,17 @@ msgpack maps, one *part* per cell in the order asked::
 ``body`` is a ``walkstream-cellmesh`` blob (:mod:`.cellmesh`), decoded with
 :func:`~walkstream.shared.codec.cellmesh.decode_cell_mesh`; ``etag`` is the one
 ``GET .../rooms/{id}/contents`` sends for the same cell.  When the answer is
-gzip-compressed (the client sent ``Accept-Encoding: gzip``) every stored blob is
+gzip-compressed (the client sent ``Accept-Encoding: gzip``) a stored blob is
 inflated to its ``N`` form (:func:`~walkstream.shared.codec.cellmesh.inflate_cell_mesh`)
 and the whole stream is compressed together, flushed after each part, so a cell
 decodes as soon as its part is in and the cells share one dictionary (the 21 cells
 visible at the office tour's start: 29.4 kB compressed one by one, 22.9 kB as one
-gzip stream).  Uncompressed answers carry the stored blobs as they are.
+gzip stream); a blob that costs fewer bytes there as stored (lzma beats gzip on large
+cells) goes as stored.  Uncompressed answers carry the stored blobs as they are.
+
+The interior start bundle may send a cell's *head* first, a part with one more
+field, ``missing`` (:mod:`~walkstream.shared.codec.cellhead`); its whole part
+follows later in the same stream.
 
 The client decodes the parts bounded (:func:`check_contents_part`).
 """
@@ -26,7 +31,7 @@ import msgpack
 
 from walkstream.shared.errors import CodecError
 
-__all__ = ["CELLBATCH_MAX_CELLS", "pack_contents_part", "check_contents_part"]
+__all__ = ["CELLBATCH_MAX_CELLS", "pack_contents_part", "pack_head_part", "check_contents_part"]
 
 CELLBATCH_MAX_CELLS = 256
 """Cells one batch may ask for (more is a 422, as the OpenAPI's maxItems says: split the batch)."""
@@ -40,8 +45,17 @@ def pack_contents_part(cell: int, etag: str, body: bytes) -> bytes:
     return data
 
 
+def pack_head_part(cell: int, etag: str, body: bytes, missing: bytes) -> bytes:
+    """A cell's head in a contents stream: ``{cell, etag, body, missing}``
+    (:mod:`~walkstream.shared.codec.cellhead`)."""
+    data: bytes = msgpack.packb({"cell": int(cell), "etag": etag, "body": bytes(body), "missing": bytes(missing)},
+                                use_bin_type=True)
+    return data
+
+
 def check_contents_part(obj: Any, what: str) -> tuple[int, str, bytes]:
-    """``(cell, etag, body)`` of an unpacked part, every field checked.
+    """``(cell, etag, body)`` of an unpacked part, every field checked (a head's
+    ``missing`` is taken off ``obj`` first, see :func:`pack_head_part`).
 
     Raises
     ------

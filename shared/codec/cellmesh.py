@@ -235,6 +235,9 @@ class CellMesh:
     """Bytes of the encoded blob."""
     grid: float = 0.0
     """Absolute grid step of the positions (metres; ``walkstream-cellmesh/2``), 0 for version 1."""
+    missing: tuple[int, ...] = ()
+    """A cell's head (:mod:`~walkstream.shared.codec.cellhead`): the indices of the parts
+    that are stand-ins for pieces still to come; empty for a whole cell."""
     _cache: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property

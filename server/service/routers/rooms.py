@@ -50,6 +50,7 @@ from fastapi import APIRouter, Path, Request, Response
 from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
+from walkstream.server.service.contentsform import STREAM_LEVEL, ContentsStream
 from walkstream.server.service.dependencies import RepDep, SceneDep
 from walkstream.server.service.http import accepts_gzip, cached, stream_response
 from walkstream.server.service.interiors import InteriorState
@@ -219,14 +220,15 @@ async def contents_batch(request: Request, scene: SceneDep) -> StreamingResponse
     inflate = accepts_gzip(request.headers.get("accept-encoding"))
     headers = {"X-Scene-Version": scene.version, "X-Cell-Count": str(len(ids))}
     # level 9: 1 % smaller than 6 on the office's start cells, and the server's cost is small
-    return stream_response(request, _parts(state, ids, inflate), MSGPACK, headers, level=9)
+    return stream_response(request, _parts(state, ids, inflate), MSGPACK, headers, level=STREAM_LEVEL)
 
 
 async def _parts(state: InteriorState, ids: list[int], inflate: bool) -> AsyncIterator[bytes]:
     """Each cell's part, read (off the event loop on a cache miss) as the stream goes, so
     the first part leaves before the last blob is read; one piece per part, so the
-    gzip stream is flushed after each."""
+    gzip stream is flushed after each; in a gzip stream, each in its cheaper form there."""
+    stream = ContentsStream(STREAM_LEVEL) if inflate else None
     for cid in ids:
         if state.cached_contents(cid) is None:
             await run_in_threadpool(state.contents, cid)
-        yield state.contents_part(cid, inflate)
+        yield state.contents_part(cid, inflate, stream)

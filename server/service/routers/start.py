@@ -38,7 +38,10 @@ path's head ``pathhead`` comes in place of ``path``: its samples up to the first
 after SECONDS (a compact path of its own, decoding exactly as the whole path's first
 samples).  The walk starts on the head, the contents not queued behind the whole
 path; the client fetches the whole path (``GET .../paths/{name}``) when its link is
-idle, before the head ends.  A client that does not ask gets the order above; a server
+idle, before the head ends.  With ``heads=true`` as well (a path and a view), a cell the first pose sees in
+part comes first as its *head* (a part with one more field, ``missing``:
+:mod:`walkstream.shared.codec.cellhead`) and whole after every other cell, so the cell
+is named twice in ``cells``.  A client that does not ask gets the order above; a server
 that does not know ``head`` ignores it (the whole path then comes, as ``path``).  The walk's other cells come by the client's own requests.  The ``path`` part is the compact ``walkstream-path-q/1``
 encoding (as ``GET .../paths/{name}`` sends it when ``Accept`` names it); with
 ``Accept: application/json`` each body is its JSON form.
@@ -63,6 +66,7 @@ from fastapi import APIRouter, Depends, Query, Request
 from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
+from walkstream.server.service.contentsform import STREAM_LEVEL
 from walkstream.server.service.dependencies import RepDep, SceneDep, get_registry
 from walkstream.server.service.http import (
     Rep,
@@ -134,6 +138,12 @@ Head = Annotated[
           "(part pathhead, in place of path)"),
 ]
 
+Heads = Annotated[
+    bool,
+    Query(description="interiors, with view and path: a cell the first pose sees in part comes first as its "
+          "head (the pieces drawn and the boxes of the others, part field missing), whole after the others"),
+]
+
 
 @dataclass(frozen=True)
 class StartQuery:
@@ -157,6 +167,7 @@ class StartQuery:
     fog: Fog = None
     depth: Depth = None
     head: Head = None
+    heads: Heads = False
 
     def room_view(self) -> RoomView | None:
         """The client's interior view when it gave its viewport (else None)."""
@@ -218,7 +229,7 @@ async def _bundle(request: Request, scene: Scene, rep: Rep, q: StartQuery) -> St
     inflate = accepts_gzip(request.headers.get("accept-encoding"))
     parts = await run_in_threadpool(
         lambda: start_parts(scene, xy, rep, q.path, h, v, cast(ObjForm, q.form), view=view, inflate=inflate,
-                            path_head_s=q.head)
+                            path_head_s=q.head, heads=q.heads)
     )
     headers = {"X-Scene-Version": scene.version, "X-Scene": scene.name, "Cache-Control": "no-cache"}
     if rep == "json":
@@ -227,7 +238,7 @@ async def _bundle(request: Request, scene: Scene, rep: Rep, q: StartQuery) -> St
         # one piece per part, so a gzip stream is flushed after each: the walk starts
         # once the topology and the contents' list are in, and each cell is usable
         # as soon as its part is (level 9, as for a contents batch)
-        return stream_response(request, _each(_msgpack_parts(parts)), MSGPACK, headers, level=9)
+        return stream_response(request, _each(_msgpack_parts(parts)), MSGPACK, headers, level=STREAM_LEVEL)
     return stream_response(request, coalesce(_msgpack_parts(parts)), MSGPACK, headers)
 
 
