@@ -8,7 +8,7 @@ that pose and the boxes of the others; its whole blob follows after every cell's
 first part.  The server culls as the client does -- the compact topology as the
 client decodes it, the same portal walk, the same pieces
 (:func:`~walkstream.shared.codec.cellpieces.decode_cell_pieces`) and the same box test
-(:func:`~walkstream.shared.portals.cull_parts`) -- but the client does not trust it:
+(:func:`~walkstream.shared.partcull.cull_parts`) -- but the client does not trust it:
 it culls the stand-ins of the missing pieces with every frame, and a frame that keeps
 one waits for the cell.
 
@@ -28,7 +28,8 @@ from walkstream.shared.camera import camera
 from walkstream.shared.codec.cellhead import encode_cell_head
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
 from walkstream.shared.errors import CodecError
-from walkstream.shared.portals import cull_parts, cull_portals
+from walkstream.shared.partcull import cull_parts
+from walkstream.shared.portals import cull_portals
 from walkstream.shared.roomview import RoomView, room_projection
 
 __all__ = ["HEAD_SHARE", "first_heads"]
