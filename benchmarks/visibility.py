@@ -239,7 +239,7 @@ def visibility_benchmark(
         progress(0, total)
     own = ctx is None
     gl = create_context() if ctx is None else ctx
-    renderers: dict[tuple[int, int, bool], VisibilityRenderer] = {}
+    renderers: dict[tuple[int, int, bool, float], VisibilityRenderer] = {}
     try:
         meshes2, ids2 = meshes_for_scene(scene, 2)
         # -- the reference ---------------------------------------------------------
