@@ -79,3 +79,15 @@ def test_a_bad_thin_pass_gets_one_line(tmp_path: Path, capsys: pytest.CaptureFix
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--thin-pass" in err[0]
     assert not (tmp_path / "x.db").exists()
+
+
+def test_the_conservative_depth_is_the_farthest_around_within_a_tile() -> None:
+    from walkstream.server.bake.thindepth import farthest_around
+
+    d = np.full((4, 8), 0.5, np.float32)
+    d[1, 1] = 1.0  # a sky pixel in the first tile: its 3 x 3 neighbours see it
+    d[2, 4] = 0.9  # on the second tile's first column: it does not leak into the first tile
+    got = farthest_around(d, 4)
+    assert (got[0:3, 0:3] == 1.0).all() and got[3, 0] == 0.5 and got[0, 3] == 0.5
+    assert got[2, 3] == 0.5 and (got[1:4, 4:6] == np.float32(0.9)).all()
+    assert (got >= d).all()  # never nearer: occluders only shrink

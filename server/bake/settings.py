@@ -99,6 +99,10 @@ class BakeSettings:
     at most this many pixels across (narrower direction), as lines and points
     depth-tested against the fill: objects under a pixel that are not hidden enter the
     PVS (:mod:`~walkstream.server.bake.thinpass`; 0: off)."""
+    thin_depth: bool = False
+    """The thin pass tests against the fill's depth taken as the farthest over each
+    pixel's 3 x 3 neighbours (occluders shrunk by a pixel for that test:
+    :mod:`~walkstream.server.bake.thindepth`)."""
     field_spacing: float = DEFAULT_FIELD_SPACING
     """``cells="sections"`` or ``sampling="field"``: metres between the points of the dense visibility field."""
     redundancy: int = DEFAULT_REDUNDANCY
@@ -123,6 +127,8 @@ class BakeSettings:
         out = asdict(self)
         if not self.thin_pass:
             out.pop("thin_pass")  # bakes without it keep the header they had before it existed
+        if not self.thin_depth:
+            out.pop("thin_depth")
         if self.cells != "sections":
             for name in SECTION_FIELDS:
                 if name != "field_spacing" or self.sampling != "field":
@@ -159,6 +165,8 @@ class BakeSettings:
             raise InputError(f"--split: expected 0 <= split < 1 (a Jaccard distance; 0: off), got {self.split}")
         if not (np.isfinite(self.thin_pass) and 0.0 <= self.thin_pass <= 64.0):
             raise InputError(f"--thin-pass: expected 0..64 pixels (0: off), got {self.thin_pass}")
+        if self.thin_depth and not self.thin_pass:
+            raise InputError("--thin-depth: give --thin-pass PX too (it sets how the thin pass tests depth)")
         if self.threshold < 0:
             raise InputError(f"threshold: expected >= 0 pixels, got {self.threshold}")
         if self.bbox_crs not in ("local", "lonlat"):

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.server.bake.draworder import curve_order, frustum_planes, runs
+from walkstream.server.bake.thindepth import DepthEroder
 from walkstream.server.bake.thinpass import face_presence, thin_candidates
 from walkstream.shared.areas import build_area
 from walkstream.shared.buildings import build_lod
@@ -164,6 +165,11 @@ class VisibilityRenderer(Releasable):
         when it is not behind the fill at some pixel it touches
         (:mod:`~walkstream.server.bake.thinpass`).  Only the tested objects are
         drawn thicker, never the occluders, so the pass only adds.  0: off.
+    thin_depth : bool
+        Test the thin pass against the fill's depth taken as the farthest over each
+        pixel's 3 x 3 neighbours (:mod:`~walkstream.server.bake.thindepth`): every
+        occluder shrunk by a pixel for that test, so what a pixel centre on an
+        occluder's silhouette hides is not taken as hidden.
 
     Raises
     ------
@@ -195,6 +201,7 @@ class VisibilityRenderer(Releasable):
         frustum_cull: bool = True,
         edge_pass: bool = False,
         thin_pass: float = 0.0,
+        thin_depth: bool = False,
     ) -> None:
         ids = np.asarray(object_ids, dtype=np.int64).reshape(-1)
         if len(ids) != len(meshes):
@@ -227,6 +234,8 @@ class VisibilityRenderer(Releasable):
         self.frustum_cull = bool(frustum_cull)
         self.edge_pass = bool(edge_pass)
         self.thin_pass = float(thin_pass)
+        self.thin_depth = bool(thin_depth)
+        self._eroder: DepthEroder | None = None
         self._prepare_geometry(meshes, ids)
 
         self._own_ctx = ctx is None
@@ -523,6 +532,10 @@ class VisibilityRenderer(Releasable):
             points, self._lo, self._hi, draw, seen, resolution=self.resolution, near=self.near, pixels=self.thin_pass
         )
         commands, offsets = self._unmerged_commands(cand)
+        if self.thin_depth and len(commands):
+            if self._eroder is None:
+                self._eroder = DepthEroder(ctx, fb.size)
+            self._eroder.erode(fb.fbo, used, self.resolution)
         # Colour only: with the depth mask off the clear keeps the fill's depth.
         fb.fbo.depth_mask = False
         ctx.depth_func = "<="
@@ -685,6 +698,9 @@ class VisibilityRenderer(Releasable):
 
     def release(self) -> None:
         """Release every GL object (and the context if this renderer made it); idempotent."""
+        if getattr(self, "_eroder", None) is not None:
+            self._eroder.release()  # type: ignore[union-attr]
+            self._eroder = None
         if self._fb is not None:
             self._fb.release()
             self._fb = None
