@@ -239,7 +239,7 @@ def visibility_benchmark(
         progress(0, total)
     own = ctx is None
     gl = create_context() if ctx is None else ctx
-    renderers: dict[tuple[int, int, bool], VisibilityRenderer] = {}
+    renderers: dict[tuple[int, int, bool, float, bool], VisibilityRenderer] = {}
     try:
         meshes2, ids2 = meshes_for_scene(scene, 2)
         # -- the reference ---------------------------------------------------------
@@ -279,10 +279,10 @@ def visibility_benchmark(
                 ref_r.release()
         # -- the settings, taking turns cell by cell --------------------------------
         for s in rows_in:
-            key = (s.bake.occluder_lod, s.bake.resolution, s.bake.edge_pass)
+            key = (s.bake.occluder_lod, s.bake.resolution, s.bake.edge_pass, s.bake.thin_pass, s.bake.thin_depth)
             if key not in renderers:
                 m, ids = (meshes2, ids2) if key[0] == 2 else meshes_for_scene(scene, key[0])
-                renderers[key] = VisibilityRenderer(m, ids, resolution=key[1], view_distance=vd, ctx=gl, edge_pass=key[2])
+                renderers[key] = VisibilityRenderer(m, ids, resolution=key[1], view_distance=vd, ctx=gl, edge_pass=key[2], thin_pass=key[3], thin_depth=key[4])
                 renderers[key].cell_counts(np.array([[0.0, 0.0, 1.7]]))  # compile, warm up
         # the field settings: the lattice of the whole scene's cells, as the bake lays it
         lattices: dict[str, FieldLattice] = {}
@@ -295,7 +295,7 @@ def visibility_benchmark(
         npts: list[list[int]] = [[] for _ in rows_in]
         for c in chosen:
             for k, s in enumerate(rows_in):
-                r = renderers[(s.bake.occluder_lod, s.bake.resolution, s.bake.edge_pass)]
+                r = renderers[(s.bake.occluder_lod, s.bake.resolution, s.bake.edge_pass, s.bake.thin_pass, s.bake.thin_depth)]
                 best = math.inf
                 for _ in range(max(1, int(repeat))):
                     t = time.perf_counter()

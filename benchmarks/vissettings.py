@@ -46,7 +46,7 @@ class Setting:
     bake: BakeSettings
 
 
-_SPEC = re.compile(r"^(corners|(?:boundary|region|field)(\d+(?:\.\d+)?)?)-(\d+)((?:-[a-zA-Z]+\d*(?:\.\d+)?|\+[ce])*)$")
+_SPEC = re.compile(r"^(corners|(?:boundary|region|field)(\d+(?:\.\d+)?)?)-(\d+)((?:-[a-zA-Z]+\d*(?:\.\d+)?|\+[ced])*)$")
 
 
 def parse_setting(spec: str) -> Setting:
@@ -57,7 +57,8 @@ def parse_setting(spec: str) -> Setting:
     and both ends of the height range; ``-t2`` adds a hardly-visible threshold of 2
     pixels, ``-L2`` renders LOD2 occluders, ``-h0.25`` samples a height every 0.25 m
     of the cell's range, ``+c`` the centre too, ``+e`` the edge pass (objects thinner
-    than a pixel).  ``field4-128`` samples the cell from the dense visibility field
+    than a pixel), ``-thin2`` the thin pass for boxes at most 2 px across
+    (``--thin-pass 2``), ``+d`` its conservative depth (``--thin-depth``).  ``field4-128`` samples the cell from the dense visibility field
     every 4 m (``--sampling field --field-spacing 4``).
 
     >>> s = parse_setting("boundary10-256-t4+c").bake
@@ -66,6 +67,8 @@ def parse_setting(spec: str) -> Setting:
     >>> s = parse_setting("region20-128+e").bake
     >>> (s.sampling, s.spacing, s.edge_pass)
     ('region', 20.0, True)
+    >>> parse_setting("region20-128-thin2").bake.thin_pass
+    2.0
     >>> s = parse_setting("field2-128").bake
     >>> (s.sampling, s.field_spacing)
     ('field', 2.0)
@@ -87,12 +90,16 @@ def parse_setting(spec: str) -> Setting:
         kw["sampling"] = "region" if m.group(1).startswith("region") else "boundary"
         if m.group(2):
             kw["spacing"] = float(m.group(2))
-    for part in re.findall(r"-([a-zA-Z]+)(\d+(?:\.\d+)?)|\+([ce])", m.group(4)):
+    for part in re.findall(r"-([a-zA-Z]+)(\d+(?:\.\d+)?)|\+([ced])", m.group(4)):
         key, value, flag = part
         if flag == "c":
             kw["centre"] = True
+        elif flag == "d":
+            kw["thin_depth"] = True
         elif flag == "e":
             kw["edge_pass"] = True
+        elif key == "thin":
+            kw["thin_pass"] = float(value)
         elif key == "s":
             kw["split"] = float(value)
         elif key == "t":
@@ -102,7 +109,7 @@ def parse_setting(spec: str) -> Setting:
         elif key == "h":
             kw["height_step"] = float(value)
         else:
-            raise InputError(f"setting {spec!r}: unknown part -{key}{value} (t, L, h, s, +c or +e)")
+            raise InputError(f"setting {spec!r}: unknown part -{key}{value} (t, L, h, s, thin, +c or +e)")
     return Setting(spec.strip(), BakeSettings(**kw).check())
 
 
@@ -141,10 +148,10 @@ DEFAULT_SETTINGS: tuple[str, ...] = (
 def same_sampling(a: BakeSettings, b: BakeSettings) -> bool:
     """Whether two bake settings sample a cell alike (every field that changes its PVS)."""
     keys: tuple[str, ...] = (
-        "sampling", "spacing", "height_step", "centre", "resolution", "occluder_lod", "threshold", "edge_pass", "split",
+        "sampling", "spacing", "height_step", "centre", "resolution", "occluder_lod", "threshold", "edge_pass", "thin_pass", "thin_depth", "split",
     )
     if a.sampling == "field" or b.sampling == "field":
-        keys = ("sampling", "field_spacing", "resolution", "occluder_lod", "threshold", "edge_pass")
+        keys = ("sampling", "field_spacing", "resolution", "occluder_lod", "threshold", "edge_pass", "thin_pass", "thin_depth")
     return all(getattr(a, k) == getattr(b, k) for k in keys)
 
 
@@ -157,4 +164,6 @@ def bake_default() -> Setting:
         name = f"field{st.field_spacing:g}-{st.resolution}"
     else:
         name = f"{st.sampling}{st.spacing:g}-{st.resolution}"
+    if st.thin_pass:
+        name += f"-thin{st.thin_pass:g}" + ("+d" if st.thin_depth else "")
     return Setting(name, st)

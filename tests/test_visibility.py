@@ -471,3 +471,39 @@ def test_split_points_go_between_views_that_differ() -> None:
     assert len(moved) == 1 and not shapely.intersects(shapely.Polygon(blds[0].rings[0]), shapely.points(moved[0, :2]))
     with pytest.raises(InputError):
         split_points(pts, [same], square, differ=0.5, max_gap=25.0)
+
+
+def test_the_thin_pass_adds_an_object_under_a_pixel_and_nothing_hidden(gl: moderngl.Context) -> None:
+    # the trap: a strip 2 m deep on the ground 100 m north, seen through the wall's gap
+    # from 1.7 m up, is a band 0.02 degrees high, far below one 64 px pixel (1.4
+    # degrees): the fill misses it at every pixel centre; a small box far behind the
+    # wall (under a pixel too; the wall's foot 5 pixels below it) stays hidden, with
+    # the occluders shrunk by a pixel too; nothing the fill counted changes
+    sliver = StreetParams(99, "street", rect(-30.0, 100.0, 30.0, 102.0), 2.0)
+    tucked = block(98, 120.0, 150.0, 120.5, 150.5, 0.5)  # behind the east wall, under a pixel, 20 degrees off the gap
+    scene = SourceScene("sliver", "local", (0.0, 0.0), BUILDINGS[:2] + BUILDINGS[3:] + (tucked,), (sliver,))
+    meshes, ids = meshes_for_scene(scene, 0)
+    eye = np.array([[0.0, 0.0, 1.7], [2.0, -3.0, 1.5]])
+    got = {}
+    for thin, depth in ((0.0, False), (2.0, False), (2.0, True)):
+        with VisibilityRenderer(meshes, ids, resolution=64, view_distance=VIEW_DISTANCE, ctx=gl, thin_pass=thin,
+                                thin_depth=depth) as r:
+            got[thin, depth] = dict(zip(*(a.tolist() for a in r.cell_counts(eye)), strict=True))
+            each = r.each_point_counts(eye)
+            _, _, seen = r.point_counts(eye)
+    plain = got[0.0, False]
+    assert 99 not in plain
+    for key in ((2.0, False), (2.0, True)):  # with or without the occluders shrunk by a pixel
+        assert got[key].get(99, 0) >= 1
+        assert {k: got[key][k] for k in plain} == plain
+        assert HIDDEN not in got[key] and 98 not in got[key]
+    # per point the same objects: the thin pass feeds split_points and the field alike
+    assert 99 in set(np.concatenate(seen).tolist())
+    assert 99 in set(np.concatenate([e[0] for e in each]).tolist())
+    # ... and the box is added where the wall does not stand (it is hidden, not ignored)
+    open_scene = SourceScene("open", "local", (0.0, 0.0), (tucked,), (sliver,))
+    m2, i2 = meshes_for_scene(open_scene, 0)
+    with VisibilityRenderer(m2, i2, resolution=64, view_distance=VIEW_DISTANCE, ctx=gl, thin_pass=2.0) as r:
+        assert 98 in r.cell_counts(eye)[0].tolist()
+    with pytest.raises(InputError, match="thin_pass"):
+        VisibilityRenderer(meshes, ids, thin_pass=-1.0, ctx=gl)

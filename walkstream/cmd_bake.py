@@ -106,7 +106,7 @@ def cmd_bake(args: argparse.Namespace) -> int:
         threshold=args.threshold,
         **{k: v for k, v in (("resolution", args.resolution), ("occluder_lod", args.occluder_lod)) if v is not None},
         **{k: v for k, v in (("field_spacing", args.field_spacing), ("redundancy", args.redundancy), ("min_size", args.min_size), ("section_shape", args.section_shape), ("section_cover", args.section_cover)) if v is not None},
-        **{k: v for k, v in (("sampling", args.sampling), ("spacing", args.spacing), ("height_step", args.height_step), ("edge_pass", args.edge_pass), ("split", args.split)) if v is not None},
+        **{k: v for k, v in (("sampling", args.sampling), ("spacing", args.spacing), ("height_step", args.height_step), ("edge_pass", args.edge_pass), ("thin_pass", args.thin_pass), ("thin_depth", args.thin_depth), ("split", args.split)) if v is not None},
     )
     st.check()  # a bad setting fails before any progress bar
     if args.building is not None and args.interior is None:
@@ -226,6 +226,8 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--spacing", type=float, default=None, help="region/boundary sampling: metres between points along an edge and of the inside grid (default 20)")
     bk.add_argument("--height-step", type=float, default=None, help="region/boundary sampling: every point at one more eye height per this many metres of the cell's height range (default 1)")
     bk.add_argument("--split", type=float, default=None, help="adaptive sampling: add points between two whose visible sets differ by more than this Jaccard distance (0..1; default 0: off)")
+    bk.add_argument("--thin-pass", type=float, default=None, metavar="PX", help="after the fill, test again the objects a cube face did not show whose box is at most PX pixels across (narrower direction), as lines and points against the fill's depth: objects under a pixel enter the PVS unless hidden (0: off)")
+    bk.add_argument("--thin-depth", action="store_true", default=None, help="with --thin-pass: test against the fill's depth taken as the farthest over each pixel's 3x3 neighbours (occluders shrunk by a pixel for that test)")
     bk.add_argument("--edge-pass", action="store_true", default=None, help="also draw every triangle's edges, adding objects thinner than a pixel (about 2x the render time)")
     bk.add_argument("--centre", action="store_true", help="also sample the cell centre")
     bk.add_argument("--threshold", type=int, default=0, help="hardly-visible threshold (m-LOMA): pixels an object must exceed over the cell's images to enter the PVS (default 0)")

@@ -87,7 +87,7 @@ def section_plan(
         "occluder_lod": st.occluder_lod, "view_distance": st.view_distance, "edge_pass": st.edge_pass,
         "margin": st.margin, "bbox": st.bbox, "bbox_crs": st.bbox_crs, "network": st.network,
         "heights": EYE_HEIGHTS,
-    } | ({"angle": round(angle, 9)} if angle else {}) | ({"cover": _digest(lattice.index)} if len(lattice) < free else {}))
+    } | ({"thin_pass": st.thin_pass, "thin_depth": st.thin_depth} if st.thin_pass else {}) | ({"angle": round(angle, 9)} if angle else {}) | ({"cover": _digest(lattice.index)} if len(lattice) < free else {}))
     features = ["buildings"] + (["streets"] if scene.streets else []) + ["section_cells"]
     say(f"{src.name}: {len(scene.buildings)} buildings, {len(scene.streets)} street pieces, "
         f"a field of {len(lattice)} points every {st.field_spacing:g} m"

@@ -18,6 +18,7 @@ __all__ = [
     "DEFAULT_RESOLUTION",
     "DEFAULT_OCCLUDER_LOD",
     "DEFAULT_SAMPLING",
+    "DEFAULT_THIN_PASS",
     "DEFAULT_FIELD_SPACING",
     "DEFAULT_REDUNDANCY",
     "DEFAULT_MIN_SIZE",
@@ -35,6 +36,9 @@ __all__ = [
 DEFAULT_RESOLUTION = 128
 DEFAULT_OCCLUDER_LOD = 0
 DEFAULT_SAMPLING = "region"
+#: the thin pass (objects under a pixel tested again, lines and points against the
+#: fill's depth), in pixels of a box's narrower screen extent; 0: off
+DEFAULT_THIN_PASS = 0.0
 
 #: sections (Brosnan et al. sample every 2 m; see docs/benchmarks.md for the cost of
 #: the field on the demo city at 2 and 4 m)
@@ -90,6 +94,15 @@ class BakeSettings:
     edge_pass: bool = False
     """Draw every triangle's edges as lines after the fill, adding the objects thinner
     than a pixel (:class:`~walkstream.server.bake.visibility.VisibilityRenderer`)."""
+    thin_pass: float = DEFAULT_THIN_PASS
+    """After the fill, test again the objects a face did not show whose box projects
+    at most this many pixels across (narrower direction), as lines and points
+    depth-tested against the fill: objects under a pixel that are not hidden enter the
+    PVS (:mod:`~walkstream.server.bake.thinpass`; 0: off)."""
+    thin_depth: bool = False
+    """The thin pass tests against the fill's depth taken as the farthest over each
+    pixel's 3 x 3 neighbours (occluders shrunk by a pixel for that test:
+    :mod:`~walkstream.server.bake.thindepth`)."""
     field_spacing: float = DEFAULT_FIELD_SPACING
     """``cells="sections"`` or ``sampling="field"``: metres between the points of the dense visibility field."""
     redundancy: int = DEFAULT_REDUNDANCY
@@ -112,6 +125,10 @@ class BakeSettings:
         the header (and the scene version) it had before they existed.
         """
         out = asdict(self)
+        if not self.thin_pass:
+            out.pop("thin_pass")  # bakes without it keep the header they had before it existed
+        if not self.thin_depth:
+            out.pop("thin_depth")
         if self.cells != "sections":
             for name in SECTION_FIELDS:
                 if name != "field_spacing" or self.sampling != "field":
@@ -146,6 +163,10 @@ class BakeSettings:
             raise InputError(f"occluder LOD: expected 0, 1 or 2, got {self.occluder_lod}")
         if not 0.0 <= self.split < 1.0:
             raise InputError(f"--split: expected 0 <= split < 1 (a Jaccard distance; 0: off), got {self.split}")
+        if not (np.isfinite(self.thin_pass) and 0.0 <= self.thin_pass <= 64.0):
+            raise InputError(f"--thin-pass: expected 0..64 pixels (0: off), got {self.thin_pass}")
+        if self.thin_depth and not self.thin_pass:
+            raise InputError("--thin-depth: give --thin-pass PX too (it sets how the thin pass tests depth)")
         if self.threshold < 0:
             raise InputError(f"threshold: expected >= 0 pixels, got {self.threshold}")
         if self.bbox_crs not in ("local", "lonlat"):

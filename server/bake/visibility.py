@@ -32,6 +32,9 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.server.bake.draworder import curve_order, frustum_planes, runs
+from walkstream.server.bake.thindepth import DepthEroder
+from walkstream.server.bake.thinpass import face_presence, thin_candidates
 from walkstream.shared.areas import build_area
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.camera import cube_face_views, perspective
@@ -102,90 +105,6 @@ def meshes_for_scene(scene: SourceScene, lod: int) -> tuple[list[Mesh], I64]:
     return meshes, ids
 
 
-def _hilbert_key(x: I64, y: I64, bits: int = 16) -> I64:
-    """Distance along a Hilbert curve of integer points ``x, y`` in ``[0, 2**bits)``."""
-    x, y = x.copy(), y.copy()
-    d = np.zeros(len(x), np.int64)
-    s = 1 << (bits - 1)
-    while s > 0:
-        rx = (x & s) > 0
-        ry = (y & s) > 0
-        d += s * s * ((3 * rx.astype(np.int64)) ^ ry.astype(np.int64))
-        # Rotate the quadrant so the sub-curve is traversed in the right orientation
-        # (only the bits below ``s`` matter from here on, so ``s - 1 - x`` is enough).
-        flip = ~ry & rx
-        x[flip], y[flip] = s - 1 - x[flip], s - 1 - y[flip]
-        swap = ~ry
-        x[swap], y[swap] = y[swap], x[swap]
-        s >>= 1
-    return d
-
-
-def _curve_order(centres: F64) -> I64:
-    """Indices that sort points ``(n, 2)`` along a Hilbert curve (ties by index).
-
-    Objects next to each other on the curve are next to each other in space, so a
-    frustum keeps few contiguous runs of them (a Hilbert curve gives about a quarter
-    fewer runs than a Morton curve on a generated city).
-    """
-    if len(centres) == 0:
-        return np.zeros(0, np.int64)
-    lo = centres.min(axis=0)
-    span = float(max((centres.max(axis=0) - lo).max(), 1e-9))
-    q = np.clip((centres - lo) / span * 65535.0, 0, 65535).astype(np.int64)
-    return np.argsort(_hilbert_key(q[:, 0], q[:, 1]), kind="stable").astype(np.int64)
-
-
-# ------------------------------------------------------------------------- culling
-
-
-def _frustum_planes(near: float, far: float) -> tuple[F64, F64, F64]:
-    """Half-space tests of the six cube-face frusta, in world axes relative to the eye.
-
-    A box (relative to the eye) meets face ``f`` only if, for each of its six planes
-    ``k``, ``max over the box of w[f, k] . x >= t[f, k]``.  For face axis ``a`` with
-    sign ``s`` the planes are the four 90-degree sides ``s*x_a >= |x_b|``,
-    ``s*x_a >= |x_c|``, the near plane ``s*x_a >= near`` and the far plane
-    ``s*x_a <= far``.
-
-    Returns
-    -------
-    w_pos, w_neg : (36, 3) float64
-        Positive and negative parts of the plane normals (face-major), so that the box
-        maximum is ``hi @ w_pos.T + lo @ w_neg.T``.
-    t : (36,) float64
-        The thresholds.
-    """
-    w = np.zeros((6, 6, 3))
-    t = np.zeros((6, 6))
-    for f in range(6):
-        a, s = f // 2, (1.0 if f % 2 == 0 else -1.0)  # order +x -x +y -y +z -z
-        b, c = [k for k in range(3) if k != a]
-        for k, (axis, sign) in enumerate(((b, 1.0), (b, -1.0), (c, 1.0), (c, -1.0))):
-            w[f, k, a] = s
-            w[f, k, axis] = sign
-        w[f, 4, a] = s
-        t[f, 4] = near
-        w[f, 5, a] = -s
-        t[f, 5] = -far
-    flat = w.reshape(36, 3)
-    return np.maximum(flat, 0.0), np.minimum(flat, 0.0), t.reshape(36)
-
-
-def _runs(mask: NDArray[np.bool_]) -> tuple[I64, I64, I64]:
-    """Runs of True in each row of ``mask`` ``(r, n)``: ``(row, start, stop)`` each ``(m,)``.
-
-    Runs come row by row, left to right; ``stop`` is exclusive.
-    """
-    r, n = mask.shape
-    padded = np.zeros((r, n + 2), np.int8)
-    padded[:, 1:-1] = mask
-    step = np.diff(padded, axis=1)
-    rows, starts = np.nonzero(step == 1)
-    _, stops = np.nonzero(step == -1)
-    return rows.astype(np.int64), starts.astype(np.int64), stops.astype(np.int64)
-
-
 # ------------------------------------------------------------------------ renderer
 
 
@@ -238,6 +157,19 @@ class VisibilityRenderer(Releasable):
         conservative rasterisation: it adds objects within about half a pixel of
         being visible (it does not open gaps narrower than a pixel between
         occluders).
+    thin_pass : float
+        After the fill, draw again the objects each face did not show whose bounding
+        box projects at most this many pixels across in its narrower screen direction,
+        as one-pixel lines (their edges) and points (their vertices), depth-tested
+        against the fill without writing depth: an object under a pixel is added
+        when it is not behind the fill at some pixel it touches
+        (:mod:`~walkstream.server.bake.thinpass`).  Only the tested objects are
+        drawn thicker, never the occluders, so the pass only adds.  0: off.
+    thin_depth : bool
+        Test the thin pass against the fill's depth taken as the farthest over each
+        pixel's 3 x 3 neighbours (:mod:`~walkstream.server.bake.thindepth`): every
+        occluder shrunk by a pixel for that test, so what a pixel centre on an
+        occluder's silhouette hides is not taken as hidden.
 
     Raises
     ------
@@ -268,6 +200,8 @@ class VisibilityRenderer(Releasable):
         merge_gap: int = 512,
         frustum_cull: bool = True,
         edge_pass: bool = False,
+        thin_pass: float = 0.0,
+        thin_depth: bool = False,
     ) -> None:
         ids = np.asarray(object_ids, dtype=np.int64).reshape(-1)
         if len(ids) != len(meshes):
@@ -288,6 +222,8 @@ class VisibilityRenderer(Releasable):
             raise InputError(
                 f"VisibilityRenderer.max_points_per_pass: expected >= 1, got {max_points_per_pass}"
             )
+        if not 0.0 <= float(thin_pass) < math.inf:
+            raise InputError(f"VisibilityRenderer.thin_pass: expected >= 0 pixels, got {thin_pass}")
         if int(merge_gap) < 0:
             raise InputError(f"VisibilityRenderer.merge_gap: expected >= 0, got {merge_gap}")
         self.resolution = int(resolution)
@@ -297,6 +233,9 @@ class VisibilityRenderer(Releasable):
         self.merge_gap = int(merge_gap)
         self.frustum_cull = bool(frustum_cull)
         self.edge_pass = bool(edge_pass)
+        self.thin_pass = float(thin_pass)
+        self.thin_depth = bool(thin_depth)
+        self._eroder: DepthEroder | None = None
         self._prepare_geometry(meshes, ids)
 
         self._own_ctx = ctx is None
@@ -324,7 +263,7 @@ class VisibilityRenderer(Releasable):
         except BaseException:
             self.release()
             raise
-        self._w_pos, self._w_neg, self._t = _frustum_planes(self.near, self.view_distance)
+        self._w_pos, self._w_neg, self._t = frustum_planes(self.near, self.view_distance)
         self._proj = perspective(90.0, 1.0, self.near, self.view_distance).astype(np.float64)
         # The six face rotations are the same at every point; only the translation
         # (-R @ eye) changes, so the per-point matrices are one vectorised product.
@@ -344,7 +283,7 @@ class VisibilityRenderer(Releasable):
                 lo[i], hi[i] = p.min(axis=0), p.max(axis=0)
                 nonempty[i] = True
         keep = np.flatnonzero(nonempty)
-        order = keep[_curve_order((lo[keep, :2] + hi[keep, :2]) / 2.0)]
+        order = keep[curve_order((lo[keep, :2] + hi[keep, :2]) / 2.0)]
         #: object id of each drawn object, in draw (Hilbert-curve) order
         self._ids = ids[order]
         self._lo, self._hi = lo[order], hi[order]
@@ -455,7 +394,7 @@ class VisibilityRenderer(Releasable):
         offsets : (faces + 1,) int64
             Face ``f`` uses commands ``offsets[f]:offsets[f + 1]``.
         """
-        rows, starts, stops = _runs(draw)
+        rows, starts, stops = runs(draw)
         first = self._index_first[starts]
         stop = self._index_stop[stops - 1]
         if self.merge_gap and len(rows) > 1:
@@ -494,7 +433,8 @@ class VisibilityRenderer(Releasable):
 
         res = self.resolution
         p = len(points)
-        commands, offsets = self._draw_commands(*self._face_masks(points))
+        draw, unsafe = self._face_masks(points)
+        commands, offsets = self._draw_commands(draw, unsafe)
         if self._multi_draw and len(commands):
             need = commands.nbytes
             if need > indirect.size:
@@ -555,6 +495,15 @@ class VisibilityRenderer(Releasable):
                 if each is not None:
                     own = [np.where(a == 0, np.bincount(rows[i * res : (i + 1) * res].reshape(-1), minlength=n)[:n], a)
                            for i, a in enumerate(own)]
+            if self.thin_pass > 0:
+                thin = self._thin_pass(points, draw, rows, used, mvps)
+                counts += thin
+                for i in range(p):
+                    extra = np.bincount(rows[i * res : (i + 1) * res].reshape(-1), minlength=n)[:n]
+                    if seen is not None:
+                        per[i] = per[i] | (extra > 0)
+                    if each is not None:
+                        own[i] = own[i] + extra
         finally:
             ctx.scissor = None
             if self.cull_back_faces:
@@ -564,9 +513,72 @@ class VisibilityRenderer(Releasable):
         if each is not None:
             each.extend(own)
 
-    def _draw_faces(self, commands: NDArray[np.uint32], offsets: I64, mvps: NDArray[np.float32]) -> None:
-        """Draw every face's commands into its own tile (faces of point ``i`` in row ``i``)."""
+    def _thin_pass(
+        self, points: F64, draw: NDArray[np.bool_], rows: NDArray[np.uint32], used: tuple[int, int, int, int],
+        mvps: NDArray[np.float32],
+    ) -> I64:
+        """Draw the thin pass's candidates over the finished fill; their pixels per object.
+
+        ``rows`` is read in (the fill's image) and overwritten with the pass's own
+        image: only the candidates' ids, 0 elsewhere.
+        """
         import moderngl
+
+        ctx, fb = self.ctx, self._fb
+        assert ctx is not None and fb is not None
+        n = len(self._ids)
+        seen = face_presence(rows, self.resolution, len(points), n)
+        cand = thin_candidates(
+            points, self._lo, self._hi, draw, seen, resolution=self.resolution, near=self.near, pixels=self.thin_pass
+        )
+        commands, offsets = self._unmerged_commands(cand)
+        if self.thin_depth and len(commands):
+            if self._eroder is None:
+                self._eroder = DepthEroder(ctx, fb.size)
+            self._eroder.erode(fb.fbo, used, self.resolution)
+        # Colour only: with the depth mask off the clear keeps the fill's depth.
+        fb.fbo.depth_mask = False
+        ctx.depth_func = "<="
+        ctx.disable(moderngl.CULL_FACE)  # an edge-on sliver may show only its back
+        try:
+            fb.fbo.clear(0.0, 0.0, 0.0, 0.0, viewport=used)
+            if len(commands):
+                if self._multi_draw:
+                    if commands.nbytes > self._indirect.size:  # type: ignore[union-attr]
+                        self._indirect.orphan(max(commands.nbytes, 2 * self._indirect.size))  # type: ignore[union-attr]
+                    self._indirect.write(commands.tobytes())  # type: ignore[union-attr]
+                ctx.wireframe = True
+                try:
+                    self._draw_faces(commands, offsets, mvps)
+                finally:
+                    ctx.wireframe = False
+                self._draw_faces(commands, offsets, mvps, moderngl.POINTS)
+        finally:
+            ctx.depth_func = "<"
+            fb.fbo.depth_mask = True
+            if self.cull_back_faces:
+                ctx.enable(moderngl.CULL_FACE)
+        fb.fbo.read_into(rows, viewport=used, components=1, dtype="u4", alignment=1)
+        return np.bincount(rows.reshape(-1), minlength=n + 1)[: n + 1].astype(np.int64)
+
+    def _unmerged_commands(self, mask: NDArray[np.bool_]) -> tuple[NDArray[np.uint32], I64]:
+        """:meth:`_draw_commands` of ``mask`` with no gap bridged (each run its own range)."""
+        gap, self.merge_gap = self.merge_gap, 0
+        try:
+            return self._draw_commands(mask, mask)
+        finally:
+            self.merge_gap = gap
+
+    def _draw_faces(
+        self, commands: NDArray[np.uint32], offsets: I64, mvps: NDArray[np.float32], mode: int | None = None
+    ) -> None:
+        """Draw every face's commands into its own tile (faces of point ``i`` in row ``i``).
+
+        ``mode``: the primitive (triangles by default; points for the thin pass).
+        """
+        import moderngl
+
+        mode = moderngl.TRIANGLES if mode is None else mode
 
         ctx, vao, indirect = self.ctx, self._vao, self._indirect
         assert ctx is not None and vao is not None and indirect is not None
@@ -583,10 +595,10 @@ class VisibilityRenderer(Releasable):
             ctx.scissor = tile
             self._mvp.write(mvps[face].tobytes())
             if self._multi_draw:
-                vao.render_indirect(indirect, moderngl.TRIANGLES, count=c1 - c0, first=c0)
+                vao.render_indirect(indirect, mode, count=c1 - c0, first=c0)
             else:
                 for cmd in commands[c0:c1]:
-                    vao.render(moderngl.TRIANGLES, vertices=int(cmd[0]), first=int(cmd[2]))
+                    vao.render(mode, vertices=int(cmd[0]), first=int(cmd[2]))
 
     def cell_counts(self, points: ArrayLike) -> tuple[I64, I64]:
         """Pixels each object covers in the six cube faces of every sample point.
@@ -686,6 +698,9 @@ class VisibilityRenderer(Releasable):
 
     def release(self) -> None:
         """Release every GL object (and the context if this renderer made it); idempotent."""
+        if getattr(self, "_eroder", None) is not None:
+            self._eroder.release()  # type: ignore[union-attr]
+            self._eroder = None
         if self._fb is not None:
             self._fb.release()
             self._fb = None

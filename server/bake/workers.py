@@ -51,7 +51,8 @@ def _renderer_for(scene: SourceScene, settings: BakeSettings, key: str) -> tuple
         meshes, ids = meshes_for_scene(scene, settings.occluder_lod)
         _WORKER["renderer"] = VisibilityRenderer(
             meshes, ids, resolution=settings.resolution, view_distance=settings.view_distance,
-            edge_pass=settings.edge_pass,
+            edge_pass=settings.edge_pass, thin_pass=settings.thin_pass,
+            thin_depth=settings.thin_depth,
         )
         _WORKER["footprints"] = shapely.STRtree(
             [shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings]
