@@ -15,6 +15,7 @@
     walkstream bench fill [scene.db] [--views 6] [--size 1280x960] [--repeat 6] [--json]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--kinds street,grid,sections] [--reuse] [--out DIR] [--truth-every N]
     walkstream bench sections [SRC] [--redundancy R ...] [--min-size M ...] [--section-cover walkable free] [--field-spacing 4] [--walks SE,drive]
+    walkstream bench field [SRC ...] [--points 64] [--starts 4] [--field-spacing 4] [--json]
     walkstream bench clusters DB [DB ...] [--min-objects 12] [--max-cells 64] [--plot clusters.png] [--json]
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
     walkstream bench portals [--presets paper paper10] [--frames N] [--truth N] [--no-gl] [--out DIR] [--json]
@@ -514,6 +515,23 @@ def cmd_bench_city(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_field(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench field``."""
+    from walkstream.benchmarks.fieldspeed import format_field_speed, run_field_speed
+    from walkstream.cmd_bake import default_city_source
+
+    sources = [Path(s) for s in args.source] or [default_city_source(Path(args.out))]
+    rows = [run_field_speed(s, points=args.points, starts=args.starts, spacing=args.field_spacing) for s in sources]
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(format_field_speed(rows))
+    print("(renders = field points x 2 eye heights, 6 cube faces of 128 px each; per CPU-s counts every thread "
+          "of the process, the rasteriser's too; same sets / same px: points whose visible set / pixel counts "
+          "equal the plain render's; max dpx: the largest pixel difference of one object)")
+    return 0
+
+
 def cmd_bench_sections(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench sections``."""
     from walkstream.benchmarks.sections import (
@@ -671,6 +689,15 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--workers", type=int, default=1, help="local processes rendering the field (default 1)")
     b.add_argument("--out", default="out/bench-sections", help="folder for the databases, reports and the plot")
     b.set_defaults(func=cmd_bench_sections)
+
+    b = besub.add_parser("field", help="how fast the dense visibility field renders: the bake's renderer against exact occlusion culling, same points")
+    b.add_argument("source", nargs="*", help="city sources (default: the default 700 m city, generated in --out)")
+    b.add_argument("--points", type=int, default=64, help="consecutive field points per run (default 64, one block)")
+    b.add_argument("--starts", type=int, default=4, help="runs spread over the lattice (default 4)")
+    b.add_argument("--field-spacing", type=float, default=4.0, help="metres between field points (default 4)")
+    b.add_argument("--out", default="out/bench-field", help="folder for the generated city")
+    b.add_argument("--json", action="store_true", help="print the rows as JSON")
+    b.set_defaults(func=cmd_bench_field)
 
     b = besub.add_parser("city", help="OpenStreetMap extracts: street cells against grid cells (bake, PVS, replay)")
     b.add_argument("--data", default="../shared/data/osm", help="folder of the extracts (default ../shared/data/osm)")
