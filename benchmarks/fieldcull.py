@@ -9,7 +9,7 @@ the depth read-back and the tests in numpy cost as much (docs/benchmarks.md).
 
 A field point's twelve cube faces see a few dozen objects, but every face draws
 every object whose box meets its frustum within the view distance (on the demo city
-about 2,300 triangles a face, of which a tenth show).  :class:`FieldRenderer` draws
+about 2,300 triangles a face, of which a tenth show).  :class:`CulledRenderer` draws
 each pass of points in two steps and leaves out what cannot show:
 
 1. **Likely occluders first.**  In each face it draws the objects whose box lies
@@ -47,7 +47,7 @@ from walkstream.shared.arrays import F64, I64
 from walkstream.shared.gl import check_gl_error
 from walkstream.shared.records import Mesh
 
-__all__ = ["DEPTH_MARGIN", "HINT_RADIUS", "MIN_TRIANGLES", "NEAR_RADIUS", "PIXEL_MARGIN", "FieldRenderer"]
+__all__ = ["DEPTH_MARGIN", "HINT_RADIUS", "MIN_TRIANGLES", "NEAR_RADIUS", "PIXEL_MARGIN", "CulledRenderer"]
 
 NEAR_RADIUS = 30.0
 """Metres: an object whose box is this close to the eye is drawn in the first step."""
@@ -83,7 +83,7 @@ WINDOW = 4
 whose texels cover the candidate's pixels in at most this many per side."""
 
 
-class FieldRenderer(VisibilityRenderer):
+class CulledRenderer(VisibilityRenderer):
     """A :class:`~.visibility.VisibilityRenderer` that renders many nearby points faster.
 
     The same constructor (``near_radius``, ``occlusion`` and ``min_triangles`` besides); :meth:`field_counts`

@@ -5,11 +5,15 @@ The field's points of a city (the walkable cover the sections bake uses, every
 from ``--starts`` places spread over the lattice, each at both eye heights in the
 field's order, and rendered side by side in one run by
 
-- ``plain``: the bake's ID renderer, as the field's blocks are rendered
+- ``plain``: the bake's ID renderer one pass after the other, as the field's blocks
+  were rendered before
   (:meth:`~walkstream.server.bake.visibility.VisibilityRenderer.each_point_counts`);
-- ``culled``: the same with exact occlusion culling (:mod:`.fieldcull`),
+- ``bake``: the field's renderer today, two passes in flight
+  (:meth:`~walkstream.server.bake.fieldrender.FieldRenderer.field_counts`);
+- ``culled``: the plain renderer with exact occlusion culling (:mod:`.fieldcull`,
+  tried, not adopted),
 
-alternating run by run so that both see the same load.  A row gives the renders
+alternating run by run so that all see the same load.  A row gives the renders
 (point and height) per second of wall time and per CPU second (every thread of this
 process: the rasteriser's too), the triangles set up against the plain render, the
 faces drawn twice, and the points whose counts equal the plain render's (visible
@@ -25,8 +29,9 @@ from typing import Any
 import numpy as np
 import shapely
 
-from walkstream.benchmarks.fieldcull import FieldRenderer
+from walkstream.benchmarks.fieldcull import CulledRenderer
 from walkstream.server.bake.cells import make_cells
+from walkstream.server.bake.fieldrender import FieldRenderer
 from walkstream.server.bake.field import FIELD_BLOCK, FIELD_HEIGHTS, field_lattice, points_meeting
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene
@@ -57,10 +62,10 @@ def run_field_speed(
     -------
     dict
         ``scene``, ``objects``, ``triangles``, ``renders`` and per renderer (``plain``,
-        ``culled``) ``wall_s``, ``cpu_s``, ``renders_per_s``, ``renders_per_cpu_s``; for
+        ``bake``, ``culled``) ``wall_s``, ``cpu_s``, ``renders_per_s``, ``renders_per_cpu_s``; for
         ``culled`` also ``triangles_share``, ``faces_redrawn``, ``faces_appended``,
-        ``passes_plain``, ``same_sets`` and ``same_counts`` (points equal to the plain
-        render's), ``max_pixel_difference``.
+        ``passes_plain``; for ``bake`` and ``culled`` ``same_sets`` and ``same_counts``
+        (points equal to the plain render's), ``max_pixel_difference``.
     """
     if points < 1 or starts < 1:
         raise InputError(f"bench field: --points and --starts must be at least 1, got {points} and {starts}")
@@ -80,28 +85,31 @@ def run_field_speed(
         runs.append(np.vstack([np.column_stack([e, np.full(len(e), z)]) for z in FIELD_HEIGHTS]))
     meshes, ids = meshes_for_scene(scene, 0)
     plain = VisibilityRenderer(meshes, ids, resolution=resolution)
-    culled = FieldRenderer(meshes, ids, resolution=resolution)
-    times = {"plain": [0.0, 0.0], "culled": [0.0, 0.0]}
-    same_sets = same_counts = 0
-    worst = 0
+    bake = FieldRenderer(meshes, ids, resolution=resolution)
+    culled = CulledRenderer(meshes, ids, resolution=resolution)
+    calls = (("plain", plain, plain.each_point_counts), ("bake", bake, bake.field_counts),
+             ("culled", culled, culled.field_counts))
+    times = {name: [0.0, 0.0] for name, _, _ in calls}
+    same = {name: [0, 0, 0] for name in ("bake", "culled")}  # sets, counts, worst pixel difference
     try:
         for pts in runs:
             got = {}
-            for name, r, call in (("plain", plain, plain.each_point_counts), ("culled", culled, culled.field_counts)):
+            for name, r, call in calls:
                 assert r.ctx is not None
                 r.ctx.__enter__()  # each renderer has its own context
                 w, c = time.perf_counter(), time.process_time()
                 got[name] = call(pts)
                 times[name][0] += time.perf_counter() - w
                 times[name][1] += time.process_time() - c
-            for (ia, pa), (ib, pb) in zip(got["plain"], got["culled"], strict=True):
-                if np.array_equal(ia, ib):
-                    same_sets += 1
-                    same_counts += bool(np.array_equal(pa, pb))
-                    if len(pa):
-                        worst = max(worst, int(np.abs(pa - pb).max()))
-                else:
-                    worst = max(worst, int(max(pa.sum(), pb.sum())))
+            for name, tally in same.items():
+                for (ia, pa), (ib, pb) in zip(got["plain"], got[name], strict=True):
+                    if np.array_equal(ia, ib):
+                        tally[0] += 1
+                        tally[1] += bool(np.array_equal(pa, pb))
+                        if len(pa):
+                            tally[2] = max(tally[2], int(np.abs(pa - pb).max()))
+                    else:
+                        tally[2] = max(tally[2], int(max(pa.sum(), pb.sum())))
         n = sum(len(p) for p in runs)
         out: dict[str, Any] = {"scene": source.name, "objects": len(ids),
                                "triangles": int(sum(m.indices.size // 3 for m in meshes)), "renders": n}
@@ -114,11 +122,13 @@ def run_field_speed(
             "faces_redrawn": s["faces_redrawn"] / s["faces"] if s["faces"] else None,
             "faces_appended": s["faces_appended"] / s["faces"] if s["faces"] else None,
             "passes_plain": s["passes_plain"], "passes": s["passes"],
-            "same_sets": same_sets, "same_counts": same_counts, "max_pixel_difference": worst,
         })
+        for name, (sets, counts, worst) in same.items():
+            out[name].update({"same_sets": sets, "same_counts": counts, "max_pixel_difference": worst})
         return out
     finally:
         culled.release()
+        bake.release()
         plain.release()
 
 
@@ -129,11 +139,12 @@ def format_field_speed(rows: list[dict[str, Any]]) -> str:
     lines = [head, "-" * len(head)]
     for r in rows:
         base = r["plain"]["renders_per_cpu_s"]
-        for name in ("plain", "culled"):
+        for name in ("plain", "bake", "culled"):
             f = r[name]
-            extra = (f"{100 * (f['triangles_share'] or 0):>8.0f}% {100 * (f['faces_redrawn'] or 0):>6.0f}% "
-                     f"{f['same_sets']:>9} {f['same_counts']:>8} {f['max_pixel_difference']:>7}"
-                     if name == "culled" else f"{'100%':>9} {'-':>7} {'-':>9} {'-':>8} {'-':>7}")
+            tri = (f"{100 * (f['triangles_share'] or 0):>8.0f}% {100 * (f['faces_redrawn'] or 0):>6.0f}%"
+                   if name == "culled" else f"{'100%':>9} {'-':>7}")
+            extra = (f"{tri} {f['same_sets']:>9} {f['same_counts']:>8} {f['max_pixel_difference']:>7}"
+                     if name != "plain" else f"{tri} {'-':>9} {'-':>8} {'-':>7}")
             lines.append(
                 f"{r['scene']:<22} {name:<8} {r['renders']:>7} {f['renders_per_s']:>7.1f} {f['renders_per_cpu_s']:>9.1f} "
                 f"{f['renders_per_cpu_s'] / base:>7.2f} {extra}")
