@@ -526,8 +526,9 @@ def cmd_bench_field(args: argparse.Namespace) -> int:
         print(json.dumps(rows, indent=2))
         return 0
     print(format_field_speed(rows))
-    print("(renders = field points x 2 eye heights, 6 cube faces of 128 px each; per CPU-s counts every thread "
-          "of the process, the rasteriser's too; same sets / same px: points whose visible set / pixel counts "
+    print("(renders = field points x 2 eye heights, 6 cube faces of 128 px each; plain: the renderer as the field "
+          "used it before, bake: the field's renderer now (two passes in flight), culled: exact occlusion culling, "
+          "not adopted; per CPU-s counts every thread of the process, the rasteriser's too; same sets / same px: points whose visible set / pixel counts "
           "equal the plain render's; max dpx: the largest pixel difference of one object)")
     return 0
 
