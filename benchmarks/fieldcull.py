@@ -181,7 +181,7 @@ class CulledRenderer(VisibilityRenderer):
         list of (ids, pixels)
             As :meth:`~.visibility.VisibilityRenderer.each_point_counts`.
         """
-        if not self.occlusion or self.edge_pass or getattr(self, "thin_pass", 0.0):
+        if not self.occlusion or self.edge_pass or float(getattr(self, "thin_pass", 0)):
             return self.each_point_counts(points)
         pts = self._check_points(points)
         if not (len(pts) and len(self._ids)):
@@ -197,11 +197,11 @@ class CulledRenderer(VisibilityRenderer):
                 # else what the last pass saw
                 d = np.hypot(*(batch[:, None, :2] - pts[None, :s, :2]).transpose(2, 0, 1))
                 close = d <= HINT_RADIUS
-                hint = np.empty((len(batch), 6, len(self._ids)), bool)
+                by_point = np.empty((len(batch), 6, len(self._ids)), bool)
                 for i in range(len(batch)):
                     near_pts = np.flatnonzero(close[i])
-                    hint[i] = seen[near_pts].any(axis=0) if len(near_pts) else last
-                hint = hint.reshape(len(batch) * 6, -1)
+                    by_point[i] = seen[near_pts].any(axis=0) if len(near_pts) else last
+                hint = by_point.reshape(len(batch) * 6, -1)
             draw, unsafe = self._face_masks(batch)
             tris = int((draw @ self._tris).sum())
             if tris < self.min_triangles * len(draw):
@@ -217,7 +217,7 @@ class CulledRenderer(VisibilityRenderer):
             else:
                 own, faces = self._culled_pass(batch, hint, (draw, unsafe))
             seen[s : s + len(batch)] = faces.reshape(len(batch), 6, -1)
-            last = faces.reshape(len(batch), 6, -1).any(axis=0)
+            last = np.asarray(faces.reshape(len(batch), 6, -1).any(axis=0), bool)
             out.extend(self._ids_pixels(c) for c in own)
         assert self.ctx is not None
         check_gl_error(self.ctx, f"after rendering {len(pts)} field points")
@@ -322,11 +322,13 @@ class CulledRenderer(VisibilityRenderer):
 
     def _tile_keys(self, p: int) -> I64:
         """``(p * res, 6 * res)``: each pixel's face times ``n + 1`` (a face and an id make one bin)."""
-        if getattr(self, "_keys", None) is None or self._keys.shape[0] < p * self.resolution:
+        keys: I64 | None = getattr(self, "_keys", None)
+        if keys is None or keys.shape[0] < p * self.resolution:
             res, n = self.resolution, len(self._ids)
             rows = np.arange(self.points_per_pass * res)[:, None] // res
-            self._keys = ((rows * 6 + np.arange(6 * res)[None, :] // res) * (n + 1)).astype(np.int64)
-        out: I64 = self._keys[: p * self.resolution]
+            keys = ((rows * 6 + np.arange(6 * res)[None, :] // res) * (n + 1)).astype(np.int64)
+            self._keys = keys
+        out: I64 = keys[: p * self.resolution]
         return out
 
     def _set_state(self) -> None:
@@ -435,7 +437,8 @@ class CulledRenderer(VisibilityRenderer):
         wl, wh = np.where(front, wlo, 1.0), np.where(front, whi, 1.0)
         bounds = [np.where(lo[:, k] <= 0, lo[:, k] / wl, lo[:, k] / wh) for k in (0, 1)]
         bounds += [np.where(hi[:, k] >= 0, hi[:, k] / wl, hi[:, k] / wh) for k in (0, 1)]
-        out: NDArray[np.bool_] = front & self._behind(pyramid, np.searchsorted(faces, fi), *bounds, wl)
+        x0, y0, x1, y1 = bounds
+        out: NDArray[np.bool_] = front & self._behind(pyramid, np.searchsorted(faces, fi), x0, y0, x1, y1, wl)
         return out
 
     def _behind(

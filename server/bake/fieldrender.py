@@ -47,7 +47,7 @@ class FieldRenderer(VisibilityRenderer):
         list of (ids, pixels)
             As :meth:`~.visibility.VisibilityRenderer.each_point_counts`, the same counts.
         """
-        if self.edge_pass or getattr(self, "thin_pass", 0.0):
+        if self.edge_pass or float(getattr(self, "thin_pass", 0)):
             return self.each_point_counts(points)
         pts = self._check_points(points)
         if not (len(pts) and len(self._ids)):
