@@ -14,7 +14,7 @@
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
     walkstream bench fill [scene.db] [--views 6] [--size 1280x960] [--repeat 6] [--json]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--kinds street,grid,sections] [--reuse] [--out DIR] [--truth-every N]
-    walkstream bench sections [SRC] [--redundancy R ...] [--min-size M ...] [--section-cover walkable free] [--field-spacing 4] [--walks SE,drive]
+    walkstream bench sections [SRC] [--redundancy R ...] [--min-size M ...] [--section-cover walkable free] [--field-spacing 4] [--walks SE,drive] [--bbox X0,Y0,X1,Y1 [--bbox-crs lonlat]]
     walkstream bench field [SRC ...] [--points 64] [--starts 4] [--field-spacing 4] [--json]
     walkstream bench clusters DB [DB ...] [--min-objects 12] [--max-cells 64] [--plot clusters.png] [--json]
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
@@ -540,7 +540,7 @@ def cmd_bench_sections(args: argparse.Namespace) -> int:
         plot_sections_trade,
         run_sections_bench,
     )
-    from walkstream.cmd_bake import default_city_source
+    from walkstream.cmd_bake import _parse_bbox, default_city_source
     from walkstream.cmd_replay import replay_with_options
 
     out = Path(args.out)
@@ -549,6 +549,7 @@ def cmd_bench_sections(args: argparse.Namespace) -> int:
         replay_with_options, source=source, out=out, redundancies=args.redundancy, min_sizes=args.min_size,
         field_spacing=args.field_spacing, walks=[w.strip() for w in args.walks.split(",") if w.strip()],
         covers=args.section_cover, reuse=args.reuse, workers=args.workers,
+        bbox=_parse_bbox(args.bbox), bbox_crs=args.bbox_crs,
     )
     print(format_sections_table(rows))
     print("(56 kbit/s, 200 ms, simulated clock, desktop2003; redund. = objects a section holds that the "
@@ -688,6 +689,8 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--section-cover", nargs="+", default=["walkable"], help="covers to bake, of walkable and free (default walkable)")
     b.add_argument("--reuse", action="store_true", help="keep databases already baked in --out")
     b.add_argument("--workers", type=int, default=1, help="local processes rendering the field (default 1)")
+    b.add_argument("--bbox", help="MINX,MINY,MAXX,MAXY: bake only this part of the source (as bake --bbox)")
+    b.add_argument("--bbox-crs", choices=("local", "lonlat"), default="local", help="--bbox in scene-local metres (default) or lon/lat degrees")
     b.add_argument("--out", default="out/bench-sections", help="folder for the databases, reports and the plot")
     b.set_defaults(func=cmd_bench_sections)
 
