@@ -540,7 +540,7 @@ def cmd_bench_sections(args: argparse.Namespace) -> int:
         plot_sections_trade,
         run_sections_bench,
     )
-    from walkstream.cmd_bake import _parse_bbox, default_city_source
+    from walkstream.cmd_bake import default_city_source, parse_bbox
     from walkstream.cmd_replay import replay_with_options
 
     out = Path(args.out)
@@ -549,7 +549,7 @@ def cmd_bench_sections(args: argparse.Namespace) -> int:
         replay_with_options, source=source, out=out, redundancies=args.redundancy, min_sizes=args.min_size,
         field_spacing=args.field_spacing, walks=[w.strip() for w in args.walks.split(",") if w.strip()],
         covers=args.section_cover, reuse=args.reuse, workers=args.workers,
-        bbox=_parse_bbox(args.bbox), bbox_crs=args.bbox_crs,
+        bbox=parse_bbox(args.bbox), bbox_crs=args.bbox_crs,
     )
     print(format_sections_table(rows))
     print("(56 kbit/s, 200 ms, simulated clock, desktop2003; redund. = objects a section holds that the "
