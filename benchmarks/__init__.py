@@ -15,6 +15,8 @@ Each module is one benchmark that ``walkstream bench ...`` runs and prints as a 
 - :mod:`.lod`: image error against frame time, ACH against distance LODs;
 - :mod:`.fill`: where the gl device's frame time goes, lighting per fragment vs per vertex;
 - :mod:`.city`: OpenStreetMap extracts, street cells against grid cells;
+- :mod:`.fieldspeed`: how fast the dense visibility field renders, the bake's renderer
+  against exact occlusion culling (:mod:`.fieldcull`) on the same points;
 - :mod:`.clusters`: visibility lists clustered along the cell adjacency (m-LOMA)
   against the delta-coded records: bytes of the cell records and of the walks' traffic;
 - :mod:`.interiors`: interiors per IFC model and generated size (cells, portals,
@@ -25,6 +27,8 @@ Each module is one benchmark that ``walkstream bench ...`` runs and prints as a 
 Helpers of those, not commands of their own:
 
 - :mod:`.visref`: the dense reference of :mod:`.visibility`, kept on disk between runs;
+- :mod:`.fieldcull`: the field's points rendered with exact occlusion culling (tried,
+  measured by :mod:`.fieldspeed`, not the bake's renderer: it does not pay on llvmpipe);
 - :mod:`.cellcodec`: the cell-contents codec's versions side by side (a table of
   ``walkstream bench interiors``);
 - :mod:`.portalwalk`: the first portal walk, the reference that :mod:`.portals` times
@@ -59,6 +63,7 @@ _EXPORTS = {
     "run_fill_bench": "walkstream.benchmarks.fill",
     "run_city_bench": "walkstream.benchmarks.city",
     "run_sections_bench": "walkstream.benchmarks.sections",
+    "run_field_speed": "walkstream.benchmarks.fieldspeed",
     "format_sections_table": "walkstream.benchmarks.sections",
     "plot_sections_trade": "walkstream.benchmarks.sections",
     "run_clusters_bench": "walkstream.benchmarks.clusters",

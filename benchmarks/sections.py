@@ -57,9 +57,12 @@ def run_sections_bench(
     covers: Sequence[str] = ("walkable",),
     reuse: bool = False,
     workers: int = 1,
+    bbox: tuple[float, float, float, float] | None = None,
+    bbox_crs: str = "local",
 ) -> list[dict[str, Any]]:
     """Bake ``source`` with street cells, grid cells and in sections for every ``(R, M)`` and cover
-    (``--section-cover``); replay ``walks``.
+    (``--section-cover``); replay ``walks``.  With ``bbox`` (``bbox_crs``: ``local`` or
+    ``lonlat``) every bake takes only that part of the source (``bake --bbox``).
 
     Returns one row per database; writes ``bench_sections.json`` and the replay
     reports into ``out``.
@@ -67,15 +70,16 @@ def run_sections_bench(
     if not source.exists():
         raise WalkstreamError(f"{source}: no such source")
     out.mkdir(parents=True, exist_ok=True)
+    clip: dict[str, Any] = {"bbox": bbox, "bbox_crs": bbox_crs} if bbox is not None else {}
     runs: list[tuple[str, Path, BakeSettings, int | None, float | None]] = [
-        ("street", out / "street.db", BakeSettings(), None, None),
-        ("grid", out / "grid.db", BakeSettings(cells="grid"), None, None),
+        ("street", out / "street.db", BakeSettings(**clip), None, None),
+        ("grid", out / "grid.db", BakeSettings(cells="grid", **clip), None, None),
     ]
     for cover in covers:
         for rr in redundancies:
             for mm in min_sizes:
                 st = BakeSettings(cells="sections", field_spacing=field_spacing, redundancy=int(rr),
-                                  min_size=float(mm), section_cover=cover).check()
+                                  min_size=float(mm), section_cover=cover, **clip).check()
                 name = f"sections-R{rr}-M{mm:g}" + ("" if cover == "walkable" else f"-{cover}")
                 runs.append(("sections", out / f"{name}.db", st, int(rr), float(mm)))
     # one field per cover (the walkable cover renders fewer points): the other bakes

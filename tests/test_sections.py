@@ -376,3 +376,10 @@ def test_the_bench_table_and_plot_show_every_kind_cover_and_where_the_bytes_go(t
     assert "40,000" in lines[4] and "12,000" in lines[4] and "60,064" in lines[4]
     plot_sections_trade(rows, tmp_path / "trade.png")
     assert (tmp_path / "trade.png").stat().st_size > 10_000
+
+
+def test_bench_sections_refuses_a_bad_bbox_in_one_line(city: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "sections", str(city), "--bbox", "1,2,3", "--out", str(tmp_path / "b")]) != 0
+    err = capsys.readouterr().err
+    assert "--bbox" in err and "Traceback" not in err
+    assert not (tmp_path / "b" / "street.db").exists()

@@ -25,10 +25,11 @@ from typing import Any
 from walkstream.shared.errors import WalkstreamError
 from walkstream.terminal import count_bar, print_summary, stage_setter
 
-__all__ = ["add_bake_parsers", "default_city_source", "run_bake"]
+__all__ = ["add_bake_parsers", "default_city_source", "parse_bbox", "run_bake"]
 
 
-def _parse_bbox(text: str | None) -> tuple[float, float, float, float] | None:
+def parse_bbox(text: str | None) -> tuple[float, float, float, float] | None:
+    """``--bbox MINX,MINY,MAXX,MAXY`` as four numbers (None when not given); a bad one is a one-line error."""
     if text is None:
         return None
     try:
@@ -99,7 +100,7 @@ def cmd_bake(args: argparse.Namespace) -> int:
         cell_size=args.cell_size,
         max_length=args.cell_size,
         view_distance=args.view_distance,
-        bbox=_parse_bbox(args.bbox),
+        bbox=parse_bbox(args.bbox),
         bbox_crs=args.bbox_crs,
         network=args.network,
         centre=args.centre,

@@ -14,7 +14,8 @@
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
     walkstream bench fill [scene.db] [--views 6] [--size 1280x960] [--repeat 6] [--json]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--kinds street,grid,sections] [--reuse] [--out DIR] [--truth-every N]
-    walkstream bench sections [SRC] [--redundancy R ...] [--min-size M ...] [--section-cover walkable free] [--field-spacing 4] [--walks SE,drive]
+    walkstream bench sections [SRC] [--redundancy R ...] [--min-size M ...] [--section-cover walkable free] [--field-spacing 4] [--walks SE,drive] [--bbox X0,Y0,X1,Y1 [--bbox-crs lonlat]]
+    walkstream bench field [SRC ...] [--points 64] [--starts 4] [--field-spacing 4] [--json]
     walkstream bench clusters DB [DB ...] [--min-objects 12] [--max-cells 64] [--plot clusters.png] [--json]
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
     walkstream bench portals [--presets paper paper10] [--frames N] [--truth N] [--no-gl] [--out DIR] [--json]
@@ -514,6 +515,24 @@ def cmd_bench_city(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_field(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench field``."""
+    from walkstream.benchmarks.fieldspeed import format_field_speed, run_field_speed
+    from walkstream.cmd_bake import default_city_source
+
+    sources = [Path(s) for s in args.source] or [default_city_source(Path(args.out))]
+    rows = [run_field_speed(s, points=args.points, starts=args.starts, spacing=args.field_spacing) for s in sources]
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(format_field_speed(rows))
+    print("(renders = field points x 2 eye heights, 6 cube faces of 128 px each; plain: the renderer as the field "
+          "used it before, bake: the field's renderer now (two passes in flight), culled: exact occlusion culling, "
+          "not adopted; per CPU-s counts every thread of the process, the rasteriser's too; same sets / same px: points whose visible set / pixel counts "
+          "equal the plain render's; max dpx: the largest pixel difference of one object)")
+    return 0
+
+
 def cmd_bench_sections(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench sections``."""
     from walkstream.benchmarks.sections import (
@@ -521,7 +540,7 @@ def cmd_bench_sections(args: argparse.Namespace) -> int:
         plot_sections_trade,
         run_sections_bench,
     )
-    from walkstream.cmd_bake import default_city_source
+    from walkstream.cmd_bake import default_city_source, parse_bbox
     from walkstream.cmd_replay import replay_with_options
 
     out = Path(args.out)
@@ -530,6 +549,7 @@ def cmd_bench_sections(args: argparse.Namespace) -> int:
         replay_with_options, source=source, out=out, redundancies=args.redundancy, min_sizes=args.min_size,
         field_spacing=args.field_spacing, walks=[w.strip() for w in args.walks.split(",") if w.strip()],
         covers=args.section_cover, reuse=args.reuse, workers=args.workers,
+        bbox=parse_bbox(args.bbox), bbox_crs=args.bbox_crs,
     )
     print(format_sections_table(rows))
     print("(56 kbit/s, 200 ms, simulated clock, desktop2003; redund. = objects a section holds that the "
@@ -669,8 +689,19 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--section-cover", nargs="+", default=["walkable"], help="covers to bake, of walkable and free (default walkable)")
     b.add_argument("--reuse", action="store_true", help="keep databases already baked in --out")
     b.add_argument("--workers", type=int, default=1, help="local processes rendering the field (default 1)")
+    b.add_argument("--bbox", help="MINX,MINY,MAXX,MAXY: bake only this part of the source (as bake --bbox)")
+    b.add_argument("--bbox-crs", choices=("local", "lonlat"), default="local", help="--bbox in scene-local metres (default) or lon/lat degrees")
     b.add_argument("--out", default="out/bench-sections", help="folder for the databases, reports and the plot")
     b.set_defaults(func=cmd_bench_sections)
+
+    b = besub.add_parser("field", help="how fast the dense visibility field renders: the bake's renderer against exact occlusion culling, same points")
+    b.add_argument("source", nargs="*", help="city sources (default: the default 700 m city, generated in --out)")
+    b.add_argument("--points", type=int, default=64, help="consecutive field points per run (default 64, one block)")
+    b.add_argument("--starts", type=int, default=4, help="runs spread over the lattice (default 4)")
+    b.add_argument("--field-spacing", type=float, default=4.0, help="metres between field points (default 4)")
+    b.add_argument("--out", default="out/bench-field", help="folder for the generated city")
+    b.add_argument("--json", action="store_true", help="print the rows as JSON")
+    b.set_defaults(func=cmd_bench_field)
 
     b = besub.add_parser("city", help="OpenStreetMap extracts: street cells against grid cells (bake, PVS, replay)")
     b.add_argument("--data", default="../shared/data/osm", help="folder of the extracts (default ../shared/data/osm)")

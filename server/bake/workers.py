@@ -15,6 +15,7 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from walkstream.server.bake.fieldrender import FieldRenderer
 from walkstream.server.bake.samples import bake_points, split_points
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
@@ -42,14 +43,16 @@ PVS_CHUNK = 8
 _WORKER: dict[str, Any] = {}
 
 
-def _renderer_for(scene: SourceScene, settings: BakeSettings, key: str) -> tuple[VisibilityRenderer, Any]:
-    """One renderer per process (and per scene), built on first use and kept."""
+def _renderer_for(scene: SourceScene, settings: BakeSettings, key: str) -> tuple[FieldRenderer, Any]:
+    """One renderer per process (and per scene), built on first use and kept (the
+    field's :class:`~.fieldrender.FieldRenderer`: a :class:`VisibilityRenderer` with
+    one more way to render many points)."""
     if _WORKER.get("key") != key:
         old = _WORKER.get("renderer")
         if old is not None:
             old.release()
         meshes, ids = meshes_for_scene(scene, settings.occluder_lod)
-        _WORKER["renderer"] = VisibilityRenderer(
+        _WORKER["renderer"] = FieldRenderer(
             meshes, ids, resolution=settings.resolution, view_distance=settings.view_distance,
             edge_pass=settings.edge_pass, thin_pass=settings.thin_pass,
             thin_depth=settings.thin_depth,
@@ -173,14 +176,17 @@ def field_task(
 
     ``(block, eyes (k, 2), heights)`` in: every eye rendered at both heights (a full
     spin up and down); ``(block, offsets (k + 1,), ids, pixels)`` out, each point's
-    visible set with the pixels each object covers over its twelve images.
+    visible set with the pixels each object covers over its twelve images.  The
+    points go to the renderer height by height, in the order they always had (a
+    point's place in the framebuffer decides the rounding of its vertices, and a
+    resumed field mixes blocks rendered at different times).
     """
     renderer, _ = _renderer_for(scene, settings, key)
     out = []
     for block, eyes, heights in blocks:
         k = len(eyes)
         pts = np.vstack([np.column_stack([eyes, np.full(k, z)]) for z in heights])
-        per = renderer.each_point_counts(pts)
+        per = renderer.field_counts(pts)
         offsets = np.zeros(k + 1, np.int64)
         ids_l, pix_l = [], []
         for i in range(k):
