@@ -120,6 +120,10 @@ class ReplayConfig:
     True always, False never (``--no-facades``: plain boxes), None (``--facades auto``)
     on a simulated device only (where the cost model's budget leaves the boxes; on
     ``gl`` the rendering's real time cost frames and LOD2 is drawn nearly everywhere)."""
+    facade_lookalike: bool = True
+    """Draw a building the allocation put at LOD2 as its box with facade textures where
+    the two look alike from the eye (``--no-facade-lookalike``: only boxes get them;
+    :mod:`walkstream.client.draw.lookalike`)."""
     facade_texels_per_m: float = 8.0
     """Texels per metre of a facade texture (``--facade-texels``)."""
     facade_budget_bytes: int = 8 << 20
