@@ -124,3 +124,18 @@ def test_on_gl_the_lookalike_boxes_save_triangles(city: Path, gl_ctx: object) ->
     off = _replay(city, facade_lookalike=False)
     assert on["facades"]["lookalike_mean"] > 0 and off["facades"]["lookalike_mean"] == 0
     assert on["triangles_mean"] < off["triangles_mean"]
+
+
+@pytest.mark.gl
+def test_under_the_real_clock_the_pictures_are_baked_in_the_frames_slack(city: Path, gl_ctx: object) -> None:
+    # 2 fps: half a second of slack a frame, whatever the machine's load
+    app = create_app([city])
+    try:
+        cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="gl", clock="real", duration_s=4.0,
+                           size=(160, 120), fps=2.0, facades=True)
+        f = run_replay(httpx.ASGITransport(app=app), URL, cfg).summary["facades"]
+    finally:
+        app.state.scenes.close()
+    assert f["slack_triangles"] > 0 and f["slack_triangles"] == f["bake_triangles"]
+    assert f["bake_triangles_max"] == 0  # no frame paid for a bake in its own time
+    assert f["buildings_baked"] > 0

@@ -59,8 +59,9 @@ CREDIT_FRAMES = 2
 """The bake credit saved up is at most this many frames' share (no burst after a quiet spell)."""
 SLACK_MARGIN_S = 0.004
 """Seconds of a frame's slack the bake leaves unused (the event loop's own work, timer jitter)."""
-SLACK_DECAY = 0.98
-"""Per face baked, the share of the slowest face time kept (one slow face does not stop the bake for good)."""
+SLACK_DECAY = 0.9
+"""Per frame, the share of the slowest face time kept (one slow face, the first one's
+shader and framebuffer among them, does not stop the bake for long)."""
 MIN_PIECE = 48
 """Triangles of a face a frame may draw even when the budget leaves none above the
 visible lowest LODs (about 3 ms on ``pda``, within the 10 % of a 25 fps frame)."""
@@ -170,13 +171,14 @@ def bake_facades(w: WalkState, f: Frame, room: int) -> int:
 def bake_in_slack(w: WalkState, slack_s: float) -> int:
     """Under the real clock: bake whole faces in the ``slack_s`` seconds the frame left
     before the next tick, off the frame's critical path: a face starts only when the
-    slowest face so far (:attr:`FacadeState.face_s`) fits in what is left, so the next
+    slowest recent face (:attr:`FacadeState.face_s`) fits in what is left, so the next
     frame does not start late.  Returns the LOD2 triangles drawn."""
     st: FacadeState | None = w.facades
     if st is None or st.error is not None or w.indoors:
         return 0
     t0 = time.perf_counter()
     drawn = 0
+    st.face_s *= SLACK_DECAY
     while True:
         left = slack_s - (time.perf_counter() - t0)
         if left < SLACK_MARGIN_S + st.face_s:
@@ -186,7 +188,7 @@ def bake_in_slack(w: WalkState, slack_s: float) -> int:
             break
         t1 = time.perf_counter()
         drawn += _bake_piece(st, job, None)
-        st.face_s = max(st.face_s * SLACK_DECAY, time.perf_counter() - t1)
+        st.face_s = max(st.face_s, time.perf_counter() - t1)
     st.slack_triangles += drawn
     return drawn
 
