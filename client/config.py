@@ -124,6 +124,11 @@ class ReplayConfig:
     """Draw a building the allocation put at LOD2 as its box with facade textures where
     the two look alike from the eye (``--no-facade-lookalike``: only boxes get them;
     :mod:`walkstream.client.draw.lookalike`)."""
+    facade_grazing_deg: float = 70.0
+    """The look-alike boxes: the largest angle between a face's normal and the ray from
+    its centre to the eye at which its picture stands for LOD2 (``--facade-grazing``;
+    90: no limit, a third fewer triangles on ``gl`` at a higher pixel-level error;
+    :data:`~walkstream.client.draw.lookalike.GRAZING_COS`)."""
     facade_texels_per_m: float = 8.0
     """Texels per metre of a facade texture (``--facade-texels``)."""
     facade_budget_bytes: int = 8 << 20
@@ -151,6 +156,8 @@ class ReplayConfig:
             raise InputError(f"--target-fps {tf!r}: expected a number in (0, 1000]")
         if not (math.isfinite(self.facade_texels_per_m) and 0 < self.facade_texels_per_m <= 64):
             raise InputError(f"--facade-texels {self.facade_texels_per_m!r}: expected texels per metre in (0, 64]")
+        if not (math.isfinite(self.facade_grazing_deg) and 0 <= self.facade_grazing_deg <= 90):
+            raise InputError(f"--facade-grazing {self.facade_grazing_deg!r}: expected degrees from 0 to 90")
         if self.facade_budget_bytes < 0:
             raise InputError(f"--facade-budget {self.facade_budget_bytes}: must not be negative")
         if not (math.isfinite(self.facade_bake_share) and 0 < self.facade_bake_share <= 1):

@@ -13,6 +13,7 @@ import pytest
 from walkstream.client.config import ReplayConfig
 from walkstream.client.draw.facades import BACK_M, FRONT_M, FacadeBaker
 from walkstream.client.draw.lookalike import (
+    GRAZING_COS,
     PARALLAX_PX,
     facade_screen_error,
     face_geometry,
@@ -27,6 +28,7 @@ from walkstream.server.service.main import create_app
 from walkstream.server.sources.citygen import write_city
 from walkstream.shared.buildings import build_lods
 from walkstream.shared.camera import look_at
+from walkstream.shared.errors import InputError
 from walkstream.shared.records import BuildingParams, Mesh
 
 URL = "http://walkstream.test"
@@ -42,14 +44,15 @@ def _face(relief: float, texel: float = 0.125) -> tuple[Any, ...]:
 def test_parallax_is_nil_head_on_and_grows_near_and_grazing() -> None:
     g = _face(0.3)
     far_head_on = np.array([10.0, -200.0, 7.5])
-    p, t = facade_screen_error(g, far_head_on, FOCAL)
-    assert p < PARALLAX_PX and t < 1.0 and looks_alike(g, far_head_on, FOCAL)
-    # the same distance at a grazing angle: the corner nearest the eye sees the relief move
+    p, t, c = facade_screen_error(g, far_head_on, FOCAL)
+    assert p < PARALLAX_PX and t < 1.0 and c > 0.99 and looks_alike(g, far_head_on, FOCAL)
+    # the same distance at a grazing angle: the corner nearest the eye sees the relief move,
+    # and the windows shrink across the view below a pixel: not alike, whatever the parallax
     graze = np.array([200.0, -20.0, 1.7])
-    p2, _ = facade_screen_error(g, graze, FOCAL)
-    assert p2 > p
+    p2, _, c2 = facade_screen_error(g, graze, FOCAL)
+    assert p2 > p and p2 < PARALLAX_PX and c2 < GRAZING_COS and not looks_alike(g, graze, FOCAL)
     near = np.array([10.0, -15.0, 1.7])
-    pn, tn = facade_screen_error(g, near, FOCAL)
+    pn, tn, _ = facade_screen_error(g, near, FOCAL)
     assert pn > PARALLAX_PX and not looks_alike(g, near, FOCAL)
     # by the formula: the nearest point at 15 m, the grid's far corners at a slant
     assert pn <= 0.3 * FOCAL / 15.0 + 1e-9
@@ -58,7 +61,7 @@ def test_parallax_is_nil_head_on_and_grows_near_and_grazing() -> None:
 def test_a_face_turned_away_is_not_seen_and_a_too_coarse_texel_refuses() -> None:
     g = _face(0.3)
     behind = np.array([10.0, 30.0, 1.7])
-    assert facade_screen_error(g, behind, FOCAL) == (0.0, 0.0)
+    assert facade_screen_error(g, behind, FOCAL) == (0.0, 0.0, 1.0)
     coarse = _face(0.0, texel=1.0)  # a metre a texel: within a pixel beyond 208 m only
     assert not looks_alike(coarse, np.array([10.0, -150.0, 7.5]), FOCAL)
     assert looks_alike(coarse, np.array([10.0, -260.0, 7.5]), FOCAL)
@@ -111,8 +114,9 @@ def city(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def _replay(db: Path, **kw: Any) -> dict[str, Any]:
     app = create_app([db])
     try:
+        # a fixed schedule well within the frame period: the budget draws LOD2, whatever the load
         cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="gl", clock="sim", duration_s=8.0,
-                           size=(160, 120), truth_every=40, facades=True, **kw)
+                           size=(160, 120), truth_every=40, facades=True, frame_times=(0.02,) * 400, **kw)
         return run_replay(httpx.ASGITransport(app=app), URL, cfg).summary
     finally:
         app.state.scenes.close()
@@ -120,7 +124,7 @@ def _replay(db: Path, **kw: Any) -> dict[str, Any]:
 
 @pytest.mark.gl
 def test_on_gl_the_lookalike_boxes_save_triangles(city: Path, gl_ctx: object) -> None:
-    on = _replay(city)
+    on = _replay(city, facade_grazing_deg=90.0)  # no grazing limit: the small city's streets are narrow
     off = _replay(city, facade_lookalike=False)
     assert on["facades"]["lookalike_mean"] > 0 and off["facades"]["lookalike_mean"] == 0
     assert on["triangles_mean"] < off["triangles_mean"]
@@ -139,3 +143,9 @@ def test_under_the_real_clock_the_pictures_are_baked_in_the_frames_slack(city: P
     assert f["slack_triangles"] > 0 and f["slack_triangles"] == f["bake_triangles"]
     assert f["bake_triangles_max"] == 0  # no frame paid for a bake in its own time
     assert f["buildings_baked"] > 0
+
+
+def test_a_bad_grazing_angle_is_refused() -> None:
+    link = LinkProfile(56_000.0, 56_000.0, 0.2)
+    with pytest.raises(InputError, match="--facade-grazing"):
+        ReplayConfig(link, facade_grazing_deg=95.0)

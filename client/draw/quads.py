@@ -79,7 +79,10 @@ class QuadRenderer:
         if tex is None:
             a = np.ascontiguousarray(rgba, np.uint8)
             tex = self.ctx.texture((a.shape[1], a.shape[0]), 4, a.tobytes())
-            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            # a facade picture (negative ids) seen from afar, its texels under a pixel: each
+            # pixel takes the texel under its centre, as rasterising LOD2 takes the surface
+            # under it (bilinear blurs a window's edge over the next pixel); near, bilinear
+            tex.filter = (moderngl.NEAREST if image < 0 else moderngl.LINEAR, moderngl.LINEAR)
             tex.repeat_x = tex.repeat_y = False
             self._textures[image] = tex
             self.texture_bytes += a.nbytes

@@ -22,7 +22,8 @@ A part of the ``allocate`` step (:mod:`.allocate`), on the street only:
 4. With ``facade_lookalike`` (the default), in the same step: a building the allocation
    drew at LOD2 whose box with its pictures looks like LOD2 from the eye (the relief's
    parallax and the texel each within a pixel, :mod:`walkstream.client.draw.lookalike`)
-   is drawn as that box instead, for 12 triangles and two a face turned to the eye where
+   is drawn as that box instead (no face turned to the eye seen more obliquely than
+   ``facade_grazing_deg``), for 12 triangles and two a face turned to the eye where
    LOD2 draws ~1,200; buildings at LOD2 far enough for a texel to be within a pixel are
    wanted for the bake after the boxes.  This is the lever on a device whose budget
    draws LOD2 nearly everywhere (``gl``).
@@ -33,6 +34,7 @@ while the budget holds them: nothing crosses the link.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -219,7 +221,8 @@ def choose_facades(w: WalkState, f: Frame) -> None:
     alike: dict[int, bool] = {}
     if lookalike:  # the held buildings at LOD2, tested in one pass
         ids = [o.geoms[k].id for k in cand[lods[cand] == 2].tolist() if o.geoms[k].id in st.shapes]
-        alike = dict(zip(ids, buildings_alike([st.shapes[i] for i in ids], f.eye, focal).tolist(), strict=True))
+        cos = math.cos(math.radians(w.config.facade_grazing_deg))
+        alike = dict(zip(ids, buildings_alike([st.shapes[i] for i in ids], f.eye, focal, cos).tolist(), strict=True))
     far = texel_distance(1.0 / w.config.facade_texels_per_m, focal)
     budget = w.config.facade_budget_bytes
     used = 0
