@@ -116,7 +116,7 @@ def _replay(db: Path, **kw: Any) -> dict[str, Any]:
     try:
         # a fixed schedule well within the frame period: the budget draws LOD2, whatever the load
         cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="gl", clock="sim", duration_s=8.0,
-                           size=(160, 120), truth_every=40, facades=True, frame_times=(0.02,) * 400, **kw)
+                           size=(160, 120), facades=True, frame_times=(0.02,) * 400, **kw)
         return run_replay(httpx.ASGITransport(app=app), URL, cfg).summary
     finally:
         app.state.scenes.close()
