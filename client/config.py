@@ -109,6 +109,11 @@ class ReplayConfig:
     """Metres beyond the bake's ``D`` over which an impostor fades in over its geometry
     (``--impostor-blend``; None: a share of ``D``,
     :func:`~walkstream.client.draw.impostors.blend_length`; 0: no blend by distance)."""
+    impostor_perspective: bool = False
+    """Count the orthographic image's own parallax in the error an impostor is held to
+    (``--impostor-perspective``; :func:`~walkstream.shared.impostors.orthographic_parallax`):
+    where it and the direction's error together pass the bake's ``A`` the building fades
+    to geometry.  Off: the bound counts the direction's error alone, as the bake does."""
     impostor_fade_s: float | None = None
     """Seconds the opacity drawn takes at least to go from 0 to 1 (``--impostor-fade``;
     None: :data:`~walkstream.client.draw.impostors.FADE_S`; 0: none, with

@@ -143,6 +143,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         impostors=not args.no_impostors,
         impostor_blend_m=args.impostor_blend,
         impostor_fade_s=args.impostor_fade,
+        impostor_perspective=args.impostor_perspective,
         virtual_walls=not args.no_walls,
         wall_zone_blend=args.wall_zone_blend,
         facades=False if args.no_facades else {"auto": None, "on": True, "off": False}[args.facades],
@@ -357,6 +358,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--facade-bake-share", type=float, default=0.3, metavar="S", help="share of the frame's triangle budget baking facade textures may take on average (default 0.3)")
     r.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres beyond the bake's D over which an impostor fades in over its geometry (default a tenth of D; 0: none)")
     r.add_argument("--impostor-fade", type=float, default=None, metavar="S", help="seconds an impostor's opacity takes at least from 0 to 1, so an image arriving or a building joining the cell's list does not pop (default 1; 0 with --impostor-blend 0: a hard switch)")
+    r.add_argument("--impostor-perspective", action="store_true", help="hold an impostor to the bake's error bound A counting the parallax of its orthographic image in the perspective view as well (fewer impostors near D, each within A)")
     r.add_argument("--per-object-draws", action="store_true", help="gl device: one draw call per object instead of one multi-draw call per frame (the older path, for comparison)")
 
 
