@@ -113,6 +113,11 @@ class ReplayConfig:
     """Metres beyond the bake's ``D`` over which an impostor fades in over its geometry
     (``--impostor-blend``; None: a share of ``D``,
     :func:`~walkstream.client.draw.impostors.blend_length`; 0: no blend by distance)."""
+    impostor_perspective: bool = False
+    """Count the orthographic image's own parallax in the error an impostor is held to
+    (``--impostor-perspective``; :func:`~walkstream.shared.impostors.orthographic_parallax`):
+    where it and the direction's error together pass the bake's ``A`` the building fades
+    to geometry.  Off: the bound counts the direction's error alone, as the bake does."""
     impostor_fade_s: float | None = None
     """Seconds the opacity drawn takes at least to go from 0 to 1 (``--impostor-fade``;
     None: :data:`~walkstream.client.draw.impostors.FADE_S`; 0: none, with
@@ -124,6 +129,15 @@ class ReplayConfig:
     True always, False never (``--no-facades``: plain boxes), None (``--facades auto``)
     on a simulated device only (where the cost model's budget leaves the boxes; on
     ``gl`` the rendering's real time cost frames and LOD2 is drawn nearly everywhere)."""
+    facade_lookalike: bool = True
+    """Draw a building the allocation put at LOD2 as its box with facade textures where
+    the two look alike from the eye (``--no-facade-lookalike``: only boxes get them;
+    :mod:`walkstream.client.draw.lookalike`)."""
+    facade_grazing_deg: float = 70.0
+    """The look-alike boxes: the largest angle between a face's normal and the ray from
+    its centre to the eye at which its picture stands for LOD2 (``--facade-grazing``;
+    90: no limit, a third fewer triangles on ``gl`` at a higher pixel-level error;
+    :data:`~walkstream.client.draw.lookalike.GRAZING_COS`)."""
     facade_texels_per_m: float = 8.0
     """Texels per metre of a facade texture (``--facade-texels``)."""
     facade_budget_bytes: int = 8 << 20
@@ -151,6 +165,8 @@ class ReplayConfig:
             raise InputError(f"--target-fps {tf!r}: expected a number in (0, 1000]")
         if not (math.isfinite(self.facade_texels_per_m) and 0 < self.facade_texels_per_m <= 64):
             raise InputError(f"--facade-texels {self.facade_texels_per_m!r}: expected texels per metre in (0, 64]")
+        if not (math.isfinite(self.facade_grazing_deg) and 0 <= self.facade_grazing_deg <= 90):
+            raise InputError(f"--facade-grazing {self.facade_grazing_deg!r}: expected degrees from 0 to 90")
         if self.facade_budget_bytes < 0:
             raise InputError(f"--facade-budget {self.facade_budget_bytes}: must not be negative")
         if not (math.isfinite(self.facade_bake_share) and 0 < self.facade_bake_share <= 1):

@@ -445,6 +445,7 @@ async def replay(
                 "buildings_baked": fs.baked_buildings,
                 "faces_baked": fs.baked_faces,
                 "bake_triangles": fs.bake_triangles,
+                "slack_triangles": fs.slack_triangles,
                 "dropped": fs.dropped,
                 **({"error": fs.error} if fs.error else {}),
             }

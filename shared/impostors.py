@@ -18,6 +18,13 @@ the image's direction and the viewer's.  An image may stand in while this stays 
 or under the bound ``A``: ``theta <= asin(min(1, d tan(A) / R))``
 (:func:`allowed_angle`).
 
+**Perspective.**  The image is orthographic while the viewer's is a perspective
+view, so even from the image's own direction (``theta`` 0) a point of the object at
+``x`` across and ``z`` towards the eye is seen at ``atan(x / (d - z))`` where the
+image puts it at ``atan(x / d)``; over the bounding sphere that is at most
+:func:`orthographic_parallax` (about ``R^2 / (2 d^2)``), which finer bins do not
+reduce: 1-3 degrees for the demo's buildings at 60 m, 0.1 at 250 m.
+
 **Direction bins.**  Directions are binned on a fixed grid of azimuth and elevation,
 one grid per *level*: level ``l`` has steps of ``BASE_STEP / 2**l`` radians.  A bin's
 image is rendered from the bin's centre direction, and any direction in the bin is
@@ -51,6 +58,7 @@ __all__ = [
     "image_size",
     "level_for",
     "level_step",
+    "orthographic_parallax",
     "texels_needed",
 ]
 
@@ -72,6 +80,25 @@ def angular_error(radius: ArrayLike, distance: ArrayLike, theta: ArrayLike) -> N
     r = np.asarray(radius, np.float64)
     d = np.maximum(np.asarray(distance, np.float64), 1e-9)
     return np.arctan(r * np.sin(np.asarray(theta, np.float64)) / d)
+
+
+def orthographic_parallax(radius: ArrayLike, distance: ArrayLike, samples: int = 257) -> NDArray[np.float64]:
+    """The largest angle (radians) between where an orthographic image puts a point of
+    an object of bounding ``radius`` and where a perspective viewer at ``distance``
+    from its centre, along the image's own direction, sees it (module docstring).
+
+    The maximum of ``atan(x / (d - z)) - atan(x / d)`` over the sphere's front
+    (``x = R sin(phi)``, ``z = R cos(phi)``), taken over ``samples`` angles ``phi``;
+    ``radius`` and ``distance`` broadcast; a viewer inside the sphere gets ``pi / 2``.
+    """
+    r = np.asarray(radius, np.float64)[..., None]
+    d = np.asarray(distance, np.float64)[..., None]
+    phi = np.linspace(0.0, math.pi / 2.0, samples)
+    x, z = r * np.sin(phi), r * np.cos(phi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        diff = np.arctan2(x, d - z) - np.arctan2(x, d)
+    out: NDArray[np.float64] = np.where(d[..., 0] > r[..., 0], diff.max(axis=-1), math.pi / 2.0)
+    return out
 
 
 def allowed_angle(radius: ArrayLike, distance: ArrayLike, bound: float) -> NDArray[np.float64]:

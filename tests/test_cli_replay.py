@@ -89,6 +89,7 @@ def test_replay_on_the_gl_device_really_draws(db: Path, tmp_path: Path, gl_ctx: 
         (["--facade-texels", "0"], "--facade-texels"),
         (["--facade-bake-share", "2"], "--facade-bake-share"),
         (["--facade-budget", "lots"], "lots"),
+        (["--facade-grazing", "120"], "--facade-grazing"),
     ],
 )
 def test_bad_replay_arguments_are_one_line(

@@ -635,7 +635,7 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--truth-every", type=int, default=25, metavar="N", help="compare every Nth frame with the ground truth, colour error included (default 25; 0: never)")
     b.add_argument("--duration", help="limit every walk, e.g. 60s")
     b.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres over which an impostor fades in over its geometry (default a tenth of the bake's D; 0: none; the 'pop' column measures it, with --truth-every 1)")
-    b.add_argument("--impostor-fade", type=float, default=None, metavar="S", help="seconds an impostor's opacity takes at least from 0 to 1 (default 1; 0 with --impostor-blend 0: a hard switch)")
+    b.add_argument("--impostor-fade", type=float, default=None, metavar="S", help="seconds an impostor's opacity takes at least from 0 to 1 (default 2; 0 with --impostor-blend 0: a hard switch)")
     b.add_argument("--facades", default="auto", choices=("auto", "on", "off", "both"), help="facade textures on the boxes: the replay's default (auto: on a simulated device), always (on), never (off), or each walk both ways (both)")
     b.add_argument("--out", default="out/bench-impostors", help="folder for the reports")
     b.set_defaults(func=cmd_bench_impostors)

@@ -144,9 +144,12 @@ def config_from_args(args: argparse.Namespace) -> Any:
         impostors=not args.no_impostors,
         impostor_blend_m=args.impostor_blend,
         impostor_fade_s=args.impostor_fade,
+        impostor_perspective=args.impostor_perspective,
         virtual_walls=not args.no_walls,
         wall_zone_blend=args.wall_zone_blend,
         facades=False if args.no_facades else {"auto": None, "on": True, "off": False}[args.facades],
+        facade_lookalike=not args.no_facade_lookalike,
+        facade_grazing_deg=args.facade_grazing,
         facade_texels_per_m=args.facade_texels,
         facade_budget_bytes=parse_size(args.facade_budget),
         facade_bake_share=args.facade_bake_share,
@@ -352,11 +355,14 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--no-impostors", action="store_true", help="draw geometry only on a scene baked with --impostors (no image asked for)")
     r.add_argument("--facades", default="auto", choices=("auto", "on", "off"), help="a building left at its LOD0 box carries textures of its LOD2 facades, rendered by the client: on a simulated device (auto, default), always (on) or never (off)")
     r.add_argument("--no-facades", action="store_true", help="draw a building left at its LOD0 box plain (--facades off)")
+    r.add_argument("--no-facade-lookalike", action="store_true", help="give facade textures to the boxes only (by default a building at LOD2 is drawn as its box with textures where the two look alike from the eye: the relief's parallax and a texel each within a pixel)")
+    r.add_argument("--facade-grazing", type=float, default=70.0, metavar="DEG", help="look-alike boxes: the largest angle between a face's normal and the eye at which its texture stands for LOD2 (default 70; 90: no limit, fewer triangles, more error at the pixel level)")
     r.add_argument("--facade-texels", type=float, default=8.0, metavar="T", help="texels per metre of a facade texture (default 8)")
     r.add_argument("--facade-budget", default="8MB", metavar="BYTES", help="bytes of facade textures held and drawn (default 8MB)")
     r.add_argument("--facade-bake-share", type=float, default=0.3, metavar="S", help="share of the frame's triangle budget baking facade textures may take on average (default 0.3)")
     r.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres beyond the bake's D over which an impostor fades in over its geometry (default a tenth of D; 0: none)")
-    r.add_argument("--impostor-fade", type=float, default=None, metavar="S", help="seconds an impostor's opacity takes at least from 0 to 1, so an image arriving or a building joining the cell's list does not pop (default 1; 0 with --impostor-blend 0: a hard switch)")
+    r.add_argument("--impostor-fade", type=float, default=None, metavar="S", help="seconds an impostor's opacity takes at least from 0 to 1, so an image arriving or a building joining the cell's list does not pop (default 2; 0 with --impostor-blend 0: a hard switch)")
+    r.add_argument("--impostor-perspective", action="store_true", help="hold an impostor to the bake's error bound A counting the parallax of its orthographic image in the perspective view as well (fewer impostors near D, each within A)")
     r.add_argument("--per-object-draws", action="store_true", help="gl device: one draw call per object instead of one multi-draw call per frame (the older path, for comparison)")
 
 

@@ -203,6 +203,10 @@ class FacadeImage:
     """``(h, w, 4)`` premultiplied, row 0 at the top."""
     bake_triangles: int
     """LOD2 triangles drawn to make it (those facing the face within its depth range)."""
+    relief: float = 0.0
+    """Metres LOD2's surfaces in the image stand in front of or behind the face's plane
+    (the larger; ``inf`` where LOD2 rises above the image's top): what parallax the flat
+    picture misses (:mod:`walkstream.client.draw.lookalike`)."""
 
 
 @dataclass(frozen=True)
@@ -237,6 +241,8 @@ class FacadeJob:
     """LOD2's vertices as the baker draws them (position, normal, colour)."""
     selections: tuple[NDArray[np.int64], ...]
     """Per face, the ``(k, 3)`` LOD2 triangles its camera can see."""
+    reliefs: tuple[float, ...] = ()
+    """Per face, :attr:`FacadeImage.relief`."""
     images: list[FacadeImage] = field(default_factory=list)
     drawn: int = 0
     """Triangles of the current face drawn so far (its image is under way)."""
@@ -306,13 +312,14 @@ class FacadeBaker:
         verts = np.zeros(len(p), [("p", "<f4", 3), ("n", "<f4", 3), ("c", "<f4", 3)])
         verts["p"], verts["n"] = lod2.positions, lod2.normals
         verts["c"] = material_rgb(lod2.materials).astype(np.float32) / 255.0
-        sels = []
+        sels, reliefs = [], []
         for face in faces:
             # the LOD2 triangles this face's camera can see: facing it, within its depth range
             depth = (centres - face.origin) @ face.normal
             keep = (normals @ face.normal > 0.05) & (depth <= FRONT_M + 0.5) & (depth >= -BACK_M - 0.5)
             sels.append(idx[keep])
-        return FacadeJob(int(oid), tuple(faces), verts, tuple(sels))
+            reliefs.append(_relief(face, p, idx[keep], top))
+        return FacadeJob(int(oid), tuple(faces), verts, tuple(sels), tuple(reliefs))
 
     def bake_face(self, job: FacadeJob, max_triangles: int | None = None) -> int:
         """Draw the next triangles of ``job``'s current face, at most ``max_triangles``
@@ -357,7 +364,8 @@ class FacadeBaker:
         if stop >= len(sel):
             raw = np.frombuffer(fbo.read(components=4, alignment=1), np.uint8)
             img = raw.reshape(h * SUPERSAMPLE, w * SUPERSAMPLE, 4)[::-1]
-            job.images.append(FacadeImage(face, average_samples(img), int(len(sel))))
+            relief = job.reliefs[k] if k < len(job.reliefs) else 0.0
+            job.images.append(FacadeImage(face, average_samples(img), int(len(sel)), relief))
             job.drawn = 0
         check_gl_error(ctx, "after baking a facade image")
         return int(len(part))
@@ -374,6 +382,24 @@ class FacadeBaker:
         release_objects(self.ctx, self._gl, self._own)
         self._fbos.clear()
         self.ctx = None
+
+
+def _relief(face: WallFace, positions: NDArray[np.float64], tris: NDArray[np.int64], top: float | None) -> float:
+    """:attr:`FacadeImage.relief` of ``face``: the largest depth from its plane, clipped to
+    the image's depth range, of LOD2's triangles ``tris`` ``(k, 3)`` it shows over the
+    wall itself (a centre within the face less its side margins: a sill on the next wall,
+    seen edge-on past the corner, is that wall's relief); ``inf`` where LOD2 (its highest
+    point ``top``) rises above the image."""
+    if top is not None and top > float(face.origin[2]) + face.height + 1e-6:
+        return math.inf
+    if not len(tris):
+        return 0.0
+    u = (positions[tris].mean(axis=1) - face.origin) @ face.right
+    on = tris[(u >= MARGIN_M) & (u <= face.width - MARGIN_M)]
+    if not len(on):
+        return 0.0
+    depth = (positions[np.unique(on)] - face.origin) @ face.normal
+    return float(np.abs(np.clip(depth, -BACK_M, FRONT_M)).max())
 
 
 def _face_camera(face: WallFace) -> NDArray[np.float64]:

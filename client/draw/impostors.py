@@ -43,7 +43,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.shared.impostors import angular_error, bin_direction, bin_of, directions
+from walkstream.shared.impostors import (
+    angular_error,
+    bin_direction,
+    bin_of,
+    directions,
+    orthographic_parallax,
+)
 from walkstream.shared.wire import ImpostorRow
 
 __all__ = [
@@ -115,9 +121,16 @@ class ImpostorChoice:
 
 
 def choose_impostors(
-    rows: Sequence[ImpostorRow], eye: ArrayLike, d: float, bound: float, blend_m: float | None = None
+    rows: Sequence[ImpostorRow],
+    eye: ArrayLike,
+    d: float,
+    bound: float,
+    blend_m: float | None = None,
+    perspective: bool = False,
 ) -> list[ImpostorChoice]:
-    """Each listed building's image and opacity for a viewer at ``eye`` (see the module docstring)."""
+    """Each listed building's image and opacity for a viewer at ``eye`` (see the module
+    docstring); with ``perspective`` the error adds the orthographic image's own parallax
+    (:func:`~walkstream.shared.impostors.orthographic_parallax`) to the direction's."""
     e = np.asarray(eye, np.float64).reshape(3)
     out = []
     for r in rows:
@@ -135,6 +148,8 @@ def choose_impostors(
             continue
         theta = math.acos(float(np.clip(v @ bin_direction(r.level, int(ia), int(ie)) / span, -1.0, 1.0)))
         err = float(angular_error(radius, span, theta))
+        if perspective:
+            err += float(orthographic_parallax(radius, span))
         alpha = float(impostor_alpha(dist, err, d, bound, blend_m))
         out.append(ImpostorChoice(r.object, image if alpha > 0.0 else None, alpha, dist, err))
     return out

@@ -70,6 +70,8 @@ class WalkFrames:
     """LOD2 triangles each frame drew baking facade textures."""
     facade_bytes: list[int] = field(default_factory=list)
     """Bytes of the facade textures each frame drew."""
+    facade_swaps: list[int] = field(default_factory=list)
+    """Of :attr:`facades`, the buildings drawn so instead of LOD2 (they look alike)."""
 
     walls: list[int] = field(default_factory=list)
     """Virtual walls drawn as textures per frame (an interior with walls; empty otherwise)."""
@@ -116,6 +118,7 @@ class WalkFrames:
                                                            self.facade_bytes))
         return {
             "facades_mean": float(n.mean()),
+            "lookalike_mean": float(np.mean(self.facade_swaps)) if self.facade_swaps else 0.0,
             "facade_quads_mean": float(q.mean()),
             "frames_with_facades": float((n > 0).mean()),
             "bake_triangles_mean": float(k.mean()),

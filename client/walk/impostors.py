@@ -108,7 +108,7 @@ def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
             return []
         lane.started = True
     cfg = w.config
-    choices = choose_impostors(imp.rows, f.eye, imp.d, imp.bound, cfg.impostor_blend_m)
+    choices = choose_impostors(imp.rows, f.eye, imp.d, imp.bound, cfg.impostor_blend_m, cfg.impostor_perspective)
     wants = ahead_wants(w, f) if cfg.prefetch else {}
     wants.update({c.image: 0.0 for c in choices if c.image is not None})
     lane.want(wants)
@@ -207,6 +207,7 @@ def ahead_wants(w: WalkState, f: Frame) -> dict[int, float]:
     if city is None:
         return {}
     velocity = np.asarray(city.velocity, np.float64)
+    cfg = w.config
     out: dict[int, float] = {}
     for cell, t in sorted(city.need.items(), key=lambda kv: kv[1]):
         if cell == f.street or not 0.0 <= t <= AHEAD_S:
@@ -217,7 +218,7 @@ def ahead_wants(w: WalkState, f: Frame) -> dict[int, float]:
             continue
         eye = np.asarray(f.eye, np.float64).copy()
         eye[:2] += velocity * t
-        for c in choose_impostors(imp.rows, eye, imp.d, imp.bound, w.config.impostor_blend_m):
+        for c in choose_impostors(imp.rows, eye, imp.d, imp.bound, cfg.impostor_blend_m, cfg.impostor_perspective):
             if c.image is not None and c.image not in out:
                 out[c.image] = float(t)
     return out

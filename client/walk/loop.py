@@ -24,7 +24,8 @@ steps run in order, each a module of this package and a phase of
     The frame log, the walk's figures, the ground truth's notes, the controller fed.
 
 A frame that finished before the next tick waits for it; one that took longer is
-shown late and the next starts at once.  Under the simulated clock the same code runs
+shown late and the next starts at once.  Under the real clock the wait first bakes
+facade pictures while it lasts (:func:`~walkstream.client.walk.facades.bake_in_slack`).  Under the simulated clock the same code runs
 on virtual time.
 """
 
@@ -43,6 +44,7 @@ from walkstream.client.report.metrics import FrameLog
 from walkstream.client.walk.allocate import allocate
 from walkstream.client.walk.build import build
 from walkstream.client.walk.draw import draw, forget_flushed, upload
+from walkstream.client.walk.facades import bake_in_slack
 from walkstream.client.walk.locate import locate
 from walkstream.client.walk.measure import measure
 from walkstream.client.walk.state import Frame, WalkState
@@ -135,6 +137,8 @@ async def walk(
         if w.frame % FORGET_EVERY == 0:
             forget_flushed(w)
         phases.end()
+        if w.facades is not None and not clock.simulated:  # facade pictures in the frame's slack
+            bake_in_slack(w, t + tick - clock.now())
         await clock.sleep_until(t + max(f.frame_time, tick))
     if rooms is not None:
         rooms.fog_m = w.indoor_fog

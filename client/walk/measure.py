@@ -81,6 +81,7 @@ def measure(w: WalkState, f: Frame) -> None:
         fr.facade_quads.append(len(f.facade_quads))
         fr.facade_bake.append(f.facade_bake)
         fr.facade_bytes.append(sum(s.nbytes for s in f.facades))
+        fr.facade_swaps.append(w.facades.swapped)
     if w.scene.images is not None:
         fr.impostors.append(len(f.impostors))
         fr.texture_bytes.append(sum({d.image: d.nbytes for d in f.impostors}.values()))
