@@ -250,7 +250,7 @@ class CulledRenderer(VisibilityRenderer):
         mvps = np.ascontiguousarray(np.transpose(self._face_mvps(points), (0, 2, 1)), np.float32)
         used = (0, 0, 6 * res, p * res)
         ids_img = self._pixels[: p * res]
-        self._set_state()
+        self._begin_pass(fb, None)
         try:
             # step 1; a merged range never bridges a candidate (it would be drawn)
             commands, offsets = self._upload(first, unsafe | cand)
@@ -330,24 +330,6 @@ class CulledRenderer(VisibilityRenderer):
             self._keys = keys
         out: I64 = keys[: p * self.resolution]
         return out
-
-    def _set_state(self) -> None:
-        """The GL state every pass of the renderer draws with (as its plain pass)."""
-        import moderngl
-
-        ctx, fb = self.ctx, self._fb
-        assert ctx is not None and fb is not None
-        fb.fbo.use()
-        ctx.enable(moderngl.DEPTH_TEST)
-        ctx.disable(moderngl.BLEND)
-        ctx.depth_func = "<"
-        if self.cull_back_faces:
-            ctx.front_face = "ccw"
-            ctx.cull_face = "back"
-            ctx.enable(moderngl.CULL_FACE)
-        else:
-            ctx.disable(moderngl.CULL_FACE)
-        ctx.scissor = None
 
     def _upload(self, mask: NDArray[np.bool_], unsafe: NDArray[np.bool_]) -> tuple[NDArray[np.uint32], I64]:
         """The draw commands of ``mask`` (never bridging ``unsafe``), written to the indirect buffer."""

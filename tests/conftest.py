@@ -81,6 +81,21 @@ def office_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def small_city_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 150 m generated city (seed 2), baked coarsely (32 px, corners): for walks that need a city, not its PVS."""
+
+    def build(folder: Path) -> Path:
+        from walkstream.server.bake import BakeSettings, bake
+        from walkstream.server.sources.citygen import write_city
+
+        write_city(folder / "city.geojson", 150, 2)
+        bake(folder / "city.geojson", folder / "city.db", settings=BakeSettings(resolution=32, sampling="corners"), name="city")
+        return folder / "city.db"
+
+    return once_per_run(tmp_path_factory, "small-city", build)
+
+
+@pytest.fixture(scope="session")
 def duplex_db(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
     """../shared/data/indoor/duplex.ifc, baked, and the bake's summary."""
     return _baked_ifc(tmp_path_factory, "duplex.ifc")

@@ -23,9 +23,7 @@ from walkstream.client.draw.lookalike import (
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import run_replay
 from walkstream.client.truth.render import TruthRenderer, form_key
-from walkstream.server.bake import BakeSettings, bake
 from walkstream.server.service.main import create_app
-from walkstream.server.sources.citygen import write_city
 from walkstream.shared.buildings import build_lods
 from walkstream.shared.camera import look_at
 from walkstream.shared.errors import InputError
@@ -104,11 +102,9 @@ def test_where_the_test_says_alike_the_pictured_box_matches_lod2(gl: Any) -> Non
 
 
 @pytest.fixture(scope="module")
-def city(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    d = tmp_path_factory.mktemp("lookalike")
-    write_city(d / "city.geojson", 150, 2)
-    bake(d / "city.geojson", d / "city.db", settings=BakeSettings(resolution=32, sampling="corners"), name="city")
-    return d / "city.db"
+def city(small_city_db: Path) -> Path:
+    """The small city every walk here replays (read only)."""
+    return small_city_db
 
 
 def _replay(db: Path, **kw: Any) -> dict[str, Any]:

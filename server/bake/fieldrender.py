@@ -76,31 +76,10 @@ class FieldRenderer(VisibilityRenderer):
         """Cull and draw one pass into ``fb`` (as the plain pass does), without reading it."""
         import moderngl
 
-        ctx, indirect = self.ctx, self._indirect
-        assert ctx is not None and indirect is not None
-        res, p = self.resolution, len(points)
-        commands, offsets = self._draw_commands(*self._face_masks(points))
-        if self._multi_draw and len(commands):
-            if commands.nbytes > indirect.size:
-                indirect.orphan(max(commands.nbytes, 2 * indirect.size))
-            indirect.write(commands.tobytes())
-        views = np.zeros((p, 6, 4, 4))
-        views[:, :, :3, :3] = self._face_rot
-        views[:, :, :3, 3] = -np.einsum("fij,pj->pfi", self._face_rot, points)
-        views[:, :, 3, 3] = 1.0
-        mvps = np.ascontiguousarray(np.transpose(self._proj @ views, (0, 1, 3, 2)).reshape(p * 6, 4, 4), np.float32)
-        fb.fbo.use()
-        ctx.enable(moderngl.DEPTH_TEST)
-        ctx.disable(moderngl.BLEND)
-        ctx.depth_func = "<"
-        if self.cull_back_faces:
-            ctx.front_face = "ccw"
-            ctx.cull_face = "back"
-            ctx.enable(moderngl.CULL_FACE)
-        else:
-            ctx.disable(moderngl.CULL_FACE)
-        ctx.scissor = None
-        fb.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=(0, 0, 6 * res, p * res))
+        ctx = self.ctx
+        assert ctx is not None
+        _, commands, offsets, mvps = self._prepare_pass(points)
+        self._begin_pass(fb, (0, 0, 6 * self.resolution, len(points) * self.resolution))
         try:
             self._draw_faces(commands, offsets, mvps)
         finally:

@@ -419,19 +419,15 @@ class VisibilityRenderer(Releasable):
 
     # -- rendering -----------------------------------------------------------------
 
-    def _render_pass(
-        self, points: F64, counts: I64, seen: list[I64] | None = None, each: list[I64] | None = None
-    ) -> None:
-        """Render up to ``points_per_pass`` points and add each object's pixels to ``counts``.
+    def _prepare_pass(self, points: F64) -> tuple[NDArray[np.bool_], NDArray[np.uint32], I64, NDArray[np.float32]]:
+        """Cull one pass's faces, upload its draw commands and build its face matrices.
 
-        With ``seen``, also append per point the local indices + 1 it sees (0 dropped);
-        with ``each``, per point its own pixel counts (indexed as ``counts``).
+        Returns the faces' draw masks ``(p * 6, n)``, the commands and their per-face
+        offsets (as :meth:`_draw_commands`) and the ``(p * 6, 4, 4)`` column-major
+        float32 model-view-projection matrices the shader takes.
         """
-        ctx, fb, vao, indirect = self.ctx, self._fb, self._vao, self._indirect
-        assert ctx is not None and fb is not None and vao is not None and indirect is not None
-        import moderngl
-
-        res = self.resolution
+        indirect = self._indirect
+        assert indirect is not None
         p = len(points)
         draw, unsafe = self._face_masks(points)
         commands, offsets = self._draw_commands(draw, unsafe)
@@ -440,7 +436,6 @@ class VisibilityRenderer(Releasable):
             if need > indirect.size:
                 indirect.orphan(max(need, 2 * indirect.size))
             indirect.write(commands.tobytes())
-
         views = np.zeros((p, 6, 4, 4))
         views[:, :, :3, :3] = self._face_rot
         views[:, :, :3, 3] = -np.einsum("fij,pj->pfi", self._face_rot, points)
@@ -449,8 +444,14 @@ class VisibilityRenderer(Releasable):
         mvps = np.ascontiguousarray(
             np.transpose(self._proj @ views, (0, 1, 3, 2)).reshape(p * 6, 4, 4), np.float32
         )
+        return draw, commands, offsets, mvps
 
-        used = (0, 0, 6 * res, p * res)
+    def _begin_pass(self, fb: Framebuffer, used: tuple[int, int, int, int] | None) -> None:
+        """Bind ``fb`` with the GL state every pass draws with; clear ``used`` (x, y, w, h) if given."""
+        import moderngl
+
+        ctx = self.ctx
+        assert ctx is not None
         fb.fbo.use()
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.disable(moderngl.BLEND)
@@ -462,7 +463,26 @@ class VisibilityRenderer(Releasable):
         else:
             ctx.disable(moderngl.CULL_FACE)
         ctx.scissor = None
-        fb.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=used)
+        if used is not None:
+            fb.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=used)
+
+    def _render_pass(
+        self, points: F64, counts: I64, seen: list[I64] | None = None, each: list[I64] | None = None
+    ) -> None:
+        """Render up to ``points_per_pass`` points and add each object's pixels to ``counts``.
+
+        With ``seen``, also append per point the local indices + 1 it sees (0 dropped);
+        with ``each``, per point its own pixel counts (indexed as ``counts``).
+        """
+        ctx, fb = self.ctx, self._fb
+        assert ctx is not None and fb is not None
+        import moderngl
+
+        res = self.resolution
+        p = len(points)
+        draw, commands, offsets, mvps = self._prepare_pass(points)
+        used = (0, 0, 6 * res, p * res)
+        self._begin_pass(fb, used)
         try:
             self._draw_faces(commands, offsets, mvps)
             rows = self._pixels[: p * res]
