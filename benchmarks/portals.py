@@ -400,12 +400,15 @@ WHOLE_TOUR = "whole"
 
 
 def seed_rows(seeds: Sequence[int], replay: Callable[[str, dict[str, Any], str], Any], out: Path,
-              duration: str = "30s", storeys: int = 3, log: Callable[[str], None] = lambda s: None) -> list[dict[str, Any]]:
+              duration: str = "30s", storeys: int = 3, log: Callable[[str], None] = lambda s: None,
+              truth_every: int = 50) -> list[dict[str, Any]]:
     """Generated offices of ``seeds`` (``walkstream generate interior --storeys 3 --seed S``),
     each baked and its tour replayed for ``duration`` (``"whole"``: to the tour's end) as
     the issue measures a tour: 56
-    kbit/s, 200 ms, simulated clock, ``desktop2003``, every 50th frame against the truth at
-    160x120.  A row per seed: perfect frames, first perfect frame, culled pixels,
+    kbit/s, 200 ms, simulated clock, ``desktop2003``, every ``truth_every``-th frame
+    against the truth at 160x120 (0: no truth, whose frames cost seconds each on
+    llvmpipe: a whole tour's 600 take longer than its replay; the simulated clock walks
+    the same frames either way).  A row per seed: perfect frames, first perfect frame, culled pixels,
     tightness p95, bytes, the culling's median milliseconds, the cells missing from a frame
     after the first perfect one (the replay's ``late_cells``: which and why in its report),
     and ``walked_s``, the seconds the replay walked."""
@@ -417,7 +420,7 @@ def seed_rows(seeds: Sequence[int], replay: Callable[[str, dict[str, Any], str],
             log(f"bench portals: baking seed {seed}")
             bake(src, db)
         options = {"bandwidth": "56kbit", "rtt": "200ms", "path": "tour", "kind": "interior",
-                   "device": "desktop2003", "truth_every": 50, "size": "160x120",
+                   "device": "desktop2003", "truth_every": truth_every, "size": "160x120",
                    "report": str(out / f"seed{seed}-replay")}
         if duration != WHOLE_TOUR:
             options["duration"] = duration

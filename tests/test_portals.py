@@ -384,6 +384,9 @@ def test_bench_portals_whole_tours_say_how_far_they_walked(capsys: pytest.Captur
     # a bad duration is named in one line before anything is generated or baked
     assert main(["bench", "portals", "--presets", "--no-gl", "--seeds", "3", "--seed-duration", "soon"]) == 2
     assert "'soon'" in capsys.readouterr().err
+    assert args.seed_truth_every == 50  # the truth as before unless asked
+    assert main(["bench", "portals", "--presets", "--no-gl", "--seeds", "3", "--seed-truth-every", "-1"]) == 2
+    assert "--seed-truth-every -1" in capsys.readouterr().err
     row = {"seed": 3, "duration": WHOLE_TOUR, "perfect_frame_ratio": 1.0, "time_to_first_perfect_frame_s": 2.37,
            "culled_pixels": 0, "truth_frames": 600, "tightness_p95": 2.5, "bytes_received": 990000,
            "start_contents_cells": 30, "culling_ms_median": 3.0, "late_cells": 0, "walked_s": 1328.4}
@@ -396,7 +399,8 @@ def test_bench_portals_whole_tours_say_how_far_they_walked(capsys: pytest.Captur
         return type("R", (), {"summary": {"duration_s": 12.0}})()
 
     (tmp_path / "seed3.db").touch()  # baked already: the rows only replay
-    for duration in ("whole", "20s"):
-        rows = seed_rows([3], replay, tmp_path, duration=duration)
+    for duration, every in (("whole", 0), ("20s", 50)):
+        rows = seed_rows([3], replay, tmp_path, duration=duration, truth_every=every)
     assert "duration" not in seen[0] and seen[1]["duration"] == "20s"  # whole: no limit on the replay
+    assert seen[0]["truth_every"] == 0 and seen[1]["truth_every"] == 50
     assert rows[0]["walked_s"] == 12.0
