@@ -395,14 +395,23 @@ def replay_rows(db: Path, replay: Callable[[str, dict[str, Any], str], Any], out
     return rows
 
 
+WHOLE_TOUR = "whole"
+"""The ``--seed-duration`` that replays each tour to its end."""
+
+
 def seed_rows(seeds: Sequence[int], replay: Callable[[str, dict[str, Any], str], Any], out: Path,
-              duration: str = "30s", storeys: int = 3, log: Callable[[str], None] = lambda s: None) -> list[dict[str, Any]]:
+              duration: str = "30s", storeys: int = 3, log: Callable[[str], None] = lambda s: None,
+              truth_every: int = 50) -> list[dict[str, Any]]:
     """Generated offices of ``seeds`` (``walkstream generate interior --storeys 3 --seed S``),
-    each baked and its tour replayed for ``duration`` as the issue measures a tour: 56
-    kbit/s, 200 ms, simulated clock, ``desktop2003``, every 50th frame against the truth at
-    160x120.  A row per seed: perfect frames, first perfect frame, culled pixels,
+    each baked and its tour replayed for ``duration`` (``"whole"``: to the tour's end) as
+    the issue measures a tour: 56
+    kbit/s, 200 ms, simulated clock, ``desktop2003``, every ``truth_every``-th frame
+    against the truth at 160x120 (0: no truth, whose frames cost seconds each on
+    llvmpipe: a whole tour's 600 take longer than its replay; the simulated clock walks
+    the same frames either way).  A row per seed: perfect frames, first perfect frame, culled pixels,
     tightness p95, bytes, the culling's median milliseconds, the cells missing from a frame
-    after the first perfect one (the replay's ``late_cells``: which and why in its report)."""
+    after the first perfect one (the replay's ``late_cells``: which and why in its report),
+    and ``walked_s``, the seconds the replay walked."""
     rows = []
     for seed in seeds:
         src, db = out / f"seed{seed}.json", out / f"seed{seed}.db"
@@ -410,15 +419,18 @@ def seed_rows(seeds: Sequence[int], replay: Callable[[str, dict[str, Any], str],
             write_interior(src, InteriorPlan(storeys=storeys, seed=seed))
             log(f"bench portals: baking seed {seed}")
             bake(src, db)
-        options = {"bandwidth": "56kbit", "rtt": "200ms", "duration": duration, "path": "tour", "kind": "interior",
-                   "device": "desktop2003", "truth_every": 50, "size": "160x120",
+        options = {"bandwidth": "56kbit", "rtt": "200ms", "path": "tour", "kind": "interior",
+                   "device": "desktop2003", "truth_every": truth_every, "size": "160x120",
                    "report": str(out / f"seed{seed}-replay")}
+        if duration != WHOLE_TOUR:
+            options["duration"] = duration
         s = replay(str(db), options, f"bench portals: seed {seed}").summary
         truth = s.get("truth") or {}
         rows.append({"seed": seed, "duration": duration, **{key: s.get(key) for key in (
             "perfect_frame_ratio", "time_to_first_perfect_frame_s", "bytes_received", "start_contents_cells",
             "culling_ms_median")}, "culled_pixels": truth.get("culled_pixels"), "tightness_p95": truth.get("tightness_p95"),
-            "truth_frames": truth.get("frames"), "late_cells": (s.get("late_cells") or {}).get("cells")})
+            "truth_frames": truth.get("frames"), "late_cells": (s.get("late_cells") or {}).get("cells"),
+            "walked_s": s.get("duration_s")})
     return rows
 
 
@@ -434,7 +446,8 @@ def seed_table(rows: Sequence[dict[str, Any]]) -> str:
            f"{'tight p95':>10}{'kB down':>8}{'1st view':>9}{'cull ms':>8}{'late':>5}"]
     for r in rows:
         pf = r["perfect_frame_ratio"]
-        out.append(f"{r['seed']:>5}{r['duration']:>8}{f(None if pf is None else 100 * pf, '.2f'):>9}"
+        walked = r["duration"] if r.get("walked_s") is None else f"{r['walked_s']:.0f}s"
+        out.append(f"{r['seed']:>5}{walked:>8}{f(None if pf is None else 100 * pf, '.2f'):>9}"
                    f"{f(r['time_to_first_perfect_frame_s'], '.2f'):>11}{f(r['culled_pixels'], ',d'):>10}"
                    f"{f(r['truth_frames'], 'd'):>9}{f(r['tightness_p95'], '.2f'):>10}"
                    f"{f(None if r['bytes_received'] is None else r['bytes_received'] / 1000, '.1f'):>8}"

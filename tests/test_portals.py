@@ -373,3 +373,34 @@ def test_bench_portals_seed_rows_are_parsed_and_tabled() -> None:
     assert table[0].split()[:4] == ["seed", "walked", "perfect%", "1st"]
     assert table[1].split() == ["11", "20s", "99.64", "4.09", "0", "12", "3.91", "79.7", "39", "2.50", "2"]
     assert table[2].split()[4] == "-" and table[2].split()[6] == "-"  # no truth: said so, not zero
+
+
+def test_bench_portals_whole_tours_say_how_far_they_walked(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    from walkstream.benchmarks.portals import WHOLE_TOUR, seed_rows, seed_table
+    from walkstream.cli import build_parser
+
+    args = build_parser().parse_args(["bench", "portals", "--presets", "--seeds", "3", "--seed-duration", "whole"])
+    assert args.seed_duration == WHOLE_TOUR
+    # a bad duration is named in one line before anything is generated or baked
+    assert main(["bench", "portals", "--presets", "--no-gl", "--seeds", "3", "--seed-duration", "soon"]) == 2
+    assert "'soon'" in capsys.readouterr().err
+    assert args.seed_truth_every == 50  # the truth as before unless asked
+    assert main(["bench", "portals", "--presets", "--no-gl", "--seeds", "3", "--seed-truth-every", "-1"]) == 2
+    assert "--seed-truth-every -1" in capsys.readouterr().err
+    row = {"seed": 3, "duration": WHOLE_TOUR, "perfect_frame_ratio": 1.0, "time_to_first_perfect_frame_s": 2.37,
+           "culled_pixels": 0, "truth_frames": 600, "tightness_p95": 2.5, "bytes_received": 990000,
+           "start_contents_cells": 30, "culling_ms_median": 3.0, "late_cells": 0, "walked_s": 1328.4}
+    assert seed_table([row]).splitlines()[1].split()[:2] == ["3", "1328s"]  # the tour's length, not "whole"
+    assert seed_table([{**row, "walked_s": None}]).splitlines()[1].split()[1] == "whole"
+    seen: list[dict[str, object]] = []
+
+    def replay(db: str, options: dict[str, object], title: str) -> object:
+        seen.append(options)
+        return type("R", (), {"summary": {"duration_s": 12.0}})()
+
+    (tmp_path / "seed3.db").touch()  # baked already: the rows only replay
+    for duration, every in (("whole", 0), ("20s", 50)):
+        rows = seed_rows([3], replay, tmp_path, duration=duration, truth_every=every)
+    assert "duration" not in seen[0] and seen[1]["duration"] == "20s"  # whole: no limit on the replay
+    assert seen[0]["truth_every"] == 0 and seen[1]["truth_every"] == 50
+    assert rows[0]["walked_s"] == 12.0

@@ -12,6 +12,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from walkstream.shared.errors import InputError
+
 __all__ = ["add_room_benches"]
 
 
@@ -60,6 +62,12 @@ def cmd_bench_portals(args: argparse.Namespace) -> int:
                              log=lambda s: print(s, file=sys.stderr))
         print(json.dumps({"culling_cpu": rows}, indent=2) if args.json else cull_cpu_table(rows))
         return 0
+    if args.seed_truth_every < 0:
+        raise InputError(f"--seed-truth-every {args.seed_truth_every}: expected 0 (no truth) or a positive count of frames")
+    if args.seeds and args.seed_duration != "whole":
+        from walkstream.client.units import parse_duration
+
+        parse_duration(args.seed_duration)  # a bad duration named before the first bake, not after it
     scenes, halls = run_portals_bench(
         Path(args.out), args.presets, frames=args.frames, step_s=args.step, truth_frames=args.truth,
         gl=not args.no_gl, log=lambda s: print(s, file=sys.stderr),
@@ -76,7 +84,7 @@ def cmd_bench_portals(args: argparse.Namespace) -> int:
         from walkstream.benchmarks.portals import seed_rows, seed_table
         from walkstream.cmd_replay import replay_with_options
 
-        seeds = seed_rows(args.seeds, replay_with_options, Path(args.out), duration=args.seed_duration,
+        seeds = seed_rows(args.seeds, replay_with_options, Path(args.out), duration=args.seed_duration, truth_every=args.seed_truth_every,
                           log=lambda s: print(s, file=sys.stderr))
     if args.json:
         print(json.dumps({"scenes": scenes, "halls": halls, "replays": replays, "seeds": seeds}, indent=2))
@@ -88,8 +96,10 @@ def cmd_bench_portals(args: argparse.Namespace) -> int:
             print("(simulated clock; tour of the first preset)")
         if seeds:
             print(seed_table(seeds))
-            print(f"(generated offices, 3 storeys; the first {args.seed_duration} of each tour, 56 kbit/s, 200 ms, "
-                  "simulated clock, desktop2003, every 50th frame against the truth at 160x120)")
+            part = "the whole tour" if args.seed_duration == "whole" else f"the first {args.seed_duration} of each tour"
+            truth = (f"every {args.seed_truth_every}th frame against the truth at 160x120" if args.seed_truth_every
+                     else "no truth: culled pixels not measured")
+            print(f"(generated offices, 3 storeys; {part}, 56 kbit/s, 200 ms, simulated clock, desktop2003, {truth})")
     return 0
 
 
@@ -118,7 +128,10 @@ def add_room_benches(besub: Any) -> None:
                     help="also generate offices of these seeds (3 storeys), bake them and replay each tour at "
                     "56 kbit/s against the truth")
     bp.add_argument("--seed-duration", default="30s", metavar="DURATION",
-                    help="with --seeds: replay this much of each tour (default 30s)")
+                    help="with --seeds: replay this much of each tour (default 30s; whole: each tour to its end)")
+    bp.add_argument("--seed-truth-every", type=int, default=50, metavar="N",
+                    help="with --seeds: compare every Nth frame with the id truth (default 50; 0: none, "
+                    "for whole tours, whose truth takes longer than the replay)")
     bp.add_argument("--replays", metavar="DURATION", help="also replay the first preset's tour this long (e.g. 180s): "
                     "56 kbit/s with the default and a small cache, pda with the fog set by the budget through a cost step")
     bp.add_argument("--cull", nargs="*", type=int, metavar="SEED", default=None,
