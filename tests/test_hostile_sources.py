@@ -1,7 +1,8 @@
 """Hostile source files (issue 25): each is one line naming the file and the feature, or a skip counted.
 
 Every case runs the real command in its own process (``python -m walkstream ...``),
-its CPU time and peak memory read from the kernel (``os.wait4``): within
+its CPU time and peak memory read from the kernel (``os.wait4``, by a small launcher: see
+:data:`_LAUNCHER`): within
 :data:`SECONDS` and :data:`MAX_RSS_MB` (CPU seconds, not wall: on a shared
 2-core machine under a load of 8 the wall time was up to three times the CPU time), no traceback, and either exit status 2 with
 one ``walkstream: error:`` line naming the file and the bad feature, or exit 0 with
@@ -13,7 +14,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
 import sys
 import time
@@ -48,17 +48,28 @@ class Run:
         return [ln for ln in text.splitlines() if ln.strip() and not ln.startswith("reading the source")]
 
 
+#: Starts ``python -m walkstream ARGV`` and writes its exit code, CPU seconds and peak
+#: RSS (KiB) to the file named first.  Linux counts a process's peak RSS from the
+#: memory it had when forked, so a CLI forked straight from a pytest worker would be
+#: charged the worker's own size; this small launcher forks it instead.
+_LAUNCHER = """
+import os, subprocess, sys
+proc = subprocess.Popen([sys.executable, "-m", "walkstream", *sys.argv[2:]])
+_, status, usage = os.wait4(proc.pid, 0)
+with open(sys.argv[1], "w") as fh:
+    fh.write(f"{os.waitstatus_to_exitcode(status)} {usage.ru_utime + usage.ru_stime} {usage.ru_maxrss}")
+"""
+
+
 def run_cli(*argv: str | Path, cwd: Path) -> Run:
     """``python -m walkstream ARGV`` in its own process: status, output, CPU and wall seconds, peak RSS."""
-    out, err = cwd / "stdout.txt", cwd / "stderr.txt"
+    out, err, usage = cwd / "stdout.txt", cwd / "stderr.txt", cwd / "usage.txt"
     with out.open("wb") as fo, err.open("wb") as fe:
         t0 = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, "-m", "walkstream", *map(str, argv)], stdout=fo, stderr=fe, cwd=cwd)
-        _, status, usage = os.wait4(proc.pid, 0)
+        subprocess.run([sys.executable, "-c", _LAUNCHER, str(usage), *map(str, argv)], stdout=fo, stderr=fe, cwd=cwd, check=True)
         wall = time.perf_counter() - t0
-        proc.returncode = os.waitstatus_to_exitcode(status)
-    cpu = usage.ru_utime + usage.ru_stime
-    return Run(proc.returncode, out.read_text(), err.read_text(), cpu, wall, usage.ru_maxrss / 1024.0)
+    rc, cpu, rss_kib = usage.read_text().split()
+    return Run(int(rc), out.read_text(), err.read_text(), float(cpu), wall, float(rss_kib) / 1024.0)
 
 
 def within_budget(r: Run) -> None:
