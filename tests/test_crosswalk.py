@@ -247,10 +247,11 @@ def test_a_crossing_baked_before_placements_still_replays(scene: Path, walked: R
         stored = sum(c.nbytes for c in r.contents_info().values())
     with SceneReader.open(scene) as r:
         assert sum(c.nbytes for c in r.contents_info().values()) < 0.7 * stored  # the turn cost the boxes
-    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", truth_every=25, kind="crossing")
+    # every 50th frame: the walk's own test compares every 25th
+    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", truth_every=50, kind="crossing")
     got = run_replay(httpx.ASGITransport(app=create_app([old])), "http://t", cfg).summary
     assert got["entrance"] == {k: v for k, v in walked.summary["entrance"].items() if k != "placement"}
-    assert got["truth"]["culled_pixels"] == 0 and got["truth"]["frames"] - got["truth"]["unknown"] >= 40
+    assert got["truth"]["culled_pixels"] == 0 and got["truth"]["frames"] - got["truth"]["unknown"] >= 20
     assert got["door_frames_without_first_room"] == 0 and got["perfect_frame_ratio"] > 0.9
     assert got["contents_bytes"] > walked.summary["contents_bytes"]
 

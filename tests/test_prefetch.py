@@ -341,10 +341,10 @@ def test_a_route_leaving_the_cells_keeps_going(town: Path) -> None:
 def test_a_cell_index_larger_than_the_cache_budget(town: Path) -> None:
     """A cache that cannot hold the index (nor anything much): tiles are evicted and
     fetched again when the route needs them, the viewer is tracked all along."""
-    big = _replay(town, path="drive", duration_s=45.0).summary
+    big = _replay(town, path="drive", duration_s=30.0).summary
     index_bytes = big["index_bytes"]
     assert index_bytes > 2000
-    r = _replay(town, path="drive", duration_s=45.0, cache_bytes=index_bytes // 4)
+    r = _replay(town, path="drive", duration_s=30.0, cache_bytes=index_bytes // 4)
     s, log = r.summary, r.log
     assert s["cache_over_budget_events"] > 0  # only what the frame needs, pinned
     assert s["index_requests"] > big["index_requests"]  # evicted, and fetched again

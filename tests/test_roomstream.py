@@ -128,11 +128,11 @@ def test_flush_after_is_honoured_by_both_policies(office_db: Path) -> None:
 
 
 def test_flush_after_from_the_cli(office_db: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
-    quick = _replay(office_db, tmp_path / "quick", "--duration", "30", "--flush-after", "2", "--flush-policy", "paper")
+    quick = _replay(office_db, tmp_path / "quick", "--duration", "16", "--flush-after", "2", "--flush-policy", "paper")
     # an interior manifest has no grammar: nothing may try to parse one (it logged a traceback)
     assert not [r for r in caplog.records if r.exc_info], caplog.text
     assert quick["flush_policy"] == "paper" and quick["flush_after_s"] == 2.0 and quick["cells_flushed"] > 0
-    kept = _replay(office_db, tmp_path / "kept", "--duration", "30", "--flush-after", "2")
+    kept = _replay(office_db, tmp_path / "kept", "--duration", "16", "--flush-after", "2")
     assert kept["flush_policy"] == "crowded" and kept["cells_flushed"] == 0 and kept["redownloads"] == 0
 
 

@@ -122,6 +122,7 @@ def _demo_replay(db: Path, report: Path, args: argparse.Namespace) -> int:
     from walkstream.client.config import ReplayConfig
     from walkstream.client.net.link import LinkProfile
     from walkstream.client.report import format_headline
+    from walkstream.client.units import parse_duration
     from walkstream.cmd_replay import replay_to_report
     from walkstream.server.service.process import server_process
 
@@ -133,6 +134,7 @@ def _demo_replay(db: Path, report: Path, args: argparse.Namespace) -> int:
         device="desktop2003",
         snapshot_every=250,
         report_dir=report,
+        duration_s=parse_duration(args.duration) if args.duration else None,
     )
     t0 = time.perf_counter()
     with server_process([db]) as (host, port):
@@ -151,4 +153,5 @@ def add_demo_parser(sub: Any) -> None:
     d.add_argument("--out", default="out/demo", help="folder for everything the demo writes (default out/demo)")
     d.add_argument("--no-replay", action="store_true", help="stop after the bake (no server, no replay)")
     d.add_argument("--workers", type=int, default=1, help="local processes for the bake (default 1)")
+    d.add_argument("--duration", help="replay only the first part of SE, e.g. 30s (default: the whole walk)")
     d.set_defaults(func=cmd_demo)
