@@ -1,0 +1,229 @@
+"""Parts kept by their boxes, tested again by their triangles (portal culling's step 5, refined).
+
+The parts culling (:mod:`walkstream.shared.partcull`) keeps a part when its box's
+rectangle meets one of its cell's visible screen areas (VSAs).  A box is a loose
+stand-in for what it holds: a chair whose box touches a corner of the view while none of
+its triangles does, a stair stringer's box reaching round a door's edge, a railing's
+balusters edge-on whose box spans pixels that none of their thin triangles covers.  The
+triangles of such a part draw nothing, yet the whole part was drawn (on the duplex's
+frames facing a wall, 124 triangles drawn for 8 seen).
+
+:func:`refine_parts` takes every part the box test kept, of at least
+:data:`MIN_TRIANGLES` triangles, and tests its triangles one by one, the same test the
+box had: each triangle's clipped, projected rectangle of pixel centres
+(:func:`~walkstream.shared.screenrects.rects_ckm`, the same margin and clip plane) against
+its cell's VSAs, and its depths against the near and far planes.  A part none of whose
+triangles passes is dropped.  It is exactly as conservative as the box test: a triangle
+draws only pixel centres inside its own rectangle, and a cell shows only inside its VSAs,
+so a triangle whose rectangle meets none draws no pixel the full model would show of it;
+a rectangle with no pixel centre (a sliver under a pixel) draws nothing at all.  It only
+ever drops parts the boxes kept, never adds one.
+
+A head's stand-ins (:attr:`~walkstream.shared.codec.cellmesh.CellMesh.missing`: boxes
+with no triangles yet) are never dropped: they stand for triangles still to come.
+
+Cost: every candidate triangle of the frame in one batch (the triangles of each cell
+packed once, coordinate-major, and kept with the cell's mesh).  Parts under
+:data:`MIN_TRIANGLES` cost less to draw than to test and are left as the boxes decided.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from walkstream.shared.screenrects import CENTRE_MARGIN_PX, rects_ckm
+
+__all__ = ["MIN_TRIANGLES", "TRIANGLE_EDGES", "cell_triangles", "refine_parts"]
+
+#: Parts with fewer triangles are left as the box test decided (cheaper to draw than to test).
+MIN_TRIANGLES = 16
+
+#: A triangle's sides as index pairs into its three vertices (the clip of
+#: :func:`~walkstream.shared.screenrects.rects_ckm`).
+TRIANGLE_EDGES = np.array([[0, 1], [1, 2], [2, 0]], np.int64)
+
+
+class _Part(Protocol):
+    positions: NDArray[Any]
+    indices: NDArray[Any]
+
+
+class _Mesh(Protocol):
+    @property
+    def parts(self) -> tuple[Any, ...]: ...  # tuple of _Part
+
+    @property
+    def missing(self) -> tuple[int, ...]: ...
+
+    @property
+    def _cache(self) -> dict[str, Any]: ...
+
+
+def cell_triangles(mesh: _Mesh) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """A cell's triangles packed coordinate-major, and where each part's begin (cached on ``mesh``).
+
+    Parameters
+    ----------
+    mesh : CellMesh
+        A decoded cell (:class:`~walkstream.shared.codec.cellmesh.CellMesh`).
+
+    Returns
+    -------
+    tri : (3, 3, T) float64
+        ``tri[j, k, t]``: coordinate ``j`` of vertex ``k`` of triangle ``t``, the parts'
+        triangles one after another.
+    start : (parts + 1,) int64
+        Part ``i``'s triangles are ``tri[:, :, start[i]:start[i + 1]]``.
+    """
+    got = mesh._cache.get("triangles_ckm")
+    if got is not None:
+        return got  # type: ignore[no-any-return]
+    per = [np.asarray(p.positions, np.float64)[np.asarray(p.indices, np.int64)].reshape(-1, 3, 3) for p in mesh.parts]
+    counts = np.array([len(t) for t in per], np.int64)
+    start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    tri = np.concatenate(per) if per else np.zeros((0, 3, 3))
+    out = (np.ascontiguousarray(tri.transpose(2, 1, 0)), start)
+    mesh._cache["triangles_ckm"] = out
+    return out
+
+
+def refine_parts(
+    masks: dict[int, NDArray[np.bool_]],
+    meshes: Mapping[int, _Mesh],
+    vsas: Mapping[int, list[tuple[int, int, int, int]]],
+    view: ArrayLike,
+    proj: ArrayLike,
+    size: tuple[int, int],
+    *,
+    clip_m: float = 0.03,
+    min_triangles: int = MIN_TRIANGLES,
+) -> int:
+    """Drop, in place, the kept parts none of whose triangles meets its cell's VSAs.
+
+    Parameters
+    ----------
+    masks : dict of int -> (parts,) bool
+        Per cell, the parts the box test kept (:func:`~walkstream.shared.partcull.cull_parts`
+        in ``portals`` mode); changed in place.
+    meshes : mapping of int -> CellMesh
+        The cells' decoded contents (a cell not here is left alone).
+    vsas : mapping of int -> list of (x0, y0, x1, y1)
+        Per cell its VSAs (a cell without is left alone).
+    view, proj : (4, 4) float
+    size : (int, int)
+    clip_m : float
+        The clip plane of the rectangles (as the box test's).
+    min_triangles : int
+        Parts with fewer triangles are left alone.
+
+    Returns
+    -------
+    int
+        The number of parts dropped.
+    """
+    cells: list[int] = []
+    tris: list[NDArray[np.float64]] = []
+    part_of: list[NDArray[np.int64]] = []
+    for c, m in masks.items():
+        if c not in vsas or c not in meshes or not vsas[c] or not m.any():
+            continue
+        tri, start = cell_triangles(meshes[c])
+        counts = np.diff(start)
+        if len(counts) != len(m):
+            continue  # not the mesh the mask was made for: left as it is
+        cand = m & (counts >= min_triangles)
+        missing = meshes[c].missing
+        if missing:
+            cand[np.asarray(missing, np.int64)] = False
+        idx = np.flatnonzero(cand)
+        if not len(idx):
+            continue
+        n = counts[idx]
+        # each candidate triangle's index into the cell's packed triangles
+        first = np.repeat(start[idx] - np.concatenate([[0], np.cumsum(n)[:-1]]), n)
+        t = np.arange(int(n.sum())) + first
+        cells.append(c)
+        tris.append(tri[:, :, t])
+        part_of.append(np.repeat(idx, n))
+    if not cells:
+        return 0
+    owner = np.repeat(np.arange(len(cells)), [len(p) for p in part_of])
+    pts = np.concatenate(tris, axis=2)
+    V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
+    rect, front, near_d, far_d = rects_ckm(pts, TRIANGLE_EDGES, V, P, size, clip_m)
+    lists = [vsas[c] for c in cells]
+    kmax = max(map(len, lists))
+    table = np.array([list(v) + [(1, 1, 0, 0)] * (kmax - len(v)) for v in lists], np.int64)  # (cells, kmax, 4)
+    vo = table[owner]  # (n, kmax, 4)
+    r = rect.T[:, None, :]
+    # each triangle's rectangle cut to each of its cell's VSAs: the pixel centres it may draw there
+    box = np.concatenate([np.maximum(r[..., :2], vo[..., :2]), np.minimum(r[..., 2:], vo[..., 2:])], axis=2)
+    meet = (box[..., 0] <= box[..., 2]) & (box[..., 1] <= box[..., 3])
+    ahead = near_d >= clip_m
+    if ahead.any():  # wholly in front of the clip plane: the triangle's own sides too
+        meet[ahead] &= _sides_meet(pts[:, :, ahead], box[ahead], V, P, size)
+    got = front & meet.any(axis=1)
+    planes = _near_far(P)
+    if planes is not None:
+        got &= (far_d >= planes[0]) & (near_d <= planes[1])
+    dropped = 0
+    at = 0
+    for c, parts in zip(cells, part_of, strict=True):
+        g = got[at:at + len(parts)]
+        at += len(parts)
+        cand = np.unique(parts)
+        shows = np.zeros(len(masks[c]), bool)
+        shows[parts[g]] = True
+        gone = cand[~shows[cand]]
+        if len(gone):
+            masks[c][gone] = False
+            dropped += len(gone)
+    return dropped
+
+
+def _sides_meet(
+    pts: NDArray[np.float64],
+    box: NDArray[np.int64],
+    view: NDArray[np.float64],
+    proj: NDArray[np.float64],
+    size: tuple[int, int],
+) -> NDArray[np.bool_]:
+    """Whether each triangle ``pts`` ``(3, 3, n)`` (wholly in front of the eye), grown by
+    :data:`~walkstream.shared.screenrects.CENTRE_MARGIN_PX`, may meet each whole-pixel
+    rectangle ``box`` ``(n, k, 4)`` of pixel centres: False where one of the triangle's
+    sides separates them (a separating axis proves the two apart; the rectangle's own axes
+    were the rectangles' test).  A triangle across a corner of a door's rectangle, whose
+    screen box reaches into it while the triangle does not, is told apart here."""
+    n = pts.shape[2]
+    h = (proj @ view)[[0, 1, 3]] @ np.concatenate([pts.reshape(3, -1), np.ones((1, 3 * n))])
+    # window coordinates with pixel i's centre at i (ndc_pixels' convention)
+    xy = (h[:2] / h[2] + 1.0) * (0.5 * np.array([[size[0]], [size[1]]], np.float64)) - 0.5
+    x, y = xy[0].reshape(3, n), xy[1].reshape(3, n)
+    cx = 0.5 * (box[..., 0] + box[..., 2])  # (n, k) the rectangle's centre and half sizes
+    cy = 0.5 * (box[..., 1] + box[..., 3])
+    hx = 0.5 * (box[..., 2] - box[..., 0])
+    hy = 0.5 * (box[..., 3] - box[..., 1])
+    meet = np.ones(box.shape[:2], bool)
+    for i, j in TRIANGLE_EDGES.tolist():
+        nx, ny = y[i] - y[j], x[j] - x[i]  # (n,) the side's normal
+        t = nx * x + ny * y  # (3, n) the vertices along it
+        grow = CENTRE_MARGIN_PX * (np.abs(nx) + np.abs(ny))
+        lo, hi = t.min(axis=0) - grow, t.max(axis=0) + grow
+        c = nx[:, None] * cx + ny[:, None] * cy
+        e = np.abs(nx)[:, None] * hx + np.abs(ny)[:, None] * hy
+        meet &= (c - e <= hi[:, None]) & (c + e >= lo[:, None])
+    return meet
+
+
+def _near_far(proj: NDArray[np.float64]) -> tuple[float, float] | None:
+    """The near and far planes' depths (``-z`` in eye space) of a perspective projection, or
+    None for another kind (then the depths are not tested)."""
+    (a, b, c, d), (e, f, g, h) = proj[2:].tolist()
+    if (a, b, e, f, g, h) != (0.0, 0.0, 0.0, 0.0, -1.0, 0.0) or math.isclose(c, 1.0) or math.isclose(c, -1.0):
+        return None
+    return d / (c - 1.0), d / (c + 1.0)
