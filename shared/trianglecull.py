@@ -164,9 +164,9 @@ def refine_parts(
     # each triangle's rectangle cut to each of its cell's VSAs: the pixel centres it may draw there
     box = np.concatenate([np.maximum(r[..., :2], vo[..., :2]), np.minimum(r[..., 2:], vo[..., 2:])], axis=2)
     meet = (box[..., 0] <= box[..., 2]) & (box[..., 1] <= box[..., 3])
-    ahead = near_d >= clip_m
-    if ahead.any():  # wholly in front of the clip plane: the triangle's own sides too
-        meet[ahead] &= _sides_meet(pts[:, :, ahead], box[ahead], V, P, size)
+    on = front & meet.any(axis=1)
+    if on.any():  # then the triangle's own sides
+        meet[on] &= _sides_meet(pts[:, :, on], box[on], V, P, size, clip_m)
     got = front & meet.any(axis=1)
     planes = _near_far(P)
     if planes is not None:
@@ -192,31 +192,49 @@ def _sides_meet(
     view: NDArray[np.float64],
     proj: NDArray[np.float64],
     size: tuple[int, int],
+    clip_m: float,
 ) -> NDArray[np.bool_]:
-    """Whether each triangle ``pts`` ``(3, 3, n)`` (wholly in front of the eye), grown by
+    """Whether each triangle ``pts`` ``(3, 3, n)`` (each with a point in front of the clip
+    plane), clipped at depth ``clip_m`` and grown by
     :data:`~walkstream.shared.screenrects.CENTRE_MARGIN_PX`, may meet each whole-pixel
     rectangle ``box`` ``(n, k, 4)`` of pixel centres: False where one of the triangle's
-    sides separates them (a separating axis proves the two apart; the rectangle's own axes
-    were the rectangles' test).  A triangle across a corner of a door's rectangle, whose
-    screen box reaches into it while the triangle does not, is told apart here."""
+    sides separates them.  A separating axis proves the two apart; the rectangle's own
+    axes were the rectangles' test, this adds the three sides' normals (each side's part in
+    front of the clip plane: a side's line projects to a line).  A triangle across a corner
+    of a door's rectangle, or a long beam's face passing beside the view, whose screen box
+    reaches into the rectangle while the triangle does not, is told apart here."""
     n = pts.shape[2]
-    h = (proj @ view)[[0, 1, 3]] @ np.concatenate([pts.reshape(3, -1), np.ones((1, 3 * n))])
+    # clip coordinates x, y and w (= depth) of each vertex: linear in the point, so a
+    # side's crossing of the clip plane is interpolated in them
+    h = ((proj @ view)[[0, 1, 3]] @ np.concatenate([pts.reshape(3, -1), np.ones((1, 3 * n))])).reshape(3, 3, n)
+    d = h[2] - clip_m  # (3, n) >= 0: in front
+    fallback = np.take_along_axis(h, np.argmax(d, axis=0)[None, None, :], axis=1)[:, 0]  # (3, n), in front
+    ends = []
+    for i, j in TRIANGLE_EDGES.tolist():
+        di, dj = d[i], d[j]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(di == dj, 0.0, di / (di - dj))
+        cross = h[:, i] + (h[:, j] - h[:, i]) * s
+        a = np.where(di >= 0, h[:, i], np.where(dj >= 0, cross, fallback))
+        b = np.where(dj >= 0, h[:, j], np.where(di >= 0, cross, fallback))
+        ends += [a, b]
+    q = np.stack(ends, axis=1)  # (3, 6, n): each side's ends in front of the plane
     # window coordinates with pixel i's centre at i (ndc_pixels' convention)
-    xy = (h[:2] / h[2] + 1.0) * (0.5 * np.array([[size[0]], [size[1]]], np.float64)) - 0.5
-    x, y = xy[0].reshape(3, n), xy[1].reshape(3, n)
+    x = (q[0] / q[2] + 1.0) * (0.5 * size[0]) - 0.5
+    y = (q[1] / q[2] + 1.0) * (0.5 * size[1]) - 0.5
     cx = 0.5 * (box[..., 0] + box[..., 2])  # (n, k) the rectangle's centre and half sizes
     cy = 0.5 * (box[..., 1] + box[..., 3])
     hx = 0.5 * (box[..., 2] - box[..., 0])
     hy = 0.5 * (box[..., 3] - box[..., 1])
     meet = np.ones(box.shape[:2], bool)
-    for i, j in TRIANGLE_EDGES.tolist():
-        nx, ny = y[i] - y[j], x[j] - x[i]  # (n,) the side's normal
-        t = nx * x + ny * y  # (3, n) the vertices along it
+    for e in range(3):
+        nx, ny = y[2 * e] - y[2 * e + 1], x[2 * e + 1] - x[2 * e]  # (n,) the side's normal
+        t = nx * x + ny * y  # (6, n) the points along it
         grow = CENTRE_MARGIN_PX * (np.abs(nx) + np.abs(ny))
         lo, hi = t.min(axis=0) - grow, t.max(axis=0) + grow
         c = nx[:, None] * cx + ny[:, None] * cy
-        e = np.abs(nx)[:, None] * hx + np.abs(ny)[:, None] * hy
-        meet &= (c - e <= hi[:, None]) & (c + e >= lo[:, None])
+        r = np.abs(nx)[:, None] * hx + np.abs(ny)[:, None] * hy
+        meet &= (c - r <= hi[:, None]) & (c + r >= lo[:, None])
     return meet
 
 

@@ -47,15 +47,22 @@ def _pixel(p: np.ndarray) -> np.ndarray:
 
 
 def _covers(tri: np.ndarray, vsa: tuple[int, int, int, int]) -> bool:
-    """Whether the triangle (3, 3), wholly beyond the near plane, covers a pixel centre of ``vsa``."""
-    a, b, c = _pixel(tri)
+    """Whether the triangle (3, 3), clipped at the near plane as GL clips it, covers a
+    pixel centre of ``vsa`` (a plain rasteriser: every centre against every side)."""
+    depth = -(np.c_[tri, np.ones(3)] @ VIEW.T)[:, 2] - 0.1
+    poly = []
+    for i in range(3):  # Sutherland-Hodgman against the near plane
+        j = (i + 1) % 3
+        if depth[i] >= 0:
+            poly.append(tri[i])
+        if (depth[i] >= 0) != (depth[j] >= 0):
+            poly.append(tri[i] + (tri[j] - tri[i]) * depth[i] / (depth[i] - depth[j]))
+    if len(poly) < 3:
+        return False
+    p = _pixel(np.array(poly))
     x0, y0, x1, y1 = vsa
     gx, gy = np.meshgrid(np.arange(x0, x1 + 1) + 0.5, np.arange(y0, y1 + 1) + 0.5)
-
-    def edge(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-        return (q[0] - p[0]) * (gy - p[1]) - (q[1] - p[1]) * (gx - p[0])
-
-    e = np.stack([edge(a, b), edge(b, c), edge(c, a)])
+    e = np.stack([(b[0] - a[0]) * (gy - a[1]) - (b[1] - a[1]) * (gx - a[0]) for a, b in zip(p, np.roll(p, -1, axis=0))])
     return bool(np.any(np.all(e >= 0, axis=0) | np.all(e <= 0, axis=0)))
 
 
@@ -126,7 +133,10 @@ def test_never_drops_a_part_that_covers_a_pixel_centre_of_its_area() -> None:
                 centre[1:] = rng.uniform(-0.7, 0.7, 2) * centre[0]
                 size = rng.choice([0.01, 0.1, 1.0])
                 t = centre + rng.normal(0.0, size, (n, 3, 3))
-                t[..., 0] = np.maximum(t[..., 0], 0.2)  # beyond the near plane
+                if rng.random() < 0.7:
+                    t[..., 0] = np.maximum(t[..., 0], 0.2)  # beyond the near plane
+                else:  # long triangles past the eye's side, across the clip plane
+                    t[:, int(rng.integers(3)), 0] = rng.uniform(-3.0, 0.05, n)
                 parts.append(_part(t))
                 cov.append(any(_covers(tri, vsa) for tri in t))
             cells.append(c)
