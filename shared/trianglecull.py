@@ -36,12 +36,18 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.shared.screenrects import CENTRE_MARGIN_PX, rects_ckm
+from walkstream.shared.screenrects import CENTRE_MARGIN_PX, box_rects, rects_ckm
 
-__all__ = ["MIN_TRIANGLES", "TRIANGLE_EDGES", "cell_triangles", "refine_parts"]
+__all__ = ["MIN_TRIANGLES", "WIDE_PX", "TRIANGLE_EDGES", "cell_triangles", "refine_parts"]
 
 #: Parts with fewer triangles are left as the box test decided (cheaper to draw than to test).
 MIN_TRIANGLES = 16
+
+#: A kept part whose box's rectangle lies inside one of its cell's VSAs and is at least this
+#: many pixel centres wide and high is left as the box test decided (its triangles mostly
+#: draw there: the test is not worth its time); only the others -- boxes across a VSA's edge, thin or under a few pixels -- are
+#: tested triangle by triangle.
+WIDE_PX = 4
 
 #: A triangle's sides as index pairs into its three vertices (the clip of
 #: :func:`~walkstream.shared.screenrects.rects_ckm`).
@@ -80,6 +86,12 @@ def cell_triangles(mesh: _Mesh) -> tuple[NDArray[np.float64], NDArray[np.int64]]
     start : (parts + 1,) int64
         Part ``i``'s triangles are ``tri[:, :, start[i]:start[i + 1]]``.
     """
+    tri, start, _lo, _hi = _packed(mesh)
+    return tri, start
+
+
+def _packed(mesh: _Mesh) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`cell_triangles` and the parts' boxes ``(parts, 3)`` (lower, upper), made once per mesh."""
     got = mesh._cache.get("triangles_ckm")
     if got is not None:
         return got  # type: ignore[no-any-return]
@@ -87,7 +99,11 @@ def cell_triangles(mesh: _Mesh) -> tuple[NDArray[np.float64], NDArray[np.int64]]
     counts = np.array([len(t) for t in per], np.int64)
     start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     tri = np.concatenate(per) if per else np.zeros((0, 3, 3))
-    out = (np.ascontiguousarray(tri.transpose(2, 1, 0)), start)
+    box = [(t.reshape(-1, 3).min(axis=0), t.reshape(-1, 3).max(axis=0)) if len(t) else (np.zeros(3), np.zeros(3))
+           for t in per]
+    lo = np.array([b[0] for b in box]).reshape(-1, 3)
+    hi = np.array([b[1] for b in box]).reshape(-1, 3)
+    out = (np.ascontiguousarray(tri.transpose(2, 1, 0)), start, lo, hi)
     mesh._cache["triangles_ckm"] = out
     return out
 
@@ -126,13 +142,14 @@ def refine_parts(
     int
         The number of parts dropped.
     """
+    V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
+    # the candidates: kept parts of enough triangles, not stand-ins, of cells with VSAs
     cells: list[int] = []
-    tris: list[NDArray[np.float64]] = []
-    part_of: list[NDArray[np.int64]] = []
+    picks: list[NDArray[np.int64]] = []
     for c, m in masks.items():
         if c not in vsas or c not in meshes or not vsas[c] or not m.any():
             continue
-        tri, start = cell_triangles(meshes[c])
+        _tri, start, _lo, _hi = _packed(meshes[c])
         counts = np.diff(start)
         if len(counts) != len(m):
             continue  # not the mesh the mask was made for: left as it is
@@ -141,24 +158,48 @@ def refine_parts(
         if missing:
             cand[np.asarray(missing, np.int64)] = False
         idx = np.flatnonzero(cand)
-        if not len(idx):
-            continue
-        n = counts[idx]
-        # each candidate triangle's index into the cell's packed triangles
-        first = np.repeat(start[idx] - np.concatenate([[0], np.cumsum(n)[:-1]]), n)
-        t = np.arange(int(n.sum())) + first
-        cells.append(c)
-        tris.append(tri[:, :, t])
-        part_of.append(np.repeat(idx, n))
+        if len(idx):
+            cells.append(c)
+            picks.append(idx)
     if not cells:
         return 0
-    owner = np.repeat(np.arange(len(cells)), [len(p) for p in part_of])
-    pts = np.concatenate(tris, axis=2)
-    V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
-    rect, front, near_d, far_d = rects_ckm(pts, TRIANGLE_EDGES, V, P, size, clip_m)
     lists = [vsas[c] for c in cells]
     kmax = max(map(len, lists))
     table = np.array([list(v) + [(1, 1, 0, 0)] * (kmax - len(v)) for v in lists], np.int64)  # (cells, kmax, 4)
+    # only the parts whose box is not wholly inside a VSA, or is thin there: a box well
+    # inside one mostly holds triangles that draw there, and testing them cost 3 times
+    # the rest of the culling on the duplex's tour
+    lo = np.concatenate([_packed(meshes[c])[2][i] for c, i in zip(cells, picks, strict=True)])
+    hi = np.concatenate([_packed(meshes[c])[3][i] for c, i in zip(cells, picks, strict=True)])
+    powner = np.repeat(np.arange(len(cells)), [len(i) for i in picks])
+    brect, _front = box_rects(lo, hi, V, P, size, clip_m)
+    v = table[powner]  # (parts, kmax, 4)
+    b = brect[:, None, :]
+    inside = ((b[..., 0] >= v[..., 0]) & (b[..., 1] >= v[..., 1]) & (b[..., 2] <= v[..., 2]) & (b[..., 3] <= v[..., 3])
+              & (b[..., 2] - b[..., 0] >= WIDE_PX - 1) & (b[..., 3] - b[..., 1] >= WIDE_PX - 1)).any(axis=1)
+    tris: list[NDArray[np.float64]] = []
+    part_of: list[NDArray[np.int64]] = []
+    at = 0
+    keep_cells = []
+    for k, (c, idx) in enumerate(zip(cells, picks, strict=True)):
+        idx = idx[~inside[at:at + len(idx)]]
+        at += len(picks[k])
+        if not len(idx):
+            continue
+        tri, start, _lo, _hi = _packed(meshes[c])
+        n = np.diff(start)[idx]
+        # each candidate triangle's index into the cell's packed triangles
+        first = np.repeat(start[idx] - np.concatenate([[0], np.cumsum(n)[:-1]]), n)
+        tris.append(tri[:, :, np.arange(int(n.sum())) + first])
+        part_of.append(np.repeat(idx, n))
+        keep_cells.append(k)
+    if not keep_cells:
+        return 0
+    table = table[keep_cells]
+    cells = [cells[k] for k in keep_cells]
+    owner = np.repeat(np.arange(len(cells)), [len(p) for p in part_of])
+    pts = np.concatenate(tris, axis=2)
+    rect, front, near_d, far_d = rects_ckm(pts, TRIANGLE_EDGES, V, P, size, clip_m)
     vo = table[owner]  # (n, kmax, 4)
     r = rect.T[:, None, :]
     # each triangle's rectangle cut to each of its cell's VSAs: the pixel centres it may draw there
@@ -171,18 +212,19 @@ def refine_parts(
     planes = _near_far(P)
     if planes is not None:
         got &= (far_d >= planes[0]) & (near_d <= planes[1])
-    dropped = 0
-    at = 0
-    for c, parts in zip(cells, part_of, strict=True):
-        g = got[at:at + len(parts)]
-        at += len(parts)
-        cand = np.unique(parts)
-        shows = np.zeros(len(masks[c]), bool)
-        shows[parts[g]] = True
-        gone = cand[~shows[cand]]
-        if len(gone):
-            masks[c][gone] = False
-            dropped += len(gone)
+    # a part shows when any of its triangles does (parts numbered across the cells)
+    base = np.concatenate([[0], np.cumsum([len(masks[c]) for c in cells])])
+    gid = np.concatenate([p + base[k] for k, p in enumerate(part_of)])
+    shows = np.bincount(gid[got], minlength=int(base[-1])) > 0
+    tested = np.zeros(int(base[-1]), bool)
+    tested[gid] = True
+    gone = tested & ~shows
+    dropped = int(gone.sum())
+    if dropped:
+        for k, c in enumerate(cells):
+            g = gone[base[k]:base[k + 1]]
+            if g.any():
+                masks[c][g] = False
     return dropped
 
 
@@ -206,36 +248,61 @@ def _sides_meet(
     n = pts.shape[2]
     # clip coordinates x, y and w (= depth) of each vertex: linear in the point, so a
     # side's crossing of the clip plane is interpolated in them
-    h = ((proj @ view)[[0, 1, 3]] @ np.concatenate([pts.reshape(3, -1), np.ones((1, 3 * n))])).reshape(3, 3, n)
+    m = (proj @ view)[[0, 1, 3]]
+    h = (m[:, :3] @ pts.reshape(3, -1) + m[:, 3:]).reshape(3, 3, n)
     d = h[2] - clip_m  # (3, n) >= 0: in front
-    fallback = np.take_along_axis(h, np.argmax(d, axis=0)[None, None, :], axis=1)[:, 0]  # (3, n), in front
-    ends = []
-    for i, j in TRIANGLE_EDGES.tolist():
-        di, dj = d[i], d[j]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(di == dj, 0.0, di / (di - dj))
-        cross = h[:, i] + (h[:, j] - h[:, i]) * s
-        a = np.where(di >= 0, h[:, i], np.where(dj >= 0, cross, fallback))
-        b = np.where(dj >= 0, h[:, j], np.where(di >= 0, cross, fallback))
-        ends += [a, b]
-    q = np.stack(ends, axis=1)  # (3, 6, n): each side's ends in front of the plane
-    # window coordinates with pixel i's centre at i (ndc_pixels' convention)
-    x = (q[0] / q[2] + 1.0) * (0.5 * size[0]) - 0.5
-    y = (q[1] / q[2] + 1.0) * (0.5 * size[1]) - 0.5
-    cx = 0.5 * (box[..., 0] + box[..., 2])  # (n, k) the rectangle's centre and half sizes
-    cy = 0.5 * (box[..., 1] + box[..., 3])
-    hx = 0.5 * (box[..., 2] - box[..., 0])
-    hy = 0.5 * (box[..., 3] - box[..., 1])
-    meet = np.ones(box.shape[:2], bool)
-    for e in range(3):
-        nx, ny = y[2 * e] - y[2 * e + 1], x[2 * e + 1] - x[2 * e]  # (n,) the side's normal
-        t = nx * x + ny * y  # (6, n) the points along it
-        grow = CENTRE_MARGIN_PX * (np.abs(nx) + np.abs(ny))
-        lo, hi = t.min(axis=0) - grow, t.max(axis=0) + grow
-        c = nx[:, None] * cx + ny[:, None] * cy
-        r = np.abs(nx)[:, None] * hx + np.abs(ny)[:, None] * hy
-        meet &= (c - r <= hi[:, None]) & (c + r >= lo[:, None])
+    ahead = (d >= 0).all(axis=0)
+    meet = np.empty(box.shape[:2], bool)
+    if ahead.any():  # most: the three vertices, and the sides between them
+        q = h[:, :, ahead]
+        meet[ahead] = _separated(q[0] / q[2], q[1] / q[2], _SIDES_AHEAD, box[ahead], size)
+    if not ahead.all():  # across the clip plane: each side's part in front of it
+        q, dd = h[:, :, ~ahead], d[:, ~ahead]
+        fallback = np.take_along_axis(q, np.argmax(dd, axis=0)[None, None, :], axis=1)[:, 0]  # in front
+        ends = []
+        for i, j in TRIANGLE_EDGES.tolist():
+            di, dj = dd[i], dd[j]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                s = np.where(di == dj, 0.0, di / (di - dj))
+            cross = q[:, i] + (q[:, j] - q[:, i]) * s
+            ends += [np.where(di >= 0, q[:, i], np.where(dj >= 0, cross, fallback)),
+                     np.where(dj >= 0, q[:, j], np.where(di >= 0, cross, fallback))]
+        e = np.stack(ends, axis=1)  # (3, 6, n)
+        meet[~ahead] = _separated(e[0] / e[2], e[1] / e[2], _SIDES_CLIPPED, box[~ahead], size)
     return meet
+
+
+#: Point index pairs of the three sides: a triangle's vertices; a clipped triangle's six
+#: ends (each side's two).
+_SIDES_AHEAD = (np.array([0, 1, 2]), np.array([1, 2, 0]))
+_SIDES_CLIPPED = (np.array([0, 2, 4]), np.array([1, 3, 5]))
+
+
+def _separated(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    sides: tuple[NDArray[np.int64], NDArray[np.int64]],
+    box: NDArray[np.int64],
+    size: tuple[int, int],
+) -> NDArray[np.bool_]:
+    """False where a side's normal separates the points ``x``, ``y`` (NDC, ``(p, n)``), grown
+    by the centre margin, from the rectangle ``box`` ``(n, k, 4)``; the three sides at once."""
+    # window coordinates with pixel i's centre at i (ndc_pixels' convention)
+    x = (x + 1.0) * (0.5 * size[0]) - 0.5
+    y = (y + 1.0) * (0.5 * size[1]) - 0.5
+    a, b = sides
+    nx, ny = y[a] - y[b], x[b] - x[a]  # (3, n) the sides' normals
+    t = nx[:, None, :] * x + ny[:, None, :] * y  # (3, p, n) the points along each
+    grow = CENTRE_MARGIN_PX * (np.abs(nx) + np.abs(ny))
+    lo, hi = t.min(axis=1) - grow, t.max(axis=1) + grow  # (3, n)
+    cx = box[..., 0] + box[..., 2]  # (n, k) twice the rectangle's centre and half sizes
+    cy = box[..., 1] + box[..., 3]
+    hx = box[..., 2] - box[..., 0]
+    hy = box[..., 3] - box[..., 1]
+    ax, ay = np.abs(nx)[..., None], np.abs(ny)[..., None]
+    c = nx[..., None] * cx + ny[..., None] * cy  # (3, n, k), doubled
+    r = ax * hx + ay * hy
+    return ((c - r <= 2.0 * hi[..., None]) & (c + r >= 2.0 * lo[..., None])).all(axis=0)
 
 
 def _near_far(proj: NDArray[np.float64]) -> tuple[float, float] | None:

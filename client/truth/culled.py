@@ -213,10 +213,6 @@ for by the texture, not culled: :func:`~.standin.wall_stand_in`).  ``rows``, whe
         drawn_tris = sum(truth.triangles[truth.index[d]] for d in drawn if d in truth.index)
         if chk.visible_triangles:
             tight.append(drawn_tris / chk.visible_triangles)
-            import os, sys  # DEBUG-TIGHT (not to be committed)
-            if os.environ.get("DEBUG_TIGHT"):
-                print("TIGHT", note.frame, round(note.t, 3), drawn_tris, chk.visible_triangles,
-                      [(d, truth.triangles[truth.index[d]]) for d in drawn if d in truth.index], "EYE", list(map(float, note.eye)), "VIEW", np.asarray(note.view).ravel().tolist(), file=sys.stderr)
     out = {
         "frames": len(notes),
         "unknown": sum(1 for n in notes if n.pvs is None),
