@@ -94,7 +94,7 @@ def _packed(mesh: _Mesh) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArra
     """:func:`cell_triangles` and the parts' boxes ``(parts, 3)`` (lower, upper), made once per mesh."""
     got = mesh._cache.get("triangles_ckm")
     if got is not None:
-        return got  # type: ignore[no-any-return]
+        return got
     per = [np.asarray(p.positions, np.float64)[np.asarray(p.indices, np.int64)].reshape(-1, 3, 3) for p in mesh.parts]
     counts = np.array([len(t) for t in per], np.int64)
     start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
@@ -175,8 +175,9 @@ def refine_parts(
     brect, _front = box_rects(lo, hi, V, P, size, clip_m)
     v = table[powner]  # (parts, kmax, 4)
     b = brect[:, None, :]
-    inside = ((b[..., 0] >= v[..., 0]) & (b[..., 1] >= v[..., 1]) & (b[..., 2] <= v[..., 2]) & (b[..., 3] <= v[..., 3])
-              & (b[..., 2] - b[..., 0] >= WIDE_PX - 1) & (b[..., 3] - b[..., 1] >= WIDE_PX - 1)).any(axis=1)
+    within = ((b[..., 0] >= v[..., 0]) & (b[..., 1] >= v[..., 1]) & (b[..., 2] <= v[..., 2]) & (b[..., 3] <= v[..., 3])
+              & (b[..., 2] - b[..., 0] >= WIDE_PX - 1) & (b[..., 3] - b[..., 1] >= WIDE_PX - 1))
+    inside = np.any(within, axis=1)
     tris: list[NDArray[np.float64]] = []
     part_of: list[NDArray[np.int64]] = []
     at = 0

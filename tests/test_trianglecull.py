@@ -62,7 +62,8 @@ def _covers(tri: np.ndarray, vsa: tuple[int, int, int, int]) -> bool:
     p = _pixel(np.array(poly))
     x0, y0, x1, y1 = vsa
     gx, gy = np.meshgrid(np.arange(x0, x1 + 1) + 0.5, np.arange(y0, y1 + 1) + 0.5)
-    e = np.stack([(b[0] - a[0]) * (gy - a[1]) - (b[1] - a[1]) * (gx - a[0]) for a, b in zip(p, np.roll(p, -1, axis=0))])
+    e = np.stack([(b[0] - a[0]) * (gy - a[1]) - (b[1] - a[1]) * (gx - a[0])
+                  for a, b in zip(p, np.roll(p, -1, axis=0), strict=True)])
     return bool(np.any(np.all(e >= 0, axis=0) | np.all(e <= 0, axis=0)))
 
 
