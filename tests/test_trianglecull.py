@@ -9,9 +9,12 @@ duplex, the traps and the hypothesis-drawn interiors cull as the client does).
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellhead import stand_in
@@ -122,7 +125,7 @@ def test_stand_ins_and_cells_without_areas_are_left_alone() -> None:
 def test_never_drops_a_part_that_covers_a_pixel_centre_of_its_area() -> None:
     rng = np.random.default_rng(24)
     kept_drawn = dropped = 0
-    for _ in range(40):
+    for _ in range(20):
         cells, meshes, vsas, covered = [], {}, {}, {}
         for c in range(4):
             parts, cov = [], []
@@ -150,4 +153,29 @@ def test_never_drops_a_part_that_covers_a_pixel_centre_of_its_area() -> None:
             assert not np.any(covered[c] & ~masks[c]), (c, vsas[c])
             kept_drawn += int(covered[c].sum())
             dropped += int((~masks[c]).sum())
-    assert kept_drawn > 50 and dropped > 500  # both sides were exercised
+    assert kept_drawn > 25 and dropped > 250  # both sides were exercised
+
+
+
+def test_the_cli_turns_it_off_and_benches_it(office_db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import argparse
+
+    from walkstream.cli import main
+    from walkstream.cmd_replay import add_replay_arguments, config_from_args
+
+    parser = argparse.ArgumentParser()
+    add_replay_arguments(parser)
+    parser.add_argument("--report", default="report")
+    assert config_from_args(parser.parse_args([])).triangle_cull
+    assert not config_from_args(parser.parse_args(["--no-triangle-cull"])).triangle_cull
+    # the bench: parts and triangles the boxes keep, those the triangles keep (never more)
+    assert main(["bench", "portals", "--triangles", str(office_db), "--step", "10", "--out", str(tmp_path), "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["triangles"]
+    assert [r["size"] for r in rows] == ["160x120", "640x480"] and rows[0]["poses"] >= 3
+    for r in rows:
+        assert 0 < r["tris_triangles"] < r["tris_boxes"] and r["parts_triangles"] < r["parts_boxes"]
+        assert set(r["ms"]) == {"walk", "boxes", "triangles"}
+    # a bad source is named in one line
+    assert main(["bench", "portals", "--triangles", str(tmp_path / "nope.db"), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "nope.db" in err and "Traceback" not in err
