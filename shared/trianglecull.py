@@ -35,13 +35,13 @@ test and are left as the boxes decided.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.partcull import _near_far
 from walkstream.shared.screenrects import CENTRE_MARGIN_PX, box_rects
 
 __all__ = ["MIN_TRIANGLES", "WIDE_PX", "TRIANGLE_EDGES", "cell_triangles", "refine_parts"]
@@ -59,14 +59,9 @@ WIDE_PX = 4
 TRIANGLE_EDGES = np.array([[0, 1], [1, 2], [2, 0]], np.int64)
 
 
-class _Part(Protocol):
-    positions: NDArray[Any]
-    indices: NDArray[Any]
-
-
 class _Mesh(Protocol):
     @property
-    def parts(self) -> tuple[Any, ...]: ...  # tuple of _Part
+    def parts(self) -> tuple[Any, ...]: ...  # CellPart: positions (n, 3), indices (m, 3)
 
     @property
     def missing(self) -> tuple[int, ...]: ...
@@ -297,12 +292,3 @@ def _separated(x: NDArray[np.float64], y: NDArray[np.float64], box: NDArray[np.f
     c = nx[..., None] * cx + ny[..., None] * cy  # (3, n, k), doubled
     r = np.abs(nx)[..., None] * hx + np.abs(ny)[..., None] * hy
     return np.all((c - r <= 2.0 * hi[..., None]) & (c + r >= 2.0 * lo[..., None]), axis=0)
-
-
-def _near_far(proj: NDArray[np.float64]) -> tuple[float, float] | None:
-    """The near and far planes' depths (``-z`` in eye space) of a perspective projection, or
-    None for another kind (then the depths are not tested)."""
-    (a, b, c, d), (e, f, g, h) = proj[2:].tolist()
-    if (a, b, e, f, g, h) != (0.0, 0.0, 0.0, 0.0, -1.0, 0.0) or math.isclose(c, 1.0) or math.isclose(c, -1.0):
-        return None
-    return d / (c - 1.0), d / (c + 1.0)
