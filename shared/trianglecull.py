@@ -90,6 +90,19 @@ def cell_triangles(mesh: _Mesh) -> tuple[NDArray[np.float64], NDArray[np.int64]]
     return tri, start
 
 
+def _eligible(mesh: _Mesh, min_triangles: int) -> NDArray[np.bool_]:
+    """The parts of ``mesh`` that may be tested: at least ``min_triangles`` triangles, not a
+    stand-in (made once per mesh and count)."""
+    key = f"eligible {min_triangles}"
+    got = mesh._cache.get(key)
+    if got is None:
+        got = np.diff(_packed(mesh)[1]) >= min_triangles
+        if mesh.missing:
+            got[np.asarray(mesh.missing, np.int64)] = False
+        mesh._cache[key] = got
+    return np.asarray(got, bool)
+
+
 def _packed(mesh: _Mesh) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
     """:func:`cell_triangles` and the parts' boxes ``(parts, 3)`` (lower, upper), made once per mesh."""
     got = mesh._cache.get("triangles_ckm")
@@ -150,17 +163,12 @@ def refine_parts(
     cells: list[int] = []
     picks: list[NDArray[np.int64]] = []
     for c, m in masks.items():
-        if c not in vsas or c not in meshes or not vsas[c] or not m.any():
+        if c not in vsas or c not in meshes or not vsas[c]:
             continue
-        _tri, start, _lo, _hi = _packed(meshes[c])
-        counts = np.diff(start)
-        if len(counts) != len(m):
+        able = _eligible(meshes[c], min_triangles)
+        if len(able) != len(m):
             continue  # not the mesh the mask was made for: left as it is
-        cand = m & (counts >= min_triangles)
-        missing = meshes[c].missing
-        if missing:
-            cand[np.asarray(missing, np.int64)] = False
-        idx = np.flatnonzero(cand)
+        idx = np.flatnonzero(m & able)
         if len(idx):
             cells.append(c)
             picks.append(idx)
