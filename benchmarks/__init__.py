@@ -34,7 +34,9 @@ Helpers of those, not commands of their own:
 - :mod:`.portalwalk`: the first portal walk, the reference that :mod:`.portals` times
   and tests/test_portalwalk.py checks the faster walk against;
 - :mod:`.cullcpu`: the culling's CPU time per frame (``walkstream bench portals
-  --cull``), beside the culling of an earlier revision.
+  --cull``), beside the culling of an earlier revision;
+- :mod:`.trianglecost`: what testing the kept room parts' triangles saves and costs
+  (``walkstream bench portals --triangles``).
 
 Scripts, not commands (they time product code against itself, no scene to bake):
 

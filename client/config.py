@@ -67,6 +67,9 @@ class ReplayConfig:
     """Interiors: portals farther than this are not looked through."""
     culling: str = "portals"
     """Interiors: ``portals``, ``frustum`` or ``none`` (:mod:`walkstream.shared.portals`)."""
+    triangle_cull: bool = True
+    """Interiors, ``portals`` culling: the parts kept by their boxes are tested again by
+    their triangles (:mod:`walkstream.shared.trianglecull`)."""
     fog_budget: bool = True
     """Interiors: the budget controller sets the fog distance (one LOD per part)."""
     rooms: dict[str, Any] = field(default_factory=dict)

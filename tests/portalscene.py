@@ -3,7 +3,8 @@
 :class:`PortalScene` holds a baked interior's compact topology (as the client gets
 it), every cell's contents and a :class:`~walkstream.client.truth.render.TruthRenderer`
 of the whole building; :meth:`PortalScene.frame` culls one pose with the visible
-screen areas and compares what it kept with the truth; :func:`walk_every_door`
+screen areas (the parts by their boxes, then by their triangles, as the client culls) and
+compares what it kept with the truth; :func:`walk_every_door`
 sums that over the frames at every door, opening and stair.
 """
 
@@ -28,6 +29,7 @@ from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.portals import cull_portals, frustum_cells
 from walkstream.shared.roomcompact import decode_topology_compact
 from walkstream.shared.roomview import cell_of, stack_planes
+from walkstream.shared.trianglecull import refine_parts
 
 __all__ = ["EYE", "SIZE", "PortalScene", "walk_every_door"]
 
@@ -53,6 +55,8 @@ class PortalScene:
         }
         self.truth = TruthRenderer(size=SIZE, rooms=self.meshes, near=0.1, far=100.0, two_sided=True, ctx=ctx)
         self.proj = self.truth.proj
+        #: parts the boxes kept and their triangles dropped, over every frame (as the client culls)
+        self.triangle_culled = 0
 
     def frame(self, eye: np.ndarray, yaw: float, pitch: float = 0.0, naive: bool = False,
               mode: str = "portals") -> tuple[TruthCheck, int, np.ndarray] | None:
@@ -67,6 +71,8 @@ class PortalScene:
             if mode == "portals":
                 pc = cull_portals(self.graph, start, eye, view, self.proj, SIZE, naive=naive)
                 keep = cull_parts("portals", pc.order, self.boxes, eye, view, self.proj, SIZE, vsas=pc.vsas)
+                if not naive:
+                    self.triangle_culled += refine_parts(keep, self.meshes, pc.vsas, view, self.proj, SIZE)
             else:
                 cells = frustum_cells(self.graph, start, eye, self.proj @ view)
                 keep = cull_parts(mode, cells, self.boxes, eye, view, self.proj, SIZE)

@@ -143,6 +143,7 @@ def test_generated_office_every_door_zero_missed_pixels_and_the_papers_bug_is_ca
         good = walk_every_door(scene)
         assert good["frames"] >= 100
         assert good["missed"] == 0 and good["leaks"] == 0 and good["pinholes"] == 0, good
+        assert scene.triangle_culled > 0  # the parts' triangles were tested, and some dropped
         bad = walk_every_door(scene, naive=True)
         assert bad["frames"] == good["frames"]
         assert bad["bad_frames"] >= 0.1 * bad["frames"] and bad["missed"] > 10_000, bad

@@ -62,6 +62,12 @@ def cmd_bench_portals(args: argparse.Namespace) -> int:
                              log=lambda s: print(s, file=sys.stderr))
         print(json.dumps({"culling_cpu": rows}, indent=2) if args.json else cull_cpu_table(rows))
         return 0
+    if args.triangles is not None:
+        from walkstream.benchmarks.trianglecost import triangle_rows, triangle_table
+
+        trows = triangle_rows(args.triangles, Path(args.out), step_s=args.step, log=lambda s: print(s, file=sys.stderr))
+        print(json.dumps({"triangles": trows}, indent=2) if args.json else triangle_table(trows))
+        return 0
     if args.seed_truth_every < 0:
         raise InputError(f"--seed-truth-every {args.seed_truth_every}: expected 0 (no truth) or a positive count of frames")
     if args.seeds and args.seed_duration != "whole":
@@ -141,5 +147,9 @@ def add_room_benches(besub: Any) -> None:
                     help="with --cull: time the culling of this git revision beside today's, frame by frame")
     bp.add_argument("--cull-frames", type=int, default=120, metavar="N",
                     help="with --cull: frames of the hall (default 120), each culled twice")
+    bp.add_argument("--triangles", nargs="+", metavar="SRC", default=None,
+                    help="only the kept parts' triangles tested, pose by pose (every --step s) along the tour of "
+                    "each SRC (a generated office's seed, or a baked interior database): parts and triangles kept "
+                    "by the boxes and by the triangles, and each step's CPU time")
     bp.add_argument("--json", action="store_true", help="print the figures as JSON")
     bp.set_defaults(func=cmd_bench_portals)

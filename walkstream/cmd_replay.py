@@ -128,6 +128,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         fog_m=args.fog,
         culling=args.culling,
         fog_budget=not args.no_fog_budget,
+        triangle_cull=not args.no_triangle_cull,
         rooms={"flush_s": args.flush_after, "flush_policy": args.flush_policy, "flush_fill": args.flush_fill,
                "batch_bytes": parse_size(args.contents_batch),
                **({} if args.prefetch_portals is None else {"beyond_portals": args.prefetch_portals})},
@@ -320,6 +321,9 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--culling", choices=("portals", "frustum", "none"), default="portals",
                    help="interiors: portal culling with visible screen areas (default), portals in the frustum "
                    "only, or every part of the visible cells")
+    r.add_argument("--no-triangle-cull", action="store_true",
+                   help="interiors: cull parts by their boxes only (default: a part the boxes keep is dropped "
+                   "when none of its triangles meets its cell's visible screen areas)")
     r.add_argument("--flush-after", type=float, default=30.0, metavar="S",
                    help="interiors: a cell not visible for S seconds is flushed (default 30)")
     r.add_argument("--flush-policy", choices=("crowded", "paper"), default="crowded",

@@ -63,6 +63,8 @@ def interior_summary(
         "fog_m_min": float(np.min(frames.fog_m)) if frames.fog_m else config.fog_m,
         "fog_tightened_frames": frames.tightened,
         "fog_below_portal_frames": frames.fog_below_portal,
+        "triangle_cull": config.triangle_cull,
+        "triangle_culled_parts": frames.triangle_culled,
         "path_wait_s": frames.path_wait_s,
         "start_hold_s": frames.start_hold_s,
         "late_cells": streamer.late.figures(

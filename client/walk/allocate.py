@@ -30,6 +30,7 @@ from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.partcull import cull_parts
 from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.portals import PortalCull, box_distance
+from walkstream.shared.trianglecull import refine_parts
 
 __all__ = ["allocate", "fog_for_budget", "nearest_portal_in_view"]
 
@@ -103,6 +104,9 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
         walked = [] if culling == "portals" else list(f.loaded)
     masks = cull_parts(culling, walked, boxes, f.eye, f.view, w.proj, w.size,
                        vsas=None if pc is None else pc.vsas, fog_m=f.fog)
+    if culling == "portals" and pc is not None and w.config.triangle_cull:
+        # the parts the boxes kept, tested again by their triangles (never adds one)
+        w.frames.triangle_culled += refine_parts(masks, f.loaded, pc.vsas, f.view, w.proj, w.size)
     # a cell drawn besides the portal walk's (the shell from the street): the frustum's test
     whole = [c for c in f.loaded if c not in masks or c in f.shown]
     for c, m in cull_parts("frustum", whole, boxes, f.eye, f.view, w.proj, w.size, fog_m=f.fog).items():

@@ -44,6 +44,9 @@ class WalkFrames:
     tightened: int = 0
     """Frames on which the visible cells did not fit the memory budget at the default
     fog, so the fog was tightened until they did (the paper's use of fog)."""
+    triangle_culled: int = 0
+    """Parts the boxes kept and their triangles dropped, over all frames
+    (:mod:`walkstream.shared.trianglecull`)."""
     fog_below_portal: int = 0
     """Frames whose budget fog was nearer than the nearest portal the portal walk looked
     through: everything beyond the viewer's own room fogged out (said in the report)."""

@@ -1,0 +1,181 @@
+"""The parts kept by their boxes, tested again by their triangles (shared/trianglecull.py).
+
+The refinement must only ever drop a part none of whose triangles can draw a pixel centre
+inside its cell's visible screen areas: checked here against a plain rasteriser of pixel
+centres (numpy, no GL) on random triangles and rectangles; the GL truth checks it on whole
+interiors through :mod:`portalscene` (every door of the generated office, FZK-Haus and the
+duplex, the traps and the hypothesis-drawn interiors cull as the client does).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from walkstream.shared.camera import camera, perspective
+from walkstream.shared.codec.cellhead import stand_in
+from walkstream.shared.codec.cellmesh import CellMesh, CellPart
+from walkstream.shared.partcull import cull_parts
+from walkstream.shared.trianglecull import cell_triangles, refine_parts
+
+SIZE = (160, 120)
+PROJ = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 60.0).astype(np.float64)
+# at the origin looking along +x (yaw 0), eye height 0
+VIEW = camera(np.zeros(3), 0.0, 0.0).astype(np.float64)
+
+
+def _mesh(parts: list[CellPart], missing: tuple[int, ...] = ()) -> CellMesh:
+    return CellMesh(tuple(parts), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), missing=missing)
+
+
+def _part(tris: np.ndarray) -> CellPart:
+    t = np.asarray(tris, np.float64).reshape(-1, 3, 3)
+    return CellPart(1, 0, t.reshape(-1, 3), np.arange(3 * len(t)).reshape(-1, 3))
+
+
+def _boxes(m: CellMesh) -> tuple[np.ndarray, np.ndarray]:
+    b = [p.bbox for p in m.parts]
+    return np.array([x[0] for x in b]).reshape(-1, 3), np.array([x[1] for x in b]).reshape(-1, 3)
+
+
+def _pixel(p: np.ndarray) -> np.ndarray:
+    """World points (n, 3) to window coordinates (n, 2) (pixel i's centre at i + 0.5)."""
+    h = np.c_[p, np.ones(len(p))] @ (PROJ @ VIEW).T
+    ndc = h[:, :2] / h[:, 3:4]
+    return (ndc + 1.0) / 2.0 * np.array(SIZE, np.float64)
+
+
+def _covers(tri: np.ndarray, vsa: tuple[int, int, int, int]) -> bool:
+    """Whether the triangle (3, 3), clipped at the near plane as GL clips it, covers a
+    pixel centre of ``vsa`` (a plain rasteriser: every centre against every side)."""
+    depth = -(np.c_[tri, np.ones(3)] @ VIEW.T)[:, 2] - 0.1
+    poly = []
+    for i in range(3):  # Sutherland-Hodgman against the near plane
+        j = (i + 1) % 3
+        if depth[i] >= 0:
+            poly.append(tri[i])
+        if (depth[i] >= 0) != (depth[j] >= 0):
+            poly.append(tri[i] + (tri[j] - tri[i]) * depth[i] / (depth[i] - depth[j]))
+    if len(poly) < 3:
+        return False
+    p = _pixel(np.array(poly))
+    x0, y0, x1, y1 = vsa
+    gx, gy = np.meshgrid(np.arange(x0, x1 + 1) + 0.5, np.arange(y0, y1 + 1) + 0.5)
+    e = np.stack([(b[0] - a[0]) * (gy - a[1]) - (b[1] - a[1]) * (gx - a[0])
+                  for a, b in zip(p, np.roll(p, -1, axis=0), strict=True)])
+    return bool(np.any(np.all(e >= 0, axis=0) | np.all(e <= 0, axis=0)))
+
+
+def test_a_part_whose_box_meets_the_area_but_none_of_its_triangles_is_dropped() -> None:
+    # a narrow door rectangle in the middle of the view; part 0: two slivers left and
+    # right of it, 5 m away (its box spans the door); part 1: a triangle in the door
+    left = [[5.0, 1.5, -0.2], [5.0, 1.4, 0.2], [5.0, 1.5, 0.2]]
+    right = [[5.0, -1.5, -0.2], [5.0, -1.4, 0.2], [5.0, -1.5, 0.2]]
+    inside = [[5.0, 0.05, -0.05], [5.0, -0.05, -0.05], [5.0, 0.0, 0.05]]
+    m = _mesh([_part(np.array([left, right])), _part(np.array([inside]))])
+    vsas = {7: [(75, 50, 85, 70)]}
+    masks = cull_parts("portals", [7], {7: _boxes(m)}, np.zeros(3), VIEW, PROJ, SIZE, vsas=vsas)
+    assert masks[7].tolist() == [True, True]  # both boxes meet the door
+    dropped = refine_parts(masks, {7: m}, vsas, VIEW, PROJ, SIZE, min_triangles=1)
+    assert dropped == 1 and masks[7].tolist() == [False, True]
+    # a triangle beside the door's corner: its screen box reaches into the door, its
+    # hypotenuse passes 2 pixels outside the corner (x + y = 158 at pixels (83, 75),
+    # (95, 75), (95, 63); the door's corner (85, 70))
+    s = 2.0 * 5.0 * math.tan(math.radians(30.0)) / SIZE[1]  # a pixel at 5 m
+    corner = np.array([[5.0, -(px + 0.5 - 80.0) * s, (py + 0.5 - 60.0) * s] for px, py in ((83, 75), (95, 75), (95, 63))])
+    m = _mesh([_part(np.array([corner])), _part(np.array([inside]))])
+    masks = cull_parts("portals", [7], {7: _boxes(m)}, np.zeros(3), VIEW, PROJ, SIZE, vsas=vsas)
+    assert masks[7].tolist() == [True, True]
+    assert refine_parts(masks, {7: m}, vsas, VIEW, PROJ, SIZE, min_triangles=1) == 1
+    assert masks[7].tolist() == [False, True]
+    # the default leaves parts of a few triangles as their boxes decided
+    masks = {7: np.ones(2, bool)}
+    assert refine_parts(masks, {7: m}, vsas, VIEW, PROJ, SIZE) == 0 and masks[7].all()
+
+
+def test_a_sliver_under_a_pixel_is_dropped_and_a_triangle_round_the_eye_kept() -> None:
+    # a baluster seen edge on 20 m away: 1 mm wide, between two pixel centres' columns
+    # (a pixel is about 0.19 m wide there; the view's centre line is the boundary
+    # between the two middle columns of pixel centres)
+    sliver = [[20.0, 0.0005, -0.5], [20.0, -0.0005, -0.5], [20.0, 0.0, 0.5]]
+    # a floor under the eye that reaches behind it (crosses the clip plane)
+    floor = [[-3.0, -3.0, -1.0], [6.0, -3.0, -1.0], [6.0, 6.0, -1.0]]
+    m = _mesh([_part(np.array([sliver])), _part(np.array([floor]))])
+    masks = {1: np.ones(2, bool)}
+    refine_parts(masks, {1: m}, {1: [(0, 0, SIZE[0] - 1, SIZE[1] - 1)]}, VIEW, PROJ, SIZE, min_triangles=1)
+    assert masks[1].tolist() == [False, True]
+
+
+def test_stand_ins_and_cells_without_areas_are_left_alone() -> None:
+    far_off = [[5.0, 3.0, 2.0], [5.0, 3.1, 2.0], [5.0, 3.0, 2.1]]  # outside the area below
+    m = _mesh([_part(np.array([far_off])), stand_in([4.0, -1.0, -1.0], [6.0, 1.0, 1.0])], missing=(1,))
+    masks = {1: np.ones(2, bool), 2: np.ones(2, bool)}
+    refine_parts(masks, {1: m, 2: m}, {1: [(70, 50, 90, 70)]}, VIEW, PROJ, SIZE, min_triangles=1)
+    assert masks[1].tolist() == [False, True]  # the stand-in stays: its triangles are still to come
+    assert masks[2].all()  # no visible screen areas: not the portal walk's to refine
+    tri, start = cell_triangles(m)
+    assert tri.shape == (3, 3, 1) and start.tolist() == [0, 1, 1]
+    assert cell_triangles(m)[0] is tri  # packed once per mesh
+
+
+def test_never_drops_a_part_that_covers_a_pixel_centre_of_its_area() -> None:
+    rng = np.random.default_rng(24)
+    kept_drawn = dropped = 0
+    for _ in range(20):
+        cells, meshes, vsas, covered = [], {}, {}, {}
+        for c in range(4):
+            parts, cov = [], []
+            x0, y0 = int(rng.integers(0, SIZE[0] - 8)), int(rng.integers(0, SIZE[1] - 8))
+            vsa = (x0, y0, min(SIZE[0] - 1, x0 + int(rng.integers(0, 60))), min(SIZE[1] - 1, y0 + int(rng.integers(0, 60))))
+            for _p in range(6):
+                n = int(rng.integers(1, 4))
+                centre = np.array([rng.uniform(1.0, 12.0), 0.0, 0.0])
+                centre[1:] = rng.uniform(-0.7, 0.7, 2) * centre[0]
+                size = rng.choice([0.01, 0.1, 1.0])
+                t = centre + rng.normal(0.0, size, (n, 3, 3))
+                if rng.random() < 0.7:
+                    t[..., 0] = np.maximum(t[..., 0], 0.2)  # beyond the near plane
+                else:  # long triangles past the eye's side, across the clip plane
+                    t[:, int(rng.integers(3)), 0] = rng.uniform(-3.0, 0.05, n)
+                parts.append(_part(t))
+                cov.append(any(_covers(tri, vsa) for tri in t))
+            cells.append(c)
+            meshes[c] = _mesh(parts)
+            vsas[c] = [vsa]
+            covered[c] = np.array(cov)
+        masks = {c: np.ones(6, bool) for c in cells}
+        refine_parts(masks, meshes, vsas, VIEW, PROJ, SIZE, min_triangles=1)
+        for c in cells:
+            assert not np.any(covered[c] & ~masks[c]), (c, vsas[c])
+            kept_drawn += int(covered[c].sum())
+            dropped += int((~masks[c]).sum())
+    assert kept_drawn > 25 and dropped > 250  # both sides were exercised
+
+
+
+def test_the_cli_turns_it_off_and_benches_it(office_db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import argparse
+
+    from walkstream.cli import main
+    from walkstream.cmd_replay import add_replay_arguments, config_from_args
+
+    parser = argparse.ArgumentParser()
+    add_replay_arguments(parser)
+    parser.add_argument("--report", default="report")
+    assert config_from_args(parser.parse_args([])).triangle_cull
+    assert not config_from_args(parser.parse_args(["--no-triangle-cull"])).triangle_cull
+    # the bench: parts and triangles the boxes keep, those the triangles keep (never more)
+    assert main(["bench", "portals", "--triangles", str(office_db), "--step", "10", "--out", str(tmp_path), "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["triangles"]
+    assert [r["size"] for r in rows] == ["160x120", "640x480"] and rows[0]["poses"] >= 3
+    for r in rows:
+        assert 0 < r["tris_triangles"] < r["tris_boxes"] and r["parts_triangles"] < r["parts_boxes"]
+        assert set(r["ms"]) == {"walk", "boxes", "triangles"}
+    # a bad source is named in one line
+    assert main(["bench", "portals", "--triangles", str(tmp_path / "nope.db"), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "nope.db" in err and "Traceback" not in err
