@@ -145,10 +145,9 @@ def rects_ckm(
     # the projection's numerators and the depth straight from world points: one 3 x 3
     # product (the camera's rows combined with the projection's) instead of the eye
     # space and four passes more over every vertex
-    R, t = view[:3, :3], view[:3, 3]
-    p00, p02, p11, p12 = proj[0, 0], proj[0, 2], proj[1, 1], proj[1, 2]
-    rows = np.array([p00 * R[0] + p02 * R[2], p11 * R[1] + p12 * R[2], -R[2]])
-    shift = np.array([[p00 * t[0] + p02 * t[2]], [p11 * t[1] + p12 * t[2]], [-t[2]]])
+    R = view[:3, :3]
+    rows, shift = _camera_rows(view, proj)
+    shift = shift[:, None]
     q = (rows @ pts.reshape(3, -1) + shift).reshape(pts.shape)  # (3, k, m): x and y numerators, depth
     depth = q[2]
     near_d, far_d = depth.min(axis=0), depth.max(axis=0)
@@ -170,6 +169,20 @@ def rects_ckm(
         v = (R @ part.reshape(3, -1) + view[:3, 3:4]).reshape(part.shape)
         rect[:, rest], front[rest] = _clipped(v, -v[2], edges, proj, size, clip_m, margin_px)
     return rect, front, near_d, far_d
+
+
+def _camera_rows(view: NDArray[np.float64], proj: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The camera's rows combined with the projection's, ``(3, 3)``, and their shift ``(3,)``:
+    a world point ``p`` has x and y numerators and depth ``rows @ p + shift``.  Nine values,
+    worked out in plain floats (the same IEEE products and sums as numpy's, without a
+    numpy call per row: a frame makes this a few times)."""
+    (r0, r1, r2), t = view[:3, :3].tolist(), view[:3, 3].tolist()
+    p00, p02, p11, p12 = float(proj[0, 0]), float(proj[0, 2]), float(proj[1, 1]), float(proj[1, 2])
+    rows = [[p00 * a + p02 * c for a, c in zip(r0, r2, strict=True)],
+            [p11 * b + p12 * c for b, c in zip(r1, r2, strict=True)],
+            [-c for c in r2]]
+    shift = [p00 * t[0] + p02 * t[2], p11 * t[1] + p12 * t[2], -t[2]]
+    return np.array(rows), np.array(shift)
 
 
 def box_rects_ckm(
@@ -199,10 +212,8 @@ def box_rects_ckm(
         z = np.zeros(0)
         return np.zeros((4, 0), np.int64), np.zeros(0, bool), z, z
     w = work if work is not None else RectBuffers()
-    R, t = view[:3, :3], view[:3, 3]
-    p00, p02, p11, p12 = proj[0, 0], proj[0, 2], proj[1, 1], proj[1, 2]
-    rows = np.array([p00 * R[0] + p02 * R[2], p11 * R[1] + p12 * R[2], -R[2]])
-    shift = np.array([p00 * t[0] + p02 * t[2], p11 * t[1] + p12 * t[2], -t[2]])
+    R = view[:3, :3]
+    rows, shift = _camera_rows(view, proj)
     prod = np.multiply(rows[:, :, None, None], lohi, out=w.take("prod", (3, 3, 2, n)))  # row, coordinate, bound
     prod[:, 0] += shift[:, None, None]
     # (3, 2, 2, 2, n): row, then the bound taken of x, y and z
