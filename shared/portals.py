@@ -190,7 +190,7 @@ def cull_portals(
     # whole-pixel rectangles as plain ints.  The walk is the round-one FIFO walk
     # (benchmarks/portalwalk.py) step for step, so its cells, VSAs and depths are the
     # same; only the constant work per portal is less.
-    rows_of, ntest = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed, margin_px)
+    rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed, margin_px)
     s = graph.index[start]
     full = (0, 0, w - 1, h - 1)
     # per cell index (lists, not dicts: indexing is the walk's most frequent step)
@@ -203,10 +203,7 @@ def cull_portals(
     order = [s]
     queue = deque([s])
     pop, push = queue.popleft, queue.append
-    # the counts are kept per cell, not per portal: a cell looked through tests each of its
-    # portals that is not culled outright (``ntest``), and opens those whose rectangle
-    # meets its VSA (all tested ones but the ``missed``)
-    missed = tested = 0
+    opened = tested = 0
     limit = nc + 1 if max_depth is None else max_depth  # a chain of first visits has at most nc cells
     while queue:
         c = pop()
@@ -215,11 +212,11 @@ def cull_portals(
         if dc >= limit:
             continue
         dn = dc + 1
-        tested += ntest[c]
         vx0, vy0, vx1, vy1 = bound[c]
         for t, pr in rows_of(c):
             if pr is None:
                 continue
+            tested += 1
             if pr is True:
                 a0, a1, a2, a3 = vx0, vy0, vx1, vy1
             else:
@@ -230,15 +227,14 @@ def cull_portals(
                 if a2 > vx1:
                     a2 = vx1
                 if a0 > a2:
-                    missed += 1
                     continue
                 if a1 < vy0:
                     a1 = vy0
                 if a3 > vy1:
                     a3 = vy1
                 if a1 > a3:
-                    missed += 1
                     continue
+            opened += 1
             ob = bound[t]
             if ob is None:  # the first visit
                 n = (a0, a1, a2, a3)
@@ -291,7 +287,7 @@ def cull_portals(
         order=[ids[i] for i in order],
         vsas={ids[i]: lists[i] for i in order},
         depth={ids[i]: depth[i] for i in order},
-        portals=tested - missed,
+        portals=opened,
         tested=tested,
         seconds=time.perf_counter() - t0,
     )
@@ -323,17 +319,15 @@ def _portal_rows(
     naive: bool,
     closed: frozenset[int] = frozenset(),
     margin_px: float = CENTRE_MARGIN_PX,
-) -> tuple[Callable[[int], Iterable[tuple[int, Any]]], list[int]]:
+) -> Callable[[int], Iterable[tuple[int, Any]]]:
     """A function giving, for a cell index, its directed portals as ``(target index, what)``
     pairs: ``what`` is ``None`` (culled: beyond the fog or wholly behind the clip plane),
     ``True`` (pass the parent's VSA through) or the portal's whole-pixel rectangle
-    ``[x0, y0, x1, y1]``; every portal projected in one numpy batch.  With it, per cell
-    index, how many of its portals are not ``None`` (the portal tests looking through the
-    cell makes)."""
+    ``[x0, y0, x1, y1]``; every portal projected in one numpy batch."""
     m = len(graph.target)
     adjacency, starts = graph.adjacency, graph.row_start
     if m == 0:
-        return (lambda c: ()), [0] * len(graph.ids)
+        return lambda c: ()
     if naive:
         rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive, margin_px)
         rect4 = rect.T
@@ -353,9 +347,6 @@ def _portal_rows(
         what[box_distance(graph.lo, graph.hi, e) > fog_m] = 0
     if closed:
         what[np.isin(graph.portal, np.fromiter(closed, np.int64, len(closed)))] = 0
-    # the tests per cell: its rows that are not culled outright
-    tests = np.concatenate([[0], np.cumsum(what != 0)])[graph.start]
-    ntest = np.diff(tests).tolist()
     if m <= _LIST_ALL:
         # a rectangle that meets no pixel of the viewport meets no VSA (they all lie
         # within it): such a portal is tested as before (the counts stay) but against
@@ -364,20 +355,16 @@ def _portal_rows(
         x0, y0, x1, y1 = rect4
         opens = np.flatnonzero((what == 2) & (x0 <= x1) & (y0 <= y1) & (x1 >= 0) & (y1 >= 0)
                                & (x0 < size[0]) & (y0 < size[1]))
-        table: list[Any]
-        if 2 * len(opens) < m:
-            # the codes turned into their entries in one C-level map (a loop per culled
-            # portal cost more than the projection's own tail in a tour's frame)
-            table = list(map(_ENTRY.__getitem__, what.tolist()))
+        sparse = 2 * len(opens) < m  # else all at once is cheaper (an open hall)
+        table: list[Any] = [_NO_PIXEL] * m if sparse else rect.tolist()
+        for i in np.flatnonzero(what == 0).tolist():
+            table[i] = None
+        for i in np.flatnonzero(what == 1).tolist():
+            table[i] = True
+        if sparse:
             for i, r in zip(opens.tolist(), rect4[:, opens].T.tolist(), strict=True):
                 table[i] = r
-        else:  # all at once is cheaper (an open hall)
-            table = rect.tolist()
-            for i in np.flatnonzero(what == 0).tolist():
-                table[i] = None
-            for i in np.flatnonzero(what == 1).tolist():
-                table[i] = True
-        return (lambda c: zip(adjacency[c], table[starts[c] : starts[c + 1]], strict=True)), ntest
+        return lambda c: zip(adjacency[c], table[starts[c] : starts[c + 1]], strict=True)
     done: dict[int, list[tuple[int, Any]]] = {}
 
     def rows_of(c: int) -> list[tuple[int, Any]]:
@@ -391,7 +378,7 @@ def _portal_rows(
             done[c] = got
         return got
 
-    return rows_of, ntest
+    return rows_of
 
 
 def frustum_cells(
@@ -436,7 +423,3 @@ def frustum_cells(
 
 #: An empty whole-pixel rectangle (no pixel centre): pads a cell's VSAs.
 _NO_PIXEL = (1, 1, 0, 0)
-
-#: A portal's entry in the walk's table by its code (0 culled, 1 pass through, 2 a
-#: rectangle, here one that meets no pixel of the viewport; those that do are set after).
-_ENTRY: tuple[Any, ...] = (None, True, _NO_PIXEL)
