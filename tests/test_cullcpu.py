@@ -89,3 +89,20 @@ def test_bench_portals_cull_from_the_cli(tmp_path: Path, capsys: pytest.CaptureF
                  "--out", str(tmp_path)]) != 0
     err = capsys.readouterr().err
     assert "no-such-revision" in err and "Traceback" not in err
+
+
+def test_bench_portals_cull_against_a_revision_times_both_in_turn(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    # HEAD's culling loaded beside today's: both columns over the same frames, each going
+    # first on every other frame, and the parts compared on every frame (the same code
+    # in a checkout without local changes to the culling; the bench raises otherwise)
+    root = Path(__file__).resolve().parents[1]
+    if not (root / ".git").exists():
+        pytest.skip("not a git checkout: no revision to load")
+    assert main(["bench", "portals", "--cull", "--cull-frames", "1", "--cull-against", "HEAD",
+                 "--out", str(tmp_path), "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)["culling_cpu"][0]
+    assert r["against"] == "HEAD" and r["frames"] == 2
+    for who in ("now", "then"):
+        for part in ("walk", "parts", "total"):
+            assert 0 < r[who][part]["median"] <= r[who][part]["p99"]
