@@ -60,8 +60,8 @@ and the test against the targets' VSA lists alone, as one numpy batch per level,
 took 1.2-1.5 times the CPU of this whole walk, before any merge, queue or projection.
 Nor does projecting only the portals of the cells reached, a batch per level, pay on
 a tour's frame (a tenth of a generated office's portals tested over 3-8 levels): the
-per-level batches cost what the whole building's one batch does.  A frame's cost is mostly numpy's per-call cost, not the
-elements: the batches run coordinate-major (:func:`~walkstream.shared.screenrects.coord_rects`,
+per-level batches cost what the whole building's one batch does.  A frame's cost is
+mostly numpy's per-call cost, not the elements: the batches run coordinate-major (:func:`~walkstream.shared.screenrects.coord_rects`,
 each call one pass over long rows), the few sets that straddle the clip plane are
 clipped in plain floats, and the parts culling takes every visible cell's boxes in
 one batch (:mod:`walkstream.shared.partcull`); a VSA arriving at a cell is appended
