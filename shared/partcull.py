@@ -49,7 +49,6 @@ from walkstream.shared.screenrects import (
     box_corners_ckm,
     box_rects,
     box_rects_ckm,
-    clipped_box_rects,
     rects_ckm,
     thread_buffers,
 )
@@ -255,10 +254,9 @@ def cull_parts(
     V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
     if n < _FEW_BOXES:  # the eight corners' one product: fewer numpy calls
         lo_b, hi_b = lohi[:, 0].T, lohi[:, 1].T
-        rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo_b, hi_b), BOX_EDGES, V, P, size, clip_m,
-                                               clip_rest=False)
+        rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo_b, hi_b), BOX_EDGES, V, P, size, clip_m)
     else:
-        rect, front, near_d, far_d = box_rects_ckm(lohi, V, P, size, clip_m, work=work, clip_rest=False)
+        rect, front, near_d, far_d = box_rects_ckm(lohi, V, P, size, clip_m, work=work)
     kmax = v.shape[1]
     # 32-bit pixels (the bounds are clamped to +-1e9): half the bytes to gather and compare
     rect = rect.astype(np.int32)
@@ -273,7 +271,6 @@ def cull_parts(
     meet &= lo_ <= hi_
     got = meet[0].copy() if kmax == 1 else np.logical_or.reduce(meet, axis=0)
     got &= front
-    _clip_crossing(got, near_d, lohi, vo, V, P, size, clip_m)
     planes = _near_far(P)
     if planes is None:
         lo_b, hi_b = lohi[:, 0].T, lohi[:, 1].T
@@ -319,13 +316,11 @@ def _cull_few(
         lo, hi, owner = lo[idx], hi[idx], owner[idx]
     if len(lo):
         V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
-        rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo, hi), BOX_EDGES, V, P, size, clip_m,
-                                               clip_rest=False)
+        rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo, hi), BOX_EDGES, V, P, size, clip_m)
         v = _vsa_table(vsas, seen)[:, :, owner]
         meet = ((np.maximum(rect[0], v[0]) <= np.minimum(rect[2], v[2]))
                 & (np.maximum(rect[1], v[1]) <= np.minimum(rect[3], v[3])))
         got = front & np.any(meet, axis=0)
-        _clip_crossing(got, near_d, None, v, V, P, size, clip_m, lo, hi)
         planes = _near_far(P)
         if planes is None:
             got[got] = frustum_cull(lo[got], hi[got], vp)
@@ -340,41 +335,6 @@ def _cull_few(
     n = np.asarray(counts, np.int64)
     ends = np.cumsum(n)
     return dict(zip(seen, _slices(keep, ends - n, ends), strict=True))
-
-
-def _clip_crossing(
-    got: NDArray[np.bool_],
-    near_d: NDArray[np.float64],
-    lohi: NDArray[np.float64] | None,
-    vsa: NDArray[Any],
-    view: NDArray[np.float64],
-    proj: NDArray[np.float64],
-    size: tuple[int, int],
-    clip_m: float,
-    lo: NDArray[np.float64] | None = None,
-    hi: NDArray[np.float64] | None = None,
-) -> None:
-    """Test again, exactly, the boxes kept (``got``, changed in place) that cross the clip plane.
-
-    Their rectangles were :func:`~walkstream.shared.screenrects.crossing_rects`' supersets
-    (no clipping): a box whose superset meets none of its cell's VSAs is culled as the exact
-    test would, and only those it meets are clipped (in float64, as before), so the answer
-    is the exact test's.  ``lohi`` ``(3, 2, n)`` or ``lo``, ``hi`` ``(n, 3)`` the boxes;
-    ``vsa`` ``(4, k, n)`` each box's cell's VSAs.
-    """
-    redo = np.flatnonzero(got & (near_d < clip_m))
-    if not len(redo):
-        return
-    if lohi is not None:
-        lo, hi = lohi[:, 0, redo].T, lohi[:, 1, redo].T
-    else:
-        assert lo is not None and hi is not None
-        lo, hi = lo[redo], hi[redo]
-    rect, front = clipped_box_rects(lo, hi, view, proj, size, clip_m)
-    v = vsa[:, :, redo]
-    meet = ((np.maximum(rect[0], v[0]) <= np.minimum(rect[2], v[2]))
-            & (np.maximum(rect[1], v[1]) <= np.minimum(rect[3], v[3])))
-    got[redo] = front & np.any(meet, axis=0)
 
 
 def _slices(a: NDArray[np.bool_], starts: NDArray[np.int64], ends: NDArray[np.int64]) -> Any:

@@ -338,10 +338,7 @@ def _portal_rows(
         rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive, margin_px)
         rect4 = rect.T
     else:
-        # the portals that cross the clip plane get a superset first (no clipping), and
-        # are clipped exactly below only where that can matter
-        rect4, front, near_d, _far = rects_ckm(graph.poly_ckm, graph.edges, V, P, size, clip_m, margin_px,
-                                               clip_rest=False)
+        rect4, front, _near, _far = rects_ckm(graph.poly_ckm, graph.edges, V, P, size, clip_m, margin_px)
         rect = rect4.T
     # 0 culled, 1 pass through, 2 the rectangle
     what = np.where(front, 2, 0).astype(np.int8)
@@ -356,15 +353,6 @@ def _portal_rows(
         what[box_distance(graph.lo, graph.hi, e) > fog_m] = 0
     if closed:
         what[np.isin(graph.portal, np.fromiter(closed, np.int64, len(closed)))] = 0
-    if not naive:
-        # a crossing portal passed through, culled, or whose superset meets no pixel of the
-        # viewport (so no VSA) needs no exact rectangle; the others are clipped exactly
-        # (the same figures as clipping them all: tests/test_portals.py)
-        x0, y0, x1, y1 = rect4
-        redo = np.flatnonzero((what == 2) & (near_d < clip_m) & (x0 <= x1) & (y0 <= y1) & (x1 >= 0) & (y1 >= 0)
-                              & (x0 < size[0]) & (y0 < size[1]))
-        if len(redo):
-            rect4[:, redo] = rects_ckm(graph.poly_ckm[:, :, redo], graph.edges, V, P, size, clip_m, margin_px)[0]
     if m <= _LIST_ALL:
         # a rectangle that meets no pixel of the viewport meets no VSA (they all lie
         # within it): such a portal is tested as before (the counts stay) but against
