@@ -19,7 +19,8 @@ loaded beside the current one (its ``shared/screenrects.py``, ``shared/portals.p
 ``shared/partcull.py`` where it has one)
 and timed frame by frame alternately with it, so that both see the same load, each
 going first on every other frame (the one timed second may find the frame's arrays
-in the cache); the two must keep the same parts, which is checked on every frame.
+in the cache); today's must keep every part that revision keeps (a superset), which is
+checked on every frame.
 """
 
 from __future__ import annotations
@@ -200,9 +201,11 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
                     got[who]["total"].append(w + p)
                     if who == "now":
                         visible.append(n)
+                # conservative: today's culling keeps every part the other keeps (a superset:
+                # rectangles grown outward may keep a few more)
                 if "then" in kept and (kept["now"].keys() != kept["then"].keys()
-                                       or not all(np.array_equal(kept["now"][c], kept["then"][c]) for c in kept["now"])):
-                    raise WalkstreamError(f"bench portals: {name}: the culling now and at {against} keep different parts")
+                                       or any(np.any(kept["then"][c] & ~kept["now"][c]) for c in kept["now"])):
+                    raise WalkstreamError(f"bench portals: {name}: the culling now drops parts the culling at {against} keeps")
         row: dict[str, Any] = {"scene": name, "frames": len(frames) * repeats,
                                "visible_median": float(np.median(visible)), "visible_max": int(max(visible)),
                                "now": {k: _ms(v) for k, v in got["now"].items()}}
