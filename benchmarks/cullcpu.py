@@ -17,8 +17,10 @@ frames:
 With ``against`` (a git revision of this repository) the culling of that revision is
 loaded beside the current one (its ``shared/screenrects.py``, ``shared/portals.py`` and
 ``shared/partcull.py`` where it has one)
-and timed frame by frame alternately with it, so that both see the same load; the
-two must keep the same parts, which is checked on every frame.
+and timed frame by frame alternately with it, so that both see the same load, each
+going first on every other frame (the one timed second may find the frame's arrays
+in the cache); today's must keep every part that revision keeps (a superset), which is
+checked on every frame.
 """
 
 from __future__ import annotations
@@ -186,20 +188,24 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
         for culling in (now, then):
             if culling is not None:  # warm up (first calls, caches) untimed
                 _time(culling, frames[0], boxes, proj, fog)
-        for _ in range(repeats):
-            for f in frames:
-                for who, culling in (("now", now), ("then", then)):
-                    if culling is None:
-                        continue
-                    w, p, n, keep = _time(culling, f, boxes, proj, fog)
+        pair = [("now", now), ("then", then)] if then is not None else [("now", now)]
+        for r in range(repeats):
+            for i, f in enumerate(frames):
+                # the two take turns at going first: the one timed second may find the
+                # frame's arrays in the cache (the same code read 0-6 % apart by column)
+                kept: dict[str, dict[int, NDArray[np.bool_]]] = {}
+                for who, culling in pair if (r + i) % 2 == 0 else pair[::-1]:
+                    w, p, n, kept[who] = _time(culling, f, boxes, proj, fog)
                     got[who]["walk"].append(w)
                     got[who]["parts"].append(p)
                     got[who]["total"].append(w + p)
                     if who == "now":
                         visible.append(n)
-                        kept = keep
-                    elif kept.keys() != keep.keys() or not all(np.array_equal(kept[c], keep[c]) for c in kept):
-                        raise WalkstreamError(f"bench portals: {name}: the culling now and at {against} keep different parts")
+                # conservative: today's culling keeps every part the other keeps (a superset:
+                # rectangles grown outward may keep a few more)
+                if "then" in kept and (kept["now"].keys() != kept["then"].keys()
+                                       or any(np.any(kept["then"][c] & ~kept["now"][c]) for c in kept["now"])):
+                    raise WalkstreamError(f"bench portals: {name}: the culling now drops parts the culling at {against} keeps")
         row: dict[str, Any] = {"scene": name, "frames": len(frames) * repeats,
                                "visible_median": float(np.median(visible)), "visible_max": int(max(visible)),
                                "now": {k: _ms(v) for k, v in got["now"].items()}}

@@ -16,7 +16,13 @@ corridor.)  The points are clipped against a plane ``clip_m`` in front of the ey
 first, so that a vertex behind the eye never projects to a wrong place (see
 :mod:`walkstream.shared.portals` for why the plane is not the camera's near plane).
 Pure numpy, every set of a batch at once, coordinate-major (a handful of sets that
-straddle the clip plane in plain floats, the same operations).
+straddle the clip plane in plain floats, the same operations).  A caller may take an
+unclipped superset for the sets that straddle the plane instead (:func:`crossing_rects`,
+``clip_rest=False``): the parts culling does, a conservative rectangle at a quarter of
+the calls.  A caller that tests the
+rectangles against VSAs may take an unclipped superset for the sets that straddle the
+plane (:func:`crossing_rects`) and clip exactly only those whose superset still meets
+one (the parts culling, the portal walk's table).
 """
 
 from __future__ import annotations
@@ -39,6 +45,8 @@ __all__ = [
     "coord_rects",
     "rects_ckm",
     "box_rects_ckm",
+    "crossing_rects",
+    "clipped_box_rects",
     "RectBuffers",
     "thread_buffers",
     "box_corners_ckm",
@@ -135,9 +143,14 @@ def rects_ckm(
     size: tuple[int, int],
     clip_m: float,
     margin_px: float = CENTRE_MARGIN_PX,
+    clip_rest: bool = True,
 ) -> tuple[NDArray[np.int64], NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
     """:func:`coord_rects` with the rectangles coordinate-major too, ``(4, m)`` (rows ``x0, y0,
-    x1, y1``), and each set's nearest and farthest vertex depth ``(m,)`` (``-z`` in eye space)."""
+    x1, y1``), and each set's nearest and farthest vertex depth ``(m,)`` (``-z`` in eye space).
+
+    Without ``clip_rest`` a set that crosses the clip plane (nearest depth below ``clip_m``,
+    farthest at or beyond it) gets :func:`crossing_rects`' rectangle, a superset of its
+    clipped one (conservative, not the same)."""
     m = pts.shape[2]
     if m == 0:
         z = np.zeros(0)
@@ -145,10 +158,9 @@ def rects_ckm(
     # the projection's numerators and the depth straight from world points: one 3 x 3
     # product (the camera's rows combined with the projection's) instead of the eye
     # space and four passes more over every vertex
-    R, t = view[:3, :3], view[:3, 3]
-    p00, p02, p11, p12 = proj[0, 0], proj[0, 2], proj[1, 1], proj[1, 2]
-    rows = np.array([p00 * R[0] + p02 * R[2], p11 * R[1] + p12 * R[2], -R[2]])
-    shift = np.array([[p00 * t[0] + p02 * t[2]], [p11 * t[1] + p12 * t[2]], [-t[2]]])
+    R = view[:3, :3]
+    rows, shift = _camera_rows(view, proj)
+    shift = shift[:, None]
     q = (rows @ pts.reshape(3, -1) + shift).reshape(pts.shape)  # (3, k, m): x and y numerators, depth
     depth = q[2]
     near_d, far_d = depth.min(axis=0), depth.max(axis=0)
@@ -164,12 +176,28 @@ def rects_ckm(
         rect = _pixels4(np.concatenate([xy.min(axis=1), xy.max(axis=1)]), size, margin_px, inplace=True)
     rect[:, ~front] = _EMPTY_COL
     rest = ~ahead & front
-    if rest.any():
+    if rest.any() and not clip_rest:
+        rect[:, rest] = crossing_rects(q[:, :, rest], size, clip_m, margin_px)
+    elif rest.any():
         # the sets that cross the clip plane, clipped in eye space
         part = pts[:, :, rest]
         v = (R @ part.reshape(3, -1) + view[:3, 3:4]).reshape(part.shape)
         rect[:, rest], front[rest] = _clipped(v, -v[2], edges, proj, size, clip_m, margin_px)
     return rect, front, near_d, far_d
+
+
+def _camera_rows(view: NDArray[np.float64], proj: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The camera's rows combined with the projection's, ``(3, 3)``, and their shift ``(3,)``:
+    a world point ``p`` has x and y numerators and depth ``rows @ p + shift``.  Nine values,
+    worked out in plain floats (the same IEEE products and sums as numpy's, without a
+    numpy call per row: a frame makes this a few times)."""
+    (r0, r1, r2), t = view[:3, :3].tolist(), view[:3, 3].tolist()
+    p00, p02, p11, p12 = float(proj[0, 0]), float(proj[0, 2]), float(proj[1, 1]), float(proj[1, 2])
+    rows = [[p00 * a + p02 * c for a, c in zip(r0, r2, strict=True)],
+            [p11 * b + p12 * c for b, c in zip(r1, r2, strict=True)],
+            [-c for c in r2]]
+    shift = [p00 * t[0] + p02 * t[2], p11 * t[1] + p12 * t[2], -t[2]]
+    return np.array(rows), np.array(shift)
 
 
 def box_rects_ckm(
@@ -180,6 +208,7 @@ def box_rects_ckm(
     clip_m: float,
     margin_px: float = CENTRE_MARGIN_PX,
     work: RectBuffers | None = None,
+    clip_rest: bool = True,
 ) -> tuple[NDArray[np.int64], NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
     """:func:`rects_ckm` of boxes given by their two corners coordinate-major, ``lohi`` ``(3, 2, n)``
     (``lohi[j, 0]`` the lower, ``lohi[j, 1]`` the upper bound of coordinate ``j``).
@@ -193,16 +222,14 @@ def box_rects_ckm(
     ``work`` the temporaries are views of its buffers, made once and reused (the depths
     returned too: valid until ``work`` is used again): a fresh array of a few hundred kB
     per step costs more than the step (the allocator maps and faults its pages in anew).
+    ``clip_rest`` as in :func:`rects_ckm`.
     """
     n = lohi.shape[2]
     if n == 0:
         z = np.zeros(0)
         return np.zeros((4, 0), np.int64), np.zeros(0, bool), z, z
     w = work if work is not None else RectBuffers()
-    R, t = view[:3, :3], view[:3, 3]
-    p00, p02, p11, p12 = proj[0, 0], proj[0, 2], proj[1, 1], proj[1, 2]
-    rows = np.array([p00 * R[0] + p02 * R[2], p11 * R[1] + p12 * R[2], -R[2]])
-    shift = np.array([p00 * t[0] + p02 * t[2], p11 * t[1] + p12 * t[2], -t[2]])
+    rows, shift = _camera_rows(view, proj)
     prod = np.multiply(rows[:, :, None, None], lohi, out=w.take("prod", (3, 3, 2, n)))  # row, coordinate, bound
     prod[:, 0] += shift[:, None, None]
     # (3, 2, 2, 2, n): row, then the bound taken of x, y and z
@@ -223,12 +250,53 @@ def box_rects_ckm(
     if not front.all():
         rect[:, ~front] = _EMPTY_COL
     rest = ~ahead & front
-    if rest.any():
+    if rest.any() and not clip_rest:
+        rect[:, rest] = crossing_rects(q[:, :, rest], size, clip_m, margin_px)
+    elif rest.any():
         # the boxes that cross the clip plane: their corners, clipped in eye space
-        part = box_corners_ckm(lohi[:, 0, rest].T, lohi[:, 1, rest].T)
-        v = (R @ part.reshape(3, -1) + view[:3, 3:4]).reshape(part.shape)
-        rect[:, rest], front[rest] = _clipped(v, -v[2], BOX_EDGES, proj, size, clip_m, margin_px)
+        rect[:, rest], front[rest] = clipped_box_rects(lohi[:, 0, rest].T, lohi[:, 1, rest].T, view, proj, size,
+                                                       clip_m, margin_px)
     return rect, front, near_d, far_d
+
+
+def clipped_box_rects(
+    lo: NDArray[np.float64],
+    hi: NDArray[np.float64],
+    view: NDArray[np.float64],
+    proj: NDArray[np.float64],
+    size: tuple[int, int],
+    clip_m: float,
+    margin_px: float = CENTRE_MARGIN_PX,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """The exact rectangles ``(4, m)`` of boxes ``(m, 3)`` that cross the clip plane, clipped
+    in eye space (as :func:`box_rects_ckm` clips them), and ``(m,)`` whether any part is in front."""
+    part = box_corners_ckm(lo, hi)
+    v = (view[:3, :3] @ part.reshape(3, -1) + view[:3, 3:4]).reshape(part.shape)
+    return _clipped(v, -v[2], BOX_EDGES, proj, size, clip_m, margin_px)
+
+
+def crossing_rects(q: NDArray[np.float64], size: tuple[int, int], clip_m: float,
+                   margin_px: float = CENTRE_MARGIN_PX) -> NDArray[np.int64]:
+    """Rectangles ``(4, m)`` holding the clipped ones of point sets that cross the clip plane,
+    without clipping: ``q`` ``(3, k, m)`` each point's x and y numerators and depth (as
+    :func:`rects_ckm` makes them: ``x_ndc = q_0 / q_2``).
+
+    The clipped set's projection is bounded by its vertices': the points in front
+    (``q / depth``) and the points where its sides meet the plane.  The numerators are
+    linear in the point, so such a point's lie between the set's least and greatest
+    numerators, and its depth is ``clip_m``: the bounds of ``q / max(depth, clip_m)`` and
+    of ``min q / clip_m``, ``max q / clip_m`` hold both (a point behind the plane adds a
+    value within the latter).  Grown by a millionth of a pixel more than ``margin_px``
+    for the roundings of the exact clip's own arithmetic.  About ten numpy calls for all
+    the sets, against some forty (or a Python loop per set) for the exact clip.  Loose
+    for a set reaching past the eye's sides (the numerators over ``clip_m`` are large),
+    tight enough for the parts culling: on the generated offices' tours 4 of 70 crossing
+    boxes (median) meet a VSA by it, and 1.5 % more boxes are kept than by the exact clip.
+    """
+    xy = q[:2] / np.maximum(q[2], clip_m)
+    lo = np.minimum(xy.min(axis=1), q[:2].min(axis=1) / clip_m)
+    hi = np.maximum(xy.max(axis=1), q[:2].max(axis=1) / clip_m)
+    return _pixels4(np.concatenate([lo, hi]), size, margin_px + 1e-6, inplace=True)
 
 
 class RectBuffers:

@@ -41,7 +41,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.shared.partcull import _near_far
+from walkstream.shared.partcull import near_far
 from walkstream.shared.screenrects import CENTRE_MARGIN_PX, box_rects
 
 __all__ = ["MIN_TRIANGLES", "WIDE_PX", "TRIANGLE_EDGES", "cell_triangles", "refine_parts"]
@@ -156,7 +156,7 @@ def refine_parts(
         The number of parts dropped.
     """
     V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
-    planes = _near_far(P)
+    planes = near_far(P)
     if planes is None:  # not a perspective projection (depth is not w): left as the boxes decided
         return 0
     # the candidates: kept parts of enough triangles, not stand-ins, of cells with VSAs

@@ -2,9 +2,10 @@
 
 :func:`~walkstream.shared.partcull.cull_parts` culls every visible cell's boxes in one
 batch, coordinate-major, and takes the frustum's near and far planes as depths (its
-side planes cannot cull a box whose rectangle meets a VSA).  It must keep exactly
-what the plain per-cell test keeps (:func:`~walkstream.shared.partcull.cull_boxes`:
-the box rectangles against the cell's VSAs, then the six-plane frustum test), on each
+side planes cannot cull a box whose rectangle meets a VSA).  It must keep every box
+the plain per-cell test keeps (:func:`~walkstream.shared.partcull.cull_boxes`: the box
+rectangles against the cell's VSAs, then the six-plane frustum test), and few more (a
+box that crosses the clip plane is tested by an unclipped superset of its rectangle), on each
 of its paths (a batch of two corners' sums or of eight corners' product, a few
 cells'), with a fog that leaves some boxes out, and with boxes that hold the eye or
 cross the clip plane.
@@ -44,7 +45,7 @@ def test_parts_culled_at_once_keep_what_the_plain_box_test_keeps(
     boxes = hall_boxes(k)
     proj = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 30.0).astype(np.float64)
     rng = np.random.default_rng(seed)
-    kept_some = dropped_some = 0
+    kept_some = dropped_some = extra = 0
     for i in range(8):
         # a corner looking across, then eyes anywhere, low (in the furniture) and high
         eye = np.array([0.5, 0.5, 1.6]) if i == 0 else np.array([*rng.uniform(0.2, 4.0 * k - 0.2, 2),
@@ -58,12 +59,16 @@ def test_parts_culled_at_once_keep_what_the_plain_box_test_keeps(
         for c in pc.order:
             lo, hi = boxes[c]
             want = cull_boxes(lo, hi, pc.vsas[c], eye, view, proj, SIZE, fog_m=fog)
-            assert np.array_equal(got[c], want), (i, c)
+            # conservative: every box the exact test keeps (a box crossing the clip plane
+            # is tested by an unclipped superset of its rectangle, so a few more may stay)
+            assert not np.any(want & ~got[c]), (i, c)
+            extra += int(np.sum(got[c] & ~want))
             kept_some += int(want.sum())
             dropped_some += int((~want).sum())
         if i == 0:
             assert len(pc.order) > 20 and sum(len(boxes[c][0]) for c in pc.order) > 300  # a batch of hundreds
     assert kept_some > 100 and dropped_some > 100  # both outcomes were compared
+    assert extra <= 0.05 * kept_some
 
 
 def test_hall_boxes_lie_in_their_cells() -> None:
@@ -89,3 +94,20 @@ def test_bench_portals_cull_from_the_cli(tmp_path: Path, capsys: pytest.CaptureF
                  "--out", str(tmp_path)]) != 0
     err = capsys.readouterr().err
     assert "no-such-revision" in err and "Traceback" not in err
+
+
+def test_bench_portals_cull_against_a_revision_times_both_in_turn(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    # HEAD's culling loaded beside today's: both columns over the same frames, each going
+    # first on every other frame, and the parts compared on every frame (the same code
+    # in a checkout without local changes to the culling; the bench raises otherwise)
+    root = Path(__file__).resolve().parents[1]
+    if not (root / ".git").exists():
+        pytest.skip("not a git checkout: no revision to load")
+    assert main(["bench", "portals", "--cull", "--cull-frames", "1", "--cull-against", "HEAD",
+                 "--out", str(tmp_path), "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)["culling_cpu"][0]
+    assert r["against"] == "HEAD" and r["frames"] == 2
+    for who in ("now", "then"):
+        for part in ("walk", "parts", "total"):
+            assert 0 < r[who][part]["median"] <= r[who][part]["p99"]

@@ -34,7 +34,12 @@ def _want(cells: list[int], boxes: dict, vsas: dict, eye: np.ndarray, view: np.n
 
 
 def _same(got: dict, want: dict) -> bool:
-    return got.keys() == want.keys() and all(np.array_equal(got[c], want[c]) for c in want)
+    """Conservative and close: every box the exact test keeps is kept, and few more (a box
+    that crosses the clip plane is tested by an unclipped superset of its rectangle)."""
+    if got.keys() != want.keys() or any(np.any(want[c] & ~got[c]) for c in want):
+        return False
+    extra = sum(int(np.sum(got[c] & ~want[c])) for c in want)
+    return extra <= 4 + 0.05 * sum(int(np.sum(want[c])) for c in want)
 
 
 def test_box_rects_from_two_corners_are_the_eight_corner_rects() -> None:

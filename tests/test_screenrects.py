@@ -64,3 +64,28 @@ def test_a_few_clipped_sets_in_plain_floats_give_numpys_rectangles(monkeypatch: 
             monkeypatch.setattr(screenrects, "_FEW", 100)
             few = screenrects._clipped(v, -v[2], edges, proj, (640, 480), 0.03, margin)
             assert np.array_equal(many[0], few[0]) and np.array_equal(many[1], few[1])
+
+
+def test_a_crossing_sets_unclipped_rectangle_holds_its_clipped_one() -> None:
+    """:func:`~walkstream.shared.screenrects.crossing_rects` (no clipping) holds the exact
+    clipped rectangle of every box and portal that crosses the clip plane, and is not
+    everything: sets beside or behind the eye fall wholly off the viewport."""
+    proj = perspective(60.0, 4 / 3, 0.1, 100.0).astype(np.float64)
+    view = camera(np.array([0.0, 0.0, 1.6]), 0.3, -0.1).astype(np.float64)
+    size = (640, 480)
+    rng = np.random.default_rng(5)
+    quad = np.stack([np.arange(4), (np.arange(4) + 1) % 4], axis=1)
+    off = 0
+    for k, edges in ((4, quad), (8, BOX_EDGES)):
+        pts = rng.normal(0.0, 1.0, (3, k, 600)) + np.array([0.0, 0.0, 1.6])[:, None, None]
+        pts += rng.normal(0.0, 1.5, (3, 1, 600))  # sets scattered around the eye
+        exact, front, near, _far = screenrects.rects_ckm(pts, edges, view, proj, size, 0.03)
+        loose, front2, _n, _f = screenrects.rects_ckm(pts, edges, view, proj, size, 0.03, clip_rest=False)
+        cross = front & (near < 0.03)
+        assert cross.sum() > 100 and np.array_equal(front, front2)
+        assert np.array_equal(exact[:, ~cross], loose[:, ~cross])
+        e, lo = exact[:, cross], loose[:, cross]
+        shows = (e[0] <= e[2]) & (e[1] <= e[3])  # an exact rectangle with no pixel centre needs no holding
+        assert np.all((lo[:2, shows] <= e[:2, shows]) & (lo[2:, shows] >= e[2:, shows]))
+        off += int(np.sum((lo[2] < 0) | (lo[0] >= size[0]) | (lo[3] < 0) | (lo[1] >= size[1])))
+    assert off > 20
