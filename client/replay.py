@@ -436,6 +436,7 @@ async def replay(
         summary.update(city_summary(config, log, streamer, cache, stats, api, bytes_log, t_end - t_start,
                                     t_start, setup_s, path, manifest))
         summary["spike_frames"] = int(spikes.sum())
+        summary.update(frames.geometry_figures())  # objects drawn as geometry, whatever the quads
         if scene.wall_images is not None:  # a city's rings of walls
             summary["walls"] = _walls_summary(scene, frames)
         if state.facades is not None:  # boxes with their facades (--no-facades: none)
