@@ -97,7 +97,7 @@ def behind_walls(geoms: list[ObjectGeometry | None], walls: tuple[tuple[float, f
     left = (d[None, None, :, 0] * rel[..., 1] - d[None, None, :, 1] * rel[..., 0] > 0.0).any(axis=1)  # (m, k)
     if eye is not None:
         left &= through_walls(corners, w, np.asarray(eye, np.float64).reshape(-1)[:2])
-    out[built] = left.any(axis=1)
+    out[built] = np.any(left, axis=1)
     return out
 
 
