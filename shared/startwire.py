@@ -7,7 +7,7 @@ start part
     followed in the stream by ``count`` object frames; an interior's ``contents``
     part is ``{part, etag: null, cells: [ids]}`` followed by one contents part
     ``{cell, etag, body}`` per cell (:mod:`walkstream.shared.codec.cellbatch`); the
-    ``walltex`` part (a scene baked with ``--virtual-walls``, asked with
+    ``walltex`` part (an interior baked with ``--virtual-walls``, asked with
     ``walls=true``) is ``{part, etag: null, textures: [ids]}`` followed by one part
     ``{cell: texture id, etag, body}`` per texture, as the wall textures' batch sends
     them; the ``walls`` part's body is what ``GET .../walls`` sends (every wall side).
@@ -26,8 +26,8 @@ __all__ = ["START_PARTS", "START_MAX_TEXTURES", "decode_start_part"]
 START_PARTS: tuple[str, ...] = ("pathhead", "path", "topology", "walls", "walltex", "contents", "cell", "index",
                                 "manifest", "objects")
 """What a start bundle may hold, in the order the service sends it (an interior's
-``pathhead``, when asked, in place of ``path``; a city's ``walls`` and ``walltex``
-after its objects)."""
+``pathhead``, when asked, in place of ``path``; ``walls`` and ``walltex``, when asked,
+on an interior)."""
 
 START_MAX_TEXTURES = 64
 """The most wall textures a start bundle's ``walltex`` part may list."""

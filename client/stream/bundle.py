@@ -17,10 +17,9 @@ bundle is stopped there and the link is free.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, Protocol, cast
+from typing import Protocol
 
 from walkstream.client.net.api import SceneClient
-from walkstream.client.stream.startwalls import StartWalls
 from walkstream.client.stream.stats import StreamStats
 from walkstream.shared.errors import ApiError, StreamCut
 from walkstream.shared.paths import RecordedPath
@@ -96,9 +95,6 @@ class StartBundle:
     on_end:
         Called when the bundle ends, with the error that ended it (None when it
         ended well), e.g. an :class:`ApiError` 404 from a server without bundles.
-    walls:
-        Where the wall sides and the first ring's textures go (asked for only then:
-        a scene baked with ``--virtual-walls``).
 
     Attributes
     ----------
@@ -115,10 +111,8 @@ class StartBundle:
         on_path: Callable[[RecordedPath, int], None],
         on_manifest: Callable[[Manifest], None],
         on_end: Callable[[BaseException | None], None],
-        walls: StartWalls | None = None,
     ) -> None:
         self.streamer = streamer
-        self.walls = walls
         self.form = form
         self.on_path = on_path
         self.on_manifest = on_manifest
@@ -132,7 +126,7 @@ class StartBundle:
         error: BaseException | None = None
         frames: list[ObjectFrame] = []
         try:
-            async for part, item in st.api.start(path=path, form=self.form, walls=self.walls is not None):
+            async for part, item in st.api.start(path=path, form=self.form):
                 if part == "path":
                     p, n = item
                     st.stats.bundle_bytes += n
@@ -161,9 +155,6 @@ class StartBundle:
                     self.left += len(ids) * st.frame_bytes
                 elif part == "objects":
                     self.left = item * st.frame_bytes
-                elif part in ("walls", "walltex", "texture"):
-                    self._wall_part(part, item)
-                    continue  # nothing for the streamer to plan
                 else:
                     st.stats.bundle_bytes += item.nbytes
                     self._arrived({item.id})
@@ -177,21 +168,7 @@ class StartBundle:
             self._arrived(set(self.ids))
             self.left = 0.0
             st.store_objects(frames)
-            if self.walls is not None:
-                self.walls.end()
             self.on_end(error)
-
-    def _wall_part(self, part: str, item: object) -> None:
-        """A wall part (asked for with :attr:`walls`): the sides or one texture."""
-        if self.walls is None:
-            return
-        got = cast(tuple[Any, ...], item)
-        if part == "walls":
-            self.streamer.stats.bundle_bytes += int(got[1])
-            self.walls.add_sides(got[0], int(got[1]))
-        elif part == "texture":
-            self.streamer.stats.bundle_bytes += int(got[2])
-            self.walls.add_texture(int(got[0]), got[1], int(got[2]))
 
     def _arrived(self, ids: set[int]) -> None:
         self.ids -= ids

@@ -1,4 +1,4 @@
-"""What a start bundle brought of a scene's textured virtual walls: the wall sides and the first view's textures.
+"""What an interior's start bundle brought of its textured virtual walls: the wall sides and the first view's textures.
 
 Asked for with ``walls=true`` (:attr:`~walkstream.client.config.ReplayConfig.start_walls`):
 the bundle carries every wall side (what ``GET .../walls`` sends) and the textures of
@@ -12,7 +12,6 @@ None: the replay then asks for the sides itself, as before.
 
 from __future__ import annotations
 
-import asyncio
 from typing import Any
 
 from walkstream.client.stream.images import ImpostorImages
@@ -29,8 +28,6 @@ class StartWalls:
         """Every wall side, once the bundle's ``walls`` part is in (None: not sent)."""
         self.nbytes = 0
         """Bytes of the wall parts on the wire (sides and textures)."""
-        self.ended = asyncio.Event()
-        """Set once the sides are in, or the bundle ended without them."""
         self._textures: list[tuple[int, Any, int]] = []
         self._lane: ImpostorImages | None = None
 
@@ -38,7 +35,6 @@ class StartWalls:
         """The bundle's ``walls`` part arrived."""
         self.sides = sides
         self.nbytes += int(nbytes)
-        self.ended.set()
 
     def add_texture(self, tid: int, rgba: Any, nbytes: int) -> None:
         """One of the first view's textures arrived (kept until the lane is attached)."""
@@ -47,10 +43,6 @@ class StartWalls:
             self._lane.adopt(tid, rgba, nbytes)
         else:
             self._textures.append((tid, rgba, nbytes))
-
-    def end(self) -> None:
-        """The bundle ended (with or without the walls)."""
-        self.ended.set()
 
     def attach(self, lane: ImpostorImages) -> None:
         """The walls' lane is made: the textures received so far go into its cache, the

@@ -68,7 +68,6 @@ from walkstream.client.stream.plan import Tile, plan_needs, tile_key, tile_of_ke
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.route import horizon_m, turn_cost_m
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
-from walkstream.client.stream.startwalls import StartWalls
 from walkstream.client.stream.stats import StreamStats
 from walkstream.client.tasks import reap
 from walkstream.shared.cells import TileGrid
@@ -653,13 +652,12 @@ class Streamer:
         on_path: Callable[[RecordedPath, int], None],
         on_manifest: Callable[[Manifest], None],
         on_end: Callable[[BaseException | None], None],
-        walls: StartWalls | None = None,
     ) -> asyncio.Task[None]:
         """Ask for the start bundle at recorded path ``path``'s start; feed its parts in.
 
-        See :class:`~walkstream.client.stream.bundle.StartBundle` for the callbacks and ``walls``.
+        See :class:`~walkstream.client.stream.bundle.StartBundle` for the callbacks.
         """
-        bundle = StartBundle(self, self.config.form, on_path, on_manifest, on_end, walls)
+        bundle = StartBundle(self, self.config.form, on_path, on_manifest, on_end)
         self._bundle = bundle
         self._bundle_task = asyncio.create_task(self._run_bundle(bundle, path))
         return self._bundle_task

@@ -88,11 +88,8 @@ async def bundle_start(
     manifest_fut: asyncio.Future[Manifest],
     tasks: list[asyncio.Task[Any]],
     manifest_failed: Callable[[BaseException], None] | None = None,
-    walls: StartWalls | None = None,
 ) -> tuple[RecordedPath, int] | None:
     """Start with the start bundle of recorded path ``path``: the path and its bytes.
-    With ``walls``, the bundle also brings the wall sides and the first ring's textures
-    there (a city baked with ``--virtual-walls``).
 
     None when the bundle failed before the path arrived (the caller then starts the
     old way).  When it is cut after the path but before the manifest, a task
@@ -117,7 +114,7 @@ async def bundle_start(
             # cut after the path: the manifest (the grammar) comes on its own
             tasks.append(manifest_task(api, disk, manifest_arrived, manifest_failed))
 
-    streamer.start_bundle(path, on_path, on_manifest, on_end, walls)
+    streamer.start_bundle(path, on_path, on_manifest, on_end)
     try:
         got: tuple[RecordedPath, int] | None = await within(
             clock, timeout_s, path_fut
@@ -215,8 +212,6 @@ async def interior_start(
         await within(clock, timeout_s, head())
     except (ApiError, StreamCut):
         pass
-    if walls is not None:
-        walls.end()
     if "path" not in got or "topology" not in got:
         await stream.aclose()
         return None, None, None

@@ -23,9 +23,9 @@ from walkstream.shared.camera import camera
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.roomcompact import decode_topology_compact
 from walkstream.shared.roomview import RoomView, room_projection
-from walkstream.shared.walls import WallSide, WallTable, ring_cell
+from walkstream.shared.walls import WallSide, WallTable
 
-__all__ = ["FIRST_WALL_TEXTURES", "SceneWalls", "first_ring_textures", "first_wall_textures", "scene_walls"]
+__all__ = ["FIRST_WALL_TEXTURES", "SceneWalls", "first_wall_textures", "scene_walls"]
 
 FIRST_WALL_TEXTURES = 16
 """At most this many textures in a start bundle (the nearest first): about 0.9 kB each."""
@@ -44,17 +44,12 @@ class SceneWalls:
     """``(k,)`` the cell on the viewer's side of each side."""
 
     @classmethod
-    def of(cls, rows: list[list[float | int]] | list[tuple[float | int, ...]], topology: bytes | None) -> SceneWalls:
-        """From the stored wall rows and an interior's compact topology's bytes (None:
-        a city's rings, each side facing from its ringed cell)."""
-        if topology is None:
-            sides = tuple(WallSide.from_row(r, "stored wall") for r in rows)
-            viewer = np.array([ring_cell(s.portal) for s in sides], np.int64)
-        else:
-            topo = decode_topology_compact(topology, "topology")
-            cells = {int(p[0]): (int(p[2]), int(p[3])) for p in topo.portals if p[1] == "wall"}
-            sides = tuple(s for r in rows if (s := WallSide.from_row(r, "stored wall")).portal in cells)
-            viewer = np.array([cells[s.portal][0 if s.side == 0 else 1] for s in sides], np.int64)
+    def of(cls, rows: list[list[float | int]] | list[tuple[float | int, ...]], topology: bytes) -> SceneWalls:
+        """From the stored wall rows and the interior's compact topology's bytes."""
+        topo = decode_topology_compact(topology, "topology")
+        cells = {int(p[0]): (int(p[2]), int(p[3])) for p in topo.portals if p[1] == "wall"}
+        sides = tuple(s for r in rows if (s := WallSide.from_row(r, "stored wall")).portal in cells)
+        viewer = np.array([cells[s.portal][0 if s.side == 0 else 1] for s in sides], np.int64)
         corners = np.array([s.corners() for s in sides], np.float64).reshape(-1, 4, 3)
         return cls(sides, WallTable(sides), corners.min(axis=1), corners.max(axis=1), viewer)
 
@@ -90,7 +85,7 @@ def first_wall_textures(
 _WALLS: dict[tuple[str, str], SceneWalls] = {}
 
 
-def scene_walls(scene: Any, topology: bytes | None) -> SceneWalls:
+def scene_walls(scene: Any, topology: bytes) -> SceneWalls:
     """The :class:`SceneWalls` of a served scene (``scene.reader``'s stored sides,
     ``topology`` its compact topology's bytes), made once per scene version."""
     key = (str(scene.name), str(scene.version))
@@ -102,25 +97,3 @@ def scene_walls(scene: Any, topology: bytes | None) -> SceneWalls:
         _WALLS[key] = got
     return got
 
-
-def first_ring_textures(walls: SceneWalls, cell: int, eye: ArrayLike, heading: float | None) -> list[int]:
-    """A city's start: the textures of ``cell``'s ring walls the viewer at ``eye``
-    ``(2,)`` or ``(3,)`` (at eye height when 2-D) sees, each its zone's: every side
-    facing the viewer (weight above 0) that is not wholly behind it going along
-    ``heading`` (radians; None: every such side), nearest first, at most
-    :data:`FIRST_WALL_TEXTURES`.  The client's projection is not known here; a wall
-    half a turn away from the heading is left to the walk (asked for when it turns)."""
-    mine = np.flatnonzero(walls.viewer_cell == int(cell))
-    if not len(mine):
-        return []
-    e = np.asarray(eye, np.float64).reshape(-1)
-    eye3 = np.array([e[0], e[1], e[2] if len(e) > 2 else float(walls.table.eye_z[mine[0]])])
-    zones, dist, weights = walls.table.views(eye3[None, :])
-    keep = mine[weights[0, mine] > 0.0]
-    if heading is not None and len(keep):
-        d = np.array([np.cos(heading), np.sin(heading)])
-        lo, hi = walls.lo[keep, :2], walls.hi[keep, :2]
-        corners = np.stack([lo, np.stack([hi[:, 0], lo[:, 1]], 1), hi, np.stack([lo[:, 0], hi[:, 1]], 1)], 1)
-        keep = keep[((corners - eye3[:2]) @ d > 0.0).any(axis=1)]
-    keep = keep[np.argsort(dist[0, keep], kind="stable")][:FIRST_WALL_TEXTURES]
-    return [walls.sides[k].textures[int(zones[0, k])] for k in keep.tolist()]

@@ -22,7 +22,6 @@ from numpy.typing import NDArray
 from walkstream.server.service.contentsform import STREAM_LEVEL, ContentsStream
 from walkstream.server.service.firstheads import HEAD_SHARE, first_heads
 from walkstream.server.service.firstwalls import (
-    first_ring_textures,
     first_wall_textures,
     scene_walls,
 )
@@ -217,11 +216,11 @@ def start_parts(
     (:mod:`~walkstream.server.service.firstheads`) and whole after every other cell: the
     contents' list then names it twice.
 
-    With ``walls``, on a scene baked with ``--virtual-walls``, the bundle also brings the
-    wall sides (``walls``) and the textures of the walls the first view sees
-    (``walltex``, :mod:`~walkstream.server.service.firstwalls`): an interior's before
-    its contents, whose first view is then the walk with those walls closed; a city's
-    after its objects (the start cell's ring walls ahead).
+    With ``walls``, on an interior baked with ``--virtual-walls``, the bundle also brings
+    the wall sides (``walls``) and the textures of the walls the first view sees
+    (``walltex``, :mod:`~walkstream.server.service.firstwalls`) before its contents,
+    whose first view is then the walk with those walls closed (a city's bundle is
+    unchanged).
     """
     parts: list[StartPart] = []
     split = path is not None and scene.interior is not None and view is not None and rep == "msgpack"
@@ -292,9 +291,6 @@ def start_parts(
         if missing:
             found.update(scene.load_frames(missing, form))
         parts.append(("objects", Frames(order, [found[oid] for oid in order])))
-    if walls and scene.has_walls and cells:  # the start cell's ring walls ahead, after its objects
-        ids = first_ring_textures(scene_walls(scene, None), cells[0], xy, heading)
-        parts += [("walls", scene.walls[rep]), ("walltex", _textures(scene, ids))]
     return parts
 
 

@@ -41,12 +41,11 @@ path; the client fetches the whole path (``GET .../paths/{name}``) when its link
 idle, before the head ends.  With ``heads=true`` as well (a path and a view), a cell the first pose sees in
 part comes first as its *head* (a part with one more field, ``missing``:
 :mod:`walkstream.shared.codec.cellhead`) and whole after every other cell, so the cell
-is named twice in ``cells``.  With ``walls=true`` (a scene baked with ``--virtual-walls``) the
-wall sides (``walls``, as ``GET .../walls`` sends them) and the first view's wall textures
-(``walltex``: ``{part, etag: null, textures: [ids]}`` then one ``{cell, etag, body}`` part
-each, as ``POST .../walls/textures`` sends them) come before the contents, and the first
-view's cells are those of the walk with those walls closed; on a city they come after
-the objects (the start cell's ring walls ahead).  A client that does not ask gets the order above; a server
+is named twice in ``cells``.  With ``walls=true`` (an interior baked with ``--virtual-walls``,
+a path and a view) the wall sides (``walls``, as ``GET .../walls`` sends them) and the first
+view's wall textures (``walltex``: ``{part, etag: null, textures: [ids]}`` then one ``{cell,
+etag, body}`` part each, as ``POST .../walls/textures`` sends them) come before the
+contents, and the first view's cells are those of the walk with those walls closed.  A client that does not ask gets the order above; a server
 that does not know ``head`` ignores it (the whole path then comes, as ``path``).  The walk's other cells come by the client's own requests.  The ``path`` part is the compact ``walkstream-path-q/1``
 encoding (as ``GET .../paths/{name}`` sends it when ``Accept`` names it); with
 ``Accept: application/json`` each body is its JSON form.
@@ -151,10 +150,9 @@ Heads = Annotated[
 
 WallsQ = Annotated[
     bool,
-    Query(description="a scene baked with --virtual-walls: also the wall sides (part walls) and the first view's "
-          "wall textures (part walltex: {part, etag: null, textures: [ids]}, then one {cell, etag, body} part "
-          "each); an interior's before its contents (the first view then walked with those walls closed), a "
-          "city's after its objects"),
+    Query(description="interiors baked with --virtual-walls, with view and path: also the wall sides (part walls) "
+          "and the first view's wall textures (part walltex: {part, etag: null, textures: [ids]}, then one "
+          "{cell, etag, body} part each) before the contents, the first view then walked with those walls closed"),
 ]
 
 
