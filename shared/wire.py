@@ -59,7 +59,6 @@ from walkstream.shared.content.registry import frame_keys
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import Viewpoint, readonly
 from walkstream.shared.scene.cellkinds import CELL_KINDS
-from walkstream.shared.startwire import START_PARTS, decode_start_part
 
 __all__ = [
     "MSGPACK",
@@ -68,7 +67,6 @@ __all__ = [
     "MSGPACK_TYPES",
     "FRAME_KEYS",
     "OFFERS",
-    "START_PARTS",
     "Manifest",
     "CellRecord",
     "CellImpostors",
@@ -80,7 +78,6 @@ __all__ = [
     "cell_from_wire",
     "decode_cell_index",
     "decode_frame",
-    "decode_start_part",
     "locate_answer",
     "decode_locate",
     "decode_scene_list",

@@ -70,7 +70,6 @@ from walkstream.shared.wire import (
 )
 
 __all__ = [
-    "StartItem",
     "SceneClient",
 ]
 
@@ -577,7 +576,7 @@ class SceneClient:
 
         The scene is :attr:`scene` if set, else the server's first; it is set from
         the answer's ``X-Scene`` header as soon as the head arrives.  Items are
-        yielded decoded (see :data:`StartItem`), each as soon as its last byte is in.
+        yielded decoded (see :data:`~walkstream.client.net.startitems.StartItem`), each as soon as its last byte is in.
 
         Raises
         ------

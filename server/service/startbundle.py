@@ -84,7 +84,7 @@ class Frames:
 
 
 StartPart = tuple[str, "Encoded | Frames"]
-"""One part of a start bundle: its name (:data:`~walkstream.shared.wire.START_PARTS`) and
+"""One part of a start bundle: its name (:data:`~walkstream.shared.startwire.START_PARTS`) and
 its encoded body, or for ``objects`` and ``contents`` the frames that follow its header."""
 
 
