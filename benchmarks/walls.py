@@ -177,8 +177,9 @@ def _row(scene: str, variant: str, pda: Any, gl: Any, reports: tuple[Path, Path 
     cells = s.get("visible_cells_mean")
     in_scene = s.get("cells_in_scene") if interior else objects
     walls = s.get("walls") or {}
-    # outdoors with rings: objects drawn as geometry (the frame log's count holds the walls' quads too)
-    geometry = walls.get("geometry_objects_mean")
+    # outdoors: objects drawn as geometry, the same count with walls and without (the
+    # frame log's `visible` holds the walls' and the facades' quads too)
+    geometry = s.get("geometry_objects_mean", walls.get("geometry_objects_mean"))
     if geometry is None and len(drawn):
         geometry = float(drawn.mean())
     row: dict[str, Any] = {

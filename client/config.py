@@ -86,6 +86,11 @@ class ReplayConfig:
     """Interiors, with :attr:`start_contents` and :attr:`path_head_s`: a cell the first
     pose sees in part comes first as its head (the pieces drawn, stand-ins for the
     others), whole after the other cells (:mod:`~walkstream.shared.codec.cellhead`)."""
+    start_walls: bool = True
+    """An interior baked with ``--virtual-walls`` (and :attr:`virtual_walls` on, with
+    :attr:`start_contents`): the start bundle brings the wall sides and the first view's
+    wall textures before its contents (:mod:`~walkstream.server.service.firstwalls`):
+    the first frames show those walls closed and need only the cells before them."""
     start_hold_s: float = 3.0
     """Interiors: the walker stands at the path's start until the first frame there is
     perfect (every cell it shows in memory) and no contents are on the link (the start

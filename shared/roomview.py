@@ -138,12 +138,14 @@ def cells_seen(
     locator: RoomLocator,
     poses: Iterable[tuple[ArrayLike, float, float]],
     view: RoomView,
+    closed: frozenset[int] = frozenset(),
 ) -> list[list[int]]:
     """The cells portal culling keeps from each of ``poses`` (``(eye (3,), yaw, pitch)``,
     as :meth:`~walkstream.shared.paths.RecordedPath.at` gives them), each list in the
     culling's order (nearest first): the cells the client will see from there.  Each
     pose is located from the one before; a pose outside every cell (and not following
-    one inside) sees nothing."""
+    one inside) sees nothing.  ``closed``: portals the walk stops at (virtual walls
+    drawn as their textures)."""
     proj = room_projection(view.fov_deg, view.size, view.fog_m)
     out: list[list[int]] = []
     cur: int | None = None
@@ -154,6 +156,7 @@ def cells_seen(
             out.append([])
             continue
         v = camera(eye, float(yaw), float(pitch)).astype(np.float64)
-        pc = cull_portals(graph, cur, eye, v, proj, view.size, fog_m=view.fog_m, max_depth=view.max_depth)
+        pc = cull_portals(graph, cur, eye, v, proj, view.size, fog_m=view.fog_m, max_depth=view.max_depth,
+                          closed=closed)
         out.append(list(pc.order))
     return out

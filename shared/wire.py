@@ -40,18 +40,12 @@ object frame
     ``{id, kind, params: bin}`` (or ``mesh: bin`` for the ``lod2`` form); a stream of
     them is plain concatenated msgpack, one per asked id in the order asked.
 start part
-    ``{part, etag, body: bin}``: one resource of the start bundle, ``body`` being
-    exactly what the resource's own endpoint sends (``part`` one of
-    :data:`START_PARTS`); the ``objects`` part is ``{part, etag: null, count}``
-    followed in the stream by ``count`` object frames; an interior's ``contents``
-    part is ``{part, etag: null, cells: [ids]}`` followed by one contents part
-    ``{cell, etag, body}`` per cell (:mod:`walkstream.shared.codec.cellbatch`).
+    one part of the start bundle: :mod:`walkstream.shared.startwire`.
 """
 
 from __future__ import annotations
 
 import contextlib
-from collections import Counter
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -61,7 +55,6 @@ from numpy.typing import NDArray
 
 from walkstream.shared.cells import TileGrid
 from walkstream.shared.codec import ACH_UNITS, pack_ints, quantise_ach, unpack_bounded, unpack_ints
-from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.content.registry import frame_keys
 from walkstream.shared.errors import CodecError
 from walkstream.shared.records import Viewpoint, readonly
@@ -74,7 +67,6 @@ __all__ = [
     "MSGPACK_TYPES",
     "FRAME_KEYS",
     "OFFERS",
-    "START_PARTS",
     "Manifest",
     "CellRecord",
     "CellImpostors",
@@ -86,7 +78,6 @@ __all__ = [
     "cell_from_wire",
     "decode_cell_index",
     "decode_frame",
-    "decode_start_part",
     "locate_answer",
     "decode_locate",
     "decode_scene_list",
@@ -107,10 +98,6 @@ OFFERS: tuple[str, ...] = ("cell-index", "cells-batch", "start")
 """Optional parts of the API a manifest may list in ``offers``: the cell index
 (``GET .../index/{i}/{j}``), cell records in batches (``POST .../cells``) and the
 start bundle (``GET /v1/start``)."""
-
-START_PARTS: tuple[str, ...] = ("pathhead", "path", "topology", "contents", "cell", "index", "manifest", "objects")
-"""What a start bundle may hold, in the order the service sends it (an interior's
-``pathhead``, when asked, in place of ``path``)."""
 
 _MAX_MANIFEST = 4 << 20
 #: the longest string a manifest may hold: the building grammar's text (the default
@@ -669,41 +656,6 @@ def decode_cell_index(body: bytes, what: str, etag: str | None = None) -> CellIn
             etag=etag,
             body=bytes(body),
         )
-
-
-def decode_start_part(obj: Any, what: str) -> tuple[str, str | None, bytes | int | list[int]]:
-    """``(part, etag, body)`` of one unpacked part of a start bundle, checked.
-
-    For the ``objects`` part, ``body`` is the number of object frames that follow; for
-    ``contents``, the ids of the cells whose contents parts follow, in order (a cell
-    named twice comes first as its head, :mod:`~walkstream.shared.codec.cellhead`).
-    """
-    if (
-        not isinstance(obj, dict)
-        or obj.get("part") not in START_PARTS
-        or not (obj.get("etag") is None or isinstance(obj.get("etag"), str))
-    ):
-        raise CodecError(f"{what}: not {{part, etag, body}} with a known part")
-    if obj["part"] == "objects":
-        count = obj.get("count")
-        if type(count) is not int or not 0 <= count <= 1 << 20:
-            raise CodecError(f"{what}: objects part without a count")
-        return "objects", None, count
-    if obj["part"] == "contents":
-        cells = obj.get("cells")
-        if (
-            not isinstance(cells, list)
-            or len(cells) > 2 * CELLBATCH_MAX_CELLS
-            or not all(type(c) is int and c >= 0 for c in cells)
-            or len(set(cells)) > CELLBATCH_MAX_CELLS
-            or max(Counter(cells).values(), default=0) > 2
-        ):
-            raise CodecError(f"{what}: contents part without its cells (ids >= 0, each at most twice: a head, "
-                             f"then whole; at most {CELLBATCH_MAX_CELLS} cells)")
-        return "contents", None, list(cells)
-    if not isinstance(obj.get("body"), bytes):
-        raise CodecError(f"{what}: {obj['part']} part without a body")
-    return obj["part"], obj.get("etag"), obj["body"]
 
 
 def _viewpoint(v: Any) -> Viewpoint:

@@ -128,6 +128,9 @@ def test_a_walk_on_pda_draws_boxes_with_facades_and_pays_for_them(city: Path, gl
     assert f["buildings_baked"] > 0 and f["facades_mean"] > 0 and f["facade_quads_mean"] > 0
     assert f["bake_triangles"] > 0 and 0 < f["texture_bytes_max"] <= 8 << 20
     assert "error" not in f and "facades" not in box
+    # objects drawn as geometry count no quad: the facades' quads stay out of the count
+    geo = fac["geometry_objects_mean"], box["geometry_objects_mean"]
+    assert 0 < geo[0] < geo[1] + f["facade_quads_mean"] / 2, (geo, f["facade_quads_mean"])
     err = fac["truth"]["colour"]["error_causes"]["lod_colour"], box["truth"]["colour"]["error_causes"]["lod_colour"]
     assert err[0] < err[1], err  # the boxes' own error falls
 

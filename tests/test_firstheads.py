@@ -21,7 +21,7 @@ from walkstream.server.service.main import create_app
 from walkstream.shared.codec.cellbatch import check_contents_part
 from walkstream.shared.codec.cellhead import STAND_IN_ELEMENT, decode_cell_head
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
-from walkstream.shared.wire import decode_start_part
+from walkstream.shared.startwire import decode_start_part
 
 
 def _bundle(app: Any, heads: bool) -> tuple[list[tuple[int, dict[str, Any]]], list[int]]:

@@ -317,6 +317,16 @@ def test_a_missing_ring_texture_brings_back_only_the_far_objects_behind_its_wall
     assert behind_walls(geoms, east).tolist() == [False, True, True, True]
     assert behind_walls(geoms, north + east).tolist() == [True, True, True, True]
     assert behind_walls(geoms, ()).tolist() == [True] * 4
+    # from the eye at the ring's middle, the corner box (30, 30) is behind both lines but
+    # seen through the north wall's end only just; a box far to the east behind the
+    # north wall's line is seen through the east wall alone: left to its texture
+    eye = np.array([0.0, 0.0, 1.7])
+    far_east = [box(60.0, 12.0), box(0.0, 30.0), box(8.0, 80.0)]
+    assert behind_walls(far_east, north).tolist() == [True, True, True]  # the line alone keeps all three
+    assert behind_walls(far_east, north, eye).tolist() == [False, True, True]
+    assert behind_walls(far_east, east, eye).tolist() == [True, False, False]
+    # the eye inside a box: that box spans every angle and stays
+    assert behind_walls([box(0.0, 30.0)], north, np.array([0.0, 30.0, 1.7])).tolist() == [True]
 
 
 def test_ring_textures_are_lossy_at_the_outdoor_quality_and_a_bad_quality_is_one_line() -> None:

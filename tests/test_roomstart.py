@@ -44,7 +44,7 @@ from walkstream.shared.roomcompact import (
 )
 from walkstream.shared.roomview import RoomLocator, RoomView, cell_of, cells_seen, stack_planes
 from walkstream.shared.roomwire import Topology, decode_topology, decode_topology_packed
-from walkstream.shared.wire import decode_start_part
+from walkstream.shared.startwire import decode_start_part
 
 MODEM = LinkProfile(56_000.0, 56_000.0, 0.2)
 

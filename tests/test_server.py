@@ -40,12 +40,12 @@ from walkstream.shared.codec import decode_object
 from walkstream.shared.errors import StoreError
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_q
 from walkstream.shared.records import StreetParams
+from walkstream.shared.startwire import decode_start_part
 from walkstream.shared.wire import (
     cell_from_wire,
     decode_cell,
     decode_cell_index,
     decode_manifest,
-    decode_start_part,
 )
 
 JSON_ACCEPT = {"accept": "application/json"}

@@ -429,7 +429,8 @@ def _replay(db: Path, **kw: object) -> object:
 
     app = create_app([db])
     try:
-        cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="pda", path="cross", duration_s=14.0,
+        kw = {"duration_s": 14.0, **kw}
+        cfg = ReplayConfig(link=LinkProfile(56_000.0, 56_000.0, 0.2), device="pda", path="cross",
                            fog_budget=False, **kw)  # type: ignore[arg-type]
         return run_replay(httpx.ASGITransport(app=app), "http://walkstream.test", cfg)
     finally:
@@ -488,6 +489,82 @@ def test_the_walls_walks_only_imperfect_frames_are_its_start(replays: tuple[obje
     assert perfect[first:].all() and s["perfect_frame_ratio"] == 1.0
     assert s["late_cells"]["cells"] == 0 and sum(s["late_cells"]["cell_frames_by_cause"].values()) == 0
     assert s["perfect_frames"] == len(log.t) - first
+def _bundle(app: object, walls: bool) -> list[tuple[str, object]]:
+    """The start bundle of the walk ``cross`` for a 160x120 view: each part's name and
+    body (for ``walltex`` and ``contents`` the ids listed)."""
+    from walkstream.shared.startwire import decode_start_part
+
+    c = Http(app)
+    try:
+        got = c.get("/v1/scenes/walls/start", params={"path": "cross", "view": "160x120",
+                                                      **({"walls": "true"} if walls else {})},
+                    headers={"Accept": MSGPACK})
+    finally:
+        c.close()
+    assert got.status_code == 200
+    unpacker = msgpack.Unpacker(raw=False)
+    unpacker.feed(got.content)
+    out: list[tuple[str, object]] = []
+    follow = 0
+    for obj in unpacker:
+        if follow:
+            follow -= 1
+            continue
+        part, _etag, body = decode_start_part(obj, "bundle")
+        if part in ("walltex", "contents"):
+            follow = len(body)  # type: ignore[arg-type]
+        out.append((part, body))
+    return out
+
+
+@pytest.mark.gl
+def test_the_start_bundle_brings_the_first_views_wall_textures_and_walks_it_closed(walked: Path) -> None:
+    app = create_app([walked])
+    try:
+        on, off = _bundle(app, True), _bundle(app, False)
+    finally:
+        app.state.scenes.close()  # type: ignore[attr-defined]
+    names = [n for n, _ in on]
+    assert names.index("walls") < names.index("walltex") < names.index("contents")
+    assert "walls" not in [n for n, _ in off]  # not asked: the bundle as before
+    ids = dict(on)["walltex"]
+    sides = decode_walls(dict(on)["walls"], "walls")  # type: ignore[arg-type]
+    assert ids and set(ids) <= {t for s in sides for t in s.textures}  # type: ignore[arg-type]
+    # the first view walked with those walls closed needs no cell the open walk does not
+    first_on, first_off = dict(on)["contents"], dict(off)["contents"]
+    assert set(first_on) <= set(first_off) and len(first_on) <= len(first_off)  # type: ignore[arg-type]
+
+
+@pytest.mark.gl
+def test_a_walk_started_with_its_wall_textures_closes_its_first_walls(walked: Path) -> None:
+    with_tex = _replay(walked, kind="interior", start_walls=True, duration_s=4.0)
+    without = _replay(walked, kind="interior", start_walls=False, duration_s=4.0)
+    a, b = with_tex.interior, without.interior  # type: ignore[attr-defined]
+    s, g = with_tex.summary, without.summary  # type: ignore[attr-defined]
+    # the textures came in the bundle: the first frame shows walls closed, and fewer
+    # cells; a texture still missing on the other walk left its walls open
+    assert s["walls"]["textures_received"] > 0
+    assert a["cells"][0] < b["cells"][0]
+    assert s["perfect_frame_ratio"] >= 0.995
+    assert s["time_to_first_perfect_frame_s"] <= g["time_to_first_perfect_frame_s"]
+
+
+def test_a_walltex_part_lists_distinct_textures_and_a_short_bundle_says_so() -> None:
+    from walkstream.client.net.startitems import StartDecoder
+    from walkstream.shared.errors import CodecError
+    from walkstream.shared.startwire import decode_start_part
+
+    assert decode_start_part({"part": "walltex", "etag": None, "textures": [3, 5]}, "b") == ("walltex", None, [3, 5])
+    for bad in ([3, 3], [-1], "x", list(range(65))):
+        with pytest.raises(CodecError, match="walltex part without its textures"):
+            decode_start_part({"part": "walltex", "etag": None, "textures": bad}, "b")
+    dec = StartDecoder("params", False)
+    assert dec({"part": "walltex", "etag": None, "textures": [7]}, 10) == ("walltex", [7])
+    assert dec.short() == "1 wall textures"
+    with pytest.raises(CodecError, match="texture 8 where 7 was announced"):
+        dec({"cell": 8, "etag": "e", "body": b""}, 10)
+
+
 @pytest.mark.parametrize(
     ("flags", "message"),
     [

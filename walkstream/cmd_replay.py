@@ -137,6 +137,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         start_contents=not args.no_start_contents,
         path_head_s=args.path_head or None,
         start_heads=not args.no_start_heads,
+        start_walls=not args.no_start_walls,
         start_hold_s=args.start_hold,
         gzip=not args.no_gzip,
         truth_every=args.truth_every,
@@ -344,6 +345,9 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--no-start-heads", action="store_true",
                    help="interiors: the start bundle sends each cell of the first view whole (default: a cell "
                    "the first pose sees in part first as the pieces it draws, whole after the others)")
+    r.add_argument("--no-start-walls", action="store_true",
+                   help="a scene baked with --virtual-walls: the start bundle leaves out the wall sides and the "
+                   "first view's wall textures (they come by their own requests)")
     r.add_argument("--path-head", type=_seconds, default=10.0, metavar="S",
                    help="interiors: the start bundle sends only the path's first S seconds; the whole path is "
                    "fetched when the link is idle (default 10; 0: the whole path in the bundle)")

@@ -25,15 +25,15 @@ import math
 import random
 import zlib
 from collections.abc import AsyncGenerator, AsyncIterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import httpx
 import msgpack
 
 from walkstream.client.clock import Clock
+from walkstream.client.net.startitems import StartDecoder, StartItem, contents_part
 from walkstream.shared.codec.cellbatch import check_contents_part
-from walkstream.shared.codec.cellhead import decode_cell_head
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.content.impostor import KIND as IMPOSTOR
@@ -42,7 +42,7 @@ from walkstream.shared.content.walltex import KIND as WALLTEX
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, decode_path_any
 from walkstream.shared.paths import RecordedPath
-from walkstream.shared.roomcompact import TOPOLOGY_COMPACT_MAGIC, decode_topology_compact
+from walkstream.shared.roomcompact import decode_topology_compact
 from walkstream.shared.roomview import RoomView
 from walkstream.shared.roomwire import (
     Entrance,
@@ -67,25 +67,14 @@ from walkstream.shared.wire import (
     decode_locate,
     decode_manifest,
     decode_scene_list,
-    decode_start_part,
 )
 
 __all__ = [
-    "StartItem",
     "SceneClient",
 ]
 
 
 _MAX_FRAME = 32 << 20  # one object frame (an LOD2 mesh of a large block fits)
-
-StartItem = tuple[str, Any]
-"""One item of a start bundle as :meth:`SceneClient.start` yields it: ``("path",
-(RecordedPath, nbytes))`` (and ``("pathhead", ...)``, the path's first seconds, when asked), ``("cell", CellRecord)``, ``("index", CellIndex)``,
-``("topology", Topology)`` (interiors), ``("manifest", (Manifest, nbytes))``, ``("objects", count)`` (the PVS objects that
-follow), ``("object", ObjectFrame)``, ``("contents", [cell ids])`` (interiors: the
-contents that follow) or ``("room", (cell id, CellMesh))``; ``nbytes`` (and the records' ``nbytes``) is
-what the part cost on the wire."""
-
 
 @dataclass
 class TransferStats:
@@ -420,7 +409,7 @@ class SceneClient:
         def check(obj: Any, nbytes: int) -> tuple[int, CellMesh]:
             if got >= len(ids):
                 raise CodecError("more cells than asked")
-            return _contents_part(obj, nbytes, ids[got], f"{what}: part {got}")
+            return contents_part(obj, nbytes, ids[got], f"{what}: part {got}")
 
         async for part in self._stream("POST", self._url("/rooms/contents"), what, {"ids": ids}, check):
             got += 1
@@ -573,6 +562,7 @@ class SceneClient:
         view: RoomView | None = None,
         path_head_s: float | None = None,
         heads: bool = False,
+        walls: bool = False,
     ) -> AsyncGenerator[StartItem, None]:
         """Stream the start bundle (``GET /v1/start``) for a path's start or a position.
 
@@ -581,11 +571,12 @@ class SceneClient:
         such), the caller fetching the whole path itself; with ``heads`` too, a cell
         the first pose sees in part may come first as its head (a ``room`` item whose
         ``CellMesh.missing`` is not empty, :mod:`~walkstream.shared.codec.cellhead`),
-        then whole.
+        then whole.  With ``walls``, a scene baked with virtual walls adds its wall sides
+        and the first view's wall textures (``walls``, ``walltex``, ``texture`` items).
 
         The scene is :attr:`scene` if set, else the server's first; it is set from
         the answer's ``X-Scene`` header as soon as the head arrives.  Items are
-        yielded decoded (see :data:`StartItem`), each as soon as its last byte is in.
+        yielded decoded (see :data:`~walkstream.client.net.startitems.StartItem`), each as soon as its last byte is in.
 
         Raises
         ------
@@ -611,43 +602,11 @@ class SceneClient:
                 query["head"] = repr(float(path_head_s))
                 if heads:  # cells seen in part: their heads first
                     query["heads"] = "true"
+        if walls:  # a scene baked with walls: the sides and the first view's textures too
+            query["walls"] = "true"
         url = str(httpx.URL("/v1/start", params=query))
         what = "start bundle"
-        state: dict[str, Any] = {"objects": 0, "k": 0}
-        rooms: list[int] = []  # the contents parts still to come, in order
-
-        def item(obj: Any, nbytes: int) -> StartItem:
-            k = state["k"]
-            state["k"] = k + 1
-            if rooms:
-                return "room", _contents_part(obj, nbytes, rooms.pop(0), f"{what}: item {k}", heads)
-            if state["objects"] > 0:
-                state["objects"] -= 1
-                frame = obj
-                if not isinstance(frame, dict) or type(frame.get("id")) is not int:
-                    raise CodecError(f"{what}: item {k} is not an object frame")
-                return "object", decode_frame(frame, frame["id"], form, nbytes, f"{what}: object")
-            part, etag, body = decode_start_part(obj, f"{what}: item {k}")
-            if part == "objects":
-                assert isinstance(body, int)
-                state["objects"] = body
-                return "objects", body
-            if part == "contents":
-                assert isinstance(body, list)
-                rooms.extend(body)
-                return "contents", list(body)
-            assert isinstance(body, bytes)
-            label = f"{what}: {part}"
-            if part in ("path", "pathhead"):
-                return part, (decode_path_any(body, label), nbytes)
-            if part == "topology":
-                dec = decode_topology_compact if body[:4] == TOPOLOGY_COMPACT_MAGIC else decode_topology
-                return "topology", replace(dec(body, label), nbytes=nbytes)
-            if part == "cell":
-                return "cell", replace(decode_cell(body, label, etag), nbytes=nbytes)
-            if part == "index":
-                return "index", replace(decode_cell_index(body, label, etag), nbytes=nbytes)
-            return "manifest", (decode_manifest(body, label, etag), nbytes)
+        item = StartDecoder(form, heads, what)
 
         def on_head(r: httpx.Response) -> None:
             name = r.headers.get("x-scene")
@@ -656,10 +615,10 @@ class SceneClient:
 
         async for got in self._stream("GET", url, what, None, item, on_head=on_head):
             yield got
-        if state["objects"] > 0 or rooms:
+        short = item.short()
+        if short is not None:
             self.stats.cut_streams += 1
-            short = f"{state['objects']} objects" if state["objects"] else f"{len(rooms)} cells' contents"
-            raise StreamCut(f"{what}: ended {short} short", state["k"])
+            raise StreamCut(f"{what}: ended {short} short", item.k)
 
     async def _stream(
         self,
@@ -767,17 +726,3 @@ class SceneClient:
             # includes msgpack's BufferFull / limits: corrupt bytes, fetch again
             self.stats.cut_streams += 1
             raise StreamCut(f"{what}: corrupt after {got} items ({exc})", got) from exc
-
-
-def _contents_part(obj: Any, nbytes: int, expected: int, what: str, heads: bool = False) -> tuple[int, CellMesh]:
-    """``(cell, contents)`` of one unpacked contents part, which must be cell
-    ``expected``'s; ``nbytes`` is its share of the stream."""
-    missing = obj.pop("missing", None) if heads and isinstance(obj, dict) else None
-    cid, _etag, body = check_contents_part(obj, what)
-    if cid != expected:
-        raise CodecError(f"{what}: cell {cid} where {expected} was asked")
-    if missing is not None:  # a head: the pieces drawn first, stand-ins for the others
-        if not isinstance(missing, bytes):
-            raise CodecError(f"{what}: missing must be bytes")
-        return cid, replace(decode_cell_head(body, missing, f"head of cell {cid}"), nbytes=nbytes)
-    return cid, replace(CELLMESH.decode(body, f"contents of cell {cid}"), nbytes=nbytes)

@@ -23,6 +23,7 @@ virtual walls, :mod:`walkstream.client.walk.walls`), fetched by ``POST
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
@@ -138,6 +139,14 @@ class ImpostorImages:
                 self.scheduler.join(self)
                 self._joined = True
             self.scheduler.dispatch()
+
+    def adopt(self, image: int, rgba: Any, nbytes: int) -> None:
+        """An image that came another way (a start bundle's wall texture): cached and
+        counted as received, as if this lane had fetched it."""
+        self.cache.put(self.kind, int(image), rgba, max(int(getattr(rgba, "nbytes", 1)), 1))
+        self.received += 1
+        self.bytes_received += int(nbytes)
+        self.wanted.pop(int(image), None)
 
     async def close(self) -> None:
         """Cancel this lane's requests (the walk ended) and wait for them to end."""

@@ -20,6 +20,7 @@ from typing import Any
 from walkstream.client.clock import Clock, within
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.diskcache import DiskCache
+from walkstream.client.stream.startwalls import StartWalls
 from walkstream.client.stream.streamer import Streamer
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
@@ -147,6 +148,7 @@ async def interior_start(
     path_head_s: float | None = None,
     path_arrived: Callable[[RecordedPath], None] | None = None,
     heads: bool = False,
+    walls: StartWalls | None = None,
 ) -> tuple[tuple[RecordedPath, int] | None, Topology | None, StartContents | None]:
     """The interior start bundle of recorded path ``path``: ``((path, its bytes), topology,
     the first view's contents)``.
@@ -167,10 +169,14 @@ async def interior_start(
     ``head``), it goes to ``path_arrived`` at once: a caller that was not called walks
     a head.  With the path's head, ``heads``: a cell the first pose sees in part may
     come first as its head, then whole (``StartContents.cells`` names each cell once).
+    With ``walls`` (an interior baked with ``--virtual-walls``), the wall sides and the
+    first view's wall textures, before the contents: the first view is then walked with
+    those walls closed.
     """
     got: dict[str, Any] = {}
     split = view is not None and path_head_s is not None and path_arrived is not None
-    stream = api.start(path=path, view=view, path_head_s=path_head_s if split else None, heads=split and heads)
+    stream = api.start(path=path, view=view, path_head_s=path_head_s if split else None, heads=split and heads,
+                       walls=walls is not None and view is not None)
 
     def on_whole(p: RecordedPath) -> None:
         if path_arrived is not None:
@@ -194,6 +200,10 @@ async def interior_start(
                 on_whole(item[0])
             elif part == "pathhead":
                 part = "path"  # walk the head while the whole path comes
+            elif part == "walls" and walls is not None:
+                walls.add_sides(*item)
+            elif part == "texture" and walls is not None:
+                walls.add_texture(*item)
             got[part] = item
             if part == "contents":
                 return  # the walk can start: the contents follow as it goes

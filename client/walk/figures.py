@@ -83,7 +83,8 @@ class WalkFrames:
     wall_bytes: list[int] = field(default_factory=list)
     """Bytes of the wall textures each frame drew."""
     geometry: list[int] = field(default_factory=list)
-    """Objects drawn as geometry per frame (a scene with walls; empty otherwise)."""
+    """Street frames: the city objects drawn as geometry per frame (no quad counted: the
+    walls', the facades' and the impostors' are not geometry); empty indoors."""
     far_field: list[int] = field(default_factory=list)
     """Outdoors, per frame: 1 when a ring wall in view had no texture yet and the frame
     drew the ring's far field as geometry instead, else 0."""
@@ -105,11 +106,16 @@ class WalkFrames:
             "frames_with_walls": float((n > 0).mean()),
             "wall_texture_bytes_mean": float(b.mean()),
             "wall_texture_bytes_max": int(b.max()),
-            **({"geometry_objects_mean": float(np.mean(self.geometry))} if self.geometry else {}),
+            **self.geometry_figures(),
             **({"far_field_frames": float(np.mean(self.far_field))} if self.far_field else {}),
             **({"texture_missing_frames": float(np.mean(np.asarray(self.texture_missing) > 0))}
                if self.texture_missing else {}),
         }
+
+    def geometry_figures(self) -> dict[str, float]:
+        """``geometry_objects_mean``: city objects drawn as geometry per frame (street
+        frames; the effective culling's numerator), empty when no street frame was counted."""
+        return {"geometry_objects_mean": float(np.mean(self.geometry))} if self.geometry else {}
 
     def facade_figures(self) -> dict[str, float]:
         """Boxes with facades and their quads per frame (mean), the share of frames drawing

@@ -73,9 +73,10 @@ def measure(w: WalkState, f: Frame) -> None:
         fr.walls_closed.append(sum(1 for d in f.walls if d.alpha >= 1.0))
         fr.wall_bytes.append(sum({d.image: d.nbytes for d in f.walls}.values()))
         if not w.indoors and city is not None:
-            fr.geometry.append(int((f.lods >= 0).sum()))
             fr.far_field.append(int(f.ring_far))
             fr.texture_missing.append(int(f.wall_missing))
+    if not w.indoors and city is not None:  # objects drawn as geometry: no quad counted (walls, facades, impostors)
+        fr.geometry.append(int((f.lods >= 0).sum()))
     if w.facades is not None and not w.indoors:
         fr.facades.append(len(f.facades))
         fr.facade_quads.append(len(f.facade_quads))

@@ -11,7 +11,7 @@ from walkstream.client.rewrite.geometry import ObjectGeometry
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.streamer import Streamer
 
-__all__ = ["PvsObjects", "behind_walls"]
+__all__ = ["PvsObjects", "behind_walls", "through_walls"]
 
 
 class PvsObjects:
@@ -31,13 +31,17 @@ class PvsObjects:
         self.hi: NDArray[np.float64] = np.zeros((0, 3))
 
     def update(self, cells: list[int], city: Streamer, cache: Cache, skip: int, *,
-               far: tuple[tuple[float, float, float, float], ...] = ()) -> None:
+               far: tuple[tuple[float, float, float, float], ...] = (),
+               eye: NDArray[np.float64] | None = None) -> None:
         """The union of ``cells``' PVS (each object at its highest ACH), ``skip`` left out;
         ``far``: the ring walls in view without their texture (their ends, the hidden
         space to the left, :attr:`~walkstream.client.walk.state.Frame.far_walls`): the
         objects of the far field their ring carries that stand behind one of them join
-        (:func:`behind_walls`; one not built yet joins too: it must arrive)."""
-        key = (tuple((c, c in city.cells) for c in cells), city.geometry_version, sum(cache.evictions.values()), far)
+        (:func:`behind_walls`; one not built yet joins too: it must arrive); with ``eye``
+        ``(3,)`` only those seen through one of those walls from it."""
+        # the eye moves the far field's angles: in the key only while a far field is drawn
+        at = tuple(np.round(np.asarray(eye, np.float64).reshape(-1)[:2], 2).tolist()) if far and eye is not None else ()
+        key = (tuple((c, c in city.cells) for c in cells), city.geometry_version, sum(cache.evictions.values()), far, at)
         if key == self.key:
             return
         self.key = key
@@ -49,7 +53,7 @@ class PvsObjects:
             ids, cover = rec.streamed() if far else (rec.pvs, rec.ach)
             keep = np.ones(len(ids), bool)
             if far:
-                keep[len(rec.pvs):] = behind_walls([cache.peek("geom", int(i)) for i in ids[len(rec.pvs):]], far)
+                keep[len(rec.pvs):] = behind_walls([cache.peek("geom", int(i)) for i in ids[len(rec.pvs):]], far, eye)
             for oid, a in zip(ids[keep].tolist(), cover[keep].tolist(), strict=True):
                 if oid != skip:
                     ach[oid] = max(a, ach.get(oid, 0.0))
@@ -67,11 +71,19 @@ class PvsObjects:
             self.lo = self.hi = np.zeros((0, 3))
 
 
-def behind_walls(geoms: list[ObjectGeometry | None], walls: tuple[tuple[float, float, float, float], ...]) -> NDArray[np.bool_]:
+def behind_walls(geoms: list[ObjectGeometry | None], walls: tuple[tuple[float, float, float, float], ...],
+                 eye: NDArray[np.float64] | None = None) -> NDArray[np.bool_]:
     """``(n,)`` which of ``geoms`` (None: not built yet, kept) have a corner of their box
     behind one of ``walls`` (ends ``(x0, y0, x1, y1)``, the hidden space to the left of
     ``p0 -> p1`` seen from above): the far field a missing texture of those walls leaves
-    to geometry."""
+    to geometry.
+
+    With ``eye`` ``(2,)`` or ``(3,)`` as well, only the boxes seen *through* one of those
+    walls: behind its line and within the angle it spans from the eye
+    (:func:`through_walls`).  A far object behind a missing wall's line but seen only
+    through a neighbour wall whose texture is held is on that texture: drawing it as
+    geometry too only cost culling (the ring's four walls meet at its corners, so most of
+    a wall's half-plane is seen through its neighbours)."""
     out = np.ones(len(geoms), bool)
     built = [k for k, g in enumerate(geoms) if g is not None]
     if not built or not walls:
@@ -82,7 +94,28 @@ def behind_walls(geoms: list[ObjectGeometry | None], walls: tuple[tuple[float, f
     w = np.asarray(walls, np.float64).reshape(-1, 4)
     d = w[:, 2:] - w[:, :2]  # (k, 2)
     rel = corners[:, :, None, :] - w[None, None, :, :2]  # (m, 4, k, 2)
-    left = d[None, None, :, 0] * rel[..., 1] - d[None, None, :, 1] * rel[..., 0] > 0.0
-    out[built] = left.any(axis=(1, 2))
+    left = (d[None, None, :, 0] * rel[..., 1] - d[None, None, :, 1] * rel[..., 0] > 0.0).any(axis=1)  # (m, k)
+    if eye is not None:
+        left &= through_walls(corners, w, np.asarray(eye, np.float64).reshape(-1)[:2])
+    out[built] = np.any(left, axis=1)
     return out
 
+
+def through_walls(corners: NDArray[np.float64], walls: NDArray[np.float64], eye: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """``(m, k)`` whether box ``i`` (its four corners ``(m, 4, 2)``, seen from above)
+    overlaps the angle wall ``j`` (ends ``(k, 4)`` as ``(x0, y0, x1, y1)``) spans from
+    ``eye`` ``(2,)``: every angle is taken from the direction to the wall's middle, so
+    neither interval wraps; a box spanning half a turn or more (the eye inside it, or
+    beside it) always overlaps.  Conservative: a box outside the angle cannot be seen
+    through the wall."""
+    mid = (walls[:, :2] + walls[:, 2:]) / 2.0 - eye  # (k, 2)
+
+    def angle(v: NDArray[np.float64]) -> NDArray[np.float64]:  # v (..., k, 2) from the eye
+        return np.arctan2(mid[:, 0] * v[..., 1] - mid[:, 1] * v[..., 0], mid[:, 0] * v[..., 0] + mid[:, 1] * v[..., 1])
+
+    ends = np.stack([angle(walls[:, :2] - eye), angle(walls[:, 2:] - eye)])  # (2, k)
+    a_lo, a_hi = ends.min(axis=0), ends.max(axis=0)
+    seen = angle(corners[:, :, None, :] - eye)  # (m, 4, k)
+    b_lo, b_hi = seen.min(axis=1), seen.max(axis=1)  # (m, k)
+    wide = b_hi - b_lo >= np.pi
+    return wide | ((b_hi >= a_lo[None, :]) & (b_lo <= a_hi[None, :]))

@@ -85,4 +85,5 @@ def visible(w: WalkState, f: Frame) -> None:
     f.room_cells = [c for c in vis if c not in foreign]
     f.default_room_cells = [c for c in default if c not in foreign]
     if city is not None:
-        w.objects.update(f.pvs_cells, city, w.scene.cache, -1 if e is None else e.building, far=f.far_walls)
+        w.objects.update(f.pvs_cells, city, w.scene.cache, -1 if e is None else e.building, far=f.far_walls,
+                          eye=f.eye)

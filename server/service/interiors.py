@@ -185,7 +185,8 @@ class InteriorState:
         return PortalGraph.from_topology(topo), RoomLocator(topo.cells)
 
     def first_view(
-        self, poses: Sequence[tuple[ArrayLike, float, float]], view: RoomView, max_bytes: int
+        self, poses: Sequence[tuple[ArrayLike, float, float]], view: RoomView, max_bytes: int,
+        closed: frozenset[int] = frozenset(),
     ) -> list[int]:
         """The cells a client walking with ``view`` sees from ``poses`` (``(eye, yaw,
         pitch)``, the first where the walk starts, the others where it may lead) while
@@ -196,9 +197,15 @@ class InteriorState:
         each next pose's new ones.  (Ordering the first view's cells by how long they
         stay in view, which helps when the walk goes straight on, made the office
         tour's first perfect frame later, 3.21 s against 3.17 s: the tour turns.)
+
+        ``closed``: the virtual walls whose textures the bundle brings, closed in the
+        first pose's walk (:mod:`~walkstream.server.service.firstwalls`).
         """
         graph, locator = self.view_model
-        order = list(dict.fromkeys(c for seen in cells_seen(graph, locator, poses, view) for c in seen))
+        seen = cells_seen(graph, locator, poses, view)
+        if closed and seen:
+            seen[0] = cells_seen(graph, locator, poses[:1], view, closed)[0]
+        order = list(dict.fromkeys(c for cells in seen for c in cells))
         out: list[int] = []
         total = 0
         for cid in order:

@@ -21,12 +21,17 @@ from numpy.typing import NDArray
 
 from walkstream.server.service.contentsform import STREAM_LEVEL, ContentsStream
 from walkstream.server.service.firstheads import HEAD_SHARE, first_heads
+from walkstream.server.service.firstwalls import (
+    first_wall_textures,
+    scene_walls,
+)
 from walkstream.server.service.http import Encoded, Rep
 from walkstream.server.service.scenes import Form, Scene
+from walkstream.shared.codec.cellbatch import pack_contents_part
 from walkstream.shared.errors import ApiError
 from walkstream.shared.pathcodec import decode_path_q
 from walkstream.shared.paths import RecordedPath
-from walkstream.shared.roomview import RoomView
+from walkstream.shared.roomview import RoomView, cells_seen
 
 __all__ = [
     "START_LEAD_S",
@@ -79,7 +84,7 @@ class Frames:
 
 
 StartPart = tuple[str, "Encoded | Frames"]
-"""One part of a start bundle: its name (:data:`~walkstream.shared.wire.START_PARTS`) and
+"""One part of a start bundle: its name (:data:`~walkstream.shared.startwire.START_PARTS`) and
 its encoded body, or for ``objects`` and ``contents`` the frames that follow its header."""
 
 
@@ -183,6 +188,7 @@ def start_parts(
     inflate: bool = False,
     path_head_s: float | None = None,
     heads: bool = False,
+    walls: bool = False,
 ) -> list[StartPart]:
     """The parts of a start bundle at ``xy``, in the order sent.
 
@@ -209,6 +215,12 @@ def start_parts(
     ``heads`` as well, a cell the path's first pose sees in part goes first as its head
     (:mod:`~walkstream.server.service.firstheads`) and whole after every other cell: the
     contents' list then names it twice.
+
+    With ``walls``, on an interior baked with ``--virtual-walls``, the bundle also brings
+    the wall sides (``walls``) and the textures of the walls the first view sees
+    (``walltex``, :mod:`~walkstream.server.service.firstwalls`) before its contents,
+    whose first view is then the walk with those walls closed (a city's bundle is
+    unchanged).
     """
     parts: list[StartPart] = []
     split = path is not None and scene.interior is not None and view is not None and rep == "msgpack"
@@ -224,7 +236,11 @@ def start_parts(
         if path is not None and view is not None:
             interior = scene.interior
             lead = room_lead(scene, path)
-            cells = interior.first_view(lead, view, START_ROOM_BYTES)
+            closed: frozenset[int] = frozenset()
+            if walls and scene.has_walls:  # the first view's wall textures first: their walls closed
+                wall_parts, closed = _first_walls(scene, lead[0], view, rep)
+                parts += wall_parts
+            cells = interior.first_view(lead, view, START_ROOM_BYTES, closed)
             # the cells the first pose sees in part go first as heads, whole after the others
             hd = first_heads(interior, cells, lead[0], view) if heads else {}
             # in a gzip answer, each cell in the form that costs it fewer bytes there
@@ -276,6 +292,25 @@ def start_parts(
             found.update(scene.load_frames(missing, form))
         parts.append(("objects", Frames(order, [found[oid] for oid in order])))
     return parts
+
+
+def _first_walls(scene: Scene, pose: tuple[NDArray[np.float64], float, float], view: RoomView,
+                 rep: Rep) -> tuple[list[StartPart], frozenset[int]]:
+    """An interior's wall parts (every side, then the textures of the walls ``pose``
+    sees at full weight on the cells its walk reaches with them closed) and those walls."""
+    interior = scene.interior
+    assert interior is not None
+    graph, locator = interior.view_model
+    ids, closed = first_wall_textures(
+        scene_walls(scene, interior.topology_compact.content), pose, view,
+        reached=lambda shut: cells_seen(graph, locator, [pose], view, shut)[0])
+    return [("walls", scene.walls[rep]), ("walltex", _textures(scene, ids))], closed
+
+
+def _textures(scene: Scene, ids: list[int]) -> Frames:
+    """Wall textures ``ids`` as the textures' batch sends them, one part each."""
+    encs = [scene.wall_texture(t) for t in ids]
+    return Frames(ids, [pack_contents_part(t, e.etag, e.content) for t, e in zip(ids, encs, strict=True)])
 
 
 def room_lead(scene: Scene, path: str) -> list[tuple[NDArray[np.float64], float, float]]:

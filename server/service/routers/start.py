@@ -41,7 +41,11 @@ path; the client fetches the whole path (``GET .../paths/{name}``) when its link
 idle, before the head ends.  With ``heads=true`` as well (a path and a view), a cell the first pose sees in
 part comes first as its *head* (a part with one more field, ``missing``:
 :mod:`walkstream.shared.codec.cellhead`) and whole after every other cell, so the cell
-is named twice in ``cells``.  A client that does not ask gets the order above; a server
+is named twice in ``cells``.  With ``walls=true`` (an interior baked with ``--virtual-walls``,
+a path and a view) the wall sides (``walls``, as ``GET .../walls`` sends them) and the first
+view's wall textures (``walltex``: ``{part, etag: null, textures: [ids]}`` then one ``{cell,
+etag, body}`` part each, as ``POST .../walls/textures`` sends them) come before the
+contents, and the first view's cells are those of the walk with those walls closed.  A client that does not ask gets the order above; a server
 that does not know ``head`` ignores it (the whole path then comes, as ``path``).  The walk's other cells come by the client's own requests.  The ``path`` part is the compact ``walkstream-path-q/1``
 encoding (as ``GET .../paths/{name}`` sends it when ``Accept`` names it); with
 ``Accept: application/json`` each body is its JSON form.
@@ -144,6 +148,13 @@ Heads = Annotated[
           "head (the pieces drawn and the boxes of the others, part field missing), whole after the others"),
 ]
 
+WallsQ = Annotated[
+    bool,
+    Query(description="interiors baked with --virtual-walls, with view and path: also the wall sides (part walls) "
+          "and the first view's wall textures (part walltex: {part, etag: null, textures: [ids]}, then one "
+          "{cell, etag, body} part each) before the contents, the first view then walked with those walls closed"),
+]
+
 
 @dataclass(frozen=True)
 class StartQuery:
@@ -168,6 +179,7 @@ class StartQuery:
     depth: Depth = None
     head: Head = None
     heads: Heads = False
+    walls: WallsQ = False
 
     def room_view(self) -> RoomView | None:
         """The client's interior view when it gave its viewport (else None)."""
@@ -229,7 +241,7 @@ async def _bundle(request: Request, scene: Scene, rep: Rep, q: StartQuery) -> St
     inflate = accepts_gzip(request.headers.get("accept-encoding"))
     parts = await run_in_threadpool(
         lambda: start_parts(scene, xy, rep, q.path, h, v, cast(ObjForm, q.form), view=view, inflate=inflate,
-                            path_head_s=q.head, heads=q.heads)
+                            path_head_s=q.head, heads=q.heads, walls=q.walls)
     )
     headers = {"X-Scene-Version": scene.version, "X-Scene": scene.name, "Cache-Control": "no-cache"}
     if rep == "json":
@@ -253,6 +265,8 @@ def _msgpack_parts(parts: list[StartPart]) -> Iterable[bytes]:
             head: dict[str, Any] = {"part": name, "etag": None}
             if name == "contents":
                 head["cells"] = body.ids
+            elif name == "walltex":
+                head["textures"] = body.ids
             else:
                 head["count"] = len(body.frames)
             yield dump_msgpack(head)

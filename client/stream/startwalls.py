@@ -1,0 +1,53 @@
+"""What an interior's start bundle brought of its textured virtual walls: the wall sides and the first view's textures.
+
+Asked for with ``walls=true`` (:attr:`~walkstream.client.config.ReplayConfig.start_walls`):
+the bundle carries every wall side (what ``GET .../walls`` sends) and the textures of
+the walls the first view sees (:mod:`walkstream.server.service.firstwalls`).  The
+walls' image lane does not exist yet while the bundle streams (it is made once the
+sides are known), so the textures wait here and go into the walk's cache when the
+lane is attached (:meth:`StartWalls.attach`); a texture arriving after that goes
+straight in.  A server that sends no walls part leaves :attr:`StartWalls.sides`
+None: the replay then asks for the sides itself, as before.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from walkstream.client.stream.images import ImpostorImages
+from walkstream.shared.walls import WallSide
+
+__all__ = ["StartWalls"]
+
+
+class StartWalls:
+    """The wall parts of one start bundle (see the module docstring)."""
+
+    def __init__(self) -> None:
+        self.sides: tuple[WallSide, ...] | None = None
+        """Every wall side, once the bundle's ``walls`` part is in (None: not sent)."""
+        self.nbytes = 0
+        """Bytes of the wall parts on the wire (sides and textures)."""
+        self._textures: list[tuple[int, Any, int]] = []
+        self._lane: ImpostorImages | None = None
+
+    def add_sides(self, sides: tuple[WallSide, ...], nbytes: int) -> None:
+        """The bundle's ``walls`` part arrived."""
+        self.sides = sides
+        self.nbytes += int(nbytes)
+
+    def add_texture(self, tid: int, rgba: Any, nbytes: int) -> None:
+        """One of the first view's textures arrived (kept until the lane is attached)."""
+        self.nbytes += int(nbytes)
+        if self._lane is not None:
+            self._lane.adopt(tid, rgba, nbytes)
+        else:
+            self._textures.append((tid, rgba, nbytes))
+
+    def attach(self, lane: ImpostorImages) -> None:
+        """The walls' lane is made: the textures received so far go into its cache, the
+        later ones as they come."""
+        self._lane = lane
+        for tid, rgba, nbytes in self._textures:
+            lane.adopt(tid, rgba, nbytes)
+        self._textures.clear()
