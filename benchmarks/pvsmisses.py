@@ -60,7 +60,7 @@ from walkstream.shared.paths import RecordedPath
 if TYPE_CHECKING:
     import moderngl
 
-__all__ = ["REASONS", "OVER_SHARE", "client_face_pixels", "pvs_misses", "format_pvs_misses"]
+__all__ = ["REASONS", "OVER_SHARE", "client_face_pixels", "run_pvs_misses", "format_pvs_misses"]
 
 #: the reasons an object is missed, in the order they are tried (see the module docs)
 REASONS: tuple[str, ...] = ("sampling", "resolution", "geometry", "pixel centres", "outside")
@@ -82,7 +82,7 @@ def client_face_pixels(width: int, fov_deg: float) -> int:
     return int(math.ceil(width / math.tan(math.radians(fov_deg) / 2.0) - 1e-9))
 
 
-def pvs_misses(
+def run_pvs_misses(
     database: str | os.PathLike[str],
     paths: Sequence[str],
     *,
@@ -183,7 +183,7 @@ def pvs_misses(
                 if share <= OVER_SHARE:
                     continue  # the probes are the slow part: only the poses that count
                 seen = [dict(zip(*(a.tolist() for a in r.cell_counts(eye[None])), strict=True)) for r in probes]
-                listed = []
+                listed: list[dict[str, Any]] = []
                 for j in np.flatnonzero(out)[np.argsort(-px[out], kind="stable")]:
                     o = int(ids[j])
                     r = "outside" if cid is None else next(

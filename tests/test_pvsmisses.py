@@ -6,14 +6,14 @@ from pathlib import Path
 
 import pytest
 
-from walkstream.benchmarks.pvsmisses import REASONS, pvs_misses
+from walkstream.benchmarks.pvsmisses import REASONS, run_pvs_misses
 from walkstream.cli import main
 
 
 @pytest.mark.gl
 def test_every_missed_pixel_gets_a_reason_and_the_mean_is_theirs(small_city_db: Path, gl: object) -> None:
     # the small city is baked coarsely (32 px at the box corners): it misses things for several reasons
-    r = pvs_misses(small_city_db, ["SE"], every=4.0, size=(160, 120), top=3, ctx=gl)  # type: ignore[arg-type]
+    r = run_pvs_misses(small_city_db, ["SE"], every=4.0, size=(160, 120), top=3, ctx=gl)  # type: ignore[arg-type]
     f = r["paths"]["SE"]
     assert r["probe_resolution"] == 278  # 160 px over 60 degrees: as fine at the centre
     assert set(f["reasons"]) == set(REASONS)

@@ -15,11 +15,11 @@ __all__ = ["add_pvs_benches"]
 
 def cmd_bench_pvs_misses(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench pvs-misses``."""
-    from walkstream.benchmarks.pvsmisses import format_pvs_misses, pvs_misses
+    from walkstream.benchmarks.pvsmisses import format_pvs_misses, run_pvs_misses
 
     bar, progress = count_bar("poses", "pose")
     try:
-        result = pvs_misses(Path(args.db), [p for p in args.paths.split(",") if p], every=args.every,
+        result = run_pvs_misses(Path(args.db), [p for p in args.paths.split(",") if p], every=args.every,
                             top=args.top, progress=progress)
     finally:
         bar.close()
