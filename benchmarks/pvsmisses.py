@@ -49,8 +49,9 @@ import numpy as np
 import shapely
 
 from walkstream.benchmarks.visinput import scene_from_database
+from walkstream.server.bake.idpack import meshes_for_scene
 from walkstream.server.bake.settings import BakeSettings
-from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene
+from walkstream.server.bake.visibility import VisibilityRenderer
 from walkstream.server.bake.workers import cell_points
 from walkstream.shared.camera import camera
 from walkstream.shared.cells import CellLocator

@@ -35,7 +35,7 @@ def test_a_band_is_the_four_sideways_faces_cut_short_with_square_pixels() -> Non
 
 @pytest.mark.gl
 def test_the_band_sees_a_far_post_between_bake_pixels_and_not_what_a_wall_hides(gl: object) -> None:
-    from walkstream.server.bake.visibility import meshes_for_scene
+    from walkstream.server.bake.idpack import meshes_for_scene
     from walkstream.server.sources.scene import SourceScene
 
     post = _block(1, 199.5, -0.5, 200.5, 0.5, 3.0)  # 1 m wide, 200 m east, straight ahead: 0.29 degrees

@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.server.bake.draworder import frustum_planes, runs
 from walkstream.server.bake.faceset import FaceSet
-from walkstream.server.bake.idpack import meshes_for_scene, pack_meshes
+from walkstream.server.bake.idpack import pack_meshes
 from walkstream.server.bake.thindepth import DepthEroder
 from walkstream.server.bake.thinpass import draw_thin_pass
 from walkstream.shared.errors import InputError, RenderError
@@ -54,7 +54,7 @@ if TYPE_CHECKING:
 
 from walkstream.shared.arrays import F64, I64
 
-__all__ = ["meshes_for_scene", "VisibilityRenderer", "pvs_from_counts"]
+__all__ = ["VisibilityRenderer", "pvs_from_counts"]
 
 
 _VERTEX_SHADER = """

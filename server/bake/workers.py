@@ -17,10 +17,11 @@ from numpy.typing import NDArray
 
 from walkstream.server.bake.farband import band_renderer, merge_band_counts
 from walkstream.server.bake.fieldrender import FieldRenderer
+from walkstream.server.bake.idpack import meshes_for_scene
 from walkstream.server.bake.samples import bake_points, split_points
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
-from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
+from walkstream.server.bake.visibility import VisibilityRenderer, pvs_from_counts
 from walkstream.server.sources.scene import SourceScene
 
 __all__ = [
