@@ -23,15 +23,12 @@ edges merely touch an occluder's silhouette.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.shared.arrays import F64, I64
-
-if TYPE_CHECKING:
-    from walkstream.server.bake.visibility import VisibilityRenderer
 
 __all__ = ["draw_thin_pass", "face_presence", "thin_candidates"]
 
@@ -145,10 +142,13 @@ def _corners(lo: F64, hi: F64) -> F64:
 
 
 def draw_thin_pass(
-    r: VisibilityRenderer, points: F64, draw: NDArray[np.bool_], rows: NDArray[np.uint32],
+    r: Any, points: F64, draw: NDArray[np.bool_], rows: NDArray[np.uint32],
     used: tuple[int, int, int, int], mvps: NDArray[np.float32],
 ) -> I64:
     """Draw the thin pass's candidates over the finished fill of ``r``; their pixels per object (local index + 1).
+
+    ``r`` is the :class:`~walkstream.server.bake.visibility.VisibilityRenderer` whose
+    pass it is (not imported here: it imports this module).
 
     ``rows`` is read in (the fill's image) and overwritten with the pass's own
     image: only the candidates' ids, 0 elsewhere.
