@@ -177,9 +177,9 @@ def draw_thin_pass(
         fb.fbo.clear(0.0, 0.0, 0.0, 0.0, viewport=used)
         if len(commands):
             if r._multi_draw:
-                if commands.nbytes > r._indirect.size:  # type: ignore[union-attr]
-                    r._indirect.orphan(max(commands.nbytes, 2 * r._indirect.size))  # type: ignore[union-attr]
-                r._indirect.write(commands.tobytes())  # type: ignore[union-attr]
+                if commands.nbytes > r._indirect.size:
+                    r._indirect.orphan(max(commands.nbytes, 2 * r._indirect.size))
+                r._indirect.write(commands.tobytes())
             ctx.wireframe = True
             try:
                 r._draw_faces(commands, offsets, mvps)
