@@ -74,6 +74,8 @@ _EXPORTS = {
     "run_ring_bench": "walkstream.benchmarks.ringrepair",
     "format_ring_table": "walkstream.benchmarks.ringrepair",
     "run_plots_bench": "walkstream.benchmarks.reportplots",
+    "run_pvs_misses": "walkstream.benchmarks.pvsmisses",
+    "format_pvs_misses": "walkstream.benchmarks.pvsmisses",
     "format_plots_table": "walkstream.benchmarks.reportplots",
 }
 

@@ -33,8 +33,9 @@ from walkstream.benchmarks.fieldcull import CulledRenderer
 from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.field import FIELD_BLOCK, FIELD_HEIGHTS, field_lattice, points_meeting
 from walkstream.server.bake.fieldrender import FieldRenderer
+from walkstream.server.bake.idpack import meshes_for_scene
 from walkstream.server.bake.settings import BakeSettings
-from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene
+from walkstream.server.bake.visibility import VisibilityRenderer
 from walkstream.server.sources.read import read_source
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError, WalkstreamError

@@ -26,8 +26,9 @@ import shapely
 from numpy.typing import NDArray
 
 from walkstream.server.bake.cells import make_cells
+from walkstream.server.bake.idpack import meshes_for_scene
 from walkstream.server.bake.samples import sample_points
-from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene
+from walkstream.server.bake.visibility import VisibilityRenderer
 from walkstream.server.sources.citygen import generate_city
 from walkstream.server.sources.geojson import load_geojson_dict
 from walkstream.server.sources.scene import SourceScene

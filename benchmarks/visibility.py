@@ -75,10 +75,11 @@ from walkstream.benchmarks.vissettings import (
 )
 from walkstream.server.bake.field import FieldLattice
 from walkstream.server.bake.fieldsampling import cell_field_counts, sampling_lattice
+from walkstream.server.bake.idpack import meshes_for_scene
 from walkstream.server.bake.samples import reference_points
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
-from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
+from walkstream.server.bake.visibility import VisibilityRenderer, pvs_from_counts
 from walkstream.server.bake.workers import cell_counts
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.errors import InputError

@@ -18,7 +18,8 @@ from walkstream.benchmarks.fieldcull import CulledRenderer
 from walkstream.benchmarks.fieldspeed import _field_points, format_field_speed, run_field_speed
 from walkstream.cli import main
 from walkstream.server.bake.field import FIELD_HEIGHTS
-from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene
+from walkstream.server.bake.idpack import meshes_for_scene
+from walkstream.server.bake.visibility import VisibilityRenderer
 from walkstream.server.sources.citygen import write_city
 from walkstream.server.sources.read import read_source
 from walkstream.shared.errors import InputError

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import shapely
 
+from walkstream.server.bake.idpack import meshes_for_scene
 from walkstream.server.bake.samples import (
     bake_points,
     boundary_points,
@@ -19,7 +20,7 @@ from walkstream.server.bake.samples import (
     sample_points,
     split_points,
 )
-from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
+from walkstream.server.bake.visibility import VisibilityRenderer, pvs_from_counts
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.buildings import build_lod
 from walkstream.shared.errors import InputError, RenderError

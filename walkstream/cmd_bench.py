@@ -39,6 +39,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from walkstream.cmd_bench_pvs import add_pvs_benches
 from walkstream.cmd_bench_rooms import add_room_benches
 from walkstream.shared.errors import WalkstreamError
 from walkstream.terminal import building_bar, count_bar
@@ -676,6 +677,7 @@ def add_bench_parser(sub: Any) -> None:
     bc.set_defaults(func=cmd_bench_controller)
 
     add_room_benches(besub)
+    add_pvs_benches(besub)
     _add_lod(besub)
     _add_fill(besub)
     _add_clusters(besub)

@@ -19,6 +19,8 @@ __all__ = [
     "DEFAULT_OCCLUDER_LOD",
     "DEFAULT_SAMPLING",
     "DEFAULT_THIN_PASS",
+    "DEFAULT_FAR_BAND",
+    "DEFAULT_FAR_PIXELS",
     "DEFAULT_FIELD_SPACING",
     "DEFAULT_REDUNDANCY",
     "DEFAULT_MIN_SIZE",
@@ -39,6 +41,11 @@ DEFAULT_SAMPLING = "region"
 #: the thin pass (objects under a pixel tested again, lines and points against the
 #: fill's depth), in pixels of a box's narrower screen extent; 0: off
 DEFAULT_THIN_PASS = 0.0
+#: the far field's band (``--far-band``): degrees above and below the horizon, 0: off;
+#: its pixels across a 90-degree face (``--far-pixels``): a 640-pixel, 60-degree client
+#: frame's pixels per degree at the centre (640 / tan 30 degrees)
+DEFAULT_FAR_BAND = 0.0
+DEFAULT_FAR_PIXELS = 1109
 
 #: sections (Brosnan et al. sample every 2 m; see docs/benchmarks.md for the cost of
 #: the field on the demo city at 2 and 4 m)
@@ -103,6 +110,12 @@ class BakeSettings:
     """The thin pass tests against the fill's depth taken as the farthest over each
     pixel's 3 x 3 neighbours (occluders shrunk by a pixel for that test:
     :mod:`~walkstream.server.bake.thindepth`)."""
+    far_band: float = DEFAULT_FAR_BAND
+    """Render each sample point a second time as a horizon band this many degrees
+    above and below the horizon at ``far_pixels`` across 90 degrees (the far field at
+    the client's pixel size: :mod:`~walkstream.server.bake.farband`; 0: off)."""
+    far_pixels: int = DEFAULT_FAR_PIXELS
+    """The band's pixels across each of its four 90-degree faces."""
     field_spacing: float = DEFAULT_FIELD_SPACING
     """``cells="sections"`` or ``sampling="field"``: metres between the points of the dense visibility field."""
     redundancy: int = DEFAULT_REDUNDANCY
@@ -129,6 +142,9 @@ class BakeSettings:
             out.pop("thin_pass")  # bakes without it keep the header they had before it existed
         if not self.thin_depth:
             out.pop("thin_depth")
+        if not self.far_band:
+            out.pop("far_band")  # as the thin pass: bakes without it keep their header
+            out.pop("far_pixels")
         if self.cells != "sections":
             for name in SECTION_FIELDS:
                 if name != "field_spacing" or self.sampling != "field":
@@ -165,6 +181,12 @@ class BakeSettings:
             raise InputError(f"--split: expected 0 <= split < 1 (a Jaccard distance; 0: off), got {self.split}")
         if not (np.isfinite(self.thin_pass) and 0.0 <= self.thin_pass <= 64.0):
             raise InputError(f"--thin-pass: expected 0..64 pixels (0: off), got {self.thin_pass}")
+        if not (np.isfinite(self.far_band) and 0.0 <= self.far_band <= 30.0):
+            raise InputError(f"--far-band: expected 0..30 degrees (0: off), got {self.far_band}")
+        if not 8 <= self.far_pixels <= 4096:
+            raise InputError(f"--far-pixels: expected 8..4096 pixels, got {self.far_pixels}")
+        if self.far_band and (self.sampling == "field" or self.cells == "sections"):
+            raise InputError("--far-band: works with the region, boundary and corners sampling, not with the field's")
         if self.thin_depth and not self.thin_pass:
             raise InputError("--thin-depth: give --thin-pass PX too (it sets how the thin pass tests depth)")
         if self.threshold < 0:

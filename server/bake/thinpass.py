@@ -23,12 +23,14 @@ edges merely touch an occluder's silhouette.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.shared.arrays import F64
+from walkstream.shared.arrays import F64, I64
 
-__all__ = ["face_presence", "thin_candidates"]
+__all__ = ["draw_thin_pass", "face_presence", "thin_candidates"]
 
 
 def face_presence(rows: NDArray[np.uint32], resolution: int, points: int, n: int) -> NDArray[np.bool_]:
@@ -138,3 +140,56 @@ def _corners(lo: F64, hi: F64) -> F64:
     pick = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], bool)  # (8, 3)
     return np.where(pick[None, :, :], hi[:, None, :], lo[:, None, :])
 
+
+def draw_thin_pass(
+    r: Any, points: F64, draw: NDArray[np.bool_], rows: NDArray[np.uint32],
+    used: tuple[int, int, int, int], mvps: NDArray[np.float32],
+) -> I64:
+    """Draw the thin pass's candidates over the finished fill of ``r``; their pixels per object (local index + 1).
+
+    ``r`` is the :class:`~walkstream.server.bake.visibility.VisibilityRenderer` whose
+    pass it is (not imported here: it imports this module).
+
+    ``rows`` is read in (the fill's image) and overwritten with the pass's own
+    image: only the candidates' ids, 0 elsewhere.
+    """
+    import moderngl
+
+    from walkstream.server.bake.thindepth import DepthEroder
+
+    ctx, fb = r.ctx, r._fb
+    assert ctx is not None and fb is not None
+    n = len(r._ids)
+    seen = face_presence(rows, r.resolution, len(points), n)
+    cand = thin_candidates(
+        points, r._lo, r._hi, draw, seen, resolution=r.resolution, near=r.near, pixels=r.thin_pass
+    )
+    commands, offsets = r._unmerged_commands(cand)
+    if r.thin_depth and len(commands):
+        if r._eroder is None:
+            r._eroder = DepthEroder(ctx, fb.size)
+        r._eroder.erode(fb.fbo, used, r.resolution)
+    # Colour only: with the depth mask off the clear keeps the fill's depth.
+    fb.fbo.depth_mask = False
+    ctx.depth_func = "<="
+    ctx.disable(moderngl.CULL_FACE)  # an edge-on sliver may show only its back
+    try:
+        fb.fbo.clear(0.0, 0.0, 0.0, 0.0, viewport=used)
+        if len(commands):
+            if r._multi_draw:
+                if commands.nbytes > r._indirect.size:
+                    r._indirect.orphan(max(commands.nbytes, 2 * r._indirect.size))
+                r._indirect.write(commands.tobytes())
+            ctx.wireframe = True
+            try:
+                r._draw_faces(commands, offsets, mvps)
+            finally:
+                ctx.wireframe = False
+            r._draw_faces(commands, offsets, mvps, moderngl.POINTS)
+    finally:
+        ctx.depth_func = "<"
+        fb.fbo.depth_mask = True
+        if r.cull_back_faces:
+            ctx.enable(moderngl.CULL_FACE)
+    fb.fbo.read_into(rows, viewport=used, components=1, dtype="u4", alignment=1)
+    return np.bincount(rows.reshape(-1), minlength=n + 1)[: n + 1].astype(np.int64)

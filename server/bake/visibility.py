@@ -17,7 +17,8 @@ How it is made fast enough on a software rasteriser (Mesa llvmpipe):
 * each vertex carries the object's local index + 1 and the fragment shader writes it
   to an ``R32UI`` colour attachment (0 = nothing);
 * all images of a cell are tiles of one framebuffer (a row of 6 faces per sample
-  point), cleared once, read back once and counted with one ``np.bincount``;
+  point, or of the 4 faces of a horizon band, :mod:`~walkstream.server.bake.faceset`),
+  cleared once, read back once and counted with one ``np.bincount``;
 * culling is vectorised numpy: per cell the distance to every bounding box, per cube
   face a 6-plane frustum test of every bounding box; the ranges of each face are drawn
   with one ``glMultiDrawElementsIndirect`` call (OpenGL 4.3; older contexts fall back
@@ -32,12 +33,11 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.server.bake.draworder import curve_order, frustum_planes, runs
+from walkstream.server.bake.draworder import frustum_planes, runs
+from walkstream.server.bake.faceset import FaceSet
+from walkstream.server.bake.idpack import pack_meshes
 from walkstream.server.bake.thindepth import DepthEroder
-from walkstream.server.bake.thinpass import face_presence, thin_candidates
-from walkstream.shared.areas import build_area
-from walkstream.shared.buildings import build_lod
-from walkstream.shared.camera import cube_face_views, perspective
+from walkstream.server.bake.thinpass import draw_thin_pass
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import (
     VERTEX_ID_FRAGMENT_SHADER,
@@ -47,16 +47,14 @@ from walkstream.shared.gl import (
     create_context,
 )
 from walkstream.shared.records import Mesh
-from walkstream.shared.streets import build_street
 
 if TYPE_CHECKING:
     import moderngl
 
-    from walkstream.server.sources.scene import SourceScene
 
 from walkstream.shared.arrays import F64, I64
 
-__all__ = ["meshes_for_scene", "VisibilityRenderer", "pvs_from_counts"]
+__all__ = ["VisibilityRenderer", "pvs_from_counts"]
 
 
 _VERTEX_SHADER = """
@@ -74,35 +72,6 @@ void main() {
 #: Bytes of one DrawElementsIndirectCommand (count, instanceCount, firstIndex,
 #: baseVertex, baseInstance), the stride moderngl uses for render_indirect.
 _INDIRECT_STRIDE = 20
-
-
-# --------------------------------------------------------------------------- scene
-
-
-def meshes_for_scene(scene: SourceScene, lod: int) -> tuple[list[Mesh], I64]:
-    """The meshes and object ids of every object of a scene, as the bake renders them.
-
-    Parameters
-    ----------
-    scene : SourceScene
-        Buildings and street pieces in scene-local metres.
-    lod : int
-        Level of detail of the buildings (0, 1 or 2); street pieces are the same at
-        every level.
-
-    Returns
-    -------
-    meshes : list of Mesh
-        Buildings first (``build_lod``), then street pieces (``build_street``), then
-        areas (``build_area``).
-    ids : (n,) int64
-        The object id of each mesh.
-    """
-    meshes = [build_lod(b, lod) for b in scene.buildings]
-    meshes += [build_street(s, lod) for s in scene.streets]
-    meshes += [build_area(a, lod) for a in scene.areas]
-    ids = np.array([b.id for b in scene.buildings] + [s.id for s in scene.streets] + [a.id for a in scene.areas], dtype=np.int64)
-    return meshes, ids
 
 
 # ------------------------------------------------------------------------ renderer
@@ -170,6 +139,11 @@ class VisibilityRenderer(Releasable):
         pixel's 3 x 3 neighbours (:mod:`~walkstream.server.bake.thindepth`): every
         occluder shrunk by a pixel for that test, so what a pixel centre on an
         occluder's silhouette hides is not taken as hidden.
+    band : float
+        0 (default): the six faces of a cube, ``resolution`` pixels square.  Otherwise
+        a horizon band (:meth:`~walkstream.server.bake.faceset.FaceSet.band`): the four
+        sideways faces, ``resolution`` pixels across, cut to this many degrees above
+        and below the horizon (the far field at a client's pixel size, :mod:`~.farband`).
 
     Raises
     ------
@@ -202,6 +176,7 @@ class VisibilityRenderer(Releasable):
         edge_pass: bool = False,
         thin_pass: float = 0.0,
         thin_depth: bool = False,
+        band: float = 0.0,
     ) -> None:
         ids = np.asarray(object_ids, dtype=np.int64).reshape(-1)
         if len(ids) != len(meshes):
@@ -226,6 +201,10 @@ class VisibilityRenderer(Releasable):
             raise InputError(f"VisibilityRenderer.thin_pass: expected >= 0 pixels, got {thin_pass}")
         if int(merge_gap) < 0:
             raise InputError(f"VisibilityRenderer.merge_gap: expected >= 0, got {merge_gap}")
+        if not 0.0 <= float(band) < 45.0:
+            raise InputError(f"VisibilityRenderer.band: expected 0 <= degrees < 45, got {band}")
+        if band and thin_pass:
+            raise InputError("VisibilityRenderer: the thin pass works on cube faces, not on a horizon band")
         self.resolution = int(resolution)
         self.view_distance = float(view_distance)
         self.near = float(near)
@@ -235,6 +214,8 @@ class VisibilityRenderer(Releasable):
         self.edge_pass = bool(edge_pass)
         self.thin_pass = float(thin_pass)
         self.thin_depth = bool(thin_depth)
+        self.band = float(band)
+        self._faces = FaceSet.band(self.resolution, self.band) if self.band else FaceSet.cube(self.resolution)
         self._eroder: DepthEroder | None = None
         self._prepare_geometry(meshes, ids)
 
@@ -249,12 +230,13 @@ class VisibilityRenderer(Releasable):
         try:
             self.ctx = create_context() if ctx is None else ctx
             limit = int(self.ctx.info["GL_MAX_RENDERBUFFER_SIZE"])
-            if 6 * self.resolution > limit:
+            nf, (tw, th) = len(self._faces), self._faces.tile
+            if nf * tw > limit:
                 raise InputError(
-                    f"VisibilityRenderer.resolution: 6 * {self.resolution} exceeds the "
+                    f"VisibilityRenderer.resolution: {nf} * {tw} exceeds the "
                     f"driver's maximum framebuffer size {limit}"
                 )
-            self.points_per_pass = max(1, min(int(max_points_per_pass), limit // self.resolution))
+            self.points_per_pass = max(1, min(int(max_points_per_pass), limit // th))
             # glMultiDrawElementsIndirect is core in OpenGL 4.3; older contexts (e.g. macOS
             # 4.1) draw range by range instead.
             self._multi_draw = self.ctx.version_code >= 430
@@ -264,54 +246,23 @@ class VisibilityRenderer(Releasable):
             self.release()
             raise
         self._w_pos, self._w_neg, self._t = frustum_planes(self.near, self.view_distance)
-        self._proj = perspective(90.0, 1.0, self.near, self.view_distance).astype(np.float64)
-        # The six face rotations are the same at every point; only the translation
+        self._proj = self._faces.projection(self.near, self.view_distance)
+        # The face rotations are the same at every point; only the translation
         # (-R @ eye) changes, so the per-point matrices are one vectorised product.
-        self._face_rot = cube_face_views((0.0, 0.0, 0.0)).astype(np.float64)[:, :3, :3]
+        self._face_rot = self._faces.rotations
 
     # -- setup ---------------------------------------------------------------------
 
     def _prepare_geometry(self, meshes: Sequence[Mesh], ids: I64) -> None:
-        """Concatenate the meshes in Hilbert-curve order and keep per-object ranges and boxes."""
-        n = len(meshes)
-        lo = np.zeros((n, 3))
-        hi = np.zeros((n, 3))
-        nonempty = np.zeros(n, bool)
-        for i, m in enumerate(meshes):
-            if len(m.positions) and len(m.indices):
-                p = m.positions.astype(np.float64)
-                lo[i], hi[i] = p.min(axis=0), p.max(axis=0)
-                nonempty[i] = True
-        keep = np.flatnonzero(nonempty)
-        order = keep[curve_order((lo[keep, :2] + hi[keep, :2]) / 2.0)]
+        """Pack the meshes in Hilbert-curve order (:func:`~.idpack.pack_meshes`) and keep the result."""
+        packed = pack_meshes(meshes, ids)
         #: object id of each drawn object, in draw (Hilbert-curve) order
-        self._ids = ids[order]
-        self._lo, self._hi = lo[order], hi[order]
+        self._ids = packed.ids
+        self._lo, self._hi = packed.lo, packed.hi
         self.object_ids = ids.copy()
         self.object_ids.flags.writeable = False
-
-        nv = np.array([len(meshes[i].positions) for i in order], np.int64)
-        ni = np.array([meshes[i].indices.size for i in order], np.int64)
-        v_first = np.concatenate([[0], np.cumsum(nv)[:-1]]).astype(np.int64)
-        i_first = np.concatenate([[0], np.cumsum(ni)]).astype(np.int64)
-        self._index_first = i_first[:-1]
-        self._index_stop = i_first[1:]
-        total_v = int(nv.sum())
-        if total_v >= 2**32 - 1:
-            raise InputError(
-                f"VisibilityRenderer: too many vertices for uint32 indices ({total_v})"
-            )
-        # Interleaved (x, y, z, id) of 4-byte words: float32 positions as uint32 bits.
-        verts = np.empty((total_v, 4), np.uint32)
-        index = np.empty(int(i_first[-1]), np.uint32)
-        for k, i in enumerate(order):
-            m = meshes[i]
-            s, e = int(v_first[k]), int(v_first[k] + nv[k])
-            verts[s:e, :3] = np.ascontiguousarray(m.positions, np.float32).view(np.uint32)
-            verts[s:e, 3] = k + 1  # 0 is the clear value: "nothing here"
-            index[i_first[k] : i_first[k + 1]] = m.indices.reshape(-1) + np.uint32(s)
-        self._verts = verts
-        self._index = index
+        self._index_first, self._index_stop = packed.index_first, packed.index_stop
+        self._verts, self._index = packed.verts, packed.index
 
     def _create_gl_objects(self) -> None:
         ctx = self.ctx
@@ -328,9 +279,9 @@ class VisibilityRenderer(Releasable):
             index_element_size=4,
         )
         self._indirect = ctx.buffer(reserve=_INDIRECT_STRIDE * 1024, dynamic=True)
-        res = self.resolution
-        self._fb = Framebuffer(ctx, (6 * res, self.points_per_pass * res), 1, "u4")
-        self._pixels = np.empty((self.points_per_pass * res, 6 * res), np.uint32)
+        nf, (tw, th) = len(self._faces), self._faces.tile
+        self._fb = Framebuffer(ctx, (nf * tw, self.points_per_pass * th), 1, "u4")
+        self._pixels = np.empty((self.points_per_pass * th, nf * tw), np.uint32)
         # The CPU copies are not needed once uploaded.
         del self._verts, self._index
 
@@ -349,8 +300,8 @@ class VisibilityRenderer(Releasable):
             far plane is a depth, so a box farther than the view distance can still be
             in front of it).  Merged draw ranges must not include these.
         """
-        p = len(points)
-        draw = np.zeros((p, 6, len(self._ids)), bool)
+        p, nf = len(points), len(self._faces)
+        draw = np.zeros((p, nf, len(self._ids)), bool)
         unsafe = np.zeros_like(draw)
         # Per cell, one O(n) box-to-box test first: in a 90-degree face the distance to
         # a visible point is at most sqrt(3) times its depth, so boxes farther than
@@ -362,7 +313,7 @@ class VisibilityRenderer(Releasable):
         reach2 = self.view_distance**2
         cand = np.flatnonzero(np.einsum("nk,nk->n", gap, gap) <= 3.0 * reach2)
         if len(cand) == 0:
-            return draw.reshape(p * 6, -1), unsafe.reshape(p * 6, -1)
+            return draw.reshape(p * nf, -1), unsafe.reshape(p * nf, -1)
         lo_c, hi_c = self._lo[cand], self._hi[cand]
         for i, eye in enumerate(points):  # a loop over points bounds memory to (c, 36)
             lo, hi = lo_c - eye, hi_c - eye  # boxes relative to the eye
@@ -370,12 +321,14 @@ class VisibilityRenderer(Releasable):
             near_enough = np.einsum("ck,ck->c", d, d) <= reach2
             if self.frustum_cull:
                 best = hi @ self._w_pos.T + lo @ self._w_neg.T  # (c, 36): box maxima per plane
-                inside = (best >= self._t).reshape(len(cand), 6, 6).all(axis=2)  # (c, 6)
+                # (c, 6) per cube face; a band's faces are the cube's sideways ones, cut
+                # short: culled by the cube face's frustum (conservative)
+                inside = (best >= self._t).reshape(len(cand), 6, 6).all(axis=2)[:, self._faces.cube_faces]
             else:
-                inside = np.ones((len(cand), 6), bool)
+                inside = np.ones((len(cand), nf), bool)
             draw[i][:, cand] = (inside & near_enough[:, None]).T
             unsafe[i][:, cand] = (inside & ~near_enough[:, None]).T
-        return draw.reshape(p * 6, -1), unsafe.reshape(p * 6, -1)
+        return draw.reshape(p * nf, -1), unsafe.reshape(p * nf, -1)
 
     def _draw_commands(
         self, draw: NDArray[np.bool_], unsafe: NDArray[np.bool_]
@@ -436,13 +389,14 @@ class VisibilityRenderer(Releasable):
             if need > indirect.size:
                 indirect.orphan(max(need, 2 * indirect.size))
             indirect.write(commands.tobytes())
-        views = np.zeros((p, 6, 4, 4))
+        nf = len(self._faces)
+        views = np.zeros((p, nf, 4, 4))
         views[:, :, :3, :3] = self._face_rot
         views[:, :, :3, 3] = -np.einsum("fij,pj->pfi", self._face_rot, points)
         views[:, :, 3, 3] = 1.0
         # float64 product, transposed to column-major for GLSL, float32 on upload
         mvps = np.ascontiguousarray(
-            np.transpose(self._proj @ views, (0, 1, 3, 2)).reshape(p * 6, 4, 4), np.float32
+            np.transpose(self._proj @ views, (0, 1, 3, 2)).reshape(p * nf, 4, 4), np.float32
         )
         return draw, commands, offsets, mvps
 
@@ -478,10 +432,9 @@ class VisibilityRenderer(Releasable):
         assert ctx is not None and fb is not None
         import moderngl
 
-        res = self.resolution
-        p = len(points)
+        (tw, res), p = self._faces.tile, len(points)  # res: a point's rows
         draw, commands, offsets, mvps = self._prepare_pass(points)
-        used = (0, 0, 6 * res, p * res)
+        used = (0, 0, len(self._faces) * tw, p * res)
         self._begin_pass(fb, used)
         try:
             self._draw_faces(commands, offsets, mvps)
@@ -537,49 +490,8 @@ class VisibilityRenderer(Releasable):
         self, points: F64, draw: NDArray[np.bool_], rows: NDArray[np.uint32], used: tuple[int, int, int, int],
         mvps: NDArray[np.float32],
     ) -> I64:
-        """Draw the thin pass's candidates over the finished fill; their pixels per object.
-
-        ``rows`` is read in (the fill's image) and overwritten with the pass's own
-        image: only the candidates' ids, 0 elsewhere.
-        """
-        import moderngl
-
-        ctx, fb = self.ctx, self._fb
-        assert ctx is not None and fb is not None
-        n = len(self._ids)
-        seen = face_presence(rows, self.resolution, len(points), n)
-        cand = thin_candidates(
-            points, self._lo, self._hi, draw, seen, resolution=self.resolution, near=self.near, pixels=self.thin_pass
-        )
-        commands, offsets = self._unmerged_commands(cand)
-        if self.thin_depth and len(commands):
-            if self._eroder is None:
-                self._eroder = DepthEroder(ctx, fb.size)
-            self._eroder.erode(fb.fbo, used, self.resolution)
-        # Colour only: with the depth mask off the clear keeps the fill's depth.
-        fb.fbo.depth_mask = False
-        ctx.depth_func = "<="
-        ctx.disable(moderngl.CULL_FACE)  # an edge-on sliver may show only its back
-        try:
-            fb.fbo.clear(0.0, 0.0, 0.0, 0.0, viewport=used)
-            if len(commands):
-                if self._multi_draw:
-                    if commands.nbytes > self._indirect.size:  # type: ignore[union-attr]
-                        self._indirect.orphan(max(commands.nbytes, 2 * self._indirect.size))  # type: ignore[union-attr]
-                    self._indirect.write(commands.tobytes())  # type: ignore[union-attr]
-                ctx.wireframe = True
-                try:
-                    self._draw_faces(commands, offsets, mvps)
-                finally:
-                    ctx.wireframe = False
-                self._draw_faces(commands, offsets, mvps, moderngl.POINTS)
-        finally:
-            ctx.depth_func = "<"
-            fb.fbo.depth_mask = True
-            if self.cull_back_faces:
-                ctx.enable(moderngl.CULL_FACE)
-        fb.fbo.read_into(rows, viewport=used, components=1, dtype="u4", alignment=1)
-        return np.bincount(rows.reshape(-1), minlength=n + 1)[: n + 1].astype(np.int64)
+        """The thin pass over the finished fill (:func:`~.thinpass.draw_thin_pass`); its pixels per object."""
+        return draw_thin_pass(self, points, draw, rows, used, mvps)
 
     def _unmerged_commands(self, mask: NDArray[np.bool_]) -> tuple[NDArray[np.uint32], I64]:
         """:meth:`_draw_commands` of ``mask`` with no gap bridged (each run its own range)."""
@@ -602,13 +514,13 @@ class VisibilityRenderer(Releasable):
 
         ctx, vao, indirect = self.ctx, self._vao, self._indirect
         assert ctx is not None and vao is not None and indirect is not None
-        res = self.resolution
+        nf, (tw, th) = len(self._faces), self._faces.tile
         for face in range(len(offsets) - 1):
             c0, c1 = int(offsets[face]), int(offsets[face + 1])
             if c1 == c0:
                 continue
-            i, f = divmod(face, 6)
-            tile = (f * res, i * res, res, res)
+            i, f = divmod(face, nf)
+            tile = (f * tw, i * th, tw, th)
             ctx.viewport = tile
             # Guard-band clipping may rasterise outside the viewport; the scissor keeps
             # every face inside its own tile on every driver.

@@ -71,7 +71,7 @@ def wall_elements(scene: InteriorScene | SourceScene) -> list[WallElement]:
     if isinstance(scene, InteriorScene):
         return [(int(e.id), e.soup.astype(np.float64), np.asarray(e.materials, np.uint8))
                 for e in scene.elements if len(e.triangles)]
-    from walkstream.server.bake.visibility import meshes_for_scene
+    from walkstream.server.bake.idpack import meshes_for_scene
 
     meshes, ids = meshes_for_scene(scene, 2)
     out: list[WallElement] = []

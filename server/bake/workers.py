@@ -15,11 +15,13 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from walkstream.server.bake.farband import band_renderer, merge_band_counts
 from walkstream.server.bake.fieldrender import FieldRenderer
+from walkstream.server.bake.idpack import meshes_for_scene
 from walkstream.server.bake.samples import bake_points, split_points
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
-from walkstream.server.bake.visibility import VisibilityRenderer, meshes_for_scene, pvs_from_counts
+from walkstream.server.bake.visibility import VisibilityRenderer, pvs_from_counts
 from walkstream.server.sources.scene import SourceScene
 
 __all__ = [
@@ -48,15 +50,18 @@ def _renderer_for(scene: SourceScene, settings: BakeSettings, key: str) -> tuple
     field's :class:`~.fieldrender.FieldRenderer`: a :class:`VisibilityRenderer` with
     one more way to render many points)."""
     if _WORKER.get("key") != key:
-        old = _WORKER.get("renderer")
-        if old is not None:
-            old.release()
+        for name in ("band", "renderer"):
+            old = _WORKER.pop(name, None)
+            if old is not None:
+                old.release()
         meshes, ids = meshes_for_scene(scene, settings.occluder_lod)
         _WORKER["renderer"] = FieldRenderer(
             meshes, ids, resolution=settings.resolution, view_distance=settings.view_distance,
             edge_pass=settings.edge_pass, thin_pass=settings.thin_pass,
             thin_depth=settings.thin_depth,
         )
+        # the band shares the renderer's context (released before it, by whoever releases it)
+        _WORKER["band"] = band_renderer(meshes, ids, settings, ctx=_WORKER["renderer"].ctx)
         _WORKER["footprints"] = shapely.STRtree(
             [shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings]
         )
@@ -92,12 +97,17 @@ def cell_counts(
     zmin: float,
     zmax: float,
     footprints: Any,
+    band: VisibilityRenderer | None = None,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], int]:
     """Pixels per object over a cell's sample points, as the bake counts them.
 
     The points of :func:`cell_points`; with ``settings.split`` (adaptive sampling),
     up to :data:`SPLIT_ROUNDS` rounds of :func:`~walkstream.server.bake.samples.split_points`
     between the points whose views differ, each new point rendered and counted too.
+
+    With ``band`` (:func:`~.farband.band_renderer`), every point rendered is rendered
+    again as the far field's horizon band and its counts added
+    (:func:`~.farband.merge_band_counts`).
 
     Returns
     -------
@@ -111,6 +121,8 @@ def cell_counts(
         return np.zeros(0, np.int64), np.zeros(0, np.int64), 0
     if not settings.split:
         ids, pixels = renderer.cell_counts(pts)
+        if band is not None:
+            ids, pixels = merge_band_counts(ids, pixels, *band.cell_counts(pts), settings)
         return ids, pixels, len(pts)
     ids, pixels, seen = renderer.point_counts(pts)
     total = dict(zip(ids.tolist(), pixels.tolist(), strict=True))
@@ -126,7 +138,10 @@ def cell_counts(
             total[a] = total.get(a, 0) + b
         pts, seen = np.vstack([pts, new]), seen + s2
     keys = np.array(sorted(total), np.int64)
-    return keys, np.array([total[k] for k in keys.tolist()], np.int64), len(pts)
+    counts = np.array([total[k] for k in keys.tolist()], np.int64)
+    if band is not None:
+        keys, counts = merge_band_counts(keys, counts, *band.cell_counts(pts), settings)
+    return keys, counts, len(pts)
 
 
 def cell_task(
@@ -142,7 +157,7 @@ def cell_task(
     renderer, footprints = _renderer_for(scene, settings, key)
     out = []
     for cid, poly, zmin, zmax in cells:
-        ids, pixels, n = cell_counts(renderer, settings, poly, zmin, zmax, footprints)
+        ids, pixels, n = cell_counts(renderer, settings, poly, zmin, zmax, footprints, _WORKER.get("band"))
         if n == 0:
             out.append((cid, np.zeros(0, np.int64), np.zeros(0)))
             continue
@@ -204,6 +219,9 @@ def field_task(
 
 def release_renderer() -> None:
     """Free this process's renderer (its GL context) after a bake run here."""
+    band = _WORKER.pop("band", None)
+    if band is not None:
+        band.release()
     r = _WORKER.pop("renderer", None)
     _WORKER.pop("key", None)
     if r is not None:
