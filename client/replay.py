@@ -271,6 +271,8 @@ async def replay(
                 got = await bundle_start(
                     config.path, config.setup_timeout_s, clock, api, streamer, disk,
                     manifest_arrived, manifest_fut, tasks, manifest_failed,
+                    # a city walker stands at its start for its first view: that view's objects first
+                    view=_room_view(config) if config.kind == "city" and config.street_hold else None,
                 )
             if got is None:
                 # no start bundle (or it failed before the path): scene list, manifest, path

@@ -108,9 +108,9 @@ OFFERS: tuple[str, ...] = ("cell-index", "cells-batch", "start")
 (``GET .../index/{i}/{j}``), cell records in batches (``POST .../cells``) and the
 start bundle (``GET /v1/start``)."""
 
-START_PARTS: tuple[str, ...] = ("pathhead", "path", "topology", "contents", "cell", "index", "manifest", "objects")
-"""What a start bundle may hold, in the order the service sends it (an interior's
-``pathhead``, when asked, in place of ``path``)."""
+START_PARTS: tuple[str, ...] = ("pathhead", "path", "topology", "contents", "cell", "index", "manifest", "objects", "boxes")
+"""What a start bundle may hold (an interior's ``pathhead``, when asked, in place of
+``path``; a city's ``boxes``, :mod:`~walkstream.shared.codec.objectboxes`, with heads)."""
 
 _MAX_MANIFEST = 4 << 20
 #: the longest string a manifest may hold: the building grammar's text (the default

@@ -35,6 +35,7 @@ from walkstream.client.clock import Clock
 from walkstream.shared.codec.cellbatch import check_contents_part
 from walkstream.shared.codec.cellhead import decode_cell_head
 from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.codec.objectboxes import decode_object_boxes
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.content.impostor import KIND as IMPOSTOR
 from walkstream.shared.content.kind import ContentKind
@@ -82,7 +83,7 @@ StartItem = tuple[str, Any]
 """One item of a start bundle as :meth:`SceneClient.start` yields it: ``("path",
 (RecordedPath, nbytes))`` (and ``("pathhead", ...)``, the path's first seconds, when asked), ``("cell", CellRecord)``, ``("index", CellIndex)``,
 ``("topology", Topology)`` (interiors), ``("manifest", (Manifest, nbytes))``, ``("objects", count)`` (the PVS objects that
-follow), ``("object", ObjectFrame)``, ``("contents", [cell ids])`` (interiors: the
+follow), ``("object", ObjectFrame)``, ``("boxes", ObjectBoxes)`` (a city's first view), ``("contents", [cell ids])`` (interiors: the
 contents that follow) or ``("room", (cell id, CellMesh))``; ``nbytes`` (and the records' ``nbytes``) is
 what the part cost on the wire."""
 
@@ -609,8 +610,8 @@ class SceneClient:
                 query["depth"] = str(view.max_depth)
             if path is not None and path_head_s is not None:  # the path's head first, the whole after the contents
                 query["head"] = repr(float(path_head_s))
-                if heads:  # cells seen in part: their heads first
-                    query["heads"] = "true"
+            if path is not None and heads:  # the first view first: cells seen in part, a city's objects drawn
+                query["heads"] = "true"
         url = str(httpx.URL("/v1/start", params=query))
         what = "start bundle"
         state: dict[str, Any] = {"objects": 0, "k": 0}
@@ -647,6 +648,8 @@ class SceneClient:
                 return "cell", replace(decode_cell(body, label, etag), nbytes=nbytes)
             if part == "index":
                 return "index", replace(decode_cell_index(body, label, etag), nbytes=nbytes)
+            if part == "boxes":
+                return "boxes", decode_object_boxes(body, label, nbytes)
             return "manifest", (decode_manifest(body, label, etag), nbytes)
 
         def on_head(r: httpx.Response) -> None:
