@@ -438,6 +438,9 @@ async def replay(
         summary.update(city_summary(config, log, streamer, cache, stats, api, bytes_log, t_end - t_start,
                                     t_start, setup_s, path, manifest))
         summary["spike_frames"] = int(spikes.sum())
+        # a walker standing at its start for its first view: how long, and the boxes that stood in
+        summary["start_hold_s"] = frames.start_hold_s
+        summary["start_boxes"] = len(streamer.stand_ins)
         if scene.wall_images is not None:  # a city's rings of walls
             summary["walls"] = _walls_summary(scene, frames)
         if state.facades is not None:  # boxes with their facades (--no-facades: none)
