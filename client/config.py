@@ -92,8 +92,9 @@ class ReplayConfig:
     bundle's other cells, where the path leads in its first seconds, and the first
     prefetch), at most this many seconds, then walks on; 0: walks at once, whatever the
     first view holds (before, the walker was carried into cells still on the link: seed
-    3's first 30 s 90.31 % perfect frames).  Cities (with :attr:`start_heads`): the same
-    until the first frame is perfect and the start bundle is in."""
+    3's first 30 s 90.31 % perfect frames).  Cities (with :attr:`start_heads`, when the
+    caller knows the scene is a city, as the CLI does): the same until the first frame
+    is perfect and the start bundle is in."""
     gzip: bool = True
     """Ask for the streams gzip-compressed (``Accept-Encoding: gzip``)."""
     truth_every: int = 0

@@ -191,6 +191,9 @@ class Streamer:
         """The cell records held (mirrors the cache)."""
         self.pvs_seen: dict[int, NDArray[np.int64]] = {}
         """The PVS of every cell record ever received (for the overfetch figure)."""
+        self.first_view = False
+        """Whether the start bundle was asked to bring the first view first (the walker
+        then stands at its start for it)."""
         self.stand_ins: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         """Objects' boxes ``(lo (3,), hi (3,))`` known before the objects (:meth:`add_boxes`)."""
         self.tiles_held: set[Tile] = set()
@@ -663,6 +666,7 @@ class Streamer:
         See :class:`~walkstream.client.stream.bundle.StartBundle` for the callbacks and ``view``.
         """
         bundle = StartBundle(self, self.config.form, on_path, on_manifest, on_end, view=view)
+        self.first_view = view is not None
         self._bundle = bundle
         self._bundle_task = asyncio.create_task(self._run_bundle(bundle, path))
         return self._bundle_task

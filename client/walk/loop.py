@@ -100,9 +100,9 @@ async def walk(
         w.door = np.asarray(next(p[4] for p in rooms.topology.portals if p[0] == e.portal), np.float64).mean(axis=0)
     last_progress = -math.inf
     # a walker stands at the start until its first view is complete (at most start_hold_s):
-    # indoors and, with the start bundle's first view (cfg.street_hold), on the street
+    # indoors and, when the start bundle brings the first view first (cfg.street_hold), on the street
     holding = cfg.start_hold_s > 0 and ((rooms is not None and scene.streets is None)
-                                        or (cfg.street_hold and scene.streets is not None and rooms is None))
+                                        or (scene.streets is not None and rooms is None and scene.streets.first_view))
     hold_end = t_walk0 + cfg.start_hold_s
     while True:
         t = clock.now()
