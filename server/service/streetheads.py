@@ -26,10 +26,15 @@ from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomview import RoomView
 
-__all__ = ["POSE_STEP_S", "STREET_VIEW_NEAR_M", "STREET_VIEW_FAR_M", "first_view_plan", "object_boxes_body"]
+__all__ = ["BOX_MARGIN_M", "POSE_STEP_S", "STREET_VIEW_NEAR_M", "STREET_VIEW_FAR_M", "first_view_plan", "object_boxes_body"]
 
 STREET_VIEW_NEAR_M = 0.5
 """The near plane of the server's street view (the client's street near plane)."""
+
+BOX_MARGIN_M = 0.5
+"""A box sent is the stored one widened this much on every side: a street piece is
+stored flat at z 0 but drawn a few centimetres above (``STREET_Z``), an area at its
+kind's height; the box must hold what the client rebuilds."""
 
 POSE_STEP_S = 0.25
 """Seconds between two poses of the path the bundle's order follows."""
@@ -113,8 +118,8 @@ def first_view_plan(scene: Scene, path: str, view: RoomView, lead_s: float, cell
 
 
 def object_boxes_body(scene: Scene, ids: list[int]) -> bytes:
-    """The ``boxes`` part's body: the stored boxes of objects ``ids``
-    (:func:`~walkstream.shared.codec.objectboxes.encode_object_boxes`)."""
+    """The ``boxes`` part's body: the stored boxes of objects ``ids``, each widened by
+    :data:`BOX_MARGIN_M` (:func:`~walkstream.shared.codec.objectboxes.encode_object_boxes`)."""
     info = scene.reader.object_info(ids)
     box = np.array([info[i].bbox for i in ids], np.float64).reshape(-1, 6)
-    return encode_object_boxes(ids, box[:, :3], box[:, 3:])
+    return encode_object_boxes(ids, box[:, :3] - BOX_MARGIN_M, box[:, 3:] + BOX_MARGIN_M)
