@@ -18,15 +18,16 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from walkstream.server.service.scenes import Scene
 from walkstream.shared.camera import camera, perspective
-from walkstream.shared.codec.objectboxes import encode_object_boxes
+from walkstream.shared.codec.objectboxes import as_sent, encode_object_boxes
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomview import RoomView
 
-__all__ = ["BOX_MARGIN_M", "POSE_STEP_S", "STREET_VIEW_NEAR_M", "STREET_VIEW_FAR_M", "first_view_plan", "object_boxes_body"]
+__all__ = ["BOX_MARGIN_M", "POSE_STEP_S", "STREET_VIEW_NEAR_M", "STREET_VIEW_FAR_M", "first_view_plan", "object_boxes_body", "sent_boxes"]
 
 STREET_VIEW_NEAR_M = 0.5
 """The near plane of the server's street view (the client's street near plane)."""
@@ -91,9 +92,8 @@ def first_view_plan(scene: Scene, path: str, view: RoomView, lead_s: float, cell
         if not order:
             continue
         vp = proj @ camera(eye, float(yaw), float(pitch)).astype(np.float64)
-        info = scene.reader.object_info(order)
-        box = np.array([info[o].bbox for o in order], np.float64).reshape(-1, 6)
-        keep = frustum_cull(box[:, :3], box[:, 3:], vp)
+        # culled as the client will cull the boxes sent: widened, rounded outward
+        keep = frustum_cull(*sent_boxes(scene, order), vp)
         drawn = [o for o, kk in zip(order, keep.tolist(), strict=True) if kk]
         if drawn:
             items.append(("objects", drawn))
@@ -117,9 +117,15 @@ def first_view_plan(scene: Scene, path: str, view: RoomView, lead_s: float, cell
     return items
 
 
-def object_boxes_body(scene: Scene, ids: list[int]) -> bytes:
-    """The ``boxes`` part's body: the stored boxes of objects ``ids``, each widened by
-    :data:`BOX_MARGIN_M` (:func:`~walkstream.shared.codec.objectboxes.encode_object_boxes`)."""
+def sent_boxes(scene: Scene, ids: list[int]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(lo, hi)`` ``(n, 3)``: the boxes of objects ``ids`` as the client decodes them
+    from a ``boxes`` part: the stored ones widened by :data:`BOX_MARGIN_M`, rounded outward."""
     info = scene.reader.object_info(ids)
     box = np.array([info[i].bbox for i in ids], np.float64).reshape(-1, 6)
-    return encode_object_boxes(ids, box[:, :3] - BOX_MARGIN_M, box[:, 3:] + BOX_MARGIN_M)
+    return as_sent(box[:, :3] - BOX_MARGIN_M, box[:, 3:] + BOX_MARGIN_M)
+
+
+def object_boxes_body(scene: Scene, ids: list[int]) -> bytes:
+    """The ``boxes`` part's body: :func:`sent_boxes` of objects ``ids``
+    (:func:`~walkstream.shared.codec.objectboxes.encode_object_boxes`)."""
+    return encode_object_boxes(ids, *sent_boxes(scene, ids))

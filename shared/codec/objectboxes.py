@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.codec.varint import decode_varints, encode_varints, unzigzag, zigzag
 from walkstream.shared.errors import CodecError
 
-__all__ = ["MAX_BOXES", "ObjectBoxes", "encode_object_boxes", "decode_object_boxes"]
+__all__ = ["MAX_BOXES", "ObjectBoxes", "as_sent", "encode_object_boxes", "decode_object_boxes"]
 
 MAX_BOXES = 1 << 16
 """The most boxes one body may hold."""
@@ -42,6 +42,15 @@ class ObjectBoxes:
     lo: NDArray[np.float64]
     hi: NDArray[np.float64]
     nbytes: int = 0
+
+
+def as_sent(lo: ArrayLike, hi: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The boxes ``lo``, ``hi`` ``(n, 3)`` as :func:`decode_object_boxes` will give them:
+    each corner rounded outward to the body's unit (the sender culls with these, so the
+    objects it leaves to boxes are those the receiver's frustum test drops)."""
+    a = np.floor(np.asarray(lo, np.float64).reshape(-1, 3) * _UNITS_PER_M) / _UNITS_PER_M
+    b = np.ceil(np.asarray(hi, np.float64).reshape(-1, 3) * _UNITS_PER_M) / _UNITS_PER_M
+    return a, b
 
 
 def encode_object_boxes(ids: ArrayLike, lo: ArrayLike, hi: ArrayLike) -> bytes:
