@@ -85,7 +85,10 @@ class ReplayConfig:
     start_heads: bool = True
     """Interiors, with :attr:`start_contents` and :attr:`path_head_s`: a cell the first
     pose sees in part comes first as its head (the pieces drawn, stand-ins for the
-    others), whole after the other cells (:mod:`~walkstream.shared.codec.cellhead`)."""
+    others), whole after the other cells (:mod:`~walkstream.shared.codec.cellhead`).
+    Cities, with :attr:`start_hold_s`: the start bundle brings the objects the first
+    pose draws first, then the boxes of the first cell's others
+    (:mod:`~walkstream.shared.codec.objectboxes`), and the walker holds (:attr:`street_hold`)."""
     start_walls: bool = True
     """An interior baked with ``--virtual-walls`` (and :attr:`virtual_walls` on, with
     :attr:`start_contents`): the start bundle brings the wall sides and the first view's
@@ -97,7 +100,9 @@ class ReplayConfig:
     bundle's other cells, where the path leads in its first seconds, and the first
     prefetch), at most this many seconds, then walks on; 0: walks at once, whatever the
     first view holds (before, the walker was carried into cells still on the link: seed
-    3's first 30 s 90.31 % perfect frames)."""
+    3's first 30 s 90.31 % perfect frames).  Cities (with :attr:`start_heads`, when the
+    caller knows the scene is a city, as the CLI does): the same until the first frame
+    is perfect and the start bundle is in."""
     gzip: bool = True
     """Ask for the streams gzip-compressed (``Accept-Encoding: gzip``)."""
     truth_every: int = 0
@@ -204,6 +209,13 @@ class ReplayConfig:
         w, h = self.size
         if not (16 <= w <= 8192 and 16 <= h <= 8192):
             raise InputError(f"--size {w}x{h}: each side from 16 to 8192 pixels")
+
+    @property
+    def street_hold(self) -> bool:
+        """Whether a city walker stands at its start until its first view is complete
+        (:attr:`start_hold_s`): with the start bundle and its first view
+        (:attr:`start_heads`), which then brings that view's objects first."""
+        return self.start_bundle and self.start_heads and self.start_hold_s > 0
 
     @property
     def fps_target(self) -> float:

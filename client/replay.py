@@ -283,6 +283,8 @@ async def replay(
                 got = await bundle_start(
                     config.path, config.setup_timeout_s, clock, api, streamer, disk,
                     manifest_arrived, manifest_fut, tasks, manifest_failed,
+                    # a city walker stands at its start for its first view: that view's objects first
+                    view=_room_view(config) if config.kind == "city" and config.street_hold else None,
                 )
             if got is None:
                 # no start bundle (or it failed before the path): scene list, manifest, path
@@ -449,6 +451,9 @@ async def replay(
                                     t_start, setup_s, path, manifest))
         summary["spike_frames"] = int(spikes.sum())
         summary.update(frames.geometry_figures())  # objects drawn as geometry, whatever the quads
+        # a walker standing at its start for its first view: how long, and the boxes that stood in
+        summary["start_hold_s"] = frames.start_hold_s
+        summary["start_boxes"] = len(streamer.stand_ins)
         if scene.wall_images is not None:  # a city's rings of walls
             summary["walls"] = _walls_summary(scene, frames)
         if state.facades is not None:  # boxes with their facades (--no-facades: none)

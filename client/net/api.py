@@ -600,8 +600,8 @@ class SceneClient:
                 query["depth"] = str(view.max_depth)
             if path is not None and path_head_s is not None:  # the path's head first, the whole after the contents
                 query["head"] = repr(float(path_head_s))
-                if heads:  # cells seen in part: their heads first
-                    query["heads"] = "true"
+            if path is not None and heads:  # the first view first: cells seen in part, a city's objects drawn
+                query["heads"] = "true"
         if walls:  # a scene baked with walls: the sides and the first view's textures too
             query["walls"] = "true"
         url = str(httpx.URL("/v1/start", params=query))

@@ -14,6 +14,7 @@ from typing import Any
 from walkstream.shared.codec.cellbatch import check_contents_part
 from walkstream.shared.codec.cellhead import decode_cell_head
 from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.codec.objectboxes import decode_object_boxes
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.content.walltex import KIND as WALLTEX
 from walkstream.shared.errors import CodecError
@@ -32,7 +33,7 @@ yields it: ``("path", (RecordedPath, nbytes))`` (and ``("pathhead", ...)``, the 
 first seconds, when asked), ``("cell", CellRecord)``, ``("index", CellIndex)``,
 ``("topology", Topology)`` (interiors), ``("manifest", (Manifest, nbytes))``,
 ``("objects", count)`` (the PVS objects that follow), ``("object", ObjectFrame)``,
-``("contents", [cell ids])`` (interiors: the contents that follow) or ``("room", (cell
+``("boxes", ObjectBoxes)`` (a city's first view), ``("contents", [cell ids])`` (interiors: the contents that follow) or ``("room", (cell
 id, CellMesh))``; with walls asked for, ``("walls", (sides, nbytes))``, ``("walltex",
 [texture ids])`` (the textures that follow) and ``("texture", (texture id,
 premultiplied RGBA, nbytes))``; ``nbytes`` (and the records' ``nbytes``) is what the
@@ -127,4 +128,6 @@ class StartDecoder:
             return "cell", replace(decode_cell(body, label, etag), nbytes=nbytes)
         if part == "index":
             return "index", replace(decode_cell_index(body, label, etag), nbytes=nbytes)
+        if part == "boxes":
+            return "boxes", decode_object_boxes(body, label, nbytes)
         return "manifest", (decode_manifest(body, label, etag), nbytes)

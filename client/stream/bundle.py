@@ -21,8 +21,10 @@ from typing import Protocol
 
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.stats import StreamStats
+from walkstream.shared.codec.objectboxes import ObjectBoxes
 from walkstream.shared.errors import ApiError, StreamCut
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.roomview import RoomView
 from walkstream.shared.wire import CellIndex, CellRecord, Manifest, ObjectFrame
 
 __all__ = ["BundleTarget", "StartBundle"]
@@ -64,6 +66,10 @@ class BundleTarget(Protocol):
         """Whether ``oid`` is held."""
         ...
 
+    def add_boxes(self, boxes: ObjectBoxes) -> None:
+        """Learn objects' boxes (stand-ins for objects not in yet)."""
+        ...
+
     def expect(self, ids: set[int], coming: bool = True) -> None:
         """Mark objects as on their way (``coming``) or no longer so."""
         ...
@@ -92,6 +98,10 @@ class StartBundle:
         The object form asked for (``params`` or ``lod2``).
     on_path, on_manifest:
         Called as those parts arrive (the path with its bytes on the wire).
+    view:
+        How the walk views the city, when it stands at its start until its first view
+        is complete: the bundle then brings that view's objects first and the boxes of
+        the first cell's other objects (part ``boxes``).
     on_end:
         Called when the bundle ends, with the error that ended it (None when it
         ended well), e.g. an :class:`ApiError` 404 from a server without bundles.
@@ -111,8 +121,10 @@ class StartBundle:
         on_path: Callable[[RecordedPath, int], None],
         on_manifest: Callable[[Manifest], None],
         on_end: Callable[[BaseException | None], None],
+        view: RoomView | None = None,
     ) -> None:
         self.streamer = streamer
+        self.view = view
         self.form = form
         self.on_path = on_path
         self.on_manifest = on_manifest
@@ -126,7 +138,8 @@ class StartBundle:
         error: BaseException | None = None
         frames: list[ObjectFrame] = []
         try:
-            async for part, item in st.api.start(path=path, form=self.form):
+            async for part, item in st.api.start(path=path, form=self.form, view=self.view,
+                                                  heads=self.view is not None):
                 if part == "path":
                     p, n = item
                     st.stats.bundle_bytes += n
@@ -142,6 +155,9 @@ class StartBundle:
                         break  # the rest of the bundle is on disk: stop it, the link is free
                 elif part == "topology":  # an interior's: the replay fetches it for its walk
                     st.stats.bundle_bytes += item.nbytes
+                elif part == "boxes":
+                    st.stats.bundle_bytes += item.nbytes
+                    st.add_boxes(item)
                 elif part == "index":
                     st.stats.bundle_bytes += item.nbytes
                     st.add_index(item)

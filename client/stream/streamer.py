@@ -72,9 +72,11 @@ from walkstream.client.stream.stats import StreamStats
 from walkstream.client.tasks import reap
 from walkstream.shared.cells import TileGrid
 from walkstream.shared.codec import unpack_bounded
+from walkstream.shared.codec.objectboxes import ObjectBoxes
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.lsystem.grammar import Grammar
 from walkstream.shared.paths import RecordedPath
+from walkstream.shared.roomview import RoomView
 from walkstream.shared.wire import (
     CellIndex,
     CellRecord,
@@ -189,6 +191,11 @@ class Streamer:
         """The cell records held (mirrors the cache)."""
         self.pvs_seen: dict[int, NDArray[np.int64]] = {}
         """The PVS of every cell record ever received (for the overfetch figure)."""
+        self.first_view = False
+        """Whether the start bundle was asked to bring the first view first (the walker
+        then stands at its start for it)."""
+        self.stand_ins: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+        """Objects' boxes ``(lo (3,), hi (3,))`` known before the objects (:meth:`add_boxes`)."""
         self.tiles_held: set[Tile] = set()
         self.tile_members: dict[int, frozenset[int]] = {}
         """The cell ids of every index tile ever received, by :func:`tile_key`."""
@@ -652,12 +659,14 @@ class Streamer:
         on_path: Callable[[RecordedPath, int], None],
         on_manifest: Callable[[Manifest], None],
         on_end: Callable[[BaseException | None], None],
+        view: RoomView | None = None,
     ) -> asyncio.Task[None]:
         """Ask for the start bundle at recorded path ``path``'s start; feed its parts in.
 
-        See :class:`~walkstream.client.stream.bundle.StartBundle` for the callbacks.
+        See :class:`~walkstream.client.stream.bundle.StartBundle` for the callbacks and ``view``.
         """
-        bundle = StartBundle(self, self.config.form, on_path, on_manifest, on_end)
+        bundle = StartBundle(self, self.config.form, on_path, on_manifest, on_end, view=view)
+        self.first_view = view is not None
         self._bundle = bundle
         self._bundle_task = asyncio.create_task(self._run_bundle(bundle, path))
         return self._bundle_task
@@ -669,6 +678,17 @@ class Streamer:
             self._bundle = None
             self._bundle_task = None
         self.replan()
+
+    @property
+    def starting(self) -> bool:
+        """Whether the start bundle is still coming."""
+        return self._bundle_task is not None
+
+    def add_boxes(self, boxes: ObjectBoxes) -> None:
+        """Learn objects' boxes (the start bundle's first cell's objects its first view
+        does not draw): a frame does not wait for a missing one its frustum drops."""
+        for oid, lo, hi in zip(boxes.ids.tolist(), boxes.lo, boxes.hi, strict=True):
+            self.stand_ins[oid] = (lo, hi)
 
     def located(self, cid: int) -> None:
         """The server located the walk's start in cell ``cid``: it is the current cell

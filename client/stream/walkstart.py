@@ -88,12 +88,16 @@ async def bundle_start(
     manifest_fut: asyncio.Future[Manifest],
     tasks: list[asyncio.Task[Any]],
     manifest_failed: Callable[[BaseException], None] | None = None,
+    view: RoomView | None = None,
 ) -> tuple[RecordedPath, int] | None:
     """Start with the start bundle of recorded path ``path``: the path and its bytes.
 
     None when the bundle failed before the path arrived (the caller then starts the
     old way).  When it is cut after the path but before the manifest, a task
-    (added to ``tasks``) fetches the manifest on its own.
+    (added to ``tasks``) fetches the manifest on its own.  With ``view`` (a city walk
+    that stands at its start until its first view is complete), the bundle brings the
+    objects that view draws first and the boxes of the first cell's others
+    (:mod:`~walkstream.server.service.streetheads`).
     """
     loop = asyncio.get_running_loop()
     path_fut: asyncio.Future[tuple[RecordedPath, int]] = loop.create_future()
@@ -114,7 +118,7 @@ async def bundle_start(
             # cut after the path: the manifest (the grammar) comes on its own
             tasks.append(manifest_task(api, disk, manifest_arrived, manifest_failed))
 
-    streamer.start_bundle(path, on_path, on_manifest, on_end)
+    streamer.start_bundle(path, on_path, on_manifest, on_end, view=view)
     try:
         got: tuple[RecordedPath, int] | None = await within(
             clock, timeout_s, path_fut

@@ -99,8 +99,10 @@ async def walk(
     if e is not None and rooms is not None:
         w.door = np.asarray(next(p[4] for p in rooms.topology.portals if p[0] == e.portal), np.float64).mean(axis=0)
     last_progress = -math.inf
-    # an interior walker stands at the start until its first view is complete (at most start_hold_s)
-    holding = cfg.start_hold_s > 0 and rooms is not None and scene.streets is None
+    # a walker stands at the start until its first view is complete (at most start_hold_s):
+    # indoors and, when the start bundle brings the first view first (cfg.street_hold), on the street
+    holding = cfg.start_hold_s > 0 and ((rooms is not None and scene.streets is None)
+                                        or (scene.streets is not None and rooms is None and scene.streets.first_view))
     hold_end = t_walk0 + cfg.start_hold_s
     while True:
         t = clock.now()
@@ -108,6 +110,8 @@ async def walk(
         if holding and t < hold_end:
             w.frames.start_hold_s += wt
             t_walk0, wt = t, 0.0
+            if scene.streets is not None:  # the walk ends later by the time it stood
+                scene.streets.walk_end = t_walk0 + total
         holding = holding and t < hold_end
         if w.path_pending and wt > w.path.duration:
             # the whole path is still on its way: the walker waits at the head's end
@@ -131,8 +135,9 @@ async def walk(
             if name == "draw" and w.renderer is not None and (f.snap or not w.device.simulated):
                 phases.move("draw", "finish", w.renderer.last_finish_s)
         # the walk leads within seconds into the cells still on the link (the start bundle's
-        # other cells, the first prefetch): the walker waits for them too
-        holding = holding and not (f.perfect and not (rooms is not None and rooms.busy()))
+        # other cells, the first prefetch; on the street the bundle's): the walker waits for them too
+        busy = rooms.busy() if rooms is not None else scene.streets is not None and scene.streets.starting
+        holding = holding and not (f.perfect and not busy)
         w.frame += 1
         if w.frame % FORGET_EVERY == 0:
             forget_flushed(w)

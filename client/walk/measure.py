@@ -18,10 +18,12 @@ from typing import Any
 
 import httpx
 import numpy as np
+from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
 from walkstream.client.draw.quads import quads_of
 from walkstream.client.report.metrics import FrameLog, first_perfect_index
+from walkstream.client.stream.cache import Cache
 from walkstream.client.truth.recorder import TruthResult
 from walkstream.client.truth.seam import SeamWall
 from walkstream.client.walk.figures import MODEL_PORTALS, MODEL_PVS
@@ -29,9 +31,10 @@ from walkstream.client.walk.state import Frame, WalkState
 from walkstream.client.walk.visible import OUTDOOR_FOG_M
 from walkstream.client.walk.walls import wall_quads
 from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.roomwire import Topology
 
-__all__ = ["measure", "note_truth", "compare_truth"]
+__all__ = ["measure", "note_truth", "compare_truth", "unseen_stand_ins"]
 
 
 def _whole_enough(mesh: CellMesh | None, cid: int, f: Frame) -> bool:
@@ -44,14 +47,16 @@ def measure(w: WalkState, f: Frame) -> None:
     """Log the frame, its figures and its truth notes; feed the controller."""
     scene, city, rooms = w.scene, w.scene.streets, w.scene.rooms
     o = w.objects
-    have_obj = sum(1 for i in o.pvs if city.has_object(i)) if city is not None else 0
+    # a missing object whose box (a stand-in, known before it) the frustum drops is not waited for
+    unseen = unseen_stand_ins(o.pvs, city.stand_ins, w.scene.cache, f.vp) if city is not None else set()
+    have_obj = sum(1 for i in o.pvs if i not in unseen and city.has_object(i)) if city is not None else 0
     waiting = [c for c in f.default_room_cells if rooms is not None and not _whole_enough(rooms.mesh(c), c, f)]
     have_rooms = len(f.default_room_cells) - len(waiting)
     if rooms is not None:
         rooms.note_missing(f.t, waiting)
     # outdoors with rings of walls: the textures of the ring in view are content too
     have_walls = f.wall_due - f.wall_missing
-    items = len(o.pvs) + len(f.default_room_cells) + f.wall_due
+    items = len(o.pvs) - len(unseen) + len(f.default_room_cells) + f.wall_due
     known = (f.room is not None) if w.indoors else (city is not None and f.street is not None and f.street in city.cells)
     empty = 1.0 if known else scene.unknown_quality
     dq = (have_obj + have_rooms + have_walls) / items if items else empty
@@ -104,6 +109,22 @@ def measure(w: WalkState, f: Frame) -> None:
         # jitter, not its triangles (client/draw/budget.py, "Noise or cost")
         w.controller.observe(f.frame_time, f.triangles,
                              under_budget_is_noise=w.indoors and w.config.fog_budget)
+
+
+def unseen_stand_ins(pvs: list[int], boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]],
+                     cache: Cache, vp: NDArray[np.float64]) -> set[int]:
+    """The objects of ``pvs`` not rebuilt yet whose stand-in box in ``boxes`` (``lo``,
+    ``hi`` (3,) each) the frustum of ``vp`` ``(4, 4)`` drops: the frame draws none of
+    them, whole or not (:mod:`~walkstream.shared.codec.objectboxes`)."""
+    if not boxes:
+        return set()
+    ids = [i for i in pvs if i in boxes and cache.peek("geom", i) is None]
+    if not ids:
+        return set()
+    lo = np.stack([boxes[i][0] for i in ids])
+    hi = np.stack([boxes[i][1] for i in ids])
+    keep = frustum_cull(lo, hi, vp)
+    return {i for i, k in zip(ids, keep.tolist(), strict=True) if not k}
 
 
 def note_truth(w: WalkState, f: Frame) -> None:

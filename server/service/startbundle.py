@@ -27,6 +27,7 @@ from walkstream.server.service.firstwalls import (
 )
 from walkstream.server.service.http import Encoded, Rep
 from walkstream.server.service.scenes import Form, Scene
+from walkstream.server.service.streetheads import first_view_plan, object_boxes_body
 from walkstream.shared.codec.cellbatch import pack_contents_part
 from walkstream.shared.errors import ApiError
 from walkstream.shared.pathcodec import decode_path_q
@@ -264,6 +265,8 @@ def start_parts(
     more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0
     cells = start_cells(scene, xy, heading, min(START_MAX_AHEAD_M, ahead + more))
     with_objects = start_cells(scene, xy, heading, ahead)
+    if heads and path is not None and view is not None and rep == "msgpack" and cells:
+        return parts + _first_view_parts(scene, path, view, cells, with_objects, form)
     # the records first, each with the index tile that holds its cell (the client
     # follows the viewer into it by its outline; other tiles around the start it
     # asks for when it needs them), then the manifest (its grammar rebuilds the
@@ -278,19 +281,50 @@ def start_parts(
     if not cells:  # outside every cell: the tiles that may hold cells near the start
         parts += [("index", scene.index(t, rep)) for _d, t in scene.grid.tiles_near(xy)]
     parts.append(("manifest", scene.manifest[rep]))
+    order = _objects_of(scene, with_objects)
+    if order:
+        parts.append(_objects_part(scene, order, form))
+    return parts
+
+
+def _objects_of(scene: Scene, cells: list[int], seen: set[int] | None = None) -> list[int]:
+    """The objects of ``cells``' PVS not in ``seen``: the first cell's by ACH (highest
+    first), then each next cell's new ones."""
+    seen = set() if seen is None else set(seen)
     order: list[int] = []
-    seen: set[int] = set()
-    for cid in with_objects:
+    for cid in cells:
         c = scene.reader.cell(cid)
         for oid in c.pvs[np.argsort(-c.ach, kind="stable")].tolist():
             if oid not in seen:
                 seen.add(oid)
                 order.append(int(oid))
-    if order:
-        found, missing = scene.cached_frames(order, form)
-        if missing:
-            found.update(scene.load_frames(missing, form))
-        parts.append(("objects", Frames(order, [found[oid] for oid in order])))
+    return order
+
+
+def _objects_part(scene: Scene, ids: list[int], form: Form) -> StartPart:
+    found, missing = scene.cached_frames(ids, form)
+    if missing:
+        found.update(scene.load_frames(missing, form))
+    return "objects", Frames(ids, [found[oid] for oid in ids])
+
+
+def _first_view_parts(scene: Scene, path: str, view: RoomView, cells: list[int], with_objects: list[int],
+                      form: Form) -> list[StartPart]:
+    """A city bundle's parts after the path when the client holds its start for its first
+    view, in the order :func:`~walkstream.server.service.streetheads.first_view_plan` gives."""
+    parts: list[StartPart] = []
+    for name, what in first_view_plan(scene, path, view, START_LEAD_S, cells, with_objects):
+        if name == "cell":
+            parts.append(("cell", scene.cell(what, "msgpack")))
+        elif name == "index":
+            parts.append(("index", scene.index(what, "msgpack")))
+        elif name == "manifest":
+            parts.append(("manifest", scene.manifest["msgpack"]))
+        elif name == "objects":
+            parts.append(_objects_part(scene, what, form))
+        else:
+            body = object_boxes_body(scene, what)
+            parts.append(("boxes", Encoded(body, scene.manifest["msgpack"].media_type, "")))
     return parts
 
 
