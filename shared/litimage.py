@@ -69,24 +69,28 @@ def set_lighting(prog: Any) -> None:
     prog["u_ambient"].value = float(AMBIENT)
 
 
-def average_samples(img: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    """The rounded mean of each :data:`SUPERSAMPLE` x :data:`SUPERSAMPLE` block.
+def average_samples(img: NDArray[np.uint8], factor: int = SUPERSAMPLE) -> NDArray[np.uint8]:
+    """The rounded mean of each ``factor`` x ``factor`` block.
 
     Parameters
     ----------
     img:
-        ``(h * SUPERSAMPLE, w * SUPERSAMPLE, 4) uint8`` as read from the framebuffer.
+        ``(h * factor, w * factor, 4) uint8`` as read from the framebuffer.
+    factor:
+        Samples per texel along each axis (default :data:`SUPERSAMPLE`; 1 returns ``img``).
 
     Returns
     -------
     NDArray[np.uint8]
         ``(h, w, 4)``: integer sums of strided views (cheaper than per tile or in floats).
     """
+    if factor == 1:
+        return img
     wide = img.astype(np.uint16)
-    n = SUPERSAMPLE * SUPERSAMPLE
-    total = np.full_like(wide[::SUPERSAMPLE, ::SUPERSAMPLE], n // 2)
-    for i in range(SUPERSAMPLE):
-        for j in range(SUPERSAMPLE):
-            total += wide[i::SUPERSAMPLE, j::SUPERSAMPLE]
+    n = factor * factor
+    total = np.full_like(wide[::factor, ::factor], n // 2)
+    for i in range(factor):
+        for j in range(factor):
+            total += wide[i::factor, j::factor]
     out: NDArray[np.uint8] = (total // n).astype(np.uint8)
     return out
