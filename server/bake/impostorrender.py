@@ -113,7 +113,7 @@ def _nudge(size: int) -> NDArray[np.float64]:
 _NUDGE_TEXELS = 0.0023
 """How far (texels) point samples sit off the texel centres: far above the viewport
 transform's rounding (about 1e-4 of a pixel in a 2,048-pixel atlas), far below a texel
-(an edge this near a centre is rare: it moves a texel's side on about 0.2 % of a
+(an edge this near a centre is rare: it moves a texel's side on about 0.3 % of a
 windowed facade's texels), and no round fraction."""
 
 
