@@ -17,10 +17,20 @@ from numpy.typing import NDArray
 
 from walkstream.shared.lighting import AMBIENT, LIGHT_DIRECTION
 
-__all__ = ["LIT_VERTEX_SHADER", "SUPERSAMPLE", "average_samples", "lit_program", "set_lighting"]
+__all__ = ["LIT_VERTEX_SHADER", "NUDGE_TEXELS", "SUPERSAMPLE", "average_samples", "lit_program", "set_lighting"]
 
 SUPERSAMPLE = 2
 """Rendered samples per image texel along each axis (averaged: soft edges)."""
+
+NUDGE_TEXELS = 0.0023
+"""How far (texels, on both axes) a point-sampled image's samples sit off the texel
+centres.  A sample exactly on an edge (a window's edge on a texel centre, which the
+grammar's round sizes make happen) falls on either side by the last bit of the viewport
+transform, which differs with where the image is drawn; off the centre by a fraction
+no round size meets, it falls on one side wherever it is drawn.  Far above the viewport
+transform's rounding (about 1e-4 of a pixel in a 2,048-pixel atlas), far below a texel
+(an edge this near a centre moves a texel's side on about 0.3 % of a windowed facade's
+texels), and no round fraction."""
 
 LIT_VERTEX_SHADER = """
 #version 330

@@ -48,7 +48,7 @@ from walkstream.shared.gl import (
     release_objects,
 )
 from walkstream.shared.impostors import bin_direction, image_basis
-from walkstream.shared.litimage import SUPERSAMPLE, average_samples, lit_program
+from walkstream.shared.litimage import NUDGE_TEXELS, SUPERSAMPLE, average_samples, lit_program
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
@@ -96,7 +96,7 @@ _NUDGE: dict[int, NDArray[np.float64]] = {}
 
 
 def _nudge(size: int) -> NDArray[np.float64]:
-    """A shift of the point samples by :data:`_NUDGE_TEXELS` of a texel on both axes, kept per size.
+    """A shift of the point samples by :data:`~.litimage.NUDGE_TEXELS` of a texel on both axes, kept per size.
 
     A point sample exactly on an edge of the building (a window's edge on a texel centre,
     which the grammar's round sizes make happen) falls on either side by the last bit of
@@ -105,16 +105,9 @@ def _nudge(size: int) -> NDArray[np.float64]:
     a fraction no round size meets, the sample falls on one side wherever it is drawn.
     """
     m = np.eye(4)
-    m[0, 3] = m[1, 3] = 2.0 * _NUDGE_TEXELS / size
+    m[0, 3] = m[1, 3] = 2.0 * NUDGE_TEXELS / size
     _NUDGE[size] = m
     return m
-
-
-_NUDGE_TEXELS = 0.0023
-"""How far (texels) point samples sit off the texel centres: far above the viewport
-transform's rounding (about 1e-4 of a pixel in a 2,048-pixel atlas), far below a texel
-(an edge this near a centre is rare: it moves a texel's side on about 0.3 % of a
-windowed facade's texels), and no round fraction."""
 
 
 class ImpostorRenderer(Releasable):
