@@ -14,6 +14,8 @@ Each module is one benchmark that ``walkstream bench ...`` runs and prints as a 
 - :mod:`.controller`: the budget controller alone on the device cost models;
 - :mod:`.lod`: image error against frame time, ACH against distance LODs;
 - :mod:`.fill`: where the gl device's frame time goes, lighting per fragment vs per vertex;
+- :mod:`.impostorsampling`: one impostor against its truth, alone, per view, bake sampling
+  and texture filter (why the impostors' own error is what it is);
 - :mod:`.city`: OpenStreetMap extracts, street cells against grid cells;
 - :mod:`.fieldspeed`: how fast the dense visibility field renders, the bake's renderer
   against exact occlusion culling (:mod:`.fieldcull`) on the same points;

@@ -17,10 +17,20 @@ from numpy.typing import NDArray
 
 from walkstream.shared.lighting import AMBIENT, LIGHT_DIRECTION
 
-__all__ = ["LIT_VERTEX_SHADER", "SUPERSAMPLE", "average_samples", "lit_program", "set_lighting"]
+__all__ = ["LIT_VERTEX_SHADER", "NUDGE_TEXELS", "SUPERSAMPLE", "average_samples", "lit_program", "set_lighting"]
 
 SUPERSAMPLE = 2
 """Rendered samples per image texel along each axis (averaged: soft edges)."""
+
+NUDGE_TEXELS = 0.0023
+"""How far (texels, on both axes) a point-sampled image's samples sit off the texel
+centres.  A sample exactly on an edge (a window's edge on a texel centre, which the
+grammar's round sizes make happen) falls on either side by the last bit of the viewport
+transform, which differs with where the image is drawn; off the centre by a fraction
+no round size meets, it falls on one side wherever it is drawn.  Far above the viewport
+transform's rounding (about 1e-4 of a pixel in a 2,048-pixel atlas), far below a texel
+(an edge this near a centre moves a texel's side on about 0.3 % of a windowed facade's
+texels), and no round fraction."""
 
 LIT_VERTEX_SHADER = """
 #version 330
@@ -69,24 +79,28 @@ def set_lighting(prog: Any) -> None:
     prog["u_ambient"].value = float(AMBIENT)
 
 
-def average_samples(img: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    """The rounded mean of each :data:`SUPERSAMPLE` x :data:`SUPERSAMPLE` block.
+def average_samples(img: NDArray[np.uint8], factor: int = SUPERSAMPLE) -> NDArray[np.uint8]:
+    """The rounded mean of each ``factor`` x ``factor`` block.
 
     Parameters
     ----------
     img:
-        ``(h * SUPERSAMPLE, w * SUPERSAMPLE, 4) uint8`` as read from the framebuffer.
+        ``(h * factor, w * factor, 4) uint8`` as read from the framebuffer.
+    factor:
+        Samples per texel along each axis (default :data:`SUPERSAMPLE`; 1 returns ``img``).
 
     Returns
     -------
     NDArray[np.uint8]
         ``(h, w, 4)``: integer sums of strided views (cheaper than per tile or in floats).
     """
+    if factor == 1:
+        return img
     wide = img.astype(np.uint16)
-    n = SUPERSAMPLE * SUPERSAMPLE
-    total = np.full_like(wide[::SUPERSAMPLE, ::SUPERSAMPLE], n // 2)
-    for i in range(SUPERSAMPLE):
-        for j in range(SUPERSAMPLE):
-            total += wide[i::SUPERSAMPLE, j::SUPERSAMPLE]
+    n = factor * factor
+    total = np.full_like(wide[::factor, ::factor], n // 2)
+    for i in range(factor):
+        for j in range(factor):
+            total += wide[i::factor, j::factor]
     out: NDArray[np.uint8] = (total // n).astype(np.uint8)
     return out

@@ -105,6 +105,32 @@ def test_a_facade_image_is_premultiplied_and_empty_where_lod2_is_not(gl: Any) ->
         assert (a[a.shape[0] // 2, a.shape[1] // 4 : -a.shape[1] // 4, 3] == 255).all()  # the wall itself
 
 
+@pytest.mark.gl
+def test_a_facade_texel_holds_one_point_of_the_surface_not_a_mix(gl: Any) -> None:
+    """Point sampling (the default): a texel is covered or not, and its colour is one the
+    surface has; averaging 2x2 samples (``samples=2``) mixes a window with its wall."""
+    l0, _, l2 = _building()
+    with pytest.raises(InputError, match="samples per texel"):
+        FacadeBaker(gl, samples=3)
+    made = {}
+    for n in (1, 2):
+        baker = FacadeBaker(gl, samples=n)
+        try:
+            made[n] = [baker.bake(1, l0, l2).images for _ in range(2)]
+        finally:
+            baker.release()
+    for a, b in zip(*made[1], strict=True):
+        assert np.array_equal(a.rgba, b.rgba)  # the same bytes however often it is baked
+    point = np.concatenate([im.rgba.reshape(-1, 4) for im in made[1][0]])
+    area = np.concatenate([im.rgba.reshape(-1, 4) for im in made[2][0]])
+    assert set(np.unique(point[:, 3]).tolist()) <= {0, 255}
+    assert ((area[:, 3] > 0) & (area[:, 3] < 255)).any()  # soft edges where samples were averaged
+    # the colours of the opaque texels: the surface's few lit colours, not the mixes between them
+    colours = {tuple(c) for c in point[point[:, 3] == 255, :3].tolist()}
+    mixes = {tuple(c) for c in area[area[:, 3] == 255, :3].tolist()}
+    assert len(colours) < len(mixes) / 2, (len(colours), len(mixes))
+
+
 @pytest.fixture(scope="module")
 def city(small_city_db: Path) -> Path:
     """The small city every walk here replays (read only)."""

@@ -20,6 +20,7 @@
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
     walkstream bench portals [--presets paper paper10] [--frames N] [--truth N] [--no-gl] [--out DIR] [--json]
     walkstream bench portals --cull [SEED ...] [--cull-against REV] [--out DIR] [--json]
+    walkstream bench impostor-sampling [SRC] [--buildings 20] [--impostor-error 2] [--picture p.png] [--json]
     walkstream bench walls [--scenes hall,city,west-oakland,village] [--wall-errors 5,10,15,20] [--duration 60s]
         [--gl-duration 20s] [--truth-every N] [--size WxH] [--no-gl] [--quick] [--out DIR] [--json]
 
@@ -194,6 +195,26 @@ def cmd_bench_impostors(args: argparse.Namespace) -> int:
     print(format_impostor_table(rows))
     if args.truth_every:
         print(f"plot: {Path(args.out) / 'bench_impostors.png'}")
+    return 0
+
+
+def cmd_bench_impostor_sampling(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench impostor-sampling``."""
+    from walkstream.benchmarks.impostorsampling import (
+        format_sampling_table,
+        plot_sampling_picture,
+        run_sampling_bench,
+    )
+    from walkstream.cmd_bake import default_city_source
+    from walkstream.cmd_build import load_source
+
+    src = args.source or str(default_city_source(Path("out/demo")))
+    picture: dict[str, Any] | None = {} if args.picture else None
+    rows = run_sampling_bench(load_source(src).buildings, count=args.buildings, error_deg=args.impostor_error,
+                              picture=picture)
+    print(json.dumps(rows) if args.json else format_sampling_table(rows))
+    if picture:
+        print(f"picture: {plot_sampling_picture(picture, Path(args.picture))}")
     return 0
 
 
@@ -640,6 +661,14 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--facades", default="auto", choices=("auto", "on", "off", "both"), help="facade textures on the boxes: the replay's default (auto: on a simulated device), always (on), never (off), or each walk both ways (both)")
     b.add_argument("--out", default="out/bench-impostors", help="folder for the reports")
     b.set_defaults(func=cmd_bench_impostors)
+
+    b = besub.add_parser("impostor-sampling", help="one impostor against its truth, alone, per view, bake sampling and texture filter: pixels over the visible threshold")
+    b.add_argument("source", nargs="?", help="city source (default: the demo city, generated into out/demo if missing)")
+    b.add_argument("--buildings", type=int, default=20, help="the N tallest buildings (default 20)")
+    b.add_argument("--impostor-error", type=float, default=2.0, metavar="A", help="the bound A, degrees, that picks the direction bin of the perspective view (default 2)")
+    b.add_argument("--picture", metavar="PNG", help="also draw one building's frames (the middle one by height) and their pixels over the threshold")
+    b.add_argument("--json", action="store_true", help="print the rows as JSON")
+    b.set_defaults(func=cmd_bench_impostor_sampling)
 
     b = besub.add_parser("walls", help="the open scenes (hall, city, West Oakland, village) with and without virtual walls")
     b.add_argument("--scenes", default="hall,city,west-oakland,village", help="comma-separated scenes (default all four)")

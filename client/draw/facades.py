@@ -14,9 +14,13 @@ rectangle grown by :data:`MARGIN_M` (LOD2's ledges and parapet stand out of the 
 depth from :data:`FRONT_M` in front of the face to :data:`BACK_M` behind it (recessed
 windows, not the far side of the building), lit as the client and the truth light a
 surface (:mod:`walkstream.shared.lighting`: a fixed directional light, so the lit
-colour does not depend on where the viewer stands), at :data:`~walkstream.shared.litimage.SUPERSAMPLE` samples a
-texel averaged into premultiplied RGBA.  Texels LOD2 leaves empty are transparent:
-the box shows through them.
+colour does not depend on where the viewer stands), one sample a texel at its centre
+(:data:`~walkstream.shared.litimage.NUDGE_TEXELS` off it), premultiplied RGBA.  A texel holds the surface under one
+point, as the ground truth's pixel holds the surface under its centre: a texel
+averaging a window with its wall (``samples=``:data:`~walkstream.shared.litimage.SUPERSAMPLE`,
+the former default) matches neither colour a pixel of the truth can take; the impostors
+sample so for the same reason (:mod:`walkstream.server.bake.impostorrender`).  Texels
+LOD2 leaves empty are transparent: the box shows through them.
 
 The image is drawn as a textured quad (:data:`~walkstream.client.draw.quads.Quad`)
 standing :data:`LIFT_M` outside the face, over the box, by the impostors' own quad
@@ -43,7 +47,7 @@ from walkstream.client.draw.quads import Quad
 from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import check_gl_error, create_context, release_objects
-from walkstream.shared.litimage import SUPERSAMPLE, average_samples, set_lighting
+from walkstream.shared.litimage import NUDGE_TEXELS, SUPERSAMPLE, average_samples, set_lighting
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
@@ -269,13 +273,19 @@ class FacadeBaker:
         Texels per metre of wall.
     max_size : int
         Largest side of an image in texels.
+    samples : int
+        Samples per texel along each axis: 1 (the default) samples each texel at its
+        centre, :data:`~walkstream.shared.litimage.SUPERSAMPLE` averages that many squared.
     """
 
-    def __init__(self, ctx: Any = None, texels_per_m: float = 8.0, max_size: int = 256) -> None:
+    def __init__(self, ctx: Any = None, texels_per_m: float = 8.0, max_size: int = 256, samples: int = 1) -> None:
         if not (math.isfinite(texels_per_m) and texels_per_m > 0):
             raise InputError(f"facade texels per metre: expected > 0, got {texels_per_m}")
         if int(max_size) < 4:
             raise InputError(f"facade texture size: expected >= 4 texels, got {max_size}")
+        if int(samples) not in (1, SUPERSAMPLE):
+            raise InputError(f"facade samples per texel: expected 1 or {SUPERSAMPLE}, got {samples}")
+        self.samples = int(samples)
         self.texels_per_m = float(texels_per_m)
         self.max_size = int(max_size)
         self._own = ctx is None
@@ -337,9 +347,10 @@ class FacadeBaker:
         face, sel = job.faces[k], job.selections[k]
         ctx = self.ctx
         w, h = texture_size(face, self.texels_per_m, self.max_size)
-        fbo = self._fbo(w * SUPERSAMPLE, h * SUPERSAMPLE)
+        ss = self.samples
+        fbo = self._fbo(w * ss, h * ss)
         fbo.use()
-        ctx.viewport = (0, 0, w * SUPERSAMPLE, h * SUPERSAMPLE)
+        ctx.viewport = (0, 0, w * ss, h * ss)
         if job.drawn == 0:
             fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         stop = len(sel) if max_triangles is None else min(len(sel), job.drawn + max(int(max_triangles), 0))
@@ -350,7 +361,13 @@ class FacadeBaker:
             vao = ctx.vertex_array(self._prog, [(vbo, "3f 3f 3f", "in_position", "in_normal", "in_color")],
                                    index_buffer=ibo, index_element_size=4)
             try:
-                self._prog["u_view_proj"].write(mat4_bytes(_face_camera(face)))
+                cam = _face_camera(face)
+                if ss == 1:
+                    # off the exact texel centres: a window's edge there (the grammar's
+                    # round sizes put some there) falls on one side wherever it is drawn
+                    cam[0, 3] += 2.0 * NUDGE_TEXELS / w
+                    cam[1, 3] += 2.0 * NUDGE_TEXELS / h
+                self._prog["u_view_proj"].write(mat4_bytes(cam))
                 ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
                 ctx.disable(moderngl.BLEND)
                 ctx.front_face, ctx.cull_face = "ccw", "back"
@@ -363,9 +380,9 @@ class FacadeBaker:
         job.drawn = stop
         if stop >= len(sel):
             raw = np.frombuffer(fbo.read(components=4, alignment=1), np.uint8)
-            img = raw.reshape(h * SUPERSAMPLE, w * SUPERSAMPLE, 4)[::-1]
+            img = raw.reshape(h * ss, w * ss, 4)[::-1]
             relief = job.reliefs[k] if k < len(job.reliefs) else 0.0
-            job.images.append(FacadeImage(face, average_samples(img), int(len(sel)), relief))
+            job.images.append(FacadeImage(face, average_samples(img, ss), int(len(sel)), relief))
             job.drawn = 0
         check_gl_error(ctx, "after baking a facade image")
         return int(len(part))

@@ -26,7 +26,15 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.errors import RenderError
 
-__all__ = ["Quad", "QuadRenderer", "back_to_front", "quads_of"]
+__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "quads_of"]
+
+IMPOSTOR_MIN_FILTER: int = moderngl.LINEAR
+"""How an impostor image's texels are read when it is drawn smaller than baked: bilinear.
+Nearest (the texel under the pixel's centre, as the truth's rasterised LOD2 takes the
+surface under it) is closer to the truth pixel by pixel (``walkstream bench
+impostor-sampling``; on the D 60 m walk it takes the visibly wrong share's median from
+1.00 to 0.82 % of the frame) but the images shimmer as they move: the switch's
+frame-to-frame change over plain motion's rose from 1.02 to 1.13 there, so bilinear stays."""
 
 Quad = tuple[NDArray[np.float64], int, NDArray[np.uint8], float]
 """``(corners (4, 3), image id, premultiplied RGBA (h, w, 4), opacity)``; corners bottom-left,
@@ -62,8 +70,10 @@ _UV = np.array([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]], np.float32)
 class QuadRenderer:
     """Textures and draws impostor quads on ``ctx`` (see the module docstring)."""
 
-    def __init__(self, ctx: moderngl.Context) -> None:
+    def __init__(self, ctx: moderngl.Context, image_filter: int | None = None) -> None:
         self.ctx = ctx
+        self.image_filter = IMPOSTOR_MIN_FILTER if image_filter is None else int(image_filter)
+        """Minifying filter of impostor images (moderngl ``NEAREST`` or ``LINEAR``)."""
         try:
             self._prog = ctx.program(vertex_shader=_VS, fragment_shader=_FS)
         except Exception as exc:
@@ -84,9 +94,8 @@ class QuadRenderer:
             # a facade picture (negative ids) seen from afar, its texels under a pixel: each
             # pixel takes the texel under its centre, as rasterising LOD2 takes the surface
             # under it (bilinear blurs a window's edge over the next pixel); near, bilinear.
-            # An impostor stays bilinear: point-sampled it lowered its pixels' p99 error at
-            # D 60 m but shimmered as it moved (the switch's frame-to-frame change rose)
-            tex.filter = (moderngl.NEAREST if image < 0 else moderngl.LINEAR, moderngl.LINEAR)
+            # An impostor: IMPOSTOR_MIN_FILTER (bilinear; why there)
+            tex.filter = (moderngl.NEAREST if image < 0 else self.image_filter, moderngl.LINEAR)
             tex.repeat_x = tex.repeat_y = False
             self._textures[image] = tex
             self.texture_bytes += a.nbytes

@@ -511,15 +511,22 @@ class TruthRenderer(Releasable):
         ids, _ = self.render(eye, view, draw, proj=proj)
         return self.colour(), self.object_ids(ids)
 
-    def paint_quads(self, quads: Sequence[Quad], view: ArrayLike, proj: ArrayLike | None = None) -> NDArray[np.uint8]:
+    def paint_quads(
+        self, quads: Sequence[Quad], view: ArrayLike, proj: ArrayLike | None = None, image_filter: int | None = None
+    ) -> NDArray[np.uint8]:
         """Draw textured ``quads`` over the last frame drawn (its depth tested, not written;
-        premultiplied blend, as the client draws impostors) and return the colour, row 0 at the top."""
+        premultiplied blend, as the client draws impostors) and return the colour, row 0 at the top.
+        ``image_filter`` overrides the client's minifying filter of impostor images
+        (:class:`~walkstream.client.draw.quads.QuadRenderer`; benchmarks compare them)."""
         if self.ctx is None:
             raise RenderError("TruthRenderer: used after release()")
         from walkstream.client.draw.quads import QuadRenderer
 
+        if self._quads is not None and image_filter is not None and self._quads.image_filter != image_filter:
+            self._quads.release()
+            self._quads = None
         if self._quads is None:
-            self._quads = QuadRenderer(self.ctx)
+            self._quads = QuadRenderer(self.ctx, image_filter)
         self._fbo_colour.use()
         p = self.proj if proj is None else proj
         self._quads.draw(quads, np.asarray(p, np.float64) @ np.asarray(view, np.float64))

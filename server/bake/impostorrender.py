@@ -4,9 +4,20 @@
 buffer (one context, made headless through EGL like every renderer of the project)
 and renders one object at a time along a bin's direction
 (:func:`~walkstream.shared.impostors.bin_direction`) into a square of ``2 R`` metres
-(:func:`~walkstream.shared.impostors.image_basis`), over transparent black, at
-:data:`~.litimage.SUPERSAMPLE` times the size asked; averaging the supersamples gives
-premultiplied colour with soft silhouettes (:mod:`walkstream.shared.codec.image`).
+(:func:`~walkstream.shared.impostors.image_basis`), over transparent black, with
+one of two samplings (:data:`IMPOSTOR_SAMPLINGS`, the bake's ``--impostor-sampling``):
+
+``point`` (the default)
+    One sample per texel, at its centre: each texel holds the lit surface colour
+    under that point, as the ground truth's rasterised LOD2 holds the surface under
+    each pixel's centre.  The demo's windows are about a pixel at D 60 m, so a texel
+    that mixes a window with its wall matches neither colour the truth's pixel can
+    take: with the texels and the pixels on one grid, ``point`` leaves 0.3 % of the
+    building's pixels over ΔE00 2.3, area averaging 44 %
+    (``walkstream bench impostor-sampling``, docs/benchmarks.md).
+``area``
+    :data:`~.litimage.SUPERSAMPLE` x :data:`~.litimage.SUPERSAMPLE` samples averaged:
+    premultiplied colour with soft silhouettes (:mod:`walkstream.shared.codec.image`).
 The lighting is the client's per-vertex lighting (:mod:`walkstream.shared.lighting`,
 material colours of :mod:`walkstream.shared.palette`), so an image shows an object as
 the client draws its LOD2.
@@ -37,14 +48,25 @@ from walkstream.shared.gl import (
     release_objects,
 )
 from walkstream.shared.impostors import bin_direction, image_basis
-from walkstream.shared.litimage import SUPERSAMPLE, average_samples, lit_program
+from walkstream.shared.litimage import NUDGE_TEXELS, SUPERSAMPLE, average_samples, lit_program
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
 
-__all__ = ["ImageJob", "ImpostorRenderer", "impostor_task", "release_impostor_renderer"]
+__all__ = ["IMPOSTOR_SAMPLINGS", "ImageJob", "ImpostorRenderer", "impostor_task", "release_impostor_renderer", "samples_of"]
 
 _ATLAS_SIDE = 2048
 """Largest side of the framebuffer the images of one read are tiled in, pixels."""
+
+IMPOSTOR_SAMPLINGS: tuple[str, ...] = ("point", "area")
+"""How a texel is sampled (module docstring): its centre alone, or the mean over its area."""
+
+
+def samples_of(sampling: str) -> int:
+    """Rendered samples per texel along each axis for ``sampling`` (one of :data:`IMPOSTOR_SAMPLINGS`)."""
+    if sampling not in IMPOSTOR_SAMPLINGS:
+        raise InputError(f"impostor sampling {sampling!r}: expected one of {', '.join(IMPOSTOR_SAMPLINGS)}")
+    return 1 if sampling == "point" else SUPERSAMPLE
+
 
 ImageJob = tuple[int, int, int, int, int, int]
 """One image to make: ``(image id, object id, level, azimuth bin, elevation bin, size)``."""
@@ -67,6 +89,24 @@ def _ortho(radius: float, far: float) -> NDArray[np.float64]:
     m[2, 2] = -2.0 / (far - n)
     m[2, 3] = -(far + n) / (far - n)
     m[3, 3] = 1.0
+    return m
+
+
+_NUDGE: dict[int, NDArray[np.float64]] = {}
+
+
+def _nudge(size: int) -> NDArray[np.float64]:
+    """A shift of the point samples by :data:`~.litimage.NUDGE_TEXELS` of a texel on both axes, kept per size.
+
+    A point sample exactly on an edge of the building (a window's edge on a texel centre,
+    which the grammar's round sizes make happen) falls on either side by the last bit of
+    the viewport transform, which differs with the tile the image is drawn in: a resumed
+    bake, tiling its images otherwise, would store other bytes.  Off the exact centre by
+    a fraction no round size meets, the sample falls on one side wherever it is drawn.
+    """
+    m = np.eye(4)
+    m[0, 3] = m[1, 3] = 2.0 * NUDGE_TEXELS / size
+    _NUDGE[size] = m
     return m
 
 
@@ -152,16 +192,22 @@ class ImpostorRenderer(Releasable):
         out: NDArray[np.float64] = _ortho(r, 2.0 * r + 2.0) @ view
         return out
 
-    def render(self, oid: int, direction: NDArray[np.float64], size: int) -> NDArray[np.uint8]:
+    def render(
+        self, oid: int, direction: NDArray[np.float64], size: int, sampling: str = "point"
+    ) -> NDArray[np.uint8]:
         """The premultiplied ``(size, size, 4) uint8`` image of object ``oid`` seen along
-        ``-direction`` (row 0 at the top), over its bounding square."""
-        return self.render_many([(oid, direction)], size)[0]
+        ``-direction`` (row 0 at the top), over its bounding square, each texel sampled
+        as ``sampling`` says (:data:`IMPOSTOR_SAMPLINGS`)."""
+        return self.render_many([(oid, direction)], size, sampling)[0]
 
-    def render_many(self, views: Sequence[tuple[int, NDArray[np.float64]]], size: int) -> list[NDArray[np.uint8]]:
+    def render_many(
+        self, views: Sequence[tuple[int, NDArray[np.float64]]], size: int, sampling: str = "point"
+    ) -> list[NDArray[np.uint8]]:
         """:meth:`render` of several ``(object, direction)`` at one size, drawn as tiles of
         one framebuffer and read back once: llvmpipe's cost is mostly the wait for each
         read (its threads handing a frame over), so one read per tile grid, not per image."""
-        side = int(size) * SUPERSAMPLE
+        samples = samples_of(sampling)
+        side = int(size) * samples
         per_row = max(1, min(_ATLAS_SIDE // side, math.ceil(math.sqrt(len(views)))))
         per_fb = per_row * per_row
         out: list[NDArray[np.uint8]] = []
@@ -176,14 +222,17 @@ class ImpostorRenderer(Releasable):
                 # tile t: column t % per_row, row t // per_row from the top (GL's y from the bottom)
                 col, row = t % per_row, t // per_row
                 self.ctx.viewport = (col * side, (per_row - 1 - row) * side, side, side)
-                prog["u_view_proj"].write(mat4_bytes(self._mvp(oid, direction)))
+                mvp = self._mvp(oid, direction)
+                if samples == 1:
+                    mvp = _NUDGE[size] @ mvp if size in _NUDGE else _nudge(size) @ mvp
+                prog["u_view_proj"].write(mat4_bytes(mvp))
                 first, count = self._range[oid]
                 self.vao.render(vertices=count, first=first)
             check_gl_error(self.ctx, "impostor images")
             atlas = fb.read()
             # the mean of the samples, rounded, over the whole atlas at once (integer sums of
             # contiguous rows: per tile, or in floats, it costs more than the render)
-            small = average_samples(atlas)
+            small = average_samples(atlas, samples)
             for t in range(len(part)):
                 col, row = t % per_row, t // per_row
                 out.append(small[row * size : (row + 1) * size, col * size : (col + 1) * size].copy())
@@ -216,7 +265,7 @@ def _renderer_for(scene: Any, key: str) -> ImpostorRenderer:
 
 
 def impostor_task(
-    jobs: list[ImageJob], scene: Any, key: str, codec: str, quality: int
+    jobs: list[ImageJob], scene: Any, key: str, codec: str, quality: int, sampling: str = "point"
 ) -> list[tuple[ImageJob, bytes]]:
     """Render and encode images (:data:`ImageJob` each); ``(job, bytes)`` out, in order.
 
@@ -228,7 +277,7 @@ def impostor_task(
     out = []
     for size in sorted({job[5] for job in jobs}):
         same = [job for job in jobs if job[5] == size]
-        images = renderer.render_many([(job[1], bin_direction(*job[2:5])) for job in same], size)
+        images = renderer.render_many([(job[1], bin_direction(*job[2:5])) for job in same], size, sampling)
         out += [(job, encode_image(img, codec, quality)) for job, img in zip(same, images, strict=True)]
     order = {job[0]: k for k, job in enumerate(jobs)}
     return sorted(out, key=lambda r: order[r[0][0]])

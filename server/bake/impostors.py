@@ -61,7 +61,7 @@ def bake_impostors(
         f"({len(plan.jobs) - len(todo)} already baked)")
     media = IMAGE_MEDIA[st.codec]
     for results in run_chunks(
-        impostor_task, todo, (imp.scene, imp.key, st.codec, st.quality), size=IMAGE_CHUNK, workers=workers,
+        impostor_task, todo, (imp.scene, imp.key, st.codec, st.quality, st.sampling), size=IMAGE_CHUNK, workers=workers,
         scheduler=scheduler, progress=progress, done=len(plan.jobs) - len(todo), total=len(plan.jobs),
         release=release_impostor_renderer,
     ):

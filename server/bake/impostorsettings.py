@@ -49,6 +49,9 @@ class ImpostorSettings:
     codec: str = "webp-lossless"
     quality: int = 90
     """Quality of the lossy codecs (``webp``, ``avif``)."""
+    sampling: str = "point"
+    """How a texel is sampled: ``point`` (its centre, as the truth samples a pixel) or
+    ``area`` (the mean of 2 x 2 samples); :mod:`~.impostorrender`."""
 
     def check(self) -> ImpostorSettings:
         """Raise InputError naming the first bad setting."""
@@ -62,6 +65,8 @@ class ImpostorSettings:
             raise InputError(f"--complex-triangles: expected >= 1, got {self.complex_triangles}")
         if self.codec not in IMAGE_CODECS:
             raise InputError(f"impostor codec {self.codec!r}: expected one of {', '.join(IMAGE_CODECS)}")
+        if self.sampling not in ("point", "area"):
+            raise InputError(f"--impostor-sampling: expected point or area, got {self.sampling!r}")
         if not 1 <= self.quality <= 100:
             raise InputError(f"impostor quality: expected 1..100, got {self.quality}")
         if self.view_height < 1 or not 0 < self.fov_deg < 180:

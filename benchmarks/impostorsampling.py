@@ -1,0 +1,252 @@
+"""``walkstream bench impostor-sampling``: one impostor against its truth, alone, and why they differ.
+
+The colour error's truth (:mod:`walkstream.client.truth.render`) rasterises LOD2: each
+pixel holds the lit surface under its centre.  An impostor is an image baked on its
+own texel grid, drawn on a quad, read through a texture filter.  This benchmark takes
+buildings of a city one at a time, draws the truth's pixels of that building alone
+and the impostor's pixels alone (the bake's renderer,
+:class:`~walkstream.server.bake.impostorrender.ImpostorRenderer`, and the client's
+quad, :class:`~walkstream.client.draw.quads.QuadRenderer`, through the truth's own
+:meth:`~walkstream.client.truth.render.TruthRenderer.paint_quads`), and counts the
+pixels over ΔE00 :data:`~walkstream.client.truth.colour.VISIBLE_DE` among those either
+shows, in three views that separate the causes:
+
+``aligned``
+    Orthographic along the image's own direction, the frame's pixels on the image's
+    texels (one a pixel): no parallax, no filtering, no resampling; what is left is the
+    lighting, the palette, the encoding and the texel's sampling.
+``minified``
+    The same view with the image at the bake's size, 2.67 texels to a pixel (as a
+    D 60 m image sized for 640 x 480 shows at 160 x 120): resampling and filtering.
+``on-axis``
+    A perspective frame (160 x 120, 60 degrees) from an eye 60-150 m away on the
+    image's own axis, the quad as the client places it, the image sized as the bake
+    sizes it: the orthographic image's parallax against the perspective view added
+    (:func:`~walkstream.shared.impostors.orthographic_parallax`), not yet the bound.
+``perspective``
+    The client's view: the same frame from an eye at street height anywhere in the
+    direction bin the error bound ``A`` picks: the bound added.
+
+Each is run for both samplings of the bake (``point``, ``area``:
+:data:`~walkstream.server.bake.impostorrender.IMPOSTOR_SAMPLINGS`) and both minifying
+filters of the quad (``nearest``, ``linear``), beside the truth against itself drawn
+at 4 x 4 samples a pixel and averaged: what an anti-aliased picture of the very same
+geometry scores under the per-pixel measure.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.truth.colour import VISIBLE_DE, delta_e_2000, srgb_to_lab
+from walkstream.client.truth.render import TruthRenderer
+from walkstream.client.walk.impostors import quad_corners, toward_eye
+from walkstream.server.bake.impostorrender import IMPOSTOR_SAMPLINGS, ImpostorRenderer
+from walkstream.server.bake.objectrows import building_box
+from walkstream.shared.buildings import build_lod_batch
+from walkstream.shared.camera import look_at
+from walkstream.shared.errors import InputError
+from walkstream.shared.impostors import (
+    bin_direction,
+    bin_of,
+    directions,
+    image_size,
+    level_for,
+    texels_needed,
+)
+
+__all__ = ["VIEWS", "format_sampling_table", "plot_sampling_picture", "run_sampling_bench"]
+
+VIEWS: tuple[str, ...] = ("aligned", "minified", "on-axis", "perspective")
+"""The views of the benchmark (module docstring)."""
+
+_FILTERS = ("nearest", "linear")
+_ALIGNED_PX = 64
+_MINIFIED_PX = 48
+_BAKED_TEXELS = 128
+_TRUTH_SS = 4
+
+
+def _ortho(radius: float, near: float = 0.5, far: float = 2000.0) -> NDArray[np.float64]:
+    m = np.zeros((4, 4))
+    m[0, 0] = m[1, 1] = 1.0 / radius
+    m[2, 2] = -2.0 / (far - near)
+    m[2, 3] = -(far + near) / (far - near)
+    m[3, 3] = 1.0
+    return m
+
+
+def _wrong(truth: NDArray[np.uint8], other: NDArray[np.uint8], area: NDArray[np.bool_]) -> tuple[int, int]:
+    """Pixels of ``area`` over the visible threshold between two ``(h, w, 3)`` pictures, and ``area``'s size."""
+    de = delta_e_2000(srgb_to_lab(truth), srgb_to_lab(other))
+    return int((de[area] > VISIBLE_DE).sum()), int(area.sum())
+
+
+class _Scene:
+    """The truth at a frame size and its 4 x 4 supersampled twin, on one context."""
+
+    def __init__(self, meshes: dict[int, Any], size: tuple[int, int], ctx: Any = None) -> None:
+        self.size = size
+        self.truth = TruthRenderer(meshes, size, ctx=ctx)
+        self.fine = TruthRenderer(meshes, (size[0] * _TRUTH_SS, size[1] * _TRUTH_SS), ctx=self.truth.ctx)
+
+    def frames(self, oid: int, eye: NDArray[np.float64], view: NDArray[np.float64], proj: NDArray[np.float64] | None) -> tuple[
+        NDArray[np.bool_], NDArray[np.uint8], NDArray[np.uint8]
+    ]:
+        """The building's pixels, the truth, the truth supersampled and averaged."""
+        w, h = self.size
+        self.fine.render(eye, view, self.fine.flags([(-1 - oid, 0)]), proj=proj)
+        fine = self.fine.colour().astype(np.float64).reshape(h, _TRUTH_SS, w, _TRUTH_SS, 3).mean(axis=(1, 3))
+        idx, _ = self.truth.render(eye, view, self.truth.flags([(-1 - oid, 0)]), proj=proj)
+        return idx >= 0, self.truth.colour().copy(), np.rint(fine).astype(np.uint8)
+
+    def painted(self, quad: tuple[Any, ...], eye: NDArray[np.float64], view: NDArray[np.float64],
+                proj: NDArray[np.float64] | None, image_filter: str) -> tuple[NDArray[np.uint8], NDArray[np.bool_]]:
+        """The quad alone over the empty frame, drawn as the client draws it, and the pixels it changed."""
+        import moderngl
+
+        tr = self.truth
+        tr.render(eye, view, np.zeros(len(tr.keys), bool), proj=proj)
+        empty = tr.colour().copy()
+        gl_filter = moderngl.NEAREST if image_filter == "nearest" else moderngl.LINEAR
+        out = tr.paint_quads([quad], view, proj, image_filter=gl_filter)
+        return out, np.any(out != empty, axis=2)
+
+    def release(self) -> None:
+        self.fine.release()
+        self.truth.release()
+
+
+def run_sampling_bench(
+    buildings: Sequence[Any], count: int = 20, error_deg: float = 2.0, seed: int = 1, ctx: Any = None,
+    views: Sequence[str] = VIEWS, picture: dict[str, NDArray[np.uint8]] | None = None,
+) -> list[dict[str, Any]]:
+    """The benchmark's rows (module docstring) over ``count`` of the tallest ``buildings``
+    (drawn on ``ctx``, by default a context of its own), for ``views`` (of :data:`VIEWS`).
+    ``picture``, when given, receives the middle building's frames (by height) (``"VIEW truth"``,
+    ``"VIEW SAMPLING FILTER"``) for :func:`plot_sampling_picture`.
+
+    Returns
+    -------
+    list of dict
+        One row per view, sampling and filter (``view``, ``sampling``, ``filter``,
+        ``wrong_share``: pixels over the threshold / pixels of the building or the
+        image, ``pixels``), then one ``sampling="truth 4x4"`` row per view.
+    """
+    if count < 1:
+        raise InputError(f"--buildings: expected at least 1, got {count}")
+    if not views or any(v not in VIEWS for v in views):
+        raise InputError(f"bench impostor-sampling views {list(views)}: expected some of {', '.join(VIEWS)}")
+    chosen = sorted(buildings, key=lambda b: -float(b.top))[:count]
+    if not chosen:
+        raise InputError("bench impostor-sampling: the source has no buildings")
+    meshes = build_lod_batch(chosen, 2)
+    ids = [int(b.id) for b in chosen]
+    boxes = [building_box(b) for b in chosen]
+    objects = dict(zip(ids, meshes, strict=True))
+    scenes = {"aligned": _Scene(objects, (_ALIGNED_PX, _ALIGNED_PX), ctx)}
+    ctx = scenes["aligned"].truth.ctx
+    scenes["minified"] = _Scene(objects, (_MINIFIED_PX, _MINIFIED_PX), ctx)
+    scenes["perspective"] = scenes["on-axis"] = _Scene(objects, (160, 120), ctx)
+    ren = ImpostorRenderer(meshes, ids, boxes, ctx=ctx)
+    rng = np.random.default_rng(seed)
+    tally: dict[tuple[str, str, str], list[int]] = {}
+    image_id = 0
+    try:
+        for k, oid in enumerate(ids):
+            lo, hi = np.asarray(boxes[k][:3], np.float64), np.asarray(boxes[k][3:], np.float64)
+            c, r = (lo + hi) / 2.0, float(np.linalg.norm(hi - lo)) / 2.0
+            d = float(rng.uniform(60.0, 150.0))
+            az = float(rng.uniform(-math.pi, math.pi))
+            street = c + d * np.array([math.cos(az), math.sin(az), 0.0])
+            street[2] = 1.7
+            level = int(level_for(r, float(np.linalg.norm(street - c)), math.radians(error_deg)))
+            level = max(level, 0)
+            a, e = directions(street, c)
+            ia, ie = (int(v) for v in bin_of(level, a, e))
+            u = bin_direction(level, ia, ie)
+            corners = quad_corners(boxes[k], level, ia, ie)
+            for view_name in views:
+                sc = scenes[view_name]
+                if view_name in ("on-axis", "perspective"):
+                    eye, proj = (street if view_name == "perspective" else c + u * d), None
+                    size = int(image_size(texels_needed(r, d, 480, 60.0), _BAKED_TEXELS))
+                    quad_at = toward_eye(corners, eye, boxes[k])
+                else:
+                    eye, proj = c + u * (r + 50.0), _ortho(r)
+                    size = _ALIGNED_PX if view_name == "aligned" else _BAKED_TEXELS
+                    quad_at = corners
+                view = np.asarray(look_at(eye, c), np.float64)
+                mask, truth, fine = sc.frames(oid, eye, view, proj)
+                if picture is not None and k == len(ids) // 2:
+                    picture[f"{view_name} truth"] = truth
+                ref = _wrong(truth, fine, mask)
+                t = tally.setdefault((view_name, "truth 4x4", "-"), [0, 0])
+                t[0] += ref[0]
+                t[1] += ref[1]
+                for sampling in IMPOSTOR_SAMPLINGS:
+                    img = ren.render(oid, u, size, sampling)
+                    for filt in _FILTERS:
+                        image_id += 1  # a new id per image: the quad renderer keeps textures by id
+                        pic, painted = sc.painted((quad_at, image_id, img, 1.0), eye, view, proj, filt)
+                        n_wrong, n = _wrong(truth, pic, mask | painted)
+                        if picture is not None and k == len(ids) // 2:
+                            picture[f"{view_name} {sampling} {filt}"] = pic
+                        t = tally.setdefault((view_name, sampling, filt), [0, 0])
+                        t[0] += n_wrong
+                        t[1] += n
+    finally:
+        ren.release()
+        for name in ("perspective", "minified", "aligned"):
+            scenes[name].release()
+    order = {v: i for i, v in enumerate(VIEWS)}
+    keys = sorted(tally, key=lambda key: (order[key[0]], key[1] == "truth 4x4", key[1], key[2]))
+    return [
+        {"view": v, "sampling": s, "filter": f, "wrong_share": tally[(v, s, f)][0] / max(tally[(v, s, f)][1], 1),
+         "pixels": tally[(v, s, f)][1], "buildings": len(ids)}
+        for v, s, f in keys
+    ]
+
+
+def format_sampling_table(rows: Sequence[dict[str, Any]]) -> str:
+    """The rows as a text table."""
+    head = f"{'view':12s} {'sampling':10s} {'filter':8s} {'pixels':>8s}  over dE00 {VISIBLE_DE}"
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(f"{r['view']:12s} {r['sampling']:10s} {r['filter']:8s} {r['pixels']:8d}  {100.0 * r['wrong_share']:6.1f} %")
+    return "\n".join(lines)
+
+
+def plot_sampling_picture(picture: dict[str, NDArray[np.uint8]], path: Any) -> Any:
+    """One building's frames per view (rows): the truth, the area-sampled image read
+    bilinear, the point-sampled image read nearest, and each image's pixels over the
+    threshold; written to ``path`` (PNG), returned."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    views = [v for v in VIEWS if f"{v} truth" in picture]
+    cols = [("truth", "truth"), ("area linear", "area, bilinear"), ("point nearest", "point, nearest")]
+    fig = Figure(figsize=(11, 2.3 * len(views)))
+    axes = fig.subplots(len(views), 5, squeeze=False)
+    for r, v in enumerate(views):
+        truth = picture[f"{v} truth"]
+        for c, (key, title) in enumerate(cols):
+            axes[r][c].imshow(picture[f"{v} {key}"], interpolation="nearest")
+            axes[r][c].set_title(f"{v}: {title}" if c == 0 else title, fontsize=8)
+        for c, (key, title) in enumerate(cols[1:]):
+            de = delta_e_2000(srgb_to_lab(truth), srgb_to_lab(picture[f"{v} {key}"]))
+            axes[r][3 + c].imshow(de > VISIBLE_DE, cmap="magma", interpolation="nearest")
+            axes[r][3 + c].set_title(f"{title}: over ΔE00 {VISIBLE_DE}", fontsize=8)
+        for ax in axes[r]:
+            ax.set_xticks([])
+            ax.set_yticks([])
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    return path
