@@ -17,7 +17,6 @@ command line hands in.
 from __future__ import annotations
 
 import json
-import math
 import os
 import sys
 import time
@@ -204,31 +203,44 @@ def format_sections_table(rows: list[dict[str, Any]]) -> str:
 
 
 def trade_labels(rows: Sequence[Mapping[str, Any]], walk: str) -> list[tuple[float, float, str]]:
-    """The trade plot's labels for ``walk``: one ``(mean PVS, kB per km, label)`` per point, the
-    sections rows that fall on the same point (equal to 0.1 %, e.g. two ``R`` that grow the same
-    sections) sharing one label, ``"R128, R256 M64 (redundancy 40)"``."""
+    """The trade plot's labels for ``walk``: ``(mean PVS, kB per km, label)`` per spot.
+
+    Sections rows whose points lie on one spot of the plot -- within 4 % of the points'
+    kB range of each other and closer than 35 % of their PVS range (a label's width),
+    e.g. ``R128`` and ``R256`` once the sections hold most of the scene -- share one label
+    at the spot's first point: ``"R128, R256 M64 (redundancy 178, 214)"`` (one redundancy
+    where they agree, ``"; "`` between whole labels where ``M`` or the cover differ).
+    """
+    pts = [(float(r["pvs_mean"]), r["walks"][walk]["bytes_per_km"] / 1000, r) for r in rows if walk in r["walks"]]
+    if not pts:
+        return []
+    xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+    xr, yr = (max(xs) - min(xs)) or 1.0, (max(ys) - min(ys)) or 1.0
     groups: list[tuple[float, float, list[Mapping[str, Any]]]] = []
-    for r in rows:
-        if walk not in r["walks"]:
-            continue
-        x, b = float(r["pvs_mean"]), r["walks"][walk]["bytes_per_km"] / 1000
+    for x, b, r in pts:
         for gx, gb, members in groups:
-            if math.isclose(x, gx, rel_tol=1e-3, abs_tol=1e-9) and math.isclose(b, gb, rel_tol=1e-3, abs_tol=1e-9):
+            if abs(b - gb) <= 0.04 * yr and abs(x - gx) <= 0.35 * xr:
                 members.append(r)
                 break
         else:
             groups.append((x, b, [r]))
 
     def tail(r: Mapping[str, Any]) -> str:
-        red = r.get("section_redundancy_mean")
-        return (f" M{r['min_size']:g}" + ("" if r.get("cover") in (None, "walkable") else f" {r['cover']}")
-                + ("" if red is None else f" (redundancy {red:.0f})"))
+        return f" M{r['min_size']:g}" + ("" if r.get("cover") in (None, "walkable") else f" {r['cover']}")
+
+    def red(r: Mapping[str, Any]) -> str | None:
+        v = r.get("section_redundancy_mean")
+        return None if v is None else f"{v:.0f}"
 
     out = []
     for x, b, members in groups:
-        tails = {tail(r) for r in members}
-        label = (", ".join(f"R{r['redundancy']}" for r in members) + tails.pop() if len(tails) == 1
-                 else "; ".join(f"R{r['redundancy']}{tail(r)}" for r in members))
+        if len({tail(r) for r in members}) == 1:
+            reds = list(dict.fromkeys(v for r in members if (v := red(r)) is not None))
+            label = (", ".join(f"R{r['redundancy']}" for r in members) + tail(members[0])
+                     + (f" (redundancy {', '.join(reds)})" if reds else ""))
+        else:
+            label = "; ".join(f"R{r['redundancy']}{tail(r)}" + ("" if red(r) is None else f" (redundancy {red(r)})")
+                              for r in members)
         out.append((x, b, label))
     return out
 
@@ -254,8 +266,12 @@ def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]
             b = [r["walks"][w]["bytes_per_km"] / 1000 for r in on]
             c = [r["walks"][w]["cells_per_km"] for r in on]
             ax.plot(x, b, "o-", color="#1f77b4", label="sections: kB/km")
+            mid = (min(x) + max(x)) / 2
             for xi, bi, li in trade_labels(on, w):
-                ax.annotate(li, (xi, bi), fontsize=7, xytext=(3, 3), textcoords="offset points")
+                # right of the middle a label ends at its point, so it stays inside the axes
+                right = len(x) > 1 and xi > mid
+                ax.annotate(li, (xi, bi), fontsize=7, xytext=(-3 if right else 3, 3), textcoords="offset points",
+                            ha="right" if right else "left")
             ax2 = ax.twinx()
             ax2.plot(x, c, "s--", color="#d62728", label="sections: cells entered/km")
             ax2.set_ylabel("cells entered per km", color="#d62728")
