@@ -29,20 +29,61 @@ from walkstream.server.store import SceneReader, write_path
 from walkstream.shared.errors import WalkstreamError
 from walkstream.shared.paths import RecordedPath
 
-__all__ = ["run_sections_bench", "format_sections_table", "plot_sections_trade"]
+__all__ = ["run_sections_bench", "format_sections_table", "plot_sections_trade", "trade_labels"]
 
 Replayer = Callable[[str, Mapping[str, Any], str], Any]
 
 
-def _bake(src: Path, db: Path, st: BakeSettings, reuse: bool, workers: int) -> dict[str, Any]:
+# the bake's figures the database does not hold (the sections' redundancy, the field's
+# size): kept beside the database so that ``--reuse`` shows them again
+_BAKE_FIGURES = ("section_redundancy_mean", "sections", "section_pvs_mean", "field_points", "field_bytes")
+
+
+def _figures_path(db: Path) -> Path:
+    return db.with_name(db.name + ".figures.json")
+
+
+def _stored_figures(db: Path, previous: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The bake figures kept for ``db``: its ``.figures.json``, else the row of the last
+    run's ``bench_sections.json`` (``previous``) for the same database."""
+    try:
+        return {k: v for k, v in json.loads(_figures_path(db).read_text()).items() if k in _BAKE_FIGURES}
+    except (OSError, ValueError, AttributeError):
+        pass
+    return {k: previous[k] for k in _BAKE_FIGURES if previous is not None and previous.get(k) is not None}
+
+
+def _bake(src: Path, db: Path, st: BakeSettings, reuse: bool, workers: int,
+          previous: Mapping[str, Any] | None = None) -> dict[str, Any]:
     if reuse and db.exists():
         with SceneReader.open(db) as reader:
-            return reader.summary() | {"bake_seconds": float(reader.summary().get("bake_seconds") or 0.0)}
+            s = reader.summary()
+        return s | _stored_figures(db, previous) | {"bake_seconds": float(s.get("bake_seconds") or 0.0)}
     print(f"  baking {db.name} ...", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     summary = bake(src, db, settings=st, workers=workers)
     summary["bake_seconds"] = time.perf_counter() - t0
+    _figures_path(db).write_text(json.dumps({k: summary[k] for k in _BAKE_FIGURES if k in summary}))
     return summary
+
+
+def _previous_rows(out: Path) -> dict[str, dict[str, Any]]:
+    """The last run's rows by database name (``{}`` where there is none or it is unreadable)."""
+    try:
+        rows = json.loads((out / "bench_sections.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return {_db_name(r): r for r in rows if isinstance(r, dict) and "cells_kind" in r} if isinstance(rows, list) else {}
+
+
+def _db_name(row: Mapping[str, Any]) -> str:
+    """The database file a row was measured in (the names :func:`run_sections_bench` gives)."""
+    if row.get("database"):
+        return str(row["database"])
+    if row["cells_kind"] != "sections":
+        return f"{row['cells_kind']}.db"
+    cover = row.get("cover") or "walkable"
+    return f"sections-R{row['redundancy']}-M{float(row['min_size']):g}" + ("" if cover == "walkable" else f"-{cover}") + ".db"
 
 
 def run_sections_bench(
@@ -87,13 +128,14 @@ def run_sections_bench(
     first_field: dict[str, Path] = {}
     street_blobs: dict[str, bytes] = {}
     rows: list[dict[str, Any]] = []
+    previous = _previous_rows(out) if reuse else {}
     for kind, db, st, r, m in runs:
         if kind == "sections":
             folder = Path(os.fspath(db) + ".field")
             first = first_field.setdefault(st.section_cover, folder)
             if first != folder and not folder.exists() and first.exists():
                 folder.symlink_to(first.resolve(), target_is_directory=True)
-        s = _bake(source, db, st, reuse, workers)
+        s = _bake(source, db, st, reuse, workers, previous.get(db.name))
         with SceneReader.open(db) as reader:
             blobs = {w: reader.path_blob(w) for w in walks if w in reader.path_names()}
         if kind == "street":
@@ -106,7 +148,7 @@ def run_sections_bench(
                     blobs[w] = blob
         paths = {w: RecordedPath.from_msgpack(blob, w) for w, blob in blobs.items()}
         row: dict[str, Any] = {
-            "cells_kind": kind, "redundancy": r, "min_size": m, "cells": s["cells"], "pvs_mean": s["pvs_mean"],
+            "database": db.name, "cells_kind": kind, "redundancy": r, "min_size": m, "cells": s["cells"], "pvs_mean": s["pvs_mean"],
             "cover": st.section_cover if kind == "sections" else None,
             "section_redundancy_mean": s.get("section_redundancy_mean"), "bake_seconds": s["bake_seconds"],
             "field_points": s.get("field_points"), "field_bytes": s.get("field_bytes"), "walks": {},
@@ -160,6 +202,49 @@ def format_sections_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def trade_labels(rows: Sequence[Mapping[str, Any]], walk: str) -> list[tuple[float, float, str]]:
+    """The trade plot's labels for ``walk``: ``(mean PVS, kB per km, label)`` per spot.
+
+    Sections rows whose points lie on one spot of the plot -- within 4 % of the points'
+    kB range of each other and closer than 35 % of their PVS range (a label's width),
+    e.g. ``R128`` and ``R256`` once the sections hold most of the scene -- share one label
+    at the spot's first point: ``"R128, R256 M64 (redundancy 178, 214)"`` (one redundancy
+    where they agree, ``"; "`` between whole labels where ``M`` or the cover differ).
+    """
+    pts = [(float(r["pvs_mean"]), r["walks"][walk]["bytes_per_km"] / 1000, r) for r in rows if walk in r["walks"]]
+    if not pts:
+        return []
+    xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+    xr, yr = (max(xs) - min(xs)) or 1.0, (max(ys) - min(ys)) or 1.0
+    groups: list[tuple[float, float, list[Mapping[str, Any]]]] = []
+    for x, b, r in pts:
+        for gx, gb, members in groups:
+            if abs(b - gb) <= 0.04 * yr and abs(x - gx) <= 0.35 * xr:
+                members.append(r)
+                break
+        else:
+            groups.append((x, b, [r]))
+
+    def tail(r: Mapping[str, Any]) -> str:
+        return f" M{r['min_size']:g}" + ("" if r.get("cover") in (None, "walkable") else f" {r['cover']}")
+
+    def red(r: Mapping[str, Any]) -> str | None:
+        v = r.get("section_redundancy_mean")
+        return None if v is None else f"{v:.0f}"
+
+    out = []
+    for x, b, members in groups:
+        if len({tail(r) for r in members}) == 1:
+            reds = list(dict.fromkeys(v for r in members if (v := red(r)) is not None))
+            label = (", ".join(f"R{r['redundancy']}" for r in members) + tail(members[0])
+                     + (f" (redundancy {', '.join(reds)})" if reds else ""))
+        else:
+            label = "; ".join(f"R{r['redundancy']}{tail(r)}" + ("" if red(r) is None else f" (redundancy {red(r)})")
+                              for r in members)
+        out.append((x, b, label))
+    return out
+
+
 def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]) -> None:
     """The paper's trade as a plot: per walk, bytes per km and cells entered per km against
     the sections' mean PVS (one point per ``(R, M)``, labelled with its redundancy where
@@ -175,15 +260,18 @@ def plot_sections_trade(rows: list[dict[str, Any]], path: str | os.PathLike[str]
     fig = Figure(figsize=(5.0 * max(1, len(walks)), 4.2), dpi=120)
     for k, w in enumerate(walks):
         ax = fig.add_subplot(1, max(1, len(walks)), k + 1)
-        pts = [(r["pvs_mean"], r["walks"][w]["bytes_per_km"] / 1000, r["walks"][w]["cells_per_km"],
-                f"R{r['redundancy']} M{r['min_size']:g}" + ("" if r.get("cover") in (None, "walkable") else f" {r['cover']}")
-                + ("" if r["section_redundancy_mean"] is None else f" (redundancy {r['section_redundancy_mean']:.0f})"))
-               for r in secs if w in r["walks"]]
-        if pts:
-            x, b, c, lab = zip(*pts, strict=True)
+        on = [r for r in secs if w in r["walks"]]
+        if on:
+            x = [r["pvs_mean"] for r in on]
+            b = [r["walks"][w]["bytes_per_km"] / 1000 for r in on]
+            c = [r["walks"][w]["cells_per_km"] for r in on]
             ax.plot(x, b, "o-", color="#1f77b4", label="sections: kB/km")
-            for xi, bi, li in zip(x, b, lab, strict=True):
-                ax.annotate(li, (xi, bi), fontsize=7, xytext=(3, 3), textcoords="offset points")
+            mid = (min(x) + max(x)) / 2
+            for xi, bi, li in trade_labels(on, w):
+                # right of the middle a label ends at its point, so it stays inside the axes
+                right = len(x) > 1 and xi > mid
+                ax.annotate(li, (xi, bi), fontsize=7, xytext=(-3 if right else 3, 3), textcoords="offset points",
+                            ha="right" if right else "left")
             ax2 = ax.twinx()
             ax2.plot(x, c, "s--", color="#d62728", label="sections: cells entered/km")
             ax2.set_ylabel("cells entered per km", color="#d62728")

@@ -383,3 +383,58 @@ def test_bench_sections_refuses_a_bad_bbox_in_one_line(city: Path, tmp_path: Pat
     err = capsys.readouterr().err
     assert "--bbox" in err and "Traceback" not in err
     assert not (tmp_path / "b" / "street.db").exists()
+
+
+def test_a_reused_database_keeps_the_redundancy_its_bake_measured(small_city_db: Path, tmp_path: Path) -> None:
+    import json
+    import shutil
+
+    from walkstream.benchmarks.sections import _bake, _previous_rows
+
+    db = tmp_path / "sections-R64-M64.db"
+    shutil.copy(small_city_db, db)
+    st = BakeSettings(cells="sections")
+    # no figures kept: the table shows "-"
+    assert _bake(tmp_path / "unused.geojson", db, st, True, 1).get("section_redundancy_mean") is None
+    # a database of an older run: its row in the last bench_sections.json (named by R, M, cover)
+    (tmp_path / "bench_sections.json").write_text(json.dumps([
+        {"cells_kind": "sections", "cover": "walkable", "redundancy": 64, "min_size": 64.0, "section_redundancy_mean": 37.5},
+        {"cells_kind": "sections", "cover": "free", "redundancy": 64, "min_size": 64.0, "section_redundancy_mean": 99.0},
+    ]))
+    prev = _previous_rows(tmp_path)
+    assert set(prev) == {"sections-R64-M64.db", "sections-R64-M64-free.db"}
+    s = _bake(tmp_path / "unused.geojson", db, st, True, 1, prev.get(db.name))
+    assert s["section_redundancy_mean"] == 37.5 and s["cells"] > 0
+    # the figures the bake kept beside the database win
+    (tmp_path / "sections-R64-M64.db.figures.json").write_text(json.dumps({"section_redundancy_mean": 12.25}))
+    assert _bake(tmp_path / "unused.geojson", db, st, True, 1, prev.get(db.name))["section_redundancy_mean"] == 12.25
+
+
+def test_points_on_one_spot_of_the_trade_plot_share_one_label(tmp_path: Path) -> None:
+    from walkstream.benchmarks.sections import plot_sections_trade, trade_labels
+
+    def row(r: int, pvs: float, kb: float, red: float | None, m: float = 64.0) -> dict[str, object]:
+        return {"cells_kind": "sections", "cover": "walkable", "redundancy": r, "min_size": m, "cells": 10,
+                "pvs_mean": pvs, "section_redundancy_mean": red, "bake_seconds": 1.0,
+                "walks": {"drive": {"bytes_per_km": kb * 1000, "cells_per_km": 5.0}}}
+
+    # Kouvola's clip on the drive: R 128 and R 256 a quarter of the PVS range apart, 0.05 kB/km
+    rows = [row(32, 127.7, 38.1, 35.0), row(64, 159.2, 19.0, 73.0), row(128, 255.7, 9.09, 178.0),
+            row(256, 306.0, 9.04, 214.0)]
+    labels = trade_labels(rows, "drive")
+    assert [lab for _, _, lab in labels] == ["R32 M64 (redundancy 35)", "R64 M64 (redundancy 73)",
+                                             "R128, R256 M64 (redundancy 178, 214)"]
+    assert labels[2][:2] == (255.7, 9.09)
+    # one redundancy where they agree, none where it was not measured
+    rows[3]["section_redundancy_mean"] = 178.0
+    assert trade_labels(rows, "drive")[2][2] == "R128, R256 M64 (redundancy 178)"
+    rows[2]["section_redundancy_mean"] = rows[3]["section_redundancy_mean"] = None
+    assert trade_labels(rows, "drive")[2][2] == "R128, R256 M64"
+    # another M on the same spot: whole labels side by side
+    rows[3] = row(256, 306.0, 9.04, 214.0, m=128.0)
+    assert trade_labels(rows, "drive")[2][2] == "R128 M64; R256 M128 (redundancy 214)"
+    # far apart in kB/km: two labels, even at one PVS
+    assert len(trade_labels([row(128, 300.0, 9.0, 1.0), row(256, 300.0, 30.0, 1.0)], "drive")) == 2
+    assert trade_labels(rows, "SE") == []
+    plot_sections_trade(rows, tmp_path / "trade.png")
+    assert (tmp_path / "trade.png").stat().st_size > 10_000
