@@ -28,7 +28,8 @@ from walkstream.shared.codec.objectboxes import decode_object_boxes, encode_obje
 from walkstream.shared.errors import CodecError
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.paths import RecordedPath
-from walkstream.shared.wire import decode_cell, decode_start_part
+from walkstream.shared.startwire import decode_start_part
+from walkstream.shared.wire import decode_cell
 
 
 def test_boxes_round_trip_widened_outward() -> None:
