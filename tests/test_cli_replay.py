@@ -109,7 +109,7 @@ def test_replay_of_a_missing_database(tmp_path: Path, capsys: pytest.CaptureFixt
 
 def test_bench_stream_prints_one_table(db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "bench"
-    argv = ["bench", "stream", str(db), "--only", "SE 56k", "--duration", "8s", "--out", str(out)]
+    argv = ["bench", "stream", str(db), "--only", "SE 56k", "--duration", "5s", "--out", str(out)]
     assert main(argv) == 0
     text = capsys.readouterr().out
     for name in ("SE 56k prefetch", "SE 56k no-prefetch", "SE 56k meshes", "SE 56k cache 8MB"):
@@ -121,7 +121,7 @@ def test_bench_stream_prints_one_table(db: Path, tmp_path: Path, capsys: pytest.
     # another scene database joins the table: a row per path and link
     argv = [
         "bench", "stream", str(db), "--scene", f"other={db}:SE", "--only", "other",
-        "--duration", "5s", "--out", str(out),
+        "--duration", "3s", "--out", str(out),
     ]  # fmt: skip
     assert main(argv) == 0
     assert "other SE GPRS" in capsys.readouterr().out

@@ -230,14 +230,14 @@ def _server(db: Path, port: int = 0) -> Iterator[str]:
 @pytest.mark.solo
 @pytest.mark.slow
 def test_real_and_simulated_clocks_agree(city400: Path) -> None:
-    """30 s of SE under both clocks against the same real server (issue 5, item 2)."""
-    cfg = config(duration_s=30.0)
+    """20 s of SE under both clocks against the same real server (issue 5, item 2)."""
+    cfg = config(duration_s=20.0)
     with _server(city400) as url:
         sim = run_replay(httpx.AsyncHTTPTransport(), url, cfg).summary
         real = run_replay(httpx.AsyncHTTPTransport(), url, replace(cfg, clock="real")).summary
     # within 2 %, or one cell record (about 330 B): a record is due by distance over the
     # measured speed, and the two clocks' frames sample that speed at different moments,
-    # so one side street's record can go out on one clock and not within the 30 s on the other
+    # so one side street's record can go out on one clock and not within the 20 s on the other
     assert abs(real["bytes_received"] - sim["bytes_received"]) <= max(0.02 * sim["bytes_received"], 400)
     assert abs(real["download_quality_mean"] - sim["download_quality_mean"]) <= 5.0
     assert real["frames"] > 0.8 * sim["frames"]
