@@ -49,7 +49,7 @@ from walkstream.client.walk.impostors import quad_corners, toward_eye
 from walkstream.server.bake.impostorrender import IMPOSTOR_SAMPLINGS, ImpostorRenderer
 from walkstream.server.bake.objectrows import building_box
 from walkstream.shared.buildings import build_lod_batch
-from walkstream.shared.camera import look_at
+from walkstream.shared.camera import look_at, orthographic
 from walkstream.shared.errors import InputError
 from walkstream.shared.impostors import (
     bin_direction,
@@ -70,15 +70,6 @@ _ALIGNED_PX = 64
 _MINIFIED_PX = 48
 _BAKED_TEXELS = 128
 _TRUTH_SS = 4
-
-
-def _ortho(radius: float, near: float = 0.5, far: float = 2000.0) -> NDArray[np.float64]:
-    m = np.zeros((4, 4))
-    m[0, 0] = m[1, 1] = 1.0 / radius
-    m[2, 2] = -2.0 / (far - near)
-    m[2, 3] = -(far + near) / (far - near)
-    m[3, 3] = 1.0
-    return m
 
 
 def _wrong(truth: NDArray[np.uint8], other: NDArray[np.uint8], area: NDArray[np.bool_]) -> tuple[int, int]:
@@ -178,7 +169,7 @@ def run_sampling_bench(
                     size = int(image_size(texels_needed(r, d, 480, 60.0), _BAKED_TEXELS))
                     quad_at = toward_eye(corners, eye, boxes[k])
                 else:
-                    eye, proj = c + u * (r + 50.0), _ortho(r)
+                    eye, proj = c + u * (r + 50.0), orthographic(r, 0.5, 2000.0)
                     size = _ALIGNED_PX if view_name == "aligned" else _BAKED_TEXELS
                     quad_at = corners
                 view = np.asarray(look_at(eye, c), np.float64)

@@ -33,6 +33,7 @@ __all__ = [
     "fit_view",
     "look_at",
     "mat4_bytes",
+    "orthographic",
     "perspective",
 ]
 
@@ -95,6 +96,23 @@ def perspective(fovy_deg: float, aspect: float, near: float, far: float) -> F32:
     m[2, 3] = 2.0 * fa * n / (n - fa)
     m[3, 2] = -1.0
     return m.astype(np.float32)
+
+
+def orthographic(radius: float, near: float, far: float) -> NDArray[np.float64]:
+    """OpenGL orthographic projection of a square ``2 radius`` across, centred on the
+    view axis (the impostor images' camera).
+
+    Returns
+    -------
+    (4, 4) float64
+        Maps view-space depth ``-near`` to NDC ``z = -1`` and ``-far`` to ``+1``.
+    """
+    m = np.zeros((4, 4))
+    m[0, 0] = m[1, 1] = 1.0 / radius
+    m[2, 2] = -2.0 / (far - near)
+    m[2, 3] = -(far + near) / (far - near)
+    m[3, 3] = 1.0
+    return m
 
 
 def _look_at64(

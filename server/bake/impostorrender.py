@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from walkstream.server.bake.objectrows import building_box
 from walkstream.shared.buildings import build_lod_batch
-from walkstream.shared.camera import mat4_bytes
+from walkstream.shared.camera import mat4_bytes, orthographic
 from walkstream.shared.codec.image import encode_image
 from walkstream.shared.errors import InputError
 from walkstream.shared.gl import (
@@ -79,17 +79,6 @@ void main() {
     f_color = vec4(v_lit, 1.0);
 }
 """
-
-
-def _ortho(radius: float, far: float) -> NDArray[np.float64]:
-    """Orthographic projection of a ``2 radius`` square, depth 0.01..``far``."""
-    n = 0.01
-    m = np.zeros((4, 4))
-    m[0, 0] = m[1, 1] = 1.0 / radius
-    m[2, 2] = -2.0 / (far - n)
-    m[2, 3] = -(far + n) / (far - n)
-    m[3, 3] = 1.0
-    return m
 
 
 _NUDGE: dict[int, NDArray[np.float64]] = {}
@@ -189,7 +178,7 @@ class ImpostorRenderer(Releasable):
         view = np.eye(4)  # look_at(eye, c) written out: numpy's cross costs more than the draw
         view[0, :3], view[1, :3], view[2, :3] = right, up, u
         view[:3, 3] = -view[:3, :3] @ eye
-        out: NDArray[np.float64] = _ortho(r, 2.0 * r + 2.0) @ view
+        out: NDArray[np.float64] = orthographic(r, 0.01, 2.0 * r + 2.0) @ view
         return out
 
     def render(
