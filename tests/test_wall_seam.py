@@ -14,11 +14,18 @@ import pytest
 from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.truth.pop import summarise_pop
-from walkstream.client.truth.seam import SEAM_KINDS, SeamMeter, SeamWall, wall_pixels
+from walkstream.client.truth.seam import (
+    SEAM_KINDS,
+    SeamMeter,
+    SeamWall,
+    seam_figures,
+    still_quads,
+    wall_pixels,
+)
 from walkstream.client.walk.walls import DrawnWall, wall_quads
 from walkstream.shared.camera import look_at, perspective
 from walkstream.shared.errors import InputError
-from walkstream.shared.walls import EYE_HEIGHT, WallSide, WallTable, zone_mix
+from walkstream.shared.walls import EYE_HEIGHT, WallSide, WallTable, zone_mix, zone_slide
 
 _SIDE = WallSide(0, 0, (-6.0, 5.0), (6.0, 5.0), 0.0, 3.0, 0.0, 1.0, 1.0, 3.0, float(np.radians(10.0)), 4,
                  (10, 11, 12, 13))
@@ -69,7 +76,7 @@ def _texture(zone: int) -> np.ndarray:
     """Zone ``zone``'s picture: stripes shifted a fifth of a period a zone (as the parallax
     of what lies behind shifts it from one sampling point to the next)."""
     x = np.arange(48) / 48.0
-    v = 0.5 + 0.4 * np.sin(2.0 * np.pi * (4.0 * x + 0.2 * zone))
+    v = 0.5 + 0.4 * np.sin(2.0 * np.pi * (4.0 * x - 0.2 * zone))
     img = np.zeros((16, 48, 4), np.uint8)
     img[..., 0] = (255 * v)[None, :]
     img[..., 1] = (255 * (1.0 - v))[None, :]
@@ -78,7 +85,7 @@ def _texture(zone: int) -> np.ndarray:
     return img
 
 
-def _walk(gl: Any, band: float) -> dict[str, Any]:
+def _walk(gl: Any, band: float, parallax: float = 0.0) -> dict[str, Any]:
     """A viewer walking 9 m along the wall, 5 m from it, looking at it, across three zone
     borders; each frame drawn by the client's renderer (the walls as the frame loop hands
     them over) and measured."""
@@ -98,17 +105,25 @@ def _walk(gl: Any, band: float) -> dict[str, Any]:
             nb, share = zone_mix(table.along_of(eye)[0], table.width, table.zones, band)
             zone, alpha = int(zones[0, 0]), float(weights[0, 0])
             mix_image = _SIDE.textures[int(nb[0])] if nb[0] >= 0 else -1
+            foot = float(table.along_of(eye)[0, 0])
+            slides = tuple(float(v) for v in zone_slide(foot, np.array([zone, nb[0]]), table.width[0], parallax))
             d = DrawnWall(0, 0, zone, _SIDE.textures[zone], alpha, _SIDE.corners(), 0, (0, 1), mix_image,
-                          float(share[0]) if mix_image >= 0 else 0.0)
+                          float(share[0]) if mix_image >= 0 else 0.0, (slides[0], slides[1]))
+            walls = [SeamWall(d.portal, d.side, d.image, d.mix_image, d.mix, d.alpha, d.corners, d.slides)]
+            still = None
+            earlier = meter.earlier(walls)
+            if earlier[0] is not None:  # the frame held still: the wall as the frame before showed it
+                r.impostors = still_quads(walls, earlier, {k: images[k] for k in images})
+                r.draw([], view, proj)
+                still = r.snapshot()
             r.impostors = wall_quads([d], images.get)
             r.draw([], view, proj)
             rgb = r.snapshot()
-            walls = [SeamWall(d.portal, d.side, d.image, d.mix_image, d.mix, d.alpha, d.corners)]
             pixels = wall_pixels(walls, view, proj, np.full(size[::-1], np.inf))
-            meter.add(rgb, walls, pixels)
+            meter.add(rgb, walls, pixels, still)
     finally:
         r.release()
-    return summarise_pop(meter, SEAM_KINDS)
+    return {**summarise_pop(meter, SEAM_KINDS), **seam_figures(meter)}
 
 
 @pytest.mark.gl
@@ -120,3 +135,26 @@ def test_a_hard_swap_at_a_zone_border_shows_a_seam_where_the_blend_does_not(gl: 
     assert hard["ratio"] is not None and blended["ratio"] is not None
     assert blended["ratio"] <= 1.5 < 3.0 < hard["ratio"]
     assert hard["switching_change_mean"] > 3.0 * blended["switching_change_mean"]
+    # held still, a switching wall's change splits into the camera's motion and the look's:
+    # a hard swap is nearly all look, the blend's look is a fraction of its motion
+    assert hard["split"] == 3 and blended["split"] == blended["switching"]
+    assert hard["look_mean"] > 2.0 * hard["motion_mean"]
+    assert blended["look_mean"] < blended["motion_mean"]
+
+
+
+@pytest.mark.gl
+def test_textures_slid_with_the_parallax_agree_at_the_border(gl: Any) -> None:
+    """Zone k's stripes are shifted 0.2 period (0.6 m on the 12 m wall) a zone, as the
+    parallax of what stands far behind shifts them: slid by the whole offset
+    (``zone_slide`` at 0.2: 0.6 m over the 3 m between sampling lines) the two textures meet at the border showing the same
+    stripes: the look's part of the change at a border falls.  (The ratio to plain motion
+    does not: plain motion falls as much; the physically right direction of the zones'
+    shift already makes the fixed textures' blend 0.69 of plain motion here.)"""
+    slid = _walk(gl, 0.5, 0.2)
+    fixed = _walk(gl, 0.5, 0.0)
+    assert slid["ratio"] is not None and fixed["ratio"] is not None
+    # the look's part of a border's change falls (0.0070 against 0.0118), and so does the
+    # wall's plain motion (the stripes move on the screen less than the wall does)
+    assert slid["look_mean"] < 0.75 * fixed["look_mean"]
+    assert slid["plain_change_mean"] < fixed["plain_change_mean"]
