@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from walkstream.client.config import ReplayConfig
+from walkstream.client.draw.quads import slid
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.truth.pop import summarise_pop
 from walkstream.client.truth.seam import (
@@ -56,6 +57,30 @@ def test_the_zone_blend_is_continuous_across_a_border_and_off_away_from_it() -> 
     link = LinkProfile(56_000.0, 56_000.0, 0.2)
     with pytest.raises(InputError, match="--wall-zone-blend 1.5"):
         ReplayConfig(link=link, wall_zone_blend=1.5)
+
+
+def test_slid_textures_agree_on_the_border_for_points_as_deep_as_the_viewer_stands() -> None:
+    w, x = 3.0, 5.0  # zone width, the viewer's distance from the wall
+    # on the sampling line nothing slides; on a border the two zones slide apart by w share
+    assert float(zone_slide(4.5, 1, w, 0.5)) == 0.0
+    left, right = zone_slide(6.0, np.array([1, 2]), w, 0.5)
+    assert left == pytest.approx(0.75) and right == pytest.approx(-0.75)
+    assert float(zone_slide(6.0, -1, w, 0.5)) == 0.0  # no neighbour: nothing
+    # a point P at depth p = x behind the wall: each zone's texture shows it where the ray
+    # from its sampling point meets the wall; slid, both agree with where the viewer sees it
+    p, px, viewer = x, 7.3, 6.0
+    seen = viewer + (px - viewer) * x / (x + p)
+    for zone, slide in ((1, left), (2, right)):
+        c = (zone + 0.5) * w
+        assert c + (px - c) * x / (x + p) + slide == pytest.approx(seen)
+    # the quad's texture coordinates: slid right by a quarter of a 12 m wall
+    corners = _SIDE.corners()
+    uv = slid(corners, 3.0)
+    assert uv.shape == (4, 5) and np.allclose(uv[:, :3], corners)
+    assert np.allclose(uv[:, 3], [-0.25, 0.75, 0.75, -0.25]) and slid(corners, 0.0) is corners
+    link = LinkProfile(56_000.0, 56_000.0, 0.2)
+    with pytest.raises(InputError, match="--wall-parallax 1.5"):
+        ReplayConfig(link=link, wall_parallax=1.5)
 
 
 def test_a_blended_wall_is_two_quads_that_compose_the_cross_fade() -> None:

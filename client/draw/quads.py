@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.errors import RenderError
 
-__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of"]
+__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "slid"]
 
 IMPOSTOR_MIN_FILTER: int = moderngl.LINEAR
 """How an impostor image's texels are read when it is drawn smaller than baked: bilinear.
