@@ -165,21 +165,14 @@ def test_a_hard_swap_at_a_zone_border_shows_a_seam_where_the_blend_does_not(gl: 
     assert hard["split"] == 3 and blended["split"] == blended["switching"]
     assert hard["look_mean"] > 2.0 * hard["motion_mean"]
     assert blended["look_mean"] < blended["motion_mean"]
-
-
-
-@pytest.mark.gl
-def test_textures_slid_with_the_parallax_agree_at_the_border(gl: Any) -> None:
-    """Zone k's stripes are shifted 0.2 period (0.6 m on the 12 m wall) a zone, as the
-    parallax of what stands far behind shifts them: slid by the whole offset
-    (``zone_slide`` at 0.2: 0.6 m over the 3 m between sampling lines) the two textures meet at the border showing the same
-    stripes: the look's part of the change at a border falls.  (The ratio to plain motion
-    does not: plain motion falls as much; the physically right direction of the zones'
-    shift already makes the fixed textures' blend 0.69 of plain motion here.)"""
+    # zone k's stripes are shifted 0.2 period (0.6 m) a zone as parallax shifts what stands
+    # behind: slid by 0.2 of the offset (0.6 m over the 3 m between sampling lines) two
+    # zones' textures meet on the border showing the same stripes, and the look's part
+    # of the change there falls (0.0070 against 0.0118), as does the wall's plain motion
+    # (the stripes move on the screen less than the wall); the ratio to plain motion does
+    # not fall, as plain motion falls as much
     slid = _walk(gl, 0.5, 0.2)
-    fixed = _walk(gl, 0.5, 0.0)
-    assert slid["ratio"] is not None and fixed["ratio"] is not None
-    # the look's part of a border's change falls (0.0070 against 0.0118), and so does the
-    # wall's plain motion (the stripes move on the screen less than the wall does)
-    assert slid["look_mean"] < 0.75 * fixed["look_mean"]
-    assert slid["plain_change_mean"] < fixed["plain_change_mean"]
+    assert slid["look_mean"] < 0.75 * blended["look_mean"]
+    assert slid["plain_change_mean"] < blended["plain_change_mean"]
+
+
