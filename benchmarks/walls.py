@@ -7,6 +7,9 @@ with and without walls:
 - ``hall``: the generated production hall (``walkstream generate interior --preset
   hall``, :mod:`~walkstream.server.sources.hallgen`), its ``tour``;
 - ``city``: the generated city (700 m, street cells), its ``SE`` walk (past its squares);
+- ``squares``: a generated city small enough for its rings' bake to take minutes (300 m,
+  seed 1: two squares, 186 buildings; the 700 m city's rings are tens of thousands of
+  textures), its ``SM`` walk (along two sides of a square: :data:`SQUARES_CITY`);
 - ``west-oakland`` and ``village``: the OpenStreetMap extracts of the data folder, street
   cells, the longest walk that does not repeat itself
   (:func:`~walkstream.server.bake.walks.longest_walk`).
@@ -63,7 +66,13 @@ __all__ = ["SCENES", "WALL_ERRORS", "run_walls_bench", "format_walls_table", "pl
 Replayer = Callable[[str, Mapping[str, Any], str], Any]
 
 #: The scenes, in table order.
-SCENES: tuple[str, ...] = ("hall", "city", "west-oakland", "village")
+SCENES: tuple[str, ...] = ("hall", "city", "squares", "west-oakland", "village")
+#: The ``squares`` scene: the generated city's side (m), seed and walk.  Every street
+#: region of a generated city is ringed (its PVS is tens of objects, over ``--wall-keep``)
+#: at the least distance (its nearest ``K`` objects stand within ``--wall-ring-min``), so
+#: at A = 10 degrees each side of a ring is ~17 zones: a 300 m city is 4,162 textures
+#: (~15 minutes' bake on two shared cores), the 700 m city several times that.
+SQUARES_CITY: tuple[float, int, str] = (300.0, 1, "SM")
 #: The wall errors A (degrees) the paper's question asks about: 10 good, 15 the limit.
 WALL_ERRORS: tuple[float, ...] = (5.0, 10.0, 15.0, 20.0)
 _OSM = {"west-oakland": "west-oakland.osm", "village": "village-10.068_48.135.osm"}
@@ -118,6 +127,13 @@ def _bake_scene(name: str, out: Path, data: Path, quick: bool, settings: dict[st
         if not src.exists():
             write_city(src, 700.0, 1)
         path = "SE"
+    elif name == "squares":
+        from walkstream.server.sources.citygen import write_city
+
+        side, seed, path = SQUARES_CITY
+        src = out / "squares.geojson"
+        if not src.exists():
+            write_city(src, side, seed)
     elif name in _OSM:
         src = data / _OSM[name]
         if not src.exists():

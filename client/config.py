@@ -163,6 +163,10 @@ class ReplayConfig:
     """Width of the blend between two zones' textures of a virtual wall around their
     border, in zone widths (``--wall-zone-blend``; 0: a hard swap at the border;
     :func:`~walkstream.shared.walls.zone_mix`)."""
+    wall_parallax: float = 0.5
+    """How far a virtual wall's texture slides along the wall with the viewer's offset from
+    its zone's sampling line, as a share of that offset (``--wall-parallax``; 0: fixed on
+    the wall; :func:`~walkstream.shared.walls.zone_slide`)."""
 
     def __post_init__(self) -> None:
         if self.stream not in STREAM_FORMS:
@@ -201,6 +205,9 @@ class ReplayConfig:
         zb = self.wall_zone_blend
         if not (math.isfinite(zb) and 0 <= zb <= 1):
             raise InputError(f"--wall-zone-blend {zb!r}: expected zone widths from 0 to 1")
+        wp = self.wall_parallax
+        if not (math.isfinite(wp) and 0 <= wp <= 1):
+            raise InputError(f"--wall-parallax {wp!r}: expected a share from 0 to 1")
         fs = self.impostor_fade_s
         if fs is not None and not (math.isfinite(fs) and fs >= 0):
             raise InputError(f"--impostor-fade {fs!r}: expected seconds >= 0")

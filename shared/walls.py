@@ -59,6 +59,7 @@ __all__ = [
     "wall_distance",
     "zone_count",
     "zone_mix",
+    "zone_slide",
 ]
 
 DEFAULT_WALL_ERROR_DEG = 10.0
@@ -330,6 +331,28 @@ def zone_mix(along: ArrayLike, width: ArrayLike, zones: ArrayLike, band: float) 
     share = 0.5 * np.clip(1.0 - gap / half, 0.0, 1.0) if half > 0 else np.zeros_like(gap)
     ok = (nb >= 0) & (nb < n) & (share > 0) & (u >= 0) & (u <= n)
     return np.where(ok, nb, -1), np.where(ok, share, 0.0)
+
+
+def zone_slide(along: ArrayLike, zone: ArrayLike, width: ArrayLike, share: float) -> NDArray[np.float64]:
+    """How far (metres, towards ``p1``) zone ``zone``'s texture slides along the wall for a
+    viewer whose foot on the wall line is ``along``: ``share`` of the viewer's offset from
+    the zone's sampling line (its middle).
+
+    A texture sampled from ``B`` shows a point ``P`` at depth ``p`` behind the wall where
+    ``B -> P`` meets it; a viewer at the same distance ``x`` from the wall but ``Δ``
+    along it sees ``P`` ``Δ p / (x + p)`` farther along (the module's error metric):
+    slid by ``share Δ`` the texture is exact for the points at depth ``p = x share /
+    (1 - share)`` (at one half: as far behind the wall as the viewer stands before it)
+    and errs by at most ``max(share, 1 - share) Δ / x`` on the rest, against ``Δ / x``
+    fixed; two neighbour zones' textures slid so agree, for those points, on their
+    border, where the viewer is ``w / 2`` from both sampling lines, and the blend
+    across it (:func:`zone_mix`) cross-fades pictures that agree there.
+
+    ``along``, ``zone``, ``width`` broadcast; returns their shape (0 where ``zone`` < 0)."""
+    t = np.asarray(along, np.float64)
+    z = np.asarray(zone, np.int64)
+    out: NDArray[np.float64] = np.where(z >= 0, float(share) * (t - (z + 0.5) * np.asarray(width, np.float64)), 0.0)
+    return out
 
 
 def walls_wire(rows: list[list[float | int]]) -> dict[str, list[list[float | int]]]:

@@ -52,5 +52,6 @@ def test_bench_walls_refuses_an_unknown_scene_in_one_line(capsys: pytest.Capture
     assert main(["bench", "walls", "--scenes", "hall,atlantis"]) != 0
     err = capsys.readouterr().err
     assert "--scenes" in err and "atlantis" in err and "Traceback" not in err
+    assert "squares" in err  # the small generated city with squares is a scene of its own
     assert main(["bench", "walls", "--wall-errors", "10,ninety"]) != 0
     assert "--wall-errors" in capsys.readouterr().err

@@ -671,7 +671,7 @@ def add_bench_parser(sub: Any) -> None:
     b.set_defaults(func=cmd_bench_impostor_sampling)
 
     b = besub.add_parser("walls", help="the open scenes (hall, city, West Oakland, village) with and without virtual walls")
-    b.add_argument("--scenes", default="hall,city,west-oakland,village", help="comma-separated scenes (default all four)")
+    b.add_argument("--scenes", default="hall,city,west-oakland,village", help="comma-separated scenes: hall, city, squares, west-oakland, village (default all but squares)")
     b.add_argument("--wall-errors", default="5,10,15,20", help="wall errors A in degrees, one walls bake each (default 5,10,15,20)")
     b.add_argument("--data", default="../shared/data/osm", help="folder of the OpenStreetMap extracts")
     b.add_argument("--duration", default="60s", help="walk length of the pda replays (default 60s)")

@@ -149,6 +149,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         impostor_perspective=args.impostor_perspective,
         virtual_walls=not args.no_walls,
         wall_zone_blend=args.wall_zone_blend,
+        wall_parallax=args.wall_parallax,
         facades=False if args.no_facades else {"auto": None, "on": True, "off": False}[args.facades],
         facade_lookalike=not args.no_facade_lookalike,
         facade_grazing_deg=args.facade_grazing,
@@ -359,6 +360,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--frame-times", metavar="REPORT", help="a recorded frame schedule: take each frame's time from an earlier report's frames.csv (its folder or the file) instead of measuring it, so that a gl replay, and the frames --truth-every compares, repeat exactly")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")
     r.add_argument("--wall-zone-blend", type=float, default=0.5, metavar="Z", help="zone widths around a virtual wall's zone border over which the two zones' textures blend (default 0.5; 0: a hard swap; the seam figure, truth.seam, measures it with --truth-every 1)")
+    r.add_argument("--wall-parallax", type=float, default=0.5, metavar="R", help="share of the viewer's offset from a virtual wall zone's sampling line by which its texture slides along the wall (default 0.5: exact for what stands as far behind the wall as the viewer stands before it; 0: the texture fixed on the wall)")
     r.add_argument("--no-walls", action="store_true", help="open every virtual wall on an interior baked with --virtual-walls (geometry only, no texture asked for)")
     r.add_argument("--no-impostors", action="store_true", help="draw geometry only on a scene baked with --impostors (no image asked for)")
     r.add_argument("--facades", default="auto", choices=("auto", "on", "off"), help="a building left at its LOD0 box carries textures of its LOD2 facades, rendered by the client: on a simulated device (auto, default), always (on) or never (off)")

@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.errors import RenderError
 
-__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "quads_of"]
+__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "slid"]
 
 IMPOSTOR_MIN_FILTER: int = moderngl.LINEAR
 """How an impostor image's texels are read when it is drawn smaller than baked: bilinear.
@@ -38,7 +38,9 @@ frame-to-frame change over plain motion's rose from 1.02 to 1.13 there, so bilin
 
 Quad = tuple[NDArray[np.float64], int, NDArray[np.uint8], float]
 """``(corners (4, 3), image id, premultiplied RGBA (h, w, 4), opacity)``; corners bottom-left,
-bottom-right, top-right, top-left of the image (its row 0 is the top)."""
+bottom-right, top-right, top-left of the image (its row 0 is the top).  Corners ``(4, 5)``
+carry each corner's texture coordinates ``u, v`` too (a virtual wall's texture slid along
+the wall, :func:`cross_fade`; outside 0..1 the image's edge texels)."""
 
 _VS = """
 #version 330
@@ -127,7 +129,8 @@ class QuadRenderer:
             for corners, image, rgba, alpha in back_to_front(quads, view_proj):
                 self._texture(image, rgba).use(0)
                 ua.value = float(alpha)
-                verts = np.hstack([np.asarray(corners, np.float32).reshape(4, 3), _UV])
+                c = np.asarray(corners, np.float32)
+                verts = c if c.shape == (4, 5) else np.hstack([c.reshape(4, 3), _UV])
                 self._vbo.write(verts[[0, 1, 2, 3]].astype("f4").tobytes())
                 self._vao.render(moderngl.TRIANGLE_FAN, vertices=4)
         finally:
@@ -157,7 +160,7 @@ def back_to_front(quads: Sequence[Quad], view_proj: ArrayLike) -> list[Quad]:
     one building cross-fading share a centre and keep their order (the old under the new).
     """
     m = np.asarray(view_proj, np.float64).reshape(4, 4)
-    depth = [float(m[3, :3] @ np.asarray(q[0], np.float64).reshape(4, 3).mean(axis=0) + m[3, 3]) for q in quads]
+    depth = [float(m[3, :3] @ np.asarray(q[0], np.float64).reshape(4, -1)[:, :3].mean(axis=0) + m[3, 3]) for q in quads]
     order = sorted(range(len(quads)), key=lambda k: -depth[k])  # stable: ties keep their order
     return [quads[k] for k in order]
 
@@ -171,3 +174,33 @@ def quads_of(drawn: Sequence[Any], image: Any) -> list[Quad]:
         if rgba is not None:
             out.append((d.corners, d.image, rgba, float(d.alpha)))
     return out
+
+
+def slid(corners: NDArray[np.float64], slide: float) -> NDArray[np.float64]:
+    """``(4, 5)`` a quad's ``corners`` ``(4, 3)`` with texture coordinates that slide its
+    image ``slide`` metres from the left edge towards the right (0: ``(4, 3)`` as given)."""
+    if slide == 0.0:
+        return corners
+    c = np.asarray(corners, np.float64).reshape(4, 3)
+    length = max(float(np.linalg.norm(c[1, :2] - c[0, :2])), 1e-9)
+    uv = _UV.astype(np.float64).copy()
+    uv[:, 0] -= slide / length
+    return np.hstack([c, uv])
+
+
+def cross_fade(
+    corners: NDArray[np.float64], key: int, rgba: NDArray[np.uint8], other_key: int,
+    other: NDArray[np.uint8] | None, alpha: float, mix: float, slides: tuple[float, float] = (0.0, 0.0),
+) -> list[Quad]:
+    """One quad showing ``(1 - mix)`` of ``rgba`` and ``mix`` of ``other`` at opacity
+    ``alpha``, as the renderer composes it: ``rgba`` at ``a (1 - m) / (1 - a m)`` and
+    ``other`` over it at ``a m``; drawn "over" (premultiplied) that is exactly
+    ``a ((1 - m) rgba + m other) + (1 - a) behind`` for opaque images.  One quad when
+    ``other`` is None or ``mix`` is 0.  ``corners`` ``(4, 3)``, images ``(h, w, 4)``;
+    ``slides`` the metres each image slides along the quad (:func:`slid`)."""
+    own = slid(corners, slides[0])
+    if other is None or mix <= 0.0:
+        return [(own, key, rgba, float(alpha))]
+    a, m = float(alpha), float(mix)
+    return [(own, key, rgba, a * (1.0 - m) / max(1.0 - a * m, 1e-9)),
+            (slid(corners, slides[1]), other_key, other, a * m)]

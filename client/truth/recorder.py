@@ -65,7 +65,7 @@ from walkstream.client.truth.pop import PopMeter, summarise_pop
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.roomcolour import room_colour
 from walkstream.client.truth.scene import TruthScene, fetch_contents
-from walkstream.client.truth.seam import SEAM_KINDS
+from walkstream.client.truth.seam import SEAM_KINDS, seam_figures
 from walkstream.client.truth.solid import SolidProbe
 from walkstream.client.truth.standin import impostor_overlay
 from walkstream.shared.camera import perspective
@@ -345,7 +345,7 @@ class TruthRecorder:
             rc = room_colour(truth, self.notes, solid=solid)
             figures["colour"] = summarise_colour(rc.log.colour or ColourLog.empty())
             if rc.seam is not None:
-                figures["seam"] = summarise_pop(rc.seam, SEAM_KINDS)
+                figures["seam"] = {**summarise_pop(rc.seam, SEAM_KINDS), **seam_figures(rc.seam)}
             return TruthResult(rc.log, figures=figures, culled=rows, culled_worst=view, colour_worst=rc.worst)
         except (WalkstreamError, httpx.HTTPError) as exc:
             return self._failed(exc, cells, t_first_perfect)

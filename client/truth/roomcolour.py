@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -57,7 +58,7 @@ from walkstream.client.truth.culled import SOLID_NEAR
 from walkstream.client.truth.missing import ColourWorst
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.render import TruthRenderer, form_key, object_key
-from walkstream.client.truth.seam import SeamMeter, wall_pixels
+from walkstream.client.truth.seam import SeamMeter, still_quads, wall_pixels
 from walkstream.client.truth.solid import SolidProbe
 
 __all__ = ["RoomColour", "client_keys", "pixel_distance", "room_colour"]
@@ -126,6 +127,7 @@ def room_colour(
                tuple[float, float, float, float, NDArray[np.float64], NDArray[np.float64]], float]] = []
     worst: ColourWorst | None = None
     seam: SeamMeter | None = None
+    seen_quads: list[Any] = []  # the last frame's wall quads: its textures by id
     for j, note in enumerate(notes):
         if progress is not None:
             progress(j + 1, len(notes))
@@ -145,7 +147,16 @@ def room_colour(
             c_rgb = painted
         if note.seam_walls or seam is not None:
             seam = seam or SeamMeter()
-            seam.add(c_rgb, note.seam_walls, wall_pixels(note.seam_walls, note.view, truth.proj, c_depth))
+            still = None
+            earlier = seam.earlier(note.seam_walls)
+            if any(e is not None for e in earlier):  # the frame held still: motion and look apart
+                images = {-1 - q[1]: q[2] for q in [*seen_quads, *note.wall_quads]}
+                quads = still_quads(note.seam_walls, earlier, images)
+                if quads is not None:
+                    truth.render(note.eye, note.view, truth.flags(drawn), note.fog)
+                    still = truth.paint_quads(quads, note.view)
+            seam.add(c_rgb, note.seam_walls, wall_pixels(note.seam_walls, note.view, truth.proj, c_depth), still)
+            seen_quads = list(note.wall_quads)
         shown = t_idx >= 0
         ti = np.maximum(t_idx, 0)
         ci = np.maximum(c_idx, 0)

@@ -26,6 +26,14 @@ comes near) is neither.  The figure (:func:`~walkstream.client.truth.pop.summari
 with the kinds ``blend`` and ``hard``): the switching walls' mean change over the
 plain-motion walls' mean change (``ratio``); at most 1, the switch is no more visible
 than the motion itself: no seam.  The figures are the report's ``truth.seam``.
+
+What makes a switching wall's change is told apart on a third picture, the frame
+**held still**: the same frame with each switching wall showing the textures and shares
+it showed the frame before (:func:`still_quads`).  From the frame before to it the
+wall changes by the camera's **motion** alone; from it to the frame, by the **look**
+alone (the texture swap and the shares of the blend).  ``ratio_own`` is the switching
+walls' change over their own motion's on the same frame pairs: at most 1, the
+switch adds nothing a viewer sees beyond the wall's own motion.
 """
 
 from __future__ import annotations
@@ -36,9 +44,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.client.draw.quads import Quad, cross_fade
 from walkstream.client.truth.pop import object_change
 
-__all__ = ["SEAM_KINDS", "SeamMeter", "SeamWall", "wall_pixels"]
+__all__ = ["SEAM_KINDS", "SeamMeter", "SeamWall", "seam_figures", "still_quads", "wall_pixels"]
 
 SEAM_KINDS = ("blend", "hard")
 """The kinds of switching walls (module docs)."""
@@ -57,6 +66,8 @@ class SeamWall:
     mix: float
     alpha: float
     corners: NDArray[np.float64]
+    slides: tuple[float, float] = (0.0, 0.0)
+    """How far its texture and the neighbour's slid along the wall (``DrawnWall.slides``)."""
 
     @property
     def look(self) -> tuple[int, int, float]:
@@ -112,11 +123,30 @@ class SeamMeter:
     """One change per plain-motion wall per frame pair."""
     pairs: int = 0
     """Frame pairs with at least one switching wall."""
+    motion: list[float] = field(default_factory=list)
+    """Each switching change's part from the camera's motion alone (the frame before to
+    the frame held still; NaN where no still picture was given)."""
+    look: list[float] = field(default_factory=list)
+    """Each switching change's part from the look alone (the frame held still to the frame)."""
     _last: tuple[NDArray[np.uint8], NDArray[np.int64], list[SeamWall]] | None = None
 
-    def add(self, rgb: NDArray[np.uint8], walls: Sequence[SeamWall], pixels: NDArray[np.int64]) -> None:
+    def earlier(self, walls: Sequence[SeamWall]) -> list[SeamWall | None]:
+        """For each of ``walls`` the look it had in the frame added last where it switched
+        since (drawn in both at the same opacity, its textures or shares changed), else None."""
+        if self._last is None:
+            return [None] * len(walls)
+        before = {(x.portal, x.side): x for x in self._last[2]}
+        out: list[SeamWall | None] = []
+        for b in walls:
+            a = before.get((b.portal, b.side))
+            out.append(a if a is not None and a.alpha == b.alpha and a.look != b.look else None)
+        return out
+
+    def add(self, rgb: NDArray[np.uint8], walls: Sequence[SeamWall], pixels: NDArray[np.int64],
+            still: NDArray[np.uint8] | None = None) -> None:
         """Compare a frame (its client picture ``(h, w, 3)`` sRGB, its walls and their
-        :func:`wall_pixels`) with the one added before it."""
+        :func:`wall_pixels`) with the one added before it; ``still`` ``(h, w, 3)``, the
+        frame held still (module docs), splits each switching change into motion and look."""
         prev, self._last = self._last, (rgb, pixels.copy(), list(walls))
         if prev is None:
             return
@@ -131,6 +161,13 @@ class SeamMeter:
             return lut[pix + 1]
 
         change, count = object_change(p_rgb, ids(p_pix, p_walls), rgb, ids(pixels, walls))
+        nan = np.full(len(change), np.nan)
+        moved, looked = nan, nan
+        if still is not None:  # the still picture's walls stand where this frame's do
+            moved = object_change(p_rgb, ids(p_pix, p_walls), still, ids(pixels, walls))[0]
+            moved = np.pad(moved, (0, max(0, len(change) - len(moved))), constant_values=np.nan)
+            looked = object_change(still, ids(pixels, walls), rgb, ids(pixels, walls))[0]
+            looked = np.pad(looked, (0, max(0, len(change) - len(looked))), constant_values=np.nan)
         before = {(x.portal, x.side): x for x in p_walls}
         switch: list[tuple[str, float]] = []
         for b in walls:
@@ -142,6 +179,39 @@ class SeamMeter:
                 self.plain.append(float(change[i]))
             else:
                 switch.append(("blend" if a.mix > 0 or b.mix > 0 else "hard", float(change[i])))
+                self.motion.append(float(moved[i]))
+                self.look.append(float(looked[i]))
         self.pairs += bool(switch)
         self.kinds.extend(kind for kind, _ in switch)
         self.switching.extend(c for _, c in switch)
+
+
+def still_quads(walls: Sequence[SeamWall], earlier: Sequence[SeamWall | None],
+                images: dict[int, NDArray[np.uint8]]) -> list[Quad] | None:
+    """The quads of a frame's ``walls`` held still: each wall with an ``earlier`` look
+    (:meth:`SeamMeter.earlier`) shows it, slid as it was, the others their own (``images``
+    by texture id; None where an image is missing: no still picture then).  A slide's
+    change is so counted with the look's, not the motion's."""
+    out: list[Quad] = []
+    for b, a in zip(walls, earlier, strict=True):
+        w = b if a is None else a
+        rgba = images.get(w.image)
+        other = images.get(w.mix_image) if w.mix > 0 else None
+        if rgba is None or (w.mix > 0 and other is None):
+            return None
+        out += cross_fade(b.corners, -1 - w.image, rgba, -1 - w.mix_image, other, b.alpha, w.mix, w.slides)
+    return out
+
+
+def seam_figures(meter: SeamMeter) -> dict[str, float | None]:
+    """The split of the switching walls' change (module docs): ``motion_mean`` and
+    ``look_mean`` (linear RGB), and ``ratio_own``, the switching walls' mean change over
+    their own motion's, on the pairs with a still picture (None without any)."""
+    m, k = np.asarray(meter.motion, np.float64), np.asarray(meter.look, np.float64)
+    s = np.asarray(meter.switching, np.float64)
+    ok = np.isfinite(m) & np.isfinite(k) if m.size == s.size else np.zeros(s.size, bool)
+    if not ok.any():
+        return {"motion_mean": None, "look_mean": None, "ratio_own": None, "split": 0}
+    mm = float(m[ok].mean())
+    return {"motion_mean": mm, "look_mean": float(k[ok].mean()),
+            "ratio_own": float(s[ok].mean() / mm) if mm > 0 else None, "split": int(ok.sum())}

@@ -17,7 +17,12 @@ before the portal walk (:func:`frame_walls`):
   (the blend zone); a side whose texture has not arrived leaves the portal open: the
   cell behind is drawn as geometry (or is past the fog), never a hole;
 - the quads kept are those of walls on the sides of the cells the walk reaches, so
-  a wall two cells away is drawn only when its cell is (:func:`drawn_walls`).
+  a wall two cells away is drawn only when its cell is (:func:`drawn_walls`);
+- with ``--wall-parallax R`` (0.5 by default) each texture slides along its wall by ``R``
+  times the viewer's offset from its zone's sampling line
+  (:func:`~walkstream.shared.walls.zone_slide`): what
+  stands behind the wall moves on the screen as parallax moves it, not as the wall does,
+  and two zones' textures agree at their border, where they blend.
 
 With ``config.virtual_walls`` off, or a scene without walls, nothing is closed and
 the frame is what it was.
@@ -47,10 +52,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.draw.quads import Quad
+from walkstream.client.draw.quads import Quad, cross_fade
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.frustum import frustum_cull
-from walkstream.shared.walls import zone_mix
+from walkstream.shared.walls import zone_mix, zone_slide
 
 __all__ = [
     "RING_BEHIND_NEED_S", "WALL_AHEAD_S", "WALL_MIX_NEED_S", "DrawnWall", "drawn_walls", "frame_walls", "ring_walls",
@@ -79,6 +84,10 @@ class DrawnWall:
     mix: float = 0.0
     """Its share (0 to 0.5): the wall shows ``(1 - mix)`` of its own zone's texture
     and ``mix`` of the neighbour's, at :attr:`alpha`."""
+    slides: tuple[float, float] = (0.0, 0.0)
+    """Metres its own texture and the neighbour's slide along the wall towards its
+    right end, with the viewer's offset from each zone's sampling line
+    (:func:`~walkstream.shared.walls.zone_slide`, ``--wall-parallax``)."""
 
 
 WALL_AHEAD_S = (0.5, 1.0, 1.5, 2.0, 3.0, 4.5, 6.0)
@@ -96,6 +105,14 @@ swaps its texture at the border, it is never open)."""
 RING_BEHIND_NEED_S = 0.5
 """The need (seconds) of a ring wall's texture out of view (the viewer turns to it):
 after those in view."""
+
+
+def _slides(foot: float, zone: int, mix_zone: int, width: float, share: float) -> tuple[float, float]:
+    """The slides of a wall's own zone's texture and the neighbour's blended in (module docs)."""
+    if share <= 0.0:
+        return (0.0, 0.0)
+    got = zone_slide(foot, np.array([zone, mix_zone]), width, share)
+    return (float(got[0]), float(got[1]))
 
 
 def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
@@ -142,7 +159,8 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     has_far = rec is not None and rec.far is not None
     if ring:
         seen = in_view(ring, np.zeros(3))
-        mix_zone, mix_share = zone_mix(table.along_of(eye)[0], table.width, table.zones, w.config.wall_zone_blend)
+        foot = table.along_of(eye)[0]
+        mix_zone, mix_share = zone_mix(foot, table.width, table.zones, w.config.wall_zone_blend)
         for j, k in enumerate(ring):
             if weights[0, k] <= 0.0:
                 continue
@@ -169,7 +187,8 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
                     want(nb, WALL_MIX_NEED_S)
             img = lane.image(tid)
             out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
-                                 int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix))
+                                 int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix,
+                                 _slides(foot[k], zone, int(mix_zone[k]), table.width[k], w.config.wall_parallax)))
         for h, t in enumerate(horizons, start=1):  # the zones the eye walks into, of walls it will see
             shown = in_view(ring, eyes[h] - eye)
             for j, k in enumerate(ring):
@@ -233,7 +252,8 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     seen = in_view(f.vp)
     to_eye = np.asarray(f.vp, np.float64) @ np.linalg.inv(view)  # the projection
     band = w.config.wall_zone_blend
-    mix_zone, mix_share = zone_mix(table.along_of(eye)[0], table.width, table.zones, band)
+    foot = table.along_of(eye)[0]
+    mix_zone, mix_share = zone_mix(foot, table.width, table.zones, band)
     for k in np.flatnonzero(weights[0] > 0.0).tolist():
         s = sides[k]
         zone = int(zones[0, k])
@@ -256,7 +276,8 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             elif seen[k]:
                 wanted.append((nb, cells[0], WALL_MIX_NEED_S))
         out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
-                             int(getattr(img, "nbytes", 0)), cells, mix_tid, mix))
+                             int(getattr(img, "nbytes", 0)), cells, mix_tid, mix,
+                             _slides(foot[k], zone, int(mix_zone[k]), table.width[k], w.config.wall_parallax)))
         if weights[0, k] >= 1.0:
             closed.add(s.portal)
     for h, t in enumerate(horizons, start=1):
@@ -312,10 +333,5 @@ def wall_quads(walls: Sequence[DrawnWall], image: Callable[[int], Any]) -> list[
         if rgba is None:
             continue
         other = image(d.mix_image) if d.mix_image >= 0 and d.mix > 0.0 else None
-        if other is None:
-            out.append((d.corners, -1 - d.image, rgba, float(d.alpha)))
-            continue
-        a, m = float(d.alpha), float(d.mix)
-        out.append((d.corners, -1 - d.image, rgba, a * (1.0 - m) / max(1.0 - a * m, 1e-9)))
-        out.append((d.corners, -1 - d.mix_image, other, a * m))
+        out += cross_fade(d.corners, -1 - d.image, rgba, -1 - d.mix_image, other, d.alpha, d.mix, d.slides)
     return out
