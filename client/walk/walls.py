@@ -48,6 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.draw.quads import Quad
+from walkstream.client.walk.ringahead import ring_textures_ahead
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.walls import zone_mix
@@ -175,18 +176,8 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             for j, k in enumerate(ring):
                 if weights[h, k] > 0.0 and shown[j]:
                     want(sides[k].textures[int(zones[h, k])], float(t))
-    if w.config.prefetch:  # the rings of the cells the streamer predicts, where the eye will be
-        ahead = [(c, t) for c, t in sorted(city.need.items(), key=lambda kv: kv[1])
-                 if c != f.street and 0.0 <= t <= WALL_AHEAD_S[-1] and c in w.scene.wall_rings]
-        if ahead:
-            at = np.array([eye + np.array([*(velocity * t), 0.0]) for _, t in ahead])
-            az, _ad, aw = table.views(at)
-            for row, (c, t) in enumerate(ahead):
-                theirs = list(w.scene.wall_rings[c])
-                seen_there = in_view(theirs, at[row] - eye)
-                for j, k in enumerate(theirs):
-                    if aw[row, k] > 0.0 and seen_there[j]:
-                        want(sides[k].textures[int(az[row, k])], float(t))
+    if w.config.prefetch:  # the rings the walker enters next, where it enters them
+        ring_textures_ahead(w, f, WALL_AHEAD_S, in_view, want)
     lane.want(wants)
     return out
 

@@ -1,0 +1,94 @@
+"""Part of the frame step ``visible`` outdoors: the textures of the rings the walker enters next.
+
+A city baked with ``--virtual-walls`` rings regions of street cells with four textured
+walls (:mod:`walkstream.server.bake.ringwalls`).  While a ring wall in view has no
+texture the frame draws the far field behind it as geometry
+(:func:`~walkstream.client.walk.walls.ring_walls`), so every texture of the next ring
+should be held when the walker crosses into its region.  Measured frame by frame on the
+village's walk, the frames drawing a far field were, after the walk's start, mostly
+those just after the walker entered a new region: the next ring's textures were asked
+for from the eye moved on *in a straight line* at its velocity, looking the same way,
+at the streamer's need times, which add a turn's cost to the cells after a turn.  A
+walker who turns into a side street is not where that eye is, and looks elsewhere.
+
+So the next rings' textures are asked for **where the walker will enter them**
+(:func:`ring_textures_ahead`): for each cell of another ring on the streamer's predicted
+route within :data:`~walkstream.client.walk.walls.WALL_AHEAD_S`'s last horizon, from the
+point of that cell nearest the eye, at the time the route reaches it by distance alone
+(:attr:`~walkstream.client.stream.streamer.Streamer.need_records`: a turn makes a cell
+less likely, not later), every wall of its ring facing that point: those the view shows
+looking the same way at that time, the others :data:`TURNED_LAG_S` later (the walker
+may turn to them as it enters); and from that point on at the walker's velocity, the
+zones it walks along at the later horizons of the walls it will see (a walker entering
+a region alongside a wall crosses a zone about every second: the ring becomes the
+current one, whose own horizons ask for those zones, only as it enters).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.walk.state import Frame, WalkState
+from walkstream.shared.cells import inside_convex
+
+__all__ = ["TURNED_LAG_S", "entry_point", "ring_textures_ahead"]
+
+TURNED_LAG_S = 0.5
+"""How much later than the walls in view a wall of a ring ahead is asked for that the
+view shows only after a turn (after those the walker sees as it walks on)."""
+
+
+def entry_point(outline: NDArray[np.float64], xy: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(2,)`` the point of the convex cell ``outline`` ``(n, 2)`` nearest ``xy`` ``(2,)``
+    (``xy`` itself when inside): where a walker coming from ``xy`` enters the cell."""
+    p = np.asarray(xy, np.float64).reshape(2)
+    a = np.asarray(outline, np.float64).reshape(-1, 2)
+    if inside_convex(a, p[None, :])[0]:
+        return p
+    ab = np.roll(a, -1, axis=0) - a
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12), 0.0, 1.0)
+    q = a + t[:, None] * ab
+    out: NDArray[np.float64] = q[int(np.argmin(np.einsum("ij,ij->i", q - p, q - p)))]
+    return out
+
+
+def ring_textures_ahead(w: WalkState, f: Frame, horizons: Sequence[float],
+                        in_view: Callable[[list[int], NDArray[np.float64]], NDArray[np.bool_]],
+                        want: Callable[[int, float], None]) -> int:
+    """Want the textures of the rings the walker enters within the last of ``horizons``
+    (seconds; the module docstring), and, from where it enters, those of the zones it
+    walks into at the later horizons; ``in_view(walls, moved)`` says which of ``walls`` (indices of the
+    scene's sides) the view shows from the eye moved by ``moved`` ``(3,)``, looking the
+    same way, ``want(texture, need)`` asks for one.  Returns the cells looked at."""
+    city, table, rings = w.scene.streets, w.scene.wall_table, w.scene.wall_rings
+    if city is None or table is None or not rings:
+        return 0
+    sides = w.scene.walls
+    eye = np.asarray(f.eye, np.float64).reshape(3)
+    velocity = np.asarray(city.velocity, np.float64).reshape(2)
+    here = rings.get(-1 if f.street is None else int(f.street), ())
+    mine = {sides[k].textures for k in here}  # the current ring's walls: wanted by the horizons
+    n = 0
+    for c, t in sorted(city.need_records.items(), key=lambda kv: kv[1]):
+        if t < 0.0 or t > horizons[-1] or c == f.street or c not in rings:
+            continue
+        theirs = [k for k in rings[c] if sides[k].textures not in mine]
+        outline = city.cellmap.outlines.get(c)
+        if not theirs or outline is None:
+            continue
+        n += 1
+        at = np.array([*entry_point(outline, eye[:2]), eye[2]])
+        # from where it enters, on at its velocity: the zones it walks along next, before
+        # the ring is the current one and its own horizons take over
+        later = [h for h in horizons if h > t]
+        eyes = np.array([at, *[at + np.array([*(velocity * (h - t)), 0.0]) for h in later]])
+        zones, _d, weights = table.views(eyes)
+        for row, need in enumerate([float(t), *later]):
+            seen = in_view(theirs, eyes[row] - eye)
+            for j, k in enumerate(theirs):
+                if weights[row, k] > 0.0 and (row == 0 or seen[j]):
+                    want(sides[k].textures[int(zones[row, k])], need if seen[j] else need + TURNED_LAG_S)
+    return n
