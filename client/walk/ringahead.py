@@ -26,13 +26,13 @@ current one, whose own horizons ask for those zones, only as it enters).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
-from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.cells import inside_convex
+from walkstream.shared.walls import WallSide, WallTable
 
 __all__ = ["TURNED_LAG_S", "entry_point", "ring_textures_ahead"]
 
@@ -55,39 +55,51 @@ def entry_point(outline: NDArray[np.float64], xy: NDArray[np.float64]) -> NDArra
     return out
 
 
-def ring_textures_ahead(w: WalkState, f: Frame, horizons: Sequence[float],
-                        in_view: Callable[[list[int], NDArray[np.float64]], NDArray[np.bool_]],
-                        want: Callable[[int, float], None]) -> int:
+def ring_textures_ahead(
+    table: WallTable,
+    sides: Sequence[WallSide],
+    rings: Mapping[int, Sequence[int]],
+    street: int | None,
+    eye: ArrayLike,
+    velocity: ArrayLike,
+    route: Mapping[int, float],
+    outlines: Mapping[int, NDArray[np.float64]],
+    horizons: Sequence[float],
+    in_view: Callable[[list[int], NDArray[np.float64]], NDArray[np.bool_]],
+    want: Callable[[int, float], None],
+) -> int:
     """Want the textures of the rings the walker enters within the last of ``horizons``
     (seconds; the module docstring), and, from where it enters, those of the zones it
-    walks into at the later horizons; ``in_view(walls, moved)`` says which of ``walls`` (indices of the
-    scene's sides) the view shows from the eye moved by ``moved`` ``(3,)``, looking the
-    same way, ``want(texture, need)`` asks for one.  Returns the cells looked at."""
-    city, table, rings = w.scene.streets, w.scene.wall_table, w.scene.wall_rings
-    if city is None or table is None or not rings:
-        return 0
-    sides = w.scene.walls
-    eye = np.asarray(f.eye, np.float64).reshape(3)
-    velocity = np.asarray(city.velocity, np.float64).reshape(2)
-    here = rings.get(-1 if f.street is None else int(f.street), ())
-    mine = {sides[k].textures for k in here}  # the current ring's walls: wanted by the horizons
+    walks into at the later horizons.
+
+    ``table`` and ``sides`` are the scene's wall sides, ``rings`` each ringed cell's
+    sides (indices), ``street`` the viewer's cell, ``eye`` ``(3,)`` and ``velocity``
+    ``(2,)`` (m/s) the viewer's; ``route`` the cells ahead and when the route reaches
+    them (seconds, by distance), ``outlines`` the cells' outlines ``(n, 2)``;
+    ``in_view(walls, moved)`` says which of ``walls`` the view shows from the eye moved
+    by ``moved`` ``(3,)``, looking the same way, ``want(texture, need)`` asks for one.
+    Returns how many cells ahead were looked at."""
+    e = np.asarray(eye, np.float64).reshape(3)
+    v = np.asarray(velocity, np.float64).reshape(2)
+    here = rings.get(-1 if street is None else int(street), ())
+    mine = {sides[k].textures for k in here}  # the current ring's walls: wanted by its own horizons
     n = 0
-    for c, t in sorted(city.need_records.items(), key=lambda kv: kv[1]):
-        if t < 0.0 or t > horizons[-1] or c == f.street or c not in rings:
+    for c, t in sorted(route.items(), key=lambda kv: kv[1]):
+        if t < 0.0 or t > horizons[-1] or c == street or c not in rings:
             continue
         theirs = [k for k in rings[c] if sides[k].textures not in mine]
-        outline = city.cellmap.outlines.get(c)
+        outline = outlines.get(c)
         if not theirs or outline is None:
             continue
         n += 1
-        at = np.array([*entry_point(outline, eye[:2]), eye[2]])
+        at = np.array([*entry_point(outline, e[:2]), e[2]])
         # from where it enters, on at its velocity: the zones it walks along next, before
         # the ring is the current one and its own horizons take over
         later = [h for h in horizons if h > t]
-        eyes = np.array([at, *[at + np.array([*(velocity * (h - t)), 0.0]) for h in later]])
+        eyes = np.array([at, *[at + np.array([*(v * (h - t)), 0.0]) for h in later]])
         zones, _d, weights = table.views(eyes)
         for row, need in enumerate([float(t), *later]):
-            seen = in_view(theirs, eyes[row] - eye)
+            seen = in_view(theirs, eyes[row] - e)
             for j, k in enumerate(theirs):
                 if weights[row, k] > 0.0 and (row == 0 or seen[j]):
                     want(sides[k].textures[int(zones[row, k])], need if seen[j] else need + TURNED_LAG_S)

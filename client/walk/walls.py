@@ -177,7 +177,8 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
                 if weights[h, k] > 0.0 and shown[j]:
                     want(sides[k].textures[int(zones[h, k])], float(t))
     if w.config.prefetch:  # the rings the walker enters next, where it enters them
-        ring_textures_ahead(w, f, WALL_AHEAD_S, in_view, want)
+        ring_textures_ahead(table, sides, w.scene.wall_rings, f.street, eye, velocity, city.need_records,
+                            city.cellmap.outlines, WALL_AHEAD_S, in_view, want)
     lane.want(wants)
     return out
 
