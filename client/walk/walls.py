@@ -27,8 +27,8 @@ street cell whose PVS was large, :mod:`walkstream.server.bake.ringwalls`), each 
 (:func:`ring_walls`) draws the walls of the current cell's ring, each with its zone's
 texture (blended with the next zone's near a border, as indoors); their textures are
 wanted now for the walls in view (sooner than those behind the viewer), ahead for the
-zones the eye moves into and for the rings of the cells the streamer predicts, at
-their need times.  The far field is no longer in the cell's geometry PVS, but the
+zones the eye moves into, and for the rings the walker enters next from where it
+enters them (:mod:`~walkstream.client.walk.ringahead`).  The far field is no longer in the cell's geometry PVS, but the
 cell's record lists it apart (:attr:`~walkstream.shared.wire.CellRecord.far`, streamed
 with the PVS: a city's objects are a few parameters each): while a ring wall in view
 has no texture yet, the frame draws that far field as geometry
