@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.walk.ringahead import TURNED_LAG_S, entry_point, ring_textures_ahead
+from walkstream.client.stream.cellmap import nearest_point
+from walkstream.client.walk.ringahead import TURNED_LAG_S, ring_textures_ahead
 from walkstream.server.bake.ringwalls import plan_ring_walls
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.wallplan import WallSettings
@@ -46,9 +47,9 @@ def _facing_east(sides: list, eye: NDArray[np.float64]):  # type: ignore[no-unty
 
 def test_the_entry_point_is_the_cells_point_nearest_the_walker() -> None:
     sq = _square(10, 0)
-    assert entry_point(sq, np.array([12.0, 3.0])).tolist() == [12.0, 3.0]  # inside: where it stands
-    assert entry_point(sq, np.array([4.0, 5.0])).tolist() == [10.0, 5.0]
-    assert np.allclose(entry_point(sq, np.array([25.0, 20.0])), [20.0, 10.0])
+    assert nearest_point(sq, np.array([12.0, 3.0])).tolist() == [12.0, 3.0]  # inside: where it stands
+    assert nearest_point(sq, np.array([4.0, 5.0])).tolist() == [10.0, 5.0]
+    assert np.allclose(nearest_point(sq, np.array([25.0, 20.0])), [20.0, 10.0])
 
 
 def test_the_next_rings_textures_are_wanted_where_the_walker_enters_it_and_along_after() -> None:

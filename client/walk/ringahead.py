@@ -31,28 +31,14 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.shared.cells import inside_convex
+from walkstream.client.stream.cellmap import nearest_point
 from walkstream.shared.walls import WallSide, WallTable
 
-__all__ = ["TURNED_LAG_S", "entry_point", "ring_textures_ahead"]
+__all__ = ["TURNED_LAG_S", "ring_textures_ahead"]
 
 TURNED_LAG_S = 0.5
 """How much later than the walls in view a wall of a ring ahead is asked for that the
 view shows only after a turn (after those the walker sees as it walks on)."""
-
-
-def entry_point(outline: NDArray[np.float64], xy: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``(2,)`` the point of the convex cell ``outline`` ``(n, 2)`` nearest ``xy`` ``(2,)``
-    (``xy`` itself when inside): where a walker coming from ``xy`` enters the cell."""
-    p = np.asarray(xy, np.float64).reshape(2)
-    a = np.asarray(outline, np.float64).reshape(-1, 2)
-    if inside_convex(a, p[None, :])[0]:
-        return p
-    ab = np.roll(a, -1, axis=0) - a
-    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12), 0.0, 1.0)
-    q = a + t[:, None] * ab
-    out: NDArray[np.float64] = q[int(np.argmin(np.einsum("ij,ij->i", q - p, q - p)))]
-    return out
 
 
 def ring_textures_ahead(
@@ -92,7 +78,7 @@ def ring_textures_ahead(
         if not theirs or outline is None:
             continue
         n += 1
-        at = np.array([*entry_point(outline, e[:2]), e[2]])
+        at = np.array([*nearest_point(outline, e[:2]), e[2]])
         # from where it enters, on at its velocity: the zones it walks along next, before
         # the ring is the current one and its own horizons take over
         later = [h for h in horizons if h > t]
