@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.stream.cellmap import nearest_point
-from walkstream.client.walk.ringahead import TURNED_LAG_S, ring_textures_ahead
+from walkstream.client.walk.ringahead import TURNED_LAG_S, ring_textures_ahead, ring_zones_ahead
 from walkstream.server.bake.ringwalls import plan_ring_walls
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.wallplan import WallSettings
@@ -102,3 +102,25 @@ def test_nothing_is_wanted_without_rings_ahead() -> None:
     n = ring_textures_ahead(table, sides, rings, 0, eye, np.zeros(2), {0: 0.0, 7: 1.0}, outlines, HORIZONS,
                             _facing_east(sides, eye), lambda t, need: got.append(t))
     assert n == 0 and got == []
+
+
+def test_the_current_rings_zones_ahead_include_the_walls_a_turn_shows_later() -> None:
+    sides, table, rings, _outlines = _scene()
+    eye = np.array([2.0, 5.0, 1.6])
+    eyes = np.array([eye + np.array([2.0 * h, 0.0, 0.0]) for h in HORIZONS[:3]])  # walking east
+    calls: list[tuple[int, float]] = []
+    in_view = _facing_east(sides, eye)
+    ring_zones_ahead(table, sides, rings[0], eye, eyes, HORIZONS, in_view, lambda t, need: calls.append((t, need)))
+    zones, _d, weights = table.views(eyes)
+    expected = set()
+    for h, t in enumerate(HORIZONS[:3]):
+        shown = in_view(rings[0], eyes[h] - eye)
+        for j, k in enumerate(rings[0]):
+            if weights[h, k] > 0.0:
+                expected.add((sides[k].textures[int(zones[h, k])], t if shown[j] else t + TURNED_LAG_S))
+    assert set(calls) == expected
+    # the wall behind the walker (west) is asked for too, after a turn's lag
+    west = [k for k in rings[0] if max(sides[k].p0[0], sides[k].p1[0]) < 0.0]
+    assert west and any(t in sides[west[0]].textures and need > HORIZONS[0] for t, need in calls)
+    ring_zones_ahead(table, sides, rings[0], eye, np.zeros((0, 3)), (), in_view, lambda t, need: calls.append((-1, 0.0)))
+    assert (-1, 0.0) not in calls  # standing: no horizons, nothing ahead

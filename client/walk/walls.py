@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.draw.quads import Quad
-from walkstream.client.walk.ringahead import ring_textures_ahead
+from walkstream.client.walk.ringahead import ring_textures_ahead, ring_zones_ahead
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.walls import zone_mix
@@ -171,11 +171,8 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             img = lane.image(tid)
             out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
                                  int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix))
-        for h, t in enumerate(horizons, start=1):  # the zones the eye walks into, of walls it will see
-            shown = in_view(ring, eyes[h] - eye)
-            for j, k in enumerate(ring):
-                if weights[h, k] > 0.0 and shown[j]:
-                    want(sides[k].textures[int(zones[h, k])], float(t))
+        # the zones the eye walks into along its ring (the walker may turn: ring_zones_ahead)
+        ring_zones_ahead(table, sides, ring, eye, eyes[1:], horizons, in_view, want)
     if w.config.prefetch:  # the rings the walker enters next, where it enters them
         ring_textures_ahead(table, sides, w.scene.wall_rings, f.street, eye, velocity, city.need_records,
                             city.cellmap.outlines, WALL_AHEAD_S, in_view, want)
