@@ -99,6 +99,22 @@ def test_neighbouring_cells_share_one_ring_and_its_textures() -> None:
     assert {tuple(k.tolist()) for k in plan.kept.values()} == {(0, 1, 2)}
 
 
+def test_a_region_grows_only_while_its_ring_at_the_least_distance_keeps_at_most_k() -> None:
+    # four 10 m cells in a row, an object in each: a 100 m region would hold all four,
+    # and its ring, at the least distance, would keep all four as geometry (K = 2)
+    cells = [_cell(i, 10.0 * i, 0.0, neighbours=tuple(n for n in (i - 1, i + 1) if 0 <= n < 4)) for i in range(4)]
+    boxes = {i: _box(5 + 10 * i, 5, half=1.0) for i in range(4)} | {10 + i: _box(200 + 30 * i, 5) for i in range(4)}
+    pvs = {c.id: np.array(sorted(boxes)) for c in cells}
+    st = WallSettings(keep=2, ring_min=3.0, region=100.0)
+    assert [[c.id for c in r] for r in ring_regions(cells, st.region)] == [[0, 1, 2, 3]]
+    plan = plan_ring_walls(cells, pvs, boxes, st)
+    regions = {}
+    for s in plan.walls.sides:
+        regions.setdefault(s.textures, set()).add(ring_cell(s.portal))
+    assert sorted(sorted(v) for v in regions.values()) == [[0, 1], [0, 1], [0, 1], [0, 1], [2, 3], [2, 3], [2, 3], [2, 3]]
+    assert all(len(k) <= st.keep for k in plan.kept.values())
+
+
 @pytest.mark.parametrize(
     ("flags", "message"),
     [

@@ -23,7 +23,7 @@ from walkstream.shared.arrays import F64
 from walkstream.shared.cells import INSIDE_TOL, inside_convex
 from walkstream.shared.scene.cellkinds import CELL_KINDS, visibility_of
 
-__all__ = ["CellMap", "portal_between"]
+__all__ = ["CellMap", "nearest_point", "portal_between"]
 
 Tile = tuple[int, int] | None
 
@@ -277,15 +277,19 @@ class CellMap:
         if poly is None:
             return float("inf")
         p = np.asarray(xy, dtype=np.float64).reshape(2)
-        if inside_convex(poly, p[None, :])[0]:
-            return 0.0
-        a = poly
-        b = np.roll(poly, -1, axis=0)
-        ab = b - a
-        t = np.clip(
-            np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12),
-            0,
-            1,
-        )
-        d = a + t[:, None] * ab - p
-        return float(np.sqrt(np.min(np.einsum("ij,ij->i", d, d))))
+        return float(np.hypot(*(nearest_point(poly, p) - p)))
+
+
+def nearest_point(poly: F64, xy: ArrayLike) -> NDArray[np.float64]:
+    """``(2,)`` the point of the convex outline ``poly`` ``(n, 2)`` nearest ``xy`` ``(2,)``:
+    ``xy`` itself when inside, else the nearest point of its boundary (where a walker
+    coming from ``xy`` enters the cell)."""
+    p = np.asarray(xy, dtype=np.float64).reshape(2)
+    if inside_convex(poly, p[None, :])[0]:
+        return p
+    a = np.asarray(poly, np.float64)
+    ab = np.roll(a, -1, axis=0) - a
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12), 0.0, 1.0)
+    q = a + t[:, None] * ab
+    out: NDArray[np.float64] = q[int(np.argmin(np.einsum("ij,ij->i", q - p, q - p)))]
+    return out

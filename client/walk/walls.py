@@ -32,8 +32,8 @@ street cell whose PVS was large, :mod:`walkstream.server.bake.ringwalls`), each 
 (:func:`ring_walls`) draws the walls of the current cell's ring, each with its zone's
 texture (blended with the next zone's near a border, as indoors); their textures are
 wanted now for the walls in view (sooner than those behind the viewer), ahead for the
-zones the eye moves into and for the rings of the cells the streamer predicts, at
-their need times.  The far field is no longer in the cell's geometry PVS, but the
+zones the eye moves into, and for the rings the walker enters next from where it
+enters them (:mod:`~walkstream.client.walk.ringahead`).  The far field is no longer in the cell's geometry PVS, but the
 cell's record lists it apart (:attr:`~walkstream.shared.wire.CellRecord.far`, streamed
 with the PVS: a city's objects are a few parameters each): while a ring wall in view
 has no texture yet, the frame draws that far field as geometry
@@ -53,6 +53,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.draw.quads import Quad, cross_fade
+from walkstream.client.walk.ringahead import ring_textures_ahead, ring_zones_ahead
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.walls import zone_mix, zone_slide
@@ -189,23 +190,11 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
                                  int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix,
                                  _slides(foot[k], zone, int(mix_zone[k]), table.width[k], w.config.wall_parallax)))
-        for h, t in enumerate(horizons, start=1):  # the zones the eye walks into, of walls it will see
-            shown = in_view(ring, eyes[h] - eye)
-            for j, k in enumerate(ring):
-                if weights[h, k] > 0.0 and shown[j]:
-                    want(sides[k].textures[int(zones[h, k])], float(t))
-    if w.config.prefetch:  # the rings of the cells the streamer predicts, where the eye will be
-        ahead = [(c, t) for c, t in sorted(city.need.items(), key=lambda kv: kv[1])
-                 if c != f.street and 0.0 <= t <= WALL_AHEAD_S[-1] and c in w.scene.wall_rings]
-        if ahead:
-            at = np.array([eye + np.array([*(velocity * t), 0.0]) for _, t in ahead])
-            az, _ad, aw = table.views(at)
-            for row, (c, t) in enumerate(ahead):
-                theirs = list(w.scene.wall_rings[c])
-                seen_there = in_view(theirs, at[row] - eye)
-                for j, k in enumerate(theirs):
-                    if aw[row, k] > 0.0 and seen_there[j]:
-                        want(sides[k].textures[int(az[row, k])], float(t))
+        # the zones the eye walks into along its ring (the walker may turn: ring_zones_ahead)
+        ring_zones_ahead(table, sides, ring, eye, eyes[1:], horizons, in_view, want)
+    if w.config.prefetch:  # the rings the walker enters next, where it enters them
+        ring_textures_ahead(table, sides, w.scene.wall_rings, f.street, eye, velocity, city.need_records,
+                            city.cellmap.outlines, WALL_AHEAD_S, in_view, want)
     lane.want(wants)
     return out
 
