@@ -159,13 +159,15 @@ def kept_distances(
     """Per cell with a kept part, the kept parts' indices ``(k,)`` into ``masks[cid]`` and
     their boxes' distances ``(k,)`` from ``eye`` ``(3,)`` (:func:`box_distance`), in the
     cells' order: what the fog is chosen on (:func:`fog_for_budget`) and then cuts."""
-    out: dict[int, tuple[NDArray[np.int64], NDArray[np.float64]]] = {}
-    for cid, m in masks.items():
-        idx = np.flatnonzero(m)
-        if len(idx):
-            lo, hi = boxes[cid]
-            out[cid] = (idx, box_distance(lo[idx], hi[idx], eye))
-    return out
+    picks = [(cid, np.flatnonzero(m)) for cid, m in masks.items()]
+    picks = [(cid, idx) for cid, idx in picks if len(idx)]
+    if not picks:
+        return {}
+    # every cell's kept boxes in one batch (a box's distance is its own row's)
+    d = box_distance(np.concatenate([boxes[cid][0][idx] for cid, idx in picks]),
+                     np.concatenate([boxes[cid][1][idx] for cid, idx in picks]), eye)
+    ends = np.cumsum([len(idx) for _, idx in picks]).tolist()
+    return {cid: (idx, d[end - len(idx):end]) for (cid, idx), end in zip(picks, ends, strict=True)}
 
 
 def fog_for_budget(
