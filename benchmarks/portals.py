@@ -411,7 +411,8 @@ def seed_rows(seeds: Sequence[int], replay: Callable[[str, dict[str, Any], str],
     the same frames either way).  A row per seed: perfect frames, first perfect frame, culled pixels,
     tightness p95, bytes, the culling's median milliseconds, the cells missing from a frame
     after the first perfect one (the replay's ``late_cells``: which and why in its report),
-    and ``walked_s``, the seconds the replay walked."""
+    ``walked_s``, the seconds the replay walked, and ``cpu_ms_per_frame``, this process's CPU
+    time over the replay (the client, the in-process server, the report) per frame walked."""
     rows = []
     for seed in seeds:
         src, db = out / f"seed{seed}.json", out / f"seed{seed}.db"
@@ -424,13 +425,16 @@ def seed_rows(seeds: Sequence[int], replay: Callable[[str, dict[str, Any], str],
                    "report": str(out / f"seed{seed}-replay")}
         if duration != WHOLE_TOUR:
             options["duration"] = duration
+        cpu0 = time.process_time()
         s = replay(str(db), options, f"bench portals: seed {seed}").summary
+        cpu = time.process_time() - cpu0
         truth = s.get("truth") or {}
         rows.append({"seed": seed, "duration": duration, **{key: s.get(key) for key in (
             "perfect_frame_ratio", "time_to_first_perfect_frame_s", "bytes_received", "start_contents_cells",
             "culling_ms_median")}, "culled_pixels": truth.get("culled_pixels"), "tightness_p95": truth.get("tightness_p95"),
             "truth_frames": truth.get("frames"), "late_cells": (s.get("late_cells") or {}).get("cells"),
-            "walked_s": s.get("duration_s")})
+            "walked_s": s.get("duration_s"),
+            "cpu_ms_per_frame": 1e3 * cpu / s["frames"] if s.get("frames") else None})
     return rows
 
 
@@ -443,7 +447,7 @@ def seed_table(rows: Sequence[dict[str, Any]]) -> str:
     """The generated seeds' replays as text."""
     f = _or_dash
     out = [f"{'seed':>5}{'walked':>8}{'perfect%':>9}{'1st perf s':>11}{'culled px':>10}{'truth fr':>9}"
-           f"{'tight p95':>10}{'kB down':>8}{'1st view':>9}{'cull ms':>8}{'late':>5}"]
+           f"{'tight p95':>10}{'kB down':>8}{'1st view':>9}{'cull ms':>8}{'late':>5}{'cpu ms/fr':>10}"]
     for r in rows:
         pf = r["perfect_frame_ratio"]
         walked = r["duration"] if r.get("walked_s") is None else f"{r['walked_s']:.0f}s"
@@ -452,7 +456,7 @@ def seed_table(rows: Sequence[dict[str, Any]]) -> str:
                    f"{f(r['truth_frames'], 'd'):>9}{f(r['tightness_p95'], '.2f'):>10}"
                    f"{f(None if r['bytes_received'] is None else r['bytes_received'] / 1000, '.1f'):>8}"
                    f"{f(r['start_contents_cells'], 'd'):>9}{f(r['culling_ms_median'], '.2f'):>8}"
-                   f"{f(r.get('late_cells'), 'd'):>5}")
+                   f"{f(r.get('late_cells'), 'd'):>5}{f(r.get('cpu_ms_per_frame'), '.1f'):>10}")
     return "\n".join(out)
 
 

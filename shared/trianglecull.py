@@ -58,6 +58,9 @@ WIDE_PX = 4
 #: A triangle's sides as index pairs into its three vertices.
 TRIANGLE_EDGES = np.array([[0, 1], [1, 2], [2, 0]], np.int64)
 
+#: Each side's two ends in turn, as vertex indices (the sides of :data:`TRIANGLE_EDGES`).
+_SIDE_ENDS = TRIANGLE_EDGES.reshape(-1)
+
 
 class _Mesh(Protocol):
     @property
@@ -119,6 +122,15 @@ def _packed(mesh: _Mesh) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArra
     out = (np.ascontiguousarray(tri.transpose(2, 1, 0)), start, lo, hi)
     mesh._cache["triangles_ckm"] = out
     return out
+
+
+def _triangle_parts(mesh: _Mesh) -> NDArray[np.int64]:
+    """The part of each of ``mesh``'s packed triangles ``(T,)`` (made once per mesh)."""
+    got = mesh._cache.get("triangle_parts")
+    if got is None:
+        start = _packed(mesh)[1]
+        got = mesh._cache["triangle_parts"] = np.repeat(np.arange(len(start) - 1), np.diff(start))
+    return np.asarray(got, np.int64)
 
 
 def refine_parts(
@@ -198,12 +210,14 @@ def refine_parts(
         at += len(picks[k])
         if not len(idx):
             continue
-        tri, start, _lo, _hi = _packed(meshes[c])
-        n = np.diff(start)[idx]
-        # each candidate triangle's index into the cell's packed triangles
-        first = np.repeat(start[idx] - np.concatenate([[0], np.cumsum(n)[:-1]]), n)
-        tris.append(tri[:, :, np.arange(int(n.sum())) + first])
-        part_of.append(np.repeat(idx, n))
+        tri, _start, _lo, _hi = _packed(meshes[c])
+        of = _triangle_parts(meshes[c])
+        chosen = np.zeros(len(masks[c]), bool)
+        chosen[idx] = True
+        # each candidate triangle's index into the cell's packed triangles, in order
+        t = np.flatnonzero(chosen[of])
+        tris.append(tri[:, :, t])
+        part_of.append(of[t])
         keep_cells.append(k)
     if not keep_cells:
         return 0
@@ -254,20 +268,14 @@ def _shows(
     m = (proj @ view)[[0, 1, 3]]
     h = (m[:, :3] @ pts.reshape(3, -1) + m[:, 3:]).reshape(3, 3, n)
     d = h[2] - clip_m  # (3, n) >= 0: in front
-    front = (d >= 0).any(axis=0)
-    if not front.all():  # wholly behind: any point in front stands in (never shown, front is False)
-        h[:, :, ~front] = np.array([0.0, 0.0, 1.0])[:, None, None]
-        d[:, ~front] = 1.0
-    fallback = np.take_along_axis(h, np.argmax(d, axis=0)[None, None, :], axis=1)[:, 0]  # in front
-    ends = []
-    for i, j in TRIANGLE_EDGES.tolist():
-        di, dj = d[i], d[j]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(di == dj, 0.0, di / (di - dj))
-        cross = h[:, i] + (h[:, j] - h[:, i]) * s
-        ends += [np.where(di >= 0, h[:, i], np.where(dj >= 0, cross, fallback)),
-                 np.where(dj >= 0, h[:, j], np.where(di >= 0, cross, fallback))]
-    q = np.stack(ends, axis=1)  # (3, 6, n): each side's two ends in front of the plane
+    ahead = d >= 0
+    front = ahead.any(axis=0)
+    # each side's two ends in front of the plane (3, 6, n): a triangle wholly in front
+    # (most of them) is its own vertices; only those across the plane are clipped
+    q = h[:, _SIDE_ENDS]
+    cut = np.flatnonzero(~ahead.all(axis=0))
+    if len(cut):
+        q[:, :, cut] = _clipped_ends(h[:, :, cut], d[:, cut], front[cut])
     # window coordinates with pixel i's centre at i
     x = np.clip((q[0] / q[2] + 1.0) * (0.5 * size[0]) - 0.5, -1e9, 1e9)
     y = np.clip((q[1] / q[2] + 1.0) * (0.5 * size[1]) - 0.5, -1e9, 1e9)
@@ -282,6 +290,29 @@ def _shows(
     if on.any():  # then the triangle's own sides
         meet[on] &= _separated(x[:, on], y[:, on], box[on])
     return on & meet.any(axis=1)
+
+
+def _clipped_ends(h: NDArray[np.float64], d: NDArray[np.float64], front: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """The ends in front of the clip plane ``(3, 6, n)`` of the sides of triangles with a
+    vertex behind it: clip coordinates ``h`` ``(3, 3, n)``, the vertices' depths beyond the
+    plane ``d`` ``(3, n)`` and whether any vertex is in front (``front`` ``(n,)``).  A
+    side's line projects to a line, so a side crossing the plane ends where it crosses
+    (interpolated in ``h``); a side wholly behind ends at the triangle's vertex farthest in
+    front, a triangle wholly behind at any point in front (it is never shown)."""
+    h, d = h.copy(), d.copy()
+    if not front.all():
+        h[:, :, ~front] = np.array([0.0, 0.0, 1.0])[:, None, None]
+        d[:, ~front] = 1.0
+    fallback = np.take_along_axis(h, np.argmax(d, axis=0)[None, None, :], axis=1)[:, 0]  # in front
+    ends = []
+    for i, j in TRIANGLE_EDGES.tolist():
+        di, dj = d[i], d[j]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(di == dj, 0.0, di / (di - dj))
+        cross = h[:, i] + (h[:, j] - h[:, i]) * s
+        ends += [np.where(di >= 0, h[:, i], np.where(dj >= 0, cross, fallback)),
+                 np.where(dj >= 0, h[:, j], np.where(di >= 0, cross, fallback))]
+    return np.stack(ends, axis=1)
 
 
 def _separated(x: NDArray[np.float64], y: NDArray[np.float64], box: NDArray[np.float64]) -> NDArray[np.bool_]:

@@ -369,10 +369,10 @@ def test_bench_portals_seed_rows_are_parsed_and_tabled() -> None:
         build_parser().parse_args(["bench", "portals", "--seeds", "eleven"])
     row = {"seed": 11, "duration": "20s", "perfect_frame_ratio": 0.99637, "time_to_first_perfect_frame_s": 4.0877,
            "culled_pixels": 0, "truth_frames": 12, "tightness_p95": 3.907, "bytes_received": 79662,
-           "start_contents_cells": 39, "culling_ms_median": 2.5, "late_cells": 2}
+           "start_contents_cells": 39, "culling_ms_median": 2.5, "late_cells": 2, "cpu_ms_per_frame": 11.04}
     table = seed_table([row, {**row, "seed": 13, "culled_pixels": None, "tightness_p95": None}]).splitlines()
-    assert table[0].split()[:4] == ["seed", "walked", "perfect%", "1st"]
-    assert table[1].split() == ["11", "20s", "99.64", "4.09", "0", "12", "3.91", "79.7", "39", "2.50", "2"]
+    assert table[0].split()[:4] == ["seed", "walked", "perfect%", "1st"] and table[0].split()[-2:] == ["cpu", "ms/fr"]
+    assert table[1].split() == ["11", "20s", "99.64", "4.09", "0", "12", "3.91", "79.7", "39", "2.50", "2", "11.0"]
     assert table[2].split()[4] == "-" and table[2].split()[6] == "-"  # no truth: said so, not zero
 
 
@@ -397,11 +397,13 @@ def test_bench_portals_whole_tours_say_how_far_they_walked(capsys: pytest.Captur
 
     def replay(db: str, options: dict[str, object], title: str) -> object:
         seen.append(options)
-        return type("R", (), {"summary": {"duration_s": 12.0}})()
+        return type("R", (), {"summary": {"duration_s": 12.0, "frames": 300 if options.get("duration") else 0}})()
 
     (tmp_path / "seed3.db").touch()  # baked already: the rows only replay
-    for duration, every in (("whole", 0), ("20s", 50)):
-        rows = seed_rows([3], replay, tmp_path, duration=duration, truth_every=every)
+    rows_whole = seed_rows([3], replay, tmp_path, duration="whole", truth_every=0)
+    rows = seed_rows([3], replay, tmp_path, duration="20s", truth_every=50)
     assert "duration" not in seen[0] and seen[1]["duration"] == "20s"  # whole: no limit on the replay
     assert seen[0]["truth_every"] == 0 and seen[1]["truth_every"] == 50
     assert rows[0]["walked_s"] == 12.0
+    assert rows[0]["cpu_ms_per_frame"] >= 0.0  # the replay's CPU time over the frames it walked
+    assert rows_whole[0]["cpu_ms_per_frame"] is None  # no frame walked: not a figure

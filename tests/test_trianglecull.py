@@ -179,3 +179,28 @@ def test_the_cli_turns_it_off_and_benches_it(office_db: Path, tmp_path: Path, ca
     assert main(["bench", "portals", "--triangles", str(tmp_path / "nope.db"), "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "nope.db" in err and "Traceback" not in err
+
+
+def test_triangles_wholly_in_front_skip_the_clip_and_each_is_tested_as_alone() -> None:
+    from walkstream.shared.partcull import near_far
+    from walkstream.shared.trianglecull import _SIDE_ENDS, _clipped_ends, _shows
+
+    rng = np.random.default_rng(7)
+    n = 300
+    centre = np.c_[rng.uniform(-2.0, 10.0, n), rng.uniform(-4.0, 4.0, n), rng.uniform(-2.0, 2.0, n)]
+    tri = centre[:, None, :] + rng.normal(0.0, rng.choice([0.05, 0.5, 3.0], n)[:, None, None], (n, 3, 3))
+    pts = np.ascontiguousarray(tri.transpose(2, 1, 0))  # (3, 3, n) coordinate-major
+    m = (PROJ @ VIEW)[[0, 1, 3]]
+    h = (m[:, :3] @ pts.reshape(3, -1) + m[:, 3:]).reshape(3, 3, n)
+    d = h[2] - 0.03
+    whole = (d >= 0).all(axis=0)
+    assert 50 < whole.sum() < n - 50  # in front, across the plane and behind, all drawn
+    # the exactness of the shortcut: a triangle wholly in front ends at its own vertices
+    ends = _clipped_ends(h[:, :, whole], d[:, whole], np.ones(int(whole.sum()), bool))
+    assert np.array_equal(ends, h[:, _SIDE_ENDS][:, :, whole])
+    vsa = np.tile(np.array([[30, 20, 120, 90], [1, 1, 0, 0]], np.int64), (n, 1, 1))
+    planes = near_far(PROJ)
+    assert planes is not None
+    batch = _shows(pts, vsa, VIEW, PROJ, SIZE, 0.03, planes)
+    alone = [bool(_shows(pts[:, :, i:i + 1], vsa[i:i + 1], VIEW, PROJ, SIZE, 0.03, planes)[0]) for i in range(n)]
+    assert batch.tolist() == alone and 0 < batch.sum() < n

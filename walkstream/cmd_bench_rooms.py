@@ -105,7 +105,8 @@ def cmd_bench_portals(args: argparse.Namespace) -> int:
             part = "the whole tour" if args.seed_duration == "whole" else f"the first {args.seed_duration} of each tour"
             truth = (f"every {args.seed_truth_every}th frame against the truth at 160x120" if args.seed_truth_every
                      else "no truth: culled pixels not measured")
-            print(f"(generated offices, 3 storeys; {part}, 56 kbit/s, 200 ms, simulated clock, desktop2003, {truth})")
+            print(f"(generated offices, 3 storeys; {part}, 56 kbit/s, 200 ms, simulated clock, desktop2003, {truth}; "
+                  "cpu ms/fr: this process's CPU time per frame walked)")
     return 0
 
 

@@ -32,7 +32,7 @@ from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.portals import PortalCull, box_distance
 from walkstream.shared.trianglecull import refine_parts
 
-__all__ = ["allocate", "fog_for_budget", "nearest_portal_in_view"]
+__all__ = ["allocate", "fog_for_budget", "kept_distances", "nearest_portal_in_view"]
 
 
 def allocate(w: WalkState, f: Frame) -> None:
@@ -123,10 +123,11 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
     lever = w.controller is not None and (w.scene.streets is not None or w.config.fog_budget)
     f.budget = int(w.controller.budget) if lever and w.controller is not None else 0
     if w.indoors and w.config.fog_budget:  # indoors the budget's lever is the fog
-        f.fog = fog_for_budget(masks, boxes, f.loaded, f.eye, f.budget, f.fog, w.part_triangles)
-        for cid, mask in masks.items():
-            lo, hi = boxes[cid]
-            mask &= box_distance(lo, hi, f.eye) <= f.fog
+        # the kept parts' distances, once: the fog is chosen on them and then cuts them
+        kept = kept_distances(masks, boxes, f.eye)
+        f.fog = fog_for_budget(masks, boxes, f.loaded, f.eye, f.budget, f.fog, w.part_triangles, kept=kept)
+        for cid, (idx, d) in kept.items():
+            masks[cid][idx[d > f.fog]] = False
         if pc is not None and f.fog < nearest_portal_in_view(rooms.graph, pc, f.eye):
             w.frames.fog_below_portal += 1
     f.masks = masks
@@ -150,6 +151,25 @@ def nearest_portal_in_view(graph: PortalGraph, pc: PortalCull, eye: NDArray[np.f
     return float(box_distance(graph.lo[rows[seen]], graph.hi[rows[seen]], eye).min())
 
 
+def kept_distances(
+    masks: dict[int, NDArray[np.bool_]],
+    boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]],
+    eye: NDArray[np.float64],
+) -> dict[int, tuple[NDArray[np.int64], NDArray[np.float64]]]:
+    """Per cell with a kept part, the kept parts' indices ``(k,)`` into ``masks[cid]`` and
+    their boxes' distances ``(k,)`` from ``eye`` ``(3,)`` (:func:`box_distance`), in the
+    cells' order: what the fog is chosen on (:func:`fog_for_budget`) and then cuts."""
+    picks = [(cid, np.flatnonzero(m)) for cid, m in masks.items()]
+    picks = [(cid, idx) for cid, idx in picks if len(idx)]
+    if not picks:
+        return {}
+    # every cell's kept boxes in one batch (a box's distance is its own row's)
+    d = box_distance(np.concatenate([boxes[cid][0][idx] for cid, idx in picks]),
+                     np.concatenate([boxes[cid][1][idx] for cid, idx in picks]), eye)
+    ends = np.cumsum([len(idx) for _, idx in picks]).tolist()
+    return {cid: (idx, d[end - len(idx):end]) for (cid, idx), end in zip(picks, ends, strict=True)}
+
+
 def fog_for_budget(
     masks: dict[int, NDArray[np.bool_]],
     boxes: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]],
@@ -158,21 +178,23 @@ def fog_for_budget(
     budget: int,
     fog: float,
     part_triangles: dict[int, NDArray[np.int64]] | None = None,
+    *,
+    kept: dict[int, tuple[NDArray[np.int64], NDArray[np.float64]]] | None = None,
 ) -> float:
     """The fog distance at which the kept parts, nearest first, fit ``budget`` triangles
     (``fog`` itself when they all fit; never below 2 m); ``part_triangles``: each cell's
-    triangles per part, when the caller keeps them (else counted here)."""
+    triangles per part, when the caller keeps them (else counted here); ``kept``: the
+    kept parts' indices and distances (:func:`kept_distances`), when the caller has them."""
+    if kept is None:
+        kept = kept_distances(masks, boxes, eye)
     dist: list[NDArray[np.float64]] = []
     tris: list[NDArray[np.int64]] = []
-    for cid, m in masks.items():
-        if not m.any():
-            continue
-        lo, hi = boxes[cid]
-        dist.append(box_distance(lo[m], hi[m], eye))
+    for cid, (idx, d) in kept.items():
+        dist.append(d)
         counts = part_triangles.get(cid) if part_triangles is not None else None
         if counts is None:
             counts = np.array([p.triangles for p in loaded[cid].parts], np.int64)
-        tris.append(counts[m])
+        tris.append(counts[idx])
     if not dist:
         return fog
     d = np.concatenate(dist)
