@@ -453,7 +453,7 @@ async def replay(
         summary.update(frames.geometry_figures())  # objects drawn as geometry, whatever the quads
         # a walker standing at its start for its first view: how long, and the boxes that stood in
         summary["start_hold_s"] = frames.start_hold_s
-        summary["start_boxes"] = len(streamer.stand_ins)
+        summary["start_boxes"] = len(streamer.start_feed.stand_ins)
         if scene.wall_images is not None:  # a city's rings of walls
             summary["walls"] = _walls_summary(scene, frames)
         if state.facades is not None:  # boxes with their facades (--no-facades: none)

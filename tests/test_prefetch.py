@@ -194,6 +194,26 @@ def test_a_record_round_the_corner_is_due_by_distance_not_turn_cost() -> None:
     assert needs.records[ID["E1"]] == pytest.approx(needs.need[ID["E1"]])  # straight on: the same
 
 
+def test_a_record_beyond_the_objects_reach_is_due_by_its_cost() -> None:
+    """Where a cell's objects are not wanted yet (its cost beyond the objects' reach),
+    its record is needed no sooner than they: due by cost, so the side streets a car
+    passes at a junction do not hold up the records of the street it goes on along."""
+    m = _map()
+    m.current = ID["W1"]
+    v = np.array([14.0, 0.0])
+    needs = plan_needs(
+        m, None, [-10.0, 0.0], v, v, reach_m=20.0, reach_records_m=80.0,
+        turn_m=turn_cost_m(14.0), min_speed=1.5,
+    )
+    cost = predict_route(m, ID["W1"], [-10.0, 0.0], v, 80.0, turn_cost_m(14.0)).cost()
+    assert cost[ID["E1"]] <= 20.0 and ID["E1"] in needs.need  # ahead: objects wanted
+    assert needs.records[ID["E1"]] == pytest.approx(needs.need[ID["E1"]])
+    for side in ("N1", "S1"):
+        assert cost[ID[side]] > 20.0 and ID[side] not in needs.need  # objects not wanted yet
+        assert needs.records[ID[side]] == pytest.approx(cost[ID[side]] / 14.0)  # by cost
+        assert needs.records[ID[side]] > needs.records[ID["E1"]]  # after the street ahead
+
+
 def test_a_route_leaving_the_cells_keeps_the_last_cell_and_asks_for_tiles() -> None:
     m = _map()
     grid = TileGrid((-45.0, -25.0), 50.0, (2, 2), 1.0)

@@ -2,7 +2,8 @@
 
 :class:`StartBundle` asks for the bundle (``GET /v1/start``, see
 :mod:`walkstream.server.service.routers.start`) and feeds its parts to a
-:class:`BundleTarget` (the :class:`~walkstream.client.stream.streamer.Streamer`) as
+:class:`BundleTarget` (the :class:`~walkstream.client.stream.streamer.Streamer`) and a
+:class:`StartTarget` (its :class:`~walkstream.client.stream.startfeed.StartFeed`) as
 they arrive: the path to
 the replay (the walk starts), the cell records and index tiles to the streamer
 (the viewer is tracked from the first frame), the manifest to the replay (the
@@ -27,7 +28,7 @@ from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomview import RoomView
 from walkstream.shared.wire import CellIndex, CellRecord, Manifest, ObjectFrame
 
-__all__ = ["BundleTarget", "StartBundle"]
+__all__ = ["BundleTarget", "StartTarget", "StartBundle"]
 
 
 class BundleTarget(Protocol):
@@ -46,10 +47,6 @@ class BundleTarget(Protocol):
         """The mean bytes of an object frame on the wire."""
         ...
 
-    def located(self, cid: int) -> None:
-        """The server located the walk's start in cell ``cid``."""
-        ...
-
     def add_index(self, idx: CellIndex) -> None:
         """Learn an index tile."""
         ...
@@ -64,10 +61,6 @@ class BundleTarget(Protocol):
 
     def has_object(self, oid: int) -> bool:
         """Whether ``oid`` is held."""
-        ...
-
-    def add_boxes(self, boxes: ObjectBoxes) -> None:
-        """Learn objects' boxes (stand-ins for objects not in yet)."""
         ...
 
     def expect(self, ids: set[int], coming: bool = True) -> None:
@@ -87,13 +80,26 @@ class BundleTarget(Protocol):
         ...
 
 
+class StartTarget(Protocol):
+    """Where a start bundle's start-only parts go: where the walk starts and the stand-ins'
+    boxes (:class:`~walkstream.client.stream.startfeed.StartFeed`)."""
+
+    def located(self, cid: int) -> None:
+        """The server located the walk's start in cell ``cid``."""
+        ...
+
+    def add_boxes(self, boxes: ObjectBoxes) -> None:
+        """Learn objects' boxes (stand-ins for objects not in yet)."""
+        ...
+
+
 class StartBundle:
     """One start bundle in flight for a streamer.
 
     Parameters
     ----------
     streamer:
-        Where the parts go.
+        Where the cells, index tiles and objects go.
     form:
         The object form asked for (``params`` or ``lod2``).
     on_path, on_manifest:
@@ -105,6 +111,8 @@ class StartBundle:
     on_end:
         Called when the bundle ends, with the error that ended it (None when it
         ended well), e.g. an :class:`ApiError` 404 from a server without bundles.
+    start:
+        Where the start cell's id and the stand-ins' boxes go.
 
     Attributes
     ----------
@@ -122,8 +130,11 @@ class StartBundle:
         on_manifest: Callable[[Manifest], None],
         on_end: Callable[[BaseException | None], None],
         view: RoomView | None = None,
+        *,
+        start: StartTarget,
     ) -> None:
         self.streamer = streamer
+        self.start = start
         self.view = view
         self.form = form
         self.on_path = on_path
@@ -157,13 +168,13 @@ class StartBundle:
                     st.stats.bundle_bytes += item.nbytes
                 elif part == "boxes":
                     st.stats.bundle_bytes += item.nbytes
-                    st.add_boxes(item)
+                    self.start.add_boxes(item)
                 elif part == "index":
                     st.stats.bundle_bytes += item.nbytes
                     st.add_index(item)
                 elif part == "cell":
                     st.stats.bundle_bytes += item.nbytes
-                    st.located(item.id)
+                    self.start.located(item.id)
                     st.add_cell(item)
                     ids = {i for i in item.pvs.tolist() if not st.has_object(i)} - self.ids
                     self.ids |= ids

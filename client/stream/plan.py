@@ -9,9 +9,13 @@ the cell index and answers, in seconds until needed:
   ``reach_m`` of cost, each at its cost over the speed;
 * ``records`` -- the cells whose records are wanted: the same within
   ``reach_records_m`` (a little further: a cell's objects can be asked for only once
-  its record is in), each at its *distance* over the speed: the turn cost decides
-  which cells are wanted, but a cell round a corner is entered as soon as the way
-  there is walked, and a late record leaves the viewer with nothing to count;
+  its record is in), each within the objects' reach at its *distance* over the
+  speed: the turn cost decides which cells are wanted, but a cell round a corner is
+  entered as soon as the way there is walked, and a late record leaves the viewer
+  with nothing to count; beyond the objects' reach at its *cost* over the speed:
+  its objects are not wanted yet, so its record is needed no sooner than they, and
+  the side streets of a junction the route passes (many records on a close-meshed
+  network) do not go before the street it goes on along;
 * ``tiles`` -- the index tiles wanted: those around the viewer (0 s), those the
   route runs through and into (a neighbour whose tile is not held), and, when the
   viewer is outside every held cell, those within ``reach_m``.
@@ -124,7 +128,8 @@ def plan_needs(
             t = s.cost_m / v_eff
             # a turn makes a cell less likely, not later: if the viewer takes it, it is
             # there after the distance alone, so its record (small) is due by that
-            records.setdefault(s.cell, s.distance_m / v_eff)
+            # where its objects are wanted; beyond, its record is needed no sooner than they
+            records.setdefault(s.cell, (s.distance_m if s.cost_m <= reach_m else s.cost_m) / v_eff)
             if s.cost_m <= reach_m:
                 need.setdefault(s.cell, t)
             on = cellmap.tile_of.get(s.cell)

@@ -34,9 +34,10 @@ items is wanted is cancelled (what already arrived is kept).  Nothing cached or 
 flight is asked for again; an item comes again only after the cache evicted it
 (counted as a re-download).
 
-The start: :meth:`Streamer.start_bundle` asks for the start bundle (path, first
-cell, index tiles, manifest, the first cell's objects in one round trip) and feeds
-its parts in as they arrive.
+The start: the streamer's :class:`~walkstream.client.stream.startfeed.StartFeed`
+(:attr:`Streamer.start_feed`) asks for the start bundle (path, first cell, index
+tiles, manifest, the first cell's objects in one round trip) and feeds its parts in
+as they arrive.
 
 The scheduler never blocks the frame loop: it starts tasks and returns.
 """
@@ -46,7 +47,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -59,7 +60,6 @@ from walkstream.client.content.registry import client_content_for_form
 from walkstream.client.net.api import SceneClient
 from walkstream.client.rewrite.geometry import ObjectGeometry, geometry_of
 from walkstream.client.rewrite.pool import RewriteOptions, RewritePool
-from walkstream.client.stream.bundle import StartBundle
 from walkstream.client.stream.cache import CITY_KINDS, Cache, Kind
 from walkstream.client.stream.cellmap import CellMap
 from walkstream.client.stream.diskcache import DiskCache
@@ -68,19 +68,16 @@ from walkstream.client.stream.plan import Tile, plan_needs, tile_key, tile_of_ke
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.stream.route import horizon_m, turn_cost_m
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
+from walkstream.client.stream.startfeed import StartFeed
 from walkstream.client.stream.stats import StreamStats
 from walkstream.client.tasks import reap
 from walkstream.shared.cells import TileGrid
 from walkstream.shared.codec import unpack_bounded
-from walkstream.shared.codec.objectboxes import ObjectBoxes
 from walkstream.shared.errors import ApiError, CodecError, StreamCut
 from walkstream.shared.lsystem.grammar import Grammar
-from walkstream.shared.paths import RecordedPath
-from walkstream.shared.roomview import RoomView
 from walkstream.shared.wire import (
     CellIndex,
     CellRecord,
-    Manifest,
     ObjectFrame,
     decode_cell,
     decode_cell_index,
@@ -191,11 +188,8 @@ class Streamer:
         """The cell records held (mirrors the cache)."""
         self.pvs_seen: dict[int, NDArray[np.int64]] = {}
         """The PVS of every cell record ever received (for the overfetch figure)."""
-        self.first_view = False
-        """Whether the start bundle was asked to bring the first view first (the walker
-        then stands at its start for it)."""
-        self.stand_ins: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
-        """Objects' boxes ``(lo (3,), hi (3,))`` known before the objects (:meth:`add_boxes`)."""
+        self.start_feed = StartFeed(self, config.form, self.cellmap)
+        """The start bundle and what it brought besides cells and objects."""
         self.tiles_held: set[Tile] = set()
         self.tile_members: dict[int, frozenset[int]] = {}
         """The cell ids of every index tile ever received, by :func:`tile_key`."""
@@ -209,8 +203,6 @@ class Streamer:
         self._in_flight_ids: set[int] = set()
         self._in_flight_cells: set[int] = set()
         self._wanted: dict[int, tuple[float, float]] = {}
-        self._bundle: StartBundle | None = None
-        self._bundle_task: asyncio.Task[None] | None = None
         self._last_plan = -math.inf
         self._last_locate = -math.inf
         self._xy = np.zeros(2)
@@ -244,7 +236,7 @@ class Streamer:
         if (
             not found
             and self.grid is None
-            and self._bundle is None
+            and self.start_feed.bundle is None
             and self._locate_task is None
             and now - self._last_locate >= 1.0
         ):
@@ -377,7 +369,7 @@ class Streamer:
 
     def _outstanding(self) -> float:
         """Bytes asked for and not yet received (estimated)."""
-        n = self._bundle.left if self._bundle is not None else 0.0
+        n = self.start_feed.left()
         for b in self.scheduler.flights(self):
             each = self._frame_bytes if b.kind == "objects" else self._record_bytes
             n += len(b.left) * each + self._head_bytes
@@ -473,7 +465,7 @@ class Streamer:
             len(self._tile_tasks)
             + len(self.scheduler.flights(self))
             + (self._locate_task is not None)
-            + (self._bundle_task is not None)
+            + (self.start_feed.task is not None)
         )
 
     def _next_batch(self, todo: list[tuple[tuple[float, float], int]]) -> list[int]:
@@ -651,50 +643,7 @@ class Streamer:
         except CodecError:
             return  # a bad record: not cached, so it is wanted (and fetched) again
 
-    # -- the start bundle --------------------------------------------------------
-
-    def start_bundle(
-        self,
-        path: str | None,
-        on_path: Callable[[RecordedPath, int], None],
-        on_manifest: Callable[[Manifest], None],
-        on_end: Callable[[BaseException | None], None],
-        view: RoomView | None = None,
-    ) -> asyncio.Task[None]:
-        """Ask for the start bundle at recorded path ``path``'s start; feed its parts in.
-
-        See :class:`~walkstream.client.stream.bundle.StartBundle` for the callbacks and ``view``.
-        """
-        bundle = StartBundle(self, self.config.form, on_path, on_manifest, on_end, view=view)
-        self.first_view = view is not None
-        self._bundle = bundle
-        self._bundle_task = asyncio.create_task(self._run_bundle(bundle, path))
-        return self._bundle_task
-
-    async def _run_bundle(self, bundle: StartBundle, path: str | None) -> None:
-        try:
-            await bundle.run(path)
-        finally:
-            self._bundle = None
-            self._bundle_task = None
-        self.replan()
-
-    @property
-    def starting(self) -> bool:
-        """Whether the start bundle is still coming."""
-        return self._bundle_task is not None
-
-    def add_boxes(self, boxes: ObjectBoxes) -> None:
-        """Learn objects' boxes (the start bundle's first cell's objects its first view
-        does not draw): a frame does not wait for a missing one its frustum drops."""
-        for oid, lo, hi in zip(boxes.ids.tolist(), boxes.lo, boxes.hi, strict=True):
-            self.stand_ins[oid] = (lo, hi)
-
-    def located(self, cid: int) -> None:
-        """The server located the walk's start in cell ``cid``: it is the current cell
-        unless the viewer was found in one already."""
-        if self.cellmap.current is None:
-            self.cellmap.current = cid
+    # -- the start bundle's side ------------------------------------------------
 
     def expect(self, ids: set[int], coming: bool = True) -> None:
         """Mark objects as on their way (``coming``) or no longer so (the start bundle's)."""
@@ -781,8 +730,8 @@ class Streamer:
         ]
         if self._locate_task is not None:
             tasks.append(self._locate_task)
-        if self._bundle_task is not None:
-            tasks.append(self._bundle_task)
+        if self.start_feed.task is not None:
+            tasks.append(self.start_feed.task)
         await reap(tasks)
         if self.rewrite is not None:
             await self.rewrite.close()

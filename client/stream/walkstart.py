@@ -118,7 +118,7 @@ async def bundle_start(
             # cut after the path: the manifest (the grammar) comes on its own
             tasks.append(manifest_task(api, disk, manifest_arrived, manifest_failed))
 
-    streamer.start_bundle(path, on_path, on_manifest, on_end, view=view)
+    streamer.start_feed.start_bundle(path, on_path, on_manifest, on_end, view=view)
     try:
         got: tuple[RecordedPath, int] | None = await within(
             clock, timeout_s, path_fut

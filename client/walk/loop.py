@@ -102,7 +102,7 @@ async def walk(
     # a walker stands at the start until its first view is complete (at most start_hold_s):
     # indoors and, when the start bundle brings the first view first (cfg.street_hold), on the street
     holding = cfg.start_hold_s > 0 and ((rooms is not None and scene.streets is None)
-                                        or (scene.streets is not None and rooms is None and scene.streets.first_view))
+                                        or (scene.streets is not None and rooms is None and scene.streets.start_feed.first_view))
     hold_end = t_walk0 + cfg.start_hold_s
     while True:
         t = clock.now()
@@ -136,7 +136,7 @@ async def walk(
                 phases.move("draw", "finish", w.renderer.last_finish_s)
         # the walk leads within seconds into the cells still on the link (the start bundle's
         # other cells, the first prefetch; on the street the bundle's): the walker waits for them too
-        busy = rooms.busy() if rooms is not None else scene.streets is not None and scene.streets.starting
+        busy = rooms.busy() if rooms is not None else scene.streets is not None and scene.streets.start_feed.starting
         holding = holding and not (f.perfect and not busy)
         w.frame += 1
         if w.frame % FORGET_EVERY == 0:

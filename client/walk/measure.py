@@ -48,7 +48,7 @@ def measure(w: WalkState, f: Frame) -> None:
     scene, city, rooms = w.scene, w.scene.streets, w.scene.rooms
     o = w.objects
     # a missing object whose box (a stand-in, known before it) the frustum drops is not waited for
-    unseen = unseen_stand_ins(o.pvs, city.stand_ins, w.scene.cache, f.vp) if city is not None else set()
+    unseen = unseen_stand_ins(o.pvs, city.start_feed.stand_ins, w.scene.cache, f.vp) if city is not None else set()
     have_obj = sum(1 for i in o.pvs if i not in unseen and city.has_object(i)) if city is not None else 0
     waiting = [c for c in f.default_room_cells if rooms is not None and not _whole_enough(rooms.mesh(c), c, f)]
     have_rooms = len(f.default_room_cells) - len(waiting)
