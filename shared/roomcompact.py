@@ -5,7 +5,9 @@ lists; most of its bytes are the float64s and every cell's planes, which are the
 prism of its outline between its floor and ceiling.  This encoding stores
 coordinates as integer millimetres, outlines and paths as differences of
 consecutive vertices, a cell's planes only when they are not its outline's prism
-(the decoder rebuilds those with :func:`prism_planes`), and deflates the msgpack
+(the decoder rebuilds those with :func:`prism_planes`; planes within a millimetre of
+that prism everywhere in the cell count as the prism: on duplex.ifc, 21 of 50 cells
+whose space walls lie off the millimetre grid, 3.7 -> 2.8 kB), and deflates the msgpack
 body: 7.9 kB -> about 3.9 kB on the generated office.
 
 Layout (media type :data:`TOPOLOGY_COMPACT_MEDIA`)::
@@ -55,6 +57,10 @@ _VERSION = 2
 _MM = 1000.0
 _MAX_INFLATED = 64 << 20
 _MAX_COUNT = 1 << 20
+_NEAR_M = 1e-3
+"""A cell's planes within this of its rounded outline's prism (the outline's own
+millimetre rounding: IFC spaces' sub-millimetre walls) are not stored; the decoder
+rebuilds them from the outline."""
 
 
 def prism_planes(outline: ArrayLike, zmin: float, zmax: float) -> F64:
@@ -101,6 +107,19 @@ def _deltas(rows: NDArray[np.int64]) -> list[int]:
     return out
 
 
+def _near_prism(planes: NDArray[np.float64], prism: NDArray[np.float64], outline: NDArray[np.float64],
+                zmin: float, zmax: float) -> bool:
+    """Whether a cell's ``planes`` ``(k, 4)`` are its rounded outline's ``prism`` ``(k, 4)``,
+    row by row, to :data:`_NEAR_M` wherever the cell is (each row's offset between the
+    two planes, at the corners of the outline ``(m, 2)`` at ``zmin`` and ``zmax``: a
+    plane's offset is linear, so no point of the cell differs more)."""
+    if len(planes) == 0 or planes.shape != prism.shape:
+        return False
+    corners = np.concatenate([np.column_stack([outline, np.full(len(outline), z)]) for z in (zmin, zmax)])
+    gap = (planes[:, :3] - prism[:, :3]) @ corners.T + (planes[:, 3] - prism[:, 3])[:, None]
+    return bool(np.all(np.abs(gap) <= _NEAR_M) and np.all(np.einsum("ij,ij->i", planes[:, :3], prism[:, :3]) > 0.99))
+
+
 def encode_topology_compact(t: Topology) -> bytes:
     """Encode ``t`` as ``walkstream-topology/2`` (see the module docstring)."""
     kinds = sorted({c.kind for c in t.cells} | {p[1] for p in t.portals})
@@ -109,7 +128,7 @@ def encode_topology_compact(t: Topology) -> bytes:
     for i, c in enumerate(t.cells):
         ol = _mm(c.outline) / _MM
         rebuilt = prism_planes(ol, round(c.zmin * _MM) / _MM, round(c.zmax * _MM) / _MM)
-        if len(c.planes) == 0 or c.planes.shape != rebuilt.shape or not np.allclose(c.planes, rebuilt, atol=1e-6, rtol=0):
+        if not _near_prism(c.planes, rebuilt, ol, c.zmin, c.zmax):
             planes.append([i, c.planes.reshape(-1).tolist()])
     body = {
         "storeys": [[i, n, int(_mm(a)), int(_mm(b))] for i, n, a, b in t.storeys],

@@ -19,18 +19,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.server.service.contentsform import STREAM_LEVEL, ContentsStream
-from walkstream.server.service.firstheads import HEAD_SHARE, first_heads
+from walkstream.server.service.firstview import first_view_contents
 from walkstream.server.service.firstwalls import (
     first_wall_textures,
     scene_walls,
 )
 from walkstream.server.service.http import Encoded, Rep
-from walkstream.server.service.interiors import InteriorState
 from walkstream.server.service.scenes import Form, Scene
 from walkstream.server.service.streetheads import first_view_plan, object_boxes_body
 from walkstream.shared.codec.cellbatch import pack_contents_part
-from walkstream.shared.codec.contentspack import pack_parts
 from walkstream.shared.errors import ApiError
 from walkstream.shared.pathcodec import decode_path_q
 from walkstream.shared.paths import RecordedPath
@@ -244,26 +241,9 @@ def start_parts(
                 wall_parts, closed = _first_walls(scene, lead[0], view, rep)
                 parts += wall_parts
             cells = interior.first_view(lead, view, START_ROOM_BYTES, closed)
-            # the cells the first pose sees in part go first as heads, whole after the others
-            hd = first_heads(interior, cells, lead[0], view) if heads else {}
-            # in a gzip answer, each cell in the form that costs it fewer bytes there
-            stream = ContentsStream(STREAM_LEVEL) if inflate else None
-            frames: list[bytes] = []
-            later: list[int] = []
-            for cid in cells:
-                whole_forms = interior.contents_forms(cid, inflate)
-                head_forms = interior.head_forms(cid, *hd[cid], inflate) if cid in hd else []
-                cheap = bool(head_forms) and (
-                    stream is None or stream.cost(*head_forms) <= HEAD_SHARE * stream.cost(*whole_forms))
-                if cheap:
-                    frames.append(head_forms[0] if stream is None else stream.cheaper(*head_forms))
-                    later.append(cid)
-                else:
-                    frames.append(whole_forms[0] if stream is None else stream.cheaper(*whole_forms))
-            if heads and rep == "msgpack" and cells:  # the first view in one LZMA dictionary, where that costs less
-                frames, stream = _first_view_pack(interior, cells, later, hd, frames, stream, inflate)
-            frames += [interior.contents_part(cid, inflate, stream) for cid in later]
-            parts.append(("contents", Frames([*cells, *later], frames)))
+            ids, frames = first_view_contents(interior, cells, lead[0], view, heads=heads, inflate=inflate,
+                                              pack=heads and rep == "msgpack")
+            parts.append(("contents", Frames(ids, frames)))
         return [*parts, ("manifest", scene.manifest[rep])]
     ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
     more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0
@@ -349,23 +329,6 @@ def _textures(scene: Scene, ids: list[int]) -> Frames:
     """Wall textures ``ids`` as the textures' batch sends them, one part each."""
     encs = [scene.wall_texture(t) for t in ids]
     return Frames(ids, [pack_contents_part(t, e.etag, e.content) for t, e in zip(ids, encs, strict=True)])
-
-
-def _first_view_pack(interior: InteriorState, cells: list[int], heads: list[int], hd: dict[int, tuple[bytes, bytes]],
-                     frames: list[bytes], stream: ContentsStream | None,
-                     inflate: bool) -> tuple[list[bytes], ContentsStream | None]:
-    """The first view's contents ``frames`` (one per cell of ``cells``, those of ``heads``
-    as heads ``hd``), or in their place one pack of their inflated forms
-    (:mod:`~walkstream.shared.codec.contentspack`) when it costs fewer bytes: in the
-    answer's gzip stream (``stream``, the mirror after ``frames``; a new mirror after the
-    pack is returned with it) or, uncompressed, as sent."""
-    inner = [interior.head_forms(cid, *hd[cid], True)[0] if cid in heads else interior.contents_forms(cid, True)[0]
-             for cid in cells]
-    pack = pack_parts(inner)
-    if stream is None:
-        return ([pack], None) if (not inflate and len(pack) < sum(map(len, frames))) else (frames, None)
-    alone = ContentsStream(STREAM_LEVEL)
-    return ([pack], alone) if alone.feed(pack) < stream.nbytes else (frames, stream)
 
 
 def room_lead(scene: Scene, path: str) -> list[tuple[NDArray[np.float64], float, float]]:

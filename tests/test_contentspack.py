@@ -1,0 +1,109 @@
+"""An interior's first view as one LZMA pack (``shared/codec/contentspack.py``), the
+start bundle's decoder reading one (``client/net/startitems.py``), and the compact
+topology leaving out planes within a millimetre of their outline's prism
+(``shared/roomcompact.py``)."""
+
+from __future__ import annotations
+
+import lzma
+
+import msgpack
+import numpy as np
+import pytest
+
+from walkstream.client.net.startitems import StartDecoder
+from walkstream.shared.codec.cellbatch import pack_contents_part, pack_head_part
+from walkstream.shared.codec.cellhead import encode_cell_head
+from walkstream.shared.codec.cellmesh import encode_cell_mesh, inflate_cell_mesh
+from walkstream.shared.codec.cellpieces import decode_cell_pieces
+from walkstream.shared.codec.contentspack import FILTERS, PACK_FORMAT, is_pack, pack_parts, unpack_parts
+from walkstream.shared.errors import CodecError
+from walkstream.shared.roomcompact import decode_topology_compact, encode_topology_compact, prism_planes
+from walkstream.shared.roomwire import ContentsRef, RoomRecord, Topology
+
+
+def _blob(seed: int, boxes: int = 6) -> bytes:
+    """A cell's stored blob: ``boxes`` unit boxes (12 triangles each) at random places."""
+    rng = np.random.default_rng(seed)
+    corners = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], np.float64)
+    faces = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                      [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
+    parts = [(k, k % 3, corners * rng.uniform(0.2, 2.0, 3) + rng.uniform(0, 20, 3).round(3), faces)
+             for k in range(boxes)]
+    return encode_cell_mesh(parts)
+
+
+def test_a_pack_gives_back_its_parts_and_costs_less_than_the_parts_alone() -> None:
+    blobs = {c: _blob(c) for c in (3, 4, 5)}
+    pieces = decode_cell_pieces(blobs[4])
+    keep = np.arange(len(pieces.parts)) < 2
+    body, missing = encode_cell_head(pieces, keep)
+    parts = [pack_contents_part(3, "e3", inflate_cell_mesh(blobs[3])), pack_head_part(4, "e4", body, missing),
+             pack_contents_part(5, "e5", blobs[5])]
+    packed = pack_parts(parts)
+    obj = msgpack.unpackb(packed, raw=False)
+    assert is_pack(obj) and obj["pack"] == PACK_FORMAT and obj["parts"] == 3
+    got = unpack_parts(obj)
+    assert [o for o, _ in got] == [msgpack.unpackb(p, raw=False) for p in parts]
+    assert [n for _, n in got] == [len(p) for p in parts]
+    assert len(packed) < sum(len(p) for p in parts)
+    # the start bundle's decoder: one item for the pack, the cells in the order announced
+    dec = StartDecoder("params", heads=True)
+    assert dec({"part": "contents", "etag": None, "cells": [3, 4, 5, 4]}, 10) == ("contents", [3, 4, 5, 4])
+    kind, rooms = dec(obj, len(packed))
+    assert kind == "rooms" and [c for c, _ in rooms] == [3, 4, 5] and dec.rooms == [4]
+    assert rooms[1][1].missing and len(rooms[1][1].parts) == len(pieces.parts)
+    assert sum(m.nbytes for _, m in rooms) == pytest.approx(len(packed), abs=2)
+
+
+def _damaged(obj: dict[str, object], **change: object) -> dict[str, object]:
+    return {**obj, **change}
+
+
+def test_a_damaged_pack_is_a_codec_error_never_a_traceback() -> None:
+    parts = [pack_contents_part(c, f"e{c}", _blob(c, 2)) for c in (1, 2)]
+    obj = msgpack.unpackb(pack_parts(parts), raw=False)
+    body = obj["body"]
+    raw = b"".join(parts)
+    cases = {
+        "cut": _damaged(obj, body=body[: len(body) // 2]),
+        "noise": _damaged(obj, body=bytes(len(body))),
+        "too few said": _damaged(obj, parts=1),
+        "too many said": _damaged(obj, parts=3),
+        "no parts": _damaged(obj, parts=0),
+        "other format": _damaged(obj, pack="walkstream-contentspack/9"),
+        "extra key": _damaged(obj, extra=1),
+        "not a map inside": _damaged(obj, parts=1, body=lzma.compress(msgpack.packb([1, 2]), format=lzma.FORMAT_RAW,
+                                                                     filters=FILTERS)),
+        "half a part": _damaged(obj, body=lzma.compress(raw[:-3], format=lzma.FORMAT_RAW, filters=FILTERS)),
+    }
+    for name, bad in cases.items():
+        with pytest.raises(CodecError):
+            unpack_parts(bad, name)
+    # more parts than the bundle announced
+    dec = StartDecoder("params", heads=True)
+    dec({"part": "contents", "etag": None, "cells": [1]}, 10)
+    with pytest.raises(CodecError, match="announced"):
+        dec(obj, 100)
+    with pytest.raises(ValueError):
+        pack_parts([])
+
+
+def _cell(cid: int, outline: np.ndarray, planes: np.ndarray) -> RoomRecord:
+    return RoomRecord(id=cid, kind="room", name=f"c{cid}", room=None, storey=0, outline=outline, zmin=0.0,
+                      zmax=3.0, planes=planes, portals=(), neighbours=(), contents=ContentsRef(0, 0, 0, 0, 0, 0.0))
+
+
+def test_planes_within_a_millimetre_of_the_outlines_prism_are_left_out() -> None:
+    # an IFC space's wall 0.4 mm off the millimetre grid: its plane is not its rounded outline's
+    exact = np.array([[0.0, 0.0], [4.3836, 0.0], [4.3836, 2.825], [0.0, 2.825]])
+    near = prism_planes(exact, 0.0, 3.0)
+    far = near.copy()
+    far[1, 3] -= 0.002  # 2 mm: a plane of its own
+    topo = Topology(storeys=((0, "g", 0.0, 3.0),),
+                    cells=(_cell(1, exact, near), _cell(2, exact + [10.0, 0.0], far)), portals=(), stairs=())
+    back = decode_topology_compact(encode_topology_compact(topo), "topology")
+    a, b = back.cells
+    assert np.allclose(a.planes, prism_planes(np.round(exact * 1000) / 1000, 0.0, 3.0))
+    assert np.abs(a.planes - near).max() <= 1e-3
+    assert np.allclose(b.planes, far, atol=1e-12)
