@@ -5,7 +5,7 @@ topology leaving out planes within a millimetre of their outline's prism
 
 from __future__ import annotations
 
-import lzma
+import zlib
 
 import msgpack
 import numpy as np
@@ -16,9 +16,14 @@ from walkstream.shared.codec.cellbatch import pack_contents_part, pack_head_part
 from walkstream.shared.codec.cellhead import encode_cell_head
 from walkstream.shared.codec.cellmesh import encode_cell_mesh, inflate_cell_mesh
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
-from walkstream.shared.codec.contentspack import FILTERS, PACK_FORMAT, is_pack, pack_parts, unpack_parts
+from walkstream.shared.codec.contentspack import PACK_FORMAT, is_pack, pack_parts, unpack_parts
+from walkstream.shared.codec.rawlzma import compress_raw, decompress_raw
 from walkstream.shared.errors import CodecError
-from walkstream.shared.roomcompact import decode_topology_compact, encode_topology_compact, prism_planes
+from walkstream.shared.roomcompact import (
+    decode_topology_compact,
+    encode_topology_compact,
+    prism_planes,
+)
 from walkstream.shared.roomwire import ContentsRef, RoomRecord, Topology
 
 
@@ -73,9 +78,8 @@ def test_a_damaged_pack_is_a_codec_error_never_a_traceback() -> None:
         "no parts": _damaged(obj, parts=0),
         "other format": _damaged(obj, pack="walkstream-contentspack/9"),
         "extra key": _damaged(obj, extra=1),
-        "not a map inside": _damaged(obj, parts=1, body=lzma.compress(msgpack.packb([1, 2]), format=lzma.FORMAT_RAW,
-                                                                     filters=FILTERS)),
-        "half a part": _damaged(obj, body=lzma.compress(raw[:-3], format=lzma.FORMAT_RAW, filters=FILTERS)),
+        "not a map inside": _damaged(obj, parts=1, body=compress_raw(msgpack.packb([1, 2]))),
+        "half a part": _damaged(obj, body=compress_raw(raw[:-3])),
     }
     for name, bad in cases.items():
         with pytest.raises(CodecError):
@@ -107,3 +111,17 @@ def test_planes_within_a_millimetre_of_the_outlines_prism_are_left_out() -> None
     assert np.allclose(a.planes, prism_planes(np.round(exact * 1000) / 1000, 0.0, 3.0))
     assert np.abs(a.planes - near).max() <= 1e-3
     assert np.allclose(b.planes, far, atol=1e-12)
+
+
+def test_the_compact_topology_is_written_as_lzma_and_read_as_zlib_too() -> None:
+    exact = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0]])
+    topo = Topology(storeys=((0, "g", 0.0, 3.0),), cells=(_cell(1, exact, prism_planes(exact, 0.0, 3.0)),),
+                    portals=(), stairs=())
+    body = encode_topology_compact(topo)
+    assert body[:5] == b"WSTC\x03"
+    old = b"WSTC\x02" + zlib.compress(decompress_raw(body[5:], "t", 1 << 20), 9)
+    a, b = decode_topology_compact(body, "v3"), decode_topology_compact(old, "v2")
+    assert a.cells[0].name == b.cells[0].name == "c1" and np.array_equal(a.cells[0].planes, b.cells[0].planes)
+    for bad in (body[:-4], b"WSTC\x03" + bytes(20), b"WSTC\x09" + body[5:]):
+        with pytest.raises(CodecError):
+            decode_topology_compact(bad, "damaged")

@@ -14,9 +14,7 @@ A pack is the msgpack map::
 
     {"pack": "walkstream-contentspack/1", "parts": n, "body": bin}
 
-``body`` is a raw LZMA2 stream (:data:`FILTERS`: preset 9 extreme, one literal context
-bit and no position bits, which suit the varint and msgpack bytes of the cell meshes
-best, with a 1 MiB dictionary so that a decoder needs little memory) of ``n`` contents
+``body`` is a raw LZMA2 stream (:mod:`~walkstream.shared.codec.rawlzma`) of ``n`` contents
 parts (:mod:`~walkstream.shared.codec.cellbatch`: ``{cell, etag, body}`` or a head's
 ``{cell, etag, body, missing}``) packed one after the other, each exactly as it would
 go alone.  A reader unpacks the ``n`` parts and reads each as if it had come alone; a
@@ -30,25 +28,19 @@ nothing after the last; any failure is a :class:`~walkstream.shared.errors.Codec
 
 from __future__ import annotations
 
-import lzma
 from collections.abc import Sequence
 from typing import Any
 
 import msgpack
 
+from walkstream.shared.codec.rawlzma import compress_raw, decompress_raw
 from walkstream.shared.errors import CodecError
 
-__all__ = ["PACK_FORMAT", "FILTERS", "MAX_PACK_BYTES", "MAX_PACK_PARTS", "pack_parts", "is_pack",
+__all__ = ["PACK_FORMAT", "MAX_PACK_BYTES", "MAX_PACK_PARTS", "pack_parts", "is_pack",
            "unpack_parts"]
 
 PACK_FORMAT = "walkstream-contentspack/1"
 """The ``pack`` field of a pack."""
-
-FILTERS: list[dict[str, int]] = [
-    {"id": lzma.FILTER_LZMA2, "preset": 9 | lzma.PRESET_EXTREME, "dict_size": 1 << 20, "lc": 1, "lp": 0, "pb": 0}
-]
-"""The raw LZMA2 filter chain of a pack's body (the duplex's first view: 17.3 kB; the
-``xz`` defaults, ``lc`` 3 and ``pb`` 2: 17.6 kB)."""
 
 MAX_PACK_BYTES = 64 << 20
 """Most bytes a pack's body inflates to."""
@@ -69,7 +61,7 @@ def pack_parts(parts: Sequence[bytes]) -> bytes:
     """
     if not 0 < len(parts) <= MAX_PACK_PARTS:
         raise ValueError(f"a pack holds 1 to {MAX_PACK_PARTS} parts, got {len(parts)}")
-    body = lzma.compress(b"".join(parts), format=lzma.FORMAT_RAW, filters=FILTERS)
+    body = compress_raw(b"".join(parts))
     data: bytes = msgpack.packb({"pack": PACK_FORMAT, "parts": len(parts), "body": body}, use_bin_type=True)
     return data
 
@@ -93,15 +85,7 @@ def unpack_parts(obj: Any, what: str = "contents pack") -> list[tuple[Any, int]]
     n, body = obj["parts"], obj["body"]
     if type(n) is not int or not 0 < n <= MAX_PACK_PARTS or not isinstance(body, bytes):
         raise CodecError(f"{what}: parts must be 1 to {MAX_PACK_PARTS} and body bytes")
-    dec = lzma.LZMADecompressor(lzma.FORMAT_RAW, filters=FILTERS)
-    try:
-        raw = dec.decompress(body, MAX_PACK_BYTES)
-    except lzma.LZMAError as exc:
-        raise CodecError(f"{what}: damaged body ({exc})") from exc
-    if not dec.eof:
-        raise CodecError(f"{what}: body cut short or over {MAX_PACK_BYTES} bytes inflated")
-    if dec.unused_data:
-        raise CodecError(f"{what}: {len(dec.unused_data)} bytes after the body's end")
+    raw = decompress_raw(body, what, MAX_PACK_BYTES)
     u = msgpack.Unpacker(raw=False, max_buffer_size=max(len(raw), 1), max_map_len=8, max_array_len=0,
                          max_str_len=1 << 12, max_bin_len=len(raw), max_ext_len=0, strict_map_key=True)
     u.feed(raw)
