@@ -130,6 +130,9 @@ def _payload(body: bytes, what: str) -> bytes:
     """The msgpack payload of a compact topology: version 3 LZMA, version 2 zlib."""
     b = bytes(body)
     k = len(TOPOLOGY_COMPACT_MAGIC)
+    if len(b) > k and b[:k] == TOPOLOGY_COMPACT_MAGIC and b[k] not in (_ZLIB_VERSION, _VERSION):
+        raise CodecError(f"{what}: compact topology version {b[k]} is not supported (this reader knows "
+                         f"{_ZLIB_VERSION} and {_VERSION})")
     if len(b) > k and b[:k] == TOPOLOGY_COMPACT_MAGIC and b[k] == _VERSION:
         return decompress_raw(b[k + 1 :], f"{what}: compact topology", _MAX_INFLATED)
     return inflate_tagged(b, what, TOPOLOGY_COMPACT_MAGIC, _ZLIB_VERSION, _MAX_INFLATED, "compact topology")

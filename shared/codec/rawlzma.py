@@ -36,7 +36,7 @@ def decompress_raw(data: bytes, what: str, max_bytes: int) -> bytes:
     Raises
     ------
     CodecError
-        Damaged, cut short, decompressing past ``max_bytes``, or bytes after its end.
+        Damaged, truncated, decompressing past ``max_bytes`` (a bomb), or bytes after its end.
     """
     dec = lzma.LZMADecompressor(lzma.FORMAT_RAW, filters=FILTERS)
     try:
@@ -44,7 +44,7 @@ def decompress_raw(data: bytes, what: str, max_bytes: int) -> bytes:
     except lzma.LZMAError as exc:
         raise CodecError(f"{what}: damaged LZMA stream ({exc})") from exc
     if not dec.eof:
-        raise CodecError(f"{what}: LZMA stream cut short or over {max_bytes} bytes decompressed")
+        raise CodecError(f"{what}: LZMA stream truncated, or it decompresses to more than {max_bytes} bytes")
     if dec.unused_data:
         raise CodecError(f"{what}: {len(dec.unused_data)} bytes after the LZMA stream's end")
     return raw
