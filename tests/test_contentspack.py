@@ -135,7 +135,7 @@ def test_the_compact_topology_is_written_as_lzma_and_read_as_zlib_too() -> None:
 
 def test_columns_give_every_part_back_byte_for_byte() -> None:
     """A pack of alike meshes goes field by field (smaller) and reads back to the very
-    parts; a part whose body is no inflated mesh rides along as it is."""
+    parts, etags too; a part whose body is no inflated mesh rides along as it is."""
     rng = np.random.default_rng(5)
 
     def mesh(n: int, extra: bool) -> bytes:
@@ -148,7 +148,7 @@ def test_columns_give_every_part_back_byte_for_byte() -> None:
 
     parts = [pack_contents_part(3, "v-contents:3-cellmesh", mesh(300, False)),
              pack_head_part(7, "v-contents:7-cellmesh", mesh(200, True), b"\x05\x06"),
-             pack_contents_part(9, "v-contents:9-cellmesh", b"Xnot-a-mesh"),
+             pack_contents_part(9, "an-etag-of-its-own", b"Xnot-a-mesh"),
              pack_contents_part(11, "v-contents:11-cellmesh", mesh(250, False))]
     packed = pack_parts(parts)
     obj = msgpack.unpackb(packed, raw=False)
@@ -158,8 +158,11 @@ def test_columns_give_every_part_back_byte_for_byte() -> None:
     plain = msgpack.unpackb(pack_parts(parts, columns=False), raw=False)
     assert plain["pack"] == PACK_FORMAT and len(plain["body"]) > len(obj["body"])
     # damaged columns: one row's value gone is a CodecError, not a wrong part
-    rows, columns = msgpack.unpackb(decompress_raw(obj["body"], "t", 1 << 24), raw=False)
+    rows, columns, etags = msgpack.unpackb(decompress_raw(obj["body"], "t", 1 << 24), raw=False)
+    # the etags that follow the server's pattern around the cell id are left out
+    assert etags == ["v-contents", "cellmesh"]
+    assert [r[0]["etag"] for r in rows] == [None, None, "an-etag-of-its-own", None]
     columns["positions"].pop()
-    bad = {**obj, "body": compress_raw(msgpack.packb([rows, columns], use_bin_type=True))}
+    bad = {**obj, "body": compress_raw(msgpack.packb([rows, columns, etags], use_bin_type=True))}
     with pytest.raises(CodecError):
         unpack_parts(bad)

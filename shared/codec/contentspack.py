@@ -29,7 +29,10 @@ apart field by field: ``rows`` holds one ``[part, keys]`` per part, the part's m
 with ``body`` nil and ``keys`` its mesh's field names in order (``true``: every
 column's, in the columns' order; ``[part, nil]``: the part as it is, its body not an
 inflated mesh), and ``columns`` maps each field name to the list of that field's values
-over the parts that have it, in part order.  A cell's positions then sit beside the other cells' positions, its
+over the parts that have it, in part order.  The stream holds ``[rows, columns,
+etags]``: ``etags`` is nil or ``[before, after]``, and a row's etag nil stands for
+``before:ID-after`` with ID its cell id (the server's etags name the scene version,
+``contents:ID`` and the representation, so one pattern gives them all).  A cell's positions then sit beside the other cells' positions, its
 indices beside theirs, and LZMA's matches and literal coding find more alike: the
 duplex's first view 15,885 -> 15,3xx B.  The reader packs every part back, byte for
 byte the part that went in (:func:`pack_parts` sends this form only when it does, and
@@ -116,8 +119,28 @@ def _columns(parts: Sequence[bytes]) -> bytes | None:
     for row in rows:  # most meshes have every field, in the same order: one ``true`` says so
         if row[1] == order:
             row[1] = True
-    data: bytes = msgpack.packb([rows, columns], use_bin_type=True)
+    etags = _etag_pattern([r[0] for r in rows])
+    if etags is not None:  # each etag the server's pattern around its cell id: left out
+        for row in rows:
+            if row[0].get("etag") == _etag_of(etags, row[0].get("cell")):
+                row[0] = {**row[0], "etag": None}
+    data: bytes = msgpack.packb([rows, columns, etags], use_bin_type=True)
     return data
+
+
+def _etag_pattern(parts: list[dict[Any, Any]]) -> list[str] | None:
+    """``[before, after]`` such that the first part's etag is ``before:ID-after`` (ID its
+    cell id), or None."""
+    for part in parts:
+        etag, cell = part.get("etag"), part.get("cell")
+        if isinstance(etag, str) and type(cell) is int and etag.count(f":{cell}-") == 1:
+            return etag.split(f":{cell}-")
+    return None
+
+
+def _etag_of(pattern: list[str], cell: Any) -> str | None:
+    """The etag ``pattern`` gives ``cell`` (None: no int cell)."""
+    return f"{pattern[0]}:{cell}-{pattern[1]}" if type(cell) is int else None
 
 
 def _rows_back(table: bytes, what: str) -> bytes:
@@ -127,9 +150,12 @@ def _rows_back(table: bytes, what: str) -> bytes:
                               max_array_len=len(table), max_map_len=len(table), max_ext_len=0)
     except (msgpack.UnpackException, ValueError) as exc:
         raise CodecError(f"{what}: damaged columns ({exc})") from exc
-    if not (isinstance(obj, list) and len(obj) == 2 and isinstance(obj[0], list) and isinstance(obj[1], dict)):
-        raise CodecError(f"{what}: columns must be [rows, columns]")
-    rows, columns = obj
+    if not (isinstance(obj, list) and len(obj) == 3 and isinstance(obj[0], list) and isinstance(obj[1], dict)):
+        raise CodecError(f"{what}: columns must be [rows, columns, etags]")
+    rows, columns, etags = obj
+    if etags is not None and not (isinstance(etags, list) and len(etags) == 2
+                                  and all(isinstance(e, str) for e in etags)):
+        raise CodecError(f"{what}: the etags' pattern must be nil or [before, after]")
     if not all(isinstance(v, list) for v in columns.values()):
         raise CodecError(f"{what}: a column that is not a list")
     at = dict.fromkeys(columns, 0)
@@ -138,6 +164,8 @@ def _rows_back(table: bytes, what: str) -> bytes:
         if not (isinstance(row, list) and len(row) == 2 and isinstance(row[0], dict)):
             raise CodecError(f"{what}: a row that is not [part, keys]")
         part, keys = row
+        if etags is not None and "etag" in part and part["etag"] is None:
+            part = {**part, "etag": _etag_of(etags, part.get("cell"))}
         if keys is True:
             keys = list(columns)
         if keys is not None:
