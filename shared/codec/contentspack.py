@@ -34,7 +34,7 @@ etags]``: ``etags`` is nil or ``[before, after]``, and a row's etag nil stands f
 ``before:ID-after`` with ID its cell id (the server's etags name the scene version,
 ``contents:ID`` and the representation, so one pattern gives them all).  A cell's positions then sit beside the other cells' positions, its
 indices beside theirs, and LZMA's matches and literal coding find more alike: the
-duplex's first view 15,885 -> 15,3xx B.  The reader packs every part back, byte for
+duplex's first view 15,885 -> 15,289 B.  The reader packs every part back, byte for
 byte the part that went in (:func:`pack_parts` sends this form only when it does, and
 only when it is smaller), and reads them as from the first form.
 
