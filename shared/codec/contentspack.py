@@ -23,20 +23,20 @@ pack's parts are all in when the pack is, so a client that needs every one of th
 early waits for the last.
 
 Column by column (``walkstream-contentspack/2``): the same map, its ``body`` the raw
-LZMA2 stream of the msgpack array ``[columns, rows]``.  Each part's inflated cell mesh
-(``body`` ``N`` + a msgpack map, :mod:`~walkstream.shared.codec.cellmesh`) is taken
-apart field by field: ``rows`` holds one ``[part, keys]`` per part, the part's map
-with ``body`` nil and ``keys`` its mesh's field names in order (``true``: every
-column's, in the columns' order; ``[part, nil]``: the part as it is, its body not an
-inflated mesh), and ``columns`` maps each field name to the list of that field's values
-over the parts that have it, in part order.  The stream holds ``[rows, columns,
-etags]``: ``etags`` is nil or ``[before, after]``, and a row's etag nil stands for
-``before:ID-after`` with ID its cell id (the server's etags name the scene version,
-``contents:ID`` and the representation, so one pattern gives them all).  A cell's positions then sit beside the other cells' positions, its
-indices beside theirs, and LZMA's matches and literal coding find more alike: the
-duplex's first view 15,885 -> 15,289 B.  The reader packs every part back, byte for
-byte the part that went in (:func:`pack_parts` sends this form only when it does, and
-only when it is smaller), and reads them as from the first form.
+LZMA2 stream of the msgpack array ``[rows, columns, etags]``.  Each part's inflated
+cell mesh (``body`` ``N`` + a msgpack map, :mod:`~walkstream.shared.codec.cellmesh`)
+is taken apart field by field: ``rows`` holds one ``[part, keys]`` per part, the
+part's map with ``body`` nil and ``keys`` its mesh's field names in order (``true``:
+every column's, in the columns' order; ``[part, nil]``: the part as it is, its body
+not an inflated mesh); ``columns`` maps each field name to the list of that field's
+values over the parts that have it, in part order; ``etags`` is nil or ``[before,
+after]``, and a row's etag nil stands for ``before:ID-after`` with ID its cell id (the
+server's etags name the scene version, ``contents:ID`` and the representation, so one
+pattern gives them all).  A cell's positions then sit beside the other cells'
+positions, its indices beside theirs, and LZMA's matches and literal coding find more
+alike: the duplex's first view 15,885 -> 15,289 B.  The reader packs every part back,
+byte for byte the part that went in (:func:`pack_parts` sends this form only when it
+does, and only when it is smaller), and reads them as from the first form.
 
 Decoding is bounded: at most :data:`MAX_PACK_BYTES` inflated, exactly ``n`` parts,
 nothing after the last; any failure is a :class:`~walkstream.shared.errors.CodecError`.
