@@ -571,7 +571,8 @@ class SceneClient:
         such), the caller fetching the whole path itself; with ``heads`` too, a cell
         the first pose sees in part may come first as its head (a ``room`` item whose
         ``CellMesh.missing`` is not empty, :mod:`~walkstream.shared.codec.cellhead`),
-        then whole.  With ``walls``, a scene baked with virtual walls adds its wall sides
+        then whole; the first view's contents may then come as one pack
+        (:mod:`~walkstream.shared.codec.contentspack`), yielded a ``room`` item each.  With ``walls``, a scene baked with virtual walls adds its wall sides
         and the first view's wall textures (``walls``, ``walltex``, ``texture`` items).
 
         The scene is :attr:`scene` if set, else the server's first; it is set from
@@ -614,7 +615,11 @@ class SceneClient:
                 self.scene = name
 
         async for got in self._stream("GET", url, what, None, item, on_head=on_head):
-            yield got
+            if got[0] == "rooms":  # a pack: its cells one by one, all in at once
+                for room in got[1]:
+                    yield "room", room
+            else:
+                yield got
         short = item.short()
         if short is not None:
             self.stats.cut_streams += 1

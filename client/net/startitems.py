@@ -14,6 +14,7 @@ from typing import Any
 from walkstream.shared.codec.cellbatch import check_contents_part
 from walkstream.shared.codec.cellhead import decode_cell_head
 from walkstream.shared.codec.cellmesh import CellMesh
+from walkstream.shared.codec.contentspack import is_pack, unpack_parts
 from walkstream.shared.codec.objectboxes import decode_object_boxes
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
 from walkstream.shared.content.walltex import KIND as WALLTEX
@@ -34,7 +35,9 @@ first seconds, when asked), ``("cell", CellRecord)``, ``("index", CellIndex)``,
 ``("topology", Topology)`` (interiors), ``("manifest", (Manifest, nbytes))``,
 ``("objects", count)`` (the PVS objects that follow), ``("object", ObjectFrame)``,
 ``("boxes", ObjectBoxes)`` (a city's first view), ``("contents", [cell ids])`` (interiors: the contents that follow) or ``("room", (cell
-id, CellMesh))``; with walls asked for, ``("walls", (sides, nbytes))``, ``("walltex",
+id, CellMesh))`` (:class:`StartDecoder` gives ``("rooms", [(cell id, CellMesh), ...])`` for
+a pack of several, :mod:`~walkstream.shared.codec.contentspack`, which
+:meth:`~walkstream.client.net.api.SceneClient.start` yields one ``room`` item each); with walls asked for, ``("walls", (sides, nbytes))``, ``("walltex",
 [texture ids])`` (the textures that follow) and ``("texture", (texture id,
 premultiplied RGBA, nbytes))``; ``nbytes`` (and the records' ``nbytes``) is what the
 part cost on the wire."""
@@ -62,7 +65,8 @@ class StartDecoder:
     form:
         The object form asked for (``params`` or ``lod2``).
     heads:
-        Whether an interior's contents may come as heads first.
+        Whether an interior's contents may come as heads first, and its first view's
+        parts as one pack (:mod:`~walkstream.shared.codec.contentspack`).
     what:
         The bundle in error lines.
     """
@@ -91,6 +95,14 @@ class StartDecoder:
     def __call__(self, obj: Any, nbytes: int) -> StartItem:
         what, k = self.what, self.k
         self.k += 1
+        if self.rooms and self.heads and is_pack(obj):  # several cells' parts in one LZMA dictionary
+            inner = unpack_parts(obj, f"{what}: item {k}")
+            if len(inner) > len(self.rooms):
+                raise CodecError(f"{what}: item {k}: a pack of {len(inner)} parts, {len(self.rooms)} announced")
+            total = sum(n for _, n in inner)
+            return "rooms", [contents_part(o, round(nbytes * n / total), self.rooms.pop(0),
+                                           f"{what}: item {k}: part {j}", self.heads)
+                             for j, (o, n) in enumerate(inner)]
         if self.rooms:
             return "room", contents_part(obj, nbytes, self.rooms.pop(0), f"{what}: item {k}", self.heads)
         if self.textures:

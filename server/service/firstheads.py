@@ -42,10 +42,12 @@ so a head that saves little costs bytes twice."""
 
 
 def first_heads(
-    interior: InteriorState, cells: Sequence[int], pose: tuple[ArrayLike, float, float], view: RoomView
+    interior: InteriorState, cells: Sequence[int], pose: tuple[ArrayLike, float, float], view: RoomView,
+    share: float = HEAD_SHARE,
 ) -> dict[int, tuple[bytes, bytes]]:
     """The heads ``{cell: (body, missing)}`` of those of ``cells`` that the view from
-    ``pose`` (``(eye (3,), yaw, pitch)``) sees only in part (see :data:`HEAD_SHARE`)."""
+    ``pose`` (``(eye (3,), yaw, pitch)``) sees only in part, each at most ``share`` of
+    its stored blob (see :data:`HEAD_SHARE`; ``inf``: every one)."""
     graph, locator = interior.view_model
     eye = np.asarray(pose[0], np.float64).reshape(3)
     cur = locator.locate(eye)
@@ -69,6 +71,6 @@ def first_heads(
         if keep.all() or not keep.any():
             continue
         body, missing = encode_cell_head(pieces, keep)
-        if len(body) + len(missing) <= HEAD_SHARE * len(stored):
+        if len(body) + len(missing) <= share * len(stored):
             out[c] = (body, missing)
     return out

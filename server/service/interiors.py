@@ -99,7 +99,7 @@ class InteriorState:
         self.topology_packed = Encoded(packed, TOPOLOGY_PACKED_MEDIA, etag_for(self.version, "topology", "msgpack-gzip"))
         """The topology's msgpack body gzip-compressed (``walkstream-topology/1+gzip``)."""
         compact = encode_topology_compact(decode_topology(self.topology["msgpack"].content, "topology"))
-        self.topology_compact = Encoded(compact, TOPOLOGY_COMPACT_MEDIA, etag_for(self.version, "topology", "c2"))
+        self.topology_compact = Encoded(compact, TOPOLOGY_COMPACT_MEDIA, etag_for(self.version, "topology", "c3"))
         """The topology in millimetres, planes rebuilt from outlines (``walkstream-topology/2``)."""
         entrances = [Entrance(e.portal, e.building, e.street, e.doorway, e.shell, e.placement).to_wire() for e in reader.entrances()]
         self.entrances: dict[Rep, Encoded] = {

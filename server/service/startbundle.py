@@ -19,8 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.server.service.contentsform import STREAM_LEVEL, ContentsStream
-from walkstream.server.service.firstheads import HEAD_SHARE, first_heads
+from walkstream.server.service.firstview import first_view_contents
 from walkstream.server.service.firstwalls import (
     first_wall_textures,
     scene_walls,
@@ -242,24 +241,9 @@ def start_parts(
                 wall_parts, closed = _first_walls(scene, lead[0], view, rep)
                 parts += wall_parts
             cells = interior.first_view(lead, view, START_ROOM_BYTES, closed)
-            # the cells the first pose sees in part go first as heads, whole after the others
-            hd = first_heads(interior, cells, lead[0], view) if heads else {}
-            # in a gzip answer, each cell in the form that costs it fewer bytes there
-            stream = ContentsStream(STREAM_LEVEL) if inflate else None
-            frames: list[bytes] = []
-            later: list[int] = []
-            for cid in cells:
-                whole_forms = interior.contents_forms(cid, inflate)
-                head_forms = interior.head_forms(cid, *hd[cid], inflate) if cid in hd else []
-                cheap = bool(head_forms) and (
-                    stream is None or stream.cost(*head_forms) <= HEAD_SHARE * stream.cost(*whole_forms))
-                if cheap:
-                    frames.append(head_forms[0] if stream is None else stream.cheaper(*head_forms))
-                    later.append(cid)
-                else:
-                    frames.append(whole_forms[0] if stream is None else stream.cheaper(*whole_forms))
-            frames += [interior.contents_part(cid, inflate, stream) for cid in later]
-            parts.append(("contents", Frames([*cells, *later], frames)))
+            ids, frames = first_view_contents(interior, cells, lead[0], view, heads=heads, inflate=inflate,
+                                              pack=heads and rep == "msgpack")
+            parts.append(("contents", Frames(ids, frames)))
         return [*parts, ("manifest", scene.manifest[rep])]
     ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
     more = max(START_RECORD_AHEAD_M, max(0.0, speed) * START_RECORD_LEAD_S) if speed > 0 else 0.0

@@ -41,7 +41,9 @@ path; the client fetches the whole path (``GET .../paths/{name}``) when its link
 idle, before the head ends.  With ``heads=true`` as well (a path and a view), a cell the first pose sees in
 part comes first as its *head* (a part with one more field, ``missing``:
 :mod:`walkstream.shared.codec.cellhead`) and whole after every other cell, so the cell
-is named twice in ``cells``.  With ``walls=true`` (an interior baked with ``--virtual-walls``,
+is named twice in ``cells``; the first view's parts may then come as one pack in their
+place (:mod:`walkstream.shared.codec.contentspack`: the parts in one LZMA2 stream),
+where that costs fewer bytes (:mod:`walkstream.server.service.firstview`).  With ``walls=true`` (an interior baked with ``--virtual-walls``,
 a path and a view) the wall sides (``walls``, as ``GET .../walls`` sends them) and the first
 view's wall textures (``walltex``: ``{part, etag: null, textures: [ids]}`` then one ``{cell,
 etag, body}`` part each, as ``POST .../walls/textures`` sends them) come before the
