@@ -277,7 +277,7 @@ def test_report_shows_the_truth(runs: tuple[ReplayResult, ReplayResult], tmp_pat
         assert all(v is not None for v in colour[key].values()), key
     assert colour["frames_over_visible_scielab_ratio"] is not None and "visible_scielab" in colour["per_frame"]
     assert (tmp_path / "truth/worst_colour_de_scielab.png").read_bytes()[:4] == b"\x89PNG"
-    assert "viewer's scale" in page
+    assert "S-CIELAB" in page
 
 
 def test_cli_truth_every(every_db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], gl_ctx: Any) -> None:
