@@ -64,6 +64,10 @@ def test_fog_and_culling_show_as_colour_error_with_their_causes(office_db: Path,
     # under the fog: visible error, every visible pixel the fog's
     assert c.visible[1] > 0.05 and c.mean_error[1] > 0.0
     assert c.causes[1, fog] == pytest.approx(c.visible[1])
+    # beside it the viewer-scale (S-CIELAB) share, at the view's own pixels per degree
+    assert c.visible_scielab is not None and c.causes_scielab is not None and c.viewer_ppd is not None
+    assert c.visible_scielab[0] == 0.0 and c.visible_scielab[1] > 0.0
+    assert c.causes_scielab[1, fog] == pytest.approx(c.visible_scielab[1])
     assert rc.log.missing[1, fog] > 0.2 and rc.log.missing[1, culled] == 0.0
     # its own cell only: what the other cells show is culled, nothing of it the fog's
     assert c.causes[2, culled] > 0.0 and c.causes[2, fog] == 0.0

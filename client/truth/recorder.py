@@ -348,7 +348,7 @@ class TruthRecorder:
                                      solid=solid, rows=rows)
             top = worst_row(rows)
             view = None if top is None else culled_view(truth, next(n for n in self.notes if n.frame == top.frame))
-            rc = room_colour(truth, self.notes, solid=solid)
+            rc = room_colour(truth, self.notes, solid=solid, viewer_ppd=self.viewer_ppd)
             figures["colour"] = summarise_colour(rc.log.colour or ColourLog.empty())
             if rc.seam is not None:
                 figures["seam"] = summarise_pop(rc.seam, SEAM_KINDS)
