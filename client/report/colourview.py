@@ -54,7 +54,7 @@ def write_colour_worst(out: Path, w: ColourWorst) -> str:
         f"frame {w.frame} at {w.t:.2f} s: mean error {100.0 * w.mean_error:.2f} % of full scale (linear RGB), "
         f"{100.0 * w.visible:.2f} % of its pixels over dE00 {VISIBLE_DE:g}"
         + ("" if w.visible_scielab is None else
-           f" ({100.0 * w.visible_scielab:.2f} % at the viewer's scale, {w.viewer_ppd or 0:.1f} px/deg)")
+           f" ({100.0 * w.visible_scielab:.2f} % S-CIELAB at {w.viewer_ppd or 0:.1f} px/deg)")
         + f", {psnr}"
     )
     fig, axes = grid_figure(1, 3.4, cols=len(pics), sharex=False)
@@ -69,7 +69,7 @@ def write_colour_worst(out: Path, w: ColourWorst) -> str:
     bar.ax.axhline(VISIBLE_DE, color="#00c0ff", linewidth=1.5)
     if w.delta_e_scielab is not None:
         axes[3].imshow(w.delta_e_scielab, cmap="magma", vmin=0.0, vmax=HEAT_TOP_DE)
-        axes[3].set_title(f"dE00 at the viewer's scale (S-CIELAB, {w.viewer_ppd or 0:.1f} px/deg)", fontsize=9)
+        axes[3].set_title(f"S-CIELAB dE00 at {w.viewer_ppd or 0:.1f} px/deg", fontsize=9)
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])
