@@ -82,7 +82,7 @@ _CAPTIONS = {
     "the client's frame does not, stacked by cause (middle); on a city walk the colour error of "
     "the client's picture against the full scene (bottom): the mean linear-RGB error per pixel "
     "(line, % of full scale) and the pixels over the visible CIEDE2000 threshold, stacked by cause "
-    "(per pixel; the viewer's scale, S-CIELAB, as a dashed line).",
+    "(per pixel; with replay --viewer-ppd also at the viewer's scale, as a dashed line).",
     "culled.png": "A walk with rooms: for every compared frame, the pixels where the truth shows "
     "a part the frame culled (must be 0; pinholes apart) and the pinholes; crosses mark poses "
     "refused as in solid geometry.",

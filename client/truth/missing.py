@@ -37,7 +37,7 @@ from walkstream.client.truth.colour import COLOUR_CAUSES
 from walkstream.client.truth.compare import CAUSES, compare_frame, missing_mask
 from walkstream.client.truth.horizon import below_horizon, horizon_shares
 from walkstream.client.truth.notes import FrameNote
-from walkstream.client.truth.picture import Overlay, colour_error, view_ppd
+from walkstream.client.truth.picture import Overlay, colour_error
 from walkstream.client.truth.pop import PopMeter, pop_frame
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.scene import TruthScene
@@ -138,7 +138,7 @@ def missing_figures(
     knew none); ``proj`` the client's projection; ``overlay`` the ``impostor`` hook of
     :mod:`walkstream.client.truth.picture`; ``pop`` is fed each frame as the client
     drew it (:mod:`walkstream.client.truth.pop`); ``viewer_ppd`` the display's pixels
-    per degree for the viewer-scale colour figures (None: the view's own).  Returns one row per frame (with its
+    per degree for the viewer-scale (S-CIELAB) colour figures (None: not measured).  Returns one row per frame (with its
     colour figures), the worst frame by missing pixels (from the first perfect frame
     on first) as images, every frame in detail, and the worst frame by colour error.
     """
@@ -153,7 +153,7 @@ def missing_figures(
     worst_key = (-1, -1.0)
     colour_rows: list[tuple[float, float, float, float, NDArray[np.float64], NDArray[np.float64], float, float,
                             NDArray[np.float64]]] = []
-    ppd = view_ppd(proj, truth.size[1]) if viewer_ppd is None else float(viewer_ppd)
+    ppd = None if viewer_ppd is None else float(viewer_ppd)
     cworst: ColourWorst | None = None
     cworst_key = (-1, -1.0)
     n = len(notes)
@@ -224,7 +224,7 @@ def missing_figures(
                 cworst_key = ckey
                 cworst = ColourWorst(
                     st.frame, st.t, cerr.mean_error, cerr.visible_share, cerr.psnr_db, pic.rgb, t_rgb, cerr.delta_e,
-                    cerr.scielab_visible_share, cerr.scielab_delta_e, ppd,
+                    None if ppd is None else cerr.scielab_visible_share, cerr.scielab_delta_e, ppd,
                 )
             if progress is not None:
                 progress(k + 1, n)
@@ -239,9 +239,10 @@ def missing_figures(
         frames, times, col(0), col(1), col(2), col(3),
         np.array([r[4] for r in colour_rows]).reshape(-1, len(COLOUR_CAUSES)),
         np.array([r[5] for r in colour_rows]).reshape(-1, len(COLOUR_CAUSES)),
-        delta_e_scielab_mean=col(6),
-        visible_scielab=col(7),
-        causes_scielab=np.array([r[8] for r in colour_rows]).reshape(-1, len(COLOUR_CAUSES)),
+        # not asked for (ppd None): the columns stay out, as in a log read from an older truth.csv
+        delta_e_scielab_mean=None if ppd is None else col(6),
+        visible_scielab=None if ppd is None else col(7),
+        causes_scielab=None if ppd is None else np.array([r[8] for r in colour_rows]).reshape(-1, len(COLOUR_CAUSES)),
         viewer_ppd=ppd,
     )
     log = TruthLog(

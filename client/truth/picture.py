@@ -95,12 +95,10 @@ def colour_error(
 
     ``id_cause`` is the frame's id-based cause per pixel
     (:attr:`~walkstream.client.truth.compare.FrameError.cause`).  The viewer-scale
-    (S-CIELAB) figures are measured at ``ppd`` pixels per degree, by default the
-    view's own (:func:`view_ppd`).
+    (S-CIELAB) figures are measured at ``ppd`` pixels per degree (the view's own is
+    :func:`view_ppd`); None: not measured (their filtering costs 0.1-1 s a frame).
     """
     pic = client_picture(truth, note, proj, overlay)
-    if ppd is None:
-        ppd = view_ppd(truth.proj if proj is None else proj, truth.size[1])
     err = compare_colour(truth_rgb, pic.rgb, id_cause=id_cause, coarse=pic.coarse, stand_in=pic.stand_in, ppd=ppd)
     return err, pic
 

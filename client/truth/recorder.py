@@ -151,7 +151,8 @@ class TruthRecorder:
         :data:`~walkstream.shared.ground.GROUND_Z`); None: none (an interior).
     viewer_ppd : float, optional
         The display's pixels per degree of a city's viewer-scale (S-CIELAB) colour
-        figures; None: the view's own (:func:`~walkstream.client.truth.picture.view_ppd`).
+        figures (``--viewer-ppd``; the view's own is
+        :func:`~walkstream.client.truth.picture.view_ppd`); None: not measured.
     """
 
     def __init__(
@@ -175,7 +176,7 @@ class TruthRecorder:
         self.view_distance = float(view_distance)
         self.ground_z = None if ground_z is None else float(ground_z)
         self.viewer_ppd = None if viewer_ppd is None else float(viewer_ppd)
-        """The display's pixels per degree of the viewer-scale colour figures (None: the view's own)."""
+        """The display's pixels per degree of the viewer-scale colour figures (None: not measured)."""
         self.notes: list[FrameNote] = []
         self.overlay: Overlay | None = None
         """The ``impostor`` hook of the colour error (:mod:`walkstream.client.truth.picture`):

@@ -56,7 +56,6 @@ from walkstream.client.truth.compare import CAUSES
 from walkstream.client.truth.culled import SOLID_NEAR
 from walkstream.client.truth.missing import ColourWorst
 from walkstream.client.truth.notes import FrameNote
-from walkstream.client.truth.picture import view_ppd
 from walkstream.client.truth.render import TruthRenderer, form_key, object_key
 from walkstream.client.truth.seam import SeamMeter, wall_pixels
 from walkstream.client.truth.solid import SolidProbe
@@ -115,9 +114,9 @@ def room_colour(
     ``truth`` holds every room part, the city objects at LOD2 and the coarser forms the
     frames drew (``forms=forms_of(notes)``); it must be drawn with its own projection
     (the client's).  ``viewer_ppd``: the display's pixels per degree of the viewer-scale
-    (S-CIELAB) figures (None: the view's own).
+    (S-CIELAB) figures (None: not measured).
     """
-    ppd = view_ppd(truth.proj, truth.size[1]) if viewer_ppd is None else float(viewer_ppd)
+    ppd = None if viewer_ppd is None else float(viewer_ppd)
     n_keys = len(truth.keys)
     # one identity per thing shown: a room part is itself, an object's forms are the object
     ident = np.arange(n_keys, dtype=np.int64)
@@ -188,7 +187,7 @@ def room_colour(
                      note.fog))
         if worst is None or err.mean_error > worst.mean_error:
             worst = ColourWorst(note.frame, note.t, err.mean_error, err.visible_share, err.psnr_db, c_rgb, t_rgb,
-                                err.delta_e, err.scielab_visible_share, err.scielab_delta_e, ppd)
+                                err.delta_e, None if ppd is None else err.scielab_visible_share, err.scielab_delta_e, ppd)
     frames = np.array([r[0] for r in rows], np.int64)
     times = np.array([r[1] for r in rows], np.float64)
 
@@ -198,8 +197,10 @@ def room_colour(
     colour = ColourLog(frames, times, col(0), col(1), col(2), col(3),
                        np.array([r[4][4] for r in rows]).reshape(-1, len(COLOUR_CAUSES)),
                        np.array([r[4][5] for r in rows]).reshape(-1, len(COLOUR_CAUSES)),
-                       delta_e_scielab_mean=col(6), visible_scielab=col(7),
-                       causes_scielab=np.array([r[4][8] for r in rows]).reshape(-1, len(COLOUR_CAUSES)), viewer_ppd=ppd)
+                       delta_e_scielab_mean=None if ppd is None else col(6),
+                       visible_scielab=None if ppd is None else col(7),
+                       causes_scielab=None if ppd is None else np.array([r[4][8] for r in rows]).reshape(-1, len(COLOUR_CAUSES)),
+                       viewer_ppd=ppd)
     log = TruthLog(frames, times, np.array([r[2] for r in rows], np.float64),
                    np.array([r[3] for r in rows]).reshape(-1, len(CAUSES)), colour)
     return RoomColour(log, worst, np.array([r[5] for r in rows], np.float64), seam)
