@@ -32,6 +32,13 @@ Each is run for both samplings of the bake (``point``, ``area``:
 filters of the quad (``nearest``, ``linear``), beside the truth against itself drawn
 at 4 x 4 samples a pixel and averaged: what an anti-aliased picture of the very same
 geometry scores under the per-pixel measure.
+
+Beside the per-pixel count, each comparison is counted at the viewer's scale too
+(S-CIELAB, :func:`~walkstream.client.truth.colour.scielab_delta_e`) at each of the
+given pixels per degree (:data:`DEFAULT_PPD`: the 160 x 120 view's own, 1.81, and a
+handheld screen's, 24): the pixels over
+:data:`~walkstream.client.truth.colour.SCIELAB_VISIBLE_DE` after both pictures are
+filtered as the eye sees them at that scale.
 """
 
 from __future__ import annotations
@@ -43,7 +50,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.truth.colour import VISIBLE_DE, delta_e_2000, srgb_to_lab
+from walkstream.client.truth.colour import (
+    SCIELAB_VISIBLE_DE,
+    VISIBLE_DE,
+    delta_e_2000,
+    pixels_per_degree,
+    scielab_delta_e,
+    srgb_to_lab,
+)
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.walk.impostors import quad_corners, toward_eye
 from walkstream.server.bake.impostorrender import IMPOSTOR_SAMPLINGS, ImpostorRenderer
@@ -60,10 +74,14 @@ from walkstream.shared.impostors import (
     texels_needed,
 )
 
-__all__ = ["VIEWS", "format_sampling_table", "plot_sampling_picture", "run_sampling_bench"]
+__all__ = ["DEFAULT_PPD", "VIEWS", "format_sampling_table", "plot_sampling_picture", "run_sampling_bench"]
 
 VIEWS: tuple[str, ...] = ("aligned", "minified", "on-axis", "perspective")
 """The views of the benchmark (module docstring)."""
+
+DEFAULT_PPD: tuple[float, ...] = (round(pixels_per_degree(120, 60.0), 2), 24.0)
+"""Pixels per degree of the viewer-scale columns: the 160 x 120, 60° view seen under its
+own angle, and a handheld's screen (about 0.22 mm a pixel at 30 cm: 24 a degree)."""
 
 _FILTERS = ("nearest", "linear")
 _ALIGNED_PX = 64
@@ -72,10 +90,19 @@ _BAKED_TEXELS = 128
 _TRUTH_SS = 4
 
 
-def _wrong(truth: NDArray[np.uint8], other: NDArray[np.uint8], area: NDArray[np.bool_]) -> tuple[int, int]:
-    """Pixels of ``area`` over the visible threshold between two ``(h, w, 3)`` pictures, and ``area``'s size."""
+def _wrong(truth: NDArray[np.uint8], other: NDArray[np.uint8], area: NDArray[np.bool_],
+           ppds: Sequence[float] = ()) -> list[int]:
+    """Pixels of ``area`` over the visible threshold between two ``(h, w, 3)`` pictures, ``area``'s
+    size, then per pixels per degree of ``ppds`` those over it at the viewer's scale (S-CIELAB)."""
     de = delta_e_2000(srgb_to_lab(truth), srgb_to_lab(other))
-    return int((de[area] > VISIBLE_DE).sum()), int(area.sum())
+    out = [int((de[area] > VISIBLE_DE).sum()), int(area.sum())]
+    return out + [int((scielab_delta_e(truth, other, p)[area] > SCIELAB_VISIBLE_DE).sum()) for p in ppds]
+
+
+def _add(tally: dict[tuple[str, str, str], list[int]], key: tuple[str, str, str], counts: list[int]) -> None:
+    t = tally.setdefault(key, [0] * len(counts))
+    for i, v in enumerate(counts):
+        t[i] += v
 
 
 class _Scene:
@@ -116,9 +143,12 @@ class _Scene:
 def run_sampling_bench(
     buildings: Sequence[Any], count: int = 20, error_deg: float = 2.0, seed: int = 1, ctx: Any = None,
     views: Sequence[str] = VIEWS, picture: dict[str, NDArray[np.uint8]] | None = None,
+    ppds: Sequence[float] = DEFAULT_PPD, against_aa: bool = False,
 ) -> list[dict[str, Any]]:
     """The benchmark's rows (module docstring) over ``count`` of the tallest ``buildings``
     (drawn on ``ctx``, by default a context of its own), for ``views`` (of :data:`VIEWS`).
+    ``against_aa`` compares the images with the truth drawn at 4 x 4 samples a pixel and
+    averaged (the anti-aliased picture of the same geometry) instead of the truth.
     ``picture``, when given, receives the middle building's frames (by height) (``"VIEW truth"``,
     ``"VIEW SAMPLING FILTER"``) for :func:`plot_sampling_picture`.
 
@@ -127,8 +157,11 @@ def run_sampling_bench(
     list of dict
         One row per view, sampling and filter (``view``, ``sampling``, ``filter``,
         ``wrong_share``: pixels over the threshold / pixels of the building or the
-        image, ``pixels``), then one ``sampling="truth 4x4"`` row per view.
+        image, ``pixels``, ``scielab_shares``: per pixels per degree of ``ppds`` the
+        same share at the viewer's scale), then one ``sampling="truth 4x4"`` row per view.
     """
+    if any(not (math.isfinite(p) and p > 0) for p in ppds):
+        raise InputError(f"--ppd {list(ppds)}: expected positive pixels per degree")
     if count < 1:
         raise InputError(f"--buildings: expected at least 1, got {count}")
     if not views or any(v not in VIEWS for v in views):
@@ -176,21 +209,16 @@ def run_sampling_bench(
                 mask, truth, fine = sc.frames(oid, eye, view, proj)
                 if picture is not None and k == len(ids) // 2:
                     picture[f"{view_name} truth"] = truth
-                ref = _wrong(truth, fine, mask)
-                t = tally.setdefault((view_name, "truth 4x4", "-"), [0, 0])
-                t[0] += ref[0]
-                t[1] += ref[1]
+                _add(tally, (view_name, "truth 4x4", "-"), _wrong(truth, fine, mask, ppds))
                 for sampling in IMPOSTOR_SAMPLINGS:
                     img = ren.render(oid, u, size, sampling)
                     for filt in _FILTERS:
                         image_id += 1  # a new id per image: the quad renderer keeps textures by id
                         pic, painted = sc.painted((quad_at, image_id, img, 1.0), eye, view, proj, filt)
-                        n_wrong, n = _wrong(truth, pic, mask | painted)
+                        counts = _wrong(fine if against_aa else truth, pic, mask | painted, ppds)
                         if picture is not None and k == len(ids) // 2:
                             picture[f"{view_name} {sampling} {filt}"] = pic
-                        t = tally.setdefault((view_name, sampling, filt), [0, 0])
-                        t[0] += n_wrong
-                        t[1] += n
+                        _add(tally, (view_name, sampling, filt), counts)
     finally:
         ren.release()
         for name in ("perspective", "minified", "aligned"):
@@ -199,17 +227,21 @@ def run_sampling_bench(
     keys = sorted(tally, key=lambda key: (order[key[0]], key[1] == "truth 4x4", key[1], key[2]))
     return [
         {"view": v, "sampling": s, "filter": f, "wrong_share": tally[(v, s, f)][0] / max(tally[(v, s, f)][1], 1),
-         "pixels": tally[(v, s, f)][1], "buildings": len(ids)}
+         "pixels": tally[(v, s, f)][1], "buildings": len(ids),
+         "scielab_shares": {float(p): tally[(v, s, f)][2 + i] / max(tally[(v, s, f)][1], 1) for i, p in enumerate(ppds)}}
         for v, s, f in keys
     ]
 
 
 def format_sampling_table(rows: Sequence[dict[str, Any]]) -> str:
     """The rows as a text table."""
-    head = f"{'view':12s} {'sampling':10s} {'filter':8s} {'pixels':>8s}  over dE00 {VISIBLE_DE}"
+    ppds = list(rows[0].get("scielab_shares", {})) if rows else []
+    head = (f"{'view':12s} {'sampling':10s} {'filter':8s} {'pixels':>8s}  over dE00 {VISIBLE_DE}"
+            + "".join(f"  S-CIELAB {p:g} px/deg" for p in ppds))
     lines = [head, "-" * len(head)]
     for r in rows:
-        lines.append(f"{r['view']:12s} {r['sampling']:10s} {r['filter']:8s} {r['pixels']:8d}  {100.0 * r['wrong_share']:6.1f} %")
+        lines.append(f"{r['view']:12s} {r['sampling']:10s} {r['filter']:8s} {r['pixels']:8d}  {100.0 * r['wrong_share']:12.1f} %"
+                     + "".join(f"  {100.0 * r['scielab_shares'][p]:17.1f} %" for p in ppds))
     return "\n".join(lines)
 
 

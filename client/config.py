@@ -107,6 +107,10 @@ class ReplayConfig:
     """Ask for the streams gzip-compressed (``Accept-Encoding: gzip``)."""
     truth_every: int = 0
     """Compare every N-th frame with the ground truth after the walk (0: never)."""
+    viewer_ppd: float | None = None
+    """The display's pixels per degree for the truth's viewer-scale (S-CIELAB) colour
+    figures (``--viewer-ppd``; None: not measured, as their filtering costs 0.1-1 s a
+    compared frame; the view's own is its height over its field of view, 1.81 at 160x120)."""
     frame_times: tuple[float, ...] | None = None
     """A recorded frame schedule (``--frame-times``): frame ``k`` takes ``frame_times[k]``
     seconds on the clock instead of the time measured (the ``gl`` device measures
@@ -213,6 +217,9 @@ class ReplayConfig:
             raise InputError(f"--impostor-fade {fs!r}: expected seconds >= 0")
         if self.truth_every < 0:
             raise InputError(f"--truth-every {self.truth_every}: must not be negative")
+        vp = self.viewer_ppd
+        if vp is not None and not (math.isfinite(vp) and 0.1 <= vp <= 1000.0):
+            raise InputError(f"--viewer-ppd {vp!r}: expected pixels per degree from 0.1 to 1000")
         w, h = self.size
         if not (16 <= w <= 8192 and 16 <= h <= 8192):
             raise InputError(f"--size {w}x{h}: each side from 16 to 8192 pixels")

@@ -374,7 +374,8 @@ async def replay(
             if streamer is not None:
                 cache.on_evict = on_evict
             recorder = (  # the one ground truth, at the walk's near and far planes
-                TruthRecorder(config.truth_every, config.size, config.fov_deg, near=near, far=far, ground_z=ground_z)
+                TruthRecorder(config.truth_every, config.size, config.fov_deg, near=near, far=far, ground_z=ground_z,
+                              viewer_ppd=config.viewer_ppd)
                 if config.truth_every
                 else None
             )

@@ -53,7 +53,7 @@ def test_fog_and_culling_show_as_colour_error_with_their_causes(office_db: Path,
             _note(2, eye, view, own, math.inf, here),  # only its own cell: the rest culled
             _note(3, eye, view, own, math.inf, here, waiting=tuple(c for c in rooms if c != here)),  # the rest late
         ]
-        rc = room_colour(truth, notes)
+        rc = room_colour(truth, notes, viewer_ppd=12.0)
     finally:
         truth.release()
     c = rc.log.colour
@@ -64,6 +64,10 @@ def test_fog_and_culling_show_as_colour_error_with_their_causes(office_db: Path,
     # under the fog: visible error, every visible pixel the fog's
     assert c.visible[1] > 0.05 and c.mean_error[1] > 0.0
     assert c.causes[1, fog] == pytest.approx(c.visible[1])
+    # beside it the viewer-scale (S-CIELAB) share, asked for at 12 pixels per degree
+    assert c.visible_scielab is not None and c.causes_scielab is not None and c.viewer_ppd == 12.0
+    assert c.visible_scielab[0] == 0.0 and c.visible_scielab[1] > 0.0
+    assert c.causes_scielab[1, fog] == pytest.approx(c.visible_scielab[1])
     assert rc.log.missing[1, fog] > 0.2 and rc.log.missing[1, culled] == 0.0
     # its own cell only: what the other cells show is culled, nothing of it the fog's
     assert c.causes[2, culled] > 0.0 and c.causes[2, fog] == 0.0
@@ -143,6 +147,9 @@ def test_a_wall_texture_is_painted_into_the_picture_with_its_own_cause(office_db
         truth.release()
     c = rc.log.colour
     assert c is not None and len(c) == 3
+    # not asked for: no viewer-scale (S-CIELAB) figures, no filtered picture
+    assert c.visible_scielab is None and c.causes_scielab is None and c.viewer_ppd is None
+    assert rc.worst is not None and rc.worst.delta_e_scielab is None and rc.worst.visible_scielab is None
     culled, wall = CAUSES.index("culled"), COLOUR_CAUSES.index("wall")
     # without the wall: what lies beyond the own cell is culled
     assert c.causes[0, culled] > 0.05 and c.causes[0, wall] == 0.0

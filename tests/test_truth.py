@@ -271,15 +271,33 @@ def test_report_shows_the_truth(runs: tuple[ReplayResult, ReplayResult], tmp_pat
     for key in ("mean_error", "visible_pixels", "psnr_db", "delta_e_mean", "causes"):
         assert all(v is not None for v in colour[key].values()), key
     assert colour["causes"]["other"] == 0.0  # the right object at LOD2 is never the wrong colour
+    # the viewer-scale (S-CIELAB) figures are asked for (--viewer-ppd): none without it
+    assert res.truth.log.colour is not None and res.truth.log.colour.visible_scielab is None
+    for key in ("viewer_ppd", "visible_scielab_pixels", "delta_e_scielab_mean", "causes_scielab",
+                "frames_over_visible_scielab_ratio"):
+        assert key not in colour, key
+    assert "visible_scielab" not in colour["per_frame"] and "reached_scielab" not in report["truth"].get("impostor", {})
+    assert not (tmp_path / "truth/worst_colour_de_scielab.png").exists() and "S-CIELAB" not in page
+    assert "scielab" not in (tmp_path / "truth.csv").read_text().splitlines()[0]
 
 
 def test_cli_truth_every(every_db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], gl_ctx: Any) -> None:
     out = tmp_path / "rep"
     t0 = time.perf_counter()
-    assert main(["replay", str(every_db), "--device", "desktop2003", "--duration", "3s", "--truth-every", "25", "--report", str(out)]) == 0
+    assert main(["replay", str(every_db), "--device", "desktop2003", "--duration", "3s", "--truth-every", "25",
+                 "--viewer-ppd", "24", "--report", str(out)]) == 0
     assert time.perf_counter() - t0 < 120
     report = json.loads((out / "report.json").read_text())
     assert report["truth"]["frames"] == len(range(0, report["frames"], 25))
+    # asked for: the viewer-scale (S-CIELAB) figures beside the per-pixel ones
+    colour = report["truth"]["colour"]
+    assert colour["viewer_ppd"] == 24.0
+    for key in ("visible_scielab_pixels", "delta_e_scielab_mean", "causes_scielab"):
+        assert all(v is not None for v in colour[key].values()), key
+    assert colour["frames_over_visible_scielab_ratio"] is not None and "visible_scielab" in colour["per_frame"]
+    assert (out / "truth/worst_colour_de_scielab.png").read_bytes()[:4] == b"\x89PNG"
+    assert "S-CIELAB" in (out / "index.html").read_text()
+    assert "visible_scielab" in (out / "truth.csv").read_text().splitlines()[0]
     assert (out / "error.png").exists()
     with pytest.raises(InputError, match="truth-every"):
         ReplayConfig(link=LinkProfile(1.0, 1.0, 0.1), truth_every=-1)

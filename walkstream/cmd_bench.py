@@ -20,7 +20,7 @@
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
     walkstream bench portals [--presets paper paper10] [--frames N] [--truth N] [--no-gl] [--out DIR] [--json]
     walkstream bench portals --cull [SEED ...] [--cull-against REV] [--out DIR] [--json]
-    walkstream bench impostor-sampling [SRC] [--buildings 20] [--impostor-error 2] [--picture p.png] [--json]
+    walkstream bench impostor-sampling [SRC] [--buildings 20] [--impostor-error 2] [--ppd 1.81 24] [--against-aa] [--picture p.png] [--json]
     walkstream bench walls [--scenes hall,city,west-oakland,village] [--wall-errors 5,10,15,20] [--duration 60s]
         [--gl-duration 20s] [--truth-every N] [--size WxH] [--no-gl] [--quick] [--out DIR] [--json]
 
@@ -211,7 +211,7 @@ def cmd_bench_impostor_sampling(args: argparse.Namespace) -> int:
     src = args.source or str(default_city_source(Path("out/demo")))
     picture: dict[str, Any] | None = {} if args.picture else None
     rows = run_sampling_bench(load_source(src).buildings, count=args.buildings, error_deg=args.impostor_error,
-                              picture=picture)
+                              picture=picture, ppds=args.ppd, against_aa=args.against_aa)
     print(json.dumps(rows) if args.json else format_sampling_table(rows))
     if picture:
         print(f"picture: {plot_sampling_picture(picture, Path(args.picture))}")
@@ -666,6 +666,8 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("source", nargs="?", help="city source (default: the demo city, generated into out/demo if missing)")
     b.add_argument("--buildings", type=int, default=20, help="the N tallest buildings (default 20)")
     b.add_argument("--impostor-error", type=float, default=2.0, metavar="A", help="the bound A, degrees, that picks the direction bin of the perspective view (default 2)")
+    b.add_argument("--ppd", type=float, nargs="+", default=[1.81, 24.0], metavar="P", help="pixels per degree of the viewer-scale (S-CIELAB) columns (default 1.81, the 160x120 view's own, and 24, a handheld's screen)")
+    b.add_argument("--against-aa", action="store_true", help="compare the images with the truth drawn anti-aliased (4x4 samples a pixel, averaged) instead of the truth")
     b.add_argument("--picture", metavar="PNG", help="also draw one building's frames (the middle one by height) and their pixels over the threshold")
     b.add_argument("--json", action="store_true", help="print the rows as JSON")
     b.set_defaults(func=cmd_bench_impostor_sampling)

@@ -20,6 +20,13 @@ frames (the start-up frames, before anything has arrived, count too):
 ``frames_over_visible_ratio``
     The share of frames whose visible pixels exceed 0.5 % of the frame
     (:data:`~walkstream.client.report.truth.OVER_SHARE`).
+``viewer_ppd``, ``visible_scielab_threshold``, ``delta_e_scielab_mean``, ``visible_scielab_pixels``, ``frames_over_visible_scielab_ratio``, ``causes_scielab``
+    The same figures at the viewer's scale (S-CIELAB, the module docs of
+    :mod:`walkstream.client.truth.colour`), beside the per-pixel ones above, never in
+    their place: the display's pixels per degree they were measured at, the
+    threshold, the frames' mean filtered ΔE00, their share of pixels over it, the
+    share of frames over 0.5 % of them, and per cause the mean share.  Absent when
+    not measured (a log read back from an older ``truth.csv``).
 ``psnr_db``
     ``median``, ``p5`` (the worst twentieth) and ``min`` of the frames' PSNR, dB;
     identical pictures count as :data:`~walkstream.client.truth.colour.PSNR_CAP_DB`.
@@ -40,11 +47,13 @@ frames (the start-up frames, before anything has arrived, count too):
     share of the frame's pixels visibly wrong where an impostor stands in),
     ``frames_within_ratio`` (the share of frames within both limits,
     :data:`IMPOSTOR_ERROR_MAX` and :data:`COLOUR_OVER_SHARE`) and ``reached`` (that
-    share at least 99 %).
+    share at least 99 %); with the viewer-scale figures also ``visible_scielab``,
+    ``frames_within_scielab_ratio`` and ``reached_scielab``, the same figure with the
+    pixels counted at the viewer's scale (the error limit unchanged).
 ``per_frame``
     The rows, as columns: ``frame``, ``t``, ``mean_error``, ``delta_e_mean``,
-    ``visible`` and ``psnr_db`` (capped) per compared frame (``truth.csv`` has the
-    causes too).
+    ``visible`` and ``psnr_db`` (capped) per compared frame, and ``visible_scielab``
+    when measured (``truth.csv`` has the causes too).
 """
 
 from __future__ import annotations
@@ -55,7 +64,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from walkstream.client.truth.colour import COLOUR_CAUSES, PSNR_CAP_DB, VISIBLE_DE
+from walkstream.client.truth.colour import (
+    COLOUR_CAUSES,
+    PSNR_CAP_DB,
+    SCIELAB_VISIBLE_DE,
+    VISIBLE_DE,
+)
 from walkstream.shared.arrays import F64, I64
 from walkstream.shared.errors import InputError
 
@@ -91,6 +105,14 @@ class ColourLog:
         Share of the pixels visibly wrong, per cause.
     error_causes : (n, len(COLOUR_CAUSES)) float64 or None
         The frame's mean error split by cause (None: not measured).
+    delta_e_scielab_mean : (n,) float64 or None
+        Mean ΔE00 per pixel of the S-CIELAB-filtered pictures (None: not measured).
+    visible_scielab : (n,) float64 or None
+        Share of the pixels over the visible threshold at the viewer's scale.
+    causes_scielab : (n, len(COLOUR_CAUSES)) float64 or None
+        ``visible_scielab`` per cause.
+    viewer_ppd : float or None
+        The display's pixels per degree of the viewer-scale figures.
     """
 
     frame: I64
@@ -101,6 +123,10 @@ class ColourLog:
     psnr_db: F64
     causes: F64
     error_causes: F64 | None = None
+    delta_e_scielab_mean: F64 | None = None
+    visible_scielab: F64 | None = None
+    causes_scielab: F64 | None = None
+    viewer_ppd: float | None = None
 
     def __post_init__(self) -> None:
         n = len(np.asarray(self.frame))
@@ -115,6 +141,14 @@ class ColourLog:
         }
         if self.error_causes is not None:
             cols["error_causes"] = np.array(self.error_causes, np.float64).reshape(-1, len(COLOUR_CAUSES))
+        scielab = (self.delta_e_scielab_mean, self.visible_scielab, self.causes_scielab)
+        if any(v is not None for v in scielab) and not all(v is not None for v in scielab):
+            raise InputError("ColourLog: the viewer-scale columns come together (delta_e_scielab_mean, visible_scielab, "
+                             "causes_scielab)")
+        if self.visible_scielab is not None:
+            cols["delta_e_scielab_mean"] = np.array(self.delta_e_scielab_mean, np.float64).reshape(-1)
+            cols["visible_scielab"] = np.array(self.visible_scielab, np.float64).reshape(-1)
+            cols["causes_scielab"] = np.array(self.causes_scielab, np.float64).reshape(-1, len(COLOUR_CAUSES))
         for name, a in cols.items():
             if len(a) != n:
                 raise InputError(f"ColourLog column {name!r} has {len(a)} rows, expected {n}")
@@ -161,7 +195,31 @@ def _impostor_figures(log: ColourLog) -> dict[str, Any]:
     within = float(ok.mean()) if ok.size else None
     out["frames_within_ratio"] = within
     out["reached"] = None if within is None else within >= IMPOSTOR_FRAMES_WITHIN
+    if log.causes_scielab is not None:
+        s_vis = np.asarray(log.causes_scielab, np.float64).reshape(-1, len(COLOUR_CAUSES))[:, k]
+        s_ok = s_vis <= COLOUR_OVER_SHARE
+        if log.error_causes is not None:
+            s_ok &= err <= IMPOSTOR_ERROR_MAX
+        s_within = float(s_ok.mean()) if s_ok.size else None
+        out["visible_scielab"] = _stats(s_vis, keys)
+        out["frames_within_scielab_ratio"] = s_within
+        out["reached_scielab"] = None if s_within is None else s_within >= IMPOSTOR_FRAMES_WITHIN
     return out
+
+
+def _scielab_figures(log: ColourLog) -> dict[str, Any]:
+    """The viewer-scale keys of ``truth.colour`` (none when not measured; see the module docs)."""
+    if log.visible_scielab is None or log.delta_e_scielab_mean is None or log.causes_scielab is None:
+        return {}
+    n = len(log)
+    return {
+        "viewer_ppd": log.viewer_ppd,
+        "visible_scielab_threshold": SCIELAB_VISIBLE_DE,
+        "delta_e_scielab_mean": _stats(log.delta_e_scielab_mean, ("median", "p95", "max")),
+        "visible_scielab_pixels": _stats(log.visible_scielab, ("median", "p95", "max", "mean")),
+        "frames_over_visible_scielab_ratio": float((log.visible_scielab > COLOUR_OVER_SHARE).mean()) if n else None,
+        "causes_scielab": {c: (float(log.causes_scielab[:, k].mean()) if n else None) for k, c in enumerate(COLOUR_CAUSES)},
+    }
 
 
 def summarise_colour(log: ColourLog) -> dict[str, Any]:
@@ -175,6 +233,7 @@ def summarise_colour(log: ColourLog) -> dict[str, Any]:
         "delta_e_mean": _stats(log.delta_e_mean, ("median", "p95", "max")),
         "visible_pixels": _stats(log.visible, ("median", "p95", "max", "mean")),
         "frames_over_visible_ratio": float((log.visible > COLOUR_OVER_SHARE).mean()) if n else None,
+        **_scielab_figures(log),
         "psnr_db": _stats(np.minimum(log.psnr_db, PSNR_CAP_DB), ("median", "p5", "min")),
         "causes": {c: (float(log.causes[:, k].mean()) if n else None) for k, c in enumerate(COLOUR_CAUSES)},
         **({} if log.error_causes is None else {"error_causes": {
@@ -187,5 +246,7 @@ def summarise_colour(log: ColourLog) -> dict[str, Any]:
             "delta_e_mean": [round(float(v), 4) for v in log.delta_e_mean],
             "visible": [round(float(v), 6) for v in log.visible],
             "psnr_db": [round(float(v), 3) for v in np.minimum(log.psnr_db, PSNR_CAP_DB)],
+            **({} if log.visible_scielab is None else {
+                "visible_scielab": [round(float(v), 6) for v in log.visible_scielab]}),
         },
     }

@@ -1,8 +1,9 @@
 """The worst frame by colour error as pictures: the client's picture, the full scene and a ΔE00 heat map.
 
 :func:`write_colour_worst` writes ``truth/worst_colour.png`` (the three side by side
-with the heat map's scale) and each alone (``worst_colour_client.png``,
-``worst_colour_truth.png``, ``worst_colour_de.png``) into a report folder and returns
+with the heat map's scale, and the viewer-scale (S-CIELAB) heat map fourth where it
+was measured) and each alone (``worst_colour_client.png``,
+``worst_colour_truth.png``, ``worst_colour_de.png``, ``worst_colour_de_scielab.png``) into a report folder and returns
 the page's section.  The frame is :class:`~walkstream.client.truth.missing.ColourWorst`.
 """
 
@@ -27,6 +28,7 @@ _NAMES = {
     "client": "worst_colour_client.png",
     "truth": "worst_colour_truth.png",
     "heat": "worst_colour_de.png",
+    "scielab": "worst_colour_de_scielab.png",
 }
 
 
@@ -42,14 +44,20 @@ def write_colour_worst(out: Path, w: ColourWorst) -> str:
     folder = out / "truth"
     folder.mkdir(exist_ok=True)
     heat = heat_map(w.delta_e, HEAT_TOP_DE)
-    for key, rgb in (("client", w.client), ("truth", w.truth), ("heat", heat)):
+    pics = [("client", w.client), ("truth", w.truth), ("heat", heat)]
+    if w.delta_e_scielab is not None:
+        pics.append(("scielab", heat_map(w.delta_e_scielab, HEAT_TOP_DE)))
+    for key, rgb in pics:
         _save(folder / _NAMES[key], rgb)
     psnr = "identical" if not np.isfinite(w.psnr_db) else f"PSNR {min(w.psnr_db, PSNR_CAP_DB):.1f} dB"
     head = (
         f"frame {w.frame} at {w.t:.2f} s: mean error {100.0 * w.mean_error:.2f} % of full scale (linear RGB), "
-        f"{100.0 * w.visible:.2f} % of its pixels over dE00 {VISIBLE_DE:g}, {psnr}"
+        f"{100.0 * w.visible:.2f} % of its pixels over dE00 {VISIBLE_DE:g}"
+        + ("" if w.visible_scielab is None else
+           f" ({100.0 * w.visible_scielab:.2f} % S-CIELAB at {w.viewer_ppd or 0:.1f} px/deg)")
+        + f", {psnr}"
     )
-    fig, axes = grid_figure(1, 3.4, cols=3, sharex=False)
+    fig, axes = grid_figure(1, 3.4, cols=len(pics), sharex=False)
     for ax, img, cap in zip(
         axes, (w.client, w.truth), ("the client's picture (its LODs)", "the full scene (every object at LOD2)"), strict=False
     ):
@@ -59,6 +67,9 @@ def write_colour_worst(out: Path, w: ColourWorst) -> str:
     axes[2].set_title(f"dE00 per pixel (visible above {VISIBLE_DE:g})", fontsize=9)
     bar = fig.colorbar(im, ax=axes[2], fraction=0.046, pad=0.03)
     bar.ax.axhline(VISIBLE_DE, color="#00c0ff", linewidth=1.5)
+    if w.delta_e_scielab is not None:
+        axes[3].imshow(w.delta_e_scielab, cmap="magma", vmin=0.0, vmax=HEAT_TOP_DE)
+        axes[3].set_title(f"S-CIELAB dE00 at {w.viewer_ppd or 0:.1f} px/deg", fontsize=9)
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])
@@ -69,11 +80,12 @@ def write_colour_worst(out: Path, w: ColourWorst) -> str:
         "client": "the client's picture: its objects at the LOD it drew them",
         "truth": "the full scene: every object within the view distance at LOD2",
         "heat": f"dE00 per pixel: black none, white {HEAT_TOP_DE:g} or more",
+        "scielab": "dE00 of the pictures filtered as the eye sees them (S-CIELAB), same scale",
     }
     figs = "".join(
         f"<figure><a href='truth/{_NAMES[k]}'><img src='truth/{_NAMES[k]}' alt='{k}'></a>"
         f"<figcaption>{html.escape(caps[k])}</figcaption></figure>"
-        for k in ("client", "truth", "heat")
+        for k, _ in pics
     )
     return (
         f"<h3>Worst compared frame by colour error: {html.escape(head)}</h3>"

@@ -81,7 +81,8 @@ _CAPTIONS = {
     "that differ from the ground truth (line) and the pixels where the truth shows an object "
     "the client's frame does not, stacked by cause (middle); on a city walk the colour error of "
     "the client's picture against the full scene (bottom): the mean linear-RGB error per pixel "
-    "(line, % of full scale) and the pixels over the visible CIEDE2000 threshold, stacked by cause.",
+    "(line, % of full scale) and the pixels over the visible CIEDE2000 threshold, stacked by cause "
+    "(per pixel; with replay --viewer-ppd also at the viewer's scale, as a dashed line).",
     "culled.png": "A walk with rooms: for every compared frame, the pixels where the truth shows "
     "a part the frame culled (must be 0; pinholes apart) and the pinholes; crosses mark poses "
     "refused as in solid geometry.",
@@ -275,11 +276,25 @@ def _colour_rows(c: Mapping[str, Any] | None, pct: Callable[[Any], str]) -> list
          " / ".join(pct((ic.get("visible") or {}).get(k)) for k in ("median", "p99", "max"))),
         ("frames within 1 % error and 0.5 % pixels from impostors", pct(ic.get("frames_within_ratio"))),
     ]
+    if imp and ic.get("visible_scielab") is not None:
+        imp += [
+            ("pixels wrong where an impostor stands in, viewer's scale (median / p99 / max)",
+             " / ".join(pct((ic.get("visible_scielab") or {}).get(k)) for k in ("median", "p99", "max"))),
+            ("frames within 1 % error and 0.5 % pixels from impostors, viewer's scale",
+             pct(ic.get("frames_within_scielab_ratio"))),
+        ]
+    sv = c.get("visible_scielab_pixels")
+    scielab = [] if sv is None else [
+        (f"pixels over dE00 {c.get('visible_scielab_threshold')} at the viewer's scale (S-CIELAB, "
+         f"{num(c.get('viewer_ppd'), ' px/deg')}; median / p95 / max)", " / ".join(pct(sv.get(k)) for k in ("median", "p95", "max"))),
+        ("frames with > 0.5 % of pixels over it at the viewer's scale", pct(c.get("frames_over_visible_scielab_ratio"))),
+    ]
     return [
         ("colour error, linear RGB, % of full scale (median / p95 / max)", " / ".join(pct(me.get(k)) for k in ("median", "p95", "max"))),
         ("mean dE00 per pixel (median / p95 / max)", " / ".join(num(de.get(k), "") for k in ("median", "p95", "max"))),
         (f"pixels over dE00 {c.get('visible_threshold')} (median / p95 / max)", " / ".join(pct(vp.get(k)) for k in ("median", "p95", "max"))),
         ("frames with > 0.5 % of pixels over it", pct(c.get("frames_over_visible_ratio"))),
+        *scielab,
         ("PSNR (median / worst 5 % / min)", " / ".join(num(ps.get(k), " dB") for k in ("median", "p5", "min"))),
         *imp,
     ]

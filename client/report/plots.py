@@ -532,6 +532,10 @@ def _colour_panel(ax: Axes, colour: ColourLog, t0: float) -> None:
         ax.plot(tx, 100.0 * colour.mean_error, color="#000000", linewidth=1.1, drawstyle="steps-post",
                 label="mean error, linear RGB (% of full scale)")
         top = max(float(shares.sum(axis=1).max()), float((100.0 * colour.mean_error).max()), 100.0 * OVER_SHARE)
+        if colour.visible_scielab is not None:  # beside the per-pixel count, never in its place
+            ax.plot(tx, 100.0 * colour.visible_scielab, color="#0072B2", linestyle="--", linewidth=1.1,
+                    drawstyle="steps-post", label=f"over dE00 {VISIBLE_DE:g} at the viewer's scale (S-CIELAB)")
+            top = max(top, float((100.0 * colour.visible_scielab).max()))
         ax.set_yscale("symlog", linthresh=1.0, linscale=2.0)
         ax.set_ylim(0.0, max(2.0, 1.5 * top))
     ax.axhline(100.0 * OVER_SHARE, color="#D55E00", linestyle="--", linewidth=1.0, label="0.5 % of the frame")

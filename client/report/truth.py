@@ -164,21 +164,29 @@ def summarise_truth(log: TruthLog, t_first_perfect: float | None) -> dict[str, A
 
 
 _COLOUR_COLUMNS = ["mean_error", "delta_e_mean", "visible", "psnr_db", *(f"colour_{c}" for c in COLOUR_CAUSES)]
+_SCIELAB_COLUMNS = ["delta_e_scielab_mean", "visible_scielab", *(f"scielab_{c}" for c in COLOUR_CAUSES)]
 
 
 def write_truth_csv(path: str | os.PathLike[str], log: TruthLog) -> Path:
     """One row per compared frame: ``frame, t, differing`` and one column per cause (shares);
     with colour figures also ``mean_error, delta_e_mean, visible, psnr_db`` and one
-    ``colour_<cause>`` column per colour cause."""
+    ``colour_<cause>`` column per colour cause; with the viewer-scale (S-CIELAB) figures
+    then ``delta_e_scielab_mean, visible_scielab`` and one ``scielab_<cause>`` column
+    per colour cause."""
     p = Path(path)
     c = log.colour
     with atomic_open(p) as f:
         w = csv.writer(f, lineterminator="\n")
-        w.writerow(["frame", "t", "differing", *CAUSES, *(_COLOUR_COLUMNS if c is not None else [])])
+        scielab = c is not None and c.visible_scielab is not None
+        w.writerow(["frame", "t", "differing", *CAUSES, *(_COLOUR_COLUMNS if c is not None else []),
+                    *(_SCIELAB_COLUMNS if scielab else [])])
         for i in range(len(log)):
             extra = [] if c is None else [
                 c.mean_error[i], c.delta_e_mean[i], c.visible[i], c.psnr_db[i], *c.causes[i]
             ]
+            if c is not None and c.visible_scielab is not None:
+                assert c.delta_e_scielab_mean is not None and c.causes_scielab is not None
+                extra += [c.delta_e_scielab_mean[i], c.visible_scielab[i], *c.causes_scielab[i]]
             w.writerow(
                 [int(log.frame[i]), repr(float(log.t[i])), repr(float(log.differing[i]))]
                 + [repr(float(v)) for v in log.missing[i]]
@@ -193,9 +201,10 @@ def read_truth_csv(path: str | os.PathLike[str]) -> TruthLog:
     with p.open(encoding="utf-8", newline="") as f:
         rows = list(csv.reader(f))
     head = ["frame", "t", "differing", *CAUSES]
-    if not rows or rows[0] not in (head, head + _COLOUR_COLUMNS):
+    if not rows or rows[0] not in (head, head + _COLOUR_COLUMNS, head + _COLOUR_COLUMNS + _SCIELAB_COLUMNS):
         raise InputError(f"{p}: not a truth.csv (expected the header frame, t, differing, causes[, colour figures])")
     with_colour = len(rows[0]) > len(head)
+    with_scielab = len(rows[0]) > len(head) + len(_COLOUR_COLUMNS)
     try:
         body = [[float(v) for v in r] for r in rows[1:]]
     except ValueError as exc:
@@ -205,7 +214,11 @@ def read_truth_csv(path: str | os.PathLike[str]) -> TruthLog:
         return TruthLog(e.frame, e.t, e.differing, e.missing, ColourLog.empty()) if with_colour else e
     a = np.array(body, np.float64)
     k = len(head)
+    s = k + len(_COLOUR_COLUMNS)
     colour = None if not with_colour else ColourLog(
-        a[:, 0].astype(np.int64), a[:, 1], a[:, k], a[:, k + 1], a[:, k + 2], a[:, k + 3], a[:, k + 4 :]
+        a[:, 0].astype(np.int64), a[:, 1], a[:, k], a[:, k + 1], a[:, k + 2], a[:, k + 3], a[:, k + 4 : s],
+        delta_e_scielab_mean=a[:, s] if with_scielab else None,
+        visible_scielab=a[:, s + 1] if with_scielab else None,
+        causes_scielab=a[:, s + 2 :] if with_scielab else None,
     )
     return TruthLog(a[:, 0].astype(np.int64), a[:, 1], a[:, 2], a[:, 3:k], colour)

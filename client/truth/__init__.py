@@ -9,7 +9,8 @@ produces the scene's figures after it), :mod:`.missing` (a city's frames compare
 colour, missing pixels by cause) with :mod:`.compare` (the pixel comparison and the
 causes (a)-(f) of a missing pixel), :mod:`.culled` (what a frame with rooms kept
 against the truth: culled pixels and pinholes), :mod:`.colour` (a frame's colour error:
-linear-RGB error, CIEDE2000, visible pixels, PSNR, colour causes) with
+linear-RGB error, CIEDE2000, visible pixels per pixel and at the viewer's scale
+(S-CIELAB), PSNR, colour causes) with
 :mod:`.picture` (the client's picture drawn by the truth renderer, and the
 ``impostor`` hook), :mod:`.pop` (the pop at an impostor's switch).  The figures computed from the
 colour-compared frames are :mod:`walkstream.client.report.truth`.  Public names are
@@ -31,6 +32,9 @@ _EXPORTS = {
     "compare_colour": "walkstream.client.truth.colour",
     "delta_e_2000": "walkstream.client.truth.colour",
     "psnr": "walkstream.client.truth.colour",
+    "SCIELAB_VISIBLE_DE": "walkstream.client.truth.colour",
+    "pixels_per_degree": "walkstream.client.truth.colour",
+    "scielab_delta_e": "walkstream.client.truth.colour",
     "ClientPicture": "walkstream.client.truth.picture",
     "Overlay": "walkstream.client.truth.picture",
     "client_picture": "walkstream.client.truth.picture",

@@ -28,6 +28,30 @@ visible pixels
     (``tests/test_colour.py`` checks it; near-neutral dark greys are the worst case,
     where CIEDE2000 is most sensitive to a hue shift).  Both pictures come from one
     renderer, so a frame drawn at LOD2 throughout has no error at all.
+viewer-scale visible pixels (S-CIELAB)
+    The per-pixel measure above compares pixel with pixel, so it counts aliasing
+    of pixel-wide detail (a window that falls on a pixel centre in one picture and
+    between two in the other) at full weight.  Beside it -- never in its place --
+    the spatial extension of CIELAB of Zhang and Wandell ("A spatial extension of
+    CIELAB for digital color image reproduction", SID Symposium 1996; J. SID 5(1),
+    1997): both pictures go to CIE XYZ (D65), to the opponent space of Poirson and
+    Wandell (:data:`XYZ_TO_OPPONENT`: luminance, red-green, blue-yellow), each
+    channel is filtered with the eye's spatial sensitivity for that channel
+    (:data:`SCIELAB_KERNELS`: a sum of Gaussians ``w exp(-r² / s²)``, ``s`` in degrees
+    of visual angle, each Gaussian normalised to sum 1, as in the paper's table),
+    then back to XYZ and CIELAB, and CIEDE2000 per pixel of the filtered pictures
+    (CIEDE2000 with S-CIELAB as Johnson and Fairchild, "A top down description of
+    S-CIELAB and CIEDE2000", Color Res. Appl. 28(6), 2003).  A pixel is visibly
+    wrong at the viewer's scale when that ΔE00 exceeds :data:`SCIELAB_VISIBLE_DE`
+    (2.3, the same threshold: S-CIELAB is built so that its ΔE reads as CIELAB's
+    on uniform areas, where the filters pass everything).  The filters' widths in
+    pixels come from the display's pixels per degree: :func:`pixels_per_degree` of
+    the view's height and vertical field of view (the picture seen under the angle
+    it was drawn for), or a viewer's own figure.  At 160 x 120 and 60° that is 1.8
+    pixels a degree, where every filter is under a pixel wide and the measure
+    stays close to the per-pixel one: a pixel there is 0.55° across, which an eye
+    resolves.  Causes: each pixel over the threshold is given the cause of the
+    nearest differing pixel (the filter spreads an error over its neighbours).
 PSNR
     ``10 log10(255² / MSE)`` over the sRGB code values of all three channels, dB;
     identical pictures have no error and an infinite PSNR (:func:`psnr` returns
@@ -63,6 +87,12 @@ from walkstream.shared.errors import InputError
 
 __all__ = [
     "VISIBLE_DE",
+    "SCIELAB_VISIBLE_DE",
+    "SCIELAB_KERNELS",
+    "XYZ_TO_OPPONENT",
+    "pixels_per_degree",
+    "scielab_xyz",
+    "scielab_delta_e",
     "PSNR_CAP_DB",
     "COLOUR_CAUSES",
     "COLOUR_CAUSE_RGB",
@@ -77,6 +107,25 @@ __all__ = [
 
 #: ΔE00 above which a pixel counts as visibly wrong (see the module docs).
 VISIBLE_DE = 2.3
+
+#: ΔE00 of the S-CIELAB-filtered pictures above which a pixel counts as visibly wrong
+#: at the viewer's scale (see the module docs).
+SCIELAB_VISIBLE_DE = 2.3
+
+#: CIE XYZ to the opponent channels (luminance, red-green, blue-yellow) of Poirson and
+#: Wandell, as S-CIELAB uses them (Zhang and Wandell 1997).
+XYZ_TO_OPPONENT = np.array(
+    [[0.2787336, 0.7218031, -0.1065520], [-0.4487736, 0.2898056, 0.0771569], [0.0859513, -0.5899859, 0.5011089]]
+)
+
+#: S-CIELAB's spatial filters (Zhang and Wandell 1997, table 1): per opponent channel
+#: the ``(weight, spread)`` of each Gaussian ``exp(-r² / spread²)``, spread in degrees of
+#: visual angle; each channel's weights sum to 1, so a uniform area passes unchanged.
+SCIELAB_KERNELS: tuple[tuple[tuple[float, float], ...], ...] = (
+    ((1.00327, 0.0500), (0.114416, 0.2250), (-0.117686, 7.0000)),
+    ((0.616725, 0.0685), (0.383275, 0.8260)),
+    ((0.567885, 0.0920), (0.432115, 0.6451)),
+)
 
 #: The PSNR the report writes for identical pictures (dB).  Any real difference between
 #: 8-bit pictures of fewer than 10**10 values scores less: one level off in one value
@@ -124,7 +173,12 @@ def srgb_to_linear(rgb: ArrayLike) -> NDArray[np.float64]:
 
 def srgb_to_lab(rgb: ArrayLike) -> NDArray[np.float64]:
     """CIELAB (D65) of sRGB code values: ``(..., 3)`` uint8 -> ``(..., 3)`` float (L*, a*, b*)."""
-    xyz = srgb_to_linear(rgb) @ _RGB_TO_XYZ.T / _WHITE
+    return _xyz_to_lab(srgb_to_linear(rgb) @ _RGB_TO_XYZ.T)
+
+
+def _xyz_to_lab(xyz_abs: NDArray[np.float64]) -> NDArray[np.float64]:
+    """CIELAB of ``(..., 3)`` CIE XYZ on the scale where the D65 white's Y is 1."""
+    xyz = xyz_abs / _WHITE
     d = 6.0 / 29.0
     f = np.where(xyz > d**3, np.cbrt(xyz), xyz / (3 * d * d) + 4.0 / 29.0)
     return np.stack([116.0 * f[..., 1] - 16.0, 500.0 * (f[..., 0] - f[..., 1]), 200.0 * (f[..., 1] - f[..., 2])], axis=-1)
@@ -179,6 +233,85 @@ def delta_e_2000(lab1: ArrayLike, lab2: ArrayLike) -> NDArray[np.float64]:
     return out
 
 
+def pixels_per_degree(height_px: int, fov_y_deg: float) -> float:
+    """Pixels per degree of visual angle at the centre of a view seen under its own angle.
+
+    Parameters
+    ----------
+    height_px : int
+        The view's height in pixels.
+    fov_y_deg : float
+        Its vertical field of view, degrees (square pixels: the width and the
+        horizontal field of view give the same figure).
+
+    Returns
+    -------
+    float
+        The focal length in pixels times pi / 180: 1.81 at 120 pixels and 60°.
+    """
+    if height_px <= 0 or not 0.0 < fov_y_deg < 180.0:
+        raise InputError(f"pixels_per_degree: expected a positive height and a field of view in (0, 180), "
+                         f"got {height_px}, {fov_y_deg}")
+    return float(height_px / 2.0 / math.tan(math.radians(fov_y_deg) / 2.0) * math.pi / 180.0)
+
+
+def scielab_xyz(rgb: ArrayLike, ppd: float) -> NDArray[np.float64]:
+    """An sRGB picture as the eye sees it at ``ppd`` pixels a degree: S-CIELAB's filtered CIE XYZ.
+
+    Parameters
+    ----------
+    rgb : (h, w, 3) uint8
+        sRGB code values.
+    ppd : float
+        The display's pixels per degree of visual angle (:func:`pixels_per_degree`).
+
+    Returns
+    -------
+    (h, w, 3) float64
+        CIE XYZ (the D65 white's Y is 1) of the picture filtered in the opponent
+        channels by :data:`SCIELAB_KERNELS` (edges mirrored).
+    """
+    from scipy.ndimage import gaussian_filter
+
+    a = np.asarray(rgb)
+    if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8:
+        raise InputError(f"scielab_xyz: expected an (h, w, 3) uint8 picture, got {a.shape} {a.dtype}")
+    if not ppd > 0.0:
+        raise InputError(f"scielab_xyz: pixels per degree must be positive, got {ppd}")
+    opp = srgb_to_linear(a) @ (XYZ_TO_OPPONENT @ _RGB_TO_XYZ).T
+    out = np.empty_like(opp)
+    for ch, kernels in enumerate(SCIELAB_KERNELS):
+        plane = opp[..., ch]
+        # exp(-r² / s²) is a Gaussian of standard deviation s / sqrt(2)
+        out[..., ch] = sum(w * gaussian_filter(plane, s * ppd / math.sqrt(2.0), mode="reflect") for w, s in kernels)
+    xyz: NDArray[np.float64] = out @ np.linalg.inv(XYZ_TO_OPPONENT).T
+    return xyz
+
+
+def scielab_delta_e(truth_rgb: ArrayLike, client_rgb: ArrayLike, ppd: float) -> NDArray[np.float64]:
+    """ΔE00 per pixel between two sRGB pictures after S-CIELAB's spatial filters.
+
+    Parameters
+    ----------
+    truth_rgb, client_rgb : (h, w, 3) uint8
+        Two pictures of one camera.
+    ppd : float
+        The display's pixels per degree.
+
+    Returns
+    -------
+    (h, w) float64
+        Zero everywhere for identical pictures.
+    """
+    t = np.asarray(truth_rgb)
+    c = np.asarray(client_rgb)
+    if t.shape != c.shape:
+        raise InputError(f"scielab_delta_e: expected two pictures of one shape, got {t.shape}, {c.shape}")
+    if np.array_equal(t, c):
+        return np.zeros(t.shape[:2], np.float64)
+    return delta_e_2000(_xyz_to_lab(scielab_xyz(t, ppd)), _xyz_to_lab(scielab_xyz(c, ppd)))
+
+
 def psnr(a: ArrayLike, b: ArrayLike) -> float:
     """PSNR of two uint8 pictures over every value, dB (``inf`` when they are identical)."""
     x = np.asarray(a)
@@ -211,6 +344,17 @@ class ColourError:
         Visible pixels per cause, in :data:`COLOUR_CAUSES` order (they sum to ``visible``).
     delta_e : (h, w) float32
         ΔE00 per pixel.
+    ppd : float or None
+        The display's pixels per degree the viewer-scale figures were measured at
+        (None: not measured, and the ``scielab`` figures are zero).
+    scielab_delta_e_mean : float
+        Mean ΔE00 of the S-CIELAB-filtered pictures over the frame's pixels.
+    scielab_visible : int
+        Pixels over :data:`SCIELAB_VISIBLE_DE` after S-CIELAB's filters.
+    scielab_causes : (len(COLOUR_CAUSES),) int64
+        ``scielab_visible`` per cause (the cause of each one's nearest differing pixel).
+    scielab_delta_e : (h, w) float32 or None
+        The filtered ΔE00 per pixel.
     error_causes : (len(COLOUR_CAUSES),) float64
         ``mean_error`` split by cause: each differing pixel's linear-RGB error, summed
         per cause (every differing pixel, visible or not, attributed as the visible
@@ -226,11 +370,29 @@ class ColourError:
     causes: NDArray[np.int64]
     delta_e: NDArray[np.float32]
     error_causes: NDArray[np.float64] | None = None
+    ppd: float | None = None
+    scielab_delta_e_mean: float = 0.0
+    scielab_visible: int = 0
+    scielab_causes: NDArray[np.int64] | None = None
+    scielab_delta_e: NDArray[np.float32] | None = None
 
     @property
     def visible_share(self) -> float:
         """Visible pixels as a share of the frame."""
         return self.visible / max(self.pixels, 1)
+
+    @property
+    def scielab_visible_share(self) -> float:
+        """Pixels visibly wrong at the viewer's scale (S-CIELAB) as a share of the frame."""
+        return self.scielab_visible / max(self.pixels, 1)
+
+    @property
+    def scielab_cause_shares(self) -> NDArray[np.float64]:
+        """``scielab_causes`` as shares of the frame (zeros when not measured)."""
+        if self.scielab_causes is None:
+            return np.zeros(len(COLOUR_CAUSES))
+        out: NDArray[np.float64] = self.scielab_causes / max(self.pixels, 1)
+        return out
 
     @property
     def error_shares(self) -> NDArray[np.float64]:
@@ -254,6 +416,7 @@ def compare_colour(
     coarse: ArrayLike | None = None,
     stand_in: ArrayLike | None = None,
     wall: ArrayLike | None = None,
+    ppd: float | None = None,
 ) -> ColourError:
     """The colour error of the client's picture against the truth's (see the module docs).
 
@@ -271,6 +434,9 @@ def compare_colour(
         Pixels an image-based stand-in drew (the ``impostor`` hook).
     wall : (h, w) bool, optional
         Pixels a virtual wall's texture drew (cause ``wall``).
+    ppd : float, optional
+        The display's pixels per degree: with it the viewer-scale (S-CIELAB) figures
+        are measured too, beside the per-pixel ones.
 
     Returns
     -------
@@ -317,6 +483,22 @@ def compare_colour(
     cause = _attribute(cause_id[vis], coarse_m[vis], stand_m[vis], wall_m[vis])
     counts = np.bincount(cause, minlength=len(COLOUR_CAUSES)).astype(np.int64)
     mse = sq_err / max(3 * pixels, 1)
+    s_de: NDArray[np.float32] | None = None
+    s_counts: NDArray[np.int64] | None = None
+    if ppd is not None:
+        s_de = np.zeros(shape, np.float32)
+        s_counts = np.zeros(len(COLOUR_CAUSES), np.int64)
+        if diff.any():
+            from scipy.ndimage import distance_transform_edt
+
+            s_de = scielab_delta_e(t, c, ppd).astype(np.float32)
+            s_vis = s_de > SCIELAB_VISIBLE_DE
+            if s_vis.any():
+                # the filter spreads a pixel's error over its neighbours: the nearest differing pixel's cause
+                near = distance_transform_edt(~diff, return_distances=False, return_indices=True)
+                ny, nx = near[0][s_vis], near[1][s_vis]
+                s_cause = _attribute(cause_id[ny, nx], coarse_m[ny, nx], stand_m[ny, nx], wall_m[ny, nx])
+                s_counts = np.bincount(s_cause, minlength=len(COLOUR_CAUSES)).astype(np.int64)
     return ColourError(
         pixels=pixels,
         mean_error=lin_err / max(3 * pixels, 1),
@@ -326,6 +508,11 @@ def compare_colour(
         causes=counts,
         delta_e=de,
         error_causes=by_cause / max(3 * pixels, 1),
+        ppd=ppd,
+        scielab_delta_e_mean=0.0 if s_de is None else float(s_de.sum(dtype=np.float64)) / max(pixels, 1),
+        scielab_visible=0 if s_counts is None else int(s_counts.sum()),
+        scielab_causes=s_counts,
+        scielab_delta_e=s_de,
     )
 
 

@@ -100,6 +100,12 @@ class ColourWorst:
     """``(h, w, 3)`` the full scene."""
     delta_e: NDArray[np.float32]
     """``(h, w)`` ΔE00 per pixel."""
+    visible_scielab: float | None = None
+    """Share of its pixels over the visible threshold at the viewer's scale (S-CIELAB)."""
+    delta_e_scielab: NDArray[np.float32] | None = None
+    """``(h, w)`` ΔE00 per pixel of the S-CIELAB-filtered pictures."""
+    viewer_ppd: float | None = None
+    """The display's pixels per degree of the S-CIELAB figures."""
 
 
 def needed_objects(ts: TruthScene, notes: Sequence[FrameNote], view_distance: float) -> list[int]:
@@ -123,6 +129,7 @@ def missing_figures(
     progress: Callable[[int, int], None] | None = None,
     overlay: Overlay | None = None,
     pop: PopMeter | None = None,
+    viewer_ppd: float | None = None,
 ) -> tuple[TruthLog, WorstFrame | None, list[ComparedFrame], ColourWorst | None]:
     """Compare every noted frame with its truth (see the module docstring).
 
@@ -130,7 +137,8 @@ def missing_figures(
     the frames drew; ``pvs_of`` is each frame's PVS (the service's where the client
     knew none); ``proj`` the client's projection; ``overlay`` the ``impostor`` hook of
     :mod:`walkstream.client.truth.picture`; ``pop`` is fed each frame as the client
-    drew it (:mod:`walkstream.client.truth.pop`).  Returns one row per frame (with its
+    drew it (:mod:`walkstream.client.truth.pop`); ``viewer_ppd`` the display's pixels
+    per degree for the viewer-scale (S-CIELAB) colour figures (None: not measured).  Returns one row per frame (with its
     colour figures), the worst frame by missing pixels (from the first perfect frame
     on first) as images, every frame in detail, and the worst frame by colour error.
     """
@@ -143,7 +151,9 @@ def missing_figures(
     compared: list[ComparedFrame] = []
     worst: WorstFrame | None = None
     worst_key = (-1, -1.0)
-    colour_rows: list[tuple[float, float, float, float, NDArray[np.float64], NDArray[np.float64]]] = []
+    colour_rows: list[tuple[float, float, float, float, NDArray[np.float64], NDArray[np.float64], float, float,
+                            NDArray[np.float64]]] = []
+    ppd = None if viewer_ppd is None else float(viewer_ppd)
     cworst: ColourWorst | None = None
     cworst_key = (-1, -1.0)
     n = len(notes)
@@ -205,14 +215,16 @@ def missing_figures(
                     st.frame, st.t, share, err.differing / err.pixels, c_rgb, t_rgb,
                     missing_mask(t_rgb, err.cause),
                 )
-            cerr, pic = colour_error(truth, st, t_rgb, err.cause, proj, overlay)
+            cerr, pic = colour_error(truth, st, t_rgb, err.cause, proj, overlay, ppd)
             colour_rows.append((cerr.mean_error, cerr.delta_e_mean, cerr.visible_share, cerr.psnr_db, cerr.cause_shares,
-                                cerr.error_shares))
+                                cerr.error_shares, cerr.scielab_delta_e_mean, cerr.scielab_visible_share,
+                                cerr.scielab_cause_shares))
             ckey = (int(after), cerr.mean_error)
             if ckey > cworst_key:
                 cworst_key = ckey
                 cworst = ColourWorst(
-                    st.frame, st.t, cerr.mean_error, cerr.visible_share, cerr.psnr_db, pic.rgb, t_rgb, cerr.delta_e
+                    st.frame, st.t, cerr.mean_error, cerr.visible_share, cerr.psnr_db, pic.rgb, t_rgb, cerr.delta_e,
+                    None if ppd is None else cerr.scielab_visible_share, cerr.scielab_delta_e, ppd,
                 )
             if progress is not None:
                 progress(k + 1, n)
@@ -227,6 +239,11 @@ def missing_figures(
         frames, times, col(0), col(1), col(2), col(3),
         np.array([r[4] for r in colour_rows]).reshape(-1, len(COLOUR_CAUSES)),
         np.array([r[5] for r in colour_rows]).reshape(-1, len(COLOUR_CAUSES)),
+        # not asked for (ppd None): the columns stay out, as in a log read from an older truth.csv
+        delta_e_scielab_mean=None if ppd is None else col(6),
+        visible_scielab=None if ppd is None else col(7),
+        causes_scielab=None if ppd is None else np.array([r[8] for r in colour_rows]).reshape(-1, len(COLOUR_CAUSES)),
+        viewer_ppd=ppd,
     )
     log = TruthLog(
         frames,

@@ -23,18 +23,19 @@ error is attributed to ``impostor`` (:data:`~walkstream.client.truth.colour.COLO
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.client.truth.colour import ColourError, compare_colour
+from walkstream.client.truth.colour import ColourError, compare_colour, pixels_per_degree
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.render import TruthRenderer, form_key, object_key
 from walkstream.shared.records import Mesh
 
-__all__ = ["Overlay", "ClientPicture", "forms_of", "client_picture", "colour_error"]
+__all__ = ["Overlay", "ClientPicture", "forms_of", "client_picture", "colour_error", "view_ppd"]
 
 Overlay = Callable[[FrameNote, NDArray[np.uint8], NDArray[np.int64]], NDArray[np.bool_]]
 """``overlay(note, rgb, keys) -> painted``: the ``impostor`` hook (see the module docs)."""
@@ -88,12 +89,21 @@ def colour_error(
     id_cause: ArrayLike,
     proj: ArrayLike | None = None,
     overlay: Overlay | None = None,
+    ppd: float | None = None,
 ) -> tuple[ColourError, ClientPicture]:
     """The colour error of one compared frame: its client picture against the full scene ``truth_rgb``.
 
     ``id_cause`` is the frame's id-based cause per pixel
-    (:attr:`~walkstream.client.truth.compare.FrameError.cause`).
+    (:attr:`~walkstream.client.truth.compare.FrameError.cause`).  The viewer-scale
+    (S-CIELAB) figures are measured at ``ppd`` pixels per degree (the view's own is
+    :func:`view_ppd`); None: not measured (their filtering costs 0.1-1 s a frame).
     """
     pic = client_picture(truth, note, proj, overlay)
-    err = compare_colour(truth_rgb, pic.rgb, id_cause=id_cause, coarse=pic.coarse, stand_in=pic.stand_in)
+    err = compare_colour(truth_rgb, pic.rgb, id_cause=id_cause, coarse=pic.coarse, stand_in=pic.stand_in, ppd=ppd)
     return err, pic
+
+
+def view_ppd(proj: ArrayLike, height_px: int) -> float:
+    """Pixels per degree at the centre of a view of projection ``proj`` (4, 4) and ``height_px`` rows."""
+    fov = math.degrees(2.0 * math.atan(1.0 / float(np.asarray(proj)[1, 1])))
+    return pixels_per_degree(int(height_px), fov)

@@ -149,6 +149,10 @@ class TruthRecorder:
     ground_z : float, optional
         Height of the ground plane both frames draw (a scene with outdoor space:
         :data:`~walkstream.shared.ground.GROUND_Z`); None: none (an interior).
+    viewer_ppd : float, optional
+        The display's pixels per degree of a city's viewer-scale (S-CIELAB) colour
+        figures (``--viewer-ppd``; the view's own is
+        :func:`~walkstream.client.truth.picture.view_ppd`); None: not measured.
     """
 
     def __init__(
@@ -161,6 +165,7 @@ class TruthRecorder:
         far: float,
         view_distance: float = TRUTH_VIEW_DISTANCE,
         ground_z: float | None = None,
+        viewer_ppd: float | None = None,
     ) -> None:
         if int(every) < 1:
             raise InputError(f"--truth-every {every}: expected a frame count >= 1")
@@ -170,6 +175,8 @@ class TruthRecorder:
         self.proj = perspective(fov_deg, self.size[0] / self.size[1], near, far)
         self.view_distance = float(view_distance)
         self.ground_z = None if ground_z is None else float(ground_z)
+        self.viewer_ppd = None if viewer_ppd is None else float(viewer_ppd)
+        """The display's pixels per degree of the viewer-scale colour figures (None: not measured)."""
         self.notes: list[FrameNote] = []
         self.overlay: Overlay | None = None
         """The ``impostor`` hook of the colour error (:mod:`walkstream.client.truth.picture`):
@@ -322,7 +329,7 @@ class TruthRecorder:
                     overlay = impostor_overlay(truth, self.proj)
                 pop = PopMeter() if any(st.impostors for st in self.notes) else None
                 log, worst, frames, cworst = missing_figures(
-                    ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, overlay, pop
+                    ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, overlay, pop, self.viewer_ppd
                 )
                 figures = summarise_truth(log, t_first_perfect)
                 if pop is not None:
@@ -342,7 +349,7 @@ class TruthRecorder:
                                      solid=solid, rows=rows)
             top = worst_row(rows)
             view = None if top is None else culled_view(truth, next(n for n in self.notes if n.frame == top.frame))
-            rc = room_colour(truth, self.notes, solid=solid)
+            rc = room_colour(truth, self.notes, solid=solid, viewer_ppd=self.viewer_ppd)
             figures["colour"] = summarise_colour(rc.log.colour or ColourLog.empty())
             if rc.seam is not None:
                 figures["seam"] = {**summarise_pop(rc.seam, SEAM_KINDS), **seam_figures(rc.seam)}

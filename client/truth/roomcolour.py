@@ -108,13 +108,16 @@ def room_colour(
     *,
     solid: SolidProbe | None = None,
     progress: Callable[[int, int], None] | None = None,
+    viewer_ppd: float | None = None,
 ) -> RoomColour:
     """Compare each noted frame that knew its visible set with the full scene (module docs).
 
     ``truth`` holds every room part, the city objects at LOD2 and the coarser forms the
     frames drew (``forms=forms_of(notes)``); it must be drawn with its own projection
-    (the client's).
+    (the client's).  ``viewer_ppd``: the display's pixels per degree of the viewer-scale
+    (S-CIELAB) figures (None: not measured).
     """
+    ppd = None if viewer_ppd is None else float(viewer_ppd)
     n_keys = len(truth.keys)
     # one identity per thing shown: a room part is itself, an object's forms are the object
     ident = np.arange(n_keys, dtype=np.int64)
@@ -124,7 +127,8 @@ def room_colour(
     is_part = oid_of < 0
     cell_of = np.where(is_part, np.array([key[0] for key in truth.keys], np.int64).reshape(-1), -1)
     rows: list[tuple[int, float, float, NDArray[np.float64],
-               tuple[float, float, float, float, NDArray[np.float64], NDArray[np.float64]], float]] = []
+               tuple[float, float, float, float, NDArray[np.float64], NDArray[np.float64], float, float,
+                     NDArray[np.float64]], float]] = []
     worst: ColourWorst | None = None
     seam: SeamMeter | None = None
     seen_quads: list[Any] = []  # the last frame's wall quads: its textures by id
@@ -184,16 +188,17 @@ def room_colour(
             c = np.where(beyond, _FOG, c)
             cause = np.where(lacks & ~wall, c, -1)
         lods = truth.lods(c_idx)
-        err = compare_colour(t_rgb, c_rgb, id_cause=cause, coarse=(lods >= 0) & (lods < 2), wall=wall)
+        err = compare_colour(t_rgb, c_rgb, id_cause=cause, coarse=(lods >= 0) & (lods < 2), wall=wall, ppd=ppd)
         pixels = err.pixels
         missing = np.bincount(cause[cause >= 0], minlength=len(CAUSES)).astype(np.float64) / pixels
         differing = float(np.count_nonzero(differ)) / pixels
         rows.append((note.frame, note.t, differing, missing,
-                     (err.mean_error, err.delta_e_mean, err.visible_share, err.psnr_db, err.cause_shares, err.error_shares),
+                     (err.mean_error, err.delta_e_mean, err.visible_share, err.psnr_db, err.cause_shares, err.error_shares,
+                      err.scielab_delta_e_mean, err.scielab_visible_share, err.scielab_cause_shares),
                      note.fog))
         if worst is None or err.mean_error > worst.mean_error:
             worst = ColourWorst(note.frame, note.t, err.mean_error, err.visible_share, err.psnr_db, c_rgb, t_rgb,
-                                err.delta_e)
+                                err.delta_e, None if ppd is None else err.scielab_visible_share, err.scielab_delta_e, ppd)
     frames = np.array([r[0] for r in rows], np.int64)
     times = np.array([r[1] for r in rows], np.float64)
 
@@ -202,7 +207,11 @@ def room_colour(
 
     colour = ColourLog(frames, times, col(0), col(1), col(2), col(3),
                        np.array([r[4][4] for r in rows]).reshape(-1, len(COLOUR_CAUSES)),
-                       np.array([r[4][5] for r in rows]).reshape(-1, len(COLOUR_CAUSES)))
+                       np.array([r[4][5] for r in rows]).reshape(-1, len(COLOUR_CAUSES)),
+                       delta_e_scielab_mean=None if ppd is None else col(6),
+                       visible_scielab=None if ppd is None else col(7),
+                       causes_scielab=None if ppd is None else np.array([r[4][8] for r in rows]).reshape(-1, len(COLOUR_CAUSES)),
+                       viewer_ppd=ppd)
     log = TruthLog(frames, times, np.array([r[2] for r in rows], np.float64),
                    np.array([r[3] for r in rows]).reshape(-1, len(CAUSES)), colour)
     return RoomColour(log, worst, np.array([r[5] for r in rows], np.float64), seam)
