@@ -25,6 +25,7 @@ heads; one pack with three (its cell 4, 22 kB inflated, seen in part: a 7.9 kB h
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -40,7 +41,7 @@ __all__ = ["first_view_contents"]
 
 def first_view_contents(
     interior: InteriorState, cells: list[int], pose: tuple[ArrayLike, float, float], view: RoomView, *,
-    heads: bool, inflate: bool, pack: bool,
+    heads: bool, inflate: bool, pack: bool, first: Collection[int] | None = None,
 ) -> tuple[list[int], list[bytes]]:
     """The start bundle's ``contents``: the cell ids its parts name, in order, and the
     frames that carry them (one per id, or a pack first in place of one per cell of
@@ -59,6 +60,12 @@ def first_view_contents(
         in the stream (else as stored).
     pack:
         The client reads packs: the first view may go as one.
+    first:
+        Of ``cells``, those ``pose`` itself sees (None: all).  Only they may go in the
+        pack, whose cells all arrive with its last byte; the cells of the poses the walk
+        leads to follow it part by part, so that the first frame does not wait for them
+        (with the first view's virtual walls closed, the first pose sees one cell of a
+        hall and the lead's cells would hold it back).
     """
     every = first_heads(interior, cells, pose, view, share=math.inf) if heads else {}
     stored = {c: len(interior.contents(c).content) for c in every}
@@ -78,12 +85,19 @@ def first_view_contents(
         else:
             frames.append(whole_forms[0] if stream is None else stream.cheaper(*whole_forms))
     order = list(cells)
-    if pack and cells:
-        packed, pack_heads = _pack(interior, cells, every)
+    inpack = [c for c in cells if first is None or c in first]
+    if pack and inpack:
+        packed, pack_heads = _pack(interior, inpack, every)
         alone = ContentsStream(STREAM_LEVEL) if stream is not None else None
         cost = alone.feed(packed) if alone is not None else len(packed)
+        rest = [c for c in cells if c not in set(inpack)]
+        after = [interior.contents_part(cid, inflate, alone) for cid in rest]
+        if alone is None:
+            cost += int(np.sum([len(f) for f in after]))
+        else:
+            cost = alone.nbytes
         if cost < (stream.nbytes if stream is not None else int(np.sum([len(f) for f in frames]))):
-            frames, later, stream, order = [packed], pack_heads, alone, sorted(cells)
+            frames, later, stream, order = [packed, *after], pack_heads, alone, [*sorted(inpack), *rest]
     frames += [interior.contents_part(cid, inflate, stream) for cid in later]
     return [*order, *later], frames
 

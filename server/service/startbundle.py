@@ -241,8 +241,9 @@ def start_parts(
                 wall_parts, closed = _first_walls(scene, lead[0], view, rep)
                 parts += wall_parts
             cells = interior.first_view(lead, view, START_ROOM_BYTES, closed)
+            first = interior.first_view(lead[:1], view, START_ROOM_BYTES, closed)
             ids, frames = first_view_contents(interior, cells, lead[0], view, heads=heads, inflate=inflate,
-                                              pack=heads and rep == "msgpack")
+                                              pack=heads and rep == "msgpack", first=first)
             parts.append(("contents", Frames(ids, frames)))
         return [*parts, ("manifest", scene.manifest[rep])]
     ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)
