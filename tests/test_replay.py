@@ -83,8 +83,8 @@ def test_sim_replay_is_deterministic(city: Path) -> None:
 
 
 def test_prefetch_beats_no_prefetch(city: Path) -> None:
-    on = replay_in_process(city, config(duration_s=60.0)).summary
-    off = replay_in_process(city, config(duration_s=60.0, prefetch=False)).summary
+    on = replay_in_process(city, config(duration_s=30.0)).summary
+    off = replay_in_process(city, config(duration_s=30.0, prefetch=False)).summary
     assert on["perfect_frame_ratio"] > off["perfect_frame_ratio"]
     assert on["download_quality_mean"] > off["download_quality_mean"]
 
@@ -98,9 +98,9 @@ def test_meshes_cost_far_more_bytes_than_params(city: Path) -> None:
 
 
 def test_small_cache_counts_redownloads_and_big_cache_has_none(city: Path) -> None:
-    big = replay_in_process(city, config(duration_s=90.0, path="SM")).summary
+    big = replay_in_process(city, config(duration_s=45.0, path="SM")).summary
     assert big["redownloads"] == 0 and big["rebuilds"] == 0
-    small = replay_in_process(city, config(duration_s=90.0, path="SM", cache_bytes=200_000)).summary
+    small = replay_in_process(city, config(duration_s=45.0, path="SM", cache_bytes=200_000)).summary
     assert small["redownloads"] + small["rebuilds"] > 0
     assert small["cache_peak_bytes"] < big["cache_peak_bytes"]
 
