@@ -187,7 +187,8 @@ def test_compact_topology_is_exact_enough(office: Path, tour: RecordedPath) -> N
     assert body[:4] == TOPOLOGY_COMPACT_MAGIC and len(body) < 0.6 * len(packed)
     assert compact.nbytes == len(body) and compact.storeys == full.storeys
     for a, b in zip(full.cells, compact.cells, strict=True):
-        assert (a.id, a.kind, a.name, a.storey, a.neighbours) == (b.id, b.kind, b.name, b.storey, b.neighbours)
+        assert (a.id, a.kind, a.storey, a.neighbours) == (b.id, b.kind, b.storey, b.neighbours)
+        assert b.name == ""  # version 4 leaves the names out (GET .../topology has them)
         assert np.abs(a.outline - b.outline).max() <= 5e-4 and abs(a.zmin - b.zmin) <= 5e-4
         assert a.planes.shape == b.planes.shape and np.allclose(a.planes, b.planes, rtol=0, atol=1e-6)
         assert a.contents.triangles == b.contents.triangles and a.contents.nbytes == b.contents.nbytes
@@ -229,7 +230,7 @@ def test_bad_compact_topologies_are_one_line_codec_errors(office: Path) -> None:
     obj = msgpack.unpackb(decompress_raw(body[5:], "t", 1 << 24), strict_map_key=False)
     cells = obj["cells"]
     bad_n = {**obj, "cells": {**cells, "n": [n + 1 for n in cells["n"]]}}
-    bad_names = {**obj, "cells": {**cells, "name": cells["name"][:-1]}}
+    bad_names = {**obj, "cells": {**cells, "name": [c.name for c in full.cells][:-1]}}
     bad_outline = {**obj, "cells": {**cells, "outline": [o[:-1] for o in cells["outline"]]}}
     for o, words in ((bad_n, ("vertices", "n says")), (bad_names, ("cells.name", "expected")),
                      (bad_outline, ("outline",)), ({**obj, "kinds": None}, ("t:",))):
@@ -490,7 +491,8 @@ def test_the_walk_starts_with_the_first_views_contents(office: Path, tour: Recor
     # (or just after the first view's pack, which holds the heads: shared/codec/contentspack.py)
     k = next(i for i, o in enumerate(objs) if isinstance(o, dict) and ("missing" in o or is_pack(o)))
     inner = [o for o, _ in unpack_parts(objs[k])] if is_pack(objs[k]) else objs[3 : k + 1]
-    cut = _replay(office, cut=sum(len(msgpack.packb(o)) for o in objs[: k + 1]) + 7, path_head_s=0.2)
+    cut = _replay(office, cut=sum(len(msgpack.packb(o)) for o in objs[: k + 1]) + 7, path_head_s=0.2,
+                  start_pose=False)  # the stream as asked above (the posed start: tests/test_firstpose.py)
     assert "error" not in cut and cut["redownloads"] == 0
     assert cut["start_head_cells"] == sum("missing" in o for o in inner) >= 1
     # the heads' cells are counted when whole, so not here: they are asked for again

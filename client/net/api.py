@@ -563,6 +563,7 @@ class SceneClient:
         path_head_s: float | None = None,
         heads: bool = False,
         walls: bool = False,
+        pose: bool = False,
     ) -> AsyncGenerator[StartItem, None]:
         """Stream the start bundle (``GET /v1/start``) for a path's start or a position.
 
@@ -574,6 +575,9 @@ class SceneClient:
         then whole; the first view's contents may then come as one pack
         (:mod:`~walkstream.shared.codec.contentspack`), yielded a ``room`` item each.  With ``walls``, a scene baked with virtual walls adds its wall sides
         and the first view's wall textures (``walls``, ``walltex``, ``texture`` items).
+        With ``pose`` too (and ``path_head_s``, ``heads``), the first ``pathhead`` item is
+        the head's first pose alone, and the head comes as a second ``pathhead`` item
+        among the ``room`` items, once the first pose's view is in.
 
         The scene is :attr:`scene` if set, else the server's first; it is set from
         the answer's ``X-Scene`` header as soon as the head arrives.  Items are
@@ -603,6 +607,8 @@ class SceneClient:
                 query["head"] = repr(float(path_head_s))
             if path is not None and heads:  # the first view first: cells seen in part, a city's objects drawn
                 query["heads"] = "true"
+            if path is not None and path_head_s is not None and heads and pose:  # the first pose, then the view
+                query["pose"] = "true"
         if walls:  # a scene baked with walls: the sides and the first view's textures too
             query["walls"] = "true"
         url = str(httpx.URL("/v1/start", params=query))
