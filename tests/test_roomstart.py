@@ -551,3 +551,86 @@ def test_the_walker_stands_at_the_start_until_its_first_view_is_in(office: Path)
     assert late["cells"] == len(late["worst"]) or len(late["worst"]) == 20
     assert sum(late["cell_frames_by_cause"].values()) >= sum(w["frames"] for w in late["worst"])
     assert all(w["wanted_s"] <= w["missing_s"] for w in late["worst"])
+
+
+# -- the posed start: the first pose alone, the head after the first view ----------
+
+
+def test_the_posed_start_brings_the_first_pose_then_the_head_after_the_first_view(office: Path) -> None:
+    app = create_app([office])
+    try:
+        url = "/v1/scenes/office/start?path=tour&view=160x120&head=10&heads=true"
+        plain = _unpack(_get(app, url, **{"accept-encoding": "identity"}).content)
+        posed = _unpack(_get(app, url + "&pose=true", **{"accept-encoding": "identity"}).content)
+        # first the head's first pose alone (its first two samples, no ETag), then the topology
+        assert posed[0]["part"] == plain[0]["part"] == "pathhead" and posed[0]["etag"] is None
+        pose, head = decode_path_q(posed[0]["body"], "pose"), decode_path_q(plain[0]["body"], "head")
+        assert len(pose) == 2 and np.array_equal(pose.xyz, head.xyz[:2]) and np.array_equal(pose.yaw, head.yaw[:2])
+        assert len(posed[0]["body"]) < len(plain[0]["body"]) and posed[1] == plain[1]
+        assert posed[2] == plain[2] and posed[2]["part"] == "contents"
+        # the head, as the plain bundle sends it, right after the frames of the first pose's view
+        k = next(i for i, o in enumerate(posed) if i > 0 and o.get("part") == "pathhead")
+        assert posed[k] == plain[0] and (is_pack(posed[k - 1]) or "cell" in posed[k - 1])
+        assert posed[3:k] + posed[k + 1 :] == plain[3:]
+        # the client's decoder takes it among the contents' frames
+        from walkstream.client.net.startitems import StartDecoder
+
+        dec = StartDecoder("params", heads=True)
+        kinds = [dec(o, len(msgpack.packb(o)))[0] for o in posed]
+        assert kinds.count("pathhead") == 2 and kinds[k] == "pathhead" and not dec.rooms
+        # without heads (or a head), pose changes nothing
+        for other in ("/v1/scenes/office/start?path=tour&view=160x120&head=10",
+                      "/v1/scenes/office/start?path=tour&view=160x120&heads=true"):
+            assert _get(app, other + "&pose=true").content == _get(app, other).content
+        r = _get(app, url + "&pose=maybe")
+        assert r.status_code == 422 and "pose" in r.text
+        # the compact topology's version 4 has an ETag of its own: a client holding the
+        # version 3 body under its ETag gets the new one, not a 304
+        r = _get(app, "/v1/scenes/office/topology/compact")
+        assert r.headers["etag"].endswith('-topology-c4"') and r.content[:5] == b"WSTC\x04"
+        old = r.headers["etag"].replace("-c4", "-c3")
+        again = _get(app, "/v1/scenes/office/topology/compact", **{"if-none-match": old})
+        assert again.status_code == 200 and again.content == r.content
+    finally:
+        app.state.scenes.close()
+
+
+def test_the_first_views_cells_and_the_first_poses_come_from_one_culling(office: Path) -> None:
+    from walkstream.server.service.scenes import Scene
+    from walkstream.server.service.startbundle import START_ROOM_BYTES, room_lead
+
+    scene = Scene.load(office)
+    try:
+        interior = scene.interior
+        assert interior is not None
+        lead, view = room_lead(scene, "tour"), RoomView((160, 120), 60.0, 40.0)
+        cells, first = interior.first_view(lead, view, START_ROOM_BYTES)
+        assert first == interior.first_view(lead[:1], view, START_ROOM_BYTES)[0]
+        assert first and cells[: len(first)] == first
+        # the byte bound cuts the first pose's cells alike
+        small = interior.records[cells[0]].contents.nbytes
+        assert interior.first_view(lead, view, small) == ([cells[0]], [cells[0]])
+    finally:
+        scene.close()
+
+
+def test_the_walker_stands_at_the_first_pose_until_its_head_comes(office: Path, tour: RecordedPath) -> None:
+    posed, plain = _replay(office), _replay(office, start_pose=False)
+    for s in (posed, plain):
+        assert "error" not in s and s["redownloads"] == 0 and s["perfect_frame_ratio"] > 0
+        assert s["path_wait_s"] == 0.0 and s["path_duration_s"] >= 10.0
+    # the same first view, no later (the link counts whole segments and the request is 10
+    # bytes longer: the pose's 130 bytes fewer show on the duplex, docs/benchmarks.md)
+    assert posed["start_contents_cells"] == plain["start_contents_cells"]
+    assert posed["time_to_first_perfect_frame_s"] <= plain["time_to_first_perfect_frame_s"] + 0.01
+    # a bundle cut after the first view, before the head: the whole path comes on its own
+    app = create_app([office])
+    try:
+        url = "/v1/scenes/office/start?path=tour&view=640x480&fov=60.0&fog=40.0&head=10.0&heads=true&pose=true"
+        objs = _unpack(_get(app, url, **{"accept-encoding": "identity"}).content)
+    finally:
+        app.state.scenes.close()
+    k = next(i for i, o in enumerate(objs) if i > 0 and o.get("part") == "pathhead")
+    cut = _replay(office, cut=sum(len(msgpack.packb(o)) for o in objs[:k]) + 7)
+    assert "error" not in cut and cut["perfect_frame_ratio"] > 0
+    assert cut["path_duration_s"] == pytest.approx(tour.duration, abs=1e-3)
