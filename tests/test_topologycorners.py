@@ -1,5 +1,7 @@
 """The compact topology's version 4 (``shared/roomcompact.py``): no cell names, portals
-column by column, a rectangle as two corners and a mask; versions 3 and 2 still read."""
+column by column, a rectangle as two corners and a mask; versions 3 and 2 still read.
+And the replay's flag for the start bundle's first pose first (the bundle itself:
+``tests/test_roomstart.py``)."""
 
 from __future__ import annotations
 
@@ -114,3 +116,16 @@ def test_damaged_portal_columns_are_one_line_codec_errors(change: Any, words: tu
         decode_topology_compact(_v4({**obj, "portals": change(obj["portals"])}), "t")
     msg = str(e.value)
     assert "\n" not in msg and all(w in msg for w in words), msg
+
+
+def test_the_replay_asks_for_the_first_pose_first_only_where_the_walker_stands() -> None:
+    import argparse
+
+    from walkstream.cmd_replay import add_replay_arguments, config_from_args
+
+    parser = argparse.ArgumentParser()
+    add_replay_arguments(parser)
+    parser.add_argument("--report", default="report")
+    assert config_from_args(parser.parse_args([])).posed_start
+    for flags in (["--no-start-pose"], ["--start-hold", "0"], ["--no-start-heads"], ["--no-start-contents"]):
+        assert not config_from_args(parser.parse_args(flags)).posed_start, flags
