@@ -89,6 +89,12 @@ class ReplayConfig:
     Cities, with :attr:`start_hold_s`: the start bundle brings the objects the first
     pose draws first, then the boxes of the first cell's others
     (:mod:`~walkstream.shared.codec.objectboxes`), and the walker holds (:attr:`street_hold`)."""
+    start_pose: bool = True
+    """Interiors, with :attr:`start_heads` and a walker that stands at its start
+    (:attr:`start_hold_s`): the start bundle brings the path's first pose alone before
+    the topology and the path's head once the first pose's view is in (the walker
+    stands at that pose until then; :attr:`posed_start`): the first view about 170
+    bytes sooner."""
     start_walls: bool = True
     """An interior baked with ``--virtual-walls`` (and :attr:`virtual_walls` on, with
     :attr:`start_contents`): the start bundle brings the wall sides and the first view's
@@ -230,6 +236,13 @@ class ReplayConfig:
         (:attr:`start_hold_s`): with the start bundle and its first view
         (:attr:`start_heads`), which then brings that view's objects first."""
         return self.start_bundle and self.start_heads and self.start_hold_s > 0
+
+    @property
+    def posed_start(self) -> bool:
+        """Whether an interior's start bundle is asked for the path's first pose alone
+        before the topology, its head after the first pose's view (:attr:`start_pose`):
+        only where the walker stands at its start until that view is in."""
+        return self.start_pose and self.start_heads and self.start_contents and self.start_hold_s > 0
 
     @property
     def fps_target(self) -> float:

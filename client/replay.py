@@ -270,6 +270,22 @@ async def replay(
                 if st is not None:
                     st.path, st.path_pending = p, False
 
+            def fetch_whole(head: RecordedPath) -> None:
+                # the whole path when the link is idle, at the latest PATH_LEAD_S before the head ends
+                if "fetch" not in whole and rooms is not None:
+                    whole["fetch"] = asyncio.create_task(whole_path_when_idle(
+                        api, clock, config.path, head, clock.now() + head.duration - PATH_LEAD_S, rooms.busy,
+                        path_arrived))
+                    tasks.append(whole["fetch"])
+
+            def head_arrived(p: RecordedPath | None) -> None:
+                # the path's head after the first pose's view (None: the bundle ended without it)
+                whole["head"] = p
+                st = whole.get("state")
+                if st is not None and st.path_pending:
+                    st.path = p or st.path
+                    fetch_whole(st.path)
+
             headed = False
             # an interior's wall sides and first view's textures in the bundle (a scene without walls sends none)
             start_walls = StartWalls() if config.start_walls and config.virtual_walls else None
@@ -277,7 +293,8 @@ async def replay(
                 got, topology, first_view = await interior_start(
                     config.path, config.setup_timeout_s, clock, api, disk, manifest_arrived, tasks,
                     _room_view(config) if config.start_contents else None, manifest_failed,
-                    config.path_head_s, path_arrived, heads=config.start_heads, walls=start_walls)
+                    config.path_head_s, path_arrived, heads=config.start_heads, walls=start_walls,
+                    head_arrived=head_arrived if config.posed_start else None)
                 headed = got is not None
             elif config.start_bundle and streamer is not None:
                 got = await bundle_start(
@@ -388,12 +405,11 @@ async def replay(
             if facades and scene.streets is not None:  # boxes carrying their LOD2's facades
                 state.facades = FacadeState()
             if headed:  # walking the path's head until the whole path is in
-                state.path, state.path_pending = whole.get("path", path), "path" not in whole
+                head = whole.get("head") or path  # the first pose alone until its head comes (start_pose)
+                state.path, state.path_pending = whole.get("path", head), "path" not in whole
                 whole["state"] = state
-                if state.path_pending and rooms is not None:  # fetched when the link is idle
-                    due = clock.now() + path.duration - PATH_LEAD_S
-                    tasks.append(asyncio.create_task(whole_path_when_idle(
-                        api, clock, config.path, path, due, rooms.busy, path_arrived)))
+                if state.path_pending and (not config.posed_start or "head" in whole):
+                    fetch_whole(head)  # fetched when the link is idle
             log, snapshots, spikes = await _walk_unless_manifest_fails(walk(state, phases, progress), manifest_fut)
             t_end = clock.now()
             release_facades(state)

@@ -26,8 +26,9 @@ __all__ = ["START_PARTS", "START_MAX_TEXTURES", "decode_start_part"]
 START_PARTS: tuple[str, ...] = ("pathhead", "path", "topology", "walls", "walltex", "contents", "cell", "index",
                                 "manifest", "objects", "boxes")
 """What a start bundle may hold, in the order the service sends it (an interior's
-``pathhead``, when asked, in place of ``path``; ``walls`` and ``walltex``, when asked,
-on an interior)."""
+``pathhead``, when asked, in place of ``path``, and with ``pose`` a second ``pathhead``
+among the contents' frames, after the first pose's view; ``walls`` and ``walltex``, when
+asked, on an interior)."""
 
 START_MAX_TEXTURES = 64
 """The most wall textures a start bundle's ``walltex`` part may list."""

@@ -124,11 +124,11 @@ def test_the_compact_topology_is_written_as_lzma_and_read_as_zlib_too() -> None:
     topo = Topology(storeys=((0, "g", 0.0, 3.0),), cells=(_cell(1, exact, prism_planes(exact, 0.0, 3.0)),),
                     portals=(), stairs=())
     body = encode_topology_compact(topo)
-    assert body[:5] == b"WSTC\x03"
+    assert body[:5] == b"WSTC\x04"
     old = b"WSTC\x02" + zlib.compress(decompress_raw(body[5:], "t", 1 << 20), 9)
-    a, b = decode_topology_compact(body, "v3"), decode_topology_compact(old, "v2")
-    assert a.cells[0].name == b.cells[0].name == "c1" and np.array_equal(a.cells[0].planes, b.cells[0].planes)
-    for bad in (body[:-4], b"WSTC\x03" + bytes(20), b"WSTC\x09" + body[5:]):
+    a, b = decode_topology_compact(body, "v4"), decode_topology_compact(old, "v2")
+    assert a.cells[0].name == b.cells[0].name == "" and np.array_equal(a.cells[0].planes, b.cells[0].planes)
+    for bad in (body[:-4], b"WSTC\x04" + bytes(20), b"WSTC\x09" + body[5:]):
         with pytest.raises(CodecError):
             decode_topology_compact(bad, "damaged")
 

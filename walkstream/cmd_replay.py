@@ -137,6 +137,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         start_contents=not args.no_start_contents,
         path_head_s=args.path_head or None,
         start_heads=not args.no_start_heads,
+        start_pose=not args.no_start_pose,
         start_walls=not args.no_start_walls,
         start_hold_s=args.start_hold,
         gzip=not args.no_gzip,
@@ -347,6 +348,9 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--no-start-heads", action="store_true",
                    help="interiors: the start bundle sends each cell of the first view whole (default: a cell "
                    "the first pose sees in part first as the pieces it draws, whole after the others)")
+    r.add_argument("--no-start-pose", action="store_true",
+                   help="interiors: the start bundle sends the path's head before the topology (default: the "
+                   "first pose alone there, the head once the first pose's view is in)")
     r.add_argument("--no-start-walls", action="store_true",
                    help="a scene baked with --virtual-walls: the start bundle leaves out the wall sides and the "
                    "first view's wall textures (they come by their own requests)")

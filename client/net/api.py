@@ -563,6 +563,7 @@ class SceneClient:
         path_head_s: float | None = None,
         heads: bool = False,
         walls: bool = False,
+        pose: bool = False,
     ) -> AsyncGenerator[StartItem, None]:
         """Stream the start bundle (``GET /v1/start``) for a path's start or a position.
 
@@ -574,6 +575,9 @@ class SceneClient:
         then whole; the first view's contents may then come as one pack
         (:mod:`~walkstream.shared.codec.contentspack`), yielded a ``room`` item each.  With ``walls``, a scene baked with virtual walls adds its wall sides
         and the first view's wall textures (``walls``, ``walltex``, ``texture`` items).
+        With ``pose`` too (and ``path_head_s``, ``heads``), the first ``pathhead`` item is
+        the head's first pose alone, and the head comes as a second ``pathhead`` item
+        among the ``room`` items, once the first pose's view is in.
 
         The scene is :attr:`scene` if set, else the server's first; it is set from
         the answer's ``X-Scene`` header as soon as the head arrives.  Items are
@@ -596,13 +600,15 @@ class SceneClient:
         if form != "params":
             query["form"] = form
         if view is not None:  # an interior's bundle then brings the first view's contents
-            query.update(view=f"{view.size[0]}x{view.size[1]}", fov=repr(view.fov_deg), fog=repr(view.fog_m))
+            query.update(view=f"{view.size[0]}x{view.size[1]}", fov=_num(view.fov_deg), fog=_num(view.fog_m))
             if view.max_depth is not None:  # none: as deep as the fog reaches
                 query["depth"] = str(view.max_depth)
             if path is not None and path_head_s is not None:  # the path's head first, the whole after the contents
-                query["head"] = repr(float(path_head_s))
+                query["head"] = _num(path_head_s)
             if path is not None and heads:  # the first view first: cells seen in part, a city's objects drawn
-                query["heads"] = "true"
+                query["heads"] = "1"  # (each byte of the request goes up before anything comes down)
+            if path is not None and path_head_s is not None and heads and pose:  # the first pose, then the view
+                query["pose"] = "1"
         if walls:  # a scene baked with walls: the sides and the first view's textures too
             query["walls"] = "true"
         url = str(httpx.URL("/v1/start", params=query))
@@ -731,3 +737,9 @@ class SceneClient:
             # includes msgpack's BufferFull / limits: corrupt bytes, fetch again
             self.stats.cut_streams += 1
             raise StreamCut(f"{what}: corrupt after {got} items ({exc})", got) from exc
+
+
+def _num(v: float) -> str:
+    """A query's number in its shortest exact form (``60`` for 60.0: ``repr`` otherwise)."""
+    f = float(v)
+    return str(int(f)) if f.is_integer() and abs(f) < 1e15 else repr(f)

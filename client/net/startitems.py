@@ -95,7 +95,9 @@ class StartDecoder:
     def __call__(self, obj: Any, nbytes: int) -> StartItem:
         what, k = self.what, self.k
         self.k += 1
-        if self.rooms and self.heads and is_pack(obj):  # several cells' parts in one LZMA dictionary
+        if self.rooms and self.heads and isinstance(obj, dict) and obj.get("part") == "pathhead":
+            pass  # the path's head once the first pose's view is in (asked with pose): a start part
+        elif self.rooms and self.heads and is_pack(obj):  # several cells' parts in one LZMA dictionary
             inner = unpack_parts(obj, f"{what}: item {k}")
             if len(inner) > len(self.rooms):
                 raise CodecError(f"{what}: item {k}: a pack of {len(inner)} parts, {len(self.rooms)} announced")
@@ -103,7 +105,7 @@ class StartDecoder:
             return "rooms", [contents_part(o, round(nbytes * n / total), self.rooms.pop(0),
                                            f"{what}: item {k}: part {j}", self.heads)
                              for j, (o, n) in enumerate(inner)]
-        if self.rooms:
+        elif self.rooms:
             return "room", contents_part(obj, nbytes, self.rooms.pop(0), f"{what}: item {k}", self.heads)
         if self.textures:
             tid, _etag, blob = check_contents_part(obj, f"{what}: item {k}")

@@ -153,6 +153,7 @@ async def interior_start(
     path_arrived: Callable[[RecordedPath], None] | None = None,
     heads: bool = False,
     walls: StartWalls | None = None,
+    head_arrived: Callable[[RecordedPath | None], None] | None = None,
 ) -> tuple[tuple[RecordedPath, int] | None, Topology | None, StartContents | None]:
     """The interior start bundle of recorded path ``path``: ``((path, its bytes), topology,
     the first view's contents)``.
@@ -175,12 +176,16 @@ async def interior_start(
     come first as its head, then whole (``StartContents.cells`` names each cell once).
     With ``walls`` (an interior baked with ``--virtual-walls``), the wall sides and the
     first view's wall textures, before the contents: the first view is then walked with
-    those walls closed.
+    those walls closed.  With ``head_arrived`` as well (and a path's head, ``heads``), the
+    path returned is the head's first pose alone, and the head comes once the first
+    pose's view is in: to ``head_arrived``, which gets None instead when the bundle ends
+    without it (the walk then goes on by the whole path alone).
     """
     got: dict[str, Any] = {}
     split = view is not None and path_head_s is not None and path_arrived is not None
+    posed = split and heads and head_arrived is not None
     stream = api.start(path=path, view=view, path_head_s=path_head_s if split else None, heads=split and heads,
-                       walls=walls is not None and view is not None)
+                       walls=walls is not None and view is not None, pose=posed)
 
     def on_whole(p: RecordedPath) -> None:
         if path_arrived is not None:
@@ -222,7 +227,14 @@ async def interior_start(
     if "contents" not in got:
         await stream.aclose()
         without_manifest()
+        if posed and head_arrived is not None:
+            head_arrived(None)
         return got["path"], got["topology"], None
+    headed: list[RecordedPath] = []
+
+    def head_done() -> None:
+        if posed and head_arrived is not None and not headed:
+            head_arrived(None)
 
     async def rest() -> AsyncIterator[tuple[int, CellMesh]]:
         try:
@@ -231,9 +243,14 @@ async def interior_start(
                     yield item
                 elif part == "manifest":
                     on_manifest(item[0])
+                elif part == "pathhead" and posed and head_arrived is not None and not headed:
+                    headed.append(item[0])
+                    head_arrived(item[0])
         except (ApiError, StreamCut):
             without_manifest()
             raise
+        finally:  # ended, cut or closed without the head: the walk must not wait for it
+            head_done()
         without_manifest()
 
     return got["path"], got["topology"], StartContents(list(dict.fromkeys(got["contents"])), rest())

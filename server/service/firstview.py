@@ -42,10 +42,11 @@ __all__ = ["first_view_contents"]
 def first_view_contents(
     interior: InteriorState, cells: list[int], pose: tuple[ArrayLike, float, float], view: RoomView, *,
     heads: bool, inflate: bool, pack: bool, first: Collection[int] | None = None,
-) -> tuple[list[int], list[bytes]]:
-    """The start bundle's ``contents``: the cell ids its parts name, in order, and the
+) -> tuple[list[int], list[bytes], int]:
+    """The start bundle's ``contents``: the cell ids its parts name, in order, the
     frames that carry them (one per id, or a pack first in place of one per cell of
-    ``cells``).
+    ``cells``), and how many of those frames carry the view from ``pose`` (the pack, or
+    the parts of ``first``, which lead ``cells``).
 
     Parameters
     ----------
@@ -86,6 +87,7 @@ def first_view_contents(
             frames.append(whole_forms[0] if stream is None else stream.cheaper(*whole_forms))
     order = list(cells)
     inpack = [c for c in cells if first is None or c in first]
+    seen = len(inpack)
     if pack and inpack:
         packed, pack_heads = _pack(interior, inpack, every)
         alone = ContentsStream(STREAM_LEVEL) if stream is not None else None
@@ -98,8 +100,9 @@ def first_view_contents(
             cost = alone.nbytes
         if cost < (stream.nbytes if stream is not None else int(np.sum([len(f) for f in frames]))):
             frames, later, stream, order = [packed, *after], pack_heads, alone, [*sorted(inpack), *rest]
+            seen = 1
     frames += [interior.contents_part(cid, inflate, stream) for cid in later]
-    return [*order, *later], frames
+    return [*order, *later], frames, seen
 
 
 def _pack(interior: InteriorState, cells: list[int],

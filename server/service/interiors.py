@@ -99,7 +99,7 @@ class InteriorState:
         self.topology_packed = Encoded(packed, TOPOLOGY_PACKED_MEDIA, etag_for(self.version, "topology", "msgpack-gzip"))
         """The topology's msgpack body gzip-compressed (``walkstream-topology/1+gzip``)."""
         compact = encode_topology_compact(decode_topology(self.topology["msgpack"].content, "topology"))
-        self.topology_compact = Encoded(compact, TOPOLOGY_COMPACT_MEDIA, etag_for(self.version, "topology", "c3"))
+        self.topology_compact = Encoded(compact, TOPOLOGY_COMPACT_MEDIA, etag_for(self.version, "topology", "c4"))
         """The topology in millimetres, planes rebuilt from outlines (``walkstream-topology/2``)."""
         entrances = [Entrance(e.portal, e.building, e.street, e.doorway, e.shell, e.placement).to_wire() for e in reader.entrances()]
         self.entrances: dict[Rep, Encoded] = {
@@ -187,11 +187,14 @@ class InteriorState:
     def first_view(
         self, poses: Sequence[tuple[ArrayLike, float, float]], view: RoomView, max_bytes: int,
         closed: frozenset[int] = frozenset(),
-    ) -> list[int]:
+    ) -> tuple[list[int], list[int]]:
         """The cells a client walking with ``view`` sees from ``poses`` (``(eye, yaw,
         pitch)``, the first where the walk starts, the others where it may lead) while
         their stored contents stay within ``max_bytes`` (the first cell always); cells
-        without contents are left out.
+        without contents are left out.  Returns ``(those cells, those of them the first
+        pose itself sees)``: the second is what this gives for ``poses[:1]`` (its cells
+        come first in the order, so the byte bound cuts them alike), from one culling
+        walk per pose.
 
         Order: the first view's cells as the culling found them (nearest first), then
         each next pose's new ones.  (Ordering the first view's cells by how long they
@@ -216,4 +219,5 @@ class InteriorState:
                 break
             out.append(cid)
             total += nbytes
-        return out
+        firsts = set(seen[0]) if seen else set()
+        return out, [c for c in out if c in firsts]

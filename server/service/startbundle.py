@@ -24,7 +24,7 @@ from walkstream.server.service.firstwalls import (
     first_wall_textures,
     scene_walls,
 )
-from walkstream.server.service.http import Encoded, Rep
+from walkstream.server.service.http import Encoded, Rep, dump_msgpack
 from walkstream.server.service.scenes import Form, Scene
 from walkstream.server.service.streetheads import first_view_plan, object_boxes_body
 from walkstream.shared.codec.cellbatch import pack_contents_part
@@ -189,6 +189,7 @@ def start_parts(
     path_head_s: float | None = None,
     heads: bool = False,
     walls: bool = False,
+    pose: bool = False,
 ) -> list[StartPart]:
     """The parts of a start bundle at ``xy``, in the order sent.
 
@@ -216,6 +217,12 @@ def start_parts(
     (:mod:`~walkstream.server.service.firstheads`) and whole after every other cell: the
     contents' list then names it twice.
 
+    With ``pose`` as well (with ``path_head_s`` and ``heads``), the head's first pose
+    comes first (``pathhead``, the path's first two samples, no ETag: the walker stands
+    there until its first view is in) and the head of ``path_head_s`` among the
+    contents' frames, right after those that carry the first pose's view (the pack,
+    or those cells part by part): the first view arrives that much sooner.
+
     With ``walls``, on an interior baked with ``--virtual-walls``, the bundle also brings
     the wall sides (``walls``) and the textures of the walls the first view sees
     (``walltex``, :mod:`~walkstream.server.service.firstwalls`) before its contents,
@@ -225,9 +232,13 @@ def start_parts(
     parts: list[StartPart] = []
     split = path is not None and scene.interior is not None and view is not None and rep == "msgpack"
     head = scene.path_head_q(path, path_head_s) if split and path and path_head_s is not None else None
+    first_pose = scene.path_head_q(path, 0.0) if head is not None and path and pose and heads else None
     if path is not None:
         whole = scene.path_q(path) if rep == "msgpack" else scene.path(path, rep)
-        parts.append(("path", whole) if head is None else ("pathhead", head))
+        if first_pose is not None:  # the head's first pose alone: no cache keeps it
+            parts.append(("pathhead", Encoded(first_pose.content, first_pose.media_type, "")))
+        else:
+            parts.append(("path", whole) if head is None else ("pathhead", head))
     if scene.interior is not None:
         # an interior walk needs its topology before its first frame, then the first
         # view's contents; the manifest (not needed to walk) goes last
@@ -240,10 +251,11 @@ def start_parts(
             if walls and scene.has_walls:  # the first view's wall textures first: their walls closed
                 wall_parts, closed = _first_walls(scene, lead[0], view, rep)
                 parts += wall_parts
-            cells = interior.first_view(lead, view, START_ROOM_BYTES, closed)
-            first = interior.first_view(lead[:1], view, START_ROOM_BYTES, closed)
-            ids, frames = first_view_contents(interior, cells, lead[0], view, heads=heads, inflate=inflate,
-                                              pack=heads and rep == "msgpack", first=first)
+            cells, first = interior.first_view(lead, view, START_ROOM_BYTES, closed)
+            ids, frames, seen = first_view_contents(interior, cells, lead[0], view, heads=heads, inflate=inflate,
+                                                    pack=heads and rep == "msgpack", first=first)
+            if first_pose is not None and head is not None:  # the rest of the head once the first view is in
+                frames.insert(seen, dump_msgpack({"part": "pathhead", "etag": head.etag or None, "body": head.content}))
             parts.append(("contents", Frames(ids, frames)))
         return [*parts, ("manifest", scene.manifest[rep])]
     ahead = min(START_MAX_AHEAD_M, max(0.0, speed) * START_LEAD_S)

@@ -43,7 +43,11 @@ part comes first as its *head* (a part with one more field, ``missing``:
 :mod:`walkstream.shared.codec.cellhead`) and whole after every other cell, so the cell
 is named twice in ``cells``; the first view's parts may then come as one pack in their
 place (:mod:`walkstream.shared.codec.contentspack`: the parts in one LZMA2 stream),
-where that costs fewer bytes (:mod:`walkstream.server.service.firstview`).  With ``walls=true`` (an interior baked with ``--virtual-walls``,
+where that costs fewer bytes (:mod:`walkstream.server.service.firstview`).  With ``pose=true`` as
+well, the ``pathhead`` before the topology is only the head's first pose (its first two
+samples, ETag null: the walker stands there until its first view is in), and the head of
+``head`` seconds comes as a second ``pathhead`` part among the contents' frames, right after
+those that carry the first pose's view (the pack, or those cells' parts).  With ``walls=true`` (an interior baked with ``--virtual-walls``,
 a path and a view) the wall sides (``walls``, as ``GET .../walls`` sends them) and the first
 view's wall textures (``walltex``: ``{part, etag: null, textures: [ids]}`` then one ``{cell,
 etag, body}`` part each, as ``POST .../walls/textures`` sends them) come before the
@@ -144,6 +148,11 @@ Head = Annotated[
           "(part pathhead, in place of path)"),
 ]
 
+Pose = Annotated[
+    bool,
+    Query(description="interiors, with head and heads: the path's first pose alone first (part pathhead, no "
+          "ETag), the head of head seconds right after the first view's contents (a pathhead part among them)"),
+]
 Heads = Annotated[
     bool,
     Query(description="interiors, with view and path: a cell the first pose sees in part comes first as its "
@@ -182,6 +191,7 @@ class StartQuery:
     head: Head = None
     heads: Heads = False
     walls: WallsQ = False
+    pose: Pose = False
 
     def room_view(self) -> RoomView | None:
         """The client's interior view when it gave its viewport (else None)."""
@@ -243,7 +253,7 @@ async def _bundle(request: Request, scene: Scene, rep: Rep, q: StartQuery) -> St
     inflate = accepts_gzip(request.headers.get("accept-encoding"))
     parts = await run_in_threadpool(
         lambda: start_parts(scene, xy, rep, q.path, h, v, cast(ObjForm, q.form), view=view, inflate=inflate,
-                            path_head_s=q.head, heads=q.heads, walls=q.walls)
+                            path_head_s=q.head, heads=q.heads, walls=q.walls, pose=q.pose)
     )
     headers = {"X-Scene-Version": scene.version, "X-Scene": scene.name, "Cache-Control": "no-cache"}
     if rep == "json":
