@@ -14,6 +14,7 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
+from asgiclient import Http
 from PIL import Image
 
 from walkstream.client.config import ReplayConfig
@@ -27,6 +28,7 @@ from walkstream.server.service.main import create_app
 from walkstream.server.sources.citygen import write_city
 from walkstream.server.store import SceneReader
 from walkstream.shared.walls import ring_cell, zone_count
+from walkstream.shared.wire import MSGPACK
 
 URL = "http://walkstream.test"
 FAST = BakeSettings(resolution=32, sampling="corners")
@@ -236,6 +238,8 @@ def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tupl
     p = plain_walk
     ws = w["walls"]
     assert ws["frames_with_walls"] > 0.5 and ws["textures_received"] > 0 and ws["texture_bytes"] > 0
+    # the rings came as the walk came to their cells: the start bundle's, then by request
+    assert ws["ring_requests"] >= 1 and 0 < ws["wall_sides"]
     assert ws["geometry_objects_mean"] < p["visible_mean"]
     # the far field is on the walls: the truth's colour error stays that of a picture, not of holes
     assert w["truth"]["colour"]["mean_error"]["median"] < 0.1
@@ -272,6 +276,61 @@ def test_a_ring_wall_whose_texture_never_arrives_shows_its_far_field_as_geometry
         db.close()
     with SceneReader.open(bare) as r:
         assert all(r.ring_far(c.id) is None for c in r.cells())
+
+
+def test_the_walls_route_sends_the_rings_of_the_cells_asked_and_the_start_bundle_its_first_ring(
+        dbs: tuple[Path, Path, dict[str, Any]]) -> None:
+    import msgpack
+
+    from walkstream.shared.startwire import decode_start_part
+    from walkstream.shared.walls import decode_walls
+
+    walls, _plain, _ = dbs
+    app = create_app([walls])
+    c = Http(app)
+    try:
+        every = decode_walls(c.get("/v1/scenes/walls/walls", headers={"Accept": MSGPACK}).content, "all")
+        ringed = sorted({ring_cell(s.portal) for s in every})
+        with SceneReader.open(walls) as r:
+            bare = sorted({int(x.id) for x in r.cells()} - set(ringed))
+        ask = [ringed[0], ringed[-1], *bare[:1]]
+        got = decode_walls(c.get("/v1/scenes/walls/walls", params={"cells": ",".join(map(str, ask))},
+                                 headers={"Accept": MSGPACK}).content, "some")
+        assert sorted(s.to_row() for s in got) == sorted(s.to_row() for s in every if ring_cell(s.portal) in ask)
+        assert 0 < len(got) < len(every)
+        for bad in ("x", "1,,2", "-3", ",".join(["1"] * 2) + "," + ",".join(str(i) for i in range(300))):
+            r = c.get("/v1/scenes/walls/walls", params={"cells": bad}, headers={"Accept": MSGPACK})
+            assert r.status_code == 422 and len(r.text.splitlines()) == 1
+        # a city's start bundle with walls: the rings its first seconds pass, after the first view's objects
+        start = {"path": "SE", "view": "160x120", "heads": "true"}
+        parts = []
+        for ask_walls in (True, False):
+            got_b = c.get("/v1/scenes/walls/start", params={**start, **({"walls": "true"} if ask_walls else {})},
+                          headers={"Accept": MSGPACK})
+            assert got_b.status_code == 200
+            unpacker = msgpack.Unpacker(raw=False)
+            unpacker.feed(got_b.content)
+            names: list[tuple[str, object]] = []
+            follow = 0
+            for obj in unpacker:
+                if follow:
+                    follow -= 1
+                    continue
+                part, _etag, body = decode_start_part(obj, "bundle")
+                follow = body if part == "objects" else len(body) if part == "walltex" else 0  # type: ignore[assignment,arg-type]
+                names.append((part, body))
+            parts.append(names)
+    finally:
+        c.close()
+        app.state.scenes.close()
+    on, off = parts
+    names_on = [n for n, _ in on]
+    assert "walls" not in [n for n, _ in off]  # not asked: as before
+    assert names_on.index("objects") < names_on.index("walls") < names_on.index("walltex")
+    first = decode_walls(dict(on)["walls"], "walls")  # type: ignore[arg-type]
+    assert first and len(first) < len(every)
+    tex = [t for n, b in on if n == "walltex" for t in b]  # type: ignore[union-attr]
+    assert tex and set(tex) <= {t for s in first for t in s.textures}
 
 
 def test_the_walls_list_sends_a_regions_ring_once_and_decodes_to_every_cells_walls() -> None:
