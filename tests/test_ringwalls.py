@@ -21,6 +21,7 @@ from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayResult, run_replay
 from walkstream.server.bake import BakeSettings, bake
+from walkstream.server.bake.impostorsettings import ImpostorSettings
 from walkstream.server.bake.ringwalls import plan_ring_walls, ring_regions
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.wallplan import WallSettings
@@ -180,7 +181,9 @@ def test_the_far_object_is_painted_on_the_ring_and_a_crossing_one_is_a_hole(gl: 
 def dbs(tmp_path_factory: pytest.TempPathFactory, gl_ctx: object) -> tuple[Path, Path, dict[str, Any]]:
     d = tmp_path_factory.mktemp("ringwalls")
     write_city(d / "city.geojson", 150, 2)  # 35 cells, 45 objects: both bakes in about 10 s
-    summary = bake(d / "city.geojson", d / "walls.db", settings=FAST, walls=RINGS, name="walls")
+    # the rings baked together with impostors (small images): the walk draws both, and the facades
+    summary = bake(d / "city.geojson", d / "walls.db", settings=FAST, walls=RINGS, name="walls",
+                   impostors=ImpostorSettings(size=16, complex_triangles=400).check())
     bake(d / "city.geojson", d / "plain.db", settings=FAST, name="plain")
     return d / "walls.db", d / "plain.db", summary
 
@@ -210,6 +213,7 @@ def _pvs(db: Path) -> dict[int, set[int]]:
 def test_a_city_bake_rings_its_cells_and_carries_the_far_field_on_the_textures(dbs: tuple[Path, Path, dict[str, Any]]) -> None:
     walls, plain, summary = dbs
     assert summary["ring_cells"] > 0 and summary["ring_removed"] > 0 and summary["wall_textures"] > 0
+    assert summary["impostor_images"] > 0  # rings and impostors bake together
     cut, full = _pvs(walls), _pvs(plain)
     assert cut.keys() == full.keys()
     assert all(cut[c] <= full[c] for c in cut)  # only taken away
@@ -240,6 +244,7 @@ def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tupl
     assert ws["frames_with_walls"] > 0.5 and ws["textures_received"] > 0 and ws["texture_bytes"] > 0
     # the rings came as the walk came to their cells: the start bundle's, then by request
     assert ws["ring_requests"] >= 1 and 0 < ws["wall_sides"]
+    assert w["facades"]["frames_with_facades"] > 0 and w["perfect_frame_ratio"] >= 0.99  # with the facades, on pda
     assert ws["geometry_objects_mean"] < p["visible_mean"]
     # the far field is on the walls: the truth's colour error stays that of a picture, not of holes
     assert w["truth"]["colour"]["mean_error"]["median"] < 0.1
@@ -413,3 +418,4 @@ def test_ring_textures_are_lossy_at_the_outdoor_quality_and_a_bad_quality_is_one
     for bad in (WallSettings(outdoor_quality=0), WallSettings(quality=101)):
         with pytest.raises(InputError, match="quality: expected 1 to 100"):
             bad.check()
+
