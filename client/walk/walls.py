@@ -28,8 +28,10 @@ With ``config.virtual_walls`` off, or a scene without walls, nothing is closed a
 the frame is what it was.
 
 **Outdoors** (a city baked with ``--virtual-walls``: a ring of walls around each
-street cell whose PVS was large, :mod:`walkstream.server.bake.ringwalls`), each frame
-(:func:`ring_walls`) draws the walls of the current cell's ring, each with its zone's
+street cell whose PVS was large, :mod:`walkstream.server.bake.ringwalls`; the rings
+fetched as the walk comes to their cells, :class:`~walkstream.client.stream.ringsides.RingSides`,
+merged by :func:`add_ring_sides`, a ringed cell whose ring is not in yet drawing its
+whole far field), each frame (:func:`ring_walls`) draws the walls of the current cell's ring, each with its zone's
 texture (blended with the next zone's near a border, as indoors); their textures are
 wanted now for the walls in view (sooner than those behind the viewer), ahead for the
 zones the eye moves into, and for the rings the walker enters next from where it
