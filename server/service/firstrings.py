@@ -56,12 +56,15 @@ def first_rings(scene: Scene, path: RecordedPath, view: RoomView,
     for k in range(steps):
         xyz, yaw, pitch = path.at(k * POSE_STEP_S)
         eye = np.asarray(xyz, np.float64).reshape(3)
-        cid = scene.locator.locate(float(eye[0]), float(eye[1]))
-        rows = scene.ring_sides.get(int(cid), []) if cid is not None else []
+        found = scene.locator.locate(float(eye[0]), float(eye[1]))
+        if found is None:
+            continue
+        cid = int(found)
+        rows = scene.ring_sides.get(cid, [])
         if not rows:
             continue
         if cid not in cells:
-            cells.append(int(cid))
+            cells.append(cid)
         sides = tuple(WallSide.from_row(r, "stored wall") for r in rows)
         corners = np.array([s.corners() for s in sides], np.float64).reshape(-1, 4, 3)
         zones, _d, weights = WallTable(sides).views(eye[None, :])
