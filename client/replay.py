@@ -52,6 +52,7 @@ from walkstream.client.rewrite.pool import RewriteOptions
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache
 from walkstream.client.stream.images import ImpostorImages
+from walkstream.client.stream.ringsides import RingSides
 from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 from walkstream.client.stream.startwalls import StartWalls
 from walkstream.client.stream.streamer import Streamer, StreamerConfig
@@ -71,12 +72,13 @@ from walkstream.client.walk.loop import walk
 from walkstream.client.walk.measure import compare_truth
 from walkstream.client.walk.scene import STREET_FAR_M, STREET_NEAR_M, WalkScene, walk_projection
 from walkstream.client.walk.state import WalkState
+from walkstream.client.walk.walls import add_ring_sides
 from walkstream.shared.errors import ApiError
 from walkstream.shared.ground import GROUND_Z
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomview import VIEW_NEAR_M, RoomView
-from walkstream.shared.walls import WallTable, ring_cell
+from walkstream.shared.walls import WallTable
 from walkstream.shared.wire import Manifest
 
 __all__ = ["ReplayResult", "run_replay", "replay"]
@@ -157,27 +159,24 @@ async def _virtual_walls(scene: WalkScene, api: SceneClient, topology: Any, room
         start.attach(scene.wall_images)
 
 
-async def _ring_walls(scene: WalkScene, api: SceneClient, streamer: Streamer) -> None:
+async def _ring_walls(scene: WalkScene, api: SceneClient, streamer: Streamer,
+                      start: StartWalls | None = None) -> None:
     """A city's rings of textured virtual walls (its manifest lists the ``walls``
-    feature): the wall sides (one request, before the walk), each ringed cell's walls
-    and the textures' lane on the streamer's scheduler (:func:`~.walk.walls.ring_walls`).
-    (The sides and the first ring's textures in the start bundle, after its objects,
-    were tried: West Oakland's walk then started with its far field still on the link,
-    93.5 % perfect frames in its first 20 s against 100 %.)"""
-    try:
-        sides = await api.walls()
-    except ApiError:
-        return
-    scene.walls = tuple(sides)
-    rings: dict[int, list[int]] = {}
-    for k, s in enumerate(scene.walls):
-        rings.setdefault(ring_cell(s.portal), []).append(k)
-    scene.wall_rings = {c: tuple(v) for c, v in rings.items()}
-    scene.wall_cells = {s.portal: (ring_cell(s.portal), -1) for s in scene.walls}
-    scene.wall_table = WallTable(scene.walls)
-    corners = np.array([s.corners() for s in scene.walls], np.float64).reshape(-1, 4, 3)
-    scene.wall_boxes = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
+    feature): the rings fetched as the walk comes to their cells
+    (:class:`~walkstream.client.stream.ringsides.RingSides`, merged into the scene by
+    :func:`~.walk.walls.add_ring_sides`) and the textures' lane on the streamer's
+    scheduler; the start cell's ring and the textures its first pose sees come in the
+    start bundle (``start``).  (Every side in one request before the walk held West
+    Oakland's first frame back by six seconds of the link.)"""
     scene.wall_images = ImpostorImages(api, scene.cache, streamer.scheduler, kind="walltex")
+    feed = streamer.start_feed
+    bundled = start is not None and feed.walls is start
+    # while the start bundle still brings the start cell's ring the walker stands at its start
+    waiting = (lambda: feed.starting and start.sides is None) if bundled and start is not None else None
+    loader = scene.ring_sides = RingSides(api, lambda sides: add_ring_sides(scene, sides), waiting)
+    if bundled and start is not None:  # the start bundle's ring and textures
+        start.on_sides(loader.adopt)
+        start.attach(scene.wall_images)
 
 
 def _walls_summary(scene: WalkScene, frames: Any) -> dict[str, Any]:
@@ -196,6 +195,8 @@ def _walls_summary(scene: WalkScene, frames: Any) -> dict[str, Any]:
         "textures_received": walls.received,
         "texture_bytes": walls.bytes_received,
         "texture_requests": walls.requests,
+        # outdoors: the requests for rings the walk came to (the start bundle brings the first)
+        **({"ring_requests": scene.ring_sides.requests} if scene.ring_sides is not None else {}),
     }
 
 
@@ -297,6 +298,8 @@ async def replay(
                     head_arrived=head_arrived if config.posed_start else None)
                 headed = got is not None
             elif config.start_bundle and streamer is not None:
+                if start_walls is not None and config.kind == "city" and config.street_hold:
+                    streamer.start_feed.walls = start_walls  # the start cell's ring and first textures
                 got = await bundle_start(
                     config.path, config.setup_timeout_s, clock, api, streamer, disk,
                     manifest_arrived, manifest_fut, tasks, manifest_failed,
@@ -365,7 +368,7 @@ async def replay(
             elif kind == "city" and streamer is not None and config.virtual_walls:
                 m1 = await within(clock, config.setup_timeout_s, asyncio.shield(manifest_fut))
                 if m1 is not None and "walls" in m1.features:
-                    await _ring_walls(scene, api, streamer)
+                    await _ring_walls(scene, api, streamer, start_walls)
             proj = walk_projection(config, scene)
             near = VIEW_NEAR_M if rooms is not None else STREET_NEAR_M  # the projection's near plane
             # the truth draws as far as the streets reach, or the rooms beyond any fog
@@ -418,6 +421,8 @@ async def replay(
                 await scene.images.close()
             if scene.wall_images is not None:
                 await scene.wall_images.close()
+            if scene.ring_sides is not None:
+                await scene.ring_sides.close()
             await _close(streamer, rooms)
             streamer_closed = True
             truth = await compare_truth(

@@ -14,12 +14,14 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
+from asgiclient import Http
 from PIL import Image
 
 from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayResult, run_replay
 from walkstream.server.bake import BakeSettings, bake
+from walkstream.server.bake.impostorsettings import ImpostorSettings
 from walkstream.server.bake.ringwalls import plan_ring_walls, ring_regions
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.wallplan import WallSettings
@@ -27,6 +29,7 @@ from walkstream.server.service.main import create_app
 from walkstream.server.sources.citygen import write_city
 from walkstream.server.store import SceneReader
 from walkstream.shared.walls import ring_cell, zone_count
+from walkstream.shared.wire import MSGPACK
 
 URL = "http://walkstream.test"
 FAST = BakeSettings(resolution=32, sampling="corners")
@@ -178,7 +181,9 @@ def test_the_far_object_is_painted_on_the_ring_and_a_crossing_one_is_a_hole(gl: 
 def dbs(tmp_path_factory: pytest.TempPathFactory, gl_ctx: object) -> tuple[Path, Path, dict[str, Any]]:
     d = tmp_path_factory.mktemp("ringwalls")
     write_city(d / "city.geojson", 150, 2)  # 35 cells, 45 objects: both bakes in about 10 s
-    summary = bake(d / "city.geojson", d / "walls.db", settings=FAST, walls=RINGS, name="walls")
+    # the rings baked together with impostors (small images): the walk draws both, and the facades
+    summary = bake(d / "city.geojson", d / "walls.db", settings=FAST, walls=RINGS, name="walls",
+                   impostors=ImpostorSettings(size=16, complex_triangles=400).check())
     bake(d / "city.geojson", d / "plain.db", settings=FAST, name="plain")
     return d / "walls.db", d / "plain.db", summary
 
@@ -208,6 +213,7 @@ def _pvs(db: Path) -> dict[int, set[int]]:
 def test_a_city_bake_rings_its_cells_and_carries_the_far_field_on_the_textures(dbs: tuple[Path, Path, dict[str, Any]]) -> None:
     walls, plain, summary = dbs
     assert summary["ring_cells"] > 0 and summary["ring_removed"] > 0 and summary["wall_textures"] > 0
+    assert summary["impostor_images"] > 0  # rings and impostors bake together
     cut, full = _pvs(walls), _pvs(plain)
     assert cut.keys() == full.keys()
     assert all(cut[c] <= full[c] for c in cut)  # only taken away
@@ -236,6 +242,9 @@ def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tupl
     p = plain_walk
     ws = w["walls"]
     assert ws["frames_with_walls"] > 0.5 and ws["textures_received"] > 0 and ws["texture_bytes"] > 0
+    # the rings came as the walk came to their cells: the start bundle's, then by request
+    assert ws["ring_requests"] >= 1 and 0 < ws["wall_sides"]
+    assert w["facades"]["frames_with_facades"] > 0 and w["perfect_frame_ratio"] >= 0.99  # with the facades, on pda
     assert ws["geometry_objects_mean"] < p["visible_mean"]
     # the far field is on the walls: the truth's colour error stays that of a picture, not of holes
     assert w["truth"]["colour"]["mean_error"]["median"] < 0.1
@@ -272,6 +281,61 @@ def test_a_ring_wall_whose_texture_never_arrives_shows_its_far_field_as_geometry
         db.close()
     with SceneReader.open(bare) as r:
         assert all(r.ring_far(c.id) is None for c in r.cells())
+
+
+def test_the_walls_route_sends_the_rings_of_the_cells_asked_and_the_start_bundle_its_first_ring(
+        dbs: tuple[Path, Path, dict[str, Any]]) -> None:
+    import msgpack
+
+    from walkstream.shared.startwire import decode_start_part
+    from walkstream.shared.walls import decode_walls
+
+    walls, _plain, _ = dbs
+    app = create_app([walls])
+    c = Http(app)
+    try:
+        every = decode_walls(c.get("/v1/scenes/walls/walls", headers={"Accept": MSGPACK}).content, "all")
+        ringed = sorted({ring_cell(s.portal) for s in every})
+        with SceneReader.open(walls) as r:
+            bare = sorted({int(x.id) for x in r.cells()} - set(ringed))
+        ask = [ringed[0], ringed[-1], *bare[:1]]
+        got = decode_walls(c.get("/v1/scenes/walls/walls", params={"cells": ",".join(map(str, ask))},
+                                 headers={"Accept": MSGPACK}).content, "some")
+        assert sorted(s.to_row() for s in got) == sorted(s.to_row() for s in every if ring_cell(s.portal) in ask)
+        assert 0 < len(got) < len(every)
+        for bad in ("x", "1,,2", "-3", ",".join(["1"] * 2) + "," + ",".join(str(i) for i in range(300))):
+            r = c.get("/v1/scenes/walls/walls", params={"cells": bad}, headers={"Accept": MSGPACK})
+            assert r.status_code == 422 and len(r.text.splitlines()) == 1
+        # a city's start bundle with walls: the rings its first seconds pass, after the first view's objects
+        start = {"path": "SE", "view": "160x120", "heads": "true"}
+        parts = []
+        for ask_walls in (True, False):
+            got_b = c.get("/v1/scenes/walls/start", params={**start, **({"walls": "true"} if ask_walls else {})},
+                          headers={"Accept": MSGPACK})
+            assert got_b.status_code == 200
+            unpacker = msgpack.Unpacker(raw=False)
+            unpacker.feed(got_b.content)
+            names: list[tuple[str, object]] = []
+            follow = 0
+            for obj in unpacker:
+                if follow:
+                    follow -= 1
+                    continue
+                part, _etag, body = decode_start_part(obj, "bundle")
+                follow = body if part == "objects" else len(body) if part == "walltex" else 0  # type: ignore[assignment,arg-type]
+                names.append((part, body))
+            parts.append(names)
+    finally:
+        c.close()
+        app.state.scenes.close()
+    on, off = parts
+    names_on = [n for n, _ in on]
+    assert "walls" not in [n for n, _ in off]  # not asked: as before
+    assert names_on.index("objects") < names_on.index("walls") < names_on.index("walltex")
+    first = decode_walls(dict(on)["walls"], "walls")  # type: ignore[arg-type]
+    assert first and len(first) < len(every)
+    tex = [t for n, b in on if n == "walltex" for t in b]  # type: ignore[union-attr]
+    assert tex and set(tex) <= {t for s in first for t in s.textures}
 
 
 def test_the_walls_list_sends_a_regions_ring_once_and_decodes_to_every_cells_walls() -> None:
@@ -354,3 +418,4 @@ def test_ring_textures_are_lossy_at_the_outdoor_quality_and_a_bad_quality_is_one
     for bad in (WallSettings(outdoor_quality=0), WallSettings(quality=101)):
         with pytest.raises(InputError, match="quality: expected 1 to 100"):
             bad.check()
+

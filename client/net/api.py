@@ -346,11 +346,13 @@ class SceneClient:
         _, got = await self._get_decoded(self._url("/entrances"), what, lambda r: decode_entrances(r.content, what))
         return got
 
-    async def walls(self) -> tuple[WallSide, ...]:
-        """An interior's textured virtual walls (``GET .../walls``); a scene baked without
-        them answers 404 (:class:`~walkstream.shared.errors.ApiError`)."""
-        what = f"scene {self.scene!r} walls"
-        _, got = await self._get_decoded(self._url("/walls"), what, lambda r: decode_walls(r.content, what))
+    async def walls(self, cells: Sequence[int] | None = None) -> tuple[WallSide, ...]:
+        """The textured virtual walls (``GET .../walls``), with ``cells`` only the rings
+        of those street cells (``?cells=``); a scene baked without them answers 404
+        (:class:`~walkstream.shared.errors.ApiError`)."""
+        what = f"scene {self.scene!r} walls" + (f" of {len(cells)} cells" if cells is not None else "")
+        tail = "/walls" if cells is None else "/walls?cells=" + ",".join(str(int(c)) for c in cells)
+        _, got = await self._get_decoded(self._url(tail), what, lambda r: decode_walls(r.content, what))
         return got
 
     async def wall_textures(self, ids: Sequence[int]) -> AsyncIterator[tuple[int, Any, int]]:

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from typing import Protocol
 
 from walkstream.client.net.api import SceneClient
+from walkstream.client.stream.startwalls import StartWalls
 from walkstream.client.stream.stats import StreamStats
 from walkstream.shared.codec.objectboxes import ObjectBoxes
 from walkstream.shared.errors import ApiError, StreamCut
@@ -92,6 +93,11 @@ class StartTarget(Protocol):
         """Learn objects' boxes (stand-ins for objects not in yet)."""
         ...
 
+    @property
+    def walls(self) -> StartWalls | None:
+        """Where a city's start ring and first wall textures go (None: not asked for)."""
+        ...
+
 
 class StartBundle:
     """One start bundle in flight for a streamer.
@@ -149,8 +155,9 @@ class StartBundle:
         error: BaseException | None = None
         frames: list[ObjectFrame] = []
         try:
+            walls = self.start.walls if self.view is not None else None
             async for part, item in st.api.start(path=path, form=self.form, view=self.view,
-                                                  heads=self.view is not None):
+                                                  heads=self.view is not None, walls=walls is not None):
                 if part == "path":
                     p, n = item
                     st.stats.bundle_bytes += n
@@ -182,6 +189,16 @@ class StartBundle:
                     self.left += len(ids) * st.frame_bytes
                 elif part == "objects":
                     self.left = item * st.frame_bytes
+                elif part == "walls":  # a city's start ring (walls asked for)
+                    if walls is not None:
+                        walls.add_sides(*item)
+                    st.stats.bundle_bytes += item[1]
+                elif part == "walltex":  # the ids of the textures that follow
+                    pass
+                elif part == "texture":
+                    if walls is not None:
+                        walls.add_texture(*item)
+                    st.stats.bundle_bytes += item[2]
                 else:
                     st.stats.bundle_bytes += item.nbytes
                     self._arrived({item.id})

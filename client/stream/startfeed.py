@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from walkstream.client.stream.bundle import BundleTarget, StartBundle
 from walkstream.client.stream.cellmap import CellMap
+from walkstream.client.stream.startwalls import StartWalls
 from walkstream.shared.codec.objectboxes import ObjectBoxes
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomview import RoomView
@@ -62,6 +63,9 @@ class StartFeed:
         self.first_view = False
         """Whether the start bundle was asked to bring the first view first (the walker
         then stands at its start for it)."""
+        self.walls: StartWalls | None = None
+        """Where a city bundle's start ring and first textures go (set before the
+        bundle is asked for: it then asks for them; None: not asked)."""
         self.stand_ins: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         """Objects' boxes ``(lo (3,), hi (3,))`` known before the objects (:meth:`add_boxes`)."""
 

@@ -12,6 +12,7 @@ None: the replay then asks for the sides itself, as before.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from walkstream.client.stream.images import ImpostorImages
@@ -30,11 +31,21 @@ class StartWalls:
         """Bytes of the wall parts on the wire (sides and textures)."""
         self._textures: list[tuple[int, Any, int]] = []
         self._lane: ImpostorImages | None = None
+        self._on_sides: Callable[[tuple[WallSide, ...]], None] | None = None
 
     def add_sides(self, sides: tuple[WallSide, ...], nbytes: int) -> None:
-        """The bundle's ``walls`` part arrived."""
+        """The bundle's ``walls`` part arrived (handed on when :meth:`on_sides` was set)."""
         self.sides = sides
         self.nbytes += int(nbytes)
+        if self._on_sides is not None:
+            self._on_sides(sides)
+
+    def on_sides(self, take: Callable[[tuple[WallSide, ...]], None]) -> None:
+        """Hand the sides to ``take``: now when they are in, else as they arrive (a city's
+        start ring comes after the first view's objects, once the walk is set up)."""
+        self._on_sides = take
+        if self.sides is not None:
+            take(self.sides)
 
     def add_texture(self, tid: int, rgba: Any, nbytes: int) -> None:
         """One of the first view's textures arrived (kept until the lane is attached)."""

@@ -32,16 +32,18 @@ class PvsObjects:
 
     def update(self, cells: list[int], city: Streamer, cache: Cache, skip: int, *,
                far: tuple[tuple[float, float, float, float], ...] = (),
-               eye: NDArray[np.float64] | None = None) -> None:
+               eye: NDArray[np.float64] | None = None, far_all: bool = False) -> None:
         """The union of ``cells``' PVS (each object at its highest ACH), ``skip`` left out;
         ``far``: the ring walls in view without their texture (their ends, the hidden
         space to the left, :attr:`~walkstream.client.walk.state.Frame.far_walls`): the
         objects of the far field their ring carries that stand behind one of them join
         (:func:`behind_walls`; one not built yet joins too: it must arrive); with ``eye``
-        ``(3,)`` only those seen through one of those walls from it."""
+        ``(3,)`` only those seen through one of those walls from it; ``far_all``: the
+        whole far field joins (the cell's ring has not arrived)."""
         # the eye moves the far field's angles: in the key only while a far field is drawn
         at = tuple(np.round(np.asarray(eye, np.float64).reshape(-1)[:2], 2).tolist()) if far and eye is not None else ()
-        key = (tuple((c, c in city.cells) for c in cells), city.geometry_version, sum(cache.evictions.values()), far, at)
+        key = (tuple((c, c in city.cells) for c in cells), city.geometry_version, sum(cache.evictions.values()), far, at,
+               far_all)
         if key == self.key:
             return
         self.key = key
@@ -50,9 +52,9 @@ class PvsObjects:
             rec = city.cells.get(c)
             if rec is None:
                 continue
-            ids, cover = rec.streamed() if far else (rec.pvs, rec.ach)
+            ids, cover = rec.streamed() if far or far_all else (rec.pvs, rec.ach)
             keep = np.ones(len(ids), bool)
-            if far:
+            if far and not far_all:
                 keep[len(rec.pvs):] = behind_walls([cache.peek("geom", int(i)) for i in ids[len(rec.pvs):]], far, eye)
             for oid, a in zip(ids[keep].tolist(), cover[keep].tolist(), strict=True):
                 if oid != skip:

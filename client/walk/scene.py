@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from walkstream.client.config import ReplayConfig
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.images import ImpostorImages
+from walkstream.client.stream.ringsides import RingSides
 from walkstream.client.stream.rooms import RoomStreamer
 from walkstream.client.stream.streamer import Streamer
 from walkstream.shared.camera import perspective
@@ -62,6 +63,9 @@ class WalkScene:
     wall_boxes: NDArray[np.float64] | None = None
     """``(sides, 2, 3)`` each side's quad's box (min, max corners): the frustum test of
     the textures a frame asks for."""
+    ring_sides: RingSides | None = None
+    """Outdoors: the rings fetched as the walk comes to their cells (None indoors and
+    without walls); :attr:`walls` and the tables after it grow as they arrive."""
     wall_images: ImpostorImages | None = None
     """The wall textures' lane (kind ``walltex``; None without walls)."""
     unknown_quality: float = 0.0

@@ -176,6 +176,10 @@ class Frame:
     far_walls: tuple[tuple[float, float, float, float], ...] = ()
     """Those walls' ends ``(x0, y0, x1, y1)`` (the hidden space to the left of ``p0 ->
     p1``): the far field's objects behind one of them are drawn."""
+    far_all: bool = False
+    """Outdoors: the current cell's ring has not arrived yet
+    (:class:`~walkstream.client.stream.ringsides.RingSides`): its whole far field is
+    drawn as geometry."""
     # -- draw
     snap: bool = False
     keys: list[Hashable] = field(default_factory=list)

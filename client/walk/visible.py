@@ -66,7 +66,7 @@ def visible(w: WalkState, f: Frame) -> None:
             rooms.closed = rooms.due_closed = frozenset()
         if f.street is not None:
             f.pvs_cells = [f.street]
-        if rooms is None and w.scene.wall_rings:
+        if rooms is None and (w.scene.wall_rings or w.scene.ring_sides is not None):
             f.walls = ring_walls(w, f)
         default = vis = []
         if rooms is not None:
@@ -86,4 +86,4 @@ def visible(w: WalkState, f: Frame) -> None:
     f.default_room_cells = [c for c in default if c not in foreign]
     if city is not None:
         w.objects.update(f.pvs_cells, city, w.scene.cache, -1 if e is None else e.building, far=f.far_walls,
-                          eye=f.eye)
+                          eye=f.eye, far_all=f.far_all)

@@ -28,8 +28,10 @@ With ``config.virtual_walls`` off, or a scene without walls, nothing is closed a
 the frame is what it was.
 
 **Outdoors** (a city baked with ``--virtual-walls``: a ring of walls around each
-street cell whose PVS was large, :mod:`walkstream.server.bake.ringwalls`), each frame
-(:func:`ring_walls`) draws the walls of the current cell's ring, each with its zone's
+street cell whose PVS was large, :mod:`walkstream.server.bake.ringwalls`; the rings
+fetched as the walk comes to their cells, :class:`~walkstream.client.stream.ringsides.RingSides`,
+merged by :func:`add_ring_sides`, a ringed cell whose ring is not in yet drawing its
+whole far field), each frame (:func:`ring_walls`) draws the walls of the current cell's ring, each with its zone's
 texture (blended with the next zone's near a border, as indoors); their textures are
 wanted now for the walls in view (sooner than those behind the viewer), ahead for the
 zones the eye moves into, and for the rings the walker enters next from where it
@@ -54,13 +56,14 @@ from numpy.typing import NDArray
 
 from walkstream.client.draw.quads import Quad, cross_fade
 from walkstream.client.walk.ringahead import ring_textures_ahead, ring_zones_ahead
+from walkstream.client.walk.scene import WalkScene
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.frustum import frustum_cull
-from walkstream.shared.walls import zone_mix, zone_slide
+from walkstream.shared.walls import WallSide, WallTable, ring_cell, zone_mix, zone_slide
 
 __all__ = [
     "RING_BEHIND_NEED_S", "WALL_AHEAD_S", "WALL_MIX_NEED_S", "DrawnWall", "drawn_walls", "frame_walls", "ring_walls",
-    "wall_quads", "want_wall_textures",
+    "add_ring_sides", "wall_quads", "want_wall_textures",
 ]
 
 
@@ -116,18 +119,47 @@ def _slides(foot: float, zone: int, mix_zone: int, width: float, share: float) -
     return (float(got[0]), float(got[1]))
 
 
+def add_ring_sides(scene: WalkScene, sides: Sequence[WallSide]) -> None:
+    """Add ring walls that arrived (:class:`~walkstream.client.stream.ringsides.RingSides`)
+    to ``scene``: its :attr:`~.scene.WalkScene.walls` (each side once), each ringed
+    cell's indices, the portals' cells, the table and the quads' boxes."""
+    have = {(s.portal, s.side) for s in scene.walls}
+    new = tuple(s for s in sides if (s.portal, s.side) not in have)
+    if not new:
+        return
+    scene.walls = (*scene.walls, *new)
+    rings: dict[int, list[int]] = {}
+    for k, s in enumerate(scene.walls):
+        rings.setdefault(ring_cell(s.portal), []).append(k)
+    scene.wall_rings = {c: tuple(v) for c, v in rings.items()}
+    scene.wall_cells = {s.portal: (ring_cell(s.portal), -1) for s in scene.walls}
+    scene.wall_table = WallTable(scene.walls)
+    corners = np.array([s.corners() for s in scene.walls], np.float64).reshape(-1, 4, 3)
+    scene.wall_boxes = np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
+
+
 def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     """Outdoors: the walls of the current street cell's ring drawn with their textures
     (see the module docstring); sets the frame's ``wall_due`` and ``wall_missing`` and
     wants the textures now and ahead from the lane."""
-    lane, table, city = w.scene.wall_images, w.scene.wall_table, w.scene.streets
+    lane, city = w.scene.wall_images, w.scene.streets
     f.wall_due = f.wall_missing = 0
-    f.ring_far = False
+    f.ring_far = f.far_all = False
     f.far_walls = ()
-    if lane is None or table is None or city is None or not w.config.virtual_walls or not w.scene.wall_rings:
+    if lane is None or city is None or not w.config.virtual_walls:
+        return []
+    street = -1 if f.street is None else int(f.street)
+    loader = w.scene.ring_sides
+    if loader is not None:  # the rings of the cells the walk comes to: this one's first
+        route = city.need_records
+        loader.want([street, *sorted(route, key=route.__getitem__)])
+        rec = city.cells.get(street)
+        if street >= 0 and not loader.held(street) and rec is not None and rec.far is not None:
+            f.ring_far = f.far_all = True  # its ring not in yet: the whole far field, never a hole
+    table = w.scene.wall_table
+    if table is None or not w.scene.wall_rings:
         return []
     sides = w.scene.walls
-    street = -1 if f.street is None else int(f.street)
     ring = list(w.scene.wall_rings.get(street, ()))
     eye = np.asarray(f.eye, np.float64).reshape(3)
     velocity = np.zeros(2)

@@ -69,7 +69,7 @@ from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, encode_path_q, head_path_q
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.records import BuildingParams
-from walkstream.shared.walls import WallSide, walls_wire
+from walkstream.shared.walls import WallSide, ring_cell, walls_wire
 from walkstream.shared.wire import (
     MSGPACK,
     OFFERS,
@@ -272,6 +272,12 @@ class Scene:
         """The wall textures the scene has (empty without walls)."""
         sides = [WallSide.from_row(r, "stored wall").to_row(compact=True) for r in reader.wall_sides()] \
             if self.has_walls else []
+        self.ring_sides: dict[int, list[list[float | int]]] = {}
+        """A city's ring walls by the cell they ring (``ring_cell`` of the portal): what
+        ``GET .../walls?cells=...`` answers (a walk asks for the rings of the cells it
+        comes to, not for every side before it starts)."""
+        for row in sides:
+            self.ring_sides.setdefault(ring_cell(int(row[0])), []).append(row)
         self.walls: dict[Rep, Encoded] = {
             rep: encode(walls_wire(sides), rep, self.version, "walls") for rep in ("msgpack", "json")
         } if self.has_walls else {}

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.server.service.firstrings import first_rings
 from walkstream.server.service.firstview import first_view_contents
 from walkstream.server.service.firstwalls import (
     first_wall_textures,
@@ -263,7 +264,7 @@ def start_parts(
     cells = start_cells(scene, xy, heading, min(START_MAX_AHEAD_M, ahead + more))
     with_objects = start_cells(scene, xy, heading, ahead)
     if heads and path is not None and view is not None and rep == "msgpack" and cells:
-        return parts + _first_view_parts(scene, path, view, cells, with_objects, form)
+        return parts + _first_view_parts(scene, path, view, cells, with_objects, form, walls)
     # the records first, each with the index tile that holds its cell (the client
     # follows the viewer into it by its outline; other tiles around the start it
     # asks for when it needs them), then the manifest (its grammar rebuilds the
@@ -306,11 +307,24 @@ def _objects_part(scene: Scene, ids: list[int], form: Form) -> StartPart:
 
 
 def _first_view_parts(scene: Scene, path: str, view: RoomView, cells: list[int], with_objects: list[int],
-                      form: Form) -> list[StartPart]:
+                      form: Form, walls: bool = False) -> list[StartPart]:
     """A city bundle's parts after the path when the client holds its start for its first
-    view, in the order :func:`~walkstream.server.service.streetheads.first_view_plan` gives."""
+    view, in the order :func:`~walkstream.server.service.streetheads.first_view_plan` gives;
+    with ``walls`` on a city baked with them, the rings of the cells its first seconds
+    pass and the textures the first pose sees right after the first view's objects,
+    those its later poses see last (:mod:`~.firstrings`)."""
     parts: list[StartPart] = []
+    ring = None
+    if walls and scene.has_walls:
+        ring = first_rings(scene, RecordedPath.from_msgpack(scene.path(path, "msgpack").content, f"path {path!r}"),
+                           view, START_LEAD_S)
+    placed = False
     for name, what in first_view_plan(scene, path, view, START_LEAD_S, cells, with_objects):
+        if ring is not None and not placed and name != "objects" and any(p[0] == "objects" for p in parts):
+            placed = True  # after the first view's objects: the rings and the first pose's textures
+            parts.append(("walls", ring[0]))
+            if ring[1]:
+                parts.append(("walltex", _textures(scene, ring[1])))
         if name == "cell":
             parts.append(("cell", scene.cell(what, "msgpack")))
         elif name == "index":
@@ -322,6 +336,12 @@ def _first_view_parts(scene: Scene, path: str, view: RoomView, cells: list[int],
         else:
             body = object_boxes_body(scene, what)
             parts.append(("boxes", Encoded(body, scene.manifest["msgpack"].media_type, "")))
+    if ring is not None and not placed:
+        parts.append(("walls", ring[0]))
+        if ring[1]:
+            parts.append(("walltex", _textures(scene, ring[1])))
+    if ring is not None and ring[2]:  # last: the textures the first seconds' later poses see
+        parts.append(("walltex", _textures(scene, ring[2])))
     return parts
 
 

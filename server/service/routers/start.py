@@ -51,7 +51,9 @@ those that carry the first pose's view (the pack, or those cells' parts).  With 
 a path and a view) the wall sides (``walls``, as ``GET .../walls`` sends them) and the first
 view's wall textures (``walltex``: ``{part, etag: null, textures: [ids]}`` then one ``{cell,
 etag, body}`` part each, as ``POST .../walls/textures`` sends them) come before the
-contents, and the first view's cells are those of the walk with those walls closed.  A client that does not ask gets the order above; a server
+contents, and the first view's cells are those of the walk with those walls closed; on a city baked with them (with
+``heads=true``) the start cell's ring (``walls``, as ``GET .../walls?cells=`` sends it) and the textures of the ring
+walls the first pose sees (``walltex``) come right after the first view's objects.  A client that does not ask gets the order above; a server
 that does not know ``head`` ignores it (the whole path then comes, as ``path``).  The walk's other cells come by the client's own requests.  The ``path`` part is the compact ``walkstream-path-q/1``
 encoding (as ``GET .../paths/{name}`` sends it when ``Accept`` names it); with
 ``Accept: application/json`` each body is its JSON form.
@@ -163,7 +165,9 @@ WallsQ = Annotated[
     bool,
     Query(description="interiors baked with --virtual-walls, with view and path: also the wall sides (part walls) "
           "and the first view's wall textures (part walltex: {part, etag: null, textures: [ids]}, then one "
-          "{cell, etag, body} part each) before the contents, the first view then walked with those walls closed"),
+          "{cell, etag, body} part each) before the contents, the first view then walked with those walls closed; "
+          "a city's (with heads): the start cell's ring and the textures its first pose sees, after the first "
+          "view's objects"),
 ]
 
 
