@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.client.truth.antialias import Sampling
 from walkstream.client.truth.colour import (
     SCIELAB_VISIBLE_DE,
     VISIBLE_DE,
@@ -87,7 +88,8 @@ _FILTERS = ("nearest", "linear")
 _ALIGNED_PX = 64
 _MINIFIED_PX = 48
 _BAKED_TEXELS = 128
-_TRUTH_SS = 4
+_TRUTH_AA = Sampling(grid=4)
+_REFERENCE = Sampling(grid=8)
 
 
 def _wrong(truth: NDArray[np.uint8], other: NDArray[np.uint8], area: NDArray[np.bool_],
@@ -106,22 +108,24 @@ def _add(tally: dict[tuple[str, str, str], list[int]], key: tuple[str, str, str]
 
 
 class _Scene:
-    """The truth at a frame size and its 4 x 4 supersampled twin, on one context."""
+    """The truth at a frame size, point-sampled and anti-aliased (the renderer's own sampling)."""
 
     def __init__(self, meshes: dict[int, Any], size: tuple[int, int], ctx: Any = None) -> None:
         self.size = size
         self.truth = TruthRenderer(meshes, size, ctx=ctx)
-        self.fine = TruthRenderer(meshes, (size[0] * _TRUTH_SS, size[1] * _TRUTH_SS), ctx=self.truth.ctx)
 
-    def frames(self, oid: int, eye: NDArray[np.float64], view: NDArray[np.float64], proj: NDArray[np.float64] | None) -> tuple[
-        NDArray[np.bool_], NDArray[np.uint8], NDArray[np.uint8]
+    def frames(self, oid: int, eye: NDArray[np.float64], view: NDArray[np.float64], proj: NDArray[np.float64] | None,
+               samplings: Sequence[Sampling] = (_TRUTH_AA,)) -> tuple[
+        NDArray[np.bool_], NDArray[np.uint8], dict[Sampling, NDArray[np.uint8]]
     ]:
-        """The building's pixels, the truth, the truth supersampled and averaged."""
-        w, h = self.size
-        self.fine.render(eye, view, self.fine.flags([(-1 - oid, 0)]), proj=proj)
-        fine = self.fine.colour().astype(np.float64).reshape(h, _TRUTH_SS, w, _TRUTH_SS, 3).mean(axis=(1, 3))
-        idx, _ = self.truth.render(eye, view, self.truth.flags([(-1 - oid, 0)]), proj=proj)
-        return idx >= 0, self.truth.colour().copy(), np.rint(fine).astype(np.uint8)
+        """The building's pixels, the truth, and the truth drawn at each of ``samplings``."""
+        flags = self.truth.flags([(-1 - oid, 0)])
+        smooth = {}
+        for sampling in samplings:
+            self.truth.render(eye, view, flags, proj=proj, samples=sampling)
+            smooth[sampling] = self.truth.colour()
+        idx, _ = self.truth.render(eye, view, flags, proj=proj)
+        return idx >= 0, self.truth.colour().copy(), smooth
 
     def painted(self, quad: tuple[Any, ...], eye: NDArray[np.float64], view: NDArray[np.float64],
                 proj: NDArray[np.float64] | None, image_filter: str) -> tuple[NDArray[np.uint8], NDArray[np.bool_]]:
@@ -136,7 +140,6 @@ class _Scene:
         return out, np.any(out != empty, axis=2)
 
     def release(self) -> None:
-        self.fine.release()
         self.truth.release()
 
 
@@ -144,11 +147,16 @@ def run_sampling_bench(
     buildings: Sequence[Any], count: int = 20, error_deg: float = 2.0, seed: int = 1, ctx: Any = None,
     views: Sequence[str] = VIEWS, picture: dict[str, NDArray[np.uint8]] | None = None,
     ppds: Sequence[float] = DEFAULT_PPD, against_aa: bool = False,
+    truth_samples: Sequence[Sampling] = (), reference: Sampling = _REFERENCE,
 ) -> list[dict[str, Any]]:
     """The benchmark's rows (module docstring) over ``count`` of the tallest ``buildings``
     (drawn on ``ctx``, by default a context of its own), for ``views`` (of :data:`VIEWS`).
     ``against_aa`` compares the images with the truth drawn at 4 x 4 samples a pixel and
     averaged (the anti-aliased picture of the same geometry) instead of the truth.
+    ``truth_samples``: also one row per view and sampling S (``sampling="truth S"``,
+    ``filter`` the ``reference``'s name): the truth drawn at S against the truth drawn at
+    ``reference`` (by default 8 x 8), the anti-aliased truth's own error; one sample a
+    pixel (``Sampling()``) is the point-sampled truth's.
     ``picture``, when given, receives the middle building's frames (by height) (``"VIEW truth"``,
     ``"VIEW SAMPLING FILTER"``) for :func:`plot_sampling_picture`.
 
@@ -206,10 +214,15 @@ def run_sampling_bench(
                     size = _ALIGNED_PX if view_name == "aligned" else _BAKED_TEXELS
                     quad_at = corners
                 view = np.asarray(look_at(eye, c), np.float64)
-                mask, truth, fine = sc.frames(oid, eye, view, proj)
+                wanted = [_TRUTH_AA, *((reference, *truth_samples) if truth_samples else ())]
+                mask, truth, smooth = sc.frames(oid, eye, view, proj, wanted)
+                fine = smooth[_TRUTH_AA]
                 if picture is not None and k == len(ids) // 2:
                     picture[f"{view_name} truth"] = truth
                 _add(tally, (view_name, "truth 4x4", "-"), _wrong(truth, fine, mask, ppds))
+                for ts in truth_samples:  # the truth at each sampling against the reference
+                    other = truth if ts.point else smooth[ts]
+                    _add(tally, (view_name, f"truth {ts}", f"vs {reference}"), _wrong(smooth[reference], other, mask, ppds))
                 for sampling in IMPOSTOR_SAMPLINGS:
                     img = ren.render(oid, u, size, sampling)
                     for filt in _FILTERS:
@@ -224,7 +237,7 @@ def run_sampling_bench(
         for name in ("perspective", "minified", "aligned"):
             scenes[name].release()
     order = {v: i for i, v in enumerate(VIEWS)}
-    keys = sorted(tally, key=lambda key: (order[key[0]], key[1] == "truth 4x4", key[1], key[2]))
+    keys = sorted(tally, key=lambda key: (order[key[0]], key[1].startswith("truth"), key[2].startswith("vs"), key[1], key[2]))
     return [
         {"view": v, "sampling": s, "filter": f, "wrong_share": tally[(v, s, f)][0] / max(tally[(v, s, f)][1], 1),
          "pixels": tally[(v, s, f)][1], "buildings": len(ids),

@@ -13,6 +13,7 @@ from typing import Any
 
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.rewrite.pool import SHM_BYTES, RewriteOptions
+from walkstream.client.truth.antialias import POINT, Sampling
 from walkstream.shared.errors import InputError
 
 __all__ = ["STREAM_FORMS", "ReplayConfig"]
@@ -117,6 +118,13 @@ class ReplayConfig:
     """The display's pixels per degree for the truth's viewer-scale (S-CIELAB) colour
     figures (``--viewer-ppd``; None: not measured, as their filtering costs 0.1-1 s a
     compared frame; the view's own is its height over its field of view, 1.81 at 160x120)."""
+    truth_samples: Sampling = POINT
+    """How the truth's colour error samples a pixel of the full scene (``--truth-samples``:
+    N x N supersampled or multisampled, :mod:`walkstream.client.truth.antialias`; by
+    default one sample at its centre); the id comparison stays point-sampled."""
+    picture_samples: Sampling = POINT
+    """How the colour error samples a pixel of the client's picture (``--picture-samples``:
+    a client drawing with a GPU's anti-aliasing); by default one, as the client draws."""
     frame_times: tuple[float, ...] | None = None
     """A recorded frame schedule (``--frame-times``): frame ``k`` takes ``frame_times[k]``
     seconds on the clock instead of the time measured (the ``gl`` device measures

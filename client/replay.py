@@ -395,7 +395,8 @@ async def replay(
                 cache.on_evict = on_evict
             recorder = (  # the one ground truth, at the walk's near and far planes
                 TruthRecorder(config.truth_every, config.size, config.fov_deg, near=near, far=far, ground_z=ground_z,
-                              viewer_ppd=config.viewer_ppd)
+                              viewer_ppd=config.viewer_ppd, truth_samples=config.truth_samples,
+                              picture_samples=config.picture_samples)
                 if config.truth_every
                 else None
             )

@@ -271,6 +271,7 @@ def test_report_shows_the_truth(runs: tuple[ReplayResult, ReplayResult], tmp_pat
     for key in ("mean_error", "visible_pixels", "psnr_db", "delta_e_mean", "causes"):
         assert all(v is not None for v in colour[key].values()), key
     assert colour["causes"]["other"] == 0.0  # the right object at LOD2 is never the wrong colour
+    assert "truth_samples" not in colour and "picture_samples" not in colour  # point-sampled, as always
     # the viewer-scale (S-CIELAB) figures are asked for (--viewer-ppd): none without it
     assert res.truth.log.colour is not None and res.truth.log.colour.visible_scielab is None
     for key in ("viewer_ppd", "visible_scielab_pixels", "delta_e_scielab_mean", "causes_scielab",
@@ -285,13 +286,15 @@ def test_cli_truth_every(every_db: Path, tmp_path: Path, capsys: pytest.CaptureF
     out = tmp_path / "rep"
     t0 = time.perf_counter()
     assert main(["replay", str(every_db), "--device", "desktop2003", "--duration", "3s", "--truth-every", "25",
-                 "--viewer-ppd", "24", "--report", str(out)]) == 0
+                 "--viewer-ppd", "24", "--truth-samples", "2", "--report", str(out)]) == 0
     assert time.perf_counter() - t0 < 120
     report = json.loads((out / "report.json").read_text())
     assert report["truth"]["frames"] == len(range(0, report["frames"], 25))
     # asked for: the viewer-scale (S-CIELAB) figures beside the per-pixel ones
     colour = report["truth"]["colour"]
     assert colour["viewer_ppd"] == 24.0
+    # asked for: the full scene anti-aliased (2 x 2), the client's picture as drawn
+    assert colour["truth_samples"] == "2x2" and colour["picture_samples"] == "1"
     for key in ("visible_scielab_pixels", "delta_e_scielab_mean", "causes_scielab"):
         assert all(v is not None for v in colour[key].values()), key
     assert colour["frames_over_visible_scielab_ratio"] is not None and "visible_scielab" in colour["per_frame"]

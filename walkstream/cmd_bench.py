@@ -20,7 +20,7 @@
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
     walkstream bench portals [--presets paper paper10] [--frames N] [--truth N] [--no-gl] [--out DIR] [--json]
     walkstream bench portals --cull [SEED ...] [--cull-against REV] [--out DIR] [--json]
-    walkstream bench impostor-sampling [SRC] [--buildings 20] [--impostor-error 2] [--ppd 1.81 24] [--against-aa] [--picture p.png] [--json]
+    walkstream bench impostor-sampling [SRC] [--buildings 20] [--impostor-error 2] [--ppd 1.81 24] [--against-aa] [--truth-samples 1 2 4 msaa4 [--reference 8]] [--picture p.png] [--json]
     walkstream bench walls [--scenes hall,city,west-oakland,village] [--wall-errors 5,10,15,20] [--duration 60s]
         [--gl-duration 20s] [--truth-every N] [--size WxH] [--no-gl] [--quick] [--out DIR] [--json]
 
@@ -205,13 +205,16 @@ def cmd_bench_impostor_sampling(args: argparse.Namespace) -> int:
         plot_sampling_picture,
         run_sampling_bench,
     )
+    from walkstream.client.truth.antialias import parse_sampling
     from walkstream.cmd_bake import default_city_source
     from walkstream.cmd_build import load_source
 
     src = args.source or str(default_city_source(Path("out/demo")))
     picture: dict[str, Any] | None = {} if args.picture else None
     rows = run_sampling_bench(load_source(src).buildings, count=args.buildings, error_deg=args.impostor_error,
-                              picture=picture, ppds=args.ppd, against_aa=args.against_aa)
+                              picture=picture, ppds=args.ppd, against_aa=args.against_aa,
+                              truth_samples=[parse_sampling(t) for t in args.truth_samples],
+                              reference=parse_sampling(args.reference, "--reference"))
     print(json.dumps(rows) if args.json else format_sampling_table(rows))
     if picture:
         print(f"picture: {plot_sampling_picture(picture, Path(args.picture))}")
@@ -668,6 +671,8 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--impostor-error", type=float, default=2.0, metavar="A", help="the bound A, degrees, that picks the direction bin of the perspective view (default 2)")
     b.add_argument("--ppd", type=float, nargs="+", default=[1.81, 24.0], metavar="P", help="pixels per degree of the viewer-scale (S-CIELAB) columns (default 1.81, the 160x120 view's own, and 24, a handheld's screen)")
     b.add_argument("--against-aa", action="store_true", help="compare the images with the truth drawn anti-aliased (4x4 samples a pixel, averaged) instead of the truth")
+    b.add_argument("--truth-samples", nargs="+", default=[], metavar="S", help="also the truth drawn at each sampling S (1, N or NxN supersampled, msaaS) against the truth drawn at --reference: the anti-aliased truth's own error, a row per view and S")
+    b.add_argument("--reference", default="8", metavar="S", help="the sampling --truth-samples is compared with (default 8: 8x8 samples a pixel)")
     b.add_argument("--picture", metavar="PNG", help="also draw one building's frames (the middle one by height) and their pixels over the threshold")
     b.add_argument("--json", action="store_true", help="print the rows as JSON")
     b.set_defaults(func=cmd_bench_impostor_sampling)

@@ -95,6 +95,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
     """A :class:`~walkstream.client.config.ReplayConfig` from parsed replay arguments."""
     from walkstream.client.config import ReplayConfig
     from walkstream.client.net.link import LinkProfile
+    from walkstream.client.truth.antialias import parse_sampling
     from walkstream.client.units import parse_bandwidth, parse_duration, parse_size
 
     down = parse_bandwidth(args.bandwidth)
@@ -143,6 +144,8 @@ def config_from_args(args: argparse.Namespace) -> Any:
         gzip=not args.no_gzip,
         truth_every=args.truth_every,
         viewer_ppd=args.viewer_ppd,
+        truth_samples=parse_sampling(args.truth_samples, "--truth-samples"),
+        picture_samples=parse_sampling(args.picture_samples, "--picture-samples"),
         frame_times=_frame_times(args.frame_times) if args.frame_times else None,
         batched_draws=not args.per_object_draws,
         impostors=not args.no_impostors,
@@ -365,6 +368,8 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--frame-times", metavar="REPORT", help="a recorded frame schedule: take each frame's time from an earlier report's frames.csv (its folder or the file) instead of measuring it, so that a gl replay, and the frames --truth-every compares, repeat exactly")
     r.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame with a ground truth (every object at LOD2) after the walk: report.json 'truth', error.png (default 0: never)")
     r.add_argument("--viewer-ppd", type=float, default=None, metavar="P", help="with --truth-every: also measure the colour error at the viewer's scale (S-CIELAB) for a display of P pixels per degree, beside the per-pixel figures (the view's own: its height over its field of view, 1.81 at 160x120; a handheld about 24); off by default, as the filtering costs 0.1-1 s a compared frame")
+    r.add_argument("--truth-samples", default="1", metavar="N", help="with --truth-every: the colour error's full scene anti-aliased, N x N samples a pixel averaged (N 2 to 8, or NxN), or msaaS for S-sample GL multisampling; the id comparison stays point-sampled (default 1: one sample at the pixel centre; costs a second drawing of each compared frame)")
+    r.add_argument("--picture-samples", default="1", metavar="N", help="with --truth-every: the client's picture in the colour error sampled so too (as --truth-samples; a client drawing with a GPU's anti-aliasing; default 1, as the client draws)")
     r.add_argument("--wall-zone-blend", type=float, default=0.5, metavar="Z", help="zone widths around a virtual wall's zone border over which the two zones' textures blend (default 0.5; 0: a hard swap; the seam figure, truth.seam, measures it with --truth-every 1)")
     r.add_argument("--wall-parallax", type=float, default=0.5, metavar="R", help="share of the viewer's offset from a virtual wall zone's sampling line by which its texture slides along the wall (default 0.5: exact for what stands as far behind the wall as the viewer stands before it; 0: the texture fixed on the wall)")
     r.add_argument("--no-walls", action="store_true", help="open every virtual wall on an interior baked with --virtual-walls (geometry only, no texture asked for)")

@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from walkstream.client.report.colour import ColourLog
 from walkstream.client.report.truth import TruthLog
+from walkstream.client.truth.antialias import POINT, Sampling
 from walkstream.client.truth.colour import COLOUR_CAUSES
 from walkstream.client.truth.compare import CAUSES, compare_frame, missing_mask
 from walkstream.client.truth.horizon import below_horizon, horizon_shares
@@ -130,6 +131,8 @@ def missing_figures(
     overlay: Overlay | None = None,
     pop: PopMeter | None = None,
     viewer_ppd: float | None = None,
+    truth_samples: Sampling = POINT,
+    picture_samples: Sampling = POINT,
 ) -> tuple[TruthLog, WorstFrame | None, list[ComparedFrame], ColourWorst | None]:
     """Compare every noted frame with its truth (see the module docstring).
 
@@ -138,7 +141,10 @@ def missing_figures(
     knew none); ``proj`` the client's projection; ``overlay`` the ``impostor`` hook of
     :mod:`walkstream.client.truth.picture`; ``pop`` is fed each frame as the client
     drew it (:mod:`walkstream.client.truth.pop`); ``viewer_ppd`` the display's pixels
-    per degree for the viewer-scale (S-CIELAB) colour figures (None: not measured).  Returns one row per frame (with its
+    per degree for the viewer-scale (S-CIELAB) colour figures (None: not measured);
+    ``truth_samples`` and ``picture_samples`` how the colour error's full scene and
+    client picture sample a pixel (:mod:`walkstream.client.truth.antialias`; the id
+    comparison stays point-sampled either way).  Returns one row per frame (with its
     colour figures), the worst frame by missing pixels (from the first perfect frame
     on first) as images, every frame in detail, and the worst frame by colour error.
     """
@@ -170,7 +176,9 @@ def missing_figures(
             client.draw(keys, st.view, proj)
             c_rgb = client.snapshot()
             c_ids = client.draw_ids(keys, st.view, proj)
-            t_rgb, t_ids = truth.colour_frame(st.eye, st.view, proj, also=[i for i, _, _ in st.drawn])
+            t_rgb, t_ids = truth.colour_frame(st.eye, st.view, proj, also=[i for i, _, _ in st.drawn],
+                                              samples=truth_samples)
+            t_point = t_rgb if truth_samples.point else truth.colour(smooth=False)  # the id comparison's
             if st.impostors or st.wall_quads:  # a building drawn as its image shows where the image painted
                 client.impostors = list(st.facades)
                 client.draw(keys, st.view, proj)
@@ -186,7 +194,7 @@ def missing_figures(
                 fogged = _beyond(ts, st.eye, st.fog)
             err = compare_frame(
                 t_ids,
-                t_rgb,
+                t_point,
                 c_ids,
                 c_rgb,
                 pvs=pvs,
@@ -212,10 +220,10 @@ def missing_figures(
             if key > worst_key:
                 worst_key = key
                 worst = WorstFrame(
-                    st.frame, st.t, share, err.differing / err.pixels, c_rgb, t_rgb,
-                    missing_mask(t_rgb, err.cause),
+                    st.frame, st.t, share, err.differing / err.pixels, c_rgb, t_point,
+                    missing_mask(t_point, err.cause),
                 )
-            cerr, pic = colour_error(truth, st, t_rgb, err.cause, proj, overlay, ppd)
+            cerr, pic = colour_error(truth, st, t_rgb, err.cause, proj, overlay, ppd, picture_samples)
             colour_rows.append((cerr.mean_error, cerr.delta_e_mean, cerr.visible_share, cerr.psnr_db, cerr.cause_shares,
                                 cerr.error_shares, cerr.scielab_delta_e_mean, cerr.scielab_visible_share,
                                 cerr.scielab_cause_shares))

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.client.truth.antialias import Sampling
 from walkstream.client.truth.colour import ColourError, compare_colour, pixels_per_degree
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.render import TruthRenderer, form_key, object_key
@@ -66,15 +67,19 @@ def forms_of(notes: Iterable[FrameNote]) -> dict[tuple[int, int], Mesh]:
 
 
 def client_picture(
-    truth: TruthRenderer, note: FrameNote, proj: ArrayLike | None = None, overlay: Overlay | None = None
+    truth: TruthRenderer, note: FrameNote, proj: ArrayLike | None = None, overlay: Overlay | None = None,
+    samples: Sampling | None = None,
 ) -> ClientPicture:
     """Draw the objects ``note`` says the client drew, each at its LOD, from its camera and at its fog.
 
     ``truth`` must hold the coarser forms the note drew (``forms=forms_of(notes)``);
     objects it lacks are left out, as :meth:`TruthRenderer.colour_frame` leaves them.
+    ``samples``: the picture's colour anti-aliased so (a client drawing with a GPU's
+    anti-aliasing; :mod:`walkstream.client.truth.antialias`); None: point-sampled, as
+    the client draws.  Its ids and masks stay point-sampled.
     """
     keys = [object_key(i) if lod >= 2 else form_key(i, lod) for i, lod, _ in note.drawn]
-    idx, _ = truth.render(note.eye, note.view, truth.flags(keys), note.fog, proj=proj)
+    idx, _ = truth.render(note.eye, note.view, truth.flags(keys), note.fog, proj=proj, samples=samples)
     rgb = truth.colour()
     lods = truth.lods(idx)
     coarse = (lods >= 0) & (lods < 2)
@@ -90,6 +95,7 @@ def colour_error(
     proj: ArrayLike | None = None,
     overlay: Overlay | None = None,
     ppd: float | None = None,
+    samples: Sampling | None = None,
 ) -> tuple[ColourError, ClientPicture]:
     """The colour error of one compared frame: its client picture against the full scene ``truth_rgb``.
 
@@ -97,8 +103,9 @@ def colour_error(
     (:attr:`~walkstream.client.truth.compare.FrameError.cause`).  The viewer-scale
     (S-CIELAB) figures are measured at ``ppd`` pixels per degree (the view's own is
     :func:`view_ppd`); None: not measured (their filtering costs 0.1-1 s a frame).
+    ``samples`` is the client picture's sampling (:func:`client_picture`).
     """
-    pic = client_picture(truth, note, proj, overlay)
+    pic = client_picture(truth, note, proj, overlay, samples)
     err = compare_colour(truth_rgb, pic.rgb, id_cause=id_cause, coarse=pic.coarse, stand_in=pic.stand_in, ppd=ppd)
     return err, pic
 

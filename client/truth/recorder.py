@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.report.colour import ColourLog, summarise_colour
 from walkstream.client.report.truth import TruthLog, summarise_truth
+from walkstream.client.truth.antialias import POINT, Sampling
 from walkstream.client.truth.culled import (
     CROSSING_FIGURES,
     INTERIOR_FIGURES,
@@ -153,6 +154,11 @@ class TruthRecorder:
         The display's pixels per degree of a city's viewer-scale (S-CIELAB) colour
         figures (``--viewer-ppd``; the view's own is
         :func:`~walkstream.client.truth.picture.view_ppd`); None: not measured.
+    truth_samples, picture_samples : Sampling
+        How a city's colour error samples a pixel of the full scene (``--truth-samples``)
+        and of the client's picture (``--picture-samples``)
+        (:mod:`walkstream.client.truth.antialias`); one sample at the centre by default.
+        The id comparison, and a walk with rooms, stay point-sampled.
     """
 
     def __init__(
@@ -166,6 +172,8 @@ class TruthRecorder:
         view_distance: float = TRUTH_VIEW_DISTANCE,
         ground_z: float | None = None,
         viewer_ppd: float | None = None,
+        truth_samples: Sampling = POINT,
+        picture_samples: Sampling = POINT,
     ) -> None:
         if int(every) < 1:
             raise InputError(f"--truth-every {every}: expected a frame count >= 1")
@@ -177,6 +185,10 @@ class TruthRecorder:
         self.ground_z = None if ground_z is None else float(ground_z)
         self.viewer_ppd = None if viewer_ppd is None else float(viewer_ppd)
         """The display's pixels per degree of the viewer-scale colour figures (None: not measured)."""
+        self.truth_samples = truth_samples
+        """How a city's colour error samples the full scene's pixels."""
+        self.picture_samples = picture_samples
+        """How a city's colour error samples the client picture's pixels."""
         self.notes: list[FrameNote] = []
         self.overlay: Overlay | None = None
         """The ``impostor`` hook of the colour error (:mod:`walkstream.client.truth.picture`):
@@ -329,9 +341,14 @@ class TruthRecorder:
                     overlay = impostor_overlay(truth, self.proj)
                 pop = PopMeter() if any(st.impostors for st in self.notes) else None
                 log, worst, frames, cworst = missing_figures(
-                    ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, overlay, pop, self.viewer_ppd
+                    ts, truth, self.notes, pvs_of, self.proj, t_first_perfect, progress, overlay, pop, self.viewer_ppd,
+                    self.truth_samples, self.picture_samples,
                 )
                 figures = summarise_truth(log, t_first_perfect)
+                aa = not (self.truth_samples.point and self.picture_samples.point)
+                if aa and isinstance(figures.get("colour"), dict):  # which sampling the colour figures are of
+                    figures["colour"]["truth_samples"] = str(self.truth_samples)
+                    figures["colour"]["picture_samples"] = str(self.picture_samples)
                 if pop is not None:
                     figures["pop"] = summarise_pop(pop)
                 figures["below_horizon"] = horizon_figures(f.below for f in frames)

@@ -31,6 +31,12 @@ light and palette as the full scene and the two differ only where the client's c
 of forms makes them differ (:mod:`walkstream.client.truth.picture`, the colour error of
 :mod:`walkstream.client.truth.colour`).
 
+Anti-aliased colour (``samples`` of :meth:`TruthRenderer.render`, a
+:class:`~walkstream.client.truth.antialias.Sampling`): the frame's colour drawn again into
+an N x N supersampled or multisampled target and resolved to the frame size
+(:mod:`walkstream.client.truth.antialias`); its key indices and depths stay point-sampled.
+By default one sample a pixel, at its centre, as always.
+
 Under a scene with outdoor space (``ground_z``) the truth draws the ground plane of
 :mod:`walkstream.shared.ground` first, depth test off, key 0 (nothing): it changes the
 colour below the horizon from the sky's to the ground's and no key of any pixel.
@@ -50,6 +56,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.draw.meshes import AMBIENT, BACKGROUND_RGB, LIGHT_DIRECTION
+from walkstream.client.truth.antialias import Sampling, SmoothTarget
 from walkstream.shared.camera import mat4_bytes, perspective
 from walkstream.shared.codec.cellmesh import CellMesh, flat_normals
 from walkstream.shared.errors import InputError, RenderError
@@ -186,6 +193,8 @@ class TruthRenderer(Releasable):
             raise InputError(f"TruthRenderer.view_distance: expected > 0, got {view_distance}")
         self.size = (w, h)
         self._quads: QuadRenderer | None = None
+        self._smooth: dict[Sampling, SmoothTarget] = {}
+        self._shown: SmoothTarget | None = None  # where the last frame's colour is (None: the point-sampled one)
         self.near, self.far = float(near), float(far)
         self.proj = perspective(fov_deg, w / h, near, far).astype(np.float64)
         self.view_distance = float(view_distance)
@@ -368,6 +377,7 @@ class TruthRenderer(Releasable):
         fog_m: float = math.inf,
         *,
         proj: ArrayLike | None = None,
+        samples: Sampling | None = None,
     ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         """Draw the keys (all, or those flagged in ``only``) from one camera.
 
@@ -384,6 +394,10 @@ class TruthRenderer(Releasable):
             Fragments farther from the eye are not drawn.
         proj : (4, 4) float, optional
             The projection (default: the renderer's).
+        samples : Sampling, optional
+            The colour's sampling (:mod:`walkstream.client.truth.antialias`); None or
+            one sample: point-sampled.  Anti-aliased, the frame is drawn a second time
+            into its target, and :meth:`colour` and :meth:`paint_quads` use that one.
 
         Returns
         -------
@@ -396,7 +410,6 @@ class TruthRenderer(Releasable):
         """
         if self.ctx is None:
             raise RenderError("TruthRenderer: used after release()")
-        import moderngl
 
         ctx = self.ctx
         p = self.proj if proj is None else np.asarray(proj, np.float64)
@@ -410,26 +423,21 @@ class TruthRenderer(Releasable):
         self._fbo_ids.clear(0.0, 0.0, 0.0, 0.0)
         self._fbo.use()
         ctx.viewport = (0, 0, w, h)
-        ctx.disable(moderngl.BLEND)
-        if self.ground_z is not None:
-            self._draw_ground(eye, p)
-        if self.two_sided:
-            ctx.enable(moderngl.DEPTH_TEST)
-            ctx.disable(moderngl.CULL_FACE)
-        else:
-            ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-            ctx.front_face = "ccw"
-            ctx.cull_face = "back"
-        ctx.depth_func = "<"
         if only is None:  # the full scene: every object at LOD2 and every room part, no coarser form
             flags = np.zeros(len(self.keys), bool)
             flags[: self._forms0] = True
         else:
             flags = np.asarray(only, bool)
-        for s, t in self._runs(flags):
-            first, last = int(self._first[s]), int(self._stop[t - 1])
-            if last > first:
-                self._vao.render(moderngl.TRIANGLES, vertices=last - first, first=first)
+        runs = self._runs(flags)
+        self._draw(eye, p, runs)
+        self._shown = None
+        if samples is not None and not samples.point:
+            target = self._smooth.get(samples)
+            if target is None:
+                target = self._smooth[samples] = SmoothTarget(ctx, self.size, samples)
+            target.clear((r, g, b))
+            self._draw(eye, p, runs)
+            self._shown = target
         check_gl_error(ctx, "after drawing a truth frame")
         raw = self._fbo.read(components=1, attachment=1, dtype="u4", alignment=1)
         ids = np.frombuffer(raw, np.uint32).reshape(h, w)[::-1].astype(np.int64) - 1
@@ -440,6 +448,27 @@ class TruthRenderer(Releasable):
         ndc = 2.0 * d - 1.0
         lin = np.where(d >= 1.0, np.inf, 2.0 * n * f / (f + n - ndc * (f - n)))
         return ids, lin.reshape(h, w)[::-1]
+
+    def _draw(self, eye: ArrayLike, proj: NDArray[np.float64], runs: list[tuple[int, int]]) -> None:
+        """Draw the ground and the key runs ``runs`` into the bound framebuffer."""
+        import moderngl
+
+        ctx = self.ctx
+        ctx.disable(moderngl.BLEND)
+        if self.ground_z is not None:
+            self._draw_ground(eye, proj)
+        if self.two_sided:
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.disable(moderngl.CULL_FACE)
+        else:
+            ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+            ctx.front_face = "ccw"
+            ctx.cull_face = "back"
+        ctx.depth_func = "<"
+        for s, t in runs:
+            first, last = int(self._first[s]), int(self._stop[t - 1])
+            if last > first:
+                self._vao.render(moderngl.TRIANGLES, vertices=last - first, first=first)
 
     def _runs(self, flags: NDArray[np.bool_]) -> list[tuple[int, int]]:
         """``(start, stop)`` runs of key indices to draw, in draw order."""
@@ -472,16 +501,21 @@ class TruthRenderer(Releasable):
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         self._ground_vao.render(moderngl.TRIANGLES)
 
-    def colour(self) -> NDArray[np.uint8]:
-        """``(h, w, 3)`` the lit colour of the last frame drawn, row 0 at the top."""
+    def colour(self, *, smooth: bool = True) -> NDArray[np.uint8]:
+        """``(h, w, 3)`` the lit colour of the last frame drawn, row 0 at the top: anti-aliased
+        when it was drawn so, unless ``smooth`` is False (its point-sampled colour, as
+        drawn before any :meth:`paint_quads`)."""
         if self.ctx is None:
             raise RenderError("TruthRenderer: used after release()")
+        if self._shown is not None and smooth:
+            return self._shown.colour()
         w, h = self.size
         raw = self._fbo.read(components=3, attachment=0, alignment=1)
         return np.frombuffer(raw, np.uint8).reshape(h, w, 3)[::-1].copy()
 
     def colour_frame(
-        self, eye: ArrayLike, view: ArrayLike, proj: ArrayLike | None = None, *, also: Iterable[int] = ()
+        self, eye: ArrayLike, view: ArrayLike, proj: ArrayLike | None = None, *, also: Iterable[int] = (),
+        samples: Sampling | None = None,
     ) -> tuple[NDArray[np.uint8], NDArray[np.uint32]]:
         """The city's truth of one camera: every object within the view distance, and ``also``.
 
@@ -494,6 +528,8 @@ class TruthRenderer(Releasable):
         also : ints
             Objects to draw wherever they are (those the client drew), so that the
             truth never lacks a surface the client's frame shows.
+        samples : Sampling, optional
+            The colour's sampling (:meth:`render`); the ids stay point-sampled.
 
         Returns
         -------
@@ -508,14 +544,15 @@ class TruthRenderer(Releasable):
         if len(extra) and len(self.ids):
             pos = np.clip(np.searchsorted(self.ids, extra), 0, len(self.ids) - 1)
             draw[pos[self.ids[pos] == extra]] = True
-        ids, _ = self.render(eye, view, draw, proj=proj)
+        ids, _ = self.render(eye, view, draw, proj=proj, samples=samples)
         return self.colour(), self.object_ids(ids)
 
     def paint_quads(
         self, quads: Sequence[Quad], view: ArrayLike, proj: ArrayLike | None = None, image_filter: int | None = None
     ) -> NDArray[np.uint8]:
         """Draw textured ``quads`` over the last frame drawn (its depth tested, not written;
-        premultiplied blend, as the client draws impostors) and return the colour, row 0 at the top.
+        premultiplied blend, as the client draws impostors) and return the colour, row 0 at the top
+        (into the anti-aliased target when the last frame was drawn anti-aliased).
         ``image_filter`` overrides the client's minifying filter of impostor images
         (:class:`~walkstream.client.draw.quads.QuadRenderer`; benchmarks compare them)."""
         if self.ctx is None:
@@ -527,7 +564,10 @@ class TruthRenderer(Releasable):
             self._quads = None
         if self._quads is None:
             self._quads = QuadRenderer(self.ctx, image_filter)
-        self._fbo_colour.use()
+        if self._shown is not None:
+            self._shown.use()
+        else:
+            self._fbo_colour.use()
         p = self.proj if proj is None else proj
         self._quads.draw(quads, np.asarray(p, np.float64) @ np.asarray(view, np.float64))
         return self.colour()
@@ -537,5 +577,9 @@ class TruthRenderer(Releasable):
         if self._quads is not None:
             self._quads.release()
             self._quads = None
+        for target in self._smooth.values():
+            target.release()
+        self._smooth.clear()
+        self._shown = None
         release_objects(self.ctx, self._gl, self._own_ctx)
         self.ctx = None
