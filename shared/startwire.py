@@ -23,8 +23,8 @@ from walkstream.shared.errors import CodecError
 
 __all__ = ["START_PARTS", "START_MAX_TEXTURES", "decode_start_part"]
 
-START_PARTS: tuple[str, ...] = ("pathhead", "path", "topology", "walls", "walltex", "contents", "cell", "index",
-                                "manifest", "objects", "boxes")
+START_PARTS: tuple[str, ...] = ("pathhead", "path", "topology", "walls", "walltex", "contents", "cell", "record",
+                                "index", "manifest", "objects", "boxes")
 """What a start bundle may hold, in the order the service sends it (an interior's
 ``pathhead``, when asked, in place of ``path``; ``walls`` and ``walltex``, when asked,
 on an interior)."""

@@ -171,3 +171,22 @@ def test_a_box_sent_holds_what_the_client_rebuilds(small_city_db: Path) -> None:
     for k, oid in enumerate(boxes.ids.tolist()):
         g = rebuild(oid, params[oid], grammar)
         assert np.all(boxes.lo[k] <= g.bbox_min) and np.all(boxes.hi[k] >= g.bbox_max), (oid, info[oid].kind)
+
+
+@pytest.mark.parametrize("query", ["path=drive", "path=drive&view=640x480&heads=true"])
+def test_a_record_whose_objects_the_bundle_does_not_bring_says_so(small_city_db: Path, query: str) -> None:
+    """The bundle's records reach further than its objects (the cells of the next seconds
+    after the first three): those records come as ``record`` parts, so that the client
+    asks for their objects itself instead of waiting for a bundle that never brings them."""
+    app = create_app([small_city_db])
+    try:
+        parts = _bundle(app, f"/v1/start?{query}")
+    finally:
+        app.state.scenes.close()
+    brought = {b for n, b in parts if n == "object"}
+    recs = {n: [decode_cell(b, n) for p, b in parts if p == n] for n in ("cell", "record")}
+    assert recs["cell"] and recs["record"]  # at 50 km/h the records reach past the objects
+    for rec in recs["cell"]:
+        assert set(rec.pvs.tolist()) <= brought  # a cell part: all its objects come
+    for rec in recs["record"]:
+        assert not set(rec.pvs.tolist()) <= brought  # a record part: some never come

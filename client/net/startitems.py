@@ -136,8 +136,8 @@ class StartDecoder:
             return "topology", replace(dec(body, label), nbytes=nbytes)
         if part == "walls":
             return "walls", (decode_walls(body, label), nbytes)
-        if part == "cell":
-            return "cell", replace(decode_cell(body, label, etag), nbytes=nbytes)
+        if part in ("cell", "record"):  # a record: the bundle does not bring all the cell's objects
+            return part, replace(decode_cell(body, label, etag), nbytes=nbytes)
         if part == "index":
             return "index", replace(decode_cell_index(body, label, etag), nbytes=nbytes)
         if part == "boxes":

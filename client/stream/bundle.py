@@ -172,10 +172,13 @@ class StartBundle:
                 elif part == "index":
                     st.stats.bundle_bytes += item.nbytes
                     st.add_index(item)
-                elif part == "cell":
+                elif part in ("cell", "record"):
                     st.stats.bundle_bytes += item.nbytes
                     self.start.located(item.id)
                     st.add_cell(item)
+                    if part == "record":
+                        st.replan()
+                        continue  # its objects do not all come in the bundle: the streamer asks for them
                     ids = {i for i in item.pvs.tolist() if not st.has_object(i)} - self.ids
                     self.ids |= ids
                     st.expect(ids)
