@@ -11,6 +11,9 @@ start part
     ``walls=true``) is ``{part, etag: null, textures: [ids]}`` followed by one part
     ``{cell: texture id, etag, body}`` per texture, as the wall textures' batch sends
     them; the ``walls`` part's body is what ``GET .../walls`` sends (every wall side).
+    A city's cell record comes as a ``cell`` part when the bundle's objects hold its
+    whole PVS, as a ``record`` part (the same body) when they do not: the client then
+    does not wait for the bundle to bring that cell's objects.
 """
 
 from __future__ import annotations

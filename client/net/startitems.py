@@ -31,7 +31,8 @@ __all__ = ["StartDecoder", "StartItem", "contents_part"]
 StartItem = tuple[str, Any]
 """One item of a start bundle as :meth:`~walkstream.client.net.api.SceneClient.start`
 yields it: ``("path", (RecordedPath, nbytes))`` (and ``("pathhead", ...)``, the path's
-first seconds, when asked), ``("cell", CellRecord)``, ``("index", CellIndex)``,
+first seconds, when asked), ``("cell", CellRecord)`` (``("record", CellRecord)`` for
+a cell whose objects the bundle does not all bring), ``("index", CellIndex)``,
 ``("topology", Topology)`` (interiors), ``("manifest", (Manifest, nbytes))``,
 ``("objects", count)`` (the PVS objects that follow), ``("object", ObjectFrame)``,
 ``("boxes", ObjectBoxes)`` (a city's first view), ``("contents", [cell ids])`` (interiors: the contents that follow) or ``("room", (cell

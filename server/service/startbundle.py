@@ -200,7 +200,8 @@ def start_parts(
     with them; outside every cell, the tiles that may hold cells near ``xy``),
     the manifest, then the objects of the PVS of the cells of the first
     :data:`START_LEAD_S`: the first cell's by ACH (highest first), then each
-    next cell's new ones.  Reads the database on cache misses: call it
+    next cell's new ones.  A record whose PVS those objects do not all hold comes as
+    a ``record`` part (:func:`_record_part`), the others as ``cell`` parts.  Reads the database on cache misses: call it
     from a worker thread.
 
     An interior's bundle is the path, the topology, then (for a path and a client
