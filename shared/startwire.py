@@ -11,6 +11,9 @@ start part
     ``walls=true``) is ``{part, etag: null, textures: [ids]}`` followed by one part
     ``{cell: texture id, etag, body}`` per texture, as the wall textures' batch sends
     them; the ``walls`` part's body is what ``GET .../walls`` sends (every wall side).
+    A city's cell record comes as a ``cell`` part when the bundle's objects hold its
+    whole PVS, as a ``record`` part (the same body) when they do not: the client then
+    does not wait for the bundle to bring that cell's objects.
 """
 
 from __future__ import annotations
@@ -23,8 +26,8 @@ from walkstream.shared.errors import CodecError
 
 __all__ = ["START_PARTS", "START_MAX_TEXTURES", "decode_start_part"]
 
-START_PARTS: tuple[str, ...] = ("pathhead", "path", "topology", "walls", "walltex", "contents", "cell", "index",
-                                "manifest", "objects", "boxes")
+START_PARTS: tuple[str, ...] = ("pathhead", "path", "topology", "walls", "walltex", "contents", "cell", "record",
+                                "index", "manifest", "objects", "boxes")
 """What a start bundle may hold, in the order the service sends it (an interior's
 ``pathhead``, when asked, in place of ``path``, and with ``pose`` a second ``pathhead``
 among the contents' frames, after the first pose's view; ``walls`` and ``walltex``, when

@@ -311,21 +311,26 @@ def test_start_bundle_brings_everything_for_the_first_frame(client: Client, city
     assert any(here in t.ids.tolist() for t in tiles)
     # moving fast along the street: the cells ahead come too, in the order entered
     ahead = _bundle(client.get(f"/v1/start?x={x!r}&y={y!r}&heading=0&speed=15"))
-    ahead_cells = [decode_cell(b, "cell").id for p, b in ahead if p == "cell"]
+    ahead_cells = [decode_cell(b, "cell").id for p, b in ahead if p in ("cell", "record")]
     assert ahead_cells[0] == here and len(ahead_cells) > 1
     # the records reach further than the objects (START_RECORD_LEAD_S), each cell's
     # index tile comes with it and no other, all before the manifest and the objects
-    recs = {c.id: c for c in (decode_cell(b, "cell") for p, b in ahead if p == "cell")}
+    recs = {c.id: c for c in (decode_cell(b, "cell") for p, b in ahead if p in ("cell", "record"))}
     got = [o["id"] for p, o in ahead if p == "object"]
     # the objects are those of a prefix of the cells (the last ones' may not come)
     assert any(set(got) == {int(i) for c in ahead_cells[:k] for i in recs[c].pvs}
                for k in range(1, len(ahead_cells) + 1))
+    # a record whose objects do not all come is a ``record`` part, so that the client
+    # does not wait for them; one whose objects all come a ``cell`` part
+    kinds = {decode_cell(b, "cell").id: p for p, b in ahead if p in ("cell", "record")}
+    for cid, p in kinds.items():
+        assert ({int(i) for i in recs[cid].pvs} <= set(got)) == (p == "cell"), (cid, p)
     tiles_ahead = [decode_cell_index(b, "tile") for p, b in ahead if p == "index"]
     held = {i for t in tiles_ahead for i in t.ids.tolist()}
     assert set(ahead_cells) <= held
     assert all(set(t.ids.tolist()) & set(ahead_cells) for t in tiles_ahead)
     names_ahead = [p for p, _ in ahead]
-    assert names_ahead.index("manifest") > max(i for i, p in enumerate(names_ahead) if p in ("cell", "index"))
+    assert names_ahead.index("manifest") > max(i for i, p in enumerate(names_ahead) if p in ("cell", "record", "index"))
     # a path: the path first (the walk can start), from its own start (here outside
     # every cell: no cell, no objects)
     by_path = _bundle(client.get(f"/v1/start?path={PATH_NAME}"))

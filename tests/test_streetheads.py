@@ -16,8 +16,11 @@ import numpy as np
 import pytest
 
 from walkstream.cli import main
+from walkstream.client.clock import SimClock
+from walkstream.client.net.api import SceneClient
 from walkstream.client.rewrite.geometry import rebuild
 from walkstream.client.stream.cache import Cache
+from walkstream.client.stream.streamer import Streamer, StreamerConfig
 from walkstream.client.walk.measure import unseen_stand_ins
 from walkstream.server.service.main import create_app
 from walkstream.server.service.streetheads import object_boxes_body
@@ -171,3 +174,51 @@ def test_a_box_sent_holds_what_the_client_rebuilds(small_city_db: Path) -> None:
     for k, oid in enumerate(boxes.ids.tolist()):
         g = rebuild(oid, params[oid], grammar)
         assert np.all(boxes.lo[k] <= g.bbox_min) and np.all(boxes.hi[k] >= g.bbox_max), (oid, info[oid].kind)
+
+
+@pytest.mark.parametrize("query", ["path=drive", "path=drive&view=640x480&heads=true"])
+def test_a_record_whose_objects_the_bundle_does_not_bring_says_so(small_city_db: Path, query: str) -> None:
+    """The bundle's records reach further than its objects (the cells of the next seconds
+    after the first three): those records come as ``record`` parts, so that the client
+    asks for their objects itself instead of waiting for a bundle that never brings them."""
+    app = create_app([small_city_db])
+    try:
+        parts = _bundle(app, f"/v1/start?{query}")
+    finally:
+        app.state.scenes.close()
+    brought = {b for n, b in parts if n == "object"}
+    recs = {n: [decode_cell(b, n) for p, b in parts if p == n] for n in ("cell", "record")}
+    assert recs["cell"] and recs["record"]  # at 50 km/h the records reach past the objects
+    for rec in recs["cell"]:
+        assert set(rec.pvs.tolist()) <= brought  # a cell part: all its objects come
+    for rec in recs["record"]:
+        assert not set(rec.pvs.tolist()) <= brought  # a record part: some never come
+
+
+def test_the_client_holds_as_coming_only_what_the_bundle_brings(small_city_db: Path) -> None:
+    """While the bundle runs, the objects it is expected to bring count as in flight (the
+    streamer does not ask for them); those of a ``record`` part's cell are not among them,
+    so the streamer asks for them by their need time instead of waiting for the bundle's end."""
+    app = create_app([small_city_db])
+    brought = {b for n, b in _bundle(app, "/v1/start?path=drive") if n == "object"}
+
+    async def go() -> set[int]:
+        clock = SimClock()
+        async with httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://t") as http:
+            st = Streamer(SceneClient(http, clock, "city"), clock, Cache(64 << 20), StreamerConfig())
+            coming: list[set[int]] = []
+
+            def at_manifest(_m: object) -> None:  # every record is in, no object yet (the plain order)
+                assert st.start_feed.bundle is not None
+                coming.append(set(st.start_feed.bundle.ids))
+
+            task = st.start_feed.start_bundle("drive", lambda _p, _n: None, at_manifest, lambda _e: None)
+            await task
+            await st.close()
+            return coming[0]
+
+    try:
+        coming = asyncio.run(go())
+    finally:
+        app.state.scenes.close()
+    assert coming == brought  # all of it comes, and nothing else is waited for

@@ -31,7 +31,8 @@ __all__ = ["StartDecoder", "StartItem", "contents_part"]
 StartItem = tuple[str, Any]
 """One item of a start bundle as :meth:`~walkstream.client.net.api.SceneClient.start`
 yields it: ``("path", (RecordedPath, nbytes))`` (and ``("pathhead", ...)``, the path's
-first seconds, when asked), ``("cell", CellRecord)``, ``("index", CellIndex)``,
+first seconds, when asked), ``("cell", CellRecord)`` (``("record", CellRecord)`` for
+a cell whose objects the bundle does not all bring), ``("index", CellIndex)``,
 ``("topology", Topology)`` (interiors), ``("manifest", (Manifest, nbytes))``,
 ``("objects", count)`` (the PVS objects that follow), ``("object", ObjectFrame)``,
 ``("boxes", ObjectBoxes)`` (a city's first view), ``("contents", [cell ids])`` (interiors: the contents that follow) or ``("room", (cell
@@ -138,8 +139,8 @@ class StartDecoder:
             return "topology", replace(dec(body, label), nbytes=nbytes)
         if part == "walls":
             return "walls", (decode_walls(body, label), nbytes)
-        if part == "cell":
-            return "cell", replace(decode_cell(body, label, etag), nbytes=nbytes)
+        if part in ("cell", "record"):  # a record: the bundle does not bring all the cell's objects
+            return part, replace(decode_cell(body, label, etag), nbytes=nbytes)
         if part == "index":
             return "index", replace(decode_cell_index(body, label, etag), nbytes=nbytes)
         if part == "boxes":

@@ -8,7 +8,10 @@ they arrive: the path to
 the replay (the walk starts), the cell records and index tiles to the streamer
 (the viewer is tracked from the first frame), the manifest to the replay (the
 grammar lets rewriting start), the objects to the cache.  While it runs, the
-objects of the cells it brought count as in flight, so nobody asks for them twice;
+objects of the cells it brought as ``cell`` parts count as in flight, so nobody asks
+for them twice (a ``record`` part's cell -- one beyond the bundle's first seconds --
+does not: the bundle does not bring all its objects, and on a slow link it ends seconds
+after the walk reached that cell, so the streamer asks for them by their need time);
 and the bytes it is still expected to bring count against the link, so that other
 requests queue behind it instead of slowing it down.  When the manifest says the
 disk cache holds this scene version and it holds the objects still to come, the
@@ -179,10 +182,13 @@ class StartBundle:
                 elif part == "index":
                     st.stats.bundle_bytes += item.nbytes
                     st.add_index(item)
-                elif part == "cell":
+                elif part in ("cell", "record"):
                     st.stats.bundle_bytes += item.nbytes
                     self.start.located(item.id)
                     st.add_cell(item)
+                    if part == "record":
+                        st.replan()
+                        continue  # its objects do not all come in the bundle: the streamer asks for them
                     ids = {i for i in item.pvs.tolist() if not st.has_object(i)} - self.ids
                     self.ids |= ids
                     st.expect(ids)

@@ -202,7 +202,7 @@ class CellIndexOut(BaseModel):
 class StartPartOut(BaseModel):
     """One part of a start bundle: the body its own endpoint sends, with that body's ETag."""
 
-    part: str = Field(description="pathhead (interiors, asked with head), path, topology (interiors), contents (interiors), cell, index, manifest or objects")
+    part: str = Field(description="pathhead (interiors, asked with head), path, topology (interiors), contents (interiors), cell, record (a cell record whose objects the bundle does not all bring), index, manifest or objects")
     etag: str | None
     body: Any = Field(description="msgpack: the body's bytes; JSON: the body's JSON form")
 

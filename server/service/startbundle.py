@@ -202,7 +202,8 @@ def start_parts(
     with them; outside every cell, the tiles that may hold cells near ``xy``),
     the manifest, then the objects of the PVS of the cells of the first
     :data:`START_LEAD_S`: the first cell's by ACH (highest first), then each
-    next cell's new ones.  Reads the database on cache misses: call it
+    next cell's new ones.  A record whose PVS those objects do not all hold comes as
+    a ``record`` part (:func:`_record_part`), the others as ``cell`` parts.  Reads the database on cache misses: call it
     from a worker thread.
 
     An interior's bundle is the path, the topology, then (for a path and a client
@@ -270,8 +271,10 @@ def start_parts(
     # asks for when it needs them), then the manifest (its grammar rebuilds the
     # objects), then the objects of the cells reached within START_LEAD_S
     sent: set[tuple[int, int]] = set()
+    order = _objects_of(scene, with_objects)
+    brought = set(order)
     for cid in cells:
-        parts.append(("cell", scene.cell(cid, rep)))
+        parts.append((_record_part(scene, cid, brought), scene.cell(cid, rep)))
         tile = scene.cell_tile[cid]
         if tile not in sent:
             sent.add(tile)
@@ -279,10 +282,19 @@ def start_parts(
     if not cells:  # outside every cell: the tiles that may hold cells near the start
         parts += [("index", scene.index(t, rep)) for _d, t in scene.grid.tiles_near(xy)]
     parts.append(("manifest", scene.manifest[rep]))
-    order = _objects_of(scene, with_objects)
     if order:
         parts.append(_objects_part(scene, order, form))
     return parts
+
+
+def _record_part(scene: Scene, cid: int, brought: set[int]) -> str:
+    """The part name of cell ``cid``'s record in a bundle that brings the objects
+    ``brought``: ``cell`` when they hold its whole PVS, else ``record`` (the client
+    then does not wait for the bundle to bring its objects: the records of the cells
+    beyond :data:`START_LEAD_S` come without them, and on a slow link the bundle can
+    take seconds longer than the walk takes to reach them)."""
+    pvs = scene.reader.cell(cid).pvs.tolist()
+    return "cell" if brought.issuperset(int(i) for i in pvs) else "record"
 
 
 def _objects_of(scene: Scene, cells: list[int], seen: set[int] | None = None) -> list[int]:
@@ -319,14 +331,16 @@ def _first_view_parts(scene: Scene, path: str, view: RoomView, cells: list[int],
         ring = first_rings(scene, RecordedPath.from_msgpack(scene.path(path, "msgpack").content, f"path {path!r}"),
                            view, START_LEAD_S)
     placed = False
-    for name, what in first_view_plan(scene, path, view, START_LEAD_S, cells, with_objects):
+    plan = first_view_plan(scene, path, view, START_LEAD_S, cells, with_objects)
+    brought = {int(i) for name, what in plan if name == "objects" for i in what}
+    for name, what in plan:
         if ring is not None and not placed and name != "objects" and any(p[0] == "objects" for p in parts):
             placed = True  # after the first view's objects: the rings and the first pose's textures
             parts.append(("walls", ring[0]))
             if ring[1]:
                 parts.append(("walltex", _textures(scene, ring[1])))
         if name == "cell":
-            parts.append(("cell", scene.cell(what, "msgpack")))
+            parts.append((_record_part(scene, what, brought), scene.cell(what, "msgpack")))
         elif name == "index":
             parts.append(("index", scene.index(what, "msgpack")))
         elif name == "manifest":

@@ -15,7 +15,8 @@ it had asked for it):
    radians counter-clockwise from +x and ``speed`` in m/s; a path gives its own
    start heading and speed, a viewpoint its yaw and standing still), and those of
    the cells reached in :data:`~walkstream.server.service.startbundle.START_RECORD_LEAD_S`
-   more (records only);
+   more (records only); a record whose PVS the bundle's objects do not all hold comes
+   as a ``record`` part instead (the same body), so that the client asks for the rest;
 3. ``index`` -- after each cell, the index tile holding it (when not sent yet); outside
    every cell, the tiles that may hold cells near the start;
 4. ``manifest`` -- the scene manifest (its grammar rebuilds the objects);
