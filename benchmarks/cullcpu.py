@@ -10,6 +10,9 @@ frames:
   at 640x480 from a corner, the view swept from 30 to 60 degrees so that 200-236
   cells are visible; each cell holds :data:`HALL_PARTS` part boxes (floor, ceiling and
   furniture at fixed random places), so the parts culling tests a few thousand boxes;
+- ``hall walk``: the same hall walked at 1.4 m/s and 25 frames a second from the
+  corner along the diagonal (5.6 cm a frame), the view swept likewise, from the
+  cell the eye stands in: consecutive frames as a walker makes them;
 - ``seed S``: the tour of the generated office of seed ``S`` (3 storeys, ``walkstream
   generate interior --storeys 3 --seed S``, baked into ``--out`` once), a pose every
   10 s culled from its cell at a 40 m fog, 640x480.
@@ -21,6 +24,13 @@ and timed frame by frame alternately with it, so that both see the same load, ea
 going first on every other frame (the one timed second may find the frame's arrays
 in the cache); today's must keep every part that revision keeps (a superset), which is
 checked on every frame.
+
+With ``cache`` today's culling is the one reused frame to frame
+(:class:`~walkstream.shared.cullcache.CullCache`, one per scene, its misses counted):
+its walk column is the walk of the frames that make a guard and the checks of those
+that reuse one (with the next guard's walk, made ahead), its parts column the parts
+culling of a guard; the other side is each frame culled anew (``against``'s revision,
+or today's culling), and the cache must keep every part that one keeps.
 """
 
 from __future__ import annotations
@@ -47,6 +57,7 @@ from walkstream.server.store import SceneReader
 from walkstream.shared import partcull, portals
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
+from walkstream.shared.cullcache import CullCache
 from walkstream.shared.errors import InputError, WalkstreamError
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.portalgraph import PortalGraph
@@ -64,6 +75,9 @@ Culling = tuple[Callable[..., Any], Callable[..., Any]]
 Frame = tuple[PortalGraph, int, NDArray[np.float64], NDArray[np.float64]]
 
 SIZE = (640, 480)
+
+#: The hall walk's step a frame: 1.4 m/s at 25 frames a second.
+WALK_STEP_M = 1.4 / 25.0
 
 
 def hall_boxes(k: int, per_cell: int = HALL_PARTS, cell_m: float = 4.0, height: float = 3.0,
@@ -123,6 +137,17 @@ def _hall_frames(frames: int) -> tuple[list[Frame], dict[int, tuple[NDArray[np.f
     return [(graph, 0, eye, camera(eye, float(a), 0.0).astype(np.float64)) for a in yaws], hall_boxes(k), math.inf
 
 
+def _hall_walk(frames: int) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
+    k, cell_m = 16, 4.0
+    graph = PortalGraph.from_topology(hall_topology(k))
+    out: list[Frame] = []
+    for i, a in enumerate(np.linspace(math.radians(30.0), math.radians(60.0), frames).tolist()):
+        eye = np.array([0.5, 0.5, 1.6]) + i * WALK_STEP_M * np.array([math.sqrt(0.5), math.sqrt(0.5), 0.0])
+        cell = int(eye[1] // cell_m) * k + int(eye[0] // cell_m)
+        out.append((graph, cell, eye, camera(eye, a, 0.0).astype(np.float64)))
+    return out, hall_boxes(k), math.inf
+
+
 def _seed_frames(seed: int, out: Path, log: Callable[[str], None], step_s: float = 10.0,
                  storeys: int = 3) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
     src, db = out / f"seed{seed}.json", out / f"seed{seed}.db"
@@ -163,30 +188,68 @@ def _time(culling: Culling, frame: Frame, boxes: dict[int, Any], proj: NDArray[n
     return t1 - t0, t2 - t1, len(pc.order), keep
 
 
+def _cache_culling(cache: CullCache) -> Culling:
+    """``(walk, parts)`` functions that time :meth:`CullCache.cull` as :func:`_time` times the
+    two steps: the walk returns the whole answer, whose own split of the CPU the parts step
+    hands back (the bench's clock around it is the check)."""
+    got: dict[str, Any] = {}
+
+    def walk(graph: PortalGraph, start: int, eye: Any, view: Any, proj: Any, size: Any, *, fog_m: float) -> Any:
+        got["r"] = r = cache.cull(start, eye, view, proj, size, got["boxes"], fog_m=fog_m)
+        return types.SimpleNamespace(order=r.order, vsas=None)
+
+    def parts(_mode: str, _cells: Any, _boxes: Any, *_a: Any, **_k: Any) -> dict[int, NDArray[np.bool_]]:
+        return dict(got["r"].masks)
+
+    walk.got = got  # type: ignore[attr-defined]
+    return walk, parts
+
+
+def _time_cached(culling: Culling, frame: Frame, boxes: dict[int, Any], proj: NDArray[np.float64],
+                 fog_m: float) -> tuple[float, float, int, dict[int, NDArray[np.bool_]]]:
+    """:func:`_time` of a :func:`_cache_culling` pair: the cache's own split of its CPU seconds."""
+    walk, _parts = culling
+    walk.got["boxes"] = boxes  # type: ignore[attr-defined]
+    graph, start, eye, view = frame
+    t0 = time.process_time()
+    walk(graph, start, eye, view, proj, SIZE, fog_m=fog_m)
+    total = time.process_time() - t0
+    r = walk.got["r"]  # type: ignore[attr-defined]
+    return total - r.parts_s, r.parts_s, len(r.order), dict(r.masks)
+
+
 def _ms(x: Sequence[float]) -> dict[str, float]:
     a = 1e3 * np.asarray(x, np.float64)
     return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99))}
 
 
 def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None, hall_frames: int = 120,
-                  repeats: int = 2, log: Callable[[str], None] = lambda s: None) -> list[dict[str, Any]]:
-    """The culling's CPU time on the hall and the tours of ``seeds`` (module docstring): a row per
-    scene with the frames, the visible cells and per part (``walk``, ``parts``, ``total``)
-    the median and p99 milliseconds, now and (``against``) at that revision.  Each frame is
-    culled ``repeats`` times over (every frame once, then again)."""
-    now: Culling = (portals.cull_portals, partcull.cull_parts)
-    then = culling_at(against) if against else None
+                  repeats: int = 2, cache: bool = False,
+                  log: Callable[[str], None] = lambda s: None) -> list[dict[str, Any]]:
+    """The culling's CPU time on the hall, the hall walked and the tours of ``seeds`` (module
+    docstring): a row per scene with the frames, the visible cells and per part (``walk``,
+    ``parts``, ``total``) the median and p99 milliseconds, now and (``against``) at that
+    revision; with ``cache``, now is the culling reused frame to frame (its ``misses``
+    counted) and the other each frame culled anew (``against``'s, or today's, labelled
+    ``anew``).  Each frame is culled ``repeats`` times over (every frame once, then again)."""
+    exact: Culling = (portals.cull_portals, partcull.cull_parts)
+    then = culling_at(against) if against else (exact if cache else None)
+    label = against if against else ("anew" if cache else None)
     proj = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 1000.0).astype(np.float64)
-    scenes: list[tuple[str, Callable[[], Any]]] = [("hall 16x16", lambda: _hall_frames(hall_frames))]
+    scenes: list[tuple[str, Callable[[], Any]]] = [("hall 16x16", lambda: _hall_frames(hall_frames)),
+                                                   ("hall walk", lambda: _hall_walk(hall_frames))]
     scenes += [(f"seed {s}", functools.partial(_seed_frames, s, out, log)) for s in seeds]
     rows = []
     for name, make in scenes:
         frames, boxes, fog = make()
+        cached = CullCache(frames[0][0]) if cache and frames else None
+        now = _cache_culling(cached) if cached is not None else exact
         log(f"bench portals: culling CPU, {name}, {len(frames)} frames x {repeats}")
         got: dict[str, dict[str, list[float]]] = {w: {"walk": [], "parts": [], "total": []} for w in ("now", "then")}
         visible = []
         for culling in (now, then):
-            if culling is not None:  # warm up (first calls, caches) untimed
+            # warm up (first calls, the packed boxes) untimed; not the cache: its first guard is timed
+            if culling is not None and (cached is None or culling is not now):
                 _time(culling, frames[0], boxes, proj, fog)
         pair = [("now", now), ("then", then)] if then is not None else [("now", now)]
         for r in range(repeats):
@@ -195,7 +258,8 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
                 # frame's arrays in the cache (the same code read 0-6 % apart by column)
                 kept: dict[str, dict[int, NDArray[np.bool_]]] = {}
                 for who, culling in pair if (r + i) % 2 == 0 else pair[::-1]:
-                    w, p, n, kept[who] = _time(culling, f, boxes, proj, fog)
+                    timer = _time_cached if who == "now" and cached is not None else _time
+                    w, p, n, kept[who] = timer(culling, f, boxes, proj, fog)
                     got[who]["walk"].append(w)
                     got[who]["parts"].append(p)
                     got[who]["total"].append(w + p)
@@ -203,15 +267,17 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
                         visible.append(n)
                 # conservative: today's culling keeps every part the other keeps (a superset:
                 # rectangles grown outward may keep a few more)
-                if "then" in kept and (kept["now"].keys() != kept["then"].keys()
-                                       or any(np.any(kept["then"][c] & ~kept["now"][c]) for c in kept["now"])):
-                    raise WalkstreamError(f"bench portals: {name}: the culling now drops parts the culling at {against} keeps")
+                if "then" in kept and (not kept["then"].keys() <= kept["now"].keys()
+                                       or any(np.any(kept["then"][c] & ~kept["now"][c]) for c in kept["then"])):
+                    raise WalkstreamError(f"bench portals: {name}: the culling now drops parts the culling {label} keeps")
         row: dict[str, Any] = {"scene": name, "frames": len(frames) * repeats,
                                "visible_median": float(np.median(visible)), "visible_max": int(max(visible)),
                                "now": {k: _ms(v) for k, v in got["now"].items()}}
         if then is not None:
             row["then"] = {k: _ms(v) for k, v in got["then"].items()}
-            row["against"] = against
+            row["against"] = label
+        if cached is not None:
+            row["misses"] = cached.misses
         rows.append(row)
     return rows
 
@@ -221,10 +287,15 @@ def cull_cpu_table(rows: Sequence[dict[str, Any]]) -> str:
     at that revision and the ratio of the total medians."""
     against = next((r["against"] for r in rows if "against" in r), None)
     head = f"{'scene':<12}{'frames':>7}{'visible':>9}{'walk ms':>14}{'parts ms':>14}{'total ms':>14}"
+    cached = any("misses" in r for r in rows)
+    if cached:
+        head += f"{'misses':>8}"
     if against:
         head += f"  |{'before walk':>14}{'before parts':>14}{'before total':>14}{'speed-up':>9}"
+    what = "each frame culled anew (today's)" if against == "anew" else f"the culling at {against}"
     out = ["culling CPU per frame (time.process_time; median / p99; 640x480)"
-           + (f"; before = the culling at {against}, timed alternately" if against else "") + ":", head]
+           + ("; now = reused frame to frame (shared/cullcache.py)" if cached else "")
+           + (f"; before = {what}, timed alternately" if against else "") + ":", head]
 
     def mp(r: dict[str, float]) -> str:
         return f"{r['median']:.2f} / {r['p99']:.2f}"
@@ -233,6 +304,8 @@ def cull_cpu_table(rows: Sequence[dict[str, Any]]) -> str:
         lo, hi = round(r["visible_median"]), r["visible_max"]
         line = (f"{r['scene']:<12}{r['frames']:>7}{f'{lo}-{hi}' if lo != hi else str(hi):>9}{mp(r['now']['walk']):>14}"
                 f"{mp(r['now']['parts']):>14}{mp(r['now']['total']):>14}")
+        if cached:
+            line += f"{r.get('misses', 0):>8}"
         if "then" in r:
             t = r["then"]
             line += (f"  |{mp(t['walk']):>14}{mp(t['parts']):>14}{mp(t['total']):>14}"
