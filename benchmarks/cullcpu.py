@@ -15,7 +15,9 @@ frames:
   cell the eye stands in: consecutive frames as a walker makes them;
 - ``seed S``: the tour of the generated office of seed ``S`` (3 storeys, ``walkstream
   generate interior --storeys 3 --seed S``, baked into ``--out`` once), a pose every
-  10 s culled from its cell at a 40 m fog, 640x480.
+  10 s culled from its cell at a 40 m fog, 640x480;
+- ``seed S walk`` (with ``cache`` only): a minute of that tour (:data:`WALK_SPAN_S`)
+  frame by frame at 25 frames a second.
 
 With ``against`` (a git revision of this repository) the culling of that revision is
 loaded beside the current one (its ``shared/screenrects.py``, ``shared/portals.py`` and
@@ -78,6 +80,9 @@ SIZE = (640, 480)
 
 #: The hall walk's step a frame: 1.4 m/s at 25 frames a second.
 WALK_STEP_M = 1.4 / 25.0
+
+#: The stretch of a seed's tour culled frame by frame with ``cache``, seconds.
+WALK_SPAN_S = (60.0, 120.0)
 
 
 def hall_boxes(k: int, per_cell: int = HALL_PARTS, cell_m: float = 4.0, height: float = 3.0,
@@ -149,7 +154,7 @@ def _hall_walk(frames: int) -> tuple[list[Frame], dict[int, tuple[NDArray[np.flo
 
 
 def _seed_frames(seed: int, out: Path, log: Callable[[str], None], step_s: float = 10.0,
-                 storeys: int = 3) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
+                 storeys: int = 3, span: tuple[float, float] | None = None) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
     src, db = out / f"seed{seed}.json", out / f"seed{seed}.db"
     if not db.exists():
         out.mkdir(parents=True, exist_ok=True)
@@ -166,7 +171,8 @@ def _seed_frames(seed: int, out: Path, log: Callable[[str], None], step_s: float
     boxes = {cid: (np.array([p.bbox[0] for p in m.parts]).reshape(-1, 3), np.array([p.bbox[1] for p in m.parts]).reshape(-1, 3))
              for cid, m in meshes.items()}
     frames: list[Frame] = []
-    for t in np.arange(0.0, tour.duration, step_s).tolist():
+    t0, t1 = span if span is not None else (0.0, tour.duration)
+    for t in np.arange(t0, min(t1, tour.duration), step_s).tolist():
         xyz, yaw, pitch = tour.at(t)
         eye = np.asarray(xyz, np.float64)
         hit = np.flatnonzero(cell_of(planes, eye))
@@ -239,6 +245,9 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
     scenes: list[tuple[str, Callable[[], Any]]] = [("hall 16x16", lambda: _hall_frames(hall_frames)),
                                                    ("hall walk", lambda: _hall_walk(hall_frames))]
     scenes += [(f"seed {s}", functools.partial(_seed_frames, s, out, log)) for s in seeds]
+    if cache:  # consecutive frames of a tour, where reuse can pay: 25 a second over a minute
+        scenes += [(f"seed {s} walk", functools.partial(_seed_frames, s, out, log, 1.0 / 25.0, span=WALK_SPAN_S))
+                   for s in seeds]
     rows = []
     for name, make in scenes:
         frames, boxes, fog = make()

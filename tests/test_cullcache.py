@@ -133,8 +133,8 @@ def test_frames_within_a_guard_show_no_culled_pixel_at_the_doors(office_db: Path
     try:
         frames = hits = 0
         for k, (eye, yaw, pitch) in enumerate(scene.poses()):
-            if k % 4:
-                continue  # a quarter of the door poses keeps the test to a few seconds
+            if k % 6:
+                continue  # a sixth of the door poses keeps the test to a few seconds
             res = scene.frame(eye, yaw, pitch)
             if res is None:
                 continue
@@ -153,6 +153,6 @@ def test_frames_within_a_guard_show_no_culled_pixel_at_the_doors(office_db: Path
             chk = check_kept(scene.truth, kept, eye, view)
             frames += 1
             assert chk.missed_pixels - chk.pinholes == 0, (eye.tolist(), yaw, chk.missed_pixels)
-        assert frames >= 15 and hits >= 0.8 * frames, (frames, hits)
+        assert frames >= 10 and hits >= 0.8 * frames, (frames, hits)
     finally:
         scene.release()
