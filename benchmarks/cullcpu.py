@@ -256,6 +256,7 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
         log(f"bench portals: culling CPU, {name}, {len(frames)} frames x {repeats}")
         got: dict[str, dict[str, list[float]]] = {w: {"walk": [], "parts": [], "total": []} for w in ("now", "then")}
         visible = []
+        parts_kept = {"now": 0, "then": 0}
         for culling in (now, then):
             # warm up (first calls, the packed boxes) untimed; not the cache: its first guard is timed
             if culling is not None and (cached is None or culling is not now):
@@ -272,6 +273,7 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
                     got[who]["walk"].append(w)
                     got[who]["parts"].append(p)
                     got[who]["total"].append(w + p)
+                    parts_kept[who] += sum(int(m.sum()) for m in kept[who].values())
                     if who == "now":
                         visible.append(n)
                 # conservative: today's culling keeps every part the other keeps (a superset:
@@ -287,6 +289,8 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
             row["against"] = label
         if cached is not None:
             row["misses"] = cached.misses
+        if then is not None:  # parts drawn, over every frame: what a looser answer costs the GPU
+            row["kept"] = dict(parts_kept)
         rows.append(row)
     return rows
 
@@ -298,12 +302,13 @@ def cull_cpu_table(rows: Sequence[dict[str, Any]]) -> str:
     head = f"{'scene':<12}{'frames':>7}{'visible':>9}{'walk ms':>14}{'parts ms':>14}{'total ms':>14}"
     cached = any("misses" in r for r in rows)
     if cached:
-        head += f"{'misses':>8}"
+        head += f"{'misses':>8}{'parts':>8}"
     if against:
         head += f"  |{'before walk':>14}{'before parts':>14}{'before total':>14}{'speed-up':>9}"
     what = "each frame culled anew (today's)" if against == "anew" else f"the culling at {against}"
     out = ["culling CPU per frame (time.process_time; median / p99; 640x480)"
-           + ("; now = reused frame to frame (shared/cullcache.py)" if cached else "")
+           + ("; now = reused frame to frame (shared/cullcache.py), its misses and the parts it"
+              " keeps over those kept anew" if cached else "")
            + (f"; before = {what}, timed alternately" if against else "") + ":", head]
 
     def mp(r: dict[str, float]) -> str:
@@ -314,7 +319,9 @@ def cull_cpu_table(rows: Sequence[dict[str, Any]]) -> str:
         line = (f"{r['scene']:<12}{r['frames']:>7}{f'{lo}-{hi}' if lo != hi else str(hi):>9}{mp(r['now']['walk']):>14}"
                 f"{mp(r['now']['parts']):>14}{mp(r['now']['total']):>14}")
         if cached:
-            line += f"{r.get('misses', 0):>8}"
+            kept = r.get("kept", {})
+            more = kept["now"] / kept["then"] if kept.get("then") else math.nan
+            line += f"{r.get('misses', 0):>8}{more:>7.2f}x"
         if "then" in r:
             t = r["then"]
             line += (f"  |{mp(t['walk']):>14}{mp(t['parts']):>14}{mp(t['total']):>14}"
