@@ -32,7 +32,10 @@ With ``cache`` today's culling is the one reused frame to frame
 its walk column is the walk of the frames that make a guard and the checks of those
 that reuse one (with the next guard's walk, made ahead), its parts column the parts
 culling of a guard; the other side is each frame culled anew (``against``'s revision,
-or today's culling), and the cache must keep every part that one keeps.
+or today's culling).  The cache keeps every part a frame sees (its guard tests rays),
+not every part the frame's own rectangles keep by their pixel rounding: the parts kept
+anew and left out by the cache are counted (``dropped``), and the id truth decides
+whether any was seen (tests/test_cullcache.py).
 """
 
 from __future__ import annotations
@@ -257,6 +260,7 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
         got: dict[str, dict[str, list[float]]] = {w: {"walk": [], "parts": [], "total": []} for w in ("now", "then")}
         visible = []
         parts_kept = {"now": 0, "then": 0}
+        dropped = 0
         for culling in (now, then):
             # warm up (first calls, the packed boxes) untimed; not the cache: its first guard is timed
             if culling is not None and (cached is None or culling is not now):
@@ -278,9 +282,16 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
                         visible.append(n)
                 # conservative: today's culling keeps every part the other keeps (a superset:
                 # rectangles grown outward may keep a few more)
-                if "then" in kept and (not kept["then"].keys() <= kept["now"].keys()
-                                       or any(np.any(kept["then"][c] & ~kept["now"][c]) for c in kept["then"])):
-                    raise WalkstreamError(f"bench portals: {name}: the culling now drops parts the culling {label} keeps")
+                if "then" in kept:
+                    lost = sum(int(m.sum()) if c not in kept["now"] else int((m & ~kept["now"][c]).sum())
+                               for c, m in kept["then"].items())
+                    if lost and cached is None:
+                        raise WalkstreamError(f"bench portals: {name}: the culling now drops parts the culling "
+                                              f"{label} keeps")
+                    # the cache's guard tests rays, not the frame's pixel grid: a part the frame's
+                    # own rectangles keep by their rounding alone may be left out (the id truth
+                    # decides: tests/test_cullcache.py); counted, not refused
+                    dropped += lost
         row: dict[str, Any] = {"scene": name, "frames": len(frames) * repeats,
                                "visible_median": float(np.median(visible)), "visible_max": int(max(visible)),
                                "now": {k: _ms(v) for k, v in got["now"].items()}}
@@ -289,6 +300,7 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
             row["against"] = label
         if cached is not None:
             row["misses"] = cached.misses
+            row["dropped"] = dropped
         if then is not None:  # parts drawn, over every frame: what a looser answer costs the GPU
             row["kept"] = dict(parts_kept)
         rows.append(row)
@@ -302,13 +314,13 @@ def cull_cpu_table(rows: Sequence[dict[str, Any]]) -> str:
     head = f"{'scene':<12}{'frames':>7}{'visible':>9}{'walk ms':>14}{'parts ms':>14}{'total ms':>14}"
     cached = any("misses" in r for r in rows)
     if cached:
-        head += f"{'misses':>8}{'parts':>8}"
+        head += f"{'misses':>8}{'parts':>8}{'dropped':>8}"
     if against:
         head += f"  |{'before walk':>14}{'before parts':>14}{'before total':>14}{'speed-up':>9}"
     what = "each frame culled anew (today's)" if against == "anew" else f"the culling at {against}"
     out = ["culling CPU per frame (time.process_time; median / p99; 640x480)"
-           + ("; now = reused frame to frame (shared/cullcache.py), its misses and the parts it"
-              " keeps over those kept anew" if cached else "")
+           + ("; now = reused frame to frame (shared/cullcache.py), its misses, the parts it keeps"
+              " over those kept anew, and the parts kept anew it left out (all frames)" if cached else "")
            + (f"; before = {what}, timed alternately" if against else "") + ":", head]
 
     def mp(r: dict[str, float]) -> str:
@@ -321,7 +333,7 @@ def cull_cpu_table(rows: Sequence[dict[str, Any]]) -> str:
         if cached:
             kept = r.get("kept", {})
             more = kept["now"] / kept["then"] if kept.get("then") else math.nan
-            line += f"{r.get('misses', 0):>8}{more:>7.2f}x"
+            line += f"{r.get('misses', 0):>8}{more:>7.2f}x{r.get('dropped', 0):>8}"
         if "then" in r:
             t = r["then"]
             line += (f"  |{mp(t['walk']):>14}{mp(t['parts']):>14}{mp(t['total']):>14}"
