@@ -156,3 +156,36 @@ def test_frames_within_a_guard_show_no_culled_pixel_at_the_doors(office_db: Path
         assert frames >= 10 and hits >= 0.8 * frames, (frames, hits)
     finally:
         scene.release()
+
+
+@pytest.mark.gl
+def test_a_walk_along_the_tour_frame_by_frame_shows_no_culled_pixel(office_db: Path, gl_ctx: Any) -> None:
+    """25 frames a second along the office's tour, every frame culled through one cache
+    (most reuse a guard), every 6th compared with the id truth."""
+    from walkstream.server.store import SceneReader
+    from walkstream.shared.paths import RecordedPath
+    from walkstream.shared.roomview import cell_of
+
+    with SceneReader.open(office_db) as r:
+        tour = RecordedPath.from_msgpack(r.path_blob("tour"))
+    scene = PortalScene(office_db, gl_ctx)
+    try:
+        cache = CullCache(scene.graph)
+        compared = 0
+        for i, t in enumerate(np.arange(0.0, min(12.0, tour.duration), 1.0 / 25.0).tolist()):
+            xyz, yaw, pitch = tour.at(t)
+            eye = np.asarray(xyz, np.float64)
+            hit = np.flatnonzero(cell_of(scene.planes, eye))
+            if not len(hit):
+                continue
+            view = camera(eye, float(yaw), float(pitch)).astype(np.float64)
+            got = cache.cull(int(scene.ids[hit[0]]), eye, view, scene.proj, SIZE, scene.boxes)
+            if i % 6:
+                continue
+            kept = [(c, k) for c, m in got.masks.items() for k in np.flatnonzero(m).tolist()]
+            chk = check_kept(scene.truth, kept, eye, view)
+            compared += 1
+            assert chk.missed_pixels - chk.pinholes == 0, (t, chk.missed_pixels)
+        assert compared >= 40 and cache.hits >= 2 * cache.misses, (compared, cache.hits, cache.misses)
+    finally:
+        scene.release()
