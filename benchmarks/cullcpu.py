@@ -81,6 +81,10 @@ Frame = tuple[PortalGraph, int, NDArray[np.float64], NDArray[np.float64]]
 
 SIZE = (640, 480)
 
+#: A scene of the bench: its frames, part boxes, fog and a locator of points' cells.
+Scene = tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float,
+              Callable[[NDArray[np.float64]], "int | None"]]
+
 #: The hall walk's step a frame: 1.4 m/s at 25 frames a second.
 WALK_STEP_M = 1.4 / 25.0
 
@@ -137,27 +141,37 @@ def culling_at(rev: str) -> Culling:
     return mods["portals"].cull_portals, mods.get("partcull", mods["portals"]).cull_parts
 
 
-def _hall_frames(frames: int) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
+def _hall_frames(frames: int) -> Scene:
     k = 16
     graph = PortalGraph.from_topology(hall_topology(k))
     eye = np.array([0.5, 0.5, 1.6])
     yaws = np.linspace(math.radians(30.0), math.radians(60.0), frames)
-    return [(graph, 0, eye, camera(eye, float(a), 0.0).astype(np.float64)) for a in yaws], hall_boxes(k), math.inf
+    return ([(graph, 0, eye, camera(eye, float(a), 0.0).astype(np.float64)) for a in yaws], hall_boxes(k), math.inf,
+            _hall_cell(k))
 
 
-def _hall_walk(frames: int) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
+def _hall_cell(k: int, cell_m: float = 4.0) -> Callable[[NDArray[np.float64]], int | None]:
+    """The cell of the hall of ``k`` x ``k`` cells that holds a point (None outside)."""
+    def locate(eye: NDArray[np.float64]) -> int | None:
+        x, y = int(eye[0] // cell_m), int(eye[1] // cell_m)
+        return y * k + x if 0 <= x < k and 0 <= y < k else None
+    return locate
+
+
+def _hall_walk(frames: int) -> Scene:
     k, cell_m = 16, 4.0
     graph = PortalGraph.from_topology(hall_topology(k))
     out: list[Frame] = []
     for i, a in enumerate(np.linspace(math.radians(30.0), math.radians(60.0), frames).tolist()):
         eye = np.array([0.5, 0.5, 1.6]) + i * WALK_STEP_M * np.array([math.sqrt(0.5), math.sqrt(0.5), 0.0])
-        cell = int(eye[1] // cell_m) * k + int(eye[0] // cell_m)
+        cell = _hall_cell(k, cell_m)(eye)
+        assert cell is not None
         out.append((graph, cell, eye, camera(eye, a, 0.0).astype(np.float64)))
-    return out, hall_boxes(k), math.inf
+    return out, hall_boxes(k), math.inf, _hall_cell(k, cell_m)
 
 
 def _seed_frames(seed: int, out: Path, log: Callable[[str], None], step_s: float = 10.0,
-                 storeys: int = 3, span: tuple[float, float] | None = None) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
+                 storeys: int = 3, span: tuple[float, float] | None = None) -> Scene:
     src, db = out / f"seed{seed}.json", out / f"seed{seed}.db"
     if not db.exists():
         out.mkdir(parents=True, exist_ok=True)
@@ -181,7 +195,12 @@ def _seed_frames(seed: int, out: Path, log: Callable[[str], None], step_s: float
         hit = np.flatnonzero(cell_of(planes, eye))
         if len(hit):
             frames.append((graph, int(ids[hit[0]]), eye, camera(eye, float(yaw), float(pitch)).astype(np.float64)))
-    return frames, boxes, 40.0
+
+    def locate(eye: NDArray[np.float64]) -> int | None:
+        hit = np.flatnonzero(cell_of(planes, eye))
+        return int(ids[hit[0]]) if len(hit) else None
+
+    return frames, boxes, 40.0, locate
 
 
 def _time(culling: Culling, frame: Frame, boxes: dict[int, Any], proj: NDArray[np.float64],
@@ -253,8 +272,8 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
                    for s in seeds]
     rows = []
     for name, make in scenes:
-        frames, boxes, fog = make()
-        cached = CullCache(frames[0][0]) if cache and frames else None
+        frames, boxes, fog, locate = make()
+        cached = CullCache(frames[0][0], locate=locate) if cache and frames else None
         now = _cache_culling(cached) if cached is not None else exact
         log(f"bench portals: culling CPU, {name}, {len(frames)} frames x {repeats}")
         got: dict[str, dict[str, list[float]]] = {w: {"walk": [], "parts": [], "total": []} for w in ("now", "then")}

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from operator import is_
 from typing import Any
@@ -152,11 +153,19 @@ class CullCache:
         Metres the eye may move from the guard's frame before a miss.
     clip_m : float
         The walk's clip plane (:func:`~walkstream.shared.portals.cull_portals`).
+    ahead : bool
+        Make the next guard ahead of the walker (:meth:`cull`).
+    locate : callable, optional
+        The cell id that holds a point ``(3,)`` (None outside every cell): with it, the next
+        guard is made for the cell the walker is about to enter, so that a door crossed
+        at a steady pace is not a miss.
     """
 
     def __init__(self, graph: PortalGraph, *, turn_deg: float = 10.0, move_m: float = 0.3,
-                 clip_m: float = 0.03, ahead: bool = True) -> None:
+                 clip_m: float = 0.03, ahead: bool = True,
+                 locate: Callable[[NDArray[np.float64]], int | None] | None = None) -> None:
         self.graph = graph
+        self.locate = locate
         self.turn_deg = float(turn_deg)
         self.move_m = float(move_m)
         self.clip_m = float(clip_m)
@@ -246,24 +255,26 @@ class CullCache:
         if self._half is not None:
             hkey, centre, made, pc = self._half
             self._half = None
-            if hkey == key:
+            if hkey[1:] == key[1:]:
+                key = hkey
                 self._next = self._parts(key, centre, made, pc, boxes, fog_m)
             return 0.0, time.process_time() - t0
         g = self._guard
         if self._next is not None or last is None or g is None:
             return 0.0, 0.0
         # the pose three frames on (the last step and the last turn made thrice more): when
-        # it leaves the guard, the next one is made for the pose two frames on (its walk
-        # now, its parts on the next frame, used from the frame after)
+        # it leaves the guard or its cell, the next guard is made for it (its walk now, its
+        # parts on the next frame, used from the frame after)
         turn = V[:3, :3] @ last[1].T
-        turn2 = turn @ turn
-        step = e - last[0]
-        ahead = e + 3.0 * step
-        if self._within(g, ahead, _camera_at(turn2 @ turn @ V[:3, :3], ahead), P):
+        rot = turn @ turn @ turn @ V[:3, :3]
+        centre = e + 3.0 * (e - last[0])
+        cell = key[0] if self.locate is None else self.locate(centre)
+        if cell is None:
             return 0.0, 0.0
-        centre = e + 2.0 * step
-        made = guard_view(centre, _camera_at(turn2 @ V[:3, :3], centre), P, size, self.turn_deg, self.move_m,
-                          self.clip_m)
+        if cell == key[0] and self._within(g, centre, _camera_at(rot, centre), P):
+            return 0.0, 0.0
+        key = (cell, *key[1:])
+        made = guard_view(centre, _camera_at(rot, centre), P, size, self.turn_deg, self.move_m, self.clip_m)
         if made is None:
             return 0.0, 0.0
         self._half = (key, centre, made, self._walk(key, made, fog_m, closed))
