@@ -253,11 +253,10 @@ class CullCache:
         """Half of the next guard (:meth:`cull`); the CPU seconds of its walk and of its parts."""
         t0 = time.process_time()
         if self._half is not None:
-            hkey, centre, made, pc = self._half
+            hkey, hcentre, hmade, pc = self._half
             self._half = None
             if hkey[1:] == key[1:]:
-                key = hkey
-                self._next = self._parts(key, centre, made, pc, boxes, fog_m)
+                self._next = self._parts(hkey, hcentre, hmade, pc, boxes, fog_m)
             return 0.0, time.process_time() - t0
         g = self._guard
         if self._next is not None or last is None or g is None:
