@@ -10,37 +10,45 @@ within it (a *hit*: a few numpy calls to check, no walk).
 
 The guard view (made on a *miss*):
 
-- its apex ``a`` stands ``b`` behind the eye ``e`` on the view axis, far enough that
-  the ball of radius ``move_m`` around the eye lies inside its pyramid (``b = move_m /
-  sin(least half-angle)``, and at least ``move_m + clip_m``);
+- its apex ``a`` stands ``b = move_m / 2 + 2 clip_m`` behind the eye ``e`` on the view
+  axis;
 - its pyramid is the camera's own, each half-angle widened by ``turn_deg``, with as
-  many more pixels as keep the camera's pixel size; its near plane at the clip plane;
-- every portal is grown by ``R = b + move_m`` on all sides (the walk's ``grow_m``), the
-  fog by ``R``, and portals and boxes keep every pixel they touch
-  (:data:`~walkstream.shared.screenrects.TOUCH_MARGIN_PX`), not only the centres.
+  many more pixels as keep the camera's pixel size; its near plane at half the clip
+  plane, its far plane beyond the camera's by ``R``;
+- every portal is grown by ``R = b + move_m`` on all sides (the walk's ``grow_m``: the
+  grown box is projected, and passed through when the apex comes within the
+  pass-through distance of it), the fog by ``R``, and portals and boxes keep every pixel
+  they touch (:data:`~walkstream.shared.screenrects.TOUCH_MARGIN_PX`), not only the
+  centres.
 
-Why that never hides what a later frame sees (a frame with eye ``e'``, ``|e' - e| <=
-move_m``, in the same cell, whose frustum's corner rays lie inside the guard
-pyramid's): a point ``X`` it sees lies in the guard pyramid (the pyramid is convex,
+A frame is *within* the guard when its eye ``e'`` lies within ``R`` of the apex, inside
+the guard's pyramid at a depth of at least the clip plane, its frustum's four corner
+rays lie inside the pyramid, and it is culled from the same cell with the same
+projection, viewport, fog, closed portals and boxes.  Why nothing such a frame sees is
+left out: a point ``X`` it sees lies in the guard pyramid (the pyramid is convex and
 holds ``e'`` and every direction of the frame's frustum), at a depth from ``a`` of at
-least ``b - move_m >= clip_m``.  The segment ``e' X`` passes the portals ``P1 ... Pk``
-from the start cell to ``X``'s cell; the segment ``a X`` passes, at the same fraction
-of its length, within ``|a - e'| <= R`` of each crossing point, so through each grown
-portal; and its points there project to ``X``'s pixel from ``a``.  So that pixel lies
-in every grown portal's rectangle (or the walk passes the portal through), in a VSA of
-``X``'s cell, and in the rectangle of ``X``'s box: the box is kept.  Distances from
-``a`` exceed those from ``e'`` by at most ``R``, so the fog grown by ``R`` keeps
-whatever the frame's fog keeps.  The same holds for the frame the guard was made on.
+least ``e'``'s, so beyond the clip plane.  The segment ``e' X`` passes the portals
+``P1 ... Pk`` from the start cell to ``X``'s cell; the segment ``a X`` passes, at the
+same fraction of its length, within ``|a - e'| <= R`` of each crossing point, so
+through each grown portal, where its points project to ``X``'s pixel from ``a`` (a
+grown box farther from the apex than the pass-through distance has its points in the
+pyramid beyond the clip plane).  So that pixel lies in every grown portal's rectangle
+(or the walk passes the portal through), in a VSA of ``X``'s cell, and in the
+rectangle of ``X``'s box: the box is kept.  Distances from ``a`` exceed those from
+``e'`` by at most ``R``, so the fog grown by ``R`` keeps whatever the frame's fog keeps.
+The frame the guard is made on is within it.
 
-What a hit costs: the pose checks (the eye's distance, the frustum's four corner rays
-against the guard's four side planes) and an identity check of the visible cells'
-boxes (a cell loaded or replaced since is a miss).  What a miss costs: one walk and one
-parts culling of the guard view, wider than the frame's (more cells and boxes; the
-portals' boxes instead of their polygons).  A turn of more than ``turn_deg`` or a step
-of more than ``move_m`` from the guard's frame, a new cell, another fog, viewport,
-projection or closed portals is a miss.  The answer is a superset of the frame's own
-culling: more parts drawn for fewer CPU milliseconds (``walkstream bench portals --cull
---cull-cache`` measures both).
+What a hit costs: the pose checks (in plain floats) and an identity check of the
+visible cells' boxes (a cell loaded or replaced since is a miss).  What a miss costs:
+one walk and one parts culling of the guard view, wider than the frame's (more cells
+and boxes; the portals' boxes instead of their polygons), 1.3-1.4 times a frame culled
+anew.  While a guard serves, the next one is made ahead (:meth:`CullCache.cull`), half
+of it a frame, so a steady walk or turn misses only where it starts.  The answer holds
+every part the frame sees, and more than the frame's own culling keeps (on the
+generated offices' tours 2-3 times the parts); it tests rays, not the frame's pixel
+grid, so a part the frame's own rectangles keep by their rounding alone may be left
+out (the id truth finds no pixel of any: tests/test_cullcache.py, docs/benchmarks.md).
+``walkstream bench portals --cull --cull-cache`` measures it.
 """
 
 from __future__ import annotations
@@ -150,7 +158,8 @@ class CullCache:
     turn_deg : float
         Degrees each half-angle of the frustum is widened by: the turn a hit allows.
     move_m : float
-        Metres the eye may move from the guard's frame before a miss.
+        Metres the eye may move on from the guard's frame before a miss (the portals are
+        grown by this and the apex's distance behind the eye; module docstring).
     clip_m : float
         The walk's clip plane (:func:`~walkstream.shared.portals.cull_portals`).
     ahead : bool
