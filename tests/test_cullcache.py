@@ -189,3 +189,20 @@ def test_a_walk_along_the_tour_frame_by_frame_shows_no_culled_pixel(office_db: P
         assert compared >= 40 and cache.hits >= 2 * cache.misses, (compared, cache.hits, cache.misses)
     finally:
         scene.release()
+
+
+def test_a_replay_with_the_cull_cache_culls_no_pixel_the_truth_shows(office_db: Path, tmp_path: Path) -> None:
+    """``replay --cull-cache``: the walk's culling reused frame to frame, and the truth
+    still finds no culled pixel (the default, culled anew, in test_portals.py)."""
+    import json
+
+    from walkstream.cli import main
+
+    rep = tmp_path / "cached"
+    assert main(["replay", str(office_db), "--path", "tour", "--duration", "5", "--truth-every", "25",
+                 "--size", "160x120", "--report", str(rep), "--cull-cache"]) == 0
+    s = json.loads((rep / "report.json").read_text())
+    s = s.get("summary", s)
+    assert s["truth"]["frames"] >= 4 and s["truth"]["culled_pixels"] == 0, s["truth"]
+    # the cache served most frames: a walk at a steady pace misses where it starts and at turns
+    assert s["cull_cache_hits"] > s["cull_cache_misses"] > 0, s

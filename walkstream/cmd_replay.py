@@ -130,7 +130,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         fog_budget=not args.no_fog_budget,
         triangle_cull=not args.no_triangle_cull,
         rooms={"flush_s": args.flush_after, "flush_policy": args.flush_policy, "flush_fill": args.flush_fill,
-               "batch_bytes": parse_size(args.contents_batch),
+               "batch_bytes": parse_size(args.contents_batch), "cull_cache": args.cull_cache,
                **({} if args.prefetch_portals is None else {"beyond_portals": args.prefetch_portals})},
         report_dir=Path(args.report),
         start_bundle=not args.no_start_bundle,
@@ -324,6 +324,9 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--culling", choices=("portals", "frustum", "none"), default="portals",
                    help="interiors: portal culling with visible screen areas (default), portals in the frustum "
                    "only, or every part of the visible cells")
+    r.add_argument("--cull-cache", action="store_true",
+                   help="interiors, portal culling: reuse a frame's culling while the view stays within a guard "
+                   "view (less CPU per frame, more parts drawn; default: each frame culled anew)")
     r.add_argument("--no-triangle-cull", action="store_true",
                    help="interiors: cull parts by their boxes only (default: a part the boxes keep is dropped "
                    "when none of its triangles meets its cell's visible screen areas)")
