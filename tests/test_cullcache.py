@@ -206,3 +206,18 @@ def test_a_replay_with_the_cull_cache_culls_no_pixel_the_truth_shows(office_db: 
     assert s["truth"]["frames"] >= 4 and s["truth"]["culled_pixels"] == 0, s["truth"]
     # the cache served most frames: a walk at a steady pace misses where it starts and at turns
     assert s["cull_cache_hits"] > s["cull_cache_misses"] > 0, s
+
+
+def test_the_cull_cache_is_an_opt_in_of_the_replay() -> None:
+    import argparse
+
+    from walkstream.cmd_replay import add_replay_arguments, config_from_args
+
+    parser = argparse.ArgumentParser()
+    add_replay_arguments(parser)
+    parser.add_argument("--report", default="report")
+    got = [config_from_args(parser.parse_args(a)).rooms["cull_cache"]
+           for a in ([], ["--cull-cache"], ["--cull-cache", "frustum"])]
+    assert got == ["", "guard", "frustum"]
+    with pytest.raises(SystemExit):  # a bad choice is refused by the parser, in one line
+        parser.parse_args(["--cull-cache", "walls"])

@@ -324,9 +324,10 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--culling", choices=("portals", "frustum", "none"), default="portals",
                    help="interiors: portal culling with visible screen areas (default), portals in the frustum "
                    "only, or every part of the visible cells")
-    r.add_argument("--cull-cache", action="store_true",
+    r.add_argument("--cull-cache", nargs="?", const="guard", default="", choices=("guard", "frustum"),
                    help="interiors, portal culling: reuse a frame's culling while the view stays within a guard "
-                   "view (less CPU per frame, more parts drawn; default: each frame culled anew)")
+                   "view (less CPU per frame, more parts drawn; default: each frame culled anew); guard (the "
+                   "default with the flag): the guard's parts, frustum: the guard's parts cut by the frame's frustum")
     r.add_argument("--no-triangle-cull", action="store_true",
                    help="interiors: cull parts by their boxes only (default: a part the boxes keep is dropped "
                    "when none of its triangles meets its cell's visible screen areas)")

@@ -56,6 +56,7 @@ class RoomCullCache:
         self.cache = CullCache(graph, locate=locate)
         self.boxes: Boxes = {}
         self.last: CachedCull | None = None
+        self._culled: dict[int, object] = {}  # the boxes the last answer culled, per cell
 
     def cells(
         self,
@@ -76,14 +77,17 @@ class RoomCullCache:
         if start is None or view is None or proj is None or size is None:
             return None
         self.last = self.cache.cull(start, eye, view, proj, size, self.boxes, fog_m=fog_m, closed=closed)
+        self._culled = {c: self.boxes.get(c) for c in self.last.masks}
         return list(self.last.order)
 
     def masks(self, loaded: Mapping[int, object]) -> dict[int, NDArray[np.bool_]]:
         """The last answer's parts to draw of the ``loaded`` cells, copies the frame may
-        change (the fog budget cuts them; the cached arrays are shared and read-only)."""
+        change (the fog budget cuts them; the cached arrays are shared and read-only).  A
+        cell whose boxes were replaced since the culling (a head made whole) is left out:
+        the caller culls it as a cell drawn besides the walk's."""
         if self.last is None:
             return {}
-        return {c: m.copy() for c, m in self.last.masks.items() if c in loaded}
+        return {c: m.copy() for c, m in self.last.masks.items() if c in loaded and self.boxes.get(c) is self._culled[c]}
 
     def head_clear(self, cid: int, gone: NDArray[np.int64]) -> bool:
         """Whether the last answer draws none of cell ``cid``'s parts ``gone`` ``(k,)`` (a

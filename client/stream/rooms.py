@@ -147,8 +147,9 @@ class RoomStreamConfig:
     culling: str = "portals"
     """``portals`` (VSAs), ``frustum`` (portals in the frustum) or ``none`` (as
     ``frustum`` for the cells, every part of them drawn)."""
-    cull_cache: bool = False
-    """``portals``: the frame's culling reused while its view stays within a guard (:mod:`.cachedcull`)."""
+    cull_cache: str = ""
+    """``portals``: ``guard`` or ``frustum`` reuse the culling while the view stays within a guard
+    (:mod:`.cachedcull`); empty (default): each frame culled anew."""
 
     def __post_init__(self) -> None:
         if self.flush_policy not in FLUSH_POLICIES:

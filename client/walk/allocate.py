@@ -102,6 +102,9 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
     if cached is not None:  # the guard's parts (--cull-cache), copied: the fog budget cuts them
         masks = cached.masks(f.loaded)
         walked = list(masks)
+        if rooms.config.cull_cache == "frustum":  # the frame's own frustum cuts the guard's wider view
+            for c, m in cull_parts("frustum", walked, boxes, f.eye, f.view, w.proj, w.size, fog_m=f.fog).items():
+                masks[c] &= m
     elif pc is not None:
         walked = [c for c in f.loaded if c in pc.vsas]
     else:  # no portal walk: the chosen culling on its own ("portals" without one keeps nothing)
