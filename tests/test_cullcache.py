@@ -212,6 +212,7 @@ def test_the_cull_cache_is_an_opt_in_of_the_replay() -> None:
     import argparse
 
     from walkstream.cmd_replay import add_replay_arguments, config_from_args
+    from walkstream.shared.errors import InputError
 
     parser = argparse.ArgumentParser()
     add_replay_arguments(parser)
@@ -221,3 +222,8 @@ def test_the_cull_cache_is_an_opt_in_of_the_replay() -> None:
     assert got == ["", "guard", "frustum"]
     with pytest.raises(SystemExit):  # a bad choice is refused by the parser, in one line
         parser.parse_args(["--cull-cache", "walls"])
+    assert config_from_args(parser.parse_args([])).rooms["cull_guard"] == (0.3, 10.0)
+    assert config_from_args(parser.parse_args(["--cull-guard", "0.1,3"])).rooms["cull_guard"] == (0.1, 3.0)
+    for bad in ("0.1", "x,3", "0,3", "0.1,90", "nan,3"):
+        with pytest.raises(InputError, match="--cull-guard"):
+            config_from_args(parser.parse_args(["--cull-guard", bad]))

@@ -42,6 +42,8 @@ class RoomCullCache:
     locate : callable
         The cell holding a point ``(3,)`` (None outside every cell), without moving the
         viewer: the next guard is made for the cell the walker is about to enter.
+    move_m, turn_deg : float
+        The step and the turn a guard allows (:class:`~walkstream.shared.cullcache.CullCache`).
 
     Attributes
     ----------
@@ -52,8 +54,9 @@ class RoomCullCache:
         The last frame's answer (None when the frame was not culled through the cache).
     """
 
-    def __init__(self, graph: PortalGraph, locate: Callable[[NDArray[np.float64]], int | None]) -> None:
-        self.cache = CullCache(graph, locate=locate)
+    def __init__(self, graph: PortalGraph, locate: Callable[[NDArray[np.float64]], int | None],
+                 move_m: float = 0.3, turn_deg: float = 10.0) -> None:
+        self.cache = CullCache(graph, locate=locate, move_m=move_m, turn_deg=turn_deg)
         self.boxes: Boxes = {}
         self.last: CachedCull | None = None
         self._culled: dict[int, object] = {}  # the boxes the last answer culled, per cell

@@ -150,6 +150,8 @@ class RoomStreamConfig:
     cull_cache: str = ""
     """``portals``: ``guard`` or ``frustum`` reuse the culling while the view stays within a guard
     (:mod:`.cachedcull`); empty (default): each frame culled anew."""
+    cull_guard: tuple[float, float] = (0.3, 10.0)
+    """``cull_cache``: the step (m) and the turn (degrees) a guard allows."""
 
     def __post_init__(self) -> None:
         if self.flush_policy not in FLUSH_POLICIES:
@@ -273,7 +275,7 @@ class RoomStreamer:
         self.visible: list[int] = []
         self.graph = PortalGraph.from_topology(topology)
         self.last_cull: PortalCull | None = None
-        self.cull_cache = RoomCullCache(self.graph, lambda p: self._where.locate(p, self.current)) \
+        self.cull_cache = RoomCullCache(self.graph, lambda p: self._where.locate(p, self.current), *self.config.cull_guard) \
             if self.config.cull_cache and self.config.culling == "portals" else None
         self._track: list[tuple[float, NDArray[np.float64]]] = []
         self._headings: list[tuple[float, float, float]] = []  # (t, yaw, pitch) of the frames' views
