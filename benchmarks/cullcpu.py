@@ -10,9 +10,14 @@ frames:
   at 640x480 from a corner, the view swept from 30 to 60 degrees so that 200-236
   cells are visible; each cell holds :data:`HALL_PARTS` part boxes (floor, ceiling and
   furniture at fixed random places), so the parts culling tests a few thousand boxes;
+- ``hall walk``: the same hall walked at 1.4 m/s and 25 frames a second from the
+  corner along the diagonal (5.6 cm a frame), the view swept likewise, from the
+  cell the eye stands in: consecutive frames as a walker makes them;
 - ``seed S``: the tour of the generated office of seed ``S`` (3 storeys, ``walkstream
   generate interior --storeys 3 --seed S``, baked into ``--out`` once), a pose every
-  10 s culled from its cell at a 40 m fog, 640x480.
+  10 s culled from its cell at a 40 m fog, 640x480;
+- ``seed S walk`` (with ``cache`` only): a minute of that tour (:data:`WALK_SPAN_S`)
+  frame by frame at 25 frames a second.
 
 With ``against`` (a git revision of this repository) the culling of that revision is
 loaded beside the current one (its ``shared/screenrects.py``, ``shared/portals.py`` and
@@ -21,6 +26,16 @@ and timed frame by frame alternately with it, so that both see the same load, ea
 going first on every other frame (the one timed second may find the frame's arrays
 in the cache); today's must keep every part that revision keeps (a superset), which is
 checked on every frame.
+
+With ``cache`` today's culling is the one reused frame to frame
+(:class:`~walkstream.shared.cullcache.CullCache`, one per scene, its misses counted):
+its walk column is the walk of the frames that make a guard and the checks of those
+that reuse one (with the next guard's walk, made ahead), its parts column the parts
+culling of a guard; the other side is each frame culled anew (``against``'s revision,
+or today's culling).  The cache keeps every part a frame sees (its guard tests rays),
+not every part the frame's own rectangles keep by their pixel rounding: the parts kept
+anew and left out by the cache are counted (``dropped``), and the id truth decides
+whether any was seen (tests/test_cullcache.py).
 """
 
 from __future__ import annotations
@@ -47,6 +62,7 @@ from walkstream.server.store import SceneReader
 from walkstream.shared import partcull, portals
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
+from walkstream.shared.cullcache import CullCache
 from walkstream.shared.errors import InputError, WalkstreamError
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.portalgraph import PortalGraph
@@ -64,6 +80,16 @@ Culling = tuple[Callable[..., Any], Callable[..., Any]]
 Frame = tuple[PortalGraph, int, NDArray[np.float64], NDArray[np.float64]]
 
 SIZE = (640, 480)
+
+#: A scene of the bench: its frames, part boxes, fog and a locator of points' cells.
+Scene = tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float,
+              Callable[[NDArray[np.float64]], "int | None"]]
+
+#: The hall walk's step a frame: 1.4 m/s at 25 frames a second.
+WALK_STEP_M = 1.4 / 25.0
+
+#: The stretch of a seed's tour culled frame by frame with ``cache``, seconds.
+WALK_SPAN_S = (60.0, 120.0)
 
 
 def hall_boxes(k: int, per_cell: int = HALL_PARTS, cell_m: float = 4.0, height: float = 3.0,
@@ -115,16 +141,37 @@ def culling_at(rev: str) -> Culling:
     return mods["portals"].cull_portals, mods.get("partcull", mods["portals"]).cull_parts
 
 
-def _hall_frames(frames: int) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
+def _hall_frames(frames: int) -> Scene:
     k = 16
     graph = PortalGraph.from_topology(hall_topology(k))
     eye = np.array([0.5, 0.5, 1.6])
     yaws = np.linspace(math.radians(30.0), math.radians(60.0), frames)
-    return [(graph, 0, eye, camera(eye, float(a), 0.0).astype(np.float64)) for a in yaws], hall_boxes(k), math.inf
+    return ([(graph, 0, eye, camera(eye, float(a), 0.0).astype(np.float64)) for a in yaws], hall_boxes(k), math.inf,
+            _hall_cell(k))
+
+
+def _hall_cell(k: int, cell_m: float = 4.0) -> Callable[[NDArray[np.float64]], int | None]:
+    """The cell of the hall of ``k`` x ``k`` cells that holds a point (None outside)."""
+    def locate(eye: NDArray[np.float64]) -> int | None:
+        x, y = int(eye[0] // cell_m), int(eye[1] // cell_m)
+        return y * k + x if 0 <= x < k and 0 <= y < k else None
+    return locate
+
+
+def _hall_walk(frames: int) -> Scene:
+    k, cell_m = 16, 4.0
+    graph = PortalGraph.from_topology(hall_topology(k))
+    out: list[Frame] = []
+    for i, a in enumerate(np.linspace(math.radians(30.0), math.radians(60.0), frames).tolist()):
+        eye = np.array([0.5, 0.5, 1.6]) + i * WALK_STEP_M * np.array([math.sqrt(0.5), math.sqrt(0.5), 0.0])
+        cell = _hall_cell(k, cell_m)(eye)
+        assert cell is not None
+        out.append((graph, cell, eye, camera(eye, a, 0.0).astype(np.float64)))
+    return out, hall_boxes(k), math.inf, _hall_cell(k, cell_m)
 
 
 def _seed_frames(seed: int, out: Path, log: Callable[[str], None], step_s: float = 10.0,
-                 storeys: int = 3) -> tuple[list[Frame], dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]], float]:
+                 storeys: int = 3, span: tuple[float, float] | None = None) -> Scene:
     src, db = out / f"seed{seed}.json", out / f"seed{seed}.db"
     if not db.exists():
         out.mkdir(parents=True, exist_ok=True)
@@ -141,13 +188,19 @@ def _seed_frames(seed: int, out: Path, log: Callable[[str], None], step_s: float
     boxes = {cid: (np.array([p.bbox[0] for p in m.parts]).reshape(-1, 3), np.array([p.bbox[1] for p in m.parts]).reshape(-1, 3))
              for cid, m in meshes.items()}
     frames: list[Frame] = []
-    for t in np.arange(0.0, tour.duration, step_s).tolist():
+    t0, t1 = span if span is not None else (0.0, tour.duration)
+    for t in np.arange(t0, min(t1, tour.duration), step_s).tolist():
         xyz, yaw, pitch = tour.at(t)
         eye = np.asarray(xyz, np.float64)
         hit = np.flatnonzero(cell_of(planes, eye))
         if len(hit):
             frames.append((graph, int(ids[hit[0]]), eye, camera(eye, float(yaw), float(pitch)).astype(np.float64)))
-    return frames, boxes, 40.0
+
+    def locate(eye: NDArray[np.float64]) -> int | None:
+        hit = np.flatnonzero(cell_of(planes, eye))
+        return int(ids[hit[0]]) if len(hit) else None
+
+    return frames, boxes, 40.0, locate
 
 
 def _time(culling: Culling, frame: Frame, boxes: dict[int, Any], proj: NDArray[np.float64],
@@ -163,30 +216,73 @@ def _time(culling: Culling, frame: Frame, boxes: dict[int, Any], proj: NDArray[n
     return t1 - t0, t2 - t1, len(pc.order), keep
 
 
+def _cache_culling(cache: CullCache) -> Culling:
+    """``(walk, parts)`` functions that time :meth:`CullCache.cull` as :func:`_time` times the
+    two steps: the walk returns the whole answer, whose own split of the CPU the parts step
+    hands back (the bench's clock around it is the check)."""
+    got: dict[str, Any] = {}
+
+    def walk(graph: PortalGraph, start: int, eye: Any, view: Any, proj: Any, size: Any, *, fog_m: float) -> Any:
+        got["r"] = r = cache.cull(start, eye, view, proj, size, got["boxes"], fog_m=fog_m)
+        return types.SimpleNamespace(order=r.order, vsas=None)
+
+    def parts(_mode: str, _cells: Any, _boxes: Any, *_a: Any, **_k: Any) -> dict[int, NDArray[np.bool_]]:
+        return dict(got["r"].masks)
+
+    walk.got = got  # type: ignore[attr-defined]
+    return walk, parts
+
+
+def _time_cached(culling: Culling, frame: Frame, boxes: dict[int, Any], proj: NDArray[np.float64],
+                 fog_m: float) -> tuple[float, float, int, dict[int, NDArray[np.bool_]]]:
+    """:func:`_time` of a :func:`_cache_culling` pair: the cache's own split of its CPU seconds."""
+    walk, _parts = culling
+    walk.got["boxes"] = boxes  # type: ignore[attr-defined]
+    graph, start, eye, view = frame
+    t0 = time.process_time()
+    walk(graph, start, eye, view, proj, SIZE, fog_m=fog_m)
+    total = time.process_time() - t0
+    r = walk.got["r"]  # type: ignore[attr-defined]
+    return total - r.parts_s, r.parts_s, len(r.order), dict(r.masks)
+
+
 def _ms(x: Sequence[float]) -> dict[str, float]:
     a = 1e3 * np.asarray(x, np.float64)
     return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99))}
 
 
 def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None, hall_frames: int = 120,
-                  repeats: int = 2, log: Callable[[str], None] = lambda s: None) -> list[dict[str, Any]]:
-    """The culling's CPU time on the hall and the tours of ``seeds`` (module docstring): a row per
-    scene with the frames, the visible cells and per part (``walk``, ``parts``, ``total``)
-    the median and p99 milliseconds, now and (``against``) at that revision.  Each frame is
-    culled ``repeats`` times over (every frame once, then again)."""
-    now: Culling = (portals.cull_portals, partcull.cull_parts)
-    then = culling_at(against) if against else None
+                  repeats: int = 2, cache: bool = False,
+                  log: Callable[[str], None] = lambda s: None) -> list[dict[str, Any]]:
+    """The culling's CPU time on the hall, the hall walked and the tours of ``seeds`` (module
+    docstring): a row per scene with the frames, the visible cells and per part (``walk``,
+    ``parts``, ``total``) the median and p99 milliseconds, now and (``against``) at that
+    revision; with ``cache``, now is the culling reused frame to frame (its ``misses``
+    counted) and the other each frame culled anew (``against``'s, or today's, labelled
+    ``anew``).  Each frame is culled ``repeats`` times over (every frame once, then again)."""
+    exact: Culling = (portals.cull_portals, partcull.cull_parts)
+    then = culling_at(against) if against else (exact if cache else None)
+    label = against if against else ("anew" if cache else None)
     proj = perspective(60.0, SIZE[0] / SIZE[1], 0.1, 1000.0).astype(np.float64)
-    scenes: list[tuple[str, Callable[[], Any]]] = [("hall 16x16", lambda: _hall_frames(hall_frames))]
+    scenes: list[tuple[str, Callable[[], Any]]] = [("hall 16x16", lambda: _hall_frames(hall_frames)),
+                                                   ("hall walk", lambda: _hall_walk(hall_frames))]
     scenes += [(f"seed {s}", functools.partial(_seed_frames, s, out, log)) for s in seeds]
+    if cache:  # consecutive frames of a tour, where reuse can pay: 25 a second over a minute
+        scenes += [(f"seed {s} walk", functools.partial(_seed_frames, s, out, log, 1.0 / 25.0, span=WALK_SPAN_S))
+                   for s in seeds]
     rows = []
     for name, make in scenes:
-        frames, boxes, fog = make()
+        frames, boxes, fog, locate = make()
+        cached = CullCache(frames[0][0], locate=locate) if cache and frames else None
+        now = _cache_culling(cached) if cached is not None else exact
         log(f"bench portals: culling CPU, {name}, {len(frames)} frames x {repeats}")
         got: dict[str, dict[str, list[float]]] = {w: {"walk": [], "parts": [], "total": []} for w in ("now", "then")}
         visible = []
+        parts_kept = {"now": 0, "then": 0}
+        dropped = 0
         for culling in (now, then):
-            if culling is not None:  # warm up (first calls, caches) untimed
+            # warm up (first calls, the packed boxes) untimed; not the cache: its first guard is timed
+            if culling is not None and (cached is None or culling is not now):
                 _time(culling, frames[0], boxes, proj, fog)
         pair = [("now", now), ("then", then)] if then is not None else [("now", now)]
         for r in range(repeats):
@@ -195,23 +291,37 @@ def cull_cpu_rows(seeds: Sequence[int], out: Path, *, against: str | None = None
                 # frame's arrays in the cache (the same code read 0-6 % apart by column)
                 kept: dict[str, dict[int, NDArray[np.bool_]]] = {}
                 for who, culling in pair if (r + i) % 2 == 0 else pair[::-1]:
-                    w, p, n, kept[who] = _time(culling, f, boxes, proj, fog)
+                    timer = _time_cached if who == "now" and cached is not None else _time
+                    w, p, n, kept[who] = timer(culling, f, boxes, proj, fog)
                     got[who]["walk"].append(w)
                     got[who]["parts"].append(p)
                     got[who]["total"].append(w + p)
+                    parts_kept[who] += sum(int(m.sum()) for m in kept[who].values())
                     if who == "now":
                         visible.append(n)
                 # conservative: today's culling keeps every part the other keeps (a superset:
                 # rectangles grown outward may keep a few more)
-                if "then" in kept and (kept["now"].keys() != kept["then"].keys()
-                                       or any(np.any(kept["then"][c] & ~kept["now"][c]) for c in kept["now"])):
-                    raise WalkstreamError(f"bench portals: {name}: the culling now drops parts the culling at {against} keeps")
+                if "then" in kept:
+                    lost = sum(int(m.sum()) if c not in kept["now"] else int((m & ~kept["now"][c]).sum())
+                               for c, m in kept["then"].items())
+                    if lost and cached is None:
+                        raise WalkstreamError(f"bench portals: {name}: the culling now drops parts the culling "
+                                              f"{label} keeps")
+                    # the cache's guard tests rays, not the frame's pixel grid: a part the frame's
+                    # own rectangles keep by their rounding alone may be left out (the id truth
+                    # decides: tests/test_cullcache.py); counted, not refused
+                    dropped += lost
         row: dict[str, Any] = {"scene": name, "frames": len(frames) * repeats,
                                "visible_median": float(np.median(visible)), "visible_max": int(max(visible)),
                                "now": {k: _ms(v) for k, v in got["now"].items()}}
         if then is not None:
             row["then"] = {k: _ms(v) for k, v in got["then"].items()}
-            row["against"] = against
+            row["against"] = label
+        if cached is not None:
+            row["misses"] = cached.misses
+            row["dropped"] = dropped
+        if then is not None:  # parts drawn, over every frame: what a looser answer costs the GPU
+            row["kept"] = dict(parts_kept)
         rows.append(row)
     return rows
 
@@ -221,10 +331,16 @@ def cull_cpu_table(rows: Sequence[dict[str, Any]]) -> str:
     at that revision and the ratio of the total medians."""
     against = next((r["against"] for r in rows if "against" in r), None)
     head = f"{'scene':<12}{'frames':>7}{'visible':>9}{'walk ms':>14}{'parts ms':>14}{'total ms':>14}"
+    cached = any("misses" in r for r in rows)
+    if cached:
+        head += f"{'misses':>8}{'parts':>8}{'dropped':>8}"
     if against:
         head += f"  |{'before walk':>14}{'before parts':>14}{'before total':>14}{'speed-up':>9}"
+    what = "each frame culled anew (today's)" if against == "anew" else f"the culling at {against}"
     out = ["culling CPU per frame (time.process_time; median / p99; 640x480)"
-           + (f"; before = the culling at {against}, timed alternately" if against else "") + ":", head]
+           + ("; now = reused frame to frame (shared/cullcache.py), its misses, the parts it keeps"
+              " over those kept anew, and the parts kept anew it left out (all frames)" if cached else "")
+           + (f"; before = {what}, timed alternately" if against else "") + ":", head]
 
     def mp(r: dict[str, float]) -> str:
         return f"{r['median']:.2f} / {r['p99']:.2f}"
@@ -233,6 +349,10 @@ def cull_cpu_table(rows: Sequence[dict[str, Any]]) -> str:
         lo, hi = round(r["visible_median"]), r["visible_max"]
         line = (f"{r['scene']:<12}{r['frames']:>7}{f'{lo}-{hi}' if lo != hi else str(hi):>9}{mp(r['now']['walk']):>14}"
                 f"{mp(r['now']['parts']):>14}{mp(r['now']['total']):>14}")
+        if cached:
+            kept = r.get("kept", {})
+            more = kept["now"] / kept["then"] if kept.get("then") else math.nan
+            line += f"{r.get('misses', 0):>8}{more:>7.2f}x{r.get('dropped', 0):>8}"
         if "then" in r:
             t = r["then"]
             line += (f"  |{mp(t['walk']):>14}{mp(t['parts']):>14}{mp(t['total']):>14}"

@@ -405,6 +405,8 @@ async def replay(
                 lambda: int(link.stats.bytes_down), WalkFrames(), recorder,
                 BudgetController(config.fps_target, k=config.budget_frames),
             )
+            if rooms is not None and rooms.cull_cache is not None:  # --cull-cache culls the walk's own boxes
+                rooms.cull_cache.boxes = state.boxes
             facades = device.simulated if config.facades is None else config.facades
             if facades and scene.streets is not None:  # boxes carrying their LOD2's facades
                 state.facades = FacadeState()

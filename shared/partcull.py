@@ -52,6 +52,7 @@ from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.portals import CULLING_MODES, box_distance
 from walkstream.shared.screenrects import (
     BOX_EDGES,
+    CENTRE_MARGIN_PX,
     box_corners_ckm,
     box_rects,
     box_rects_ckm,
@@ -182,6 +183,7 @@ def cull_parts(
     vsas: dict[int, list[tuple[int, int, int, int]]] | None = None,
     fog_m: float = math.inf,
     clip_m: float = 0.03,
+    margin_px: float = CENTRE_MARGIN_PX,
 ) -> dict[int, NDArray[np.bool_]]:
     """Which parts of each visible cell to draw, by ``mode`` (:data:`~walkstream.shared.portals.CULLING_MODES`).
 
@@ -197,6 +199,10 @@ def cull_parts(
         Per cell, its parts' boxes (packed once, :func:`part_table`).
     vsas : dict of int -> list of (x0, y0, x1, y1)
         Per cell its VSAs (``portals`` mode; a cell without is culled whole).
+    margin_px : float
+        Pixels by which a box's projection is grown before the pixels it covers are taken
+        (``portals`` mode; :data:`~walkstream.shared.screenrects.TOUCH_MARGIN_PX` keeps every
+        pixel it touches, as the cache's guard view does: :mod:`walkstream.shared.cullcache`).
 
     Returns
     -------
@@ -224,7 +230,7 @@ def cull_parts(
     if vsas is None or not seen:
         return out
     if len(seen) < _FEW_CELLS:
-        out.update(_cull_few(seen, boxes, vsas, e, view, proj, size, fog_m, clip_m, vp))
+        out.update(_cull_few(seen, boxes, vsas, e, view, proj, size, fog_m, clip_m, vp, margin_px))
         return out
     table = part_table(boxes, seen)
     nseen = len(seen)
@@ -261,9 +267,9 @@ def cull_parts(
     if n < _FEW_BOXES:  # the eight corners' one product: fewer numpy calls
         lo_b, hi_b = lohi[:, 0].T, lohi[:, 1].T
         rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo_b, hi_b), BOX_EDGES, V, P, size, clip_m,
-                                               clip_rest=False)
+                                               margin_px, clip_rest=False)
     else:
-        rect, front, near_d, far_d = box_rects_ckm(lohi, V, P, size, clip_m, work=work, clip_rest=False)
+        rect, front, near_d, far_d = box_rects_ckm(lohi, V, P, size, clip_m, margin_px, work=work, clip_rest=False)
     kmax = v.shape[1]
     # 32-bit pixels (the bounds are clamped to +-1e9): half the bytes to gather and compare
     rect = rect.astype(np.int32)
@@ -307,6 +313,7 @@ def _cull_few(
     fog_m: float,
     clip_m: float,
     vp: NDArray[np.float64],
+    margin_px: float = CENTRE_MARGIN_PX,
 ) -> dict[int, NDArray[np.bool_]]:
     """:func:`cull_parts` of a few cells (a tour's 4-40): their arrays joined as they are (no
     table to check), the eight corners' one product, fresh arrays; side by side with the
@@ -324,7 +331,7 @@ def _cull_few(
     if len(lo):
         V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
         rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo, hi), BOX_EDGES, V, P, size, clip_m,
-                                               clip_rest=False)
+                                               margin_px, clip_rest=False)
         v = _vsa_table(vsas, seen)[:, :, owner]
         meet = ((np.maximum(rect[0], v[0]) <= np.minimum(rect[2], v[2]))
                 & (np.maximum(rect[1], v[1]) <= np.minimum(rect[3], v[3])))

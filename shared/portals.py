@@ -84,7 +84,13 @@ from numpy.typing import ArrayLike, NDArray
 from walkstream.shared.errors import InputError
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.screenrects import CENTRE_MARGIN_PX, corner_secant, point_rects, rects_ckm
+from walkstream.shared.screenrects import (
+    CENTRE_MARGIN_PX,
+    box_rects_ckm,
+    corner_secant,
+    point_rects,
+    rects_ckm,
+)
 
 __all__ = [
     "CULLING_MODES",
@@ -151,6 +157,7 @@ def cull_portals(
     naive: bool = False,
     closed: frozenset[int] = frozenset(),
     margin_px: float = CENTRE_MARGIN_PX,
+    grow_m: float = 0.0,
 ) -> PortalCull:
     """Cells seen from cell ``start`` through portals, with their VSAs (module docstring).
 
@@ -182,6 +189,12 @@ def cull_portals(
         Pixels by which a portal's projection is grown before the pixel centres it
         covers are taken (:func:`~walkstream.shared.screenrects.ndc_pixels`; a
         predicted view's walk takes every pixel touched, ``TOUCH_MARGIN_PX``).
+    grow_m : float
+        Metres by which every portal is grown on all sides before it is projected (its
+        box, grown, is projected instead of its polygon, and the walk passes a portal
+        through when the eye comes within the pass-through distance of the grown box):
+        the walk of an eye that may be anywhere within ``grow_m`` of ``eye``
+        (:mod:`walkstream.shared.cullcache`).  The fog is tested on the portal as it is.
     """
     t0 = time.perf_counter()
     if start not in graph.index:
@@ -196,7 +209,7 @@ def cull_portals(
     # whole-pixel rectangles as plain ints.  The walk is the round-one FIFO walk
     # (benchmarks/portalwalk.py) step for step, so its cells, VSAs and depths are the
     # same; only the constant work per portal is less.
-    rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed, margin_px)
+    rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed, margin_px, grow_m)
     s = graph.index[start]
     full = (0, 0, w - 1, h - 1)
     # per cell index (lists, not dicts: indexing is the walk's most frequent step)
@@ -325,6 +338,7 @@ def _portal_rows(
     naive: bool,
     closed: frozenset[int] = frozenset(),
     margin_px: float = CENTRE_MARGIN_PX,
+    grow_m: float = 0.0,
 ) -> Callable[[int], Iterable[tuple[int, Any]]]:
     """A function giving, for a cell index, its directed portals as ``(target index, what)``
     pairs: ``what`` is ``None`` (culled: beyond the fog or wholly behind the clip plane),
@@ -337,12 +351,26 @@ def _portal_rows(
     if naive:
         rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive, margin_px)
         rect4 = rect.T
+    elif grow_m > 0.0:
+        # the portals' boxes grown by ``grow_m``: a ray from any point within ``grow_m`` of
+        # the eye through a portal passes, from the eye, through the grown box (the
+        # cache's walk, :mod:`walkstream.shared.cullcache`); a box across the clip plane
+        # gets the unclipped superset of its rectangle
+        glo, ghi = graph.lo - grow_m, graph.hi + grow_m
+        rect4, front, _near, _far = box_rects_ckm(np.stack([glo.T, ghi.T], axis=1), V, P, size, clip_m, margin_px,
+                                                  clip_rest=False)
+        rect = rect4.T
     else:
         rect4, front, _near, _far = rects_ckm(graph.poly_ckm, graph.edges, V, P, size, clip_m, margin_px)
         rect = rect4.T
     # 0 culled, 1 pass through, 2 the rectangle
     what = np.where(front, 2, 0).astype(np.int8)
-    if not naive:
+    if grow_m > 0.0 and not naive:
+        # the eye near a grown box: some ray of the eyes it stands for may pass the
+        # portal at a depth the projection cannot hold
+        near_pass = max(pass_m, clip_m * corner_secant(P) * 1.01)
+        what[box_distance(glo, ghi, e) <= near_pass] = 1
+    elif not naive:
         near_pass = max(pass_m, clip_m * corner_secant(P) * 1.01)
         dist = np.abs(graph.plane[:, :3] @ e + graph.plane[:, 3])
         near = np.flatnonzero(dist <= near_pass)

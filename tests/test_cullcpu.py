@@ -83,7 +83,7 @@ def test_hall_boxes_lie_in_their_cells() -> None:
 def test_bench_portals_cull_from_the_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["bench", "portals", "--cull", "--cull-frames", "3", "--out", str(tmp_path), "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)["culling_cpu"]
-    assert [r["scene"] for r in rows] == ["hall 16x16"]
+    assert [r["scene"] for r in rows] == ["hall 16x16", "hall walk"]
     r = rows[0]
     assert r["frames"] == 6 and 200 <= r["visible_median"] <= r["visible_max"] <= 256
     for part in ("walk", "parts", "total"):
@@ -94,6 +94,20 @@ def test_bench_portals_cull_from_the_cli(tmp_path: Path, capsys: pytest.CaptureF
                  "--out", str(tmp_path)]) != 0
     err = capsys.readouterr().err
     assert "no-such-revision" in err and "Traceback" not in err
+
+
+def test_bench_portals_cull_cache_from_the_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # the culling reused frame to frame against each frame culled anew: the cache's misses
+    # counted (the first frame of each pass makes a guard), and it kept every part the
+    # other kept (the bench raises otherwise)
+    assert main(["bench", "portals", "--cull", "--cull-cache", "--cull-frames", "10", "--out", str(tmp_path),
+                 "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["culling_cpu"]
+    assert [r["scene"] for r in rows] == ["hall 16x16", "hall walk"]
+    for r in rows:
+        assert r["against"] == "anew" and 1 <= r["misses"] < r["frames"] // 2 and r["frames"] == 20
+        assert 0 < r["now"]["total"]["median"] <= r["now"]["total"]["p99"]
+        assert 0 < r["then"]["total"]["median"] <= r["then"]["total"]["p99"]
 
 
 def test_bench_portals_cull_against_a_revision_times_both_in_turn(tmp_path: Path,

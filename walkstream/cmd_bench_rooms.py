@@ -59,7 +59,7 @@ def cmd_bench_portals(args: argparse.Namespace) -> int:
         from walkstream.benchmarks.cullcpu import cull_cpu_rows, cull_cpu_table
 
         rows = cull_cpu_rows(args.cull, Path(args.out), against=args.cull_against, hall_frames=args.cull_frames,
-                             log=lambda s: print(s, file=sys.stderr))
+                             cache=args.cull_cache, log=lambda s: print(s, file=sys.stderr))
         print(json.dumps({"culling_cpu": rows}, indent=2) if args.json else cull_cpu_table(rows))
         return 0
     if args.triangles is not None:
@@ -148,6 +148,9 @@ def add_room_benches(besub: Any) -> None:
                     help="with --cull: time the culling of this git revision beside today's, frame by frame")
     bp.add_argument("--cull-frames", type=int, default=120, metavar="N",
                     help="with --cull: frames of the hall (default 120), each culled twice")
+    bp.add_argument("--cull-cache", action="store_true",
+                    help="with --cull: time the culling reused frame to frame (a guard view, shared/cullcache.py) "
+                    "against each frame culled anew (today's, or --cull-against's revision)")
     bp.add_argument("--triangles", nargs="+", metavar="SRC", default=None,
                     help="only the kept parts' triangles tested, pose by pose (every --step s) along the tour of "
                     "each SRC (a generated office's seed, or a baked interior database): parts and triangles kept "

@@ -131,7 +131,8 @@ def config_from_args(args: argparse.Namespace) -> Any:
         fog_budget=not args.no_fog_budget,
         triangle_cull=not args.no_triangle_cull,
         rooms={"flush_s": args.flush_after, "flush_policy": args.flush_policy, "flush_fill": args.flush_fill,
-               "batch_bytes": parse_size(args.contents_batch),
+               "batch_bytes": parse_size(args.contents_batch), "cull_cache": args.cull_cache,
+               "cull_guard": _cull_guard(args.cull_guard),
                **({} if args.prefetch_portals is None else {"beyond_portals": args.prefetch_portals})},
         report_dir=Path(args.report),
         start_bundle=not args.no_start_bundle,
@@ -328,6 +329,12 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--culling", choices=("portals", "frustum", "none"), default="portals",
                    help="interiors: portal culling with visible screen areas (default), portals in the frustum "
                    "only, or every part of the visible cells")
+    r.add_argument("--cull-cache", nargs="?", const="guard", default="", choices=("guard", "frustum"),
+                   help="interiors, portal culling: reuse a frame's culling while the view stays within a guard "
+                   "view (less CPU per frame, more parts drawn; default: each frame culled anew); guard (the "
+                   "default with the flag): the guard's parts, frustum: the guard's parts cut by the frame's frustum")
+    r.add_argument("--cull-guard", default="0.3,10", metavar="M,DEG",
+                   help="--cull-cache: the step in metres and the turn in degrees a guard allows (default 0.3,10)")
     r.add_argument("--no-triangle-cull", action="store_true",
                    help="interiors: cull parts by their boxes only (default: a part the boxes keep is dropped "
                    "when none of its triangles meets its cell's visible screen areas)")
@@ -425,3 +432,14 @@ def replay_with_options(server: str, options: Mapping[str, Any], title: str) -> 
             raise InputError(f"replay option {key!r} does not exist")
     config = replace(config_from_args(ns), **direct)
     return replay_to_report(server, config, title=title)
+
+
+def _cull_guard(text: str) -> tuple[float, float]:
+    """``--cull-guard M,DEG``: the step and the turn, each finite and above 0 (the turn below 80)."""
+    try:
+        m, deg = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"--cull-guard {text!r}: expected METRES,DEGREES such as 0.3,10") from None
+    if not (0.0 < m < math.inf and 0.0 < deg < 80.0):
+        raise InputError(f"--cull-guard {text!r}: expected a step above 0 m and a turn from 0 to 80 degrees")
+    return m, deg

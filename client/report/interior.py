@@ -64,6 +64,9 @@ def interior_summary(
         "fog_tightened_frames": frames.tightened,
         "fog_below_portal_frames": frames.fog_below_portal,
         "triangle_cull": config.triangle_cull,
+        # --cull-cache: the frames culled through a guard made for them (misses) or reused (hits)
+        **({} if streamer.cull_cache is None else {
+            "cull_cache_hits": streamer.cull_cache.cache.hits, "cull_cache_misses": streamer.cull_cache.cache.misses}),
         "triangle_culled_parts": frames.triangle_culled,
         "path_wait_s": frames.path_wait_s,
         "start_hold_s": frames.start_hold_s,

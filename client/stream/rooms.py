@@ -56,6 +56,7 @@ from walkstream.client.clock import Clock
 from walkstream.client.content.cellmesh import CELLMESH_CONTENT, decoded_bytes
 from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
+from walkstream.client.stream.cachedcull import RoomCullCache
 from walkstream.client.stream.roomlate import LateCells
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
 from walkstream.client.tasks import reap
@@ -146,6 +147,11 @@ class RoomStreamConfig:
     culling: str = "portals"
     """``portals`` (VSAs), ``frustum`` (portals in the frustum) or ``none`` (as
     ``frustum`` for the cells, every part of them drawn)."""
+    cull_cache: str = ""
+    """``portals``: ``guard`` or ``frustum`` reuse the culling while the view stays within a guard
+    (:mod:`.cachedcull`); empty (default): each frame culled anew."""
+    cull_guard: tuple[float, float] = (0.3, 10.0)
+    """``cull_cache``: the step (m) and the turn (degrees) a guard allows."""
 
     def __post_init__(self) -> None:
         if self.flush_policy not in FLUSH_POLICIES:
@@ -269,6 +275,8 @@ class RoomStreamer:
         self.visible: list[int] = []
         self.graph = PortalGraph.from_topology(topology)
         self.last_cull: PortalCull | None = None
+        self.cull_cache = RoomCullCache(self.graph, lambda p: self._where.locate(p, self.current), *self.config.cull_guard) \
+            if self.config.cull_cache and self.config.culling == "portals" else None
         self._track: list[tuple[float, NDArray[np.float64]]] = []
         self._headings: list[tuple[float, float, float]] = []  # (t, yaw, pitch) of the frames' views
         self._ahead: list[int] = []
@@ -307,6 +315,9 @@ class RoomStreamer:
         given (its result is kept in :attr:`last_cull`), otherwise through the portals in
         the frustum (breadth first)."""
         self.last_cull = None
+        if self.cull_cache is not None and (cached := self.cull_cache.cells(
+                self.current, eye, view, proj, size, fog_m=self.fog_m, closed=self.closed)) is not None:
+            return cached
         if self.current is None:
             return []
         cull, order = self._cells_from(self.current, eye, view_proj, view, proj, size, self.closed)

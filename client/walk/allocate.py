@@ -98,12 +98,20 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
             w.part_triangles[cid] = np.array([p.triangles for p in cm.parts], np.int64)
     pc = rooms.last_cull
     culling = rooms.config.culling
-    if pc is not None:
+    cached = rooms.cull_cache if rooms.cull_cache is not None and rooms.cull_cache.last is not None else None
+    if cached is not None:  # the guard's parts (--cull-cache), copied: the fog budget cuts them
+        masks = cached.masks(f.loaded)
+        walked = list(masks)
+        if rooms.config.cull_cache == "frustum":  # the frame's own frustum cuts the guard's wider view
+            for c, m in cull_parts("frustum", walked, boxes, f.eye, f.view, w.proj, w.size, fog_m=f.fog).items():
+                masks[c] &= m
+    elif pc is not None:
         walked = [c for c in f.loaded if c in pc.vsas]
     else:  # no portal walk: the chosen culling on its own ("portals" without one keeps nothing)
         walked = [] if culling == "portals" else list(f.loaded)
-    masks = cull_parts(culling, walked, boxes, f.eye, f.view, w.proj, w.size,
-                       vsas=None if pc is None else pc.vsas, fog_m=f.fog)
+    if cached is None:
+        masks = cull_parts(culling, walked, boxes, f.eye, f.view, w.proj, w.size,
+                           vsas=None if pc is None else pc.vsas, fog_m=f.fog)
     if culling == "portals" and pc is not None and w.config.triangle_cull:
         # the parts the boxes kept, tested again by their triangles (never adds one)
         w.frames.triangle_culled += refine_parts(masks, f.loaded, pc.vsas, f.view, w.proj, w.size)
@@ -115,7 +123,10 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
     # would draw whole; any other head is waiting for its cell
     for c in walked:
         gone = np.asarray(f.loaded[c].missing, np.int64)
-        if len(gone) and c not in whole and pc is not None:
+        if len(gone) and c not in whole and cached is not None:
+            if cached.head_clear(c, gone):
+                f.heads_clear.add(c)
+        elif len(gone) and c not in whole and pc is not None:
             lo, hi = boxes[c]
             if not cull_parts(culling, [c], {c: (lo[gone], hi[gone])}, f.eye, f.view, w.proj, w.size,
                               vsas=pc.vsas, fog_m=rooms.config.fog_m)[c].any():
