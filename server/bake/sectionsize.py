@@ -3,9 +3,10 @@
 ``R`` counts objects, and the number of objects a section can afford depends on the
 city: on the demo city R 96 wins the bytes figure, on West Oakland (126 objects) R 64
 already makes the whole extract one section, on a clip of Kouvola R 64 wins and R 32
-loses (docs/benchmarks.md).  No single count, nor a fixed multiple of the street cells'
-PVS (0.53 to 1.2 times there) or of a field point's visible set (0.7 to 2 times),
-fits all three.  What does agree is the sections' *size*: where sections won, they
+loses (docs/benchmarks.md).  The smallest R that won was 0.53 to 1.2 times the street
+cells' mean PVS and 0.7 to 2 times a field point's mean visible set: no count and no
+fixed multiple says how coarse the partition gets.  What does agree is the sections'
+*size*: where sections won with the smallest R, they
 averaged 2,160 to 2,350 m² of the walkable cover (demo R 96, West Oakland R 32), and
 where they lost they were at most 1,210 m² (demo R 64, by 5 % on one walk; the clip's
 R 32: 117 m²).  That is geometry, not object counts: a walker enters a section per
