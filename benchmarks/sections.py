@@ -36,7 +36,7 @@ Replayer = Callable[[str, Mapping[str, Any], str], Any]
 
 # the bake's figures the database does not hold (the sections' redundancy, the field's
 # size): kept beside the database so that ``--reuse`` shows them again
-_BAKE_FIGURES = ("section_redundancy_mean", "sections", "section_pvs_mean", "field_points", "field_bytes")
+_BAKE_FIGURES = ("section_redundancy_mean", "sections", "section_pvs_mean", "field_points", "field_bytes", "redundancy")
 
 
 def _figures_path(db: Path) -> Path:
@@ -91,7 +91,7 @@ def run_sections_bench(
     *,
     source: Path,
     out: Path,
-    redundancies: Sequence[int] = (32, 64, 96),
+    redundancies: Sequence[int | None] = (32, 64, 96),
     min_sizes: Sequence[float] = (64.0,),
     field_spacing: float = 4.0,
     walks: Sequence[str] = ("SE", "drive"),
@@ -102,7 +102,7 @@ def run_sections_bench(
     bbox_crs: str = "local",
 ) -> list[dict[str, Any]]:
     """Bake ``source`` with street cells, grid cells and in sections for every ``(R, M)`` and cover
-    (``--section-cover``); replay ``walks``.  With ``bbox`` (``bbox_crs``: ``local`` or
+    (``--section-cover``; an ``R`` of None: the bake's default, ``R`` from the field); replay ``walks``.  With ``bbox`` (``bbox_crs``: ``local`` or
     ``lonlat``) every bake takes only that part of the source (``bake --bbox``).
 
     Returns one row per database; writes ``bench_sections.json`` and the replay
@@ -119,10 +119,11 @@ def run_sections_bench(
     for cover in covers:
         for rr in redundancies:
             for mm in min_sizes:
-                st = BakeSettings(cells="sections", field_spacing=field_spacing, redundancy=int(rr),
+                st = BakeSettings(cells="sections", field_spacing=field_spacing,
+                                  redundancy=None if rr is None else int(rr),
                                   min_size=float(mm), section_cover=cover, **clip).check()
-                name = f"sections-R{rr}-M{mm:g}" + ("" if cover == "walkable" else f"-{cover}")
-                runs.append(("sections", out / f"{name}.db", st, int(rr), float(mm)))
+                name = f"sections-R{'auto' if rr is None else rr}-M{mm:g}" + ("" if cover == "walkable" else f"-{cover}")
+                runs.append(("sections", out / f"{name}.db", st, None if rr is None else int(rr), float(mm)))
     # one field per cover (the walkable cover renders fewer points): the other bakes
     # of that cover point at the first one's folder
     first_field: dict[str, Path] = {}
@@ -148,7 +149,10 @@ def run_sections_bench(
                     blobs[w] = blob
         paths = {w: RecordedPath.from_msgpack(blob, w) for w, blob in blobs.items()}
         row: dict[str, Any] = {
-            "database": db.name, "cells_kind": kind, "redundancy": r, "min_size": m, "cells": s["cells"], "pvs_mean": s["pvs_mean"],
+            "database": db.name, "cells_kind": kind,
+            # the R the sections were grown with (the field's choice where none was asked for)
+            "redundancy": r if r is not None or kind != "sections" else s.get("redundancy"),
+            "redundancy_from_field": kind == "sections" and r is None, "min_size": m, "cells": s["cells"], "pvs_mean": s["pvs_mean"],
             "cover": st.section_cover if kind == "sections" else None,
             "section_redundancy_mean": s.get("section_redundancy_mean"), "bake_seconds": s["bake_seconds"],
             "field_points": s.get("field_points"), "field_bytes": s.get("field_bytes"), "walks": {},
@@ -177,7 +181,7 @@ def run_sections_bench(
 
 def format_sections_table(rows: list[dict[str, Any]]) -> str:
     """One line per database and walk."""
-    head = (f"{'cells':<9} {'cover':<8} {'R':>3} {'M m2':>5} {'n cells':>7} {'PVS mean':>8} {'redund.':>7} "
+    head = (f"{'cells':<9} {'cover':<8} {'R':>4} {'M m2':>5} {'n cells':>7} {'PVS mean':>8} {'redund.':>7} "
             f"{'bake s':>7} {'walk':>6} {'cells/km':>8} {'bytes/km':>9} {'objects':>8} {'records':>8} {'index':>7} "
             f"{'overf.':>6} {'perfect%':>8} {'first s':>7}")
     lines = [head, "-" * len(head)]
@@ -188,11 +192,12 @@ def format_sections_table(rows: list[dict[str, Any]]) -> str:
     for r in rows:
         red = "-" if r["section_redundancy_mean"] is None else f"{r['section_redundancy_mean']:.1f}"
         big = "-" if r["min_size"] is None else f"{r['min_size']:g}"
+        rr = "-" if r["redundancy"] is None else f"{r['redundancy']}" + ("*" if r.get("redundancy_from_field") else "")
         for w, f in r["walks"].items():
             first = f["first_perfect_s"]
             over = f.get("overfetch_ratio")
             lines.append(
-                f"{r['cells_kind']:<9} {r.get('cover') or '-':<8} {'-' if r['redundancy'] is None else r['redundancy']:>3} "
+                f"{r['cells_kind']:<9} {r.get('cover') or '-':<8} {rr:>4} "
                 f"{big:>5} {r['cells']:>7,} {r['pvs_mean']:>8.1f} "
                 f"{red:>7} {r['bake_seconds']:>7.0f} {w:>6} {f['cells_per_km']:>8.1f} {f['bytes_per_km']:>9,.0f} "
                 f"{n(f.get('object_bytes_per_km')):>8} {n(f.get('cell_bytes_per_km')):>8} "

@@ -7,6 +7,8 @@ city with a coarse field at a low resolution.
 
 from __future__ import annotations
 
+import json
+import math
 from pathlib import Path
 
 import httpx
@@ -26,11 +28,13 @@ from walkstream.server.bake.cells import make_cells
 from walkstream.server.bake.field import (
     FieldLattice,
     PointSets,
+    bake_field,
     field_folder,
     field_lattice,
     points_meeting,
 )
 from walkstream.server.bake.sections import grow_sections, section_points, section_pvs
+from walkstream.server.bake.sectionsize import sections_for_area
 from walkstream.server.service.main import create_app
 from walkstream.server.sources.citygen import write_city
 from walkstream.server.sources.read import read_source
@@ -112,7 +116,8 @@ def test_overlaps_only_where_they_add_points() -> None:
 
 # --------------------------------------------------------------------- the bake
 
-FAST = BakeSettings(cells="sections", resolution=32, field_spacing=6.0, redundancy=8)
+# the default R (from the field): the bake below is the default's path
+FAST = BakeSettings(cells="sections", resolution=32, field_spacing=6.0)
 
 
 @pytest.fixture(scope="module")
@@ -281,7 +286,6 @@ def test_the_route_into_an_overlapping_section_crosses_where_the_viewer_is() -> 
 
 def _turned_city(path: Path, degrees: float) -> Path:
     """The small generated city turned by ``degrees`` about its corner."""
-    import json
     import math
 
     from walkstream.server.sources.citygen import generate_city
@@ -321,7 +325,7 @@ def test_aligned_sections_are_turned_rectangles_that_cover_the_field(tmp_path: P
     st = BakeSettings(cells="sections", resolution=16, field_spacing=10.0, redundancy=8, section_shape="aligned",
                       section_cover="free")
     summary = bake(src, db, settings=st)
-    assert summary["cells"] == summary["sections"] > 1
+    assert summary["cells"] == summary["sections"] > 1 and summary["redundancy"] == 8  # given: not from the field
     scene = read_source(src)
     from walkstream.server.bake.sectionplan import street_angle
 
@@ -386,7 +390,6 @@ def test_bench_sections_refuses_a_bad_bbox_in_one_line(city: Path, tmp_path: Pat
 
 
 def test_a_reused_database_keeps_the_redundancy_its_bake_measured(small_city_db: Path, tmp_path: Path) -> None:
-    import json
     import shutil
 
     from walkstream.benchmarks.sections import _bake, _previous_rows
@@ -438,3 +441,63 @@ def test_points_on_one_spot_of_the_trade_plot_share_one_label(tmp_path: Path) ->
     assert trade_labels(rows, "SE") == []
     plot_sections_trade(rows, tmp_path / "trade.png")
     assert (tmp_path / "trade.png").stat().st_size > 10_000
+
+
+# --------------------------------------------------------------------- R from the field
+
+
+def _target(lat: FieldLattice, sets: PointSets, area: float) -> int:
+    coarsest = len(grow_sections(lat, sets, redundancy=10_000, min_size=0.0))
+    return max(math.ceil(len(lat) * lat.spacing**2 / area), coarsest)
+
+
+def test_the_default_redundancy_is_the_smallest_that_reaches_the_sections_area() -> None:
+    lat, sets = _field()  # 84 points of 4 m², 336 m²
+    chosen = []
+    for area in (4.0, 12.0, 30.0, 80.0, 400.0):
+        r, secs = sections_for_area(lat, sets, min_size=0.0, area=area)
+        target = _target(lat, sets, area)
+        assert len(secs) <= target  # sections of the area on average (or the coarsest partition)
+        if r > 0:  # and no smaller R reaches it (the bracket is exact below 32 objects)
+            assert len(grow_sections(lat, sets, redundancy=r - 1, min_size=0.0)) > target
+        assert secs == grow_sections(lat, sets, redundancy=r, min_size=0.0)  # the sections of that R
+        chosen.append(r)
+    assert chosen == sorted(chosen) and chosen[0] == 0 < chosen[-1]  # bigger sections, more redundancy
+    assert sections_for_area(lat.subset(np.zeros(len(lat), bool)), PointSets(np.zeros(1, np.int64),
+                             np.zeros(0, np.int64), np.zeros(0, np.int64)), min_size=0.0) == (0, [])
+    with pytest.raises(ValueError, match="section area"):
+        sections_for_area(lat, sets, min_size=0.0, area=0.0)
+
+
+def test_the_default_redundancy_is_stored_as_from_the_field() -> None:
+    st = BakeSettings(cells="sections").check()
+    assert st.redundancy is None and st.record()["redundancy"] is None
+    assert BakeSettings(cells="sections", redundancy=12).check().record()["redundancy"] == 12
+
+
+@pytest.mark.gl
+def test_a_bake_without_redundancy_takes_r_from_its_field(city: Path, baked: tuple[Path, dict]) -> None:
+    db, summary = baked  # baked without a redundancy
+    scene = read_source(city)
+    free = field_lattice(scene, FAST.field_spacing, (1.7, 2.0), margin=FAST.margin)
+    lat = free.subset(points_meeting(free, shapely.union_all([shapely.Polygon(c.polygon)
+                                                              for c in make_cells(scene, "auto")])))
+    folder = next(Path(str(db) + ".field").iterdir())
+    sets = bake_field(lat, scene, FAST, folder.name, folder)  # all blocks on disk: loaded, not rendered
+    assert sets is not None
+    r, secs = sections_for_area(lat, sets, min_size=FAST.min_size)
+    assert summary["redundancy"] == r and summary["sections"] == len(secs) > 1
+    assert len(secs) <= max(math.ceil(len(lat) * FAST.field_spacing**2 / 2400.0),
+                            len(grow_sections(lat, sets, redundancy=10_000, min_size=FAST.min_size)))
+    with SceneReader.open(db) as reader:
+        assert reader.meta.settings["redundancy"] is None  # the header says: from the field
+
+
+def test_bench_sections_takes_auto_and_refuses_a_bad_redundancy(capsys: pytest.CaptureFixture[str]) -> None:
+    from walkstream.cmd_bench import _redundancy_arg
+
+    assert _redundancy_arg("auto") is None and _redundancy_arg("64") == 64
+    with pytest.raises(SystemExit):
+        main(["bench", "sections", "--redundancy", "lots"])
+    err = capsys.readouterr().err
+    assert "--redundancy" in err and "lots" in err and "Traceback" not in err

@@ -212,7 +212,7 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--cells", choices=("auto", "street", "grid", "sections"), default="auto", help="street cells (needs streets), a grid, "
                     "or sections grown over a dense visibility field (Brosnan et al.; default auto: street cells, else a grid)")
     bk.add_argument("--field-spacing", type=float, default=None, help="sections and --sampling field: metres between the points of the visibility field (default 4)")
-    bk.add_argument("--redundancy", type=int, default=None, help="sections: objects a section may hold beyond what its seed point sees (default 96)")
+    bk.add_argument("--redundancy", type=int, default=None, help="sections: objects a section may hold beyond what its seed point sees (default: from the field, the smallest R whose sections average 2,400 m² of the walkable cover)")
     bk.add_argument("--min-size", type=float, default=None, help="sections: smallest section the first pass accepts, square metres (default 64)")
     bk.add_argument("--section-shape", default=None, help="sections: axis (rectangles along the x and y axes, as the paper's; default) or aligned (turned to the scene's prevailing street direction)")
     bk.add_argument("--section-cover", default=None, help="sections: walkable (over the field points of the walkable cells: the street cells, or the grid cells where the scene has no streets; default) or free (over all the free space, as the paper's)")

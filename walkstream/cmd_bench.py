@@ -14,7 +14,7 @@
     walkstream bench lod [scene.db] [--plot p.png] [--images v.png]
     walkstream bench fill [scene.db] [--views 6] [--size 1280x960] [--repeat 6] [--json]
     walkstream bench city [--data ../shared/data/osm] [--only NAMES] [--kinds street,grid,sections] [--reuse] [--out DIR] [--truth-every N]
-    walkstream bench sections [SRC] [--redundancy R ...] [--min-size M ...] [--section-cover walkable free] [--field-spacing 4] [--walks SE,drive] [--bbox X0,Y0,X1,Y1 [--bbox-crs lonlat]]
+    walkstream bench sections [SRC] [--redundancy R|auto ...] [--min-size M ...] [--section-cover walkable free] [--field-spacing 4] [--walks SE,drive] [--bbox X0,Y0,X1,Y1 [--bbox-crs lonlat]]
     walkstream bench field [SRC ...] [--points 64] [--starts 4] [--field-spacing 4] [--json]
     walkstream bench clusters DB [DB ...] [--min-objects 12] [--max-cells 64] [--plot clusters.png] [--json]
     walkstream bench interiors [--ifc FILE ...] [--presets paper paper10] [--out DIR] [--json]
@@ -394,6 +394,15 @@ def _ratio(text: str) -> float | None:
     return v
 
 
+def _redundancy_arg(text: str) -> int | None:
+    # bench sections --redundancy: a count of objects, or auto (None: R from the field)
+    if text.strip().lower() == "auto":
+        return None
+    if not text.strip().isdigit():
+        raise argparse.ArgumentTypeError(f"expected a number of objects >= 0 or 'auto', got {text!r}")
+    return int(text)
+
+
 def cmd_bench_fill(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench fill``."""
     from walkstream.benchmarks.fill import format_fill_table, run_fill_bench
@@ -577,7 +586,7 @@ def cmd_bench_sections(args: argparse.Namespace) -> int:
         bbox=parse_bbox(args.bbox), bbox_crs=args.bbox_crs,
     )
     print(format_sections_table(rows))
-    print("(56 kbit/s, 200 ms, simulated clock, desktop2003; redund. = objects a section holds that the "
+    print("(56 kbit/s, 200 ms, simulated clock, desktop2003; R* = R from the field (auto); redund. = objects a section holds that the "
           "field point where the walker stands does not see, mean; objects, records, index = bytes/km of the "
           "objects, the cell records and the index tiles; overf. = share of the bytes never used in a cell entered)")
     plot = out / "sections_trade.png"
@@ -720,7 +729,8 @@ def add_bench_parser(sub: Any) -> None:
 
     b = besub.add_parser("sections", help="the section-size trade: street cells against sections for every --redundancy and --min-size (bake, replay)")
     b.add_argument("source", nargs="?", help="city source (default: the default 700 m city, generated in --out)")
-    b.add_argument("--redundancy", type=int, nargs="+", default=[32, 64, 96], help="redundancies R to bake (default 32 64 96)")
+    b.add_argument("--redundancy", type=_redundancy_arg, nargs="+", default=[32, 64, 96],
+                   help="redundancies R to bake; auto: the bake's default, R from the field (default 32 64 96)")
     b.add_argument("--min-size", type=float, nargs="+", default=[64.0], help="minimum sizes M to bake, square metres (default 64)")
     b.add_argument("--field-spacing", type=float, default=4.0, help="metres between field points (default 4)")
     b.add_argument("--walks", default="SE,drive", help="comma-separated walks to replay (default SE,drive)")

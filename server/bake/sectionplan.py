@@ -28,6 +28,7 @@ from walkstream.server.bake.objectrows import object_rows
 from walkstream.server.bake.plan import BakePlan, FieldCells, Say, Walk, settings_key
 from walkstream.server.bake.scenenav import SceneGraph
 from walkstream.server.bake.sections import grow_sections, section_pvs, section_stats
+from walkstream.server.bake.sectionsize import sections_for_area
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell, cell_locator, finish_cells
 from walkstream.server.bake.viewpoints import viewpoints
@@ -99,7 +100,11 @@ def section_plan(
 
     def grow(sets: PointSets) -> list[tuple[int, I64, F64]]:
         grid = lattice.grid()
-        secs = grow_sections(lattice, sets, redundancy=st.redundancy, min_size=st.min_size)
+        if st.redundancy is None:
+            # the default: R from the field, sections of about SECTION_AREA m² each
+            r, secs = sections_for_area(lattice, sets, min_size=st.min_size, say=say)
+        else:
+            r, secs = st.redundancy, grow_sections(lattice, sets, redundancy=st.redundancy, min_size=st.min_size)
         outlines = [s.outline(lattice) for s in secs]
         cells = finish_cells([("section", o) for o in outlines], *HEIGHT_RANGE)
         by_box = {_box(o): k for k, o in enumerate(outlines)}
@@ -108,9 +113,9 @@ def section_plan(
         res = [(c.id, *section_pvs(sec, grid, sets, threshold=st.threshold)) for c, sec in zip(cells, secs, strict=True)]
         made[:] = cells
         summary.update(section_stats(secs, grid, sets, np.array([len(p) for _, p, _ in res], np.int64)))
-        summary.update({"field_points": len(lattice), "field_bytes": sets.nbytes,
+        summary.update({"redundancy": r, "field_points": len(lattice), "field_bytes": sets.nbytes,
                         "field_spacing": st.field_spacing})
-        say(f"{len(cells)} sections ({summary['sections_relaxed']} of the relaxed pass), PVS mean "
+        say(f"R {r}{'' if st.redundancy is not None else ' (from the field)'}: {len(cells)} sections ({summary['sections_relaxed']} of the relaxed pass), PVS mean "
             f"{summary['section_pvs_mean']:.1f}, field {len(lattice)} points, {sets.nbytes / 1e6:.1f} MB")
         return res
 

@@ -50,9 +50,9 @@ DEFAULT_FAR_PIXELS = 1109
 #: sections (Brosnan et al. sample every 2 m; see docs/benchmarks.md for the cost of
 #: the field on the demo city at 2 and 4 m)
 DEFAULT_FIELD_SPACING = 4.0
-#: R 96: on the demo city the smallest R whose sections move fewer bytes per km than
-#: street and grid cells on both walks at 56 kbit/s (docs/benchmarks.md)
-DEFAULT_REDUNDANCY = 96
+#: None: R derived from the scene's field, the smallest whose sections average
+#: ``sectionsize.SECTION_AREA`` m² of the walkable cover (docs/benchmarks.md)
+DEFAULT_REDUNDANCY: int | None = None
 DEFAULT_MIN_SIZE = 64.0
 
 #: the settings only a bake of sections stores (:meth:`BakeSettings.record`;
@@ -118,8 +118,9 @@ class BakeSettings:
     """The band's pixels across each of its four 90-degree faces."""
     field_spacing: float = DEFAULT_FIELD_SPACING
     """``cells="sections"`` or ``sampling="field"``: metres between the points of the dense visibility field."""
-    redundancy: int = DEFAULT_REDUNDANCY
-    """``cells="sections"``: objects a section may hold beyond what its seed point sees."""
+    redundancy: int | None = DEFAULT_REDUNDANCY
+    """``cells="sections"``: objects a section may hold beyond what its seed point sees
+    (None: derived from the field, :mod:`~walkstream.server.bake.sectionsize`)."""
     min_size: float = DEFAULT_MIN_SIZE
     """``cells="sections"``: smallest section (square metres) the first pass accepts."""
     section_shape: str = "axis"
@@ -159,7 +160,7 @@ class BakeSettings:
             raise InputError(f"--cells: expected street, grid, sections or auto, got {self.cells!r}")
         if not (np.isfinite(self.field_spacing) and self.field_spacing > 0):
             raise InputError(f"--field-spacing: expected a positive number of metres, got {self.field_spacing}")
-        if not (np.isfinite(self.redundancy) and self.redundancy >= 0):
+        if self.redundancy is not None and not (np.isfinite(self.redundancy) and self.redundancy >= 0):
             raise InputError(f"--redundancy: expected >= 0 objects, got {self.redundancy}")
         if self.section_shape not in SECTION_SHAPES:
             raise InputError(f"--section-shape: expected axis or aligned, got {self.section_shape!r}")
