@@ -1,7 +1,8 @@
 """The start bundle's parts on the wire: their names, and each part's header checked.
 
 start part
-    ``{part, etag, body: bin}``: one resource of the start bundle, ``body`` being
+    ``{part, etag, body: bin}``: one resource of the start bundle (``etag`` nil or,
+    in msgpack, missing where the part has none), ``body`` being
     exactly what the resource's own endpoint sends (``part`` one of
     :data:`START_PARTS`); the ``objects`` part is ``{part, etag: null, count}``
     followed in the stream by ``count`` object frames; an interior's ``contents``

@@ -566,7 +566,7 @@ def test_the_posed_start_brings_the_first_pose_then_the_head_after_the_first_vie
         plain = _unpack(_get(app, url, **{"accept-encoding": "identity"}).content)
         posed = _unpack(_get(app, url + "&pose=true", **{"accept-encoding": "identity"}).content)
         # first the head's first pose alone (its first two samples, no ETag), then the topology
-        assert posed[0]["part"] == plain[0]["part"] == "pathhead" and posed[0]["etag"] is None
+        assert posed[0]["part"] == plain[0]["part"] == "pathhead" and "etag" not in posed[0]
         pose, head = decode_path_q(posed[0]["body"], "pose"), decode_path_q(plain[0]["body"], "head")
         assert len(pose) == 2 and np.array_equal(pose.xyz, head.xyz[:2]) and np.array_equal(pose.yaw, head.yaw[:2])
         assert len(posed[0]["body"]) < len(plain[0]["body"]) and posed[1] == plain[1]
@@ -585,6 +585,8 @@ def test_the_posed_start_brings_the_first_pose_then_the_head_after_the_first_vie
         for other in ("/v1/scenes/office/start?path=tour&view=160x120&head=10",
                       "/v1/scenes/office/start?path=tour&view=160x120&heads=true"):
             assert _get(app, other + "&pose=true").content == _get(app, other).content
+        # a part without an ETag goes without the field, one with it keeps it
+        assert "etag" not in posed[2] and posed[1]["etag"].endswith('-topology-c4"')
         r = _get(app, url + "&pose=maybe")
         assert r.status_code == 422 and "pose" in r.text
         # the compact topology's version 4 has an ETag of its own: a client holding the
@@ -630,3 +632,39 @@ def test_a_posed_start_cut_before_its_head_walks_on_the_whole_path(office: Path,
     cut = _replay(office, cut=sum(len(msgpack.packb(o)) for o in objs[:k]) + 7)
     assert "error" not in cut and cut["perfect_frame_ratio"] > 0
     assert cut["path_duration_s"] == pytest.approx(tour.duration, abs=1e-3)
+
+
+def test_the_posed_start_flushes_its_gzip_stream_once_before_the_first_view_ends(office: Path) -> None:
+    from walkstream.server.service.routers.start import _join_first_view, _msgpack_parts
+    from walkstream.server.service.scenes import Scene
+    from walkstream.server.service.startbundle import start_parts, start_position
+
+    scene = Scene.load(office)
+    xy, h, v = start_position(scene, path="tour")
+    view = RoomView((160, 120), 60.0, 40.0)
+
+    def pieces(pose: bool) -> tuple[list[Any], list[bytes]]:
+        parts = start_parts(scene, xy, "msgpack", "tour", h, v, view=view, inflate=True, path_head_s=10.0,
+                            heads=True, pose=pose)
+        return parts, list(_msgpack_parts(parts))
+
+    def first_view_end(ps: list[bytes], k: int) -> int:  # the gzip stream's bytes, flushed after each piece
+        co = zlib.compressobj(9, zlib.DEFLATED, 31)
+        return sum(len(co.compress(p) + co.flush(zlib.Z_SYNC_FLUSH)) for p in ps[:k])
+
+    try:
+        parts, each = pieces(True)
+        joined = _join_first_view(each, parts)
+        # one piece: the first pose, the topology, the contents' list and the first view's
+        # frames, in order; then the head, then the rest as before
+        first = _unpack(joined[0])
+        assert [o.get("part") for o in first[:3]] == ["pathhead", "topology", "contents"]
+        assert b"".join(joined) == b"".join(each) and len(joined) == len(each) - len(first) + 1
+        assert _unpack(joined[1])[0]["part"] == "pathhead" and joined[1:] == each[len(first):]
+        # the first view ends sooner on the stream: fewer flushes before it
+        assert first_view_end(joined, 1) < first_view_end(each, len(first))
+        # without pose nothing is joined (the walk may start once the topology is in)
+        plain_parts, plain = pieces(False)
+        assert _join_first_view(plain, plain_parts) == plain
+    finally:
+        scene.close()
