@@ -13,7 +13,8 @@ import pytest
 
 from walkstream.cli import main
 from walkstream.client.clock import SimClock
-from walkstream.client.net.api import SceneClient, TransferStats
+from walkstream.client.net.api import SceneClient
+from walkstream.client.net.transferstats import TransferStats
 from walkstream.cmd_replay import MAX_OUTAGE_SHARE, REPLAY_FAILED, outage_line, replay_failure
 from walkstream.server.service.process import free_port
 

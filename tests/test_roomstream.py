@@ -19,12 +19,8 @@ import pytest
 from walkstream.cli import main
 from walkstream.client.clock import SimClock
 from walkstream.client.stream.cache import Cache
-from walkstream.client.stream.rooms import (
-    RoomStreamConfig,
-    RoomStreamer,
-    predicted_view,
-    turned_view,
-)
+from walkstream.client.stream.roommotion import predicted_view, turned_view
+from walkstream.client.stream.rooms import RoomStreamConfig, RoomStreamer
 from walkstream.server.service.main import create_app
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.errors import CodecError, InputError

@@ -16,7 +16,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.stream.rooms import RoomStreamer, predicted_view
+from walkstream.client.stream.roommotion import predicted_view
+from walkstream.client.stream.rooms import RoomStreamer
 from walkstream.shared.camera import camera, look_at
 from walkstream.shared.roomwire import Entrance
 

@@ -58,9 +58,9 @@ from walkstream.client.net.api import SceneClient
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.cachedcull import RoomCullCache
 from walkstream.client.stream.roomlate import LateCells
+from walkstream.client.stream.roommotion import RoomMotion, turned_view
 from walkstream.client.stream.scheduler import Flight, Offer, RequestScheduler
 from walkstream.client.tasks import reap
-from walkstream.shared.camera import camera
 from walkstream.shared.codec.cellbatch import CELLBATCH_MAX_CELLS
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.content.cellmesh import KIND as CELLMESH
@@ -72,9 +72,8 @@ from walkstream.shared.roomwire import RoomRecord, Topology
 from walkstream.shared.scene.placement import ContentsPlacement, placement_for
 from walkstream.shared.screenrects import CENTRE_MARGIN_PX, TOUCH_MARGIN_PX
 
-__all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer", "predicted_view", "turned_view"]
+__all__ = ["FLUSH_POLICIES", "RoomStreamConfig", "RoomStreamer"]
 
-_TURNING = np.radians(20.0)
 """A heading turning at least this fast (radians a second) is predicted to go on turning."""
 
 _HEAD_BYTES = 200
@@ -183,27 +182,7 @@ class RoomStreamStats:
     fetched: set[int] = field(default_factory=set)
 
 
-def predicted_view(view: NDArray[np.float64], eye: NDArray[np.float64], eye2: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The ``(4, 4)`` view matrix ``view`` moved from ``eye`` ``(3,)`` to ``eye2`` ``(3,)``,
-    looking the same way."""
-    out = np.array(view, dtype=np.float64)
-    out[:3, 3] -= out[:3, :3] @ (np.asarray(eye2, np.float64) - np.asarray(eye, np.float64))
-    return out
-
-
-def turned_view(view: NDArray[np.float64], eye: NDArray[np.float64], deg: float) -> NDArray[np.float64]:
-    """The ``(4, 4)`` view matrix ``view`` turned by ``deg`` degrees about the vertical
-    through ``eye`` ``(3,)``."""
-    a = np.radians(deg)
-    rot = np.eye(4)
-    rot[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
-    move, back = np.eye(4), np.eye(4)
-    move[:3, 3] = eye
-    back[:3, 3] = -np.asarray(eye, np.float64)
-    return np.asarray(view, np.float64) @ move @ rot @ back
-
-
-class RoomStreamer:
+class RoomStreamer(RoomMotion):
     """Follows the viewer through an interior and keeps the visible cells' contents loaded.
 
     Parameters
@@ -277,8 +256,7 @@ class RoomStreamer:
         self.last_cull: PortalCull | None = None
         self.cull_cache = RoomCullCache(self.graph, lambda p: self._where.locate(p, self.current), *self.config.cull_guard) \
             if self.config.cull_cache and self.config.culling == "portals" else None
-        self._track: list[tuple[float, NDArray[np.float64]]] = []
-        self._headings: list[tuple[float, float, float]] = []  # (t, yaw, pitch) of the frames' views
+        RoomMotion.__init__(self, self.config.velocity_s)
         self._ahead: list[int] = []
         self._planned_t = -np.inf
         self._bytes_per_triangle = 32.0
@@ -536,53 +514,6 @@ class RoomStreamer:
                     self.cache.remove(CELLMESH.cache_kind, c)
                     self.stats.flushed += 1
                 del self.last_visible[c]
-
-    def observe(self, t: float, eye: NDArray[np.float64]) -> None:
-        """Note the eye at time ``t`` (for :meth:`velocity`)."""
-        self._track.append((t, np.array(eye, dtype=np.float64).reshape(3)))
-        while len(self._track) > 2 and t - self._track[1][0] >= self.config.velocity_s:
-            self._track.pop(0)
-
-    def _observe_heading(self, t: float, view: NDArray[np.float64]) -> None:
-        """Note the view's heading at time ``t`` (for :meth:`turn_rate`)."""
-        f = -np.asarray(view, np.float64)[2, :3]  # the camera looks down its -z
-        self._headings.append((t, float(np.arctan2(f[1], f[0])), float(np.arcsin(np.clip(f[2], -1.0, 1.0)))))
-        while len(self._headings) > 2 and t - self._headings[1][0] >= self.config.velocity_s:
-            self._headings.pop(0)
-
-    def turn_rate(self) -> float:
-        """The heading's turn over the last ``velocity_s`` seconds (radians a second,
-        counter-clockwise positive)."""
-        if len(self._headings) < 2:
-            return 0.0
-        (t0, y0, _), (t1, y1, _) = self._headings[0], self._headings[-1]
-        turn = (y1 - y0 + np.pi) % (2 * np.pi) - np.pi
-        return float(turn / (t1 - t0)) if t1 > t0 else 0.0
-
-    def turning(self) -> bool:
-        """Whether the heading turns fast enough (20 degrees a second) to be predicted
-        to go on turning."""
-        return len(self._headings) >= 2 and abs(self.turn_rate()) >= _TURNING
-
-    def velocity(self) -> NDArray[np.float64]:
-        """``(3,)`` the eye's velocity over the last ``velocity_s`` seconds (m/s)."""
-        if len(self._track) < 2:
-            return np.zeros(3)
-        (t0, e0), (t1, e1) = self._track[0], self._track[-1]
-        return (e1 - e0) / (t1 - t0) if t1 > t0 else np.zeros(3)
-
-    def view_ahead(
-        self, eye: NDArray[np.float64], view: NDArray[np.float64], h: float
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The eye ``(3,)`` and view ``(4, 4)`` predicted ``h`` seconds ahead: moved on at
-        :meth:`velocity`, looking the same way, or, while :meth:`turn_rate` is 20 degrees
-        a second or more, turned on at that rate (half a turn at most)."""
-        e2 = np.asarray(eye, np.float64).reshape(3) + h * self.velocity()
-        w = self.turn_rate()
-        if self.turning():  # a walker turning goes on turning
-            _, yaw, pitch = self._headings[-1]
-            return e2, camera(e2, yaw + float(np.clip(w * h, -np.pi, np.pi)), pitch).astype(np.float64)
-        return e2, predicted_view(view, eye, e2)
 
     def predicted(
         self,
