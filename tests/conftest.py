@@ -42,12 +42,12 @@ def gl(gl_ctx: moderngl.Context) -> Iterator[moderngl.Context]:
     """The session context, with the GL error state checked before and after the test."""
     from walkstream.shared.gl import check_gl_error
 
-    # a replay run in-process makes its own context current and releases it: this one
-    # is made current again before it is checked and used
-    with gl_ctx:
-        check_gl_error(gl_ctx, "before the test (left by an earlier one)")
-        yield gl_ctx
-        check_gl_error(gl_ctx, "after the test")
+    # a replay run in-process makes its own context current and releases it: this one is
+    # made current again (and left current, as the tests that take gl_ctx itself expect)
+    gl_ctx.__enter__()
+    check_gl_error(gl_ctx, "before the test (left by an earlier one)")
+    yield gl_ctx
+    check_gl_error(gl_ctx, "after the test")
 
 
 # --------------------------------------------------------------------------- interiors
