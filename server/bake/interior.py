@@ -32,8 +32,9 @@ from walkstream.server.bake.floorroute import FloorObstacle
 from walkstream.server.bake.outsidetiles import OUTSIDE_TILE_M, outside_parts
 from walkstream.server.bake.plan import BakePlan, RoomCells
 from walkstream.server.bake.roomcontents import REACH, Part, contents_task, outside_mask
+from walkstream.server.bake.roomlayout import RoomLayout
 from walkstream.server.bake.roomnav import RoomGraph
-from walkstream.server.bake.rooms import RoomLayout, room_layout
+from walkstream.server.bake.rooms import room_layout
 from walkstream.server.bake.roomwalks import TOUR_NAME, entrance_cell, tour
 from walkstream.server.bake.scenenav import SceneGraph
 from walkstream.server.bake.wallplan import WallSettings, plan_walls

@@ -45,8 +45,8 @@ import numpy as np
 import shapely
 
 from walkstream.server.bake.interior import InteriorParts
+from walkstream.server.bake.roomlayout import Portal, RoomCell, RoomLayout, StairLink
 from walkstream.server.bake.roomnav import RoomGraph
-from walkstream.server.bake.rooms import Portal, RoomCell, RoomLayout, StairLink
 from walkstream.server.bake.roomwalks import entrance_cell, tour
 from walkstream.server.sources.interior import InteriorScene, mesh_footprint
 from walkstream.shared.arrays import F64

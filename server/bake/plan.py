@@ -34,7 +34,7 @@ from typing import Any
 from walkstream.server.bake.field import FieldLattice, PointSets
 from walkstream.server.bake.impostorsettings import ImpostorSettings
 from walkstream.server.bake.roomcontents import Part
-from walkstream.server.bake.rooms import RoomLayout
+from walkstream.server.bake.roomlayout import RoomLayout
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.wallplan import WallPlan, WallSettings

@@ -34,7 +34,7 @@ import shapely
 import shapely.ops
 
 from walkstream.server.bake.floorroute import FloorObstacle, FloorRoutes, walkable_floor
-from walkstream.server.bake.rooms import Portal, RoomCell, StairLink
+from walkstream.server.bake.roomlayout import Portal, RoomCell, StairLink
 from walkstream.shared.arrays import F64
 from walkstream.shared.cells import CellLocator
 from walkstream.shared.errors import RouteError

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import shapely
 
+from walkstream.server.bake.roomlayout import Portal, RoomCell
 from walkstream.server.bake.roomnav import (
     CLEARANCE,
     EYE_HEIGHT,
@@ -26,7 +27,6 @@ from walkstream.server.bake.roomnav import (
     RoomGraph,
     walk_path,
 )
-from walkstream.server.bake.rooms import Portal, RoomCell
 from walkstream.shared.arrays import F64
 from walkstream.shared.errors import RouteError
 from walkstream.shared.paths import RecordedPath

@@ -54,7 +54,8 @@ from walkstream.server.bake.placement import (
     interior_shell,
     misfit,
 )
-from walkstream.server.bake.rooms import RoomLayout, room_layout
+from walkstream.server.bake.roomlayout import RoomLayout
+from walkstream.server.bake.rooms import room_layout
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.scene import SourceScene

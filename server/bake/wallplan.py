@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from walkstream.server.bake.roomcontents import Part, weld
-from walkstream.server.bake.rooms import RoomLayout
+from walkstream.server.bake.roomlayout import RoomLayout
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.shared.codec.image import IMAGE_MEDIA
 from walkstream.shared.errors import InputError

@@ -13,8 +13,8 @@ import shapely
 
 from walkstream.server.bake.navgraph import CellGraph
 from walkstream.server.bake.placement import door_face
+from walkstream.server.bake.roomlayout import Portal, RoomCell, StairLink
 from walkstream.server.bake.roomnav import RoomGraph
-from walkstream.server.bake.rooms import Portal, RoomCell, StairLink
 from walkstream.server.bake.scenenav import Entrance, SceneGraph, front_of
 from walkstream.server.store import CellInfo, RoomInfo, SceneReader
 
