@@ -323,6 +323,7 @@ def test_images_are_listed_by_cells_and_served_immutable_in_batches(http: Http) 
         imp = decode_cell(resp.content, "cell").impostors
         if imp is not None:
             assert imp.d == SMALL.distance and abs(imp.bound - math.radians(SMALL.error_deg)) < 1e-6
+            assert not imp.perspective  # an orthographic bake: served as before
             rows += imp.rows
     assert rows, "no cell lists an impostor"
     row = rows[0]
