@@ -402,6 +402,7 @@ def test_a_texture_budget_smaller_than_one_cells_images() -> None:
         (["--impostors", "--impostor-error", "0"], "--impostor-error"),
         (["--impostor-distance", "100"], "give --impostors too"),
         (["--impostor-sampling", "point"], "give --impostors too"),
+        (["--impostor-projection", "perspective"], "give --impostors too"),
     ],
 )
 def test_bad_impostor_flags_are_one_clear_line(
