@@ -205,7 +205,7 @@ def test_bench_impostors_replays_one_walk_both_ways(dbs: tuple[Path, Path], tmp_
     rows = run_impostor_bench([str(dbs[0])], replay_with_options, out=tmp_path, duration="2s",
                               truth_every=25, size="80x60")
     assert [r["with_impostors"] for r in rows] == [True, False]
-    assert [r["bake"] for r in rows] == ["imp D50 A4 S16"] * 2
+    assert [r["bake"] for r in rows] == ["imp D50 A4 S16 persp"] * 2
     assert bake_label(str(dbs[1])) == "plain (no impostors)"
     assert rows[0]["impostors"]["image_bytes"] > 0 and "impostors" not in rows[1]
     assert all(r["frame_time_median_ms"] > 0 for r in rows)
