@@ -42,7 +42,8 @@ Replayer = Callable[[str, dict[str, Any], str], Any]
 
 
 def bake_label(db: str) -> str:
-    """``city D250 A2 S128``: a database's file stem and the D, A, S of its settings record."""
+    """``city D250 A2 S128``: a database's file stem and the D, A, S of its settings record
+    (`` persp`` after them for perspective images)."""
     from walkstream.server.store import SceneReader
 
     if db.startswith(("http://", "https://")):
@@ -57,7 +58,8 @@ def bake_label(db: str) -> str:
         reader.close()
     if not st:
         return f"{Path(db).stem} (no impostors)"
-    return f"{Path(db).stem} D{float(st['distance']):g} A{float(st['error_deg']):g} S{int(st['size'])}"
+    persp = " persp" if st.get("projection") == "perspective" else ""
+    return f"{Path(db).stem} D{float(st['distance']):g} A{float(st['error_deg']):g} S{int(st['size'])}{persp}"
 
 
 def run_impostor_bench(

@@ -70,6 +70,8 @@ from walkstream.shared.impostors import (
     bin_direction,
     bin_of,
     directions,
+    eye_distance,
+    half_side,
     image_size,
     level_for,
     texels_needed,
@@ -148,6 +150,7 @@ def run_sampling_bench(
     views: Sequence[str] = VIEWS, picture: dict[str, NDArray[np.uint8]] | None = None,
     ppds: Sequence[float] = DEFAULT_PPD, against_aa: bool = False,
     truth_samples: Sequence[Sampling] = (), reference: Sampling = _REFERENCE,
+    projections: Sequence[str] = ("ortho",), distance: float = 60.0,
 ) -> list[dict[str, Any]]:
     """The benchmark's rows (module docstring) over ``count`` of the tallest ``buildings``
     (drawn on ``ctx``, by default a context of its own), for ``views`` (of :data:`VIEWS`).
@@ -157,6 +160,10 @@ def run_sampling_bench(
     ``filter`` the ``reference``'s name): the truth drawn at S against the truth drawn at
     ``reference`` (by default 8 x 8), the anti-aliased truth's own error; one sample a
     pixel (``Sampling()``) is the point-sampled truth's.
+    ``projections``: the images orthographic (``ortho``, sampling named as it is) and/or
+    in perspective from their level's sampling eye (``perspective``, sampling named
+    ``"S persp"``; :func:`~walkstream.shared.impostors.eye_distance` for a bake at D
+    ``distance``), the on-axis and perspective views from 60-150 m either way.
     ``picture``, when given, receives the middle building's frames (by height) (``"VIEW truth"``,
     ``"VIEW SAMPLING FILTER"``) for :func:`plot_sampling_picture`.
 
@@ -202,17 +209,14 @@ def run_sampling_bench(
             a, e = directions(street, c)
             ia, ie = (int(v) for v in bin_of(level, a, e))
             u = bin_direction(level, ia, ie)
-            corners = quad_corners(boxes[k], level, ia, ie)
+            eyes = {p: math.inf if p == "ortho" else float(eye_distance(r, level, math.radians(error_deg), distance))
+                    for p in projections}
             for view_name in views:
                 sc = scenes[view_name]
                 if view_name in ("on-axis", "perspective"):
                     eye, proj = (street if view_name == "perspective" else c + u * d), None
-                    size = int(image_size(texels_needed(r, d, 480, 60.0), _BAKED_TEXELS))
-                    quad_at = toward_eye(corners, eye, boxes[k])
                 else:
                     eye, proj = c + u * (r + 50.0), orthographic(r, 0.5, 2000.0)
-                    size = _ALIGNED_PX if view_name == "aligned" else _BAKED_TEXELS
-                    quad_at = corners
                 view = np.asarray(look_at(eye, c), np.float64)
                 wanted = [_TRUTH_AA, *((reference, *truth_samples) if truth_samples else ())]
                 mask, truth, smooth = sc.frames(oid, eye, view, proj, wanted)
@@ -223,15 +227,24 @@ def run_sampling_bench(
                 for ts in truth_samples:  # the truth at each sampling against the reference
                     other = truth if ts.point else smooth[ts]
                     _add(tally, (view_name, f"truth {ts}", f"vs {reference}"), _wrong(smooth[reference], other, mask, ppds))
-                for sampling in IMPOSTOR_SAMPLINGS:
-                    img = ren.render(oid, u, size, sampling)
+                for sampling, pname in ((s, p) for p in projections for s in IMPOSTOR_SAMPLINGS):
+                    at = eyes[pname]
+                    corners = quad_corners(boxes[k], level, ia, ie, at)
+                    if view_name in ("on-axis", "perspective"):
+                        size = int(image_size(texels_needed(half_side(r, at), d, 480, 60.0), _BAKED_TEXELS))
+                        quad_at = toward_eye(corners, eye, boxes[k])
+                    else:
+                        size = _ALIGNED_PX if view_name == "aligned" else _BAKED_TEXELS
+                        quad_at = corners
+                    img = ren.render(oid, u, size, sampling, eye=at)
+                    label = sampling if pname == "ortho" else f"{sampling} persp"
                     for filt in _FILTERS:
                         image_id += 1  # a new id per image: the quad renderer keeps textures by id
                         pic, painted = sc.painted((quad_at, image_id, img, 1.0), eye, view, proj, filt)
                         counts = _wrong(fine if against_aa else truth, pic, mask | painted, ppds)
                         if picture is not None and k == len(ids) // 2:
-                            picture[f"{view_name} {sampling} {filt}"] = pic
-                        _add(tally, (view_name, sampling, filt), counts)
+                            picture[f"{view_name} {label} {filt}"] = pic
+                        _add(tally, (view_name, label, filt), counts)
     finally:
         ren.release()
         for name in ("perspective", "minified", "aligned"):
@@ -260,7 +273,8 @@ def format_sampling_table(rows: Sequence[dict[str, Any]]) -> str:
 
 def plot_sampling_picture(picture: dict[str, NDArray[np.uint8]], path: Any) -> Any:
     """One building's frames per view (rows): the truth, the area-sampled image read
-    bilinear, the point-sampled image read nearest, and each image's pixels over the
+    bilinear, the point-sampled image read nearest (with perspective images too: the
+    point-sampled orthographic and perspective images read bilinear), and each image's pixels over the
     threshold; written to ``path`` (PNG), returned."""
     import matplotlib
 
@@ -269,6 +283,12 @@ def plot_sampling_picture(picture: dict[str, NDArray[np.uint8]], path: Any) -> A
 
     views = [v for v in VIEWS if f"{v} truth" in picture]
     cols = [("truth", "truth"), ("area linear", "area, bilinear"), ("point nearest", "point, nearest")]
+    if views and f"{views[0]} point linear" not in picture:  # perspective images alone
+        cols = [("truth", "truth"), ("point persp linear", "point persp, bilinear"),
+                ("point persp nearest", "point persp, nearest")]
+    elif views and f"{views[0]} point persp linear" in picture:  # both: orthographic against perspective
+        cols = [("truth", "truth"), ("point linear", "point ortho, bilinear"),
+                ("point persp linear", "point persp, bilinear")]
     fig = Figure(figsize=(11, 2.3 * len(views)))
     axes = fig.subplots(len(views), 5, squeeze=False)
     for r, v in enumerate(views):

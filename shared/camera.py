@@ -33,6 +33,7 @@ __all__ = [
     "fit_view",
     "look_at",
     "mat4_bytes",
+    "off_axis",
     "orthographic",
     "perspective",
 ]
@@ -113,6 +114,74 @@ def orthographic(radius: float, near: float, far: float) -> NDArray[np.float64]:
     m[2, 3] = -(far + near) / (far - near)
     m[3, 3] = 1.0
     return m
+
+
+def off_axis(
+    eye: ArrayLike,
+    corner: ArrayLike,
+    right: ArrayLike,
+    up: ArrayLike,
+    width: float,
+    height: float,
+    near: float | None = None,
+    far: float = 2000.0,
+) -> NDArray[np.float64]:
+    """``(4, 4)`` view-projection from ``eye`` through a rectangle: an **off-axis
+    perspective** whose image is exactly the rectangle, as the eye sees it.
+
+    The rectangle has its bottom-left at ``corner`` and spans ``width`` along the unit
+    ``right`` and ``height`` along the unit ``up`` (perpendicular to ``right``); its
+    plane's normal ``right x up`` points towards the eye.  The rectangle fills the
+    image (``corner`` at the bottom-left, row 0 of an image read top-down at ``up``'s
+    end), so a texture on a quad with those corners puts every texel where the eye saw
+    it.  The virtual walls' textures and the perspective impostor images both use it.
+
+    Parameters
+    ----------
+    eye, corner, right, up : (3,) array_like
+        World positions and unit vectors (``up`` need not be the world's z).
+    width, height : float
+        The rectangle's sides, metres.
+    near : float or None
+        Distance of the near clip plane from the eye along the plane's normal; None:
+        the rectangle's own plane (what lies in front of it is clipped, as a wall
+        wants).  An impostor passes the front of the object's bounding sphere.
+    far : float
+        Distance of the far clip plane.
+
+    Returns
+    -------
+    (4, 4) float64
+        ``proj @ view``; view depth ``-near`` maps to NDC ``z = -1``, ``-far`` to ``+1``.
+    """
+    e = np.asarray(eye, np.float64).reshape(3)
+    u = np.asarray(right, np.float64).reshape(3)
+    v = np.asarray(up, np.float64).reshape(3)
+    n = np.cross(u, v)
+    p0 = np.asarray(corner, np.float64).reshape(3)
+    plane = float((e - p0) @ n)  # the eye's distance to the rectangle's plane
+    clip = plane if near is None else float(near)
+    if not 0.0 < clip < far or plane <= 0.0:
+        raise InputError(f"off_axis: expected the eye in front of the rectangle and 0 < near < far, "
+                         f"got plane {plane:g}, near {clip:g}, far {far:g}")
+    k = clip / plane  # the rectangle scaled onto the near plane
+    left = float((p0 - e) @ u) * k
+    right_ = left + width * k
+    bottom = float((p0 - e) @ v) * k
+    top = bottom + height * k
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = u, v, n
+    view[:3, 3] = -view[:3, :3] @ e
+    proj = np.zeros((4, 4))
+    proj[0, 0] = 2 * clip / (right_ - left)
+    proj[0, 2] = (right_ + left) / (right_ - left)
+    proj[1, 1] = 2 * clip / (top - bottom)
+    proj[1, 2] = (top + bottom) / (top - bottom)
+    proj[2, 2] = -(far + clip) / (far - clip)
+    proj[2, 3] = -2 * far * clip / (far - clip)
+    proj[3, 2] = -1.0
+    out: NDArray[np.float64] = proj @ view
+    return out
 
 
 def _look_at64(

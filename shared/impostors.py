@@ -25,6 +25,26 @@ image puts it at ``atan(x / d)``; over the bounding sphere that is at most
 :func:`orthographic_parallax` (about ``R^2 / (2 d^2)``), which finer bins do not
 reduce: 1-3 degrees for the demo's buildings at 60 m, 0.1 at 250 m.
 
+**Perspective images** (the bake's ``--impostor-projection perspective``).  An
+image of bin ``u`` at level ``l`` may instead be rendered in perspective from a
+*sampling eye* ``e = c + u d_e`` (:func:`eye_distance`) onto the same plane through
+``c`` across ``u``, over the square that holds the bounding sphere's silhouette from
+``e`` (half side :func:`half_side`, ``R d_e / sqrt(d_e^2 - R^2)``), with the one
+off-axis projection of :func:`~walkstream.shared.camera.off_axis`.  From ``e`` the
+textured quad is the object, pixel for pixel.  A viewer elsewhere sees a point ``p``
+displaced by the segment between ``p`` and its image on the plane (at most about
+``R``) seen under the angle at ``p`` between the sampling eye and the viewer: to first
+order the angle ``theta`` at the centre between ``u`` and the viewer's direction (the
+bound ``A`` as before: :func:`angular_error`, :func:`level_for` and the direction
+bins do not change, and the image for a viewer is still the bin of its direction
+from the centre) plus the difference of the two eyes' distances, which
+:func:`image_parallax` measures: about ``R^2 |1/d - 1/d_e| / (2 d)`` where the
+orthographic image has ``R^2 / (2 d^2)`` (its ``d_e`` infinite).  A level serves
+the distances where its bins are the coarsest within ``A`` (a factor of about two);
+``d_e`` is the distance in that band that makes the largest residual over the band
+the smallest, so it is a property of the image's level, and two cells that share
+the image share its eye.
+
 **Direction bins.**  Directions are binned on a fixed grid of azimuth and elevation,
 one grid per *level*: level ``l`` has steps of ``BASE_STEP / 2**l`` radians.  A bin's
 image is rendered from the bin's centre direction, and any direction in the bin is
@@ -54,11 +74,15 @@ __all__ = [
     "bin_direction",
     "bin_of",
     "directions",
+    "eye_distance",
+    "half_side",
     "image_basis",
+    "image_parallax",
     "image_size",
     "level_for",
     "level_step",
     "orthographic_parallax",
+    "PROJECTIONS",
     "texels_needed",
 ]
 
@@ -67,6 +91,14 @@ BASE_STEP = math.pi / 4.0
 
 MAX_LEVEL = 6
 """Finest level (steps of 0.70 degrees); a cell needing finer bins gets no impostor."""
+
+PROJECTIONS: tuple[str, ...] = ("ortho", "perspective")
+"""How an image is projected (module docstring): orthographic along its bin's
+direction, or in perspective from its level's sampling eye."""
+
+EYE_MIN_RADII = 1.5
+"""The sampling eye is at least this many bounding radii from the centre (a level's
+band may reach nearer than the object's own sphere, where no cell uses it)."""
 
 
 def level_step(level: int) -> float:
@@ -85,19 +117,75 @@ def angular_error(radius: ArrayLike, distance: ArrayLike, theta: ArrayLike) -> N
 def orthographic_parallax(radius: ArrayLike, distance: ArrayLike, samples: int = 257) -> NDArray[np.float64]:
     """The largest angle (radians) between where an orthographic image puts a point of
     an object of bounding ``radius`` and where a perspective viewer at ``distance``
-    from its centre, along the image's own direction, sees it (module docstring).
+    from its centre, along the image's own direction, sees it (module docstring):
+    :func:`image_parallax` with the sampling eye at infinity."""
+    return image_parallax(radius, distance, math.inf, samples)
 
-    The maximum of ``atan(x / (d - z)) - atan(x / d)`` over the sphere's front
-    (``x = R sin(phi)``, ``z = R cos(phi)``), taken over ``samples`` angles ``phi``;
-    ``radius`` and ``distance`` broadcast; a viewer inside the sphere gets ``pi / 2``.
+
+def image_parallax(
+    radius: ArrayLike, distance: ArrayLike, eye: ArrayLike = math.inf, samples: int = 257
+) -> NDArray[np.float64]:
+    """The largest angle (radians) between where an image rendered from a sampling eye
+    ``eye`` metres from the centre (``inf``: orthographic) puts a point of an object of
+    bounding ``radius`` and where a viewer at ``distance`` on the same axis sees it.
+
+    A point at ``x`` across and ``z`` towards the eye (``x = R sin(phi)``,
+    ``z = R cos(phi)``, over the sphere's front) lies on the image's plane at
+    ``x d_e / (d_e - z)``; the viewer sees it at ``atan(x / (d - z))`` and the quad's
+    texel at ``atan(x d_e / ((d_e - z) d))``; the maximum over ``samples`` angles
+    ``phi``.  Zero when ``distance == eye``; ``radius``, ``distance`` and ``eye``
+    broadcast; a viewer or an eye inside the sphere gets ``pi / 2``.
     """
     r = np.asarray(radius, np.float64)[..., None]
     d = np.asarray(distance, np.float64)[..., None]
+    e = np.asarray(eye, np.float64)[..., None]
     phi = np.linspace(0.0, math.pi / 2.0, samples)
     x, z = r * np.sin(phi), r * np.cos(phi)
     with np.errstate(divide="ignore", invalid="ignore"):
-        diff = np.arctan2(x, d - z) - np.arctan2(x, d)
-    out: NDArray[np.float64] = np.where(d[..., 0] > r[..., 0], diff.max(axis=-1), math.pi / 2.0)
+        scale = np.where(np.isinf(e), 1.0, e / (e - z))
+        diff = np.abs(np.arctan2(x, d - z) - np.arctan2(x * scale, d))
+    inside = (d[..., 0] <= r[..., 0]) | (e[..., 0] <= r[..., 0])
+    out: NDArray[np.float64] = np.where(inside, math.pi / 2.0, diff.max(axis=-1))
+    return out
+
+
+def eye_distance(radius: ArrayLike, level: ArrayLike, bound: float, far: float = 0.0) -> NDArray[np.float64]:
+    """The sampling eye's distance (metres from the centre) of a perspective image of an
+    object of bounding ``radius`` at ``level`` under the bound ``bound`` (radians), in a
+    bake whose far objects are at least ``far`` (D) from every cell.
+
+    Level ``l`` is the coarsest within ``bound`` for the distances ``d`` where
+    :func:`allowed_angle` lies between its half diagonal and the next coarser one's:
+    ``lo = R sin(h_l) / tan(A)`` to ``hi = R sin(h_{l-1}) / tan(A)`` (``hi`` infinite
+    at level 0), ``lo`` at least :data:`EYE_MIN_RADII` radii.  The residual
+    ``|1/d - 1/d_e| / d`` (:func:`image_parallax`'s first order) over ``1/d`` in
+    ``[1/hi, 1/lo]`` is smallest at its largest for ``1/d_e = (a^2 + b^2) / (a + b)``
+    (``a = 1/lo``, ``b = 1/hi``) when ``b >= (sqrt 2 - 1) a``, else ``2 (sqrt 2 - 1) a``:
+    about 1.2 ``lo`` for a band of a factor of two.
+    """
+    r = np.maximum(np.asarray(radius, np.float64), 1e-9)
+    lv = np.asarray(level, np.int64)
+    t = math.tan(bound)
+    h = BASE_STEP / np.exp2(lv.astype(np.float64)) / math.sqrt(2.0)
+    lo = np.maximum(r * np.sin(np.minimum(h, math.pi / 2.0)) / t, EYE_MIN_RADII * r)
+    coarser = np.minimum(2.0 * h, math.pi / 2.0)
+    hi = np.where(lv <= 0, np.inf, r * np.sin(coarser) / t)
+    lo = np.where(far < hi, np.maximum(lo, far), lo)
+    a = 1.0 / lo
+    b = np.where(hi > lo, 1.0 / np.maximum(hi, lo), a)
+    x = np.where(b >= (math.sqrt(2.0) - 1.0) * a, (a * a + b * b) / (a + b), 2.0 * (math.sqrt(2.0) - 1.0) * a)
+    out: NDArray[np.float64] = 1.0 / x
+    return out
+
+
+def half_side(radius: ArrayLike, eye: ArrayLike = math.inf) -> NDArray[np.float64]:
+    """Half the side of an image's square on the plane through the centre: ``radius``
+    for an orthographic image (``eye`` infinite), the bounding sphere's silhouette from
+    a sampling eye ``eye`` metres away, ``R d_e / sqrt(d_e^2 - R^2)``, for a perspective one."""
+    r = np.asarray(radius, np.float64)
+    e = np.asarray(eye, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out: NDArray[np.float64] = np.where(np.isinf(e), r, r * e / np.sqrt(np.maximum(e * e - r * r, 1e-18)))
     return out
 
 

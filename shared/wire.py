@@ -46,6 +46,8 @@ start part
 from __future__ import annotations
 
 import contextlib
+import functools
+import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -57,6 +59,7 @@ from walkstream.shared.cells import TileGrid
 from walkstream.shared.codec import ACH_UNITS, pack_ints, quantise_ach, unpack_bounded, unpack_ints
 from walkstream.shared.content.registry import frame_keys
 from walkstream.shared.errors import CodecError
+from walkstream.shared.impostors import eye_distance
 from walkstream.shared.records import Viewpoint, readonly
 from walkstream.shared.scene.cellkinds import CELL_KINDS
 
@@ -261,29 +264,51 @@ def _impostor_row(row: Any, what: str) -> ImpostorRow:
 @dataclass(frozen=True, slots=True)
 class CellImpostors:
     """What a cell draws as impostors: the rows, and the bake's distance ``d`` (metres)
-    and error bound ``bound`` (radians) the client blends by.
-    On the wire: ``{"d": centimetres, "a": microradians, "rows": [...]}``."""
+    and error bound ``bound`` (radians) the client blends by, and how the images are
+    projected (``perspective``: from each level's sampling eye, which the client places
+    its quads by; :mod:`walkstream.shared.impostors`).
+    On the wire: ``{"d": centimetres, "a": microradians, "rows": [...]}``, with ``"p": 1``
+    for perspective images (absent: orthographic, as every record before)."""
 
     d: float
     bound: float
     rows: tuple[ImpostorRow, ...]
+    perspective: bool = False
 
     def to_wire(self) -> dict[str, Any]:
         """The record's ``imp`` as sent."""
-        return {"d": int(round(self.d * 100.0)), "a": int(round(self.bound * 1e6)),
-                "rows": [r.to_wire() for r in self.rows]}
+        out: dict[str, Any] = {"d": int(round(self.d * 100.0)), "a": int(round(self.bound * 1e6)),
+                               "rows": [r.to_wire() for r in self.rows]}
+        if self.perspective:
+            out["p"] = 1
+        return out
+
+    def eye(self, row: ImpostorRow) -> float:
+        """The sampling eye's distance (metres from the centre) of ``row``'s images:
+        infinite for orthographic ones."""
+        if not self.perspective:
+            return math.inf
+        return _eye_of(math.dist(row.box[:3], row.box[3:]) / 2.0, row.level, self.bound, self.d)
+
+
+@functools.lru_cache(maxsize=4096)
+def _eye_of(radius: float, level: int, bound: float, d: float) -> float:
+    """:func:`~walkstream.shared.impostors.eye_distance` of one image, kept (the client asks every frame)."""
+    return float(eye_distance(radius, level, bound, d))
 
 
 def _cell_impostors(obj: Any, what: str) -> CellImpostors | None:
     """A record's ``imp`` (None when absent), checked."""
     if obj is None:
         return None
-    if not isinstance(obj, dict) or set(obj) != {"d", "a", "rows"}:
-        raise CodecError(f"{what}: imp is not a map of d, a and rows")
-    d, a, rows = obj["d"], obj["a"], obj["rows"]
+    if not isinstance(obj, dict) or set(obj) - {"p"} != {"d", "a", "rows"}:
+        raise CodecError(f"{what}: imp is not a map of d, a, rows and an optional p")
+    d, a, rows, p = obj["d"], obj["a"], obj["rows"], obj.get("p", 0)
     if type(d) is not int or type(a) is not int or d <= 0 or a <= 0 or not isinstance(rows, list):
         raise CodecError(f"{what}: imp: d and a must be positive integers and rows a list")
-    return CellImpostors(d / 100.0, a / 1e6, tuple(_impostor_row(r, what) for r in rows))
+    if p not in (0, 1) or type(p) is not int:
+        raise CodecError(f"{what}: imp: p must be 1 (perspective images) or absent")
+    return CellImpostors(d / 100.0, a / 1e6, tuple(_impostor_row(r, what) for r in rows), p == 1)
 
 
 @dataclass(frozen=True)

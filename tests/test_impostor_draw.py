@@ -26,7 +26,9 @@ from walkstream.shared.impostors import bin_direction
 
 URL = "http://walkstream.test"
 FAST = BakeSettings(resolution=32, sampling="corners")
-SMALL = ImpostorSettings(distance=50.0, error_deg=4.0, size=16)
+# perspective images: this module's walks bake, serve and draw them (an orthographic bake
+# is served and drawn in tests/test_impostors.py and tests/test_ringwalls.py)
+SMALL = ImpostorSettings(distance=50.0, error_deg=4.0, size=16, projection="perspective")
 
 
 @pytest.fixture(scope="module")
@@ -66,6 +68,26 @@ def test_far_buildings_are_drawn_as_impostors_and_cost_two_triangles(
     assert 0 < f["texture_bytes_max"] <= 8 << 20
     assert "impostors" not in geo  # geometry only: no image asked for
     assert imp["triangles_mean"] < geo["triangles_mean"]
+
+
+@pytest.mark.gl
+def test_a_perspective_bake_serves_its_cells_with_the_projection(dbs: tuple[Path, Path]) -> None:
+    from asgiclient import Http
+
+    from walkstream.shared.wire import MSGPACK, decode_cell
+
+    app = create_app([dbs[0]])
+    http = Http(app)
+    try:
+        listed = [imp for cid in range(40)
+                  if (resp := http.get(f"/v1/scenes/imp/cells/{cid}", headers={"Accept": MSGPACK})).status_code == 200
+                  and (imp := decode_cell(resp.content, "cell").impostors) is not None]
+    finally:
+        http.close()
+        app.state.scenes.close()
+    assert listed and all(imp.perspective for imp in listed)
+    row = listed[0].rows[0]
+    assert listed[0].eye(row) > row.radius  # the client places the quad from the same eye as the bake
 
 
 @pytest.mark.gl
@@ -183,7 +205,7 @@ def test_bench_impostors_replays_one_walk_both_ways(dbs: tuple[Path, Path], tmp_
     rows = run_impostor_bench([str(dbs[0])], replay_with_options, out=tmp_path, duration="2s",
                               truth_every=25, size="80x60")
     assert [r["with_impostors"] for r in rows] == [True, False]
-    assert [r["bake"] for r in rows] == ["imp D50 A4 S16"] * 2
+    assert [r["bake"] for r in rows] == ["imp D50 A4 S16 persp"] * 2
     assert bake_label(str(dbs[1])) == "plain (no impostors)"
     assert rows[0]["impostors"]["image_bytes"] > 0 and "impostors" not in rows[1]
     assert all(r["frame_time_median_ms"] > 0 for r in rows)

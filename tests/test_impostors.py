@@ -323,6 +323,7 @@ def test_images_are_listed_by_cells_and_served_immutable_in_batches(http: Http) 
         imp = decode_cell(resp.content, "cell").impostors
         if imp is not None:
             assert imp.d == SMALL.distance and abs(imp.bound - math.radians(SMALL.error_deg)) < 1e-6
+            assert not imp.perspective  # an orthographic bake: served as before
             rows += imp.rows
     assert rows, "no cell lists an impostor"
     row = rows[0]
@@ -401,6 +402,7 @@ def test_a_texture_budget_smaller_than_one_cells_images() -> None:
         (["--impostors", "--impostor-error", "0"], "--impostor-error"),
         (["--impostor-distance", "100"], "give --impostors too"),
         (["--impostor-sampling", "point"], "give --impostors too"),
+        (["--impostor-projection", "perspective"], "give --impostors too"),
     ],
 )
 def test_bad_impostor_flags_are_one_clear_line(

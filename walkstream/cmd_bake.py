@@ -113,14 +113,15 @@ def cmd_bake(args: argparse.Namespace) -> int:
     if args.building is not None and args.interior is None:
         raise WalkstreamError("--building: give --interior FILE too (the interior to place in the building)")
     extra: dict[str, Any] = {} if args.interior is None else {"interior": args.interior, "building": args.building}
-    imp_flags = (args.impostor_distance, args.impostor_error, args.impostor_size, args.complex_triangles, args.impostor_sampling)
+    imp_flags = (args.impostor_distance, args.impostor_error, args.impostor_size, args.complex_triangles, args.impostor_sampling,
+                 args.impostor_projection)
     if args.impostors:
         from walkstream.server.bake import ImpostorSettings
 
-        names = ("distance", "error_deg", "size", "complex_triangles", "sampling")
+        names = ("distance", "error_deg", "size", "complex_triangles", "sampling", "projection")
         extra["impostors"] = ImpostorSettings(**{k: v for k, v in zip(names, imp_flags, strict=True) if v is not None}).check()
     elif any(v is not None for v in imp_flags):
-        raise WalkstreamError("--impostor-distance/-error/-size/-sampling, --complex-triangles: give --impostors too")
+        raise WalkstreamError("--impostor-distance/-error/-size/-sampling/-projection, --complex-triangles: give --impostors too")
     wall_flags = (args.wall_error, args.wall_pitch, args.wall_keep, args.wall_ring_min, args.wall_region)
     if args.virtual_walls:
         from walkstream.server.bake.wallplan import WallSettings
@@ -244,6 +245,7 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--impostor-distance", type=float, default=None, metavar="D", help="with --impostors: a building at least D metres from every point of a cell is far (default 250)")
     bk.add_argument("--impostor-error", type=float, default=None, metavar="A", help="with --impostors: the largest angle, degrees, under which a point of an impostor may move (default 2)")
     bk.add_argument("--impostor-size", type=int, default=None, metavar="S", help="with --impostors: the largest image side, texels, a power of two (default 128)")
+    bk.add_argument("--impostor-projection", choices=("ortho", "perspective"), default=None, help="with --impostors: each image orthographic along its direction (ortho, default) or in perspective from its level's sampling eye onto the quad's plane (perspective: no orthographic parallax from that eye; docs/benchmarks.md)")
     bk.add_argument("--impostor-sampling", choices=("point", "area"), default=None, help="with --impostors: each texel the surface under its centre (point, default: as the truth samples a pixel) or the mean of 2x2 samples (area)")
     bk.add_argument("--complex-triangles", type=int, default=None, metavar="N", help="with --impostors: buildings over N triangles at LOD2 are impostors wherever the error bound allows (default 12000)")
     bk.add_argument("--virtual-walls", action="store_true", help="interiors: cut open rooms by textured virtual walls; cities: ring the cells whose PVS is large by walls that carry their far field (docs/bake.md, virtual walls)")

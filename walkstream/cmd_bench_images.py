@@ -57,7 +57,8 @@ def cmd_bench_impostor_sampling(args: argparse.Namespace) -> int:
     rows = run_sampling_bench(load_source(src).buildings, count=args.buildings, error_deg=args.impostor_error,
                               picture=picture, ppds=args.ppd, against_aa=args.against_aa,
                               truth_samples=[parse_sampling(t) for t in args.truth_samples],
-                              reference=parse_sampling(args.reference, "--reference"))
+                              reference=parse_sampling(args.reference, "--reference"),
+                              projections=args.projection, distance=args.impostor_distance)
     print(json.dumps(rows) if args.json else format_sampling_table(rows))
     if picture:
         print(f"picture: {plot_sampling_picture(picture, Path(args.picture))}")
@@ -120,6 +121,8 @@ def add_image_benches(besub: Any) -> None:
     b.add_argument("source", nargs="?", help="city source (default: the demo city, generated into out/demo if missing)")
     b.add_argument("--buildings", type=int, default=20, help="the N tallest buildings (default 20)")
     b.add_argument("--impostor-error", type=float, default=2.0, metavar="A", help="the bound A, degrees, that picks the direction bin of the perspective view (default 2)")
+    b.add_argument("--projection", nargs="+", choices=("ortho", "perspective"), default=["ortho"], help="the images orthographic and/or in perspective from their level's sampling eye (rows 'S persp'; default ortho)")
+    b.add_argument("--impostor-distance", type=float, default=60.0, metavar="D", help="with --projection perspective: the bake's D the sampling eye is placed for (default 60)")
     b.add_argument("--ppd", type=float, nargs="+", default=[1.81, 24.0], metavar="P", help="pixels per degree of the viewer-scale (S-CIELAB) columns (default 1.81, the 160x120 view's own, and 24, a handheld's screen)")
     b.add_argument("--against-aa", action="store_true", help="compare the images with the truth drawn anti-aliased (4x4 samples a pixel, averaged) instead of the truth")
     b.add_argument("--truth-samples", nargs="+", default=[], metavar="S", help="also the truth drawn at each sampling S (1, N or NxN supersampled, msaaS) against the truth drawn at --reference: the anti-aliased truth's own error, a row per view and S")

@@ -48,7 +48,7 @@ from walkstream.shared.impostors import (
     bin_direction,
     bin_of,
     directions,
-    orthographic_parallax,
+    image_parallax,
 )
 from walkstream.shared.wire import ImpostorRow
 
@@ -127,13 +127,16 @@ def choose_impostors(
     bound: float,
     blend_m: float | None = None,
     perspective: bool = False,
+    eyes: Sequence[float] | None = None,
 ) -> list[ImpostorChoice]:
     """Each listed building's image and opacity for a viewer at ``eye`` (see the module
-    docstring); with ``perspective`` the error adds the orthographic image's own parallax
-    (:func:`~walkstream.shared.impostors.orthographic_parallax`) to the direction's."""
+    docstring); with ``perspective`` the error adds the image's own parallax to the
+    direction's: :func:`~walkstream.shared.impostors.image_parallax` from its sampling
+    eye (``eyes``, metres from the centre per row, a scene baked with perspective
+    images; None: orthographic images, the eye at infinity)."""
     e = np.asarray(eye, np.float64).reshape(3)
     out = []
-    for r in rows:
+    for k, r in enumerate(rows):
         lo, hi = np.asarray(r.box[:3]), np.asarray(r.box[3:])
         centre, radius = (lo + hi) / 2.0, float(np.linalg.norm(hi - lo)) / 2.0
         # the bake's distance: from the eye to the box's footprint
@@ -149,7 +152,7 @@ def choose_impostors(
         theta = math.acos(float(np.clip(v @ bin_direction(r.level, int(ia), int(ie)) / span, -1.0, 1.0)))
         err = float(angular_error(radius, span, theta))
         if perspective:
-            err += float(orthographic_parallax(radius, span))
+            err += float(image_parallax(radius, span, math.inf if eyes is None else eyes[k]))
         alpha = float(impostor_alpha(dist, err, d, bound, blend_m))
         out.append(ImpostorChoice(r.object, image if alpha > 0.0 else None, alpha, dist, err))
     return out

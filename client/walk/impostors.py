@@ -14,9 +14,10 @@ predicted cells will draw, at their need times (:func:`ahead_wants`); of those h
 the texture budget, the farthest dropped first
 (:func:`~walkstream.client.draw.impostors.fit_textures`).  Each kept image is one
 :class:`DrawnImpostor`: a quad fixed to its baking direction (the image is an
-orthographic view along the bin's direction over the building's bounding square, so
-the quad in that plane puts each texel where the bake saw it; the error bound keeps
-the viewer's direction near it), two triangles and one draw for the budget and the
+orthographic view along the bin's direction over the building's bounding square, or
+a perspective view from the level's sampling eye onto the square through the centre
+that holds the sphere's silhouette from there, so the quad in that plane puts each
+texel where the bake saw it; the error bound keeps the viewer's direction near it), two triangles and one draw for the budget and the
 device.  A building at opacity 1 is drawn as its image alone (its geometry is left
 out of the allocation); between 0 and 1 both are drawn, the image over the geometry.
 
@@ -35,7 +36,7 @@ from numpy.typing import NDArray
 
 from walkstream.client.draw.impostors import FADE_S, choose_impostors, fade_towards, fit_textures
 from walkstream.client.walk.state import Frame, WalkState
-from walkstream.shared.impostors import bin_direction, bin_of, directions, image_basis
+from walkstream.shared.impostors import bin_direction, bin_of, directions, half_side, image_basis
 
 __all__ = ["AHEAD_S", "DrawnImpostor", "ahead_wants", "frame_impostors", "quad_corners", "replaced", "toward_eye"]
 
@@ -58,12 +59,18 @@ class DrawnImpostor:
     """The texture's bytes."""
 
 
-def quad_corners(box: tuple[float, ...] | NDArray[np.float64], level: int, ia: int, ie: int) -> NDArray[np.float64]:
+def quad_corners(
+    box: tuple[float, ...] | NDArray[np.float64], level: int, ia: int, ie: int, eye: float = math.inf
+) -> NDArray[np.float64]:
     """The corners of the quad of a building's ``box`` (``lo`` then ``hi``) for the image
-    of bin ``(ia, ie)`` at ``level``: the bounding sphere's square across the bin's direction."""
+    of bin ``(ia, ie)`` at ``level``: the bounding sphere's square across the bin's
+    direction, through the centre; for a perspective image (``eye`` its sampling eye's
+    distance, :meth:`~walkstream.shared.wire.CellImpostors.eye`) the larger square that
+    holds the sphere's silhouette from that eye, where the bake's off-axis projection
+    put its image (:func:`~walkstream.shared.impostors.half_side`)."""
     b = np.asarray(box, np.float64).reshape(2, 3)
     c = b.mean(axis=0)
-    r = float(np.linalg.norm(b[1] - b[0])) / 2.0
+    r = float(half_side(float(np.linalg.norm(b[1] - b[0])) / 2.0, eye))
     right, up = image_basis(bin_direction(level, ia, ie))
     right, up = np.asarray(right, np.float64) * r, np.asarray(up, np.float64) * r
     return np.stack([c - right - up, c + right - up, c + right + up, c - right + up])
@@ -108,7 +115,8 @@ def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
             return []
         lane.started = True
     cfg = w.config
-    choices = choose_impostors(imp.rows, f.eye, imp.d, imp.bound, cfg.impostor_blend_m, cfg.impostor_perspective)
+    eyes = [imp.eye(r) for r in imp.rows] if imp.perspective else None
+    choices = choose_impostors(imp.rows, f.eye, imp.d, imp.bound, cfg.impostor_blend_m, cfg.impostor_perspective, eyes)
     wants = ahead_wants(w, f) if cfg.prefetch else {}
     wants.update({c.image: 0.0 for c in choices if c.image is not None})
     lane.want(wants)
@@ -126,7 +134,7 @@ def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
         lo, hi = np.asarray(r.box[:3], np.float64), np.asarray(r.box[3:], np.float64)
         az, el = directions(f.eye, (lo + hi) / 2.0)
         ia, ie = bin_of(r.level, az, el)
-        corners = toward_eye(quad_corners(r.box, r.level, int(ia), int(ie)), f.eye, r.box)
+        corners = toward_eye(quad_corners(r.box, r.level, int(ia), int(ie), imp.eye(r)), f.eye, r.box)
         target[c.object] = DrawnImpostor(c.object, c.image, c.alpha, corners, held[c.image])
     return _faded(w, f, target)
 
@@ -218,7 +226,8 @@ def ahead_wants(w: WalkState, f: Frame) -> dict[int, float]:
             continue
         eye = np.asarray(f.eye, np.float64).copy()
         eye[:2] += velocity * t
-        for c in choose_impostors(imp.rows, eye, imp.d, imp.bound, cfg.impostor_blend_m, cfg.impostor_perspective):
+        eyes = [imp.eye(r) for r in imp.rows] if imp.perspective else None
+        for c in choose_impostors(imp.rows, eye, imp.d, imp.bound, cfg.impostor_blend_m, cfg.impostor_perspective, eyes):
             if c.image is not None and c.image not in out:
                 out[c.image] = float(t)
     return out

@@ -39,7 +39,15 @@ from numpy.typing import NDArray
 from walkstream.server.bake.impostorrender import ImageJob
 from walkstream.server.bake.impostorsettings import ImpostorSettings
 from walkstream.server.bake.viewcell import ViewCell
-from walkstream.shared.impostors import bin_of, image_size, level_for, level_step, texels_needed
+from walkstream.shared.impostors import (
+    bin_of,
+    eye_distance,
+    half_side,
+    image_size,
+    level_for,
+    level_step,
+    texels_needed,
+)
 
 __all__ = ["CellImpostor", "ImpostorPlan", "plan_impostors"]
 
@@ -127,7 +135,10 @@ def plan_impostors(
         corners = np.asarray(cell.polygon)[:, :2]
         near = shapely.distance(poly, centres2d[chosen])
         levels = level_for(radius[chosen], near, bound)
-        sizes = image_size(texels_needed(radius[chosen], near, settings.view_height, settings.fov_deg), settings.size)
+        side = radius[chosen]
+        if settings.projection == "perspective":  # the square holds the silhouette from the sampling eye
+            side = half_side(side, eye_distance(side, np.maximum(levels, 0), bound, settings.distance))
+        sizes = image_size(texels_needed(side, near, settings.view_height, settings.fov_deg), settings.size)
         for j, o in enumerate(chosen.tolist()):
             if near[j] <= radius[o] or levels[j] < 0:  # reaching into the bounding sphere, or too near the bound
                 plan.too_near += 1

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from walkstream.server.bake.objectrows import building_box
 from walkstream.shared.buildings import build_lod_batch
-from walkstream.shared.camera import mat4_bytes, orthographic
+from walkstream.shared.camera import mat4_bytes, off_axis, orthographic
 from walkstream.shared.codec.image import encode_image
 from walkstream.shared.errors import InputError
 from walkstream.shared.gl import (
@@ -47,7 +47,7 @@ from walkstream.shared.gl import (
     create_context,
     release_objects,
 )
-from walkstream.shared.impostors import bin_direction, image_basis
+from walkstream.shared.impostors import bin_direction, eye_distance, half_side, image_basis
 from walkstream.shared.litimage import NUDGE_TEXELS, SUPERSAMPLE, average_samples, lit_program
 from walkstream.shared.palette import material_rgb
 from walkstream.shared.records import Mesh
@@ -165,8 +165,12 @@ class ImpostorRenderer(Releasable):
             fb = self._fbs[side] = Framebuffer(self.ctx, (side, side))
         return fb
 
-    def _mvp(self, oid: int, direction: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The orthographic view of object ``oid`` along ``-direction`` over its bounding square."""
+    def _mvp(self, oid: int, direction: NDArray[np.float64], eye: float = math.inf) -> NDArray[np.float64]:
+        """The orthographic view of object ``oid`` along ``-direction`` over its bounding
+        square or, for a finite ``eye`` (metres from the centre along ``direction``), the
+        off-axis perspective from there onto the square through the centre that holds
+        the bounding sphere's silhouette (:func:`~walkstream.shared.impostors.half_side`),
+        near plane at the sphere's front."""
         if oid not in self._range:
             raise InputError(f"impostor: no mesh of object {oid}")
         c, r = self._bounds[oid]
@@ -174,25 +178,33 @@ class ImpostorRenderer(Releasable):
         u = np.asarray(direction, np.float64)
         u = u / np.linalg.norm(u)
         right, up = image_basis(u)
-        eye = c + u * (r + 1.0)
-        view = np.eye(4)  # look_at(eye, c) written out: numpy's cross costs more than the draw
+        if math.isfinite(eye):
+            if eye <= r:
+                raise InputError(f"impostor: sampling eye {eye:g} m inside object {oid}'s sphere ({r:g} m)")
+            s = float(half_side(r, eye))
+            return off_axis(c + u * eye, c - (right + up) * s, right, up, 2.0 * s, 2.0 * s,
+                            max(eye - r - 1.0, 0.01 * eye), eye + r + 1.0)
+        at = c + u * (r + 1.0)
+        view = np.eye(4)  # look_at(at, c) written out: numpy's cross costs more than the draw
         view[0, :3], view[1, :3], view[2, :3] = right, up, u
-        view[:3, 3] = -view[:3, :3] @ eye
+        view[:3, 3] = -view[:3, :3] @ at
         out: NDArray[np.float64] = orthographic(r, 0.01, 2.0 * r + 2.0) @ view
         return out
 
     def render(
-        self, oid: int, direction: NDArray[np.float64], size: int, sampling: str = "point"
+        self, oid: int, direction: NDArray[np.float64], size: int, sampling: str = "point", eye: float = math.inf
     ) -> NDArray[np.uint8]:
         """The premultiplied ``(size, size, 4) uint8`` image of object ``oid`` seen along
         ``-direction`` (row 0 at the top), over its bounding square, each texel sampled
-        as ``sampling`` says (:data:`IMPOSTOR_SAMPLINGS`)."""
-        return self.render_many([(oid, direction)], size, sampling)[0]
+        as ``sampling`` says (:data:`IMPOSTOR_SAMPLINGS`); orthographic, or in perspective
+        from ``eye`` metres out along ``direction`` when finite (:meth:`_mvp`)."""
+        return self.render_many([(oid, direction, eye)], size, sampling)[0]
 
     def render_many(
-        self, views: Sequence[tuple[int, NDArray[np.float64]]], size: int, sampling: str = "point"
+        self, views: Sequence[tuple[int, NDArray[np.float64]] | tuple[int, NDArray[np.float64], float]],
+        size: int, sampling: str = "point",
     ) -> list[NDArray[np.uint8]]:
-        """:meth:`render` of several ``(object, direction)`` at one size, drawn as tiles of
+        """:meth:`render` of several ``(object, direction[, eye])`` at one size, drawn as tiles of
         one framebuffer and read back once: llvmpipe's cost is mostly the wait for each
         read (its threads handing a frame over), so one read per tile grid, not per image."""
         samples = samples_of(sampling)
@@ -207,11 +219,12 @@ class ImpostorRenderer(Releasable):
             fb.use()
             fb.clear((0.0, 0.0, 0.0, 0.0))
             self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.CULL_FACE)
-            for t, (oid, direction) in enumerate(part):
+            for t, view in enumerate(part):
                 # tile t: column t % per_row, row t // per_row from the top (GL's y from the bottom)
                 col, row = t % per_row, t // per_row
                 self.ctx.viewport = (col * side, (per_row - 1 - row) * side, side, side)
-                mvp = self._mvp(oid, direction)
+                oid = view[0]
+                mvp = self._mvp(oid, view[1], float(view[2]) if len(view) > 2 else math.inf)
                 if samples == 1:
                     mvp = _NUDGE[size] @ mvp if size in _NUDGE else _nudge(size) @ mvp
                 prog["u_view_proj"].write(mat4_bytes(mvp))
@@ -254,19 +267,29 @@ def _renderer_for(scene: Any, key: str) -> ImpostorRenderer:
 
 
 def impostor_task(
-    jobs: list[ImageJob], scene: Any, key: str, codec: str, quality: int, sampling: str = "point"
+    jobs: list[ImageJob], scene: Any, key: str, codec: str, quality: int, sampling: str = "point",
+    projection: tuple[str, float, float] = ("ortho", 0.0, 0.0),
 ) -> list[tuple[ImageJob, bytes]]:
     """Render and encode images (:data:`ImageJob` each); ``(job, bytes)`` out, in order.
 
     Runs wherever the one chunk runner sends it; ``scene`` is the city's
     :class:`~walkstream.server.sources.scene.SourceScene`, ``key`` names it (a worker
-    keeps its renderer while the key stays).
+    keeps its renderer while the key stays).  ``projection`` is ``(kind, A radians,
+    D metres)``: ``perspective`` renders each image from its level's sampling eye
+    (:func:`~walkstream.shared.impostors.eye_distance`).
     """
     renderer = _renderer_for(scene, key)
+    kind, bound, far = projection
+
+    def eye(job: ImageJob) -> float:
+        if kind != "perspective":
+            return math.inf
+        return float(eye_distance(renderer.bounds(job[1])[1], job[2], bound, far))
+
     out = []
     for size in sorted({job[5] for job in jobs}):
         same = [job for job in jobs if job[5] == size]
-        images = renderer.render_many([(job[1], bin_direction(*job[2:5])) for job in same], size, sampling)
+        images = renderer.render_many([(job[1], bin_direction(*job[2:5]), eye(job)) for job in same], size, sampling)
         out += [(job, encode_image(img, codec, quality)) for job, img in zip(same, images, strict=True)]
     order = {job[0]: k for k, job in enumerate(jobs)}
     return sorted(out, key=lambda r: order[r[0][0]])

@@ -13,6 +13,7 @@ Called by the one driver (:func:`~.driver.drive`) once every PVS cell is done:
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -61,7 +62,8 @@ def bake_impostors(
         f"({len(plan.jobs) - len(todo)} already baked)")
     media = IMAGE_MEDIA[st.codec]
     for results in run_chunks(
-        impostor_task, todo, (imp.scene, imp.key, st.codec, st.quality, st.sampling), size=IMAGE_CHUNK, workers=workers,
+        impostor_task, todo, (imp.scene, imp.key, st.codec, st.quality, st.sampling,
+                        (st.projection, math.radians(st.error_deg), st.distance)), size=IMAGE_CHUNK, workers=workers,
         scheduler=scheduler, progress=progress, done=len(plan.jobs) - len(todo), total=len(plan.jobs),
         release=release_impostor_renderer,
     ):

@@ -14,6 +14,7 @@ from typing import Any
 
 from walkstream.shared.codec.image import IMAGE_CODECS
 from walkstream.shared.errors import InputError
+from walkstream.shared.impostors import PROJECTIONS
 
 __all__ = [
     "DEFAULT_COMPLEX_TRIANGLES",
@@ -52,6 +53,10 @@ class ImpostorSettings:
     sampling: str = "point"
     """How a texel is sampled: ``point`` (its centre, as the truth samples a pixel) or
     ``area`` (the mean of 2 x 2 samples); :mod:`~.impostorrender`."""
+    projection: str = "ortho"
+    """How an image is projected (:data:`~walkstream.shared.impostors.PROJECTIONS`):
+    ``ortho`` along its bin's direction, or ``perspective`` from its level's sampling
+    eye (:func:`~walkstream.shared.impostors.eye_distance`)."""
 
     def check(self) -> ImpostorSettings:
         """Raise InputError naming the first bad setting."""
@@ -67,6 +72,8 @@ class ImpostorSettings:
             raise InputError(f"impostor codec {self.codec!r}: expected one of {', '.join(IMAGE_CODECS)}")
         if self.sampling not in ("point", "area"):
             raise InputError(f"--impostor-sampling: expected point or area, got {self.sampling!r}")
+        if self.projection not in PROJECTIONS:
+            raise InputError(f"--impostor-projection: expected one of {', '.join(PROJECTIONS)}, got {self.projection!r}")
         if not 1 <= self.quality <= 100:
             raise InputError(f"impostor quality: expected 1..100, got {self.quality}")
         if self.view_height < 1 or not 0 < self.fov_deg < 180:
@@ -74,5 +81,10 @@ class ImpostorSettings:
         return self
 
     def record(self) -> dict[str, Any]:
-        """The fields as they enter the bake's settings record."""
-        return asdict(self)
+        """The fields as they enter the bake's settings record (``projection`` only when
+        not ``ortho``: an orthographic bake writes the record, and so the scene version
+        and every ETag, it wrote before the choice existed)."""
+        out = asdict(self)
+        if out["projection"] == "ortho":
+            del out["projection"]
+        return out

@@ -30,6 +30,7 @@ from walkstream.server.bake.wallplan import WallJob, texture_height
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.server.sources.scene import SourceScene
 from walkstream.shared.camera import mat4_bytes
+from walkstream.shared.camera import off_axis as camera_off_axis
 from walkstream.shared.codec.image import encode_image
 from walkstream.shared.gl import (
     Framebuffer,
@@ -88,28 +89,10 @@ def wall_elements(scene: InteriorScene | SourceScene) -> list[WallElement]:
 def off_axis(eye: NDArray[np.float64], side: WallSide, far: float = _FAR) -> NDArray[np.float64]:
     """``(4, 4)`` view-projection from ``eye`` ``(3,)`` through the side's quad: the
     quad fills the image (``p0`` on the left, ``z1`` at the top), the near plane is
-    the wall's plane (what is in front of it is clipped)."""
-    u = np.array([*side.along, 0.0])
-    n = np.array([*side.normal, 0.0])
-    up = np.array([0.0, 0.0, 1.0])
-    p0 = np.array([*side.p0, 0.0])
-    near = float((p0 - eye) @ n)
-    left = float((p0 - eye) @ u)
-    right = left + side.length
-    bottom, top = side.z0 - float(eye[2]), side.z1 - float(eye[2])
-    view = np.eye(4)
-    view[0, :3], view[1, :3], view[2, :3] = u, up, -n
-    view[:3, 3] = -view[:3, :3] @ eye
-    proj = np.zeros((4, 4))
-    proj[0, 0] = 2 * near / (right - left)
-    proj[0, 2] = (right + left) / (right - left)
-    proj[1, 1] = 2 * near / (top - bottom)
-    proj[1, 2] = (top + bottom) / (top - bottom)
-    proj[2, 2] = -(far + near) / (far - near)
-    proj[2, 3] = -2 * far * near / (far - near)
-    proj[3, 2] = -1.0
-    out: NDArray[np.float64] = proj @ view
-    return out
+    the wall's plane (what is in front of it is clipped); the one off-axis projection
+    (:func:`~walkstream.shared.camera.off_axis`)."""
+    return camera_off_axis(eye, (side.p0[0], side.p0[1], side.z0), (*side.along, 0.0), (0.0, 0.0, 1.0),
+                           side.length, side.z1 - side.z0, None, far)
 
 
 class WallRenderer(Releasable):

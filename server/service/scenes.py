@@ -367,7 +367,7 @@ class Scene:
         return CellImpostors(float(st["distance"]), math.radians(float(st["error_deg"])), tuple(
             ImpostorRow(oid, level, az0, n_az, el0, n_el, info[oid].bbox, tuple(images))
             for oid, level, az0, n_az, el0, n_el, *images in rows
-        ))
+        ), st.get("projection", "ortho") == "perspective")
 
     def cached_wall_texture(self, tid: int) -> Encoded | None:
         """Wall texture ``tid`` if it is cached (no database access)."""
