@@ -63,6 +63,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.camera import frustum_projection, view_matrix
 from walkstream.shared.partcull import Boxes, cull_parts, near_far
 from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.portals import PortalCull, cull_portals
@@ -112,16 +113,14 @@ class _Guard:
 
 
 def guard_view(
-    eye: NDArray[np.float64],
-    view: NDArray[np.float64],
-    proj: NDArray[np.float64],
-    size: tuple[int, int],
-    turn_deg: float,
-    move_m: float,
-    clip_m: float,
+    eye: NDArray[np.float64], rot: NDArray[np.float64], proj: NDArray[np.float64], size: tuple[int, int], *,
+    turn_deg: float, move_m: float, clip_m: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], tuple[int, int], float] | None:
-    """The guard view of a camera at ``eye`` (module docstring): its apex ``(3,)``, view and
-    projection ``(4, 4)``, viewport size and the growth ``R`` in metres; None for a
+    """The guard view of a camera at ``eye`` ``(3,)`` turned by ``rot`` ``(3, 3)`` (its view
+    matrix's upper left) with the projection ``proj`` ``(4, 4)`` (module docstring): its apex
+    ``(3,)``, view and projection ``(4, 4)`` (:func:`~walkstream.shared.camera.view_matrix`,
+    :func:`~walkstream.shared.camera.frustum_projection`), viewport size and the growth
+    ``R`` in metres; None for a
     projection that is not a symmetric perspective one or a widening past 80 degrees a side."""
     planes = near_far(proj)
     if planes is None or proj[0, 2] != 0.0 or proj[1, 2] != 0.0:
@@ -131,19 +130,13 @@ def guard_view(
     if max(hx, hy) > math.radians(80.0):
         return None
     gx, gy = math.tan(hx), math.tan(hy)
-    rot = np.asarray(view, np.float64)[:3, :3]
+    rot = np.asarray(rot, np.float64)
     fwd = -rot[2]
     back = 0.5 * move_m + 2.0 * clip_m
     apex = eye - back * fwd
     grow = 1.001 * (back + move_m)
-    gv = np.eye(4)
-    gv[:3, :3] = rot
-    gv[:3, 3] = -(rot @ apex)
-    far = planes[1] * corner_secant(proj) + grow
-    near = 0.5 * clip_m
-    gp = np.zeros((4, 4))
-    gp[0, 0], gp[1, 1] = 1.0 / gx, 1.0 / gy
-    gp[2, 2], gp[2, 3], gp[3, 2] = (far + near) / (near - far), 2.0 * far * near / (near - far), -1.0
+    gv = view_matrix(rot, apex)
+    gp = frustum_projection(1.0 / gx, 1.0 / gy, 0.5 * clip_m, planes[1] * corner_secant(proj) + grow)
     gsize = (math.ceil(size[0] * gx / tx), math.ceil(size[1] * gy / ty))
     return apex, gv, gp, gsize, grow
 
@@ -215,7 +208,7 @@ class CullCache:
         key = (start, P.tobytes(), int(size[0]), int(size[1]), float(fog_m), closed, id(boxes))
         last, self._last = self._last, (e, V[:3, :3])
         for g in (self._next, self._guard):
-            if g is not None and g.key == key and self._within(g, e, V, P) \
+            if g is not None and g.key == key and self._within(g, e, V[:3, :3], P) \
                     and all(map(is_, map(boxes.get, g.cells), g.src)):
                 if g is self._next:
                     self._guard, self._next = g, None
@@ -227,7 +220,7 @@ class CullCache:
         self.misses += 1
         self._guard = self._next = None
         self._half = None
-        made = guard_view(e, V, P, size, self.turn_deg, self.move_m, self.clip_m)
+        made = self._guard_view(e, V[:3, :3], P, size)
         if made is None:  # not a symmetric perspective: the frame's own culling, not kept
             pc = cull_portals(self.graph, start, e, V, P, size, fog_m=fog_m, closed=closed, clip_m=self.clip_m)
             t1 = time.process_time()
@@ -279,17 +272,23 @@ class CullCache:
         cell = key[0] if self.locate is None else self.locate(centre)
         if cell is None:
             return 0.0, 0.0
-        if cell == key[0] and self._within(g, centre, _camera_at(rot, centre), P):
+        if cell == key[0] and self._within(g, centre, rot, P):
             return 0.0, 0.0
         key = (cell, *key[1:])
-        made = guard_view(centre, _camera_at(rot, centre), P, size, self.turn_deg, self.move_m, self.clip_m)
+        made = self._guard_view(centre, rot, P, size)
         if made is None:
             return 0.0, 0.0
         self._half = (key, centre, made, self._walk(key, made, fog_m, closed))
         return time.process_time() - t0, 0.0
 
-    def _within(self, g: _Guard, e: NDArray[np.float64], V: NDArray[np.float64], P: NDArray[np.float64]) -> bool:
-        """Whether a frame at ``e`` with the camera ``V``, ``P`` lies within the guard: the eye
+    def _guard_view(self, e: NDArray[np.float64], rot: NDArray[np.float64], P: NDArray[np.float64],
+                    size: tuple[int, int]) -> tuple[Any, ...] | None:
+        """:func:`guard_view` with this cache's turn, step and clip plane."""
+        return guard_view(e, rot, P, size, turn_deg=self.turn_deg, move_m=self.move_m, clip_m=self.clip_m)
+
+    def _within(self, g: _Guard, e: NDArray[np.float64], rot: NDArray[np.float64], P: NDArray[np.float64]) -> bool:
+        """Whether a frame at ``e`` turned by ``rot`` ``(3, 3)`` with the projection ``P`` lies
+        within the guard: the eye
         within its reach of the apex, inside its pyramid at a depth of at least the clip
         plane, and the frustum's corner rays inside the pyramid."""
         d = e - g.apex
@@ -306,7 +305,7 @@ class CullCache:
         # in plain floats (a few microseconds, not a dozen numpy calls): the frame's
         # rotation transposed stands for its inverse, a float32 camera being orthonormal
         # to about 1e-7, which the slack of 1e-5 below covers
-        (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = V[:3, :3].tolist()
+        (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = rot.tolist()
         gx, gy, slack = g.tan_x * (1.0 - 1e-5), g.tan_y * (1.0 - 1e-5), 1e-5
         for r0, r1, r2 in g.rows:
             # (guard row) . (frame rotation transposed): the row applied to the frame's axes
@@ -324,10 +323,3 @@ class CullCache:
                 return False
         return True
 
-
-def _camera_at(rot: NDArray[np.float64], eye: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The view matrix ``(4, 4)`` of rotation ``rot`` ``(3, 3)`` at ``eye`` ``(3,)``."""
-    v = np.eye(4)
-    v[:3, :3] = rot
-    v[:3, 3] = -(rot @ eye)
-    return v
