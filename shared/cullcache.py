@@ -71,11 +71,15 @@ from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.portals import PortalCull, PortalRows, cull_portals, portal_rows
 from walkstream.shared.screenrects import TOUCH_MARGIN_PX, corner_secant
 
-__all__ = ["AHEAD_FRAMES", "CachedCull", "CullCache", "guard_view"]
+__all__ = ["AHEAD_FRAMES", "LEAD_FRAMES", "CachedCull", "CullCache", "guard_view"]
 
 #: The next guard is made for the pose this many frames on (the last step and turn
 #: repeated): it takes four frames to make (:meth:`CullCache.cull`) and serves from the fifth.
 AHEAD_FRAMES = 5
+
+#: A guard made on a miss is made for the pose this many frames on, when the frame lies
+#: within it (:meth:`CullCache.cull`), so that it serves while the next is made.
+LEAD_FRAMES = 2
 
 #: The walk's pass-through distance (:func:`~walkstream.shared.portals.cull_portals`' default).
 _PASS_M = 0.05
@@ -252,7 +256,9 @@ class CullCache:
         self.misses += 1
         self._guard = self._next = None
         self._plan = None
-        made = self._guard_view(e, V[:3, :3], P, size)
+        made = self._lead(start, e, V[:3, :3], P, size, last) if self.ahead else None
+        if made is None:
+            made = self._guard_view(e, V[:3, :3], P, size)
         if made is None:  # not a symmetric perspective: the frame's own culling, not kept
             pc = cull_portals(self.graph, start, e, V, P, size, fog_m=fog_m, closed=closed, clip_m=self.clip_m)
             t1 = time.process_time()
@@ -338,6 +344,27 @@ class CullCache:
             return 0.0, 0.0
         self._plan = _Plan(key, made, rows=self._rows(made, fog_m, closed))
         return time.process_time() - t0, 0.0
+
+    def _lead(self, start: int, e: NDArray[np.float64], rot: NDArray[np.float64], P: NDArray[np.float64],
+              size: tuple[int, int], last: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+              ) -> tuple[Any, ...] | None:
+        """On a miss, the guard view made for the pose :data:`LEAD_FRAMES` frames on (the last
+        step and turn repeated) when this frame lies within it (else None): a guard centred
+        on the frame itself would serve half its reach, too few frames to make the next
+        one a quarter a frame."""
+        if last is None:
+            return None
+        turn = rot @ last[1].T
+        ahead_rot = np.linalg.matrix_power(turn, LEAD_FRAMES) @ rot
+        centre = e + float(LEAD_FRAMES) * (e - last[0])
+        if self.locate is not None and self.locate(centre) != start:
+            return None
+        made = self._guard_view(centre, ahead_rot, P, size)
+        if made is None:
+            return None
+        apex, gv, gp, _gsize, grow = made
+        probe = _Guard((), apex, grow / 1.001, 1.0 / gp[0, 0], 1.0 / gp[1, 1], [], {}, [], [], gv[:3, :3].tolist())
+        return made if self._within(probe, e, rot, P) else None
 
     def _guard_view(self, e: NDArray[np.float64], rot: NDArray[np.float64], P: NDArray[np.float64],
                     size: tuple[int, int]) -> tuple[Any, ...] | None:
