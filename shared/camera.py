@@ -31,11 +31,13 @@ __all__ = [
     "CUBE_FACE_UPS",
     "cube_face_views",
     "fit_view",
+    "frustum_projection",
     "look_at",
     "mat4_bytes",
     "off_axis",
     "orthographic",
     "perspective",
+    "view_matrix",
 ]
 
 
@@ -89,14 +91,33 @@ def perspective(fovy_deg: float, aspect: float, near: float, far: float) -> F32:
     if not 0.0 < near < far or not math.isfinite(far):
         raise InputError(f"perspective: expected 0 < near < far < inf, got near={near}, far={far}")
     f = 1.0 / math.tan(math.radians(fovy_deg) / 2.0)
+    return frustum_projection(f / aspect, f, near, far).astype(np.float32)
+
+
+def frustum_projection(scale_x: float, scale_y: float, near: float, far: float) -> NDArray[np.float64]:
+    """The symmetric perspective projection ``(4, 4)`` float64 that scales x and y by
+    ``scale_x`` and ``scale_y`` (the cotangents of the half-angles across and up), with
+    the clip planes at ``near`` and ``far`` (``0 < near < far``; not checked:
+    :func:`perspective` checks a user's values).
+    :func:`perspective` is this one in float32; a widened view (the culling cache's guard,
+    :mod:`walkstream.shared.cullcache`) takes it in float64."""
     n, fa = float(near), float(far)
     m = np.zeros((4, 4), np.float64)
-    m[0, 0] = f / aspect
-    m[1, 1] = f
+    m[0, 0] = scale_x
+    m[1, 1] = scale_y
     m[2, 2] = (fa + n) / (n - fa)
     m[2, 3] = 2.0 * fa * n / (n - fa)
     m[3, 2] = -1.0
-    return m.astype(np.float32)
+    return m
+
+
+def view_matrix(rot: NDArray[np.float64], eye: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The view matrix ``(4, 4)`` float64 of the camera at ``eye`` ``(3,)`` whose rows of
+    ``rot`` ``(3, 3)`` are its right, up and backward axes in world coordinates."""
+    m = np.eye(4, dtype=np.float64)
+    m[:3, :3] = rot
+    m[:3, 3] = -(m[:3, :3] @ eye)
+    return m
 
 
 def orthographic(radius: float, near: float, far: float) -> NDArray[np.float64]:
@@ -201,12 +222,7 @@ def _look_at64(
         )
     side = side / sn
     true_up = np.cross(side, fwd)
-    m = np.eye(4, dtype=np.float64)
-    m[0, :3] = side
-    m[1, :3] = true_up
-    m[2, :3] = -fwd
-    m[:3, 3] = -m[:3, :3] @ eye
-    return m
+    return view_matrix(np.stack([side, true_up, -fwd]), eye)
 
 
 def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> F32:

@@ -42,8 +42,10 @@ What a hit costs: the pose checks (in plain floats) and an identity check of the
 visible cells' boxes (a cell loaded or replaced since is a miss).  What a miss costs:
 one walk and one parts culling of the guard view, wider than the frame's (more cells
 and boxes; the portals' boxes instead of their polygons), 1.3-1.4 times a frame culled
-anew.  While a guard serves, the next one is made ahead (:meth:`CullCache.cull`), half
-of it a frame, so a steady walk or turn misses only where it starts.  The answer holds
+anew.  While a guard serves, the next one is made ahead (:meth:`CullCache.cull`), a
+quarter of it a frame (the portals' projection, the walk, the parts of half the cells,
+the others), so a steady walk or turn misses only where it starts and no frame pays
+for a whole guard.  The answer holds
 every part the frame sees, and more than the frame's own culling keeps (on the
 generated offices' tours 2-3 times the parts); it tests rays, not the frame's pixel
 grid, so a part the frame's own rectangles keep by their rounding alone may be left
@@ -63,12 +65,24 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.camera import frustum_projection, view_matrix
 from walkstream.shared.partcull import Boxes, cull_parts, near_far
 from walkstream.shared.portalgraph import PortalGraph
-from walkstream.shared.portals import PortalCull, cull_portals
+from walkstream.shared.portals import PortalCull, PortalRows, cull_portals, portal_rows
 from walkstream.shared.screenrects import TOUCH_MARGIN_PX, corner_secant
 
-__all__ = ["CachedCull", "CullCache", "guard_view"]
+__all__ = ["AHEAD_FRAMES", "LEAD_FRAMES", "CachedCull", "CullCache", "guard_view"]
+
+#: The next guard is made for the pose this many frames on (the last step and turn
+#: repeated): it takes four frames to make (:meth:`CullCache.cull`) and serves from the fifth.
+AHEAD_FRAMES = 5
+
+#: A guard made on a miss is made for the pose this many frames on, when the frame lies
+#: within it (:meth:`CullCache.cull`), so that it serves while the next is made.
+LEAD_FRAMES = 2
+
+#: The walk's pass-through distance (:func:`~walkstream.shared.portals.cull_portals`' default).
+_PASS_M = 0.05
 
 
 @dataclass
@@ -111,17 +125,37 @@ class _Guard:
     m: list[tuple[float, float, float]] = field(default_factory=list)  # scratch
 
 
+@dataclass
+class _Plan:
+    """The next guard in the making (:meth:`CullCache._ahead`): its portals projected
+    (``rows``), then walked (``pc``), then its parts culled half the cells at a time."""
+
+    key: tuple[Any, ...]
+    made: tuple[Any, ...]  # guard_view's answer
+    rows: PortalRows | None = None
+    pc: PortalCull | None = None
+    first_half: bool = False
+    masks: dict[int, NDArray[np.bool_]] = field(default_factory=dict)
+    src: dict[int, Any] = field(default_factory=dict)  # the boxes each cell was culled with
+
+    def guard(self) -> _Guard:
+        """The guard these make."""
+        assert self.pc is not None
+        apex, gv, gp, _gsize, grow = self.made
+        cells = list(self.pc.order)
+        return _Guard(self.key, apex.copy(), grow / 1.001, 1.0 / gp[0, 0], 1.0 / gp[1, 1], self.pc.order,
+                      self.masks, cells, [self.src.get(c) for c in cells], gv[:3, :3].tolist())
+
+
 def guard_view(
-    eye: NDArray[np.float64],
-    view: NDArray[np.float64],
-    proj: NDArray[np.float64],
-    size: tuple[int, int],
-    turn_deg: float,
-    move_m: float,
-    clip_m: float,
+    eye: NDArray[np.float64], rot: NDArray[np.float64], proj: NDArray[np.float64], size: tuple[int, int], *,
+    turn_deg: float, move_m: float, clip_m: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], tuple[int, int], float] | None:
-    """The guard view of a camera at ``eye`` (module docstring): its apex ``(3,)``, view and
-    projection ``(4, 4)``, viewport size and the growth ``R`` in metres; None for a
+    """The guard view of a camera at ``eye`` ``(3,)`` turned by ``rot`` ``(3, 3)`` (its view
+    matrix's upper left) with the projection ``proj`` ``(4, 4)`` (module docstring): its apex
+    ``(3,)``, view and projection ``(4, 4)`` (:func:`~walkstream.shared.camera.view_matrix`,
+    :func:`~walkstream.shared.camera.frustum_projection`), viewport size and the growth
+    ``R`` in metres; None for a
     projection that is not a symmetric perspective one or a widening past 80 degrees a side."""
     planes = near_far(proj)
     if planes is None or proj[0, 2] != 0.0 or proj[1, 2] != 0.0:
@@ -131,19 +165,13 @@ def guard_view(
     if max(hx, hy) > math.radians(80.0):
         return None
     gx, gy = math.tan(hx), math.tan(hy)
-    rot = np.asarray(view, np.float64)[:3, :3]
+    rot = np.asarray(rot, np.float64)
     fwd = -rot[2]
     back = 0.5 * move_m + 2.0 * clip_m
     apex = eye - back * fwd
     grow = 1.001 * (back + move_m)
-    gv = np.eye(4)
-    gv[:3, :3] = rot
-    gv[:3, 3] = -(rot @ apex)
-    far = planes[1] * corner_secant(proj) + grow
-    near = 0.5 * clip_m
-    gp = np.zeros((4, 4))
-    gp[0, 0], gp[1, 1] = 1.0 / gx, 1.0 / gy
-    gp[2, 2], gp[2, 3], gp[3, 2] = (far + near) / (near - far), 2.0 * far * near / (near - far), -1.0
+    gv = view_matrix(rot, apex)
+    gp = frustum_projection(1.0 / gx, 1.0 / gy, 0.5 * clip_m, planes[1] * corner_secant(proj) + grow)
     gsize = (math.ceil(size[0] * gx / tx), math.ceil(size[1] * gy / ty))
     return apex, gv, gp, gsize, grow
 
@@ -183,8 +211,7 @@ class CullCache:
         self.misses = 0
         self._guard: _Guard | None = None
         self._next: _Guard | None = None
-        # the next guard half made: its key, its camera and its walk
-        self._half: tuple[tuple[Any, ...], NDArray[np.float64], tuple[Any, ...], PortalCull] | None = None
+        self._plan: _Plan | None = None  # the next guard, in the making
         self._last: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
 
     def cull(
@@ -204,10 +231,12 @@ class CullCache:
         a new guard's.  ``boxes`` as :func:`~walkstream.shared.partcull.cull_parts` takes them
         (its arrays must not change in place; a cell whose pair is replaced is a miss).
 
-        With ``ahead`` (the default) a hit also makes half of the next guard, for the pose
-        two frames on (the last frame's step and turn repeated), when that pose would leave
-        the current guard: its walk on one frame, its parts on the next, so that a viewer
-        who walks or turns steadily finds the next guard made instead of a miss."""
+        With ``ahead`` (the default) a hit also makes a quarter of the next guard, for the
+        pose :data:`AHEAD_FRAMES` frames on (the last frame's step and turn repeated), when
+        that pose would leave the current guard: its portals' projection on one frame, its
+        walk on the next, the parts of the first half of its cells on the third and of the
+        others on the fourth, so that a viewer who walks or turns steadily finds the next
+        guard made instead of a miss, and no frame pays for more than a quarter of it."""
         t0 = time.process_time()
         e = np.asarray(eye, np.float64).reshape(3)
         V = np.asarray(view, np.float64)
@@ -215,7 +244,7 @@ class CullCache:
         key = (start, P.tobytes(), int(size[0]), int(size[1]), float(fog_m), closed, id(boxes))
         last, self._last = self._last, (e, V[:3, :3])
         for g in (self._next, self._guard):
-            if g is not None and g.key == key and self._within(g, e, V, P) \
+            if g is not None and g.key == key and self._within(g, e, V[:3, :3], P) \
                     and all(map(is_, map(boxes.get, g.cells), g.src)):
                 if g is self._next:
                     self._guard, self._next = g, None
@@ -226,8 +255,10 @@ class CullCache:
                 return CachedCull(g.order, dict(g.masks), False, time.process_time() - t0 - parts_s, parts_s)
         self.misses += 1
         self._guard = self._next = None
-        self._half = None
-        made = guard_view(e, V, P, size, self.turn_deg, self.move_m, self.clip_m)
+        self._plan = None
+        made = self._lead(start, e, V[:3, :3], P, size, last) if self.ahead else None
+        if made is None:
+            made = self._guard_view(e, V[:3, :3], P, size)
         if made is None:  # not a symmetric perspective: the frame's own culling, not kept
             pc = cull_portals(self.graph, start, e, V, P, size, fog_m=fog_m, closed=closed, clip_m=self.clip_m)
             t1 = time.process_time()
@@ -235,61 +266,114 @@ class CullCache:
             return CachedCull(pc.order, masks, True, t1 - t0, time.process_time() - t1)
         pc = self._walk(key, made, fog_m, closed)
         t1 = time.process_time()
-        g = self._guard = self._parts(key, e, made, pc, boxes, fog_m)
+        g = self._guard = self._parts(key, made, pc, boxes, fog_m)
         return CachedCull(g.order, dict(g.masks), True, t1 - t0, time.process_time() - t1)
 
-    def _walk(self, key: tuple[Any, ...], made: tuple[Any, ...], fog_m: float, closed: frozenset[int]) -> PortalCull:
-        """The guard view's portal walk (``made`` from :func:`guard_view`)."""
+    def _rows(self, made: tuple[Any, ...], fog_m: float, closed: frozenset[int]) -> PortalRows:
+        """The guard view's portals projected (``made`` from :func:`guard_view`)."""
+        apex, gv, gp, gsize, grow = made
+        return portal_rows(self.graph, apex, gv, gp, gsize, self.clip_m, _PASS_M, fog_m + grow, False, closed,
+                           TOUCH_MARGIN_PX, grow)
+
+    def _walk(self, key: tuple[Any, ...], made: tuple[Any, ...], fog_m: float, closed: frozenset[int],
+              rows: PortalRows | None = None) -> PortalCull:
+        """The guard view's portal walk (on ``rows`` from :meth:`_rows` when given)."""
         apex, gv, gp, gsize, grow = made
         return cull_portals(self.graph, key[0], apex, gv, gp, gsize, fog_m=fog_m + grow, closed=closed,
-                            clip_m=self.clip_m, margin_px=TOUCH_MARGIN_PX, grow_m=grow)
+                            clip_m=self.clip_m, pass_m=_PASS_M, margin_px=TOUCH_MARGIN_PX, grow_m=grow, rows=rows)
 
-    def _parts(self, key: tuple[Any, ...], centre: NDArray[np.float64], made: tuple[Any, ...], pc: PortalCull,
-               boxes: Boxes, fog_m: float) -> _Guard:
-        """The guard view's parts culling, and the guard."""
+    def _masks(self, made: tuple[Any, ...], pc: PortalCull, cells: list[int], boxes: Boxes, fog_m: float,
+               into: _Plan) -> None:
+        """The guard view's parts culling of ``cells`` (of the walk ``pc``) into ``into``, with
+        the boxes they were culled with."""
         apex, gv, gp, gsize, grow = made
-        masks = cull_parts("portals", pc.order, boxes, apex, gv, gp, gsize, vsas=pc.vsas, fog_m=fog_m + grow,
+        masks = cull_parts("portals", cells, boxes, apex, gv, gp, gsize, vsas=pc.vsas, fog_m=fog_m + grow,
                            clip_m=self.clip_m, margin_px=TOUCH_MARGIN_PX)
         for m in masks.values():
             m.flags.writeable = False  # shared by every frame the guard serves
-        cells = list(pc.order)
-        return _Guard(key, apex.copy(), grow / 1.001, 1.0 / gp[0, 0], 1.0 / gp[1, 1], pc.order, masks, cells,
-                      list(map(boxes.get, cells)), gv[:3, :3].tolist())
+        into.masks.update(masks)
+        into.src.update(zip(cells, map(boxes.get, cells), strict=True))
+
+    def _parts(self, key: tuple[Any, ...], made: tuple[Any, ...], pc: PortalCull, boxes: Boxes,
+               fog_m: float) -> _Guard:
+        """The guard view's parts culling, and the guard."""
+        plan = _Plan(key, made, pc=pc)
+        self._masks(made, pc, pc.order, boxes, fog_m, plan)
+        return plan.guard()
 
     def _ahead(self, key: tuple[Any, ...], e: NDArray[np.float64], V: NDArray[np.float64], P: NDArray[np.float64],
                size: tuple[int, int], boxes: Boxes, fog_m: float, closed: frozenset[int],
                last: tuple[NDArray[np.float64], NDArray[np.float64]] | None) -> tuple[float, float]:
-        """Half of the next guard (:meth:`cull`); the CPU seconds of its walk and of its parts."""
+        """A quarter of the next guard (:meth:`cull`); the CPU seconds of its walk and of its parts."""
         t0 = time.process_time()
-        if self._half is not None:
-            hkey, hcentre, hmade, pc = self._half
-            self._half = None
-            if hkey[1:] == key[1:]:
-                self._next = self._parts(hkey, hcentre, hmade, pc, boxes, fog_m)
+        plan = self._plan
+        if plan is not None:
+            if plan.key[1:] != key[1:]:  # another fog, projection or boxes: made anew when due
+                self._plan = None
+                return 0.0, 0.0
+            if plan.pc is None:
+                plan.pc = self._walk(plan.key, plan.made, fog_m, closed, plan.rows)
+                plan.rows = None
+                return time.process_time() - t0, 0.0
+            order = plan.pc.order
+            half = (len(order) + 1) // 2
+            if not plan.first_half:
+                self._masks(plan.made, plan.pc, order[:half], boxes, fog_m, plan)
+                plan.first_half = True
+            else:
+                self._masks(plan.made, plan.pc, order[half:], boxes, fog_m, plan)
+                self._next, self._plan = plan.guard(), None
             return 0.0, time.process_time() - t0
         g = self._guard
         if self._next is not None or last is None or g is None:
             return 0.0, 0.0
-        # the pose three frames on (the last step and the last turn made thrice more): when
-        # it leaves the guard or its cell, the next guard is made for it (its walk now, its
-        # parts on the next frame, used from the frame after)
+        # the pose AHEAD_FRAMES frames on (the last step and the last turn made as many
+        # times more): when it leaves the guard or its cell, the next guard is made for it
+        # over the next frames (its portals projected now), used from the frame after
         turn = V[:3, :3] @ last[1].T
-        rot = turn @ turn @ turn @ V[:3, :3]
-        centre = e + 3.0 * (e - last[0])
+        rot = np.linalg.matrix_power(turn, AHEAD_FRAMES) @ V[:3, :3]
+        centre = e + float(AHEAD_FRAMES) * (e - last[0])
         cell = key[0] if self.locate is None else self.locate(centre)
         if cell is None:
             return 0.0, 0.0
-        if cell == key[0] and self._within(g, centre, _camera_at(rot, centre), P):
+        if cell == key[0] and self._within(g, centre, rot, P):
             return 0.0, 0.0
         key = (cell, *key[1:])
-        made = guard_view(centre, _camera_at(rot, centre), P, size, self.turn_deg, self.move_m, self.clip_m)
+        made = self._guard_view(centre, rot, P, size)
         if made is None:
             return 0.0, 0.0
-        self._half = (key, centre, made, self._walk(key, made, fog_m, closed))
+        self._plan = _Plan(key, made, rows=self._rows(made, fog_m, closed))
         return time.process_time() - t0, 0.0
 
-    def _within(self, g: _Guard, e: NDArray[np.float64], V: NDArray[np.float64], P: NDArray[np.float64]) -> bool:
-        """Whether a frame at ``e`` with the camera ``V``, ``P`` lies within the guard: the eye
+    def _lead(self, start: int, e: NDArray[np.float64], rot: NDArray[np.float64], P: NDArray[np.float64],
+              size: tuple[int, int], last: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+              ) -> tuple[Any, ...] | None:
+        """On a miss, the guard view made for the pose :data:`LEAD_FRAMES` frames on (the last
+        step and turn repeated) when this frame lies within it (else None): a guard centred
+        on the frame itself would serve half its reach, too few frames to make the next
+        one a quarter a frame."""
+        if last is None:
+            return None
+        turn = rot @ last[1].T
+        ahead_rot = np.linalg.matrix_power(turn, LEAD_FRAMES) @ rot
+        centre = e + float(LEAD_FRAMES) * (e - last[0])
+        if self.locate is not None and self.locate(centre) != start:
+            return None
+        made = self._guard_view(centre, ahead_rot, P, size)
+        if made is None:
+            return None
+        apex, gv, gp, _gsize, grow = made
+        probe = _Guard((), apex, grow / 1.001, 1.0 / gp[0, 0], 1.0 / gp[1, 1], [], {}, [], [], gv[:3, :3].tolist())
+        return made if self._within(probe, e, rot, P) else None
+
+    def _guard_view(self, e: NDArray[np.float64], rot: NDArray[np.float64], P: NDArray[np.float64],
+                    size: tuple[int, int]) -> tuple[Any, ...] | None:
+        """:func:`guard_view` with this cache's turn, step and clip plane."""
+        return guard_view(e, rot, P, size, turn_deg=self.turn_deg, move_m=self.move_m, clip_m=self.clip_m)
+
+    def _within(self, g: _Guard, e: NDArray[np.float64], rot: NDArray[np.float64], P: NDArray[np.float64]) -> bool:
+        """Whether a frame at ``e`` turned by ``rot`` ``(3, 3)`` with the projection ``P`` lies
+        within the guard: the eye
         within its reach of the apex, inside its pyramid at a depth of at least the clip
         plane, and the frustum's corner rays inside the pyramid."""
         d = e - g.apex
@@ -306,7 +390,7 @@ class CullCache:
         # in plain floats (a few microseconds, not a dozen numpy calls): the frame's
         # rotation transposed stands for its inverse, a float32 camera being orthonormal
         # to about 1e-7, which the slack of 1e-5 below covers
-        (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = V[:3, :3].tolist()
+        (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = rot.tolist()
         gx, gy, slack = g.tan_x * (1.0 - 1e-5), g.tan_y * (1.0 - 1e-5), 1e-5
         for r0, r1, r2 in g.rows:
             # (guard row) . (frame rotation transposed): the row applied to the frame's axes
@@ -324,10 +408,3 @@ class CullCache:
                 return False
         return True
 
-
-def _camera_at(rot: NDArray[np.float64], eye: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The view matrix ``(4, 4)`` of rotation ``rot`` ``(3, 3)`` at ``eye`` ``(3,)``."""
-    v = np.eye(4)
-    v[:3, :3] = rot
-    v[:3, 3] = -(rot @ eye)
-    return v

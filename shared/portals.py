@@ -95,7 +95,9 @@ from walkstream.shared.screenrects import (
 __all__ = [
     "CULLING_MODES",
     "PortalCull",
+    "PortalRows",
     "cull_portals",
+    "portal_rows",
     "frustum_cells",
     "box_distance",
 ]
@@ -135,6 +137,11 @@ class PortalCull:
     seconds: float = 0.0
 
 
+#: What :func:`portal_rows` gives: for a cell index, its directed portals as
+#: ``(target index, what)`` pairs.
+PortalRows = Callable[[int], Iterable[tuple[int, Any]]]
+
+
 def box_distance(lo: NDArray[np.float64], hi: NDArray[np.float64], eye: NDArray[np.float64]) -> NDArray[np.float64]:
     """``(n,)`` distances from ``eye`` ``(3,)`` to boxes ``(n, 3)`` (0 inside)."""
     gap = np.maximum(np.maximum(lo - eye, eye - hi), 0.0)
@@ -158,6 +165,7 @@ def cull_portals(
     closed: frozenset[int] = frozenset(),
     margin_px: float = CENTRE_MARGIN_PX,
     grow_m: float = 0.0,
+    rows: PortalRows | None = None,
 ) -> PortalCull:
     """Cells seen from cell ``start`` through portals, with their VSAs (module docstring).
 
@@ -195,6 +203,10 @@ def cull_portals(
         through when the eye comes within the pass-through distance of the grown box):
         the walk of an eye that may be anywhere within ``grow_m`` of ``eye``
         (:mod:`walkstream.shared.cullcache`).  The fog is tested on the portal as it is.
+    rows : callable, optional
+        The portals' rectangles already made for this camera and these settings by
+        :func:`portal_rows` (a caller that spreads a walk over two frames: the
+        projection on one, the walk on the next); by default made here.
     """
     t0 = time.perf_counter()
     if start not in graph.index:
@@ -205,11 +217,12 @@ def cull_portals(
     w, h = int(size[0]), int(size[1])
     # A portal's rectangle depends on the camera only, not on the VSA it is seen
     # through: every directed portal is projected in one numpy batch per frame
-    # (_portal_rows; the adjacency is built once per scene), and the walk below intersects
+    # (portal_rows; the adjacency is built once per scene), and the walk below intersects
     # whole-pixel rectangles as plain ints.  The walk is the round-one FIFO walk
     # (benchmarks/portalwalk.py) step for step, so its cells, VSAs and depths are the
     # same; only the constant work per portal is less.
-    rows_of = _portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed, margin_px, grow_m)
+    rows_of = rows if rows is not None else portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed,
+                                                        margin_px, grow_m)
     s = graph.index[start]
     full = (0, 0, w - 1, h - 1)
     # per cell index (lists, not dicts: indexing is the walk's most frequent step)
@@ -326,7 +339,7 @@ def _bounding(rects: list[tuple[int, int, int, int]]) -> tuple[int, int, int, in
 _LIST_ALL = 1024
 
 
-def _portal_rows(
+def portal_rows(
     graph: PortalGraph,
     e: NDArray[np.float64],
     V: NDArray[np.float64],
@@ -339,11 +352,12 @@ def _portal_rows(
     closed: frozenset[int] = frozenset(),
     margin_px: float = CENTRE_MARGIN_PX,
     grow_m: float = 0.0,
-) -> Callable[[int], Iterable[tuple[int, Any]]]:
+) -> PortalRows:
     """A function giving, for a cell index, its directed portals as ``(target index, what)``
     pairs: ``what`` is ``None`` (culled: beyond the fog or wholly behind the clip plane),
     ``True`` (pass the parent's VSA through) or the portal's whole-pixel rectangle
-    ``[x0, y0, x1, y1]``; every portal projected in one numpy batch."""
+    ``[x0, y0, x1, y1]``; every portal projected in one numpy batch.  The arguments as
+    :func:`cull_portals` takes them (``e`` ``(3,)``, ``V``, ``P`` ``(4, 4)`` float64)."""
     m = len(graph.target)
     adjacency, starts = graph.adjacency, graph.row_start
     if m == 0:

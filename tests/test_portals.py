@@ -224,6 +224,11 @@ def test_replay_culling_switch_on_an_interior(office_db: Path, tmp_path: Path) -
         s = json.loads((rep / "report.json").read_text())
         s = s.get("summary", s)
         assert s["culling"] == mode and s["culling_ms_median"] > 0
+        # the culling's CPU time split: the walk and the triangle test are parts of it, frame
+        # by frame; the triangle test is made after the portal walk only
+        assert 0 < s["culling_walk_ms_median"] <= s["culling_ms_median"] <= s["culling_ms_p99"]
+        assert s["culling_triangles_ms_median"] <= s["culling_ms_median"]
+        assert (s["culling_triangles_ms_median"] > 0) == (mode == "portals")
         # the ground truth on an interior: no part culled shows (late cells are not culled)
         assert s["truth"]["frames"] >= 4 and s["truth"]["culled_pixels"] == 0, s["truth"]
         assert set(s["truth"]) == {"frames", "culled_pixels", "culled_frames", "pinholes", "refused_poses",

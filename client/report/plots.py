@@ -563,7 +563,7 @@ def plot_interior(path: Path, t: ArrayLike, series: dict[str, ArrayLike], title:
     panels = (
         (("cells", "visible cells"), ("portals", "portals opened")),
         (("triangles", "triangles drawn"),),
-        (("cull_ms", "culling ms (cells and parts)"),),
+        (("cull_ms", "culling CPU ms (cells and parts)"),),
         (("fog_m", "fog distance m"),),
     )
     for ax, lines in zip(axes, panels, strict=True):

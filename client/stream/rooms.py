@@ -263,6 +263,9 @@ class RoomStreamer(RoomMotion):
         self._decoded: dict[int, tuple[CellMesh, int]] = {}
         self.plan_s = 0.0
         """CPU seconds the last :meth:`tick` spent predicting (not the frame's culling)."""
+        self.walk_s = 0.0
+        """CPU seconds (``time.thread_time``) of the frame's portal walks: those of the last
+        :meth:`tick` and of the :meth:`visible_cells` calls after it."""
         self._received = [0, 0]  # decoded bytes, triangles
         self.late = LateCells()
         """Each cell's wait from wanted to arrived, and the frames it was missing from
@@ -293,13 +296,16 @@ class RoomStreamer(RoomMotion):
         given (its result is kept in :attr:`last_cull`), otherwise through the portals in
         the frustum (breadth first)."""
         self.last_cull = None
+        t0 = time.thread_time()
         if self.cull_cache is not None and (cached := self.cull_cache.cells(
                 self.current, eye, view, proj, size, fog_m=self.fog_m, closed=self.closed)) is not None:
+            self.walk_s += time.thread_time() - t0
             return cached
         if self.current is None:
             return []
         cull, order = self._cells_from(self.current, eye, view_proj, view, proj, size, self.closed)
         self.last_cull = cull
+        self.walk_s += time.thread_time() - t0
         return order
 
     def _cells_from(
@@ -388,6 +394,7 @@ class RoomStreamer(RoomMotion):
             self.locate(e)
         else:
             self.current = cell
+        self.walk_s = 0.0
         vis = self.visible_cells(e, view_proj, view, proj, size)
         self.visible = vis
         due = vis
@@ -588,9 +595,9 @@ class RoomStreamer(RoomMotion):
         self.plan_s = 0.0
         if t - self._planned_t >= self.config.replan_s:
             self._planned_t = t
-            t0 = time.perf_counter()
+            t0 = time.thread_time()
             self._ahead = self.predicted(eye, view_proj, view, proj, size)
-            self.plan_s = time.perf_counter() - t0
+            self.plan_s = time.thread_time() - t0
         have = set(want)
         room = self.config.prefetch_share * self.cache.budget_bytes - self.visible_bytes(want)
         beyond = self._beyond(vis, self.config.beyond_portals)

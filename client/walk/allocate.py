@@ -83,6 +83,7 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
     """The visible room cells' parts to draw (``f.loaded``, ``f.masks``), the fog's lever indoors."""
     rooms = w.scene.rooms
     assert rooms is not None
+    tri_s = 0.0
     boxes = w.boxes
     for cid in f.room_cells:
         cm = rooms.mesh(cid)
@@ -114,7 +115,9 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
                            vsas=None if pc is None else pc.vsas, fog_m=f.fog)
     if culling == "portals" and pc is not None and w.config.triangle_cull:
         # the parts the boxes kept, tested again by their triangles (never adds one)
+        t_tri = time.thread_time()
         w.frames.triangle_culled += refine_parts(masks, f.loaded, pc.vsas, f.view, w.proj, w.size)
+        tri_s = time.thread_time() - t_tri
     # a cell drawn besides the portal walk's (the shell from the street): the frustum's test
     whole = [c for c in f.loaded if c not in masks or c in f.shown]
     for c, m in cull_parts("frustum", whole, boxes, f.eye, f.view, w.proj, w.size, fog_m=f.fog).items():
@@ -142,7 +145,9 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
         if pc is not None and f.fog < nearest_portal_in_view(rooms.graph, pc, f.eye):
             w.frames.fog_below_portal += 1
     f.masks = masks
-    w.frames.cull_s.append(time.perf_counter() - f.t_cull - rooms.plan_s)
+    w.frames.cull_s.append(time.thread_time() - f.t_cull - rooms.plan_s)
+    w.frames.triangle_s.append(tri_s)
+    w.frames.walk_s.append(rooms.walk_s)
     w.frames.portals.append(0 if pc is None else pc.portals)
 
 

@@ -38,7 +38,15 @@ class WalkFrames:
     budget: list[int] = field(default_factory=list)
     """The budget of the frame log (0 where no lever takes it)."""
     cull_s: list[float] = field(default_factory=list)
-    """CPU seconds of the rooms' culling (cells and parts; 0 without rooms)."""
+    """CPU seconds (``time.thread_time``) of the rooms' culling: from the frame's visible
+    step to its parts to draw (the portal walk and the streamer's tick, the parts
+    culling, the triangle test, the fog budget), the streamer's planning left out."""
+    walk_s: list[float] = field(default_factory=list)
+    """Of :attr:`cull_s`, the portal walks for the frame's view
+    (:attr:`~walkstream.client.stream.rooms.RoomStreamer.walk_s`)."""
+    triangle_s: list[float] = field(default_factory=list)
+    """Of :attr:`cull_s`, the triangle test of the kept parts
+    (:mod:`walkstream.shared.trianglecull`; 0 where it is not made)."""
     portals: list[int] = field(default_factory=list)
     """Portals opened by the portal walk."""
     tightened: int = 0
@@ -162,14 +170,18 @@ class WalkFrames:
         return out
 
     def figures(self) -> dict[str, float]:
-        """Median, p95 and max culling milliseconds per frame, and portals opened per frame."""
+        """Median, p95, p99 and max culling milliseconds per frame (CPU), the medians of its
+        portal walk and triangle test, and portals opened per frame."""
         if not self.cull_s:
             return {}
         ms = np.asarray(self.cull_s) * 1e3
         return {
             "culling_ms_median": float(np.median(ms)),
             "culling_ms_p95": float(np.percentile(ms, 95)),
+            "culling_ms_p99": float(np.percentile(ms, 99)),
             "culling_ms_max": float(ms.max()),
+            "culling_walk_ms_median": float(np.median(self.walk_s)) * 1e3,
+            "culling_triangles_ms_median": float(np.median(self.triangle_s)) * 1e3,
             "portals_mean": float(np.mean(self.portals)),
             "portals_max": int(np.max(self.portals)),
         }

@@ -136,7 +136,8 @@ class Frame:
     fog: float = math.inf
     """The fog in force."""
     t_cull: float = 0.0
-    """``perf_counter`` at the start of the rooms' culling."""
+    """``time.thread_time`` at the start of the rooms' culling (its CPU, not the wall clock
+    a loaded machine stretches)."""
     # -- allocate
     loaded: dict[int, CellMesh] = field(default_factory=dict)
     masks: dict[int, NDArray[np.bool_]] = field(default_factory=dict)

@@ -42,7 +42,7 @@ distance (the city's PVS has no fog)."""
 def visible(w: WalkState, f: Frame) -> None:
     """Set the frame's visible room cells, street cells (their PVS in ``w.objects``) and fog."""
     e, city, rooms = w.scene.entrance, w.scene.streets, w.scene.rooms
-    f.t_cull = time.perf_counter()
+    f.t_cull = time.thread_time()
     if rooms is not None and w.indoors:
         rooms.fog_m = w.indoor_fog
         walls = frame_walls(w, f)  # which virtual walls close the walk this frame
