@@ -190,9 +190,7 @@ def off_axis(
     right_ = left + width * k
     bottom = float((p0 - e) @ v) * k
     top = bottom + height * k
-    view = np.eye(4)
-    view[0, :3], view[1, :3], view[2, :3] = u, v, n
-    view[:3, 3] = -view[:3, :3] @ e
+    view = view_matrix(np.stack([u, v, n]), e)
     proj = np.zeros((4, 4))
     proj[0, 0] = 2 * clip / (right_ - left)
     proj[0, 2] = (right_ + left) / (right_ - left)
