@@ -19,7 +19,7 @@ from walkstream.shared.impostors import (
     image_basis,
     orthographic_parallax,
 )
-from walkstream.shared.wire import ImpostorRow
+from walkstream.shared.impostorwire import ImpostorRow
 
 
 def _seen_against_image(radius: float, distance: float, n: int = 20000) -> np.ndarray:

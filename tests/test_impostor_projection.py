@@ -22,8 +22,8 @@ from walkstream.shared.impostors import (
     level_for,
     orthographic_parallax,
 )
+from walkstream.shared.impostorwire import CellImpostors, ImpostorRow, impostors_from_wire
 from walkstream.shared.records import Mesh
-from walkstream.shared.wire import CellImpostors, ImpostorRow, _cell_impostors
 
 BOX = (-6.0, -4.0, 0.0, 6.0, 4.0, 30.0)  # a tower: its parallax is large near it
 
@@ -110,12 +110,12 @@ def test_the_projection_is_on_the_wire_only_when_perspective() -> None:
     row = ImpostorRow(7, 2, 0, 1, 0, 1, (0.0, 0.0, 0.0, 10.0, 10.0, 20.0), (5,))
     ortho = CellImpostors(60.0, 0.03, (row,))
     assert "p" not in ortho.to_wire() and ortho.eye(row) == math.inf
-    back = _cell_impostors(ortho.to_wire(), "cell 1")
+    back = impostors_from_wire(ortho.to_wire(), "cell 1")
     assert back is not None and not back.perspective  # an orthographic bake's record as before
-    persp = _cell_impostors(CellImpostors(60.0, 0.03, (row,), True).to_wire(), "cell 1")
+    persp = impostors_from_wire(CellImpostors(60.0, 0.03, (row,), True).to_wire(), "cell 1")
     assert persp is not None and persp.perspective and math.isfinite(persp.eye(row))
     with pytest.raises(CodecError, match="p must be 1"):
-        _cell_impostors({**ortho.to_wire(), "p": 2}, "cell 1")
+        impostors_from_wire({**ortho.to_wire(), "p": 2}, "cell 1")
     assert "projection" not in ImpostorSettings().record()  # an orthographic bake's settings as before
     assert ImpostorSettings(projection="perspective").check().record()["projection"] == "perspective"
     with pytest.raises(InputError, match="--impostor-projection"):

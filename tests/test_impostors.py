@@ -44,7 +44,8 @@ from walkstream.shared.impostors import (
     level_for,
     level_step,
 )
-from walkstream.shared.wire import MSGPACK, CellRecord, ImpostorRow, decode_cell
+from walkstream.shared.impostorwire import ImpostorRow
+from walkstream.shared.wire import MSGPACK, CellRecord, decode_cell
 
 BOUND = math.radians(2.0)
 

@@ -801,12 +801,11 @@ def test_documented_shapes_match_the_wire_records() -> None:
     """The pydantic models of /docs describe exactly what shared/wire.py sends."""
     from walkstream.server.service import models
     from walkstream.shared.cells import TileGrid
+    from walkstream.shared.impostorwire import CellImpostors, ImpostorRow
     from walkstream.shared.records import Viewpoint
     from walkstream.shared.wire import (
-        CellImpostors,
         CellIndex,
         CellRecord,
-        ImpostorRow,
         Manifest,
         locate_answer,
     )

@@ -1,8 +1,8 @@
 """Which far buildings a frame draws as impostors, how opaque, and which images fit the texture budget.
 
 Pure numpy over the rows of the current cell's record
-(:class:`~walkstream.shared.wire.ImpostorRow`, with the bake's distance ``D`` and
-error bound ``A`` of :class:`~walkstream.shared.wire.CellImpostors`); the frame step
+(:class:`~walkstream.shared.impostorwire.ImpostorRow`, with the bake's distance ``D`` and
+error bound ``A`` of :class:`~walkstream.shared.impostorwire.CellImpostors`); the frame step
 that calls it, wants the images and makes the quads is
 :mod:`walkstream.client.walk.impostors`, the draw :mod:`walkstream.client.draw.quads`.
 
@@ -50,7 +50,7 @@ from walkstream.shared.impostors import (
     directions,
     image_parallax,
 )
-from walkstream.shared.wire import ImpostorRow
+from walkstream.shared.impostorwire import ImpostorRow
 
 __all__ = [
     "BLEND_SHARE",

@@ -1,7 +1,7 @@
 """The impostor images' lane of the request scheduler: the images the frame wants, fetched in batches.
 
 A scene baked with ``--impostors`` lists, in a cell's record, the images of the
-buildings the cell may draw as impostors (:class:`~walkstream.shared.wire.CellImpostors`).
+buildings the cell may draw as impostors (:class:`~walkstream.shared.impostorwire.CellImpostors`).
 The frame loop says which of them it wants and when (:meth:`ImpostorImages.want`:
 the image of the viewer's direction bin of each listed building, needed *now* in the
 current cell, and in the cells ahead at their predicted need times); this lane offers

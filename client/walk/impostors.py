@@ -1,7 +1,7 @@
 """Part of the frame step ``allocate``: which far buildings the frame draws as impostors.
 
 On a scene baked with ``--impostors`` the current street cell's record lists the
-buildings it may draw as images (:class:`~walkstream.shared.wire.CellImpostors`).
+buildings it may draw as images (:class:`~walkstream.shared.impostorwire.CellImpostors`).
 Each frame (:func:`frame_impostors`): the image of the viewer's direction bin and
 its opacity by distance and error (:func:`~walkstream.client.draw.impostors.choose_impostors`),
 moved towards it in time (:func:`~walkstream.client.draw.impostors.fade_towards`: an
@@ -65,7 +65,7 @@ def quad_corners(
     """The corners of the quad of a building's ``box`` (``lo`` then ``hi``) for the image
     of bin ``(ia, ie)`` at ``level``: the bounding sphere's square across the bin's
     direction, through the centre; for a perspective image (``eye`` its sampling eye's
-    distance, :meth:`~walkstream.shared.wire.CellImpostors.eye`) the larger square that
+    distance, :meth:`~walkstream.shared.impostorwire.CellImpostors.eye`) the larger square that
     holds the sphere's silhouette from that eye, where the bake's off-axis projection
     put its image (:func:`~walkstream.shared.impostors.half_side`)."""
     b = np.asarray(box, np.float64).reshape(2, 3)

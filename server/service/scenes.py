@@ -65,6 +65,7 @@ from walkstream.shared.content.params import KIND as PARAMS
 from walkstream.shared.content.registry import by_form, object_forms
 from walkstream.shared.content.walltex import KIND as WALLTEX
 from walkstream.shared.errors import ApiError, CodecError, DatabaseDamagedError, StoreError
+from walkstream.shared.impostorwire import CellImpostors, ImpostorRow
 from walkstream.shared.lsystem.grammar import Grammar, parse_grammar
 from walkstream.shared.pathcodec import PATH_Q_MEDIA, encode_path_q, head_path_q
 from walkstream.shared.paths import RecordedPath
@@ -73,10 +74,8 @@ from walkstream.shared.walls import WallSide, ring_cell, walls_wire
 from walkstream.shared.wire import (
     MSGPACK,
     OFFERS,
-    CellImpostors,
     CellIndex,
     CellRecord,
-    ImpostorRow,
     Manifest,
     ObjectFrame,
     locate_answer,

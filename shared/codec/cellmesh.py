@@ -496,7 +496,8 @@ def decode_cell_mesh(blob: bytes, what: str = "cell mesh") -> CellMesh:
 
 def _decode_v2(body: dict[str, Any], what: str, nbytes: int) -> CellMesh:
     """A version 2, 3 or 4 map as a :class:`CellMesh` (its box measured from the decoded positions)."""
-    from walkstream.shared.codec.planarmesh import GRID, decode_planar_body
+    from walkstream.shared.codec.planardecode import decode_planar_body
+    from walkstream.shared.codec.planarmesh import GRID
 
     parts = tuple(CellPart(e, m, p, t) for e, m, p, t in decode_planar_body(body, what))
     allp = np.concatenate([p.positions for p in parts]).astype(np.float64) if parts else np.zeros((0, 3))

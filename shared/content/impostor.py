@@ -2,7 +2,7 @@
 
 The bake stores each image (``impostors.data`` of the ``impostors`` feature, a WebP
 file of :mod:`walkstream.shared.codec.image`) under an image id; a cell record lists
-which images its impostors use (:class:`~walkstream.shared.wire.ImpostorRow`). The
+which images its impostors use (:class:`~walkstream.shared.impostorwire.ImpostorRow`). The
 service answers ``GET .../impostors/{id}`` with the file as stored (immutable, ETag,
 304) and ``POST .../impostors`` with many of them in the parts of
 :mod:`walkstream.shared.codec.cellbatch` (the image id in the part's ``cell`` key); the
