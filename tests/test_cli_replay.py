@@ -165,7 +165,15 @@ def test_path_record_then_replay_it(db: Path, tmp_path: Path, capsys: pytest.Cap
 
 @pytest.mark.slow
 @pytest.mark.gl
-def test_demo_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str], gl_ctx: object) -> None:
+def test_demo_end_to_end(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], gl_ctx: object, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from walkstream.server.sources import citygen
+
+    # every step of `make demo` (generate, rebuild, bake, serve, replay SE) on a 300 m default
+    # city: the 700 m one's bake and rebuilds were two thirds of the test, and nothing below
+    # depends on the city's size (SE is recorded on any generated city)
+    monkeypatch.setattr(citygen, "DEFAULT_SIZE", 300.0)
     # the first 16 s of the walk: the whole 200 s is `make demo`'s, not the suite's
     assert main(["demo", "--out", str(tmp_path), "--duration", "16s"]) == 0
     out = capsys.readouterr().out
