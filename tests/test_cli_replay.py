@@ -175,16 +175,16 @@ def test_demo_end_to_end(
     # city: the 700 m one's bake and rebuilds were two thirds of the test, and nothing below
     # depends on the city's size (SE is recorded on any generated city)
     monkeypatch.setattr(citygen, "DEFAULT_SIZE", 300.0)
-    # the first 16 s of the walk: the whole 200 s is `make demo`'s, not the suite's
-    assert main(["demo", "--out", str(tmp_path), "--duration", "16s"]) == 0
+    # the first 8 s of the walk: the whole walk is `make demo`'s, not the suite's
+    assert main(["demo", "--out", str(tmp_path), "--duration", "8s"]) == 0
     out = capsys.readouterr().out
     assert "server on http://127.0.0.1:" in out and "perfect" in out
     summary = json.loads((tmp_path / "report" / "report.json").read_text())
     assert summary["path"] == "SE" and summary["device"] == "desktop2003"
     assert summary["clock"] == "sim" and summary["bandwidth_bps"] == 56_000
-    # 16 s of walk at 25 fps, after the start's hold for the first view (at most 3 s)
+    # 8 s of walk at 25 fps, after the start's hold for the first view (at most 3 s)
     assert 0 < summary["start_hold_s"] <= 3.0
-    assert 16 * 25 <= summary["frames"] <= 25 * (16 + summary["start_hold_s"]) + 3
+    assert 8 * 25 <= summary["frames"] <= 25 * (8 + summary["start_hold_s"]) + 3
 
 
 @pytest.mark.gl
