@@ -34,7 +34,7 @@ def test_replay_writes_the_report(db: Path, tmp_path: Path, capsys: pytest.Captu
     report = tmp_path / "report"
     argv = [
         "replay", str(db), "--path", "SE", "--bandwidth", "7kB/s", "--rtt", "200ms",
-        "--duration", "20s", "--device", "desktop2003", "--snapshot-every", "100",
+        "--duration", "12s", "--device", "desktop2003", "--snapshot-every", "60",
         "--size", "160x120", "--report", str(report),
     ]  # fmt: skip
     assert main(argv) == 0
@@ -47,7 +47,7 @@ def test_replay_writes_the_report(db: Path, tmp_path: Path, capsys: pytest.Captu
     for png in ("quality.png", "bytes.png", "fps.png", "budget.png"):
         assert (report / png).stat().st_size > 1000 and png in html
     frames = sorted(report.rglob("frame_*.png"))
-    assert len(frames) >= 4  # 20 s at 25 fps, every 100th frame
+    assert len(frames) >= 4  # 12 s at 25 fps, every 60th frame
     assert all(f.name in html for f in frames)
 
 
