@@ -367,14 +367,29 @@ def _facing(part: Any) -> np.ndarray:
     return np.concatenate([np.clip(n, 0, None).sum(axis=0), np.clip(-n, 0, None).sum(axis=0)])
 
 
-def test_a_stopped_crossing_bake_resumes_to_the_same_version(
+def test_a_killed_then_stopped_crossing_bake_resumes_to_the_same_version(
     baked: tuple[Path, dict[str, Any], Path], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    """One driver for every scene: a crossing resumes like a city, and its room contents and
-    its street cells' PVS both go through the one chunk runner."""
+    """One driver for every scene: a crossing killed while it wrote its tables resumes, one
+    stopped after a few cells resumes like a city, and its room contents and its street
+    cells' PVS both go through the one chunk runner.  One work file through the three runs
+    (each of the two interruptions alone cost a whole bake of the scene more)."""
     from walkstream.server.bake import chunks
+    from walkstream.server.store import SceneWriter
 
     _, summary, d = baked
+    out = tmp_path / "resumed" / "x.db"
+    out.parent.mkdir()
+    args = (d / "city.geojson", out)
+
+    def killed(*_: Any) -> None:
+        raise RuntimeError("killed")
+
+    with monkeypatch.context() as m:
+        m.setattr(SceneWriter, "add_portals", killed)  # after the city's tables, before the rooms'
+        with pytest.raises(RuntimeError, match="killed"):
+            bake(*args, settings=FAST, interior=d / "office.json", name="scene")
+    assert Path(str(out) + ".partial").exists() and not out.exists()
     ran: list[str] = []
     run = chunks._run
 
@@ -383,9 +398,6 @@ def test_a_stopped_crossing_bake_resumes_to_the_same_version(
         return run(task, *args)
 
     monkeypatch.setattr(chunks, "_run", spy)
-    out = tmp_path / "resumed" / "x.db"
-    out.parent.mkdir()
-    args = (d / "city.geojson", out)
     assert bake(*args, settings=FAST, interior=d / "office.json", name="scene", max_cells=3) == {}
     assert ran == ["contents_task", "pvs_task"] and not out.exists()
     ran.clear()
@@ -424,24 +436,3 @@ def test_one_graph_walks_every_scene_kind(baked: tuple[Path, dict[str, Any], Pat
     at_front = int(np.flatnonzero(np.all(np.isclose(floor[:, :2], e.front), axis=1))[0])
     assert np.allclose(floor[at_front + 1], e.threshold)  # from the street's front of the door to its threshold
     assert (floor[: at_front + 1, 2] == 0).all() and both.rooms.locate(*floor[-1] + [0, 0, 1.6]) in rooms
-
-
-def test_a_crossing_killed_while_writing_its_tables_resumes(
-    baked: tuple[Path, dict[str, Any], Path], monkeypatch: pytest.MonkeyPatch, tmp_path: Path
-) -> None:
-    from walkstream.server.store import SceneWriter
-
-    _, summary, d = baked
-    out = tmp_path / "tables" / "x.db"
-    out.parent.mkdir()
-
-    def killed(*_: Any) -> None:
-        raise RuntimeError("killed")
-
-    with monkeypatch.context() as m:
-        m.setattr(SceneWriter, "add_portals", killed)  # after the city's tables, before the rooms'
-        with pytest.raises(RuntimeError, match="killed"):
-            bake(d / "city.geojson", out, settings=FAST, interior=d / "office.json", name="scene")
-    assert Path(str(out) + ".partial").exists() and not out.exists()
-    again = bake(d / "city.geojson", out, settings=FAST, interior=d / "office.json", name="scene")
-    assert again["version"] == summary["version"]

@@ -309,10 +309,10 @@ def town(tmp_path_factory: pytest.TempPathFactory) -> Path:
         _timed(
             "slow", [((-77.4, -90.0), 14.0), ((-77.2, -66.0), 1.0), ((-76.2, -10.0), 14.0)], start
         ),
-        # walking north, then west out of every cell, past the town's edge, and back
+        # walking north, then west out of every cell, 50 m past the town's edge, and back
         _timed(
             "leave",
-            [((-77.3, -76.5), 2.0), ((-260.0, -78.0), 4.0), ((-77.3, -76.5), 4.0)],
+            [((-77.3, -76.5), 2.0), ((-200.0, -78.0), 4.0), ((-77.3, -76.5), 4.0)],
             start,
         ),
     ]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 from typing import Any
 
@@ -284,10 +283,8 @@ def test_report_shows_the_truth(runs: tuple[ReplayResult, ReplayResult], tmp_pat
 
 def test_cli_truth_every(every_db: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], gl_ctx: Any) -> None:
     out = tmp_path / "rep"
-    t0 = time.perf_counter()
     assert main(["replay", str(every_db), "--device", "desktop2003", "--duration", "3s", "--truth-every", "25",
                  "--viewer-ppd", "24", "--truth-samples", "2", "--report", str(out)]) == 0
-    assert time.perf_counter() - t0 < 120
     report = json.loads((out / "report.json").read_text())
     assert report["truth"]["frames"] == len(range(0, report["frames"], 25))
     # asked for: the viewer-scale (S-CIELAB) figures beside the per-pixel ones
