@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from asgiclient import Http
 from PIL import Image
+from startparts import start_parts
 
 from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
@@ -285,9 +286,7 @@ def test_a_ring_wall_whose_texture_never_arrives_shows_its_far_field_as_geometry
 
 def test_the_walls_route_sends_the_rings_of_the_cells_asked_and_the_start_bundle_its_first_ring(
         dbs: tuple[Path, Path, dict[str, Any]]) -> None:
-    import msgpack
 
-    from walkstream.shared.startwire import decode_start_part
     from walkstream.shared.walls import decode_walls
 
     walls, _plain, _ = dbs
@@ -313,17 +312,7 @@ def test_the_walls_route_sends_the_rings_of_the_cells_asked_and_the_start_bundle
             got_b = c.get("/v1/scenes/walls/start", params={**start, **({"walls": "true"} if ask_walls else {})},
                           headers={"Accept": MSGPACK})
             assert got_b.status_code == 200
-            unpacker = msgpack.Unpacker(raw=False)
-            unpacker.feed(got_b.content)
-            names: list[tuple[str, object]] = []
-            follow = 0
-            for obj in unpacker:
-                if follow:
-                    follow -= 1
-                    continue
-                part, _etag, body = decode_start_part(obj, "bundle")
-                follow = body if part == "objects" else len(body) if part == "walltex" else 0  # type: ignore[assignment,arg-type]
-                names.append((part, body))
+            names = start_parts(got_b.content, heads=True)
             parts.append(names)
     finally:
         c.close()
@@ -332,7 +321,7 @@ def test_the_walls_route_sends_the_rings_of_the_cells_asked_and_the_start_bundle
     names_on = [n for n, _ in on]
     assert "walls" not in [n for n, _ in off]  # not asked: as before
     assert names_on.index("objects") < names_on.index("walls") < names_on.index("walltex")
-    first = decode_walls(dict(on)["walls"], "walls")  # type: ignore[arg-type]
+    first = dict(on)["walls"][0]
     assert first and len(first) < len(every)
     tex = [t for n, b in on if n == "walltex" for t in b]  # type: ignore[union-attr]
     assert tex and set(tex) <= {t for s in first for t in s.textures}
