@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from asgiclient import Http
 from PIL import Image
+from startparts import start_parts
 
 from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
@@ -246,6 +247,8 @@ def test_the_client_draws_its_cells_ring_and_fewer_objects_as_geometry(dbs: tupl
     assert ws["ring_requests"] >= 1 and 0 < ws["wall_sides"]
     assert w["facades"]["frames_with_facades"] > 0 and w["perfect_frame_ratio"] >= 0.99  # with the facades, on pda
     assert ws["geometry_objects_mean"] < p["visible_mean"]
+    # the walker stands at its start for its first view and first textures, not for the later poses' parts
+    assert w["start_hold_s"] <= p["start_hold_s"] + 0.25
     # the far field is on the walls: the truth's colour error stays that of a picture, not of holes
     assert w["truth"]["colour"]["mean_error"]["median"] < 0.1
     off = _replay(walls, virtual_walls=False).summary
@@ -285,9 +288,7 @@ def test_a_ring_wall_whose_texture_never_arrives_shows_its_far_field_as_geometry
 
 def test_the_walls_route_sends_the_rings_of_the_cells_asked_and_the_start_bundle_its_first_ring(
         dbs: tuple[Path, Path, dict[str, Any]]) -> None:
-    import msgpack
 
-    from walkstream.shared.startwire import decode_start_part
     from walkstream.shared.walls import decode_walls
 
     walls, _plain, _ = dbs
@@ -313,17 +314,7 @@ def test_the_walls_route_sends_the_rings_of_the_cells_asked_and_the_start_bundle
             got_b = c.get("/v1/scenes/walls/start", params={**start, **({"walls": "true"} if ask_walls else {})},
                           headers={"Accept": MSGPACK})
             assert got_b.status_code == 200
-            unpacker = msgpack.Unpacker(raw=False)
-            unpacker.feed(got_b.content)
-            names: list[tuple[str, object]] = []
-            follow = 0
-            for obj in unpacker:
-                if follow:
-                    follow -= 1
-                    continue
-                part, _etag, body = decode_start_part(obj, "bundle")
-                follow = body if part == "objects" else len(body) if part == "walltex" else 0  # type: ignore[assignment,arg-type]
-                names.append((part, body))
+            names = start_parts(got_b.content, heads=True)
             parts.append(names)
     finally:
         c.close()
@@ -332,10 +323,56 @@ def test_the_walls_route_sends_the_rings_of_the_cells_asked_and_the_start_bundle
     names_on = [n for n, _ in on]
     assert "walls" not in [n for n, _ in off]  # not asked: as before
     assert names_on.index("objects") < names_on.index("walls") < names_on.index("walltex")
-    first = decode_walls(dict(on)["walls"], "walls")  # type: ignore[arg-type]
+    first = dict(on)["walls"][0]
     assert first and len(first) < len(every)
     tex = [t for n, b in on if n == "walltex" for t in b]  # type: ignore[union-attr]
     assert tex and set(tex) <= {t for s in first for t in s.textures}
+    # the first pose's parts, then the rings and the first moments' textures in a part of
+    # their own (even when none): the walker stands at its start until that part's
+    # textures are in (StartFeed.holding); the later poses' parts by the time the walk
+    # needs them, the records of the cells it reaches after the first seconds last
+    at = [i for i, n in enumerate(names_on) if n == "walltex"]
+    assert at[0] == names_on.index("walls") + 1 and names_on.index("boxes") < at[0]
+    assert all(n in ("walltex", "cell", "record", "index", "objects") for n in names_on[at[0] + 1:])
+    assert len(tex) == len(set(tex))
+
+
+def test_the_walker_stops_waiting_for_the_start_bundle_once_its_first_textures_are_in() -> None:
+    import asyncio
+
+    from walkstream.client.stream.cache import Cache
+    from walkstream.client.stream.cellmap import CellMap
+    from walkstream.client.stream.images import ImpostorImages
+    from walkstream.client.stream.scheduler import RequestScheduler
+    from walkstream.client.stream.startfeed import StartFeed
+    from walkstream.client.stream.startwalls import StartWalls
+
+    async def walk() -> None:
+        feed = StartFeed(None, "params", CellMap())  # type: ignore[arg-type]
+        feed.task = asyncio.create_task(asyncio.sleep(0))  # a bundle on the link
+        assert feed.starting and feed.holding
+        feed.textures_left()  # its first walltex part's textures are in: the later poses' parts follow
+        assert feed.starting and not feed.holding  # still on the link, but the walk goes on
+        await feed.task
+        feed.task = None
+        assert not feed.starting and not feed.holding
+        # the textures the bundle announced are not asked for by the walls' lane meanwhile
+        sched = RequestScheduler(3)
+        lane = ImpostorImages(None, Cache(1 << 20), sched, kind="walltex")  # type: ignore[arg-type]
+        start = StartWalls()
+        start.expect([7, 8])
+        start.attach(lane)
+        lane.want({7: 0.0, 8: 0.0, 9: 0.0})
+        assert [list(f.ids) for f in sched.flights(lane)] == [[9]]
+        start.add_texture(7, np.zeros((1, 1, 4), np.uint8), 10)  # it came: held, not asked
+        start.ended()  # the bundle ended without 8: the lane asks for it
+        assert lane.held(7) and sorted(i for f in sched.flights(lane) for i in f.ids) == [8, 9]
+        for f in sched.flights(lane):
+            assert f.task is not None
+            f.task.cancel()
+        await asyncio.sleep(0)
+
+    asyncio.run(walk())
 
 
 def test_the_walls_list_sends_a_regions_ring_once_and_decodes_to_every_cells_walls() -> None:

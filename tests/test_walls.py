@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from asgiclient import Http
 from openhall import open_hall
+from startparts import start_parts
 
 from walkstream.server.bake import bake
 from walkstream.server.bake.rooms import room_layout
@@ -489,11 +490,11 @@ def test_the_walls_walks_only_imperfect_frames_are_its_start(replays: tuple[obje
     assert perfect[first:].all() and s["perfect_frame_ratio"] == 1.0
     assert s["late_cells"]["cells"] == 0 and sum(s["late_cells"]["cell_frames_by_cause"].values()) == 0
     assert s["perfect_frames"] == len(log.t) - first
+
+
 def _bundle(app: object, walls: bool) -> list[tuple[str, object]]:
     """The start bundle of the walk ``cross`` for a 160x120 view: each part's name and
     body (for ``walltex`` and ``contents`` the ids listed)."""
-    from walkstream.shared.startwire import decode_start_part
-
     c = Http(app)
     try:
         got = c.get("/v1/scenes/walls/start", params={"path": "cross", "view": "160x120",
@@ -502,19 +503,7 @@ def _bundle(app: object, walls: bool) -> list[tuple[str, object]]:
     finally:
         c.close()
     assert got.status_code == 200
-    unpacker = msgpack.Unpacker(raw=False)
-    unpacker.feed(got.content)
-    out: list[tuple[str, object]] = []
-    follow = 0
-    for obj in unpacker:
-        if follow:
-            follow -= 1
-            continue
-        part, _etag, body = decode_start_part(obj, "bundle")
-        if part in ("walltex", "contents"):
-            follow = len(body)  # type: ignore[arg-type]
-        out.append((part, body))
-    return out
+    return start_parts(got.content)
 
 
 @pytest.mark.gl
@@ -528,7 +517,7 @@ def test_the_start_bundle_brings_the_first_views_wall_textures_and_walks_it_clos
     assert names.index("walls") < names.index("walltex") < names.index("contents")
     assert "walls" not in [n for n, _ in off]  # not asked: the bundle as before
     ids = dict(on)["walltex"]
-    sides = decode_walls(dict(on)["walls"], "walls")  # type: ignore[arg-type]
+    sides = dict(on)["walls"][0]
     assert ids and set(ids) <= {t for s in sides for t in s.textures}  # type: ignore[arg-type]
     # the first view walked with those walls closed needs no cell the open walk does not
     first_on, first_off = dict(on)["contents"], dict(off)["contents"]

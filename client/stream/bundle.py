@@ -32,7 +32,10 @@ from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomview import RoomView
 from walkstream.shared.wire import CellIndex, CellRecord, Manifest, ObjectFrame
 
-__all__ = ["BundleTarget", "StartTarget", "StartBundle"]
+__all__ = ["TEXTURE_BYTES", "BundleTarget", "StartTarget", "StartBundle"]
+
+TEXTURE_BYTES = 900.0
+"""A ring wall texture's bytes on the wire before it arrives (about 0.9 kB: lossy WebP)."""
 
 
 class BundleTarget(Protocol):
@@ -101,6 +104,12 @@ class StartTarget(Protocol):
         """Where a city's start ring and first wall textures go (None: not asked for)."""
         ...
 
+    def textures_left(self) -> None:
+        """The bundle's parts the walker stands at its start for are in (a city's first
+        view, its rings and the textures its first moments see): what still comes is
+        for the walk's later poses, and the walker walks as it comes."""
+        ...
+
 
 class StartBundle:
     """One start bundle in flight for a streamer.
@@ -151,14 +160,18 @@ class StartBundle:
         self.on_end = on_end
         self.ids: set[int] = set()
         self.left = 2000.0  # the manifest, at least
+        self.texture_bytes = 0.0
+        """Bytes of the wall textures announced and not yet in (an estimate): they count
+        against the link as :attr:`left` does."""
+        self._first_textures: set[int] | None = None  # the first walltex part's, not yet in
 
     async def run(self, path: str | None) -> None:
         """Stream the bundle for recorded path ``path``'s start; never raises for the network."""
         st = self.streamer
         error: BaseException | None = None
         frames: list[ObjectFrame] = []
+        walls = self.start.walls if self.view is not None else None
         try:
-            walls = self.start.walls if self.view is not None else None
             async for part, item in st.api.start(path=path, form=self.form, view=self.view,
                                                   heads=self.view is not None, walls=walls is not None):
                 if part == "path":
@@ -200,11 +213,20 @@ class StartBundle:
                         walls.add_sides(*item)
                     st.stats.bundle_bytes += item[1]
                 elif part == "walltex":  # the ids of the textures that follow
-                    pass
+                    self.texture_bytes += len(item) * TEXTURE_BYTES
+                    if walls is not None:
+                        walls.expect(item)
+                    if self._first_textures is None:  # the first: what the walker stands for ends with it
+                        self._first_textures = set(item)
+                        self._walk_on()
                 elif part == "texture":
                     if walls is not None:
                         walls.add_texture(*item)
                     st.stats.bundle_bytes += item[2]
+                    self.texture_bytes = max(0.0, self.texture_bytes - TEXTURE_BYTES)
+                    if self._first_textures:
+                        self._first_textures.discard(item[0])
+                        self._walk_on()
                 else:
                     st.stats.bundle_bytes += item.nbytes
                     self._arrived({item.id})
@@ -216,9 +238,16 @@ class StartBundle:
             error = exc
         finally:
             self._arrived(set(self.ids))
-            self.left = 0.0
+            self.left = self.texture_bytes = 0.0
+            if walls is not None:
+                walls.ended()
             st.store_objects(frames)
             self.on_end(error)
+
+    def _walk_on(self) -> None:
+        """Tell the start target once the first ``walltex`` part's textures are all in."""
+        if self._first_textures is not None and not self._first_textures:
+            self.start.textures_left()
 
     def _arrived(self, ids: set[int]) -> None:
         self.ids -= ids

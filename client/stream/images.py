@@ -108,6 +108,7 @@ class ImpostorImages:
         self.wanted: dict[int, float] = {}
         """Images wanted and not held, by need (seconds from now)."""
         self._asked: set[int] = set()
+        self._coming: set[int] = set()  # brought by another way (the start bundle): not asked for
         self._now: set[Flight] = set()  # requests of textures needed now
         self._joined = False
         self._image_bytes = IMAGE_BYTES
@@ -148,6 +149,17 @@ class ImpostorImages:
         self.bytes_received += int(nbytes)
         self.wanted.pop(int(image), None)
 
+    def expect(self, images: set[int], coming: bool = True) -> None:
+        """Images on their way another way (a start bundle's ``walltex`` part), not asked
+        for while they come (``coming``), or no longer so: asking for one too would
+        take the link from the bundle bringing it (two copies at once, both late)."""
+        if coming:
+            self._coming |= {int(i) for i in images}
+        else:
+            self._coming -= {int(i) for i in images}
+            if self.wanted and not self.refused and self._joined:
+                self.scheduler.dispatch()
+
     async def close(self) -> None:
         """Cancel this lane's requests (the walk ended) and wait for them to end."""
         self.refused = True  # nothing more is asked
@@ -160,7 +172,8 @@ class ImpostorImages:
         """The next batch of wanted images not asked for yet, needed before what is due now."""
         if self.refused:
             return None
-        todo = sorted((t, i) for i, t in self.wanted.items() if i not in self._asked and not self.held(i))
+        todo = sorted((t, i) for i, t in self.wanted.items()
+                      if i not in self._asked and i not in self._coming and not self.held(i))
         if not todo:
             return None
         need = todo[0][0]

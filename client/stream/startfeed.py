@@ -11,6 +11,9 @@ planning and the frame loop read of it:
   flight and is cancelled with the streamer);
 * :attr:`StartFeed.first_view` -- whether the bundle was asked to bring the first
   view first (the walker then stands at its start for it);
+* :attr:`StartFeed.holding` -- whether the walker standing at its start still waits
+  for the bundle (on a city baked with walls, only until its first view, rings and
+  first textures are in: the parts for the path's later poses come as it walks);
 * :attr:`StartFeed.stand_ins` -- the boxes of the first cell's objects the first view
   does not draw: a frame does not wait for a missing object whose box its frustum
   drops.
@@ -66,6 +69,9 @@ class StartFeed:
         self.walls: StartWalls | None = None
         """Where a city bundle's start ring and first textures go (set before the
         bundle is asked for: it then asks for them; None: not asked)."""
+        self.textures_only = False
+        """Whether the running bundle brings only what the path's later poses need now
+        (:meth:`textures_left`): the walker no longer stands at its start for it."""
         self.stand_ins: dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         """Objects' boxes ``(lo (3,), hi (3,))`` known before the objects (:meth:`add_boxes`)."""
 
@@ -83,6 +89,7 @@ class StartFeed:
         """
         bundle = StartBundle(self.streamer, self.form, on_path, on_manifest, on_end, view=view, start=self)
         self.first_view = view is not None
+        self.textures_only = False
         self.bundle = bundle
         self.task = asyncio.create_task(self._run_bundle(bundle, path))
         return self.task
@@ -100,9 +107,21 @@ class StartFeed:
         """Whether the start bundle is still coming."""
         return self.task is not None
 
+    @property
+    def holding(self) -> bool:
+        """Whether the walker standing at its start still waits for the bundle: until
+        it ends or, on a city baked with walls, until its first ``walltex`` part's
+        textures are in (the later poses' textures, records and objects stream while it
+        walks; waiting for them held such a city's walker about 3 s)."""
+        return self.task is not None and not self.textures_only
+
+    def textures_left(self) -> None:
+        """The parts the walker stands for are in; the later poses' parts follow."""
+        self.textures_only = True
+
     def left(self) -> float:
         """Bytes the bundle is still expected to bring (0 when none runs)."""
-        return self.bundle.left if self.bundle is not None else 0.0
+        return self.bundle.left + self.bundle.texture_bytes if self.bundle is not None else 0.0
 
     def add_boxes(self, boxes: ObjectBoxes) -> None:
         """Learn objects' boxes (the start bundle's first cell's objects its first view

@@ -29,6 +29,9 @@ class StartWalls:
         """Every wall side, once the bundle's ``walls`` part is in (None: not sent)."""
         self.nbytes = 0
         """Bytes of the wall parts on the wire (sides and textures)."""
+        self.coming: set[int] = set()
+        """Textures the bundle announced and has not brought yet: the lane does not ask
+        for them (:meth:`ImpostorImages.expect`)."""
         self._textures: list[tuple[int, Any, int]] = []
         self._lane: ImpostorImages | None = None
         self._on_sides: Callable[[tuple[WallSide, ...]], None] | None = None
@@ -47,11 +50,27 @@ class StartWalls:
         if self.sides is not None:
             take(self.sides)
 
+    def expect(self, ids: list[int]) -> None:
+        """The bundle announced textures ``ids`` (a ``walltex`` part): they are on their
+        way, and the lane leaves them to the bundle."""
+        new = set(ids) - self.coming
+        self.coming |= new
+        if self._lane is not None:
+            self._lane.expect(new)
+
+    def ended(self) -> None:
+        """The bundle ended: what it did not bring the lane may ask for again."""
+        if self._lane is not None:
+            self._lane.expect(self.coming, False)
+        self.coming.clear()
+
     def add_texture(self, tid: int, rgba: Any, nbytes: int) -> None:
-        """One of the first view's textures arrived (kept until the lane is attached)."""
+        """One of the bundle's textures arrived (kept until the lane is attached)."""
+        self.coming.discard(tid)
         self.nbytes += int(nbytes)
         if self._lane is not None:
             self._lane.adopt(tid, rgba, nbytes)
+            self._lane.expect({tid}, False)
         else:
             self._textures.append((tid, rgba, nbytes))
 
@@ -59,6 +78,7 @@ class StartWalls:
         """The walls' lane is made: the textures received so far go into its cache, the
         later ones as they come."""
         self._lane = lane
+        lane.expect(self.coming)
         for tid, rgba, nbytes in self._textures:
             lane.adopt(tid, rgba, nbytes)
         self._textures.clear()

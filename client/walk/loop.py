@@ -136,7 +136,8 @@ async def walk(
                 phases.move("draw", "finish", w.renderer.last_finish_s)
         # the walk leads within seconds into the cells still on the link (the start bundle's
         # other cells, the first prefetch; on the street the bundle's): the walker waits for them too
-        busy = rooms.busy() if rooms is not None else scene.streets is not None and scene.streets.start_feed.starting
+        # (on a city baked with walls not the parts for the later poses: they come while it walks)
+        busy = rooms.busy() if rooms is not None else scene.streets is not None and scene.streets.start_feed.holding
         holding = holding and not (f.perfect and not busy)
         w.frame += 1
         if w.frame % FORGET_EVERY == 0:

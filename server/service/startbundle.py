@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,7 +28,7 @@ from walkstream.server.service.firstwalls import (
 )
 from walkstream.server.service.http import Encoded, Rep, dump_msgpack
 from walkstream.server.service.scenes import Form, Scene
-from walkstream.server.service.streetheads import first_view_plan, object_boxes_body
+from walkstream.server.service.streetheads import POSE_STEP_S, first_view_plan, object_boxes_body
 from walkstream.shared.codec.cellbatch import pack_contents_part
 from walkstream.shared.errors import ApiError
 from walkstream.shared.pathcodec import decode_path_q
@@ -327,42 +328,55 @@ def _objects_part(scene: Scene, ids: list[int], form: Form) -> StartPart:
 def _first_view_parts(scene: Scene, path: str, view: RoomView, cells: list[int], with_objects: list[int],
                       form: Form, walls: bool = False) -> list[StartPart]:
     """A city bundle's parts after the path when the client holds its start for its first
-    view, in the order :func:`~walkstream.server.service.streetheads.first_view_plan` gives;
-    with ``walls`` on a city baked with them, the rings of the cells its first seconds
-    pass and the textures the first pose sees right after the first view's objects,
-    those its later poses see last (:mod:`~.firstrings`)."""
-    parts: list[StartPart] = []
+    view, in the order :func:`~walkstream.server.service.streetheads.first_view_plan` gives.
+
+    With ``walls`` on a city baked with them (:mod:`~.firstrings`): after the first
+    pose's parts the rings of the cells its first seconds pass and the textures its
+    first :data:`~.firstrings.HOLD_TEXTURES_S` see, in a ``walltex`` part sent even when
+    empty: the client's walker stands at its start until that part's textures are in,
+    not for the rest of the bundle.  The later poses' parts and textures follow in the
+    order the walk needs them (each a pose's step before the pose that first needs it:
+    the walk crosses into a cell or a zone anywhere between two poses), so the textures
+    of the walls the walk turns to come before the records of the cells it reaches later (the
+    walker does not wait for them: on West Oakland's walk it crossed into the next zone
+    of a wall 0.08 s after it started walking, and a missing texture leaves its far
+    field, tens of objects, to geometry)."""
     ring = None
     if walls and scene.has_walls:
         ring = first_rings(scene, RecordedPath.from_msgpack(scene.path(path, "msgpack").content, f"path {path!r}"),
                            view, START_LEAD_S)
-    placed = False
     plan = first_view_plan(scene, path, view, START_LEAD_S, cells, with_objects)
-    brought = {int(i) for name, what in plan if name == "objects" for i in what}
-    for name, what in plan:
-        if ring is not None and not placed and name != "objects" and any(p[0] == "objects" for p in parts):
-            placed = True  # after the first view's objects: the rings and the first pose's textures
-            parts.append(("walls", ring[0]))
-            if ring[1]:
-                parts.append(("walltex", _textures(scene, ring[1])))
+    brought = {int(i) for name, what, _t in plan if name == "objects" for i in what}
+
+    def part(name: str, what: Any) -> StartPart:
         if name == "cell":
-            parts.append((_record_part(scene, what, brought), scene.cell(what, "msgpack")))
-        elif name == "index":
-            parts.append(("index", scene.index(what, "msgpack")))
-        elif name == "manifest":
-            parts.append(("manifest", scene.manifest["msgpack"]))
-        elif name == "objects":
-            parts.append(_objects_part(scene, what, form))
+            return _record_part(scene, what, brought), scene.cell(what, "msgpack")
+        if name == "index":
+            return "index", scene.index(what, "msgpack")
+        if name == "manifest":
+            return "manifest", scene.manifest["msgpack"]
+        if name == "objects":
+            return _objects_part(scene, what, form)
+        return "boxes", Encoded(object_boxes_body(scene, what), scene.manifest["msgpack"].media_type, "")
+
+    if ring is None:
+        return [part(name, what) for name, what, _t in plan]
+    first = [part(name, what) for name, what, t in plan if t <= 0.0]
+    first += [("walls", ring[0]), ("walltex", _textures(scene, ring[1]))]  # the walker's wait ends here
+    # the rest by the time the walk needs it: a pose's step before the pose that first needs
+    # it (the walk may cross into a cell or a zone anywhere between two poses), a cell's
+    # record before the textures of the same pose (without it the frame knows no cell)
+    later: list[tuple[float, int, str, Any]] = [(t - POSE_STEP_S, 0, name, what) for name, what, t in plan if t > 0.0]
+    later += [(t - POSE_STEP_S, 1, "walltex", tid) for tid, t in ring[2]]
+    later.sort(key=lambda x: (x[0], x[1]))  # stable: the plan's order kept at equal times
+    groups: list[tuple[str, Any]] = []
+    for _t, _k, name, what in later:
+        if name == "walltex" and groups and groups[-1][0] == "walltex":
+            groups[-1][1].append(what)  # textures in a row: one part
         else:
-            body = object_boxes_body(scene, what)
-            parts.append(("boxes", Encoded(body, scene.manifest["msgpack"].media_type, "")))
-    if ring is not None and not placed:
-        parts.append(("walls", ring[0]))
-        if ring[1]:
-            parts.append(("walltex", _textures(scene, ring[1])))
-    if ring is not None and ring[2]:  # last: the textures the first seconds' later poses see
-        parts.append(("walltex", _textures(scene, ring[2])))
-    return parts
+            groups.append((name, [what] if name == "walltex" else what))
+    rest = [("walltex", _textures(scene, what)) if name == "walltex" else part(name, what) for name, what in groups]
+    return first + rest
 
 
 def _first_walls(scene: Scene, pose: tuple[NDArray[np.float64], float, float], view: RoomView,

@@ -46,10 +46,11 @@ least what the client's frustum keeps."""
 
 
 def first_view_plan(scene: Scene, path: str, view: RoomView, lead_s: float, cells: list[int],
-                    with_objects: list[int]) -> list[tuple[str, Any]]:
+                    with_objects: list[int]) -> list[tuple[str, Any, float]]:
     """What a city bundle sends after the path, in order, when the client holds its start
-    for its first view: ``("cell", id)``, ``("index", tile)``, ``("manifest", None)``,
-    ``("objects", ids)`` and ``("boxes", ids)`` items.
+    for its first view: ``("cell", id, t)``, ``("index", tile, t)``, ``("manifest", None,
+    t)``, ``("objects", ids, t)`` and ``("boxes", ids, t)`` items, ``t`` the seconds into
+    the path of the pose that first needs the item (``lead_s`` for those after the poses).
 
     The path's poses every :data:`POSE_STEP_S` up to ``lead_s`` are walked in turn; each
     new cell the path enters brings its record (and its index tile when new), then the
@@ -61,7 +62,8 @@ def first_view_plan(scene: Scene, path: str, view: RoomView, lead_s: float, cell
     p = RecordedPath.from_msgpack(scene.path(path, "msgpack").content, f"path {path!r}")
     w, h = view.size
     proj = perspective(view.fov_deg, w / h, STREET_VIEW_NEAR_M, STREET_VIEW_FAR_M).astype(np.float64)
-    items: list[tuple[str, Any]] = []
+    items: list[tuple[str, Any, float]] = []
+    now = 0.0  # the pose the items are for
     tiles: set[tuple[int, int]] = set()
     records: set[int] = set()
     sent: set[int] = set()  # objects sent
@@ -69,15 +71,16 @@ def first_view_plan(scene: Scene, path: str, view: RoomView, lead_s: float, cell
 
     def record(cid: int) -> None:
         records.add(cid)
-        items.append(("cell", cid))
+        items.append(("cell", cid, now))
         tile = scene.cell_tile[cid]
         if tile not in tiles:
             tiles.add(tile)
-            items.append(("index", tile))
+            items.append(("index", tile, now))
 
     steps = int(np.floor(min(lead_s, p.duration) / POSE_STEP_S + 1e-9)) + 1
     for k in range(steps):
-        xyz, yaw, pitch = p.at(k * POSE_STEP_S)
+        now = k * POSE_STEP_S
+        xyz, yaw, pitch = p.at(now)
         eye = np.asarray(xyz, np.float64)
         cid = scene.locator.locate(float(eye[0]), float(eye[1]))
         if cid is None:
@@ -86,7 +89,7 @@ def first_view_plan(scene: Scene, path: str, view: RoomView, lead_s: float, cell
         if new_cell:
             record(cid)
             if not k:
-                items.append(("manifest", None))  # the grammar rebuilds the objects
+                items.append(("manifest", None, now))  # the grammar rebuilds the objects
         c = scene.reader.cell(cid)
         order = [o for o in c.pvs[np.argsort(-c.ach, kind="stable")].tolist() if o not in sent]
         if not order:
@@ -96,15 +99,16 @@ def first_view_plan(scene: Scene, path: str, view: RoomView, lead_s: float, cell
         keep = frustum_cull(*sent_boxes(scene, order), vp)
         drawn = [o for o, kk in zip(order, keep.tolist(), strict=True) if kk]
         if drawn:
-            items.append(("objects", drawn))
+            items.append(("objects", drawn, now))
             sent.update(drawn)
         if new_cell:
             others = [o for o in order if o not in sent and o not in boxed]
             if others:
-                items.append(("boxes", others))
+                items.append(("boxes", others, now))
                 boxed.update(others)
-    if not any(n == "manifest" for n, _ in items):
-        items.append(("manifest", None))
+    now = min(lead_s, p.duration)
+    if not any(n == "manifest" for n, _, _ in items):
+        items.append(("manifest", None, now))
     for cid in cells:
         if cid not in records:
             record(cid)
@@ -113,7 +117,7 @@ def first_view_plan(scene: Scene, path: str, view: RoomView, lead_s: float, cell
         c = scene.reader.cell(cid)
         rest += [o for o in c.pvs[np.argsort(-c.ach, kind="stable")].tolist() if o not in sent and o not in rest]
     if rest:
-        items.append(("objects", rest))
+        items.append(("objects", rest, now))
     return items
 
 
