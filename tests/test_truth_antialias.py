@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from walkstream.client.truth.antialias import POINT, Sampling, parse_sampling
+from walkstream.client.truth.antialias import POINT, Sampling, check_sampling, parse_sampling
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.shared.camera import look_at, orthographic
 from walkstream.shared.errors import InputError
@@ -45,6 +45,23 @@ def test_parse_sampling() -> None:
     for bad in ("0", "9", "2x3", "msaa1", "four", ""):
         with pytest.raises(InputError, match="--truth-samples"):
             parse_sampling(bad)
+
+
+class _NoGL:
+    """A context that fails if anything of it is read."""
+
+    def __getattr__(self, name: str) -> Any:
+        raise AssertionError(f"the GL was asked for {name}")
+
+
+@pytest.mark.gl
+def test_a_multisample_count_the_gl_lacks_is_refused_before_the_walk(gl: Any) -> None:
+    most = int(gl.max_samples)
+    check_sampling(Sampling(msaa=most), ctx=gl)
+    with pytest.raises(InputError, match=rf"--picture-samples msaa{most * 2}: .*at most {most}"):
+        check_sampling(Sampling(msaa=most * 2), "--picture-samples", ctx=gl)
+    for other in (POINT, Sampling(grid=8)):  # nothing of the GL needed
+        check_sampling(other, ctx=_NoGL())
 
 
 @pytest.mark.gl

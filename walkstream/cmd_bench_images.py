@@ -48,16 +48,19 @@ def cmd_bench_impostor_sampling(args: argparse.Namespace) -> int:
         plot_sampling_picture,
         run_sampling_bench,
     )
-    from walkstream.client.truth.antialias import parse_sampling
+    from walkstream.client.truth.antialias import check_sampling, parse_sampling
     from walkstream.cmd_bake import default_city_source
     from walkstream.cmd_build import load_source
 
+    samplings = [parse_sampling(t) for t in args.truth_samples]
+    reference = parse_sampling(args.reference, "--reference")
+    for sampling in (*samplings, reference):
+        check_sampling(sampling, "--reference" if sampling is reference else "--truth-samples")
     src = args.source or str(default_city_source(Path("out/demo")))
     picture: dict[str, Any] | None = {} if args.picture else None
     rows = run_sampling_bench(load_source(src).buildings, count=args.buildings, error_deg=args.impostor_error,
                               picture=picture, ppds=args.ppd, against_aa=args.against_aa,
-                              truth_samples=[parse_sampling(t) for t in args.truth_samples],
-                              reference=parse_sampling(args.reference, "--reference"),
+                              truth_samples=samplings, reference=reference,
                               projections=args.projection, distance=args.impostor_distance)
     print(json.dumps(rows) if args.json else format_sampling_table(rows))
     if picture:

@@ -95,9 +95,14 @@ def config_from_args(args: argparse.Namespace) -> Any:
     """A :class:`~walkstream.client.config.ReplayConfig` from parsed replay arguments."""
     from walkstream.client.config import ReplayConfig
     from walkstream.client.net.link import LinkProfile
-    from walkstream.client.truth.antialias import parse_sampling
+    from walkstream.client.truth.antialias import check_sampling, parse_sampling
     from walkstream.client.units import parse_bandwidth, parse_duration, parse_size
 
+    samplings = {flag: parse_sampling(text, flag) for flag, text in
+                 (("--truth-samples", args.truth_samples), ("--picture-samples", args.picture_samples))}
+    if args.truth_every:
+        for flag, sampling in samplings.items():
+            check_sampling(sampling, flag)  # the truth draws after the walk: refuse now, not then
     down = parse_bandwidth(args.bandwidth)
     up = parse_bandwidth(args.uplink) if args.uplink else down
     if not 0.0 <= args.loss <= 1.0:
@@ -145,8 +150,8 @@ def config_from_args(args: argparse.Namespace) -> Any:
         gzip=not args.no_gzip,
         truth_every=args.truth_every,
         viewer_ppd=args.viewer_ppd,
-        truth_samples=parse_sampling(args.truth_samples, "--truth-samples"),
-        picture_samples=parse_sampling(args.picture_samples, "--picture-samples"),
+        truth_samples=samplings["--truth-samples"],
+        picture_samples=samplings["--picture-samples"],
         frame_times=_frame_times(args.frame_times) if args.frame_times else None,
         batched_draws=not args.per_object_draws,
         impostors=not args.no_impostors,

@@ -34,9 +34,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.shared.errors import InputError, RenderError
-from walkstream.shared.gl import Releasable, check_gl_error, release_objects
+from walkstream.shared.gl import Releasable, check_gl_error, create_context, release_objects
 
-__all__ = ["MAX_GRID", "POINT", "Sampling", "SmoothTarget", "parse_sampling"]
+__all__ = ["MAX_GRID", "POINT", "Sampling", "SmoothTarget", "parse_sampling", "check_sampling"]
 
 MAX_GRID = 8
 """The largest N of N x N supersampling (64 samples a pixel)."""
@@ -98,6 +98,33 @@ def parse_sampling(text: str, flag: str = "--truth-samples") -> Sampling:
     if not 1 <= n <= MAX_GRID:
         raise InputError(f"{flag} {text!r}: expected 1 to {MAX_GRID} samples a side")
     return Sampling(grid=n)
+
+
+def check_sampling(sampling: Sampling, flag: str = "--truth-samples", ctx: Any = None) -> None:
+    """Refuse, before a walk starts, a multisample count this GL does not offer.
+
+    The truth draws its frames after the walk, so without this check a replay would walk
+    to its end and only then fail.  Opens a context of its own when ``ctx`` is None
+    (only for ``msaaS``: other samplings need nothing of the GL).
+
+    Raises
+    ------
+    InputError
+        ``msaaS`` with S over the GL's ``GL_MAX_SAMPLES``, naming ``flag``.
+    RenderError
+        No GL context could be opened.
+    """
+    if not sampling.msaa:
+        return
+    own = ctx is None
+    gl = create_context() if own else ctx
+    try:
+        most = int(gl.max_samples)
+    finally:
+        if own:
+            gl.release()
+    if sampling.msaa > most:
+        raise InputError(f"{flag} {sampling}: this GL offers at most {most} samples a pixel")
 
 
 class SmoothTarget(Releasable):
