@@ -6,7 +6,7 @@ on generated cities of the given sizes, :func:`~walkstream.server.sources.rings.
 called once per polygon (a geometry object and a GEOS call per ring and per check)
 against :func:`~walkstream.server.sources.rings.clean_and_repair_all` (one GEOS call per
 check over every polygon), both on the same polygons (checked to give the same parts),
-and the whole :func:`~walkstream.server.sources.citygen.city_summary` (generation
+and the whole :func:`~walkstream.server.sources.citysummary.city_summary` (generation
 excluded).  CPU seconds, the best of ``repeat`` runs.  Run it as
 ``python -m walkstream.benchmarks.ringrepair [SIZE ...]``.
 """
@@ -58,7 +58,8 @@ def run_ring_bench(sizes: Sequence[int] = (700, 2000), repeat: int = 3) -> list[
     AssertionError
         The two ways gave different parts or issues (the benchmark compares equals only).
     """
-    from walkstream.server.sources.citygen import city_summary, generate_city
+    from walkstream.server.sources.citygen import generate_city
+    from walkstream.server.sources.citysummary import city_summary
     from walkstream.server.sources.features import IssueLog
     from walkstream.server.sources.rings import clean_and_repair, clean_and_repair_all
 

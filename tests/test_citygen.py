@@ -15,10 +15,10 @@ import shapely
 from walkstream.server.sources.citygen import (
     CRS_NAME,
     ORIGIN,
-    city_summary,
     generate_city,
     write_city,
 )
+from walkstream.server.sources.citysummary import city_summary
 from walkstream.shared.errors import InputError
 
 OVERLAP_M2 = 0.01

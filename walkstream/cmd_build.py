@@ -38,7 +38,8 @@ def load_source(path: str | Path) -> Any:
 
 def cmd_generate_city(args: argparse.Namespace) -> int:
     """Handler of ``walkstream generate city``."""
-    from walkstream.server.sources.citygen import city_summary, write_city
+    from walkstream.server.sources.citygen import write_city
+    from walkstream.server.sources.citysummary import city_summary
 
     t0 = time.perf_counter()
     write_city(args.output, args.size, args.seed)

@@ -24,7 +24,7 @@ __all__ = ["add_demo_parser", "stale_reason"]
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """Handler of ``walkstream demo``: the main job on the built-in default scene."""
-    from walkstream.server.sources.citygen import city_summary
+    from walkstream.server.sources.citysummary import city_summary
 
     out = Path(args.out)
     city = default_city_source(out)

@@ -14,7 +14,8 @@ track), :mod:`.clip` (``--bbox``).  A new source format is a module here returni
 :class:`SourceScene` (or an interior) and one row of :data:`.read.READERS`.
 """
 
-from walkstream.server.sources.citygen import city_summary, generate_city, write_city
+from walkstream.server.sources.citygen import generate_city, write_city
+from walkstream.server.sources.citysummary import city_summary
 from walkstream.server.sources.clip import clip_scene
 from walkstream.server.sources.geojson import load_geojson, load_geojson_dict
 from walkstream.server.sources.geojsonlines import read_linestring
