@@ -393,7 +393,8 @@ def format_walls_table(result: Mapping[str, Any]) -> str:
     56 kbit/s); ``bake s`` the database's bake time; ``far%`` the frames that drew a
     ring's far field as geometry while a texture was missing (outdoors); ``vis1%`` the
     compared frames with at most 1 % of their pixels over ΔE00 2.3, and ``wall1%`` those
-    with at most 1 % over it because of the walls (the truth's cause ``wall``).
+    with at most 1 % over it because of the walls (the truth's cause ``wall``: an
+    interior's walls and a city's ring walls alike).
     """
     head = (f"{'scene':<13} {'variant':<20} {'tri/fr':>7} {'drawn':>6} {'pda ms':>7} {'pda10%':>7} {'gl ms':>7} "
             f"{'gl per':>7} {'gl10%':>6} {'fog m':>6} {'err %':>6} {'dE00':>6} {'over%':>6} {'fog%':>6} "

@@ -185,8 +185,8 @@ def test_the_truth_paints_facades_into_the_boxes_picture_not_as_stand_ins(gl: An
         keys, _ = truth.render(eye, view, truth.flags([form_key(1, 0)]))
         rgb = truth.colour()
         plain = rgb.copy()
-        painted = impostor_overlay(truth, truth.proj)(note, rgb, keys)
-        assert not painted.any()  # no stand-in: the pixels stay the box's
+        painted, wall = impostor_overlay(truth, truth.proj)(note, rgb, keys)
+        assert not painted.any() and not wall.any()  # no stand-in: the pixels stay the box's
         assert np.any(rgb != plain, axis=2).mean() > 0.05  # the windows are on the box now
     finally:
         baker.release()

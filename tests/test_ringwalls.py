@@ -21,6 +21,7 @@ from startparts import start_parts
 from walkstream.client.config import ReplayConfig
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.replay import ReplayResult, run_replay
+from walkstream.client.truth.colour import COLOUR_CAUSES
 from walkstream.server.bake import BakeSettings, bake
 from walkstream.server.bake.impostorsettings import ImpostorSettings
 from walkstream.server.bake.ringwalls import plan_ring_walls, ring_regions
@@ -456,3 +457,88 @@ def test_ring_textures_are_lossy_at_the_outdoor_quality_and_a_bad_quality_is_one
         with pytest.raises(InputError, match="quality: expected 1 to 100"):
             bad.check()
 
+
+
+def _solid_quad(x0: float, x1: float, y: float, image: int, rgb: tuple[int, int, int]) -> tuple[Any, ...]:
+    """An opaque quad of one colour standing at ``y``, from ``x0`` to ``x1``, 0-6 m high."""
+    corners = np.array([[x0, y, 0.0], [x1, y, 0.0], [x1, y, 6.0], [x0, y, 6.0]])
+    rgba = np.zeros((8, 8, 4), np.uint8)
+    rgba[..., :3], rgba[..., 3] = rgb, 255
+    return corners, image, rgba, 1.0
+
+
+@pytest.mark.gl
+def test_a_ring_wall_and_an_impostor_side_by_side_are_each_under_their_own_cause(gl: object) -> None:
+    from walkstream.client.truth.notes import FrameNote
+    from walkstream.client.truth.picture import colour_error
+    from walkstream.client.truth.render import TruthRenderer
+    from walkstream.client.truth.standin import impostor_overlay
+    from walkstream.shared.camera import look_at
+
+    truth = TruthRenderer({}, (160, 120), ctx=gl)
+    try:
+        eye = np.array([0.0, 0.0, 3.0])
+        view = look_at(eye, (0.0, 20.0, 3.0))
+        imp = _solid_quad(-8.0, -1.0, 20.0, -1, (255, 0, 255))  # left: an impostor, magenta
+        wall = _solid_quad(1.0, 8.0, 20.0, -2, (0, 255, 0))  # right: a ring wall, green
+        front = _solid_quad(-3.0, -2.0, 12.0, -3, (0, 0, 255))  # a wall nearer, over the impostor's right edge
+        note = FrameNote(frame=0, t=0.0, eye=eye, view=view, cell=None, pvs=None, received=np.zeros(0, np.int64),
+                         built=np.zeros(0, np.int64), drawn=(), parts=(), waiting=(), fog=np.inf,
+                         impostors=((7, imp),), wall_quads=(wall, front))
+        truth.render(eye, view)
+        sky = truth.colour()  # the truth: nothing there but sky and ground
+        overlay = impostor_overlay(truth, truth.proj)
+        err, pic = colour_error(truth, note, sky, np.full(sky.shape[:2], -1), truth.proj, overlay)
+    finally:
+        truth.release()
+    assert pic.stand_in is not None and pic.wall is not None
+    stand, walls = pic.stand_in, pic.wall
+    assert not (stand & walls).any()
+    mid = stand.shape[1] // 2
+    # the impostor's pixels are left of the middle, the far wall's right of it
+    assert stand.any() and stand[:, mid:].sum() == 0
+    assert walls[:, mid + 5:].sum() > 100
+    # the nearer wall over the impostor is the wall's, not the impostor's
+    blue = (pic.rgb[..., 2] > 200) & (pic.rgb[..., 0] < 50)
+    assert blue.any() and walls[blue].all() and not stand[blue].any()
+    causes = dict(zip(COLOUR_CAUSES, err.causes.tolist(), strict=True))
+    assert causes["impostor"] == int(stand.sum()) and causes["wall"] == int(walls.sum())
+
+
+def _wrong_textures(db: Path) -> None:
+    """Every wall texture of ``db`` painted one loud colour (its shape and alpha kept)."""
+    con = sqlite3.connect(db)
+    try:
+        for tid, data in con.execute("SELECT id, data FROM wall_textures").fetchall():
+            im = Image.open(io.BytesIO(data))
+            fmt = im.format
+            rgba = np.asarray(im.convert("RGBA")).copy()
+            rgba[..., 0], rgba[..., 1], rgba[..., 2] = 255, 0, 255
+            rgba[..., :3] = (rgba[..., :3].astype(np.uint16) * rgba[..., 3:4] // 255).astype(np.uint8)
+            buf = io.BytesIO()
+            Image.fromarray(rgba, "RGBA").save(buf, format=fmt, lossless=True) if fmt == "WEBP" else \
+                Image.fromarray(rgba, "RGBA").save(buf, format=fmt)
+            con.execute("UPDATE wall_textures SET data = ? WHERE id = ?", (buf.getvalue(), tid))
+        con.commit()
+    finally:
+        con.close()
+
+
+@pytest.mark.gl
+def test_the_bench_counts_a_visibly_wrong_ring_wall_under_wall1(dbs: tuple[Path, Path, dict[str, Any]],
+                                                                tmp_path: Path) -> None:
+    from walkstream.benchmarks.walls import _visible_shares
+    from walkstream.client.report.truth import write_truth_csv
+
+    walls, _plain, _ = dbs
+    wrong = tmp_path / "wrong.db"
+    shutil.copy(walls, wrong)
+    _wrong_textures(wrong)
+    r = _replay(wrong, truth_every=25)
+    assert r.truth is not None and r.summary["walls"]["textures_received"] > 0
+    write_truth_csv(tmp_path / "truth.csv", r.truth.log)
+    shares = _visible_shares(tmp_path)
+    # the walls' magenta is theirs: wall1% falls below every frame (it read 100 % outdoors
+    # whatever the walls showed, their pixels counted as the impostors')
+    assert shares["frames_wall_visible_1pct"] is not None and shares["frames_wall_visible_1pct"] < 1.0
+    assert r.summary["truth"]["colour"]["causes"]["wall"] > 0

@@ -17,8 +17,10 @@ The ``impostor`` hook: the client's picture is geometry only.  A part that draws
 image in place of an object (an impostor) passes ``overlay``: a callable given the
 frame's note, the picture (``(h, w, 3)`` uint8, written in place) and the per-pixel
 key index of the geometry under it, that paints the images the client drew over the
-picture and returns the ``(h, w)`` bool mask of the pixels it painted; those pixels'
-error is attributed to ``impostor`` (:data:`~walkstream.client.truth.colour.COLOUR_CAUSES`).
+picture and returns two ``(h, w)`` bool masks of the pixels it painted: where an
+impostor shows, whose error is attributed to ``impostor``, and where a virtual wall's
+texture shows (a city's ring walls), attributed to ``wall`` as an interior's walls are
+(:data:`~walkstream.client.truth.colour.COLOUR_CAUSES`).
 """
 
 from __future__ import annotations
@@ -36,10 +38,10 @@ from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.render import TruthRenderer, form_key, object_key
 from walkstream.shared.records import Mesh
 
-__all__ = ["Overlay", "ClientPicture", "forms_of", "client_picture", "colour_error", "view_ppd"]
+__all__ = ["Overlay", "ClientPicture", "client_keys", "forms_of", "client_picture", "colour_error", "view_ppd"]
 
-Overlay = Callable[[FrameNote, NDArray[np.uint8], NDArray[np.int64]], NDArray[np.bool_]]
-"""``overlay(note, rgb, keys) -> painted``: the ``impostor`` hook (see the module docs)."""
+Overlay = Callable[[FrameNote, NDArray[np.uint8], NDArray[np.int64]], tuple[NDArray[np.bool_], NDArray[np.bool_]]]
+"""``overlay(note, rgb, keys) -> (stand_in, wall)``: the ``impostor`` hook (see the module docs)."""
 
 
 @dataclass(frozen=True)
@@ -53,7 +55,16 @@ class ClientPicture:
     coarse: NDArray[np.bool_]
     """``(h, w)`` pixels showing an object drawn at a coarser LOD than LOD2."""
     stand_in: NDArray[np.bool_] | None
-    """``(h, w)`` pixels an ``overlay`` painted (None without one)."""
+    """``(h, w)`` pixels an ``overlay`` painted with an impostor (None without one)."""
+    wall: NDArray[np.bool_] | None = None
+    """``(h, w)`` pixels an ``overlay`` painted with a virtual wall's texture (None without one)."""
+
+
+def client_keys(note: FrameNote) -> list[tuple[int, int]]:
+    """The truth renderer's keys of what a noted frame drew: its room parts, its objects
+    at LOD2 (:func:`~.render.object_key`) or at the coarser LOD it drew them (:func:`~.render.form_key`)."""
+    objs = [object_key(i) if lod >= 2 else form_key(i, lod) for i, lod, _ in note.drawn]
+    return [*note.parts, *objs]
 
 
 def forms_of(notes: Iterable[FrameNote]) -> dict[tuple[int, int], Mesh]:
@@ -78,13 +89,15 @@ def client_picture(
     anti-aliasing; :mod:`walkstream.client.truth.antialias`); None: point-sampled, as
     the client draws.  Its ids and masks stay point-sampled.
     """
-    keys = [object_key(i) if lod >= 2 else form_key(i, lod) for i, lod, _ in note.drawn]
-    idx, _ = truth.render(note.eye, note.view, truth.flags(keys), note.fog, proj=proj, samples=samples)
+    idx, _ = truth.render(note.eye, note.view, truth.flags(client_keys(note)), note.fog, proj=proj, samples=samples)
     rgb = truth.colour()
     lods = truth.lods(idx)
     coarse = (lods >= 0) & (lods < 2)
-    stand_in = None if overlay is None else np.asarray(overlay(note, rgb, idx), bool)
-    return ClientPicture(rgb, truth.object_ids(idx), coarse, stand_in)
+    ids = truth.object_ids(idx)
+    if overlay is None:
+        return ClientPicture(rgb, ids, coarse, None)
+    stand_in, wall = overlay(note, rgb, idx)
+    return ClientPicture(rgb, ids, coarse, np.asarray(stand_in, bool), np.asarray(wall, bool))
 
 
 def colour_error(
@@ -106,7 +119,8 @@ def colour_error(
     ``samples`` is the client picture's sampling (:func:`client_picture`).
     """
     pic = client_picture(truth, note, proj, overlay, samples)
-    err = compare_colour(truth_rgb, pic.rgb, id_cause=id_cause, coarse=pic.coarse, stand_in=pic.stand_in, ppd=ppd)
+    err = compare_colour(truth_rgb, pic.rgb, id_cause=id_cause, coarse=pic.coarse, stand_in=pic.stand_in,
+                         wall=pic.wall, ppd=ppd)
     return err, pic
 
 

@@ -57,11 +57,12 @@ from walkstream.client.truth.compare import CAUSES
 from walkstream.client.truth.culled import SOLID_NEAR
 from walkstream.client.truth.missing import ColourWorst
 from walkstream.client.truth.notes import FrameNote
-from walkstream.client.truth.render import TruthRenderer, form_key, object_key
+from walkstream.client.truth.picture import client_keys
+from walkstream.client.truth.render import TruthRenderer, object_key
 from walkstream.client.truth.seam import SeamMeter, still_quads, wall_pixels
 from walkstream.client.truth.solid import SolidProbe
 
-__all__ = ["RoomColour", "client_keys", "pixel_distance", "room_colour"]
+__all__ = ["RoomColour", "pixel_distance", "room_colour"]
 
 _PVS, _NOT_RECEIVED, _NOT_BUILT, _LOD, _CULLED, _FOG = (
     CAUSES.index(c) for c in ("pvs", "not_received", "not_built", "lod", "culled", "fog")
@@ -81,13 +82,6 @@ class RoomColour:
     """``(n,)`` the fog distance of each compared frame (``inf``: none)."""
     seam: SeamMeter | None = None
     """The seam at the walls' zone borders (None: no frame drew a wall)."""
-
-
-def client_keys(note: FrameNote) -> list[tuple[int, int]]:
-    """The truth renderer's keys of what a noted frame drew: its room parts, its objects
-    at LOD2 (:func:`~.render.object_key`) or at the coarser LOD it drew them (:func:`~.render.form_key`)."""
-    objs = [object_key(i) if lod >= 2 else form_key(i, lod) for i, lod, _ in note.drawn]
-    return [*note.parts, *objs]
 
 
 def pixel_distance(depth: NDArray[np.float64], proj: NDArray[np.float64]) -> NDArray[np.float64]:

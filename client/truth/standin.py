@@ -8,7 +8,9 @@ and opacity) and the facade textures drawn over boxes
 client's picture as the client drew them (the truth renderer's
 :meth:`~walkstream.client.truth.render.TruthRenderer.paint_quads`: depth tested
 against the picture's geometry, premultiplied blend) and returns the pixels they
-changed, whose error the colour comparison puts under ``impostor``; it paints the
+changed, whose error the colour comparison puts under ``impostor`` -- and those a
+city's ring walls (the note's ``wall_quads``) painted under ``wall``, as an
+interior's walls are, so a wall's own error is told from an impostor's; it paints the
 facades first, and their pixels stay the boxes' (``lod_colour``), not stand-ins.
 :func:`stand_in_ids` is the id comparison's side: a pixel an impostor painted counts
 as showing the building the truth shows there when that building was drawn as an
@@ -22,33 +24,63 @@ culled figures count it under ``wall_pixels``).
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.truth.notes import FrameNote
-from walkstream.client.truth.picture import Overlay
+from walkstream.client.truth.picture import Overlay, client_keys
 from walkstream.client.truth.render import TruthRenderer
 
 __all__ = ["impostor_overlay", "stand_in_ids", "wall_stand_in"]
 
 
 def impostor_overlay(truth: TruthRenderer, proj: ArrayLike) -> Overlay:
-    """The ``impostor`` hook painting a note's impostors (and a city's ring walls, its
-    ``wall_quads``) with ``truth`` at projection ``proj``."""
+    """The ``impostor`` hook painting a note's impostors and a city's ring walls (its
+    ``wall_quads``) with ``truth`` at projection ``proj``: the pixels an impostor shows
+    come back as the stand-in mask (cause ``impostor``), those a wall's texture shows as
+    the wall mask (cause ``wall``, as an interior's walls)."""
 
-    def paint(note: FrameNote, rgb: NDArray[np.uint8], keys: NDArray[np.int64]) -> NDArray[np.bool_]:
+    def paint(note: FrameNote, rgb: NDArray[np.uint8], keys: NDArray[np.int64]) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
         if note.facades:  # the boxes' facades first, part of the boxes' picture (not stand-ins)
             rgb[...] = truth.paint_quads(list(note.facades), note.view, proj)
-        quads = [q for _, q in note.impostors] + list(note.wall_quads)
-        if not quads:
-            return np.zeros(rgb.shape[:2], bool)
-        out = truth.paint_quads(quads, note.view, proj)  # over the facades painted
-        mask: NDArray[np.bool_] = np.any(out != rgb, axis=2)
+        imps, walls = [q for _, q in note.impostors], list(note.wall_quads)
+        none = np.zeros(rgb.shape[:2], bool)
+        if not imps and not walls:
+            return none, none
+        # one pass, back to front over both kinds, as the client draws them
+        out = truth.paint_quads(imps + walls, note.view, proj)
+        painted: NDArray[np.bool_] = np.any(out != rgb, axis=2)
         rgb[...] = out
-        return mask
+        if not walls:
+            return painted, none
+        if not imps:
+            return none, painted
+        wall = painted & _wall_on_top(truth, note, proj, imps, walls, out)
+        return painted & ~wall, wall
 
     return paint
+
+
+def _wall_on_top(
+    truth: TruthRenderer, note: FrameNote, proj: ArrayLike, imps: list[Any], walls: list[Any], out: NDArray[np.uint8]
+) -> NDArray[np.bool_]:
+    """``(h, w)`` the pixels of the picture ``out`` (impostors and walls painted together)
+    where a wall's texture shows rather than an impostor: each kind painted alone over the
+    frame's geometry; where both paint, the one whose colour the picture holds (the
+    nearer opaque one; one transparent there leaves the other's colour)."""
+    alone = []
+    for quads in (walls, imps):
+        truth.render(note.eye, note.view, truth.flags(client_keys(note)), note.fog, proj=proj)
+        under = truth.paint_quads(list(note.facades), note.view, proj) if note.facades else truth.colour()
+        over = truth.paint_quads(quads, note.view, proj)
+        alone.append((np.any(over != under, axis=2), over.astype(np.int32)))
+    (by_wall, wall_rgb), (by_imp, imp_rgb) = alone
+    o = out.astype(np.int32)
+    nearer = np.abs(o - wall_rgb).sum(axis=2) <= np.abs(o - imp_rgb).sum(axis=2)
+    top: NDArray[np.bool_] = by_wall & (~by_imp | nearer)
+    return top
 
 
 def stand_in_ids(
