@@ -200,7 +200,7 @@ def refine_parts(
     inside = np.any(within, axis=1)
     tris: list[NDArray[np.float64]] = []
     part_of: list[NDArray[np.int64]] = []
-    ranks: list[NDArray[np.int64]] = []  # each triangle's place within its part
+    runs: list[NDArray[np.int64]] = []  # the tested parts' triangle counts, in order
     at = 0
     keep_cells = []
     for k, (c, idx) in enumerate(zip(cells, picks, strict=True)):
@@ -216,7 +216,7 @@ def refine_parts(
         t = np.arange(int(ends[-1])) + np.repeat(first - (ends - counts), counts)
         tris.append(tri[:, :, t])
         part_of.append(np.repeat(idx, counts))
-        ranks.append(np.arange(len(t)) - np.repeat(ends - counts, counts))
+        runs.append(counts)
         keep_cells.append(k)
     if not keep_cells:
         return 0
@@ -234,12 +234,14 @@ def refine_parts(
         # two rounds: each part's first triangles, then the rest of the parts none of whose
         # first showed (a part shows when any of its triangles does: the parts are the same)
         got = np.zeros(len(gid), bool)
-        one = np.flatnonzero(np.concatenate(ranks) < _FIRST_ROUND)
+        run = np.concatenate(runs)
+        rank = np.arange(len(gid)) - np.repeat(np.cumsum(run) - run, run)  # each triangle's place in its part
+        one = np.flatnonzero(rank < _FIRST_ROUND)
         got[one] = _shows(pts[:, :, one], vsa[one], V, P, size, clip_m, planes)
         settled = np.zeros(int(base[-1]), bool)
         settled[gid[one[got[one]]]] = True
         two = np.flatnonzero(~settled[gid])
-        two = two[np.concatenate(ranks)[two] >= _FIRST_ROUND]
+        two = two[rank[two] >= _FIRST_ROUND]
         if len(two):
             got[two] = _shows(pts[:, :, two], vsa[two], V, P, size, clip_m, planes)
     shows = np.bincount(gid[got], minlength=int(base[-1])) > 0
