@@ -27,10 +27,19 @@ A head's stand-ins (:attr:`~walkstream.shared.codec.cellmesh.CellMesh.missing`: 
 with no triangles yet) are never dropped: they stand for triangles still to come.
 
 Cost: every candidate triangle of the frame in one batch (the triangles of each cell
-packed once, coordinate-major, and kept with the cell's mesh), about 2.5 times the
-boxes' own test per frame on the duplex's and FZK-Haus's tours (``walkstream bench
-portals --triangles``).  Parts under :data:`MIN_TRIANGLES` cost less to draw than to
-test and are left as the boxes decided.
+packed once, coordinate-major, and kept with the cell's mesh; a part's triangles taken
+as its run, not by a pass over the whole cell), about 2.5 times the boxes' own test per
+frame on the duplex's and FZK-Haus's tours (``walkstream bench portals --triangles``).
+Parts under :data:`MIN_TRIANGLES` cost less to draw than to test and are left as the
+boxes decided.  The work per triangle is cut without changing a figure: a triangle
+wholly in front of the clip plane is projected as its three vertices (its sides' six
+ends are those, twice), the few across the plane are clipped in plain floats, the
+sides' separating test is made only for the (triangle, VSA) pairs whose rectangles
+meet, and a frame of more than :data:`_ONE_ROUND` candidate triangles tests each part's
+first :data:`_FIRST_ROUND` first and the rest only of the parts none of whose first
+showed (a part shows when any of its triangles does, so the same parts are kept).  On
+the tours' frames of several thousand triangles this takes the test's p99 from 13-16 ms
+to about 5 ms (tests/test_trianglecull.py checks the paths against each other).
 """
 
 from __future__ import annotations
