@@ -196,11 +196,56 @@ def test_triangles_wholly_in_front_skip_the_clip_and_each_is_tested_as_alone() -
     whole = (d >= 0).all(axis=0)
     assert 50 < whole.sum() < n - 50  # in front, across the plane and behind, all drawn
     # the exactness of the shortcut: a triangle wholly in front ends at its own vertices
-    ends = _clipped_ends(h[:, :, whole], d[:, whole], np.ones(int(whole.sum()), bool))
-    assert np.array_equal(ends, h[:, _SIDE_ENDS][:, :, whole])
+    ex, ey = _clipped_ends(h[:, :, whole], d[:, whole], SIZE)
+    q = h[:, _SIDE_ENDS][:, :, whole]
+    assert np.array_equal(ex, np.clip((q[0] / q[2] + 1.0) * (0.5 * SIZE[0]) - 0.5, -1e9, 1e9))
+    assert np.array_equal(ey, np.clip((q[1] / q[2] + 1.0) * (0.5 * SIZE[1]) - 0.5, -1e9, 1e9))
     vsa = np.tile(np.array([[30, 20, 120, 90], [1, 1, 0, 0]], np.int64), (n, 1, 1))
     planes = near_far(PROJ)
     assert planes is not None
     batch = _shows(pts, vsa, VIEW, PROJ, SIZE, 0.03, planes)
     alone = [bool(_shows(pts[:, :, i:i + 1], vsa[i:i + 1], VIEW, PROJ, SIZE, 0.03, planes)[0]) for i in range(n)]
     assert batch.tolist() == alone and 0 < batch.sum() < n
+
+
+def test_the_plain_float_clip_and_the_two_rounds_keep_what_one_batch_keeps(monkeypatch: pytest.MonkeyPatch) -> None:
+    import walkstream.shared.trianglecull as tc
+
+    rng = np.random.default_rng(11)
+    n = 400
+    centre = np.c_[rng.uniform(-1.0, 8.0, n), rng.uniform(-4.0, 4.0, n), rng.uniform(-2.0, 2.0, n)]
+    tri = centre[:, None, :] + rng.normal(0.0, rng.choice([0.05, 0.5, 3.0], n)[:, None, None], (n, 3, 3))
+    pts = np.ascontiguousarray(tri.transpose(2, 1, 0))
+    m = (PROJ @ VIEW)[[0, 1, 3]]
+    h = (m[:, :3] @ pts.reshape(3, -1) + m[:, 3:]).reshape(3, 3, n)
+    d = h[2] - 0.03
+    cut = np.flatnonzero(~(d >= 0).all(axis=0) & (d >= 0).any(axis=0))
+    assert len(cut) > tc._FEW_CUT
+    # the few triangles across the clip plane in plain floats: numpy's figures, bit for bit
+    sx, sy = 0.5 * SIZE[0], 0.5 * SIZE[1]
+    for a in range(0, len(cut), tc._FEW_CUT):
+        few = cut[a:a + tc._FEW_CUT]
+        got = tc._clipped_ends(h[:, :, few], d[:, few], SIZE)
+        want = tc._clipped_ends_np(h[:, :, few], d[:, few], sx, sy)
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    # parts of many triangles, tested in two rounds (their first triangles, then the rest
+    # of the parts none of whose first showed) or all in one batch: the same parts kept
+    parts = [_part(tri[i:i + k]) for i, k in zip(range(0, n, 50), rng.integers(16, 50, n // 50), strict=False)]
+    # slivers beside the area on both sides (the box spans it, no triangle meets it), and
+    # the same with one triangle in the middle after the first round's
+    side = np.array([[0.0, 0.0, 0.0], [0.0, 0.01, 0.0], [0.0, 0.0, 0.01]])
+    beside = np.array([side + (5.0, -3.0 if i % 2 else 3.0, 0.05 * i - 1.0) for i in range(40)])
+    middle = 50.0 * side + (5.0, 0.0, 0.0)
+    parts += [_part(beside), _part(np.concatenate([beside, middle[None]])), _part(beside[::-1])]
+    mesh = _mesh(parts)
+    lo, hi = _boxes(mesh)
+    vsas = {0: [(30, 20, 120, 90), (0, 0, 20, 10)]}
+    kept = cull_parts("portals", [0], {0: (lo, hi)}, np.zeros(3), VIEW, PROJ, SIZE, vsas=vsas)
+    assert kept[0].sum() >= 4 and kept[0][-3:].all()
+    masks = {}
+    for one_round in (10**9, 0):
+        monkeypatch.setattr(tc, "_ONE_ROUND", one_round)
+        masks[one_round] = {0: kept[0].copy()}
+        refine_parts(masks[one_round], {0: mesh}, vsas, VIEW, PROJ, SIZE, min_triangles=1)
+    assert np.array_equal(masks[0][0], masks[10**9][0])
+    assert masks[0][0][-3:].tolist() == [False, True, False]  # kept by a triangle of the second round

@@ -120,7 +120,8 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
         tri_s = time.thread_time() - t_tri
     # a cell drawn besides the portal walk's (the shell from the street): the frustum's test
     whole = [c for c in f.loaded if c not in masks or c in f.shown]
-    for c, m in cull_parts("frustum", whole, boxes, f.eye, f.view, w.proj, w.size, fog_m=f.fog).items():
+    for c, m in (cull_parts("frustum", whole, boxes, f.eye, f.view, w.proj, w.size, fog_m=f.fog).items()
+                 if whole else ()):
         masks[c] = masks[c] | m if c in masks else m
     # a head walked to whose stand-ins the culling drops, at the default fog, draws all it
     # would draw whole; any other head is waiting for its cell
