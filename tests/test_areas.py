@@ -199,7 +199,7 @@ def test_bake_serve_and_map_areas_and_an_old_database_still_serves(tmp_path: Pat
     # are drawn by both, below the horizon no sky
     rep = tmp_path / "rep"
     assert main(["replay", str(db), "--path", walk, "--duration", "6s", "--clock", "sim", "--device", "desktop2003",
-                 "--truth-every", "30", "--report", str(rep)]) == 0  # fmt: skip
+                 "--truth-every", "30", "--report", str(rep), "--no-plots"]) == 0  # fmt: skip
     report = json.loads((rep / "report.json").read_text())
     truth = report.get("summary", report)["truth"]
     assert truth["frames"] >= 2

@@ -16,7 +16,7 @@ pytestmark = pytest.mark.gl
 
 def test_bench_walls_quick_measures_the_hall_without_walls(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "bench"
-    assert main(["bench", "walls", "--quick", "--no-gl", "--out", str(out), "--json"]) == 0
+    assert main(["bench", "walls", "--quick", "--no-gl", "--no-plots", "--out", str(out), "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     rows = result["rows"]
     base = [r for r in rows if r["variant"] == "no walls"]

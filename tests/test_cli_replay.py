@@ -115,7 +115,7 @@ def test_bench_stream_prints_one_table(db: Path, tmp_path: Path, capsys: pytest.
     # its walk, and a second run wrote a second comparison page
     argv = [
         "bench", "stream", str(db), "--scene", f"other={db}:SE",
-        "--only", ",".join(names), "--duration", "5s", "--out", str(out),
+        "--only", ",".join(names), "--duration", "5s", "--out", str(out), "--no-plots",
     ]  # fmt: skip
     assert main(argv) == 0
     text = capsys.readouterr().out
@@ -124,6 +124,9 @@ def test_bench_stream_prints_one_table(db: Path, tmp_path: Path, capsys: pytest.
     assert "util%" in text and "overfetch" in text
     rows = json.loads((out / "bench_stream.json").read_text())
     assert [r["scenario"] for r in rows] == names and (out / "index.html").exists()
+    # --no-plots: each row's own report has its figures and no plot; the comparison has its plots
+    assert (out / "01-se-56k-prefetch" / "frames.csv").exists() and not list((out / "01-se-56k-prefetch").glob("*.png"))
+    assert (out / "compare_bytes.png").exists()
     assert all(0.0 <= r["link_utilisation"] <= 1.05 and r["overfetch_ratio"] <= 0.5 for r in rows)
     assert main(["bench", "stream", str(db), "--scene", "nonsense", "--out", str(out)]) == 2
     assert "LABEL=DB" in capsys.readouterr().err
@@ -133,7 +136,7 @@ def test_bench_budget_table(db: Path, tmp_path: Path, capsys: pytest.CaptureFixt
     # 5 s after the cost's step: each row has recovered from it within a few frames
     argv = [
         "bench", "budget", str(db), "--no-gl", "--duration", "10s", "--step-at", "5",
-        "--out", str(tmp_path / "b"),
+        "--out", str(tmp_path / "b"), "--no-plots",
     ]  # fmt: skip
     assert main(argv) == 0
     text = capsys.readouterr().out

@@ -248,7 +248,8 @@ def test_a_crossing_baked_before_placements_still_replays(scene: Path, walked: R
     with SceneReader.open(scene) as r:
         assert sum(c.nbytes for c in r.contents_info().values()) < 0.7 * stored  # the turn cost the boxes
     # every 50th frame: the walk's own test compares every 25th
-    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", truth_every=50, kind="crossing")
+    cfg = ReplayConfig(link=LINK_56K, path="enter", device="desktop2003", truth_every=50, kind="crossing",
+                       size=(320, 240))  # the culled pixels at a quarter of the pixels: the rooms in place or not
     got = run_replay(httpx.ASGITransport(app=create_app([old])), "http://t", cfg).summary
     assert got["entrance"] == {k: v for k, v in walked.summary["entrance"].items() if k != "placement"}
     assert got["truth"]["culled_pixels"] == 0 and got["truth"]["frames"] - got["truth"]["unknown"] >= 20

@@ -204,7 +204,7 @@ def test_a_replay_with_the_cull_cache_culls_no_pixel_the_truth_shows(office_db: 
 
     rep = tmp_path / "cached"
     assert main(["replay", str(office_db), "--path", "tour", "--duration", "3", "--truth-every", "25",
-                 "--size", "160x120", "--report", str(rep), "--cull-cache"]) == 0
+                 "--size", "160x120", "--report", str(rep), "--cull-cache", "--no-plots"]) == 0
     s = json.loads((rep / "report.json").read_text())
     s = s.get("summary", s)
     assert s["truth"]["frames"] >= 3 and s["truth"]["culled_pixels"] == 0, s["truth"]

@@ -91,7 +91,7 @@ def test_heads_come_first_and_their_cells_whole_after(fzk_db: tuple[Path, dict[s
 
 def _replay(db: Path, out: Path, *extra: str) -> tuple[dict[str, Any], Path]:
     main(["replay", str(db), "--path", "tour", "--bandwidth", "56kbit", "--rtt", "200ms", "--clock", "sim",
-          "--size", "160x120", "--device", "desktop2003", "--duration", "4s", "--report", str(out), *extra])
+          "--size", "160x120", "--device", "desktop2003", "--duration", "4s", "--report", str(out), "--no-plots", *extra])
     return json.loads((out / "report.json").read_text()), out
 
 

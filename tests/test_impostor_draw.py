@@ -197,12 +197,12 @@ def test_bench_impostors_replays_one_walk_both_ways(dbs: tuple[Path, Path], tmp_
         format_impostor_table,
         run_impostor_bench,
     )
-    from walkstream.cmd_replay import replay_with_options
+    from walkstream.cmd_replay import replayer
 
-    # one bake's two rows (each replay writes a full report: most of this test's time); a
-    # sweep is the same loop over more databases, and the label of a bake without
-    # impostors is read from its settings record as here
-    rows = run_impostor_bench([str(dbs[0])], replay_with_options, out=tmp_path, duration="2s",
+    # one bake's two rows (their reports without plots: drawing them was most of this
+    # test's time); a sweep is the same loop over more databases, and the label of a bake
+    # without impostors is read from its settings record as here
+    rows = run_impostor_bench([str(dbs[0])], replayer(plots=False), out=tmp_path, duration="2s",
                               truth_every=25, size="80x60")
     assert [r["with_impostors"] for r in rows] == [True, False]
     assert [r["bake"] for r in rows] == ["imp D50 A4 S16 persp"] * 2

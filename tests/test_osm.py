@@ -510,7 +510,7 @@ def test_bake_serve_record_and_replay_a_real_city(tmp_path: Path, gl: object) ->
     assert main(["inspect", str(db), "--map", str(png)]) == 0
     assert png.stat().st_size > 10_000
     rep = tmp_path / "rep"
-    assert main(["replay", str(db), "--path", "mine", "--duration", "10s", "--device", "pda", "--report", str(rep)]) == 0
+    assert main(["replay", str(db), "--path", "mine", "--duration", "10s", "--device", "pda", "--report", str(rep), "--no-plots"]) == 0
     assert (rep / "report.json").exists()
 
 
@@ -552,7 +552,7 @@ def test_locate_record_and_replay_over_http_on_a_real_network(tmp_path: Path) ->
                            headers={"Accept": "application/json"})  # fmt: skip
             assert far.json()["cell"] is None
             rep = tmp_path / "rep"
-            argv = ["replay", url, "--path", "mine", "--duration", "10s", "--device", "pda", "--report", str(rep)]
+            argv = ["replay", url, "--path", "mine", "--duration", "10s", "--device", "pda", "--report", str(rep), "--no-plots"]
             assert main(argv) == 0
     finally:
         app.state.scenes.close()

@@ -272,7 +272,7 @@ def test_real_clock_replay_with_the_process_pool_from_the_cli(
     argv = [
         "replay", str(db), "--path", "SE", "--clock", "real", "--device", "gl", "--size", "96x64",
         "--fps", "30", "--duration", "8s", "--bandwidth", "10mbit", "--rtt", "20ms",
-        "--rewrite", "process", "--shm", "1MB", "--report", str(report),
+        "--rewrite", "process", "--shm", "1MB", "--report", str(report), "--no-plots",
     ]  # fmt: skip
     assert main(argv) == 0
     summary = json.loads((report / "report.json").read_text())

@@ -251,7 +251,7 @@ def test_client_batch_raises_streamcut_on_a_short_answer(office_db: Path) -> Non
 
 def _replay(db: Path, out: Path, *extra: str) -> dict[str, Any]:
     assert main(["replay", str(db), "--path", "tour", "--device", "pda", "--bandwidth", "56kbit", "--rtt", "200ms",
-                 "--duration", "10", "--report", str(out), *extra]) == 0
+                 "--duration", "10", "--report", str(out), "--no-plots", *extra]) == 0
     s = json.loads((out / "report.json").read_text())
     return dict(s.get("summary", s))
 

@@ -72,7 +72,7 @@ def test_bad_packed_topology_is_a_clear_error(office_db: Path) -> None:
 
 def _replay(db: Path, out: Path, *extra: str) -> dict[str, Any]:
     assert main(["replay", str(db), "--path", "tour", "--device", "pda", "--bandwidth", "56kbit", "--rtt", "200ms",
-                 "--report", str(out), *extra]) == 0
+                 "--report", str(out), "--no-plots", *extra]) == 0
     s = json.loads((out / "report.json").read_text())
     return dict(s.get("summary", s))
 

@@ -142,7 +142,7 @@ def test_a_city_walk_waits_for_what_its_first_view_draws_and_hides_nothing(
     # 2 kB/s: the generated city's objects (about 50 bytes each) take seconds, as Kouvola's do at 5 kB/s
     main(["replay", str(db), "--path", "SE", "--bandwidth", "2kB/s", "--rtt", "500ms", "--clock", "sim",
           "--size", "160x120", "--device", "desktop2003", "--duration", "5s", "--truth-every", "5",
-          "--report", str(out)])
+          "--report", str(out), "--no-plots"])
     first = json.loads((out / "report.json").read_text())
     # the walker stood at its start for its first view, with boxes for the objects it does not draw
     assert first["start_hold_s"] > 0 and first["start_boxes"] > 0

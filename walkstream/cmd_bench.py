@@ -182,13 +182,13 @@ def cmd_bench_stream(args: argparse.Namespace) -> int:
         parse_extra,
         run_stream_bench,
     )
-    from walkstream.cmd_replay import replay_with_options
+    from walkstream.cmd_replay import replayer
 
     out = Path(args.out)
     only = [s.strip() for s in args.only.split(",")] if args.only else []
     rows = run_stream_bench(
         args.db,
-        replay_with_options,
+        replayer(not args.no_plots),
         out=out,
         vienna=args.vienna,
         extra=[parse_extra(t) for t in args.scene],
@@ -237,12 +237,12 @@ def cmd_bench_budget(args: argparse.Namespace) -> int:
         run_budget_bench,
     )
     from walkstream.client.rewrite.pool import MODES
-    from walkstream.cmd_replay import replay_with_options
+    from walkstream.cmd_replay import replayer
 
     out = Path(args.out)
     rows = run_budget_bench(
         args.db,
-        replay_with_options,
+        replayer(not args.no_plots),
         out=out,
         duration=args.duration,
         gl_duration=args.gl_duration,
@@ -574,6 +574,7 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--truth-every", type=int, default=0, metavar="N", help="compare every Nth frame of each walk with the ground truth (a second table, and the colour error; default 0: never)")
     b.add_argument("--clock", default="sim", choices=("sim", "real"), help="simulated clock (default) or real time (with --device gl: frames drawn and timed for real)")
     b.add_argument("--out", default="out/bench-stream", help="folder for reports and plots")
+    b.add_argument("--no-plots", action="store_true", help="each replay's report without its plots (as replay --no-plots); the comparison's own plots are drawn")
     b.set_defaults(func=cmd_bench_stream)
 
     add_image_benches(besub)
@@ -590,6 +591,7 @@ def add_bench_parser(sub: Any) -> None:
     b.add_argument("--rewrite", default="process", help="rebuild paths of the real-clock gl rows, e.g. thread,process (default process)")
     b.add_argument("--seed", type=int, default=0, help="seed of the device noise and spikes (default 0)")
     b.add_argument("--out", default="out/bench-budget", help="folder for the reports")
+    b.add_argument("--no-plots", action="store_true", help="each replay's report without its plots (as replay --no-plots); the table is the same")
     b.set_defaults(func=cmd_bench_budget)
 
     bc = besub.add_parser("controller", help="the budget controller alone on the device cost models, many seeds")

@@ -17,7 +17,7 @@ __all__ = ["add_image_benches"]
 def cmd_bench_impostors(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench impostors``."""
     from walkstream.benchmarks.impostors import format_impostor_table, run_impostor_bench
-    from walkstream.cmd_replay import replay_with_options
+    from walkstream.cmd_replay import replayer
     from walkstream.shared.errors import InputError
 
     for db in args.db:
@@ -30,7 +30,7 @@ def cmd_bench_impostors(args: argparse.Namespace) -> int:
              **({} if args.impostor_fade is None else {"impostor_fade": args.impostor_fade})}
     facades: tuple[bool | None, ...] = {"auto": (None,), "on": (True,), "off": (False,), "both": (True, False)}[
         args.facades]
-    rows = run_impostor_bench(args.db, replay_with_options, out=Path(args.out), paths=paths, device=args.device,
+    rows = run_impostor_bench(args.db, replayer(not args.no_plots), out=Path(args.out), paths=paths, device=args.device,
                               truth_every=args.truth_every, duration=args.duration, link=link, size=args.size,
                               extra=extra, facades=facades)
     if not rows:
@@ -71,7 +71,7 @@ def cmd_bench_impostor_sampling(args: argparse.Namespace) -> int:
 def cmd_bench_walls(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench walls``."""
     from walkstream.benchmarks.walls import SCENES, format_walls_table, run_walls_bench
-    from walkstream.cmd_replay import replay_with_options
+    from walkstream.cmd_replay import replayer
     from walkstream.shared.errors import InputError
 
     scenes = [s.strip() for s in args.scenes.split(",") if s.strip()]
@@ -86,7 +86,7 @@ def cmd_bench_walls(args: argparse.Namespace) -> int:
         raise InputError(f"--wall-errors {args.wall_errors!r}: expected angles from 0.5 to 45 degrees")
     quick = args.quick
     result = run_walls_bench(
-        replay_with_options, out=Path(args.out), data=Path(args.data),
+        replayer(not args.no_plots), out=Path(args.out), data=Path(args.data),
         scenes=["hall"] if quick else scenes, wall_errors=[10.0] if quick else errors,
         duration="4s" if quick else args.duration, gl_duration="3s" if quick else args.gl_duration,
         truth_every=40 if quick else args.truth_every, size="160x120" if quick else args.size,
@@ -118,6 +118,7 @@ def add_image_benches(besub: Any) -> None:
     b.add_argument("--impostor-fade", type=float, default=None, metavar="S", help="seconds an impostor's opacity takes at least from 0 to 1 (default 2; 0 with --impostor-blend 0: a hard switch)")
     b.add_argument("--facades", default="auto", choices=("auto", "on", "off", "both"), help="facade textures on the boxes: the replay's default (auto: on a simulated device), always (on), never (off), or each walk both ways (both)")
     b.add_argument("--out", default="out/bench-impostors", help="folder for the reports")
+    b.add_argument("--no-plots", action="store_true", help="each replay's report without its plots (as replay --no-plots); the bench's own plot is drawn")
     b.set_defaults(func=cmd_bench_impostors)
 
     b = besub.add_parser("impostor-sampling", help="one impostor against its truth, alone, per view, bake sampling and texture filter: pixels over the visible threshold")
@@ -145,6 +146,7 @@ def add_image_benches(besub: Any) -> None:
     b.add_argument("--frames", type=int, default=40, help="hall tour frames for frustum culling alone and drawing whole (default 40)")
     b.add_argument("--no-gl", action="store_true", help="skip the gl replays and gl draws")
     b.add_argument("--quick", action="store_true", help="a small hall only, short walks, a small frame (a test)")
+    b.add_argument("--no-plots", action="store_true", help="each replay's report without its plots (as replay --no-plots); the bench's own plot is drawn")
     b.add_argument("--json", action="store_true", help="print the rows as JSON")
     b.add_argument("--out", default="out/bench-walls", help="folder for the databases, reports and plot")
     b.set_defaults(func=cmd_bench_walls)

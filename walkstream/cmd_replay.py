@@ -32,6 +32,7 @@ __all__ = [
     "transport_for",
     "config_from_args",
     "replay_to_report",
+    "replayer",
     "replay_with_options",
     "scene_kind",
 ]
@@ -197,8 +198,10 @@ def scene_kind(server: str, scene: str | None) -> str | None:
         return None
 
 
-def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = False) -> Any:
-    """Run one replay against ``server`` and write its report folder; returns the result."""
+def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = False, plots: bool = True) -> Any:
+    """Run one replay against ``server`` and write its report folder; returns the result.
+
+    ``plots`` False writes the report without its plots (``--no-plots``)."""
     from walkstream.client.replay import run_replay
     from walkstream.client.report import write_report
 
@@ -232,6 +235,7 @@ def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = Fals
             truth=result.truth,
             phases=result.phases,
             interior=result.interior,
+            plots=plots,
         )
     return result
 
@@ -243,7 +247,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from walkstream.client.report import format_headline
 
     config = config_from_args(args)
-    result = replay_to_report(args.server, config, title=f"replay {config.path}")
+    result = replay_to_report(args.server, config, title=f"replay {config.path}", plots=not args.no_plots)
     disk = result.summary.get("disk_cache")
     if disk and not disk["available"]:
         print(f"walkstream: warning: --cache-dir not used: {disk['error']}", file=sys.stderr)
@@ -405,6 +409,7 @@ def add_replay_parser(sub: Any) -> None:
     r.add_argument("server", metavar="SERVER", help="server URL (real sockets) or scene database (in-process)")
     add_replay_arguments(r)
     r.add_argument("--report", required=True, help="report folder (report.json, plots, index.html)")
+    r.add_argument("--no-plots", action="store_true", help="write the report without its plots: the figures, the CSV files and the worst frames' pictures (most of a report's time is drawing the plots; for sweeps)")
     r.add_argument("--json", action="store_true", help="print the summary as JSON")
     r.set_defaults(func=cmd_replay)
 
@@ -414,6 +419,7 @@ def _defaults() -> argparse.Namespace:
     add_replay_arguments(p)
     ns = p.parse_args([])
     ns.report = "."
+    ns.no_plots = False
     return ns
 
 
@@ -436,7 +442,19 @@ def replay_with_options(server: str, options: Mapping[str, Any], title: str) -> 
         else:
             raise InputError(f"replay option {key!r} does not exist")
     config = replace(config_from_args(ns), **direct)
-    return replay_to_report(server, config, title=title)
+    return replay_to_report(server, config, title=title, plots=not ns.no_plots)
+
+
+def replayer(plots: bool = True) -> Any:
+    """:func:`replay_with_options` for a benchmark; ``plots`` False (its ``--no-plots``)
+    writes each replay's report without its plots."""
+    if plots:
+        return replay_with_options
+
+    def replay(server: str, options: Mapping[str, Any], title: str) -> Any:
+        return replay_with_options(server, {**options, "no_plots": True}, title)
+
+    return replay
 
 
 def _cull_guard(text: str) -> tuple[float, float]:

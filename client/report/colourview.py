@@ -39,8 +39,19 @@ def _save(path: Path, rgb: np.ndarray) -> None:
         Image.fromarray(rgb, "RGB").save(f, format="PNG")
 
 
-def write_colour_worst(out: Path, w: ColourWorst) -> str:
-    """Write the worst colour frame's pictures into ``out/truth`` and return its HTML section."""
+_CAPTIONS = {
+    "client": "the client's picture: its objects at the LOD it drew them",
+    "truth": "the full scene: every object within the view distance at LOD2",
+    "heat": f"dE00 per pixel: black none, white {HEAT_TOP_DE:g} or more",
+    "scielab": "dE00 of the pictures filtered as the eye sees them (S-CIELAB), same scale",
+}
+
+
+def write_colour_worst(out: Path, w: ColourWorst, plots: bool = True) -> str:
+    """Write the worst colour frame's pictures into ``out/truth`` and return its HTML section.
+
+    ``plots`` False: each picture alone, without the side-by-side figure with its scale
+    (matplotlib's, most of the time this takes)."""
     folder = out / "truth"
     folder.mkdir(exist_ok=True)
     heat = heat_map(w.delta_e, HEAT_TOP_DE)
@@ -57,6 +68,14 @@ def write_colour_worst(out: Path, w: ColourWorst) -> str:
            f" ({100.0 * w.visible_scielab:.2f} % S-CIELAB at {w.viewer_ppd or 0:.1f} px/deg)")
         + f", {psnr}"
     )
+    figs = "".join(
+        f"<figure><a href='truth/{_NAMES[k]}'><img src='truth/{_NAMES[k]}' alt='{k}'></a>"
+        f"<figcaption>{html.escape(_CAPTIONS[k])}</figcaption></figure>"
+        for k, _ in pics
+    )
+    section = f"<h3>Worst compared frame by colour error: {html.escape(head)}</h3><div class='snaps'>{figs}</div>"
+    if not plots:
+        return section
     fig, axes = grid_figure(1, 3.4, cols=len(pics), sharex=False)
     for ax, img, cap in zip(
         axes, (w.client, w.truth), ("the client's picture (its LODs)", "the full scene (every object at LOD2)"), strict=False
@@ -76,19 +95,4 @@ def write_colour_worst(out: Path, w: ColourWorst) -> str:
         ax.grid(False)
     fig.suptitle("Worst compared frame by colour error: " + head, fontsize=9)
     save_figure(fig, folder / "worst_colour.png")
-    caps = {
-        "client": "the client's picture: its objects at the LOD it drew them",
-        "truth": "the full scene: every object within the view distance at LOD2",
-        "heat": f"dE00 per pixel: black none, white {HEAT_TOP_DE:g} or more",
-        "scielab": "dE00 of the pictures filtered as the eye sees them (S-CIELAB), same scale",
-    }
-    figs = "".join(
-        f"<figure><a href='truth/{_NAMES[k]}'><img src='truth/{_NAMES[k]}' alt='{k}'></a>"
-        f"<figcaption>{html.escape(caps[k])}</figcaption></figure>"
-        for k, _ in pics
-    )
-    return (
-        f"<h3>Worst compared frame by colour error: {html.escape(head)}</h3>"
-        f"<div class='snaps'>{figs}</div><p>Side by side with the scale: "
-        "<a href='truth/worst_colour.png'>worst_colour.png</a></p>"
-    )
+    return section + "<p>Side by side with the scale: <a href='truth/worst_colour.png'>worst_colour.png</a></p>"

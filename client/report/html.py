@@ -124,7 +124,12 @@ def _page(title: str, body: str) -> str:
     )
 
 
-def _figures(names: Sequence[str], captions: Mapping[str, str]) -> str:
+_NO_PLOTS = "<p class='missing'>Plots not drawn (<code>--no-plots</code>): the figures are in the CSV files.</p>"
+
+
+def _figures(names: Sequence[str], captions: Mapping[str, str], plots: bool = True) -> str:
+    if not plots:
+        return _NO_PLOTS
     return "\n".join(
         f"<figure><img src='{_url(n)}' alt='{html.escape(n)}'>"
         f"<figcaption>{html.escape(captions.get(n, n))}</figcaption></figure>"
@@ -172,7 +177,7 @@ def _save_png(path: Path, rgb: Any) -> None:
         Image.fromarray(rgb, "RGB").save(f, format="PNG")
 
 
-def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | None) -> str:
+def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | None, plots: bool = True) -> str:
     """The ground-truth part of the page: figures, error.png, the worst frame; files written here."""
     if truth is None:
         return ""
@@ -181,7 +186,7 @@ def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | N
     if truth.error:
         parts.append(f"<p class='missing'>no ground truth: {html.escape(truth.error)}</p>")
     if truth.culled:
-        parts.append(_culled_section(out, s, truth))
+        parts.append(_culled_section(out, s, truth, plots))
         if len(truth.log):  # the colour error against the full scene without fog
             write_truth_csv(out / "truth.csv", truth.log)
             pct = _pct
@@ -191,9 +196,9 @@ def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | N
                 + "".join(f"<tr><th>{html.escape(k)}</th><td class='v'>{html.escape(v)}</td></tr>" for k, v in rows)
                 + "</table><p>Per compared frame: <a href='truth.csv'>truth.csv</a></p>"
             )
-            parts.append(_figures(["error.png"], _CAPTIONS))
+            parts.append(_figures(["error.png"], _CAPTIONS, plots))
         if truth.colour_worst is not None:
-            parts.append(write_colour_worst(out, truth.colour_worst))
+            parts.append(write_colour_worst(out, truth.colour_worst, plots))
         return "\n".join(parts)
     write_truth_csv(out / "truth.csv", truth.log)
 
@@ -223,7 +228,7 @@ def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | N
         + "".join(f"<tr><th>{html.escape(k)}</th><td class='v'>{html.escape(v)}</td></tr>" for k, v in rows)
         + "</table><p>Per compared frame: <a href='truth.csv'>truth.csv</a></p>"
     )
-    parts.append(_figures(["error.png"], _CAPTIONS))
+    parts.append(_figures(["error.png"], _CAPTIONS, plots))
     w = truth.worst
     if w is not None:
         (out / "truth").mkdir(exist_ok=True)
@@ -250,7 +255,7 @@ def _truth_section(out: Path, summary: Mapping[str, Any], truth: TruthResult | N
             f"<div class='snaps'>{figs}</div><p>Mask colours: {legend}</p>"
         )
     if truth.colour_worst is not None:
-        parts.append(write_colour_worst(out, truth.colour_worst))
+        parts.append(write_colour_worst(out, truth.colour_worst, plots))
     return "\n".join(parts)
 
 
@@ -300,19 +305,20 @@ def _colour_rows(c: Mapping[str, Any] | None, pct: Callable[[Any], str]) -> list
     ]
 
 
-def _culled_section(out: Path, s: Mapping[str, Any], truth: TruthResult) -> str:
+def _culled_section(out: Path, s: Mapping[str, Any], truth: TruthResult, plots: bool = True) -> str:
     """A walk with rooms: its culled-pixel figures, ``culled.png`` and the worst frame
     beside its truth with a mask of its culled pixels coloured by cell."""
     from walkstream.client.report.plots import plot_culled
     from walkstream.client.truth.culledview import PINHOLE_RGB, cell_rgb
 
     rows = truth.culled
-    plot_culled(out / "culled.png", [r.t for r in rows], [r.culled_pixels for r in rows],
-                [r.pinholes for r in rows], [r.refused for r in rows], "culled pixels per compared frame")
+    if plots:
+        plot_culled(out / "culled.png", [r.t for r in rows], [r.culled_pixels for r in rows],
+                    [r.pinholes for r in rows], [r.refused for r in rows], "culled pixels per compared frame")
     keys = ("frames", "culled_pixels", "culled_frames", "pinholes", "refused_poses", "tightness_p95")
     table = "".join(f"<tr><th>{html.escape(k)}</th><td class='v'>{html.escape(str(s.get(k)))}</td></tr>"
                     for k in keys if k in s)
-    parts = [f"<table>{table}</table>", _figures(["culled.png"], _CAPTIONS)]
+    parts = [f"<table>{table}</table>", _figures(["culled.png"], _CAPTIONS, plots)]
     w = truth.culled_worst
     if w is None:
         parts.append("<p>No compared frame culled a pixel the truth shows (nor a pinhole).</p>")
@@ -365,6 +371,7 @@ def write_report(
     truth: TruthResult | None = None,
     phases: NDArray[np.float64] | None = None,
     interior: Mapping[str, NDArray[np.float64]] | None = None,
+    plots: bool = True,
 ) -> Path:
     """Write the report folder of one replay and return the path of its ``index.html``.
 
@@ -396,6 +403,9 @@ def write_report(
     interior : dict of (frames,) arrays, optional
         An interior walk's ``cells``, ``portals``, ``triangles``, ``cull_ms``,
         ``fog_m`` per frame: adds ``interior.png``.
+    plots : bool
+        False: no plot is drawn (``replay --no-plots``), only the figures, the CSV files
+        and the worst frames' pictures; drawing the plots is most of a report's time.
 
     Returns
     -------
@@ -414,25 +424,28 @@ def write_report(
     run = make_run(title, safe, log, bytes_log, 0)
     write_frames_csv(out / "frames.csv", log)
     write_bytes_csv(out / "bytes.csv", bytes_log)
-    plot_bytes(out / "bytes.png", [run], f"{title}: bytes downloaded")
-    plot_quality(out / "quality.png", [run], f"{title}: download and rewrite quality per frame")
-    plot_fps(out / "fps.png", [run], f"{title}: frame rate")
-    plot_budget(out / "budget.png", [run], f"{title}: polygon budget")
+    if plots:
+        plot_bytes(out / "bytes.png", [run], f"{title}: bytes downloaded")
+        plot_quality(out / "quality.png", [run], f"{title}: download and rewrite quality per frame")
+        plot_fps(out / "fps.png", [run], f"{title}: frame rate")
+        plot_budget(out / "budget.png", [run], f"{title}: polygon budget")
     names = list(BASE_PLOT_NAMES)
     if phases is not None and len(phases) == len(log.t):
         write_phases_csv(out / "phases.csv", log.t, phases)
-        plot_phases(
-            out / "phases.png", log.t - run.t0, phases, f"{title}: frame loop time per phase"
-        )
+        if plots:
+            plot_phases(
+                out / "phases.png", log.t - run.t0, phases, f"{title}: frame loop time per phase"
+            )
         names.append("phases.png")
     if interior is not None and len(log.t):
         from walkstream.client.report.plots import plot_interior
 
-        plot_interior(out / "interior.png", log.t - run.t0, dict(interior), f"{title}: cells, culling and fog")
+        if plots:
+            plot_interior(out / "interior.png", log.t - run.t0, dict(interior), f"{title}: cells, culling and fog")
         names.append("interior.png")
-    if truth is not None and (not truth.culled or len(truth.log)):
+    if plots and truth is not None and (not truth.culled or len(truth.log)):
         plot_error(out / "error.png", run, truth.log, f"{title}: frame rate and image error against the truth")
-    truth_html = _truth_section(out, safe, truth)
+    truth_html = _truth_section(out, safe, truth, plots)
     placed = _place_snapshots(out, snapshots)
     write_json(out / "report.json", safe)
     summary_json = json.dumps(safe, indent=2, allow_nan=False)
@@ -442,7 +455,7 @@ def write_report(
             "<p>Files: <a href='report.json'>report.json</a> · <a href='frames.csv'>frames.csv</a>"
             " (one row per frame) · <a href='bytes.csv'>bytes.csv</a> (link samples)</p>",
             "<h2>Plots</h2>",
-            _figures(names, _CAPTIONS),
+            _figures(names, _CAPTIONS, plots),
             truth_html,
             _snapshot_section(placed),
             "<h2>Definitions</h2><ul>"
