@@ -27,8 +27,10 @@ texture is sampled at eye height, so a viewer ``Δz`` above or below it at dista
 ``x`` errs by at most ``atan(|Δz| / x)``, and the texture is used only while that
 is under ``A`` (stairs, a gallery: geometry instead).  What the paper leaves out, a
 viewer nearer or farther than the sampling point seeing points far to the side, is
-not bounded by this metric; :func:`angular_error` computes any case exactly (the
-tests check the bound where it holds and measure the rest).
+not bounded by this metric (a texture sampled from ``x_s`` and seen from ``x`` is
+magnified ``x_s / x`` about the viewer's foot: :func:`zone_warp` lays it for the
+viewer's distance); :func:`angular_error` computes any case exactly (the tests check
+the bound where it holds and measure the rest).
 
 Blend: nearer than ``x_T + blend`` the texture fades out linearly, reaching 0 at
 ``x_T``; below ``x_T`` the wall is open (the next cell drawn as geometry).
