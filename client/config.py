@@ -183,8 +183,9 @@ class ReplayConfig:
     :func:`~walkstream.shared.walls.zone_mix`)."""
     wall_parallax: float = 0.5
     """How far a virtual wall's texture slides along the wall with the viewer's offset from
-    its zone's sampling line, as a share of that offset (``--wall-parallax``; 0: fixed on
-    the wall; :func:`~walkstream.shared.walls.zone_slide`)."""
+    its zone's sampling line, as a share of that offset, and is scaled for the viewer's
+    distance against the sampling point's (``--wall-parallax``; 0: fixed on the wall;
+    :func:`~walkstream.shared.walls.zone_warp`)."""
 
     def __post_init__(self) -> None:
         if self.stream not in STREAM_FORMS:

@@ -27,8 +27,10 @@ texture is sampled at eye height, so a viewer ``Δz`` above or below it at dista
 ``x`` errs by at most ``atan(|Δz| / x)``, and the texture is used only while that
 is under ``A`` (stairs, a gallery: geometry instead).  What the paper leaves out, a
 viewer nearer or farther than the sampling point seeing points far to the side, is
-not bounded by this metric; :func:`angular_error` computes any case exactly (the
-tests check the bound where it holds and measure the rest).
+not bounded by this metric (a texture sampled from ``x_s`` and seen from ``x`` is
+magnified ``x_s / x`` about the viewer's foot: :func:`zone_warp` lays it for the
+viewer's distance); :func:`angular_error` computes any case exactly (the tests check
+the bound where it holds and measure the rest).
 
 Blend: nearer than ``x_T + blend`` the texture fades out linearly, reaching 0 at
 ``x_T``; below ``x_T`` the wall is open (the next cell drawn as geometry).
@@ -48,10 +50,12 @@ from walkstream.shared.errors import InputError
 __all__ = [
     "DEFAULT_WALL_ERROR_DEG",
     "EYE_HEIGHT",
+    "NO_WARP",
     "RING_SIDES",
     "WallSide",
     "WallTable",
     "WallView",
+    "WallWarp",
     "angular_error",
     "decode_walls",
     "ring_cell",
@@ -60,6 +64,7 @@ __all__ = [
     "zone_count",
     "zone_mix",
     "zone_slide",
+    "zone_warp",
 ]
 
 DEFAULT_WALL_ERROR_DEG = 10.0
@@ -264,6 +269,7 @@ class WallTable:
         self.x_t = np.array([s.x_t for s in self.sides], np.float64)
         self.blend = np.array([s.blend for s in self.sides], np.float64)
         self.eye_z = np.array([s.floor + EYE_HEIGHT for s in self.sides], np.float64)
+        self.depth = np.array([s.depth for s in self.sides], np.float64)
         self.tan = np.tan(np.array([s.alpha for s in self.sides], np.float64))
 
     def along_of(self, eyes: ArrayLike) -> NDArray[np.float64]:
@@ -352,6 +358,55 @@ def zone_slide(along: ArrayLike, zone: ArrayLike, width: ArrayLike, share: float
     t = np.asarray(along, np.float64)
     z = np.asarray(zone, np.int64)
     out: NDArray[np.float64] = np.where(z >= 0, float(share) * (t - (z + 0.5) * np.asarray(width, np.float64)), 0.0)
+    return out
+
+
+WallWarp = tuple[float, float, float]
+"""How a wall's texture is laid on its quad: ``(scale, along, up)``, the texture's point
+shown at the wall's point ``(s, z)`` (``s`` metres from ``p0``, ``z`` the height) is the
+one the texture holds at ``(along + scale s, up + scale z)``; ``(1, 0, 0)`` as baked, and
+``(1, -d, 0)`` the texture slid ``d`` metres towards ``p1``."""
+
+NO_WARP: WallWarp = (1.0, 0.0, 0.0)
+"""The texture as baked."""
+
+
+def zone_warp(along: ArrayLike, eye_z: ArrayLike, distance: ArrayLike, zone: ArrayLike, width: ArrayLike,
+              depth: ArrayLike, sample_z: ArrayLike, share: float) -> NDArray[np.float64]:
+    """``(..., 3)`` the :data:`WallWarp` of zone ``zone``'s texture for a viewer whose foot on
+    the wall line is ``along`` (metres from ``p0``), eye at height ``eye_z``, ``distance``
+    in front of the wall, the zone's sampling point ``depth`` in front of it at height
+    ``sample_z``: exact for what stands ``p = x share / (1 - share)`` behind the wall
+    (``x`` the viewer's distance; at one half as far behind the wall as the viewer stands
+    before it), as :func:`zone_slide` along the wall.
+
+    :func:`zone_slide` is the case of a viewer as far from the wall as the sampling point.
+    A viewer nearer or farther sees a texture sampled from ``x_s`` magnified: a point
+    ``P`` far behind the wall, at angle ``θ`` from the wall's normal, is on the texture
+    ``x_s tan θ`` from the sampling point's foot, and the viewer at ``x`` sees it at
+    ``atan(x_s tan θ / x)``, not ``θ``: at ``x_s / x`` = 1.6 that is 13 degrees off at
+    ``θ`` = 38 degrees, whatever the zone's width (the paper's error metric moves the
+    viewer along the wall only).  A ring's regions are tens of metres deep, so a viewer
+    stands anywhere from ``r`` to ``r`` plus the region's depth from a wall sampled from its
+    middle.  From a sampling foot ``F_s`` and the viewer's ``F_v`` (along the wall and at
+    eye height), a point at depth ``p`` shows on the texture at ``T_s = F_s + (P - F_s) x_s
+    / (x_s + p)`` and the viewer sees it at ``T_v = F_v + (P - F_v) x / (x + p)``; with
+    ``R = share = p / (x + p)``, ``T_s = F_s + k (T_v - F_v - (1 - R) (F_s - F_v))`` with
+    ``k = x_s / (x_s (1 - R) + x R)``: the same affine map along the wall and up it, so
+    the texture is laid on the quad by its corners' texture coordinates alone.
+
+    ``along`` ... ``sample_z`` broadcast; ``share`` from 0 (the texture fixed on the wall)
+    to 1 (exact for what is far)."""
+    t = np.asarray(along, np.float64)
+    x = np.maximum(np.asarray(distance, np.float64), 1e-6)
+    xs = np.maximum(np.asarray(depth, np.float64), 1e-6)
+    r = float(share)
+    b_s = (np.asarray(zone, np.float64) + 0.5) * np.asarray(width, np.float64)
+    z_s = np.asarray(sample_z, np.float64)
+    k = xs / (xs * (1.0 - r) + x * r)
+    out: NDArray[np.float64] = np.stack(np.broadcast_arrays(
+        k, b_s - k * (r * t + (1.0 - r) * b_s), z_s - k * (r * np.asarray(eye_z, np.float64) + (1.0 - r) * z_s)),
+        axis=-1)
     return out
 
 

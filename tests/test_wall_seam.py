@@ -26,7 +26,7 @@ from walkstream.client.truth.seam import (
 from walkstream.client.walk.walls import DrawnWall, wall_quads
 from walkstream.shared.camera import look_at, perspective
 from walkstream.shared.errors import InputError
-from walkstream.shared.walls import EYE_HEIGHT, WallSide, WallTable, zone_mix, zone_slide
+from walkstream.shared.walls import EYE_HEIGHT, WallSide, WallTable, zone_mix, zone_slide, zone_warp
 
 _SIDE = WallSide(0, 0, (-6.0, 5.0), (6.0, 5.0), 0.0, 3.0, 0.0, 1.0, 1.0, 3.0, float(np.radians(10.0)), 4,
                  (10, 11, 12, 13))
@@ -126,15 +126,17 @@ def _walk(gl: Any, band: float, parallax: float = 0.0) -> dict[str, Any]:
         for x in np.linspace(-4.5, 4.5, 91):
             eye = np.array([x, 0.0, EYE_HEIGHT])
             view = look_at(eye, np.array([x, 5.0, EYE_HEIGHT]))
-            zones, _d, weights = table.views(eye[None])
+            zones, dist, weights = table.views(eye[None])
             nb, share = zone_mix(table.along_of(eye)[0], table.width, table.zones, band)
             zone, alpha = int(zones[0, 0]), float(weights[0, 0])
             mix_image = _SIDE.textures[int(nb[0])] if nb[0] >= 0 else -1
             foot = float(table.along_of(eye)[0, 0])
-            slides = tuple(float(v) for v in zone_slide(foot, np.array([zone, nb[0]]), table.width[0], parallax))
+            got = zone_warp(foot, EYE_HEIGHT, dist[0, 0], np.array([zone, max(int(nb[0]), 0)]), table.width[0],
+                            table.depth[0], table.eye_z[0], parallax)
+            warps = tuple((float(g[0]), float(g[1]), float(g[2])) for g in got)
             d = DrawnWall(0, 0, zone, _SIDE.textures[zone], alpha, _SIDE.corners(), 0, (0, 1), mix_image,
-                          float(share[0]) if mix_image >= 0 else 0.0, (slides[0], slides[1]))
-            walls = [SeamWall(d.portal, d.side, d.image, d.mix_image, d.mix, d.alpha, d.corners, d.slides)]
+                          float(share[0]) if mix_image >= 0 else 0.0, (warps[0], warps[1]))
+            walls = [SeamWall(d.portal, d.side, d.image, d.mix_image, d.mix, d.alpha, d.corners, d.warps)]
             still = None
             earlier = meter.earlier(walls)
             if earlier[0] is not None:  # the frame held still: the wall as the frame before showed it

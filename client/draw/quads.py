@@ -25,8 +25,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.errors import RenderError
+from walkstream.shared.walls import NO_WARP, WallWarp
 
-__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "slid"]
+__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "slid", "warped"]
 
 IMPOSTOR_MIN_FILTER: int = moderngl.LINEAR
 """How an impostor image's texels are read when it is drawn smaller than baked: bilinear.
@@ -179,28 +180,41 @@ def quads_of(drawn: Sequence[Any], image: Any) -> list[Quad]:
 def slid(corners: NDArray[np.float64], slide: float) -> NDArray[np.float64]:
     """``(4, 5)`` a quad's ``corners`` ``(4, 3)`` with texture coordinates that slide its
     image ``slide`` metres from the left edge towards the right (0: ``(4, 3)`` as given)."""
-    if slide == 0.0:
+    return warped(corners, (1.0, -float(slide), 0.0))
+
+
+def warped(corners: NDArray[np.float64], warp: WallWarp) -> NDArray[np.float64]:
+    """``(4, 5)`` a virtual wall's ``corners`` ``(4, 3)`` (bottom-left, bottom-right,
+    top-right, top-left, vertical) with texture coordinates that lay its texture by
+    ``warp`` (:data:`~walkstream.shared.walls.WallWarp`: the texture's point at
+    ``(along + scale s, up + scale z)`` shown at the wall's ``(s, z)``); the corners as
+    given for :data:`~walkstream.shared.walls.NO_WARP`.  The map is affine on the quad's
+    plane, so the corners' coordinates interpolated across it are exact."""
+    if tuple(warp) == NO_WARP:
         return corners
+    k, along, up = (float(v) for v in warp)
     c = np.asarray(corners, np.float64).reshape(4, 3)
     length = max(float(np.linalg.norm(c[1, :2] - c[0, :2])), 1e-9)
-    uv = _UV.astype(np.float64).copy()
-    uv[:, 0] -= slide / length
+    z0, z1 = float(c[0, 2]), float(c[3, 2])
+    height = z1 - z0 if abs(z1 - z0) > 1e-9 else 1e-9
+    s = np.array([0.0, length, length, 0.0])
+    uv = np.stack([(along + k * s) / length, (z1 - (up + k * c[:, 2])) / height], axis=1)
     return np.hstack([c, uv])
 
 
 def cross_fade(
     corners: NDArray[np.float64], key: int, rgba: NDArray[np.uint8], other_key: int,
-    other: NDArray[np.uint8] | None, alpha: float, mix: float, slides: tuple[float, float] = (0.0, 0.0),
+    other: NDArray[np.uint8] | None, alpha: float, mix: float, warps: tuple[WallWarp, WallWarp] = (NO_WARP, NO_WARP),
 ) -> list[Quad]:
     """One quad showing ``(1 - mix)`` of ``rgba`` and ``mix`` of ``other`` at opacity
     ``alpha``, as the renderer composes it: ``rgba`` at ``a (1 - m) / (1 - a m)`` and
     ``other`` over it at ``a m``; drawn "over" (premultiplied) that is exactly
     ``a ((1 - m) rgba + m other) + (1 - a) behind`` for opaque images.  One quad when
     ``other`` is None or ``mix`` is 0.  ``corners`` ``(4, 3)``, images ``(h, w, 4)``;
-    ``slides`` the metres each image slides along the quad (:func:`slid`)."""
-    own = slid(corners, slides[0])
+    ``warps`` how each image is laid on the quad (:func:`warped`)."""
+    own = warped(corners, warps[0])
     if other is None or mix <= 0.0:
         return [(own, key, rgba, float(alpha))]
     a, m = float(alpha), float(mix)
     return [(own, key, rgba, a * (1.0 - m) / max(1.0 - a * m, 1e-9)),
-            (slid(corners, slides[1]), other_key, other, a * m)]
+            (warped(corners, warps[1]), other_key, other, a * m)]

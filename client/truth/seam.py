@@ -46,6 +46,7 @@ from numpy.typing import NDArray
 
 from walkstream.client.draw.quads import Quad, cross_fade
 from walkstream.client.truth.pop import object_change
+from walkstream.shared.walls import NO_WARP, WallWarp
 
 __all__ = ["SEAM_KINDS", "SeamMeter", "SeamWall", "seam_figures", "still_quads", "wall_pixels"]
 
@@ -66,8 +67,8 @@ class SeamWall:
     mix: float
     alpha: float
     corners: NDArray[np.float64]
-    slides: tuple[float, float] = (0.0, 0.0)
-    """How far its texture and the neighbour's slid along the wall (``DrawnWall.slides``)."""
+    warps: tuple[WallWarp, WallWarp] = (NO_WARP, NO_WARP)
+    """How its texture and the neighbour's were laid on the wall (``DrawnWall.warps``)."""
 
     @property
     def look(self) -> tuple[int, int, float]:
@@ -199,7 +200,7 @@ def still_quads(walls: Sequence[SeamWall], earlier: Sequence[SeamWall | None],
         other = images.get(w.mix_image) if w.mix > 0 else None
         if rgba is None or (w.mix > 0 and other is None):
             return None
-        out += cross_fade(b.corners, -1 - w.image, rgba, -1 - w.mix_image, other, b.alpha, w.mix, w.slides)
+        out += cross_fade(b.corners, -1 - w.image, rgba, -1 - w.mix_image, other, b.alpha, w.mix, w.warps)
     return out
 
 

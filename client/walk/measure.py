@@ -153,7 +153,7 @@ def note_truth(w: WalkState, f: Frame) -> None:
         rec.record(frame=w.frame, t=t, eye=f.eye, view=f.view, parts=parts, waiting=waiting, fog=float(f.fog),
                    walls=[d.corners for d in f.walls if d.alpha >= 1.0],
                    wall_quads=[] if w.scene.wall_images is None else wall_quads(f.walls, w.scene.wall_images.image),
-                   seam_walls=[SeamWall(d.portal, d.side, d.image, d.mix_image, d.mix, d.alpha, d.corners, d.slides)
+                   seam_walls=[SeamWall(d.portal, d.side, d.image, d.mix_image, d.mix, d.alpha, d.corners, d.warps)
                                for d in f.walls])
     else:
         # outdoors before the street cell's record: no visible set known, nothing culled

@@ -20,9 +20,12 @@ before the portal walk (:func:`frame_walls`):
   a wall two cells away is drawn only when its cell is (:func:`drawn_walls`);
 - with ``--wall-parallax R`` (0.5 by default) each texture slides along its wall by ``R``
   times the viewer's offset from its zone's sampling line
-  (:func:`~walkstream.shared.walls.zone_slide`): what
-  stands behind the wall moves on the screen as parallax moves it, not as the wall does,
-  and two zones' textures agree at their border, where they blend.
+  (:func:`~walkstream.shared.walls.zone_slide`), and shrinks or grows about the
+  viewer's foot on the wall as the viewer stands nearer or farther than the sampling
+  point (:func:`~walkstream.shared.walls.zone_warp`): what stands behind the wall moves
+  on the screen as parallax moves it, not as the wall does, two zones' textures agree
+  at their border, where they blend, and a viewer near a wall sampled from far does not
+  see what is behind it magnified.
 
 With ``config.virtual_walls`` off, or a scene without walls, nothing is closed and
 the frame is what it was.
@@ -59,7 +62,15 @@ from walkstream.client.walk.ringahead import ring_textures_ahead, ring_zones_ahe
 from walkstream.client.walk.scene import WalkScene
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.frustum import frustum_cull
-from walkstream.shared.walls import WallSide, WallTable, ring_cell, zone_mix, zone_slide
+from walkstream.shared.walls import (
+    NO_WARP,
+    WallSide,
+    WallTable,
+    WallWarp,
+    ring_cell,
+    zone_mix,
+    zone_warp,
+)
 
 __all__ = [
     "RING_BEHIND_NEED_S", "WALL_AHEAD_S", "WALL_MIX_NEED_S", "DrawnWall", "drawn_walls", "frame_walls", "ring_walls",
@@ -88,10 +99,10 @@ class DrawnWall:
     mix: float = 0.0
     """Its share (0 to 0.5): the wall shows ``(1 - mix)`` of its own zone's texture
     and ``mix`` of the neighbour's, at :attr:`alpha`."""
-    slides: tuple[float, float] = (0.0, 0.0)
-    """Metres its own texture and the neighbour's slide along the wall towards its
-    right end, with the viewer's offset from each zone's sampling line
-    (:func:`~walkstream.shared.walls.zone_slide`, ``--wall-parallax``)."""
+    warps: tuple[WallWarp, WallWarp] = (NO_WARP, NO_WARP)
+    """How its own texture and the neighbour's are laid on the wall: slid with the viewer's
+    offset from each zone's sampling line and scaled with its distance against the
+    sampling point's (:func:`~walkstream.shared.walls.zone_warp`, ``--wall-parallax``)."""
 
 
 WALL_AHEAD_S = (0.5, 1.0, 1.5, 2.0, 3.0, 4.5, 6.0)
@@ -111,12 +122,17 @@ RING_BEHIND_NEED_S = 0.5
 after those in view."""
 
 
-def _slides(foot: float, zone: int, mix_zone: int, width: float, share: float) -> tuple[float, float]:
-    """The slides of a wall's own zone's texture and the neighbour's blended in (module docs)."""
+def _warps(table: WallTable, k: int, eye: NDArray[np.float64], foot: float, distance: float, zone: int,
+           mix_zone: int, share: float) -> tuple[WallWarp, WallWarp]:
+    """How side ``k``'s own zone's texture and the neighbour's blended in are laid on it
+    for a viewer at ``eye`` (module docs)."""
     if share <= 0.0:
-        return (0.0, 0.0)
-    got = zone_slide(foot, np.array([zone, mix_zone]), width, share)
-    return (float(got[0]), float(got[1]))
+        return (NO_WARP, NO_WARP)
+    got = zone_warp(foot, float(eye[2]), distance, np.array([zone, max(mix_zone, 0)]), table.width[k],
+                    table.depth[k], table.eye_z[k], share)
+    own = (float(got[0, 0]), float(got[0, 1]), float(got[0, 2]))
+    other = (float(got[1, 0]), float(got[1, 1]), float(got[1, 2])) if mix_zone >= 0 else NO_WARP
+    return (own, other)
 
 
 def add_ring_sides(scene: WalkScene, sides: Sequence[WallSide]) -> None:
@@ -168,7 +184,7 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     moving = float(np.linalg.norm(velocity)) > 1e-3
     horizons = WALL_AHEAD_S if moving else ()
     eyes = np.array([eye, *[eye + np.array([*(velocity * t), 0.0]) for t in horizons]])
-    zones, _d, weights = table.views(eyes)
+    zones, dist, weights = table.views(eyes)
     wants: dict[int, float] = {}
 
     def want(tid: int, need: float) -> None:
@@ -221,7 +237,8 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             img = lane.image(tid)
             out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
                                  int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix,
-                                 _slides(foot[k], zone, int(mix_zone[k]), table.width[k], w.config.wall_parallax)))
+                                 _warps(table, k, eye, float(foot[k]), float(dist[0, k]), zone, int(mix_zone[k]),
+                                        w.config.wall_parallax)))
         # the zones the eye walks into along its ring (the walker may turn: ring_zones_ahead)
         ring_zones_ahead(table, sides, ring, eye, eyes[1:], horizons, in_view, want)
     if w.config.prefetch:  # the rings the walker enters next, where it enters them
@@ -257,7 +274,7 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
     # out before the turn shows them)
     ahead = [rooms.view_ahead(eye, view, t) for t in horizons]
     eyes = np.array([eye, *[e for e, _ in ahead]])
-    zones, _d, weights = table.views(eyes)
+    zones, dist, weights = table.views(eyes)
     wanted: list[tuple[int, int, float]] = []
     out: list[DrawnWall] = []
     closed: set[int] = set()
@@ -298,7 +315,8 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
                 wanted.append((nb, cells[0], WALL_MIX_NEED_S))
         out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
                              int(getattr(img, "nbytes", 0)), cells, mix_tid, mix,
-                             _slides(foot[k], zone, int(mix_zone[k]), table.width[k], w.config.wall_parallax)))
+                             _warps(table, k, eye, float(foot[k]), float(dist[0, k]), zone, int(mix_zone[k]),
+                                    w.config.wall_parallax)))
         if weights[0, k] >= 1.0:
             closed.add(s.portal)
     for h, t in enumerate(horizons, start=1):
@@ -354,5 +372,5 @@ def wall_quads(walls: Sequence[DrawnWall], image: Callable[[int], Any]) -> list[
         if rgba is None:
             continue
         other = image(d.mix_image) if d.mix_image >= 0 and d.mix > 0.0 else None
-        out += cross_fade(d.corners, -1 - d.image, rgba, -1 - d.mix_image, other, d.alpha, d.mix, d.slides)
+        out += cross_fade(d.corners, -1 - d.image, rgba, -1 - d.mix_image, other, d.alpha, d.mix, d.warps)
     return out

@@ -126,9 +126,13 @@ class WallRenderer(Releasable):
         self.vao = self.ctx.vertex_array(prog, [(vbo, "3f 3f 3f", "in_position", "in_normal", "in_color")])
         self._objects.append(self.vao)
 
-    def render(self, side: WallSide, zone: int, width: int, exclude: Sequence[int] = ()) -> NDArray[np.uint8]:
+    def render(self, side: WallSide, zone: int, width: int, exclude: Sequence[int] = (),
+               eye: NDArray[np.float64] | None = None) -> NDArray[np.uint8]:
         """The premultiplied ``(height, width, 4) uint8`` texture of ``side``'s zone ``zone``
-        (row 0 at the top), the elements ``exclude`` as transparent holes."""
+        (row 0 at the top), the elements ``exclude`` as transparent holes; with ``eye``
+        ``(3,)`` what that eye sees through the wall's quad instead of the zone's sampling
+        point (what a viewer there should see on the wall: tests and benchmarks hold the
+        texture against it)."""
         height = texture_height(side, width)
         size = (width * SUPERSAMPLE, height * SUPERSAMPLE)
         fb = self._fbs.get(size)
@@ -138,7 +142,8 @@ class WallRenderer(Releasable):
         fb.clear((0.0, 0.0, 0.0, 0.0))
         self.ctx.enable(self.ctx.DEPTH_TEST)
         self.ctx.disable(self.ctx.CULL_FACE)
-        self.prog["u_view_proj"].write(mat4_bytes(off_axis(side.sample_point(zone), side)))
+        at = side.sample_point(zone) if eye is None else np.asarray(eye, np.float64).reshape(3)
+        self.prog["u_view_proj"].write(mat4_bytes(off_axis(at, side)))
         skip = set(int(e) for e in exclude)
         self.prog["u_hole"].value = 0.0
         run_first = run_count = 0
