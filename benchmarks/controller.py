@@ -44,7 +44,8 @@ from numpy.typing import NDArray
 
 from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.devices import Device, make_device
-from walkstream.client.report.metrics import displayed_fps, recovery_frames, within_ratio
+from walkstream.client.report.framelog import displayed_fps
+from walkstream.client.report.metrics import recovery_frames, within_ratio
 from walkstream.shared.errors import InputError
 
 __all__ = [

@@ -41,13 +41,10 @@ from walkstream.client.net.api import SceneClient
 from walkstream.client.net.link import ShapedTransport
 from walkstream.client.report.city import city_summary
 from walkstream.client.report.crossing import crossing_summary
+from walkstream.client.report.framelog import FrameLog, FrameLogBuilder
 from walkstream.client.report.interior import interior_summary
 from walkstream.client.report.link import bytes_series, link_figures
-from walkstream.client.report.metrics import (
-    FrameLog,
-    FrameLogBuilder,
-    summarise,
-)
+from walkstream.client.report.metrics import summarise
 from walkstream.client.rewrite.pool import RewriteOptions
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.diskcache import DiskCache

@@ -19,7 +19,8 @@ from walkstream.benchmarks.controller import (
 )
 from walkstream.client.draw.budget import BudgetController
 from walkstream.client.draw.devices import CostModelDevice, make_device
-from walkstream.client.report.metrics import displayed_fps, recovery_frames, within_ratio
+from walkstream.client.report.framelog import displayed_fps
+from walkstream.client.report.metrics import recovery_frames, within_ratio
 from walkstream.shared.errors import InputError
 
 CASES = [("desktop2003", 25.0), ("desktop2003", 40.0), ("pda", 10.0)]

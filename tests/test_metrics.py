@@ -9,11 +9,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from walkstream.client.report.framelog import FrameLog, FrameLogBuilder, displayed_fps
 from walkstream.client.report.metrics import (
-    FrameLog,
-    FrameLogBuilder,
     Recovery,
-    displayed_fps,
     first_perfect_index,
     perfect_mask,
     recovery_frames,

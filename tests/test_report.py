@@ -27,7 +27,8 @@ from walkstream.client.report import (
 )
 from walkstream.client.report import files as report_files
 from walkstream.client.report import plots as report_plots
-from walkstream.client.report.metrics import FrameLog, FrameLogBuilder, summarise
+from walkstream.client.report.framelog import FrameLog, FrameLogBuilder
+from walkstream.client.report.metrics import summarise
 from walkstream.shared.errors import InputError
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

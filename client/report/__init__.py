@@ -49,12 +49,10 @@ from walkstream.client.report.files import (
     write_frames_csv,
     write_json,
 )
+from walkstream.client.report.framelog import FrameLog, FrameLogBuilder, displayed_fps
 from walkstream.client.report.html import write_comparison, write_report
 from walkstream.client.report.metrics import (
-    FrameLog,
-    FrameLogBuilder,
     Recovery,
-    displayed_fps,
     link_utilisation,
     recovery_frames,
     summarise,

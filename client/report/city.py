@@ -9,7 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from walkstream.client.config import ReplayConfig
-from walkstream.client.report.metrics import FrameLog, link_utilisation
+from walkstream.client.report.framelog import FrameLog
+from walkstream.client.report.metrics import link_utilisation
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.streamer import Streamer
 from walkstream.shared.paths import RecordedPath

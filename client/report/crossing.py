@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from walkstream.client.config import ReplayConfig
-from walkstream.client.report.metrics import FrameLog
+from walkstream.client.report.framelog import FrameLog
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.rooms import RoomStreamer
 from walkstream.client.stream.streamer import Streamer

@@ -16,7 +16,7 @@ from typing import IO, TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.client.report.metrics import COLUMNS, FrameLog
+from walkstream.client.report.framelog import COLUMNS, FrameLog
 from walkstream.shared.errors import InputError
 
 if TYPE_CHECKING:

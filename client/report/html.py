@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import quote
 
-from walkstream.client.report.metrics import FrameLog
+from walkstream.client.report.framelog import FrameLog
 from walkstream.shared.errors import InputError
 
 if TYPE_CHECKING:

@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 
 from walkstream.client.config import ReplayConfig
-from walkstream.client.report.metrics import FrameLog, first_perfect_index
+from walkstream.client.report.framelog import FrameLog
+from walkstream.client.report.metrics import first_perfect_index
 from walkstream.client.stream.cache import Cache
 from walkstream.client.stream.rooms import RoomStreamer
 from walkstream.client.walk.figures import WalkFrames

@@ -18,7 +18,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.client.report.colour import ColourLog
-from walkstream.client.report.metrics import FrameLog, first_perfect_index
+from walkstream.client.report.framelog import FrameLog
+from walkstream.client.report.metrics import first_perfect_index
 from walkstream.client.report.truth import OVER_SHARE, TruthLog
 from walkstream.client.truth.colour import COLOUR_CAUSE_RGB, COLOUR_CAUSES, VISIBLE_DE
 from walkstream.client.truth.compare import CAUSE_RGB, CAUSES

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.report.metrics import FrameLog
+from walkstream.client.report.framelog import FrameLog
 
 __all__ = ["MODEL_PVS", "MODEL_PORTALS", "WalkFrames"]
 

@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from walkstream.client.content.cellmesh import CELLMESH_CONTENT
 from walkstream.client.draw.phases import FramePhases
-from walkstream.client.report.metrics import FrameLog
+from walkstream.client.report.framelog import FrameLog
 from walkstream.client.walk.allocate import allocate
 from walkstream.client.walk.build import build
 from walkstream.client.walk.draw import draw, forget_flushed, upload

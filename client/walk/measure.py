@@ -22,7 +22,8 @@ from numpy.typing import NDArray
 
 from walkstream.client.clock import Clock
 from walkstream.client.draw.quads import quads_of
-from walkstream.client.report.metrics import FrameLog, first_perfect_index
+from walkstream.client.report.framelog import FrameLog
+from walkstream.client.report.metrics import first_perfect_index
 from walkstream.client.stream.cache import Cache
 from walkstream.client.truth.recorder import TruthResult
 from walkstream.client.truth.seam import SeamWall

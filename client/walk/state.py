@@ -19,7 +19,7 @@ from walkstream.client.clock import Clock
 from walkstream.client.config import ReplayConfig
 from walkstream.client.draw.allocate import Allocation
 from walkstream.client.draw.budget import BudgetController
-from walkstream.client.report.metrics import FrameLogBuilder
+from walkstream.client.report.framelog import FrameLogBuilder
 from walkstream.client.stream.predict import MotionPredictor
 from walkstream.client.truth.recorder import TruthRecorder
 from walkstream.client.walk.figures import WalkFrames
