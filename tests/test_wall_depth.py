@@ -6,7 +6,8 @@ tens of metres deep, its walls sampled from the region's middle) saw the texture
 magnified about its foot on the wall: on the village's worst frame a far tower a tenth
 of the frame off and a block of buildings pushed out of the frame.  Here one pillar
 stands behind a wall; where it lands on the texture and where the client lays it are
-checked against a ray-plane projection and a render from the eye itself.
+checked against a ray-plane projection and a render from the eye itself, and so is
+the texture drawn as a textured depth mesh (``benchmarks/walldepth.py``).
 """
 
 from __future__ import annotations
