@@ -332,7 +332,9 @@ def measure(db: str, source: str, report: str, path_name: str = "bench", share: 
                     filled = np.where(mask[..., :1] >= 128, pic, laid)
                     res[f"mesh {g} {how} + warp"] = _share(_wrong(filled, truth), weight)
                     res[f"holes {g} {how}"] = _share(mask[..., 0] < 128, weight)
-                    res[f"rubber {g} {how}"] = _share((mask[..., 0] >= 128) & (mask[..., 1] >= 128), weight)
+                    rubber = (mask[..., 0] >= 128) & (mask[..., 1] >= 128)
+                    res[f"rubber {g} {how}"] = _share(rubber, weight)
+                    res[f"wrong on rubber {g} {how}"] = _share(_wrong(filled, truth) & rubber, weight)
             # the bound: a texture from the viewer's own distance, slid by half its offset
             own = at + np.array([*(s.normal * (s.depth - v.distance)), 0.0])
             tex_own = ren.render(s, v.zone, width, eye=own)
@@ -351,19 +353,20 @@ def table(res: dict[str, list[float]]) -> str:
     """The Markdown table of :func:`measure`'s shares (percent of the wall views' weight)."""
     views = len(res.get("fixed", []))
     lines = [f"{views} wall views", "",
-             "| method | wrong, mean | median | 90th pct | holes, mean | rubber, mean | triangles a wall (flat runs merged) | depth bytes |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "| method | wrong, mean | median | 90th pct | holes, mean | rubber, mean | of it on rubber | triangles a wall (flat runs merged) | depth bytes |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     names = ["fixed", "warp"] + [f"mesh {g} {h}{f}" for g in _GRIDS for h in ("mean", "nearest")
                                  for f in ("", " + warp")] + ["own distance"]
     for name in names:
         if name not in res:
             continue
         a = 100.0 * np.asarray(res[name])
-        extra = ["", "", "2", ""]
+        extra = ["", "", "", "2", ""]
         if name.startswith("mesh"):
             key = name[5:].removesuffix(" + warp")
             g = int(key.split()[0])
             extra = [f"{100.0 * np.mean(res['holes ' + key]):.1f} %", f"{100.0 * np.mean(res['rubber ' + key]):.1f} %",
+                     f"{100.0 * np.mean(res['wrong on rubber ' + key]):.1f} %" if name.endswith("warp") else "",
                      f"{2 * g * g} ({np.mean(res['triangles ' + key]):.0f}){' + 2' if name.endswith('warp') else ''}",
                      f"{np.mean(res['bytes ' + key]):.0f}"]
         lines.append(f"| {name} | {a.mean():.1f} % | {np.median(a):.1f} % | {np.percentile(a, 90):.1f} % | "
