@@ -277,6 +277,13 @@ class Framebuffer(Releasable):
         raw = self.fbo.read(components=c, dtype=self.dtype, alignment=1)
         return np.frombuffer(raw, dtype=np_dtype).reshape(h, w, c)[::-1].copy()
 
+    def read_depth(self) -> NDArray[np.float32]:
+        """``(h, w) float32`` the depth buffer (0 at the near plane, 1 at the far plane
+        and where nothing was drawn), row 0 the top of the image as :meth:`read`."""
+        w, h = self.size
+        raw = self.fbo.read(components=1, attachment=-1, dtype="f4", alignment=1)
+        return np.frombuffer(raw, dtype=np.float32).reshape(h, w)[::-1].copy()
+
     def release(self) -> None:
         """Release the GL objects (safe to call twice)."""
         if self._fbo is not None and self.ctx.fbo is self._fbo:

@@ -6,7 +6,8 @@ tens of metres deep, its walls sampled from the region's middle) saw the texture
 magnified about its foot on the wall: on the village's worst frame a far tower a tenth
 of the frame off and a block of buildings pushed out of the frame.  Here one pillar
 stands behind a wall; where it lands on the texture and where the client lays it are
-checked against a ray-plane projection and a render from the eye itself.
+checked against a ray-plane projection and a render from the eye itself, and so is
+the texture drawn as a textured depth mesh (``benchmarks/walldepth.py``).
 """
 
 from __future__ import annotations
@@ -76,9 +77,16 @@ def test_the_texture_laid_for_a_nearer_viewer_shows_what_it_sees_through_the_wal
     eye = np.array([-1.5, 10.0, EYE_HEIGHT])  # 10 m from the wall, 1.5 m left of the sampling line
     try:
         tex = ren.render(_SIDE, 0, width)
+        behind = ren.depth_behind(_SIDE, 0, width)
         seen = ren.render(_SIDE, 0, width, eye=eye)
+        mesh = _depth_mesh_seen(gl, tex, behind, eye)
     finally:
         ren.release()
+    # the depth the texture carries: the pillar's front face 9.5 m behind the wall, nothing elsewhere
+    on = np.repeat(np.repeat(tex[..., 3] > 250, 2, axis=0), 2, axis=1)
+    assert np.median(behind[on]) == pytest.approx(_DEPTH - 0.5, abs=0.01) and np.isinf(behind[~on]).mean() > 0.99
+    # a 16 x 16 depth mesh of it, drawn from the eye, shows the pillar where the eye sees it
+    assert ((mesh[..., 3] > 127) != (seen[..., 3] > 127)).mean() < 0.005
     centre = np.array([3.0, 20.0 + _DEPTH, 0.0])
     top = np.array([3.0, 20.0 + _DEPTH - 0.5, 6.0])  # the top's near edge bounds it on the wall
     # the texture shows the pillar where the ray from the sampling point meets the wall
@@ -102,6 +110,26 @@ def test_the_texture_laid_for_a_nearer_viewer_shows_what_it_sees_through_the_wal
     off = _pillar(_laid(tex, (1.0, -slide, 0.0)))
     assert abs(off[0] - want[0]) > 0.4 and off[1] - EYE_HEIGHT > 1.2 * (want[1] - EYE_HEIGHT)
     assert _laid(tex, NO_WARP) is not tex and np.array_equal(_laid(tex, NO_WARP), tex)
+
+
+def _depth_mesh_seen(gl: object, tex: np.ndarray, behind: np.ndarray, eye: np.ndarray) -> np.ndarray:
+    """``tex`` with its depths ``behind`` as a 16 x 16 depth mesh (8-bit, the nearest
+    depth at each vertex) drawn from ``eye`` (``benchmarks/walldepth.py``)."""
+    from walkstream.benchmarks.walldepth import MeshDrawer, depth_mesh, quantised, vertex_depths
+    from walkstream.shared.gl import Framebuffer
+    from walkstream.shared.litimage import SUPERSAMPLE
+
+    at = _SIDE.sample_point(0)
+    inv = _SIDE.depth / (_SIDE.depth + np.minimum(behind.astype(np.float64), 1000.0))
+    grid = quantised(vertex_depths(inv, 16, "nearest"), 8, _SIDE.depth / (_SIDE.depth + 1000.0))
+    drawer = MeshDrawer(gl)
+    fb = Framebuffer(gl, (tex.shape[1] * SUPERSAMPLE, tex.shape[0] * SUPERSAMPLE))
+    try:
+        pic, _ = drawer.draw(_SIDE, eye, at, depth_mesh(_SIDE, at, grid), tex, fb)
+    finally:
+        fb.release()
+        drawer.release()
+    return pic
 
 
 def test_the_warp_is_the_slide_at_the_sampling_depth_and_exact_for_points_as_deep_as_the_share_says() -> None:

@@ -166,6 +166,21 @@ class WallRenderer(Releasable):
         check_gl_error(self.ctx, "wall textures")
         return average_samples(fb.read())
 
+    def depth_behind(self, side: WallSide, zone: int, width: int,
+                     eye: NDArray[np.float64] | None = None) -> NDArray[np.float32]:
+        """``(height * SUPERSAMPLE, width * SUPERSAMPLE) float32`` how far behind the wall's
+        plane (metres along its normal) each sample of the last :meth:`render` of the same
+        arguments lies, ``inf`` where nothing was drawn (row 0 at the top): the depth a
+        textured depth mesh would carry (``benchmarks/walldepth.py`` measures one)."""
+        fb = self._fbs[(width * SUPERSAMPLE, texture_height(side, width) * SUPERSAMPLE)]
+        d = fb.read_depth().astype(np.float64)
+        at = side.sample_point(zone) if eye is None else np.asarray(eye, np.float64).reshape(3)
+        near = float((np.asarray(side.p0, np.float64) - at[:2]) @ side.normal)
+        ndc = 2.0 * d - 1.0
+        view = 2.0 * near * _FAR / (_FAR + near - ndc * (_FAR - near))
+        out: NDArray[np.float32] = np.where(d >= 1.0, np.inf, np.maximum(view - near, 0.0)).astype(np.float32)
+        return out
+
     def release(self) -> None:
         """Free the GL objects (and the context when it made it)."""
         for fb in self._fbs.values():
