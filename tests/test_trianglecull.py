@@ -200,11 +200,12 @@ def test_triangles_wholly_in_front_skip_the_clip_and_each_is_tested_as_alone() -
     q = h[:, _SIDE_ENDS][:, :, whole]
     assert np.array_equal(ex, np.clip((q[0] / q[2] + 1.0) * (0.5 * SIZE[0]) - 0.5, -1e9, 1e9))
     assert np.array_equal(ey, np.clip((q[1] / q[2] + 1.0) * (0.5 * SIZE[1]) - 0.5, -1e9, 1e9))
-    vsa = np.tile(np.array([[30, 20, 120, 90], [1, 1, 0, 0]], np.int64), (n, 1, 1))
+    # (4, k, n): each triangle's two VSAs, the second an empty pad
+    vsa = np.ascontiguousarray(np.tile(np.array([[30, 20, 120, 90], [1, 1, 0, 0]], np.int64), (n, 1, 1)).transpose(2, 1, 0))
     planes = near_far(PROJ)
     assert planes is not None
     batch = _shows(pts, vsa, VIEW, PROJ, SIZE, 0.03, planes)
-    alone = [bool(_shows(pts[:, :, i:i + 1], vsa[i:i + 1], VIEW, PROJ, SIZE, 0.03, planes)[0]) for i in range(n)]
+    alone = [bool(_shows(pts[:, :, i:i + 1], vsa[:, :, i:i + 1], VIEW, PROJ, SIZE, 0.03, planes)[0]) for i in range(n)]
     assert batch.tolist() == alone and 0 < batch.sum() < n
 
 
