@@ -59,8 +59,14 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from walkstream.shared.partcull import near_far
-from walkstream.shared.screenrects import CENTRE_MARGIN_PX, box_rects
+from walkstream.shared.partcull import PartRects, near_far
+from walkstream.shared.screenrects import (
+    BOX_EDGES,
+    CENTRE_MARGIN_PX,
+    box_corners_ckm,
+    clipped_box_rects,
+    rects_ckm,
+)
 from walkstream.shared.tritable import pack_cell, thread_table
 
 __all__ = ["MIN_TRIANGLES", "WIDE_PX", "TRIANGLE_EDGES", "cell_triangles", "refine_parts"]
@@ -136,6 +142,7 @@ def refine_parts(
     *,
     clip_m: float = 0.03,
     min_triangles: int = MIN_TRIANGLES,
+    rects: PartRects | None = None,
 ) -> int:
     """Drop, in place, the kept parts none of whose triangles meets its cell's VSAs.
 
@@ -154,6 +161,10 @@ def refine_parts(
         The clip plane of the rectangles (as the box test's).
     min_triangles : int
         Parts with fewer triangles are left alone.
+    rects : PartRects, optional
+        The parts culling's rectangles of this frame's boxes (``cull_parts(rects=...)``):
+        those of the same boxes, made with the same camera wholly in front of the clip
+        plane, are taken as they are; the others are made here.
 
     Returns
     -------
@@ -184,20 +195,22 @@ def refine_parts(
     owner = np.searchsorted(base, cand, side="right") - 1  # each candidate's cell, an index into ``cells``
     lists = [vsas[c] for c in cells]
     kmax = max(map(len, lists))
-    areas = np.array([list(v) + [(1, 1, 0, 0)] * (kmax - len(v)) for v in lists], np.int64)  # (cells, kmax, 4)
+    # (4, kmax, cells): the cells' VSAs coordinate-major, padded with empty rectangles
+    areas = np.array([list(v) + [(1, 1, 0, 0)] * (kmax - len(v)) for v in lists], np.int64).transpose(2, 1, 0)
     # only the parts whose box is not wholly inside a VSA, or is thin there: a box well
     # inside one mostly holds triangles that draw there, and testing them cost 3 times
     # the rest of the culling on the duplex's tour
-    brect, _front = box_rects(table.lo[part], table.hi[part], V, P, size, clip_m)
-    v = areas[owner]  # (parts, kmax, 4)
+    lo, hi = table.lo[part], table.hi[part]
+    brect = _box_rects(rects, cells, owner, cand - base[owner], lo, hi, V, P, size, clip_m)  # (4, parts)
+    v = np.take(areas, owner, axis=2)  # (4, kmax, parts)
     b = brect[:, None, :]
-    within = ((b[..., 0] >= v[..., 0]) & (b[..., 1] >= v[..., 1]) & (b[..., 2] <= v[..., 2]) & (b[..., 3] <= v[..., 3])
-              & (b[..., 2] - b[..., 0] >= WIDE_PX - 1) & (b[..., 3] - b[..., 1] >= WIDE_PX - 1))
-    test = np.flatnonzero(~np.any(within, axis=1))
+    within = (b[0] >= v[0]) & (b[1] >= v[1]) & (b[2] <= v[2]) & (b[3] <= v[3])
+    within &= (brect[2] - brect[0] >= WIDE_PX - 1) & (brect[3] - brect[1] >= WIDE_PX - 1)
+    test = np.flatnonzero(~np.any(within, axis=0))
     if not len(test):
         return 0
     cand, part, owner = cand[test], part[test], owner[test]
-    areas4 = np.ascontiguousarray(areas.transpose(2, 1, 0))  # (4, kmax, cells)
+    areas4 = np.ascontiguousarray(areas)
     start, count, witness = table.start[part], table.count[part], table.witness[part]
     shown = np.zeros(len(part), bool)
     found = np.full(len(part), -1, np.int64)  # each part's new witness
@@ -206,29 +219,63 @@ def refine_parts(
     # the rest of the parts not shown by the first (a part shows when any of its
     # triangles does, each triangle's test its own: the same parts kept)
     has = witness >= 0
-    cap = _FIRST_ROUND if int(count.sum()) > _ONE_ROUND else None
+    cap = _FIRST_ROUND if int(count[~has].sum()) > _ONE_ROUND else None
     n1 = np.where(has, 1, count if cap is None else np.minimum(count, cap))
     first1 = np.where(has, start + witness, start)
     for go in (0, 1):
         if go == 0:
             tri, who = _runs(first1, n1)
         else:
-            two = np.flatnonzero(~shown & (has | (n1 < count)))
+            two = np.flatnonzero(~shown & (n1 < count))  # (a witness tested a part of one triangle whole)
             if not len(two):
                 break
             # a failed witness's part is tested whole; a part tested in part, on from there
             tri, who = _runs(np.where(has[two], start[two], start[two] + n1[two]),
                              np.where(has[two], count[two], count[two] - n1[two]))
             who = two[who]
-        got = _shows(table.tri[:, :, tri], np.take(areas4, owner[who], axis=2), V, P, size, clip_m, planes)
-        hit = who[got]
+        _got, seen, score = _shows(table.tri[:, :, tri], np.take(areas4, owner[who], axis=2), V, P, size, clip_m,
+                                   planes, scored=True)
+        # the next witness: of the part's triangles that showed, the one whose rectangle
+        # holds the most pixel centres of a VSA (the last written of the sorted)
+        seen = seen[np.argsort(score, kind="stable")]
+        hit = who[seen]
         shown[hit] = True
-        found[hit] = tri[got] - start[hit]
+        found[hit] = tri[seen] - start[hit]
     table.witness[part] = found
     gone = np.flatnonzero(~shown)
     for k, i in zip(owner[gone].tolist(), (cand[gone] - base[owner[gone]]).tolist(), strict=True):
         masks[cells[k]][i] = False
     return len(gone)
+
+
+def _box_rects(
+    rects: PartRects | None,
+    cells: list[int],
+    owner: NDArray[np.int64],
+    local: NDArray[np.int64],
+    lo: NDArray[np.float64],
+    hi: NDArray[np.float64],
+    view: NDArray[np.float64],
+    proj: NDArray[np.float64],
+    size: tuple[int, int],
+    clip_m: float,
+) -> NDArray[np.int64]:
+    """The rectangles ``(4, n)`` of the candidates' boxes ``lo``, ``hi`` ``(n, 3)`` (part
+    ``local`` of cell ``cells[owner]`` each), as
+    :func:`~walkstream.shared.screenrects.box_rects` makes them: the parts culling's
+    (``rects``) where it made them so for the same boxes, the rest here (the boxes across
+    the clip plane, clipped as box_rects clips them)."""
+    if rects is not None and rects.made_for(view, proj, size, clip_m, CENTRE_MARGIN_PX):
+        first = [rects.first.get(c, -1) for c in cells]
+        if min(first) >= 0:
+            row = np.asarray(first, np.int64)[owner] + local
+            if np.array_equal(rects.lo[row], lo) and np.array_equal(rects.hi[row], hi):
+                rect = rects.rect[:, row]
+                rest = np.flatnonzero(~rects.exact[row])
+                if len(rest):
+                    rect[:, rest] = clipped_box_rects(lo[rest], hi[rest], view, proj, size, clip_m)[0]
+                return rect
+    return rects_ckm(box_corners_ckm(lo, hi), BOX_EDGES, view, proj, size, clip_m)[0]
 
 
 def _runs(first: NDArray[np.int64], count: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -256,7 +303,8 @@ def _shows(
     size: tuple[int, int],
     clip_m: float,
     planes: tuple[float, float],
-) -> NDArray[np.bool_]:
+    scored: bool = False,
+) -> Any:
     """Whether each triangle ``pts`` ``(3, 3, n)`` may draw a pixel centre inside one of its
     VSAs ``vsa`` ``(4, k, n)`` (coordinate-major: ``vsa[:, j, t]`` the ``j``-th VSA of
     triangle ``t``, padded with empty rectangles).
@@ -316,7 +364,7 @@ def _shows(
     on = front & meet.any(axis=0) & (far_d >= planes[0]) & (near_d <= planes[1])
     vi, ti = np.nonzero(meet & on)  # the (VSA, triangle) pairs left to the sides' test
     if not len(ti):
-        return on
+        return (on, ti, np.zeros(0)) if scored else on
     # each pair's triangle's side ends (2, 6, pairs): its vertices twice, or its clipped ends
     e = xy[:, _SIDE_ENDS[:, None], ti]
     if ends is not None:
@@ -330,7 +378,11 @@ def _shows(
     ok2 = _separated(e[0], e[1], bl[0], bl[1], bh[0], bh[1])
     out = np.zeros(n, bool)
     out[ti[ok2]] = True
-    return out
+    if not scored:
+        return out
+    size2 = bh - bl
+    size2 += 1.0
+    return out, ti[ok2], (size2[0] * size2[1])[ok2]
 
 
 def _clipped_ends(h: NDArray[np.float64], d: NDArray[np.float64], size: tuple[int, int]) -> tuple[
