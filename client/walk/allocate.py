@@ -127,6 +127,8 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
     # a head walked to whose stand-ins the culling drops, at the default fog, draws all it
     # would draw whole; any other head is waiting for its cell
     for c in walked:
+        if not f.loaded[c].missing:  # a whole cell (most): no array to make
+            continue
         gone = np.asarray(f.loaded[c].missing, np.int64)
         if len(gone) and c not in whole and cached is not None:
             if cached.head_clear(c, gone):
