@@ -193,6 +193,8 @@ class PartRects:
     exact : (rows,) bool
         The box lay wholly in front of the clip plane and was projected: its rectangle is
         its clipped one (a box across the plane gets a superset, one beyond the fog none).
+    crossing : (rows,) bool
+        The box was projected and lies across the clip plane (its rectangle a superset).
     lo, hi : (rows, 3) float64
         The boxes.
     """
@@ -204,25 +206,31 @@ class PartRects:
         self.clip_m = self.margin_px = 0.0
         self.first: dict[int, int] = {}
         self.rect = np.zeros((4, 0), np.int64)
-        self.exact = np.zeros(0, bool)
+        self.exact = self.crossing = np.zeros(0, bool)
         self.lo = self.hi = np.zeros((0, 3))
 
     def fill(self, view: NDArray[np.float64], proj: NDArray[np.float64], size: tuple[int, int], clip_m: float,
              margin_px: float, cells: list[int], counts: list[int], lo: NDArray[np.float64], hi: NDArray[np.float64],
-             rows: NDArray[np.int64] | None, rect: NDArray[np.int64], near_d: NDArray[np.float64]) -> None:
-        """Keep the rectangles ``rect`` ``(4, m)`` and nearest depths ``near_d`` ``(m,)`` of the
-        boxes ``rows`` (all when None) of ``lo``, ``hi`` (``cells``' boxes, ``counts`` each)."""
+             rows: NDArray[np.int64] | None, rect: NDArray[np.int64], near_d: NDArray[np.float64],
+             far_d: NDArray[np.float64]) -> None:
+        """Keep the rectangles ``rect`` ``(4, m)`` and nearest and farthest depths ``near_d``,
+        ``far_d`` ``(m,)`` of the boxes ``rows`` (all when None) of ``lo``, ``hi`` (``cells``'
+        boxes, ``counts`` each)."""
         self.view, self.proj, self.size = view.tolist(), proj.tolist(), size
         self.clip_m, self.margin_px = clip_m, margin_px
         self.first = dict(zip(cells, np.cumsum([0, *counts[:-1]]).tolist(), strict=True))
         self.lo, self.hi = lo, hi
+        ahead = near_d >= clip_m
+        crossing = ~ahead & (far_d >= clip_m)
         if rows is None:
-            self.rect, self.exact = rect, near_d >= clip_m
+            self.rect, self.exact, self.crossing = rect, ahead, crossing
         else:
             self.rect = np.zeros((4, len(lo)), np.int64)
             self.rect[:, rows] = rect
             self.exact = np.zeros(len(lo), bool)
-            self.exact[rows] = near_d >= clip_m
+            self.exact[rows] = ahead
+            self.crossing = np.zeros(len(lo), bool)
+            self.crossing[rows] = crossing
 
     def made_for(self, view: NDArray[np.float64], proj: NDArray[np.float64], size: tuple[int, int], clip_m: float,
                  margin_px: float) -> bool:
@@ -335,7 +343,7 @@ def cull_parts(
         if rects is not None:  # the table's rows of these cells, as the triangle test shares them
             rows_lo = table.lohi[:, 0, :].T
             rects.fill(V, P, size, clip_m, margin_px, seen, counts.tolist(), np.take(rows_lo, idx, axis=0),
-                       np.take(table.lohi[:, 1, :].T, idx, axis=0), sub, rect, near_d)
+                       np.take(table.lohi[:, 1, :].T, idx, axis=0), sub, rect, near_d, far_d)
     else:
         rect, front, near_d, far_d = box_rects_ckm(lohi, V, P, size, clip_m, margin_px, work=work, clip_rest=False)
     kmax = v.shape[1]
@@ -403,7 +411,7 @@ def _cull_few(
         rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo, hi), BOX_EDGES, V, P, size, clip_m,
                                                margin_px, clip_rest=False)
         if rects is not None:
-            rects.fill(V, P, size, clip_m, margin_px, seen, counts, lo_all, hi_all, idx, rect, near_d)
+            rects.fill(V, P, size, clip_m, margin_px, seen, counts, lo_all, hi_all, idx, rect, near_d, far_d)
         v = _vsa_table(vsas, seen)[:, :, owner]
         meet = ((np.maximum(rect[0], v[0]) <= np.minimum(rect[2], v[2]))
                 & (np.maximum(rect[1], v[1]) <= np.minimum(rect[3], v[3])))

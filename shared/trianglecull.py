@@ -266,8 +266,8 @@ def _box_rects(
     """The rectangles ``(4, n)`` of the candidates' boxes ``lo``, ``hi`` ``(n, 3)`` (part
     ``local`` of cell ``cells[owner]`` each), as
     :func:`~walkstream.shared.screenrects.box_rects` makes them: the parts culling's
-    (``rects``) where it made them so for the same boxes, the rest here (the boxes across
-    the clip plane, clipped as box_rects clips them)."""
+    (``rects``) where it made them so for the same boxes, and those across the clip plane
+    clipped as box_rects clips them; all made here otherwise."""
     if rects is not None and rects.made_for(view, proj, size, clip_m, CENTRE_MARGIN_PX):
         first = [rects.first.get(c, -1) for c in cells]
         if min(first) >= 0:
@@ -275,9 +275,11 @@ def _box_rects(
             if np.array_equal(rects.lo[row], lo) and np.array_equal(rects.hi[row], hi):
                 rect = rects.rect[:, row]
                 rest = np.flatnonzero(~rects.exact[row])
-                if len(rest):
+                if not len(rest):
+                    return rect
+                if rects.crossing[row[rest]].all():  # across the clip plane: clipped as box_rects clips
                     rect[:, rest] = clipped_box_rects(lo[rest], hi[rest], view, proj, size, clip_m)[0]
-                return rect
+                    return rect
     return rects_ckm(box_corners_ckm(lo, hi), BOX_EDGES, view, proj, size, clip_m)[0]
 
 
