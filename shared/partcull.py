@@ -60,7 +60,7 @@ from walkstream.shared.screenrects import (
     thread_buffers,
 )
 
-__all__ = ["PartTable", "part_table", "cull_parts", "cull_boxes", "near_far"]
+__all__ = ["PartTable", "PartRects", "part_table", "cull_parts", "cull_boxes", "near_far"]
 
 Boxes = Mapping[int, tuple[NDArray[np.float64], NDArray[np.float64]]]
 
@@ -171,6 +171,74 @@ def part_table(boxes: Boxes, cells: list[int]) -> PartTable:
     return t
 
 
+class PartRects:
+    """The rectangles :func:`cull_parts` made for a frame's boxes, kept for the kept parts'
+    triangle test (:func:`~walkstream.shared.trianglecull.refine_parts`), which tests
+    again the parts whose box is not well inside a VSA and so needs the same rectangles.
+
+    Handed to :func:`cull_parts` empty (``rects=``), filled by it when it projects the
+    boxes as :func:`~walkstream.shared.screenrects.box_rects` does (the eight corners' one
+    product: a frame of fewer than :data:`_FEW_BOXES` boxes), left empty otherwise.
+
+    Attributes
+    ----------
+    view, proj : list of lists of float
+        The camera the rectangles were made with (``tolist()`` of its arrays).
+    size : (int, int)
+    clip_m, margin_px : float
+    first : dict of int -> int
+        A cell's first row (its boxes' rows follow in order).
+    rect : (4, rows) int64
+        Each box's rectangle (rows ``x0, y0, x1, y1``), where :attr:`exact`.
+    exact : (rows,) bool
+        The box lay wholly in front of the clip plane and was projected: its rectangle is
+        its clipped one (a box across the plane gets a superset, one beyond the fog none).
+    crossing : (rows,) bool
+        The box was projected and lies across the clip plane (its rectangle a superset).
+    lo, hi : (rows, 3) float64
+        The boxes.
+    """
+
+    def __init__(self) -> None:
+        self.view: list[list[float]] = []
+        self.proj: list[list[float]] = []
+        self.size = (0, 0)
+        self.clip_m = self.margin_px = 0.0
+        self.first: dict[int, int] = {}
+        self.rect = np.zeros((4, 0), np.int64)
+        self.exact = self.crossing = np.zeros(0, bool)
+        self.lo = self.hi = np.zeros((0, 3))
+
+    def fill(self, view: NDArray[np.float64], proj: NDArray[np.float64], size: tuple[int, int], clip_m: float,
+             margin_px: float, cells: list[int], counts: list[int], lo: NDArray[np.float64], hi: NDArray[np.float64],
+             rows: NDArray[np.int64] | None, rect: NDArray[np.int64], near_d: NDArray[np.float64],
+             far_d: NDArray[np.float64]) -> None:
+        """Keep the rectangles ``rect`` ``(4, m)`` and nearest and farthest depths ``near_d``,
+        ``far_d`` ``(m,)`` of the boxes ``rows`` (all when None) of ``lo``, ``hi`` (``cells``'
+        boxes, ``counts`` each)."""
+        self.view, self.proj, self.size = view.tolist(), proj.tolist(), size
+        self.clip_m, self.margin_px = clip_m, margin_px
+        self.first = dict(zip(cells, np.cumsum([0, *counts[:-1]]).tolist(), strict=True))
+        self.lo, self.hi = lo, hi
+        ahead = near_d >= clip_m
+        crossing = ~ahead & (far_d >= clip_m)
+        if rows is None:
+            self.rect, self.exact, self.crossing = rect, ahead, crossing
+        else:
+            self.rect = np.zeros((4, len(lo)), np.int64)
+            self.rect[:, rows] = rect
+            self.exact = np.zeros(len(lo), bool)
+            self.exact[rows] = ahead
+            self.crossing = np.zeros(len(lo), bool)
+            self.crossing[rows] = crossing
+
+    def made_for(self, view: NDArray[np.float64], proj: NDArray[np.float64], size: tuple[int, int], clip_m: float,
+                 margin_px: float) -> bool:
+        """Whether the rectangles were made with this camera and these settings."""
+        return (tuple(self.size) == tuple(size) and self.clip_m == clip_m and self.margin_px == margin_px
+                and self.view == view.tolist() and self.proj == proj.tolist())
+
+
 def cull_parts(
     mode: str,
     cells: list[int],
@@ -184,6 +252,7 @@ def cull_parts(
     fog_m: float = math.inf,
     clip_m: float = 0.03,
     margin_px: float = CENTRE_MARGIN_PX,
+    rects: PartRects | None = None,
 ) -> dict[int, NDArray[np.bool_]]:
     """Which parts of each visible cell to draw, by ``mode`` (:data:`~walkstream.shared.portals.CULLING_MODES`).
 
@@ -203,6 +272,9 @@ def cull_parts(
         Pixels by which a box's projection is grown before the pixels it covers are taken
         (``portals`` mode; :data:`~walkstream.shared.screenrects.TOUCH_MARGIN_PX` keeps every
         pixel it touches, as the cache's guard view does: :mod:`walkstream.shared.cullcache`).
+    rects : PartRects, optional
+        Filled with the boxes' rectangles where they are made as the triangle test makes
+        them (``portals`` mode), for it to share (:class:`PartRects`).
 
     Returns
     -------
@@ -230,7 +302,7 @@ def cull_parts(
     if vsas is None or not seen:
         return out
     if len(seen) < _FEW_CELLS:
-        out.update(_cull_few(seen, boxes, vsas, e, view, proj, size, fog_m, clip_m, vp, margin_px))
+        out.update(_cull_few(seen, boxes, vsas, e, view, proj, size, fog_m, clip_m, vp, margin_px, rects))
         return out
     table = part_table(boxes, seen)
     nseen = len(seen)
@@ -268,6 +340,10 @@ def cull_parts(
         lo_b, hi_b = lohi[:, 0].T, lohi[:, 1].T
         rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo_b, hi_b), BOX_EDGES, V, P, size, clip_m,
                                                margin_px, clip_rest=False)
+        if rects is not None:  # the table's rows of these cells, as the triangle test shares them
+            rows_lo = table.lohi[:, 0, :].T
+            rects.fill(V, P, size, clip_m, margin_px, seen, counts.tolist(), np.take(rows_lo, idx, axis=0),
+                       np.take(table.lohi[:, 1, :].T, idx, axis=0), sub, rect, near_d, far_d)
     else:
         rect, front, near_d, far_d = box_rects_ckm(lohi, V, P, size, clip_m, margin_px, work=work, clip_rest=False)
     kmax = v.shape[1]
@@ -314,6 +390,7 @@ def _cull_few(
     clip_m: float,
     vp: NDArray[np.float64],
     margin_px: float = CENTRE_MARGIN_PX,
+    rects: PartRects | None = None,
 ) -> dict[int, NDArray[np.bool_]]:
     """:func:`cull_parts` of a few cells (a tour's 4-40): their arrays joined as they are (no
     table to check), the eight corners' one product, fresh arrays; side by side with the
@@ -326,12 +403,15 @@ def _cull_few(
     keep = np.ones(len(lo), bool) if math.isinf(fog_m) else box_distance(lo, hi, e) <= fog_m
     owner = np.repeat(np.arange(len(seen)), counts)
     idx = None if keep.all() else np.flatnonzero(keep)
+    lo_all, hi_all = lo, hi
     if idx is not None:
         lo, hi, owner = lo[idx], hi[idx], owner[idx]
     if len(lo):
         V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
         rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo, hi), BOX_EDGES, V, P, size, clip_m,
                                                margin_px, clip_rest=False)
+        if rects is not None:
+            rects.fill(V, P, size, clip_m, margin_px, seen, counts, lo_all, hi_all, idx, rect, near_d, far_d)
         v = _vsa_table(vsas, seen)[:, :, owner]
         meet = ((np.maximum(rect[0], v[0]) <= np.minimum(rect[2], v[2]))
                 & (np.maximum(rect[1], v[1]) <= np.minimum(rect[3], v[3])))

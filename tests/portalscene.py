@@ -24,7 +24,7 @@ from walkstream.server.store import SceneReader
 from walkstream.shared.camera import camera
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
-from walkstream.shared.partcull import cull_parts
+from walkstream.shared.partcull import PartRects, cull_parts
 from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.portals import cull_portals, frustum_cells
 from walkstream.shared.roomcompact import decode_topology_compact
@@ -70,9 +70,12 @@ class PortalScene:
             start = int(self.ids[h])
             if mode == "portals":
                 pc = cull_portals(self.graph, start, eye, view, self.proj, SIZE, naive=naive)
-                keep = cull_parts("portals", pc.order, self.boxes, eye, view, self.proj, SIZE, vsas=pc.vsas)
+                rects = PartRects()  # shared by the two tests, as the client does
+                keep = cull_parts("portals", pc.order, self.boxes, eye, view, self.proj, SIZE, vsas=pc.vsas,
+                                  rects=rects)
                 if not naive:
-                    self.triangle_culled += refine_parts(keep, self.meshes, pc.vsas, view, self.proj, SIZE)
+                    self.triangle_culled += refine_parts(keep, self.meshes, pc.vsas, view, self.proj, SIZE,
+                                                         rects=rects)
             else:
                 cells = frustum_cells(self.graph, start, eye, self.proj @ view)
                 keep = cull_parts(mode, cells, self.boxes, eye, view, self.proj, SIZE)

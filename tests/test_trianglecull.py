@@ -200,11 +200,12 @@ def test_triangles_wholly_in_front_skip_the_clip_and_each_is_tested_as_alone() -
     q = h[:, _SIDE_ENDS][:, :, whole]
     assert np.array_equal(ex, np.clip((q[0] / q[2] + 1.0) * (0.5 * SIZE[0]) - 0.5, -1e9, 1e9))
     assert np.array_equal(ey, np.clip((q[1] / q[2] + 1.0) * (0.5 * SIZE[1]) - 0.5, -1e9, 1e9))
-    vsa = np.tile(np.array([[30, 20, 120, 90], [1, 1, 0, 0]], np.int64), (n, 1, 1))
+    # (4, k, n): each triangle's two VSAs, the second an empty pad
+    vsa = np.ascontiguousarray(np.tile(np.array([[30, 20, 120, 90], [1, 1, 0, 0]], np.int64), (n, 1, 1)).transpose(2, 1, 0))
     planes = near_far(PROJ)
     assert planes is not None
     batch = _shows(pts, vsa, VIEW, PROJ, SIZE, 0.03, planes)
-    alone = [bool(_shows(pts[:, :, i:i + 1], vsa[i:i + 1], VIEW, PROJ, SIZE, 0.03, planes)[0]) for i in range(n)]
+    alone = [bool(_shows(pts[:, :, i:i + 1], vsa[:, :, i:i + 1], VIEW, PROJ, SIZE, 0.03, planes)[0]) for i in range(n)]
     assert batch.tolist() == alone and 0 < batch.sum() < n
 
 
@@ -249,3 +250,75 @@ def test_the_plain_float_clip_and_the_two_rounds_keep_what_one_batch_keeps(monke
         refine_parts(masks[one_round], {0: mesh}, vsas, VIEW, PROJ, SIZE, min_triangles=1)
     assert np.array_equal(masks[0][0], masks[10**9][0])
     assert masks[0][0][-3:].tolist() == [False, True, False]  # kept by a triangle of the second round
+
+
+def test_witnesses_the_table_and_the_shared_rectangles_keep_each_frames_parts(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A walk's frames, refined as the client does (the parts culling's rectangles shared,
+    one triangle table whose witnesses carry from frame to frame, a table made anew when it
+    would hold too much), keep frame for frame what each part's triangles decide alone."""
+    import walkstream.shared.trianglecull as tc
+    import walkstream.shared.tritable as tt
+    from walkstream.shared.partcull import PartRects, near_far
+    from walkstream.shared.screenrects import box_rects
+
+    rng = np.random.default_rng(5)
+    cells: dict[int, CellMesh] = {}
+    for c in range(3):  # clusters of small triangles round the view, some across the clip plane
+        parts = []
+        for _ in range(12):
+            centre = np.array([rng.uniform(-0.5, 9.0), rng.uniform(-4.0, 4.0), rng.uniform(-2.0, 2.0)])
+            k = int(rng.integers(16, 40))
+            parts.append(_part(centre + rng.normal(0.0, rng.choice([0.02, 0.3, 1.5]), (k, 3, 3))))
+        cells[c] = _mesh(parts)
+    # a part of two clusters, seen left and right of the view: its witness fails each frame
+    # the door's area moves from one half to the other, while the other cluster shows
+    two = [np.array([5.0, y, 0.0]) + rng.normal(0.0, 0.05, (10, 3, 3)) for y in (1.5, -1.5)]
+    cells[3] = _mesh([_part(np.concatenate(two))])
+    boxes = {c: _boxes(m) for c, m in cells.items()}
+    planes = near_far(PROJ)
+    assert planes is not None
+    table = tt.TriangleTable()
+    monkeypatch.setattr(tc, "thread_table", lambda: table)
+    dropped = witnessed = crossing = 0
+    for i in range(10):  # turning and stepping a little each frame, the doors' areas moving
+        eye = np.array([0.04 * i, 0.0, 0.0])
+        view = camera(eye, 0.03 * i, 0.01 * i).astype(np.float64)
+        s = 7 * (i % 3)
+        vsas = {0: [(0, 0, SIZE[0] - 1, SIZE[1] - 1)], 1: [(40 + s, 30, 90 + s, 80), (100, 10 + s, 150, 40 + s)],
+                2: [(60 - s, 50, 75 - s, 62)], 3: [(0, 0, 79, SIZE[1] - 1) if i % 2 else (80, 0, SIZE[0] - 1, SIZE[1] - 1)]}
+        rects = PartRects()
+        masks = cull_parts("portals", list(cells), boxes, eye, view, PROJ, SIZE, vsas=vsas, rects=rects)
+        # the kept parts' shared rectangles are box_rects' own, those across the clip plane too
+        order = list(cells)
+        kept = np.concatenate([masks[c] for c in order])
+        owner = np.concatenate([np.full(len(masks[c]), k) for k, c in enumerate(order)])[kept]
+        local = np.concatenate([np.arange(len(masks[c])) for c in order])[kept]
+        lo = np.concatenate([boxes[c][0] for c in order])[kept]
+        hi = np.concatenate([boxes[c][1] for c in order])[kept]
+        shared = tc._box_rects(rects, order, owner, local, lo, hi, view, PROJ, SIZE, 0.03)
+        assert np.array_equal(shared.T, box_rects(lo, hi, view, PROJ, SIZE)[0])
+        crossing += int((~rects.exact[np.asarray([rects.first[c] for c in order])[owner] + local]).sum())
+        # the reference: every candidate part's triangles (each one's test its own)
+        want = {}
+        for c, m in masks.items():
+            keep = m.copy()
+            lo, hi = boxes[c]
+            rect, _front = box_rects(lo, hi, view, PROJ, SIZE)
+            tri, start = cell_triangles(cells[c])
+            for p in np.flatnonzero(m):
+                r = rect[p]
+                inside = any(r[0] >= v[0] and r[1] >= v[1] and r[2] <= v[2] and r[3] <= v[3]
+                             and r[2] - r[0] >= tc.WIDE_PX - 1 and r[3] - r[1] >= tc.WIDE_PX - 1 for v in vsas[c])
+                if inside:
+                    continue
+                a, b = int(start[p]), int(start[p + 1])  # the part's triangles, all of them
+                v4 = np.repeat(np.array(vsas[c], np.int64).T[:, :, None], b - a, axis=2)
+                keep[p] = bool(tc._shows(tri[:, :, a:b], v4, view, PROJ, SIZE, 0.03, planes).any())
+            want[c] = keep
+        witnessed += int((table.witness >= 0).sum())
+        if i == 5:  # a table that must be made anew: it holds other cells (a walk's past)
+            table.used = table.tri.shape[2]
+            table._slot = {}
+        dropped += refine_parts(masks, cells, vsas, view, PROJ, SIZE, rects=rects)
+        assert {c: m.tolist() for c, m in masks.items()} == {c: m.tolist() for c, m in want.items()}, i
+    assert dropped > 0 and witnessed > 0 and crossing > 0

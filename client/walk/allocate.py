@@ -27,7 +27,7 @@ from walkstream.client.walk.impostors import frame_impostors, replaced
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.frustum import frustum_cull
-from walkstream.shared.partcull import cull_parts
+from walkstream.shared.partcull import PartRects, cull_parts
 from walkstream.shared.portalgraph import PortalGraph
 from walkstream.shared.portals import PortalCull, box_distance
 from walkstream.shared.trianglecull import refine_parts
@@ -110,13 +110,14 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
         walked = [c for c in f.loaded if c in pc.vsas]
     else:  # no portal walk: the chosen culling on its own ("portals" without one keeps nothing)
         walked = [] if culling == "portals" else list(f.loaded)
+    rects = PartRects()  # the boxes' rectangles, made once for both tests
     if cached is None:
         masks = cull_parts(culling, walked, boxes, f.eye, f.view, w.proj, w.size,
-                           vsas=None if pc is None else pc.vsas, fog_m=f.fog)
+                           vsas=None if pc is None else pc.vsas, fog_m=f.fog, rects=rects)
     if culling == "portals" and pc is not None and w.config.triangle_cull:
         # the parts the boxes kept, tested again by their triangles (never adds one)
         t_tri = time.thread_time()
-        w.frames.triangle_culled += refine_parts(masks, f.loaded, pc.vsas, f.view, w.proj, w.size)
+        w.frames.triangle_culled += refine_parts(masks, f.loaded, pc.vsas, f.view, w.proj, w.size, rects=rects)
         tri_s = time.thread_time() - t_tri
     # a cell drawn besides the portal walk's (the shell from the street): the frustum's test
     whole = [c for c in f.loaded if c not in masks or c in f.shown]
@@ -126,6 +127,8 @@ def _cull_rooms(w: WalkState, f: Frame) -> None:
     # a head walked to whose stand-ins the culling drops, at the default fog, draws all it
     # would draw whole; any other head is waiting for its cell
     for c in walked:
+        if not f.loaded[c].missing:  # a whole cell (most): no array to make
+            continue
         gone = np.asarray(f.loaded[c].missing, np.int64)
         if len(gone) and c not in whole and cached is not None:
             if cached.head_clear(c, gone):
