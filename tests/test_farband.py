@@ -79,20 +79,21 @@ def test_a_bake_with_the_band_keeps_every_object_and_says_so_in_its_header(tmp_p
     city = tmp_path / "c.geojson"
     write_city(city, 150, 2)
     pvs = {}
-    for name, flags in (("plain", []), ("band", ["--far-band", "3", "--far-pixels", "256", "--far-axis", "20"])):
+    for name, flags in (("plain", []), ("band", ["--far-band", "3", "--far-pixels", "256", "--far-axis", "20", "--far-edges"])):
         db = tmp_path / f"{name}.db"
         assert main(["bake", str(city), "-o", str(db), "--resolution", "32", *flags]) == 0
         with SceneReader.open(db) as r:
             pvs[name] = {c.id: set(c.pvs.tolist()) for c in r.cells()}
             assert r.meta.settings.get("far_band") == (3.0 if name == "band" else None)
             assert r.meta.settings.get("far_axis") == (20.0 if name == "band" else None)
+            assert r.meta.settings.get("far_edges") == (True if name == "band" else None)
     assert all(pvs["plain"][k] <= pvs["band"][k] for k in pvs["plain"])  # the band only adds
     assert sum(len(v) for v in pvs["band"].values()) > sum(len(v) for v in pvs["plain"].values())
 
 
 @pytest.mark.parametrize(("flags", "word"), [(["--far-band", "-1"], "--far-band"), (["--far-band", "3", "--far-pixels", "4"], "--far-pixels"),
                                              (["--far-band", "3", "--sampling", "field"], "--far-band"),
-                                             (["--far-axis", "20"], "--far-axis"), (["--far-band", "3", "--far-axis", "-1"], "--far-axis")])
+                                             (["--far-axis", "20"], "--far-axis"), (["--far-edges"], "--far-edges"), (["--far-band", "3", "--far-axis", "-1"], "--far-axis")])
 def test_a_bad_far_band_gets_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str], word: str) -> None:
     city = tmp_path / "c.geojson"
     city.write_text('{"type": "FeatureCollection", "features": []}')

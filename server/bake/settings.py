@@ -121,6 +121,11 @@ class BakeSettings:
     along each cell's long axis (:func:`~walkstream.server.bake.samples.axis_points`:
     the middle of a street, where the cube's outline points are farthest; the band
     alone, not the cube); 0: only at the cube's points."""
+    far_edges: bool = False
+    """With ``far_band``: after the band's fill, its triangles' edges drawn again as
+    one-pixel lines depth-tested against it (the renderer's ``edge_pass``, in the band
+    only): a street piece hundreds of metres ahead, thinner than a band pixel, marks the
+    pixels it crosses instead of falling between their centres."""
     field_spacing: float = DEFAULT_FIELD_SPACING
     """``cells="sections"`` or ``sampling="field"``: metres between the points of the dense visibility field."""
     redundancy: int | None = DEFAULT_REDUNDANCY
@@ -153,6 +158,8 @@ class BakeSettings:
             out.pop("far_pixels")
         if not self.far_axis:
             out.pop("far_axis")  # bakes without it keep their header
+        if not self.far_edges:
+            out.pop("far_edges")
         if self.cells != "sections":
             for name in SECTION_FIELDS:
                 if name != "field_spacing" or self.sampling != "field":
@@ -195,6 +202,8 @@ class BakeSettings:
             raise InputError(f"--far-pixels: expected 8..4096 pixels, got {self.far_pixels}")
         if not (np.isfinite(self.far_axis) and self.far_axis >= 0.0):
             raise InputError(f"--far-axis: expected a number of metres >= 0 (0: off), got {self.far_axis}")
+        if self.far_edges and not self.far_band:
+            raise InputError("--far-edges: give --far-band too (the edges are drawn in the band)")
         if self.far_axis and not self.far_band:
             raise InputError("--far-axis: give --far-band too (the axis points render the band only)")
         if self.far_band and (self.sampling == "field" or self.cells == "sections"):
