@@ -33,6 +33,23 @@ def test_a_band_is_the_four_sideways_faces_cut_short_with_square_pixels() -> Non
         FaceSet.band(100, 45.0)
 
 
+def test_axis_points_run_down_the_middle_of_a_street_cell_and_out_of_buildings() -> None:
+    from shapely import Point, Polygon, STRtree
+
+    from walkstream.server.bake.samples import axis_points
+
+    street = np.array([[0.0, 0.0], [40.0, 0.0], [40.0, 12.0], [0.0, 12.0]])  # 40 m long, 12 m wide
+    pts = axis_points(street, 1.5, 2.0, spacing=20.0)
+    assert np.allclose(pts, [[10.0, 6.0, 2.0], [30.0, 6.0, 1.5]])  # half a step in, heights alternating
+    assert len(axis_points(street[:, ::-1], 1.5, 2.0, spacing=15.0)) == 3  # the long axis whichever way it runs
+    kiosk = STRtree([Polygon([(8.0, 4.0), (12.0, 4.0), (12.0, 8.0), (8.0, 8.0)])])
+    moved = axis_points(street, 1.5, 2.0, spacing=20.0, footprints=kiosk)
+    assert kiosk.geometries[0].distance(Point(moved[0, :2])) >= 0.25  # moved out, the margin from the walls kept
+    assert np.allclose(moved[1], [30.0, 6.0, 1.5])
+    with pytest.raises(InputError, match="spacing"):
+        axis_points(street, 1.5, 2.0, spacing=0.0)
+
+
 @pytest.mark.gl
 def test_the_band_sees_a_far_post_between_bake_pixels_and_not_what_a_wall_hides(gl: object) -> None:
     from walkstream.server.bake.idpack import meshes_for_scene
@@ -62,18 +79,21 @@ def test_a_bake_with_the_band_keeps_every_object_and_says_so_in_its_header(tmp_p
     city = tmp_path / "c.geojson"
     write_city(city, 150, 2)
     pvs = {}
-    for name, flags in (("plain", []), ("band", ["--far-band", "3", "--far-pixels", "256"])):
+    for name, flags in (("plain", []), ("band", ["--far-band", "3", "--far-pixels", "256", "--far-axis", "20", "--far-edges"])):
         db = tmp_path / f"{name}.db"
         assert main(["bake", str(city), "-o", str(db), "--resolution", "32", *flags]) == 0
         with SceneReader.open(db) as r:
             pvs[name] = {c.id: set(c.pvs.tolist()) for c in r.cells()}
             assert r.meta.settings.get("far_band") == (3.0 if name == "band" else None)
+            assert r.meta.settings.get("far_axis") == (20.0 if name == "band" else None)
+            assert r.meta.settings.get("far_edges") == (True if name == "band" else None)
     assert all(pvs["plain"][k] <= pvs["band"][k] for k in pvs["plain"])  # the band only adds
     assert sum(len(v) for v in pvs["band"].values()) > sum(len(v) for v in pvs["plain"].values())
 
 
 @pytest.mark.parametrize(("flags", "word"), [(["--far-band", "-1"], "--far-band"), (["--far-band", "3", "--far-pixels", "4"], "--far-pixels"),
-                                             (["--far-band", "3", "--sampling", "field"], "--far-band")])
+                                             (["--far-band", "3", "--sampling", "field"], "--far-band"),
+                                             (["--far-axis", "20"], "--far-axis"), (["--far-edges"], "--far-edges"), (["--far-band", "3", "--far-axis", "-1"], "--far-axis")])
 def test_a_bad_far_band_gets_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str], word: str) -> None:
     city = tmp_path / "c.geojson"
     city.write_text('{"type": "FeatureCollection", "features": []}')

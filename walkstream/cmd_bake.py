@@ -107,7 +107,7 @@ def cmd_bake(args: argparse.Namespace) -> int:
         threshold=args.threshold,
         **{k: v for k, v in (("resolution", args.resolution), ("occluder_lod", args.occluder_lod)) if v is not None},
         **{k: v for k, v in (("field_spacing", args.field_spacing), ("redundancy", args.redundancy), ("min_size", args.min_size), ("section_shape", args.section_shape), ("section_cover", args.section_cover)) if v is not None},
-        **{k: v for k, v in (("sampling", args.sampling), ("spacing", args.spacing), ("height_step", args.height_step), ("edge_pass", args.edge_pass), ("thin_pass", args.thin_pass), ("thin_depth", args.thin_depth), ("split", args.split), ("far_band", args.far_band), ("far_pixels", args.far_pixels)) if v is not None},
+        **{k: v for k, v in (("sampling", args.sampling), ("spacing", args.spacing), ("height_step", args.height_step), ("edge_pass", args.edge_pass), ("thin_pass", args.thin_pass), ("thin_depth", args.thin_depth), ("split", args.split), ("far_band", args.far_band), ("far_pixels", args.far_pixels), ("far_axis", args.far_axis), ("far_edges", args.far_edges)) if v is not None},
     )
     st.check()  # a bad setting fails before any progress bar
     if args.building is not None and args.interior is None:
@@ -231,6 +231,8 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--thin-pass", type=float, default=None, metavar="PX", help="after the fill, test again the objects a cube face did not show whose box is at most PX pixels across (narrower direction), as lines and points against the fill's depth: objects under a pixel enter the PVS unless hidden (0: off)")
     bk.add_argument("--far-band", type=float, default=None, metavar="DEG", help="render every sample point again as a band DEG degrees above and below the horizon at --far-pixels across 90 degrees: the far field at the client's pixel size, adding what is under a bake pixel there (0: off, the default)")
     bk.add_argument("--far-pixels", type=int, default=None, metavar="N", help="with --far-band: the band's pixels across each 90-degree face (default 1109: a 640-pixel, 60-degree client's pixels per degree)")
+    bk.add_argument("--far-axis", type=float, default=None, metavar="M", help="with --far-band: render the band also at points every M metres along each cell's long axis (the middle of a street, where a walker sees far buildings past the near facades that the outline points hug); 0: off, the default")
+    bk.add_argument("--far-edges", action="store_true", default=None, help="with --far-band: draw the band's triangle edges again as one-pixel lines after its fill (a street piece far ahead thinner than a band pixel still counts)")
     bk.add_argument("--thin-depth", action="store_true", default=None, help="with --thin-pass: test against the fill's depth taken as the farthest over each pixel's 3x3 neighbours (occluders shrunk by a pixel for that test)")
     bk.add_argument("--edge-pass", action="store_true", default=None, help="also draw every triangle's edges, adding objects thinner than a pixel (about 2x the render time)")
     bk.add_argument("--centre", action="store_true", help="also sample the cell centre")

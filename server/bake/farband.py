@@ -14,6 +14,14 @@ and below the horizon.  Everything within the view distance is drawn, the near
 occluders too, so the band adds only what is really seen from a sample point, at a
 finer pixel.
 
+Two options close what the band still misses on a walk (docs/benchmarks.md, "The band
+at the middle of the street"): ``far_axis`` renders the band also at points along each
+cell's long axis (:func:`~walkstream.server.bake.workers.band_points`), where a walker
+sees far buildings past the near facades that the outline points hug; ``far_edges``
+draws the band's triangle edges again after its fill (the renderer's ``edge_pass``),
+so a street piece hundreds of metres ahead, thinner than a band pixel, is not lost
+between the pixel centres.
+
 An object's pixels in the band count toward its ACH scaled to the cube's pixel size
 (``(resolution / far_pixels)**2``), at least one pixel for an object only the band
 shows, so that the coverage hints keep the cube's scale.
@@ -47,7 +55,7 @@ def band_renderer(
         return None
     return VisibilityRenderer(
         meshes, ids, resolution=settings.far_pixels, band=settings.far_band,
-        view_distance=settings.view_distance, ctx=ctx,
+        view_distance=settings.view_distance, ctx=ctx, edge_pass=settings.far_edges,
     )
 
 

@@ -55,6 +55,7 @@ __all__ = [
     "sample_points",
     "boundary_points",
     "region_points",
+    "axis_points",
     "split_points",
     "height_levels",
     "bake_points",
@@ -331,6 +332,64 @@ def region_points(
         return np.vstack([np.column_stack([xy, np.full(len(xy), z)]) for z in levels])
     z = np.where(np.arange(len(xy)) % 2 == 0, hi, lo)
     return np.column_stack([xy, z])
+
+
+def axis_points(
+    polygon: ArrayLike,
+    zmin: float,
+    zmax: float,
+    *,
+    spacing: float = 10.0,
+    height_step: float = 1.0,
+    margin: float = 0.3,
+    footprints: STRtree | None = None,
+) -> F64:
+    """Points along the middle of a cell: its long axis, every ``spacing`` metres.
+
+    The long axis is the middle line of the cell's smallest enclosing (rotated)
+    rectangle, joining the middles of its two short sides: a street cell's
+    centre line.  ``ceil(length / spacing)`` points evenly along it (half a step in
+    from each end), each moved into the cell's free space when it falls outside
+    (:func:`region_points`' margin, out of buildings); heights as
+    :func:`region_points` gives them (alternating top and bottom of the eye range, or
+    every :func:`height_levels` height when the range is taller than ``height_step``).
+
+    The outline points of :func:`region_points` stand ``margin`` inside the cell's
+    edge, so on a street cell they hug the facades on either side: a position in the
+    middle of the street (where a walker walks) is up to half the street's width and
+    half the outline spacing from every one of them, and from there a far building seen
+    down the street past the near facades (a slit a few pixels wide) is hidden from
+    every outline point by the facades nearer it.  These points close that gap for
+    the far field's band (:mod:`~walkstream.server.bake.farband`).
+
+    Returns
+    -------
+    (p, 3) float64
+        The points, from one end of the axis to the other; none when the cell has no
+        free space.
+    """
+    lo, hi = _check_z(zmin, zmax)
+    if not (np.isfinite(spacing) and spacing > 0):
+        raise InputError(f"axis_points.spacing: expected a positive number of metres, got {spacing}")
+    poly = _cell_polygon(polygon)
+    free = _free_space(poly, float(margin), footprints)
+    if free is None:
+        return np.zeros((0, 3))
+    rect = np.asarray(shapely.minimum_rotated_rectangle(poly).exterior.coords, np.float64)[:4]
+    if len(rect) < 4:  # a degenerate rectangle (a line): the cell has no width
+        return np.zeros((0, 3))
+    e1, e2 = rect[1] - rect[0], rect[2] - rect[1]
+    if np.hypot(*e1) < np.hypot(*e2):  # e1 is a short side: the axis joins its middle to the opposite one's
+        a, b = (rect[0] + rect[1]) / 2.0, (rect[2] + rect[3]) / 2.0
+    else:
+        a, b = (rect[1] + rect[2]) / 2.0, (rect[3] + rect[0]) / 2.0
+    n = max(1, int(np.ceil(float(np.hypot(*(b - a))) / float(spacing))))
+    t = (np.arange(n) + 0.5) / n
+    xy = _move_into(free, a + t[:, None] * (b - a))
+    levels = height_levels(lo, hi, height_step)
+    if len(levels) > 1:
+        return np.vstack([np.column_stack([xy, np.full(len(xy), z)]) for z in levels])
+    return np.column_stack([xy, np.where(np.arange(len(xy)) % 2 == 0, hi, lo)])
 
 
 def split_points(

@@ -116,6 +116,16 @@ class BakeSettings:
     the client's pixel size: :mod:`~walkstream.server.bake.farband`; 0: off)."""
     far_pixels: int = DEFAULT_FAR_PIXELS
     """The band's pixels across each of its four 90-degree faces."""
+    far_axis: float = 0.0
+    """With ``far_band``: the band is rendered also at points every this many metres
+    along each cell's long axis (:func:`~walkstream.server.bake.samples.axis_points`:
+    the middle of a street, where the cube's outline points are farthest; the band
+    alone, not the cube); 0: only at the cube's points."""
+    far_edges: bool = False
+    """With ``far_band``: after the band's fill, its triangles' edges drawn again as
+    one-pixel lines depth-tested against it (the renderer's ``edge_pass``, in the band
+    only): a street piece hundreds of metres ahead, thinner than a band pixel, marks the
+    pixels it crosses instead of falling between their centres."""
     field_spacing: float = DEFAULT_FIELD_SPACING
     """``cells="sections"`` or ``sampling="field"``: metres between the points of the dense visibility field."""
     redundancy: int | None = DEFAULT_REDUNDANCY
@@ -146,6 +156,10 @@ class BakeSettings:
         if not self.far_band:
             out.pop("far_band")  # as the thin pass: bakes without it keep their header
             out.pop("far_pixels")
+        if not self.far_axis:
+            out.pop("far_axis")  # bakes without it keep their header
+        if not self.far_edges:
+            out.pop("far_edges")
         if self.cells != "sections":
             for name in SECTION_FIELDS:
                 if name != "field_spacing" or self.sampling != "field":
@@ -186,6 +200,12 @@ class BakeSettings:
             raise InputError(f"--far-band: expected 0..30 degrees (0: off), got {self.far_band}")
         if not 8 <= self.far_pixels <= 4096:
             raise InputError(f"--far-pixels: expected 8..4096 pixels, got {self.far_pixels}")
+        if not (np.isfinite(self.far_axis) and self.far_axis >= 0.0):
+            raise InputError(f"--far-axis: expected a number of metres >= 0 (0: off), got {self.far_axis}")
+        if self.far_edges and not self.far_band:
+            raise InputError("--far-edges: give --far-band too (the edges are drawn in the band)")
+        if self.far_axis and not self.far_band:
+            raise InputError("--far-axis: give --far-band too (the axis points render the band only)")
         if self.far_band and (self.sampling == "field" or self.cells == "sections"):
             raise InputError("--far-band: works with the region, boundary and corners sampling, not with the field's")
         if self.thin_depth and not self.thin_pass:

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from walkstream.server.bake.farband import band_renderer, merge_band_counts
 from walkstream.server.bake.fieldrender import FieldRenderer
 from walkstream.server.bake.idpack import meshes_for_scene
-from walkstream.server.bake.samples import bake_points, split_points
+from walkstream.server.bake.samples import axis_points, bake_points, split_points
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.visibility import VisibilityRenderer, pvs_from_counts
@@ -26,6 +26,7 @@ from walkstream.server.sources.scene import SourceScene
 
 __all__ = [
     "PVS_CHUNK",
+    "band_points",
     "SPLIT_ROUNDS",
     "cell_counts",
     "cell_points",
@@ -86,6 +87,19 @@ def cell_points(
     )
 
 
+def band_points(
+    settings: BakeSettings, pts: NDArray[np.float64], polygon: NDArray[np.float64], zmin: float, zmax: float,
+    footprints: Any,
+) -> NDArray[np.float64]:
+    """Where the far field's band is rendered: the cube's points ``pts``, then, with
+    ``settings.far_axis``, the cell's :func:`~walkstream.server.bake.samples.axis_points`."""
+    if not settings.far_axis:
+        return pts
+    more = axis_points(polygon, zmin, zmax, spacing=settings.far_axis, height_step=settings.height_step,
+                       margin=settings.margin, footprints=footprints)
+    return np.vstack([pts, more]) if len(more) else pts
+
+
 #: rounds of adaptive sampling (``BakeSettings.split``): each halves the gaps it splits
 SPLIT_ROUNDS = 2
 
@@ -107,7 +121,8 @@ def cell_counts(
 
     With ``band`` (:func:`~.farband.band_renderer`), every point rendered is rendered
     again as the far field's horizon band and its counts added
-    (:func:`~.farband.merge_band_counts`).
+    (:func:`~.farband.merge_band_counts`); with ``settings.far_axis`` the band also at
+    the cell's :func:`band_points` beyond them.
 
     Returns
     -------
@@ -122,7 +137,8 @@ def cell_counts(
     if not settings.split:
         ids, pixels = renderer.cell_counts(pts)
         if band is not None:
-            ids, pixels = merge_band_counts(ids, pixels, *band.cell_counts(pts), settings)
+            bp = band_points(settings, pts, polygon, zmin, zmax, footprints)
+            ids, pixels = merge_band_counts(ids, pixels, *band.cell_counts(bp), settings)
         return ids, pixels, len(pts)
     ids, pixels, seen = renderer.point_counts(pts)
     total = dict(zip(ids.tolist(), pixels.tolist(), strict=True))
@@ -140,7 +156,8 @@ def cell_counts(
     keys = np.array(sorted(total), np.int64)
     counts = np.array([total[k] for k in keys.tolist()], np.int64)
     if band is not None:
-        keys, counts = merge_band_counts(keys, counts, *band.cell_counts(pts), settings)
+        bp = band_points(settings, pts, polygon, zmin, zmax, footprints)
+        keys, counts = merge_band_counts(keys, counts, *band.cell_counts(bp), settings)
     return keys, counts, len(pts)
 
 
