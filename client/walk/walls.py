@@ -164,6 +164,13 @@ def _triangles(lane: Any, side: WallSide, tid: int, mix_tid: int) -> int:
     return out
 
 
+def _meshed(lane: Any, side: WallSide, tid: int, mix_tid: int, seen: bool) -> tuple[WallSide | None, int]:
+    """:attr:`DrawnWall.side_of` and :attr:`DrawnWall.triangles` of a wall: a wall out
+    of the view draws its quad alone (off the screen either way; its depth meshes'
+    triangles would take the frame's budget for nothing)."""
+    return (side, _triangles(lane, side, tid, mix_tid)) if seen else (None, 2)
+
+
 def add_ring_sides(scene: WalkScene, sides: Sequence[WallSide]) -> None:
     """Add ring walls that arrived (:class:`~walkstream.client.stream.ringsides.RingSides`)
     to ``scene``: its :attr:`~.scene.WalkScene.walls` (each side once), each ringed
@@ -267,7 +274,7 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
                                  int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix,
                                  _warps(table, k, eye, float(foot[k]), float(dist[0, k]), zone, int(mix_zone[k]),
-                                        w.config.wall_parallax), s, _triangles(lane, s, tid, mix_tid)))
+                                        w.config.wall_parallax), *_meshed(lane, s, tid, mix_tid, bool(seen[j]))))
         # the zones the eye walks into along its ring (the walker may turn: ring_zones_ahead)
         ring_zones_ahead(table, sides, ring, eye, eyes[1:], horizons, in_view, want)
     if w.config.prefetch:  # the rings the walker enters next, where it enters them
@@ -345,7 +352,7 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
         out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
                              int(getattr(img, "nbytes", 0)), cells, mix_tid, mix,
                              _warps(table, k, eye, float(foot[k]), float(dist[0, k]), zone, int(mix_zone[k]),
-                                    w.config.wall_parallax), s, _triangles(lane, s, tid, mix_tid)))
+                                    w.config.wall_parallax), *_meshed(lane, s, tid, mix_tid, bool(seen[k]))))
         if weights[0, k] >= 1.0:
             closed.add(s.portal)
     for h, t in enumerate(horizons, start=1):
