@@ -22,7 +22,7 @@ trailer still decodes the image.
 different depths, ``u q``, ``t q`` and ``q`` are affine in the position, so dividing by
 the interpolated ``q`` shows exactly the texel the sampling point saw each point
 through.  Each row's runs of cells whose four corners share one depth (the sky, a
-facade square on) are merged into one quad.
+facade square on) are merged into one quad, and the same run on the rows below it too.
 """
 
 from __future__ import annotations
@@ -152,7 +152,8 @@ def with_depth(rgba: NDArray[np.uint8], inv: NDArray[np.float64] | None) -> NDAr
 def depth_mesh(side: WallSide, zone: int, inv: NDArray[np.float64]) -> NDArray[np.float32]:
     """``(n, 6) float32`` triangles (position, projective texture coordinates ``u q, t q, q``;
     ``t`` 0 at the image's top) of zone ``zone``'s texture of ``side`` with vertex inverse
-    depths ``inv`` ``(g + 1, g + 1)`` (row 0 at the top), flat runs of a row merged."""
+    depths ``inv`` ``(g + 1, g + 1)`` (row 0 at the top), flat runs of a row merged, and
+    with the same run on the rows below."""
     at = side.sample_point(zone)
     g = inv.shape[0] - 1
     t = np.linspace(0.0, 1.0, g + 1)
@@ -164,17 +165,30 @@ def depth_mesh(side: WallSide, zone: int, inv: NDArray[np.float64]) -> NDArray[n
     vert = np.concatenate([pos, (s * q)[..., None], (top * q)[..., None], q[..., None]], -1)
     flat = (inv[:-1, :-1] == inv[:-1, 1:]) & (inv[:-1, :-1] == inv[1:, :-1]) & (inv[:-1, :-1] == inv[1:, 1:])
     tris: list[NDArray[np.float64]] = []
-    for i in range(g):
+
+    def quad(i0: int, i1: int, j0: int, j1: int) -> None:
+        # top-left, bottom-left, bottom-right, top-right of the cells rows i0..i1, columns j0..j1
+        c = vert[[i0, i1, i1, i0], [j0, j0, j1, j1]]
+        tris.append(c[[0, 1, 2, 0, 2, 3]])
+
+    open_runs: dict[tuple[int, int, float], int] = {}  # a flat run -> the row it started on
+    for i in range(g + 1):
+        runs: set[tuple[int, int, float]] = set()
         j = 0
-        while j < g:
+        while i < g and j < g:
             k = j + 1
             if flat[i, j]:  # a run of cells on one plane parallel to the wall: one quad
                 while k < g and flat[i, k] and inv[i, k] == inv[i, j]:
                     k += 1
-            # top-left, bottom-left, bottom-right, top-right
-            quad = vert[[i, i + 1, i + 1, i], [j, j, k, k]]
-            tris.append(quad[[0, 1, 2, 0, 2, 3]])
+                runs.add((j, k, float(inv[i, j])))
+            else:
+                quad(i, i + 1, j, k)
             j = k
+        # the same run on the rows below joins it (one plane): emit those that end here
+        for key in [r for r in open_runs if r not in runs]:
+            quad(open_runs.pop(key), i, key[0], key[1])
+        for key in runs:
+            open_runs.setdefault(key, i)
     return np.concatenate(tris).astype(np.float32) if tris else np.zeros((0, 6), np.float32)
 
 

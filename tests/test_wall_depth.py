@@ -219,3 +219,20 @@ def test_a_texture_with_a_depth_grid_is_drawn_as_its_mesh_over_its_warped_quad()
     # a texture without a grid is the quad as before
     flat = DrawnWall(0, 0, 1, 6, 1.0, side.corners(), rgba.nbytes, (0, 1), side_of=side)
     assert wall_quads([flat], images.get)[0][0].shape == (4, 3)
+
+
+def test_a_depth_mesh_covers_its_wall_once_with_flat_blocks_merged() -> None:
+    from walkstream.shared.walldepth import depth_mesh
+
+    rng = np.random.default_rng(1)
+    for g in (4, 8, 16):
+        inv = np.full((g + 1, g + 1), 0.02)
+        near = rng.random((g + 1, g + 1)) < 0.3
+        inv[near] = rng.choice([0.5, 0.7], int(near.sum()))
+        tri = depth_mesh(_SIDE, 0, inv).reshape(-1, 3, 6).astype(np.float64)
+        uv = tri[..., 3:5] / tri[..., 5:6]  # where on the texture (and the wall) each corner is
+        e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+        assert np.abs(e1[:, 0] * e2[:, 1] - e2[:, 0] * e1[:, 1]).sum() / 2 == pytest.approx(1.0)
+        assert len(tri) < 2 * g * g
+    # one depth everywhere: one quad
+    assert len(depth_mesh(_SIDE, 0, np.full((9, 9), 0.02))) == 6
