@@ -148,8 +148,9 @@ def _bake_scene(name: str, out: Path, data: Path, quick: bool, settings: dict[st
         if settings.get("virtual_walls"):
             from walkstream.server.bake.wallplan import WallSettings
 
-            extra["walls"] = WallSettings(error_deg=float(settings.get("wall_error", 10.0))).check()
-        settings = {k: v for k, v in settings.items() if k not in ("virtual_walls", "wall_error")}
+            extra["walls"] = WallSettings(error_deg=float(settings.get("wall_error", 10.0)),
+                                          depth_grid=int(settings.get("wall_depth", 0))).check()
+        settings = {k: v for k, v in settings.items() if k not in ("virtual_walls", "wall_error", "wall_depth")}
         bake(src, db, settings=BakeSettings(**(cells | settings)), **extra)
         base = out / f"{name}.db"
         if extra and path != _BENCH_PATH and base.exists():
@@ -298,8 +299,11 @@ def run_walls_bench(
     gl: bool = True,
     quick: bool = False,
     frustum_frames: int = 40,
+    wall_depth: int = 0,
 ) -> dict[str, Any]:
-    """Bake and replay every scene with and without walls (module docstring).
+    """Bake and replay every scene with and without walls (module docstring); with
+    ``wall_depth`` ``G`` > 0 each A also baked with ``--wall-depth G`` and played as the
+    variant ``walls A=a G=g`` (textured depth meshes), beside the walls without.
 
     Returns ``{"rows": [...], "frustum": {...} or None, "notes": [...]}`` and writes
     ``bench_walls.json`` and ``bench_walls.png`` into ``out``.
@@ -326,6 +330,11 @@ def run_walls_bench(
                     notes.append(f"{scene} A={a:g}: no walls in this database (the bake placed none)")
                     continue
                 variants.append((f"walls A={a:g}", wdb, {"virtual_walls": True} if can_play else {}))
+                if wall_depth:
+                    ddb, _ = _bake_scene(scene, out, data, quick, {"virtual_walls": True, "wall_error": float(a),
+                                                                   "wall_depth": wall_depth},
+                                         tag=f"-walls-{a:g}-depth{wall_depth}")
+                    variants.append((f"walls A={a:g} G={wall_depth}", ddb, {"virtual_walls": True} if can_play else {}))
                 if can_play and scene == "hall":
                     # indoors the walls' database plays without them too (every portal
                     # open); a city's rings cut its PVS, so without walls it is the plain bake

@@ -80,6 +80,9 @@ def test_the_texture_laid_for_a_nearer_viewer_shows_what_it_sees_through_the_wal
         behind = ren.depth_behind(_SIDE, 0, width)
         seen = ren.render(_SIDE, 0, width, eye=eye)
         mesh = _depth_mesh_seen(gl, tex, behind, eye)
+        dist, foot = _SIDE.view(eye).distance, float(eye[0] - _SIDE.p0[0])
+        warp = tuple(float(g) for g in zone_warp(foot, eye[2], dist, 0, _SIDE.length, _SIDE.depth, EYE_HEIGHT, 0.5))
+        drawn = _client_mesh_seen(gl, tex, behind, eye, warp)
     finally:
         ren.release()
     # the depth the texture carries: the pillar's front face 9.5 m behind the wall, nothing elsewhere
@@ -87,6 +90,10 @@ def test_the_texture_laid_for_a_nearer_viewer_shows_what_it_sees_through_the_wal
     assert np.median(behind[on]) == pytest.approx(_DEPTH - 0.5, abs=0.01) and np.isinf(behind[~on]).mean() > 0.99
     # a 16 x 16 depth mesh of it, drawn from the eye, shows the pillar where the eye sees it
     assert ((mesh[..., 3] > 127) != (seen[..., 3] > 127)).mean() < 0.005
+    # the client's own (--wall-depth 16: stored, decoded, drawn by the quad renderer, its
+    # warped quad where the mesh leaves holes) too; the texture laid flat on the quad does not
+    assert ((drawn[..., 3] > 127) != (seen[..., 3] > 127)).mean() < 0.005
+    assert ((tex[..., 3] > 127) != (seen[..., 3] > 127)).mean() > 0.01
     centre = np.array([3.0, 20.0 + _DEPTH, 0.0])
     top = np.array([3.0, 20.0 + _DEPTH - 0.5, 6.0])  # the top's near edge bounds it on the wall
     # the texture shows the pillar where the ray from the sampling point meets the wall
@@ -132,6 +139,38 @@ def _depth_mesh_seen(gl: object, tex: np.ndarray, behind: np.ndarray, eye: np.nd
     return pic
 
 
+def _client_mesh_seen(gl: object, tex: np.ndarray, behind: np.ndarray, eye: np.ndarray,
+                      warp: tuple[float, ...]) -> np.ndarray:
+    """``tex`` stored with its 16 x 16 depth grid (:mod:`walkstream.shared.walldepth`),
+    decoded as the client does and drawn by its quad renderer from ``eye`` (the mesh, and
+    the quad laid by ``warp`` in its holes), at the texture's resolution."""
+    from walkstream.client.draw.quads import QuadRenderer, with_mesh
+    from walkstream.server.bake.wallrender import off_axis
+    from walkstream.shared.codec.image import encode_image
+    from walkstream.shared.content.walltex import decode_walltex
+    from walkstream.shared.gl import Framebuffer
+    from walkstream.shared.litimage import SUPERSAMPLE, average_samples
+    from walkstream.shared.walldepth import attach_depth, depth_mesh, encode_depth, vertex_depths
+
+    inv = vertex_depths(behind, _SIDE.depth, 16)
+    img = decode_walltex(attach_depth(encode_image(tex), encode_depth(inv)))
+    assert img.depth is not None and np.abs(img.depth - inv).max() <= 0.5 / 255 + 1e-9
+    assert np.array_equal(img, decode_walltex(encode_image(tex)))  # the image, as without a grid
+    corners = with_mesh(warped(_SIDE.corners(), warp), depth_mesh(_SIDE, 0, img.depth))
+    fb = Framebuffer(gl, (tex.shape[1] * SUPERSAMPLE, tex.shape[0] * SUPERSAMPLE))
+    quads = QuadRenderer(gl)
+    try:
+        fb.use()
+        fb.clear((0.0, 0.0, 0.0, 0.0))
+        quads.draw([(corners, -1, img, 1.0)], off_axis(eye, _SIDE))
+        assert quads.last_triangles == len(corners) // 3 < 2 + 2 * 16 * 16
+        out: np.ndarray = average_samples(fb.read())
+    finally:
+        quads.release()
+        fb.release()
+    return out
+
+
 def test_the_warp_is_the_slide_at_the_sampling_depth_and_exact_for_points_as_deep_as_the_share_says() -> None:
     w, xs = 3.0, 14.0
     for x in (7.0, 14.0, 30.0):
@@ -147,3 +186,53 @@ def test_the_warp_is_the_slide_at_the_sampling_depth_and_exact_for_points_as_dee
                 v_at = viewer + (point - viewer) * x / (x + p)
                 assert along + k * v_at[0] == pytest.approx(s_at[0]) and up + k * v_at[2] == pytest.approx(s_at[2])
     assert np.allclose(zone_warp(5.1, 1.7, 7.0, 1, w, xs, EYE_HEIGHT, 0.0), NO_WARP)  # share 0: fixed on the wall
+
+
+def test_a_texture_with_a_depth_grid_is_drawn_as_its_mesh_over_its_warped_quad() -> None:
+    from walkstream.client.walk.walls import DrawnWall, _triangles, wall_quads
+    from walkstream.shared.walldepth import depth_mesh, with_depth
+
+    side = WallSide(0, 0, (-6.0, 20.0), (6.0, 20.0), 0.0, 12.0, 0.0, 0.0, 0.0, 20.0, math.radians(10.0), 2, (5, 6))
+    inv = np.full((9, 9), 20.0 / 1020.0)
+    inv[4:6, 3:5] = 20.0 / 29.5  # something near behind the middle of the wall
+    rgba = np.zeros((32, 32, 4), np.uint8)
+    images = {5: with_depth(rgba, inv), 6: rgba}
+
+    class Lane:
+        def image(self, tid: int) -> object:
+            return images[tid]
+
+    own = _triangles(Lane(), side, 5, -1)
+    mesh = depth_mesh(side, 0, inv)
+    # the rows of cells at one depth merged: far fewer than 2 x 8 x 8
+    assert own == 2 + len(mesh) // 3 and own < 2 + 64
+    assert _triangles(Lane(), side, 6, -1) == 2 and _triangles(Lane(), side, 6, 5) == own
+    wall = DrawnWall(0, 0, 0, 5, 1.0, side.corners(), rgba.nbytes, (0, 1), side_of=side, triangles=own)
+    (corners, key, image, alpha), = wall_quads([wall], images.get)
+    assert key == -6 and image is images[5] and alpha == 1.0 and corners.shape == (6 + len(mesh), 6)
+    assert np.allclose(corners[6:], mesh) and np.allclose(corners[:6, :3], side.corners()[[0, 1, 2, 0, 2, 3]])
+    # each vertex where the sampling point saw it: on its ray through the wall, at its depth
+    at = side.sample_point(0)
+    u, q = corners[6:, 3] / corners[6:, 5], corners[6:, 5]
+    assert np.allclose(at[1] + (20.0 - at[1]) * q, corners[6:, 1])
+    assert np.allclose(at[0] + (side.p0[0] + u * side.length - at[0]) * q, corners[6:, 0], atol=1e-3)
+    # a texture without a grid is the quad as before
+    flat = DrawnWall(0, 0, 1, 6, 1.0, side.corners(), rgba.nbytes, (0, 1), side_of=side)
+    assert wall_quads([flat], images.get)[0][0].shape == (4, 3)
+
+
+def test_a_depth_mesh_covers_its_wall_once_with_flat_blocks_merged() -> None:
+    from walkstream.shared.walldepth import depth_mesh
+
+    rng = np.random.default_rng(1)
+    for g in (4, 8, 16):
+        inv = np.full((g + 1, g + 1), 0.02)
+        near = rng.random((g + 1, g + 1)) < 0.3
+        inv[near] = rng.choice([0.5, 0.7], int(near.sum()))
+        tri = depth_mesh(_SIDE, 0, inv).reshape(-1, 3, 6).astype(np.float64)
+        uv = tri[..., 3:5] / tri[..., 5:6]  # where on the texture (and the wall) each corner is
+        e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+        assert np.abs(e1[:, 0] * e2[:, 1] - e2[:, 0] * e1[:, 1]).sum() / 2 == pytest.approx(1.0)
+        assert len(tri) < 2 * g * g
+    # one depth everywhere: one quad
+    assert len(depth_mesh(_SIDE, 0, np.full((9, 9), 0.02))) == 6

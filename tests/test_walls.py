@@ -8,6 +8,7 @@ walls), a bake killed among its textures (resumed to the same version).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections.abc import Iterator
@@ -235,6 +236,13 @@ def baked(hall: Path, gl_ctx: object) -> tuple[Path, dict]:
 
 
 @pytest.fixture(scope="module")
+def deep(hall: Path, gl_ctx: object) -> tuple[Path, dict]:
+    """The hall baked with ``--wall-depth 8``: each texture's depth grid after it."""
+    out = hall.parent / "deep.db"
+    return out, bake(hall, out, walls=dataclasses.replace(SMALL, depth_grid=8), name="deep")
+
+
+@pytest.fixture(scope="module")
 def plain(hall: Path, gl_ctx: object) -> tuple[Path, dict]:
     out = hall.parent / "plain.db"
     return out, bake(hall, out, name="plain")
@@ -306,6 +314,32 @@ def _centre(e: object) -> tuple[float, float]:
 
 
 @pytest.mark.gl
+def test_a_bake_with_wall_depth_stores_each_textures_grid_after_its_image(
+    baked: tuple[Path, dict], deep: tuple[Path, dict]
+) -> None:
+    from walkstream.shared.content.walltex import decode_walltex
+    from walkstream.shared.walldepth import split_depth
+
+    with SceneReader.open(deep[0]) as r, SceneReader.open(baked[0]) as old:
+        assert r.meta.settings["walls"]["depth_grid"] == 8 and "depth_grid" not in old.meta.settings["walls"]
+        assert r.wall_sides() == old.wall_sides() and r.wall_texture_info().keys() == old.wall_texture_info().keys()
+        ids = sorted(r.wall_texture_info())
+        blobs, flat = r.wall_textures(ids), old.wall_textures(ids)
+    for tid in ids:
+        image, inv = split_depth(blobs[tid][1])
+        # the image byte for byte as without depths, then the 9 x 9 grid (the hall is
+        # enclosed: every vertex sees something, within the hall's 24 m)
+        assert image == flat[tid][1] and split_depth(flat[tid][1]) == (flat[tid][1], None)
+        assert inv is not None and inv.shape == (9, 9) and 0.0 < inv.min() and inv.max() <= 1.0
+        img = decode_walltex(blobs[tid][1])
+        assert np.array_equal(img, decode_image(image, "t")) and np.array_equal(img.depth, inv)
+        # a decoder that does not know the trailer still reads the image (WebP's own length)
+        assert np.array_equal(decode_image(blobs[tid][1], "t"), img)
+    extra = sum(len(blobs[t][1]) - len(flat[t][1]) for t in ids) / len(ids)
+    assert 20 < extra < 90  # bytes a texture: 81 depths, row differences deflated
+
+
+@pytest.mark.gl
 def test_a_bake_without_walls_is_unchanged(plain: tuple[Path, dict]) -> None:
     path, summary = plain
     assert not any(k.startswith("wall") for k in summary) and "walls" not in summary["features"]
@@ -349,8 +383,8 @@ def test_walls_refuse_a_city_and_bad_settings(tmp_path: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def http(baked: tuple[Path, dict], plain: tuple[Path, dict]) -> Iterator[Http]:
-    app = create_app([baked[0], plain[0]])
+def http(baked: tuple[Path, dict], plain: tuple[Path, dict], deep: tuple[Path, dict]) -> Iterator[Http]:
+    app = create_app([baked[0], plain[0], deep[0]])
     c = Http(app)
     yield c
     c.close()
@@ -395,6 +429,22 @@ def test_walls_and_textures_are_served_immutable_and_in_batches(http: Http, bake
     assert all(body == stored[i][1] for i, _etag, body in parts)
     assert http.get("/v1/scenes/walls/walls/textures/99999").status_code == 404
     assert http.post("/v1/scenes/walls/walls/textures", json={"ids": [tid, tid]}).status_code == 422
+
+
+@pytest.mark.gl
+def test_a_textures_depth_grid_travels_with_it(http: Http) -> None:
+    from walkstream.shared.content.walltex import decode_walltex
+
+    tid = decode_walls(http.get("/v1/scenes/deep/walls", headers={"Accept": MSGPACK}).content, "w")[0].textures[0]
+    one, flat = http.get(f"/v1/scenes/deep/walls/textures/{tid}"), http.get(f"/v1/scenes/walls/walls/textures/{tid}")
+    assert one.status_code == 200 and one.headers["etag"] != flat.headers["etag"]
+    assert one.content.startswith(flat.content) and decode_walltex(one.content).depth.shape == (9, 9)
+    assert getattr(decode_walltex(flat.content), "depth", None) is None
+    assert http.get(f"/v1/scenes/deep/walls/textures/{tid}", headers={"If-None-Match": one.headers["etag"]}).status_code == 304
+    batch = http.post("/v1/scenes/deep/walls/textures", json={"ids": [tid]})
+    unpacker = msgpack.Unpacker(raw=False)
+    unpacker.feed(batch.content)
+    assert [check_contents_part(p, "part")[2] for p in unpacker] == [one.content]
 
 
 @pytest.mark.gl
@@ -560,6 +610,8 @@ def test_a_walltex_part_lists_distinct_textures_and_a_short_bundle_says_so() -> 
         (["--virtual-walls", "--wall-error", "0"], "--wall-error"),
         (["--virtual-walls", "--wall-pitch", "1"], "--wall-pitch"),
         (["--wall-error", "10"], "give --virtual-walls too"),
+        (["--virtual-walls", "--wall-depth", "5"], "--wall-depth: expected one of 0, 4, 8, 16, got 5"),
+        (["--wall-depth", "8"], "give --virtual-walls too"),
     ],
 )
 def test_bad_wall_flags_are_one_clear_line(

@@ -27,7 +27,8 @@ from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.errors import RenderError
 from walkstream.shared.walls import NO_WARP, WallWarp
 
-__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "slid", "warped"]
+__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "slid", "warped",
+           "with_mesh"]
 
 IMPOSTOR_MIN_FILTER: int = moderngl.LINEAR
 """How an impostor image's texels are read when it is drawn smaller than baked: bilinear.
@@ -41,17 +42,24 @@ Quad = tuple[NDArray[np.float64], int, NDArray[np.uint8], float]
 """``(corners (4, 3), image id, premultiplied RGBA (h, w, 4), opacity)``; corners bottom-left,
 bottom-right, top-right, top-left of the image (its row 0 is the top).  Corners ``(4, 5)``
 carry each corner's texture coordinates ``u, v`` too (a virtual wall's texture slid along
-the wall, :func:`cross_fade`; outside 0..1 the image's edge texels)."""
+the wall, :func:`cross_fade`; outside 0..1 the image's edge texels).  Corners ``(3 m, 6)``
+are ``m`` triangles with projective texture coordinates ``u q, v q, q`` (a wall texture's
+depth mesh, :mod:`walkstream.shared.walldepth`, its warped quad as the first two
+triangles: :func:`with_mesh`)."""
 
 _VS = """
 #version 330
 uniform mat4 u_view_proj;
+uniform float u_push;
 in vec3 in_pos;
-in vec2 in_uv;
-out vec2 v_uv;
+in vec3 in_uvq;
+out vec3 v_uvq;
 void main() {
-    v_uv = in_uv;
+    v_uvq = in_uvq;
     gl_Position = u_view_proj * vec4(in_pos, 1.0);
+    // a depth mesh's quad: just before the far plane, so it shows only where neither its
+    // mesh (depth written) nor geometry drew (z = c w stays linear: clipping agrees)
+    if (u_push > 0.5) gl_Position.z = 0.99999 * gl_Position.w;
 }
 """
 
@@ -59,15 +67,36 @@ _FS = """
 #version 330
 uniform sampler2D u_image;
 uniform float u_alpha;
-in vec2 v_uv;
+in vec3 v_uvq;
 out vec4 f_colour;
 void main() {
-    f_colour = texture(u_image, v_uv) * u_alpha;  // premultiplied: every channel scales
+    // projective: a depth mesh's triangle shows what the sampling point saw (q = 1 on a quad)
+    f_colour = texture(u_image, v_uvq.xy / v_uvq.z) * u_alpha;  // premultiplied: every channel scales
 }
 """
 
 # texture v: row 0 of the array (the image's top) is at v = 0
 _UV = np.array([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]], np.float32)
+
+_MESH_VERTICES = 3 * 2 * (2 + 16 * 16)
+"""Vertices the buffer holds from the start: a 16 x 16 depth mesh and its quad (more grows it)."""
+
+
+def _uvq(corners: NDArray[np.floating]) -> NDArray[np.float32]:
+    """``(4, 6)`` a quad's corners ``(4, 3)`` or ``(4, 5)`` with ``u, v, q = 1``."""
+    c = np.asarray(corners, np.float32)
+    uv = c[:, 3:5] if c.shape[1] >= 5 else _UV
+    return np.hstack([c[:, :3], uv, np.ones((4, 1), np.float32)])
+
+
+def with_mesh(quad: NDArray[np.floating], mesh: NDArray[np.float32]) -> NDArray[np.float64]:
+    """``(6 + n, 6)`` triangles: the quad ``(4, 3)`` or ``(4, 5)`` (a wall's warped quad)
+    as two triangles first, then the depth mesh ``(n, 6)``; the renderer draws the mesh
+    and fills its holes with the quad (:meth:`QuadRenderer._mesh`; :func:`back_to_front`
+    sorts the item by the quad)."""
+    q = _uvq(quad)
+    out: NDArray[np.float64] = np.vstack([q[[0, 1, 2, 0, 2, 3]], np.asarray(mesh, np.float32)]).astype(np.float64)
+    return out
 
 
 class QuadRenderer:
@@ -81,13 +110,15 @@ class QuadRenderer:
             self._prog = ctx.program(vertex_shader=_VS, fragment_shader=_FS)
         except Exception as exc:
             raise RenderError(f"QuadRenderer: shader program failed: {exc}") from exc
-        self._vbo = ctx.buffer(reserve=4 * 5 * 4)
-        self._vao = ctx.vertex_array(self._prog, [(self._vbo, "3f 2f", "in_pos", "in_uv")])
+        self._vbo = ctx.buffer(reserve=_MESH_VERTICES * 6 * 4)
+        self._vao = ctx.vertex_array(self._prog, [(self._vbo, "3f 3f", "in_pos", "in_uvq")])
         self._textures: dict[int, moderngl.Texture] = {}
         self.texture_bytes = 0
         """Bytes of the textures held."""
         self.last_quads = 0
         """Quads the last :meth:`draw` drew."""
+        self.last_triangles = 0
+        """Triangles the last :meth:`draw` drew (two a quad, a depth mesh's own)."""
 
     def _texture(self, image: int, rgba: NDArray[np.uint8]) -> moderngl.Texture:
         tex = self._textures.get(image)
@@ -113,6 +144,7 @@ class QuadRenderer:
             self.texture_bytes -= tex.width * tex.height * 4
             tex.release()
         self.last_quads = len(quads)
+        self.last_triangles = sum(2 if len(q[0]) == 4 else len(q[0]) // 3 for q in quads)
         if not quads:
             return
         ctx = self.ctx
@@ -131,13 +163,34 @@ class QuadRenderer:
                 self._texture(image, rgba).use(0)
                 ua.value = float(alpha)
                 c = np.asarray(corners, np.float32)
-                verts = c if c.shape == (4, 5) else np.hstack([c.reshape(4, 3), _UV])
-                self._vbo.write(verts[[0, 1, 2, 3]].astype("f4").tobytes())
+                if len(c) != 4:  # a depth mesh, then its quad where the mesh left holes
+                    self._mesh(c, fbo)
+                    continue
+                verts = _uvq(c)
+                self._vbo.write(verts.astype("f4").tobytes())
                 self._vao.render(moderngl.TRIANGLE_FAN, vertices=4)
         finally:
             fbo.depth_mask = True
             ctx.disable(moderngl.BLEND)
             ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+
+    def _mesh(self, tris: NDArray[np.floating], fbo: Any) -> None:
+        """Draw a :func:`with_mesh` item: the mesh (its rows after the first six) with its
+        depth written, then the quad (the first six) pushed to the far plane, so it fills
+        only the mesh's holes (what a viewer nearer than the sampling point sees past the
+        texture's edges), as ``benchmarks/walldepth.py`` measured "mesh + warp"."""
+        data = np.ascontiguousarray(tris, "f4").tobytes()
+        if len(data) > self._vbo.size:
+            self._vbo.orphan(len(data))
+        self._vbo.write(data)
+        push = self._prog["u_push"]
+        assert isinstance(push, moderngl.Uniform)
+        fbo.depth_mask = True
+        self._vao.render(moderngl.TRIANGLES, vertices=len(tris) - 6, first=6)
+        fbo.depth_mask = False
+        push.value = 1.0
+        self._vao.render(moderngl.TRIANGLES, vertices=6, first=0)
+        push.value = 0.0
 
     def release(self) -> None:
         """Release the textures and buffers."""
@@ -161,7 +214,9 @@ def back_to_front(quads: Sequence[Quad], view_proj: ArrayLike) -> list[Quad]:
     one building cross-fading share a centre and keep their order (the old under the new).
     """
     m = np.asarray(view_proj, np.float64).reshape(4, 4)
-    depth = [float(m[3, :3] @ np.asarray(q[0], np.float64).reshape(4, -1)[:, :3].mean(axis=0) + m[3, 3]) for q in quads]
+    # a depth mesh by its quad (its first two triangles, :func:`with_mesh`)
+    depth = [float(m[3, :3] @ np.asarray(q[0], np.float64)[:6 if len(q[0]) != 4 else 4, :3].mean(axis=0) + m[3, 3])
+             for q in quads]
     order = sorted(range(len(quads)), key=lambda k: -depth[k])  # stable: ties keep their order
     return [quads[k] for k in order]
 

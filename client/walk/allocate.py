@@ -53,7 +53,8 @@ def allocate(w: WalkState, f: Frame) -> None:
         f.impostors = [] if w.indoors else frame_impostors(w, f)
         if f.impostors and len(seen):  # a building drawn as its image alone: no geometry
             seen &= ~replaced([g.id for g in o.geoms], f.impostors)
-        quad_tris = 2 * len(f.impostors)
+        # the walls' depth meshes (--wall-depth) come out of the objects' share too
+        quad_tris = 2 * len(f.impostors) + sum(d.triangles - 2 for d in f.walls)
         if w.facades is not None and not w.indoors:  # the bake and last frame's facade quads come first
             quad_tris += 2 * w.facades.last_quads
             floor = int(o.tri[seen & o.avail[:, 0], 0].sum()) if len(seen) else 0
@@ -71,8 +72,10 @@ def allocate(w: WalkState, f: Frame) -> None:
         w.device.cost_scale = w.device.cost_scale * cfg.cost_step_factor
         w.stepped = True
     lods = f.lods
-    # a wall texture is a quad as an impostor is: two triangles and one draw
-    f.triangles = room_tris + 2 * (len(f.impostors) + len(f.walls)) + (0 if f.alloc is None else int(f.alloc.triangles))
+    # a wall texture is a quad as an impostor is: two triangles and one draw (and its
+    # depth mesh's triangles, --wall-depth)
+    f.triangles = room_tris + 2 * len(f.impostors) + sum(d.triangles for d in f.walls) + (
+        0 if f.alloc is None else int(f.alloc.triangles))
     f.drawn = room_parts + len(f.impostors) + len(f.walls) + int((lods >= 0).sum())
     f.triangles += f.facade_bake
     if w.facades is not None and not w.indoors:

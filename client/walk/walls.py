@@ -57,11 +57,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.draw.quads import Quad, cross_fade
+from walkstream.client.draw.quads import Quad, cross_fade, with_mesh
 from walkstream.client.walk.ringahead import ring_textures_ahead, ring_zones_ahead
 from walkstream.client.walk.scene import WalkScene
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.frustum import frustum_cull
+from walkstream.shared.walldepth import depth_mesh, mesh_triangles
 from walkstream.shared.walls import (
     NO_WARP,
     WallSide,
@@ -74,7 +75,7 @@ from walkstream.shared.walls import (
 
 __all__ = [
     "RING_BEHIND_NEED_S", "WALL_AHEAD_S", "WALL_MIX_NEED_S", "DrawnWall", "drawn_walls", "frame_walls", "ring_walls",
-    "add_ring_sides", "wall_quads", "want_wall_textures",
+    "add_ring_sides", "wall_mesh", "wall_quads", "want_wall_textures",
 ]
 
 
@@ -103,6 +104,11 @@ class DrawnWall:
     """How its own texture and the neighbour's are laid on the wall: slid with the viewer's
     offset from each zone's sampling line and scaled with its distance against the
     sampling point's (:func:`~walkstream.shared.walls.zone_warp`, ``--wall-parallax``)."""
+    side_of: WallSide | None = None
+    """The side drawn: a texture with a depth grid (``--wall-depth``) is drawn as its
+    depth mesh (:func:`wall_mesh`) over the warped quad."""
+    triangles: int = 2
+    """Triangles the wall draws: its quad's two, and its textures' depth meshes'."""
 
 
 WALL_AHEAD_S = (0.5, 1.0, 1.5, 2.0, 3.0, 4.5, 6.0)
@@ -133,6 +139,36 @@ def _warps(table: WallTable, k: int, eye: NDArray[np.float64], foot: float, dist
     own = (float(got[0, 0]), float(got[0, 1]), float(got[0, 2]))
     other = (float(got[1, 0]), float(got[1, 1]), float(got[1, 2])) if mix_zone >= 0 else NO_WARP
     return (own, other)
+
+
+def wall_mesh(image: Any, side: WallSide, tid: int) -> NDArray[np.float32] | None:
+    """The depth mesh of texture ``tid`` of ``side`` (its decoded ``image`` carrying a depth
+    grid, ``--wall-depth``: :class:`~walkstream.shared.walldepth.WallImage`), built once
+    and kept on the image; None for a texture without one."""
+    inv = getattr(image, "depth", None)
+    if inv is None or tid not in side.textures:
+        return None
+    mesh: NDArray[np.float32] | None = getattr(image, "mesh", None)
+    if mesh is None:
+        mesh = depth_mesh(side, side.textures.index(tid), inv)
+        image.mesh = mesh
+    return mesh
+
+
+def _triangles(lane: Any, side: WallSide, tid: int, mix_tid: int) -> int:
+    """Triangles a wall draws (:attr:`DrawnWall.triangles`): the quad's two and the depth
+    meshes of its texture and the neighbour's blended in."""
+    out = 2 + mesh_triangles(wall_mesh(lane.image(tid), side, tid))
+    if mix_tid >= 0:
+        out += mesh_triangles(wall_mesh(lane.image(mix_tid), side, mix_tid))
+    return out
+
+
+def _meshed(lane: Any, side: WallSide, tid: int, mix_tid: int, seen: bool) -> tuple[WallSide | None, int]:
+    """:attr:`DrawnWall.side_of` and :attr:`DrawnWall.triangles` of a wall: a wall out
+    of the view draws its quad alone (off the screen either way; its depth meshes'
+    triangles would take the frame's budget for nothing)."""
+    return (side, _triangles(lane, side, tid, mix_tid)) if seen else (None, 2)
 
 
 def add_ring_sides(scene: WalkScene, sides: Sequence[WallSide]) -> None:
@@ -238,7 +274,7 @@ def ring_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
             out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
                                  int(getattr(img, "nbytes", 0)), (street, -1), mix_tid, mix,
                                  _warps(table, k, eye, float(foot[k]), float(dist[0, k]), zone, int(mix_zone[k]),
-                                        w.config.wall_parallax)))
+                                        w.config.wall_parallax), *_meshed(lane, s, tid, mix_tid, bool(seen[j]))))
         # the zones the eye walks into along its ring (the walker may turn: ring_zones_ahead)
         ring_zones_ahead(table, sides, ring, eye, eyes[1:], horizons, in_view, want)
     if w.config.prefetch:  # the rings the walker enters next, where it enters them
@@ -316,7 +352,7 @@ def frame_walls(w: WalkState, f: Frame) -> list[DrawnWall]:
         out.append(DrawnWall(s.portal, s.side, zone, tid, float(weights[0, k]), s.corners(),
                              int(getattr(img, "nbytes", 0)), cells, mix_tid, mix,
                              _warps(table, k, eye, float(foot[k]), float(dist[0, k]), zone, int(mix_zone[k]),
-                                    w.config.wall_parallax)))
+                                    w.config.wall_parallax), *_meshed(lane, s, tid, mix_tid, bool(seen[k]))))
         if weights[0, k] >= 1.0:
             closed.add(s.portal)
     for h, t in enumerate(horizons, start=1):
@@ -360,7 +396,9 @@ def drawn_walls(walls: list[DrawnWall], visible: list[int]) -> list[DrawnWall]:
 def wall_quads(walls: Sequence[DrawnWall], image: Callable[[int], Any]) -> list[Quad]:
     """The quads of a frame's walls (``image(id)`` the decoded RGBA of a texture), each
     keyed by its texture id turned negative: impostor images and wall textures share
-    the quad renderer's textures without colliding.
+    the quad renderer's textures without colliding.  A texture with a depth grid
+    (``--wall-depth``) is its depth mesh over its warped quad, one item
+    (:func:`~walkstream.client.draw.quads.with_mesh`).
 
     A wall with a neighbour zone blended in (:attr:`DrawnWall.mix` ``m`` at opacity
     ``a``) is two quads, its own texture at ``a (1 - m) / (1 - a m)`` and then the
@@ -372,5 +410,11 @@ def wall_quads(walls: Sequence[DrawnWall], image: Callable[[int], Any]) -> list[
         if rgba is None:
             continue
         other = image(d.mix_image) if d.mix_image >= 0 and d.mix > 0.0 else None
-        out += cross_fade(d.corners, -1 - d.image, rgba, -1 - d.mix_image, other, d.alpha, d.mix, d.warps)
+        quads = cross_fade(d.corners, -1 - d.image, rgba, -1 - d.mix_image, other, d.alpha, d.mix, d.warps)
+        if d.side_of is not None:  # a texture with a depth grid: its mesh over its warped quad
+            for n, q in enumerate(quads):
+                mesh = wall_mesh(q[2], d.side_of, d.image if n == 0 else d.mix_image)
+                if mesh is not None:
+                    quads[n] = (with_mesh(q[0], mesh), q[1], q[2], q[3])
+        out += quads
     return out

@@ -45,6 +45,7 @@ from walkstream.server.bake.roomlayout import RoomLayout
 from walkstream.server.sources.interior import InteriorScene
 from walkstream.shared.codec.image import IMAGE_MEDIA
 from walkstream.shared.errors import InputError
+from walkstream.shared.walldepth import check_depth_grid
 from walkstream.shared.walls import DEFAULT_WALL_ERROR_DEG, WallSide, zone_count
 
 __all__ = [
@@ -100,6 +101,9 @@ class WallSettings:
     outdoor_max_side: int = 256
     quality: int = 90
     outdoor_quality: int = 75
+    depth_grid: int = 0
+    """``--wall-depth G``: each texture's ``G`` x ``G`` inverse-depth grid stored after it
+    (:mod:`walkstream.shared.walldepth`; 0: none)."""
 
     def check(self) -> WallSettings:
         """These settings, or a one-line :class:`InputError` naming the bad one."""
@@ -116,6 +120,7 @@ class WallSettings:
         for name, q in (("quality", self.quality), ("outdoor quality", self.outdoor_quality)):
             if not (isinstance(q, int) and 1 <= q <= 100):
                 raise InputError(f"wall {name}: expected 1 to 100, got {q!r:.20}")
+        check_depth_grid(self.depth_grid)
         if self.codec not in IMAGE_MEDIA:
             raise InputError(f"wall codec: expected one of {', '.join(IMAGE_MEDIA)}, got {self.codec!r}")
         return self
@@ -123,7 +128,9 @@ class WallSettings:
     def record(self) -> dict[str, Any]:
         """What the database's settings record (a change is a different bake)."""
         return {"pitch": self.pitch, "error_deg": self.error_deg, "texels_per_m": self.texels_per_m,
-                "max_side": self.max_side, "codec": self.codec}
+                "max_side": self.max_side, "codec": self.codec,
+                # only when asked: a bake without depths records what it always did
+                **({"depth_grid": self.depth_grid} if self.depth_grid else {})}
 
     def outdoors(self) -> WallSettings:
         """These settings for a city's rings: the outdoor texture resolution in force."""
@@ -134,7 +141,7 @@ class WallSettings:
         """What a city's database records (a change is a different bake)."""
         return {"error_deg": self.error_deg, "keep": self.keep, "ring_min": self.ring_min, "region": self.region,
                 "texels_per_m": self.outdoor_texels_per_m, "max_side": self.outdoor_max_side, "codec": self.codec,
-                "quality": self.outdoor_quality}
+                "quality": self.outdoor_quality, **({"depth_grid": self.depth_grid} if self.depth_grid else {})}
 
 
 WallJob = tuple[int, tuple[Any, ...], int, int, tuple[int, ...]]

@@ -41,6 +41,7 @@ from walkstream.shared.gl import (
 )
 from walkstream.shared.litimage import SUPERSAMPLE, average_samples, lit_program
 from walkstream.shared.palette import material_rgb
+from walkstream.shared.walldepth import attach_depth, encode_depth, vertex_depths
 from walkstream.shared.walls import WallSide
 
 __all__ = ["WallElement", "WallRenderer", "off_axis", "release_wall_renderer", "wall_elements", "wall_task"]
@@ -194,9 +195,11 @@ _WORKER: dict[str, Any] = {}
 
 
 def wall_task(jobs: list[WallJob], scene: InteriorScene | SourceScene, key: str, codec: str,
-              quality: int = 90) -> list[tuple[WallJob, tuple[int, bytes]]]:
+              quality: int = 90, depth_grid: int = 0) -> list[tuple[WallJob, tuple[int, bytes]]]:
     """Render and encode textures (:data:`~.wallplan.WallJob` each): ``(job, (height, bytes))``
-    in order, lossy codecs at ``quality``.  A worker keeps its renderer while ``key`` (the scene's) stays."""
+    in order, lossy codecs at ``quality``; with ``depth_grid`` ``G`` > 0 each image followed
+    by its ``G`` x ``G`` depth grid (:mod:`walkstream.shared.walldepth`, from the render's
+    own depth buffer).  A worker keeps its renderer while ``key`` (the scene's) stays."""
     if _WORKER.get("key") != key:
         release_wall_renderer()
         _WORKER["renderer"] = WallRenderer(scene)
@@ -207,7 +210,11 @@ def wall_task(jobs: list[WallJob], scene: InteriorScene | SourceScene, key: str,
         tid, row, zone, width, exclude = job
         side = WallSide.from_row(list(row), f"texture {tid}")
         img = r.render(side, zone, width, exclude)
-        out.append((job, (img.shape[0], encode_image(img, codec, quality))))
+        data = encode_image(img, codec, quality)
+        if depth_grid:
+            inv = vertex_depths(r.depth_behind(side, zone, width), side.depth, depth_grid)
+            data = attach_depth(data, encode_depth(inv))
+        out.append((job, (img.shape[0], data)))
     return out
 
 

@@ -57,7 +57,7 @@ def bake_walls(
         f"({len(plan.jobs) - len(todo)} already baked)")
     media = IMAGE_MEDIA[settings.codec]
     for results in run_chunks(
-        wall_task, todo, (scene, key, settings.codec, settings.quality), size=WALL_CHUNK, workers=workers, scheduler=scheduler,
+        wall_task, todo, (scene, key, settings.codec, settings.quality, settings.depth_grid), size=WALL_CHUNK, workers=workers, scheduler=scheduler,
         progress=progress, done=len(plan.jobs) - len(todo), total=len(plan.jobs), release=release_wall_renderer,
     ):
         for (tid, row, zone, width, _ex), (height, data) in results:
