@@ -48,14 +48,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from walkstream.shared.walldepth import DEPTH_CAP, grid_reduce
+
 _GRIDS = (4, 8, 16)
 _VISIBLE = 24
 """A channel difference (of 255) above which a texel counts as visibly wrong."""
 _CONE = np.radians(37.6)
 _RUBBER = 1.25
-_CAP = 1000.0
-"""Depths beyond this (metres behind the wall), sky included, are placed here: inside
-the wall renderer's far plane for any viewer."""
 
 _VERTEX = """
 #version 330
@@ -89,18 +88,9 @@ void main() {
 def vertex_depths(inv: NDArray[np.float64], grid: int, how: str) -> NDArray[np.float64]:
     """``(grid + 1, grid + 1)`` inverse depths ``x_s / (x_s + p)`` at a ``grid`` x ``grid``
     mesh's vertices (row 0 at the top) from the per-sample ``inv`` ``(h, w)``: the mean
-    (``how`` "mean") or the largest, the nearest (``how`` "nearest"), within half a
-    cell of each vertex."""
-    h, w = inv.shape
-    out = np.empty((grid + 1, grid + 1))
-    rows = np.linspace(0, h, grid + 1)
-    cols = np.linspace(0, w, grid + 1)
-    hr, hc = h / grid / 2, w / grid / 2
-    for i, r in enumerate(rows):
-        for j, c in enumerate(cols):
-            win = inv[int(max(r - hr, 0)):int(min(r + hr, h)) + 1, int(max(c - hc, 0)):int(min(c + hc, w)) + 1]
-            out[i, j] = win.mean() if how == "mean" else win.max()
-    return out
+    (``how`` "mean") or the largest, the nearest (``how`` "nearest", what the bake
+    stores), within half a cell of each vertex."""
+    return grid_reduce(inv, grid, np.mean if how == "mean" else np.max)
 
 
 def quantised(inv_v: NDArray[np.float64], bits: int, floor: float) -> NDArray[np.float64]:
@@ -309,7 +299,7 @@ def measure(db: str, source: str, report: str, path_name: str = "bench", share: 
             tex = ren.render(s, v.zone, width)
             behind = ren.depth_behind(s, v.zone, width).astype(np.float64)
             at = s.sample_point(v.zone)
-            inv = s.depth / (s.depth + np.minimum(behind, _CAP))
+            inv = s.depth / (s.depth + np.minimum(behind, DEPTH_CAP))
             foot = float((eye[:2] - np.asarray(s.p0)) @ s.along)
             zw = s.length / s.zones
             res: dict[str, float] = {}
@@ -323,7 +313,7 @@ def measure(db: str, source: str, report: str, path_name: str = "bench", share: 
                 for how in ("mean", "nearest"):
                     inv_v = vertex_depths(inv, g, how)
                     res[f"bytes {g} {how}"] = float(grid_bytes(inv_v, bits))
-                    inv_v = quantised(inv_v, bits, s.depth / (s.depth + _CAP))
+                    inv_v = quantised(inv_v, bits, s.depth / (s.depth + DEPTH_CAP))
                     res[f"triangles {g} {how}"] = float(merged_triangles(inv_v))
                     tris = depth_mesh(s, at, inv_v)
                     pic, mask = drawer.draw(s, eye, at, tris, tex, fb)

@@ -29,6 +29,8 @@ from __future__ import annotations
 
 import struct
 import zlib
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +47,7 @@ __all__ = [
     "check_depth_grid",
     "depth_mesh",
     "encode_depth",
+    "grid_reduce",
     "mesh_triangles",
     "split_depth",
     "vertex_depths",
@@ -77,15 +80,22 @@ def vertex_depths(behind: NDArray[np.floating], x_s: float, grid: int) -> NDArra
     wall, ``inf`` where nothing was drawn): the largest, the nearest, within half a cell
     of each vertex, no smaller than :data:`DEPTH_CAP`'s."""
     p = np.minimum(np.asarray(behind, np.float64), DEPTH_CAP)
-    inv = x_s / (x_s + p)
-    h, w = inv.shape
+    return grid_reduce(x_s / (x_s + p), grid)
+
+
+def grid_reduce(
+    values: NDArray[np.float64], grid: int, reduce: Callable[[NDArray[np.float64]], Any] = np.max
+) -> NDArray[np.float64]:
+    """``(grid + 1, grid + 1)``: ``reduce`` of the samples of ``values`` ``(h, w)`` within
+    half a cell of each vertex of a ``grid`` x ``grid`` mesh over them (row 0 at the top)."""
+    h, w = values.shape
     out = np.empty((grid + 1, grid + 1))
     rows, cols = np.linspace(0, h, grid + 1), np.linspace(0, w, grid + 1)
     hr, hc = h / grid / 2, w / grid / 2
     for i, r in enumerate(rows):
         r0, r1 = int(max(r - hr, 0)), int(min(r + hr, h)) + 1
         for j, c in enumerate(cols):
-            out[i, j] = inv[r0:r1, int(max(c - hc, 0)):int(min(c + hc, w)) + 1].max()
+            out[i, j] = reduce(values[r0:r1, int(max(c - hc, 0)):int(min(c + hc, w)) + 1])
     return out
 
 
