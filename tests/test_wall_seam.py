@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from walkstream.client.config import ReplayConfig
-from walkstream.client.draw.quads import slid
+from walkstream.client.draw.quads import warped
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.truth.pop import summarise_pop
 from walkstream.client.truth.seam import (
@@ -75,9 +75,9 @@ def test_slid_textures_agree_on_the_border_for_points_as_deep_as_the_viewer_stan
         assert c + (px - c) * x / (x + p) + slide == pytest.approx(seen)
     # the quad's texture coordinates: slid right by a quarter of a 12 m wall
     corners = _SIDE.corners()
-    uv = slid(corners, 3.0)
+    uv = warped(corners, (1.0, -3.0, 0.0))  # slid by 3 m: scale 1, the texture 3 m on
     assert uv.shape == (4, 5) and np.allclose(uv[:, :3], corners)
-    assert np.allclose(uv[:, 3], [-0.25, 0.75, 0.75, -0.25]) and slid(corners, 0.0) is corners
+    assert np.allclose(uv[:, 3], [-0.25, 0.75, 0.75, -0.25]) and warped(corners, (1.0, -0.0, 0.0)) is corners
     link = LinkProfile(56_000.0, 56_000.0, 0.2)
     with pytest.raises(InputError, match="--wall-parallax 1.5"):
         ReplayConfig(link=link, wall_parallax=1.5)

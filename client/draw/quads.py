@@ -27,7 +27,7 @@ from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.errors import RenderError
 from walkstream.shared.walls import NO_WARP, WallWarp
 
-__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "slid", "warped",
+__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "warped",
            "with_mesh"]
 
 IMPOSTOR_MIN_FILTER: int = moderngl.LINEAR
@@ -230,12 +230,6 @@ def quads_of(drawn: Sequence[Any], image: Any) -> list[Quad]:
         if rgba is not None:
             out.append((d.corners, d.image, rgba, float(d.alpha)))
     return out
-
-
-def slid(corners: NDArray[np.float64], slide: float) -> NDArray[np.float64]:
-    """``(4, 5)`` a quad's ``corners`` ``(4, 3)`` with texture coordinates that slide its
-    image ``slide`` metres from the left edge towards the right (0: ``(4, 3)`` as given)."""
-    return warped(corners, (1.0, -float(slide), 0.0))
 
 
 def warped(corners: NDArray[np.float64], warp: WallWarp) -> NDArray[np.float64]:
