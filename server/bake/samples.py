@@ -327,11 +327,15 @@ def region_points(
     if len(grid):
         d = np.hypot(grid[:, None, 0] - ring[None, :, 0], grid[:, None, 1] - ring[None, :, 1]).min(axis=1)
         grid = grid[d >= sp / 2.0]
-    xy = np.vstack([ring, grid])
+    return _at_heights(np.vstack([ring, grid]), levels, lo, hi)
+
+
+def _at_heights(xy: F64, levels: F64, lo: float, hi: float) -> F64:
+    """``xy`` at every height of ``levels`` when there are several, else alternating
+    between the top ``hi`` and the bottom ``lo`` of the eye range along the points."""
     if len(levels) > 1:
         return np.vstack([np.column_stack([xy, np.full(len(xy), z)]) for z in levels])
-    z = np.where(np.arange(len(xy)) % 2 == 0, hi, lo)
-    return np.column_stack([xy, z])
+    return np.column_stack([xy, np.where(np.arange(len(xy)) % 2 == 0, hi, lo)])
 
 
 def axis_points(
@@ -386,10 +390,7 @@ def axis_points(
     n = max(1, int(np.ceil(float(np.hypot(*(b - a))) / float(spacing))))
     t = (np.arange(n) + 0.5) / n
     xy = _move_into(free, a + t[:, None] * (b - a))
-    levels = height_levels(lo, hi, height_step)
-    if len(levels) > 1:
-        return np.vstack([np.column_stack([xy, np.full(len(xy), z)]) for z in levels])
-    return np.column_stack([xy, np.where(np.arange(len(xy)) % 2 == 0, hi, lo)])
+    return _at_heights(xy, height_levels(lo, hi, height_step), lo, hi)
 
 
 def split_points(
