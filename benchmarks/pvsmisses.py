@@ -33,7 +33,8 @@ itself, every ``every`` seconds of walk time (``bench stream``'s every 25th fram
 
 Besides, per pose: whether the eye is inside its cell's outline, its distance to the
 outline and to the nearest of the cell's sample points (the bake's own
-:func:`~walkstream.server.bake.workers.cell_points`), and its height against the
+:func:`~walkstream.server.bake.workers.cell_points`, with the far band's axis points of
+:func:`~walkstream.server.bake.workers.band_points` when the bake has them), and its height against the
 cell's eye-height range.  The figures are ``bench stream``'s: the share of poses whose
 ``pvs`` pixels exceed 0.01 % of the frame, and their mean share.
 """
@@ -52,7 +53,7 @@ from walkstream.benchmarks.visinput import scene_from_database
 from walkstream.server.bake.idpack import meshes_for_scene
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.visibility import VisibilityRenderer
-from walkstream.server.bake.workers import cell_points
+from walkstream.server.bake.workers import band_points, cell_points
 from walkstream.shared.camera import camera
 from walkstream.shared.cells import CellLocator
 from walkstream.shared.errors import InputError
@@ -219,7 +220,9 @@ def _pose_row(
     c = by_id[cid]
     poly = shapely.Polygon(c.polygon)
     p = shapely.Point(float(eye[0]), float(eye[1]))
-    pts = cell_points(bs, c.polygon, c.zmin, c.zmax, footprints)
+    # the band's axis points (``--far-axis``) are samples too: a pose near one is not far from every sample
+    pts = band_points(bs, cell_points(bs, c.polygon, c.zmin, c.zmax, footprints), np.asarray(c.polygon, np.float64),
+                      c.zmin, c.zmax, footprints)
     row.update(
         inside=bool(poly.covers(p)),
         to_outline=float(poly.exterior.distance(p)),
