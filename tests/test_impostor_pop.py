@@ -235,3 +235,39 @@ def test_the_quad_stands_in_front_of_its_own_building_on_the_same_pixels() -> No
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     assert (front - eye)[:, 1].max() <= (corners - eye)[:, 1].min() + 1e-9  # in front along the view
     assert (at - eye)[:, 1].min() > (corners - eye)[:, 1].min()  # the quad through the centre was not
+
+
+def test_a_building_the_next_cell_does_not_list_blends_on_by_its_distance() -> None:
+    """Walking towards a building at D 100 m (blend 20 m, 2 m/s, 25 fps), the cell changes at 108 m
+    to one that does not list it (a point of the new cell is within D of it): its opacity keeps
+    following the blend by the eye's distance to 0 at D, on the row of the cell that listed it,
+    rather than falling at the 2 s fade's rate (three times the blend's steepest here)."""
+    from types import SimpleNamespace
+
+    from walkstream.client.draw.impostors import FADE_S
+    from walkstream.client.walk.impostors import frame_impostors
+    from walkstream.shared.impostorwire import CellImpostors, ImpostorRow
+
+    d, blend, bound = 100.0, 20.0, 0.5  # a wide bound: the error blend stays 1 throughout
+    row = ImpostorRow(5, 0, 0, 8, 0, 4, (-5.0, -5.0, 0.0, 5.0, 5.0, 20.0), tuple(range(100, 132)))  # every bin
+    cells = {1: SimpleNamespace(impostors=CellImpostors(d, bound, (row,))),
+             2: SimpleNamespace(impostors=CellImpostors(d, bound, ()))}
+    wanted: list[int] = []
+    lane = SimpleNamespace(started=True, held=lambda i: True, image=lambda i: SimpleNamespace(nbytes=1024),
+                           want=lambda wants: wanted.extend(wants))
+    cfg = SimpleNamespace(impostor_blend_m=blend, impostor_perspective=False, prefetch=False,
+                          texture_budget_bytes=1 << 30, impostor_fade_s=None)
+    w: Any = SimpleNamespace(scene=SimpleNamespace(streets=SimpleNamespace(cells=cells), images=lane), config=cfg,
+                             impostors_shown={}, impostors_old={}, impostors_wt=-math.inf, impostor_rows={})
+    alphas, expected = [], []
+    for k in range(int(25 / 0.08)):  # 117 m to 92 m from the box
+        dist = 117.0 - 0.08 * k - 5.0
+        f = SimpleNamespace(street=1 if dist > 108.0 else 2, eye=np.array([dist + 5.0, 0.0, 1.7]), wt=0.04 * k)
+        wanted.clear()
+        drawn = frame_impostors(w, f)
+        assert len(drawn) <= 1 and (f.street == 1 or not wanted)  # a kept building wants no image
+        alphas.append(drawn[0].alpha if drawn else 0.0)
+        expected.append(float(impostor_alpha(dist, 0.0, d, bound, blend)))
+    assert alphas == pytest.approx(expected, abs=1e-9)  # the blend by distance, on both sides of the border
+    assert max(-np.diff(alphas)) < 0.5 * 0.04 / FADE_S  # never the fade's rate
+    assert alphas[-1] == 0.0 and w.impostor_rows == {}  # at D: geometry, the row let go
