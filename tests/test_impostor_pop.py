@@ -320,3 +320,30 @@ def test_a_building_the_next_cell_does_not_list_blends_on_by_its_distance() -> N
     assert alphas == pytest.approx(expected, abs=1e-9)  # the blend by distance, on both sides of the border
     assert max(-np.diff(alphas)) < 0.5 * 0.04 / FADE_S  # never the fade's rate
     assert alphas[-1] == 0.0 and w.impostor_rows == {}  # at D: geometry, the row let go
+
+
+def test_a_building_under_its_blending_image_keeps_its_lod() -> None:
+    from types import SimpleNamespace
+
+    from walkstream.client.draw.allocate import Allocation
+    from walkstream.client.walk.impostors import DrawnImpostor, hold_blend_lods
+
+    geoms = [SimpleNamespace(id=i) for i in (3, 4, 5)]
+    tri = np.array([[12, 100, 900]] * 3, np.int64)
+    avail = np.array([[True, True, False], [True, True, True], [True, True, True]])
+    w: Any = SimpleNamespace(objects=SimpleNamespace(geoms=geoms, tri=tri, avail=avail), blend_lods={})
+
+    def frame(lods: list[int], alphas: dict[int, float]) -> Any:
+        lod = np.array(lods, np.int8)
+        f = SimpleNamespace(alloc=Allocation(lod, int(tri[np.arange(3), lod].sum()), False, False),
+                            impostors=[DrawnImpostor(o, 9, a, np.zeros((4, 3)), 64) for o, a in alphas.items()])
+        hold_blend_lods(w, f)
+        return f.alloc
+
+    frame([1, 1, 1], {3: 0.5, 5: 1.0})  # 3 blends at LOD 1; 5 is its image alone
+    a = frame([0, 0, 2], {3: 0.49, 5: 1.0})  # the budget moves 3 to LOD 0: kept at 1, its triangles counted
+    assert a.lod.tolist() == [1, 0, 2] and a.triangles == 100 + 12 + 900
+    a = frame([2, 0, 2], {3: 0.48})  # LOD 2 not built for 3: the LOD 1 kept still
+    assert a.lod.tolist() == [1, 0, 2]
+    a = frame([0, 0, 2], {})  # the blend over: the allocation's LOD again
+    assert a.lod.tolist() == [0, 0, 2] and w.blend_lods == {}
