@@ -341,9 +341,9 @@ def test_a_building_under_its_blending_image_keeps_its_lod() -> None:
         return f.alloc
 
     frame([1, 1, 1], {3: 0.5, 5: 1.0})  # 3 blends at LOD 1; 5 is its image alone
-    a = frame([0, 0, 2], {3: 0.49, 5: 1.0})  # the budget moves 3 to LOD 0: kept at 1, its triangles counted
-    assert a.lod.tolist() == [1, 0, 2] and a.triangles == 100 + 12 + 900
-    a = frame([2, 0, 2], {3: 0.48})  # LOD 2 not built for 3: the LOD 1 kept still
-    assert a.lod.tolist() == [1, 0, 2]
-    a = frame([0, 0, 2], {})  # the blend over: the allocation's LOD again
-    assert a.lod.tolist() == [0, 0, 2] and w.blend_lods == {}
+    a = frame([0, 0, 2], {3: 0.49, 5: 1.0})  # the budget moves 3 to LOD 0: down, taken
+    assert a.lod.tolist() == [0, 0, 2] and a.triangles == 12 + 12 + 900
+    a = frame([1, 1, 2], {3: 0.48})  # and back to 1: kept at 0, its triangles counted
+    assert a.lod.tolist() == [0, 1, 2] and a.triangles == 12 + 100 + 900
+    a = frame([1, 0, 2], {})  # the blend over: the allocation's LOD again
+    assert a.lod.tolist() == [1, 0, 2] and w.blend_lods == {}
