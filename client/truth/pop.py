@@ -46,8 +46,9 @@ frame before drew it (its quads, opacity and image; :func:`held_impostors`), the
 added that frame), its **motion change** the mean ``|held - previous|`` over the same
 pixels (its own plain motion); ``ratio_own`` is the switch changes' mean over the
 motion changes' mean, at most 1: the switch adds no more change than the motion does
-("no pop").  A pair whose geometry changed LOD too is left out of it and counted
-(``lod_changed``): the held frame draws this frame's LOD, so the LOD's change would
+("no pop").  A pair whose geometry changed LOD too, or appeared or went (the frame
+the image starts or stops standing alone), is left out of it and counted
+(``lod_changed``): the held frame draws this frame's geometry, so that change would
 count as motion.  Why: the switching buildings at the default ``D`` cover 1-5 pixels
 at 160 x 120, and their change is mostly their silhouette crossing pixel centres
 (0.3-0.6 on the frames it happens, against 0.001 between), so a few such frames of
@@ -213,7 +214,8 @@ class PopMeter:
     own_motion: list[float] = field(default_factory=list)
     """The same objects' motion change on the same pairs."""
     lod_changed: int = 0
-    """Switching ``blend`` or ``image`` changes whose geometry also changed LOD (not held)."""
+    """Switching ``blend`` or ``image`` changes whose geometry also changed LOD, or appeared
+    or went (not held)."""
     _last: PopFrame | None = None
 
     @property
