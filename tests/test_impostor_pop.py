@@ -307,7 +307,8 @@ def test_a_building_the_next_cell_does_not_list_blends_on_by_its_distance() -> N
     cfg = SimpleNamespace(impostor_blend_m=blend, impostor_perspective=False, prefetch=False,
                           texture_budget_bytes=1 << 30, impostor_fade_s=None)
     w: Any = SimpleNamespace(scene=SimpleNamespace(streets=SimpleNamespace(cells=cells), images=lane), config=cfg,
-                             impostors_shown={}, impostors_old={}, impostors_wt=-math.inf, impostor_rows={})
+                             impostors_shown={}, impostors_old={}, impostors_wt=-math.inf, impostor_rows={},
+                             objects=SimpleNamespace(pvs=[5]))
     alphas, expected = [], []
     for k in range(int(25 / 0.08)):  # 117 m to 92 m from the box
         dist = 117.0 - 0.08 * k - 5.0
@@ -320,6 +321,13 @@ def test_a_building_the_next_cell_does_not_list_blends_on_by_its_distance() -> N
     assert alphas == pytest.approx(expected, abs=1e-9)  # the blend by distance, on both sides of the border
     assert max(-np.diff(alphas)) < 0.5 * 0.04 / FADE_S  # never the fade's rate
     assert alphas[-1] == 0.0 and w.impostor_rows == {}  # at D: geometry, the row let go
+    # a building the new cell's PVS does not hold is not kept: it fades out on its image as before
+    w.impostors_shown, w.impostor_rows, w.impostors_wt, w.objects.pvs = {}, {}, -math.inf, []
+    alphas = []
+    for k in range(40):
+        f = SimpleNamespace(street=1 if k < 10 else 2, eye=np.array([122.0 - 0.08 * k, 0.0, 1.7]), wt=0.04 * k)
+        alphas.append(max((q.alpha for q in frame_impostors(w, f)), default=0.0))
+    assert alphas[9] > 0.8 and alphas[10] == pytest.approx(alphas[9] - 0.04 / FADE_S)
 
 
 def test_a_building_under_its_blending_image_keeps_its_lod() -> None:

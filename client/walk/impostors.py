@@ -107,8 +107,8 @@ def toward_eye(
 def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
     """The impostors frame ``f`` draws (see the module docstring); wants the missing images.
 
-    A building drawn as its image that the current cell does not list (the walker
-    entered a cell with a point within ``D`` of it, or whose record is not in yet) keeps
+    A building drawn as its image that the current cell does not list but its PVS holds
+    (the walker entered a cell with a point within ``D`` of it, or whose record is not in yet) keeps
     the row of the cell that listed it while its image is held (:func:`kept_rows`): its
     opacity follows the blend by the eye's own distance and error to 0, as for a listed
     building, rather than being cut to the fade in time at the cell's border (five
@@ -120,6 +120,9 @@ def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
     imp = None if rec is None else rec.impostors
     listed = [] if imp is None else [(r, imp) for r in imp.rows]
     kept = kept_rows(w.impostor_rows, w.impostors_shown, {r.object for r, _ in listed}, lane.held)
+    if kept:  # only a building the frame's PVS still holds (one it left fades out, as before)
+        pvs = set(w.objects.pvs)
+        kept = [(r, i) for r, i in kept if r.object in pvs]
     if not listed and not kept:
         w.impostor_rows = {}
         return _faded(w, f, {})  # no list (yet): the images drawn fade out
