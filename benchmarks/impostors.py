@@ -16,7 +16,9 @@ pop at the switch (``pop``: the mean frame-to-frame change of the pixels of buil
 switching between image and geometry over that of the buildings in plain motion on the
 same frame pairs, :mod:`walkstream.client.truth.pop`; at most 1: no pop; it compares
 successive compared frames, so ``--truth-every 1`` measures it frame to frame; ``pop~``
-the same against plain motion of objects of the same size on screen, ``ratio_matched``);
+the same against plain motion of objects of the same size on screen, ``ratio_matched``;
+``pop=`` the switch's own change against the same buildings' own motion on the same
+frames, ``ratio_own``, the like-with-like reading);
 the impostors' own error frame by frame (``imp p99``: the 99th percentile over the
 compared frames of the frame's mean error from impostors, % of full scale; ``impv p99``:
 of the share of its pixels visibly wrong where an impostor stands in; ``imp ok%``: the
@@ -128,7 +130,7 @@ def format_impostor_table(rows: list[dict[str, Any]]) -> str:
     head = (
         f"{'bake':<24} {'walk':<20} {'device':<6} {'fps10%':>6} {'ft ms':>6} {'tri/fr':>6} {'imp/fr':>6} {'fac/fr':>6} "
         f"{'bytes down':>10} {'images B':>9} {'tex kB max':>10} {'perfect%':>8} {'err% med':>8} {'err% p95':>8} "
-        f"{'vis% med':>8} {'over%':>6} {'PSNR med':>8} {'e:boxes':>7} {'e:imp':>6} {'e:rest':>6} {'imp p99':>7} {'impv p99':>8} {'imp ok%':>7} {'pop':>5} {'pop~':>5}"
+        f"{'vis% med':>8} {'over%':>6} {'PSNR med':>8} {'e:boxes':>7} {'e:imp':>6} {'e:rest':>6} {'imp p99':>7} {'impv p99':>8} {'imp ok%':>7} {'pop':>5} {'pop~':>5} {'pop=':>5}"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
@@ -140,7 +142,7 @@ def format_impostor_table(rows: list[dict[str, Any]]) -> str:
         rest = None if not ec else sum(v or 0.0 for v in ec.values()) - (boxes or 0.0) - (by_imp or 0.0)
         ft = r.get("frame_time_median_ms")
         pops = (r.get("truth") or {}).get("pop") or {}
-        pop, pop_m = pops.get("ratio"), pops.get("ratio_matched")
+        pop, pop_m, pop_o = pops.get("ratio"), pops.get("ratio_matched"), pops.get("ratio_own")
         ic = c.get("impostor") or {}
         fac = r.get("facades") or {}
         lines.append(
@@ -155,7 +157,8 @@ def format_impostor_table(rows: list[dict[str, Any]]) -> str:
             f"{'n/a' if ps is None else f'{ps:.1f}':>8} {_pct(boxes):>7} {_pct(by_imp):>6} {_pct(rest):>6} "
             f"{_pct((ic.get('error') or {}).get('p99')):>7} {_pct((ic.get('visible') or {}).get('p99')):>8} "
             f"{_pct(ic.get('frames_within_ratio'), 1):>7} "
-            f"{'n/a' if pop is None else f'{pop:.2f}':>5} {'n/a' if pop_m is None else f'{pop_m:.2f}':>5}"
+            f"{'n/a' if pop is None else f'{pop:.2f}':>5} {'n/a' if pop_m is None else f'{pop_m:.2f}':>5} "
+            f"{'n/a' if pop_o is None else f'{pop_o:.2f}':>5}"
         )
     return "\n".join(lines)
 

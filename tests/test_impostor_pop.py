@@ -14,7 +14,15 @@ import pytest
 import trimesh
 
 from walkstream.client.draw.impostors import impostor_alpha
-from walkstream.client.truth.pop import PopMeter, object_change, pop_frame, summarise_pop
+from walkstream.client.truth.pop import (
+    PopMeter,
+    held_impostors,
+    held_objects,
+    object_change,
+    own_change,
+    pop_frame,
+    summarise_pop,
+)
 from walkstream.client.walk.impostors import quad_corners, toward_eye
 from walkstream.shared.camera import look_at, perspective
 from walkstream.shared.impostors import bin_of, directions
@@ -73,9 +81,13 @@ def _box(cx: float, cy: float, half: float = 5.0, h: float = 20.0) -> tuple[tupl
     return box, Mesh(np.asarray(tm.vertices)[faces.ravel()], normals, np.arange(faces.size).reshape(-1, 3))
 
 
-def _measure(r: Any, meter: PopMeter, k: int, keys: list[Any], quads: list[Any], view: Any, proj: Any) -> None:
+def _measure(
+    r: Any, meter: PopMeter, k: int, keys: list[Any], quads: list[Any], view: Any, proj: Any,
+    prev: list[Any] | None = None,
+) -> None:
     """Draw frame ``k`` with ``quads`` as the impostors and feed it to ``meter``; where the
-    image painted, the ids show object 1 (drawn again without it to find those pixels)."""
+    image painted, the ids show object 1 (drawn again without it to find those pixels);
+    with ``prev`` (the quads of the frame before) the held frame too, as the replay draws it."""
     r.impostors = quads
     r.draw(keys, view, proj)
     rgb = r.snapshot()
@@ -85,7 +97,15 @@ def _measure(r: Any, meter: PopMeter, k: int, keys: list[Any], quads: list[Any],
         r.draw(keys, view, proj)
         ids = ids.copy()
         ids[np.any(r.snapshot() != rgb, axis=2)] = 2
-    meter.add(pop_frame(k, rgb, ids, keys, [(1, q) for q in quads]))
+    pf = pop_frame(k, rgb, ids, keys, [(1, q) for q in quads])
+    held = None
+    if prev is not None and meter.last is not None:
+        held, objs = rgb, held_objects(meter.last, pf)
+        if objs:
+            r.impostors = [q for _, q in held_impostors([(1, q) for q in prev], [(1, q) for q in quads], objs)]
+            r.draw(keys, view, proj)
+            held = r.snapshot()
+    meter.add(pf, held)
 
 
 def _walk(gl: Any, blend_m: float) -> dict[str, Any]:
@@ -101,10 +121,12 @@ def _walk(gl: Any, blend_m: float) -> dict[str, Any]:
     proj = perspective(50.0, size[0] / size[1], 0.5, 400.0)
     r = FrameRenderer(size=size, fov_deg=50.0, ctx=gl)
     meter = PopMeter()
+    quads: list[Any] = []
     try:
         r.upload((1, 2), mesh_a)
         r.upload((2, 2), mesh_b)
         for k, y in enumerate(np.linspace(0.0, 30.0, 61)):
+            prev = quads
             eye = np.array([0.0, y, 1.7])
             view = look_at(eye, np.array([0.0, 100.0, 8.0]))
             alpha = float(impostor_alpha(box_a[1] - y, 0.0, 70.0, 1.0, blend_m))
@@ -112,7 +134,7 @@ def _walk(gl: Any, blend_m: float) -> dict[str, Any]:
             ia, ie = bin_of(2, *directions(eye, (lo + hi) / 2.0))
             quads = [(quad_corners(box_a, 2, int(ia), int(ie)), 1, image, alpha)] if alpha > 0 else []
             keys = [(1, 2), (2, 2)] if alpha < 1 else [(2, 2)]
-            _measure(r, meter, k, keys, quads, view, proj)
+            _measure(r, meter, k, keys, quads, view, proj, prev)
     finally:
         r.release()
     return summarise_pop(meter)
@@ -126,6 +148,33 @@ def test_a_hard_switch_pops_where_the_blend_does_not(gl: Any) -> None:
     assert hard["ratio"] > 10.0 * blended["ratio"]  # here 68 against 2.5 (a saturated image over grey)
     assert hard["kinds"]["hard"]["switching"] == 1 and blended["kinds"]["hard"]["switching"] == 0
     assert hard["switching_change_mean"] > 5.0 * blended["switching_change_mean"]
+    # against its own motion on the same frames (the held frame): the blend adds less than the
+    # motion does; the hard switch has no held frame (geometry to image alone), so no own figure
+    assert blended["own"]["switching"] > 10 and blended["ratio_own"] is not None
+    assert blended["own"]["switch_change_mean"] < blended["switching_change_mean"]
+    assert hard["ratio_own"] is None and hard["own"]["switching"] == 0
+
+
+def test_the_own_change_splits_a_frame_into_the_switch_and_the_motion() -> None:
+    prev, cur = np.zeros((1, 4, 3), np.uint8), np.zeros((1, 4, 3), np.uint8)
+    ids = np.array([[8, 8, 0, 0]], np.uint32)  # object 7 on two pixels
+    held = prev.copy()
+    held[0, 0] = 255  # the motion alone: one pixel turns white
+    cur[0, 0], cur[0, 1] = 255, 255  # the switch turns the other white too
+    switch, motion, count = own_change(prev, ids, held, cur, ids)
+    assert count[8] == 2 and switch[8] == pytest.approx(0.5) and motion[8] == pytest.approx(0.5)
+    quad = (np.zeros((4, 3)), 3, np.zeros((1, 1, 4), np.uint8), 0.5)
+    m = PopMeter()
+    m.add(pop_frame(0, prev, ids, [(7, 2), (9, 2)], [(7, quad)]))
+    m.add(pop_frame(1, cur, ids, [(7, 2), (9, 1)], [(7, (*quad[:3], 0.6)), (9, quad)]), held)
+    s = summarise_pop(m)
+    assert s["ratio_own"] == pytest.approx(1.0) and s["own"]["switching"] == 1
+    # object 9 fades in with its geometry's LOD changing (2 to 1): the held frame draws this
+    # frame's LOD, so it cannot hold it: counted apart, left out of the own figure
+    assert s["own"]["lod_changed"] == 1
+    m.add(pop_frame(2, cur, ids, [(7, 2), (9, 2)], [(7, (*quad[:3], 0.6)), (9, (*quad[:3], 0.7))]), cur)
+    assert summarise_pop(m)["own"]["lod_changed"] == 2 and summarise_pop(m)["own"]["switching"] == 1
+    assert held_impostors([(7, "old"), (9, "b")], [(7, "new"), (9, "c")], [7]) == [(9, "c"), (7, "old")]
 
 
 def test_the_fade_moves_the_opacity_at_most_its_rate_fades_a_leaving_building_out_and_cross_fades_images() -> None:
@@ -235,3 +284,74 @@ def test_the_quad_stands_in_front_of_its_own_building_on_the_same_pixels() -> No
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     assert (front - eye)[:, 1].max() <= (corners - eye)[:, 1].min() + 1e-9  # in front along the view
     assert (at - eye)[:, 1].min() > (corners - eye)[:, 1].min()  # the quad through the centre was not
+
+
+def test_a_building_the_next_cell_does_not_list_blends_on_by_its_distance() -> None:
+    """Walking towards a building at D 100 m (blend 20 m, 2 m/s, 25 fps), the cell changes at 108 m
+    to one that does not list it (a point of the new cell is within D of it): its opacity keeps
+    following the blend by the eye's distance to 0 at D, on the row of the cell that listed it,
+    rather than falling at the 2 s fade's rate (three times the blend's steepest here)."""
+    from types import SimpleNamespace
+
+    from walkstream.client.draw.impostors import FADE_S
+    from walkstream.client.walk.impostors import frame_impostors
+    from walkstream.shared.impostorwire import CellImpostors, ImpostorRow
+
+    d, blend, bound = 100.0, 20.0, 0.5  # a wide bound: the error blend stays 1 throughout
+    row = ImpostorRow(5, 0, 0, 8, 0, 4, (-5.0, -5.0, 0.0, 5.0, 5.0, 20.0), tuple(range(100, 132)))  # every bin
+    cells = {1: SimpleNamespace(impostors=CellImpostors(d, bound, (row,))),
+             2: SimpleNamespace(impostors=CellImpostors(d, bound, ()))}
+    wanted: list[int] = []
+    lane = SimpleNamespace(started=True, held=lambda i: True, image=lambda i: SimpleNamespace(nbytes=1024),
+                           want=lambda wants: wanted.extend(wants))
+    cfg = SimpleNamespace(impostor_blend_m=blend, impostor_perspective=False, prefetch=False,
+                          texture_budget_bytes=1 << 30, impostor_fade_s=None)
+    w: Any = SimpleNamespace(scene=SimpleNamespace(streets=SimpleNamespace(cells=cells), images=lane), config=cfg,
+                             impostors_shown={}, impostors_old={}, impostors_wt=-math.inf, impostor_rows={},
+                             objects=SimpleNamespace(pvs=[5]))
+    alphas, expected = [], []
+    for k in range(int(25 / 0.08)):  # 117 m to 92 m from the box
+        dist = 117.0 - 0.08 * k - 5.0
+        f = SimpleNamespace(street=1 if dist > 108.0 else 2, eye=np.array([dist + 5.0, 0.0, 1.7]), wt=0.04 * k)
+        wanted.clear()
+        drawn = frame_impostors(w, f)
+        assert len(drawn) <= 1 and (f.street == 1 or not wanted)  # a kept building wants no image
+        alphas.append(drawn[0].alpha if drawn else 0.0)
+        expected.append(float(impostor_alpha(dist, 0.0, d, bound, blend)))
+    assert alphas == pytest.approx(expected, abs=1e-9)  # the blend by distance, on both sides of the border
+    assert max(-np.diff(alphas)) < 0.5 * 0.04 / FADE_S  # never the fade's rate
+    assert alphas[-1] == 0.0 and w.impostor_rows == {}  # at D: geometry, the row let go
+    # a building the new cell's PVS does not hold is not kept: it fades out on its image as before
+    w.impostors_shown, w.impostor_rows, w.impostors_wt, w.objects.pvs = {}, {}, -math.inf, []
+    alphas = []
+    for k in range(40):
+        f = SimpleNamespace(street=1 if k < 10 else 2, eye=np.array([122.0 - 0.08 * k, 0.0, 1.7]), wt=0.04 * k)
+        alphas.append(max((q.alpha for q in frame_impostors(w, f)), default=0.0))
+    assert alphas[9] > 0.8 and alphas[10] == pytest.approx(alphas[9] - 0.04 / FADE_S)
+
+
+def test_a_building_under_its_blending_image_keeps_its_lod() -> None:
+    from types import SimpleNamespace
+
+    from walkstream.client.draw.allocate import Allocation
+    from walkstream.client.walk.impostors import DrawnImpostor, hold_blend_lods
+
+    geoms = [SimpleNamespace(id=i) for i in (3, 4, 5)]
+    tri = np.array([[12, 100, 900]] * 3, np.int64)
+    avail = np.array([[True, True, False], [True, True, True], [True, True, True]])
+    w: Any = SimpleNamespace(objects=SimpleNamespace(geoms=geoms, tri=tri, avail=avail), blend_lods={})
+
+    def frame(lods: list[int], alphas: dict[int, float]) -> Any:
+        lod = np.array(lods, np.int8)
+        f = SimpleNamespace(alloc=Allocation(lod, int(tri[np.arange(3), lod].sum()), False, False),
+                            impostors=[DrawnImpostor(o, 9, a, np.zeros((4, 3)), 64) for o, a in alphas.items()])
+        hold_blend_lods(w, f)
+        return f.alloc
+
+    frame([1, 1, 1], {3: 0.5, 5: 1.0})  # 3 blends at LOD 1; 5 is its image alone
+    a = frame([0, 0, 2], {3: 0.49, 5: 1.0})  # the budget moves 3 to LOD 0: down, taken
+    assert a.lod.tolist() == [0, 0, 2] and a.triangles == 12 + 12 + 900
+    a = frame([1, 1, 2], {3: 0.48})  # and back to 1: kept at 0, its triangles counted
+    assert a.lod.tolist() == [0, 1, 2] and a.triangles == 12 + 100 + 900
+    a = frame([1, 0, 2], {})  # the blend over: the allocation's LOD again
+    assert a.lod.tolist() == [1, 0, 2] and w.blend_lods == {}

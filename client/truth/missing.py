@@ -39,7 +39,7 @@ from walkstream.client.truth.compare import CAUSES, compare_frame, missing_mask
 from walkstream.client.truth.horizon import below_horizon, horizon_shares
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.picture import Overlay, colour_error
-from walkstream.client.truth.pop import PopMeter, pop_frame
+from walkstream.client.truth.pop import PopMeter, held_impostors, held_objects, pop_frame
 from walkstream.client.truth.render import TruthRenderer
 from walkstream.client.truth.scene import TruthScene
 from walkstream.client.truth.standin import stand_in_ids
@@ -163,6 +163,7 @@ def missing_figures(
     cworst: ColourWorst | None = None
     cworst_key = (-1, -1.0)
     n = len(notes)
+    prev: FrameNote | None = None  # the note compared before (the pop's held frame draws its impostors)
     try:
         for k, (st, pvs) in enumerate(zip(notes, pvs_of, strict=True)):
             keys = [(i, lod) for i, lod, _ in st.drawn]
@@ -187,7 +188,16 @@ def missing_figures(
                 if st.wall_quads:  # a ring wall's texture stands in for whatever lies behind it
                     c_ids = np.where(painted, t_ids, c_ids).astype(c_ids.dtype)
             if pop is not None:
-                pop.add(pop_frame(st.frame, c_rgb, c_ids, keys, st.impostors))
+                pf = pop_frame(st.frame, c_rgb, c_ids, keys, st.impostors)
+                held = c_rgb  # nothing held: no switch of its own to measure
+                objs = [] if pop.last is None or prev is None else held_objects(pop.last, pf)
+                if objs and prev is not None:  # the frame again, the switching objects as the frame before drew them
+                    client.impostors = [*st.facades, *(q for _, q in held_impostors(prev.impostors, st.impostors, objs)),
+                                        *st.wall_quads]
+                    client.draw(keys, st.view, proj)
+                    held = client.snapshot()
+                pop.add(pf, held)
+            prev = st
             knows = st.pvs is not None
             fogged: list[int] = []
             if np.isfinite(st.fog):

@@ -37,6 +37,23 @@ ones, a few pixels each, and the change of so small an object is mostly its edge
 moving across pixels (on the demo's SE at 160 x 120, plain motion changes a 1-4 pixel
 object 0.0085 a frame, a 1,000-pixel one 0.0024): the plain mean of every object is
 the wrong yardstick for them, by a factor of about two.
+
+``ratio_own`` compares like with like: the same objects, the same pixels, the same
+frame pairs.  The frame is drawn a second time with each switching object as the
+frame before drew it (its quads, opacity and image; :func:`held_impostors`), the
+*held* frame: what plain motion alone would have shown.  A switching object's
+**switch change** is the mean ``|drawn - held|`` over its pixels (what the switch
+added that frame), its **motion change** the mean ``|held - previous|`` over the same
+pixels (its own plain motion); ``ratio_own`` is the switch changes' mean over the
+motion changes' mean, at most 1: the switch adds no more change than the motion does
+("no pop").  A pair whose geometry changed LOD too, or appeared or went (the frame
+the image starts or stops standing alone), is left out of it and counted
+(``lod_changed``): the held frame draws this frame's geometry, so that change would
+count as motion.  Why: the switching buildings at the default ``D`` cover 1-5 pixels
+at 160 x 120, and their change is mostly their silhouette crossing pixel centres
+(0.3-0.6 on the frames it happens, against 0.001 between), so a few such frames of
+two buildings set ``ratio`` and ``ratio_matched``; the held frame has them too, and
+they cancel.
 """
 
 from __future__ import annotations
@@ -50,7 +67,10 @@ from numpy.typing import NDArray
 
 from walkstream.client.truth.colour import srgb_to_linear
 
-__all__ = ["PopFrame", "PopMeter", "object_change", "pop_frame", "size_bin", "summarise_pop"]
+__all__ = [
+    "PopFrame", "PopMeter", "held_impostors", "held_objects", "object_change", "own_change", "pop_frame", "size_bin", "summarise_pop",
+    "switches",
+]
 
 
 @dataclass(frozen=True)
@@ -119,6 +139,60 @@ def object_change(
     return change, count.astype(np.int64)
 
 
+def own_change(
+    a_rgb: NDArray[np.uint8], a_ids: NDArray[np.uint32], held: NDArray[np.uint8], b_rgb: NDArray[np.uint8],
+    b_ids: NDArray[np.uint32],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """Each object's switch and motion change (see the module docs) between frame ``a``
+    and frame ``b``, ``held`` ``(h, w, 3)`` frame ``b`` drawn with the switching objects as
+    in ``a``: ``(n,)`` the mean ``|b - held|`` and the mean ``|held - a|`` (linear RGB)
+    over the pixels the object covers in either frame (NaN where none), and their count,
+    indexed by object id + 1 as :func:`object_change`."""
+    lin_h = srgb_to_linear(held)
+    switch = np.abs(srgb_to_linear(b_rgb) - lin_h).mean(axis=2).ravel()
+    motion = np.abs(lin_h - srgb_to_linear(a_rgb)).mean(axis=2).ravel()
+    a, b = a_ids.astype(np.int64).ravel(), b_ids.astype(np.int64).ravel()
+    n = int(max(a.max(initial=0), b.max(initial=0))) + 1
+    same = a == b
+
+    def per_object(d: NDArray[np.float64]) -> NDArray[np.float64]:
+        out: NDArray[np.float64] = (np.bincount(a, d, n) + np.bincount(b[~same], d[~same], n)).astype(np.float64)
+        return out
+
+    count = np.bincount(a, minlength=n) + np.bincount(b[~same], minlength=n)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return per_object(switch) / count, per_object(motion) / count, count.astype(np.int64)
+
+
+def switches(prev: PopFrame, cur: PopFrame) -> dict[str, list[int]]:
+    """The objects switching between ``prev`` and ``cur`` by kind (``blend``, ``hard``,
+    ``image``: the module docs) and ``plain``, those in plain motion."""
+    both = prev.alpha.keys() & cur.alpha.keys()
+    image = sorted(i for i in both if prev.form[i][1] >= 0 and cur.form[i][1] >= 0 and prev.form[i][1] != cur.form[i][1])
+    fade = sorted(i for i in both if prev.alpha[i] != cur.alpha[i] and i not in set(image))
+    hard = [i for i in fade if {prev.alpha[i], cur.alpha[i]} == {0.0, 1.0}]
+    fade = [i for i in fade if i not in set(hard)]
+    plain = sorted(i for i in both if prev.alpha[i] == cur.alpha[i] and prev.form[i] == cur.form[i])
+    return {"blend": fade, "hard": hard, "image": image, "plain": plain}
+
+
+def held_objects(prev: PopFrame, cur: PopFrame) -> list[int]:
+    """The switching objects a held frame can show as ``prev`` did (``blend`` and ``image``
+    switches whose geometry, or its absence, is the same in both frames; the held frame
+    draws ``cur``'s geometry)."""
+    sw = switches(prev, cur)
+    return [i for i in sw["blend"] + sw["image"] if prev.form[i][0] == cur.form[i][0]]
+
+
+def held_impostors(
+    prev: Iterable[tuple[int, Any]], cur: Iterable[tuple[int, Any]], objects: Iterable[int]
+) -> list[tuple[int, Any]]:
+    """The ``(object id, quad)`` impostors of a held frame: ``cur``'s, with those of
+    ``objects`` (the switching ones, :func:`held_objects`) as ``prev`` drew them."""
+    keep = {int(i) for i in objects}
+    return [(i, q) for i, q in cur if int(i) not in keep] + [(i, q) for i, q in prev if int(i) in keep]
+
+
 @dataclass
 class PopMeter:
     """Fed every compared frame in order; keeps the switching and plain-motion changes."""
@@ -135,20 +209,39 @@ class PopMeter:
     """The pixels each of :attr:`plain` is over."""
     pairs: int = 0
     """Frame pairs with at least one switching object."""
+    own_switch: list[float] = field(default_factory=list)
+    """One switch change per held switching object per frame pair (``ratio_own``, the module docs)."""
+    own_motion: list[float] = field(default_factory=list)
+    """The same objects' motion change on the same pairs."""
+    lod_changed: int = 0
+    """Switching ``blend`` or ``image`` changes whose geometry also changed LOD, or appeared
+    or went (not held)."""
     _last: PopFrame | None = None
 
-    def add(self, cur: PopFrame) -> None:
-        """Compare ``cur`` with the frame before it (the previous one added)."""
+    @property
+    def last(self) -> PopFrame | None:
+        """The frame added last (the next one is compared with it)."""
+        return self._last
+
+    def add(self, cur: PopFrame, held: NDArray[np.uint8] | None = None) -> None:
+        """Compare ``cur`` with the frame before it (the previous one added); ``held``:
+        ``cur`` drawn with the switching objects of :func:`held_objects` as the frame
+        before drew them (:func:`held_impostors`), for ``ratio_own``."""
         prev, self._last = self._last, cur
         if prev is None:
             return
-        both = prev.alpha.keys() & cur.alpha.keys()
-        image = [i for i in both if prev.form[i][1] >= 0 and cur.form[i][1] >= 0 and prev.form[i][1] != cur.form[i][1]]
-        fade = [i for i in both if prev.alpha[i] != cur.alpha[i] and i not in set(image)]
-        hard = [i for i in fade if {prev.alpha[i], cur.alpha[i]} == {0.0, 1.0}]
-        fade = [i for i in fade if i not in set(hard)]
-        plain = [i for i in both if prev.alpha[i] == cur.alpha[i] and prev.form[i] == cur.form[i]]
+        sw = switches(prev, cur)
+        fade, hard, image, plain = sw["blend"], sw["hard"], sw["image"], sw["plain"]
         change, count = object_change(prev.rgb, prev.ids, cur.rgb, cur.ids)
+        if held is not None:
+            kept = held_objects(prev, cur)
+            self.lod_changed += len(fade) + len(image) - len(kept)
+            s_own, m_own, n_own = own_change(prev.rgb, prev.ids, held, cur.rgb, cur.ids)
+            k = np.asarray(kept, np.int64) + 1
+            k = k[k < len(n_own)]
+            k = k[n_own[k] > 0]
+            self.own_switch.extend(s_own[k].tolist())
+            self.own_motion.extend(m_own[k].tolist())
 
         def take(objs: Sequence[int]) -> tuple[list[float], list[int]]:
             k = np.asarray(objs, np.int64) + 1
@@ -194,7 +287,9 @@ def summarise_pop(meter: PopMeter | Any, kinds_of: Sequence[str] = ("blend", "ha
     (switching mean over the mean of the plain motion of objects of each one's size,
     :func:`size_bin`; None where the meter keeps no pixel counts); ``kinds``: per kind
     (``kinds_of``: ``blend``, ``hard``, ``image``) its count, mean change, ratio and
-    matched ratio.
+    matched ratio; ``ratio_own`` the switch changes' mean over the same objects' motion
+    changes' mean on the same frame pairs, and ``own`` its counts and means (None and
+    zeros where the meter was fed no held frames).
 
     ``meter`` is a :class:`PopMeter` or anything with its ``switching``, ``kinds``,
     ``plain`` and ``pairs`` (the walls' seam, :class:`~walkstream.client.truth.seam.SeamMeter`)."""
@@ -210,6 +305,9 @@ def summarise_pop(meter: PopMeter | Any, kinds_of: Sequence[str] = ("blend", "ha
         return float(f(a)) if a.size else None
 
     sm, pm = stat(s, np.mean), stat(p, np.mean)
+    own_s = np.asarray(getattr(meter, "own_switch", []), np.float64)
+    own_m = np.asarray(getattr(meter, "own_motion", []), np.float64)
+    osm, omm = stat(own_s, np.mean), stat(own_m, np.mean)
     kind = np.asarray(meter.kinds, dtype=object)
     kinds = {}
     for k in kinds_of:
@@ -225,6 +323,9 @@ def summarise_pop(meter: PopMeter | Any, kinds_of: Sequence[str] = ("blend", "ha
         "plain_change_mean": pm,
         "ratio": None if sm is None or not pm else sm / pm,
         "ratio_matched": matched(slice(None)),
+        "ratio_own": None if osm is None or not omm else osm / omm,
+        "own": {"switching": int(own_s.size), "switch_change_mean": osm, "motion_change_mean": omm,
+                "lod_changed": int(getattr(meter, "lod_changed", 0))},
         "kinds": kinds,
     }
 

@@ -8,7 +8,8 @@ fit the budget are drawn and the fog is set just beyond, :func:`fog_for_budget`)
 the street* the triangles (the ACH allocation of the PVS objects in the frustum,
 ``lod_select == "distance"`` the usual distance bands instead), after the room parts
 drawn; the impostors of the current cell (:mod:`.impostors`) first, two triangles and
-one draw each, their buildings' geometry left out where the image stands alone.  The device's cost step (``cost_step_at_s``) is applied here too.
+one draw each, their buildings' geometry left out where the image stands alone and
+kept at its LOD while the image blends over it (:func:`~.impostors.hold_blend_lods`).  The device's cost step (``cost_step_at_s``) is applied here too.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from numpy.typing import NDArray
 from walkstream.client.draw.allocate import allocate_ach, allocate_distance
 from walkstream.client.walk.draw import forget_cell
 from walkstream.client.walk.facades import bake_facades, choose_facades, facade_avail
-from walkstream.client.walk.impostors import frame_impostors, replaced
+from walkstream.client.walk.impostors import frame_impostors, hold_blend_lods, replaced
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.frustum import frustum_cull
@@ -68,6 +69,7 @@ def allocate(w: WalkState, f: Frame) -> None:
             centre = (o.lo + o.hi) / 2.0
             dist = np.hypot(centre[:, 0] - f.eye[0], centre[:, 1] - f.eye[1])
             f.alloc = allocate_distance(dist, o.tri, avail, seen, cfg.lod_distances)
+        hold_blend_lods(w, f)  # a building under its blending image keeps its LOD
     if cfg.cost_step_at_s is not None and not w.stepped and f.wt >= cfg.cost_step_at_s:
         w.device.cost_scale = w.device.cost_scale * cfg.cost_step_factor
         w.stepped = True

@@ -87,6 +87,14 @@ class WalkState:
     """The impostors the last frame drew, by building
     (:class:`~walkstream.client.walk.impostors.DrawnImpostor`): the fade starts from them."""
     impostors_old: dict[int, tuple[Any, float]] = field(default_factory=dict)
+    blend_lods: dict[int, int] = field(default_factory=dict)
+    """The geometry's LOD of each building whose image was blending over it the last
+    frame (:func:`~walkstream.client.walk.impostors.hold_blend_lods` keeps it)."""
+    impostor_rows: dict[int, tuple[Any, Any]] = field(default_factory=dict)
+    """Per building the last frame drew as an image, its row and the record that listed it
+    (:class:`~walkstream.shared.impostorwire.ImpostorRow`,
+    :class:`~walkstream.shared.impostorwire.CellImpostors`): its blend by distance runs on
+    where the next cell does not list it (:func:`~walkstream.client.walk.impostors.frame_impostors`)."""
     """Per building crossing into another image: the image it showed before and that
     image's share, falling from 1 to 0 over the fade."""
     facades: Any = None
