@@ -43,8 +43,9 @@ import numpy as np
 from walkstream.server.bake.roomcontents import Part, weld
 from walkstream.server.bake.roomlayout import RoomLayout
 from walkstream.server.sources.interior import InteriorScene
-from walkstream.shared.codec.image import IMAGE_MEDIA
+from walkstream.shared.codec.image import IMAGE_MEDIA, MAX_IMAGE_SIDE
 from walkstream.shared.errors import InputError
+from walkstream.shared.impostors import texels_needed
 from walkstream.shared.walldepth import check_depth_grid
 from walkstream.shared.walls import DEFAULT_WALL_ERROR_DEG, WallSide, zone_count
 
@@ -54,8 +55,10 @@ __all__ = [
     "WallJob",
     "WallPlan",
     "WallSettings",
+    "parse_wall_quality",
     "plan_walls",
     "texture_height",
+    "texture_width",
     "whole_crossing",
 ]
 
@@ -87,7 +90,15 @@ class WallSettings:
     texels wide, encoded at WebP quality ``outdoor_quality`` (75: the textures of a
     ring's long walls are 1-4 kB at 90, and a walker along a street needs a new one on
     each wall beside it every second or so; 75 takes about 40 % off their bytes).
-    ``quality`` is the lossy codecs' quality indoors."""
+    ``quality`` is the lossy codecs' quality indoors.
+
+    Fidelity from the target view (``--wall-view H``, ``view_height``; 0: the fixed
+    densities above): each side's texels a metre so that a texel is at most a pixel of a
+    view ``H`` pixels high at ``fov_deg`` from the side's nearest viewing distance, times
+    the magnification the client's warp lays on it there (:func:`texture_width`), capped
+    at ``max_side`` on both axes.  ``--wall-texels T``, ``--wall-max-side S`` and
+    ``--wall-quality Q|lossless`` set the fixed density, the cap and the codec indoors and
+    outdoors alike (:meth:`with_texture`)."""
 
     pitch: float = 8.0
     error_deg: float = DEFAULT_WALL_ERROR_DEG
@@ -104,6 +115,11 @@ class WallSettings:
     depth_grid: int = 0
     """``--wall-depth G``: each texture's ``G`` x ``G`` inverse-depth grid stored after it
     (:mod:`walkstream.shared.walldepth`; 0: none)."""
+    view_height: int = 0
+    """``--wall-view H``: the target view's height, pixels, that sizes each side's texture
+    (0: the fixed ``texels_per_m``)."""
+    fov_deg: float = 60.0
+    """The target view's vertical field of view, degrees (the client's default)."""
 
     def check(self) -> WallSettings:
         """These settings, or a one-line :class:`InputError` naming the bad one."""
@@ -121,6 +137,16 @@ class WallSettings:
             if not (isinstance(q, int) and 1 <= q <= 100):
                 raise InputError(f"wall {name}: expected 1 to 100, got {q!r:.20}")
         check_depth_grid(self.depth_grid)
+        if not (isinstance(self.view_height, int) and 0 <= self.view_height <= 8192):
+            raise InputError(f"--wall-view: expected 0 (fixed texels a metre) to 8192 pixels, got {self.view_height!r:.20}")
+        if not (math.isfinite(self.fov_deg) and 1.0 <= self.fov_deg <= 170.0):
+            raise InputError(f"wall view field: expected 1 to 170 degrees, got {self.fov_deg}")
+        for t in (self.texels_per_m, self.outdoor_texels_per_m):
+            if not (math.isfinite(t) and 0.1 <= t <= 256.0):
+                raise InputError(f"--wall-texels: expected 0.1 to 256 texels a metre, got {t}")
+        for m in (self.max_side, self.outdoor_max_side):
+            if not (isinstance(m, int) and 8 <= m <= MAX_IMAGE_SIDE):
+                raise InputError(f"--wall-max-side: expected 8 to {MAX_IMAGE_SIDE} texels, got {m!r:.20}")
         if self.codec not in IMAGE_MEDIA:
             raise InputError(f"wall codec: expected one of {', '.join(IMAGE_MEDIA)}, got {self.codec!r}")
         return self
@@ -130,7 +156,27 @@ class WallSettings:
         return {"pitch": self.pitch, "error_deg": self.error_deg, "texels_per_m": self.texels_per_m,
                 "max_side": self.max_side, "codec": self.codec,
                 # only when asked: a bake without depths records what it always did
-                **({"depth_grid": self.depth_grid} if self.depth_grid else {})}
+                **({"depth_grid": self.depth_grid} if self.depth_grid else {}),
+                **self._view_record(), **({"quality": self.quality} if self.quality != 90 else {})}
+
+    def _view_record(self) -> dict[str, Any]:
+        return {"view_height": self.view_height, "fov_deg": self.fov_deg} if self.view_height else {}
+
+    def with_texture(self, *, texels: float | None = None, max_side: int | None = None,
+                     quality: int | str | None = None) -> WallSettings:
+        """These settings with the texture flags (``--wall-texels``, ``--wall-max-side``,
+        ``--wall-quality``) set indoors and outdoors alike; ``quality`` ``"lossless"``
+        is lossless WebP; ``None`` leaves a field as it is."""
+        out = self
+        if texels is not None:
+            out = dataclasses.replace(out, texels_per_m=float(texels), outdoor_texels_per_m=float(texels))
+        if max_side is not None:
+            out = dataclasses.replace(out, max_side=max_side, outdoor_max_side=max_side)
+        if quality == "lossless":
+            out = dataclasses.replace(out, codec="webp-lossless")
+        elif quality is not None:
+            out = dataclasses.replace(out, quality=int(quality), outdoor_quality=int(quality))
+        return out
 
     def outdoors(self) -> WallSettings:
         """These settings for a city's rings: the outdoor texture resolution in force."""
@@ -141,7 +187,8 @@ class WallSettings:
         """What a city's database records (a change is a different bake)."""
         return {"error_deg": self.error_deg, "keep": self.keep, "ring_min": self.ring_min, "region": self.region,
                 "texels_per_m": self.outdoor_texels_per_m, "max_side": self.outdoor_max_side, "codec": self.codec,
-                "quality": self.outdoor_quality, **({"depth_grid": self.depth_grid} if self.depth_grid else {})}
+                "quality": self.outdoor_quality, **({"depth_grid": self.depth_grid} if self.depth_grid else {}),
+                **self._view_record()}
 
 
 WallJob = tuple[int, tuple[Any, ...], int, int, tuple[int, ...]]
@@ -211,12 +258,54 @@ def plan_walls(scene: InteriorScene, layout: RoomLayout, settings: WallSettings)
             floor = float(cells[viewer].zmin)
             ws = WallSide(p.id, side, (float(a[0]), float(a[1])), (float(b[0]), float(b[1])), z0, z1, floor,
                           x_t, depth / 16.0, 0.75 * depth, alpha, zones)
-            width = int(min(settings.max_side, max(8, round(length * settings.texels_per_m))))
+            width = texture_width(length, z1 - z0, x_t, 0.75 * depth, settings)
             ids = tuple(range(len(jobs), len(jobs) + zones))
             row = tuple(ws.to_row())
             jobs += [(tid, row, k, width, crossing[p.id]) for k, tid in enumerate(ids)]
             sides.append(dataclasses.replace(ws, textures=ids))
     return WallPlan(sides, jobs, crossing)
+
+
+def parse_wall_quality(text: str | None) -> int | str | None:
+    """``--wall-quality``'s value: ``"lossless"``, a WebP quality 1-100, or None when not
+    given; anything else a one-line :class:`InputError`."""
+    if text is None:
+        return None
+    t = str(text).strip().lower()
+    if t == "lossless":
+        return t
+    try:
+        q = int(t)
+    except ValueError:
+        q = 0
+    if not 1 <= q <= 100:
+        raise InputError(f"--wall-quality: expected 1 to 100 or lossless, got {str(text)!r:.30}")
+    return q
+
+
+WARP_SHARE = 0.5
+"""The client's default warp share (``--wall-parallax``, :func:`~walkstream.shared.walls.zone_warp`):
+a texture sampled from ``x_s`` is laid ``x_s / (x_s (1 - R) + x R)`` times larger for a
+viewer at ``x``, so its texels are that much larger on the screen."""
+
+
+def texture_width(length: float, tall: float, near: float, sample: float, settings: WallSettings) -> int:
+    """Texels across a texture of a wall side ``length`` by ``tall`` metres, first seen as
+    texture from ``near`` metres and sampled from ``sample`` metres in front of it.
+
+    With ``settings.view_height`` 0: ``texels_per_m`` a metre.  Otherwise a texel is at
+    most a pixel of the target view at ``near``: the view's pixels a metre there
+    (:func:`~walkstream.shared.impostors.texels_needed`) times the warp's magnification at
+    ``near`` (:data:`WARP_SHARE`; at least 1).  Between 8 and ``max_side``, the height
+    (:func:`texture_height`) at most ``max_side`` too."""
+    if settings.view_height:
+        near = max(near, 0.5)
+        k = sample / (sample * (1.0 - WARP_SHARE) + near * WARP_SHARE) if sample > 0 else 1.0
+        per_m = float(texels_needed(0.5, near, settings.view_height, settings.fov_deg)) * max(k, 1.0)
+    else:
+        per_m = settings.texels_per_m
+    cap = min(settings.max_side, settings.max_side * length / max(tall, 1e-6))
+    return int(max(1, min(cap, max(8, round(length * per_m)))))
 
 
 def texture_height(side: WallSide, width: int) -> int:
