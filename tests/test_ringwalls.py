@@ -448,12 +448,14 @@ def test_a_missing_ring_texture_brings_back_only_the_far_objects_behind_its_wall
     assert behind_walls([box(0.0, 30.0)], north, np.array([0.0, 30.0, 1.7])).tolist() == [True]
 
 
-def test_ring_textures_are_lossy_at_the_outdoor_quality_and_a_bad_quality_is_one_line() -> None:
+def test_ring_textures_are_lossless_by_default_lossy_at_a_quality_and_a_bad_quality_is_one_line() -> None:
     from walkstream.shared.errors import InputError
 
     st = WallSettings()
-    assert st.outdoors().quality == st.outdoor_quality < st.quality
-    assert st.record_outdoors()["quality"] == st.outdoor_quality
+    assert st.outdoors().codec == st.record_outdoors()["codec"] == "webp-lossless"
+    assert st.outdoors().quality == st.outdoor_quality < st.quality and st.codec == "webp"  # indoors as before
+    lossy = st.with_texture(quality=60)
+    assert (lossy.outdoors().codec, lossy.outdoors().quality, lossy.record_outdoors()["quality"]) == ("webp", 60, 60)
     for bad in (WallSettings(outdoor_quality=0), WallSettings(quality=101)):
         with pytest.raises(InputError, match="quality: expected 1 to 100"):
             bad.check()
@@ -481,7 +483,6 @@ def test_texture_fidelity_from_the_target_view_the_cap_and_the_codec_flags() -> 
     assert (st.texels_per_m, st.outdoor_texels_per_m, st.max_side, st.outdoor_max_side) == (8.0, 8.0, 128, 128)
     assert st.codec == "webp-lossless" and st.record_outdoors()["view_height"] == 240
     assert "view_height" not in WallSettings().record_outdoors() and "quality" not in WallSettings().record()
-    assert WallSettings().with_texture(quality=60).outdoors().quality == 60
 
 
 def _solid_quad(x0: float, x1: float, y: float, image: int, rgb: tuple[int, int, int]) -> tuple[Any, ...]:

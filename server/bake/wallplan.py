@@ -87,9 +87,11 @@ class WallSettings:
     outdoor textures are ``outdoor_texels_per_m`` (4: a ring's wall is tens of metres
     long and seen from at least ``ring_min``; on the village's walk 8 texels per metre
     sent 24 % more bytes for the same colour error) and at most ``outdoor_max_side``
-    texels wide, encoded at WebP quality ``outdoor_quality`` (75: the textures of a
-    ring's long walls are 1-4 kB at 90, and a walker along a street needs a new one on
-    each wall beside it every second or so; 75 takes about 40 % off their bytes).
+    texels wide, encoded by ``outdoor_codec``: lossless WebP (a ring texture is flat-shaded
+    facades and sky: on the village's walk lossless sent 12 % more texture bytes than WebP
+    at quality 75 and on the squares' 7 % fewer, for a colour error median 0.99 -> 0.73-0.81 %
+    and 0.89 -> 0.83 %, docs/benchmarks.md); ``outdoor_quality`` (75) is the lossy
+    codecs' quality there (``--wall-quality Q``).
     ``quality`` is the lossy codecs' quality indoors.
 
     Fidelity from the target view (``--wall-view H``, ``view_height``; 0: the fixed
@@ -112,6 +114,7 @@ class WallSettings:
     outdoor_max_side: int = 256
     quality: int = 90
     outdoor_quality: int = 75
+    outdoor_codec: str = "webp-lossless"
     depth_grid: int = 0
     """``--wall-depth G``: each texture's ``G`` x ``G`` inverse-depth grid stored after it
     (:mod:`walkstream.shared.walldepth`; 0: none)."""
@@ -147,8 +150,9 @@ class WallSettings:
         for m in (self.max_side, self.outdoor_max_side):
             if not (isinstance(m, int) and 8 <= m <= MAX_IMAGE_SIDE):
                 raise InputError(f"--wall-max-side: expected 8 to {MAX_IMAGE_SIDE} texels, got {m!r:.20}")
-        if self.codec not in IMAGE_MEDIA:
-            raise InputError(f"wall codec: expected one of {', '.join(IMAGE_MEDIA)}, got {self.codec!r}")
+        for codec in (self.codec, self.outdoor_codec):
+            if codec not in IMAGE_MEDIA:
+                raise InputError(f"wall codec: expected one of {', '.join(IMAGE_MEDIA)}, got {codec!r}")
         return self
 
     def record(self) -> dict[str, Any]:
@@ -166,28 +170,29 @@ class WallSettings:
                      quality: int | str | None = None) -> WallSettings:
         """These settings with the texture flags (``--wall-texels``, ``--wall-max-side``,
         ``--wall-quality``) set indoors and outdoors alike; ``quality`` ``"lossless"``
-        is lossless WebP; ``None`` leaves a field as it is."""
+        is lossless WebP, a number lossy WebP at that quality; ``None`` leaves a field as it is."""
         out = self
         if texels is not None:
             out = dataclasses.replace(out, texels_per_m=float(texels), outdoor_texels_per_m=float(texels))
         if max_side is not None:
             out = dataclasses.replace(out, max_side=max_side, outdoor_max_side=max_side)
         if quality == "lossless":
-            out = dataclasses.replace(out, codec="webp-lossless")
+            out = dataclasses.replace(out, codec="webp-lossless", outdoor_codec="webp-lossless")
         elif quality is not None:
-            out = dataclasses.replace(out, quality=int(quality), outdoor_quality=int(quality))
+            out = dataclasses.replace(out, quality=int(quality), outdoor_quality=int(quality), codec="webp",
+                                      outdoor_codec="webp")
         return out
 
     def outdoors(self) -> WallSettings:
         """These settings for a city's rings: the outdoor texture resolution in force."""
         return dataclasses.replace(self, texels_per_m=self.outdoor_texels_per_m, max_side=self.outdoor_max_side,
-                                   quality=self.outdoor_quality)
+                                   quality=self.outdoor_quality, codec=self.outdoor_codec)
 
     def record_outdoors(self) -> dict[str, Any]:
         """What a city's database records (a change is a different bake)."""
         return {"error_deg": self.error_deg, "keep": self.keep, "ring_min": self.ring_min, "region": self.region,
-                "texels_per_m": self.outdoor_texels_per_m, "max_side": self.outdoor_max_side, "codec": self.codec,
-                "quality": self.outdoor_quality, **({"depth_grid": self.depth_grid} if self.depth_grid else {}),
+                "texels_per_m": self.outdoor_texels_per_m, "max_side": self.outdoor_max_side,
+                "codec": self.outdoor_codec, "quality": self.outdoor_quality, **({"depth_grid": self.depth_grid} if self.depth_grid else {}),
                 **self._view_record()}
 
 
