@@ -448,13 +448,16 @@ def test_a_missing_ring_texture_brings_back_only_the_far_objects_behind_its_wall
     assert behind_walls([box(0.0, 30.0)], north, np.array([0.0, 30.0, 1.7])).tolist() == [True]
 
 
-def test_ring_textures_are_lossless_by_default_lossy_at_a_quality_and_a_bad_quality_is_one_line() -> None:
+def test_ring_textures_are_lossy_at_the_outdoor_quality_and_a_bad_quality_is_one_line() -> None:
     from walkstream.shared.errors import InputError
 
     st = WallSettings()
-    assert st.outdoors().codec == st.record_outdoors()["codec"] == "webp-lossless"
-    assert st.outdoors().quality == st.outdoor_quality < st.quality and st.codec == "webp"  # indoors as before
-    lossy = st.with_texture(quality=60)
+    assert st.outdoors().quality == st.outdoor_quality < st.quality
+    assert st.record_outdoors()["quality"] == st.outdoor_quality
+    assert st.outdoors().codec == st.record_outdoors()["codec"] == st.codec == "webp"
+    lossless = st.with_texture(quality="lossless")
+    assert lossless.outdoors().codec == lossless.record_outdoors()["codec"] == lossless.codec == "webp-lossless"
+    lossy = lossless.with_texture(quality=60)
     assert (lossy.outdoors().codec, lossy.outdoors().quality, lossy.record_outdoors()["quality"]) == ("webp", 60, 60)
     for bad in (WallSettings(outdoor_quality=0), WallSettings(quality=101)):
         with pytest.raises(InputError, match="quality: expected 1 to 100"):

@@ -89,11 +89,13 @@ class WallSettings:
     WebP quality 75 sent 17 % more texture bytes for a colour error median 0.99 -> 0.79 %,
     and the later textures left the far field drawn as geometry on 21 % of the frames,
     not 4 %) and at most ``outdoor_max_side``
-    texels wide, encoded by ``outdoor_codec``: lossless WebP (a ring texture is flat-shaded
-    facades and sky: on the village's walk lossless sent 12 % more texture bytes than WebP
-    at quality 75 and on the squares' 7 % fewer, for a colour error median 0.99 -> 0.73-0.81 %
-    and 0.89 -> 0.83 %, docs/benchmarks.md); ``outdoor_quality`` (75) is the lossy
-    codecs' quality there (``--wall-quality Q``).
+    texels wide, encoded by ``outdoor_codec`` at WebP quality ``outdoor_quality`` (75: the
+    textures of a ring's long walls are 1-4 kB at 90, and a walker along a street needs a
+    new one on each wall beside it every second or so; 75 takes about 40 % off their
+    bytes).  Lossless WebP (``--wall-quality lossless``) sent 12 % more texture bytes on the
+    village's walk and 7 % fewer on the squares', for a colour error median 0.99 -> 0.80 %
+    and 0.89 -> 0.84 %, but West Oakland's ``SE`` walk kept 98.9 % perfect frames with it
+    (100 % at 75): not the default (docs/benchmarks.md).
     ``quality`` is the lossy codecs' quality indoors.
 
     Fidelity from the target view (``--wall-view H``, ``view_height``; 0: the fixed
@@ -116,7 +118,7 @@ class WallSettings:
     outdoor_max_side: int = 256
     quality: int = 90
     outdoor_quality: int = 75
-    outdoor_codec: str = "webp-lossless"
+    outdoor_codec: str = "webp"
     depth_grid: int = 0
     """``--wall-depth G``: each texture's ``G`` x ``G`` inverse-depth grid stored after it
     (:mod:`walkstream.shared.walldepth`; 0: none)."""
