@@ -263,7 +263,7 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--wall-view", type=int, default=None, metavar="H", help="with --virtual-walls: size each wall's textures for a view H pixels high (60 degrees): a texel at most a pixel from the wall's nearest viewing distance, capped by --wall-max-side (0: --wall-texels a metre; docs/usage.md)")
     bk.add_argument("--wall-texels", type=float, default=None, metavar="T", help="with --virtual-walls and --wall-view 0: texels a metre of the wall textures (default 16 indoors, 4 outdoors)")
     bk.add_argument("--wall-max-side", type=int, default=None, metavar="S", help="with --virtual-walls: the largest wall texture side, texels (8 to 1024; default 512 indoors, 256 outdoors)")
-    bk.add_argument("--wall-quality", default=None, metavar="Q", help="with --virtual-walls: the wall textures lossy WebP at quality Q (1 to 100) or lossless (default 75 outdoors, 90 indoors)")
+    bk.add_argument("--wall-quality", default=None, metavar="Q", help="with --virtual-walls: the wall textures lossy WebP at quality Q (1 to 100) or lossless (default 75 outdoors, lossless indoors)")
     bk.add_argument("--wall-pitch", type=float, default=None, metavar="S", help="with --virtual-walls: a room part over 2 S^2 is cut into cells about S metres square (default 8)")
     bk.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     bk.set_defaults(func=cmd_bake)

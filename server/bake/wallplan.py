@@ -74,10 +74,12 @@ class WallSettings:
     """``--virtual-walls`` settings: ``pitch`` (grid spacing, m), ``error_deg`` (the angle
     of error A), ``texels_per_m`` (texture resolution), ``max_side`` (texels), ``codec``.
 
-    16 texels per metre in lossy WebP (quality 90): a texture of the production hall's
-    6 m walls is about 0.9 kB (1.75 kB at 32 texels per metre lossless), and a walk
-    wants a new one every second or so at 56 kbit/s, where the 1.75 kB textures filled
-    three quarters of the link.
+    16 texels per metre in lossless WebP: a texture of the production hall's 6 m walls is
+    about 0.9 kB (1.75 kB at 32 texels per metre), and a walk wants a new one every second
+    or so at 56 kbit/s, where the 1.75 kB textures filled three quarters of the link.
+    Lossless against lossy WebP at quality 90 (``--wall-quality 90``) on the hall's tour:
+    texture bytes +4.6 %, colour error median 1.01 -> 0.83 %, ΔE00 2.70 -> 1.71, every
+    frame perfect both ways (docs/benchmarks.md).
 
     Outdoors (a city's street or grid cells, :mod:`~.ringwalls`): ``keep`` (``--wall-keep
     K``), the objects a cell keeps as geometry before a ring of walls carries the rest,
@@ -96,7 +98,7 @@ class WallSettings:
     village's walk and 7 % fewer on the squares', for a colour error median 0.99 -> 0.80 %
     and 0.89 -> 0.84 %, but West Oakland's ``SE`` walk kept 98.9 % perfect frames with it
     (100 % at 75): not the default (docs/benchmarks.md).
-    ``quality`` is the lossy codecs' quality indoors.
+    ``quality`` (90) is the lossy codecs' quality indoors (``--wall-quality Q``).
 
     Fidelity from the target view (``--wall-view H``, ``view_height``; 0: the fixed
     densities above): each side's texels a metre so that a texel is at most a pixel of a
@@ -110,7 +112,7 @@ class WallSettings:
     error_deg: float = DEFAULT_WALL_ERROR_DEG
     texels_per_m: float = 16.0
     max_side: int = 512
-    codec: str = "webp"
+    codec: str = "webp-lossless"
     keep: int = 8
     ring_min: float = 10.0
     region: float = 40.0
