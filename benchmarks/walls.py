@@ -61,7 +61,8 @@ import numpy as np
 
 from walkstream.shared.errors import WalkstreamError
 
-__all__ = ["SCENES", "WALL_ERRORS", "run_walls_bench", "format_walls_table", "plot_walls", "walls_support"]
+__all__ = ["SCENES", "TEXTURE_KEYS", "WALL_ERRORS", "format_walls_table", "parse_texture_variants", "plot_walls",
+           "run_walls_bench", "texture_label", "texture_settings", "walls_support"]
 
 Replayer = Callable[[str, Mapping[str, Any], str], Any]
 
@@ -148,9 +149,11 @@ def _bake_scene(name: str, out: Path, data: Path, quick: bool, settings: dict[st
         if settings.get("virtual_walls"):
             from walkstream.server.bake.wallplan import WallSettings
 
-            extra["walls"] = WallSettings(error_deg=float(settings.get("wall_error", 10.0)),
-                                          depth_grid=int(settings.get("wall_depth", 0))).check()
-        settings = {k: v for k, v in settings.items() if k not in ("virtual_walls", "wall_error", "wall_depth")}
+            extra["walls"] = texture_settings(WallSettings(error_deg=float(settings.get("wall_error", 10.0)),
+                                                           depth_grid=int(settings.get("wall_depth", 0))),
+                                              settings.get("wall_texture") or {})
+        settings = {k: v for k, v in settings.items()
+                    if k not in ("virtual_walls", "wall_error", "wall_depth", "wall_texture")}
         bake(src, db, settings=BakeSettings(**(cells | settings)), **extra)
         base = out / f"{name}.db"
         if extra and path != _BENCH_PATH and base.exists():
@@ -172,6 +175,53 @@ def _bake_scene(name: str, out: Path, data: Path, quick: bool, settings: dict[st
                 raise WalkstreamError(f"{db}: no walk of two cells or more in its street cells")
             write_path(db, _BENCH_PATH, replace(walk, name=_BENCH_PATH).to_msgpack())
     return db, path
+
+
+TEXTURE_KEYS: tuple[str, ...] = ("view", "texels", "max-side", "quality")
+"""The keys of a ``--wall-textures`` variant: ``walkstream bake``'s ``--wall-view``,
+``--wall-texels``, ``--wall-max-side`` and ``--wall-quality``."""
+
+
+def texture_settings(base: Any, texture: Mapping[str, str]) -> Any:
+    """``base`` (a :class:`~walkstream.server.bake.wallplan.WallSettings`) with a
+    ``--wall-textures`` variant's keys set, checked (a bad value: one-line error)."""
+    from walkstream.server.bake.wallplan import parse_wall_quality
+
+    def number(key: str, kind: type) -> Any:
+        try:
+            return None if key not in texture else kind(texture[key])
+        except ValueError:
+            raise WalkstreamError(f"--wall-textures {key}={texture[key]!r}: expected a number") from None
+
+    view = number("view", int)
+    st = base if view is None else replace(base, view_height=view)
+    return st.with_texture(texels=number("texels", float), max_side=number("max-side", int),
+                           quality=parse_wall_quality(texture.get("quality"))).check()
+
+
+def parse_texture_variants(text: str) -> list[dict[str, str]]:
+    """``--wall-textures``: variants separated by ``;``, each ``key=value`` pairs separated
+    by ``,`` (:data:`TEXTURE_KEYS`), e.g. ``view=120;texels=4,quality=75``; each checked."""
+    from walkstream.server.bake.wallplan import WallSettings
+
+    out: list[dict[str, str]] = []
+    for part in (p.strip() for p in text.split(";")):
+        if not part:
+            continue
+        spec: dict[str, str] = {}
+        for pair in (q.strip() for q in part.split(",") if q.strip()):
+            key, eq, value = pair.partition("=")
+            if not eq or key.strip() not in TEXTURE_KEYS:
+                raise WalkstreamError(f"--wall-textures {pair!r}: expected key=value with a key of {', '.join(TEXTURE_KEYS)}")
+            spec[key.strip()] = value.strip()
+        texture_settings(WallSettings(), spec)
+        out.append(spec)
+    return out
+
+
+def texture_label(spec: Mapping[str, str]) -> str:
+    """A ``--wall-textures`` variant as it names its row and database (``view=120 quality=75``)."""
+    return " ".join(f"{k}={spec[k]}" for k in TEXTURE_KEYS if k in spec)
 
 
 def _frames(report: Path) -> dict[str, np.ndarray]:
@@ -300,10 +350,13 @@ def run_walls_bench(
     quick: bool = False,
     frustum_frames: int = 40,
     wall_depth: int = 0,
+    wall_textures: Sequence[Mapping[str, str]] = (),
 ) -> dict[str, Any]:
     """Bake and replay every scene with and without walls (module docstring); with
     ``wall_depth`` ``G`` > 0 each A also baked with ``--wall-depth G`` and played as the
-    variant ``walls A=a G=g`` (textured depth meshes), beside the walls without.
+    variant ``walls A=a G=g`` (textured depth meshes), beside the walls without; each of
+    ``wall_textures`` (:func:`parse_texture_variants`) bakes each A once more with those
+    texture settings, the variant ``walls A=a view=... quality=...``.
 
     Returns ``{"rows": [...], "frustum": {...} or None, "notes": [...]}`` and writes
     ``bench_walls.json`` and ``bench_walls.png`` into ``out``.
@@ -335,6 +388,12 @@ def run_walls_bench(
                                                                    "wall_depth": wall_depth},
                                          tag=f"-walls-{a:g}-depth{wall_depth}")
                     variants.append((f"walls A={a:g} G={wall_depth}", ddb, {"virtual_walls": True} if can_play else {}))
+                for spec in wall_textures:
+                    label = texture_label(spec)
+                    tdb, _ = _bake_scene(scene, out, data, quick, {"virtual_walls": True, "wall_error": float(a),
+                                                                   "wall_texture": spec},
+                                         tag=f"-walls-{a:g}-" + label.replace(" ", "-").replace("=", ""))
+                    variants.append((f"walls A={a:g} {label}", tdb, {"virtual_walls": True} if can_play else {}))
                 if can_play and scene == "hall":
                     # indoors the walls' database plays without them too (every portal
                     # open); a city's rings cut its PVS, so without walls it is the plain bake

@@ -55,3 +55,15 @@ def test_bench_walls_refuses_an_unknown_scene_in_one_line(capsys: pytest.Capture
     assert "squares" in err  # the small generated city with squares is a scene of its own
     assert main(["bench", "walls", "--wall-errors", "10,ninety"]) != 0
     assert "--wall-errors" in capsys.readouterr().err
+
+
+def test_bench_walls_texture_variants_are_parsed_and_a_bad_one_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    from walkstream.benchmarks.walls import parse_texture_variants, texture_label
+
+    specs = parse_texture_variants("view=120; texels=4,quality=75,max-side=256")
+    assert [texture_label(s) for s in specs] == ["view=120", "texels=4 max-side=256 quality=75"]
+    for bad, message in (("size=3", "key=value with a key of"), ("view=x", "view='x': expected a number"),
+                         ("quality=0", "--wall-quality: expected 1 to 100")):
+        assert main(["bench", "walls", "--wall-textures", bad]) != 0
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err

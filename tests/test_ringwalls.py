@@ -8,6 +8,7 @@ import io
 import math
 import shutil
 import sqlite3
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -453,10 +454,38 @@ def test_ring_textures_are_lossy_at_the_outdoor_quality_and_a_bad_quality_is_one
     st = WallSettings()
     assert st.outdoors().quality == st.outdoor_quality < st.quality
     assert st.record_outdoors()["quality"] == st.outdoor_quality
+    assert st.outdoors().codec == st.record_outdoors()["codec"] == "webp" != st.codec  # indoors lossless
+    lossless = st.with_texture(quality="lossless")
+    assert lossless.outdoors().codec == lossless.record_outdoors()["codec"] == lossless.codec == "webp-lossless"
+    lossy = lossless.with_texture(quality=60)
+    assert (lossy.outdoors().codec, lossy.outdoors().quality, lossy.record_outdoors()["quality"]) == ("webp", 60, 60)
     for bad in (WallSettings(outdoor_quality=0), WallSettings(quality=101)):
         with pytest.raises(InputError, match="quality: expected 1 to 100"):
             bad.check()
 
+
+
+def test_texture_fidelity_from_the_target_view_the_cap_and_the_codec_flags() -> None:
+    from walkstream.server.bake.wallplan import texture_width
+
+    fixed = WallSettings().outdoors()
+    # the fixed density: 4 texels a metre, whatever the distance
+    assert texture_width(30.0, 20.0, 10.0, 20.0, fixed) == texture_width(30.0, 20.0, 40.0, 20.0, fixed) == 120
+    view = replace(WallSettings(view_height=120, outdoor_max_side=1024), outdoor_texels_per_m=4.0).outdoors()
+    # a texel at most a pixel of a 120-pixel, 60-degree view at 10 m (10.4 px/m), the warp's
+    # magnification there (20 / (10 + 5) = 1.33) on top: 30 m x 13.9 texels a metre
+    assert texture_width(30.0, 20.0, 10.0, 20.0, view) == round(30.0 * 120 / (2 * 10.0 * np.tan(np.radians(30))) * 4 / 3)
+    # twice as far: about half the texels; nearer than the sampling point only magnifies
+    assert abs(texture_width(30.0, 20.0, 20.0, 20.0, view) - 30 * 5.196) <= 1
+    # capped on both axes: a tall short wall's height stays within the cap
+    capped = replace(view, max_side=64)
+    w = texture_width(10.0, 40.0, 5.0, 20.0, capped)
+    assert w == 16 and round(w * 40.0 / 10.0) == 64
+    # the flags set indoors and outdoors alike; lossless is the lossless codec; records carry the view
+    st = WallSettings(view_height=240).with_texture(texels=8.0, max_side=128, quality="lossless").check()
+    assert (st.texels_per_m, st.outdoor_texels_per_m, st.max_side, st.outdoor_max_side) == (8.0, 8.0, 128, 128)
+    assert st.codec == "webp-lossless" and st.record_outdoors()["view_height"] == 240
+    assert "view_height" not in WallSettings().record_outdoors() and "quality" not in WallSettings().record()
 
 
 def _solid_quad(x0: float, x1: float, y: float, image: int, rgb: tuple[int, int, int]) -> tuple[Any, ...]:

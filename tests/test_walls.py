@@ -612,6 +612,11 @@ def test_a_walltex_part_lists_distinct_textures_and_a_short_bundle_says_so() -> 
         (["--wall-error", "10"], "give --virtual-walls too"),
         (["--virtual-walls", "--wall-depth", "5"], "--wall-depth: expected one of 0, 4, 8, 16, got 5"),
         (["--wall-depth", "8"], "give --virtual-walls too"),
+        (["--virtual-walls", "--wall-view", "-1"], "--wall-view: expected 0"),
+        (["--virtual-walls", "--wall-texels", "0"], "--wall-texels: expected 0.1 to 256"),
+        (["--virtual-walls", "--wall-max-side", "2048"], "--wall-max-side: expected 8 to 1024"),
+        (["--virtual-walls", "--wall-quality", "best"], "--wall-quality: expected 1 to 100 or lossless, got 'best'"),
+        (["--wall-quality", "lossless"], "give --virtual-walls too"),
     ],
 )
 def test_bad_wall_flags_are_one_clear_line(

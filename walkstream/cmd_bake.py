@@ -122,16 +122,19 @@ def cmd_bake(args: argparse.Namespace) -> int:
         extra["impostors"] = ImpostorSettings(**{k: v for k, v in zip(names, imp_flags, strict=True) if v is not None}).check()
     elif any(v is not None for v in imp_flags):
         raise WalkstreamError("--impostor-distance/-error/-size/-sampling/-projection, --complex-triangles: give --impostors too")
-    wall_flags = (args.wall_error, args.wall_pitch, args.wall_keep, args.wall_ring_min, args.wall_region, args.wall_depth)
+    wall_flags = (args.wall_error, args.wall_pitch, args.wall_keep, args.wall_ring_min, args.wall_region, args.wall_depth,
+                  args.wall_view)
+    texture_flags = (args.wall_texels, args.wall_max_side, args.wall_quality)
     if args.virtual_walls:
-        from walkstream.server.bake.wallplan import WallSettings
+        from walkstream.server.bake.wallplan import WallSettings, parse_wall_quality
 
-        wall_names = ("error_deg", "pitch", "keep", "ring_min", "region", "depth_grid")
-        extra["walls"] = WallSettings(**{k: v for k, v in zip(wall_names, wall_flags, strict=True)
-                                         if v is not None}).check()
-    elif any(v is not None for v in wall_flags):
-        raise WalkstreamError("--wall-error/--wall-pitch/--wall-keep/--wall-ring-min/--wall-region/--wall-depth: "
-                              "give --virtual-walls too")
+        wall_names = ("error_deg", "pitch", "keep", "ring_min", "region", "depth_grid", "view_height")
+        extra["walls"] = WallSettings(**{k: v for k, v in zip(wall_names, wall_flags, strict=True) if v is not None}
+                                      ).with_texture(texels=args.wall_texels, max_side=args.wall_max_side,
+                                                     quality=parse_wall_quality(args.wall_quality)).check()
+    elif any(v is not None for v in (*wall_flags, *texture_flags)):
+        raise WalkstreamError("--wall-error/--wall-pitch/--wall-keep/--wall-ring-min/--wall-region/--wall-depth/"
+                              "--wall-view/--wall-texels/--wall-max-side/--wall-quality: give --virtual-walls too")
     summary = run_bake(source, args.output, settings=st, name=args.name, workers=args.workers, scheduler=args.scheduler, **extra)
     print_summary(f"baked {args.output}", summary, args.json)
     return 0
@@ -257,6 +260,10 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--wall-ring-min", type=float, default=None, metavar="M", help="with --virtual-walls on a city: the ring's least distance from its cell, metres (default 10)")
     bk.add_argument("--wall-region", type=float, default=None, metavar="S", help="with --virtual-walls on a city: neighbouring cells within S by S metres share one ring and its textures (default 40; 0: a ring per cell)")
     bk.add_argument("--wall-depth", type=int, default=None, metavar="G", help="with --virtual-walls: store each texture's G x G grid of depths (0, 4, 8 or 16; default 0: none) and draw it as a textured depth mesh (docs/usage.md)")
+    bk.add_argument("--wall-view", type=int, default=None, metavar="H", help="with --virtual-walls: size each wall's textures for a view H pixels high (60 degrees): a texel at most a pixel from the wall's nearest viewing distance, capped by --wall-max-side (0: --wall-texels a metre; docs/usage.md)")
+    bk.add_argument("--wall-texels", type=float, default=None, metavar="T", help="with --virtual-walls and --wall-view 0: texels a metre of the wall textures (default 16 indoors, 4 outdoors)")
+    bk.add_argument("--wall-max-side", type=int, default=None, metavar="S", help="with --virtual-walls: the largest wall texture side, texels (8 to 1024; default 512 indoors, 256 outdoors)")
+    bk.add_argument("--wall-quality", default=None, metavar="Q", help="with --virtual-walls: the wall textures lossy WebP at quality Q (1 to 100) or lossless (default 75 outdoors, lossless indoors)")
     bk.add_argument("--wall-pitch", type=float, default=None, metavar="S", help="with --virtual-walls: a room part over 2 S^2 is cut into cells about S metres square (default 8)")
     bk.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     bk.set_defaults(func=cmd_bake)

@@ -70,7 +70,12 @@ def cmd_bench_impostor_sampling(args: argparse.Namespace) -> int:
 
 def cmd_bench_walls(args: argparse.Namespace) -> int:
     """Handler of ``walkstream bench walls``."""
-    from walkstream.benchmarks.walls import SCENES, format_walls_table, run_walls_bench
+    from walkstream.benchmarks.walls import (
+        SCENES,
+        format_walls_table,
+        parse_texture_variants,
+        run_walls_bench,
+    )
     from walkstream.cmd_replay import replayer
     from walkstream.shared.errors import InputError
     from walkstream.shared.walldepth import check_depth_grid
@@ -92,7 +97,7 @@ def cmd_bench_walls(args: argparse.Namespace) -> int:
         duration="4s" if quick else args.duration, gl_duration="3s" if quick else args.gl_duration,
         truth_every=40 if quick else args.truth_every, size="160x120" if quick else args.size,
         gl=not args.no_gl, quick=quick, frustum_frames=5 if quick else args.frames,
-        wall_depth=check_depth_grid(args.wall_depth),
+        wall_depth=check_depth_grid(args.wall_depth), wall_textures=parse_texture_variants(args.wall_textures),
     )
     if args.json:
         print(json.dumps(result, default=str))
@@ -141,6 +146,7 @@ def add_image_benches(besub: Any) -> None:
     b.add_argument("--scenes", default="hall,city,west-oakland,village", help="comma-separated scenes: hall, city, squares, west-oakland, village (default all but squares)")
     b.add_argument("--wall-errors", default="5,10,15,20", help="wall errors A in degrees, one walls bake each (default 5,10,15,20)")
     b.add_argument("--wall-depth", type=int, default=0, metavar="G", help="also bake each A with --wall-depth G (4, 8 or 16) and play it beside the walls without (variant 'walls A=a G=g'; default 0: not)")
+    b.add_argument("--wall-textures", default="", metavar="SPECS", help="also bake each A with other wall texture settings and play it beside: variants split by ';', each key=value pairs split by ',' of view, texels, max-side, quality (bake's --wall-view, --wall-texels, --wall-max-side, --wall-quality), e.g. 'view=120;texels=4,quality=lossless'")
     b.add_argument("--data", default="../shared/data/osm", help="folder of the OpenStreetMap extracts")
     b.add_argument("--duration", default="60s", help="walk length of the pda replays (default 60s)")
     b.add_argument("--gl-duration", default="20s", help="walk length of the real-clock gl replays (default 20s)")

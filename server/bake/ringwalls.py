@@ -59,7 +59,7 @@ import shapely
 from numpy.typing import NDArray
 
 from walkstream.server.bake.viewcell import ViewCell
-from walkstream.server.bake.wallplan import WallJob, WallPlan, WallSettings
+from walkstream.server.bake.wallplan import WallJob, WallPlan, WallSettings, texture_width
 from walkstream.shared.walls import RING_SIDES, WallSide, zone_count
 
 __all__ = ["RingPlan", "plan_ring_walls", "ring_rectangle", "ring_regions"]
@@ -227,7 +227,8 @@ def plan_ring_walls(
             zones = zone_count(length, r, alpha)
             ws = WallSide(RING_SIDES * first + k, 0, (float(p0[0]), float(p0[1])), (float(p1[0]), float(p1[1])),
                           ground, ground + top, ground, 0.0, 0.0, across / 2.0, alpha, zones)
-            width = int(min(settings.max_side, max(8, round(length * settings.texels_per_m))))
+            # seen from r on (the region's edge), sampled from the ring's middle
+            width = texture_width(length, top, r, across / 2.0, settings)
             tids = tuple(range(len(jobs), len(jobs) + zones))
             row = tuple(ws.to_row())
             jobs += [(tid, row, z, width, hole) for z, tid in enumerate(tids)]

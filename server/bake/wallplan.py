@@ -43,8 +43,9 @@ import numpy as np
 from walkstream.server.bake.roomcontents import Part, weld
 from walkstream.server.bake.roomlayout import RoomLayout
 from walkstream.server.sources.interior import InteriorScene
-from walkstream.shared.codec.image import IMAGE_MEDIA
+from walkstream.shared.codec.image import IMAGE_MEDIA, MAX_IMAGE_SIDE
 from walkstream.shared.errors import InputError
+from walkstream.shared.impostors import texels_needed
 from walkstream.shared.walldepth import check_depth_grid
 from walkstream.shared.walls import DEFAULT_WALL_ERROR_DEG, WallSide, zone_count
 
@@ -54,8 +55,10 @@ __all__ = [
     "WallJob",
     "WallPlan",
     "WallSettings",
+    "parse_wall_quality",
     "plan_walls",
     "texture_height",
+    "texture_width",
     "whole_crossing",
 ]
 
@@ -71,10 +74,12 @@ class WallSettings:
     """``--virtual-walls`` settings: ``pitch`` (grid spacing, m), ``error_deg`` (the angle
     of error A), ``texels_per_m`` (texture resolution), ``max_side`` (texels), ``codec``.
 
-    16 texels per metre in lossy WebP (quality 90): a texture of the production hall's
-    6 m walls is about 0.9 kB (1.75 kB at 32 texels per metre lossless), and a walk
-    wants a new one every second or so at 56 kbit/s, where the 1.75 kB textures filled
-    three quarters of the link.
+    16 texels per metre in lossless WebP: a texture of the production hall's 6 m walls is
+    about 0.9 kB (1.75 kB at 32 texels per metre), and a walk wants a new one every second
+    or so at 56 kbit/s, where the 1.75 kB textures filled three quarters of the link.
+    Lossless against lossy WebP at quality 90 (``--wall-quality 90``) on the hall's tour:
+    texture bytes +4.6 %, colour error median 1.01 -> 0.83 %, ΔE00 2.70 -> 1.71, every
+    frame perfect both ways (docs/benchmarks.md).
 
     Outdoors (a city's street or grid cells, :mod:`~.ringwalls`): ``keep`` (``--wall-keep
     K``), the objects a cell keeps as geometry before a ring of walls carries the rest,
@@ -82,18 +87,32 @@ class WallSettings:
     surrounds, and ``region`` (``--wall-region``, m), the largest group of neighbouring
     cells that share one ring;
     outdoor textures are ``outdoor_texels_per_m`` (4: a ring's wall is tens of metres
-    long and seen from at least ``ring_min``; on the village's walk 8 texels per metre
-    sent 24 % more bytes for the same colour error) and at most ``outdoor_max_side``
-    texels wide, encoded at WebP quality ``outdoor_quality`` (75: the textures of a
-    ring's long walls are 1-4 kB at 90, and a walker along a street needs a new one on
-    each wall beside it every second or so; 75 takes about 40 % off their bytes).
-    ``quality`` is the lossy codecs' quality indoors."""
+    long and seen from at least ``ring_min``; on the village's walk 8 texels a metre at
+    WebP quality 75 sent 17 % more texture bytes for a colour error median 0.99 -> 0.79 %,
+    and the later textures left the far field drawn as geometry on 21 % of the frames,
+    not 4 %) and at most ``outdoor_max_side``
+    texels wide, encoded by ``outdoor_codec`` at WebP quality ``outdoor_quality`` (75: the
+    textures of a ring's long walls are 1-4 kB at 90, and a walker along a street needs a
+    new one on each wall beside it every second or so; 75 takes about 40 % off their
+    bytes).  Lossless WebP (``--wall-quality lossless``) sent 12 % more texture bytes on the
+    village's walk and 7 % fewer on the squares', for a colour error median 0.99 -> 0.80 %
+    and 0.89 -> 0.84 %, but West Oakland's ``SE`` walk kept 98.9 % perfect frames with it
+    (100 % at 75): not the default (docs/benchmarks.md).
+    ``quality`` (90) is the lossy codecs' quality indoors (``--wall-quality Q``).
+
+    Fidelity from the target view (``--wall-view H``, ``view_height``; 0: the fixed
+    densities above): each side's texels a metre so that a texel is at most a pixel of a
+    view ``H`` pixels high at ``fov_deg`` from the side's nearest viewing distance, times
+    the magnification the client's warp lays on it there (:func:`texture_width`), capped
+    at ``max_side`` on both axes.  ``--wall-texels T``, ``--wall-max-side S`` and
+    ``--wall-quality Q|lossless`` set the fixed density, the cap and the codec indoors and
+    outdoors alike (:meth:`with_texture`)."""
 
     pitch: float = 8.0
     error_deg: float = DEFAULT_WALL_ERROR_DEG
     texels_per_m: float = 16.0
     max_side: int = 512
-    codec: str = "webp"
+    codec: str = "webp-lossless"
     keep: int = 8
     ring_min: float = 10.0
     region: float = 40.0
@@ -101,9 +120,15 @@ class WallSettings:
     outdoor_max_side: int = 256
     quality: int = 90
     outdoor_quality: int = 75
+    outdoor_codec: str = "webp"
     depth_grid: int = 0
     """``--wall-depth G``: each texture's ``G`` x ``G`` inverse-depth grid stored after it
     (:mod:`walkstream.shared.walldepth`; 0: none)."""
+    view_height: int = 0
+    """``--wall-view H``: the target view's height, pixels, that sizes each side's texture
+    (0: the fixed ``texels_per_m``)."""
+    fov_deg: float = 60.0
+    """The target view's vertical field of view, degrees (the client's default)."""
 
     def check(self) -> WallSettings:
         """These settings, or a one-line :class:`InputError` naming the bad one."""
@@ -121,8 +146,19 @@ class WallSettings:
             if not (isinstance(q, int) and 1 <= q <= 100):
                 raise InputError(f"wall {name}: expected 1 to 100, got {q!r:.20}")
         check_depth_grid(self.depth_grid)
-        if self.codec not in IMAGE_MEDIA:
-            raise InputError(f"wall codec: expected one of {', '.join(IMAGE_MEDIA)}, got {self.codec!r}")
+        if not (isinstance(self.view_height, int) and 0 <= self.view_height <= 8192):
+            raise InputError(f"--wall-view: expected 0 (fixed texels a metre) to 8192 pixels, got {self.view_height!r:.20}")
+        if not (math.isfinite(self.fov_deg) and 1.0 <= self.fov_deg <= 170.0):
+            raise InputError(f"wall view field: expected 1 to 170 degrees, got {self.fov_deg}")
+        for t in (self.texels_per_m, self.outdoor_texels_per_m):
+            if not (math.isfinite(t) and 0.1 <= t <= 256.0):
+                raise InputError(f"--wall-texels: expected 0.1 to 256 texels a metre, got {t}")
+        for m in (self.max_side, self.outdoor_max_side):
+            if not (isinstance(m, int) and 8 <= m <= MAX_IMAGE_SIDE):
+                raise InputError(f"--wall-max-side: expected 8 to {MAX_IMAGE_SIDE} texels, got {m!r:.20}")
+        for codec in (self.codec, self.outdoor_codec):
+            if codec not in IMAGE_MEDIA:
+                raise InputError(f"wall codec: expected one of {', '.join(IMAGE_MEDIA)}, got {codec!r}")
         return self
 
     def record(self) -> dict[str, Any]:
@@ -130,18 +166,40 @@ class WallSettings:
         return {"pitch": self.pitch, "error_deg": self.error_deg, "texels_per_m": self.texels_per_m,
                 "max_side": self.max_side, "codec": self.codec,
                 # only when asked: a bake without depths records what it always did
-                **({"depth_grid": self.depth_grid} if self.depth_grid else {})}
+                **({"depth_grid": self.depth_grid} if self.depth_grid else {}),
+                **self._view_record(), **({"quality": self.quality} if self.quality != 90 else {})}
+
+    def _view_record(self) -> dict[str, Any]:
+        return {"view_height": self.view_height, "fov_deg": self.fov_deg} if self.view_height else {}
+
+    def with_texture(self, *, texels: float | None = None, max_side: int | None = None,
+                     quality: int | str | None = None) -> WallSettings:
+        """These settings with the texture flags (``--wall-texels``, ``--wall-max-side``,
+        ``--wall-quality``) set indoors and outdoors alike; ``quality`` ``"lossless"``
+        is lossless WebP, a number lossy WebP at that quality; ``None`` leaves a field as it is."""
+        out = self
+        if texels is not None:
+            out = dataclasses.replace(out, texels_per_m=float(texels), outdoor_texels_per_m=float(texels))
+        if max_side is not None:
+            out = dataclasses.replace(out, max_side=max_side, outdoor_max_side=max_side)
+        if quality == "lossless":
+            out = dataclasses.replace(out, codec="webp-lossless", outdoor_codec="webp-lossless")
+        elif quality is not None:
+            out = dataclasses.replace(out, quality=int(quality), outdoor_quality=int(quality), codec="webp",
+                                      outdoor_codec="webp")
+        return out
 
     def outdoors(self) -> WallSettings:
         """These settings for a city's rings: the outdoor texture resolution in force."""
         return dataclasses.replace(self, texels_per_m=self.outdoor_texels_per_m, max_side=self.outdoor_max_side,
-                                   quality=self.outdoor_quality)
+                                   quality=self.outdoor_quality, codec=self.outdoor_codec)
 
     def record_outdoors(self) -> dict[str, Any]:
         """What a city's database records (a change is a different bake)."""
         return {"error_deg": self.error_deg, "keep": self.keep, "ring_min": self.ring_min, "region": self.region,
-                "texels_per_m": self.outdoor_texels_per_m, "max_side": self.outdoor_max_side, "codec": self.codec,
-                "quality": self.outdoor_quality, **({"depth_grid": self.depth_grid} if self.depth_grid else {})}
+                "texels_per_m": self.outdoor_texels_per_m, "max_side": self.outdoor_max_side,
+                "codec": self.outdoor_codec, "quality": self.outdoor_quality, **({"depth_grid": self.depth_grid} if self.depth_grid else {}),
+                **self._view_record()}
 
 
 WallJob = tuple[int, tuple[Any, ...], int, int, tuple[int, ...]]
@@ -211,12 +269,54 @@ def plan_walls(scene: InteriorScene, layout: RoomLayout, settings: WallSettings)
             floor = float(cells[viewer].zmin)
             ws = WallSide(p.id, side, (float(a[0]), float(a[1])), (float(b[0]), float(b[1])), z0, z1, floor,
                           x_t, depth / 16.0, 0.75 * depth, alpha, zones)
-            width = int(min(settings.max_side, max(8, round(length * settings.texels_per_m))))
+            width = texture_width(length, z1 - z0, x_t, 0.75 * depth, settings)
             ids = tuple(range(len(jobs), len(jobs) + zones))
             row = tuple(ws.to_row())
             jobs += [(tid, row, k, width, crossing[p.id]) for k, tid in enumerate(ids)]
             sides.append(dataclasses.replace(ws, textures=ids))
     return WallPlan(sides, jobs, crossing)
+
+
+def parse_wall_quality(text: str | None) -> int | str | None:
+    """``--wall-quality``'s value: ``"lossless"``, a WebP quality 1-100, or None when not
+    given; anything else a one-line :class:`InputError`."""
+    if text is None:
+        return None
+    t = str(text).strip().lower()
+    if t == "lossless":
+        return t
+    try:
+        q = int(t)
+    except ValueError:
+        q = 0
+    if not 1 <= q <= 100:
+        raise InputError(f"--wall-quality: expected 1 to 100 or lossless, got {str(text)!r:.30}")
+    return q
+
+
+WARP_SHARE = 0.5
+"""The client's default warp share (``--wall-parallax``, :func:`~walkstream.shared.walls.zone_warp`):
+a texture sampled from ``x_s`` is laid ``x_s / (x_s (1 - R) + x R)`` times larger for a
+viewer at ``x``, so its texels are that much larger on the screen."""
+
+
+def texture_width(length: float, tall: float, near: float, sample: float, settings: WallSettings) -> int:
+    """Texels across a texture of a wall side ``length`` by ``tall`` metres, first seen as
+    texture from ``near`` metres and sampled from ``sample`` metres in front of it.
+
+    With ``settings.view_height`` 0: ``texels_per_m`` a metre.  Otherwise a texel is at
+    most a pixel of the target view at ``near``: the view's pixels a metre there
+    (:func:`~walkstream.shared.impostors.texels_needed`) times the warp's magnification at
+    ``near`` (:data:`WARP_SHARE`; at least 1).  Between 8 and ``max_side``, the height
+    (:func:`texture_height`) at most ``max_side`` too."""
+    if settings.view_height:
+        near = max(near, 0.5)
+        k = sample / (sample * (1.0 - WARP_SHARE) + near * WARP_SHARE) if sample > 0 else 1.0
+        per_m = float(texels_needed(0.5, near, settings.view_height, settings.fov_deg)) * max(k, 1.0)
+    else:
+        per_m = settings.texels_per_m
+    cap = min(settings.max_side, settings.max_side * length / max(tall, 1e-6))
+    return int(max(1, min(cap, max(8, round(length * per_m)))))
 
 
 def texture_height(side: WallSide, width: int) -> int:
