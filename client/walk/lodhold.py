@@ -1,0 +1,72 @@
+"""Part of the frame step ``allocate``: the LOD hold, so that a building's LOD does not flip frame to frame.
+
+The greedy ACH allocation (:func:`~walkstream.client.draw.allocate.allocate_ach`) hands
+what the budget leaves after the objects of most ACH to the ones after them: far
+buildings of a few pixels.  The budget moves a little every frame (the controller's
+estimate, the impostors' and facades' quads taken off it first), and that slack moves
+such a building between LOD 0 and 1 every few frames, each change a pop of its own
+(issue 27: on the ``pda`` budget about 0.044 of the switching pixels' colour).  The
+hold: an object whose LOD changed less than ``hold_s`` ago may not go *up* (its cap is
+its LOD, :func:`lod_caps`); it may always go down, so the frame never draws more than
+its budget, and an object up-and-down twice a second at most.  A LOD held
+back this way leaves its triangles to the objects after it in the greedy order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from walkstream.client.walk.state import Frame, WalkState
+
+__all__ = ["held_budget", "lod_caps", "note_lod_changes"]
+
+
+def held_budget(w: WalkState, f: Frame, budget: int) -> int:
+    """The objects' ``budget`` the allocation gets: the least of it over the last
+    ``config.lod_hold_s`` of walk time (``budget`` itself with the hold off).  The
+    frame's own share swings by the facade bake's and the impostors' quads frame to
+    frame; the low water of the last second does not, so what it leaves the far
+    buildings stays put, and it is never more than the frame's own."""
+    hold = w.config.lod_hold_s
+    if hold <= 0:
+        return budget
+    lows = w.lod_budgets
+    while lows and lows[0][0] <= f.wt - hold:
+        lows.popleft()
+    while lows and lows[-1][1] >= budget:  # the least of the window at lows[0]: a rising
+        lows.pop()  # budget leaves nothing behind it that could be the least later
+    lows.append((f.wt, budget))
+    return int(lows[0][1])
+
+
+def lod_caps(w: WalkState, f: Frame) -> NDArray[np.int64] | None:
+    """``(k,)`` the highest LOD each of the walk's objects (``w.objects.geoms``) may take
+    this frame: its LOD where that changed less than ``config.lod_hold_s`` before the
+    frame's walk time, else 2; None with the hold off (0) or nothing held."""
+    hold = w.config.lod_hold_s
+    if hold <= 0 or not w.lod_since:
+        return None
+    since = w.lod_since
+    caps = np.full(len(w.objects.geoms), 2, np.int64)
+    for k, g in enumerate(w.objects.geoms):
+        held = since.get(g.id)
+        if held is not None and f.wt - held[1] < hold:
+            caps[k] = held[0]
+    return caps
+
+
+def note_lod_changes(w: WalkState, f: Frame) -> None:
+    """Note each drawn object's LOD and, where it changed (or first drawn), the frame's
+    walk time (``w.lod_since``), after the allocation and its blend hold."""
+    if w.config.lod_hold_s <= 0 or f.alloc is None:
+        return
+    since = w.lod_since
+    for g, lod in zip(w.objects.geoms, f.alloc.lod.tolist(), strict=False):
+        if lod < 0:
+            continue
+        was = since.get(g.id)
+        if was is None:
+            since[g.id] = (lod, -np.inf)  # first drawn: nothing to hold it against
+        elif was[0] != lod:
+            since[g.id] = (lod, f.wt)
