@@ -60,3 +60,10 @@ def test_an_upgrade_that_costs_nothing_is_taken_after_the_budget_ran_out() -> No
     tri = np.array([[12, 240, 2000], [2, 2, 2]], np.int64)
     a = allocate_ach([0.9, 0.1], tri, np.ones((2, 3), bool), np.ones(2, bool), 300, reserve_floor=True, greedy=True)
     assert a.lod.tolist() == [1, 2]
+
+
+def test_the_held_budget_falls_at_once_and_rises_after_the_hold() -> None:
+    w: Any = SimpleNamespace(config=SimpleNamespace(lod_hold_s=1.0), lod_budgets=deque())
+    got = [held_budget(w, SimpleNamespace(wt=0.04 * k), b) for k, b in enumerate([500, 400, 600] + [600] * 30)]
+    assert got[:3] == [500, 400, 400]
+    assert got[24] == 400 and got[28] == 600  # the 400 of 0.04 s leaves the 1 s window at about 1.04 s

@@ -2,14 +2,19 @@
 
 The greedy ACH allocation (:func:`~walkstream.client.draw.allocate.allocate_ach`) hands
 what the budget leaves after the objects of most ACH to the ones after them: far
-buildings of a few pixels.  The budget moves a little every frame (the controller's
-estimate, the impostors' and facades' quads taken off it first), and that slack moves
-such a building between LOD 0 and 1 every few frames, each change a pop of its own
-(issue 27: on the ``pda`` budget about 0.044 of the switching pixels' colour).  The
-hold: an object whose LOD changed less than ``hold_s`` ago may not go *up* (its cap is
-its LOD, :func:`lod_caps`); it may always go down, so the frame never draws more than
-its budget, and an object up-and-down twice a second at most.  A LOD held
-back this way leaves its triangles to the objects after it in the greedy order.
+buildings of a few pixels.  The objects' share of the budget swings by a few hundred
+triangles frame to frame on ``pda`` (the facade bake's triangles and the impostors'
+quads come off it first, on some frames and not others), and that slack moved such a
+building between LOD 0 and 1 every few frames, each change a pop of its own (issue 27:
+about 0.044 of the switching pixels' colour).  Two rules, both ``config.lod_hold_s``
+long (0: neither):
+
+- the allocation gets the least of the objects' share over the last ``hold_s``
+  (:func:`held_budget`): it falls at once with the budget and rises only when the rise
+  has lasted, and it is never more than the frame's own share;
+- an object whose LOD changed less than ``hold_s`` ago may only go down (:func:`lod_caps`,
+  :func:`note_lod_changes`): the ACH order changing (a new cell's ACH, an object coming
+  into view) moves an object once a hold at most, never over the budget.
 """
 
 from __future__ import annotations
