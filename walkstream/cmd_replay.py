@@ -331,9 +331,10 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--ach-shares", action="store_true",
                    help="ACH selection by the paper's shares of the budget (the older rule; default: in descending "
                         "ACH each object takes the best LOD that still fits)")
-    r.add_argument("--lod-hold", type=float, default=1.0, metavar="S",
-                   help="ACH selection: an object whose LOD changed less than S seconds ago may not go up "
-                        "(no LOD flipping frame to frame with the budget; default 1; 0: no hold)")
+    r.add_argument("--lod-hold", type=float, default=None, metavar="S",
+                   help="ACH selection: the least of the objects' budget over the last S seconds, and an object "
+                        "whose LOD changed less than S seconds ago may only go down (no LOD flipping frame to "
+                        "frame with the budget; default 1 on a simulated device, 0 on gl; 0: no hold)")
     r.add_argument("--lod-distances", default="40,120", help="distance selection: LOD2 nearer than D1, LOD1 nearer than D2 (default 40,120)")
     r.add_argument("--seed", type=int, default=0, help="seed of link loss, device noise, backoff jitter")
     r.add_argument("--fog", type=float, default=40.0, help="interiors: portals farther than this many metres are not looked through (default 40)")
