@@ -52,6 +52,11 @@ class ReplayConfig:
     lod_greedy: bool = True
     """ACH selection: in descending ACH each object takes the best LOD that still fits
     (:func:`~walkstream.client.draw.allocate.allocate_ach` ``greedy``); False: the paper's shares."""
+    lod_hold_s: float | None = None
+    """The LOD hold's seconds (:mod:`~walkstream.client.walk.lodhold`; ``--lod-hold``): the
+    allocation gets the least of the objects' budget over them and an object whose LOD
+    changed within them may only go down; 0: no hold; None: 1 s on a simulated device
+    (where the facade bake swings the objects' budget frame to frame), 0 on ``gl``."""
     lod_distances: tuple[float, float] = (40.0, 120.0)
     budget_frames: int = 4
     seed: int = 0
@@ -192,6 +197,8 @@ class ReplayConfig:
             raise InputError(f"--stream {self.stream!r}: choose one of {', '.join(STREAM_FORMS)}")
         if self.clock not in ("sim", "real"):
             raise InputError(f"--clock {self.clock!r}: choose sim or real")
+        if self.lod_hold_s is not None and not (math.isfinite(self.lod_hold_s) and self.lod_hold_s >= 0):
+            raise InputError(f"--lod-hold {self.lod_hold_s!r}: expected seconds >= 0")
         if self.lod_select not in ("ach", "distance"):
             raise InputError(f"--lod {self.lod_select!r}: choose ach or distance")
         if not (math.isfinite(self.fps) and 0 < self.fps <= 1000):

@@ -473,6 +473,7 @@ async def replay(
                                     t_start, setup_s, path, manifest))
         summary["spike_frames"] = int(spikes.sum())
         summary.update(frames.geometry_figures())  # objects drawn as geometry, whatever the quads
+        summary.update(frames.lod_figures())  # LOD changes frame to frame (pops of their own)
         # a walker standing at its start for its first view: how long, and the boxes that stood in
         summary["start_hold_s"] = frames.start_hold_s
         summary["start_boxes"] = len(streamer.start_feed.stand_ins)

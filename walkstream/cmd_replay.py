@@ -130,6 +130,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         shm_bytes=parse_size(args.shm),
         lod_select=args.lod,
         lod_greedy=not args.ach_shares,
+        lod_hold_s=args.lod_hold,
         lod_distances=(lo, hi),
         seed=args.seed,
         fog_m=args.fog,
@@ -330,6 +331,10 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--ach-shares", action="store_true",
                    help="ACH selection by the paper's shares of the budget (the older rule; default: in descending "
                         "ACH each object takes the best LOD that still fits)")
+    r.add_argument("--lod-hold", type=float, default=None, metavar="S",
+                   help="ACH selection: the least of the objects' budget over the last S seconds, and an object "
+                        "whose LOD changed less than S seconds ago may only go down (no LOD flipping frame to "
+                        "frame with the budget; default 1 on a simulated device, 0 on gl; 0: no hold)")
     r.add_argument("--lod-distances", default="40,120", help="distance selection: LOD2 nearer than D1, LOD1 nearer than D2 (default 40,120)")
     r.add_argument("--seed", type=int, default=0, help="seed of link loss, device noise, backoff jitter")
     r.add_argument("--fog", type=float, default=40.0, help="interiors: portals farther than this many metres are not looked through (default 40)")

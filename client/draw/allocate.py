@@ -165,6 +165,7 @@ def allocate_ach(
     *,
     reserve_floor: bool = False,
     greedy: bool = False,
+    cap: ArrayLike | None = None,
 ) -> Allocation:
     """Share a triangle budget among the visible objects by their ACH.
 
@@ -196,6 +197,10 @@ def allocate_ach(
         hand the accumulated rest to the last, least-covering ones; greedy gives it to
         the objects that cover the most of the view (never over the budget).  The
         replay uses True.
+    cap : (k,) int, optional
+        The highest LOD each object may take this frame (its lowest available one is
+        still taken where that is above): the replay's LOD hold
+        (:func:`~walkstream.client.walk.lodhold.lod_caps`).  None: no cap.
 
     Returns
     -------
@@ -231,6 +236,12 @@ def allocate_ach(
     # cost of each LOD, infinite where not available, and the fallback (lowest) LOD
     cost = np.where(av[ids], t[ids], np.inf)
     low = _lowest_available(av[ids])
+    if cap is not None:
+        c = np.asarray(cap, np.int64).reshape(-1)
+        if c.shape != (k,):
+            raise InputError(f"{what}: cap: expected {k} values, got {c.shape[0]}")
+        above = np.arange(_N_LODS)[None, :] > np.maximum(c[ids], low)[:, None]
+        cost = np.where(above, np.inf, cost)  # a LOD over the cap is as if not built
     if reserve_floor:
         floor = cost[np.arange(len(ids)), low]
         cost = cost - floor[:, None]  # what moving up from the lowest LOD costs
@@ -280,6 +291,9 @@ def _greedy(
     each object with some ACH, in order, moves to its best LOD whose extra cost still fits."""
     out = chosen.copy()
     rows = cost.tolist()
+    # no early stop once the budget is spent: a later object's upgrade that costs
+    # nothing (LODs of equal triangles) is still taken, else such an object flips
+    # between its LODs with the budget's slack frame to frame
     for j in np.flatnonzero(ws > 0).tolist():
         now = rows[j][out[j]]
         for level in (2, 1):
@@ -288,8 +302,6 @@ def _greedy(
                 out[j] = level
                 rest -= extra
                 break
-        if rest <= 1e-9:
-            break
     return out
 
 

@@ -9,11 +9,14 @@ the street* the triangles (the ACH allocation of the PVS objects in the frustum,
 ``lod_select == "distance"`` the usual distance bands instead), after the room parts
 drawn; the impostors of the current cell (:mod:`.impostors`) first, two triangles and
 one draw each, their buildings' geometry left out where the image stands alone and
-kept at its LOD while the image blends over it (:func:`~.impostors.hold_blend_lods`).  The device's cost step (``cost_step_at_s``) is applied here too.
+kept at its LOD while the image blends over it (:func:`~.impostors.hold_blend_lods`);
+the LOD hold (:mod:`.lodhold`) gives the allocation the low water of the objects'
+share and lets a LOD that just changed only go down, so nothing flips with the budget.  The device's cost step (``cost_step_at_s``) is applied here too.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from typing import Any
@@ -25,6 +28,7 @@ from walkstream.client.draw.allocate import allocate_ach, allocate_distance
 from walkstream.client.walk.draw import forget_cell
 from walkstream.client.walk.facades import bake_facades, choose_facades, facade_avail
 from walkstream.client.walk.impostors import frame_impostors, hold_blend_lods, replaced
+from walkstream.client.walk.lodhold import held_budget, lod_caps, note_lod_changes
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.frustum import frustum_cull
@@ -63,13 +67,21 @@ def allocate(w: WalkState, f: Frame) -> None:
             quad_tris += f.facade_bake
         avail = o.avail if w.facades is None or w.indoors else facade_avail(w)
         if cfg.lod_select == "ach":
-            f.alloc = allocate_ach(o.ach, o.tri, avail, seen, max(f.budget - room_tris - quad_tris, 0),
-                                   reserve_floor=True, greedy=cfg.lod_greedy)
+            own = max(f.budget - room_tris - quad_tris, 0)
+            share = held_budget(w, f, own)  # its low water: no flips with the budget's slack
+            f.alloc = allocate_ach(o.ach, o.tri, avail, seen, share,
+                                   reserve_floor=True, greedy=cfg.lod_greedy, cap=lod_caps(w, f))
+            if f.alloc.floor_limited and share < own:  # limited by the frame's own share, not the low water
+                low = np.argmax(avail, axis=1)
+                drawable = seen & avail.any(axis=1)
+                floor = int(o.tri[drawable, low[drawable]].sum())
+                f.alloc = dataclasses.replace(f.alloc, floor_limited=floor > own)
         else:
             centre = (o.lo + o.hi) / 2.0
             dist = np.hypot(centre[:, 0] - f.eye[0], centre[:, 1] - f.eye[1])
             f.alloc = allocate_distance(dist, o.tri, avail, seen, cfg.lod_distances)
         hold_blend_lods(w, f)  # a building under its blending image keeps its LOD
+        note_lod_changes(w, f)  # a LOD that just changed does not go up again for a while
     if cfg.cost_step_at_s is not None and not w.stepped and f.wt >= cfg.cost_step_at_s:
         w.device.cost_scale = w.device.cost_scale * cfg.cost_step_factor
         w.stepped = True

@@ -99,6 +99,43 @@ class WalkFrames:
     texture_missing: list[int] = field(default_factory=list)
     """Outdoors, per frame: ring walls in view with no texture and nothing drawn for them
     (a scene baked before the far field was stored)."""
+    lod_changes: int = 0
+    """Street frames: LOD changes of objects drawn as geometry in both of two successive
+    frames (:meth:`note_lods`)."""
+    lod_flips: int = 0
+    """Of :attr:`lod_changes`, those back to the LOD the object had before its previous
+    change (back and forth: a pop each way)."""
+    lod_object_s: float = 0.0
+    """Seconds times objects drawn as geometry in both of two successive frames (the
+    per-object rate's denominator)."""
+    _lod_last: tuple[float, NDArray[np.int64], NDArray[np.int64]] | None = None
+    _lod_before: dict[int, int] = field(default_factory=dict)
+
+    def note_lods(self, t: float, ids: NDArray[np.int64], lods: NDArray[np.int64]) -> None:
+        """Count the LOD changes between the last street frame noted and this one at walk
+        time ``t``: ``ids`` ``(k,)`` the objects, ``lods`` ``(k,)`` their LODs (-1: not drawn)."""
+        drawn = lods >= 0
+        cur_ids, cur = ids[drawn].astype(np.int64), lods[drawn].astype(np.int64)
+        last, self._lod_last = self._lod_last, (t, cur_ids, cur)
+        if last is None:
+            return
+        t0, ids0, lods0 = last
+        both, i0, i1 = np.intersect1d(ids0, cur_ids, assume_unique=True, return_indices=True)
+        self.lod_object_s += len(both) * max(t - t0, 0.0)
+        moved = np.flatnonzero(lods0[i0] != cur[i1])
+        self.lod_changes += len(moved)
+        for k in moved.tolist():  # few a frame
+            obj, was, now = int(both[k]), int(lods0[i0[k]]), int(cur[i1[k]])
+            self.lod_flips += self._lod_before.get(obj) == now
+            self._lod_before[obj] = was
+
+    def lod_figures(self) -> dict[str, float]:
+        """``lod_changes``, ``lod_flips`` (:meth:`note_lods`) and ``lod_changes_per_object_s``
+        (changes per object drawn, per second); empty when no street frame was noted."""
+        if self._lod_last is None:
+            return {}
+        rate = self.lod_changes / self.lod_object_s if self.lod_object_s > 0 else 0.0
+        return {"lod_changes": self.lod_changes, "lod_flips": self.lod_flips, "lod_changes_per_object_s": rate}
 
     def wall_figures(self) -> dict[str, float]:
         """Wall textures drawn per frame (mean, max), closed walls per frame, the share of

@@ -83,6 +83,8 @@ def measure(w: WalkState, f: Frame) -> None:
             fr.texture_missing.append(int(f.wall_missing))
     if not w.indoors and city is not None:  # objects drawn as geometry: no quad counted (walls, facades, impostors)
         fr.geometry.append(int((f.lods >= 0).sum()))
+        lods = np.asarray(f.lods, np.int64)  # none without an allocation
+        fr.note_lods(f.t - w.t_start, np.fromiter((g.id for g in o.geoms[:len(lods)]), np.int64, len(lods)), lods)
     if w.facades is not None and not w.indoors:
         fr.facades.append(len(f.facades))
         fr.facade_quads.append(len(f.facade_quads))

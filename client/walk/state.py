@@ -7,6 +7,7 @@ own findings to the frame; nothing else passes between the steps.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -90,6 +91,12 @@ class WalkState:
     blend_lods: dict[int, int] = field(default_factory=dict)
     """The geometry's LOD of each building whose image was blending over it the last
     frame (:func:`~walkstream.client.walk.impostors.hold_blend_lods` keeps it)."""
+    lod_since: dict[int, tuple[int, float]] = field(default_factory=dict)
+    """Per object drawn, its last LOD and the walk time it changed to it
+    (:mod:`~walkstream.client.walk.lodhold`)."""
+    lod_budgets: deque[tuple[float, int]] = field(default_factory=deque)
+    """The objects' budgets of the last frames, ``(walk time, budget)``, ascending in
+    both (:func:`~walkstream.client.walk.lodhold.held_budget`)."""
     impostor_rows: dict[int, tuple[Any, Any]] = field(default_factory=dict)
     """Per building the last frame drew as an image, its row and the record that listed it
     (:class:`~walkstream.shared.impostorwire.ImpostorRow`,
