@@ -208,8 +208,10 @@ def generate_interior(plan: InteriorPlan) -> dict[str, Any]:
             rooms.append({"id": rid, "name": f"{k}.00 stair", "storey": k,
                           "outline": rect(stair_x0, 0.0, L, south_depth)})
             dx = L - 0.5 * _STAIR_W
+            # the door opens into the corridor: swung into the stairwell its leaf would stand
+            # between the flights' ends on the floor landing, leaving no body's width past it
             wall_s.append({"id": f"d{k}.stair", "kind": "door", "offset": _r(dx), "width": _DOOR_W,
-                           "sill": 0.0, "head": _DOOR_H, "swing": -1})
+                           "sill": 0.0, "head": _DOOR_H, "swing": 1})
             door_xs.append((dx, "s"))
             win_s.append({"id": f"w{k}.stair", "kind": "window", "offset": _r(L - 0.5 * _STAIR_W + _TE),
                           "width": 1.2, "sill": 1.2, "head": 2.4})
