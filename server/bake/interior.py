@@ -65,6 +65,7 @@ __all__ = [
     "CONTENTS_CHUNK",
     "INTERIOR_FEATURES",
     "InteriorParts",
+    "STANDING",
     "floor_obstacles",
     "furniture_footprints",
     "interior_parts",
@@ -160,22 +161,34 @@ def interior_parts(
     return InteriorParts(layout, {}, notes, graph, start, walk, coverage)
 
 
-_STANDING = frozenset({"furniture", "column"})
-"""Element kinds a walk goes around (walls, stairs and railings bound the cells themselves)."""
+STANDING = frozenset({"furniture", "column", "door", "stair", "railing"})
+"""Element kinds a walk goes around (walls and slabs bound the cells themselves).  A door's
+leaf swung open stands in the room it opens into (its frame lies in the wall: grown by
+the clearance it reaches no farther than the wall's own); a stair and its railings fill
+the floor under them, where a walker has no headroom, and on the storey above they stand
+in the slab's hole: a walk keeps its clearance from them on both (the stair's own walk
+is its walking line)."""
 
 
-def floor_obstacles(scene: InteriorScene, below: float = 2.0) -> list[FloorObstacle]:
-    """What stands on a floor and is walked around: furniture and columns whose bottom is
-    within ``below`` metres above a storey's floor, as footprints (convex hulls,
-    scene-local) with their height range."""
+_ARRIVAL = 0.1
+"""How far (metres) above its top a stair counts as standing: its top is the floor it
+climbs to, where its footprint is the opening it comes up through."""
+
+
+def floor_obstacles(scene: InteriorScene, below: float = 2.0, kinds: frozenset[str] = STANDING) -> list[FloorObstacle]:
+    """What stands on a floor and is walked around: elements of ``kinds``
+    (:data:`STANDING`) whose bottom is within ``below`` metres above a storey's floor, as
+    footprints (convex hulls, scene-local) with their height range."""
     floors = np.array([s.elevation for s in scene.storeys], np.float64)
     out = []
     for e in scene.elements:
-        if e.kind not in _STANDING or len(e.vertices) == 0:
+        if e.kind not in kinds or len(e.vertices) == 0:
             continue
         z0, z1 = float(e.vertices[:, 2].min()), float(e.vertices[:, 2].max())
         if len(floors) and float(np.min(np.abs(z0 - floors))) > below:
             continue
+        if e.kind == "stair":
+            z1 += _ARRIVAL  # the stair's opening in the floor it climbs to
         out.append(FloorObstacle(shapely.MultiPoint(np.asarray(e.vertices[:, :2], np.float64)).convex_hull, z0, z1))
     return out
 

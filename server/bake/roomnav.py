@@ -87,13 +87,7 @@ class RoomGraph:
         self.node_cell: list[int] = []
         self.centre: dict[int, int] = {}
         members: dict[int, list[int]] = {i: [] for i in ids}
-        for i in ids:
-            c = self.cells[i]
-            if c.kind == "room":
-                poly = shapely.Polygon(c.outline)
-                p = poly.centroid if poly.contains(poly.centroid) else poly.representative_point()
-                # a room's middle is often its table's: the walk goes to the nearest free floor
-                self.centre[i] = self._node(self.step_in(i, np.array([p.x, p.y, c.zmin])), i, members)
+        self.members = members
         self.adj: dict[int, list[tuple[int, float, F64 | None]]] = {}
         for p in portals:
             if p.kind not in _WALKABLE or p.a not in self.cells or p.b not in self.cells:
@@ -109,7 +103,21 @@ class RoomGraph:
             b = self._node(s.path[-1], s.upper, members)
             length = float(np.linalg.norm(np.diff(s.path, axis=0), axis=1).sum())
             self._edge(a, b, length, s.path)
-        self.members = members
+        # the doors' and stairs' nodes first: they say which pieces of a floor are walked
+        # (:meth:`free`), so a room's middle steps onto a piece a door leads to
+        rooms = [i for i in ids if self.cells[i].kind == "room"]
+        # a cell of a room with no floor to stand on (an alcove its cupboards fill) is no
+        # place to walk to where another cell of the room has some: the room is visited there
+        roomy = {self.cells[i].room for i in rooms if self.free(i) is not None}
+        for i in rooms:
+            c = self.cells[i]
+            if self.free(i) is None and c.room in roomy:
+                continue
+            poly = shapely.Polygon(c.outline)
+            mp = poly.centroid if poly.contains(poly.centroid) else poly.representative_point()
+            # a room's middle is often its table's (or its stair's): the walk goes to the
+            # nearest free floor
+            self.centre[i] = self._node(self.step_in(i, np.array([mp.x, mp.y, c.zmin])), i, members)
         for cid, nodes in members.items():
             for x in range(len(nodes)):
                 for y in range(x + 1, len(nodes)):
@@ -144,7 +152,8 @@ class RoomGraph:
             c = self.cells[cell]
             outline = shapely.Polygon(c.outline)
             feet = [o.footprint for o in self.obstacles if o.blocks(c.zmin) and o.footprint.intersects(outline)]
-            self._free[cell] = walkable_floor(outline, feet, CLEARANCE)
+            self._free[cell] = _reached(walkable_floor(outline, feet, CLEARANCE),
+                                        [self.nodes[n] for n in self.members.get(cell, ())])
         return self._free[cell]
 
     def step_in(self, cell: int, xyz: F64) -> F64:
@@ -273,6 +282,19 @@ class RoomGraph:
             floor = self.cells[cid].zmin
             nodes.append(self._start_node(cid, np.array([q[0], q[1], floor])))
         return self.polyline(self.route_nodes(nodes[0], nodes[1]))
+
+
+def _reached(free: shapely.Geometry | None, entries: Sequence[F64]) -> shapely.Geometry | None:
+    """The pieces of a walkable floor ``free`` that a walker coming in at floor points
+    ``entries`` (a cell's doors and stairs) steps onto: each entry's nearest piece.  A piece
+    no entry leads to (beyond a stair that fills the room's middle, behind furniture wall
+    to wall) is not walked to; with no entry, every piece is kept."""
+    pieces = list(getattr(free, "geoms", [free])) if free is not None else []
+    if len(pieces) < 2 or not entries:
+        return free
+    keep = sorted({int(np.argmin([g.distance(shapely.Point(float(e[0]), float(e[1]))) for g in pieces]))
+                   for e in entries})
+    return pieces[keep[0]] if len(keep) == 1 else shapely.MultiPolygon([pieces[k] for k in keep])
 
 
 def _bottom_middle(polygon: F64) -> F64:

@@ -26,8 +26,9 @@ as for cities); heights are metres.  ``storeys`` are ordered bottom to top;
 its storey's floor to the underside of the slab above (``height - slab``).  A wall
 runs along its centre line from its storey's floor to the slab above; each opening is
 centred ``offset`` metres along the wall from ``from``, ``width`` wide, from ``sill``
-to ``head`` above the floor.  A door is drawn open: its leaf swung flat against the
-wall on the side ``swing`` says (1: left of ``from`` -> ``to``).  A slab is the floor
+to ``head`` above the floor.  A door is drawn open: its leaf swung 90 degrees, at
+right angles to the wall, into the side ``swing`` says (1: left of ``from`` -> ``to``;
+a walk keeps its clearance from it).  A slab is the floor
 of its storey (its top at the storey's elevation, ``slab`` thick), with holes where
 stairs pass; the roof is a slab of the storey past the last.  A stair is a switchback
 in a stairwell from storey ``i`` to ``i + 1``: the first half-flight climbs along

@@ -170,6 +170,7 @@ def generate_interior(plan: InteriorPlan) -> dict[str, Any]:
         z = k * H
         sk = f"s{k}"
         door_xs: list[tuple[float, str]] = []
+        leaves: list[float] = []  # where a door's leaf stands in the corridor
         wall_s: list[dict[str, Any]] = []  # openings in the south corridor wall
         wall_n: list[dict[str, Any]] = []
         win_s: list[dict[str, Any]] = []  # windows in the south / north outer walls
@@ -208,9 +209,13 @@ def generate_interior(plan: InteriorPlan) -> dict[str, Any]:
             rooms.append({"id": rid, "name": f"{k}.00 stair", "storey": k,
                           "outline": rect(stair_x0, 0.0, L, south_depth)})
             dx = L - 0.5 * _STAIR_W
+            # the door opens into the corridor: swung into the stairwell its leaf would stand
+            # between the flights' ends on the floor landing, leaving no body's width past it
             wall_s.append({"id": f"d{k}.stair", "kind": "door", "offset": _r(dx), "width": _DOOR_W,
-                           "sill": 0.0, "head": _DOOR_H, "swing": -1})
+                           "sill": 0.0, "head": _DOOR_H, "swing": 1})
             door_xs.append((dx, "s"))
+            # its leaf stands in the corridor, hinged at the west jamb (``door_boxes``)
+            leaves.append(dx - 0.5 * _DOOR_W + 0.01)
             win_s.append({"id": f"w{k}.stair", "kind": "window", "offset": _r(L - 0.5 * _STAIR_W + _TE),
                           "width": 1.2, "sill": 1.2, "head": 2.4})
             walls.append({"id": f"p{k}.stair", "storey": k, "from": pt(stair_x0 - 0.5 * _TI, 0.0),
@@ -238,8 +243,10 @@ def generate_interior(plan: InteriorPlan) -> dict[str, Any]:
                 kind = "bench" if rng.random() < 0.5 else "plant"
                 fy = y_cn - 0.3 if kind == "bench" else y_cn - 0.35
                 fx = 0.5 * (cuts[q] + cuts[q + 1])
-                reach = (0.9 if kind == "bench" else 0.25) + 0.5 * _DOOR_W + 0.3  # a walker passes the door
-                if all(abs(fx - dx) >= reach for dx, side in door_xs if side == "n"):
+                # a walker passes the door (and the leaf of one opening into the corridor)
+                reach = (0.9 if kind == "bench" else 0.25) + 0.5 * _DOOR_W + 0.3
+                ends = [dx for dx, side in door_xs if side == "n"] + leaves
+                if all(abs(fx - x) >= reach for x in ends):
                     furn.append({"id": f"f{rid}", "kind": kind, "storey": k, "at": pt(fx, fy), "yaw": 0.0})
         # corridor walls (with the doors) and the outer walls (with the windows)
         if not single:

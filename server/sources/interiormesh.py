@@ -26,6 +26,7 @@ __all__ = [
     "window_boxes",
     "furniture_boxes",
     "FURNITURE_KINDS",
+    "STAIR_WAIST",
     "stair_boxes",
 ]
 
@@ -366,6 +367,10 @@ def furniture_boxes(kind: str, at: ArrayLike, yaw: float, z0: float) -> F64:
     )
 
 
+STAIR_WAIST = 0.2
+"""How far (metres) a flight's soffit lies below each step's riser: the stair's slab."""
+
+
 def stair_boxes(
     start: ArrayLike, end: ArrayLike, width: float, z0: float, rise: float, steps: int = 0,
     rails: Sequence[float] = (-1.0, 1.0),
@@ -374,9 +379,11 @@ def stair_boxes(
 
     Returns
     -------
-    boxes : (k, 7) box rows: one solid block per step (from the floor up to the
-        tread, so the flight is closed underneath) and a balustrade on each side in
-        ``rails`` (-1: right of the climb, 1: left)
+    boxes : (k, 7) box rows: one solid block per step, from :data:`STAIR_WAIST` below
+        the step's riser up to its tread (no lower than ``z0``), so the flight is closed
+        underneath by a stepped soffit and leaves headroom under it (a flight over
+        another, a switchback's over the one below, is not filled down to its floor) and
+        a balustrade on each side in ``rails`` (-1: right of the climb, 1: left)
     path : (steps + 1, 3) the walking line: floor points from the bottom of the
         first step to the top of the last
     """
@@ -392,7 +399,7 @@ def stair_boxes(
     tops = z0 + (k + 1) * rise / n
     rows = np.column_stack(
         [centres[:, 0], centres[:, 1], np.full(n, going), np.full(n, width), np.full(n, yaw),
-         np.full(n, z0), tops]
+         np.maximum(z0, tops - rise / n - STAIR_WAIST), tops]
     )
     side = np.array([-u[1], u[0]])
     mid = 0.5 * (a + b)
