@@ -67,10 +67,13 @@ def test_heads_come_first_and_their_cells_whole_after(fzk_db: tuple[Path, dict[s
     cells = [c for c, _ in plain]
     assert len(set(cells)) == len(cells) and not any("missing" in o for _, o in plain)
     # the same cells (in one pack: in cell-id order), then each head's cell again, whole
+    # (in the order the walk's lead needs them whole: firstheads.wholes_order)
     heads = [c for c, o in split if "missing" in o]
     first = [c for c, _ in split[: len(cells)]]
-    assert first in (cells, sorted(cells))
-    assert heads and [c for c, _ in split] == first + heads
+    # (the pack: the first pose's cells in cell-id order, the lead's after it as they were)
+    assert any(first[:k] == sorted(cells[:k]) and first[k:] == cells[k:] for k in range(len(cells) + 1))
+    wholes = [c for c, _ in split[len(cells):]]
+    assert heads and [c for c, _ in split[: len(cells)]] == first and sorted(wholes) == sorted(heads)
     for c, o in split[len(cells):]:
         assert "missing" not in o
         whole = decode_cell_pieces(check_contents_part(o, "whole")[2])
@@ -109,3 +112,26 @@ def test_a_walk_with_heads_is_perfect_sooner_and_hides_nothing(
     # a frame that keeps a stand-in waits for the cell, and no frame hides a pixel
     run, _ = _replay(db, tmp_path / "walk", "--start-hold", "0", "--truth-every", "5")
     assert run["truth"]["frames"] >= 15 and run["truth"]["culled_pixels"] == 0
+
+
+def test_the_heads_cells_follow_whole_in_the_order_the_walk_needs_them(
+    fzk_db: tuple[Path, dict[str, Any]],
+) -> None:
+    from walkstream.server.service.firstheads import wholes_order
+    from walkstream.server.service.scenes import Scene
+    from walkstream.server.service.startbundle import room_lead
+    from walkstream.shared.roomview import RoomView
+
+    scene = Scene.load(fzk_db[0])
+    try:
+        interior = scene.interior
+        assert interior is not None
+        lead, view = room_lead(scene, "tour"), RoomView((160, 120), 60.0, 40.0)
+        # a walk standing still needs no cell whole sooner than another: the order stays
+        assert wholes_order(interior, [6, 13], [lead[0]] * 3, view) == [6, 13]
+        assert wholes_order(interior, [13, 6], [lead[0]] * 3, view) == [13, 6]
+        # the tour bends round the stair towards the start room's window: the outside
+        # cell's pieces its head lacks are needed before the start room's
+        assert wholes_order(interior, [6, 13], lead, view) == [13, 6]
+    finally:
+        scene.close()

@@ -25,13 +25,13 @@ heads; one pack with three (its cell 4, 22 kB inflated, seen in part: a 7.9 kB h
 from __future__ import annotations
 
 import math
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from walkstream.server.service.contentsform import STREAM_LEVEL, ContentsStream
-from walkstream.server.service.firstheads import HEAD_SHARE, first_heads
+from walkstream.server.service.firstheads import HEAD_SHARE, first_heads, wholes_order
 from walkstream.server.service.interiors import InteriorState
 from walkstream.shared.codec.contentspack import pack_parts
 from walkstream.shared.roomview import RoomView
@@ -42,6 +42,7 @@ __all__ = ["first_view_contents"]
 def first_view_contents(
     interior: InteriorState, cells: list[int], pose: tuple[ArrayLike, float, float], view: RoomView, *,
     heads: bool, inflate: bool, pack: bool, first: Collection[int] | None = None,
+    lead: Sequence[tuple[ArrayLike, float, float]] = (),
 ) -> tuple[list[int], list[bytes], int]:
     """The start bundle's ``contents``: the cell ids its parts name, in order, the
     frames that carry them (one per id, or a pack first in place of one per cell of
@@ -67,6 +68,10 @@ def first_view_contents(
         leads to follow it part by part, so that the first frame does not wait for them
         (with the first view's virtual walls closed, the first pose sees one cell of a
         hall and the lead's cells would hold it back).
+    lead:
+        Where the path leads after ``pose`` (:func:`~walkstream.server.service.startbundle.room_lead`):
+        the heads' cells follow whole in the order the walk needs them whole there
+        (:func:`~walkstream.server.service.firstheads.wholes_order`; none: in ``cells``' order).
     """
     every = first_heads(interior, cells, pose, view, share=math.inf) if heads else {}
     stored = {c: len(interior.contents(c).content) for c in every}
@@ -101,6 +106,8 @@ def first_view_contents(
         if cost < (stream.nbytes if stream is not None else int(np.sum([len(f) for f in frames]))):
             frames, later, stream, order = [packed, *after], pack_heads, alone, [*sorted(inpack), *rest]
             seen = 1
+    if lead and len(later) > 1:
+        later = wholes_order(interior, later, [pose, *lead], view)
     frames += [interior.contents_part(cid, inflate, stream) for cid in later]
     return [*order, *later], frames, seen
 

@@ -68,9 +68,10 @@ requests queue behind the bundle."""
 START_RECORD_AHEAD_M = 20.0
 """... and at least this many metres more (a walker's next junction)."""
 
-START_ROOM_LEAD_S: tuple[float, ...] = (0.5, 1.0, 2.0)
+START_ROOM_LEAD_S: tuple[float, ...] = tuple(0.25 * k for k in range(1, 9))
 """An interior start bundle holds the contents of the cells seen from the path's first
-pose and from where it leads, going straight on, after these many seconds."""
+pose and from its poses after these many seconds (every quarter second of the first
+two: a walk swerving round a stair or a door leaf glimpses a cell for half a second)."""
 
 START_ROOM_BYTES = 32_000
 """An interior start bundle holds at most this many bytes of stored contents (the
@@ -262,7 +263,7 @@ def start_parts(
                 parts += wall_parts
             cells, first = interior.first_view(lead, view, START_ROOM_BYTES, closed)
             ids, frames, seen = first_view_contents(interior, cells, lead[0], view, heads=heads, inflate=inflate,
-                                                    pack=heads and rep == "msgpack", first=first)
+                                                    pack=heads and rep == "msgpack", first=first, lead=lead[1:])
             if first_pose is not None and head is not None:  # the rest of the head once the first view is in
                 frames.insert(seen, dump_msgpack({"part": "pathhead", "etag": head.etag or None, "body": head.content}))
             parts.append(("contents", Frames(ids, frames, seen if first_pose is not None else 0)))
@@ -400,12 +401,14 @@ def _textures(scene: Scene, ids: list[int]) -> Frames:
 
 def room_lead(scene: Scene, path: str) -> list[tuple[NDArray[np.float64], float, float]]:
     """The poses of an interior start: the path's first (as the client decodes the
-    compact path) and, going straight on at its velocity over its first half second
-    and looking the same way, those after :data:`START_ROOM_LEAD_S` (the client's
-    own prediction, :class:`~walkstream.client.stream.rooms.RoomStreamer`, does the same)."""
+    compact path) and the path's own poses after :data:`START_ROOM_LEAD_S` (past its end,
+    its last).  The walk follows the path, so the bundle follows it too: a walk that
+    bends in its first seconds (round a stair or a door leaf, keeping its clearance)
+    sees cells that going straight on never would, and the client's own requests for
+    them queue behind the bundle."""
     p = decode_path_q(scene.path_q(path).content, f"path {path!r}")
-    xyz, yaw, pitch = p.at(0.0)
-    eye = np.asarray(xyz, dtype=np.float64)
-    dt = min(0.5, p.duration)
-    v = (np.asarray(p.at(dt)[0], dtype=np.float64) - eye) / dt if dt > 0 else np.zeros(3)
-    return [(eye + h * v, float(yaw), float(pitch)) for h in (0.0, *START_ROOM_LEAD_S)]
+    out: list[tuple[NDArray[np.float64], float, float]] = []
+    for h in (0.0, *START_ROOM_LEAD_S):
+        xyz, yaw, pitch = p.at(min(h, p.duration))
+        out.append((np.asarray(xyz, dtype=np.float64), float(yaw), float(pitch)))
+    return out
