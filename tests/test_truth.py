@@ -269,10 +269,9 @@ def test_report_shows_the_truth(runs: tuple[ReplayResult, ReplayResult], tmp_pat
     assert colour["frames"] == len(res.truth.log) and colour["metric"] == "CIEDE2000"
     for key in ("mean_error", "visible_pixels", "psnr_db", "delta_e_mean", "causes"):
         assert all(v is not None for v in colour[key].values()), key
-    # the right object at LOD2 is never the wrong colour; what "other" holds is a pixel or two
-    # a frame at a coarse form's silhouette that the client picture's colour pass covers and its
-    # id pass does not (no object there, the truth's sky): about 1e-4 of the pixels
-    assert colour["causes"]["other"] < 5e-4
+    # the right object at LOD2 is never the wrong colour (a box's facade picture whose edge
+    # covers a pixel the box's id does not is the box's: lod_colour)
+    assert colour["causes"]["other"] == 0.0
     assert "truth_samples" not in colour and "picture_samples" not in colour  # point-sampled, as always
     # the viewer-scale (S-CIELAB) figures are asked for (--viewer-ppd): none without it
     assert res.truth.log.colour is not None and res.truth.log.colour.visible_scielab is None

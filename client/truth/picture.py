@@ -53,7 +53,8 @@ class ClientPicture:
     ids: NDArray[np.uint32]
     """``(h, w)`` object id + 1 per pixel, 0 where none shows (images an ``overlay`` painted aside)."""
     coarse: NDArray[np.bool_]
-    """``(h, w)`` pixels showing an object drawn at a coarser LOD than LOD2."""
+    """``(h, w)`` pixels showing an object drawn at a coarser LOD than LOD2, with the facade
+    pictures an ``overlay`` painted over the boxes (the boxes' picture)."""
     stand_in: NDArray[np.bool_] | None
     """``(h, w)`` pixels an ``overlay`` painted with an impostor (None without one)."""
     wall: NDArray[np.bool_] | None = None
@@ -96,8 +97,13 @@ def client_picture(
     ids = truth.object_ids(idx)
     if overlay is None:
         return ClientPicture(rgb, ids, coarse, None)
+    before = rgb.copy()
     stand_in, wall = overlay(note, rgb, idx)
-    return ClientPicture(rgb, ids, coarse, np.asarray(stand_in, bool), np.asarray(wall, bool))
+    stand_in, wall = np.asarray(stand_in, bool), np.asarray(wall, bool)
+    # what the overlay painted that is neither a stand-in nor a wall is a box's facade picture:
+    # the box's coarse form, also where the quad's edge covers a pixel the box's own id does not
+    coarse |= np.any(rgb != before, axis=2) & ~stand_in & ~wall
+    return ClientPicture(rgb, ids, coarse, stand_in, wall)
 
 
 def colour_error(
