@@ -45,6 +45,7 @@ __all__ = [
     "coord_rects",
     "rects_ckm",
     "box_rects_ckm",
+    "camera_rows",
     "crossing_rects",
     "clipped_box_rects",
     "RectBuffers",
@@ -159,7 +160,7 @@ def rects_ckm(
     # product (the camera's rows combined with the projection's) instead of the eye
     # space and four passes more over every vertex
     R = view[:3, :3]
-    rows, shift = _camera_rows(view, proj)
+    rows, shift = camera_rows(view, proj)
     shift = shift[:, None]
     q = (rows @ pts.reshape(3, -1) + shift).reshape(pts.shape)  # (3, k, m): x and y numerators, depth
     depth = q[2]
@@ -186,7 +187,7 @@ def rects_ckm(
     return rect, front, near_d, far_d
 
 
-def _camera_rows(view: NDArray[np.float64], proj: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def camera_rows(view: NDArray[np.float64], proj: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The camera's rows combined with the projection's, ``(3, 3)``, and their shift ``(3,)``:
     a world point ``p`` has x and y numerators and depth ``rows @ p + shift``.  Nine values,
     worked out in plain floats (the same IEEE products and sums as numpy's, without a
@@ -229,7 +230,7 @@ def box_rects_ckm(
         z = np.zeros(0)
         return np.zeros((4, 0), np.int64), np.zeros(0, bool), z, z
     w = work if work is not None else RectBuffers()
-    rows, shift = _camera_rows(view, proj)
+    rows, shift = camera_rows(view, proj)
     prod = np.multiply(rows[:, :, None, None], lohi, out=w.take("prod", (3, 3, 2, n)))  # row, coordinate, bound
     prod[:, 0] += shift[:, None, None]
     # (3, 2, 2, 2, n): row, then the bound taken of x, y and z
