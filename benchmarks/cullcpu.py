@@ -116,21 +116,25 @@ def hall_boxes(k: int, per_cell: int = HALL_PARTS, cell_m: float = 4.0, height: 
 def culling_at(rev: str) -> Culling:
     """``(cull_portals, cull_parts)`` as they were at git revision ``rev`` of this repository,
     loaded as modules of their own beside the current ones (``shared/screenrects.py``,
-    ``shared/portals.py`` and, where the revision has it, ``shared/partcull.py``)."""
+    ``shared/portals.py`` and, where the revision has them, ``shared/cullkernels.py`` and
+    ``shared/partcull.py``; that revision's kernels compiled anew, not cached: their source
+    is no file)."""
     root = Path(portals.__file__).resolve().parents[1]
     mods: dict[str, types.ModuleType] = {}
-    for name in ("screenrects", "portals", "partcull"):
+    for name in ("screenrects", "cullkernels", "portals", "partcull"):
         try:
             got = subprocess.run(["git", "-C", str(root), "show", f"{rev}:shared/{name}.py"],
                                  capture_output=True, text=True, check=False)
         except OSError as exc:
             raise InputError(f"--cull-against {rev}: git could not be run ({exc.strerror})") from None
         if got.returncode != 0:
+            if name == "cullkernels":  # before the culling was compiled
+                continue
             if name == "partcull":  # before the parts culling had a module of its own
                 break
             raise InputError(f"--cull-against {rev}: no shared/{name}.py at that revision of {root}")
         mod_name = f"walkstream_cull_{name}_at_{abs(hash(rev))}"
-        text = got.stdout
+        text = got.stdout if name != "cullkernels" else got.stdout.replace("cache=True", "cache=False")
         for dep, mod in mods.items():  # that revision's own modules, not today's
             text = re.sub(rf"\bwalkstream\.shared\.{dep}\b", mod.__name__, text)
         mod = types.ModuleType(mod_name)

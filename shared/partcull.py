@@ -9,28 +9,24 @@ once and must keep every box :func:`cull_boxes` keeps, and few more (tests/test_
 tests/test_partcull.py).
 
 Cost: at a couple of hundred visible cells a frame (an open hall) the per-cell Python and
-numpy's fresh temporaries, not the arithmetic, were most of the time.  So:
+numpy's calls, not the arithmetic, were most of the time (docs/benchmarks.md, "The
+culling's CPU time").  So:
 
-- the boxes of a scene are packed once into one coordinate-major array (a
-  :class:`PartTable`, cached per ``boxes`` mapping and checked by identity: a cell whose
-  ``(lo, hi)`` pair is not the one packed makes the table anew), and a frame gathers its
-  visible cells' boxes by index, not by concatenating one array per cell;
-- every visible box is projected in one batch from its two corners
-  (:func:`~walkstream.shared.screenrects.box_rects_ckm`: 18 products a box, not 72), into
-  buffers reused from frame to frame (:func:`~walkstream.shared.screenrects.thread_buffers`:
-  a fresh array of a few hundred kB costs more than the step that fills it, which is why
-  the boxes were culled in chunks of 1,024 before);
-- the per-cell steps (which cells, their VSAs, the answer's slices) are C-level maps over
-  the cell lists (one comprehension pads the VSA lists), no Python statement per cell;
+- the boxes of a scene are packed once into one array (a :class:`PartTable`, cached per
+  ``boxes`` mapping and checked by identity: a cell whose ``(lo, hi)`` pair is not the one
+  packed makes the table anew); a frame of a few cells (a tour's 4-40) joins its cells'
+  arrays instead;
+- every visible box is tested in one call of a compiled loop
+  (:func:`~walkstream.shared.cullkernels.box_kernel`, numba): the fog, the box projected
+  from its two corners with :func:`~walkstream.shared.screenrects.box_rects_ckm`'s
+  arithmetic, its cell's VSAs, the near and far planes;
 - a box that crosses the clip plane (a tour's frame has 70 or so, median: the walls,
   floor and furniture around the eye) is tested by an unclipped superset of its rectangle
-  (:func:`~walkstream.shared.screenrects.crossing_rects`, about ten numpy calls for all,
-  against some forty to clip them): conservative, not the same, so this keeps every box
-  :func:`cull_boxes` keeps and a few more (1.5 % on the generated offices' tours; 10-19 %
-  less CPU in their parts culling);
-- a frame of a few cells (a tour's 4-40) takes the plain form instead (their arrays
-  joined, the eight corners' one product, fresh arrays): there numpy's calls, not the
-  boxes, are the cost, and the batch's extra steps made it 10-20 % slower.
+  (:func:`~walkstream.shared.screenrects.crossing_rects`' figures): conservative, not the
+  same, so this keeps every box :func:`cull_boxes` keeps and a few more (1.5 % on the
+  generated offices' tours);
+- the answer's per-cell slices are C-level maps over the cell lists, no Python statement
+  per cell.
 
 ``walkstream bench portals --cull`` times it (:mod:`walkstream.benchmarks.cullcpu`).
 """
@@ -171,9 +167,11 @@ class PartRects:
     triangle test (:func:`~walkstream.shared.trianglecull.refine_parts`), which tests
     again the parts whose box is not well inside a VSA and so needs the same rectangles.
 
-    Handed to :func:`cull_parts` empty (``rects=``), filled by it when it projects the
-    boxes as :func:`~walkstream.shared.screenrects.box_rects` does (the eight corners' one
-    product: a frame of fewer than :data:`_FEW_BOXES` boxes), left empty otherwise.
+    Handed to :func:`cull_parts` empty (``rects=``), filled by it with the rectangles
+    :func:`~walkstream.shared.screenrects.box_rects` makes (as
+    :func:`~walkstream.shared.screenrects.box_rects_ckm` makes them: but for the order of
+    three additions in a corner's sums, the same; tests/test_partcull.py) on a frame of a
+    few cells or of fewer than :data:`_FEW_BOXES` boxes, left empty otherwise.
 
     Attributes
     ----------

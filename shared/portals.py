@@ -46,26 +46,17 @@ the pass-through takes (its threshold is the larger of that and ``pass_m``).
 show that the conservative test catches it.
 
 Cost: a portal's rectangle depends on the camera only, so every directed portal of the
-building is clipped and projected in one numpy batch per frame; the walk is then a FIFO
-walk over plain ints (per-scene adjacency lists built once, in
-:class:`~walkstream.shared.portalgraph.PortalGraph`),
-about 4-6 us per visible cell on the 2-core machine.  It is the reference walk step for
-step (:mod:`walkstream.benchmarks.portalwalk` keeps that one; tests/test_portalwalk.py checks they agree):
-a walk by levels with numpy batches per level was not taken, since the FIFO order
-decides the VSA lists (which VSAs reach a cell before it is looked through) and a
-level costs tens of numpy calls whatever its size, more than the few cells of a
-level cost in Python.  Measured on the open 16 x 16 hall (236 cells visible over 31
-levels of at most 14 cells): the levels' portal clipping against their parents' VSAs
-and the test against the targets' VSA lists alone, as one numpy batch per level,
-took 1.2-1.5 times the CPU of this whole walk, before any merge, queue or projection.
-Nor does projecting only the portals of the cells reached, a batch per level, pay on
-a tour's frame (a tenth of a generated office's portals tested over 3-8 levels): the
-per-level batches cost what the whole building's one batch does.  A frame's cost is
-mostly numpy's per-call cost, not the elements: the batches run coordinate-major (:func:`~walkstream.shared.screenrects.coord_rects`,
-each call one pass over long rows), the few sets that straddle the clip plane are
-clipped in plain floats, and the parts culling takes every visible cell's boxes in
-one batch (:mod:`walkstream.shared.partcull`); a VSA arriving at a cell is appended
-in place.
+building is clipped and projected in one numpy batch per frame (:func:`portal_rows`,
+coordinate-major: :func:`~walkstream.shared.screenrects.rects_ckm`); the walk is then one
+call of a compiled loop (:func:`~walkstream.shared.cullkernels.walk_kernel`, numba) over
+that table and the graph's adjacency arrays.  It is the reference walk step for step
+(:mod:`walkstream.benchmarks.portalwalk` keeps that one; tests/test_portalwalk.py checks
+they agree): the FIFO order decides the VSA lists (which VSAs reach a cell before it is
+looked through), so the walk stays a walk.  In Python it cost 4-6 us a visible cell
+(1.3-1.5 ms at the open 16 x 16 hall's 236 cells); numpy batches by levels were
+measured and cost more (docs/benchmarks.md, "a walk by levels measured"); compiled, the
+walk itself takes some 20 us there, and the frame's walk is the projection's numpy
+calls and the answer's Python lists.
 ``walkstream bench portals --cull`` times it (:mod:`walkstream.benchmarks.cullcpu`).
 """
 
@@ -196,7 +187,7 @@ def cull_portals(
         through when the eye comes within the pass-through distance of the grown box):
         the walk of an eye that may be anywhere within ``grow_m`` of ``eye``
         (:mod:`walkstream.shared.cullcache`).  The fog is tested on the portal as it is.
-    rows : callable, optional
+    rows : PortalRows, optional
         The portals' rectangles already made for this camera and these settings by
         :func:`portal_rows` (a caller that spreads a walk over two frames: the
         projection on one, the walk on the next); by default made here.
