@@ -349,7 +349,7 @@ def _vsa_rows(vsas: dict[int, list[tuple[int, int, int, int]]], cells: list[int]
     counts = np.fromiter(map(len, lists), np.int64, len(cells))
     k = int(counts.sum())
     out = np.empty((k, 4), np.int64)  # writable: the kernel is compiled for writable arrays
-    struct.pack_into(f"={4 * k}q", out, 0, *chain.from_iterable(chain.from_iterable(lists)))
+    struct.pack_into(f"={4 * k}q", out.data, 0, *chain.from_iterable(chain.from_iterable(lists)))
     return out, counts
 
 
