@@ -289,6 +289,9 @@ def box_kernel(lo: NDArray[np.float64], hi: NDArray[np.float64], first: NDArray[
                 rect[0, o], rect[1, o], rect[2, o], rect[3, o] = x0, y0, x1, y1
                 near[o], far[o] = nd, fd
             got = False
+            # of the frustum's six planes only the near and the far one can cull a box whose
+            # rectangle meets a VSA (a VSA lies within the viewport, so some point of the box
+            # lies inside each side plane): the two are tested as depths
             if fd >= clip_m and (not planes or (fd >= near_plane and nd <= far_plane)):
                 for j in range(v0, v1):
                     if (max(x0, vsas[j, 0]) <= min(x1, vsas[j, 2])

@@ -121,7 +121,7 @@ class PartTable:
     slot : dict of int -> int
         A cell id's index into ``start`` and ``count``.
     start, count : (cells,) int64
-        Each cell's first box in ``lohi`` and its number of boxes.
+        Each cell's first box in ``lo``, ``hi`` and its number of boxes.
     src : dict of int -> (lo, hi)
         The pair each cell was packed from (a frame checks its cells against it by identity).
     """

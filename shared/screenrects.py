@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import functools
 import math
-import threading
 from typing import Any
 
 import numpy as np
@@ -49,7 +48,6 @@ __all__ = [
     "crossing_rects",
     "clipped_box_rects",
     "RectBuffers",
-    "thread_buffers",
     "box_corners_ckm",
     "clipped_rects",
     "ndc_pixels",
@@ -301,10 +299,10 @@ def crossing_rects(q: NDArray[np.float64], size: tuple[int, int], clip_m: float,
 
 
 class RectBuffers:
-    """Reusable buffers for a batch's temporaries (:func:`box_rects_ckm`, the parts culling):
-    one flat buffer per name, grown when a batch needs more, handed out as contiguous views.
+    """Reusable buffers for a batch's temporaries (:func:`box_rects_ckm`): one flat buffer per
+    name, grown when a batch needs more, handed out as contiguous views.
 
-    Not shared between threads (:func:`thread_buffers` gives each thread its own).
+    Not shared between threads.
     """
 
     def __init__(self) -> None:
@@ -319,17 +317,6 @@ class RectBuffers:
             buf = np.empty(max(need, 1024, 0 if buf is None else len(buf) * 3 // 2), dtype)
             self._bufs[key] = buf
         return buf[:need].reshape(shape)
-
-
-_LOCAL = threading.local()
-
-
-def thread_buffers() -> RectBuffers:
-    """The calling thread's :class:`RectBuffers` (made on first use)."""
-    got: RectBuffers | None = getattr(_LOCAL, "buffers", None)
-    if got is None:
-        got = _LOCAL.buffers = RectBuffers()
-    return got
 
 
 def _pixels4(b: NDArray[np.float64], size: tuple[int, int], margin_px: float, inplace: bool = False) -> NDArray[np.int64]:
