@@ -40,6 +40,7 @@ whether any was seen (tests/test_cullcache.py).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import re
@@ -59,7 +60,7 @@ from walkstream.server.bake import bake
 from walkstream.server.service.interiors import InteriorState
 from walkstream.server.sources.interiorgen import InteriorPlan, write_interior
 from walkstream.server.store import SceneReader
-from walkstream.shared import partcull, portals
+from walkstream.shared import cullkernels, partcull, portals
 from walkstream.shared.camera import camera, perspective
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
 from walkstream.shared.cullcache import CullCache
@@ -116,21 +117,30 @@ def hall_boxes(k: int, per_cell: int = HALL_PARTS, cell_m: float = 4.0, height: 
 def culling_at(rev: str) -> Culling:
     """``(cull_portals, cull_parts)`` as they were at git revision ``rev`` of this repository,
     loaded as modules of their own beside the current ones (``shared/screenrects.py``,
-    ``shared/portals.py`` and, where the revision has it, ``shared/partcull.py``)."""
+    ``shared/portals.py`` and, where the revision has them, ``shared/portalgraph.py``,
+    ``shared/cullkernels.py`` and ``shared/partcull.py``; that revision's kernels compiled
+    anew, not cached, their source being no file, unless they are today's).  Its walk is handed each graph made anew
+    as that revision's :class:`PortalGraph` (once per graph, on the untimed first frame:
+    the derived tables it walks over are its own)."""
     root = Path(portals.__file__).resolve().parents[1]
     mods: dict[str, types.ModuleType] = {}
-    for name in ("screenrects", "portals", "partcull"):
+    for name in ("screenrects", "portalgraph", "cullkernels", "portals", "partcull"):
         try:
             got = subprocess.run(["git", "-C", str(root), "show", f"{rev}:shared/{name}.py"],
                                  capture_output=True, text=True, check=False)
         except OSError as exc:
             raise InputError(f"--cull-against {rev}: git could not be run ({exc.strerror})") from None
         if got.returncode != 0:
+            if name in ("portalgraph", "cullkernels"):  # before the graph had a module, the culling was compiled
+                continue
             if name == "partcull":  # before the parts culling had a module of its own
                 break
             raise InputError(f"--cull-against {rev}: no shared/{name}.py at that revision of {root}")
+        if name == "cullkernels" and got.stdout == Path(cullkernels.__file__).read_text():
+            mods[name] = cullkernels  # the same kernels: today's, compiled and cached
+            continue
         mod_name = f"walkstream_cull_{name}_at_{abs(hash(rev))}"
-        text = got.stdout
+        text = got.stdout if name != "cullkernels" else got.stdout.replace("cache=True", "cache=False")
         for dep, mod in mods.items():  # that revision's own modules, not today's
             text = re.sub(rf"\bwalkstream\.shared\.{dep}\b", mod.__name__, text)
         mod = types.ModuleType(mod_name)
@@ -138,7 +148,25 @@ def culling_at(rev: str) -> Culling:
         sys.modules[mod_name] = mod  # dataclasses look their module up by name
         exec(compile(text, mod.__file__, "exec"), mod.__dict__)  # noqa: S102 - this repository's own code
         mods[name] = mod
-    return mods["portals"].cull_portals, mods.get("partcull", mods["portals"]).cull_parts
+    walk = mods["portals"].cull_portals
+    if "portalgraph" in mods:
+        walk = _graph_as(mods["portalgraph"].PortalGraph, walk)
+    return walk, mods.get("partcull", mods["portals"]).cull_parts
+
+
+def _graph_as(cls: Any, walk: Callable[..., Any]) -> Callable[..., Any]:
+    """``walk`` called with each graph remade as ``cls`` (an earlier revision's
+    :class:`PortalGraph`, from today's one's fields; made once per graph)."""
+    made: dict[int, tuple[PortalGraph, Any]] = {}
+
+    def run(graph: PortalGraph, *args: Any, **kwargs: Any) -> Any:
+        got = made.get(id(graph))
+        if got is None or got[0] is not graph:
+            fields = {f.name: getattr(graph, f.name) for f in dataclasses.fields(graph) if f.init}
+            got = made[id(graph)] = (graph, cls(**fields))
+        return walk(got[1], *args, **kwargs)
+
+    return run
 
 
 def _hall_frames(frames: int) -> Scene:

@@ -70,6 +70,7 @@ from walkstream.client.walk.measure import compare_truth
 from walkstream.client.walk.scene import STREET_FAR_M, STREET_NEAR_M, WalkScene, walk_projection
 from walkstream.client.walk.state import WalkState
 from walkstream.client.walk.walls import add_ring_sides
+from walkstream.shared.cullkernels import warm_up as warm_up_culling
 from walkstream.shared.errors import ApiError
 from walkstream.shared.ground import GROUND_Z
 from walkstream.shared.lsystem.grammar import parse_grammar
@@ -216,6 +217,9 @@ async def replay(
     truth_progress: Callable[[int, int], None] | None = None,
 ) -> ReplayResult:
     """The replay coroutine (see :func:`run_replay` to run it on a clock)."""
+    # the culling's compiled kernels loaded (or compiled, on a cold cache) before the
+    # walk, not inside its first timed frame
+    warm_up_culling()
     link = ShapedTransport(transport, config.link, clock)
     renderer: Any = None
     phases = FramePhases()

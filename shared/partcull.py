@@ -9,28 +9,24 @@ once and must keep every box :func:`cull_boxes` keeps, and few more (tests/test_
 tests/test_partcull.py).
 
 Cost: at a couple of hundred visible cells a frame (an open hall) the per-cell Python and
-numpy's fresh temporaries, not the arithmetic, were most of the time.  So:
+numpy's calls, not the arithmetic, were most of the time (docs/benchmarks.md, "The
+culling's CPU time").  So:
 
-- the boxes of a scene are packed once into one coordinate-major array (a
-  :class:`PartTable`, cached per ``boxes`` mapping and checked by identity: a cell whose
-  ``(lo, hi)`` pair is not the one packed makes the table anew), and a frame gathers its
-  visible cells' boxes by index, not by concatenating one array per cell;
-- every visible box is projected in one batch from its two corners
-  (:func:`~walkstream.shared.screenrects.box_rects_ckm`: 18 products a box, not 72), into
-  buffers reused from frame to frame (:func:`~walkstream.shared.screenrects.thread_buffers`:
-  a fresh array of a few hundred kB costs more than the step that fills it, which is why
-  the boxes were culled in chunks of 1,024 before);
-- the per-cell steps (which cells, their VSAs, the answer's slices) are C-level maps over
-  the cell lists (one comprehension pads the VSA lists), no Python statement per cell;
+- the boxes of a scene are packed once into one array (a :class:`PartTable`, cached per
+  ``boxes`` mapping and checked by identity: a cell whose ``(lo, hi)`` pair is not the one
+  packed makes the table anew); a frame of a few cells (a tour's 4-40) joins its cells'
+  arrays instead;
+- every visible box is tested in one call of a compiled loop
+  (:func:`~walkstream.shared.cullkernels.box_kernel`, numba): the fog, the box projected
+  from its two corners with :func:`~walkstream.shared.screenrects.box_rects_ckm`'s
+  arithmetic, its cell's VSAs, the near and far planes;
 - a box that crosses the clip plane (a tour's frame has 70 or so, median: the walls,
   floor and furniture around the eye) is tested by an unclipped superset of its rectangle
-  (:func:`~walkstream.shared.screenrects.crossing_rects`, about ten numpy calls for all,
-  against some forty to clip them): conservative, not the same, so this keeps every box
-  :func:`cull_boxes` keeps and a few more (1.5 % on the generated offices' tours; 10-19 %
-  less CPU in their parts culling);
-- a frame of a few cells (a tour's 4-40) takes the plain form instead (their arrays
-  joined, the eight corners' one product, fresh arrays): there numpy's calls, not the
-  boxes, are the cost, and the batch's extra steps made it 10-20 % slower.
+  (:func:`~walkstream.shared.screenrects.crossing_rects`' figures): conservative, not the
+  same, so this keeps every box :func:`cull_boxes` keeps and a few more (1.5 % on the
+  generated offices' tours);
+- the answer's per-cell slices are C-level maps over the cell lists, no Python statement
+  per cell.
 
 ``walkstream bench portals --cull`` times it (:mod:`walkstream.benchmarks.cullcpu`).
 """
@@ -41,23 +37,20 @@ import math
 import struct
 from collections.abc import Mapping
 from itertools import chain, repeat
-from operator import is_not
+from operator import is_not, itemgetter
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.cullkernels import box_kernel
 from walkstream.shared.errors import InputError
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.portals import CULLING_MODES, box_distance
 from walkstream.shared.screenrects import (
-    BOX_EDGES,
     CENTRE_MARGIN_PX,
-    box_corners_ckm,
     box_rects,
-    box_rects_ckm,
-    rects_ckm,
-    thread_buffers,
+    camera_rows,
 )
 
 __all__ = ["PartTable", "PartRects", "part_table", "cull_parts", "cull_boxes", "near_far"]
@@ -119,17 +112,16 @@ def _meet(a: NDArray[np.int64], b: NDArray[np.int64]) -> NDArray[np.bool_]:
 
 
 class PartTable:
-    """A scene's part boxes packed once: every cell's boxes in one coordinate-major array.
+    """A scene's part boxes packed once: every cell's boxes in one array.
 
     Attributes
     ----------
-    lohi : (3, 2, N) float64
-        ``lohi[j, 0]`` the lower and ``lohi[j, 1]`` the upper bound of coordinate ``j`` of
-        each box, the cells one after another.
+    lo, hi : (N, 3) float64
+        Each box's lower and upper corner, the cells one after another.
     slot : dict of int -> int
         A cell id's index into ``start`` and ``count``.
     start, count : (cells,) int64
-        Each cell's first box in ``lohi`` and its number of boxes.
+        Each cell's first box in ``lo``, ``hi`` and its number of boxes.
     src : dict of int -> (lo, hi)
         The pair each cell was packed from (a frame checks its cells against it by identity).
     """
@@ -142,9 +134,8 @@ class PartTable:
         self.count = np.array([len(x) for x in los], np.int64)
         self.start = np.concatenate([[0], np.cumsum(self.count)[:-1]]).astype(np.int64)
         self.slot = {c: i for i, c in enumerate(cells)}
-        lo = np.concatenate(los) if los else np.zeros((0, 3))
-        hi = np.concatenate(his) if his else np.zeros((0, 3))
-        self.lohi = np.ascontiguousarray(np.stack([lo.T, hi.T], axis=1))
+        self.lo = np.concatenate(los) if los else np.zeros((0, 3))
+        self.hi = np.concatenate(his) if his else np.zeros((0, 3))
 
     def current(self, boxes: Boxes, cells: list[int]) -> bool:
         """Whether ``cells`` (all in ``boxes``) are packed from the pairs ``boxes`` holds now."""
@@ -176,9 +167,11 @@ class PartRects:
     triangle test (:func:`~walkstream.shared.trianglecull.refine_parts`), which tests
     again the parts whose box is not well inside a VSA and so needs the same rectangles.
 
-    Handed to :func:`cull_parts` empty (``rects=``), filled by it when it projects the
-    boxes as :func:`~walkstream.shared.screenrects.box_rects` does (the eight corners' one
-    product: a frame of fewer than :data:`_FEW_BOXES` boxes), left empty otherwise.
+    Handed to :func:`cull_parts` empty (``rects=``), filled by it with the rectangles
+    :func:`~walkstream.shared.screenrects.box_rects` makes (as
+    :func:`~walkstream.shared.screenrects.box_rects_ckm` makes them: but for the order of
+    three additions in a corner's sums, the same; tests/test_partcull.py) on a frame of a
+    few cells or of fewer than :data:`_FEW_BOXES` boxes, left empty otherwise.
 
     Attributes
     ----------
@@ -282,7 +275,7 @@ def cull_parts(
     """
     if mode not in CULLING_MODES:
         raise InputError(f"culling mode {mode!r}: expected one of {', '.join(CULLING_MODES)}")
-    e = np.asarray(eye, np.float64).reshape(3)
+    e = np.ascontiguousarray(eye, np.float64).reshape(3)
     present = list(filter(boxes.__contains__, cells))
     if mode == "none":
         return {c: np.ones(len(boxes[c][0]), bool) for c in present}
@@ -301,135 +294,46 @@ def cull_parts(
         out = {c: np.zeros(len(boxes[c][0]), bool) for c in present if vsas is None or c not in vsas}
     if vsas is None or not seen:
         return out
-    if len(seen) < _FEW_CELLS:
-        out.update(_cull_few(seen, boxes, vsas, e, view, proj, size, fog_m, clip_m, vp, margin_px, rects))
-        return out
-    table = part_table(boxes, seen)
-    nseen = len(seen)
-    slot = np.fromiter(map(table.slot.__getitem__, seen), np.int64, nseen)
-    counts = table.count[slot]
+    if len(seen) < _FEW_CELLS:  # their arrays joined as they are: no table to check
+        pairs = list(map(boxes.__getitem__, seen))
+        counts = np.fromiter(map(len, map(itemgetter(0), pairs)), np.int64, len(seen))
+        # float64 and C order whatever the cells hold: one compiled form of the kernel
+        lo = np.concatenate([np.reshape(p[0], (-1, 3)) for p in pairs], dtype=np.float64)
+        hi = np.concatenate([np.reshape(p[1], (-1, 3)) for p in pairs], dtype=np.float64)
+        first = np.cumsum(counts) - counts
+        table = None
+    else:
+        table = part_table(boxes, seen)
+        slot = np.fromiter(map(table.slot.__getitem__, seen), np.int64, len(seen))
+        counts, first, lo, hi = table.count[slot], table.start[slot], table.lo, table.hi
     ends = np.cumsum(counts)
-    total = int(ends[-1])
-    if total == 0:
+    offsets = ends - counts
+    if int(ends[-1]) == 0:
         out.update(zip(seen, map(np.zeros, counts.tolist(), repeat(bool)), strict=True))
         return out
-    offsets = ends - counts
-    # each visible box's index into the table and its cell's index into ``seen``
-    owner = np.repeat(np.arange(nseen), counts)
-    idx = np.arange(total) + (table.start[slot] - offsets)[owner]
-    work = thread_buffers()
-    lohi = np.take(table.lohi, idx, axis=2, out=work.take("lohi", (3, 2, total)), mode="clip")
-    keep = np.zeros(total, bool)
-    if not math.isinf(fog_m):
-        near = box_distance(lohi[:, 0].T, lohi[:, 1].T, e) <= fog_m
-        if not near.all():  # only the boxes within the fog are projected
-            sub = np.flatnonzero(near)
-            if not len(sub):
-                out.update(zip(seen, _slices(keep, offsets, ends), strict=True))
-                return out
-            owner = owner[sub]
-            lohi = np.take(lohi, sub, axis=2, out=work.take("lohi_fog", (3, 2, len(sub))), mode="clip")
-        else:
-            sub = None
-    else:
-        sub = None
-    v = _vsa_table(vsas, seen)
-    n = len(owner)
     V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
-    if n < _FEW_BOXES:  # the eight corners' one product: fewer numpy calls
-        lo_b, hi_b = lohi[:, 0].T, lohi[:, 1].T
-        rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo_b, hi_b), BOX_EDGES, V, P, size, clip_m,
-                                               margin_px, clip_rest=False)
-        if rects is not None:  # the table's rows of these cells, as the triangle test shares them
-            rows_lo = table.lohi[:, 0, :].T
-            rects.fill(V, P, size, clip_m, margin_px, seen, counts.tolist(), np.take(rows_lo, idx, axis=0),
-                       np.take(table.lohi[:, 1, :].T, idx, axis=0), sub, rect, near_d, far_d)
-    else:
-        rect, front, near_d, far_d = box_rects_ckm(lohi, V, P, size, clip_m, margin_px, work=work, clip_rest=False)
-    kmax = v.shape[1]
-    # 32-bit pixels (the bounds are clamped to +-1e9): half the bytes to gather and compare
-    rect = rect.astype(np.int32)
-    # each box's own cell's VSAs ("clip": the indices are valid, and numpy buffers an
-    # ``out`` under the default "raise")
-    vo = np.take(v, owner, axis=2, out=work.take("vsa", (4, kmax, n), np.int32), mode="clip")
-    lo_ = np.maximum(rect[0], vo[0], out=work.take("meet0", (kmax, n), np.int32))
-    hi_ = np.minimum(rect[2], vo[2], out=work.take("meet1", (kmax, n), np.int32))
-    meet = np.less_equal(lo_, hi_, out=work.take("meetx", (kmax, n), np.bool_))
-    np.maximum(rect[1], vo[1], out=lo_)
-    np.minimum(rect[3], vo[3], out=hi_)
-    meet &= lo_ <= hi_
-    got = meet[0].copy() if kmax == 1 else np.logical_or.reduce(meet, axis=0)
-    got &= front
+    rows, shift = camera_rows(V, P)
     planes = near_far(P)
-    if planes is None:
-        lo_b, hi_b = lohi[:, 0].T, lohi[:, 1].T
-        got[got] = frustum_cull(lo_b[got], hi_b[got], vp)
-    else:
-        # the frustum's other four planes cannot cull a box whose rectangle meets a
-        # VSA: a VSA lies within the viewport, so some point of the box lies inside
-        # each of them (by at least a third of a pixel); the near and the far plane
-        # are depths
-        got &= (far_d >= planes[0]) & (near_d <= planes[1])
-    if sub is None:
-        keep = got
-    else:
-        keep[sub] = got
+    want = rects is not None and (table is None or int(ends[-1]) < _FEW_BOXES)
+    vsa_rows, vsa_count = _vsa_rows(vsas, seen)
+    keep, projected, rect, near_d, far_d = box_kernel(
+        lo, hi, first, counts, vsa_rows, np.cumsum(vsa_count) - vsa_count, vsa_count, e, float(fog_m), rows, shift,
+        int(size[0]), int(size[1]), float(margin_px), float(clip_m), planes is not None,
+        *(planes or (0.0, 0.0)), want)
+    if planes is None or want:
+        # the rows of ``lo``, ``hi`` of the cells' boxes one after another
+        idx = None if table is None else np.arange(int(ends[-1])) + np.repeat(first - offsets, counts)
+        lo_s, hi_s = (lo, hi) if idx is None else (lo[idx], hi[idx])
+    if planes is None:  # not a perspective projection: the six-plane frustum test
+        got = np.flatnonzero(keep)
+        keep[got] = frustum_cull(lo_s[got], hi_s[got], vp)
+    if want and rects is not None:
+        sub = None if projected.all() else np.flatnonzero(projected)
+        pick = (lambda a: a) if sub is None else (lambda a: a[..., sub])
+        rects.fill(V, P, size, clip_m, margin_px, seen, counts.tolist(), lo_s, hi_s, sub, pick(rect),
+                   pick(near_d), pick(far_d))
     out.update(zip(seen, _slices(keep, offsets, ends), strict=True))
     return out
-
-
-def _cull_few(
-    seen: list[int],
-    boxes: Boxes,
-    vsas: dict[int, list[tuple[int, int, int, int]]],
-    e: NDArray[np.float64],
-    view: ArrayLike,
-    proj: ArrayLike,
-    size: tuple[int, int],
-    fog_m: float,
-    clip_m: float,
-    vp: NDArray[np.float64],
-    margin_px: float = CENTRE_MARGIN_PX,
-    rects: PartRects | None = None,
-) -> dict[int, NDArray[np.bool_]]:
-    """:func:`cull_parts` of a few cells (a tour's 4-40): their arrays joined as they are (no
-    table to check), the eight corners' one product, fresh arrays; side by side with the
-    batch path this is 10-20 % less CPU at such sizes (numpy's calls, not the boxes, are
-    the cost)."""
-    pairs = list(map(boxes.__getitem__, seen))
-    counts = [len(p[0]) for p in pairs]
-    lo = np.concatenate([p[0] for p in pairs]).reshape(-1, 3)
-    hi = np.concatenate([p[1] for p in pairs]).reshape(-1, 3)
-    keep = np.ones(len(lo), bool) if math.isinf(fog_m) else box_distance(lo, hi, e) <= fog_m
-    owner = np.repeat(np.arange(len(seen)), counts)
-    idx = None if keep.all() else np.flatnonzero(keep)
-    lo_all, hi_all = lo, hi
-    if idx is not None:
-        lo, hi, owner = lo[idx], hi[idx], owner[idx]
-    if len(lo):
-        V, P = np.asarray(view, np.float64), np.asarray(proj, np.float64)
-        rect, front, near_d, far_d = rects_ckm(box_corners_ckm(lo, hi), BOX_EDGES, V, P, size, clip_m,
-                                               margin_px, clip_rest=False)
-        if rects is not None:
-            rects.fill(V, P, size, clip_m, margin_px, seen, counts, lo_all, hi_all, idx, rect, near_d, far_d)
-        v = _vsa_table(vsas, seen)[:, :, owner]
-        meet = ((np.maximum(rect[0], v[0]) <= np.minimum(rect[2], v[2]))
-                & (np.maximum(rect[1], v[1]) <= np.minimum(rect[3], v[3])))
-        got = front & np.any(meet, axis=0)
-        planes = near_far(P)
-        if planes is None:
-            got[got] = frustum_cull(lo[got], hi[got], vp)
-        else:  # as in cull_parts
-            got &= (far_d >= planes[0]) & (near_d <= planes[1])
-    else:
-        got = np.zeros(0, bool)
-    if idx is None:
-        keep = got
-    else:
-        keep[idx] = got
-    n = np.asarray(counts, np.int64)
-    ends = np.cumsum(n)
-    return dict(zip(seen, _slices(keep, ends - n, ends), strict=True))
 
 
 def _slices(a: NDArray[np.bool_], starts: NDArray[np.int64], ends: NDArray[np.int64]) -> Any:
@@ -437,30 +341,25 @@ def _slices(a: NDArray[np.bool_], starts: NDArray[np.int64], ends: NDArray[np.in
     return map(a.__getitem__, map(slice, starts.tolist(), ends.tolist()))
 
 
-def _vsa_table(vsas: dict[int, list[tuple[int, int, int, int]]], cells: list[int]) -> NDArray[np.int32]:
-    """The cells' VSAs ``(4, kmax, cells)`` as int32, a coordinate of one VSA of every cell
-    per row, the shorter lists padded with empty rectangles (which meet nothing)."""
+def _vsa_rows(vsas: dict[int, list[tuple[int, int, int, int]]], cells: list[int]) -> tuple[
+        NDArray[np.int64], NDArray[np.int64]]:
+    """The cells' VSAs one after another ``(k, 4)`` int64, and how many each cell has
+    ``(cells,)`` (packed into the array in one C call: a third of the CPU of ``np.fromiter``)."""
     lists = list(map(vsas.__getitem__, cells))
-    kmax = max(map(len, lists))
-    # padded in Python (one short list added per cell), then packed as bytes in one C call:
-    # fewer numpy calls than padding in numpy, and a third of the CPU of np.fromiter
-    pads = [[_NO_PIXEL] * (kmax - i) for i in range(kmax + 1)]
-    padded = [have + pads[len(have)] for have in lists]
-    ints = struct.pack(f"={4 * kmax * len(cells)}i", *chain.from_iterable(chain.from_iterable(padded)))
-    return np.frombuffer(ints, np.int32).reshape(len(cells), kmax, 4).transpose(2, 1, 0)
+    counts = np.fromiter(map(len, lists), np.int64, len(cells))
+    k = int(counts.sum())
+    out = np.empty((k, 4), np.int64)  # writable: the kernel is compiled for writable arrays
+    struct.pack_into(f"={4 * k}q", out.data, 0, *chain.from_iterable(chain.from_iterable(lists)))
+    return out, counts
 
 
-#: An empty whole-pixel rectangle (no pixel centre): pads a cell's VSAs.
-_NO_PIXEL = (1, 1, 0, 0)
-
-
-#: Visible cells below which a frame takes :func:`_cull_few`.
+#: Visible cells below which a frame joins their box arrays as they are (a tour's 4-40):
+#: no table to check, and a table made anew when the streamer loads a cell costs more.
 _FEW_CELLS = 48
 
-#: Boxes below which a frame projects their eight corners with one product
-#: (:func:`~walkstream.shared.screenrects.rects_ckm`, as the plain test does): fewer numpy
-#: calls, 5-10 % less CPU up to a thousand boxes; above, the two corners' sums
-#: (:func:`~walkstream.shared.screenrects.box_rects_ckm`, the same rectangles) take half.
+#: Boxes below which a frame of many cells keeps its boxes' rectangles for the triangle
+#: test (:class:`PartRects`; above, the copies of every box's rows cost more than the
+#: triangle test's few candidates' rectangles made there).
 _FEW_BOXES = 1200
 
 

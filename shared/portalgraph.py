@@ -52,12 +52,6 @@ class PortalGraph:
     hi: NDArray[np.float64]
     plane: NDArray[np.float64]
     index: dict[int, int] = field(default_factory=dict)
-    #: Per cell (by index) the target indices of its directed portals (rows
-    #: ``start[i]:start[i + 1]``): the walk's adjacency as plain ints, built once per
-    #: scene, not per frame.
-    adjacency: list[list[int]] = field(init=False, repr=False, compare=False)
-    #: :attr:`start` as plain ints.
-    row_start: list[int] = field(init=False, repr=False, compare=False)
     #: ``(k, 2)`` the vertex index pairs joining a padded polygon's sides.
     edges: NDArray[np.int64] = field(init=False, repr=False, compare=False)
     #: :attr:`poly` coordinate-major, ``(3, k, m)``: the layout the frame's batch projects
@@ -65,13 +59,8 @@ class PortalGraph:
     poly_ckm: NDArray[np.float64] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        target = self.target.tolist()
-        starts = self.start.tolist()
-        adjacency = [target[a:b] for a, b in zip(starts[:-1], starts[1:], strict=True)]
         k = self.poly.shape[1]
         # frozen: the derived tables are set once, here
-        object.__setattr__(self, "adjacency", adjacency)
-        object.__setattr__(self, "row_start", starts)
         object.__setattr__(self, "edges", np.stack([np.arange(k), (np.arange(k) + 1) % k], axis=1))
         object.__setattr__(self, "poly_ckm", np.ascontiguousarray(self.poly.transpose(2, 1, 0)))
 

@@ -46,26 +46,17 @@ the pass-through takes (its threshold is the larger of that and ``pass_m``).
 show that the conservative test catches it.
 
 Cost: a portal's rectangle depends on the camera only, so every directed portal of the
-building is clipped and projected in one numpy batch per frame; the walk is then a FIFO
-walk over plain ints (per-scene adjacency lists built once, in
-:class:`~walkstream.shared.portalgraph.PortalGraph`),
-about 4-6 us per visible cell on the 2-core machine.  It is the reference walk step for
-step (:mod:`walkstream.benchmarks.portalwalk` keeps that one; tests/test_portalwalk.py checks they agree):
-a walk by levels with numpy batches per level was not taken, since the FIFO order
-decides the VSA lists (which VSAs reach a cell before it is looked through) and a
-level costs tens of numpy calls whatever its size, more than the few cells of a
-level cost in Python.  Measured on the open 16 x 16 hall (236 cells visible over 31
-levels of at most 14 cells): the levels' portal clipping against their parents' VSAs
-and the test against the targets' VSA lists alone, as one numpy batch per level,
-took 1.2-1.5 times the CPU of this whole walk, before any merge, queue or projection.
-Nor does projecting only the portals of the cells reached, a batch per level, pay on
-a tour's frame (a tenth of a generated office's portals tested over 3-8 levels): the
-per-level batches cost what the whole building's one batch does.  A frame's cost is
-mostly numpy's per-call cost, not the elements: the batches run coordinate-major (:func:`~walkstream.shared.screenrects.coord_rects`,
-each call one pass over long rows), the few sets that straddle the clip plane are
-clipped in plain floats, and the parts culling takes every visible cell's boxes in
-one batch (:mod:`walkstream.shared.partcull`); a VSA arriving at a cell is appended
-in place.
+building is clipped and projected in one numpy batch per frame (:func:`portal_rows`,
+coordinate-major: :func:`~walkstream.shared.screenrects.rects_ckm`); the walk is then one
+call of a compiled loop (:func:`~walkstream.shared.cullkernels.walk_kernel`, numba) over
+that table and the graph's adjacency arrays.  It is the reference walk step for step
+(:mod:`walkstream.benchmarks.portalwalk` keeps that one; tests/test_portalwalk.py checks
+they agree): the FIFO order decides the VSA lists (which VSAs reach a cell before it is
+looked through), so the walk stays a walk.  In Python it cost 4-6 us a visible cell
+(1.3-1.5 ms at the open 16 x 16 hall's 236 cells); numpy batches by levels were
+measured and cost more (docs/benchmarks.md, "a walk by levels measured"); compiled, the
+walk itself takes some 20 us there, and the frame's walk is the projection's numpy
+calls and the answer's Python lists.
 ``walkstream bench portals --cull`` times it (:mod:`walkstream.benchmarks.cullcpu`).
 """
 
@@ -73,14 +64,12 @@ from __future__ import annotations
 
 import math
 import time
-from collections import deque
-from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from walkstream.shared.cullkernels import walk_kernel
 from walkstream.shared.errors import InputError
 from walkstream.shared.frustum import frustum_cull
 from walkstream.shared.portalgraph import PortalGraph
@@ -135,11 +124,6 @@ class PortalCull:
     portals: int = 0
     tested: int = 0
     seconds: float = 0.0
-
-
-#: What :func:`portal_rows` gives: for a cell index, its directed portals as
-#: ``(target index, what)`` pairs.
-PortalRows = Callable[[int], Iterable[tuple[int, Any]]]
 
 
 def box_distance(lo: NDArray[np.float64], hi: NDArray[np.float64], eye: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -203,7 +187,7 @@ def cull_portals(
         through when the eye comes within the pass-through distance of the grown box):
         the walk of an eye that may be anywhere within ``grow_m`` of ``eye``
         (:mod:`walkstream.shared.cullcache`).  The fog is tested on the portal as it is.
-    rows : callable, optional
+    rows : PortalRows, optional
         The portals' rectangles already made for this camera and these settings by
         :func:`portal_rows` (a caller that spreads a walk over two frames: the
         projection on one, the walk on the next); by default made here.
@@ -217,125 +201,51 @@ def cull_portals(
     w, h = int(size[0]), int(size[1])
     # A portal's rectangle depends on the camera only, not on the VSA it is seen
     # through: every directed portal is projected in one numpy batch per frame
-    # (portal_rows; the adjacency is built once per scene), and the walk below intersects
-    # whole-pixel rectangles as plain ints.  The walk is the round-one FIFO walk
-    # (benchmarks/portalwalk.py) step for step, so its cells, VSAs and depths are the
-    # same; only the constant work per portal is less.
-    rows_of = rows if rows is not None else portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed,
-                                                        margin_px, grow_m)
-    s = graph.index[start]
-    full = (0, 0, w - 1, h - 1)
-    # per cell index (lists, not dicts: indexing is the walk's most frequent step)
-    nc = len(graph.ids)
-    bound: list[Any] = [None] * nc
-    lists: list[Any] = [None] * nc
-    depth = [0] * nc
-    queued = [False] * nc
-    bound[s], lists[s], queued[s] = full, [full], True
-    order = [s]
-    queue = deque([s])
-    pop, push = queue.popleft, queue.append
-    opened = tested = 0
-    limit = nc + 1 if max_depth is None else max_depth  # a chain of first visits has at most nc cells
-    while queue:
-        c = pop()
-        queued[c] = False
-        dc = depth[c]
-        if dc >= limit:
-            continue
-        dn = dc + 1
-        vx0, vy0, vx1, vy1 = bound[c]
-        for t, pr in rows_of(c):
-            if pr is None:
-                continue
-            tested += 1
-            if pr is True:
-                a0, a1, a2, a3 = vx0, vy0, vx1, vy1
-            else:
-                a0, a1, a2, a3 = pr
-                # the portal's rectangle met the parent's VSA (max / min, inlined)
-                if a0 < vx0:
-                    a0 = vx0
-                if a2 > vx1:
-                    a2 = vx1
-                if a0 > a2:
-                    continue
-                if a1 < vy0:
-                    a1 = vy0
-                if a3 > vy1:
-                    a3 = vy1
-                if a1 > a3:
-                    continue
-            opened += 1
-            ob = bound[t]
-            if ob is None:  # the first visit
-                n = (a0, a1, a2, a3)
-                bound[t] = n
-                lists[t] = [n]
-                depth[t] = dn
-                order.append(t)
-                push(t)
-                queued[t] = True
-            else:
-                have = lists[t]
-                # one pass: is the new VSA covered by one the cell has (nothing to do), or
-                # does it cover some (they go)?  The list is changed in place when none
-                # goes (the common case: no new list per arrival)
-                drop = False
-                for q in have:
-                    q0, q1, q2, q3 = q
-                    if q0 <= a0 and q1 <= a1 and q2 >= a2 and q3 >= a3:
-                        break
-                    if a0 <= q0 and a1 <= q1 and a2 >= q2 and a3 >= q3:
-                        drop = True
-                else:
-                    n = (a0, a1, a2, a3)
-                    if drop:
-                        have = [q for q in have if not (a0 <= q[0] and a1 <= q[1] and a2 >= q[2] and a3 >= q[3])]
-                        lists[t] = have
-                    have.append(n)
-                    if len(have) > max_vsas:
-                        lists[t] = [_bounding(have)]
-                    b0, b1, b2, b3 = ob
-                    grew = False
-                    if a0 < b0:
-                        b0, grew = a0, True
-                    if a1 < b1:
-                        b1, grew = a1, True
-                    if a2 > b2:
-                        b2, grew = a2, True
-                    if a3 > b3:
-                        b3, grew = a3, True
-                    if not grew:
-                        continue
-                    bound[t] = (b0, b1, b2, b3)
-                    if dn < depth[t]:
-                        depth[t] = dn
-                    if not queued[t]:
-                        push(t)
-                        queued[t] = True
-    ids = graph.ids.tolist()
+    # (portal_rows), and the compiled walk (cullkernels.walk_kernel) intersects the
+    # whole-pixel rectangles.  It is the round-one FIFO walk (benchmarks/portalwalk.py)
+    # step for step, so its cells, VSAs and depths are the same.
+    table = rows if rows is not None else portal_rows(graph, e, V, P, (w, h), clip_m, pass_m, fog_m, naive, closed,
+                                                      margin_px, grow_m)
+    limit = len(graph.ids) + 1 if max_depth is None else max_depth  # a chain of first visits has at most nc cells
+    cells, depths, vsa_rows, counts, opened, tested = walk_kernel(
+        graph.target, graph.start, table.what, table.rect, graph.index[start], w, h, limit, max_vsas)
+    ids = graph.ids[cells].tolist()
+    # the VSAs as tuples of plain ints, each cell's a slice of one list (no statement per cell)
+    flat = list(map(tuple, vsa_rows.tolist()))
+    ends = np.cumsum(counts)
+    vsas = dict(zip(ids, map(flat.__getitem__, map(slice, (ends - counts).tolist(), ends.tolist())), strict=True))
     return PortalCull(
-        order=[ids[i] for i in order],
-        vsas={ids[i]: lists[i] for i in order},
-        depth={ids[i]: depth[i] for i in order},
-        portals=opened,
-        tested=tested,
+        order=ids,
+        vsas=vsas,
+        depth=dict(zip(ids, depths.tolist(), strict=True)),
+        portals=int(opened),
+        tested=int(tested),
         seconds=time.perf_counter() - t0,
     )
 
 
-def _bounding(rects: list[tuple[int, int, int, int]]) -> tuple[int, int, int, int]:
-    """The bounding rectangle of whole-pixel rectangles."""
-    x0, y0, x1, y1 = rects[0]
-    for q in rects[1:]:
-        x0, y0, x1, y1 = min(x0, q[0]), min(y0, q[1]), max(x1, q[2]), max(y1, q[3])
-    return (x0, y0, x1, y1)
+@dataclass(frozen=True)
+class PortalRows:
+    """Every directed portal's part in a frame's walk, made by :func:`portal_rows` for one
+    camera and one set of settings (:attr:`~walkstream.shared.portalgraph.PortalGraph.target`'s
+    rows).
+
+    Attributes
+    ----------
+    what : (m,) int8
+        0 culled (beyond the fog, wholly behind the clip plane, or closed), 1 passed
+        through (the parent's VSA goes on unchanged), 2 its rectangle.
+    rect : (4, m) int64
+        The portals' whole-pixel rectangles (rows ``x0, y0, x1, y1``), where ``what`` is 2.
+    """
+
+    what: NDArray[np.int8]
+    rect: NDArray[np.int64]
 
 
-#: Directed portals up to which a frame turns every portal's rectangle into Python ints
-#: at once; above, a cell's are turned when the walk first reaches it (a large building
-#: of which a few cells are seen).  Either way all are projected in one numpy batch.
+#: Directed portals above which a frame projects only the portals within the fog (a large
+#: building of which a few cells are seen); up to it, all of them (the selection's calls
+#: cost more than projecting a few hundred).  Either way in one numpy batch.
 _LIST_ALL = 1024
 
 
@@ -353,18 +263,18 @@ def portal_rows(
     margin_px: float = CENTRE_MARGIN_PX,
     grow_m: float = 0.0,
 ) -> PortalRows:
-    """A function giving, for a cell index, its directed portals as ``(target index, what)``
-    pairs: ``what`` is ``None`` (culled: beyond the fog or wholly behind the clip plane),
-    ``True`` (pass the parent's VSA through) or the portal's whole-pixel rectangle
-    ``[x0, y0, x1, y1]``; every portal projected in one numpy batch.  The arguments as
-    :func:`cull_portals` takes them (``e`` ``(3,)``, ``V``, ``P`` ``(4, 4)`` float64)."""
+    """Every directed portal's part in the walk (:class:`PortalRows`): culled (beyond the fog
+    or wholly behind the clip plane), passed through, or its whole-pixel rectangle; the
+    portals projected in one numpy batch.  The arguments as :func:`cull_portals` takes
+    them (``e`` ``(3,)``, ``V``, ``P`` ``(4, 4)`` float64)."""
     m = len(graph.target)
-    adjacency, starts = graph.adjacency, graph.row_start
     if m == 0:
-        return lambda c: ()
+        return PortalRows(np.zeros(0, np.int8), np.zeros((4, 0), np.int64))
+    fogged = box_distance(graph.lo, graph.hi, e) > fog_m if math.isfinite(fog_m) else None
+    few = None if fogged is None or m <= _LIST_ALL or naive or grow_m > 0.0 else np.flatnonzero(~fogged)
     if naive:
         rect, front = point_rects(graph.poly, graph.edges, V, P, size, clip_m, naive, margin_px)
-        rect4 = rect.T
+        rect4 = np.ascontiguousarray(rect.T)
     elif grow_m > 0.0:
         # the portals' boxes grown by ``grow_m``: a ray from any point within ``grow_m`` of
         # the eye through a portal passes, from the eye, through the grown box (the
@@ -373,10 +283,14 @@ def portal_rows(
         glo, ghi = graph.lo - grow_m, graph.hi + grow_m
         rect4, front, _near, _far = box_rects_ckm(np.stack([glo.T, ghi.T], axis=1), V, P, size, clip_m, margin_px,
                                                   clip_rest=False)
-        rect = rect4.T
+    elif few is not None:
+        # each portal's figures are its own (elementwise), so a subset's are the same
+        rect4 = np.empty((4, m), np.int64)
+        front = np.zeros(m, bool)
+        rect4[:, few], front[few], _near, _far = rects_ckm(graph.poly_ckm[:, :, few], graph.edges, V, P, size,
+                                                           clip_m, margin_px)
     else:
         rect4, front, _near, _far = rects_ckm(graph.poly_ckm, graph.edges, V, P, size, clip_m, margin_px)
-        rect = rect4.T
     # 0 culled, 1 pass through, 2 the rectangle
     what = np.where(front, 2, 0).astype(np.int8)
     if grow_m > 0.0 and not naive:
@@ -391,42 +305,11 @@ def portal_rows(
         if len(near):
             inside = np.all((e >= graph.lo[near] - near_pass) & (e <= graph.hi[near] + near_pass), axis=1)
             what[near[inside]] = 1
-    if math.isfinite(fog_m):
-        what[box_distance(graph.lo, graph.hi, e) > fog_m] = 0
+    if fogged is not None:
+        what[fogged] = 0
     if closed:
         what[np.isin(graph.portal, np.fromiter(closed, np.int64, len(closed)))] = 0
-    if m <= _LIST_ALL:
-        # a rectangle that meets no pixel of the viewport meets no VSA (they all lie
-        # within it): such a portal is tested as before (the counts stay) but against
-        # an empty rectangle, and only the others are turned into ints (a tenth of a
-        # generated office's portals at a time)
-        x0, y0, x1, y1 = rect4
-        opens = np.flatnonzero((what == 2) & (x0 <= x1) & (y0 <= y1) & (x1 >= 0) & (y1 >= 0)
-                               & (x0 < size[0]) & (y0 < size[1]))
-        sparse = 2 * len(opens) < m  # else all at once is cheaper (an open hall)
-        table: list[Any] = [_NO_PIXEL] * m if sparse else rect.tolist()
-        for i in np.flatnonzero(what == 0).tolist():
-            table[i] = None
-        for i in np.flatnonzero(what == 1).tolist():
-            table[i] = True
-        if sparse:
-            for i, r in zip(opens.tolist(), rect4[:, opens].T.tolist(), strict=True):
-                table[i] = r
-        return lambda c: zip(adjacency[c], table[starts[c] : starts[c + 1]], strict=True)
-    done: dict[int, list[tuple[int, Any]]] = {}
-
-    def rows_of(c: int) -> list[tuple[int, Any]]:
-        got = done.get(c)
-        if got is None:
-            a, b = starts[c], starts[c + 1]
-            got = [
-                (t, r if k == 2 else (None if k == 0 else True))
-                for t, r, k in zip(adjacency[c], rect[a:b].tolist(), what[a:b].tolist(), strict=True)
-            ]
-            done[c] = got
-        return got
-
-    return rows_of
+    return PortalRows(what, rect4)
 
 
 def frustum_cells(
@@ -468,6 +351,3 @@ def frustum_cells(
                 order.append(t)
     return [int(graph.ids[c]) for c in order]
 
-
-#: An empty whole-pixel rectangle (no pixel centre): pads a cell's VSAs.
-_NO_PIXEL = (1, 1, 0, 0)

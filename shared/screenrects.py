@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import functools
 import math
-import threading
 from typing import Any
 
 import numpy as np
@@ -45,10 +44,10 @@ __all__ = [
     "coord_rects",
     "rects_ckm",
     "box_rects_ckm",
+    "camera_rows",
     "crossing_rects",
     "clipped_box_rects",
     "RectBuffers",
-    "thread_buffers",
     "box_corners_ckm",
     "clipped_rects",
     "ndc_pixels",
@@ -159,7 +158,7 @@ def rects_ckm(
     # product (the camera's rows combined with the projection's) instead of the eye
     # space and four passes more over every vertex
     R = view[:3, :3]
-    rows, shift = _camera_rows(view, proj)
+    rows, shift = camera_rows(view, proj)
     shift = shift[:, None]
     q = (rows @ pts.reshape(3, -1) + shift).reshape(pts.shape)  # (3, k, m): x and y numerators, depth
     depth = q[2]
@@ -186,7 +185,7 @@ def rects_ckm(
     return rect, front, near_d, far_d
 
 
-def _camera_rows(view: NDArray[np.float64], proj: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def camera_rows(view: NDArray[np.float64], proj: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The camera's rows combined with the projection's, ``(3, 3)``, and their shift ``(3,)``:
     a world point ``p`` has x and y numerators and depth ``rows @ p + shift``.  Nine values,
     worked out in plain floats (the same IEEE products and sums as numpy's, without a
@@ -229,7 +228,7 @@ def box_rects_ckm(
         z = np.zeros(0)
         return np.zeros((4, 0), np.int64), np.zeros(0, bool), z, z
     w = work if work is not None else RectBuffers()
-    rows, shift = _camera_rows(view, proj)
+    rows, shift = camera_rows(view, proj)
     prod = np.multiply(rows[:, :, None, None], lohi, out=w.take("prod", (3, 3, 2, n)))  # row, coordinate, bound
     prod[:, 0] += shift[:, None, None]
     # (3, 2, 2, 2, n): row, then the bound taken of x, y and z
@@ -300,10 +299,10 @@ def crossing_rects(q: NDArray[np.float64], size: tuple[int, int], clip_m: float,
 
 
 class RectBuffers:
-    """Reusable buffers for a batch's temporaries (:func:`box_rects_ckm`, the parts culling):
-    one flat buffer per name, grown when a batch needs more, handed out as contiguous views.
+    """Reusable buffers for a batch's temporaries (:func:`box_rects_ckm`): one flat buffer per
+    name, grown when a batch needs more, handed out as contiguous views.
 
-    Not shared between threads (:func:`thread_buffers` gives each thread its own).
+    Not shared between threads.
     """
 
     def __init__(self) -> None:
@@ -318,17 +317,6 @@ class RectBuffers:
             buf = np.empty(max(need, 1024, 0 if buf is None else len(buf) * 3 // 2), dtype)
             self._bufs[key] = buf
         return buf[:need].reshape(shape)
-
-
-_LOCAL = threading.local()
-
-
-def thread_buffers() -> RectBuffers:
-    """The calling thread's :class:`RectBuffers` (made on first use)."""
-    got: RectBuffers | None = getattr(_LOCAL, "buffers", None)
-    if got is None:
-        got = _LOCAL.buffers = RectBuffers()
-    return got
 
 
 def _pixels4(b: NDArray[np.float64], size: tuple[int, int], margin_px: float, inplace: bool = False) -> NDArray[np.int64]:
