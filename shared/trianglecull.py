@@ -67,7 +67,6 @@ from walkstream.shared.screenrects import (
     BOX_EDGES,
     CENTRE_MARGIN_PX,
     box_corners_ckm,
-    clipped_box_rects,
     rects_ckm,
 )
 from walkstream.shared.trianglekernels import candidates, take_rects, test_parts
@@ -236,11 +235,10 @@ def _box_rects(
         if min(first) >= 0:
             row = np.asarray(first, np.int64)[owner] + local
             c = np.ascontiguousarray  # the layouts the kernel was compiled for (a no-op mostly)
-            rect, rest, status = take_rects(c(rects.rect, np.int64), c(rects.exact), c(rects.crossing),
-                                            c(rects.lo, np.float64), c(rects.hi, np.float64), row, c(lo), c(hi))
-            if status == 0:
-                if len(rest):  # across the clip plane: clipped as box_rects clips
-                    rect[:, rest] = clipped_box_rects(lo[rest], hi[rest], view, proj, size, clip_m)[0]
+            rect, taken = take_rects(c(rects.rect, np.int64), c(rects.exact), c(rects.crossing), c(rects.lo, np.float64),
+                                     c(rects.hi, np.float64), row, c(lo), c(hi), c(view), c(proj), float(size[0]),
+                                     float(size[1]), clip_m, CENTRE_MARGIN_PX)
+            if taken:  # those across the clip plane clipped as box_rects clips them
                 return rect
     return rects_ckm(box_corners_ckm(lo, hi), BOX_EDGES, view, proj, size, clip_m)[0]
 

@@ -81,30 +81,85 @@ def candidates(mask: NDArray[np.bool_], first: NDArray[np.int64], n: NDArray[np.
 @njit(cache=True, error_model="numpy")
 def take_rects(rect: NDArray[np.int64], exact: NDArray[np.bool_], crossing: NDArray[np.bool_],
                rlo: NDArray[np.float64], rhi: NDArray[np.float64], row: NDArray[np.int64],
-               lo: NDArray[np.float64], hi: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.int64], int]:
-    """The parts culling's rectangles ``rect[:, row]`` of boxes ``lo``, ``hi`` ``(n, 3)``, its
-    rows ``row`` (:class:`~walkstream.shared.partcull.PartRects`' arrays).  Returns the
-    rectangles ``(4, n)``, the places of those to clip anew (not :attr:`exact`) and a
-    status: 0 taken (the places' rectangles to be clipped when any), 1 none taken (a box
-    differs from its row's, or one not exact is not across the clip plane: all to be
-    made anew)."""
+               lo: NDArray[np.float64], hi: NDArray[np.float64], view: NDArray[np.float64],
+               proj: NDArray[np.float64], w: float, h: float, clip_m: float,
+               margin: float) -> tuple[NDArray[np.int64], bool]:
+    """The rectangles ``(4, n)`` of boxes ``lo``, ``hi`` ``(n, 3)`` from the parts culling's
+    (:class:`~walkstream.shared.partcull.PartRects`' arrays, the boxes' rows ``row``): taken
+    where :attr:`exact`, clipped here (:func:`_clip_box`) where across the clip plane.
+    False with them when a box differs from its row's or one neither exact nor across the
+    plane is met (all then to be made anew)."""
     n = row.shape[0]
     out = np.empty((4, n), np.int64)
-    rest = np.empty(n, np.int64)
-    m = 0
     for i in range(n):
         r = row[i]
         for j in range(3):
             if rlo[r, j] != lo[i, j] or rhi[r, j] != hi[i, j]:
-                return out, rest[:0], 1
-        for j in range(4):
-            out[j, i] = rect[j, r]
-        if not exact[r]:
-            if not crossing[r]:
-                return out, rest[:0], 1
-            rest[m] = i
-            m += 1
-    return out, rest[:m], 0
+                return out, False
+        if exact[r]:
+            for j in range(4):
+                out[j, i] = rect[j, r]
+        elif crossing[r]:
+            _clip_box(lo, hi, i, view, proj, w, h, clip_m, margin, out)
+        else:
+            return out, False
+    return out, True
+
+
+#: A box's edges as corner pairs (:data:`~walkstream.shared.screenrects.BOX_EDGES`; corner
+#: ``c`` takes coordinate ``j`` from the upper corner where bit ``j`` of ``c`` is set).
+_EDGES = ((0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7))
+
+
+@njit(cache=True, error_model="numpy")
+def _clip_box(lo: NDArray[np.float64], hi: NDArray[np.float64], i: int, view: NDArray[np.float64],
+              proj: NDArray[np.float64], w: float, h: float, clip_m: float, margin: float,
+              out: NDArray[np.int64]) -> None:
+    """Box ``i``'s rectangle of pixel centres clipped at depth ``clip_m`` into ``out[:, i]``
+    (:func:`~walkstream.shared.screenrects.clipped_box_rects`: its corners in eye space as
+    numpy's product makes them, the corners in front and the edges' crossings of the plane
+    projected, the same operations as ``_clipped_few``)."""
+    ex, ey, ez = np.empty(8), np.empty(8), np.empty(8)
+    for c in range(8):
+        x = hi[i, 0] if c & 1 else lo[i, 0]
+        y = hi[i, 1] if c & 2 else lo[i, 1]
+        z = hi[i, 2] if c & 4 else lo[i, 2]
+        ex[c] = _fma(view[0, 2], z, _fma(view[0, 1], y, view[0, 0] * x)) + view[0, 3]
+        ey[c] = _fma(view[1, 2], z, _fma(view[1, 1], y, view[1, 0] * x)) + view[1, 3]
+        ez[c] = _fma(view[2, 2], z, _fma(view[2, 1], y, view[2, 0] * x)) + view[2, 3]
+    p00, p02, p11, p12 = proj[0, 0], proj[0, 2], proj[1, 1], proj[1, 2]
+    big = 1e30
+    xlo = ylo = big
+    xhi = yhi = -big
+    for c in range(8):
+        d = -ez[c]
+        if d >= clip_m:
+            px, py = (p00 * ex[c] + p02 * ez[c]) / d, (p11 * ey[c] + p12 * ez[c]) / d
+            xlo, xhi, ylo, yhi = min(xlo, px), max(xhi, px), min(ylo, py), max(yhi, py)
+    for a, b in _EDGES:
+        da, db = -ez[a], -ez[b]
+        if (da - clip_m) * (db - clip_m) < 0:
+            t = (clip_m - da) / (db - da)
+            x = ex[a] + t * (ex[b] - ex[a])
+            y = ey[a] + t * (ey[b] - ey[a])
+            z = ez[a] + t * (ez[b] - ez[a])
+            px, py = (p00 * x + p02 * z) / -z, (p11 * y + p12 * z) / -z
+            xlo, xhi, ylo, yhi = min(xlo, px), max(xhi, px), min(ylo, py), max(yhi, py)
+    out[0, i] = int(np.ceil(_pixel(xlo, w) - 0.5 - margin))
+    out[1, i] = int(np.ceil(_pixel(ylo, h) - 0.5 - margin))
+    out[2, i] = int(np.floor(_pixel(xhi, w) - 0.5 + margin))
+    out[3, i] = int(np.floor(_pixel(yhi, h) - 0.5 + margin))
+
+
+@njit(cache=True, error_model="numpy")
+def _pixel(ndc: float, wh: float) -> float:
+    """An NDC bound in pixels (``_clipped_few``'s ``(ndc + 1) / 2 * wh`` within +-1e9)."""
+    q = (ndc + 1.0) * 0.5 * wh
+    if q < -1e9:
+        q = -1e9
+    if q > 1e9:
+        q = 1e9
+    return q
 
 
 @njit(cache=True, error_model="numpy")
@@ -137,13 +192,13 @@ def _window(ndc: float, half: float) -> float:
 
 @njit(cache=True, error_model="numpy")
 def _triangle(tri: NDArray[np.float64], t: int, m: NDArray[np.float64], sx: float, sy: float, clip_m: float,
-              near: float, far: float, ex: NDArray[np.float64], ey: NDArray[np.float64]) -> bool:
+              near: float, far: float, ex: NDArray[np.float64], ey: NDArray[np.float64],
+              scratch: NDArray[np.float64]) -> bool:
     """Triangle ``t``'s six side ends in window coordinates into ``ex``, ``ey`` (its
     vertices twice, or clipped at depth ``clip_m``); False when it is wholly behind the
-    clip plane or its depths miss the near and far planes."""
-    X = np.empty(3)
-    Y = np.empty(3)
-    W = np.empty(3)
+    clip plane or its depths miss the near and far planes.  ``scratch`` ``(4, 3)``: room
+    for its clip coordinates and depths beyond the plane (made once per round)."""
+    X, Y, W, d = scratch[0], scratch[1], scratch[2], scratch[3]
     for k in range(3):
         x, y, z = tri[0, k, t], tri[1, k, t], tri[2, k, t]
         X[k] = _fma(m[0, 2], z, _fma(m[0, 1], y, m[0, 0] * x)) + m[0, 3]
@@ -160,7 +215,6 @@ def _triangle(tri: NDArray[np.float64], t: int, m: NDArray[np.float64], sx: floa
             ex[2 * k], ey[2 * k] = x, y
             ex[(2 * k + 5) % 6], ey[(2 * k + 5) % 6] = x, y  # ends 0,1 1,2 2,0
         return True
-    d = np.empty(3)
     for k in range(3):
         d[k] = W[k] - clip_m
     fa = 0  # the first of the farthest in front
@@ -211,13 +265,14 @@ def _round(tri: NDArray[np.float64], first: NDArray[np.int64], many: NDArray[np.
     triangle: the numpy version's stable sort)."""
     ex = np.empty(6)
     ey = np.empty(6)
+    scratch = np.empty((4, 3))
     for i in range(who.shape[0]):
         p = who[i]
         cell = owner[p]
         best = -1.0
         best_v = -1
         for t in range(first[i], first[i] + many[i]):
-            if not _triangle(tri, t, m, sx, sy, clip_m, near, far, ex, ey):
+            if not _triangle(tri, t, m, sx, sy, clip_m, near, far, ex, ey, scratch):
                 continue
             x0, y0, x1, y1 = ex[0], ey[0], ex[0], ey[0]
             for e in range(1, 6):
@@ -324,8 +379,9 @@ def warm() -> None:
     tri[0, 1, 0] = tri[1, 2, 0] = 1.0
     one = np.zeros(1, np.int64)
     part, owner, _local = candidates(np.ones(1, np.bool_), one, one + 1, np.zeros(1, np.bool_), one + 1, 1)
-    take_rects(np.zeros((4, 1), np.int64), np.ones(1, np.bool_), np.zeros(1, np.bool_), np.zeros((1, 3)),
-               np.zeros((1, 3)), one, np.zeros((1, 3)), np.zeros((1, 3)))
+    box = np.array([[-1.0, -1.0, -2.0]]), np.array([[1.0, 1.0, 1.0]])  # across the clip plane
+    take_rects(np.zeros((4, 1), np.int64), np.zeros(1, np.bool_), np.ones(1, np.bool_), box[0], box[1], one,
+               box[0], box[1], np.eye(4), np.eye(4), 160.0, 120.0, 0.03, 0.125)
     m = np.eye(4)[[0, 1, 3]]
     m[2, 2] = -1.0
     test_parts(tri, one, one + 1, one - 1, part, owner, np.zeros((4, 1), np.int64),
