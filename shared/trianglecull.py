@@ -51,6 +51,13 @@ rectangles are the parts culling's where it made them the same way
 (:class:`~walkstream.shared.partcull.PartRects`); only the candidates across the clip
 plane are clipped here.  (The tours' captured calls: median 1.20-1.32 -> 0.63-0.70 ms,
 p99 4.0-4.2 -> 2.0 ms, the same parts on every call; docs/benchmarks.md.)
+
+The frame's loops are compiled (:mod:`walkstream.shared.trianglekernels`, numba): the
+candidates' gather, the rectangles of the boxes across the clip plane, each triangle's
+clip, rectangle and sides' test against its VSAs, and the witnesses' rounds, with the
+figures of the numpy version (:func:`_shows` and its helpers, kept as the reference the
+tests check the kernels against), operation for operation.  What is left here is the
+frame's bookkeeping: the cells placed in the table, their VSAs, the masks changed.
 """
 
 from __future__ import annotations
