@@ -35,6 +35,7 @@ from walkstream.shared.portals import cull_portals
 from walkstream.shared.roomcompact import decode_topology_compact
 from walkstream.shared.roomview import cell_of, room_projection, stack_planes
 from walkstream.shared.trianglecull import refine_parts
+from walkstream.shared.trianglekernels import warm_up as warm_up_triangle_test
 
 __all__ = ["triangle_rows", "triangle_table"]
 
@@ -65,6 +66,7 @@ def triangle_rows(sources: Sequence[str], out: Path, *, step_s: float = 1.0,
     boxes and by the triangles (sums over the poses), and per step (``walk``, ``boxes``,
     ``triangles``) the median and p99 milliseconds."""
     rows = []
+    warm_up_triangle_test()  # the compiled kernels made or loaded before any pose is timed
     for src in sources:
         name, db = _scene_db(src, out, log)
         with SceneReader.open(db) as r:

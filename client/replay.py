@@ -76,6 +76,7 @@ from walkstream.shared.ground import GROUND_Z
 from walkstream.shared.lsystem.grammar import parse_grammar
 from walkstream.shared.paths import RecordedPath
 from walkstream.shared.roomview import VIEW_NEAR_M, RoomView
+from walkstream.shared.trianglekernels import warm_up as warm_up_triangle_test
 from walkstream.shared.walls import WallTable
 from walkstream.shared.wire import Manifest
 
@@ -217,9 +218,6 @@ async def replay(
     truth_progress: Callable[[int, int], None] | None = None,
 ) -> ReplayResult:
     """The replay coroutine (see :func:`run_replay` to run it on a clock)."""
-    # the culling's compiled kernels loaded (or compiled, on a cold cache) before the
-    # walk, not inside its first timed frame
-    warm_up_culling()
     link = ShapedTransport(transport, config.link, clock)
     renderer: Any = None
     phases = FramePhases()
@@ -233,6 +231,12 @@ async def replay(
         transport=link, base_url=base_url, timeout=httpx.Timeout(30.0)
     ) as http:
         api = SceneClient(http, clock, config.scene, seed=config.seed, compress=config.gzip)
+        if config.kind != "city" and config.culling == "portals":
+            # the culling's compiled kernels made (a cold cache: seconds) or loaded before the
+            # walk's clock starts, never inside a timed frame; a city walk uses none of them
+            warm_up_culling()
+            if config.triangle_cull:
+                warm_up_triangle_test()
         t_start = clock.now()
         loop = asyncio.get_running_loop()
         manifest_fut: asyncio.Future[Manifest] = loop.create_future()

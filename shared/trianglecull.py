@@ -51,6 +51,13 @@ rectangles are the parts culling's where it made them the same way
 (:class:`~walkstream.shared.partcull.PartRects`); only the candidates across the clip
 plane are clipped here.  (The tours' captured calls: median 1.20-1.32 -> 0.63-0.70 ms,
 p99 4.0-4.2 -> 2.0 ms, the same parts on every call; docs/benchmarks.md.)
+
+The frame's loops are compiled (:mod:`walkstream.shared.trianglekernels`, numba): the
+candidates' gather, the rectangles of the boxes across the clip plane, each triangle's
+clip, rectangle and sides' test against its VSAs, and the witnesses' rounds, with the
+figures of the numpy version (:func:`_shows` and its helpers, kept as the reference the
+tests check the kernels against), operation for operation.  What is left here is the
+frame's bookkeeping: the cells placed in the table, their VSAs, the masks changed.
 """
 
 from __future__ import annotations
@@ -67,9 +74,9 @@ from walkstream.shared.screenrects import (
     BOX_EDGES,
     CENTRE_MARGIN_PX,
     box_corners_ckm,
-    clipped_box_rects,
     rects_ckm,
 )
+from walkstream.shared.trianglekernels import candidates, take_rects, test_parts
 from walkstream.shared.tritable import pack_cell, thread_table
 
 __all__ = ["MIN_TRIANGLES", "WIDE_PX", "TRIANGLE_EDGES", "cell_triangles", "refine_parts"]
@@ -184,69 +191,31 @@ def refine_parts(
         return 0
     table = thread_table()
     first = table.place([meshes[c] for c in cells])
-    # every part of these cells in one row, numbered in the frame (``row``) and in the table (``part``)
     n = [len(masks[c]) for c in cells]
-    base = np.cumsum([0, *n])
-    rows = int(base[-1])
-    part = np.arange(rows) + np.repeat(np.asarray(first, np.int64) - base[:-1], n)
-    # the candidates: kept parts of enough triangles, not stand-ins
-    cand = np.flatnonzero(np.concatenate([masks[c] for c in cells]) & ~table.stand_in[part]
-                          & (table.count[part] >= min_triangles))
-    if not len(cand):
+    # the candidates: kept parts of enough triangles, not stand-ins; each one's part in the
+    # table, its cell (an index into ``cells``) and its place in its cell's mask
+    part, owner, local = candidates(np.concatenate([masks[c] for c in cells]), np.asarray(first, np.int64),
+                                    np.asarray(n, np.int64), table.stand_in, table.count, min_triangles)
+    if not len(part):
         return 0
-    part = part[cand]
-    owner = np.searchsorted(base, cand, side="right") - 1  # each candidate's cell, an index into ``cells``
     lists = [vsas[c] for c in cells]
     kmax = max(map(len, lists))
-    # (4, kmax, cells): the cells' VSAs coordinate-major, padded with empty rectangles
-    areas = np.array([list(v) + [(1, 1, 0, 0)] * (kmax - len(v)) for v in lists], np.int64).transpose(2, 1, 0)
-    # only the parts whose box is not wholly inside a VSA, or is thin there: a box well
+    # (cells, kmax, 4): the cells' VSAs, padded with empty rectangles (never met)
+    areas = np.array([list(v) + [(1, 1, 0, 0)] * (kmax - len(v)) for v in lists], np.int64)
+    brect = np.ascontiguousarray(_box_rects(rects, cells, owner, local, table.lo[part], table.hi[part], V, P, size,
+                                            clip_m), np.int64)  # (4, parts)
+    # only the parts whose box is not wholly inside a VSA, or is thin there (a box well
     # inside one mostly holds triangles that draw there, and testing them cost 3 times
-    # the rest of the culling on the duplex's tour
-    lo, hi = table.lo[part], table.hi[part]
-    brect = _box_rects(rects, cells, owner, cand - base[owner], lo, hi, V, P, size, clip_m)  # (4, parts)
-    v = np.take(areas, owner, axis=2)  # (4, kmax, parts)
-    b = brect[:, None, :]
-    within = (b[0] >= v[0]) & (b[1] >= v[1]) & (b[2] <= v[2]) & (b[3] <= v[3])
-    within &= (brect[2] - brect[0] >= WIDE_PX - 1) & (brect[3] - brect[1] >= WIDE_PX - 1)
-    test = np.flatnonzero(~np.any(within, axis=0))
-    if not len(test):
-        return 0
-    cand, part, owner = cand[test], part[test], owner[test]
-    areas4 = np.ascontiguousarray(areas)
-    start, count, witness = table.start[part], table.count[part], table.witness[part]
-    shown = np.zeros(len(part), bool)
-    found = np.full(len(part), -1, np.int64)  # each part's new witness
-    # the first round: each part's witness (a triangle that showed when it was last
-    # tested), or its triangles (its first _FIRST_ROUND of a frame of many); the second:
-    # the rest of the parts not shown by the first (a part shows when any of its
-    # triangles does, each triangle's test its own: the same parts kept)
-    has = witness >= 0
-    cap = _FIRST_ROUND if int(count[~has].sum()) > _ONE_ROUND else None
-    n1 = np.where(has, 1, count if cap is None else np.minimum(count, cap))
-    first1 = np.where(has, start + witness, start)
-    for go in (0, 1):
-        if go == 0:
-            tri, who = _runs(first1, n1)
-        else:
-            two = np.flatnonzero(~shown & (n1 < count))  # (a witness tested a part of one triangle whole)
-            if not len(two):
-                break
-            # a failed witness's part is tested whole; a part tested in part, on from there
-            tri, who = _runs(np.where(has[two], start[two], start[two] + n1[two]),
-                             np.where(has[two], count[two], count[two] - n1[two]))
-            who = two[who]
-        _got, seen, score = _shows(table.tri[:, :, tri], np.take(areas4, owner[who], axis=2), V, P, size, clip_m,
-                                   planes, scored=True)
-        # the next witness: of the part's triangles that showed, the one whose rectangle
-        # holds the most pixel centres of a VSA (the last written of the sorted)
-        seen = seen[np.argsort(score, kind="stable")]
-        hit = who[seen]
-        shown[hit] = True
-        found[hit] = tri[seen] - start[hit]
-    table.witness[part] = found
-    gone = np.flatnonzero(~shown)
-    for k, i in zip(owner[gone].tolist(), (cand[gone] - base[owner[gone]]).tolist(), strict=True):
+    # the rest of the culling on the duplex's tour), in two rounds: each part's witness
+    # (a triangle that showed when it was last tested), or its triangles (its first
+    # _FIRST_ROUND of a frame of many); then the rest of the parts not shown by the first
+    # (a part shows when any of its triangles does, each triangle's test its own: the
+    # same parts kept).  Compiled: the numpy version's figures (_shows), operation for
+    # operation (shared/trianglekernels.py).
+    gone = test_parts(table.tri, table.start, table.count, table.witness, part, owner, brect, areas,
+                      np.array([len(v) for v in lists], np.int64), (P @ V)[[0, 1, 3]], 0.5 * size[0], 0.5 * size[1],
+                      clip_m, planes[0], planes[1], CENTRE_MARGIN_PX, WIDE_PX, _ONE_ROUND, _FIRST_ROUND)
+    for k, i in zip(owner[gone].tolist(), local[gone].tolist(), strict=True):
         masks[cells[k]][i] = False
     return len(gone)
 
@@ -272,23 +241,13 @@ def _box_rects(
         first = [rects.first.get(c, -1) for c in cells]
         if min(first) >= 0:
             row = np.asarray(first, np.int64)[owner] + local
-            if np.array_equal(rects.lo[row], lo) and np.array_equal(rects.hi[row], hi):
-                rect = rects.rect[:, row]
-                rest = np.flatnonzero(~rects.exact[row])
-                if not len(rest):
-                    return rect
-                if rects.crossing[row[rest]].all():  # across the clip plane: clipped as box_rects clips
-                    rect[:, rest] = clipped_box_rects(lo[rest], hi[rest], view, proj, size, clip_m)[0]
-                    return rect
+            c = np.ascontiguousarray  # the layouts the kernel was compiled for (a no-op mostly)
+            rect, taken = take_rects(c(rects.rect, np.int64), c(rects.exact), c(rects.crossing), c(rects.lo, np.float64),
+                                     c(rects.hi, np.float64), row, c(lo), c(hi), c(view), c(proj), float(size[0]),
+                                     float(size[1]), clip_m, CENTRE_MARGIN_PX)
+            if taken:  # those across the clip plane clipped as box_rects clips them
+                return rect
     return rects_ckm(box_corners_ckm(lo, hi), BOX_EDGES, view, proj, size, clip_m)[0]
-
-
-def _runs(first: NDArray[np.int64], count: NDArray[np.int64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """The indices of runs ``first[i] .. first[i] + count[i] - 1`` one after another, and
-    each index's run ``i``."""
-    ends = np.cumsum(count)
-    total = int(ends[-1]) if len(ends) else 0
-    return np.arange(total) + np.repeat(first - (ends - count), count), np.repeat(np.arange(len(count)), count)
 
 
 @functools.lru_cache(maxsize=16)

@@ -46,15 +46,25 @@ class _Mesh(Protocol):
 def pack_cell(mesh: _Mesh) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
     """A cell's triangles coordinate-major ``(3, 3, T)`` (``[j, k, t]``: coordinate ``j`` of
     vertex ``k`` of triangle ``t``), where each part's begin ``(parts + 1,)``, and the
-    parts' boxes ``(parts, 3)`` (lower, upper) of their triangles' vertices."""
-    per = [np.asarray(p.positions, np.float64)[np.asarray(p.indices, np.int64)].reshape(-1, 3, 3) for p in mesh.parts]
-    counts = np.array([len(t) for t in per], np.int64)
+    parts' boxes ``(parts, 3)`` (lower, upper) of their triangles' vertices (zeros for a
+    part without triangles).  All parts in one gather and one reduction each (a cell of
+    30 parts cost 0.5 ms part by part, the tail of the triangle test's frames)."""
+    pos = [np.asarray(p.positions, np.float64).reshape(-1, 3) for p in mesh.parts]
+    idx = [np.asarray(p.indices, np.int64).reshape(-1, 3) for p in mesh.parts]
+    counts = np.array([len(i) for i in idx], np.int64)
     start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    tri = np.concatenate(per) if per else np.zeros((0, 3, 3))
-    box = [(t.reshape(-1, 3).min(axis=0), t.reshape(-1, 3).max(axis=0)) if len(t) else (np.zeros(3), np.zeros(3))
-           for t in per]
-    lo = np.array([b[0] for b in box]).reshape(-1, 3)
-    hi = np.array([b[1] for b in box]).reshape(-1, 3)
+    lo = np.zeros((len(idx), 3))
+    hi = np.zeros((len(idx), 3))
+    if not int(start[-1]):
+        return np.zeros((3, 3, 0)), start, lo, hi
+    # each part's indices moved past the parts' vertices before it: one gather for all
+    offset = np.cumsum([0, *map(len, pos[:-1])])
+    tri = np.concatenate(pos)[np.concatenate(idx) + np.repeat(offset, counts)[:, None]]  # (T, 3, 3)
+    some = np.flatnonzero(counts)  # the parts with triangles: their runs of vertices one after another
+    at = 3 * start[some]
+    vertices = tri.reshape(-1, 3)
+    lo[some] = np.minimum.reduceat(vertices, at, axis=0)
+    hi[some] = np.maximum.reduceat(vertices, at, axis=0)
     return np.ascontiguousarray(tri.transpose(2, 1, 0)), start, lo, hi
 
 

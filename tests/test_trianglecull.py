@@ -322,3 +322,33 @@ def test_witnesses_the_table_and_the_shared_rectangles_keep_each_frames_parts(mo
         dropped += refine_parts(masks, cells, vsas, view, PROJ, SIZE, rects=rects)
         assert {c: m.tolist() for c, m in masks.items()} == {c: m.tolist() for c, m in want.items()}, i
     assert dropped > 0 and witnessed > 0 and crossing > 0
+
+
+def test_the_compiled_test_keeps_what_the_numpy_reference_keeps() -> None:
+    """Each triangle a part of its own, tested by the compiled kernel and by the numpy
+    reference (``_shows``): the same triangles shown, in front of, across and behind the
+    clip plane, against two VSAs and a pad."""
+    import walkstream.shared.trianglecull as tc
+    from walkstream.shared.partcull import near_far
+    from walkstream.shared.trianglekernels import test_parts
+
+    rng = np.random.default_rng(23)
+    n = 400
+    centre = np.c_[rng.uniform(-1.0, 9.0, n), rng.uniform(-4.0, 4.0, n), rng.uniform(-2.0, 2.0, n)]
+    tri = centre[:, None, :] + rng.normal(0.0, rng.choice([0.02, 0.3, 2.0], n)[:, None, None], (n, 3, 3))
+    pts = np.ascontiguousarray(tri.transpose(2, 1, 0))
+    areas = [(30, 20, 120, 90), (0, 0, 20, 10), (1, 1, 0, 0)]
+    vsa = np.ascontiguousarray(np.tile(np.array(areas, np.int64), (n, 1, 1)).transpose(2, 1, 0))
+    planes = near_far(PROJ)
+    assert planes is not None
+    want = tc._shows(pts, vsa, VIEW, PROJ, SIZE, 0.03, planes)
+    one = np.ones(n, np.int64)
+    witness = np.full(n, -1, np.int64)
+    brect = np.tile(np.array([[0], [0], [-1], [-1]], np.int64), (1, n))  # no box inside a VSA: all tested
+    gone = test_parts(pts, np.arange(n), one, witness, np.arange(n), np.zeros(n, np.int64), brect,
+                      np.array([areas], np.int64), np.array([2], np.int64), (PROJ @ VIEW)[[0, 1, 3]],
+                      0.5 * SIZE[0], 0.5 * SIZE[1], 0.03, planes[0], planes[1], 0.125, tc.WIDE_PX, 10**9, 32)
+    got = np.ones(n, bool)
+    got[gone] = False
+    assert got.tolist() == want.tolist() and 50 < want.sum() < n - 50
+    assert ((witness == 0) == want).all()  # a triangle shown is its part's witness
