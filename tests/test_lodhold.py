@@ -15,6 +15,7 @@ from walkstream.client.walk.lodhold import (
     best_triangles,
     held_budget,
     held_share,
+    lod_caps,
     note_lod_changes,
 )
 
@@ -109,3 +110,13 @@ def test_a_binding_budget_holds_the_cut_not_the_controllers_climb() -> None:
     f = _frame(w, 4, 4000, 3810)
     after = [_frame(w, k, 4000, 3990) for k in range(5, 10)]
     assert all(g.alloc.triangles <= 3810 for g in [f, *after])
+
+
+def test_a_fall_holds_a_rise_back_but_a_rise_may_rise_on() -> None:
+    w = _hold_walk(1.0)
+    for k, lods in enumerate([[0, 0, 0, 0], [1, 2, 0, 0]]):  # first drawn, then two rise
+        note_lod_changes(w, SimpleNamespace(wt=0.04 * k, alloc=SimpleNamespace(lod=np.array(lods, np.int8))))
+    assert lod_caps(w, SimpleNamespace(wt=0.08)).tolist() == [2, 2, 2, 2]  # a rise is no flip: free
+    note_lod_changes(w, SimpleNamespace(wt=0.08, alloc=SimpleNamespace(lod=np.array([1, 1, 0, 0], np.int8))))
+    assert lod_caps(w, SimpleNamespace(wt=0.12)).tolist() == [2, 1, 2, 2]  # the fall: no rise back
+    assert lod_caps(w, SimpleNamespace(wt=1.12)).tolist() == [2, 2, 2, 2]  # until the hold is over

@@ -11,7 +11,7 @@ drawn; the impostors of the current cell (:mod:`.impostors`) first, two triangle
 one draw each, their buildings' geometry left out where the image stands alone and
 kept at its LOD while the image blends over it (:func:`~.impostors.hold_blend_lods`);
 while the budget binds, the LOD hold (:mod:`.lodhold`) holds the most the draws before
-the objects took off their share and lets a LOD that just changed only go down, so
+the objects took off their share and lets a LOD that just fell not rise, so
 nothing flips with the budget.  The device's cost step (``cost_step_at_s``) is applied here too.
 """
 

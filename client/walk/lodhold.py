@@ -15,10 +15,10 @@ long (0: neither; :func:`hold_seconds`), and both only while the budget binds
   ``hold_s`` (:func:`held_budget` of that cut): the swing those draws give the objects'
   share is held, the budget controller's own moves pass at once, and it is never more
   than the frame's own share;
-- an object whose LOD changed less than ``hold_s`` ago may only go down (:func:`lod_caps`,
+- an object whose LOD fell less than ``hold_s`` ago may not rise (:func:`lod_caps`,
   :func:`note_lod_changes`): the ACH order changing (a new cell's ACH, an object coming
-  into view) and the controller's budget falling move an object once a hold at most,
-  never over the budget.
+  into view) and the controller's budget falling move an object down and back once a
+  hold at most, never over the budget; an object that rose may rise on (no flip).
 
 A frame whose own share draws every visible object at its best LOD gets that share and
 no caps, so the objects rise at once.  Why both limits: on ``desktop2003`` (the demo's
@@ -27,8 +27,10 @@ rule as it was (the low water of the whole share) kept the objects below LOD 2 f
 second after each dip even on frames where everything fit, and at the walk's start it
 held the controller's climb to its level at the climb's foot, where the controller,
 seeing the same triangle count frame after frame, could not learn what a triangle
-costs and crept up for 3 s instead of 10 frames (issue 27: all-LOD 2 frames 67 -> 30 %,
-pixels visibly wrong 0.10 -> 0.57 % of the frame on the demo's SE, 40 s at 320 x 240).
+costs and crept up for 3 s instead of 10 frames, and the second rule as it was (no
+rise for a hold after any change) stopped each object at the LOD it first rose to
+(issue 27: all-LOD 2 frames 67 -> 30 %, pixels visibly wrong 0.10 -> 0.57 % of the
+frame on the demo's SE, 40 s at 320 x 240, against no hold).
 """
 
 from __future__ import annotations
@@ -108,7 +110,7 @@ def held_share(
 
 def lod_caps(w: WalkState, f: Frame) -> NDArray[np.int64] | None:
     """``(k,)`` the highest LOD each of the walk's objects (``w.objects.geoms``) may take
-    this frame: its LOD where that changed less than ``config.lod_hold_s`` before the
+    this frame: its LOD where that fell less than ``config.lod_hold_s`` before the
     frame's walk time, else 2; None with the hold off (0) or nothing held."""
     hold = hold_seconds(w)
     if hold <= 0 or not w.lod_since:
@@ -123,8 +125,9 @@ def lod_caps(w: WalkState, f: Frame) -> NDArray[np.int64] | None:
 
 
 def note_lod_changes(w: WalkState, f: Frame) -> None:
-    """Note each drawn object's LOD and, where it changed (or first drawn), the frame's
-    walk time (``w.lod_since``), after the allocation and its blend hold."""
+    """Note each drawn object's LOD and, where it fell, the frame's walk time
+    (``w.lod_since``; first drawn or risen: ``-inf``, nothing to hold), after the
+    allocation and its blend hold."""
     if hold_seconds(w) <= 0 or f.alloc is None:
         return
     since = w.lod_since
@@ -134,5 +137,7 @@ def note_lod_changes(w: WalkState, f: Frame) -> None:
         was = since.get(g.id)
         if was is None:
             since[g.id] = (lod, -np.inf)  # first drawn: nothing to hold it against
-        elif was[0] != lod:
-            since[g.id] = (lod, f.wt)
+        elif lod < was[0]:
+            since[g.id] = (lod, f.wt)  # a fall: no rise back for the hold
+        elif lod > was[0]:
+            since[g.id] = (lod, -np.inf)  # a rise: a further rise is no flip (the climb at the start)
