@@ -10,8 +10,9 @@ the street* the triangles (the ACH allocation of the PVS objects in the frustum,
 drawn; the impostors of the current cell (:mod:`.impostors`) first, two triangles and
 one draw each, their buildings' geometry left out where the image stands alone and
 kept at its LOD while the image blends over it (:func:`~.impostors.hold_blend_lods`);
-the LOD hold (:mod:`.lodhold`) gives the allocation the low water of the objects'
-share and lets a LOD that just changed only go down, so nothing flips with the budget.  The device's cost step (``cost_step_at_s``) is applied here too.
+while the budget binds, the LOD hold (:mod:`.lodhold`) holds the most the draws before
+the objects took off their share and lets a LOD that just fell not rise, so
+nothing flips with the budget.  The device's cost step (``cost_step_at_s``) is applied here too.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from walkstream.client.draw.allocate import allocate_ach, allocate_distance
 from walkstream.client.walk.draw import forget_cell
 from walkstream.client.walk.facades import bake_facades, choose_facades, facade_avail
 from walkstream.client.walk.impostors import frame_impostors, hold_blend_lods, replaced
-from walkstream.client.walk.lodhold import held_budget, lod_caps, note_lod_changes
+from walkstream.client.walk.lodhold import held_share, note_lod_changes
 from walkstream.client.walk.state import Frame, WalkState
 from walkstream.shared.codec.cellmesh import CellMesh
 from walkstream.shared.frustum import frustum_cull
@@ -68,10 +69,11 @@ def allocate(w: WalkState, f: Frame) -> None:
         avail = o.avail if w.facades is None or w.indoors else facade_avail(w)
         if cfg.lod_select == "ach":
             own = max(f.budget - room_tris - quad_tris, 0)
-            share = held_budget(w, f, own)  # its low water: no flips with the budget's slack
+            # held while the budget binds: no flips with the share's swing
+            share, caps = held_share(w, f, own, o.tri, avail, seen)
             f.alloc = allocate_ach(o.ach, o.tri, avail, seen, share,
-                                   reserve_floor=True, greedy=cfg.lod_greedy, cap=lod_caps(w, f))
-            if f.alloc.floor_limited and share < own:  # limited by the frame's own share, not the low water
+                                   reserve_floor=True, greedy=cfg.lod_greedy, cap=caps)
+            if f.alloc.floor_limited and share < own:  # limited by the frame's own share, not the hold
                 low = np.argmax(avail, axis=1)
                 drawable = seen & avail.any(axis=1)
                 floor = int(o.tri[drawable, low[drawable]].sum())

@@ -92,11 +92,11 @@ class WalkState:
     """The geometry's LOD of each building whose image was blending over it the last
     frame (:func:`~walkstream.client.walk.impostors.hold_blend_lods` keeps it)."""
     lod_since: dict[int, tuple[int, float]] = field(default_factory=dict)
-    """Per object drawn, its last LOD and the walk time it changed to it
-    (:mod:`~walkstream.client.walk.lodhold`)."""
+    """Per object drawn, its last LOD and the walk time it fell to it (``-inf`` where
+    it rose to it or was first drawn at it; :mod:`~walkstream.client.walk.lodhold`)."""
     lod_budgets: deque[tuple[float, int]] = field(default_factory=deque)
-    """The objects' budgets of the last frames, ``(walk time, budget)``, ascending in
-    both (:func:`~walkstream.client.walk.lodhold.held_budget`)."""
+    """Of the last frames, ``(walk time, value)``, ascending in both: the value the
+    objects' share is below the frame's budget (:func:`~walkstream.client.walk.lodhold.held_budget`)."""
     impostor_rows: dict[int, tuple[Any, Any]] = field(default_factory=dict)
     """Per building the last frame drew as an image, its row and the record that listed it
     (:class:`~walkstream.shared.impostorwire.ImpostorRow`,
