@@ -22,6 +22,7 @@ from walkstream.shared.codec.cellbatch import check_contents_part
 from walkstream.shared.codec.cellhead import STAND_IN_ELEMENT, decode_cell_head
 from walkstream.shared.codec.cellpieces import decode_cell_pieces
 from walkstream.shared.codec.contentspack import is_pack, unpack_parts
+from walkstream.shared.cullkernels import box_kernel, walk_kernel
 from walkstream.shared.startwire import decode_start_part
 
 
@@ -59,6 +60,8 @@ def _bundle(app: Any, heads: bool) -> tuple[list[tuple[int, dict[str, Any]]], li
 
 def test_heads_come_first_and_their_cells_whole_after(fzk_db: tuple[Path, dict[str, Any]]) -> None:
     app = create_app([fzk_db[0]])
+    # an interior's service made its compiled culling at the start, before any request
+    assert walk_kernel.signatures and box_kernel.signatures
     try:
         plain, plain_ends = _bundle(app, heads=False)
         split, split_ends = _bundle(app, heads=True)

@@ -32,6 +32,7 @@ from starlette.requests import ClientDisconnect
 from walkstream.server.service import routers
 from walkstream.server.service.metrics import Metrics, MetricsMiddleware
 from walkstream.server.service.registry import SceneRegistry
+from walkstream.shared.cullkernels import warm_up as warm_up_culling
 from walkstream.shared.errors import (
     ApiError,
     CodecError,
@@ -193,6 +194,10 @@ def create_app(paths: Sequence[str | os.PathLike[str]]) -> FastAPI:
         databases with the same scene name.  The message names the file.
     """
     registry = SceneRegistry.open(list(paths))
+    if any(scene.interior is not None for scene in registry.scenes.values()):
+        # an interior's first view is culled on the server (its start bundle): the compiled
+        # culling made (a cold cache: seconds) or loaded now, not in the first walker's request
+        warm_up_culling()
     app = FastAPI(
         title="walkstream",
         version="1",
