@@ -115,6 +115,10 @@ def test_a_walk_with_heads_is_perfect_sooner_and_hides_nothing(
     # a frame that keeps a stand-in waits for the cell, and no frame hides a pixel
     run, _ = _replay(db, tmp_path / "walk", "--start-hold", "0", "--truth-every", "5")
     assert run["truth"]["frames"] >= 15 and run["truth"]["culled_pixels"] == 0
+    # and the colour truth agrees: a pixel the frame waited for (a late cell's part, or one
+    # at the same depth) is late, not culled, before the first view too
+    causes = run["truth"]["colour"]["causes"]
+    assert causes["culled"] == 0 and causes["not_received"] > 0
 
 
 def test_the_heads_cells_follow_whole_in_the_order_the_walk_needs_them(

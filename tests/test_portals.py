@@ -233,6 +233,8 @@ def test_replay_culling_switch_on_an_interior(office_db: Path, tmp_path: Path) -
         assert (s["culling_triangles_ms_median"] > 0) == (mode == "portals")
         # the ground truth on an interior: no part culled shows (late cells are not culled)
         assert s["truth"]["frames"] >= 4 and s["truth"]["culled_pixels"] == 0, s["truth"]
+        # the colour truth agrees: what the frame waited for, or kept at the same depth, is not culled
+        assert s["truth"]["colour"]["causes"]["culled"] == 0, s["truth"]["colour"]["causes"]
         assert set(s["truth"]) == {"frames", "culled_pixels", "culled_frames", "pinholes", "refused_poses",
                                    "fog_hidden_pct", "tightness_mean", "tightness_p95", "colour"}
         page = (rep / "index.html").read_text()

@@ -77,6 +77,37 @@ def test_fog_and_culling_show_as_colour_error_with_their_causes(office_db: Path,
     np.testing.assert_array_equal(rc.fog_m[:2], [math.inf, 2.5])
 
 
+def test_a_surface_the_frame_waited_for_at_the_same_depth_is_late_not_culled(office_db: Path, gl: object) -> None:
+    # coincident surfaces (a wall's piece in two cells) show either key in the truth: the
+    # frame that waited for one of them lacks the pixel because it is late, as the
+    # culled-pixel check (which draws what the frame kept) counts it, not because of culling
+    with SceneReader.open(office_db) as r:
+        rooms = {c.id: decode_cell_mesh(r.contents(c.id)) for c in r.cells()}
+        tour = RecordedPath.from_msgpack(r.path_blob("tour"))
+        cells = [c for c in r.cells() if c.kind != "outside"]
+    twin = max(rooms) + 1
+    probe = TruthRenderer(size=(160, 120), rooms=rooms, near=0.1, far=100.0, two_sided=True, ctx=gl)
+    try:
+        _, eye, view = _far_pose(probe, tour)
+    finally:
+        probe.release()
+    here = next(c.id for c in cells if _inside(c, eye))
+    rooms[twin] = rooms[here]  # the walker's own cell twice: every surface of it in two keys
+    truth = TruthRenderer(size=(160, 120), rooms=rooms, near=0.1, far=100.0, two_sided=True, ctx=gl)
+    try:
+        ids, _ = truth.render(eye, view)
+        keys = [truth.keys[i] for i in np.unique(ids[ids >= 0]).tolist()]
+        for late in (twin, here):  # waiting for either twin, drawing nothing
+            others = tuple(c for c in rooms if c not in (here, twin))
+            rc = room_colour(truth, [_note(0, eye, view, [], math.inf, here, waiting=(late, *others))])
+            c = rc.log.colour
+            assert c is not None
+            assert c.causes[0, CAUSES.index("culled")] == 0.0, (late, keys[:4])
+            assert c.causes[0, CAUSES.index("not_received")] > 0.5
+    finally:
+        truth.release()
+
+
 def _far_pose(truth: TruthRenderer, tour: RecordedPath) -> tuple[float, np.ndarray, np.ndarray]:
     """Of 40 poses along ``tour``, the one whose frame shows most beyond 3 m: ``(share of
     the frame beyond 3 m, eye, view)``."""

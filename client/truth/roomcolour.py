@@ -30,7 +30,11 @@ it); ``not_received`` for a part of a visible cell whose contents had not arrive
 an object of the visible set not yet received; ``not_built`` for one received and not
 built; ``pvs`` for an object outside the visible set; ``lod`` for an object drawn at a
 coarser LOD; ``culled`` for anything else left out (portal culling; the culled-pixel
-check says whether that was wrong).  A pixel a wall's texture painted is the wall's:
+check says whether that was wrong).  Where what the frame kept (drew, or waited for)
+lies at the same depth as the full scene's surface (within the culled-pixel check's
+:data:`~walkstream.client.truth.culled.TIE_M`: coincident surfaces, a wall's piece in
+two cells, show either key), the pixel takes the kept thing's cause instead, as that
+check counts it: late if it was waited for, none if it was drawn.  A pixel a wall's texture painted is the wall's:
 its colour cause is ``wall`` (:data:`~walkstream.client.truth.colour.COLOUR_CAUSES`),
 and it is not counted as lacking by an id cause (the texture stands in, as the
 culled-pixel check counts it under ``wall_pixels``), so the error with walls is the
@@ -54,7 +58,7 @@ from walkstream.client.report.colour import ColourLog
 from walkstream.client.report.truth import TruthLog
 from walkstream.client.truth.colour import COLOUR_CAUSES, compare_colour
 from walkstream.client.truth.compare import CAUSES
-from walkstream.client.truth.culled import SOLID_NEAR
+from walkstream.client.truth.culled import SOLID_NEAR, TIE_M, kept_keys
 from walkstream.client.truth.missing import ColourWorst
 from walkstream.client.truth.notes import FrameNote
 from walkstream.client.truth.picture import client_keys
@@ -82,6 +86,26 @@ class RoomColour:
     """``(n,)`` the fog distance of each compared frame (``inf``: none)."""
     seam: SeamMeter | None = None
     """The seam at the walls' zone borders (None: no frame drew a wall)."""
+
+
+def _causes(note: FrameNote, ki: NDArray[np.int64], oid_of: NDArray[np.int64], cell_of: NDArray[np.int64],
+            is_part: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """``(h, w)`` the id cause (an index of :data:`CAUSES`, fog apart) of the frame lacking
+    the key ``ki`` of each pixel (module docs: the order the causes are told in)."""
+    oid = oid_of[ki]
+    waiting = np.isin(cell_of[ki], np.asarray(note.waiting, np.int64)) & is_part[ki]
+    in_pvs = np.isin(oid, note.pvs if note.pvs is not None else np.zeros(0, np.int64))
+    received = np.isin(oid, note.received)
+    built = np.isin(oid, note.built)
+    coarse = np.isin(oid, np.array([i for i, lod, _ in note.drawn if lod < 2], np.int64))
+    obj = oid >= 0
+    c = np.full(ki.shape, _CULLED, np.int64)
+    c = np.where(obj & coarse, _LOD, c)
+    c = np.where(obj & in_pvs & received & ~built, _NOT_BUILT, c)
+    c = np.where(obj & in_pvs & ~received, _NOT_RECEIVED, c)
+    c = np.where(obj & ~in_pvs, _PVS, c)
+    out: NDArray[np.int64] = np.where(waiting, _NOT_RECEIVED, c)
+    return out
 
 
 def pixel_distance(depth: NDArray[np.float64], proj: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -165,20 +189,19 @@ def room_colour(
         cause = np.full(t_idx.shape, -1, np.int64)
         if lacks.any():
             beyond = pixel_distance(t_depth, truth.proj) > note.fog
-            oid = oid_of[ti]
-            waiting = np.isin(cell_of[ti], np.asarray(note.waiting, np.int64)) & is_part[ti]
-            pvs = note.pvs
-            in_pvs = np.isin(oid, pvs)
-            received = np.isin(oid, note.received)
-            built = np.isin(oid, note.built)
-            coarse = np.isin(oid, np.array([i for i, lod, _ in note.drawn if lod < 2], np.int64))
-            obj = oid >= 0
-            c = np.full(t_idx.shape, _CULLED, np.int64)
-            c = np.where(obj & coarse, _LOD, c)
-            c = np.where(obj & in_pvs & received & ~built, _NOT_BUILT, c)
-            c = np.where(obj & in_pvs & ~received, _NOT_RECEIVED, c)
-            c = np.where(obj & ~in_pvs, _PVS, c)
-            c = np.where(waiting, _NOT_RECEIVED, c)
+            c = _causes(note, ti, oid_of, cell_of, is_part)
+            left_out = lacks & (c == _CULLED)
+            if left_out.any():
+                # what the frame kept (drew, or waited for) at the same depth is no culling,
+                # as the culled-pixel check counts it: coincident surfaces (a wall's piece in
+                # two cells) show either key, so the cause is the kept key's own
+                kept_flags = truth.flags(kept_keys(truth, note)[1])
+                k_idx, k_depth = truth.render(note.eye, note.view, kept_flags, note.fog)
+                tie = left_out & (k_idx >= 0) & (k_depth <= t_depth + TIE_M)
+                if tie.any():
+                    ki = np.maximum(k_idx, 0)
+                    own = np.where(truth.flags(drawn)[ki], -1, _causes(note, ki, oid_of, cell_of, is_part))
+                    c = np.where(tie, own, c)
             c = np.where(beyond, _FOG, c)
             cause = np.where(lacks & ~wall, c, -1)
         lods = truth.lods(c_idx)
