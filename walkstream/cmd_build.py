@@ -199,7 +199,8 @@ def add_build_parsers(sub: Any) -> None:
     gi.add_argument("--size", help="LENGTHxWIDTH of the building in metres (default 60x20)")
     gi.add_argument("--preset", help="a named plan: paper (the scale of Mulloni et al.'s model), paper10 (ten times its cells), "
                     "hall (an open production hall of machines, robots and racks, 96 x 60 m in 40 bays)")
-    gi.add_argument("-o", "--output", required=True, help="interior file to write (.json)")
+    gi.add_argument("-o", "--output", required=True,
+                    help="interior file to write: .json (walkstream-interior), or .ifc (an IFC4 model; needs the ifc extra)")
     gi.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     gi.set_defaults(func=cmd_generate_interior)
 

@@ -343,7 +343,8 @@ def interior_summary(doc: dict[str, Any]) -> dict[str, Any]:
 
 
 def write_interior(path: str | os.PathLike[str], plan: InteriorPlan) -> dict[str, Any]:
-    """Generate an interior and write it as compact JSON (via a temporary file).
+    """Generate an interior and write it as compact JSON (via a temporary file), or as
+    IFC4 when ``path`` ends in ``.ifc``.
 
     Returns
     -------
@@ -355,8 +356,20 @@ def write_interior(path: str | os.PathLike[str], plan: InteriorPlan) -> dict[str
 
 def write_interior_doc(path: str | os.PathLike[str], doc: dict[str, Any]) -> dict[str, Any]:
     """Write a generated interior document (an office's or a hall's) as compact JSON (via a
-    temporary file) and return its :func:`interior_summary`."""
+    temporary file), or as an IFC4 model when ``path`` ends in ``.ifc``
+    (:func:`~walkstream.server.sources.ifcwrite.write_interior_ifc`), and return its
+    :func:`interior_summary`."""
     dest = Path(path)
+    if dest.suffix.lower() == ".ifc":
+        from walkstream.server.sources.ifcwrite import write_interior_ifc
+
+        tmp = dest.with_name(dest.name + ".tmp")
+        summary = write_interior_ifc(tmp, doc)
+        try:
+            tmp.replace(dest)
+        except OSError as exc:
+            raise InputError(f"{dest}: cannot write ({exc.strerror or exc})") from exc
+        return summary
     tmp = dest.with_name(dest.name + ".tmp")
     try:
         tmp.write_text(json.dumps(doc, separators=(",", ":"), allow_nan=False), encoding="utf-8")
