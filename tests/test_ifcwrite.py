@@ -54,6 +54,13 @@ def test_a_generated_interior_survives_ifc(tmp_path: Path) -> None:
     assert {room_id.get(cells[c].room or "", None) for c in (door.a, door.b)} & {"r0.01", "c0.00"}
 
 
+def test_same_plan_same_bytes(tmp_path: Path) -> None:
+    tiny = InteriorPlan(storeys=1, length=12.0, width=8.0, seed=5, furniture=0.5)
+    a, b = tmp_path / "a.ifc", tmp_path / "b.ifc"
+    assert write_interior(a, tiny) == write_interior(b, tiny)
+    assert a.read_bytes() == b.read_bytes()
+
+
 def test_writing_ifc_without_ifcopenshell_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "ifcopenshell", None)
     with pytest.raises(InputError, match="ifcopenshell.*walkstream\\[ifc\\]"):

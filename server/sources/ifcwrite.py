@@ -266,6 +266,26 @@ class IfcBuilder:
             items.append(self._prism([c - u - v, c + u - v, c + u + v, c - u + v], z0, z1 - z0))
         return items
 
+    def fix_ids(self, key: str) -> None:
+        """Make the file depend on its content only: every ``GlobalId`` derived from
+        ``key`` and the entity's rank, relationships' members in creation order (the API
+        keeps them in sets) and a fixed time stamp (same model, same bytes)."""
+        import uuid
+
+        import ifcopenshell.guid
+
+        for rel in self.f.by_type("IfcRelationship"):
+            for attr in ("RelatedObjects", "RelatedElements"):
+                members = getattr(rel, attr, None) if hasattr(rel, attr) else None
+                if members:
+                    setattr(rel, attr, sorted(members, key=lambda x: x.id()))
+        for units in self.f.by_type("IfcUnitAssignment"):
+            units.Units = sorted(units.Units, key=lambda x: x.id())
+
+        for i, e in enumerate(sorted(self.f.by_type("IfcRoot"), key=lambda x: x.id())):
+            e.GlobalId = ifcopenshell.guid.compress(uuid.uuid5(uuid.NAMESPACE_URL, f"walkstream:{key}:{i}").hex)
+        self.f.header.file_name.time_stamp = "2000-01-01T00:00:00"
+
     def write(self, path: str | os.PathLike[str]) -> Path:
         """Write the model as an IFC-SPF file."""
         dest = Path(path)
@@ -289,6 +309,7 @@ def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any]) -> dic
     ``LANDING`` slab, with an ``IfcRailing`` beside each flight; furniture an
     ``IfcFurnishingElement`` of boxes.  The file carries no space boundaries: a
     reader finds which rooms a door joins from the geometry, as for most exporters.
+    Same document, same bytes (:meth:`IfcBuilder.fix_ids`).
 
     Raises
     ------
@@ -358,6 +379,7 @@ def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any]) -> dic
         k = int(f["storey"])
         rows = furniture_boxes(str(f["kind"]), local(f["at"]), float(f.get("yaw", 0.0)), floor(k))
         b.element("IfcFurnishingElement", f"{f['kind']} {f['id']}", storeys[k], rows)
+    b.fix_ids(str(doc.get("name", "interior")))
     b.write(path)
     return interior_summary(doc)
 
