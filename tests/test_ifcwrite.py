@@ -61,6 +61,12 @@ def test_same_plan_same_bytes(tmp_path: Path) -> None:
     assert a.read_bytes() == b.read_bytes()
 
 
+def test_an_ifc_into_a_missing_folder_is_one_line(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="cannot write"):
+        write_interior(tmp_path / "missing" / "office.ifc", InteriorPlan(storeys=1, length=12.0, width=8.0))
+    assert not (tmp_path / "missing").exists()
+
+
 def test_writing_ifc_without_ifcopenshell_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "ifcopenshell", None)
     with pytest.raises(InputError, match="ifcopenshell.*walkstream\\[ifc\\]"):

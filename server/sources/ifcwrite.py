@@ -290,14 +290,15 @@ class IfcBuilder:
         """Write the model as an IFC-SPF file."""
         dest = Path(path)
         try:
-            self.f.write(str(dest))
+            # written here, not by ifcopenshell's write(): that one makes missing folders
+            dest.write_text(self.f.to_string(), encoding="utf-8")
         except OSError as exc:
             raise InputError(f"{dest}: cannot write ({exc.strerror or exc})") from exc
         return dest
 
 
-def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any]) -> dict[str, Any]:
-    """Write a ``walkstream-interior`` document as an IFC4 file; return its summary.
+def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any]) -> Path:
+    """Write a ``walkstream-interior`` document as an IFC4 file; return its path.
 
     What each element becomes: a room an ``IfcSpace`` (its outline extruded from its
     storey's floor to the underside of the slab above, ``Name`` its id, ``LongName``
@@ -318,7 +319,6 @@ def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any]) -> dic
         names it), or the file cannot be written.
     """
     from walkstream.server.sources.interiorfile import load_interior_dict
-    from walkstream.server.sources.interiorgen import interior_summary
     from walkstream.shared.errors import SourceError
 
     try:
@@ -380,8 +380,7 @@ def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any]) -> dic
         rows = furniture_boxes(str(f["kind"]), local(f["at"]), float(f.get("yaw", 0.0)), floor(k))
         b.element("IfcFurnishingElement", f"{f['kind']} {f['id']}", storeys[k], rows)
     b.fix_ids(str(doc.get("name", "interior")))
-    b.write(path)
-    return interior_summary(doc)
+    return b.write(path)
 
 
 def _stair(b: IfcBuilder, storey: Any, st: dict[str, Any], off: np.ndarray, z0: float, rise: float) -> None:

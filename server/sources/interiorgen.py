@@ -363,13 +363,15 @@ def write_interior_doc(path: str | os.PathLike[str], doc: dict[str, Any]) -> dic
     if dest.suffix.lower() == ".ifc":
         from walkstream.server.sources.ifcwrite import write_interior_ifc
 
+        if not dest.parent.is_dir():
+            raise InputError(f"{dest}: cannot write (no folder {dest.parent})")
         tmp = dest.with_name(dest.name + ".tmp")
-        summary = write_interior_ifc(tmp, doc)
+        write_interior_ifc(tmp, doc)
         try:
             tmp.replace(dest)
         except OSError as exc:
             raise InputError(f"{dest}: cannot write ({exc.strerror or exc})") from exc
-        return summary
+        return interior_summary(doc)
     tmp = dest.with_name(dest.name + ".tmp")
     try:
         tmp.write_text(json.dumps(doc, separators=(",", ":"), allow_nan=False), encoding="utf-8")
