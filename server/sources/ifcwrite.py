@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import shapely
 from numpy.typing import ArrayLike
 
 from walkstream.server.sources.interiormesh import (
@@ -245,6 +246,17 @@ class IfcBuilder:
             ifcopenshell.api.aggregate.assign_object(self.f, products=[e], relating_object=within)
         return e
 
+    def boundary(self, space: Any, element: Any, internal: bool = True) -> Any:
+        """A physical space boundary: ``element`` (a door, a wall) bounds ``space``; no
+        connection geometry (optional in IFC4): it says which spaces, not where."""
+        import ifcopenshell.guid
+
+        return self.f.create_entity(
+            "IfcRelSpaceBoundary", GlobalId=ifcopenshell.guid.new(), RelatingSpace=space,
+            RelatedBuildingElement=element, PhysicalOrVirtualBoundary="PHYSICAL",
+            InternalOrExternalBoundary="INTERNAL" if internal else "EXTERNAL",
+        )
+
     def assembly(self, cls: str, name: str, storey: Any, predefined: str | None = None) -> Any:
         """A product with no body of its own (a stair), contained in ``storey``; its parts
         are :meth:`element` calls with ``within`` set to it."""
@@ -297,7 +309,7 @@ class IfcBuilder:
         return dest
 
 
-def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any]) -> Path:
+def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any], boundaries: bool = False) -> Path:
     """Write a ``walkstream-interior`` document as an IFC4 file; return its path.
 
     What each element becomes: a room an ``IfcSpace`` (its outline extruded from its
@@ -308,8 +320,10 @@ def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any]) -> Pat
     (frame and pane); a slab an ``IfcSlab`` (the roof one of type ``ROOF`` on the top
     storey); a switchback stair an ``IfcStair`` of two ``IfcStairFlight`` and a
     ``LANDING`` slab, with an ``IfcRailing`` beside each flight; furniture an
-    ``IfcFurnishingElement`` of boxes.  The file carries no space boundaries: a
-    reader finds which rooms a door joins from the geometry, as for most exporters.
+    ``IfcFurnishingElement`` of boxes.  Without ``boundaries`` the file carries no
+    space boundaries: a reader finds which rooms a door joins from the geometry; with
+    them, each door and window has a physical ``IfcRelSpaceBoundary`` to each space it
+    opens into (10 cm past the wall's faces), as exporters that write boundaries do.
     Same document, same bytes (:meth:`IfcBuilder.fix_ids`).
 
     Raises
@@ -342,9 +356,12 @@ def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any]) -> Pat
     def ring(r: Any) -> list[np.ndarray]:
         return [local(q) for q in r]
 
+    spaces: list[tuple[int, shapely.Polygon, Any]] = []
     for r in doc["rooms"]:
         k = int(r["storey"])
-        b.space(str(r["id"]), storeys[k], ring(r["outline"]), floor(k), height[k] - slab, str(r.get("name", r["id"])))
+        sp = b.space(str(r["id"]), storeys[k], ring(r["outline"]), floor(k), height[k] - slab,
+                     str(r.get("name", r["id"])))
+        spaces.append((k, shapely.Polygon(ring(r["outline"])), sp))
     centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0)) - off
     for w in doc["walls"]:
         k = int(w["storey"])
@@ -364,8 +381,13 @@ def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any]) -> Pat
             elif kind == "window":
                 side = 1.0 if float(np.dot(centre - c, nrm)) >= 0 else -1.0
                 body = b.box_items(np.concatenate(window_boxes(c, nrm * side, wid, t, z0 + sill, z0 + head)))
-            b.opening(storeys[k], wall, c, ux, wid, t + 0.02, z0 + sill, z0 + head,
-                      kind if kind in ("door", "window") else None, str(o.get("id", kind)), body)
+            fill = b.opening(storeys[k], wall, c, ux, wid, t + 0.02, z0 + sill, z0 + head,
+                             kind if kind in ("door", "window") else None, str(o.get("id", kind)), body)
+            if boundaries and kind in ("door", "window"):
+                sides = [shapely.Point(c + nrm * sgn * (0.5 * t + 0.1)) for sgn in (1.0, -1.0)]
+                found = [sp for ks, poly, sp in spaces if ks == k and any(poly.contains(q) for q in sides)]
+                for sp in found:
+                    b.boundary(sp, fill, internal=len(found) == 2)
     for s in doc["slabs"]:
         k = int(s["storey"])
         roof = k >= len(storeys)
