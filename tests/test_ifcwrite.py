@@ -54,13 +54,15 @@ def test_a_generated_interior_survives_ifc(tmp_path: Path) -> None:
     assert {room_id.get(cells[c].room or "", None) for c in (door.a, door.b)} & {"r0.01", "c0.00"}
 
 
-def test_same_plan_same_bytes_and_space_boundaries(tmp_path: Path) -> None:
+@pytest.mark.parametrize("schema", ["IFC4", "IFC2X3"])
+def test_same_plan_same_bytes_and_space_boundaries(tmp_path: Path, schema: str) -> None:
     tiny = InteriorPlan(storeys=1, length=12.0, width=8.0, seed=5, furniture=0.5)
     a, b = tmp_path / "a.ifc", tmp_path / "b.ifc"
-    assert write_interior(a, tiny, boundaries=True) == write_interior(b, tiny, boundaries=True)
+    assert write_interior(a, tiny, True, schema) == write_interior(b, tiny, True, schema)
     assert a.read_bytes() == b.read_bytes()
     # with space boundaries the reader takes a door's two rooms from them
     scene = load_ifc(a, threads=1)
+    assert scene.source_format == schema
     room_id = {r.key: r.name.split()[0] for r in scene.rooms}
     doors = {o.name: o for o in scene.openings if o.kind == "door"}
     assert doors["entrance"].source == "geometry" and len(doors["entrance"].rooms) == 1

@@ -22,7 +22,7 @@ import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import shapely
@@ -36,7 +36,45 @@ from walkstream.server.sources.interiormesh import (
 )
 from walkstream.shared.errors import InputError
 
-__all__ = ["IfcBuilder", "write_interior_ifc"]
+__all__ = ["IFC_WRITE_SCHEMAS", "IfcBuilder", "write_interior_ifc"]
+
+IFC_WRITE_SCHEMAS = ("IFC4", "IFC2X3")
+"""Schemas :class:`IfcBuilder` writes."""
+
+
+def _set_type(e: Any, value: str) -> None:
+    """Set a product's predefined type where its schema has one (IFC2X3's stair has a
+    ``ShapeType`` instead, its flight none)."""
+    info = e.get_info(recursive=False)
+    if "PredefinedType" in info:
+        e.PredefinedType = value
+    elif "ShapeType" in info:
+        e.ShapeType = value
+
+
+def _owner_history_settings() -> None:
+    """IFC2X3 makes an owner history mandatory: tell ifcopenshell's API who writes (the
+    way its ``owner.create_owner_history`` documentation asks), once per file."""
+    import ifcopenshell.api.owner.settings as owner
+
+    def user(f: Any) -> Any:
+        found = f.by_type("IfcPersonAndOrganization")
+        if found:
+            return found[0]
+        org = f.create_entity("IfcOrganization", Name="walkstream")
+        return f.create_entity("IfcPersonAndOrganization", ThePerson=f.create_entity("IfcPerson", FamilyName="walkstream"),
+                               TheOrganization=org)
+
+    def application(f: Any) -> Any:
+        found = f.by_type("IfcApplication")
+        if found:
+            return found[0]
+        org = user(f).TheOrganization
+        return f.create_entity("IfcApplication", ApplicationDeveloper=org, Version="1",
+                               ApplicationFullName="walkstream", ApplicationIdentifier="walkstream")
+
+    setattr(owner, "get_user", user)  # noqa: B010 (the documented hooks, typed narrower)
+    setattr(owner, "get_application", application)  # noqa: B010
 
 
 def _xy(ring: ArrayLike) -> list[tuple[float, float]]:
@@ -53,9 +91,11 @@ def _need_ifcopenshell() -> None:
 
 
 class IfcBuilder:
-    """Builds an IFC4 model step by step (see the module docstring)."""
+    """Builds an IFC4 (or IFC2X3) model step by step (see the module docstring)."""
 
-    def __init__(self, offset: tuple[float, float] = (0.0, 0.0), name: str = "test") -> None:
+    def __init__(self, offset: tuple[float, float] = (0.0, 0.0), name: str = "test", schema: str = "IFC4") -> None:
+        if schema not in IFC_WRITE_SCHEMAS:
+            raise InputError(f"IFC schema {schema!r}: choose one of {', '.join(IFC_WRITE_SCHEMAS)}")
         _need_ifcopenshell()
         import ifcopenshell
         import ifcopenshell.api.aggregate
@@ -65,7 +105,9 @@ class IfcBuilder:
         import ifcopenshell.util.shape_builder
 
         self.api = ifcopenshell.api
-        self.f = ifcopenshell.file(schema="IFC4")
+        self.f = ifcopenshell.file(schema=cast(Any, schema))
+        if schema == "IFC2X3":  # every rooted entity needs an owner history there
+            _owner_history_settings()
         self.offset = np.array([offset[0], offset[1], 0.0])
         project = ifcopenshell.api.root.create_entity(self.f, ifc_class="IfcProject", name=name)
         ifcopenshell.api.unit.assign_unit(self.f, length={"is_metric": True, "raw": "METERS"})
@@ -238,7 +280,7 @@ class IfcBuilder:
 
         e = self._product(cls, name)
         if predefined is not None:
-            e.PredefinedType = predefined
+            _set_type(e, predefined)
         self._body(e, self.box_items(rows))
         if within is None:
             self._contain(e, storey)
@@ -262,7 +304,7 @@ class IfcBuilder:
         are :meth:`element` calls with ``within`` set to it."""
         e = self._product(cls, name)
         if predefined is not None:
-            e.PredefinedType = predefined
+            _set_type(e, predefined)
         self._contain(e, storey)
         return e
 
@@ -296,6 +338,10 @@ class IfcBuilder:
 
         for i, e in enumerate(sorted(self.f.by_type("IfcRoot"), key=lambda x: x.id())):
             e.GlobalId = ifcopenshell.guid.compress(uuid.uuid5(uuid.NAMESPACE_URL, f"walkstream:{key}:{i}").hex)
+        for history in self.f.by_type("IfcOwnerHistory"):  # IFC2X3's: creation dates
+            history.CreationDate = 946684800
+            if history.LastModifiedDate is not None:
+                history.LastModifiedDate = 946684800
         self.f.header.file_name.time_stamp = "2000-01-01T00:00:00"
 
     def write(self, path: str | os.PathLike[str]) -> Path:
@@ -309,8 +355,9 @@ class IfcBuilder:
         return dest
 
 
-def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any], boundaries: bool = False) -> Path:
-    """Write a ``walkstream-interior`` document as an IFC4 file; return its path.
+def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any], boundaries: bool = False,
+                       schema: str = "IFC4") -> Path:
+    """Write a ``walkstream-interior`` document as an IFC4 (or IFC2X3) file; return its path.
 
     What each element becomes: a room an ``IfcSpace`` (its outline extruded from its
     storey's floor to the underside of the slab above, ``Name`` its id, ``LongName``
@@ -344,7 +391,7 @@ def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any], bounda
     height = [float(s["height"]) for s in doc["storeys"]]
     pts = np.array([q for r in doc["rooms"] for q in r["outline"]], dtype=np.float64)
     off = np.floor(pts.min(axis=0))
-    b = IfcBuilder((float(off[0]), float(off[1])), name=str(doc.get("name", "interior")))
+    b = IfcBuilder((float(off[0]), float(off[1])), name=str(doc.get("name", "interior")), schema=schema)
     storeys = [b.storey(str(s.get("name", k)), e) for k, (s, e) in enumerate(zip(doc["storeys"], elev, strict=True))]
 
     def floor(k: int) -> float:
@@ -393,7 +440,7 @@ def write_interior_ifc(path: str | os.PathLike[str], doc: dict[str, Any], bounda
         roof = k >= len(storeys)
         el = b.slab(storeys[min(k, len(storeys) - 1)], ring(s["outline"]), floor(k), slab,
                     [ring(h) for h in s.get("holes", [])], str(s["id"]))
-        el.PredefinedType = "ROOF" if roof else "FLOOR"
+        _set_type(el, "ROOF" if roof else "FLOOR")
     for st in doc["stairs"]:
         _stair(b, storeys[int(st["storey"])], st, off, floor(int(st["storey"])),
                floor(int(st["storey"]) + 1) - floor(int(st["storey"])))

@@ -342,7 +342,9 @@ def interior_summary(doc: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def write_interior(path: str | os.PathLike[str], plan: InteriorPlan, boundaries: bool = False) -> dict[str, Any]:
+def write_interior(
+    path: str | os.PathLike[str], plan: InteriorPlan, boundaries: bool = False, schema: str = "IFC4"
+) -> dict[str, Any]:
     """Generate an interior and write it as compact JSON (via a temporary file), or as
     IFC4 when ``path`` ends in ``.ifc``.
 
@@ -351,15 +353,17 @@ def write_interior(path: str | os.PathLike[str], plan: InteriorPlan, boundaries:
     dict
         :func:`interior_summary` of the written document.
     """
-    return write_interior_doc(path, generate_interior(plan), boundaries)
+    return write_interior_doc(path, generate_interior(plan), boundaries, schema)
 
 
-def write_interior_doc(path: str | os.PathLike[str], doc: dict[str, Any], boundaries: bool = False) -> dict[str, Any]:
+def write_interior_doc(
+    path: str | os.PathLike[str], doc: dict[str, Any], boundaries: bool = False, schema: str = "IFC4"
+) -> dict[str, Any]:
     """Write a generated interior document (an office's or a hall's) as compact JSON (via a
     temporary file), or as an IFC4 model when ``path`` ends in ``.ifc``
     (:func:`~walkstream.server.sources.ifcwrite.write_interior_ifc`), and return its
     :func:`interior_summary`; ``boundaries``: the IFC's doors and windows get space
-    boundaries."""
+    boundaries; ``schema``: IFC4 or IFC2X3."""
     dest = Path(path)
     if dest.suffix.lower() == ".ifc":
         from walkstream.server.sources.ifcwrite import write_interior_ifc
@@ -367,7 +371,7 @@ def write_interior_doc(path: str | os.PathLike[str], doc: dict[str, Any], bounda
         if not dest.parent.is_dir():
             raise InputError(f"{dest}: cannot write (no folder {dest.parent})")
         tmp = dest.with_name(dest.name + ".tmp")
-        write_interior_ifc(tmp, doc, boundaries)
+        write_interior_ifc(tmp, doc, boundaries, schema)
         try:
             tmp.replace(dest)
         except OSError as exc:
