@@ -1,4 +1,4 @@
-"""IFC4 models written with ifcopenshell's API: a small builder and the generated interiors.
+"""IFC4 (or IFC2X3) models written with ifcopenshell's API: a builder and the generated interiors.
 
 :class:`IfcBuilder` writes a model step by step, as an exporter does: a project, a site,
 a building, storeys (``IfcBuildingStorey``), spaces (``IfcSpace``, an extruded footprint
@@ -11,7 +11,8 @@ origin) and its geometry is given in metres relative to it, as extruded solids.
 :func:`write_interior_ifc` writes a ``walkstream-interior`` document (a generated
 office or hall, :mod:`.interiorgen`, :mod:`.hallgen`) as such a model, element by
 element with the shapes :mod:`.interiorfile` gives them, so the same building can be
-baked from its JSON and from its IFC and the two compared.
+baked from its JSON and from its IFC and the two compared; space boundaries (doors and
+windows to the spaces they open into) on request, as some exporters write them.
 
 ifcopenshell is the optional ``ifc`` extra: without it a one-line error says so.
 """
