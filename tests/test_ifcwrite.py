@@ -3,6 +3,7 @@ back through the IFC reader: the same rooms, doors, stairs and portals as its JS
 
 from __future__ import annotations
 
+import json
 import sys
 from collections import Counter
 from pathlib import Path
@@ -11,6 +12,7 @@ import pytest
 
 pytest.importorskip("ifcopenshell")
 
+from walkstream.cli import main
 from walkstream.server.bake.roomlayout import RoomLayout
 from walkstream.server.bake.rooms import room_layout
 from walkstream.server.sources.ifc import load_ifc
@@ -69,6 +71,18 @@ def test_same_plan_same_bytes_and_space_boundaries(tmp_path: Path, schema: str) 
     inner = [o for name, o in doors.items() if name != "entrance"]
     assert inner and all(o.source == "boundary" for o in inner)
     assert {room_id[k] for k in doors["d0.01"].rooms} == {"r0.01", "c0.00"}
+
+
+def test_the_cli_writes_ifc_beside_the_summary(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "office.ifc"
+    args = ["generate", "interior", "--storeys", "1", "--size", "12x8", "-o", str(out)]
+    assert main([*args, "--ifc-schema", "ifc2x3", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["rooms"] >= 3
+    assert out.read_text(encoding="utf-8").startswith("ISO-10303-21;") and "FILE_SCHEMA(('IFC2X3'))" in out.read_text()
+    assert main(["generate", "interior", "--space-boundaries", "-o", str(tmp_path / "office.json")]) == 2
+    assert "only for an .ifc output" in capsys.readouterr().err
+    assert main([*args, "--ifc-schema", "IFC5"]) == 2
+    assert "IFC schema 'IFC5'" in capsys.readouterr().err
 
 
 def test_an_ifc_into_a_missing_folder_is_one_line(tmp_path: Path) -> None:

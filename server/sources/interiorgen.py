@@ -371,11 +371,13 @@ def write_interior_doc(
         if not dest.parent.is_dir():
             raise InputError(f"{dest}: cannot write (no folder {dest.parent})")
         tmp = dest.with_name(dest.name + ".tmp")
-        write_interior_ifc(tmp, doc, boundaries, schema)
         try:
+            write_interior_ifc(tmp, doc, boundaries, schema)
             tmp.replace(dest)
         except OSError as exc:
             raise InputError(f"{dest}: cannot write ({exc.strerror or exc})") from exc
+        finally:
+            tmp.unlink(missing_ok=True)  # a half-written model never stays behind
         return interior_summary(doc)
     tmp = dest.with_name(dest.name + ".tmp")
     try:
