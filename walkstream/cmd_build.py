@@ -63,12 +63,17 @@ def cmd_generate_interior(args: argparse.Namespace) -> int:
         write_interior_doc,
     )
 
+    boundaries = bool(getattr(args, "space_boundaries", False))
+    schema = str(getattr(args, "ifc_schema", None) or "IFC4").upper()
+    if (boundaries or getattr(args, "ifc_schema", None)) and not str(args.output).lower().endswith(".ifc"):
+        raise WalkstreamError(f"--space-boundaries, --ifc-schema: only for an .ifc output, not {args.output}")
     if args.preset in HALL_PRESETS:
         if args.storeys is not None or args.size is not None:
             raise WalkstreamError(f"--preset {args.preset}: a hall of fixed bays takes --seed only, not --storeys or --size")
         hall = HALL_PRESETS[args.preset]
         t0 = time.perf_counter()
-        summary = write_interior_doc(args.output, generate_hall(replace(hall, seed=hall.seed if args.seed is None else args.seed)))
+        summary = write_interior_doc(args.output, generate_hall(replace(hall, seed=hall.seed if args.seed is None else args.seed)),
+                                     boundaries, schema)
         summary["seconds"] = round(time.perf_counter() - t0, 2)
         summary["output"] = str(args.output)
         print_summary("interior", summary, args.json)
@@ -91,7 +96,7 @@ def cmd_generate_interior(args: argparse.Namespace) -> int:
             raise WalkstreamError(f"--size {args.size!r}: expected LENGTHxWIDTH in metres, e.g. 60x20") from None
         changes |= {"length": length, "width": width}
     t0 = time.perf_counter()
-    summary = write_interior(args.output, replace(plan, **changes))
+    summary = write_interior(args.output, replace(plan, **changes), boundaries, schema)
     summary["seconds"] = round(time.perf_counter() - t0, 2)
     summary["output"] = str(args.output)
     print_summary("interior", summary, args.json)
@@ -199,7 +204,12 @@ def add_build_parsers(sub: Any) -> None:
     gi.add_argument("--size", help="LENGTHxWIDTH of the building in metres (default 60x20)")
     gi.add_argument("--preset", help="a named plan: paper (the scale of Mulloni et al.'s model), paper10 (ten times its cells), "
                     "hall (an open production hall of machines, robots and racks, 96 x 60 m in 40 bays)")
-    gi.add_argument("-o", "--output", required=True, help="interior file to write (.json)")
+    gi.add_argument("-o", "--output", required=True,
+                    help="interior file to write: .json (walkstream-interior), or .ifc (an IFC4 model; needs the ifc extra)")
+    gi.add_argument("--space-boundaries", action="store_true",
+                    help="with an .ifc output: a space boundary (IfcRelSpaceBoundary) from each door and window to "
+                    "each space it opens into, as exporters that write boundaries do (default: none, rooms found from the geometry)")
+    gi.add_argument("--ifc-schema", help="with an .ifc output: IFC4 (default) or IFC2X3")
     gi.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     gi.set_defaults(func=cmd_generate_interior)
 

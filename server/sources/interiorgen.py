@@ -342,21 +342,43 @@ def interior_summary(doc: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def write_interior(path: str | os.PathLike[str], plan: InteriorPlan) -> dict[str, Any]:
-    """Generate an interior and write it as compact JSON (via a temporary file).
+def write_interior(
+    path: str | os.PathLike[str], plan: InteriorPlan, boundaries: bool = False, schema: str = "IFC4"
+) -> dict[str, Any]:
+    """Generate an interior and write it as compact JSON (via a temporary file), or as
+    IFC4 when ``path`` ends in ``.ifc``.
 
     Returns
     -------
     dict
         :func:`interior_summary` of the written document.
     """
-    return write_interior_doc(path, generate_interior(plan))
+    return write_interior_doc(path, generate_interior(plan), boundaries, schema)
 
 
-def write_interior_doc(path: str | os.PathLike[str], doc: dict[str, Any]) -> dict[str, Any]:
+def write_interior_doc(
+    path: str | os.PathLike[str], doc: dict[str, Any], boundaries: bool = False, schema: str = "IFC4"
+) -> dict[str, Any]:
     """Write a generated interior document (an office's or a hall's) as compact JSON (via a
-    temporary file) and return its :func:`interior_summary`."""
+    temporary file), or as an IFC4 model when ``path`` ends in ``.ifc``
+    (:func:`~walkstream.server.sources.ifcwrite.write_interior_ifc`), and return its
+    :func:`interior_summary`; ``boundaries``: the IFC's doors and windows get space
+    boundaries; ``schema``: IFC4 or IFC2X3."""
     dest = Path(path)
+    if dest.suffix.lower() == ".ifc":
+        from walkstream.server.sources.ifcwrite import write_interior_ifc
+
+        if not dest.parent.is_dir():
+            raise InputError(f"{dest}: cannot write (no folder {dest.parent})")
+        tmp = dest.with_name(dest.name + ".tmp")
+        try:
+            write_interior_ifc(tmp, doc, boundaries, schema)
+            tmp.replace(dest)
+        except OSError as exc:
+            raise InputError(f"{dest}: cannot write ({exc.strerror or exc})") from exc
+        finally:
+            tmp.unlink(missing_ok=True)  # a half-written model never stays behind
+        return interior_summary(doc)
     tmp = dest.with_name(dest.name + ".tmp")
     try:
         tmp.write_text(json.dumps(doc, separators=(",", ":"), allow_nan=False), encoding="utf-8")
