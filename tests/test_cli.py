@@ -103,3 +103,21 @@ def test_bench_rebuild_compares_paths_in_one_run(city: Path, capsys: pytest.Capt
         assert row in out, row
     assert main(["bench", "rebuild", str(city), "--repeat", "1", "--batch", "0"]) == 2
     assert "--batch" in capsys.readouterr().err
+
+
+def test_a_step_slow_only_on_its_first_run_is_said_then_and_only_then(capsys: pytest.CaptureFixture[str]) -> None:
+    import time
+
+    from walkstream.terminal import say_if_slow
+
+    assert say_if_slow(lambda: time.sleep(0.3), "compiling the thing", after_s=0.05) >= 0.3
+    err = capsys.readouterr().err
+    assert "walkstream: compiling the thing ..." in err and "compiling the thing: done in" in err
+    say_if_slow(lambda: None, "loading the thing", after_s=0.5)  # quick: the terminal stays quiet
+    assert capsys.readouterr().err == ""
+
+    def broken() -> None:
+        raise ValueError("no kernel")
+
+    with pytest.raises(ValueError, match="no kernel"):  # raised where the caller waits
+        say_if_slow(broken, "compiling")

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from walkstream.shared.errors import InputError, WalkstreamError
-from walkstream.terminal import WalkBar, count_bar
+from walkstream.terminal import WalkBar, count_bar, say_if_slow
 
 __all__ = [
     "MAX_OUTAGE_SHARE",
@@ -199,6 +199,17 @@ def scene_kind(server: str, scene: str | None) -> str | None:
         return None
 
 
+def _warm_up_culling(triangles: bool) -> None:
+    """The interiors' compiled culling made or loaded (the replay does it again, at no cost
+    then, before its clock starts: this is only where the terminal can say so)."""
+    from walkstream.shared.cullkernels import warm_up
+    from walkstream.shared.trianglekernels import warm_up as warm_up_triangles
+
+    warm_up()
+    if triangles:
+        warm_up_triangles()
+
+
 def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = False, plots: bool = True) -> Any:
     """Run one replay against ``server`` and write its report folder; returns the result.
 
@@ -209,6 +220,9 @@ def replay_to_report(server: str, config: Any, *, title: str, quiet: bool = Fals
     if config.kind is None:
         config = replace(config, kind=scene_kind(server, config.scene))
 
+    if not quiet and config.kind != "city" and config.culling == "portals":
+        say_if_slow(lambda: _warm_up_culling(config.triangle_cull),
+                    "compiling the interiors' culling (the first run only; cached after)")
     with transport_for(server) as (transport, url):
         if quiet:
             result = run_replay(transport, url, config)

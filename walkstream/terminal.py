@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import json
 import sys
+import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["building_bar", "count_bar", "stage_setter", "WalkBar", "print_summary"]
+__all__ = ["building_bar", "count_bar", "stage_setter", "WalkBar", "print_summary", "say_if_slow"]
 
 
 def building_bar(total: int, desc: str) -> Any:
@@ -87,3 +89,34 @@ def print_summary(title: str, summary: dict[str, Any], as_json: bool) -> None:
     width = max(len(k) for k in summary)
     for k, v in summary.items():
         print(f"  {k:<{width}}  {v}")
+
+
+def say_if_slow(work: Callable[[], None], what: str, after_s: float = 1.0) -> float:
+    """Run ``work``; if it is still running after ``after_s`` seconds, say ``what`` on
+    stderr and, when it ends, how long it took.  Returns its seconds.
+
+    For a step that is quick but for its first run (compiled code made for the cache:
+    the interiors' culling takes some 20 s once), so that the terminal is not silent then
+    and says nothing the other times.  An error in ``work`` is raised here."""
+    failed: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            work()
+        except BaseException as exc:  # handed to the caller's thread
+            failed.append(exc)
+
+    t0 = time.perf_counter()
+    worker = threading.Thread(target=run, daemon=True)
+    worker.start()
+    worker.join(after_s)
+    slow = worker.is_alive()
+    if slow:
+        print(f"walkstream: {what} ...", file=sys.stderr, flush=True)
+        worker.join()
+    seconds = time.perf_counter() - t0
+    if failed:
+        raise failed[0]
+    if slow:
+        print(f"walkstream: {what}: done in {seconds:.0f} s", file=sys.stderr, flush=True)
+    return seconds
