@@ -8,7 +8,7 @@ triangles against their cells' VSAs with the witnesses' two rounds
 a few hundred triangles, each call's own cost most of its time; here each is a loop.
 
 **The same figures, operation for operation**, as the numpy version
-(:func:`~walkstream.shared.trianglecull._shows`, kept as the reference the tests check
+(``_shows`` in ``tests/trianglereference.py``, kept as the reference the tests check
 against): the clip coordinates are made as numpy's matrix product makes them here
 (OpenBLAS's kernel: each row a chain of fused multiply-adds, ``fma(m2, z, fma(m1, y, m0 *
 x))``, then the translation added), every other step in the same IEEE operations in the

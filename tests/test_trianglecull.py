@@ -182,8 +182,9 @@ def test_the_cli_turns_it_off_and_benches_it(office_db: Path, tmp_path: Path, ca
 
 
 def test_triangles_wholly_in_front_skip_the_clip_and_each_is_tested_as_alone() -> None:
+    from trianglereference import _SIDE_ENDS, _clipped_ends, _shows
+
     from walkstream.shared.partcull import near_far
-    from walkstream.shared.trianglecull import _SIDE_ENDS, _clipped_ends, _shows
 
     rng = np.random.default_rng(7)
     n = 300
@@ -210,6 +211,8 @@ def test_triangles_wholly_in_front_skip_the_clip_and_each_is_tested_as_alone() -
 
 
 def test_the_plain_float_clip_and_the_two_rounds_keep_what_one_batch_keeps(monkeypatch: pytest.MonkeyPatch) -> None:
+    import trianglereference as ref
+
     import walkstream.shared.trianglecull as tc
 
     rng = np.random.default_rng(11)
@@ -221,13 +224,13 @@ def test_the_plain_float_clip_and_the_two_rounds_keep_what_one_batch_keeps(monke
     h = (m[:, :3] @ pts.reshape(3, -1) + m[:, 3:]).reshape(3, 3, n)
     d = h[2] - 0.03
     cut = np.flatnonzero(~(d >= 0).all(axis=0) & (d >= 0).any(axis=0))
-    assert len(cut) > tc._FEW_CUT
+    assert len(cut) > ref._FEW_CUT
     # the few triangles across the clip plane in plain floats: numpy's figures, bit for bit
     sx, sy = 0.5 * SIZE[0], 0.5 * SIZE[1]
-    for a in range(0, len(cut), tc._FEW_CUT):
-        few = cut[a:a + tc._FEW_CUT]
-        got = tc._clipped_ends(h[:, :, few], d[:, few], SIZE)
-        want = tc._clipped_ends_np(h[:, :, few], d[:, few], sx, sy)
+    for a in range(0, len(cut), ref._FEW_CUT):
+        few = cut[a:a + ref._FEW_CUT]
+        got = ref._clipped_ends(h[:, :, few], d[:, few], SIZE)
+        want = ref._clipped_ends_np(h[:, :, few], d[:, few], sx, sy)
         assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
     # parts of many triangles, tested in two rounds (their first triangles, then the rest
     # of the parts none of whose first showed) or all in one batch: the same parts kept
@@ -256,6 +259,8 @@ def test_witnesses_the_table_and_the_shared_rectangles_keep_each_frames_parts(mo
     """A walk's frames, refined as the client does (the parts culling's rectangles shared,
     one triangle table whose witnesses carry from frame to frame, a table made anew when it
     would hold too much), keep frame for frame what each part's triangles decide alone."""
+    import trianglereference as ref
+
     import walkstream.shared.trianglecull as tc
     import walkstream.shared.tritable as tt
     from walkstream.shared.partcull import PartRects, near_far
@@ -313,7 +318,7 @@ def test_witnesses_the_table_and_the_shared_rectangles_keep_each_frames_parts(mo
                     continue
                 a, b = int(start[p]), int(start[p + 1])  # the part's triangles, all of them
                 v4 = np.repeat(np.array(vsas[c], np.int64).T[:, :, None], b - a, axis=2)
-                keep[p] = bool(tc._shows(tri[:, :, a:b], v4, view, PROJ, SIZE, 0.03, planes).any())
+                keep[p] = bool(ref._shows(tri[:, :, a:b], v4, view, PROJ, SIZE, 0.03, planes).any())
             want[c] = keep
         witnessed += int((table.witness >= 0).sum())
         if i == 5:  # a table that must be made anew: it holds other cells (a walk's past)
@@ -328,6 +333,8 @@ def test_the_compiled_test_keeps_what_the_numpy_reference_keeps() -> None:
     """Each triangle a part of its own, tested by the compiled kernel and by the numpy
     reference (``_shows``): the same triangles shown, in front of, across and behind the
     clip plane, against two VSAs and a pad."""
+    import trianglereference as ref
+
     import walkstream.shared.trianglecull as tc
     from walkstream.shared.partcull import near_far
     from walkstream.shared.trianglekernels import test_parts
@@ -341,7 +348,7 @@ def test_the_compiled_test_keeps_what_the_numpy_reference_keeps() -> None:
     vsa = np.ascontiguousarray(np.tile(np.array(areas, np.int64), (n, 1, 1)).transpose(2, 1, 0))
     planes = near_far(PROJ)
     assert planes is not None
-    want = tc._shows(pts, vsa, VIEW, PROJ, SIZE, 0.03, planes)
+    want = ref._shows(pts, vsa, VIEW, PROJ, SIZE, 0.03, planes)
     one = np.ones(n, np.int64)
     witness = np.full(n, -1, np.int64)
     brect = np.tile(np.array([[0], [0], [-1], [-1]], np.int64), (1, n))  # no box inside a VSA: all tested
