@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike
 from walkstream.server.sources.interiormesh import (
     door_boxes,
     furniture_boxes,
-    stair_boxes,
+    switchback_boxes,
     window_boxes,
 )
 from walkstream.shared.errors import InputError
@@ -459,13 +459,7 @@ def _stair(b: IfcBuilder, storey: Any, st: dict[str, Any], off: np.ndarray, z0: 
     x1, x2 = (float(v) - off[0] for v in st["x"])
     y0, y1 = (float(v) - off[1] for v in st["y"])
     width = float(st.get("width", 1.1))
-    half = 0.5 * rise
-    d = math.copysign(1.0, y1 - y0)
-    outer = -1.0 if (x2 - x1) * (y1 - y0) < 0 else 1.0
-    flight_a, _ = stair_boxes((x1, y0), (x1, y1), width, z0, half, rails=(outer,))
-    flight_b, _ = stair_boxes((x2, y1), (x2, y0), width, z0 + half, half, rails=(outer,))
-    ym = y1 + d * 0.5
-    landing = np.array([[0.5 * (x1 + x2), ym, abs(x2 - x1) + width, 1.0, 0.0, z0 + half - 0.2, z0 + half]])
+    flight_a, _, flight_b, _, landing, _ = switchback_boxes((x1, x2), (y0, y1), width, z0, rise)
     key = str(st["id"])
     stair = b.assembly("IfcStair", f"stair {key}", storey, "HALF_TURN_STAIR")
     # the last row of each flight is its balustrade: a railing of its own, beside the stair

@@ -68,7 +68,7 @@ from walkstream.server.sources.interiormesh import (
     door_boxes,
     furniture_boxes,
     prism_mesh,
-    stair_boxes,
+    switchback_boxes,
     wall_boxes,
     window_boxes,
 )
@@ -310,15 +310,7 @@ def load_interior_dict(doc: Any, name: str = "interior", label: str = "interior"
         width = _num(st.get("width", 1.1), what)
         rise = floor(k + 1) - floor(k)
         half = 0.5 * rise
-        d = math.copysign(1.0, y1 - y0)
-        land = 1.0  # depth of the half landing
-        # a balustrade on the outer side of each half-flight (they face each other inside)
-        outer = -1.0 if (x2 - x1) * (y1 - y0) < 0 else 1.0
-        boxes_a, path_a = stair_boxes((x1, y0), (x1, y1), width, floor(k), half, rails=(outer,))
-        boxes_b, path_b = stair_boxes((x2, y1), (x2, y0), width, floor(k) + half, half, rails=(outer,))
-        ym = y1 + d * 0.5 * land
-        landing = np.array([[0.5 * (x1 + x2), ym, abs(x2 - x1) + width, land, 0.0,
-                             floor(k) + half - 0.2, floor(k) + half]])
+        boxes_a, path_a, boxes_b, path_b, landing, ym = switchback_boxes((x1, x2), (y0, y1), width, floor(k), rise)
         key = str(st.get("id"))
         b.boxes(key, "stair", f"stair {key}", np.concatenate([boxes_a, boxes_b, landing]), _MAT["stair"])
         turn = np.array([[x1, ym, floor(k) + half], [x2, ym, floor(k) + half]])

@@ -28,6 +28,8 @@ __all__ = [
     "FURNITURE_KINDS",
     "STAIR_WAIST",
     "stair_boxes",
+    "HALF_LANDING_M",
+    "switchback_boxes",
 ]
 
 # the 12 triangles of a unit box over corners numbered by bits (x, y, z): outward, CCW
@@ -412,3 +414,30 @@ def stair_boxes(
     zs = np.concatenate([[z0], tops])
     path = np.column_stack([a + u * ts[:, None], zs])
     return np.concatenate([rows, np.array(stringers)]), path
+
+
+HALF_LANDING_M = 1.0
+"""Depth of a switchback stair's half landing, metres."""
+
+
+def switchback_boxes(
+    x: tuple[float, float], y: tuple[float, float], width: float, z0: float, rise: float,
+) -> tuple[F64, F64, F64, F64, F64, float]:
+    """A switchback stair as the interior format gives it: the first half-flight along
+    ``x[0]`` from ``y[0]`` (the floor landing) to ``y[1]``, the half landing beyond it, the
+    second half-flight back along ``x[1]``; ``rise`` the storey's height from ``z0``.
+
+    Returns ``(flight_a, path_a, flight_b, path_b, landing, y_landing)``: each flight's
+    box rows and walking line (:func:`stair_boxes`; each flight's last row its
+    balustrade, on the outer side: the flights face each other inside), the landing's
+    box row ``(1, 7)`` and the y of its middle line."""
+    x1, x2 = x
+    y0, y1 = y
+    half = 0.5 * rise
+    d = math.copysign(1.0, y1 - y0)
+    outer = -1.0 if (x2 - x1) * (y1 - y0) < 0 else 1.0
+    flight_a, path_a = stair_boxes((x1, y0), (x1, y1), width, z0, half, rails=(outer,))
+    flight_b, path_b = stair_boxes((x2, y1), (x2, y0), width, z0 + half, half, rails=(outer,))
+    ym = y1 + d * 0.5 * HALF_LANDING_M
+    landing = np.array([[0.5 * (x1 + x2), ym, abs(x2 - x1) + width, HALF_LANDING_M, 0.0, z0 + half - 0.2, z0 + half]])
+    return flight_a, path_a, flight_b, path_b, landing, ym
