@@ -31,6 +31,18 @@ itself, every ``every`` seconds of walk time (``bench stream``'s every 25th fram
    ``outside``
        the eye is in no cell (no PVS at all).
 
+The floor the per-frame figure puts under the PVS: an object that alone covers more
+than :data:`OVER_SHARE` of some pose's frame must be in the PVS of that pose's cell, or
+the pose is over whatever else the PVS holds.  ``floor`` gathers those objects per
+visited cell and sets their count beside the stored PVS's over the same cells, and
+beside a yardstick database's (``yardstick``: the same source baked another way, for
+example ``--sampling corners --resolution 64``, the first bake, against which the issue
+bounds the PVS).  It is a floor, not the whole need: several objects under the share
+together can put a pose over too.  ``need`` estimates the whole need: at each pose the
+objects left when the least-seen are left out while they stay within the share
+together, gathered per cell (each pose chooses alone, so a PVS chosen for all its poses
+at once could hold a little less).
+
 Besides, per pose: whether the eye is inside its cell's outline, its distance to the
 outline and to the nearest of the cell's sample points (the bake's own
 :func:`~walkstream.server.bake.workers.cell_points`, with the far band's axis points of
@@ -62,7 +74,7 @@ from walkstream.shared.paths import RecordedPath
 if TYPE_CHECKING:
     import moderngl
 
-__all__ = ["REASONS", "OVER_SHARE", "client_face_pixels", "run_pvs_misses", "format_pvs_misses"]
+__all__ = ["REASONS", "OVER_SHARE", "client_face_pixels", "frame_need", "pvs_floor", "run_pvs_misses", "format_pvs_misses"]
 
 #: the reasons an object is missed, in the order they are tried (see the module docs)
 REASONS: tuple[str, ...] = ("sampling", "resolution", "geometry", "pixel centres", "outside")
@@ -92,6 +104,7 @@ def run_pvs_misses(
     size: tuple[int, int] = (640, 480),
     fov_deg: float = 60.0,
     top: int = 5,
+    yardstick: str | os.PathLike[str] | None = None,
     ctx: moderngl.Context | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
@@ -110,6 +123,8 @@ def run_pvs_misses(
     top : int
         Objects listed per pose in ``rows`` (the largest misses); every missed
         object of a pose over :data:`OVER_SHARE` counts in ``reasons`` whatever ``top``.
+    yardstick : path, optional
+        Another bake of the same source and cells whose PVS sizes ``floor`` compares with.
     ctx : moderngl.Context, optional
         Context for every renderer; by default one is made and released.
     progress : callable, optional
@@ -121,6 +136,7 @@ def run_pvs_misses(
         ``paths``: per path ``{"poses", "over", "mean", "reasons": {reason: pixels}}``
         (the reasons of every missed pixel of the poses over :data:`OVER_SHARE`, the
         poses that count; the probes are not rendered for the others);
+        ``floor``: :func:`pvs_floor` over the visited cells;
         ``rows``: per pose over :data:`OVER_SHARE`, ``{"path", "t", "cell", "share",
         "eye", "inside", "to_outline", "to_sample", "zrange", "objects": [{"id",
         "kind", "pixels", "depth", "reason"}]}``; ``probe_resolution``, ``settings``.
@@ -132,6 +148,7 @@ def run_pvs_misses(
     if not every > 0 or not math.isfinite(every):
         raise InputError(f"--every {every}: expected a positive number of seconds")
     scene, cells, baked, settings = scene_from_database(database)
+    other = _yardstick(yardstick, cells) if yardstick is not None else None
     with SceneReader.open(database) as reader:
         known = reader.path_names()
         bad = [p for p in paths if p not in known]
@@ -164,6 +181,8 @@ def run_pvs_misses(
             renderers.append(probes[-1])
         total = sum(len(np.arange(0.0, w.duration, every)) for w in walks.values())
         done, rows, figures = 0, [], {}
+        must: dict[int, set[int]] = {}
+        need: dict[int, set[int]] = {}
         frame = float(size[0] * size[1])
         for name, walk in walks.items():
             shares, reasons = [], dict.fromkeys(REASONS, 0)
@@ -176,6 +195,10 @@ def run_pvs_misses(
                 cid = loc.locate(float(eye[0]), float(eye[1]))
                 pvs = baked.get(cid, np.zeros(0, np.int64)) if cid is not None else np.zeros(0, np.int64)
                 ids, px = np.unique(obj, return_counts=True)
+                if cid is not None:
+                    n_ids, m_ids = frame_need(ids, px, frame)
+                    need.setdefault(cid, set()).update(n_ids.tolist())
+                    must.setdefault(cid, set()).update(m_ids.tolist())
                 out = ~np.isin(ids, pvs)
                 share = float(px[out].sum()) / frame
                 shares.append(share)
@@ -199,12 +222,72 @@ def run_pvs_misses(
             sh = np.asarray(shares) if shares else np.zeros(1)
             figures[name] = {"poses": len(shares), "over": float(np.mean(sh > OVER_SHARE)), "mean": float(sh.mean()),
                              "reasons": reasons}
-        return {"paths": figures, "rows": rows, "probe_resolution": probe, "settings": settings}
+        return {"paths": figures, "rows": rows, "probe_resolution": probe, "settings": settings,
+                "floor": pvs_floor(must, baked, other) | {"need_mean": float(np.mean([len(v) for v in need.values()]))
+                                                           if need else 0.0}}
     finally:
         for r in renderers:
             r.release()
         if own:
             gl.release()
+
+
+def frame_need(ids: np.ndarray, pixels: np.ndarray, frame: float) -> tuple[np.ndarray, np.ndarray]:
+    """What a PVS must hold for one frame to stay within :data:`OVER_SHARE` of its ``frame`` pixels.
+
+    ``ids``/``pixels``: the objects the frame's truth shows and their pixels.  Returns
+    ``(need, must)``: the objects left when the least-seen are left out while they stay
+    within the share together (the fewest that frame can do with), and those that alone
+    cover more than the share (no PVS without them keeps the frame within it).
+
+    >>> need, must = frame_need(np.array([4, 5, 6]), np.array([900, 2, 1]), 10_000.0)
+    >>> need.tolist(), must.tolist()
+    ([5, 4], [4, 5])
+    """
+    order = np.argsort(pixels, kind="stable")
+    spare = np.cumsum(pixels[order]) <= OVER_SHARE * frame
+    return ids[order[~spare]], ids[pixels > OVER_SHARE * frame]
+
+
+def pvs_floor(
+    must: dict[int, set[int]], baked: dict[int, np.ndarray], yardstick: dict[int, np.ndarray] | None = None,
+) -> dict[str, Any]:
+    """The objects each visited cell's PVS must hold, against the stored PVS and a yardstick's.
+
+    ``must`` maps a visited cell to the objects that alone put one of its poses over
+    :data:`OVER_SHARE`.  Returns the means over those cells of the must-hold objects
+    (``must_mean``), of the stored PVS (``pvs_mean``) and of the yardstick's
+    (``yardstick_mean``, None without one), the must-hold objects the stored PVS lacks
+    (``lacking``), and ``must_ratio`` = ``must_mean / yardstick_mean``: over the issue's
+    bound, no PVS that keeps every pose under the share fits the bound in these cells.
+    """
+    cells = sorted(must)
+
+    def mean(sizes: list[int]) -> float:
+        return float(np.mean(sizes)) if sizes else 0.0
+
+    mm = mean([len(must[c]) for c in cells])
+    ym = mean([len(yardstick.get(c, ())) for c in cells]) if yardstick is not None else None
+    return {
+        "cells": len(cells),
+        "must_mean": mm,
+        "pvs_mean": mean([len(baked.get(c, ())) for c in cells]),
+        "yardstick_mean": ym,
+        "must_ratio": mm / ym if ym else None,
+        "lacking": int(sum(len(must[c] - set(np.asarray(baked.get(c, ())).tolist())) for c in cells)),
+    }
+
+
+def _yardstick(path: str | os.PathLike[str], cells: Sequence[Any]) -> dict[int, np.ndarray]:
+    """The PVS of another bake of the same cells (``--yardstick``); a clear error when its cells differ."""
+    _, ycells, ybaked, _ = scene_from_database(path)
+    same = len(ycells) == len(cells) and all(
+        a.id == b.id and np.shape(a.polygon) == np.shape(b.polygon) and np.allclose(a.polygon, b.polygon)
+        for a, b in zip(ycells, cells, strict=True)
+    )
+    if not same:
+        raise InputError(f"--yardstick {path}: its cells are not the database's (bake the same source with the same cell settings)")
+    return ybaked
 
 
 def _pose_row(
@@ -239,6 +322,20 @@ def format_pvs_misses(result: dict[str, Any], worst: int = 8) -> str:
         tot = sum(f["reasons"].values()) or 1
         why = ", ".join(f"{k} {v} ({100 * v / tot:.0f} %)" for k, v in f["reasons"].items() if v)
         lines.append(f"{name:<10} {f['poses']:>5} {100 * f['over']:>9.1f}% {f['mean']:>9.2e}  {why or '-'}")
+    fl = result.get("floor")
+    if fl and fl["cells"]:
+        ys = "" if fl["yardstick_mean"] is None else (
+            f", the yardstick's {fl['yardstick_mean']:.1f}: the floor is {fl['must_ratio']:.2f} x the yardstick's")
+        lines.append(
+            f"floor over the {fl['cells']} visited cells: {fl['must_mean']:.1f} objects a cell that alone put a pose "
+            f"over 0.01 % (the PVS must hold them; {fl['lacking']} not in the stored PVS), stored PVS "
+            f"{fl['pvs_mean']:.1f}{ys}"
+        )
+        nr = "" if not fl["yardstick_mean"] else f" ({fl['need_mean'] / fl['yardstick_mean']:.2f} x the yardstick's)"
+        lines.append(
+            f"need (estimate): {fl['need_mean']:.1f} objects a cell keep every pose of its cell under 0.01 % "
+            f"when each pose leaves out its least-seen objects{nr}"
+        )
     rows = sorted(result["rows"], key=lambda r: -r["share"])[:worst]
     if rows:
         lines.append("")

@@ -38,7 +38,16 @@ image error at random eye points
     PVS would show (:func:`~walkstream.client.truth.compare.compare_frame`, cause
     ``pvs``): the share of the truth's object pixels showing an object missing from
     the PVS, the share of the objects it shows that are missing, and the sizes of
-    the missed objects (share of the frame).
+    the missed objects (share of the frame); and the share of views whose missing
+    pixels exceed 0.01 % of the frame (``view_over_hundredth``, the per-frame figure
+    at random eye points) and their mean.  ``view_need``: the per-frame figure's floor
+    at those eye points (:func:`view_need`), against ``corners-64``'s PVS.
+
+least PVS
+    The floor the PVS bound meets (:func:`least_pvs`): per cell, the reference-visible
+    objects less the least-seen ones that both miss targets allow leaving out.  When it
+    is over the PVS target, no sampling can meet the miss targets and the PVS target
+    together on these cells.
 
 When the scene is a baked database, its stored PVS is scored too (row ``baked``).
 The scene and the sample of cells come from :mod:`walkstream.benchmarks.visinput`, the
@@ -61,6 +70,7 @@ import numpy as np
 import shapely
 from numpy.typing import NDArray
 
+from walkstream.benchmarks.pvsmisses import OVER_SHARE, frame_need
 from walkstream.benchmarks.visinput import BenchInput, pick_cells
 from walkstream.benchmarks.visref import reference_cache_key, scene_digest
 from walkstream.benchmarks.vissettings import (
@@ -87,7 +97,7 @@ from walkstream.shared.errors import InputError
 if TYPE_CHECKING:
     import moderngl
 
-__all__ = ["VIEW_MARGIN", "visibility_benchmark"]
+__all__ = ["VIEW_MARGIN", "least_pvs", "view_need", "visibility_benchmark"]
 
 Progress = Callable[[int, int], None]
 
@@ -126,6 +136,55 @@ def _score(pvs: list[set[int]], ref: list[dict[int, int]]) -> dict[str, Any]:
     }
 
 
+def least_pvs(ref: list[dict[int, int]], miss_px: float, miss_max: float) -> list[set[int]]:
+    """The smallest PVS per cell that still meets the miss targets against the reference.
+
+    Leaving objects out of a cell's PVS costs their reference pixels.  The targets allow
+    ``miss_px`` of all the cells' reference pixels (pooled, as :func:`_score` counts them)
+    and no single object above ``miss_max`` of its own cell's pixels, so the most objects
+    that can be left out are the fewest pixels first: the objects under ``miss_max``,
+    taken over all cells in ascending order of pixels while their sum stays within the
+    budget.  No sampling, however placed, can meet both targets with a smaller mean PVS
+    against this reference: it is the floor the PVS bound (``pvs_ratio``) meets.
+    """
+    total = sum(sum(r.values()) for r in ref)
+    budget = miss_px * total
+    cands = sorted(
+        (px, k, j) for k, r in enumerate(ref) for j, px in r.items()
+        if r and px <= miss_max * sum(r.values())
+    )
+    out = [set(r) for r in ref]
+    spent = 0
+    for px, k, j in cands:
+        if spent + px > budget:
+            break
+        spent += px
+        out[k].discard(j)
+    return out
+
+
+def view_need(
+    views: list[tuple[int, NDArray[np.uint32], NDArray[np.uint8]]], cells: int
+) -> tuple[list[set[int]], list[set[int]]]:
+    """Per cell, what its PVS must hold to keep every view of it within :data:`OVER_SHARE`.
+
+    Returns ``(need, must)``.  ``must``: the objects that alone cover more than
+    :data:`OVER_SHARE` of some view, a floor no PVS that keeps every view within the
+    share goes under.  ``need``: at each view the objects it shows less its least-seen
+    ones while they stay within the share together, their union per cell, an estimate
+    of the whole need (each view choosing alone: a PVS chosen for all of a cell's views
+    at once could hold a little less).  More views only add to both.
+    """
+    need: list[set[int]] = [set() for _ in range(cells)]
+    must: list[set[int]] = [set() for _ in range(cells)]
+    for k, ids, _ in views:
+        tid = ids.astype(np.int64).reshape(-1) - 1
+        n_ids, m_ids = frame_need(*np.unique(tid[tid >= 0], return_counts=True), float(tid.size))
+        need[k].update(n_ids.tolist())
+        must[k].update(m_ids.tolist())
+    return need, must
+
+
 def _view_error(views: list[tuple[int, NDArray[np.uint32], NDArray[np.uint8]]], pvs: list[set[int]]) -> dict[str, Any]:
     """The image error of one setting's PVS at the random eye points (see the module docs)."""
     from walkstream.client.truth.compare import compare_frame
@@ -146,6 +205,8 @@ def _view_error(views: list[tuple[int, NDArray[np.uint32], NDArray[np.uint8]]], 
         sizes += (per[missed] / err.pixels).tolist()
     fs = np.array(frame_share) if frame_share else np.zeros(1)
     return {
+        "view_over_hundredth": float(np.mean(fs > OVER_SHARE)),
+        "view_frame_mean": float(fs.mean()),
         "view_miss_px": miss_px / obj_px if obj_px else 0.0,
         "view_miss_count": float(np.mean(counts)) if counts else 0.0,
         "view_frame_p95": float(np.percentile(fs, 95)),
@@ -331,6 +392,9 @@ def visibility_benchmark(
             | _score(pvs[k], ref)
             | (_view_error(shots, pvs[k]) if shots else {})
         )
+    floor = least_pvs(ref, TARGETS["miss_px"], TARGETS["miss_max"])
+    rows.append({"name": "least PVS", "sec_per_cell": None} | _score(floor, ref) | (_view_error(shots, floor) if shots else {}))
+    need, must = view_need(shots, len(chosen)) if shots else (None, None)
     if inp.baked is not None:
         stored = [{int(i) for i in inp.baked.get(c.id, np.zeros(0, np.int64))} for c in chosen]
         rows.append({"name": "baked", "sec_per_cell": None} | _score(stored, ref) | (_view_error(shots, stored) if shots else {}))
@@ -371,6 +435,12 @@ def visibility_benchmark(
         },
         "views": len(shots),
         "view_size": list(view_size),
+        "view_need": None if need is None or must is None else {
+            "pvs_mean": float(np.mean([len(n) for n in need])),
+            "pvs_ratio": float(np.mean([len(n) for n in need])) / base["pvs_mean"] if base["pvs_mean"] else None,
+            "must_mean": float(np.mean([len(n) for n in must])),
+            "must_ratio": float(np.mean([len(n) for n in must])) / base["pvs_mean"] if base["pvs_mean"] else None,
+        },
         "seconds": time.perf_counter() - t_start,
     }
 

@@ -34,7 +34,8 @@ def format_table(result: dict[str, Any]) -> str:
         "random heading) compared with their ground truth",
         "",
         f"{'setting':<20} {'pts':>4} {'ms/cell':>8} {'time x':>6} {'x dflt':>6} {'x prev':>6} {'PVS':>6} {'PVS x':>5} {'x prev':>6} "
-        f"{'culled%':>7} {'missed':>6} {'miss#%':>6} {'miss px%':>8} {'max obj%':>8} {'view px%':>8} {'view #%':>7} {'v>0.5%':>6}",
+        f"{'culled%':>7} {'missed':>6} {'miss#%':>6} {'miss px%':>8} {'max obj%':>8} {'view px%':>8} {'view #%':>7} {'v>0.5%':>6} "
+        f"{'v>0.01%':>7}",
     ]
     for r in result["rows"]:
         mark = "  <- bake default" if r["name"] == result.get("default") else ""
@@ -47,7 +48,8 @@ def format_table(result: dict[str, Any]) -> str:
             f"{r['pvs_ratio']:>5.2f} {_ratio(r.get('pvs_ratio_previous')):>6} {_pct(r['culled'], 1):>7} {r['missed']:>6d} "
             f"{_pct(r['miss_count'], 1):>6} "
             f"{_pct(r['miss_px'], 4):>8} {_pct(r['miss_max'], 4):>8} {_pct(r.get('view_miss_px'), 3):>8} "
-            f"{_pct(r.get('view_miss_count'), 1):>7} {_pct(r.get('view_over_half'), 1):>6}{mark}"
+            f"{_pct(r.get('view_miss_count'), 1):>7} {_pct(r.get('view_over_half'), 1):>6} "
+            f"{_pct(r.get('view_over_hundredth'), 1):>7}{mark}"
         )
     t = TARGETS
     lines += [
@@ -58,8 +60,19 @@ def format_table(result: dict[str, Any]) -> str:
         f"time x, PVS x: against {TODAY.name} (the first bake); x dflt: against the bake's default; "
         f"x prev: against {PREVIOUS.name} (the default before region sampling), when it is a row",
         "view px%: truth pixels showing an object missing from the cell's PVS; view #%: objects "
-        "shown that are missing; v>0.5%: views whose missing pixels exceed 0.5 % of the frame",
+        "shown that are missing; v>0.5%, v>0.01%: views whose missing pixels exceed 0.5 % (0.01 %) of the frame",
+        "least PVS: the fewest objects a PVS can hold and still meet both miss targets against this "
+        "reference (the least-seen objects left out first): no sampling stays under its PVS x",
     ]
+    vn = result.get("view_need")
+    if vn:
+        lines.append(
+            f"view need: {vn['pvs_mean']:.1f} objects a cell keep each of its views within 0.01 % of the frame "
+            f"(each view less its least-seen objects within it): {_ratio(vn['pvs_ratio'])} x {TODAY.name}'s PVS, "
+            f"the per-frame figure's need at these eye points; of them {vn['must_mean']:.1f} "
+            f"({_ratio(vn['must_ratio'])} x) alone cover over 0.01 % of some view: no PVS that keeps every view "
+            "within 0.01 % holds fewer"
+        )
     for r in result["rows"]:
         if r.get("bake_sec_per_cell") is not None:
             lines.append(
@@ -155,11 +168,23 @@ def plot_visibility_benchmark(result: dict[str, Any], path: str | os.PathLike[st
             "the reference PVS", (need, 0.98), xycoords=("data", "axes fraction"),
             fontsize=7, rotation=90, va="top", ha="right", color="#CC79A7",
         )
+        # the floors: no PVS left of them meets the miss targets (the reference) or keeps
+        # every random view within 0.01 % of the frame (the per-frame figure)
+        least = next((r for r in rows if r["name"] == "least PVS"), None)
+        vn = result.get("view_need")
+        for x, label, colour in (
+            (least["pvs_mean"] / base["pvs_mean"] if least else None, "the least PVS within the miss targets", "#E69F00"),
+            (vn["pvs_ratio"] if vn else None, "what the views need (per frame)", "#56B4E9"),
+        ):
+            if x is not None:
+                ax2.axvline(x, color=colour, linestyle="-.", linewidth=1.0)
+                ax2.annotate(label, (x, 0.98), xycoords=("data", "axes fraction"), fontsize=7, rotation=90,
+                             va="top", ha="right", color=colour)
     ax2.axhline(100 * TARGETS["miss_px"], color="#0072B2", linestyle="--", linewidth=1.0)
     ax2.set_yscale("log")
     ax2.set_xlabel("mean PVS size / the first default's")
     ax2.set_ylabel("reference pixels missed (%, pooled, log)")
-    ax2.set_title("misses by pixels against PVS growth (targets dashed)", fontsize=9)
+    ax2.set_title("misses by pixels against PVS growth (targets dashed, the PVS bound dotted, the floors dash-dotted)", fontsize=9)
     bins = np.logspace(-6, 0, 37)
     for name, colour in ((TODAY.name, "#D55E00"), (result.get("default"), "#009E73"), ("baked", "#555555")):
         r = next((x for x in rows if x["name"] == name), None)

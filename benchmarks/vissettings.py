@@ -50,12 +50,13 @@ _SPEC = re.compile(r"^(corners|(?:boundary|region|field)(\d+(?:\.\d+)?)?)-(\d+)(
 
 
 def parse_setting(spec: str) -> Setting:
-    """A setting from its name: ``SAMPLING-RES[-tN][-LK][-hH][+c][+e]``.
+    """A setting from its name: ``SAMPLING-RES[-tN][-pP][-LK][-hH][+c][+e]``.
 
     ``corners-64`` is the first bake (8 box corners, 64 px); ``boundary20-128`` samples
     the outline every 20 m at 128 px; ``region20-128`` the outline, a 20 m grid inside
     and both ends of the height range; ``-t2`` adds a hardly-visible threshold of 2
-    pixels, ``-L2`` renders LOD2 occluders, ``-h0.25`` samples a height every 0.25 m
+    pixels, ``-p0.003`` a pixel budget of 0.003 % of each view's pixels (``--pvs-budget``: the
+    least-seen objects left out while every view's loss fits it), ``-L2`` renders LOD2 occluders, ``-h0.25`` samples a height every 0.25 m
     of the cell's range, ``+c`` the centre too, ``+e`` the edge pass (objects thinner
     than a pixel), ``-thin2`` the thin pass for boxes at most 2 px across
     (``--thin-pass 2``), ``+d`` its conservative depth (``--thin-depth``).  ``field4-128`` samples the cell from the dense visibility field
@@ -104,12 +105,14 @@ def parse_setting(spec: str) -> Setting:
             kw["split"] = float(value)
         elif key == "t":
             kw["threshold"] = int(float(value))
+        elif key == "p":
+            kw["pvs_budget"] = float(value) / 100.0
         elif key == "L":
             kw["occluder_lod"] = int(value)
         elif key == "h":
             kw["height_step"] = float(value)
         else:
-            raise InputError(f"setting {spec!r}: unknown part -{key}{value} (t, L, h, s, thin, +c or +e)")
+            raise InputError(f"setting {spec!r}: unknown part -{key}{value} (t, p, L, h, s, thin, +c or +e)")
     return Setting(spec.strip(), BakeSettings(**kw).check())
 
 

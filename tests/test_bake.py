@@ -106,12 +106,17 @@ def test_bad_settings_and_sources(city: Path, tmp_path: Path) -> None:
         BakeSettings(thin_pass=-1.0).check()
     with pytest.raises(InputError, match="--thin-pass"):
         BakeSettings(thin_pass=float("nan")).check()
+    for budget in (-1e-5, 0.01, float("nan")):
+        with pytest.raises(InputError, match="--pvs-budget"):
+            BakeSettings(pvs_budget=budget).check()
 
 
 def test_the_thin_pass_is_part_of_a_bakes_identity_only_when_on() -> None:
     # a bake without it keeps the header (and scene version) it had before it existed
     assert "thin_pass" not in BakeSettings(thin_pass=0.0).record()
     assert BakeSettings(thin_pass=2.0).record()["thin_pass"] == 2.0
+    assert "pvs_budget" not in BakeSettings().record()
+    assert BakeSettings(pvs_budget=3e-5).record()["pvs_budget"] == 3e-5
 
 
 def test_inspect_cli_json_map_and_bad_files(baked: tuple[Path, dict], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from teamdata import team_data
 
-from walkstream.benchmarks.visibility import visibility_benchmark
+from walkstream.benchmarks.visibility import least_pvs, view_need, visibility_benchmark
 from walkstream.benchmarks.visinput import BenchInput, load_bench_input, pick_cells
 from walkstream.benchmarks.visreport import format_table, plot_visibility_benchmark
 from walkstream.benchmarks.vissettings import TODAY, bake_default, parse_setting
@@ -51,9 +51,16 @@ def result(city: BenchInput, gl_ctx: moderngl.Context) -> dict[str, Any]:
 
 def test_rows_and_ranges(result: dict[str, Any]) -> None:
     rows = {r["name"]: r for r in result["rows"]}
+    least = rows.pop("least PVS")
     # the first default and the bake's default are the yardsticks of the ratios: added when not asked for
     dflt = bake_default().name
     assert list(rows) == [TODAY.name, dflt, *SETTINGS]
+    # the floor meets both miss targets against the reference, and no setting that meets them holds less
+    assert least["meets"]["miss_px"] and least["meets"]["miss_max"] and least["sec_per_cell"] is None
+    assert least["pvs_mean"] <= result["reference"]["pvs_mean"]
+    for r in rows.values():
+        if r["meets"]["miss_px"] and r["meets"]["miss_max"]:
+            assert r["pvs_mean"] >= least["pvs_mean"]
     assert rows[TODAY.name]["time_ratio"] == 1.0 and rows[TODAY.name]["pvs_ratio"] == 1.0
     assert rows[dflt]["time_ratio_default"] == 1.0 and result["default"] == dflt
     for r in rows.values():
@@ -74,6 +81,11 @@ def test_rows_and_ranges(result: dict[str, Any]) -> None:
     assert ref["resolution"] == 64 and ref["lod"] == 2 and ref["frustum_culling"] is False
     assert ref["points_per_cell"] <= 6 and ref["cells_scored"] >= 1
     assert result["views"] == 2
+    for r in rows.values():
+        assert 0.0 <= r["view_over_hundredth"] <= 1.0 and r["view_over_hundredth"] >= r["view_over_half"]
+    need = result["view_need"]
+    assert need["pvs_ratio"] == pytest.approx(need["pvs_mean"] / rows[TODAY.name]["pvs_mean"])
+    assert need["must_mean"] <= need["pvs_mean"]
     assert result["_progress"][-1] == (2 * 3, 2 * 3)
 
 
@@ -89,12 +101,38 @@ def test_table_and_plot(result: dict[str, Any], tmp_path: Path) -> None:
     json.dumps(result)  # the CLI writes it as JSON
 
 
+def test_least_pvs_leaves_out_the_least_seen_objects_within_both_targets() -> None:
+    ref = [{1: 9_000, 2: 600, 3: 300, 4: 100}, {5: 9_990, 6: 10}, {}]
+    # 20,000 pixels: the budget 1 % is 200 (4 and 6 fit, 3 would not); the cap 4 % of a cell
+    got = least_pvs(ref, 0.01, 0.04)
+    assert got == [{1, 2, 3}, {5}, set()]
+    # the cap keeps what is large in its own cell even when the budget would allow it
+    assert least_pvs(ref, 0.5, 0.005) == [{1, 2, 3, 4}, {5}, set()]
+    # a PVS that left out anything more would miss the budget: nothing to leave out at 0
+    assert least_pvs(ref, 0.0, 1.0) == [set(r) for r in ref]
+
+
+def test_view_need_leaves_out_what_each_view_can_spare() -> None:
+    frame = np.zeros((100, 100), np.uint32)  # 10,000 pixels: 0.01 % is one pixel
+    frame[:50] = 4  # object 3 (ids are object + 1)
+    frame[50:, :40] = 8
+    frame[99, 99] = 10  # object 9: one pixel, spared
+    other = np.zeros((100, 100), np.uint32)
+    other[0, 0], other[0, 1] = 6, 7  # one pixel each: 5 is spared, 6 then makes two
+    views = [(0, frame, frame), (1, other, other), (1, frame, frame)]
+    need, must = view_need(views, 3)
+    assert need == [{3, 7}, {6, 3, 7}, set()]
+    # alone over one pixel: 3 and 7, not the one-pixel objects
+    assert must == [{3, 7}, {3, 7}, set()]
+
+
 def test_parse_setting() -> None:
     s = parse_setting("boundary15-96-t2-L1-h0.5+c").bake
     assert (s.sampling, s.spacing, s.resolution, s.threshold, s.occluder_lod, s.height_step, s.centre) == (
         "boundary", 15.0, 96, 2, 1, 0.5, True
     )
     assert parse_setting("corners-64").bake.sampling == "corners"
+    assert parse_setting("region20-256-p0.003").bake.pvs_budget == pytest.approx(3e-5)
     r = parse_setting("region10-128+e+c").bake
     assert (r.sampling, r.spacing, r.edge_pass, r.centre) == ("region", 10.0, True, True)
     for bad in ("random-64", "corners", "boundary20-128-x3", "corners-4"):

@@ -105,6 +105,7 @@ def cmd_bake(args: argparse.Namespace) -> int:
         network=args.network,
         centre=args.centre,
         threshold=args.threshold,
+        pvs_budget=args.pvs_budget / 100.0,
         **{k: v for k, v in (("resolution", args.resolution), ("occluder_lod", args.occluder_lod)) if v is not None},
         **{k: v for k, v in (("field_spacing", args.field_spacing), ("redundancy", args.redundancy), ("min_size", args.min_size), ("section_shape", args.section_shape), ("section_cover", args.section_cover)) if v is not None},
         **{k: v for k, v in (("sampling", args.sampling), ("spacing", args.spacing), ("height_step", args.height_step), ("edge_pass", args.edge_pass), ("thin_pass", args.thin_pass), ("thin_depth", args.thin_depth), ("split", args.split), ("far_band", args.far_band), ("far_pixels", args.far_pixels), ("far_axis", args.far_axis), ("far_edges", args.far_edges)) if v is not None},
@@ -241,6 +242,9 @@ def add_bake_parsers(sub: Any) -> None:
     bk.add_argument("--edge-pass", action="store_true", default=None, help="also draw every triangle's edges, adding objects thinner than a pixel (about 2x the render time)")
     bk.add_argument("--centre", action="store_true", help="also sample the cell centre")
     bk.add_argument("--threshold", type=int, default=0, help="hardly-visible threshold (m-LOMA): pixels an object must exceed over the cell's images to enter the PVS (default 0)")
+    bk.add_argument("--pvs-budget", type=float, default=0.0, metavar="PCT", help="per cell, leave out of the PVS the least-seen objects "
+                    "while, at every sample point (its cube; with --far-band, its band too), the pixels they cover together stay "
+                    "within PCT %% of what it sees (default 0: off)")
     bk.add_argument("--workers", type=int, default=1, help="local processes rendering cells (default 1)")
     bk.add_argument("--scheduler", help="tcp://HOST:PORT of a Dask scheduler to run the cell tasks on")
     bk.add_argument("--interior", metavar="FILE", help="an interior (.ifc or walkstream-interior .json) to place in one of the city's "

@@ -20,7 +20,7 @@ def cmd_bench_pvs_misses(args: argparse.Namespace) -> int:
     bar, progress = count_bar("poses", "pose")
     try:
         result = run_pvs_misses(Path(args.db), [p for p in args.paths.split(",") if p], every=args.every,
-                            top=args.top, progress=progress)
+                            top=args.top, yardstick=args.yardstick, progress=progress)
     finally:
         bar.close()
     if args.json:
@@ -40,5 +40,7 @@ def add_pvs_benches(besub: Any) -> None:
     p.add_argument("--every", type=float, default=1.0, help="seconds of walk time between poses (default 1: bench stream's every 25th frame)")
     p.add_argument("--top", type=int, default=5, help="objects listed per pose (default 5)")
     p.add_argument("--worst", type=int, default=8, help="poses listed (default 8)")
+    p.add_argument("--yardstick", help="another bake of the same source and cells (e.g. --sampling corners --resolution 64): "
+                   "the floor's PVS sizes set beside its own")
     p.add_argument("--json", help="write every pose over 0.01 %% and the figures to this JSON file")
     p.set_defaults(func=cmd_bench_pvs_misses)

@@ -81,6 +81,10 @@ class BakeSettings:
     threshold: int = 0
     """Hardly-visible threshold (m-LOMA): an object needs more than this many pixels
     over the cell's images to enter its PVS (0: any pixel at all)."""
+    pvs_budget: float = 0.0
+    """A share of each view's object pixels (a sample point's cube, a band point's band)
+    that the objects a cell's PVS leaves out may cover together, the least-seen first
+    (:mod:`~walkstream.server.bake.pvsbudget`; 0: off)."""
     margin: float = 0.3
     sampling: str = DEFAULT_SAMPLING
     """Where a cell is sampled: ``"region"`` (its outline and a grid inside, every
@@ -160,6 +164,8 @@ class BakeSettings:
             out.pop("far_axis")  # bakes without it keep their header
         if not self.far_edges:
             out.pop("far_edges")
+        if not self.pvs_budget:
+            out.pop("pvs_budget")  # bakes without it keep their header
         if self.cells != "sections":
             for name in SECTION_FIELDS:
                 if name != "field_spacing" or self.sampling != "field":
@@ -212,6 +218,10 @@ class BakeSettings:
             raise InputError("--thin-depth: give --thin-pass PX too (it sets how the thin pass tests depth)")
         if self.threshold < 0:
             raise InputError(f"threshold: expected >= 0 pixels, got {self.threshold}")
+        if not (np.isfinite(self.pvs_budget) and 0.0 <= self.pvs_budget < 0.01):
+            raise InputError(f"--pvs-budget: expected a share of a cell's pixels in [0, 1 %), got {100 * self.pvs_budget:g} %")
+        if self.pvs_budget and (self.split or self.sampling == "field" or self.cells == "sections"):
+            raise InputError("--pvs-budget: works with the region, boundary and corners sampling, without --split")
         if self.bbox_crs not in ("local", "lonlat"):
             raise InputError(f"--bbox-crs: expected local or lonlat, got {self.bbox_crs!r}")
         if self.network not in ("walk", "drive"):

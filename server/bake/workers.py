@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from walkstream.server.bake.farband import band_renderer, merge_band_counts
 from walkstream.server.bake.fieldrender import FieldRenderer
 from walkstream.server.bake.idpack import meshes_for_scene
+from walkstream.server.bake.pvsbudget import within_budget
 from walkstream.server.bake.samples import axis_points, bake_points, split_points
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.server.bake.viewcell import ViewCell
@@ -124,6 +125,9 @@ def cell_counts(
     (:func:`~.farband.merge_band_counts`); with ``settings.far_axis`` the band also at
     the cell's :func:`band_points` beyond them.
 
+    With ``settings.pvs_budget``, the counts less the objects the budget leaves out
+    (:func:`~.pvsbudget.within_budget`: each point's cube and each band point's band a view).
+
     Returns
     -------
     ids, pixels : (k,) int64
@@ -134,6 +138,11 @@ def cell_counts(
     pts = cell_points(settings, polygon, zmin, zmax, footprints)
     if len(pts) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), 0
+    if settings.pvs_budget:
+        # the same renders kept apart by view, for the budget (which takes no split)
+        cube = renderer.each_point_counts(pts)
+        far = band.each_point_counts(band_points(settings, pts, polygon, zmin, zmax, footprints)) if band is not None else []
+        return *within_budget(cube, far, settings), len(pts)
     if not settings.split:
         ids, pixels = renderer.cell_counts(pts)
         if band is not None:
