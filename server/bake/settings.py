@@ -219,7 +219,7 @@ class BakeSettings:
         if self.threshold < 0:
             raise InputError(f"threshold: expected >= 0 pixels, got {self.threshold}")
         if not (np.isfinite(self.pvs_budget) and 0.0 <= self.pvs_budget < 0.01):
-            raise InputError(f"--pvs-budget: expected a share of a cell's pixels in [0, 1 %), got {100 * self.pvs_budget:g} %")
+            raise InputError(f"--pvs-budget: expected a share of each view's pixels in [0, 1 %), got {100 * self.pvs_budget:g} %")
         if self.pvs_budget and (self.split or self.sampling == "field" or self.cells == "sections"):
             raise InputError("--pvs-budget: works with the region, boundary and corners sampling, without --split")
         if self.bbox_crs not in ("local", "lonlat"):
