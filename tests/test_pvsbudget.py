@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -10,6 +11,9 @@ import pytest
 from walkstream.server.bake.pvsbudget import budget_drops, pool_views, within_budget
 from walkstream.server.bake.settings import BakeSettings
 from walkstream.shared.errors import InputError
+
+if TYPE_CHECKING:
+    import moderngl
 
 
 def _v(ids: list[int], px: list[int]) -> tuple[np.ndarray, np.ndarray]:
@@ -62,7 +66,7 @@ def test_the_budget_is_checked_and_refused_where_it_does_not_apply() -> None:
 
 
 @pytest.mark.gl
-def test_a_budgeted_bake_holds_a_subset_every_point_sees_within_the_budget(tmp_path: Path, gl: object) -> None:
+def test_a_budgeted_bake_holds_a_subset_every_point_sees_within_the_budget(tmp_path: Path, gl: moderngl.Context) -> None:
     import json
 
     import shapely
@@ -79,6 +83,7 @@ def test_a_budgeted_bake_holds_a_subset_every_point_sees_within_the_budget(tmp_p
     plain, tight = BakeSettings(resolution=48), BakeSettings(resolution=48, pvs_budget=0.002)
     for st, name in ((plain, "a.db"), (tight, "b.db")):
         bake(src, tmp_path / name, settings=st)
+    gl.__enter__()  # each bake made its own context current and released it
     _, _, before, _ = scene_from_database(tmp_path / "a.db")
     scene, cells, after, header = scene_from_database(tmp_path / "b.db")
     assert header["pvs_budget"] == 0.002 and "pvs_budget" not in scene_from_database(tmp_path / "a.db")[3]
@@ -88,7 +93,7 @@ def test_a_budgeted_bake_holds_a_subset_every_point_sees_within_the_budget(tmp_p
     # what the budget left out, every sample point of the cell sees within the budget
     meshes, ids = meshes_for_scene(scene, tight.occluder_lod)
     fp = shapely.STRtree([shapely.Polygon(b.rings[0], b.rings[1:]) for b in scene.buildings])
-    r = VisibilityRenderer(meshes, ids, resolution=48, view_distance=tight.view_distance, ctx=gl)  # type: ignore[arg-type]
+    r = VisibilityRenderer(meshes, ids, resolution=48, view_distance=tight.view_distance, ctx=gl)
     try:
         for c in cells[:8]:
             gone = np.setdiff1d(before[c.id], after[c.id])

@@ -33,6 +33,9 @@ def city() -> BenchInput:
 
 @pytest.fixture(scope="module")
 def result(city: BenchInput, gl_ctx: moderngl.Context) -> dict[str, Any]:
+    # a bake or replay run in-process by an earlier module makes its own context current
+    # and releases it: the session's is made current again (as the ``gl`` fixture does)
+    gl_ctx.__enter__()
     calls: list[tuple[int, int]] = []
     out = visibility_benchmark(
         city,
@@ -159,6 +162,7 @@ def test_a_database_is_read_alone_and_its_pvs_scored(tmp_path: Path, gl_ctx: mod
     assert direct.view_distance == 800.0 and direct.cells and direct.baked is None
     db = tmp_path / "city.db"
     bake(src, db, settings=BakeSettings(view_distance=500.0, resolution=32, sampling="corners"))
+    gl_ctx.__enter__()  # the bake made its own context current and released it
     src.unlink()  # the database alone is enough (a source of any kind)
     baked = load_bench_input(db)
     assert baked.view_distance == 500.0 and baked.baked is not None
