@@ -9,12 +9,13 @@ and, with ``--far-band``, each band point's band another, and an object may be l
 out only while, in every view, the pixels of all the objects left out stay within
 ``budget`` of that view's object pixels.  The objects are tried least-seen first, by
 their largest share of any one view, so an object seen well from one point and hardly
-from the rest is kept, where a threshold on pixels pooled over the cell would drop it.
+from the rest is kept, where a budget on the pixels pooled over the cell would drop it
+(large in one view, it is small in the sum of many).
 
 Every view's loss within the budget bounds what the cell's own samples lose: pooled
-over the points (what ``bench visibility`` counts against its reference) and for the
-worst single object, both at most ``budget``; and a view of the band is the client's
-pixel size around the horizon, where the far field is.
+over the points (as ``bench visibility`` pools its reference's) and for the worst
+single object, both at most ``budget``; and a view of the band is the client's pixel
+size around the horizon, where the far field is.
 """
 
 from __future__ import annotations
