@@ -37,6 +37,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -370,19 +371,21 @@ def write_interior_doc(
 
         if not dest.parent.is_dir():
             raise InputError(f"{dest}: cannot write (no folder {dest.parent})")
-        tmp = dest.with_name(dest.name + ".tmp")
-        try:
-            write_interior_ifc(tmp, doc, boundaries, schema)
-            tmp.replace(dest)
-        except OSError as exc:
-            raise InputError(f"{dest}: cannot write ({exc.strerror or exc})") from exc
-        finally:
-            tmp.unlink(missing_ok=True)  # a half-written model never stays behind
-        return interior_summary(doc)
+        _write_via_tmp(dest, lambda tmp: write_interior_ifc(tmp, doc, boundaries, schema))
+    else:
+        _write_via_tmp(dest, lambda tmp: tmp.write_text(json.dumps(doc, separators=(",", ":"), allow_nan=False),
+                                                        encoding="utf-8"))
+    return interior_summary(doc)
+
+
+def _write_via_tmp(dest: Path, write: Callable[[Path], object]) -> None:
+    """``write`` a file beside ``dest`` and put it in its place; a write that fails names
+    ``dest`` and leaves nothing half-written behind."""
     tmp = dest.with_name(dest.name + ".tmp")
     try:
-        tmp.write_text(json.dumps(doc, separators=(",", ":"), allow_nan=False), encoding="utf-8")
+        write(tmp)
         tmp.replace(dest)
     except OSError as exc:
         raise InputError(f"{dest}: cannot write ({exc.strerror or exc})") from exc
-    return interior_summary(doc)
+    finally:
+        tmp.unlink(missing_ok=True)
