@@ -174,6 +174,13 @@ class ReplayConfig:
     its centre to the eye at which its picture stands for LOD2 (``--facade-grazing``;
     90: no limit, a third fewer triangles on ``gl`` at a higher pixel-level error;
     :data:`~walkstream.client.draw.lookalike.GRAZING_COS`)."""
+    facade_parallax_px: float = 1.0
+    """Largest parallax of a facade's relief, in pixels, at which a box with its pictures
+    stands for LOD2 (``--facade-parallax``; :data:`~walkstream.client.draw.lookalike.PARALLAX_PX`)."""
+    facade_filter: str = "point"
+    """How a facade picture is read when drawn smaller than baked (``--facade-filter``; one
+    of :data:`~walkstream.client.draw.quads.FACADE_FILTERS`): ``point`` (the closest to the
+    point-sampled truth) or ``anisotropic`` (the closest to an anti-aliased one)."""
     facade_texels_per_m: float = 8.0
     """Texels per metre of a facade texture (``--facade-texels``)."""
     facade_budget_bytes: int = 8 << 20
@@ -206,6 +213,10 @@ class ReplayConfig:
         tf = self.target_fps
         if tf is not None and not (math.isfinite(tf) and 0 < tf <= 1000):
             raise InputError(f"--target-fps {tf!r}: expected a number in (0, 1000]")
+        if not (math.isfinite(self.facade_parallax_px) and 0 < self.facade_parallax_px <= 8):
+            raise InputError(f"--facade-parallax {self.facade_parallax_px!r}: expected pixels in (0, 8]")
+        if self.facade_filter not in ("point", "anisotropic"):
+            raise InputError(f"--facade-filter {self.facade_filter!r}: expected point or anisotropic")
         if not (math.isfinite(self.facade_texels_per_m) and 0 < self.facade_texels_per_m <= 64):
             raise InputError(f"--facade-texels {self.facade_texels_per_m!r}: expected texels per metre in (0, 64]")
         if not (math.isfinite(self.facade_grazing_deg) and 0 <= self.facade_grazing_deg <= 90):

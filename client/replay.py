@@ -386,7 +386,7 @@ async def replay(
 
                 renderer = FrameRenderer(
                     size=config.size, fov_deg=config.fov_deg, batched=config.batched_draws,
-                    near=near,
+                    near=near, facade_filter=config.facade_filter,
                 )
                 renderer.ground_z = ground_z
 
@@ -401,7 +401,7 @@ async def replay(
             recorder = (  # the one ground truth, at the walk's near and far planes
                 TruthRecorder(config.truth_every, config.size, config.fov_deg, near=near, far=far, ground_z=ground_z,
                               viewer_ppd=config.viewer_ppd, truth_samples=config.truth_samples,
-                              picture_samples=config.picture_samples)
+                              picture_samples=config.picture_samples, facade_filter=config.facade_filter)
                 if config.truth_every
                 else None
             )

@@ -53,6 +53,17 @@ def test_image_ids_are_negative_and_distinct() -> None:
     assert len(ids) == 500 and max(ids) < 0
 
 
+def test_facade_ids_never_meet_a_wall_texture_or_an_impostor_image() -> None:
+    # a wall texture t is drawn as -1 - t: building 2's face 3 was -1 - 131 before, the key
+    # of wall texture 131 too, so one frame showing both drew one image in both places
+    from walkstream.client.draw.quads import FACADE_IDS
+
+    facades = {facade_image_id(o, k) for o in range(200) for k in range(64)}
+    walls = {-1 - t for t in range(200 * 64 + 1)}
+    assert not facades & walls
+    assert max(facades) <= -FACADE_IDS < min(walls)
+
+
 def test_bad_facade_settings_are_refused() -> None:
     link = LinkProfile(56_000.0, 56_000.0, 0.2)
     with pytest.raises(InputError, match="--facade-texels"):
@@ -61,6 +72,43 @@ def test_bad_facade_settings_are_refused() -> None:
         ReplayConfig(link, facade_bake_share=0.0)
     with pytest.raises(InputError, match="--facade-budget"):
         ReplayConfig(link, facade_budget_bytes=-1)
+    with pytest.raises(InputError, match="--facade-filter 'mipmap'"):
+        ReplayConfig(link, facade_filter="mipmap")
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("how", ["point", "anisotropic"])
+def test_a_facade_seen_obliquely_is_read_as_its_filter_says(gl: Any, how: str) -> None:
+    """Windows a texel wide, black on white, on a face seen along the street at 80 degrees:
+    read point-sampled each pixel is a window or a wall (what one sample of LOD2 shows),
+    read anisotropically each is the mean under its footprint (what an anti-aliased
+    drawing of LOD2 shows); a wrong filter, or mipmaps with none built, fails one side."""
+    from walkstream.client.draw.facades import facade_image_id
+    from walkstream.client.draw.frames import FrameRenderer
+    from walkstream.shared.camera import perspective
+
+    img = np.full((64, 256, 4), 255, np.uint8)
+    img[:, 1::2, :3] = 0  # a column of windows every other texel
+    # a 40 m x 10 m face in the plane y = 0 facing -y, seen from 3 m in front at 80 degrees
+    corners = np.array([[0.0, 0.0, 0.0], [40.0, 0.0, 0.0], [40.0, 0.0, 10.0], [0.0, 0.0, 10.0]])
+    eye = np.array([-2.0, -3.0, 5.0])
+    r = FrameRenderer(size=(64, 64), fov_deg=40.0, ctx=gl, facade_filter=how)
+    try:
+        r.impostors = [(corners, facade_image_id(1, 0), img, 1.0)]
+        r.draw([], look_at(eye, eye + np.array([np.sin(np.radians(80)), np.cos(np.radians(80)), 0.0])),
+               perspective(40.0, 1.0, 0.5, 100.0))
+        px = r.snapshot()[:, :, :3].astype(float).mean(axis=2)
+        held = r._quads.texture_bytes if r._quads is not None else 0
+    finally:
+        r.release()
+    # the face's far part, where a pixel spans several windows (the sky, 239, is to its right)
+    far = px[16:48, 12:32]
+    if how == "point":
+        assert ((far < 40) | (far > 250)).mean() > 0.9  # black or white, as the texel under each centre
+        assert held == img.nbytes
+    else:
+        assert np.abs(far - 127.5).max() < 25  # grey, the windows averaged with their wall
+        assert held == img.nbytes * 4 // 3  # the mipmaps counted
 
 
 @pytest.mark.gl

@@ -15,6 +15,7 @@ from walkstream.client.draw.facades import BACK_M, FRONT_M, FacadeBaker
 from walkstream.client.draw.lookalike import (
     GRAZING_COS,
     PARALLAX_PX,
+    buildings_alike,
     facade_screen_error,
     face_geometry,
     looks_alike,
@@ -145,3 +146,17 @@ def test_a_bad_grazing_angle_is_refused() -> None:
     link = LinkProfile(56_000.0, 56_000.0, 0.2)
     with pytest.raises(InputError, match="--facade-grazing"):
         ReplayConfig(link, facade_grazing_deg=95.0)
+    for bad in (0.0, -1.0, math.nan, 9.0):
+        with pytest.raises(InputError, match="--facade-parallax"):
+            ReplayConfig(link, facade_parallax_px=bad)
+
+
+def test_the_parallax_bound_decides_which_buildings_look_alike() -> None:
+    # a relief of 0.3 m from 25 m, 10 m past the face's edge: between 1 and 1.5 pixels,
+    # its texels within one
+    g = _face(0.3)
+    eye = np.array([-10.0, -25.0, 7.5])
+    p, _, _ = facade_screen_error(g, eye, FOCAL)
+    assert PARALLAX_PX < p < 1.5
+    assert buildings_alike([g, _face(0.0)], eye, FOCAL, 0.0).tolist() == [False, True]
+    assert buildings_alike([g, _face(0.0)], eye, FOCAL, 0.0, 1.5).tolist() == [True, True]

@@ -166,6 +166,8 @@ def config_from_args(args: argparse.Namespace) -> Any:
         facades=False if args.no_facades else {"auto": None, "on": True, "off": False}[args.facades],
         facade_lookalike=not args.no_facade_lookalike,
         facade_grazing_deg=args.facade_grazing,
+        facade_filter=args.facade_filter,
+        facade_parallax_px=args.facade_parallax,
         facade_texels_per_m=args.facade_texels,
         facade_budget_bytes=parse_size(args.facade_budget),
         facade_bake_share=args.facade_bake_share,
@@ -413,6 +415,8 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--no-facades", action="store_true", help="draw a building left at its LOD0 box plain (--facades off)")
     r.add_argument("--no-facade-lookalike", action="store_true", help="give facade textures to the boxes only (by default a building at LOD2 is drawn as its box with textures where the two look alike from the eye: the relief's parallax and a texel each within a pixel)")
     r.add_argument("--facade-grazing", type=float, default=70.0, metavar="DEG", help="look-alike boxes: the largest angle between a face's normal and the eye at which its texture stands for LOD2 (default 70; 90: no limit, fewer triangles, more error at the pixel level)")
+    r.add_argument("--facade-parallax", type=float, default=1.0, metavar="PX", help="look-alike boxes: the largest parallax of a facade's relief, in pixels, at which its picture stands for LOD2 (default 1; 1.5 with --facade-filter anisotropic on gl: fewer triangles at no more colour error against an anti-aliased truth)")
+    r.add_argument("--facade-filter", default="point", choices=("point", "anisotropic"), help="how a facade picture is read where it is drawn smaller than baked: the texel under each pixel's centre (point, default; the closest to the point-sampled truth) or the mean under the pixel's footprint, mipmapped with 16x anisotropy (anisotropic; the closest to an anti-aliased truth, --truth-samples 4)")
     r.add_argument("--facade-texels", type=float, default=8.0, metavar="T", help="texels per metre of a facade texture (default 8)")
     r.add_argument("--facade-budget", default="8MB", metavar="BYTES", help="bytes of facade textures held and drawn (default 8MB)")
     r.add_argument("--facade-bake-share", type=float, default=0.3, metavar="S", help="share of the frame's triangle budget baking facade textures may take on average (default 0.3)")

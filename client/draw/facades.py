@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from walkstream.client.draw.quads import Quad
+from walkstream.client.draw.quads import FACADE_IDS, Quad
 from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.gl import check_gl_error, create_context, release_objects
@@ -188,8 +188,11 @@ def texture_size(face: WallFace, texels_per_m: float, max_size: int) -> tuple[in
 
 
 def facade_image_id(oid: int, face: int) -> int:
-    """The image id of building ``oid``'s face ``face``: negative, never an impostor's or a wall texture's."""
-    return -1 - (int(oid) * MAX_FACES + int(face))
+    """The image id of building ``oid``'s face ``face``: at most ``-FACADE_IDS``
+    (:data:`~walkstream.client.draw.quads.FACADE_IDS`), never an impostor's (0 and up) or
+    a wall texture's (-1 down to ``-FACADE_IDS + 1``): the quad renderer keeps one texture
+    an id, so a shared id would draw one image in the other's place."""
+    return -FACADE_IDS - (int(oid) * MAX_FACES + int(face))
 
 
 def facing(faces: NDArray[np.float64], normals: NDArray[np.float64], eye: NDArray[np.float64]) -> NDArray[np.bool_]:

@@ -104,6 +104,9 @@ class FrameRenderer(Releasable):
         Lighting per vertex (default, cheap on llvmpipe) or per fragment (the path
         before, for comparison) when there is no fog; see
         :class:`~walkstream.client.draw.meshes.MeshRenderer`.
+    facade_filter : {"point", "anisotropic"}
+        How facade pictures are read where drawn smaller than baked
+        (:data:`~walkstream.client.draw.quads.FACADE_FILTERS`).
 
     Notes
     -----
@@ -121,6 +124,7 @@ class FrameRenderer(Releasable):
         ctx: moderngl.Context | None = None,
         batched: bool = True,
         shading: str = "vertex",
+        facade_filter: str = "point",
     ) -> None:
         w, h = (int(v) for v in size)
         if w <= 0 or h <= 0:
@@ -152,6 +156,8 @@ class FrameRenderer(Releasable):
         self.last_issue_s = 0.0
         self.last_finish_s = 0.0
         self._quads: QuadRenderer | None = None
+        self.facade_filter = facade_filter
+        """How facade pictures are read when minified (:data:`~walkstream.client.draw.quads.FACADE_FILTERS`)."""
         #: The impostor quads the next :meth:`draw` draws over its meshes (the frame's
         #: ``upload`` step sets them; :mod:`walkstream.client.draw.quads`).
         self.impostors: list[Quad] = []
@@ -286,7 +292,7 @@ class FrameRenderer(Releasable):
             self._r.draw(meshes, view, p, self.size)
         if self.impostors or self._quads is not None:
             if self._quads is None:
-                self._quads = QuadRenderer(self.ctx)
+                self._quads = QuadRenderer(self.ctx, facade_filter=self.facade_filter)
             self._quads.draw(self.impostors, np.asarray(p, np.float64) @ np.asarray(view, np.float64))
         t1 = time.perf_counter()
         self.ctx.finish()

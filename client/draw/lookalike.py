@@ -127,15 +127,16 @@ def looks_alike(geom: FaceGeometry, eye: NDArray[np.float64], focal_px: float) -
 
 
 def buildings_alike(geoms: Sequence[FaceGeometry], eye: NDArray[np.float64], focal_px: float,
-                    grazing_cos: float = GRAZING_COS) -> NDArray[np.bool_]:
+                    grazing_cos: float = GRAZING_COS, parallax_px: float = PARALLAX_PX) -> NDArray[np.bool_]:
     """``(m,)`` :func:`looks_alike` of each of ``geoms`` (one building each), in one pass
-    over all their faces; ``grazing_cos`` in place of :data:`GRAZING_COS` (0: no limit)."""
+    over all their faces; ``grazing_cos`` in place of :data:`GRAZING_COS` (0: no limit),
+    ``parallax_px`` in place of :data:`PARALLAX_PX`."""
     counts = np.array([len(g[0]) for g in geoms], np.int64)
     if not len(geoms) or not counts.sum():
         return np.ones(len(geoms), bool)
     joined: FaceGeometry = tuple(np.concatenate([g[i] for g in geoms]) for i in range(6))  # type: ignore[assignment]
     p, t, c = face_screen_errors(joined, eye, focal_px)
-    ok = (p <= PARALLAX_PX) & (t <= TEXEL_PX) & (c >= grazing_cos)
+    ok = (p <= parallax_px) & (t <= TEXEL_PX) & (c >= grazing_cos)
     owner = np.repeat(np.arange(len(geoms)), counts)
     bad = np.bincount(owner[~ok], minlength=len(geoms))
     out: NDArray[np.bool_] = bad == 0

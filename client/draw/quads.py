@@ -24,10 +24,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from walkstream.shared.camera import mat4_bytes
-from walkstream.shared.errors import RenderError
+from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.walls import NO_WARP, WallWarp
 
-__all__ = ["IMPOSTOR_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "warped",
+__all__ = ["ANISOTROPY", "FACADE_FILTERS", "FACADE_IDS", "IMPOSTOR_MIN_FILTER", "WALL_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "warped",
            "with_mesh"]
 
 IMPOSTOR_MIN_FILTER: int = moderngl.LINEAR
@@ -37,6 +37,26 @@ surface under it) is closer to the truth pixel by pixel (``walkstream bench
 impostor-sampling``; on the D 60 m walk it takes the visibly wrong share's median from
 1.00 to 0.82 % of the frame) but the images shimmer as they move: the switch's
 frame-to-frame change over plain motion's rose from 1.02 to 1.13 there, so bilinear stays."""
+
+WALL_MIN_FILTER: int = moderngl.NEAREST
+"""How a wall texture's texels are read when it is drawn smaller than baked: the texel
+under the pixel's centre, as the truth's rasterised geometry takes the surface under it."""
+
+FACADE_IDS: int = 1 << 40
+"""The quads' image ids by kind: 0 and up an impostor image, -1 down to ``-FACADE_IDS + 1``
+a wall texture (``-1 - texture id``), ``-FACADE_IDS`` and below a facade picture
+(:func:`~walkstream.client.draw.facades.facade_image_id`).  The renderer keeps one texture
+an id, so the ranges never meet."""
+
+FACADE_FILTERS: tuple[str, ...] = ("point", "anisotropic")
+"""How a facade picture is read when drawn smaller than baked (``--facade-filter``):
+``point``, the texel under the pixel's centre, as one sample a pixel of LOD2 geometry takes
+the surface under it (the closest to the point-sampled truth); ``anisotropic``, the mean of
+the texels under the pixel's footprint (trilinear mipmaps, :data:`ANISOTROPY` samples along
+a face seen obliquely), as an anti-aliased drawing of the geometry would show them."""
+
+ANISOTROPY: float = 16.0
+"""The largest anisotropy of an ``anisotropic`` facade picture (the driver clamps it to its own)."""
 
 Quad = tuple[NDArray[np.float64], int, NDArray[np.uint8], float]
 """``(corners (4, 3), image id, premultiplied RGBA (h, w, 4), opacity)``; corners bottom-left,
@@ -102,10 +122,14 @@ def with_mesh(quad: NDArray[np.floating], mesh: NDArray[np.float32]) -> NDArray[
 class QuadRenderer:
     """Textures and draws impostor quads on ``ctx`` (see the module docstring)."""
 
-    def __init__(self, ctx: moderngl.Context, image_filter: int | None = None) -> None:
+    def __init__(self, ctx: moderngl.Context, image_filter: int | None = None, facade_filter: str = "point") -> None:
+        if facade_filter not in FACADE_FILTERS:
+            raise InputError(f"--facade-filter {facade_filter!r}: expected one of {', '.join(FACADE_FILTERS)}")
         self.ctx = ctx
         self.image_filter = IMPOSTOR_MIN_FILTER if image_filter is None else int(image_filter)
         """Minifying filter of impostor images (moderngl ``NEAREST`` or ``LINEAR``)."""
+        self.facade_filter = facade_filter
+        """How facade pictures are read when minified (one of :data:`FACADE_FILTERS`)."""
         try:
             self._prog = ctx.program(vertex_shader=_VS, fragment_shader=_FS)
         except Exception as exc:
@@ -113,6 +137,7 @@ class QuadRenderer:
         self._vbo = ctx.buffer(reserve=_MESH_VERTICES * 6 * 4)
         self._vao = ctx.vertex_array(self._prog, [(self._vbo, "3f 3f", "in_pos", "in_uvq")])
         self._textures: dict[int, moderngl.Texture] = {}
+        self._bytes: dict[int, int] = {}
         self.texture_bytes = 0
         """Bytes of the textures held."""
         self.last_quads = 0
@@ -125,14 +150,20 @@ class QuadRenderer:
         if tex is None:
             a = np.ascontiguousarray(rgba, np.uint8)
             tex = self.ctx.texture((a.shape[1], a.shape[0]), 4, a.tobytes())
-            # a facade picture (negative ids) seen from afar, its texels under a pixel: each
-            # pixel takes the texel under its centre, as rasterising LOD2 takes the surface
-            # under it (bilinear blurs a window's edge over the next pixel); near, bilinear.
-            # An impostor: IMPOSTOR_MIN_FILTER (bilinear; why there)
-            tex.filter = (moderngl.NEAREST if image < 0 else self.image_filter, moderngl.LINEAR)
+            # magnified, bilinear; minified, by kind (FACADE_FILTERS, WALL_MIN_FILTER,
+            # IMPOSTOR_MIN_FILTER: why each)
+            if image <= -FACADE_IDS and self.facade_filter == "anisotropic":
+                tex.build_mipmaps()
+                tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+                tex.anisotropy = ANISOTROPY
+            else:
+                tex.filter = (moderngl.NEAREST if image <= -FACADE_IDS else WALL_MIN_FILTER if image < 0
+                              else self.image_filter, moderngl.LINEAR)
             tex.repeat_x = tex.repeat_y = False
             self._textures[image] = tex
-            self.texture_bytes += a.nbytes
+            # a mipmapped texture's levels hold a third more
+            self._bytes[image] = a.nbytes * 4 // 3 if tex.filter[0] == moderngl.LINEAR_MIPMAP_LINEAR else a.nbytes
+            self.texture_bytes += self._bytes[image]
         return tex
 
     def draw(self, quads: Sequence[Quad], view_proj: ArrayLike) -> None:
@@ -141,7 +172,7 @@ class QuadRenderer:
         used = {q[1] for q in quads}
         for image in [i for i in self._textures if i not in used]:
             tex = self._textures.pop(image)
-            self.texture_bytes -= tex.width * tex.height * 4
+            self.texture_bytes -= self._bytes.pop(image)
             tex.release()
         self.last_quads = len(quads)
         self.last_triangles = sum(2 if len(q[0]) == 4 else len(q[0]) // 3 for q in quads)
@@ -197,6 +228,7 @@ class QuadRenderer:
         for tex in self._textures.values():
             tex.release()
         self._textures.clear()
+        self._bytes.clear()
         self.texture_bytes = 0
         self._vao.release()
         self._vbo.release()

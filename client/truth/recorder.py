@@ -159,6 +159,9 @@ class TruthRecorder:
         and of the client's picture (``--picture-samples``)
         (:mod:`walkstream.client.truth.antialias`); one sample at the centre by default.
         The id comparison, and a walk with rooms, stay point-sampled.
+    facade_filter : {"point", "anisotropic"}
+        How the client read its facade pictures (``--facade-filter``): the picture the
+        colour error redraws reads them so too.
     """
 
     def __init__(
@@ -174,6 +177,7 @@ class TruthRecorder:
         viewer_ppd: float | None = None,
         truth_samples: Sampling = POINT,
         picture_samples: Sampling = POINT,
+        facade_filter: str = "point",
     ) -> None:
         if int(every) < 1:
             raise InputError(f"--truth-every {every}: expected a frame count >= 1")
@@ -189,6 +193,8 @@ class TruthRecorder:
         """How a city's colour error samples the full scene's pixels."""
         self.picture_samples = picture_samples
         """How a city's colour error samples the client picture's pixels."""
+        self.facade_filter = facade_filter
+        """How the redrawn picture reads facade pictures, as the client did."""
         self.notes: list[FrameNote] = []
         self.overlay: Overlay | None = None
         """The ``impostor`` hook of the colour error (:mod:`walkstream.client.truth.picture`):
@@ -335,6 +341,7 @@ class TruthRecorder:
                     fov_deg=self.fov_deg, near=self.near, far=self.far, view_distance=self.view_distance,
                     forms=forms_of(self.notes),
                     ground_z=self.ground_z,
+                    facade_filter=self.facade_filter,
                 )
                 overlay = self.overlay
                 if overlay is None and any(st.impostors or st.wall_quads or st.facades for st in self.notes):

@@ -166,6 +166,9 @@ class TruthRenderer(Releasable):
         the client's picture does.  Their keys (:func:`form_key`) come after the room
         parts; a frame that draws any of them draws everything in ascending object
         id, as the client's id pass does (ties in depth resolve alike).
+    facade_filter : {"point", "anisotropic"}
+        How :meth:`paint_quads` reads facade pictures where they are minified, as the
+        client did (:data:`~walkstream.client.draw.quads.FACADE_FILTERS`).
     """
 
     def __init__(
@@ -182,6 +185,7 @@ class TruthRenderer(Releasable):
         ground_z: float | None = None,
         ctx: moderngl.Context | None = None,
         forms: Mapping[tuple[int, int], Mesh] | None = None,
+        facade_filter: str = "point",
     ) -> None:
         objects = objects or {}
         rooms = rooms or {}
@@ -193,6 +197,7 @@ class TruthRenderer(Releasable):
             raise InputError(f"TruthRenderer.view_distance: expected > 0, got {view_distance}")
         self.size = (w, h)
         self._quads: QuadRenderer | None = None
+        self.facade_filter = facade_filter
         self._smooth: dict[Sampling, SmoothTarget] = {}
         self._shown: SmoothTarget | None = None  # where the last frame's colour is (None: the point-sampled one)
         self.near, self.far = float(near), float(far)
@@ -563,7 +568,7 @@ class TruthRenderer(Releasable):
             self._quads.release()
             self._quads = None
         if self._quads is None:
-            self._quads = QuadRenderer(self.ctx, image_filter)
+            self._quads = QuadRenderer(self.ctx, image_filter, self.facade_filter)
         if self._shown is not None:
             self._shown.use()
         else:

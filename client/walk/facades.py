@@ -222,7 +222,8 @@ def choose_facades(w: WalkState, f: Frame) -> None:
     if lookalike:  # the held buildings at LOD2, tested in one pass
         ids = [o.geoms[k].id for k in cand[lods[cand] == 2].tolist() if o.geoms[k].id in st.shapes]
         cos = math.cos(math.radians(w.config.facade_grazing_deg))
-        alike = dict(zip(ids, buildings_alike([st.shapes[i] for i in ids], f.eye, focal, cos).tolist(), strict=True))
+        alike = dict(zip(ids, buildings_alike([st.shapes[i] for i in ids], f.eye, focal, cos,
+                                              w.config.facade_parallax_px).tolist(), strict=True))
     far = texel_distance(1.0 / w.config.facade_texels_per_m, focal)
     budget = w.config.facade_budget_bytes
     used = 0
