@@ -1,5 +1,5 @@
 """The floor under ``wall1%``: the walls' visibly wrong share of the frame with ideal textures
-(``python -m walkstream.benchmarks.wallfloor DB SOURCE REPORT``).
+(``walkstream bench wall-floor DB SOURCE --report REPORT``).
 
 Issue 28 asks that a ring wall's texture leave at most 1 % of the frame visibly wrong
 (CIEDE2000 over :data:`~walkstream.client.truth.colour.VISIBLE_DE`) on 99 % of the
@@ -51,11 +51,9 @@ interior's walls are rendered without their crossing objects' holes.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import math
-import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -64,8 +62,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["FloorRun", "edge_mask", "frame_width", "ideal_quads", "main", "measure", "ring_holes", "summarise", "table",
-           "texture_costs", "texture_id"]
+__all__ = ["FloorRun", "edge_mask", "frame_width", "ideal_quads", "measure", "ring_holes", "summarise", "table",
+           "texture_costs", "texture_id", "write"]
+
+Replay = Callable[[str, Mapping[str, Any], str], Any]
+"""``replay(server, options, title)``: one replay with ``walkstream replay``'s options
+(the CLI's ``replay_with_options``), its report written, its result returned."""
 
 VISIBLE_SHARE = 0.01
 """The issue's bound on a frame's walls' visibly wrong share (as ``benchmarks/walls.py``)."""
@@ -116,7 +118,7 @@ def ring_holes(ring: Sequence[Any], ids: NDArray[np.int64], boxes: NDArray[np.fl
     from the region's rectangle at most the ring's distance ``r`` is the reach from the
     rectangle pushed out by ``r``, the ring itself, being 0).  ``ring``: the ring's four
     wall sides (wall ``k`` runs from the ring's corner ``k + 1`` to corner ``k``)."""
-    from walkstream.server.bake.ringwalls import _reach
+    from walkstream.server.bake.ringwalls import ring_reach
     from walkstream.shared.walls import RING_SIDES
 
     by_k = {int(s.portal) % RING_SIDES: s for s in ring}
@@ -126,7 +128,7 @@ def ring_holes(ring: Sequence[Any], ids: NDArray[np.int64], boxes: NDArray[np.fl
     u, v = corners[1] - corners[0], corners[3] - corners[0]
     half = np.array([np.linalg.norm(u), np.linalg.norm(v)]) / 2.0
     axes = np.stack([u / (2.0 * half[0]), v / (2.0 * half[1])])
-    hit = _reach(np.asarray(boxes, np.float64).reshape(-1, 6), corners.mean(axis=0), axes, half) <= 1e-9
+    hit = ring_reach(np.asarray(boxes, np.float64).reshape(-1, 6), corners.mean(axis=0), axes, half) <= 1e-9
     return tuple(int(i) for i in np.asarray(ids)[hit])
 
 
@@ -220,19 +222,18 @@ def texture_costs(ren: Any, sides: dict[tuple[int, int], Any], info: Mapping[int
     return out
 
 
-def measure(db: str, source: str, report: str, *, path: str = "bench", device: str = "pda",
+def measure(db: str, source: str, report: str, replay: Replay, *, path: str = "bench", device: str = "pda",
             size: str = "160x120", duration: str = "60s", truth_every: int = 25, bandwidth: str = "56kbit",
             rtt: str = "200ms", fps: float = 25.0, densities: Sequence[float] = (1.0, 2.0, 4.0),
             frame_res: Sequence[float] = (1.0,), costs: bool = True, viewer_ppd: float | None = None) -> FloorRun:
-    """Replay ``db`` (baked from ``source``) on ``path`` with the simulated clock, its
-    report into ``report``, and measure each compared frame's walls again with each
+    """Replay ``db`` (baked from ``source``) on ``path`` with the simulated clock by
+    ``replay`` (in this process: the truth runs here), its report into ``report``, and measure each compared frame's walls again with each
     variant's textures (see the module docs); with ``viewer_ppd`` at the viewer's scale
     too (S-CIELAB at that many pixels a degree, the replay's ``--viewer-ppd``)."""
     import walkstream.client.replay  # noqa: F401  (first: the truth's modules import each other through it)
     import walkstream.client.truth.missing as missing
     import walkstream.client.truth.recorder as recorder
     from walkstream.client.truth.colour import COLOUR_CAUSES
-    from walkstream.cmd_replay import replay_with_options
     from walkstream.server.bake.wallrender import WallRenderer, wall_elements
     from walkstream.server.sources.read import read_source
     from walkstream.server.store import SceneReader
@@ -343,7 +344,7 @@ def measure(db: str, source: str, report: str, *, path: str = "bench", device: s
 
     recorder.missing_figures = figures
     try:
-        result = replay_with_options(db, {
+        result = replay(db, {
             "path": path, "device": device, "clock": "sim", "duration": duration, "size": size,
             "truth_every": truth_every, "bandwidth": bandwidth, "rtt": rtt, "fps": fps, "report": report,
             "no_plots": True, "viewer_ppd": viewer_ppd}, f"replay {path} (wall floor)")
@@ -440,59 +441,3 @@ def write(run: FloorRun, folder: Path, plot: bool) -> None:
     fig.tight_layout()
     fig.savefig(folder / "floor.png", dpi=110)
     plt.close(fig)
-
-
-def _numbers(text: str, what: str) -> list[float]:
-    try:
-        out = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise SystemExit(f"wallfloor: {what} {text!r}: expected numbers separated by commas") from None
-    if any(not (0.0 < v <= 16.0) for v in out):
-        raise SystemExit(f"wallfloor: {what} {text!r}: each from above 0 to 16")
-    return out
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m walkstream.benchmarks.wallfloor DB SOURCE REPORT [options]``."""
-    ap = argparse.ArgumentParser(prog="python -m walkstream.benchmarks.wallfloor", description=__doc__.split("\n")[0])
-    ap.add_argument("db", help="a walls database (bench walls' SCENE-walls-A.db)")
-    ap.add_argument("source", help="the scene's source (the OSM file) the database was baked from")
-    ap.add_argument("report", help="the folder the replay's report and floor.csv, floor.json (floor.png) go to")
-    ap.add_argument("--path", default="bench", help="the recorded path to walk (default bench)")
-    ap.add_argument("--device", default="pda", help="the simulated device (default pda)")
-    ap.add_argument("--size", default="160x120", help="frame size (default 160x120)")
-    ap.add_argument("--duration", default="60s", help="walk length (default 60s)")
-    ap.add_argument("--truth-every", type=int, default=25, help="compare every Nth frame (default 25)")
-    ap.add_argument("--bandwidth", default="56kbit", help="link bandwidth (default 56kbit)")
-    ap.add_argument("--rtt", default="200ms", help="round trip (default 200ms)")
-    ap.add_argument("--fps", type=float, default=25.0, help="frame rate (default 25)")
-    ap.add_argument("--densities", default="1,2,4", help="the ideal textures' texels a metre, times the stored (default 1,2,4)")
-    ap.add_argument("--frame-res", default="1", help="texels a frame pixel of the sanity variants (default 1; '' none)")
-    ap.add_argument("--viewer-ppd", type=float, default=None, metavar="P",
-                    help="also count at the viewer's scale (S-CIELAB) for a display of P pixels a degree (slow)")
-    ap.add_argument("--no-costs", action="store_true", help="skip encoding the textures for their bytes")
-    ap.add_argument("--plot", action="store_true", help="write floor.png")
-    a = ap.parse_args(argv)
-    for name, p in (("db", a.db), ("source", a.source)):
-        if not Path(p).is_file():
-            print(f"wallfloor: {name} {p}: no such file", file=sys.stderr)
-            return 2
-    densities = _numbers(a.densities, "--densities")
-    frame_res = _numbers(a.frame_res, "--frame-res")
-    from walkstream.shared.errors import WalkstreamError
-
-    Path(a.report).mkdir(parents=True, exist_ok=True)
-    try:
-        run = measure(a.db, a.source, a.report, path=a.path, device=a.device, size=a.size, duration=a.duration,
-                      truth_every=a.truth_every, bandwidth=a.bandwidth, rtt=a.rtt, fps=a.fps, densities=densities,
-                      frame_res=frame_res, costs=not a.no_costs, viewer_ppd=a.viewer_ppd)
-    except WalkstreamError as exc:
-        print(f"wallfloor: {exc}", file=sys.stderr)
-        return 2
-    write(run, Path(a.report), a.plot)
-    print(table(run))
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
