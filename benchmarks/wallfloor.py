@@ -182,6 +182,8 @@ class FloorRun:
     """Variant -> the textures' cost (:func:`texture_costs`)."""
     summary: dict[str, Any] = field(default_factory=dict)
     """The replay's summary."""
+    ppd: float | None = None
+    """The viewer's pixels a degree the viewer-scale shares were counted at (None: not counted)."""
 
 
 def _variants(densities: Sequence[float], frame_res: Sequence[float]) -> list[str]:
@@ -225,11 +227,13 @@ def texture_costs(ren: Any, sides: dict[tuple[int, int], Any], info: Mapping[int
 def measure(db: str, source: str, report: str, replay: Replay, *, path: str = "bench", device: str = "pda",
             size: str = "160x120", duration: str = "60s", truth_every: int = 25, bandwidth: str = "56kbit",
             rtt: str = "200ms", fps: float = 25.0, densities: Sequence[float] = (1.0, 2.0, 4.0),
-            frame_res: Sequence[float] = (1.0,), costs: bool = True, viewer_ppd: float | None = None) -> FloorRun:
+            frame_res: Sequence[float] = (1.0,), costs: bool = True, viewer_ppd: float | None = None,
+            samples: Mapping[str, str] | None = None) -> FloorRun:
     """Replay ``db`` (baked from ``source``) on ``path`` with the simulated clock by
     ``replay`` (in this process: the truth runs here), its report into ``report``, and measure each compared frame's walls again with each
     variant's textures (see the module docs); with ``viewer_ppd`` at the viewer's scale
-    too (S-CIELAB at that many pixels a degree, the replay's ``--viewer-ppd``)."""
+    too (S-CIELAB at that many pixels a degree, the replay's ``--viewer-ppd``); ``samples``
+    the replay's ``truth_samples`` and ``picture_samples`` (an anti-aliased measure)."""
     import walkstream.client.replay  # noqa: F401  (first: the truth's modules import each other through it)
     import walkstream.client.truth.missing as missing
     import walkstream.client.truth.recorder as recorder
@@ -263,7 +267,7 @@ def measure(db: str, source: str, report: str, replay: Replay, *, path: str = "b
         return hole_cache[c]
 
     wall = COLOUR_CAUSES.index("wall")
-    run = FloorRun(_variants(densities, frame_res))
+    run = FloorRun(_variants(densities, frame_res), ppd=viewer_ppd)
     for v in run.variants:
         run.wrong[v], run.painted[v], run.texels[v], run.scielab[v] = [], [], [], []
     seen: set[int] = set()
@@ -347,7 +351,7 @@ def measure(db: str, source: str, report: str, replay: Replay, *, path: str = "b
         result = replay(db, {
             "path": path, "device": device, "clock": "sim", "duration": duration, "size": size,
             "truth_every": truth_every, "bandwidth": bandwidth, "rtt": rtt, "fps": fps, "report": report,
-            "no_plots": True, "viewer_ppd": viewer_ppd}, f"replay {path} (wall floor)")
+            "no_plots": True, "viewer_ppd": viewer_ppd, **(samples or {})}, f"replay {path} (wall floor)")
     finally:
         recorder.missing_figures = orig_figures
         reader.close()
@@ -361,7 +365,7 @@ def table(run: FloorRun) -> str:
     textures and each density what they would cost."""
     sent = (run.summary.get("walls") or {}).get("texture_bytes")
     base = run.costs.get("eye x1", {})
-    scale = bool(run.scielab) and any(run.scielab.values())
+    scale = run.ppd is not None
     walled = int(np.count_nonzero(np.asarray(run.painted.get("today", [])) > 0))
     head = [f"{len(run.frames)} compared frames, {walled} of them drawing a wall"]
     if base:
@@ -417,7 +421,8 @@ def write(run: FloorRun, folder: Path, plot: bool) -> None:
     (folder / "floor.json").write_text(json.dumps(
         {"frames": len(run.frames), "summaries": {v: summarise(run.wrong[v]) for v in run.variants},
          "edges": summarise(run.edges),
-         "viewer_scale": {v: summarise(run.scielab[v]) for v in run.variants if any(run.scielab.get(v, []))},
+         "viewer_ppd": run.ppd,
+         "viewer_scale": {v: summarise(run.scielab[v]) for v in run.variants} if run.ppd is not None else None,
          "texels_per_metre": {v: float(np.mean(t)) if t else None for v, t in run.texels.items()},
          "costs": run.costs}, indent=2))
     if not plot:

@@ -242,11 +242,13 @@ def test_the_wall_floor_counts_as_the_truth_and_lays_ideal_textures_unwarped() -
     """``benchmarks/wallfloor.py``: the pieces of its arithmetic (the replay around it is a benchmark)."""
     from walkstream.benchmarks.wallfloor import (
         MAX_WIDTH,
+        FloorRun,
         edge_mask,
         frame_width,
         ideal_quads,
         ring_holes,
         summarise,
+        table,
         texture_id,
     )
 
@@ -285,3 +287,10 @@ def test_the_wall_floor_counts_as_the_truth_and_lays_ideal_textures_unwarped() -
     pic = np.full((3, 4, 3), 200, np.uint8)
     pic[:, 2:] = 60
     assert edge_mask(pic).tolist() == [[False, True, True, False]] * 3
+    # the table: a row a variant; the viewer's scale only when it was counted
+    run = FloorRun(["today", "eye x1"], frames=[1, 2], wrong={"today": [0.02, 0.0], "eye x1": [0.005, 0.0]},
+                   painted={"today": [0.1, 0.0], "eye x1": [0.1, 0.0]}, texels={"today": [4.0], "eye x1": [4.0]},
+                   edges=[0.05, 0.0])
+    text = table(run)
+    assert "2 compared frames, 1 of them drawing a wall" in text and "viewer-scale" not in text
+    assert "| today | 4.0 | 50.0 % |" in text and "| eye x1 | 4.0 | 100.0 % |" in text

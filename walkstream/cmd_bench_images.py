@@ -135,7 +135,9 @@ def cmd_bench_wall_floor(args: argparse.Namespace) -> int:
     run = measure(args.db, args.source, str(out), replay_with_options, path=args.path, device=args.device,
                   size=args.size, duration=args.duration, truth_every=args.truth_every, bandwidth=args.bandwidth,
                   rtt=args.rtt, fps=args.fps, densities=densities, frame_res=frame_res, costs=not args.no_costs,
-                  viewer_ppd=args.viewer_ppd)
+                  viewer_ppd=args.viewer_ppd,
+                  samples={k: v for k, v in (("truth_samples", args.truth_samples),
+                                             ("picture_samples", args.picture_samples)) if v})
     write(run, out, args.plot)
     print(table(run))
     print(f"(per frame: {out / 'floor.csv'}{'; plot: ' + str(out / 'floor.png') if args.plot else ''})")
@@ -210,6 +212,8 @@ def add_image_benches(besub: Any) -> None:
     b.add_argument("--densities", default="1,2,4", help="the ideal textures' texels a metre as factors of the stored (default 1,2,4)")
     b.add_argument("--frame-res", default="1", help="texels a frame pixel of the check at the frame's resolution (default 1; '' none)")
     b.add_argument("--viewer-ppd", type=float, default=None, metavar="P", help="also count at the viewer's scale (S-CIELAB) for a display of P pixels a degree (slower)")
+    b.add_argument("--truth-samples", help="the truth's colour anti-aliased (as replay --truth-samples: 4 for 4 x 4, msaa4)")
+    b.add_argument("--picture-samples", help="the client's picture anti-aliased (as replay --picture-samples)")
     b.add_argument("--no-costs", action="store_true", help="skip rendering and encoding the textures for their bytes")
     b.add_argument("--plot", action="store_true", help="write floor.png (each variant's frames sorted by their walls' share)")
     b.set_defaults(func=cmd_bench_wall_floor)
