@@ -247,10 +247,12 @@ def measure(db: str, source: str, report: str, replay: Replay, *, path: str = "b
     reader = SceneReader.open(db)
     sides = {(s.portal, s.side): s for s in (WallSide.from_row(r) for r in reader.wall_sides())}
     info = reader.wall_texture_info()
-    if not sides or not info:
-        from walkstream.shared.errors import InputError
+    from walkstream.shared.errors import InputError
 
+    if not sides or not info:
         raise InputError(f"{db}: no virtual walls (bake with --virtual-walls)")
+    if reader.meta.kind != "city":
+        raise InputError(f"{db}: an interior; the floor is measured on a city's ring walls only")
     elements = wall_elements(read_source(source, network="walk"))
     ids = reader.object_ids()
     objects = reader.object_info(ids.tolist())
