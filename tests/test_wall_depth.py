@@ -236,3 +236,61 @@ def test_a_depth_mesh_covers_its_wall_once_with_flat_blocks_merged() -> None:
         assert len(tri) < 2 * g * g
     # one depth everywhere: one quad
     assert len(depth_mesh(_SIDE, 0, np.full((9, 9), 0.02))) == 6
+
+
+def test_the_wall_floor_counts_as_the_truth_and_lays_ideal_textures_unwarped() -> None:
+    """``benchmarks/wallfloor.py``: the pieces of its arithmetic (the replay around it is a benchmark)."""
+    from walkstream.benchmarks.wallfloor import (
+        MAX_WIDTH,
+        FloorRun,
+        edge_mask,
+        frame_width,
+        ideal_quads,
+        ring_holes,
+        summarise,
+        table,
+        texture_id,
+    )
+
+    assert texture_id(-1) == 0 and texture_id(-1 - 41) == 41  # the client keys a texture -1 - id
+    # 120 rows at 60 degrees: 120 / (2 tan 30°) = 103.9 pixels a metre at 1 m, 10.39 at 10 m
+    p11 = 1.0 / math.tan(math.radians(30.0))
+    assert frame_width(20.0, 10.0, p11, 120, 1.0) == 208  # a 20 m wall at 10 m: 207.8 pixels across
+    assert frame_width(20.0, 10.0, p11, 120, 4.0) == 832
+    assert frame_width(20.0, 0.0, p11, 120, 8.0) == MAX_WIDTH
+    s = summarise([0.0, 0.005, 0.01, 0.02])  # at most 1 % counts as within
+    assert s["wall1"] == 0.75 and s["median"] == pytest.approx(0.0075) and s["mean"] == pytest.approx(0.00875)
+    assert math.isnan(summarise([])["wall1"])
+    # a wall blending with its neighbour zone: two quads, both replaced, fresh negative keys, opacities kept
+    corners = np.hstack([_SIDE.corners(), np.array([[0.1, 1.0], [0.9, 1.0], [0.9, 0.0], [0.1, 0.0]])])
+    tex = np.zeros((4, 4, 4), np.uint8)
+    quads = [(corners, -1 - 7, tex, 0.6), (corners, -1 - 8, tex, 0.3), (corners, -1 - 99, tex, 1.0)]
+    ideal = np.full((8, 8, 4), 255, np.uint8)
+    keys = iter([-100, -101])
+    out = ideal_quads(quads, lambda t: ideal if t in (7, 8) else None, lambda: next(keys))
+    assert [q[1] for q in out] == [-100, -101, -1 - 99] and [q[3] for q in out] == [0.6, 0.3, 1.0]
+    assert out[0][0].shape == (4, 3) and out[0][2] is ideal  # laid on the quad as it is: no warp
+    assert out[2][0] is corners and out[2][2] is tex  # a texture it has none for stays as drawn
+    kept = ideal_quads(quads[:1], lambda t: ideal, lambda: -5, warp=True)
+    assert kept[0][0].shape == (4, 5)
+    # a ring 10 x 6 m (corner k + 1 to corner k, as the bake lays them): every box meeting it is a hole
+    ring_corners = [(-5.0, -3.0), (5.0, -3.0), (5.0, 3.0), (-5.0, 3.0)]
+    ring = [WallSide(4 * 3 + k, 0, ring_corners[(k + 1) % 4], ring_corners[k], 0.0, 10.0, 0.0, 0.0, 0.0, 3.0,
+                     math.radians(10.0), 1, (k,)) for k in range(4)]
+    boxes = np.array([[-1, -1, 0, 1, 1, 5],  # inside
+                      [4, 2, 0, 7, 4, 5],  # across the corner
+                      [5.5, -1, 0, 8, 1, 5],  # beyond the right wall
+                      [6, 4, 0, 7, 5, 5]], np.float64)  # off the corner
+    assert ring_holes(ring, np.array([10, 11, 12, 13]), boxes) == (10, 11)
+    assert ring_holes(ring[:3], np.array([10]), boxes[:1]) == ()
+    # edges: a pixel visibly different from a neighbour, both sides of the step
+    pic = np.full((3, 4, 3), 200, np.uint8)
+    pic[:, 2:] = 60
+    assert edge_mask(pic).tolist() == [[False, True, True, False]] * 3
+    # the table: a row a variant; the viewer's scale only when it was counted
+    run = FloorRun(["today", "eye x1"], frames=[1, 2], wrong={"today": [0.02, 0.0], "eye x1": [0.005, 0.0]},
+                   painted={"today": [0.1, 0.0], "eye x1": [0.1, 0.0]}, texels={"today": [4.0], "eye x1": [4.0]},
+                   edges=[0.05, 0.0])
+    text = table(run)
+    assert "2 compared frames, 1 of them drawing a wall" in text and "viewer-scale" not in text
+    assert "| today | 4.0 | 50.0 % |" in text and "| eye x1 | 4.0 | 100.0 % |" in text

@@ -23,6 +23,8 @@
     walkstream bench impostor-sampling [SRC] [--buildings 20] [--impostor-error 2] [--ppd 1.81 24] [--against-aa] [--truth-samples 1 2 4 msaa4 [--reference 8]] [--picture p.png] [--json]
     walkstream bench walls [--scenes hall,city,west-oakland,village] [--wall-errors 5,10,15,20] [--duration 60s]
         [--gl-duration 20s] [--truth-every N] [--size WxH] [--no-gl] [--quick] [--out DIR] [--json]
+    walkstream bench wall-floor DB SOURCE [--report DIR] [--path NAME] [--densities 1,2,4] [--frame-res F]
+        [--viewer-ppd P] [--plot]
 
 The benchmarks themselves are :mod:`walkstream.benchmarks`; this module parses their
 options, hands the replaying ones a way to run a replay

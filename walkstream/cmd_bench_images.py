@@ -1,4 +1,4 @@
-"""``walkstream bench impostors``, ``bench impostor-sampling`` and ``bench walls``: the
+"""``walkstream bench impostors``, ``bench impostor-sampling``, ``bench walls`` and ``bench wall-floor``: the
 benchmarks of what images stand in for (impostors, facade pictures, textured virtual
 walls) and of their colour error, registered under ``bench`` by
 :mod:`walkstream.cmd_bench`.
@@ -107,6 +107,43 @@ def cmd_bench_walls(args: argparse.Namespace) -> int:
     return 0
 
 
+def _factors(text: str, flag: str) -> list[float]:
+    """``--densities`` / ``--frame-res``: factors separated by commas, each above 0 and at most 16."""
+    from walkstream.shared.errors import InputError
+
+    try:
+        out = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise InputError(f"{flag} {text!r}: expected numbers separated by commas, such as 1,2,4") from None
+    if any(not 0.0 < v <= 16.0 for v in out):
+        raise InputError(f"{flag} {text!r}: expected factors above 0 and at most 16")
+    return out
+
+
+def cmd_bench_wall_floor(args: argparse.Namespace) -> int:
+    """Handler of ``walkstream bench wall-floor``."""
+    from walkstream.benchmarks.wallfloor import measure, table, write
+    from walkstream.cmd_replay import replay_with_options
+    from walkstream.shared.errors import InputError
+
+    for what, p in (("DB", args.db), ("SOURCE", args.source)):
+        if not Path(p).is_file():
+            raise InputError(f"{what} {p}: no such file")
+    densities, frame_res = _factors(args.densities, "--densities"), _factors(args.frame_res, "--frame-res")
+    out = Path(args.report)
+    out.mkdir(parents=True, exist_ok=True)
+    run = measure(args.db, args.source, str(out), replay_with_options, path=args.path, device=args.device,
+                  size=args.size, duration=args.duration, truth_every=args.truth_every, bandwidth=args.bandwidth,
+                  rtt=args.rtt, fps=args.fps, densities=densities, frame_res=frame_res, costs=not args.no_costs,
+                  viewer_ppd=args.viewer_ppd,
+                  samples={k: v for k, v in (("truth_samples", args.truth_samples),
+                                             ("picture_samples", args.picture_samples)) if v})
+    write(run, out, args.plot)
+    print(table(run))
+    print(f"(per frame: {out / 'floor.csv'}{'; plot: ' + str(out / 'floor.png') if args.plot else ''})")
+    return 0
+
+
 def add_image_benches(besub: Any) -> None:
     """Register ``impostors``, ``impostor-sampling`` and ``walls`` under ``bench``'s
     sub-parsers ``besub``."""
@@ -159,3 +196,24 @@ def add_image_benches(besub: Any) -> None:
     b.add_argument("--json", action="store_true", help="print the rows as JSON")
     b.add_argument("--out", default="out/bench-walls", help="folder for the databases, reports and plot")
     b.set_defaults(func=cmd_bench_walls)
+
+    b = besub.add_parser("wall-floor", help="the walls' visibly wrong share of the frame with ideal textures from the eye at 1, 2, 4 times the stored density: the floor under wall1%")
+    b.add_argument("db", help="a walls database (bench walls' SCENE-walls-A.db)")
+    b.add_argument("source", help="the scene's source (the OSM file) the database was baked from")
+    b.add_argument("--report", default="out/wall-floor", help="folder for the replay's report, floor.csv, floor.json and floor.png (default out/wall-floor)")
+    b.add_argument("--path", default="bench", help="the recorded path to walk (default bench)")
+    b.add_argument("--device", default="pda", choices=("gl", "desktop2003", "pda"), help="device (default pda)")
+    b.add_argument("--size", default="160x120", help="frame size (default 160x120)")
+    b.add_argument("--duration", default="60s", help="walk length (default 60s)")
+    b.add_argument("--truth-every", type=int, default=25, metavar="N", help="compare every Nth frame (default 25)")
+    b.add_argument("--bandwidth", default="56kbit", help="link bandwidth (default 56kbit)")
+    b.add_argument("--rtt", default="200ms", help="round-trip time (default 200ms)")
+    b.add_argument("--fps", type=float, default=25.0, help="frame loop tick rate (default 25)")
+    b.add_argument("--densities", default="1,2,4", help="the ideal textures' texels a metre as factors of the stored (default 1,2,4)")
+    b.add_argument("--frame-res", default="1", help="texels a frame pixel of the check at the frame's resolution (default 1; '' none)")
+    b.add_argument("--viewer-ppd", type=float, default=None, metavar="P", help="also count at the viewer's scale (S-CIELAB) for a display of P pixels a degree (slower)")
+    b.add_argument("--truth-samples", help="the truth's colour anti-aliased (as replay --truth-samples: 4 for 4 x 4, msaa4)")
+    b.add_argument("--picture-samples", help="the client's picture anti-aliased (as replay --picture-samples)")
+    b.add_argument("--no-costs", action="store_true", help="skip rendering and encoding the textures for their bytes")
+    b.add_argument("--plot", action="store_true", help="write floor.png (each variant's frames sorted by their walls' share)")
+    b.set_defaults(func=cmd_bench_wall_floor)

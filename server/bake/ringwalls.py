@@ -62,7 +62,7 @@ from walkstream.server.bake.viewcell import ViewCell
 from walkstream.server.bake.wallplan import WallJob, WallPlan, WallSettings, texture_width
 from walkstream.shared.walls import RING_SIDES, WallSide, zone_count
 
-__all__ = ["RingPlan", "plan_ring_walls", "ring_rectangle", "ring_regions"]
+__all__ = ["RingPlan", "plan_ring_walls", "ring_reach", "ring_rectangle", "ring_regions"]
 
 _MIN_HEIGHT = 3.0
 """Least wall height, metres (a ring behind which only low objects stand)."""
@@ -97,7 +97,7 @@ def ring_rectangle(polygon: NDArray[np.float64]) -> tuple[NDArray[np.float64], N
     return centre, np.stack([u, v]), np.array([l0 / 2.0, l1 / 2.0])
 
 
-def _reach(boxes: NDArray[np.float64], centre: NDArray[np.float64], axes: NDArray[np.float64],
+def ring_reach(boxes: NDArray[np.float64], centre: NDArray[np.float64], axes: NDArray[np.float64],
            half: NDArray[np.float64]) -> NDArray[np.float64]:
     """``(m,)`` for each object box ``(m, 6)`` the least ring distance ``r`` at which it meets
     the rectangle pushed out by ``r`` (0: it meets the cell's rectangle itself): the
@@ -188,7 +188,7 @@ def plan_ring_walls(
         if len(ids) <= settings.keep:
             return True
         centre, axes, half = ring_rectangle(outline)
-        reach = _reach(all_boxes[np.searchsorted(all_ids, ids)], centre, axes, half)
+        reach = ring_reach(all_boxes[np.searchsorted(all_ids, ids)], centre, axes, half)
         return int((reach <= settings.ring_min).sum()) <= settings.keep
 
     for region in ring_regions(cells, settings.region, fits):
@@ -197,7 +197,7 @@ def plan_ring_walls(
         if len(ids) <= settings.keep:
             continue
         centre, axes, half = ring_rectangle(np.vstack([np.asarray(c.polygon, np.float64) for c in region]))
-        reach = _reach(all_boxes[np.searchsorted(all_ids, ids)], centre, axes, half)
+        reach = ring_reach(all_boxes[np.searchsorted(all_ids, ids)], centre, axes, half)
         # the largest r (1 m grid) keeping at most K objects: just under the (K+1)-th reach
         order = np.sort(reach)
         r = math.floor(float(order[settings.keep]) - 1e-6) if order[settings.keep] > settings.ring_min else settings.ring_min
@@ -211,7 +211,7 @@ def plan_ring_walls(
             radius[c.id] = r
             removed += int((~inside).sum())
         # every scene object meeting the ring stays geometry: a hole in its textures
-        every = _reach(all_boxes, centre, axes, half) <= r
+        every = ring_reach(all_boxes, centre, axes, half) <= r
         hole = tuple(int(i) for i in all_ids[every])
         far = all_boxes[~every]
         top = max(_MIN_HEIGHT, float(far[:, 5].max()) + 1.0 if len(far) else _MIN_HEIGHT)
