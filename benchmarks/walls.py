@@ -6,6 +6,10 @@ with and without walls:
 
 - ``hall``: the generated production hall (``walkstream generate interior --preset
   hall``, :mod:`~walkstream.server.sources.hallgen`), its ``tour``;
+- ``hall-ifc``: the same hall written as an IFC4 model (``walkstream generate interior
+  --preset hall -o hall.ifc``) and read back by the IFC reader: one large open space
+  whose bays are IFC spaces with no wall between them, the reader's open stretches
+  made virtual walls (not in the default ``--scenes``);
 - ``city``: the generated city (700 m, street cells), its ``SE`` walk (past its squares);
 - ``squares``: a generated city small enough for its rings' bake to take minutes (300 m,
   seed 1: two squares, 186 buildings; the 700 m city's rings are tens of thousands of
@@ -37,7 +41,7 @@ cut the cells' PVS: the baseline is the plain bake's row, on the same walk (the
 cells, hence the walk, are the same).  Until then each scene's walls row says why
 there is none.
 
-For the hall, the triangles per frame of **frustum culling alone** and of drawing the
+For the halls, the triangles per frame of **frustum culling alone** and of drawing the
 whole hall are measured on the tour's frames too
 (:func:`~walkstream.benchmarks.portals.portal_figures`: cells behind portals in the
 frustum, no fog; every part), with their ``gl`` and ``pda`` frame times: the issue's
@@ -67,7 +71,10 @@ __all__ = ["SCENES", "TEXTURE_KEYS", "WALL_ERRORS", "format_walls_table", "parse
 Replayer = Callable[[str, Mapping[str, Any], str], Any]
 
 #: The scenes, in table order.
-SCENES: tuple[str, ...] = ("hall", "city", "squares", "west-oakland", "village")
+SCENES: tuple[str, ...] = ("hall", "hall-ifc", "city", "squares", "west-oakland", "village")
+
+HALLS: tuple[str, ...] = ("hall", "hall-ifc")
+"""The interior scenes: each its own database plays without walls too, and has its frustum-alone figures."""
 #: The ``squares`` scene: the generated city's side (m), seed and walk.  Every street
 #: region of a generated city is ringed (its PVS is tens of objects, over ``--wall-keep``)
 #: at the least distance (its nearest ``K`` objects stand within ``--wall-ring-min``), so
@@ -112,11 +119,11 @@ def _bake_scene(name: str, out: Path, data: Path, quick: bool, settings: dict[st
     from walkstream.server.store import SceneReader, write_path
 
     db = out / f"{name}{tag}.db"
-    if name == "hall":
+    if name in HALLS:
         from walkstream.server.sources.hallgen import HALL_PRESETS, HallPlan, generate_hall
         from walkstream.server.sources.interiorgen import write_interior_doc
 
-        src = out / "hall.json"
+        src = out / ("hall.ifc" if name == "hall-ifc" else "hall.json")
         if not src.exists():
             plan = HallPlan(columns=2, rows=1, side_depth=0.0, seed=2) if quick else HALL_PRESETS["hall"]
             write_interior_doc(src, generate_hall(plan))
@@ -144,7 +151,7 @@ def _bake_scene(name: str, out: Path, data: Path, quick: bool, settings: dict[st
         raise WalkstreamError(f"bench walls: unknown scene {name!r}; choose from {', '.join(SCENES)}")
     if not db.exists():
         print(f"  baking {db.name} ...", file=sys.stderr, flush=True)
-        cells = {} if name == "hall" else {"cells": "street"}
+        cells = {} if name in HALLS else {"cells": "street"}
         extra: dict[str, Any] = {}
         if settings.get("virtual_walls"):
             from walkstream.server.bake.wallplan import WallSettings
@@ -358,14 +365,14 @@ def run_walls_bench(
     ``wall_textures`` (:func:`parse_texture_variants`) bakes each A once more with those
     texture settings, the variant ``walls A=a view=... quality=...``.
 
-    Returns ``{"rows": [...], "frustum": {...} or None, "notes": [...]}`` and writes
+    Returns ``{"rows": [...], "frustum": {hall scene: {...}}, "notes": [...]}`` and writes
     ``bench_walls.json`` and ``bench_walls.png`` into ``out``.
     """
     out.mkdir(parents=True, exist_ok=True)
     can_bake, can_play = walls_support()
     rows: list[dict[str, Any]] = []
     notes: list[str] = []
-    frustum: dict[str, Any] | None = None
+    frustum: dict[str, Any] = {}
     link = {"bandwidth": "56kbit", "rtt": "200ms", "fps": 25.0}
     for scene in scenes:
         print(f"{scene}:", file=sys.stderr, flush=True)
@@ -394,7 +401,7 @@ def run_walls_bench(
                                                                    "wall_texture": spec},
                                          tag=f"-walls-{a:g}-" + label.replace(" ", "-").replace("=", ""))
                     variants.append((f"walls A={a:g} {label}", tdb, {"virtual_walls": True} if can_play else {}))
-                if can_play and scene == "hall":
+                if can_play and scene in HALLS:
                     # indoors the walls' database plays without them too (every portal
                     # open); a city's rings cut its PVS, so without walls it is the plain bake
                     variants.append((f"no walls (A={a:g} db)", wdb, {"virtual_walls": False}))
@@ -417,12 +424,12 @@ def run_walls_bench(
             bake_s = _summary(vdb).get("bake_seconds")
             rows.append(_row(scene, variant, pda, g, (rep_pda, rep_gl), objects,
                              None if bake_s is None else float(bake_s)))
-        if scene == "hall":
+        if scene in HALLS:
             from walkstream.benchmarks.portals import portal_figures
 
             w, h = (int(v) for v in size.lower().split("x"))
             fig = portal_figures(db, frames=frustum_frames, step_s=2.0, size=(w, h), gl=gl)
-            frustum = {
+            frustum[scene] = {
                 "frames": fig["frames"],
                 "triangles_in_hall": fig["triangles"],
                 "modes": {m: {"triangles_median": fig["modes"][m]["tris"]["median"],
@@ -484,10 +491,9 @@ def format_walls_table(result: Mapping[str, Any]) -> str:
             f"{_f(r.get('far_field_frames'), '6.1f', 100)} {_f(r.get('frames_visible_1pct'), '6.1f', 100)} "
             f"{_f(r.get('frames_wall_visible_1pct'), '6.1f', 100)}"
         )
-    fr = result.get("frustum")
-    if fr:
+    for scene, fr in (result.get("frustum") or {}).items():
         lines.append("")
-        lines.append(f"hall, {fr['frames']} tour frames, {fr['triangles_in_hall']:,} triangles in the hall (no fog):")
+        lines.append(f"{scene}, {fr['frames']} tour frames, {fr['triangles_in_hall']:,} triangles in the hall (no fog):")
         for m, label in (("portals", "portal culling"), ("frustum", "frustum culling alone"), ("none", "drawn whole")):
             d = fr["modes"][m]
             lines.append(f"  {label:<22} {d['triangles_median']:>9,.0f} triangles/frame, {d['cells_median']:>5.0f} cells, "

@@ -28,8 +28,9 @@ def test_bench_walls_quick_measures_the_hall_without_walls(tmp_path: Path, capsy
     assert r["compared_frames"] >= 1 and r["colour_error_median"] > 0.0 and r["fog_visible_share"] > 0.0
     assert 0.0 <= r["effective_culling"] < 1.0 and r["texture_bytes"] == 0
     # frustum culling alone against drawing the whole hall, on the tour's frames
-    modes = result["frustum"]["modes"]
-    assert 0 < modes["frustum"]["triangles_median"] <= modes["none"]["triangles_median"] == result["frustum"]["triangles_in_hall"]
+    assert list(result["frustum"]) == ["hall"]
+    modes = result["frustum"]["hall"]["modes"]
+    assert 0 < modes["frustum"]["triangles_median"] <= modes["none"]["triangles_median"] == result["frustum"]["hall"]["triangles_in_hall"]
     assert modes["none"]["pda_ms_median"] > 1000.0 / 25.0
     bake, play = walls_support()
     assert bake and play  # the bake places walls and the replay switches them

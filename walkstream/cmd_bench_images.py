@@ -180,7 +180,7 @@ def add_image_benches(besub: Any) -> None:
     b.set_defaults(func=cmd_bench_impostor_sampling)
 
     b = besub.add_parser("walls", help="the open scenes (hall, city, West Oakland, village) with and without virtual walls")
-    b.add_argument("--scenes", default="hall,city,west-oakland,village", help="comma-separated scenes: hall, city, squares, west-oakland, village (default all but squares)")
+    b.add_argument("--scenes", default="hall,city,west-oakland,village", help="comma-separated scenes: hall, hall-ifc (the same hall as an IFC model, read by the IFC reader), city, squares, west-oakland, village (default hall, city, west-oakland, village)")
     b.add_argument("--wall-errors", default="5,10,15,20", help="wall errors A in degrees, one walls bake each (default 5,10,15,20)")
     b.add_argument("--wall-depth", type=int, default=0, metavar="G", help="also bake each A with --wall-depth G (4, 8 or 16) and play it beside the walls without (variant 'walls A=a G=g'; default 0: not)")
     b.add_argument("--wall-textures", default="", metavar="SPECS", help="also bake each A with other wall texture settings and play it beside: variants split by ';', each key=value pairs split by ',' of view, texels, max-side, quality (bake's --wall-view, --wall-texels, --wall-max-side, --wall-quality), e.g. 'view=120;texels=4,quality=lossless'")
