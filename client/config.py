@@ -215,8 +215,10 @@ class ReplayConfig:
             raise InputError(f"--target-fps {tf!r}: expected a number in (0, 1000]")
         if not (math.isfinite(self.facade_parallax_px) and 0 < self.facade_parallax_px <= 8):
             raise InputError(f"--facade-parallax {self.facade_parallax_px!r}: expected pixels in (0, 8]")
-        if self.facade_filter not in ("point", "anisotropic"):
-            raise InputError(f"--facade-filter {self.facade_filter!r}: expected point or anisotropic")
+        from walkstream.client.draw.quads import FACADE_FILTERS
+
+        if self.facade_filter not in FACADE_FILTERS:
+            raise InputError(f"--facade-filter {self.facade_filter!r}: expected one of {', '.join(FACADE_FILTERS)}")
         if not (math.isfinite(self.facade_texels_per_m) and 0 < self.facade_texels_per_m <= 64):
             raise InputError(f"--facade-texels {self.facade_texels_per_m!r}: expected texels per metre in (0, 64]")
         if not (math.isfinite(self.facade_grazing_deg) and 0 <= self.facade_grazing_deg <= 90):

@@ -40,7 +40,10 @@ frame-to-frame change over plain motion's rose from 1.02 to 1.13 there, so bilin
 
 WALL_MIN_FILTER: int = moderngl.NEAREST
 """How a wall texture's texels are read when it is drawn smaller than baked: the texel
-under the pixel's centre, as the truth's rasterised geometry takes the surface under it."""
+under the pixel's centre, as the truth's rasterised geometry takes the surface under it
+(read anisotropically, with the facade pictures, the village's walk on ``pda`` was worse
+against the point-sampled truth and against the 4 x 4 one: docs/benchmarks.md, "Facade
+pictures read anisotropically")."""
 
 FACADE_IDS: int = 1 << 40
 """The quads' image ids by kind: 0 and up an impostor image, -1 down to ``-FACADE_IDS + 1``
