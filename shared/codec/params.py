@@ -22,7 +22,7 @@ area
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, overload
 
 import msgpack
 import numpy as np
@@ -446,6 +446,12 @@ def decode_object(
         raise CodecError(f"{what}: {exc}") from exc
 
 
+@overload
+def stored_form(p: BuildingParams) -> BuildingParams: ...
+@overload
+def stored_form(p: StreetParams) -> StreetParams: ...
+@overload
+def stored_form(p: AreaParams) -> AreaParams: ...
 def stored_form(p: BuildingParams | StreetParams | AreaParams) -> BuildingParams | StreetParams | AreaParams:
     """``p`` as every reader of a database rebuilds it: encoded and decoded again
     (coordinates, heights and the floor height on the centimetre).
