@@ -571,3 +571,33 @@ def test_the_bench_counts_a_visibly_wrong_ring_wall_under_wall1(dbs: tuple[Path,
     # whatever the walls showed, their pixels counted as the impostors')
     assert shares["frames_wall_visible_1pct"] is not None and shares["frames_wall_visible_1pct"] < 1.0
     assert r.summary["truth"]["colour"]["causes"]["wall"] > 0
+
+
+def test_a_wall_texture_builds_each_building_as_the_client_does_so_its_door_is_on_the_same_side() -> None:
+    """The village's building 23 (way/513995876): a rectangle whose two long sides are
+    equally long to the millimetre; the grammar's door goes on the longest free frontage,
+    and the centimetre the database stores moves it from the south side to the north.
+    The bake's textures must show the door where the client's building (and the truth)
+    has it."""
+    from walkstream.server.bake.wallrender import wall_elements
+    from walkstream.server.sources.scene import SourceScene
+    from walkstream.shared.buildings import build_lod
+    from walkstream.shared.codec.params import decode_building, encode_building
+    from walkstream.shared.records import BuildingParams
+
+    ring = np.array([[20.2338134, -27.48756555], [20.2810145, -33.55667563], [27.33462918, -33.50303865],
+                     [27.2874206, -27.43392854]])
+    b = BuildingParams(id=23, rings=(ring,), neighbour_heights=(np.array([0.0, 0.0, 6.4, 0.0]),), floors=6,
+                       floor_height=3.2, style=1224950823)
+
+    def door_y(tri: np.ndarray, mats: np.ndarray) -> float:
+        return float(tri[mats == 2].reshape(-1, 3)[:, 1].mean())
+
+    def mesh_door_y(m: Any) -> float:
+        idx = np.asarray(m.indices, np.int64).reshape(-1, 3)
+        return door_y(np.asarray(m.positions, np.float64)[idx], np.asarray(m.materials)[idx[:, 0]])
+
+    client = mesh_door_y(build_lod(decode_building(encode_building(b)), 2))
+    assert client > -28.0 and mesh_door_y(build_lod(b, 2)) < -33.0  # the premise: the rounding moves the door
+    (_, tri, mats), = wall_elements(SourceScene("door", "local", (0.0, 0.0), (b,), ()))
+    assert door_y(tri, mats) == pytest.approx(client, abs=0.01)

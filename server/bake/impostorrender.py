@@ -39,6 +39,7 @@ from walkstream.server.bake.objectrows import building_box
 from walkstream.shared.buildings import build_lod_batch
 from walkstream.shared.camera import mat4_bytes, off_axis, orthographic
 from walkstream.shared.codec.image import encode_image
+from walkstream.shared.codec.params import stored_form
 from walkstream.shared.errors import InputError
 from walkstream.shared.gl import (
     Framebuffer,
@@ -258,9 +259,11 @@ def _renderer_for(scene: Any, key: str) -> ImpostorRenderer:
     """One renderer per process (and per scene), built on first use and kept."""
     if _WORKER.get("key") != key:
         release_impostor_renderer()
-        meshes = build_lod_batch(scene.buildings, 2)
-        boxes = [building_box(b) for b in scene.buildings]
-        _WORKER["renderer"] = ImpostorRenderer(meshes, [b.id for b in scene.buildings], boxes)
+        # the buildings as the client rebuilds them (on the centimetre): a door on the side it has there
+        buildings = [stored_form(b) for b in scene.buildings]
+        meshes = build_lod_batch(buildings, 2)
+        boxes = [building_box(b) for b in buildings]
+        _WORKER["renderer"] = ImpostorRenderer(meshes, [b.id for b in buildings], boxes)
         _WORKER["key"] = key
     renderer: ImpostorRenderer = _WORKER["renderer"]
     return renderer

@@ -69,13 +69,16 @@ WallElement = tuple[int, NDArray[np.float64], NDArray[np.uint8]]
 def wall_elements(scene: InteriorScene | SourceScene) -> list[WallElement]:
     """What wall textures of ``scene`` show: an interior's elements, or a city's objects
     as the bake renders them (:func:`~.visibility.meshes_for_scene`, buildings at LOD2,
-    the detail the client draws near)."""
+    the detail the client draws near) built from their stored form
+    (:func:`~.objectrows.stored_scene`: the centimetre the client rebuilds from, so a
+    door lands on the side the client's own building has it)."""
     if isinstance(scene, InteriorScene):
         return [(int(e.id), e.soup.astype(np.float64), np.asarray(e.materials, np.uint8))
                 for e in scene.elements if len(e.triangles)]
     from walkstream.server.bake.idpack import meshes_for_scene
+    from walkstream.server.bake.objectrows import stored_scene
 
-    meshes, ids = meshes_for_scene(scene, 2)
+    meshes, ids = meshes_for_scene(stored_scene(scene), 2)
     out: list[WallElement] = []
     for oid, m in zip(ids.tolist(), meshes, strict=True):
         idx = np.asarray(m.indices, np.int64).reshape(-1, 3)

@@ -22,7 +22,7 @@ area
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, overload
 
 import msgpack
 import numpy as np
@@ -53,6 +53,7 @@ __all__ = [
     "encode_area",
     "decode_area",
     "decode_object",
+    "stored_form",
 ]
 
 _REC_BUILDING = 1
@@ -443,3 +444,25 @@ def decode_object(
         raise
     except DECODE_ERRORS as exc:
         raise CodecError(f"{what}: {exc}") from exc
+
+
+@overload
+def stored_form(p: BuildingParams) -> BuildingParams: ...
+@overload
+def stored_form(p: StreetParams) -> StreetParams: ...
+@overload
+def stored_form(p: AreaParams) -> AreaParams: ...
+def stored_form(p: BuildingParams | StreetParams | AreaParams) -> BuildingParams | StreetParams | AreaParams:
+    """``p`` as every reader of a database rebuilds it: encoded and decoded again
+    (coordinates, heights and the floor height on the centimetre).
+
+    Whatever a bake renders for a client to show (wall textures, impostor images) must be
+    built from this form, not from the source's float coordinates: the grammar's choices
+    are thresholds on lengths (the door goes on the longest free frontage, ``L >= LMAX``),
+    so a rectangle's two equally long sides, a millimetre apart in the source, can swap
+    their door under the rounding."""
+    if isinstance(p, BuildingParams):
+        return decode_building(encode_building(p))
+    if isinstance(p, StreetParams):
+        return decode_street(encode_street(p))
+    return decode_area(encode_area(p))
