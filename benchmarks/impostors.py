@@ -91,7 +91,7 @@ def run_impostor_bench(
     for k, (d, path, fac, imp) in enumerate(runs, 1):
         name = f"{path} {'impostors' if imp else 'geometry'}{' boxes' if fac is False else ''}"
         options: dict[str, Any] = {"device": device, "path": path, **(link or {}), **(extra or {}), "impostors": imp,
-                                   **({} if fac is None else {"facades": fac}),
+                                   **({} if fac is None else {"facades": "on" if fac else "off"}),
                                    "report": str(out / f"{k:02d}-{name.replace(' ', '-').lower()}")}
         if duration:
             options["duration"] = duration

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from walkstream.client.draw.impostors import MAX_IMAGE_DEG
 from walkstream.client.net.link import LinkProfile
 from walkstream.client.rewrite.pool import SHM_BYTES, RewriteOptions
 from walkstream.client.truth.antialias import POINT, Sampling
@@ -154,6 +155,10 @@ class ReplayConfig:
     (``--impostor-perspective``; :func:`~walkstream.shared.impostors.orthographic_parallax`):
     where it and the direction's error together pass the bake's ``A`` the building fades
     to geometry.  Off: the bound counts the direction's error alone, as the bake does."""
+    impostor_max_size_deg: float = MAX_IMAGE_DEG
+    """The largest angular radius, degrees, at which a building's image stands in for it
+    (``--impostor-max-size``; :data:`~walkstream.client.draw.impostors.MAX_IMAGE_DEG`;
+    ``inf``: no limit): a building larger on the screen is drawn as geometry."""
     impostor_fade_s: float | None = None
     """Seconds the opacity drawn takes at least to go from 0 to 1 (``--impostor-fade``;
     None: :data:`~walkstream.client.draw.impostors.FADE_S`; 0: none, with
@@ -247,6 +252,9 @@ class ReplayConfig:
         wp = self.wall_parallax
         if not (math.isfinite(wp) and 0 <= wp <= 1):
             raise InputError(f"--wall-parallax {wp!r}: expected a share from 0 to 1")
+        ms = self.impostor_max_size_deg
+        if not (ms > 0 and (math.isinf(ms) or ms <= 90)):
+            raise InputError(f"--impostor-max-size {ms!r}: expected degrees in (0, 90], or inf")
         fs = self.impostor_fade_s
         if fs is not None and not (math.isfinite(fs) and fs >= 0):
             raise InputError(f"--impostor-fade {fs!r}: expected seconds >= 0")

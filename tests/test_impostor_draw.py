@@ -202,9 +202,11 @@ def test_bench_impostors_replays_one_walk_both_ways(dbs: tuple[Path, Path], tmp_
     # one bake's two rows (their reports without plots: drawing them was most of this
     # test's time); a sweep is the same loop over more databases, and the label of a bake
     # without impostors is read from its settings record as here
+    # with plain boxes (--facades both's second half: the replay's --facades off)
     rows = run_impostor_bench([str(dbs[0])], replayer(plots=False), out=tmp_path, duration="2s",
-                              truth_every=25, size="80x60")
+                              truth_every=25, size="80x60", facades=(False,))
     assert [r["with_impostors"] for r in rows] == [True, False]
+    assert [r["with_facades"] for r in rows] == [False, False] and all(not r.get("facades") for r in rows)
     assert [r["bake"] for r in rows] == ["imp D50 A4 S16 persp"] * 2
     assert bake_label(str(dbs[1])) == "plain (no impostors)"
     assert rows[0]["impostors"]["image_bytes"] > 0 and "impostors" not in rows[1]

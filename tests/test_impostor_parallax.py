@@ -12,6 +12,8 @@ import pytest
 
 from walkstream.client.config import ReplayConfig
 from walkstream.client.draw.impostors import choose_impostors
+from walkstream.client.net.link import LinkProfile
+from walkstream.shared.errors import InputError
 from walkstream.shared.impostors import (
     MAX_LEVEL,
     bin_of,
@@ -75,16 +77,36 @@ EYE = (0.0, 0.0, 1.7)
 def test_the_choice_counts_the_parallax_only_when_asked() -> None:
     row, radius, span = _near_row()
     parallax = float(orthographic_parallax(radius, span))
-    (plain,) = choose_impostors([row], EYE, 60.0, math.radians(4.0))
-    (held,) = choose_impostors([row], EYE, 60.0, math.radians(4.0), perspective=True)
+    # the building is 9 degrees across at 75 m: no size limit here, the parallax alone is tested
+    (plain,) = choose_impostors([row], EYE, 60.0, math.radians(4.0), max_size_deg=math.inf)
+    (held,) = choose_impostors([row], EYE, 60.0, math.radians(4.0), perspective=True, max_size_deg=math.inf)
     assert held.error == pytest.approx(plain.error + parallax)
     assert plain.alpha == 1.0 and held.alpha == 1.0, "well within a loose bound: the image either way"
     # a bound the direction's error keeps and the parallax breaks: geometry when counted
     bound = plain.error + 0.9 * parallax
-    (plain,) = choose_impostors([row], EYE, 60.0, bound)
-    (held,) = choose_impostors([row], EYE, 60.0, bound, perspective=True)
+    (plain,) = choose_impostors([row], EYE, 60.0, bound, max_size_deg=math.inf)
+    (held,) = choose_impostors([row], EYE, 60.0, bound, perspective=True, max_size_deg=math.inf)
     assert plain.image == 5 and plain.alpha == 1.0
     assert held.image is None and held.alpha == 0.0
+
+
+def test_a_building_large_on_the_screen_is_drawn_as_geometry() -> None:
+    # 9.2 degrees across (radius 12 m at 75 m): over the limit, geometry; under a looser
+    # limit the image; in the fade's last quarter part of each
+    row, radius, span = _near_row()
+    size = math.degrees(math.asin(radius / span))
+    assert 9.0 < size < 9.5
+    (big,) = choose_impostors([row], EYE, 60.0, math.radians(4.0))  # the default limit, 6 degrees
+    assert big.image is None and big.alpha == 0.0
+    (loose,) = choose_impostors([row], EYE, 60.0, math.radians(4.0), max_size_deg=12.0 * 4.0 / 3.0)
+    assert loose.image == 5 and loose.alpha == 1.0
+    (fading,) = choose_impostors([row], EYE, 60.0, math.radians(4.0), max_size_deg=size / 0.875)
+    assert fading.image == 5 and 0.0 < fading.alpha < 1.0
+    link = LinkProfile(56_000.0, 56_000.0, 0.2)
+    for bad in (0.0, -1.0, math.nan, 91.0):
+        with pytest.raises(InputError, match="--impostor-max-size"):
+            ReplayConfig(link, impostor_max_size_deg=bad)
+    assert ReplayConfig(link, impostor_max_size_deg=math.inf).impostor_max_size_deg == math.inf
 
 
 def test_the_replay_flag_is_offered_and_off_by_default() -> None:

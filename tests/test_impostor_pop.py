@@ -304,8 +304,9 @@ def test_a_building_the_next_cell_does_not_list_blends_on_by_its_distance() -> N
     wanted: list[int] = []
     lane = SimpleNamespace(started=True, held=lambda i: True, image=lambda i: SimpleNamespace(nbytes=1024),
                            want=lambda wants: wanted.extend(wants))
+    # the building is 7 degrees across at 100 m: no size limit here, the distance's blend alone is tested
     cfg = SimpleNamespace(impostor_blend_m=blend, impostor_perspective=False, prefetch=False,
-                          texture_budget_bytes=1 << 30, impostor_fade_s=None)
+                          texture_budget_bytes=1 << 30, impostor_fade_s=None, impostor_max_size_deg=math.inf)
     w: Any = SimpleNamespace(scene=SimpleNamespace(streets=SimpleNamespace(cells=cells), images=lane), config=cfg,
                              impostors_shown={}, impostors_old={}, impostors_wt=-math.inf, impostor_rows={},
                              objects=SimpleNamespace(pvs=[5]))

@@ -159,6 +159,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
         impostors=not args.no_impostors,
         impostor_blend_m=args.impostor_blend,
         impostor_fade_s=args.impostor_fade,
+        impostor_max_size_deg=args.impostor_max_size,
         impostor_perspective=args.impostor_perspective,
         virtual_walls=not args.no_walls,
         wall_zone_blend=args.wall_zone_blend,
@@ -421,6 +422,7 @@ def add_replay_arguments(r: argparse.ArgumentParser) -> None:
     r.add_argument("--facade-budget", default="8MB", metavar="BYTES", help="bytes of facade textures held and drawn (default 8MB)")
     r.add_argument("--facade-bake-share", type=float, default=0.3, metavar="S", help="share of the frame's triangle budget baking facade textures may take on average (default 0.3)")
     r.add_argument("--impostor-blend", type=float, default=None, metavar="M", help="metres beyond the bake's D over which an impostor fades in over its geometry (default a tenth of D; 0: none)")
+    r.add_argument("--impostor-max-size", type=float, default=6.0, metavar="DEG", help="the largest angular radius, degrees, of a building's bounding sphere at which its image stands in; a building larger on the screen fades to geometry (default 6; inf: no limit)")
     r.add_argument("--impostor-fade", type=float, default=None, metavar="S", help="seconds an impostor's opacity takes at least from 0 to 1, so an image arriving or a building joining the cell's list does not pop (default 2; 0 with --impostor-blend 0: a hard switch)")
     r.add_argument("--impostor-perspective", action="store_true", help="hold an impostor to the bake's error bound A counting the parallax of its orthographic image in the perspective view as well (fewer impostors near D, each within A)")
     r.add_argument("--per-object-draws", action="store_true", help="gl device: one draw call per object instead of one multi-draw call per frame (the older path, for comparison)")

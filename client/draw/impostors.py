@@ -21,6 +21,14 @@ that calls it, wants the images and makes the quads is
   blend's length, so a length proportional to ``D`` keeps the blend's change the same
   share of the building's own motion whatever ``D`` (a fixed 20 m was a tenth of the
   motion's scale at ``D`` 200 m and nearly all of it at ``D`` 25 m).
+- **The size** (:data:`MAX_IMAGE_DEG`): an image stands in only while its building's
+  bounding sphere looks no larger than that (its angular radius), fading out over the
+  last :data:`ERROR_BLEND` of it.  An image's pixels differ from the geometry's one
+  sample a pixel on about a third to two thirds of the building's pixels whatever the
+  image's direction, size or projection (windows a pixel wide sampled on two grids:
+  docs/benchmarks.md), so a building large on the screen drawn as its image puts more
+  than half a percent of the frame visibly wrong: the generated city's spire (120 m) at
+  300-400 m from the drive was 1 % of the frame on one compared frame in ten.
 - **The fade in time** (:func:`fade_towards`): what the blend cannot see coming --
   an image arriving while its building is already beyond ``D + blend_m``, a building
   the next cell lists or no longer lists, an image the texture budget drops -- would
@@ -56,6 +64,7 @@ __all__ = [
     "BLEND_SHARE",
     "ERROR_BLEND",
     "FADE_S",
+    "MAX_IMAGE_DEG",
     "ImpostorChoice",
     "blend_length",
     "choose_impostors",
@@ -71,7 +80,14 @@ FADE_S = 2.0
 """Seconds over which the opacity drawn may go from 0 to 1 at most (:func:`fade_towards`)."""
 
 ERROR_BLEND = 0.25
-"""Share of the error bound over which an impostor fades out as its error nears the bound."""
+"""Share of the error bound (and of :data:`MAX_IMAGE_DEG`) over which an impostor fades
+out as its error (its size) nears the bound."""
+
+MAX_IMAGE_DEG = 6.0
+"""The largest angular radius, degrees, of a building's bounding sphere at which its image
+stands in (``--impostor-max-size``; module docstring): a building 20 m across at the
+default D of 250 m is about 2.3 degrees, the generated city's 120 m spire 9-12 degrees
+at 300-400 m."""
 
 
 def _smoothstep(x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -97,14 +113,19 @@ def fade_towards(shown: float, target: float, dt: float, fade_s: float = FADE_S)
 
 
 def impostor_alpha(
-    distance: ArrayLike, error: ArrayLike, d: float, bound: float, blend_m: float | None = None
+    distance: ArrayLike, error: ArrayLike, d: float, bound: float, blend_m: float | None = None,
+    size: ArrayLike = 0.0, max_size: float = math.radians(MAX_IMAGE_DEG),
 ) -> NDArray[np.float64]:
     """The impostor's opacity (0: geometry only, 1: impostor only) at ``distance`` from
     the building's box (metres) with angular ``error`` (radians), for the bake's ``d``
-    and ``bound``; the blend over ``blend_m`` metres (None: :func:`blend_length`)."""
+    and ``bound``; the blend over ``blend_m`` metres (None: :func:`blend_length`);
+    ``size`` the building's angular radius (radians), the image fading out as it nears
+    ``max_size`` (:data:`MAX_IMAGE_DEG`; ``math.inf``: no limit)."""
     near = _smoothstep((np.asarray(distance, np.float64) - d) / max(blend_length(d, blend_m), 1e-9))
     err = _smoothstep((bound - np.asarray(error, np.float64)) / (ERROR_BLEND * bound))
     out: NDArray[np.float64] = np.minimum(near, err)
+    if math.isfinite(max_size):
+        out = np.minimum(out, _smoothstep((max_size - np.asarray(size, np.float64)) / (ERROR_BLEND * max_size)))
     return out
 
 
@@ -128,12 +149,15 @@ def choose_impostors(
     blend_m: float | None = None,
     perspective: bool = False,
     eyes: Sequence[float] | None = None,
+    max_size_deg: float = MAX_IMAGE_DEG,
 ) -> list[ImpostorChoice]:
     """Each listed building's image and opacity for a viewer at ``eye`` (see the module
     docstring); with ``perspective`` the error adds the image's own parallax to the
     direction's: :func:`~walkstream.shared.impostors.image_parallax` from its sampling
     eye (``eyes``, metres from the centre per row, a scene baked with perspective
-    images; None: orthographic images, the eye at infinity)."""
+    images; None: orthographic images, the eye at infinity); ``max_size_deg`` the
+    largest angular radius an image stands in at (:data:`MAX_IMAGE_DEG`; ``math.inf``:
+    no limit)."""
     e = np.asarray(eye, np.float64).reshape(3)
     out = []
     for k, r in enumerate(rows):
@@ -153,7 +177,8 @@ def choose_impostors(
         err = float(angular_error(radius, span, theta))
         if perspective:
             err += float(image_parallax(radius, span, math.inf if eyes is None else eyes[k]))
-        alpha = float(impostor_alpha(dist, err, d, bound, blend_m))
+        alpha = float(impostor_alpha(dist, err, d, bound, blend_m, math.asin(min(radius / span, 1.0)),
+                                     math.radians(max_size_deg)))
         out.append(ImpostorChoice(r.object, image if alpha > 0.0 else None, alpha, dist, err))
     return out
 

@@ -137,7 +137,8 @@ def frame_impostors(w: WalkState, f: Frame) -> list[DrawnImpostor]:
     head = pairs[0][1]  # one bake: every record's D, A and projection are the same
     rows = [r for r, _ in pairs]
     eyes = [head.eye(r) for r in rows] if head.perspective else None
-    choices = choose_impostors(rows, f.eye, head.d, head.bound, cfg.impostor_blend_m, cfg.impostor_perspective, eyes)
+    choices = choose_impostors(rows, f.eye, head.d, head.bound, cfg.impostor_blend_m, cfg.impostor_perspective, eyes,
+                               cfg.impostor_max_size_deg)
     wants = ahead_wants(w, f) if cfg.prefetch else {}
     # a kept building wants no new image (another bin's): it is on its way to geometry
     wants.update({c.image: 0.0 for c in choices[:len(listed)] if c.image is not None})
@@ -294,7 +295,8 @@ def ahead_wants(w: WalkState, f: Frame) -> dict[int, float]:
         eye = np.asarray(f.eye, np.float64).copy()
         eye[:2] += velocity * t
         eyes = [imp.eye(r) for r in imp.rows] if imp.perspective else None
-        for c in choose_impostors(imp.rows, eye, imp.d, imp.bound, cfg.impostor_blend_m, cfg.impostor_perspective, eyes):
+        for c in choose_impostors(imp.rows, eye, imp.d, imp.bound, cfg.impostor_blend_m, cfg.impostor_perspective, eyes,
+                                  cfg.impostor_max_size_deg):
             if c.image is not None and c.image not in out:
                 out[c.image] = float(t)
     return out
