@@ -27,8 +27,8 @@ from walkstream.shared.camera import mat4_bytes
 from walkstream.shared.errors import InputError, RenderError
 from walkstream.shared.walls import NO_WARP, WallWarp
 
-__all__ = ["ANISOTROPY", "FACADE_FILTERS", "FACADE_IDS", "IMPOSTOR_MIN_FILTER", "WALL_MIN_FILTER", "Quad", "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "warped",
-           "with_mesh"]
+__all__ = ["ANISOTROPY", "FACADE_FILTERS", "FACADE_IDS", "IMPOSTOR_MIN_FILTER", "WALL_MIN_FILTER", "Quad",
+           "QuadRenderer", "back_to_front", "cross_fade", "quads_of", "warped", "with_mesh"]
 
 IMPOSTOR_MIN_FILTER: int = moderngl.LINEAR
 """How an impostor image's texels are read when it is drawn smaller than baked: bilinear.
